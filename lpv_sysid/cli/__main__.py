@@ -1,0 +1,5 @@
+import sys
+
+from lpv_sysid.cli.main import main
+
+sys.exit(main())

@@ -1,0 +1,1 @@
+"""lpv_sysid.control"""
