@@ -1,0 +1,186 @@
+"""MAVLink throughput and latency of the bridge core (targets of issue 7).
+
+Run: ``.venv/bin/python -m bench.bench_mavlink`` (prints medians; ~15 s).
+
+1. decode: MAVLink 2 datagrams (PX4 telemetry mix) through ``MavlinkLink.feed`` (parse,
+   counters, sequence tracking) and through ``TelemetryDecoder`` (samples) -> msgs/s.
+   Target >= 20k msgs/s.
+2. latency: telemetry in -> command out on 127.0.0.1. A vehicle-side UDP socket sends
+   ATTITUDE_QUATERNION; the bridge (attitude_rate transport, OFFBOARD_ACTIVE reached by a
+   real handshake with the simulated vehicle) decodes it, a sample callback issues the
+   actuator command, the bridge sends SET_ATTITUDE_TARGET; the vehicle socket receives it.
+   (a) bridge polled in the sender's thread right after the send (core cost + 2 loopback
+   hops); (b) bridge in its own thread blocked in ``wait_readable`` (select) -> poll, as a
+   shell thread would run it. Target p99 <= 2 ms.
+"""
+
+from __future__ import annotations
+
+import socket
+import statistics
+import threading
+import time
+
+import numpy as np
+
+from lpv_sysid.mavlink import px4
+from lpv_sysid.mavlink.bridge import BridgeConfig, BridgeCore
+from lpv_sysid.mavlink.link import LinkConfig, MavlinkLink, free_udp_port
+from lpv_sysid.mavlink.offboard import OffboardConfig, State
+from lpv_sysid.mavlink.sim_vehicle import SimVehicle, SimVehicleConfig
+from lpv_sysid.mavlink.telemetry import StateSample, TelemetryDecoder
+
+
+def _telemetry_datagrams(n: int) -> list[bytes]:
+    tx = px4.make_codec(None, 1, 1)
+    esc = px4.esc_status_class()
+    out = []
+    for i in range(n):
+        k = i % 6
+        t = i * 4
+        if k in (0, 3):
+            m = tx.attitude_quaternion_encode(t, 0.99, 0.01, 0.02, 0.1, 0.1, 0.2, 0.3, [0.0] * 4)
+        elif k in (1, 4):
+            m = tx.highres_imu_encode(t * 1000, 0.1, 0.2, -9.8, 0.01, 0.02, 0.03, 0.2, 0, 0.4, 1013, 0, 10, 25, 0x1FF, 0)
+        elif k == 2:
+            m = tx.local_position_ned_encode(t, 1.0, 2.0, -3.0, 0.5, 0.1, -0.2)
+        else:
+            m = esc(0, t * 1000, [6000, 6100, 6200, 6300], [16.0] * 4, [5.0] * 4)
+        out.append(m.pack(tx))
+        tx.seq = (tx.seq + 1) % 256
+    return out
+
+
+def bench_decode(n: int = 30000, repeat: int = 5) -> tuple[float, float]:
+    data = _telemetry_datagrams(n)
+    rates_parse, rates_full = [], []
+    for _ in range(repeat):
+        link = MavlinkLink(LinkConfig(url="udpin:127.0.0.1:1"))
+        link.codec = px4.make_codec(None, 2, 1)
+        out: list = []
+        t0 = time.perf_counter()
+        for d in data:
+            link.feed(d, 0.0, out)
+        rates_parse.append(len(out) / (time.perf_counter() - t0))
+        assert len(out) == n and link.stats.bad_data == 0
+        dec = TelemetryDecoder()
+        link.codec = px4.make_codec(None, 2, 1)
+        t0 = time.perf_counter()
+        for i, d in enumerate(data):
+            for m in link.feed(d, 0.0):
+                dec.on_message(m, i * 1e-3)
+        rates_full.append(n / (time.perf_counter() - t0))
+    return statistics.median(rates_parse), statistics.median(rates_full)
+
+
+def _active_bridge():
+    """Bridge in OFFBOARD_ACTIVE (attitude_rate) against the sim vehicle, then hand over the
+    vehicle's socket to the benchmark."""
+    port = free_udp_port()
+    veh = SimVehicle(SimVehicleConfig(url=f"udpout:127.0.0.1:{port}"))
+    core = BridgeCore(BridgeConfig(link=LinkConfig(url=f"udpin:127.0.0.1:{port}", link_timeout=30.0),
+                                   offboard=OffboardConfig(arm=True, input_timeout=30.0),
+                                   command="attitude_rate", telemetry_max_age=1e6))
+    core.open(0.0)
+    veh.open()
+    u = np.array([0.3, 0.0, 0.0, 0.0])
+    t = 0.0
+    for i in range(2000):
+        t += 0.004
+        veh.step(t)
+        if i % 5 == 0:
+            core.on_actuator_command(t, u)
+        if i == 50:
+            core.start(t)
+        core.poll(t)
+        if core.state == State.OFFBOARD_ACTIVE:
+            break
+    assert core.state == State.OFFBOARD_ACTIVE, core.state
+    return veh, core, t
+
+
+def bench_latency(n: int = 2000) -> dict[str, list[float]]:
+    veh, core, t_sim = _active_bridge()
+    sock: socket.socket = veh.link.conn.port          # the vehicle's UDP socket
+    sock.setblocking(True)
+    sock.settimeout(1.0)
+    dest = ("127.0.0.1", core.link.conn.port.getsockname()[1])
+    tx = veh.link.codec
+    u = np.array([0.3, 0.001, 0.0, 0.0])
+
+    def on_sample(s):
+        if isinstance(s, StateSample):
+            core.on_actuator_command(core_clock[0], u)
+
+    core_clock = [t_sim]
+    core.sample_callback = on_sample
+    results: dict[str, list[float]] = {"same_thread": [], "bridge_thread": []}
+
+    def drain():
+        sock.setblocking(False)
+        try:
+            while True:
+                sock.recv(65535)
+        except (BlockingIOError, socket.timeout):
+            pass
+        sock.setblocking(True)
+        sock.settimeout(1.0)
+
+    def one(i: int, poll_inline: bool) -> float | None:
+        msg = tx.attitude_quaternion_encode(int(t_sim * 1000) + 1000 + i, 1.0, 0, 0, 0, 0, 0, 0, [0.0] * 4)
+        buf = msg.pack(tx)
+        t0 = time.perf_counter()
+        sock.sendto(buf, dest)
+        if poll_inline:
+            core_clock[0] += 0.001
+            core.poll(core_clock[0])
+        while True:
+            data = sock.recv(65535)
+            m = tx.parse_buffer(data)
+            if m and any(x.get_type() == "SET_ATTITUDE_TARGET" for x in m):
+                return time.perf_counter() - t0
+
+    drain()
+    for i in range(n):
+        lat = one(i, True)
+        if lat is not None:
+            results["same_thread"].append(lat)
+    stop = threading.Event()
+
+    def bridge_loop():
+        while not stop.is_set():
+            if core.link.wait_readable(0.01):
+                core_clock[0] += 0.001
+                core.poll(core_clock[0])
+
+    th = threading.Thread(target=bridge_loop, daemon=True)
+    th.start()
+    time.sleep(0.05)
+    drain()
+    try:
+        for i in range(n):
+            lat = one(n + i, False)
+            if lat is not None:
+                results["bridge_thread"].append(lat)
+            time.sleep(0.0005)
+    finally:
+        stop.set()
+        th.join(2.0)
+        core.close()
+        veh.close()
+    return results
+
+
+def main() -> None:
+    parse, full = bench_decode()
+    print(f"decode MavlinkLink.feed (parse+counters)      : {parse:10.0f} msgs/s (median of 5, 30000 msgs)")
+    print(f"decode feed + TelemetryDecoder (samples)      : {full:10.0f} msgs/s (median of 5)")
+    res = bench_latency()
+    for k, v in res.items():
+        a = np.array(v) * 1e3
+        print(f"latency telemetry->command {k:<13}      : median {np.median(a):.3f} ms, p99 "
+              f"{np.percentile(a, 99):.3f} ms, max {a.max():.3f} ms (n={len(a)})")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,51 @@
+"""Phase 1 (seed 0 Sec. 3): PX4 baseline velocity control + excitation, logged.
+
+    ros2 launch lpv_sysid phase1.launch.py [vertex:="[2.0, 0.0, 0.0]"] [config_dir:=...]
+
+Nodes (namespace /lpv_sysid): excitation (phase-1 mode: vertex offset + multisine on
+u, v, w and yaw rate), mavlink_bridge (velocity setpoints to PX4), data_logger.
+One vertex per run: pass ``vertex`` (body velocity u, v, w in the seed's FRD frame,
+m/s); run the file again for the next vertex of the box.
+"""
+
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
+from launch_ros.actions import Node
+
+NAMESPACE = "lpv_sysid"
+
+
+def generate_launch_description():
+    share = get_package_share_directory("lpv_sysid")
+    config_dir = LaunchConfiguration("config_dir")
+
+    def params(name):
+        return PathJoinSubstitution([config_dir, name])
+
+    return LaunchDescription([
+        DeclareLaunchArgument("config_dir", default_value=os.path.join(share, "config"),
+                              description="directory holding the node parameter files"),
+        DeclareLaunchArgument("signals_file", default_value="signals.npz",
+                              description="signals.npz written by `lpv-sysid signals`"),
+        DeclareLaunchArgument("vertex", default_value="[0.0, 0.0, 0.0]",
+                              description="vertex body velocity (u, v, w) FRD, m/s, for this run"),
+        DeclareLaunchArgument("log_dir", default_value="phase1_log",
+                              description="experiment directory of the data logger"),
+        Node(package="lpv_sysid", executable="excitation_node", name="excitation",
+             namespace=NAMESPACE, output="screen",
+             parameters=[params("excitation_node.yaml"),
+                         {"mode": "phase1",
+                          "signals_file": LaunchConfiguration("signals_file"),
+                          "vertex_frd": LaunchConfiguration("vertex")}]),
+        Node(package="lpv_sysid", executable="mavlink_bridge_node", name="mavlink_bridge",
+             namespace=NAMESPACE, output="screen",
+             parameters=[params("mavlink_bridge_node.yaml"), {"command": "velocity"}]),
+        Node(package="lpv_sysid", executable="data_logger_node", name="data_logger",
+             namespace=NAMESPACE, output="screen",
+             parameters=[params("data_logger.yaml"),
+                         {"out_dir": LaunchConfiguration("log_dir")}]),
+    ])

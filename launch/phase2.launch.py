@@ -1,0 +1,51 @@
+"""Phase 2 (seed 0 Sec. 4): robust LPV control of the vehicle + excitation, logged.
+
+    ros2 launch lpv_sysid phase2.launch.py gains_file:=gains.yaml [signals_file:=...]
+
+Nodes (namespace /lpv_sysid): excitation (phase-2 mode: v_d(t) and u_e(t)),
+lpv_controller (refuses to start on an invalid gains file), mavlink_bridge (actuator
+commands to PX4; hands control back to PX4 when commands stop), data_logger.
+"""
+
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
+from launch_ros.actions import Node
+
+NAMESPACE = "lpv_sysid"
+
+
+def generate_launch_description():
+    share = get_package_share_directory("lpv_sysid")
+    config_dir = LaunchConfiguration("config_dir")
+
+    def params(name):
+        return PathJoinSubstitution([config_dir, name])
+
+    gains = LaunchConfiguration("gains_file")
+    return LaunchDescription([
+        DeclareLaunchArgument("config_dir", default_value=os.path.join(share, "config"),
+                              description="directory holding the node parameter files"),
+        DeclareLaunchArgument("gains_file", description="gains.yaml from `lpv-sysid synthesize`"),
+        DeclareLaunchArgument("signals_file", default_value="signals.npz",
+                              description="signals.npz written by `lpv-sysid signals`"),
+        DeclareLaunchArgument("log_dir", default_value="phase2_log",
+                              description="experiment directory of the data logger"),
+        Node(package="lpv_sysid", executable="excitation_node", name="excitation",
+             namespace=NAMESPACE, output="screen",
+             parameters=[params("excitation_node.yaml"),
+                         {"mode": "phase2", "signals_file": LaunchConfiguration("signals_file")}]),
+        Node(package="lpv_sysid", executable="lpv_controller_node", name="lpv_controller",
+             namespace=NAMESPACE, output="screen",
+             parameters=[params("lpv_controller.yaml"), {"gains_file": gains}]),
+        Node(package="lpv_sysid", executable="mavlink_bridge_node", name="mavlink_bridge",
+             namespace=NAMESPACE, output="screen",
+             parameters=[params("mavlink_bridge_node.yaml"), {"command": "attitude_rate"}]),
+        Node(package="lpv_sysid", executable="data_logger_node", name="data_logger",
+             namespace=NAMESPACE, output="screen",
+             parameters=[params("data_logger.yaml"),
+                         {"out_dir": LaunchConfiguration("log_dir"), "gains_file": gains}]),
+    ])

@@ -1,0 +1,151 @@
+"""`lpv-sysid identify`: phase-1 bags -> vertex_models.yaml (seed 0 Sec. IV, Tables 1-3).
+
+    lpv-sysid identify --bags DIR --config config/identification.yaml --out vertex_models.yaml
+
+Every rosbag2 directory under DIR is one maneuver.  Its velocity reference during the
+trim segment decides what it is: a corner of the scheduling box -> a vertex model; the
+box centre -> the independent validation maneuver (seed 0 Table 3, Fig. 4).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+COMMAND = "identify"
+HELP = "identify the uncertain vertex LTI models from phase-1 bags (seed 0 Sec. IV)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--bags", required=True, type=Path, help="directory holding one rosbag2 per maneuver")
+    parser.add_argument("--config", type=Path, default=None,
+                        help="identification YAML (default: built-in values = config/identification.yaml)")
+    parser.add_argument("--out", required=True, type=Path, help="vertex_models.yaml to write")
+    parser.add_argument("--plot", type=Path, default=None,
+                        help="validation figure (default: next to --out, <stem>_validation.png)")
+    parser.add_argument("--quadrotor", type=Path, default=None,
+                        help="config/quadrotor.yaml: vehicle parameters for the known elements")
+
+
+def load_config(path: Path | None):
+    from lpv_sysid.errors import ConfigError
+    from lpv_sysid.ident.vertex import IdentificationConfig
+
+    if path is None:
+        return IdentificationConfig()
+    import yaml
+
+    try:
+        d = yaml.safe_load(Path(path).read_text())
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read ({exc.strerror})") from None
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: malformed YAML ({str(exc).splitlines()[0]})") from None
+    try:
+        return IdentificationConfig.from_dict(d)
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
+
+
+def _quadrotor_params(path: Path | None) -> dict:
+    if path is None:
+        return {}
+    from lpv_sysid.errors import ConfigError
+    import yaml
+
+    try:
+        d = yaml.safe_load(Path(path).read_text()) or {}
+    except (OSError, yaml.YAMLError) as exc:
+        raise ConfigError(f"{path}: cannot read ({exc})") from None
+    q = d.get("quadrotor", {}) if isinstance(d, dict) else None
+    if not isinstance(q, dict):
+        raise ConfigError(f"{path}: section 'quadrotor' must be a mapping")
+    return q
+
+
+def format_r2_table(results) -> str:
+    from lpv_sysid.ident.metrics import AXES
+
+    lines = ["LTI equation-error coefficient of determination R^2 [%] (seed 0 Table 2)",
+             f"{'Nominal vertex':>18} " + " ".join(f"{a:>7}" for a in AXES)]
+    for r in results:
+        vtx = "[" + " ".join(f"{c:+g}" for c in r.scheduling) + "]"
+        lines.append(f"{vtx:>18} " + " ".join(f"{100 * r.r2_axes[a]:7.1f}" for a in AXES))
+    return "\n".join(lines)
+
+
+def format_validation_table(val: dict) -> str:
+    from lpv_sysid.ident.metrics import AXES
+
+    return "\n".join([
+        "LPV model validation metrics (seed 0 Table 3)",
+        f"{'Axis':>6} " + " ".join(f"{a:>7}" for a in AXES),
+        f"{'TIC':>6} " + " ".join(f"{val['tic'][a]:7.3f}" for a in AXES),
+        f"{'NRMSE':>6} " + " ".join(f"{val['nrmse'][a]:7.3f}" for a in AXES)])
+
+
+def run(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    import numpy as np
+
+    from lpv_sysid.errors import ConfigError
+    from lpv_sysid.ident import dataprep as dp
+    from lpv_sysid.ident import metrics
+    from lpv_sysid.ident import vertex as vx
+    from lpv_sysid.io.formats import VertexModels
+
+    cfg = load_config(args.config)
+    if args.quadrotor is not None:
+        cfg = dataclasses.replace(cfg, quadrotor=_quadrotor_params(args.quadrotor))
+    bags = dp.find_bags(args.bags)
+    centre = 0.5 * (np.asarray(cfg.vmin) + np.asarray(cfg.vmax))
+    vertices, validation = {}, None
+    for bag in bags:
+        aligned = dp.align(dp.streams_from_bag(bag), cfg)
+        v_d = dp.snap_to_box(aligned.vertex.scheduling, cfg)
+        data = dataclasses.replace(aligned.vertex, scheduling=v_d)
+        if np.allclose(v_d, centre):
+            if validation is not None:
+                raise ConfigError(f"{bag}: second validation maneuver at the box centre "
+                                  f"(first: {validation.name})")
+            validation = data
+            continue
+        key = tuple(v_d)
+        if key in vertices:
+            raise ConfigError(f"{bag}: vertex {list(key)} already given by {vertices[key].name}")
+        if aligned.input_source != "actuator_command":
+            print(f"{bag.name}: no actuator_command, input reconstructed from rotor speeds (Eq. 8)")
+        vertices[key] = data
+    missing = [c.tolist() for c in vx.box_corners(cfg) if tuple(c) not in vertices]
+    if missing:
+        raise ConfigError(f"{args.bags}: no maneuver for vertex/vertices {missing}")
+    results = []
+    for key, data in vertices.items():
+        res = vx.identify_vertex(data, cfg)
+        ins = vx.in_sample_metrics(res, data, cfg)
+        results.append(dataclasses.replace(res, validation=ins))
+    results = [results[k] for k in vx.vertex_order(results, cfg)]
+    print("Flight data vertex equilibria (seed 0 Table 1)")
+    print(dp.format_table1([(r.scheduling, dp.trim_row(r.x0)) for r in results]))
+    print()
+    print(format_r2_table(results))
+    val = None
+    if validation is not None:
+        val = vx.validate(results, validation, cfg)
+        val["name"] = validation.name
+        print()
+        print(format_validation_table(val))
+    doc = vx.vertex_models_dict(results, cfg, val)
+    models = VertexModels.from_dict(doc)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    sha = models.save(args.out)
+    print()
+    print(f"uncertain systems per vertex M_i = {[r.uncertain.M for r in results]} "
+          f"({cfg.uncertainty.method}, p_max={cfg.uncertainty.p_max}, k={cfg.uncertainty.k_sigma:g})")
+    print(f"wrote {args.out} (sha256 {sha[:12]})")
+    if val is not None:
+        plot = args.plot or args.out.with_name(args.out.stem + "_validation.png")
+        metrics.plot_validation(val["t"], val["xdot_m"], val["xdot_f"], str(plot))
+        print(f"wrote {plot}")
+    return 0

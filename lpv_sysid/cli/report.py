@@ -1,0 +1,31 @@
+"""`lpv-sysid report`: Markdown report (+ PNG figures) of a run directory."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+COMMAND = "report"
+HELP = "write a Markdown report with figures from the artefacts of a run directory"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--run", required=True, type=Path, help="run directory (e.g. demo_out)")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="report path, ending in .md (default: RUN/report/report.md); figures go next to it")
+    parser.add_argument("--strict", action="store_true",
+                        help="exit 2 when an input file exists but cannot be read")
+
+
+def run(args: argparse.Namespace) -> int:
+    from lpv_sysid.errors import ConfigError
+    from lpv_sysid.report.data import load_run
+    from lpv_sysid.report.markdown import write_report
+
+    if args.strict:
+        problems = load_run(args.run).problems
+        if problems:
+            raise ConfigError("; ".join(problems.values()))
+    path = write_report(args.run, args.out)
+    print(path)
+    return 0

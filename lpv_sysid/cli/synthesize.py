@@ -1,0 +1,159 @@
+"""`lpv-sysid synthesize`: robust LPV H-infinity state feedback (seed 0 Lemma 1) -> gains.yaml.
+
+    lpv-sysid synthesize --models vertex_models.yaml --config config/synthesis.yaml --out gains.yaml
+
+Writes gains.yaml (ARCHITECTURE.md section 5) with the certificate entry and the sidecar
+``<out stem>.cert.npz`` (X, S, H, scaling) referenced by name and sha256; then runs the
+independent verification (``lpv-sysid verify``) on what it wrote unless ``--no-verify``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from lpv_sysid.errors import ConfigError, SolverError
+
+COMMAND = "synthesize"
+HELP = "robust polytopic LPV H-infinity state feedback (seed 0 Lemma 1) -> gains.yaml + certificate"
+
+log = logging.getLogger(__name__)
+
+_TOP_KEYS = {"hinf", "weights", "velocity_states", "uncertainty", "verify"}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--models", required=True, help="vertex_models.yaml (identify)")
+    parser.add_argument("--config", required=True, help="config/synthesis.yaml")
+    parser.add_argument("--out", required=True, help="gains.yaml to write (sidecar <stem>.cert.npz next to it)")
+    parser.add_argument("--summary", default=None, help="signals summary.yaml with R and Q (overrides weights)")
+    parser.add_argument("--gamma", type=float, default=None, help="override hinf.gamma")
+    parser.add_argument("--solver", default=None, help="override hinf.solver (CLARABEL, SCS, MOSEK)")
+    parser.add_argument("--no-verify", action="store_true", help="skip the independent verification")
+
+
+def load_config(path: str) -> dict:
+    from lpv_sysid.synthesis.files import read_yaml
+
+    cfg = read_yaml(path, "config")
+    bad = set(cfg) - _TOP_KEYS
+    if bad:
+        raise ConfigError(f"{path}: unknown key(s) {sorted(bad)}; known: {sorted(_TOP_KEYS)}")
+    return cfg
+
+
+def weights_from_config(cfg: dict, n_u: int, summary_path: str | None, cfg_path: str) -> tuple[np.ndarray, np.ndarray, str]:
+    """(R, Q, source) from a signals summary (R, Q entries) or from Eqs. (27)-(28)."""
+    from lpv_sysid.synthesis.files import read_yaml
+    from lpv_sysid.synthesis.hinf_lmi import excitation_R, output_Q
+
+    w = dict(cfg.get("weights") or {})
+    summary_path = summary_path or w.get("summary")
+    if summary_path:
+        p = Path(summary_path)
+        if not p.is_absolute() and not p.exists():
+            p = Path(cfg_path).parent / p
+        s = read_yaml(p, "signals summary")
+        if "R" not in s or "Q" not in s:
+            raise ConfigError(f"{p}: signals summary has no 'R'/'Q' (write it with weights in the signals config)")
+        R = np.array(s["R"], dtype=float)
+        Q = np.array(s["Q"], dtype=float)
+        if R.shape[0] != n_u or Q.ndim != 2 or Q.shape[0] != Q.shape[1]:
+            raise ConfigError(f"{p}: R {R.shape} / Q {Q.shape} do not fit {n_u} inputs")
+        return R, Q, str(p)
+    bad = set(w) - {"T", "input_magnitudes", "output_magnitudes", "summary"}
+    if bad:
+        raise ConfigError(f"{cfg_path}: weights: unknown key(s) {sorted(bad)}")
+    try:
+        T = float(w["T"])
+        R = excitation_R(w["input_magnitudes"], T)
+        Q = output_Q(w["output_magnitudes"], T)
+    except KeyError as exc:
+        raise ConfigError(f"{cfg_path}: weights.{exc.args[0]} missing") from None
+    if R.shape[0] != n_u:
+        raise ConfigError(f"{cfg_path}: weights.input_magnitudes has {R.shape[0]} entries, the model {n_u} inputs")
+    return R, Q, "Eqs. (27)-(28)"
+
+
+def velocity_index(cfg: dict, state_names: tuple) -> tuple[int, ...]:
+    names = cfg.get("velocity_states", ["u", "v", "w"])
+    try:
+        return tuple(state_names.index(n) for n in names)
+    except ValueError:
+        raise ConfigError(f"velocity_states {names} not all among the model states {list(state_names)}") from None
+
+
+def run(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from lpv_sysid.synthesis.files import (gains_dict, load_models, save_certificate_npz, save_yaml,
+                                           sha256_file)
+    from lpv_sysid.synthesis.hinf_lmi import HinfOptions, performance_matrix, synthesize_hinf
+
+    cfg = load_config(args.config)
+    opts = HinfOptions.from_dict(cfg.get("hinf"))
+    if args.gamma is not None:
+        opts = replace(opts, gamma=float(args.gamma))
+    if args.solver is not None:
+        opts = HinfOptions.from_dict({**{k: getattr(opts, k) for k in opts.__dataclass_fields__},
+                                      "solver": args.solver})
+    model, raw = load_models(args.models, cfg.get("uncertainty"))
+    R, Q, source = weights_from_config(cfg, model.n_u, args.summary, args.config)
+    vidx = velocity_index(cfg, model.state_names)
+    C = performance_matrix(Q, model.n_x, vidx)
+    Ms = [len(s) for s in model.systems]
+    print(f"models: {args.models} ({model.n_vertices} vertices x M = {Ms} uncertainty vertices, "
+          f"{model.n_x} states, {model.n_u} inputs); R, Q from {source}")
+    if model.ts is not None:
+        raise ConfigError(f"{args.models}: Lemma 1 is a continuous-time result; the models are discrete "
+                          f"(Ts={model.ts})")
+    try:
+        res = synthesize_hinf(model, R, C, opts)
+    except SolverError as exc:
+        raise SolverError(str(exc).replace("\n", " | ")) from None
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    side = out.with_name(out.stem + ".cert.npz")
+    side_sha = save_certificate_npz(side, res.X, res.S, res.H, res.scaling.t, res.scaling.s_u, R, C)
+    cert = {
+        "lmi": "seed 0 Lemma 1" + (" + seed 2 Eq. (125) region (common H)" if opts.region else ""),
+        "solver": res.solver,
+        "status": res.status,
+        "gamma_requested": float(opts.gamma),
+        "gamma_achieved": float(res.gamma_certified),
+        "min_margin": float(res.min_margin),
+        "eps": float(opts.eps),
+        "models_sha256": sha256_file(args.models),
+        "uncertainty": cfg.get("uncertainty"),
+        "uncertainty_vertices": Ms,
+        "problem": res.size.as_dict(),
+        "compile_time_s": round(res.compile_time, 3),
+        "solve_time_s": round(res.solve_time, 3),
+        "sidecar": {"file": side.name, "sha256": side_sha},
+    }
+    if opts.region is not None:
+        cert["region"] = opts.region.to_dict()
+    gamma_file = float(opts.gamma) if not opts.minimize_gamma else float(max(res.gamma_certified, 1e-12))
+    save_yaml(gains_dict(raw, model, res.K, R, Q, gamma_file, cert), out)
+    print(f"LMI: {res.size.lmi_blocks} blocks (total dim {res.size.lmi_total_dim}, {res.size.scalar_constraints} "
+          f"scalar constraints), {res.size.scalar_variables} scalar variables; "
+          f"compile {res.compile_time:.2f} s, solve {res.solve_time:.2f} s ({res.solver}, {res.status})")
+    print(f"gamma requested {opts.gamma:g}, certified (numpy re-evaluation of Eq. 30) {res.gamma_certified:.4g}, "
+          f"min margin {res.min_margin:.3g}")
+    print(f"wrote {out}")
+    print(f"wrote {side}")
+    if args.no_verify:
+        return 0
+    from lpv_sysid.synthesis.verify import verify_files
+
+    vcfg = cfg.get("verify") or {}
+    rep = verify_files(out, args.models, n_random=int(vcfg.get("n_random", 20)), seed=int(vcfg.get("seed", 0)),
+                       velocity_index=vidx)
+    print(rep.table())
+    if not rep.passed:
+        print("independent verification FAILED (see table); the gains file was written but must not be flown")
+        return 1
+    return 0

@@ -1,0 +1,223 @@
+"""Runtime robust LPV law of seed 0 Eqs. (17), (31): u = u0(v_d) + K(v_d) (x - x0(v_d)) + R u_e.
+
+One :meth:`LpvController.step` does, in this order:
+
+1. input check: NaN/inf in x, v_d, u_e or t -> :class:`SafetyError`; time going backwards ->
+   :class:`SafetyError`;
+2. multilinear weights alpha_i(v_d) (seed 0 Eq. 21, vertex order of ``models.lpv.box_vertices``);
+   v_d outside the box is clamped onto it and ``info["clamped"]`` is set (the safety supervisor
+   decides what to do with it);
+3. one small matrix product ``alpha @ W`` with the precomputed stack W = [vec K_i | x0_i | u0_i]
+   gives K(v_d), x0(v_d), u0(v_d) together;
+4. the law ``u = u0 + K (x - x0) + R u_e``;
+5. actuator saturation through the mixer (seed 0 Eq. 7): ``u_ESC = clip(Mix^-1 u, 0, 1)``,
+   ``u = Mix u_ESC`` (the mixer is a constructor argument; without it no saturation);
+6. optional rate limit ``|u_k - u_{k-1}| <= rate * dt`` per channel (after saturation, and the
+   result re-saturated, so the command stays feasible);
+7. bound monitor: running energies of ``z = Q^-1 (v - v_d)`` (Eq. 18) and ``u_e``
+   (rectangle rule), gain estimate ``sqrt(E_z / E_e)`` compared with ``gamma * margin`` only after
+   ``E_e >= min_energy`` (before that the ratio is meaningless: z also contains the response to
+   initial conditions and reference changes). ``info["bound_exceeded"]`` latches.
+
+Pure numpy, no allocation beyond a few small temporaries; see bench/bench_lpv_law.py.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Optional, Sequence
+
+import numpy as np
+
+from lpv_sysid.errors import ConfigError, SafetyError
+
+
+@dataclass(frozen=True)
+class LpvControllerConfig:
+    """Options of the runtime law (``lpv_controller`` section of the node config)."""
+
+    u_esc_min: float = 0.0
+    u_esc_max: float = 1.0
+    rate_limit: Optional[tuple] = None      # per virtual channel, units of u per second
+    monitor_margin: float = 1.2             # flag when gain > gamma * margin
+    monitor_min_energy: float = 0.05        # ||u_e||_2^2 needed before the gain is judged
+    velocity_index: tuple = (2, 3, 4)       # u, v, w in the 12-state of DESIGN.md
+
+    @classmethod
+    def from_dict(cls, d: Optional[dict]) -> "LpvControllerConfig":
+        d = dict(d or {})
+        bad = set(d) - set(cls.__dataclass_fields__)
+        if bad:
+            raise ConfigError(f"lpv_controller: unknown key(s) {sorted(bad)}")
+        if "rate_limit" in d and d["rate_limit"] is not None:
+            d["rate_limit"] = tuple(float(v) for v in d["rate_limit"])
+        if "velocity_index" in d:
+            d["velocity_index"] = tuple(int(v) for v in d["velocity_index"])
+        cfg = cls(**d)
+        if not cfg.u_esc_min < cfg.u_esc_max:
+            raise ConfigError("lpv_controller: need u_esc_min < u_esc_max")
+        if not (cfg.monitor_margin > 0 and cfg.monitor_min_energy > 0):
+            raise ConfigError("lpv_controller: monitor_margin and monitor_min_energy must be > 0")
+        if cfg.rate_limit is not None and any(not (r > 0) for r in cfg.rate_limit):
+            raise ConfigError("lpv_controller: rate_limit entries must be > 0")
+        return cfg
+
+
+def _schedule_arrays(schedule: Any) -> tuple:
+    """(K, x0, u0, R, Q, gamma, vmin, vmax) from io.formats.GainSchedule or synthesis.files.Gains."""
+    K = np.asarray(schedule.K, dtype=float)
+    x0 = np.asarray(schedule.x0, dtype=float)
+    u0 = np.asarray(schedule.u0, dtype=float)
+    if hasattr(schedule, "scheduling") and hasattr(schedule.scheduling, "min"):
+        vmin, vmax = schedule.scheduling.min, schedule.scheduling.max
+    else:
+        vmin, vmax = schedule.vmin, schedule.vmax
+    return (K, x0, u0, np.asarray(schedule.R, float), np.asarray(schedule.Q, float), float(schedule.gamma),
+            np.asarray(vmin, float), np.asarray(vmax, float))
+
+
+class LpvController:
+    """The runtime law; ``schedule`` is a loaded gains file (io.formats.GainSchedule)."""
+
+    def __init__(self, schedule: Any, config: LpvControllerConfig = LpvControllerConfig(),
+                 mix: Optional[np.ndarray] = None) -> None:
+        K, x0, u0, R, Q, gamma, vmin, vmax = _schedule_arrays(schedule)
+        N, m, n = K.shape
+        p = vmin.size
+        if N != 2 ** p or x0.shape != (N, n) or u0.shape != (N, m) or R.shape[0] != m:
+            raise ConfigError(f"gain schedule shapes inconsistent: K {K.shape}, x0 {x0.shape}, u0 {u0.shape}, "
+                              f"R {R.shape} for a {p}-axis box")
+        if np.any(vmax <= vmin):
+            raise ConfigError("gain schedule: scheduling box needs max > min")
+        self.n_x, self.n_u, self.n_p = n, m, p
+        self.vmin = vmin.copy()
+        self.inv_range = 1.0 / (vmax - vmin)
+        self.vmax = vmax.copy()
+        # W = [vec K_i | x0_i | u0_i]: one product alpha @ W interpolates everything (Eq. 31)
+        self.W = np.ascontiguousarray(np.hstack([K.reshape(N, m * n), x0, u0]))
+        self._mn = m * n
+        self.R = np.ascontiguousarray(R)
+        self.n_e = R.shape[1]
+        self.Qinv = np.linalg.inv(Q)
+        vi = tuple(config.velocity_index)
+        # a contiguous index set becomes a slice (a view, cheaper than fancy indexing)
+        self.vel = (slice(vi[0], vi[-1] + 1) if vi == tuple(range(vi[0], vi[-1] + 1))
+                    else np.array(vi, dtype=int))
+        self._vel_max = max(vi)
+        self._n_vel = len(vi)
+        if self.Qinv.shape[0] != self._n_vel or self._vel_max >= n:
+            raise ConfigError(f"Q is {Q.shape[0]}x{Q.shape[0]} but velocity_index is {config.velocity_index}")
+        self.gamma = gamma
+        self.cfg = config
+        if mix is not None:
+            mix = np.asarray(mix, dtype=float)
+            if mix.shape != (m, m):
+                raise ConfigError(f"mixer must be {m}x{m}, got {mix.shape}")
+            self.mix = mix
+            self.mix_inv = np.linalg.inv(mix)
+        else:
+            self.mix = self.mix_inv = None
+        if config.rate_limit is not None and len(config.rate_limit) != m:
+            raise ConfigError(f"rate_limit needs {m} entries, got {len(config.rate_limit)}")
+        self.rate = None if config.rate_limit is None else np.asarray(config.rate_limit, dtype=float)
+        self._rate_list = None if self.rate is None else self.rate.tolist()
+        self.threshold = gamma * config.monitor_margin
+        self.reset()
+
+    def reset(self) -> None:
+        self.t_prev: Optional[float] = None
+        self.u_prev: Optional[np.ndarray] = None
+        self.energy_z = 0.0
+        self.energy_e = 0.0
+        self.bound_exceeded = False
+
+    # -- pieces (public for tests) -----------------------------------------------------
+    def weights(self, v_d: np.ndarray) -> tuple[np.ndarray, bool]:
+        """alpha(v_d) (clamped) and the clamp flag; box order of models.lpv.box_vertices."""
+        t = ((v_d - self.vmin) * self.inv_range).tolist()
+        clamped = False
+        for k, tk in enumerate(t):
+            if tk < 0.0 or tk > 1.0:
+                clamped = True
+                t[k] = 0.0 if tk < 0.0 else 1.0
+        if self.n_p == 3:
+            # unrolled kron((1-a, a), (1-b, b), (1-c, c)): plain floats are faster than 3 np.kron
+            a, b, c = t
+            a0, b0, c0 = 1.0 - a, 1.0 - b, 1.0 - c
+            p00, p01, p10, p11 = a0 * b0, a0 * b, a * b0, a * b
+            return np.array((p00 * c0, p00 * c, p01 * c0, p01 * c, p10 * c0, p10 * c, p11 * c0, p11 * c)), clamped
+        alpha = np.ones(1)
+        for tk in t:
+            alpha = np.kron(alpha, np.array((1.0 - tk, tk)))
+        return alpha, clamped
+
+    def gain(self) -> float:
+        """Running estimate ||z||_2 / ||u_e||_2 (NaN before any excitation)."""
+        return math.sqrt(self.energy_z / self.energy_e) if self.energy_e > 0 else float("nan")
+
+    # -- the step ----------------------------------------------------------------------
+    def step(self, t: float, x: np.ndarray, v_d: np.ndarray, u_e: np.ndarray) -> tuple[np.ndarray, dict]:
+        try:
+            x = np.asarray(x, dtype=float)
+            v_d = np.asarray(v_d, dtype=float)
+            u_e = np.asarray(u_e, dtype=float)
+            t = float(t)
+        except (TypeError, ValueError) as exc:
+            raise SafetyError(f"lpv law: non-numeric input ({exc})") from None
+        if x.shape != (self.n_x,) or v_d.shape != (self.n_p,) or u_e.shape != (self.n_e,):
+            raise SafetyError(f"lpv law: shapes x {x.shape}, v_d {v_d.shape}, u_e {u_e.shape}; expected "
+                              f"({self.n_x},), ({self.n_p},), ({self.n_e},)")
+        # one finiteness test for all inputs: a sum of squares is NaN/inf iff an entry is (or
+        # overflows, which is also refused); ee is reused by the monitor
+        ee = float(u_e @ u_e)
+        if not math.isfinite(t + float(x @ x) + float(v_d @ v_d) + ee):
+            raise SafetyError(_nonfinite_message(t, x, v_d, u_e))
+        dt = 0.0
+        if self.t_prev is not None:
+            dt = t - self.t_prev
+            if dt < 0.0:
+                raise SafetyError(f"lpv law: time went backwards ({self.t_prev} -> {t})")
+        alpha, clamped = self.weights(v_d)
+        row = alpha @ self.W
+        mn, n = self._mn, self.n_x
+        u = row[mn + n:] + row[:mn].reshape(self.n_u, n) @ (x - row[mn:mn + n]) + self.R @ u_e
+        saturated = False
+        if self.mix is not None:
+            u, saturated = self._saturate(u)
+        rate_limited = False
+        if self.rate is not None and self.u_prev is not None:
+            du = u - self.u_prev
+            if any(abs(d) > r * dt for d, r in zip(du.tolist(), self._rate_list)):
+                step_max = self.rate * dt
+                u = self.u_prev + np.clip(du, -step_max, step_max)
+                rate_limited = True
+                if self.mix is not None:
+                    u, sat2 = self._saturate(u)
+                    saturated = saturated or sat2
+        self.u_prev = u
+        self.t_prev = t
+        # bound monitor (Eq. 18 performance output, Eq. 26/29 energies)
+        if dt > 0.0:
+            z = self.Qinv @ (x[self.vel] - v_d)
+            self.energy_z += float(z @ z) * dt
+            self.energy_e += ee * dt
+        judged = self.energy_e >= self.cfg.monitor_min_energy
+        if judged and self.energy_z > self.threshold * self.threshold * self.energy_e:
+            self.bound_exceeded = True
+        return u, {"clamped": clamped, "saturated": saturated, "rate_limited": rate_limited,
+                   "bound_judged": judged, "bound_exceeded": self.bound_exceeded}
+
+    def _saturate(self, u: np.ndarray) -> tuple[np.ndarray, bool]:
+        esc = self.mix_inv @ u
+        lo, hi = self.cfg.u_esc_min, self.cfg.u_esc_max
+        lst = esc.tolist()
+        if min(lst) < lo or max(lst) > hi:
+            return self.mix @ np.clip(esc, lo, hi), True
+        return u, False
+
+
+def _nonfinite_message(t, x, v_d, u_e) -> str:
+    bad = [name for name, a in (("t", np.atleast_1d(t)), ("x", x), ("v_d", v_d), ("u_e", u_e))
+           if not np.all(np.isfinite(np.asarray(a, dtype=float)))]
+    return f"lpv law: non-finite input in {', '.join(bad) or 'inputs (overflow)'}"

@@ -1,0 +1,202 @@
+"""Safety supervisor: the conditions that end an experiment in a safe state.
+
+Watches the inputs of the phase-2 loop (seed 0 Sec. 4: the LPV controller is only
+certified inside the scheduling box and with fresh state feedback) and latches an abort
+on the first of:
+
+- ``stale``          an input stream older than its timeout (receipt time, node clock);
+- ``out_of_order``   a stream's header stamp going backwards;
+- ``non_finite``     NaN/inf in any input value or stamp;
+- ``out_of_box``     the scheduling vector v_d outside the box (plus a margin);
+- ``bound_exceeded`` the bound monitor flag raised (state/excitation bounds);
+- ``external``       an operator or another node asked for an abort.
+
+Once aborted, :attr:`action` is the safe state: excitation off and no actuator command
+(the bridge then stops offboard streaming so PX4 takes control back, ARCHITECTURE.md
+Sec. 4). The abort stays latched until :meth:`reset` is called while disarmed.
+The supervisor is pure: it never reads a clock; every call carries its time.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from lpv_sysid.errors import ConfigError, SafetyError
+
+STALE = "stale"
+OUT_OF_ORDER = "out_of_order"
+NON_FINITE = "non_finite"
+OUT_OF_BOX = "out_of_box"
+BOUND_EXCEEDED = "bound_exceeded"
+EXTERNAL = "external"
+REASONS = (STALE, OUT_OF_ORDER, NON_FINITE, OUT_OF_BOX, BOUND_EXCEEDED, EXTERNAL)
+
+
+@dataclass(frozen=True)
+class SafetyConfig:
+    """Stream timeouts [s] and the scheduling box (seed 0 Eq. 17, ``v_d`` in a box)."""
+
+    timeouts: Mapping[str, float]
+    box_min: tuple[float, ...] = ()
+    box_max: tuple[float, ...] = ()
+    box_margin: float = 0.0
+
+    def __post_init__(self):
+        for name, tmo in self.timeouts.items():
+            if not isinstance(tmo, (int, float)) or not math.isfinite(tmo) or tmo <= 0.0:
+                raise ConfigError(f"safety: timeouts.{name} must be a positive number, "
+                                  f"got {tmo!r}")
+        if len(self.box_min) != len(self.box_max):
+            raise ConfigError("safety: box_min and box_max have different lengths "
+                              f"({len(self.box_min)} vs {len(self.box_max)})")
+        lo, hi = np.asarray(self.box_min, float), np.asarray(self.box_max, float)
+        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo < hi)):
+            raise ConfigError("safety: box_min must be finite and below box_max")
+        if not math.isfinite(self.box_margin) or self.box_margin < 0.0:
+            raise ConfigError(f"safety: box_margin must be >= 0, got {self.box_margin!r}")
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "SafetyConfig":
+        known = {"timeouts", "box_min", "box_max", "box_margin"}
+        bad = set(d) - known
+        if bad:
+            raise ConfigError(f"safety: unknown key(s) {sorted(bad)}")
+        if "timeouts" not in d or not isinstance(d["timeouts"], Mapping):
+            raise ConfigError("safety: 'timeouts' must be a mapping stream -> seconds")
+        return cls(timeouts=dict(d["timeouts"]),
+                   box_min=tuple(float(v) for v in d.get("box_min", ())),
+                   box_max=tuple(float(v) for v in d.get("box_max", ())),
+                   box_margin=float(d.get("box_margin", 0.0)))
+
+
+@dataclass(frozen=True)
+class SafetyEvent:
+    """A latched abort: when, why (one of :data:`REASONS`) and what exactly."""
+
+    t: float
+    reason: str
+    detail: str
+
+    def as_error(self) -> SafetyError:
+        return SafetyError(f"safety abort at t={self.t:.6f} s: {self.reason}: {self.detail}")
+
+
+@dataclass(frozen=True)
+class SafeAction:
+    """What the shells must do: publish excitation? publish actuator commands?"""
+
+    excitation_on: bool
+    commanding: bool
+
+
+_RUN = SafeAction(excitation_on=True, commanding=True)
+_SAFE = SafeAction(excitation_on=False, commanding=False)
+
+
+@dataclass
+class SafetySupervisor:
+    config: SafetyConfig
+    armed: bool = False
+    event: SafetyEvent | None = None
+    _t_arm: float = 0.0
+    _last_rx: dict = field(default_factory=dict)
+    _last_stamp: dict = field(default_factory=dict)
+
+    # -- state ------------------------------------------------------------------------
+    @property
+    def aborted(self) -> bool:
+        return self.event is not None
+
+    @property
+    def action(self) -> SafeAction:
+        """Safe state once aborted or before arming; run otherwise."""
+        return _RUN if self.armed and not self.aborted else _SAFE
+
+    def arm(self, t: float) -> None:
+        """Start monitoring at time ``t``; every stream must arrive within its timeout."""
+        if self.aborted:
+            raise self.event.as_error()
+        self.armed = True
+        self._t_arm = float(t)
+        self._last_rx.clear()
+
+    def disarm(self) -> None:
+        self.armed = False
+
+    def reset(self) -> None:
+        """Clear a latched abort (only while disarmed, i.e. on the ground / PX4 in charge)."""
+        if self.armed:
+            raise SafetyError("safety: cannot reset a latched abort while armed; disarm first")
+        self.event = None
+        self._last_stamp.clear()
+        self._last_rx.clear()
+
+    def abort(self, t: float, reason: str, detail: str) -> SafetyEvent:
+        """Latch an abort (the first one wins); return the latched event."""
+        if reason not in REASONS:
+            raise ValueError(f"unknown safety reason {reason!r}")
+        if self.event is None:
+            self.event = SafetyEvent(float(t), reason, detail)
+        return self.event
+
+    # -- inputs -----------------------------------------------------------------------
+    def on_input(self, stream: str, stamp: float, values: Sequence[float] | np.ndarray,
+                 t_now: float) -> SafetyEvent | None:
+        """One message of ``stream`` stamped ``stamp`` received at ``t_now``."""
+        vals = np.asarray(values, dtype=float)
+        if not math.isfinite(stamp) or not np.all(np.isfinite(vals)):
+            bad = np.flatnonzero(~np.isfinite(vals)).tolist()
+            what = f"indices {bad}" if bad else f"stamp {stamp!r}"
+            return self.abort(t_now, NON_FINITE, f"{stream}: non-finite value at {what}")
+        last = self._last_stamp.get(stream)
+        if last is not None and stamp < last:
+            return self.abort(t_now, OUT_OF_ORDER,
+                              f"{stream}: stamp {stamp:.6f} s before previous {last:.6f} s")
+        self._last_stamp[stream] = float(stamp)
+        self._last_rx[stream] = float(t_now)
+        return self.event
+
+    def check_scheduling(self, t: float, v_d: Sequence[float] | np.ndarray) -> SafetyEvent | None:
+        """Abort when ``v_d`` leaves the box widened by ``box_margin``."""
+        v = np.asarray(v_d, dtype=float)
+        cfg = self.config
+        if not cfg.box_min:
+            return self.event
+        if v.shape != (len(cfg.box_min),):
+            return self.abort(t, NON_FINITE, f"scheduling vector has shape {v.shape}, "
+                              f"expected ({len(cfg.box_min)},)")
+        if not np.all(np.isfinite(v)):
+            return self.abort(t, NON_FINITE, f"scheduling vector {v.tolist()} not finite")
+        lo = np.asarray(cfg.box_min) - cfg.box_margin
+        hi = np.asarray(cfg.box_max) + cfg.box_margin
+        out = np.flatnonzero((v < lo) | (v > hi))
+        if out.size:
+            i = int(out[0])
+            return self.abort(t, OUT_OF_BOX, f"scheduling[{i}] = {v[i]:.4g} outside "
+                              f"[{cfg.box_min[i]:.4g}, {cfg.box_max[i]:.4g}]"
+                              + (f" + margin {cfg.box_margin:g}" if cfg.box_margin else ""))
+        return self.event
+
+    def on_bound_flag(self, t: float, exceeded: bool, detail: str = "") -> SafetyEvent | None:
+        """The bound monitor's verdict (True = a bound is exceeded)."""
+        if exceeded:
+            return self.abort(t, BOUND_EXCEEDED, detail or "bound monitor flag raised")
+        return self.event
+
+    def check(self, t_now: float) -> SafetyEvent | None:
+        """Staleness of every configured stream at ``t_now`` (only while armed)."""
+        if not self.armed or self.aborted:
+            return self.event
+        for stream, timeout in self.config.timeouts.items():
+            since = self._last_rx.get(stream, self._t_arm)
+            age = t_now - since
+            if age > timeout:
+                never = stream not in self._last_rx
+                return self.abort(t_now, STALE, f"{stream}: {'no message for' if never else 'last message'}"
+                                  f" {age:.3f} s {'since arming' if never else 'ago'}"
+                                  f" (timeout {timeout:g} s)")
+        return self.event

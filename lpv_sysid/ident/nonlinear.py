@@ -1,0 +1,339 @@
+"""Nonlinear aerodynamic model identification: seed 0 Eq. (6) from (phase-2) flight data.
+
+Step 1 - linear regression.  Eq. (6) is linear in the lumped parameters K, so with the
+measured generalised force (Eq. 3c/3d solved for F and M)
+
+    F = m (v' - v x omega - g R_IB^T e3),      M = I omega' - (I omega) x omega
+
+each axis is an ordinary least-squares problem ``f_axis = Phi_axis K_axis`` with the
+regressors of :data:`REGRESSORS` (``delta = Mix Omega``, ``delta^2 = Mix Omega^2``, Eq. 7).
+The rotor reaction torque ``J_z delta_r'`` in ``M_z`` uses the known ``j_rotor`` and is
+moved to the measured side.  Solved with :func:`lpv_sysid.ident.equation_error.fit_row`
+(SVD, standard errors with the coloured-residual correction, R^2); the regressor
+correlation matrix per axis is seed 0 Fig. 10.
+
+Step 2 - output-error refinement in the spirit of seed 2 Sec. 4 (Eqs. 70, 89, 95, 101):
+``min_K sum_segments sum_k ||W (nu(k) - nu_hat(k; K))||^2`` with ``nu = (v, omega)``, where
+``nu_hat`` integrates Eqs. (3c)-(3d) with the Eq. (6) model over short segments (default
+1 s) starting from the measured ``nu``, driven by the *measured* attitude (gravity term) and
+rotor speeds - as seed 2 drives each sub-model with the measured neighbouring states.  Short
+segments keep the unstable vehicle's open-loop prediction bounded.  Solved with
+``scipy.optimize.least_squares`` (trust-region reflective) from the regression estimate;
+parameter standard errors from the Gauss-Newton covariance ``s^2 (J^T J)^-1``.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from lpv_sysid.errors import ConfigError, SolverError
+from lpv_sysid.ident import equation_error as ee
+
+log = logging.getLogger(__name__)
+
+AXES = ("X", "Y", "Z", "L", "M", "N")
+#: (K name, regressor label) per axis of Eq. (6); K names are ``models.quadrotor.K_NAMES``
+REGRESSORS = {
+    "X": (("x_mu0", "u"), ("x_muw", "u w"), ("x_muh", "u dt")),
+    "Y": (("y_mu0", "v"), ("y_muw", "v w"), ("y_muh", "v dt")),
+    "Z": (("z_T0", "dt^2"), ("z_mu0", "dt"), ("z_mu", "u^2+v^2"), ("z_muw", "4w dt - p da - q de")),
+    "L": (("l_T0", "da^2"), ("l_mu0", "da"), ("l_muw", "w da - 2l^2 p dt - l^2 q dr/2"), ("l_muh", "v dt"),
+          ("l_muh_mu0", "v"), ("l_muh_muw", "v w"), ("l_dr", "u dr")),
+    "M": (("m_T0", "de^2"), ("m_mu0", "de"), ("m_muw", "w de - 2l^2 q dt - l^2 p dr/2"), ("m_muh", "u dt"),
+          ("m_muh_mu0", "u"), ("m_muh_muw", "u w"), ("m_dr", "v dr")),
+    "N": (("n_Q0", "dr^2"), ("n_mu0", "dr"), ("n_muw", "w dr + p de + q da"), ("n_muw2", "p q"),
+          ("n_muh", "u da + v de"), ("n_muh_muw", "u p + v q")),
+}
+
+
+@dataclass(frozen=True)
+class FlightData:
+    """Aligned measurements on a uniform grid (NED/FRD, SI)."""
+
+    t: np.ndarray          # (N,)
+    euler: np.ndarray      # (N, 2) phi, theta (psi does not enter Eq. 3c-3d)
+    v: np.ndarray          # (N, 3) body velocity
+    omega: np.ndarray      # (N, 3) body rates
+    Omega: np.ndarray      # (N, 4) rotor speeds
+    v_dot: np.ndarray      # (N, 3)
+    omega_dot: np.ndarray  # (N, 3)
+    Omega_dot: np.ndarray  # (N, 4)
+
+
+def regressors(v, omega, Omega, Omega_dot, arm_length: float, mix: np.ndarray) -> dict[str, np.ndarray]:
+    """Regressor matrices (N, n_axis) of Eq. (6a)-(6f) in the order of :data:`REGRESSORS`."""
+    v = np.atleast_2d(v)
+    omega = np.atleast_2d(omega)
+    Omega = np.atleast_2d(Omega)
+    u, vv, w = v[:, 0], v[:, 1], v[:, 2]
+    p, q, r = omega[:, 0], omega[:, 1], omega[:, 2]
+    d = Omega @ mix.T
+    d2 = (Omega * Omega) @ mix.T
+    dt, da, de, dr = d.T
+    l2 = arm_length ** 2
+    return {
+        "X": np.stack([u, u * w, u * dt], axis=1),
+        "Y": np.stack([vv, vv * w, vv * dt], axis=1),
+        "Z": np.stack([d2[:, 0], dt, u * u + vv * vv, 4 * w * dt - p * da - q * de], axis=1),
+        "L": np.stack([d2[:, 1], da, w * da - 2 * l2 * p * dt - 0.5 * l2 * q * dr, vv * dt, vv, vv * w,
+                       u * dr], axis=1),
+        "M": np.stack([d2[:, 2], de, w * de - 2 * l2 * q * dt - 0.5 * l2 * p * dr, u * dt, u, u * w,
+                       vv * dr], axis=1),
+        "N": np.stack([d2[:, 3], dr, w * dr + p * de + q * da, p * q, u * da + vv * de, u * p + vv * q],
+                      axis=1),
+    }
+
+
+def _gravity_body(phi, th, g):
+    """g R_IB^T e3 (Eq. 3c) for arrays of roll/pitch."""
+    return g * np.stack([-np.sin(th), np.sin(phi) * np.cos(th), np.cos(phi) * np.cos(th)], axis=-1)
+
+
+def generalized_force(data: FlightData, params, smoother=None) -> tuple[np.ndarray, np.ndarray]:
+    """Measured F (N, 3) and M (N, 3) from Eqs. (3c)-(3d) (nonlinear terms smoothed by
+    ``smoother`` when given, see :func:`regression`)."""
+    m, g = params.mass, params.g
+    I = np.asarray(params.inertia, dtype=float)
+    sm = smoother or (lambda a: a)
+    known_v = sm(np.cross(data.v, data.omega) + _gravity_body(data.euler[:, 0], data.euler[:, 1], g))
+    F = m * (data.v_dot - known_v)
+    M = data.omega_dot @ I.T - sm(np.cross(data.omega @ I.T, data.omega))
+    return F, M
+
+
+def flight_data(t: np.ndarray, euler: np.ndarray, v: np.ndarray, omega: np.ndarray, Omega: np.ndarray,
+                deriv_cfg=None, edge_s: float = 0.5):
+    """Measured arrays on a uniform grid -> ``(FlightData, smoother, keep)`` for :func:`regression`.
+
+    Derivatives of ``v``, ``omega``, ``Omega`` by the global Fourier (or Savitzky-Golay)
+    differentiator of :mod:`lpv_sysid.ident.derivatives`; the states stay raw (the smoother
+    is applied to the nonlinear terms inside :func:`regression`); ``keep`` drops ``edge_s``
+    at both ends.
+    """
+    from lpv_sysid.ident import derivatives as dv
+
+    cfg = deriv_cfg or dv.DerivativeConfig()
+    t = np.asarray(t, dtype=float)
+    dt = float(t[1] - t[0])
+    n_edge = int(round(edge_s / dt))
+    if t.size <= 2 * n_edge + 10:
+        raise ConfigError(f"flight record of {t.size} samples is too short (edges {n_edge} each)")
+    _, v_dot = dv.smooth_and_differentiate(v, dt, cfg)
+    _, w_dot = dv.smooth_and_differentiate(omega, dt, cfg)
+    _, O_dot = dv.smooth_and_differentiate(Omega, dt, cfg)
+    data = FlightData(t, np.asarray(euler)[:, :2], np.asarray(v), np.asarray(omega), np.asarray(Omega),
+                      v_dot, w_dot, O_dot)
+    return data, (lambda a: dv.smooth(a, dt, cfg)), slice(n_edge, t.size - n_edge)
+
+
+@dataclass
+class AxisFit:
+    axis: str
+    names: tuple[str, ...]
+    labels: tuple[str, ...]
+    K: np.ndarray
+    std: np.ndarray
+    r2: float
+    correlation: np.ndarray
+
+
+@dataclass
+class NonlinearResult:
+    K: dict[str, float]
+    std: dict[str, float]
+    axes: dict[str, AxisFit]
+    method: str = "regression"
+    cost: float | None = None
+    refined_std: dict[str, float] = field(default_factory=dict)
+
+
+def correlation(X: np.ndarray) -> np.ndarray:
+    """Correlation coefficients of the regressor columns (seed 0 Fig. 10); NaN for constants."""
+    Xc = X - X.mean(axis=0)
+    s = np.sqrt(np.sum(Xc * Xc, axis=0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return (Xc.T @ Xc) / np.outer(s, s)
+
+
+def _check(data: FlightData) -> int:
+    n = np.asarray(data.t).size
+    for name in ("euler", "v", "omega", "Omega", "v_dot", "omega_dot", "Omega_dot"):
+        a = np.asarray(getattr(data, name))
+        if a.shape[0] != n:
+            raise ConfigError(f"flight data '{name}' has {a.shape[0]} samples, t has {n}")
+        if not np.all(np.isfinite(a)):
+            raise ConfigError(f"flight data '{name}' contains NaN/inf")
+    return n
+
+
+def regression(data: FlightData, params, max_lag: int | None = None,
+               fixed: dict[str, float] | None = None, smoother=None,
+               keep: slice | None = None) -> NonlinearResult:
+    """Step 1: per-axis least squares of Eq. (6) on the measured generalised force.
+
+    ``fixed`` maps K names to known values; their regressors move to the measured side
+    (e.g. the ``*_mu0`` terms when the data cannot separate them from ``*_T0``).
+
+    With measured data, ``data`` holds the *raw* states and the smoothed derivatives of
+    :func:`flight_data`; ``smoother`` (the same filter) is then applied to every nonlinear
+    term (regressors, ``v x omega``, gravity, gyroscopic moment) computed from the raw
+    states, so that the filtered equation holds exactly (``L[phi(x)]``, not ``phi(L[x])``),
+    and ``keep`` drops the filter's edge samples.
+    """
+    return regression_stacked([(data, smoother, keep)], params, max_lag, fixed)
+
+
+def _axis_data(data: FlightData, params, smoother, keep):
+    """Per-axis measured generalised force component and regressor matrix (filtered, cut)."""
+    from lpv_sysid.models.quadrotor import mixer
+
+    _check(data)
+    mix = mixer(params.arm_length)
+    regs = regressors(data.v, data.omega, data.Omega, data.Omega_dot, params.arm_length, mix)
+    F, M = generalized_force(data, params, smoother)
+    ddr = data.Omega_dot @ mix[3]
+    if smoother is not None:
+        regs = {a: smoother(r) for a, r in regs.items()}
+    if keep is not None:
+        regs = {a: r[keep] for a, r in regs.items()}
+        F, M, ddr = F[keep], M[keep], ddr[keep]
+    meas = {"X": F[:, 0], "Y": F[:, 1], "Z": F[:, 2], "L": M[:, 0], "M": M[:, 1],
+            "N": M[:, 2] - params.j_rotor * ddr}
+    return meas, regs
+
+
+def regression_stacked(records, params, max_lag: int | None = None,
+                       fixed: dict[str, float] | None = None) -> NonlinearResult:
+    """:func:`regression` over several records ``[(data, smoother, keep), ...]`` stacked
+    row-wise (one least-squares problem per axis over all records)."""
+    fixed = dict(fixed or {})
+    parts = [_axis_data(d, params, sm, kp) for d, sm, kp in records]
+    K, std, axes = {}, {}, {}
+    for ax in AXES:
+        names = [nm for nm, _ in REGRESSORS[ax]]
+        labels = [lb for _, lb in REGRESSORS[ax]]
+        y = np.concatenate([m[ax] for m, _ in parts])
+        R = np.concatenate([r[ax] for _, r in parts])
+        free = [c for c, nm in enumerate(names) if nm not in fixed]
+        for c, nm in enumerate(names):
+            if nm in fixed:
+                y = y - R[:, c] * fixed[nm]
+                K[nm], std[nm] = float(fixed[nm]), 0.0
+        H = R[:, free]
+        if y.size <= len(free):
+            raise SolverError(f"axis {ax}: {y.size} samples for {len(free)} parameters")
+        rf = ee.fit_row(AXES.index(ax), y, H, tuple(range(len(free))), (), max_lag)
+        for j, c in enumerate(free):
+            K[names[c]] = float(rf.theta[j])
+            std[names[c]] = float(rf.std[j])
+        axes[ax] = AxisFit(ax, tuple(names[c] for c in free), tuple(labels[c] for c in free),
+                           rf.theta, rf.std, rf.r2, correlation(H))
+    return NonlinearResult(K, std, axes)
+
+
+# ----------------------------------------------------------------------------- output error
+@dataclass(frozen=True)
+class OutputErrorConfig:
+    segment_s: float = 1.0
+    max_segments: int = 40
+    max_nfev: int = 60
+    free: tuple[str, ...] | None = None      # K names to refine (default: all regression ones)
+
+
+def _segments(n: int, seg: int, max_segments: int) -> np.ndarray:
+    starts = np.arange(0, n - seg, seg)
+    if starts.size == 0:
+        raise ConfigError(f"record of {n} samples is shorter than one output-error segment ({seg})")
+    if starts.size > max_segments:
+        starts = starts[np.linspace(0, starts.size - 1, max_segments).astype(int)]
+    return starts
+
+
+def simulate_segments(K: dict[str, float], params, data: FlightData, starts: np.ndarray, seg: int) -> np.ndarray:
+    """RK4 integration of Eqs. (3c)-(3d) + (6) over each segment, vectorised over segments;
+    attitude and rotor speeds are the measured ones (linearly interpolated at the half step). Returns (S, seg, 6) predicted ``nu = (v, omega)``."""
+    from lpv_sysid.models.quadrotor import mixer
+
+    mix = mixer(params.arm_length)
+    m, g = params.mass, params.g
+    I = np.asarray(params.inertia, dtype=float)
+    Ii = np.linalg.inv(I)
+    kv = {ax: np.array([K[nm] for nm, _ in REGRESSORS[ax]]) for ax in AXES}
+    dt = float(data.t[1] - data.t[0])
+    grav = _gravity_body(data.euler[:, 0], data.euler[:, 1], g)
+    # rotor reaction torque J_z delta_r': the step mean (delta_r(k+1) - delta_r(k)) / dt, which
+    # integrates exactly over the step whatever the rotor speed does inside it
+    dr = data.Omega @ mix[3]
+    ddr_step = np.diff(dr) / dt
+
+    def f(nu, Om, gr, dd):
+        v, w = nu[:, :3], nu[:, 3:]
+        R = regressors(v, w, Om, None, params.arm_length, mix)
+        F = np.stack([R[a] @ kv[a] for a in ("X", "Y", "Z")], axis=1)
+        Mo = np.stack([R[a] @ kv[a] for a in ("L", "M", "N")], axis=1)
+        Mo[:, 2] += params.j_rotor * dd
+        vd = np.cross(v, w) + gr + F / m
+        wd = (np.cross(w @ I.T, w) + Mo) @ Ii.T
+        return np.concatenate([vd, wd], axis=1)
+
+    nu = np.concatenate([data.v[starts], data.omega[starts]], axis=1)
+    out = np.empty((starts.size, seg, 6))
+    out[:, 0] = nu
+    for k in range(seg - 1):
+        a, b = starts + k, starts + k + 1
+        ins0 = (data.Omega[a], grav[a], ddr_step[a])
+        ins1 = (data.Omega[b], grav[b], ddr_step[a])
+        insh = tuple(0.5 * (p0 + p1) for p0, p1 in zip(ins0, ins1))
+        k1 = f(nu, *ins0)
+        k2 = f(nu + 0.5 * dt * k1, *insh)
+        k3 = f(nu + 0.5 * dt * k2, *insh)
+        k4 = f(nu + dt * k3, *ins1)
+        nu = nu + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+        if not np.all(np.isfinite(nu)) or np.max(np.abs(nu)) > 1e3:
+            nu = np.where(np.isfinite(nu), np.clip(nu, -1e3, 1e3), 1e3)
+        out[:, k + 1] = nu
+    return out
+
+
+def output_error(data: FlightData, params, K0: dict[str, float],
+                 cfg: OutputErrorConfig = OutputErrorConfig()) -> NonlinearResult:
+    """Step 2: refine K by output-error NLS over short segments (seed 2 Sec. 4)."""
+    n = _check(data)
+    dt = float(data.t[1] - data.t[0])
+    seg = max(3, int(round(cfg.segment_s / dt)))
+    starts = _segments(n, seg, cfg.max_segments)
+    free = list(cfg.free) if cfg.free is not None else [nm for ax in AXES for nm, _ in REGRESSORS[ax]]
+    unknown = [nm for nm in free if nm not in K0]
+    if unknown:
+        raise ConfigError(f"output error: no initial value for {unknown}")
+    meas = np.stack([np.concatenate([data.v[s:s + seg], data.omega[s:s + seg]], axis=1) for s in starts])
+    scale_out = np.maximum(meas.reshape(-1, 6).std(axis=0), 1e-6)
+    x0 = np.array([K0[nm] for nm in free])
+    xs = np.where(np.abs(x0) > 0, np.abs(x0), 1e-6)       # parameter scaling
+
+    def resid(z):
+        K = dict(K0)
+        K.update(dict(zip(free, z * xs)))
+        pred = simulate_segments(K, params, data, starts, seg)
+        return ((pred[:, 1:] - meas[:, 1:]) / scale_out).ravel()
+
+    sol = least_squares(resid, x0 / xs, method="trf", x_scale="jac", max_nfev=cfg.max_nfev)
+    if not np.all(np.isfinite(sol.x)):
+        raise SolverError("output-error refinement diverged")
+    Kr = dict(K0)
+    Kr.update(dict(zip(free, sol.x * xs)))
+    J = sol.jac
+    dof = max(sol.fun.size - len(free), 1)
+    s2 = float(sol.fun @ sol.fun) / dof
+    try:
+        cov = s2 * np.linalg.pinv(J.T @ J)
+        rstd = {nm: float(np.sqrt(max(cov[i, i], 0.0)) * xs[i]) for i, nm in enumerate(free)}
+    except np.linalg.LinAlgError:
+        rstd = {}
+    log.info("output error: cost %.4g -> %.4g in %d evaluations", 0.5 * float(resid(x0 / xs) @ resid(x0 / xs)),
+             sol.cost, sol.nfev)
+    return NonlinearResult(Kr, {}, {}, method="output-error", cost=float(sol.cost), refined_std=rstd)

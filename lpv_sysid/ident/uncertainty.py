@@ -1,0 +1,234 @@
+"""Uncertainty box and uncertain vertex systems, seed 0 Eqs. (22)-(23).
+
+Every identified element ``theta_l`` of a vertex model gets the interval
+``[theta_l - k s_l, theta_l + k s_l]`` (``k`` configurable, default 3; ``s_l`` its standard
+error from :mod:`lpv_sysid.ident.equation_error`), Eq. (22).  The uncertain vertex system
+``Lambda_i(theta)`` is then a convex combination of the ``M_i`` systems ``Lambda_i^j`` of
+Eq. (23), i.e. of ``(A_i^j, B^j)`` pairs (``C`` is fixed and ``B_e = B R`` follows from ``B``).
+
+With ``p`` identified elements the box has ``2^p`` corners (``p`` ~ 40 for the quadrotor),
+which no LMI solver will take.  Three reductions are offered (``method``):
+
+``box``      all ``2^p`` corners (exact, only for small ``p``; refused above ``max_corners``).
+``influence`` (default) rank the parameters by their *influence* on the H-infinity-relevant
+    frequency response ``G(jw) = C (jwI - A)^-1 B`` (``C`` selects the performance output,
+    the body velocities of Eq. 18, by default), ``infl_l = halfwidth_l * max_w ||dG/dtheta_l||_F``
+    with the analytic first-order sensitivities ``dG/dA_ab = C R e_a e_b^T R B`` and
+    ``dG/dB_ab = C R e_a e_b^T`` (``R = (jwI - A)^-1``), keep the ``p_max`` most influential
+    ones as corner parameters (``M_i = 2^p_max``) and fix the others at their nominal values.
+    The dropped intervals are *absorbed* by widening the kept half-widths by the factor
+    ``sum_all infl / sum_kept infl`` (>= 1): the sum of the kept first-order bounds then
+    equals the first-order bound of all parameters, so the worst-case first-order
+    frequency-response perturbation of the reduced polytope is at least that of the full
+    box.  This is conservative in that first-order sense, not a set containment: the
+    dropped elements themselves stay nominal in every corner.
+``hybrid``   strict containment with few corners: the kept parameters span box corners, the
+    ``q`` dropped ones are enclosed by a simplex with ``q + 1`` vertices,
+    ``{theta_d >= lower_d, sum_d (theta_d - lower_d) / width_d <= q}`` (it contains the
+    unit box of the dropped parameters), so ``M_i = 2^p_max (q + 1)`` and every parameter in
+    the box of Eq. (22) lies in the convex hull of the generated systems.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from lpv_sysid.errors import ConfigError
+
+METHODS = ("box", "influence", "hybrid")
+
+
+@dataclass(frozen=True)
+class UncertaintyConfig:
+    k_sigma: float = 3.0
+    method: str = "influence"
+    p_max: int = 4
+    max_corners: int = 4096
+    freq_hz: tuple[float, float] = (0.05, 10.0)
+    n_freq: int = 40
+    output_states: tuple[int, ...] = (2, 3, 4)      # u, v, w: z = Q^-1 (v - v_d), Eq. (18)
+
+    @classmethod
+    def from_dict(cls, d: dict | None) -> "UncertaintyConfig":
+        d = dict(d or {})
+        allowed = {"k_sigma", "method", "p_max", "max_corners", "freq_hz", "n_freq", "output_states"}
+        unknown = set(d) - allowed
+        if unknown:
+            raise ConfigError(f"uncertainty: unknown key(s) {sorted(unknown)}")
+        if "freq_hz" in d:
+            d["freq_hz"] = tuple(float(v) for v in d["freq_hz"])
+        if "output_states" in d:
+            d["output_states"] = tuple(int(v) for v in d["output_states"])
+        cfg = cls(**d)
+        if not (np.isfinite(cfg.k_sigma) and cfg.k_sigma > 0):
+            raise ConfigError(f"uncertainty.k_sigma must be > 0, got {cfg.k_sigma!r}")
+        if cfg.method not in METHODS:
+            raise ConfigError(f"uncertainty.method must be one of {METHODS}, got {cfg.method!r}")
+        if int(cfg.p_max) != cfg.p_max or not 0 <= cfg.p_max <= 16:
+            raise ConfigError(f"uncertainty.p_max must be an integer in [0, 16], got {cfg.p_max!r}")
+        if len(cfg.freq_hz) != 2 or not 0 < cfg.freq_hz[0] < cfg.freq_hz[1]:
+            raise ConfigError(f"uncertainty.freq_hz must be [low, high] with 0 < low < high, got {cfg.freq_hz}")
+        if cfg.n_freq < 2:
+            raise ConfigError("uncertainty.n_freq must be >= 2")
+        return cfg
+
+
+@dataclass(frozen=True)
+class Interval:
+    """One identified element and its interval, Eq. (22) (ARCHITECTURE.md section 5 'uncertain')."""
+
+    matrix: str          # "A" or "B"
+    row: int
+    col: int
+    nominal: float
+    std: float
+    lower: float
+    upper: float
+    influence: float = 0.0
+    corner: bool = False  # varied over the corners of Eq. (23)
+
+    def as_dict(self) -> dict:
+        return {"matrix": self.matrix, "row": self.row, "col": self.col, "nominal": self.nominal,
+                "std": self.std, "lower": self.lower, "upper": self.upper}
+
+
+@dataclass(frozen=True)
+class UncertainVertex:
+    """Nominal vertex model, its parameter box and the systems ``Lambda_i^j`` of Eq. (23)."""
+
+    A: np.ndarray
+    B: np.ndarray
+    intervals: tuple[Interval, ...]
+    systems: tuple[tuple[np.ndarray, np.ndarray], ...]    # (A_i^j, B^j), j = 1..M_i
+    method: str
+    inflation: float = 1.0
+
+    @property
+    def M(self) -> int:
+        return len(self.systems)
+
+
+def intervals_from_elements(elements, k_sigma: float) -> list[Interval]:
+    """``elements``: iterable of (matrix, row, col, nominal, std) (``Fit.elements()``)."""
+    out = []
+    for m, r, c, nom, s in elements:
+        if not (np.isfinite(nom) and np.isfinite(s) and s >= 0):
+            raise ConfigError(f"{m}[{r},{c}]: non-finite nominal or standard error ({nom}, {s})")
+        out.append(Interval(m, int(r), int(c), float(nom), float(s), nom - k_sigma * s, nom + k_sigma * s))
+    return out
+
+
+def influence(A: np.ndarray, B: np.ndarray, intervals: Sequence[Interval],
+              cfg: UncertaintyConfig = UncertaintyConfig()) -> np.ndarray:
+    """``halfwidth_l * max_w ||dG(jw)/dtheta_l||_F`` for every interval (see module docstring)."""
+    n = A.shape[0]
+    C = np.eye(n)[list(cfg.output_states)]
+    w = 2 * np.pi * np.geomspace(cfg.freq_hz[0], cfg.freq_hz[1], cfg.n_freq)
+    col_norm = np.zeros((w.size, n))       # ||C R e_a||
+    row_norm = np.zeros((w.size, n))       # ||e_b^T R B||
+    eye = np.eye(n)
+    for q, wq in enumerate(w):
+        # scipy.linalg.solve would do the same; numpy's batched solve is enough for 12 x 12
+        R = np.linalg.solve(1j * wq * eye - A, eye)
+        col_norm[q] = np.linalg.norm(C @ R, axis=0)
+        row_norm[q] = np.linalg.norm(R @ B, axis=1)
+    out = np.zeros(len(intervals))
+    for l, iv in enumerate(intervals):
+        half = 0.5 * (iv.upper - iv.lower)
+        if iv.matrix == "A":
+            sens = np.max(col_norm[:, iv.row] * row_norm[:, iv.col])
+        else:
+            sens = np.max(col_norm[:, iv.row])
+        out[l] = half * sens
+    return out
+
+
+def _apply(A: np.ndarray, B: np.ndarray, ivs: Sequence[Interval], values: Sequence[float]):
+    Aj, Bj = A.copy(), B.copy()
+    for iv, val in zip(ivs, values):
+        (Aj if iv.matrix == "A" else Bj)[iv.row, iv.col] = val
+    return Aj, Bj
+
+
+def build(A: np.ndarray, B: np.ndarray, elements, cfg: UncertaintyConfig = UncertaintyConfig()) -> UncertainVertex:
+    """Intervals (Eq. 22) and uncertain vertex systems (Eq. 23) for one LPV vertex."""
+    A = np.asarray(A, dtype=float)
+    B = np.asarray(B, dtype=float)
+    ivs = intervals_from_elements(elements, cfg.k_sigma)
+    if cfg.output_states and max(cfg.output_states) >= A.shape[0]:
+        raise ConfigError(f"uncertainty.output_states {cfg.output_states} out of range for n_x={A.shape[0]}")
+    infl = influence(A, B, ivs, cfg) if ivs else np.zeros(0)
+    p = len(ivs)
+    if cfg.method == "box" or p <= cfg.p_max:
+        if 2 ** p > cfg.max_corners:
+            raise ConfigError(f"uncertainty.method 'box' needs 2^{p} corners (> max_corners "
+                              f"{cfg.max_corners}); use 'influence' or 'hybrid'")
+        kept = list(range(p))
+    else:
+        kept = sorted(np.argsort(-infl, kind="stable")[: cfg.p_max].tolist())
+    dropped = [l for l in range(p) if l not in kept]
+    inflation = 1.0
+    if cfg.method == "influence" and dropped:
+        s_kept = float(np.sum(infl[kept]))
+        inflation = float(np.sum(infl) / s_kept) if s_kept > 0 else 1.0
+    marked = []
+    for l, iv in enumerate(ivs):
+        is_kept = l in kept
+        lo, hi = iv.lower, iv.upper
+        if is_kept and inflation != 1.0:
+            half = 0.5 * (hi - lo) * inflation
+            lo, hi = iv.nominal - half, iv.nominal + half
+        marked.append(Interval(iv.matrix, iv.row, iv.col, iv.nominal, iv.std, lo, hi,
+                               float(infl[l]), is_kept))
+    corner_ivs = [marked[l] for l in kept]
+    systems = []
+    box_corners = list(itertools.product(*[(iv.lower, iv.upper) for iv in corner_ivs]))
+    if cfg.method == "hybrid" and dropped:
+        d_ivs = [marked[l] for l in dropped]
+        q = len(d_ivs)
+        lows = np.array([iv.lower for iv in d_ivs])
+        widths = np.array([iv.upper - iv.lower for iv in d_ivs])
+        simplex = [lows] + [lows + q * widths * np.eye(q)[j] for j in range(q)]
+        if len(box_corners) * len(simplex) > cfg.max_corners:
+            raise ConfigError(f"uncertainty 'hybrid' needs {len(box_corners) * len(simplex)} systems "
+                              f"(> max_corners {cfg.max_corners}); lower p_max")
+        for corner in box_corners:
+            Ak, Bk = _apply(A, B, corner_ivs, corner)
+            for s in simplex:
+                systems.append(_apply(Ak, Bk, d_ivs, s))
+    else:
+        for corner in box_corners:
+            systems.append(_apply(A, B, corner_ivs, corner))
+    return UncertainVertex(A, B, tuple(marked), tuple(systems), cfg.method, inflation)
+
+
+def contains(uv: UncertainVertex, A_true: np.ndarray, B_true: np.ndarray, tol: float = 1e-9) -> bool:
+    """Is ``(A_true, B_true)`` a convex combination of the systems ``Lambda_i^j`` (Eq. 23)?
+
+    Solved as a linear feasibility problem with ``scipy.optimize.linprog`` over the
+    identified elements (all systems agree elsewhere; those elements are compared directly).
+    """
+    from scipy.optimize import linprog
+
+    idx = [(iv.matrix, iv.row, iv.col) for iv in uv.intervals]
+    def vec(Am, Bm):
+        return np.array([(Am if m == "A" else Bm)[r, c] for m, r, c in idx])
+    V = np.array([vec(Aj, Bj) for Aj, Bj in uv.systems]).T          # (p, M)
+    target = vec(A_true, B_true)
+    # every element outside the identified set must equal the nominal one
+    mask = np.ones_like(uv.A, dtype=bool)
+    maskb = np.ones_like(uv.B, dtype=bool)
+    for m, r, c in idx:
+        (mask if m == "A" else maskb)[r, c] = False
+    if not (np.allclose(A_true[mask], uv.A[mask], atol=tol) and np.allclose(B_true[maskb], uv.B[maskb], atol=tol)):
+        return False
+    M = V.shape[1]
+    scale = np.maximum(np.abs(V).max(axis=1), 1e-12)
+    A_eq = np.vstack([V / scale[:, None], np.ones((1, M))])
+    b_eq = np.concatenate([target / scale, [1.0]])
+    res = linprog(np.zeros(M), A_eq=A_eq, b_eq=b_eq, bounds=[(0, None)] * M, method="highs")
+    return bool(res.status == 0)

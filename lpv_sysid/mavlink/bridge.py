@@ -1,0 +1,287 @@
+"""Bridge core: link + telemetry decoder + offboard state machine + setpoint transport.
+
+The rclpy shell (``nodes/mavlink_bridge_node.py``) is glue around :class:`BridgeCore`:
+
+- timer (e.g. 200 Hz): ``out = core.poll(now)`` -> publish ``out.samples`` (StateSample,
+  ImuSample, RotorSample in NED/FRD; convert with io/frames) and ``out.events``
+  (``status`` topic); ``core.status(now)`` gives key/values for the DiagnosticStatus;
+- subscriptions: ``core.on_velocity_reference(now, v_frd, yaw_rate, stamp)`` /
+  ``core.on_actuator_command(now, u, stamp)``;
+- services: ``core.start(now)``, ``core.abort(now, reason)`` (both return the status
+  events they caused); on shutdown ``core.shutdown(now)`` (sends the hand-back command at
+  once, returns the undelivered events) then ``core.close()``. Rejected commands and
+  events caused by commands are delivered with the next ``poll``.
+
+``sample_callback`` (optional) is called synchronously for every decoded sample, which
+is what a controller uses to answer within the same poll (lowest latency). Commands go
+out immediately when the machine is streaming (``send_on_command``), and again at the
+configured rate.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from lpv_sysid.errors import ConfigError, LpvSysidError, SafetyError
+from lpv_sysid.mavlink import px4
+from lpv_sysid.mavlink.link import LinkConfig, LinkEvent, MavlinkLink
+from lpv_sysid.mavlink.offboard import (OffboardConfig, OffboardMachine, SendCommand, SendSetpoint,
+                                        State, StatusEvent)
+from lpv_sysid.mavlink.telemetry import StateSample, TelemetryDecoder
+from lpv_sysid.mavlink.transport import (ActuatorSetpoint, TransportContext, VelocitySetpoint,
+                                         make_transport)
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class BridgeConfig:
+    """``config/mavlink_bridge.yaml``: sections ``link``, ``offboard``, ``command``."""
+
+    link: LinkConfig = field(default_factory=LinkConfig)
+    offboard: OffboardConfig = field(default_factory=OffboardConfig)
+    command: str = "velocity"                 # velocity | attitude_rate
+    velocity_frame: str = "body_ned"          # body_ned | local_ned
+    use_yaw_rate: bool = True
+    arm_length: float = 0.225                 # attitude_rate: seed 0 Eq. (7) geometry
+    rate_p: tuple[float, float, float] = (0.15, 0.15, 0.2)
+    auto_start: bool = False                  # start the machine on the first command
+    telemetry_max_age: float = 0.5
+    n_rotors: int = 4
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "BridgeConfig":
+        if not isinstance(d, Mapping):
+            raise ConfigError("mavlink bridge config must be a mapping")
+        known = set(cls.__dataclass_fields__)
+        bad = sorted(set(d) - known)
+        if bad:
+            raise ConfigError(f"unknown mavlink bridge config key(s) {bad}; known: {sorted(known)}")
+        kw = dict(d)
+        kw["link"] = LinkConfig.from_dict(d.get("link", {}) or {})
+        kw["offboard"] = OffboardConfig.from_dict(d.get("offboard", {}) or {})
+        if "rate_p" in kw:
+            try:
+                kw["rate_p"] = tuple(float(x) for x in kw["rate_p"])
+            except (TypeError, ValueError):
+                raise ConfigError("rate_p must be a list of 3 numbers") from None
+        cfg = cls(**kw)
+        cfg.transport()          # validates command/frame/geometry
+        return cfg
+
+    @classmethod
+    def load(cls, path: str) -> "BridgeConfig":
+        import yaml
+
+        try:
+            with open(path, "r", encoding="utf-8") as f:
+                d = yaml.safe_load(f)
+        except OSError as exc:
+            raise ConfigError(f"{path}: cannot read ({exc.strerror})") from None
+        except yaml.YAMLError as exc:
+            raise ConfigError(f"{path}: malformed YAML ({exc})") from None
+        try:
+            return cls.from_dict(d or {})
+        except ConfigError as exc:
+            raise ConfigError(f"{path}: {exc}") from None
+
+    def transport(self):
+        if self.command == "velocity":
+            return make_transport("velocity", frame=self.velocity_frame, use_yaw_rate=self.use_yaw_rate)
+        if self.command == "attitude_rate":
+            return make_transport("attitude_rate", arm_length=self.arm_length, rate_p=self.rate_p)
+        return make_transport(self.command)
+
+
+@dataclass
+class BridgeOutput:
+    samples: list[Any] = field(default_factory=list)
+    events: list[Any] = field(default_factory=list)     # StatusEvent | LinkEvent
+
+
+class BridgeCore:
+    """See module docstring."""
+
+    def __init__(self, config: BridgeConfig, link: MavlinkLink | None = None,
+                 sample_callback: Callable[[Any], None] | None = None) -> None:
+        self.config = config
+        self.link = link or MavlinkLink(config.link)
+        self.telemetry = TelemetryDecoder(config.n_rotors, config.telemetry_max_age)
+        self.transport = config.transport()
+        self.machine = OffboardMachine(config.offboard, self.transport.neutral())
+        self.sample_callback = sample_callback
+        self.rejected_commands = 0
+        self._t0: float | None = None
+        self._last_stamp = -math.inf
+        self._pending_events: list[Any] = []
+        self._link_was_up = False
+        self._state: StateSample | None = None
+        self._last_ack: tuple[int, int] | None = None
+
+    # ----------------------------------------------------------- lifecycle
+    def open(self, now: float) -> None:
+        """Open the link; if the device is not there yet, report it and retry in poll()."""
+        self._t0 = now
+        try:
+            self.link.open(now)
+        except LpvSysidError as exc:
+            self.link.stats.io_errors += 1
+            self._pending_events.append(LinkEvent(now, "io_error", f"{exc}; retrying every "
+                                                  f"{self.config.link.reconnect_period} s"))
+
+    def close(self) -> None:
+        self.link.close()
+
+    # ----------------------------------------------------------------- loop
+    def poll(self, now: float) -> BridgeOutput:
+        out = BridgeOutput()
+        if self._t0 is None:
+            self._t0 = now
+        for msg in self.link.poll(now):
+            self._on_message(msg, now, out)
+        self.link.step(now)
+        for ev in self.link.events():
+            out.events.append(ev)
+        up = self.link.link_up(now)
+        if up != self._link_was_up:
+            self._link_was_up = up
+            self._run(self.machine.on_link(now, up), now, out)
+        self._run(self.machine.step(now), now, out)
+        out.events[:0] = self._pending_events
+        self._pending_events = []
+        return out
+
+    def _on_message(self, msg: Any, now: float, out: BridgeOutput) -> None:
+        mtype = msg.get_type()
+        if mtype == "HEARTBEAT":
+            if msg.get_srcSystem() == self.link.target_system and msg.autopilot != 8:
+                mode = px4.decode_custom_mode(msg.custom_mode)
+                armed = bool(msg.base_mode & px4.MAV_MODE_FLAG_SAFETY_ARMED)
+                if not self._link_was_up:
+                    self._link_was_up = True
+                    self._run(self.machine.on_link(now, True), now, out)
+                self._run(self.machine.on_heartbeat(now, mode, armed), now, out)
+            return
+        if mtype == "COMMAND_ACK":
+            if msg.get_srcSystem() == self.link.target_system:
+                self._run(self.machine.on_ack(now, msg.command, msg.result), now, out)
+            return
+        for s in self.telemetry.on_message(msg, now):
+            if isinstance(s, StateSample):
+                self._state = s
+            out.samples.append(s)
+            if self.sample_callback is not None:
+                self.sample_callback(s)
+
+    # ------------------------------------------------------------- inputs
+    def on_velocity_reference(self, now: float, v_frd: Any, yaw_rate: float = 0.0,
+                              stamp: float | None = None) -> bool:
+        try:
+            v = np.asarray(v_frd, dtype=float)
+            if v.shape != (3,) or not np.isfinite(v).all() or not math.isfinite(float(yaw_rate)):
+                raise SafetyError(f"velocity reference rejected: needs 3 finite values and a finite "
+                                  f"yaw rate, got {np.asarray(v_frd).tolist()!r}, {yaw_rate!r}")
+        except (TypeError, ValueError):
+            return self._reject(now, f"velocity reference rejected: not numeric ({v_frd!r})")
+        except SafetyError as exc:
+            return self._reject(now, str(exc))
+        if self.config.command != "velocity":
+            return self._reject(now, f"velocity reference ignored: bridge command is {self.config.command!r}")
+        return self._command(now, VelocitySetpoint(tuple(float(x) for x in v), float(yaw_rate)), stamp)
+
+    def on_actuator_command(self, now: float, u: Any, stamp: float | None = None) -> bool:
+        try:
+            a = np.asarray(u, dtype=float)
+        except (TypeError, ValueError):
+            return self._reject(now, f"actuator command rejected: not numeric ({u!r})")
+        if a.shape != (4,) or not np.isfinite(a).all():
+            return self._reject(now, f"actuator command rejected: needs 4 finite values (ut, ua, ue, ur), "
+                                     f"got {a.tolist()!r}")
+        if self.config.command != "attitude_rate":
+            return self._reject(now, f"actuator command ignored: bridge command is {self.config.command!r}")
+        return self._command(now, ActuatorSetpoint(tuple(float(x) for x in a)), stamp)
+
+    def start(self, now: float) -> list[Any]:
+        """Begin pre-streaming (service ``start``); returns the status events it caused."""
+        out = BridgeOutput()
+        self._run(self.machine.start(now), now, out)
+        return out.events
+
+    def abort(self, now: float, reason: str = "abort requested") -> list[Any]:
+        """Hand control back (service ``abort``); returns the status events it caused."""
+        out = BridgeOutput()
+        self._run(self.machine.abort(now, reason), now, out)
+        return out.events
+
+    def shutdown(self, now: float) -> list[Any]:
+        """Hand control back at once (node shutdown); returns all undelivered status events."""
+        out = BridgeOutput()
+        self._run(self.machine.shutdown(now), now, out)
+        events, self._pending_events = self._pending_events + out.events, []
+        return events
+
+    # ------------------------------------------------------------ status
+    def status(self, now: float) -> dict[str, str]:
+        d = self.machine.status(now)
+        d.update({f"link_{k}": str(v) for k, v in self.link.stats.as_dict().items()})
+        d["link_up"] = str(self.link.link_up(now))
+        d["rejected_commands"] = str(self.rejected_commands)
+        d["telemetry_out_of_order"] = str(self.telemetry.stats.out_of_order)
+        for k, age in self.telemetry.staleness(now).items():
+            d[f"age_{k}_s"] = f"{age:.3f}" if math.isfinite(age) else "inf"
+        return d
+
+    @property
+    def state(self) -> State:
+        return self.machine.state
+
+    # ---------------------------------------------------------- internals
+    def _command(self, now: float, sp: Any, stamp: float | None) -> bool:
+        if stamp is not None:
+            if stamp < self._last_stamp:
+                return self._reject(now, f"out-of-order command (stamp {stamp:.6f} < {self._last_stamp:.6f})")
+            self._last_stamp = stamp
+        out = BridgeOutput()
+        self._run(self.machine.on_command(now, sp), now, out)
+        if self.config.auto_start and self.machine.state == State.IDLE:
+            self._run(self.machine.start(now), now, out)
+        self._pending_events.extend(out.events)
+        return True
+
+    def _reject(self, now: float, reason: str) -> bool:
+        self.rejected_commands += 1
+        log.warning(reason)
+        self._pending_events.append(StatusEvent(now, self.machine.state.value, self.machine.state.value,
+                                                reason, "error"))
+        return False
+
+    def _ctx(self, now: float) -> TransportContext:
+        s = self._state
+        fresh = s is not None and now - s.t <= self.config.telemetry_max_age
+        return TransportContext(int(max(now - (self._t0 or now), 0.0) * 1000) & 0xFFFFFFFF,
+                                self.link.target_system or 1, self.link.target_component,
+                                s.q_wxyz if fresh else None, s.omega if fresh else None)
+
+    def _run(self, actions: list[Any], now: float, out: BridgeOutput) -> None:
+        for a in actions:
+            if isinstance(a, SendSetpoint):
+                if self.link.codec is None:
+                    continue
+                try:
+                    msgs = self.transport.encode(self.link.codec, a.setpoint, self._ctx(now))
+                except SafetyError as exc:
+                    self._run(self.machine.abort(now, f"setpoint not encodable: {exc}"), now, out)
+                    out.events.append(StatusEvent(now, self.machine.state.value, self.machine.state.value,
+                                                  str(exc), "error"))
+                    continue
+                for m in msgs:
+                    self.link.send(m)
+            elif isinstance(a, SendCommand):
+                self.link.command_long(a.command, *a.params, confirmation=a.attempt - 1)
+            else:
+                out.events.append(a)

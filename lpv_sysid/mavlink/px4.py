@@ -1,0 +1,316 @@
+"""PX4 conventions on top of MAVLink 2 (PX4 v1.14 - v1.16).
+
+Everything the bridge, the simulated vehicle and the preflight check must agree on
+lives here: the PX4 custom-mode encoding, the MAVLink codec used by every link,
+PX4's byte-wise encoding of integer parameters, and the ESC_STATUS message.
+
+PX4 custom mode (``HEARTBEAT.custom_mode``, ``MAV_CMD_DO_SET_MODE`` param2/param3)::
+
+    custom_mode = main_mode << 16 | sub_mode << 24
+
+e.g. OFFBOARD = main 6, HOLD = main 4 / sub 3 (AUTO.LOITER), LAND = main 4 / sub 6,
+POSCTL = main 3.
+
+ESC_STATUS (id 291) is sent by PX4 but is not part of the dialects bundled with
+pymavlink 2.4.50, so it is defined here with the field layout and CRC_EXTRA of
+mavlink/message_definitions common.xml (CRC_EXTRA 10, verified against
+``pymavlink.generator.mavparse`` in the tests).
+"""
+
+from __future__ import annotations
+
+import enum
+import importlib
+import struct
+import time
+from dataclasses import dataclass
+from types import ModuleType
+from typing import Any
+
+from lpv_sysid.errors import ConfigError
+
+# --------------------------------------------------------------------------- modes
+MAIN_MANUAL = 1
+MAIN_ALTCTL = 2
+MAIN_POSCTL = 3
+MAIN_AUTO = 4
+MAIN_ACRO = 5
+MAIN_OFFBOARD = 6
+MAIN_STABILIZED = 7
+
+SUB_AUTO_READY = 1
+SUB_AUTO_TAKEOFF = 2
+SUB_AUTO_LOITER = 3
+SUB_AUTO_MISSION = 4
+SUB_AUTO_RTL = 5
+SUB_AUTO_LAND = 6
+
+MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = 1
+MAV_MODE_FLAG_AUTO_ENABLED = 4
+MAV_MODE_FLAG_GUIDED_ENABLED = 8
+MAV_MODE_FLAG_STABILIZE_ENABLED = 16
+MAV_MODE_FLAG_MANUAL_INPUT_ENABLED = 64
+MAV_MODE_FLAG_SAFETY_ARMED = 128
+
+
+@dataclass(frozen=True)
+class Px4Mode:
+    """A PX4 flight mode as (main, sub); ``name`` follows QGroundControl/MAVSDK."""
+
+    main: int
+    sub: int = 0
+
+    @property
+    def custom_mode(self) -> int:
+        return encode_custom_mode(self.main, self.sub)
+
+    @property
+    def name(self) -> str:
+        return _MODE_NAMES.get((self.main, self.sub), f"UNKNOWN({self.main}.{self.sub})")
+
+
+MANUAL = Px4Mode(MAIN_MANUAL)
+ALTCTL = Px4Mode(MAIN_ALTCTL)
+POSCTL = Px4Mode(MAIN_POSCTL)
+OFFBOARD = Px4Mode(MAIN_OFFBOARD)
+STABILIZED = Px4Mode(MAIN_STABILIZED)
+ACRO = Px4Mode(MAIN_ACRO)
+HOLD = Px4Mode(MAIN_AUTO, SUB_AUTO_LOITER)
+LAND = Px4Mode(MAIN_AUTO, SUB_AUTO_LAND)
+RTL = Px4Mode(MAIN_AUTO, SUB_AUTO_RTL)
+TAKEOFF = Px4Mode(MAIN_AUTO, SUB_AUTO_TAKEOFF)
+MISSION = Px4Mode(MAIN_AUTO, SUB_AUTO_MISSION)
+AUTO_READY = Px4Mode(MAIN_AUTO, SUB_AUTO_READY)
+
+_MODE_NAMES = {
+    (MAIN_MANUAL, 0): "MANUAL",
+    (MAIN_ALTCTL, 0): "ALTCTL",
+    (MAIN_POSCTL, 0): "POSCTL",
+    (MAIN_OFFBOARD, 0): "OFFBOARD",
+    (MAIN_STABILIZED, 0): "STABILIZED",
+    (MAIN_ACRO, 0): "ACRO",
+    (MAIN_AUTO, SUB_AUTO_READY): "READY",
+    (MAIN_AUTO, SUB_AUTO_LOITER): "HOLD",
+    (MAIN_AUTO, SUB_AUTO_LAND): "LAND",
+    (MAIN_AUTO, SUB_AUTO_RTL): "RTL",
+    (MAIN_AUTO, SUB_AUTO_TAKEOFF): "TAKEOFF",
+    (MAIN_AUTO, SUB_AUTO_MISSION): "MISSION",
+}
+MODES_BY_NAME = {name: Px4Mode(*key) for key, name in _MODE_NAMES.items()}
+
+#: hand-back modes the offboard state machine may choose (configurable by name).
+HANDBACK_MODES = {"HOLD": HOLD, "POSCTL": POSCTL, "LAND": LAND}
+
+
+def encode_custom_mode(main: int, sub: int = 0) -> int:
+    """PX4 ``custom_mode``: main mode in bits 16-23, sub mode in bits 24-31."""
+    if not (0 <= main <= 255 and 0 <= sub <= 255):
+        raise ConfigError(f"PX4 mode main={main} sub={sub} out of range 0..255")
+    return (main << 16) | (sub << 24)
+
+
+def decode_custom_mode(custom_mode: int) -> Px4Mode:
+    """Inverse of :func:`encode_custom_mode` (bits 0-15 are unused by PX4)."""
+    return Px4Mode((custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF)
+
+
+def mode_by_name(name: str) -> Px4Mode:
+    try:
+        return MODES_BY_NAME[name.upper()]
+    except KeyError:
+        raise ConfigError(f"unknown PX4 mode {name!r}; known: {sorted(MODES_BY_NAME)}") from None
+
+
+def base_mode_flags(mode: Px4Mode, armed: bool) -> int:
+    """HEARTBEAT.base_mode as PX4 commander fills it (mavlink_main get_mavlink_mode_state)."""
+    flags = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    if armed:
+        flags |= MAV_MODE_FLAG_SAFETY_ARMED
+    if mode.main in (MAIN_MANUAL, MAIN_ACRO, MAIN_STABILIZED):
+        flags |= MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+        if mode.main == MAIN_STABILIZED:
+            flags |= MAV_MODE_FLAG_STABILIZE_ENABLED
+    elif mode.main in (MAIN_ALTCTL, MAIN_POSCTL):
+        flags |= MAV_MODE_FLAG_MANUAL_INPUT_ENABLED | MAV_MODE_FLAG_STABILIZE_ENABLED
+        if mode.main == MAIN_POSCTL:
+            flags |= MAV_MODE_FLAG_GUIDED_ENABLED
+    elif mode.main in (MAIN_AUTO, MAIN_OFFBOARD):
+        flags |= (MAV_MODE_FLAG_AUTO_ENABLED | MAV_MODE_FLAG_STABILIZE_ENABLED
+                  | MAV_MODE_FLAG_GUIDED_ENABLED)
+    return flags
+
+
+# ------------------------------------------------------------------ firmware version
+def decode_flight_sw_version(v: int) -> tuple[int, int, int, int]:
+    """AUTOPILOT_VERSION.flight_sw_version: major<<24 | minor<<16 | patch<<8 | type."""
+    return (v >> 24) & 0xFF, (v >> 16) & 0xFF, (v >> 8) & 0xFF, v & 0xFF
+
+
+def encode_flight_sw_version(major: int, minor: int, patch: int, fw_type: int = 255) -> int:
+    """FIRMWARE_VERSION_TYPE_OFFICIAL = 255."""
+    return (major << 24) | (minor << 16) | (patch << 8) | fw_type
+
+
+# ------------------------------------------------------------------------ parameters
+class OblAction(enum.IntEnum):
+    """COM_OBL_RC_ACT (PX4 v1.14+): mode entered after offboard loss (COM_OF_LOSS_T)."""
+
+    POSITION = 0
+    ALTITUDE = 1
+    MANUAL = 2
+    RETURN = 3
+    LAND = 4
+    HOLD = 5
+    TERMINATE = 6
+    DISARM = 7
+
+
+MAV_PARAM_TYPE_INT32 = 6
+MAV_PARAM_TYPE_REAL32 = 9
+
+
+def param_to_wire(value: float | int, param_type: int) -> float:
+    """PX4 sends INT32 parameters byte-wise: the int32 bits are carried in the float field."""
+    if param_type == MAV_PARAM_TYPE_INT32:
+        return struct.unpack("<f", struct.pack("<i", int(value)))[0]
+    return float(value)
+
+
+def param_from_wire(wire: float, param_type: int) -> float | int:
+    """Inverse of :func:`param_to_wire` (PX4 byte-wise encoding, MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE)."""
+    if param_type == MAV_PARAM_TYPE_INT32:
+        return struct.unpack("<i", struct.pack("<f", wire))[0]
+    return float(wire)
+
+
+def param_id_str(param_id: Any) -> str:
+    if isinstance(param_id, (bytes, bytearray)):
+        param_id = param_id.decode("ascii", errors="replace")
+    return str(param_id).rstrip("\x00")
+
+
+# --------------------------------------------------------------------- MAVLink codec
+MAVLINK_MSG_ID_ESC_STATUS = 291
+ESC_STATUS_CRC_EXTRA = 10
+_ESC_STATUS_STRUCT = struct.Struct("<Q4i4f4fB")   # wire order: time_usec, rpm, voltage, current, index
+
+DEFAULT_DIALECT = "development"   # PX4 builds its MAVLink with development.xml (includes common)
+_DIALECTS = ("development", "common", "ardupilotmega", "all")
+
+
+def dialect_module(name: str = DEFAULT_DIALECT) -> ModuleType:
+    """The pymavlink MAVLink-2 dialect module (``pymavlink.dialects.v20.<name>``)."""
+    if name not in _DIALECTS:
+        raise ConfigError(f"mavlink dialect {name!r} not supported; use one of {_DIALECTS}")
+    return importlib.import_module(f"pymavlink.dialects.v20.{name}")
+
+
+_CODEC_CLASSES: dict[str, type] = {}
+
+
+def esc_status_class(name: str = DEFAULT_DIALECT) -> type:
+    """MAVLink_esc_status_message class built on the dialect's MAVLink_message base."""
+    return _codec_classes(name)[1]
+
+
+def _codec_classes(name: str) -> tuple[type, type]:
+    if name in _CODEC_CLASSES:
+        return _CODEC_CLASSES[name], _CODEC_CLASSES[name + ":esc"]
+    mod = dialect_module(name)
+
+    class EscStatusMessage(mod.MAVLink_message):  # type: ignore[name-defined,misc]
+        """ESC_STATUS (291): index, time_usec [us], rpm[4], voltage[4] [V], current[4] [A]."""
+
+        id = MAVLINK_MSG_ID_ESC_STATUS
+        msgname = "ESC_STATUS"
+        fieldnames = ["index", "time_usec", "rpm", "voltage", "current"]
+        ordered_fieldnames = ["time_usec", "rpm", "voltage", "current", "index"]
+        crc_extra = ESC_STATUS_CRC_EXTRA
+        unpacker = _ESC_STATUS_STRUCT
+        instance_field = None
+        instance_offset = -1
+
+        def __init__(self, index: int, time_usec: int, rpm, voltage, current) -> None:
+            mod.MAVLink_message.__init__(self, MAVLINK_MSG_ID_ESC_STATUS, "ESC_STATUS")
+            self._fieldnames = self.fieldnames
+            self._instance_field = None
+            self._instance_offset = -1
+            self.index = int(index)
+            self.time_usec = int(time_usec)
+            self.rpm = [int(x) for x in rpm]
+            self.voltage = [float(x) for x in voltage]
+            self.current = [float(x) for x in current]
+
+        def pack(self, mav: Any, force_mavlink1: bool = False) -> bytes:
+            payload = _ESC_STATUS_STRUCT.pack(self.time_usec, *self.rpm, *self.voltage,
+                                              *self.current, self.index)
+            return self._pack(mav, self.crc_extra, payload, force_mavlink1=force_mavlink1)
+
+    class Px4Codec(mod.MAVLink):  # type: ignore[name-defined,misc]
+        """The dialect's MAVLink parser plus ESC_STATUS; robust parsing always on."""
+
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, **kwargs)
+            self.robust_parsing = True
+
+        def decode(self, msgbuf: bytearray):  # noqa: D102 - pymavlink API
+            m = super().decode(msgbuf)
+            if (isinstance(m, mod.MAVLink_unknown) and msgbuf[0] == mod.PROTOCOL_MARKER_V2
+                    and (msgbuf[7] | msgbuf[8] << 8 | msgbuf[9] << 16) == MAVLINK_MSG_ID_ESC_STATUS):
+                return _decode_esc_status(self, mod, EscStatusMessage, msgbuf)
+            return m
+
+    _CODEC_CLASSES[name] = Px4Codec
+    _CODEC_CLASSES[name + ":esc"] = EscStatusMessage
+    return Px4Codec, EscStatusMessage
+
+
+def _decode_esc_status(codec: Any, mod: ModuleType, cls: type, msgbuf: bytearray):
+    """Decode ESC_STATUS with CRC and signature checks, mirroring pymavlink's decode()."""
+    signed = bool(msgbuf[2] & mod.MAVLINK_IFLAG_SIGNED)
+    sig_len = mod.MAVLINK_SIGNATURE_BLOCK_LEN if signed else 0
+    mlen = msgbuf[1]
+    crc = struct.unpack("<H", bytes(msgbuf[10 + mlen:12 + mlen]))[0]
+    crcbuf = bytearray(msgbuf[1:10 + mlen])
+    crcbuf.append(ESC_STATUS_CRC_EXTRA)
+    if crc != mod.x25crc(crcbuf).crc:
+        raise mod.MAVError("invalid MAVLink CRC in msgID 291")
+    src_sys, src_comp = msgbuf[5], msgbuf[6]
+    if codec.signing.secret_key is not None:
+        ok = signed and codec.check_signature(msgbuf, src_sys, src_comp)
+        if not ok and not (codec.signing.allow_unsigned_callback is not None
+                           and codec.signing.allow_unsigned_callback(codec, 291)):
+            codec.signing.badsig_count += 1
+            raise mod.MAVError("Invalid signature")
+    payload = bytes(msgbuf[10:10 + mlen]).ljust(_ESC_STATUS_STRUCT.size, b"\0")
+    t = _ESC_STATUS_STRUCT.unpack(payload[:_ESC_STATUS_STRUCT.size])
+    m = cls(t[13], t[0], t[1:5], t[5:9], t[9:13])
+    m._msgbuf = msgbuf
+    m._payload = msgbuf[10:10 + mlen]
+    m._crc = crc
+    m._signed = signed
+    m._header = mod.MAVLink_header(291, msgbuf[2], msgbuf[3], mlen, msgbuf[4], src_sys, src_comp)
+    return m
+
+
+def make_codec(file: Any, source_system: int, source_component: int,
+               dialect: str = DEFAULT_DIALECT) -> Any:
+    """A MAVLink 2 parser/packer for ``file`` (anything with ``write(bytes)``)."""
+    cls, _ = _codec_classes(dialect)
+    return cls(file, srcSystem=source_system, srcComponent=source_component)
+
+
+SIGNING_EPOCH = 1420070400   # 2015-01-01T00:00:00Z, MAVLink signing timestamp origin
+
+
+def setup_signing(codec: Any, key: bytes, link_id: int = 0, allow_unsigned: bool = False,
+                  wall_time: float | None = None) -> None:
+    """Enable MAVLink 2 signing on ``codec`` (timestamp in 10 us since 2015-01-01)."""
+    if len(key) != 32:
+        raise ConfigError(f"MAVLink signing key must be 32 bytes, got {len(key)}")
+    codec.signing.secret_key = bytes(key)
+    codec.signing.sign_outgoing = True
+    codec.signing.link_id = int(link_id) & 0xFF
+    codec.signing.allow_unsigned_callback = (lambda _mav, _msgid: True) if allow_unsigned else None
+    now = time.time() if wall_time is None else wall_time
+    codec.signing.timestamp = int(max(now - SIGNING_EPOCH, 0.0) * 100_000)

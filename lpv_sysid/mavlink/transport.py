@@ -1,0 +1,179 @@
+"""Setpoint transports: how a core command becomes MAVLink for PX4 OFFBOARD.
+
+A transport turns a setpoint object into MAVLink messages; the bridge does not care
+which. Implementations here are the ones that can be exercised end to end against the
+simulated vehicle (and that PX4 v1.16 accepts over MAVLink):
+
+- :class:`VelocityTransport` (phase 1): SET_POSITION_TARGET_LOCAL_NED, velocity only
+  (type_mask 0x0FC7) or velocity + yaw rate (0x07C7), in MAV_FRAME_BODY_NED (PX4 rotates
+  the vector by the current *yaw only*) or MAV_FRAME_LOCAL_NED (the bridge rotates the
+  body reference by the full attitude R_IB of the latest telemetry, seed 0 Eq. 1).
+- :class:`AttitudeRateTransport` (phase 2 fallback): the virtual actuator command
+  u = (ut, ua, ue, ur) of seed 0 Eq. (7)-(8) becomes SET_ATTITUDE_TARGET body rates +
+  collective thrust (see docs/px4_transport.md for what is lost).
+
+Direct motor commands (px4_msgs ActuatorMotors over uXRCE-DDS) are not a MAVLink path
+and not a dependency of this package; SET_ACTUATOR_CONTROL_TARGET is ignored by PX4 since
+about v1.14. docs/px4_transport.md lists what each firmware path supports.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from lpv_sysid.errors import ConfigError, SafetyError
+
+MAV_FRAME_LOCAL_NED = 1
+MAV_FRAME_BODY_NED = 8
+TYPE_MASK_VELOCITY = 0x0FC7          # ignore position, acceleration, force, yaw, yaw rate
+TYPE_MASK_VELOCITY_YAW_RATE = 0x07C7  # as above but yaw rate used
+ATTITUDE_TARGET_IGNORE_ATTITUDE = 128  # ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE
+_SQ2 = math.sqrt(2.0) / 2.0
+
+
+@dataclass(frozen=True)
+class VelocitySetpoint:
+    """Body velocity reference (u_d, v_d, w_d) FRD [m/s] and yaw-rate reference r_d [rad/s]."""
+
+    v_frd: tuple[float, float, float]
+    yaw_rate: float = 0.0
+
+
+@dataclass(frozen=True)
+class ActuatorSetpoint:
+    """Virtual actuator command u = (ut, ua, ue, ur) of seed 0 Eq. (7) (INPUT_NAMES)."""
+
+    u: tuple[float, float, float, float]
+
+
+@dataclass(frozen=True)
+class TransportContext:
+    """What a transport may need besides the setpoint."""
+
+    time_boot_ms: int
+    target_system: int
+    target_component: int
+    q_wxyz: np.ndarray | None = None      # latest attitude (FRD -> NED)
+    omega: np.ndarray | None = None       # latest body rates FRD
+
+
+class SetpointTransport(Protocol):
+    name: str
+
+    def encode(self, codec: Any, setpoint: Any, ctx: TransportContext) -> list[Any]:
+        """MAVLink messages for ``setpoint`` (raises SafetyError if it cannot be encoded)."""
+
+    def neutral(self) -> Any | None:
+        """Setpoint streamed while no fresh command exists (None: stream nothing)."""
+
+
+def _finite(name: str, values: Any, n: int) -> np.ndarray:
+    a = np.asarray(values, dtype=float)
+    if a.shape != (n,):
+        raise SafetyError(f"{name}: expected {n} values, got shape {a.shape}")
+    if not np.isfinite(a).all():
+        raise SafetyError(f"{name}: contains NaN or inf")
+    return a
+
+
+class VelocityTransport:
+    """Phase-1 velocity setpoints (module docstring)."""
+
+    name = "velocity"
+
+    def __init__(self, frame: str = "body_ned", use_yaw_rate: bool = True) -> None:
+        if frame not in ("body_ned", "local_ned"):
+            raise ConfigError(f"velocity frame must be 'body_ned' or 'local_ned', got {frame!r}")
+        self.frame = frame
+        self.use_yaw_rate = bool(use_yaw_rate)
+        self.type_mask = TYPE_MASK_VELOCITY_YAW_RATE if use_yaw_rate else TYPE_MASK_VELOCITY
+
+    def neutral(self) -> VelocitySetpoint:
+        """Zero velocity: PX4 brakes and hovers (used only during pre-stream)."""
+        return VelocitySetpoint((0.0, 0.0, 0.0), 0.0)
+
+    def encode(self, codec: Any, sp: VelocitySetpoint, ctx: TransportContext) -> list[Any]:
+        v = _finite("velocity setpoint", sp.v_frd, 3)
+        r = float(sp.yaw_rate)
+        if not math.isfinite(r):
+            raise SafetyError("yaw-rate setpoint is not finite")
+        if self.frame == "local_ned":
+            if ctx.q_wxyz is None:
+                raise SafetyError("local_ned velocity setpoint needs the vehicle attitude (no telemetry)")
+            from lpv_sysid.mavlink.telemetry import quat_to_dcm
+            v = quat_to_dcm(ctx.q_wxyz) @ v
+            frame = MAV_FRAME_LOCAL_NED
+        else:
+            frame = MAV_FRAME_BODY_NED
+        return [codec.set_position_target_local_ned_encode(
+            ctx.time_boot_ms, ctx.target_system, ctx.target_component, frame, self.type_mask,
+            0.0, 0.0, 0.0, float(v[0]), float(v[1]), float(v[2]), 0.0, 0.0, 0.0,
+            0.0, r if self.use_yaw_rate else 0.0)]
+
+
+class AttitudeRateTransport:
+    """Phase-2 fallback: virtual actuator command -> body-rate + thrust setpoint.
+
+    Seed 0 Eq. (7) with PX4 quad-X numbering gives the per-motor normalised commands
+    u_ESC = Mix^-1 u. PX4's normalised allocation for a quad-X with unit effectiveness
+    (motor_i = T + a_i tau_roll + b_i tau_pitch + c_i tau_yaw, |a_i| = |b_i| = |c_i| = 1)
+    inverts that exactly to::
+
+        T = ut,  tau_roll = ua / (4 s),  tau_pitch = ue / (4 s),  tau_yaw = ur / 4,
+        s = arm_length * sqrt(2) / 2
+
+    PX4's rate controller produces tau = K_p (omega_sp - omega) (+ I, D, FF terms), so
+    the rate setpoint that makes its proportional term reproduce tau is::
+
+        omega_sp = omega_measured + tau / K_p,   K_p = (MC_ROLLRATE_P, MC_PITCHRATE_P, MC_YAWRATE_P)
+
+    Lost on this path: the rate integrator/derivative of PX4 act on top (set MC_*RATE_I
+    to 0 for identification flights), per-axis effectiveness scaling of PX4's control
+    allocator (CA_ROTOR geometry) and THR_MDL_FAC reshape the command, motor saturation
+    is handled by PX4's allocator, and one extra sample of latency is added.
+    """
+
+    name = "attitude_rate"
+
+    def __init__(self, arm_length: float, rate_p: tuple[float, float, float] = (0.15, 0.15, 0.2),
+                 max_rate: float = 4.0) -> None:
+        if not (arm_length > 0 and math.isfinite(arm_length)):
+            raise ConfigError(f"attitude_rate.arm_length must be positive, got {arm_length!r}")
+        kp = np.asarray(rate_p, dtype=float)
+        if kp.shape != (3,) or not np.isfinite(kp).all() or (kp <= 0).any():
+            raise ConfigError(f"attitude_rate.rate_p must be 3 positive numbers, got {rate_p!r}")
+        self.s = arm_length * _SQ2
+        self.rate_p = kp
+        self.max_rate = float(max_rate)
+
+    def neutral(self) -> None:
+        return None     # no safe neutral without a model of the hover thrust: stream nothing
+
+    def thrust_torque(self, u: Any) -> tuple[float, np.ndarray]:
+        ut, ua, ue, ur = _finite("actuator command", u, 4)
+        return float(ut), np.array([ua / (4 * self.s), ue / (4 * self.s), ur / 4.0])
+
+    def encode(self, codec: Any, sp: ActuatorSetpoint, ctx: TransportContext) -> list[Any]:
+        if ctx.omega is None:
+            raise SafetyError("attitude_rate transport needs the body rates (no telemetry)")
+        thrust, tau = self.thrust_torque(sp.u)
+        omega_sp = np.clip(np.asarray(ctx.omega, dtype=float) + tau / self.rate_p,
+                           -self.max_rate, self.max_rate)
+        thrust = min(max(thrust, 0.0), 1.0)
+        return [codec.set_attitude_target_encode(
+            ctx.time_boot_ms, ctx.target_system, ctx.target_component,
+            ATTITUDE_TARGET_IGNORE_ATTITUDE, [1.0, 0.0, 0.0, 0.0],
+            float(omega_sp[0]), float(omega_sp[1]), float(omega_sp[2]), thrust)]
+
+
+def make_transport(kind: str, **kw: Any) -> SetpointTransport:
+    if kind == "velocity":
+        return VelocityTransport(**kw)
+    if kind == "attitude_rate":
+        return AttitudeRateTransport(**kw)
+    raise ConfigError(f"command transport {kind!r} unknown; use 'velocity' or 'attitude_rate' "
+                      "(direct motor control needs uXRCE-DDS, see docs/px4_transport.md)")

@@ -1,0 +1,327 @@
+"""Polytopic (uncertain) LPV model over the scheduling box of seed 0 Eqs. (20)-(23).
+
+Vertex order (fixed, documented, identical to the ``vertices`` list of ``vertex_models.yaml``
+and ``gains.yaml``): ``itertools.product(*[(min_k, max_k) for k in axes])``, first axis
+slowest. For the quadrotor box ``v_d = (u_d, v_d, w_d)`` vertex 0 is (min, min, min),
+vertex 1 is (min, min, max), ..., vertex 7 is (max, max, max).
+
+Multilinear weights (seed 0 Eq. 21): with ``t_k = (v_k - min_k) / (max_k - min_k)`` and the
+1-D barycentric pair ``(1 - t_k, t_k)``, ``alpha_i = prod_k w_k(bit_ik)``, where bit_ik = 0 for
+min and 1 for max. They are non-negative, sum to 1, and reproduce every affine (indeed every
+multilinear) function of ``v_d`` exactly from its vertex values. Outside the box ``v_d`` is
+clamped to the box and a flag is returned (the caller raises the safety event).
+
+Nested uncertainty vertices Lambda_i^j (seed 0 Eq. 23) are built per scheduling vertex from the
+nominal ``(A_i, B_i)`` and the interval box of the uncertain elements (Eq. 22) by corner
+enumeration, or taken from an explicit list (e.g. produced by ``lpv_sysid.ident.uncertainty``).
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+from dataclasses import dataclass, field
+from typing import Iterable, Optional, Sequence
+
+import numpy as np
+
+from lpv_sysid.errors import ConfigError
+
+log = logging.getLogger(__name__)
+
+#: corner enumeration of p uncertain elements gives 2**p systems; refuse more than this.
+MAX_CORNERS_DEFAULT = 4096
+
+
+# --------------------------------------------------------------------------- box and weights
+def box_vertices(vmin: Sequence[float], vmax: Sequence[float]) -> np.ndarray:
+    """Corners of the box [vmin, vmax] (seed 0 Eq. 20), shape (2**p, p), first axis slowest."""
+    vmin, vmax = _check_box(vmin, vmax)
+    return np.array(list(itertools.product(*zip(vmin, vmax))), dtype=float)
+
+
+def _check_box(vmin: Sequence[float], vmax: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+    lo = np.asarray(vmin, dtype=float).ravel()
+    hi = np.asarray(vmax, dtype=float).ravel()
+    if lo.shape != hi.shape or lo.size == 0:
+        raise ConfigError(f"scheduling box: min {lo.shape} and max {hi.shape} must be equal, non-empty")
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        raise ConfigError("scheduling box: min/max must be finite")
+    if np.any(hi <= lo):
+        raise ConfigError(f"scheduling box: need max > min on every axis, got min={lo.tolist()} max={hi.tolist()}")
+    return lo, hi
+
+
+def multilinear_weights(v: Sequence[float], vmin: Sequence[float], vmax: Sequence[float]
+                        ) -> tuple[np.ndarray, bool]:
+    """alpha_i(v) of seed 0 Eq. (21) for the vertex order of :func:`box_vertices`.
+
+    Returns (alpha (2**p,), clamped). ``clamped`` is True when v was outside the box and was
+    projected onto it before the weights were computed. NaN in ``v`` raises ConfigError.
+    """
+    lo, hi = _check_box(vmin, vmax)
+    v = np.asarray(v, dtype=float).ravel()
+    if v.shape != lo.shape:
+        raise ConfigError(f"scheduling point has {v.size} entries, the box has {lo.size} axes")
+    if not np.all(np.isfinite(v)):
+        raise ConfigError(f"scheduling point contains NaN/inf: {v.tolist()}")
+    t = (v - lo) / (hi - lo)
+    clamped = bool(np.any(t < 0.0) or np.any(t > 1.0))
+    t = np.clip(t, 0.0, 1.0)
+    alpha = np.ones(1)
+    for tk in t:
+        alpha = np.kron(alpha, np.array([1.0 - tk, tk]))   # kron: first factor slowest
+    return alpha, clamped
+
+
+def multilinear_weight_gradient(v: Sequence[float], vmin: Sequence[float], vmax: Sequence[float]
+                                ) -> np.ndarray:
+    """d alpha_i / d v_k, shape (2**p, p), at a point clamped into the box (used by Eq. 34).
+
+    Outside the box the clamped coordinate has zero derivative (the clamped model is flat).
+    """
+    lo, hi = _check_box(vmin, vmax)
+    v = np.asarray(v, dtype=float).ravel()
+    if not np.all(np.isfinite(v)):
+        raise ConfigError(f"scheduling point contains NaN/inf: {v.tolist()}")
+    t_raw = (v - lo) / (hi - lo)
+    t = np.clip(t_raw, 0.0, 1.0)
+    inside = (t_raw >= 0.0) & (t_raw <= 1.0)
+    p = lo.size
+    grad = np.empty((2 ** p, p))
+    for k in range(p):
+        g = np.ones(1)
+        for l_ in range(p):
+            if l_ == k:
+                d = np.array([-1.0, 1.0]) / (hi[k] - lo[k]) if inside[k] else np.zeros(2)
+                g = np.kron(g, d)
+            else:
+                g = np.kron(g, np.array([1.0 - t[l_], t[l_]]))
+        grad[:, k] = g
+    return grad
+
+
+# --------------------------------------------------------------------------- uncertainty
+@dataclass(frozen=True)
+class UncertainElement:
+    """One identified matrix element with its interval (seed 0 Eq. 22)."""
+
+    matrix: str          # "A" or "B"
+    row: int
+    col: int
+    lower: float
+    upper: float
+    nominal: Optional[float] = None
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "UncertainElement":
+        try:
+            el = cls(matrix=str(d["matrix"]), row=int(d["row"]), col=int(d["col"]),
+                     lower=float(d["lower"]), upper=float(d["upper"]),
+                     nominal=None if d.get("nominal") is None else float(d["nominal"]))
+        except KeyError as exc:
+            raise ConfigError(f"uncertain element {d!r}: missing key {exc}") from None
+        except (TypeError, ValueError) as exc:
+            raise ConfigError(f"uncertain element {d!r}: {exc}") from None
+        if el.matrix not in ("A", "B"):
+            raise ConfigError(f"uncertain element: 'matrix' must be 'A' or 'B', got {el.matrix!r}")
+        if not (np.isfinite(el.lower) and np.isfinite(el.upper)) or el.upper < el.lower:
+            raise ConfigError(f"uncertain element {el.matrix}[{el.row},{el.col}]: need finite lower <= upper, "
+                              f"got [{el.lower}, {el.upper}]")
+        return el
+
+
+def uncertainty_vertices(A: np.ndarray, B: np.ndarray, elements: Sequence[UncertainElement],
+                         max_corners: int = MAX_CORNERS_DEFAULT) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Lambda_i^j of seed 0 Eq. (23): all 2**p corners of the interval box of the elements.
+
+    Corner order: itertools.product over (lower, upper) per element, first element slowest.
+    Elements with lower == upper are fixed (they do not double the count). With no uncertain
+    elements the single nominal system is returned.
+    """
+    A = np.asarray(A, dtype=float)
+    B = np.asarray(B, dtype=float)
+    free = []
+    for el in elements:
+        mat = A if el.matrix == "A" else B
+        if not (0 <= el.row < mat.shape[0] and 0 <= el.col < mat.shape[1]):
+            raise ConfigError(f"uncertain element {el.matrix}[{el.row},{el.col}] outside shape {mat.shape}")
+        if el.upper > el.lower:
+            free.append(el)
+    n_corners = 2 ** len(free)
+    if n_corners > max_corners:
+        raise ConfigError(
+            f"{len(free)} uncertain elements give {n_corners} corners (> max_corners={max_corners}); "
+            "pass an explicit list of vertex systems (ident.uncertainty) or raise max_corners")
+    base_A, base_B = A.copy(), B.copy()
+    for el in elements:
+        if el.upper == el.lower:
+            (base_A if el.matrix == "A" else base_B)[el.row, el.col] = el.lower
+    out = []
+    for corner in itertools.product(*[(el.lower, el.upper) for el in free]):
+        Aj, Bj = base_A.copy(), base_B.copy()
+        for el, val in zip(free, corner):
+            (Aj if el.matrix == "A" else Bj)[el.row, el.col] = val
+        out.append((Aj, Bj))
+    return out
+
+
+# --------------------------------------------------------------------------- the polytope
+@dataclass
+class PolytopicModel:
+    """Nominal vertex systems, equilibria and nested uncertainty vertices (Eqs. 20-23).
+
+    ``A`` (N, n, n), ``B`` (N, n, m), ``x0`` (N, n), ``u0`` (N, m) in the vertex order of
+    :func:`box_vertices`; ``systems[i]`` is the list of (A_i^j, B_i^j) of Eq. (23) (defaults to
+    the nominal vertex only). ``ts`` is None for continuous time, else the sample time.
+    """
+
+    vmin: np.ndarray
+    vmax: np.ndarray
+    A: np.ndarray
+    B: np.ndarray
+    x0: np.ndarray
+    u0: np.ndarray
+    systems: list = field(default_factory=list)
+    ts: Optional[float] = None
+    state_names: tuple = ()
+    input_names: tuple = ()
+    scheduling_names: tuple = ()
+
+    def __post_init__(self) -> None:
+        self.vmin, self.vmax = _check_box(self.vmin, self.vmax)
+        p = self.vmin.size
+        N = 2 ** p
+        self.A = np.asarray(self.A, dtype=float)
+        self.B = np.asarray(self.B, dtype=float)
+        if self.A.ndim != 3 or self.A.shape[0] != N or self.A.shape[1] != self.A.shape[2]:
+            raise ConfigError(f"A must have shape ({N}, n, n) for a {p}-axis box, got {self.A.shape}")
+        n = self.A.shape[1]
+        if self.B.ndim != 3 or self.B.shape[:2] != (N, n):
+            raise ConfigError(f"B must have shape ({N}, {n}, m), got {self.B.shape}")
+        m = self.B.shape[2]
+        self.x0 = np.zeros((N, n)) if self.x0 is None else np.asarray(self.x0, dtype=float)
+        self.u0 = np.zeros((N, m)) if self.u0 is None else np.asarray(self.u0, dtype=float)
+        if self.x0.shape != (N, n):
+            raise ConfigError(f"x0 must have shape ({N}, {n}), got {self.x0.shape}")
+        if self.u0.shape != (N, m):
+            raise ConfigError(f"u0 must have shape ({N}, {m}), got {self.u0.shape}")
+        for name in ("A", "B", "x0", "u0"):
+            if not np.all(np.isfinite(getattr(self, name))):
+                raise ConfigError(f"{name} contains NaN/inf")
+        if not self.systems:
+            self.systems = [[(self.A[i], self.B[i])] for i in range(N)]
+        if len(self.systems) != N:
+            raise ConfigError(f"systems: need one list of uncertainty vertices per scheduling vertex ({N}), "
+                              f"got {len(self.systems)}")
+        for i, lst in enumerate(self.systems):
+            if len(lst) == 0:
+                raise ConfigError(f"systems[{i}] is empty")
+            for j, (Aj, Bj) in enumerate(lst):
+                if np.shape(Aj) != (n, n) or np.shape(Bj) != (n, m):
+                    raise ConfigError(f"systems[{i}][{j}]: shapes {np.shape(Aj)}, {np.shape(Bj)} "
+                                      f"!= ({n},{n}), ({n},{m})")
+                if not (np.all(np.isfinite(Aj)) and np.all(np.isfinite(Bj))):
+                    raise ConfigError(f"systems[{i}][{j}] contains NaN/inf")
+        if self.ts is not None and not (np.isfinite(self.ts) and self.ts > 0):
+            raise ConfigError(f"sample time must be > 0, got {self.ts!r}")
+
+    # sizes
+    @property
+    def n_vertices(self) -> int:
+        return self.A.shape[0]
+
+    @property
+    def n_x(self) -> int:
+        return self.A.shape[1]
+
+    @property
+    def n_u(self) -> int:
+        return self.B.shape[2]
+
+    @property
+    def vertices(self) -> np.ndarray:
+        return box_vertices(self.vmin, self.vmax)
+
+    @classmethod
+    def from_uncertain_elements(cls, vmin, vmax, A, B, x0, u0, elements: Sequence[Sequence[UncertainElement]],
+                                max_corners: int = MAX_CORNERS_DEFAULT, **kw) -> "PolytopicModel":
+        """Build the nested polytope of Eq. (23) by corner enumeration per vertex."""
+        A = np.asarray(A, dtype=float)
+        B = np.asarray(B, dtype=float)
+        if len(elements) != A.shape[0]:
+            raise ConfigError(f"need one list of uncertain elements per vertex ({A.shape[0]}), got {len(elements)}")
+        systems = [uncertainty_vertices(A[i], B[i], elements[i], max_corners) for i in range(A.shape[0])]
+        return cls(vmin=vmin, vmax=vmax, A=A, B=B, x0=x0, u0=u0, systems=systems, **kw)
+
+    # interpolation (seed 0 Eq. 21, Eq. 31, Eq. 34)
+    def weights(self, v_d) -> tuple[np.ndarray, bool]:
+        return multilinear_weights(v_d, self.vmin, self.vmax)
+
+    def interpolate(self, stack: np.ndarray, v_d) -> np.ndarray:
+        """sum_i alpha_i(v_d) stack[i] for a vertex-stacked array (N, ...)."""
+        alpha, _ = self.weights(v_d)
+        return np.tensordot(alpha, np.asarray(stack, dtype=float), axes=1)
+
+    def A_at(self, v_d) -> np.ndarray:
+        return self.interpolate(self.A, v_d)
+
+    def B_at(self, v_d) -> np.ndarray:
+        return self.interpolate(self.B, v_d)
+
+    def x0_at(self, v_d) -> np.ndarray:
+        return self.interpolate(self.x0, v_d)
+
+    def u0_at(self, v_d) -> np.ndarray:
+        return self.interpolate(self.u0, v_d)
+
+    def dx0_dvd(self, v_d) -> np.ndarray:
+        """d x0 / d v_d of seed 0 Eq. (34), shape (n, p): sum_i x0_i (d alpha_i / d v_d)^T."""
+        grad = multilinear_weight_gradient(v_d, self.vmin, self.vmax)
+        return self.x0.T @ grad
+
+
+class ScheduledLpv:
+    """Nominal LPV model plus vertex gains, evaluated at v_d.
+
+    Implements the ``ScheduledModel`` protocol of :mod:`lpv_sysid.sim.lpv_closed_loop`
+    (A, B, K, x0, u0, dx0_dvd at a scheduling point), K(v_d) = sum alpha_i K_i (Eq. 31).
+    """
+
+    def __init__(self, model: PolytopicModel, K: np.ndarray) -> None:
+        K = np.asarray(K, dtype=float)
+        if K.shape != (model.n_vertices, model.n_u, model.n_x):
+            raise ConfigError(f"K must have shape ({model.n_vertices}, {model.n_u}, {model.n_x}), got {K.shape}")
+        self.model = model
+        self.Kv = K
+
+    def A(self, v_d):
+        return self.model.A_at(v_d)
+
+    def B(self, v_d):
+        return self.model.B_at(v_d)
+
+    def K(self, v_d):
+        return self.model.interpolate(self.Kv, v_d)
+
+    def x0(self, v_d):
+        return self.model.x0_at(v_d)
+
+    def u0(self, v_d):
+        return self.model.u0_at(v_d)
+
+    def dx0_dvd(self, v_d):
+        return self.model.dx0_dvd(v_d)
+
+
+def interpolate_gain(K: np.ndarray, v_d, vmin, vmax) -> np.ndarray:
+    """K(v_d) = sum_i alpha_i(v_d) K_i, seed 0 Eq. (31) (K: (N, m, n))."""
+    alpha, _ = multilinear_weights(v_d, vmin, vmax)
+    return np.tensordot(alpha, np.asarray(K, dtype=float), axes=1)
+
+
+def iter_systems(model: PolytopicModel) -> Iterable[tuple[int, int, np.ndarray, np.ndarray]]:
+    """(i, j, A_i^j, B_i^j) over the nested polytope of Eq. (23)."""
+    for i, lst in enumerate(model.systems):
+        for j, (Aj, Bj) in enumerate(lst):
+            yield i, j, np.asarray(Aj, dtype=float), np.asarray(Bj, dtype=float)

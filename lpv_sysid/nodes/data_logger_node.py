@@ -1,0 +1,136 @@
+"""data_logger_node: records the experiment topics to rosbag2 (mcap) with metadata.
+
+Shell around :class:`lpv_sysid.io.recorder.Recorder`. Subscribes with ``raw=True`` (the
+serialized CDR goes to the bag untouched, as ``ros2 bag record`` does) and stamps each
+message with the node clock at reception. Splits into ``bag_0000``, ``bag_0001``, ... by
+size / duration, writes ``experiment.yaml`` (config files, gains sha256, git revision,
+counts, rates, drops) and closes every bag on shutdown: rclpy turns SIGINT/SIGTERM into
+a context shutdown, ``spin`` returns and ``destroy_node`` closes the recorder.
+Drops reported by the middleware (QoS ``message_lost`` event) and rates go to ``status``.
+
+    ros2 run lpv_sysid data_logger_node --ros-args --params-file config/data_logger.yaml \
+        -p out_dir:=flight_07
+"""
+
+from __future__ import annotations
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
+from rosidl_runtime_py.utilities import get_message
+
+from lpv_sysid.errors import LpvSysidError
+from lpv_sysid.io import messages as M
+from lpv_sysid.io.recorder import Recorder, RecorderConfig
+from lpv_sysid.nodes import _common as C
+
+NODE_NAME = "data_logger"
+
+PARAMETERS = [
+    ("out_dir", "lpv_sysid_log", C.typed(Parameter.Type.STRING,
+                                         "experiment directory (must not exist or be empty)")),
+    ("storage", "mcap", C.typed(Parameter.Type.STRING, "rosbag2 storage: mcap or sqlite3")),
+    ("topics", list(C.TOPIC_TYPES), C.typed(
+        Parameter.Type.STRING_ARRAY,
+        "topics to record, relative to the namespace; 'name' for the lpv_sysid topics "
+        "or 'name:pkg/msg/Type' for any other")),
+    ("split_size_mb", 0.0, C.double("start a new bag after this many MB (0: never)",
+                                     0.0, 1.0e6)),
+    ("split_duration_s", 0.0, C.double("start a new bag after this long (0: never)",
+                                       0.0, 1.0e6)),
+    ("queue_depth", 1000, C.integer("subscription queue depth per topic", 1, 100000)),
+    ("config_files", Parameter.Type.STRING_ARRAY, C.typed(
+        Parameter.Type.STRING_ARRAY, "files copied verbatim into experiment.yaml")),
+    ("gains_file", "", C.typed(Parameter.Type.STRING, "gains.yaml to hash into the metadata")),
+    ("description", "", C.typed(Parameter.Type.STRING, "free text for experiment.yaml")),
+    ("status_rate_hz", 1.0, C.double("status publication rate [Hz]", 0.1, 100.0)),
+]
+
+
+def parse_topics(entries) -> dict[str, str]:
+    """``{relative name: pkg/msg/Type}`` from the ``topics`` parameter."""
+    out = {}
+    for e in entries:
+        name, _, typ = str(e).partition(":")
+        if not typ:
+            if name not in C.TOPIC_TYPES:
+                raise LpvSysidError(f"parameter 'topics': {name!r} is not an lpv_sysid topic "
+                                    f"{sorted(C.TOPIC_TYPES)}; write 'name:pkg/msg/Type'")
+            typ = C.TOPIC_TYPES[name]
+        out[name] = typ
+    return out
+
+
+class DataLoggerNode(Node):
+    def __init__(self, **kwargs):
+        kwargs.setdefault("namespace", C.NAMESPACE)   # a __ns remap still wins
+        super().__init__(NODE_NAME, **kwargs)
+        p = C.declare(self, PARAMETERS)
+        rel = parse_topics(p["topics"])
+        topics = {self.resolve_topic_name(n): t for n, t in rel.items()}
+        cfg = RecorderConfig(out_dir=p["out_dir"], topics=topics, storage=p["storage"],
+                             split_size_bytes=int(p["split_size_mb"] * 1e6),
+                             split_duration_s=p["split_duration_s"],
+                             config_files=tuple(p["config_files"]),
+                             gains_file=p["gains_file"], description=p["description"])
+        self.recorder = Recorder(cfg)
+        self.recorder.start(self.get_clock().now().nanoseconds)
+        self.f = M.MsgFactory.rclpy()
+        self.pub_status = self.create_publisher(DiagnosticArray, "status", C.qos_for("status"))
+        for name, typ in rel.items():
+            full = self.resolve_topic_name(name)
+            reliability = (QoSReliabilityPolicy.BEST_EFFORT if name in C.SENSOR_TOPICS
+                           else QoSReliabilityPolicy.RELIABLE)
+            qos = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=p["queue_depth"],
+                             reliability=reliability)
+            events = SubscriptionEventCallbacks(message_lost=self._lost_cb(full))
+            self.create_subscription(get_message(typ), name, self._record_cb(full), qos,
+                                     event_callbacks=events, raw=True)
+        self.create_timer(1.0 / p["status_rate_hz"], self.publish_status)
+        self.get_logger().info(f"recording {sorted(topics)} to {p['out_dir']}")
+
+    def _record_cb(self, topic):
+        def cb(data):
+            try:
+                self.recorder.record(topic, self.get_clock().now().nanoseconds, data)
+            except LpvSysidError as exc:
+                # disk full / write error: what was written is closed and readable; say so
+                self.get_logger().error(str(exc), once=True)
+        return cb
+
+    def _lost_cb(self, topic):
+        def cb(info):
+            self.recorder.note_dropped(topic, info.total_count_change)
+        return cb
+
+    def publish_status(self):
+        rec = self.recorder
+        values = {}
+        for topic, s in rec.stats.items():
+            values[f"{topic}.count"] = s.count
+            values[f"{topic}.rate_hz"] = round(s.rate_hz, 3)
+            values[f"{topic}.dropped"] = s.dropped
+        values["bags"] = len(rec.bags)
+        level = "ERROR" if rec.error else "OK"
+        msg = rec.error or ("recording" if rec.recording else "stopped")
+        st = M.diagnostic_status(self.f, level, self.get_fully_qualified_name(), msg, values)
+        self.pub_status.publish(
+            M.diagnostic_array(self.f, self.get_clock().now().nanoseconds, [st]))
+
+    def destroy_node(self):
+        try:
+            self.recorder.stop(self.get_clock().now().nanoseconds)
+            self.get_logger().info(self.recorder.summary())
+        except LpvSysidError as exc:
+            self.get_logger().error(str(exc))
+        super().destroy_node()
+
+
+def main(args=None):
+    return C.run(DataLoggerNode, args, NODE_NAME)
+
+
+if __name__ == "__main__":
+    main()

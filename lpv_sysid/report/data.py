@@ -1,0 +1,249 @@
+"""Loading the artefacts of a run directory for the report (no plotting here).
+
+A run directory is what ``lpv-sysid demo --out DIR`` writes (README "What the demo does").
+Every input is optional; :func:`load_run` records which files were found, which are missing
+and which could not be read, so the report can say so plainly.
+
+Files looked for (first existing candidate wins):
+
+====================  =========================================================================
+phase-1 trims         ``trims.yaml``, ``phase1/trims.yaml``
+vertex models         ``vertex_models.yaml`` (x0/u0 -> Table 1, fit.r2 -> Table 2)
+validation            ``validation.yaml``, ``ident/validation.yaml`` (TIC/NRMSE -> Table 3)
+signals               ``signals/summary.yaml`` and ``signals/signals.npz``
+gains + certificate   ``gains.yaml``
+verification          ``verification.yaml``, ``verify.yaml``
+phase 2               ``phase2/summary.yaml`` and ``phase2/*.npz`` (written by
+                      :mod:`lpv_sysid.sim.phase2`)
+====================  =========================================================================
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Optional
+
+import numpy as np
+import yaml
+
+from lpv_sysid.errors import ConfigError
+
+log = logging.getLogger(__name__)
+
+CANDIDATES: dict[str, tuple[str, ...]] = {
+    "trims": ("trims.yaml", "phase1/trims.yaml"),
+    "models": ("vertex_models.yaml",),
+    "validation": ("validation.yaml", "ident/validation.yaml"),
+    "signals_summary": ("signals/summary.yaml", "summary.yaml"),
+    "signals": ("signals/signals.npz", "signals.npz"),
+    "gains": ("gains.yaml",),
+    "verification": ("verification.yaml", "verify.yaml"),
+    "phase2_summary": ("phase2/summary.yaml",),
+}
+PHASE2_SERIES = ("eq33", "nonlinear")
+
+
+@dataclass
+class RunData:
+    """Everything the report can use; ``None`` when the input was not found or unreadable."""
+
+    run_dir: Path
+    found: dict[str, Path] = field(default_factory=dict)
+    missing: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    problems: dict[str, str] = field(default_factory=dict)
+    trims: Optional[Any] = None
+    models: Optional[dict] = None
+    validation: Optional[dict] = None
+    signals_summary: Optional[dict] = None
+    signals: Optional[dict[str, np.ndarray]] = None
+    gains: Optional[dict] = None
+    verification: Optional[Any] = None
+    phase2_summary: Optional[dict] = None
+    phase2_series: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
+
+
+def read_yaml(path: Path) -> Any:
+    """YAML file -> Python object; ConfigError naming the file on malformed input."""
+    try:
+        with open(path, "r", encoding="utf-8") as fh:
+            return yaml.safe_load(fh)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: malformed YAML ({exc.__class__.__name__}: "
+                          f"{str(exc).splitlines()[0] if str(exc) else ''})") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read ({exc.strerror})") from None
+
+
+def read_npz(path: Path) -> dict[str, np.ndarray]:
+    """npz archive -> dict of arrays (no pickles); ConfigError naming the file otherwise."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return {k: np.asarray(data[k]) for k in data.files}
+    except (OSError, ValueError, KeyError) as exc:
+        raise ConfigError(f"{path}: not a readable npz archive ({exc})") from None
+
+
+def _find(run_dir: Path, key: str) -> Optional[Path]:
+    for rel in CANDIDATES[key]:
+        p = run_dir / rel
+        if p.is_file():
+            return p
+    return None
+
+
+def load_run(run_dir: str | Path) -> RunData:
+    """Collect the artefacts of ``run_dir``. Raises ConfigError only if the directory is absent."""
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise ConfigError(f"--run: {run_dir} is not a directory")
+    data = RunData(run_dir=run_dir)
+    for key in CANDIDATES:
+        path = _find(run_dir, key)
+        if path is None:
+            data.missing[key] = CANDIDATES[key]
+            continue
+        data.found[key] = path
+        try:
+            value = read_npz(path) if path.suffix == ".npz" else read_yaml(path)
+            if key in ("models", "gains", "signals_summary", "phase2_summary", "validation") and not isinstance(value, dict):
+                raise ConfigError(f"{path}: expected a mapping at the top level, got {type(value).__name__}")
+        except ConfigError as exc:
+            data.problems[key] = str(exc)
+            log.warning("%s", exc)
+            continue
+        setattr(data, key, value)
+    for name in PHASE2_SERIES:
+        path = run_dir / "phase2" / f"{name}.npz"
+        if path.is_file():
+            try:
+                data.phase2_series[name] = read_npz(path)
+                data.found[f"phase2_{name}"] = path
+            except ConfigError as exc:
+                data.problems[f"phase2_{name}"] = str(exc)
+    return data
+
+
+# ---------------------------------------------------------------------------------------------
+# Table extraction (pure functions on the loaded objects)
+# ---------------------------------------------------------------------------------------------
+
+def _names(block: Any) -> list[str]:
+    """['phi', ...] from [{name: phi, unit: rad}, ...] or ['phi', ...]."""
+    if not isinstance(block, list):
+        return []
+    return [str(b.get("name")) if isinstance(b, dict) else str(b) for b in block]
+
+
+TRIM_COLUMNS = (("u", "m/s", 1.0), ("v", "m/s", 1.0), ("w", "m/s", 1.0), ("phi", "deg", 180 / np.pi),
+                ("theta", "deg", 180 / np.pi), ("dt", "rad/s", 1.0), ("da", "m*rad/s", 1.0),
+                ("de", "m*rad/s", 1.0), ("dr", "rad/s", 1.0))
+
+
+def equilibrium_table(models: dict) -> tuple[list[str], list[list[Any]]]:
+    """Seed 0 Table 1 from the vertex equilibria x0 of ``vertex_models.yaml``."""
+    names = _names(models.get("states"))
+    vertices = models.get("vertices") or []
+    header = ["vertex [m/s]"] + [f"{n}_0 [{u}]" for n, u, _ in TRIM_COLUMNS]
+    rows = []
+    for k, vx in enumerate(vertices):
+        x0 = vx.get("x0") if isinstance(vx, dict) else None
+        sched = vx.get("scheduling") if isinstance(vx, dict) else None
+        if not isinstance(x0, list) or len(x0) != len(names):
+            raise ConfigError(f"vertex_models.yaml: vertices[{k}].x0 missing or not {len(names)} long")
+        row: list[Any] = [_fmt_vec(sched)]
+        for n, _, scale in TRIM_COLUMNS:
+            row.append(float(x0[names.index(n)]) * scale if n in names else None)
+        rows.append(row)
+    return header, rows
+
+
+def trims_table(trims: Any) -> tuple[list[str], list[list[Any]]]:
+    """Phase-1 trims (``trims.yaml`` of :mod:`lpv_sysid.sim.phase1`, format
+    ``lpv_sysid/phase1_trims@1``): per run the achieved equilibrium (mean of the trim segment,
+    seed 0 Table 1), the model trim and, where the vertex matches, the seed's Table 1 row."""
+    if not isinstance(trims, dict) or not isinstance(trims.get("runs"), list):
+        raise ConfigError("trims.yaml: expected a mapping with a 'runs' list")
+    columns = trims.get("columns") or []
+    units = trims.get("units") or [""] * len(columns)
+    if not columns:
+        raise ConfigError("trims.yaml: 'columns' missing")
+    header = ["run", "vertex [m/s]", "source"] + [f"{c} [{u}]" if u else str(c) for c, u in zip(columns, units)]
+    rows = []
+    for k, run in enumerate(trims["runs"]):
+        if not isinstance(run, dict):
+            raise ConfigError(f"trims.yaml: runs[{k}] is not a mapping")
+        for source in ("achieved", "model_trim", "seed0_table1"):
+            vals = run.get(source)
+            if isinstance(vals, dict):
+                rows.append([run.get("run", k), _fmt_vec(run.get("vertex")), source.replace("_", " ")]
+                            + [None if vals.get(c) is None else float(vals[c]) for c in columns])
+    return header, rows
+
+
+#: canonical axis order of the state equations (seed 0 Tables 2-3); other keys keep file order.
+AXIS_ORDER = ("u", "v", "w", "p", "q", "r", "phi", "theta", "dt", "da", "de", "dr")
+
+
+def _axis_key(name: str) -> str:
+    n = str(name).lower()
+    for suffix in ("_dot", "dot", "'"):
+        if n.endswith(suffix) and n[: -len(suffix)] in AXIS_ORDER:
+            return n[: -len(suffix)]
+    return n
+
+
+def order_axes(axes: list[str]) -> list[str]:
+    """Sort axis keys like udot, vdot, ... (or u, v, ...) in the seed's table order."""
+    def rank(a: str) -> tuple[int, int]:
+        k = _axis_key(a)
+        return (AXIS_ORDER.index(k), 0) if k in AXIS_ORDER else (len(AXIS_ORDER), axes.index(a))
+    return sorted(axes, key=rank)
+
+
+def fit_table(models: dict, metric: str) -> tuple[list[str], list[list[Any]], bool]:
+    """Per-vertex, per-axis ``fit.<metric>`` (Table 2 for r2). Returns (header, rows, percent)
+    where R^2 stored as a fraction is shown in percent like the seed."""
+    vertices = models.get("vertices") or []
+    axes: list[str] = []
+    for vx in vertices:
+        m = ((vx.get("fit") or {}).get(metric) or {}) if isinstance(vx, dict) else {}
+        if isinstance(m, dict):
+            axes += [a for a in m if a not in axes]
+    if not axes:
+        return [], [], False
+    axes = order_axes(axes)
+    values = [[((vx.get("fit") or {}).get(metric) or {}).get(a) for a in axes] for vx in vertices]
+    flat = [float(v) for row in values for v in row if isinstance(v, (int, float))]
+    percent = metric == "r2" and bool(flat) and max(abs(v) for v in flat) <= 1.0
+    rows = []
+    for vx, vals in zip(vertices, values):
+        rows.append([_fmt_vec(vx.get("scheduling"))] +
+                    [None if v is None else float(v) * (100.0 if percent else 1.0) for v in vals])
+    return ["vertex [m/s]"] + axes, rows, percent
+
+
+def validation_table(validation: dict) -> tuple[list[str], list[list[Any]]]:
+    """Seed 0 Table 3 from ``validation.yaml``: {tic: {axis: x}, nrmse: {axis: x}}."""
+    axes: list[str] = []
+    for m in ("tic", "nrmse"):
+        block = validation.get(m) or validation.get(m.upper()) or {}
+        if isinstance(block, dict):
+            axes += [a for a in block if a not in axes]
+    if not axes:
+        raise ConfigError("validation.yaml: expected 'tic' and/or 'nrmse' mappings axis -> value")
+    axes = order_axes(axes)
+    rows = []
+    for m in ("tic", "nrmse"):
+        block = validation.get(m) or validation.get(m.upper()) or {}
+        rows.append([m.upper()] + [None if block.get(a) is None else float(block[a]) for a in axes])
+    return ["metric"] + axes, rows
+
+
+def _fmt_vec(v: Any) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return "[" + " ".join(f"{float(x):+g}" for x in v) + "]"
+    return str(v)

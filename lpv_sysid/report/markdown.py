@@ -1,0 +1,461 @@
+"""Markdown report of a run directory (report.md + PNG figures next to it).
+
+Sections follow the method of seed 0: phase-1 equilibria (Table 1), identification R^2
+(Table 2), validation TIC/NRMSE (Table 3), signal design (Figs. 5-7), synthesis certificate
+(Lemma 1), independent verification, phase-2 achieved gain vs gamma (Eq. 29), tracking
+(Figs. 8-9) and regressor correlations (Fig. 10). A section is written only when its input
+exists; otherwise the report says which file is missing.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any, Iterable, Optional, Sequence
+
+import numpy as np
+
+from lpv_sysid.errors import ConfigError
+from lpv_sysid.report import plots
+from lpv_sysid.report.data import (
+    CANDIDATES,
+    RunData,
+    equilibrium_table,
+    fit_table,
+    load_run,
+    trims_table,
+    validation_table,
+)
+from lpv_sysid.report.regressors import AXES, REGRESSOR_NAMES, RegressorCorrelation
+
+log = logging.getLogger(__name__)
+
+SECTION_INPUTS = {
+    "trims": "phase-1 model trims",
+    "models": "identified vertex models (Tables 1, 2)",
+    "validation": "independent validation (Table 3)",
+    "signals_summary": "signal design summary",
+    "signals": "signal time histories",
+    "gains": "LPV gains + certificate",
+    "verification": "independent verification",
+    "phase2_summary": "phase-2 simulation",
+}
+
+
+def md_table(header: Sequence[str], rows: Iterable[Sequence[Any]], fmt: str = "{:.3g}") -> str:
+    """GitHub-flavoured Markdown table; floats with ``fmt``, None as '-'."""
+    def cell(v: Any) -> str:
+        if v is None:
+            return "-"
+        if isinstance(v, (float, np.floating)):
+            return "nan" if not np.isfinite(v) else fmt.format(float(v))
+        if isinstance(v, (bool, np.bool_)):
+            return "yes" if v else "NO"
+        return str(v).replace("|", "\\|")
+
+    lines = ["| " + " | ".join(str(h).replace("|", "\\|") for h in header) + " |",
+             "|" + "|".join("---" for _ in header) + "|"]
+    lines += ["| " + " | ".join(cell(v) for v in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def _flatten(d: Any, prefix: str = "") -> list[tuple[str, Any]]:
+    out: list[tuple[str, Any]] = []
+    if isinstance(d, dict):
+        for k, v in d.items():
+            out += _flatten(v, f"{prefix}.{k}" if prefix else str(k))
+    elif isinstance(d, list) and d and all(isinstance(x, (int, float)) for x in d) and len(d) <= 16:
+        out.append((prefix, "[" + ", ".join(f"{x:g}" for x in d) + "]"))
+    elif isinstance(d, list) and d and all(isinstance(x, dict) for x in d):
+        for i, x in enumerate(d):
+            out += _flatten(x, f"{prefix}[{i}]")
+    elif isinstance(d, list) and len(d) > 16:
+        out.append((prefix, f"<{len(d)} values>"))
+    else:
+        out.append((prefix, d))
+    return out
+
+
+def _kv_table(d: Any) -> str:
+    return md_table(["key", "value"], _flatten(d), fmt="{:.6g}")
+
+
+class _Report:
+    def __init__(self, data: RunData, out_path: Path) -> None:
+        self.data = data
+        self.out = Path(out_path)
+        self.fig_dir = self.out.parent
+        self.lines: list[str] = []
+        self.figures: list[Path] = []
+
+    def h(self, level: int, text: str) -> None:
+        self.lines += ["", "#" * level + " " + text, ""]
+
+    def p(self, text: str) -> None:
+        self.lines += [text, ""]
+
+    def fig(self, path: Path, caption: str) -> None:
+        self.figures.append(path)
+        self.p(f"![{caption}]({path.name})\n\n*{caption}*")
+
+    def missing(self, key: str) -> None:
+        if key in self.data.problems:
+            self.p(f"**Input unreadable:** {self.data.problems[key]}")
+        else:
+            self.p(f"**Input missing:** none of `{'`, `'.join(CANDIDATES[key])}` in the run directory.")
+
+    def guard(self, label: str, fn) -> None:
+        """Run one section; a malformed (but parseable) file ends that section only."""
+        try:
+            fn()
+        except (ConfigError, KeyError, TypeError, ValueError, IndexError) as exc:
+            log.warning("%s: %s", label, exc)
+            self.p(f"**Could not build this section:** {exc}")
+
+
+def _inputs_section(r: _Report) -> None:
+    d = r.data
+    r.h(2, "Inputs")
+    rows = []
+    for key, label in SECTION_INPUTS.items():
+        if key in d.problems:
+            rows.append([label, "UNREADABLE", d.problems[key]])
+        elif key in d.found:
+            rows.append([label, "found", f"`{d.found[key].relative_to(d.run_dir)}`"])
+        else:
+            rows.append([label, "missing", "looked for " + ", ".join(f"`{c}`" for c in CANDIDATES[key])])
+    for name in ("eq33", "nonlinear"):
+        key = f"phase2_{name}"
+        if key in d.found:
+            rows.append([f"phase-2 {name} time histories", "found", f"`{d.found[key].relative_to(d.run_dir)}`"])
+        elif key in d.problems:
+            rows.append([f"phase-2 {name} time histories", "UNREADABLE", d.problems[key]])
+    r.p(md_table(["input", "status", "file"], rows))
+    absent = [SECTION_INPUTS[k] for k in SECTION_INPUTS if k not in d.found or k in d.problems]
+    if absent:
+        r.p("Missing or unreadable inputs: " + "; ".join(absent) + ".")
+    else:
+        r.p("All inputs present.")
+
+
+def _phase1_section(r: _Report) -> None:
+    d = r.data
+    r.h(2, "Phase 1: vertex equilibria (seed 0 Table 1)")
+    if d.models is not None:
+        def table1() -> None:
+            header, rows = equilibrium_table(d.models)
+            r.p("Equilibria `x0` of the identified vertex models (from flight data in the seed; "
+                "here from the phase-1 runs).")
+            r.p(md_table(header, rows, fmt="{:.2f}"))
+        r.guard("Table 1", table1)
+    else:
+        r.missing("models")
+    if d.trims is not None:
+        def trims() -> None:
+            header, rows = trims_table(d.trims)
+            r.p("Phase-1 runs (`trims.yaml`): achieved equilibrium (mean over the trim segment, as "
+                "seed 0 Table 1), the model trim, and the seed's Table 1 row where the vertex matches.")
+            r.p(md_table(header, rows, fmt="{:.2f}"))
+        r.guard("trims", trims)
+    elif "trims" in d.problems:
+        r.missing("trims")
+
+
+def _ident_section(r: _Report) -> None:
+    d = r.data
+    r.h(2, "Identification: equation-error R^2 (seed 0 Table 2)")
+    if d.models is None:
+        r.missing("models")
+    else:
+        def table2() -> None:
+            header, rows, percent = fit_table(d.models, "r2")
+            if not rows:
+                r.p("`vertex_models.yaml` has no `fit.r2` entries.")
+                return
+            r.p(f"Coefficient of determination per state-equation axis{' [%]' if percent else ''}.")
+            r.p(md_table(header, rows, fmt="{:.1f}" if percent else "{:.3f}"))
+        r.guard("Table 2", table2)
+
+    r.h(2, "Validation: TIC and NRMSE (seed 0 Table 3, Eqs. 24-25)")
+    meta_val = ((d.models or {}).get("meta") or {}).get("validation") if isinstance(d.models, dict) else None
+    if d.validation is not None:
+        def table3() -> None:
+            header, rows = validation_table(d.validation)
+            r.p(md_table(header, rows, fmt="{:.3f}"))
+        r.guard("Table 3", table3)
+    elif isinstance(meta_val, dict):
+        def table3m() -> None:
+            header, rows = validation_table(meta_val)
+            r.p(f"Independent validation maneuver `{meta_val.get('maneuver', '?')}` (from `vertex_models.yaml` meta):")
+            r.p(md_table(header, rows, fmt="{:.3f}"))
+        r.guard("Table 3", table3m)
+    else:
+        r.missing("validation")
+        if d.models is not None:
+            r.p("`vertex_models.yaml` carries no `meta.validation` either.")
+            def fit_metrics() -> None:
+                for metric in ("tic", "nrmse"):
+                    header, rows, _ = fit_table(d.models, metric)
+                    if rows:
+                        r.p(f"{metric.upper()} on the identification data per vertex (from `vertex_models.yaml`):")
+                        r.p(md_table(header, rows, fmt="{:.3f}"))
+            r.guard("fit metrics", fit_metrics)
+
+
+def _get(d: dict, *keys: str) -> Any:
+    for k in keys:
+        if k in d:
+            return d[k]
+    return None
+
+
+def _signals_section(r: _Report) -> None:
+    d = r.data
+    r.h(2, "Signal design (seed 0 Sec. V, Figs. 5-7)")
+    if d.signals_summary is None and d.signals is None:
+        r.missing("signals_summary")
+        return
+    s = d.signals_summary or {}
+    names = _get(s, "names", "channels")
+    channels = s.get("channels") if isinstance(s.get("channels"), list) else []
+    if isinstance(names, list) and names and isinstance(names[0], dict):
+        names = [str(c.get("name")) for c in names]
+
+    def summary() -> None:
+        rpf = _get(s, "rpf", "RPF", "relative_peak_factor")
+        if rpf is None and channels and all(isinstance(c, dict) for c in channels):
+            keys = [k for k in ("group", "frequency_range_hz", "n_harmonics", "rpf", "peak", "rms",
+                                "leakage_fraction") if any(k in c for c in channels)]
+            r.p("Channels (`signals/summary.yaml`):")
+            r.p(md_table(["channel"] + keys, [[c.get("name")] + [_short(c.get(k)) for k in keys]
+                                              for c in channels], fmt="{:.4g}"))
+        if isinstance(rpf, dict):
+            r.p("Relative peak factor per channel:")
+            r.p(md_table(["channel", "RPF"], [[k, float(v)] for k, v in rpf.items()], fmt="{:.3f}"))
+        elif isinstance(rpf, list) and names and len(rpf) == len(names):
+            r.p("Relative peak factor per channel:")
+            r.p(md_table(["channel", "RPF"], [[n, float(v)] for n, v in zip(names, rpf)], fmt="{:.3f}"))
+        corr = _get(s, "correlation", "corr", "correlation_matrix")
+        if isinstance(corr, dict):
+            names_c = corr.get("names", names)
+            corr = corr.get("matrix", corr.get("values"))
+        else:
+            names_c = names
+        if isinstance(corr, list) and corr:
+            C = np.asarray(corr, dtype=float)
+            labels = list(names_c) if names_c and len(names_c) == C.shape[0] else [str(i) for i in range(C.shape[0])]
+            off = np.abs(C - np.diag(np.diag(C)))
+            r.p(f"Largest |correlation| between distinct channels: **{off.max():.4f}** "
+                "(seed 0 Fig. 7 reports at most 0.075).")
+            r.p(md_table([""] + labels, [[labels[i]] + [float(x) for x in C[i]] for i in range(C.shape[0])],
+                         fmt="{:+.4f}"))
+            r.fig(plots.plot_correlation_matrix(labels, C, r.fig_dir / "signal_correlation.png",
+                                                "signal correlation"), "Signal channel correlation (Fig. 7)")
+        scalars = {k: v for k, v in s.items() if isinstance(v, (int, float, str))}
+        if scalars:
+            r.p(_kv_table(scalars))
+    if d.signals_summary is not None:
+        r.guard("signals summary", summary)
+    else:
+        r.missing("signals_summary")
+
+    if d.signals is not None:
+        def sig_plot() -> None:
+            t = np.asarray(d.signals["t"], dtype=float)
+            u = np.asarray(d.signals["u"], dtype=float)
+            nm = [str(x) for x in d.signals.get("names", np.arange(u.shape[1]))]
+            r.p(f"`signals.npz`: {u.shape[1]} channels ({', '.join(nm)}), {t.size} samples, "
+                f"T = {t[-1] - t[0]:.2f} s, dt = {np.median(np.diff(t)):.4g} s.")
+            r.fig(plots.plot_signals(t, u, nm, r.fig_dir / "signals.png", "normalised channels"),
+                  "Reference and excitation signals normalised to unit amplitude (Fig. 5)")
+        r.guard("signals plot", sig_plot)
+
+
+def _synthesis_section(r: _Report) -> None:
+    d = r.data
+    r.h(2, "Robust LPV synthesis (seed 0 Lemma 1, Eqs. 27-31)")
+    if d.gains is None:
+        r.missing("gains")
+        return
+
+    def body() -> None:
+        g = d.gains
+        vertices = g.get("vertices") or []
+        rows = [["gamma (design)", g.get("gamma")], ["vertices", len(vertices)]]
+        sched = g.get("scheduling")
+        if isinstance(sched, dict):
+            rows.append(["box min", sched.get("min")])
+            rows.append(["box max", sched.get("max")])
+        for key in ("R", "Q"):
+            M = g.get(key)
+            if isinstance(M, list):
+                rows.append([f"diag({key})", [float(M[i][i]) for i in range(len(M))]])
+        if vertices and isinstance(vertices[0], dict) and "K" in vertices[0]:
+            norms = [float(np.linalg.norm(np.asarray(v["K"], dtype=float), 2)) for v in vertices]
+            rows.append(["max ||K_i||_2", max(norms)])
+        r.p(md_table(["quantity", "value"], [[k, _short(v)] for k, v in rows], fmt="{:.6g}"))
+        cert = g.get("certificate")
+        if isinstance(cert, dict):
+            r.p("Certificate:")
+            r.p(_kv_table(cert))
+        else:
+            r.p("**gains.yaml carries no certificate.**")
+    r.guard("synthesis", body)
+
+
+def _short(v: Any) -> Any:
+    if isinstance(v, list):
+        return "[" + ", ".join(f"{float(x):g}" if isinstance(x, (int, float)) else str(x) for x in v) + "]"
+    return v
+
+
+def _verification_section(r: _Report) -> None:
+    d = r.data
+    r.h(2, "Independent verification")
+    if d.verification is None:
+        r.missing("verification")
+        return
+
+    def body() -> None:
+        v = d.verification
+        if isinstance(v, dict):
+            ok = _get(v, "passed", "ok", "pass")
+            if ok is not None:
+                r.p(f"Overall: **{'PASSED' if ok else 'FAILED'}**")
+            checks = _get(v, "checks", "results")
+            if isinstance(checks, list) and checks and all(isinstance(c, dict) for c in checks):
+                keys: list[str] = []
+                for c in checks:
+                    keys += [k for k in c if k not in keys]
+                r.p(md_table(keys, [[_short(c.get(k)) for k in keys] for c in checks], fmt="{:.4g}"))
+                rest = {k: x for k, x in v.items() if k not in ("checks", "results")}
+                if rest:
+                    r.p(_kv_table(rest))
+            else:
+                r.p(_kv_table(v))
+        elif isinstance(v, list):
+            r.p(_kv_table({"checks": v}))
+        else:
+            raise ConfigError(f"{d.found['verification']}: expected a mapping or a list")
+    r.guard("verification", body)
+
+
+def _phase2_section(r: _Report) -> None:
+    d = r.data
+    r.h(2, "Phase 2: LPV-controlled excitation (seed 0 Sec. VII)")
+    s = d.phase2_summary
+    if s is None:
+        r.missing("phase2_summary")
+    else:
+        def gains_table() -> None:
+            gamma = s.get("gamma")
+            rows = []
+            for name, label in (("eq33", "LPV closed loop, Eq. (33)"), ("nonlinear", "nonlinear quadrotor")):
+                e = s.get(name)
+                if not isinstance(e, dict):
+                    continue
+                if e.get("skipped"):
+                    rows.append([label, None, None, None, None, "skipped: " + str(e["skipped"])])
+                    continue
+                gain = e.get("gain")
+                within = None if gain is None or gamma is None else bool(float(gain) <= float(gamma))
+                note = e.get("safety_event") or ("completed" if e.get("completed", True) else "stopped")
+                rows.append([label, e.get("z_norm"), e.get("ue_norm"), gain, within, note])
+            r.p(f"Excitation multiplier kappa = {s.get('kappa')}, design gamma = {gamma} "
+                "(bound on ||z||_2 / ||kappa u_e||_2, Eq. 29).")
+            r.p(md_table(["simulation", "||z||_2", "||kappa u_e||_2", "achieved gain", "<= gamma", "run"],
+                         rows, fmt="{:.4g}"))
+            events = s.get("safety_events") or []
+            if events:
+                r.p("**Safety events:** " + "; ".join(str(e) for e in events))
+        r.guard("phase-2 gains", gains_table)
+
+    for name, label in (("eq33", "LPV closed loop Eq. (33)"), ("nonlinear", "nonlinear quadrotor")):
+        ser = d.phase2_series.get(name)
+        if ser is None:
+            continue
+
+        def tracking(ser=ser, name=name, label=label) -> None:
+            t = np.asarray(ser["t"], dtype=float)
+            vd = np.asarray(ser["v_d"], dtype=float)
+            v = np.asarray(ser["v"], dtype=float)
+            err = v - vd
+            rms = np.sqrt(np.mean(err**2, axis=0))
+            r.p(f"{label}: {t.size} samples over {t[-1] - t[0]:.2f} s; RMS tracking error "
+                f"u/v/w = {rms[0]:.3f} / {rms[1]:.3f} / {rms[2]:.3f} m/s, max |v - v_d| = "
+                f"{np.max(np.abs(err)):.3f} m/s.")
+            r.fig(plots.plot_tracking(t, vd, v, r.fig_dir / f"tracking_{name}.png", label),
+                  f"Body velocity and reference, {label} (Fig. 8)")
+            r.fig(plots.plot_perturbation(t, err, r.fig_dir / f"perturbation_{name}.png", label),
+                  f"Body velocity perturbation, {label} (Fig. 9)")
+        r.guard(f"phase-2 {name} plots", tracking)
+
+    if s is not None and isinstance(s.get("regressor_correlation"), dict):
+        def fig10() -> None:
+            rc = s["regressor_correlation"]
+            corrs = regressor_correlations_from_summary(rc)
+            r.h(3, "Regressor correlation (seed 0 Eq. 6, Fig. 10)")
+            r.p(f"Computed from the {rc.get('source', 'phase-2')} simulation data. Largest |correlation| "
+                "between distinct regressors of each axis:")
+            r.p(md_table(["axis", "regressors", "max |corr|", "pair"],
+                         [[c.axis, len(c.names), c.max_offdiag(), _worst_pair(c)] for c in corrs],
+                         fmt="{:.3f}"))
+            r.fig(plots.plot_regressor_correlations(corrs, r.fig_dir / "regressor_correlation.png",
+                                                    "Eq. (6) regressor correlation"),
+                  "Regressor correlation coefficients per axis (Fig. 10)")
+        r.guard("Fig. 10", fig10)
+
+
+def regressor_correlations_from_summary(rc: dict) -> list[RegressorCorrelation]:
+    """Summary block {axes: {X: {names, corr}, ...}} -> RegressorCorrelation list."""
+    axes = rc.get("axes")
+    if not isinstance(axes, dict):
+        raise ConfigError("phase2/summary.yaml: regressor_correlation.axes must be a mapping")
+    out = []
+    for a in AXES:
+        if a not in axes:
+            continue
+        names = tuple(axes[a].get("names") or REGRESSOR_NAMES[a])
+        C = np.array([[np.nan if x is None else float(x) for x in row] for row in axes[a]["corr"]])
+        if C.shape != (len(names), len(names)):
+            raise ConfigError(f"phase2/summary.yaml: regressor_correlation.axes.{a}.corr has shape {C.shape}")
+        out.append(RegressorCorrelation(a, names, C))
+    return out
+
+
+def _worst_pair(c: RegressorCorrelation) -> str:
+    A = np.abs(c.corr.copy())
+    np.fill_diagonal(A, np.nan)
+    if not np.any(np.isfinite(A)):
+        return "-"
+    i, j = np.unravel_index(np.nanargmax(A), A.shape)
+    return f"{c.names[i]} / {c.names[j]}"
+
+
+def write_report(run_dir: str | Path, out_path: Optional[str | Path] = None) -> Path:
+    """Write ``report.md`` (default ``RUN/report/report.md``) and its PNG figures; return its path."""
+    data = load_run(run_dir)
+    out = Path(out_path) if out_path is not None else data.run_dir / "report" / "report.md"
+    if out.suffix.lower() != ".md":
+        raise ConfigError(f"--out: {out} must end in .md")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"--out: cannot create {out.parent} ({exc.strerror})") from None
+    r = _Report(data, out)
+    r.lines = ["# lpv_sysid run report", "",
+               f"Run directory: `{data.run_dir}`. Method: Hopwood & Woolsey, robust LPV control for "
+               "safe and effective unstable-aircraft system identification (seed 0)."]
+    _inputs_section(r)
+    _phase1_section(r)
+    _ident_section(r)
+    _signals_section(r)
+    _synthesis_section(r)
+    _verification_section(r)
+    _phase2_section(r)
+    text = "\n".join(r.lines).rstrip() + "\n"
+    try:
+        out.write_text(text, encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"--out: cannot write {out} ({exc.strerror})") from None
+    return out

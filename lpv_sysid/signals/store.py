@@ -1,0 +1,122 @@
+"""Signal files: ``signals.npz`` (``t`` (N,), ``u`` (N, n), ``names`` (n,)) and ``summary.yaml``
+(ARCHITECTURE.md section 5)."""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+
+from lpv_sysid.errors import ConfigError
+from lpv_sysid.signals import metrics
+from lpv_sysid.signals.multisine import SignalSet
+
+
+def save_npz(path: str, t: np.ndarray, u: np.ndarray, names) -> None:
+    """Write ``t``, ``u``, ``names`` (unicode array) to ``path`` (numpy .npz, uncompressed)."""
+    try:
+        with open(path, "wb") as fh:
+            np.savez(fh, t=np.asarray(t, float), u=np.asarray(u, float), names=np.asarray(list(names), dtype=str))
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot write ({exc.strerror})") from None
+
+
+def load_npz(path: str) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    """Read and validate a signal file: ``t`` strictly increasing and uniform, ``u`` (N, n)
+    finite, ``names`` n unique strings."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            missing = [k for k in ("t", "u", "names") if k not in z.files]
+            if missing:
+                raise ConfigError(f"{path}: missing array(s) {missing}")
+            t, u, names = z["t"], z["u"], z["names"]
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such file") from None
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"{path}: not a readable .npz file ({exc})") from None
+    return validate_table(t, u, names, where=path)
+
+
+def validate_table(t, u, names, where: str = "signals") -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    t = np.asarray(t, dtype=float)
+    u = np.asarray(u, dtype=float)
+    if u.ndim == 1:
+        u = u[:, None]
+    names = tuple(str(n) for n in np.atleast_1d(np.asarray(names)))
+    if t.ndim != 1 or t.size < 2:
+        raise ConfigError(f"{where}: 't' must be 1-D with >= 2 samples, got shape {t.shape}")
+    if u.ndim != 2 or u.shape[0] != t.size:
+        raise ConfigError(f"{where}: 'u' must be ({t.size}, n), got shape {u.shape}")
+    if len(names) != u.shape[1] or len(set(names)) != len(names):
+        raise ConfigError(f"{where}: 'names' must be {u.shape[1]} unique names, got {list(names)}")
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(u))):
+        raise ConfigError(f"{where}: 't' or 'u' contains NaN or inf")
+    d = np.diff(t)
+    if np.any(d <= 0) or np.max(np.abs(d - d.mean())) > 1e-6 * d.mean():
+        raise ConfigError(f"{where}: 't' must be a strictly increasing uniform grid")
+    return t, u, names
+
+
+def summary(sig: SignalSet) -> dict[str, Any]:
+    """Plain-data summary: per channel band, harmonics, RPF (optimised and Schroeder-only),
+    peak, rms, start/end values, harmonic leakage; the correlation matrix; R, Q."""
+    content = metrics.harmonic_content(sig.u, sig.harmonics)
+    corr = metrics.correlation_matrix(sig.u)
+    chans = []
+    for j, name in enumerate(sig.names):
+        x = sig.u[:, j]
+        chans.append({
+            "name": name,
+            "group": sig.groups[j],
+            "band_hz": [float(b) for b in sig.bands[j]],
+            "harmonics": [int(h) for h in sig.harmonics[j]],
+            "n_harmonics": int(sig.harmonics[j].size),
+            "frequency_range_hz": [float(sig.harmonics[j].min() * sig.f0), float(sig.harmonics[j].max() * sig.f0)],
+            "rpf": float(sig.rpf[j]),
+            "rpf_schroeder": float(sig.rpf_schroeder[j]),
+            "peak": float(np.max(np.abs(x))),
+            "rms": float(metrics.rms(x)),
+            "start_value": float(x[0]),
+            "end_value": float(x[-1]),
+            "leakage_fraction": float(content[j].leakage_fraction),
+        })
+    off = corr - np.diag(np.diag(corr))
+    out: dict[str, Any] = {
+        "format": "lpv_sysid/signals_summary@1",
+        "duration": float(sig.duration),
+        "sample_rate": float(sig.sample_rate),
+        "n_samples": int(sig.t.size),
+        "f0_hz": float(sig.f0),
+        "channels": chans,
+        "correlation": {"names": list(sig.names), "matrix": corr.tolist(),
+                        "max_abs_offdiagonal": float(np.max(np.abs(off))) if corr.shape[0] > 1 else 0.0},
+    }
+    if sig.R is not None:
+        out["R"] = sig.R.tolist()
+    if sig.Q is not None:
+        out["Q"] = sig.Q.tolist()
+    return out
+
+
+def save_summary(path: str, data: dict[str, Any]) -> None:
+    import yaml
+
+    try:
+        with open(path, "w", encoding="utf-8") as fh:
+            yaml.safe_dump(data, fh, sort_keys=False, default_flow_style=None, width=120)
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot write ({exc.strerror})") from None
+
+
+def write_signal_set(out_dir: str, sig: SignalSet) -> tuple[str, str]:
+    """Write ``signals.npz`` and ``summary.yaml`` into ``out_dir`` (created); returns paths."""
+    try:
+        os.makedirs(out_dir, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"{out_dir}: cannot create directory ({exc.strerror})") from None
+    npz = os.path.join(out_dir, "signals.npz")
+    yml = os.path.join(out_dir, "summary.yaml")
+    save_npz(npz, sig.t, sig.u, sig.names)
+    save_summary(yml, summary(sig))
+    return npz, yml

@@ -1,0 +1,451 @@
+"""LPV closed loop of seed 0 Eq. (33) at nominal parameters theta0.
+
+    x' = A(v_d, theta0) (x - x0(v_d)) + B_c(theta0) (u_c - u0(v_d)) + B_e(theta0) kappa u_e + x0'
+
+with the static LPV state feedback of Eq. (31), ``u_c = u0(v_d) + K(v_d) (x - x0(v_d))``,
+``B_e = B_c R`` (Eq. 19), the equilibrium rate of Eq. (34), ``x0' = dx0/dv_d * dv_d/dt``, and
+the performance output of Eq. (18), ``z = Q^-1 (v - v_d)``. Eq. (19b) writes it as
+``z = C dx = Q^-1 (v - v0(v_d))``, which is the same signal when the equilibrium velocity
+``v0(v_d)`` of the vertex models equals ``v_d``; identified equilibria need not (seed 0 Table 1),
+so both are reported: ``z`` / ``gain`` (Eq. 18) and ``z_model`` / ``gain_model`` (Eq. 19b, the
+output the Lemma 1 certificate bounds).
+Because ``B_e kappa u_e = B_c R kappa u_e`` the right-hand side is evaluated as
+``A dx + B (u - u0) + x0'`` with the total command ``u = u_c + R kappa u_e`` (Eq. 17); a
+saturating law can therefore be plugged in unchanged.
+
+The scheduled quantities ``A(v_d), B(v_d), K(v_d), x0(v_d), u0(v_d), dx0/dv_d`` come from an
+object implementing :class:`ScheduledModel` (in the product: the multilinear interpolation of
+``lpv_sysid.models.lpv`` over the vertices of ``vertex_models.yaml`` and ``gains.yaml``; see
+:mod:`lpv_sysid.sim.phase2`). This module never interpolates by itself.
+
+Signals are first-order hold (piecewise linear between samples, as ``scipy.signal.lsim``):
+``v_d(t)`` and ``u_e(t)`` are linearly interpolated and ``dv_d/dt`` is the slope of the
+current segment, so Eq. (34) is exact for the interpolated reference.
+
+Integration: ``method="RK45"`` uses ``scipy.integrate.solve_ivp`` (Dormand-Prince, the
+algorithm of Matlab's ode45 that the seed used), restarted on every sample interval so the
+kinks of the interpolated signals are step boundaries (one call over the whole horizon
+straddles them and loses ~4 digits); ``method="rk4"`` is a fixed-step classical Runge-Kutta on the
+signal grid, with each sample interval split into enough sub-steps that
+``h * max|eig(A + B K)| <= rk4_lambda_h`` (RK4's stability region reaches 2.78 on the real axis;
+the default 0.5 keeps the error small). Both report the solution on the signal grid.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from typing import Any, Callable, Optional, Protocol, Sequence
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from lpv_sysid.errors import ConfigError, SafetyError
+
+log = logging.getLogger(__name__)
+
+#: indices of the body velocity ``u, v, w`` in the 12-state of DESIGN.md (seed 0 Eq. 14).
+VELOCITY_INDEX = (2, 3, 4)
+
+
+class ScheduledModel(Protocol):
+    """Nominal polytopic LPV model plus LPV gains, evaluated at a scheduling point v_d (3,)."""
+
+    def A(self, v_d: np.ndarray) -> np.ndarray: ...          # (n_x, n_x), Eq. (21)
+    def B(self, v_d: np.ndarray) -> np.ndarray: ...          # (n_x, n_u), B_c of Eq. (19)
+    def K(self, v_d: np.ndarray) -> np.ndarray: ...          # (n_u, n_x), Eq. (31)
+    def x0(self, v_d: np.ndarray) -> np.ndarray: ...         # (n_x,)
+    def u0(self, v_d: np.ndarray) -> np.ndarray: ...         # (n_u,)
+    def dx0_dvd(self, v_d: np.ndarray) -> np.ndarray: ...    # (n_x, 3), Eq. (34)
+
+
+# A control law u = law(t, x, v_d, ue_scaled) returning the total virtual command (Eq. 17).
+ControlLaw = Callable[[float, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+
+
+@dataclass(frozen=True)
+class ReferenceSignals:
+    """Sampled reference v_d (N, 3) and normalised excitation u_e (N, n_e) on grid t (N,).
+
+    First-order hold between samples (see module docstring).
+    """
+
+    t: np.ndarray
+    v_d: np.ndarray
+    u_e: np.ndarray
+
+    def __post_init__(self) -> None:
+        t = np.asarray(self.t, dtype=float)
+        v_d = np.atleast_2d(np.asarray(self.v_d, dtype=float))
+        u_e = np.atleast_2d(np.asarray(self.u_e, dtype=float))
+        if t.ndim != 1 or t.size < 2:
+            raise ConfigError(f"signals: 't' must be a 1-D grid with >= 2 samples, got shape {t.shape}")
+        if not np.all(np.diff(t) > 0):
+            raise ConfigError("signals: 't' must be strictly increasing")
+        for name, arr in (("v_d", v_d), ("u_e", u_e)):
+            if arr.shape[0] != t.size:
+                raise ConfigError(f"signals: '{name}' has {arr.shape[0]} samples, 't' has {t.size}")
+            if not np.all(np.isfinite(arr)):
+                raise ConfigError(f"signals: '{name}' contains NaN or inf")
+        if v_d.shape[1] != 3:
+            raise ConfigError(f"signals: 'v_d' must have 3 columns (u_d, v_d, w_d), got {v_d.shape[1]}")
+        object.__setattr__(self, "t", t)
+        object.__setattr__(self, "v_d", v_d)
+        object.__setattr__(self, "u_e", u_e)
+
+    @property
+    def dt(self) -> float:
+        return float(np.min(np.diff(self.t)))
+
+    def segment(self, t: float) -> int:
+        """Index k of the FOH segment [t_k, t_k+1] containing t (clamped to the grid)."""
+        k = int(np.searchsorted(self.t, t, side="right")) - 1
+        return min(max(k, 0), self.t.size - 2)
+
+    def at(self, t: float, segment: Optional[int] = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(v_d(t), dv_d/dt(t), u_e(t)) with first-order hold.
+
+        ``segment`` forces the FOH segment (a fixed-step integrator on the grid passes it so
+        that the slope dv_d/dt at a segment end is the one of the current interval).
+        """
+        k = self.segment(t) if segment is None else segment
+        t0, t1 = self.t[k], self.t[k + 1]
+        s = (t - t0) / (t1 - t0)
+        s = min(max(s, 0.0), 1.0)
+        vd = (1.0 - s) * self.v_d[k] + s * self.v_d[k + 1]
+        vd_dot = (self.v_d[k + 1] - self.v_d[k]) / (t1 - t0)
+        ue = (1.0 - s) * self.u_e[k] + s * self.u_e[k + 1]
+        return vd, vd_dot, ue
+
+
+class LastPointCache:
+    """Wraps a ScheduledModel and remembers its values at the last scheduling point.
+
+    Within one RK step the stages share v_d (RK4 stages 2-3, the law and the right-hand side
+    all ask for A, B, K, x0, u0 at the same point), so this halves to quarters the number of
+    multilinear interpolations without changing any value.
+    """
+
+    _NAMES = ("A", "B", "K", "x0", "u0", "dx0_dvd")
+
+    def __init__(self, model: ScheduledModel) -> None:
+        self.model = model
+        self._cache: dict[str, tuple[bytes, np.ndarray]] = {}
+
+    def _get(self, name: str, v_d: np.ndarray) -> np.ndarray:
+        key = np.asarray(v_d, dtype=float).tobytes()
+        hit = self._cache.get(name)
+        if hit is not None and hit[0] == key:
+            return hit[1]
+        stacks = _vertex_stacks(self.model)
+        if stacks is not None and name != "dx0_dvd":
+            # one weight evaluation for all interpolated quantities at this point (Eq. 21, 31)
+            w = self._cache.get("_alpha")
+            if w is None or w[0] != key:
+                w = (key, self.model.model.weights(v_d)[0])
+                self._cache["_alpha"] = w
+            val = np.tensordot(w[1], stacks[name], axes=1)
+        else:
+            val = np.asarray(getattr(self.model, name)(v_d), dtype=float)
+        self._cache[name] = (key, val)
+        return val
+
+    def A(self, v_d): return self._get("A", v_d)            # noqa: E704
+    def B(self, v_d): return self._get("B", v_d)            # noqa: E704
+    def K(self, v_d): return self._get("K", v_d)            # noqa: E704
+    def x0(self, v_d): return self._get("x0", v_d)          # noqa: E704
+    def u0(self, v_d): return self._get("u0", v_d)          # noqa: E704
+    def dx0_dvd(self, v_d): return self._get("dx0_dvd", v_d)  # noqa: E704
+
+
+def _vertex_stacks(model: Any) -> Optional[dict[str, np.ndarray]]:
+    """Vertex stacks of a :class:`lpv_sysid.models.lpv.ScheduledLpv` (else None)."""
+    pm, Kv = getattr(model, "model", None), getattr(model, "Kv", None)
+    if pm is None or Kv is None or not hasattr(pm, "weights"):
+        return None
+    return {"A": pm.A, "B": pm.B, "K": Kv, "x0": pm.x0, "u0": pm.u0}
+
+
+def performance_matrix(Q: np.ndarray, n_x: int, velocity_index: Sequence[int] = VELOCITY_INDEX) -> np.ndarray:
+    """C of Eq. (19b): z = Q^-1 dv = C dx (Eq. 18)."""
+    Q = np.asarray(Q, dtype=float)
+    S = np.zeros((len(velocity_index), n_x))
+    S[np.arange(len(velocity_index)), list(velocity_index)] = 1.0
+    return np.linalg.solve(Q, S)
+
+
+def x0_dot(model: ScheduledModel, v_d: np.ndarray, v_d_dot: np.ndarray) -> np.ndarray:
+    """Equilibrium state rate of seed 0 Eq. (34): x0' = (dx0/dv_d) (dv_d/dt)."""
+    return np.asarray(model.dx0_dvd(v_d), dtype=float) @ np.asarray(v_d_dot, dtype=float)
+
+
+def linear_lpv_law(model: ScheduledModel, R: np.ndarray) -> ControlLaw:
+    """Unsaturated law of Eqs. (17), (31): u = u0(v_d) + K(v_d)(x - x0(v_d)) + R (kappa u_e).
+
+    ``ue_scaled`` passed to the returned function is already ``kappa u_e``.
+    """
+    R = np.asarray(R, dtype=float)
+
+    def law(t: float, x: np.ndarray, v_d: np.ndarray, ue_scaled: np.ndarray) -> np.ndarray:
+        return model.u0(v_d) + model.K(v_d) @ (x - model.x0(v_d)) + R @ ue_scaled
+
+    return law
+
+
+def eq33_rhs(
+    t: float,
+    x: np.ndarray,
+    model: ScheduledModel,
+    signals: ReferenceSignals,
+    law: ControlLaw,
+    kappa: float,
+    segment: Optional[int] = None,
+) -> np.ndarray:
+    """Right-hand side of seed 0 Eq. (33); the command u of ``law`` includes R kappa u_e."""
+    v_d, v_d_dot, ue = signals.at(t, segment)
+    u = law(t, x, v_d, kappa * ue)
+    return (
+        model.A(v_d) @ (x - model.x0(v_d))
+        + model.B(v_d) @ (u - model.u0(v_d))
+        + x0_dot(model, v_d, v_d_dot)
+    )
+
+
+def l2_norm(t: np.ndarray, y: np.ndarray) -> float:
+    """sqrt(int y^T y dt) by the trapezoidal rule on grid t (Eq. 26 / Eq. 29 norm)."""
+    y = np.asarray(y, dtype=float).reshape(len(t), -1)
+    return float(np.sqrt(np.trapz(np.sum(y * y, axis=1), t)))
+
+
+@dataclass(frozen=True)
+class ClosedLoopConfig:
+    """How Eq. (33) is integrated (see module docstring)."""
+
+    kappa: float = 1.0
+    method: str = "RK45"
+    rtol: float = 1e-7
+    atol: float = 1e-9
+    rk4_lambda_h: float = 0.5
+    # states whose magnitude above this bound marks the run as diverged (finiteness always checked)
+    divergence_bound: float = 1e6
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.kappa) and self.kappa > 0):
+            raise ConfigError(f"kappa must be a finite number > 0, got {self.kappa!r}")
+        if self.method not in ("RK45", "rk4"):
+            raise ConfigError(f"method must be 'RK45' or 'rk4', got {self.method!r}")
+
+
+@dataclass
+class ClosedLoopResult:
+    """Time histories on the signal grid and the achieved L2 gain (seed 0 Eq. 29)."""
+
+    t: np.ndarray
+    x: np.ndarray            # (N, n_x) absolute state
+    dx: np.ndarray           # (N, n_x) x - x0(v_d)
+    v_d: np.ndarray          # (N, 3)
+    ue: np.ndarray           # (N, n_e) kappa u_e actually applied
+    u: np.ndarray            # (N, n_u) total virtual command
+    z: np.ndarray            # (N, 3) Q^-1 (v - v_d), Eq. (18)
+    z_model: np.ndarray      # (N, 3) C dx, Eq. (19b)
+    tracking_error: np.ndarray   # (N, 3) v - v_d (Fig. 9)
+    z_norm: float
+    ue_norm: float
+    gain: float              # ||z||_2 / ||kappa u_e||_2
+    gain_model: float        # ||C dx||_2 / ||kappa u_e||_2
+    gamma: Optional[float]
+    kappa: float
+    method: str
+    n_steps: int = 0         # right-hand-side evaluations
+    info: dict = field(default_factory=dict)
+
+    @property
+    def within_gamma(self) -> Optional[bool]:
+        return None if self.gamma is None else bool(self.gain <= self.gamma)
+
+
+def _closed_loop_rate(model: ScheduledModel, signals: ReferenceSignals) -> float:
+    """max |eig(A + B K)| over the signal's scheduling samples (for the RK4 sub-step)."""
+    idx = np.unique(np.linspace(0, signals.t.size - 1, min(signals.t.size, 25)).astype(int))
+    rate = 0.0
+    for k in idx:
+        vd = signals.v_d[k]
+        acl = model.A(vd) + model.B(vd) @ model.K(vd)
+        rate = max(rate, float(np.max(np.abs(np.linalg.eigvals(acl)))))
+    return rate
+
+
+def _rk4(f: Callable[[float, np.ndarray, int], np.ndarray], t: np.ndarray, x_init: np.ndarray,
+         n_sub: int, bound: float) -> tuple[np.ndarray, int]:
+    """Classical RK4 on grid t with n_sub equal sub-steps per interval (results on t)."""
+    x = np.empty((t.size, x_init.size))
+    x[0] = x_init
+    xi = x_init.copy()
+    steps = 0
+    for k in range(t.size - 1):
+        h = (t[k + 1] - t[k]) / n_sub
+        tk = t[k]
+        for j in range(n_sub):
+            ts = tk + j * h
+            # all stages inside FOH segment k (its slope dv_d/dt holds up to t[k+1])
+            k1 = f(ts, xi, k)
+            k2 = f(ts + 0.5 * h, xi + 0.5 * h * k1, k)
+            k3 = f(ts + 0.5 * h, xi + 0.5 * h * k2, k)
+            k4 = f(ts + h, xi + h * k3, k)
+            xi = xi + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+            steps += 4
+        if not np.all(np.isfinite(xi)) or np.max(np.abs(xi)) > bound:
+            x[k + 1:] = np.nan
+            raise _Diverged(t[k + 1], x, steps)
+        x[k + 1] = xi
+    return x, steps
+
+
+def _rk45_segments(f: Callable[..., np.ndarray], t: np.ndarray, x_init: np.ndarray,
+                   config: ClosedLoopConfig) -> tuple[np.ndarray, int]:
+    """solve_ivp RK45 (ode45's Dormand-Prince pair) restarted on every FOH interval.
+
+    The right-hand side has a kink at every sample (slope of the interpolated signals), which
+    an embedded error estimator straddling it handles poorly; restarting makes every kink a
+    step boundary. The last accepted step size seeds the next interval.
+    """
+    x = np.empty((t.size, x_init.size))
+    x[0] = x_init
+    xi = x_init
+    nfev = 0
+    h = None
+    for k in range(t.size - 1):
+        sol = solve_ivp(f, (t[k], t[k + 1]), xi, method="RK45", args=(k,), rtol=config.rtol,
+                        atol=config.atol, first_step=h)
+        nfev += int(sol.nfev)
+        if sol.status != 0 or not np.all(np.isfinite(sol.y[:, -1])):
+            raise SafetyError(f"Eq. (33) integration failed at t={t[k]:.3f} s: {sol.message}")
+        xi = sol.y[:, -1]
+        if np.max(np.abs(xi)) > config.divergence_bound:
+            raise SafetyError(f"Eq. (33) closed loop diverged at t={t[k + 1]:.3f} s "
+                              f"(|x| > {config.divergence_bound:g})")
+        if sol.t.size > 1 and k + 2 < t.size:
+            h = min(2.0 * float(sol.t[-1] - sol.t[-2]), float(t[k + 2] - t[k + 1]))
+        x[k + 1] = xi
+    return x, nfev
+
+
+class _Diverged(Exception):
+    def __init__(self, t_fail: float, x: np.ndarray, steps: int) -> None:
+        super().__init__(t_fail)
+        self.t_fail, self.x, self.steps = t_fail, x, steps
+
+
+def simulate_eq33(
+    model: ScheduledModel,
+    signals: ReferenceSignals,
+    R: np.ndarray,
+    Q: np.ndarray,
+    gamma: Optional[float] = None,
+    config: ClosedLoopConfig = ClosedLoopConfig(),
+    x_init: Optional[np.ndarray] = None,
+    law: Optional[ControlLaw] = None,
+    velocity_index: Sequence[int] = VELOCITY_INDEX,
+) -> ClosedLoopResult:
+    """Simulate seed 0 Eq. (33) over the signal grid.
+
+    ``x_init`` defaults to the equilibrium ``x0(v_d(0))`` (so dx(0) = 0 and the L2 gain of
+    Eq. (29) is the gain from zero initial conditions). ``law`` defaults to
+    :func:`linear_lpv_law` (the unsaturated Eq. 31 law used for the certificate).
+    Raises :class:`SafetyError` when the state becomes non-finite or exceeds
+    ``config.divergence_bound``.
+    """
+    R = np.asarray(R, dtype=float)
+    model = LastPointCache(model)
+    v0 = signals.v_d[0]
+    x_start = np.asarray(model.x0(v0), dtype=float) if x_init is None else np.asarray(x_init, dtype=float)
+    n_x = x_start.size
+    if R.shape != (np.asarray(model.B(v0)).shape[1], signals.u_e.shape[1]):
+        raise ConfigError(
+            f"R has shape {R.shape}, expected ({np.asarray(model.B(v0)).shape[1]}, {signals.u_e.shape[1]}) "
+            "(inputs x excitation channels)"
+        )
+    law = law or linear_lpv_law(model, R)
+    kappa = config.kappa
+
+    def f(t: float, x: np.ndarray, segment: Optional[int] = None) -> np.ndarray:
+        return eq33_rhs(t, x, model, signals, law, kappa, segment)
+
+    t = signals.t
+    info: dict = {}
+    if config.method == "RK45":
+        x, n_steps = _rk45_segments(f, t, x_start, config)
+        info["nfev"] = n_steps
+    else:
+        rate = _closed_loop_rate(model, signals)
+        n_sub = max(1, int(np.ceil(signals.dt * rate / config.rk4_lambda_h)))
+        info["rk4_substeps"] = n_sub
+        info["max_closed_loop_rate"] = rate
+        try:
+            x, n_steps = _rk4(f, t, x_start, n_sub, config.divergence_bound)
+        except _Diverged as exc:
+            raise SafetyError(f"Eq. (33) closed loop diverged at t={exc.t_fail:.3f} s "
+                              f"(non-finite state or |x| > {config.divergence_bound:g})") from None
+    if np.max(np.abs(x)) > config.divergence_bound:
+        raise SafetyError(f"Eq. (33) closed loop diverged (|x| > {config.divergence_bound:g})")
+
+    # Post-process on the grid (exact FOH samples).
+    C = performance_matrix(Q, n_x, velocity_index)
+    vi = list(velocity_index)
+    x0s = np.array([model.x0(vd) for vd in signals.v_d])
+    dx = x - x0s
+    ue = kappa * signals.u_e
+    u = np.array([law(tk, xk, vd, uek) for tk, xk, vd, uek in zip(t, x, signals.v_d, ue)])
+    z_model = dx @ C.T
+    err = x[:, vi] - signals.v_d
+    z = np.linalg.solve(np.asarray(Q, dtype=float), err.T).T
+    z_norm = l2_norm(t, z)
+    ue_norm = l2_norm(t, ue)
+    if ue_norm <= 0:
+        raise ConfigError("signals: the excitation u_e is identically zero, the L2 gain is undefined")
+    return ClosedLoopResult(
+        t=t, x=x, dx=dx, v_d=signals.v_d, ue=ue, u=u, z=z, z_model=z_model, tracking_error=err,
+        z_norm=z_norm, ue_norm=ue_norm, gain=z_norm / ue_norm,
+        gain_model=l2_norm(t, z_model) / ue_norm, gamma=gamma, kappa=kappa,
+        method=config.method, n_steps=n_steps, info=info,
+    )
+
+
+def hinf_norm_grid(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: Optional[np.ndarray] = None,
+                   w: Optional[np.ndarray] = None) -> tuple[float, float]:
+    """Peak max singular value of G(jw) = C (jwI - A)^-1 B + D over a frequency grid.
+
+    An independent check of Eq. (29) at a frozen parameter: it does not use any LMI. The
+    grid maximum is refined with a bounded scalar search around the best grid point. Returns
+    (norm, frequency in rad/s). Unstable A -> inf.
+    """
+    from scipy.optimize import minimize_scalar
+
+    A = np.asarray(A, dtype=float)
+    if np.max(np.real(np.linalg.eigvals(A))) >= 0:
+        return float("inf"), float("nan")
+    B = np.asarray(B, dtype=float)
+    C = np.asarray(C, dtype=float)
+    D = np.zeros((C.shape[0], B.shape[1])) if D is None else np.asarray(D, dtype=float)
+    n = A.shape[0]
+    eye = np.eye(n)
+
+    def sigma(wk: float) -> float:
+        G = C @ np.linalg.solve(1j * wk * eye - A, B) + D
+        return float(np.linalg.svd(G, compute_uv=False)[0])
+
+    if w is None:
+        rates = np.abs(np.linalg.eigvals(A))
+        lo, hi = max(1e-4, 0.01 * rates.min()), 100.0 * rates.max()
+        w = np.concatenate([[0.0], np.logspace(np.log10(lo), np.log10(hi), 2000)])
+    s = np.array([sigma(wk) for wk in w])
+    k = int(np.argmax(s))
+    best, wbest = float(s[k]), float(w[k])
+    a = w[max(k - 1, 0)]
+    b = w[min(k + 1, w.size - 1)]
+    if b > a:
+        res = minimize_scalar(lambda wk: -sigma(wk), bounds=(a, b), method="bounded",
+                              options={"xatol": 1e-10 * max(1.0, b)})
+        if -res.fun > best:
+            best, wbest = float(-res.fun), float(res.x)
+    return best, wbest

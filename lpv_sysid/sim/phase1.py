@@ -1,0 +1,414 @@
+"""Phase-1 experiment simulation (seed 0 Sec. IV): vertex flights under baseline control.
+
+For each vertex v_d of the scheduling box (seed 0 Eq. 20, default [-5, 5]^3 m/s, Table 1
+order: u fastest, then v, then w) the simulated vehicle flies ``trim_s`` (10 s) at the
+constant body-velocity reference, then ``excite_s`` (30 s) of a 4-axis multisine on the
+u, v, w and yaw-rate references (0.2-2 Hz), all under the PX4-like baseline controller.
+One extra run about hover serves as the independent validation manoeuvre.
+
+With ``start: hover`` (default) each run starts in hover (model hover trim, controller
+integrators warm started there) and the vertex reference is applied as a step at t = 0,
+so the 10 s trim segment contains the transition and the settling, as in flight; with
+``start: trim`` the run starts at the model trim of its vertex (quick tests). The
+achieved equilibrium is the mean over the last ``trim_average_s`` of the trim segment of
+the *measured* data, as seed 0 Table 1 is computed from flight data.
+
+Outputs: an in-memory :class:`RunRecord` per run; ``write_run_bag`` writes it as a
+rosbag2 directory with the topics of docs/DESIGN.md; ``write_trim_table`` writes
+trims.yaml and trims.md.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import math
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+import yaml
+
+from lpv_sysid.control.baseline import BaselineController, BaselineGains
+from lpv_sysid.errors import ConfigError, SafetyError
+from lpv_sysid.models.quadrotor import Quadrotor, QuadrotorParams, Trim, mixer
+from lpv_sysid.sim.vehicle import SensorConfig, SimVehicle
+
+log = logging.getLogger(__name__)
+
+REFERENCE_NAMES = ("u_d", "v_d", "w_d", "r_d")
+
+# Seed 0 Table 1 (flight-data vertex equilibria), Table 1 row order, for comparison.
+SEED0_TABLE1 = {
+    (-5, -5, -5): (-4.99, -5.04, -4.20, -10.87, 9.28, 691.4, -36.7, 29.0, 310.5),
+    (5, -5, -5): (4.95, -5.04, -4.17, -10.44, -8.05, 685.0, -34.1, -1.5, 39.2),
+    (-5, 5, -5): (-5.01, 5.03, -3.95, 8.55, 8.11, 689.0, -2.8, 25.3, 34.9),
+    (5, 5, -5): (5.03, 5.01, -4.00, 8.04, -8.98, 679.5, -5.8, -4.0, 305.4),
+    (-5, -5, 5): (-4.83, -4.68, 2.88, -5.00, 3.17, 554.9, -45.0, 28.0, 367.6),
+    (5, -5, 5): (4.73, -4.61, 2.72, -5.14, -4.08, 521.8, -34.6, -18.3, 158.9),
+    (-5, 5, 5): (-4.85, 4.75, 3.00, 3.80, 3.00, 546.9, 14.0, 23.4, -9.8),
+    (5, 5, 5): (4.64, 4.73, 2.86, 3.85, -4.83, 525.8, 3.49, -15.8, 298.1),
+}
+TRIM_COLUMNS = ("u0", "v0", "w0", "phi0_deg", "theta0_deg", "dt0", "da0", "de0", "dr0")
+
+
+@dataclass(frozen=True)
+class Phase1Config:
+    """Phase-1 experiment settings (seed 0 Sec. IV)."""
+
+    box_min: tuple = (-5.0, -5.0, -5.0)
+    box_max: tuple = (5.0, 5.0, 5.0)
+    trim_s: float = 10.0
+    excite_s: float = 30.0
+    trim_average_s: float = 5.0
+    amplitudes: tuple = (1.5, 1.5, 1.0, 0.4)   # peak u, v, w [m/s], yaw rate [rad/s]
+    f_min_hz: float = 0.2
+    f_max_hz: float = 2.0
+    taper_s: float = 1.0
+    hover_validation: bool = True
+    start: str = "hover"      # "hover": reference steps from hover at t=0; "trim": start at the model trim
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.start not in ("hover", "trim"):
+            raise ConfigError(f"phase1.start: must be 'hover' or 'trim', got {self.start!r}")
+        for name, n in (("box_min", 3), ("box_max", 3), ("amplitudes", 4)):
+            v = getattr(self, name)
+            try:
+                arr = np.asarray(v, dtype=float)
+            except (TypeError, ValueError):
+                raise ConfigError(f"phase1.{name}: not numeric: {v!r}") from None
+            if arr.shape != (n,) or not np.all(np.isfinite(arr)):
+                raise ConfigError(f"phase1.{name}: expected {n} finite numbers, got {v!r}")
+            object.__setattr__(self, name, tuple(float(x) for x in arr))
+        if any(a >= b for a, b in zip(self.box_min, self.box_max)):
+            raise ConfigError("phase1.box_min: must be below box_max in every component")
+        if any(a < 0 for a in self.amplitudes):
+            raise ConfigError("phase1.amplitudes: must be >= 0")
+        for name in ("trim_s", "excite_s", "trim_average_s", "f_min_hz", "f_max_hz", "taper_s"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+                raise ConfigError(f"phase1.{name}: must be a finite number >= 0, got {v!r}")
+            object.__setattr__(self, name, float(v))
+        if self.trim_s <= 0 or self.excite_s <= 0:
+            raise ConfigError("phase1.trim_s and phase1.excite_s: must be > 0")
+        if not 0 < self.f_min_hz < self.f_max_hz:
+            raise ConfigError("phase1.f_min_hz: need 0 < f_min_hz < f_max_hz")
+        if not isinstance(self.hover_validation, bool):
+            raise ConfigError("phase1.hover_validation: must be true or false")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+            raise ConfigError(f"phase1.seed: must be a non-negative integer, got {self.seed!r}")
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "Phase1Config":
+        if not isinstance(d, Mapping):
+            raise ConfigError(f"phase1: expected a mapping, got {type(d).__name__}")
+        names = {f.name for f in fields(cls)}
+        bad = sorted(set(d) - names)
+        if bad:
+            raise ConfigError(f"phase1: unknown key(s) {bad}")
+        return cls(**d)
+
+    def scaled(self, s: float) -> "Phase1Config":
+        """Durations multiplied by ``s`` (quick runs); the band is kept."""
+        if not (math.isfinite(s) and s > 0):
+            raise ConfigError(f"duration scale must be > 0, got {s}")
+        kw = {f.name: getattr(self, f.name) for f in fields(self)}
+        for name in ("trim_s", "excite_s", "trim_average_s", "taper_s"):
+            kw[name] = kw[name] * s
+        return Phase1Config(**kw)
+
+    def vertices(self) -> list[tuple[float, float, float]]:
+        """The 2^3 box corners in seed 0 Table 1 order (u fastest, then v, then w)."""
+        return [(u, v, w) for w, v, u in itertools.product(
+            (self.box_min[2], self.box_max[2]), (self.box_min[1], self.box_max[1]),
+            (self.box_min[0], self.box_max[0]))]
+
+
+@dataclass
+class RunRecord:
+    """Everything one simulated run produced (arrays in NED/FRD, SI units)."""
+
+    name: str
+    v_d: np.ndarray                 # (3,) vertex body-velocity reference
+    t_excite: float                 # start of the excitation segment, s
+    duration: float
+    model_trim: Trim
+    state_t: np.ndarray             # (N,)
+    state_true: np.ndarray          # (N, 16) FULL_STATE_NAMES
+    state_meas: np.ndarray          # (N, 16) estimator output (rotor columns = truth)
+    rotor_t: np.ndarray             # (M,)
+    rotor_meas: np.ndarray          # (M, 4) rad/s
+    imu_t: np.ndarray               # (K,)
+    imu_accel: np.ndarray           # (K, 3) specific force FRD
+    imu_gyro: np.ndarray            # (K, 3) FRD
+    cmd_t: np.ndarray               # (L,) control-rate time
+    reference: np.ndarray           # (L, 4) u_d, v_d, w_d [m/s], r_d [rad/s]
+    excitation: np.ndarray          # (L, 4) multisine part of the reference
+    command: np.ndarray             # (L, 4) virtual command u = [ut, ua, ue, ur]
+    meta: dict = field(default_factory=dict)
+
+    def achieved_trim(self, average_s: float, arm_length: float) -> dict:
+        """Mean over the last ``average_s`` of the trim segment (seed 0 Table 1 columns)."""
+        t0 = max(0.0, self.t_excite - average_s)
+        s = (self.state_t >= t0) & (self.state_t < self.t_excite)
+        r = (self.rotor_t >= t0) & (self.rotor_t < self.t_excite)
+        if not s.any() or not r.any():
+            raise ConfigError(f"run {self.name}: no samples in the trim averaging window")
+        xm = self.state_meas[s]
+        delta = self.rotor_meas[r] @ mixer(arm_length).T
+        vals = [*xm[:, 6:9].mean(axis=0), *np.degrees(xm[:, 3:5].mean(axis=0)), *delta.mean(axis=0)]
+        return {k: float(v) for k, v in zip(TRIM_COLUMNS, vals)}
+
+
+def design_excitation(cfg: Phase1Config):
+    """The phase-1 4-axis multisine (seed 0 Sec. IV): orthogonal, phase-optimised, flat
+    spectrum in [f_min_hz, f_max_hz], one period of ``excite_s``, channels u, v, w, yaw-rate
+    reference scaled to ``cfg.amplitudes`` (designed by :mod:`lpv_sysid.signals`)."""
+    from lpv_sysid.signals.excitation import phase1_signals
+
+    return phase1_signals(duration=cfg.excite_s, band=(cfg.f_min_hz, cfg.f_max_hz),
+                          peaks=cfg.amplitudes, sample_rate=50.0)
+
+
+def excitation_signal(cfg: Phase1Config, t: np.ndarray, signals=None) -> np.ndarray:
+    """Excitation (N, 4) for excitation-segment times t in [0, excite_s], with cosine taper.
+
+    ``signals`` is the designed :class:`~lpv_sysid.signals.multisine.SignalSet`
+    (:func:`design_excitation`; designed here when None). It is evaluated as the exact sum
+    of sinusoids at ``t``, so the control rate need not match the design grid.
+    """
+    if signals is None:
+        signals = design_excitation(cfg)
+    u = signals.evaluate(t)
+    if cfg.taper_s > 0:
+        w = np.ones_like(t)
+        a = t < cfg.taper_s
+        w[a] = 0.5 - 0.5 * np.cos(np.pi * t[a] / cfg.taper_s)
+        b = t > cfg.excite_s - cfg.taper_s
+        w[b] = 0.5 - 0.5 * np.cos(np.pi * (cfg.excite_s - t[b]) / cfg.taper_s)
+        u = u * w[:, None]
+    return u
+
+
+def simulate_run(model: Quadrotor, gains: BaselineGains, sensors: SensorConfig,
+                 cfg: Phase1Config, v_d, name: str, seed: int, signals=None) -> RunRecord:
+    """Fly one phase-1 run (trim then excitation) about body velocity ``v_d``.
+
+    ``signals``: the designed excitation (:func:`design_excitation`), shared by all runs."""
+    v_d = np.asarray(v_d, dtype=float)
+    trim = model.trim(v_d)
+    if gains.arm_length != model.params.arm_length:
+        # the controller's output mixer must be the vehicle's (seed 0 Eq. 7)
+        gains = replace(gains, arm_length=model.params.arm_length)
+    phys = sensors.physics_hz
+    d_ctrl = phys / gains.rate_hz
+    if abs(d_ctrl - round(d_ctrl)) > 1e-9 or d_ctrl < 1:
+        raise ConfigError(f"controller.rate_hz={gains.rate_hz} must divide sim.physics_hz={phys}")
+    d_ctrl = int(round(d_ctrl))
+    d_state, d_imu, d_rot = (sensors.decimation(r) for r in (sensors.state_hz, sensors.imu_hz, sensors.rotor_hz))
+    T = cfg.trim_s + cfg.excite_s
+    n = int(round(T * phys))
+    rng = np.random.default_rng(seed)
+    t_c = np.arange(0, n, d_ctrl) / phys
+    exc = np.zeros((t_c.size, 4))
+    on = t_c >= cfg.trim_s
+    exc[on] = excitation_signal(cfg, t_c[on] - cfg.trim_s, signals)
+    ref = exc + np.r_[v_d, 0.0]
+
+    start = trim if cfg.start == "trim" else model.trim([0.0, 0.0, 0.0])
+    veh = SimVehicle(model, SensorConfig(**{**sensors.to_dict(), "seed": seed}), start.full_state)
+    veh.u = start.u0.tolist()
+    ctrl = BaselineController(gains)
+    ctrl.warm_start(start.x0, start.u0, start.v_d)
+
+    ns, ni, nr = -(-n // d_state), -(-n // d_imu), -(-n // d_rot)
+    state_t, state_true, state_meas = np.empty(ns), np.empty((ns, 16)), np.empty((ns, 16))
+    imu_t, imu_a, imu_g = np.empty(ni), np.empty((ni, 3)), np.empty((ni, 3))
+    rot_t, rot_m = np.empty(nr), np.empty((nr, 4))
+    cmd = np.empty((t_c.size, 4))
+    xm = None
+    u = start.u0.tolist()
+    for k in range(n):
+        t = k / phys
+        if k % d_state == 0:
+            i = k // d_state
+            state_t[i] = t
+            state_true[i] = veh.x
+            xm = veh.measure_state()
+            state_meas[i] = xm
+        if k % d_rot == 0:
+            i = k // d_rot
+            rot_t[i] = t
+            rot_m[i] = veh.measure_rotors()
+        if k % d_imu == 0:
+            i = k // d_imu
+            imu_t[i] = t
+            imu_a[i], imu_g[i] = veh.measure_imu()
+        if k % d_ctrl == 0:
+            j = k // d_ctrl
+            r = ref[j]
+            x12 = (xm[3], xm[4], xm[6], xm[7], xm[8], xm[9], xm[10], xm[11])
+            u = ctrl.step(t, x12, (r[0], r[1], r[2]), r[3]).tolist()
+            cmd[j] = u
+        try:
+            veh.step(u)
+        except SafetyError as exc_:
+            raise SafetyError(f"run {name}: {exc_}; check gains/limits") from None
+    return RunRecord(name=name, v_d=v_d, t_excite=cfg.trim_s, duration=T, model_trim=trim,
+                     state_t=state_t, state_true=state_true, state_meas=state_meas,
+                     rotor_t=rot_t, rotor_meas=rot_m, imu_t=imu_t, imu_accel=imu_a,
+                     imu_gyro=imu_g, cmd_t=t_c, reference=ref, excitation=exc, command=cmd,
+                     meta={"seed": seed, "physics_hz": phys, "control_hz": gains.rate_hz})
+
+
+def run_name(v_d) -> str:
+    return "vertex_" + "_".join(f"{'p' if c > 0 else ('m' if c < 0 else '0')}{abs(c):g}" for c in v_d)
+
+
+def run_phase1(model: Quadrotor, gains: BaselineGains, sensors: SensorConfig, cfg: Phase1Config,
+               vertex_indices: Sequence[int] | None = None) -> list[RunRecord]:
+    """All vertex runs (1-based Table 1 indices, default all) plus the hover validation."""
+    verts = cfg.vertices()
+    idx = list(range(1, len(verts) + 1)) if vertex_indices is None else list(vertex_indices)
+    for i in idx:
+        if not 1 <= i <= len(verts):
+            raise ConfigError(f"vertex index {i} out of range 1..{len(verts)}")
+    signals = design_excitation(cfg)
+    runs = []
+    for i in idx:
+        log.info("phase 1: vertex %d %s", i, verts[i - 1])
+        runs.append(simulate_run(model, gains, sensors, cfg, verts[i - 1], run_name(verts[i - 1]),
+                                 seed=cfg.seed * 100 + i, signals=signals))
+    if cfg.hover_validation:
+        runs.append(simulate_run(model, gains, sensors, cfg, (0.0, 0.0, 0.0), "hover_validation",
+                                 seed=cfg.seed * 100 + 99, signals=signals))
+    return runs
+
+
+def trim_table(runs: Sequence[RunRecord], cfg: Phase1Config, arm_length: float) -> list[dict]:
+    rows = []
+    for rec in runs:
+        ach = rec.achieved_trim(cfg.trim_average_s, arm_length)
+        x0 = rec.model_trim.x0
+        model = dict(zip(TRIM_COLUMNS, [*x0[2:5], *np.degrees(x0[0:2]), *x0[8:12]]))
+        row = {"run": rec.name, "vertex": [float(c) for c in rec.v_d], "achieved": ach,
+               "model_trim": {k: float(v) for k, v in model.items()}}
+        key = tuple(int(round(c)) for c in rec.v_d)
+        if key in SEED0_TABLE1:
+            row["seed0_table1"] = dict(zip(TRIM_COLUMNS, SEED0_TABLE1[key]))
+        rows.append(row)
+    return rows
+
+
+def write_trim_table(rows: Sequence[dict], out_dir: str | Path) -> tuple[Path, Path]:
+    """trims.yaml (machine-readable) and trims.md (seed 0 Table 1 layout)."""
+    out = Path(out_dir)
+    y = out / "trims.yaml"
+    y.write_text(yaml.safe_dump({"format": "lpv_sysid/phase1_trims@1", "columns": list(TRIM_COLUMNS),
+                                 "units": ["m/s", "m/s", "m/s", "deg", "deg", "rad/s", "m*rad/s",
+                                           "m*rad/s", "rad/s"], "runs": list(rows)}, sort_keys=False))
+    m = out / "trims.md"
+    m.write_text(format_trim_table(rows) + "\n")
+    return y, m
+
+
+def format_trim_table(rows: Sequence[dict]) -> str:
+    head = "| vertex | source | " + " | ".join(TRIM_COLUMNS) + " |"
+    lines = [head, "|" + "---|" * (len(TRIM_COLUMNS) + 2)]
+    for row in rows:
+        vtx = "[" + " ".join(f"{c:+g}" for c in row["vertex"]) + "]"
+        for src in ("achieved", "model_trim", "seed0_table1"):
+            if src in row:
+                vals = " | ".join(f"{row[src][k]:.2f}" if abs(row[src][k]) < 100 else f"{row[src][k]:.1f}"
+                                  for k in TRIM_COLUMNS)
+                lines.append(f"| {vtx} | {src} | {vals} |")
+    return "\n".join(lines)
+
+
+def load_config(path: str | Path) -> tuple[QuadrotorParams, BaselineGains, SensorConfig, Phase1Config]:
+    """Read config/quadrotor.yaml (sections quadrotor, controller, sim, phase1)."""
+    p = Path(path)
+    try:
+        d = yaml.safe_load(p.read_text())
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read ({exc.strerror})") from None
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{p}: malformed YAML ({str(exc).splitlines()[0]})") from None
+    if not isinstance(d, dict):
+        raise ConfigError(f"{p}: expected a mapping at top level")
+    allowed = {"quadrotor", "controller", "sim", "phase1", "phase2"}
+    bad = sorted(set(d) - allowed)
+    if bad:
+        raise ConfigError(f"{p}: unknown section(s) {bad}; allowed: {sorted(allowed)}")
+    try:
+        qp = QuadrotorParams.from_dict(d.get("quadrotor") or {})
+        gains = BaselineGains.from_dict(d.get("controller") or {})
+        sens = SensorConfig.from_dict(d.get("sim") or {})
+        ph1 = Phase1Config.from_dict(d.get("phase1") or {})
+    except TypeError as exc:
+        raise ConfigError(f"{p}: {exc}") from None
+    except ConfigError as exc:
+        raise ConfigError(f"{p}: {exc}") from None
+    return qp, gains, sens, ph1
+
+
+TOPIC_NAMESPACE = "/lpv_sysid"
+BAG_TOPICS = ("state", "rotor_speeds", "imu", "velocity_reference", "actuator_command", "status")
+
+
+def write_run_bag(record: RunRecord, path: str | Path, storage: str = "mcap",
+                  namespace: str = TOPIC_NAMESPACE) -> Path:
+    """Write one run as a rosbag2 directory with the topics of docs/DESIGN.md.
+
+    Topics (``namespace``/name): ``state`` (estimator output), ``rotor_speeds``, ``imu``
+    (orientation from the nearest estimator sample), ``velocity_reference``,
+    ``actuator_command`` and ``status`` (1 Hz, phase trim/excitation). Messages are built
+    by :mod:`lpv_sysid.io.messages` (all frame conversions there), written by
+    :class:`lpv_sysid.io.bag.BagWriter`. Stamps are nanoseconds from the run start.
+    """
+    from lpv_sysid.errors import BagError
+
+    try:
+        from lpv_sysid.io import messages as M
+        from lpv_sysid.io.bag import BagWriter
+    except ImportError as exc:
+        raise BagError(f"{path}: rosbag2 writing unavailable ({exc})") from None
+    f = M.MsgFactory.rosbags()
+    path = Path(path)
+
+    def ns(t):
+        return int(round(float(t) * 1e9))
+
+    items: list[tuple[int, str, Any]] = []
+    xm = record.state_meas
+    for t, x in zip(record.state_t, xm):
+        items.append((ns(t), "state", M.odometry_from_state(f, ns(t), x[0:3], x[3:6], x[6:9], x[9:12])))
+    for t, om in zip(record.rotor_t, record.rotor_meas):
+        items.append((ns(t), "rotor_speeds", M.rotor_speeds_msg(f, ns(t), om)))
+    idx = np.clip(np.searchsorted(record.state_t, record.imu_t, side="right") - 1, 0, len(record.state_t) - 1)
+    for t, a, w, i in zip(record.imu_t, record.imu_accel, record.imu_gyro, idx):
+        items.append((ns(t), "imu", M.imu_msg(f, ns(t), a, w, xm[i, 3:6])))
+    for t, r, u in zip(record.cmd_t, record.reference, record.command):
+        items.append((ns(t), "velocity_reference", M.twist_reference_msg(f, ns(t), r[0:3], float(r[3]))))
+        items.append((ns(t), "actuator_command", M.actuator_command_msg(f, ns(t), u)))
+    for t in np.arange(0.0, record.duration, 1.0):
+        phase = "trim" if t < record.t_excite else "excitation"
+        st = M.diagnostic_status(f, "OK", "sim_phase1", f"{record.name}: {phase}", {
+            "phase": phase, "run": record.name, "v_d": " ".join(f"{c:g}" for c in record.v_d),
+            "t_excite": record.t_excite, "seed": record.meta.get("seed", "")})
+        items.append((ns(t), "status", M.diagnostic_array(f, ns(t), [st])))
+    items.sort(key=lambda it: it[0])
+    topic = {name: f"{namespace}/{name}" for name in BAG_TOPICS}
+    try:
+        with BagWriter(str(path), storage=storage) as w:
+            for name in BAG_TOPICS:
+                w.add_topic(topic[name], M.TYPES[name])
+            for stamp, name, msg in items:
+                w.write(topic[name], stamp, msg)
+    except BagError:
+        raise
+    except OSError as exc:
+        raise BagError(f"{path}: cannot write bag ({exc})") from None
+    return path

@@ -1,0 +1,750 @@
+"""Phase-2 experiment simulation (seed 0 Sec. VII): the LPV-controlled excitation flight.
+
+Two simulations of the same 7-channel signal (reference ``u_d, v_d, w_d`` and normalised
+excitation ``ue_t, ue_a, ue_e, ue_r``, excitation multiplier ``kappa``):
+
+(a) the LPV closed loop of Eq. (33) at nominal parameters (:mod:`lpv_sysid.sim.lpv_closed_loop`,
+    scheduled model from ``vertex_models.yaml`` + ``gains.yaml`` via :mod:`lpv_sysid.models.lpv`);
+(b) the full nonlinear quadrotor of :mod:`lpv_sysid.models.quadrotor` under the runtime LPV law
+    (:mod:`lpv_sysid.control.lpv_controller`) fed with the simulated *measured* state (sensor
+    model of :mod:`lpv_sysid.sim.vehicle`), recorded to a rosbag2 with the DESIGN.md topics.
+
+Both report the achieved ``||z||_2 / ||kappa u_e||_2`` (z = Q^-1 (v - v_d), Eq. 18) against the
+design gamma (Eq. 29), tracking (Figs. 8-9) and the correlation of the Eq. (6) regressors
+(Fig. 10). A :class:`SafetySupervisor` stops run (b) -- excitation off, event reported -- when
+the vehicle leaves the scheduling box (plus a margin), tilts beyond a limit, or its state
+becomes non-finite.
+
+Outputs in ``--out DIR`` (read by :mod:`lpv_sysid.report`): ``summary.yaml``,
+``eq33.npz`` / ``nonlinear.npz`` (time histories), PNG figures, and ``bag/`` (rosbag2).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Optional, Protocol, Sequence
+
+import numpy as np
+import yaml
+
+from lpv_sysid.errors import ConfigError, LpvSysidError, SafetyError
+from lpv_sysid.sim.lpv_closed_loop import (
+    VELOCITY_INDEX,
+    ClosedLoopConfig,
+    ControlLaw,
+    ClosedLoopResult,
+    ReferenceSignals,
+    l2_norm,
+    linear_lpv_law,
+    simulate_eq33,
+)
+
+log = logging.getLogger(__name__)
+
+REFERENCE_CHANNELS = ("u_d", "v_d", "w_d")
+EXCITATION_CHANNELS = ("ue_t", "ue_a", "ue_e", "ue_r")
+SUMMARY_FORMAT = "lpv_sysid/phase2_summary@1"
+
+
+# --------------------------------------------------------------------------- configuration
+@dataclass(frozen=True)
+class Phase2Config:
+    """Options of the phase-2 simulation (CLI flags of ``simulate phase2``)."""
+
+    kappa: float = 1.0                 # excitation multiplier of Eq. (33)
+    eq33_method: str = "rk4"           # "rk4" (fixed step on the signal grid) or "RK45" (ode45-like)
+    box_margin: float = 1.0            # m/s beyond the scheduling box before the supervisor stops
+    max_tilt_deg: float = 60.0         # |phi|, |theta| limit of the supervisor
+    duration: Optional[float] = None   # truncate the signals to this many seconds
+    ramp: Optional[float] = 2.0        # fade in/out of the excitation player (None: raw table)
+    record_bag: bool = True
+    storage: str = "mcap"
+    seed: int = 0                      # sensor-noise seed of run (b)
+    run_eq33: bool = True
+    run_nonlinear: bool = True
+    monitor_margin: float = 1.2        # bound monitor of the runtime law: flag at gain > gamma x margin
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.kappa, (int, float)) and math.isfinite(self.kappa) and self.kappa > 0):
+            raise ConfigError(f"--kappa must be a finite number > 0, got {self.kappa!r}")
+        if self.eq33_method not in ("RK45", "rk4"):
+            raise ConfigError(f"eq33 method must be RK45 or rk4, got {self.eq33_method!r}")
+        if not (self.box_margin >= 0 and math.isfinite(self.box_margin)):
+            raise ConfigError(f"box margin must be >= 0, got {self.box_margin!r}")
+        if not (0 < self.max_tilt_deg < 90):
+            raise ConfigError(f"max tilt must be in (0, 90) deg, got {self.max_tilt_deg!r}")
+        if self.duration is not None and not (self.duration > 0 and math.isfinite(self.duration)):
+            raise ConfigError(f"--duration must be > 0, got {self.duration!r}")
+        if not (self.monitor_margin > 0):
+            raise ConfigError(f"--monitor-margin must be > 0, got {self.monitor_margin!r}")
+        if self.storage not in ("mcap", "sqlite3"):
+            raise ConfigError(f"--storage must be mcap or sqlite3, got {self.storage!r}")
+
+
+# --------------------------------------------------------------------------- safety
+def make_supervisor(vmin: Sequence[float], vmax: Sequence[float], margin: float):
+    """control.safety.SafetySupervisor watching the measured state stream and the box."""
+    from lpv_sysid.control.safety import SafetyConfig, SafetySupervisor
+
+    return SafetySupervisor(SafetyConfig(timeouts={}, box_min=tuple(float(v) for v in vmin),
+                                         box_max=tuple(float(v) for v in vmax), box_margin=float(margin)))
+
+
+def supervise(sup, t: float, x12: np.ndarray, max_tilt: float) -> Optional[str]:
+    """Phase-2 trip conditions on the measured 12-state (latched in ``sup``).
+
+    Non-finite state (``non_finite``); measured body velocity outside the scheduling box
+    widened by the margin (``out_of_box``: the certificate of Lemma 1 only covers the box,
+    Eq. 20); roll or pitch beyond ``max_tilt`` (``bound_exceeded``: Assumption 2 far from valid).
+    Returns the event text once tripped, else None.
+    """
+    sup.on_input("state", t, x12, t)
+    if not sup.aborted:
+        sup.check_scheduling(t, np.asarray(x12, dtype=float)[list(VELOCITY_INDEX)])
+    if not sup.aborted:
+        tilt = max(abs(float(x12[0])), abs(float(x12[1])))
+        if tilt > max_tilt:
+            sup.on_bound_flag(t, True, f"attitude |phi|,|theta| = {math.degrees(tilt):.1f} deg > "
+                              f"{math.degrees(max_tilt):.1f} deg")
+    ev = sup.event
+    if ev is None:
+        return None
+    what = " (measured body velocity u, v, w vs the scheduling box)" if ev.reason == "out_of_box" else ""
+    return f"{ev.reason} at t={ev.t:.3f} s: {ev.detail}{what}"
+
+
+# --------------------------------------------------------------------------- signals
+def reference_signals(t: np.ndarray, u: np.ndarray, names: Sequence[str],
+                      duration: Optional[float] = None) -> ReferenceSignals:
+    """Pick the reference and excitation channels of ``signals.npz`` by name."""
+    names = [str(n) for n in names]
+    u = np.asarray(u, dtype=float)
+    t = np.asarray(t, dtype=float)
+    if u.ndim != 2 or u.shape[1] != len(names):
+        raise ConfigError(f"signals.npz: 'u' has shape {u.shape}, 'names' has {len(names)} entries")
+    missing = [c for c in REFERENCE_CHANNELS + EXCITATION_CHANNELS if c not in names]
+    if missing:
+        raise ConfigError(f"signals.npz: channel(s) {missing} missing; have {names}")
+    if duration is not None:
+        keep = t <= t[0] + duration + 1e-12
+        t, u = t[keep], u[keep]
+    vd = u[:, [names.index(c) for c in REFERENCE_CHANNELS]]
+    ue = u[:, [names.index(c) for c in EXCITATION_CHANNELS]]
+    return ReferenceSignals(t, vd, ue)
+
+
+def load_signals(signals_dir: str | Path, duration: Optional[float] = None,
+                 ramp: Optional[float] = None) -> ReferenceSignals:
+    """``DIR/signals.npz`` (t, u, names) -> ReferenceSignals; ConfigError naming the problem.
+
+    With ``ramp`` (seconds) the table is played as the excitation node plays it
+    (:meth:`lpv_sysid.signals.excitation.ExcitationCore.phase2`: raised-cosine fade in and out
+    of that length around one period, so v_d starts and ends at zero, i.e. hover), sampled on
+    the table's own time step; without it the raw table is used.
+    """
+    path = Path(signals_dir)
+    if path.is_dir():
+        path = path / "signals.npz"
+    if not path.is_file():
+        raise ConfigError(f"--signals: {path} not found")
+    try:
+        with np.load(path, allow_pickle=False) as d:
+            missing = [k for k in ("t", "u", "names") if k not in d.files]
+            if missing:
+                raise ConfigError(f"{path}: missing array(s) {missing}")
+            t, u, names = d["t"], d["u"], [str(n) for n in d["names"]]
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"{path}: not a readable npz archive ({exc})") from None
+    sig = reference_signals(t, u, names)          # validates channels by name
+    if ramp is None:
+        return reference_signals(t, u, names, duration)
+    from lpv_sysid.signals.excitation import ExcitationCore
+
+    core = ExcitationCore.phase2(t, u, names, start_time=0.0, ramp=float(ramp))
+    dt = float(np.median(np.diff(sig.t)))
+    end = core.duration if duration is None else min(core.duration, float(duration))
+    grid = np.arange(0.0, end + 0.5 * dt, dt)
+    vel, _, ue = core.evaluate(grid)
+    return ReferenceSignals(grid, vel, ue)
+
+
+# --------------------------------------------------------------------------- regressors
+def regressor_correlation_block(t: np.ndarray, x12: np.ndarray, arm_length: float,
+                                source: str, Omega: Optional[np.ndarray] = None) -> dict:
+    """Fig. 10 correlation matrices of the Eq. (6) regressors for ``summary.yaml``.
+
+    ``x12`` in DESIGN.md state order; ``Omega`` (N, 4) rotor speeds if known, else
+    Omega = Mix^-1 delta from the virtual-actuator states.
+    """
+    from lpv_sysid.models.quadrotor import mixer
+    from lpv_sysid.report.regressors import regressor_correlations, regressors, virtual_actuators
+
+    mix = mixer(arm_length)
+    x12 = np.asarray(x12, dtype=float)
+    if Omega is None:
+        Omega = np.linalg.solve(mix, x12[:, 8:12].T).T
+    delta, delta_sq = virtual_actuators(Omega, mix)
+    regs = regressors(t, x12[:, 2:5], x12[:, 5:8], delta, delta_sq, arm_length)
+    corrs = regressor_correlations(regs)
+    return {"source": source, "n_samples": int(t.size),
+            "axes": {c.axis: c.to_dict() for c in corrs},
+            "max_abs_offdiag": {c.axis: _finite_or_none(c.max_offdiag()) for c in corrs}}
+
+
+def _finite_or_none(x: float) -> Optional[float]:
+    return float(x) if x is not None and np.isfinite(x) else None
+
+
+# --------------------------------------------------------------------------- nonlinear run (b)
+@dataclass(frozen=True)
+class NonlinearConfig:
+    """Loop rates of run (b). The control law runs at ``control_hz`` (zero-order hold on the
+    vehicle's fixed-step physics, which must be a multiple); the signals are sampled there."""
+
+    control_hz: float = 100.0
+    status_hz: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not (self.control_hz > 0 and math.isfinite(self.control_hz)):
+            raise ConfigError(f"control_hz must be > 0, got {self.control_hz!r}")
+
+
+class BagSink(Protocol):
+    """Where run (b) sends its samples (in the product: :class:`Phase2Bag`)."""
+
+    def sample(self, t: float, x16_meas: np.ndarray, imu: tuple[np.ndarray, np.ndarray],
+               Omega_meas: np.ndarray, v_d: np.ndarray, ue: np.ndarray, u: np.ndarray) -> None: ...
+    def status(self, t: float, level: str, message: str, values: dict) -> None: ...
+
+
+TOPIC_NAMESPACE = "/lpv_sysid"
+BAG_TOPICS = ("state", "rotor_speeds", "imu", "velocity_reference", "excitation", "actuator_command", "status")
+
+
+class Phase2Bag:
+    """rosbag2 (mcap) recorder of run (b) with the DESIGN.md topics, written while flying.
+
+    Messages are built by :mod:`lpv_sysid.io.messages` (all ENU/FLU conversions there) and
+    written by :class:`lpv_sysid.io.bag.BagWriter`; stamps are nanoseconds from the run start.
+    ``excitation`` carries the normalised u_e (DESIGN.md); kappa is in every ``status``.
+    Use as a context manager: the bag is closed (and stays readable) also after an error.
+    """
+
+    def __init__(self, path: str | Path, storage: str = "mcap", namespace: str = TOPIC_NAMESPACE,
+                 node_name: str = "sim_phase2", kappa: float = 1.0) -> None:
+        from lpv_sysid.io import messages as M
+        from lpv_sysid.io.bag import BagWriter
+
+        self.M = M
+        self.f = M.MsgFactory.rosbags()
+        self.path = Path(path)
+        self.node_name = node_name
+        self.kappa = float(kappa)
+        self.topic = {name: f"{namespace}/{name}" for name in BAG_TOPICS}
+        self.writer = BagWriter(str(self.path), storage=storage)
+        self.counts = {name: 0 for name in BAG_TOPICS}
+
+    def __enter__(self) -> "Phase2Bag":
+        self.writer.open()
+        for name in BAG_TOPICS:
+            self.writer.add_topic(self.topic[name], self.M.TYPES[name])
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        return self.writer.__exit__(exc_type, exc, tb)
+
+    def _write(self, name: str, ns: int, msg: Any) -> None:
+        self.writer.write(self.topic[name], ns, msg)
+        self.counts[name] += 1
+
+    def sample(self, t, x16_meas, imu, Omega_meas, v_d, ue, u) -> None:
+        M, f, ns = self.M, self.f, int(round(float(t) * 1e9))
+        x = np.asarray(x16_meas, dtype=float)
+        self._write("state", ns, M.odometry_from_state(f, ns, x[0:3], x[3:6], x[6:9], x[9:12]))
+        self._write("rotor_speeds", ns, M.rotor_speeds_msg(f, ns, Omega_meas))
+        self._write("imu", ns, M.imu_msg(f, ns, imu[0], imu[1], x[3:6]))
+        self._write("velocity_reference", ns, M.twist_reference_msg(f, ns, v_d, 0.0))
+        self._write("excitation", ns, M.excitation_msg(f, ns, np.asarray(ue, dtype=float) / self.kappa))
+        self._write("actuator_command", ns, M.actuator_command_msg(f, ns, u))
+
+    def status(self, t, level, message, values) -> None:
+        M, f, ns = self.M, self.f, int(round(float(t) * 1e9))
+        vals = {"phase": "phase2", "kappa": self.kappa}
+        vals.update(values)
+        st = M.diagnostic_status(f, level, self.node_name, message, vals)
+        self._write("status", ns, M.diagnostic_array(f, ns, [st]))
+
+
+def measured_x12(x16_meas: np.ndarray, Omega_meas: np.ndarray, mix: np.ndarray) -> np.ndarray:
+    """Controller state (DESIGN.md order) from the estimator output and ESC rotor speeds."""
+    x16_meas = np.asarray(x16_meas, dtype=float)
+    return np.concatenate([x16_meas[3:5], x16_meas[6:12], mix @ np.asarray(Omega_meas, dtype=float)])
+
+
+def simulate_nonlinear(
+    vehicle: Any,
+    law: ControlLaw,
+    signals: ReferenceSignals,
+    Q: np.ndarray,
+    vmin: Sequence[float],
+    vmax: Sequence[float],
+    kappa: float = 1.0,
+    gamma: Optional[float] = None,
+    config: NonlinearConfig = NonlinearConfig(),
+    box_margin: float = 1.0,
+    max_tilt: float = math.radians(60.0),
+    sink: Optional[BagSink] = None,
+) -> RunRecord:
+    """Seed 0 Sec. VII on the nonlinear quadrotor: the LPV law on measured states.
+
+    ``vehicle`` is a :class:`lpv_sysid.sim.vehicle.SimVehicle` (fixed-step RK4 physics,
+    noisy sensors) already placed at its initial state; ``law(t, x12, v_d, kappa u_e)`` returns
+    the virtual command. Each control period: measure (estimator state + ESC rotor speeds),
+    supervise, compute u, hold it over the physics steps. On a safety trip the excitation is
+    switched off, a status is emitted and the run stops (on the vehicle PX4 takes over).
+    The performance output uses the true velocity: z = Q^-1 (v - v_d) (Eq. 18).
+    """
+    mix = vehicle.model.mix
+    n_phys = vehicle.cfg.physics_hz / config.control_hz
+    if abs(n_phys - round(n_phys)) > 1e-9 or n_phys < 1:
+        raise ConfigError(f"control_hz={config.control_hz} must divide the vehicle physics rate "
+                          f"{vehicle.cfg.physics_hz} Hz")
+    n_phys = int(round(n_phys))
+    dt_c = 1.0 / config.control_hz
+    t0, t_end = float(signals.t[0]), float(signals.t[-1])
+    n_steps = int(math.floor((t_end - t0) / dt_c + 1e-9)) + 1
+    sup = make_supervisor(vmin, vmax, box_margin)
+    sup.arm(t0)
+    status_every = max(1, int(round(config.control_hz / config.status_hz))) if config.status_hz > 0 else 0
+    T, VD, X, XM, UE, U, OM = [], [], [], [], [], [], []
+    event: Optional[str] = None
+    for k in range(n_steps):
+        t = t0 + k * dt_c
+        v_d, _, ue = signals.at(t)
+        x16_true = np.array(vehicle.x)
+        x16_meas = vehicle.measure_state()
+        Om_meas = vehicle.measure_rotors()
+        x12m = measured_x12(x16_meas, Om_meas, mix)
+        event = supervise(sup, t, x12m, max_tilt)
+        if event is not None:
+            ue = np.zeros_like(ue)
+            if sink is not None:
+                sink.status(t, "ERROR", "safety abort: excitation off, run stopped",
+                            {"event": event, "excitation": "off"})
+            break
+        ue_s = kappa * ue
+        try:
+            u = np.asarray(law(t, x12m, v_d, ue_s), dtype=float)
+        except SafetyError as exc:
+            u = np.full(4, np.nan)
+            detail = str(exc)
+        else:
+            detail = f"control law returned {u.tolist()}"
+        if u.shape != (4,) or not np.all(np.isfinite(u)):
+            event = f"non_finite at t={t:.3f} s: {detail}"
+        elif (getattr(law, "last_info", None) or {}).get("bound_exceeded"):
+            gain_est = law.ctrl.gain() if hasattr(law, "ctrl") else float("nan")
+            sup.on_bound_flag(t, True, f"bound monitor: running ||z||/||u_e|| = {gain_est:.3g} above gamma x margin")
+            event = supervise(sup, t, x12m, max_tilt)
+        if event is not None:
+            if sink is not None:
+                sink.status(t, "ERROR", "safety abort: excitation off, run stopped",
+                            {"event": event, "excitation": "off"})
+            break
+        T.append(t); VD.append(v_d); X.append(_x12_of(x16_true, mix)); XM.append(x12m)
+        UE.append(ue_s); U.append(u); OM.append(x16_true[12:16])
+        if sink is not None:
+            sink.sample(t, x16_meas, vehicle.measure_imu(), Om_meas, v_d, ue_s, u)
+            if status_every and k % status_every == 0:
+                sink.status(t, "OK", "phase 2 excitation running", {"kappa": kappa})
+        if k == n_steps - 1:
+            break
+        try:
+            for _ in range(n_phys):
+                vehicle.step(u)
+        except FloatingPointError as exc:
+            event = f"non_finite at t={t:.3f} s: {exc}"
+            if sink is not None:
+                sink.status(t, "ERROR", "safety abort: excitation off, run stopped",
+                            {"event": event, "excitation": "off"})
+            break
+    if not T:
+        raise SafetyError(f"phase 2 nonlinear run stopped before the first sample: {event}")
+    t_arr = np.array(T)
+    x_arr, vd_arr, ue_arr = np.array(X), np.array(VD), np.array(UE)
+    err = x_arr[:, list(VELOCITY_INDEX)] - vd_arr
+    z = np.linalg.solve(np.asarray(Q, dtype=float), err.T).T
+    z_norm, ue_norm = l2_norm(t_arr, z), l2_norm(t_arr, ue_arr)
+    gain = z_norm / ue_norm if ue_norm > 0 else float("inf")
+    if sink is not None and event is None:
+        sink.status(t_arr[-1], "OK", "phase 2 excitation complete", {"gain": gain})
+    return RunRecord(
+        name="nonlinear", t=t_arr, v_d=vd_arr, x12=x_arr, ue=ue_arr, u=np.array(U), z=z,
+        gain=gain, z_norm=z_norm, ue_norm=ue_norm, completed=event is None, safety_event=event,
+        extra={"x_meas": np.array(XM), "Omega": np.array(OM)},
+        info={"control_hz": float(config.control_hz), "physics_hz": float(vehicle.cfg.physics_hz),
+              "t_stop": float(t_arr[-1]), **(law.stats() if hasattr(law, "stats") else {})},
+    )
+
+
+def _x12_of(x16: np.ndarray, mix: np.ndarray) -> np.ndarray:
+    return np.concatenate([x16[3:5], x16[6:12], mix @ x16[12:16]])
+
+
+# --------------------------------------------------------------------------- outputs
+@dataclass
+class RunRecord:
+    """Time histories of one phase-2 simulation and its achieved gain (for the outputs)."""
+
+    name: str                    # "eq33" | "nonlinear"
+    t: np.ndarray
+    v_d: np.ndarray              # (N, 3)
+    x12: np.ndarray              # (N, 12)
+    ue: np.ndarray               # (N, 4) kappa u_e applied
+    u: np.ndarray                # (N, 4) virtual command
+    z: np.ndarray                # (N, 3) Q^-1 (v - v_d)
+    gain: float
+    z_norm: float
+    ue_norm: float
+    completed: bool = True
+    safety_event: Optional[str] = None
+    extra: dict = field(default_factory=dict)        # additional arrays for the npz
+    info: dict = field(default_factory=dict)         # additional summary entries
+
+    @property
+    def v(self) -> np.ndarray:
+        return self.x12[:, list(VELOCITY_INDEX)]
+
+    def summary(self, gamma: Optional[float]) -> dict:
+        out = {"gain": float(self.gain), "z_norm": float(self.z_norm), "ue_norm": float(self.ue_norm),
+               "within_gamma": None if gamma is None else bool(self.gain <= gamma),
+               "completed": bool(self.completed), "safety_event": self.safety_event,
+               "duration": float(self.t[-1] - self.t[0]) if self.t.size else 0.0,
+               "rms_tracking_error": [float(x) for x in np.sqrt(np.mean((self.v - self.v_d) ** 2, axis=0))],
+               "max_abs_tracking_error": float(np.max(np.abs(self.v - self.v_d))) if self.t.size else 0.0}
+        out.update(self.info)
+        return out
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        d = {"t": self.t, "v_d": self.v_d, "v": self.v, "x": self.x12, "ue": self.ue, "u": self.u, "z": self.z}
+        d.update(self.extra)
+        return d
+
+
+def record_from_eq33(res: ClosedLoopResult) -> RunRecord:
+    return RunRecord(
+        name="eq33", t=res.t, v_d=res.v_d, x12=res.x, ue=res.ue, u=res.u, z=res.z,
+        gain=res.gain, z_norm=res.z_norm, ue_norm=res.ue_norm,
+        extra={"z_model": res.z_model, "dx": res.dx},
+        info={"gain_model": float(res.gain_model), "method": res.method, "rhs_evaluations": int(res.n_steps)},
+    )
+
+
+def write_outputs(out_dir: str | Path, gamma: Optional[float], kappa: float,
+                  records: Sequence[RunRecord], skipped: Optional[dict[str, str]] = None,
+                  regressor_block: Optional[dict] = None, extra: Optional[dict] = None,
+                  figures: bool = True) -> dict[str, Path]:
+    """Write ``summary.yaml``, ``<name>.npz`` and figures; return the written paths."""
+    out = Path(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"--out: cannot create {out} ({exc.strerror})") from None
+    written: dict[str, Path] = {}
+    summary: dict[str, Any] = {"format": SUMMARY_FORMAT, "gamma": None if gamma is None else float(gamma),
+                               "kappa": float(kappa)}
+    events = []
+    for rec in records:
+        summary[rec.name] = rec.summary(gamma)
+        if rec.safety_event:
+            events.append(f"{rec.name}: {rec.safety_event}")
+        p = out / f"{rec.name}.npz"
+        np.savez(p, **rec.arrays())
+        written[rec.name] = p
+    for name, reason in (skipped or {}).items():
+        summary[name] = {"skipped": reason}
+    summary["safety_events"] = events
+    if regressor_block is not None:
+        summary["regressor_correlation"] = regressor_block
+    if extra:
+        summary.update(extra)
+    p = out / "summary.yaml"
+    p.write_text(yaml.safe_dump(summary, sort_keys=False, default_flow_style=None), encoding="utf-8")
+    written["summary"] = p
+    if figures:
+        from lpv_sysid.report import plots
+        from lpv_sysid.report.markdown import regressor_correlations_from_summary
+
+        for rec in records:
+            if rec.t.size < 2:
+                continue
+            written[f"tracking_{rec.name}"] = plots.plot_tracking(
+                rec.t, rec.v_d, rec.v, out / f"tracking_{rec.name}.png", rec.name)
+            written[f"perturbation_{rec.name}"] = plots.plot_perturbation(
+                rec.t, rec.v - rec.v_d, out / f"perturbation_{rec.name}.png", rec.name)
+        if regressor_block is not None:
+            written["regressor_correlation"] = plots.plot_regressor_correlations(
+                regressor_correlations_from_summary(regressor_block), out / "regressor_correlation.png",
+                f"Eq. (6) regressor correlation ({regressor_block['source']})")
+    return written
+
+
+# --------------------------------------------------------------------------- the whole run
+@dataclass
+class Phase2Problem:
+    """What phase 2 flies: vertex gains/equilibria (gains.yaml), weights R, Q, the design gamma,
+    and optionally the nominal vertex models (vertex_models.yaml) for Eq. (33)."""
+
+    vmin: np.ndarray
+    vmax: np.ndarray
+    K: np.ndarray                  # (N, n_u, n_x), Eq. (31)
+    x0: np.ndarray                 # (N, n_x)
+    u0: np.ndarray                 # (N, n_u)
+    R: np.ndarray                  # (n_u, n_e), Eq. (27)
+    Q: np.ndarray                  # (3, 3), Eq. (28)
+    gamma: Optional[float]
+    A: Optional[np.ndarray] = None  # (N, n_x, n_x) nominal vertex models (theta0)
+    B: Optional[np.ndarray] = None  # (N, n_x, n_u)
+    source: dict = field(default_factory=dict)
+
+    def scheduled(self):
+        """ScheduledLpv of the nominal model with the gains' equilibria (Eq. 33 inputs)."""
+        from lpv_sysid.models.lpv import PolytopicModel, ScheduledLpv
+
+        if self.A is None or self.B is None:
+            raise ConfigError("Eq. (33) needs the vertex models (--models vertex_models.yaml)")
+        pm = PolytopicModel(vmin=self.vmin, vmax=self.vmax, A=self.A, B=self.B, x0=self.x0, u0=self.u0)
+        return ScheduledLpv(pm, self.K)
+
+    def gain_schedule(self):
+        """K(v_d), x0(v_d), u0(v_d) only (A, B unused): the law of Eqs. (17), (31)."""
+        from lpv_sysid.models.lpv import PolytopicModel, ScheduledLpv
+
+        N, m, n = self.K.shape
+        pm = PolytopicModel(vmin=self.vmin, vmax=self.vmax, A=np.zeros((N, n, n)), B=np.zeros((N, n, m)),
+                            x0=self.x0, u0=self.u0)
+        return ScheduledLpv(pm, self.K)
+
+
+def load_problem(gains_path: str | Path, models_path: Optional[str | Path] = None) -> Phase2Problem:
+    """Phase2Problem from ``gains.yaml`` (+ ``vertex_models.yaml``), validated by
+    :mod:`lpv_sysid.io.formats`: with a models file the gains must match it (names, box,
+    vertex equilibria and the certificate's SHA-256 of the models file)."""
+    from lpv_sysid.io.formats import GainSchedule, VertexModels
+
+    gains_path = Path(gains_path)
+    if not gains_path.is_file():
+        raise ConfigError(f"--gains: {gains_path} not found")
+    if models_path is not None and not Path(models_path).is_file():
+        raise ConfigError(f"--models: {models_path} not found")
+    gs = GainSchedule.load(gains_path, models_path)
+    source = {"gains": gains_path}
+    A = B = None
+    if models_path is not None:
+        vm = VertexModels.load(models_path)
+        source["models"] = Path(models_path)
+        if vm.ts is None:
+            A, B = vm.A, vm.B
+        else:
+            log.warning("%s: discrete-time models (Ts=%g); Eq. (33) is continuous, skipped", models_path, vm.ts)
+    R = np.asarray(gs.R, dtype=float)
+    return Phase2Problem(vmin=np.asarray(gs.scheduling.min, dtype=float), vmax=np.asarray(gs.scheduling.max, dtype=float),
+                         K=gs.K, x0=gs.x0, u0=gs.u0, R=R, Q=np.asarray(gs.Q, dtype=float), gamma=float(gs.gamma),
+                         A=A, B=B, source=source)
+
+
+class RuntimeLaw:
+    """The onboard law of :mod:`lpv_sysid.control.lpv_controller` as a ``ControlLaw``:
+    ``u = u0(v_d) + K(v_d)(x - x0(v_d)) + R (kappa u_e)`` with actuator saturation through the
+    mixer and the running-gain bound monitor. ``last_info`` holds the flags of the last step;
+    counters record how often the command saturated or v_d was clamped."""
+
+    def __init__(self, problem: "Phase2Problem", mix: Optional[np.ndarray] = None, config: Any = None) -> None:
+        from lpv_sysid.control.lpv_controller import LpvController, LpvControllerConfig
+
+        self.ctrl = LpvController(problem, config if config is not None else LpvControllerConfig(), mix)
+        self.last_info: dict = {}
+        self.steps = self.saturated = self.clamped = 0
+
+    def __call__(self, t: float, x: np.ndarray, v_d: np.ndarray, ue_scaled: np.ndarray) -> np.ndarray:
+        u, info = self.ctrl.step(float(t), np.asarray(x, dtype=float), np.asarray(v_d, dtype=float),
+                                 np.asarray(ue_scaled, dtype=float))
+        self.last_info = info
+        self.steps += 1
+        self.saturated += int(info.get("saturated", False))
+        self.clamped += int(info.get("clamped", False))
+        return u
+
+    def stats(self) -> dict:
+        return {"law_steps": self.steps, "saturated_steps": self.saturated, "clamped_steps": self.clamped,
+                "monitor_gain_estimate": _finite_or_none(self.ctrl.gain())}
+
+
+def runtime_law(problem: "Phase2Problem", mix: Optional[np.ndarray] = None,
+                monitor_margin: float = 1.2) -> RuntimeLaw:
+    """The control law of run (b) (see :class:`RuntimeLaw`)."""
+    from lpv_sysid.control.lpv_controller import LpvControllerConfig
+
+    return RuntimeLaw(problem, mix, LpvControllerConfig(monitor_margin=float(monitor_margin)))
+
+
+def load_vehicle_config(path: Optional[str | Path], seed: Optional[int] = None):
+    """(QuadrotorParams, SensorConfig) from ``config/quadrotor.yaml`` (sections quadrotor, sim)."""
+    from dataclasses import replace
+
+    from lpv_sysid.models.quadrotor import QuadrotorParams
+    from lpv_sysid.sim.vehicle import SensorConfig
+
+    if path is None:
+        qp, sens = QuadrotorParams(), SensorConfig()
+    else:
+        from lpv_sysid.sim.phase1 import load_config
+
+        qp, _, sens, _ = load_config(path)
+    if seed is not None:
+        sens = replace(sens, seed=int(seed))
+    return qp, sens
+
+
+@dataclass
+class Phase2Result:
+    records: dict[str, RunRecord]
+    skipped: dict[str, str]
+    written: dict[str, Path]
+    summary_path: Path
+
+
+def run(problem: Phase2Problem, signals: ReferenceSignals, cfg: Phase2Config, quad_params: Any,
+        sensors: Any, out_dir: str | Path, law: Optional[ControlLaw] = None) -> Phase2Result:
+    """Runs (a) and (b), writes the outputs (see module docstring) and returns them."""
+    from lpv_sysid.models.quadrotor import Quadrotor
+    from lpv_sysid.sim.vehicle import SimVehicle
+
+    out = Path(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"--out: cannot create {out} ({exc.strerror})") from None
+    records: dict[str, RunRecord] = {}
+    skipped: dict[str, str] = {}
+    v_box = (problem.vmin, problem.vmax)
+    if cfg.run_nonlinear and cfg.record_bag and (out / "bag").exists():
+        raise ConfigError(f"--out: {out / 'bag'} exists; choose an empty output directory")
+    outside = np.any((signals.v_d < problem.vmin - 1e-9) | (signals.v_d > problem.vmax + 1e-9))
+    if outside:
+        raise ConfigError("signals: the reference v_d leaves the scheduling box of the gains "
+                          f"[{problem.vmin.tolist()}, {problem.vmax.tolist()}]")
+    if cfg.run_eq33:
+        if problem.A is None:
+            skipped["eq33"] = "no vertex models (vertex_models.yaml) to simulate Eq. (33)"
+        else:
+            try:
+                res = simulate_eq33(problem.scheduled(), signals, problem.R, problem.Q, problem.gamma,
+                                    ClosedLoopConfig(kappa=cfg.kappa, method=cfg.eq33_method))
+                records["eq33"] = record_from_eq33(res)
+            except SafetyError as exc:
+                skipped["eq33"] = f"diverged: {exc}"
+    else:
+        skipped["eq33"] = "not requested"
+    bag_path = None
+    if cfg.run_nonlinear:
+        quad = Quadrotor(quad_params)
+        trim = quad.trim(signals.v_d[0])
+        vehicle = SimVehicle(quad, sensors, x0=trim.full_state)
+        law = law or runtime_law(problem, quad.mix, cfg.monitor_margin)
+        kw = dict(kappa=cfg.kappa, gamma=problem.gamma, box_margin=cfg.box_margin,
+                  max_tilt=math.radians(cfg.max_tilt_deg))
+        if cfg.record_bag:
+            bag_path = out / "bag"
+            with Phase2Bag(bag_path, cfg.storage, kappa=cfg.kappa) as bag:
+                rec = simulate_nonlinear(vehicle, law, signals, problem.Q, *v_box, sink=bag, **kw)
+            rec.info["bag"] = str(bag_path)
+            rec.info["bag_messages"] = dict(bag.counts)
+        else:
+            rec = simulate_nonlinear(vehicle, law, signals, problem.Q, *v_box, **kw)
+        records["nonlinear"] = rec
+    else:
+        skipped["nonlinear"] = "not requested"
+    block = None
+    for name in ("nonlinear", "eq33"):
+        rec = records.get(name)
+        if rec is not None and rec.t.size >= 10:
+            block = regressor_correlation_block(rec.t, rec.x12, quad_params.arm_length, name,
+                                                rec.extra.get("Omega"))
+            break
+    extra = {"box": {"min": problem.vmin.tolist(), "max": problem.vmax.tolist()},
+             "inputs": {k: str(v) for k, v in problem.source.items()},
+             "signals": {"duration": float(signals.t[-1] - signals.t[0]), "samples": int(signals.t.size),
+                         "ramp": cfg.ramp}}
+    written = write_outputs(out, problem.gamma, cfg.kappa, list(records.values()), skipped, block, extra)
+    if bag_path is not None:
+        written["bag"] = bag_path
+    return Phase2Result(records, skipped, written, written["summary"])
+
+
+# --------------------------------------------------------------------------- CLI (wired by the lead)
+def add_phase2_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``lpv-sysid simulate phase2``."""
+    parser.add_argument("--gains", required=True, type=Path, help="gains.yaml (lpv_sysid/gains@1)")
+    parser.add_argument("--signals", required=True, type=Path,
+                        help="directory with signals.npz (7 channels u_d, v_d, w_d, ue_t, ue_a, ue_e, ue_r)")
+    parser.add_argument("--out", required=True, type=Path, help="output directory (created)")
+    parser.add_argument("--models", type=Path, default=None,
+                        help="vertex_models.yaml for the Eq. (33) simulation (default: next to --gains)")
+    parser.add_argument("--config", type=Path, default=None,
+                        help="YAML with sections quadrotor and sim (default: built-in FlameWheel-450 "
+                             "parameters, default sensors)")
+    parser.add_argument("--kappa", type=float, default=1.0, help="excitation multiplier of Eq. (33), default 1")
+    parser.add_argument("--duration", type=float, default=None, help="simulate only the first SECONDS")
+    parser.add_argument("--ramp", type=float, default=2.0,
+                        help="fade in/out of the excitation player in s (0: play the raw table), default 2")
+    parser.add_argument("--eq33-method", choices=("rk4", "RK45"), default="rk4",
+                        help="integrator of Eq. (33): fixed-step RK4 on the signal grid (default) or "
+                             "scipy RK45 (ode45's method)")
+    parser.add_argument("--box-margin", type=float, default=1.0,
+                        help="m/s beyond the scheduling box before the safety supervisor stops the run")
+    parser.add_argument("--max-tilt", type=float, default=60.0, help="roll/pitch limit of the supervisor, deg")
+    parser.add_argument("--monitor-margin", type=float, default=1.2,
+                        help="bound monitor of the runtime law flags when the running ||z||/||kappa u_e|| "
+                             "exceeds gamma x MARGIN (the flag stops the run), default 1.2")
+    parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="rosbag2 storage")
+    parser.add_argument("--no-bag", action="store_true", help="do not record the rosbag2")
+    parser.add_argument("--skip-eq33", action="store_true", help="only the nonlinear simulation")
+    parser.add_argument("--skip-nonlinear", action="store_true", help="only the Eq. (33) simulation")
+    parser.add_argument("--seed", type=int, default=None, help="sensor-noise seed (default: from --config)")
+
+
+def run_phase2(args: argparse.Namespace) -> int:
+    """``lpv-sysid simulate phase2``: prints what it wrote; LpvSysidError on bad input."""
+    import time
+
+    cfg = Phase2Config(kappa=args.kappa, eq33_method=args.eq33_method, box_margin=args.box_margin,
+                       max_tilt_deg=args.max_tilt, duration=args.duration,
+                       ramp=None if not args.ramp else float(args.ramp), record_bag=not args.no_bag,
+                       storage=args.storage, run_eq33=not args.skip_eq33, run_nonlinear=not args.skip_nonlinear,
+                       monitor_margin=args.monitor_margin)
+    models_path = args.models if args.models is not None else Path(args.gains).parent / "vertex_models.yaml"
+    problem = load_problem(args.gains, models_path if (args.models is not None or models_path.is_file()) else None)
+    signals = load_signals(args.signals, cfg.duration, cfg.ramp)
+    quad_params, sensors = load_vehicle_config(args.config, args.seed)
+    out = Path(args.out)
+    t0 = time.perf_counter()
+    result = run(problem, signals, cfg, quad_params, sensors, out)
+    print(f"simulated phase 2 in {time.perf_counter() - t0:.1f} s (kappa = {cfg.kappa:g}, gamma = "
+          f"{problem.gamma if problem.gamma is not None else 'n/a'})")
+    for name in ("eq33", "nonlinear"):
+        rec = result.records.get(name)
+        if rec is not None:
+            state = "completed" if rec.completed else f"STOPPED: {rec.safety_event}"
+            print(f"  {name:9s}: ||z||/||kappa u_e|| = {rec.gain:.4g}"
+                  + (f" ({'<=' if rec.gain <= problem.gamma else '>'} gamma)" if problem.gamma else "")
+                  + f", {state}")
+        elif name in result.skipped:
+            print(f"  {name:9s}: skipped ({result.skipped[name]})")
+    for key, path in result.written.items():
+        print(f"wrote {path}")
+    return 0

@@ -1,0 +1,330 @@
+"""vertex_models.yaml -> PolytopicModel, synthesis result -> gains.yaml + certificate sidecar.
+
+File formats: ARCHITECTURE.md section 5. When :mod:`lpv_sysid.io.formats` (VertexModels,
+GainSchedule with ``load``/``save`` and strict validation, DESIGN.md) is importable, its loaders
+are run on every file read and written here, so both modules must agree; the conversion to the
+synthesis data structures itself works on the plain YAML mapping of section 5.
+
+Certificate sidecar: ``<gains stem>.cert.npz`` next to gains.yaml holds the LMI matrices
+(X (N, M, n, n) padded with NaN for vertices with fewer uncertainty vertices, M_i, S (N, m, n),
+H (n, n), the scaling t (n,), s_u (m,), R, C). The gains file's ``certificate`` entry references
+it by file name and sha256, so ``verify`` can re-evaluate Eq. (30) with numpy.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import math
+from pathlib import Path
+from typing import Any, Optional, Sequence
+
+import numpy as np
+import yaml
+
+from lpv_sysid.errors import ConfigError
+from lpv_sysid.models.lpv import PolytopicModel, UncertainElement, box_vertices, uncertainty_vertices
+
+log = logging.getLogger(__name__)
+
+MODELS_FORMAT = "lpv_sysid/vertex_models@1"
+GAINS_FORMAT = "lpv_sysid/gains@1"
+
+
+def sha256_file(path: Path | str) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _formats():
+    try:
+        from lpv_sysid.io import formats  # noqa: WPS433 - optional until io/formats.py lands
+    except ImportError:
+        return None
+    return formats
+
+
+def _layout(fm, path) -> Any:
+    """The quadrotor layout (names + units strictly checked) for files with the quadrotor's
+    state names, otherwise no layout (generic plants: shapes/finiteness/box still checked)."""
+    try:
+        d = read_yaml(path, "file")
+        names = tuple(e.get("name") if isinstance(e, dict) else e for e in d.get("states", []))
+    except (ConfigError, AttributeError):
+        return fm.QUADROTOR_LAYOUT
+    return fm.QUADROTOR_LAYOUT if names == tuple(fm.QUADROTOR_LAYOUT.state_names) else None
+
+
+def read_yaml(path: Path | str, what: str) -> dict:
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f"{what}: file not found: {p}")
+    try:
+        with open(p, "r", encoding="utf-8") as f:
+            d = yaml.safe_load(f)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{p}: malformed YAML: {str(exc).splitlines()[0]}") from None
+    if not isinstance(d, dict):
+        raise ConfigError(f"{p}: expected a mapping at the top level")
+    return d
+
+
+def _matrix(v: Any, shape: tuple, where: str) -> np.ndarray:
+    try:
+        a = np.array(v, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{where}: not a numeric matrix") from None
+    if a.shape != shape:
+        raise ConfigError(f"{where}: shape {a.shape}, expected {shape}")
+    if not np.all(np.isfinite(a)):
+        raise ConfigError(f"{where}: contains NaN/inf")
+    return a
+
+
+def _names(d: dict, key: str, where: str) -> tuple[str, ...]:
+    v = d.get(key)
+    if not isinstance(v, list) or not v:
+        raise ConfigError(f"{where}: '{key}' must be a non-empty list")
+    out = []
+    for k, e in enumerate(v):
+        if isinstance(e, dict) and "name" in e:
+            out.append(str(e["name"]))
+        elif isinstance(e, str):
+            out.append(e)
+        else:
+            raise ConfigError(f"{where}: {key}[{k}] must be {{name, unit}}")
+    return tuple(out)
+
+
+def _box(d: dict, where: str) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+    s = d.get("scheduling")
+    if not isinstance(s, dict) or not {"names", "min", "max"} <= set(s):
+        raise ConfigError(f"{where}: 'scheduling' must be {{names, min, max}}")
+    names = tuple(str(n) for n in s["names"])
+    lo = _matrix(s["min"], (len(names),), f"{where}: scheduling.min")
+    hi = _matrix(s["max"], (len(names),), f"{where}: scheduling.max")
+    return names, lo, hi
+
+
+def _time(d: dict, where: str) -> Optional[float]:
+    t = d.get("time", "continuous")
+    if t == "continuous":
+        return None
+    if isinstance(t, dict) and "discrete" in t:
+        ts = float(t["discrete"])
+        if not ts > 0:
+            raise ConfigError(f"{where}: time.discrete must be > 0")
+        return ts
+    raise ConfigError(f"{where}: 'time' must be 'continuous' or {{discrete: Ts}}, got {t!r}")
+
+
+def load_models(path: Path | str, uncertainty: Optional[dict] = None) -> tuple[PolytopicModel, dict]:
+    """Read vertex_models.yaml into the nested polytope of seed 0 Eq. (23).
+
+    Uncertainty vertices per scheduling vertex: all corners of the stored intervals
+    [lower, upper] when 2**p <= ``max_corners`` and p <= ``p_max`` (``uncertainty`` config,
+    defaults p_max = 4, max_corners = 4096); otherwise the reduction of
+    :func:`lpv_sysid.ident.uncertainty.build` (``method`` influence/hybrid/box) is applied to the
+    stored intervals (centre = midpoint, half-width = k_sigma * std with k_sigma = 1).
+    Returns (model, raw mapping).
+    """
+    fm = _formats()
+    if fm is not None and hasattr(fm, "VertexModels"):
+        fm.VertexModels.load(path, _layout(fm, path))   # strict validation by the io/formats contract
+    d = read_yaml(path, "models")
+    where = str(path)
+    if d.get("format") != MODELS_FORMAT:
+        raise ConfigError(f"{where}: 'format' must be {MODELS_FORMAT!r}, got {d.get('format')!r}")
+    states = _names(d, "states", where)
+    inputs = _names(d, "inputs", where)
+    names, lo, hi = _box(d, where)
+    ts = _time(d, where)
+    n, m = len(states), len(inputs)
+    verts = d.get("vertices")
+    corners = box_vertices(lo, hi)
+    if not isinstance(verts, list) or len(verts) != len(corners):
+        raise ConfigError(f"{where}: 'vertices' must list {len(corners)} vertices (box corners)")
+    ucfg = dict(uncertainty or {})
+    p_max = int(ucfg.pop("p_max", 4))
+    max_corners = int(ucfg.pop("max_corners", 4096))
+    method = str(ucfg.pop("method", "influence"))
+    As, Bs, x0s, u0s, systems = [], [], [], [], []
+    for k, v in enumerate(verts):
+        w = f"{where}: vertices[{k}]"
+        if not isinstance(v, dict):
+            raise ConfigError(f"{w}: must be a mapping")
+        sch = _matrix(v.get("scheduling"), (len(names),), f"{w}.scheduling")
+        if not np.allclose(sch, corners[k], rtol=1e-9, atol=1e-9):
+            raise ConfigError(f"{w}.scheduling {sch.tolist()} is not box corner {corners[k].tolist()} "
+                              "(order: itertools.product over (min, max), first axis slowest)")
+        A = _matrix(v.get("A"), (n, n), f"{w}.A")
+        B = _matrix(v.get("B"), (n, m), f"{w}.B")
+        x0 = _matrix(v.get("x0", [0.0] * n), (n,), f"{w}.x0")
+        u0 = _matrix(v.get("u0", [0.0] * m), (m,), f"{w}.u0")
+        els = [UncertainElement.from_dict(e) for e in (v.get("uncertain") or [])]
+        free = [e for e in els if e.upper > e.lower]
+        if len(free) <= p_max and 2 ** len(free) <= max_corners:
+            sys_k = uncertainty_vertices(A, B, els, max_corners)
+        else:
+            from lpv_sysid.ident import uncertainty as unc
+
+            cfg = unc.UncertaintyConfig.from_dict({"k_sigma": 1.0, "method": method, "p_max": p_max,
+                                                   "max_corners": max_corners, **ucfg})
+            elements = [(e.matrix, e.row, e.col, 0.5 * (e.lower + e.upper), 0.5 * (e.upper - e.lower))
+                        for e in els]
+            sys_k = [(np.asarray(a), np.asarray(b)) for a, b in unc.build(A, B, elements, cfg).systems]
+        As.append(A)
+        Bs.append(B)
+        x0s.append(x0)
+        u0s.append(u0)
+        systems.append(sys_k)
+    model = PolytopicModel(vmin=lo, vmax=hi, A=np.array(As), B=np.array(Bs), x0=np.array(x0s),
+                           u0=np.array(u0s), systems=systems, ts=ts, state_names=states,
+                           input_names=inputs, scheduling_names=names)
+    return model, d
+
+
+def models_dict(model: PolytopicModel, elements: Optional[Sequence[Sequence[UncertainElement]]] = None,
+                state_units: Optional[Sequence[str]] = None, input_units: Optional[Sequence[str]] = None) -> dict:
+    """Inverse of :func:`load_models` (for tests and examples)."""
+    n, m = model.n_x, model.n_u
+    sn = model.state_names or tuple(f"x{k}" for k in range(n))
+    inn = model.input_names or tuple(f"u{k}" for k in range(m))
+    su = state_units or ["1"] * n
+    iu = input_units or ["1"] * m
+    schn = model.scheduling_names or tuple(f"s{k}" for k in range(model.vmin.size))
+    verts = []
+    for i, vd in enumerate(model.vertices):
+        e = {"scheduling": vd.tolist(), "x0": model.x0[i].tolist(), "u0": model.u0[i].tolist(),
+             "A": model.A[i].tolist(), "B": model.B[i].tolist(), "uncertain": []}
+        if elements is not None:
+            e["uncertain"] = [{"matrix": el.matrix, "row": el.row, "col": el.col,
+                               "nominal": float(el.nominal if el.nominal is not None else 0.5 * (el.lower + el.upper)),
+                               "std": float(0.5 * (el.upper - el.lower)),
+                               "lower": float(el.lower), "upper": float(el.upper)} for el in elements[i]]
+        verts.append(e)
+    return {
+        "format": MODELS_FORMAT,
+        "time": "continuous" if model.ts is None else {"discrete": float(model.ts)},
+        "states": [{"name": a, "unit": b} for a, b in zip(sn, su)],
+        "inputs": [{"name": a, "unit": b} for a, b in zip(inn, iu)],
+        "scheduling": {"names": list(schn), "min": model.vmin.tolist(), "max": model.vmax.tolist()},
+        "vertices": verts,
+    }
+
+
+def save_yaml(d: dict, path: Path | str) -> None:
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    tmp = p.with_name(p.name + ".tmp")
+    with open(tmp, "w", encoding="utf-8") as f:
+        yaml.safe_dump(d, f, sort_keys=False, default_flow_style=None, width=1000)
+    tmp.replace(p)
+
+
+# --------------------------------------------------------------------------- gains
+def save_certificate_npz(path: Path | str, X: list, S: np.ndarray, H: np.ndarray, t: np.ndarray, s_u: np.ndarray,
+                         R: np.ndarray, C: np.ndarray) -> str:
+    """Write the sidecar; returns its sha256."""
+    N = len(X)
+    Mi = np.array([len(x) for x in X])
+    n = H.shape[0]
+    Xa = np.full((N, int(Mi.max()), n, n), np.nan)
+    for i in range(N):
+        for j in range(Mi[i]):
+            Xa[i, j] = X[i][j]
+    p = Path(path)
+    with open(p, "wb") as f:
+        np.savez(f, X=Xa, M=Mi, S=np.asarray(S), H=np.asarray(H), t=np.asarray(t), s_u=np.asarray(s_u),
+                 R=np.asarray(R), C=np.asarray(C))
+    return sha256_file(p)
+
+
+def load_certificate_npz(path: Path | str) -> dict:
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            d = {k: np.array(z[k]) for k in z.files}
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"{path}: unreadable certificate sidecar ({exc})") from None
+    need = {"X", "M", "S", "H", "t", "s_u"}
+    if not need <= set(d):
+        raise ConfigError(f"{path}: certificate sidecar misses {sorted(need - set(d))}")
+    d["X_list"] = [[d["X"][i, j] for j in range(int(d["M"][i]))] for i in range(d["X"].shape[0])]
+    return d
+
+
+def gains_dict(models_raw: dict, model: PolytopicModel, K: np.ndarray, R: np.ndarray, Q: np.ndarray, gamma: float,
+               certificate: dict) -> dict:
+    """The gains.yaml document of ARCHITECTURE.md section 5."""
+    return {
+        "format": GAINS_FORMAT,
+        "states": models_raw["states"],
+        "inputs": models_raw["inputs"],
+        "scheduling": models_raw["scheduling"],
+        "vertices": [{"scheduling": model.vertices[i].tolist(), "K": np.asarray(K[i]).tolist(),
+                      "x0": model.x0[i].tolist(), "u0": model.u0[i].tolist()} for i in range(model.n_vertices)],
+        "R": np.asarray(R).tolist(),
+        "Q": np.asarray(Q).tolist(),
+        "gamma": float(gamma),
+        "certificate": certificate,
+    }
+
+
+class Gains:
+    """gains.yaml in memory: K (N, m, n), x0 (N, n), u0 (N, m), R, Q, gamma, box, certificate."""
+
+    def __init__(self, d: dict, path: Optional[Path] = None) -> None:
+        where = str(path) if path else "gains"
+        if d.get("format") != GAINS_FORMAT:
+            raise ConfigError(f"{where}: 'format' must be {GAINS_FORMAT!r}, got {d.get('format')!r}")
+        self.raw = d
+        self.path = path
+        self.state_names = _names(d, "states", where)
+        self.input_names = _names(d, "inputs", where)
+        self.scheduling_names, self.vmin, self.vmax = _box(d, where)
+        n, m = len(self.state_names), len(self.input_names)
+        corners = box_vertices(self.vmin, self.vmax)
+        verts = d.get("vertices")
+        if not isinstance(verts, list) or len(verts) != len(corners):
+            raise ConfigError(f"{where}: 'vertices' must list {len(corners)} vertices")
+        K, x0, u0 = [], [], []
+        for k, v in enumerate(verts):
+            w = f"{where}: vertices[{k}]"
+            if not isinstance(v, dict):
+                raise ConfigError(f"{w}: must be a mapping")
+            sch = _matrix(v.get("scheduling"), (corners.shape[1],), f"{w}.scheduling")
+            if not np.allclose(sch, corners[k]):
+                raise ConfigError(f"{w}.scheduling {sch.tolist()} is not box corner {corners[k].tolist()}")
+            K.append(_matrix(v.get("K"), (m, n), f"{w}.K"))
+            x0.append(_matrix(v.get("x0"), (n,), f"{w}.x0"))
+            u0.append(_matrix(v.get("u0"), (m,), f"{w}.u0"))
+        self.K, self.x0, self.u0 = np.array(K), np.array(x0), np.array(u0)
+        R = np.array(d.get("R"), dtype=float)
+        if R.ndim != 2 or R.shape[0] != m:
+            raise ConfigError(f"{where}: R must be {m} x n_e, got shape {R.shape}")
+        self.R = _matrix(d.get("R"), R.shape, f"{where}: R")
+        Qa = np.array(d.get("Q"), dtype=float)
+        if Qa.ndim != 2 or Qa.shape[0] != Qa.shape[1]:
+            raise ConfigError(f"{where}: Q must be square, got shape {Qa.shape}")
+        self.Q = _matrix(d.get("Q"), Qa.shape, f"{where}: Q")
+        try:
+            self.gamma = float(d["gamma"])
+        except (KeyError, TypeError, ValueError):
+            raise ConfigError(f"{where}: 'gamma' must be a number") from None
+        if not (math.isfinite(self.gamma) and self.gamma > 0):
+            raise ConfigError(f"{where}: 'gamma' must be > 0")
+        cert = d.get("certificate")
+        if not isinstance(cert, dict):
+            raise ConfigError(f"{where}: 'certificate' must be a mapping")
+        self.certificate = cert
+
+    @classmethod
+    def load(cls, path: Path | str) -> "Gains":
+        fm = _formats()
+        if fm is not None and hasattr(fm, "GainSchedule"):
+            fm.GainSchedule.load(path, layout=_layout(fm, path))
+        p = Path(path)
+        return cls(read_yaml(p, "gains"), p)

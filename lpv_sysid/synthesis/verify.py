@@ -1,0 +1,221 @@
+"""Independent re-check of a gains certificate (seed 0 Lemma 1, Eqs. 29-31) without the solver.
+
+Checks, each a row of the report:
+
+1. ``hinf``: frozen-parameter closed loops A_i^j + B_i^j K_i at every scheduling vertex and every
+   uncertainty vertex, H-infinity norm u_e -> z by Hamiltonian bisection
+   (:mod:`lpv_sysid.synthesis.hinf_norm`) <= gamma;
+2. ``hinf interior``: the same at random interior scheduling points with the interpolated model
+   and gain (Eq. 21, Eq. 31), for the nominal model and for every uncertainty index j when all
+   vertices have the same number M of uncertainty vertices (the j-th corners taken together,
+   which is the same parameter theta for corner-enumerated polytopes);
+3. ``region``: closed-loop eigenvalues at all of the above points in the promised LMI region
+   (the stability region when none is promised);
+4. ``lmi``: when the certificate sidecar is present (sha256 checked), K_i == S_i H^-1 and the
+   Eq. (30) LMIs re-evaluated with numpy eigenvalues from the stored X, S, H (after the stored
+   diagonal congruence, which preserves inertia) hold at the file's gamma.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from lpv_sysid.models.lpv import PolytopicModel, multilinear_weights
+from lpv_sysid.synthesis.hinf_lmi import certificate_margins
+from lpv_sysid.synthesis.hinf_norm import hinf_norm
+from lpv_sysid.synthesis.regions import Region
+from lpv_sysid.synthesis.scaling import Scaling
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class CheckRow:
+    check: str
+    where: str
+    value: float
+    limit: float
+    ok: bool
+    note: str = ""
+
+
+@dataclass
+class VerifyReport:
+    rows: list = field(default_factory=list)
+
+    @property
+    def passed(self) -> bool:
+        return bool(self.rows) and all(r.ok for r in self.rows)
+
+    def add(self, *a, **kw) -> None:
+        self.rows.append(CheckRow(*a, **kw))
+
+    def worst(self, check: str) -> Optional[CheckRow]:
+        rows = [r for r in self.rows if r.check == check]
+        if not rows:
+            return None
+        bad = [r for r in rows if not r.ok]
+        return bad[0] if bad else max(rows, key=lambda r: r.value)
+
+    def table(self, max_rows: int = 40) -> str:
+        """Failing rows first, then the worst passing row per check."""
+        lines = [f"{'check':<14} {'where':<28} {'value':>12} {'limit':>12}  result"]
+        shown = [r for r in self.rows if not r.ok][:max_rows]
+        for chk in dict.fromkeys(r.check for r in self.rows):
+            w = self.worst(chk)
+            if w is not None and w.ok:
+                shown.append(w)
+        for r in shown:
+            lines.append(f"{r.check:<14} {r.where:<28} {r.value:>12.6g} {r.limit:>12.6g}  "
+                         f"{'ok' if r.ok else 'FAIL'}{('  ' + r.note) if r.note else ''}")
+        n_bad = sum(not r.ok for r in self.rows)
+        lines.append(f"{len(self.rows)} checks, {n_bad} failed")
+        return "\n".join(lines)
+
+
+def _check_point(rep: VerifyReport, where: str, A: np.ndarray, B: np.ndarray, K: np.ndarray, R: np.ndarray,
+                 C: np.ndarray, gamma: float, region: Optional[Region], rtol: float, ts: Optional[float]) -> None:
+    Acl = A + B @ K
+    eig = np.linalg.eigvals(Acl)
+    if ts is not None:
+        # discrete-time certificates are not produced by Lemma 1 (continuous); report stability only
+        rho = float(np.max(np.abs(eig)))
+        rep.add("stability", where, rho, 1.0, rho < 1.0)
+    else:
+        h = hinf_norm(Acl, B @ R, C)
+        rep.add("hinf", where, h.value, gamma, bool(h.stable and h.lower <= gamma * (1 + rtol)),
+                "" if h.stable else "closed loop unstable")
+    if region is not None:
+        ok = region.contains(eig, tol=1e-9 * max(1.0, float(np.max(np.abs(eig)))))
+        k = int(np.argmin(ok)) if not np.all(ok) else int(np.argmax(eig.real))
+        rep.add("region", where, float(eig[k].real), float("nan"), bool(np.all(ok)),
+                f"eig {eig[k]:.4g}" + ("" if np.all(ok) else " outside region"))
+    elif ts is None:
+        mx = float(np.max(eig.real))
+        rep.add("stability", where, mx, 0.0, mx < 0.0)
+
+
+def verify_gains(model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.ndarray, gamma: float,
+                 region: Optional[Region] = None, n_random: int = 20, seed: int = 0, rtol: float = 1e-6,
+                 certificate: Optional[dict] = None, k_rtol: float = 1e-6) -> VerifyReport:
+    """Run the checks of the module docstring; ``certificate`` is the loaded sidecar (or None)."""
+    rep = VerifyReport()
+    K = np.asarray(K, dtype=float)
+    R = np.asarray(R, dtype=float)
+    C = np.asarray(C, dtype=float)
+    for i, lst in enumerate(model.systems):
+        for j, (A, B) in enumerate(lst):
+            _check_point(rep, f"vertex {i} unc {j}", np.asarray(A), np.asarray(B), K[i], R, C, gamma, region,
+                         rtol, model.ts)
+    rng = np.random.default_rng(seed)
+    Ms = {len(lst) for lst in model.systems}
+    same_M = len(Ms) == 1
+    for k in range(n_random):
+        vd = model.vmin + rng.random(model.vmin.size) * (model.vmax - model.vmin)
+        alpha, _ = multilinear_weights(vd, model.vmin, model.vmax)
+        Kv = np.tensordot(alpha, K, axes=1)
+        cases = [("nom", model.A, model.B)]
+        if same_M and next(iter(Ms)) > 1:
+            for j in range(next(iter(Ms))):
+                cases.append((f"unc {j}", np.array([lst[j][0] for lst in model.systems]),
+                              np.array([lst[j][1] for lst in model.systems])))
+        for name, As, Bs in cases:
+            A = np.tensordot(alpha, As, axes=1)
+            B = np.tensordot(alpha, Bs, axes=1)
+            _check_point(rep, f"interior {k} {name}", A, B, Kv, R, C, gamma, region, rtol, model.ts)
+    for r in rep.rows:
+        if r.check == "hinf" and r.where.startswith("interior"):
+            r.check = "hinf interior"
+    if certificate is not None:
+        _check_lmi(rep, model, K, R, C, gamma, certificate, k_rtol)
+    return rep
+
+
+def _check_lmi(rep: VerifyReport, model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.ndarray, gamma: float,
+               cert: dict, k_rtol: float) -> None:
+    X, S, H = cert["X_list"], np.asarray(cert["S"]), np.asarray(cert["H"])
+    sc = Scaling(t=np.asarray(cert["t"], float), s_u=np.asarray(cert["s_u"], float))
+    if len(X) != model.n_vertices or any(len(X[i]) != len(model.systems[i]) for i in range(model.n_vertices)):
+        rep.add("lmi", "shapes", float("nan"), float("nan"), False,
+                "certificate X does not match the models' uncertainty vertices")
+        return
+    for i in range(model.n_vertices):
+        try:
+            K_cert = np.linalg.solve(H.T, S[i].T).T
+        except np.linalg.LinAlgError:
+            rep.add("K = S H^-1", f"vertex {i}", float("inf"), k_rtol, False, "H singular")
+            continue
+        # compare in the scaled coordinates (relative to the gain's own magnitude there)
+        Ks, Kc = K[i] * sc.t[None, :] / sc.s_u[:, None], K_cert * sc.t[None, :] / sc.s_u[:, None]
+        err = float(np.max(np.abs(Ks - Kc)) / max(np.max(np.abs(Kc)), 1e-300))
+        rep.add("K = S H^-1", f"vertex {i}", err, k_rtol, err <= k_rtol)
+    for key in ("R", "C"):
+        if key in cert:
+            ref = R if key == "R" else C
+            same = np.shape(cert[key]) == np.shape(ref) and np.allclose(cert[key], ref, rtol=1e-12, atol=0)
+            rep.add("lmi data", key, 0.0 if same else 1.0, 0.0, bool(same),
+                    "" if same else f"{key} differs from the one the certificate was computed with")
+    gam, margin = certificate_margins(model, R, C, X, S, H, sc, gamma=gamma)
+    rep.add("lmi gamma", "Eq. (30) all i,j", gam, gamma, gam <= gamma)
+    rep.add("lmi margin", "Eq. (30) all i,j", margin, 0.0, margin > 0.0,
+            "min(-lambda_max(LMI), lambda_min(X))")
+
+
+def verify_files(gains_path: Path | str, models_path: Path | str, n_random: int = 20, seed: int = 0,
+                 uncertainty: Optional[dict] = None, velocity_index=None) -> VerifyReport:
+    """Load gains.yaml (+ sidecar) and vertex_models.yaml and run :func:`verify_gains`.
+
+    Also checks names, box, equilibria and the models_sha256 of the certificate.
+    """
+    from lpv_sysid.synthesis.files import Gains, load_certificate_npz, load_models, sha256_file
+    from lpv_sysid.synthesis.hinf_lmi import performance_matrix
+
+    gains = Gains.load(gains_path)
+    cert = gains.certificate
+    unc_cfg = uncertainty if uncertainty is not None else cert.get("uncertainty")
+    model, _raw = load_models(models_path, unc_cfg)
+    rep = VerifyReport()
+    sha = sha256_file(models_path)
+    rep.add("models hash", Path(models_path).name, 0.0 if sha == cert.get("models_sha256") else 1.0, 0.0,
+            sha == cert.get("models_sha256"), "" if sha == cert.get("models_sha256") else
+            "models file differs from the one the gains were synthesised for")
+    same_names = (gains.state_names == model.state_names and gains.input_names == model.input_names
+                  and gains.scheduling_names == model.scheduling_names)
+    rep.add("names", "states/inputs/scheduling", 0.0 if same_names else 1.0, 0.0, same_names)
+    same_box = np.allclose(gains.vmin, model.vmin) and np.allclose(gains.vmax, model.vmax)
+    rep.add("box", "scheduling min/max", 0.0 if same_box else 1.0, 0.0, bool(same_box))
+    eq_err = float(max(np.max(np.abs(gains.x0 - model.x0)), np.max(np.abs(gains.u0 - model.u0))))
+    rep.add("equilibria", "x0/u0 vs models", eq_err, 1e-9, eq_err <= 1e-9)
+    if not (same_names and same_box):
+        return rep
+    region = Region.from_dict(cert.get("region")) if cert.get("region") else None
+    sidecar = None
+    side = cert.get("sidecar")
+    if isinstance(side, dict) and side.get("file"):
+        p = Path(gains_path).parent / str(side["file"])
+        if not p.is_file():
+            rep.add("sidecar", p.name, 1.0, 0.0, False, "certificate sidecar missing")
+        else:
+            ok = sha256_file(p) == side.get("sha256")
+            rep.add("sidecar", p.name, 0.0 if ok else 1.0, 0.0, ok, "" if ok else "sha256 mismatch")
+            if ok:
+                sidecar = load_certificate_npz(p)
+    if velocity_index is None:
+        names = ("u", "v", "w")
+        velocity_index = (tuple(model.state_names.index(n) for n in names)
+                          if all(n in model.state_names for n in names) else (2, 3, 4))
+    C = performance_matrix(gains.Q, model.n_x, velocity_index)
+    sub = verify_gains(model, gains.K, gains.R, C, gains.gamma, region, n_random, seed, certificate=sidecar)
+    rep.rows.extend(sub.rows)
+    ga = cert.get("gamma_achieved")
+    if ga is not None:
+        worst = max((r.value for r in rep.rows if r.check.startswith("hinf")), default=float("nan"))
+        rep.add("gamma claim", "certificate.gamma_achieved", worst, float(ga) * (1 + 1e-3) + 1e-12,
+                bool(worst <= float(ga) * (1 + 1e-3) + 1e-12),
+                "worst independent H-inf norm vs the claimed gamma_achieved")
+    return rep

@@ -1,0 +1,6 @@
+"""Stand-in diagnostic_msgs.msg: rclpy-like classes generated from the rosbags Jazzy typestore."""
+
+from _rosmsg_standin import populate as _populate
+
+_populate(globals(), "diagnostic_msgs", "msg")
+del _populate

@@ -1,0 +1,6 @@
+"""Stand-in rcl_interfaces.msg: rclpy-like classes generated from the rosbags Jazzy typestore."""
+
+from _rosmsg_standin import populate as _populate
+
+_populate(globals(), "rcl_interfaces", "msg")
+del _populate

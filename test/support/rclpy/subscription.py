@@ -1,0 +1,58 @@
+"""Stand-in for ``rclpy.subscription.Subscription``: a KEEP_LAST/KEEP_ALL queue."""
+
+import collections
+
+import _rosmsg_standin as _msgs
+from rclpy.qos import HistoryPolicy
+
+
+class Subscription:
+    def __init__(self, node, msg_type, topic, callback, callback_group, qos_profile,
+                 raw=False, event_callbacks=None):
+        self._node = node
+        self.msg_type = msg_type
+        self._topic = topic
+        self.callback = callback
+        self.callback_group = callback_group
+        self.qos_profile = qos_profile
+        self.raw = raw
+        self.event_callbacks = event_callbacks
+        depth = None if qos_profile.history == HistoryPolicy.KEEP_ALL else \
+            max(int(qos_profile.depth), 1)
+        self._queue = collections.deque(maxlen=depth)
+        self.standin_received = 0
+        self.standin_dropped = 0
+
+    @property
+    def topic_name(self):
+        return self._topic
+
+    @property
+    def handle(self):
+        return self
+
+    def _standin_enqueue(self, data):
+        if self._queue.maxlen is not None and len(self._queue) == self._queue.maxlen:
+            self.standin_dropped += 1
+        self._queue.append(data)
+        self.standin_received += 1
+
+    def _standin_ready(self):
+        return bool(self._queue)
+
+    def _standin_execute(self):
+        data = self._queue.popleft()
+        msg = data if self.raw else _msgs.deserialize(data, self.msg_type)
+        self.callback(msg)
+
+    def standin_lose(self, n):
+        """Simulate ``n`` samples lost by the middleware (fires ``message_lost``)."""
+        self.standin_lost = getattr(self, "standin_lost", 0) + n
+        cbs = self.event_callbacks
+        if cbs is not None and cbs.message_lost is not None:
+            from rclpy.event_handler import QoSMessageLostInfo
+            cbs.message_lost(QoSMessageLostInfo(total_count=self.standin_lost,
+                                                total_count_change=n))
+
+    def destroy(self):
+        self._node.destroy_subscription(self)

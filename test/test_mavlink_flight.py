@@ -1,0 +1,384 @@
+"""Protocol tests: the bridge core against the simulated PX4 vehicle over UDP on 127.0.0.1.
+
+Both ends are driven in lock-step by one simulated clock (``step(t)`` / ``poll(t)``) while
+every message really travels through loopback UDP sockets, so a 15 s flight takes well
+under a second of wall time and the outcome does not depend on machine load.
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import subprocess
+import sys
+import os
+
+import numpy as np
+import pytest
+
+from lpv_sysid.mavlink import px4
+from lpv_sysid.mavlink.bridge import BridgeConfig, BridgeCore
+from lpv_sysid.mavlink.link import LinkConfig, free_udp_port
+from lpv_sysid.mavlink.offboard import OffboardConfig, State, StatusEvent
+from lpv_sysid.mavlink.preflight import NOGO, judge, run_checks, verdict
+from lpv_sysid.mavlink.sim_vehicle import SimVehicle, SimVehicleConfig
+from lpv_sysid.mavlink.telemetry import RotorSample, StateSample
+
+DT = 0.004
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+class UdpRelay:
+    """Forwards datagrams vehicle <-> bridge; ``cut = True`` drops everything (link cut)."""
+
+    def __init__(self, bridge_port: int) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.setblocking(False)
+        self.port = self.sock.getsockname()[1]
+        self.bridge = ("127.0.0.1", bridge_port)
+        self.vehicle = None
+        self.cut = False
+        self.dropped = 0
+
+    def pump(self) -> None:
+        for _ in range(10000):
+            try:
+                data, addr = self.sock.recvfrom(65535)
+            except BlockingIOError:
+                return
+            if self.cut:
+                self.dropped += 1
+                continue
+            if addr == self.bridge:
+                if self.vehicle is not None:
+                    self.sock.sendto(data, self.vehicle)
+            else:
+                self.vehicle = addr
+                self.sock.sendto(data, self.bridge)
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+class Flight:
+    """Bridge + vehicle (+ optional relay) on one simulated clock."""
+
+    def __init__(self, offboard: OffboardConfig, vehicle_params: dict | None = None,
+                 relay: bool = False, command: str = "velocity", link_timeout: float = 1.5) -> None:
+        port = free_udp_port()
+        self.relay = UdpRelay(port) if relay else None
+        veh_port = self.relay.port if relay else port
+        self.veh = SimVehicle(SimVehicleConfig(url=f"udpout:127.0.0.1:{veh_port}",
+                                               params=vehicle_params or {}))
+        self.bridge = BridgeCore(BridgeConfig(
+            link=LinkConfig(url=f"udpin:127.0.0.1:{port}", link_timeout=link_timeout),
+            offboard=offboard, command=command))
+        self.t = 0.0
+        self.events: list = []
+        self.samples: list = []
+        self.truth: list = []
+        self.last_ref_t = -1.0
+        self.bridge.open(0.0)
+        self.veh.open()
+
+    def tick(self) -> None:
+        self.t += DT
+        self.veh.step(self.t)
+        if self.relay is not None:
+            self.relay.pump()
+        out = self.bridge.poll(self.t)
+        self.events += out.events
+        for s in out.samples:
+            self.samples.append(s)
+            self.truth.append((s, self.veh.x.copy()))
+
+    def run_until(self, t_end: float, reference=None) -> None:
+        n = 0
+        while self.t < t_end - 1e-9:
+            n += 1
+            assert n < 100000
+            if reference is not None:
+                r = reference(self.t)
+                if r is not None and int(round(self.t / DT)) % 5 == 0:    # 50 Hz reference
+                    self.bridge.on_velocity_reference(self.t, r, 0.0)
+                    self.last_ref_t = self.t
+            self.tick()
+
+    def transitions(self) -> list[tuple[str, str]]:
+        return [(e.previous, e.state) for e in self.events
+                if isinstance(e, StatusEvent) and e.previous != e.state]
+
+    def t_of(self, state: str) -> float:
+        return next(e.t for e in self.events if isinstance(e, StatusEvent) and e.state == state
+                    and e.previous != e.state)
+
+    def close(self) -> None:
+        self.bridge.close()
+        self.veh.close()
+        if self.relay is not None:
+            self.relay.close()
+
+
+@pytest.fixture
+def flights():
+    made: list[Flight] = []
+
+    def make(*a, **k) -> Flight:
+        f = Flight(*a, **k)
+        made.append(f)
+        return f
+
+    yield make
+    for f in made:
+        f.close()
+
+
+def _takeoff_then(profile):
+    def ref(t):
+        if t < 0.3:
+            return None
+        if t < 5.0:
+            return (0.0, 0.0, -1.0)          # climb (NED down < 0)
+        return profile(t)
+    return ref
+
+
+def test_phase1_flight_prestream_offboard_arm_track_abort_handback(flights):
+    f = flights(OffboardConfig(arm=True, handback_mode="HOLD", setpoint_rate_hz=20.0))
+    amp, freq = 0.5, 0.2
+
+    def profile(t):
+        if t < 9.0:
+            return (1.0, 0.0, 0.0)                                  # 4 s step to 1 m/s
+        return (1.0 + amp * math.sin(2 * math.pi * freq * (t - 9.0)), 0.0, 0.0)
+
+    ref = _takeoff_then(profile)
+    f.run_until(0.5, ref)
+    f.events += f.bridge.start(f.t)
+    f.run_until(9.0, ref)
+    # steady state of the 1 m/s step (integral action: no steady error), via telemetry
+    st = [s for s in f.samples if isinstance(s, StateSample) and 8.5 <= s.t <= 9.0]
+    assert len(st) > 20
+    assert abs(np.mean([s.v_body[0] for s in st]) - 1.0) < 0.05
+    assert max(abs(s.v_body[2]) for s in st) < 0.1
+    f.run_until(19.0, ref)
+    sin_part = [s for s in f.samples if isinstance(s, StateSample) and 10.0 <= s.t <= 19.0]
+    tt = np.array([s.t - 9.0 for s in sin_part])
+    vu = np.array([s.v_body[0] for s in sin_part])
+    # least-squares fit v = c + a sin(wt) + b cos(wt): gain and phase of the tracking loop
+    w = 2 * math.pi * freq
+    coef = np.linalg.lstsq(np.c_[np.ones_like(tt), np.sin(w * tt), np.cos(w * tt)], vu, rcond=None)[0]
+    gain = math.hypot(coef[1], coef[2]) / amp
+    lag = -math.degrees(math.atan2(coef[2], coef[1]))
+    assert 0.6 < gain < 1.15 and 0.0 < lag < 60.0, (gain, lag)
+    assert abs(coef[0] - 1.0) < 0.1
+    rms = float(np.sqrt(np.mean(np.square(vu - np.array([ref(s.t)[0] for s in sin_part])))))
+    assert rms < 0.8 * amp / math.sqrt(2)           # below the error of just holding 1 m/s
+    assert f.bridge.machine.vehicle_mode == px4.OFFBOARD      # from the vehicle HEARTBEAT
+    assert f.bridge.machine.armed
+    n_sp = f.veh.setpoints_received
+    f.events += f.bridge.abort(f.t, "test abort")
+    f.run_until(21.5, None)
+    assert f.transitions() == [("IDLE", "PRESTREAM"), ("PRESTREAM", "SWITCHING"), ("SWITCHING", "ARMING"),
+                               ("ARMING", "OFFBOARD_ACTIVE"), ("OFFBOARD_ACTIVE", "HANDBACK"),
+                               ("HANDBACK", "DONE")]
+    assert f.t_of("SWITCHING") - f.t_of("PRESTREAM") > 1.0                      # > 1 s pre-stream
+    assert f.bridge.machine.vehicle_mode == px4.HOLD and f.veh.mode == px4.HOLD
+    assert f.veh.setpoints_received == n_sp                                      # stream stopped
+    assert [m for _, m, _ in f.veh.mode_log][:2] == ["OFFBOARD", "HOLD"]
+    # decode path against the simulator's truth (float32 telemetry)
+    pairs = [(s, x) for s, x in f.truth if isinstance(s, StateSample) and s.t > 6.0 and s.skew == 0.0]
+    assert len(pairs) > 100
+    dv = max(float(np.max(np.abs(s.v_body - x[6:9]))) for s, x in pairs)
+    de = max(float(np.max(np.abs(s.euler - x[3:6]))) for s, x in pairs)
+    assert dv < 1e-4 and de < 1e-5
+    rot = [(s, x) for s, x in f.truth if isinstance(s, RotorSample) and s.t > 6.0]
+    assert rot and max(float(np.max(np.abs(s.omega - x[12:16]))) for s, x in rot) <= 0.5 * 2 * math.pi / 60 + 1e-9
+    assert f.bridge.link.stats.bad_data == 0 and f.bridge.link.stats.seq_lost == 0
+
+
+def test_link_cut_vehicle_failsafe_and_bridge_reports_loss(flights):
+    f = flights(OffboardConfig(arm=True, handback_mode="HOLD"), vehicle_params={"COM_OBL_RC_ACT": 4},
+                relay=True, link_timeout=1.5)
+    ref = _takeoff_then(lambda t: (0.5, 0.0, 0.0))
+    f.run_until(0.5, ref)
+    f.events += f.bridge.start(f.t)
+    f.run_until(7.0, ref)
+    assert f.bridge.state == State.OFFBOARD_ACTIVE
+    f.relay.cut = True
+    t_cut = f.t
+    t_last_sp = f.veh.setpoint.t          # last setpoint that got through
+    t_last_hb = f.bridge.link.last_heartbeat_t
+    f.run_until(10.0, ref)
+    # vehicle: offboard loss after COM_OF_LOSS_T = 1 s -> COM_OBL_RC_ACT = 4 (Land)
+    lost = [(t, m, r) for t, m, r in f.veh.mode_log if m == "LAND"]
+    assert lost, f.veh.mode_log
+    assert 1.0 <= lost[0][0] - t_last_sp <= 1.0 + 2 * DT
+    assert "COM_OF_LOSS_T" in lost[0][2]
+    # bridge: link lost after link_timeout without HEARTBEAT (heartbeats are 1 Hz)
+    ev = [e for e in f.events if getattr(e, "kind", "") == "link_lost"]
+    assert len(ev) == 1 and 1.5 < ev[0].t - t_last_hb <= 1.5 + 2 * DT
+    hb = [e for e in f.events if isinstance(e, StatusEvent) and e.state == "HANDBACK" and e.previous != e.state]
+    assert len(hb) == 1 and "link lost" in hb[0].reason and hb[0].t == ev[0].t
+    # hand-back command retried (ack_timeout x max_retries), then PX4's failsafe is in charge
+    assert f.bridge.state == State.FAILED and "hand-back not confirmed" in f.bridge.machine.reason
+    n_sp = f.veh.setpoints_received
+    f.relay.cut = False
+    f.run_until(12.5, ref)
+    # link back: the HEARTBEAT shows LAND, the bridge ends FAILED and never resumes streaming
+    assert any(getattr(e, "kind", "") == "link_up" and e.t > t_cut for e in f.events)
+    assert f.bridge.machine.vehicle_mode == px4.LAND
+    assert f.bridge.state == State.FAILED
+    assert f.veh.setpoints_received <= n_sp + 1      # at most one in flight when the link returned
+    assert f.veh.mode == px4.LAND
+
+
+def test_stale_input_stops_stream_within_timeout(flights):
+    cfg = OffboardConfig(arm=True, input_timeout=0.3, setpoint_rate_hz=25.0, handback_mode="LAND")
+    f = flights(cfg)
+    t_stop = 7.0
+    ref = _takeoff_then(lambda t: (0.3, 0.0, 0.0) if t < t_stop else None)
+    f.run_until(0.5, ref)
+    f.events += f.bridge.start(f.t)
+    f.run_until(t_stop, ref)
+    assert f.bridge.state == State.OFFBOARD_ACTIVE
+    f.run_until(9.0, ref)
+    last_cmd = f.last_ref_t
+    assert 6.9 < last_cmd < 7.01
+    t_hb = f.t_of("HANDBACK")
+    assert cfg.input_timeout <= t_hb - last_cmd <= cfg.input_timeout + 2 * DT
+    # the vehicle saw no setpoint after the hand-back, and lands (hand-back mode LAND)
+    assert f.veh.setpoint.t <= t_hb + 1e-9
+    assert f.veh.mode == px4.LAND and f.bridge.machine.vehicle_mode == px4.LAND
+    assert f.bridge.state == State.FAILED and "stale input" in f.bridge.machine.reason
+
+
+def test_phase2_attitude_rate_transport_reproduces_virtual_command(flights):
+    f = flights(OffboardConfig(arm=True), command="attitude_rate")
+    u_cmd = np.array([0.3, 0.004, -0.003, 0.02])          # below hover thrust: stays on the ground
+    n = 0
+    while f.t < 5.0 and n < 5000:
+        n += 1
+        if f.t > 0.3 and n % 5 == 0:
+            f.bridge.on_actuator_command(f.t, u_cmd)
+        if abs(f.t - 0.5) < DT / 2:
+            f.events += f.bridge.start(f.t)
+        f.tick()
+    assert f.bridge.state == State.OFFBOARD_ACTIVE and f.veh.mode == px4.OFFBOARD and f.veh.armed
+    # Mix u_ESC applied by the vehicle's rate loop equals the LPV command (float32 link)
+    assert np.allclose(f.veh.u, u_cmd, atol=2e-6)
+
+
+def test_vehicle_refuses_offboard_without_setpoint_stream(flights):
+    f = flights(OffboardConfig())
+    f.run_until(0.5)
+    f.bridge.link.command_long(176, 1.0, 6.0, 0.0)        # OFFBOARD without any setpoint stream
+    acks = []
+    orig = f.bridge._on_message
+
+    def spy(msg, now, out):
+        if msg.get_type() == "COMMAND_ACK":
+            acks.append((msg.command, msg.result))
+        orig(msg, now, out)
+
+    f.bridge._on_message = spy
+    f.run_until(0.7)
+    assert acks == [(176, 1)]                               # MAV_RESULT_TEMPORARILY_REJECTED
+    assert f.veh.mode == px4.HOLD
+
+
+def test_preflight_against_sim_vehicle_go_and_nogo(flights):
+    for params, expect in (({"COM_OBL_RC_ACT": 5}, True), ({"COM_OBL_RC_ACT": 7}, False)):
+        f = flights(OffboardConfig(), vehicle_params=params)
+        clock = {"t": 0.0}
+
+        def sleep(dt, f=f, clock=clock):
+            clock["t"] += DT
+            f.veh.step(clock["t"])
+
+        checks = run_checks(f.bridge.link, timeout=3.0, clock=lambda: clock["t"], sleep=sleep)
+        names = {c.name: c for c in checks}
+        assert names["firmware"].value == "1.16.0" and names["autopilot"].value == "PX4"
+        assert names["COM_OF_LOSS_T"].value == "1 s"
+        assert verdict(checks) is expect
+        if not expect:
+            assert names["COM_OBL_RC_ACT"].verdict == NOGO and "DISARM" in names["COM_OBL_RC_ACT"].value
+    assert verdict(judge(None, None, {}, set())) is False
+
+
+def _cli(*args: str, timeout: float = 20.0) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "lpv_sysid.cli", *args], cwd=ROOT, capture_output=True,
+                          text=True, timeout=timeout, env={**os.environ, "PYTHONPATH": ROOT})
+
+
+def test_cli_preflight_against_cli_sim_vehicle():
+    port = free_udp_port()
+    veh = subprocess.Popen([sys.executable, "-m", "lpv_sysid.cli", "sim-vehicle", "--udp",
+                            f"127.0.0.1:{port}", "--duration", "4", "--param", "COM_OBL_RC_ACT=5"],
+                           cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                           env={**os.environ, "PYTHONPATH": ROOT})
+    try:
+        r = _cli("preflight", "--connect", f"udpin:127.0.0.1:{port}", "--timeout", "3")
+    finally:
+        out, err = veh.communicate(timeout=15)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "COM_OBL_RC_ACT" in r.stdout and "5 (HOLD)" in r.stdout and r.stdout.strip().endswith("GO")
+    assert veh.returncode == 0 and "final mode HOLD" in out
+    # nobody there: NO-GO (1); bad input: 2 with a one-line reason
+    r = _cli("preflight", "--connect", f"udpin:127.0.0.1:{free_udp_port()}", "--timeout", "0.3")
+    assert r.returncode == 1 and "NO-GO" in r.stdout
+    r = _cli("preflight", "--connect", "udpin:127.0.0.1:notaport")
+    assert r.returncode == 2 and "port" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    r = _cli("sim-vehicle", "--udp", "127.0.0.1:1", "--param", "COM_BOGUS=1", "--duration", "1")
+    assert r.returncode == 2 and "COM_BOGUS" in r.stderr
+
+
+def test_tcp_link_reconnects_after_vehicle_restart():
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    def vehicle():
+        v = SimVehicle(SimVehicleConfig(url=f"tcpin:127.0.0.1:{port}"))
+        v.open()
+        return v
+
+    veh = vehicle()
+    core = BridgeCore(BridgeConfig(link=LinkConfig(url=f"tcp:127.0.0.1:{port}", link_timeout=1.0,
+                                                   reconnect_period=0.5)))
+    events: list = []
+    t = 0.0
+
+    def run(t_end, v):
+        nonlocal t
+        n = 0
+        while t < t_end and n < 5000:
+            n += 1
+            t += DT
+            if v is not None:
+                v.step(t)
+            out = core.poll(t)
+            events.extend(out.events)
+
+    try:
+        core.open(0.0)
+        run(1.0, veh)
+        assert core.link.link_up(t)
+        veh.close()                                      # vehicle gone (reboot, cable)
+        run(3.0, None)
+        kinds = [e.kind for e in events if hasattr(e, "kind")]
+        assert kinds[0] == "link_up" and "link_lost" in kinds
+        closed = [e for e in events if getattr(e, "kind", "") == "io_error"]
+        assert "peer closed" in closed[0].detail
+        assert len(closed) >= 3                          # reopen attempts every 0.5 s, refused
+        assert not core.link.link_up(t) and core.link.conn is None
+        veh = vehicle()                                  # back on the same port
+        run(5.0, veh)
+        kinds = [e.kind for e in events if hasattr(e, "kind")]
+        assert kinds.count("reconnect") == 1 and kinds[-1] == "link_up"
+        assert core.link.link_up(t) and core.link.stats.reconnects == 1
+        assert core.telemetry.staleness(t)["attitude"] < 0.1
+    finally:
+        core.close()
+        veh.close()

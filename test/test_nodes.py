@@ -1,0 +1,280 @@
+"""Node shells through the rclpy stand-in: parameters, topics, QoS, services, data flow."""
+
+import os
+
+import numpy as np
+import pytest
+import rclpy
+import rclpy._standin as standin
+import yaml
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import TwistStamped
+from nav_msgs.msg import Odometry
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+
+from lpv_sysid.io import messages as M
+from lpv_sysid.io.bag import read_bag
+from lpv_sysid.signals.excitation import ExcitationCore
+from lpv_sysid.signals.store import save_npz
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CONFIG = os.path.join(ROOT, "config")
+NS = "lpv_sysid"
+
+
+@pytest.fixture(autouse=True)
+def fresh():
+    standin.reset()
+    yield
+    rclpy.try_shutdown()
+
+
+@pytest.fixture
+def signals1(tmp_path):
+    """Phase-1 table: 0.5 Hz sine on v_ref (FRD) of amplitude 0.5 m/s, 20 s at 50 Hz."""
+    t = np.arange(0.0, 20.0, 0.02)
+    s = 0.5 * np.sin(2 * np.pi * 0.5 * t)
+    path = str(tmp_path / "sig1.npz")
+    save_npz(path, t, np.stack([0 * t, s, 0 * t, 0.1 * s], axis=1),
+             ["u_ref", "v_ref", "w_ref", "r_ref"])
+    return path
+
+
+def ros_args(*pairs, params_file=None):
+    args = ["node", "--ros-args"]
+    if params_file:
+        args += ["--params-file", os.path.join(CONFIG, params_file)]
+    for k, v in pairs:
+        args += ["-p", f"{k}:={v}"]
+    return args
+
+
+def spin(nodes, seconds):
+    ex = SingleThreadedExecutor()
+    for n in nodes:
+        ex.add_node(n)
+    standin.spin_for(ex, seconds)
+    return ex
+
+
+def collect(node, msg_type, topic, qos=100):
+    out = []
+    node.create_subscription(msg_type, topic, out.append, qos)
+    return out
+
+
+def call(client_node, server_nodes, srv_name):
+    cli = client_node.create_client(Trigger, srv_name)
+    assert cli.wait_for_service(timeout_sec=1.0)
+    fut = cli.call_async(Trigger.Request())
+    ex = SingleThreadedExecutor()
+    for n in [client_node, *server_nodes]:
+        ex.add_node(n)
+    ex.spin_until_future_complete(fut, timeout_sec=1.0)
+    return fut.result()
+
+
+# ------------------------------------------------------------------ excitation_node
+def test_excitation_parameters_topics_qos(signals1):
+    from lpv_sysid.nodes.excitation_node import ExcitationNode
+    rclpy.init(args=ros_args(("signals_file", signals1), params_file="excitation_node.yaml"))
+    node = ExcitationNode(namespace=NS)
+    # parameters from config/excitation_node.yaml, typed and described
+    assert node.get_parameter("rate_hz").value == 100.0
+    assert node.get_parameter("ramp_s").value == 2.0
+    d = node.describe_parameter("rate_hz")
+    assert d.type == Parameter.Type.DOUBLE.value and d.description
+    assert (d.floating_point_range[0].from_value, d.floating_point_range[0].to_value) == (1.0, 1000.0)
+    res = node.set_parameters([Parameter("rate_hz", value=5000.0)])
+    assert not res[0].successful and "out of range" in res[0].reason
+    assert dict(node.get_topic_names_and_types()) == {
+        "/lpv_sysid/velocity_reference": ["geometry_msgs/msg/TwistStamped"],
+        "/lpv_sysid/excitation": ["sensor_msgs/msg/JointState"],
+        "/lpv_sysid/status": ["diagnostic_msgs/msg/DiagnosticArray"]}
+    for topic in ("velocity_reference", "excitation", "status"):
+        pub = standin.find_publisher(node, topic)
+        assert pub.qos_profile.reliability == QoSReliabilityPolicy.RELIABLE
+    assert sorted(n for n, _ in node.get_service_names_and_types()) == [
+        "/lpv_sysid/excitation/abort", "/lpv_sysid/excitation/start"]
+
+
+def test_excitation_phase1_plays_core_in_flu(signals1):
+    from lpv_sysid.nodes.excitation_node import ExcitationNode
+    rclpy.init(args=ros_args(("signals_file", signals1), ("vertex_frd", "[2.0, 1.0, -0.5]"),
+                             ("ramp_s", 1.0), params_file="excitation_node.yaml"))
+    node = ExcitationNode(namespace=NS)
+    probe = rclpy.create_node("probe")
+    refs = collect(probe, TwistStamped, "/lpv_sysid/velocity_reference")
+    spin([node, probe], 0.2)
+    # before start: the vertex (trim) reference, FRD (2, 1, -0.5) -> FLU (2, -1, 0.5)
+    v = refs[-1].twist.linear
+    assert (v.x, v.y, v.z) == (2.0, -1.0, 0.5) and len(refs) == 20
+    resp = call(probe, [node], "/lpv_sysid/excitation/start")
+    assert resp.success and "phase1" in resp.message
+    t_start = node.core.start_time
+    refs.clear()
+    spin([node, probe], 3.0)
+    # oracle: an independent core with the same table and start time, converted FRD -> FLU
+    from lpv_sysid.signals.store import load_npz
+    t, u, names = load_npz(signals1)
+    oracle = ExcitationCore.phase1(t, u, names, start_time=t_start,
+                                   vertex_velocity=[2.0, 1.0, -0.5], ramp=1.0)
+    ts = np.array([M.stamp_ns_of(m) * 1e-9 for m in refs])
+    v_exp, r_exp, _ = oracle.evaluate(ts)
+    got = np.array([[m.twist.linear.x, m.twist.linear.y, m.twist.linear.z] for m in refs])
+    np.testing.assert_allclose(got, v_exp * [1, -1, -1], atol=1e-12)
+    np.testing.assert_allclose([m.twist.angular.z for m in refs], -r_exp, atol=1e-12)
+    assert np.ptp(got[:, 1]) > 0.5      # the multisine is really there
+    ns = np.array([M.stamp_ns_of(m) for m in refs])
+    assert np.all(np.diff(ns) == 10_000_000)  # 100 Hz, no accumulated drift
+
+
+def test_excitation_abort_fades_to_zero(signals1):
+    from lpv_sysid.nodes.excitation_node import ExcitationNode
+    rclpy.init(args=ros_args(("signals_file", signals1), ("mode", "phase1"),
+                             ("vertex_frd", "[1.0, 0.0, 0.0]"), ("ramp_s", 0.5),
+                             ("auto_start", True), params_file="excitation_node.yaml"))
+    node = ExcitationNode(namespace=NS)
+    probe = rclpy.create_node("probe")
+    refs = collect(probe, TwistStamped, "/lpv_sysid/velocity_reference")
+    status = collect(probe, DiagnosticArray, "/lpv_sysid/status")
+    spin([node, probe], 1.0)
+    assert call(probe, [node], "/lpv_sysid/excitation/abort").success
+    refs.clear()
+    spin([node, probe], 1.0)
+    last = refs[-1].twist.linear
+    assert (last.x, last.y, last.z) == (0.0, 0.0, 0.0)
+    _, st = M.status_from_diagnostic_array(status[-1])
+    assert st[0].level == 1 and st[0].values["phase"] == "aborted"
+    assert not call(probe, [node], "/lpv_sysid/excitation/start").success
+
+
+def test_excitation_bad_parameters(tmp_path, signals1, caplog):
+    from rclpy.exceptions import InvalidParameterTypeException
+
+    from lpv_sysid.nodes import excitation_node
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("/**/excitation:\n  ros__parameters:\n    rate_hz: 100\n")
+    rclpy.init(args=["n", "--ros-args", "--params-file", str(bad)])
+    with pytest.raises(InvalidParameterTypeException, match="rate_hz"):
+        excitation_node.ExcitationNode(namespace=NS)
+    rclpy.shutdown()
+    standin.reset()
+    # an empty signals_file: main() exits 2 with one FATAL line naming the parameter
+    with caplog.at_level("CRITICAL"):
+        assert excitation_node.main(args=["n"]) == 2
+    assert "signals_file" in caplog.records[-1].getMessage()
+
+
+# ------------------------------------------------------------------ sim_vehicle_node
+def test_sim_vehicle_baseline_tracks_reference():
+    from lpv_sysid.nodes.sim_vehicle_node import SimVehicleNode
+    rclpy.init(args=ros_args(params_file="sim_vehicle.yaml"))
+    node = SimVehicleNode(namespace=NS)
+    for topic in ("state", "imu", "rotor_speeds"):
+        assert standin.find_publisher(node, topic).qos_profile.reliability == \
+            QoSReliabilityPolicy.BEST_EFFORT
+    probe = rclpy.create_node("probe")
+    from rclpy.qos import qos_profile_sensor_data
+    states = collect(probe, Odometry, "/lpv_sysid/state", qos_profile_sensor_data)
+    rotors = collect(probe, JointState, "/lpv_sysid/rotor_speeds", qos_profile_sensor_data)
+    pub = probe.create_publisher(TwistStamped, "/lpv_sysid/velocity_reference", 10)
+    f = M.MsgFactory.rclpy()
+    probe.create_timer(0.02, lambda: pub.publish(M.twist_reference_msg(
+        f, probe.get_clock().now().nanoseconds, [1.0, 0.0, 0.0], 0.0)))
+    spin([node, probe], 4.0)
+    # 250 Hz state and 100 Hz rotor speeds over 4 s (probe's KEEP_LAST depth 5 never overflows
+    # because the executor runs each callback as soon as its message is queued)
+    assert len(states) == 1000 and len(rotors) == 400
+    s = M.state_from_odometry(states[-1])
+    assert abs(s.v_body[0] - 1.0) < 0.2 and abs(node.vehicle.x[6] - 1.0) < 0.1
+    assert np.all(np.diff([m.header.stamp.nanosec for m in states[:10]]) == 4_000_000)
+
+
+# ------------------------------------------------------------------ data_logger_node
+def test_logger_records_excitation_and_closes(tmp_path, signals1):
+    from lpv_sysid.nodes.data_logger_node import DataLoggerNode
+    from lpv_sysid.nodes.excitation_node import ExcitationNode
+    out = tmp_path / "log"
+    rclpy.init(args=ros_args(("signals_file", signals1), ("auto_start", True),
+                             ("out_dir", str(out)), ("split_duration_s", 1.0),
+                             ("config_files", f"['{CONFIG}/excitation_node.yaml']")))
+    exc = ExcitationNode(namespace=NS, cli_args=["--ros-args", "--params-file",
+                                                 os.path.join(CONFIG, "excitation_node.yaml")])
+    log = DataLoggerNode(namespace=NS, cli_args=["--ros-args", "--params-file",
+                                                 os.path.join(CONFIG, "data_logger.yaml")])
+    spin([exc, log], 2.5)
+    sent = standin.find_publisher(exc, "excitation").standin_published
+    standin.find_subscription(log, "excitation").standin_lose(2)   # middleware-reported loss
+    log.destroy_node()
+    meta = yaml.safe_load((out / "experiment.yaml").read_text())
+    assert meta["closed_cleanly"] and [b["path"] for b in meta["bags"]] == \
+        ["bag_0000", "bag_0001", "bag_0002"]
+    assert meta["topics"]["/lpv_sysid/excitation"]["dropped"] == 2
+    assert "excitation_node.yaml" in next(iter(meta["config_files"]))
+    got = []
+    for b in meta["bags"]:
+        got += read_bag(str(out / b["path"]), topics=["/lpv_sysid/excitation"]).get(
+            "/lpv_sysid/excitation", [])
+    assert len(got) == sent == 250
+    assert meta["topics"]["/lpv_sysid/excitation"]["rate_hz"] == pytest.approx(100.0)
+    assert list(got[0][1].name) == ["ue_t", "ue_a", "ue_e", "ue_r"]
+
+
+def test_logger_main_closes_bag_on_shutdown(tmp_path):
+    from lpv_sysid.nodes import data_logger_node
+    out = tmp_path / "log2"
+    standin.shutdown_at(1.5)   # like SIGTERM: rclpy shuts the context down, spin returns
+    assert data_logger_node.main(args=ros_args(("out_dir", str(out)),
+                                               ("topics", "['status']"))) == 0
+    meta = yaml.safe_load((out / "experiment.yaml").read_text())
+    assert meta["closed_cleanly"] is True
+    # its own 1 Hz status is recorded: t = 1.0 s (the 1.5 s shutdown comes first)
+    bag = read_bag(str(out / "bag_0000"))
+    assert len(bag["/lpv_sysid/status"]) == meta["topics"]["/lpv_sysid/status"]["count"] == 1
+
+
+# ------------------------------------------------------------------ mavlink_bridge_node
+def _free_udp_port():
+    import socket
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+def test_bridge_publishes_telemetry_of_mavlink_vehicle():
+    """Bridge against the simulated PX4 over UDP 127.0.0.1, lock-stepped to the sim clock."""
+    from lpv_sysid.mavlink.sim_vehicle import SimVehicle, SimVehicleConfig
+    from lpv_sysid.nodes.mavlink_bridge_node import MavlinkBridgeNode
+    port = _free_udp_port()
+    rclpy.init(args=ros_args(("link.url", f"udpin:127.0.0.1:{port}"),
+                             params_file="mavlink_bridge_node.yaml"))
+    node = MavlinkBridgeNode(namespace=NS)
+    veh = SimVehicle(SimVehicleConfig(url=f"udpout:127.0.0.1:{port}"))
+    veh.open()
+    try:
+        probe = rclpy.create_node("probe")
+        t0 = probe.get_clock().now().nanoseconds
+        probe.create_timer(0.004, lambda: veh.step((probe.get_clock().now().nanoseconds - t0) * 1e-9))
+        from rclpy.qos import qos_profile_sensor_data
+        states = collect(probe, Odometry, "/lpv_sysid/state", qos_profile_sensor_data)
+        status = collect(probe, DiagnosticArray, "/lpv_sysid/status")
+        spin([node, probe], 3.0)
+    finally:
+        veh.close()
+        node.destroy_node()
+    assert len(states) > 10
+    s = states[-1]
+    # vehicle on the ground, heading north: NED yaw 0 is ENU yaw +90 deg
+    q = s.pose.pose.orientation
+    np.testing.assert_allclose([q.x, q.y, q.z, q.w], [0, 0, np.sqrt(0.5), np.sqrt(0.5)],
+                               atol=1e-3)
+    assert s.header.frame_id == "odom" and s.child_frame_id == "base_link"
+    _, st = M.status_from_diagnostic_array(status[-1])
+    assert st[0].values["link_up"] == "True"
