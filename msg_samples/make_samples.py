@@ -51,7 +51,7 @@ def _args(params_file: str, **params) -> list[str]:
     return args
 
 
-def phase1(out_dir: str, signals: str, seconds: float = 6.0) -> str:
+def phase1(out_dir: str, signals: str, seconds: float = 5.0) -> str:
     """Phase 1 about the vertex (2, 0, 0) m/s: baseline + multisine, 1 s ramp."""
     from lpv_sysid.nodes.data_logger_node import DataLoggerNode
     from lpv_sysid.nodes.excitation_node import ExcitationNode
@@ -74,7 +74,7 @@ def phase1(out_dir: str, signals: str, seconds: float = 6.0) -> str:
     return path
 
 
-def phase2(out_dir: str, signals: str, gains: str, seconds: float = 6.0) -> str:
+def phase2(out_dir: str, signals: str, gains: str, seconds: float = 5.0) -> str:
     """Phase 2 under the LPV controller (gains.yaml), excitation on, sim vehicle."""
     from lpv_sysid.nodes.data_logger_node import DataLoggerNode
     from lpv_sysid.nodes.excitation_node import ExcitationNode
@@ -103,16 +103,17 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=HERE)
     ap.add_argument("--gains", default=os.path.join(HERE, "gains.yaml"),
-                    help="gains.yaml for the phase-2 sample")
+                    help="gains.yaml for the phase-2 sample (written with LQR test gains "
+                         "when missing)")
     args = ap.parse_args(argv)
+    if not os.path.exists(args.gains):
+        from lpv_test_gains import write_gains
+        print("wrote", write_gains(args.gains, box=5.0))   # the box of signals_phase2.yaml
     with tempfile.TemporaryDirectory() as tmp:
         for name in ("phase1_sim", "phase2_sim"):
             shutil.rmtree(os.path.join(args.out, name), ignore_errors=True)
         print("wrote", phase1(args.out, _signals("signals_phase1.yaml", tmp)))
-        if os.path.exists(args.gains):
-            print("wrote", phase2(args.out, _signals("signals_phase2.yaml", tmp), args.gains))
-        else:
-            print(f"skipped phase2_sim: {args.gains} not found")
+        print("wrote", phase2(args.out, _signals("signals_phase2.yaml", tmp), args.gains))
     return 0
 
 

@@ -281,3 +281,17 @@ def test_influence_matches_finite_difference(lti):
         (Ap if iv.matrix == "A" else Bp)[iv.row, iv.col] += h
         sens = max(np.linalg.norm((G(Ap, Bp, wq) - G(A, B, wq)) / h) for wq in w)
         assert infl[l] == pytest.approx(0.5 * (iv.upper - iv.lower) * sens, rel=1e-4)
+
+
+def test_sidak_joint_coverage():
+    """k from sidak_k covers all p Gaussian errors jointly with probability 1 - alpha."""
+    assert unc.sidak_k(1, 0.05) == pytest.approx(1.959964, abs=1e-5)
+    k = unc.sidak_k(43, 0.05)
+    z = np.random.default_rng(0).normal(size=(20000, 43))
+    joint = np.mean(np.max(np.abs(z), axis=1) < k)
+    assert joint == pytest.approx(0.95, abs=0.006)
+    assert np.mean(np.max(np.abs(z), axis=1) < 3.0) == pytest.approx(0.9973 ** 43, abs=0.01)
+    els = [("A", 0, j, 1.0, 0.1) for j in range(5)]
+    A = -np.eye(5)
+    uv = unc.build(A, np.ones((5, 1)), els, unc.UncertaintyConfig(method="box", joint_alpha=0.05, output_states=(0,)))
+    assert uv.intervals[0].upper - 1.0 == pytest.approx(0.1 * max(3.0, unc.sidak_k(5, 0.05)))

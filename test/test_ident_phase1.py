@@ -26,7 +26,8 @@ def runs():
 
 
 def _truth(q, rec, cfg):
-    sel = (rec.state_t >= rec.t_excite - cfg.trim_average) & (rec.state_t < rec.t_excite)
+    a, b = vx.trim_window((0.0, rec.t_excite), cfg)
+    sel = (rec.state_t >= a) & (rec.state_t < b)
     x0 = reduced_state(rec.state_true[sel], q.params.arm_length).mean(axis=0)
     return q.linearize(x0), x0
 

@@ -128,3 +128,15 @@ def test_polytopic_model_validates_shapes():
         LO, HI, np.zeros((8, 2, 2)), np.zeros((8, 2, 1)), None, None,
         [[UncertainElement("A", 0, 1, -1, 1)]] * 8)
     assert [len(s) for s in m.systems] == [2] * 8
+
+
+def test_from_vertex_systems_of_the_identification_helper():
+    from lpv_sysid.ident import uncertainty as unc
+
+    A = np.array([[-1.0, 0.5], [0.0, -2.0]])
+    B = np.array([[0.0], [1.0]])
+    uv = unc.build(A, B, [("A", 0, 1, 0.5, 0.1), ("B", 1, 0, 1.0, 0.05)], unc.UncertaintyConfig(k_sigma=2.0, output_states=(0, 1)))
+    m = PolytopicModel.from_vertex_systems([0.0], [1.0], [uv, uv], x0=None, u0=None)
+    assert [len(s) for s in m.systems] == [4, 4]
+    vals = sorted((round(a[0, 1], 12), round(b[1, 0], 12)) for a, b in m.systems[0])
+    assert vals == [(0.3, 0.9), (0.3, 1.1), (0.7, 0.9), (0.7, 1.1)]

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import socket
+import signal
 import subprocess
 import sys
 import os
@@ -40,6 +41,7 @@ class UdpRelay:
         self.vehicle = None
         self.cut = False
         self.dropped = 0
+        self.drop_to_vehicle = None      # optional predicate(datagram) -> drop it
 
     def pump(self) -> None:
         for _ in range(10000):
@@ -51,6 +53,9 @@ class UdpRelay:
                 self.dropped += 1
                 continue
             if addr == self.bridge:
+                if self.drop_to_vehicle is not None and self.drop_to_vehicle(data):
+                    self.dropped += 1
+                    continue
                 if self.vehicle is not None:
                     self.sock.sendto(data, self.vehicle)
             else:
@@ -65,12 +70,13 @@ class Flight:
     """Bridge + vehicle (+ optional relay) on one simulated clock."""
 
     def __init__(self, offboard: OffboardConfig, vehicle_params: dict | None = None,
-                 relay: bool = False, command: str = "velocity", link_timeout: float = 1.5) -> None:
+                 relay: bool = False, command: str = "velocity", link_timeout: float = 1.5,
+                 duplicate_acks: bool = False) -> None:
         port = free_udp_port()
         self.relay = UdpRelay(port) if relay else None
         veh_port = self.relay.port if relay else port
         self.veh = SimVehicle(SimVehicleConfig(url=f"udpout:127.0.0.1:{veh_port}",
-                                               params=vehicle_params or {}))
+                                               params=vehicle_params or {}, duplicate_acks=duplicate_acks))
         self.bridge = BridgeCore(BridgeConfig(
             link=LinkConfig(url=f"udpin:127.0.0.1:{port}", link_timeout=link_timeout),
             offboard=offboard, command=command))
@@ -145,7 +151,7 @@ def _takeoff_then(profile):
 
 
 def test_phase1_flight_prestream_offboard_arm_track_abort_handback(flights):
-    f = flights(OffboardConfig(arm=True, handback_mode="HOLD", setpoint_rate_hz=20.0))
+    f = flights(OffboardConfig(arm=True, handback_mode="HOLD", setpoint_rate_hz=20.0), duplicate_acks=True)
     amp, freq = 0.5, 0.2
 
     def profile(t):
@@ -315,12 +321,13 @@ def _cli(*args: str, timeout: float = 20.0) -> subprocess.CompletedProcess:
 def test_cli_preflight_against_cli_sim_vehicle():
     port = free_udp_port()
     veh = subprocess.Popen([sys.executable, "-m", "lpv_sysid.cli", "sim-vehicle", "--udp",
-                            f"127.0.0.1:{port}", "--duration", "4", "--param", "COM_OBL_RC_ACT=5"],
+                            f"127.0.0.1:{port}", "--duration", "15", "--param", "COM_OBL_RC_ACT=5"],
                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                            env={**os.environ, "PYTHONPATH": ROOT})
     try:
-        r = _cli("preflight", "--connect", f"udpin:127.0.0.1:{port}", "--timeout", "3")
+        r = _cli("preflight", "--connect", f"udpin:127.0.0.1:{port}", "--timeout", "5")
     finally:
+        veh.send_signal(signal.SIGINT)                   # Ctrl-C: the vehicle prints its summary
         out, err = veh.communicate(timeout=15)
     assert r.returncode == 0, r.stdout + r.stderr
     assert "COM_OBL_RC_ACT" in r.stdout and "5 (HOLD)" in r.stdout and r.stdout.strip().endswith("GO")
@@ -330,6 +337,8 @@ def test_cli_preflight_against_cli_sim_vehicle():
     assert r.returncode == 1 and "NO-GO" in r.stdout
     r = _cli("preflight", "--connect", "udpin:127.0.0.1:notaport")
     assert r.returncode == 2 and "port" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    r = _cli("preflight", "--connect", "/dev/ttyLPVSYSID_NONE", "--timeout", "0.5")
+    assert r.returncode == 2 and "cannot open MAVLink connection" in r.stderr
     r = _cli("sim-vehicle", "--udp", "127.0.0.1:1", "--param", "COM_BOGUS=1", "--duration", "1")
     assert r.returncode == 2 and "COM_BOGUS" in r.stderr
 
@@ -382,3 +391,53 @@ def test_tcp_link_reconnects_after_vehicle_restart():
     finally:
         core.close()
         veh.close()
+
+
+def test_lost_commands_are_retried_until_offboard(flights):
+    """The first two COMMAND_LONGs (DO_SET_MODE) never reach the vehicle: the bridge retries."""
+    f = flights(OffboardConfig(arm=False, ack_timeout=0.3, max_retries=3), relay=True)
+    mod = px4.dialect_module()
+    seen = {"n": 0}
+
+    def drop(data: bytes) -> bool:
+        msgs = mod.MAVLink(None).parse_buffer(data) or []
+        if any(m.get_type() == "COMMAND_LONG" and m.command == 176 for m in msgs) and seen["n"] < 2:
+            seen["n"] += 1
+            return True
+        return False
+
+    f.relay.drop_to_vehicle = drop
+    ref = lambda t: (0.0, 0.0, 0.0) if t > 0.3 else None      # noqa: E731
+    f.run_until(0.5, ref)
+    f.events += f.bridge.start(f.t)
+    f.run_until(4.0, ref)
+    retries = [e for e in f.events if isinstance(e, StatusEvent) and "retry" in e.reason]
+    assert [e.reason.rsplit("retry ", 1)[1] for e in retries] == ["1/3", "2/3"]
+    assert all("no COMMAND_ACK for command 176 within 0.3 s" in e.reason for e in retries)
+    assert f.relay.dropped == 2 and f.bridge.state == State.OFFBOARD_ACTIVE
+    assert f.veh.mode == px4.OFFBOARD and not f.veh.armed          # arm not configured: not armed
+
+
+def test_vehicle_disarms_without_takeoff_and_serves_param_set(flights):
+    f = flights(OffboardConfig(), vehicle_params={"COM_DISARM_PRFLT": 2.0})
+    f.run_until(0.3)
+    link = f.bridge.link
+    link.send(link.codec.param_set_encode(1, 1, b"COM_OBL_RC_ACT", px4.param_to_wire(4, 6), 6))
+    link.command_long(400, 1.0)                                 # arm on the ground
+    values = []
+    orig = f.bridge._on_message
+
+    def spy(msg, now, out):
+        if msg.get_type() == "PARAM_VALUE":
+            values.append((px4.param_id_str(msg.param_id), px4.param_from_wire(msg.param_value, msg.param_type)))
+        orig(msg, now, out)
+
+    f.bridge._on_message = spy
+    f.run_until(1.5)
+    assert values == [("COM_OBL_RC_ACT", 4)] and f.veh.param("COM_OBL_RC_ACT") == 4
+    assert f.bridge.machine.armed                               # HEARTBEAT shows armed
+    t_arm = f.veh.t_armed
+    f.run_until(4.5)
+    dis = [t for t, m, r in f.veh.mode_log if m == "DISARMED"]
+    assert len(dis) == 1 and 2.0 < dis[0] - t_arm <= 2.0 + 2 * DT
+    assert not f.veh.armed and not f.bridge.machine.armed

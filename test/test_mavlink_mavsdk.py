@@ -50,7 +50,7 @@ def test_mavsdk_connects_reads_telemetry_arms_and_starts_offboard():
     from mavsdk.telemetry import FlightMode
 
     port = free_udp_port()
-    veh = SimVehicle(SimVehicleConfig(url=f"udpout:127.0.0.1:{port}"))
+    veh = SimVehicle(SimVehicleConfig(url=f"udpout:127.0.0.1:{port}", params={"COM_OBL_RC_ACT": 5}))
     veh.open()
     stop = threading.Event()
     th = threading.Thread(target=veh.run_realtime, kwargs={"duration": 20.0, "stop": stop.is_set},
@@ -66,6 +66,11 @@ def test_mavsdk_connects_reads_telemetry_arms_and_starts_offboard():
             q = await _first(drone.telemetry.attitude_quaternion(), 5.0)
             result["q"] = (q.w, q.x, q.y, q.z)
             result["mode0"] = await _first(drone.telemetry.flight_mode(), 5.0)
+            # parameters and firmware version decoded by MAVSDK's own PX4 conventions
+            result["obl"] = await asyncio.wait_for(drone.param.get_param_int("COM_OBL_RC_ACT"), 5.0)
+            result["loss_t"] = await asyncio.wait_for(drone.param.get_param_float("COM_OF_LOSS_T"), 5.0)
+            v = await asyncio.wait_for(drone.info.get_version(), 5.0)
+            result["version"] = (v.flight_sw_major, v.flight_sw_minor, v.flight_sw_patch)
             await asyncio.wait_for(drone.action.arm(), 5.0)
             result["armed"] = await _until(drone.telemetry.armed(), bool, 5.0)
             await drone.offboard.set_velocity_body(VelocityBodyYawspeed(0.0, 0.0, -1.0, 0.0))
@@ -90,6 +95,8 @@ def test_mavsdk_connects_reads_telemetry_arms_and_starts_offboard():
         veh.close()
     assert result["q"] == pytest.approx((1.0, 0.0, 0.0, 0.0), abs=1e-6)     # level on the ground
     assert result["mode0"] == FlightMode.HOLD
+    assert result["obl"] == 5 and result["loss_t"] == pytest.approx(1.0)     # INT32 byte-wise, REAL32
+    assert result["version"] == (1, 16, 0)
     assert result["armed"] is True and veh.armed
     assert result["mode1"] == FlightMode.OFFBOARD
     down, vdown = result["climb"]

@@ -265,10 +265,24 @@ def test_bridge_publishes_telemetry_of_mavlink_vehicle():
         from rclpy.qos import qos_profile_sensor_data
         states = collect(probe, Odometry, "/lpv_sysid/state", qos_profile_sensor_data)
         status = collect(probe, DiagnosticArray, "/lpv_sysid/status")
+        spin([node, probe], 2.0)
+        # phase-1 path: start offboard, stream velocity references (FLU forward 1 m/s)
+        f = M.MsgFactory.rclpy()
+        pub = probe.create_publisher(TwistStamped, "/lpv_sysid/velocity_reference", 10)
+        probe.create_timer(0.02, lambda: pub.publish(M.twist_reference_msg(
+            f, probe.get_clock().now().nanoseconds, [1.0, 0.0, 0.0])))
+        assert call(probe, [node], "/lpv_sysid/mavlink_bridge/start").success
         spin([node, probe], 3.0)
+        offboard_state = node.core.state.value
+        received = veh.setpoints_received
+        mode = veh.mode
     finally:
         veh.close()
         node.destroy_node()
+    # the PX4 simulator received the setpoints and switched to OFFBOARD after prestreaming
+    assert offboard_state == "OFFBOARD_ACTIVE" and received > 50
+    from lpv_sysid.mavlink import px4
+    assert mode == px4.OFFBOARD
     assert len(states) > 10
     s = states[-1]
     # vehicle on the ground, heading north: NED yaw 0 is ENU yaw +90 deg
@@ -278,3 +292,33 @@ def test_bridge_publishes_telemetry_of_mavlink_vehicle():
     assert s.header.frame_id == "odom" and s.child_frame_id == "base_link"
     _, st = M.status_from_diagnostic_array(status[-1])
     assert st[0].values["link_up"] == "True"
+
+
+def test_logger_node_sigterm_closes_bag(tmp_path):
+    """data_logger_node main() in a subprocess killed by SIGTERM: rclpy's handler shuts the
+    context down, spin returns, destroy_node closes the bag -- it opens afterwards."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    out = tmp_path / "log"
+    code = (f"import sys; sys.path[:0] = [{ROOT!r}, {os.path.join(ROOT, 'test', 'support')!r}]\n"
+            "from lpv_sysid.nodes.data_logger_node import main\n"
+            f"sys.exit(main(args=['n', '--ros-args', '-p', 'out_dir:={out}', "
+            "'-p', 'topics:=[status]', '-p', 'status_rate_hz:=10.0']))\n")
+    proc = subprocess.Popen([sys.executable, "-c", code])
+    try:
+        for _ in range(300):
+            if (out / "bag_0000").exists():
+                break
+            time.sleep(0.05)
+        time.sleep(0.3)
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=30) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    meta = yaml.safe_load((out / "experiment.yaml").read_text())
+    assert meta["closed_cleanly"] is True
+    bag = read_bag(str(out / "bag_0000"))
+    assert len(bag["/lpv_sysid/status"]) == meta["topics"]["/lpv_sysid/status"]["count"] > 0

@@ -170,7 +170,8 @@ def test_full_run_writes_bag_summary_and_report(lpv, tmp_path):
     t = np.arange(0.0, 1.5 + 1e-9, 0.02)
     sig = ReferenceSignals(t, np.column_stack([0.5 * np.sin(t), 0 * t, 0.2 * t]),
                            np.column_stack([np.sin(2 * np.pi * f * t) for f in (1.0, 1.5, 2.0, 2.5)]))
-    res = run(problem, sig, Phase2Config(kappa=2.0), quad.params, SensorConfig(seed=1), tmp_path / "phase2")
+    res = run(problem, sig, Phase2Config(kappa=2.0, superposition=True), quad.params, SensorConfig(seed=1),
+              tmp_path / "phase2")
     nl, eq = res.records["nonlinear"], res.records["eq33"]
     assert nl.completed and eq.completed
     summary = yaml.safe_load(res.summary_path.read_text())
@@ -179,6 +180,7 @@ def test_full_run_writes_bag_summary_and_report(lpv, tmp_path):
     assert summary["eq33"]["gain"] == pytest.approx(eq.gain)
     assert set(summary["regressor_correlation"]["axes"]) == set("XYZLMN")
     assert summary["regressor_correlation"]["source"] == "nonlinear"
+    assert summary["regressor_correlation"]["complete_run"] is True
 
     bag = read_bag(tmp_path / "phase2" / "bag")
     names = {k.rsplit("/", 1)[-1]: v for k, v in bag.items()}
@@ -198,7 +200,10 @@ def test_full_run_writes_bag_summary_and_report(lpv, tmp_path):
 
     report = write_report(tmp_path).read_text()
     assert f"| nonlinear quadrotor | {nl.z_norm:.4g} | {nl.ue_norm:.4g} | {nl.gain:.4g} | yes | completed |" in report
-    assert "Computed from the nonlinear simulation data" in report
+    assert "Computed from the nonlinear quadrotor simulation data, 151 samples." in report
+    sp = summary["nonlinear"]["superposition"]
+    assert sp["complete"] and 0 < sp["gain"] < 1.0
+    assert f"| nonlinear quadrotor, excitation only (superposition) | {sp['z_norm']:.4g} |" in report
 
 
 def _write_files(lpv, d):
@@ -291,3 +296,60 @@ def test_runtime_law_bound_monitor_stops_the_run(lpv):
                             sig, Q, pm.vmin, pm.vmax, gamma=1e-4)
     assert not nl.completed and nl.safety_event.startswith("bound_exceeded")
     assert "bound monitor" in nl.safety_event
+
+
+def test_bag_failure_keeps_results_and_names_the_problem(lpv, tmp_path, monkeypatch):
+    """A recording failure mid-flight (e.g. full disk) raises BagError naming it; the Eq. (33)
+    results and a summary saying what failed are still written."""
+    import yaml
+
+    from lpv_sysid.errors import BagError
+    from lpv_sysid.sim import phase2 as P
+
+    quad, sched = lpv
+    pm = sched.model
+    problem = P.Phase2Problem(vmin=pm.vmin, vmax=pm.vmax, K=sched.Kv, x0=pm.x0, u0=pm.u0, R=R, Q=Q,
+                              gamma=1.0, A=pm.A, B=pm.B)
+    sig = _signals(1.0, lambda t: np.zeros((t.size, 3)))
+    real_write = P.Phase2Bag._write
+
+    def failing_write(self, name, ns, msg):
+        if ns > 0.5e9:
+            raise BagError(f"bag {self.path}: write failed: [Errno 28] No space left on device")
+        real_write(self, name, ns, msg)
+
+    monkeypatch.setattr(P.Phase2Bag, "_write", failing_write)
+    with pytest.raises(BagError, match="No space left"):
+        P.run(problem, sig, P.Phase2Config(), quad.params, QUIET, tmp_path / "p2")
+    s = yaml.safe_load((tmp_path / "p2" / "summary.yaml").read_text())
+    assert s["eq33"]["completed"] and "No space left" in s["nonlinear"]["skipped"]
+    assert (tmp_path / "p2" / "eq33.npz").is_file()
+    from lpv_sysid.io.bag import read_bag
+    got = read_bag(tmp_path / "p2" / "bag")                  # what was recorded is readable
+    assert len(got["/lpv_sysid/state"]) == 51                 # 0 .. 0.5 s at 100 Hz
+
+
+def test_superposition_isolates_the_excitation_response(lpv):
+    """Constant v_d at a true trim, noise-free: the reference-only flight stays at the trim, so
+    z_e equals the excited flight's z and its gain equals the direct gain; with a moving v_d the
+    reference-only flight carries the tracking lag and z_e removes it (gain_e << direct gain)."""
+    from lpv_sysid.sim.phase2 import RuntimeLaw, excitation_gain_by_superposition
+
+    quad, sched = lpv
+    pm = sched.model
+    from lpv_sysid.sim.phase2 import Phase2Problem
+    prob = Phase2Problem(vmin=pm.vmin, vmax=pm.vmax, K=sched.Kv, x0=pm.x0, u0=pm.u0, R=R, Q=Q, gamma=1.0)
+    from lpv_sysid.control.lpv_controller import LpvControllerConfig
+    law = lambda: RuntimeLaw(prob, quad.mix, LpvControllerConfig(monitor_margin=1e12))  # noqa: E731
+    corner = np.array([BOX, -BOX, BOX])                     # vertex: x0/u0 are the exact trim
+    sig = _signals(2.0, lambda t: np.tile(corner, (t.size, 1)))
+    veh = lambda: SimVehicle(quad, QUIET, x0=quad.trim(corner).full_state)  # noqa: E731
+    sp = excitation_gain_by_superposition(veh, law, sig, Q, pm.vmin, pm.vmax, kappa=1.0)
+    direct = simulate_nonlinear(veh(), law(), sig, Q, pm.vmin, pm.vmax)
+    assert sp["complete"] and sp["reference_only_z_norm"] < 1e-6 * direct.z_norm
+    assert sp["gain"] == pytest.approx(direct.gain, rel=1e-4)
+    moving = _signals(3.0, lambda t: np.column_stack([1.5 * np.sin(2 * np.pi * 0.3 * t), 0 * t, 0 * t]))
+    veh0 = lambda: SimVehicle(quad, SensorConfig(seed=2), x0=quad.trim(np.zeros(3)).full_state)  # noqa: E731
+    sp = excitation_gain_by_superposition(veh0, law, moving, Q, pm.vmin, pm.vmax, kappa=1.0)
+    direct = simulate_nonlinear(veh0(), law(), moving, Q, pm.vmin, pm.vmax)
+    assert sp["gain"] < 0.5 * direct.gain and sp["reference_only_z_norm"] > sp["z_norm"]

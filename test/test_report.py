@@ -81,7 +81,7 @@ def _write_run(d: Path) -> None:
 
 def test_report_contains_expected_numbers(tmp_path):
     _write_run(tmp_path)
-    out = write_report(tmp_path, tmp_path / "rep" / "report.md")
+    out = write_report(tmp_path, tmp_path / "rep" / "report.md", verify=False)
     text = out.read_text()
     # Table 1: phi0/theta0 converted back to degrees, rotor states as stored
     assert "| [-5 -5 -5] | -4.99 | -5.04 | -4.20 | -10.87 | 9.28 | 691.40 | -36.70 | 29.00 | 310.50 |" in text
@@ -122,6 +122,20 @@ def block_max(x, axis):
     C = np.abs(correlation(regressors(x["t"], x["v"], x["x"][:, 5:8], d, d2, 0.225)[axis]))
     np.fill_diagonal(C, 0)
     return float(np.nanmax(C))
+
+
+def test_verification_is_recomputed_and_failures_are_named(tmp_path):
+    """Without verification.yaml the report runs synthesis.verify on gains + models; the synthetic
+    files here are not valid gains/models files, which the report must say (not crash)."""
+    _write_run(tmp_path)
+    text = write_report(tmp_path).read_text()
+    assert "| independent verification | UNREADABLE | verification of gains.yaml against vertex_models.yaml failed:" in text
+    # a verification.yaml written by someone else is rendered as given
+    (tmp_path / "verification.yaml").write_text(yaml.safe_dump({"passed": False, "checks": [
+        {"check": "hinf", "where": "vertex 2", "value": 1.37, "limit": 1.0, "ok": False}]}))
+    text = write_report(tmp_path).read_text()
+    assert "Overall: **FAILED** (1 checks, 1 failed)" in text
+    assert "| hinf | vertex 2 | 1.37 | 1 | NO |" in text
 
 
 def test_empty_run_dir_lists_every_missing_input(tmp_path):
@@ -179,3 +193,17 @@ def test_regressors_match_eq6_by_hand():
     assert [regs[a].shape[1] for a in "XYZLMN"] == [len(REGRESSOR_NAMES[a]) for a in "XYZLMN"]
     C = correlation(np.column_stack([t, 2 * t + 1, np.ones(2)]))
     assert C[0, 1] == pytest.approx(1.0) and np.isnan(C[0, 2])
+
+
+def test_table3_from_models_meta_validation(tmp_path):
+    """identify stores the independent validation (Table 3) in vertex_models.yaml meta."""
+    models = {"states": [{"name": n} for n in STATES], "vertices": [],
+              "meta": {"validation": {"maneuver": "hover_validation",
+                                      "tic": dict(zip(AXES, TABLE3["tic"])),
+                                      "nrmse": dict(zip(AXES, TABLE3["nrmse"]))}}}
+    (tmp_path / "vertex_models.yaml").write_text(yaml.safe_dump(models))
+    text = write_report(tmp_path, verify=False).read_text()
+    assert "Independent validation maneuver `hover_validation` (from vertex_models.yaml meta.validation):" in text
+    assert "| independent validation (Table 3) | derived | from vertex_models.yaml meta.validation |" in text
+    assert "| TIC | 0.110 | 0.049 | 0.104 | 0.274 | 0.355 | 0.352 |" in text
+    assert "| metric | udot | vdot | wdot | pdot | qdot | rdot |" in text

@@ -330,3 +330,24 @@ def test_history_keep_all_and_logger(caplog):
         for _ in range(3):
             n.get_logger().warning("once", once=True)
     assert [r.name for r in caplog.records] == ["lpv_sysid.log", "lpv_sysid.log"]
+
+
+def test_raw_subscription_message_lost_and_get_message():
+    from rclpy.event_handler import SubscriptionEventCallbacks
+    from rosidl_runtime_py.utilities import get_message
+    assert get_message("sensor_msgs/msg/JointState") is JointState
+    with pytest.raises(ValueError):
+        get_message("sensor_msgs/msg/Nope")
+    rclpy.init()
+    n = Node("raw")
+    raw, lost = [], []
+    pub = n.create_publisher(JointState, "js", 10)
+    sub = n.create_subscription(
+        JointState, "js", raw.append, 10, raw=True,
+        event_callbacks=SubscriptionEventCallbacks(message_lost=lambda i: lost.append(i)))
+    msg = JointState(name=["a"], position=[0.5])
+    pub.publish(msg)
+    rclpy.spin_once(n, timeout_sec=0.0)
+    assert raw == [serialize_message(msg)] and isinstance(raw[0], bytes)
+    sub.standin_lose(3)
+    assert lost[0].total_count == 3 and lost[0].total_count_change == 3

@@ -43,6 +43,24 @@ def test_hinf_norm_matches_dense_sweep_on_random_mimo():
         assert h.lower <= s * (1 + 2e-3) and h.value >= s  # and gets within 0.2% on a dense grid
 
 
+def test_hinf_norm_badly_scaled_12_state_matches_sweep_with_and_without_balancing():
+    model = quadrotor_like_polytope(0)
+    R = excitation_R([0.1] * 4, 100.0)
+    C = performance_matrix(output_Q([5.0] * 3, 100.0), 12, (2, 3, 4))
+    # any stabilising gain will do; take the LQR gain (Riccati, independent of Lemma 1)
+    from scipy.linalg import solve_continuous_are
+    A, B = model.A[0], model.B[0]
+    P = solve_continuous_are(A, B, np.eye(12), 1e6 * np.eye(4))
+    K = -np.linalg.solve(1e6 * np.eye(4), B.T @ P)
+    Acl = A + B @ K
+    assert np.max(np.linalg.eigvals(Acl).real) < 0
+    h1 = hinf_norm(Acl, B @ R, C)
+    h0 = hinf_norm(Acl, B @ R, C, balanced=False)
+    s, _ = hinf_norm_sweep(Acl, B @ R, C, np.concatenate([[0.0], np.logspace(-3, 4, 4000)]))
+    assert abs(h1.value - h0.value) < 1e-5 * h1.value
+    assert s <= h1.value * (1 + 1e-9) and h1.lower <= s * (1 + 2e-3)
+
+
 def test_hinf_norm_unstable_is_inf():
     assert hinf_norm(np.array([[0.1]]), np.eye(1), np.eye(1)).value == np.inf
 
@@ -137,3 +155,30 @@ def test_options_validation():
         excitation_R([0.1, -1], 10.0)
     np.testing.assert_allclose(excitation_R([0.1] * 4, 50.0), np.sqrt(4 * 50 / 2) * 0.1 * np.eye(4))  # Eq. 27
     np.testing.assert_allclose(output_Q([5.0] * 3, 50.0), np.sqrt(3 * 50) * 5 * np.eye(3))            # Eq. 28
+
+
+def test_uncertainty_reduction_remedy_by_bisection_matches_analytic_shrink():
+    # x1' = -a1 x1 + w with a1 in [2 - 1, 2 + 1]: gamma_min = 1 / a1_lower. Shrinking the interval
+    # by rho gives a1_lower = 2 - rho, so gamma = 0.6 needs rho <= 2 - 1/0.6 = 1/3 (analytic).
+    from lpv_sysid.models.lpv import PolytopicModel, UncertainElement
+    from lpv_sysid.synthesis.hinf_lmi import remedy_analysis
+
+    base, Be, C, _ = uncontrollable_disturbance_plant(a1=2.0, a2=1.0)
+    el = [UncertainElement("A", 0, 0, -3.0, -1.0, -2.0)]
+    model = PolytopicModel.from_uncertain_elements(base.vmin, base.vmax, base.A, base.B, base.x0, base.u0, [el, el])
+    rem = remedy_analysis(model, None, C, HinfOptions(gamma=0.6, remedy_bisection_steps=7), Be=Be)
+    assert abs(rem.gamma_min - 1.0) < 2e-3                     # 1 / a1_lower = 1 / 1
+    assert abs(rem.excitation_shrink - 1.0 / 0.6) < 5e-3
+    assert abs(rem.nominal_gamma_min - 0.5) < 2e-3
+    assert 1 / 3 - 0.02 < rem.uncertainty_shrink <= 1 / 3 + 1e-3
+    assert "33" in rem.message() or "32" in rem.message()
+
+
+def test_auto_solver_order():
+    from lpv_sysid.synthesis.hinf_lmi import _solver_order
+
+    auto = HinfOptions.from_dict({"solver": "auto"})
+    assert _solver_order(auto, 8, {"CLARABEL", "SCS"}) == ["CLARABEL", "SCS"]
+    assert _solver_order(auto, 128, {"CLARABEL", "SCS"}) == ["SCS", "CLARABEL"]
+    assert _solver_order(auto, 128, {"CLARABEL", "SCS", "MOSEK"})[0] == "MOSEK"
+    assert _solver_order(HinfOptions(solver="SCS", fallback="CLARABEL"), 8, set()) == ["SCS", "CLARABEL"]

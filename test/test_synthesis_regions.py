@@ -110,3 +110,10 @@ def test_hinf_combined_with_region_common_H():
     assert -2.5 < pole <= -2.0 + 1e-6          # H-inf needs pole <= -2 (gamma 0.5), region > -2.5
     assert hinf_norm(np.array([[pole]]), np.array([[r * b]]), np.eye(1)).value <= 0.5 * (1 + 1e-6)
     np.testing.assert_allclose(res.H, res.H.T, atol=1e-9)
+
+
+def test_region_dict_round_trip():
+    for d in ({"disk": {"centre": -2.0, "radius": 1.5}, "strip": {"min": -4.0, "max": -0.5}},
+              {"strip": {"min": -4.0, "max": None}}, {"half_plane": {"alpha": 0.3}}):
+        r = Region.from_dict(d)
+        assert Region.from_dict(r.to_dict()) == r

@@ -27,7 +27,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", type=Path, default=None,
                         help="identification YAML (derivative settings, sample rate)")
     parser.add_argument("--refine", action="store_true", help="output-error refinement (seed 2 Sec. 4)")
-    parser.add_argument("--segment", type=float, default=1.0, help="output-error segment length, s")
+    parser.add_argument("--segment", type=float, default=2.0, help="output-error segment length, s")
     parser.add_argument("--max-segments", type=int, default=40, help="output-error segments used")
     parser.add_argument("--max-nfev", type=int, default=60, help="output-error function evaluations")
     parser.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
@@ -150,10 +150,10 @@ def run(args: argparse.Namespace) -> int:
                              "correlation": np.where(np.isfinite(a.correlation), a.correlation, 0.0).tolist()}
                     for a in res.axes.values()}}
     if args.refine:
-        bag, data, _, _ = max(pieces, key=lambda p: p[1].t.size)
+        bag, data, sm_sel, _ = max(pieces, key=lambda p: p[1].t.size)
         free = tuple(k for k in K_NAMES if k not in fixed)
         oe = nl.output_error(data, params, res.K, nl.OutputErrorConfig(args.segment, args.max_segments,
-                                                                       args.max_nfev, free))
+                                                                       args.max_nfev, free), res.std, sm_sel)
         print()
         print(f"Output-error refinement on {bag.name} (seed 2 Sec. 4): cost {oe.cost:.4g}")
         print(f"{'K':>12} {'regression':>13} {'refined':>13} {'std':>11}")

@@ -13,6 +13,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--run", required=True, type=Path, help="run directory (e.g. demo_out)")
     parser.add_argument("--out", type=Path, default=None,
                         help="report path, ending in .md (default: RUN/report/report.md); figures go next to it")
+    parser.add_argument("--no-verify", action="store_true",
+                        help="do not re-run the independent verifier when verification.yaml is absent")
     parser.add_argument("--strict", action="store_true",
                         help="exit 2 when an input file exists but cannot be read")
 
@@ -23,9 +25,9 @@ def run(args: argparse.Namespace) -> int:
     from lpv_sysid.report.markdown import write_report
 
     if args.strict:
-        problems = load_run(args.run).problems
+        problems = load_run(args.run, verify=not args.no_verify).problems
         if problems:
             raise ConfigError("; ".join(problems.values()))
-    path = write_report(args.run, args.out)
+    path = write_report(args.run, args.out, verify=not args.no_verify)
     print(path)
     return 0

@@ -26,7 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--connect", metavar="URL", default=None,
                    help="any link URL instead (udpin:H:P, udpout:H:P, tcpin:H:P, serial device)")
     parser.add_argument("--duration", type=float, default=None,
-                        help="stop after this many seconds (default: run until Ctrl-C)")
+                        help="stop after this many simulated seconds (default: run until Ctrl-C)")
     parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                         help="override a PX4 parameter, e.g. COM_OBL_RC_ACT=5 (repeatable)")
     parser.add_argument("--mode", default="HOLD", help="initial PX4 mode name (default HOLD)")
@@ -35,6 +35,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--signing-key", default=None, metavar="FILE",
                         help="MAVLink 2 signing secret (32 raw bytes or 64 hex chars)")
     parser.add_argument("--noise", action="store_true", help="add sensor noise to the telemetry")
+    parser.add_argument("--speed", type=float, default=1.0,
+                        help="simulated seconds per wall-clock second (default 1 = real time)")
 
 
 def _params(items: list[str]) -> dict[str, float]:
@@ -62,6 +64,8 @@ def run(args: argparse.Namespace) -> int:
         url = f"udpout:{hostport}"
     if args.duration is not None and not args.duration > 0:
         raise ConfigError("--duration must be positive")
+    if not (args.speed > 0 and args.speed <= 100):
+        raise ConfigError("--speed must be in (0, 100]")
     if not 1 <= args.system_id <= 255:
         raise ConfigError("--system-id must be 1..255")
     cfg = SimVehicleConfig(url=url, system_id=args.system_id, physics_hz=args.physics_hz,
@@ -74,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
           + ", ".join(f"{k}={veh.param(k):g}" for k in ("COM_OF_LOSS_T", "COM_OBL_RC_ACT", "COM_DISARM_PRFLT")),
           flush=True)
     try:
-        veh.run_realtime(args.duration)
+        veh.run_realtime(args.duration, speed=args.speed)
     except KeyboardInterrupt:
         pass
     finally:

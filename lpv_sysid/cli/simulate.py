@@ -1,4 +1,4 @@
-"""`lpv-sysid simulate`: experiment simulation (phase 1 now; phase 2 is added as its own mode).
+"""`lpv-sysid simulate`: experiment simulation, phase 1 and phase 2.
 
 ``lpv-sysid simulate phase1 --config config/quadrotor.yaml --out DIR`` flies the seed 0
 Sec. IV vertex runs plus the hover validation run under the PX4-like baseline controller,
@@ -15,7 +15,7 @@ from pathlib import Path
 from lpv_sysid.errors import ConfigError
 
 COMMAND = "simulate"
-HELP = "simulate the phase-1 (baseline control, vertex runs) experiment and write rosbag2 logs"
+HELP = "simulate the phase-1 (baseline control) or phase-2 (LPV control) experiment and write rosbag2 logs"
 
 log = logging.getLogger(__name__)
 
@@ -28,7 +28,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                       "of the velocity box, plus a hover validation run.")
     _add_phase1_arguments(p1)
     p1.set_defaults(_mode_run=run_phase1)
-    # A `phase2` mode is added here as its own function (add parser + set _mode_run).
+    from lpv_sysid.sim.phase2 import add_phase2_arguments, run_phase2
+
+    p2 = modes.add_parser("phase2", help="LPV-controlled large-amplitude excitation (seed 0 Secs. V-VII)",
+                          description="Phase 2: the Eq. (33) LPV closed loop at nominal parameters and "
+                                      "the nonlinear quadrotor under the runtime LPV law, with the "
+                                      "7-channel reference/excitation signals; writes a rosbag2.")
+    add_phase2_arguments(p2)
+    p2.set_defaults(_mode_run=run_phase2)
 
 
 def _add_phase1_arguments(p: argparse.ArgumentParser) -> None:

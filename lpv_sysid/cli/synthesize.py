@@ -5,12 +5,19 @@
 Writes gains.yaml (ARCHITECTURE.md section 5) with the certificate entry and the sidecar
 ``<out stem>.cert.npz`` (X, S, H, scaling) referenced by name and sha256; then runs the
 independent verification (``lpv-sysid verify``) on what it wrote unless ``--no-verify``.
+
+With ``uncertainty.common_b: true`` (config/synthesis.yaml) the input matrix of the Eq. (23)
+polytope is the interval hull over all vertices, common to every vertex (lpv_sysid.models.lpv),
+so Lemma 1 covers the interior of the scheduling box; ``certificate.input_structure`` records
+which structure was solved (B common | per_vertex, M_A, M_B, the B hull) and the verifier
+rebuilds and checks exactly that structure. Prints the sizes M_i = M_A x M_B and the wall time.
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import time
 from pathlib import Path
 
 import numpy as np
@@ -86,11 +93,23 @@ def velocity_index(cfg: dict, state_names: tuple) -> tuple[int, ...]:
         raise ConfigError(f"velocity_states {names} not all among the model states {list(state_names)}") from None
 
 
+def _structure_entry(model) -> dict:
+    """certificate.input_structure: which Eq. (23) structure Lemma 1 was solved for."""
+    st = dict(model.input_structure)
+    if model.common_input is not None:
+        st["B_hull"] = [{"row": e.row, "col": e.col, "lower": e.lower, "upper": e.upper, "nominal": e.nominal}
+                        for e in model.common_input.elements]
+        st["covers"] = "scheduling box interior (Lemma 1, common B)"
+    else:
+        st["covers"] = "scheduling vertices (per-vertex B: interior only spot-checked)"
+    return st
+
+
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from lpv_sysid.synthesis.files import (gains_dict, load_models, save_certificate_npz, save_yaml,
-                                           sha256_file)
+                                           sha256_file, uncertainty_settings)
     from lpv_sysid.synthesis.hinf_lmi import HinfOptions, performance_matrix, synthesize_hinf
 
     cfg = load_config(args.config)
@@ -100,26 +119,42 @@ def run(args: argparse.Namespace) -> int:
     if args.solver is not None:
         opts = HinfOptions.from_dict({**{k: getattr(opts, k) for k in opts.__dataclass_fields__},
                                       "solver": args.solver})
-    model, raw = load_models(args.models, cfg.get("uncertainty"))
+    unc_cfg = uncertainty_settings(cfg.get("uncertainty"))
+    t0 = time.perf_counter()
+    model, raw = load_models(args.models, unc_cfg)
     R, Q, source = weights_from_config(cfg, model.n_u, args.summary, args.config)
     vidx = velocity_index(cfg, model.state_names)
     C = performance_matrix(Q, model.n_x, vidx)
-    Ms = [len(s) for s in model.systems]
-    print(f"models: {args.models} ({model.n_vertices} vertices x M = {Ms} uncertainty vertices, "
-          f"{model.n_x} states, {model.n_u} inputs); R, Q from {source}")
+    st = model.input_structure
+    Ms = st["M"]
+    print(f"models: {args.models} ({model.n_vertices} vertices, {model.n_x} states, {model.n_u} inputs); "
+          f"R, Q from {source}")
     if model.ts is not None:
         raise ConfigError(f"{args.models}: Lemma 1 is a continuous-time result; the models are discrete "
                           f"(Ts={model.ts})")
+    if model.common_input is not None:
+        els = ", ".join(f"B[{e.row},{e.col}] in [{e.lower:.6g}, {e.upper:.6g}]" for e in model.common_input.elements)
+        print(f"input matrix common to all vertices (uncertainty.common_b): hull {els or '(B identical)'}; "
+              f"M_i = M_A x M_B = {st['M_A']} x {st['M_B']} = {Ms} ({st['B_method']} corners); "
+              "Lemma 1 covers the whole box")
+    else:
+        print(f"uncertainty vertices per scheduling vertex M_i = {Ms} (per-vertex B, uncertainty.common_b: false)")
+        if len({tuple(np.round(np.array([b for _, b in lst]), 12).ravel()) for lst in model.systems}) > 1:
+            print("note: B differs between scheduling vertices; Lemma 1 certifies the vertices, the interior "
+                  "(B(v_d) S(v_d) is bilinear) is only checked by the verifier's random interior points")
     try:
         res = synthesize_hinf(model, R, C, opts)
     except SolverError as exc:
         raise SolverError(str(exc).replace("\n", " | ")) from None
+    wall = time.perf_counter() - t0
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     side = out.with_name(out.stem + ".cert.npz")
     side_sha = save_certificate_npz(side, res.X, res.S, res.H, res.scaling.t, res.scaling.s_u, R, C)
     cert = {
-        "lmi": "seed 0 Lemma 1" + (" + seed 2 Eq. (125) region (common H)" if opts.region else ""),
+        "lmi": "seed 0 Lemma 1" + (" (common B: scheduling box interior covered)" if model.common_input is not None
+                                   else " (per-vertex B: vertices certified)")
+               + (" + seed 2 Eq. (125) region (common H)" if opts.region else ""),
         "solver": res.solver,
         "status": res.status,
         "gamma_requested": float(opts.gamma),
@@ -127,11 +162,14 @@ def run(args: argparse.Namespace) -> int:
         "min_margin": float(res.min_margin),
         "eps": float(opts.eps),
         "models_sha256": sha256_file(args.models),
-        "uncertainty": cfg.get("uncertainty"),
+        "uncertainty": unc_cfg,
         "uncertainty_vertices": Ms,
+        "input_structure": _structure_entry(model),
+        "velocity_states": [model.state_names[k] for k in vidx],
         "problem": res.size.as_dict(),
         "compile_time_s": round(res.compile_time, 3),
         "solve_time_s": round(res.solve_time, 3),
+        "synthesis_wall_s": round(wall, 3),
         "sidecar": {"file": side.name, "sha256": side_sha},
     }
     if opts.region is not None:
@@ -140,7 +178,8 @@ def run(args: argparse.Namespace) -> int:
     save_yaml(gains_dict(raw, model, res.K, R, Q, gamma_file, cert), out)
     print(f"LMI: {res.size.lmi_blocks} blocks (total dim {res.size.lmi_total_dim}, {res.size.scalar_constraints} "
           f"scalar constraints), {res.size.scalar_variables} scalar variables; "
-          f"compile {res.compile_time:.2f} s, solve {res.solve_time:.2f} s ({res.solver}, {res.status})")
+          f"compile {res.compile_time:.2f} s, solve {res.solve_time:.2f} s, load + synthesis wall {wall:.2f} s "
+          f"({res.solver}, {res.status})")
     print(f"gamma requested {opts.gamma:g}, certified (numpy re-evaluation of Eq. 30) {res.gamma_certified:.4g}, "
           f"min margin {res.min_margin:.3g}")
     print(f"wrote {out}")

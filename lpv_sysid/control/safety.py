@@ -148,7 +148,9 @@ class SafetySupervisor:
                  t_now: float) -> SafetyEvent | None:
         """One message of ``stream`` stamped ``stamp`` received at ``t_now``."""
         vals = np.asarray(values, dtype=float)
-        if not math.isfinite(stamp) or not np.all(np.isfinite(vals)):
+        # fast path: a sum is finite only if every term is (an overflow to inf is re-checked)
+        if not (math.isfinite(stamp) and math.isfinite(float(vals.sum()))) and \
+                not (math.isfinite(stamp) and np.all(np.isfinite(vals))):
             bad = np.flatnonzero(~np.isfinite(vals)).tolist()
             what = f"indices {bad}" if bad else f"stamp {stamp!r}"
             return self.abort(t_now, NON_FINITE, f"{stream}: non-finite value at {what}")
@@ -162,20 +164,19 @@ class SafetySupervisor:
 
     def check_scheduling(self, t: float, v_d: Sequence[float] | np.ndarray) -> SafetyEvent | None:
         """Abort when ``v_d`` leaves the box widened by ``box_margin``."""
-        v = np.asarray(v_d, dtype=float)
         cfg = self.config
         if not cfg.box_min:
             return self.event
-        if v.shape != (len(cfg.box_min),):
-            return self.abort(t, NON_FINITE, f"scheduling vector has shape {v.shape}, "
-                              f"expected ({len(cfg.box_min)},)")
-        if not np.all(np.isfinite(v)):
-            return self.abort(t, NON_FINITE, f"scheduling vector {v.tolist()} not finite")
-        lo = np.asarray(cfg.box_min) - cfg.box_margin
-        hi = np.asarray(cfg.box_max) + cfg.box_margin
-        out = np.flatnonzero((v < lo) | (v > hi))
-        if out.size:
-            i = int(out[0])
+        v = [float(c) for c in v_d]
+        if len(v) != len(cfg.box_min):
+            return self.abort(t, NON_FINITE, f"scheduling vector has {len(v)} entries, "
+                              f"expected {len(cfg.box_min)}")
+        if not all(math.isfinite(c) for c in v):
+            return self.abort(t, NON_FINITE, f"scheduling vector {v} not finite")
+        m = cfg.box_margin
+        out = [i for i, c in enumerate(v) if c < cfg.box_min[i] - m or c > cfg.box_max[i] + m]
+        if out:
+            i = out[0]
             return self.abort(t, OUT_OF_BOX, f"scheduling[{i}] = {v[i]:.4g} outside "
                               f"[{cfg.box_min[i]:.4g}, {cfg.box_max[i]:.4g}]"
                               + (f" + margin {cfg.box_margin:g}" if cfg.box_margin else ""))
@@ -195,8 +196,9 @@ class SafetySupervisor:
             since = self._last_rx.get(stream, self._t_arm)
             age = t_now - since
             if age > timeout:
-                never = stream not in self._last_rx
-                return self.abort(t_now, STALE, f"{stream}: {'no message for' if never else 'last message'}"
-                                  f" {age:.3f} s {'since arming' if never else 'ago'}"
-                                  f" (timeout {timeout:g} s)")
+                if stream not in self._last_rx:
+                    what = f"no message for {age:.3f} s since arming"
+                else:
+                    what = f"last message {age:.3f} s ago"
+                return self.abort(t_now, STALE, f"{stream}: {what} (timeout {timeout:g} s)")
         return self.event

@@ -242,12 +242,18 @@ def _segment(t: np.ndarray, a: float, b: float, what: str, min_len: float) -> np
     return idx
 
 
+def trim_window(trim: tuple[float, float], cfg: IdentificationConfig) -> tuple[float, float]:
+    """Averaging window for x0, u0: the last ``trim_average`` s, at most half the trim segment."""
+    a, b = trim
+    return b - min(cfg.trim_average, 0.5 * (b - a)), b
+
+
 def equilibrium(data: VertexData, cfg: IdentificationConfig) -> tuple[np.ndarray, np.ndarray]:
-    """``x0, u0`` = means over the last ``trim_average`` seconds of the trim segment (the
-    vehicle may still be converging to the new reference at its start), seed 0 Table 1."""
-    a, b = data.trim
-    idx = _segment(data.t, max(a, b - cfg.trim_average), b, f"{data.name or 'vertex'} trim",
-                   min(1.0, 0.5 * cfg.trim_average))
+    """``x0, u0`` = means over the last ``trim_average`` seconds (at most half) of the trim
+    segment (the vehicle may still be converging to the new reference at its start), seed 0
+    Table 1."""
+    a, b = trim_window(data.trim, cfg)
+    idx = _segment(data.t, a, b, f"{data.name or 'vertex'} trim", min(0.5, b - a))
     return data.x[idx].mean(axis=0), data.u[idx].mean(axis=0)
 
 
@@ -268,6 +274,8 @@ def prepare(data: VertexData, cfg: IdentificationConfig, x0: np.ndarray, u0: np.
     # differentiate a little more than the fit segment so the smoother's end effects fall
     # outside it, then cut the edges
     full = _segment(t, a, b, f"{data.name or 'vertex'} excitation", cfg.min_fit_duration + 2 * cfg.edge)
+    if cfg.derivatives.method == "fourier":
+        full = full[: deriv.fast_length(full.size)]      # FFT-friendly length, drops < 2 % (n > 2000)
     xs, xdot = deriv.smooth_and_differentiate(data.x[full], dt, cfg.derivatives)
     us = deriv.smooth(data.u[full], dt, cfg.derivatives)
     n_edge = int(round(cfg.edge / dt))
@@ -355,6 +363,7 @@ def vertex_models_dict(results: Sequence[VertexResult], cfg: IdentificationConfi
         "model": cfg.model,
         "derivatives": dataclasses.asdict(cfg.derivatives),
         "k_sigma": cfg.uncertainty.k_sigma,
+        "joint_alpha": cfg.uncertainty.joint_alpha,
         "uncertainty": {"method": cfg.uncertainty.method, "p_max": cfg.uncertainty.p_max,
                         "M": [results[k].uncertain.M for k in order],
                         "inflation": [results[k].uncertain.inflation for k in order]},

@@ -8,11 +8,11 @@ Layout of an experiment directory ``out``::
     out/bag_0001/              next split (size or duration limit reached)
 
 Messages arrive as rosbags message objects or as serialized CDR bytes (the node shell
-subscribes with ``raw=True``; bytes go to the bag untouched, as ``ros2 bag record`` does). ``experiment.yaml``
-is rewritten at start, at every split and at stop, so a crash still leaves it describing
-every bag closed so far (``closed_cleanly: false``). A write error (disk full, ...) closes
-the current bag so what was written stays readable, is recorded in the metadata and
-raised as :class:`~lpv_sysid.errors.BagError`.
+subscribes with ``raw=True``; bytes go to the bag untouched, as ``ros2 bag record`` does).
+``experiment.yaml`` is rewritten at start, at every split and at stop, so a crash still
+leaves it describing every bag closed so far (``closed_cleanly: false``). A write error
+(disk full, ...) closes the current bag so what was written stays readable, is recorded
+in the metadata and raised as :class:`~lpv_sysid.errors.BagError`.
 """
 
 from __future__ import annotations
@@ -153,6 +153,8 @@ class Recorder:
     _wall_stop: str = ""
     _typestore: object = None
     _static_meta: dict = field(default_factory=dict)
+    _busy: bool = False
+    _exit_code: int | None = None
 
     def __post_init__(self):
         self.stats = {t: TopicStats(m) for t, m in self.config.topics.items()}
@@ -186,6 +188,15 @@ class Recorder:
 
     def record(self, topic: str, stamp_ns: int, msg) -> None:
         """Write one message (rosbags object or CDR bytes) stamped ``stamp_ns``."""
+        self._busy = True
+        try:
+            self._record(topic, stamp_ns, msg)
+        finally:
+            self._busy = False
+        if self._exit_code is not None:      # a signal arrived during the write
+            raise SystemExit(self._exit_code)
+
+    def _record(self, topic: str, stamp_ns: int, msg) -> None:
         if self._writer is None:
             raise BagError(f"recorder: {self.out_dir} is not recording"
                            + (f" (stopped after error: {self.error})" if self.error else ""))
@@ -361,8 +372,11 @@ def stop_on_signals(recorder: Recorder, stamp_ns: Callable[[], int] | None = Non
     previous = {}
 
     def handler(signo, _frame):
-        recorder.stop(stamp_ns() if stamp_ns else None)
-        raise SystemExit(128 + signo)
+        # Never close the bag from inside a half-done write: if the signal interrupted
+        # record(), it exits once that message is complete; the finally below closes.
+        recorder._exit_code = 128 + signo
+        if not recorder._busy:
+            raise SystemExit(128 + signo)
 
     for s in signals:
         previous[s] = signal.signal(s, handler)

@@ -278,6 +278,9 @@ class MavlinkLink:
         try:
             self.conn = self._factory(self._device, self._baud, self.config.source_system,
                                       self.config.source_component)
+        except ImportError as exc:
+            raise LpvSysidError(f"cannot open MAVLink connection {self.config.url!r}: {exc} "
+                                "(serial links need pyserial, ROS package python3-serial)") from None
         except (OSError, ValueError) as exc:
             raise LpvSysidError(f"cannot open MAVLink connection {self.config.url!r}: {exc}") from None
         self.codec = px4.make_codec(self.conn, self.config.source_system,

@@ -105,8 +105,24 @@ class SimVehicleConfig:
     allow_unsigned: bool = False
     sensor_noise: bool = False
     seed: int = 0
+    duplicate_acks: bool = False            # send every COMMAND_ACK twice (PX4 sometimes does)
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "SimVehicleConfig":
+        if not isinstance(d, Mapping):
+            raise ConfigError("sim vehicle config must be a mapping")
+        bad = sorted(set(d) - set(cls.__dataclass_fields__))
+        if bad:
+            raise ConfigError(f"unknown sim vehicle config key(s) {bad}; known: {sorted(cls.__dataclass_fields__)}")
+        cfg = cls(**dict(d))
+        cfg.validate()
+        return cfg
 
     def validate(self) -> None:
+        if not isinstance(self.physics_hz, (int, float)) or isinstance(self.physics_hz, bool):
+            raise ConfigError(f"sim vehicle physics_hz must be a number, got {self.physics_hz!r}")
+        if not isinstance(self.params, Mapping):
+            raise ConfigError("sim vehicle params must be a mapping NAME: value")
         if not (self.physics_hz >= 50.0 and math.isfinite(self.physics_hz)):
             raise ConfigError(f"sim vehicle physics_hz must be >= 50, got {self.physics_hz!r}")
         for k, v in self.params.items():
@@ -114,7 +130,8 @@ class SimVehicleConfig:
                 raise ConfigError(f"sim vehicle: unknown parameter {k!r}; known: {sorted(DEFAULT_PARAMS)}")
             if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(float(v)):
                 raise ConfigError(f"sim vehicle: parameter {k} must be a finite number, got {v!r}")
-        px4.mode_by_name(self.initial_mode)
+        if px4.mode_by_name(self.initial_mode) == px4.OFFBOARD:
+            raise ConfigError("sim vehicle initial_mode cannot be OFFBOARD (PX4 needs a setpoint stream)")
 
 
 @dataclass
@@ -211,17 +228,25 @@ class SimVehicle:
             self._send_telemetry(now)
 
     def run_realtime(self, duration: float | None = None, stop: Callable[[], bool] | None = None,
-                     period: float = 0.002) -> None:
-        """Drive :meth:`step` from the wall clock (bounded by ``duration`` if given)."""
-        t0 = time.monotonic() - self.t
+                     period: float = 0.002, speed: float = 1.0) -> None:
+        """Drive :meth:`step` from the wall clock (bounded by ``duration`` simulated seconds).
+
+        ``speed`` > 1 runs faster than real time (simulated time = speed x wall time); the
+        peers then see a vehicle whose clock runs fast, which is fine for protocol tests.
+        """
+        if not (speed > 0 and math.isfinite(speed)):
+            raise ConfigError(f"sim vehicle speed must be positive, got {speed!r}")
+        w0 = time.monotonic()
+        s0 = self.t
         while True:
-            now = time.monotonic() - t0
+            w = time.monotonic()
+            now = s0 + (w - w0) * speed
             if duration is not None and now >= duration:
                 break
             if stop is not None and stop():
                 break
             self.step(now)
-            time.sleep(max(0.0, period - (time.monotonic() - t0 - now)))
+            time.sleep(max(0.0, period - (time.monotonic() - w)))
 
     # --------------------------------------------------------------- physics
     def _physics_step(self) -> None:
@@ -414,7 +439,8 @@ class SimVehicle:
             name.encode("ascii"), px4.param_to_wire(value, ptype), ptype, len(names), names.index(name)))
 
     def _ack(self, cmd: int, result: int) -> None:
-        self.link.send(self.link.codec.command_ack_encode(cmd, result, 0, 0, 0, 0))
+        for _ in range(2 if self.config.duplicate_acks else 1):
+            self.link.send(self.link.codec.command_ack_encode(cmd, result, 0, 0, 0, 0))
 
     def _command(self, m: Any, now: float) -> None:
         c = m.command

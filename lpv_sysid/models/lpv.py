@@ -14,13 +14,40 @@ clamped to the box and a flag is returned (the caller raises the safety event).
 Nested uncertainty vertices Lambda_i^j (seed 0 Eq. 23) are built per scheduling vertex from the
 nominal ``(A_i, B_i)`` and the interval box of the uncertain elements (Eq. 22) by corner
 enumeration, or taken from an explicit list (e.g. produced by ``lpv_sysid.ident.uncertainty``).
+
+Common input matrix (why, and what it costs). Lemma 1 (seed 0 Sec. VI, Rotondo Thm. 2) certifies
+the *whole* scheduling box only because the seed's input matrix depends on theta alone (Eq. 16):
+B_c^j carries no vertex index. Identification estimates the B elements at every vertex, so
+B_i^j differs between vertices; then sum_i alpha_i sum_j beta_i^j B_i^j S_i contains the cross
+terms alpha_i alpha_k B_i S_k and is *not* B(v_d) S(v_d): the LMIs hold at the vertices, the
+interior is uncovered (B(v_d) K(v_d) is bilinear in alpha). :func:`input_hull` closes the hole
+conservatively: every B element that is uncertain or differs across vertices gets the interval
+hull over all vertices of [lower_i, upper_i] and of the nominal values B_i (so it contains
+B(v_d, theta) = sum_i alpha_i B_i(theta_i) for every v_d in the box and theta in Eq. 22); its
+corners B^b, b = 1..M_B, are enumerated once and combined as a product with each vertex's
+A-corners A_i^a (:func:`product_systems`): Lambda_i^(a,b) = (A_i^a, B^b, B^b R, C), M_i = M_A,i M_B.
+With product weights beta_i^(a,b) = beta_i^a beta^b (beta_i^a the A-weights of vertex i, beta^b
+the B-weights, both summing to 1) the B part's weight is independent of i:
+sum_a beta_i^a beta^b = beta^b. Summing Eq. (30) with the non-negative weights
+alpha_i beta_i^a beta^b (sum 1) gives, because Eq. (30) is affine in (A, B_c, B_e, X) for fixed
+(S_i, H) and U = A H + B_c S_i,
+
+    sum_i alpha_i sum_(a,b) beta_i^a beta^b U_i^(a,b)
+        = A(v_d, theta) H + (sum_b beta^b B^b)(sum_i alpha_i S_i) = A(v_d, theta) H + B(theta) S(v_d),
+
+i.e. Eq. (30) for the frozen system (A(v_d, theta), B(theta)) with X(v_d, theta) =
+sum alpha_i beta_i^a beta^b X_i^(a,b) > 0 and the gain S(v_d) H^-1 = sum_i alpha_i K_i = K(v_d)
+(Eq. 31): B(theta) K(v_d) = sum_i alpha_i sum_b beta^b B^b S_i H^-1. So ||u_e -> z||_inf < gamma at
+every frozen v_d in the box, which is what Lemma 1 claims (a parameter-dependent X certifies frozen
+points; rate bounds are outside the seed's lemma). The price is conservatism (the B hull ignores
+the correlation of B with v_d) and size: M_i = M_A M_B.
 """
 
 from __future__ import annotations
 
 import itertools
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Iterable, Optional, Sequence
 
 import numpy as np
@@ -166,6 +193,90 @@ def uncertainty_vertices(A: np.ndarray, B: np.ndarray, elements: Sequence[Uncert
     return out
 
 
+# --------------------------------------------------------------------------- common input set
+@dataclass(frozen=True)
+class CommonInputSet:
+    """Input-matrix corners B^b (b = 1..M_B) shared by all scheduling vertices (module docstring).
+
+    ``corners`` (M_B, n, m); ``elements`` the hull intervals of :func:`input_hull` (``nominal`` =
+    mean of the vertex nominals); ``nominal_lo``/``nominal_hi`` (n, m) the elementwise min/max of
+    the vertex nominal B_i (the set that remains when the identified intervals shrink to zero);
+    ``method`` how the corners were generated (``box`` = all corners of the hull, else the
+    reduction of :mod:`lpv_sysid.ident.uncertainty`).
+    """
+
+    corners: np.ndarray
+    elements: tuple = ()
+    nominal_lo: Optional[np.ndarray] = None
+    nominal_hi: Optional[np.ndarray] = None
+    method: str = "box"
+
+    @property
+    def M(self) -> int:
+        return int(np.shape(self.corners)[0])
+
+    def shrunk(self, rho: float) -> "CommonInputSet":
+        """Corners with the identified interval widths scaled by rho about the nominal hull
+        (remedy 3 of seed 0 Sec. VI): B^b -> c^b + rho (B^b - c^b), c^b = B^b clipped into
+        [nominal_lo, nominal_hi]; for box corners this is exactly the hull of the shrunk intervals."""
+        corners = np.asarray(self.corners, dtype=float)
+        lo = corners.min(axis=0) if self.nominal_lo is None else self.nominal_lo
+        hi = corners.max(axis=0) if self.nominal_hi is None else self.nominal_hi
+        c = np.clip(corners, lo, hi)
+        return replace(self, corners=c + rho * (corners - c))
+
+
+def input_hull(B: np.ndarray, elements: Sequence[Sequence[UncertainElement]]
+               ) -> tuple[np.ndarray, list[UncertainElement], np.ndarray, np.ndarray]:
+    """Interval hull over all scheduling vertices of the input matrix (module docstring).
+
+    ``B`` (N, n, m) nominal vertex input matrices, ``elements[i]`` the uncertain elements of vertex
+    i (the B ones are used). For every B element that has a non-degenerate interval at some vertex
+    or whose nominal value differs between vertices, the hull is
+    ``[min_i min(lower_i, B_i), max_i max(upper_i, B_i)]`` (a vertex without an interval for that
+    element contributes its nominal value). Returns (base B (n, m) -- identical-across-vertices
+    elements as they are, hull elements at their mean nominal --, hull elements in row-major
+    order, nominal_lo, nominal_hi).
+    """
+    B = np.asarray(B, dtype=float)
+    if B.ndim != 3 or len(elements) != B.shape[0]:
+        raise ConfigError(f"input_hull: need B (N, n, m) and one element list per vertex, got {B.shape} "
+                          f"and {len(elements)} lists")
+    lo = B.min(axis=0)
+    hi = B.max(axis=0)
+    nom_lo, nom_hi = lo.copy(), hi.copy()
+    for i, els in enumerate(elements):
+        for el in els:
+            if el.matrix != "B":
+                continue
+            if not (0 <= el.row < B.shape[1] and 0 <= el.col < B.shape[2]):
+                raise ConfigError(f"uncertain element B[{el.row},{el.col}] outside shape {B.shape[1:]} "
+                                  f"(vertex {i})")
+            lo[el.row, el.col] = min(lo[el.row, el.col], el.lower)
+            hi[el.row, el.col] = max(hi[el.row, el.col], el.upper)
+    base = B[0].copy()
+    mean = B.mean(axis=0)
+    hull = []
+    for r, c in zip(*np.nonzero(hi > lo)):
+        base[r, c] = mean[r, c]
+        hull.append(UncertainElement("B", int(r), int(c), float(lo[r, c]), float(hi[r, c]), float(mean[r, c])))
+    return base, hull, nom_lo, nom_hi
+
+
+def input_corners(base_B: np.ndarray, hull: Sequence[UncertainElement],
+                  max_corners: int = MAX_CORNERS_DEFAULT) -> np.ndarray:
+    """All 2**p corners B^b of the hull box (order of :func:`uncertainty_vertices`), (M_B, n, m)."""
+    base_B = np.asarray(base_B, dtype=float)
+    n = base_B.shape[0]
+    return np.array([b for _, b in uncertainty_vertices(np.zeros((n, n)), base_B, hull, max_corners)])
+
+
+def product_systems(a_corners: Sequence[Sequence[np.ndarray]], common: CommonInputSet) -> list:
+    """Lambda_i^(a,b) = (A_i^a, B^b), flattened as j = a * M_B + b (A slowest), module docstring."""
+    return [[(np.asarray(Aa, dtype=float), np.asarray(Bb, dtype=float)) for Aa in lst for Bb in common.corners]
+            for lst in a_corners]
+
+
 # --------------------------------------------------------------------------- the polytope
 @dataclass
 class PolytopicModel:
@@ -187,6 +298,9 @@ class PolytopicModel:
     state_names: tuple = ()
     input_names: tuple = ()
     scheduling_names: tuple = ()
+    #: set when the input matrices of ``systems`` are the common corners B^b in product order
+    #: (j = a * M_B + b, see :func:`product_systems`); None = per-vertex B_i^j (vertices only).
+    common_input: Optional[CommonInputSet] = None
 
     def __post_init__(self) -> None:
         self.vmin, self.vmax = _check_box(self.vmin, self.vmax)
@@ -223,6 +337,15 @@ class PolytopicModel:
                                       f"!= ({n},{n}), ({n},{m})")
                 if not (np.all(np.isfinite(Aj)) and np.all(np.isfinite(Bj))):
                     raise ConfigError(f"systems[{i}][{j}] contains NaN/inf")
+        if self.common_input is not None:
+            MB = self.common_input.M
+            if np.shape(self.common_input.corners)[1:] != (n, m) or MB == 0:
+                raise ConfigError(f"common_input.corners must have shape (M_B, {n}, {m}), "
+                                  f"got {np.shape(self.common_input.corners)}")
+            bad = [i for i, lst in enumerate(self.systems) if len(lst) % MB]
+            if bad:
+                raise ConfigError(f"common_input: systems of vertices {bad} are not a product with the "
+                                  f"M_B = {MB} input corners")
         if self.ts is not None and not (np.isfinite(self.ts) and self.ts > 0):
             raise ConfigError(f"sample time must be > 0, got {self.ts!r}")
 
@@ -240,6 +363,16 @@ class PolytopicModel:
         return self.B.shape[2]
 
     @property
+    def input_structure(self) -> dict:
+        """{"B": "common" | "per_vertex", "M": [M_i], "M_A": [M_A,i], "M_B": M_B} (certificate entry)."""
+        M = [len(lst) for lst in self.systems]
+        if self.common_input is None:
+            return {"B": "per_vertex", "M": M, "M_A": M, "M_B": 1}
+        MB = self.common_input.M
+        return {"B": "common", "M": M, "M_A": [k // MB for k in M], "M_B": MB,
+                "B_method": self.common_input.method}
+
+    @property
     def vertices(self) -> np.ndarray:
         return box_vertices(self.vmin, self.vmax)
 
@@ -253,6 +386,32 @@ class PolytopicModel:
             raise ConfigError(f"need one list of uncertain elements per vertex ({A.shape[0]}), got {len(elements)}")
         systems = [uncertainty_vertices(A[i], B[i], elements[i], max_corners) for i in range(A.shape[0])]
         return cls(vmin=vmin, vmax=vmax, A=A, B=B, x0=x0, u0=u0, systems=systems, **kw)
+
+    @classmethod
+    def from_common_input(cls, vmin, vmax, A, B, x0, u0, elements: Sequence[Sequence[UncertainElement]],
+                          max_corners: int = MAX_CORNERS_DEFAULT, **kw) -> "PolytopicModel":
+        """Eq. (23) with a common input set: per-vertex A corners (the A elements of
+        ``elements[i]``) times the corners of the B hull (:func:`input_hull`), module docstring."""
+        A = np.asarray(A, dtype=float)
+        B = np.asarray(B, dtype=float)
+        if len(elements) != A.shape[0]:
+            raise ConfigError(f"need one list of uncertain elements per vertex ({A.shape[0]}), got {len(elements)}")
+        base, hull, nlo, nhi = input_hull(B, elements)
+        common = CommonInputSet(input_corners(base, hull, max_corners), tuple(hull), nlo, nhi, "box")
+        a_corners = [[a for a, _ in uncertainty_vertices(A[i], B[i], [e for e in elements[i] if e.matrix == "A"],
+                                                         max(1, max_corners // common.M))]
+                     for i in range(A.shape[0])]
+        return cls(vmin=vmin, vmax=vmax, A=A, B=B, x0=x0, u0=u0, systems=product_systems(a_corners, common),
+                   common_input=common, **kw)
+
+    @classmethod
+    def from_vertex_systems(cls, vmin, vmax, uncertain_vertices: Sequence, x0, u0, **kw) -> "PolytopicModel":
+        """Build from per-vertex objects with ``A``, ``B`` and ``systems`` (the explicit list of
+        Eq. (23) systems, e.g. :class:`lpv_sysid.ident.uncertainty.UncertainVertex`)."""
+        return cls(vmin=vmin, vmax=vmax, A=np.array([uv.A for uv in uncertain_vertices]),
+                   B=np.array([uv.B for uv in uncertain_vertices]), x0=x0, u0=u0,
+                   systems=[[(np.asarray(a), np.asarray(b)) for a, b in uv.systems] for uv in uncertain_vertices],
+                   **kw)
 
     # interpolation (seed 0 Eq. 21, Eq. 31, Eq. 34)
     def weights(self, v_d) -> tuple[np.ndarray, bool]:
@@ -325,3 +484,23 @@ def iter_systems(model: PolytopicModel) -> Iterable[tuple[int, int, np.ndarray, 
     for i, lst in enumerate(model.systems):
         for j, (Aj, Bj) in enumerate(lst):
             yield i, j, np.asarray(Aj, dtype=float), np.asarray(Bj, dtype=float)
+
+
+def common_input_deviation(model: PolytopicModel, M_B: int) -> tuple[float, float]:
+    """How far ``model.systems`` is from the common-input product structure with M_B corners.
+
+    Returns (dB, dA): dB = max |B_i^(a,b) - B_0^(0,b)| over all i, a, b (B^b identical across
+    scheduling vertices and A-corners), dA = max |A_i^(a,b) - A_i^(a,0)| (A part independent of b).
+    inf when a vertex's M_i is not a multiple of M_B. Pure numpy, independent of
+    :class:`CommonInputSet` (used by the verifier).
+    """
+    if M_B < 1 or any(len(lst) % M_B for lst in model.systems):
+        return float("inf"), float("inf")
+    ref = [np.asarray(model.systems[0][b][1], dtype=float) for b in range(M_B)]
+    dB = dA = 0.0
+    for lst in model.systems:
+        for j, (Aj, Bj) in enumerate(lst):
+            a, b = divmod(j, M_B)
+            dB = max(dB, float(np.max(np.abs(np.asarray(Bj, dtype=float) - ref[b]))))
+            dA = max(dA, float(np.max(np.abs(np.asarray(Aj, dtype=float) - np.asarray(lst[a * M_B][0], dtype=float)))))
+    return dB, dA

@@ -14,19 +14,12 @@ from rclpy.qos import (QoSDurabilityPolicy, QoSHistoryPolicy, QoSProfile, QoSRel
                        qos_profile_sensor_data)
 
 from lpv_sysid.errors import LpvSysidError
+from lpv_sysid.io.messages import TYPES
 
 NAMESPACE = "lpv_sysid"
 
 # ARCHITECTURE.md Sec. 4 / DESIGN.md: topic (relative to /lpv_sysid) -> type
-TOPIC_TYPES = {
-    "velocity_reference": "geometry_msgs/msg/TwistStamped",
-    "excitation": "sensor_msgs/msg/JointState",
-    "state": "nav_msgs/msg/Odometry",
-    "rotor_speeds": "sensor_msgs/msg/JointState",
-    "imu": "sensor_msgs/msg/Imu",
-    "actuator_command": "sensor_msgs/msg/JointState",
-    "status": "diagnostic_msgs/msg/DiagnosticArray",
-}
+TOPIC_TYPES = dict(TYPES)
 # high-rate measurement streams: best effort (a late sample is worthless); the rest
 # (references, excitation, commands, status) reliable.
 SENSOR_TOPICS = frozenset({"state", "rotor_speeds", "imu"})
@@ -72,10 +65,6 @@ def declare(node, table) -> dict:
             p = node.get_parameter_or(name, Parameter(name, value=[]))
         values[name] = p.value
     return values
-
-
-def stamp_seconds(node) -> float:
-    return node.get_clock().now().nanoseconds * 1e-9
 
 
 def run(node_factory, args=None, name: str = NAMESPACE) -> int:

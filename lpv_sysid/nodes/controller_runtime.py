@@ -118,28 +118,28 @@ class ControllerRuntime:
     def on_message(self, topic: str, msg, t_now: float) -> None:
         """A message of ``topic`` (one of :data:`INPUT_TOPICS`) received at ``t_now`` [s]."""
         try:
-            if topic == "state":
-                s = M.state_from_odometry(msg)
-                t, values = s.t, np.concatenate([s.euler[:2], s.v_body, s.omega])
-                self.x8 = values
-            elif topic == "rotor_speeds":
-                t, values = M.rotor_speeds_from_joint_state(msg)
-                self.omega = values
-            elif topic == "velocity_reference":
-                t, v, r = M.reference_from_twist(msg)
-                values = np.append(v, r)
-                self.v_d = v
-            elif topic == "excitation":
-                t, values = M.excitation_from_joint_state(msg)
-                self.u_e = values
-            else:
-                raise ConfigError(f"lpv_controller: unknown input topic {topic!r}")
+            t, values = parse_input(topic, msg)
         except M.MessageError as exc:
-            if self.supervisor.armed:
-                self.supervisor.abort(t_now, NON_FINITE, f"{topic}: {exc}")
-            else:
-                LOG.warning("%s rejected before start: %s", topic, exc)
+            self.on_bad_message(topic, exc, t_now)
             return
+        self.on_sample(topic, t, values, t_now)
+
+    def on_bad_message(self, topic: str, exc: Exception, t_now: float) -> None:
+        if self.supervisor.armed:
+            self.supervisor.abort(t_now, NON_FINITE, f"{topic}: {exc}")
+        else:
+            LOG.warning("%s rejected before start: %s", topic, exc)
+
+    def on_sample(self, topic: str, t: float, values: np.ndarray, t_now: float) -> None:
+        """Parsed input (see :func:`parse_input`): header time ``t`` [s], ``values``."""
+        if topic == "state":
+            self.x8 = values
+        elif topic == "rotor_speeds":
+            self.omega = values
+        elif topic == "velocity_reference":
+            self.v_d = values[:3]
+        else:
+            self.u_e = values
         self.supervisor.on_input(topic, t, values, t_now)
 
     def start(self, t_now: float) -> tuple[bool, str]:
@@ -179,9 +179,11 @@ class ControllerRuntime:
             else:
                 for k in self.flags:
                     self.flags[k] += bool(info[k])
-                sup.on_bound_flag(t_now, info["bound_exceeded"],
-                                  f"L2 gain estimate {self.law.gain():.4g} > gamma {self.law.gamma:g}"
-                                  f" x margin {self.settings.monitor_margin:g}")
+                if info["bound_exceeded"]:
+                    sup.on_bound_flag(t_now, True,
+                                      f"L2 gain estimate {self.law.gain():.4g} > gamma "
+                                      f"{self.law.gamma:g} x margin "
+                                      f"{self.settings.monitor_margin:g}")
                 if not sup.aborted:
                     self.commands += 1
                     out.append(("actuator_command",
@@ -211,6 +213,42 @@ class ControllerRuntime:
         return M.diagnostic_array(self.f, round(t_now * 1e9), [st])
 
 
+def parse_input(topic: str, msg) -> tuple[float, np.ndarray]:
+    """``(header time [s], values)`` of one input message; MessageError when malformed.
+
+    state: ``[phi, theta, u, v, w, p, q, r]`` (FRD); rotor_speeds: Omega (4);
+    velocity_reference: ``[u_d, v_d, w_d, r_d]`` (FRD); excitation: u_e (4).
+    """
+    if topic == "state":
+        s = M.state_from_odometry(msg)
+        return s.t, np.concatenate([s.euler[:2], s.v_body, s.omega])
+    if topic == "rotor_speeds":
+        return M.rotor_speeds_from_joint_state(msg)
+    if topic == "velocity_reference":
+        t, v, r = M.reference_from_twist(msg)
+        return t, np.append(v, r)
+    if topic == "excitation":
+        return M.excitation_from_joint_state(msg)
+    raise ConfigError(f"lpv_controller: unknown input topic {topic!r}")
+
+
+def parse_inputs(topic: str, msgs: list) -> tuple[np.ndarray, np.ndarray]:
+    """Vectorised :func:`parse_input` for a whole recording (replay); MessageError names
+    the first malformed message."""
+    if topic == "state":
+        s = M.states_from_odometry(msgs)
+        return s.t, np.column_stack([s.euler[:, :2], s.v_body, s.omega])
+    if topic == "rotor_speeds":
+        return M.channels_from_joint_states(msgs, M.ROTOR_NAMES, field="velocity")
+    if topic == "excitation":
+        return M.channels_from_joint_states(msgs, M.EXCITATION_NAMES, field="position")
+    t = np.empty(len(msgs))
+    out = np.empty((len(msgs), 4))
+    for i, m in enumerate(msgs):
+        t[i], out[i] = parse_input(topic, m)
+    return t, out
+
+
 def load_settings(path: str, node_name: str = "lpv_controller") -> dict:
     """``ros__parameters`` of ``node_name`` from a ROS parameter file (for replay)."""
     import yaml
@@ -234,4 +272,4 @@ def load_settings(path: str, node_name: str = "lpv_controller") -> dict:
 
 
 __all__ = ["ControllerRuntime", "ControllerSettings", "INPUT_TOPICS", "OUTPUT_TOPICS",
-           "load_settings"]
+           "load_settings", "parse_input", "parse_inputs"]

@@ -9,6 +9,14 @@ When commands stop for ``offboard.input_timeout`` s (e.g. the controller aborted
 the ``abort`` service, or on shutdown, the core hands control back to PX4
 (``offboard.handback_mode``). Services ``start`` / ``abort`` (std_srvs/Trigger).
 
+``transport: mavros`` (vehicles already running MAVROS): no MAVLink link; the shell wraps
+:class:`lpv_sysid.mavlink.mavros.MavrosCore` instead, republishes
+``/mavros/local_position/odom`` and ``/mavros/imu/data`` (best effort) on ``state`` / ``imu``
+and streams ``velocity_reference`` rotated to local ENU on
+``/mavros/setpoint_velocity/cmd_vel`` (reliable). Mode switching and arming need
+mavros_msgs and are left to the operator; a stop ends the stream (PX4's offboard-loss
+failsafe takes over). See docs/px4_transport.md, "MAVROS mode".
+
     ros2 run lpv_sysid mavlink_bridge_node --ros-args \
         --params-file config/mavlink_bridge_node.yaml -p link.url:=udpin:0.0.0.0:14540
 """
@@ -23,8 +31,9 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import Imu, JointState
 from std_srvs.srv import Trigger
 
-from lpv_sysid.errors import LpvSysidError
+from lpv_sysid.errors import ConfigError, LpvSysidError
 from lpv_sysid.io import messages as M
+from lpv_sysid.mavlink import mavros as MR
 from lpv_sysid.mavlink.bridge import BridgeConfig, BridgeCore
 from lpv_sysid.mavlink.telemetry import ImuSample, RotorSample, StateSample
 from lpv_sysid.nodes import _common as C
@@ -33,6 +42,14 @@ NODE_NAME = "mavlink_bridge"
 S = Parameter.Type.STRING
 
 PARAMETERS = [
+    ("transport", "mavlink", C.typed(S, "mavlink (own MAVLink link) | mavros (MAVROS topics)")),
+    ("mavros.namespace", "/mavros", C.typed(S, "MAVROS node namespace (transport mavros)")),
+    ("mavros.odom_frame_id", "map", C.typed(S, "frame_id of MAVROS local_position/odom")),
+    ("mavros.base_frame_id", "base_link", C.typed(S, "MAVROS body frame (odom child, imu)")),
+    ("mavros.prestream_timeout", 30.0, C.double("zero-velocity stream without a reference "
+                                                "-> stop [s]", 1.0001, 3600.0)),
+    ("mavros.use_diagnostics", True, C.typed(Parameter.Type.BOOL,
+                                             "read the PX4 mode from /diagnostics (read-only)")),
     ("link.url", "udpin:127.0.0.1:14540", C.typed(S, "pymavlink connection string")),
     ("link.baud", 921600, C.integer("serial baud rate (serial URLs only)", 1200, 12000000)),
     ("link.source_system", 1, C.integer("our MAVLink system id", 1, 255)),
@@ -69,27 +86,54 @@ def bridge_config(p: dict) -> BridgeConfig:
                                    "telemetry_max_age": p["telemetry_max_age"]})
 
 
+def mavros_config(p: dict) -> MR.MavrosConfig:
+    d = {k.split(".", 1)[1]: v for k, v in p.items() if k.startswith("mavros.")}
+    return MR.MavrosConfig.from_dict({**d, "setpoint_rate_hz": p["offboard.setpoint_rate_hz"],
+                                      "input_timeout": p["offboard.input_timeout"],
+                                      "telemetry_max_age": p["telemetry_max_age"],
+                                      "auto_start": p["auto_start"], "command": p["command"]})
+
+
 class MavlinkBridgeNode(Node):
     def __init__(self, **kwargs):
         kwargs.setdefault("namespace", C.NAMESPACE)   # a __ns remap still wins
         super().__init__(NODE_NAME, **kwargs)
         p = C.declare(self, PARAMETERS)
-        self.core = BridgeCore(bridge_config(p))
+        if p["transport"] not in ("mavlink", "mavros"):
+            raise ConfigError(f"transport must be 'mavlink' or 'mavros', got {p['transport']!r}")
+        self.mavros = p["transport"] == "mavros"
+        self.core = MR.MavrosCore(mavros_config(p)) if self.mavros else BridgeCore(bridge_config(p))
         self.f = M.MsgFactory.rclpy()
         self.pub_state = self.create_publisher(Odometry, "state", C.qos_for("state"))
         self.pub_imu = self.create_publisher(Imu, "imu", C.qos_for("imu"))
-        self.pub_rot = self.create_publisher(JointState, "rotor_speeds", C.qos_for("rotor_speeds"))
         self.pub_status = self.create_publisher(DiagnosticArray, "status", C.qos_for("status"))
         self.create_subscription(TwistStamped, "velocity_reference", self.on_reference,
                                  C.qos_for("velocity_reference"))
-        self.create_subscription(JointState, "actuator_command", self.on_command,
-                                 C.qos_for("actuator_command"))
         self.create_service(Trigger, "~/start", self.on_start)
         self.create_service(Trigger, "~/abort", self.on_abort)
-        self.core.open(self.now())
-        self.create_timer(1.0 / p["poll_rate_hz"], self.on_poll)
+        if self.mavros:
+            cfg = self.core.config
+            self.pub_cmd = self.create_publisher(TwistStamped, cfg.topic("cmd_vel"), C.QOS_RELIABLE)
+            self.create_subscription(Odometry, cfg.topic("odom"), self.on_mavros_odom, C.QOS_SENSOR)
+            self.create_subscription(Imu, cfg.topic("imu"), self.on_mavros_imu, C.QOS_SENSOR)
+            if cfg.use_diagnostics:
+                self.create_subscription(DiagnosticArray, MR.DIAGNOSTICS_TOPIC,
+                                         self.on_mavros_diagnostics, C.QOS_SENSOR)
+            # twice the setpoint rate: the core sends when due; stale input is seen within
+            # half a setpoint period
+            self.create_timer(0.5 / cfg.setpoint_rate_hz,
+                              lambda: self.publish_mavros(self.core.step(self.now())))
+            self.get_logger().info(f"MAVROS {cfg.namespace}: setpoints on {cfg.topic('cmd_vel')}; "
+                                   f"mode control: {MR.MODE_CONTROL}")
+        else:
+            self.pub_rot = self.create_publisher(JointState, "rotor_speeds",
+                                                 C.qos_for("rotor_speeds"))
+            self.create_subscription(JointState, "actuator_command", self.on_command,
+                                     C.qos_for("actuator_command"))
+            self.core.open(self.now())
+            self.create_timer(1.0 / p["poll_rate_hz"], self.on_poll)
+            self.get_logger().info(f"MAVLink {p['link.url']}, command {p['command']}")
         self.create_timer(1.0 / p["status_rate_hz"], lambda: self.publish_status([]))
-        self.get_logger().info(f"MAVLink {p['link.url']}, command {p['command']}")
 
     def now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
@@ -102,7 +146,45 @@ class MavlinkBridgeNode(Node):
             self.get_logger().warning(f"velocity_reference rejected: {exc}",
                                       throttle_duration_sec=1.0)
             return
-        self.core.on_velocity_reference(self.now(), v, r, stamp=t)
+        out = self.core.on_velocity_reference(self.now(), v, r, stamp=t)
+        if self.mavros:
+            self.publish_mavros(out)
+
+    # -- MAVROS mode (transport: mavros) ----------------------------------------------------
+    def on_mavros_odom(self, msg):
+        cfg = self.core.config
+        try:
+            s = M.state_from_odometry(msg, frame_id=cfg.odom_frame_id,
+                                      child_frame_id=cfg.base_frame_id)
+        except LpvSysidError as exc:
+            return self.core.reject(self.now(), f"{cfg.topic('odom')} rejected: {exc}")
+        s = self.core.on_odometry(self.now(), s)
+        if s is not None:
+            self.pub_state.publish(M.odometry_from_state(self.f, s.stamp_ns, s.pos_ned, s.euler,
+                                                         s.v_body, s.omega))
+
+    def on_mavros_imu(self, msg):
+        try:
+            s = M.imu_from_msg(msg, frame_id=self.core.config.base_frame_id)
+        except LpvSysidError as exc:
+            return self.core.reject(self.now(), f"{self.core.config.topic('imu')} rejected: {exc}")
+        s = self.core.on_imu(self.now(), s)
+        if s is not None:
+            self.pub_imu.publish(M.imu_msg(self.f, s.stamp_ns, s.specific_force, s.omega, s.euler))
+
+    def on_mavros_diagnostics(self, msg):
+        try:
+            _, statuses = M.status_from_diagnostic_array(msg)
+        except LpvSysidError:
+            return                       # other nodes' diagnostics are not ours to judge
+        self.core.on_diagnostics(self.now(), statuses)
+
+    def publish_mavros(self, out):
+        for sp in out.setpoints:
+            self.pub_cmd.publish(MR.cmd_vel_msg(self.f, round(sp.t * 1e9), sp,
+                                                self.core.config.odom_frame_id))
+        if out.events:
+            self.publish_status(out.events)
 
     def on_command(self, msg):
         try:

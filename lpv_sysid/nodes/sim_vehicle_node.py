@@ -82,8 +82,8 @@ class SimVehicleNode(Node):
         if p["mode"] not in MODES:
             raise LpvSysidError(f"parameter 'mode' must be one of {MODES}, got {p['mode']!r}")
         self.p = p
-        model = Quadrotor(QuadrotorParams.from_dict(_yaml_mapping(p["vehicle_file"], "vehicle_file"))
-                          if p["vehicle_file"] else None)
+        vehicle = _yaml_mapping(p["vehicle_file"], "vehicle_file")
+        model = Quadrotor(QuadrotorParams.from_dict(vehicle) if vehicle else None)
         sensors = SensorConfig(physics_hz=p["physics_hz"], state_hz=p["state_hz"],
                                imu_hz=p["imu_hz"], rotor_hz=p["rotor_hz"], seed=p["seed"])
         gains = BaselineGains.from_dict(_yaml_mapping(p["baseline_file"], "baseline_file"))

@@ -53,6 +53,7 @@ class RunData:
     found: dict[str, Path] = field(default_factory=dict)
     missing: dict[str, tuple[str, ...]] = field(default_factory=dict)
     problems: dict[str, str] = field(default_factory=dict)
+    derived: dict[str, str] = field(default_factory=dict)    # input -> how it was obtained instead
     trims: Optional[Any] = None
     models: Optional[dict] = None
     validation: Optional[dict] = None
@@ -93,8 +94,27 @@ def _find(run_dir: Path, key: str) -> Optional[Path]:
     return None
 
 
-def load_run(run_dir: str | Path) -> RunData:
-    """Collect the artefacts of ``run_dir``. Raises ConfigError only if the directory is absent."""
+def verification_from_files(gains: Path, models: Path, n_random: int = 20, seed: int = 0) -> dict:
+    """Run the independent verifier (:func:`lpv_sysid.synthesis.verify.verify_files`: frozen-point
+    H-inf norms, closed-loop poles, Eq. 30 re-evaluated, file consistency) and return its rows
+    in the layout of a ``verification.yaml``: {passed, source, checks: [{check, where, value,
+    limit, ok, note}]}."""
+    from lpv_sysid.synthesis.verify import verify_files
+
+    rep = verify_files(gains, models, n_random=n_random, seed=seed)
+    return {"passed": bool(rep.passed),
+            "source": f"computed by the report: synthesis.verify.verify_files({gains.name}, {models.name}, "
+                      f"n_random={n_random}, seed={seed})",
+            "checks": [{"check": r.check, "where": r.where, "value": float(r.value), "limit": float(r.limit),
+                        "ok": bool(r.ok), "note": r.note} for r in rep.rows]}
+
+
+def load_run(run_dir: str | Path, verify: bool = True) -> RunData:
+    """Collect the artefacts of ``run_dir``. Raises ConfigError only if the directory is absent.
+
+    With ``verify`` and no ``verification.yaml``, but both ``gains.yaml`` and
+    ``vertex_models.yaml`` readable, the verification is computed (:func:`verification_from_files`).
+    """
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise ConfigError(f"--run: {run_dir} is not a directory")
@@ -114,6 +134,20 @@ def load_run(run_dir: str | Path) -> RunData:
             log.warning("%s", exc)
             continue
         setattr(data, key, value)
+    if (verify and data.verification is None and "verification" not in data.problems
+            and data.gains is not None and data.models is not None):
+        try:
+            data.verification = verification_from_files(data.found["gains"], data.found["models"])
+            data.derived["verification"] = "computed: synthesis.verify on gains.yaml + vertex_models.yaml"
+            data.missing.pop("verification", None)
+        except Exception as exc:  # noqa: BLE001 - any verifier failure is reported, not fatal
+            data.problems["verification"] = f"verification of gains.yaml against vertex_models.yaml failed: {exc}"
+            data.missing.pop("verification", None)
+    meta_val = (data.models.get("meta") or {}).get("validation") if isinstance(data.models, dict) else None
+    if data.validation is None and "validation" not in data.problems and isinstance(meta_val, dict):
+        data.validation = meta_val
+        data.derived["validation"] = "from vertex_models.yaml meta.validation"
+        data.missing.pop("validation", None)
     for name in PHASE2_SERIES:
         path = run_dir / "phase2" / f"{name}.npz"
         if path.is_file():

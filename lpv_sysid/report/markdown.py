@@ -10,6 +10,7 @@ exists; otherwise the report says which file is missing.
 from __future__ import annotations
 
 import logging
+import shutil
 from pathlib import Path
 from typing import Any, Iterable, Optional, Sequence
 
@@ -108,7 +109,7 @@ class _Report:
         """Run one section; a malformed (but parseable) file ends that section only."""
         try:
             fn()
-        except (ConfigError, KeyError, TypeError, ValueError, IndexError) as exc:
+        except (ConfigError, KeyError, TypeError, ValueError, IndexError, OSError) as exc:
             log.warning("%s: %s", label, exc)
             self.p(f"**Could not build this section:** {exc}")
 
@@ -120,6 +121,8 @@ def _inputs_section(r: _Report) -> None:
     for key, label in SECTION_INPUTS.items():
         if key in d.problems:
             rows.append([label, "UNREADABLE", d.problems[key]])
+        elif key in d.derived:
+            rows.append([label, "derived", d.derived[key]])
         elif key in d.found:
             rows.append([label, "found", f"`{d.found[key].relative_to(d.run_dir)}`"])
         else:
@@ -131,7 +134,8 @@ def _inputs_section(r: _Report) -> None:
         elif key in d.problems:
             rows.append([f"phase-2 {name} time histories", "UNREADABLE", d.problems[key]])
     r.p(md_table(["input", "status", "file"], rows))
-    absent = [SECTION_INPUTS[k] for k in SECTION_INPUTS if k not in d.found or k in d.problems]
+    absent = [SECTION_INPUTS[k] for k in SECTION_INPUTS
+              if (k not in d.found and k not in d.derived) or k in d.problems]
     if absent:
         r.p("Missing or unreadable inputs: " + "; ".join(absent) + ".")
     else:
@@ -177,18 +181,22 @@ def _ident_section(r: _Report) -> None:
         r.guard("Table 2", table2)
 
     r.h(2, "Validation: TIC and NRMSE (seed 0 Table 3, Eqs. 24-25)")
-    meta_val = ((d.models or {}).get("meta") or {}).get("validation") if isinstance(d.models, dict) else None
     if d.validation is not None:
         def table3() -> None:
             header, rows = validation_table(d.validation)
+            if "validation" in d.derived:
+                r.p(f"Independent validation maneuver `{d.validation.get('maneuver', '?')}` "
+                    f"({d.derived['validation']}):")
             r.p(md_table(header, rows, fmt="{:.3f}"))
+            for name in ("identification.png", "vertex_models_validation.png"):   # identify --plot
+                fig4 = d.run_dir / name
+                if fig4.is_file():
+                    dst = r.fig_dir / "validation.png"
+                    shutil.copyfile(fig4, dst)
+                    r.fig(dst, "Independent validation time histories, model vs flight-data state "
+                               f"derivatives (Fig. 4; from `{name}`)")
+                    break
         r.guard("Table 3", table3)
-    elif isinstance(meta_val, dict):
-        def table3m() -> None:
-            header, rows = validation_table(meta_val)
-            r.p(f"Independent validation maneuver `{meta_val.get('maneuver', '?')}` (from `vertex_models.yaml` meta):")
-            r.p(md_table(header, rows, fmt="{:.3f}"))
-        r.guard("Table 3", table3m)
     else:
         r.missing("validation")
         if d.models is not None:
@@ -303,6 +311,16 @@ def _synthesis_section(r: _Report) -> None:
     r.guard("synthesis", body)
 
 
+def _failing_and_worst(checks: list[dict]) -> list[dict]:
+    """Failing rows, then per check kind the passing row with the largest value."""
+    out = [c for c in checks if c.get("ok") is False]
+    for kind in dict.fromkeys(c.get("check") for c in checks):
+        rows = [c for c in checks if c.get("check") == kind and c.get("ok") is not False]
+        if rows:
+            out.append(max(rows, key=lambda c: float(c.get("value") or 0.0)))
+    return out
+
+
 def _short(v: Any) -> Any:
     if isinstance(v, list):
         return "[" + ", ".join(f"{float(x):g}" if isinstance(x, (int, float)) else str(x) for x in v) + "]"
@@ -320,15 +338,28 @@ def _verification_section(r: _Report) -> None:
         v = d.verification
         if isinstance(v, dict):
             ok = _get(v, "passed", "ok", "pass")
-            if ok is not None:
-                r.p(f"Overall: **{'PASSED' if ok else 'FAILED'}**")
             checks = _get(v, "checks", "results")
+            if ok is not None:
+                n_fail = sum(1 for c in checks if isinstance(c, dict) and c.get("ok") is False) \
+                    if isinstance(checks, list) else None
+                r.p(f"Overall: **{'PASSED' if ok else 'FAILED'}**"
+                    + (f" ({len(checks)} checks, {n_fail} failed)" if n_fail is not None else ""))
+            if v.get("source"):
+                r.p(f"Source: {v['source']}.")
+            elif "verification" in d.derived:
+                r.p(f"Source: {d.derived['verification']}.")
             if isinstance(checks, list) and checks and all(isinstance(c, dict) for c in checks):
                 keys: list[str] = []
                 for c in checks:
                     keys += [k for k in c if k not in keys]
-                r.p(md_table(keys, [[_short(c.get(k)) for k in keys] for c in checks], fmt="{:.4g}"))
-                rest = {k: x for k, x in v.items() if k not in ("checks", "results")}
+                canon = ("check", "where", "value", "limit", "ok", "note")
+                keys = [k for k in canon if k in keys] + [k for k in keys if k not in canon]
+                shown = checks
+                if len(checks) > 20 and "check" in keys:
+                    shown = _failing_and_worst(checks)
+                    r.p("Failing checks, then the worst passing row of each check:")
+                r.p(md_table(keys, [[_short(c.get(k)) for k in keys] for c in shown], fmt="{:.4g}"))
+                rest = {k: x for k, x in v.items() if k not in ("checks", "results", "source", "passed")}
                 if rest:
                     r.p(_kv_table(rest))
             else:
@@ -361,10 +392,36 @@ def _phase2_section(r: _Report) -> None:
                 within = None if gain is None or gamma is None else bool(float(gain) <= float(gamma))
                 note = e.get("safety_event") or ("completed" if e.get("completed", True) else "stopped")
                 rows.append([label, e.get("z_norm"), e.get("ue_norm"), gain, within, note])
+                sp = e.get("superposition")
+                if isinstance(sp, dict) and sp.get("gain") is not None:
+                    g = float(sp["gain"])
+                    rows.append([f"{label}, excitation only (superposition)", sp.get("z_norm"), sp.get("ue_norm"),
+                                 g, None if gamma is None else bool(g <= float(gamma)),
+                                 f"{sp.get('duration', 0):.1f} s, reference-only ||z||_2 = "
+                                 f"{float(sp.get('reference_only_z_norm', float('nan'))):.4g}"
+                                 + ("" if sp.get("complete", True) else " (a flight stopped early)")])
             r.p(f"Excitation multiplier kappa = {s.get('kappa')}, design gamma = {gamma} "
                 "(bound on ||z||_2 / ||kappa u_e||_2, Eq. 29).")
             r.p(md_table(["simulation", "||z||_2", "||kappa u_e||_2", "achieved gain", "<= gamma", "run"],
                          rows, fmt="{:.4g}"))
+            r.p("z = Q^-1 (v - v_d) (Eq. 18). In Eq. (33) the equilibrium moves with v_d through x0' "
+                "(Eq. 34), so z there is the response to u_e alone, which is what Lemma 1 bounds. On the "
+                "nonlinear quadrotor z also contains the lag in following v_d itself (the vehicle must "
+                "accelerate), which the certificate does not cover; a gain above gamma there measures "
+                "reference tracking, not a violated bound. The superposition row (when present) flies the "
+                "nonlinear model twice with identical sensor noise, with and without u_e, and uses the "
+                "difference of the two z: the response to the excitation alone.")
+            details = []
+            for name in ("eq33", "nonlinear"):
+                e = s.get(name)
+                if isinstance(e, dict) and not e.get("skipped"):
+                    for k, v in e.items():
+                        if k not in ("gain", "z_norm", "ue_norm", "within_gamma", "completed", "safety_event",
+                                     "superposition"):
+                            details.append([f"{name}.{k}", _short(v) if not isinstance(v, dict) else
+                                            ", ".join(f"{a}: {b}" for a, b in v.items())])
+            if details:
+                r.p(md_table(["run detail", "value"], details, fmt="{:.4g}"))
             events = s.get("safety_events") or []
             if events:
                 r.p("**Safety events:** " + "; ".join(str(e) for e in events))
@@ -395,8 +452,11 @@ def _phase2_section(r: _Report) -> None:
             rc = s["regressor_correlation"]
             corrs = regressor_correlations_from_summary(rc)
             r.h(3, "Regressor correlation (seed 0 Eq. 6, Fig. 10)")
-            r.p(f"Computed from the {rc.get('source', 'phase-2')} simulation data. Largest |correlation| "
-                "between distinct regressors of each axis:")
+            src = {"eq33": "Eq. (33) LPV closed-loop", "nonlinear": "nonlinear quadrotor"}.get(
+                rc.get("source"), str(rc.get("source", "phase-2")))
+            partial = "" if rc.get("complete_run", True) else " (run stopped early: partial data)"
+            r.p(f"Computed from the {src} simulation data{partial}, {rc.get('n_samples', '?')} samples. "
+                "Largest |correlation| between distinct regressors of each axis:")
             r.p(md_table(["axis", "regressors", "max |corr|", "pair"],
                          [[c.axis, len(c.names), c.max_offdiag(), _worst_pair(c)] for c in corrs],
                          fmt="{:.3f}"))
@@ -432,9 +492,12 @@ def _worst_pair(c: RegressorCorrelation) -> str:
     return f"{c.names[i]} / {c.names[j]}"
 
 
-def write_report(run_dir: str | Path, out_path: Optional[str | Path] = None) -> Path:
-    """Write ``report.md`` (default ``RUN/report/report.md``) and its PNG figures; return its path."""
-    data = load_run(run_dir)
+def write_report(run_dir: str | Path, out_path: Optional[str | Path] = None, verify: bool = True) -> Path:
+    """Write ``report.md`` (default ``RUN/report/report.md``) and its PNG figures; return its path.
+
+    ``verify``: without a ``verification.yaml``, re-run the independent verifier on
+    ``gains.yaml`` + ``vertex_models.yaml`` (about a second)."""
+    data = load_run(run_dir, verify=verify)
     out = Path(out_path) if out_path is not None else data.run_dir / "report" / "report.md"
     if out.suffix.lower() != ".md":
         raise ConfigError(f"--out: {out} must end in .md")

@@ -11,9 +11,13 @@ excitation ``ue_t, ue_a, ue_e, ue_r``, excitation multiplier ``kappa``):
 
 Both report the achieved ``||z||_2 / ||kappa u_e||_2`` (z = Q^-1 (v - v_d), Eq. 18) against the
 design gamma (Eq. 29), tracking (Figs. 8-9) and the correlation of the Eq. (6) regressors
-(Fig. 10). A :class:`SafetySupervisor` stops run (b) -- excitation off, event reported -- when
+(Fig. 10). The safety supervisor of :mod:`lpv_sysid.control.safety` stops run (b) -- excitation off, event reported -- when
 the vehicle leaves the scheduling box (plus a margin), tilts beyond a limit, or its state
-becomes non-finite.
+becomes non-finite; the runtime law's bound monitor flag stops it too.
+
+On the nonlinear vehicle z also holds the lag in following v_d (absent from Eq. 33, where x0'
+moves the equilibrium); :func:`excitation_gain_by_superposition` (``--superposition``) separates
+the excitation response by flying with and without u_e under identical sensor noise.
 
 Outputs in ``--out DIR`` (read by :mod:`lpv_sysid.report`): ``summary.yaml``,
 ``eq33.npz`` / ``nonlinear.npz`` (time histories), PNG figures, and ``bag/`` (rosbag2).
@@ -26,12 +30,12 @@ import logging
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Optional, Protocol, Sequence
+from typing import Any, Callable, Optional, Protocol, Sequence
 
 import numpy as np
 import yaml
 
-from lpv_sysid.errors import ConfigError, LpvSysidError, SafetyError
+from lpv_sysid.errors import BagError, ConfigError, SafetyError
 from lpv_sysid.sim.lpv_closed_loop import (
     VELOCITY_INDEX,
     ClosedLoopConfig,
@@ -39,7 +43,6 @@ from lpv_sysid.sim.lpv_closed_loop import (
     ClosedLoopResult,
     ReferenceSignals,
     l2_norm,
-    linear_lpv_law,
     simulate_eq33,
 )
 
@@ -67,6 +70,7 @@ class Phase2Config:
     run_eq33: bool = True
     run_nonlinear: bool = True
     monitor_margin: float = 1.2        # bound monitor of the runtime law: flag at gain > gamma x margin
+    superposition: bool = False        # also estimate the excitation-only gain on the nonlinear model
 
     def __post_init__(self) -> None:
         if not (isinstance(self.kappa, (int, float)) and math.isfinite(self.kappa) and self.kappa > 0):
@@ -493,6 +497,41 @@ def write_outputs(out_dir: str | Path, gamma: Optional[float], kappa: float,
     return written
 
 
+# --------------------------------------------------------------------------- superposition estimate
+def excitation_gain_by_superposition(make_vehicle: Callable[[], Any], make_law: Callable[[], ControlLaw],
+                                     signals: ReferenceSignals, Q: np.ndarray, vmin: Sequence[float],
+                                     vmax: Sequence[float], kappa: float, box_margin: float = 1.0,
+                                     max_tilt: float = math.radians(60.0)) -> dict:
+    """Excitation-attributable gain on the nonlinear quadrotor.
+
+    On the nonlinear vehicle z = Q^-1 (v - v_d) also contains the lag in following v_d, which
+    Eq. (33) removes through x0' and Lemma 1 does not bound. Two flights with identical sensor
+    noise (fresh vehicles from ``make_vehicle``, same seed, no recording), one with kappa u_e and
+    one with u_e = 0, give z_e = z_excited - z_reference, the response to the excitation
+    (exact for a linear plant, first-order for the nonlinear one); the returned
+    ``gain = ||z_e||_2 / ||kappa u_e||_2`` is comparable with gamma. ``make_law`` must return a
+    fresh law each call (the runtime law has state); pass one without a tripping bound monitor.
+    """
+    quiet = ReferenceSignals(signals.t, signals.v_d, np.zeros_like(signals.u_e))
+    runs = [simulate_nonlinear(make_vehicle(), make_law(), sig, Q, vmin, vmax, kappa=k,
+                               box_margin=box_margin, max_tilt=max_tilt)
+            for sig, k in ((signals, kappa), (quiet, 1.0))]
+    exc, ref = runs
+    n = min(exc.t.size, ref.t.size)
+    t = exc.t[:n]
+    z_e = exc.z[:n] - ref.z[:n]
+    ue_norm = l2_norm(t, exc.ue[:n])
+    out = {"gain": float(l2_norm(t, z_e) / ue_norm) if ue_norm > 0 else None,
+           "z_norm": float(l2_norm(t, z_e)), "ue_norm": float(ue_norm), "duration": float(t[-1] - t[0]),
+           "reference_only_z_norm": float(l2_norm(t, ref.z[:n])),
+           "complete": bool(exc.completed and ref.completed)}
+    events = [f"{name}: {r.safety_event}" for name, r in (("excited", exc), ("reference only", ref))
+              if r.safety_event]
+    if events:
+        out["safety_events"] = events
+    return out
+
+
 # --------------------------------------------------------------------------- the whole run
 @dataclass
 class Phase2Problem:
@@ -520,15 +559,6 @@ class Phase2Problem:
         pm = PolytopicModel(vmin=self.vmin, vmax=self.vmax, A=self.A, B=self.B, x0=self.x0, u0=self.u0)
         return ScheduledLpv(pm, self.K)
 
-    def gain_schedule(self):
-        """K(v_d), x0(v_d), u0(v_d) only (A, B unused): the law of Eqs. (17), (31)."""
-        from lpv_sysid.models.lpv import PolytopicModel, ScheduledLpv
-
-        N, m, n = self.K.shape
-        pm = PolytopicModel(vmin=self.vmin, vmax=self.vmax, A=np.zeros((N, n, n)), B=np.zeros((N, n, m)),
-                            x0=self.x0, u0=self.u0)
-        return ScheduledLpv(pm, self.K)
-
 
 def load_problem(gains_path: str | Path, models_path: Optional[str | Path] = None) -> Phase2Problem:
     """Phase2Problem from ``gains.yaml`` (+ ``vertex_models.yaml``), validated by
@@ -551,10 +581,10 @@ def load_problem(gains_path: str | Path, models_path: Optional[str | Path] = Non
             A, B = vm.A, vm.B
         else:
             log.warning("%s: discrete-time models (Ts=%g); Eq. (33) is continuous, skipped", models_path, vm.ts)
-    R = np.asarray(gs.R, dtype=float)
-    return Phase2Problem(vmin=np.asarray(gs.scheduling.min, dtype=float), vmax=np.asarray(gs.scheduling.max, dtype=float),
-                         K=gs.K, x0=gs.x0, u0=gs.u0, R=R, Q=np.asarray(gs.Q, dtype=float), gamma=float(gs.gamma),
-                         A=A, B=B, source=source)
+    return Phase2Problem(vmin=np.asarray(gs.scheduling.min, dtype=float),
+                         vmax=np.asarray(gs.scheduling.max, dtype=float),
+                         K=gs.K, x0=gs.x0, u0=gs.u0, R=np.asarray(gs.R, dtype=float),
+                         Q=np.asarray(gs.Q, dtype=float), gamma=float(gs.gamma), A=A, B=B, source=source)
 
 
 class RuntimeLaw:
@@ -660,21 +690,37 @@ def run(problem: Phase2Problem, signals: ReferenceSignals, cfg: Phase2Config, qu
                   max_tilt=math.radians(cfg.max_tilt_deg))
         if cfg.record_bag:
             bag_path = out / "bag"
-            with Phase2Bag(bag_path, cfg.storage, kappa=cfg.kappa) as bag:
-                rec = simulate_nonlinear(vehicle, law, signals, problem.Q, *v_box, sink=bag, **kw)
+            try:
+                with Phase2Bag(bag_path, cfg.storage, kappa=cfg.kappa) as bag:
+                    rec = simulate_nonlinear(vehicle, law, signals, problem.Q, *v_box, sink=bag, **kw)
+            except BagError as exc:
+                # the bag is closed (readable up to the failure); keep the other results, then fail
+                skipped["nonlinear"] = f"recording failed: {exc}"
+                write_outputs(out, problem.gamma, cfg.kappa, list(records.values()), skipped)
+                raise
             rec.info["bag"] = str(bag_path)
             rec.info["bag_messages"] = dict(bag.counts)
         else:
             rec = simulate_nonlinear(vehicle, law, signals, problem.Q, *v_box, **kw)
+        if cfg.superposition:
+            # bound monitor effectively off: it would stop on the reference-tracking part of z
+            rec.info["superposition"] = excitation_gain_by_superposition(
+                lambda: SimVehicle(quad, sensors, x0=trim.full_state),
+                lambda: runtime_law(problem, quad.mix, 1e12), signals, problem.Q, *v_box, kappa=cfg.kappa,
+                box_margin=cfg.box_margin, max_tilt=math.radians(cfg.max_tilt_deg))
         records["nonlinear"] = rec
     else:
         skipped["nonlinear"] = "not requested"
+    # Fig. 10 data: the nonlinear flight when it completed; else the Eq. (33) run (what the
+    # seed used); else whatever part of the nonlinear flight there is.
     block = None
-    for name in ("nonlinear", "eq33"):
-        rec = records.get(name)
+    nl, eq = records.get("nonlinear"), records.get("eq33")
+    order = [nl, eq] if nl is not None and nl.completed else [eq, nl]
+    for rec in order:
         if rec is not None and rec.t.size >= 10:
-            block = regressor_correlation_block(rec.t, rec.x12, quad_params.arm_length, name,
+            block = regressor_correlation_block(rec.t, rec.x12, quad_params.arm_length, rec.name,
                                                 rec.extra.get("Omega"))
+            block["complete_run"] = bool(rec.completed)
             break
     extra = {"box": {"min": problem.vmin.tolist(), "max": problem.vmax.tolist()},
              "inputs": {k: str(v) for k, v in problem.source.items()},
@@ -716,6 +762,9 @@ def add_phase2_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--skip-eq33", action="store_true", help="only the nonlinear simulation")
     parser.add_argument("--skip-nonlinear", action="store_true", help="only the Eq. (33) simulation")
     parser.add_argument("--seed", type=int, default=None, help="sensor-noise seed (default: from --config)")
+    parser.add_argument("--superposition", action="store_true",
+                        help="two more nonlinear flights (with / without u_e, same noise) to estimate the "
+                             "excitation-only gain ||z_e||/||kappa u_e||, comparable with gamma")
 
 
 def run_phase2(args: argparse.Namespace) -> int:
@@ -726,7 +775,7 @@ def run_phase2(args: argparse.Namespace) -> int:
                        max_tilt_deg=args.max_tilt, duration=args.duration,
                        ramp=None if not args.ramp else float(args.ramp), record_bag=not args.no_bag,
                        storage=args.storage, run_eq33=not args.skip_eq33, run_nonlinear=not args.skip_nonlinear,
-                       monitor_margin=args.monitor_margin)
+                       monitor_margin=args.monitor_margin, superposition=args.superposition)
     models_path = args.models if args.models is not None else Path(args.gains).parent / "vertex_models.yaml"
     problem = load_problem(args.gains, models_path if (args.models is not None or models_path.is_file()) else None)
     signals = load_signals(args.signals, cfg.duration, cfg.ramp)
@@ -745,6 +794,10 @@ def run_phase2(args: argparse.Namespace) -> int:
                   + f", {state}")
         elif name in result.skipped:
             print(f"  {name:9s}: skipped ({result.skipped[name]})")
+        sp = rec.info.get("superposition") if rec is not None else None
+        if sp and sp.get("gain") is not None:
+            print(f"  {'':9s}  excitation-only (superposition): ||z_e||/||kappa u_e|| = {sp['gain']:.4g}"
+                  + (f" ({'<=' if sp['gain'] <= problem.gamma else '>'} gamma)" if problem.gamma else ""))
     for key, path in result.written.items():
         print(f"wrote {path}")
     return 0

@@ -1,1 +1,10 @@
-"""lpv_sysid.synthesis"""
+"""lpv_sysid.synthesis: robust polytopic LPV control design and its independent verification.
+
+* ``hinf_lmi``       seed 0 Lemma 1 (Eq. 30) with cvxpy, remedies of Sec. VI
+* ``regions``        LMI regions, pole placement, observer, integral action (seed 2 Sec. 5)
+* ``scaling``        similarity scaling used inside the LMIs (undone for K)
+* ``hinf_norm``      H-infinity norm by Hamiltonian bisection (the independent check)
+* ``verify``         certificate re-check (``lpv-sysid verify``)
+* ``files``          vertex_models.yaml -> polytope, gains.yaml + certificate sidecar
+* ``example_models`` small reference plants (tests, benchmarks)
+"""

@@ -23,7 +23,8 @@ import numpy as np
 import yaml
 
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.models.lpv import PolytopicModel, UncertainElement, box_vertices, uncertainty_vertices
+from lpv_sysid.models.lpv import (CommonInputSet, PolytopicModel, UncertainElement, box_vertices, input_corners,
+                                  input_hull, product_systems, uncertainty_vertices)
 
 log = logging.getLogger(__name__)
 
@@ -121,15 +122,90 @@ def _time(d: dict, where: str) -> Optional[float]:
     raise ConfigError(f"{where}: 'time' must be 'continuous' or {{discrete: Ts}}, got {t!r}")
 
 
+#: ``uncertainty.common_b`` when the key is absent. The shipped config/synthesis.yaml sets it to
+#: true (the default synthesis path); absent means the per-vertex structure of older configs and
+#: certificates (which are re-verified with the structure they were synthesised for).
+DEFAULT_COMMON_B = False
+#: ``uncertainty.p_max_b``: corner parameters of the common input set before reduction.
+DEFAULT_P_MAX_B = 2
+
+
+def _flag(v: Any, where: str) -> bool:
+    if isinstance(v, bool):
+        return v
+    raise ConfigError(f"{where} must be true or false, got {v!r}")
+
+
+def _reduced_systems(A: np.ndarray, B: np.ndarray, els: Sequence[UncertainElement], p_max: int, max_corners: int,
+                     method: str, ucfg: dict) -> list:
+    """Eq. (23) systems of one (A, B) from stored intervals: all corners when the free elements
+    fit (p <= p_max, 2**p <= max_corners), else the reduction of ident.uncertainty.build applied to
+    the stored intervals (centre = midpoint, half-width = k_sigma * std with k_sigma = 1)."""
+    free = [e for e in els if e.upper > e.lower]
+    if len(free) <= p_max and 2 ** len(free) <= max_corners:
+        return uncertainty_vertices(A, B, els, max_corners)
+    from lpv_sysid.ident import uncertainty as unc
+
+    cfg = unc.UncertaintyConfig.from_dict({"k_sigma": 1.0, "method": method, "p_max": p_max,
+                                           "max_corners": max_corners, **ucfg})
+    elements = [(e.matrix, e.row, e.col, 0.5 * (e.lower + e.upper), 0.5 * (e.upper - e.lower)) for e in els]
+    return [(np.asarray(a), np.asarray(b)) for a, b in unc.build(A, B, elements, cfg).systems]
+
+
+def uncertainty_settings(uncertainty: Optional[dict]) -> dict:
+    """The effective ``uncertainty`` section (defaults filled in; recorded in the certificate)."""
+    u = dict(uncertainty or {})
+    u.setdefault("p_max", 4)
+    u.setdefault("max_corners", 4096)
+    u.setdefault("method", "influence")
+    u["common_b"] = _flag(u.get("common_b", DEFAULT_COMMON_B), "uncertainty.common_b")
+    u.setdefault("p_max_b", DEFAULT_P_MAX_B)
+    return u
+
+
+def common_input_systems(As: np.ndarray, Bs: np.ndarray, els: Sequence[Sequence[UncertainElement]], p_max: int,
+                         p_max_b: int, max_corners: int, method: str, ucfg: dict) -> tuple[list, CommonInputSet]:
+    """Product polytope Lambda_i^(a,b) = (A_i^a, B^b) (models.lpv module docstring).
+
+    B part: the hull of :func:`lpv_sysid.models.lpv.input_hull`; all corners when its p_B
+    elements fit (p_B <= p_max_b), else the ``method`` reduction of ident.uncertainty with
+    p_max_b corner parameters (ranking frequency responses with the mean vertex A). A part: the
+    per-vertex A intervals with the remaining budget p_max - ceil(log2 M_B) corner parameters and
+    max_corners // M_B systems, so that M_i = M_A,i M_B stays within 2**p_max (box/influence).
+    """
+    base, hull, nlo, nhi = input_hull(Bs, els)
+    if len(hull) <= p_max_b and 2 ** len(hull) <= max_corners:
+        corners, b_method = input_corners(base, hull, max_corners), "box"
+    else:
+        A_ref = np.mean(As, axis=0)
+        corners = np.array([b for _, b in _reduced_systems(A_ref, base, hull, p_max_b, max_corners, method, ucfg)])
+        b_method = method
+    common = CommonInputSet(corners, tuple(hull), nlo, nhi, b_method)
+    M_B = common.M
+    p_a = max(0, p_max - int(np.ceil(np.log2(M_B))))
+    max_a = max(1, max_corners // M_B)
+    a_corners = []
+    for A, B, e in zip(As, Bs, els):
+        a_els = [x for x in e if x.matrix == "A"]
+        a_corners.append([a for a, _ in _reduced_systems(A, B, a_els, p_a, max_a, method, ucfg)])
+    return product_systems(a_corners, common), common
+
+
 def load_models(path: Path | str, uncertainty: Optional[dict] = None) -> tuple[PolytopicModel, dict]:
     """Read vertex_models.yaml into the nested polytope of seed 0 Eq. (23).
 
-    Uncertainty vertices per scheduling vertex: all corners of the stored intervals
-    [lower, upper] when 2**p <= ``max_corners`` and p <= ``p_max`` (``uncertainty`` config,
-    defaults p_max = 4, max_corners = 4096); otherwise the reduction of
-    :func:`lpv_sysid.ident.uncertainty.build` (``method`` influence/hybrid/box) is applied to the
-    stored intervals (centre = midpoint, half-width = k_sigma * std with k_sigma = 1).
-    Returns (model, raw mapping).
+    ``uncertainty`` config (see config/synthesis.yaml): ``p_max`` (default 4) corner parameters
+    per vertex, ``max_corners`` (4096), ``method`` (influence | hybrid | box) of
+    :func:`lpv_sysid.ident.uncertainty.build` for the reduction, ``common_b`` and ``p_max_b``.
+
+    ``common_b: false``: per scheduling vertex, all corners of the stored intervals [lower, upper]
+    when 2**p <= ``max_corners`` and p <= ``p_max``, otherwise the reduction applied to the stored
+    intervals (centre = midpoint, half-width = k_sigma * std with k_sigma = 1). B_i^j then differs
+    between vertices and Lemma 1 certifies the vertices only.
+
+    ``common_b: true``: the product polytope of :func:`common_input_systems` (B^b common to all
+    vertices, so Lemma 1 covers the interior; models.lpv module docstring); ``model.common_input``
+    holds the B corners. Returns (model, raw mapping).
     """
     fm = _formats()
     if fm is not None and hasattr(fm, "VertexModels"):
@@ -147,11 +223,19 @@ def load_models(path: Path | str, uncertainty: Optional[dict] = None) -> tuple[P
     corners = box_vertices(lo, hi)
     if not isinstance(verts, list) or len(verts) != len(corners):
         raise ConfigError(f"{where}: 'vertices' must list {len(corners)} vertices (box corners)")
-    ucfg = dict(uncertainty or {})
-    p_max = int(ucfg.pop("p_max", 4))
-    max_corners = int(ucfg.pop("max_corners", 4096))
-    method = str(ucfg.pop("method", "influence"))
-    As, Bs, x0s, u0s, systems = [], [], [], [], []
+    ucfg = uncertainty_settings(uncertainty)
+    try:
+        p_max = int(ucfg.pop("p_max"))
+        max_corners = int(ucfg.pop("max_corners"))
+        p_max_b = int(ucfg.pop("p_max_b"))
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"uncertainty: p_max, p_max_b and max_corners must be integers ({exc})") from None
+    if p_max < 0 or p_max_b < 0 or max_corners < 1:
+        raise ConfigError(f"uncertainty: need p_max >= 0, p_max_b >= 0, max_corners >= 1, got "
+                          f"{p_max}, {p_max_b}, {max_corners}")
+    method = str(ucfg.pop("method"))
+    common_b = ucfg.pop("common_b")
+    As, Bs, x0s, u0s, elss = [], [], [], [], []
     for k, v in enumerate(verts):
         w = f"{where}: vertices[{k}]"
         if not isinstance(v, dict):
@@ -160,30 +244,20 @@ def load_models(path: Path | str, uncertainty: Optional[dict] = None) -> tuple[P
         if not np.allclose(sch, corners[k], rtol=1e-9, atol=1e-9):
             raise ConfigError(f"{w}.scheduling {sch.tolist()} is not box corner {corners[k].tolist()} "
                               "(order: itertools.product over (min, max), first axis slowest)")
-        A = _matrix(v.get("A"), (n, n), f"{w}.A")
-        B = _matrix(v.get("B"), (n, m), f"{w}.B")
-        x0 = _matrix(v.get("x0", [0.0] * n), (n,), f"{w}.x0")
-        u0 = _matrix(v.get("u0", [0.0] * m), (m,), f"{w}.u0")
-        els = [UncertainElement.from_dict(e) for e in (v.get("uncertain") or [])]
-        free = [e for e in els if e.upper > e.lower]
-        if len(free) <= p_max and 2 ** len(free) <= max_corners:
-            sys_k = uncertainty_vertices(A, B, els, max_corners)
-        else:
-            from lpv_sysid.ident import uncertainty as unc
-
-            cfg = unc.UncertaintyConfig.from_dict({"k_sigma": 1.0, "method": method, "p_max": p_max,
-                                                   "max_corners": max_corners, **ucfg})
-            elements = [(e.matrix, e.row, e.col, 0.5 * (e.lower + e.upper), 0.5 * (e.upper - e.lower))
-                        for e in els]
-            sys_k = [(np.asarray(a), np.asarray(b)) for a, b in unc.build(A, B, elements, cfg).systems]
-        As.append(A)
-        Bs.append(B)
-        x0s.append(x0)
-        u0s.append(u0)
-        systems.append(sys_k)
-    model = PolytopicModel(vmin=lo, vmax=hi, A=np.array(As), B=np.array(Bs), x0=np.array(x0s),
-                           u0=np.array(u0s), systems=systems, ts=ts, state_names=states,
-                           input_names=inputs, scheduling_names=names)
+        As.append(_matrix(v.get("A"), (n, n), f"{w}.A"))
+        Bs.append(_matrix(v.get("B"), (n, m), f"{w}.B"))
+        x0s.append(_matrix(v.get("x0", [0.0] * n), (n,), f"{w}.x0"))
+        u0s.append(_matrix(v.get("u0", [0.0] * m), (m,), f"{w}.u0"))
+        elss.append([UncertainElement.from_dict(e) for e in (v.get("uncertain") or [])])
+    As, Bs = np.array(As), np.array(Bs)
+    common = None
+    if common_b:
+        systems, common = common_input_systems(As, Bs, elss, p_max, p_max_b, max_corners, method, ucfg)
+    else:
+        systems = [_reduced_systems(A, B, e, p_max, max_corners, method, ucfg) for A, B, e in zip(As, Bs, elss)]
+    model = PolytopicModel(vmin=lo, vmax=hi, A=As, B=Bs, x0=np.array(x0s), u0=np.array(u0s), systems=systems,
+                           ts=ts, state_names=states, input_names=inputs, scheduling_names=names,
+                           common_input=common)
     return model, d
 
 

@@ -9,7 +9,9 @@ S_i and one common (general square) H with
     [ C H              -C H            0       -g I    ]
 
 with g = gamma^2; then K_i = S_i H^-1 (Eq. 31) gives ||u_e -> z||_inf < gamma for all v_d in the
-box and all theta in the uncertainty box. (Eq. 30 is Phi0 + He([A;I;0;C] H [I,-I,0,0]) with the
+box and all theta in the uncertainty box -- provided B_c^j is common to all scheduling vertices
+(``model.common_input``, the product polytope of :mod:`lpv_sysid.models.lpv`, whose docstring
+gives the interior argument); with per-vertex B_i^j only the vertices are certified. (Eq. 30 is Phi0 + He([A;I;0;C] H [I,-I,0,0]) with the
 dual bounded-real-lemma matrix Phi0; eliminating H recovers A X + X A^T + B_e B_e^T + X C^T C X / g < 0.)
 
 Strictness: every LMI is imposed as ``<= -eps I`` and ``X >= eps I`` (in the scaled coordinates of
@@ -30,7 +32,6 @@ is quantified by bisection on the shrink factor rho of the uncertainty vertices 
 from __future__ import annotations
 
 import logging
-import time
 from dataclasses import dataclass, field, replace
 from typing import Optional, Sequence
 
@@ -43,7 +44,10 @@ from lpv_sysid.synthesis.scaling import Scaling, choose_scaling
 
 log = logging.getLogger(__name__)
 
-SOLVERS = ("CLARABEL", "SCS", "MOSEK")
+SOLVERS = ("CLARABEL", "SCS", "MOSEK", "AUTO")
+#: AUTO: Clarabel up to this many Eq. (30) blocks, SCS above (measured crossover, see
+#: bench/results/synthesis.md: Clarabel 2.9 s / 18 s / 117 s for 8 / 16 / 32 blocks, SCS < 1.5 s).
+AUTO_CLARABEL_MAX_BLOCKS = 8
 
 
 @dataclass(frozen=True)
@@ -53,10 +57,9 @@ class HinfOptions:
     gamma: float = 1.0              # requested bound (Eq. 29)
     minimize_gamma: bool = False    # True: minimise gamma^2 as a variable; False: feasibility at gamma
     eps: float = 1e-6               # strictness margin: LMI <= -eps I, X >= eps I (scaled coords)
-    solver: str = "CLARABEL"        # CLARABEL (default) | SCS | MOSEK
+    solver: str = "CLARABEL"        # CLARABEL (default) | SCS | MOSEK | AUTO (MOSEK if installed, else by size)
     fallback: Optional[str] = "SCS"  # tried when the first solver errors out (not when infeasible)
     scale: bool = True              # diagonal similarity scaling (synthesis.scaling)
-    h_bound: Optional[float] = None  # optional |H| <= h_bound (norm bound) to keep H bounded
     remedy_bisection_steps: int = 0  # >0: quantify uncertainty-reduction remedy by bisection
     region: Optional[Region] = None  # optional LMI region for the closed-loop poles (common-H, see _build)
     verbose: bool = False
@@ -256,8 +259,6 @@ def _build(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: HinfOption
             size.lmi_blocks += 1
             size.lmi_total_dim += dr
             size.scalar_constraints += dr * (dr + 1) // 2
-    if opts.h_bound is not None:
-        constraints.append(cp.sigma_max(H) <= float(opts.h_bound))
     objective = cp.Minimize(g) if g is not None else cp.Minimize(0)
     prob = cp.Problem(objective, constraints)
     return prob, H, S, Xs, g, size, systems, Cs
@@ -293,8 +294,8 @@ def solve_lemma1(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: Hinf
     scaling = (choose_scaling(all_A, all_B, all_Be, C) if opts.scale
                else Scaling.identity(model.n_x, model.n_u))
     prob, H, S, Xs, g, size, systems, Cs = _build(model, R, C, opts, scaling, Be)
-    solvers = [opts.solver] + ([opts.fallback] if opts.fallback and opts.fallback != opts.solver else [])
     installed = set(cp.installed_solvers())
+    solvers = _solver_order(opts, len(systems), installed)
     errors = []
     for sv in solvers:
         if sv not in installed:
@@ -311,7 +312,11 @@ def solve_lemma1(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: Hinf
         if prob.status not in ("optimal", "optimal_inaccurate"):
             errors.append(f"{sv}: status {prob.status}")
             continue
-        res = _extract(model, R, C, opts, Be, prob, H, S, Xs, g, size, scaling, sv)
+        try:
+            res = _extract(model, R, C, opts, Be, prob, H, S, Xs, g, size, scaling, sv)
+        except SolverError as exc:
+            errors.append(f"{sv}: {exc}")
+            continue
         # the solver's word is not the certificate: accept only what numpy re-checks (Eq. 30)
         ok = res.min_margin > 0 if not opts.minimize_gamma else np.isfinite(res.gamma_certified)
         if ok:
@@ -320,6 +325,17 @@ def solve_lemma1(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: Hinf
                       f"(margin {res.min_margin:.3g}, gamma {res.gamma_certified:.4g})")
         log.warning("%s", errors[-1])
     raise SolverError("Lemma 1 LMI (seed 0 Eq. 30): no certified solution (" + "; ".join(errors) + ")")
+
+
+def _solver_order(opts: HinfOptions, n_blocks: int, installed: set) -> list:
+    """Solvers to try in order (``AUTO``: MOSEK if installed, else Clarabel/SCS by problem size)."""
+    if opts.solver == "AUTO":
+        first = ["MOSEK"] if "MOSEK" in installed else []
+        by_size = ["CLARABEL", "SCS"] if n_blocks <= AUTO_CLARABEL_MAX_BLOCKS else ["SCS", "CLARABEL"]
+        order = first + by_size
+    else:
+        order = [opts.solver] + ([opts.fallback] if opts.fallback else [])
+    return list(dict.fromkeys(order))
 
 
 def _extract(model, R, C, opts, Be, prob, H, S, Xs, g, size, scaling, used) -> HinfResult:
@@ -414,6 +430,15 @@ class Remedy:
 
 
 def _shrunk_model(model: PolytopicModel, rho: float) -> PolytopicModel:
+    """Uncertainty vertices shrunk by rho about the nominal (remedy 3). A common input set keeps
+    its product structure: its corners shrink about the hull of the vertex nominals
+    (:meth:`lpv_sysid.models.lpv.CommonInputSet.shrunk`), so B stays common to all vertices."""
+    if model.common_input is not None:
+        common = model.common_input.shrunk(rho)
+        MB = common.M
+        systems = [[(model.A[i] + rho * (a - model.A[i]), common.corners[j % MB]) for j, (a, _) in enumerate(lst)]
+                   for i, lst in enumerate(model.systems)]
+        return replace(model, systems=systems, common_input=common)
     systems = [[(model.A[i] + rho * (a - model.A[i]), model.B[i] + rho * (b - model.B[i])) for a, b in lst]
                for i, lst in enumerate(model.systems)]
     return replace(model, systems=systems)

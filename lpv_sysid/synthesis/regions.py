@@ -59,12 +59,16 @@ class Region:
                 raise ConfigError("region.disk needs {centre: real, radius: > 0}") from None
         if "strip" in d:
             try:
-                kw["s_min"], kw["s_max"] = float(d["strip"]["min"]), float(d["strip"]["max"])
+                smax = d["strip"].get("max")
+                kw["s_min"] = float(d["strip"]["min"])
+                kw["s_max"] = None if smax is None else float(smax)
             except (KeyError, TypeError, ValueError):
                 raise ConfigError("region.strip needs {min: real, max: real}") from None
         if "half_plane" in d:
             try:
-                kw["s_max"] = min(kw.get("s_max", np.inf), -float(d["half_plane"]["alpha"]))
+                prev = kw.get("s_max")
+                hp = -float(d["half_plane"]["alpha"])
+                kw["s_max"] = hp if prev is None else min(prev, hp)
             except (KeyError, TypeError, ValueError):
                 raise ConfigError("region.half_plane needs {alpha: real} (Re z < -alpha)") from None
         reg = cls(**kw)
@@ -79,7 +83,7 @@ class Region:
             if self.s_min is None:
                 out["half_plane"] = {"alpha": -float(self.s_max)}
             else:
-                out["strip"] = {"min": float(self.s_min), "max": float(self.s_max if self.s_max is not None else np.inf)}
+                out["strip"] = {"min": float(self.s_min), "max": None if self.s_max is None else float(self.s_max)}
         return out
 
     def check(self) -> None:

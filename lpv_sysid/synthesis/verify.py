@@ -6,9 +6,18 @@ Checks, each a row of the report:
    uncertainty vertex, H-infinity norm u_e -> z by Hamiltonian bisection
    (:mod:`lpv_sysid.synthesis.hinf_norm`) <= gamma;
 2. ``hinf interior``: the same at random interior scheduling points with the interpolated model
-   and gain (Eq. 21, Eq. 31), for the nominal model and for every uncertainty index j when all
+   and gain (Eq. 21, Eq. 31), for the nominal model, for every uncertainty index j when all
    vertices have the same number M of uncertainty vertices (the j-th corners taken together,
-   which is the same parameter theta for corner-enumerated polytopes);
+   which is the same parameter theta for corner-enumerated polytopes), and for ``n_mix`` random
+   corner mixes: A = sum_i alpha_i sum_j w_i^j A_i^j, B = sum_i alpha_i sum_j w_i^j B_i^j with
+   Dirichlet weights; for a common input set (``model.common_input``) the weights are the product
+   w_i^(a,b) = beta_i^a beta^b with one beta^b for all vertices, so B = sum_b beta^b B^b -- the
+   frozen systems the common-B certificate claims (models.lpv module docstring);
+2b. ``common B`` / ``product A`` (common input set only): B_i^(a,b) identical to B^b for all
+   scheduling vertices i and A-corners a within 1e-12, and A_i^(a,b) independent of b -- the
+   structure Lemma 1's interior argument needs; ``verify_files`` also checks that the structure
+   is the one the certificate claims and that the B corners span every vertex's identified
+   B interval and nominal value (``B hull``);
 3. ``region``: closed-loop eigenvalues at all of the above points in the promised LMI region
    (the stability region when none is promised);
 4. ``lmi``: when the certificate sidecar is present (sha256 checked), K_i == S_i H^-1 and the
@@ -25,7 +34,7 @@ from typing import Optional
 
 import numpy as np
 
-from lpv_sysid.models.lpv import PolytopicModel, multilinear_weights
+from lpv_sysid.models.lpv import PolytopicModel, common_input_deviation, multilinear_weights
 from lpv_sysid.synthesis.hinf_lmi import certificate_margins
 from lpv_sysid.synthesis.hinf_norm import hinf_norm
 from lpv_sysid.synthesis.regions import Region
@@ -100,14 +109,33 @@ def _check_point(rep: VerifyReport, where: str, A: np.ndarray, B: np.ndarray, K:
         rep.add("stability", where, mx, 0.0, mx < 0.0)
 
 
+#: tolerance of the common-input structure check (B^b identical across vertices)
+COMMON_B_TOL = 1e-12
+
+
+def _mix_weights(model: PolytopicModel, rng: np.random.Generator) -> list:
+    """Random corner weights w_i (M_i,) per vertex (product beta_i^a beta^b for a common input set)."""
+    if model.common_input is None:
+        return [rng.dirichlet(np.ones(len(lst))) for lst in model.systems]
+    MB = model.common_input.M
+    beta_b = rng.dirichlet(np.ones(MB))
+    return [np.kron(rng.dirichlet(np.ones(len(lst) // MB)), beta_b) for lst in model.systems]
+
+
 def verify_gains(model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.ndarray, gamma: float,
                  region: Optional[Region] = None, n_random: int = 20, seed: int = 0, rtol: float = 1e-6,
-                 certificate: Optional[dict] = None, k_rtol: float = 1e-6) -> VerifyReport:
+                 certificate: Optional[dict] = None, k_rtol: float = 1e-6, n_mix: int = 3) -> VerifyReport:
     """Run the checks of the module docstring; ``certificate`` is the loaded sidecar (or None)."""
     rep = VerifyReport()
     K = np.asarray(K, dtype=float)
     R = np.asarray(R, dtype=float)
     C = np.asarray(C, dtype=float)
+    if model.common_input is not None:
+        dB, dA = common_input_deviation(model, model.common_input.M)
+        rep.add("common B", "B_i^(a,b) vs B^b, all i, a", dB, COMMON_B_TOL, dB <= COMMON_B_TOL,
+                "" if dB <= COMMON_B_TOL else "input matrix differs between vertices: interior not certified")
+        rep.add("product A", "A_i^(a,b) vs A_i^(a,0)", dA, COMMON_B_TOL, dA <= COMMON_B_TOL,
+                "" if dA <= COMMON_B_TOL else "systems are not the product A-corners x B-corners")
     for i, lst in enumerate(model.systems):
         for j, (A, B) in enumerate(lst):
             _check_point(rep, f"vertex {i} unc {j}", np.asarray(A), np.asarray(B), K[i], R, C, gamma, region,
@@ -115,18 +143,24 @@ def verify_gains(model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.ndar
     rng = np.random.default_rng(seed)
     Ms = {len(lst) for lst in model.systems}
     same_M = len(Ms) == 1
+    As_all = [np.array([np.asarray(a, dtype=float) for a, _ in lst]) for lst in model.systems]
+    Bs_all = [np.array([np.asarray(b, dtype=float) for _, b in lst]) for lst in model.systems]
     for k in range(n_random):
         vd = model.vmin + rng.random(model.vmin.size) * (model.vmax - model.vmin)
         alpha, _ = multilinear_weights(vd, model.vmin, model.vmax)
         Kv = np.tensordot(alpha, K, axes=1)
-        cases = [("nom", model.A, model.B)]
+        cases = [("nom", np.tensordot(alpha, model.A, axes=1), np.tensordot(alpha, model.B, axes=1))]
         if same_M and next(iter(Ms)) > 1:
             for j in range(next(iter(Ms))):
-                cases.append((f"unc {j}", np.array([lst[j][0] for lst in model.systems]),
-                              np.array([lst[j][1] for lst in model.systems])))
-        for name, As, Bs in cases:
-            A = np.tensordot(alpha, As, axes=1)
-            B = np.tensordot(alpha, Bs, axes=1)
+                cases.append((f"unc {j}", sum(a * As_all[i][j] for i, a in enumerate(alpha)),
+                              sum(a * Bs_all[i][j] for i, a in enumerate(alpha))))
+        if max(Ms) > 1:
+            for r in range(n_mix):
+                w = _mix_weights(model, rng)
+                cases.append((f"mix {r}",
+                              sum(a * np.tensordot(w[i], As_all[i], axes=1) for i, a in enumerate(alpha)),
+                              sum(a * np.tensordot(w[i], Bs_all[i], axes=1) for i, a in enumerate(alpha))))
+        for name, A, B in cases:
             _check_point(rep, f"interior {k} {name}", A, B, Kv, R, C, gamma, region, rtol, model.ts)
     for r in rep.rows:
         if r.check == "hinf" and r.where.startswith("interior"):
@@ -134,6 +168,38 @@ def verify_gains(model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.ndar
     if certificate is not None:
         _check_lmi(rep, model, K, R, C, gamma, certificate, k_rtol)
     return rep
+
+
+def _check_input_claim(rep: VerifyReport, model: PolytopicModel, claim: Optional[dict], raw: dict) -> None:
+    """The certificate's input_structure vs the rebuilt polytope, and the B hull's coverage of the
+    models file (read from the raw YAML, not through models.lpv.input_hull)."""
+    if not isinstance(claim, dict):
+        return
+    st = model.input_structure
+    same = all(claim.get(k) == st.get(k) for k in ("B", "M_A", "M_B"))
+    rep.add("structure", f"B {claim.get('B')} M_B {claim.get('M_B')}", 0.0 if same else 1.0, 0.0, bool(same),
+            "" if same else f"rebuilt polytope is B {st['B']}, M_A {st['M_A']}, M_B {st['M_B']}")
+    if st["B"] != "common" or not same:
+        if st["B"] == "per_vertex":
+            rep.add("coverage", "scheduling box", 0.0, 0.0, True,
+                    "per-vertex B: Lemma 1 certifies the vertices; interior only spot-checked")
+        return
+    corners = np.asarray(model.common_input.corners, dtype=float)
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    worst = 0.0
+    for v in raw.get("vertices", []):
+        Bv = np.asarray(v["B"], dtype=float)
+        worst = max(worst, float(np.max(np.maximum(lo - Bv, Bv - hi))))
+        for e in v.get("uncertain") or []:
+            if e.get("matrix") == "B":
+                r, c = int(e["row"]), int(e["col"])
+                worst = max(worst, lo[r, c] - float(e["lower"]), float(e["upper"]) - hi[r, c])
+    tol = 1e-12 * max(1.0, float(np.max(np.abs(corners))))
+    exact = model.common_input.method in ("box", "hybrid")
+    ok = worst <= tol or not exact
+    note = "" if worst <= tol else ("identified B interval outside the common B corners" if exact else
+                                    "influence reduction of B: first-order, not a set containment")
+    rep.add("B hull", "B^b span all vertex B intervals", max(worst, 0.0), tol, bool(ok), note)
 
 
 def _check_lmi(rep: VerifyReport, model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.ndarray, gamma: float,
@@ -177,8 +243,15 @@ def verify_files(gains_path: Path | str, models_path: Path | str, n_random: int 
 
     gains = Gains.load(gains_path)
     cert = gains.certificate
-    unc_cfg = uncertainty if uncertainty is not None else cert.get("uncertainty")
-    model, _raw = load_models(models_path, unc_cfg)
+    claim = cert.get("input_structure")
+    if uncertainty is not None:
+        unc_cfg = uncertainty
+    else:
+        # rebuild the polytope the certificate was solved for; certificates without an
+        # input_structure entry predate the common-B option and are per-vertex
+        unc_cfg = dict(cert.get("uncertainty") or {})
+        unc_cfg["common_b"] = isinstance(claim, dict) and claim.get("B") == "common"
+    model, raw = load_models(models_path, unc_cfg)
     rep = VerifyReport()
     sha = sha256_file(models_path)
     rep.add("models hash", Path(models_path).name, 0.0 if sha == cert.get("models_sha256") else 1.0, 0.0,
@@ -193,6 +266,7 @@ def verify_files(gains_path: Path | str, models_path: Path | str, n_random: int 
     rep.add("equilibria", "x0/u0 vs models", eq_err, 1e-9, eq_err <= 1e-9)
     if not (same_names and same_box):
         return rep
+    _check_input_claim(rep, model, claim, raw)
     region = Region.from_dict(cert.get("region")) if cert.get("region") else None
     sidecar = None
     side = cert.get("sidecar")
@@ -205,6 +279,12 @@ def verify_files(gains_path: Path | str, models_path: Path | str, n_random: int 
             rep.add("sidecar", p.name, 0.0 if ok else 1.0, 0.0, ok, "" if ok else "sha256 mismatch")
             if ok:
                 sidecar = load_certificate_npz(p)
+    if velocity_index is None and cert.get("velocity_states"):
+        try:
+            velocity_index = tuple(model.state_names.index(nm) for nm in cert["velocity_states"])
+        except ValueError:
+            rep.add("velocity", "certificate.velocity_states", 1.0, 0.0, False, "names not among the states")
+            return rep
     if velocity_index is None:
         names = ("u", "v", "w")
         velocity_index = (tuple(model.state_names.index(n) for n in names)

@@ -26,6 +26,47 @@ class SignalHandlerOptions:
 def init(args=None, *, context=None, domain_id=None, signal_handler_options=None):
     context = get_default_context() if context is None else context
     context.init(args, domain_id=domain_id)
+    if signal_handler_options is None:
+        signal_handler_options = SignalHandlerOptions.ALL
+    _install_signal_handlers(context, signal_handler_options)
+
+
+_previous_handlers = {}
+
+
+def _install_signal_handlers(context, options):
+    """As rclpy: SIGINT/SIGTERM shut the context down (a spinning executor then raises
+    ExternalShutdownException); SIGINT then chains to the previous handler, which by
+    default raises KeyboardInterrupt. Restored by shutdown()/try_shutdown()."""
+    import signal
+    import threading
+    if threading.current_thread() is not threading.main_thread():
+        return
+    wanted = []
+    if options in (SignalHandlerOptions.SIGINT, SignalHandlerOptions.ALL):
+        wanted.append(signal.SIGINT)
+    if options in (SignalHandlerOptions.SIGTERM, SignalHandlerOptions.ALL):
+        wanted.append(signal.SIGTERM)
+    for signo in wanted:
+        prev = signal.getsignal(signo)
+
+        def handler(s, frame, prev=prev):
+            context.try_shutdown()
+            if s == signal.SIGINT and callable(prev):
+                prev(s, frame)
+        _previous_handlers.setdefault(signo, prev)
+        signal.signal(signo, handler)
+    context.on_shutdown(uninstall_signal_handlers)
+
+
+def uninstall_signal_handlers():
+    import signal
+    import threading
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for signo, prev in list(_previous_handlers.items()):
+        signal.signal(signo, prev if prev is not None else signal.SIG_DFL)
+    _previous_handlers.clear()
 
 
 def get_global_executor():

@@ -7,6 +7,7 @@ def reset():
     """Fresh default context (call before each test)."""
     import rclpy
     rclpy._global_executor = None
+    rclpy.uninstall_signal_handlers()
     return _reset_default_context()
 
 
