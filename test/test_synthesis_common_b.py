@@ -169,6 +169,9 @@ def test_per_vertex_B_fails_inside_while_common_B_certifies_the_interior(tmp_pat
     rep = verify_files(out_c, models, n_random=10)
     assert rep.passed, rep.table()
     assert {r.check for r in rep.rows} >= {"common B", "product A", "B hull", "structure", "hinf interior"}
+    # re-verifying the common-B certificate against a per-vertex rebuild is refused (structure + LMIs)
+    rep = verify_files(out_c, models, n_random=2, uncertainty={"common_b": False})
+    assert {r.check for r in rep.rows if not r.ok} >= {"structure", "lmi"}
 
 
 def test_common_B_refuses_what_no_gain_can_do(tmp_path, capsys):
@@ -186,6 +189,21 @@ def test_common_B_refuses_what_no_gain_can_do(tmp_path, capsys):
     assert sorted(model_cb.common_input.corners.ravel()) == [-1.0, 1.0]
     with pytest.raises(SolverError):
         solve_lemma1(model_cb, np.eye(1), np.eye(1), HinfOptions(gamma=0.5, minimize_gamma=True))
+    # the CLI refuses with exit 2, writes nothing and names the option
+    models = tmp_path / "flip.yaml"
+    doc = {"format": "lpv_sysid/vertex_models@1", "time": "continuous", "states": [{"name": "x", "unit": "m/s"}],
+           "inputs": [{"name": "u", "unit": "1"}], "scheduling": {"names": ["s"], "min": [-1.0], "max": [1.0]},
+           "vertices": [{"scheduling": [s], "x0": [0.0], "u0": [0.0], "A": [[1.0]], "B": [[b]], "uncertain": []}
+                        for s, b in ((-1.0, 1.0), (1.0, -1.0))]}
+    models.write_text(yaml.safe_dump(doc))
+    cfg = {"hinf": {"gamma": 0.5, "solver": "CLARABEL"}, "velocity_states": ["x"],
+           "weights": {"T": 2.0, "input_magnitudes": [1.0], "output_magnitudes": [2 ** -0.5]},
+           "uncertainty": {"common_b": True}}
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
+    rc = main(["synthesize", "--models", str(models), "--config", str(tmp_path / "c.yaml"),
+               "--out", str(tmp_path / "g.yaml")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "common_b" in err and "Lemma 1" in err and not (tmp_path / "g.yaml").exists()
 
 
 def test_verifier_flags_a_broken_common_structure():

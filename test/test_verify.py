@@ -107,6 +107,9 @@ def test_vertex_dependent_B_is_caught_in_the_interior(tmp_path, capsys):
     d["vertices"][1]["B"] = [[-1.0]]
     models.write_text(yaml.safe_dump(d))
     cfg = _config(tmp_path / "c.yaml", region=False)
+    c = yaml.safe_load(cfg.read_text())
+    c["uncertainty"] = {"common_b": False}   # the old per-vertex B structure (not the default)
+    cfg.write_text(yaml.safe_dump(c))
     rc = main(["synthesize", "--models", str(models), "--config", str(cfg), "--out", str(tmp_path / "g.yaml")])
     out = capsys.readouterr().out
     assert rc == 1 and "B differs between scheduling vertices" in out and "FAIL" in out

@@ -145,7 +145,11 @@ def run(args: argparse.Namespace) -> int:
     try:
         res = synthesize_hinf(model, R, C, opts)
     except SolverError as exc:
-        raise SolverError(str(exc).replace("\n", " | ")) from None
+        hint = ""
+        if model.common_input is not None and model.common_input.elements:
+            hint = (" | the input matrix is the hull over all vertices (uncertainty.common_b: true); if B(v_d) varies "
+                    "strongly across the box, narrow the box; common_b: false certifies the vertices only")
+        raise SolverError(str(exc).replace("\n", " | ") + hint) from None
     wall = time.perf_counter() - t0
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

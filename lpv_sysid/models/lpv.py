@@ -218,7 +218,10 @@ class CommonInputSet:
     def shrunk(self, rho: float) -> "CommonInputSet":
         """Corners with the identified interval widths scaled by rho about the nominal hull
         (remedy 3 of seed 0 Sec. VI): B^b -> c^b + rho (B^b - c^b), c^b = B^b clipped into
-        [nominal_lo, nominal_hi]; for box corners this is exactly the hull of the shrunk intervals."""
+        [nominal_lo, nominal_hi]. For box corners the result is the hull box
+        [(1 - rho) min_i B_i + rho min_i lower_i, ...], which contains the hull of the per-vertex
+        shrunk intervals [(1 - rho) B_i + rho lower_i, ...] (min of a sum >= sum of mins), with
+        equality when one vertex attains both minima (and both maxima)."""
         corners = np.asarray(self.corners, dtype=float)
         lo = corners.min(axis=0) if self.nominal_lo is None else self.nominal_lo
         hi = corners.max(axis=0) if self.nominal_hi is None else self.nominal_hi

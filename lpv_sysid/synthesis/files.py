@@ -122,10 +122,10 @@ def _time(d: dict, where: str) -> Optional[float]:
     raise ConfigError(f"{where}: 'time' must be 'continuous' or {{discrete: Ts}}, got {t!r}")
 
 
-#: ``uncertainty.common_b`` when the key is absent. The shipped config/synthesis.yaml sets it to
-#: true (the default synthesis path); absent means the per-vertex structure of older configs and
-#: certificates (which are re-verified with the structure they were synthesised for).
-DEFAULT_COMMON_B = False
+#: ``uncertainty.common_b`` when the key is absent: the common input-matrix polytope, so
+#: Lemma 1 certifies the interior of the scheduling box, not only its vertices. ``false`` selects
+#: the per-vertex B structure; older certificates are re-verified with the structure recorded in them.
+DEFAULT_COMMON_B = True
 #: ``uncertainty.p_max_b``: corner parameters of the common input set before reduction.
 DEFAULT_P_MAX_B = 2
 

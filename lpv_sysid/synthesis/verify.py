@@ -34,6 +34,7 @@ from typing import Optional
 
 import numpy as np
 
+from lpv_sysid.errors import ConfigError
 from lpv_sysid.models.lpv import PolytopicModel, common_input_deviation, multilinear_weights
 from lpv_sysid.synthesis.hinf_lmi import certificate_margins
 from lpv_sysid.synthesis.hinf_norm import hinf_norm
@@ -249,7 +250,10 @@ def verify_files(gains_path: Path | str, models_path: Path | str, n_random: int 
     else:
         # rebuild the polytope the certificate was solved for; certificates without an
         # input_structure entry predate the common-B option and are per-vertex
-        unc_cfg = dict(cert.get("uncertainty") or {})
+        unc_raw = cert.get("uncertainty") or {}
+        if not isinstance(unc_raw, dict):
+            raise ConfigError(f"{gains_path}: certificate.uncertainty must be a mapping, got {unc_raw!r}")
+        unc_cfg = dict(unc_raw)
         unc_cfg["common_b"] = isinstance(claim, dict) and claim.get("B") == "common"
     model, raw = load_models(models_path, unc_cfg)
     rep = VerifyReport()
