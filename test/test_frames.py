@@ -236,3 +236,17 @@ def test_body_forward_frd_is_flu_x():
 def test_wrap_angle():
     np.testing.assert_allclose(fr.wrap_angle([3 * np.pi, -np.pi, 0.5, -7.0]),
                                [np.pi, np.pi, 0.5, -7.0 + 2 * np.pi], atol=1e-14)
+
+
+def test_scalar_quaternion_rotation_matches_vectorised_and_scipy():
+    """The hot-path scalar closed form equals the vectorised functions and scipy."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(7)
+    for _ in range(50):
+        q = rng.normal(size=4)
+        q /= np.linalg.norm(q)
+        R, euler = fr.rotation_euler_from_quaternion_scalar(*map(float, q))
+        np.testing.assert_allclose(np.array(R), fr.rotation_from_quaternion(q), atol=1e-12)
+        np.testing.assert_allclose(np.array(R), Rotation.from_quat(q[[1, 2, 3, 0]]).as_matrix(), atol=1e-12)
+        np.testing.assert_allclose(euler, fr.euler_from_quaternion(q), atol=1e-9)

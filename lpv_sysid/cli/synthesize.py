@@ -29,7 +29,28 @@ HELP = "robust polytopic LPV H-infinity state feedback (seed 0 Lemma 1) -> gains
 
 log = logging.getLogger(__name__)
 
-_TOP_KEYS = {"hinf", "weights", "velocity_states", "uncertainty", "verify"}
+_TOP_KEYS = {"hinf", "weights", "velocity_states", "uncertainty", "verify", "feedforward"}
+
+
+def feedforward_settings(cfg: dict, cfg_path: str) -> tuple[bool, dict, float]:
+    """``feedforward``: true (default) | false | {enabled, cond_max, free_states,
+    accelerated_states, held_states} -> (enabled, layout dict, cond_max)."""
+    from lpv_sysid.synthesis.feedforward import COND_MAX_DEFAULT, FeedforwardLayout
+
+    v = cfg.get("feedforward", True)
+    if isinstance(v, bool):
+        return v, FeedforwardLayout().to_dict(), COND_MAX_DEFAULT
+    if not isinstance(v, dict):
+        raise ConfigError(f"{cfg_path}: feedforward must be true, false or a mapping, got {v!r}")
+    v = dict(v)
+    enabled = v.pop("enabled", True)
+    if not isinstance(enabled, bool):
+        raise ConfigError(f"{cfg_path}: feedforward.enabled must be true or false, got {enabled!r}")
+    try:
+        cond_max = float(v.pop("cond_max", COND_MAX_DEFAULT))
+    except (TypeError, ValueError):
+        raise ConfigError(f"{cfg_path}: feedforward.cond_max must be a number") from None
+    return enabled, FeedforwardLayout.from_dict(v).to_dict(), cond_max
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -120,6 +141,7 @@ def run(args: argparse.Namespace) -> int:
         opts = HinfOptions.from_dict({**{k: getattr(opts, k) for k in opts.__dataclass_fields__},
                                       "solver": args.solver})
     unc_cfg = uncertainty_settings(cfg.get("uncertainty"))
+    ff_enabled, ff_layout_cfg, ff_cond_max = feedforward_settings(cfg, args.config)
     t0 = time.perf_counter()
     model, raw = load_models(args.models, unc_cfg)
     R, Q, source = weights_from_config(cfg, model.n_u, args.summary, args.config)
@@ -179,13 +201,30 @@ def run(args: argparse.Namespace) -> int:
     if opts.region is not None:
         cert["region"] = opts.region.to_dict()
     gamma_file = float(opts.gamma) if not opts.minimize_gamma else float(max(res.gamma_certified, 1e-12))
-    save_yaml(gains_dict(raw, model, res.K, R, Q, gamma_file, cert), out)
+    F_ff = ff_layout = None
+    if ff_enabled and "feedforward" not in cfg:
+        # default on, but only for models that have the layout's states (generic plants: off)
+        names = set(model.state_names)
+        if not all(set(ff_layout_cfg[k]) <= names for k in ff_layout_cfg):
+            print(f"feedforward: off (default layout {ff_layout_cfg['free_states']} not among the model states)")
+            ff_enabled = False
+    if ff_enabled:
+        from lpv_sysid.synthesis.feedforward import FeedforwardLayout, vertex_feedforward
+
+        # from the nominal vertex models (theta0), synthesis/feedforward.py
+        F_ff = vertex_feedforward(model.A, model.B, model.state_names, FeedforwardLayout.from_dict(ff_layout_cfg),
+                                  ff_cond_max)
+        ff_layout = ff_layout_cfg
+    save_yaml(gains_dict(raw, model, res.K, R, Q, gamma_file, cert, F_ff, ff_layout), out)
     print(f"LMI: {res.size.lmi_blocks} blocks (total dim {res.size.lmi_total_dim}, {res.size.scalar_constraints} "
           f"scalar constraints), {res.size.scalar_variables} scalar variables; "
           f"compile {res.compile_time:.2f} s, solve {res.solve_time:.2f} s, load + synthesis wall {wall:.2f} s "
           f"({res.solver}, {res.status})")
     print(f"gamma requested {opts.gamma:g}, certified (numpy re-evaluation of Eq. 30) {res.gamma_certified:.4g}, "
           f"min margin {res.min_margin:.3g}")
+    if F_ff is not None:
+        print(f"reference feedforward F_ff ({F_ff.shape[1]}x{F_ff.shape[2]} per vertex, rows "
+              f"{ff_layout['free_states']} + inputs) from the nominal vertex models")
     print(f"wrote {out}")
     print(f"wrote {side}")
     if args.no_verify:

@@ -20,7 +20,11 @@ interval box (Eq. 22) and fit metrics (Eqs. 24-25)::
 ``gains.yaml`` (``lpv_sysid/gains@1``): vertex gains ``K_i`` (Eq. 31, ``du_c = K dx``),
 excitation input matrix ``R`` (Eq. 27), performance scaling ``Q`` (Eq. 28), the bound
 ``gamma`` and the certificate of seed 0 Lemma 1 with ``models_sha256`` = SHA-256 of the
-bytes of the models file the gains were synthesised for.
+bytes of the models file the gains were synthesised for. Optional reference feedforward
+(:mod:`lpv_sysid.synthesis.feedforward`): a top-level ``feedforward: {free_states,
+accelerated_states, held_states}`` and, then required at every vertex, ``F_ff`` with
+``len(free_states) + n_u`` rows (free states in the listed order, then the inputs) and one
+column per accelerated state; a file without ``feedforward`` has no feedforward (older files).
 
 Validation is strict: format tag, unknown/missing keys, names and units (by default the
 quadrotor layout of :mod:`lpv_sysid.models.quadrotor`), matrix shapes, finiteness, the box
@@ -52,7 +56,7 @@ from lpv_sysid.errors import ConfigError
 __all__ = [
     "MODELS_FORMAT", "GAINS_FORMAT", "Layout", "QUADROTOR_LAYOUT",
     "SchedulingBox", "UncertainEntry", "VertexModel", "VertexModels",
-    "GainVertex", "Certificate", "GainSchedule",
+    "GainVertex", "FeedforwardSpec", "Certificate", "GainSchedule",
     "load_yaml", "sha256_file", "sha256_bytes",
 ]
 
@@ -539,24 +543,83 @@ class VertexModels:
 # ---------------------------------------------------------------------------- gains
 @dataclass(frozen=True)
 class GainVertex:
-    """Gain at one scheduling corner: ``u = u0 + K (x - x0)`` (seed 0 Eq. 31)."""
+    """Gain at one scheduling corner: ``u = u0 + K (x - x0)`` (seed 0 Eq. 31).
+
+    ``F_ff`` (optional, rows = ``feedforward.free_states`` then all inputs, columns =
+    ``feedforward.accelerated_states``): the reference feedforward of
+    :mod:`lpv_sysid.synthesis.feedforward`, ``(dx_ff, du_ff) = F_ff a`` with a = dv_d/dt.
+    """
 
     scheduling: np.ndarray
     K: np.ndarray
     x0: np.ndarray
     u0: np.ndarray
+    F_ff: Optional[np.ndarray] = None
 
     def to_dict(self) -> dict:
-        return {"scheduling": _floats(self.scheduling), "K": _rows(self.K),
-                "x0": _floats(self.x0), "u0": _floats(self.u0)}
+        d = {"scheduling": _floats(self.scheduling), "K": _rows(self.K),
+             "x0": _floats(self.x0), "u0": _floats(self.u0)}
+        if self.F_ff is not None:
+            d["F_ff"] = _rows(self.F_ff)
+        return d
 
     @classmethod
-    def parse(cls, v: _V, d, i: int, n_x: int, n_u: int, n_p: int) -> "GainVertex":
+    def parse(cls, v: _V, d, i: int, n_x: int, n_u: int, n_p: int,
+              ff_shape: Optional[tuple] = None) -> "GainVertex":
         p = f"vertices[{i}]"
-        v.mapping(d, p, ("scheduling", "K", "x0", "u0"))
+        v.mapping(d, p, ("scheduling", "K", "x0", "u0"), ("F_ff",))
+        F = None
+        if "F_ff" in d:
+            if ff_shape is None:
+                v.fail(f"{p}.F_ff", "given but the file has no top-level 'feedforward' layout")
+            F = v.matrix(d["F_ff"], ff_shape, f"{p}.F_ff")
+        elif ff_shape is not None:
+            v.fail(p, "missing key 'F_ff' (the file declares 'feedforward': every vertex needs it)")
         return cls(v.vector(d["scheduling"], n_p, f"{p}.scheduling"),
                    v.matrix(d["K"], (n_u, n_x), f"{p}.K"),
-                   v.vector(d["x0"], n_x, f"{p}.x0"), v.vector(d["u0"], n_u, f"{p}.u0"))
+                   v.vector(d["x0"], n_x, f"{p}.x0"), v.vector(d["u0"], n_u, f"{p}.u0"), F)
+
+
+@dataclass(frozen=True)
+class FeedforwardSpec:
+    """Top-level ``feedforward`` of gains.yaml: the layout of the per-vertex ``F_ff``
+    (:class:`lpv_sysid.synthesis.feedforward.FeedforwardLayout`). Absent = no feedforward."""
+
+    free_states: tuple
+    accelerated_states: tuple
+    held_states: tuple
+
+    def to_dict(self) -> dict:
+        return {"free_states": list(self.free_states), "accelerated_states": list(self.accelerated_states),
+                "held_states": list(self.held_states)}
+
+    def shape(self, n_u: int) -> tuple:
+        return (len(self.free_states) + n_u, len(self.accelerated_states))
+
+    @classmethod
+    def parse(cls, v: _V, d, state_names: tuple, n_u: int, n_p: int,
+              path: str = "feedforward") -> "FeedforwardSpec":
+        v.mapping(d, path, ("free_states", "accelerated_states", "held_states"))
+        got = {}
+        for k in ("free_states", "accelerated_states", "held_states"):
+            lst = d[k]
+            if not isinstance(lst, list) or not lst:
+                v.fail(f"{path}.{k}", f"expected a non-empty list of state names, got {_kind(lst)}")
+            names = tuple(v.string(s, f"{path}.{k}[{j}]") for j, s in enumerate(lst))
+            bad = [s for s in names if s not in state_names]
+            if bad:
+                v.fail(f"{path}.{k}", f"{bad} are not state names {list(state_names)}")
+            if len(set(names)) != len(names):
+                v.fail(f"{path}.{k}", f"duplicate names in {list(names)}")
+            got[k] = names
+        if len(got["accelerated_states"]) != n_p:
+            v.fail(f"{path}.accelerated_states", f"expected {n_p} entries (one per scheduling axis), "
+                                                 f"got {len(got['accelerated_states'])}")
+        if set(got["free_states"]) & set(got["accelerated_states"]):
+            v.fail(path, "a state cannot be both free and accelerated")
+        if len(got["accelerated_states"]) + len(got["held_states"]) != len(got["free_states"]) + n_u:
+            v.fail(path, "the feedforward system must be square: accelerated + held rows = free states + inputs")
+        return cls(got["free_states"], got["accelerated_states"], got["held_states"])
 
 
 @dataclass(frozen=True)
@@ -606,6 +669,14 @@ class GainSchedule:
     gamma: float
     certificate: Certificate
     ts: Optional[float] = None
+    feedforward: Optional[FeedforwardSpec] = None
+
+    @property
+    def F_ff(self) -> Optional[np.ndarray]:
+        """Stacked feedforward matrices (N, n_free + m, p) in box order, or None."""
+        if self.feedforward is None:
+            return None
+        return np.stack([vx.F_ff for vx in self.vertices])
 
     @property
     def K(self) -> np.ndarray:
@@ -631,6 +702,8 @@ class GainSchedule:
             "vertices": [vx.to_dict() for vx in self.vertices],
             "R": _rows(self.R), "Q": _rows(self.Q), "gamma": float(self.gamma),
             "certificate": self.certificate.to_dict()})
+        if self.feedforward is not None:
+            d["feedforward"] = self.feedforward.to_dict()
         return d
 
     @classmethod
@@ -639,7 +712,7 @@ class GainSchedule:
         v = _V(label)
         lay = layout or Layout()
         v.mapping(d, "", ("format", "states", "inputs", "scheduling", "vertices", "R", "Q", "gamma",
-                          "certificate"), ("time",))
+                          "certificate"), ("time", "feedforward"))
         if d["format"] != GAINS_FORMAT:
             v.fail("format", f"expected {GAINS_FORMAT!r}, got {d['format']!r}")
         ts = _time(v, d["time"]) if "time" in d else None
@@ -649,7 +722,11 @@ class GainSchedule:
         n_x, n_u, n_p = len(sn), len(inn), len(box.names)
         if not isinstance(d["vertices"], list):
             v.fail("vertices", f"expected a list, got {_kind(d['vertices'])}")
-        vxs = [GainVertex.parse(v, e, i, n_x, n_u, n_p) for i, e in enumerate(d["vertices"])]
+        ff = None
+        if d.get("feedforward") is not None:
+            ff = FeedforwardSpec.parse(v, d["feedforward"], sn, n_u, n_p)
+        ff_shape = None if ff is None else ff.shape(n_u)
+        vxs = [GainVertex.parse(v, e, i, n_x, n_u, n_p, ff_shape) for i, e in enumerate(d["vertices"])]
         order = _order_vertices(v, [vx.scheduling for vx in vxs], box)
         R = v.matrix(d["R"], (n_u, n_u), "R")
         Q = v.matrix(d["Q"], (n_p, n_p), "Q")
@@ -661,7 +738,7 @@ class GainSchedule:
         cert = Certificate.parse(v, d["certificate"])
         if cert.gamma_achieved > gamma * (1 + 1e-6):
             v.fail("certificate.gamma_achieved", f"{cert.gamma_achieved} exceeds gamma = {gamma}")
-        return cls(sn, su, inn, inu, box, tuple(vxs[k] for k in order), R, Q, gamma, cert, ts)
+        return cls(sn, su, inn, inu, box, tuple(vxs[k] for k in order), R, Q, gamma, cert, ts, ff)
 
     @classmethod
     def load(cls, path, models_path=None,

@@ -32,6 +32,8 @@ oracle, and because the element orders and the ``w >= 0`` canonical form must be
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from lpv_sysid.errors import LpvSysidError
@@ -303,6 +305,22 @@ def euler_from_ros_orientation(q_xyzw) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------ kinematics
+def rotation_euler_from_quaternion_scalar(w: float, x: float, y: float, z: float):
+    """R_IB (nested lists) and (phi, theta, psi) of a unit quaternion (w, x, y, z), on floats.
+
+    Same convention as :func:`rotation_from_quaternion` / :func:`euler_from_rotation`
+    (seed 0 Eq. 1), without validation or vectorisation: a hot path (one call per MAVLink
+    attitude message) where the numpy versions cost ~40 us and this closed form ~3 us.
+    test_mavlink_core.py checks it against the vectorised functions and scipy.
+    """
+    R = [[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+         [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+         [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]]
+    euler = np.array([math.atan2(R[2][1], R[2][2]), math.asin(max(-1.0, min(1.0, -R[2][0]))),
+                      math.atan2(R[1][0], R[0][0])])
+    return R, euler
+
+
 def kinematics_matrix(phi, theta) -> np.ndarray:
     """``L_IB(phi, theta)`` of seed 0 Eq. (2): ``Theta_dot = L_IB omega``.
 

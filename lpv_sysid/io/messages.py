@@ -487,6 +487,17 @@ def twist_reference_msg(f: MsgFactory, stamp_ns: int, v_d_frd, r_d_frd: float = 
     return f("geometry_msgs/msg/TwistStamped", header=header_msg(f, stamp_ns, frame_id), twist=twist)
 
 
+def enu_velocity_setpoint_msg(f: MsgFactory, stamp_ns: int, v_enu, yaw_rate_enu: float, frame_id: str):
+    """``geometry_msgs/TwistStamped`` already in a local ENU frame (MAVROS
+    ``setpoint_velocity/cmd_vel``): linear = ENU velocity, angular = (0, 0, ENU yaw rate).
+    The NED/FRD -> ENU conversion happens before, through :mod:`lpv_sysid.io.frames`."""
+    v = _finite(v_enu, 3, "v_enu")
+    r = _finite([yaw_rate_enu], 1, "yaw_rate_enu")[0]
+    return f("geometry_msgs/msg/TwistStamped", header=header_msg(f, stamp_ns, frame_id),
+             twist=f("geometry_msgs/msg/Twist", linear=_vector3(f, v),
+                     angular=_vector3(f, [0.0, 0.0, r])))
+
+
 def reference_from_twist(msg, *, frame_id: str | None = BASE_FRAME):
     """``(t, v_d_frd(3), r_d_frd)`` from a ``velocity_reference`` TwistStamped."""
     _check_frame(msg.header.frame_id, frame_id, "velocity_reference.header")

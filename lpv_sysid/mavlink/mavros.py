@@ -174,11 +174,7 @@ def cmd_vel_msg(f: M.MsgFactory, stamp_ns: int, sp: CmdVel, frame_id: str = "map
     """``geometry_msgs/TwistStamped`` for ``/mavros/setpoint_velocity/cmd_vel``: linear =
     local ENU velocity, angular = (0, 0, ENU yaw rate); ``frame_id`` names the local ENU
     frame (MAVROS reads only the stamp)."""
-    v = [float(x) for x in sp.v_enu]
-    lin = f("geometry_msgs/msg/Vector3", x=v[0], y=v[1], z=v[2])
-    ang = f("geometry_msgs/msg/Vector3", x=0.0, y=0.0, z=float(sp.yaw_rate_enu))
-    return f("geometry_msgs/msg/TwistStamped", header=M.header_msg(f, stamp_ns, frame_id),
-             twist=f("geometry_msgs/msg/Twist", linear=lin, angular=ang))
+    return M.enu_velocity_setpoint_msg(f, stamp_ns, sp.v_enu, sp.yaw_rate_enu, frame_id)
 
 
 def vehicle_mode_from_statuses(statuses: Sequence[Any]) -> str | None:

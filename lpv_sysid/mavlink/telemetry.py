@@ -39,21 +39,6 @@ def quat_to_euler(q_wxyz: np.ndarray) -> np.ndarray:
     return frames.euler_from_quaternion(q_wxyz)
 
 
-def _rot_euler_scalar(w: float, x: float, y: float, z: float) -> tuple[list[list[float]], np.ndarray]:
-    """R_IB and (phi, theta, psi) of a unit quaternion on Python floats.
-
-    Hot path (one call per attitude/velocity message): io/frames.py is vectorised with
-    validation (~40 us per call); this scalar closed form of the same convention costs
-    ~3 us. tests/test_mavlink_core.py checks it against io/frames and scipy.
-    """
-    R = [[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-         [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-         [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]]
-    euler = np.array([math.atan2(R[2][1], R[2][2]), math.asin(max(-1.0, min(1.0, -R[2][0]))),
-                      math.atan2(R[1][0], R[0][0])])
-    return R, euler
-
-
 def euler_to_quat(phi: float, theta: float, psi: float) -> np.ndarray:
     """Quaternion (w, x, y, z) of R_IB(phi, theta, psi), via io/frames."""
     return frames.quaternion_from_euler(np.array([phi, theta, psi], dtype=float))
@@ -239,7 +224,7 @@ class TelemetryDecoder:
             return None
         q, omega = a.value
         pos, vel = p.value
-        R, euler = _rot_euler_scalar(float(q[0]), float(q[1]), float(q[2]), float(q[3]))
+        R, euler = frames.rotation_euler_from_quaternion_scalar(float(q[0]), float(q[1]), float(q[2]), float(q[3]))
         vn, ve, vd = float(vel[0]), float(vel[1]), float(vel[2])
         v_body = np.array([R[0][0] * vn + R[1][0] * ve + R[2][0] * vd,      # R_IB^T v_ned
                            R[0][1] * vn + R[1][1] * ve + R[2][1] * vd,

@@ -331,9 +331,13 @@ def load_certificate_npz(path: Path | str) -> dict:
 
 
 def gains_dict(models_raw: dict, model: PolytopicModel, K: np.ndarray, R: np.ndarray, Q: np.ndarray, gamma: float,
-               certificate: dict) -> dict:
-    """The gains.yaml document of ARCHITECTURE.md section 5."""
-    return {
+               certificate: dict, F_ff: Optional[np.ndarray] = None, ff_layout: Optional[dict] = None) -> dict:
+    """The gains.yaml document of ARCHITECTURE.md section 5.
+
+    With ``F_ff`` (N, n_free + m, p) and its layout (``FeedforwardLayout.to_dict()``) every vertex
+    gets an ``F_ff`` entry and the document a top-level ``feedforward`` (synthesis/feedforward.py).
+    """
+    d = {
         "format": GAINS_FORMAT,
         "states": models_raw["states"],
         "inputs": models_raw["inputs"],
@@ -345,6 +349,13 @@ def gains_dict(models_raw: dict, model: PolytopicModel, K: np.ndarray, R: np.nda
         "gamma": float(gamma),
         "certificate": certificate,
     }
+    if F_ff is not None:
+        if ff_layout is None:
+            raise ConfigError("gains_dict: F_ff needs its layout (free/accelerated/held states)")
+        d["feedforward"] = dict(ff_layout)
+        for i, vx in enumerate(d["vertices"]):
+            vx["F_ff"] = np.asarray(F_ff[i]).tolist()
+    return d
 
 
 class Gains:
@@ -364,7 +375,10 @@ class Gains:
         verts = d.get("vertices")
         if not isinstance(verts, list) or len(verts) != len(corners):
             raise ConfigError(f"{where}: 'vertices' must list {len(corners)} vertices")
-        K, x0, u0 = [], [], []
+        K, x0, u0, F = [], [], [], []
+        ff = d.get("feedforward")
+        if ff is not None and not isinstance(ff, dict):
+            raise ConfigError(f"{where}: 'feedforward' must be a mapping")
         for k, v in enumerate(verts):
             w = f"{where}: vertices[{k}]"
             if not isinstance(v, dict):
@@ -375,7 +389,15 @@ class Gains:
             K.append(_matrix(v.get("K"), (m, n), f"{w}.K"))
             x0.append(_matrix(v.get("x0"), (n,), f"{w}.x0"))
             u0.append(_matrix(v.get("u0"), (m,), f"{w}.u0"))
+            if ff is not None:
+                if "F_ff" not in v:
+                    raise ConfigError(f"{w}: missing F_ff (the file declares 'feedforward')")
+                Fa = np.array(v["F_ff"], dtype=float)
+                F.append(_matrix(v["F_ff"], Fa.shape, f"{w}.F_ff"))
         self.K, self.x0, self.u0 = np.array(K), np.array(x0), np.array(u0)
+        #: feedforward layout (dict) and stacked F_ff (N, r, p), or None (synthesis/feedforward.py)
+        self.feedforward = ff
+        self.F_ff = np.array(F) if ff is not None else None
         R = np.array(d.get("R"), dtype=float)
         if R.ndim != 2 or R.shape[0] != m:
             raise ConfigError(f"{where}: R must be {m} x n_e, got shape {R.shape}")

@@ -233,6 +233,45 @@ def _check_lmi(rep: VerifyReport, model: PolytopicModel, K: np.ndarray, R: np.nd
             "min(-lambda_max(LMI), lambda_min(X))")
 
 
+#: relative tolerance of the recomputed feedforward matrices (YAML keeps ~16 digits)
+FF_RTOL = 1e-8
+
+
+def check_feedforward(rep: VerifyReport, model: PolytopicModel, F_ff: np.ndarray, layout: dict,
+                      rtol: float = FF_RTOL) -> None:
+    """Recompute F_i from the nominal vertex models (synthesis/feedforward.py) and compare with the
+    stored F_ff; also the defining property: A_i dx_ff + B_i du_ff has the accelerated rows = a and
+    the held rows = 0 for a = each unit vector (independent of how F was computed)."""
+    from lpv_sysid.synthesis.feedforward import FeedforwardLayout, feedforward_matrix, feedforward_residual
+
+    try:
+        lay = FeedforwardLayout.from_dict(layout)
+        free, acc, held = lay.indices(model.state_names)
+    except ConfigError as exc:
+        rep.add("feedforward", "layout", 1.0, 0.0, False, str(exc))
+        return
+    F_ff = np.asarray(F_ff, dtype=float)
+    want = (model.n_vertices, len(free) + model.n_u, len(acc))
+    if F_ff.shape != want:
+        rep.add("feedforward", "F_ff shape", 1.0, 0.0, False, f"shape {F_ff.shape}, expected {want}")
+        return
+    for i in range(model.n_vertices):
+        try:
+            F = feedforward_matrix(model.A[i], model.B[i], model.state_names, lay, where=f"vertex {i}")
+        except ConfigError as exc:
+            rep.add("feedforward", f"vertex {i}", float("inf"), rtol, False, str(exc))
+            continue
+        err = float(np.max(np.abs(F_ff[i] - F)) / max(1.0, float(np.max(np.abs(F)))))
+        rep.add("feedforward", f"vertex {i} F_ff vs recomputed", err, rtol, err <= rtol,
+                "" if err <= rtol else "stored F_ff differs from the one of the nominal model")
+        scale = max(1.0, float(np.max(np.abs(model.A[i]))), float(np.max(np.abs(model.B[i]))))
+        res = max(float(np.max(np.abs(feedforward_residual(model.A[i], model.B[i], F_ff[i], free, acc, e)[acc + held])))
+                  for e in np.eye(len(acc)))
+        ok = res <= 1e-6 * scale
+        rep.add("ff residual", f"vertex {i} A dx_ff + B du_ff - a", res, 1e-6 * scale, ok,
+                "" if ok else "stored F_ff does not produce the requested acceleration")
+
+
 def verify_files(gains_path: Path | str, models_path: Path | str, n_random: int = 20, seed: int = 0,
                  uncertainty: Optional[dict] = None, velocity_index=None) -> VerifyReport:
     """Load gains.yaml (+ sidecar) and vertex_models.yaml and run :func:`verify_gains`.
@@ -271,6 +310,8 @@ def verify_files(gains_path: Path | str, models_path: Path | str, n_random: int 
     if not (same_names and same_box):
         return rep
     _check_input_claim(rep, model, claim, raw)
+    if gains.F_ff is not None:
+        check_feedforward(rep, model, gains.F_ff, gains.feedforward)
     region = Region.from_dict(cert.get("region")) if cert.get("region") else None
     sidecar = None
     side = cert.get("sidecar")

@@ -1,0 +1,162 @@
+"""Reference feedforward from the vertex models (seed 2 Sec. 5.1, Eq. 102, on seed 0 Eq. 16).
+
+Seed 2 Sec. 5.1 turns the reference r into a state reference x_r and a feedforward input u_r that
+make the reference a trajectory of the model, and applies ``u = u_r + K (x - x_r)`` (Eq. 102).
+Seed 0's law ``u = u0(v_d) + K(v_d)(x - x0(v_d))`` (Eq. 31) uses the static trims only: they hold
+v = v_d when v_d is constant, but a *changing* v_d needs a tilt and a thrust change the trims do
+not contain, so feedback alone has to create them and the vehicle lags (Eq. 33 hides this: its
+``x0'`` term, Eq. 34, moves the equilibrium for free).
+
+For a desired body acceleration ``a = dv_d/dt`` the perturbation about the vertex trim that gives
+``v' = a`` with ``omega' = 0`` and ``delta' = 0`` at ``Delta v = 0``, ``Delta omega = 0`` follows
+from the rows of ``[A_i B_i]`` of the linear model ``Delta x' = A Delta x + B Delta u`` (Eq. 16):
+the unknowns ``y = (Delta phi, Delta theta, Delta delta (4), Delta u (4))`` (10) solve
+
+    [A_i[rows, free]  B_i[rows, :]] y = E a,     rows = (u, v, w | p, q, r, dt, da, de, dr),
+
+with ``E`` the identity on the velocity rows and 0 on the held rows (10 equations, 10 unknowns).
+So ``y = F_i a`` with ``F_i = M_i^-1 E`` (10 x 3). The kinematic rows (phi', theta') are not
+imposed: with ``Delta omega = 0`` they are ~0 at trims with zero yaw rate (their residual is
+reported by :func:`feedforward_residual`).
+
+Row order of ``F_i`` (the ``F_ff`` entry of gains.yaml): the ``free_states`` in the order given
+(quadrotor: phi, theta, dt, da, de, dr), then all inputs in input order (ut, ua, ue, ur); the
+columns are the ``accelerated_states`` (u, v, w), i.e. the axes of v_d.
+
+At runtime (control/lpv_controller.py) ``F(v_d) = sum_i alpha_i(v_d) F_i`` (Eq. 21 weights) and
+
+    u = u0(v_d) + du_ff + K(v_d) (x - x0(v_d) - dx_ff) + R u_e,   (dx_ff, du_ff) = F(v_d) a.
+
+``M_i`` is solved by least squares (scipy.linalg.lstsq, columns equilibrated to unit norm) so that
+a rank-deficient identified model still gives the minimum-norm answer; the condition number of
+the equilibrated matrix is checked (a warning above 1e6): above ``cond_max`` the
+model cannot produce the requested acceleration reliably and :class:`ConfigError` names the
+vertex (the caller may switch feedforward off in config/synthesis.yaml).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Optional, Sequence
+
+import numpy as np
+import scipy.linalg
+
+from lpv_sysid.errors import ConfigError
+
+log = logging.getLogger(__name__)
+
+#: largest accepted condition number of the 10 x 10 system (1/eps^(1/2) would lose half the digits).
+COND_MAX_DEFAULT = 1e10
+
+
+@dataclass(frozen=True)
+class FeedforwardLayout:
+    """Which states are solved for, which are accelerated and which are held (module docstring)."""
+
+    free_states: tuple = ("phi", "theta", "dt", "da", "de", "dr")
+    accelerated_states: tuple = ("u", "v", "w")
+    held_states: tuple = ("p", "q", "r", "dt", "da", "de", "dr")
+
+    def to_dict(self) -> dict:
+        return {"free_states": list(self.free_states), "accelerated_states": list(self.accelerated_states),
+                "held_states": list(self.held_states)}
+
+    @classmethod
+    def from_dict(cls, d: Optional[dict]) -> "FeedforwardLayout":
+        d = dict(d or {})
+        bad = set(d) - {"free_states", "accelerated_states", "held_states"}
+        if bad:
+            raise ConfigError(f"feedforward: unknown key(s) {sorted(bad)}")
+        kw = {}
+        for k, v in d.items():
+            if not isinstance(v, (list, tuple)) or not all(isinstance(s, str) for s in v):
+                raise ConfigError(f"feedforward.{k}: expected a list of state names, got {v!r}")
+            kw[k] = tuple(v)
+        return cls(**kw)
+
+    def indices(self, state_names: Sequence[str]) -> tuple[list, list, list]:
+        names = list(state_names)
+        out = []
+        for what in ("free_states", "accelerated_states", "held_states"):
+            sel = getattr(self, what)
+            missing = [s for s in sel if s not in names]
+            if missing:
+                raise ConfigError(f"feedforward.{what}: {missing} not among the model states {names}")
+            if len(set(sel)) != len(sel):
+                raise ConfigError(f"feedforward.{what}: duplicate names in {list(sel)}")
+            out.append([names.index(s) for s in sel])
+        if set(out[0]) & set(out[1]):
+            raise ConfigError("feedforward: a state cannot be both free and accelerated (Delta v = 0)")
+        return out[0], out[1], out[2]
+
+    def n_rows(self, n_u: int) -> int:
+        return len(self.free_states) + n_u
+
+
+def feedforward_matrix(A: np.ndarray, B: np.ndarray, state_names: Sequence[str],
+                       layout: FeedforwardLayout = FeedforwardLayout(), cond_max: float = COND_MAX_DEFAULT,
+                       where: str = "model") -> np.ndarray:
+    """F (n_free + n_u, n_acc) of the module docstring for one linear model (A, B)."""
+    A = np.asarray(A, dtype=float)
+    B = np.asarray(B, dtype=float)
+    n, m = B.shape
+    if A.shape != (n, n):
+        raise ConfigError(f"{where}: A {A.shape} and B {B.shape} do not fit")
+    free, acc, held = layout.indices(state_names)
+    rows = acc + held
+    M = np.hstack([A[np.ix_(rows, free)], B[rows, :]])
+    if M.shape[0] != M.shape[1]:
+        raise ConfigError(f"{where}: feedforward system is {M.shape[0]} x {M.shape[1]} "
+                          f"({len(rows)} imposed rows, {len(free)} free states + {m} inputs); it must be square")
+    E = np.zeros((len(rows), len(acc)))
+    E[np.arange(len(acc)), np.arange(len(acc))] = 1.0
+    # column equilibration: the motor rows carry b_Omega ~ 1.4e4 (seed 0 Eq. 15), so the raw
+    # condition number (~1e6 for the quadrotor) says more about units than about solvability
+    scale = np.linalg.norm(M, axis=0)
+    scale[scale == 0.0] = 1.0
+    # lstsq (not solve): a singular identified model gives the minimum-norm answer and its rank
+    Fs, _, rank, sv = scipy.linalg.lstsq(M / scale, E, lapack_driver="gelsd")
+    F = Fs / scale[:, None]
+    cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
+    if rank < M.shape[0] or not cond <= cond_max:
+        raise ConfigError(f"{where}: feedforward system [A[rows, free] B[rows]] is ill-conditioned "
+                          f"(rank {rank}/{M.shape[0]}, cond {cond:.3g} > {cond_max:.3g}): the model cannot "
+                          "produce the requested accelerations; set feedforward: false in the synthesis config")
+    if cond > 1e6:
+        log.warning("%s: feedforward system condition number %.3g (> 1e6)", where, cond)
+    if not np.all(np.isfinite(F)):
+        raise ConfigError(f"{where}: feedforward matrix is not finite")
+    return F
+
+
+def vertex_feedforward(A: np.ndarray, B: np.ndarray, state_names: Sequence[str],
+                       layout: FeedforwardLayout = FeedforwardLayout(),
+                       cond_max: float = COND_MAX_DEFAULT) -> np.ndarray:
+    """F_i for every vertex, (N, n_free + n_u, n_acc); A (N, n, n), B (N, n, m) nominal models."""
+    A = np.asarray(A, dtype=float)
+    B = np.asarray(B, dtype=float)
+    return np.array([feedforward_matrix(A[i], B[i], state_names, layout, cond_max, f"vertex {i}")
+                     for i in range(A.shape[0])])
+
+
+def split(F: np.ndarray, n_x: int, free_index: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
+    """(Gx (..., n_x, p), Gu (..., m, p)) with dx_ff = Gx a, du_ff = Gu a (zero rows for the
+    states that are not free). Works on one F (r, p) or a stack (N, r, p)."""
+    F = np.asarray(F, dtype=float)
+    nf = len(free_index)
+    Gx = np.zeros(F.shape[:-2] + (n_x, F.shape[-1]))
+    Gx[..., list(free_index), :] = F[..., :nf, :]
+    return Gx, F[..., nf:, :].copy()
+
+
+def feedforward_residual(A: np.ndarray, B: np.ndarray, F: np.ndarray, free_index: Sequence[int],
+                         acc_index: Sequence[int], a: np.ndarray) -> np.ndarray:
+    """A dx_ff + B du_ff - (a on the accelerated rows): the full 12-row residual (kinematic rows
+    included) for a test acceleration a."""
+    A = np.asarray(A, dtype=float)
+    Gx, Gu = split(F, A.shape[0], free_index)
+    r = A @ (Gx @ a) + np.asarray(B, dtype=float) @ (Gu @ a)
+    r[list(acc_index)] -= a
+    return r
