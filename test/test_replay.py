@@ -119,7 +119,7 @@ def test_replay_rate_grid_on_phase1_sample(tmp_path):
 @pytest.mark.parametrize("kind, needle", [
     ("nobag", "no such file"),
     ("badgains", "gamma"),
-    ("missing_topic", "not recorded"),
+    ("missing_topic", "not in bag"),
     ("exists", "already exists"),
 ])
 def test_replay_bad_input(tmp_path, capsys, kind, needle):

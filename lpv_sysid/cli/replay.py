@@ -64,11 +64,8 @@ def read_inputs(path: str, topics: list[str], optional: str | None = None):
     extra = []
     want = topics + ([optional] if optional else [])
     for part in bag_directories(path):
-        data = read_bag(str(part), strict=True)
-        missing = [t for t in topics if t not in data.types]
-        if missing:
-            raise BagError(f"bag {part}: topic(s) {missing} not recorded; it has "
-                           f"{sorted(data.types)}")
+        # only the inputs (and the optional topic) are deserialised, not e.g. imu
+        data = read_bag(str(part), topics=topics, strict=True, optional=[optional] if optional else ())
         for t in want:
             if t == optional:
                 extra.extend(ns for ns, _ in data.get(t, []))

@@ -1,4 +1,6 @@
-"""Runtime robust LPV law of seed 0 Eqs. (17), (31): u = u0(v_d) + K(v_d) (x - x0(v_d)) + R u_e.
+"""Runtime robust LPV law of seed 0 Eqs. (17), (31): u = u0(v_d) + K(v_d) (x - x0(v_d)) + R u_e,
+with the optional reference feedforward of seed 2 Sec. 5.1 (Eq. 102):
+u = u0(v_d) + du_ff + K(v_d) (x - x0(v_d) - dx_ff) + R u_e, (dx_ff, du_ff) = F(v_d) a.
 
 One :meth:`LpvController.step` does, in this order:
 
@@ -9,15 +11,32 @@ One :meth:`LpvController.step` does, in this order:
    decides what to do with it);
 3. one small matrix product ``alpha @ W`` with the precomputed stack W = [vec K_i | x0_i | u0_i]
    gives K(v_d), x0(v_d), u0(v_d) together;
-4. the law ``u = u0 + K (x - x0) + R u_e``;
+4. the law ``u = u0 + K (x - x0) + R u_e``; when the schedule carries ``F_ff`` (gains.yaml,
+   :mod:`lpv_sysid.synthesis.feedforward`) and ``feedforward`` is on, the state reference
+   ``x0 + dx_ff`` and input ``u0 + du_ff`` with ``(dx_ff, du_ff) = (sum_i alpha_i F_i) a`` replace
+   x0, u0. ``a = dv_d/dt`` is passed by the caller (simulation: exact derivative of the signal) or,
+   when not given, is the derivative of the reference low-passed with time constant
+   ``ff_filter_tau`` (``a = d/dt [v_d / (tau s + 1)]``, discretised exactly for a held input:
+   ``y_k = y_k-1 + (1 - exp(-dt/tau)) (v_d,k - y_k-1)``, ``a_k = (y_k - y_k-1) / dt``, which gives
+   the exact slope of a ramp after the transient). Trade-off: the filter delays a by ~tau (phase
+   lag 2 pi f tau at frequency f: 0.2 s costs 36 deg at 0.5 Hz), a small tau passes the staircase
+   of a reference stream that is slower than the control rate and its noise (gain 1/tau at high
+   frequency). 0.2 s suits a 50 Hz reference with content up to ~0.5 Hz;
 5. actuator saturation through the mixer (seed 0 Eq. 7): ``u_ESC = clip(Mix^-1 u, 0, 1)``,
    ``u = Mix u_ESC`` (the mixer is a constructor argument; without it no saturation);
 6. optional rate limit ``|u_k - u_{k-1}| <= rate * dt`` per channel (after saturation, and the
    result re-saturated, so the command stays feasible);
-7. bound monitor: running energies of ``z = Q^-1 (v - v_d)`` (Eq. 18) and ``u_e``
-   (rectangle rule), gain estimate ``sqrt(E_z / E_e)`` compared with ``gamma * margin`` only after
-   ``E_e >= min_energy`` (before that the ratio is meaningless: z also contains the response to
-   initial conditions and reference changes). ``info["bound_exceeded"]`` latches.
+7. bound monitor: energies of ``z = Q^-1 (v - v_d)`` (Eq. 18) and ``u_e`` (rectangle rule), gain
+   estimate ``sqrt(E_z / E_e)`` compared with ``gamma * margin`` only after the total excitation
+   energy reaches ``min_energy`` (before that the ratio is meaningless: z also contains the
+   response to initial conditions and reference changes). ``monitor_window`` (s, optional)
+   replaces the running integrals by exponentially forgetting ones, ``E <- exp(-dt/W) E + term``:
+   an old transient (the reference lag before the feedforward settled, a gust) is forgotten, and
+   for a linear closed loop the weighted ratio is bounded by the H-inf norm of the loop shifted
+   by 1/(2W) (``A + I/(2W)``), i.e. ~gamma for W well above the slowest closed-loop time constant
+   (slowest pole -0.5 1/s here: W >= 10 s). z still contains the tracking part that the
+   feedforward does not remove (model error, saturation); the monitor judges that too, on purpose.
+   ``info["bound_exceeded"]`` latches.
 
 Pure numpy, no allocation beyond a few small temporaries; see bench/bench_lpv_law.py.
 """
@@ -43,6 +62,9 @@ class LpvControllerConfig:
     monitor_margin: float = 1.2             # flag when gain > gamma * margin
     monitor_min_energy: float = 0.05        # ||u_e||_2^2 needed before the gain is judged
     velocity_index: tuple = (2, 3, 4)       # u, v, w in the 12-state of DESIGN.md
+    feedforward: bool = True                # use the schedule's F_ff when it has one
+    ff_filter_tau: float = 0.2              # s, derivative filter of v_d when a is not given
+    monitor_window: Optional[float] = None  # s, exponential forgetting of the monitor (None: running)
 
     @classmethod
     def from_dict(cls, d: Optional[dict]) -> "LpvControllerConfig":
@@ -61,6 +83,13 @@ class LpvControllerConfig:
             raise ConfigError("lpv_controller: monitor_margin and monitor_min_energy must be > 0")
         if cfg.rate_limit is not None and any(not (r > 0) for r in cfg.rate_limit):
             raise ConfigError("lpv_controller: rate_limit entries must be > 0")
+        if not isinstance(cfg.feedforward, bool):
+            raise ConfigError(f"lpv_controller: feedforward must be true or false, got {cfg.feedforward!r}")
+        if not (isinstance(cfg.ff_filter_tau, (int, float)) and math.isfinite(cfg.ff_filter_tau)
+                and cfg.ff_filter_tau >= 0):
+            raise ConfigError(f"lpv_controller: ff_filter_tau must be >= 0 s, got {cfg.ff_filter_tau!r}")
+        if cfg.monitor_window is not None and not (math.isfinite(cfg.monitor_window) and cfg.monitor_window > 0):
+            raise ConfigError(f"lpv_controller: monitor_window must be > 0 s, got {cfg.monitor_window!r}")
         return cfg
 
 
@@ -75,6 +104,25 @@ def _schedule_arrays(schedule: Any) -> tuple:
         vmin, vmax = schedule.vmin, schedule.vmax
     return (K, x0, u0, np.asarray(schedule.R, float), np.asarray(schedule.Q, float), float(schedule.gamma),
             np.asarray(vmin, float), np.asarray(vmax, float))
+
+
+def _feedforward_arrays(schedule: Any, n_x: int) -> Optional[tuple]:
+    """(F (N, r, p), free state indices) of a schedule with feedforward, else None.
+
+    ``schedule.feedforward`` is io.formats.FeedforwardSpec or the raw mapping (synthesis.files.Gains);
+    state names from ``schedule.state_names`` (quadrotor layout when the schedule has none)."""
+    F = getattr(schedule, "F_ff", None)
+    spec = getattr(schedule, "feedforward", None)
+    if F is None or spec is None:
+        return None
+    free = spec["free_states"] if isinstance(spec, dict) else spec.free_states
+    names = getattr(schedule, "state_names", None)
+    if not names:
+        from lpv_sysid.models.quadrotor import STATE_NAMES as names
+    names = list(names)
+    if len(names) != n_x or any(s not in names for s in free):
+        raise ConfigError(f"feedforward free states {list(free)} not among the schedule's states {names}")
+    return np.asarray(F, dtype=float), [names.index(s) for s in free]
 
 
 class LpvController:
@@ -95,7 +143,20 @@ class LpvController:
         self.inv_range = 1.0 / (vmax - vmin)
         self.vmax = vmax.copy()
         # W = [vec K_i | x0_i | u0_i]: one product alpha @ W interpolates everything (Eq. 31)
-        self.W = np.ascontiguousarray(np.hstack([K.reshape(N, m * n), x0, u0]))
+        stack = [K.reshape(N, m * n), x0, u0]
+        ff = _feedforward_arrays(schedule, n) if config.feedforward else None
+        self.has_ff = ff is not None
+        if ff is not None:
+            F, free = ff
+            if F.shape != (N, len(free) + m, p):
+                raise ConfigError(f"gain schedule: F_ff has shape {F.shape}, expected ({N}, {len(free) + m}, {p})")
+            if not np.all(np.isfinite(F)):
+                raise ConfigError("gain schedule: F_ff contains NaN/inf")
+            stack.append(F.reshape(N, -1))          # F(v_d) = sum alpha_i F_i rides on the same product
+            self._ff_shape = F.shape[1:]
+            self._ff_free = np.array(free, dtype=int)
+            self._ff_nf = len(free)
+        self.W = np.ascontiguousarray(np.hstack(stack))
         self._mn = m * n
         self.R = np.ascontiguousarray(R)
         self.n_e = R.shape[1]
@@ -123,14 +184,36 @@ class LpvController:
         self.rate = None if config.rate_limit is None else np.asarray(config.rate_limit, dtype=float)
         self._rate_list = None if self.rate is None else self.rate.tolist()
         self.threshold = gamma * config.monitor_margin
+        self.tau = float(config.ff_filter_tau)
+        self.window = config.monitor_window
         self.reset()
 
     def reset(self) -> None:
         self.t_prev: Optional[float] = None
         self.u_prev: Optional[np.ndarray] = None
-        self.energy_z = 0.0
+        self.energy_z = 0.0           # monitor energies (windowed when monitor_window is set)
         self.energy_e = 0.0
+        self.energy_e_total = 0.0     # running excitation energy (decides when to judge)
         self.bound_exceeded = False
+        self.vd_filt: Optional[np.ndarray] = None   # low-passed v_d of the derivative filter
+        self.a_filt = np.zeros(self.n_p)
+
+    def reference_rate(self, t: float, v_d: np.ndarray) -> np.ndarray:
+        """Filtered derivative of the reference (module docstring, item 4); updates the filter.
+
+        Uses the time since the previous call of :meth:`step` (``t_prev``)."""
+        if self.vd_filt is None or self.t_prev is None:
+            self.vd_filt = np.array(v_d, dtype=float)
+            self.a_filt = np.zeros(self.n_p)
+            return self.a_filt
+        dt = t - self.t_prev
+        if dt <= 0.0:
+            return self.a_filt
+        k = 1.0 if self.tau == 0.0 else -math.expm1(-dt / self.tau)
+        y = self.vd_filt + k * (v_d - self.vd_filt)
+        self.a_filt = (y - self.vd_filt) / dt
+        self.vd_filt = y
+        return self.a_filt
 
     # -- pieces (public for tests) -----------------------------------------------------
     def weights(self, v_d: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -153,11 +236,17 @@ class LpvController:
         return alpha, clamped
 
     def gain(self) -> float:
-        """Running estimate ||z||_2 / ||u_e||_2 (NaN before any excitation)."""
+        """Running (or windowed) estimate ||z||_2 / ||u_e||_2 (NaN before any excitation)."""
         return math.sqrt(self.energy_z / self.energy_e) if self.energy_e > 0 else float("nan")
 
     # -- the step ----------------------------------------------------------------------
-    def step(self, t: float, x: np.ndarray, v_d: np.ndarray, u_e: np.ndarray) -> tuple[np.ndarray, dict]:
+    def step(self, t: float, x: np.ndarray, v_d: np.ndarray, u_e: np.ndarray,
+             a: Optional[np.ndarray] = None) -> tuple[np.ndarray, dict]:
+        """One control step; ``a`` = dv_d/dt for the feedforward (None: filtered derivative)."""
+        if a is not None:
+            a = np.asarray(a, dtype=float)
+            if a.shape != (self.n_p,) or not np.all(np.isfinite(a)):
+                raise SafetyError(f"lpv law: reference acceleration must be {self.n_p} finite values, got {a}")
         try:
             x = np.asarray(x, dtype=float)
             v_d = np.asarray(v_d, dtype=float)
@@ -178,10 +267,20 @@ class LpvController:
             dt = t - self.t_prev
             if dt < 0.0:
                 raise SafetyError(f"lpv law: time went backwards ({self.t_prev} -> {t})")
+        a_filt = self.reference_rate(t, v_d)
         alpha, clamped = self.weights(v_d)
         row = alpha @ self.W
-        mn, n = self._mn, self.n_x
-        u = row[mn + n:] + row[:mn].reshape(self.n_u, n) @ (x - row[mn:mn + n]) + self.R @ u_e
+        mn, n, m = self._mn, self.n_x, self.n_u
+        x_ref = row[mn:mn + n]
+        u_ref = row[mn + n:mn + n + m]
+        a_used = None
+        if self.has_ff:
+            a_used = a_filt if a is None else a
+            ff = row[mn + n + m:].reshape(self._ff_shape) @ a_used
+            x_ref = x_ref.copy()
+            x_ref[self._ff_free] += ff[:self._ff_nf]
+            u_ref = u_ref + ff[self._ff_nf:]
+        u = u_ref + row[:mn].reshape(m, n) @ (x - x_ref) + self.R @ u_e
         saturated = False
         if self.mix is not None:
             u, saturated = self._saturate(u)
@@ -200,13 +299,19 @@ class LpvController:
         # bound monitor (Eq. 18 performance output, Eq. 26/29 energies)
         if dt > 0.0:
             z = self.Qinv @ (x[self.vel] - v_d)
+            if self.window is not None:
+                lam = math.exp(-dt / self.window)
+                self.energy_z *= lam
+                self.energy_e *= lam
             self.energy_z += float(z @ z) * dt
             self.energy_e += ee * dt
-        judged = self.energy_e >= self.cfg.monitor_min_energy
+            self.energy_e_total += ee * dt
+        judged = self.energy_e_total >= self.cfg.monitor_min_energy and self.energy_e > 0.0
         if judged and self.energy_z > self.threshold * self.threshold * self.energy_e:
             self.bound_exceeded = True
         return u, {"clamped": clamped, "saturated": saturated, "rate_limited": rate_limited,
-                   "bound_judged": judged, "bound_exceeded": self.bound_exceeded}
+                   "bound_judged": judged, "bound_exceeded": self.bound_exceeded,
+                   "feedforward": self.has_ff, "a_ff": a_used}
 
     def _saturate(self, u: np.ndarray) -> tuple[np.ndarray, bool]:
         esc = self.mix_inv @ u

@@ -549,21 +549,25 @@ def _deserializers(sources: list[_Source]) -> dict[str, object]:
     return out
 
 
-def read_bag(path, topics: Iterable[str] | None = None, strict: bool = True) -> BagContents:
+def read_bag(path, topics: Iterable[str] | None = None, strict: bool = True,
+             optional: Iterable[str] = ()) -> BagContents:
     """Read a rosbag2 directory (or a bare ``.mcap`` / ``.db3`` file).
 
     Returns :class:`BagContents` ``{topic: [(stamp_ns, msg), ...]}`` sorted by stamp for
     every topic of the bag (or of ``topics``). ``strict=True`` raises :class:`BagError` on
     a missing/damaged bag and on a requested topic the bag does not have; ``strict=False``
-    returns what can be read and lists the problems in ``.problems``.
+    returns what can be read and lists the problems in ``.problems``. ``optional`` topics
+    (with ``topics``) are read when the bag has them and are no error when it does not.
+    Only the requested topics are deserialised.
     """
+    optional = [t for t in optional if topics is None or t not in topics]
     topics = None if topics is None else list(topics)
-    sources, problems = _collect(path, topics, strict)
+    sources, problems = _collect(path, None if topics is None else topics + optional, strict)
     out = BagContents()
     out.problems = problems
     for src in sources:
         for topic, msgtype in src.types.items():
-            if topics is None or topic in topics:
+            if topics is None or topic in topics or topic in optional:
                 out.types.setdefault(topic, msgtype)
                 out.setdefault(topic, [])
     if topics is not None:

@@ -71,6 +71,9 @@ class Phase2Config:
     run_nonlinear: bool = True
     monitor_margin: float = 1.2        # bound monitor of the runtime law: flag at gain > gamma x margin
     superposition: bool = False        # also estimate the excitation-only gain on the nonlinear model
+    feedforward: str = "exact"         # reference feedforward of run (b): exact | filtered | off
+    ff_filter_tau: float = 0.2         # s, derivative filter of the 'filtered' feedforward
+    monitor_window: Optional[float] = None   # s, exponential forgetting of the bound monitor
 
     def __post_init__(self) -> None:
         if not (isinstance(self.kappa, (int, float)) and math.isfinite(self.kappa) and self.kappa > 0):
@@ -85,6 +88,12 @@ class Phase2Config:
             raise ConfigError(f"--duration must be > 0, got {self.duration!r}")
         if not (self.monitor_margin > 0):
             raise ConfigError(f"--monitor-margin must be > 0, got {self.monitor_margin!r}")
+        if self.feedforward not in ("exact", "filtered", "off"):
+            raise ConfigError(f"--feedforward must be exact, filtered or off, got {self.feedforward!r}")
+        if not (math.isfinite(self.ff_filter_tau) and self.ff_filter_tau >= 0):
+            raise ConfigError(f"--ff-filter-tau must be >= 0, got {self.ff_filter_tau!r}")
+        if self.monitor_window is not None and not (math.isfinite(self.monitor_window) and self.monitor_window > 0):
+            raise ConfigError(f"--monitor-window must be > 0, got {self.monitor_window!r}")
         if self.storage not in ("mcap", "sqlite3"):
             raise ConfigError(f"--storage must be mcap or sqlite3, got {self.storage!r}")
 
@@ -549,6 +558,9 @@ class Phase2Problem:
     A: Optional[np.ndarray] = None  # (N, n_x, n_x) nominal vertex models (theta0)
     B: Optional[np.ndarray] = None  # (N, n_x, n_u)
     source: dict = field(default_factory=dict)
+    F_ff: Optional[np.ndarray] = None   # (N, n_free + n_u, 3) reference feedforward (gains.yaml)
+    feedforward: Any = None             # its layout (io.formats.FeedforwardSpec), None: no feedforward
+    state_names: tuple = ()
 
     def scheduled(self):
         """ScheduledLpv of the nominal model with the gains' equilibria (Eq. 33 inputs)."""
@@ -584,25 +596,45 @@ def load_problem(gains_path: str | Path, models_path: Optional[str | Path] = Non
     return Phase2Problem(vmin=np.asarray(gs.scheduling.min, dtype=float),
                          vmax=np.asarray(gs.scheduling.max, dtype=float),
                          K=gs.K, x0=gs.x0, u0=gs.u0, R=np.asarray(gs.R, dtype=float),
-                         Q=np.asarray(gs.Q, dtype=float), gamma=float(gs.gamma), A=A, B=B, source=source)
+                         Q=np.asarray(gs.Q, dtype=float), gamma=float(gs.gamma), A=A, B=B, source=source,
+                         F_ff=gs.F_ff, feedforward=gs.feedforward, state_names=tuple(gs.state_names))
+
+
+def reference_acceleration(signals: ReferenceSignals) -> Callable[[float], np.ndarray]:
+    """a(t) = dv_d/dt of the reference table for the feedforward: second-order central
+    differences of the samples (np.gradient; one-sided at the ends), linearly interpolated.
+    For the phase-2 multisine (<= 0.5 Hz sampled at 50 Hz) the relative error is
+    (2 pi f dt)^2 / 6 < 7e-4."""
+    t = signals.t
+    acc = np.gradient(signals.v_d, t, axis=0, edge_order=2)
+
+    def a(tk: float) -> np.ndarray:
+        return np.array([np.interp(tk, t, acc[:, j]) for j in range(acc.shape[1])])
+
+    return a
 
 
 class RuntimeLaw:
     """The onboard law of :mod:`lpv_sysid.control.lpv_controller` as a ``ControlLaw``:
-    ``u = u0(v_d) + K(v_d)(x - x0(v_d)) + R (kappa u_e)`` with actuator saturation through the
-    mixer and the running-gain bound monitor. ``last_info`` holds the flags of the last step;
-    counters record how often the command saturated or v_d was clamped."""
+    ``u = u0(v_d) + du_ff + K(v_d)(x - x0(v_d) - dx_ff) + R (kappa u_e)`` with actuator saturation
+    through the mixer and the bound monitor; the feedforward (when the gains carry F_ff) uses
+    ``accel(t)`` (the reference's derivative) or, without it, the law's own filtered derivative
+    of v_d (as on the vehicle). ``last_info`` holds the flags of the last step; counters record
+    how often the command saturated or v_d was clamped."""
 
-    def __init__(self, problem: "Phase2Problem", mix: Optional[np.ndarray] = None, config: Any = None) -> None:
+    def __init__(self, problem: "Phase2Problem", mix: Optional[np.ndarray] = None, config: Any = None,
+                 accel: Optional[Callable[[float], np.ndarray]] = None) -> None:
         from lpv_sysid.control.lpv_controller import LpvController, LpvControllerConfig
 
         self.ctrl = LpvController(problem, config if config is not None else LpvControllerConfig(), mix)
+        self.accel = accel
         self.last_info: dict = {}
         self.steps = self.saturated = self.clamped = 0
 
     def __call__(self, t: float, x: np.ndarray, v_d: np.ndarray, ue_scaled: np.ndarray) -> np.ndarray:
+        a = None if self.accel is None else self.accel(float(t))
         u, info = self.ctrl.step(float(t), np.asarray(x, dtype=float), np.asarray(v_d, dtype=float),
-                                 np.asarray(ue_scaled, dtype=float))
+                                 np.asarray(ue_scaled, dtype=float), a)
         self.last_info = info
         self.steps += 1
         self.saturated += int(info.get("saturated", False))
@@ -610,16 +642,29 @@ class RuntimeLaw:
         return u
 
     def stats(self) -> dict:
+        mode = "off" if not self.ctrl.has_ff else ("filtered" if self.accel is None else "exact")
         return {"law_steps": self.steps, "saturated_steps": self.saturated, "clamped_steps": self.clamped,
-                "monitor_gain_estimate": _finite_or_none(self.ctrl.gain())}
+                "monitor_gain_estimate": _finite_or_none(self.ctrl.gain()), "feedforward": mode,
+                "monitor_window_s": self.ctrl.window}
 
 
 def runtime_law(problem: "Phase2Problem", mix: Optional[np.ndarray] = None,
-                monitor_margin: float = 1.2) -> RuntimeLaw:
-    """The control law of run (b) (see :class:`RuntimeLaw`)."""
+                monitor_margin: float = 1.2, feedforward: str = "off",
+                signals: Optional[ReferenceSignals] = None, monitor_window: Optional[float] = None,
+                ff_filter_tau: float = 0.2) -> RuntimeLaw:
+    """The control law of run (b) (see :class:`RuntimeLaw`); ``feedforward``: ``exact`` (a from
+    :func:`reference_acceleration` of ``signals``), ``filtered`` (the law's derivative filter,
+    time constant ``ff_filter_tau``) or ``off``. Gains without F_ff fly without feedforward."""
     from lpv_sysid.control.lpv_controller import LpvControllerConfig
 
-    return RuntimeLaw(problem, mix, LpvControllerConfig(monitor_margin=float(monitor_margin)))
+    if feedforward not in ("exact", "filtered", "off"):
+        raise ConfigError(f"--feedforward must be exact, filtered or off, got {feedforward!r}")
+    if feedforward == "exact" and signals is None:
+        raise ConfigError("feedforward 'exact' needs the reference signals")
+    cfg = LpvControllerConfig(monitor_margin=float(monitor_margin), feedforward=feedforward != "off",
+                              ff_filter_tau=float(ff_filter_tau), monitor_window=monitor_window)
+    accel = reference_acceleration(signals) if feedforward == "exact" else None
+    return RuntimeLaw(problem, mix, cfg, accel)
 
 
 def load_vehicle_config(path: Optional[str | Path], seed: Optional[int] = None):
@@ -685,7 +730,8 @@ def run(problem: Phase2Problem, signals: ReferenceSignals, cfg: Phase2Config, qu
         quad = Quadrotor(quad_params)
         trim = quad.trim(signals.v_d[0])
         vehicle = SimVehicle(quad, sensors, x0=trim.full_state)
-        law = law or runtime_law(problem, quad.mix, cfg.monitor_margin)
+        law = law or runtime_law(problem, quad.mix, cfg.monitor_margin, cfg.feedforward, signals,
+                                 cfg.monitor_window, cfg.ff_filter_tau)
         kw = dict(kappa=cfg.kappa, gamma=problem.gamma, box_margin=cfg.box_margin,
                   max_tilt=math.radians(cfg.max_tilt_deg))
         if cfg.record_bag:
@@ -706,7 +752,7 @@ def run(problem: Phase2Problem, signals: ReferenceSignals, cfg: Phase2Config, qu
             # bound monitor effectively off: it would stop on the reference-tracking part of z
             rec.info["superposition"] = excitation_gain_by_superposition(
                 lambda: SimVehicle(quad, sensors, x0=trim.full_state),
-                lambda: runtime_law(problem, quad.mix, 1e12), signals, problem.Q, *v_box, kappa=cfg.kappa,
+                lambda: runtime_law(problem, quad.mix, 1e12, cfg.feedforward, signals, None, cfg.ff_filter_tau), signals, problem.Q, *v_box, kappa=cfg.kappa,
                 box_margin=cfg.box_margin, max_tilt=math.radians(cfg.max_tilt_deg))
         records["nonlinear"] = rec
     else:
@@ -757,6 +803,14 @@ def add_phase2_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--monitor-margin", type=float, default=1.2,
                         help="bound monitor of the runtime law flags when the running ||z||/||kappa u_e|| "
                              "exceeds gamma x MARGIN (the flag stops the run), default 1.2")
+    parser.add_argument("--feedforward", choices=("exact", "filtered", "off"), default="exact",
+                        help="reference feedforward of the nonlinear run when gains.yaml has F_ff: exact "
+                             "(derivative of the signal table), filtered (the onboard derivative filter) or off")
+    parser.add_argument("--ff-filter-tau", type=float, default=0.2,
+                        help="time constant (s) of the onboard derivative filter (--feedforward filtered)")
+    parser.add_argument("--monitor-window", type=float, default=None,
+                        help="bound monitor over an exponentially forgetting window of SECONDS "
+                             "(default: running from the start)")
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="rosbag2 storage")
     parser.add_argument("--no-bag", action="store_true", help="do not record the rosbag2")
     parser.add_argument("--skip-eq33", action="store_true", help="only the nonlinear simulation")
@@ -775,7 +829,9 @@ def run_phase2(args: argparse.Namespace) -> int:
                        max_tilt_deg=args.max_tilt, duration=args.duration,
                        ramp=None if not args.ramp else float(args.ramp), record_bag=not args.no_bag,
                        storage=args.storage, run_eq33=not args.skip_eq33, run_nonlinear=not args.skip_nonlinear,
-                       monitor_margin=args.monitor_margin, superposition=args.superposition)
+                       monitor_margin=args.monitor_margin, superposition=args.superposition,
+                       feedforward=args.feedforward, ff_filter_tau=args.ff_filter_tau,
+                       monitor_window=args.monitor_window)
     models_path = args.models if args.models is not None else Path(args.gains).parent / "vertex_models.yaml"
     problem = load_problem(args.gains, models_path if (args.models is not None or models_path.is_file()) else None)
     signals = load_signals(args.signals, cfg.duration, cfg.ramp)
