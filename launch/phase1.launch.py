@@ -8,33 +8,19 @@ One vertex per run: pass ``vertex`` (body velocity u, v, w in the seed's FRD fra
 m/s); run the file again for the next vertex of the box.
 """
 
-import os
-
-from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
-from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
+from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
+
+from lpv_sysid.nodes.launch_util import declare_arguments, params
 
 NAMESPACE = "lpv_sysid"
 
 
 def generate_launch_description():
-    share = get_package_share_directory("lpv_sysid")
-    config_dir = LaunchConfiguration("config_dir")
-
-    def params(name):
-        return PathJoinSubstitution([config_dir, name])
-
     return LaunchDescription([
-        DeclareLaunchArgument("config_dir", default_value=os.path.join(share, "config"),
-                              description="directory holding the node parameter files"),
-        DeclareLaunchArgument("signals_file", default_value="signals.npz",
-                              description="signals.npz written by `lpv-sysid signals`"),
-        DeclareLaunchArgument("vertex", default_value="[0.0, 0.0, 0.0]",
-                              description="vertex body velocity (u, v, w) FRD, m/s, for this run"),
-        DeclareLaunchArgument("log_dir", default_value="phase1_log",
-                              description="experiment directory of the data logger"),
+        *declare_arguments(signals_file="signals.npz", vertex="[0.0, 0.0, 0.0]",
+                           log_dir="phase1_log"),
         Node(package="lpv_sysid", executable="excitation_node", name="excitation",
              namespace=NAMESPACE, output="screen",
              parameters=[params("excitation_node.yaml"),

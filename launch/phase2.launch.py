@@ -7,33 +7,19 @@ lpv_controller (refuses to start on an invalid gains file), mavlink_bridge (actu
 commands to PX4; hands control back to PX4 when commands stop), data_logger.
 """
 
-import os
-
-from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
-from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
+from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
+
+from lpv_sysid.nodes.launch_util import REQUIRED, declare_arguments, params
 
 NAMESPACE = "lpv_sysid"
 
 
 def generate_launch_description():
-    share = get_package_share_directory("lpv_sysid")
-    config_dir = LaunchConfiguration("config_dir")
-
-    def params(name):
-        return PathJoinSubstitution([config_dir, name])
-
     gains = LaunchConfiguration("gains_file")
     return LaunchDescription([
-        DeclareLaunchArgument("config_dir", default_value=os.path.join(share, "config"),
-                              description="directory holding the node parameter files"),
-        DeclareLaunchArgument("gains_file", description="gains.yaml from `lpv-sysid synthesize`"),
-        DeclareLaunchArgument("signals_file", default_value="signals.npz",
-                              description="signals.npz written by `lpv-sysid signals`"),
-        DeclareLaunchArgument("log_dir", default_value="phase2_log",
-                              description="experiment directory of the data logger"),
+        *declare_arguments(gains_file=REQUIRED, signals_file="signals.npz", log_dir="phase2_log"),
         Node(package="lpv_sysid", executable="excitation_node", name="excitation",
              namespace=NAMESPACE, output="screen",
              parameters=[params("excitation_node.yaml"),

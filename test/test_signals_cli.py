@@ -104,7 +104,7 @@ def test_shipped_configs_load():
     c2 = load_config(os.path.join(ROOT, "config", "signals_phase2.yaml"))
     assert c2.channel_names == ("u_d", "v_d", "w_d", "ue_t", "ue_a", "ue_e", "ue_r")
     assert c2.duration == 100.0 and c2.sample_rate == 50.0
-    assert c2.groups[0].band == (0.01, 0.5) and c2.groups[1].band == (0.5, 5.0)
+    assert c2.groups[0].band == (0.01, 0.2) and c2.groups[1].band == (0.51, 5.0)
     assert c2.groups[0].peak == (5.0, 5.0, 5.0) and c2.groups[1].energy == 1.0
     c1 = load_config(os.path.join(ROOT, "config", "signals_phase1.yaml"))
     assert c1 == SignalsConfig.from_dict(PHASE1_DEFAULT)

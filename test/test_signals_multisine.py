@@ -153,7 +153,7 @@ def test_rpf_targets_phase2_set(phase2):
         assert h.size >= 5
         assert r <= (1.05 if h.size >= 30 else 1.25), (phase2.names[j], h.size, r)
     assert metrics.max_cross_correlation(phase2.u) < 1e-9
-    assert [h.size for h in phase2.harmonics] == [17, 17, 16, 113, 113, 112, 112]
+    assert [h.size for h in phase2.harmonics] == [7, 7, 6, 113, 113, 112, 112]
     assert phase2.Q == pytest.approx(np.sqrt(300.0) * np.eye(3))
 
 

@@ -30,33 +30,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def load_config(path: Path | None):
     from lpv_sysid.errors import ConfigError
     from lpv_sysid.ident.vertex import IdentificationConfig
+    from lpv_sysid.io.yaml_file import read_yaml
 
     if path is None:
         return IdentificationConfig()
-    import yaml
-
-    try:
-        d = yaml.safe_load(Path(path).read_text())
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read ({exc.strerror})") from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: malformed YAML ({str(exc).splitlines()[0]})") from None
+    d = read_yaml(path)
     try:
         return IdentificationConfig.from_dict(d)
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from None
 
 
-def _quadrotor_params(path: Path | None) -> dict:
+def quadrotor_section(path: Path | None) -> dict:
+    """The ``quadrotor`` section of config/quadrotor.yaml (``{}`` without a file)."""
     if path is None:
         return {}
     from lpv_sysid.errors import ConfigError
-    import yaml
+    from lpv_sysid.io.yaml_file import read_yaml
 
-    try:
-        d = yaml.safe_load(Path(path).read_text()) or {}
-    except (OSError, yaml.YAMLError) as exc:
-        raise ConfigError(f"{path}: cannot read ({exc})") from None
+    d = read_yaml(path) or {}
     q = d.get("quadrotor", {}) if isinstance(d, dict) else None
     if not isinstance(q, dict):
         raise ConfigError(f"{path}: section 'quadrotor' must be a mapping")
@@ -97,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
 
     cfg = load_config(args.config)
     if args.quadrotor is not None:
-        cfg = dataclasses.replace(cfg, quadrotor=_quadrotor_params(args.quadrotor))
+        cfg = dataclasses.replace(cfg, quadrotor=quadrotor_section(args.quadrotor))
     bags = dp.find_bags(args.bags)
     centre = 0.5 * (np.asarray(cfg.vmin) + np.asarray(cfg.vmax))
     vertices, validation = {}, None

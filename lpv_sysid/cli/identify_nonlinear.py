@@ -36,21 +36,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _params(path: Path | None):
+    from lpv_sysid.cli.identify import quadrotor_section
     from lpv_sysid.errors import ConfigError
     from lpv_sysid.models.quadrotor import QuadrotorParams
 
     if path is None:
         return QuadrotorParams()
-    import yaml
-
+    q = quadrotor_section(path)
     try:
-        d = yaml.safe_load(Path(path).read_text()) or {}
-    except (OSError, yaml.YAMLError) as exc:
-        raise ConfigError(f"{path}: cannot read ({exc})") from None
-    if not isinstance(d, dict) or not isinstance(d.get("quadrotor", {}), dict):
-        raise ConfigError(f"{path}: expected a mapping with a 'quadrotor' section")
-    try:
-        return QuadrotorParams.from_dict(d.get("quadrotor", {}))
+        return QuadrotorParams.from_dict(q)
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from None
 

@@ -34,7 +34,7 @@ _TOP_KEYS = {"hinf", "weights", "velocity_states", "uncertainty", "verify", "fee
 
 def feedforward_settings(cfg: dict, cfg_path: str) -> tuple[bool, dict, float]:
     """``feedforward``: true (default) | false | {enabled, cond_max, free_states,
-    accelerated_states, held_states} -> (enabled, layout dict, cond_max)."""
+    accelerated_states, held_states, kinematic_states, rate_states} -> (enabled, layout dict, cond_max)."""
     from lpv_sysid.synthesis.feedforward import COND_MAX_DEFAULT, FeedforwardLayout
 
     v = cfg.get("feedforward", True)
@@ -201,7 +201,7 @@ def run(args: argparse.Namespace) -> int:
     if opts.region is not None:
         cert["region"] = opts.region.to_dict()
     gamma_file = float(opts.gamma) if not opts.minimize_gamma else float(max(res.gamma_certified, 1e-12))
-    F_ff = ff_layout = None
+    F_ff = ff_layout = F_jerk = None
     if ff_enabled and "feedforward" not in cfg:
         # default on, but only for models that have the layout's states (generic plants: off)
         names = set(model.state_names)
@@ -212,10 +212,10 @@ def run(args: argparse.Namespace) -> int:
         from lpv_sysid.synthesis.feedforward import FeedforwardLayout, vertex_feedforward
 
         # from the nominal vertex models (theta0), synthesis/feedforward.py
-        F_ff = vertex_feedforward(model.A, model.B, model.state_names, FeedforwardLayout.from_dict(ff_layout_cfg),
-                                  ff_cond_max)
+        F_ff, F_jerk = vertex_feedforward(model.A, model.B, model.state_names,
+                                          FeedforwardLayout.from_dict(ff_layout_cfg), ff_cond_max)
         ff_layout = ff_layout_cfg
-    save_yaml(gains_dict(raw, model, res.K, R, Q, gamma_file, cert, F_ff, ff_layout), out)
+    save_yaml(gains_dict(raw, model, res.K, R, Q, gamma_file, cert, F_ff, ff_layout, F_jerk), out)
     print(f"LMI: {res.size.lmi_blocks} blocks (total dim {res.size.lmi_total_dim}, {res.size.scalar_constraints} "
           f"scalar constraints), {res.size.scalar_variables} scalar variables; "
           f"compile {res.compile_time:.2f} s, solve {res.solve_time:.2f} s, load + synthesis wall {wall:.2f} s "
@@ -224,7 +224,8 @@ def run(args: argparse.Namespace) -> int:
           f"min margin {res.min_margin:.3g}")
     if F_ff is not None:
         print(f"reference feedforward F_ff ({F_ff.shape[1]}x{F_ff.shape[2]} per vertex, rows "
-              f"{ff_layout['free_states']} + inputs) from the nominal vertex models")
+              f"{ff_layout['free_states']} + inputs) from the nominal vertex models"
+              + (f", jerk term F_jerk ({F_jerk.shape[1]}x{F_jerk.shape[2]})" if F_jerk is not None else ""))
     print(f"wrote {out}")
     print(f"wrote {side}")
     if args.no_verify:

@@ -50,15 +50,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _read_yaml(path: str) -> dict:
-    import yaml
+    from lpv_sysid.io.yaml_file import read_yaml
 
     p = Path(path)
     if not p.is_file():
         raise ConfigError(f"config file not found: {p}")
-    try:
-        d = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{p}: malformed YAML: {str(exc).splitlines()[0]}") from None
+    d = read_yaml(p)
     if not isinstance(d, dict):
         raise ConfigError(f"{p}: expected a mapping at the top level")
     return d

@@ -33,6 +33,7 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError, SafetyError
 from lpv_sysid.models.quadrotor import mixer
+from lpv_sysid.validation import check_keys, is_finite_number
 
 
 @dataclass(frozen=True)
@@ -77,7 +78,7 @@ class BaselineGains:
     def __post_init__(self) -> None:
         for f in fields(self):
             v = getattr(self, f.name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            if not is_finite_number(v):
                 raise ConfigError(f"controller.{f.name}: must be a finite number, got {v!r}")
             if v < 0:
                 raise ConfigError(f"controller.{f.name}: must be >= 0, got {v!r}")
@@ -93,12 +94,7 @@ class BaselineGains:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "BaselineGains":
-        if not isinstance(d, Mapping):
-            raise ConfigError(f"controller: expected a mapping, got {type(d).__name__}")
-        names = {f.name for f in fields(cls)}
-        bad = sorted(set(d) - names)
-        if bad:
-            raise ConfigError(f"controller: unknown key(s) {bad}")
+        check_keys(d, {f.name for f in fields(cls)}, "controller")
         return cls(**{k: (float(v) if isinstance(v, int) and not isinstance(v, bool) else v)
                       for k, v in d.items()})
 

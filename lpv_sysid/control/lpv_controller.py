@@ -21,7 +21,13 @@ One :meth:`LpvController.step` does, in this order:
    the exact slope of a ramp after the transient). Trade-off: the filter delays a by ~tau (phase
    lag 2 pi f tau at frequency f: 0.2 s costs 36 deg at 0.5 Hz), a small tau passes the staircase
    of a reference stream that is slower than the control rate and its noise (gain 1/tau at high
-   frequency). 0.2 s suits a 50 Hz reference with content up to ~0.5 Hz;
+   frequency). 0.2 s suits a 50 Hz reference with content up to ~0.5 Hz. With ``F_jerk`` in the
+   schedule the jerk term ``F_jerk(v_d) j`` (rate states of x_ref, more tilt/inputs; see
+   synthesis/feedforward.py) is added, j = d2v_d/dt2 given by the caller or a second stage with
+   its own time constant ``ff_jerk_tau`` applied to the filtered a. Measured on the phase-2
+   reference (band 0.01-0.2 Hz) held at 50 Hz and sampled at 250 Hz: a has 28 / 13 / 12 % rms
+   error for tau = 0.02 / 0.05 / 0.1 s; a jerk stage of 0.05 s is useless (error 2x the signal:
+   it differentiates the staircase), 0.1 s gives 60 %, hence the separate, longer ff_jerk_tau;
 5. actuator saturation through the mixer (seed 0 Eq. 7): ``u_ESC = clip(Mix^-1 u, 0, 1)``,
    ``u = Mix u_ESC`` (the mixer is a constructor argument; without it no saturation);
 6. optional rate limit ``|u_k - u_{k-1}| <= rate * dt`` per channel (after saturation, and the
@@ -63,7 +69,8 @@ class LpvControllerConfig:
     monitor_min_energy: float = 0.05        # ||u_e||_2^2 needed before the gain is judged
     velocity_index: tuple = (2, 3, 4)       # u, v, w in the 12-state of DESIGN.md
     feedforward: bool = True                # use the schedule's F_ff when it has one
-    ff_filter_tau: float = 0.2              # s, derivative filter of v_d when a is not given
+    ff_filter_tau: float = 0.05             # s, derivative filter of v_d when a is not given
+    ff_jerk_tau: float = 0.2                # s, second stage (jerk) filter when j is not given
     monitor_window: Optional[float] = None  # s, exponential forgetting of the monitor (None: running)
 
     @classmethod
@@ -88,6 +95,9 @@ class LpvControllerConfig:
         if not (isinstance(cfg.ff_filter_tau, (int, float)) and math.isfinite(cfg.ff_filter_tau)
                 and cfg.ff_filter_tau >= 0):
             raise ConfigError(f"lpv_controller: ff_filter_tau must be >= 0 s, got {cfg.ff_filter_tau!r}")
+        if not (isinstance(cfg.ff_jerk_tau, (int, float)) and math.isfinite(cfg.ff_jerk_tau)
+                and cfg.ff_jerk_tau >= 0):
+            raise ConfigError(f"lpv_controller: ff_jerk_tau must be >= 0 s, got {cfg.ff_jerk_tau!r}")
         if cfg.monitor_window is not None and not (math.isfinite(cfg.monitor_window) and cfg.monitor_window > 0):
             raise ConfigError(f"lpv_controller: monitor_window must be > 0 s, got {cfg.monitor_window!r}")
         return cfg
@@ -107,7 +117,8 @@ def _schedule_arrays(schedule: Any) -> tuple:
 
 
 def _feedforward_arrays(schedule: Any, n_x: int) -> Optional[tuple]:
-    """(F (N, r, p), free state indices) of a schedule with feedforward, else None.
+    """(F (N, r, p), free state indices, F_jerk (N, r + n_rate, p) or None, rate state indices)
+    of a schedule with feedforward, else None.
 
     ``schedule.feedforward`` is io.formats.FeedforwardSpec or the raw mapping (synthesis.files.Gains);
     state names from ``schedule.state_names`` (quadrotor layout when the schedule has none)."""
@@ -120,9 +131,14 @@ def _feedforward_arrays(schedule: Any, n_x: int) -> Optional[tuple]:
     if not names:
         from lpv_sysid.models.quadrotor import STATE_NAMES as names
     names = list(names)
-    if len(names) != n_x or any(s not in names for s in free):
-        raise ConfigError(f"feedforward free states {list(free)} not among the schedule's states {names}")
-    return np.asarray(F, dtype=float), [names.index(s) for s in free]
+    rate = (spec.get("rate_states") or []) if isinstance(spec, dict) else spec.rate_states
+    Fj = getattr(schedule, "F_jerk", None)
+    if len(names) != n_x or any(s not in names for s in list(free) + list(rate)):
+        raise ConfigError(f"feedforward states {list(free) + list(rate)} not among the schedule's states {names}")
+    if Fj is None or not rate:
+        Fj, rate = None, []
+    return (np.asarray(F, dtype=float), [names.index(s) for s in free],
+            None if Fj is None else np.asarray(Fj, dtype=float), [names.index(s) for s in rate])
 
 
 class LpvController:
@@ -146,8 +162,9 @@ class LpvController:
         stack = [K.reshape(N, m * n), x0, u0]
         ff = _feedforward_arrays(schedule, n) if config.feedforward else None
         self.has_ff = ff is not None
+        self.has_jerk = False
         if ff is not None:
-            F, free = ff
+            F, free, Fj, rate = ff
             if F.shape != (N, len(free) + m, p):
                 raise ConfigError(f"gain schedule: F_ff has shape {F.shape}, expected ({N}, {len(free) + m}, {p})")
             if not np.all(np.isfinite(F)):
@@ -156,6 +173,14 @@ class LpvController:
             self._ff_shape = F.shape[1:]
             self._ff_free = np.array(free, dtype=int)
             self._ff_nf = len(free)
+            if Fj is not None:
+                if Fj.shape != (N, len(free) + m + len(rate), p) or not np.all(np.isfinite(Fj)):
+                    raise ConfigError(f"gain schedule: F_jerk has shape {Fj.shape} (expected "
+                                      f"({N}, {len(free) + m + len(rate)}, {p})) or is not finite")
+                stack.append(Fj.reshape(N, -1))
+                self.has_jerk = True
+                self._fj_shape = Fj.shape[1:]
+                self._fj_x = np.array(list(free) + list(rate), dtype=int)   # state rows of F_jerk
         self.W = np.ascontiguousarray(np.hstack(stack))
         self._mn = m * n
         self.R = np.ascontiguousarray(R)
@@ -185,6 +210,7 @@ class LpvController:
         self._rate_list = None if self.rate is None else self.rate.tolist()
         self.threshold = gamma * config.monitor_margin
         self.tau = float(config.ff_filter_tau)
+        self.tau_j = float(config.ff_jerk_tau)
         self.window = config.monitor_window
         self.reset()
 
@@ -197,23 +223,33 @@ class LpvController:
         self.bound_exceeded = False
         self.vd_filt: Optional[np.ndarray] = None   # low-passed v_d of the derivative filter
         self.a_filt = np.zeros(self.n_p)
+        self.a_lp: Optional[np.ndarray] = None      # low-passed a (second stage, jerk)
+        self.j_filt = np.zeros(self.n_p)
 
-    def reference_rate(self, t: float, v_d: np.ndarray) -> np.ndarray:
-        """Filtered derivative of the reference (module docstring, item 4); updates the filter.
+    def reference_rate(self, t: float, v_d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Filtered first and second derivative (a, j) of the reference (module docstring, item 4);
+        updates the filter. The jerk is the derivative filter (time constant ``ff_jerk_tau``)
+        applied to a (two cascaded stages).
 
         Uses the time since the previous call of :meth:`step` (``t_prev``)."""
         if self.vd_filt is None or self.t_prev is None:
             self.vd_filt = np.array(v_d, dtype=float)
             self.a_filt = np.zeros(self.n_p)
-            return self.a_filt
+            self.a_lp = np.zeros(self.n_p)
+            self.j_filt = np.zeros(self.n_p)
+            return self.a_filt, self.j_filt
         dt = t - self.t_prev
         if dt <= 0.0:
-            return self.a_filt
+            return self.a_filt, self.j_filt
         k = 1.0 if self.tau == 0.0 else -math.expm1(-dt / self.tau)
         y = self.vd_filt + k * (v_d - self.vd_filt)
         self.a_filt = (y - self.vd_filt) / dt
         self.vd_filt = y
-        return self.a_filt
+        k2 = 1.0 if self.tau_j == 0.0 else -math.expm1(-dt / self.tau_j)
+        y2 = self.a_lp + k2 * (self.a_filt - self.a_lp)
+        self.j_filt = (y2 - self.a_lp) / dt
+        self.a_lp = y2
+        return self.a_filt, self.j_filt
 
     # -- pieces (public for tests) -----------------------------------------------------
     def weights(self, v_d: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -241,12 +277,17 @@ class LpvController:
 
     # -- the step ----------------------------------------------------------------------
     def step(self, t: float, x: np.ndarray, v_d: np.ndarray, u_e: np.ndarray,
-             a: Optional[np.ndarray] = None) -> tuple[np.ndarray, dict]:
-        """One control step; ``a`` = dv_d/dt for the feedforward (None: filtered derivative)."""
+             a: Optional[np.ndarray] = None, j: Optional[np.ndarray] = None) -> tuple[np.ndarray, dict]:
+        """One control step; ``a`` = dv_d/dt and ``j`` = d2v_d/dt2 for the feedforward (None: the
+        filtered derivatives of v_d)."""
         if a is not None:
             a = np.asarray(a, dtype=float)
             if a.shape != (self.n_p,) or not np.all(np.isfinite(a)):
                 raise SafetyError(f"lpv law: reference acceleration must be {self.n_p} finite values, got {a}")
+        if j is not None:
+            j = np.asarray(j, dtype=float)
+            if j.shape != (self.n_p,) or not np.all(np.isfinite(j)):
+                raise SafetyError(f"lpv law: reference jerk must be {self.n_p} finite values, got {j}")
         try:
             x = np.asarray(x, dtype=float)
             v_d = np.asarray(v_d, dtype=float)
@@ -267,19 +308,28 @@ class LpvController:
             dt = t - self.t_prev
             if dt < 0.0:
                 raise SafetyError(f"lpv law: time went backwards ({self.t_prev} -> {t})")
-        a_filt = self.reference_rate(t, v_d)
+        if self.has_ff:
+            a_filt, j_filt = self.reference_rate(t, v_d)
         alpha, clamped = self.weights(v_d)
         row = alpha @ self.W
         mn, n, m = self._mn, self.n_x, self.n_u
         x_ref = row[mn:mn + n]
         u_ref = row[mn + n:mn + n + m]
-        a_used = None
+        a_used = j_used = None
         if self.has_ff:
             a_used = a_filt if a is None else a
-            ff = row[mn + n + m:].reshape(self._ff_shape) @ a_used
+            off = mn + n + m
+            nF = self._ff_shape[0] * self._ff_shape[1]
+            ff = row[off:off + nF].reshape(self._ff_shape) @ a_used
             x_ref = x_ref.copy()
             x_ref[self._ff_free] += ff[:self._ff_nf]
             u_ref = u_ref + ff[self._ff_nf:]
+            if self.has_jerk:
+                j_used = j_filt if j is None else j
+                fj = row[off + nF:].reshape(self._fj_shape) @ j_used
+                nf = self._ff_nf
+                x_ref[self._fj_x] += np.concatenate([fj[:nf], fj[nf + m:]])
+                u_ref = u_ref + fj[nf:nf + m]
         u = u_ref + row[:mn].reshape(m, n) @ (x - x_ref) + self.R @ u_e
         saturated = False
         if self.mix is not None:
@@ -311,7 +361,7 @@ class LpvController:
             self.bound_exceeded = True
         return u, {"clamped": clamped, "saturated": saturated, "rate_limited": rate_limited,
                    "bound_judged": judged, "bound_exceeded": self.bound_exceeded,
-                   "feedforward": self.has_ff, "a_ff": a_used}
+                   "feedforward": self.has_ff, "a_ff": a_used, "j_ff": j_used}
 
     def _saturate(self, u: np.ndarray) -> tuple[np.ndarray, bool]:
         esc = self.mix_inv @ u

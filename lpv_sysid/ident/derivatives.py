@@ -45,6 +45,7 @@ import numpy as np
 from scipy.signal import savgol_coeffs, savgol_filter
 
 from lpv_sysid.errors import ConfigError
+from lpv_sysid.validation import check_keys
 
 METHODS = ("fourier", "savgol")
 
@@ -62,9 +63,7 @@ class DerivativeConfig:
     @classmethod
     def from_dict(cls, d: dict | None) -> "DerivativeConfig":
         d = dict(d or {})
-        unknown = set(d) - {"method", "f_cut", "taper", "window_s", "polyorder"}
-        if unknown:
-            raise ConfigError(f"derivatives: unknown key(s) {sorted(unknown)}")
+        check_keys(d, ("method", "f_cut", "taper", "window_s", "polyorder"), "derivatives")
         cfg = cls(**d)
         if cfg.method not in METHODS:
             raise ConfigError(f"derivatives.method must be one of {METHODS}, got {cfg.method!r}")

@@ -38,6 +38,7 @@ from typing import Sequence
 import numpy as np
 
 from lpv_sysid.errors import ConfigError
+from lpv_sysid.validation import check_keys
 
 METHODS = ("box", "influence", "hybrid")
 
@@ -56,11 +57,8 @@ class UncertaintyConfig:
     @classmethod
     def from_dict(cls, d: dict | None) -> "UncertaintyConfig":
         d = dict(d or {})
-        allowed = {"k_sigma", "method", "p_max", "max_corners", "freq_hz", "n_freq", "output_states",
-                   "joint_alpha"}
-        unknown = set(d) - allowed
-        if unknown:
-            raise ConfigError(f"uncertainty: unknown key(s) {sorted(unknown)}")
+        check_keys(d, ("k_sigma", "method", "p_max", "max_corners", "freq_hz", "n_freq",
+                       "output_states", "joint_alpha"), "uncertainty")
         if "freq_hz" in d:
             d["freq_hz"] = tuple(float(v) for v in d["freq_hz"])
         if "output_states" in d:

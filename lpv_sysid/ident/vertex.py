@@ -34,6 +34,7 @@ log = logging.getLogger(__name__)
 
 from lpv_sysid.models.quadrotor import (INPUT_NAMES, INPUT_UNITS, SCHEDULING_NAMES, STATE_NAMES,
                                         STATE_UNITS)
+from lpv_sysid.validation import check_keys, is_count, is_finite_number
 
 FORMAT = "lpv_sysid/vertex_models@1"
 
@@ -65,10 +66,7 @@ class IdentificationConfig:
         if not isinstance(d, dict):
             raise ConfigError(f"identification config must be a mapping, got {type(d).__name__}")
         d = dict(d.get("identification", d))
-        allowed = {f for f in cls.__dataclass_fields__}
-        unknown = set(d) - allowed
-        if unknown:
-            raise ConfigError(f"identification: unknown key(s) {sorted(unknown)}; allowed {sorted(allowed)}")
+        check_keys(d, cls.__dataclass_fields__, "identification", list_allowed=True)
         kw: dict = {}
         kw["derivatives"] = deriv.DerivativeConfig.from_dict(d.pop("derivatives", None))
         kw["uncertainty"] = unc.UncertaintyConfig.from_dict(d.pop("uncertainty", None))
@@ -76,12 +74,12 @@ class IdentificationConfig:
                     "excitation_threshold"):
             if key in d:
                 v = d.pop(key)
-                if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
+                if not is_finite_number(v) or v < 0:
                     raise ConfigError(f"identification.{key} must be a finite number >= 0, got {v!r}")
                 kw[key] = float(v)
         if "max_lag" in d:
             v = d.pop("max_lag")
-            if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 0):
+            if v is not None and not is_count(v):
                 raise ConfigError(f"identification.max_lag must be null or an integer >= 0, got {v!r}")
             kw["max_lag"] = v
         for key in ("vmin", "vmax"):

@@ -24,7 +24,9 @@ bytes of the models file the gains were synthesised for. Optional reference feed
 (:mod:`lpv_sysid.synthesis.feedforward`): a top-level ``feedforward: {free_states,
 accelerated_states, held_states}`` and, then required at every vertex, ``F_ff`` with
 ``len(free_states) + n_u`` rows (free states in the listed order, then the inputs) and one
-column per accelerated state; a file without ``feedforward`` has no feedforward (older files).
+column per accelerated state; with ``kinematic_states`` and ``rate_states`` in ``feedforward`` also
+``F_jerk`` (rows: free states, inputs, rate states; the jerk term). A file without
+``feedforward`` has no feedforward (older files).
 
 Validation is strict: format tag, unknown/missing keys, names and units (by default the
 quadrotor layout of :mod:`lpv_sysid.models.quadrotor`), matrix shapes, finiteness, the box
@@ -555,29 +557,36 @@ class GainVertex:
     x0: np.ndarray
     u0: np.ndarray
     F_ff: Optional[np.ndarray] = None
+    F_jerk: Optional[np.ndarray] = None
 
     def to_dict(self) -> dict:
         d = {"scheduling": _floats(self.scheduling), "K": _rows(self.K),
              "x0": _floats(self.x0), "u0": _floats(self.u0)}
         if self.F_ff is not None:
             d["F_ff"] = _rows(self.F_ff)
+        if self.F_jerk is not None:
+            d["F_jerk"] = _rows(self.F_jerk)
         return d
 
     @classmethod
     def parse(cls, v: _V, d, i: int, n_x: int, n_u: int, n_p: int,
-              ff_shape: Optional[tuple] = None) -> "GainVertex":
+              ff_shape: Optional[tuple] = None, jerk_shape: Optional[tuple] = None) -> "GainVertex":
         p = f"vertices[{i}]"
-        v.mapping(d, p, ("scheduling", "K", "x0", "u0"), ("F_ff",))
-        F = None
-        if "F_ff" in d:
-            if ff_shape is None:
-                v.fail(f"{p}.F_ff", "given but the file has no top-level 'feedforward' layout")
-            F = v.matrix(d["F_ff"], ff_shape, f"{p}.F_ff")
-        elif ff_shape is not None:
-            v.fail(p, "missing key 'F_ff' (the file declares 'feedforward': every vertex needs it)")
+        v.mapping(d, p, ("scheduling", "K", "x0", "u0"), ("F_ff", "F_jerk"))
+        mats = {}
+        for key, shape, why in (("F_ff", ff_shape, "'feedforward'"),
+                                ("F_jerk", jerk_shape, "'feedforward' with kinematic_states/rate_states")):
+            mats[key] = None
+            if key in d:
+                if shape is None:
+                    v.fail(f"{p}.{key}", f"given but the file has no top-level {why}")
+                mats[key] = v.matrix(d[key], shape, f"{p}.{key}")
+            elif shape is not None:
+                v.fail(p, f"missing key {key!r} (the file declares {why}: every vertex needs it)")
         return cls(v.vector(d["scheduling"], n_p, f"{p}.scheduling"),
                    v.matrix(d["K"], (n_u, n_x), f"{p}.K"),
-                   v.vector(d["x0"], n_x, f"{p}.x0"), v.vector(d["u0"], n_u, f"{p}.u0"), F)
+                   v.vector(d["x0"], n_x, f"{p}.x0"), v.vector(d["u0"], n_u, f"{p}.u0"),
+                   mats["F_ff"], mats["F_jerk"])
 
 
 @dataclass(frozen=True)
@@ -588,20 +597,41 @@ class FeedforwardSpec:
     free_states: tuple
     accelerated_states: tuple
     held_states: tuple
+    kinematic_states: tuple = ()       # jerk term (both non-empty): per-vertex F_jerk
+    rate_states: tuple = ()
+
+    @property
+    def has_jerk(self) -> bool:
+        return bool(self.kinematic_states) and bool(self.rate_states)
 
     def to_dict(self) -> dict:
-        return {"free_states": list(self.free_states), "accelerated_states": list(self.accelerated_states),
-                "held_states": list(self.held_states)}
+        d = {"free_states": list(self.free_states), "accelerated_states": list(self.accelerated_states),
+             "held_states": list(self.held_states)}
+        if self.has_jerk:
+            d["kinematic_states"] = list(self.kinematic_states)
+            d["rate_states"] = list(self.rate_states)
+        return d
 
     def shape(self, n_u: int) -> tuple:
         return (len(self.free_states) + n_u, len(self.accelerated_states))
 
+    def jerk_shape(self, n_u: int) -> Optional[tuple]:
+        if not self.has_jerk:
+            return None
+        return (len(self.free_states) + n_u + len(self.rate_states), len(self.accelerated_states))
+
     @classmethod
     def parse(cls, v: _V, d, state_names: tuple, n_u: int, n_p: int,
               path: str = "feedforward") -> "FeedforwardSpec":
-        v.mapping(d, path, ("free_states", "accelerated_states", "held_states"))
+        v.mapping(d, path, ("free_states", "accelerated_states", "held_states"),
+                  ("kinematic_states", "rate_states"))
+        if ("kinematic_states" in d) != ("rate_states" in d):
+            v.fail(path, "kinematic_states and rate_states go together (the jerk term needs both)")
         got = {}
-        for k in ("free_states", "accelerated_states", "held_states"):
+        for k in ("free_states", "accelerated_states", "held_states", "kinematic_states", "rate_states"):
+            if k not in d:
+                got[k] = ()
+                continue
             lst = d[k]
             if not isinstance(lst, list) or not lst:
                 v.fail(f"{path}.{k}", f"expected a non-empty list of state names, got {_kind(lst)}")
@@ -619,7 +649,10 @@ class FeedforwardSpec:
             v.fail(path, "a state cannot be both free and accelerated")
         if len(got["accelerated_states"]) + len(got["held_states"]) != len(got["free_states"]) + n_u:
             v.fail(path, "the feedforward system must be square: accelerated + held rows = free states + inputs")
-        return cls(got["free_states"], got["accelerated_states"], got["held_states"])
+        if not set(got["kinematic_states"]) <= set(got["free_states"]):
+            v.fail(f"{path}.kinematic_states", "must be among the free states")
+        return cls(got["free_states"], got["accelerated_states"], got["held_states"],
+                   got["kinematic_states"], got["rate_states"])
 
 
 @dataclass(frozen=True)
@@ -679,6 +712,13 @@ class GainSchedule:
         return np.stack([vx.F_ff for vx in self.vertices])
 
     @property
+    def F_jerk(self) -> Optional[np.ndarray]:
+        """Stacked jerk-term matrices (N, n_free + m + n_rate, p) in box order, or None."""
+        if self.feedforward is None or not self.feedforward.has_jerk:
+            return None
+        return np.stack([vx.F_jerk for vx in self.vertices])
+
+    @property
     def K(self) -> np.ndarray:
         """Stacked gains (N, m, n) in box order."""
         return np.stack([vx.K for vx in self.vertices])
@@ -726,7 +766,8 @@ class GainSchedule:
         if d.get("feedforward") is not None:
             ff = FeedforwardSpec.parse(v, d["feedforward"], sn, n_u, n_p)
         ff_shape = None if ff is None else ff.shape(n_u)
-        vxs = [GainVertex.parse(v, e, i, n_x, n_u, n_p, ff_shape) for i, e in enumerate(d["vertices"])]
+        jerk_shape = None if ff is None else ff.jerk_shape(n_u)
+        vxs = [GainVertex.parse(v, e, i, n_x, n_u, n_p, ff_shape, jerk_shape) for i, e in enumerate(d["vertices"])]
         order = _order_vertices(v, [vx.scheduling for vx in vxs], box)
         R = v.matrix(d["R"], (n_u, n_u), "R")
         Q = v.matrix(d["Q"], (n_p, n_p), "Q")

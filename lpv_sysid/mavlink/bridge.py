@@ -33,6 +33,7 @@ from lpv_sysid.mavlink.link import LinkConfig, LinkEvent, MavlinkLink
 from lpv_sysid.mavlink.offboard import (OffboardConfig, OffboardMachine, SendCommand, SendSetpoint,
                                         State, StatusEvent)
 from lpv_sysid.mavlink.telemetry import StateSample, TelemetryDecoder
+from lpv_sysid.validation import check_config_keys
 from lpv_sysid.mavlink.transport import (ActuatorSetpoint, TransportContext, VelocitySetpoint,
                                          make_transport)
 
@@ -56,12 +57,7 @@ class BridgeConfig:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "BridgeConfig":
-        if not isinstance(d, Mapping):
-            raise ConfigError("mavlink bridge config must be a mapping")
-        known = set(cls.__dataclass_fields__)
-        bad = sorted(set(d) - known)
-        if bad:
-            raise ConfigError(f"unknown mavlink bridge config key(s) {bad}; known: {sorted(known)}")
+        check_config_keys(d, cls.__dataclass_fields__, "mavlink bridge")
         kw = dict(d)
         kw["link"] = LinkConfig.from_dict(d.get("link", {}) or {})
         kw["offboard"] = OffboardConfig.from_dict(d.get("offboard", {}) or {})
@@ -76,15 +72,9 @@ class BridgeConfig:
 
     @classmethod
     def load(cls, path: str) -> "BridgeConfig":
-        import yaml
+        from lpv_sysid.io.yaml_file import read_yaml
 
-        try:
-            with open(path, "r", encoding="utf-8") as f:
-                d = yaml.safe_load(f)
-        except OSError as exc:
-            raise ConfigError(f"{path}: cannot read ({exc.strerror})") from None
-        except yaml.YAMLError as exc:
-            raise ConfigError(f"{path}: malformed YAML ({exc})") from None
+        d = read_yaml(path)
         try:
             return cls.from_dict(d or {})
         except ConfigError as exc:

@@ -29,6 +29,7 @@ from typing import Any, Callable, Mapping
 
 from lpv_sysid.errors import ConfigError, LpvSysidError
 from lpv_sysid.mavlink import px4
+from lpv_sysid.validation import check_config_keys
 
 log = logging.getLogger(__name__)
 
@@ -73,12 +74,7 @@ class LinkConfig:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "LinkConfig":
-        if not isinstance(d, Mapping):
-            raise ConfigError(f"link config must be a mapping, got {type(d).__name__}")
-        known = {f for f in cls.__dataclass_fields__}
-        bad = sorted(set(d) - known)
-        if bad:
-            raise ConfigError(f"unknown link config key(s) {bad}; known: {sorted(known)}")
+        check_config_keys(d, cls.__dataclass_fields__, "link")
         kw = dict(d)
         if "streams" in kw:
             s = kw["streams"]

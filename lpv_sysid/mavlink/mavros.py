@@ -58,6 +58,7 @@ from lpv_sysid.errors import ConfigError
 from lpv_sysid.io import frames
 from lpv_sysid.io import messages as M
 from lpv_sysid.mavlink.offboard import StatusEvent
+from lpv_sysid.validation import check_config_keys
 
 log = logging.getLogger(__name__)
 
@@ -105,12 +106,7 @@ class MavrosConfig:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "MavrosConfig":
-        if not isinstance(d, Mapping):
-            raise ConfigError("mavros config must be a mapping")
-        known = set(cls.__dataclass_fields__)
-        bad = sorted(set(d) - known)
-        if bad:
-            raise ConfigError(f"unknown mavros config key(s) {bad}; known: {sorted(known)}")
+        check_config_keys(d, cls.__dataclass_fields__, "mavros")
         cfg = cls(**dict(d))
         cfg.validate()
         return cfg

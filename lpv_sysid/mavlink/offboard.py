@@ -32,6 +32,7 @@ from typing import Any, Mapping
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.mavlink import px4
+from lpv_sysid.validation import check_config_keys
 
 MAV_CMD_DO_SET_MODE = 176
 MAV_CMD_COMPONENT_ARM_DISARM = 400
@@ -73,12 +74,7 @@ class OffboardConfig:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "OffboardConfig":
-        if not isinstance(d, Mapping):
-            raise ConfigError("offboard config must be a mapping")
-        known = set(cls.__dataclass_fields__)
-        bad = sorted(set(d) - known)
-        if bad:
-            raise ConfigError(f"unknown offboard config key(s) {bad}; known: {sorted(known)}")
+        check_config_keys(d, cls.__dataclass_fields__, "offboard")
         cfg = cls(**dict(d))
         cfg.validate()
         return cfg

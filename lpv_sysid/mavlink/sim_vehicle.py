@@ -50,6 +50,7 @@ from lpv_sysid.io import frames
 from lpv_sysid.mavlink import px4
 from lpv_sysid.mavlink.link import LinkConfig, MavlinkLink
 from lpv_sysid.mavlink.telemetry import euler_to_quat
+from lpv_sysid.validation import check_config_keys, is_finite_number
 
 log = logging.getLogger(__name__)
 
@@ -109,11 +110,7 @@ class SimVehicleConfig:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "SimVehicleConfig":
-        if not isinstance(d, Mapping):
-            raise ConfigError("sim vehicle config must be a mapping")
-        bad = sorted(set(d) - set(cls.__dataclass_fields__))
-        if bad:
-            raise ConfigError(f"unknown sim vehicle config key(s) {bad}; known: {sorted(cls.__dataclass_fields__)}")
+        check_config_keys(d, cls.__dataclass_fields__, "sim vehicle")
         cfg = cls(**dict(d))
         cfg.validate()
         return cfg
@@ -128,7 +125,7 @@ class SimVehicleConfig:
         for k, v in self.params.items():
             if k not in DEFAULT_PARAMS:
                 raise ConfigError(f"sim vehicle: unknown parameter {k!r}; known: {sorted(DEFAULT_PARAMS)}")
-            if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(float(v)):
+            if not is_finite_number(v):
                 raise ConfigError(f"sim vehicle: parameter {k} must be a finite number, got {v!r}")
         if px4.mode_by_name(self.initial_mode) == px4.OFFBOARD:
             raise ConfigError("sim vehicle initial_mode cannot be OFFBOARD (PX4 needs a setpoint stream)")

@@ -1,14 +1,17 @@
-"""Shared glue of the rclpy shells: topic table, QoS, parameter descriptors, main().
+"""Shared glue of the rclpy shells: topic table, QoS, parameter descriptors, base node, main().
 
 Imported only by ``lpv_sysid/nodes/*`` (rclpy is imported here, never in the cores).
 """
 
 from __future__ import annotations
 
+import math
+
 import rclpy
 import rclpy.logging
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import (QoSDurabilityPolicy, QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy,
                        qos_profile_sensor_data)
@@ -65,6 +68,42 @@ def declare(node, table) -> dict:
             p = node.get_parameter_or(name, Parameter(name, value=[]))
         values[name] = p.value
     return values
+
+
+class ShellNode(Node):
+    """Base of the node shells: ``node_name`` in ``/lpv_sysid`` unless a namespace is given
+    (a ``__ns`` remap still wins), the module's parameter table declared into
+    ``self.params`` (see :func:`declare`), and the node clock in seconds / nanoseconds."""
+
+    #: at most one "rejected" warning per input topic in this period [s]
+    REJECT_LOG_PERIOD_S = 1.0
+
+    def __init__(self, node_name: str, parameters, **kwargs):
+        kwargs.setdefault("namespace", NAMESPACE)
+        super().__init__(node_name, **kwargs)
+        self._rejected_logged_at: dict[str, float] = {}
+        self.params = declare(self, parameters)
+
+    def now_ns(self) -> int:
+        return self.get_clock().now().nanoseconds
+
+    def now(self) -> float:
+        return self.now_ns() * 1e-9
+
+    def parse_input(self, topic: str, parse, msg):
+        """``parse(msg)``; a bad message (LpvSysidError) is dropped with a warning naming
+        ``topic`` (at most one per topic per :attr:`REJECT_LOG_PERIOD_S` of node time) and
+        gives ``None``: one bad input never stops the node."""
+        try:
+            return parse(msg)
+        except LpvSysidError as exc:
+            # throttled per topic by hand: rclpy's throttle_duration_sec keys on the call
+            # site, which is this one line for every topic of every shell
+            now = self.now()
+            if now - self._rejected_logged_at.get(topic, -math.inf) >= self.REJECT_LOG_PERIOD_S:
+                self._rejected_logged_at[topic] = now
+                self.get_logger().warning(f"{topic} rejected: {exc}")
+            return None
 
 
 def run(node_factory, args=None, name: str = NAMESPACE) -> int:

@@ -7,7 +7,8 @@ node would have published.
 
 Per tick (``rate_hz``), once started: staleness of every input stream, scheduling box,
 the runtime LPV law u = u0(v_d) + K(v_d)(x - x0(v_d)) + R kappa u_e (seed 0 Eq. 31,
-control/lpv_controller.py) on x = [phi, theta, u, v, w, p, q, r, Mix Omega] (seed 0
+control/lpv_controller.py; with the reference feedforward of gains.yaml F_ff/F_jerk the law's
+own filtered derivatives of velocity_reference supply a = dv_d/dt and its rate) on x = [phi, theta, u, v, w, p, q, r, Mix Omega] (seed 0
 Eq. 14 without position and yaw; delta = Mix Omega, Eq. 7), and its bound monitor. Any
 fault (stale / out-of-order / non-finite input, v_d outside the box, bound exceeded,
 abort request) latches an abort in :class:`~lpv_sysid.control.safety.SafetySupervisor`:
@@ -57,6 +58,10 @@ class ControllerSettings:
     rate_limit: tuple = ()                # per channel, units of u per second; () = none
     monitor_margin: float = 1.2
     monitor_min_energy: float = 0.05
+    monitor_window_s: float = 0.0         # > 0: exponentially forgetting monitor window; 0: running
+    feedforward: bool = True              # reference feedforward when gains.yaml has F_ff
+    ff_filter_tau: float = 0.05           # s, derivative filter of velocity_reference (a)
+    ff_jerk_tau: float = 0.2              # s, its jerk stage (j, when gains.yaml has F_jerk)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "ControllerSettings":
@@ -69,8 +74,11 @@ class ControllerSettings:
                               "gains.yaml written by `lpv-sysid synthesize`")
         kw = dict(d)
         kw["rate_limit"] = tuple(float(v) for v in kw.get("rate_limit", ()) or ())
+        if not isinstance(kw.get("feedforward", True), bool):
+            raise ConfigError(f"lpv_controller: parameter 'feedforward' must be true or false, "
+                              f"got {kw['feedforward']!r}")
         for k, v in kw.items():
-            if k not in ("gains_file", "models_file", "rate_limit"):
+            if k not in ("gains_file", "models_file", "rate_limit", "feedforward"):
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                     raise ConfigError(f"lpv_controller: parameter '{k}' must be a finite number, "
                                       f"got {v!r}")
@@ -78,6 +86,8 @@ class ControllerSettings:
         s = cls(**kw)
         if s.rate_hz <= 0:
             raise ConfigError(f"lpv_controller: rate_hz must be > 0, got {s.rate_hz}")
+        if s.monitor_window_s < 0 or s.ff_filter_tau < 0 or s.ff_jerk_tau < 0:
+            raise ConfigError("lpv_controller: monitor_window_s, ff_filter_tau and ff_jerk_tau must be >= 0")
         return s
 
     @property
@@ -100,7 +110,9 @@ class ControllerRuntime:
         cfg = LpvControllerConfig(
             u_esc_min=settings.u_esc_min, u_esc_max=settings.u_esc_max,
             rate_limit=settings.rate_limit or None, monitor_margin=settings.monitor_margin,
-            monitor_min_energy=settings.monitor_min_energy)
+            monitor_min_energy=settings.monitor_min_energy, feedforward=settings.feedforward,
+            ff_filter_tau=settings.ff_filter_tau, ff_jerk_tau=settings.ff_jerk_tau,
+            monitor_window=settings.monitor_window_s or None)
         self.law = LpvController(self.schedule, cfg, mix=self.mix)
         box = self.schedule.scheduling
         self.supervisor = SafetySupervisor(SafetyConfig(

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 from rosidl_runtime_py.utilities import get_message
@@ -63,11 +62,10 @@ def parse_topics(entries) -> dict[str, str]:
     return out
 
 
-class DataLoggerNode(Node):
+class DataLoggerNode(C.ShellNode):
     def __init__(self, **kwargs):
-        kwargs.setdefault("namespace", C.NAMESPACE)   # a __ns remap still wins
-        super().__init__(NODE_NAME, **kwargs)
-        p = C.declare(self, PARAMETERS)
+        super().__init__(NODE_NAME, PARAMETERS, **kwargs)
+        p = self.params
         rel = parse_topics(p["topics"])
         topics = {self.resolve_topic_name(n): t for n, t in rel.items()}
         cfg = RecorderConfig(out_dir=p["out_dir"], topics=topics, storage=p["storage"],
@@ -76,7 +74,7 @@ class DataLoggerNode(Node):
                              config_files=tuple(p["config_files"]),
                              gains_file=p["gains_file"], description=p["description"])
         self.recorder = Recorder(cfg)
-        self.recorder.start(self.get_clock().now().nanoseconds)
+        self.recorder.start(self.now_ns())
         self.f = M.MsgFactory.rclpy()
         self.pub_status = self.create_publisher(DiagnosticArray, "status", C.qos_for("status"))
         for name, typ in rel.items():
@@ -94,7 +92,7 @@ class DataLoggerNode(Node):
     def _record_cb(self, topic):
         def cb(data):
             try:
-                self.recorder.record(topic, self.get_clock().now().nanoseconds, data)
+                self.recorder.record(topic, self.now_ns(), data)
             except LpvSysidError as exc:
                 # disk full / write error: what was written is closed and readable; say so
                 self.get_logger().error(str(exc), once=True)
@@ -117,11 +115,11 @@ class DataLoggerNode(Node):
         msg = rec.error or ("recording" if rec.recording else "stopped")
         st = M.diagnostic_status(self.f, level, self.get_fully_qualified_name(), msg, values)
         self.pub_status.publish(
-            M.diagnostic_array(self.f, self.get_clock().now().nanoseconds, [st]))
+            M.diagnostic_array(self.f, self.now_ns(), [st]))
 
     def destroy_node(self):
         try:
-            self.recorder.stop(self.get_clock().now().nanoseconds)
+            self.recorder.stop(self.now_ns())
             self.get_logger().info(self.recorder.summary())
         except LpvSysidError as exc:
             self.get_logger().error(str(exc))

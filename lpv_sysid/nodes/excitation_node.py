@@ -17,7 +17,6 @@ from __future__ import annotations
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistStamped
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
@@ -47,11 +46,10 @@ PARAMETERS = [
 ]
 
 
-class ExcitationNode(Node):
+class ExcitationNode(C.ShellNode):
     def __init__(self, **kwargs):
-        kwargs.setdefault("namespace", C.NAMESPACE)   # a __ns remap still wins
-        super().__init__(NODE_NAME, **kwargs)
-        p = C.declare(self, PARAMETERS)
+        super().__init__(NODE_NAME, PARAMETERS, **kwargs)
+        p = self.params
         self.mode = p["mode"]
         if self.mode not in MODES:
             raise LpvSysidError(f"parameter 'mode' must be one of {MODES}, got {self.mode!r}")
@@ -61,7 +59,6 @@ class ExcitationNode(Node):
         if vertex.shape != (3,):
             raise LpvSysidError(f"parameter 'vertex_frd' needs 3 values, got {list(vertex)}")
         self.table = load_npz(p["signals_file"])
-        self.params = p
         self.offset = vertex if self.mode == "phase1" else np.zeros(3)
         self.yaw_offset = p["yaw_rate_offset"] if self.mode == "phase1" else 0.0
         self.core = self._make_core(start_time=0.0)   # validates channels now, not at start
@@ -91,12 +88,9 @@ class ExcitationNode(Node):
         return ExcitationCore.phase2(t, u, names, start_time=start_time,
                                      ramp=self.params["ramp_s"])
 
-    def now_ns(self) -> int:
-        return self.get_clock().now().nanoseconds
-
     # -- services -----------------------------------------------------------------------
     def _start(self) -> str:
-        t = self.now_ns() * 1e-9
+        t = self.now()
         self.core = self._make_core(start_time=t + self.params["start_delay_s"])
         self.started = True
         return f"{self.mode} excitation starts at t={self.core.start_time:.3f} s, " \

@@ -17,7 +17,6 @@ from __future__ import annotations
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistStamped
 from nav_msgs.msg import Odometry
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
@@ -58,11 +57,10 @@ PARAMETERS = [
 SHELL_ONLY = ("auto_start", "status_rate_hz")
 
 
-class LpvControllerNode(Node):
+class LpvControllerNode(C.ShellNode):
     def __init__(self, **kwargs):
-        kwargs.setdefault("namespace", C.NAMESPACE)   # a __ns remap still wins
-        super().__init__(NODE_NAME, **kwargs)
-        p = C.declare(self, PARAMETERS)
+        super().__init__(NODE_NAME, PARAMETERS, **kwargs)
+        p = self.params
         settings = ControllerSettings.from_dict({k: v for k, v in p.items()
                                                  if k not in SHELL_ONLY})
         self.runtime = ControllerRuntime(settings, M.MsgFactory.rclpy(),
@@ -83,9 +81,6 @@ class LpvControllerNode(Node):
                                f"gamma {self.runtime.schedule.gamma:g}")
         if p["auto_start"]:
             self.get_logger().info(self.runtime.start(self.now())[1])
-
-    def now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
 
     def _input(self, topic):
         def cb(msg):

@@ -26,7 +26,6 @@ from __future__ import annotations
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistStamped
 from nav_msgs.msg import Odometry
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import Imu, JointState
 from std_srvs.srv import Trigger
@@ -94,11 +93,10 @@ def mavros_config(p: dict) -> MR.MavrosConfig:
                                       "auto_start": p["auto_start"], "command": p["command"]})
 
 
-class MavlinkBridgeNode(Node):
+class MavlinkBridgeNode(C.ShellNode):
     def __init__(self, **kwargs):
-        kwargs.setdefault("namespace", C.NAMESPACE)   # a __ns remap still wins
-        super().__init__(NODE_NAME, **kwargs)
-        p = C.declare(self, PARAMETERS)
+        super().__init__(NODE_NAME, PARAMETERS, **kwargs)
+        p = self.params
         if p["transport"] not in ("mavlink", "mavros"):
             raise ConfigError(f"transport must be 'mavlink' or 'mavros', got {p['transport']!r}")
         self.mavros = p["transport"] == "mavros"
@@ -135,17 +133,12 @@ class MavlinkBridgeNode(Node):
             self.get_logger().info(f"MAVLink {p['link.url']}, command {p['command']}")
         self.create_timer(1.0 / p["status_rate_hz"], lambda: self.publish_status([]))
 
-    def now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
-
     # -- inputs -------------------------------------------------------------------------
     def on_reference(self, msg):
-        try:
-            t, v, r = M.reference_from_twist(msg)
-        except LpvSysidError as exc:
-            self.get_logger().warning(f"velocity_reference rejected: {exc}",
-                                      throttle_duration_sec=1.0)
+        parsed = self.parse_input("velocity_reference", M.reference_from_twist, msg)
+        if parsed is None:
             return
+        t, v, r = parsed
         out = self.core.on_velocity_reference(self.now(), v, r, stamp=t)
         if self.mavros:
             self.publish_mavros(out)
@@ -187,13 +180,9 @@ class MavlinkBridgeNode(Node):
             self.publish_status(out.events)
 
     def on_command(self, msg):
-        try:
-            t, u = M.actuator_command_from_joint_state(msg)
-        except LpvSysidError as exc:
-            self.get_logger().warning(f"actuator_command rejected: {exc}",
-                                      throttle_duration_sec=1.0)
-            return
-        self.core.on_actuator_command(self.now(), u, stamp=t)
+        parsed = self.parse_input("actuator_command", M.actuator_command_from_joint_state, msg)
+        if parsed is not None:
+            self.core.on_actuator_command(self.now(), parsed[1], stamp=parsed[0])
 
     def on_start(self, request, response):
         events = self.core.start(self.now())

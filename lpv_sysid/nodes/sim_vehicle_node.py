@@ -17,17 +17,16 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistStamped
 from nav_msgs.msg import Odometry
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import Imu, JointState
 
 from lpv_sysid.control.baseline import BaselineController, BaselineGains
 from lpv_sysid.errors import ConfigError, LpvSysidError
 from lpv_sysid.io import messages as M
+from lpv_sysid.io.yaml_file import read_yaml
 from lpv_sysid.models.quadrotor import Quadrotor, QuadrotorParams
 from lpv_sysid.nodes import _common as C
 from lpv_sysid.sim.vehicle import SensorConfig, SimVehicle
@@ -62,26 +61,18 @@ PARAMETERS = [
 def _yaml_mapping(path: str, what: str) -> dict:
     if not path:
         return {}
-    try:
-        with open(path) as fh:
-            d = yaml.safe_load(fh)
-    except OSError as exc:
-        raise ConfigError(f"{what} {path}: {exc.strerror}") from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{what} {path}: malformed YAML ({exc})") from None
+    d = read_yaml(path, f"{what} {path}")
     if not isinstance(d, dict):
         raise ConfigError(f"{what} {path}: expected a mapping")
     return d
 
 
-class SimVehicleNode(Node):
+class SimVehicleNode(C.ShellNode):
     def __init__(self, **kwargs):
-        kwargs.setdefault("namespace", C.NAMESPACE)   # a __ns remap still wins
-        super().__init__(NODE_NAME, **kwargs)
-        p = C.declare(self, PARAMETERS)
+        super().__init__(NODE_NAME, PARAMETERS, **kwargs)
+        p = self.params
         if p["mode"] not in MODES:
             raise LpvSysidError(f"parameter 'mode' must be one of {MODES}, got {p['mode']!r}")
-        self.p = p
         vehicle = _yaml_mapping(p["vehicle_file"], "vehicle_file")
         model = Quadrotor(QuadrotorParams.from_dict(vehicle) if vehicle else None)
         sensors = SensorConfig(physics_hz=p["physics_hz"], state_hz=p["state_hz"],
@@ -106,7 +97,7 @@ class SimVehicleNode(Node):
         self.ref = (v0.copy(), 0.0, -np.inf)          # (v_d FRD, r_d, receive time)
         self.cmd = (None, -np.inf)                    # (u, receive time)
         self.handed_back = False
-        self.t0_ns = self.get_clock().now().nanoseconds
+        self.t0_ns = self.now_ns()
         self.f = M.MsgFactory.rclpy()
         self.pub_state = self.create_publisher(Odometry, "state", C.qos_for("state"))
         self.pub_imu = self.create_publisher(Imu, "imu", C.qos_for("imu"))
@@ -119,29 +110,19 @@ class SimVehicleNode(Node):
         self.create_timer(1.0 / sensors.physics_hz, self.on_physics)
         self.create_timer(1.0 / p["status_rate_hz"], self.publish_status)
 
-    def now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
-
     def on_reference(self, msg):
-        try:
-            _, v, r = M.reference_from_twist(msg)
-        except LpvSysidError as exc:
-            self.get_logger().warning(f"velocity_reference ignored: {exc}",
-                                      throttle_duration_sec=1.0)
-            return
-        self.ref = (v, r, self.now())
+        parsed = self.parse_input("velocity_reference", M.reference_from_twist, msg)
+        if parsed is not None:
+            self.ref = (parsed[1], parsed[2], self.now())
 
     def on_command(self, msg):
-        try:
-            _, u = M.actuator_command_from_joint_state(msg)
-        except LpvSysidError as exc:
-            self.get_logger().warning(f"actuator_command ignored: {exc}", throttle_duration_sec=1.0)
-            return
-        self.cmd = (u, self.now())
+        parsed = self.parse_input("actuator_command", M.actuator_command_from_joint_state, msg)
+        if parsed is not None:
+            self.cmd = (parsed[1], self.now())
 
     def on_physics(self):
         veh, k, now = self.vehicle, self.k, self.now()
-        stamp = self.get_clock().now().nanoseconds
+        stamp = self.now_ns()
         if k % self.d_state == 0:
             self.xm = veh.measure_state()
             x = self.xm
@@ -163,9 +144,9 @@ class SimVehicleNode(Node):
     def _command(self, now: float):
         xm = self.xm
         x8 = (xm[3], xm[4], xm[6], xm[7], xm[8], xm[9], xm[10], xm[11])
-        if self.p["mode"] == "lpv":
+        if self.params["mode"] == "lpv":
             u, t_rx = self.cmd
-            if u is not None and now - t_rx <= self.p["command_timeout_s"]:
+            if u is not None and now - t_rx <= self.params["command_timeout_s"]:
                 self.handed_back = False
                 return list(u)
             if u is not None and not self.handed_back:
@@ -173,20 +154,20 @@ class SimVehicleNode(Node):
                 self.get_logger().warning("actuator_command stale: baseline holds (hand-back)")
             return self.baseline.step(now, x8, (0.0, 0.0, 0.0), 0.0).tolist()
         v, r, t_rx = self.ref
-        if now - t_rx > self.p["reference_timeout_s"] and np.isfinite(t_rx):
+        if now - t_rx > self.params["reference_timeout_s"] and np.isfinite(t_rx):
             v, r = np.zeros(3), 0.0
         return self.baseline.step(now, x8, tuple(v), r).tolist()
 
     def publish_status(self):
         x = self.vehicle.x
-        values = {"mode": self.p["mode"], "t_sim": round(self.vehicle.t, 6),
+        values = {"mode": self.params["mode"], "t_sim": round(self.vehicle.t, 6),
                   "u": float(x[6]), "v": float(x[7]), "w": float(x[8]),
                   "handed_back": self.handed_back}
+        message = "baseline hold" if self.handed_back else self.params["mode"]
         st = M.diagnostic_status(self.f, "WARN" if self.handed_back else "OK",
-                                 self.get_fully_qualified_name(),
-                                 "baseline hold" if self.handed_back else self.p["mode"], values)
+                                 self.get_fully_qualified_name(), message, values)
         self.pub_status.publish(M.diagnostic_array(
-            self.f, self.get_clock().now().nanoseconds, [st]))
+            self.f, self.now_ns(), [st]))
 
 
 def main(args=None):

@@ -26,9 +26,9 @@ from pathlib import Path
 from typing import Any, Optional
 
 import numpy as np
-import yaml
 
 from lpv_sysid.errors import ConfigError
+from lpv_sysid.io.yaml_file import read_yaml
 
 log = logging.getLogger(__name__)
 
@@ -63,18 +63,6 @@ class RunData:
     verification: Optional[Any] = None
     phase2_summary: Optional[dict] = None
     phase2_series: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
-
-
-def read_yaml(path: Path) -> Any:
-    """YAML file -> Python object; ConfigError naming the file on malformed input."""
-    try:
-        with open(path, "r", encoding="utf-8") as fh:
-            return yaml.safe_load(fh)
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: malformed YAML ({exc.__class__.__name__}: "
-                          f"{str(exc).splitlines()[0] if str(exc) else ''})") from None
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read ({exc.strerror})") from None
 
 
 def read_npz(path: Path) -> dict[str, np.ndarray]:

@@ -113,6 +113,15 @@ class _Report:
             log.warning("%s: %s", label, exc)
             self.p(f"**Could not build this section:** {exc}")
 
+    def with_input(self, key: str, label: str, fn) -> bool:
+        """``fn()`` under :meth:`guard` when input ``key`` was loaded, else the
+        :meth:`missing` note; whether the input was there."""
+        if getattr(self.data, key) is None:
+            self.missing(key)
+            return False
+        self.guard(label, fn)
+        return True
+
 
 def _inputs_section(r: _Report) -> None:
     d = r.data
@@ -145,15 +154,13 @@ def _inputs_section(r: _Report) -> None:
 def _phase1_section(r: _Report) -> None:
     d = r.data
     r.h(2, "Phase 1: vertex equilibria (seed 0 Table 1)")
-    if d.models is not None:
-        def table1() -> None:
-            header, rows = equilibrium_table(d.models)
-            r.p("Equilibria `x0` of the identified vertex models (from flight data in the seed; "
-                "here from the phase-1 runs).")
-            r.p(md_table(header, rows, fmt="{:.2f}"))
-        r.guard("Table 1", table1)
-    else:
-        r.missing("models")
+
+    def table1() -> None:
+        header, rows = equilibrium_table(d.models)
+        r.p("Equilibria `x0` of the identified vertex models (from flight data in the seed; "
+            "here from the phase-1 runs).")
+        r.p(md_table(header, rows, fmt="{:.2f}"))
+    r.with_input("models", "Table 1", table1)
     if d.trims is not None:
         def trims() -> None:
             header, rows = trims_table(d.trims)
@@ -168,37 +175,33 @@ def _phase1_section(r: _Report) -> None:
 def _ident_section(r: _Report) -> None:
     d = r.data
     r.h(2, "Identification: equation-error R^2 (seed 0 Table 2)")
-    if d.models is None:
-        r.missing("models")
-    else:
-        def table2() -> None:
-            header, rows, percent = fit_table(d.models, "r2")
-            if not rows:
-                r.p("`vertex_models.yaml` has no `fit.r2` entries.")
-                return
-            r.p(f"Coefficient of determination per state-equation axis{' [%]' if percent else ''}.")
-            r.p(md_table(header, rows, fmt="{:.1f}" if percent else "{:.3f}"))
-        r.guard("Table 2", table2)
+
+    def table2() -> None:
+        header, rows, percent = fit_table(d.models, "r2")
+        if not rows:
+            r.p("`vertex_models.yaml` has no `fit.r2` entries.")
+            return
+        r.p(f"Coefficient of determination per state-equation axis{' [%]' if percent else ''}.")
+        r.p(md_table(header, rows, fmt="{:.1f}" if percent else "{:.3f}"))
+    r.with_input("models", "Table 2", table2)
 
     r.h(2, "Validation: TIC and NRMSE (seed 0 Table 3, Eqs. 24-25)")
-    if d.validation is not None:
-        def table3() -> None:
-            header, rows = validation_table(d.validation)
-            if "validation" in d.derived:
-                r.p(f"Independent validation maneuver `{d.validation.get('maneuver', '?')}` "
-                    f"({d.derived['validation']}):")
-            r.p(md_table(header, rows, fmt="{:.3f}"))
-            for name in ("identification.png", "vertex_models_validation.png"):   # identify --plot
-                fig4 = d.run_dir / name
-                if fig4.is_file():
-                    dst = r.fig_dir / "validation.png"
-                    shutil.copyfile(fig4, dst)
-                    r.fig(dst, "Independent validation time histories, model vs flight-data state "
-                               f"derivatives (Fig. 4; from `{name}`)")
-                    break
-        r.guard("Table 3", table3)
-    else:
-        r.missing("validation")
+
+    def table3() -> None:
+        header, rows = validation_table(d.validation)
+        if "validation" in d.derived:
+            r.p(f"Independent validation maneuver `{d.validation.get('maneuver', '?')}` "
+                f"({d.derived['validation']}):")
+        r.p(md_table(header, rows, fmt="{:.3f}"))
+        for name in ("identification.png", "vertex_models_validation.png"):   # identify --plot
+            fig4 = d.run_dir / name
+            if fig4.is_file():
+                dst = r.fig_dir / "validation.png"
+                shutil.copyfile(fig4, dst)
+                r.fig(dst, "Independent validation time histories, model vs flight-data state "
+                           f"derivatives (Fig. 4; from `{name}`)")
+                break
+    if not r.with_input("validation", "Table 3", table3):
         if d.models is not None:
             r.p("`vertex_models.yaml` carries no `meta.validation` either.")
             def fit_metrics() -> None:
@@ -262,10 +265,7 @@ def _signals_section(r: _Report) -> None:
         scalars = {k: v for k, v in s.items() if isinstance(v, (int, float, str))}
         if scalars:
             r.p(_kv_table(scalars))
-    if d.signals_summary is not None:
-        r.guard("signals summary", summary)
-    else:
-        r.missing("signals_summary")
+    r.with_input("signals_summary", "signals summary", summary)
 
     if d.signals is not None:
         def sig_plot() -> None:
@@ -282,9 +282,6 @@ def _signals_section(r: _Report) -> None:
 def _synthesis_section(r: _Report) -> None:
     d = r.data
     r.h(2, "Robust LPV synthesis (seed 0 Lemma 1, Eqs. 27-31)")
-    if d.gains is None:
-        r.missing("gains")
-        return
 
     def body() -> None:
         g = d.gains
@@ -308,7 +305,7 @@ def _synthesis_section(r: _Report) -> None:
             r.p(_kv_table(cert))
         else:
             r.p("**gains.yaml carries no certificate.**")
-    r.guard("synthesis", body)
+    r.with_input("gains", "synthesis", body)
 
 
 def _failing_and_worst(checks: list[dict]) -> list[dict]:
@@ -330,9 +327,6 @@ def _short(v: Any) -> Any:
 def _verification_section(r: _Report) -> None:
     d = r.data
     r.h(2, "Independent verification")
-    if d.verification is None:
-        r.missing("verification")
-        return
 
     def body() -> None:
         v = d.verification
@@ -368,64 +362,62 @@ def _verification_section(r: _Report) -> None:
             r.p(_kv_table({"checks": v}))
         else:
             raise ConfigError(f"{d.found['verification']}: expected a mapping or a list")
-    r.guard("verification", body)
+    r.with_input("verification", "verification", body)
 
 
 def _phase2_section(r: _Report) -> None:
     d = r.data
     r.h(2, "Phase 2: LPV-controlled excitation (seed 0 Sec. VII)")
     s = d.phase2_summary
-    if s is None:
-        r.missing("phase2_summary")
-    else:
-        def gains_table() -> None:
-            gamma = s.get("gamma")
-            rows = []
-            for name, label in (("eq33", "LPV closed loop, Eq. (33)"), ("nonlinear", "nonlinear quadrotor")):
-                e = s.get(name)
-                if not isinstance(e, dict):
-                    continue
-                if e.get("skipped"):
-                    rows.append([label, None, None, None, None, "skipped: " + str(e["skipped"])])
-                    continue
-                gain = e.get("gain")
-                within = None if gain is None or gamma is None else bool(float(gain) <= float(gamma))
-                note = e.get("safety_event") or ("completed" if e.get("completed", True) else "stopped")
-                rows.append([label, e.get("z_norm"), e.get("ue_norm"), gain, within, note])
-                sp = e.get("superposition")
-                if isinstance(sp, dict) and sp.get("gain") is not None:
-                    g = float(sp["gain"])
-                    rows.append([f"{label}, excitation only (superposition)", sp.get("z_norm"), sp.get("ue_norm"),
-                                 g, None if gamma is None else bool(g <= float(gamma)),
-                                 f"{sp.get('duration', 0):.1f} s, reference-only ||z||_2 = "
-                                 f"{float(sp.get('reference_only_z_norm', float('nan'))):.4g}"
-                                 + ("" if sp.get("complete", True) else " (a flight stopped early)")])
-            r.p(f"Excitation multiplier kappa = {s.get('kappa')}, design gamma = {gamma} "
-                "(bound on ||z||_2 / ||kappa u_e||_2, Eq. 29).")
-            r.p(md_table(["simulation", "||z||_2", "||kappa u_e||_2", "achieved gain", "<= gamma", "run"],
-                         rows, fmt="{:.4g}"))
-            r.p("z = Q^-1 (v - v_d) (Eq. 18). In Eq. (33) the equilibrium moves with v_d through x0' "
-                "(Eq. 34), so z there is the response to u_e alone, which is what Lemma 1 bounds. On the "
-                "nonlinear quadrotor z also contains the lag in following v_d itself (the vehicle must "
-                "accelerate), which the certificate does not cover; a gain above gamma there measures "
-                "reference tracking, not a violated bound. The superposition row (when present) flies the "
-                "nonlinear model twice with identical sensor noise, with and without u_e, and uses the "
-                "difference of the two z: the response to the excitation alone.")
-            details = []
-            for name in ("eq33", "nonlinear"):
-                e = s.get(name)
-                if isinstance(e, dict) and not e.get("skipped"):
-                    for k, v in e.items():
-                        if k not in ("gain", "z_norm", "ue_norm", "within_gamma", "completed", "safety_event",
-                                     "superposition"):
-                            details.append([f"{name}.{k}", _short(v) if not isinstance(v, dict) else
-                                            ", ".join(f"{a}: {b}" for a, b in v.items())])
-            if details:
-                r.p(md_table(["run detail", "value"], details, fmt="{:.4g}"))
-            events = s.get("safety_events") or []
-            if events:
-                r.p("**Safety events:** " + "; ".join(str(e) for e in events))
-        r.guard("phase-2 gains", gains_table)
+
+    def gains_table() -> None:
+        gamma = s.get("gamma")
+        rows = []
+        for name, label in (("eq33", "LPV closed loop, Eq. (33)"), ("nonlinear", "nonlinear quadrotor")):
+            e = s.get(name)
+            if not isinstance(e, dict):
+                continue
+            if e.get("skipped"):
+                rows.append([label, None, None, None, None, "skipped: " + str(e["skipped"])])
+                continue
+            gain = e.get("gain")
+            within = None if gain is None or gamma is None else bool(float(gain) <= float(gamma))
+            note = e.get("safety_event") or ("completed" if e.get("completed", True) else "stopped")
+            rows.append([label, e.get("z_norm"), e.get("ue_norm"), gain, within, note])
+            sp = e.get("superposition")
+            if isinstance(sp, dict) and sp.get("gain") is not None:
+                g = float(sp["gain"])
+                rows.append([f"{label}, excitation only (superposition)", sp.get("z_norm"), sp.get("ue_norm"),
+                             g, None if gamma is None else bool(g <= float(gamma)),
+                             f"{sp.get('duration', 0):.1f} s, reference-only ||z||_2 = "
+                             f"{float(sp.get('reference_only_z_norm', float('nan'))):.4g}"
+                             + ("" if sp.get("complete", True) else " (a flight stopped early)")])
+        r.p(f"Excitation multiplier kappa = {s.get('kappa')}, design gamma = {gamma} "
+            "(bound on ||z||_2 / ||kappa u_e||_2, Eq. 29).")
+        r.p(md_table(["simulation", "||z||_2", "||kappa u_e||_2", "achieved gain", "<= gamma", "run"],
+                     rows, fmt="{:.4g}"))
+        r.p("z = Q^-1 (v - v_d) (Eq. 18). In Eq. (33) the equilibrium moves with v_d through x0' "
+            "(Eq. 34), so z there is the response to u_e alone, which is what Lemma 1 bounds. On the "
+            "nonlinear quadrotor z also contains the lag in following v_d itself (the vehicle must "
+            "accelerate), which the certificate does not cover; a gain above gamma there measures "
+            "reference tracking, not a violated bound. The superposition row (when present) flies the "
+            "nonlinear model twice with identical sensor noise, with and without u_e, and uses the "
+            "difference of the two z: the response to the excitation alone.")
+        details = []
+        for name in ("eq33", "nonlinear"):
+            e = s.get(name)
+            if isinstance(e, dict) and not e.get("skipped"):
+                for k, v in e.items():
+                    if k not in ("gain", "z_norm", "ue_norm", "within_gamma", "completed", "safety_event",
+                                 "superposition"):
+                        details.append([f"{name}.{k}", _short(v) if not isinstance(v, dict) else
+                                        ", ".join(f"{a}: {b}" for a, b in v.items())])
+        if details:
+            r.p(md_table(["run detail", "value"], details, fmt="{:.4g}"))
+        events = s.get("safety_events") or []
+        if events:
+            r.p("**Safety events:** " + "; ".join(str(e) for e in events))
+    r.with_input("phase2_summary", "phase-2 gains", gains_table)
 
     for name, label in (("eq33", "LPV closed loop Eq. (33)"), ("nonlinear", "nonlinear quadrotor")):
         ser = d.phase2_series.get(name)

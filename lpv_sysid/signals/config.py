@@ -29,22 +29,13 @@ the amplitude of harmonic f is the piecewise-linear interpolation of the breakpo
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Optional
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.signals.phase_opt import PhaseOptOptions
-
-
-def _check_keys(d: Any, allowed: set[str], where: str, required: set[str] = frozenset()) -> None:
-    if not isinstance(d, Mapping):
-        raise ConfigError(f"{where}: expected a mapping, got {type(d).__name__}")
-    unknown = sorted(set(d) - allowed)
-    if unknown:
-        raise ConfigError(f"{where}: unknown key(s) {unknown}; allowed {sorted(allowed)}")
-    missing = sorted(required - set(d))
-    if missing:
-        raise ConfigError(f"{where}: missing key(s) {missing}")
+from lpv_sysid.validation import check_keys, is_count
 
 
 def _num(v: Any, where: str, *, positive: bool = False, nonneg: bool = False) -> float:
@@ -61,7 +52,7 @@ def _num(v: Any, where: str, *, positive: bool = False, nonneg: bool = False) ->
 
 
 def _int(v: Any, where: str, *, minimum: int = 0) -> int:
-    if isinstance(v, bool) or not isinstance(v, int) or v < minimum:
+    if not is_count(v, minimum):
         raise ConfigError(f"{where}: expected an integer >= {minimum}, got {v!r}")
     return int(v)
 
@@ -102,7 +93,7 @@ class GroupConfig:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], where: str = "group") -> "GroupConfig":
-        _check_keys(d, set(cls.KEYS), where, {"name", "channels", "band"})
+        check_keys(d, cls.KEYS, where, required={"name", "channels", "band"}, list_allowed=True)
         name = d["name"]
         if not isinstance(name, str) or not name:
             raise ConfigError(f"{where}.name: expected a non-empty string, got {name!r}")
@@ -157,7 +148,7 @@ class WeightsConfig:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], where: str = "weights") -> "WeightsConfig":
-        _check_keys(d, set(cls.KEYS), where)
+        check_keys(d, cls.KEYS, where, list_allowed=True)
         g = d.get("group")
         if g is not None and not isinstance(g, str):
             raise ConfigError(f"{where}.group: expected a group name, got {g!r}")
@@ -173,7 +164,7 @@ class WeightsConfig:
 
 def _options_from_dict(d: Mapping[str, Any], where: str = "optimisation") -> PhaseOptOptions:
     keys = {"p_stages", "max_iter", "clip_iter", "clip_level", "restarts", "restart_max_harmonics", "seed"}
-    _check_keys(d, keys, where)
+    check_keys(d, keys, where, list_allowed=True)
     kw: dict[str, Any] = {}
     if "p_stages" in d:
         kw["p_stages"] = _num_list(d["p_stages"], f"{where}.p_stages", positive=True)
@@ -207,7 +198,8 @@ class SignalsConfig:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], where: str = "signals config") -> "SignalsConfig":
-        _check_keys(d, set(cls.KEYS), where, {"duration", "sample_rate", "groups"})
+        check_keys(d, cls.KEYS, where, required={"duration", "sample_rate", "groups"},
+                   list_allowed=True)
         T = _num(d["duration"], f"{where}.duration", positive=True)
         fs = _num(d["sample_rate"], f"{where}.sample_rate", positive=True)
         n = T * fs
@@ -246,17 +238,11 @@ class SignalsConfig:
 
 def load_config(path: str) -> SignalsConfig:
     """Read a YAML file into :class:`SignalsConfig`; every problem is a ConfigError."""
-    import yaml
+    from lpv_sysid.io.yaml_file import read_yaml
 
-    try:
-        with open(path, "r", encoding="utf-8") as fh:
-            data = yaml.safe_load(fh)
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such file") from None
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read ({exc.strerror})") from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: malformed YAML ({str(exc).splitlines()[0]})") from None
+    if not os.path.lexists(path):
+        raise ConfigError(f"{path}: no such file")
+    data = read_yaml(path)
     if data is None:
         raise ConfigError(f"{path}: empty file")
     return SignalsConfig.from_dict(data, where=path)

@@ -14,6 +14,17 @@ from lpv_sysid.signals import metrics
 from lpv_sysid.signals.multisine import SignalSet
 
 
+def _label_column(ax, j: int, n: int, xlabel: str, title: str) -> None:
+    """Row ``j`` of a column of ``n`` stacked axes sharing the x range: x tick labels and
+    the x label on the bottom one only, the column title on the top one."""
+    if j < n - 1:
+        ax.set_xticklabels([])
+    else:
+        ax.set_xlabel(xlabel)
+    if j == 0:
+        ax.set_title(title)
+
+
 def signal_figure(sig: SignalSet) -> Figure:
     n = len(sig.names)
     fig = Figure(figsize=(14, max(6.0, 1.1 * n + 1)))
@@ -28,12 +39,7 @@ def signal_figure(sig: SignalSet) -> Figure:
         ax.set_ylabel(name, rotation=0, ha="right", va="center")
         ax.set_ylim(-1.1, 1.1)
         ax.set_yticks([-1, 0, 1])
-        if j < n - 1:
-            ax.set_xticklabels([])
-        else:
-            ax.set_xlabel("time, s")
-        if j == 0:
-            ax.set_title("time histories (normalised, Fig. 5)")
+        _label_column(ax, j, n, "time, s", "time histories (normalised, Fig. 5)")
         ax2 = fig.add_subplot(gs[j, 1])
         pj = P[:, j] / P[:, j].max()
         db = 10 * np.log10(np.maximum(pj, 1e-12))
@@ -44,12 +50,7 @@ def signal_figure(sig: SignalSet) -> Figure:
         ax2.set_xlim(sig.f0 * 0.9, fmax)
         ax2.set_ylim(-60, 5)
         ax2.text(0.98, 0.1, f"RPF {sig.rpf[j]:.3f}", transform=ax2.transAxes, ha="right", fontsize=8)
-        if j < n - 1:
-            ax2.set_xticklabels([])
-        else:
-            ax2.set_xlabel("frequency, Hz")
-        if j == 0:
-            ax2.set_title("power, dB (Fig. 6)")
+        _label_column(ax2, j, n, "frequency, Hz", "power, dB (Fig. 6)")
     axc = fig.add_subplot(gs[:, 2])
     c = metrics.correlation_matrix(sig.u)
     im = axc.imshow(c, vmin=-1, vmax=1, cmap="RdBu_r")

@@ -22,6 +22,16 @@ Signals are first-order hold (piecewise linear between samples, as ``scipy.signa
 ``v_d(t)`` and ``u_e(t)`` are linearly interpolated and ``dv_d/dt`` is the slope of the
 current segment, so Eq. (34) is exact for the interpolated reference.
 
+Reference feedforward (synthesis/feedforward.py, seed 2 Sec. 5.1). Eq. (33) is kept as the
+seed's: its ``x0'`` term moves the equilibrium with v_d for free, so the reference is already a
+trajectory of Eq. (33) by construction and the seed's law needs no feedforward there (adding the
+feedforward *and* keeping ``x0'`` would ask for the acceleration twice). The linear counterpart
+of the real vehicle drops ``x0'`` (``moving_equilibrium=False``: ``x' = A (x - x0) + B (u - u0)``,
+the equilibrium does not move by itself) and flies :func:`feedforward_law`,
+``u = u0 + du_ff + K (x - x0 - dx_ff) + R kappa u_e``: there the feedforward has to make the
+reference a trajectory, which it does by construction of F_i from the same (A_i, B_i) up to the
+neglected dF/dt and snap terms; :mod:`lpv_sysid.sim.phase2` reports it as ``linear_ff``.
+
 Integration: ``method="RK45"`` uses ``scipy.integrate.solve_ivp`` (Dormand-Prince, the
 algorithm of Matlab's ode45 that the seed used), restarted on every sample interval so the
 kinks of the interpolated signals are step boundaries (one call over the whole horizon
@@ -118,6 +128,17 @@ class ReferenceSignals:
         return vd, vd_dot, ue
 
 
+def fast_weights(v_d: np.ndarray, vmin: np.ndarray, vmax: np.ndarray) -> np.ndarray:
+    """alpha(v_d) of seed 0 Eq. (21), clamped to the box, in the vertex order of
+    ``models.lpv.box_vertices`` -- the values of ``models.lpv.multilinear_weights`` without its
+    input validation and np.kron (which dominated the RK4 loop: 3 kron calls per point)."""
+    t = np.clip((np.asarray(v_d, dtype=float) - vmin) / (vmax - vmin), 0.0, 1.0)
+    alpha = np.ones(1)
+    for tk in t.tolist():
+        alpha = np.outer(alpha, (1.0 - tk, tk)).ravel()   # first axis slowest, as kron
+    return alpha
+
+
 class LastPointCache:
     """Wraps a ScheduledModel and remembers its values at the last scheduling point.
 
@@ -142,7 +163,10 @@ class LastPointCache:
             # one weight evaluation for all interpolated quantities at this point (Eq. 21, 31)
             w = self._cache.get("_alpha")
             if w is None or w[0] != key:
-                w = (key, self.model.model.weights(v_d)[0])
+                pm = self.model.model
+                if not np.all(np.isfinite(v_d)):
+                    raise ConfigError(f"scheduling point contains NaN/inf: {np.asarray(v_d).tolist()}")
+                w = (key, fast_weights(v_d, pm.vmin, pm.vmax))
                 self._cache["_alpha"] = w
             val = np.tensordot(w[1], stacks[name], axes=1)
         else:
@@ -192,6 +216,69 @@ def linear_lpv_law(model: ScheduledModel, R: np.ndarray) -> ControlLaw:
     return law
 
 
+class FeedforwardSchedule:
+    """Vertex feedforward matrices F_i (and F_jerk,i) interpolated with the weights of Eq. (21).
+
+    ``F`` (N, n_free + m, p) rows free states then inputs; ``F_jerk`` (N, n_free + m + n_rate, p)
+    rows free states, inputs, rate states (synthesis/feedforward.py); ``free_index`` /
+    ``rate_index`` positions of those states in x."""
+
+    def __init__(self, vmin, vmax, F: np.ndarray, free_index: Sequence[int], n_x: int,
+                 F_jerk: Optional[np.ndarray] = None, rate_index: Sequence[int] = ()) -> None:
+        self.vmin = np.asarray(vmin, dtype=float)
+        self.vmax = np.asarray(vmax, dtype=float)
+        self.F = np.asarray(F, dtype=float)
+        self.Fj = None if F_jerk is None else np.asarray(F_jerk, dtype=float)
+        self.free = list(free_index)
+        self.rate = list(rate_index)
+        self.n_x = n_x
+        if self.F.ndim != 3 or self.F.shape[1] <= len(self.free):
+            raise ConfigError(f"feedforward: F must be (N, n_free + m, p), got {self.F.shape}")
+        self._last: Optional[tuple] = None
+
+    def _at(self, v_d: np.ndarray) -> tuple[np.ndarray, Optional[np.ndarray]]:
+        """F(v_d), F_jerk(v_d); the last point is cached (RK stages and the law share v_d)."""
+        key = np.asarray(v_d, dtype=float).tobytes()
+        if self._last is None or self._last[0] != key:
+            alpha = fast_weights(v_d, self.vmin, self.vmax)
+            self._last = (key, np.tensordot(alpha, self.F, axes=1),
+                          None if self.Fj is None else np.tensordot(alpha, self.Fj, axes=1))
+        return self._last[1], self._last[2]
+
+    def offsets(self, v_d: np.ndarray, a: np.ndarray, j: Optional[np.ndarray] = None
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """(dx_ff (n_x,), du_ff (m,)) = F(v_d) a (+ F_jerk(v_d) j)."""
+        Fv, Fjv = self._at(v_d)
+        nf = len(self.free)
+        y = Fv @ np.asarray(a, dtype=float)
+        dx = np.zeros(self.n_x)
+        dx[self.free] = y[:nf]
+        du = y[nf:].copy()
+        if Fjv is not None and j is not None:
+            yj = Fjv @ np.asarray(j, dtype=float)
+            m = du.size
+            dx[self.free] += yj[:nf]
+            du += yj[nf:nf + m]
+            dx[self.rate] += yj[nf + m:]
+        return dx, du
+
+
+def feedforward_law(model: ScheduledModel, R: np.ndarray, ffs: FeedforwardSchedule,
+                    accel: Callable[[float], tuple]) -> ControlLaw:
+    """u = u0 + du_ff + K (x - x0 - dx_ff) + R (kappa u_e), (dx_ff, du_ff) from ``ffs`` at
+    ``accel(t) = (a, j)`` (seed 2 Eq. 102 on seed 0 Eq. 31)."""
+    R = np.asarray(R, dtype=float)
+    if not isinstance(model, LastPointCache):
+        model = LastPointCache(model)
+
+    def law(t: float, x: np.ndarray, v_d: np.ndarray, ue_scaled: np.ndarray) -> np.ndarray:
+        a, j = accel(t)
+        dx, du = ffs.offsets(v_d, a, j)
+        return model.u0(v_d) + du + model.K(v_d) @ (x - model.x0(v_d) - dx) + R @ ue_scaled
+
+    return law
+
+
 def eq33_rhs(
     t: float,
     x: np.ndarray,
@@ -200,15 +287,18 @@ def eq33_rhs(
     law: ControlLaw,
     kappa: float,
     segment: Optional[int] = None,
+    moving_equilibrium: bool = True,
 ) -> np.ndarray:
-    """Right-hand side of seed 0 Eq. (33); the command u of ``law`` includes R kappa u_e."""
+    """Right-hand side of seed 0 Eq. (33); the command u of ``law`` includes R kappa u_e.
+
+    ``moving_equilibrium=False`` drops the ``x0'`` term (module docstring: the linear model of
+    the real vehicle, used with :func:`feedforward_law`)."""
     v_d, v_d_dot, ue = signals.at(t, segment)
     u = law(t, x, v_d, kappa * ue)
-    return (
-        model.A(v_d) @ (x - model.x0(v_d))
-        + model.B(v_d) @ (u - model.u0(v_d))
-        + x0_dot(model, v_d, v_d_dot)
-    )
+    xdot = model.A(v_d) @ (x - model.x0(v_d)) + model.B(v_d) @ (u - model.u0(v_d))
+    if moving_equilibrium:
+        xdot = xdot + x0_dot(model, v_d, v_d_dot)
+    return xdot
 
 
 def l2_norm(t: np.ndarray, y: np.ndarray) -> float:
@@ -346,6 +436,7 @@ def simulate_eq33(
     x_init: Optional[np.ndarray] = None,
     law: Optional[ControlLaw] = None,
     velocity_index: Sequence[int] = VELOCITY_INDEX,
+    moving_equilibrium: bool = True,
 ) -> ClosedLoopResult:
     """Simulate seed 0 Eq. (33) over the signal grid.
 
@@ -353,7 +444,8 @@ def simulate_eq33(
     Eq. (29) is the gain from zero initial conditions). ``law`` defaults to
     :func:`linear_lpv_law` (the unsaturated Eq. 31 law used for the certificate).
     Raises :class:`SafetyError` when the state becomes non-finite or exceeds
-    ``config.divergence_bound``.
+    ``config.divergence_bound``. ``moving_equilibrium=False`` drops the ``x0'`` term of Eq. (33)
+    (module docstring; pair it with :func:`feedforward_law`).
     """
     R = np.asarray(R, dtype=float)
     model = LastPointCache(model)
@@ -369,7 +461,7 @@ def simulate_eq33(
     kappa = config.kappa
 
     def f(t: float, x: np.ndarray, segment: Optional[int] = None) -> np.ndarray:
-        return eq33_rhs(t, x, model, signals, law, kappa, segment)
+        return eq33_rhs(t, x, model, signals, law, kappa, segment, moving_equilibrium)
 
     t = signals.t
     info: dict = {}
@@ -407,7 +499,7 @@ def simulate_eq33(
         t=t, x=x, dx=dx, v_d=signals.v_d, ue=ue, u=u, z=z, z_model=z_model, tracking_error=err,
         z_norm=z_norm, ue_norm=ue_norm, gain=z_norm / ue_norm,
         gain_model=l2_norm(t, z_model) / ue_norm, gamma=gamma, kappa=kappa,
-        method=config.method, n_steps=n_steps, info=info,
+        method=config.method, n_steps=n_steps, info={**info, "moving_equilibrium": bool(moving_equilibrium)},
     )
 
 

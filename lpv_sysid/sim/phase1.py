@@ -32,8 +32,10 @@ import yaml
 
 from lpv_sysid.control.baseline import BaselineController, BaselineGains
 from lpv_sysid.errors import ConfigError, SafetyError
+from lpv_sysid.io.yaml_file import read_yaml
 from lpv_sysid.models.quadrotor import Quadrotor, QuadrotorParams, Trim, mixer
 from lpv_sysid.sim.vehicle import SensorConfig, SimVehicle
+from lpv_sysid.validation import check_keys, is_count, is_finite_number
 
 log = logging.getLogger(__name__)
 
@@ -88,7 +90,7 @@ class Phase1Config:
             raise ConfigError("phase1.amplitudes: must be >= 0")
         for name in ("trim_s", "excite_s", "trim_average_s", "f_min_hz", "f_max_hz", "taper_s"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+            if not is_finite_number(v) or v < 0:
                 raise ConfigError(f"phase1.{name}: must be a finite number >= 0, got {v!r}")
             object.__setattr__(self, name, float(v))
         if self.trim_s <= 0 or self.excite_s <= 0:
@@ -97,17 +99,12 @@ class Phase1Config:
             raise ConfigError("phase1.f_min_hz: need 0 < f_min_hz < f_max_hz")
         if not isinstance(self.hover_validation, bool):
             raise ConfigError("phase1.hover_validation: must be true or false")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+        if not is_count(self.seed):
             raise ConfigError(f"phase1.seed: must be a non-negative integer, got {self.seed!r}")
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "Phase1Config":
-        if not isinstance(d, Mapping):
-            raise ConfigError(f"phase1: expected a mapping, got {type(d).__name__}")
-        names = {f.name for f in fields(cls)}
-        bad = sorted(set(d) - names)
-        if bad:
-            raise ConfigError(f"phase1: unknown key(s) {bad}")
+        check_keys(d, {f.name for f in fields(cls)}, "phase1")
         return cls(**d)
 
     def scaled(self, s: float) -> "Phase1Config":
@@ -330,12 +327,7 @@ def format_trim_table(rows: Sequence[dict]) -> str:
 def load_config(path: str | Path) -> tuple[QuadrotorParams, BaselineGains, SensorConfig, Phase1Config]:
     """Read config/quadrotor.yaml (sections quadrotor, controller, sim, phase1)."""
     p = Path(path)
-    try:
-        d = yaml.safe_load(p.read_text())
-    except OSError as exc:
-        raise ConfigError(f"{p}: cannot read ({exc.strerror})") from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{p}: malformed YAML ({str(exc).splitlines()[0]})") from None
+    d = read_yaml(p)
     if not isinstance(d, dict):
         raise ConfigError(f"{p}: expected a mapping at top level")
     allowed = {"quadrotor", "controller", "sim", "phase1", "phase2"}

@@ -5,6 +5,8 @@ excitation ``ue_t, ue_a, ue_e, ue_r``, excitation multiplier ``kappa``):
 
 (a) the LPV closed loop of Eq. (33) at nominal parameters (:mod:`lpv_sysid.sim.lpv_closed_loop`,
     scheduled model from ``vertex_models.yaml`` + ``gains.yaml`` via :mod:`lpv_sysid.models.lpv`);
+    with reference feedforward in the gains (F_ff) also ``linear_ff``: the same linear model
+    without Eq. (33)'s ``x0'`` term under the feedforward law (the linear counterpart of (b));
 (b) the full nonlinear quadrotor of :mod:`lpv_sysid.models.quadrotor` under the runtime LPV law
     (:mod:`lpv_sysid.control.lpv_controller`) fed with the simulated *measured* state (sensor
     model of :mod:`lpv_sysid.sim.vehicle`), recorded to a rosbag2 with the DESIGN.md topics.
@@ -16,7 +18,8 @@ the vehicle leaves the scheduling box (plus a margin), tilts beyond a limit, or 
 becomes non-finite; the runtime law's bound monitor flag stops it too.
 
 On the nonlinear vehicle z also holds the lag in following v_d (absent from Eq. 33, where x0'
-moves the equilibrium); :func:`excitation_gain_by_superposition` (``--superposition``) separates
+moves the equilibrium); the reference feedforward of gains.yaml (``--feedforward exact``: a and
+its rate from the signal table; ``filtered``: the onboard derivative filter) removes most of it; :func:`excitation_gain_by_superposition` (``--superposition``) separates
 the excitation response by flying with and without u_e under identical sensor noise.
 
 Outputs in ``--out DIR`` (read by :mod:`lpv_sysid.report`): ``summary.yaml``,
@@ -72,7 +75,8 @@ class Phase2Config:
     monitor_margin: float = 1.2        # bound monitor of the runtime law: flag at gain > gamma x margin
     superposition: bool = False        # also estimate the excitation-only gain on the nonlinear model
     feedforward: str = "exact"         # reference feedforward of run (b): exact | filtered | off
-    ff_filter_tau: float = 0.2         # s, derivative filter of the 'filtered' feedforward
+    ff_filter_tau: float = 0.05        # s, derivative filter of the 'filtered' feedforward
+    ff_jerk_tau: float = 0.2           # s, its jerk stage
     monitor_window: Optional[float] = None   # s, exponential forgetting of the bound monitor
 
     def __post_init__(self) -> None:
@@ -92,6 +96,8 @@ class Phase2Config:
             raise ConfigError(f"--feedforward must be exact, filtered or off, got {self.feedforward!r}")
         if not (math.isfinite(self.ff_filter_tau) and self.ff_filter_tau >= 0):
             raise ConfigError(f"--ff-filter-tau must be >= 0, got {self.ff_filter_tau!r}")
+        if not (math.isfinite(self.ff_jerk_tau) and self.ff_jerk_tau >= 0):
+            raise ConfigError(f"--ff-jerk-tau must be >= 0, got {self.ff_jerk_tau!r}")
         if self.monitor_window is not None and not (math.isfinite(self.monitor_window) and self.monitor_window > 0):
             raise ConfigError(f"--monitor-window must be > 0, got {self.monitor_window!r}")
         if self.storage not in ("mcap", "sqlite3"):
@@ -448,9 +454,9 @@ class RunRecord:
         return d
 
 
-def record_from_eq33(res: ClosedLoopResult) -> RunRecord:
+def record_from_eq33(res: ClosedLoopResult, name: str = "eq33") -> RunRecord:
     return RunRecord(
-        name="eq33", t=res.t, v_d=res.v_d, x12=res.x, ue=res.ue, u=res.u, z=res.z,
+        name=name, t=res.t, v_d=res.v_d, x12=res.x, ue=res.ue, u=res.u, z=res.z,
         gain=res.gain, z_norm=res.z_norm, ue_norm=res.ue_norm,
         extra={"z_model": res.z_model, "dx": res.dx},
         info={"gain_model": float(res.gain_model), "method": res.method, "rhs_evaluations": int(res.n_steps)},
@@ -559,6 +565,7 @@ class Phase2Problem:
     B: Optional[np.ndarray] = None  # (N, n_x, n_u)
     source: dict = field(default_factory=dict)
     F_ff: Optional[np.ndarray] = None   # (N, n_free + n_u, 3) reference feedforward (gains.yaml)
+    F_jerk: Optional[np.ndarray] = None  # (N, n_free + n_u + n_rate, 3) its jerk term
     feedforward: Any = None             # its layout (io.formats.FeedforwardSpec), None: no feedforward
     state_names: tuple = ()
 
@@ -597,21 +604,28 @@ def load_problem(gains_path: str | Path, models_path: Optional[str | Path] = Non
                          vmax=np.asarray(gs.scheduling.max, dtype=float),
                          K=gs.K, x0=gs.x0, u0=gs.u0, R=np.asarray(gs.R, dtype=float),
                          Q=np.asarray(gs.Q, dtype=float), gamma=float(gs.gamma), A=A, B=B, source=source,
-                         F_ff=gs.F_ff, feedforward=gs.feedforward, state_names=tuple(gs.state_names))
+                         F_ff=gs.F_ff, F_jerk=gs.F_jerk, feedforward=gs.feedforward,
+                         state_names=tuple(gs.state_names))
 
 
-def reference_acceleration(signals: ReferenceSignals) -> Callable[[float], np.ndarray]:
-    """a(t) = dv_d/dt of the reference table for the feedforward: second-order central
-    differences of the samples (np.gradient; one-sided at the ends), linearly interpolated.
-    For the phase-2 multisine (<= 0.5 Hz sampled at 50 Hz) the relative error is
-    (2 pi f dt)^2 / 6 < 7e-4."""
+def reference_acceleration(signals: ReferenceSignals) -> Callable[[float], tuple[np.ndarray, np.ndarray]]:
+    """(a, j)(t) = (dv_d/dt, d2v_d/dt2) of the reference table for the feedforward: second-order
+    central differences of the samples (np.gradient, applied twice; one-sided at the ends),
+    linearly interpolated. For the phase-2 multisine (<= 0.5 Hz sampled at 50 Hz) the relative
+    error is (2 pi f dt)^2 / 6 < 7e-4 per derivative."""
     t = signals.t
     acc = np.gradient(signals.v_d, t, axis=0, edge_order=2)
+    jerk = np.gradient(acc, t, axis=0, edge_order=2)
+    both = np.hstack([acc, jerk])
+    p = acc.shape[1]
 
-    def a(tk: float) -> np.ndarray:
-        return np.array([np.interp(tk, t, acc[:, j]) for j in range(acc.shape[1])])
+    def aj(tk: float) -> tuple[np.ndarray, np.ndarray]:
+        k = min(max(int(np.searchsorted(t, tk, side="right")) - 1, 0), t.size - 2)
+        s = min(max((tk - t[k]) / (t[k + 1] - t[k]), 0.0), 1.0)
+        v = (1.0 - s) * both[k] + s * both[k + 1]
+        return v[:p], v[p:]
 
-    return a
+    return aj
 
 
 class RuntimeLaw:
@@ -623,7 +637,7 @@ class RuntimeLaw:
     how often the command saturated or v_d was clamped."""
 
     def __init__(self, problem: "Phase2Problem", mix: Optional[np.ndarray] = None, config: Any = None,
-                 accel: Optional[Callable[[float], np.ndarray]] = None) -> None:
+                 accel: Optional[Callable[[float], tuple]] = None) -> None:
         from lpv_sysid.control.lpv_controller import LpvController, LpvControllerConfig
 
         self.ctrl = LpvController(problem, config if config is not None else LpvControllerConfig(), mix)
@@ -632,9 +646,9 @@ class RuntimeLaw:
         self.steps = self.saturated = self.clamped = 0
 
     def __call__(self, t: float, x: np.ndarray, v_d: np.ndarray, ue_scaled: np.ndarray) -> np.ndarray:
-        a = None if self.accel is None else self.accel(float(t))
+        a, j = (None, None) if self.accel is None else self.accel(float(t))
         u, info = self.ctrl.step(float(t), np.asarray(x, dtype=float), np.asarray(v_d, dtype=float),
-                                 np.asarray(ue_scaled, dtype=float), a)
+                                 np.asarray(ue_scaled, dtype=float), a, j)
         self.last_info = info
         self.steps += 1
         self.saturated += int(info.get("saturated", False))
@@ -643,6 +657,8 @@ class RuntimeLaw:
 
     def stats(self) -> dict:
         mode = "off" if not self.ctrl.has_ff else ("filtered" if self.accel is None else "exact")
+        if self.ctrl.has_jerk:
+            mode += " + jerk"
         return {"law_steps": self.steps, "saturated_steps": self.saturated, "clamped_steps": self.clamped,
                 "monitor_gain_estimate": _finite_or_none(self.ctrl.gain()), "feedforward": mode,
                 "monitor_window_s": self.ctrl.window}
@@ -651,7 +667,7 @@ class RuntimeLaw:
 def runtime_law(problem: "Phase2Problem", mix: Optional[np.ndarray] = None,
                 monitor_margin: float = 1.2, feedforward: str = "off",
                 signals: Optional[ReferenceSignals] = None, monitor_window: Optional[float] = None,
-                ff_filter_tau: float = 0.2) -> RuntimeLaw:
+                ff_filter_tau: float = 0.05, ff_jerk_tau: float = 0.2) -> RuntimeLaw:
     """The control law of run (b) (see :class:`RuntimeLaw`); ``feedforward``: ``exact`` (a from
     :func:`reference_acceleration` of ``signals``), ``filtered`` (the law's derivative filter,
     time constant ``ff_filter_tau``) or ``off``. Gains without F_ff fly without feedforward."""
@@ -662,7 +678,8 @@ def runtime_law(problem: "Phase2Problem", mix: Optional[np.ndarray] = None,
     if feedforward == "exact" and signals is None:
         raise ConfigError("feedforward 'exact' needs the reference signals")
     cfg = LpvControllerConfig(monitor_margin=float(monitor_margin), feedforward=feedforward != "off",
-                              ff_filter_tau=float(ff_filter_tau), monitor_window=monitor_window)
+                              ff_filter_tau=float(ff_filter_tau), ff_jerk_tau=float(ff_jerk_tau),
+                              monitor_window=monitor_window)
     accel = reference_acceleration(signals) if feedforward == "exact" else None
     return RuntimeLaw(problem, mix, cfg, accel)
 
@@ -723,6 +740,24 @@ def run(problem: Phase2Problem, signals: ReferenceSignals, cfg: Phase2Config, qu
                 records["eq33"] = record_from_eq33(res)
             except SafetyError as exc:
                 skipped["eq33"] = f"diverged: {exc}"
+            if problem.F_ff is not None and cfg.feedforward != "off":
+                # linear model without the x0' term + the feedforward law (lpv_closed_loop docstring)
+                from lpv_sysid.sim.lpv_closed_loop import FeedforwardSchedule, feedforward_law
+
+                try:
+                    sched = problem.scheduled()
+                    names = list(problem.state_names)
+                    spec = problem.feedforward
+                    ffs = FeedforwardSchedule(problem.vmin, problem.vmax, problem.F_ff,
+                                              [names.index(s_) for s_ in spec.free_states], len(names),
+                                              problem.F_jerk, [names.index(s_) for s_ in spec.rate_states])
+                    res = simulate_eq33(sched, signals, problem.R, problem.Q, problem.gamma,
+                                        ClosedLoopConfig(kappa=cfg.kappa, method=cfg.eq33_method),
+                                        law=feedforward_law(sched, problem.R, ffs, reference_acceleration(signals)),
+                                        moving_equilibrium=False)
+                    records["linear_ff"] = record_from_eq33(res, "linear_ff")
+                except SafetyError as exc:
+                    skipped["linear_ff"] = f"diverged: {exc}"
     else:
         skipped["eq33"] = "not requested"
     bag_path = None
@@ -731,7 +766,7 @@ def run(problem: Phase2Problem, signals: ReferenceSignals, cfg: Phase2Config, qu
         trim = quad.trim(signals.v_d[0])
         vehicle = SimVehicle(quad, sensors, x0=trim.full_state)
         law = law or runtime_law(problem, quad.mix, cfg.monitor_margin, cfg.feedforward, signals,
-                                 cfg.monitor_window, cfg.ff_filter_tau)
+                                 cfg.monitor_window, cfg.ff_filter_tau, cfg.ff_jerk_tau)
         kw = dict(kappa=cfg.kappa, gamma=problem.gamma, box_margin=cfg.box_margin,
                   max_tilt=math.radians(cfg.max_tilt_deg))
         if cfg.record_bag:
@@ -752,7 +787,8 @@ def run(problem: Phase2Problem, signals: ReferenceSignals, cfg: Phase2Config, qu
             # bound monitor effectively off: it would stop on the reference-tracking part of z
             rec.info["superposition"] = excitation_gain_by_superposition(
                 lambda: SimVehicle(quad, sensors, x0=trim.full_state),
-                lambda: runtime_law(problem, quad.mix, 1e12, cfg.feedforward, signals, None, cfg.ff_filter_tau), signals, problem.Q, *v_box, kappa=cfg.kappa,
+                lambda: runtime_law(problem, quad.mix, 1e12, cfg.feedforward, signals, None, cfg.ff_filter_tau,
+                                    cfg.ff_jerk_tau), signals, problem.Q, *v_box, kappa=cfg.kappa,
                 box_margin=cfg.box_margin, max_tilt=math.radians(cfg.max_tilt_deg))
         records["nonlinear"] = rec
     else:
@@ -806,8 +842,10 @@ def add_phase2_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--feedforward", choices=("exact", "filtered", "off"), default="exact",
                         help="reference feedforward of the nonlinear run when gains.yaml has F_ff: exact "
                              "(derivative of the signal table), filtered (the onboard derivative filter) or off")
-    parser.add_argument("--ff-filter-tau", type=float, default=0.2,
+    parser.add_argument("--ff-filter-tau", type=float, default=0.05,
                         help="time constant (s) of the onboard derivative filter (--feedforward filtered)")
+    parser.add_argument("--ff-jerk-tau", type=float, default=0.2,
+                        help="time constant (s) of its jerk stage (--feedforward filtered)")
     parser.add_argument("--monitor-window", type=float, default=None,
                         help="bound monitor over an exponentially forgetting window of SECONDS "
                              "(default: running from the start)")
@@ -831,6 +869,7 @@ def run_phase2(args: argparse.Namespace) -> int:
                        storage=args.storage, run_eq33=not args.skip_eq33, run_nonlinear=not args.skip_nonlinear,
                        monitor_margin=args.monitor_margin, superposition=args.superposition,
                        feedforward=args.feedforward, ff_filter_tau=args.ff_filter_tau,
+                       ff_jerk_tau=args.ff_jerk_tau,
                        monitor_window=args.monitor_window)
     models_path = args.models if args.models is not None else Path(args.gains).parent / "vertex_models.yaml"
     problem = load_problem(args.gains, models_path if (args.models is not None or models_path.is_file()) else None)
@@ -841,7 +880,7 @@ def run_phase2(args: argparse.Namespace) -> int:
     result = run(problem, signals, cfg, quad_params, sensors, out)
     print(f"simulated phase 2 in {time.perf_counter() - t0:.1f} s (kappa = {cfg.kappa:g}, gamma = "
           f"{problem.gamma if problem.gamma is not None else 'n/a'})")
-    for name in ("eq33", "nonlinear"):
+    for name in ("eq33", "linear_ff", "nonlinear"):
         rec = result.records.get(name)
         if rec is not None:
             state = "completed" if rec.completed else f"STOPPED: {rec.safety_event}"

@@ -27,6 +27,7 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError, SafetyError
 from lpv_sysid.models.quadrotor import Quadrotor
+from lpv_sysid.validation import check_keys, is_count, is_finite_number
 
 
 @dataclass(frozen=True)
@@ -53,10 +54,10 @@ class SensorConfig:
         for f in fields(self):
             v = getattr(self, f.name)
             if f.name == "seed":
-                if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                if not is_count(v):
                     raise ConfigError(f"sim.seed: must be a non-negative integer, got {v!r}")
                 continue
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+            if not is_finite_number(v) or v < 0:
                 raise ConfigError(f"sim.{f.name}: must be a finite number >= 0, got {v!r}")
         for name in ("physics_hz", "state_hz", "imu_hz", "rotor_hz", "omega_ref"):
             if getattr(self, name) <= 0:
@@ -68,12 +69,7 @@ class SensorConfig:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "SensorConfig":
-        if not isinstance(d, Mapping):
-            raise ConfigError(f"sim: expected a mapping, got {type(d).__name__}")
-        names = {f.name for f in fields(cls)}
-        bad = sorted(set(d) - names)
-        if bad:
-            raise ConfigError(f"sim: unknown key(s) {bad}")
+        check_keys(d, {f.name for f in fields(cls)}, "sim")
         return cls(**{k: (float(v) if k != "seed" and isinstance(v, int) and not isinstance(v, bool) else v)
                       for k, v in d.items()})
 

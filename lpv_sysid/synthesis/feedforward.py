@@ -23,6 +23,17 @@ Row order of ``F_i`` (the ``F_ff`` entry of gains.yaml): the ``free_states`` in 
 (quadrotor: phi, theta, dt, da, de, dr), then all inputs in input order (ut, ua, ue, ur); the
 columns are the ``accelerated_states`` (u, v, w), i.e. the axes of v_d.
 
+Jerk term (optional, ``kinematic_states``/``rate_states`` of the layout; on by default). With
+omega = 0 imposed, F alone asks for an attitude that *changes* with a but not for the body
+rates that change it; in body axes those rates act on the velocity through -omega x v (the
+A[v, omega] entries are ~|v|, 5 m/s at the box corners), so at 0.4 rad/s the vehicle sees
+~2 m/s^2 it was not asked for, and the feedback resists the rates (x_ref has omega = 0). With the
+jerk j = da/dt the reference rates w_ff = A[kin, rate]^+ F[kin] j (kinematic rows phi, theta) and
+the correction y_j = M^-1 (-A[rows, rate] w_ff) give ``F_jerk`` (rows: free states, inputs, rate
+states): (dx_ff, du_ff) = F a + F_jerk j, with the rate states of dx_ff = w_ff. Measured on the
+phase-2 demo (reference band 0.01-0.2 Hz): F alone left 0.7-0.8 m/s rms tracking error and the
+flight left the box at 27 s; with the jerk term 0.2-0.4 m/s rms and the flight completed.
+
 At runtime (control/lpv_controller.py) ``F(v_d) = sum_i alpha_i(v_d) F_i`` (Eq. 21 weights) and
 
     u = u0(v_d) + du_ff + K(v_d) (x - x0(v_d) - dx_ff) + R u_e,   (dx_ff, du_ff) = F(v_d) a.
@@ -58,20 +69,36 @@ class FeedforwardLayout:
     free_states: tuple = ("phi", "theta", "dt", "da", "de", "dr")
     accelerated_states: tuple = ("u", "v", "w")
     held_states: tuple = ("p", "q", "r", "dt", "da", "de", "dr")
+    #: jerk term (module docstring): the attitude rows whose rate is imposed and the rate states
+    #: that produce it; empty tuples switch the jerk term off.
+    kinematic_states: tuple = ("phi", "theta")
+    rate_states: tuple = ("p", "q", "r")
+
+    @property
+    def has_jerk(self) -> bool:
+        return bool(self.kinematic_states) and bool(self.rate_states)
 
     def to_dict(self) -> dict:
-        return {"free_states": list(self.free_states), "accelerated_states": list(self.accelerated_states),
-                "held_states": list(self.held_states)}
+        d = {"free_states": list(self.free_states), "accelerated_states": list(self.accelerated_states),
+             "held_states": list(self.held_states)}
+        if self.has_jerk:
+            d["kinematic_states"] = list(self.kinematic_states)
+            d["rate_states"] = list(self.rate_states)
+        return d
 
     @classmethod
     def from_dict(cls, d: Optional[dict]) -> "FeedforwardLayout":
         d = dict(d or {})
-        bad = set(d) - {"free_states", "accelerated_states", "held_states"}
+        if d and ("kinematic_states" not in d or "rate_states" not in d):
+            # an explicit layout without the jerk keys has no jerk term (older gains files)
+            d.setdefault("kinematic_states", [])
+            d.setdefault("rate_states", [])
+        bad = set(d) - {"free_states", "accelerated_states", "held_states", "kinematic_states", "rate_states"}
         if bad:
             raise ConfigError(f"feedforward: unknown key(s) {sorted(bad)}")
         kw = {}
         for k, v in d.items():
-            if not isinstance(v, (list, tuple)) or not all(isinstance(s, str) for s in v):
+            if not isinstance(v, (list, tuple)) or not all(isinstance(x, str) for x in v):
                 raise ConfigError(f"feedforward.{k}: expected a list of state names, got {v!r}")
             kw[k] = tuple(v)
         return cls(**kw)
@@ -91,14 +118,26 @@ class FeedforwardLayout:
             raise ConfigError("feedforward: a state cannot be both free and accelerated (Delta v = 0)")
         return out[0], out[1], out[2]
 
+    def jerk_indices(self, state_names: Sequence[str]) -> tuple[list, list]:
+        names = list(state_names)
+        out = []
+        for what in ("kinematic_states", "rate_states"):
+            sel = getattr(self, what)
+            missing = [s for s in sel if s not in names]
+            if missing:
+                raise ConfigError(f"feedforward.{what}: {missing} not among the model states {names}")
+            out.append([names.index(s) for s in sel])
+        if not set(self.kinematic_states) <= set(self.free_states):
+            raise ConfigError("feedforward.kinematic_states must be among the free states")
+        return out[0], out[1]
+
     def n_rows(self, n_u: int) -> int:
         return len(self.free_states) + n_u
 
 
-def feedforward_matrix(A: np.ndarray, B: np.ndarray, state_names: Sequence[str],
-                       layout: FeedforwardLayout = FeedforwardLayout(), cond_max: float = COND_MAX_DEFAULT,
-                       where: str = "model") -> np.ndarray:
-    """F (n_free + n_u, n_acc) of the module docstring for one linear model (A, B)."""
+def _system(A: np.ndarray, B: np.ndarray, state_names: Sequence[str], layout: FeedforwardLayout,
+            where: str) -> tuple[np.ndarray, list, list, list]:
+    """M = [A[rows, free] B[rows, :]] with rows = accelerated + held states (module docstring)."""
     A = np.asarray(A, dtype=float)
     B = np.asarray(B, dtype=float)
     n, m = B.shape
@@ -110,14 +149,16 @@ def feedforward_matrix(A: np.ndarray, B: np.ndarray, state_names: Sequence[str],
     if M.shape[0] != M.shape[1]:
         raise ConfigError(f"{where}: feedforward system is {M.shape[0]} x {M.shape[1]} "
                           f"({len(rows)} imposed rows, {len(free)} free states + {m} inputs); it must be square")
-    E = np.zeros((len(rows), len(acc)))
-    E[np.arange(len(acc)), np.arange(len(acc))] = 1.0
+    return M, free, acc, rows
+
+
+def _solve(M: np.ndarray, rhs: np.ndarray, cond_max: float, where: str) -> np.ndarray:
     # column equilibration: the motor rows carry b_Omega ~ 1.4e4 (seed 0 Eq. 15), so the raw
     # condition number (~1e6 for the quadrotor) says more about units than about solvability
     scale = np.linalg.norm(M, axis=0)
     scale[scale == 0.0] = 1.0
     # lstsq (not solve): a singular identified model gives the minimum-norm answer and its rank
-    Fs, _, rank, sv = scipy.linalg.lstsq(M / scale, E, lapack_driver="gelsd")
+    Fs, _, rank, sv = scipy.linalg.lstsq(M / scale, rhs, lapack_driver="gelsd")
     F = Fs / scale[:, None]
     cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
     if rank < M.shape[0] or not cond <= cond_max:
@@ -131,14 +172,54 @@ def feedforward_matrix(A: np.ndarray, B: np.ndarray, state_names: Sequence[str],
     return F
 
 
+def feedforward_matrix(A: np.ndarray, B: np.ndarray, state_names: Sequence[str],
+                       layout: FeedforwardLayout = FeedforwardLayout(), cond_max: float = COND_MAX_DEFAULT,
+                       where: str = "model") -> np.ndarray:
+    """F (n_free + n_u, n_acc) of the module docstring for one linear model (A, B)."""
+    M, _, acc, rows = _system(A, B, state_names, layout, where)
+    E = np.zeros((len(rows), len(acc)))
+    E[np.arange(len(acc)), np.arange(len(acc))] = 1.0
+    return _solve(M, E, cond_max, where)
+
+
+def jerk_matrix(A: np.ndarray, B: np.ndarray, state_names: Sequence[str], F: np.ndarray,
+                layout: FeedforwardLayout = FeedforwardLayout(), cond_max: float = COND_MAX_DEFAULT,
+                where: str = "model") -> np.ndarray:
+    """F_j (n_free + n_u + n_rate, n_acc) of the jerk term (module docstring) for one model.
+
+    The attitude reference moves, (d/dt) dx_ff[kin] = F[kin] j (j = da/dt, dF/dt neglected), so
+    the kinematic rows need the rates w_ff = A[kin, rate]^+ F[kin] j (minimum norm: r_ff = 0 for
+    the quadrotor at zero yaw rate); those rates act on the imposed rows through A[rows, rate]
+    (the -omega x v term of Eq. 3 in body axes: ~|v| per rad/s), which the free states and the
+    inputs cancel: y_j = M^-1 (-A[rows, rate] w_ff). Rows: free states, inputs, rate states."""
+    A = np.asarray(A, dtype=float)
+    M, free, _, rows = _system(A, B, state_names, layout, where)
+    kin, rate = layout.jerk_indices(state_names)
+    F = np.asarray(F, dtype=float)
+    F_kin = F[[free.index(k) for k in kin], :]
+    A_kr = A[np.ix_(kin, rate)]
+    Gw, _, rank, _ = scipy.linalg.lstsq(A_kr, F_kin)
+    if rank < len(kin):
+        raise ConfigError(f"{where}: the rate states {list(layout.rate_states)} cannot move the attitude rows "
+                          f"{list(layout.kinematic_states)} (rank {rank}); drop the jerk term")
+    Fj = _solve(M, -A[np.ix_(rows, rate)] @ Gw, cond_max, where)
+    return np.vstack([Fj, Gw])
+
+
 def vertex_feedforward(A: np.ndarray, B: np.ndarray, state_names: Sequence[str],
                        layout: FeedforwardLayout = FeedforwardLayout(),
-                       cond_max: float = COND_MAX_DEFAULT) -> np.ndarray:
-    """F_i for every vertex, (N, n_free + n_u, n_acc); A (N, n, n), B (N, n, m) nominal models."""
+                       cond_max: float = COND_MAX_DEFAULT) -> tuple[np.ndarray, Optional[np.ndarray]]:
+    """(F_i (N, n_free + n_u, n_acc), F_jerk,i (N, n_free + n_u + n_rate, n_acc) or None) for every
+    vertex; A (N, n, n), B (N, n, m) nominal models."""
     A = np.asarray(A, dtype=float)
     B = np.asarray(B, dtype=float)
-    return np.array([feedforward_matrix(A[i], B[i], state_names, layout, cond_max, f"vertex {i}")
-                     for i in range(A.shape[0])])
+    F = np.array([feedforward_matrix(A[i], B[i], state_names, layout, cond_max, f"vertex {i}")
+                  for i in range(A.shape[0])])
+    if not layout.has_jerk:
+        return F, None
+    Fj = np.array([jerk_matrix(A[i], B[i], state_names, F[i], layout, cond_max, f"vertex {i}")
+                   for i in range(A.shape[0])])
+    return F, Fj
 
 
 def split(F: np.ndarray, n_x: int, free_index: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:

@@ -331,7 +331,8 @@ def load_certificate_npz(path: Path | str) -> dict:
 
 
 def gains_dict(models_raw: dict, model: PolytopicModel, K: np.ndarray, R: np.ndarray, Q: np.ndarray, gamma: float,
-               certificate: dict, F_ff: Optional[np.ndarray] = None, ff_layout: Optional[dict] = None) -> dict:
+               certificate: dict, F_ff: Optional[np.ndarray] = None, ff_layout: Optional[dict] = None,
+               F_jerk: Optional[np.ndarray] = None) -> dict:
     """The gains.yaml document of ARCHITECTURE.md section 5.
 
     With ``F_ff`` (N, n_free + m, p) and its layout (``FeedforwardLayout.to_dict()``) every vertex
@@ -355,6 +356,8 @@ def gains_dict(models_raw: dict, model: PolytopicModel, K: np.ndarray, R: np.nda
         d["feedforward"] = dict(ff_layout)
         for i, vx in enumerate(d["vertices"]):
             vx["F_ff"] = np.asarray(F_ff[i]).tolist()
+            if F_jerk is not None:
+                vx["F_jerk"] = np.asarray(F_jerk[i]).tolist()
     return d
 
 
@@ -375,7 +378,7 @@ class Gains:
         verts = d.get("vertices")
         if not isinstance(verts, list) or len(verts) != len(corners):
             raise ConfigError(f"{where}: 'vertices' must list {len(corners)} vertices")
-        K, x0, u0, F = [], [], [], []
+        K, x0, u0, F, Fj = [], [], [], [], []
         ff = d.get("feedforward")
         if ff is not None and not isinstance(ff, dict):
             raise ConfigError(f"{where}: 'feedforward' must be a mapping")
@@ -392,12 +395,14 @@ class Gains:
             if ff is not None:
                 if "F_ff" not in v:
                     raise ConfigError(f"{w}: missing F_ff (the file declares 'feedforward')")
-                Fa = np.array(v["F_ff"], dtype=float)
-                F.append(_matrix(v["F_ff"], Fa.shape, f"{w}.F_ff"))
+                for key, lst in (("F_ff", F), ("F_jerk", Fj)):
+                    if key in v:
+                        lst.append(_matrix(v[key], np.array(v[key], dtype=float).shape, f"{w}.{key}"))
         self.K, self.x0, self.u0 = np.array(K), np.array(x0), np.array(u0)
         #: feedforward layout (dict) and stacked F_ff (N, r, p), or None (synthesis/feedforward.py)
         self.feedforward = ff
         self.F_ff = np.array(F) if ff is not None else None
+        self.F_jerk = np.array(Fj) if ff is not None and len(Fj) == len(verts) else None
         R = np.array(d.get("R"), dtype=float)
         if R.ndim != 2 or R.shape[0] != m:
             raise ConfigError(f"{where}: R must be {m} x n_e, got shape {R.shape}")

@@ -238,11 +238,13 @@ FF_RTOL = 1e-8
 
 
 def check_feedforward(rep: VerifyReport, model: PolytopicModel, F_ff: np.ndarray, layout: dict,
-                      rtol: float = FF_RTOL) -> None:
-    """Recompute F_i from the nominal vertex models (synthesis/feedforward.py) and compare with the
-    stored F_ff; also the defining property: A_i dx_ff + B_i du_ff has the accelerated rows = a and
-    the held rows = 0 for a = each unit vector (independent of how F was computed)."""
-    from lpv_sysid.synthesis.feedforward import FeedforwardLayout, feedforward_matrix, feedforward_residual
+                      F_jerk: Optional[np.ndarray] = None, rtol: float = FF_RTOL) -> None:
+    """Recompute F_i (and F_jerk,i) from the nominal vertex models (synthesis/feedforward.py) and
+    compare with the stored ones; also the defining property: A_i dx_ff + B_i du_ff has the
+    accelerated rows = a and the held rows = 0 for a = each unit vector (independent of how F was
+    computed)."""
+    from lpv_sysid.synthesis.feedforward import (FeedforwardLayout, feedforward_matrix, feedforward_residual,
+                                                 jerk_matrix)
 
     try:
         lay = FeedforwardLayout.from_dict(layout)
@@ -267,9 +269,25 @@ def check_feedforward(rep: VerifyReport, model: PolytopicModel, F_ff: np.ndarray
         scale = max(1.0, float(np.max(np.abs(model.A[i]))), float(np.max(np.abs(model.B[i]))))
         res = max(float(np.max(np.abs(feedforward_residual(model.A[i], model.B[i], F_ff[i], free, acc, e)[acc + held])))
                   for e in np.eye(len(acc)))
-        ok = res <= 1e-6 * scale
-        rep.add("ff residual", f"vertex {i} A dx_ff + B du_ff - a", res, 1e-6 * scale, ok,
+        ok = res <= 1e-9 * scale
+        rep.add("ff residual", f"vertex {i} A dx_ff + B du_ff - a", res, 1e-9 * scale, ok,
                 "" if ok else "stored F_ff does not produce the requested acceleration")
+        if lay.has_jerk:
+            if F_jerk is None:
+                rep.add("ff jerk", f"vertex {i}", 1.0, 0.0, False, "layout declares the jerk term, F_jerk missing")
+                continue
+            try:
+                Fj = jerk_matrix(model.A[i], model.B[i], model.state_names, F, lay, where=f"vertex {i}")
+            except ConfigError as exc:
+                rep.add("ff jerk", f"vertex {i}", float("inf"), rtol, False, str(exc))
+                continue
+            Fj_s = np.asarray(F_jerk[i], dtype=float)
+            if Fj_s.shape != Fj.shape:
+                rep.add("ff jerk", f"vertex {i} F_jerk shape", 1.0, 0.0, False, f"{Fj_s.shape} != {Fj.shape}")
+                continue
+            err = float(np.max(np.abs(Fj_s - Fj)) / max(1.0, float(np.max(np.abs(Fj)))))
+            rep.add("ff jerk", f"vertex {i} F_jerk vs recomputed", err, rtol, err <= rtol,
+                    "" if err <= rtol else "stored F_jerk differs from the one of the nominal model")
 
 
 def verify_files(gains_path: Path | str, models_path: Path | str, n_random: int = 20, seed: int = 0,
@@ -311,7 +329,7 @@ def verify_files(gains_path: Path | str, models_path: Path | str, n_random: int 
         return rep
     _check_input_claim(rep, model, claim, raw)
     if gains.F_ff is not None:
-        check_feedforward(rep, model, gains.F_ff, gains.feedforward)
+        check_feedforward(rep, model, gains.F_ff, gains.feedforward, gains.F_jerk)
     region = Region.from_dict(cert.get("region")) if cert.get("region") else None
     sidecar = None
     side = cert.get("sidecar")

@@ -3,27 +3,16 @@
 import collections
 
 import _rosmsg_standin as _msgs
+from rclpy._standin_entity import ServiceEndpoint
 from rclpy.task import Future
 
 
-class Client:
+class Client(ServiceEndpoint):
     def __init__(self, node, srv_type, srv_name, qos_profile, callback_group):
-        self._node = node
-        self.srv_type = srv_type
-        self._srv_name = srv_name
-        self.qos_profile = qos_profile
-        self.callback_group = callback_group
+        super().__init__(node, srv_type, srv_name, callback_group, qos_profile)
         self._seq = 0
         self._pending = {}
         self._standin_responses = collections.deque()
-
-    @property
-    def service_name(self):
-        return self._srv_name
-
-    @property
-    def handle(self):
-        return self
 
     def _service(self):
         for s in self._node.context._standin_entities("services"):

@@ -514,37 +514,34 @@ class Node:
         self.clients.append(cli)
         return cli
 
+    @staticmethod
+    def _standin_remove(entities, entity):
+        """Drop ``entity`` from this node's list; whether it was there (rclpy's bool)."""
+        if entity in entities:
+            entities.remove(entity)
+            return True
+        return False
+
     def destroy_publisher(self, publisher):
-        if publisher in self.publishers:
-            self.publishers.remove(publisher)
+        if self._standin_remove(self.publishers, publisher):
             publisher._destroyed = True
             return True
         return False
 
     def destroy_subscription(self, subscription):
-        if subscription in self.subscriptions:
-            self.subscriptions.remove(subscription)
-            return True
-        return False
+        return self._standin_remove(self.subscriptions, subscription)
 
     def destroy_timer(self, timer):
-        if timer in self.timers:
-            self.timers.remove(timer)
+        if self._standin_remove(self.timers, timer):
             timer.destroy()
             return True
         return False
 
     def destroy_service(self, service):
-        if service in self.services:
-            self.services.remove(service)
-            return True
-        return False
+        return self._standin_remove(self.services, service)
 
     def destroy_client(self, client):
-        if client in self.clients:
-            self.clients.remove(client)
-            return True
-        return False
+        return self._standin_remove(self.clients, client)
 
     def destroy_node(self):
         for pub in list(self.publishers):

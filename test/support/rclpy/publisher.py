@@ -3,16 +3,13 @@
 import collections
 
 import _rosmsg_standin as _msgs
+from rclpy._standin_entity import TopicEndpoint
 from rclpy.qos import DurabilityPolicy, QoSCompatibility, qos_check_compatible
 
 
-class Publisher:
+class Publisher(TopicEndpoint):
     def __init__(self, node, msg_type, topic, qos_profile, event_callbacks=None):
-        self._node = node
-        self.msg_type = msg_type
-        self._topic = topic
-        self.qos_profile = qos_profile
-        self.event_callbacks = event_callbacks
+        super().__init__(node, msg_type, topic, qos_profile, event_callbacks)
         self._destroyed = False
         keep = qos_profile.depth if qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL \
             else 0
@@ -20,16 +17,8 @@ class Publisher:
         self.standin_published = 0
 
     @property
-    def topic_name(self):
-        return self._topic
-
-    @property
     def topic(self):
         return self._topic
-
-    @property
-    def handle(self):
-        return self
 
     def get_subscription_count(self):
         return sum(1 for s in self._node.context._standin_entities("subscriptions")

@@ -3,25 +3,14 @@
 import collections
 
 import _rosmsg_standin as _msgs
+from rclpy._standin_entity import ServiceEndpoint
 
 
-class Service:
+class Service(ServiceEndpoint):
     def __init__(self, node, srv_type, srv_name, callback, callback_group, qos_profile):
-        self._node = node
-        self.srv_type = srv_type
-        self._srv_name = srv_name
+        super().__init__(node, srv_type, srv_name, callback_group, qos_profile)
         self.callback = callback
-        self.callback_group = callback_group
-        self.qos_profile = qos_profile
         self._requests = collections.deque()
-
-    @property
-    def service_name(self):
-        return self._srv_name
-
-    @property
-    def handle(self):
-        return self
 
     def _standin_ready(self):
         return bool(self._requests)

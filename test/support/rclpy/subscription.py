@@ -3,33 +3,22 @@
 import collections
 
 import _rosmsg_standin as _msgs
+from rclpy._standin_entity import TopicEndpoint
 from rclpy.qos import HistoryPolicy
 
 
-class Subscription:
+class Subscription(TopicEndpoint):
     def __init__(self, node, msg_type, topic, callback, callback_group, qos_profile,
                  raw=False, event_callbacks=None):
-        self._node = node
-        self.msg_type = msg_type
-        self._topic = topic
+        super().__init__(node, msg_type, topic, qos_profile, event_callbacks)
         self.callback = callback
         self.callback_group = callback_group
-        self.qos_profile = qos_profile
         self.raw = raw
-        self.event_callbacks = event_callbacks
         depth = None if qos_profile.history == HistoryPolicy.KEEP_ALL else \
             max(int(qos_profile.depth), 1)
         self._queue = collections.deque(maxlen=depth)
         self.standin_received = 0
         self.standin_dropped = 0
-
-    @property
-    def topic_name(self):
-        return self._topic
-
-    @property
-    def handle(self):
-        return self
 
     def _standin_enqueue(self, data):
         if self._queue.maxlen is not None and len(self._queue) == self._queue.maxlen:

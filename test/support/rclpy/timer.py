@@ -1,9 +1,10 @@
 """Stand-in for ``rclpy.timer.Timer`` on the simulated clock."""
 
+from rclpy._standin_entity import Entity
 from rclpy.exceptions import InvalidHandle
 
 
-class Timer:
+class Timer(Entity):
     def __init__(self, callback, callback_group, timer_period_ns, clock, *, context=None,
                  autostart=True):
         self._context = context
@@ -18,10 +19,6 @@ class Timer:
     @property
     def clock(self):
         return self._clock
-
-    @property
-    def handle(self):
-        return self
 
     @property
     def timer_period_ns(self):

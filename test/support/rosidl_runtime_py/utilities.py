@@ -17,19 +17,18 @@ def get_interface(identifier: str):
     return get_message(identifier) if kind == "msg" else get_service(identifier)
 
 
-def get_message(identifier: str):
-    pkg, _, name = _split(identifier, "msg")
+def _lookup(identifier: str, kind: str, what: str):
+    pkg, _, name = _split(identifier, kind)
     try:
-        module = importlib.import_module(f"{pkg}.msg")
+        module = importlib.import_module(f"{pkg}.{kind}")
         return getattr(module, name)
     except (ImportError, AttributeError):
-        raise ValueError(f"Invalid message type: '{identifier}'") from None
+        raise ValueError(f"Invalid {what} type: '{identifier}'") from None
+
+
+def get_message(identifier: str):
+    return _lookup(identifier, "msg", "message")
 
 
 def get_service(identifier: str):
-    pkg, _, name = _split(identifier, "srv")
-    try:
-        module = importlib.import_module(f"{pkg}.srv")
-        return getattr(module, name)
-    except (ImportError, AttributeError):
-        raise ValueError(f"Invalid service type: '{identifier}'") from None
+    return _lookup(identifier, "srv", "service")

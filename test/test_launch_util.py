@@ -1,0 +1,173 @@
+"""nodes/launch_util and the launch files that use it, run against recording fakes of the
+ROS 2 ``launch`` / ``launch_ros`` / ``ament_index_python`` API (not installed here).
+
+The fakes keep the real signatures' keyword-only arguments, so a call the real classes
+would refuse fails here too. They are injected into ``sys.modules`` for one test only
+(never put on the path: a real ROS 2 install must not be shadowed).
+"""
+
+import importlib
+import importlib.util
+import os
+import sys
+import types
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SHARE = "/opt/ros/jazzy/share/lpv_sysid"
+
+
+class _Recorded:
+    def __init__(self, *args, **kwargs):
+        self.args, self.kwargs = args, kwargs
+
+    def __eq__(self, other):
+        return type(self) is type(other) and (self.args, self.kwargs) == (other.args, other.kwargs)
+
+    def __repr__(self):
+        return f"{type(self).__name__}{self.args}{self.kwargs}"
+
+
+class LaunchDescription(_Recorded):
+    def __init__(self, initial_entities=None):
+        super().__init__(initial_entities)
+        self.entities = list(initial_entities or [])
+
+
+class DeclareLaunchArgument(_Recorded):
+    def __init__(self, name, *, default_value=None, description=None, choices=None):
+        super().__init__(name, default_value=default_value, description=description,
+                         choices=choices)
+        self.name, self.default_value, self.description = name, default_value, description
+
+
+class LaunchConfiguration(_Recorded):
+    def __init__(self, variable_name, *, default=None):
+        super().__init__(variable_name, default=default)
+
+
+class PathJoinSubstitution(_Recorded):
+    def __init__(self, substitutions):
+        super().__init__(list(substitutions))
+
+
+class PythonExpression(_Recorded):
+    def __init__(self, expression):
+        super().__init__(list(expression))
+
+
+class IfCondition(_Recorded):
+    def __init__(self, predicate_expression):
+        super().__init__(predicate_expression)
+
+
+class Node(_Recorded):
+    def __init__(self, *, executable, package=None, name=None, namespace=None, output="log",
+                 parameters=None, condition=None, **kwargs):
+        super().__init__(executable=executable, package=package, name=name,
+                         namespace=namespace, output=output, parameters=parameters,
+                         condition=condition, **kwargs)
+        self.executable, self.parameters, self.condition = executable, parameters, condition
+
+
+def _share(package):
+    assert package == "lpv_sysid"
+    return SHARE
+
+
+@pytest.fixture
+def fake_launch(monkeypatch):
+    mods = {
+        "launch": dict(LaunchDescription=LaunchDescription),
+        "launch.actions": dict(DeclareLaunchArgument=DeclareLaunchArgument),
+        "launch.substitutions": dict(LaunchConfiguration=LaunchConfiguration,
+                                     PathJoinSubstitution=PathJoinSubstitution,
+                                     PythonExpression=PythonExpression),
+        "launch.conditions": dict(IfCondition=IfCondition),
+        "launch_ros": {},
+        "launch_ros.actions": dict(Node=Node),
+        "ament_index_python": {},
+        "ament_index_python.packages": dict(get_package_share_directory=_share),
+    }
+    for name, attrs in mods.items():
+        mod = types.ModuleType(name)
+        mod.__dict__.update(attrs)
+        monkeypatch.setitem(sys.modules, name, mod)
+    # a fresh import against the fakes; the original state is restored afterwards
+    monkeypatch.delitem(sys.modules, "lpv_sysid.nodes.launch_util", raising=False)
+    return importlib.import_module("lpv_sysid.nodes.launch_util")
+
+
+def _describe(fname):
+    spec = importlib.util.spec_from_file_location("lf_" + fname.split(".")[0],
+                                                  os.path.join(ROOT, "launch", fname))
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    ld = mod.generate_launch_description()
+    args = {e.name: (e.default_value, e.description) for e in ld.entities
+            if isinstance(e, DeclareLaunchArgument)}
+    order = [e.name for e in ld.entities if isinstance(e, DeclareLaunchArgument)]
+    nodes = {e.executable: e for e in ld.entities if isinstance(e, Node)}
+    return order, args, nodes
+
+
+def test_declare_arguments_and_params(fake_launch):
+    L = fake_launch
+    out = L.declare_arguments(gains_file=L.REQUIRED, log_dir="x_log", notes={"log_dir": "test"})
+    assert [a.name for a in out] == ["config_dir", "gains_file", "log_dir"]
+    assert out[0].default_value == os.path.join(SHARE, "config")
+    assert out[0].description == "directory holding the node parameter files"
+    assert out[1].default_value is None            # required: no default_value given at all
+    assert out[1].kwargs["default_value"] is None
+    assert out[2].default_value == "x_log"
+    assert out[2].description == "experiment directory of the data logger (test)"
+    assert L.params("a.yaml") == PathJoinSubstitution([LaunchConfiguration("config_dir"),
+                                                       "a.yaml"])
+    with pytest.raises(KeyError, match=r"\['colour'\]"):
+        L.declare_arguments(colour="red")
+    with pytest.raises(KeyError, match=r"\['speed'\]"):
+        L.declare_arguments(notes={"speed": "fast"})
+
+
+CONFIG_DIR = os.path.join(SHARE, "config")
+SIGNALS = ("signals.npz", "signals.npz written by `lpv-sysid signals`")
+
+
+@pytest.mark.parametrize("fname, order, expected", [
+    ("phase1.launch.py", ["config_dir", "signals_file", "vertex", "log_dir"], {
+        "signals_file": SIGNALS,
+        "vertex": ("[0.0, 0.0, 0.0]", "vertex body velocity (u, v, w) FRD, m/s, for this run"),
+        "log_dir": ("phase1_log", "experiment directory of the data logger")}),
+    ("phase2.launch.py", ["config_dir", "gains_file", "signals_file", "log_dir"], {
+        "gains_file": (None, "gains.yaml from `lpv-sysid synthesize`"),
+        "signals_file": SIGNALS,
+        "log_dir": ("phase2_log", "experiment directory of the data logger")}),
+    ("sim.launch.py", ["phase", "config_dir", "signals_file", "gains_file", "vertex", "log_dir"], {
+        "phase": ("1", "1: baseline + excitation, 2: LPV controller"),
+        "gains_file": ("gains.yaml", "gains.yaml from `lpv-sysid synthesize` (phase 2 only)"),
+        "vertex": ("[0.0, 0.0, 0.0]",
+                   "vertex body velocity (u, v, w) FRD, m/s, for this run (phase 1 only)"),
+        "log_dir": ("sim_log", "experiment directory of the data logger")}),
+])
+def test_launch_files_declare_and_wire(fake_launch, fname, order, expected):
+    got_order, args, nodes = _describe(fname)
+    assert got_order == order
+    assert args["config_dir"][0] == CONFIG_DIR
+    for name, value in expected.items():
+        assert args[name] == value, name
+    for executable, node in nodes.items():
+        assert node.kwargs["namespace"] == "lpv_sysid" and node.kwargs["package"] == "lpv_sysid"
+        # first parameter entry: the node's file in config_dir; every LaunchConfiguration
+        # in the overrides names a declared argument
+        first = node.parameters[0]
+        assert first.args[0][0] == LaunchConfiguration("config_dir")
+        for v in node.parameters[1].values():
+            if isinstance(v, LaunchConfiguration):
+                assert v.args[0] in args, (executable, v)
+    if fname == "phase2.launch.py":
+        assert nodes["lpv_controller_node"].parameters[1] == {
+            "gains_file": LaunchConfiguration("gains_file")}
+    if fname == "sim.launch.py":
+        assert nodes["lpv_controller_node"].condition is not None
+        assert all(n.condition is None for e, n in nodes.items() if e != "lpv_controller_node")

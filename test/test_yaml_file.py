@@ -1,0 +1,69 @@
+"""io/yaml_file.read_yaml and the configuration readers built on it."""
+
+import pytest
+
+from lpv_sysid.cli.identify import load_config as load_identification, quadrotor_section
+from lpv_sysid.cli.identify_nonlinear import _params as nonlinear_params
+from lpv_sysid.errors import ConfigError
+from lpv_sysid.io.yaml_file import read_yaml
+from lpv_sysid.mavlink.bridge import BridgeConfig
+from lpv_sysid.report.data import load_run
+from lpv_sysid.signals.config import load_config as load_signals
+from lpv_sysid.sim.phase1 import load_config as load_phase1
+
+BAD = "a: [1, 2\nb: 3\n"            # unclosed flow sequence
+
+
+def test_read_yaml_values_and_errors(tmp_path):
+    f = tmp_path / "ok.yaml"
+    f.write_text("mass: 1.5\nlist: [1, 2]\nname: ümlaut\n", encoding="utf-8")
+    assert read_yaml(f) == {"mass": 1.5, "list": [1, 2], "name": "ümlaut"}
+    assert read_yaml(str(f)) == read_yaml(f)
+    (tmp_path / "empty.yaml").write_text("")
+    assert read_yaml(tmp_path / "empty.yaml") is None
+    (tmp_path / "bad.yaml").write_text(BAD)
+    with pytest.raises(ConfigError,
+                       match=r"^.*bad\.yaml: malformed YAML \(while parsing a flow sequence\)$"):
+        read_yaml(tmp_path / "bad.yaml")
+    with pytest.raises(ConfigError, match=r"^.*nope\.yaml: cannot read \(No such file or directory\)$"):
+        read_yaml(tmp_path / "nope.yaml")
+    with pytest.raises(ConfigError, match=r"^vehicle_file x: cannot read \(Is a directory\)$"):
+        read_yaml(tmp_path, "vehicle_file x")
+
+
+@pytest.mark.parametrize("reader", [load_identification, quadrotor_section, nonlinear_params,
+                                    BridgeConfig.load, load_signals, load_phase1])
+def test_readers_name_the_file_on_bad_yaml(tmp_path, reader):
+    f = tmp_path / "cfg.yaml"
+    f.write_text(BAD)
+    with pytest.raises(ConfigError, match=r"cfg\.yaml: malformed YAML \(while parsing"):
+        reader(f)
+
+
+def test_quadrotor_section_readers(tmp_path):
+    f = tmp_path / "q.yaml"
+    f.write_text("quadrotor: {mass: 1.9}\ncontroller: {}\n")
+    assert quadrotor_section(f) == {"mass": 1.9}
+    assert nonlinear_params(f).mass == 1.9
+    assert quadrotor_section(None) == {}
+    f.write_text("quadrotor: [1, 2]\n")
+    for reader in (quadrotor_section, nonlinear_params):
+        with pytest.raises(ConfigError, match=r"q\.yaml: section 'quadrotor' must be a mapping"):
+            reader(f)
+    f.write_text("quadrotor: {colour: red}\n")
+    with pytest.raises(ConfigError, match=r"q\.yaml: quadrotor: unknown key"):
+        nonlinear_params(f)
+
+
+def test_signals_config_keeps_missing_and_empty_wording(tmp_path):
+    with pytest.raises(ConfigError, match=r"nope\.yaml: no such file$"):
+        load_signals(str(tmp_path / "nope.yaml"))
+    (tmp_path / "e.yaml").write_text("")
+    with pytest.raises(ConfigError, match=r"e\.yaml: empty file$"):
+        load_signals(str(tmp_path / "e.yaml"))
+
+
+def test_report_names_malformed_input(tmp_path):
+    (tmp_path / "gains.yaml").write_text(BAD)
+    data = load_run(tmp_path, verify=False)
+    assert data.problems["gains"].endswith("gains.yaml: malformed YAML (while parsing a flow sequence)")
