@@ -169,18 +169,28 @@ class LpvController:
                 raise ConfigError(f"gain schedule: F_ff has shape {F.shape}, expected ({N}, {len(free) + m}, {p})")
             if not np.all(np.isfinite(F)):
                 raise ConfigError("gain schedule: F_ff contains NaN/inf")
-            stack.append(F.reshape(N, -1))          # F(v_d) = sum alpha_i F_i rides on the same product
             self._ff_shape = F.shape[1:]
             self._ff_free = np.array(free, dtype=int)
             self._ff_nf = len(free)
+            # dense per-vertex maps [a; j] -> (dx_ff over all n states, du_ff): scattered once
+            # here so the step needs one small product each (G_x (n x 2p), G_u (m x 2p))
+            nf = len(free)
+            Gx = np.zeros((N, n, 2 * p))
+            Gu = np.zeros((N, m, 2 * p))
+            Gx[:, self._ff_free, :p] = F[:, :nf, :]
+            Gu[:, :, :p] = F[:, nf:, :]
             if Fj is not None:
                 if Fj.shape != (N, len(free) + m + len(rate), p) or not np.all(np.isfinite(Fj)):
                     raise ConfigError(f"gain schedule: F_jerk has shape {Fj.shape} (expected "
                                       f"({N}, {len(free) + m + len(rate)}, {p})) or is not finite")
-                stack.append(Fj.reshape(N, -1))
                 self.has_jerk = True
                 self._fj_shape = Fj.shape[1:]
                 self._fj_x = np.array(list(free) + list(rate), dtype=int)   # state rows of F_jerk
+                Gx[:, self._fj_x, p:] = np.concatenate([Fj[:, :nf, :], Fj[:, nf + m:, :]], axis=1)
+                Gu[:, :, p:] = Fj[:, nf:nf + m, :]
+            # G(v_d) = sum alpha_i G_i, G_i = [G_x; G_u], rides on the same product as K, x0, u0
+            stack.append(np.concatenate([Gx, Gu], axis=1).reshape(N, -1))
+            self._aj = np.zeros(2 * p)
         self.W = np.ascontiguousarray(np.hstack(stack))
         self._mn = m * n
         self.R = np.ascontiguousarray(R)
@@ -242,13 +252,23 @@ class LpvController:
         if dt <= 0.0:
             return self.a_filt, self.j_filt
         k = 1.0 if self.tau == 0.0 else -math.expm1(-dt / self.tau)
-        y = self.vd_filt + k * (v_d - self.vd_filt)
-        self.a_filt = (y - self.vd_filt) / dt
-        self.vd_filt = y
         k2 = 1.0 if self.tau_j == 0.0 else -math.expm1(-dt / self.tau_j)
-        y2 = self.a_lp + k2 * (self.a_filt - self.a_lp)
-        self.j_filt = (y2 - self.a_lp) / dt
-        self.a_lp = y2
+        # first-order low-pass + difference per axis on plain floats: for 3-vectors numpy's
+        # per-call overhead (~1 us an operation) costs more than the arithmetic
+        vf, alp = self.vd_filt.tolist(), self.a_lp.tolist()
+        a_new, j_new, vf_new, alp_new = [], [], [], []
+        for vdk, vfk, alk in zip(v_d.tolist(), vf, alp):
+            y = vfk + k * (vdk - vfk)
+            ak = (y - vfk) / dt
+            y2 = alk + k2 * (ak - alk)
+            a_new.append(ak)
+            j_new.append((y2 - alk) / dt)
+            vf_new.append(y)
+            alp_new.append(y2)
+        self.vd_filt = np.array(vf_new)
+        self.a_lp = np.array(alp_new)
+        self.a_filt = np.array(a_new)
+        self.j_filt = np.array(j_new)
         return self.a_filt, self.j_filt
 
     # -- pieces (public for tests) -----------------------------------------------------
@@ -318,18 +338,14 @@ class LpvController:
         a_used = j_used = None
         if self.has_ff:
             a_used = a_filt if a is None else a
-            off = mn + n + m
-            nF = self._ff_shape[0] * self._ff_shape[1]
-            ff = row[off:off + nF].reshape(self._ff_shape) @ a_used
-            x_ref = x_ref.copy()
-            x_ref[self._ff_free] += ff[:self._ff_nf]
-            u_ref = u_ref + ff[self._ff_nf:]
-            if self.has_jerk:
-                j_used = j_filt if j is None else j
-                fj = row[off + nF:].reshape(self._fj_shape) @ j_used
-                nf = self._ff_nf
-                x_ref[self._fj_x] += np.concatenate([fj[:nf], fj[nf + m:]])
-                u_ref = u_ref + fj[nf:nf + m]
+            j_used = (j_filt if j is None else j) if self.has_jerk else None
+            aj = self._aj
+            aj[:self.n_p] = a_used
+            if j_used is not None:
+                aj[self.n_p:] = j_used
+            g = row[mn + n + m:].reshape(n + m, -1) @ aj
+            x_ref = x_ref + g[:n]
+            u_ref = u_ref + g[n:]
         u = u_ref + row[:mn].reshape(m, n) @ (x - x_ref) + self.R @ u_e
         saturated = False
         if self.mix is not None:
