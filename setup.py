@@ -1,5 +1,6 @@
 """ament_python build description for lpv_sysid (ROS 2 Jazzy)."""
 
+import os
 from glob import glob
 
 from setuptools import find_packages, setup
@@ -15,6 +16,19 @@ NODES = [
     "sim_vehicle_node",
 ]
 
+
+
+def tree_data_files(root: str, dest: str) -> list:
+    """data_files entries installing every file below ``root`` under ``dest``, keeping the
+    sub-directory layout (a rosbag2 directory must stay a directory)."""
+    entries = []
+    for dirpath, _dirs, files in sorted(os.walk(root)):
+        paths = sorted(os.path.join(dirpath, f) for f in files)
+        if paths:
+            entries.append((os.path.join(dest, os.path.relpath(dirpath, root)).rstrip("/."), paths))
+    return entries
+
+
 setup(
     name=PACKAGE,
     version="0.1.0",
@@ -24,8 +38,7 @@ setup(
         ("share/" + PACKAGE, ["package.xml"]),
         ("share/" + PACKAGE + "/launch", glob("launch/*.launch.py")),
         ("share/" + PACKAGE + "/config", glob("config/*.yaml")),
-        ("share/" + PACKAGE + "/msg_samples", glob("msg_samples/**/*", recursive=True)),
-    ],
+    ] + tree_data_files("msg_samples", "share/" + PACKAGE + "/msg_samples"),
     package_data={PACKAGE: ["py.typed"]},
     install_requires=["setuptools"],
     zip_safe=True,
