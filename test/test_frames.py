@@ -250,3 +250,16 @@ def test_scalar_quaternion_rotation_matches_vectorised_and_scipy():
         np.testing.assert_allclose(np.array(R), fr.rotation_from_quaternion(q), atol=1e-12)
         np.testing.assert_allclose(np.array(R), Rotation.from_quat(q[[1, 2, 3, 0]]).as_matrix(), atol=1e-12)
         np.testing.assert_allclose(euler, fr.euler_from_quaternion(q), atol=1e-9)
+
+
+def test_scalar_odometry_conversion_matches_the_vectorised_functions():
+    rng = np.random.default_rng(11)
+    for _ in range(50):
+        pos, v, w = rng.normal(size=(3, 3))
+        q = rng.normal(size=4)
+        q /= np.linalg.norm(q)
+        pos_ned, euler, v_frd, w_frd = fr.odometry_ned_frd_from_ros_scalar(pos.tolist(), q.tolist(), v.tolist(), w.tolist())
+        np.testing.assert_allclose(pos_ned, fr.enu_to_ned(pos), atol=1e-15)
+        np.testing.assert_allclose(euler, fr.euler_from_ros_orientation(q), atol=1e-9)
+        np.testing.assert_allclose(v_frd, fr.flu_to_frd(v), atol=1e-15)
+        np.testing.assert_allclose(w_frd, fr.flu_to_frd(w), atol=1e-15)

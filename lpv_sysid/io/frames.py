@@ -304,6 +304,30 @@ def euler_from_ros_orientation(q_xyzw) -> np.ndarray:
     return euler_from_quaternion(quaternion_ned_frd_from_enu_flu(wxyz_from_xyzw(q_xyzw)))
 
 
+def odometry_ned_frd_from_ros_scalar(pos_enu, q_xyzw, v_flu, w_flu):
+    """Scalar fast path of the Odometry conversion (one message at the controller's state
+    rate): ENU position -> NED, ROS ENU/FLU orientation ``(x, y, z, w)`` -> NED/FRD Euler
+    angles, FLU body velocity and rates -> FRD. Same conventions as :func:`enu_to_ned`,
+    :func:`euler_from_ros_orientation` and :func:`flu_to_frd` (checked against them in
+    test_frames.py); plain floats because numpy's per-call overhead dominates for 3-vectors.
+    Returns four float tuples ``(pos_ned, euler, v_frd, w_frd)``."""
+    e, n, u = pos_enu
+    x, y, z, w = q_xyzw
+    qw, qx, qy, qz = (float(c) for c in _attitude_map_scalar(w, x, y, z))
+    norm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+    _R, euler = rotation_euler_from_quaternion_scalar(qw / norm, qx / norm, qy / norm, qz / norm)
+    return ((n, e, -u), tuple(euler.tolist()), (v_flu[0], -v_flu[1], -v_flu[2]),
+            (w_flu[0], -w_flu[1], -w_flu[2]))
+
+
+_M_ATTITUDE_LIST = _M_ATTITUDE.tolist()
+
+
+def _attitude_map_scalar(w: float, x: float, y: float, z: float):
+    """``_M_ATTITUDE @ (w, x, y, z)`` on floats (the ENU/FLU <-> NED/FRD attitude map)."""
+    return [r[0] * w + r[1] * x + r[2] * y + r[3] * z for r in _M_ATTITUDE_LIST]
+
+
 # ------------------------------------------------------------------------ kinematics
 def rotation_euler_from_quaternion_scalar(w: float, x: float, y: float, z: float):
     """R_IB (nested lists) and (phi, theta, psi) of a unit quaternion (w, x, y, z), on floats.

@@ -286,6 +286,20 @@ def state_from_odometry(msg, *, frame_id: str | None = ODOM_FRAME,
     _check_frame(msg.header.frame_id, frame_id, "state.header")
     _check_frame(msg.child_frame_id, child_frame_id, "state.child_frame_id")
     p, tw = msg.pose.pose, msg.twist.twist
+    pp, o, tl, ta = p.position, p.orientation, tw.linear, tw.angular
+    vals = (pp.x, pp.y, pp.z, o.x, o.y, o.z, o.w, tl.x, tl.y, tl.z, ta.x, ta.y, ta.z)
+    try:
+        f = [float(c) for c in vals]
+    except (TypeError, ValueError):
+        f = None
+    if f is not None and all(map(math.isfinite, f)) and \
+            abs(math.sqrt(f[3] * f[3] + f[4] * f[4] + f[5] * f[5] + f[6] * f[6]) - 1.0) <= 1e-3:
+        # fast path (the controller's state rate): plain floats through io.frames
+        pos_ned, euler, v_frd, w_frd = frames.odometry_ned_frd_from_ros_scalar(f[0:3], f[3:7], f[7:10], f[10:13])
+        ns = stamp_ns_of(msg)
+        return StateSample(t=ns / 1e9, pos_ned=np.array(pos_ned), euler=np.array(euler),
+                           v_body=np.array(v_frd), omega=np.array(w_frd), stamp_ns=ns)
+    # validating path: names the offending field
     pos = _finite(_xyz(p.position), 3, "state.pose.pose.position")
     o = p.orientation
     q = _finite([o.x, o.y, o.z, o.w], 4, "state.pose.pose.orientation")
