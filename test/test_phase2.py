@@ -238,7 +238,7 @@ def _write_files(lpv, d):
 def _parse(argv):
     import argparse
 
-    from lpv_sysid.sim.phase2 import add_phase2_arguments
+    from lpv_sysid.cli.simulate import _add_phase2_arguments as add_phase2_arguments
 
     p = argparse.ArgumentParser()
     add_phase2_arguments(p)
@@ -248,7 +248,7 @@ def _parse(argv):
 def test_cli_entry_point_runs_from_files(lpv, tmp_path, capsys):
     import yaml
 
-    from lpv_sysid.sim.phase2 import run_phase2
+    from lpv_sysid.cli.simulate import run_phase2
 
     _write_files(lpv, tmp_path)
     args = _parse(["--gains", str(tmp_path / "gains.yaml"), "--signals", str(tmp_path / "signals"),

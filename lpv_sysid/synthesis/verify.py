@@ -22,7 +22,35 @@ Checks, each a row of the report:
    (the stability region when none is promised);
 4. ``lmi``: when the certificate sidecar is present (sha256 checked), K_i == S_i H^-1 and the
    Eq. (30) LMIs re-evaluated with numpy eigenvalues from the stored X, S, H (after the stored
-   diagonal congruence, which preserves inertia) hold at the file's gamma.
+   diagonal congruence, which preserves inertia) hold at the file's gamma;
+5. ``full-box *`` (optional, :func:`full_box_check`, ``verify_files(full_box=N)``): an *empirical*
+   Monte Carlo check against the FULL identified uncertainty, which the certificate does not
+   claim. Identification estimates ~43 elements per vertex; Lemma 1 is solved on the reduced
+   polytope of Eq. (23) (influence reduction, ``p_max`` corner parameters widened to absorb the
+   others to first order, :mod:`lpv_sysid.ident.uncertainty`), so the certificate covers that
+   polytope, not the Eq. (22) box with every element in ``nominal +/- k std``. The check draws
+   scheduling points v_d (the box corners, then uniform interior points) and, independently per
+   scheduling vertex i, every identified element theta_i,l from its full interval (even samples
+   uniform in the box, odd samples a random corner of it), forms A(v_d) = sum_i alpha_i A_i(theta_i),
+   B(v_d) likewise (Eq. 21, multilinear alpha) and the interpolated gain K(v_d) (Eq. 31), and
+   evaluates the frozen closed loop A + B K: spectral abscissa and H-inf norm u_e -> z
+   (:func:`lpv_sysid.synthesis.hinf_norm.hinf_norm`). Two extreme corners per scheduling vertex are
+   added: every element at the end of its interval that increases, to first order, (a) the
+   closed-loop H-inf norm (analytic sensitivity of sigma_max at the peak frequency) and (b) the
+   spectral abscissa (eigenvalue sensitivity y^H dA x / y^H x). The rows are ``ok`` only when
+   every sample is stable with norm <= gamma; otherwise they are *advisory* (printed ``WARN``) and
+   do not fail the report unless ``strict_full_box`` -- the certificate does not claim this set,
+   so a miss is information for the flight-test engineer, not a broken certificate.
+
+   Intervals (:func:`full_box_intervals`): identification (``ident.vertex.VertexResult.to_dict``)
+   writes every element with its ``std``; only the kept corner parameters have ``lower < upper``
+   (their interval *widened* by ``meta.uncertainty.inflation``, so it contains ``nominal +/- k std``),
+   the dropped ones ``lower = upper = nominal``. The check uses the stored ``[lower, upper]`` where
+   ``lower < upper`` and ``nominal +/- k std`` where the file stores ``lower = upper`` with
+   ``std > 0``, with ``k`` = ``meta.k_sigma`` of the models file (raised to the Sidak value when
+   ``meta.joint_alpha`` is set, as ``ident.uncertainty.build`` does), else 3 (the identification
+   default); ``kept="ksigma"`` uses ``nominal +/- k std`` for the kept elements too (the Eq. 22
+   box itself instead of the superset).
 """
 
 from __future__ import annotations
@@ -52,15 +80,26 @@ class CheckRow:
     limit: float
     ok: bool
     note: str = ""
+    advisory: bool = False      # empirical check the certificate does not claim: WARN, not FAIL
+
+    @property
+    def result(self) -> str:
+        return "ok" if self.ok else ("WARN" if self.advisory else "FAIL")
 
 
 @dataclass
 class VerifyReport:
     rows: list = field(default_factory=list)
+    full_box: Optional["FullBoxResult"] = None
 
     @property
     def passed(self) -> bool:
-        return bool(self.rows) and all(r.ok for r in self.rows)
+        """All rows ok; advisory rows (WARN) do not count."""
+        return bool(self.rows) and all(r.ok or r.advisory for r in self.rows)
+
+    @property
+    def warnings(self) -> int:
+        return sum(1 for r in self.rows if r.advisory and not r.ok)
 
     def add(self, *a, **kw) -> None:
         self.rows.append(CheckRow(*a, **kw))
@@ -70,7 +109,7 @@ class VerifyReport:
         if not rows:
             return None
         bad = [r for r in rows if not r.ok]
-        return bad[0] if bad else max(rows, key=lambda r: r.value)
+        return bad[0] if bad else max(rows, key=lambda r: r.value if np.isfinite(r.value) else -np.inf)
 
     def table(self, max_rows: int = 40) -> str:
         """Failing rows first, then the worst passing row per check."""
@@ -82,9 +121,10 @@ class VerifyReport:
                 shown.append(w)
         for r in shown:
             lines.append(f"{r.check:<14} {r.where:<28} {r.value:>12.6g} {r.limit:>12.6g}  "
-                         f"{'ok' if r.ok else 'FAIL'}{('  ' + r.note) if r.note else ''}")
-        n_bad = sum(not r.ok for r in self.rows)
-        lines.append(f"{len(self.rows)} checks, {n_bad} failed")
+                         f"{r.result}{('  ' + r.note) if r.note else ''}")
+        n_bad = sum(not (r.ok or r.advisory) for r in self.rows)
+        lines.append(f"{len(self.rows)} checks, {n_bad} failed"
+                     + (f", {self.warnings} warnings (empirical, not certified)" if self.warnings else ""))
         return "\n".join(lines)
 
 
@@ -290,11 +330,306 @@ def check_feedforward(rep: VerifyReport, model: PolytopicModel, F_ff: np.ndarray
                     "" if err <= rtol else "stored F_jerk differs from the one of the nominal model")
 
 
+# --------------------------------------------------------------------------- full identified box
+#: half-width multiplier of Eq. (22) when the models file records none (ident default k_sigma)
+DEFAULT_K_SIGMA = 3.0
+
+
+@dataclass(frozen=True)
+class ElementBox:
+    """Full identified intervals of one scheduling vertex (seed 0 Eq. 22): element l is
+    ``A[row, col]`` (is_a) or ``B[row, col]`` in ``[lower_l, upper_l]``."""
+
+    is_a: np.ndarray       # (p,) bool
+    row: np.ndarray        # (p,) int
+    col: np.ndarray        # (p,) int
+    nominal: np.ndarray    # (p,)
+    lower: np.ndarray      # (p,)
+    upper: np.ndarray      # (p,)
+    source: tuple          # (p,) "stored" | "k*std" | "fixed"
+
+    def apply(self, A: np.ndarray, B: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        A, B = A.copy(), B.copy()
+        A[self.row[self.is_a], self.col[self.is_a]] = theta[self.is_a]
+        B[self.row[~self.is_a], self.col[~self.is_a]] = theta[~self.is_a]
+        return A, B
+
+
+def full_box_k(raw: dict, k_sigma: Optional[float] = None) -> tuple[float, str]:
+    """k of Eq. (22): the argument, else ``meta.k_sigma`` of the models file, else 3. Returns (k, where)."""
+    if k_sigma is not None:
+        k, where = float(k_sigma), "given"
+    else:
+        meta = raw.get("meta") if isinstance(raw.get("meta"), dict) else {}
+        k, where = (float(meta["k_sigma"]), "models meta.k_sigma") if meta.get("k_sigma") is not None \
+            else (DEFAULT_K_SIGMA, "default (models file records no k_sigma)")
+    if not (np.isfinite(k) and k > 0):
+        raise ConfigError(f"full-box check: k_sigma must be > 0, got {k!r}")
+    return k, where
+
+
+def full_box_intervals(raw: dict, k_sigma: Optional[float] = None, kept: str = "stored") -> tuple[list, float, str]:
+    """One :class:`ElementBox` per vertex (box order) from the raw ``vertex_models.yaml`` mapping.
+
+    Rule (module docstring, item 5): stored ``[lower, upper]`` where ``lower < upper`` (``kept ==
+    "stored"``), ``nominal +/- k std`` where ``lower == upper`` and ``std > 0`` (and for every
+    element with ``kept == "ksigma"``), fixed at ``nominal`` when ``std == 0`` and ``lower == upper``.
+    With ``meta.joint_alpha`` k is raised to the Sidak value per vertex (ident.uncertainty.build).
+    """
+    if kept not in ("stored", "ksigma"):
+        raise ConfigError(f"full-box check: kept must be 'stored' or 'ksigma', got {kept!r}")
+    k0, where = full_box_k(raw, k_sigma)
+    meta = raw.get("meta") if isinstance(raw.get("meta"), dict) else {}
+    alpha = meta.get("joint_alpha") if k_sigma is None else None
+    out = []
+    for i, v in enumerate(raw.get("vertices") or []):
+        els = v.get("uncertain") or []
+        k = k0
+        if alpha is not None and els:
+            from lpv_sysid.ident.uncertainty import sidak_k
+
+            k = max(k0, sidak_k(len(els), float(alpha)))
+        cols = {key: [] for key in ("is_a", "row", "col", "nominal", "lower", "upper", "source")}
+        for e in els:
+            try:
+                nom, std = float(e["nominal"]), float(e.get("std", 0.0))
+                lo, hi = float(e["lower"]), float(e["upper"])
+                isa, r, c = e["matrix"] == "A", int(e["row"]), int(e["col"])
+            except (KeyError, TypeError, ValueError) as exc:
+                raise ConfigError(f"models: vertices[{i}].uncertain: bad entry {e!r} ({exc})") from None
+            if not all(np.isfinite([nom, std, lo, hi])) or std < 0:
+                raise ConfigError(f"models: vertices[{i}].uncertain {e.get('matrix')}[{r},{c}]: "
+                                  "non-finite bounds or negative std")
+            if hi > lo and kept == "stored":
+                src = "stored"
+            elif std > 0:
+                lo, hi, src = nom - k * std, nom + k * std, "k*std"
+            else:
+                src = "fixed" if hi == lo else "stored"
+            for key, val in zip(cols, (isa, r, c, nom, lo, hi, src)):
+                cols[key].append(val)
+        out.append(ElementBox(np.array(cols["is_a"], dtype=bool), np.array(cols["row"], dtype=int),
+                              np.array(cols["col"], dtype=int), np.array(cols["nominal"], dtype=float),
+                              np.array(cols["lower"], dtype=float), np.array(cols["upper"], dtype=float),
+                              tuple(cols["source"])))
+    return out, k0, where
+
+
+@dataclass
+class FullBoxSample:
+    where: str               # "corner 3 uniform", "interior 17 corner-draw", "vertex 2 worst-norm corner"
+    v_d: np.ndarray
+    norm: float              # H-inf norm u_e -> z (inf when unstable; nan in discrete time)
+    abscissa: float          # max Re eig (continuous) or spectral radius - 1 (discrete)
+    ok: bool
+
+
+@dataclass
+class FullBoxResult:
+    """Outcome of :func:`full_box_check` (empirical, not certified)."""
+
+    samples: list
+    gamma: float
+    k_sigma: float
+    k_source: str
+    seed: int
+    n_elements: list         # identified elements per vertex
+    n_stored: int            # elements using the stored [lower, upper] (all vertices)
+    n_ksigma: int            # elements using nominal +/- k std
+    worst: Optional[FullBoxSample] = None
+    worst_A: Optional[np.ndarray] = None      # frozen closed-loop data of the worst sample
+    worst_B: Optional[np.ndarray] = None
+    worst_K: Optional[np.ndarray] = None
+
+    @property
+    def n(self) -> int:
+        return len(self.samples)
+
+    @property
+    def fraction_ok(self) -> float:
+        return sum(s.ok for s in self.samples) / max(1, self.n)
+
+    @property
+    def all_stable(self) -> bool:
+        return all(s.abscissa < 0 for s in self.samples)
+
+    @property
+    def max_abscissa(self) -> float:
+        return max((s.abscissa for s in self.samples), default=float("nan"))
+
+    @property
+    def passed(self) -> bool:
+        return bool(self.samples) and all(s.ok for s in self.samples)
+
+    def summary(self) -> dict:
+        """Plain mapping for verification.yaml / the report."""
+        w = self.worst
+        return {"samples": self.n, "seed": int(self.seed), "gamma": float(self.gamma),
+                "k_sigma": float(self.k_sigma), "k_sigma_source": self.k_source,
+                "elements_per_vertex": [int(x) for x in self.n_elements],
+                "intervals_stored": int(self.n_stored), "intervals_k_std": int(self.n_ksigma),
+                "worst_norm": float(w.norm) if w is not None else float("nan"),
+                "worst_where": w.where if w is not None else "",
+                "worst_v_d": [float(x) for x in w.v_d] if w is not None else [],
+                "fraction_ok": float(self.fraction_ok), "all_stable": bool(self.all_stable),
+                "max_abscissa": float(self.max_abscissa), "passed": bool(self.passed),
+                "note": "empirical Monte Carlo over the full identified box; not claimed by the certificate"}
+
+
+def _frozen(A: np.ndarray, B: np.ndarray, K: np.ndarray, R: np.ndarray, C: np.ndarray, gamma: float,
+            rtol: float, ts: Optional[float]) -> tuple[float, float, bool]:
+    """(norm, abscissa, ok) of the frozen closed loop A + B K (seed 0 Eq. 19 with Eq. 31)."""
+    Acl = A + B @ K
+    eig = np.linalg.eigvals(Acl)
+    if ts is not None:
+        rho = float(np.max(np.abs(eig))) - 1.0
+        return float("nan"), rho, rho < 0.0
+    absc = float(np.max(eig.real))
+    if absc >= 0.0:
+        return float("inf"), absc, False
+    h = hinf_norm(Acl, B @ R, C)
+    return float(h.value), absc, bool(h.stable and h.lower <= gamma * (1 + rtol))
+
+
+def _worst_corners(A: np.ndarray, B: np.ndarray, K: np.ndarray, R: np.ndarray, C: np.ndarray,
+                   box: ElementBox, ts: Optional[float]) -> list:
+    """First-order worst corners of the element box at one scheduling vertex: every element at the
+    end of its interval that increases (a) sigma_max(G(j w_peak)) and (b) the spectral abscissa.
+    d sigma = Re(u^H dG v), dG = C Rz dAcl Rz Be + C Rz dBe, Rz = (j w - Acl)^-1, dAcl = dA + dB K,
+    dBe = dB R; d lambda = y^H dAcl x / (y^H x)."""
+    if box.is_a.size == 0:
+        return []
+    th0 = 0.5 * (box.lower + box.upper)
+    A0, B0 = box.apply(A, B, th0)
+    Acl = A0 + B0 @ K
+    eig, yl, xr = _eig_lr(Acl)
+    k = int(np.argmax(eig.real))
+    x, y = xr[:, k], yl[:, k]
+    yx = np.vdot(y, x)
+    grads = []
+    if ts is None and eig[k].real < 0:
+        h = hinf_norm(Acl, B0 @ R, C)
+        w = h.frequency if np.isfinite(h.frequency) else 0.0
+        n = Acl.shape[0]
+        Rz = np.linalg.inv(1j * w * np.eye(n) - Acl)
+        G = C @ Rz @ (B0 @ R)
+        U, _, Vh = np.linalg.svd(G)
+        u, v = U[:, 0], Vh[0].conj()
+        p = u.conj() @ C @ Rz                     # (n,)
+        q = Rz @ (B0 @ R) @ v                      # (n,)
+        g = np.empty(box.is_a.size)
+        a, b = box.is_a, ~box.is_a
+        g[a] = np.real(p[box.row[a]] * q[box.col[a]])
+        g[b] = np.real(p[box.row[b]] * ((K @ q)[box.col[b]] + (R @ v)[box.col[b]]))
+        grads.append(("worst-norm corner", g))
+    if abs(yx) > 0:
+        g = np.empty(box.is_a.size)
+        a, b = box.is_a, ~box.is_a
+        g[a] = np.real(np.conj(y[box.row[a]]) * x[box.col[a]] / yx)
+        g[b] = np.real(np.conj(y[box.row[b]]) * (K @ x)[box.col[b]] / yx)
+        grads.append(("worst-abscissa corner", g))
+    return [(name, np.where(g > 0, box.upper, box.lower)) for name, g in grads]
+
+
+def _eig_lr(M: np.ndarray):
+    from scipy.linalg import eig
+
+    w, vl, vr = eig(M, left=True, right=True)
+    return w, vl, vr
+
+
+def full_box_check(model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.ndarray, gamma: float,
+                   boxes: list, n: int = 200, seed: int = 0, rtol: float = 1e-6, extremes: bool = True,
+                   k_sigma: float = DEFAULT_K_SIGMA, k_source: str = "") -> FullBoxResult:
+    """Monte Carlo over the full identified box (module docstring, item 5); empirical only.
+
+    ``boxes``: :func:`full_box_intervals` (one per vertex, box order). Samples: the 2^p scheduling
+    corners first (when n allows), then uniform interior v_d; per sample and per vertex the
+    elements are drawn independently, uniform in their interval (even samples) or at a random
+    corner of it (odd samples). ``extremes`` adds the two first-order worst corners per scheduling
+    vertex (:func:`_worst_corners`). Seeded: same inputs and seed -> same samples.
+    """
+    if len(boxes) != model.n_vertices:
+        raise ConfigError(f"full-box check: {len(boxes)} element boxes for {model.n_vertices} vertices")
+    K = np.asarray(K, dtype=float)
+    R = np.asarray(R, dtype=float)
+    C = np.asarray(C, dtype=float)
+    rng = np.random.default_rng(seed)
+    verts = model.vertices
+    res = FullBoxResult([], float(gamma), float(k_sigma), k_source, int(seed), [b.is_a.size for b in boxes],
+                        sum(s == "stored" for b in boxes for s in b.source),
+                        sum(s == "k*std" for b in boxes for s in b.source))
+    worst_key = (-np.inf, -np.inf)
+
+    def record(where, vd, A, B, Kv):
+        nonlocal worst_key
+        norm, absc, ok = _frozen(A, B, Kv, R, C, gamma, rtol, model.ts)
+        s = FullBoxSample(where, np.asarray(vd, dtype=float), norm, absc, ok)
+        res.samples.append(s)
+        key = (absc if model.ts is not None else norm, absc)
+        if key > worst_key:
+            worst_key = key
+            res.worst, res.worst_A, res.worst_B, res.worst_K = s, A, B, Kv
+
+    for k in range(max(0, int(n))):
+        if k < len(verts):
+            vd, tag = verts[k], f"corner {k}"
+        else:
+            vd, tag = model.vmin + rng.random(model.vmin.size) * (model.vmax - model.vmin), f"interior {k}"
+        alpha, _ = multilinear_weights(vd, model.vmin, model.vmax)
+        corner_draw = k % 2 == 1
+        A = np.zeros_like(model.A[0])
+        B = np.zeros_like(model.B[0])
+        for i, a in enumerate(alpha):
+            b = boxes[i]
+            if corner_draw:
+                th = np.where(rng.random(b.lower.size) < 0.5, b.lower, b.upper)
+            else:
+                th = b.lower + rng.random(b.lower.size) * (b.upper - b.lower)
+            if a == 0.0:
+                continue
+            Ai, Bi = b.apply(model.A[i], model.B[i], th)
+            A += a * Ai
+            B += a * Bi
+        record(f"{tag} {'corner-draw' if corner_draw else 'uniform'}", vd, A, B, np.tensordot(alpha, K, axes=1))
+    if extremes and n > 0:
+        for i, vd in enumerate(verts):
+            for name, th in _worst_corners(model.A[i], model.B[i], K[i], R, C, boxes[i], model.ts):
+                Ai, Bi = boxes[i].apply(model.A[i], model.B[i], th)
+                record(f"vertex {i} {name}", vd, Ai, Bi, K[i])
+    return res
+
+
+def add_full_box_rows(rep: VerifyReport, res: FullBoxResult, strict: bool = False) -> None:
+    """Rows ``full-box hinf`` / ``full-box frac`` / ``full-box stab``: ``ok`` only when every sample
+    passes; otherwise advisory (WARN) unless ``strict``."""
+    rep.full_box = res
+    adv = not strict
+    w = res.worst
+    vd = "[" + ", ".join(f"{x:.3g}" for x in w.v_d) + "]" if w is not None else "-"
+    tag = f"empirical, {res.n} samples, k={res.k_sigma:g}; not certified"
+    if w is not None and not np.isnan(w.norm):
+        rep.add("full-box hinf", f"worst v_d {vd}", w.norm, res.gamma, res.passed,
+                f"{w.where}; {tag}", advisory=adv)
+    n_ok = sum(s.ok for s in res.samples)
+    rep.add("full-box frac", f"{n_ok}/{res.n} samples ok", res.fraction_ok, 1.0, res.passed,
+            "fraction with norm <= gamma and stable", advisory=adv)
+    n_unst = sum(s.abscissa >= 0 for s in res.samples)
+    rep.add("full-box stab", "max Re eig" if res.worst is None or not np.isnan(res.worst.norm)
+            else "max |eig| - 1", res.max_abscissa, 0.0, res.all_stable,
+            "" if res.all_stable else f"{n_unst} unstable samples", advisory=adv)
+
+
 def verify_files(gains_path: Path | str, models_path: Path | str, n_random: int = 20, seed: int = 0,
-                 uncertainty: Optional[dict] = None, velocity_index=None) -> VerifyReport:
+                 uncertainty: Optional[dict] = None, velocity_index=None, full_box: int = 0,
+                 strict_full_box: bool = False, k_sigma: Optional[float] = None,
+                 full_box_kept: str = "stored") -> VerifyReport:
     """Load gains.yaml (+ sidecar) and vertex_models.yaml and run :func:`verify_gains`.
 
-    Also checks names, box, equilibria and the models_sha256 of the certificate.
+    Also checks names, box, equilibria and the models_sha256 of the certificate. ``full_box`` > 0
+    adds the empirical Monte Carlo check over the full identified box (module docstring item 5,
+    :func:`full_box_check` with ``seed``); its rows are advisory (WARN, ``passed`` unaffected)
+    unless ``strict_full_box``. ``k_sigma`` overrides the models file's ``meta.k_sigma``.
     """
     from lpv_sysid.synthesis.files import Gains, load_certificate_npz, load_models, sha256_file
     from lpv_sysid.synthesis.hinf_lmi import performance_matrix
@@ -361,4 +696,9 @@ def verify_files(gains_path: Path | str, models_path: Path | str, n_random: int 
         rep.add("gamma claim", "certificate.gamma_achieved", worst, float(ga) * (1 + 1e-3) + 1e-12,
                 bool(worst <= float(ga) * (1 + 1e-3) + 1e-12),
                 "worst independent H-inf norm vs the claimed gamma_achieved")
+    if full_box > 0:
+        boxes, k, k_src = full_box_intervals(raw, k_sigma, full_box_kept)
+        res = full_box_check(model, gains.K, gains.R, C, gains.gamma, boxes, n=full_box, seed=seed,
+                             k_sigma=k, k_source=k_src)
+        add_full_box_rows(rep, res, strict=strict_full_box)
     return rep
