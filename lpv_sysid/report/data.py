@@ -82,19 +82,31 @@ def _find(run_dir: Path, key: str) -> Optional[Path]:
     return None
 
 
-def verification_from_files(gains: Path, models: Path, n_random: int = 20, seed: int = 0) -> dict:
+def verification_from_files(gains: Path, models: Path, n_random: int = 20, seed: int = 0,
+                            full_box: int = 200) -> dict:
     """Run the independent verifier (:func:`lpv_sysid.synthesis.verify.verify_files`: frozen-point
-    H-inf norms, closed-loop poles, Eq. 30 re-evaluated, file consistency) and return its rows
+    H-inf norms, closed-loop poles, Eq. 30 re-evaluated, file consistency, and with ``full_box`` > 0
+    the empirical Monte Carlo over the full identified uncertainty box) and return its rows
     in the layout of a ``verification.yaml``: {passed, source, checks: [{check, where, value,
-    limit, ok, note}]}."""
+    limit, ok, note[, advisory]}], full_box: {...}}. Advisory rows (the full-box check, which the
+    certificate does not claim) carry ``advisory: true`` and do not change ``passed``."""
     from lpv_sysid.synthesis.verify import verify_files
 
-    rep = verify_files(gains, models, n_random=n_random, seed=seed)
-    return {"passed": bool(rep.passed),
-            "source": f"computed by the report: synthesis.verify.verify_files({gains.name}, {models.name}, "
-                      f"n_random={n_random}, seed={seed})",
-            "checks": [{"check": r.check, "where": r.where, "value": float(r.value), "limit": float(r.limit),
-                        "ok": bool(r.ok), "note": r.note} for r in rep.rows]}
+    rep = verify_files(gains, models, n_random=n_random, seed=seed, full_box=full_box)
+    checks = []
+    for r in rep.rows:
+        c = {"check": r.check, "where": r.where, "value": float(r.value), "limit": float(r.limit),
+             "ok": bool(r.ok), "note": r.note}
+        if getattr(r, "advisory", False):
+            c["advisory"] = True
+        checks.append(c)
+    out = {"passed": bool(rep.passed),
+           "source": f"computed by the report: synthesis.verify.verify_files({gains.name}, {models.name}, "
+                     f"n_random={n_random}, seed={seed}, full_box={full_box})",
+           "checks": checks}
+    if getattr(rep, "full_box", None) is not None:
+        out["full_box"] = rep.full_box.summary()
+    return out
 
 
 def load_run(run_dir: str | Path, verify: bool = True) -> RunData:

@@ -324,6 +324,24 @@ def _short(v: Any) -> Any:
     return v
 
 
+def _full_box_paragraph(r: _Report, fb: dict) -> None:
+    """The empirical full-identified-box Monte Carlo (synthesis.verify item 5): not certified."""
+    r.h(3, "Full identified uncertainty box (empirical Monte Carlo, not certified)")
+    try:
+        worst, gamma, frac = float(fb["worst_norm"]), float(fb["gamma"]), float(fb["fraction_ok"])
+        r.p(f"Every identified element drawn independently from its full interval (k = {float(fb['k_sigma']):g} "
+            f"std, {fb.get('k_sigma_source', '')}; {fb.get('intervals_stored', '?')} stored / "
+            f"{fb.get('intervals_k_std', '?')} nominal +/- k std intervals), {fb['samples']} frozen scheduling "
+            f"points (seed {fb.get('seed', '?')}): worst closed-loop H-inf norm u_e -> z **{worst:.4g}** vs "
+            f"gamma {gamma:g} at v_d {_short(fb.get('worst_v_d', []))} ({fb.get('worst_where', '')}); "
+            f"{100 * frac:.1f} % of samples stable with norm <= gamma; all stable: "
+            f"{'yes' if fb.get('all_stable') else 'NO'}; max spectral abscissa {float(fb['max_abscissa']):.4g}. "
+            + ("All samples within the bound." if fb.get("passed") else
+               "**WARNING:** samples outside the bound -- the certificate covers the reduced polytope only."))
+    except (KeyError, TypeError, ValueError):
+        r.p(_kv_table(fb))
+
+
 def _verification_section(r: _Report) -> None:
     d = r.data
     r.h(2, "Independent verification")
@@ -334,10 +352,14 @@ def _verification_section(r: _Report) -> None:
             ok = _get(v, "passed", "ok", "pass")
             checks = _get(v, "checks", "results")
             if ok is not None:
-                n_fail = sum(1 for c in checks if isinstance(c, dict) and c.get("ok") is False) \
-                    if isinstance(checks, list) else None
+                n_fail = sum(1 for c in checks if isinstance(c, dict) and c.get("ok") is False
+                             and not c.get("advisory")) if isinstance(checks, list) else None
+                n_warn = sum(1 for c in checks if isinstance(c, dict) and c.get("ok") is False
+                             and c.get("advisory")) if isinstance(checks, list) else 0
                 r.p(f"Overall: **{'PASSED' if ok else 'FAILED'}**"
-                    + (f" ({len(checks)} checks, {n_fail} failed)" if n_fail is not None else ""))
+                    + (f" ({len(checks)} checks, {n_fail} failed" + (f", {n_warn} advisory warnings"
+                                                                     if n_warn else "") + ")"
+                       if n_fail is not None else ""))
             if v.get("source"):
                 r.p(f"Source: {v['source']}.")
             elif "verification" in d.derived:
@@ -353,11 +375,14 @@ def _verification_section(r: _Report) -> None:
                     shown = _failing_and_worst(checks)
                     r.p("Failing checks, then the worst passing row of each check:")
                 r.p(md_table(keys, [[_short(c.get(k)) for k in keys] for c in shown], fmt="{:.4g}"))
-                rest = {k: x for k, x in v.items() if k not in ("checks", "results", "source", "passed")}
+                rest = {k: x for k, x in v.items()
+                        if k not in ("checks", "results", "source", "passed", "full_box")}
                 if rest:
                     r.p(_kv_table(rest))
             else:
                 r.p(_kv_table(v))
+            if isinstance(v.get("full_box"), dict):
+                _full_box_paragraph(r, v["full_box"])
         elif isinstance(v, list):
             r.p(_kv_table({"checks": v}))
         else:
