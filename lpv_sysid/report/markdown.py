@@ -331,8 +331,8 @@ def _full_box_paragraph(r: _Report, fb: dict) -> None:
         worst, gamma, frac = float(fb["worst_norm"]), float(fb["gamma"]), float(fb["fraction_ok"])
         r.p(f"Every identified element drawn independently from its full interval (k = {float(fb['k_sigma']):g} "
             f"std, {fb.get('k_sigma_source', '')}; {fb.get('intervals_stored', '?')} stored / "
-            f"{fb.get('intervals_k_std', '?')} nominal +/- k std intervals), {fb['samples']} frozen scheduling "
-            f"points (seed {fb.get('seed', '?')}): worst closed-loop H-inf norm u_e -> z **{worst:.4g}** vs "
+            f"{fb.get('intervals_k_std', '?')} nominal +/- k std intervals), {fb['samples']} frozen samples "
+            f"(scheduling corners, random interior points and first-order worst corners; seed {fb.get('seed', '?')}): worst closed-loop H-inf norm u_e -> z **{worst:.4g}** vs "
             f"gamma {gamma:g} at v_d {_short(fb.get('worst_v_d', []))} ({fb.get('worst_where', '')}); "
             f"{100 * frac:.1f} % of samples stable with norm <= gamma; all stable: "
             f"{'yes' if fb.get('all_stable') else 'NO'}; max spectral abscissa {float(fb['max_abscissa']):.4g}. "

@@ -494,13 +494,27 @@ def _frozen(A: np.ndarray, B: np.ndarray, K: np.ndarray, R: np.ndarray, C: np.nd
 def _worst_corners(A: np.ndarray, B: np.ndarray, K: np.ndarray, R: np.ndarray, C: np.ndarray,
                    box: ElementBox, ts: Optional[float]) -> list:
     """First-order worst corners of the element box at one scheduling vertex: every element at the
-    end of its interval that increases (a) sigma_max(G(j w_peak)) and (b) the spectral abscissa.
-    d sigma = Re(u^H dG v), dG = C Rz dAcl Rz Be + C Rz dBe, Rz = (j w - Acl)^-1, dAcl = dA + dB K,
-    dBe = dB R; d lambda = y^H dAcl x / (y^H x)."""
+    end of its interval that increases (a) the H-inf norm and (b) the spectral abscissa, to first
+    order at the box centre (:func:`element_sensitivities`)."""
     if box.is_a.size == 0:
         return []
     th0 = 0.5 * (box.lower + box.upper)
-    A0, B0 = box.apply(A, B, th0)
+    return [(name, np.where(g > 0, box.upper, box.lower))
+            for name, g in element_sensitivities(A, B, K, R, C, box, th0, ts)]
+
+
+def element_sensitivities(A: np.ndarray, B: np.ndarray, K: np.ndarray, R: np.ndarray, C: np.ndarray,
+                          box: ElementBox, theta: np.ndarray, ts: Optional[float] = None) -> list:
+    """[("worst-norm corner", d||G||_inf/d theta), ("worst-abscissa corner", d max Re lambda/d theta)]
+    of the frozen closed loop at ``theta`` (the norm entry only when stable, continuous time).
+
+    d sigma = Re(u^H dG v) at the peak frequency w (u, v top singular vectors of G(j w)),
+    dG = C Rz dAcl Rz Be + C Rz dBe, Rz = (j w I - Acl)^-1, dAcl = dA + dB K, dBe = dB R;
+    d lambda = y^H dAcl x / (y^H x) for the rightmost eigenvalue (x right, y left eigenvector).
+    Hand-written: scipy has no H-inf sensitivity."""
+    if box.is_a.size == 0:
+        return []
+    A0, B0 = box.apply(A, B, theta)
     Acl = A0 + B0 @ K
     eig, yl, xr = _eig_lr(Acl)
     k = int(np.argmax(eig.real))
@@ -509,7 +523,7 @@ def _worst_corners(A: np.ndarray, B: np.ndarray, K: np.ndarray, R: np.ndarray, C
     grads = []
     if ts is None and eig[k].real < 0:
         h = hinf_norm(Acl, B0 @ R, C)
-        w = h.frequency if np.isfinite(h.frequency) else 0.0
+        w = _refine_peak(Acl, B0 @ R, C, h.frequency if np.isfinite(h.frequency) else 0.0)
         n = Acl.shape[0]
         Rz = np.linalg.inv(1j * w * np.eye(n) - Acl)
         G = C @ Rz @ (B0 @ R)
@@ -528,7 +542,21 @@ def _worst_corners(A: np.ndarray, B: np.ndarray, K: np.ndarray, R: np.ndarray, C
         g[a] = np.real(np.conj(y[box.row[a]]) * x[box.col[a]] / yx)
         g[b] = np.real(np.conj(y[box.row[b]]) * (K @ x)[box.col[b]] / yx)
         grads.append(("worst-abscissa corner", g))
-    return [(name, np.where(g > 0, box.upper, box.lower)) for name, g in grads]
+    return grads
+
+
+def _refine_peak(A: np.ndarray, B: np.ndarray, C: np.ndarray, w0: float) -> float:
+    """Peak frequency of sigma_max near the bisection's w0 (its bracket ends at a midpoint, O(dw) off
+    the maximiser; the envelope-theorem gradient needs the maximiser). scipy bounded Brent."""
+    from scipy.optimize import minimize_scalar
+
+    from lpv_sysid.synthesis.hinf_norm import sigma_max
+
+    if w0 <= 0.0:
+        return 0.0
+    r = minimize_scalar(lambda w: -sigma_max(A, B, C, w), bounds=(0.8 * w0, 1.25 * w0), method="bounded",
+                        options={"xatol": 1e-10 * w0})
+    return float(r.x) if -r.fun >= sigma_max(A, B, C, w0) else w0
 
 
 def _eig_lr(M: np.ndarray):
@@ -551,6 +579,14 @@ def full_box_check(model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.nd
     """
     if len(boxes) != model.n_vertices:
         raise ConfigError(f"full-box check: {len(boxes)} element boxes for {model.n_vertices} vertices")
+    for i, b in enumerate(boxes):
+        n_col = np.where(b.is_a, model.n_x, model.n_u)
+        if b.row.size and (np.any(b.row < 0) or np.any(b.row >= model.n_x) or np.any(b.col < 0)
+                           or np.any(b.col >= n_col)):
+            raise ConfigError(f"full-box check: vertex {i}: uncertain element outside A ({model.n_x}x{model.n_x}) "
+                              f"/ B ({model.n_x}x{model.n_u})")
+        if np.any(b.lower > b.upper) or not np.all(np.isfinite(np.r_[b.lower, b.upper])):
+            raise ConfigError(f"full-box check: vertex {i}: need finite lower <= upper")
     K = np.asarray(K, dtype=float)
     R = np.asarray(R, dtype=float)
     C = np.asarray(C, dtype=float)
