@@ -38,6 +38,7 @@ from typing import Sequence
 import numpy as np
 
 from lpv_sysid.errors import ConfigError
+from lpv_sysid.io.formats import UncertainEntry
 from lpv_sysid.validation import check_keys
 
 METHODS = ("box", "influence", "hybrid")
@@ -80,22 +81,16 @@ class UncertaintyConfig:
 
 
 @dataclass(frozen=True)
-class Interval:
-    """One identified element and its interval, Eq. (22) (ARCHITECTURE.md section 5 'uncertain')."""
+class Interval(UncertainEntry):
+    """One identified element and its interval, Eq. (22): the file entry of
+    ARCHITECTURE.md section 5 'uncertain' (:class:`~lpv_sysid.io.formats.UncertainEntry`)
+    plus what the reduction of Eq. (23) decides about it."""
 
-    matrix: str          # "A" or "B"
-    row: int
-    col: int
-    nominal: float
-    std: float
-    lower: float
-    upper: float
     influence: float = 0.0
     corner: bool = False  # varied over the corners of Eq. (23)
 
     def as_dict(self) -> dict:
-        return {"matrix": self.matrix, "row": self.row, "col": self.col, "nominal": self.nominal,
-                "std": self.std, "lower": self.lower, "upper": self.upper}
+        return self.to_dict()
 
 
 @dataclass(frozen=True)

@@ -55,6 +55,7 @@ import numpy as np
 import scipy.linalg
 
 from lpv_sysid.errors import ConfigError
+from lpv_sysid.io.formats import FeedforwardSpec
 
 log = logging.getLogger(__name__)
 
@@ -63,8 +64,10 @@ COND_MAX_DEFAULT = 1e10
 
 
 @dataclass(frozen=True)
-class FeedforwardLayout:
-    """Which states are solved for, which are accelerated and which are held (module docstring)."""
+class FeedforwardLayout(FeedforwardSpec):
+    """Which states are solved for, which are accelerated and which are held (module docstring):
+    the gains.yaml ``feedforward`` layout (:class:`~lpv_sysid.io.formats.FeedforwardSpec`,
+    which also gives ``has_jerk`` and ``to_dict``) with the quadrotor defaults."""
 
     free_states: tuple = ("phi", "theta", "dt", "da", "de", "dr")
     accelerated_states: tuple = ("u", "v", "w")
@@ -73,18 +76,6 @@ class FeedforwardLayout:
     #: that produce it; empty tuples switch the jerk term off.
     kinematic_states: tuple = ("phi", "theta")
     rate_states: tuple = ("p", "q", "r")
-
-    @property
-    def has_jerk(self) -> bool:
-        return bool(self.kinematic_states) and bool(self.rate_states)
-
-    def to_dict(self) -> dict:
-        d = {"free_states": list(self.free_states), "accelerated_states": list(self.accelerated_states),
-             "held_states": list(self.held_states)}
-        if self.has_jerk:
-            d["kinematic_states"] = list(self.kinematic_states)
-            d["rate_states"] = list(self.rate_states)
-        return d
 
     @classmethod
     def from_dict(cls, d: Optional[dict]) -> "FeedforwardLayout":
