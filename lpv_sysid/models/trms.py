@@ -8,7 +8,7 @@ The quasi-LPV form (Eq. 41) is written in the shifted state ``x~ = x - theta_v^0
 Parameters: Table 5 (manufacturer) and Table 6 (identified). ``theta_v^0`` ("equilibrium pitch
 for u_v = 0", Table 4) has no printed value; it is *derived* from the model: with u_v = 0 the
 main rotor stops (Eq. 4), f5 = 0 and Eq. (5) at rest gives (K_A - K_B) cos th - K_C sin th = 0, so
-``theta_v^0 = atan2(K_A - K_B, K_C)`` (= -0.6213 rad with the table values).
+``theta_v^0 = atan2(K_A - K_B, K_C)`` (= -0.6194 rad with the table values).
 
 Deviations from the converted seed text (docs/trms.md):
 * Eq. (27) prints ``m_cb l_cb`` (kg m, dimensionally inconsistent with the other kg m^2 terms);
@@ -22,7 +22,6 @@ Deviations from the converted seed text (docs/trms.md):
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import asdict, dataclass, fields
 from typing import Any, Mapping, Optional, Sequence
@@ -343,7 +342,7 @@ class Trms:
 
 # --------------------------------------------------------------------------- bounding box, Sec. 3.4-3.5
 #: which p variables each psi_j depends on (indices into P_NAMES); used to grid only those.
-PSI_DEPENDS = ((2,), (1, 2), (1,), (0,), (1, 3), (1, 3), (1,), (3,), (1, 3, 4), (3,), (1,))
+PSI_DEPENDS = ((2,), (1, 2), (1,), (0, 1), (1, 3), (1, 3), (1,), (3,), (1, 3, 4), (3,), (1,))
 
 
 def p_box(params: TrmsParams, ranges: Optional[Mapping[str, tuple]] = None) -> tuple[np.ndarray, np.ndarray]:
@@ -358,28 +357,41 @@ def p_box(params: TrmsParams, ranges: Optional[Mapping[str, tuple]] = None) -> t
     return lo, hi
 
 
-def psi_bounds(model: Trms, plo, phi, n_grid: int = 201) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def psi_bounds(model: Trms, plo, phi, n_grid: int = 201, gaps: Optional[Mapping[str, tuple]] = None,
+               max_points: int = 200_000) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Bounding box of psi over the p box (Eq. 62): (min (11,), max (11,), least-squares constant (11,)).
 
     Seed 2 Sec. 3.5 takes the extremes "by numerical optimization"; here each psi_j is gridded
-    over only the p variables it depends on (PSI_DEPENDS; <= 3, so a dense grid is cheap and
-    deterministic), with the box edges, 0 and the sign switches of Eqs. (15)-(20) added to the grid.
+    over only the p variables it depends on (PSI_DEPENDS, <= 3 of them; at most ``max_points``
+    points per psi), with the box edges, 0 and the sign switches of Eqs. (15)-(20) added to the
+    grid. ``gaps`` = {name: (minus, plus)} removes the open interval (minus, plus) of a p variable
+    (Eq. 69; names of P_NAMES, theta_v given as the offset from theta_v^0) and adds its edges.
     The third output is the grid mean, the least-squares constant used for frozen parameters (Sec. 6.3).
     """
     plo = np.asarray(plo, dtype=float)
     phi = np.asarray(phi, dtype=float)
-    axes = []
-    for k in range(5):
-        g = np.linspace(plo[k], phi[k], n_grid)
-        extra = [0.0, model.p.theta_v0] if k == 1 else [0.0]
-        extra = [e for e in extra if plo[k] < e < phi[k]]
-        axes.append(np.unique(np.concatenate([g, extra])))
+    gaps = dict(gaps or {})
+    bad = sorted(set(gaps) - set(P_NAMES))
+    if bad:
+        raise ConfigError(f"trms gaps: unknown variable(s) {bad}; known: {list(P_NAMES)}")
     mid = 0.5 * (plo + phi)
     lo = np.empty(11)
     hi = np.empty(11)
     mean = np.empty(11)
     for j, dep in enumerate(PSI_DEPENDS):
-        grids = np.meshgrid(*[axes[k] for k in dep], indexing="ij")
+        per_axis = max(11, min(n_grid, int(max_points ** (1.0 / len(dep)))))
+        axes = []
+        for k in dep:
+            g = np.linspace(plo[k], phi[k], per_axis)
+            extra = [0.0, model.p.theta_v0] if k == 1 else [0.0]
+            if P_NAMES[k] in gaps:
+                off = model.p.theta_v0 if k == 1 else 0.0
+                gm, gp = (float(v) + off for v in gaps[P_NAMES[k]])
+                g = g[(g <= gm) | (g >= gp)]
+                extra = [e for e in extra if not gm < e < gp] + [gm, gp]
+            extra = [e for e in extra if plo[k] <= e <= phi[k]]
+            axes.append(np.unique(np.concatenate([g, extra])))
+        grids = np.meshgrid(*axes, indexing="ij")
         P = np.broadcast_to(mid, grids[0].shape + (5,)).copy()
         for k, gk in zip(dep, grids):
             P[..., k] = gk
@@ -439,13 +451,14 @@ class TrmsPolytope:
         alpha, _ = self.weights(x)
         return np.tensordot(alpha, self.A, axes=1)
 
-    def contains(self, x, tol: float = 0.0) -> bool:
+    def contains(self, x, tol: float = 1e-12) -> bool:
         v = self.scheduled(x)
         return bool(np.all(v >= self.lo - tol) and np.all(v <= self.hi + tol))
 
 
 def bounding_box_polytope(model: Trms, names: Sequence[str] = REDUCED_PSI, ts: Optional[float] = TS_PAPER,
-                          ranges: Optional[Mapping[str, tuple]] = None, n_grid: int = 201) -> TrmsPolytope:
+                          ranges: Optional[Mapping[str, tuple]] = None, gaps: Optional[Mapping[str, tuple]] = None,
+                          n_grid: int = 201) -> TrmsPolytope:
     """Polytopic quasi-LPV model of Sec. 3.5 / 6.2 (bounding box over Table 7), vertices per Eq. (65).
 
     psi not in ``names`` are frozen at their least-squares constant over the box (Sec. 6.3), and so
@@ -457,7 +470,7 @@ def bounding_box_polytope(model: Trms, names: Sequence[str] = REDUCED_PSI, ts: O
     if bad or len(set(names)) != len(names) or not names:
         raise ConfigError(f"trms polytope: scheduled parameters must be distinct names from {PSI_NAMES}, got {list(names)}")
     plo, phi = p_box(model.p, ranges)
-    lo, hi, mean = psi_bounds(model, plo, phi, n_grid)
+    lo, hi, mean = psi_bounds(model, plo, phi, n_grid, gaps)
     idx = [PSI_NAMES.index(n) for n in names]
     frozen = {PSI_NAMES[k]: float(mean[k]) for k in range(11) if k not in idx}
     tv = np.linspace(plo[1], phi[1], n_grid)
