@@ -105,7 +105,7 @@ def test_shipped_configs_load():
     assert c2.channel_names == ("u_d", "v_d", "w_d", "ue_t", "ue_a", "ue_e", "ue_r")
     assert c2.duration == 100.0 and c2.sample_rate == 50.0
     assert c2.groups[0].band == (0.01, 0.2) and c2.groups[1].band == (0.51, 5.0)
-    assert c2.groups[0].peak == (5.0, 5.0, 5.0) and c2.groups[1].energy == 1.0
+    assert c2.groups[0].peak == (4.5, 4.5, 4.5) and c2.groups[1].energy == 1.0
     c1 = load_config(os.path.join(ROOT, "config", "signals_phase1.yaml"))
     assert c1 == SignalsConfig.from_dict(PHASE1_DEFAULT)
     assert c1.duration == 30.0 and c1.groups[0].band == (0.2, 2.0) and len(c1.channel_names) == 4

@@ -52,6 +52,7 @@ def plan(out: Path, quick: bool, kappa: float) -> list[tuple[str, list[str]]]:
         ("phase-2 flight under the LPV law",
          ["simulate", "phase2", "--gains", str(out / "gains.yaml"), "--models", str(out / "vertex_models.yaml"),
           "--signals", str(out / "signals"), "--config", quad, "--kappa", str(kappa),
+          "--feedforward", "filtered",           # the onboard path: derivatives of the v_d stream
           "--out", str(out / "phase2")]),
         ("report", ["report", "--run", str(out), "--out", str(out / "report" / "report.md")]),
     ]
