@@ -456,8 +456,26 @@ class VertexModel:
                    fit=_fit(v, d["fit"], f"{p}.fit") if d.get("fit") is not None else {})
 
 
+class _StackedVertices:
+    """Stacked views of per-vertex arrays in box order (the arrays of
+    :class:`lpv_sysid.models.lpv.PolytopicModel`), shared by the models and gains files."""
+
+    vertices: tuple
+
+    def _stacked(self, name: str) -> np.ndarray:
+        return np.stack([getattr(vx, name) for vx in self.vertices])
+
+    @property
+    def x0(self) -> np.ndarray:
+        return self._stacked("x0")
+
+    @property
+    def u0(self) -> np.ndarray:
+        return self._stacked("u0")
+
+
 @dataclass(frozen=True)
-class VertexModels:
+class VertexModels(_StackedVertices):
     """Contents of ``vertex_models.yaml``; ``vertices`` in box order."""
 
     state_names: tuple
@@ -469,22 +487,13 @@ class VertexModels:
     ts: Optional[float] = None          # None: continuous time
     meta: dict = field(default_factory=dict)
 
-    # stacked views in box order (the arrays of lpv_sysid.models.lpv.PolytopicModel)
     @property
     def A(self) -> np.ndarray:
-        return np.stack([vx.A for vx in self.vertices])
+        return self._stacked("A")
 
     @property
     def B(self) -> np.ndarray:
-        return np.stack([vx.B for vx in self.vertices])
-
-    @property
-    def x0(self) -> np.ndarray:
-        return np.stack([vx.x0 for vx in self.vertices])
-
-    @property
-    def u0(self) -> np.ndarray:
-        return np.stack([vx.u0 for vx in self.vertices])
+        return self._stacked("B")
 
     def to_polytopic(self, max_corners: Optional[int] = None):
         """:class:`lpv_sysid.models.lpv.PolytopicModel` with the Eq. (23) uncertainty vertices."""
@@ -688,7 +697,7 @@ class Certificate:
 
 
 @dataclass(frozen=True)
-class GainSchedule:
+class GainSchedule(_StackedVertices):
     """Contents of ``gains.yaml``; ``vertices`` in box order."""
 
     state_names: tuple
@@ -709,27 +718,19 @@ class GainSchedule:
         """Stacked feedforward matrices (N, n_free + m, p) in box order, or None."""
         if self.feedforward is None:
             return None
-        return np.stack([vx.F_ff for vx in self.vertices])
+        return self._stacked("F_ff")
 
     @property
     def F_jerk(self) -> Optional[np.ndarray]:
         """Stacked jerk-term matrices (N, n_free + m + n_rate, p) in box order, or None."""
         if self.feedforward is None or not self.feedforward.has_jerk:
             return None
-        return np.stack([vx.F_jerk for vx in self.vertices])
+        return self._stacked("F_jerk")
 
     @property
     def K(self) -> np.ndarray:
         """Stacked gains (N, m, n) in box order."""
-        return np.stack([vx.K for vx in self.vertices])
-
-    @property
-    def x0(self) -> np.ndarray:
-        return np.stack([vx.x0 for vx in self.vertices])
-
-    @property
-    def u0(self) -> np.ndarray:
-        return np.stack([vx.u0 for vx in self.vertices])
+        return self._stacked("K")
 
     def to_dict(self) -> dict:
         d = {"format": GAINS_FORMAT}
