@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import rclpy
 import rclpy._standin as standin
+from rclpy._standin import call_trigger as call, spin_nodes as spin
 from scipy.spatial.transform import Rotation
 
 from lpv_sysid.errors import ConfigError
@@ -220,25 +221,8 @@ def ros_args(*pairs):
     return args
 
 
-def spin(nodes, seconds):
-    from rclpy.executors import SingleThreadedExecutor
-    ex = SingleThreadedExecutor()
-    for n in nodes:
-        ex.add_node(n)
-    standin.spin_for(ex, seconds)
 
 
-def call(client_node, server_nodes, srv_name):
-    from rclpy.executors import SingleThreadedExecutor
-    from std_srvs.srv import Trigger
-    cli = client_node.create_client(Trigger, srv_name)
-    assert cli.wait_for_service(timeout_sec=1.0)
-    fut = cli.call_async(Trigger.Request())
-    ex = SingleThreadedExecutor()
-    for n in [client_node, *server_nodes]:
-        ex.add_node(n)
-    ex.spin_until_future_complete(fut, timeout_sec=1.0)
-    return fut.result()
 
 
 def test_node_mavros_parameters_topics_qos(fresh):

@@ -6,15 +6,14 @@ import numpy as np
 import pytest
 import rclpy
 import rclpy._standin as standin
+from rclpy._standin import call_trigger as call, spin_nodes as spin
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistStamped
 from nav_msgs.msg import Odometry
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSReliabilityPolicy
 from sensor_msgs.msg import JointState
-from std_srvs.srv import Trigger
 
 from lpv_sysid.io import messages as M
 from lpv_sysid.io.bag import read_bag
@@ -53,12 +52,6 @@ def ros_args(*pairs, params_file=None):
     return args
 
 
-def spin(nodes, seconds):
-    ex = SingleThreadedExecutor()
-    for n in nodes:
-        ex.add_node(n)
-    standin.spin_for(ex, seconds)
-    return ex
 
 
 def collect(node, msg_type, topic, qos=100):
@@ -67,15 +60,6 @@ def collect(node, msg_type, topic, qos=100):
     return out
 
 
-def call(client_node, server_nodes, srv_name):
-    cli = client_node.create_client(Trigger, srv_name)
-    assert cli.wait_for_service(timeout_sec=1.0)
-    fut = cli.call_async(Trigger.Request())
-    ex = SingleThreadedExecutor()
-    for n in [client_node, *server_nodes]:
-        ex.add_node(n)
-    ex.spin_until_future_complete(fut, timeout_sec=1.0)
-    return fut.result()
 
 
 # ------------------------------------------------------------------ excitation_node

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import rclpy
 import rclpy._standin as standin
+from rclpy._standin import call_trigger as call, spin_nodes as spin
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistStamped
@@ -74,11 +75,6 @@ def graph(gains, signals2, tmp_path, controller_start=True, **ctrl):
     }
 
 
-def spin(nodes, seconds):
-    ex = SingleThreadedExecutor()
-    for n in nodes:
-        ex.add_node(n)
-    standin.spin_for(ex, seconds)
 
 
 def statuses(msgs, name="/lpv_sysid/lpv_controller"):

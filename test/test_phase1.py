@@ -44,7 +44,7 @@ def test_record_shapes_and_sample_rates(short_runs):
     assert [r.name for r in runs] == ["vertex_p5_p5_p5", "hover_validation"]
     rec = runs[0]
     T = cfg.trim_s + cfg.excite_s
-    assert rec.duration == pytest.approx(6.0)
+    assert rec.duration == pytest.approx(6.0)   # simulated record length (trim + excitation), not wall-clock time
     assert rec.state_true.shape == (int(T * 250), 16) and rec.state_meas.shape == rec.state_true.shape
     assert rec.imu_accel.shape == (int(T * 250), 3) and rec.rotor_meas.shape == (int(T * 100), 4)
     assert rec.command.shape == (int(T * 250), 4) and rec.reference.shape == rec.command.shape

@@ -40,3 +40,30 @@ def find_publisher(node, topic):
 def find_subscription(node, topic):
     name = node.resolve_topic_name(topic)
     return next((s for s in node.subscriptions if s.topic_name == name), None)
+
+
+def spin_nodes(nodes, seconds):
+    """Spin ``nodes`` together on one SingleThreadedExecutor for ``seconds`` of simulated
+    time; returns the executor."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    ex = SingleThreadedExecutor()
+    for n in nodes:
+        ex.add_node(n)
+    spin_for(ex, seconds)
+    return ex
+
+
+def call_trigger(client_node, server_nodes, srv_name, timeout_sec=1.0):
+    """Call a std_srvs/Trigger service served by one of ``server_nodes``; the response."""
+    from rclpy.executors import SingleThreadedExecutor
+    from std_srvs.srv import Trigger
+
+    cli = client_node.create_client(Trigger, srv_name)
+    assert cli.wait_for_service(timeout_sec=timeout_sec)
+    fut = cli.call_async(Trigger.Request())
+    ex = SingleThreadedExecutor()
+    for n in [client_node, *server_nodes]:
+        ex.add_node(n)
+    ex.spin_until_future_complete(fut, timeout_sec=timeout_sec)
+    return fut.result()
