@@ -328,7 +328,9 @@ class LpvController:
             dt = t - self.t_prev
             if dt < 0.0:
                 raise SafetyError(f"lpv law: time went backwards ({self.t_prev} -> {t})")
-        if self.has_ff:
+        a_filt = j_filt = None
+        if self.has_ff and (a is None or (self.has_jerk and j is None)):
+            # the derivative filter only runs when the caller does not supply a (and j)
             a_filt, j_filt = self.reference_rate(t, v_d)
         alpha, clamped = self.weights(v_d)
         row = alpha @ self.W
