@@ -1,9 +1,47 @@
-"""Shared pytest configuration: make the repo importable and expose test/support."""
+"""Shared pytest configuration: make the repo importable; the rclpy stand-in only as fallback.
 
+When a real ROS 2 (rclpy) is importable — the user sourced ``setup.bash`` and runs pytest
+with ROS's Python — it is used and the stand-in (``test/support``: rclpy and the
+common_interfaces messages) stays off ``sys.path``; tests that need the stand-in's
+simulated clock are not collected (listed in the report header), and the real-ROS
+tests (``test_ros_real.py``) run the node graph as processes. Without rclpy the stand-in
+is put first on ``sys.path``.
+"""
+
+import importlib.util
 import os
 import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-for p in (ROOT, os.path.join(ROOT, "test", "support")):
-    if p not in sys.path:
-        sys.path.insert(0, p)
+SUPPORT = os.path.join(ROOT, "test", "support")
+if ROOT not in sys.path:
+    sys.path.insert(0, ROOT)
+
+REAL_RCLPY = importlib.util.find_spec("rclpy") is not None
+if not REAL_RCLPY and SUPPORT not in sys.path:
+    sys.path.insert(0, SUPPORT)
+elif REAL_RCLPY and SUPPORT not in sys.path:
+    # the stand-in's non-ROS helpers (e.g. lpv_test_gains) stay importable, after ROS
+    sys.path.append(SUPPORT)
+
+
+def _uses_standin(path: str) -> bool:
+    with open(path, encoding="utf-8") as f:
+        return "rclpy._standin" in f.read()
+
+
+# Under a real rclpy, test files built on the stand-in's simulated clock are not collected
+# (they would import rclpy._standin); pytest -ra lists nothing for them, so say it once.
+collect_ignore = []
+if REAL_RCLPY:
+    here = os.path.dirname(os.path.abspath(__file__))
+    collect_ignore = sorted(f for f in os.listdir(here)
+                            if f.startswith("test_") and f.endswith(".py")
+                            and _uses_standin(os.path.join(here, f)))
+
+
+def pytest_report_header(config):
+    if REAL_RCLPY:
+        return [f"rclpy: real ({len(collect_ignore)} stand-in test files not collected: "
+                f"{', '.join(collect_ignore)})"]
+    return ["rclpy: in-repo stand-in (test/support); real-ROS tests skip"]

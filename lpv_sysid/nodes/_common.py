@@ -6,13 +6,17 @@ Imported only by ``lpv_sysid/nodes/*`` (rclpy is imported here, never in the cor
 from __future__ import annotations
 
 import math
+import signal
+import threading
+import time
 
 import rclpy
 import rclpy.logging
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
 from rclpy.qos import (QoSDurabilityPolicy, QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy,
                        qos_profile_sensor_data)
 
@@ -84,6 +88,24 @@ class ShellNode(Node):
         self._rejected_logged_at: dict[str, float] = {}
         self.params = declare(self, parameters)
 
+    #: wall-time bound of the orderly shutdown of :func:`run` [s]
+    SHUTDOWN_TIMEOUT_S = 3.0
+
+    def begin_shutdown(self) -> None:
+        """Start the node's orderly shutdown (context still valid: may publish)."""
+
+    def shutdown_complete(self) -> bool:
+        """True once the orderly shutdown needs no more spinning."""
+        return True
+
+    def shutdown_state(self) -> str:
+        """What the orderly shutdown is still waiting for (logged on timeout)."""
+        return "complete" if self.shutdown_complete() else "waiting"
+
+    def context_ok(self) -> bool:
+        """Whether this node may still publish (false once the context is shut down)."""
+        return self.context.ok()
+
     def now_ns(self) -> int:
         return self.get_clock().now().nanoseconds
 
@@ -106,17 +128,67 @@ class ShellNode(Node):
             return None
 
 
+class StopRequest:
+    """SIGINT/SIGTERM handler that only records the request (see :func:`run`).
+
+    Real rclpy shuts the context down inside its own SIGINT handler, before any
+    ``destroy_node`` runs, so a node can no longer publish its hand-back or close its
+    bag on Ctrl-C (issue 11: ``Failed to publish: publisher's context is invalid``), and a
+    terminal's Ctrl-C plus launch's forwarded SIGINT raised ``KeyboardInterrupt`` inside
+    rosbags' ``writer.close()``. Here a signal only sets ``requested``; repeated signals
+    are counted, never raised, and the orderly shutdown of :func:`run` is bounded by
+    :attr:`ShellNode.SHUTDOWN_TIMEOUT_S` (below launch's 5 s SIGINT -> SIGTERM escalation).
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self) -> None:
+        self.requested = False
+        self.signals = 0
+        self._previous: dict = {}
+
+    def install(self) -> "StopRequest":
+        if threading.current_thread() is threading.main_thread():
+            for signo in self.SIGNALS:
+                self._previous[signo] = signal.signal(signo, self._handler)
+        return self
+
+    def uninstall(self) -> None:
+        for signo, prev in self._previous.items():
+            signal.signal(signo, prev if prev is not None else signal.SIG_DFL)
+        self._previous.clear()
+
+    def _handler(self, signo, _frame) -> None:
+        self.requested = True
+        self.signals += 1
+
+
 def run(node_factory, args=None, name: str = NAMESPACE) -> int:
-    """ros2/examples minimal-node main: init, spin, clean up on Ctrl-C or shutdown.
+    """ros2/examples minimal-node main, with an orderly shutdown that real rclpy allows.
+
+    rclpy's own signal handlers are disabled (``SignalHandlerOptions.NO``) and
+    :class:`StopRequest` records SIGINT/SIGTERM instead. On a request the node's
+    :meth:`ShellNode.begin_shutdown` runs while the context is still valid (hand-back
+    command, final status, bag closed), the executor keeps spinning until
+    :meth:`ShellNode.shutdown_complete` (e.g. PX4's HEARTBEAT confirmed the hand-back
+    mode) or :attr:`ShellNode.SHUTDOWN_TIMEOUT_S` of wall time, then the node is destroyed
+    and the context shut down. An external shutdown of the context (``ros2 lifecycle``,
+    another thread) skips straight to destruction. Exit status 0.
 
     Bad configuration (LpvSysidError, e.g. an invalid gains file) ends the node with one
     FATAL log line naming the problem and exit status 2.
     """
-    rclpy.init(args=args)
+    stop = StopRequest().install()
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     try:
         node = node_factory()
-        rclpy.spin(node)
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while rclpy.ok() and not stop.requested:
+            executor.spin_once(timeout_sec=SPIN_PERIOD_S)
+        if rclpy.ok():
+            _orderly_shutdown(node, executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except LpvSysidError as exc:
@@ -126,4 +198,19 @@ def run(node_factory, args=None, name: str = NAMESPACE) -> int:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+        stop.uninstall()
     return 0
+
+
+#: executor wait per spin: how soon a recorded signal is acted upon [s]
+SPIN_PERIOD_S = 0.05
+
+
+def _orderly_shutdown(node, executor) -> None:
+    node.begin_shutdown()
+    deadline = time.monotonic() + node.SHUTDOWN_TIMEOUT_S
+    while rclpy.ok() and not node.shutdown_complete() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=SPIN_PERIOD_S)
+    if not node.shutdown_complete():
+        node.get_logger().error(f"shutdown not complete after {node.SHUTDOWN_TIMEOUT_S} s: "
+                                f"{node.shutdown_state()}")

@@ -117,12 +117,23 @@ class DataLoggerNode(C.ShellNode):
         self.pub_status.publish(
             M.diagnostic_array(self.f, self.now_ns(), [st]))
 
-    def destroy_node(self):
+    def begin_shutdown(self):
+        """Close the bag while the context is valid (nodes/_common.run): metadata.yaml and
+        experiment.yaml are written before anything else can interrupt."""
+        self._close_recording()
+
+    def _close_recording(self):
+        if getattr(self, "_closed", False):
+            return
+        self._closed = True
         try:
             self.recorder.stop(self.now_ns())
             self.get_logger().info(self.recorder.summary())
         except LpvSysidError as exc:
             self.get_logger().error(str(exc))
+
+    def destroy_node(self):
+        self._close_recording()        # no-op when begin_shutdown already closed it
         super().destroy_node()
 
 

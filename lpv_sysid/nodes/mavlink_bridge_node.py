@@ -230,9 +230,23 @@ class MavlinkBridgeNode(C.ShellNode):
         st = M.diagnostic_status(self.f, level, self.get_fully_qualified_name(), message, values)
         self.pub_status.publish(M.diagnostic_array(self.f, round(now * 1e9), [st]))
 
+    # -- orderly shutdown (nodes/_common.run) ----------------------------------------
+    def begin_shutdown(self):
+        """Hand control back while the context is valid; the poll timer keeps running
+        until PX4's HEARTBEAT confirms the hand-back mode (or the chain fails)."""
+        self._shutting_down = True
+        self.publish_status(self.core.shutdown(self.now()))
+
+    def shutdown_complete(self):
+        return self.core.state.value in ("IDLE", "DONE", "FAILED")
+
+    def shutdown_state(self):
+        return f"hand-back {self.core.state.value}: {self.core.status(self.now()).get('reason', '')}"
+
     def destroy_node(self):
         try:
-            self.publish_status(self.core.shutdown(self.now()))
+            if not getattr(self, "_shutting_down", False) and self.context_ok():
+                self.publish_status(self.core.shutdown(self.now()))   # destroyed without run()
         finally:
             self.core.close()
             super().destroy_node()

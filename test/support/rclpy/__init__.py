@@ -16,11 +16,7 @@ __all__ = ["init", "ok", "shutdown", "try_shutdown", "spin", "spin_once",
 _global_executor = None
 
 
-class SignalHandlerOptions:
-    NO = 0
-    SIGINT = 1
-    SIGTERM = 2
-    ALL = 3
+from rclpy.signals import SignalHandlerOptions  # noqa: E402
 
 
 def init(args=None, *, context=None, domain_id=None, signal_handler_options=None):

@@ -28,6 +28,10 @@ class Publisher(TopicEndpoint):
         if self._destroyed:
             from rclpy.exceptions import InvalidHandle
             raise InvalidHandle("cannot use Destroyable because destruction was requested")
+        if not self._node.context.ok():
+            # as rclpy_pybind11 once the context is shut down (e.g. by rclpy's SIGINT handler)
+            from rclpy._params_file import RCLError
+            raise RCLError("Failed to publish: publisher's context is invalid")
         if isinstance(msg, (bytes, bytearray)):
             data = bytes(msg)
         elif isinstance(msg, self.msg_type):
