@@ -59,16 +59,41 @@ def test_node_entry_point_is_a_main_function(node):
     assert any(isinstance(n, ast.FunctionDef) and n.name == "main" for n in tree.body)
 
 
-def test_package_xml_declares_the_message_packages_the_code_uses():
+#: import name -> rosdep key, for the third-party modules the package imports
+ROSDEP_KEYS = {"numpy": "python3-numpy", "scipy": "python3-scipy", "yaml": "python3-yaml",
+               "matplotlib": "python3-matplotlib", "serial": "python3-serial"}
+#: imported, but with no Ubuntu 24.04 package / rosdep key: pip, from requirements-ros.txt
+PIP_ONLY = {"pymavlink", "rosbags", "cvxpy", "mavsdk", "scs", "clarabel"}
+
+
+def _third_party_imports():
+    import sys
+    mods = set()
+    files = [*(ROOT / "lpv_sysid").rglob("*.py"), *(ROOT / "launch").glob("*.py")]
+    for path in files:
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                mods |= {a.name.split(".")[0] for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                mods.add(node.module.split(".")[0])
+        # message types looked up by name ("std_msgs/msg/Header") through a MsgFactory
+        text = path.read_text()
+        mods |= {p for p in ("std_msgs", "geometry_msgs", "sensor_msgs", "nav_msgs",
+                             "diagnostic_msgs", "std_srvs", "builtin_interfaces")
+                 if f"{p}/msg/" in text or f"{p}/srv/" in text}
+    return {m for m in mods if m not in sys.stdlib_module_names and m != "lpv_sysid"}
+
+
+def test_package_xml_declares_exactly_what_the_code_imports():
     xml = ET.parse(ROOT / "package.xml").getroot()
     assert xml.get("format") == "3" and xml.findtext("name") == "lpv_sysid"
     deps = {e.text for e in xml.findall("exec_depend")}
-    used = set()
-    for path in (ROOT / "lpv_sysid").rglob("*.py"):
-        for pkg in ("std_msgs", "geometry_msgs", "sensor_msgs", "nav_msgs", "diagnostic_msgs", "std_srvs"):
-            if f"{pkg}/" in path.read_text() or f"{pkg}." in path.read_text():
-                used.add(pkg)
-    assert {"rclpy"} | used <= deps, sorted(({"rclpy"} | used) - deps)
+    used = _third_party_imports() | {"serial"}       # pymavlink's serial links need pyserial
+    expected = {ROSDEP_KEYS.get(m, m) for m in used - PIP_ONLY}
+    assert deps == expected, (sorted(deps - expected), sorted(expected - deps))
+    pip = (ROOT / "requirements-ros.txt").read_text().lower()
+    for m in used & PIP_ONLY - {"scs", "clarabel"}:
+        assert f"{m}==" in pip, m
     assert xml.find("export/build_type").text == "ament_python"
 
 
