@@ -2,8 +2,13 @@
 
 Shell around :class:`lpv_sysid.sim.vehicle.SimVehicle` (seed 0 Eqs. 3, 6-8, RK4) and the
 PX4-like :class:`lpv_sysid.control.baseline.BaselineController`. A timer at
-``physics_hz`` steps the physics; ``state`` (Odometry), ``imu`` and ``rotor_speeds`` are
-published at their sensor rates (best effort). Mode ``baseline`` (phase 1): the baseline
+``state_hz`` advances the physics to the node clock in fixed ``physics_hz`` RK4 steps
+(several per tick when the tick was late, so the simulation keeps real time however the
+timer jitters); ``state`` (Odometry), ``imu`` and ``rotor_speeds`` are published at their
+sensor rates (best effort), stamped with the *physics* time of the sample (evenly spaced,
+never the jittery callback time). If the node falls more than ``max_catch_up_s`` behind
+(an overloaded machine), the simulation slips: it runs slower than real time, counts the
+slip (``realtime_slips_s`` on ``status``) and warns, rather than integrating a huge step. Mode ``baseline`` (phase 1): the baseline
 flies ``velocity_reference``. Mode ``lpv`` (phase 2): ``actuator_command`` is applied
 directly; when it is older than ``command_timeout_s`` (the controller stopped commanding
 after a safety abort) the vehicle falls back to the baseline holding zero velocity, which
@@ -55,6 +60,8 @@ PARAMETERS = [
     ("reference_timeout_s", 0.5, C.double("velocity_reference older than this -> hold zero "
                                           "velocity [s]", 0.001, 60.0)),
     ("status_rate_hz", 1.0, C.double("status publication rate [Hz]", 0.1, 100.0)),
+    ("max_catch_up_s", 0.1, C.double("largest lag behind the clock made up in one tick; "
+                                     "more slips real time [s]", 0.001, 10.0)),
 ]
 
 
@@ -93,6 +100,9 @@ class SimVehicleNode(C.ShellNode):
         self.d_rot = sensors.decimation(sensors.rotor_hz)
         self.d_ctrl = sensors.decimation(gains.rate_hz)
         self.k = 0
+        self.dt_ns = round(1e9 / sensors.physics_hz)
+        self.slip_ns = 0
+        self._max_behind = max(1, round(p["max_catch_up_s"] * sensors.physics_hz))
         self.xm = self.vehicle.measure_state()
         self.ref = (v0.copy(), 0.0, -np.inf)          # (v_d FRD, r_d, receive time)
         self.cmd = (None, -np.inf)                    # (u, receive time)
@@ -107,22 +117,40 @@ class SimVehicleNode(C.ShellNode):
                                  C.qos_for("velocity_reference"))
         self.create_subscription(JointState, "actuator_command", self.on_command,
                                  C.qos_for("actuator_command"))
-        self.create_timer(1.0 / sensors.physics_hz, self.on_physics)
+        self.create_timer(1.0 / sensors.state_hz, self.on_tick)
         self.create_timer(1.0 / p["status_rate_hz"], self.publish_status)
 
     def on_reference(self, msg):
         parsed = self.parse_input("velocity_reference", M.reference_from_twist, msg)
         if parsed is not None:
-            self.ref = (parsed[1], parsed[2], self.now())
+            self.ref = (parsed[1], parsed[2], self.physics_stamp_ns() * 1e-9)
 
     def on_command(self, msg):
         parsed = self.parse_input("actuator_command", M.actuator_command_from_joint_state, msg)
         if parsed is not None:
-            self.cmd = (parsed[1], self.now())
+            self.cmd = (parsed[1], self.physics_stamp_ns() * 1e-9)
+
+    def on_tick(self):
+        """Advance the physics to the node clock (see the module docstring)."""
+        due = (self.now_ns() - self.t0_ns - self.slip_ns) // self.dt_ns
+        behind = due - self.k
+        if behind > self._max_behind:
+            self.slip_ns += (behind - self._max_behind) * self.dt_ns
+            self.get_logger().warning(
+                f"simulation {behind * self.dt_ns * 1e-9:.3f} s behind the "
+                f"clock: slipping real time (total {self.slip_ns * 1e-9:.3f} s)",
+                throttle_duration_sec=5.0)
+            behind = self._max_behind
+        for _ in range(int(behind)):
+            self.on_physics()
+
+    def physics_stamp_ns(self) -> int:
+        return self.t0_ns + self.slip_ns + self.k * self.dt_ns
 
     def on_physics(self):
-        veh, k, now = self.vehicle, self.k, self.now()
-        stamp = self.now_ns()
+        veh, k = self.vehicle, self.k
+        stamp = self.physics_stamp_ns()
+        now = stamp * 1e-9
         if k % self.d_state == 0:
             self.xm = veh.measure_state()
             x = self.xm
@@ -162,7 +190,8 @@ class SimVehicleNode(C.ShellNode):
         x = self.vehicle.x
         values = {"mode": self.params["mode"], "t_sim": round(self.vehicle.t, 6),
                   "u": float(x[6]), "v": float(x[7]), "w": float(x[8]),
-                  "handed_back": self.handed_back}
+                  "handed_back": self.handed_back,
+                  "realtime_slips_s": round(self.slip_ns * 1e-9, 6)}
         message = "baseline hold" if self.handed_back else self.params["mode"]
         st = M.diagnostic_status(self.f, "WARN" if self.handed_back else "OK",
                                  self.get_fully_qualified_name(), message, values)
