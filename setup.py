@@ -14,6 +14,7 @@ NODES = [
     "mavlink_bridge_node",
     "data_logger_node",
     "sim_vehicle_node",
+    "campaign_node",
 ]
 
 

@@ -13,6 +13,17 @@ class ConfigError(LpvSysidError):
     """A configuration or data file is malformed; the message names the field."""
 
 
+class FileReadError(ConfigError):
+    """A user file cannot be read at all (missing, not a regular file, too large, permission,
+    not UTF-8): ``path`` and ``reason`` (e.g. ``"Permission denied"``) for callers that word
+    the message themselves; ``str()`` is the full one-line message."""
+
+    def __init__(self, message: str, path: str = "", reason: str = ""):
+        super().__init__(message)
+        self.path = path
+        self.reason = reason or message
+
+
 class BagError(LpvSysidError):
     """A rosbag2 recording cannot be read or written."""
 

@@ -298,14 +298,18 @@ def test_machine_prestream_switch_arm_active():
     cmds = _kinds(acts, SendCommand)
     assert m.state == State.SWITCHING and cmds == [SendCommand(MAV_CMD_DO_SET_MODE, (1.0, 6.0, 0.0), 1)]
     assert m.on_ack(t, MAV_CMD_DO_SET_MODE, 0) == []         # accepted, waiting for HEARTBEAT
-    acts = m.on_heartbeat(t + 0.1, px4.OFFBOARD, False)
+    m.on_heartbeat(t + 0.1, px4.OFFBOARD, False)
+    assert m.state == State.SWITCHING                        # ack_settle_s: a verdict may follow
+    acts = m.step(t + 0.25)
     assert m.state == State.ARMING
     assert _kinds(acts, SendCommand) == [SendCommand(MAV_CMD_COMPONENT_ARM_DISARM, (1.0, 0.0), 1)]
-    assert m.on_ack(t + 0.15, MAV_CMD_DO_SET_MODE, 0) == []   # late duplicate of the mode ACK: ignored
-    m.on_ack(t + 0.2, MAV_CMD_COMPONENT_ARM_DISARM, 0)
-    m.on_ack(t + 0.2, MAV_CMD_COMPONENT_ARM_DISARM, 0)        # duplicated ACK: harmless
-    m.on_command(t + 0.25, "sp")
-    m.on_heartbeat(t + 0.3, px4.OFFBOARD, True)
+    assert m.on_ack(t + 0.3, MAV_CMD_DO_SET_MODE, 0) == []    # late duplicate of the mode ACK: ignored
+    m.on_ack(t + 0.3, MAV_CMD_COMPONENT_ARM_DISARM, 0)
+    m.on_ack(t + 0.3, MAV_CMD_COMPONENT_ARM_DISARM, 0)        # duplicated ACK: harmless
+    m.on_command(t + 0.35, "sp")
+    m.on_heartbeat(t + 0.4, px4.OFFBOARD, True)
+    assert m.state == State.ARMING
+    m.step(t + 0.55)
     assert m.state == State.OFFBOARD_ACTIVE
 
 
@@ -328,6 +332,8 @@ def test_machine_retries_then_fails_and_lost_ack_confirmed_by_heartbeat():
     m2.start(0.0)
     _, t = _drive(m2, 0.0, 1.2)
     m2.on_heartbeat(t + 0.05, px4.OFFBOARD, False)
+    m2.on_command(t + 0.3, "sp")
+    m2.step(t + 0.3)                                         # ack_settle_s after sending
     assert m2.state == State.OFFBOARD_ACTIVE
     # no ACK at all: resent every ack_timeout, FAILED after max_retries
     m3 = OffboardMachine(cfg, "zero")
@@ -341,7 +347,9 @@ def _active(cfg):
     m = OffboardMachine(cfg, "zero")
     m.start(0.0)
     _, t = _drive(m, 0.0, 1.3)
+    m.on_ack(t, MAV_CMD_DO_SET_MODE, 0)
     m.on_heartbeat(t, px4.OFFBOARD, True)
+    _, t = _drive(m, t, t + 0.25)                            # ack_settle_s
     assert m.state == State.OFFBOARD_ACTIVE
     return m, t
 
@@ -355,11 +363,14 @@ def test_machine_stale_input_hands_back_and_stops_stream():
     assert len(ev) == 1 and cfg.input_timeout < ev[0].t - last <= cfg.input_timeout + 0.01 + 1e-9
     t_hb = ev[0].t
     idx = acts.index(ev[0])
-    assert _kinds(acts[idx:], SendSetpoint) == []            # nothing streamed after hand-back
+    # hand-back in progress: only the neutral setpoint is streamed, never the last command
+    assert {a.setpoint for a in _kinds(acts[idx:], SendSetpoint)} <= {"zero"}
     assert _kinds(acts[idx:], SendCommand)[0] == SendCommand(MAV_CMD_DO_SET_MODE, (1.0, 3.0, 0.0), 1)
-    m.on_ack(t_hb + 0.05, MAV_CMD_DO_SET_MODE, 0)
-    m.on_heartbeat(t_hb + 0.1, px4.POSCTL, True)
-    assert m.state == State.FAILED and "stale input" in m.reason
+    m.on_ack(t2 + 0.01, MAV_CMD_DO_SET_MODE, 0)
+    m.on_heartbeat(t2 + 0.02, px4.POSCTL, True)
+    m.step(t2 + 0.25)
+    assert m.state == State.FAILED and "stale input" in m.reason and m.confirmed_mode == px4.POSCTL
+    assert _kinds(m.step(t2 + 1.0), SendSetpoint) == []      # confirmed: stream stopped
 
 
 def test_machine_abort_shutdown_link_loss_and_pilot_takeover():
@@ -367,8 +378,8 @@ def test_machine_abort_shutdown_link_loss_and_pilot_takeover():
     m.on_command(t, "sp")
     acts = m.abort(t, "operator")
     assert m.state == State.HANDBACK and _kinds(acts, SendCommand)[0].params == (1.0, 4.0, 6.0)
-    m.on_heartbeat(t + 0.1, px4.LAND, True)
-    assert m.state == State.DONE
+    m.on_heartbeat(t + 0.3, px4.LAND, True)
+    assert m.state == State.DONE and "LAND" in m.reason
     m, t = _active(OffboardConfig())
     m.on_link(t, True)
     m.on_command(t, "sp")
@@ -441,7 +452,7 @@ def test_attitude_rate_transport_inverts_px4_rate_p_and_allocation():
 # ------------------------------------------------------------------ configuration
 def test_bridge_config_file_and_errors(tmp_path):
     cfg = BridgeConfig.load(os.path.join(ROOT, "config", "mavlink_bridge.yaml"))
-    assert cfg.link.url == "udpin:127.0.0.1:14540" and cfg.offboard.handback_mode == "HOLD"
+    assert cfg.link.url == "udpin:127.0.0.1:14540" and cfg.offboard.chain == (px4.HOLD, px4.LAND)
     assert dict(cfg.link.streams)["ESC_STATUS"] > 0
     bad = tmp_path / "bad.yaml"
     bad.write_text("link: [unclosed\n")

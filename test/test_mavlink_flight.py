@@ -191,7 +191,16 @@ def test_phase1_flight_prestream_offboard_arm_track_abort_handback(flights):
                                ("HANDBACK", "DONE")]
     assert f.t_of("SWITCHING") - f.t_of("PRESTREAM") > 1.0                      # > 1 s pre-stream
     assert f.bridge.machine.vehicle_mode == px4.HOLD and f.veh.mode == px4.HOLD
-    assert f.veh.setpoints_received == n_sp                                      # stream stopped
+    assert f.bridge.machine.confirmed_mode == px4.HOLD and "hand-back confirmed: vehicle in HOLD" in \
+        f.bridge.machine.reason
+    # until HOLD was confirmed the bridge kept streaming the neutral setpoint (zero velocity),
+    # at most at the setpoint rate; after DONE nothing more is sent
+    t_abort, t_done = f.t_of("HANDBACK"), f.t_of("DONE")
+    assert 0 < f.veh.setpoints_received - n_sp <= 20.0 * (t_done - t_abort) + 2
+    np.testing.assert_array_equal(f.veh.setpoint.v_ned, np.zeros(3))
+    n_done = f.veh.setpoints_received
+    f.run_until(23.0, None)
+    assert f.veh.setpoints_received == n_done                                    # stream stopped
     assert [m for _, m, _ in f.veh.mode_log][:2] == ["OFFBOARD", "HOLD"]
     # decode path against the simulator's truth (float32 telemetry)
     pairs = [(s, x) for s, x in f.truth if isinstance(s, StateSample) and s.t > 6.0 and s.skew == 0.0]
@@ -205,7 +214,10 @@ def test_phase1_flight_prestream_offboard_arm_track_abort_handback(flights):
 
 
 def test_link_cut_vehicle_failsafe_and_bridge_reports_loss(flights):
-    f = flights(OffboardConfig(arm=True, handback_mode="HOLD"), vehicle_params={"COM_OBL_RC_ACT": 4},
+    # COM_DISARM_LAND -1: the vehicle stays armed in LAND after touching down (an auto-disarm
+    # would end the failsafe and show the user's OFFBOARD again, test_sim_vehicle_px4)
+    f = flights(OffboardConfig(arm=True, handback_mode="HOLD"),
+                vehicle_params={"COM_OBL_RC_ACT": 4, "COM_DISARM_LAND": -1.0},
                 relay=True, link_timeout=1.5)
     ref = _takeoff_then(lambda t: (0.5, 0.0, 0.0))
     f.run_until(0.5, ref)
@@ -227,11 +239,17 @@ def test_link_cut_vehicle_failsafe_and_bridge_reports_loss(flights):
     assert len(ev) == 1 and 1.5 < ev[0].t - t_last_hb <= 1.5 + 2 * DT
     hb = [e for e in f.events if isinstance(e, StatusEvent) and e.state == "HANDBACK" and e.previous != e.state]
     assert len(hb) == 1 and "link lost" in hb[0].reason and hb[0].t == ev[0].t
-    # hand-back command retried (ack_timeout x max_retries), then PX4's failsafe is in charge
-    assert f.bridge.state == State.FAILED and "hand-back not confirmed" in f.bridge.machine.reason
+    # each mode of the chain (HOLD, then LAND) retried ack_timeout x max_retries, then FAILED
+    # loudly: nothing was confirmed and PX4's failsafe is in charge
+    assert f.bridge.state == State.HANDBACK
+    f.run_until(hb[0].t + 2 * 4 * 0.5 + 0.1, ref)
+    assert f.bridge.state == State.FAILED and f.bridge.machine.confirmed_mode is None
+    failed = [e for e in f.events if isinstance(e, StatusEvent) and e.state == "FAILED"][-1]
+    assert failed.level == "error" and failed.reason.startswith("hand-back NOT confirmed: HOLD: no COMMAND_ACK")
+    assert "LAND: no COMMAND_ACK" in failed.reason and "PX4 failsafe in charge" in failed.reason
     n_sp = f.veh.setpoints_received
     f.relay.cut = False
-    f.run_until(12.5, ref)
+    f.run_until(f.t + 2.5, ref)
     # link back: the HEARTBEAT shows LAND, the bridge ends FAILED and never resumes streaming
     assert any(getattr(e, "kind", "") == "link_up" and e.t > t_cut for e in f.events)
     assert f.bridge.machine.vehicle_mode == px4.LAND
@@ -254,10 +272,14 @@ def test_stale_input_stops_stream_within_timeout(flights):
     assert 6.9 < last_cmd < 7.01
     t_hb = f.t_of("HANDBACK")
     assert cfg.input_timeout <= t_hb - last_cmd <= cfg.input_timeout + 2 * DT
-    # the vehicle saw no setpoint after the hand-back, and lands (hand-back mode LAND)
-    assert f.veh.setpoint.t <= t_hb + 1e-9
+    # after the hand-back the vehicle got only the neutral setpoint (zero velocity), and none
+    # once LAND was confirmed; it lands (hand-back mode LAND)
+    t_end = f.t_of("FAILED")
+    assert f.veh.setpoint.t <= t_end + 1e-9
+    np.testing.assert_array_equal(f.veh.setpoint.v_ned, np.zeros(3))
     assert f.veh.mode == px4.LAND and f.bridge.machine.vehicle_mode == px4.LAND
     assert f.bridge.state == State.FAILED and "stale input" in f.bridge.machine.reason
+    assert f.bridge.machine.confirmed_mode == px4.LAND
 
 
 def test_phase2_attitude_rate_transport_reproduces_virtual_command(flights):
@@ -276,10 +298,9 @@ def test_phase2_attitude_rate_transport_reproduces_virtual_command(flights):
     assert np.allclose(f.veh.u, u_cmd, atol=2e-6)
 
 
-def test_vehicle_refuses_offboard_without_setpoint_stream(flights):
+def test_vehicle_refuses_to_arm_in_offboard_without_setpoint_stream(flights):
     f = flights(OffboardConfig())
     f.run_until(0.5)
-    f.bridge.link.command_long(176, 1.0, 6.0, 0.0)        # OFFBOARD without any setpoint stream
     acks = []
     orig = f.bridge._on_message
 
@@ -289,9 +310,14 @@ def test_vehicle_refuses_offboard_without_setpoint_stream(flights):
         orig(msg, now, out)
 
     f.bridge._on_message = spy
+    f.bridge.link.command_long(176, 1.0, 6.0, 0.0)        # OFFBOARD without any setpoint stream
     f.run_until(0.7)
-    assert acks == [(176, 1)]                               # MAV_RESULT_TEMPORARILY_REJECTED
-    assert f.veh.mode == px4.HOLD
+    # PX4 v1.16 (measured on SIH): disarmed, every mode change is allowed, answered twice
+    assert acks == [(176, 0), (176, 0)] and f.veh.mode == px4.OFFBOARD
+    f.bridge.link.command_long(400, 1.0)
+    f.run_until(0.9)
+    # arming is what PX4 refuses: OFFBOARD cannot run without the stream (one answer)
+    assert acks[2:] == [(400, 1)] and not f.veh.armed
 
 
 def test_preflight_against_sim_vehicle_go_and_nogo(flights):

@@ -101,7 +101,7 @@ def test_controller_wiring(gains):
     assert standin.find_subscription(node, "excitation").qos_profile.reliability == rel.RELIABLE
     assert standin.find_publisher(node, "actuator_command").qos_profile.reliability == rel.RELIABLE
     assert node.get_parameter("rate_hz").value == 250.0
-    assert node.describe_parameter("state_timeout_s").floating_point_range[0].to_value == 10.0
+    assert node.describe_parameter("state_timeout_s").floating_point_range[0].to_value == 1.0
     assert [n for n, _ in node.get_service_names_and_types()] == [
         "/lpv_sysid/lpv_controller/abort", "/lpv_sysid/lpv_controller/start"]
     # not started: no commands, status says so
@@ -223,10 +223,170 @@ def test_abort_on_nan_state(gains, signals2, tmp_path):
     assert ev.reason == "non_finite" and "state" in ev.detail
 
 
-def test_abort_outside_scheduling_box(gains, signals2, tmp_path):
+def test_abort_on_reference_step(gains, signals2, tmp_path):
+    """A step to 3 m/s (outside the box, and far faster than the design envelope of the
+    gains) aborts on the envelope before any command follows it (issue 12 item 6); the
+    box abort itself is covered in test_controller_safety.py with a slow ramp."""
     def big_reference(g, nodes):
         pub = g["probe"].create_publisher(TwistStamped, "/lpv_sysid/velocity_reference", 10)
         stamp = g["probe"].get_clock().now().nanoseconds + 5_000_000
         pub.publish(M.twist_reference_msg(M.MsgFactory.rclpy(), stamp, [3.0, 0.0, 0.0]))
     ev = _abort_case(gains, signals2, tmp_path, big_reference)
-    assert ev.reason == "out_of_box" and ev.detail.startswith("scheduling[0] = 3")
+    assert ev.reason == "reference_envelope" and ev.detail.startswith("reference[0] changes at")
+
+
+# ------------------------------------------------ issue 12: vehicle safety at node level
+def _main_exit(caplog, **params):
+    from lpv_sysid.nodes import lpv_controller_node
+    with caplog.at_level("CRITICAL"):
+        code = lpv_controller_node.main(args=["n"] + args("lpv_controller.yaml", **params))
+    return code, caplog.records[-1].getMessage()
+
+
+def test_node_refuses_inconsistent_esc_limits(gains, caplog):
+    """u_esc_min:=0.9 u_esc_max:=0.1: before, the node started and clamped every motor to
+    0.1 (per-parameter ranges only); now exit 2 naming the cross-field rule."""
+    code, msg = _main_exit(caplog, gains_file=gains, u_esc_min=0.9, u_esc_max=0.1)
+    assert code == 2 and "u_esc_min < u_esc_max" in msg
+
+
+def test_node_refuses_gains_changed_after_certification(gains, tmp_path, caplog):
+    d = yaml.safe_load(open(gains))
+    d["vertices"][3]["K"] = (-np.array(d["vertices"][3]["K"])).tolist()
+    bad = tmp_path / "gains.yaml"
+    bad.write_text(yaml.safe_dump(d))
+    (tmp_path / "gains.cert.npz").write_bytes(
+        open(os.path.join(os.path.dirname(gains), "gains.cert.npz"), "rb").read())
+    code, msg = _main_exit(caplog, gains_file=str(bad))
+    assert code == 2 and "certificate.gains_sha256" in msg and "does not match" in msg
+
+
+def test_node_runs_the_values_of_its_yaml(gains, tmp_path):
+    """config/lpv_controller.yaml set monitor_window_s, feedforward, ff_filter_tau and
+    ff_jerk_tau, which the node did not declare, so it silently ran the defaults (issue 14
+    item 1): the node's law now gets the file's values, as replay does."""
+    from lpv_sysid.nodes.lpv_controller_node import LpvControllerNode
+    text = open(os.path.join(CONFIG, "lpv_controller.yaml")).read()
+    for key, value in (("monitor_window_s", "12.0"), ("ff_filter_tau", "0.3"),
+                       ("ff_jerk_tau", "0.7"), ("feedforward", "false")):
+        text = "\n".join(f"    {key}: {value}" if line.strip().startswith(f"{key}:") else line
+                         for line in text.splitlines())
+    f = tmp_path / "ctl.yaml"
+    f.write_text(text)
+    rclpy.init()
+    node = LpvControllerNode(cli_args=["--ros-args", "--params-file", str(f),
+                                       "-p", f"gains_file:={gains}"])
+    law = node.runtime.law
+    assert (law.window, law.tau, law.tau_j, law.cfg.feedforward) == (12.0, 0.3, 0.7, False)
+    d = node.describe_parameter("monitor_window_s")
+    assert d.floating_point_range[0].to_value == 1e4 and "window" in d.description
+
+
+def _exc_outputs(probe):
+    refs, exc = [], []
+    probe.create_subscription(TwistStamped, "/lpv_sysid/velocity_reference", refs.append, 100)
+    probe.create_subscription(JointState, "/lpv_sysid/excitation", exc.append, 100)
+    return refs, exc
+
+
+def _ue(msgs):
+    return np.array([M.excitation_from_joint_state(m)[1] for m in msgs])
+
+
+def _playing_excitation(signals2):
+    """A phase-2 excitation node 1.5 s into its signal (ramp 1 s), a probe and its
+    excitation messages."""
+    from lpv_sysid.nodes.excitation_node import ExcitationNode
+    rclpy.init()
+    exc = ExcitationNode(cli_args=args("excitation_node.yaml", signals_file=signals2,
+                                       mode="phase2", ramp_s=1.0, auto_start=True))
+    probe = rclpy.create_node("probe")
+    _, out = _exc_outputs(probe)
+    spin([exc, probe], 1.5)
+    return exc, probe, out
+
+
+def test_controller_abort_fades_the_excitation_within_one_ramp(gains, signals2, tmp_path):
+    """Before, a controller abort left the excitation node playing at full amplitude."""
+    g = graph(gains, signals2, tmp_path)
+    refs, exc = _exc_outputs(g["probe"])
+    nodes = list(g.values())
+    spin(nodes, 1.5)
+    assert np.abs(_ue(exc[-20:])).max() > 0.1            # playing (ramp 1 s done)
+    assert call(g["probe"], nodes, "/lpv_sysid/lpv_controller/abort").success
+    t_abort = g["ctl"].runtime.supervisor.event.t
+    exc.clear()
+    refs.clear()
+    spin(nodes, 1.2)
+    ts = np.array([M.stamp_ns_of(m) * 1e-9 for m in exc])
+    ue = np.abs(_ue(exc)).max(axis=1)
+    assert g["exc"].aborted and "lpv_controller" in g["exc"].abort_reason
+    assert np.all(ue[ts > t_abort + 1.0 + 0.011] == 0.0)   # faded within the 1 s ramp (+1 tick)
+    assert ue[(ts > t_abort + 0.3) & (ts < t_abort + 0.5)].max() > 0   # a fade, not a cut
+    v = np.array([[m.twist.linear.x, m.twist.linear.y, m.twist.linear.z] for m in refs])
+    assert np.all(v[-5:] == 0.0)
+
+
+@pytest.mark.parametrize("sender, level, values, fades", [
+    ("mavlink_bridge", "WARN", {"state": "HANDBACK"}, True),     # stale commands -> hand-back
+    ("mavlink_bridge", "ERROR", {"state": "FAILED"}, True),
+    ("campaign", "ERROR", {"phase": "aborting"}, True),
+    ("lpv_controller", "ERROR", {"aborted": True}, True),
+    # an ERROR that is no abort (the bridge refusing one message) and an unwatched node
+    ("mavlink_bridge", "ERROR", {"state": "OFFBOARD_ACTIVE"}, False),
+    ("sim_vehicle", "ERROR", {"aborted": True}, False),
+])
+def test_abort_status_of_a_watched_node_fades_the_excitation(signals2, sender, level, values,
+                                                              fades):
+    from diagnostic_msgs.msg import DiagnosticArray as DA
+    exc, probe, out = _playing_excitation(signals2)
+    pub = probe.create_publisher(DA, "/lpv_sysid/status", 10)
+    f = M.MsgFactory.rclpy()
+    st = M.diagnostic_status(f, level, f"/lpv_sysid/{sender}", "link lost", values)
+    pub.publish(M.diagnostic_array(f, standin.now_ns(), [st]))
+    out.clear()
+    spin([exc, probe], 1.2)
+    assert exc.aborted == fades
+    assert (np.abs(_ue(out[-5:])).max() == 0.0) == fades
+
+
+def test_excitation_abort_survives_the_clock_going_back(signals2):
+    """The node clock jumps back 5 s (sim time restarted): the excitation aborts and the
+    fade completes within one ramp of the clock's time (before: TimeOrderError in the
+    timer callback)."""
+    exc, probe, out = _playing_excitation(signals2)
+    real = exc.now_ns
+    exc.now_ns = lambda: real() - 5_000_000_000
+    out.clear()
+    spin([exc, probe], 1.2)
+    assert exc.aborted and exc.abort_reason == "node clock went back by 4.990 s"
+    ue = np.abs(_ue(out)).max(axis=1)
+    assert ue[:20].max() > 0 and np.all(ue[-15:] == 0.0)
+
+
+def test_excitation_node_checks_the_signal_against_the_gains(gains, tmp_path, caplog):
+    from lpv_sysid.nodes import excitation_node
+    t = np.arange(0.0, 20.0, 0.02)
+    cols = [0.8 * np.sin(2 * np.pi * 0.2 * t), 0 * t, 0 * t] + [3.0 * np.sin(9 * t)] * 4
+    path = str(tmp_path / "loud.npz")
+    save_npz(path, t, np.stack(cols, axis=1),
+             ["u_d", "v_d", "w_d", "ue_t", "ue_a", "ue_e", "ue_r"])
+    with caplog.at_level("CRITICAL"):
+        code = excitation_node.main(args=["n"] + args("excitation_node.yaml", signals_file=path,
+                                                      mode="phase2", ramp_s=1.0, gains_file=gains))
+    assert code == 2 and "ue_t peak 3 exceeds the design excitation peak 1" in \
+        caplog.records[-1].getMessage()
+
+
+def test_safety_abort_is_logged_by_the_node_logger(gains, signals2, tmp_path, caplog):
+    """issue 11: the abort line went through Python logging of controller_runtime (no
+    timestamp, never on /rosout); now the node's own logger says it."""
+    g = graph(gains, signals2, tmp_path)
+    nodes = list(g.values())
+    spin(nodes, 1.0)
+    with caplog.at_level("INFO"):
+        call(g["probe"], nodes, "/lpv_sysid/lpv_controller/abort")
+        spin(nodes, 0.1)
+    lines = [r for r in caplog.records if r.getMessage().startswith("safety abort: external")]
+    assert lines and {r.name for r in lines} == {g["ctl"].get_logger().name}
+    assert not [r for r in caplog.records if r.name.startswith("lpv_sysid.nodes.")]

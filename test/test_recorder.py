@@ -66,6 +66,7 @@ def test_1khz_for_60s_no_loss(tmp_path):
     rec.stop(T0 + n * 1_000_000)
     meta = yaml.safe_load((tmp_path / "exp" / "experiment.yaml").read_text())
     assert meta["closed_cleanly"] is True and meta["error"] is None
+    assert meta["status"] == "closed_cleanly"
     assert [b["path"] for b in meta["bags"]] == ["bag_0000", "bag_0001", "bag_0002"]
     assert [b["messages"] for b in meta["bags"]] == [20_000, 20_000, 20_000]
     got = []
@@ -130,6 +131,8 @@ def test_write_error_keeps_bag_readable(tmp_path):
     assert len(count_messages(tmp_path / "exp" / "bag_0000")) == 7
     meta = yaml.safe_load((tmp_path / "exp" / "experiment.yaml").read_text())
     assert meta["closed_cleanly"] is False and "No space left" in meta["error"]
+    assert meta["status"] == "incomplete"
+    assert meta["topics"]["/a"]["count"] == meta["bags"][0]["messages"] == 7
     with pytest.raises(BagError, match="not recording"):
         rec.record("/a", T0 + 100, joint_state(T0, [0.0] * 4))
 

@@ -6,7 +6,7 @@ import os
 import numpy as np
 import pytest
 import yaml
-from lpv_test_gains import gains_dict
+from lpv_test_gains import design_for, gains_dict, write_gains
 
 from lpv_sysid.cli.main import main
 from lpv_sysid.io import messages as M
@@ -49,11 +49,11 @@ def test_replay_reproduces_recorded_commands(tmp_path, capsys):
 def test_replay_matches_independent_law(tmp_path):
     """Other gains (K x 1.25): every unsaturated command equals u0 + K (x - x0) + R u_e
     computed here from the last inputs before the tick, multilinear weights by hand."""
-    d = gains_dict(box=5.0)
-    for v in d["vertices"]:
-        v["K"] = (1.25 * np.array(v["K"])).tolist()
+    def scale_k(d):
+        for v in d["vertices"]:
+            v["K"] = (1.25 * np.array(v["K"])).tolist()
     g = tmp_path / "gains2.yaml"
-    GainSchedule.from_dict(d).save(str(g))
+    write_gains(g, box=5.0, edit=scale_k)       # the test certifies the law it flies
     code, out = replay(tmp_path, gains=str(g))
     assert code == 0
     got = commands(out)
@@ -93,7 +93,7 @@ def test_replay_reports_abort_outside_box(tmp_path, capsys):
     """Gains for a +-0.3 m/s box against a flight whose v_d leaves it: exit 1, reason
     printed, ERROR status in the output and no command after the abort."""
     g = tmp_path / "small.yaml"
-    GainSchedule.from_dict(gains_dict(box=0.3)).save(str(g))
+    write_gains(g, box=0.3, design=design_for(5.0))   # the flight's signal, a smaller box
     code, out = replay(tmp_path, gains=str(g))
     assert code == 1
     text = capsys.readouterr().out
@@ -147,11 +147,11 @@ def test_replay_bad_input(tmp_path, capsys, kind, needle):
 def test_replay_bound_monitor_abort(tmp_path, capsys):
     """gamma = 0.05 (certificate alike) and a params file lowering monitor_min_energy: the
     bound monitor's L2 gain estimate exceeds gamma x margin -> bound_exceeded abort."""
-    d = gains_dict(box=5.0)
-    d["gamma"] = 0.05
-    d["certificate"]["gamma_achieved"] = 0.05
+    def tight(d):
+        d["gamma"] = 0.05
+        d["certificate"]["gamma_achieved"] = 0.05
     g = tmp_path / "tight.yaml"
-    GainSchedule.from_dict(d).save(str(g))
+    write_gains(g, box=5.0, edit=tight)
     params = tmp_path / "ctl.yaml"
     params.write_text("/**/lpv_controller:\n  ros__parameters:\n    monitor_min_energy: 0.001\n"
                       "    monitor_margin: 1.2\n")

@@ -117,3 +117,60 @@ def test_external_abort():
 def test_bad_config_names_field(cfg, field):
     with pytest.raises(ConfigError, match=field):
         SafetyConfig.from_dict(cfg)
+
+
+# ----------------------------------------------- header stamps against the node clock
+def make_tol(tol=0.01):
+    sup = SafetySupervisor(SafetyConfig(timeouts={"state": 0.05}, stamp_tolerance=tol))
+    sup.arm(10.0)
+    return sup
+
+
+def test_future_stamp_beyond_tolerance():
+    from lpv_sysid.control.safety import FUTURE_STAMP
+    sup = make_tol()
+    assert sup.on_input("state", 10.01, [0.0], 10.0) is None        # at the tolerance
+    ev = sup.on_input("state", 10.0201, [0.0], 10.01)
+    assert ev.reason == FUTURE_STAMP and "0.010 s ahead of the node clock 10.010000 s" in ev.detail
+
+
+def test_stamp_age_at_receipt_and_at_the_tick():
+    sup = make_tol()
+    assert sup.on_input("state", 9.96, [0.0], 10.0) is None        # 40 ms latency < 50 + 10
+    assert sup.check(10.0) is None
+    ev = sup.on_input("state", 9.9399, [0.0], 10.0)
+    assert ev.reason == OUT_OF_ORDER                                # went back: first reason
+    sup = make_tol()
+    sup.on_input("state", 10.0, [0.0], 10.0)
+    sup.on_input("state", 10.0, [0.0], 10.05)                       # frozen, 50 ms
+    assert sup.check(10.05) is None
+    ev = sup.on_input("state", 10.0, [0.0], 10.0601)                # 60.1 ms > 50 + 10
+    assert ev.reason == STALE and ev.detail.startswith("state: stamp frozen at 10.000000 s")
+    sup = make_tol()
+    sup.on_input("state", 10.0, [0.0], 10.0)
+    sup.on_input("state", 10.0, [0.0], 10.04)
+    ev = sup.check(10.0601)                                         # receipt 20 ms, stamp 60 ms
+    assert ev.reason == STALE and ev.detail.startswith("state: newest stamp 10.000000 s is 0.060")
+
+
+def test_stamp_checks_only_while_armed():
+    sup = SafetySupervisor(SafetyConfig(timeouts={"state": 0.05}, stamp_tolerance=0.01))
+    assert sup.on_input("state", 1e9, [0.0], 0.0) is None            # before /clock, sim time
+    with pytest.raises(ConfigError, match="stamp_tolerance"):
+        SafetyConfig(timeouts={"state": 0.05}, stamp_tolerance=-1.0)
+
+
+def test_excitation_bound_and_closed_loop_check():
+    import numpy as np
+
+    from lpv_sysid.control.safety import EXCITATION_BOUND, check_closed_loop
+    sup = make()
+    assert sup.check_excitation(10.0, [0.1, -0.2, 0.0, 0.0], [0.2, 0.2, 0.2, 0.2]) is None
+    ev = sup.check_excitation(10.0, [0.1, -0.3, 0.0, math.nan], [0.2] * 4)
+    assert ev.reason == EXCITATION_BOUND and ev.detail.startswith("excitation[1] = -0.3")
+    A = np.array([[0.0, 1.0], [0.0, 0.0]])          # double integrator
+    B = np.array([[0.0], [1.0]])
+    K_ok = np.array([[-1.0, -2.0]])                 # s^2 + 2 s + 1: poles -1, -1
+    assert check_closed_loop(K_ok[None], [[(A, B)]]) == pytest.approx(-1.0, abs=1e-6)
+    with pytest.raises(ConfigError, match="unstable at vertex 1"):
+        check_closed_loop(np.stack([K_ok, -K_ok]), [[(A, B)], [(A, B)]])

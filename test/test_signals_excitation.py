@@ -159,7 +159,23 @@ def test_time_going_backwards_is_an_error(sig2):
         core.sample(float("nan"))
     assert issubclass(TimeOrderError, SafetyError) and issubclass(TimeOrderError, LpvSysidError)
     with pytest.raises(TimeOrderError):
-        core.abort(0.5)
+        core.abort(float("nan"))
+    # an abort time before the last sample cannot fade what was already output: it starts now
+    assert core.abort(0.5) == 1.0
+
+
+def test_monotonic_time_absorbs_a_clock_jump_back():
+    from lpv_sysid.signals.excitation import MonotonicTime
+
+    clock = MonotonicTime(period=0.01)
+    assert clock.map(100.0) == (100.0, 0.0)
+    assert clock.map(100.01) == (100.01, 0.0)
+    t, jump = clock.map(3.0)                   # e.g. sim time restarted
+    assert jump == pytest.approx(97.01) and t == pytest.approx(100.02)
+    t2, jump2 = clock.map(3.5)                 # then runs on from there, re-based
+    assert jump2 == 0.0 and t2 == pytest.approx(100.52)
+    with pytest.raises(TimeOrderError):
+        clock.map(float("nan"))
 
 
 def test_progress(sig2):
@@ -239,14 +255,18 @@ def test_abort_before_any_sample_outputs_zero(sig1):
         assert s.phase == ABORTED and not np.any(s.velocity) and s.yaw_rate == 0.0
 
 
-def test_abort_stamped_ahead_starts_at_its_stamp(sig2):
+def test_abort_stamped_ahead_is_clamped_to_now(sig2):
+    """An abort stamped 1 s in the future (issue 12 item 5) fades from the last sample on:
+    half way through the 1 s raised cosine the excitation is exactly half of the undisturbed
+    signal (before, it kept full amplitude until the stamp); zero after one ramp."""
     core = ExcitationCore.phase2(sig2.t, sig2.u, sig2.names, start_time=0.0, ramp=1.0)
+    ref = ExcitationCore.phase2(sig2.t, sig2.u, sig2.names, start_time=0.0, ramp=1.0)
     core.sample(5.0)
-    core.abort(6.0)
-    s = core.sample(5.5)          # before the abort stamp: still the normal signal
-    assert np.allclose(s.u_e, sig2.evaluate([4.5])[0][3:], atol=_bound(sig2, range(3, 7)).max())
-    assert s.phase == ABORTED
-    assert not np.any(core.sample(7.0).u_e)
+    assert core.abort(6.0) == 5.0
+    s = core.sample(5.5)
+    np.testing.assert_allclose(s.u_e, 0.5 * ref.sample(5.5).u_e, rtol=1e-12, atol=1e-15)
+    assert np.any(s.u_e) and s.phase == ABORTED
+    assert not np.any(core.sample(6.0).u_e) and not np.any(core.sample(6.0).velocity)
 
 
 def test_from_file_and_status(sig2, tmp_path):

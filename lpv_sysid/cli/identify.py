@@ -30,11 +30,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def load_config(path: Path | None):
     from lpv_sysid.errors import ConfigError
     from lpv_sysid.ident.vertex import IdentificationConfig
-    from lpv_sysid.io.yaml_file import read_yaml
+    from lpv_sysid.io.yaml_file import read_yaml_mapping
 
     if path is None:
         return IdentificationConfig()
-    d = read_yaml(path)
+    d = read_yaml_mapping(path)     # an explicitly given empty or non-mapping file is an error
     try:
         return IdentificationConfig.from_dict(d)
     except ConfigError as exc:
@@ -46,10 +46,10 @@ def quadrotor_section(path: Path | None) -> dict:
     if path is None:
         return {}
     from lpv_sysid.errors import ConfigError
-    from lpv_sysid.io.yaml_file import read_yaml
+    from lpv_sysid.io.yaml_file import read_yaml_mapping
 
-    d = read_yaml(path) or {}
-    q = d.get("quadrotor", {}) if isinstance(d, dict) else None
+    d = read_yaml_mapping(path)
+    q = d.get("quadrotor", {})
     if not isinstance(q, dict):
         raise ConfigError(f"{path}: section 'quadrotor' must be a mapping")
     return q

@@ -4,8 +4,15 @@ Each module in ``lpv_sysid.cli`` that defines ``COMMAND`` (the subcommand name),
 ``HELP`` (one line), ``add_arguments(parser)`` and ``run(args) -> int`` is a
 subcommand. Modules are discovered, so adding a subcommand never edits this file.
 
-Errors derived from :class:`lpv_sysid.errors.LpvSysidError` (bad input) are
-printed as one line on stderr and exit with status 2.
+Exit status: what ``run`` returns (0, or 1 where a subcommand defines it, e.g. ``verify``
+"verification failed", ``preflight`` NO-GO, ``replay`` safety abort). Everything that ends a
+subcommand by an exception is **one line on stderr and status 2**: errors derived from
+:class:`lpv_sysid.errors.LpvSysidError` (bad input, named by the raiser), and any other
+exception escaping a subcommand (``OSError``, ``MemoryError``, ``RecursionError``,
+``UnicodeError``, ``ValueError``, ...: a hostile input that slipped past the checks), which
+is described with its type and the input files of the command; its traceback is logged only
+with ``-v``. Status 1 therefore always means a subcommand's own verdict, never a crash.
+Ctrl-C gives one line and status 130.
 """
 
 from __future__ import annotations
@@ -13,8 +20,10 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import pkgutil
 import sys
+from pathlib import Path
 from types import ModuleType
 from typing import Sequence
 
@@ -22,6 +31,9 @@ from lpv_sysid import __version__
 from lpv_sysid.errors import LpvSysidError
 
 EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130
+
+log = logging.getLogger(__name__)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -75,8 +87,62 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args._run(args) or 0)
     except LpvSysidError as exc:
-        print(f"lpv-sysid {args.command}: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        return _fail(args, str(exc))
+    except KeyboardInterrupt:
+        return _fail(args, "interrupted", EXIT_INTERRUPTED)
+    except Exception as exc:  # noqa: BLE001 - the exit-status layer: no traceback, never status 1
+        if args.verbose:
+            log.error("traceback of the error below", exc_info=True)
+        return _fail(args, describe_unexpected(exc, _inputs(args)))
+
+
+def _fail(args: argparse.Namespace, message: str, status: int = EXIT_BAD_INPUT) -> int:
+    try:
+        sys.stdout.flush()
+    except (OSError, ValueError):
+        pass
+    print(f"lpv-sysid {args.command}: error: {one_line(message)}", file=sys.stderr)
+    return status
+
+
+def one_line(message: str) -> str:
+    """``message`` with its lines joined by "; " (an error is one line on stderr)."""
+    parts = [ln.strip() for ln in str(message).splitlines() if ln.strip()]
+    return "; ".join(parts) if parts else "(no message)"
+
+
+def _inputs(args: argparse.Namespace) -> list[str]:
+    """``--name value`` of the arguments naming existing files or directories (not ``--out``)."""
+    out = []
+    for name, value in sorted(vars(args).items()):
+        if name.startswith("_") or name in ("out", "command", "mode"):
+            continue
+        for v in value if isinstance(value, (list, tuple)) else [value]:
+            if isinstance(v, (str, Path)) and str(v):
+                try:
+                    exists = os.path.lexists(v)
+                except (OSError, ValueError):
+                    exists = False
+                if exists:
+                    out.append(f"--{name.replace('_', '-')} {v}")
+    return out
+
+
+def describe_unexpected(exc: BaseException, inputs: Sequence[str] = ()) -> str:
+    """One-line description of an exception no check turned into an LpvSysidError."""
+    if isinstance(exc, OSError):
+        where = " -> ".join(str(f) for f in (exc.filename, exc.filename2) if f is not None)
+        what = exc.strerror or str(exc) or type(exc).__name__
+        text = f"{where}: {what}" if where else f"{type(exc).__name__}: {what}"
+    elif isinstance(exc, MemoryError):
+        text = "out of memory (an input is too large for this machine)"
+    elif isinstance(exc, RecursionError):
+        text = "an input is nested too deeply (RecursionError)"
+    else:
+        text = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+    if inputs and not isinstance(exc, OSError):
+        text += f" (inputs: {', '.join(inputs)})"
+    return text + " [rerun with -v for the traceback]"
 
 
 if __name__ == "__main__":

@@ -7,15 +7,20 @@ The node's message-level runtime (the same code the node runs,
 :mod:`lpv_sysid.nodes.controller_runtime`) receives the bag's input messages in
 timestamp order (bag receive time) and its timer ticks at ``rate_hz`` on the bag's clock;
 what it would have published (``actuator_command``, abort ``status``) is written to a new
-bag. The runtime is started at the first input message, as with ``auto_start``. Use it to
-check a gains file against a real flight log before flying: exit status 1 when the
-replayed controller would have aborted (the reason is printed), 0 otherwise, 2 on bad
+bag. The runtime is started at the first input message, as with ``auto_start``. The
+parameter file goes through the node's own declaration and validation
+(:class:`~lpv_sysid.nodes.controller_runtime.ControllerSettings`: the same types, ranges and
+cross-field rules, so a value the node would refuse is refused here too), and the gains
+through the same start-up checks (certificate hash, closed-loop stability, design envelope).
+Use it to check a gains file against a real flight log before flying: exit status 1 when
+the replayed controller would have aborted (the reason is printed), 0 otherwise, 2 on bad
 input.
 """
 
 from __future__ import annotations
 
 import heapq
+import logging
 import os
 from pathlib import Path
 
@@ -24,6 +29,7 @@ from lpv_sysid.errors import BagError, ConfigError
 COMMAND = "replay"
 HELP = "replay a bag through a node core (lpv_controller) and write its outputs as a bag"
 NODES = ("lpv_controller",)
+LOG = logging.getLogger(__name__)
 
 
 def add_arguments(parser) -> None:
@@ -94,9 +100,7 @@ def replay_controller(bag: str, params: dict, out: str, namespace: str = "/lpv_s
     from lpv_sysid.io.bag import BagWriter
     from lpv_sysid.nodes.controller_runtime import (INPUT_TOPICS, ControllerRuntime,
                                                     ControllerSettings)
-    shell_only = {"auto_start", "status_rate_hz"}
-    settings = ControllerSettings.from_dict({k: v for k, v in params.items()
-                                             if k not in shell_only})
+    settings = ControllerSettings.from_dict(params)
     ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
     per_topic, recorded = read_inputs(bag, [f"{ns}/{t}" for t in INPUT_TOPICS],
                                       f"{ns}/actuator_command")
@@ -108,6 +112,13 @@ def replay_controller(bag: str, params: dict, out: str, namespace: str = "/lpv_s
     if not inputs:
         raise BagError(f"bag {bag}: the input topics hold no messages")
     rt = ControllerRuntime(settings, M.MsgFactory.rosbags(), f"{ns}/lpv_controller")
+    log = {"info": LOG.info, "warn": LOG.warning, "error": LOG.error}
+
+    def drain():
+        for level, text in rt.take_log():
+            log[level](text)
+
+    drain()
     period = round(1e9 / settings.rate_hz)
     t0 = inputs[0][0]
     rt.start(t0 * 1e-9)
@@ -124,6 +135,7 @@ def replay_controller(bag: str, params: dict, out: str, namespace: str = "/lpv_s
             for rel, msg in rt.tick(t_ns * 1e-9):
                 w.write(f"{ns}/{rel}", t_ns, msg)
                 n_out[f"{ns}/{rel}"] += 1
+            drain()
 
         # tick times: the recorded command stamps (then the grid continues after them)
         grid = iter(recorded if use_recorded else ())
@@ -152,8 +164,8 @@ def replay_controller(bag: str, params: dict, out: str, namespace: str = "/lpv_s
 
 
 def run(args) -> int:
-    from lpv_sysid.nodes.controller_runtime import load_settings
-    params = load_settings(args.params, args.node)
+    from lpv_sysid.nodes.parameters import yaml_parameters
+    params = yaml_parameters(args.params, args.node)
     if args.gains:
         params["gains_file"] = args.gains
     elif params.get("gains_file") and not os.path.isabs(params["gains_file"]) \

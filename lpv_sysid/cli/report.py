@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 from pathlib import Path
 
 COMMAND = "report"
@@ -25,7 +26,13 @@ def run(args: argparse.Namespace) -> int:
     from lpv_sysid.report.markdown import write_report
 
     if args.strict:
-        problems = load_run(args.run, verify=not args.no_verify).problems
+        data_log = logging.getLogger("lpv_sysid.report.data")
+        level = data_log.level
+        data_log.setLevel(logging.ERROR)    # the problems are the one error line, not also warnings
+        try:
+            problems = load_run(args.run, verify=not args.no_verify).problems
+        finally:
+            data_log.setLevel(level)
         if problems:
             raise ConfigError("; ".join(problems.values()))
     path = write_report(args.run, args.out, verify=not args.no_verify)

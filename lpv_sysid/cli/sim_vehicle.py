@@ -2,8 +2,12 @@
 
 ``lpv-sysid sim-vehicle --udp 127.0.0.1:14540`` sends like PX4 SITL to the offboard
 port 14540 (connect the bridge with ``udpin:127.0.0.1:14540`` or MAVSDK with
-``udpin://0.0.0.0:14540``). It runs in real time until ``--duration`` elapses or Ctrl-C,
-then prints the mode/arming history it went through.
+``udpin://127.0.0.1:14540``). Its socket is bound to the local interface that routes to
+that destination (loopback by default), never to all interfaces; ``--bind HOST[:PORT]``
+chooses another. ``--config config/sim_vehicle_px4.yaml`` loads every option of
+:class:`lpv_sysid.mavlink.sim_vehicle.SimVehicleConfig` (flags given on the command line
+win). It runs in real time until ``--duration`` elapses or Ctrl-C, then prints the
+mode/arming history it went through.
 """
 
 from __future__ import annotations
@@ -25,16 +29,30 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                    help="send to HOST:PORT like PX4 SITL (default 127.0.0.1:14540)")
     g.add_argument("--connect", metavar="URL", default=None,
                    help="any link URL instead (udpin:H:P, udpout:H:P, tcpin:H:P, serial device)")
+    parser.add_argument("--config", metavar="FILE", default=None,
+                        help="YAML with SimVehicleConfig keys (e.g. config/sim_vehicle_px4.yaml)")
+    parser.add_argument("--bind", metavar="HOST[:PORT]", default=None,
+                        help="local address of the UDP socket (default: the interface that routes to "
+                             "the destination, 127.0.0.1 for a loopback destination)")
     parser.add_argument("--duration", type=float, default=None,
                         help="stop after this many simulated seconds (default: run until Ctrl-C)")
     parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                         help="override a PX4 parameter, e.g. COM_OBL_RC_ACT=5 (repeatable)")
-    parser.add_argument("--mode", default="HOLD", help="initial PX4 mode name (default HOLD)")
-    parser.add_argument("--system-id", type=int, default=1, help="MAVLink system id (default 1)")
-    parser.add_argument("--physics-hz", type=float, default=250.0, help="physics/controller rate")
+    parser.add_argument("--mode", default=None, help="initial PX4 mode name (default HOLD)")
+    parser.add_argument("--system-id", type=int, default=None, help="MAVLink system id (default 1)")
+    parser.add_argument("--physics-hz", type=float, default=None, help="physics/controller rate (default 250)")
     parser.add_argument("--signing-key", default=None, metavar="FILE",
-                        help="MAVLink 2 signing secret (32 raw bytes or 64 hex chars)")
-    parser.add_argument("--noise", action="store_true", help="add sensor noise to the telemetry")
+                        help="MAVLink 2 signing secret (32 raw bytes or 64 hex chars): unsigned "
+                             "messages are then ignored")
+    parser.add_argument("--allow-unsigned", action="store_true", default=None,
+                        help="with --signing-key: still accept unsigned messages")
+    parser.add_argument("--rc", action="store_true", default=None,
+                        help="an RC transmitter is present (sticks centred); default: no RC, as SITL")
+    parser.add_argument("--no-esc-telemetry", action="store_true", default=None,
+                        help="no ESC_STATUS (like SIH or PWM ESCs); motor outputs only")
+    parser.add_argument("--actuator-output-scale", choices=("pwm", "normalized"), default=None,
+                        help="ACTUATOR_OUTPUT_STATUS values (default pwm)")
+    parser.add_argument("--noise", action="store_true", default=None, help="add sensor noise to the telemetry")
     parser.add_argument("--speed", type=float, default=1.0,
                         help="simulated seconds per wall-clock second (default 1 = real time)")
 
@@ -46,36 +64,59 @@ def _params(items: list[str]) -> dict[str, float]:
         if not sep or not name:
             raise ConfigError(f"--param {it!r}: expected NAME=VALUE")
         try:
-            out[name.strip().upper()] = float(value)
+            v = float(value)
         except ValueError:
             raise ConfigError(f"--param {it!r}: value is not a number") from None
+        out[name.strip().upper()] = int(v) if v.is_integer() else v
     return out
 
 
-def run(args: argparse.Namespace) -> int:
-    from lpv_sysid.mavlink.sim_vehicle import SimVehicle, SimVehicleConfig
+def build_config(args: argparse.Namespace):
+    """The SimVehicleConfig of the command line (``--config`` file, then the flags)."""
+    from lpv_sysid.mavlink.sim_vehicle import SimVehicleConfig
 
+    base = SimVehicleConfig.load(args.config) if args.config else SimVehicleConfig()
+    kw: dict = {}
     if args.connect:
-        url = args.connect
-    else:
+        kw["url"] = args.connect
+    elif args.udp or not args.config:
         hostport = args.udp or "127.0.0.1:14540"
         if hostport.count(":") != 1:
             raise ConfigError(f"--udp {hostport!r}: expected HOST:PORT")
-        url = f"udpout:{hostport}"
+        kw["url"] = f"udpout:{hostport}"
+    flags = {"bind": args.bind, "initial_mode": args.mode, "system_id": args.system_id,
+             "physics_hz": args.physics_hz, "signing_key_file": args.signing_key,
+             "allow_unsigned": args.allow_unsigned, "rc_present": args.rc,
+             "esc_telemetry": False if args.no_esc_telemetry else None,
+             "actuator_output_scale": args.actuator_output_scale, "sensor_noise": args.noise}
+    kw.update({k: v for k, v in flags.items() if v is not None})
+    if args.param:
+        kw["params"] = {**dict(base.params), **_params(args.param)}
+    if kw.get("system_id") is not None and not 1 <= kw["system_id"] <= 255:
+        raise ConfigError("--system-id must be 1..255")
+    d = {k: getattr(base, k) for k in base.__dataclass_fields__}
+    d.update(kw)
+    return SimVehicleConfig.from_dict(d)
+
+
+def run(args: argparse.Namespace) -> int:
+    from lpv_sysid.mavlink.sim_vehicle import SimVehicle
+
     if args.duration is not None and not args.duration > 0:
         raise ConfigError("--duration must be positive")
     if not (args.speed > 0 and args.speed <= 100):
         raise ConfigError("--speed must be in (0, 100]")
-    if not 1 <= args.system_id <= 255:
-        raise ConfigError("--system-id must be 1..255")
-    cfg = SimVehicleConfig(url=url, system_id=args.system_id, physics_hz=args.physics_hz,
-                           params=_params(args.param), initial_mode=args.mode,
-                           signing_key_file=args.signing_key, sensor_noise=args.noise)
+    cfg = build_config(args)
     veh = SimVehicle(cfg)
     veh.open()
+    local = f"{veh.local_address[0]}:{veh.local_address[1]}" if veh.local_address else "n/a"
     print(f"sim-vehicle: PX4-like quadrotor (system {cfg.system_id}, autopilot PX4 v1.16 emulation) "
-          f"on {url}; mode {veh.mode.name}; "
-          + ", ".join(f"{k}={veh.param(k):g}" for k in ("COM_OF_LOSS_T", "COM_OBL_RC_ACT", "COM_DISARM_PRFLT")),
+          f"on {cfg.url} (local socket {local}); mode {veh.mode.name}; "
+          f"RC {'present' if cfg.rc_present else 'absent'}; ESC telemetry "
+          f"{'on' if cfg.esc_telemetry else 'off'}; signing "
+          f"{'on' if cfg.signing_key_file else 'off'}; "
+          + ", ".join(f"{k}={veh.param(k):g}" for k in ("COM_OF_LOSS_T", "COM_OBL_RC_ACT", "COM_DISARM_PRFLT",
+                                                         "COM_RC_IN_MODE")),
           flush=True)
     try:
         veh.run_realtime(args.duration, speed=args.speed)
@@ -88,5 +129,7 @@ def run(args: argparse.Namespace) -> int:
           f"position NED {[round(float(v), 2) for v in veh.x[0:3]]}")
     for t, mode, reason in veh.mode_log:
         print(f"  t={t:7.2f} s  {mode:<10} {reason}")
+    for t, err in veh.param_rejections:
+        print(f"  t={t:7.2f} s  PARAM_SET refused: {err}")
     print(f"  link: {veh.link.stats.as_dict()}")
     return 0

@@ -5,6 +5,10 @@
 Writes gains.yaml (ARCHITECTURE.md section 5) with the certificate entry and the sidecar
 ``<out stem>.cert.npz`` (X, S, H, scaling) referenced by name and sha256; then runs the
 independent verification (``lpv-sysid verify``) on what it wrote unless ``--no-verify``.
+The certificate also records ``gains_sha256`` (the hash of the certified law), the sidecar
+holds the certified systems (A_ij, B_ij), and with a phase-2 signals summary (``--summary``)
+``design`` (the signal envelope the gains are designed for): the flight runtime
+(lpv_controller_node) refuses gains without all three.
 
 With ``uncertainty.common_b: true`` (config/synthesis.yaml) the input matrix of the Eq. (23)
 polytope is the interval hull over all vertices, common to every vertex (lpv_sysid.models.lpv),
@@ -19,6 +23,7 @@ import argparse
 import logging
 import time
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 
@@ -106,6 +111,22 @@ def weights_from_config(cfg: dict, n_u: int, summary_path: str | None, cfg_path:
     return R, Q, "Eqs. (27)-(28)"
 
 
+def design_from_summary(source: str) -> Optional[dict]:
+    """``certificate.design`` (lpv_sysid.signals.excitation.design_envelope) when the weights came
+    from a phase-2 signals summary (``source`` is its path), else None."""
+    from lpv_sysid.signals.excitation import design_envelope
+    from lpv_sysid.synthesis.files import read_yaml
+
+    if source.startswith("Eqs."):
+        return None
+    try:
+        return design_envelope(read_yaml(source, "signals summary"),
+                               source=f"signals summary {Path(source).name}")
+    except ConfigError as exc:
+        print(f"note: {exc}")
+        return None
+
+
 def velocity_index(cfg: dict, state_names: tuple) -> tuple[int, ...]:
     names = cfg.get("velocity_states", ["u", "v", "w"])
     try:
@@ -176,7 +197,8 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     side = out.with_name(out.stem + ".cert.npz")
-    side_sha = save_certificate_npz(side, res.X, res.S, res.H, res.scaling.t, res.scaling.s_u, R, C)
+    side_sha = save_certificate_npz(side, res.X, res.S, res.H, res.scaling.t, res.scaling.s_u,
+                                    R, C, systems=model.systems)
     cert = {
         "lmi": "seed 0 Lemma 1" + (" (common B: scheduling box interior covered)" if model.common_input is not None
                                    else " (per-vertex B: vertices certified)")
@@ -200,6 +222,13 @@ def run(args: argparse.Namespace) -> int:
     }
     if opts.region is not None:
         cert["region"] = opts.region.to_dict()
+    design = design_from_summary(source)
+    if design is not None:
+        cert["design"] = design
+    else:
+        print("note: no phase-2 signals summary (--summary): the certificate has no design "
+              "envelope, so lpv_controller_node will refuse these gains (it bounds v_d and u_e "
+              "by that envelope)")
     gamma_file = float(opts.gamma) if not opts.minimize_gamma else float(max(res.gamma_certified, 1e-12))
     F_ff = ff_layout = F_jerk = None
     if ff_enabled and "feedforward" not in cfg:

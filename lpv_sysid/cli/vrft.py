@@ -14,6 +14,7 @@ model-reference cost ||M - T||_2^2 (Eq. 3.4) with the true plant and the thesis'
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 import numpy as np
@@ -53,7 +54,7 @@ def _read_yaml(path: str) -> dict:
     from lpv_sysid.io.yaml_file import read_yaml
 
     p = Path(path)
-    if not p.is_file():
+    if not os.path.lexists(p):
         raise ConfigError(f"config file not found: {p}")
     d = read_yaml(p)
     if not isinstance(d, dict):
@@ -62,14 +63,12 @@ def _read_yaml(path: str) -> dict:
 
 
 def _load_npz(path: str) -> dict:
+    from lpv_sysid.io.safe_open import read_npz
+
     p = Path(path)
-    if not p.is_file():
+    if not os.path.lexists(p):
         raise ConfigError(f"data file not found: {p}")
-    try:
-        with np.load(p, allow_pickle=False) as z:
-            d = {k: np.asarray(z[k]) for k in z.files}
-    except (OSError, ValueError) as exc:
-        raise ConfigError(f"{p}: not a readable npz file ({exc})") from None
+    d = read_npz(p)     # regular file, size cap, no pickles, no complex arrays
     for k in ("t", "u", "y"):
         if k not in d:
             raise ConfigError(f"{p}: missing array {k!r} (have {sorted(d)})")

@@ -45,6 +45,11 @@ One :meth:`LpvController.step` does, in this order:
    ``info["bound_exceeded"]`` latches.
 
 Pure numpy, no allocation beyond a few small temporaries; see bench/bench_lpv_law.py.
+
+:class:`LpvControllerConfig` validates itself on construction (every path: node, replay,
+simulation, library). :class:`ReferenceLimiter` is the input conditioning the flight runtime
+puts in front of the law: v_d limited to the rate and acceleration envelope the gains were
+designed for, so a reference step cannot become a feedforward spike.
 """
 
 from __future__ import annotations
@@ -56,22 +61,59 @@ from typing import Any, Optional
 import numpy as np
 
 from lpv_sysid.errors import ConfigError, SafetyError
+from lpv_sysid.validation import is_finite_number
 
 
 @dataclass(frozen=True)
 class LpvControllerConfig:
-    """Options of the runtime law (``lpv_controller`` section of the node config)."""
+    """Options of the runtime law (``lpv_controller`` section of the node config), checked by
+    :meth:`validate` on every construction."""
 
     u_esc_min: float = 0.0
     u_esc_max: float = 1.0
     rate_limit: Optional[tuple] = None      # per virtual channel, units of u per second
-    monitor_margin: float = 1.2             # flag when gain > gamma * margin
+    monitor_margin: float = 1.2             # flag when gain > gamma * margin (>= 1)
     monitor_min_energy: float = 0.05        # ||u_e||_2^2 needed before the gain is judged
     velocity_index: tuple = (2, 3, 4)       # u, v, w in the 12-state of DESIGN.md
     feedforward: bool = True                # use the schedule's F_ff when it has one
     ff_filter_tau: float = 0.05             # s, derivative filter of v_d when a is not given
     ff_jerk_tau: float = 0.2                # s, second stage (jerk) filter when j is not given
     monitor_window: Optional[float] = None  # s, exponential forgetting of the monitor (None: running)
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> None:
+        """Every rule, for every construction (node, replay, simulation, library): a config
+        that exists is one the law can fly."""
+        def bad(msg: str):
+            raise ConfigError(f"lpv_controller: {msg}")
+
+        def num(name: str, lo: float, hi: float = math.inf, lo_open: bool = False) -> float:
+            v = getattr(self, name)
+            if not is_finite_number(v) or (v <= lo if lo_open else v < lo) or v > hi:
+                rng = f"{'(' if lo_open else '['}{lo:g}, {hi:g}]"
+                bad(f"{name} must be a finite number in {rng}, got {v!r}")
+            return float(v)
+
+        lo, hi = num("u_esc_min", 0.0, 1.0), num("u_esc_max", 0.0, 1.0)
+        if not lo < hi:
+            bad(f"need u_esc_min < u_esc_max, got {lo:g} >= {hi:g}")
+        num("monitor_margin", 1.0)
+        num("monitor_min_energy", 0.0, lo_open=True)
+        num("ff_filter_tau", 0.0)
+        num("ff_jerk_tau", 0.0)
+        if self.monitor_window is not None:
+            num("monitor_window", 0.0, lo_open=True)
+        if self.rate_limit is not None:
+            if not all(is_finite_number(r) and r > 0 for r in self.rate_limit):
+                bad(f"rate_limit entries must be finite and > 0 (units of u per second), "
+                    f"got {list(self.rate_limit)}")
+        if not isinstance(self.feedforward, bool):
+            bad(f"feedforward must be true or false, got {self.feedforward!r}")
+        if not all(isinstance(i, (int, np.integer)) and not isinstance(i, bool) and i >= 0
+                   for i in self.velocity_index):
+            bad(f"velocity_index must be state indices, got {self.velocity_index!r}")
 
     @classmethod
     def from_dict(cls, d: Optional[dict]) -> "LpvControllerConfig":
@@ -80,27 +122,10 @@ class LpvControllerConfig:
         if bad:
             raise ConfigError(f"lpv_controller: unknown key(s) {sorted(bad)}")
         if "rate_limit" in d and d["rate_limit"] is not None:
-            d["rate_limit"] = tuple(float(v) for v in d["rate_limit"])
+            d["rate_limit"] = tuple(d["rate_limit"])
         if "velocity_index" in d:
-            d["velocity_index"] = tuple(int(v) for v in d["velocity_index"])
-        cfg = cls(**d)
-        if not cfg.u_esc_min < cfg.u_esc_max:
-            raise ConfigError("lpv_controller: need u_esc_min < u_esc_max")
-        if not (cfg.monitor_margin > 0 and cfg.monitor_min_energy > 0):
-            raise ConfigError("lpv_controller: monitor_margin and monitor_min_energy must be > 0")
-        if cfg.rate_limit is not None and any(not (r > 0) for r in cfg.rate_limit):
-            raise ConfigError("lpv_controller: rate_limit entries must be > 0")
-        if not isinstance(cfg.feedforward, bool):
-            raise ConfigError(f"lpv_controller: feedforward must be true or false, got {cfg.feedforward!r}")
-        if not (isinstance(cfg.ff_filter_tau, (int, float)) and math.isfinite(cfg.ff_filter_tau)
-                and cfg.ff_filter_tau >= 0):
-            raise ConfigError(f"lpv_controller: ff_filter_tau must be >= 0 s, got {cfg.ff_filter_tau!r}")
-        if not (isinstance(cfg.ff_jerk_tau, (int, float)) and math.isfinite(cfg.ff_jerk_tau)
-                and cfg.ff_jerk_tau >= 0):
-            raise ConfigError(f"lpv_controller: ff_jerk_tau must be >= 0 s, got {cfg.ff_jerk_tau!r}")
-        if cfg.monitor_window is not None and not (math.isfinite(cfg.monitor_window) and cfg.monitor_window > 0):
-            raise ConfigError(f"lpv_controller: monitor_window must be > 0 s, got {cfg.monitor_window!r}")
-        return cfg
+            d["velocity_index"] = tuple(d["velocity_index"])
+        return cls(**d)
 
 
 def _schedule_arrays(schedule: Any) -> tuple:
@@ -388,6 +413,100 @@ class LpvController:
         if min(lst) < lo or max(lst) > hi:
             return self.mix @ np.clip(esc, lo, hi), True
         return u, False
+
+
+class ReferenceLimiter:
+    """The reference the law follows: v_d limited in rate and acceleration to the design
+    envelope of the gains (``certificate.design``, :class:`lpv_sysid.io.formats.DesignEnvelope`),
+    updated once per reference message at its header stamp.
+
+    Per axis, with rate bound ``R1`` [m/s^2], acceleration bound ``R2`` [m/s^3] and the
+    table's knot interval ``T`` (the excitation node plays the table linearly interpolated,
+    so the played v_d has slope jumps at the knots): the output y has ``|dy/dt| <= R1`` and its
+    slope stays within ``R2 (T + dt)`` of a smooth rate ``w_c`` that itself changes by at most
+    ``R2 dt`` per message -- over any window W the slope changes by at most
+    ``R2 (W + 2 T + 2 dt)``.
+    A reference inside the envelope passes unchanged (bit for bit): the chord slopes of the
+    linear interpolant of a signal with ``|s''| <= R2`` stay within ``R2 (T + dt)`` of s', and
+    ``|s'| <= R1``. Outside it, y approaches the reference at the bounds with time-optimal
+    braking (no overshoot beyond one step), so a step 0 -> 4.9 m/s becomes a ramp whose
+    feedforward acceleration never exceeds R1.
+
+    :meth:`update` also reports when the *incoming* reference exceeds the envelope by
+    ``margin``: chord slope ``|dv/dt| > margin R1``, or a slope change between consecutive
+    messages beyond ``margin 2 R2 (dt + T)`` (the largest change a signal inside the envelope
+    can show, mean-value theorem over the knots); the caller aborts on it.
+    """
+
+    def __init__(self, rate_max, accel_max, knot_interval: float, margin: float) -> None:
+        self.R1 = np.asarray(rate_max, dtype=float)
+        self.R2 = np.asarray(accel_max, dtype=float)
+        if self.R1.shape != self.R2.shape or self.R1.ndim != 1 or not (
+                np.all(self.R1 > 0) and np.all(self.R2 > 0) and np.all(np.isfinite(self.R1))
+                and np.all(np.isfinite(self.R2))):
+            raise ConfigError(f"reference limiter: rate {self.R1.tolist()} and acceleration "
+                              f"{self.R2.tolist()} bounds must be positive, finite, one per axis")
+        if not (is_finite_number(knot_interval) and knot_interval >= 0.0):
+            raise ConfigError("reference limiter: knot interval must be >= 0, got "
+                              f"{knot_interval!r}")
+        if not (is_finite_number(margin) and margin >= 1.0):
+            raise ConfigError(f"reference limiter: margin must be >= 1, got {margin!r}")
+        self.T = float(knot_interval)
+        self.margin = float(margin)
+        self.reset()
+
+    def reset(self) -> None:
+        self.y: Optional[np.ndarray] = None     # the limited reference
+        self.w = np.zeros(self.R1.size)        # its slope
+        self.wc = np.zeros(self.R1.size)       # the smooth rate it stays close to
+        self.t: Optional[float] = None
+        self.r_prev: Optional[np.ndarray] = None
+        self.w_in: Optional[np.ndarray] = None  # chord slope of the incoming reference
+        self.limited = 0                        # messages on which the limiter acted
+
+    def update(self, t: float, r) -> tuple[np.ndarray, Optional[str]]:
+        """The limited reference after the message ``(t, r)``, and a description of how the
+        incoming reference exceeds the envelope by the margin (None when it does not). A
+        stamp not after the previous one changes nothing (the supervisor judges stamps)."""
+        r = np.array(r, dtype=float)
+        if self.y is None:
+            self.y, self.t, self.r_prev = r.copy(), float(t), r
+            return self.y, None
+        dt = float(t) - self.t
+        if not dt > 0.0:
+            return self.y, None
+        w_in = (r - self.r_prev) / dt
+        excess = None
+        over = np.flatnonzero(np.abs(w_in) > self.margin * self.R1)
+        if over.size:
+            k = int(over[0])
+            excess = (f"reference[{k}] changes at {w_in[k]:.4g} m/s^2, beyond the design rate "
+                      f"{self.R1[k]:.4g} m/s^2 x margin {self.margin:g}")
+        elif self.w_in is not None:
+            jump = np.abs(w_in - self.w_in)
+            allowed = self.margin * 2.0 * self.R2 * (dt + self.T)
+            over = np.flatnonzero(jump > allowed)
+            if over.size:
+                k = int(over[0])
+                excess = (f"reference[{k}] slope changed by {jump[k]:.4g} m/s^2 in {dt:.4g} s, "
+                          f"beyond the design acceleration {self.R2[k]:.4g} m/s^3 x margin "
+                          f"{self.margin:g} (allowed {allowed[k]:.4g} m/s^2)")
+        band = self.R2 * (self.T + dt)         # slope tolerance around the smooth rate
+        step = self.R2 * dt                     # change of the smooth rate per message
+        w_des = (r - self.y) / dt
+        if np.all(np.abs(w_des) <= self.R1) and np.all(np.abs(w_des - self.wc) <= step + band):
+            y, w = r, w_des                      # inside the envelope: followed exactly
+        else:
+            e0 = self.r_prev - self.y            # gap before this message
+            catch = np.sign(e0) * np.minimum(np.abs(e0) / dt, np.sqrt(2.0 * self.R2 * np.abs(e0)))
+            w = np.clip(np.clip(w_in, -self.R1, self.R1) + catch,
+                        self.wc - step - band, self.wc + step + band)
+            w = np.clip(w, -self.R1, self.R1)
+            y = self.y + w * dt
+            self.limited += 1
+        self.wc = self.wc + np.clip(w - self.wc, -step, step)
+        self.y, self.w, self.t, self.r_prev, self.w_in = y, w, float(t), r, w_in
+        return self.y, excess
 
 
 def _nonfinite_message(t, x, v_d, u_e) -> str:

@@ -4,12 +4,27 @@ Watches the inputs of the phase-2 loop (seed 0 Sec. 4: the LPV controller is onl
 certified inside the scheduling box and with fresh state feedback) and latches an abort
 on the first of:
 
-- ``stale``          an input stream older than its timeout (receipt time, node clock);
+- ``stale``          an input stream older than its timeout: by receipt time, or by its
+                     header stamp (a stamp frozen while messages keep arriving, or data
+                     stamped long ago, ages like a silent stream; ``stamp_tolerance`` allows
+                     for transport latency);
+- ``future_stamp``   a header stamp ahead of the node clock by more than ``stamp_tolerance``;
 - ``out_of_order``   a stream's header stamp going backwards;
 - ``non_finite``     NaN/inf in any input value or stamp;
 - ``out_of_box``     the scheduling vector v_d outside the box (plus a margin);
 - ``bound_exceeded`` the bound monitor flag raised (state/excitation bounds);
+- ``excitation_bound`` the excitation u_e beyond what the gains were designed for;
+- ``reference_envelope`` the reference v_d changing faster than the gains were designed for;
 - ``external``       an operator or another node asked for an abort.
+
+Stamps and ``t_now`` must come from the same clock source: the shells pass the node clock,
+which is the simulation time under ``use_sim_time`` and the system (wall) time otherwise,
+and every publisher of the graph stamps with its node clock (``io/messages``); a stamp
+from another clock source (e.g. wall time against sim time) is refused as stale or from
+the future, never silently accepted.
+
+:func:`check_closed_loop` is the start-up re-check of the gains against the certified
+systems (eigenvalues of ``A_ij + B_ij K_i``, no LMI).
 
 Once aborted, :attr:`action` is the safe state: excitation off and no actuator command
 (the bridge then stops offboard streaming so PX4 takes control back, ARCHITECTURE.md
@@ -33,17 +48,23 @@ NON_FINITE = "non_finite"
 OUT_OF_BOX = "out_of_box"
 BOUND_EXCEEDED = "bound_exceeded"
 EXTERNAL = "external"
-REASONS = (STALE, OUT_OF_ORDER, NON_FINITE, OUT_OF_BOX, BOUND_EXCEEDED, EXTERNAL)
+FUTURE_STAMP = "future_stamp"
+EXCITATION_BOUND = "excitation_bound"
+REFERENCE_ENVELOPE = "reference_envelope"
+REASONS = (STALE, OUT_OF_ORDER, NON_FINITE, OUT_OF_BOX, BOUND_EXCEEDED, EXTERNAL, FUTURE_STAMP,
+           EXCITATION_BOUND, REFERENCE_ENVELOPE)
 
 
 @dataclass(frozen=True)
 class SafetyConfig:
-    """Stream timeouts [s] and the scheduling box (seed 0 Eq. 17, ``v_d`` in a box)."""
+    """Stream timeouts [s], the tolerance of header stamps against the node clock [s] and
+    the scheduling box (seed 0 Eq. 17, ``v_d`` in a box)."""
 
     timeouts: Mapping[str, float]
     box_min: tuple[float, ...] = ()
     box_max: tuple[float, ...] = ()
     box_margin: float = 0.0
+    stamp_tolerance: float = 0.0
 
     def __post_init__(self):
         for name, tmo in self.timeouts.items():
@@ -58,10 +79,13 @@ class SafetyConfig:
             raise ConfigError("safety: box_min must be finite and below box_max")
         if not math.isfinite(self.box_margin) or self.box_margin < 0.0:
             raise ConfigError(f"safety: box_margin must be >= 0, got {self.box_margin!r}")
+        tol = self.stamp_tolerance
+        if not (isinstance(tol, (int, float)) and math.isfinite(tol) and tol >= 0.0):
+            raise ConfigError(f"safety: stamp_tolerance must be >= 0, got {tol!r}")
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "SafetyConfig":
-        known = {"timeouts", "box_min", "box_max", "box_margin"}
+        known = {"timeouts", "box_min", "box_max", "box_margin", "stamp_tolerance"}
         bad = set(d) - known
         if bad:
             raise ConfigError(f"safety: unknown key(s) {sorted(bad)}")
@@ -70,7 +94,8 @@ class SafetyConfig:
         return cls(timeouts=dict(d["timeouts"]),
                    box_min=tuple(float(v) for v in d.get("box_min", ())),
                    box_max=tuple(float(v) for v in d.get("box_max", ())),
-                   box_margin=float(d.get("box_margin", 0.0)))
+                   box_margin=float(d.get("box_margin", 0.0)),
+                   stamp_tolerance=float(d.get("stamp_tolerance", 0.0)))
 
 
 @dataclass(frozen=True)
@@ -160,6 +185,20 @@ class SafetySupervisor:
                               f"{stream}: stamp {stamp:.6f} s before previous {last:.6f} s")
         self._last_stamp[stream] = float(stamp)
         self._last_rx[stream] = float(t_now)
+        if self.armed and stream in self.config.timeouts:
+            tol = self.config.stamp_tolerance
+            if stamp - t_now > tol:
+                return self.abort(t_now, FUTURE_STAMP,
+                                  f"{stream}: stamp {stamp:.6f} s is {stamp - t_now:.3f} s ahead "
+                                  f"of the node clock {t_now:.6f} s (tolerance {tol:g} s; same "
+                                  "clock source? use_sim_time on every node or on none)")
+            limit = self.config.timeouts[stream] + tol
+            if t_now - stamp > limit:
+                age = t_now - stamp
+                what = (f"stamp frozen at {stamp:.6f} s for {age:.3f} s while messages keep "
+                        "arriving" if last == stamp else f"stamp {age:.3f} s old at receipt")
+                return self.abort(t_now, STALE, f"{stream}: {what} (timeout "
+                                  f"{self.config.timeouts[stream]:g} s + tolerance {tol:g} s)")
         return self.event
 
     def check_scheduling(self, t: float, v_d: Sequence[float] | np.ndarray) -> SafetyEvent | None:
@@ -192,6 +231,7 @@ class SafetySupervisor:
         """Staleness of every configured stream at ``t_now`` (only while armed)."""
         if not self.armed or self.aborted:
             return self.event
+        tol = self.config.stamp_tolerance
         for stream, timeout in self.config.timeouts.items():
             since = self._last_rx.get(stream, self._t_arm)
             age = t_now - since
@@ -201,4 +241,57 @@ class SafetySupervisor:
                 else:
                     what = f"last message {age:.3f} s ago"
                 return self.abort(t_now, STALE, f"{stream}: {what} (timeout {timeout:g} s)")
+            # the data's own age: a stamp frozen while messages keep arriving ages too
+            stamp = max(self._last_stamp.get(stream, self._t_arm), self._t_arm)
+            if t_now - stamp > timeout + tol:
+                return self.abort(t_now, STALE,
+                                  f"{stream}: newest stamp {stamp:.6f} s is {t_now - stamp:.3f} s "
+                                  f"old although messages arrive (stamp frozen or delayed; "
+                                  f"timeout {timeout:g} s + tolerance {tol:g} s)")
         return self.event
+
+    def check_excitation(self, t: float, u_e: Sequence[float] | np.ndarray,
+                         limit: Sequence[float] | np.ndarray) -> SafetyEvent | None:
+        """Abort when ``|u_e[k]| > limit[k]`` for a channel (the excitation the gains were
+        designed for times the margin; the law applies ``R u_e``, seed 0 Eq. 31)."""
+        u = np.abs(np.asarray(u_e, dtype=float))
+        lim = np.asarray(limit, dtype=float)
+        bad = np.flatnonzero(~(u <= lim))
+        if bad.size:
+            k = int(bad[0])
+            value = float(np.asarray(u_e)[k])
+            return self.abort(t, EXCITATION_BOUND, f"excitation[{k}] = {value:.4g} beyond the "
+                              f"designed bound {lim[k]:.4g} (design peak x margin)")
+        return self.event
+
+
+def closed_loop_abscissa(K: np.ndarray,
+                         systems: Sequence[Sequence[tuple]]) -> tuple[float, int, int]:
+    """Largest real part of the eigenvalues of ``A_ij + B_ij K_i`` over every vertex i and
+    certified system j (seed 0 Eq. 23 polytope; continuous time), with its (i, j)."""
+    worst, where = -math.inf, (-1, -1)
+    for i, (Ki, lst) in enumerate(zip(K, systems)):
+        for j, (A, B) in enumerate(lst):
+            a = float(np.max(np.linalg.eigvals(np.asarray(A) + np.asarray(B) @ Ki).real))
+            if not a <= worst:
+                worst, where = a, (i, j)
+    return worst, where[0], where[1]
+
+
+def check_closed_loop(K: np.ndarray, systems: Sequence[Sequence[tuple]],
+                      label: str = "gains") -> float:
+    """ConfigError unless every ``A_ij + B_ij K_i`` is Hurwitz (the stability the Lemma 1
+    certificate implies, Eq. 30, re-checked by eigenvalues only: N x M_i eigenproblems of
+    size n, e.g. 8 x 16 of 12 x 12 for the demo, milliseconds on a Raspberry Pi). Returns the
+    worst spectral abscissa."""
+    K = np.asarray(K, dtype=float)
+    if len(systems) != K.shape[0]:
+        raise ConfigError(f"{label}: {len(systems)} certified vertex system sets for "
+                          f"{K.shape[0]} gains")
+    worst, i, j = closed_loop_abscissa(K, systems)
+    if not worst < 0.0:
+        raise ConfigError(f"{label}: closed loop A + B K unstable at vertex {i}, certified "
+                          f"system {j} (max Re(eig) = {worst:.4g} >= 0): the gains are not the "
+                          "certified ones or do not stabilise the certified models; refusing to "
+                          "fly them")
+    return worst

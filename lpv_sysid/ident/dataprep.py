@@ -129,6 +129,9 @@ def streams_from_bag(path: str | Path) -> Streams:
 
     st = series("state", msgs.state_from_odometry, True)
     rs = series("rotor_speeds", msgs.rotor_speeds_from_joint_state, True)
+    if any(msgs.rotor_source_of(m) == "estimated" for _, m in data[_topic_for(list(data), "rotor_speeds")]):
+        log.warning("%s: rotor_speeds estimated from the motor outputs (seed 0 Eq. 8 with the airframe's "
+                    "a_Omega, b_Omega): the actuator rows reproduce that model, not a measurement", path)
     ac = series("actuator_command", msgs.actuator_command_from_joint_state, False)
     vr = series("velocity_reference", msgs.reference_from_twist, False)
     ex = series("excitation", msgs.excitation_from_joint_state, False)

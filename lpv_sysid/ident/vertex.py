@@ -65,7 +65,10 @@ class IdentificationConfig:
             d = {}
         if not isinstance(d, dict):
             raise ConfigError(f"identification config must be a mapping, got {type(d).__name__}")
-        d = dict(d.get("identification", d))
+        d = d.get("identification", d)
+        if not isinstance(d, dict):
+            raise ConfigError(f"identification: expected a mapping, got {type(d).__name__}")
+        d = dict(d)
         check_keys(d, cls.__dataclass_fields__, "identification", list_allowed=True)
         kw: dict = {}
         kw["derivatives"] = deriv.DerivativeConfig.from_dict(d.pop("derivatives", None))

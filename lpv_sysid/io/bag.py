@@ -1,5 +1,7 @@
 """rosbag2 recordings (mcap by default, sqlite3 optional) through rosbags 0.11.9.
 
+This module is the only owner of the bag format: writing, reading, salvaging and repairing.
+
 Writing
     :class:`BagWriter` is a context manager around ``rosbags.rosbag2.Writer`` (format
     version 9). Messages are CDR-serialised with the ROS 2 Jazzy typestore and each topic
@@ -7,13 +9,38 @@ Writing
     info`` / ``ros2 bag play`` accept the result, and with the offered QoS profile
     (default: reliable, volatile, keep-last 10 -- rclpy's default publisher profile).
 
-    rosbags buffers mcap messages in 1 MiB chunks and commits sqlite3 only at close, so a
-    crash would lose everything since the last chunk. :meth:`BagWriter.flush` closes the
-    pending mcap chunk (or commits sqlite3) and flushes the file; ``chunk_bytes`` sets the
-    mcap chunk size. Leaving the ``with`` block -- also through an exception -- closes the
-    bag properly (footer, index, ``metadata.yaml``) so what was written stays readable.
-    A write error (disk full, ...) raises :class:`BagError` naming the path after the bag
-    has been closed (or, when even that fails, aborted with the complete chunks on disk).
+Durability (what a ``kill -9``, a crash or a full disk can cost)
+    rosbags alone keeps an mcap chunk of up to 1 MiB in memory and commits sqlite3 once,
+    at close, so a killed recorder loses the pending chunk (mcap) or everything (sqlite3).
+    :class:`BagWriter` therefore *flushes* -- closes the pending mcap chunk and hands it
+    to the OS, or commits the sqlite3 transaction -- as soon as the oldest unflushed
+    message is ``flush_interval_s`` old (default 0.5 s, checked at every write and by
+    :meth:`BagWriter.flush_if_due`) or ``flush_messages`` are pending (default 1000), and
+    before an mcap chunk would exceed ``chunk_bytes``. A killed process thus loses at most
+    the last ``flush_interval_s`` of data; ``fsync=True`` also survives a power cut
+    (sqlite3 runs with ``synchronous=OFF`` unless ``fsync``: safe against a process kill,
+    not against a power cut). :attr:`BagWriter.durable_counts` are the messages per topic
+    known to be on disk.
+
+    While open, the bag directory holds ``.lpv_sysid_writing``: a file locked with
+    ``flock`` (the kernel drops the lock when the process dies, also on ``kill -9``, so a
+    held lock means "a live writer", see :func:`writer_alive`) and filled with
+    ``reserve_bytes`` (default 1 MiB) of disk space. On a write error the reserve is
+    released first, so that even on a full disk the pending messages, the mcap index and
+    ``metadata.yaml`` can still be written (:meth:`BagWriter._recover`); a
+    :class:`BagError` naming the path and what is readable is raised after that. A clean
+    close removes the file.
+
+Repair
+    :func:`repair_bag` (``lpv-sysid bag repair DIR``, in the spirit of ``ros2 bag
+    reindex``) makes a killed or starved recording readable by standard tools: for mcap
+    it cuts the incomplete tail (a record the process did not finish), regenerates the
+    message index of the last chunk if it was cut, appends a summary section (schemas,
+    channels, chunk indexes, statistics) and footer in place -- nothing before the cut is
+    rewritten, so it needs only a few kB even on a full disk -- and checks the result with
+    rosbags' own reader; for sqlite3 it lets SQLite roll back an uncommitted transaction
+    (hot journal). Then it writes ``metadata.yaml`` from what the storage file really
+    holds. A bag locked by a live writer is refused.
 
 Reading
     :func:`read_bag` returns ``{topic: [(stamp_ns, msg), ...]}`` through ``AnyReader``.
@@ -27,34 +54,53 @@ Reading
     :class:`BagError`; with ``strict=False`` whatever can be read is returned instead and
     the problems are listed in ``result.problems``: the storage file is read directly
     (rosbags reads ``.mcap`` / ``.db3`` files without metadata), and if that fails too, the
-    complete records of a truncated mcap are recovered by a record-level scan (rosbags'
-    reader needs a valid footer) and the readable rows of a damaged sqlite3 file are read
-    with the sqlite3 module.
+    complete records of a truncated mcap are recovered by a record-level walk and the
+    readable rows of a damaged sqlite3 file are read with the sqlite3 module. The walk is
+    written here because rosbags' ``McapReader`` refuses any file without a valid footer
+    (it seeks the footer first) and the reference ``mcap`` library is not a dependency;
+    the same walk drives :func:`repair_bag`, after which rosbags reads the file itself.
 """
 
 from __future__ import annotations
 
+import contextlib
+import datetime as _dt
 import errno
+import fcntl
 import functools
 import logging
 import math
 import os
+import shutil
 import sqlite3
 import struct
 import tempfile
-from dataclasses import dataclass
+import time
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Mapping
+from typing import Callable, Iterable, Mapping
+
+import yaml
 
 from lpv_sysid.errors import BagError
 
 LOG = logging.getLogger(__name__)
 
-__all__ = ["BagWriter", "BagContents", "TopicStats", "read_bag", "topic_info",
-           "jazzy_typestore", "DEFAULT_QOS", "make_qos"]
+__all__ = ["BagWriter", "BagContents", "TopicStats", "RepairReport", "read_bag", "topic_info",
+           "repair_bag", "writer_alive", "atomic_write_text", "DiskReserve", "jazzy_typestore",
+           "DEFAULT_QOS", "make_qos", "LOCK_FILE"]
 
 STORAGES = ("mcap", "sqlite3")
 MCAP_MAGIC = b"\x89MCAP0\r\n"
+#: lock + disk reserve of an open :class:`BagWriter`, inside the bag directory
+LOCK_FILE = ".lpv_sysid_writing"
+FLUSH_INTERVAL_S = 0.5
+FLUSH_MESSAGES = 1000
+RESERVE_BYTES = 1 << 20
+#: rosbags 0.11.9 ``McapWriter.write`` closes a chunk by itself above 2**20 bytes; the
+#: writer flushes before that so chunk boundaries (= what is durable) stay its own
+MAX_CHUNK_BYTES = 1 << 20
+_MSG_RECORD_OVERHEAD = 9 + 22       # mcap Message record: opcode + length + header
 
 
 @functools.lru_cache(maxsize=1)
@@ -98,44 +144,211 @@ def make_qos(profile: Mapping | None = None):
                zero, False)
 
 
+# --------------------------------------------------------------------- durability helpers
+def _describe(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and exc.errno is not None:
+        name = errno.errorcode.get(exc.errno, str(exc.errno))
+        return f"{name}: {exc.strerror or os.strerror(exc.errno)}"
+    return f"{type(exc).__name__}: {exc}"
+
+
+class DiskReserve:
+    """A file locked with ``flock`` that holds ``size`` bytes of disk space.
+
+    The lock says "a live process owns this directory": the kernel drops it when the
+    process ends, however it ends (also ``kill -9``), so a stale file is recognised by
+    :func:`writer_alive`. The bytes are random (a compressing file system cannot shrink
+    them) and are given back by :meth:`release` -- first thing on a write error -- so the
+    owner can still finish its files on a full disk.
+    """
+
+    def __init__(self, path, size: int):
+        self.path = Path(path)
+        self.size = int(size)
+        self._fh = None
+
+    def acquire(self) -> "DiskReserve":
+        """Create, lock and fill the file; raises OSError (ENOSPC when there is no room)."""
+        fh = open(self.path, "xb")
+        try:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+            left = self.size
+            while left > 0:
+                n = min(left, 1 << 16)
+                fh.write(os.urandom(n))
+                left -= n
+            fh.flush()
+        except BaseException:
+            fh.close()
+            with contextlib.suppress(OSError):
+                self.path.unlink()
+            raise
+        self._fh = fh
+        return self
+
+    @property
+    def held(self) -> bool:
+        return self._fh is not None
+
+    def free_space(self) -> bool:
+        """Give the space back but keep the lock; True if there was space to give."""
+        if self._fh is None:
+            return False
+        try:
+            if os.fstat(self._fh.fileno()).st_size == 0:
+                return False
+            self._fh.truncate(0)
+            self._fh.flush()
+        except OSError:
+            return False
+        return True
+
+    def release(self) -> None:
+        """Give the space back and drop the lock (idempotent, never raises)."""
+        fh, self._fh = self._fh, None
+        if fh is None:
+            return
+        with contextlib.suppress(OSError):
+            self.path.unlink()
+        with contextlib.suppress(OSError):
+            fh.close()
+
+
+def writer_alive(lock_path) -> bool:
+    """True when a live process holds the :class:`DiskReserve` lock at ``lock_path``."""
+    try:
+        fh = open(lock_path, "rb")
+    except FileNotFoundError:
+        return False
+    except OSError:
+        return True            # cannot tell: assume alive, never repair under a writer
+    try:
+        fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    except OSError:
+        return True
+    finally:
+        fh.close()             # closing drops our own lock, if we got it
+    return False
+
+
+def atomic_write_text(path, text: str, fsync: bool = False) -> None:
+    """Write ``text`` to ``path`` through ``path.tmp`` + rename: readers see the old or the
+    new file, never half of one, and a failed write (disk full) leaves no ``.tmp`` behind.
+    Raises OSError."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        with open(tmp, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            if fsync:
+                os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+    if fsync:
+        with contextlib.suppress(OSError):
+            fd = os.open(path.parent, os.O_RDONLY)
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+
+
+def _now_iso() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
+
+
 # ------------------------------------------------------------------------- writer
 class BagWriter:
     """rosbag2 writer: ``with BagWriter(path) as bag: bag.add_topic(...); bag.write(...)``.
 
     ``path`` is the bag directory to create (it must not exist). ``storage`` is ``"mcap"``
-    (default) or ``"sqlite3"``.
+    (default) or ``"sqlite3"``. Durability options (module docstring): ``flush_interval_s``
+    (> 0, default 0.5) and ``flush_messages`` (>= 1, default 1000) bound what a killed
+    process can lose, ``chunk_bytes`` (at most 1 MiB) bounds an mcap chunk, ``fsync``
+    makes every flush survive a power cut, ``reserve_bytes`` (default 1 MiB) is kept free
+    for closing on a full disk. ``clock`` (seconds, monotonic) times the flushes.
     """
 
     def __init__(self, path, storage: str = "mcap", *, typestore=None,
-                 chunk_bytes: int = 1 << 20):
+                 chunk_bytes: int = MAX_CHUNK_BYTES, flush_interval_s: float = FLUSH_INTERVAL_S,
+                 flush_messages: int = FLUSH_MESSAGES, fsync: bool = False,
+                 reserve_bytes: int = RESERVE_BYTES, clock: Callable[[], float] = time.monotonic):
         if storage not in STORAGES:
             raise BagError(f"bag {path}: storage must be one of {STORAGES}, got {storage!r}")
-        if chunk_bytes <= 0:
-            raise BagError(f"bag {path}: chunk_bytes must be positive, got {chunk_bytes}")
+        if isinstance(chunk_bytes, bool) or not isinstance(chunk_bytes, int) or chunk_bytes <= 0:
+            raise BagError(f"bag {path}: chunk_bytes must be a positive integer, got {chunk_bytes!r}")
+        if isinstance(flush_interval_s, bool) or not isinstance(flush_interval_s, (int, float)) \
+                or not math.isfinite(flush_interval_s) or flush_interval_s <= 0:
+            raise BagError(f"bag {path}: flush_interval_s must be a finite number > 0, "
+                           f"got {flush_interval_s!r}")
+        for name, value, lo in (("flush_messages", flush_messages, 1),
+                                ("reserve_bytes", reserve_bytes, 0)):
+            if isinstance(value, bool) or not isinstance(value, int) or value < lo:
+                raise BagError(f"bag {path}: {name} must be an integer >= {lo}, got {value!r}")
         self.path = Path(path)
         self.storage = storage
-        self.chunk_bytes = int(chunk_bytes)
+        self.chunk_bytes = min(int(chunk_bytes), MAX_CHUNK_BYTES)
+        self.flush_interval_s = float(flush_interval_s)
+        self.flush_messages = int(flush_messages)
+        self.fsync = bool(fsync)
+        self.reserve_bytes = int(reserve_bytes)
         self.typestore = typestore if typestore is not None else jazzy_typestore()
         self.counts: dict[str, int] = {}
+        #: messages per topic known to be on disk (last flush; the file's content after a
+        #: failed close)
+        self.durable_counts: dict[str, int] = {}
+        #: number of successful flushes (a change means ``durable_counts`` moved)
+        self.flushes = 0
+        #: the :class:`RepairReport` of the recovery after a write error, if there was one
+        self.repair: RepairReport | None = None
         self.types: dict[str, str] = {}
+        self._clock = clock
         self._writer = None
         self._connections: dict[str, object] = {}
         self._closed = False
         self._failed: str | None = None
+        self._reserve: DiskReserve | None = None
+        self._header_end = 0
+        self._pending_rows: list = []         # sqlite3: rows of the open transaction
+        self._pending_n = 0
+        self._oldest = 0.0
+
+    @property
+    def _mcap(self) -> bool:
+        return self.storage == "mcap"
 
     # -- lifecycle ---------------------------------------------------------------
     def open(self) -> "BagWriter":
         from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
         if self._writer is not None or self._closed:
             raise BagError(f"bag {self.path}: already opened")
-        plugin = StoragePlugin.MCAP if self.storage == "mcap" else StoragePlugin.SQLITE3
+        plugin = StoragePlugin.MCAP if self._mcap else StoragePlugin.SQLITE3
+        existed = self.path.exists()
+        writer = None
         try:
             writer = Writer(self.path, version=9, storage_plugin=plugin)
             writer.open()
-        except WriterError as exc:
-            raise BagError(f"bag {self.path}: cannot create: {exc}") from None
-        except OSError as exc:
-            raise BagError(f"bag {self.path}: cannot create: {exc.strerror or exc}") from None
+            storage = writer.storage
+            if self._mcap:
+                storage.bio.flush()               # the header is on disk from the start
+                self._header_end = storage.bio.tell()
+            else:
+                storage.conn.execute(f"PRAGMA synchronous={'FULL' if self.fsync else 'OFF'}")
+            self._reserve = DiskReserve(self.path / LOCK_FILE, self.reserve_bytes).acquire()
+        except (WriterError, OSError, sqlite3.Error) as exc:
+            if writer is not None and writer.storage is not None:
+                with contextlib.suppress(Exception):
+                    writer.abort()
+            if not existed:
+                shutil.rmtree(self.path, ignore_errors=True)
+            why = exc if isinstance(exc, WriterError) else _describe(exc)
+            raise BagError(f"bag {self.path}: cannot create: {why}") from None
         self._writer = writer
         return self
 
@@ -158,8 +371,14 @@ class BagWriter:
     def is_open(self) -> bool:
         return self._writer is not None
 
+    @property
+    def pending_messages(self) -> int:
+        """Messages written since the last flush (what a kill would cost now)."""
+        return self._pending_n
+
     def close(self) -> None:
-        """Write index, footer and ``metadata.yaml``; idempotent."""
+        """Write index, footer and ``metadata.yaml``; idempotent. A failing close goes
+        through the recovery of a write error and raises :class:`BagError`."""
         writer, self._writer = self._writer, None
         if writer is None:
             return
@@ -167,27 +386,14 @@ class BagWriter:
         try:
             writer.close()
         except Exception as exc:  # noqa: BLE001 - every failure must become a BagError
-            self._salvage_close(writer)
-            raise BagError(f"bag {self.path}: closing failed ({_describe(exc)}); what reached "
-                           "the disk can be recovered with read_bag(path, strict=False)") from None
+            state = self._recover(writer)
+            raise BagError(f"bag {self.path}: closing failed ({_describe(exc)}); {state}") from None
+        self.durable_counts = dict(self.counts)
+        self._pending_n = 0
+        self._pending_rows.clear()
+        if self._reserve is not None:
+            self._reserve.release()
         LOG.info("closed bag %s (%d messages)", self.path, sum(self.counts.values()))
-
-    def _salvage_close(self, writer) -> None:
-        """After a failed close: keep what is on disk. rosbags' ``abort`` would roll back
-        the uncommitted sqlite3 transaction (= every message), so sqlite3 is committed
-        instead; for mcap the file is closed as is (complete chunks stay readable)."""
-        storage = getattr(writer, "storage", None)
-        try:
-            if self.storage == "sqlite3" and storage is not None:
-                try:
-                    storage.conn.commit()
-                finally:
-                    storage.conn.close()
-                writer.storage = None
-            else:
-                writer.abort()
-        except Exception as exc:  # noqa: BLE001
-            LOG.error("bag %s: cleanup after failed close: %s", self.path, _describe(exc))
 
     # -- topics and messages -----------------------------------------------------------
     def add_topic(self, topic: str, msgtype: str, qos: Mapping | None = None) -> None:
@@ -202,16 +408,16 @@ class BagWriter:
             return
         if msgtype not in self.typestore.types:
             raise BagError(f"bag {self.path}: topic {topic!r}: unknown message type {msgtype!r}")
+        profile = make_qos(qos)
         try:
             conn = self._writer.add_connection(topic, msgtype, typestore=self.typestore,
-                                               offered_qos_profiles=[make_qos(qos)])
-        except BagError:
-            raise
+                                               offered_qos_profiles=[profile])
         except Exception as exc:  # noqa: BLE001
             self._fail(f"registering topic {topic!r} failed", exc)
         self._connections[topic] = conn
         self.types[topic] = msgtype
         self.counts[topic] = 0
+        self.durable_counts[topic] = 0
 
     def write(self, topic: str, stamp_ns: int, msg) -> None:
         """CDR-serialise ``msg`` (a rosbags message of the topic's type) and write it at
@@ -232,26 +438,29 @@ class BagWriter:
         self._topic_type(topic)
         self._write(topic, stamp_ns, bytes(data))
 
-    def flush(self, fsync: bool = False) -> None:
-        """Make everything written so far durable: close the pending mcap chunk / commit
-        sqlite3, flush the file (and ``fsync`` it when asked).
+    def flush(self, fsync: bool | None = None) -> None:
+        """Make everything written so far durable now: close the pending mcap chunk and
+        hand it to the OS / commit sqlite3 (``fsync``: also to the device; default: the
+        writer's ``fsync`` option).
 
         Relies on the storage attributes of rosbags 0.11.9 (``McapWriter.chunk``,
-        ``close_chunk``, ``bio``; ``Sqlite3Writer.conn``).
+        ``chunks``, ``close_chunk``, ``bio``; ``Sqlite3Writer.conn``).
         """
         self._check_open()
-        storage = self._writer.storage
         try:
-            if self.storage == "mcap":
-                if storage.chunk.msgs:
-                    storage.close_chunk()
-                storage.bio.flush()
-                if fsync:
-                    os.fsync(storage.bio.fileno())
-            else:
-                storage.conn.commit()
+            self._flush(fsync)
         except Exception as exc:  # noqa: BLE001
             self._fail("flush failed", exc)
+
+    def flush_if_due(self) -> bool:
+        """Flush when the oldest unflushed message is ``flush_interval_s`` old (for a timer:
+        writes check this themselves, a timer covers a stream that stops). True if it did."""
+        if self._writer is None or not self._pending_n:
+            return False
+        if self._clock() - self._oldest < self.flush_interval_s:
+            return False
+        self.flush()
+        return True
 
     # -- internals ------------------------------------------------------------------
     def _check_open(self) -> None:
@@ -273,30 +482,139 @@ class BagWriter:
         ns = int(stamp_ns)
         if not 0 <= ns < 2**63:
             raise BagError(f"bag {self.path}: topic {topic!r}: stamp {ns} ns outside [0, 2^63)")
+        conn = self._connections[topic]
+        storage = self._writer.storage
         try:
-            self._writer.write(self._connections[topic], ns, data)
-            if self.storage == "mcap" and self._writer.storage.chunk.bio.tell() > self.chunk_bytes:
-                self._writer.storage.close_chunk()
+            if self._mcap and storage.chunk.msgs and \
+                    storage.chunk.bio.tell() + _MSG_RECORD_OVERHEAD + len(data) > self.chunk_bytes:
+                self._flush()
+            nchunks = len(storage.chunks) if self._mcap else 0
+            self._writer.write(conn, ns, data)
+            self.counts[topic] += 1
+            if not self._mcap:
+                self._pending_rows.append((conn.id, ns, data))
+            now = self._clock()
+            if not self._pending_n:
+                self._oldest = now
+            self._pending_n += 1
+            if (self._mcap and len(storage.chunks) != nchunks) \
+                    or self._pending_n >= self.flush_messages \
+                    or now - self._oldest >= self.flush_interval_s:
+                self._flush()
         except Exception as exc:  # noqa: BLE001
             self._fail(f"writing {topic!r} failed", exc)
-        self.counts[topic] += 1
+
+    def _flush(self, fsync: bool | None = None) -> None:
+        sync = self.fsync if fsync is None else bool(fsync)
+        storage = self._writer.storage
+        if self._mcap:
+            if storage.chunk.msgs:
+                storage.close_chunk()
+            storage.bio.flush()
+            if sync:
+                os.fsync(storage.bio.fileno())
+        else:
+            storage.conn.commit()
+            if sync and not self.fsync:         # synchronous=OFF: sync the file ourselves
+                fd = os.open(storage.path, os.O_RDONLY)
+                try:
+                    os.fsync(fd)
+                finally:
+                    os.close(fd)
+        self.durable_counts = dict(self.counts)
+        self._pending_rows.clear()
+        self._pending_n = 0
+        self.flushes += 1
 
     def _fail(self, what: str, exc: BaseException):
-        """Close what was written (so it stays readable) and raise a BagError naming the path."""
+        """Recover what was written (so it stays readable) and raise a BagError naming the
+        path, the error and what is readable."""
         self._failed = f"{what}: {_describe(exc)}"
-        try:
-            self.close()
-            state = "closed; messages written before the error are readable"
-        except BagError as close_exc:
-            state = str(close_exc)
+        writer, self._writer = self._writer, None
+        self._closed = True
+        state = self._recover(writer) if writer is not None else "bag was not open"
         raise BagError(f"bag {self.path}: {what} ({_describe(exc)}); {state}") from None
 
+    def _recover(self, writer) -> str:
+        """After a write/close error: give the disk reserve back, save the messages still
+        in memory (the pending mcap chunk, the uncommitted sqlite3 rows), index the file
+        and write ``metadata.yaml`` from what it holds (:func:`repair_bag`); set
+        ``durable_counts`` to that. Returns a sentence for the error message."""
+        if self._reserve is not None:
+            self._reserve.release()
+        with contextlib.suppress(OSError):
+            (self.path / "metadata.yaml.tmp").unlink()
+        storage = writer.storage
+        try:
+            if self._mcap:
+                limit = pending = None
+                if storage is not None:
+                    pending = _pending_chunk(storage)
+                    limit = _completed_end(storage, self._header_end)
+                    with contextlib.suppress(Exception):
+                        storage.bio.close()   # hands over what it can; the walk checks
+                rep = repair_bag(self.path, _limit=limit, _pending=pending)
+            else:
+                if storage is not None:
+                    self._settle_sqlite(storage)
+                rep = repair_bag(self.path)
+        except Exception as exc:  # noqa: BLE001 - the write error is what gets raised
+            return (f"what reached the disk stays there, but it could not be indexed ({exc}); "
+                    f"run `lpv-sysid bag repair {self.path}` once there is space")
+        self.repair = rep
+        self.durable_counts = {t: rep.topics[t].count if t in rep.topics else 0
+                               for t in self.counts}
+        lost = sum(self.counts.values()) - rep.messages
+        if lost <= 0:
+            return f"closed; all {rep.messages} message(s) written are readable"
+        return (f"closed; {rep.messages} message(s) readable, the last {lost} written could "
+                "not be saved")
 
-def _describe(exc: BaseException) -> str:
-    if isinstance(exc, OSError) and exc.errno is not None:
-        name = errno.errorcode.get(exc.errno, str(exc.errno))
-        return f"{name}: {exc.strerror or os.strerror(exc.errno)}"
-    return f"{type(exc).__name__}: {exc}"
+    def _settle_sqlite(self, storage) -> None:
+        """Commit what the failed transaction still holds; if SQLite rolled it back, write
+        the pending rows again (the reserve just freed makes room for them)."""
+        conn = storage.conn
+        try:
+            try:
+                conn.commit()
+            except sqlite3.Error:
+                with contextlib.suppress(sqlite3.Error):
+                    conn.rollback()
+            (have,) = conn.execute("SELECT count(*) FROM messages").fetchone()
+            if self._pending_rows and have == sum(self.durable_counts.values()):
+                conn.executemany("INSERT INTO messages (topic_id, timestamp, data) "
+                                 "VALUES(?, ?, ?)", self._pending_rows)
+                conn.commit()
+        except sqlite3.Error as exc:
+            LOG.error("bag %s: saving the uncommitted rows failed: %s", self.path, exc)
+            with contextlib.suppress(sqlite3.Error):
+                conn.rollback()
+        finally:
+            with contextlib.suppress(sqlite3.Error):
+                conn.close()
+
+
+def _pending_chunk(storage):
+    """``(records, start_ns, end_ns)`` of the mcap chunk rosbags holds in memory, or None."""
+    chunk = storage.chunk
+    data = chunk.bio.getvalue()
+    if not data:
+        return None
+    if not chunk.msgs:
+        return data, 0, 0
+    return data, chunk.message_start_time, chunk.message_end_time
+
+
+def _completed_end(storage, header_end: int) -> int:
+    """File offset after the last chunk (and its message indexes) rosbags finished writing
+    to its buffer; beyond it the file holds at most a partial write of the pending chunk."""
+    if not storage.chunks:
+        return header_end
+    rec = storage.chunks[-1].getvalue()                     # a ChunkIndex record body
+    _t0, _t1, start, length = struct.unpack_from("<QQQQ", rec, 0)
+    (map_len,) = struct.unpack_from("<I", rec, 32)
+    (index_len,) = struct.unpack_from("<Q", rec, 36 + map_len)
+    return start + length + index_len
 
 
 # ------------------------------------------------------------------------- reading
@@ -334,82 +652,25 @@ def _read_with_rosbags(target: Path, topics: set | None, src: _Source) -> None:
                 src.records.append((c.topic, ns, data))
 
 
-def _read_str(buf: bytes, pos: int) -> tuple[str, int]:
-    (n,) = struct.unpack_from("<I", buf, pos)
-    end = pos + 4 + n
-    if end > len(buf):
-        raise struct.error("string beyond record")
-    return buf[pos + 4:end].decode("utf-8"), end
-
-
-def _scan_mcap_records(buf: bytes, src: _Source, schemas: dict, channels: dict,
-                       topics: set | None, problems: list, where: str, top: bool) -> None:
-    """Walk MCAP records (op u8, length u64, body); stops at the first incomplete record.
-
-    Written here because rosbags' McapReader refuses a file without a valid footer.
-    """
-    pos = len(MCAP_MAGIC) if top else 0
-    n = len(buf)
-    while pos < n:
-        if pos + 9 > n:
-            problems.append(f"{where}: truncated record header at byte {pos}")
-            return
-        op = buf[pos]
-        (length,) = struct.unpack_from("<Q", buf, pos + 1)
-        body_start, body_end = pos + 9, pos + 9 + length
-        if body_end > n:
-            problems.append(f"{where}: truncated record (op 0x{op:02x}) at byte {pos}: "
-                            f"{n - body_start} of {length} bytes present")
-            return
-        body = buf[body_start:body_end]
-        pos = body_end
-        try:
-            if op == 0x03:      # Schema
-                (sid,) = struct.unpack_from("<H", body, 0)
-                name, p = _read_str(body, 2)
-                enc, p = _read_str(body, p)
-                (dlen,) = struct.unpack_from("<I", body, p)
-                schemas[sid] = (name, enc, body[p + 4:p + 4 + dlen].decode("utf-8"))
-            elif op == 0x04:    # Channel
-                cid, sid = struct.unpack_from("<HH", body, 0)
-                topic, _ = _read_str(body, 4)
-                channels[cid] = (topic, sid)
-                if sid in schemas:
-                    name, enc, data = schemas[sid]
-                    src.types[topic] = name
-                    if enc == "ros2msg":
-                        src.msgdefs.setdefault(name, data)
-            elif op == 0x05:    # Message
-                cid, _seq, log_time = struct.unpack_from("<HIQ", body, 0)
-                ch = channels.get(cid)
-                if ch is None:
-                    problems.append(f"{where}: message on unknown channel {cid} skipped")
-                elif topics is None or ch[0] in topics:
-                    src.records.append((ch[0], log_time, bytes(body[22:])))
-            elif op == 0x06 and top:   # Chunk
-                _t0, _t1, usize, crc = struct.unpack_from("<QQQI", body, 0)
-                comp, p = _read_str(body, 28)
-                (clen,) = struct.unpack_from("<Q", body, p)
-                payload = body[p + 8:p + 8 + clen]
-                if comp:
-                    from rosbags.rosbag2.storage_mcap import decompress
-                    payload = decompress(payload, comp, usize, crc)
-                _scan_mcap_records(payload, src, schemas, channels, topics, problems,
-                                   f"{where} chunk", top=False)
-            elif op == 0x02:    # Footer
-                return
-        except Exception as exc:  # noqa: BLE001 - a damaged record ends the scan
-            problems.append(f"{where}: unreadable record (op 0x{op:02x}) before byte {pos}: "
-                            f"{_describe(exc)}")
-            return
-
-
 def _salvage_mcap(path: Path, topics: set | None, src: _Source, problems: list) -> None:
-    buf = path.read_bytes()
-    if not buf.startswith(MCAP_MAGIC):
-        problems.append(f"{path}: not an mcap file (bad magic)")
-        return
-    _scan_mcap_records(buf, src, {}, {}, topics, problems, str(path), top=True)
+    """Complete records of an mcap file rosbags cannot open (no footer: killed writer)."""
+    records = []
+
+    def keep(cid, log_time, data):
+        records.append((cid, log_time, data))
+
+    walk = _walk_mcap(path, on_message=keep)
+    problems.extend(walk.problems)
+    for cid, (sid, topic, _enc, _meta) in walk.channels.items():
+        if sid in walk.schemas:
+            name, enc, text = walk.schemas[sid]
+            src.types[topic] = name
+            if enc == "ros2msg":
+                src.msgdefs.setdefault(name, text)
+    for cid, log_time, data in records:
+        topic = walk.channels[cid][1]
+        if topic in src.types and (topics is None or topic in topics):
+            src.records.append((topic, log_time, data))
 
 
 def _salvage_sqlite(path: Path, topics: set | None, src: _Source, problems: list) -> None:
@@ -476,16 +737,42 @@ def _storage_files(directory: Path) -> list[Path]:
     return sorted(p for p in directory.iterdir() if p.suffix in (".mcap", ".db3"))
 
 
+@contextlib.contextmanager
+def _settled(f: Path, problems: list):
+    """``f``, or for a sqlite3 file with a hot journal (writer killed inside a commit) a
+    temporary copy in which SQLite rolled the unfinished transaction back: rosbags reads
+    with ``immutable=1``, which ignores the journal and could see half a commit."""
+    journal = f.with_name(f.name + "-journal")
+    if f.suffix != ".db3" or not journal.exists() or journal.stat().st_size == 0:
+        yield f
+        return
+    with tempfile.TemporaryDirectory() as tmp:
+        copy = Path(tmp) / f.name
+        shutil.copyfile(f, copy)
+        shutil.copyfile(journal, Path(tmp) / journal.name)
+        try:
+            con = sqlite3.connect(str(copy))
+            try:
+                con.execute("SELECT count(*) FROM sqlite_master").fetchone()
+            finally:
+                con.close()
+            problems.append(f"{f}: uncommitted transaction (hot journal) rolled back in a copy")
+        except sqlite3.Error as exc:
+            problems.append(f"{f}: hot journal could not be rolled back: {exc}")
+        yield copy
+
+
 def _read_file_tolerant(f: Path, topics: set | None, problems: list) -> _Source:
-    src = _Source()
-    try:
-        _read_with_rosbags(f, topics, src)
+    with _settled(f, problems) as g:
+        src = _Source()
+        try:
+            _read_with_rosbags(g, topics, src)
+            return src
+        except Exception as exc:  # noqa: BLE001 - rosbags raises many kinds
+            problems.append(f"{f}: {_describe(exc)}")
+        src = _Source()
+        (_salvage_mcap if f.suffix == ".mcap" else _salvage_sqlite)(g, topics, src, problems)
         return src
-    except Exception as exc:  # noqa: BLE001 - rosbags raises many kinds
-        problems.append(f"{f}: {_describe(exc)}")
-    src = _Source()
-    (_salvage_mcap if f.suffix == ".mcap" else _salvage_sqlite)(f, topics, src, problems)
-    return src
 
 
 def _collect(path, topics, strict: bool) -> tuple[list[_Source], list[str]]:
@@ -506,7 +793,8 @@ def _collect(path, topics, strict: bool) -> tuple[list[_Source], list[str]]:
         else:
             why = f"bag {path}: missing metadata.yaml (recording not closed?)"
         if strict:
-            raise BagError(why + " -- read_bag(path, strict=False) recovers what is readable")
+            raise BagError(why + f" -- `lpv-sysid bag repair {path}` makes it readable by standard "
+                           "tools; read_bag(path, strict=False) recovers what is readable")
         problems.append(why)
         files = _storage_files(path)
         if not files:
@@ -517,7 +805,8 @@ def _collect(path, topics, strict: bool) -> tuple[list[_Source], list[str]]:
     if strict:
         src = _Source()
         try:
-            _read_with_rosbags(path, want, src)
+            with _settled(path, problems) as g:
+                _read_with_rosbags(g, want, src)
         except Exception as exc:  # noqa: BLE001
             raise BagError(f"bag {path}: cannot be read ({_describe(exc)}); truncated or "
                            "corrupt? -- read_bag(path, strict=False) recovers what is readable") from None
@@ -641,3 +930,738 @@ def topic_info(path, strict: bool = True) -> dict[str, TopicStats]:
             s[1] = ns if s[1] is None else min(s[1], ns)
             s[2] = ns if s[2] is None else max(s[2], ns)
     return {t: TopicStats(types.get(t, "?"), *s) for t, s in sorted(stats.items())}
+# ------------------------------------------------------------------- mcap record walk
+# MCAP records are (opcode u8, length u64, body). rosbags 0.11.9 writes: magic, Header,
+# then Chunks (its first chunk also holds the Schema and Channel records), each followed
+# by one MessageIndex per channel, and at close Metadata, DataEnd, the summary section and
+# the Footer. A killed or starved writer leaves the file cut anywhere after a chunk.
+_DATA_OPS = frozenset({0x03, 0x04, 0x05, 0x06, 0x07, 0x09, 0x0C})
+_END_OPS = frozenset({0x02, 0x08, 0x0A, 0x0B, 0x0D, 0x0E, 0x0F})   # footer / summary / data end
+
+
+class _Damaged(Exception):
+    """A record that cannot be parsed; ends the walk."""
+
+
+def _read_str(buf, pos: int) -> tuple[str, int]:
+    data, end = _read_bytes(buf, pos)
+    return data.decode("utf-8"), end
+
+
+def _read_bytes(buf, pos: int) -> tuple[bytes, int]:
+    (n,) = struct.unpack_from("<I", buf, pos)
+    end = pos + 4 + n
+    if end > len(buf):
+        raise struct.error("string beyond record")
+    return bytes(buf[pos + 4:end]), end
+
+
+def _enc_str(text: str) -> bytes:
+    data = text.encode("utf-8")
+    return struct.pack("<I", len(data)) + data
+
+
+def _record(op: int, body: bytes) -> bytes:
+    return struct.pack("<BQ", op, len(body)) + body
+
+
+@dataclass
+class _Chunk:
+    """A complete Chunk record found in (or appended to) an mcap file."""
+
+    start: int                      # file offset of the record
+    length: int                     # record length including opcode and length field
+    t0: int
+    t1: int
+    usize: int
+    csize: int
+    compression: str
+    msgs: dict                      # channel id -> [(log_time, offset in the records)]
+    nbytes: dict                    # channel id -> payload bytes
+    index: dict = field(default_factory=dict)   # channel id -> file offset of its MessageIndex
+    index_end: int = 0
+
+    @property
+    def end(self) -> int:
+        return self.start + self.length
+
+    def index_complete(self) -> bool:
+        return set(self.index) == {c for c, v in self.msgs.items() if v}
+
+
+@dataclass
+class _McapWalk:
+    schemas: dict = field(default_factory=dict)     # id -> (name, encoding, data)
+    channels: dict = field(default_factory=dict)    # id -> (schema id, topic, encoding, metadata)
+    chunks: list = field(default_factory=list)
+    metadata_records: int = 0
+    unchunked: int = 0
+    header_ok: bool = False
+    data_start: int = 0
+    data_end: int = 0               # offset after the last complete data record
+    size: int = 0                   # file size
+    ended: bool = False             # reached data end / summary / footer
+    problems: list = field(default_factory=list)
+
+
+def _parse_schema(buf, pos: int, walk: _McapWalk) -> None:
+    (sid,) = struct.unpack_from("<H", buf, pos)
+    name, p = _read_str(buf, pos + 2)
+    enc, p = _read_str(buf, p)
+    data, _ = _read_bytes(buf, p)
+    walk.schemas[sid] = (name, enc, data.decode("utf-8"))
+
+
+def _parse_channel(buf, pos: int, walk: _McapWalk) -> None:
+    cid, sid = struct.unpack_from("<HH", buf, pos)
+    topic, p = _read_str(buf, pos + 4)
+    enc, p = _read_str(buf, p)
+    meta, _ = _read_bytes(buf, p)
+    walk.channels[cid] = (sid, topic, enc, meta)
+
+
+def _walk_records(buf, walk: _McapWalk, on_message, where: str):
+    """The records inside a chunk: Schema/Channel update ``walk``; Message records go to
+    ``on_message(channel_id, log_time, data)``. Returns ``(msgs, nbytes)`` per channel."""
+    msgs: dict = {}
+    nbytes: dict = {}
+    pos, n = 0, len(buf)
+    while pos < n:
+        if pos + 9 > n:
+            raise _Damaged(f"{where}: truncated record header at byte {pos}")
+        op = buf[pos]
+        (length,) = struct.unpack_from("<Q", buf, pos + 1)
+        body, end = pos + 9, pos + 9 + length
+        if end > n:
+            raise _Damaged(f"{where}: truncated record (op 0x{op:02x}) at byte {pos}: "
+                           f"{n - body} of {length} bytes present")
+        try:
+            if op == 0x05:
+                if length < 22:
+                    raise _Damaged(f"{where}: message record of {length} bytes at byte {pos}")
+                cid, _seq, log_time = struct.unpack_from("<HIQ", buf, body)
+                if cid not in walk.channels:
+                    walk.problems.append(f"{where}: message on unknown channel {cid} skipped")
+                else:
+                    msgs.setdefault(cid, []).append((log_time, pos))
+                    nbytes[cid] = nbytes.get(cid, 0) + length - 22
+                    if on_message is not None:
+                        on_message(cid, log_time, bytes(buf[body + 22:end]))
+            elif op == 0x03:
+                _parse_schema(buf[:end], body, walk)
+            elif op == 0x04:
+                _parse_channel(buf[:end], body, walk)
+        except (struct.error, UnicodeDecodeError) as exc:
+            raise _Damaged(f"{where}: unreadable record (op 0x{op:02x}) at byte {pos}: "
+                           f"{_describe(exc)}") from None
+        pos = end
+    return msgs, nbytes
+
+
+def _parse_chunk(body: bytes, pos: int, walk: _McapWalk, on_message, where: str) -> _Chunk:
+    from rosbags.rosbag2.storage_mcap import decompress
+    try:
+        t0, t1, usize, crc = struct.unpack_from("<QQQI", body, 0)
+        comp, p = _read_str(body, 28)
+        (csize,) = struct.unpack_from("<Q", body, p)
+    except (struct.error, UnicodeDecodeError) as exc:
+        raise _Damaged(f"{where}: chunk at byte {pos}: unreadable header ({exc})") from None
+    data = body[p + 8:p + 8 + csize]
+    if len(data) != csize:
+        raise _Damaged(f"{where}: chunk at byte {pos}: {len(data)} of {csize} data bytes")
+    try:
+        payload = decompress(data, comp, usize, crc)
+    except Exception as exc:  # noqa: BLE001 - rosbags / lz4 / zstd errors
+        raise _Damaged(f"{where}: chunk at byte {pos}: {_describe(exc)}") from None
+    msgs, nbytes = _walk_records(payload, walk, on_message, f"{where} chunk at byte {pos}")
+    end = pos + 9 + len(body)
+    return _Chunk(pos, 9 + len(body), t0, t1, usize, csize, comp, msgs, nbytes, {}, end)
+
+
+def _walk_mcap(path: Path, on_message=None, limit: int | None = None) -> _McapWalk:
+    """Walk the data section of an mcap file record by record, never past ``limit`` bytes;
+    stops at the end of the data section, at the first incomplete or unreadable record."""
+    walk = _McapWalk()
+    where = str(path)
+    with open(path, "rb") as fh:
+        size = walk.size = os.fstat(fh.fileno()).st_size
+        if limit is not None:
+            size = min(size, limit)
+        head = fh.read(17)
+        if len(head) < 8 or head[:8] != MCAP_MAGIC:
+            walk.problems.append(f"{where}: not an mcap file (bad magic)" if len(head) >= 8
+                                 else f"{where}: {len(head)}-byte file, no mcap header")
+            return walk
+        if len(head) < 17 or head[8] != 0x01:
+            walk.problems.append(f"{where}: no mcap header record")
+            return walk
+        (hlen,) = struct.unpack_from("<Q", head, 9)
+        if 17 + hlen > size:
+            walk.problems.append(f"{where}: truncated mcap header record")
+            return walk
+        walk.header_ok = True
+        pos = walk.data_start = walk.data_end = 17 + hlen
+        last = None
+        while True:
+            if pos >= size:
+                walk.problems.append(f"{where}: ends at byte {pos} without data end or footer "
+                                     "(recording not closed)")
+                break
+            if pos + 9 > size:
+                walk.problems.append(f"{where}: truncated record header at byte {pos}")
+                break
+            fh.seek(pos)
+            rh = fh.read(9)
+            op = rh[0]
+            (length,) = struct.unpack_from("<Q", rh, 1)
+            end = pos + 9 + length
+            if op in _END_OPS:
+                walk.ended = True
+                break
+            if end > size:
+                walk.problems.append(f"{where}: truncated record (op 0x{op:02x}) at byte {pos}: "
+                                     f"{size - pos - 9} of {length} bytes present")
+                break
+            if op not in _DATA_OPS and op < 0x80:
+                walk.problems.append(f"{where}: invalid record (op 0x{op:02x}) at byte {pos}")
+                break
+            try:
+                if op == 0x06:
+                    last = _parse_chunk(fh.read(length), pos, walk, on_message, where)
+                    walk.chunks.append(last)
+                elif op == 0x07:
+                    body = fh.read(length)
+                    if last is not None and last.index_end == pos and len(body) >= 6:
+                        (cid,) = struct.unpack_from("<H", body, 0)
+                        last.index[cid] = pos
+                        last.index_end = end
+                    else:
+                        walk.problems.append(f"{where}: message index at byte {pos} does not "
+                                             "follow a chunk; ignored")
+                elif op in (0x03, 0x04, 0x05):
+                    body = fh.read(length)
+                    rec = _record(op, body)
+                    if op == 0x05:
+                        walk.unchunked += 1
+                    _walk_records(rec, walk, on_message, where)
+                elif op == 0x0C:
+                    walk.metadata_records += 1
+            except _Damaged as exc:
+                walk.problems.append(str(exc))
+                break
+            pos = walk.data_end = end
+    return walk
+
+
+# ------------------------------------------------------------------------- repair
+@dataclass(frozen=True)
+class RepairReport:
+    """What :func:`repair_bag` found and did.
+
+    ``action``: ``"none"`` (the bag was intact), ``"metadata"`` (only ``metadata.yaml``
+    was (re)written) or ``"storage"`` (the storage file was repaired too: an unfinished
+    tail cut and the mcap index appended, or an uncommitted sqlite3 transaction rolled
+    back). ``topics`` are the readable messages per topic, ``bytes`` their payload.
+    """
+
+    path: str
+    storage: str
+    action: str
+    topics: Mapping[str, TopicStats]
+    bytes: int = 0
+    cut_bytes: int = 0
+    notes: tuple[str, ...] = ()
+    dry_run: bool = False
+
+    @property
+    def messages(self) -> int:
+        return sum(s.count for s in self.topics.values())
+
+    @property
+    def changed(self) -> bool:
+        return self.action != "none"
+
+    def summary(self) -> str:
+        what = {"none": "intact, nothing to do",
+                "metadata": "metadata.yaml regenerated",
+                "storage": "storage file repaired and metadata.yaml regenerated"}[self.action]
+        if self.dry_run and self.changed:
+            what = "needs repair: " + what.replace("regenerated", "to regenerate").replace(
+                "repaired", "to repair")
+        parts = [f"{Path(self.path).name}: {self.storage}, {what}",
+                 f"{self.messages} message(s) readable"]
+        if self.cut_bytes:
+            parts.append(f"{self.cut_bytes} byte(s) of an unfinished write "
+                         + ("to cut" if self.dry_run else "cut"))
+        return "; ".join(parts + list(self.notes))
+
+
+@dataclass
+class _FileInfo:
+    name: str
+    conns: list                     # [(topic, msgtype, serialization_format, [Qos], digest, count)]
+    topics: dict                    # topic -> TopicStats
+    bytes: int = 0
+    changed: bool = False
+    cut: int = 0
+    notes: list = field(default_factory=list)
+
+    @property
+    def count(self) -> int:
+        return sum(s.count for s in self.topics.values())
+
+    @property
+    def span(self) -> tuple[int, int] | None:
+        spans = [(s.start_ns, s.end_ns) for s in self.topics.values() if s.count]
+        if not spans:
+            return None
+        return min(a for a, _ in spans), max(b for _, b in spans)
+
+
+def repair_bag(path, dry_run: bool = False, *, _limit: int | None = None,
+               _pending=None) -> RepairReport:
+    """Make the rosbag2 directory ``path`` readable by standard tools (``ros2 bag``,
+    rosbags' ``AnyReader``), keeping every complete record; see the module docstring.
+
+    Refuses (:class:`BagError`) a bag whose writer is alive, a file that is not an mcap /
+    sqlite3 bag or is damaged beyond its tail. ``dry_run`` reports without changing
+    anything. (``_limit`` / ``_pending`` are for :class:`BagWriter`'s own recovery: the
+    end of what it completed and the chunk it still held in memory.)
+    """
+    try:
+        return _repair_bag(Path(path), dry_run, _limit, _pending)
+    except OSError as exc:
+        raise BagError(f"bag {path}: repair failed: {_describe(exc)}") from None
+    except sqlite3.Error as exc:
+        raise BagError(f"bag {path}: repair failed: sqlite3: {exc}") from None
+
+
+def _repair_bag(path: Path, dry_run: bool, _limit, _pending) -> RepairReport:
+    if not path.is_dir():
+        raise BagError(f"bag {path}: not a bag directory")
+    if writer_alive(path / LOCK_FILE):
+        raise BagError(f"bag {path}: being written by a running process ({LOCK_FILE} is "
+                       "locked); stop the recorder first")
+    files = _storage_files(path)
+    if not files:
+        raise BagError(f"bag {path}: no .mcap or .db3 storage file")
+    suffixes = {f.suffix for f in files}
+    if len(suffixes) > 1:
+        raise BagError(f"bag {path}: mixed storage files {[f.name for f in files]}")
+    storage = "mcap" if suffixes == {".mcap"} else "sqlite3"
+    if not dry_run:                       # stale leftovers; the reserve frees room for the repair
+        for stale in (path / LOCK_FILE, path / "metadata.yaml.tmp"):
+            with contextlib.suppress(FileNotFoundError):
+                stale.unlink()
+    infos = []
+    for i, f in enumerate(files):
+        last = i == len(files) - 1
+        if storage == "mcap":
+            infos.append(_repair_mcap_file(f, dry_run, _limit if last else None,
+                                           _pending if last else None))
+        else:
+            infos.append(_repair_sqlite_file(f, dry_run))
+    if any(i.changed for i in infos):
+        action = "storage"
+    else:
+        action = "none" if _metadata_matches(path, storage, infos) else "metadata"
+    notes = [n for i in infos for n in i.notes]
+    if action != "none" and not dry_run:
+        note = f"{_now_iso()}: repaired by lpv_sysid ({action})"
+        try:
+            _write_bag_metadata(path, storage, infos, note)
+        except OSError as exc:
+            raise BagError(f"bag {path}: cannot write metadata.yaml: {_describe(exc)}") from None
+        _check_readable(path, infos)
+    topics: dict[str, list] = {}
+    for info in infos:
+        for t, s in info.topics.items():
+            acc = topics.setdefault(t, [s.msgtype, 0, None, None])
+            acc[1] += s.count
+            if s.count:
+                acc[2] = s.start_ns if acc[2] is None else min(acc[2], s.start_ns)
+                acc[3] = s.end_ns if acc[3] is None else max(acc[3], s.end_ns)
+    report = RepairReport(str(path), storage, action,
+                          {t: TopicStats(*v) for t, v in sorted(topics.items())},
+                          sum(i.bytes for i in infos), sum(i.cut for i in infos), tuple(notes),
+                          dry_run)
+    if report.changed:
+        LOG.warning("%s", report.summary())
+    return report
+
+
+def _check_readable(path: Path, infos) -> None:
+    """rosbags' AnyReader opens the repaired bag and delivers a message of every topic
+    that has some (the metadata's topic entries must match the storage's connections)."""
+    from rosbags.highlevel import AnyReader
+    try:
+        with AnyReader([path], default_typestore=jazzy_typestore()) as reader:
+            for c in reader.connections:
+                if c.msgcount and next(iter(reader.messages(connections=[c])), None) is None:
+                    raise BagError(f"bag {path}: after repair rosbags reads no message of "
+                                   f"{c.topic} (metadata says {c.msgcount})")
+            total = sum(c.msgcount for c in reader.connections)
+    except BagError:
+        raise
+    except Exception as exc:  # noqa: BLE001
+        raise BagError(f"bag {path}: still unreadable after repair: {_describe(exc)}") from None
+    want = sum(i.count for i in infos)
+    if total != want:
+        raise BagError(f"bag {path}: after repair rosbags counts {total} messages, the files "
+                       f"hold {want}")
+
+
+def _rihs01(msgtype: str, encoding: str, text: str) -> str:
+    """RIHS01 hash of a stored definition ('' when it cannot be computed)."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+    jazzy = jazzy_typestore()
+    try:
+        if msgtype in jazzy.types and jazzy.generate_msgdef(msgtype, ros_version=2)[0] == text:
+            return jazzy.hash_rihs01(msgtype)
+        if encoding == "ros2msg" and text:
+            store = get_typestore(Stores.EMPTY)
+            store.register(get_types_from_msg(text, msgtype))
+            return store.hash_rihs01(msgtype)
+    except Exception:  # noqa: BLE001 - a definition rosbags cannot parse has no hash
+        pass
+    return ""
+
+
+def _mcap_info(f: Path, walk: _McapWalk, chunks, changed: bool, cut: int, notes) -> _FileInfo:
+    from rosbags.rosbag2.storage_mcap import get_qos
+    counts: dict = {}
+    spans: dict = {}
+    nbytes = 0
+    for ch in chunks:
+        for cid, entries in ch.msgs.items():
+            if not entries:
+                continue
+            counts[cid] = counts.get(cid, 0) + len(entries)
+            lo = min(t for t, _ in entries)
+            hi = max(t for t, _ in entries)
+            a, b = spans.get(cid, (lo, hi))
+            spans[cid] = (min(a, lo), max(b, hi))
+            nbytes += ch.nbytes.get(cid, 0)
+    conns, topics = [], {}
+    for cid, (sid, topic, enc, meta) in sorted(walk.channels.items()):
+        if sid not in walk.schemas:
+            notes.append(f"{f.name}: channel {topic} has no schema; left out")
+            continue
+        name, senc, text = walk.schemas[sid]
+        n = counts.get(cid, 0)
+        try:
+            qos = get_qos(meta)
+        except Exception:  # noqa: BLE001
+            qos = []
+        conns.append((topic, name, enc, qos, _rihs01(name, senc, text), n))
+        old = topics.get(topic)
+        lo, hi = spans.get(cid, (None, None))
+        if old is not None and old.count:
+            if n:
+                lo, hi = min(lo, old.start_ns), max(hi, old.end_ns)
+            else:
+                lo, hi = old.start_ns, old.end_ns
+        topics[topic] = TopicStats(name, (old.count if old else 0) + n, lo, hi)
+    return _FileInfo(f.name, conns, topics, nbytes, changed, cut, list(notes))
+
+
+def _index_records(chunk: _Chunk, base: int) -> bytes:
+    """MessageIndex records of ``chunk``, placed at file offset ``base``; sets its index."""
+    out = bytearray()
+    chunk.index = {}
+    for cid, entries in chunk.msgs.items():
+        if not entries:
+            continue
+        chunk.index[cid] = base + len(out)
+        body = struct.pack("<HI", cid, 16 * len(entries)) + b"".join(
+            struct.pack("<QQ", t, off) for t, off in entries)
+        out += _record(0x07, body)
+    chunk.index_end = base + len(out)
+    return bytes(out)
+
+
+def _summary(walk: _McapWalk, chunks, base: int) -> bytes:
+    """DataEnd, summary section (schemas, channels, chunk indexes, statistics, summary
+    offsets) and footer + magic, to be written at file offset ``base``."""
+    out = bytearray(_record(0x0F, struct.pack("<I", 0)))
+    summary_start = base + len(out)
+    groups = []
+    start = len(out)
+    for sid, (name, enc, data) in sorted(walk.schemas.items()):
+        raw = data.encode("utf-8")
+        out += _record(0x03, struct.pack("<H", sid) + _enc_str(name) + _enc_str(enc)
+                       + struct.pack("<I", len(raw)) + raw)
+    groups.append((0x03, start, len(out)))
+    start = len(out)
+    for cid, (sid, topic, enc, meta) in sorted(walk.channels.items()):
+        out += _record(0x04, struct.pack("<HH", cid, sid) + _enc_str(topic) + _enc_str(enc)
+                       + struct.pack("<I", len(meta)) + meta)
+    groups.append((0x04, start, len(out)))
+    start = len(out)
+    counts: dict = {}
+    t_lo, t_hi = None, None
+    for ch in chunks:
+        offsets = b"".join(struct.pack("<HQ", cid, off) for cid, off in sorted(
+            ch.index.items(), key=lambda kv: kv[1]))
+        out += _record(0x08, struct.pack("<QQQQ", ch.t0, ch.t1, ch.start, ch.length)
+                       + struct.pack("<I", len(offsets)) + offsets
+                       + struct.pack("<Q", ch.index_end - ch.end) + _enc_str(ch.compression)
+                       + struct.pack("<QQ", ch.csize, ch.usize))
+        for cid, entries in ch.msgs.items():
+            if entries:
+                counts[cid] = counts.get(cid, 0) + len(entries)
+                lo, hi = min(t for t, _ in entries), max(t for t, _ in entries)
+                t_lo = lo if t_lo is None else min(t_lo, lo)
+                t_hi = hi if t_hi is None else max(t_hi, hi)
+    groups.append((0x08, start, len(out)))
+    start = len(out)
+    stats = b"".join(struct.pack("<HQ", cid, n) for cid, n in sorted(counts.items()))
+    out += _record(0x0B, struct.pack("<QHIIIIQQ", sum(counts.values()), len(walk.schemas),
+                                     len(walk.channels), 0, walk.metadata_records, len(chunks),
+                                     t_lo or 0, t_hi or 0)
+                   + struct.pack("<I", len(stats)) + stats)
+    groups.append((0x0B, start, len(out)))
+    offsets_start = base + len(out)
+    for op, a, b in groups:
+        if b > a:
+            out += _record(0x0E, struct.pack("<BQQ", op, base + a, b - a))
+    out += _record(0x02, struct.pack("<QQI", summary_start, offsets_start, 0)) + MCAP_MAGIC
+    return bytes(out)
+
+
+def _empty_mcap_head() -> bytes:
+    from importlib.metadata import version
+    return MCAP_MAGIC + _record(0x01, _enc_str("ros2") + _enc_str(f"rosbags-{version('rosbags')}"))
+
+
+def _repair_mcap_file(f: Path, dry_run: bool, limit: int | None, pending) -> _FileInfo:
+    from rosbags.rosbag2.storage_mcap import McapReader
+    if limit is None and pending is None:
+        reader = McapReader(f)
+        try:
+            reader.open()
+        except Exception:  # noqa: BLE001 - not a complete file: repair below
+            pass
+        else:
+            reader.close()
+            walk = _walk_mcap(f)
+            return _mcap_info(f, walk, walk.chunks, False, 0, [])
+    walk = _walk_mcap(f, limit=limit)
+    notes: list[str] = []
+    head = b""
+    if walk.header_ok:
+        base = walk.data_end
+    else:
+        start = f.read_bytes()[:64]
+        sig = MCAP_MAGIC + b"\x01"
+        if walk.size >= 64 or start[:len(sig)] != sig[:len(start)]:
+            raise BagError(f"bag {f.parent}: {walk.problems[0]}; not repaired")
+        head = _empty_mcap_head()           # killed before its header reached the disk
+        base = len(head)
+        notes.append(f"{f.name}: no complete header; rewritten as an empty mcap")
+    chunks = list(walk.chunks)
+    old_tail = b""
+    if chunks and not chunks[-1].index_complete():
+        base = chunks[-1].end                # cut its partial message index, write it anew
+        old_tail = _index_records(chunks[-1], base)
+    for ch in chunks[:-1]:
+        if not ch.index_complete():
+            notes.append(f"{f.name}: chunk at byte {ch.start} has no complete message index; "
+                         "left out of the index")
+    indexed = [ch for ch in chunks if ch.index_complete()]
+    if walk.unchunked:
+        notes.append(f"{f.name}: {walk.unchunked} message(s) outside chunks are not indexed")
+    new_tail, extra = b"", []
+    if pending is not None:
+        data, t0, t1 = pending
+        try:
+            msgs, nbytes = _walk_records(data, walk, None, f"{f.name}: chunk held in memory")
+        except _Damaged as exc:
+            notes.append(str(exc))
+        else:
+            body = (struct.pack("<QQQI", t0, t1, len(data), 0) + _enc_str("")
+                    + struct.pack("<Q", len(data)) + data)
+            start = base + len(old_tail)
+            ch = _Chunk(start, 9 + len(body), t0, t1, len(data), len(data), "", msgs, nbytes,
+                        {}, start + 9 + len(body))
+            new_tail = _record(0x06, body) + _index_records(ch, ch.end)
+            extra = [ch]
+    cut = max(0, walk.size - base) if walk.header_ok else walk.size
+    if dry_run:
+        return _mcap_info(f, walk, indexed + extra, True, cut, notes + walk.problems[:1])
+    try:
+        tail = old_tail + new_tail
+        _write_tail(f, head, base, tail + _summary(walk, indexed + extra, base + len(tail)))
+    except OSError as exc:
+        if not extra:
+            raise BagError(f"bag {f.parent}: cannot write the index of {f.name}: "
+                           f"{_describe(exc)}") from None
+        lost = sum(len(v) for v in extra[0].msgs.values())
+        notes.append(f"{f.name}: no room for the last {lost} message(s) ({_describe(exc)})")
+        extra = []
+        try:
+            _write_tail(f, head, base, old_tail + _summary(walk, indexed, base + len(old_tail)))
+        except OSError as exc2:
+            raise BagError(f"bag {f.parent}: cannot write the index of {f.name}: "
+                           f"{_describe(exc2)}") from None
+    info = _mcap_info(f, walk, indexed + extra, True, cut, notes)
+    reader = McapReader(f)
+    try:
+        reader.open()
+        got = reader.metadata.message_count
+    except Exception as exc:  # noqa: BLE001
+        raise BagError(f"bag {f.parent}: {f.name} fails rosbags' check after repair: "
+                       f"{_describe(exc)}") from None
+    finally:
+        with contextlib.suppress(Exception):
+            reader.close()
+    if got != info.count:
+        raise BagError(f"bag {f.parent}: {f.name} after repair: rosbags counts {got} "
+                       f"messages, the index {info.count}")
+    return info
+
+
+def _write_tail(f: Path, head: bytes, base: int, tail: bytes) -> None:
+    """Cut ``f`` at ``base`` and append ``tail`` (``head`` replaces a missing header);
+    on failure the file is cut back to ``base`` (what was kept stays, ready for a retry)."""
+    with open(f, "r+b") as fh:
+        if head:
+            fh.truncate(0)
+            fh.write(head)
+        fh.truncate(base)
+        fh.seek(base)
+        try:
+            fh.write(tail)
+            fh.flush()
+            os.fsync(fh.fileno())
+        except OSError:
+            with contextlib.suppress(OSError):
+                fh.truncate(base)
+            raise
+
+
+def _repair_sqlite_file(f: Path, dry_run: bool) -> _FileInfo:
+    from rosbags.rosbag2.metadata import parse_qos
+    journal = f.with_name(f.name + "-journal")
+    hot = journal.exists() and journal.stat().st_size > 0
+    notes = []
+    with tempfile.TemporaryDirectory() as tmp:
+        work = f
+        if dry_run and hot:               # roll back in a copy, never in the original
+            work = Path(tmp) / f.name
+            shutil.copyfile(f, work)
+            shutil.copyfile(journal, Path(tmp) / journal.name)
+        try:
+            con = sqlite3.connect(str(work))     # read-write: SQLite rolls a hot journal back
+        except sqlite3.Error as exc:
+            raise BagError(f"bag {f.parent}: {f.name}: cannot open: {exc}") from None
+        try:
+            (check,) = con.execute("PRAGMA quick_check").fetchone()
+            if check != "ok":
+                raise BagError(f"bag {f.parent}: {f.name} is damaged ({check}); not repairable "
+                               "in place -- read_bag(path, strict=False) recovers the "
+                               "readable rows")
+            cols = {r[1] for r in con.execute("PRAGMA table_info(topics)")}
+            qos_col = "offered_qos_profiles" if "offered_qos_profiles" in cols else "''"
+            hash_col = "type_description_hash" if "type_description_hash" in cols else "''"
+            rows = con.execute(f"SELECT id, name, type, serialization_format, {qos_col}, "
+                               f"{hash_col} FROM topics ORDER BY id").fetchall()
+            stats = {tid: (n, lo, hi, nb) for tid, n, lo, hi, nb in con.execute(
+                "SELECT topic_id, count(*), min(timestamp), max(timestamp), "
+                "coalesce(sum(length(data)), 0) FROM messages GROUP BY topic_id")}
+        except sqlite3.Error as exc:
+            raise BagError(f"bag {f.parent}: {f.name} is damaged ({exc}); not repairable in "
+                           "place -- read_bag(path, strict=False) recovers the readable "
+                           "rows") from None
+        finally:
+            con.close()
+        rolled = hot and not work.with_name(work.name + "-journal").exists()
+    if rolled:
+        notes.append(f"{f.name}: uncommitted transaction rolled back"
+                     + (" (in a copy)" if dry_run else ""))
+    conns, topics, nbytes = [], {}, 0
+    for tid, name, typ, fmt, qos, digest in rows:
+        n, lo, hi, nb = stats.get(tid, (0, None, None, 0))
+        nbytes += nb
+        try:
+            profiles = parse_qos(qos) if qos else []
+        except Exception:  # noqa: BLE001
+            profiles = []
+        conns.append((name, typ, fmt, profiles, digest or "", n))
+        old = topics.get(name)
+        if old is not None and old.count:
+            lo = old.start_ns if not n else min(lo, old.start_ns)
+            hi = old.end_ns if not n else max(hi, old.end_ns)
+        topics[name] = TopicStats(typ, (old.count if old else 0) + n, lo, hi)
+    return _FileInfo(f.name, conns, topics, nbytes, rolled, 0, notes)
+
+
+def _metadata_matches(path: Path, storage: str, infos) -> bool:
+    """Whether the bag's metadata.yaml names exactly these files and message counts."""
+    try:
+        with open(path / "metadata.yaml", encoding="utf-8") as fh:
+            info = yaml.safe_load(fh)["rosbag2_bagfile_information"]
+        if info["storage_identifier"] != storage:
+            return False
+        if [Path(p).name for p in info["relative_file_paths"]] != [i.name for i in infos]:
+            return False
+        if info["message_count"] != sum(i.count for i in infos):
+            return False
+        have = {}
+        for t in info["topics_with_message_count"]:
+            key = (t["topic_metadata"]["name"], t["topic_metadata"]["type"])
+            have[key] = have.get(key, 0) + t["message_count"]
+    except (OSError, yaml.YAMLError, KeyError, TypeError):
+        return False
+    want: dict = {}
+    for i in infos:
+        for topic, typ, _fmt, _qos, _digest, n in i.conns:
+            want[(topic, typ)] = want.get((topic, typ), 0) + n
+    return have == want
+
+
+def _write_bag_metadata(path: Path, storage: str, infos, note: str) -> None:
+    """``metadata.yaml`` (rosbag2 format version 9, as rosbags' Writer writes it) from what
+    the storage files hold."""
+    from rosbags.rosbag2.metadata import dump_qos_v9
+    merged: dict = {}
+    for info in infos:
+        for topic, typ, fmt, qos, digest, n in info.conns:
+            key = (topic, typ, fmt)
+            if key in merged:
+                merged[key]["message_count"] += n
+            else:
+                merged[key] = {"topic_metadata": {"name": topic, "type": typ,
+                                                  "serialization_format": fmt,
+                                                  "offered_qos_profiles": dump_qos_v9(qos),
+                                                  "type_description_hash": digest},
+                               "message_count": n}
+
+    def span(spans):
+        spans = [s for s in spans if s is not None]
+        if not spans:
+            return 2**63 - 1, 0
+        lo, hi = min(a for a, _ in spans), max(b for _, b in spans)
+        return lo, hi - lo
+
+    start, duration = span([i.span for i in infos])
+    files = []
+    for i in infos:
+        s, d = span([i.span])
+        files.append({"path": i.name, "starting_time": {"nanoseconds_since_epoch": s},
+                      "duration": {"nanoseconds": d}, "message_count": i.count})
+    meta = {"rosbag2_bagfile_information": {
+        "version": 9,
+        "storage_identifier": storage,
+        "relative_file_paths": [i.name for i in infos],
+        "duration": {"nanoseconds": duration},
+        "starting_time": {"nanoseconds_since_epoch": start},
+        "message_count": sum(i.count for i in infos),
+        "topics_with_message_count": list(merged.values()),
+        "compression_format": "",
+        "compression_mode": "",
+        "files": files,
+        "custom_data": {"lpv_sysid.repair": note},
+        "ros_distro": "rosbags",
+    }}
+    atomic_write_text(path / "metadata.yaml", yaml.safe_dump(meta, sort_keys=False), fsync=True)

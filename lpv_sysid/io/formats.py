@@ -20,7 +20,11 @@ interval box (Eq. 22) and fit metrics (Eqs. 24-25)::
 ``gains.yaml`` (``lpv_sysid/gains@1``): vertex gains ``K_i`` (Eq. 31, ``du_c = K dx``),
 excitation input matrix ``R`` (Eq. 27), performance scaling ``Q`` (Eq. 28), the bound
 ``gamma`` and the certificate of seed 0 Lemma 1 with ``models_sha256`` = SHA-256 of the
-bytes of the models file the gains were synthesised for. Optional reference feedforward
+bytes of the models file the gains were synthesised for, ``gains_sha256`` = the hash of
+the certified law (:meth:`GainSchedule.law_sha256`), ``design`` = the phase-2 signal
+envelope the gains were designed for (:class:`DesignEnvelope`) and ``sidecar`` = the
+certificate sidecar holding the certified systems (:data:`SYSTEMS_ARRAYS`), all three
+required by the flight runtime. Optional reference feedforward
 (:mod:`lpv_sysid.synthesis.feedforward`): a top-level ``feedforward: {free_states,
 accelerated_states, held_states}`` and, then required at every vertex, ``F_ff`` with
 ``len(free_states) + n_u`` rows (free states in the listed order, then the inputs) and one
@@ -59,7 +63,8 @@ __all__ = [
     "MODELS_FORMAT", "GAINS_FORMAT", "Layout", "QUADROTOR_LAYOUT",
     "SchedulingBox", "UncertainEntry", "VertexModel", "VertexModels",
     "GainVertex", "FeedforwardSpec", "Certificate", "GainSchedule",
-    "load_yaml", "sha256_file", "sha256_bytes",
+    "load_yaml", "sha256_file", "sha256_bytes", "DesignEnvelope", "certify_law",
+    "SYSTEMS_ARRAYS", "systems_arrays", "load_certified_systems",
 ]
 
 MODELS_FORMAT = "lpv_sysid/vertex_models@1"
@@ -89,45 +94,30 @@ QUADROTOR_LAYOUT = _quadrotor_layout()
 
 
 # ------------------------------------------------------------------------ yaml I/O
-class _StrictLoader(yaml.SafeLoader):
-    """SafeLoader that refuses duplicate mapping keys (PyYAML silently keeps the last)."""
-
-
-def _construct_mapping(loader, node, deep=False):
-    seen = {}
-    for key_node, _ in node.value:
-        key = loader.construct_object(key_node, deep=deep)
-        if key in seen:
-            mark = key_node.start_mark
-            raise yaml.constructor.ConstructorError(
-                None, None, f"duplicate key {key!r} (first at line {seen[key] + 1})", mark)
-        seen[key] = key_node.start_mark.line
-    return yaml.SafeLoader.construct_mapping(loader, node, deep)
-
-
-_StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
-
-
 def load_yaml(path, label: Optional[str] = None) -> Any:
-    """Parse a YAML file; a syntax error becomes ``ConfigError`` with line and column."""
+    """Parse a YAML file; a syntax error becomes ``ConfigError`` with line and column.
+
+    The file is read by :func:`lpv_sysid.io.safe_open.read_text` (regular file, size cap,
+    UTF-8) and parsed by the strict loader of :mod:`lpv_sysid.io.yaml_file` (duplicate keys,
+    nesting depth, alias expansion, integer range).
+    """
+    from lpv_sysid.io.safe_open import read_text
+
     path = Path(path)
     label = label or path.name
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ConfigError(f"{label}: cannot read {path}: {exc.strerror or exc}") from None
-    except UnicodeDecodeError as exc:
-        raise ConfigError(f"{label}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    text = read_text(path, label, show_path=True)
     return parse_yaml(text, label)
 
 
 def parse_yaml(text: str, label: str) -> Any:
+    from lpv_sysid.io.yaml_file import strict_load
+
     try:
-        return yaml.load(text, Loader=_StrictLoader)  # noqa: S506 - SafeLoader subclass
+        return strict_load(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-        problem = getattr(exc, "problem", None) or str(exc)
+        problem = getattr(exc, "problem", None) or (str(exc).splitlines() or [type(exc).__name__])[0]
         raise ConfigError(f"{label}: malformed YAML{where}: {problem}") from None
 
 
@@ -171,10 +161,9 @@ def sha256_bytes(data: bytes) -> str:
 
 def sha256_file(path) -> str:
     """SHA-256 (hex) of the file's bytes -- ``certificate.models_sha256``."""
-    try:
-        return sha256_bytes(Path(path).read_bytes())
-    except OSError as exc:
-        raise ConfigError(f"{Path(path).name}: cannot read {path}: {exc.strerror or exc}") from None
+    from lpv_sysid.io.safe_open import read_bytes
+
+    return sha256_bytes(read_bytes(path, Path(path).name, show_path=True))
 
 
 # ---------------------------------------------------------------------- validators
@@ -203,12 +192,21 @@ class _V:
                 self.fail(path, f"unknown key(s) {unknown}; allowed: {list(required) + list(optional)}")
         return d
 
-    def number(self, v, path: str) -> float:
+    def number(self, v, path: str, bounded: bool = True) -> float:
+        """A finite number; with ``bounded`` (all fields but fit metrics) also
+        ``|x| <= MAX_MAGNITUDE`` (io.yaml_file: larger entries overflow downstream products)."""
+        from lpv_sysid.io.yaml_file import MAX_MAGNITUDE
+
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             self.fail(path, f"expected a number, got {_kind(v)} {v!r}")
-        x = float(v)
+        try:
+            x = float(v)
+        except OverflowError:
+            self.fail(path, f"out of range for a double, got an integer of {len(str(abs(v)))} digits")
         if not math.isfinite(x):
             self.fail(path, f"must be finite, got {x}")
+        if bounded and abs(x) > MAX_MAGNITUDE:
+            self.fail(path, f"magnitude must be <= {MAX_MAGNITUDE:g}, got {x:g}")
         return x
 
     def integer(self, v, path: str) -> int:
@@ -409,7 +407,7 @@ def _fit(v: _V, d, path: str) -> dict:
         v.mapping(per, f"{path}.{metric}", (), extra_ok=True)
         out[metric] = {}
         for ch, x in per.items():
-            out[metric][str(ch)] = v.number(x, f"{path}.{metric}.{ch}")
+            out[metric][str(ch)] = v.number(x, f"{path}.{metric}.{ch}", bounded=False)  # r2 of a flat axis: -1e20
     return out
 
 
@@ -665,8 +663,65 @@ class FeedforwardSpec:
 
 
 @dataclass(frozen=True)
+class DesignEnvelope:
+    """``certificate.design``: the phase-2 signal the gains were designed for (written by
+    ``lpv-sysid synthesize`` from the signals summary;
+    :func:`lpv_sysid.signals.excitation.design_envelope`).
+
+    The runtime bounds what it follows by it: ``reference_peak`` |v_d| per scheduling axis
+    [m/s], ``reference_rate`` |dv_d/dt| [m/s^2] and ``reference_accel`` |d2v_d/dt2| [m/s^3]
+    (Bernstein bounds of the band-limited table), ``knot_interval_s`` the table's sample
+    interval (the played v_d is linear between samples), ``fade_s`` the shortest raised-cosine
+    fade (excitation node ``ramp_s``) the rate and acceleration bounds include,
+    ``excitation_peak`` |u_e| per excitation channel (normalised, Eq. 26), ``source`` where it
+    came from."""
+
+    reference_peak: tuple
+    reference_rate: tuple
+    reference_accel: tuple
+    knot_interval_s: float
+    fade_s: float
+    excitation_peak: tuple
+    source: str = ""
+
+    KEYS = ("reference_peak", "reference_rate", "reference_accel", "knot_interval_s", "fade_s",
+            "excitation_peak")
+
+    def to_dict(self) -> dict:
+        return {"reference_peak": list(self.reference_peak),
+                "reference_rate": list(self.reference_rate),
+                "reference_accel": list(self.reference_accel),
+                "knot_interval_s": float(self.knot_interval_s), "fade_s": float(self.fade_s),
+                "excitation_peak": list(self.excitation_peak), "source": self.source}
+
+    @classmethod
+    def parse(cls, v: _V, d, n_p: Optional[int], n_e: Optional[int],
+              path: str = "certificate.design") -> "DesignEnvelope":
+        v.mapping(d, path, cls.KEYS, ("source",))
+        out = {}
+        for key, n in (("reference_peak", n_p), ("reference_rate", n_p), ("reference_accel", n_p),
+                       ("excitation_peak", n_e)):
+            vec = v.vector(d[key], n, f"{path}.{key}")
+            if np.any(vec <= 0):
+                v.fail(f"{path}.{key}", f"entries must be > 0, got {_floats(vec)}")
+            out[key] = tuple(_floats(vec))
+        knot = v.number(d["knot_interval_s"], f"{path}.knot_interval_s")
+        if not knot > 0:
+            v.fail(f"{path}.knot_interval_s", f"must be > 0, got {knot}")
+        fade = v.number(d["fade_s"], f"{path}.fade_s")
+        if not fade > 0:
+            v.fail(f"{path}.fade_s", f"must be > 0, got {fade}")
+        source = v.string(d.get("source", ""), f"{path}.source", nonempty=False)
+        return cls(out["reference_peak"], out["reference_rate"], out["reference_accel"], knot,
+                   fade, out["excitation_peak"], source)
+
+
+@dataclass(frozen=True)
 class Certificate:
-    """What the synthesis proved (seed 0 Lemma 1) and for which models file."""
+    """What the synthesis proved (seed 0 Lemma 1) and for which models file.
+
+    ``gains_sha256``: :meth:`GainSchedule.law_sha256` of the law that was certified (written
+    once, by the tool that certified it); ``design``: the :class:`DesignEnvelope`."""
 
     lmi: str
     solver: str
@@ -674,26 +729,43 @@ class Certificate:
     min_margin: float
     models_sha256: str
     extra: dict = field(default_factory=dict)
+    gains_sha256: Optional[str] = None
+    design: Optional[DesignEnvelope] = None
 
     def to_dict(self) -> dict:
         d = {"lmi": self.lmi, "solver": self.solver, "gamma_achieved": float(self.gamma_achieved),
              "min_margin": float(self.min_margin), "models_sha256": self.models_sha256}
         d.update(self.extra)
+        if self.gains_sha256 is not None:
+            d["gains_sha256"] = self.gains_sha256
+        if self.design is not None:
+            d["design"] = self.design.to_dict()
         return d
 
-    @classmethod
-    def parse(cls, v: _V, d, path: str = "certificate") -> "Certificate":
-        req = ("lmi", "solver", "gamma_achieved", "min_margin", "models_sha256")
-        v.mapping(d, path, req, extra_ok=True)
-        sha = v.string(d["models_sha256"], f"{path}.models_sha256")
+    @staticmethod
+    def _sha(v: _V, x, path: str) -> str:
+        sha = v.string(x, path)
         if len(sha) != 64 or any(c not in "0123456789abcdef" for c in sha):
-            v.fail(f"{path}.models_sha256", f"expected 64 lowercase hex digits, got {sha!r}")
+            v.fail(path, f"expected 64 lowercase hex digits, got {sha!r}")
+        return sha
+
+    @classmethod
+    def parse(cls, v: _V, d, path: str = "certificate", n_p: Optional[int] = None,
+              n_e: Optional[int] = None) -> "Certificate":
+        req = ("lmi", "solver", "gamma_achieved", "min_margin", "models_sha256")
+        own = req + ("gains_sha256", "design")
+        v.mapping(d, path, req, extra_ok=True)
+        sha = cls._sha(v, d["models_sha256"], f"{path}.models_sha256")
         g = v.number(d["gamma_achieved"], f"{path}.gamma_achieved")
         if g <= 0:
             v.fail(f"{path}.gamma_achieved", f"must be > 0, got {g}")
+        gains_sha = (cls._sha(v, d["gains_sha256"], f"{path}.gains_sha256")
+                     if d.get("gains_sha256") is not None else None)
+        design = (DesignEnvelope.parse(v, d["design"], n_p, n_e, f"{path}.design")
+                  if d.get("design") is not None else None)
         return cls(v.string(d["lmi"], f"{path}.lmi"), v.string(d["solver"], f"{path}.solver"), g,
                    v.number(d["min_margin"], f"{path}.min_margin"), sha,
-                   {k: d[k] for k in d if k not in req})
+                   {k: d[k] for k in d if k not in own}, gains_sha, design)
 
 
 @dataclass(frozen=True)
@@ -731,6 +803,50 @@ class GainSchedule(_StackedVertices):
     def K(self) -> np.ndarray:
         """Stacked gains (N, m, n) in box order."""
         return self._stacked("K")
+
+    def law_sha256(self) -> str:
+        """SHA-256 of the law the runtime flies: channel and scheduling names, the box, the
+        time base, per vertex (box order) K, x0, u0 (and F_ff, F_jerk with their layout),
+        R, Q and gamma, as float64 bytes (a YAML round trip keeps every bit). The certifying
+        tool writes it to ``certificate.gains_sha256`` (:func:`certify_law`); the runtime
+        refuses a file whose law no longer hashes to it."""
+        h = hashlib.sha256(b"lpv_sysid/gains-law@1")
+
+        def put(tag: str, a) -> None:
+            a = np.ascontiguousarray(np.asarray(a, dtype="<f8"))
+            h.update(f"|{tag}{a.shape}|".encode())
+            h.update(a.tobytes())
+
+        h.update(repr((self.state_names, self.input_names, self.scheduling.names)).encode())
+        put("min", self.scheduling.min)
+        put("max", self.scheduling.max)
+        put("ts", [] if self.ts is None else [self.ts])
+        for name in ("K", "x0", "u0"):
+            put(name, getattr(self, name))
+        put("R", self.R)
+        put("Q", self.Q)
+        put("gamma", [self.gamma])
+        if self.feedforward is not None:
+            h.update(repr(sorted(self.feedforward.to_dict().items())).encode())
+            put("F_ff", self.F_ff)
+            if self.F_jerk is not None:
+                put("F_jerk", self.F_jerk)
+        return h.hexdigest()
+
+    def check_law_sha256(self, label: str = "gains.yaml") -> None:
+        """ConfigError unless ``certificate.gains_sha256`` is present and equals
+        :meth:`law_sha256` (the gains flown are the gains that were certified)."""
+        v = _V(label)
+        got = self.certificate.gains_sha256
+        if got is None:
+            v.fail("certificate.gains_sha256", "missing: the file does not record which gains "
+                   "were certified (written before this check existed); re-run `lpv-sysid "
+                   "synthesize` to regenerate the gains and their certificate")
+        if got != self.law_sha256():
+            v.fail("certificate.gains_sha256", f"{got} does not match the gains in the file "
+                   f"(sha256 {self.law_sha256()}): K, x0, u0, R, Q, gamma or the feedforward "
+                   "were changed after certification; re-run `lpv-sysid synthesize` (and "
+                   "`lpv-sysid verify`) instead of editing gains")
 
     def to_dict(self) -> dict:
         d = {"format": GAINS_FORMAT}
@@ -777,7 +893,7 @@ class GainSchedule(_StackedVertices):
         gamma = v.number(d["gamma"], "gamma")
         if gamma <= 0:
             v.fail("gamma", f"must be > 0, got {gamma}")
-        cert = Certificate.parse(v, d["certificate"])
+        cert = Certificate.parse(v, d["certificate"], n_p=n_p, n_e=R.shape[1])
         if cert.gamma_achieved > gamma * (1 + 1e-6):
             v.fail("certificate.gamma_achieved", f"{cert.gamma_achieved} exceeds gamma = {gamma}")
         return cls(sn, su, inn, inu, box, tuple(vxs[k] for k in order), R, Q, gamma, cert, ts, ff)
@@ -827,3 +943,74 @@ class GainSchedule(_StackedVertices):
         doc = self.to_dict()
         self.from_dict(doc, layout=None, label=Path(path).name)   # never write an invalid file
         _write_yaml(path, doc, Path(path).name)
+
+
+def certify_law(doc: dict, layout: Optional[Layout] = None, label: str = "gains.yaml") -> dict:
+    """``doc`` (a gains.yaml mapping) with ``certificate.gains_sha256`` set to the
+    :meth:`GainSchedule.law_sha256` of the law it holds. Called only by the tool that
+    certified that law (``lpv-sysid synthesize``; the LQR test-law writer of the tests),
+    never by a loader or editor: the hash records what was certified."""
+    gs = GainSchedule.from_dict(doc, layout, label)
+    return {**doc, "certificate": {**doc["certificate"], "gains_sha256": gs.law_sha256()}}
+
+
+#: arrays of the certificate sidecar holding the certified Eq. (23) systems (A_ij, B_ij):
+#: ``A_sys`` (N, M, n, n), ``B_sys`` (N, M, n, m), NaN past ``M_sys[i]`` systems at vertex i
+SYSTEMS_ARRAYS = ("A_sys", "B_sys", "M_sys")
+
+
+def systems_arrays(systems: Sequence[Sequence[tuple]]) -> dict:
+    """The :data:`SYSTEMS_ARRAYS` of per-vertex lists of ``(A, B)`` (the polytope the
+    certificate covers, ``PolytopicModel.systems``), for the sidecar writer."""
+    N = len(systems)
+    Ms = np.array([len(s) for s in systems], dtype=np.int64)
+    n, m = np.asarray(systems[0][0][1]).shape
+    A = np.full((N, int(Ms.max()), n, n), np.nan)
+    B = np.full((N, int(Ms.max()), n, m), np.nan)
+    for i, lst in enumerate(systems):
+        for j, (a, b) in enumerate(lst):
+            A[i, j], B[i, j] = a, b
+    return {"A_sys": A, "B_sys": B, "M_sys": Ms}
+
+
+def load_certified_systems(gains_path, certificate: Certificate, n_x: int, n_u: int,
+                           label: Optional[str] = None) -> list:
+    """Per-vertex lists of the certified ``(A_ij, B_ij)`` from the sidecar named in
+    ``certificate.sidecar`` (``{file, sha256}``, next to the gains file); ConfigError when
+    the entry, the file, its sha256 or the :data:`SYSTEMS_ARRAYS` are missing or wrong."""
+    from lpv_sysid.io.safe_open import read_npz
+
+    gains_path = Path(gains_path)
+    v = _V(label or gains_path.name)
+    side = certificate.extra.get("sidecar")
+    if not isinstance(side, Mapping) or not isinstance(side.get("file"), str) \
+            or not isinstance(side.get("sha256"), str):
+        v.fail("certificate.sidecar", "missing {file, sha256}: the certified systems cannot be "
+               "re-checked; re-run `lpv-sysid synthesize`")
+    path = gains_path.parent / side["file"]
+    if not path.exists():
+        v.fail("certificate.sidecar", f"sidecar {path} not found (copy it next to the gains file)")
+    sha = sha256_file(path)
+    if sha != side["sha256"]:
+        v.fail("certificate.sidecar.sha256", f"{side['sha256']} does not match {path.name} "
+               f"(sha256 {sha}): the sidecar was changed or belongs to other gains")
+    d = read_npz(path, path.name)
+    missing = [k for k in SYSTEMS_ARRAYS if k not in d]
+    if missing:
+        v.fail("certificate.sidecar", f"{path.name} has no certified systems {missing} "
+               "(written before this check existed); re-run `lpv-sysid synthesize`")
+    A, B, Ms = d["A_sys"], d["B_sys"], d["M_sys"]
+    N = len(Ms)
+    if A.ndim != 4 or B.ndim != 4 or A.shape[:2] != B.shape[:2] or A.shape[0] != N \
+            or A.shape[2:] != (n_x, n_x) or B.shape[2:] != (n_x, n_u) \
+            or Ms.ndim != 1 or np.any(Ms < 1) or np.any(Ms > A.shape[1]):
+        v.fail("certificate.sidecar", f"{path.name}: certified systems have shapes A {A.shape}, "
+               f"B {B.shape}, M {Ms.shape}; expected (N, M, {n_x}, {n_x}), (N, M, {n_x}, {n_u})")
+    out = []
+    for i in range(N):
+        a, b = A[i, :int(Ms[i])], B[i, :int(Ms[i])]
+        if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+            v.fail("certificate.sidecar",
+                   f"{path.name}: certified systems of vertex {i} are not finite")
+        out.append([(a[j], b[j]) for j in range(int(Ms[i]))])
+    return out

@@ -15,7 +15,10 @@ topic                         type                            content
 ``state``                     nav_msgs/Odometry               ``odom`` (ENU) / ``base_link`` (FLU);
                                                               ENU position, ENU/FLU attitude,
                                                               body velocity and rates FLU
-``rotor_speeds``              sensor_msgs/JointState          ``rotor_1..rotor_4``, velocity rad/s
+``rotor_speeds``              sensor_msgs/JointState          ``rotor_1..rotor_4``, velocity rad/s;
+                                                              frame_id ``base_link`` measured
+                                                              (ESC), ``estimated`` from the
+                                                              motor outputs (seed 0 Eq. 8)
 ``imu``                       sensor_msgs/Imu                 FLU specific force and rates,
                                                               ENU/FLU orientation
 ``velocity_reference``        geometry_msgs/TwistStamped      ``base_link``; linear = v_d FLU,
@@ -52,7 +55,8 @@ __all__ = [
     "time_msg", "stamp_ns_from_time", "stamp_ns_of", "header_msg",
     "odometry_from_state", "state_from_odometry",
     "joint_state", "channels_from_joint_state",
-    "rotor_speeds_msg", "rotor_speeds_from_joint_state",
+    "rotor_speeds_msg", "rotor_speeds_from_joint_state", "rotor_source_of",
+    "ROTOR_SOURCES", "ROTOR_ESTIMATED_FRAME",
     "excitation_msg", "excitation_from_joint_state",
     "actuator_command_msg", "actuator_command_from_joint_state",
     "imu_msg", "imu_from_msg",
@@ -72,6 +76,10 @@ except ImportError:  # pragma: no cover - only while models/quadrotor.py is miss
 EXCITATION_NAMES = tuple(EXCITATION_NAMES)
 INPUT_NAMES = tuple(INPUT_NAMES)
 ROTOR_NAMES = ("rotor_1", "rotor_2", "rotor_3", "rotor_4")   # PX4 quad-X numbering
+#: where rotor speeds come from: "esc" (measured, ESC telemetry) or "estimated" (motor
+#: outputs through the motor model); the JointState's header.frame_id tells them apart
+ROTOR_SOURCES = ("esc", "estimated")
+ROTOR_ESTIMATED_FRAME = "estimated"
 
 #: message type of every topic of docs/DESIGN.md
 TYPES = {
@@ -415,14 +423,28 @@ def channels_from_joint_states(msgs: Sequence, names: Sequence[str], field: str 
     return t, out
 
 
-def rotor_speeds_msg(f: MsgFactory, stamp_ns: int, omega_rotors):
-    """``rotor_speeds``: rotor angular speeds Omega_1..4 (rad/s, PX4 numbering) in ``velocity``."""
-    return joint_state(f, stamp_ns, ROTOR_NAMES, velocity=omega_rotors, frame_id=BASE_FRAME)
+def rotor_speeds_msg(f: MsgFactory, stamp_ns: int, omega_rotors, source: str = "esc"):
+    """``rotor_speeds``: rotor angular speeds Omega_1..4 (rad/s, PX4 numbering) in ``velocity``.
+
+    ``source`` (:data:`ROTOR_SOURCES`) is carried in ``header.frame_id``: ``base_link`` for
+    measured speeds (ESC telemetry), ``estimated`` for speeds estimated from the motor
+    outputs; names and values are the same for both, so every consumer reads either.
+    """
+    if source not in ROTOR_SOURCES:
+        raise MessageError(f"rotor_speeds: source must be one of {ROTOR_SOURCES}, got {source!r}")
+    frame = ROTOR_ESTIMATED_FRAME if source == "estimated" else BASE_FRAME
+    return joint_state(f, stamp_ns, ROTOR_NAMES, velocity=omega_rotors, frame_id=frame)
 
 
 def rotor_speeds_from_joint_state(msg):
-    """``(t, Omega(4))`` from a ``rotor_speeds`` JointState."""
+    """``(t, Omega(4))`` from a ``rotor_speeds`` JointState (either source)."""
     return channels_from_joint_state(msg, ROTOR_NAMES, field="velocity")
+
+
+def rotor_source_of(msg) -> str:
+    """``"estimated"`` when a ``rotor_speeds`` JointState carries estimated speeds, else
+    ``"esc"`` (measured; any other frame_id, e.g. ``base_link`` of older recordings)."""
+    return "estimated" if msg.header.frame_id == ROTOR_ESTIMATED_FRAME else "esc"
 
 
 def excitation_msg(f: MsgFactory, stamp_ns: int, u_e):

@@ -9,10 +9,19 @@ Layout of an experiment directory ``out``::
 
 Messages arrive as rosbags message objects or as serialized CDR bytes (the node shell
 subscribes with ``raw=True``; bytes go to the bag untouched, as ``ros2 bag record`` does).
-``experiment.yaml`` is rewritten at start, at every split and at stop, so a crash still
-leaves it describing every bag closed so far (``closed_cleanly: false``). A write error
-(disk full, ...) closes the current bag so what was written stays readable, is recorded
-in the metadata and raised as :class:`~lpv_sysid.errors.BagError`.
+Durability. The bags are flushed at a bounded interval (``flush_interval_s`` <= 1 s,
+``flush_messages``: :class:`~lpv_sysid.io.bag.BagWriter`), so a ``kill -9`` loses at most
+that much. ``experiment.yaml`` is written atomically (temporary file + rename, no ``.tmp``
+left behind) at start, at every flush, at every split and at stop, and is truthful at
+every moment: ``status`` is ``recording`` / ``incomplete`` (ended by an error, or found
+interrupted) / ``closed_cleanly``, and every count in it is what is on disk (committed),
+never more. While recording, ``out/.lpv_sysid_recording`` is locked (``flock``; the lock
+dies with the process) and holds a disk reserve for the metadata on a full disk. A write
+error (disk full, ...) closes the current bag so what was written stays readable, is
+recorded in the metadata (``status: incomplete``, ``error``) and raised as
+:class:`~lpv_sysid.errors.BagError`. A recording whose process was killed is made
+readable by :func:`repair_experiment` (``lpv-sysid bag repair OUT``), which also runs when
+a recorder is started on that directory again.
 """
 
 from __future__ import annotations
@@ -21,7 +30,9 @@ import contextlib
 import datetime as _dt
 import hashlib
 import logging
+import math
 import os
+import re
 import signal
 import subprocess
 from dataclasses import dataclass, field
@@ -31,10 +42,17 @@ from typing import Callable, Mapping
 import yaml
 
 from lpv_sysid.errors import BagError, ConfigError
+from lpv_sysid.io.bag import (FLUSH_INTERVAL_S, FLUSH_MESSAGES, RESERVE_BYTES, DiskReserve,
+                              RepairReport, atomic_write_text, repair_bag, writer_alive)
+from lpv_sysid.io.yaml_file import read_yaml
 
 LOG = logging.getLogger(__name__)
 METADATA_FORMAT = "lpv_sysid/experiment@1"
 METADATA_FILE = "experiment.yaml"
+#: lock + metadata disk reserve of a running :class:`Recorder`, in the experiment directory
+LOCK_FILE = ".lpv_sysid_recording"
+STATUSES = ("recording", "incomplete", "closed_cleanly")
+_BAG_DIR = re.compile(r"bag_[0-9]{4}")
 
 
 @dataclass(frozen=True)
@@ -44,7 +62,10 @@ class RecorderConfig:
     ``topics`` maps a topic name to its type ``pkg/msg/Name``. ``split_size_bytes`` /
     ``split_duration_s``: start a new bag directory when the current one holds this many
     payload bytes / this much recorded time (0 disables). ``config_files`` are copied
-    verbatim into the metadata; ``gains_file`` is hashed (sha256).
+    verbatim into the metadata; ``gains_file`` is hashed (sha256). Durability
+    (:class:`~lpv_sysid.io.bag.BagWriter`): ``flush_interval_s`` (0 < s <= 1) and
+    ``flush_messages`` bound what a killed process loses, ``fsync`` makes each flush
+    survive a power cut, ``reserve_bytes`` are kept free per bag for closing on a full disk.
     """
 
     out_dir: str
@@ -55,6 +76,10 @@ class RecorderConfig:
     config_files: tuple[str, ...] = ()
     gains_file: str = ""
     description: str = ""
+    flush_interval_s: float = FLUSH_INTERVAL_S
+    flush_messages: int = FLUSH_MESSAGES
+    fsync: bool = False
+    reserve_bytes: int = RESERVE_BYTES
 
     def __post_init__(self):
         if not self.out_dir:
@@ -74,6 +99,17 @@ class RecorderConfig:
             raise ConfigError("recorder: split_size_bytes must be >= 0")
         if self.split_duration_s < 0:
             raise ConfigError("recorder: split_duration_s must be >= 0")
+        f = self.flush_interval_s
+        if isinstance(f, bool) or not isinstance(f, (int, float)) or not math.isfinite(f) \
+                or not 0 < f <= 1.0:
+            raise ConfigError(f"recorder: flush_interval_s must be in (0, 1] s (the data a "
+                              f"killed recorder may lose), got {f!r}")
+        for name, lo in (("flush_messages", 1), ("reserve_bytes", 0)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+                raise ConfigError(f"recorder: {name} must be an integer >= {lo}, got {v!r}")
+        if not isinstance(self.fsync, bool):
+            raise ConfigError(f"recorder: fsync must be true or false, got {self.fsync!r}")
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "RecorderConfig":
@@ -107,11 +143,21 @@ class TopicStats:
 
 @dataclass
 class _BagInfo:
+    """One bag: what was recorded into it (``messages``, ``bytes``, stamps, ``topics``) and
+    ``durable``, what is known to be on disk (last flush; the file's content after close)."""
+
     path: str
     start_ns: int | None = None
     end_ns: int | None = None
     messages: int = 0
     bytes: int = 0
+    topics: dict = field(default_factory=dict)
+    durable: dict | None = None
+
+    def entry(self) -> dict:
+        d = self.durable or {"topics": {}, "bytes": 0, "start_ns": None, "end_ns": None}
+        return {"path": self.path, "messages": sum(d["topics"].values()), "bytes": d["bytes"],
+                "start_ns": d["start_ns"], "end_ns": d["end_ns"]}
 
 
 def git_revision(path: str | os.PathLike) -> str | None:
@@ -155,6 +201,9 @@ class Recorder:
     _static_meta: dict = field(default_factory=dict)
     _busy: bool = False
     _exit_code: int | None = None
+    _lock: object = None
+    _flushes_seen: int = 0
+    rotor_sources: dict = field(default_factory=dict)    # rotor_speeds messages per source
 
     def __post_init__(self):
         self.stats = {t: TopicStats(m) for t, m in self.config.topics.items()}
@@ -174,15 +223,27 @@ class Recorder:
             raise BagError(f"recorder: {self.out_dir} already started")
         out = self.out_dir
         if out.exists() and any(out.iterdir()):
-            raise BagError(f"recorder: output directory {out} exists and is not empty")
+            raise BagError(_occupied(out))
         try:
             out.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise BagError(f"recorder: cannot create {out}: {exc.strerror or exc}") from None
         self._static_meta = self._collect_static_metadata()
+        # room for experiment.yaml on a full disk: twice its largest part, plus 64 kB
+        reserve = (1 << 16) + 2 * sum(len(t.encode()) for t in
+                                      self._static_meta["config_files"].values())
+        try:
+            self._lock = DiskReserve(out / LOCK_FILE, reserve).acquire()
+        except OSError as exc:
+            raise BagError(f"recorder: cannot create {out / LOCK_FILE}: "
+                           f"{exc.strerror or exc}") from None
         self._started_ns = int(stamp_ns)
         self._wall_start = _now_iso()
-        self._open_next()
+        try:
+            self._open_next()
+        except BagError:
+            self._lock.release()
+            raise
         self._write_metadata(closed=False)
         LOG.info("recording %d topic(s) to %s", len(self.stats), out)
 
@@ -224,11 +285,50 @@ class Recorder:
             nbytes = self._size_of(msg, st.msgtype)
         bag.bytes += nbytes
         bag.messages += 1
+        bag.topics[topic] = bag.topics.get(topic, 0) + 1
         bag.start_ns = stamp_ns if bag.start_ns is None else min(bag.start_ns, stamp_ns)
         bag.end_ns = stamp_ns if bag.end_ns is None else max(bag.end_ns, stamp_ns)
         st.count += 1
+        if topic.rsplit("/", 1)[-1] == "rotor_speeds":
+            self._note_rotor_source(msg, raw, st.msgtype)
         st.first_ns = stamp_ns if st.first_ns is None else min(st.first_ns, stamp_ns)
         st.last_ns = stamp_ns if st.last_ns is None else max(st.last_ns, stamp_ns)
+        self._note_flush()
+
+    def flush_if_due(self) -> bool:
+        """Flush the bag when its oldest unflushed message is ``flush_interval_s`` old and
+        update ``experiment.yaml`` (for a timer: writes check this themselves, a timer
+        covers a stream that stops). True if it flushed."""
+        writer = self._writer
+        if writer is None or not hasattr(writer, "flush_if_due"):
+            return False
+        self._busy = True
+        try:
+            try:
+                did = writer.flush_if_due()
+            except (OSError, BagError) as exc:
+                self._fail(f"flush of {self.bags[-1].path} failed: "
+                           f"{getattr(exc, 'strerror', None) or exc}")
+            if did:
+                self._note_flush()
+        finally:
+            self._busy = False
+        if self._exit_code is not None:
+            raise SystemExit(self._exit_code)
+        return did
+
+    def split(self) -> str:
+        """Close the current bag and open the next one now (one bag per maneuver, e.g. the
+        phase-1 campaign of ``lpv-sysid fly``); a bag that holds no message yet is kept, not
+        split. Returns the directory name of the bag that records from now on."""
+        if self._writer is None:
+            raise BagError(f"recorder: {self.out_dir} is not recording"
+                           + (f" (stopped after error: {self.error})" if self.error else ""))
+        if self.bags[-1].messages:
+            self._close_current()
+            self._open_next()
+            self._write_metadata(closed=False)
+        return self.bags[-1].path
 
     def note_dropped(self, topic: str, count: int = 1) -> None:
         """Messages the middleware reported lost before they reached the logger."""
@@ -242,8 +342,12 @@ class Recorder:
         self._stopped_ns = int(stamp_ns) if stamp_ns is not None else (
             max((b.end_ns or 0) for b in self.bags) if self.bags else self._started_ns)
         self._wall_stop = _now_iso()
-        self._close_current()
-        self._write_metadata(closed=self.error is None)
+        try:
+            self._close_current()
+        finally:
+            self._write_metadata(closed=self.error is None)
+            if self._lock is not None:
+                self._lock.release()
         LOG.info("recording stopped: %s", self.summary())
 
     def summary(self) -> str:
@@ -267,7 +371,7 @@ class Recorder:
     def _open_next(self) -> None:
         path = self.out_dir / f"bag_{len(self.bags):04d}"
         try:
-            writer = self.writer_factory(str(path), self.config.storage)
+            writer = self._make_writer(str(path))
             writer.__enter__()
             for topic, msgtype in self.config.topics.items():
                 writer.add_topic(topic, msgtype)
@@ -276,7 +380,49 @@ class Recorder:
             self._write_metadata(closed=False)
             raise BagError(f"recorder: {self.error}") from None
         self._writer = writer
+        self._flushes_seen = getattr(writer, "flushes", 0)
         self.bags.append(_BagInfo(path=path.name))
+
+    def _make_writer(self, path: str):
+        if self.writer_factory is not _default_writer_factory:
+            return self.writer_factory(path, self.config.storage)
+        from lpv_sysid.io.bag import BagWriter
+        c = self.config
+        return BagWriter(path, storage=c.storage, flush_interval_s=c.flush_interval_s,
+                         flush_messages=c.flush_messages, fsync=c.fsync,
+                         reserve_bytes=c.reserve_bytes)
+
+    def _note_flush(self) -> None:
+        """After the writer flushed: record what is on disk now and rewrite the metadata."""
+        writer = self._writer
+        n = getattr(writer, "flushes", None)
+        if n is None or n == self._flushes_seen:
+            return
+        self._flushes_seen = n
+        bag = self.bags[-1]
+        bag.durable = {"topics": dict(writer.durable_counts), "bytes": bag.bytes,
+                       "start_ns": bag.start_ns, "end_ns": bag.end_ns}
+        self._write_metadata(closed=False)
+
+    @staticmethod
+    def _settle(bag: _BagInfo, writer) -> None:
+        """``bag.durable`` after its writer closed (cleanly or after an error)."""
+        counts = getattr(writer, "durable_counts", None)
+        topics = dict(bag.topics) if counts is None else dict(counts)
+        n = sum(topics.values())
+        rep = getattr(writer, "repair", None)
+        if n >= bag.messages:
+            span = (bag.bytes, bag.start_ns, bag.end_ns)
+        elif isinstance(rep, RepairReport):
+            starts = [s.start_ns for s in rep.topics.values() if s.count]
+            ends = [s.end_ns for s in rep.topics.values() if s.count]
+            span = (rep.bytes, min(starts) if starts else None, max(ends) if ends else None)
+        elif bag.durable is not None:
+            span = (bag.durable["bytes"], bag.durable["start_ns"], bag.durable["end_ns"])
+        else:
+            span = (0, None, None)
+        bag.durable = {"topics": topics, "bytes": span[0], "start_ns": span[1],
+                       "end_ns": span[2]}
 
     def _close_current(self) -> None:
         writer, self._writer = self._writer, None
@@ -285,9 +431,11 @@ class Recorder:
         try:
             writer.__exit__(None, None, None)
         except (OSError, BagError) as exc:
+            self._settle(self.bags[-1], writer)
             msg = f"closing {self.bags[-1].path} failed: {getattr(exc, 'strerror', None) or exc}"
             self.error = self.error or msg
             raise BagError(f"recorder: {msg}") from None
+        self._settle(self.bags[-1], writer)
 
     def _fail(self, reason: str):
         self.error = reason
@@ -296,9 +444,20 @@ class Recorder:
             self._close_current()
         except BagError:
             pass
+        if self._lock is not None:
+            self._lock.free_space()        # room for the metadata below, lock kept
         self._write_metadata(closed=False)
-        raise BagError(f"recorder: {reason}; {bag.path} closed with {bag.messages} "
-                       "message(s) written before the error")
+        raise BagError(f"recorder: {reason}; {bag.path} closed with "
+                       f"{bag.entry()['messages']} message(s) readable")
+
+    def _note_rotor_source(self, msg, raw: bool, msgtype: str) -> None:
+        """Count rotor_speeds per source ("esc" measured / "estimated", io.messages)."""
+        from lpv_sysid.io.messages import rotor_source_of
+        try:
+            src = rotor_source_of(self._ts().deserialize_cdr(bytes(msg), msgtype) if raw else msg)
+        except Exception:        # noqa: BLE001 - not a JointState: recorded, source unknown
+            src = "unknown"
+        self.rotor_sources[src] = self.rotor_sources.get(src, 0) + 1
 
     def _ts(self):
         if self._typestore is None:
@@ -340,22 +499,41 @@ class Recorder:
             "stop_time": self._wall_stop or None,
             "start_stamp_ns": self._started_ns,
             "stop_stamp_ns": self._stopped_ns,
+            "status": self._status(closed),
             "closed_cleanly": bool(closed),
             "error": self.error,
+            "updated_time": _now_iso(),
             "split": {"size_bytes": self.config.split_size_bytes,
                       "duration_s": self.config.split_duration_s},
-            "topics": {t: {"type": s.msgtype, "count": s.count, "dropped": s.dropped,
-                           "rate_hz": round(s.rate_hz, 6)} for t, s in self.stats.items()},
-            "bags": [{"path": b.path, "messages": b.messages, "bytes": b.bytes,
-                      "start_ns": b.start_ns, "end_ns": b.end_ns} for b in self.bags],
+            "rotor_speeds_source": dict(self.rotor_sources) or None,   # {"esc"|"estimated": count}
+            # counts: what is on disk (committed), never more -- see the module docstring
+            "topics": {t: {"type": s.msgtype, "count": self._durable_count(t),
+                           "dropped": s.dropped, "rate_hz": round(s.rate_hz, 6)}
+                       for t, s in self.stats.items()},
+            "bags": [b.entry() for b in self.bags],
         }
         path = self.out_dir / METADATA_FILE
-        tmp = path.with_suffix(".yaml.tmp")
+        text = yaml.safe_dump(meta, sort_keys=False)
         try:
-            tmp.write_text(yaml.safe_dump(meta, sort_keys=False))
-            os.replace(tmp, path)
+            atomic_write_text(path, text, fsync=self.config.fsync)
         except OSError as exc:
+            if self._lock is not None and self._lock.free_space():   # disk full: use the reserve
+                try:
+                    atomic_write_text(path, text, fsync=self.config.fsync)
+                    return
+                except OSError as exc2:
+                    exc = exc2
             LOG.error("cannot write %s: %s", path, exc.strerror or exc)
+
+    def _status(self, closed: bool) -> str:
+        if closed:
+            return "closed_cleanly"
+        if self.error is not None or self._stopped_ns is not None:
+            return "incomplete"
+        return "recording"
+
+    def _durable_count(self, topic: str) -> int:
+        return sum((b.durable or {"topics": {}})["topics"].get(topic, 0) for b in self.bags)
 
 
 def _now_iso() -> str:
@@ -386,3 +564,144 @@ def stop_on_signals(recorder: Recorder, stamp_ns: Callable[[], int] | None = Non
         for s, h in previous.items():
             signal.signal(s, h)
         recorder.stop(stamp_ns() if stamp_ns else None)
+
+
+# ------------------------------------------------------------------ repair after a kill
+@dataclass(frozen=True)
+class ExperimentRepair:
+    """What :func:`repair_experiment` found and did: one
+    :class:`~lpv_sysid.io.bag.RepairReport` per bag, the status before and after, and the
+    bags that could not be repaired (``errors``)."""
+
+    out_dir: str
+    bags: tuple
+    status_before: str
+    status: str
+    changed: bool
+    errors: tuple = ()
+    dry_run: bool = False
+
+    @property
+    def messages(self) -> int:
+        return sum(r.messages for r in self.bags)
+
+    def summary(self) -> str:
+        head = f"{METADATA_FILE}: status {self.status_before}"
+        if self.changed:
+            head += (" -> " if not self.dry_run else " -> would be ") + self.status
+        else:
+            head += ", nothing to do"
+        parts = [head, f"{self.messages} message(s) readable in {len(self.bags)} bag(s)"]
+        return "; ".join(parts + list(self.errors))
+
+
+def _occupied(out: Path) -> str:
+    """Why ``out`` cannot be recorded into; an interrupted recording there is repaired
+    first (the logger's next start is the first chance to do it automatically)."""
+    msg = f"recorder: output directory {out} exists and is not empty"
+    if not (out / METADATA_FILE).is_file():
+        return msg
+    try:
+        rep = repair_experiment(out)
+    except (BagError, ConfigError) as exc:
+        return f"{msg} ({exc})"
+    if rep.changed:
+        return (f"{msg}: it held an interrupted recording, now repaired ({rep.summary()}); "
+                "choose a new out_dir")
+    return msg
+
+
+def repair_experiment(out_dir, dry_run: bool = False) -> ExperimentRepair:
+    """Make an experiment directory whose recorder was killed (or starved) readable by
+    standard tools and its ``experiment.yaml`` truthful: :func:`~lpv_sysid.io.bag.repair_bag`
+    on every bag, then the counts, spans and bags from what the bags hold, ``status:
+    incomplete`` (kept ``closed_cleanly`` when nothing needed repair), the ``error`` (an
+    interrupted recording says so) and a ``repaired`` record. Refuses a directory whose
+    recorder is alive. ``dry_run`` changes nothing."""
+    out = Path(out_dir)
+    path = out / METADATA_FILE
+    meta = read_yaml(path, finite=False)      # a package output: rates may be .nan
+    if not isinstance(meta, dict) or meta.get("format") != METADATA_FORMAT:
+        got = meta.get("format") if isinstance(meta, dict) else type(meta).__name__
+        raise BagError(f"recorder: {path}: not an lpv_sysid experiment file "
+                       f"(format {got!r}, expected {METADATA_FORMAT!r})")
+    if writer_alive(out / LOCK_FILE):
+        raise BagError(f"recorder: {out} is being recorded by a running process "
+                       f"({LOCK_FILE} is locked); stop it first")
+    names: list[str] = []
+    for b in meta.get("bags") or []:
+        name = b.get("path") if isinstance(b, dict) else None
+        if isinstance(name, str) and _BAG_DIR.fullmatch(name) and name not in names:
+            names.append(name)
+    for p in sorted(out.iterdir()):
+        if p.is_dir() and _BAG_DIR.fullmatch(p.name) and p.name not in names:
+            names.append(p.name)
+    reports, errors = [], []
+    for name in names:
+        if not (out / name).is_dir():
+            errors.append(f"{name}: missing")
+            continue
+        try:
+            reports.append(repair_bag(out / name, dry_run))
+        except BagError as exc:
+            errors.append(f"{name}: not repaired: {exc}")
+    before = meta.get("status")
+    if before not in STATUSES:                   # written before the status field existed
+        before = "closed_cleanly" if meta.get("closed_cleanly") else (
+            "incomplete" if meta.get("error") else "recording")
+    interrupted = before == "recording"          # ... and its lock is gone: the recorder died
+    changed = interrupted or bool(errors) or any(r.changed for r in reports) \
+        or (out / LOCK_FILE).exists()
+    status = "closed_cleanly" if before == "closed_cleanly" and not errors and \
+        not any(r.changed for r in reports) else "incomplete"
+    if not changed:
+        return ExperimentRepair(str(out), tuple(reports), before, before, False, (), dry_run)
+    new = dict(meta)
+    new["status"] = status
+    new["closed_cleanly"] = status == "closed_cleanly"
+    if interrupted and not new.get("error"):
+        new["error"] = ("recording interrupted: the recorder ended without closing (killed, "
+                        "crashed or lost power)")
+    old_topics = meta.get("topics") if isinstance(meta.get("topics"), dict) else {}
+    merged: dict[str, list] = {}
+    for r in reports:
+        for t, s in r.topics.items():
+            acc = merged.setdefault(t, [s.msgtype, 0, None, None])
+            acc[1] += s.count
+            if s.count:
+                acc[2] = s.start_ns if acc[2] is None else min(acc[2], s.start_ns)
+                acc[3] = s.end_ns if acc[3] is None else max(acc[3], s.end_ns)
+    topics = {}
+    for t in list(old_topics) + [t for t in merged if t not in old_topics]:
+        entry = dict(old_topics.get(t) or {})
+        typ, n, lo, hi = merged.get(t, [entry.get("type"), 0, None, None])
+        entry["type"] = entry.get("type") or typ
+        entry["count"] = n
+        entry.setdefault("dropped", 0)
+        entry["rate_hz"] = round((n - 1) / ((hi - lo) * 1e-9), 6) if n > 1 and hi > lo else 0.0
+        topics[t] = entry
+    new["topics"] = topics
+    new["bags"] = [{"path": Path(r.path).name, "messages": r.messages, "bytes": r.bytes,
+                    "start_ns": min((s.start_ns for s in r.topics.values() if s.count),
+                                    default=None),
+                    "end_ns": max((s.end_ns for s in r.topics.values() if s.count),
+                                  default=None)} for r in reports]
+    if new.get("stop_stamp_ns") is None:
+        ends = [b["end_ns"] for b in new["bags"] if b["end_ns"] is not None]
+        new["stop_stamp_ns"] = max(ends) if ends else None
+    new["repaired"] = {"time": _now_iso(), "by": "lpv_sysid.io.recorder.repair_experiment",
+                       "status_before": before,
+                       "bags": {Path(r.path).name: r.summary() for r in reports},
+                       "errors": errors or None}
+    result = ExperimentRepair(str(out), tuple(reports), before, status, True, tuple(errors),
+                              dry_run)
+    if dry_run:
+        return result
+    try:
+        atomic_write_text(path, yaml.safe_dump(new, sort_keys=False), fsync=True)
+    except OSError as exc:
+        raise BagError(f"recorder: cannot write {path}: {exc.strerror or exc}") from None
+    with contextlib.suppress(FileNotFoundError):
+        (out / LOCK_FILE).unlink()
+    LOG.warning("%s: %s", out, result.summary())
+    return result

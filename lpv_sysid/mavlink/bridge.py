@@ -16,22 +16,35 @@ The rclpy shell (``nodes/mavlink_bridge_node.py``) is glue around :class:`Bridge
 is what a controller uses to answer within the same poll (lowest latency). Commands go
 out immediately when the machine is streaming (``send_on_command``), and again at the
 configured rate.
+
+Safety envelope (:mod:`lpv_sysid.control.envelope`, section ``envelope``): armed by
+``start`` (home: the position at start on the ground, PX4's HOME_POSITION when the vehicle
+is already armed), it checks every decoded state
+sample and every velocity reference while the machine streams. A violation (floor,
+predictive floor, ceiling, geofence, tilt, speed, setpoint magnitude, non-finite values)
+puts an ``error`` StatusEvent naming it on the output and hands control back through the
+offboard machine at once; a rejected setpoint is never encoded. ``core.envelope``
+exposes the latched :class:`~lpv_sysid.control.envelope.Violation` and
+``activate_floor``; ``status`` carries ``envelope*`` keys.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import struct
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from lpv_sysid.control.envelope import Envelope, EnvelopeConfig, Violation
 from lpv_sysid.errors import ConfigError, LpvSysidError, SafetyError
 from lpv_sysid.mavlink import px4
 from lpv_sysid.mavlink.link import LinkConfig, LinkEvent, MavlinkLink
-from lpv_sysid.mavlink.offboard import (OffboardConfig, OffboardMachine, SendCommand, SendSetpoint,
-                                        State, StatusEvent)
+from lpv_sysid.mavlink.offboard import (STREAMING, OffboardConfig, OffboardMachine, SendCommand,
+                                        SendSetpoint, State, StatusEvent)
+from lpv_sysid.mavlink.rotor_estimate import RotorEstimateConfig, with_motor_output_streams
 from lpv_sysid.mavlink.telemetry import StateSample, TelemetryDecoder
 from lpv_sysid.validation import check_config_keys
 from lpv_sysid.mavlink.transport import (ActuatorSetpoint, TransportContext, VelocitySetpoint,
@@ -42,7 +55,7 @@ log = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class BridgeConfig:
-    """``config/mavlink_bridge.yaml``: sections ``link``, ``offboard``, ``command``."""
+    """``config/mavlink_bridge.yaml``: sections ``link``, ``offboard``, ``envelope``, ``command``."""
 
     link: LinkConfig = field(default_factory=LinkConfig)
     offboard: OffboardConfig = field(default_factory=OffboardConfig)
@@ -54,6 +67,8 @@ class BridgeConfig:
     auto_start: bool = False                  # start the machine on the first command
     telemetry_max_age: float = 0.5
     n_rotors: int = 4
+    rotor_estimate: RotorEstimateConfig = field(default_factory=RotorEstimateConfig)  # no ESC telemetry
+    envelope: EnvelopeConfig = field(default_factory=EnvelopeConfig)   # control/envelope.py
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "BridgeConfig":
@@ -61,6 +76,8 @@ class BridgeConfig:
         kw = dict(d)
         kw["link"] = LinkConfig.from_dict(d.get("link", {}) or {})
         kw["offboard"] = OffboardConfig.from_dict(d.get("offboard", {}) or {})
+        kw["envelope"] = EnvelopeConfig.from_dict(d.get("envelope", {}) or {})
+        kw["rotor_estimate"] = RotorEstimateConfig.from_dict(d.get("rotor_estimate", {}) or {})
         if "rate_p" in kw:
             try:
                 kw["rate_p"] = tuple(float(x) for x in kw["rate_p"])
@@ -72,11 +89,11 @@ class BridgeConfig:
 
     @classmethod
     def load(cls, path: str) -> "BridgeConfig":
-        from lpv_sysid.io.yaml_file import read_yaml
+        from lpv_sysid.io.yaml_file import read_yaml_mapping
 
-        d = read_yaml(path)
+        d = read_yaml_mapping(path)     # an explicitly given empty or non-mapping file is an error
         try:
-            return cls.from_dict(d or {})
+            return cls.from_dict(d)
         except ConfigError as exc:
             raise ConfigError(f"{path}: {exc}") from None
 
@@ -100,8 +117,10 @@ class BridgeCore:
     def __init__(self, config: BridgeConfig, link: MavlinkLink | None = None,
                  sample_callback: Callable[[Any], None] | None = None) -> None:
         self.config = config
-        self.link = link or MavlinkLink(config.link)
-        self.telemetry = TelemetryDecoder(config.n_rotors, config.telemetry_max_age)
+        self.link = link or MavlinkLink(with_motor_output_streams(config.link, config.rotor_estimate))
+        # telemetry only from the link's target (configured, or the first autopilot HEARTBEAT)
+        self.telemetry = TelemetryDecoder(config.n_rotors, config.telemetry_max_age,
+                                          rotor_estimate=config.rotor_estimate, source_filter=True)
         self.transport = config.transport()
         self.machine = OffboardMachine(config.offboard, self.transport.neutral())
         self.sample_callback = sample_callback
@@ -112,6 +131,7 @@ class BridgeCore:
         self._link_was_up = False
         self._state: StateSample | None = None
         self._last_ack: tuple[int, int] | None = None
+        self.envelope = Envelope(config.envelope)
 
     # ----------------------------------------------------------- lifecycle
     def open(self, now: float) -> None:
@@ -161,9 +181,20 @@ class BridgeCore:
             if msg.get_srcSystem() == self.link.target_system:
                 self._run(self.machine.on_ack(now, msg.command, msg.result), now, out)
             return
+        if mtype == "HOME_POSITION":
+            if msg.get_srcSystem() == self.link.target_system:
+                self.envelope.set_home_position((msg.x, msg.y, msg.z))
+            return
+        if self.link.target_system:
+            self.telemetry.target = (self.link.target_system, self.link.target_component)
         for s in self.telemetry.on_message(msg, now):
             if isinstance(s, StateSample):
                 self._state = s
+                if self.machine.state in STREAMING:
+                    v = self.envelope.check_state(s)
+                    self._envelope_notices(out)
+                    if v is not None:
+                        self._envelope_abort(now, v, out)
             out.samples.append(s)
             if self.sample_callback is not None:
                 self.sample_callback(s)
@@ -171,15 +202,19 @@ class BridgeCore:
     # ------------------------------------------------------------- inputs
     def on_velocity_reference(self, now: float, v_frd: Any, yaw_rate: float = 0.0,
                               stamp: float | None = None) -> bool:
-        try:
-            v = np.asarray(v_frd, dtype=float)
-            if v.shape != (3,) or not np.isfinite(v).all() or not math.isfinite(float(yaw_rate)):
-                raise SafetyError(f"velocity reference rejected: needs 3 finite values and a finite "
-                                  f"yaw rate, got {np.asarray(v_frd).tolist()!r}, {yaw_rate!r}")
-        except (TypeError, ValueError):
-            return self._reject(now, f"velocity reference rejected: not numeric ({v_frd!r})")
-        except SafetyError as exc:
-            return self._reject(now, str(exc))
+        bad = self.envelope.check_setpoint(now, v_frd, yaw_rate)
+        if bad is not None:
+            # never encoded; while streaming it is an envelope violation -> hand-back
+            reason = f"velocity reference rejected: {bad.message}"
+            if self.machine.state in STREAMING:
+                out = BridgeOutput()
+                self.rejected_commands += 1
+                log.warning(reason)
+                self._envelope_abort(now, self.envelope.trip(Violation(now, bad.kind, reason)), out)
+                self._pending_events.extend(out.events)
+                return False
+            return self._reject(now, reason)
+        v = np.asarray(v_frd, dtype=float)
         if self.config.command != "velocity":
             return self._reject(now, f"velocity reference ignored: bridge command is {self.config.command!r}")
         return self._command(now, VelocitySetpoint(tuple(float(x) for x in v), float(yaw_rate)), stamp)
@@ -197,15 +232,23 @@ class BridgeCore:
         return self._command(now, ActuatorSetpoint(tuple(float(x) for x in a)), stamp)
 
     def start(self, now: float) -> list[Any]:
-        """Begin pre-streaming (service ``start``); returns the status events it caused."""
+        """Begin pre-streaming (service ``start``) and arm the envelope; returns the status
+        events it caused."""
         out = BridgeOutput()
-        self._run(self.machine.start(now), now, out)
+        self._start_machine(now, out)
         return out.events
 
     def abort(self, now: float, reason: str = "abort requested") -> list[Any]:
         """Hand control back (service ``abort``); returns the status events it caused."""
         out = BridgeOutput()
         self._run(self.machine.abort(now, reason), now, out)
+        return out.events
+
+    def finish(self, now: float, mode: str = "LAND") -> list[Any]:
+        """End the session in ``mode`` (e.g. LAND after a campaign) with the offboard
+        machine's confirmation rules (``OffboardMachine.finish``); returns its events."""
+        out = BridgeOutput()
+        self._run(self.machine.finish(now, mode), now, out)
         return out.events
 
     def shutdown(self, now: float) -> list[Any]:
@@ -221,7 +264,14 @@ class BridgeCore:
         d.update({f"link_{k}": str(v) for k, v in self.link.stats.as_dict().items()})
         d["link_up"] = str(self.link.link_up(now))
         d["rejected_commands"] = str(self.rejected_commands)
-        d["telemetry_out_of_order"] = str(self.telemetry.stats.out_of_order)
+        tel = self.telemetry
+        d["telemetry_out_of_order"] = str(tel.stats.out_of_order)
+        d["foreign_messages"] = str(tel.stats.foreign)
+        d["foreign_sources"] = " ".join(f"{s}/{c}:{n}" for (s, c), n in sorted(tel.foreign_sources.items()))
+        d["attitude_source"] = tel.attitude_source(now) or "none"
+        d["position_source"] = tel.position_source(now) or "none"
+        d["rotor_source"] = tel.rotor_source or "none"
+        d.update(self.envelope.status())
         for k, age in self.telemetry.staleness(now).items():
             d[f"age_{k}_s"] = f"{age:.3f}" if math.isfinite(age) else "inf"
         return d
@@ -239,9 +289,36 @@ class BridgeCore:
         out = BridgeOutput()
         self._run(self.machine.on_command(now, sp), now, out)
         if self.config.auto_start and self.machine.state == State.IDLE:
-            self._run(self.machine.start(now), now, out)
+            self._start_machine(now, out)
         self._pending_events.extend(out.events)
         return True
+
+    def _start_machine(self, now: float, out: BridgeOutput) -> None:
+        if self.machine.state not in STREAMING and self.machine.state != State.HANDBACK:
+            s = self._state
+            fresh = s is not None and now - s.t <= self.config.telemetry_max_age
+            bad = self.envelope.arm(now, s.pos_ned if fresh else None, vehicle_armed=self.machine.armed)
+            self._envelope_notices(out)
+            if bad is not None:
+                reason = f"start refused: envelope: {bad.message}"
+                log.error(reason)
+                out.events.append(StatusEvent(now, self.machine.state.value, self.machine.state.value,
+                                              reason, "error"))
+                return
+        self._run(self.machine.start(now), now, out)
+
+    def _envelope_notices(self, out: BridgeOutput) -> None:
+        for n in self.envelope.notices():
+            log.info(n.message)
+            out.events.append(StatusEvent(n.t, self.machine.state.value, self.machine.state.value,
+                                          n.message, n.level))
+
+    def _envelope_abort(self, now: float, v: Violation, out: BridgeOutput) -> None:
+        reason = f"envelope violation ({v.kind}): {v.message}"
+        log.error(reason)
+        out.events.append(StatusEvent(now, self.machine.state.value, self.machine.state.value,
+                                      reason, "error"))
+        self._run(self.machine.abort(now, reason), now, out)
 
     def _reject(self, now: float, reason: str) -> bool:
         self.rejected_commands += 1
@@ -263,14 +340,13 @@ class BridgeCore:
                 if self.link.codec is None:
                     continue
                 try:
-                    msgs = self.transport.encode(self.link.codec, a.setpoint, self._ctx(now))
-                except SafetyError as exc:
+                    for m in self.transport.encode(self.link.codec, a.setpoint, self._ctx(now)):
+                        self.link.send(m)          # packing (float32) can overflow too
+                except (SafetyError, OverflowError, struct.error, ValueError) as exc:
                     self._run(self.machine.abort(now, f"setpoint not encodable: {exc}"), now, out)
                     out.events.append(StatusEvent(now, self.machine.state.value, self.machine.state.value,
-                                                  str(exc), "error"))
+                                                  f"setpoint not encodable: {exc}", "error"))
                     continue
-                for m in msgs:
-                    self.link.send(m)
             elif isinstance(a, SendCommand):
                 self.link.command_long(a.command, *a.params, confirmation=a.attempt - 1)
             else:

@@ -160,6 +160,22 @@ def parse_url(url: str, baud: int = 921600) -> tuple[str, int]:
     raise ConfigError(f"connection URL {url!r} not understood (udpin:H:P, udpout:H:P, tcp:H:P, /dev/ttyX, udp://:P)")
 
 
+#: bind addresses that listen on every network interface
+ALL_INTERFACES = ("0.0.0.0", "::", "", "*")
+
+
+def warn_if_all_interfaces(what: str, host: str) -> bool:
+    """Log (and return True) when ``host`` binds all interfaces: anyone on any network the
+    machine is on can then send commands, parameters and setpoints to the port."""
+    if host.strip("[]") not in ALL_INTERFACES:
+        return False
+    log.warning("%s listens on ALL network interfaces (%s): any host that can reach this port can "
+                "send it commands, PARAM_SETs and setpoints. Bind to 127.0.0.1 or one interface "
+                "address (e.g. udpin:127.0.0.1:14540) and use MAVLink signing on shared networks",
+                what, host or "no host given")
+    return True
+
+
 def _port(p: str, url: str) -> int:
     try:
         v = int(p)
@@ -184,11 +200,13 @@ def _baud(b: str, default: int, url: str) -> int:
 
 def load_signing_key(path: str) -> bytes:
     """Read a MAVLink 2 signing secret: 32 raw bytes, or 64 hexadecimal characters."""
-    try:
-        with open(path, "rb") as f:
-            raw = f.read(4096)
-    except OSError as exc:
-        raise ConfigError(f"signing key file {path!r} cannot be read: {exc.strerror}") from None
+    from lpv_sysid.errors import FileReadError
+    from lpv_sysid.io.safe_open import read_bytes
+
+    try:    # regular files only (a FIFO would block the reader), at most 4 KiB
+        raw = read_bytes(path, f"signing key file {path!r}", max_bytes=4096)
+    except FileReadError as exc:
+        raise ConfigError(f"signing key file {path!r} cannot be read: {exc.reason}") from None
     if len(raw) == 32:
         return raw
     text = raw.strip()
@@ -279,6 +297,8 @@ class MavlinkLink:
                                 "(serial links need pyserial, ROS package python3-serial)") from None
         except (OSError, ValueError) as exc:
             raise LpvSysidError(f"cannot open MAVLink connection {self.config.url!r}: {exc}") from None
+        if self._device.startswith(("udpin:", "tcpin:")):
+            warn_if_all_interfaces(f"MAVLink link {self.config.url!r}", self._device.split(":")[1])
         self.codec = px4.make_codec(self.conn, self.config.source_system,
                                     self.config.source_component, self.config.dialect)
         if self._key is not None:
@@ -564,4 +584,4 @@ def free_udp_port(host: str = "127.0.0.1") -> int:
 
 
 __all__ = ["LinkConfig", "LinkStats", "LinkEvent", "MavlinkLink", "parse_url",
-           "load_signing_key", "free_udp_port", "DEFAULT_STREAMS"]
+           "load_signing_key", "free_udp_port", "warn_if_all_interfaces", "DEFAULT_STREAMS"]

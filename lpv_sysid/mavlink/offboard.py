@@ -3,21 +3,64 @@
 ::
 
     IDLE --start--> PRESTREAM --(> prestream_time of setpoints)--> SWITCHING
-    SWITCHING --(ACK accepted and HEARTBEAT shows OFFBOARD)--> ARMING (arm configured, disarmed)
-                                                           \\-> OFFBOARD_ACTIVE
-    ARMING --(ACK accepted and HEARTBEAT armed)--> OFFBOARD_ACTIVE
-    any streaming state --abort / stale input / link loss / shutdown--> HANDBACK
-    HANDBACK --(HEARTBEAT shows a mode other than OFFBOARD)--> DONE (requested) | FAILED (fault)
-    SWITCHING/ARMING --(retries exhausted)--> HANDBACK -> FAILED
-    OFFBOARD_ACTIVE --(vehicle left OFFBOARD by itself / disarmed)--> FAILED (pilot or PX4 has it)
+    SWITCHING --(OFFBOARD confirmed)--> ARMING (arm configured, disarmed) | OFFBOARD_ACTIVE
+    ARMING --(armed confirmed)--> OFFBOARD_ACTIVE
+    any streaming state --abort / finish / stale input / link loss / shutdown--> HANDBACK
+    HANDBACK --(a mode of the chain confirmed)--> DONE (requested) | FAILED (fault, "warn")
+    HANDBACK --(chain exhausted)--> FAILED ("error": "hand-back NOT confirmed ...")
+    SWITCHING --(rejected / retries exhausted)--> FAILED (HANDBACK if the vehicle shows OFFBOARD)
+    ARMING --(rejected / retries exhausted)--> HANDBACK
+    OFFBOARD_ACTIVE --(vehicle left OFFBOARD by itself)--> FAILED (pilot or PX4 has it)
+    OFFBOARD_ACTIVE --(vehicle disarmed: landed, auto-disarm)--> HANDBACK (PX4 would keep
+                                                                 reporting OFFBOARD)
 
 PX4 facts (v1.16): setpoints must stream at >= 2 Hz for > 1 s before OFFBOARD is
 accepted; the switch is MAV_CMD_DO_SET_MODE (176) with param1 = 1
 (MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), param2 = main mode, param3 = sub mode; arming is
-MAV_CMD_COMPONENT_ARM_DISARM (400) param1 = 1. COMMAND_ACK may arrive twice: an ACK
-for a command that is not pending is ignored. The stream stops the moment the machine
-leaves a streaming state, so PX4's own offboard-loss failsafe (COM_OF_LOSS_T ->
-COM_OBL_RC_ACT) is the second line of defence if the hand-back command is lost.
+MAV_CMD_COMPONENT_ARM_DISARM (400) param1 = 1. DO_SET_MODE is answered twice
+(:data:`lpv_sysid.mavlink.px4.DOUBLE_ACK_COMMANDS`): ACCEPTED at once from PX4's MAVLink
+receiver, then the commander's verdict some ms later (TEMPORARILY_REJECTED for POSCTL
+without stick input while armed, for instance); arming is answered once or twice. A
+HEARTBEAT (1 Hz) is the only proof of the mode. While disarmed PX4 accepts every mode
+(even OFFBOARD without a stream); the arming verdict then decides.
+
+Truth rules:
+
+- every COMMAND_ACK of the pending command is kept (``status()['acks']``); a rejection,
+  also one after an ACCEPTED, is a failure of that step (TEMPORARILY_REJECTED of the
+  OFFBOARD switch or of arming is retried up to ``max_retries``, other rejections are not);
+- a step is *confirmed* only when no ACK of the current attempt rejected it,
+  ``ack_settle_s`` passed since the last ACK (and since sending) without a new one, and a
+  HEARTBEAT received after the command was first sent shows exactly the requested mode
+  (or arming state). If the vehicle showed that state already before the command (e.g.
+  the stale OFFBOARD PX4 keeps after an auto-disarm), the HEARTBEAT proves nothing and a
+  final ACCEPTED is required as well;
+- hand-back: the modes of ``handback_chain`` (default HOLD, then LAND) are tried in turn;
+  a rejection, ``max_retries`` unanswered resends, or no confirmation within
+  ``mode_confirm_timeout`` of the ACCEPTED moves on to the next mode. DONE / FAILED name
+  the confirmed mode; when nothing is confirmed the machine ends FAILED with level
+  ``error`` and the reason "hand-back NOT confirmed: ...; PX4 failsafe in charge";
+- while the hand-back is in progress the transport's neutral setpoint (velocity: zero =
+  brake and hover) keeps streaming at ``setpoint_rate_hz``, so the hand-back itself does
+  not trigger PX4's offboard-loss failsafe (COM_OF_LOSS_T -> COM_OBL_RC_ACT, which without
+  stick input is an uncontrolled descent for Position/Altitude/Stabilized); the stream
+  stops once a mode is confirmed or the chain is exhausted. A transport without a neutral
+  setpoint (attitude_rate) streams nothing and the failsafe is the backstop.
+
+Inputs: :meth:`~OffboardMachine.start`, :meth:`~OffboardMachine.on_command`,
+:meth:`~OffboardMachine.on_heartbeat`, :meth:`~OffboardMachine.on_ack`,
+:meth:`~OffboardMachine.on_link`, :meth:`~OffboardMachine.abort`,
+:meth:`~OffboardMachine.finish`, :meth:`~OffboardMachine.shutdown` and
+:meth:`~OffboardMachine.step` at the caller's poll rate; :meth:`~OffboardMachine.status`
+for diagnostics.
+
+``finish(now, mode)`` ends a campaign in a chosen mode (e.g. LAND): from a streaming
+state it hands back with ``mode`` first (then the rest of the chain), in HANDBACK it
+re-targets, from IDLE / DONE / FAILED it requests ``mode`` with the same confirmation
+rules (DONE names the confirmed mode). Landing awareness: after DONE / FAILED the machine
+reports once, when the HEARTBEAT shows a vehicle that was armed during the run disarmed
+(PX4 auto-disarms COM_DISARM_LAND after landing): a StatusEvent "vehicle disarmed in
+<mode>" and ``status()['disarmed'] == 'True'``.
 
 Outputs of :meth:`OffboardMachine.step` and the input methods are lists of
 :class:`SendSetpoint`, :class:`SendCommand` and :class:`StatusEvent`.
@@ -27,21 +70,21 @@ from __future__ import annotations
 
 import enum
 import math
-from dataclasses import dataclass
-from typing import Any, Mapping
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.mavlink import px4
 from lpv_sysid.validation import check_config_keys
 
-MAV_CMD_DO_SET_MODE = 176
-MAV_CMD_COMPONENT_ARM_DISARM = 400
-MAV_RESULT_ACCEPTED = 0
-MAV_RESULT_TEMPORARILY_REJECTED = 1
-MAV_RESULT_DENIED = 2
-MAV_RESULT_UNSUPPORTED = 3
-MAV_RESULT_FAILED = 4
-MAV_RESULT_IN_PROGRESS = 5
+MAV_CMD_DO_SET_MODE = px4.MAV_CMD_DO_SET_MODE
+MAV_CMD_COMPONENT_ARM_DISARM = px4.MAV_CMD_COMPONENT_ARM_DISARM
+MAV_RESULT_ACCEPTED = px4.MAV_RESULT_ACCEPTED
+MAV_RESULT_TEMPORARILY_REJECTED = px4.MAV_RESULT_TEMPORARILY_REJECTED
+MAV_RESULT_DENIED = px4.MAV_RESULT_DENIED
+MAV_RESULT_UNSUPPORTED = px4.MAV_RESULT_UNSUPPORTED
+MAV_RESULT_FAILED = px4.MAV_RESULT_FAILED
+MAV_RESULT_IN_PROGRESS = px4.MAV_RESULT_IN_PROGRESS
 
 
 class State(enum.Enum):
@@ -60,22 +103,36 @@ STREAMING = (State.PRESTREAM, State.SWITCHING, State.ARMING, State.OFFBOARD_ACTI
 
 @dataclass(frozen=True)
 class OffboardConfig:
-    """``config/mavlink_bridge.yaml`` section ``offboard``."""
+    """``config/mavlink_bridge.yaml`` section ``offboard``.
+
+    ``handback_chain``: PX4 modes tried in turn on hand-back (names of
+    :data:`lpv_sysid.mavlink.px4.HANDBACK_MODES`). ``handback_mode`` (optional, the
+    single-mode key of earlier releases and of the bridge node's parameters): tried first,
+    then the other modes of ``handback_chain``.
+    """
 
     setpoint_rate_hz: float = 20.0
     prestream_time: float = 1.2
     arm: bool = False
-    handback_mode: str = "HOLD"           # HOLD | POSCTL | LAND
+    handback_chain: tuple[str, ...] = ("HOLD", "LAND")
+    handback_mode: str | None = None
     input_timeout: float = 0.5            # no ROS command for longer -> hand back
-    ack_timeout: float = 0.5
+    ack_timeout: float = 0.5              # per attempt, for the first COMMAND_ACK
+    ack_settle_s: float = 0.2             # quiet time after the last ACK before a step counts
     max_retries: int = 3
-    mode_confirm_timeout: float = 2.0     # HEARTBEAT must show the commanded mode/arming
+    mode_confirm_timeout: float = 2.0     # HEARTBEAT must show the mode/arming after ACCEPTED
     send_on_command: bool = True          # forward a new command at once (latency)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "OffboardConfig":
         check_config_keys(d, cls.__dataclass_fields__, "offboard")
-        cfg = cls(**dict(d))
+        kw = dict(d)
+        chain = kw.get("handback_chain")
+        if chain is not None:
+            if isinstance(chain, (str, bytes)) or not isinstance(chain, Sequence):
+                raise ConfigError(f"offboard.handback_chain must be a list of PX4 mode names, got {chain!r}")
+            kw["handback_chain"] = tuple(chain)
+        cfg = cls(**kw)
         cfg.validate()
         return cfg
 
@@ -88,18 +145,42 @@ class OffboardConfig:
         num("prestream_time", 1.0001, 60.0)       # PX4 needs > 1 s
         num("input_timeout", 0.01, 60.0)
         num("ack_timeout", 0.01, 60.0)
+        num("ack_settle_s", 0.0, 10.0)
         num("mode_confirm_timeout", 0.01, 60.0)
+        if self.ack_settle_s >= self.mode_confirm_timeout:
+            raise ConfigError(f"offboard.ack_settle_s ({self.ack_settle_s}) must be below "
+                              f"offboard.mode_confirm_timeout ({self.mode_confirm_timeout})")
         if not isinstance(self.max_retries, int) or isinstance(self.max_retries, bool) or not 0 <= self.max_retries <= 100:
             raise ConfigError(f"offboard.max_retries must be an integer 0..100, got {self.max_retries!r}")
         if not isinstance(self.arm, bool) or not isinstance(self.send_on_command, bool):
             raise ConfigError("offboard.arm and offboard.send_on_command must be booleans")
-        if str(self.handback_mode).upper() not in px4.HANDBACK_MODES:
+        chain = self.handback_chain
+        if isinstance(chain, (str, bytes)) or not isinstance(chain, Sequence) or not chain:
+            raise ConfigError(f"offboard.handback_chain must be a non-empty list of mode names, got {chain!r}")
+        for name in chain:
+            if not isinstance(name, str) or name.upper() not in px4.HANDBACK_MODES:
+                raise ConfigError(f"offboard.handback_chain: {name!r} is not a hand-back mode; use "
+                                  f"{sorted(px4.HANDBACK_MODES)}")
+        if len({n.upper() for n in chain}) != len(chain):
+            raise ConfigError(f"offboard.handback_chain lists a mode twice: {list(chain)}")
+        if self.handback_mode is not None and (not isinstance(self.handback_mode, str)
+                                               or self.handback_mode.upper() not in px4.HANDBACK_MODES):
             raise ConfigError(f"offboard.handback_mode must be one of {sorted(px4.HANDBACK_MODES)}, "
                               f"got {self.handback_mode!r}")
 
     @property
+    def chain(self) -> tuple[px4.Px4Mode, ...]:
+        """The hand-back modes in the order they are tried."""
+        modes = [px4.HANDBACK_MODES[n.upper()] for n in self.handback_chain]
+        if self.handback_mode is not None:
+            first = px4.HANDBACK_MODES[self.handback_mode.upper()]
+            modes = [first] + [m for m in modes if m != first]
+        return tuple(modes)
+
+    @property
     def handback(self) -> px4.Px4Mode:
-        return px4.HANDBACK_MODES[str(self.handback_mode).upper()]
+        """The first hand-back choice."""
+        return self.chain[0]
 
 
 @dataclass(frozen=True)
@@ -125,12 +206,27 @@ class StatusEvent:
 
 @dataclass
 class _Pending:
+    """One step (a command and what it must achieve) and every ACK of its current attempt."""
+
     command: int
     params: tuple[float, ...]
-    t_sent: float
-    attempts: int
-    accepted: bool = False
-    t_accepted: float = 0.0
+    what: str                        # "OFFBOARD", "arm", "HOLD", ...
+    t_first: float                   # first attempt sent
+    t_sent: float                    # current attempt sent
+    already: bool = False            # the vehicle showed the wanted state before the command
+    attempts: int = 1
+    acks: list[tuple[float, int]] = field(default_factory=list)
+    t_last_ack: float = -math.inf
+    t_accepted: float | None = None
+    rejected: int | None = None
+
+    def resend(self, now: float) -> None:
+        self.attempts += 1
+        self.t_sent = now
+        self.acks = []
+        self.t_last_ack = -math.inf
+        self.t_accepted = None
+        self.rejected = None
 
 
 class OffboardMachine:
@@ -146,13 +242,23 @@ class OffboardMachine:
         self.armed = False
         self.link_up = False
         self.setpoints_sent = 0
+        self.confirmed_mode: px4.Px4Mode | None = None
+        self.disarmed_after_run = False
         self._fault = False
         self._t_state = 0.0
         self._t_stream0 = math.inf
         self._next_sp = 0.0
         self._cmd: Any = None
         self._t_cmd = -math.inf
+        self._t_hb = -math.inf
         self._pending: _Pending | None = None
+        self._target: px4.Px4Mode | None = None
+        self._chain: list[px4.Px4Mode] = []
+        self._failures: list[str] = []
+        self._handback_reason = ""
+        self._was_armed = False
+        self._armed_active = False
+        self._last_acks = ""
 
     # --------------------------------------------------------------- inputs
     def start(self, now: float) -> list[Any]:
@@ -160,6 +266,11 @@ class OffboardMachine:
             return []
         self._fault = False
         self._pending = None
+        self._target = None
+        self.confirmed_mode = None
+        self.disarmed_after_run = False
+        self._was_armed = self.armed
+        self._armed_active = False
         self._t_stream0 = now
         self._next_sp = now
         out = self._go(now, State.PRESTREAM, "start requested")
@@ -177,21 +288,34 @@ class OffboardMachine:
         return []
 
     def on_heartbeat(self, now: float, mode: px4.Px4Mode, armed: bool) -> list[Any]:
-        self.vehicle_mode, self.armed = mode, armed
+        self.vehicle_mode, self.armed, self._t_hb = mode, armed, now
+        if armed:
+            self._was_armed = True
         return self.step(now)
 
     def on_ack(self, now: float, command: int, result: int) -> list[Any]:
+        """Every COMMAND_ACK of the pending command counts (PX4 sends two, see module doc)."""
         p = self._pending
-        if p is None or p.command != command or p.accepted:
-            return []                     # duplicate or unrelated ACK
+        if p is None or p.command != command:
+            return []                     # unrelated, or for a step already decided
+        p.acks.append((now, int(result)))
+        p.t_last_ack = now
+        self._last_acks = ",".join(f"{px4.result_name(r)}@{t:.3f}" for t, r in p.acks[-6:])
         if result == MAV_RESULT_ACCEPTED:
-            p.accepted, p.t_accepted = True, now
+            if p.t_accepted is None:
+                p.t_accepted = now
             return self.step(now)
         if result == MAV_RESULT_IN_PROGRESS:
             p.t_sent = now                # keep waiting
             return []
-        reason = f"command {command} rejected (MAV_RESULT {result})"
-        return self._retry_or_fail(now, reason)
+        p.rejected = int(result)
+        how = "accepted, then rejected" if p.t_accepted is not None else "rejected"
+        reason = f"{p.what} (command {command}) {how}: {px4.result_name(result)}"
+        if self.state == State.HANDBACK:
+            return self._next_handback(now, reason)
+        if result == MAV_RESULT_TEMPORARILY_REJECTED:
+            return self._retry_or_fail(now, reason)
+        return self._fail_step(now, reason)
 
     def on_link(self, now: float, up: bool) -> list[Any]:
         was, self.link_up = self.link_up, up
@@ -207,6 +331,27 @@ class OffboardMachine:
             return self._go(now, State.DONE, reason)
         return []
 
+    def finish(self, now: float, mode: str | px4.Px4Mode = "LAND") -> list[Any]:
+        """End in ``mode`` (e.g. LAND at the end of a campaign); see module docstring."""
+        if isinstance(mode, px4.Px4Mode):
+            m = mode
+        else:
+            m = px4.HANDBACK_MODES.get(str(mode).upper())
+            if m is None:
+                raise ConfigError(f"finish mode {mode!r} is not a hand-back mode; use {sorted(px4.HANDBACK_MODES)}")
+        reason = f"finish requested: {m.name}"
+        if self.state in STREAMING:
+            return self._handback(now, reason, fault=False, first=m, force=True)
+        if self.state == State.HANDBACK:
+            self._chain = [x for x in self.config.chain if x != m]
+            self._pending = None
+            self._handback_reason = reason
+            return ([StatusEvent(now, self.state.value, self.state.value, f"hand-back re-targeted: {reason}")]
+                    + self._request_next(now, first=m))
+        self._fault = False
+        self.disarmed_after_run = False
+        return self._handback(now, reason, fault=False, first=m, force=True)
+
     def shutdown(self, now: float) -> list[Any]:
         return self.abort(now, "shutdown")
 
@@ -215,63 +360,63 @@ class OffboardMachine:
         out: list[Any] = []
         st = self.state
         cfg = self.config
+        fresh = now - self._t_cmd <= cfg.input_timeout
         if st in STREAMING:
-            fresh = now - self._t_cmd <= cfg.input_timeout
             if st in (State.SWITCHING, State.ARMING) and not fresh and self.neutral is None:
                 return self._handback(now, f"stale input during {st.value}: no command for "
                                            f"{now - self._t_cmd:.3f} s and no neutral setpoint", fault=True)
-            if st == State.OFFBOARD_ACTIVE and not fresh:
-                return self._handback(now, f"stale input: no command for {now - self._t_cmd:.3f} s "
-                                           f"(> {cfg.input_timeout} s)", fault=True)
             if st == State.OFFBOARD_ACTIVE:
+                if not fresh:
+                    return self._handback(now, f"stale input: no command for {now - self._t_cmd:.3f} s "
+                                               f"(> {cfg.input_timeout} s)", fault=True)
                 if self.vehicle_mode is not None and self.vehicle_mode != px4.OFFBOARD:
                     return self._stop(now, State.FAILED, f"vehicle left OFFBOARD (now {self.vehicle_mode.name}); "
                                                          "control stays with PX4/pilot", "warn")
-                if cfg.arm and not self.armed:
-                    return self._stop(now, State.FAILED, "vehicle disarmed during OFFBOARD", "warn")
-            if now >= self._next_sp:
-                sp = self._cmd if fresh else self.neutral
-                if sp is not None:
-                    out.append(SendSetpoint(sp))
-                    self.setpoints_sent += 1
-                    if self._t_stream0 == math.inf:
-                        self._t_stream0 = now
-                else:
-                    self._t_stream0 = math.inf     # nothing to stream: pre-stream restarts
-                period = 1.0 / cfg.setpoint_rate_hz
-                self._next_sp = self._next_sp + period if now - self._next_sp < period else now + period
+                if self.armed:
+                    self._armed_active = True
+                elif cfg.arm or self._armed_active:
+                    return self._handback(now, "vehicle disarmed during OFFBOARD (landed or auto-disarm); "
+                                               "handing back so PX4 does not keep reporting OFFBOARD", fault=True)
+        if st in STREAMING or st == State.HANDBACK:
+            out += self._stream(now, fresh)
         if st == State.PRESTREAM:
             if now - self._t_stream0 > cfg.prestream_time:
                 out += self._go(now, State.SWITCHING, f"pre-streamed {now - self._t_stream0:.2f} s")
-                out += self._send(now, MAV_CMD_DO_SET_MODE, _set_mode_params(px4.OFFBOARD))
+                out += self._send(now, MAV_CMD_DO_SET_MODE, _set_mode_params(px4.OFFBOARD), "OFFBOARD",
+                                  self.vehicle_mode == px4.OFFBOARD)
         elif st == State.SWITCHING:
-            if self.vehicle_mode == px4.OFFBOARD:       # confirmed (even if the ACK was lost)
+            if self._confirmed(now, mode=px4.OFFBOARD):
                 self._pending = None
+                why = "OFFBOARD confirmed (final ACK, then HEARTBEAT)"
                 if cfg.arm and not self.armed:
-                    out += self._go(now, State.ARMING, "OFFBOARD confirmed by HEARTBEAT")
-                    out += self._send(now, MAV_CMD_COMPONENT_ARM_DISARM, (1.0, 0.0))
+                    out += self._go(now, State.ARMING, why)
+                    out += self._send(now, MAV_CMD_COMPONENT_ARM_DISARM, (1.0, 0.0), "arm", False)
                 else:
-                    out += self._go(now, State.OFFBOARD_ACTIVE, "OFFBOARD confirmed by HEARTBEAT")
+                    out += self._go(now, State.OFFBOARD_ACTIVE, why)
             else:
                 out += self._check_pending(now)
         elif st == State.ARMING:
-            if self.armed:
+            if self._confirmed(now, armed=True):
                 self._pending = None
-                out += self._go(now, State.OFFBOARD_ACTIVE, "armed (HEARTBEAT)")
+                out += self._go(now, State.OFFBOARD_ACTIVE, "armed (final ACK, then HEARTBEAT)")
             else:
                 out += self._check_pending(now)
         elif st == State.HANDBACK:
-            if self.vehicle_mode is not None and self.vehicle_mode != px4.OFFBOARD:
-                self._pending = None
-                out += self._go(now, State.FAILED if self._fault else State.DONE,
-                                f"vehicle in {self.vehicle_mode.name}: {self.reason}",
-                                "warn" if self._fault else "info")
+            if self._target is not None and self._confirmed(now, mode=self._target):
+                out += self._handback_confirmed(now)
             else:
                 out += self._check_pending(now)
+        elif st in (State.DONE, State.FAILED):
+            if (self._was_armed and not self.armed and not self.disarmed_after_run
+                    and self._t_hb > self._t_state and self.vehicle_mode is not None):
+                self.disarmed_after_run = True
+                out.append(StatusEvent(now, st.value, st.value,
+                                       f"vehicle disarmed in {self.vehicle_mode.name} (landed or auto-disarm)"))
         return out
 
     # ------------------------------------------------------------- helpers
     def status(self, now: float) -> dict[str, str]:
+        p = self._pending
         return {
             "state": self.state.value,
             "state_age_s": f"{now - self._t_state:.3f}",
@@ -281,58 +426,137 @@ class OffboardMachine:
             "link": "up" if self.link_up else "down",
             "input_age_s": f"{now - self._t_cmd:.3f}" if self._t_cmd > -math.inf else "inf",
             "setpoints_sent": str(self.setpoints_sent),
+            "pending": f"{p.what} (attempt {p.attempts})" if p is not None else "",
+            "acks": self._last_acks,
+            "handback_target": self._target.name if self._target is not None else "",
+            "confirmed_mode": self.confirmed_mode.name if self.confirmed_mode is not None else "",
+            "disarmed": str(self.disarmed_after_run),
         }
+
+    def _stream(self, now: float, fresh: bool) -> list[Any]:
+        if now < self._next_sp:
+            return []
+        out: list[Any] = []
+        sp = self.neutral if (self.state == State.HANDBACK or not fresh) else self._cmd
+        if sp is not None:
+            out.append(SendSetpoint(sp))
+            self.setpoints_sent += 1
+            if self._t_stream0 == math.inf:
+                self._t_stream0 = now
+        else:
+            self._t_stream0 = math.inf     # nothing to stream: pre-stream restarts
+        period = 1.0 / self.config.setpoint_rate_hz
+        self._next_sp = self._next_sp + period if now - self._next_sp < period else now + period
+        return out
+
+    def _confirmed(self, now: float, mode: px4.Px4Mode | None = None, armed: bool | None = None) -> bool:
+        p = self._pending
+        if p is None or p.rejected is not None or self._t_hb <= p.t_first:
+            return False
+        if mode is not None and self.vehicle_mode != mode:
+            return False
+        if armed is not None and self.armed != armed:
+            return False
+        if p.already and p.t_accepted is None:
+            return False                  # the HEARTBEAT showed this before the command
+        return now - max(p.t_sent, p.t_last_ack) >= self.config.ack_settle_s
 
     def _go(self, now: float, new: State, reason: str, level: str = "info") -> list[Any]:
         prev, self.state, self.reason, self._t_state = self.state, new, reason, now
         return [StatusEvent(now, prev.value, new.value, reason, level)]
 
-    def _send(self, now: float, command: int, params: tuple[float, ...]) -> list[Any]:
-        self._pending = _Pending(command, params, now, 1)
+    def _send(self, now: float, command: int, params: tuple[float, ...], what: str,
+              already: bool) -> list[Any]:
+        self._pending = _Pending(command, params, what, now, now, already)
+        self._last_acks = ""
         return [SendCommand(command, params, 1)]
 
     def _check_pending(self, now: float) -> list[Any]:
         p = self._pending
         if p is None:
             return []
-        if p.accepted:
-            if now - p.t_accepted > self.config.mode_confirm_timeout:
-                return self._retry_or_fail(now, f"command {p.command} accepted but HEARTBEAT did not "
-                                                f"confirm within {self.config.mode_confirm_timeout} s")
+        cfg = self.config
+        if p.t_accepted is not None:
+            if now - p.t_accepted > cfg.mode_confirm_timeout:
+                reason = (f"{p.what} (command {p.command}) accepted but the HEARTBEAT did not show it "
+                          f"within {cfg.mode_confirm_timeout} s")
+                if self.state == State.HANDBACK:
+                    return self._next_handback(now, reason)
+                return self._retry_or_fail(now, reason)
             return []
-        if now - p.t_sent > self.config.ack_timeout:
+        if now - p.t_sent > cfg.ack_timeout:
             return self._retry_or_fail(now, f"no COMMAND_ACK for command {p.command} "
-                                            f"within {self.config.ack_timeout} s")
+                                            f"within {cfg.ack_timeout} s ({p.what})")
         return []
 
     def _retry_or_fail(self, now: float, reason: str) -> list[Any]:
         p = self._pending
         assert p is not None
         if p.attempts <= self.config.max_retries:
-            p.attempts += 1
-            p.t_sent = now
-            p.accepted = False
+            p.resend(now)
             return [StatusEvent(now, self.state.value, self.state.value,
                                 f"{reason}; retry {p.attempts - 1}/{self.config.max_retries}", "warn"),
                     SendCommand(p.command, p.params, p.attempts)]
+        return self._fail_step(now, reason)
+
+    def _fail_step(self, now: float, reason: str) -> list[Any]:
         self._pending = None
         if self.state == State.HANDBACK:
-            return self._go(now, State.FAILED, f"hand-back not confirmed ({reason}); PX4 offboard-loss "
-                                                "failsafe COM_OBL_RC_ACT is in charge", "error")
+            return self._next_handback(now, reason)
         if self.state == State.SWITCHING:
+            if self.vehicle_mode == px4.OFFBOARD:
+                return self._handback(now, f"switch to OFFBOARD failed: {reason}", fault=True)
             return self._stop(now, State.FAILED, f"switch to OFFBOARD failed: {reason}", "error")
         return self._handback(now, f"{self.state.value} failed: {reason}", fault=True)
 
-    def _handback(self, now: float, reason: str, fault: bool) -> list[Any]:
-        if self.state == State.PRESTREAM and self.vehicle_mode != px4.OFFBOARD:
+    def _handback(self, now: float, reason: str, fault: bool, first: px4.Px4Mode | None = None,
+                  force: bool = False) -> list[Any]:
+        if not force and self.state == State.PRESTREAM and self.vehicle_mode != px4.OFFBOARD:
             # nothing was handed over yet: just stop streaming
             return self._stop(now, State.FAILED if fault else State.DONE, reason,
                               "warn" if fault else "info")
         self._fault = fault
+        self._handback_reason = reason
+        self._failures = []
+        self.confirmed_mode = None
+        chain = list(self.config.chain)
+        if first is not None:
+            chain = [m for m in chain if m != first]
+        self._chain = chain
         out = self._go(now, State.HANDBACK, reason, "warn" if fault else "info")
-        mode = self.config.handback
+        return out + self._request_next(now, first=first)
+
+    def _request_next(self, now: float, first: px4.Px4Mode | None = None) -> list[Any]:
+        mode = first if first is not None else self._chain.pop(0)
+        self._target = mode
+        return self._send(now, MAV_CMD_DO_SET_MODE, _set_mode_params(mode), mode.name,
+                          self.vehicle_mode == mode)
+
+    def _next_handback(self, now: float, reason: str) -> list[Any]:
+        failed = self._target.name if self._target is not None else "?"
+        self._failures.append(f"{failed}: {reason}")
         self._pending = None
-        return out + self._send(now, MAV_CMD_DO_SET_MODE, _set_mode_params(mode))
+        if self._chain:
+            nxt = self._chain[0]
+            return ([StatusEvent(now, self.state.value, self.state.value,
+                                 f"hand-back to {failed} failed ({reason}); trying {nxt.name}", "warn")]
+                    + self._request_next(now))
+        self._target = None
+        return self._stop(now, State.FAILED,
+                          f"hand-back NOT confirmed: {'; '.join(self._failures)}; PX4 failsafe in charge "
+                          f"(COM_OF_LOSS_T -> COM_OBL_RC_ACT once the stream stops) [{self._handback_reason}]",
+                          "error")
+
+    def _handback_confirmed(self, now: float) -> list[Any]:
+        mode = self._target
+        assert mode is not None
+        self.confirmed_mode = mode
+        self._target = None
+        before = f" after {'; '.join(self._failures)}" if self._failures else ""
+        reason = f"hand-back confirmed: vehicle in {mode.name}{before}: {self._handback_reason}"
+        if self._fault:
+            return self._stop(now, State.FAILED, reason, "warn")
+        return self._stop(now, State.DONE, reason, "info")
 
     def _stop(self, now: float, new: State, reason: str, level: str) -> list[Any]:
         self._pending = None

@@ -1,8 +1,11 @@
 """PX4 conventions on top of MAVLink 2 (PX4 v1.14 - v1.16).
 
 Everything the bridge, the simulated vehicle and the preflight check must agree on
-lives here: the PX4 custom-mode encoding, the MAVLink codec used by every link,
-PX4's byte-wise encoding of integer parameters, and the ESC_STATUS message.
+lives here: the PX4 custom-mode encoding, the modes that need stick input, the
+offboard-loss actions (COM_OBL_RC_ACT) and stick sources (COM_RC_IN_MODE), the command
+ids and results (and which commands PX4 acknowledges twice), the PWM motor-output range,
+the MAVLink codec used by every link, PX4's byte-wise encoding of integer parameters,
+and the ESC_STATUS message.
 
 PX4 custom mode (``HEARTBEAT.custom_mode``, ``MAV_CMD_DO_SET_MODE`` param2/param3)::
 
@@ -99,7 +102,19 @@ _MODE_NAMES = {
 MODES_BY_NAME = {name: Px4Mode(*key) for key, name in _MODE_NAMES.items()}
 
 #: hand-back modes the offboard state machine may choose (configurable by name).
-HANDBACK_MODES = {"HOLD": HOLD, "POSCTL": POSCTL, "LAND": LAND}
+HANDBACK_MODES = {"HOLD": HOLD, "POSCTL": POSCTL, "ALTCTL": ALTCTL, "LAND": LAND, "RTL": RTL}
+
+#: modes whose flight task reads the pilot's sticks (manual control input). Without stick
+#: input PX4 v1.16 refuses DO_SET_MODE to them while armed (the commander's verdict
+#: TEMPORARILY_REJECTED; disarmed, every mode change is allowed and arming is refused
+#: instead), and when a failsafe enters one of them (COM_OBL_RC_ACT 0/1/2)
+#: the flight mode manager logs "Matching flight task was not able to run" and flies the
+#: emergency Descend task instead: level attitude, MPC_LAND_SPEED down, no position hold.
+STICK_MODES = frozenset({MANUAL, STABILIZED, ACRO, ALTCTL, POSCTL})
+
+#: vehicle_status.nav_state of each mode (PX4 v1.16 VehicleStatus.msg), as PX4 logs it
+NAV_STATES = {MANUAL: 0, ALTCTL: 1, POSCTL: 2, MISSION: 3, HOLD: 4, RTL: 5, ACRO: 10,
+              OFFBOARD: 14, STABILIZED: 15, TAKEOFF: 17, LAND: 18}
 
 
 def encode_custom_mode(main: int, sub: int = 0) -> int:
@@ -153,16 +168,42 @@ def encode_flight_sw_version(major: int, minor: int, patch: int, fw_type: int = 
 
 # ------------------------------------------------------------------------ parameters
 class OblAction(enum.IntEnum):
-    """COM_OBL_RC_ACT (PX4 v1.14+): mode entered after offboard loss (COM_OF_LOSS_T)."""
+    """COM_OBL_RC_ACT (PX4 v1.16 commander_params.c): action after offboard loss (COM_OF_LOSS_T)."""
 
     POSITION = 0
     ALTITUDE = 1
-    MANUAL = 2
+    STABILIZED = 2      # "Stabilized" in v1.16 (older releases called it "Manual")
+    MANUAL = 2          # alias of STABILIZED (pre-v1.16 name); .name reports STABILIZED
     RETURN = 3
     LAND = 4
     HOLD = 5
     TERMINATE = 6
     DISARM = 7
+
+
+#: flight mode PX4 enters for each COM_OBL_RC_ACT (6 Terminate / 7 Disarm: none, motors off)
+OBL_ACTION_MODES = {OblAction.POSITION: POSCTL, OblAction.ALTITUDE: ALTCTL,
+                    OblAction.STABILIZED: STABILIZED, OblAction.RETURN: RTL,
+                    OblAction.LAND: LAND, OblAction.HOLD: HOLD}
+
+
+class RcInMode(enum.IntEnum):
+    """COM_RC_IN_MODE (PX4 v1.16): where manual control (stick) input may come from."""
+
+    RC_ONLY = 0
+    JOYSTICK_ONLY = 1            # MAVLink MANUAL_CONTROL only
+    RC_AND_JOYSTICK = 2          # both, with fallback
+    RC_OR_JOYSTICK = 3           # both, the first one seen is kept
+    DISABLED = 4                 # stick input disabled
+
+
+def sticks_available(rc_in_mode: int, rc_present: bool, joystick_present: bool) -> bool:
+    """Whether PX4 has manual control input for STICK_MODES under COM_RC_IN_MODE."""
+    m = int(rc_in_mode)
+    rc_ok = rc_present and m in (RcInMode.RC_ONLY, RcInMode.RC_AND_JOYSTICK, RcInMode.RC_OR_JOYSTICK)
+    joy_ok = joystick_present and m in (RcInMode.JOYSTICK_ONLY, RcInMode.RC_AND_JOYSTICK,
+                                        RcInMode.RC_OR_JOYSTICK)
+    return bool(rc_ok or joy_ok)
 
 
 MAV_PARAM_TYPE_INT32 = 6
@@ -187,6 +228,52 @@ def param_id_str(param_id: Any) -> str:
     if isinstance(param_id, (bytes, bytearray)):
         param_id = param_id.decode("ascii", errors="replace")
     return str(param_id).rstrip("\x00")
+
+
+# ------------------------------------------------------------------ commands, results
+MAV_CMD_NAV_RETURN_TO_LAUNCH = 20
+MAV_CMD_NAV_LAND = 21
+MAV_CMD_NAV_TAKEOFF = 22
+MAV_CMD_DO_SET_MODE = 176
+MAV_CMD_COMPONENT_ARM_DISARM = 400
+MAV_CMD_SET_MESSAGE_INTERVAL = 511
+MAV_CMD_REQUEST_MESSAGE = 512
+MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES = 520
+#: MAV_CMD_COMPONENT_ARM_DISARM param2 that forces a disarm in the air
+FORCE_DISARM_MAGIC = 21196
+
+MAV_RESULT_ACCEPTED = 0
+MAV_RESULT_TEMPORARILY_REJECTED = 1
+MAV_RESULT_DENIED = 2
+MAV_RESULT_UNSUPPORTED = 3
+MAV_RESULT_FAILED = 4
+MAV_RESULT_IN_PROGRESS = 5
+MAV_RESULT_NAMES = {0: "ACCEPTED", 1: "TEMPORARILY_REJECTED", 2: "DENIED", 3: "UNSUPPORTED",
+                    4: "FAILED", 5: "IN_PROGRESS", 6: "CANCELLED"}
+
+#: commands PX4 v1.16 answers twice: ACCEPTED at once from its MAVLink receiver, then the
+#: commander's verdict 0-15 ms later (measured on v1.16.0 SIH SITL; e.g. TEMPORARILY_REJECTED
+#: for POSCTL without stick input while armed). Arming was answered once there; clients must
+#: handle one or two answers for any command (lpv_sysid.mavlink.offboard does).
+DOUBLE_ACK_COMMANDS = frozenset({MAV_CMD_DO_SET_MODE})
+
+
+def result_name(result: int) -> str:
+    return MAV_RESULT_NAMES.get(int(result), f"MAV_RESULT {result}")
+
+
+# ------------------------------------------------------------------- motor outputs
+#: PX4 PWM output range (PWM_MAIN_MINx / PWM_MAIN_MAXx defaults) and the disarmed value of
+#: SITL's pwm_out_sim; u_ESC in [0, 1] maps linearly onto [PWM_MIN_US, PWM_MAX_US]
+PWM_MIN_US = 1000.0
+PWM_MAX_US = 2000.0
+PWM_DISARMED_US = 900.0
+
+
+def pwm_from_u_esc(u_esc: float) -> float:
+    """PWM pulse [us] for a normalised motor command u_ESC in [0, 1] (clipped)."""
+    u = min(max(float(u_esc), 0.0), 1.0)
+    return PWM_MIN_US + (PWM_MAX_US - PWM_MIN_US) * u
 
 
 # --------------------------------------------------------------------- MAVLink codec

@@ -2,33 +2,74 @@
 
 Protocol (what a bridge, MAVSDK or a ground station sees):
 - HEARTBEAT 1 Hz: MAV_TYPE_QUADROTOR, MAV_AUTOPILOT_PX4, base_mode flags and the PX4
-  custom mode (main << 16 | sub << 24), MAV_STATE_STANDBY/ACTIVE;
-- COMMAND_LONG -> COMMAND_ACK: COMPONENT_ARM_DISARM (400; disarm in the air only with
-  the 21196 force code), DO_SET_MODE (176; OFFBOARD refused with TEMPORARILY_REJECTED
-  unless a setpoint stream is alive: >= 2 setpoints in the last second and the newest
-  younger than COM_OF_LOSS_T), SET_MESSAGE_INTERVAL (511), REQUEST_MESSAGE (512),
-  REQUEST_AUTOPILOT_CAPABILITIES (520), NAV_TAKEOFF (22), NAV_LAND (21), NAV_RETURN (20);
-  anything else MAV_RESULT_UNSUPPORTED;
+  custom mode (main << 16 | sub << 24), MAV_STATE_STANDBY/ACTIVE/CRITICAL (failsafe);
+- COMMAND_LONG -> COMMAND_ACK. DO_SET_MODE (176) is answered twice as PX4 v1.16 does
+  (``double_ack``, :data:`lpv_sysid.mavlink.px4.DOUBLE_ACK_COMMANDS`): ACCEPTED at once
+  (PX4's MAVLink receiver), then the commander's verdict ``verdict_delay_s`` later
+  (simulated time); only the verdict changes the mode. Commander rules (v1.16
+  UserModeIntention, measured on SIH SITL): while disarmed every known mode is accepted;
+  while armed a mode that cannot run is TEMPORARILY_REJECTED and the mode stays: OFFBOARD
+  without a live setpoint stream (>= 2 setpoints in the last second, the newest younger
+  than COM_OF_LOSS_T), and POSCTL, ALTCTL, MANUAL, STABILIZED, ACRO (``px4.STICK_MODES``)
+  without stick input (``rc_present`` false, the default, and no MAVLink joystick, or
+  COM_RC_IN_MODE excluding them). COMPONENT_ARM_DISARM (400), answered once (after
+  ``verdict_delay_s``): DENIED in the air or in LAND/RTL, TEMPORARILY_REJECTED ("Resolve
+  system health failures") when the current mode cannot run; disarming in the air only
+  with the 21196 force code. Also answered: SET_MESSAGE_INTERVAL (511), REQUEST_MESSAGE
+  (512), REQUEST_AUTOPILOT_CAPABILITIES (520), NAV_TAKEOFF (22), NAV_LAND (21), NAV_RETURN
+  (20); anything else MAV_RESULT_UNSUPPORTED;
 - PARAM_REQUEST_READ / PARAM_REQUEST_LIST / PARAM_SET -> PARAM_VALUE (INT32 parameters
-  byte-wise encoded as PX4 does);
+  byte-wise encoded as PX4 does). A PARAM_SET value that is NaN, infinite, not an allowed
+  enum value or outside the parameter's range (:data:`PARAMS`) is refused: the value stays,
+  and PARAM_VALUE answers with the old one;
+- MAVLink 2 signing (``signing_key_file``): unsigned or wrongly signed messages of any
+  kind (PARAM_SET, COMMAND_LONG, setpoints) are dropped by the link unless
+  ``allow_unsigned``;
 - AUTOPILOT_VERSION (PX4 v1.16.0, MAVLink 2, offboard capabilities);
-- telemetry at default or requested intervals: ATTITUDE, ATTITUDE_QUATERNION,
-  LOCAL_POSITION_NED, GLOBAL_POSITION_INT, HIGHRES_IMU, ESC_STATUS, SYS_STATUS,
-  EXTENDED_SYS_STATE, HOME_POSITION, ODOMETRY.
+- telemetry at PX4's "onboard" link rates (:data:`DEFAULT_RATES`, ``stream_rates``
+  overrides, SET_MESSAGE_INTERVAL at run time): ATTITUDE and ATTITUDE_QUATERNION (both),
+  LOCAL_POSITION_NED, ODOMETRY (pose and velocity in MAV_FRAME_LOCAL_NED as EKF2 publishes
+  them; ``time_usec`` is the estimator's IMU sample time, ``odometry_lag_s`` before the
+  ATTITUDE_QUATERNION / LOCAL_POSITION_NED stamps of the same state, so a decoder that
+  orders all streams by time sees ODOMETRY out of order, as with PX4), GLOBAL_POSITION_INT,
+  HIGHRES_IMU, ESC_STATUS (only with ``esc_telemetry``; SIH and PWM ESCs have none: the
+  stream can be configured but never sends), SERVO_OUTPUT_RAW (16 outputs, PWM us: motors
+  1000 + 1000 u_ESC, disarmed and unused outputs 900, as SIH's pwm_out_sim) and
+  ACTUATOR_OUTPUT_STATUS (``active`` 16, the same PWM values, or u_ESC in [0, 1] for the
+  motors and 0 elsewhere with ``actuator_output_scale: normalized``; off by default as in
+  PX4, SET_MESSAGE_INTERVAL enables it), RC_CHANNELS (only with an RC), SYS_STATUS
+  (RC_RECEIVER present/healthy while stick input is valid), EXTENDED_SYS_STATE,
+  HOME_POSITION.
 
 Behaviour:
 - OFFBOARD accepts SET_POSITION_TARGET_LOCAL_NED (velocity, optional yaw rate,
   position; MAV_FRAME_LOCAL_NED, or MAV_FRAME_BODY_NED / BODY_FRD rotated by yaw only, as
   PX4 does) and SET_ATTITUDE_TARGET body rates + thrust (PX4 rate loop, P term only:
   tau = K_p (omega_sp - omega), unit quad-X allocation);
-- offboard loss: no setpoint for COM_OF_LOSS_T -> COM_OBL_RC_ACT (0 Position, 1 Altitude,
-  2 Manual, 3 Return, 4 Land, 5 Hold, 6 Terminate, 7 Disarm);
+- offboard loss while armed (no setpoint for COM_OF_LOSS_T) -> failsafe COM_OBL_RC_ACT
+  (``px4.OBL_ACTION_MODES``: 0 Position, 1 Altitude, 2 Stabilized, 3 Return, 4 Land,
+  5 Hold; 6 Terminate and 7 Disarm stop the motors); the HEARTBEAT shows the failsafe
+  mode and MAV_STATE_CRITICAL. A stick mode (0, 1, 2) without stick input cannot run: the
+  vehicle logs "Matching flight task was not able to run, Nav state: N" and flies PX4's
+  emergency Descend task (FlightTaskDescend: level attitude, vertical speed
+  MPC_LAND_SPEED, no horizontal position or velocity control) down to the ground. The
+  failsafe ends when the user selects a mode or on disarm (PX4's OnModeChangeOrDisarm);
+  the mode shown is then the user's last choice again (e.g. OFFBOARD after a failsafe
+  descent and "Disarmed by landing", as PX4 v1.16 SIH does);
 - armed but no takeoff within COM_DISARM_PRFLT -> disarm; landed for COM_DISARM_LAND
-  after a flight -> disarm;
-- physics: seed 0 quadrotor (models/quadrotor.py, RK4 at ``physics_hz``) with the PX4-like
-  cascaded controller (control/baseline.py) tracking the velocity setpoints of every
-  mode (HOLD/POSCTL/ALTCTL hold position/altitude with a P loop, LAND descends at
+  after a flight -> disarm. Disarming does not change the user's mode: the HEARTBEAT
+  keeps showing it (e.g. OFFBOARD) until someone changes it, and no failsafe acts while
+  disarmed;
+- physics: seed 0 quadrotor (models/quadrotor.py, RK4 at ``physics_hz``; rotor speeds
+  follow the first-order motor model of seed 0 Eq. 8, ESC_STATUS reports them) with the
+  PX4-like cascaded controller (control/baseline.py) tracking the velocity setpoints of
+  every mode (HOLD/POSCTL/ALTCTL hold position/altitude with a P loop, LAND descends at
   MPC_LAND_SPEED, RTL flies home then lands); flat ground at z = 0.
+
+Network exposure: a ``udpout`` URL (PX4 SITL style: send to the offboard port) binds its
+socket explicitly before the first datagram, to ``bind`` or, by default, to the local
+interface that routes to the destination (127.0.0.1 for a loopback destination), never
+to all interfaces; ``udpin:0.0.0.0`` and similar all-interface URLs are logged as a risk.
 
 The vehicle is a polled object: ``step(now)`` advances physics to ``now`` (fixed steps),
 serves the link and sends due telemetry. :meth:`SimVehicle.run_realtime` drives it from the
@@ -39,16 +80,17 @@ from __future__ import annotations
 
 import logging
 import math
+import socket
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from lpv_sysid.errors import ConfigError
+from lpv_sysid.errors import ConfigError, LpvSysidError
 from lpv_sysid.io import frames
 from lpv_sysid.mavlink import px4
-from lpv_sysid.mavlink.link import LinkConfig, MavlinkLink
+from lpv_sysid.mavlink.link import LinkConfig, MavlinkLink, parse_url, warn_if_all_interfaces
 from lpv_sysid.mavlink.telemetry import euler_to_quat
 from lpv_sysid.validation import check_config_keys, is_finite_number
 
@@ -57,76 +99,178 @@ log = logging.getLogger(__name__)
 MAV_TYPE_QUADROTOR = 2
 MAV_AUTOPILOT_PX4 = 12
 MAV_STATE_STANDBY, MAV_STATE_ACTIVE, MAV_STATE_CRITICAL = 3, 4, 5
-MAV_RESULT_ACCEPTED, MAV_RESULT_TEMPORARILY_REJECTED, MAV_RESULT_DENIED = 0, 1, 2
-MAV_RESULT_UNSUPPORTED, MAV_RESULT_FAILED = 3, 4
-CMD_ARM_DISARM, CMD_DO_SET_MODE, CMD_SET_MESSAGE_INTERVAL = 400, 176, 511
-CMD_REQUEST_MESSAGE, CMD_REQUEST_CAPABILITIES = 512, 520
-CMD_NAV_TAKEOFF, CMD_NAV_LAND, CMD_NAV_RETURN = 22, 21, 20
-FORCE_DISARM_MAGIC = 21196
 MAV_LANDED_STATE_ON_GROUND, MAV_LANDED_STATE_IN_AIR = 1, 2
+MAV_FRAME_LOCAL_NED = 1
+MAV_ESTIMATOR_TYPE_AUTOPILOT = 8
+MAV_SYS_STATUS_SENSOR_RC_RECEIVER = 0x10000
+SENSORS_BASE = 0x3FFF          # gyro .. motor outputs, all present/enabled/healthy
+MANUAL_CONTROL_TIMEOUT_S = 0.5  # a MAVLink joystick counts this long after its last message
+N_OUTPUTS = 16                  # actuator outputs PX4 SIH reports (ACTUATOR_OUTPUT_STATUS.active)
 
-#: PX4 parameters served (name -> (value, MAV_PARAM_TYPE)); PX4 v1.16 defaults unless noted.
-DEFAULT_PARAMS: dict[str, tuple[float, int]] = {
-    "COM_OF_LOSS_T": (1.0, px4.MAV_PARAM_TYPE_REAL32),
-    "COM_OBL_RC_ACT": (0, px4.MAV_PARAM_TYPE_INT32),
-    "COM_DISARM_PRFLT": (10.0, px4.MAV_PARAM_TYPE_REAL32),
-    "COM_DISARM_LAND": (2.0, px4.MAV_PARAM_TYPE_REAL32),
-    "COM_RC_IN_MODE": (4, px4.MAV_PARAM_TYPE_INT32),       # SITL without RC (v1.16: 4 = disabled)
-    "COM_RCL_EXCEPT": (4, px4.MAV_PARAM_TYPE_INT32),       # bit 2: ignore RC loss in offboard
-    "NAV_DLL_ACT": (0, px4.MAV_PARAM_TYPE_INT32),
-    "MPC_XY_VEL_MAX": (12.0, px4.MAV_PARAM_TYPE_REAL32),
-    "MPC_Z_VEL_MAX_UP": (3.0, px4.MAV_PARAM_TYPE_REAL32),
-    "MPC_Z_VEL_MAX_DN": (1.5, px4.MAV_PARAM_TYPE_REAL32),
-    "MPC_LAND_SPEED": (0.7, px4.MAV_PARAM_TYPE_REAL32),
-    "MIS_TAKEOFF_ALT": (2.5, px4.MAV_PARAM_TYPE_REAL32),
-    "MC_ROLLRATE_P": (0.15, px4.MAV_PARAM_TYPE_REAL32),
-    "MC_PITCHRATE_P": (0.15, px4.MAV_PARAM_TYPE_REAL32),
-    "MC_YAWRATE_P": (0.2, px4.MAV_PARAM_TYPE_REAL32),
-    "MAV_SYS_ID": (1, px4.MAV_PARAM_TYPE_INT32),
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """A served PX4 parameter: default (PX4 v1.16 unless noted), MAV_PARAM_TYPE, range."""
+
+    default: float
+    ptype: int
+    lo: float
+    hi: float
+    values: frozenset[int] | None = None      # enum parameters: the allowed values
+
+    def check(self, name: str, value: float | int) -> str | None:
+        """Why ``value`` is refused (None: accepted)."""
+        if isinstance(value, bool) or not is_finite_number(value):
+            return f"{name} = {value!r} is not a finite number"
+        if self.ptype == px4.MAV_PARAM_TYPE_INT32 and float(value) != int(value):
+            return f"{name} is an integer parameter, got {value!r}"
+        if self.values is not None and int(value) not in self.values:
+            return f"{name} = {value!r} is not one of {sorted(self.values)}"
+        if not self.lo <= float(value) <= self.hi:
+            return f"{name} = {value!r} is outside [{self.lo:g}, {self.hi:g}]"
+        return None
+
+
+_R32, _I32 = px4.MAV_PARAM_TYPE_REAL32, px4.MAV_PARAM_TYPE_INT32
+#: PX4 parameters served. Ranges: the @min/@max or @value lists of PX4 v1.16's parameter
+#: metadata; where PX4 declares none (COM_DISARM_*, MIS_TAKEOFF_ALT) a plausibility bound.
+PARAMS: dict[str, ParamSpec] = {
+    "COM_OF_LOSS_T": ParamSpec(1.0, _R32, 0.0, 60.0),
+    "COM_OBL_RC_ACT": ParamSpec(0, _I32, 0, 7, frozenset(range(8))),
+    "COM_DISARM_PRFLT": ParamSpec(10.0, _R32, -1.0, 3600.0),
+    "COM_DISARM_LAND": ParamSpec(2.0, _R32, -1.0, 3600.0),
+    "COM_RC_IN_MODE": ParamSpec(1, _I32, 0, 4, frozenset(range(5))),   # v1.16 SIH SITL: 1 joystick only
+    "COM_RC_LOSS_T": ParamSpec(0.5, _R32, 0.0, 35.0),
+    "COM_RCL_EXCEPT": ParamSpec(4, _I32, 0, 15),        # bit 2: ignore RC loss in offboard (sim default)
+    "NAV_DLL_ACT": ParamSpec(0, _I32, 0, 6, frozenset({0, 1, 2, 3, 5, 6})),
+    "MPC_XY_VEL_MAX": ParamSpec(12.0, _R32, 0.0, 20.0),
+    "MPC_Z_VEL_MAX_UP": ParamSpec(3.0, _R32, 0.5, 8.0),
+    "MPC_Z_VEL_MAX_DN": ParamSpec(1.5, _R32, 0.5, 4.0),
+    "MPC_LAND_SPEED": ParamSpec(0.7, _R32, 0.6, 4.0),
+    "MIS_TAKEOFF_ALT": ParamSpec(2.5, _R32, 0.0, 1000.0),
+    "MC_ROLLRATE_P": ParamSpec(0.15, _R32, 0.01, 0.5),
+    "MC_PITCHRATE_P": ParamSpec(0.15, _R32, 0.01, 0.6),
+    "MC_YAWRATE_P": ParamSpec(0.2, _R32, 0.0, 0.6),
+    "MAV_SYS_ID": ParamSpec(1, _I32, 1, 250),
 }
+#: name -> (default, MAV_PARAM_TYPE)
+DEFAULT_PARAMS: dict[str, tuple[float, int]] = {k: (v.default, v.ptype) for k, v in PARAMS.items()}
 
-#: default stream rates [Hz] before any SET_MESSAGE_INTERVAL (PX4 "onboard" profile-like)
+#: default stream rates [Hz] before any SET_MESSAGE_INTERVAL: PX4 v1.16 mavlink_main.cpp,
+#: MAVLINK_MODE_ONBOARD (the SITL offboard link); 0 = off until requested
 DEFAULT_RATES: dict[str, float] = {
-    "ATTITUDE": 20.0, "ATTITUDE_QUATERNION": 50.0, "LOCAL_POSITION_NED": 30.0,
-    "GLOBAL_POSITION_INT": 10.0, "HIGHRES_IMU": 50.0, "ESC_STATUS": 10.0, "SYS_STATUS": 1.0,
-    "EXTENDED_SYS_STATE": 1.0, "HOME_POSITION": 0.5, "ODOMETRY": 0.0,
+    "ATTITUDE": 100.0, "ATTITUDE_QUATERNION": 50.0, "LOCAL_POSITION_NED": 30.0, "ODOMETRY": 30.0,
+    "GLOBAL_POSITION_INT": 50.0, "HIGHRES_IMU": 50.0, "ESC_STATUS": 10.0, "SERVO_OUTPUT_RAW": 10.0,
+    "ACTUATOR_OUTPUT_STATUS": 0.0, "RC_CHANNELS": 20.0, "SYS_STATUS": 5.0, "EXTENDED_SYS_STATE": 5.0,
+    "HOME_POSITION": 0.5,
 }
 HOME_LAT, HOME_LON, HOME_ALT = 47.397742, 8.545594, 488.0   # PX4 SITL default home
+ACTUATOR_OUTPUT_SCALES = ("pwm", "normalized")
+
+
+def parse_hostport(text: str, what: str) -> tuple[str, int]:
+    """``HOST`` or ``HOST:PORT`` -> (host, port); port 0 = any free port."""
+    if not isinstance(text, str) or not text.strip():
+        raise ConfigError(f"{what} must be HOST or HOST:PORT, got {text!r}")
+    host, sep, port = text.strip().rpartition(":")
+    if not sep:
+        host, port = text.strip(), "0"
+    try:
+        p = int(port)
+    except ValueError:
+        raise ConfigError(f"{what} {text!r}: port {port!r} is not an integer") from None
+    if not 0 <= p < 65536:
+        raise ConfigError(f"{what} {text!r}: port {p} out of range")
+    return host, p
 
 
 @dataclass(frozen=True)
 class SimVehicleConfig:
+    """Options of the simulated vehicle (``config/sim_vehicle_px4.yaml``, module docstring)."""
+
     url: str = "udpout:127.0.0.1:14540"     # PX4 SITL sends to the offboard port 14540
+    bind: str | None = None                 # udpout: local HOST[:PORT]; None: route to url's host
     system_id: int = 1
     component_id: int = 1
     physics_hz: float = 250.0
-    params: Mapping[str, float] = field(default_factory=dict)    # overrides of DEFAULT_PARAMS
+    params: Mapping[str, float] = field(default_factory=dict)    # overrides of PARAMS defaults
     initial_mode: str = "HOLD"
     signing_key_file: str | None = None
     allow_unsigned: bool = False
     sensor_noise: bool = False
     seed: int = 0
-    duplicate_acks: bool = False            # send every COMMAND_ACK twice (PX4 sometimes does)
+    rc_present: bool = False                # an RC transmitter is bound (sticks centred)
+    esc_telemetry: bool = True              # ESC_STATUS (False: SIH / PWM ESCs)
+    actuator_output_scale: str = "pwm"      # ACTUATOR_OUTPUT_STATUS values: pwm | normalized
+    stream_rates: Mapping[str, float] = field(default_factory=dict)   # overrides of DEFAULT_RATES
+    double_ack: bool = True                 # PX4 v1.16: DO_SET_MODE ACCEPTED, then the verdict
+    verdict_delay_s: float = 0.01           # commander verdict after the first ACK (0-15 ms measured)
+    odometry_lag_s: float = 0.004           # ODOMETRY time_usec behind the other stamps
+    duplicate_acks: bool = False            # additionally send every COMMAND_ACK twice
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "SimVehicleConfig":
         check_config_keys(d, cls.__dataclass_fields__, "sim vehicle")
-        cfg = cls(**dict(d))
+        kw = dict(d)
+        for k in ("params", "stream_rates"):
+            if kw.get(k) is None:
+                kw.pop(k, None)
+        cfg = cls(**kw)
         cfg.validate()
         return cfg
 
+    @classmethod
+    def load(cls, path: str) -> "SimVehicleConfig":
+        from lpv_sysid.io.yaml_file import read_yaml_mapping
+
+        d = read_yaml_mapping(path, f"sim vehicle config {path}", allow_empty=True)
+        try:
+            return cls.from_dict(d)
+        except ConfigError as exc:
+            raise ConfigError(f"{path}: {exc}") from None
+
     def validate(self) -> None:
+        if not isinstance(self.url, str):
+            raise ConfigError(f"sim vehicle url must be a string, got {self.url!r}")
+        parse_url(self.url)
+        if self.bind is not None:
+            parse_hostport(self.bind, "sim vehicle bind")
         if not isinstance(self.physics_hz, (int, float)) or isinstance(self.physics_hz, bool):
             raise ConfigError(f"sim vehicle physics_hz must be a number, got {self.physics_hz!r}")
-        if not isinstance(self.params, Mapping):
-            raise ConfigError("sim vehicle params must be a mapping NAME: value")
         if not (self.physics_hz >= 50.0 and math.isfinite(self.physics_hz)):
             raise ConfigError(f"sim vehicle physics_hz must be >= 50, got {self.physics_hz!r}")
+        for name in ("system_id", "component_id"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 255:
+                raise ConfigError(f"sim vehicle {name} must be an integer 1..255, got {v!r}")
+        if not isinstance(self.params, Mapping):
+            raise ConfigError("sim vehicle params must be a mapping NAME: value")
         for k, v in self.params.items():
-            if k not in DEFAULT_PARAMS:
-                raise ConfigError(f"sim vehicle: unknown parameter {k!r}; known: {sorted(DEFAULT_PARAMS)}")
-            if not is_finite_number(v):
-                raise ConfigError(f"sim vehicle: parameter {k} must be a finite number, got {v!r}")
+            if k not in PARAMS:
+                raise ConfigError(f"sim vehicle: unknown parameter {k!r}; known: {sorted(PARAMS)}")
+            err = PARAMS[k].check(k, v)
+            if err is not None:
+                raise ConfigError(f"sim vehicle: parameter {err}")
+        if not isinstance(self.stream_rates, Mapping):
+            raise ConfigError("sim vehicle stream_rates must be a mapping MESSAGE: rate_hz")
+        for k, v in self.stream_rates.items():
+            if k not in DEFAULT_RATES:
+                raise ConfigError(f"sim vehicle stream_rates: unknown stream {k!r}; known: {sorted(DEFAULT_RATES)}")
+            if not (is_finite_number(v) and 0 <= v <= 1000):
+                raise ConfigError(f"sim vehicle stream_rates.{k} must be a rate in [0, 1000] Hz, got {v!r}")
+        for name in ("allow_unsigned", "sensor_noise", "rc_present", "esc_telemetry", "double_ack",
+                     "duplicate_acks"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(f"sim vehicle {name} must be true or false, got {getattr(self, name)!r}")
+        if self.actuator_output_scale not in ACTUATOR_OUTPUT_SCALES:
+            raise ConfigError(f"sim vehicle actuator_output_scale must be one of {ACTUATOR_OUTPUT_SCALES}, "
+                              f"got {self.actuator_output_scale!r}")
+        for name, hi in (("verdict_delay_s", 1.0), ("odometry_lag_s", 0.1)):
+            v = getattr(self, name)
+            if not (is_finite_number(v) and 0 <= v <= hi):
+                raise ConfigError(f"sim vehicle {name} must be in [0, {hi}] s, got {v!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+            raise ConfigError(f"sim vehicle seed must be a non-negative integer, got {self.seed!r}")
         if px4.mode_by_name(self.initial_mode) == px4.OFFBOARD:
             raise ConfigError("sim vehicle initial_mode cannot be OFFBOARD (PX4 needs a setpoint stream)")
 
@@ -163,7 +307,7 @@ class SimVehicle:
         self.ctrl = controller_factory()
         self.params: dict[str, tuple[float, int]] = dict(DEFAULT_PARAMS)
         for k, v in self.config.params.items():
-            self.params[k] = (v, DEFAULT_PARAMS[k][1])
+            self.params[k] = (v, PARAMS[k].ptype)
         self.link = link or MavlinkLink(LinkConfig(
             url=self.config.url, source_system=self.config.system_id,
             source_component=self.config.component_id, streams=(),
@@ -175,18 +319,27 @@ class SimVehicle:
         self.x = np.zeros(16)             # FULL_STATE_NAMES, on the ground, motors off
         self.u = np.zeros(4)
         self.armed = False
-        self.mode = px4.mode_by_name(self.config.initial_mode)
+        self.mode = px4.mode_by_name(self.config.initial_mode)   # what the HEARTBEAT shows
+        self.user_mode = self.mode        # the mode last chosen by a user (PX4 user intention)
+        self.failsafe_active = False
         self.landed = True
         self.took_off = False
         self.t_armed = 0.0
         self.t_landed = 0.0
         self.hold_pos = np.zeros(3)
+        self.descending = False           # emergency Descend task (stick mode without sticks)
         self.setpoint: _Setpoint | None = None
         self._sp_times: list[float] = []
         self.setpoints_received = 0
         self.mode_log: list[tuple[float, str, str]] = []   # (t, mode name, reason)
+        self.px4_log: list[tuple[float, str]] = []         # what PX4 would print (errors, warnings)
+        self.acks_sent: list[tuple[float, int, int]] = []  # (t, command, result)
+        self.param_rejections: list[tuple[float, str]] = []
         self.failsafe_reason = ""
         self.gcs_last_heartbeat: float | None = None
+        self.local_address: tuple[str, int] | None = None
+        self._t_joystick = -math.inf
+        self._verdicts: list[tuple[float, int, Callable[[], int]]] = []
         self.intervals: dict[int, float] = {}
         self._next_send: dict[int, float] = {}
         self._next_hb = 0.0
@@ -196,7 +349,8 @@ class SimVehicle:
         self._stream_ids = {name: (px4.MAVLINK_MSG_ID_ESC_STATUS if name == "ESC_STATUS"
                                    else getattr(mod, f"MAVLINK_MSG_ID_{name}"))
                             for name in DEFAULT_RATES}
-        for name, rate in DEFAULT_RATES.items():
+        rates = {**DEFAULT_RATES, **dict(self.config.stream_rates)}
+        for name, rate in rates.items():
             self.intervals[self._stream_ids[name]] = 1.0 / rate if rate > 0 else -1.0
         self._esc_cls = px4.esc_status_class(px4.DEFAULT_DIALECT)
 
@@ -204,6 +358,7 @@ class SimVehicle:
     def open(self) -> None:
         self.link.open(self.t)
         self._opened = True
+        self._bind_local()
 
     def close(self) -> None:
         self.link.close()
@@ -211,6 +366,31 @@ class SimVehicle:
 
     def param(self, name: str) -> float:
         return float(self.params[name][0])
+
+    def _bind_local(self) -> None:
+        """Bind a udpout socket before its first datagram (else the OS binds 0.0.0.0)."""
+        sock = getattr(self.link.conn, "port", None)
+        if not isinstance(sock, socket.socket):
+            return
+        device, _ = parse_url(self.config.url)
+        if device.startswith("udpout:"):
+            _, dest_host, dest_port = device.split(":")
+            if self.config.bind is not None:
+                host, port = parse_hostport(self.config.bind, "sim vehicle bind")
+            else:
+                host, port = _route_source(dest_host, int(dest_port)), 0
+            warn_if_all_interfaces(f"sim vehicle {self.config.url!r} (bind {host}:{port})", host)
+            try:
+                sock.bind((host, port))
+            except OSError as exc:
+                self.close()
+                raise LpvSysidError(f"sim vehicle: cannot bind {host}:{port} for {self.config.url!r}: "
+                                    f"{exc.strerror or exc}") from None
+        try:
+            name = sock.getsockname()
+            self.local_address = (str(name[0]), int(name[1]))
+        except OSError:
+            self.local_address = None
 
     # ------------------------------------------------------------------ loop
     def step(self, now: float) -> None:
@@ -221,6 +401,8 @@ class SimVehicle:
         while self.t + self.dt <= now + 1e-9:
             self._physics_step()
             self._supervise(self.t)
+            self._run_verdicts(self.t)
+        self._run_verdicts(self.t)
         if self._opened:
             self._send_telemetry(now)
 
@@ -311,6 +493,11 @@ class SimVehicle:
         x = self.x
         pos = x[0:3]
         m = self.mode
+        if self.descending:
+            # FlightTaskDescend: vertical speed MPC_LAND_SPEED, zero horizontal acceleration
+            # (the horizontal reference follows the vehicle: nothing holds or brakes it)
+            v = self._R(x) @ x[6:9]
+            return np.array([v[0], v[1], self.param("MPC_LAND_SPEED")]), 0.0
         if m == px4.OFFBOARD and self.setpoint is not None:
             sp = self.setpoint
             if sp.kind == "velocity":
@@ -337,7 +524,7 @@ class SimVehicle:
             if abs(pos[2] - target[2]) < 0.1:
                 self._set_mode(px4.HOLD, self.t, "takeoff complete")
             return _clip_norm(1.0 * (target - pos), 2.0), 0.0
-        # HOLD, POSCTL (no sticks), ALTCTL, MANUAL, STABILIZED, OFFBOARD without setpoint
+        # HOLD, POSCTL/ALTCTL/STABILIZED with centred sticks, OFFBOARD without setpoint
         v = _clip_norm(1.0 * (self.hold_pos - pos), 3.0)
         if m in (px4.ALTCTL, px4.MANUAL, px4.STABILIZED):
             v[0:2] = 0.0
@@ -353,15 +540,22 @@ class SimVehicle:
         return self.model.mix @ u_esc
 
     # ------------------------------------------------------------ supervision
+    def sticks_available(self, now: float | None = None) -> bool:
+        """Manual control input as PX4 sees it (RC and/or MAVLink joystick, COM_RC_IN_MODE)."""
+        t = self.t if now is None else now
+        joystick = t - self._t_joystick <= MANUAL_CONTROL_TIMEOUT_S
+        return px4.sticks_available(int(self.param("COM_RC_IN_MODE")), self.config.rc_present, joystick)
+
     def _supervise(self, t: float) -> None:
-        if self.mode == px4.OFFBOARD:
+        if self.mode == px4.OFFBOARD and self.armed:       # PX4's failsafes act only while armed
             last = self.setpoint.t if self.setpoint is not None else -math.inf
             if t - last > self.param("COM_OF_LOSS_T"):
                 self._offboard_lost(t)
         if self.armed and self.landed:
-            if not self.took_off and t - self.t_armed > self.param("COM_DISARM_PRFLT"):
+            prflt, land = self.param("COM_DISARM_PRFLT"), self.param("COM_DISARM_LAND")
+            if not self.took_off and prflt > 0 and t - self.t_armed > prflt:
                 self._disarm(t, "no takeoff within COM_DISARM_PRFLT")
-            elif self.took_off and t - self.t_landed > self.param("COM_DISARM_LAND"):
+            elif self.took_off and land > 0 and t - self.t_landed > land:
                 self._disarm(t, "landed (COM_DISARM_LAND)")
 
     def _offboard_lost(self, t: float) -> None:
@@ -369,18 +563,32 @@ class SimVehicle:
         reason = f"offboard lost for > COM_OF_LOSS_T = {self.param('COM_OF_LOSS_T')} s (COM_OBL_RC_ACT={act})"
         self.failsafe_reason = reason
         log.warning(reason)
-        target = {0: px4.POSCTL, 1: px4.ALTCTL, 2: px4.MANUAL, 3: px4.RTL, 4: px4.LAND,
-                  5: px4.HOLD}.get(act)
-        if target is not None:
-            self._set_mode(target, t, reason)
-        else:                                         # 6 terminate, 7 disarm
-            self._set_mode(px4.HOLD, t, reason)
+        self.px4_log.append((t, "Failsafe activated"))
+        target = px4.OBL_ACTION_MODES.get(act)
+        if target is None:                            # 6 terminate, 7 disarm: motors off
+            self.mode_log.append((t, self.mode.name, reason))
             self._disarm(t, reason)
+            return
+        self._set_mode(target, t, reason, failsafe=True)
+        if target in px4.STICK_MODES and not self.sticks_available(t):
+            msg = f"Matching flight task was not able to run, Nav state: {px4.NAV_STATES[target]}"
+            log.error(msg)
+            self.px4_log.append((t, msg))
+            self.mode_log[-1] = (t, target.name, f"{reason}; {msg}: emergency descent")
+            self.descending = True
+            if hasattr(self.ctrl, "vel_int"):         # Descend task: no horizontal acceleration
+                self.ctrl.vel_int[0] = self.ctrl.vel_int[1] = 0.0
 
-    def _set_mode(self, mode: px4.Px4Mode, t: float, reason: str) -> None:
-        if mode != self.mode:
+    def _set_mode(self, mode: px4.Px4Mode, t: float, reason: str, failsafe: bool = False) -> None:
+        """Enter ``mode``: a failsafe's (the user's choice is kept) or a user's (ends a failsafe)."""
+        if mode != self.mode or self.descending:
             self.mode_log.append((t, mode.name, reason))
         self.mode = mode
+        self.failsafe_active = failsafe
+        if not failsafe:
+            self.user_mode = mode
+            self.failsafe_reason = ""
+        self.descending = False
         self.hold_pos = self.x[0:3].copy()
         if self.landed:
             self.hold_pos[2] = 0.0
@@ -395,6 +603,8 @@ class SimVehicle:
             self.mode_log.append((t, "DISARMED", reason))
         self.armed = False
         self.x[12:16] = 0.0
+        if self.failsafe_active:                      # cleared on disarm: the user's mode again
+            self._set_mode(self.user_mode, t, "failsafe cleared on disarm")
 
     # ------------------------------------------------------------- messages
     def _handle(self, m: Any, now: float) -> None:
@@ -411,6 +621,8 @@ class SimVehicle:
             self._position_target(m, now)
         elif mt == "SET_ATTITUDE_TARGET":
             self._attitude_target(m, now)
+        elif mt == "MANUAL_CONTROL":
+            self._t_joystick = now
         elif mt == "PARAM_REQUEST_READ":
             name = px4.param_id_str(m.param_id)
             if m.param_index >= 0:
@@ -423,11 +635,22 @@ class SimVehicle:
             for name in self.params:
                 self._send_param(name)
         elif mt == "PARAM_SET":
-            name = px4.param_id_str(m.param_id)
-            if name in self.params:
-                ptype = self.params[name][1]
-                self.params[name] = (px4.param_from_wire(m.param_value, ptype), ptype)
-                self._send_param(name)
+            self._param_set(m, now)
+
+    def _param_set(self, m: Any, now: float) -> None:
+        name = px4.param_id_str(m.param_id)
+        if name not in self.params:
+            return
+        spec = PARAMS[name]
+        value = px4.param_from_wire(m.param_value, spec.ptype)
+        err = spec.check(name, value)
+        if err is not None:
+            log.warning("PARAM_SET from %d/%d refused: %s; %s stays %g", m.get_srcSystem(),
+                        m.get_srcComponent(), err, name, self.param(name))
+            self.param_rejections.append((now, err))
+        else:
+            self.params[name] = (value, spec.ptype)
+        self._send_param(name)
 
     def _send_param(self, name: str) -> None:
         names = list(self.params)
@@ -436,41 +659,37 @@ class SimVehicle:
             name.encode("ascii"), px4.param_to_wire(value, ptype), ptype, len(names), names.index(name)))
 
     def _ack(self, cmd: int, result: int) -> None:
+        self.acks_sent.append((self.t, cmd, result))
         for _ in range(2 if self.config.duplicate_acks else 1):
             self.link.send(self.link.codec.command_ack_encode(cmd, result, 0, 0, 0, 0))
 
+    def _commander(self, cmd: int, now: float, verdict: Callable[[], int]) -> None:
+        """A command PX4's commander decides ``verdict_delay_s`` later; DOUBLE_ACK_COMMANDS
+        are ACCEPTED at once by the MAVLink receiver as well (``double_ack``)."""
+        if not self.config.double_ack:
+            self._ack(cmd, verdict())
+            return
+        if cmd in px4.DOUBLE_ACK_COMMANDS:
+            self._ack(cmd, px4.MAV_RESULT_ACCEPTED)
+        self._verdicts.append((now + self.config.verdict_delay_s, cmd, verdict))
+
+    def _run_verdicts(self, t: float) -> None:
+        while self._verdicts and self._verdicts[0][0] <= t + 1e-9:
+            _, cmd, verdict = self._verdicts.pop(0)
+            self._ack(cmd, verdict())
+
     def _command(self, m: Any, now: float) -> None:
         c = m.command
-        if c == CMD_ARM_DISARM:
-            if m.param1 >= 0.5:
-                if self.armed:
-                    return self._ack(c, MAV_RESULT_ACCEPTED)
-                if not self.landed or self.mode in (px4.LAND, px4.RTL):
-                    return self._ack(c, MAV_RESULT_DENIED)
-                if self.mode == px4.OFFBOARD and not self._stream_alive(now):
-                    return self._ack(c, MAV_RESULT_DENIED)
-                self._arm(self.t)
-                return self._ack(c, MAV_RESULT_ACCEPTED)
-            if self.landed or int(round(m.param2)) == FORCE_DISARM_MAGIC:
-                self._disarm(self.t, "disarm command")
-                return self._ack(c, MAV_RESULT_ACCEPTED)
-            return self._ack(c, MAV_RESULT_DENIED)
-        if c == CMD_DO_SET_MODE:
-            if not int(m.param1) & px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-                return self._ack(c, MAV_RESULT_UNSUPPORTED)
-            mode = px4.Px4Mode(int(m.param2), int(m.param3))
-            if mode.main == px4.MAIN_AUTO and mode.sub == 0:
-                mode = px4.HOLD
-            if mode.name.startswith("UNKNOWN"):
-                return self._ack(c, MAV_RESULT_UNSUPPORTED)
-            if mode == px4.OFFBOARD and not self._stream_alive(now):
-                return self._ack(c, MAV_RESULT_TEMPORARILY_REJECTED)
-            self._set_mode(mode, self.t, "DO_SET_MODE")
-            return self._ack(c, MAV_RESULT_ACCEPTED)
-        if c == CMD_SET_MESSAGE_INTERVAL:
+        if c == px4.MAV_CMD_COMPONENT_ARM_DISARM:
+            p1, p2 = float(m.param1), float(m.param2)
+            return self._commander(c, now, lambda: self._arm_verdict(p1, p2))
+        if c == px4.MAV_CMD_DO_SET_MODE:
+            p1, p2, p3 = float(m.param1), float(m.param2), float(m.param3)
+            return self._commander(c, now, lambda: self._set_mode_verdict(p1, p2, p3))
+        if c == px4.MAV_CMD_SET_MESSAGE_INTERVAL:
             mid, interval = int(m.param1), m.param2
             if mid not in self._stream_ids.values():
-                return self._ack(c, MAV_RESULT_UNSUPPORTED)
+                return self._ack(c, px4.MAV_RESULT_UNSUPPORTED)
             default = DEFAULT_RATES[next(k for k, v in self._stream_ids.items() if v == mid)]
             if interval < 0:
                 self.intervals[mid] = -1.0
@@ -479,25 +698,70 @@ class SimVehicle:
             else:
                 self.intervals[mid] = max(interval * 1e-6, 1.0 / 400.0)
             self._next_send[mid] = now
-            return self._ack(c, MAV_RESULT_ACCEPTED)
-        if c in (CMD_REQUEST_MESSAGE, CMD_REQUEST_CAPABILITIES):
-            mid = 148 if c == CMD_REQUEST_CAPABILITIES else int(m.param1)
+            return self._ack(c, px4.MAV_RESULT_ACCEPTED)
+        if c in (px4.MAV_CMD_REQUEST_MESSAGE, px4.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
+            mid = 148 if c == px4.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES else int(m.param1)
             if mid == 148:
-                self._ack(c, MAV_RESULT_ACCEPTED)
+                self._ack(c, px4.MAV_RESULT_ACCEPTED)
                 return self._send_autopilot_version()
             if mid in self._stream_ids.values():
-                self._ack(c, MAV_RESULT_ACCEPTED)
+                if not self._stream_has_data(mid):
+                    return self._ack(c, px4.MAV_RESULT_FAILED)
+                self._ack(c, px4.MAV_RESULT_ACCEPTED)
                 return self._send_stream(mid, now)
-            return self._ack(c, MAV_RESULT_UNSUPPORTED)
-        if c == CMD_NAV_TAKEOFF:
+            return self._ack(c, px4.MAV_RESULT_UNSUPPORTED)
+        if c == px4.MAV_CMD_NAV_TAKEOFF:
             if not self.armed:
-                return self._ack(c, MAV_RESULT_DENIED)
+                return self._ack(c, px4.MAV_RESULT_DENIED)
             self._set_mode(px4.TAKEOFF, self.t, "NAV_TAKEOFF")
-            return self._ack(c, MAV_RESULT_ACCEPTED)
-        if c in (CMD_NAV_LAND, CMD_NAV_RETURN):
-            self._set_mode(px4.LAND if c == CMD_NAV_LAND else px4.RTL, self.t, "command")
-            return self._ack(c, MAV_RESULT_ACCEPTED)
-        return self._ack(c, MAV_RESULT_UNSUPPORTED)
+            return self._ack(c, px4.MAV_RESULT_ACCEPTED)
+        if c in (px4.MAV_CMD_NAV_LAND, px4.MAV_CMD_NAV_RETURN_TO_LAUNCH):
+            self._set_mode(px4.LAND if c == px4.MAV_CMD_NAV_LAND else px4.RTL, self.t, "command")
+            return self._ack(c, px4.MAV_RESULT_ACCEPTED)
+        return self._ack(c, px4.MAV_RESULT_UNSUPPORTED)
+
+    def _can_run(self, mode: px4.Px4Mode) -> bool:
+        """Whether the flight task of ``mode`` has what it needs (stream, stick input)."""
+        if mode == px4.OFFBOARD:
+            return self._stream_alive(self.t)
+        if mode in px4.STICK_MODES:
+            return self.sticks_available()
+        return True
+
+    def _arm_verdict(self, p1: float, p2: float) -> int:
+        t = self.t
+        if p1 >= 0.5:
+            if self.armed:
+                return px4.MAV_RESULT_ACCEPTED
+            if not self.landed or self.mode in (px4.LAND, px4.RTL):
+                return px4.MAV_RESULT_DENIED
+            if not self._can_run(self.mode):
+                msg = f"Arming denied: Resolve system health failures first ({self.mode.name} cannot run)"
+                log.warning(msg)
+                self.px4_log.append((t, msg))
+                return px4.MAV_RESULT_TEMPORARILY_REJECTED
+            self._arm(t)
+            return px4.MAV_RESULT_ACCEPTED
+        if self.landed or int(round(p2)) == px4.FORCE_DISARM_MAGIC:
+            self._disarm(t, "disarm command")
+            return px4.MAV_RESULT_ACCEPTED
+        return px4.MAV_RESULT_DENIED
+
+    def _set_mode_verdict(self, p1: float, p2: float, p3: float) -> int:
+        if not int(p1) & px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+            return px4.MAV_RESULT_UNSUPPORTED
+        mode = px4.Px4Mode(int(p2), int(p3))
+        if mode.main == px4.MAIN_AUTO and mode.sub == 0:
+            mode = px4.HOLD
+        if mode.name.startswith("UNKNOWN"):
+            return px4.MAV_RESULT_UNSUPPORTED
+        if self.armed and not self._can_run(mode):   # disarmed: PX4 always allows the change
+            msg = f"Switching to {mode.name} is currently not possible"
+            log.warning(msg)
+            self.px4_log.append((self.t, msg))
+            return px4.MAV_RESULT_TEMPORARILY_REJECTED
+        self._set_mode(mode, self.t, "DO_SET_MODE")  # a user's choice also ends a failsafe
+        return px4.MAV_RESULT_ACCEPTED
 
     def _stream_alive(self, now: float) -> bool:
         self._sp_times = [t for t in self._sp_times if now - t <= 1.0]
@@ -546,6 +810,28 @@ class SimVehicle:
         self._sp_received(now, _Setpoint("rates", now, rates=rates, thrust=float(m.thrust)))
 
     # ------------------------------------------------------------ telemetry
+    def motor_outputs(self) -> tuple[np.ndarray, np.ndarray]:
+        """(u_ESC in [0, 1], PWM us) of the motors as PX4 writes them (disarmed: 0, 900 us)."""
+        if not self.armed:
+            n = len(self.x[12:16])
+            return np.zeros(n), np.full(n, px4.PWM_DISARMED_US)
+        u_esc = np.asarray(self.model.u_esc(self.u), dtype=float)
+        return u_esc, np.array([px4.pwm_from_u_esc(u) for u in u_esc])
+
+    def _outputs16(self) -> tuple[list[float], list[float]]:
+        """All 16 outputs (normalised, PWM): motors first, the unused ones idle at 0 / 900 us."""
+        u_esc, pwm = self.motor_outputs()
+        pad = N_OUTPUTS - len(pwm)
+        return [float(u) for u in u_esc] + [0.0] * pad, [float(p) for p in pwm] + [px4.PWM_DISARMED_US] * pad
+
+    def _stream_has_data(self, mid: int) -> bool:
+        sid = self._stream_ids
+        if mid == sid["ESC_STATUS"]:
+            return self.config.esc_telemetry
+        if mid == sid["RC_CHANNELS"]:
+            return self.config.rc_present
+        return True
+
     def _send_telemetry(self, now: float) -> None:
         if now >= self._next_hb:
             self._next_hb = now + 1.0
@@ -556,7 +842,8 @@ class SimVehicle:
             nxt = self._next_send.get(mid, 0.0)
             if now >= nxt:
                 self._next_send[mid] = nxt + interval if now - nxt < interval else now + interval
-                self._send_stream(mid, now)
+                if self._stream_has_data(mid):
+                    self._send_stream(mid, now)
 
     def _heartbeat(self) -> None:
         state = MAV_STATE_ACTIVE if self.armed else MAV_STATE_STANDBY
@@ -617,8 +904,18 @@ class SimVehicle:
         elif mid == sid["ESC_STATUS"]:
             rpm = [int(round(o * 60.0 / (2 * math.pi))) for o in x[12:16]]
             c_msg = self._esc_cls(0, us, rpm, [16.0] * 4, [0.0] * 4)
+        elif mid == sid["SERVO_OUTPUT_RAW"]:
+            _, pwm = self._outputs16()
+            c_msg = c.servo_output_raw_encode(us & 0xFFFFFFFF, 0, *[int(round(v)) for v in pwm])
+        elif mid == sid["ACTUATOR_OUTPUT_STATUS"]:
+            u16, pwm = self._outputs16()
+            vals = pwm if self.config.actuator_output_scale == "pwm" else u16
+            c_msg = c.actuator_output_status_encode(us, N_OUTPUTS, vals + [0.0] * (32 - N_OUTPUTS))
+        elif mid == sid["RC_CHANNELS"]:
+            chans = [1500, 1500, 1500, 1500, 1000, 1000, 1000, 1000] + [0] * 10   # sticks centred
+            c_msg = c.rc_channels_encode(ms, 8, *chans, 200)
         elif mid == sid["SYS_STATUS"]:
-            sensors = 0x3FFF
+            sensors = SENSORS_BASE | (MAV_SYS_STATUS_SENSOR_RC_RECEIVER if self.sticks_available(now) else 0)
             c_msg = c.sys_status_encode(sensors, sensors, sensors, 100, 16000, 500, 80, 0, 0, 0, 0, 0, 0)
         elif mid == sid["EXTENDED_SYS_STATE"]:
             c_msg = c.extended_sys_state_encode(0, MAV_LANDED_STATE_ON_GROUND if self.landed
@@ -627,13 +924,37 @@ class SimVehicle:
             c_msg = c.home_position_encode(int(HOME_LAT * 1e7), int(HOME_LON * 1e7), int(HOME_ALT * 1000),
                                            0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, us)
         elif mid == sid["ODOMETRY"]:
+            # EKF2 vehicle_odometry: timestamp_sample = IMU sample time (before the publish
+            # time that stamps ATTITUDE_QUATERNION / LOCAL_POSITION_NED); pose and velocity NED
             q = euler_to_quat(*x[3:6])
-            c_msg = c.odometry_encode(us, 1, 12, *[float(a) for a in x[0:3]], [float(a) for a in q],
-                                      *[float(a) for a in x[6:9]], *[float(a) for a in x[9:12]],
-                                      [float("nan")] * 21, [float("nan")] * 21, 0, 0, 100)
+            tv = max(self.t - self.config.odometry_lag_s, 0.0)
+            nan = float("nan")
+            pose_cov = [nan] * 21
+            vel_cov = [nan] * 21
+            for i, var in ((0, 1e-4), (6, 1e-4), (11, 1e-4), (15, 1e-6), (18, 1e-6), (20, 1e-6)):
+                pose_cov[i] = var
+            for i in (0, 6, 11):
+                vel_cov[i] = 1e-4
+            c_msg = c.odometry_encode(int(tv * 1e6), MAV_FRAME_LOCAL_NED, MAV_FRAME_LOCAL_NED,
+                                      *[float(a) for a in x[0:3]], [float(a) for a in q],
+                                      *[float(a) for a in v_ned], *[float(a) for a in x[9:12]],
+                                      pose_cov, vel_cov, 0, MAV_ESTIMATOR_TYPE_AUTOPILOT, 0)
         else:
             return
         self.link.send(c_msg)
+
+
+def _route_source(host: str, port: int) -> str:
+    """The local address the OS would send from to ``host`` (a UDP connect sends nothing)."""
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        s.connect((host, port))
+        return str(s.getsockname()[0])
+    except OSError as exc:
+        raise LpvSysidError(f"sim vehicle: no local interface routes to {host}:{port} ({exc}); "
+                            "give the local address with bind (--bind HOST[:PORT])") from None
+    finally:
+        s.close()
 
 
 def _clip_norm(v: np.ndarray, vmax: float) -> np.ndarray:

@@ -58,6 +58,40 @@ def typed(kind: Parameter.Type, description: str, read_only: bool = False) -> Pa
     return ParameterDescriptor(type=kind.value, description=description, read_only=read_only)
 
 
+def clock_source(node) -> str:
+    """Which time the node clock reads (header stamps are judged against it): simulation
+    time under ``use_sim_time`` (``/clock``), else the system (wall) time."""
+    clock = node.get_clock()
+    sim = bool(getattr(clock, "ros_time_is_active", False))
+    return (f"node clock {clock.clock_type.name}: "
+            f"{'simulation time (/clock, use_sim_time)' if sim else 'system time'}; "
+            "input stamps are judged against it")
+
+
+def settings_table(settings_cls) -> list:
+    """The ``[(name, default, descriptor)]`` table of :func:`declare` generated from a
+    settings dataclass (:mod:`lpv_sysid.nodes.parameters`): type, description, the range
+    (``floating_point_range`` / ``integer_range``, enforced by rclpy) and the remaining
+    constraints as ``additional_constraints`` (checked by the settings class). An empty
+    array default declares the parameter without default (see :func:`declare`)."""
+    from lpv_sysid.nodes.parameters import specs
+
+    table = []
+    for name, (default, spec) in specs(settings_cls).items():
+        kind = Parameter.Type[spec.kind]
+        if spec.kind == "DOUBLE":
+            d = double(spec.description, spec.lo, spec.hi)
+        elif spec.kind == "INTEGER":
+            d = integer(spec.description, spec.lo, spec.hi)
+        else:
+            d = typed(kind, spec.description)
+        d.additional_constraints = spec.constraints()
+        if isinstance(default, tuple):
+            default = list(default) if default else kind
+        table.append((name, default, d))
+    return table
+
+
 def declare(node, table) -> dict:
     """Declare ``[(name, default, descriptor)]``; return ``{name: value}``.
 

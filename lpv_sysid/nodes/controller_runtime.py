@@ -3,98 +3,190 @@
 No rclpy here: the node shell forwards subscription messages and timer ticks to
 :class:`ControllerRuntime`, and ``lpv-sysid replay`` does the same with the messages of a
 bag (rosbags classes via ``MsgFactory.rosbags()``), so a replay computes exactly what the
-node would have published.
+node would have published. Both build :class:`ControllerSettings`, the one declaration of
+the node's parameters (:mod:`lpv_sysid.nodes.parameters`: the rclpy declarations are
+generated from it, and it validates every path the same way, cross-field rules included).
 
-Per tick (``rate_hz``), once started: staleness of every input stream, scheduling box,
-the runtime LPV law u = u0(v_d) + K(v_d)(x - x0(v_d)) + R kappa u_e (seed 0 Eq. 31,
-control/lpv_controller.py; with the reference feedforward of gains.yaml F_ff/F_jerk the law's
-own filtered derivatives of velocity_reference supply a = dv_d/dt and its rate) on x = [phi, theta, u, v, w, p, q, r, Mix Omega] (seed 0
-Eq. 14 without position and yaw; delta = Mix Omega, Eq. 7), and its bound monitor. Any
-fault (stale / out-of-order / non-finite input, v_d outside the box, bound exceeded,
-abort request) latches an abort in :class:`~lpv_sysid.control.safety.SafetySupervisor`:
-one ERROR status naming the reason is published and no actuator command follows, so the
-bridge hands control back to PX4.
+At construction (:func:`load_flight_schedule`), before any command can exist: the gains
+file is validated (io/formats), the law it holds must hash to ``certificate.gains_sha256``
+(the K that flies is the K that was certified), every ``A_ij + B_ij K_i`` of the certified
+systems in the sidecar must be Hurwitz (eigenvalues only, milliseconds), the certificate
+must carry the design envelope of the phase-2 signal, and the ESC limits must contain every
+vertex trim; any failure refuses to start, naming the reason.
+
+Per reference message: the reference v_d is passed through the design-envelope limiter
+(:class:`~lpv_sysid.control.lpv_controller.ReferenceLimiter`, rate and acceleration of the
+gains' designed v_d(t)) before scheduling and feedforward; an incoming reference beyond the
+envelope x ``envelope_margin`` aborts. Per excitation message: ``kappa |u_e|`` beyond the
+designed excitation peak x margin aborts.
+
+Per tick (``rate_hz``), once started: staleness of every input stream (receipt time and
+header stamp against the node clock), scheduling box, the runtime LPV law
+u = u0(v_d) + K(v_d)(x - x0(v_d)) + R kappa u_e (seed 0 Eq. 31, control/lpv_controller.py;
+with the reference feedforward of gains.yaml F_ff/F_jerk the law's own filtered derivatives
+of the limited v_d supply a = dv_d/dt and its rate) on x = [phi, theta, u, v, w, p, q, r,
+Mix Omega] (seed 0 Eq. 14 without position and yaw; delta = Mix Omega, Eq. 7), and its bound
+monitor. Any fault (stale / frozen / future-stamped / out-of-order / non-finite input, v_d
+outside the box or its envelope, excitation too large, bound exceeded, abort request)
+latches an abort in :class:`~lpv_sysid.control.safety.SafetySupervisor`: one ERROR status
+naming the reason is published and no actuator command follows, so the bridge hands control
+back to PX4 (and the excitation node fades out on that status).
+
+Log lines of the core (the abort, refused inputs, the start-up checks) are queued and
+handed to the shell by :meth:`ControllerRuntime.take_log`: the node logs them with its own
+logger (timestamped, on /rosout), the replay with Python logging.
 """
 
 from __future__ import annotations
 
 import logging
-import math
-from dataclasses import dataclass, fields
-from typing import Any, Mapping
+from dataclasses import dataclass
 
 import numpy as np
 
-from lpv_sysid.control.lpv_controller import LpvController, LpvControllerConfig
-from lpv_sysid.control.safety import (EXTERNAL, NON_FINITE, OUT_OF_ORDER, SafetyConfig,
-                                      SafetySupervisor)
+from lpv_sysid.control.lpv_controller import (LpvController, LpvControllerConfig,
+                                              ReferenceLimiter)
+from lpv_sysid.control.safety import (EXTERNAL, NON_FINITE, OUT_OF_ORDER,
+                                      REFERENCE_ENVELOPE, SafetyConfig, SafetySupervisor,
+                                      check_closed_loop)
 from lpv_sysid.errors import ConfigError, SafetyError
 from lpv_sysid.io import messages as M
-from lpv_sysid.io.formats import GainSchedule
+from lpv_sysid.io.formats import GainSchedule, load_certified_systems
 from lpv_sysid.models.quadrotor import mixer
+from lpv_sysid.nodes import parameters as P
 
 LOG = logging.getLogger(__name__)
 
 INPUT_TOPICS = ("state", "rotor_speeds", "velocity_reference", "excitation")
 OUTPUT_TOPICS = ("actuator_command", "status")
+_TIMEOUTS = ("state_timeout_s", "rotor_timeout_s", "reference_timeout_s", "excitation_timeout_s")
+#: the scheduling-box margin may absorb round-off and the limiter's one-step overshoot, not
+#: widen the certified box: at most this fraction of its narrowest axis
+BOX_MARGIN_MAX_FRACTION = 0.1
 
 
 @dataclass(frozen=True)
-class ControllerSettings:
-    """The node's parameters (config/lpv_controller.yaml), validated."""
+class ControllerSettings(P.Settings):
+    """The node's parameters (config/lpv_controller.yaml): the one declaration."""
 
-    gains_file: str
-    models_file: str = ""
-    rate_hz: float = 250.0
-    state_timeout_s: float = 0.02
-    rotor_timeout_s: float = 0.05
-    reference_timeout_s: float = 0.1
-    excitation_timeout_s: float = 0.1
-    box_margin: float = 0.0
-    excitation_gain: float = 1.0          # kappa of seed 0 Eq. (33)
-    arm_length: float = 0.225             # mixer of seed 0 Eq. (7) for the saturation
-    u_esc_min: float = 0.0
-    u_esc_max: float = 1.0
-    rate_limit: tuple = ()                # per channel, units of u per second; () = none
-    monitor_margin: float = 1.2
-    monitor_min_energy: float = 0.05
-    monitor_window_s: float = 0.0         # > 0: exponentially forgetting monitor window; 0: running
-    feedforward: bool = True              # reference feedforward when gains.yaml has F_ff
-    ff_filter_tau: float = 0.05           # s, derivative filter of velocity_reference (a)
-    ff_jerk_tau: float = 0.2              # s, its jerk stage (j, when gains.yaml has F_jerk)
+    WHERE = "lpv_controller"
 
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "ControllerSettings":
-        known = {f.name for f in fields(cls)}
-        bad = sorted(set(d) - known)
-        if bad:
-            raise ConfigError(f"lpv_controller: unknown parameter(s) {bad}")
-        if not d.get("gains_file"):
-            raise ConfigError("lpv_controller: parameter 'gains_file' is empty: give the "
-                              "gains.yaml written by `lpv-sysid synthesize`")
-        kw = dict(d)
-        kw["rate_limit"] = tuple(float(v) for v in kw.get("rate_limit", ()) or ())
-        if not isinstance(kw.get("feedforward", True), bool):
-            raise ConfigError(f"lpv_controller: parameter 'feedforward' must be true or false, "
-                              f"got {kw['feedforward']!r}")
-        for k, v in kw.items():
-            if k not in ("gains_file", "models_file", "rate_limit", "feedforward"):
-                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                    raise ConfigError(f"lpv_controller: parameter '{k}' must be a finite number, "
-                                      f"got {v!r}")
-                kw[k] = float(v)
-        s = cls(**kw)
-        if s.rate_hz <= 0:
-            raise ConfigError(f"lpv_controller: rate_hz must be > 0, got {s.rate_hz}")
-        if s.monitor_window_s < 0 or s.ff_filter_tau < 0 or s.ff_jerk_tau < 0:
-            raise ConfigError("lpv_controller: monitor_window_s, ff_filter_tau and ff_jerk_tau must be >= 0")
-        return s
+    gains_file: str = P.text("", "gains.yaml from `lpv-sysid synthesize` (validated, hash, "
+                             "closed-loop stability and design envelope checked at start)",
+                             nonempty=True)
+    models_file: str = P.text("", "vertex_models.yaml the gains must match (optional)")
+    rate_hz: float = P.double(250.0, "actuator command rate [Hz]", 1.0, 2000.0)
+    state_timeout_s: float = P.double(0.02, "state older than this -> abort [s]", 0.001, 1.0)
+    rotor_timeout_s: float = P.double(0.05, "rotor_speeds older than this -> abort [s]",
+                                      0.001, 1.0)
+    reference_timeout_s: float = P.double(0.1, "velocity_reference older than this -> abort [s]",
+                                          0.001, 1.0)
+    excitation_timeout_s: float = P.double(0.1, "excitation older than this -> abort [s]",
+                                           0.001, 1.0)
+    stamp_tolerance_s: float = P.double(
+        0.01, "header stamps may lead the node clock, or lag it beyond a stream's timeout, "
+        "by this much (transport latency) [s]; node clock = sim time under use_sim_time",
+        0.0, 0.5)
+    box_margin: float = P.double(0.0, "tolerance around the scheduling box [m/s] (at most "
+                                 f"{BOX_MARGIN_MAX_FRACTION:g} of its narrowest axis)", 0.0, 1.0)
+    excitation_gain: float = P.double(1.0, "excitation multiplier kappa (seed 0 Eq. 33)",
+                                      0.0, 10.0)
+    arm_length: float = P.double(0.225, "arm length of the mixer (seed 0 Eq. 7) [m]",
+                                 0.01, 10.0)
+    u_esc_min: float = P.double(0.0, "lower ESC command limit (< u_esc_max, below every "
+                                "vertex trim)", 0.0, 1.0)
+    u_esc_max: float = P.double(1.0, "upper ESC command limit (> u_esc_min, above every "
+                                "vertex trim)", 0.0, 1.0)
+    rate_limit: tuple = P.doubles((), "per-channel rate limit of u [1/s] (unset: none)",
+                                  lo=0.0, hi=1000.0, lengths=(0, 4), lo_open=True)
+    monitor_margin: float = P.double(1.2, "bound monitor: abort when gain > gamma x margin",
+                                     1.0, 10.0)
+    monitor_min_energy: float = P.double(
+        0.05, "bound monitor: ||u_e||^2 before judging (the design signal has 1 per period, "
+        "Eq. 26)", 1e-6, 1.0)
+    monitor_window_s: float = P.double(
+        0.0, "> 0: exponentially forgetting monitor window [s] (>= 1 s); 0: running from start",
+        0.0, 1e4)
+    feedforward: bool = P.flag(True, "reference feedforward when gains.yaml has F_ff")
+    ff_filter_tau: float = P.double(0.05, "derivative filter of velocity_reference (a) [s]",
+                                    0.0, 2.0)
+    ff_jerk_tau: float = P.double(0.2, "jerk stage of the derivative filter (F_jerk) [s]",
+                                  0.0, 5.0)
+    envelope_margin: float = P.double(
+        1.5, "abort when the reference rate/acceleration or kappa u_e exceed the gains' design "
+        "envelope (certificate.design) by this factor", 1.0, 10.0)
+    auto_start: bool = P.flag(False, "start commanding without the service")
+    status_rate_hz: float = P.double(2.0, "status publication rate [Hz]", 0.1, 100.0)
+
+    def validate(self) -> None:
+        if not self.u_esc_min < self.u_esc_max:
+            self.fail(f"need u_esc_min < u_esc_max, got {self.u_esc_min:g} >= {self.u_esc_max:g}")
+        period = 1.0 / self.rate_hz
+        for name in _TIMEOUTS:
+            if getattr(self, name) < period:
+                self.fail(f"{name} {getattr(self, name):g} s is shorter than one control period "
+                          f"(1 / rate_hz = {period:g} s): staleness cannot be judged that finely")
+        shortest = min(getattr(self, n) for n in _TIMEOUTS)
+        if self.stamp_tolerance_s > shortest:
+            self.fail(f"stamp_tolerance_s {self.stamp_tolerance_s:g} s exceeds the shortest "
+                      f"timeout {shortest:g} s (stale data would pass)")
+        if 0.0 < self.monitor_window_s < 1.0:
+            self.fail("monitor_window_s must be 0 (running) or >= 1 s, got "
+                      f"{self.monitor_window_s:g}")
 
     @property
     def timeouts(self) -> dict:
         return {"state": self.state_timeout_s, "rotor_speeds": self.rotor_timeout_s,
                 "velocity_reference": self.reference_timeout_s,
                 "excitation": self.excitation_timeout_s}
+
+    def law_config(self) -> LpvControllerConfig:
+        return LpvControllerConfig(
+            u_esc_min=self.u_esc_min, u_esc_max=self.u_esc_max,
+            rate_limit=self.rate_limit or None, monitor_margin=self.monitor_margin,
+            monitor_min_energy=self.monitor_min_energy, feedforward=self.feedforward,
+            ff_filter_tau=self.ff_filter_tau, ff_jerk_tau=self.ff_jerk_tau,
+            monitor_window=self.monitor_window_s or None)
+
+
+def load_flight_schedule(settings: ControllerSettings,
+                         mix: np.ndarray) -> tuple[GainSchedule, list]:
+    """The gains to fly, after every start-up check of the module docstring; returns the
+    schedule and the info lines describing what was checked. ConfigError names the reason."""
+    path = settings.gains_file
+    label = str(path)
+    gs = GainSchedule.load(path, settings.models_file or None)
+    gs.check_law_sha256(label)
+    systems = load_certified_systems(path, gs.certificate, len(gs.state_names),
+                                     len(gs.input_names), label)
+    abscissa = check_closed_loop(gs.K, systems, label)
+    design = gs.certificate.design
+    if design is None:
+        raise ConfigError(f"{label}: certificate.design missing: the gains do not say which "
+                          "phase-2 signal they were designed for (reference rates, excitation "
+                          "peak); re-run `lpv-sysid synthesize --summary <signals>/summary.yaml`")
+    m = gs.K.shape[1]
+    if mix.shape != (m, m):
+        raise ConfigError(f"{label}: {m} inputs, but the mixer is {mix.shape[0]}x{mix.shape[1]}")
+    esc = np.linalg.solve(mix, gs.u0.T).T            # vertex trims as ESC commands (Eq. 7)
+    lo, hi = settings.u_esc_min, settings.u_esc_max
+    for i, e in enumerate(esc):
+        if e.min() < lo or e.max() > hi:
+            raise ConfigError(f"lpv_controller: ESC limits [{lo:g}, {hi:g}] do not contain the "
+                              f"trim ESC commands {np.round(e, 4).tolist()} of vertex {i} "
+                              f"({label}): every command would be clamped")
+    width = float(np.min(gs.scheduling.max - gs.scheduling.min))
+    if settings.box_margin > BOX_MARGIN_MAX_FRACTION * width:
+        raise ConfigError(f"lpv_controller: box_margin {settings.box_margin:g} m/s exceeds "
+                          f"{BOX_MARGIN_MAX_FRACTION:g} of the narrowest box axis ({width:g} m/s, "
+                          f"{label}): the certificate covers the box only")
+    n_sys = sum(len(s) for s in systems)
+    info = [f"gains {path}: law sha256 {gs.certificate.gains_sha256[:12]} matches the "
+            f"certificate; closed loop stable on {n_sys} certified systems (max Re(eig) "
+            f"{abscissa:.3g}); design envelope ({design.source or 'certificate.design'}): "
+            f"|dv_d/dt| <= {np.round(design.reference_rate, 3).tolist()} m/s^2, |u_e| <= "
+            f"{np.round(design.excitation_peak, 4).tolist()}"]
+    return gs, info
 
 
 class ControllerRuntime:
@@ -105,26 +197,38 @@ class ControllerRuntime:
         self.settings = settings
         self.f = factory
         self.name = name
-        self.schedule = GainSchedule.load(settings.gains_file, settings.models_file or None)
+        self._log: list[tuple[str, str]] = []
         self.mix = mixer(settings.arm_length)
-        cfg = LpvControllerConfig(
-            u_esc_min=settings.u_esc_min, u_esc_max=settings.u_esc_max,
-            rate_limit=settings.rate_limit or None, monitor_margin=settings.monitor_margin,
-            monitor_min_energy=settings.monitor_min_energy, feedforward=settings.feedforward,
-            ff_filter_tau=settings.ff_filter_tau, ff_jerk_tau=settings.ff_jerk_tau,
-            monitor_window=settings.monitor_window_s or None)
-        self.law = LpvController(self.schedule, cfg, mix=self.mix)
+        self.schedule, info = load_flight_schedule(settings, self.mix)
+        self._log += [("info", line) for line in info]
+        self.law = LpvController(self.schedule, settings.law_config(), mix=self.mix)
+        design = self.schedule.certificate.design
+        self.limiter = ReferenceLimiter(design.reference_rate, design.reference_accel,
+                                        design.knot_interval_s, settings.envelope_margin)
+        self.excitation_limit = np.asarray(design.excitation_peak) * settings.envelope_margin
+        if self.excitation_limit.size != self.law.n_e:
+            raise ConfigError(f"{settings.gains_file}: certificate.design.excitation_peak has "
+                              f"{self.excitation_limit.size} entries, R has {self.law.n_e} "
+                              "columns")
         box = self.schedule.scheduling
         self.supervisor = SafetySupervisor(SafetyConfig(
             timeouts=settings.timeouts, box_min=tuple(box.min), box_max=tuple(box.max),
-            box_margin=settings.box_margin))
+            box_margin=settings.box_margin, stamp_tolerance=settings.stamp_tolerance_s))
         self.x8 = None            # phi, theta, u, v, w, p, q, r (FRD)
         self.omega = None         # rotor speeds (4), rad/s
-        self.v_d = None           # scheduling / velocity reference (3), FRD
+        self.v_d_in = None        # velocity reference as received (3), FRD
+        self.v_d = None           # the reference the law follows (envelope-limited)
         self.u_e = None           # normalised excitation (4)
+        self._ref_stamp = None
         self.commands = 0
         self.flags = {"clamped": 0, "saturated": 0, "rate_limited": 0}
         self._abort_reported = False
+
+    # -- log lines for the shell ----------------------------------------------------------
+    def take_log(self) -> list[tuple[str, str]]:
+        """Queued ``(level, text)`` lines (level: info | warn | error), oldest first."""
+        out, self._log = self._log, []
+        return out
 
     # -- inputs -------------------------------------------------------------------------
     def on_message(self, topic: str, msg, t_now: float) -> None:
@@ -140,19 +244,30 @@ class ControllerRuntime:
         if self.supervisor.armed:
             self.supervisor.abort(t_now, NON_FINITE, f"{topic}: {exc}")
         else:
-            LOG.warning("%s rejected before start: %s", topic, exc)
+            self._log.append(("warn", f"{topic} rejected before start: {exc}"))
 
     def on_sample(self, topic: str, t: float, values: np.ndarray, t_now: float) -> None:
         """Parsed input (see :func:`parse_input`): header time ``t`` [s], ``values``."""
+        sup = self.supervisor
+        sup.on_input(topic, t, values, t_now)
         if topic == "state":
             self.x8 = values
         elif topic == "rotor_speeds":
             self.omega = values
         elif topic == "velocity_reference":
-            self.v_d = values[:3]
+            self.v_d_in = values[:3]
+            if sup.aborted:
+                self.v_d = self.v_d_in
+                return
+            self._ref_stamp = t
+            self.v_d, excess = self.limiter.update(t, self.v_d_in)
+            if excess is not None and sup.armed:
+                sup.abort(t_now, REFERENCE_ENVELOPE, excess)
         else:
             self.u_e = values
-        self.supervisor.on_input(topic, t, values, t_now)
+            if sup.armed and not sup.aborted:
+                sup.check_excitation(t_now, self.settings.excitation_gain * values,
+                                     self.excitation_limit)
 
     def start(self, t_now: float) -> tuple[bool, str]:
         sup = self.supervisor
@@ -160,8 +275,14 @@ class ControllerRuntime:
             return False, f"aborted ({sup.event.reason}: {sup.event.detail}); restart the node"
         if sup.armed:
             return False, "already started"
+        if not t_now > 0.0:
+            return False, (f"node clock reads {t_now:g} s: under use_sim_time no /clock has "
+                           "arrived yet; start once the clock runs")
         sup.arm(t_now)
         self.law.reset()
+        self.limiter.reset()
+        if self.v_d_in is not None:          # follow from the current reference, not a ramp to it
+            self.v_d, _ = self.limiter.update(self._ref_stamp, self.v_d_in)
         return True, "LPV control started"
 
     def abort(self, t_now: float, reason: str = "abort requested") -> str:
@@ -179,7 +300,7 @@ class ControllerRuntime:
         ready = self.x8 is not None and self.omega is not None and self.v_d is not None \
             and self.u_e is not None
         if not sup.aborted and ready:
-            sup.check_scheduling(t_now, self.v_d)
+            sup.check_scheduling(t_now, self.v_d_in)
         if not sup.aborted and ready:
             x12 = np.concatenate([self.x8, self.mix @ self.omega])
             try:
@@ -202,8 +323,8 @@ class ControllerRuntime:
                                 M.actuator_command_msg(self.f, round(t_now * 1e9), u)))
         if sup.aborted and not self._abort_reported:
             self._abort_reported = True
-            LOG.error("safety abort: %s: %s; actuator commands stopped",
-                      sup.event.reason, sup.event.detail)
+            self._log.append(("error", f"safety abort: {sup.event.reason}: {sup.event.detail}; "
+                                       "actuator commands stopped"))
             out.append(("status", self.status(t_now)))
         return out
 
@@ -220,6 +341,7 @@ class ControllerRuntime:
                   "excitation_on": sup.action.excitation_on,
                   "reason": ev.reason if ev else "", "commands": self.commands,
                   "gain_estimate": self.law.gain(), "gamma": self.law.gamma,
+                  "reference_limited_count": self.limiter.limited,
                   **{f"{k}_count": v for k, v in self.flags.items()}}
         st = M.diagnostic_status(self.f, level, self.name, message, values)
         return M.diagnostic_array(self.f, round(t_now * 1e9), [st])
@@ -261,27 +383,5 @@ def parse_inputs(topic: str, msgs: list) -> tuple[np.ndarray, np.ndarray]:
     return t, out
 
 
-def load_settings(path: str, node_name: str = "lpv_controller") -> dict:
-    """``ros__parameters`` of ``node_name`` from a ROS parameter file (for replay)."""
-    import yaml
-    try:
-        with open(path) as fh:
-            data = yaml.safe_load(fh)
-    except OSError as exc:
-        raise ConfigError(f"{path}: {exc.strerror}") from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: malformed YAML ({exc})") from None
-    if not isinstance(data, dict):
-        raise ConfigError(f"{path}: expected a mapping of node names")
-    for key, body in data.items():
-        k = str(key).lstrip("/")
-        if k in (node_name, f"**/{node_name}", f"lpv_sysid/{node_name}", "**"):
-            if not isinstance(body, dict) or not isinstance(body.get("ros__parameters"), dict):
-                raise ConfigError(f"{path}: '{key}' has no 'ros__parameters' mapping")
-            return dict(body["ros__parameters"])
-    raise ConfigError(f"{path}: no parameters for node '{node_name}' "
-                      f"(keys: {sorted(map(str, data))})")
-
-
 __all__ = ["ControllerRuntime", "ControllerSettings", "INPUT_TOPICS", "OUTPUT_TOPICS",
-           "load_settings", "parse_input", "parse_inputs"]
+           "load_flight_schedule", "parse_input", "parse_inputs"]

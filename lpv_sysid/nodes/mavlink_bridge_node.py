@@ -210,7 +210,7 @@ class MavlinkBridgeNode(C.ShellNode):
             elif isinstance(s, ImuSample):
                 self.pub_imu.publish(M.imu_msg(f, stamp, s.accel_frd, s.gyro_frd))
             elif isinstance(s, RotorSample):
-                self.pub_rot.publish(M.rotor_speeds_msg(f, stamp, s.omega))
+                self.pub_rot.publish(M.rotor_speeds_msg(f, stamp, s.omega, s.source))
         if out.events:
             self.publish_status(out.events)
 

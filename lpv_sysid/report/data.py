@@ -21,6 +21,7 @@ phase 2               ``phase2/summary.yaml`` and ``phase2/*.npz`` (written by
 from __future__ import annotations
 
 import logging
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
@@ -66,18 +67,17 @@ class RunData:
 
 
 def read_npz(path: Path) -> dict[str, np.ndarray]:
-    """npz archive -> dict of arrays (no pickles); ConfigError naming the file otherwise."""
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            return {k: np.asarray(data[k]) for k in data.files}
-    except (OSError, ValueError, KeyError) as exc:
-        raise ConfigError(f"{path}: not a readable npz archive ({exc})") from None
+    """npz archive -> dict of arrays (:func:`lpv_sysid.io.safe_open.read_npz`: regular file, size
+    cap, no pickles, no complex arrays); ConfigError naming the file otherwise."""
+    from lpv_sysid.io.safe_open import read_npz as _read_npz
+
+    return _read_npz(path)
 
 
 def _find(run_dir: Path, key: str) -> Optional[Path]:
     for rel in CANDIDATES[key]:
         p = run_dir / rel
-        if p.is_file():
+        if os.path.lexists(p):      # present but not a readable file (FIFO, directory, loop): a problem
             return p
     return None
 
@@ -126,7 +126,7 @@ def load_run(run_dir: str | Path, verify: bool = True) -> RunData:
             continue
         data.found[key] = path
         try:
-            value = read_npz(path) if path.suffix == ".npz" else read_yaml(path)
+            value = read_npz(path) if path.suffix == ".npz" else read_yaml(path, finite=False)  # outputs may hold .nan
             if key in ("models", "gains", "signals_summary", "phase2_summary", "validation") and not isinstance(value, dict):
                 raise ConfigError(f"{path}: expected a mapping at the top level, got {type(value).__name__}")
         except ConfigError as exc:
@@ -150,7 +150,7 @@ def load_run(run_dir: str | Path, verify: bool = True) -> RunData:
         data.missing.pop("validation", None)
     for name in PHASE2_SERIES:
         path = run_dir / "phase2" / f"{name}.npz"
-        if path.is_file():
+        if os.path.lexists(path):
             try:
                 data.phase2_series[name] = read_npz(path)
                 data.found[f"phase2_{name}"] = path

@@ -38,6 +38,16 @@ from lpv_sysid.signals.phase_opt import PhaseOptOptions
 from lpv_sysid.validation import check_keys, is_count
 
 
+#: Limits checked before a table is allocated: one period of at most an hour (a flight is
+#: minutes), at most 10 kHz (PX4 offboard streams run at <= 1 kHz), at most 2e6 samples per
+#: channel (16 MB per channel; the phase optimiser holds a few such arrays per channel).
+MAX_DURATION = 3600.0
+MAX_SAMPLE_RATE = 10_000.0
+MAX_SAMPLES = 2_000_000
+#: Iteration counts of the phase optimiser (defaults 150, 100, 3): larger values never finish.
+MAX_COUNTS = {"max_iter": 100_000, "clip_iter": 100_000, "restarts": 1_000}
+
+
 def _num(v: Any, where: str, *, positive: bool = False, nonneg: bool = False) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise ConfigError(f"{where}: expected a number, got {v!r}")
@@ -171,6 +181,8 @@ def _options_from_dict(d: Mapping[str, Any], where: str = "optimisation") -> Pha
     for k in ("max_iter", "clip_iter", "restarts", "restart_max_harmonics", "seed"):
         if k in d:
             kw[k] = _int(d[k], f"{where}.{k}")
+            if k in MAX_COUNTS and kw[k] > MAX_COUNTS[k]:      # a count of 10**18 never finishes
+                raise ConfigError(f"{where}.{k}: {kw[k]} exceeds the limit of {MAX_COUNTS[k]}")
     if "clip_level" in d:
         kw["clip_level"] = _num(d["clip_level"], f"{where}.clip_level", positive=True)
     return PhaseOptOptions(**kw)
@@ -202,7 +214,15 @@ class SignalsConfig:
                    list_allowed=True)
         T = _num(d["duration"], f"{where}.duration", positive=True)
         fs = _num(d["sample_rate"], f"{where}.sample_rate", positive=True)
+        # before anything is allocated: the table is duration * sample_rate rows per channel
+        if T > MAX_DURATION:
+            raise ConfigError(f"{where}.duration: {T:g} s exceeds the limit of {MAX_DURATION:g} s")
+        if fs > MAX_SAMPLE_RATE:
+            raise ConfigError(f"{where}.sample_rate: {fs:g} Hz exceeds the limit of {MAX_SAMPLE_RATE:g} Hz")
         n = T * fs
+        if n > MAX_SAMPLES:
+            raise ConfigError(f"{where}: duration * sample_rate = {n:g} samples exceeds the limit of "
+                              f"{MAX_SAMPLES} samples per channel")
         if abs(n - round(n)) > 1e-6 * max(1.0, n) or round(n) < 4:
             raise ConfigError(f"{where}: duration * sample_rate must be an integer >= 4, got {n}")
         gs = d["groups"]

@@ -20,9 +20,17 @@ continues, so the central whole periods keep exact orthogonality; a non-periodic
 3-2-1-1) plays once with the ramps inside it. The envelope is a raised cosine
 ``(1 - cos(pi s / ramp)) / 2``. The offset is applied from t = -inf (trim) and stays after the
 end; :meth:`abort` fades *everything* (signal and offset) from its current value to zero
-within one ramp. Lookup is linear interpolation with the index computed from the uniform
-grid in O(1) (no search). Time must not go backwards: a sample older than the last one
-raises :class:`TimeOrderError` (a stale/out-of-order message), a NaN time likewise.
+within one ramp, starting at once (an abort time ahead of the last sample is clamped to it:
+the fade never waits, and it never starts in the past either). Lookup is linear
+interpolation with the index computed from the uniform grid in O(1) (no search). Time must
+not go backwards: a sample older than the last one raises :class:`TimeOrderError` (a
+stale/out-of-order message), a NaN time likewise; :class:`MonotonicTime` maps a clock that
+may jump back (a node clock under ``use_sim_time``) onto a monotonic one for the core.
+
+:func:`design_envelope` turns a phase-2 signals summary into the design envelope the gains
+record (``certificate.design``): the bounds of the *played* signal (table linearly
+interpolated, raised-cosine fades of at least ``fade_s``) that the controller enforces, and
+:func:`check_design` checks a signal table against it at load.
 """
 
 from __future__ import annotations
@@ -42,6 +50,10 @@ PHASE1_CHANNELS = ("u_ref", "v_ref", "w_ref")
 PHASE1_YAW_CHANNEL = "r_ref"
 PHASE2_CHANNELS = ("u_d", "v_d", "w_d")
 PHASE2_EXCITATION = ("ue_t", "ue_a", "ue_e", "ue_r")
+#: default raised-cosine fade of phase 2 [s] (excitation node ``ramp_s``,
+#: :meth:`ExcitationCore.phase2`), also the shortest fade the design envelope of
+#: ``lpv-sysid synthesize`` allows for
+DEFAULT_RAMP_S = 2.0
 
 
 class TimeOrderError(SafetyError):
@@ -158,7 +170,7 @@ class ExcitationCore:
                    yaw_rate_offset=yaw_rate_offset, ramp=ramp)
 
     @classmethod
-    def phase2(cls, t, u, names, *, start_time: float, ramp: float = 2.0,
+    def phase2(cls, t, u, names, *, start_time: float, ramp: float = DEFAULT_RAMP_S,
                offset: Sequence[float] = (0.0, 0.0, 0.0)) -> "ExcitationCore":
         """Phase 2 (seed 0 Sec. V): v_d(t) from ``u_d, v_d, w_d``, u_e(t) from ``ue_*``."""
         return cls(t, u, names, start_time=start_time, velocity_channels=PHASE2_CHANNELS,
@@ -197,22 +209,26 @@ class ExcitationCore:
     def aborted(self) -> bool:
         return self._abort_t is not None
 
-    def abort(self, t: Optional[float] = None) -> None:
+    def abort(self, t: Optional[float] = None) -> float:
         """Fade everything (signal and offset) from its current value to zero within one
-        ramp, starting at ``t`` (default: the last sample time; before any sample the output
-        is zero at once). Idempotent."""
+        ramp, starting now: at the last sample time. An abort time ``t`` ahead of it (a
+        future stamp, a clock running ahead) is clamped to it, so the fade starts with the
+        next sample instead of holding full amplitude until ``t``; a ``t`` before it (an old
+        stamp) is clamped too, since what was output cannot be faded retroactively. Before any
+        sample the output is zero at once. Idempotent; returns the effective abort time."""
         if self._abort_t is not None:
-            return
-        if t is None and not math.isfinite(self._last_t):
+            return self._abort_t
+        if not math.isfinite(self._last_t):
             # nothing has been output yet: there is nothing to fade, output zero from now on
             self._abort_level, self._abort_t, self._phase = 0.0, -math.inf, ABORTED
-            return
-        t = self._last_t if t is None else float(t)
-        if not math.isfinite(t) or t < self._last_t:
-            raise TimeOrderError(f"excitation: abort time {t} is before the last sample {self._last_t}")
+            return self._abort_t
+        if t is not None and math.isnan(float(t)):
+            raise TimeOrderError("excitation: abort time is NaN")
+        t = self._last_t
         self._abort_level = self._envelope(t - self.start_time)[0]
         self._abort_t = t
         self._phase = ABORTED
+        return t
 
     # ------------------------------------------------------------------ evaluation
     def _envelope(self, tau: float) -> tuple[float, str]:
@@ -239,7 +255,7 @@ class ExcitationCore:
         off_gain = 1.0
         if self._abort_t is not None:
             ta = t - self._abort_t
-            if ta > 0.0 or (ta == 0.0 and self.ramp == 0.0):   # an abort stamped ahead starts at its stamp
+            if ta > 0.0 or (ta == 0.0 and self.ramp == 0.0):
                 fade = 1.0 - _raised_cosine(ta / self.ramp) if ta < self.ramp else 0.0
                 env = self._abort_level * fade
                 off_gain = fade
@@ -287,6 +303,121 @@ class ExcitationCore:
         rows = (self._tab[i] + (x - i)[:, None] * self._dtab[i]) * env[:, None]
         v = rows[:, :3] + self.offset
         return v, rows[:, 3] + self.yaw_rate_offset, rows[:, 4:]
+
+
+class MonotonicTime:
+    """Maps a clock that may jump backwards onto a monotonic time base for the core.
+
+    :meth:`map` returns ``(t_core, jump)``: ``t_core = t + offset`` never decreases; when
+    ``t`` is earlier than the previous call (a node clock under ``use_sim_time`` restarted,
+    a ROS time jump) the offset absorbs the jump (``t_core`` advances by ``period``) and
+    ``jump`` is the size of the step back [s] (0.0 otherwise), so the caller can abort and the
+    fade still completes in ``ramp`` of the clock's time."""
+
+    def __init__(self, period: float) -> None:
+        if not (math.isfinite(period) and period > 0):
+            raise ConfigError(f"excitation: clock period must be > 0, got {period!r}")
+        self.period = float(period)
+        self.offset = 0.0
+        self._last: Optional[float] = None
+
+    def map(self, t: float) -> tuple[float, float]:
+        t = float(t)
+        if not math.isfinite(t):
+            raise TimeOrderError(f"excitation: clock time {t} is not finite")
+        jump = 0.0
+        if self._last is not None and t + self.offset < self._last:
+            jump = self._last - (t + self.offset)
+            self.offset = self._last + self.period - t
+        self._last = t + self.offset
+        return self._last, jump
+
+
+def played_envelope(peak: Sequence[float], f_max: Sequence[float],
+                    fade_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Rate and acceleration bounds ``(R1, R2)`` of a played reference channel: a signal with
+    harmonics up to ``f_max`` Hz and peak ``P`` (Bernstein: ``|s'| <= 2 pi f P``,
+    ``|s''| <= (2 pi f)^2 P``) multiplied by a raised-cosine fade of length ``r = fade_s``
+    (``|e'| <= pi / (2 r)``, ``|e''| <= pi^2 / (2 r^2)``):
+    ``R1 = 2 pi f P + pi P / (2 r)``,
+    ``R2 = (2 pi f)^2 P + pi (2 pi f P) / r + pi^2 P / (2 r^2)``."""
+    P = np.asarray(peak, dtype=float)
+    w = 2.0 * math.pi * np.asarray(f_max, dtype=float)
+    r = float(fade_s)
+    if not (r > 0 and np.all(P > 0) and np.all(w > 0)):
+        raise ConfigError(f"design envelope: need peaks, frequencies and fade > 0, got "
+                          f"{P.tolist()}, {(w / (2 * math.pi)).tolist()}, {r}")
+    R1 = w * P + math.pi * P / (2.0 * r)
+    R2 = w * w * P + math.pi * w * P / r + math.pi ** 2 * P / (2.0 * r * r)
+    return R1, R2
+
+
+def envelope_dict(reference_peak: Sequence[float], reference_f_max: Sequence[float],
+                  knot_interval_s: float, excitation_peak: Sequence[float],
+                  fade_s: float = DEFAULT_RAMP_S, source: str = "") -> dict:
+    """The ``certificate.design`` mapping (:class:`lpv_sysid.io.formats.DesignEnvelope`)."""
+    R1, R2 = played_envelope(reference_peak, reference_f_max, fade_s)
+    return {"reference_peak": [float(x) for x in reference_peak], "reference_rate": R1.tolist(),
+            "reference_accel": R2.tolist(), "knot_interval_s": float(knot_interval_s),
+            "fade_s": float(fade_s), "excitation_peak": [float(x) for x in excitation_peak],
+            "source": source}
+
+
+def design_envelope(summary: dict, fade_s: float = DEFAULT_RAMP_S,
+                    source: str = "signals summary") -> dict:
+    """``certificate.design`` from a phase-2 signals summary (``lpv-sysid signals``,
+    :func:`lpv_sysid.signals.store.summary`): per reference channel (``u_d, v_d, w_d``) its
+    peak and highest harmonic (``frequency_range_hz``), per excitation channel
+    (``ue_t, ue_a, ue_e, ue_r``) its peak, the table's sample interval. ConfigError when the
+    summary is not of a phase-2 signal."""
+    try:
+        chans = {c["name"]: c for c in summary["channels"]}
+        missing = [n for n in PHASE2_CHANNELS + PHASE2_EXCITATION if n not in chans]
+        if missing:
+            raise ConfigError(f"{source}: not a phase-2 signal (channels {missing} missing)")
+        ref = [chans[n] for n in PHASE2_CHANNELS]
+        return envelope_dict([float(c["peak"]) for c in ref],
+                             [float(c["frequency_range_hz"][1]) for c in ref],
+                             1.0 / float(summary["sample_rate"]),
+                             [float(chans[n]["peak"]) for n in PHASE2_EXCITATION], fade_s, source)
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        raise ConfigError(f"{source}: cannot read the phase-2 channels "
+                          f"({type(exc).__name__}: {exc})") from None
+
+
+def check_design(t, u, names, design, ramp: float, where: str = "signals") -> None:
+    """A phase-2 table against the design envelope of the gains (``design``: a
+    :class:`lpv_sysid.io.formats.DesignEnvelope`): reference peaks, the table's own rates
+    (chord slopes, which the interpolated playback reproduces), excitation peaks, the table
+    interval and the fade ``ramp``; ConfigError naming the first violation."""
+    t, u, names = validate_table(t, u, names, where=where)
+    missing = [n for n in PHASE2_CHANNELS + PHASE2_EXCITATION if n not in names]
+    if missing:
+        raise ConfigError(f"{where}: channel(s) {missing} missing for phase 2")
+    dt = float(t[1] - t[0])
+    tol = 1e-9
+    if ramp < design.fade_s * (1 - tol):
+        raise ConfigError(f"{where}: ramp_s {ramp:g} s is shorter than the fade the gains were "
+                          f"designed for ({design.fade_s:g} s): the fades would exceed the "
+                          "designed reference rates")
+    if dt > design.knot_interval_s * (1 + tol):
+        raise ConfigError(f"{where}: sample interval {dt:g} s is coarser than the design's "
+                          f"{design.knot_interval_s:g} s")
+    for k, n in enumerate(PHASE2_CHANNELS):
+        x = u[:, names.index(n)]
+        peak, rate = float(np.max(np.abs(x))), float(np.max(np.abs(np.diff(x)))) / dt
+        if peak > design.reference_peak[k] * (1 + tol):
+            raise ConfigError(f"{where}: {n} peak {peak:.4g} m/s exceeds the design peak "
+                              f"{design.reference_peak[k]:.4g} m/s the gains were designed for")
+        if rate > design.reference_rate[k] * (1 + tol):
+            raise ConfigError(f"{where}: {n} changes at {rate:.4g} m/s^2, beyond the design rate "
+                              f"{design.reference_rate[k]:.4g} m/s^2")
+    for k, n in enumerate(PHASE2_EXCITATION):
+        peak = float(np.max(np.abs(u[:, names.index(n)])))
+        if peak > design.excitation_peak[k] * (1 + tol):
+            raise ConfigError(f"{where}: {n} peak {peak:.4g} exceeds the design excitation peak "
+                              f"{design.excitation_peak[k]:.4g} (the gains' R is designed for "
+                              "that signal)")
 
 
 def phase1_signals(

@@ -25,20 +25,24 @@ def save_npz(path: str, t: np.ndarray, u: np.ndarray, names) -> None:
 def load_npz(path: str) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
     """Read and validate a signal file: ``t`` strictly increasing and uniform, ``u`` (N, n)
     finite, ``names`` n unique strings."""
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            missing = [k for k in ("t", "u", "names") if k not in z.files]
-            if missing:
-                raise ConfigError(f"{path}: missing array(s) {missing}")
-            t, u, names = z["t"], z["u"], z["names"]
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such file") from None
-    except (OSError, ValueError) as exc:
-        raise ConfigError(f"{path}: not a readable .npz file ({exc})") from None
-    return validate_table(t, u, names, where=path)
+    from lpv_sysid.io.safe_open import read_npz
+
+    if not os.path.lexists(path):
+        raise ConfigError(f"{path}: no such file")
+    z = read_npz(path)      # regular file, size cap, no pickles, complex arrays refused
+    missing = [k for k in ("t", "u", "names") if k not in z]
+    if missing:
+        raise ConfigError(f"{path}: missing array(s) {missing}")
+    return validate_table(z["t"], z["u"], z["names"], where=path)
 
 
 def validate_table(t, u, names, where: str = "signals") -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    for key, a in (("t", t), ("u", u)):
+        kind = np.asarray(a).dtype.kind
+        if kind == "c":     # a cast to float would silently drop the imaginary part
+            raise ConfigError(f"{where}: '{key}' is complex-valued; a real-valued signal is required")
+        if kind not in "fiu":
+            raise ConfigError(f"{where}: '{key}' must be numeric, got dtype {np.asarray(a).dtype}")
     t = np.asarray(t, dtype=float)
     u = np.asarray(u, dtype=float)
     if u.ndim == 1:
@@ -55,7 +59,25 @@ def validate_table(t, u, names, where: str = "signals") -> tuple[np.ndarray, np.
     d = np.diff(t)
     if np.any(d <= 0) or np.max(np.abs(d - d.mean())) > 1e-6 * d.mean():
         raise ConfigError(f"{where}: 't' must be a strictly increasing uniform grid")
+    check_magnitude(t, u, names, where)
     return t, u, names
+
+
+def check_magnitude(t: np.ndarray, u: np.ndarray, names, where: str = "signals") -> None:
+    """A channel's energy ``dt sum u^2`` (seed 0 Eq. 26) and its sample-to-sample rate must
+    be finite numbers: a table whose energy or rate overflows (amplitudes of ~1e154 and
+    beyond, e.g. 1e308) is corrupt or mis-scaled, not a signal. (What the gains accept is
+    checked against their design envelope: signals.excitation.check_design, and at run time
+    by the controller.)"""
+    dt = float(t[-1] - t[0]) / (t.size - 1)
+    with np.errstate(over="ignore", invalid="ignore"):
+        energy = dt * np.sum(u * u, axis=0)
+        rate = np.max(np.abs(np.diff(u, axis=0)), axis=0) / dt
+    bad = [str(names[j]) for j in range(u.shape[1])
+           if not (np.isfinite(energy[j]) and np.isfinite(rate[j]))]
+    if bad:
+        raise ConfigError(f"{where}: channel(s) {bad} too large (max |u| "
+                          f"{float(np.max(np.abs(u))):.3g}): energy or rate overflows")
 
 
 def summary(sig: SignalSet) -> dict[str, Any]:

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Optional, Protocol, Sequence
@@ -164,19 +165,15 @@ def load_signals(signals_dir: str | Path, duration: Optional[float] = None,
     of that length around one period, so v_d starts and ends at zero, i.e. hover), sampled on
     the table's own time step; without it the raw table is used.
     """
+    from lpv_sysid.signals.store import load_npz
+
     path = Path(signals_dir)
     if path.is_dir():
         path = path / "signals.npz"
-    if not path.is_file():
+    if not os.path.lexists(path):
         raise ConfigError(f"--signals: {path} not found")
-    try:
-        with np.load(path, allow_pickle=False) as d:
-            missing = [k for k in ("t", "u", "names") if k not in d.files]
-            if missing:
-                raise ConfigError(f"{path}: missing array(s) {missing}")
-            t, u, names = d["t"], d["u"], [str(n) for n in d["names"]]
-    except (OSError, ValueError) as exc:
-        raise ConfigError(f"{path}: not a readable npz archive ({exc})") from None
+    t, u, names = load_npz(str(path))        # safe open + signal-table checks (store.validate_table)
+    names = list(names)
     sig = reference_signals(t, u, names)          # validates channels by name
     if ramp is None:
         return reference_signals(t, u, names, duration)
@@ -585,9 +582,9 @@ def load_problem(gains_path: str | Path, models_path: Optional[str | Path] = Non
     from lpv_sysid.io.formats import GainSchedule, VertexModels
 
     gains_path = Path(gains_path)
-    if not gains_path.is_file():
+    if not os.path.lexists(gains_path):
         raise ConfigError(f"--gains: {gains_path} not found")
-    if models_path is not None and not Path(models_path).is_file():
+    if models_path is not None and not os.path.lexists(models_path):
         raise ConfigError(f"--models: {models_path} not found")
     gs = GainSchedule.load(gains_path, models_path)
     source = {"gains": gains_path}

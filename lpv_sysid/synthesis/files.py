@@ -16,6 +16,7 @@ from __future__ import annotations
 import hashlib
 import logging
 import math
+import os
 from pathlib import Path
 from typing import Any, Optional, Sequence
 
@@ -33,8 +34,12 @@ GAINS_FORMAT = "lpv_sysid/gains@1"
 
 
 def sha256_file(path: Path | str) -> str:
+    """SHA-256 of a file read through :func:`lpv_sysid.io.safe_open.open_regular` (regular
+    files only; the npz size cap, the larger of the two caps)."""
+    from lpv_sysid.io.safe_open import MAX_NPZ_BYTES, open_regular
+
     h = hashlib.sha256()
-    with open(path, "rb") as f:
+    with open_regular(path, max_bytes=MAX_NPZ_BYTES) as f:
         for chunk in iter(lambda: f.read(1 << 20), b""):
             h.update(chunk)
     return h.hexdigest()
@@ -60,14 +65,13 @@ def _layout(fm, path) -> Any:
 
 
 def read_yaml(path: Path | str, what: str) -> dict:
+    """The top-level mapping of a YAML file (:func:`lpv_sysid.io.yaml_file.read_yaml`, strict)."""
+    from lpv_sysid.io.yaml_file import read_yaml as _read
+
     p = Path(path)
-    if not p.is_file():
+    if not os.path.lexists(p):
         raise ConfigError(f"{what}: file not found: {p}")
-    try:
-        with open(p, "r", encoding="utf-8") as f:
-            d = yaml.safe_load(f)
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{p}: malformed YAML: {str(exc).splitlines()[0]}") from None
+    d = _read(p)
     if not isinstance(d, dict):
         raise ConfigError(f"{p}: expected a mapping at the top level")
     return d
@@ -301,8 +305,10 @@ def save_yaml(d: dict, path: Path | str) -> None:
 
 # --------------------------------------------------------------------------- gains
 def save_certificate_npz(path: Path | str, X: list, S: np.ndarray, H: np.ndarray, t: np.ndarray, s_u: np.ndarray,
-                         R: np.ndarray, C: np.ndarray) -> str:
-    """Write the sidecar; returns its sha256."""
+                         R: np.ndarray, C: np.ndarray, systems: Optional[Sequence] = None) -> str:
+    """Write the sidecar; returns its sha256. ``systems`` (per vertex the certified (A_ij, B_ij),
+    ``PolytopicModel.systems``) are stored as :data:`lpv_sysid.io.formats.SYSTEMS_ARRAYS` for the
+    flight runtime's closed-loop re-check."""
     N = len(X)
     Mi = np.array([len(x) for x in X])
     n = H.shape[0]
@@ -312,17 +318,16 @@ def save_certificate_npz(path: Path | str, X: list, S: np.ndarray, H: np.ndarray
             Xa[i, j] = X[i][j]
     p = Path(path)
     with open(p, "wb") as f:
+        extra = {} if systems is None else _formats().systems_arrays(systems)
         np.savez(f, X=Xa, M=Mi, S=np.asarray(S), H=np.asarray(H), t=np.asarray(t), s_u=np.asarray(s_u),
-                 R=np.asarray(R), C=np.asarray(C))
+                 R=np.asarray(R), C=np.asarray(C), **extra)
     return sha256_file(p)
 
 
 def load_certificate_npz(path: Path | str) -> dict:
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            d = {k: np.array(z[k]) for k in z.files}
-    except (OSError, ValueError) as exc:
-        raise ConfigError(f"{path}: unreadable certificate sidecar ({exc})") from None
+    from lpv_sysid.io.safe_open import read_npz
+
+    d = read_npz(path, f"{path}: certificate sidecar")
     need = {"X", "M", "S", "H", "t", "s_u"}
     if not need <= set(d):
         raise ConfigError(f"{path}: certificate sidecar misses {sorted(need - set(d))}")
@@ -358,7 +363,8 @@ def gains_dict(models_raw: dict, model: PolytopicModel, K: np.ndarray, R: np.nda
             vx["F_ff"] = np.asarray(F_ff[i]).tolist()
             if F_jerk is not None:
                 vx["F_jerk"] = np.asarray(F_jerk[i]).tolist()
-    return d
+    # the hash of the law just certified (the one place it is written; io.formats.certify_law)
+    return _formats().certify_law(d, layout=None, label="gains")
 
 
 class Gains:

@@ -56,6 +56,7 @@ Checks, each a row of the report:
 from __future__ import annotations
 
 import logging
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional
@@ -706,9 +707,12 @@ def verify_files(gains_path: Path | str, models_path: Path | str, n_random: int 
     side = cert.get("sidecar")
     if isinstance(side, dict) and side.get("file"):
         p = Path(gains_path).parent / str(side["file"])
-        if not p.is_file():
+        if not os.path.lexists(p):
             rep.add("sidecar", p.name, 1.0, 0.0, False, "certificate sidecar missing")
         else:
+            # present but unreadable (not a regular file, empty, truncated, corrupt): a damaged
+            # input, ConfigError (exit 2), not a failed verification; readable but altered: FAIL
+            load_certificate_npz(p)
             ok = sha256_file(p) == side.get("sha256")
             rep.add("sidecar", p.name, 0.0 if ok else 1.0, 0.0, ok, "" if ok else "sha256 mismatch")
             if ok:

@@ -1,0 +1,50 @@
+"""The whole phase-1 campaign (seed 0 Sec. IV) on PX4: take-off, every vertex, hover, hand-back.
+
+    ros2 launch lpv_sysid campaign.launch.py [campaign_file:=...] [signals_file:=signals.npz] \
+        [runs_dir:=campaign_runs] [log_dir:=campaign_log]
+    ros2 service call /lpv_sysid/campaign/start std_srvs/srv/Trigger      # fly it
+    ros2 service call /lpv_sysid/campaign/abort std_srvs/srv/Trigger      # excitation off, hand back
+
+Nodes (namespace /lpv_sysid): mavlink_bridge (velocity setpoints to PX4, arming on start,
+safety envelope), campaign (lpv_sysid/nodes/campaign_node.py: the sequence, one rosbag2
+per run in ``runs_dir`` for ``lpv-sysid identify``), data_logger (the whole flight in
+``log_dir``). Check the vehicle first: ``lpv-sysid preflight --connect ...``. The ROS path
+ends with the bridge's hand-back (HOLD); ``lpv-sysid fly phase1`` also lands.
+"""
+
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+from lpv_sysid.nodes.launch_util import PACKAGE, declare_arguments, params
+
+NAMESPACE = "lpv_sysid"
+
+
+def generate_launch_description():
+    share_config = os.path.join(get_package_share_directory(PACKAGE), "config")
+    return LaunchDescription([
+        *declare_arguments(signals_file="", log_dir="campaign_log",
+                           notes={"signals_file": "empty: designed from the campaign's signals_config"}),
+        DeclareLaunchArgument("campaign_file", default_value=os.path.join(share_config, "campaign.yaml"),
+                              description="config/campaign.yaml: box, altitude window, timeouts"),
+        DeclareLaunchArgument("runs_dir", default_value="campaign_runs",
+                              description="one rosbag2 per run (trim + excitation) for `lpv-sysid identify`"),
+        Node(package="lpv_sysid", executable="mavlink_bridge_node", name="mavlink_bridge",
+             namespace=NAMESPACE, output="screen",
+             parameters=[params("mavlink_bridge_node.yaml"),
+                         {"command": "velocity", "velocity_frame": "body_ned", "offboard.arm": True}]),
+        Node(package="lpv_sysid", executable="campaign_node", name="campaign",
+             namespace=NAMESPACE, output="screen",
+             parameters=[{"campaign_file": LaunchConfiguration("campaign_file"),
+                          "signals_file": LaunchConfiguration("signals_file"),
+                          "out_dir": LaunchConfiguration("runs_dir")}]),
+        Node(package="lpv_sysid", executable="data_logger_node", name="data_logger",
+             namespace=NAMESPACE, output="screen",
+             parameters=[params("data_logger.yaml"),
+                         {"out_dir": LaunchConfiguration("log_dir")}]),
+    ])
