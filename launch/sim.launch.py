@@ -5,6 +5,15 @@
 
 sim_vehicle takes the bridge's place: it publishes state, rotor_speeds and imu, flies the
 PX4-like baseline on velocity_reference in phase 1 and applies actuator_command in phase 2.
+
+The graph runs on simulation time: sim_vehicle (``lockstep``) publishes ``/clock`` from its
+physics time, every other node has ``use_sim_time``, and the controller steps its law on each
+state sample (``tick_source: state``); sim_vehicle integrates past a state sample only once the
+command computed on it arrived. The controller follows the 100 Hz reference along its slope
+between messages (``reference_hold: foh``), as the offline simulation samples the signal. So the loop samples exactly like the offline ``lpv-sysid
+simulate phase2`` however loaded the machine is (a wall-clock Python graph on 2 loaded cores
+had more loop delay than the demo gains tolerate); the wall time of a run stretches instead.
+Start phase 2 with the controller's, then the excitation's ``start`` service.
 """
 
 from launch import LaunchDescription
@@ -16,6 +25,8 @@ from launch_ros.actions import Node
 from lpv_sysid.nodes.launch_util import declare_arguments, params
 
 NAMESPACE = "lpv_sysid"
+#: every node but sim_vehicle (the clock source) runs on its /clock
+SIM_TIME = {"use_sim_time": True}
 
 
 def generate_launch_description():
@@ -30,19 +41,21 @@ def generate_launch_description():
         Node(package="lpv_sysid", executable="sim_vehicle_node", name="sim_vehicle",
              namespace=NAMESPACE, output="screen",
              parameters=[params("sim_vehicle.yaml"),
-                         {"mode": PythonExpression(["'lpv' if '", phase, "' == '2' else 'baseline'"])}]),
+                         {"mode": PythonExpression(["'lpv' if '", phase, "' == '2' else 'baseline'"]),
+                          "lockstep": True}]),
         Node(package="lpv_sysid", executable="excitation_node", name="excitation",
              namespace=NAMESPACE, output="screen",
              parameters=[params("excitation_node.yaml"),
                          {"mode": PythonExpression(["'phase' + '", phase, "'"]),
                           "signals_file": LaunchConfiguration("signals_file"),
-                          "vertex_frd": LaunchConfiguration("vertex")}]),
+                          "vertex_frd": LaunchConfiguration("vertex"), **SIM_TIME}]),
         Node(package="lpv_sysid", executable="lpv_controller_node", name="lpv_controller",
              namespace=NAMESPACE, output="screen", condition=is_phase2,
              parameters=[params("lpv_controller.yaml"),
-                         {"gains_file": LaunchConfiguration("gains_file")}]),
+                         {"gains_file": LaunchConfiguration("gains_file"),
+                          "tick_source": "state", "reference_hold": "foh", **SIM_TIME}]),
         Node(package="lpv_sysid", executable="data_logger_node", name="data_logger",
              namespace=NAMESPACE, output="screen",
              parameters=[params("data_logger.yaml"),
-                         {"out_dir": LaunchConfiguration("log_dir")}]),
+                         {"out_dir": LaunchConfiguration("log_dir"), **SIM_TIME}]),
     ])

@@ -127,7 +127,7 @@ class StandIn:
     """Kinematic vehicle + bridge on a simulated clock (see module docstring)."""
 
     def __init__(self, campaign, tau=0.4, gain=1.0, sink=0.0, psi=0.4, handback_delay=0.3,
-                 handback_mode="HOLD", dt=0.02):
+                 handback_mode="HOLD", dt=0.02, handback_end="DONE"):
         self.c = campaign
         self.tau, self.gain, self.sink, self.psi = tau, gain, sink, psi
         self.pos = np.zeros(3)
@@ -148,6 +148,8 @@ class StandIn:
         self.commands: list = []      # (t, phase, v, r)
         self.violation = None
         self.hook = None
+        self.handback_end = handback_end      # DONE | FAILED (fault, confirmed) | LOST (nothing confirmed)
+        self.confirmed = None
 
     def _go(self, state, reason=""):
         self.state, self.reason, self.t_state = state, reason, self.t
@@ -159,7 +161,8 @@ class StandIn:
                                vel_ned=self.vel.copy(), v_body=R.T @ self.vel, omega=np.zeros(3))
 
     def status(self):
-        return C.VehicleStatus(self.state, self.reason, self.mode, self.armed, None, self.violation)
+        return C.VehicleStatus(self.state, self.reason, self.mode, self.armed, None, self.violation,
+                               self.confirmed)
 
     def handle(self, out):
         self.events += out.events
@@ -184,8 +187,11 @@ class StandIn:
             self.mode, self.armed = "OFFBOARD", True
             self._go("OFFBOARD_ACTIVE", "armed")
         if self.state == "HANDBACK" and self.t - self.t_state > self.handback_delay:
-            self.mode = self.target
-            self._go("DONE", f"hand-back confirmed: vehicle in {self.target}")
+            if self.handback_end == "LOST":
+                self._go("FAILED", "hand-back NOT confirmed: HOLD: no COMMAND_ACK; PX4 failsafe in charge")
+            else:
+                self.mode = self.confirmed = self.target
+                self._go(self.handback_end, f"hand-back confirmed: vehicle in {self.target}")
         if self.mode == "OFFBOARD":
             c, s = math.cos(self.psi), math.sin(self.psi)
             want = np.array([c * self.cmd[0] - s * self.cmd[1], s * self.cmd[0] + c * self.cmd[1], self.cmd[2]])
@@ -501,3 +507,17 @@ def test_campaign_node_flies_through_a_bridge_node_and_writes_one_bag_per_run(tm
         assert summary["bags"] == {"vertex_p1_m1_m0.3": "bag_0000", "hover_validation": "bag_0001"}
     finally:
         rclpy.try_shutdown(context=ctx)
+
+
+@pytest.mark.parametrize("end, phase", [("DONE", C.ABORTED), ("FAILED", C.ABORTED), ("LOST", C.FAILED)])
+def test_fault_handback_confirmed_or_not(table6, end, phase):
+    # the bridge ends a fault hand-back (stale input, link loss) in FAILED *with* the confirmed
+    # mode; only FAILED without a confirmed mode means nothing is confirmed
+    c = small_campaign(table6, vertices=[2], settle_tolerance=[0.01, 0.01, 0.01])
+    StandIn(c, gain=0.8, handback_end=end).run()
+    assert c.phase == phase and c.ok is False
+    if phase == C.ABORTED:
+        assert c.handback_mode == "HOLD" and c.t_handback_done - c.t_handback_request == pytest.approx(0.3, abs=0.05)
+    else:
+        assert "HAND-BACK NOT CONFIRMED" in c.summary()["reason"] or "hand-back FAILED" in c.reason
+        assert math.isnan(c.t_handback_done)

@@ -89,7 +89,9 @@ def _report(rel: str):
         run = tmp / "run"
         shutil.copytree(b / "run", run)
         (run / rel).unlink()
-        if os.path.lexists(f):
+        if os.path.islink(f) and os.readlink(f) == f.name:       # keep a symlink loop a loop
+            os.symlink(Path(rel).name, run / rel)
+        elif os.path.lexists(f):
             os.rename(f, run / rel)
         return ["report", "--run", str(run), "--strict", "--no-verify"]
     return build
@@ -191,6 +193,10 @@ def _field_text(src: Path, field, literal: str) -> str:
     return text.replace(repr(marker), literal)
 
 
+def _first_key(text: str) -> str:
+    return str(next(iter(yaml.safe_load(text))))
+
+
 LOL = "a: &a [lol, lol, lol, lol, lol, lol, lol, lol, lol]\n" + "".join(
     f"{chr(98 + i)}: &{chr(98 + i)} [{', '.join(['*' + chr(97 + i)] * 9)}]\n" for i in range(9))
 
@@ -209,13 +215,12 @@ YAML_CASES = {
     "empty": (lambda p, text, slot: p.write_text(""), r"empty|mapping|null"),
     "top_list": (lambda p, text, slot: p.write_text("- 1\n- 2\n"), r"mapping|list"),
     "top_scalar": (lambda p, text, slot: p.write_text("42\n"), r"mapping|int|number"),
-    "duplicate_key": (lambda p, text, slot: p.write_text(text.rstrip("\n") + "\n"
-                                                         + text.split(":", 1)[0] + ": null\n"),
+    "duplicate_key": (lambda p, text, slot: p.write_text(text.rstrip("\n") + f"\n{_first_key(text)}: null\n"),
                       r"duplicate key"),
     "deep_nesting": (lambda p, text, slot: p.write_text("a: " + "[" * 20000 + "]" * 20000 + "\n"),
                      r"nesting deeper than 100"),
     "alias_bomb": (lambda p, text, slot: p.write_text(LOL), r"alias"),
-    "huge_integer": (lambda p, text, slot: p.write_text(text.split(":", 1)[0] + f": {10 ** 400}\n"),
+    "huge_integer": (lambda p, text, slot: p.write_text(f"{_first_key(text)}: {10 ** 400}\n"),
                      r"out of range"),
 }
 
@@ -280,10 +285,11 @@ def _one_line(err: str) -> str:
     return lines[0]
 
 
-def _check(rc: int, err: str, hostile: Path, problem: str) -> None:
+def _check(rc: int, err: str, hostile: Path, problem: str, slot: str = "") -> None:
     line = _one_line(err)
     assert rc == EXIT_BAD_INPUT, f"exit {rc}: {line}"
-    assert hostile.name in line, f"the file is not named: {line}"
+    name = slot.split()[-1] if slot.startswith("report") else hostile.name   # renamed into the run dir
+    assert name in line, f"the file is not named: {line}"
     assert re.search(problem, line), f"problem {problem!r} not named: {line}"
 
 
@@ -308,15 +314,15 @@ def _hostile(tmp_path: Path, case: str, suffix: str) -> Path:
 
 
 # ----------------------------------------------------------------------------------- tests
-@pytest.mark.parametrize("case", sorted(c for c in YAML_CASES if c != "fifo"))
-@pytest.mark.parametrize("slot", sorted(YAML_SLOTS))
+@pytest.mark.parametrize("slot,case", [(s, c) for s in sorted(YAML_SLOTS) for c in sorted(YAML_CASES)
+                                       if c != "fifo" and not (s.startswith("report") and c == "missing")])
 def test_hostile_yaml_file_exits_2_with_one_line(base, tmp_path, capsys, slot, case):
     src, _, build = YAML_SLOTS[slot]
     make, problem = YAML_CASES[case]
     f = _hostile(tmp_path, case, ".yaml")
     make(f, (base / src).read_text(), slot)
     rc, err = _run(build(base, f, tmp_path), capsys)
-    _check(rc, err, f, problem)
+    _check(rc, err, f, problem, slot)
 
 
 @pytest.mark.parametrize("value", sorted(FIELD_CASES))
@@ -488,7 +494,8 @@ def test_interrupt_is_one_line_exit_130(base, capsys, monkeypatch):
 # ------------------------------------------------------------------ the loader and the opener
 def test_strict_loader_uses_libyaml_and_keeps_its_checks():
     if yaml.__with_libyaml__:
-        assert issubclass(yaml_file.StrictLoader, yaml.CParser)
+        from yaml.cyaml import CParser
+        assert issubclass(yaml_file.StrictLoader, CParser)
     for text, problem in (("a: 1\nb: 2\na: 3\n", "duplicate key 'a'"),
                           ("[" * 100_000 + "]" * 100_000, "nesting deeper than 100"),   # crashes CSafeLoader
                           ("a: &x [1, *x]\n", "cyclic"), (LOL, "aliases expand"),

@@ -210,11 +210,11 @@ def set_params(link, params: Mapping[str, float], clock, sleep, timeout: float =
                 if px4.param_id_str(m.param_id) != name:
                     continue
                 v = px4.param_from_wire(m.param_value, m.param_type)
+                same = math.isclose(float(v), value, rel_tol=1e-6, abs_tol=1e-6)   # float32 on the wire
                 if ptype is None:
                     ptype, old = int(m.param_type), v
-                    if v == (int(value) if ptype == px4.MAV_PARAM_TYPE_INT32 else value):
-                        confirmed = True
-                elif sent_set > -math.inf and math.isclose(float(v), value, rel_tol=1e-6, abs_tol=1e-6):
+                    confirmed = same                 # already set: nothing to change
+                elif sent_set > -math.inf and same:
                     confirmed = True
             link.step(now)
             if ptype is None and now - sent_read >= 0.5:
@@ -347,6 +347,8 @@ class FlightRunner:
         self.status_period = status_period
         self.echo = echo or (lambda s: None)
         self.interrupts = 0
+        self.max_gap = 0.0
+        self.late_loops = 0
         self._interrupts_handled = 0
         self.gave_up = False
         self.events: list[dict] = []
@@ -396,9 +398,11 @@ class FlightRunner:
         m = self.bridge.machine
         env = self.bridge.envelope
         v = env.violation
+        confirmed = getattr(m, "confirmed_mode", None)
         return VehicleStatus(m.state.value, m.reason, m.vehicle_mode.name if m.vehicle_mode is not None else None,
                              bool(m.armed), env.home if env.home is not None else None,
-                             f"{v.kind}: {v.message}" if v is not None else None)
+                             f"{v.kind}: {v.message}" if v is not None else None,
+                             confirmed.name if confirmed is not None else None)
 
     # ------------------------------------------------------------------ loop
     def run(self) -> None:
@@ -408,9 +412,18 @@ class FlightRunner:
         c, b = self.campaign, self.bridge
         now = self.clock()
         self._handle(now, c.start(now))
+        prev = now
+        warn_gap = 0.5 * b.config.offboard.input_timeout
         while not c.finished:
             t_loop = self.clock()
             now = t_loop
+            gap, prev = now - prev, now
+            self.max_gap = max(self.max_gap, gap)
+            if gap > warn_gap:
+                # the computer did not keep up (load, swapping): PX4 got no setpoints meanwhile
+                self.late_loops += 1
+                self._event(now, "runner", "warn", f"loop stalled {gap:.3f} s (> {warn_gap:.3f} s = half the "
+                                                   "bridge input_timeout): the companion computer is overloaded")
             if self.interrupts > self._interrupts_handled and c.phase not in C.TERMINAL:
                 self._interrupts_handled = self.interrupts
                 if self.interrupts >= 2:
@@ -603,6 +616,8 @@ def fly(cfg: FlyConfig, url: str | None, out_dir: str | Path, signals: str | Non
     summary.update(c.summary())
     summary["bags"] = dict(runner.rec.bags) if runner.rec is not None else {}
     summary["rotor_speeds_source"] = dict(runner.rotor_sources)
+    summary["runner"] = {"max_loop_gap_s": round(runner.max_gap, 4), "stalled_loops": runner.late_loops,
+                         "loop_period_s": cfg.loop_period}
     summary["bridge_status"] = bridge.status(clock())
     summary["events"] = runner.events
     if close_errors:
@@ -696,7 +711,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     modes = parser.add_subparsers(dest="mode", metavar="MODE")
     modes.required = True
     p = modes.add_parser("phase1", help="phase-1 campaign: take-off, every vertex + hover validation, land",
-                         description=__doc__.split("\n\n")[2] if __doc__ else None)
+                         description="Arm and take off in OFFBOARD, fly every vertex of the body-velocity "
+                                     "box (settle, trim, phase-1 multisine) and the hover validation run, "
+                                     "then HOLD or LAND; one rosbag2 per run for `lpv-sysid identify`. "
+                                     "Preflight NO-GO refuses to fly; Ctrl-C hands control back.")
     p.add_argument("--connect", required=True, metavar="URL",
                    help="MAVLink URL, e.g. udpin:127.0.0.1:14540 (PX4 SITL) or /dev/ttyAMA0:921600")
     p.add_argument("--config", required=True, type=Path, help="config/campaign.yaml")

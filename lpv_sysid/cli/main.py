@@ -23,6 +23,8 @@ import logging
 import os
 import pkgutil
 import sys
+import traceback
+import warnings
 from pathlib import Path
 from types import ModuleType
 from typing import Sequence
@@ -32,8 +34,6 @@ from lpv_sysid.errors import LpvSysidError
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130
-
-log = logging.getLogger(__name__)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -84,6 +84,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return EXIT_BAD_INPUT
+    shown = warnings.showwarning
+    warnings.showwarning = _warning_line     # a Python warning is one log line, not source text
     try:
         return int(args._run(args) or 0)
     except LpvSysidError as exc:
@@ -91,9 +93,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         return _fail(args, "interrupted", EXIT_INTERRUPTED)
     except Exception as exc:  # noqa: BLE001 - the exit-status layer: no traceback, never status 1
-        if args.verbose:
-            log.error("traceback of the error below", exc_info=True)
+        if args.verbose:        # the traceback only on request, before the one-line verdict
+            traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
         return _fail(args, describe_unexpected(exc, _inputs(args)))
+    finally:
+        warnings.showwarning = shown
+
+
+def _warning_line(message, category, filename, lineno, file=None, line=None) -> None:
+    logging.getLogger("py.warnings").warning("%s: %s (%s:%s)", category.__name__, one_line(str(message)),
+                                             os.path.basename(str(filename)), lineno)
 
 
 def _fail(args: argparse.Namespace, message: str, status: int = EXIT_BAD_INPUT) -> int:

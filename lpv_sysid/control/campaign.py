@@ -443,6 +443,8 @@ class VehicleStatus:
     armed: bool = False
     home_ned: Any = None                # the envelope's home (NED), when armed
     violation: str | None = None        # the envelope's latched violation, if any
+    confirmed_mode: str | None = None   # hand-back mode the bridge confirmed (DONE, or FAILED
+                                        # after a fault hand-back that PX4 confirmed)
 
 
 @dataclass(frozen=True)
@@ -856,6 +858,11 @@ class Campaign:
             self.t_handback_done = now
             self.handback_mode = vs.mode or ""
             self._go(now, ABORTED, f"abort: {reason}; control already back with PX4 ({vs.mode})", out, "error")
+        elif st == "FAILED" and vs.confirmed_mode:
+            self.t_handback_done = now
+            self.handback_mode = vs.confirmed_mode
+            self._go(now, ABORTED, f"abort: {reason}; control already back with PX4 ({vs.confirmed_mode}, "
+                                   f"{vs.bridge_reason})", out, "error")
         elif st == "FAILED":
             self._go(now, FAILED, f"abort: {reason}; HAND-BACK NOT CONFIRMED ({vs.bridge_reason}); "
                                   f"PX4's offboard-loss failsafe is in charge", out, "error")
@@ -865,9 +872,21 @@ class Campaign:
                 out.actions.append(AbortBridge(reason))
 
     def _wait_handback(self, now: float, vs: VehicleStatus, out: CampaignOutput, aborting: bool) -> None:
+        """DONE, or FAILED with a confirmed mode (the bridge ends a *fault* hand-back, e.g.
+        stale input or link loss, in FAILED even when PX4 confirmed the mode): control is
+        back with PX4. FAILED without a confirmed mode: nothing confirmed, failsafe."""
+        if vs.bridge_state == "FAILED" and vs.confirmed_mode:
+            self.t_handback_done = now
+            self.handback_mode = vs.confirmed_mode
+            self.ok = False
+            if not aborting:
+                self.reason = (self.reason + "; " if self.reason else "") + f"bridge: {vs.bridge_reason}"
+            self._go(now, ABORTED, f"hand-back confirmed in {now - self.t_handback_request:.2f} s after a "
+                                   f"fault, vehicle in {vs.confirmed_mode}: {self.reason}", out, "error")
+            return
         if vs.bridge_state == "DONE":
             self.t_handback_done = now
-            self.handback_mode = vs.mode or ""
+            self.handback_mode = vs.confirmed_mode or vs.mode or ""
             dt = now - self.t_handback_request
             if aborting:
                 self.ok = False
@@ -875,9 +894,9 @@ class Campaign:
                          out, "error")
                 return
             want = str(self.cfg.finish).upper()
-            if vs.mode != want:
+            if (vs.confirmed_mode or vs.mode) != want:
                 self.ok = False
-                self.reason = f"finish {want} not confirmed: the hand-back ended in {vs.mode}"
+                self.reason = f"finish {want} not confirmed: the hand-back ended in {vs.confirmed_mode or vs.mode}"
                 self._go(now, FAILED, self.reason + ("; land the vehicle manually" if want == "LAND" else ""),
                          out, "error")
                 return
@@ -922,8 +941,7 @@ class Campaign:
         self.phase = phase
         self.t_phase = now
         self._dwell_since = None
-        log.log({"info": logging.DEBUG, "warn": logging.WARNING}.get(level, logging.ERROR),
-                "campaign %s: %s", phase, message)
+        log.debug("campaign %s: %s (%s)", phase, message, level)     # the runners present events
         out.events.append(CampaignEvent(now, phase, message, level))
 
     # ------------------------------------------------------------- helpers

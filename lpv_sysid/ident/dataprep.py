@@ -179,10 +179,16 @@ def _check_gaps(name: str, t: np.ndarray, a: float, b: float, max_gap: float, ru
 
 
 def _interp(tg: np.ndarray, t: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Linear interpolation onto ``tg``; a stream sampled faster than the grid is first
-    low-passed (zero-phase 4th-order Butterworth at 0.4 x the grid rate, ``scipy.signal.
-    sosfiltfilt``) so that its content above the grid's Nyquist frequency cannot alias into
-    the identification band (the rate controller's command is broadband)."""
+    """Interpolation onto ``tg`` by a cubic spline (``scipy.interpolate.CubicSpline``,
+    not-a-knot).  Linear interpolation would low-pass the signal by ``1 - a (1 - a)
+    (1 - cos(2 pi f T))`` (``a`` the fractional offset of the grid from the samples): a
+    100 Hz stream read 2 ms off its stamps loses 1 % at 6 Hz, which biases the motor constants
+    (seed 0 Eq. 8) by more than their standard error; the spline's loss is ``O((2 pi f T)^4)``.
+    A stream sampled faster than the grid is first low-passed (zero-phase 4th-order
+    Butterworth at 0.4 x the grid rate, ``scipy.signal.sosfiltfilt``) so that its content
+    above the grid's Nyquist frequency cannot alias into the identification band (the rate
+    controller's command is broadband)."""
+    from scipy.interpolate import CubicSpline
     from scipy.signal import butter, sosfiltfilt
 
     y2 = y.reshape(y.shape[0], -1)
@@ -195,7 +201,10 @@ def _interp(tg: np.ndarray, t: np.ndarray, y: np.ndarray) -> np.ndarray:
         sos = butter(4, 0.4 / dt_grid, fs=1.0 / dt_src, output="sos")
         y2 = sosfiltfilt(sos, yu, axis=0)
         t = tu
-    out = np.stack([np.interp(tg, t, y2[:, j]) for j in range(y2.shape[1])], axis=1)
+    if t.size >= 4:
+        out = CubicSpline(t, y2, axis=0, extrapolate=True)(np.clip(tg, t[0], t[-1]))
+    else:
+        out = np.stack([np.interp(tg, t, y2[:, j]) for j in range(y2.shape[1])], axis=1)
     return out.reshape((tg.size,) + y.shape[1:])
 
 
@@ -232,6 +241,11 @@ def resample(s: Streams, sample_rate: float, max_gap: float = 0.25) -> dict[str,
         raise BagError(f"{run}: topics {core} do not overlap in time")
     for nm in core:
         _check_gaps(nm, series[nm][0], a, b, max_gap, run)
+    tr = series["rotor_speeds"][0]
+    if abs(float(np.median(np.diff(tr))) - dt) < 0.01 * dt:
+        # rotor telemetry at the grid rate is not anti-alias filtered (it arrives sampled):
+        # put the grid on its stamps so that it is not interpolated between aliased samples
+        a = float(tr[np.searchsorted(tr, a - 1e-9)])
     tg = a + dt * np.arange(int(np.floor((b - a) / dt)) + 1)
     out = {"t": tg, "state": _interp(tg, *series["state"]), "Omega": _interp(tg, *series["rotor_speeds"]),
            "series": series}

@@ -29,6 +29,7 @@ How (exact for the hypothesised model structure):
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -76,26 +77,240 @@ def remainders(x0: np.ndarray, dx: np.ndarray, params) -> dict[str, np.ndarray]:
     return {a: 0.5 * (rp[a] + rm[a]) - r0[a] for a in rp}
 
 
-def select_nuisance(rem: dict[str, np.ndarray], params, tol: float = 1e-9) -> dict[int, np.ndarray]:
-    """Per fitted row, the non-vanishing remainders of the axes that act on it.
-
-    Force rows take their own axis; moment rows every moment axis with a nonzero entry in
-    the corresponding row of ``I^-1`` (one axis for a diagonal inertia).
-    """
+def nuisance_index(rem: dict[str, np.ndarray], params, tol: float = 1e-9) -> dict[int, list[tuple[str, int]]]:
+    """Per fitted row, the ``(axis, column)`` of the non-vanishing remainders of the axes that
+    act on it: force rows take their own axis, moment rows every moment axis with a nonzero
+    entry in the corresponding row of ``I^-1`` (one axis for a diagonal inertia)."""
     Ii = np.linalg.inv(np.asarray(params.inertia, dtype=float))
     out = {}
     for n, row in enumerate(ROWS):
-        if n < 3:
-            cols = [rem[FORCE_AXES[n]]]
-        else:
-            cols = [rem[MOMENT_AXES[j]] for j in range(3) if abs(Ii[n - 3, j]) > 0]
-        R = np.concatenate(cols, axis=1)
-        norms = np.linalg.norm(R, axis=0)
-        keep = norms > tol * max(1.0, float(np.max(norms)) if norms.size else 1.0)
-        out[row] = R[:, keep]
+        axes = [FORCE_AXES[n]] if n < 3 else [MOMENT_AXES[j] for j in range(3) if abs(Ii[n - 3, j]) > 0]
+        cols = [(a, c) for a in axes for c in range(rem[a].shape[1])]
+        norms = np.array([np.linalg.norm(rem[a][:, c]) for a, c in cols])
+        big = float(np.max(norms)) if norms.size else 1.0
+        out[row] = [ac for ac, nm in zip(cols, norms) if nm > tol * max(1.0, big)]
     return out
+
+
+def select_nuisance(rem: dict[str, np.ndarray], params, tol: float = 1e-9) -> dict[int, np.ndarray]:
+    """Per fitted row, the non-vanishing remainders of the axes that act on it (the columns of
+    :func:`nuisance_index`), (N, k) per row."""
+    idx = nuisance_index(rem, params, tol)
+    n = next(iter(rem.values())).shape[0]
+    return {row: (np.stack([rem[a][:, c] for a, c in cols], axis=1) if cols else np.zeros((n, 0)))
+            for row, cols in idx.items()}
 
 
 def nuisance_regressors(x0: np.ndarray, dx: np.ndarray, params, tol: float = 1e-9) -> dict[int, np.ndarray]:
     """:func:`select_nuisance` of :func:`remainders` (unsmoothed data)."""
     return select_nuisance(remainders(x0, dx, params), params, tol)
+
+
+def remainder_hessians(x0: np.ndarray, params) -> dict[str, np.ndarray]:
+    """Hessians of the quadratic remainders: ``r_k(dx) = dx^T H_k dx / 2`` exactly (the Eq. 6
+    regressors are polynomials of degree <= 2), per axis an array (n_axis, 12, 12), from
+    ``H_jj = 2 r(e_j)``, ``H_jk = r(e_j + e_k) - r(e_j) - r(e_k)`` (exact for a quadratic)."""
+    n = np.asarray(x0).size
+    pairs = [(j, k) for j in range(n) for k in range(j + 1, n)]
+    E = np.eye(n)
+    D = np.concatenate([E, np.array([E[j] + E[k] for j, k in pairs]).reshape(-1, n)], axis=0)
+    rem = remainders(x0, D, params)
+    out = {}
+    for a, r in rem.items():
+        H = np.zeros((r.shape[1], n, n))
+        single = r[:n]
+        H[:, np.arange(n), np.arange(n)] = 2.0 * single.T
+        for m, (j, k) in enumerate(pairs):
+            h = r[n + m] - single[j] - single[k]
+            H[:, j, k] = H[:, k, j] = h
+        out[a] = H
+    return out
+
+
+# ----------------------------------------------------------------------------- equilibrium
+@dataclass(frozen=True)
+class Reexpansion:
+    """The identified second-order model re-expanded about its own equilibrium."""
+
+    x_e: np.ndarray              # equilibrium state (v fixed at the flown mean, yaw rate psi_dot)
+    u_e: np.ndarray
+    A: np.ndarray                # Jacobians of the identified model at (x_e, u_e)
+    B: np.ndarray
+    std_A: np.ndarray            # delta-method standard errors (joint covariance), 0 if not identified
+    std_B: np.ndarray
+    cov: np.ndarray              # covariance of the identified elements (Fit.elements order)
+    xdot_flown: np.ndarray       # (12,) identified model's derivative at the flown mean attitude,
+                                 # velocity, rotor speeds and input (body rates: pure yaw rate)
+    iterations: int
+
+
+def _x_of(w: np.ndarray, v0: np.ndarray, psi_dot: float) -> np.ndarray:
+    phi, th = w[0], w[1]
+    om = psi_dot * np.array([-np.sin(th), np.sin(phi) * np.cos(th), np.cos(phi) * np.cos(th)])
+    return np.concatenate([w[:2], v0, om, w[2:6]])
+
+
+class IdentifiedModel:
+    """``xdot_i = K_i(x) + theta_i . phi_i(x, u)`` per fitted row (``K_i`` the known rigid-body
+    part of rows u..r, zero for the motor rows) with ``phi_i`` built from the design labels
+    (``x<j>``: dx_j, ``u<k>``: du_k, ``bias``: 1, ``aux``: rotor acceleration d(delta_r)/dt =
+    the identified delta_r row itself, ``delay``: the latency increment of a motor row, whose
+    regressor ``-b du'`` vanishes at rest, ``nuisance<c>``: the remainder ``nuis[row][c]``)."""
+
+    def __init__(self, x0, u0, fits, nuis: dict[int, list[tuple[str, int]]], params, motor_known: bool):
+        from lpv_sysid.models.quadrotor import I_DR
+
+        self.x0 = np.asarray(x0, dtype=float)
+        self.u0 = np.asarray(u0, dtype=float)
+        self.params = params
+        self.fits = {rf.row: rf for rf in fits}
+        self.hess = remainder_hessians(self.x0, params)
+        self.motor_known = motor_known
+        self.a, self.b = params.a_omega, params.b_omega
+        self.i_dr = I_DR
+        self.P = sum(rf.theta.size for rf in fits)
+        self.nuis = {row: [self.hess[a][c] for a, c in cols] for row, cols in nuis.items()}
+
+    def phi(self, row: int, dx: np.ndarray, du: np.ndarray) -> np.ndarray:
+        """Regressor vector of ``row`` at a point (aux = 0: equilibrium, rotor acceleration 0)."""
+        out = []
+        for lab in self.fits[row].labels:
+            if lab.startswith("x"):
+                out.append(dx[int(lab[1:])])
+            elif lab.startswith("u"):
+                out.append(du[int(lab[1:])])
+            elif lab == "bias":
+                out.append(1.0)
+            elif lab in ("aux", "delay"):
+                out.append(0.0)
+            else:
+                H = self.nuis[row][int(lab[len("nuisance"):])]
+                out.append(0.5 * dx @ H @ dx)
+        return np.array(out)
+
+    def residual(self, w: np.ndarray, theta: np.ndarray, v0: np.ndarray, psi_dot: float) -> np.ndarray:
+        """Identified state derivative of rows u..r and of the four motor rows at
+        ``w = (phi, theta, delta_1..4, u_1..4)``."""
+        x = _x_of(w[:6], v0, psi_dot)
+        dx, du = x - self.x0, w[6:10] - self.u0
+        kr = known_rigid_body(x[None, :], self.params)[0]
+        out = np.zeros(10)
+        for n, row in enumerate(ROWS):
+            rf = self.fits.get(row)
+            out[n] = kr[n] + (0.0 if rf is None else theta[rf.offset: rf.offset + rf.theta.size] @ self.phi(row, dx, du))
+        for j in range(4):
+            row = 8 + j
+            rf = self.fits.get(row)
+            if rf is None or self.motor_known:
+                out[6 + j] = -self.a * dx[row] + self.b * du[j]
+            else:
+                out[6 + j] = theta[rf.offset: rf.offset + rf.theta.size] @ self.phi(row, dx, du)
+        return out
+
+    def jacobians(self, x: np.ndarray, u: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``A, B`` of the identified model at ``(x, u)`` where the rotor acceleration vanishes
+        (the ``aux`` term then contributes ``theta_aux * d(delta_r row)/d(x, u)``)."""
+        A, B = known_linear(x, self.params)
+        dx = x - self.x0
+        motor = {}
+        for row in range(8, 12):
+            rf = self.fits.get(row)
+            if rf is not None and not self.motor_known:
+                A[row, row] = 0.0
+                B[row, row - 8] = 0.0
+        for row, rf in self.fits.items():
+            th = theta[rf.offset: rf.offset + rf.theta.size]
+            for lab, c in zip(rf.labels, th):
+                if lab.startswith("x"):
+                    A[row, int(lab[1:])] += c
+                elif lab.startswith("u"):
+                    B[row, int(lab[1:])] += c
+                elif lab.startswith("nuisance"):
+                    A[row] += c * (self.nuis[row][int(lab[len("nuisance"):])] @ dx)
+        for row, rf in self.fits.items():
+            if "aux" in rf.labels:
+                c = theta[rf.offset + rf.labels.index("aux")]
+                A[row] += c * A[self.i_dr]
+                B[row] += c * B[self.i_dr]
+        return A, B
+
+
+def reexpand(model: IdentifiedModel, theta: np.ndarray, cov: np.ndarray, v0: np.ndarray, psi_dot: float,
+             maskA: np.ndarray, maskB: np.ndarray, max_iter: int = 20, tol: float = 1e-10) -> Reexpansion:
+    """Equilibrium of the identified model at the flown velocity, its Jacobians there and their
+    covariance (seed 0 Eq. 13: the model is the expansion about an equilibrium).
+
+    Newton on ``w = (phi, theta, delta, u)`` with ``v = v0`` and body rates of a pure yaw rate
+    ``psi_dot``; the delta-method covariance of the elements includes the dependence of the
+    equilibrium on the parameters (implicit function theorem: ``dw/dtheta = -G_w^-1 G_theta``,
+    ``G_theta`` = the regressor vectors at the equilibrium).
+    """
+    from lpv_sysid.errors import SolverError
+
+    x0, u0 = model.x0, model.u0
+    w = np.concatenate([x0[:2], x0[8:12], u0])
+    scale = np.concatenate([[1e-3, 1e-3], np.maximum(1.0, np.abs(x0[8:12])) * 1e-4,
+                            np.maximum(1e-3, np.abs(u0)) * 1e-3])
+
+    def G(wv, th=theta):
+        return model.residual(wv, th, v0, psi_dot)
+
+    def G_w(wv):
+        J = np.zeros((10, 10))
+        for k in range(10):
+            e = np.zeros(10)
+            e[k] = scale[k]
+            J[:, k] = (G(wv + e) - G(wv - e)) / (2 * scale[k])
+        return J
+
+    g = G(w)
+    flown = g.copy()
+    it = 0
+    for it in range(1, max_iter + 1):
+        step = np.linalg.solve(G_w(w), -g)
+        w = w + step
+        g = G(w)
+        if np.all(np.abs(step) <= tol * np.maximum(1.0, np.abs(w))):
+            break
+    else:
+        raise SolverError(f"equilibrium of the identified model not found in {max_iter} Newton steps "
+                          f"(|xdot| = {np.max(np.abs(g)):.3g})")
+    x_e = _x_of(w[:6], v0, psi_dot)
+    u_e = w[6:10]
+    A, B = model.jacobians(x_e, u_e, theta)
+    # delta method: d(elements)/d(theta) = direct + d/dw * dw/dtheta
+    idx = []
+    for i in range(A.shape[0]):
+        idx += [("A", i, int(j)) for j in np.nonzero(maskA[i])[0]]
+        idx += [("B", i, int(k)) for k in np.nonzero(maskB[i])[0]]
+
+    def elems(wv, th):
+        Aw, Bw = model.jacobians(_x_of(wv[:6], v0, psi_dot), wv[6:10], th)
+        return np.array([(Aw if m == "A" else Bw)[i, j] for m, i, j in idx])
+
+    P = theta.size
+    Gth = np.zeros((10, P))
+    dx, du = x_e - x0, u_e - u0
+    for n, row in enumerate(list(ROWS) + [8, 9, 10, 11]):
+        rf = model.fits.get(row)
+        if rf is None or (row >= 8 and model.motor_known):
+            continue
+        Gth[n, rf.offset: rf.offset + rf.theta.size] = model.phi(row, dx, du)
+    dw = -np.linalg.solve(G_w(w), Gth)                          # (10, P)
+    D = np.zeros((len(idx), P))
+    for k in range(10):                                         # d elements / d w (finite differences)
+        e = np.zeros(10)
+        e[k] = scale[k]
+        D += np.outer((elems(w + e, theta) - elems(w - e, theta)) / (2 * scale[k]), dw[k])
+    th_scale = np.maximum(np.abs(theta), 1e-12) * 1e-6
+    nz = np.nonzero(np.any(cov != 0, axis=0))[0]
+    for p in nz:                                                # d elements / d theta (linear but for aux)
+        e = np.zeros(P)
+        e[p] = th_scale[p]
+        D[:, p] += (elems(w, theta + e) - elems(w, theta - e)) / (2 * th_scale[p])
+    C = D @ cov @ D.T
+    std = np.sqrt(np.maximum(np.diag(C), 0.0))
+    std_A, std_B = np.zeros_like(A), np.zeros_like(B)
+    for (m, i, j), s in zip(idx, std):
+        (std_A if m == "A" else std_B)[i, j] = s
+    return Reexpansion(x_e, u_e, A, B, std_A, std_B, C, np.concatenate([[0.0, 0.0], flown]), it)

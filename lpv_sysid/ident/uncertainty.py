@@ -83,11 +83,14 @@ class UncertaintyConfig:
 @dataclass(frozen=True)
 class Interval(UncertainEntry):
     """One identified element and its interval, Eq. (22): the file entry of
-    ARCHITECTURE.md section 5 'uncertain' (:class:`~lpv_sysid.io.formats.UncertainEntry`)
-    plus what the reduction of Eq. (23) decides about it."""
+    ``vertex_models.yaml`` 'uncertain' (:class:`~lpv_sysid.io.formats.UncertainEntry`: ``std``
+    calibrated, ``lower``/``upper`` = ``nominal -/+ k std``) plus what the reduction of Eq. (23)
+    decides about it (``corner``: varied over the corners; ``half``: its half-width there,
+    widened by the absorption factor; 0 for an element held at its nominal value)."""
 
     influence: float = 0.0
     corner: bool = False  # varied over the corners of Eq. (23)
+    half: float = 0.0     # half-width used in the Eq. (23) systems
 
     def as_dict(self) -> dict:
         return self.to_dict()
@@ -120,12 +123,15 @@ def sidak_k(p: int, alpha: float) -> float:
     return float(norm.ppf(1.0 - a / 2.0))
 
 
-def intervals_from_elements(elements, k_sigma: float) -> list[Interval]:
-    """``elements``: iterable of (matrix, row, col, nominal, std) (``Fit.elements()``)."""
+def intervals_from_elements(elements, k_sigma: float, std_factor: float = 1.0) -> list[Interval]:
+    """``elements``: iterable of (matrix, row, col, nominal, std) (``Fit.elements()``); the
+    stored standard error is ``std * std_factor`` (the finite-sample widening of
+    :func:`lpv_sysid.ident.equation_error.t_factor`)."""
     out = []
     for m, r, c, nom, s in elements:
         if not (np.isfinite(nom) and np.isfinite(s) and s >= 0):
             raise ConfigError(f"{m}[{r},{c}]: non-finite nominal or standard error ({nom}, {s})")
+        s = s * std_factor
         out.append(Interval(m, int(r), int(c), float(nom), float(s), nom - k_sigma * s, nom + k_sigma * s))
     return out
 
@@ -162,15 +168,30 @@ def _apply(A: np.ndarray, B: np.ndarray, ivs: Sequence[Interval], values: Sequen
     return Aj, Bj
 
 
-def build(A: np.ndarray, B: np.ndarray, elements, cfg: UncertaintyConfig = UncertaintyConfig()) -> UncertainVertex:
-    """Intervals (Eq. 22) and uncertain vertex systems (Eq. 23) for one LPV vertex."""
+def applied_k(cfg: UncertaintyConfig, p: int) -> float:
+    """Half-width of Eq. (22) in standard errors: ``k_sigma``, raised to the Sidak value for
+    ``p`` elements when ``joint_alpha`` is set."""
+    k = cfg.k_sigma
+    if cfg.joint_alpha is not None:
+        k = max(k, sidak_k(p, cfg.joint_alpha))
+    return float(k)
+
+
+def build(A: np.ndarray, B: np.ndarray, elements, cfg: UncertaintyConfig = UncertaintyConfig(),
+          dof: float | None = None) -> UncertainVertex:
+    """Intervals (Eq. 22) and uncertain vertex systems (Eq. 23) for one LPV vertex.
+
+    ``dof``: Student-t degrees of freedom of the studentised estimates (``Fit.dof``); the
+    standard errors are widened by ``t_factor(k, dof)`` so that ``nominal +/- k std`` keeps the
+    normal coverage ``2 Phi(k) - 1`` (None: no widening).
+    """
+    from lpv_sysid.ident.equation_error import t_factor
+
     A = np.asarray(A, dtype=float)
     B = np.asarray(B, dtype=float)
     elements = list(elements)
-    k = cfg.k_sigma
-    if cfg.joint_alpha is not None:
-        k = max(k, sidak_k(len(elements), cfg.joint_alpha))
-    ivs = intervals_from_elements(elements, k)
+    k = applied_k(cfg, len(elements))
+    ivs = intervals_from_elements(elements, k, t_factor(k, dof))
     if cfg.output_states and max(cfg.output_states) >= A.shape[0]:
         raise ConfigError(f"uncertainty.output_states {cfg.output_states} out of range for n_x={A.shape[0]}")
     infl = influence(A, B, ivs, cfg) if ivs else np.zeros(0)
@@ -190,15 +211,14 @@ def build(A: np.ndarray, B: np.ndarray, elements, cfg: UncertaintyConfig = Uncer
     marked = []
     for l, iv in enumerate(ivs):
         is_kept = l in kept
-        lo, hi = iv.lower, iv.upper
-        if is_kept and inflation != 1.0:
-            half = 0.5 * (hi - lo) * inflation
-            lo, hi = iv.nominal - half, iv.nominal + half
-        marked.append(Interval(iv.matrix, iv.row, iv.col, iv.nominal, iv.std, lo, hi,
-                               float(infl[l]), is_kept))
+        half = 0.5 * (iv.upper - iv.lower) * (inflation if is_kept else 1.0)
+        if not is_kept and cfg.method != "hybrid":
+            half = 0.0
+        marked.append(Interval(iv.matrix, iv.row, iv.col, iv.nominal, iv.std, iv.lower, iv.upper,
+                               float(infl[l]), is_kept, float(half)))
     corner_ivs = [marked[l] for l in kept]
     systems = []
-    box_corners = list(itertools.product(*[(iv.lower, iv.upper) for iv in corner_ivs]))
+    box_corners = list(itertools.product(*[(iv.nominal - iv.half, iv.nominal + iv.half) for iv in corner_ivs]))
     if cfg.method == "hybrid" and dropped:
         d_ivs = [marked[l] for l in dropped]
         q = len(d_ivs)

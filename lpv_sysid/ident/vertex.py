@@ -50,9 +50,15 @@ class IdentificationConfig:
     edge: float = 0.5                  # s dropped at both ends of the fit segment (smoother end effects)
     min_fit_duration: float = 5.0      # s, shorter excitation segments are refused
     sample_rate: float = 100.0         # Hz, common grid of dataprep
-    max_lag: int | None = None         # residual autocorrelation lags (None: automatic)
+    max_lag: int | None = None         # residual autocorrelation lags (covariance.method residual_acf)
     intercept: bool = True             # per-row bias term (Klein & Morelli), see equation_error
     model: str = "taylor2"             # "taylor2" (ident.taylor) or "appendix_b" (plain seed 0 App. B)
+    covariance: ee.CovarianceConfig = field(default_factory=ee.CovarianceConfig)
+    equilibrium: bool = True           # taylor2: re-expand about the identified equilibrium (Eq. 13)
+    motor: str = "identify"            # a_Omega, b_Omega: "identify" (motor rows, Eq. 8) or "known"
+    motor_limit_margin: float = 15.0   # rad/s: samples this close to omega_min/max are not used ...
+    motor_pad: float = 0.5             # s: ... nor this long around them (smoother support)
+    instruments: bool = True           # taylor2: rotor speeds instrumented by the motor model (EIV)
     excitation_threshold: float = 1e-6 # |u_e| above which the excitation counts as on
     vmin: tuple[float, float, float] = (-5.0, -5.0, -5.0)
     vmax: tuple[float, float, float] = (5.0, 5.0, 5.0)
@@ -65,6 +71,8 @@ class IdentificationConfig:
             d = {}
         if not isinstance(d, dict):
             raise ConfigError(f"identification config must be a mapping, got {type(d).__name__}")
+        from lpv_sysid.signals.config import MAX_SAMPLE_RATE
+
         d = d.get("identification", d)
         if not isinstance(d, dict):
             raise ConfigError(f"identification: expected a mapping, got {type(d).__name__}")
@@ -73,12 +81,16 @@ class IdentificationConfig:
         kw: dict = {}
         kw["derivatives"] = deriv.DerivativeConfig.from_dict(d.pop("derivatives", None))
         kw["uncertainty"] = unc.UncertaintyConfig.from_dict(d.pop("uncertainty", None))
+        kw["covariance"] = ee.CovarianceConfig.from_dict(d.pop("covariance", None))
         for key in ("trim_duration", "trim_average", "edge", "min_fit_duration", "sample_rate",
-                    "excitation_threshold"):
+                    "excitation_threshold", "motor_limit_margin", "motor_pad"):
             if key in d:
                 v = d.pop(key)
                 if not is_finite_number(v) or v < 0:
                     raise ConfigError(f"identification.{key} must be a finite number >= 0, got {v!r}")
+                if key == "sample_rate" and v > MAX_SAMPLE_RATE:     # the common grid is allocated from it
+                    raise ConfigError(f"identification.sample_rate: {v:g} Hz exceeds the limit of "
+                                      f"{MAX_SAMPLE_RATE:g} Hz")
                 kw[key] = float(v)
         if "max_lag" in d:
             v = d.pop("max_lag")
@@ -91,11 +103,17 @@ class IdentificationConfig:
                 if not isinstance(v, (list, tuple)) or len(v) != 3:
                     raise ConfigError(f"identification.{key} must be a list of 3 numbers, got {v!r}")
                 kw[key] = tuple(float(a) for a in v)
-        if "intercept" in d:
-            v = d.pop("intercept")
-            if not isinstance(v, bool):
-                raise ConfigError(f"identification.intercept must be true or false, got {v!r}")
-            kw["intercept"] = v
+        for key in ("intercept", "equilibrium", "instruments"):
+            if key in d:
+                v = d.pop(key)
+                if not isinstance(v, bool):
+                    raise ConfigError(f"identification.{key} must be true or false, got {v!r}")
+                kw[key] = v
+        if "motor" in d:
+            v = d.pop("motor")
+            if v not in ("identify", "known"):
+                raise ConfigError(f"identification.motor must be 'identify' or 'known', got {v!r}")
+            kw["motor"] = v
         if "model" in d:
             v = d.pop("model")
             if v not in ("taylor2", "appendix_b"):
@@ -127,6 +145,8 @@ class VertexData:
     trim: tuple[float, float]  # [t_start, t_end) of the trim segment
     fit: tuple[float, float]   # [t_start, t_end) of the excitation (fit) segment
     name: str = ""
+    u_eff: np.ndarray | None = None   # (N, 4) command after the ESC clip of Eq. (8) (None: from u)
+    motor_identifiable: bool = True   # rotor speeds measured and u independent of them
 
 
 @dataclass(frozen=True)
@@ -143,41 +163,38 @@ class KnownModel:
 class VertexResult:
     name: str
     scheduling: np.ndarray
-    x0: np.ndarray
+    x0: np.ndarray               # operating point of the model (the identified equilibrium, taylor2)
     u0: np.ndarray
     fit: ee.Fit
     uncertain: unc.UncertainVertex
     r2_axes: dict
     validation: dict = field(default_factory=dict)
+    x_flown: np.ndarray | None = None     # mean over the trim window (seed 0 Table 1)
+    u_flown: np.ndarray | None = None
+    xdot_flown: np.ndarray | None = None  # identified model's derivative there (not an equilibrium)
+    motor: str = "known"                  # how a_Omega, b_Omega entered: "identified" or "known"
 
     def to_dict(self) -> dict:
-        """One ``vertices`` entry of ``vertex_models.yaml`` (ARCHITECTURE.md section 5).
+        """One ``vertices`` entry of ``vertex_models.yaml`` (format ``@2``, io/formats.py).
 
-        ``uncertain`` lists every identified element with its standard error.  Its
-        ``lower``/``upper`` are the interval that spans the uncertain systems of Eq. (23): the
-        corner parameters carry their (possibly widened) interval, the others
-        ``lower = upper = nominal`` - so ``io.formats.VertexModels.to_polytopic`` (corner
-        enumeration of the free elements) regenerates exactly the ``M_i`` systems of
-        :mod:`lpv_sysid.ident.uncertainty` (methods 'box' and 'influence').  The full
-        ``nominal +/- k std`` box of Eq. (22) follows from ``std`` and ``meta.k_sigma``.
+        ``uncertain`` lists every identified element (aerodynamic rows and, when identified,
+        the motor rows ``A[8:12, 8:12] = -a_Omega I``, ``B[8:12, :] = b_Omega I``) with its
+        calibrated standard error and the interval ``nominal +/- k std`` of Eq. (22), ``k`` =
+        ``meta.k_sigma`` (``meta.uncertainty.k_applied`` when raised by ``joint_alpha``).  The
+        reduced polytope of :mod:`lpv_sysid.ident.uncertainty` is not stored; a consumer that
+        wants it applies the reduction to these intervals.
         """
         fit = {"r2": {k: float(v) for k, v in self.r2_axes.items()}}
         for key in ("tic", "nrmse"):
             if key in self.validation:
                 fit[key] = {k: float(v) for k, v in self.validation[key].items()}
-        unc_list = []
-        for iv in self.uncertain.intervals:
-            d = iv.as_dict()
-            if not iv.corner:
-                d["lower"] = d["upper"] = d["nominal"]
-            unc_list.append(d)
         return {
             "scheduling": [float(v) for v in self.scheduling],
             "x0": [float(v) for v in self.x0],
             "u0": [float(v) for v in self.u0],
             "A": self.fit.A.tolist(),
             "B": self.fit.B.tolist(),
-            "uncertain": unc_list,
+            "uncertain": [iv.to_dict() for iv in self.uncertain.intervals],
             "fit": fit,
         }
 
@@ -199,12 +216,120 @@ def _params(cfg: IdentificationConfig):
     return QuadrotorParams.from_dict(cfg.quadrotor) if cfg.quadrotor else QuadrotorParams()
 
 
-def _fit_taylor2(data: VertexData, x0, u0, known: KnownModel, cfg: IdentificationConfig) -> ee.Fit:
+def _input(data: VertexData, params) -> np.ndarray:
+    """The input the rotors act on: ``Mix clip(Mix^-1 u, 0, 1)`` (Eq. 8), unless given."""
+    if data.u_eff is not None:
+        return np.asarray(data.u_eff, dtype=float)
+    from lpv_sysid.models.quadrotor import mixer
+
+    mix = mixer(params.arm_length)
+    return np.clip(np.asarray(data.u, dtype=float) @ np.linalg.inv(mix).T, 0.0, 1.0) @ mix.T
+
+
+def motor_samples(data: VertexData, cfg: IdentificationConfig, params, idx: np.ndarray) -> np.ndarray:
+    """Samples ``idx`` usable for the motor rows: every rotor speed at least
+    ``motor_limit_margin`` from ``[omega_min, omega_max]`` (where Eq. 8 holds: at the limits
+    the speed is clamped), ``motor_pad`` seconds around such events excluded as well."""
+    from lpv_sysid.models.quadrotor import mixer
+
+    Om = np.asarray(data.x, dtype=float)[:, 8:12] @ np.linalg.inv(mixer(params.arm_length)).T
+    m = cfg.motor_limit_margin
+    bad = np.any((Om < params.omega_min + m) | (Om > params.omega_max - m), axis=1)
+    dt = float(np.median(np.diff(data.t)))
+    pad = int(round(cfg.motor_pad / dt))
+    if pad > 0 and bad.any():
+        bad = np.convolve(bad.astype(float), np.ones(2 * pad + 1), mode="same") > 0
+    return ~bad[idx]
+
+
+def motor_response(u: np.ndarray, delta_start: np.ndarray, dt: float, params) -> np.ndarray:
+    """Virtual actuators of the motor model Eq. (8), ``delta' = -a_Omega delta + b_Omega u``,
+    driven by ``u`` (N, 4) from ``delta_start`` (exact for an input held over each step)."""
+    from scipy.signal import lfilter
+
+    ad = np.exp(-params.a_omega * dt)
+    g = (1.0 - ad) * params.b_omega / params.a_omega
+    u = np.asarray(u, dtype=float)
+    zi = np.asarray(delta_start, dtype=float)[None, :]
+    return lfilter([0.0, g], [1.0, -ad], u, axis=0, zi=zi)[0]
+
+
+def _shifted_input(t: np.ndarray, u: np.ndarray, tau: float, cfg: IdentificationConfig):
+    """``u(t - tau)`` (cubic spline of the raw samples) smoothed and differentiated with the
+    filter of the states: ``(L[u(t - tau)], d/dt L[u(t - tau)])``."""
+    from scipy.interpolate import CubicSpline
+
+    us = CubicSpline(t, u, axis=0)(t - tau) if tau != 0.0 else u
+    return deriv.smooth_and_differentiate(us, float(t[1] - t[0]), cfg.derivatives)
+
+
+def _motor_designs(data: VertexData, cfg: IdentificationConfig, params, full, keep, xdot, dx,
+                   u_in: np.ndarray, u0: np.ndarray, dx_iv: np.ndarray | None = None,
+                   max_delay: float = 0.05) -> tuple[list, str, list]:
+    """Rows 8-11, ``delta_j' = -a_Omega d(delta_j) + b_Omega du_j(t - tau_j) + c_j`` (Eq. 8 in
+    virtual actuators), one ``(a, b, c, tau)`` per row.
+
+    ``tau_j`` is the command-to-rotor latency (ESC, telemetry, the hold of the command): with
+    ``a_Omega ~ 12 /s`` a latency of 0.1 ms already biases ``a, b`` by ~0.1 %, more than their
+    standard error on a 30 s record.  It is found by Gauss-Newton (the regressor of a delay
+    increment is ``-b du_j'``) and kept in the design as the column ``delay`` (its increment
+    ~ 0 at convergence) so that its uncertainty enters the covariance of ``a, b``.  Returns
+    ``(designs, "identified" | "known", delays)``; none when the motor model is taken as known.
+    """
+    if cfg.motor == "known" or not data.motor_identifiable:
+        return [], "known", []
+    dt = float(np.median(np.diff(data.t)))
+    use = motor_samples(data, cfg, params, full[keep])
+    if use.sum() * dt < cfg.min_fit_duration:
+        log.warning("%s: only %.1f s away from the rotor-speed limits: a_Omega, b_Omega taken as known",
+                    data.name, use.sum() * dt)
+        return [], "known", []
+    t = np.asarray(data.t, dtype=float)[full]
+    out, delays = [], []
+    n = dx.shape[0]
+    for j in range(4):
+        row = 8 + j
+        raw = np.asarray(u_in, dtype=float)[full, j]
+        tau, b_est, H = 0.0, None, None
+        for _ in range(12):
+            us, ud = _shifted_input(t, raw, tau, cfg)
+            cols = [dx[:, row], us[keep] - u0[j], np.ones(n)]
+            if b_est is not None:
+                cols.append(-b_est * ud[keep])
+            H = np.stack(cols, axis=1)
+            th = np.linalg.lstsq(H[use], xdot[use, row], rcond=None)[0]
+            b_est = th[1]
+            step = th[3] if th.size > 3 else 0.0
+            tau = float(np.clip(tau + step, -max_delay, max_delay))
+            if th.size > 3 and abs(step) < 1e-8:
+                break
+        if abs(tau) >= max_delay:
+            log.warning("%s: motor row %d latency at the search bound %.3f s: a_Omega, b_Omega taken as known",
+                        data.name, row, max_delay)
+            return [], "known", []
+        us, ud = _shifted_input(t, raw, tau, cfg)
+        H = np.stack([dx[:, row], us[keep] - u0[j], np.ones(n), -b_est * ud[keep]], axis=1)
+        Z = None
+        if dx_iv is not None:
+            Z = H.copy()
+            Z[:, 0] = dx_iv[:, row]
+        out.append(ee.RowDesign(row, xdot[:, row], H, (row,), (j,), (f"x{row}", f"u{j}", "bias", "delay"), use,
+                                Z))
+        delays.append(tau)
+    return out, "identified", delays
+
+
+def _fit_taylor2(data: VertexData, x0, u0, known: KnownModel, cfg: IdentificationConfig):
     """Equation error with the known part nonlinear and second-order nuisance regressors
-    (:mod:`lpv_sysid.ident.taylor`); returns the Fit of the full ``A, B`` (Eq. 15)."""
+    (:mod:`lpv_sysid.ident.taylor`), re-expanded about the identified equilibrium.
+
+    Returns ``(Fit, x_e, u_e, xdot_flown, motor)``.  In the moment rows the rotor reaction
+    torque ``J_z delta_r'`` is regressed on the *measured* rotor acceleration (``aux``), so the
+    rows stay exact when a rotor saturates; its linearisation ``J_z (-a_Omega d delta_r +
+    b_Omega du_r)`` enters ``A[., dr]``, ``B[., ur]`` through the (identified) delta_r row.
+    """
     params = _params(cfg)
     rows = list(taylor.ROWS)
-    A0, B0 = taylor.known_linear(x0, params)
     x0 = np.asarray(x0, dtype=float)
     widths = {}
 
@@ -214,24 +339,102 @@ def _fit_taylor2(data: VertexData, x0, u0, known: KnownModel, cfg: Identificatio
         widths.update({a: r.shape[1] for a, r in rem.items()})
         return np.concatenate([kr] + [rem[a] for a in taylor.FORCE_AXES + taylor.MOMENT_AXES], axis=1)
 
-    _, xdot, dx, du, nl_s = prepare(data, cfg, x0, u0, nonlin)
-    y = xdot.copy()
-    y[:, rows] = xdot[:, rows] - nl_s[:, :6]
-    off = 6
-    rem = {}
+    dt, full, keep = _fit_indices(data, cfg)
+    u_in = _input(data, params)
+    _, xdot, dx, du, nl_s = prepare(data, cfg, x0, u0, nonlin, u=u_in)
+    rem, off = {}, 6
     for a in taylor.FORCE_AXES + taylor.MOMENT_AXES:
         rem[a] = nl_s[:, off: off + widths[a]]
         off += widths[a]
-    extra = taylor.select_nuisance(rem, params)
-    A_kn = np.where(known.maskA, 0.0, known.A)
-    B_kn = np.where(known.maskB, 0.0, known.B)
-    A_kn[rows] = 0.0            # the known part of these rows is already in y (nonlinear)
-    B_kn[rows] = 0.0
-    f = ee.fit(y, dx, du, A_kn, B_kn, known.maskA, known.maskB, cfg.max_lag, True, extra)
-    A, B = f.A.copy(), f.B.copy()
-    A[rows] += A0[rows]
-    B[rows] += B0[rows]
-    return dataclasses.replace(f, A=A, B=B)
+    iv = None
+    if cfg.instruments:
+        # the same regressors with the measured rotor speeds replaced by the motor model's response
+        # to the command (Eq. 8): uncorrelated with telemetry noise and aliasing (errors in variables)
+        x_iv = np.array(data.x, dtype=float)
+        x_iv[:, 8:12] = motor_response(u_in, x_iv[0, 8:12], dt, params)
+        _, _, dx_iv, _, nl_iv = prepare(dataclasses.replace(data, x=x_iv), cfg, x0, u0, nonlin, u=u_in)
+        rem_iv, off = {}, 6
+        for a in taylor.FORCE_AXES + taylor.MOMENT_AXES:
+            rem_iv[a] = nl_iv[:, off: off + widths[a]]
+            off += widths[a]
+        iv = (dx_iv, rem_iv)
+    nuis_idx = taylor.nuisance_index(rem, params)
+    designs, nuis_kept = [], {}
+    n = dx.shape[0]
+    for k, row in enumerate(rows):
+        ja = [int(j) for j in np.nonzero(known.maskA[row])[0]]
+        kb = [int(c) for c in np.nonzero(known.maskB[row])[0]]
+        y = xdot[:, row] - nl_s[:, k]
+        H = [dx[:, ja]]
+        labels = [f"x{j}" for j in ja]
+        aux = 3 in kb             # J_z delta_r' (seed 0 Eq. 6f): the measured rotor acceleration
+        kb = [c for c in kb if c != 3]
+        H.append(du[:, kb])
+        labels += [f"u{c}" for c in kb]
+        H.append(np.ones((n, 1)))
+        labels.append("bias")
+        if aux:
+            H.append(xdot[:, 11:12])
+            labels.append("aux")
+        Hm = np.concatenate(H, axis=1)
+        Z = None
+        if iv is not None:
+            Z = Hm.copy()
+            Z[:, :len(ja)] = iv[0][:, ja]
+        cols = nuis_idx[row]
+        if cols:
+            E = np.stack([rem[a][:, c] for a, c in cols], axis=1)
+            Hm, chosen = ee._append_independent(Hm, E)
+            labels += [f"nuisance{c}" for c in chosen]
+            if Z is not None:
+                Z = np.concatenate([Z] + [iv[1][cols[c][0]][:, cols[c][1]: cols[c][1] + 1] for c in chosen], axis=1)
+        designs.append(ee.RowDesign(row, y, Hm, tuple(ja), tuple(kb), tuple(labels), Z=Z))
+        nuis_kept[row] = cols
+    motor_designs, motor, delays = _motor_designs(data, cfg, params, full, keep, xdot, dx, u_in, u0,
+                                                  None if iv is None else iv[0])
+    fits, joint, dof = ee.solve_rows(designs + motor_designs, cfg.covariance, dt)
+    maskA, maskB = known.maskA.copy(), known.maskB.copy()
+    if motor == "identified":
+        for j in range(4):
+            maskA[8 + j, 8 + j] = True
+            maskB[8 + j, j] = True
+    model = taylor.IdentifiedModel(x0, u0, fits, nuis_kept, params, motor == "known")
+    theta = np.concatenate([rf.theta for rf in fits])
+    psi_dot = float((np.sin(x0[0]) * x0[6] + np.cos(x0[0]) * x0[7]) / np.cos(x0[1]))
+    if cfg.equilibrium:
+        rx = taylor.reexpand(model, theta, joint, x0[2:5], psi_dot, maskA, maskB)
+        x_e, u_e, A, B, sA, sB, flown = rx.x_e, rx.u_e, rx.A, rx.B, rx.std_A, rx.std_B, rx.xdot_flown
+        log.info("%s: equilibrium re-expansion in %d Newton steps, shift %s", data.name, rx.iterations,
+                 np.round(x_e - x0, 4).tolist())
+    else:
+        flown = np.concatenate([[0.0, 0.0], model.residual(np.concatenate([x0[:2], x0[8:12], u0]), theta,
+                                                             x0[2:5], psi_dot)])
+        A, B = model.jacobians(x0, u0, theta)
+        x_e, u_e = x0, np.asarray(u0, dtype=float)
+        sA, sB = _direct_std(model, theta, joint, x0, u0, maskA, maskB)
+    f = ee.Fit(A, B, sA, sB, maskA, maskB, tuple(fits), joint, dof, cfg.covariance.method)
+    return f, x_e, u_e, flown, motor
+
+
+def _direct_std(model, theta, cov, x, u, maskA, maskB):
+    """Delta-method standard errors of the Jacobians at a fixed point (no re-expansion)."""
+    idx = [(m, i, int(j)) for i in range(maskA.shape[0])
+           for m, msk in (("A", maskA), ("B", maskB)) for j in np.nonzero(msk[i])[0]]
+
+    def elems(th):
+        Aw, Bw = model.jacobians(x, u, th)
+        return np.array([(Aw if m == "A" else Bw)[i, j] for m, i, j in idx])
+
+    D = np.zeros((len(idx), theta.size))
+    for p in range(theta.size):
+        e = np.zeros(theta.size)
+        e[p] = max(abs(theta[p]), 1e-12) * 1e-6
+        D[:, p] = (elems(theta + e) - elems(theta - e)) / (2 * e[p])
+    std = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", D, cov, D), 0.0))
+    sA, sB = np.zeros(maskA.shape), np.zeros(maskB.shape)
+    for (m, i, j), s_ in zip(idx, std):
+        (sA if m == "A" else sB)[i, j] = s_
+    return sA, sB
 
 
 def _segment(t: np.ndarray, a: float, b: float, what: str, min_len: float) -> np.ndarray:
@@ -252,36 +455,42 @@ def trim_window(trim: tuple[float, float], cfg: IdentificationConfig) -> tuple[f
 def equilibrium(data: VertexData, cfg: IdentificationConfig) -> tuple[np.ndarray, np.ndarray]:
     """``x0, u0`` = means over the last ``trim_average`` seconds (at most half) of the trim
     segment (the vehicle may still be converging to the new reference at its start), seed 0
-    Table 1."""
+    Table 1.  This flown mean is *not* an equilibrium (the dynamics are nonlinear and the
+    vehicle fluctuates about it); ``taylor2`` identification re-expands about the equilibrium."""
     a, b = trim_window(data.trim, cfg)
     idx = _segment(data.t, a, b, f"{data.name or 'vertex'} trim", min(0.5, b - a))
     return data.x[idx].mean(axis=0), data.u[idx].mean(axis=0)
 
 
-def prepare(data: VertexData, cfg: IdentificationConfig, x0: np.ndarray, u0: np.ndarray,
-            nonlinear=None):
-    """Smoothed perturbations and derivatives over the fit segment: ``(t, dxdot, dx, du)``.
-
-    ``nonlinear(x_raw) -> (N, k)``: optional function of the *raw* states whose value is
-    smoothed with the same filter and appended to the return tuple.  Nonlinear regressors
-    must be computed before smoothing - ``L[r(x)]``, not ``r(L[x])`` - so that the filtered
-    equation ``L[x'] = A L[x] + L[r(x)]`` still holds exactly.
-    """
+def _fit_indices(data: VertexData, cfg: IdentificationConfig):
+    """``(dt, full, keep)``: sample indices differentiated (a little more than the fit segment,
+    FFT-friendly) and the slice of them kept after cutting the smoother's edges."""
     t = np.asarray(data.t, dtype=float)
     dt = float(np.median(np.diff(t)))
     if not np.allclose(np.diff(t), dt, rtol=1e-6, atol=1e-9):
         raise ConfigError(f"{data.name or 'vertex'}: samples must be on a uniform grid")
     a, b = data.fit
-    # differentiate a little more than the fit segment so the smoother's end effects fall
-    # outside it, then cut the edges
     full = _segment(t, a, b, f"{data.name or 'vertex'} excitation", cfg.min_fit_duration + 2 * cfg.edge)
     if cfg.derivatives.method == "fourier":
         full = full[: deriv.fast_length(full.size)]      # FFT-friendly length, drops < 2 % (n > 2000)
-    xs, xdot = deriv.smooth_and_differentiate(data.x[full], dt, cfg.derivatives)
-    us = deriv.smooth(data.u[full], dt, cfg.derivatives)
     n_edge = int(round(cfg.edge / dt))
-    keep = slice(n_edge, full.size - n_edge)
-    out = (t[full][keep], xdot[keep], xs[keep] - x0, us[keep] - u0)
+    return dt, full, slice(n_edge, full.size - n_edge)
+
+
+def prepare(data: VertexData, cfg: IdentificationConfig, x0: np.ndarray, u0: np.ndarray,
+            nonlinear=None, u: np.ndarray | None = None):
+    """Smoothed perturbations and derivatives over the fit segment: ``(t, dxdot, dx, du)``.
+
+    ``nonlinear(x_raw) -> (N, k)``: optional function of the *raw* states whose value is
+    smoothed with the same filter and appended to the return tuple.  Nonlinear regressors
+    must be computed before smoothing - ``L[r(x)]``, not ``r(L[x])`` - so that the filtered
+    equation ``L[x'] = A L[x] + L[r(x)]`` still holds exactly.  ``u``: the input to use
+    instead of ``data.u`` (e.g. after the ESC clip).
+    """
+    dt, full, keep = _fit_indices(data, cfg)
+    xs, xdot = deriv.smooth_and_differentiate(data.x[full], dt, cfg.derivatives)
+    us = deriv.smooth((data.u if u is None else u)[full], dt, cfg.derivatives)
+    out = (np.asarray(data.t, dtype=float)[full][keep], xdot[keep], xs[keep] - x0, us[keep] - u0)
     if nonlinear is not None:
         out = out + (deriv.smooth(nonlinear(data.x[full]), dt, cfg.derivatives)[keep],)
     return out
@@ -301,15 +510,18 @@ def identify_vertex(data: VertexData, cfg: IdentificationConfig,
     x0, u0 = equilibrium(data, cfg)
     if known is None:
         known = known_from_quadrotor(x0, cfg.quadrotor)
+    x_flown, u_flown, flown, motor = x0, u0, None, "known"
     if cfg.model == "taylor2":
-        fit = _fit_taylor2(data, x0, u0, known, cfg)
+        fit, x0, u0, flown, motor = _fit_taylor2(data, x0, u0, known, cfg)
     else:
-        _, xdot, dx, du = prepare(data, cfg, x0, u0)
-        fit = ee.fit(xdot, dx, du, known.A, known.B, known.maskA, known.maskB, cfg.max_lag, cfg.intercept)
-    uv = unc.build(fit.A, fit.B, fit.elements(), cfg.uncertainty)
+        _, xdot, dx, du = prepare(data, cfg, x0, u0, u=_input(data, _params(cfg)))
+        fit = ee.fit(xdot, dx, du, known.A, known.B, known.maskA, known.maskB, cfg.max_lag, cfg.intercept,
+                     covariance=cfg.covariance, dt=float(np.median(np.diff(data.t))))
+    uv = unc.build(fit.A, fit.B, fit.elements(), cfg.uncertainty, dof=fit.dof)
     r2 = {a: fit.r2.get(i, float("nan")) for a, i in zip(metrics.AXES, metrics.AXIS_INDEX)}
     log.info("%s: %d identified elements, M=%d uncertain systems", data.name, len(uv.intervals), uv.M)
-    return VertexResult(data.name, np.asarray(data.scheduling, dtype=float), x0, u0, fit, uv, r2)
+    return VertexResult(data.name, np.asarray(data.scheduling, dtype=float), x0, u0, fit, uv, r2,
+                        x_flown=x_flown, u_flown=u_flown, xdot_flown=flown, motor=motor)
 
 
 def validate(results: Sequence[VertexResult], data: VertexData, cfg: IdentificationConfig) -> dict:

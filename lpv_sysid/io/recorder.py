@@ -171,8 +171,10 @@ def git_revision(path: str | os.PathLike) -> str | None:
 
 
 def sha256_file(path: str | os.PathLike) -> str:
+    from lpv_sysid.io.safe_open import MAX_NPZ_BYTES, open_regular
+
     h = hashlib.sha256()
-    with open(path, "rb") as fh:
+    with open_regular(path, max_bytes=MAX_NPZ_BYTES) as fh:     # regular file: a FIFO would block
         for chunk in iter(lambda: fh.read(1 << 16), b""):
             h.update(chunk)
     return h.hexdigest()
@@ -473,12 +475,10 @@ class Recorder:
     def _collect_static_metadata(self) -> dict:
         cfg = self.config
         files = {}
-        for path in cfg.config_files:
-            try:
-                files[str(path)] = Path(path).read_text()
-            except OSError as exc:
-                raise ConfigError(f"recorder: config file {path}: "
-                                  f"{exc.strerror or exc}") from None
+        from lpv_sysid.io.safe_open import read_text
+
+        for path in cfg.config_files:       # regular UTF-8 files of at most the YAML cap
+            files[str(path)] = read_text(path, f"recorder: config file {path}")
         gains = None
         if cfg.gains_file:
             try:

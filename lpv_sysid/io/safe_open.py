@@ -162,6 +162,22 @@ def read_text(path, label: Optional[str] = None, max_bytes: int = MAX_YAML_BYTES
     return decode_text(data, f"{label}: {shown.strip()}" if shown else label)
 
 
+def check_output(path, label: Optional[str] = None) -> None:
+    """Refuse to write ``path`` when it exists and is not a regular file (an ``open(path, "w")``
+    of a FIFO blocks until a reader appears; a device or directory is never an output)."""
+    p = os.fspath(path)
+    label = p if label is None else label
+    try:
+        st = os.stat(p)
+    except FileNotFoundError:
+        return
+    except OSError as exc:
+        raise FileReadError(f"{label}: cannot write ({exc.strerror or exc})", p, str(exc.strerror or exc)) from None
+    if not stat.S_ISREG(st.st_mode):
+        reason = f"not a regular file: {_kind(st.st_mode)}"
+        raise FileReadError(f"{label}: cannot write ({reason})", p, reason)
+
+
 # ----------------------------------------------------------------------------- npz
 _ZIP_ERRORS = (zipfile.BadZipFile, zipfile.LargeZipFile, zlib.error, EOFError, ValueError, OSError,
                struct.error, NotImplementedError, RuntimeError, KeyError, OverflowError)
@@ -239,5 +255,5 @@ def read_npz(path, label: Optional[str] = None, max_bytes: int = MAX_NPZ_BYTES, 
     return out
 
 
-__all__ = ["MAX_NPZ_BYTES", "MAX_YAML_BYTES", "decode_text", "open_regular", "read_bytes", "read_npz",
-           "read_text"]
+__all__ = ["MAX_NPZ_BYTES", "MAX_YAML_BYTES", "check_output", "decode_text", "open_regular", "read_bytes",
+           "read_npz", "read_text"]

@@ -223,7 +223,7 @@ class SimVehicleConfig:
     def load(cls, path: str) -> "SimVehicleConfig":
         from lpv_sysid.io.yaml_file import read_yaml_mapping
 
-        d = read_yaml_mapping(path, f"sim vehicle config {path}", allow_empty=True)
+        d = read_yaml_mapping(path, f"sim vehicle config {path}")
         try:
             return cls.from_dict(d)
         except ConfigError as exc:
@@ -237,8 +237,10 @@ class SimVehicleConfig:
             parse_hostport(self.bind, "sim vehicle bind")
         if not isinstance(self.physics_hz, (int, float)) or isinstance(self.physics_hz, bool):
             raise ConfigError(f"sim vehicle physics_hz must be a number, got {self.physics_hz!r}")
-        if not (self.physics_hz >= 50.0 and math.isfinite(self.physics_hz)):
-            raise ConfigError(f"sim vehicle physics_hz must be >= 50, got {self.physics_hz!r}")
+        from lpv_sysid.sim.vehicle import MAX_PHYSICS_HZ
+
+        if not (50.0 <= self.physics_hz <= MAX_PHYSICS_HZ):     # NaN fails too
+            raise ConfigError(f"sim vehicle physics_hz must be in [50, {MAX_PHYSICS_HZ:g}] Hz, got {self.physics_hz!r}")
         for name in ("system_id", "component_id"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 255:

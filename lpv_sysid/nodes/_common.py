@@ -12,6 +12,7 @@ import time
 
 import rclpy
 import rclpy.logging
+from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -39,6 +40,25 @@ QOS_RELIABLE = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=10,
 
 def qos_for(topic: str) -> QoSProfile:
     return QOS_SENSOR if topic in SENSOR_TOPICS else QOS_RELIABLE
+
+
+#: the ROS convention for diagnostics (diagnostic_aggregator, rqt_robot_monitor read it);
+#: each node's ``status`` array is published there too
+DIAGNOSTICS_TOPIC = "/diagnostics"
+
+
+class StatusPublisher:
+    """``status`` (in the node's namespace, what the package's nodes read and record) and
+    :data:`DIAGNOSTICS_TOPIC`, one DiagnosticArray to both (reliable, volatile)."""
+
+    def __init__(self, node) -> None:
+        self.status = node.create_publisher(DiagnosticArray, "status", qos_for("status"))
+        self.diagnostics = node.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC,
+                                                 qos_for("status"))
+
+    def publish(self, msg) -> None:
+        self.status.publish(msg)
+        self.diagnostics.publish(msg)
 
 
 def double(description: str, lo: float, hi: float, read_only: bool = False) -> ParameterDescriptor:
@@ -70,18 +90,25 @@ def clock_source(node) -> str:
 
 def settings_table(settings_cls) -> list:
     """The ``[(name, default, descriptor)]`` table of :func:`declare` generated from a
-    settings dataclass (:mod:`lpv_sysid.nodes.parameters`): type, description, the range
-    (``floating_point_range`` / ``integer_range``, enforced by rclpy) and the remaining
-    constraints as ``additional_constraints`` (checked by the settings class). An empty
-    array default declares the parameter without default (see :func:`declare`)."""
+    settings dataclass (:mod:`lpv_sysid.nodes.parameters`); see :func:`spec_table`."""
     from lpv_sysid.nodes.parameters import specs
 
+    return spec_table(specs(settings_cls))
+
+
+def spec_table(specs: dict) -> list:
+    """``[(name, default, descriptor)]`` from ``{name: (default, ParamSpec)}``
+    (:func:`lpv_sysid.nodes.parameters.specs` / ``config_specs``): type, description, the
+    range (``floating_point_range`` / ``integer_range``, enforced by rclpy) and the
+    remaining constraints as ``additional_constraints`` (checked by the settings or
+    configuration class). An empty array default is declared as an empty list of its type
+    (see :func:`declare`)."""
     table = []
-    for name, (default, spec) in specs(settings_cls).items():
+    for name, (default, spec) in specs.items():
         kind = Parameter.Type[spec.kind]
-        if spec.kind == "DOUBLE":
+        if spec.kind == "DOUBLE" and spec.lo is not None:
             d = double(spec.description, spec.lo, spec.hi)
-        elif spec.kind == "INTEGER":
+        elif spec.kind == "INTEGER" and spec.lo is not None:
             d = integer(spec.description, spec.lo, spec.hi)
         else:
             d = typed(kind, spec.description)
@@ -95,16 +122,23 @@ def settings_table(settings_cls) -> list:
 def declare(node, table) -> dict:
     """Declare ``[(name, default, descriptor)]``; return ``{name: value}``.
 
-    A ``Parameter.Type`` default declares a parameter without default (a list parameter
-    whose natural default is empty: an empty list would be typed BYTE_ARRAY by rclpy);
-    it reads as ``[]`` when not set from a parameter file.
+    A ``Parameter.Type`` default (an array type) declares a list parameter whose default is
+    empty: typed, then set to an empty list of that type unless a parameter file or ``-p``
+    gave it a value (a plain ``[]`` would be typed BYTE_ARRAY by rclpy, and a params file
+    cannot write one). Nothing is left uninitialized: under real rclpy one uninitialized
+    parameter makes the node's ``get_parameters`` service answer with no values at all
+    (``ros2 param dump`` prints ``ros__parameters: {}``).
     """
     values = {}
     for name, default, descriptor in table:
         p = node.declare_parameter(name, default, descriptor)
         if isinstance(default, Parameter.Type):
-            p = node.get_parameter_or(name, Parameter(name, value=[]))
-        values[name] = p.value
+            if p.type_ == Parameter.Type.NOT_SET:
+                p = Parameter(name, default, [])
+                result, = node.set_parameters([p])
+                if not result.successful:
+                    raise LpvSysidError(f"parameter '{name}': {result.reason}")
+        values[name] = list(p.value) if isinstance(default, (list, Parameter.Type)) else p.value
     return values
 
 

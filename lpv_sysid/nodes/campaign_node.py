@@ -76,7 +76,8 @@ def vehicle_status(values: dict) -> CP.VehicleStatus:
     mode = values.get("vehicle_mode") or None
     return CP.VehicleStatus(values.get("state", "IDLE"), values.get("reason", ""),
                             None if mode in (None, "unknown") else mode, values.get("armed") == "True",
-                            home, values.get("envelope_violation") or None)
+                            home, values.get("envelope_violation") or None,
+                            values.get("confirmed_mode") or None)
 
 
 class CampaignNode(C.ShellNode):
@@ -118,8 +119,7 @@ class CampaignNode(C.ShellNode):
         self.create_timer(1.0 / p["status_rate_hz"], lambda: self.publish_status([]))
         self.get_logger().info(f"{len(self.plan.runs)} runs planned, excitation {prof.duration:.1f} s; "
                                f"bridge {self.bridge_name}\n{self.plan.describe()}")
-        if p["auto_start"]:
-            self._start()
+        self._auto_start = bool(p["auto_start"])     # once the bridge's services are up
 
     # -- inputs ---------------------------------------------------------------------
     def on_state(self, msg):
@@ -160,6 +160,8 @@ class CampaignNode(C.ShellNode):
     def _start(self) -> str:
         if self.campaign.phase != CP.IDLE:
             return f"already {self.campaign.phase}"
+        if not (self.cli_start.service_is_ready() and self.cli_abort.service_is_ready()):
+            return f"not started: the bridge services {self.bridge_name}/start|abort are not available"
         now = self.now()
         if self.out_dir is not None:
             from lpv_sysid.cli.fly import CampaignRecorder
@@ -189,6 +191,9 @@ class CampaignNode(C.ShellNode):
 
     # -- loop -----------------------------------------------------------------------
     def on_step(self):
+        if self._auto_start and self.bridge_values and self.cli_start.service_is_ready():
+            self._auto_start = False
+            self.get_logger().info(f"auto start: {self._start()}")
         if self.campaign.phase == CP.IDLE:
             return
         now = self.now()

@@ -20,7 +20,22 @@ gains' designed v_d(t)) before scheduling and feedforward; an incoming reference
 envelope x ``envelope_margin`` aborts. Per excitation message: ``kappa |u_e|`` beyond the
 designed excitation peak x margin aborts.
 
-Per tick (``rate_hz``), once started: staleness of every input stream (receipt time and
+Ticks (``tick_source``): ``timer`` steps the law every ``1 / rate_hz`` of the node clock on
+the newest samples received; ``state`` steps it on each state sample at that sample's stamp
+(:meth:`ControllerRuntime.on_input`), so the command is always computed on the freshest
+state and carries its stamp -- the lock-stepped ``sim_vehicle`` of ``sim.launch.py`` waits for
+exactly that command before it integrates on -- while the ``rate_hz`` timer only judges
+staleness. Why: the demo gains lose stability at ~12 ms of loop delay at 250 Hz (discrete
+closed loop of the vertex models, spectral radius >= 1 from 3 samples of input delay), and
+the wall-clock Python graph on a loaded 2-core machine measured ~14 ms mean loop delay
+(state delivery p99 31 ms): it oscillated into saturation within 0.3 s.
+
+Timeouts follow a declared rule (:meth:`ControllerSettings.validate`): every stream's
+``timeout >= TIMEOUT_PERIODS / <stream>_rate_hz + input_latency_s`` (the publication rate and
+the p99 delivery latency measured on the machine), so a healthy stream never aborts on its
+own jitter.
+
+Per tick, once started: staleness of every input stream (receipt time and
 header stamp against the node clock), scheduling box, the runtime LPV law
 u = u0(v_d) + K(v_d)(x - x0(v_d)) + R kappa u_e (seed 0 Eq. 31, control/lpv_controller.py;
 with the reference feedforward of gains.yaml F_ff/F_jerk the law's own filtered derivatives
@@ -60,6 +75,19 @@ LOG = logging.getLogger(__name__)
 INPUT_TOPICS = ("state", "rotor_speeds", "velocity_reference", "excitation")
 OUTPUT_TOPICS = ("actuator_command", "status")
 _TIMEOUTS = ("state_timeout_s", "rotor_timeout_s", "reference_timeout_s", "excitation_timeout_s")
+#: timeout parameter -> the parameter holding its stream's publication rate (the timeout rule)
+_RATES = {"state_timeout_s": "state_rate_hz", "rotor_timeout_s": "rotor_rate_hz",
+          "reference_timeout_s": "reference_rate_hz",
+          "excitation_timeout_s": "excitation_rate_hz"}
+#: the timeout rule: ``timeout >= TIMEOUT_PERIODS / rate + input_latency_s``. At any check the
+#: newest sample of a healthy stream is at most one period old plus its delivery latency; one
+#: lost sample (the sensor streams are best effort) makes it two periods
+TIMEOUT_PERIODS = 2
+#: ``reference_hold``: how the law sees the reference between messages
+REFERENCE_HOLDS = ("foh", "zoh")
+#: ``tick_source``: ``timer`` (a law step every 1 / rate_hz of the node clock on the newest
+#: samples received) or ``state`` (a law step per state sample, at its stamp)
+TICK_SOURCES = ("timer", "state")
 #: the scheduling-box margin may absorb round-off and the limiter's one-step overshoot, not
 #: widen the certified box: at most this fraction of its narrowest axis
 BOX_MARGIN_MAX_FRACTION = 0.1
@@ -87,6 +115,28 @@ class ControllerSettings(P.Settings):
         0.01, "header stamps may lead the node clock, or lag it beyond a stream's timeout, "
         "by this much (transport latency) [s]; node clock = sim time under use_sim_time",
         0.0, 0.5)
+    tick_source: str = P.text(
+        "timer", "timer: a law step every 1 / rate_hz of the node clock, on the newest samples "
+        "received; state: a law step on each state sample, at its stamp (the freshest sample, "
+        "no tick phase; the lock-stepped sim_vehicle waits for exactly that command), the "
+        "timer then only judges staleness", choices=TICK_SOURCES)
+    reference_hold: str = P.text(
+        "zoh", "the reference between its messages: zoh holds it (a staircase: its steps reach "
+        "the feedforward's derivative filter), foh extrapolates the last limited value along "
+        "its slope (the played table is piecewise linear; at most reference_timeout_s ahead)",
+        choices=REFERENCE_HOLDS)
+    state_rate_hz: float = P.double(250.0, "publication rate of state [Hz] (timeout rule)",
+                                    1.0, 5000.0)
+    rotor_rate_hz: float = P.double(100.0, "publication rate of rotor_speeds [Hz] (timeout "
+                                    "rule)", 1.0, 5000.0)
+    reference_rate_hz: float = P.double(100.0, "publication rate of velocity_reference [Hz] "
+                                        "(timeout rule)", 1.0, 5000.0)
+    excitation_rate_hz: float = P.double(100.0, "publication rate of excitation [Hz] (timeout "
+                                         "rule)", 1.0, 5000.0)
+    input_latency_s: float = P.double(
+        0.0, "p99 of receipt time minus header stamp of the input streams, measured on the "
+        f"target machine (config/lpv_controller.yaml: this machine's) [s]; every timeout >= "
+        f"{TIMEOUT_PERIODS} / rate + this", 0.0, 1.0)
     box_margin: float = P.double(0.0, "tolerance around the scheduling box [m/s] (at most "
                                  f"{BOX_MARGIN_MAX_FRACTION:g} of its narrowest axis)", 0.0, 1.0)
     excitation_gain: float = P.double(1.0, "excitation multiplier kappa (seed 0 Eq. 33)",
@@ -126,13 +176,28 @@ class ControllerSettings(P.Settings):
             if getattr(self, name) < period:
                 self.fail(f"{name} {getattr(self, name):g} s is shorter than one control period "
                           f"(1 / rate_hz = {period:g} s): staleness cannot be judged that finely")
+            rate = _RATES[name]
+            least = self.min_timeout(name)
+            if getattr(self, name) < least - 1e-12:
+                self.fail(f"{name} {getattr(self, name):g} s is below {TIMEOUT_PERIODS} / {rate} + "
+                          f"input_latency_s = {TIMEOUT_PERIODS} / {getattr(self, rate):g} Hz + "
+                          f"{self.input_latency_s:g} s = {least:.4g} s: a healthy stream would "
+                          "abort on its own delivery jitter")
         shortest = min(getattr(self, n) for n in _TIMEOUTS)
         if self.stamp_tolerance_s > shortest:
             self.fail(f"stamp_tolerance_s {self.stamp_tolerance_s:g} s exceeds the shortest "
                       f"timeout {shortest:g} s (stale data would pass)")
+        if self.stamp_tolerance_s < 1.0 / self.state_rate_hz - 1e-12:
+            self.fail(f"stamp_tolerance_s {self.stamp_tolerance_s:g} s is below one state period "
+                      f"(1 / state_rate_hz = {1.0 / self.state_rate_hz:g} s): under use_sim_time "
+                      "a sample may arrive before the /clock message of its instant")
         if 0.0 < self.monitor_window_s < 1.0:
             self.fail("monitor_window_s must be 0 (running) or >= 1 s, got "
                       f"{self.monitor_window_s:g}")
+
+    def min_timeout(self, name: str) -> float:
+        """The least value the timeout rule allows for the timeout parameter ``name``."""
+        return TIMEOUT_PERIODS / getattr(self, _RATES[name]) + self.input_latency_s
 
     @property
     def timeouts(self) -> dict:
@@ -220,6 +285,8 @@ class ControllerRuntime:
         self.v_d = None           # the reference the law follows (envelope-limited)
         self.u_e = None           # normalised excitation (4)
         self._ref_stamp = None
+        self._t_sample = None     # stamp of the last state sample ticked (tick_source: state)
+        self._ref_slope = None    # slope of the limited reference at its last message
         self.commands = 0
         self.flags = {"clamped": 0, "saturated": 0, "rate_limited": 0}
         self._abort_reported = False
@@ -231,14 +298,33 @@ class ControllerRuntime:
         return out
 
     # -- inputs -------------------------------------------------------------------------
-    def on_message(self, topic: str, msg, t_now: float) -> None:
-        """A message of ``topic`` (one of :data:`INPUT_TOPICS`) received at ``t_now`` [s]."""
+    def on_message(self, topic: str, msg, t_now: float) -> float | None:
+        """A message of ``topic`` (one of :data:`INPUT_TOPICS`) received at ``t_now`` [s];
+        returns its header time, None when it was malformed."""
         try:
             t, values = parse_input(topic, msg)
         except M.MessageError as exc:
             self.on_bad_message(topic, exc, t_now)
-            return
+            return None
         self.on_sample(topic, t, values, t_now)
+        return t
+
+    def on_input(self, topic: str, msg, t_now: float) -> list:
+        """:meth:`on_message`, then what to publish: with ``tick_source: state`` a state
+        sample newer than the last one ticked runs the law at its stamp (:meth:`tick`)."""
+        t = self.on_message(topic, msg, t_now)
+        if (self.settings.tick_source == "state" and topic == "state" and t is not None
+                and (self._t_sample is None or t > self._t_sample)):
+            self._t_sample = t
+            return self.tick(t_now, t_sample=t)
+        return []
+
+    def on_timer(self, t_now: float) -> list:
+        """The node's ``rate_hz`` timer: the law step (``tick_source: timer``) or only the
+        staleness watch (``state``: a silent state stream must still abort)."""
+        if self.settings.tick_source == "timer":
+            return self.tick(t_now)
+        return self.watchdog(t_now)
 
     def on_bad_message(self, topic: str, exc: Exception, t_now: float) -> None:
         if self.supervisor.armed:
@@ -261,6 +347,7 @@ class ControllerRuntime:
                 return
             self._ref_stamp = t
             self.v_d, excess = self.limiter.update(t, self.v_d_in)
+            self._ref_slope = self.limiter.w.copy()
             if excess is not None and sup.armed:
                 sup.abort(t_now, REFERENCE_ENVELOPE, excess)
         else:
@@ -283,6 +370,7 @@ class ControllerRuntime:
         self.limiter.reset()
         if self.v_d_in is not None:          # follow from the current reference, not a ramp to it
             self.v_d, _ = self.limiter.update(self._ref_stamp, self.v_d_in)
+            self._ref_slope = self.limiter.w.copy()
         return True, "LPV control started"
 
     def abort(self, t_now: float, reason: str = "abort requested") -> str:
@@ -290,12 +378,17 @@ class ControllerRuntime:
         return f"{ev.reason}: {ev.detail}"
 
     # -- output -------------------------------------------------------------------------
-    def tick(self, t_now: float) -> list:
-        """``[(topic, msg), ...]`` to publish at ``t_now``: the command, or the abort status."""
+    def tick(self, t_now: float, t_sample: float | None = None) -> list:
+        """``[(topic, msg), ...]`` to publish at ``t_now``: the command, or the abort status.
+
+        Staleness is judged at the node clock ``t_now``; the law steps at ``t_sample`` (the
+        stamp of the state sample the step is computed on, ``tick_source: state``; default
+        ``t_now``), which also stamps the command."""
         sup = self.supervisor
         out = []
         if not sup.armed:
             return out
+        t_law = t_now if t_sample is None else float(t_sample)
         sup.check(t_now)
         ready = self.x8 is not None and self.omega is not None and self.v_d is not None \
             and self.u_e is not None
@@ -304,7 +397,7 @@ class ControllerRuntime:
         if not sup.aborted and ready:
             x12 = np.concatenate([self.x8, self.mix @ self.omega])
             try:
-                u, info = self.law.step(t_now, x12, self.v_d,
+                u, info = self.law.step(t_law, x12, self.reference_at(t_law),
                                         self.settings.excitation_gain * self.u_e)
             except SafetyError as exc:
                 kind = OUT_OF_ORDER if "backwards" in str(exc) else NON_FINITE
@@ -320,8 +413,34 @@ class ControllerRuntime:
                 if not sup.aborted:
                     self.commands += 1
                     out.append(("actuator_command",
-                                M.actuator_command_msg(self.f, round(t_now * 1e9), u)))
-        if sup.aborted and not self._abort_reported:
+                                M.actuator_command_msg(self.f, round(t_law * 1e9), u)))
+        return self._report_abort(t_now, out)
+
+    def reference_at(self, t: float) -> np.ndarray:
+        """The reference the law follows at ``t``: the limited v_d of the last message, with
+        ``reference_hold: foh`` moved along its slope by ``t - stamp`` (clipped to one
+        message period back, ``reference_timeout_s`` ahead). The excitation node plays a
+        linearly interpolated table, so this reproduces it between messages; held (zoh) it
+        is a staircase at the message rate whose steps the feedforward's derivative filter
+        turns into spikes (offline, 250 Hz law on a 100 Hz reference, 34 s of the demo
+        signal: 16 saturated commands with zoh, 0 with foh or an exact reference)."""
+        if self.settings.reference_hold == "zoh" or self._ref_slope is None:
+            return self.v_d
+        s = self.settings
+        dt = min(max(t - self._ref_stamp, -1.0 / s.reference_rate_hz), s.reference_timeout_s)
+        return self.v_d + self._ref_slope * dt
+
+    def watchdog(self, t_now: float) -> list:
+        """Staleness of every input at ``t_now`` without a law step: ``[]`` or, on the
+        abort, its status (once)."""
+        sup = self.supervisor
+        if sup.armed:
+            sup.check(t_now)
+        return self._report_abort(t_now, [])
+
+    def _report_abort(self, t_now: float, out: list) -> list:
+        sup = self.supervisor
+        if sup.aborted and sup.armed and not self._abort_reported:
             self._abort_reported = True
             self._log.append(("error", f"safety abort: {sup.event.reason}: {sup.event.detail}; "
                                        "actuator commands stopped"))

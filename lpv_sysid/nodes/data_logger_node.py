@@ -4,8 +4,10 @@ Shell around :class:`lpv_sysid.io.recorder.Recorder`. Subscribes with ``raw=True
 serialized CDR goes to the bag untouched, as ``ros2 bag record`` does) and stamps each
 message with the node clock at reception. Splits into ``bag_0000``, ``bag_0001``, ... by
 size / duration, writes ``experiment.yaml`` (config files, gains sha256, git revision,
-counts, rates, drops) and closes every bag on shutdown: rclpy turns SIGINT/SIGTERM into
-a context shutdown, ``spin`` returns and ``destroy_node`` closes the recorder.
+counts, rates, drops) and closes every bag on shutdown: SIGINT/SIGTERM (also twice, a
+terminal's Ctrl-C plus launch's forwarded SIGINT) only request the stop, and
+:meth:`DataLoggerNode.begin_shutdown` closes the recorder before anything else runs
+(nodes/_common.run); a node destroyed without ``run`` closes it in ``destroy_node``.
 Drops reported by the middleware (QoS ``message_lost`` event) and rates go to ``status``.
 Durability: the bag is flushed at least every ``flush_interval_s`` (a timer covers a stream
 that stops), so a ``kill -9`` loses at most that much; ``experiment.yaml`` then says
@@ -20,43 +22,57 @@ is closed readable and the node reports the error on ``status``.
 
 from __future__ import annotations
 
-from diagnostic_msgs.msg import DiagnosticArray
+from dataclasses import dataclass
+
 from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.parameter import Parameter
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 from rosidl_runtime_py.utilities import get_message
 
-from lpv_sysid.errors import LpvSysidError
+from lpv_sysid.errors import ConfigError, LpvSysidError
 from lpv_sysid.io import messages as M
+from lpv_sysid.io.bag import FLUSH_INTERVAL_S, STORAGES
 from lpv_sysid.io.recorder import Recorder, RecorderConfig
 from lpv_sysid.nodes import _common as C
+from lpv_sysid.nodes import parameters as P
 
 NODE_NAME = "data_logger"
 
-PARAMETERS = [
-    ("out_dir", "lpv_sysid_log", C.typed(Parameter.Type.STRING,
-                                         "experiment directory (must not exist or be empty)")),
-    ("storage", "mcap", C.typed(Parameter.Type.STRING, "rosbag2 storage: mcap or sqlite3")),
-    ("topics", list(C.TOPIC_TYPES), C.typed(
-        Parameter.Type.STRING_ARRAY,
-        "topics to record, relative to the namespace; 'name' for the lpv_sysid topics "
-        "or 'name:pkg/msg/Type' for any other")),
-    ("split_size_mb", 0.0, C.double("start a new bag after this many MB (0: never)",
-                                     0.0, 1.0e6)),
-    ("split_duration_s", 0.0, C.double("start a new bag after this long (0: never)",
-                                       0.0, 1.0e6)),
-    ("queue_depth", 1000, C.integer("subscription queue depth per topic", 1, 100000)),
-    ("config_files", Parameter.Type.STRING_ARRAY, C.typed(
-        Parameter.Type.STRING_ARRAY, "files copied verbatim into experiment.yaml")),
-    ("gains_file", "", C.typed(Parameter.Type.STRING, "gains.yaml to hash into the metadata")),
-    ("description", "", C.typed(Parameter.Type.STRING, "free text for experiment.yaml")),
-    ("status_rate_hz", 1.0, C.double("status publication rate [Hz]", 0.1, 100.0)),
-    ("flush_interval_s", 0.5, C.double(
-        "flush the bag (mcap chunk to the OS / sqlite3 commit) at least this often: the most "
-        "a kill -9 of the logger can lose [s]", 0.01, 1.0)),
-    ("fsync", False, C.typed(Parameter.Type.BOOL,
-                             "fsync at every flush (also survives a power cut; slower on SD cards)")),
-]
+
+@dataclass(frozen=True)
+class DataLoggerSettings(P.Settings):
+    """The node's parameters (config/data_logger.yaml): the one declaration. The recorder's
+    own configuration (:class:`~lpv_sysid.io.recorder.RecorderConfig`: resolved topic names,
+    bytes) is built from it and checks the rest."""
+
+    WHERE = "data_logger"
+
+    out_dir: str = P.text("lpv_sysid_log", "experiment directory (must not exist or be empty)",
+                          nonempty=True)
+    storage: str = P.text("mcap", "rosbag2 storage", choices=STORAGES)
+    topics: tuple = P.texts(tuple(C.TOPIC_TYPES),
+                            "topics to record, relative to the namespace; 'name' for the "
+                            "lpv_sysid topics or 'name:pkg/msg/Type' for any other")
+    split_size_mb: float = P.double(0.0, "start a new bag after this many MB (0: never)",
+                                    0.0, 1.0e6)
+    split_duration_s: float = P.double(0.0, "start a new bag after this long (0: never)",
+                                       0.0, 1.0e6)
+    queue_depth: int = P.integer(1000, "subscription queue depth per topic", 1, 100000)
+    config_files: tuple = P.texts((), "files copied verbatim into experiment.yaml")
+    gains_file: str = P.text("", "gains.yaml to hash into the metadata")
+    description: str = P.text("", "free text for experiment.yaml")
+    status_rate_hz: float = P.double(1.0, "status publication rate [Hz]", 0.1, 100.0)
+    flush_interval_s: float = P.double(
+        FLUSH_INTERVAL_S, "flush the bag (mcap chunk to the OS / sqlite3 commit) at least this "
+        "often: the most a kill -9 of the logger can lose [s]", 0.01, 1.0)
+    fsync: bool = P.flag(False, "fsync at every flush (also survives a power cut; slower on "
+                         "SD cards)")
+
+    def validate(self) -> None:
+        parse_topics(self.topics)
+
+
+#: the rclpy declarations, generated from the one declaration (DataLoggerSettings)
+PARAMETERS = C.settings_table(DataLoggerSettings)
 
 
 def parse_topics(entries) -> dict[str, str]:
@@ -66,8 +82,8 @@ def parse_topics(entries) -> dict[str, str]:
         name, _, typ = str(e).partition(":")
         if not typ:
             if name not in C.TOPIC_TYPES:
-                raise LpvSysidError(f"parameter 'topics': {name!r} is not an lpv_sysid topic "
-                                    f"{sorted(C.TOPIC_TYPES)}; write 'name:pkg/msg/Type'")
+                raise ConfigError(f"parameter 'topics': {name!r} is not an lpv_sysid topic "
+                                  f"{sorted(C.TOPIC_TYPES)}; write 'name:pkg/msg/Type'")
             typ = C.TOPIC_TYPES[name]
         out[name] = typ
     return out
@@ -76,32 +92,32 @@ def parse_topics(entries) -> dict[str, str]:
 class DataLoggerNode(C.ShellNode):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, PARAMETERS, **kwargs)
-        p = self.params
-        rel = parse_topics(p["topics"])
+        self.settings = p = DataLoggerSettings.from_dict(self.params)
+        rel = parse_topics(p.topics)
         topics = {self.resolve_topic_name(n): t for n, t in rel.items()}
-        cfg = RecorderConfig(out_dir=p["out_dir"], topics=topics, storage=p["storage"],
-                             split_size_bytes=int(p["split_size_mb"] * 1e6),
-                             split_duration_s=p["split_duration_s"],
-                             config_files=tuple(p["config_files"]),
-                             gains_file=p["gains_file"], description=p["description"],
-                             flush_interval_s=p["flush_interval_s"], fsync=p["fsync"])
+        cfg = RecorderConfig(out_dir=p.out_dir, topics=topics, storage=p.storage,
+                             split_size_bytes=int(p.split_size_mb * 1e6),
+                             split_duration_s=p.split_duration_s,
+                             config_files=tuple(p.config_files),
+                             gains_file=p.gains_file, description=p.description,
+                             flush_interval_s=p.flush_interval_s, fsync=p.fsync)
         self.recorder = Recorder(cfg)
         self.recorder.start(self.now_ns())
         self.f = M.MsgFactory.rclpy()
-        self.pub_status = self.create_publisher(DiagnosticArray, "status", C.qos_for("status"))
+        self.pub_status = C.StatusPublisher(self)      # status and /diagnostics
         for name, typ in rel.items():
             full = self.resolve_topic_name(name)
             reliability = (QoSReliabilityPolicy.BEST_EFFORT if name in C.SENSOR_TOPICS
                            else QoSReliabilityPolicy.RELIABLE)
-            qos = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=p["queue_depth"],
+            qos = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=p.queue_depth,
                              reliability=reliability)
             events = SubscriptionEventCallbacks(message_lost=self._lost_cb(full))
             self.create_subscription(get_message(typ), name, self._record_cb(full), qos,
                                      event_callbacks=events, raw=True)
-        self.create_timer(1.0 / p["status_rate_hz"], self.publish_status)
+        self.create_timer(1.0 / p.status_rate_hz, self.publish_status)
         # a stream that stops still reaches the disk within flush_interval_s
-        self.create_timer(p["flush_interval_s"] / 2, self._flush_cb)
-        self.get_logger().info(f"recording {sorted(topics)} to {p['out_dir']}")
+        self.create_timer(p.flush_interval_s / 2, self._flush_cb)
+        self.get_logger().info(f"recording {sorted(topics)} to {p.out_dir}")
 
     def _flush_cb(self):
         try:

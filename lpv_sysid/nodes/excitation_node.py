@@ -112,7 +112,7 @@ class ExcitationNode(C.ShellNode):
         self.pub_ref = self.create_publisher(TwistStamped, "velocity_reference",
                                              C.qos_for("velocity_reference"))
         self.pub_exc = self.create_publisher(JointState, "excitation", C.qos_for("excitation"))
-        self.pub_status = self.create_publisher(DiagnosticArray, "status", C.qos_for("status"))
+        self.pub_status = C.StatusPublisher(self)      # status and /diagnostics
         self.create_subscription(DiagnosticArray, "status", self.on_status, C.qos_for("status"))
         self.create_service(Trigger, "~/start", self.on_start)
         self.create_service(Trigger, "~/abort", self.on_abort)
@@ -148,6 +148,7 @@ class ExcitationNode(C.ShellNode):
             return
         self.aborted = True
         self.abort_reason = reason
+        self._abort_at = self.now()
         if not self.started:
             # fade the trim offset too: a core that never starts, sampled now
             t, _ = self.clock.map(self.now())
@@ -212,6 +213,32 @@ class ExcitationNode(C.ShellNode):
             v, r, u_e = self.offset, self.yaw_offset, np.zeros(4)
         self.pub_ref.publish(M.twist_reference_msg(self.f, ns, v, r))
         self.pub_exc.publish(M.excitation_msg(self.f, ns, u_e))
+        self._shutdown_tick(ns * 1e-9)
+
+    # -- orderly shutdown (nodes/_common.run) ----------------------------------------
+    def begin_shutdown(self):
+        """Abort with reason "shutdown" while the context is valid: the fade to zero starts
+        at once and is published by the timer (downstream sees the reference go to zero,
+        not stop at full amplitude); status says so, and once more when the fade is done."""
+        self._shutdown = {"final": False}
+        self._abort("shutdown")
+        self._shutdown["faded_at"] = self._abort_at + self.settings.ramp_s
+
+    def shutdown_complete(self):
+        return getattr(self, "_shutdown", {}).get("final", False)
+
+    def shutdown_state(self):
+        left = self._shutdown["faded_at"] - self.now()
+        return f"fading out ({left:.2f} s of the {self.settings.ramp_s:g} s ramp left)"
+
+    def _shutdown_tick(self, t_published: float) -> None:
+        """After a published sample at node time ``t_published``: the final status once
+        the fade is over (every output zero)."""
+        sd = getattr(self, "_shutdown", None)
+        if sd is not None and not sd["final"] and t_published >= sd["faded_at"]:
+            sd["final"] = True
+            self.publish_status()
+            self.get_logger().info("excitation faded out: shutdown")
 
     def publish_status(self):
         prog = self.core.progress if self.started else None

@@ -7,7 +7,8 @@ validates ``gains_file`` at start and refuses to start on any mismatch, naming t
 closed loops must be stable and the design envelope present (controller_runtime). Its
 parameters are declared once, in ``ControllerSettings``. Subscribes ``state``,
 ``rotor_speeds`` (best effort), ``velocity_reference`` and ``excitation`` (reliable); after
-``start`` publishes ``actuator_command`` at ``rate_hz``. The core's log lines (the safety
+``start`` publishes ``actuator_command`` at ``rate_hz`` (``tick_source: timer``) or one per
+state sample, stamped with it (``tick_source: state``, the lock-stepped sim of sim.launch.py). The core's log lines (the safety
 abort among them) go to this node's logger.
 On a fault it publishes the abort on ``status`` and stops commanding, so the bridge hands
 control back to PX4. Services ``start`` / ``abort`` (std_srvs/Trigger).
@@ -18,7 +19,6 @@ control back to PX4. Services ``start`` / ``abort`` (std_srvs/Trigger).
 
 from __future__ import annotations
 
-from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistStamped
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import JointState
@@ -42,8 +42,7 @@ class LpvControllerNode(C.ShellNode):
                                          self.get_fully_qualified_name())
         self.pub = {"actuator_command": self.create_publisher(
                         JointState, "actuator_command", C.qos_for("actuator_command")),
-                    "status": self.create_publisher(DiagnosticArray, "status",
-                                                    C.qos_for("status"))}
+                    "status": C.StatusPublisher(self)}      # status and /diagnostics
         for topic, typ in (("state", Odometry), ("rotor_speeds", JointState),
                            ("velocity_reference", TwistStamped), ("excitation", JointState)):
             self.create_subscription(typ, topic, self._input(topic), C.qos_for(topic))
@@ -62,16 +61,26 @@ class LpvControllerNode(C.ShellNode):
         """Log what the core queued, with this node's logger (timestamp, /rosout)."""
         logger = self.get_logger()
         for level, text in self.runtime.take_log():
-            {"info": logger.info, "warn": logger.warning, "error": logger.error}[level](text)
+            # one call site per severity: real rclpy keys its log context on the calling
+            # line and raises "Logger severity cannot be changed between calls" when one
+            # line logs two severities (it killed the node at its first safety abort)
+            if level == "error":
+                logger.error(text)
+            elif level == "warn":
+                logger.warning(text)
+            else:
+                logger.info(text)
 
     def _input(self, topic):
         def cb(msg):
-            self.runtime.on_message(topic, msg, self.now())
+            # tick_source state: a state sample steps the law at once (freshest sample)
+            for out, m in self.runtime.on_input(topic, msg, self.now()):
+                self.pub[out].publish(m)
             self.log_core()
         return cb
 
     def on_tick(self):
-        for topic, msg in self.runtime.tick(self.now()):
+        for topic, msg in self.runtime.on_timer(self.now()):
             self.pub[topic].publish(msg)
         self.log_core()
 
@@ -89,6 +98,22 @@ class LpvControllerNode(C.ShellNode):
         self.get_logger().warning(f"abort: {response.message}")
         self.on_tick()
         return response
+
+
+    # -- orderly shutdown (nodes/_common.run) ----------------------------------------
+    def begin_shutdown(self):
+        """Latch an abort "shutdown" while the context is valid and publish the final
+        status: no actuator_command follows (the bridge hands control back to PX4 when the
+        commands stop; the excitation node fades out on the abort status)."""
+        now = self.now()
+        self.runtime.abort(now, "shutdown")
+        published = False
+        for topic, msg in self.runtime.tick(now):      # aborted: the abort status, no command
+            self.pub[topic].publish(msg)
+            published |= topic == "status"
+        if not published:                              # not started, or abort already reported
+            self.publish_status()
+        self.log_core()
 
 
 def main(args=None):

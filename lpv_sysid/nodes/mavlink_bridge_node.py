@@ -23,88 +23,159 @@ failsafe takes over). See docs/px4_transport.md, "MAVROS mode".
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistStamped
 from nav_msgs.msg import Odometry
-from rclpy.parameter import Parameter
 from sensor_msgs.msg import Imu, JointState
 from std_srvs.srv import Trigger
 
-from lpv_sysid.errors import ConfigError, LpvSysidError
+from lpv_sysid.errors import LpvSysidError
 from lpv_sysid.io import messages as M
 from lpv_sysid.mavlink import mavros as MR
 from lpv_sysid.mavlink.bridge import BridgeConfig, BridgeCore
 from lpv_sysid.mavlink.telemetry import ImuSample, RotorSample, StateSample
 from lpv_sysid.nodes import _common as C
+from lpv_sysid.nodes import parameters as P
 
 NODE_NAME = "mavlink_bridge"
-S = Parameter.Type.STRING
+TRANSPORTS = ("mavlink", "mavros")
 
-PARAMETERS = [
-    ("transport", "mavlink", C.typed(S, "mavlink (own MAVLink link) | mavros (MAVROS topics)")),
-    ("mavros.namespace", "/mavros", C.typed(S, "MAVROS node namespace (transport mavros)")),
-    ("mavros.odom_frame_id", "map", C.typed(S, "frame_id of MAVROS local_position/odom")),
-    ("mavros.base_frame_id", "base_link", C.typed(S, "MAVROS body frame (odom child, imu)")),
-    ("mavros.prestream_timeout", 30.0, C.double("zero-velocity stream without a reference "
-                                                "-> stop [s]", 1.0001, 3600.0)),
-    ("mavros.use_diagnostics", True, C.typed(Parameter.Type.BOOL,
-                                             "read the PX4 mode from /diagnostics (read-only)")),
-    ("link.url", "udpin:127.0.0.1:14540", C.typed(S, "pymavlink connection string")),
-    ("link.baud", 921600, C.integer("serial baud rate (serial URLs only)", 1200, 12000000)),
-    ("link.source_system", 1, C.integer("our MAVLink system id", 1, 255)),
-    ("link.source_component", 191, C.integer("our component id (191: onboard computer)",
-                                             1, 255)),
-    ("link.target_system", 0, C.integer("autopilot system id (0: first heartbeat)", 0, 255)),
-    ("link.heartbeat_period", 1.0, C.double("heartbeat period [s]", 0.05, 10.0)),
-    ("link.link_timeout", 1.5, C.double("no heartbeat for this long -> link lost [s]",
-                                        0.1, 60.0)),
-    ("offboard.setpoint_rate_hz", 20.0, C.double("setpoint stream rate [Hz] (PX4 > 2 Hz)",
-                                                 2.0001, 1000.0)),
-    ("offboard.prestream_time", 1.2, C.double("setpoints before OFFBOARD [s] (PX4 > 1 s)",
-                                              1.0001, 60.0)),
-    ("offboard.arm", False, C.typed(Parameter.Type.BOOL, "arm the vehicle on start")),
-    ("offboard.handback_mode", "HOLD", C.typed(S, "PX4 mode on hand-back: HOLD|POSCTL|LAND")),
-    ("offboard.input_timeout", 0.5, C.double("no command for this long -> hand back [s]",
-                                             0.01, 60.0)),
-    ("command", "velocity", C.typed(S, "velocity (phase 1) | attitude_rate (phase 2)")),
-    ("velocity_frame", "body_ned", C.typed(S, "velocity setpoint frame: body_ned|local_ned")),
-    ("auto_start", False, C.typed(Parameter.Type.BOOL, "start offboard on the first command")),
-    ("telemetry_max_age", 0.5, C.double("attitude/velocity older than this is not fused [s]",
-                                        0.01, 10.0)),
-    ("poll_rate_hz", 250.0, C.double("link poll rate [Hz]", 10.0, 2000.0)),
-    ("status_rate_hz", 2.0, C.double("status publication rate [Hz]", 0.1, 100.0)),
-]
+#: MavrosConfig fields supplied by the bridge's own parameters (one value for both transports)
+MAVROS_SHARED = {"setpoint_rate_hz": "offboard.setpoint_rate_hz",
+                 "input_timeout": "offboard.input_timeout",
+                 "send_on_command": "offboard.send_on_command",
+                 "telemetry_max_age": "telemetry_max_age", "auto_start": "auto_start",
+                 "command": "command"}
 
 
-def bridge_config(p: dict) -> BridgeConfig:
-    link = {k.split(".", 1)[1]: v for k, v in p.items() if k.startswith("link.")}
-    offboard = {k.split(".", 1)[1]: v for k, v in p.items() if k.startswith("offboard.")}
-    return BridgeConfig.from_dict({"link": link, "offboard": offboard, "command": p["command"],
-                                   "velocity_frame": p["velocity_frame"],
-                                   "auto_start": p["auto_start"],
-                                   "telemetry_max_age": p["telemetry_max_age"]})
+@dataclass(frozen=True)
+class BridgeNodeSettings(P.Settings):
+    """The parameters of the shell itself (the rest: :data:`PARAMETERS`)."""
+
+    WHERE = "mavlink_bridge"
+
+    transport: str = P.text("mavlink", "mavlink (own MAVLink link to PX4) | mavros (MAVROS "
+                            "topics, docs/px4_transport.md)")
+    poll_rate_hz: float = P.double(250.0, "link poll rate [Hz]", 10.0, 2000.0)
+    status_rate_hz: float = P.double(2.0, "status publication rate [Hz]", 0.1, 100.0)
+
+    def validate(self) -> None:
+        if self.transport not in TRANSPORTS:
+            self.fail(f"transport must be 'mavlink' or 'mavros', got {self.transport!r}")
 
 
-def mavros_config(p: dict) -> MR.MavrosConfig:
-    d = {k.split(".", 1)[1]: v for k, v in p.items() if k.startswith("mavros.")}
-    return MR.MavrosConfig.from_dict({**d, "setpoint_rate_hz": p["offboard.setpoint_rate_hz"],
-                                      "input_timeout": p["offboard.input_timeout"],
-                                      "telemetry_max_age": p["telemetry_max_age"],
-                                      "auto_start": p["auto_start"], "command": p["command"]})
+#: descriptions of the parameters generated from BridgeConfig (config/mavlink_bridge.yaml
+#: explains each section); types, defaults and checks are BridgeConfig's
+BRIDGE_DESCRIPTIONS = {
+    "link.url": "pymavlink connection string (udpin:H:P, udpout:H:P, tcp:H:P, serial device)",
+    "link.baud": "serial baud rate (serial URLs only)",
+    "link.source_system": "our MAVLink system id (1..255)",
+    "link.source_component": "our component id (191: onboard computer)",
+    "link.target_system": "autopilot system id (0: the first autopilot HEARTBEAT)",
+    "link.target_component": "autopilot component id",
+    "link.dialect": "MAVLink dialect (PX4: development)",
+    "link.heartbeat_period": "our HEARTBEAT period [s]",
+    "link.link_timeout": "no autopilot HEARTBEAT for this long -> link lost [s]",
+    "link.reconnect_period": "reopen period of a lost serial/TCP link [s]",
+    "link.stream_request_period": "SET_MESSAGE_INTERVAL retry period for missing streams [s]",
+    "link.streams": "requested telemetry rate [Hz] (0: off)",
+    "link.signing_key_file": "MAVLink 2 signing key file (32 raw bytes or 64 hex chars); "
+                             "empty: unsigned",
+    "link.signing_link_id": "signing link id",
+    "link.allow_unsigned": "with a signing key: still accept unsigned messages",
+    "offboard.setpoint_rate_hz": "setpoint stream rate [Hz] (PX4 needs > 2 Hz)",
+    "offboard.prestream_time": "setpoints before OFFBOARD is requested [s] (PX4 needs > 1 s)",
+    "offboard.arm": "arm the vehicle on start",
+    "offboard.handback_chain": "PX4 modes tried in turn on hand-back until the HEARTBEAT "
+                               "confirms one (HOLD, POSCTL, ALTCTL, LAND, RTL)",
+    "offboard.handback_mode": "tried before the chain (single-mode key of earlier releases); "
+                              "empty: the chain alone",
+    "offboard.input_timeout": "no command for this long -> hand back [s]",
+    "offboard.ack_timeout": "per attempt, for a COMMAND_ACK [s]",
+    "offboard.ack_settle_s": "quiet time after the last ACK before a step counts [s]",
+    "offboard.max_retries": "command retries per step",
+    "offboard.mode_confirm_timeout": "after ACCEPTED, for the HEARTBEAT to show the mode [s]",
+    "offboard.send_on_command": "forward each new command at once (latency)",
+    "command": "velocity (phase 1) | attitude_rate (phase 2)",
+    "velocity_frame": "velocity setpoint frame: body_ned (PX4 rotates by yaw) | local_ned",
+    "use_yaw_rate": "velocity setpoints carry the yaw-rate reference",
+    "arm_length": "attitude_rate: seed 0 Eq. (7) geometry [m]",
+    "rate_p": "attitude_rate: PX4 MC_ROLLRATE_P, MC_PITCHRATE_P, MC_YAWRATE_P",
+    "auto_start": "start offboard on the first command",
+    "telemetry_max_age": "attitude/velocity older than this is not fused [s]",
+    "n_rotors": "number of rotors (ESC_STATUS / motor outputs)",
+    "rotor_estimate.enabled": "estimate rotor speeds from motor outputs while no fresh ESC "
+                              "telemetry (seed 0 Eq. 8)",
+    "rotor_estimate.source": "auto | actuator_output_status | servo_output_raw",
+    "rotor_estimate.mapping": "motor output -> u_ESC: pwm | dshot | normalized | symmetric",
+    "rotor_estimate.output_min": "override of the mapping's output range (NaN: the mapping's)",
+    "rotor_estimate.output_max": "override of the mapping's output range (NaN: the mapping's)",
+    "rotor_estimate.motor_outputs": "output channel (1-based) of rotor 1..n",
+    "rotor_estimate.servo_port": "SERVO_OUTPUT_RAW port of the motors",
+    "rotor_estimate.airframe": "YAML with a quadrotor section (empty: built-in airframe)",
+    "rotor_estimate.a_omega": "motor time constant inverse [1/s] (NaN: the airframe's)",
+    "rotor_estimate.b_omega": "motor gain [rad/s^2 per unit u_ESC] (NaN: the airframe's)",
+    "rotor_estimate.omega_min": "idle rotor speed [rad/s] (NaN: the airframe's)",
+    "rotor_estimate.omega_max": "maximum rotor speed [rad/s] (NaN: the airframe's)",
+    "rotor_estimate.max_gap": "longer gaps between output samples restart the estimate [s]",
+    "rotor_estimate.esc_timeout": "ESC telemetry older than this -> the estimate is used [s]",
+    "envelope.enabled": "onboard safety envelope (violation -> hand-back)",
+    "envelope.home": "auto | home_position | start",
+    "envelope.floor": "floor above home [m]",
+    "envelope.ceiling": "ceiling above home [m]",
+    "envelope.floor_arm_margin": "the floor is active once above floor + margin [m]",
+    "envelope.lookahead": "predictive floor/ceiling/fence on p + v * lookahead [s]",
+    "envelope.radius": "horizontal geofence around home [m]",
+    "envelope.max_tilt_deg": "largest tilt [deg]",
+    "envelope.max_speed": "largest NED speed [m/s]",
+    "envelope.max_setpoint": "velocity references above this are rejected [m/s]",
+    "envelope.max_setpoint_yaw_rate": "yaw-rate references above this are rejected [rad/s]",
+}
+#: not a parameter: the MAV_TYPE of our HEARTBEAT identifies this program (onboard controller)
+BRIDGE_EXCLUDED = ("link.mav_type",)
+
+MAVROS_DESCRIPTIONS = {
+    "mavros.namespace": "MAVROS node namespace (transport mavros)",
+    "mavros.odom_frame_id": "frame_id of MAVROS local_position/odom",
+    "mavros.base_frame_id": "MAVROS body frame (odom child, imu)",
+    "mavros.prestream_timeout": "zero-velocity stream without a reference -> stop [s]",
+    "mavros.use_diagnostics": "read the PX4 mode from /diagnostics (read-only)",
+}
+
+#: the rclpy declarations: the shell's settings, then BridgeConfig's and MavrosConfig's
+#: fields (generated; nothing restated)
+SPECS = {**P.specs(BridgeNodeSettings),
+         **P.config_specs(BridgeConfig, BRIDGE_DESCRIPTIONS, exclude=BRIDGE_EXCLUDED),
+         **P.config_specs(MR.MavrosConfig, MAVROS_DESCRIPTIONS, prefix="mavros.",
+                          exclude=tuple(f"mavros.{k}" for k in MAVROS_SHARED))}
+PARAMETERS = C.spec_table(SPECS)
+
+
+def _split(p: dict) -> tuple[dict, dict, dict]:
+    """Declared values -> (shell settings, BridgeConfig mapping, MavrosConfig mapping)."""
+    shell = {k: p[k] for k in P.specs(BridgeNodeSettings)}
+    mavros = {k.split(".", 1)[1]: v for k, v in p.items() if k.startswith("mavros.")}
+    mavros.update({k: p[v] for k, v in MAVROS_SHARED.items()})
+    bridge = P.nest({k: v for k, v in p.items()
+                     if k not in shell and not k.startswith("mavros.")}, SPECS)
+    return shell, bridge, P.nest(mavros)
 
 
 class MavlinkBridgeNode(C.ShellNode):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, PARAMETERS, **kwargs)
         p = self.params
-        if p["transport"] not in ("mavlink", "mavros"):
-            raise ConfigError(f"transport must be 'mavlink' or 'mavros', got {p['transport']!r}")
-        self.mavros = p["transport"] == "mavros"
-        self.core = MR.MavrosCore(mavros_config(p)) if self.mavros else BridgeCore(bridge_config(p))
+        shell, bridge, mavros = _split(p)
+        self.settings = s = BridgeNodeSettings.from_dict(shell)
+        self.mavros = s.transport == "mavros"
+        self.core = MR.MavrosCore(MR.MavrosConfig.from_dict(mavros)) if self.mavros \
+            else BridgeCore(BridgeConfig.from_dict(bridge))
         self.f = M.MsgFactory.rclpy()
         self.pub_state = self.create_publisher(Odometry, "state", C.qos_for("state"))
         self.pub_imu = self.create_publisher(Imu, "imu", C.qos_for("imu"))
-        self.pub_status = self.create_publisher(DiagnosticArray, "status", C.qos_for("status"))
+        self.pub_status = C.StatusPublisher(self)      # status and /diagnostics
         self.create_subscription(TwistStamped, "velocity_reference", self.on_reference,
                                  C.qos_for("velocity_reference"))
         self.create_service(Trigger, "~/start", self.on_start)
@@ -129,9 +200,10 @@ class MavlinkBridgeNode(C.ShellNode):
             self.create_subscription(JointState, "actuator_command", self.on_command,
                                      C.qos_for("actuator_command"))
             self.core.open(self.now())
-            self.create_timer(1.0 / p["poll_rate_hz"], self.on_poll)
-            self.get_logger().info(f"MAVLink {p['link.url']}, command {p['command']}")
-        self.create_timer(1.0 / p["status_rate_hz"], lambda: self.publish_status([]))
+            self.create_timer(1.0 / s.poll_rate_hz, self.on_poll)
+            self.get_logger().info(f"MAVLink {self.core.config.link.url}, "
+                                   f"command {self.core.config.command}")
+        self.create_timer(1.0 / s.status_rate_hz, lambda: self.publish_status([]))
 
     # -- inputs -------------------------------------------------------------------------
     def on_reference(self, msg):
@@ -221,9 +293,14 @@ class MavlinkBridgeNode(C.ShellNode):
         for ev in events:
             lv = getattr(ev, "level", "warn" if getattr(ev, "kind", "") != "link_up" else "info")
             text = getattr(ev, "reason", None) or f"{ev.kind}: {ev.detail}"
-            log = {"info": self.get_logger().info, "warn": self.get_logger().warning,
-                   "error": self.get_logger().error}.get(lv, self.get_logger().warning)
-            log(text)
+            # one call site per severity: rclpy keys a log context on the calling line and
+            # raises "Logger severity cannot be changed between calls" otherwise
+            if lv == "info":
+                self.get_logger().info(text)
+            elif lv == "error":
+                self.get_logger().error(text)
+            else:
+                self.get_logger().warning(text)
             if lv in ("warn", "error"):
                 level = "ERROR" if lv == "error" or level == "ERROR" else "WARN"
                 message = text

@@ -15,6 +15,21 @@ declaration
   :meth:`Settings.validate`), so no path can start with values another path would refuse,
 * the shipped YAML files are checked against it by a test (every key declared, same type).
 
+A node whose parameters are the fields of a core's configuration dataclass (the bridge:
+:class:`~lpv_sysid.mavlink.bridge.BridgeConfig` with its ``link``, ``offboard``,
+``envelope`` and ``rotor_estimate`` sections; the simulated vehicle: ``SensorConfig``) does
+not restate them: :func:`config_specs` generates one parameter per leaf field (dotted
+names for the sections, ``link.url``; the type from the field's annotation, the default
+from the dataclass; a ``X | None`` field defaulting to None is declared with its unset
+value, :data:`UNSET`; a ``((key, value), ...)`` table is one parameter per default key,
+``link.streams.HIGHRES_IMU``), and :func:`nest` turns the declared values back into the
+nested mapping the dataclass's ``from_dict`` validates (its checks are the only ones).
+
+Every parameter is declared with a value: a list whose default is empty gets an empty list
+of its type (rclpy would type a plain ``[]`` BYTE_ARRAY), never "declared without default"
+(an uninitialized parameter empties the node's whole ``get_parameters`` answer under real
+rclpy, so ``ros2 param dump`` shows nothing).
+
 Pure Python (no rclpy): the replay path uses it without ROS. Ranges are inclusive, as in
 rcl_interfaces ``FloatingPointRange``; ``lo_open`` makes the lower bound exclusive (rclpy
 cannot express that, the check here does).
@@ -22,15 +37,23 @@ cannot express that, the check here does).
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import types
+import typing
 from dataclasses import MISSING, dataclass, field, fields
 from typing import Any, Mapping, Optional
 
 from lpv_sysid.errors import ConfigError
 
 #: rcl_interfaces ParameterType names used here (rclpy ``Parameter.Type`` members)
-DOUBLE, INTEGER, BOOL, STRING, DOUBLE_ARRAY, STRING_ARRAY = (
-    "DOUBLE", "INTEGER", "BOOL", "STRING", "DOUBLE_ARRAY", "STRING_ARRAY")
+DOUBLE, INTEGER, BOOL, STRING, DOUBLE_ARRAY, STRING_ARRAY, INTEGER_ARRAY = (
+    "DOUBLE", "INTEGER", "BOOL", "STRING", "DOUBLE_ARRAY", "STRING_ARRAY", "INTEGER_ARRAY")
+ARRAYS = (DOUBLE_ARRAY, STRING_ARRAY, INTEGER_ARRAY)
+#: the value of an optional (``X | None``) parameter that means "unset": rclpy cannot keep a
+#: declared parameter without value -- one uninitialized parameter makes the node's
+#: get_parameters service answer nothing, so ``ros2 param dump`` shows no parameter at all
+UNSET = {STRING: "", DOUBLE: math.nan}
 
 
 @dataclass(frozen=True)
@@ -45,6 +68,8 @@ class ParamSpec:
     choices: tuple = ()              # STRING: allowed values
     lengths: tuple = ()              # arrays: allowed lengths (empty: any)
     nonempty: bool = False           # STRING: must not be ""
+    checked_by: str = ""             # the configuration class whose from_dict checks it
+    optional: bool = False           # the field may be None: "" (STRING) / NaN (DOUBLE) = unset
 
     def constraints(self) -> str:
         """Human-readable constraints (``ParameterDescriptor.additional_constraints``)."""
@@ -52,7 +77,7 @@ class ParamSpec:
         if self.lo is not None or self.hi is not None:
             lo = "-inf" if self.lo is None else f"{self.lo:g}"
             hi = "inf" if self.hi is None else f"{self.hi:g}"
-            each = "each entry " if self.kind == DOUBLE_ARRAY else ""
+            each = "each entry " if self.kind in ARRAYS else ""
             out.append(f"{each}in {'(' if self.lo_open else '['}{lo}, {hi}]")
         if self.choices:
             out.append(f"one of {list(self.choices)}")
@@ -60,6 +85,10 @@ class ParamSpec:
             out.append(f"length {' or '.join(str(n) for n in self.lengths)}")
         if self.nonempty:
             out.append("required (not empty)")
+        if self.optional:
+            out.append(f"{UNSET[self.kind]!r}: unset")
+        if self.checked_by:
+            out.append(f"checked at start by {self.checked_by}")
         return "; ".join(out)
 
 
@@ -94,6 +123,13 @@ def doubles(default: tuple, description: str, lo: Optional[float] = None,
 
 def texts(default: tuple, description: str):
     return _field(tuple(str(x) for x in default), ParamSpec(STRING_ARRAY, description))
+
+
+def integers(default: tuple, description: str, lo: Optional[int] = None,
+             hi: Optional[int] = None, lengths: tuple = ()):
+    """An INTEGER_ARRAY parameter (a tuple of ints), entries in ``[lo, hi]``."""
+    return _field(tuple(int(x) for x in default),
+                  ParamSpec(INTEGER_ARRAY, description, lo, hi, lengths=tuple(lengths)))
 
 
 def specs(cls) -> dict:
@@ -159,6 +195,12 @@ def coerce(name: str, value: Any, spec: ParamSpec, where: str) -> Any:
         if not all(isinstance(x, str) for x in items):
             fail("must be a list of strings")
         return tuple(items)
+    if k == INTEGER_ARRAY:
+        if not all(isinstance(x, int) and not isinstance(x, bool) for x in items):
+            fail("must be a list of integers")
+        for i, x in enumerate(items):
+            in_range(x, f"entry [{i}] ")
+        return tuple(int(x) for x in items)
     if not all(_number(x) for x in items):
         fail("must be a list of numbers")
     for i, x in enumerate(items):
@@ -204,12 +246,135 @@ class Settings:
                 for name, v in ((n, getattr(self, n)) for n in specs(type(self)))}
 
 
+# -- parameters generated from a core's configuration dataclass ---------------------------
+_SCALARS = {bool: BOOL, int: INTEGER, float: DOUBLE, str: STRING}
+_ARRAYS = {float: DOUBLE_ARRAY, int: INTEGER_ARRAY, str: STRING_ARRAY}
+
+
+def _unwrap_optional(hint) -> tuple[Any, bool]:
+    """``(X, True)`` for ``X | None`` / ``Optional[X]``, else ``(hint, False)``."""
+    if typing.get_origin(hint) in (typing.Union, getattr(types, "UnionType", typing.Union)):
+        args = [a for a in typing.get_args(hint) if a is not type(None)]
+        if len(args) == 1 and len(typing.get_args(hint)) == 2:
+            return args[0], True
+    return hint, False
+
+
+def _table_hint(hint) -> bool:
+    """``tuple[tuple[str, float], ...]``: a ``{key: number}`` table stored as pairs."""
+    if typing.get_origin(hint) is not tuple:
+        return False
+    args = typing.get_args(hint)
+    return (len(args) == 2 and args[1] is Ellipsis and typing.get_origin(args[0]) is tuple
+            and typing.get_args(args[0]) in ((str, float), (str, int)))
+
+
+def _kind_of(hint, where: str) -> str:
+    if hint in _SCALARS:
+        return _SCALARS[hint]
+    if typing.get_origin(hint) is tuple:
+        elems = {a for a in typing.get_args(hint) if a is not Ellipsis}
+        if len(elems) == 1 and next(iter(elems)) in _ARRAYS:
+            return _ARRAYS[next(iter(elems))]
+    raise TypeError(f"{where}: type {hint!r} has no ROS parameter form; exclude it or give "
+                    "the field a scalar, tuple or table type")
+
+
+def config_specs(cls, descriptions: Mapping[str, str], prefix: str = "",
+                 exclude: tuple = ()) -> dict:
+    """``{name: (default, ParamSpec)}`` for every leaf field of the frozen configuration
+    dataclass ``cls`` (see the module docstring), names prefixed with ``prefix``.
+
+    A field whose default is itself a configuration dataclass is a section (``link.url``).
+    ``descriptions`` gives the description of every generated name (a table field: one
+    description for all its keys); a generated name without one, or a description of no
+    generated name, is a TypeError (the declaration and its text cannot drift apart).
+    ``exclude``: names (with prefix) not declared, e.g. fields another parameter supplies.
+    The constraints are those of ``cls.from_dict`` (``checked_by``), not restated here.
+    """
+    used: set = set()
+    out = _config_specs(cls, descriptions, prefix, tuple(exclude), cls.__name__, used)
+    unused = sorted(set(descriptions) - used)
+    if unused:
+        raise TypeError(f"{cls.__name__}: descriptions of no generated parameter: {unused}")
+    return out
+
+
+def _config_specs(cls, descriptions, prefix, exclude, owner, used) -> dict:
+    hints = typing.get_type_hints(cls)
+    out = {}
+    for f in fields(cls):
+        name = prefix + f.name
+        if name in exclude:
+            continue
+        if f.default is not MISSING:
+            default = f.default
+        elif f.default_factory is not MISSING:
+            default = f.default_factory()
+        else:
+            raise TypeError(f"{cls.__name__}.{f.name}: a parameter needs a default")
+        if dataclasses.is_dataclass(default):
+            out.update(_config_specs(type(default), descriptions, name + ".", exclude, owner,
+                                     used))
+            continue
+        if name not in descriptions:
+            raise TypeError(f"{owner}: parameter '{name}' has no description")
+        used.add(name)
+        description = descriptions[name]
+        hint, optional = _unwrap_optional(hints[f.name])
+        if _table_hint(hint):
+            value_kind = _SCALARS[typing.get_args(typing.get_args(hint)[0])[1]]
+            for key, value in default:
+                out[f"{name}.{key}"] = (value, ParamSpec(value_kind, f"{description}: {key}",
+                                                          checked_by=owner))
+            continue
+        kind = _kind_of(hint, f"{owner} parameter '{name}'")
+        if default is None:
+            if not optional or kind not in UNSET:
+                raise TypeError(f"{owner}: parameter '{name}' defaults to None: only an "
+                                f"optional {' or '.join(UNSET)} can (its unset value)")
+            out[name] = (UNSET[kind], ParamSpec(kind, description, checked_by=owner,
+                                                optional=True))
+            continue
+        out[name] = (tuple(default) if isinstance(default, (list, tuple)) else default,
+                     ParamSpec(kind, description, checked_by=owner))
+    return out
+
+
+def is_unset(value: Any, spec: ParamSpec) -> bool:
+    """Whether ``value`` of an optional parameter is its unset value (:data:`UNSET`)."""
+    if not spec.optional:
+        return False
+    if spec.kind == DOUBLE:
+        return isinstance(value, float) and math.isnan(value)
+    return value == UNSET[spec.kind]
+
+
+def nest(values: Mapping[str, Any], specs: Optional[Mapping[str, tuple]] = None) -> dict:
+    """Dotted parameter values -> the nested mapping of a configuration's ``from_dict``
+    (``{"link.url": u}`` -> ``{"link": {"url": u}}``); the unset value of an optional
+    parameter of ``specs`` (:func:`config_specs`) is left out, so the dataclass default
+    (None) applies."""
+    out: dict = {}
+    for name, value in values.items():
+        if specs is not None and name in specs and is_unset(value, specs[name][1]):
+            continue
+        *sections, leaf = name.split(".")
+        d = out
+        for s in sections:
+            d = d.setdefault(s, {})
+            if not isinstance(d, dict):
+                raise ConfigError(f"parameter '{name}': '{s}' is both a value and a section")
+        d[leaf] = list(value) if isinstance(value, tuple) else value
+    return out
+
+
 def yaml_parameters(path: str, node_name: str) -> dict:
     """``ros__parameters`` of ``node_name`` from a ROS parameter file (keys ``node_name``,
     ``/**/node_name``, ``lpv_sysid/node_name`` or ``/**``)."""
-    from lpv_sysid.io.formats import load_yaml
+    from lpv_sysid.io.yaml_file import read_yaml
 
-    data = load_yaml(path, label=str(path))
+    data = read_yaml(path)      # strict: safe open, duplicate keys, .nan/.inf refused with their key path
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping of node names")
     for key, body in data.items():
@@ -222,6 +387,7 @@ def yaml_parameters(path: str, node_name: str) -> dict:
                       f"(keys: {sorted(map(str, data))})")
 
 
-__all__ = ["BOOL", "DOUBLE", "DOUBLE_ARRAY", "INTEGER", "STRING", "STRING_ARRAY", "ParamSpec",
-           "Settings", "coerce", "double", "doubles", "flag", "integer", "specs", "text", "texts",
+__all__ = ["ARRAYS", "BOOL", "DOUBLE", "DOUBLE_ARRAY", "INTEGER", "INTEGER_ARRAY", "STRING",
+           "STRING_ARRAY", "UNSET", "ParamSpec", "Settings", "coerce", "config_specs", "double",
+           "doubles", "flag", "integer", "integers", "is_unset", "nest", "specs", "text", "texts",
            "yaml_parameters"]

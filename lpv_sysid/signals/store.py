@@ -15,6 +15,9 @@ from lpv_sysid.signals.multisine import SignalSet
 
 def save_npz(path: str, t: np.ndarray, u: np.ndarray, names) -> None:
     """Write ``t``, ``u``, ``names`` (unicode array) to ``path`` (numpy .npz, uncompressed)."""
+    from lpv_sysid.io.safe_open import check_output
+
+    check_output(path)      # an existing FIFO or device is refused, not opened
     try:
         with open(path, "wb") as fh:
             np.savez(fh, t=np.asarray(t, float), u=np.asarray(u, float), names=np.asarray(list(names), dtype=str))
@@ -124,6 +127,9 @@ def summary(sig: SignalSet) -> dict[str, Any]:
 def save_summary(path: str, data: dict[str, Any]) -> None:
     import yaml
 
+    from lpv_sysid.io.safe_open import check_output
+
+    check_output(path)
     try:
         with open(path, "w", encoding="utf-8") as fh:
             yaml.safe_dump(data, fh, sort_keys=False, default_flow_style=None, width=120)

@@ -88,10 +88,14 @@ class Phase1Config:
             raise ConfigError("phase1.box_min: must be below box_max in every component")
         if any(a < 0 for a in self.amplitudes):
             raise ConfigError("phase1.amplitudes: must be >= 0")
+        from lpv_sysid.signals.config import MAX_DURATION
+
         for name in ("trim_s", "excite_s", "trim_average_s", "f_min_hz", "f_max_hz", "taper_s"):
             v = getattr(self, name)
             if not is_finite_number(v) or v < 0:
                 raise ConfigError(f"phase1.{name}: must be a finite number >= 0, got {v!r}")
+            if name.endswith("_s") and v > MAX_DURATION:     # simulated before anything is written
+                raise ConfigError(f"phase1.{name}: {v:g} s exceeds the limit of {MAX_DURATION:g} s")
             object.__setattr__(self, name, float(v))
         if self.trim_s <= 0 or self.excite_s <= 0:
             raise ConfigError("phase1.trim_s and phase1.excite_s: must be > 0")

@@ -30,6 +30,10 @@ from lpv_sysid.models.quadrotor import Quadrotor
 from lpv_sysid.validation import check_keys, is_count, is_finite_number
 
 
+#: Highest physics rate (RK4 steps per simulated second) accepted; 100x the default.
+MAX_PHYSICS_HZ = 50_000.0
+
+
 @dataclass(frozen=True)
 class SensorConfig:
     physics_hz: float = 500.0
@@ -62,6 +66,8 @@ class SensorConfig:
         for name in ("physics_hz", "state_hz", "imu_hz", "rotor_hz", "omega_ref"):
             if getattr(self, name) <= 0:
                 raise ConfigError(f"sim.{name}: must be > 0")
+        if self.physics_hz > MAX_PHYSICS_HZ:    # every simulated second costs physics_hz RK4 steps
+            raise ConfigError(f"sim.physics_hz: {self.physics_hz:g} Hz exceeds the limit of {MAX_PHYSICS_HZ:g} Hz")
         for name in ("state_hz", "imu_hz", "rotor_hz"):
             ratio = self.physics_hz / getattr(self, name)
             if abs(ratio - round(ratio)) > 1e-9 or ratio < 1:

@@ -57,21 +57,22 @@ def _layout(fm, path) -> Any:
     """The quadrotor layout (names + units strictly checked) for files with the quadrotor's
     state names, otherwise no layout (generic plants: shapes/finiteness/box still checked)."""
     try:
-        d = read_yaml(path, "file")
+        d = read_yaml(path, "file", finite=False)    # a probe for the names; io.formats checks values
         names = tuple(e.get("name") if isinstance(e, dict) else e for e in d.get("states", []))
     except (ConfigError, AttributeError):
         return fm.QUADROTOR_LAYOUT
     return fm.QUADROTOR_LAYOUT if names == tuple(fm.QUADROTOR_LAYOUT.state_names) else None
 
 
-def read_yaml(path: Path | str, what: str) -> dict:
-    """The top-level mapping of a YAML file (:func:`lpv_sysid.io.yaml_file.read_yaml`, strict)."""
+def read_yaml(path: Path | str, what: str, finite: bool = True) -> dict:
+    """The top-level mapping of a YAML file (:func:`lpv_sysid.io.yaml_file.read_yaml`, strict;
+    ``finite``: floats must be finite and of sane magnitude)."""
     from lpv_sysid.io.yaml_file import read_yaml as _read
 
     p = Path(path)
     if not os.path.lexists(p):
         raise ConfigError(f"{what}: file not found: {p}")
-    d = _read(p)
+    d = _read(p, finite=finite)
     if not isinstance(d, dict):
         raise ConfigError(f"{p}: expected a mapping at the top level")
     return d
@@ -316,7 +317,10 @@ def save_certificate_npz(path: Path | str, X: list, S: np.ndarray, H: np.ndarray
     for i in range(N):
         for j in range(Mi[i]):
             Xa[i, j] = X[i][j]
+    from lpv_sysid.io.safe_open import check_output
+
     p = Path(path)
+    check_output(p)         # an existing FIFO or device is refused, not opened
     with open(p, "wb") as f:
         extra = {} if systems is None else _formats().systems_arrays(systems)
         np.savez(f, X=Xa, M=Mi, S=np.asarray(S), H=np.asarray(H), t=np.asarray(t), s_u=np.asarray(s_u),

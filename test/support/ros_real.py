@@ -58,6 +58,33 @@ def find_ros() -> tuple[Path | None, str]:
                   f"(tried {', '.join(str(p) for p in _setup_candidates())})")
 
 
+#: as ROS's domain_coordinator (launch_testing): a ROS_DOMAIN_ID d in 1..100 is taken while
+#: TCP port PORT_BASE + d is bound, so concurrent sessions never share a domain
+PORT_BASE = 32768
+
+
+class DomainId:
+    """A reserved ROS_DOMAIN_ID (``.value``) until :meth:`release`; ``start`` spreads
+    the search so that parallel reservations in one process rarely probe the same ids."""
+
+    def __init__(self, start: int = 0):
+        import socket
+        for k in range(100):
+            d = (start + k) % 100 + 1
+            s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            try:
+                s.bind(("", PORT_BASE + d))
+            except OSError:
+                s.close()
+                continue
+            self.value, self._socket = d, s
+            return
+        raise RuntimeError("no free ROS_DOMAIN_ID in 1..100")
+
+    def release(self) -> None:
+        self._socket.close()
+
+
 class RosEnv:
     """Commands in a sourced ROS environment, isolated on one domain id, localhost only."""
 
@@ -96,7 +123,8 @@ class Proc:
         self.p, self.log_path, self._fh = popen, log, fh
 
     def log(self) -> str:
-        self._fh.flush()
+        if not self._fh.closed:
+            self._fh.flush()
         return self.log_path.read_text(errors="replace")
 
     def wait_for(self, text: str, timeout: float) -> bool:
@@ -116,11 +144,15 @@ class Proc:
             else:
                 self.p.send_signal(signal.SIGINT)
 
+    @property
+    def pid(self) -> int:
+        return self.p.pid
+
     def wait(self, timeout: float) -> int:
-        try:
-            return self.p.wait(timeout=timeout)
-        finally:
-            self._fh.close()
+        """Exit status (subprocess.TimeoutExpired if still running after ``timeout``)."""
+        rc = self.p.wait(timeout=timeout)
+        self._fh.close()
+        return rc
 
     def kill(self) -> None:
         if self.p.poll() is None:
