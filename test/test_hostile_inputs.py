@@ -108,7 +108,8 @@ def _sidecar(b: Path, f: Path, tmp: Path) -> list[str]:
 #: name -> (valid source relative to base, key path of a float that must be finite, argv builder)
 YAML_SLOTS = {
     "identify --config": ("identification.yaml", ("identification", "sample_rate"),
-                          lambda b, f, t: ["identify", "--bags", str(BAG), "--config", str(f), "--out", _out(t, ".yaml")]),
+                          lambda b, f, t: ["identify", "--bags", str(BAG), "--config", str(f),
+                                           "--out", _out(t, ".yaml")]),
     "identify --quadrotor": ("quadrotor.yaml", ("quadrotor", "mass"),
                              lambda b, f, t: ["identify", "--bags", str(BAG), "--quadrotor", str(f),
                                               "--out", _out(t, ".yaml")]),
@@ -436,6 +437,28 @@ def test_huge_iteration_count_is_refused(base, tmp_path, capsys):
     _check(rc, err, f, r"restarts.*exceeds the limit of 1000")
 
 
+def test_error_line_quoting_a_huge_value_is_capped(base, tmp_path, capsys):
+    from lpv_sysid.cli.main import MAX_MESSAGE
+
+    doc = yaml.safe_load((base / "signals_phase1.yaml").read_text())
+    doc["groups"][0]["band"] = ["x" * 5_000_000, 2.0]          # quoted back by the field check
+    f = tmp_path / "long.yaml"
+    f.write_text(yaml.safe_dump(doc))
+    rc, err = _run(["signals", "--config", str(f), "--out", str(tmp_path / "o"), "--no-plot"], capsys)
+    _check(rc, err, f, r"band\[0\].*characters omitted")
+    assert len(_one_line(err)) < MAX_MESSAGE + 200
+
+
+def test_fifo_as_an_output_file_is_refused(base, tmp_path):
+    """``signals --out DIR`` where DIR/signals.npz is a FIFO: open(..., "wb") would block."""
+    out = tmp_path / "o"
+    out.mkdir()
+    os.mkfifo(out / "signals.npz")
+    rc, err = _run_subprocess(["signals", "--config", str(base / "signals_phase1.yaml"), "--out", str(out),
+                               "--no-plot"])
+    _check(rc, err, out / "signals.npz", r"cannot write.*FIFO")
+
+
 def test_complex_signal_is_refused_not_made_real(base, tmp_path):
     from lpv_sysid.signals.store import load_npz, validate_table
 
@@ -511,7 +534,8 @@ def test_strict_loader_uses_libyaml_and_keeps_its_checks():
 def test_read_yaml_finite_policy_names_the_key_path(tmp_path):
     f = tmp_path / "c.yaml"
     f.write_text("groups:\n  - peak: [1.0, .nan]\n")
-    with pytest.raises(ConfigError, match=r"^.*c\.yaml: line 2, column 17: groups\[0\]\.peak\[1\]: \.nan is not a finite"):
+    with pytest.raises(ConfigError,
+                       match=r"^.*c\.yaml: line 2, column 17: groups\[0\]\.peak\[1\]: \.nan is not a finite"):
         yaml_file.read_yaml(f)
     assert np.isnan(yaml_file.read_yaml(f, finite=False)["groups"][0]["peak"][1])   # the package's outputs
 

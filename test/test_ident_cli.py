@@ -85,7 +85,11 @@ def test_identify_cli_writes_valid_models(phase1_bags, tmp_path, capsys):
             z.append((e.nominal - truth) / e.std)
     assert np.mean(np.abs(np.array(z)) < 3) >= 0.95
     assert set(vm.meta["validation"]["tic"]) == {"udot", "vdot", "wdot", "pdot", "qdot", "rdot"}
-    assert len(vm.to_polytopic().systems[0]) == 8
+    # format @2: the whole box nominal +/- k std of every identified element (k = meta.k_sigma)
+    assert vm.format_version == 2 and vm.meta["k_sigma"] == 3.0
+    for e in vm.vertices[0].uncertain:
+        assert e.upper - e.nominal == pytest.approx(3.0 * e.std) and e.nominal - e.lower == pytest.approx(3.0 * e.std)
+    assert "uncertainty box of Eq. (22): every identified element" in text
 
 
 def test_identify_cli_errors(phase1_bags, tmp_path, capsys):

@@ -1,29 +1,48 @@
 """One declaration per node parameter (issue 14 item 1): each node's shipped YAML agrees
-exactly with its settings dataclass, and the rclpy declarations are generated from it.
+exactly with its declarations, and the rclpy declarations are generated from them -- a
+settings dataclass of the node (controller, excitation, data logger, the sim vehicle's
+shell) or the core's configuration dataclass (the bridge: BridgeConfig and MavrosConfig;
+the sim vehicle's sensors: SensorConfig), nothing restated.
 
 Before, config/lpv_controller.yaml set monitor_window_s, feedforward, ff_filter_tau and
 ff_jerk_tau, which the node's hand-written PARAMETERS table did not declare: the node ran
-the defaults while ``lpv-sysid replay`` applied the file."""
+the defaults while ``lpv-sysid replay`` applied the file; the bridge's table declared
+``offboard.handback_mode`` but none of the ``handback_chain``, ``envelope.*`` or
+``rotor_estimate.*`` sections its BridgeConfig reads. Under real rclpy, a parameter
+declared without value (``rate_limit``, ``config_files``) emptied the node's whole
+``get_parameters`` answer (``ros2 param dump``: ``ros__parameters: {}``)."""
 
 import math
 import os
+import socket
 
+import numpy as np
 import pytest
 import yaml
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.nodes import _common as C
+from lpv_sysid.nodes import data_logger_node, mavlink_bridge_node, sim_vehicle_node
 from lpv_sysid.nodes import parameters as P
 from lpv_sysid.nodes.controller_runtime import ControllerSettings
 from lpv_sysid.nodes.excitation_node import ExcitationSettings
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG = os.path.join(ROOT, "config")
-NODES = [("lpv_controller.yaml", "lpv_controller", ControllerSettings),
-         ("excitation_node.yaml", "excitation", ExcitationSettings)]
+#: (params file, node name, {parameter: (default, ParamSpec)}, settings class or None)
+NODES = [("lpv_controller.yaml", "lpv_controller", P.specs(ControllerSettings),
+          ControllerSettings),
+         ("excitation_node.yaml", "excitation", P.specs(ExcitationSettings), ExcitationSettings),
+         ("data_logger.yaml", "data_logger", P.specs(data_logger_node.DataLoggerSettings),
+          data_logger_node.DataLoggerSettings),
+         ("mavlink_bridge_node.yaml", "mavlink_bridge", mavlink_bridge_node.SPECS, None),
+         ("sim_vehicle.yaml", "sim_vehicle", sim_vehicle_node.SPECS, None)]
+IDS = [n[1] for n in NODES]
 
-#: YAML value -> the ROS parameter type rclpy gives it (a params file is typed by its values)
+
 def ros_type(v):
+    """YAML value -> the ROS parameter type rclpy gives it (a params file is typed by its
+    values)."""
     if isinstance(v, bool):
         return P.BOOL
     if isinstance(v, int):
@@ -32,46 +51,209 @@ def ros_type(v):
         return P.DOUBLE
     if isinstance(v, str):
         return P.STRING
-    if isinstance(v, list) and v and all(isinstance(x, float) for x in v):
-        return P.DOUBLE_ARRAY
-    if isinstance(v, list) and v and all(isinstance(x, str) for x in v):
-        return P.STRING_ARRAY
+    for kind, t in ((P.DOUBLE_ARRAY, float), (P.STRING_ARRAY, str), (P.INTEGER_ARRAY, int)):
+        if isinstance(v, list) and v and all(isinstance(x, t) and not isinstance(x, bool)
+                                             for x in v):
+            return kind
     return f"unsupported {type(v).__name__}"
 
 
-@pytest.mark.parametrize("yaml_file, node, cls", NODES)
-def test_yaml_and_declarations_agree(yaml_file, node, cls):
+def flatten(d, prefix=""):
+    """Nested ros__parameters -> dotted names, as rcl reads a params file."""
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(flatten(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
+def yaml_values(yaml_file, node):
     with open(os.path.join(CONFIG, yaml_file)) as fh:
         doc = yaml.safe_load(fh)
     (key, body), = doc.items()
     assert key == f"/**/{node}"
-    values = body["ros__parameters"]
-    declared = P.specs(cls)
+    return flatten(body["ros__parameters"])
+
+
+@pytest.mark.parametrize("yaml_file, node, declared, cls", NODES, ids=IDS)
+def test_yaml_and_declarations_agree(yaml_file, node, declared, cls):
+    values = yaml_values(yaml_file, node)
     assert sorted(set(values) - set(declared)) == []              # every YAML key declared
     # every declaration in the YAML, except lists whose default is empty (a params file
-    # cannot give an empty list a type; they are documented there as a comment)
+    # cannot write one: rcl reads [] as no value; they are documented there as a comment)
     optional = {n for n, (d, _) in declared.items() if d == ()}
     assert sorted(set(declared) - set(values) - optional) == []
     for name, v in values.items():
         assert ros_type(v) == declared[name][1].kind, name           # same types
-    cls.from_dict(values)                                           # and valid together
     text = open(os.path.join(CONFIG, yaml_file)).read()
     for name in optional:
-        assert f"# {name}:" in text
+        assert f"# {name.rsplit('.', 1)[-1]}:" in text
+    if cls is not None:
+        cls.from_dict(values)                                       # and valid together
 
 
-@pytest.mark.parametrize("yaml_file, node, cls", NODES)
-def test_rclpy_declarations_are_generated_from_the_settings(yaml_file, node, cls):
-    table = {name: (default, d) for name, default, d in C.settings_table(cls)}
-    assert list(table) == list(P.specs(cls))
-    for name, (default, spec) in P.specs(cls).items():
+def test_bridge_yaml_reaches_bridge_config_and_defaults_round_trip():
+    """The generated bridge parameters carry BridgeConfig's defaults (nest(defaults) builds
+    BridgeConfig()), and the node's YAML reaches every section, NaN / "" meaning unset."""
+    from lpv_sysid.mavlink.bridge import BridgeConfig
+    from lpv_sysid.mavlink.mavros import MavrosConfig
+    specs = mavlink_bridge_node.SPECS
+    defaults = {n: d for n, (d, _) in specs.items()}
+    _, bridge, mavros = mavlink_bridge_node._split(defaults)
+    assert BridgeConfig.from_dict(bridge) == BridgeConfig()
+    assert MavrosConfig.from_dict(mavros) == MavrosConfig()
+    _, bridge, mavros = mavlink_bridge_node._split(
+        {**defaults, **yaml_values("mavlink_bridge_node.yaml", "mavlink_bridge")})
+    cfg = BridgeConfig.from_dict(bridge)
+    assert cfg.offboard.handback_chain == ("HOLD", "LAND") and cfg.offboard.handback_mode is None
+    assert cfg.offboard.setpoint_rate_hz == 50.0 and cfg.offboard.input_timeout == 0.2
+    assert dict(cfg.link.streams) == {"LOCAL_POSITION_NED": 50.0, "ATTITUDE_QUATERNION": 100.0,
+                                      "HIGHRES_IMU": 100.0, "ESC_STATUS": 50.0}
+    assert cfg.link.signing_key_file is None and cfg.rotor_estimate.a_omega is None
+    assert cfg.rotor_estimate.motor_outputs == (1, 2, 3, 4)
+    assert cfg.envelope.floor == 5.0 and cfg.envelope.max_tilt_deg == 50.0
+    assert MavrosConfig.from_dict(mavros).setpoint_rate_hz == 50.0     # shared with offboard.*
+    # a value set through the generated parameter is what BridgeConfig gets
+    _, bridge, _ = mavlink_bridge_node._split({**defaults, "rotor_estimate.a_omega": 15.0,
+                                                "offboard.handback_chain": ["LAND"],
+                                                "envelope.radius": 50.0})
+    cfg = BridgeConfig.from_dict(bridge)
+    assert (cfg.rotor_estimate.a_omega, cfg.offboard.handback_chain, cfg.envelope.radius) == \
+        (15.0, ("LAND",), 50.0)
+    with pytest.raises(ConfigError, match="handback_chain"):
+        BridgeConfig.from_dict(mavlink_bridge_node._split(
+            {**defaults, "offboard.handback_chain": ["ACRO"]})[1])
+
+
+def test_sim_vehicle_sensor_parameters_are_sensor_config():
+    from lpv_sysid.sim.vehicle import SensorConfig
+    values = yaml_values("sim_vehicle.yaml", "sim_vehicle")
+    sensors = {k: v for k, v in values.items() if k in SensorConfig.__dataclass_fields__}
+    assert SensorConfig.from_dict(sensors) == SensorConfig()     # the YAML restates its defaults
+    assert set(sim_vehicle_node.SPECS) == set(P.specs(sim_vehicle_node.SimVehicleSettings)) | \
+        set(SensorConfig.__dataclass_fields__)
+
+
+def test_config_specs_rules():
+    from dataclasses import dataclass, field
+
+    @dataclass(frozen=True)
+    class Inner:
+        x: float = 1.0
+        table: tuple[tuple[str, float], ...] = (("A", 1.0), ("B", 2.0))
+
+    @dataclass(frozen=True)
+    class Outer:
+        name: str | None = None
+        gain: float | None = None
+        ids: tuple[int, ...] = (1, 2)
+        inner: Inner = field(default_factory=Inner)
+
+    d = {"name": "n", "gain": "g", "ids": "i", "inner.x": "x", "inner.table": "t"}
+    specs = P.config_specs(Outer, d)
+    assert {k: (v[0], v[1].kind) for k, v in specs.items() if k != "gain"} == {
+        "name": ("", P.STRING), "ids": ((1, 2), P.INTEGER_ARRAY), "inner.x": (1.0, P.DOUBLE),
+        "inner.table.A": (1.0, P.DOUBLE), "inner.table.B": (2.0, P.DOUBLE)}
+    assert math.isnan(specs["gain"][0]) and specs["gain"][1].optional
+    assert P.nest({"name": "", "gain": math.nan, "inner.table.A": 3.0}, specs) == \
+        {"inner": {"table": {"A": 3.0}}}
+    with pytest.raises(TypeError, match="'inner.x' has no description"):
+        P.config_specs(Outer, {k: v for k, v in d.items() if k != "inner.x"})
+    with pytest.raises(TypeError, match=r"descriptions of no generated parameter: \['extra'\]"):
+        P.config_specs(Outer, {**d, "extra": "e"})
+
+    @dataclass(frozen=True)
+    class Bad:
+        m: dict = field(default_factory=dict)
+    with pytest.raises(TypeError, match="no ROS parameter form"):
+        P.config_specs(Bad, {"m": "m"})
+
+
+def _free_udp_port():
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+@pytest.fixture(scope="module")
+def node_inputs(tmp_path_factory):
+    from lpv_sysid.signals.store import save_npz
+    from lpv_test_gains import write_gains
+    d = tmp_path_factory.mktemp("inputs")
+    t = np.arange(0.0, 4.0, 0.02)
+    save_npz(str(d / "s.npz"), t, np.zeros((t.size, 4)), ["u_ref", "v_ref", "w_ref", "r_ref"])
+    return {"lpv_controller": {"gains_file": write_gains(d / "gains.yaml")},
+            "excitation": {"signals_file": str(d / "s.npz")},
+            "data_logger": {"out_dir": str(d / "log")},
+            "mavlink_bridge": {"link.url": f"udpin:127.0.0.1:{_free_udp_port()}"},
+            "sim_vehicle": {}}
+
+
+@pytest.mark.parametrize("yaml_file, node, declared, cls", NODES, ids=IDS)
+def test_every_parameter_of_a_running_node_has_a_value(yaml_file, node, declared, cls,
+                                                       node_inputs):
+    """Started from its YAML, a node has no uninitialized parameter: each reads back with
+    its declared type (real rclpy answers no value at all to a get_parameters request
+    naming one uninitialized parameter, so ``ros2 param dump`` printed nothing)."""
+    import importlib
+
+    import rclpy
+    from rclpy.parameter import Parameter
+    exe = {"mavlink_bridge": "mavlink_bridge_node", "lpv_controller": "lpv_controller_node",
+           "data_logger": "data_logger_node", "sim_vehicle": "sim_vehicle_node",
+           "excitation": "excitation_node"}[node]
+    mod = importlib.import_module(f"lpv_sysid.nodes.{exe}")
+    cls_node = next(v for k, v in vars(mod).items() if k.endswith("Node") and
+                    isinstance(v, type) and issubclass(v, C.ShellNode) and v is not C.ShellNode)
+    args = ["n", "--ros-args", "--params-file", os.path.join(CONFIG, yaml_file)]
+    for k, v in node_inputs[node].items():
+        args += ["-p", f"{k}:={v}"]
+    rclpy.init(args=args)
+    try:
+        n = cls_node()
+        try:
+            for name, (_, spec) in declared.items():
+                p = n.get_parameter(name)                       # never uninitialized
+                assert p.type_ == Parameter.Type[spec.kind], (name, p.type_)
+        finally:
+            n.destroy_node()
+    finally:
+        rclpy.try_shutdown()
+
+
+@pytest.mark.parametrize("yaml_file, node, declared, cls", NODES, ids=IDS)
+def test_rclpy_declarations_are_generated_from_the_settings(yaml_file, node, declared, cls):
+    table = {name: (default, d) for name, default, d in C.spec_table(declared)}
+    assert list(table) == list(declared)
+    for name, (default, spec) in declared.items():
         got_default, d = table[name]
         assert d.type == C.Parameter.Type[spec.kind].value and d.description == spec.description
-        if spec.kind == P.DOUBLE:
+        if spec.kind == P.DOUBLE and spec.lo is not None:
             assert (d.floating_point_range[0].from_value, d.floating_point_range[0].to_value) == \
                 (spec.lo, spec.hi)
-            assert got_default == default
+        elif spec.kind == P.DOUBLE:
+            assert list(d.floating_point_range) == []       # checked by the config class
+            assert spec.checked_by and "checked at start by" in d.additional_constraints
+        if spec.kind == P.DOUBLE:
+            assert got_default == default or math.isnan(got_default) and math.isnan(default)
         assert d.additional_constraints == spec.constraints()
+        assert d.description                                # every parameter is described
+
+
+@pytest.mark.parametrize("module", ["excitation_node", "lpv_controller_node", "data_logger_node",
+                                    "mavlink_bridge_node", "sim_vehicle_node"])
+def test_each_node_declares_exactly_its_generated_table(module):
+    import importlib
+    mod = importlib.import_module(f"lpv_sysid.nodes.{module}")
+    declared = dict(NODES[[n[1] for n in NODES].index(
+        {"excitation_node": "excitation", "lpv_controller_node": "lpv_controller",
+         "data_logger_node": "data_logger", "mavlink_bridge_node": "mavlink_bridge",
+         "sim_vehicle_node": "sim_vehicle"}[module])][2])
+    assert [n for n, _, _ in mod.PARAMETERS] == list(declared)
 
 
 def test_the_node_tables_are_the_generated_ones():

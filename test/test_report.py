@@ -74,6 +74,9 @@ def _write_run(d: Path) -> None:
     x12[:, 9:12] = 5 * np.sin(np.outer(tt, [13, 17, 19]))
     rec = RunRecord("eq33", tt, vd, x12, np.zeros((tt.size, 4)), np.zeros((tt.size, 4)),
                     np.zeros((tt.size, 3)), gain=0.4321, z_norm=0.04321, ue_norm=0.1)
+    rec.decomposition = {"method": "superposition (exact: the same run with -u_e)", "ue_norm": 0.1,
+                         "total": {"z_norm": 0.04321, "ratio": 0.4321}, "offset": {"z_norm": 0.04, "ratio": 0.4},
+                         "excitation": {"z_norm": 0.005, "gain": 0.05}, "tracking": {"z_norm": 0.01, "ratio": 0.1}}
     block = regressor_correlation_block(tt, x12, 0.225, "eq33")
     write_outputs(d / "phase2", 1.0, 2.5, [rec], skipped={"nonlinear": "no quadrotor model"},
                   regressor_block=block, figures=False)
@@ -97,7 +100,8 @@ def test_report_contains_expected_numbers(tmp_path):
     assert "**0.0752**" in text and "| ue_r | excitation | 16 | 1.7 |" in text
     # certificate and gain vs gamma
     assert "gamma_achieved | 0.9321" in text
-    assert "| LPV closed loop, Eq. (33) | 0.04321 | 0.1 | 0.4321 | yes | completed |" in text
+    # the u_e -> z gain, not the total ratio, is what is compared with gamma; the rest named apart
+    assert "| LPV closed loop, Eq. (33) | 0.05 | yes | superposition | 0.4 | 0.1 | 0.4321 | completed |" in text
     assert "skipped: no quadrotor model" in text
     assert "kappa = 2.5" in text
     # inputs that do not exist are named

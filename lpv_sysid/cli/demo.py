@@ -4,6 +4,9 @@ Runs the same subcommands a flight-test engineer runs, in order (seed 0 Secs. IV
 phase-1 flights -> signal design -> vertex identification -> robust LPV synthesis ->
 independent verification -> phase-2 flight -> report. Each step's artefacts land in
 ``--out``; the run stops at the first failing step and says which.
+
+``--connect URL`` runs the same chain on a connected PX4 instead (:mod:`lpv_sysid.cli.chain`,
+``lpv-sysid chain``): rate plant, real flights, docs/px4_chain.md.
 """
 
 from __future__ import annotations
@@ -27,6 +30,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quick", action="store_true",
                         help="short flights (phase-1 durations x0.5, 2 phase-2 periods less) for a fast look")
     parser.add_argument("--kappa", type=float, default=1.0, help="phase-2 excitation multiplier (seed 0 Eq. 33)")
+    parser.add_argument("--connect", default=None, metavar="URL",
+                        help="fly the chain on a connected PX4 instead (same as `lpv-sysid chain --connect URL "
+                             "--out DIR`: rate plant, docs/px4_chain.md); without it: the simulated vehicle")
+    parser.add_argument("--set-param", action="append", default=[], metavar="NAME=VALUE",
+                        help="with --connect: PARAM_SET before phase 1 (e.g. COM_OBL_RC_ACT=5 COM_OF_LOSS_T=2)")
 
 
 def plan(out: Path, quick: bool, kappa: float) -> list[tuple[str, list[str]]]:
@@ -62,6 +70,11 @@ def run(args: argparse.Namespace) -> int:
     from lpv_sysid.cli.main import main as cli_main
 
     out = Path(args.out)
+    if getattr(args, "connect", None):
+        from lpv_sysid.cli.chain import chain
+        from lpv_sysid.cli.fly import parse_params
+
+        return chain(args.connect, out, params=parse_params(args.set_param), kappa=args.kappa)
     out.mkdir(parents=True, exist_ok=True)
     steps = plan(out, args.quick, args.kappa)
     t_start = time.monotonic()

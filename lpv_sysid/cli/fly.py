@@ -25,6 +25,9 @@ take off in OFFBOARD, every vertex and the hover run, HOLD or LAND), then the ou
   (the identification config with the campaign's box and trim duration),
   ``DIR/signals/signals.npz`` (the excitation flown).
 
+``lpv-sysid fly phase2`` (:func:`lpv_sysid.cli.chain.fly_phase2`) flies the phase-2 signal under
+the LPV law of a rate-plant design on a vehicle that is already armed and in the air.
+
 Ctrl-C (or SIGTERM) or any fault: excitation off, hand-back confirmed by the HEARTBEAT (or
 FAILED loudly), bags closed and readable, exit status 1 (130 after an interrupt) with
 the reason. A second Ctrl-C stops waiting for the confirmation.
@@ -46,12 +49,16 @@ from typing import Any, Callable, Mapping
 from lpv_sysid.errors import BagError, ConfigError, LpvSysidError, SafetyError
 
 COMMAND = "fly"
-HELP = "fly the phase-1 campaign on a PX4 vehicle over MAVLink (take-off, vertices, hover, land), write rosbag2"
+HELP = ("fly on a PX4 vehicle over MAVLink: phase1 = campaign (take-off, vertices, hover, land, rosbag2); "
+        "phase2 = LPV law on the rate plant (lpv_sysid/cli/chain.py)")
 
 log = logging.getLogger(__name__)
 
 NAMESPACE = "/lpv_sysid"
 TOPICS = ("state", "rotor_speeds", "imu", "velocity_reference", "excitation", "actuator_command", "status")
+#: with ``record_rate_setpoints``: PX4's ATTITUDE_TARGET (thrust + body-rate setpoints of its own
+#: cascade) as a JointState (names ``transport.RATE_INPUT_NAMES``, ``position``), receive-time stamps
+RATE_TOPIC = "rate_setpoint"
 EXIT_FAILED = 1
 EXIT_INTERRUPTED = 130
 
@@ -238,13 +245,16 @@ def set_params(link, params: Mapping[str, float], clock, sleep, timeout: float =
 class CampaignRecorder:
     """One rosbag2 per run (the runs recorder, split at each run) + the whole flight."""
 
-    def __init__(self, out_dir: Path, storage: str, flight_log: bool, config_files=(), description="") -> None:
+    def __init__(self, out_dir: Path, storage: str, flight_log: bool, config_files=(), description="",
+                 rate_setpoints: bool = False) -> None:
         from lpv_sysid.io import messages as M
         from lpv_sysid.io.recorder import Recorder, RecorderConfig
 
         self.M = M
         self.f = M.MsgFactory.rosbags()
         topics = {f"{NAMESPACE}/{n}": M.TYPES[n] for n in TOPICS}
+        if rate_setpoints:
+            topics[f"{NAMESPACE}/{RATE_TOPIC}"] = M.TYPES["actuator_command"]    # JointState
         self.runs = Recorder(RecorderConfig(out_dir=str(out_dir), topics=topics, storage=storage,
                                             config_files=tuple(config_files), description=description))
         self.flight = (Recorder(RecorderConfig(out_dir=str(out_dir / "flight"), topics=topics, storage=storage,
@@ -294,6 +304,13 @@ class CampaignRecorder:
         st = _ns(t)
         self._write("rotor_speeds", st, self.M.rotor_speeds_msg(self.f, st, omega, source))
 
+    def rate_setpoint(self, t: float, u) -> None:
+        """(thrust, p_sp, q_sp, r_sp) on ``rate_setpoint`` (PX4's ATTITUDE_TARGET or our command)."""
+        from lpv_sysid.mavlink.transport import RATE_INPUT_NAMES
+
+        st = _ns(t)
+        self._write(RATE_TOPIC, st, self.M.joint_state(self.f, st, RATE_INPUT_NAMES, position=u))
+
     def reference(self, t: float, v, r: float) -> None:
         st = _ns(t)
         self._write("velocity_reference", st, self.M.twist_reference_msg(self.f, st, v, r))
@@ -320,6 +337,27 @@ class CampaignRecorder:
 
 def _ns(t: float) -> int:
     return int(round(float(t) * 1e9))
+
+
+def tap_attitude_target(link, callback: Callable[[float, Any], None]) -> None:
+    """Wrap ``link.poll`` so every ATTITUDE_TARGET of the link's target reaches
+    ``callback(receive_time, [thrust, p_sp, q_sp, r_sp])`` before the bridge sees the message
+    (BridgeCore has no raw-message hook; the telemetry decoder ignores ATTITUDE_TARGET)."""
+    from lpv_sysid.mavlink.transport import rate_setpoint_from_attitude_target
+
+    poll = link.poll
+
+    def tapped(now, *a, **kw):
+        msgs = poll(now, *a, **kw)
+        for m in msgs:
+            if m.get_type() == "ATTITUDE_TARGET" and (not link.target_system
+                                                       or m.get_srcSystem() == link.target_system):
+                got = rate_setpoint_from_attitude_target(m)
+                if got is not None:
+                    callback(now, got[1])
+        return msgs
+
+    link.poll = tapped
 
 
 # =============================================================================== runner
@@ -538,10 +576,16 @@ class FlightRunner:
 def fly(cfg: FlyConfig, url: str | None, out_dir: str | Path, signals: str | None = None,
         params: Mapping[str, float] | None = None, clock: Callable[[], float] = time.monotonic,
         sleep: Callable[[float], None] = time.sleep, echo: Callable[[str], None] = print,
-        handle_signals: bool = True, preflight: bool = True, link=None) -> FlyResult:
+        handle_signals: bool = True, preflight: bool = True, link=None,
+        record_rate_setpoints: bool = False) -> FlyResult:
     """The whole CLI sequence of the module docstring (also used by the tests with a
     simulated clock); returns the exit status and the summary. Bad input raises
-    :class:`~lpv_sysid.errors.ConfigError` before anything is sent to the vehicle."""
+    :class:`~lpv_sysid.errors.ConfigError` before anything is sent to the vehicle.
+
+    ``record_rate_setpoints``: also record PX4's ATTITUDE_TARGET (the thrust and body-rate
+    setpoints its cascade produced) on ``rate_setpoint`` in every bag, the input of the
+    rate-plant identification (lpv_sysid/ident/rate_plant.py); request the stream in the
+    bridge config (``link.streams: {ATTITUDE_TARGET: 50}``, config/mavlink_bridge_chain.yaml)."""
     import numpy as np
 
     from lpv_sysid.control.campaign import Campaign, ExcitationProfile, plan_campaign, trim_rows
@@ -592,9 +636,11 @@ def fly(cfg: FlyConfig, url: str | None, out_dir: str | Path, signals: str | Non
         rec = CampaignRecorder(out, cfg.storage, cfg.flight_log,
                                config_files=[p for p in (cfg.source, cfg.bridge_config) if p and Path(p).is_file()],
                                description=f"lpv-sysid fly phase1 on {bcfg.link.url}: one bag per run, "
-                                           "see campaign_summary.yaml")
+                                           "see campaign_summary.yaml", rate_setpoints=record_rate_setpoints)
         rec.start(clock())
         runner.rec = rec
+        if record_rate_setpoints:
+            tap_attitude_target(bridge.link, lambda t, u: runner._safe(lambda: rec.rate_setpoint(t, u)))
         (out / "signals").mkdir(exist_ok=True)
         from lpv_sysid.signals.store import save_npz
         save_npz(str(out / "signals" / "signals.npz"), *table)
@@ -725,9 +771,32 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                    help="PARAM_SET before preflight, confirmed by the vehicle (repeatable), "
                         "e.g. COM_OBL_RC_ACT=5 on a SITL without RC")
     p.add_argument("--dry-run", action="store_true", help="load and plan only; print the plan and exit")
+    p2 = modes.add_parser("phase2", help="phase-2 flight under the LPV law (rate plant) on a vehicle in the air",
+                          description="Take the armed, airborne vehicle (e.g. in HOLD after `fly phase1` with "
+                                      "finish: HOLD) into OFFBOARD with the LPV law's thrust + body-rate "
+                                      "setpoints (rate plant, lpv_sysid/cli/chain.py), fly the phase-2 signal, "
+                                      "hand back (LAND); bag, phase2_summary.yaml with the measured u_e -> z gain.")
+    p2.add_argument("--connect", required=True, metavar="URL", help="MAVLink URL")
+    p2.add_argument("--gains", required=True, help="rate-plant gains.yaml (lpv-sysid chain / synthesize)")
+    p2.add_argument("--models", default=None, help="vertex_models.yaml the gains were designed for (checked)")
+    p2.add_argument("--signals", required=True, help="phase-2 signals directory (lpv-sysid signals)")
+    p2.add_argument("--bridge-config", default=None, help="bridge config (default config/mavlink_bridge_chain.yaml)")
+    p2.add_argument("--out", required=True, type=Path, help="output directory (new or empty)")
+    p2.add_argument("--kappa", type=float, default=1.0, help="excitation multiplier (seed 0 Eq. 33)")
+    p2.add_argument("--finish", default="LAND", choices=("LAND", "HOLD"), help="mode after the signal")
+    p.add_argument("--record-rate-setpoints", action="store_true",
+                   help="also record PX4's ATTITUDE_TARGET (thrust + body-rate setpoints) on rate_setpoint "
+                        "(rate-plant identification; request the stream, e.g. config/mavlink_bridge_chain.yaml)")
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.mode == "phase2":
+        from lpv_sysid.cli.chain import Phase2Options, fly_phase2
+
+        s = fly_phase2(args.gains, args.signals, args.out, url=args.connect, models=args.models,
+                       bridge_config=args.bridge_config, opts=Phase2Options(kappa=args.kappa, finish=args.finish))
+        print(f"phase 2 {'complete' if s.get('ok') else 'FAILED'}: {s.get('reason')}; {args.out / 'phase2_summary.yaml'}")
+        return 0 if s.get("ok") else EXIT_FAILED
     cfg = FlyConfig.load(args.config)
     if args.dry_run:
         from lpv_sysid.control.campaign import ExcitationProfile, plan_campaign
@@ -737,7 +806,8 @@ def run(args: argparse.Namespace) -> int:
         prof = ExcitationProfile.from_table(*table, ramp=cfg.campaign.ramp_s, periods=cfg.campaign.periods)
         print(plan_campaign(cfg.campaign, prof, bcfg.envelope).describe())
         return 0
-    res = fly(cfg, args.connect, args.out, signals=args.signals, params=parse_params(args.set_param))
+    res = fly(cfg, args.connect, args.out, signals=args.signals, params=parse_params(args.set_param),
+              record_rate_setpoints=args.record_rate_setpoints)
     if res.status:
         import sys
 

@@ -76,6 +76,44 @@ def format_validation_table(val: dict) -> str:
         f"{'NRMSE':>6} " + " ".join(f"{val['nrmse'][a]:7.3f}" for a in AXES)])
 
 
+def format_offset_table(results) -> str:
+    """The identified model's derivative at the flown trim mean (it is not an equilibrium;
+    the vertex models are re-expanded about the equilibrium instead)."""
+    from lpv_sysid.ident.metrics import AXES
+
+    lines = ["Identified state derivative at the flown trim mean (not an equilibrium)",
+             f"{'Vertex':>18} " + " ".join(f"{a:>8}" for a in AXES)]
+    for r in results:
+        if r.xdot_flown is not None:
+            vtx = "[" + " ".join(f"{c:+g}" for c in r.scheduling) + "]"
+            lines.append(f"{vtx:>18} " + " ".join(f"{v:8.4f}" for v in r.xdot_flown[2:8]))
+    return "\n".join(lines)
+
+
+def format_uncertainty_summary(results, cfg) -> str:
+    """One line per vertex: identified elements, motor constants, dof and widening of the std."""
+    from lpv_sysid.ident.equation_error import t_factor
+    from lpv_sysid.ident.uncertainty import applied_k
+
+    lines = [f"uncertainty box of Eq. (22): every identified element, nominal +/- k std (k = "
+             f"{cfg.uncertainty.k_sigma:g}); std {cfg.covariance.method}"]
+    for r in results:
+        vtx = "[" + " ".join(f"{c:+g}" for c in r.scheduling) + "]"
+        k = applied_k(cfg.uncertainty, len(r.uncertain.intervals))
+        m = r.motor.get("mode", "known")
+        if m == "identified":
+            mot = (f"a_Omega {-r.fit.A[8, 8]:.4g} +/- {r.fit.std_A[8, 8]:.2g}, b_Omega {r.fit.B[8, 0]:.5g} +/- "
+                   f"{r.fit.std_B[8, 0]:.3g}, latency {1e3 * r.motor.get('delay', 0.0):.3f} ms")
+        elif m == "prior":
+            mot = f"a_Omega, b_Omega from the other maneuvers ({r.motor.get('reason', '')})"
+        else:
+            mot = f"a_Omega, b_Omega known ({r.motor.get('reason', '')})"
+        dof = "" if r.fit.dof is None else f", dof {r.fit.dof:.0f} (std x {t_factor(k, r.fit.dof):.3f})"
+        lines.append(f"{vtx:>18}: {len(r.uncertain.intervals)} elements{dof}; {mot}; reduced polytope "
+                     f"M_i = {r.uncertain.M} ({cfg.uncertainty.method}, p_max={cfg.uncertainty.p_max})")
+    return "\n".join(lines)
+
+
 def run(args: argparse.Namespace) -> int:
     import dataclasses
 
@@ -112,14 +150,20 @@ def run(args: argparse.Namespace) -> int:
     missing = [c.tolist() for c in vx.box_corners(cfg) if tuple(c) not in vertices]
     if missing:
         raise ConfigError(f"{args.bags}: no maneuver for vertex/vertices {missing}")
-    results = []
-    for key, data in vertices.items():
-        res = vx.identify_vertex(data, cfg)
-        ins = vx.in_sample_metrics(res, data, cfg)
-        results.append(dataclasses.replace(res, validation=ins))
+    datas = list(vertices.values())
+    results = vx.identify_vertices(datas, cfg)
+    results = [dataclasses.replace(res, validation=vx.in_sample_metrics(res, data, cfg))
+               for res, data in zip(results, datas)]
     results = [results[k] for k in vx.vertex_order(results, cfg)]
-    print("Flight data vertex equilibria (seed 0 Table 1)")
-    print(dp.format_table1([(r.scheduling, dp.trim_row(r.x0)) for r in results]))
+    print("Flight data vertex equilibria (seed 0 Table 1: the flown trim means)")
+    print(dp.format_table1([(r.scheduling, dp.trim_row(r.x_flown if r.x_flown is not None else r.x0))
+                            for r in results]))
+    if cfg.model == "taylor2" and cfg.equilibrium:
+        print()
+        print("Equilibria of the identified models at the flown velocities (the models' x0, Eq. 13)")
+        print(dp.format_table1([(r.scheduling, dp.trim_row(r.x0)) for r in results]))
+        print()
+        print(format_offset_table(results))
     print()
     print(format_r2_table(results))
     val = None
@@ -133,8 +177,7 @@ def run(args: argparse.Namespace) -> int:
     args.out.parent.mkdir(parents=True, exist_ok=True)
     sha = models.save(args.out)
     print()
-    print(f"uncertain systems per vertex M_i = {[r.uncertain.M for r in results]} "
-          f"({cfg.uncertainty.method}, p_max={cfg.uncertainty.p_max}, k={cfg.uncertainty.k_sigma:g})")
+    print(format_uncertainty_summary(results, cfg))
     print(f"wrote {args.out} (sha256 {sha[:12]})")
     if val is not None:
         plot = args.plot or args.out.with_name(args.out.stem + "_validation.png")

@@ -73,7 +73,23 @@ def build_parser(commands: dict[str, ModuleType]) -> argparse.ArgumentParser:
     return parser
 
 
+#: commands whose linear algebra is many small problems: there OpenBLAS' second thread costs
+#: more CPU than it saves wall time (both settings measured by bench/bench_blas.py)
+SINGLE_THREAD_BLAS = ("identify", "identify-nonlinear", "vrft")
+
+
+def _single_thread_blas(argv: Sequence[str]) -> None:
+    """``OPENBLAS_NUM_THREADS=1`` for :data:`SINGLE_THREAD_BLAS`, set before numpy is imported
+    (OpenBLAS reads it once, when it loads); a value already in the environment wins."""
+    if "numpy" in sys.modules:
+        return
+    command = next((a for a in argv if not a.startswith("-")), None)
+    if command in SINGLE_THREAD_BLAS:
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    _single_thread_blas(sys.argv[1:] if argv is None else argv)
     commands = discover_commands()
     parser = build_parser(commands)
     args = parser.parse_args(argv)
@@ -114,10 +130,19 @@ def _fail(args: argparse.Namespace, message: str, status: int = EXIT_BAD_INPUT) 
     return status
 
 
+#: Longest error line printed: messages quote the offending value, which may be megabytes long.
+MAX_MESSAGE = 2000
+
+
 def one_line(message: str) -> str:
-    """``message`` with its lines joined by "; " (an error is one line on stderr)."""
+    """``message`` with its lines joined by "; " (an error is one line on stderr), its middle cut
+    beyond :data:`MAX_MESSAGE` characters."""
     parts = [ln.strip() for ln in str(message).splitlines() if ln.strip()]
-    return "; ".join(parts) if parts else "(no message)"
+    text = "; ".join(parts) if parts else "(no message)"
+    if len(text) > MAX_MESSAGE:
+        cut = len(text) - MAX_MESSAGE
+        text = f"{text[:MAX_MESSAGE // 2]} ... ({cut} characters omitted) ... {text[-MAX_MESSAGE // 2:]}"
+    return text
 
 
 def _inputs(args: argparse.Namespace) -> list[str]:

@@ -128,6 +128,26 @@ def _add_phase2_arguments(parser: argparse.ArgumentParser) -> None:
                              "excitation-only gain ||z_e||/||kappa u_e||, comparable with gamma")
 
 
+def format_gain_line(rec, gamma) -> str:
+    """One run's ratios, the u_e -> z gain (what gamma bounds) first, the rest named apart
+    (sim.phase2 module docstring)."""
+    state = "completed" if rec.completed else f"STOPPED: {rec.safety_event}"
+    d = rec.decomposition or {}
+    g = rec.excitation_gain
+    if g is None:
+        head = "u_e -> z gain not separated"
+    else:
+        head = f"u_e -> z gain {g:.3g}" + (f" ({'<=' if g <= gamma else '>'} gamma {gamma:g})" if gamma else "")
+    parts = [f"total ||z||/||kappa u_e|| {rec.gain:.3g}"]
+    for key, label in (("offset", "equilibrium offset"), ("tracking", "tracking"),
+                       ("tracking_and_excitation", "tracking + excitation")):
+        r = (d.get(key) or {}).get("ratio")
+        if r is not None:
+            parts.append(f"{label} {r:.3g}")
+    how = f" [{d['method']}]" if d.get("method") else ""
+    return f"{head}{how}; {', '.join(parts)} (norm ratios, not additive); {state}"
+
+
 def run_phase2(args: argparse.Namespace) -> int:
     """``lpv-sysid simulate phase2``: prints what it wrote; LpvSysidError on bad input."""
     from lpv_sysid.sim.phase2 import Phase2Config, load_problem, load_signals, load_vehicle_config, run
@@ -152,16 +172,9 @@ def run_phase2(args: argparse.Namespace) -> int:
     for name in ("eq33", "linear_ff", "nonlinear"):
         rec = result.records.get(name)
         if rec is not None:
-            state = "completed" if rec.completed else f"STOPPED: {rec.safety_event}"
-            print(f"  {name:9s}: ||z||/||kappa u_e|| = {rec.gain:.4g}"
-                  + (f" ({'<=' if rec.gain <= problem.gamma else '>'} gamma)" if problem.gamma else "")
-                  + f", {state}")
+            print(f"  {name:9s}: {format_gain_line(rec, problem.gamma)}")
         elif name in result.skipped:
             print(f"  {name:9s}: skipped ({result.skipped[name]})")
-        sp = rec.info.get("superposition") if rec is not None else None
-        if sp and sp.get("gain") is not None:
-            print(f"  {'':9s}  excitation-only (superposition): ||z_e||/||kappa u_e|| = {sp['gain']:.4g}"
-                  + (f" ({'<=' if sp['gain'] <= problem.gamma else '>'} gamma)" if problem.gamma else ""))
     for key, path in result.written.items():
         print(f"wrote {path}")
     return 0

@@ -75,6 +75,9 @@ def load_config(path: str) -> dict:
     bad = set(cfg) - _TOP_KEYS
     if bad:
         raise ConfigError(f"{path}: unknown key(s) {sorted(bad)}; known: {sorted(_TOP_KEYS)}")
+    for key in ("hinf", "weights", "uncertainty", "verify"):     # sections: mappings (or empty)
+        if cfg.get(key) is not None and not isinstance(cfg[key], dict):
+            raise ConfigError(f"{path}: {key}: expected a mapping, got {type(cfg[key]).__name__}")
     return cfg
 
 

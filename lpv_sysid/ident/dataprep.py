@@ -9,8 +9,10 @@ Steps:
 1. per topic: stamps from the message headers, sorted; duplicated stamps dropped; a gap
    longer than ``max_gap`` inside the analysed span, non-finite values, or too few samples
    raise :class:`BagError` naming the topic and the time;
-2. resampling of every stream by linear interpolation (``numpy.interp``) onto one uniform
-   grid at ``sample_rate`` over the span that all streams cover;
+2. resampling of every stream by a cubic spline onto one uniform grid at ``sample_rate``
+   over the span that all streams cover; the grid is put on the rotor-speed stamps when
+   that stream arrives at the grid rate (ESC telemetry is not anti-alias filtered:
+   interpolating it between its samples would low-pass it, see ``_interp``);
 3. the controller state of DESIGN.md, ``x = [phi, theta, u, v, w, p, q, r, dt, da, de, dr]``
    with ``delta = Mix Omega`` (seed 0 Eq. 7) from the measured rotor speeds;
 4. the input ``u = [ut, ua, ue, ur]`` from ``actuator_command``, a zero-order-hold signal
@@ -18,8 +20,11 @@ Steps:
    contain the virtual command; then it is reconstructed from the measured rotor speeds by
    inverting the (known, separately identified) motor model Eq. (8):
    ``u = Mix u_ESC = (delta' + a_Omega delta) / b_Omega`` with the smoothed derivative of
-   ``delta`` - the actuator rows then carry no information of their own (they are known
-   anyway) and the aerodynamic rows are unaffected;
+   ``delta`` - the actuator rows then carry no information of their own (a_Omega, b_Omega
+   are not identified from such a run, ``VertexData.motor_identifiable``; likewise when the
+   rotor speeds were themselves estimated from the motor outputs) and the aerodynamic rows
+   are unaffected.  ``VertexData.u_eff`` is the command after the ESC clip of Eq. (8),
+   ``Mix clip(Mix^-1 u, 0, 1)``, applied to the command samples before resampling;
 5. excitation start: an explicit value (simulation), else the first sample where the
    ``excitation`` topic leaves zero, else where the velocity reference leaves its initial
    value, else ``trim_duration`` after the start; the trim segment is the ``trim_duration``
@@ -65,6 +70,7 @@ class Streams:
     t_exc: np.ndarray | None = None
     exc: np.ndarray | None = None      # (E, 4)
     t_excite: float | None = None      # known excitation start (simulation)
+    rotor_estimated: bool = False      # rotor_speeds computed from the motor outputs, not measured
 
 
 @dataclass(frozen=True)
@@ -129,9 +135,11 @@ def streams_from_bag(path: str | Path) -> Streams:
 
     st = series("state", msgs.state_from_odometry, True)
     rs = series("rotor_speeds", msgs.rotor_speeds_from_joint_state, True)
-    if any(msgs.rotor_source_of(m) == "estimated" for _, m in data[_topic_for(list(data), "rotor_speeds")]):
+    estimated = any(msgs.rotor_source_of(m) == "estimated" for _, m in data[_topic_for(list(data), "rotor_speeds")])
+    if estimated:
         log.warning("%s: rotor_speeds estimated from the motor outputs (seed 0 Eq. 8 with the airframe's "
-                    "a_Omega, b_Omega): the actuator rows reproduce that model, not a measurement", path)
+                    "a_Omega, b_Omega): the actuator rows reproduce that model, not a measurement; "
+                    "a_Omega, b_Omega are not identified from this bag", path)
     ac = series("actuator_command", msgs.actuator_command_from_joint_state, False)
     vr = series("velocity_reference", msgs.reference_from_twist, False)
     ex = series("excitation", msgs.excitation_from_joint_state, False)
@@ -147,7 +155,8 @@ def streams_from_bag(path: str | Path) -> Streams:
         kw["exc"] = np.array([r[1] for r in ex])
     return Streams(name=name, t_state=np.array([s.t for s in st]), euler=np.array([s.euler for s in st]),
                    v=np.array([s.v_body for s in st]), omega=np.array([s.omega for s in st]),
-                   t_rotor=np.array([r[0] for r in rs]), Omega=np.array([r[1] for r in rs]), **kw)
+                   t_rotor=np.array([r[0] for r in rs]), Omega=np.array([r[1] for r in rs]),
+                   rotor_estimated=estimated, **kw)
 
 
 # ----------------------------------------------------------------------------- alignment
@@ -271,10 +280,16 @@ def align(s: Streams, cfg: IdentificationConfig, params=None, max_gap: float = 0
     if "u" in g:
         u = g["u"]
         source = "actuator_command"
+        # the input the rotors act on, Eq. (8): the ESC clip applied to the command samples
+        # before resampling (a clip after the anti-alias filter would round the corners)
+        tc, uc = series["actuator_command"]
+        mi = np.linalg.inv(mix)
+        u_eff = _interp(tg, tc, np.clip(uc @ mi.T, 0.0, 1.0) @ mix.T)
     else:
         # Eq. (8) inverted: u = Mix u_ESC = (delta' + a delta) / b (module docstring, step 4)
         _, ddelta = deriv.smooth_and_differentiate(delta, dt, cfg.derivatives)
         u = (ddelta + params.a_omega * delta) / params.b_omega
+        u_eff = u
         source = "rotor_speeds (Eq. 8 inverted)"
         log.warning("%s: no actuator_command; input reconstructed from rotor speeds", run)
     ref = g.get("ref")
@@ -300,7 +315,8 @@ def align(s: Streams, cfg: IdentificationConfig, params=None, max_gap: float = 0
     in_trim = (tg >= trim[0]) & (tg < trim[1])
     v_d = ref[in_trim, :3].mean(axis=0)
     log.info("%s: excitation at %.2f s (%s), v_d = %s", run, t_exc, how, np.round(v_d, 3).tolist())
-    vd = VertexData(tg - tg[0], x, u, v_d, (trim[0] - tg[0], trim[1] - tg[0]), (fit[0] - tg[0], fit[1] - tg[0]), run)
+    vd = VertexData(tg - tg[0], x, u, v_d, (trim[0] - tg[0], trim[1] - tg[0]), (fit[0] - tg[0], fit[1] - tg[0]), run,
+                    u_eff=u_eff, motor_identifiable=source == "actuator_command" and not s.rotor_estimated)
     return AlignedRun(vd, Og, sg[:, 0:3], ref, source, float(tg[0]))
 
 

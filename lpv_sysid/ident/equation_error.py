@@ -109,6 +109,7 @@ class RowFit:
     labels: tuple[str, ...] = ()     # one per theta entry (x<j>, u<k>, bias, aux names, nuisance)
     offset: int = 0                  # index of theta[0] in the joint parameter vector
     dof: float | None = None         # Student-t degrees of freedom of studentised errors
+    eiv_bias: np.ndarray | None = None   # LS minus bias-compensated estimate (errors in variables)
 
     @property
     def std(self) -> np.ndarray:
@@ -161,6 +162,8 @@ class RowDesign:
     labels: tuple[str, ...]
     use: np.ndarray | None = None
     Z: np.ndarray | None = None      # instruments (same shape as H): theta = (Z^T H)^-1 Z^T y
+    stack: int = 1                   # equations per time sample, stacked block-wise in y, H (score summed)
+    noise_var: np.ndarray | None = None  # (p,) variance of each regressor's measurement error (EIV)
 
 
 def _check(name: str, a: np.ndarray, shape: tuple) -> np.ndarray:
@@ -328,16 +331,25 @@ def solve_rows(designs, covariance: CovarianceConfig = CovarianceConfig(), dt: f
             sl = slice(rf.offset, rf.offset + rf.theta.size)
             J[sl, sl] = rf.cov
         return fits, J, None
-    n = designs[0].y.shape[0]
+    n = designs[0].y.shape[0] // designs[0].stack
     parts, offs, off = [], [], 0
     for d in designs:
-        if d.y.shape != (n,) or d.H.shape[0] != n:
-            raise ConfigError(f"row {d.row}: all designs need the same {n} samples")
-        use = np.ones(n, bool) if d.use is None else np.asarray(d.use, dtype=bool)
+        m = d.stack * n
+        if d.y.shape != (m,) or d.H.shape[0] != m:
+            raise ConfigError(f"row {d.row}: all designs need the same {n} samples per equation")
+        use = np.ones(m, bool) if d.use is None else np.asarray(d.use, dtype=bool)
         Hu, yu = d.H[use], d.y[use]
+        eiv = None
         if d.Z is None:
             theta, HtH_inv = _solve(d.row, yu, Hu, d.labels, rcond)
             Zs, cw = d.H, None
+            if d.noise_var is not None and np.any(np.asarray(d.noise_var) > 0):
+                # bias-compensated LS: E[h h^T] = E[h0 h0^T] + Sigma, so (H^T H - N Sigma)^-1 H^T y
+                theta_ls = theta
+                M = np.linalg.inv(HtH_inv) - Hu.shape[0] * np.diag(np.asarray(d.noise_var, dtype=float))
+                HtH_inv = np.linalg.inv(M)
+                theta = HtH_inv @ (Hu.T @ yu)
+                eiv = theta_ls - theta
         else:
             if d.Z.shape != d.H.shape:
                 raise ConfigError(f"row {d.row}: instruments {d.Z.shape} must match regressors {d.H.shape}")
@@ -347,13 +359,16 @@ def solve_rows(designs, covariance: CovarianceConfig = CovarianceConfig(), dt: f
         v = np.where(use, d.y - d.H @ theta, 0.0)
         p = theta.size
         sigma2 = float(v @ v) / (int(use.sum()) - p)
-        parts.append((d, theta, HtH_inv, v, sigma2, use, Zs, cw))
+        parts.append((d, theta, HtH_inv, v, sigma2, use, Zs, cw, eiv))
         offs.append(off)
         off += p
     P = off
     nu = covariance.dof if covariance.dof is not None else default_dof(n, dt, covariance.band_hz)
     nu = int(min(nu, n - 1))
-    S = np.concatenate([Zs * v[:, None] for _, _, _, v, _, _, Zs, _ in parts], axis=1)
+    # scores; the bias-compensation term N Sigma theta is constant in t and the cosines j >= 1
+    # of the EWC are orthogonal to constants, so it drops out
+    S = np.concatenate([(Zs * v[:, None]).reshape(d.stack, n, -1).sum(axis=0)
+                        for d, _, _, v, _, _, Zs, _, _ in parts], axis=1)
     Omega = n * ewc_long_run(S, nu)
     Hinv = np.zeros((P, P))
     for (d, theta, HtH_inv, *_), o in zip(parts, offs):
@@ -361,12 +376,12 @@ def solve_rows(designs, covariance: CovarianceConfig = CovarianceConfig(), dt: f
     joint = Hinv @ Omega @ Hinv.T
     joint = 0.5 * (joint + joint.T)
     fits = []
-    for (d, theta, HtH_inv, v, sigma2, use, _, cw), o in zip(parts, offs):
+    for (d, theta, HtH_inv, v, sigma2, use, _, cw, eiv), o in zip(parts, offs):
         sl = slice(o, o + theta.size)
         c = joint[sl, sl]
         white = sigma2 * (HtH_inv if cw is None else cw)
         fits.append(RowFit(d.row, tuple(d.cols_A), tuple(d.cols_B), theta, c, white, c, sigma2,
-                           _r2(d.y[use], v[use]), int(use.sum()), 0, tuple(d.labels), o, float(nu)))
+                           _r2(d.y[use], v[use]), int(use.sum()), 0, tuple(d.labels), o, float(nu), eiv))
     return fits, joint, float(nu)
 
 

@@ -41,23 +41,29 @@ FORCE_AXES = ("X", "Y", "Z")
 MOMENT_AXES = ("L", "M", "N")
 
 
-def known_rigid_body(x12: np.ndarray, params) -> np.ndarray:
-    """Known part of ``[u', v', w', p', q', r']`` (Eq. 3c-3d with F = M = 0), (N, 6)."""
+def known_rigid_body(x12: np.ndarray, params, Ii: np.ndarray | None = None) -> np.ndarray:
+    """Known part of ``[u', v', w', p', q', r']`` (Eq. 3c-3d with F = M = 0), (N, 6);
+    ``Ii``: the inverse inertia when already at hand."""
     x12 = np.atleast_2d(x12)
     I = np.asarray(params.inertia, dtype=float)
-    Ii = np.linalg.inv(I)
+    Ii = np.linalg.inv(I) if Ii is None else Ii
     v, w = x12[:, 2:5], x12[:, 5:8]
     vd = np.cross(v, w) + nl._gravity_body(x12[:, 0], x12[:, 1], params.g)
     wd = np.cross(w @ I.T, w) @ Ii.T
     return np.concatenate([vd, wd], axis=1)
 
 
-def known_linear(x0: np.ndarray, params) -> tuple[np.ndarray, np.ndarray]:
-    """Linearisation of the known part (model with all K = 0 and J_z = 0) at ``x0``."""
+def known_model(params):
+    """The model with all K = 0 and J_z = 0: its linearisation is the known part's."""
     from lpv_sysid.models.quadrotor import Quadrotor
 
-    p0 = dataclasses.replace(params, K={k: 0.0 for k in params.K}, j_rotor=0.0)
-    return Quadrotor(p0).linearize(np.asarray(x0, dtype=float))
+    return Quadrotor(dataclasses.replace(params, K={k: 0.0 for k in params.K}, j_rotor=0.0))
+
+
+def known_linear(x0: np.ndarray, params, model=None) -> tuple[np.ndarray, np.ndarray]:
+    """Linearisation of the known part (model with all K = 0 and J_z = 0) at ``x0``
+    (``model``: :func:`known_model` of ``params`` when already at hand)."""
+    return (model or known_model(params)).linearize(np.asarray(x0, dtype=float))
 
 
 def _phi(x12: np.ndarray, params, mix: np.ndarray, mix_inv: np.ndarray) -> dict[str, np.ndarray]:
@@ -150,25 +156,31 @@ def _x_of(w: np.ndarray, v0: np.ndarray, psi_dot: float) -> np.ndarray:
     return np.concatenate([w[:2], v0, om, w[2:6]])
 
 
+MOTOR_LABELS = ("a", "b")
+
+
 class IdentifiedModel:
     """``xdot_i = K_i(x) + theta_i . phi_i(x, u)`` per fitted row (``K_i`` the known rigid-body
-    part of rows u..r, zero for the motor rows) with ``phi_i`` built from the design labels
-    (``x<j>``: dx_j, ``u<k>``: du_k, ``bias``: 1, ``aux``: rotor acceleration d(delta_r)/dt =
-    the identified delta_r row itself, ``delay``: the latency increment of a motor row, whose
-    regressor ``-b du'`` vanishes at rest, ``nuisance<c>``: the remainder ``nuis[row][c]``)."""
+    part of rows u..r) with ``phi_i`` built from the design labels (``x<j>``: dx_j, ``u<k>``:
+    du_k, ``bias``: 1, ``aux``: rotor acceleration d(delta_r)/dt = the delta_r row itself,
+    ``nuisance<c>``: the remainder ``nuis[row][c]``), and the motor rows of Eq. (8) in virtual
+    actuators, ``delta_j' = theta_a d(delta_j) + theta_b du_j + (Mix c)_j``, from the fit whose
+    labels start with ``a, b`` (``bias<i>``: rotor i's offset; ``delay``: the latency increment,
+    whose regressor vanishes at rest); without such a fit the configured ``a_Omega, b_Omega``."""
 
-    def __init__(self, x0, u0, fits, nuis: dict[int, list[tuple[str, int]]], params, motor_known: bool):
-        from lpv_sysid.models.quadrotor import I_DR
+    def __init__(self, x0, u0, fits, nuis: dict[int, list[tuple[str, int]]], params):
+        from lpv_sysid.models.quadrotor import I_DR, mixer
 
         self.x0 = np.asarray(x0, dtype=float)
         self.u0 = np.asarray(u0, dtype=float)
         self.params = params
-        self.fits = {rf.row: rf for rf in fits}
+        self.motor = next((rf for rf in fits if rf.labels[:2] == MOTOR_LABELS), None)
+        self.fits = {rf.row: rf for rf in fits if rf is not self.motor}
         self.hess = remainder_hessians(self.x0, params)
-        self.motor_known = motor_known
-        self.a, self.b = params.a_omega, params.b_omega
+        self.mix = mixer(params.arm_length)
         self.i_dr = I_DR
-        self.P = sum(rf.theta.size for rf in fits)
+        self.known = known_model(params)
+        self.Ii = np.linalg.inv(np.asarray(params.inertia, dtype=float))
         self.nuis = {row: [self.hess[a][c] for a, c in cols] for row, cols in nuis.items()}
 
     def phi(self, row: int, dx: np.ndarray, du: np.ndarray) -> np.ndarray:
@@ -181,43 +193,60 @@ class IdentifiedModel:
                 out.append(du[int(lab[1:])])
             elif lab == "bias":
                 out.append(1.0)
-            elif lab in ("aux", "delay"):
+            elif lab == "aux":
                 out.append(0.0)
             else:
                 H = self.nuis[row][int(lab[len("nuisance"):])]
                 out.append(0.5 * dx @ H @ dx)
         return np.array(out)
 
+    def motor_phi(self, j: int, dx: np.ndarray, du: np.ndarray) -> np.ndarray:
+        """d(motor row j)/d(motor theta) at a point at rest."""
+        out = []
+        for lab in self.motor.labels:
+            if lab == "a":
+                out.append(dx[8 + j])
+            elif lab == "b":
+                out.append(du[j])
+            elif lab.startswith("bias"):
+                out.append(self.mix[j, int(lab[4:])])
+            else:                      # delay
+                out.append(0.0)
+        return np.array(out)
+
+    def _ab(self, theta: np.ndarray) -> tuple[float, float]:
+        if self.motor is None:
+            return -self.params.a_omega, self.params.b_omega
+        o = self.motor.offset
+        return float(theta[o]), float(theta[o + 1])
+
     def residual(self, w: np.ndarray, theta: np.ndarray, v0: np.ndarray, psi_dot: float) -> np.ndarray:
         """Identified state derivative of rows u..r and of the four motor rows at
         ``w = (phi, theta, delta_1..4, u_1..4)``."""
         x = _x_of(w[:6], v0, psi_dot)
         dx, du = x - self.x0, w[6:10] - self.u0
-        kr = known_rigid_body(x[None, :], self.params)[0]
+        kr = known_rigid_body(x[None, :], self.params, self.Ii)[0]
         out = np.zeros(10)
         for n, row in enumerate(ROWS):
             rf = self.fits.get(row)
             out[n] = kr[n] + (0.0 if rf is None else theta[rf.offset: rf.offset + rf.theta.size] @ self.phi(row, dx, du))
         for j in range(4):
-            row = 8 + j
-            rf = self.fits.get(row)
-            if rf is None or self.motor_known:
-                out[6 + j] = -self.a * dx[row] + self.b * du[j]
+            if self.motor is None:
+                ta, tb = self._ab(theta)
+                out[6 + j] = ta * dx[8 + j] + tb * du[j]
             else:
-                out[6 + j] = theta[rf.offset: rf.offset + rf.theta.size] @ self.phi(row, dx, du)
+                o = self.motor.offset
+                out[6 + j] = theta[o: o + self.motor.theta.size] @ self.motor_phi(j, dx, du)
         return out
 
     def jacobians(self, x: np.ndarray, u: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``A, B`` of the identified model at ``(x, u)`` where the rotor acceleration vanishes
         (the ``aux`` term then contributes ``theta_aux * d(delta_r row)/d(x, u)``)."""
-        A, B = known_linear(x, self.params)
+        A, B = known_linear(x, self.params, self.known)
         dx = x - self.x0
-        motor = {}
-        for row in range(8, 12):
-            rf = self.fits.get(row)
-            if rf is not None and not self.motor_known:
-                A[row, row] = 0.0
-                B[row, row - 8] = 0.0
+        ta, tb = self._ab(theta)
+        A[8:12, 8:12] = ta * np.eye(4)
+        B[8:12, :] = tb * np.eye(4)
         for row, rf in self.fits.items():
             th = theta[rf.offset: rf.offset + rf.theta.size]
             for lab, c in zip(rf.labels, th):
@@ -291,11 +320,14 @@ def reexpand(model: IdentifiedModel, theta: np.ndarray, cov: np.ndarray, v0: np.
     P = theta.size
     Gth = np.zeros((10, P))
     dx, du = x_e - x0, u_e - u0
-    for n, row in enumerate(list(ROWS) + [8, 9, 10, 11]):
+    for n, row in enumerate(ROWS):
         rf = model.fits.get(row)
-        if rf is None or (row >= 8 and model.motor_known):
-            continue
-        Gth[n, rf.offset: rf.offset + rf.theta.size] = model.phi(row, dx, du)
+        if rf is not None:
+            Gth[n, rf.offset: rf.offset + rf.theta.size] = model.phi(row, dx, du)
+    if model.motor is not None:
+        o = model.motor.offset
+        for j in range(4):
+            Gth[6 + j, o: o + model.motor.theta.size] = model.motor_phi(j, dx, du)
     dw = -np.linalg.solve(G_w(w), Gth)                          # (10, P)
     D = np.zeros((len(idx), P))
     for k in range(10):                                         # d elements / d w (finite differences)

@@ -2,7 +2,11 @@
 
 Every identified element ``theta_l`` of a vertex model gets the interval
 ``[theta_l - k s_l, theta_l + k s_l]`` (``k`` configurable, default 3; ``s_l`` its standard
-error from :mod:`lpv_sysid.ident.equation_error`), Eq. (22).  The uncertain vertex system
+error from :mod:`lpv_sysid.ident.equation_error`, widened by ``t_factor(k, dof)`` so that the
+interval keeps the normal coverage ``2 Phi(k) - 1`` when the studentised error is Student-t),
+Eq. (22).  These intervals - all of them - are what ``vertex_models.yaml`` stores.  The
+reductions below only decide which systems the identification itself would hand to an LMI
+(``UncertainVertex.systems``, ``Interval.corner``/``half``).  The uncertain vertex system
 ``Lambda_i(theta)`` is then a convex combination of the ``M_i`` systems ``Lambda_i^j`` of
 Eq. (23), i.e. of ``(A_i^j, B^j)`` pairs (``C`` is fixed and ``B_e = B R`` follows from ``B``).
 

@@ -2,16 +2,35 @@
 
 For each scheduling vertex ``v_d`` (one phase-1 maneuver):
 
-1. equilibrium ``x0, u0`` = mean over the trim segment (seed 0 Table 1);
+1. the flown trim ``x0, u0`` = mean over the trim-averaging window (seed 0 Table 1);
 2. the same global smoother is applied to states and inputs and the states are
    differentiated (:mod:`lpv_sysid.ident.derivatives`), edges of the record are dropped;
 3. perturbation variables ``dx = x - x0``, ``du = u - u0`` over the excitation segment;
-4. known elements of ``A, B`` (kinematics, gravity, ``v x omega``, ``I omega x omega``, motor
-   rows) from the model's analytic linearisation at the *measured* trim, unknown masks from
-   ``Quadrotor.unknown_masks()`` (seed 0 Appendix A); equation-error LS (Appendix B);
-5. intervals and uncertain vertex systems (Eqs. 22-23), :mod:`lpv_sysid.ident.uncertainty`.
+4. known elements of ``A, B`` (kinematics, gravity, ``v x omega``, ``I omega x omega``) from
+   the model's analytic linearisation, unknown masks from ``Quadrotor.unknown_masks()``
+   (seed 0 Appendix A); equation-error LS (Appendix B), by default (``model: taylor2``) with
+   the known part nonlinear and the exact second-order remainders of Eq. (6) as nuisance
+   regressors (:mod:`lpv_sysid.ident.taylor`), an intercept per row, and the rotor reaction
+   torque on the measured rotor acceleration;
+5. the motor constants ``a_Omega, b_Omega`` of Eq. (8) from the rotor speeds
+   (:func:`_motor_design`: per rotor, stacked, gated while a rotor is pinned at a speed
+   limit, with the command-to-rotor latency), where the data allow; otherwise uncertain with
+   the estimate pooled over the other maneuvers (:func:`identify_vertices`);
+6. all rows' covariance jointly (:func:`lpv_sysid.ident.equation_error.solve_rows`: stacked-
+   score EWC sandwich, Student-t dof);
+7. the flown trim is *not* an equilibrium (the vehicle fluctuates about it and the dynamics
+   are nonlinear: the identified model's derivative there is a few cm/s^2, and the flown mean
+   rotor speed sits 1-3 rad/s above trim), so the second-order model is re-expanded about its
+   own equilibrium at the flown velocity (seed 0 Eq. 13), with the delta-method covariance of
+   the Jacobians there (:func:`lpv_sysid.ident.taylor.reexpand`); that equilibrium is the
+   vertex's ``x0, u0``;
+8. intervals ``nominal +/- k std`` of every identified element (Eq. 22, std widened for the
+   Student-t dof) and the reduced uncertain vertex systems (Eq. 23),
+   :mod:`lpv_sysid.ident.uncertainty`.
 
-The result serialises to the ``vertices`` entries of ARCHITECTURE.md section 5.
+The result serialises to the ``vertices`` entries of ``vertex_models.yaml`` (format ``@2``,
+:mod:`lpv_sysid.io.formats`).  Truth coverage on simulated airframes:
+:mod:`lpv_sysid.ident.coverage` and docs/identification_coverage.md.
 """
 
 from __future__ import annotations
@@ -36,7 +55,6 @@ from lpv_sysid.models.quadrotor import (INPUT_NAMES, INPUT_UNITS, SCHEDULING_NAM
                                         STATE_UNITS)
 from lpv_sysid.validation import check_keys, is_count, is_finite_number
 
-FORMAT = "lpv_sysid/vertex_models@1"
 
 
 @dataclass(frozen=True)
@@ -56,9 +74,11 @@ class IdentificationConfig:
     covariance: ee.CovarianceConfig = field(default_factory=ee.CovarianceConfig)
     equilibrium: bool = True           # taylor2: re-expand about the identified equilibrium (Eq. 13)
     motor: str = "identify"            # a_Omega, b_Omega: "identify" (motor rows, Eq. 8) or "known"
-    motor_limit_margin: float = 15.0   # rad/s: samples this close to omega_min/max are not used ...
-    motor_pad: float = 0.5             # s: ... nor this long around them (smoother support)
-    instruments: bool = True           # taylor2: rotor speeds instrumented by the motor model (EIV)
+    motor_max_pinned: float = 0.01     # identify a_Omega, b_Omega only if no rotor is pinned at a
+                                       # speed limit longer than this fraction of the fit segment
+    motor_std: tuple[float, float] | None = None  # std of a_Omega, b_Omega where not identifiable
+    instruments: bool = False          # taylor2: rotor speeds instrumented by the motor model (EIV check)
+    measurement_noise: dict = field(default_factory=dict)  # EIV: {state or "rotor": std | [std, rate_hz]}
     excitation_threshold: float = 1e-6 # |u_e| above which the excitation counts as on
     vmin: tuple[float, float, float] = (-5.0, -5.0, -5.0)
     vmax: tuple[float, float, float] = (5.0, 5.0, 5.0)
@@ -83,7 +103,7 @@ class IdentificationConfig:
         kw["uncertainty"] = unc.UncertaintyConfig.from_dict(d.pop("uncertainty", None))
         kw["covariance"] = ee.CovarianceConfig.from_dict(d.pop("covariance", None))
         for key in ("trim_duration", "trim_average", "edge", "min_fit_duration", "sample_rate",
-                    "excitation_threshold", "motor_limit_margin", "motor_pad"):
+                    "excitation_threshold", "motor_max_pinned"):
             if key in d:
                 v = d.pop(key)
                 if not is_finite_number(v) or v < 0:
@@ -109,6 +129,15 @@ class IdentificationConfig:
                 if not isinstance(v, bool):
                     raise ConfigError(f"identification.{key} must be true or false, got {v!r}")
                 kw[key] = v
+        if "measurement_noise" in d:
+            kw["measurement_noise"] = parse_measurement_noise(d.pop("measurement_noise"))
+        if "motor_std" in d:
+            v = d.pop("motor_std")
+            if v is not None and (not isinstance(v, (list, tuple)) or len(v) != 2
+                                  or not all(is_finite_number(a) and a > 0 for a in v)):
+                raise ConfigError(f"identification.motor_std must be null or [std a_Omega, std b_Omega] > 0, "
+                                  f"got {v!r}")
+            kw["motor_std"] = None if v is None else (float(v[0]), float(v[1]))
         if "motor" in d:
             v = d.pop("motor")
             if v not in ("identify", "known"):
@@ -132,6 +161,72 @@ class IdentificationConfig:
         if any(a >= b for a, b in zip(cfg.vmin, cfg.vmax)):
             raise ConfigError(f"identification.vmin {cfg.vmin} must be below vmax {cfg.vmax}")
         return cfg
+
+
+def parse_measurement_noise(v) -> dict:
+    """``measurement_noise``: state name (STATE_NAMES) or ``rotor`` -> white-noise std per sample,
+    or ``[std, rate_hz]`` (the rate the channel was sampled at; default the grid rate)."""
+    if v is None:
+        return {}
+    if not isinstance(v, dict):
+        raise ConfigError(f"identification.measurement_noise must be a mapping, got {type(v).__name__}")
+    out = {}
+    for k, x in v.items():
+        if k not in STATE_NAMES and k != "rotor":
+            raise ConfigError(f"identification.measurement_noise: unknown channel {k!r}; "
+                              f"allowed: {list(STATE_NAMES) + ['rotor']}")
+        pair = list(x) if isinstance(x, (list, tuple)) else [x, None]
+        if len(pair) != 2 or not is_finite_number(pair[0]) or pair[0] < 0 \
+                or (pair[1] is not None and (not is_finite_number(pair[1]) or pair[1] <= 0)):
+            raise ConfigError(f"identification.measurement_noise.{k} must be std >= 0 or [std, rate_hz > 0], "
+                              f"got {x!r}")
+        out[k] = (float(pair[0]), None if pair[1] is None else float(pair[1]))
+    return out
+
+
+def regressor_noise_var(cfg: IdentificationConfig, params, dt: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """Errors-in-variables input: ``(var (12,), var of d/dt (12,), rotor-speed var)`` of the
+    *smoothed* measured states (white noise of std ``s`` sampled at ``r`` Hz has the one-sided
+    density ``2 s^2 / r``; the smoother passes ``int L(f)^2 df``, the differentiator
+    ``int (2 pi f)^2 L(f)^2 df``; ``delta = Mix Omega`` when only the rotor noise is given)."""
+    from lpv_sysid.models.quadrotor import mixer
+
+    f = np.linspace(0.0, 0.5 / dt, 4001)
+    if cfg.derivatives.method == "fourier":
+        L2 = deriv.fourier_gain(f, cfg.derivatives.f_cut, cfg.derivatives.taper) ** 2
+    else:
+        w = deriv._savgol_window(cfg.derivatives.window_s, dt, cfg.derivatives.polyorder, 10 ** 6)
+        L2 = deriv.savgol_gain(f, dt, w, cfg.derivatives.polyorder, deriv=0) ** 2
+    g0 = float(np.trapz(L2, f))
+    g1 = float(np.trapz((2 * np.pi * f) ** 2 * L2, f))
+    var, dvar = np.zeros(12), np.zeros(12)
+    noise = cfg.measurement_noise
+    rotor = 0.0
+    if "rotor" in noise:
+        s, r = noise["rotor"]
+        rotor = 2 * s ** 2 / (r or 1.0 / dt)
+        mix = mixer(params.arm_length)
+        var[8:12] = rotor * g0 * np.sum(mix ** 2, axis=1)
+        dvar[8:12] = rotor * g1 * np.sum(mix ** 2, axis=1)
+    for k, (s, r) in noise.items():
+        if k != "rotor":
+            j = STATE_NAMES.index(k)
+            dens = 2 * s ** 2 / (r or 1.0 / dt)
+            var[j], dvar[j] = dens * g0, dens * g1
+    return var, dvar, rotor * g0
+
+
+def _design_noise(labels, var: np.ndarray, dvar: np.ndarray) -> np.ndarray | None:
+    """Per regressor column its measurement-error variance: ``x<j>`` the smoothed state's, ``aux``
+    the rotor acceleration's (d delta_r / dt); commands, intercepts and the second-order
+    nuisance columns are taken as exact (their noise enters only at second order)."""
+    out = np.zeros(len(labels))
+    for k, lab in enumerate(labels):
+        if lab.startswith("x"):
+            out[k] = var[int(lab[1:])]
+        elif lab == "aux":
+            out[k] = dvar[11]
+    return out if np.any(out > 0) else None
 
 
 @dataclass(frozen=True)
@@ -172,7 +267,7 @@ class VertexResult:
     x_flown: np.ndarray | None = None     # mean over the trim window (seed 0 Table 1)
     u_flown: np.ndarray | None = None
     xdot_flown: np.ndarray | None = None  # identified model's derivative there (not an equilibrium)
-    motor: str = "known"                  # how a_Omega, b_Omega entered: "identified" or "known"
+    motor: dict = field(default_factory=lambda: {"mode": "known"})  # how a_Omega, b_Omega entered
 
     def to_dict(self) -> dict:
         """One ``vertices`` entry of ``vertex_models.yaml`` (format ``@2``, io/formats.py).
@@ -226,20 +321,45 @@ def _input(data: VertexData, params) -> np.ndarray:
     return np.clip(np.asarray(data.u, dtype=float) @ np.linalg.inv(mix).T, 0.0, 1.0) @ mix.T
 
 
-def motor_samples(data: VertexData, cfg: IdentificationConfig, params, idx: np.ndarray) -> np.ndarray:
-    """Samples ``idx`` usable for the motor rows: every rotor speed at least
-    ``motor_limit_margin`` from ``[omega_min, omega_max]`` (where Eq. 8 holds: at the limits
-    the speed is clamped), ``motor_pad`` seconds around such events excluded as well."""
-    from lpv_sysid.models.quadrotor import mixer
+def pinned(e: np.ndarray, Om_start: np.ndarray, dt: float, params, a: float | None = None,
+           b: float | None = None) -> np.ndarray:
+    """(N, 4) fraction of the interval ``[t_k - dt/2, t_k + dt/2)`` during which rotor i is
+    held at a speed limit, where Eq. (8) does not hold (the speed is clamped).
 
-    Om = np.asarray(data.x, dtype=float)[:, 8:12] @ np.linalg.inv(mixer(params.arm_length)).T
-    m = cfg.motor_limit_margin
-    bad = np.any((Om < params.omega_min + m) | (Om > params.omega_max - m), axis=1)
-    dt = float(np.median(np.diff(data.t)))
-    pad = int(round(cfg.motor_pad / dt))
-    if pad > 0 and bad.any():
-        bad = np.convolve(bad.astype(float), np.ones(2 * pad + 1), mode="same") > 0
-    return ~bad[idx]
+    Decided on the motor model's noise-free response to the command ``e`` (held over each
+    interval), not on the noisy telemetry (a rotor decelerating through a noise band above
+    ``omega_min`` would be taken as pinned), and exactly within an interval: with ``e`` held,
+    ``Omega(t) = Omega_inf + (Omega_s - Omega_inf) exp(-a t)``, ``Omega_inf = b e / a``, reaches a
+    limit after ``ln((Omega_s - Omega_inf) / (limit - Omega_inf)) / a``; a pinned rotor is released
+    as soon as ``Omega_inf`` is back inside the limits.  The fraction, not a 0/1 flag per sample,
+    keeps the gated regressors free of the half-sample bias at every entry into the pin.
+    """
+    import math
+
+    a = params.a_omega if a is None else a
+    b = params.b_omega if b is None else b
+    lo, hi = params.omega_min, params.omega_max
+    ad = math.exp(-a * dt)
+    E = np.asarray(e, dtype=float)
+    out = np.zeros(E.shape)
+    for i in range(E.shape[1]):
+        Om = min(max(float(Om_start[i]), lo), hi)
+        col = E[:, i].tolist()
+        frac = out[:, i]
+        for k, ek in enumerate(col):
+            inf = b * ek / a
+            if (Om <= lo and inf <= lo) or (Om >= hi and inf >= hi):
+                frac[k] = 1.0                       # pinned through the interval
+                continue
+            nxt = inf + (Om - inf) * ad
+            if nxt < lo or nxt > hi:                # reaches the limit inside the interval
+                lim = lo if nxt < lo else hi
+                t_hit = math.log((Om - inf) / (lim - inf)) / a
+                frac[k] = max(0.0, 1.0 - t_hit / dt)
+                Om = lim
+            else:
+                Om = nxt
+    return out
 
 
 def motor_response(u: np.ndarray, delta_start: np.ndarray, dt: float, params) -> np.ndarray:
@@ -254,72 +374,104 @@ def motor_response(u: np.ndarray, delta_start: np.ndarray, dt: float, params) ->
     return lfilter([0.0, g], [1.0, -ad], u, axis=0, zi=zi)[0]
 
 
-def _shifted_input(t: np.ndarray, u: np.ndarray, tau: float, cfg: IdentificationConfig):
-    """``u(t - tau)`` (cubic spline of the raw samples) smoothed and differentiated with the
-    filter of the states: ``(L[u(t - tau)], d/dt L[u(t - tau)])``."""
+def _smooth_keep(x: np.ndarray, dt: float, cfg: IdentificationConfig, keep) -> tuple[np.ndarray, np.ndarray]:
+    xs, xd = deriv.smooth_and_differentiate(x, dt, cfg.derivatives)
+    return xs[keep], xd[keep]
+
+
+def _motor_design(data: VertexData, cfg: IdentificationConfig, params, full, keep, x0, u0,
+                  u_in: np.ndarray, max_delay: float = 0.05, rotor_var: float = 0.0):
+    """The motor model Eq. (8) per rotor, ``Omega_i' = g_i(t) [theta_a (Omega_i - Omega_i0)
+    + theta_b (e_i(t - tau) - e_i0) + c_i]`` with ``e = Mix^-1 u`` after the ESC clip, stacked
+    over the four rotors (one ``theta_a = -a_Omega``, ``theta_b = b_Omega``, seed 0 Eq. 15).
+
+    ``g_i = 0`` while rotor i is :func:`pinned` at a speed limit (there ``Omega_i' = 0``): the
+    gated regressors are formed *before* smoothing, so the filtered equation holds at every
+    sample and nothing has to be cut out.  ``c_i`` absorbs the offset of the flown mean from
+    rest; ``tau`` is the command-to-rotor latency (ESC, telemetry, command hold; with
+    ``a_Omega ~ 12 /s`` 0.1 ms already biases ``a, b`` by ~0.1 %, more than their standard
+    error on a 30 s record), found by Gauss-Newton (the regressor of a latency increment is
+    ``-b g e'``) and kept as the column ``delay`` (increment ~ 0 at convergence) so that its
+    uncertainty enters the covariance.  ``rotor_var``: variance of the smoothed rotor-speed
+    telemetry noise (errors in variables of the ``a`` column, bias-compensated in the latency
+    search too).  Returns ``(RowDesign with stack=4, tau)`` or ``(None, reason)`` when the data
+    do not allow it.
+    """
     from scipy.interpolate import CubicSpline
 
-    us = CubicSpline(t, u, axis=0)(t - tau) if tau != 0.0 else u
-    return deriv.smooth_and_differentiate(us, float(t[1] - t[0]), cfg.derivatives)
+    from lpv_sysid.models.quadrotor import mixer
 
-
-def _motor_designs(data: VertexData, cfg: IdentificationConfig, params, full, keep, xdot, dx,
-                   u_in: np.ndarray, u0: np.ndarray, dx_iv: np.ndarray | None = None,
-                   max_delay: float = 0.05) -> tuple[list, str, list]:
-    """Rows 8-11, ``delta_j' = -a_Omega d(delta_j) + b_Omega du_j(t - tau_j) + c_j`` (Eq. 8 in
-    virtual actuators), one ``(a, b, c, tau)`` per row.
-
-    ``tau_j`` is the command-to-rotor latency (ESC, telemetry, the hold of the command): with
-    ``a_Omega ~ 12 /s`` a latency of 0.1 ms already biases ``a, b`` by ~0.1 %, more than their
-    standard error on a 30 s record.  It is found by Gauss-Newton (the regressor of a delay
-    increment is ``-b du_j'``) and kept in the design as the column ``delay`` (its increment
-    ~ 0 at convergence) so that its uncertainty enters the covariance of ``a, b``.  Returns
-    ``(designs, "identified" | "known", delays)``; none when the motor model is taken as known.
-    """
-    if cfg.motor == "known" or not data.motor_identifiable:
-        return [], "known", []
+    if cfg.motor == "known":
+        return None, "configured as known"
+    if not data.motor_identifiable:
+        return None, "rotor speeds not measured independently of the command"
     dt = float(np.median(np.diff(data.t)))
-    use = motor_samples(data, cfg, params, full[keep])
-    if use.sum() * dt < cfg.min_fit_duration:
-        log.warning("%s: only %.1f s away from the rotor-speed limits: a_Omega, b_Omega taken as known",
-                    data.name, use.sum() * dt)
-        return [], "known", []
+    mi = np.linalg.inv(mixer(params.arm_length))
+    Om = np.asarray(data.x, dtype=float)[full, 8:12] @ mi.T
+    e = np.asarray(u_in, dtype=float)[full] @ mi.T
+    Om0, e0 = mi @ x0[8:12], mi @ u0
     t = np.asarray(data.t, dtype=float)[full]
-    out, delays = [], []
-    n = dx.shape[0]
-    for j in range(4):
-        row = 8 + j
-        raw = np.asarray(u_in, dtype=float)[full, j]
-        tau, b_est, H = 0.0, None, None
+    spline = CubicSpline(t, e, axis=0)
+    n = int(np.arange(full.size)[keep].size)
+    y = np.concatenate([_smooth_keep(Om[:, i], dt, cfg, keep)[1] for i in range(4)])
+    ab = (params.a_omega, params.b_omega)
+
+    def gated(ab):
+        g = 1.0 - pinned(e, Om[0], dt, params, *ab)
+        Xa = np.concatenate([_smooth_keep(g[:, i] * (Om[:, i] - Om0[i]), dt, cfg, keep)[0] for i in range(4)])
+        Xc = np.zeros((4 * n, 4))
+        for i in range(4):
+            Xc[i * n:(i + 1) * n, i] = _smooth_keep(g[:, i], dt, cfg, keep)[0]
+        return g, Xa, Xc
+
+    def inputs(tau):
+        es, ed = spline(t - tau), spline(t - tau, 1)
+        Xb = np.concatenate([_smooth_keep(g[:, i] * (es[:, i] - e0[i]), dt, cfg, keep)[0] for i in range(4)])
+        Xd = np.concatenate([_smooth_keep(g[:, i] * ed[:, i], dt, cfg, keep)[0] for i in range(4)])
+        return Xb, Xd
+
+    def fit(Xa, Xc, tau, b_est):
+        """Gauss-Newton on the latency for a fixed gate: ``(theta, tau, b)``."""
+        th = None
         for _ in range(12):
-            us, ud = _shifted_input(t, raw, tau, cfg)
-            cols = [dx[:, row], us[keep] - u0[j], np.ones(n)]
-            if b_est is not None:
-                cols.append(-b_est * ud[keep])
-            H = np.stack(cols, axis=1)
-            th = np.linalg.lstsq(H[use], xdot[use, row], rcond=None)[0]
-            b_est = th[1]
-            step = th[3] if th.size > 3 else 0.0
+            Xb, Xd = inputs(tau)
+            H = np.column_stack([Xa, Xb, Xc] + ([-b_est * Xd] if b_est is not None else []))
+            if rotor_var > 0:
+                M = H.T @ H
+                M[0, 0] -= H.shape[0] * rotor_var        # bias-compensated (errors in variables)
+                th = np.linalg.solve(M, H.T @ y)
+            else:
+                th = np.linalg.lstsq(H, y, rcond=None)[0]
+            b_est = float(th[1])
+            step = float(th[6]) if th.size > 6 else 0.0
             tau = float(np.clip(tau + step, -max_delay, max_delay))
-            if th.size > 3 and abs(step) < 1e-8:
+            if th.size > 6 and abs(step) < 1e-8:
                 break
-        if abs(tau) >= max_delay:
-            log.warning("%s: motor row %d latency at the search bound %.3f s: a_Omega, b_Omega taken as known",
-                        data.name, row, max_delay)
-            return [], "known", []
-        us, ud = _shifted_input(t, raw, tau, cfg)
-        H = np.stack([dx[:, row], us[keep] - u0[j], np.ones(n), -b_est * ud[keep]], axis=1)
-        Z = None
-        if dx_iv is not None:
-            Z = H.copy()
-            Z[:, 0] = dx_iv[:, row]
-        out.append(ee.RowDesign(row, xdot[:, row], H, (row,), (j,), (f"x{row}", f"u{j}", "bias", "delay"), use,
-                                Z))
-        delays.append(tau)
-    return out, "identified", delays
+        return th, tau, b_est
+
+    g, Xa, Xc = gated(ab)
+    tau, b_est = 0.0, None
+    for _ in range(8):              # the pinned intervals of the identified motors (a fixed point)
+        th, tau, b_est = fit(Xa, Xc, tau, b_est)
+        if not np.any(g == 0) or not th[0] < 0 < th[1]:
+            break
+        g_new, Xa_new, Xc_new = gated((-float(th[0]), b_est))
+        if np.array_equal(g_new, g):
+            break
+        g, Xa, Xc = g_new, Xa_new, Xc_new
+    held = float(np.max(1.0 - np.mean(g[keep], axis=0)))
+    if held > cfg.motor_max_pinned:
+        return None, f"a rotor at its speed limit {100 * held:.1f} % of the time"
+    if abs(tau) >= max_delay:
+        return None, f"latency at the search bound {max_delay:g} s"
+    Xb, Xd = inputs(tau)
+    H = np.column_stack([Xa, Xb, Xc, -b_est * Xd])
+    labels = ("a", "b", "bias0", "bias1", "bias2", "bias3", "delay")
+    noise = np.array([rotor_var] + [0.0] * 6) if rotor_var > 0 else None
+    return ee.RowDesign(8, y, H, (), (), labels, stack=4, noise_var=noise), tau
 
 
-def _fit_taylor2(data: VertexData, x0, u0, known: KnownModel, cfg: IdentificationConfig):
+def _fit_taylor2(data: VertexData, x0, u0, known: KnownModel, cfg: IdentificationConfig, motor_prior=None):
     """Equation error with the known part nonlinear and second-order nuisance regressors
     (:mod:`lpv_sysid.ident.taylor`), re-expanded about the identified equilibrium.
 
@@ -342,6 +494,8 @@ def _fit_taylor2(data: VertexData, x0, u0, known: KnownModel, cfg: Identificatio
     dt, full, keep = _fit_indices(data, cfg)
     u_in = _input(data, params)
     _, xdot, dx, du, nl_s = prepare(data, cfg, x0, u0, nonlin, u=u_in)
+    x0 = np.asarray(x0, dtype=float)
+    u0 = np.asarray(u0, dtype=float)
     rem, off = {}, 6
     for a in taylor.FORCE_AXES + taylor.MOMENT_AXES:
         rem[a] = nl_s[:, off: off + widths[a]]
@@ -359,6 +513,7 @@ def _fit_taylor2(data: VertexData, x0, u0, known: KnownModel, cfg: Identificatio
             off += widths[a]
         iv = (dx_iv, rem_iv)
     nuis_idx = taylor.nuisance_index(rem, params)
+    nvar, ndvar, rotor_var = regressor_noise_var(cfg, params, dt)
     designs, nuis_kept = [], {}
     n = dx.shape[0]
     for k, row in enumerate(rows):
@@ -388,23 +543,33 @@ def _fit_taylor2(data: VertexData, x0, u0, known: KnownModel, cfg: Identificatio
             labels += [f"nuisance{c}" for c in chosen]
             if Z is not None:
                 Z = np.concatenate([Z] + [iv[1][cols[c][0]][:, cols[c][1]: cols[c][1] + 1] for c in chosen], axis=1)
-        designs.append(ee.RowDesign(row, y, Hm, tuple(ja), tuple(kb), tuple(labels), Z=Z))
+        designs.append(ee.RowDesign(row, y, Hm, tuple(ja), tuple(kb), tuple(labels), Z=Z,
+                                    noise_var=None if Z is not None else _design_noise(labels, nvar, ndvar)))
         nuis_kept[row] = cols
-    motor_designs, motor, delays = _motor_designs(data, cfg, params, full, keep, xdot, dx, u_in, u0,
-                                                  None if iv is None else iv[0])
-    fits, joint, dof = ee.solve_rows(designs + motor_designs, cfg.covariance, dt)
+    motor_d, info = _motor_design(data, cfg, params, full, keep, x0, u0, u_in, rotor_var=rotor_var)
+    fits, joint, dof = ee.solve_rows(designs + ([motor_d] if motor_d is not None else []), cfg.covariance, dt)
+    motor = {"mode": "identified", "delay": info} if motor_d is not None else {"mode": "known", "reason": info}
+    if motor_d is None and motor_prior is not None:
+        # a_Omega, b_Omega not identifiable here: uncertain with the prior (seed 0 Sec. IV values)
+        (a, sa), (b, sb) = motor_prior
+        P = joint.shape[0]
+        prior = ee.RowFit(8, (), (), np.array([-a, b]), np.diag([sa ** 2, sb ** 2]), np.diag([sa ** 2, sb ** 2]),
+                          np.diag([sa ** 2, sb ** 2]), 0.0, float("nan"), 0, 0, taylor.MOTOR_LABELS, P, dof)
+        fits = list(fits) + [prior]
+        joint = np.block([[joint, np.zeros((P, 2))], [np.zeros((2, P)), prior.cov]])
+        motor = {"mode": "prior", "reason": info, "a_omega": [a, sa], "b_omega": [b, sb]}
     maskA, maskB = known.maskA.copy(), known.maskB.copy()
-    if motor == "identified":
+    if motor["mode"] != "known":
         for j in range(4):
             maskA[8 + j, 8 + j] = True
             maskB[8 + j, j] = True
-    model = taylor.IdentifiedModel(x0, u0, fits, nuis_kept, params, motor == "known")
+    model = taylor.IdentifiedModel(x0, u0, fits, nuis_kept, params)
     theta = np.concatenate([rf.theta for rf in fits])
     psi_dot = float((np.sin(x0[0]) * x0[6] + np.cos(x0[0]) * x0[7]) / np.cos(x0[1]))
     if cfg.equilibrium:
         rx = taylor.reexpand(model, theta, joint, x0[2:5], psi_dot, maskA, maskB)
         x_e, u_e, A, B, sA, sB, flown = rx.x_e, rx.u_e, rx.A, rx.B, rx.std_A, rx.std_B, rx.xdot_flown
-        log.info("%s: equilibrium re-expansion in %d Newton steps, shift %s", data.name, rx.iterations,
+        log.debug("%s: equilibrium re-expansion in %d Newton steps, shift %s", data.name, rx.iterations,
                  np.round(x_e - x0, 4).tolist())
     else:
         flown = np.concatenate([[0.0, 0.0], model.residual(np.concatenate([x0[:2], x0[8:12], u0]), theta,
@@ -497,8 +662,9 @@ def prepare(data: VertexData, cfg: IdentificationConfig, x0: np.ndarray, u0: np.
 
 
 def identify_vertex(data: VertexData, cfg: IdentificationConfig,
-                    known: KnownModel | None = None) -> VertexResult:
-    """Full pipeline for one vertex (see module docstring)."""
+                    known: KnownModel | None = None, motor_prior=None) -> VertexResult:
+    """Full pipeline for one vertex (see module docstring).  ``motor_prior``:
+    ``((a_Omega, std), (b_Omega, std))`` used when this maneuver cannot identify them."""
     x = np.asarray(data.x, dtype=float)
     u = np.asarray(data.u, dtype=float)
     if x.ndim != 2 or x.shape[1] != 12 or u.ndim != 2 or u.shape[1] != 4 or x.shape[0] != u.shape[0] \
@@ -510,18 +676,76 @@ def identify_vertex(data: VertexData, cfg: IdentificationConfig,
     x0, u0 = equilibrium(data, cfg)
     if known is None:
         known = known_from_quadrotor(x0, cfg.quadrotor)
-    x_flown, u_flown, flown, motor = x0, u0, None, "known"
+    x_flown, u_flown, flown, motor = x0, u0, None, {"mode": "known", "reason": "model appendix_b"}
     if cfg.model == "taylor2":
-        fit, x0, u0, flown, motor = _fit_taylor2(data, x0, u0, known, cfg)
+        if motor_prior is None and cfg.motor_std is not None:
+            p = _params(cfg)
+            motor_prior = ((p.a_omega, cfg.motor_std[0]), (p.b_omega, cfg.motor_std[1]))
+        fit, x0, u0, flown, motor = _fit_taylor2(data, x0, u0, known, cfg, motor_prior)
     else:
         _, xdot, dx, du = prepare(data, cfg, x0, u0, u=_input(data, _params(cfg)))
-        fit = ee.fit(xdot, dx, du, known.A, known.B, known.maskA, known.maskB, cfg.max_lag, cfg.intercept,
-                     covariance=cfg.covariance, dt=float(np.median(np.diff(data.t))))
+        dt = float(np.median(np.diff(data.t)))
+        var, dvar, _ = regressor_noise_var(cfg, _params(cfg), dt)
+        designs, A0, B0 = ee.row_designs(xdot, dx, du, known.A, known.B, known.maskA, known.maskB, cfg.intercept)
+        designs = [dataclasses.replace(d, noise_var=_design_noise(d.labels, var, dvar)) for d in designs]
+        fits, joint, dof = ee.solve_rows(designs, cfg.covariance, dt)
+        fit = ee.assemble(fits, A0, B0, known.maskA, known.maskB, joint, dof, cfg.covariance.method)
     uv = unc.build(fit.A, fit.B, fit.elements(), cfg.uncertainty, dof=fit.dof)
     r2 = {a: fit.r2.get(i, float("nan")) for a, i in zip(metrics.AXES, metrics.AXIS_INDEX)}
     log.info("%s: %d identified elements, M=%d uncertain systems", data.name, len(uv.intervals), uv.M)
     return VertexResult(data.name, np.asarray(data.scheduling, dtype=float), x0, u0, fit, uv, r2,
                         x_flown=x_flown, u_flown=u_flown, xdot_flown=flown, motor=motor)
+
+
+def pooled_motor(results: Sequence[VertexResult]) -> tuple[tuple[float, float], tuple[float, float]] | None:
+    """``((a_Omega, std), (b_Omega, std))`` over the vertices that identified them: the mean,
+    with a std covering both the single-vertex errors and the scatter between vertices (the
+    constants may change with the flight condition, e.g. battery voltage)."""
+    vals = []
+    for r in results:
+        if r.motor.get("mode") == "identified":
+            a, sa = -r.fit.A[8, 8], r.fit.std_A[8, 8]
+            b, sb = r.fit.B[8, 0], r.fit.std_B[8, 0]
+            vals.append((a, sa, b, sb))
+    if not vals:
+        return None
+    v = np.array(vals)
+    out = []
+    for m, s_ in ((v[:, 0], v[:, 1]), (v[:, 2], v[:, 3])):
+        spread = float(np.std(m, ddof=1)) if m.size > 1 else 0.0
+        out.append((float(np.mean(m)), float(np.sqrt(np.mean(s_ ** 2) + spread ** 2))))
+    return out[0], out[1]
+
+
+def identify_vertices(datas: Sequence[VertexData], cfg: IdentificationConfig) -> list[VertexResult]:
+    """:func:`identify_vertex` for every maneuver; where a maneuver cannot identify the motor
+    constants (a rotor pinned at a speed limit longer than ``motor_max_pinned``, no independent
+    rotor-speed measurement), they enter as uncertain with the :func:`pooled_motor` estimate of
+    the maneuvers that did.  When none did, every maneuver is tried again with the pinned
+    rotors only gated out (no ``motor_max_pinned`` limit) and all use the pooled estimate of
+    those, whose spread between maneuvers then enters its standard error."""
+    results = [identify_vertex(d, cfg) for d in datas]
+    if cfg.model != "taylor2" or cfg.motor != "identify":
+        return results
+    prior = pooled_motor(results)
+    redo = [r.motor.get("mode") != "identified" for r in results]
+    if prior is None:
+        relaxed = dataclasses.replace(cfg, motor_max_pinned=1.0)
+        tried = [identify_vertex(d, relaxed) for d in datas]
+        prior = pooled_motor(tried)
+        redo = [True] * len(datas)
+    if prior is None:
+        return results
+    out = []
+    for d, r, again in zip(datas, results, redo):
+        if again:
+            log.debug("%s: a_Omega, b_Omega not identifiable (%s): pooled estimate of the maneuvers",
+                      d.name, r.motor.get("reason"))
+            reason = r.motor.get("reason", "")
+            r = identify_vertex(d, dataclasses.replace(cfg, motor="known"), motor_prior=prior)
+            r.motor["reason"] = f"{reason}; pooled estimate of the maneuvers that identified them"
+        out.append(r)
+    return out
 
 
 def validate(results: Sequence[VertexResult], data: VertexData, cfg: IdentificationConfig) -> dict:
@@ -565,19 +789,47 @@ def vertex_order(results: Sequence[VertexResult], cfg: IdentificationConfig) -> 
 
 def vertex_models_dict(results: Sequence[VertexResult], cfg: IdentificationConfig,
                        validation: dict | None = None) -> dict:
-    """The ``vertex_models.yaml`` document (ARCHITECTURE.md section 5), vertices in box order.
+    """The ``vertex_models.yaml`` document (format ``@2``, io/formats.py), vertices in box order.
 
-    ``meta`` records how the file was made: the method, ``k_sigma`` of Eq. (22), the
-    polytope reduction and ``M_i`` per vertex, and the independent validation (Table 3).
+    ``meta`` records how the file was made: the method, ``k_sigma`` of Eq. (22) (and the
+    ``k`` applied per vertex when ``joint_alpha`` raises it), how the standard errors were
+    estimated (covariance method, Student-t degrees of freedom and the resulting widening of
+    the stored ``std``), how the motor constants entered, the operating point (the flown trim
+    mean, the identified model's derivative there and the equilibrium it was re-expanded
+    about), the reduction of Eq. (23) the identification would apply (``M_i``, absorption
+    factor; the file itself stores the whole box), and the independent validation (Table 3).
     """
+    from lpv_sysid.ident.equation_error import t_factor
+    from lpv_sysid.io.formats import MODELS_FORMAT
+
     order = vertex_order(results, cfg)
+    ks = [unc.applied_k(cfg.uncertainty, len(results[k].uncertain.intervals)) for k in order]
+    dofs = [results[k].fit.dof for k in order]
+
+    def vec(a):
+        return None if a is None else [float(v) for v in a]
+
     meta = {
         "generator": "lpv_sysid.ident (seed 0 Sec. IV, Appendix B)",
         "model": cfg.model,
         "derivatives": dataclasses.asdict(cfg.derivatives),
         "k_sigma": cfg.uncertainty.k_sigma,
         "joint_alpha": cfg.uncertainty.joint_alpha,
+        "intervals": "every identified element, lower/upper = nominal -/+ k std (Eq. 22)",
+        "std": {"method": results[order[0]].fit.cov_method,
+                "meaning": "standard error widened so that nominal +/- k std keeps the normal coverage "
+                           "2 Phi(k) - 1 under Student-t(dof) errors",
+                "dof": [None if d is None else float(d) for d in dofs],
+                "t_factor": [t_factor(k, d) for k, d in zip(ks, dofs)]},
+        "motor": [dict(results[k].motor) for k in order],
+        "operating_point": {
+            "x0": "equilibrium of the identified model at the flown velocity" if cfg.model == "taylor2"
+                  and cfg.equilibrium else "mean over the trim window (flown)",
+            "x_flown": [vec(results[k].x_flown) for k in order],
+            "u_flown": [vec(results[k].u_flown) for k in order],
+            "xdot_flown": [vec(results[k].xdot_flown) for k in order]},
         "uncertainty": {"method": cfg.uncertainty.method, "p_max": cfg.uncertainty.p_max,
+                        "k_applied": ks,
                         "M": [results[k].uncertain.M for k in order],
                         "inflation": [results[k].uncertain.inflation for k in order]},
     }
@@ -586,7 +838,7 @@ def vertex_models_dict(results: Sequence[VertexResult], cfg: IdentificationConfi
                               "tic": {k: float(v) for k, v in validation["tic"].items()},
                               "nrmse": {k: float(v) for k, v in validation["nrmse"].items()}}
     return {
-        "format": FORMAT,
+        "format": MODELS_FORMAT,
         "time": "continuous",
         "states": [{"name": n, "unit": s} for n, s in zip(STATE_NAMES, STATE_UNITS)],
         "inputs": [{"name": n, "unit": s} for n, s in zip(INPUT_NAMES, INPUT_UNITS)],

@@ -87,9 +87,10 @@ from lpv_sysid.errors import BagError
 
 LOG = logging.getLogger(__name__)
 
-__all__ = ["BagWriter", "BagContents", "TopicStats", "RepairReport", "read_bag", "topic_info",
-           "repair_bag", "writer_alive", "atomic_write_text", "DiskReserve", "jazzy_typestore",
-           "DEFAULT_QOS", "make_qos", "LOCK_FILE"]
+__all__ = ["BagWriter", "BagContents", "BagArrays", "TopicArrays", "TopicStats", "RepairReport",
+           "read_bag", "read_arrays", "topic_info", "encode_block", "records_close", "CdrLayout",
+           "LayoutError", "repair_bag", "writer_alive", "atomic_write_text", "DiskReserve",
+           "jazzy_typestore", "DEFAULT_QOS", "make_qos", "LOCK_FILE"]
 
 STORAGES = ("mcap", "sqlite3")
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -102,6 +103,7 @@ RESERVE_BYTES = 1 << 20
 #: writer flushes before that so chunk boundaries (= what is durable) stay its own
 MAX_CHUNK_BYTES = 1 << 20
 _MSG_RECORD_OVERHEAD = 9 + 22       # mcap Message record: opcode + length + header
+_MCAP_MSG_RECORD = struct.Struct("<BQHIQQ")   # opcode, length, channel, sequence, log, publish
 
 
 @functools.lru_cache(maxsize=1)
@@ -439,6 +441,81 @@ class BagWriter:
         self._topic_type(topic)
         self._write(topic, stamp_ns, bytes(data))
 
+    def write_many(self, rows: Iterable) -> int:
+        """Write already CDR-serialised messages ``(topic, stamp_ns, data)`` in the given
+        order: the same records, chunks, flushes and counts as the same sequence of
+        :meth:`write_raw` calls, without rosbags' per-message overhead (mcap: the records
+        go straight into the pending chunk, as ``McapWriter.write`` of rosbags 0.11.9 writes
+        them). ``data`` is bytes or a row of the uint8 block of :func:`encode_block`.
+        Returns the number of messages written."""
+        self._check_open()
+        if not self._mcap or getattr(self._writer, "compression_mode", None) is None or \
+                self._writer.compression_mode.name != "NONE":
+            n = 0
+            for topic, stamp_ns, data in rows:
+                self.write_raw(topic, stamp_ns, data)
+                n += 1
+            return n
+        writer, storage = self._writer, self._writer.storage
+        conns: dict = {}
+        rec_head = _MCAP_MSG_RECORD.pack
+        limit, big = self.chunk_bytes, 2 ** 20
+        n = 0
+        topic = None
+        try:
+            for topic, stamp_ns, data in rows:
+                cid = conns.get(topic)
+                if cid is None:
+                    self._topic_type(topic)
+                    cid = conns[topic] = self._connections[topic].id
+                if isinstance(stamp_ns, float) and not math.isfinite(stamp_ns):
+                    raise BagError(f"bag {self.path}: topic {topic!r}: stamp {stamp_ns!r} is not finite")
+                ns = int(stamp_ns)
+                if not 0 <= ns < 2**63:
+                    raise BagError(f"bag {self.path}: topic {topic!r}: stamp {ns} ns outside [0, 2^63)")
+                size = len(data)
+                chunk = storage.chunk
+                if chunk.msgs and chunk.bio.tell() + _MSG_RECORD_OVERHEAD + size > limit:
+                    self._flush()
+                    chunk = storage.chunk
+                nchunks = len(storage.chunks)
+                # McapWriter.write
+                if ns < storage.message_start_time:
+                    storage.message_start_time = ns
+                if ns > storage.message_end_time:
+                    storage.message_end_time = ns
+                storage.channel_stats[cid] += 1
+                if ns < chunk.message_start_time:
+                    chunk.message_start_time = ns
+                if ns > chunk.message_end_time:
+                    chunk.message_end_time = ns
+                bio = chunk.bio
+                chunk.msgs[cid].append((ns, bio.tell()))
+                bio.write(rec_head(0x05, 22 + size, cid, 0, ns, ns))
+                bio.write(data)
+                if bio.tell() > big:
+                    storage.close_chunk()
+                # Writer.write
+                writer.counts[cid] += 1
+                if ns < writer.min_timestamp:
+                    writer.min_timestamp = ns
+                if ns > writer.max_timestamp:
+                    writer.max_timestamp = ns
+                self.counts[topic] += 1
+                n += 1
+                now = self._clock()
+                if not self._pending_n:
+                    self._oldest = now
+                self._pending_n += 1
+                if len(storage.chunks) != nchunks or self._pending_n >= self.flush_messages \
+                        or now - self._oldest >= self.flush_interval_s:
+                    self._flush()
+        except BagError:
+            raise
+        except Exception as exc:  # noqa: BLE001
+            self._fail(f"writing {topic!r} failed", exc)
+        return n
+
     def flush(self, fsync: bool | None = None) -> None:
         """Make everything written so far durable now: close the pending mcap chunk and
         hand it to the OS / commit sqlite3 (``fsync``: also to the device; default: the
@@ -631,7 +708,7 @@ def _completed_end(storage, header_end: int) -> int:
 # template's form another group; anything the layout cannot describe goes through
 # rosbags' own ``deserialize_cdr``.
 _CDR_PRIMITIVES = {          # ROS 2 base type -> little-endian numpy dtype (size = alignment)
-    "bool": "?", "byte": "u1", "char": "u1", "int8": "i1", "uint8": "u1",
+    "bool": "?", "byte": "i1", "char": "u1", "int8": "i1", "uint8": "u1",   # as rosbags
     "int16": "<i2", "uint16": "<u2", "int32": "<i4", "uint32": "<u4",
     "int64": "<i8", "uint64": "<u8", "float32": "<f4", "float64": "<f8",
 }
@@ -916,6 +993,28 @@ def encode_block(msgtype: str, template, values: Mapping, n: int | None = None,
     return lay.encode(int(n), values)
 
 
+def records_close(msgtype: str, a, b, rtol: float = 1e-12, atol: float = 1e-12,
+                  typestore=None) -> bool:
+    """Whether two CDR records of ``msgtype`` have the same structure (strings, sequence
+    lengths) and numeric fields equal within ``rtol``/``atol`` (integers exactly): the check
+    of a block-built record against one serialised from a message builder."""
+    ts = typestore if typestore is not None else jazzy_typestore()
+    a, b = bytes(a), bytes(b)
+    lay = _LAYOUTS.for_record(ts, msgtype, b)
+    if lay is None or len(a) != lay.size:
+        return a == b
+    rows = np.frombuffer(a + b, np.uint8).reshape(2, -1)
+    if not lay.matches(rows).all():
+        return False
+    for path, v in lay.decode(rows).items():
+        if v.dtype.kind == "f":
+            if not np.allclose(v[0], v[1], rtol=rtol, atol=atol, equal_nan=True):
+                return False
+        elif not np.array_equal(v[0], v[1]):
+            return False
+    return True
+
+
 # ------------------------------------------------------------------------- reading
 class BagContents(dict):
     """``{topic: [(stamp_ns, msg), ...]}`` plus ``types`` (topic -> msgtype) and
@@ -980,17 +1079,25 @@ class _FastPathUnavailable(Exception):
 
 
 def _yaml_load(text: str):
-    loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
-    return yaml.load(text, Loader=loader)  # noqa: S506 - a safe loader
+    """metadata.yaml / QoS text through the package's YAML loader (libyaml parser)."""
+    from lpv_sysid.io.yaml_file import strict_load
+    return strict_load(text)
 
 
 @dataclass
 class _ChunkRef:
+    """A ChunkIndex record of the summary (what rosbags' reader relies on)."""
+
     start: int                  # file offset of the Chunk record
     length: int
     index: dict                 # channel id -> file offset of its MessageIndex record
     index_length: int
     counts: dict                # channel id -> messages (from the index lengths)
+    t0: int = 0                 # message start / end time
+    t1: int = 0
+    compression: str = ""
+    csize: int = 0
+    usize: int = 0
 
 
 @dataclass
@@ -1050,14 +1157,16 @@ def _mcap_summary(path: Path) -> _McapSummary:
                 meta, _ = _read_bytes(body, p)
                 out.channels[cid] = (sid, topic, enc, _channel_qos(meta))
             elif op == 0x08:
-                _t0, _t1, start, clen = struct.unpack_from("<QQQQ", body, 0)
+                t0, t1, start, clen = struct.unpack_from("<QQQQ", body, 0)
                 (n,) = struct.unpack_from("<I", body, 32)
                 index = dict(struct.iter_unpack("<HQ", body[36:36 + n]))
                 (ilen,) = struct.unpack_from("<Q", body, 36 + n)
+                comp, p = _read_str(body, 44 + n)
+                csize, usize = struct.unpack_from("<QQ", body, p)
                 ends = sorted(index.values()) + [start + clen + ilen]
                 byoff = {off: cid for cid, off in index.items()}
                 counts = {byoff[a]: (b - a - 15) // 16 for a, b in zip(ends, ends[1:])}
-                out.chunks.append(_ChunkRef(start, clen, index, ilen, counts))
+                out.chunks.append(_ChunkRef(start, clen, index, ilen, counts, t0, t1, comp, csize, usize))
             elif op == 0x0B:
                 (n,) = struct.unpack_from("<I", body, 42)
                 out.counts = dict(struct.iter_unpack("<HQ", body[46:46 + n]))
@@ -1178,11 +1287,13 @@ def _chunk_payload(fh, ch: _ChunkRef) -> bytes:
     rec = fh.read(ch.length)
     if len(rec) != ch.length or rec[0] != 0x06:
         raise _FastPathUnavailable(f"chunk at {ch.start} unreadable")
-    _t0, _t1, usize, crc = _MCAP_CHUNK_HEAD.unpack_from(rec, 9)
+    t0, t1, usize, crc = _MCAP_CHUNK_HEAD.unpack_from(rec, 9)
     comp, p = _read_str(rec, 37)
     (csize,) = struct.unpack_from("<Q", rec, p)
     if p + 8 + csize > len(rec):
         raise _FastPathUnavailable("chunk data beyond its record")
+    if (t0, t1, usize, comp, csize) != (ch.t0, ch.t1, ch.usize, ch.compression, ch.csize):
+        raise _FastPathUnavailable(f"chunk at {ch.start} disagrees with its index")
     return decompress(rec[p + 8:p + 8 + csize], comp, usize, crc)
 
 
@@ -1209,6 +1320,8 @@ def _mcap_chunk_records(sm: _McapSummary, cmap: dict, out: list) -> None:
                     cid, _seq, log_time = msg_hdr(buf, pos + 9)
                     topic = cmap.get(cid)
                     if topic is not None:
+                        if not ch.t0 <= log_time <= ch.t1:     # rosbags would drop it
+                            raise _FastPathUnavailable("message time outside its chunk")
                         append((topic, log_time, view[pos + 31:end]))
                 pos = end
 
@@ -1605,8 +1718,10 @@ def _rows_from_index(bag: _FastBag, topics) -> dict[str, _Rows]:
                         raise _FastPathUnavailable("message index does not point at messages")
                     rec_len = payload[offs[:, None] + np.arange(1, 9)].copy().view("<u8")[:, 0]
                     ids = payload[offs[:, None] + np.arange(9, 11)].copy().view("<u2")[:, 0]
+                    rec_t = payload[offs[:, None] + np.arange(15, 23)].copy().view("<u8")[:, 0]
                     if np.any(ids != cid) or np.any(rec_len < 22) or \
-                            np.any(offs + 9 + rec_len.astype(np.int64) > payload.size):
+                            np.any(offs + 9 + rec_len.astype(np.int64) > payload.size) or \
+                            np.any(rec_t != ent[:, 0]) or np.any(rec_t < ch.t0) or np.any(rec_t > ch.t1):
                         raise _FastPathUnavailable("message index inconsistent")
                     lens = rec_len.astype(np.int64) - 22
                     order = (np.int64(fno) << 56) | (np.int64(cno) << 32) | offs
@@ -2558,7 +2673,7 @@ def _metadata_matches(path: Path, storage: str, infos) -> bool:
     """Whether the bag's metadata.yaml names exactly these files and message counts."""
     try:
         with open(path / "metadata.yaml", encoding="utf-8") as fh:
-            info = yaml.safe_load(fh)["rosbag2_bagfile_information"]
+            info = _yaml_load(fh.read())["rosbag2_bagfile_information"]
         if info["storage_identifier"] != storage:
             return False
         if [Path(p).name for p in info["relative_file_paths"]] != [i.name for i in infos]:

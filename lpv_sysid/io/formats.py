@@ -1,11 +1,11 @@
 """``vertex_models.yaml`` and ``gains.yaml`` (ARCHITECTURE.md section 5), strictly validated.
 
-``vertex_models.yaml`` (format tag ``lpv_sysid/vertex_models@1``): the nominal vertex
+``vertex_models.yaml`` (format tag ``lpv_sysid/vertex_models@2``): the nominal vertex
 models ``(A_i, B_i)`` of seed 0 Eq. (15) at the 2^3 corners of the scheduling box
 (Eq. 20), their equilibria (Table 1), the identified uncertain elements with their
 interval box (Eq. 22) and fit metrics (Eqs. 24-25)::
 
-    format: lpv_sysid/vertex_models@1
+    format: lpv_sysid/vertex_models@2
     time: continuous                 # or {discrete: Ts}
     states: [{name: phi, unit: rad}, ...]          # 12, STATE_NAMES order
     inputs: [{name: ut, unit: '1'}, ...]           # 4, INPUT_NAMES order
@@ -15,7 +15,17 @@ interval box (Eq. 22) and fit metrics (Eqs. 24-25)::
         x0: [...]; u0: [...]; A: [[...]]; B: [[...]]
         uncertain: [{matrix: A, row: 2, col: 0, nominal: -0.41, std: 0.03, lower: -0.5, upper: -0.32}]
         fit: {r2: {...}, tic: {...}, nrmse: {...}}
-    meta: {...}                      # optional, free-form provenance
+    meta: {...}                      # optional, free-form provenance (k_sigma, method, ...)
+
+``@2`` (:data:`MODELS_FORMAT`): ``uncertain`` lists *every* element the identification
+estimated (aerodynamic elements, and the motor constants ``A[8:12, 8:12] = -a_Omega I``,
+``B[8:12, :] = b_Omega I`` when identified), ``std`` is calibrated (finite-sample widened) and
+``lower``/``upper`` = ``nominal -/+ k std`` with ``k`` = ``meta.k_sigma`` (3 by default;
+``meta.uncertainty.k_applied`` per vertex when raised): the whole box of Eq. (22).  ``x0, u0``
+is an equilibrium of the identified model.  ``@1`` (:data:`MODELS_FORMAT_V1`, still read):
+``lower``/``upper`` spanned only the reduced polytope of Eq. (23) that the identification
+chose (most entries ``lower = upper = nominal``), the full box following from ``std`` and
+``meta.k_sigma``; :attr:`VertexModels.format_version` tells them apart and ``save`` keeps it.
 
 ``gains.yaml`` (``lpv_sysid/gains@1``): vertex gains ``K_i`` (Eq. 31, ``du_c = K dx``),
 excitation input matrix ``R`` (Eq. 27), performance scaling ``Q`` (Eq. 28), the bound
@@ -60,14 +70,16 @@ import yaml
 from lpv_sysid.errors import ConfigError
 
 __all__ = [
-    "MODELS_FORMAT", "GAINS_FORMAT", "Layout", "QUADROTOR_LAYOUT",
+    "MODELS_FORMAT", "MODELS_FORMAT_V1", "MODELS_FORMATS", "GAINS_FORMAT", "Layout", "QUADROTOR_LAYOUT",
     "SchedulingBox", "UncertainEntry", "VertexModel", "VertexModels",
     "GainVertex", "FeedforwardSpec", "Certificate", "GainSchedule",
     "load_yaml", "sha256_file", "sha256_bytes", "DesignEnvelope", "certify_law",
     "SYSTEMS_ARRAYS", "systems_arrays", "load_certified_systems",
 ]
 
-MODELS_FORMAT = "lpv_sysid/vertex_models@1"
+MODELS_FORMAT = "lpv_sysid/vertex_models@2"
+MODELS_FORMAT_V1 = "lpv_sysid/vertex_models@1"
+MODELS_FORMATS = {MODELS_FORMAT_V1: 1, MODELS_FORMAT: 2}
 GAINS_FORMAT = "lpv_sysid/gains@1"
 
 
@@ -484,6 +496,7 @@ class VertexModels(_StackedVertices):
     vertices: tuple
     ts: Optional[float] = None          # None: continuous time
     meta: dict = field(default_factory=dict)
+    format_version: int = 2             # 1: lower/upper span the reduced polytope (module docstring)
 
     @property
     def A(self) -> np.ndarray:
@@ -504,7 +517,8 @@ class VertexModels(_StackedVertices):
             scheduling_names=self.scheduling.names, **kw)
 
     def to_dict(self) -> dict:
-        d = {"format": MODELS_FORMAT, "time": _time_dict(self.ts),
+        tag = {v: k for k, v in MODELS_FORMATS.items()}[self.format_version]
+        d = {"format": tag, "time": _time_dict(self.ts),
              "states": [{"name": n, "unit": u} for n, u in zip(self.state_names, self.state_units)],
              "inputs": [{"name": n, "unit": u} for n, u in zip(self.input_names, self.input_units)],
              "scheduling": self.scheduling.to_dict(),
@@ -520,8 +534,8 @@ class VertexModels(_StackedVertices):
         v = _V(label)
         lay = layout or Layout()
         v.mapping(d, "", ("format", "time", "states", "inputs", "scheduling", "vertices"), ("meta",))
-        if d["format"] != MODELS_FORMAT:
-            v.fail("format", f"expected {MODELS_FORMAT!r}, got {d['format']!r}")
+        if not isinstance(d["format"], str) or d["format"] not in MODELS_FORMATS:
+            v.fail("format", f"expected {MODELS_FORMAT!r} (or {MODELS_FORMAT_V1!r}), got {d['format']!r}")
         ts = _time(v, d["time"])
         sn, su = _channels(v, d["states"], "states", lay.state_names, lay.state_units)
         inn, inu = _channels(v, d["inputs"], "inputs", lay.input_names, lay.input_units)
@@ -534,7 +548,8 @@ class VertexModels(_StackedVertices):
         meta = d.get("meta") or {}
         if not isinstance(meta, Mapping):
             v.fail("meta", f"expected a mapping, got {_kind(meta)}")
-        return cls(sn, su, inn, inu, box, tuple(vxs[k] for k in order), ts, dict(meta))
+        return cls(sn, su, inn, inu, box, tuple(vxs[k] for k in order), ts, dict(meta),
+                   MODELS_FORMATS[d["format"]])
 
     @classmethod
     def load(cls, path, layout: Optional[Layout] = QUADROTOR_LAYOUT) -> "VertexModels":

@@ -123,11 +123,18 @@ def read_bytes(path, label: Optional[str] = None, max_bytes: int = MAX_YAML_BYTE
                show_path: bool = False) -> bytes:
     """All bytes of the regular file ``path`` (at most ``max_bytes``, else ConfigError)."""
     label, shown = _shown(path, label, show_path)
+    chunks, total = [], 0
     with open_regular(path, label, max_bytes, show_path=show_path) as fh:
-        try:
-            data = fh.read(max_bytes + 1)
+        try:    # in chunks up to one byte past the cap: a file that grows (or /proc, size 0) is caught
+            while total <= max_bytes:
+                chunk = fh.read(min(1 << 20, max_bytes + 1 - total))
+                if not chunk:
+                    break
+                chunks.append(chunk)
+                total += len(chunk)
         except OSError as exc:
             raise _oserror(exc, label, shown, path) from None
+    data = b"".join(chunks)
     if len(data) > max_bytes:
         reason = f"file too large (it grew past the limit of {_size(max_bytes)})"
         raise FileReadError(f"{label}: {shown}{reason}", os.fspath(path), reason)

@@ -245,8 +245,10 @@ class TelemetryDecoder:
         return None
 
     def _on_state_source(self, slot: str, now: float) -> list[Any]:
-        if slot in (self._selected(ATTITUDE_SOURCES, now), self._selected(POSITION_SOURCES, now)):
-            return self._state_list(now)
+        sa, sp = self._selected(ATTITUDE_SOURCES, now), self._selected(POSITION_SOURCES, now)
+        if slot in (sa, sp):
+            s = self._state(now, sa, sp)
+            return [s] if s is not None else []
         return []
 
     def _attitude_quaternion(self, m: Any, now: float) -> list[Any] | None:
@@ -299,10 +301,11 @@ class TelemetryDecoder:
         return self._on_state_source("ODOMETRY", now)
 
     def _highres_imu(self, m: Any, now: float) -> list[Any] | None:
-        acc = np.array([m.xacc, m.yacc, m.zacc], dtype=float)
-        gyr = np.array([m.xgyro, m.ygyro, m.zgyro], dtype=float)
-        if not (np.isfinite(acc).all() and np.isfinite(gyr).all()):
+        v = (float(m.xacc), float(m.yacc), float(m.zacc), float(m.xgyro), float(m.ygyro), float(m.zgyro))
+        if not all(map(math.isfinite, v)):
             raise ValueError("invalid imu")
+        acc = np.array(v[0:3])
+        gyr = np.array(v[3:6])
         tv = m.time_usec * 1e-6
         if not self._accept("HIGHRES_IMU", tv, now, None):
             return None
@@ -381,8 +384,9 @@ class TelemetryDecoder:
         return [RotorSample(now, tv, omega, ESTIMATED)]
 
     # -------------------------------------------------------------- state
-    def _state(self, now: float) -> StateSample | None:
-        sa, sp = self._selected(ATTITUDE_SOURCES, now), self._selected(POSITION_SOURCES, now)
+    def _state(self, now: float, sa: str | None = None, sp: str | None = None) -> StateSample | None:
+        if sa is None or sp is None:        # the caller may pass the selected sources
+            sa, sp = self._selected(ATTITUDE_SOURCES, now), self._selected(POSITION_SOURCES, now)
         if sa is None or sp is None:
             return None
         a, p = self._latest[sa], self._latest[sp]

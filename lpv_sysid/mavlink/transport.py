@@ -11,6 +11,13 @@ simulated vehicle (and that PX4 v1.16 accepts over MAVLink):
 - :class:`AttitudeRateTransport` (phase 2 fallback): the virtual actuator command
   u = (ut, ua, ue, ur) of seed 0 Eq. (7)-(8) becomes SET_ATTITUDE_TARGET body rates +
   collective thrust (see docs/px4_transport.md for what is lost).
+- :class:`RateSetpointTransport` (phase 2 on PX4, "rate plant"): the command *is*
+  u = (thrust, p_sp, q_sp, r_sp) (:data:`RATE_INPUT_NAMES`, normalised thrust and FRD body
+  rates in rad/s) and goes out unchanged as SET_ATTITUDE_TARGET; PX4's rate loop is part of
+  the identified plant (lpv_sysid/models/rate_plant.py, docs/px4_chain.md), so nothing is
+  inverted and the certificate is about exactly what is sent.
+  :func:`rate_setpoint_from_attitude_target` reads the same four values back from PX4's
+  ATTITUDE_TARGET stream (the setpoints PX4's own velocity/attitude cascade produced).
 
 Direct motor commands (px4_msgs ActuatorMotors over uXRCE-DDS) are not a MAVLink path
 and not a dependency of this package; SET_ACTUATOR_CONTROL_TARGET is ignored by PX4 since
@@ -170,10 +177,69 @@ class AttitudeRateTransport:
             float(omega_sp[0]), float(omega_sp[1]), float(omega_sp[2]), thrust)]
 
 
+#: inputs of the rate plant, in the order of SET_ATTITUDE_TARGET's fields (thrust last there)
+RATE_INPUT_NAMES = ("thrust", "p_sp", "q_sp", "r_sp")
+RATE_INPUT_UNITS = ("1", "rad/s", "rad/s", "rad/s")
+
+
+class RateSetpointTransport:
+    """Phase 2 with PX4's rate loop inside the plant: ``ActuatorSetpoint.u`` is
+    (thrust, p_sp, q_sp, r_sp), sent as SET_ATTITUDE_TARGET (attitude ignored).
+
+    The command is clipped to PX4's ranges only (thrust [0, 1], |rate| <= ``max_rate``);
+    there is no inversion and no telemetry feedback inside the transport (unlike
+    :class:`AttitudeRateTransport`, whose omega_sp = omega + tau / K_p feeds the telemetry's
+    rate noise straight back into PX4's rate loop). It takes BridgeCore's ``attitude_rate``
+    command path (``on_actuator_command`` with 4 values); ``input_form`` tells the two apart.
+    """
+
+    name = "attitude_rate"
+    input_form = "rate_setpoint"
+
+    def __init__(self, max_rate: float = 2.0, thrust_min: float = 0.05, thrust_max: float = 0.95) -> None:
+        if not (math.isfinite(max_rate) and max_rate > 0):
+            raise ConfigError(f"rate_setpoint.max_rate must be positive, got {max_rate!r}")
+        if not (0.0 <= thrust_min < thrust_max <= 1.0):
+            raise ConfigError(f"rate_setpoint thrust range must satisfy 0 <= min < max <= 1, got "
+                              f"[{thrust_min!r}, {thrust_max!r}]")
+        self.max_rate = float(max_rate)
+        self.thrust_min = float(thrust_min)
+        self.thrust_max = float(thrust_max)
+
+    def neutral(self) -> None:
+        return None     # the hover thrust is vehicle-specific: stream only what the law commands
+
+    def clip(self, u: Any) -> np.ndarray:
+        """The command PX4 receives: thrust in [thrust_min, thrust_max], rates in +-max_rate."""
+        a = _finite("rate setpoint", u, 4).copy()
+        a[0] = min(max(a[0], self.thrust_min), self.thrust_max)
+        a[1:] = np.clip(a[1:], -self.max_rate, self.max_rate)
+        return a
+
+    def encode(self, codec: Any, sp: ActuatorSetpoint, ctx: TransportContext) -> list[Any]:
+        a = self.clip(sp.u)
+        return [codec.set_attitude_target_encode(
+            ctx.time_boot_ms, ctx.target_system, ctx.target_component,
+            ATTITUDE_TARGET_IGNORE_ATTITUDE, [1.0, 0.0, 0.0, 0.0],
+            float(a[1]), float(a[2]), float(a[3]), float(a[0]))]
+
+
+def rate_setpoint_from_attitude_target(msg: Any) -> tuple[float, np.ndarray] | None:
+    """(time_boot_ms / 1000, [thrust, p_sp, q_sp, r_sp]) of a PX4 ATTITUDE_TARGET, or None
+    when a field is not finite. PX4 fills body_*_rate from vehicle_rates_setpoint and thrust
+    from the attitude setpoint's -thrust_body[2] (normalised, as SET_ATTITUDE_TARGET takes it)."""
+    vals = np.array([msg.thrust, msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate], dtype=float)
+    if not np.isfinite(vals).all():
+        return None
+    return float(msg.time_boot_ms) * 1e-3, vals
+
+
 def make_transport(kind: str, **kw: Any) -> SetpointTransport:
     if kind == "velocity":
         return VelocityTransport(**kw)
     if kind == "attitude_rate":
         return AttitudeRateTransport(**kw)
-    raise ConfigError(f"command transport {kind!r} unknown; use 'velocity' or 'attitude_rate' "
+    if kind == "rate_setpoint":
+        return RateSetpointTransport(**kw)
+    raise ConfigError(f"command transport {kind!r} unknown; use 'velocity', 'attitude_rate' or 'rate_setpoint' "
                       "(direct motor control needs uXRCE-DDS, see docs/px4_transport.md)")

@@ -252,6 +252,142 @@ def _skew(a) -> np.ndarray:
     return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
 
 
+# ---------------------------------------------------------------- hot-path equations
+# The equations of the simulation's hot path, written once as source text and compiled per
+# model (every parameter a closure constant, every state a plain-float local): the rotor
+# model of Eq. (8), the aerodynamic forces and moments of Eq. (6) and the rigid-body
+# equations of Eq. (3). From them the model builds ``_fm`` (F, M), ``_rotor_rates``
+# (Omega-dot), ``derivatives_list`` (the 16-state derivative) and ``rk4_step`` (one classical
+# Runge-Kutta step with the command held, the four derivative evaluations inlined: no
+# calls, lists or attribute lookups between the stages). CPython executes the same float
+# operations in the same order in all four, so they agree bit for bit.
+# Names: body velocity u, v, w; rates p, q, r; rotor speeds O1..O4; command c0..c3.
+
+_SRC_ESC = """
+e1 = mi00 * c0 + mi01 * c1 + mi02 * c2 + mi03 * c3
+e1 = 0.0 if e1 < 0.0 else (1.0 if e1 > 1.0 else e1)
+e2 = mi10 * c0 + mi11 * c1 + mi12 * c2 + mi13 * c3
+e2 = 0.0 if e2 < 0.0 else (1.0 if e2 > 1.0 else e2)
+e3 = mi20 * c0 + mi21 * c1 + mi22 * c2 + mi23 * c3
+e3 = 0.0 if e3 < 0.0 else (1.0 if e3 > 1.0 else e3)
+e4 = mi30 * c0 + mi31 * c1 + mi32 * c2 + mi33 * c3
+e4 = 0.0 if e4 < 0.0 else (1.0 if e4 > 1.0 else e4)
+"""
+# Eq. (8): u_ESC = clip(Mix^-1 u, 0, 1) (e1..e4 above); Omega-dot held at 0 beyond the limits
+_SRC_ROTOR = """
+D1 = -a_om * O1 + b_om * e1
+if (O1 >= om_hi and D1 > 0.0) or (O1 <= om_lo and D1 < 0.0):
+    D1 = 0.0
+D2 = -a_om * O2 + b_om * e2
+if (O2 >= om_hi and D2 > 0.0) or (O2 <= om_lo and D2 < 0.0):
+    D2 = 0.0
+D3 = -a_om * O3 + b_om * e3
+if (O3 >= om_hi and D3 > 0.0) or (O3 <= om_lo and D3 < 0.0):
+    D3 = 0.0
+D4 = -a_om * O4 + b_om * e4
+if (O4 >= om_hi and D4 > 0.0) or (O4 <= om_lo and D4 < 0.0):
+    D4 = 0.0
+"""
+# Eq. (6) with delta = Mix Omega and delta^2 = Mix Omega^2 (Eq. 7), J_z delta_r-dot in M_z
+_SRC_FM = """
+dt = 0.25 * (O1 + O2 + O3 + O4)
+da = s_arm * (-O1 + O2 + O3 - O4)
+de = s_arm * (O1 - O2 + O3 - O4)
+dr = O1 + O2 - O3 - O4
+S1 = O1 * O1
+S2 = O2 * O2
+S3 = O3 * O3
+S4 = O4 * O4
+dt2 = 0.25 * (S1 + S2 + S3 + S4)
+da2 = s_arm * (-S1 + S2 + S3 - S4)
+de2 = s_arm * (S1 - S2 + S3 - S4)
+dr2 = S1 + S2 - S3 - S4
+ddr = D1 + D2 - D3 - D4
+Fx = u * (x_mu0 + x_muw * w + x_muh * dt)
+Fy = v * (y_mu0 + y_muw * w + y_muh * dt)
+Fz = (z_T0 * dt2 + z_mu0 * dt + z_mu * (u * u + v * v)
+      + z_muw * (4.0 * w * dt - p * da - q * de))
+Mx = (l_T0 * da2 + l_mu0 * da + l_muw * (w * da - 2.0 * l2 * p * dt - 0.5 * l2 * q * dr)
+      + l_muh * v * dt + l_muh_mu0 * v + l_muh_muw * v * w + l_dr * u * dr)
+My = (m_T0 * de2 + m_mu0 * de + m_muw * (w * de - 2.0 * l2 * q * dt - 0.5 * l2 * p * dr)
+      + m_muh * u * dt + m_muh_mu0 * u + m_muh_muw * u * w + m_dr * v * dr)
+Mz = (n_Q0 * dr2 + n_mu0 * dr + n_muw * (w * dr + p * de + q * da) + n_muw2 * p * q
+      + n_muh * (u * da + v * de) + n_muh_muw * (u * p + v * q) + j_rot * ddr)
+"""
+# Eq. (3): position (3a, ZYX Euler R_IB of Eq. 2), Euler angles (2/3b), body velocity
+# (3c: v x omega + g R^T e3 + F / m) and rates (3d: I^-1 (I omega x omega + M)); the rotor
+# rows are D1..D4
+_SRC_EQ3 = """
+sf = sin(phi)
+cf = cos(phi)
+st = sin(th)
+ct = cos(th)
+sp = sin(psi)
+cp = cos(psi)
+d0 = ct * cp * u + (sf * st * cp - cf * sp) * v + (cf * st * cp + sf * sp) * w
+d1 = ct * sp * u + (sf * st * sp + cf * cp) * v + (cf * st * sp - sf * cp) * w
+d2 = -st * u + sf * ct * v + cf * ct * w
+tt = st / ct
+d3 = p + sf * tt * q + cf * tt * r
+d4 = cf * q - sf * r
+d5 = (sf * q + cf * r) / ct
+d6 = v * r - w * q - g * st + Fx / m
+d7 = w * p - u * r + g * sf * ct + Fy / m
+d8 = u * q - v * p + g * cf * ct + Fz / m
+h0 = I00 * p + I01 * q + I02 * r
+h1 = I10 * p + I11 * q + I12 * r
+h2 = I20 * p + I21 * q + I22 * r
+t0 = h1 * r - h2 * q + Mx
+t1 = h2 * p - h0 * r + My
+t2 = h0 * q - h1 * p + Mz
+d9 = Ii00 * t0 + Ii01 * t1 + Ii02 * t2
+d10 = Ii10 * t0 + Ii11 * t1 + Ii12 * t2
+d11 = Ii20 * t0 + Ii21 * t1 + Ii22 * t2
+d12 = D1
+d13 = D2
+d14 = D3
+d15 = D4
+"""
+_X16 = ("X", "Y", "Z", "phi", "th", "psi", "u", "v", "w", "p", "q", "r", "O1", "O2", "O3", "O4")
+
+
+def _indent(src: str, n: int = 4) -> str:
+    return "".join(" " * n + line + "\n" for line in src.strip("\n").splitlines())
+
+
+def _hot_path_source() -> str:
+    """Source of the factory that compiles the hot-path functions of one model."""
+    fm = ("def _fm(u, v, w, p, q, r, O1, O2, O3, O4, D1, D2, D3, D4):\n" + _indent(_SRC_FM)
+          + "    return (Fx, Fy, Fz), (Mx, My, Mz)\n")
+    rates = ("def _rotor_rates(O, c):\n    O1, O2, O3, O4 = O\n    c0, c1, c2, c3 = c\n"
+             + _indent(_SRC_ESC) + _indent(_SRC_ROTOR) + "    return [D1, D2, D3, D4]\n")
+    deriv = ("def derivatives_list(x, c):\n    " + ", ".join(_X16) + " = x\n    c0, c1, c2, c3 = c\n"
+             + _indent(_SRC_ESC) + _indent(_SRC_ROTOR) + _indent(_SRC_FM) + _indent(_SRC_EQ3)
+             + "    return [" + ", ".join(f"d{i}" for i in range(16)) + "]\n")
+    # rk4_step: the command is held, so Eq. (8)'s u_ESC is computed once; stage k evaluates
+    # the derivative at x + a_k h k_(k-1) (positions are not needed by any derivative)
+    body = "def rk4_step(x, c, h):\n    " + ", ".join(n + "_0" for n in _X16) + " = x\n"
+    body += "    c0, c1, c2, c3 = c\n" + _indent(_SRC_ESC) + "    hh = 0.5 * h\n"
+    for k, coef in ((1, None), (2, "hh"), (3, "hh"), (4, "h")):
+        for i, n in enumerate(_X16[3:], start=3):
+            body += (f"    {n} = {n}_0\n" if coef is None else f"    {n} = {n}_0 + {coef} * k{k - 1}_{i}\n")
+        stage = _SRC_ROTOR + _SRC_FM + _SRC_EQ3
+        for i in range(16):
+            stage = stage.replace(f"d{i} = ", f"k{k}_{i} = ")
+        body += _indent(stage)
+    body += "    h6 = h / 6.0\n    return [" + ", ".join(
+        f"{n}_0 + h6 * (k1_{i} + 2.0 * k2_{i} + 2.0 * k3_{i} + k4_{i})" for i, n in enumerate(_X16)) + "]\n"
+    consts = (list(K_NAMES) + ["s_arm", "l2", "j_rot", "a_om", "b_om", "om_lo", "om_hi", "g", "m"]
+              + [f"{n}{i}{j}" for n in ("I", "Ii") for i in range(3) for j in range(3)]
+              + [f"mi{i}{j}" for i in range(4) for j in range(4)])
+    return ("def _factory(" + ", ".join(consts) + "):\n    from math import sin, cos\n"
+            + _indent(fm) + _indent(rates) + _indent(deriv) + _indent(body)
+            + "    return _fm, _rotor_rates, derivatives_list, rk4_step\n")
+
+
+_HOT_PATH = compile(_hot_path_source(), "<lpv_sysid.models.quadrotor hot path>", "exec")
+
+
 class Quadrotor:
     """Seed 0 Eqs. (3), (6)-(8) with analytic linearisation (Eqs. 10-16)."""
 
@@ -262,12 +398,25 @@ class Quadrotor:
         self.mix_inv = np.linalg.inv(self.mix)
         self.inertia = np.array(p.inertia, dtype=float)
         self.inertia_inv = np.linalg.inv(self.inertia)
-        # Plain-float copies for the lean derivative (per-step numpy overhead dominates
-        # for 3- and 4-vectors, so the hot path is written with Python floats).
-        self._mi = tuple(tuple(float(v) for v in row) for row in self.mix_inv)
-        self._I = p.inertia
-        self._Ii = tuple(tuple(float(v) for v in row) for row in self.inertia_inv)
-        self._k = tuple(p.K[k] for k in K_NAMES)
+        # Plain-float hot path (numpy's per-call overhead dominates for 3- and 4-vectors):
+        # the functions compiled from the equation sources above, parameters bound.
+        ell = p.arm_length
+        consts = dict(zip(K_NAMES, (p.K[k] for k in K_NAMES)))
+        consts.update(s_arm=ell * _SQ2, l2=ell * ell, j_rot=p.j_rotor, a_om=p.a_omega,
+                      b_om=p.b_omega, om_lo=p.omega_min, om_hi=p.omega_max, g=p.g, m=p.mass)
+        for i in range(3):
+            for j in range(3):
+                consts[f"I{i}{j}"] = p.inertia[i][j]
+                consts[f"Ii{i}{j}"] = float(self.inertia_inv[i][j])
+        for i in range(4):
+            for j in range(4):
+                consts[f"mi{i}{j}"] = float(self.mix_inv[i][j])
+        ns: dict = {}
+        exec(_HOT_PATH, ns)  # noqa: S102 - compiled from this module's own source text
+        self._fm, self._rotor_rates, self.derivatives_list, self.rk4_step = ns["_factory"](**consts)
+
+    def __reduce__(self):
+        return (Quadrotor, (self.params,))
 
     # ------------------------------------------------------------------ Eq. (6)
     def forces_moments(self, v, omega, Omega, Omega_dot=(0.0, 0.0, 0.0, 0.0)):
@@ -276,94 +425,14 @@ class Quadrotor:
                         *[float(a) for a in Omega], *[float(a) for a in Omega_dot])
         return np.array(F), np.array(M)
 
-    def _fm(self, u, v, w, p, q, r, O1, O2, O3, O4, D1, D2, D3, D4):
-        (x_mu0, x_muw, x_muh, y_mu0, y_muw, y_muh, z_T0, z_mu0, z_mu, z_muw,
-         l_T0, l_mu0, l_muw, l_muh, l_muh_mu0, l_muh_muw, l_dr,
-         m_T0, m_mu0, m_muw, m_muh, m_muh_mu0, m_muh_muw, m_dr,
-         n_Q0, n_mu0, n_muw, n_muw2, n_muh, n_muh_muw) = self._k
-        ell = self.params.arm_length
-        s = ell * _SQ2
-        l2 = ell * ell
-        dt = 0.25 * (O1 + O2 + O3 + O4)
-        da = s * (-O1 + O2 + O3 - O4)
-        de = s * (O1 - O2 + O3 - O4)
-        dr = O1 + O2 - O3 - O4
-        S1, S2, S3, S4 = O1 * O1, O2 * O2, O3 * O3, O4 * O4
-        dt2 = 0.25 * (S1 + S2 + S3 + S4)
-        da2 = s * (-S1 + S2 + S3 - S4)
-        de2 = s * (S1 - S2 + S3 - S4)
-        dr2 = S1 + S2 - S3 - S4
-        ddr = D1 + D2 - D3 - D4
-        Fx = u * (x_mu0 + x_muw * w + x_muh * dt)
-        Fy = v * (y_mu0 + y_muw * w + y_muh * dt)
-        Fz = (z_T0 * dt2 + z_mu0 * dt + z_mu * (u * u + v * v)
-              + z_muw * (4.0 * w * dt - p * da - q * de))
-        Mx = (l_T0 * da2 + l_mu0 * da + l_muw * (w * da - 2.0 * l2 * p * dt - 0.5 * l2 * q * dr)
-              + l_muh * v * dt + l_muh_mu0 * v + l_muh_muw * v * w + l_dr * u * dr)
-        My = (m_T0 * de2 + m_mu0 * de + m_muw * (w * de - 2.0 * l2 * q * dt - 0.5 * l2 * p * dr)
-              + m_muh * u * dt + m_muh_mu0 * u + m_muh_muw * u * w + m_dr * v * dr)
-        Mz = (n_Q0 * dr2 + n_mu0 * dr + n_muw * (w * dr + p * de + q * da) + n_muw2 * p * q
-              + n_muh * (u * da + v * de) + n_muh_muw * (u * p + v * q) + self.params.j_rotor * ddr)
-        return (Fx, Fy, Fz), (Mx, My, Mz)
-
     # ------------------------------------------------------------------ Eq. (8)
     def u_esc(self, u) -> np.ndarray:
         """Per-motor ESC command u_ESC = clip(Mix^-1 u, 0, 1) (seed 0 Eq. 8)."""
         return np.clip(self.mix_inv @ np.asarray(u, dtype=float), 0.0, 1.0)
 
-    def _rotor_rates(self, O, u):
-        p = self.params
-        a, b, lo, hi = p.a_omega, p.b_omega, p.omega_min, p.omega_max
-        mi = self._mi
-        out = []
-        for i in range(4):
-            row = mi[i]
-            e = row[0] * u[0] + row[1] * u[1] + row[2] * u[2] + row[3] * u[3]
-            e = 0.0 if e < 0.0 else (1.0 if e > 1.0 else e)
-            d = -a * O[i] + b * e
-            if (O[i] >= hi and d > 0.0) or (O[i] <= lo and d < 0.0):
-                d = 0.0
-            out.append(d)
-        return out
-
     # ------------------------------------------------------------------ Eq. (3)
-    def derivatives_list(self, x, u):
-        """Lean time derivative of the 16-state model on plain sequences (hot path)."""
-        phi, th, psi = x[3], x[4], x[5]
-        uu, vv, ww, p, q, r = x[6], x[7], x[8], x[9], x[10], x[11]
-        O = (x[12], x[13], x[14], x[15])
-        Od = self._rotor_rates(O, u)
-        (Fx, Fy, Fz), (Mx, My, Mz) = self._fm(uu, vv, ww, p, q, r, O[0], O[1], O[2], O[3],
-                                              Od[0], Od[1], Od[2], Od[3])
-        sf, cf = math.sin(phi), math.cos(phi)
-        st, ct = math.sin(th), math.cos(th)
-        sp, cp = math.sin(psi), math.cos(psi)
-        # Eq. (3a): qdot = R_IB v (ZYX Euler, Eq. 2 parameterisation)
-        xd = ct * cp * uu + (sf * st * cp - cf * sp) * vv + (cf * st * cp + sf * sp) * ww
-        yd = ct * sp * uu + (sf * st * sp + cf * cp) * vv + (cf * st * sp - sf * cp) * ww
-        zd = -st * uu + sf * ct * vv + cf * ct * ww
-        # Eq. (2)/(3b)
-        tt = st / ct
-        phid = p + sf * tt * q + cf * tt * r
-        thd = cf * q - sf * r
-        psid = (sf * q + cf * r) / ct
-        # Eq. (3c): v x omega + g R^T e3 + F / m
-        g, m = self.params.g, self.params.mass
-        ud = vv * r - ww * q - g * st + Fx / m
-        vd = ww * p - uu * r + g * sf * ct + Fy / m
-        wd = uu * q - vv * p + g * cf * ct + Fz / m
-        # Eq. (3d): I^-1 (I omega x omega + M)
-        I, Ii = self._I, self._Ii
-        h0 = I[0][0] * p + I[0][1] * q + I[0][2] * r
-        h1 = I[1][0] * p + I[1][1] * q + I[1][2] * r
-        h2 = I[2][0] * p + I[2][1] * q + I[2][2] * r
-        t0 = h1 * r - h2 * q + Mx
-        t1 = h2 * p - h0 * r + My
-        t2 = h0 * q - h1 * p + Mz
-        pd = Ii[0][0] * t0 + Ii[0][1] * t1 + Ii[0][2] * t2
-        qd = Ii[1][0] * t0 + Ii[1][1] * t1 + Ii[1][2] * t2
-        rd = Ii[2][0] * t0 + Ii[2][1] * t1 + Ii[2][2] * t2
-        return [xd, yd, zd, phid, thd, psid, ud, vd, wd, pd, qd, rd, Od[0], Od[1], Od[2], Od[3]]
+    # derivatives_list(x, u) -> list: the 16-state derivative on plain sequences (hot path)
+    # rk4_step(x, u, h) -> list: one RK4 step of length h with u held (hot path)
 
     def derivatives(self, x16, u) -> np.ndarray:
         """Time derivative of the full 16-state model (seed 0 Eqs. 3, 6, 7, 8)."""

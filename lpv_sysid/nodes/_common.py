@@ -21,7 +21,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.qos import (QoSDurabilityPolicy, QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy,
                        qos_profile_sensor_data)
 
-from lpv_sysid.errors import LpvSysidError
+from lpv_sysid.errors import ConfigError, LpvSysidError
 from lpv_sysid.io.messages import TYPES
 
 NAMESPACE = "lpv_sysid"
@@ -132,14 +132,22 @@ def declare(node, table) -> dict:
     values = {}
     for name, default, descriptor in table:
         p = node.declare_parameter(name, default, descriptor)
-        if isinstance(default, Parameter.Type):
-            if p.type_ == Parameter.Type.NOT_SET:
-                p = Parameter(name, default, [])
-                result, = node.set_parameters([p])
-                if not result.successful:
-                    raise LpvSysidError(f"parameter '{name}': {result.reason}")
+        if p.type_ == Parameter.Type.NOT_SET:
+            # no default, or a params file wrote ``name: []`` (rcl reads it as no value)
+            kind = Parameter.Type(descriptor.type)
+            if kind not in _ARRAY_TYPES:
+                raise ConfigError(f"parameter '{name}' has no value (a params file wrote [] "
+                                  f"for a {kind.name} parameter)")
+            p = Parameter(name, kind, [])
+            result, = node.set_parameters([p])
+            if not result.successful:
+                raise ConfigError(f"parameter '{name}': {result.reason}")
         values[name] = list(p.value) if isinstance(default, (list, Parameter.Type)) else p.value
     return values
+
+
+_ARRAY_TYPES = (Parameter.Type.DOUBLE_ARRAY, Parameter.Type.STRING_ARRAY,
+                Parameter.Type.INTEGER_ARRAY, Parameter.Type.BOOL_ARRAY)
 
 
 class ShellNode(Node):
@@ -253,6 +261,7 @@ def run(node_factory, args=None, name: str = NAMESPACE) -> int:
         node = node_factory()
         executor = SingleThreadedExecutor()
         executor.add_node(node)
+        node.get_logger().info(READY)
         while rclpy.ok() and not stop.requested:
             executor.spin_once(timeout_sec=SPIN_PERIOD_S)
         if rclpy.ok():
@@ -272,6 +281,8 @@ def run(node_factory, args=None, name: str = NAMESPACE) -> int:
 
 #: executor wait per spin: how soon a recorded signal is acted upon [s]
 SPIN_PERIOD_S = 0.05
+#: logged by :func:`run` once the node is constructed (parameters, topics, services up)
+READY = "ready (SIGINT/SIGTERM: orderly shutdown)"
 
 
 def _orderly_shutdown(node, executor) -> None:

@@ -356,7 +356,17 @@ class ControllerRuntime:
                 sup.check_excitation(t_now, self.settings.excitation_gain * values,
                                      self.excitation_limit)
 
-    def start(self, t_now: float) -> tuple[bool, str]:
+    def missing_inputs(self) -> list:
+        """The input streams of which no sample has arrived yet."""
+        have = {"state": self.x8, "rotor_speeds": self.omega,
+                "velocity_reference": self.v_d_in, "excitation": self.u_e}
+        return [topic for topic in INPUT_TOPICS if have[topic] is None]
+
+    def start(self, t_now: float, wait_for_inputs: bool = False) -> tuple[bool, str]:
+        """Arm at ``t_now``; ``(started, why)``. ``wait_for_inputs`` (the node): refused while
+        a stream has not delivered its first sample -- arming then would latch a stale abort
+        (measured under real Jazzy: the controller started the moment its service appeared,
+        before discovery had matched the excitation node, and aborted 0.1 s later)."""
         sup = self.supervisor
         if sup.aborted:
             return False, f"aborted ({sup.event.reason}: {sup.event.detail}); restart the node"
@@ -365,6 +375,10 @@ class ControllerRuntime:
         if not t_now > 0.0:
             return False, (f"node clock reads {t_now:g} s: under use_sim_time no /clock has "
                            "arrived yet; start once the clock runs")
+        missing = self.missing_inputs() if wait_for_inputs else []
+        if missing:
+            return False, (f"no {', '.join(missing)} received yet: start once every input "
+                           "stream arrives")
         sup.arm(t_now)
         self.law.reset()
         self.limiter.reset()

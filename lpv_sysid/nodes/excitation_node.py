@@ -26,6 +26,7 @@ controller enforces the same envelope at run time. Parameters are declared once,
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -216,16 +217,30 @@ class ExcitationNode(C.ShellNode):
         self._shutdown_tick(ns * 1e-9)
 
     # -- orderly shutdown (nodes/_common.run) ----------------------------------------
+    #: wall time without node-clock progress after which the shutdown stops waiting for the
+    #: fade: under use_sim_time the clock source (sim_vehicle) may be shutting down too [s]
+    CLOCK_STALL_S = 0.5
+
     def begin_shutdown(self):
         """Abort with reason "shutdown" while the context is valid: the fade to zero starts
         at once and is published by the timer (downstream sees the reference go to zero,
-        not stop at full amplitude); status says so, and once more when the fade is done."""
-        self._shutdown = {"final": False}
+        not stop at full amplitude); status says so, and once more when the fade is done
+        -- or when the node clock stops (sim time whose source is gone: nothing to fade
+        against; the consumers see the stream end)."""
+        self._shutdown = {"final": False, "clock": self.now(), "moved": time.monotonic()}
         self._abort("shutdown")
         self._shutdown["faded_at"] = self._abort_at + self.settings.ramp_s
 
     def shutdown_complete(self):
-        return getattr(self, "_shutdown", {}).get("final", False)
+        sd = getattr(self, "_shutdown", None)
+        if sd is None or sd["final"]:
+            return sd is not None
+        now = self.now()
+        if now != sd["clock"]:
+            sd["clock"], sd["moved"] = now, time.monotonic()
+        elif time.monotonic() - sd["moved"] > self.CLOCK_STALL_S:
+            self._final_status(f"node clock stopped at {now:.3f} s before the fade ended")
+        return sd["final"]
 
     def shutdown_state(self):
         left = self._shutdown["faded_at"] - self.now()
@@ -236,9 +251,12 @@ class ExcitationNode(C.ShellNode):
         the fade is over (every output zero)."""
         sd = getattr(self, "_shutdown", None)
         if sd is not None and not sd["final"] and t_published >= sd["faded_at"]:
-            sd["final"] = True
-            self.publish_status()
-            self.get_logger().info("excitation faded out: shutdown")
+            self._final_status("faded out")
+
+    def _final_status(self, how: str) -> None:
+        self._shutdown["final"] = True
+        self.publish_status()
+        self.get_logger().info(f"excitation {how}: shutdown")
 
     def publish_status(self):
         prog = self.core.progress if self.started else None

@@ -54,8 +54,10 @@ class LpvControllerNode(C.ShellNode):
                                f"{self.runtime.schedule.scheduling.to_dict()}, "
                                f"gamma {self.runtime.schedule.gamma:g}; {C.clock_source(self)}")
         self.log_core()
+        # auto_start: started by the timer once every input stream has delivered a sample
+        self._auto_start = settings.auto_start
         if settings.auto_start:
-            self.get_logger().info(self.runtime.start(self.now())[1])
+            self.get_logger().info("auto_start: commanding once every input stream arrives")
 
     def log_core(self):
         """Log what the core queued, with this node's logger (timestamp, /rosout)."""
@@ -80,6 +82,11 @@ class LpvControllerNode(C.ShellNode):
         return cb
 
     def on_tick(self):
+        if self._auto_start and not self.runtime.supervisor.armed:
+            ok, why = self.runtime.start(self.now(), wait_for_inputs=True)
+            if ok or self.runtime.supervisor.aborted:
+                self._auto_start = False
+                self.get_logger().info(f"auto_start: {why}")
         for topic, msg in self.runtime.on_timer(self.now()):
             self.pub[topic].publish(msg)
         self.log_core()
@@ -88,7 +95,8 @@ class LpvControllerNode(C.ShellNode):
         self.pub["status"].publish(self.runtime.status(self.now()))
 
     def on_start(self, request, response):
-        response.success, response.message = self.runtime.start(self.now())
+        response.success, response.message = self.runtime.start(self.now(),
+                                                                wait_for_inputs=True)
         self.get_logger().info(f"start: {response.message}")
         return response
 

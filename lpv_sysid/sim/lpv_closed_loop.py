@@ -44,6 +44,7 @@ the default 0.5 keeps the error small). Both report the solution on the signal g
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass, field
 from typing import Any, Callable, Optional, Protocol, Sequence
 
@@ -213,6 +214,7 @@ def linear_lpv_law(model: ScheduledModel, R: np.ndarray) -> ControlLaw:
     def law(t: float, x: np.ndarray, v_d: np.ndarray, ue_scaled: np.ndarray) -> np.ndarray:
         return model.u0(v_d) + model.K(v_d) @ (x - model.x0(v_d)) + R @ ue_scaled
 
+    law.eq33_parts = ("linear", model, R, None, None)    # lets simulate_eq33 fuse it (_FusedEq33)
     return law
 
 
@@ -276,7 +278,164 @@ def feedforward_law(model: ScheduledModel, R: np.ndarray, ffs: FeedforwardSchedu
         dx, du = ffs.offsets(v_d, a, j)
         return model.u0(v_d) + du + model.K(v_d) @ (x - model.x0(v_d) - dx) + R @ ue_scaled
 
+    law.eq33_parts = ("feedforward", model, R, ffs, accel)
     return law
+
+
+class _FusedEq33:
+    """Seed 0 Eq. (33) for a :class:`lpv_sysid.models.lpv.ScheduledLpv` under the laws of
+    :func:`linear_lpv_law` / :func:`feedforward_law`, evaluated with plain floats and one
+    matrix product: the multilinear weights alpha(v_d) of Eq. (21) and beta = (d alpha /
+    d v_d) dv_d/dt of Eq. (34) are computed as floats, then ``[alpha; beta] @ W`` gives every
+    scheduled quantity at once (W: per vertex A, B, K, x0, u0 and the feedforward maps,
+    row-stacked). Same values as :func:`eq33_rhs` through the ``ScheduledModel`` methods up to
+    rounding (summation order), without numpy's per-call overhead on 8-element weight
+    vectors (``np.kron``, ``tensordot``). ``moving_equilibrium`` as in :func:`eq33_rhs`."""
+
+    def __init__(self, sched: Any, law_parts: tuple, signals: "ReferenceSignals", kappa: float,
+                 moving_equilibrium: bool) -> None:
+        kind, _model, R, ffs, accel = law_parts
+        pm = sched.model
+        A, B, Kv = np.asarray(pm.A, float), np.asarray(pm.B, float), np.asarray(sched.Kv, float)
+        N, n, m = A.shape[0], A.shape[1], B.shape[2]
+        self.n, self.m = n, m
+        self.lo = [float(v) for v in pm.vmin]
+        self.span = [float(b - a) for a, b in zip(pm.vmin, pm.vmax)]
+        self.p = len(self.lo)
+        if N != 2 ** self.p:
+            raise ConfigError(f"Eq. (33): {N} vertices for a {self.p}-axis box")
+        cols = [A.reshape(N, -1), B.reshape(N, -1), Kv.reshape(N, -1), np.asarray(pm.x0, float),
+                np.asarray(pm.u0, float)]
+        self.ff = None
+        if kind == "feedforward":
+            if not (np.array_equal(ffs.vmin, pm.vmin) and np.array_equal(ffs.vmax, pm.vmax)):
+                raise ConfigError("feedforward schedule and model have different boxes")
+            cols.append(ffs.F.reshape(N, -1))
+            if ffs.Fj is not None:
+                cols.append(ffs.Fj.reshape(N, -1))
+            self.ff = (ffs, accel)
+        sizes = [c.shape[1] for c in cols]
+        edges = np.cumsum([0] + sizes)
+        self.sl = [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
+        self.W = np.ascontiguousarray(np.hstack(cols))
+        self.R = np.asarray(R, dtype=float)
+        self.kappa = float(kappa)
+        self.moving = bool(moving_equilibrium)
+        self.sig = signals
+        self._t = signals.t.tolist()
+        self._vd = signals.v_d.tolist()
+        self._ue = signals.u_e
+        self._last = None
+
+    # -- scheduling -------------------------------------------------------------
+    def weights(self, vd, vd_dot=None):
+        """(alpha, beta) as float lists: Eq. (21) weights (box clamped, first axis slowest as
+        ``models.lpv.box_vertices``) and their rate along dv_d/dt (0 on a clamped axis)."""
+        t, inside = [], []
+        for v, lo, sp in zip(vd, self.lo, self.span):
+            r = (v - lo) / sp
+            inside.append(0.0 <= r <= 1.0)
+            t.append(0.0 if r < 0.0 else (1.0 if r > 1.0 else r))
+        alpha = [1.0]
+        for tk in t:
+            alpha = [a * w for a in alpha for w in (1.0 - tk, tk)]
+        if vd_dot is None:
+            return alpha, None
+        beta = [0.0] * len(alpha)
+        for k in range(self.p):
+            if not inside[k] or vd_dot[k] == 0.0:
+                continue
+            g = [1.0]
+            for l_, tl in enumerate(t):
+                d = (-1.0 / self.span[k], 1.0 / self.span[k]) if l_ == k else (1.0 - tl, tl)
+                g = [a * w for a in g for w in d]
+            dk = vd_dot[k]
+            beta = [b + gi * dk for b, gi in zip(beta, g)]
+        return alpha, beta
+
+    def at(self, vd, vd_dot=None):
+        """Scheduled quantities at v_d: (A, B, K, x0, u0, x0_dot or None, F, F_jerk)."""
+        key = (tuple(vd), None if vd_dot is None else tuple(vd_dot))
+        if self._last is not None and self._last[0] == key:
+            return self._last[1]
+        if not all(map(math.isfinite, vd)):
+            raise ConfigError(f"scheduling point contains NaN/inf: {list(vd)}")
+        alpha, beta = self.weights(vd, vd_dot if self.moving else None)
+        P = (np.array([alpha, beta]) if beta is not None else np.array([alpha])) @ self.W
+        n, m, sl = self.n, self.m, self.sl
+        row = P[0]
+        out = (row[sl[0]].reshape(n, n), row[sl[1]].reshape(n, m), row[sl[2]].reshape(m, n),
+               row[sl[3]], row[sl[4]], P[1, sl[3]] if beta is not None else None,
+               row[sl[5]] if len(sl) > 5 else None, row[sl[6]] if len(sl) > 6 else None)
+        self._last = (key, out)
+        return out
+
+    def _offsets(self, t, Fv, Fjv):
+        ffs, accel = self.ff
+        a, j = accel(t)
+        nf = len(ffs.free)
+        y = Fv.reshape(-1, len(a)) @ np.asarray(a, dtype=float)
+        dx = np.zeros(self.n)
+        dx[ffs.free] = y[:nf]
+        du = y[nf:].copy()
+        if Fjv is not None and j is not None:
+            yj = Fjv.reshape(-1, len(j)) @ np.asarray(j, dtype=float)
+            dx[ffs.free] += yj[:nf]
+            du += yj[nf:nf + self.m]
+            dx[ffs.rate] += yj[nf + self.m:]
+        return dx, du
+
+    # -- law and right-hand side ---------------------------------------------------
+    def law(self, t: float, x: np.ndarray, v_d, ue_scaled) -> np.ndarray:
+        """The total command u of the fused law (Eq. 17 / 31, with feedforward if any)."""
+        A, B, K, x0, u0, _, Fv, Fjv = self.at([float(v) for v in v_d])
+        Re = self.R @ np.asarray(ue_scaled, dtype=float)
+        if self.ff is None:
+            return u0 + K @ (x - x0) + Re
+        dx, du = self._offsets(t, Fv, Fjv)
+        return u0 + du + K @ (x - x0 - dx) + Re
+
+    def __call__(self, t: float, x: np.ndarray, segment: Optional[int] = None) -> np.ndarray:
+        T, V = self._t, self._vd
+        k = self.sig.segment(t) if segment is None else segment
+        t0, t1 = T[k], T[k + 1]
+        s = (t - t0) / (t1 - t0)
+        s = 0.0 if s < 0.0 else (1.0 if s > 1.0 else s)
+        r = 1.0 - s
+        a, b = V[k], V[k + 1]
+        vd = [r * a[0] + s * b[0], r * a[1] + s * b[1], r * a[2] + s * b[2]]
+        vdot = [(b[0] - a[0]) / (t1 - t0), (b[1] - a[1]) / (t1 - t0), (b[2] - a[2]) / (t1 - t0)]
+        A, B, K, x0, u0, x0dot, Fv, Fjv = self.at(vd, vdot)
+        ue = r * self._ue[k] + s * self._ue[k + 1]
+        dx = x - x0
+        if self.ff is None:
+            du = K @ dx + self.R @ (self.kappa * ue)
+        else:
+            dxf, duf = self._offsets(t, Fv, Fjv)
+            du = duf + K @ (dx - dxf) + self.R @ (self.kappa * ue)
+        xdot = A @ dx + B @ du
+        if x0dot is not None:
+            xdot += x0dot
+        return xdot
+
+
+def fused_eq33(model: Any, signals: "ReferenceSignals", law: Optional[ControlLaw], R: np.ndarray,
+               kappa: float, moving_equilibrium: bool = True) -> Optional[_FusedEq33]:
+    """The fused Eq. (33) right-hand side ``f(t, x, segment)`` (:class:`_FusedEq33`) for
+    ``model`` (a ScheduledLpv, possibly wrapped in :class:`LastPointCache`) and ``law``
+    (None: :func:`linear_lpv_law` with ``R``; else a law made by :func:`linear_lpv_law` or
+    :func:`feedforward_law` for the same model); None for any other model or law, which
+    :func:`simulate_eq33` then evaluates through :func:`eq33_rhs`."""
+    inner = model.model if isinstance(model, LastPointCache) else model
+    if _vertex_stacks(inner) is None:
+        return None
+    parts = ("linear", inner, R, None, None) if law is None else getattr(law, "eq33_parts", None)
+    if parts is None:
+        return None
+    owner = parts[1].model if isinstance(parts[1], LastPointCache) else parts[1]
+    if owner is not inner:
+        return None
+    return _FusedEq33(inner, parts, signals, kappa, moving_equilibrium)
 
 
 def eq33_rhs(
@@ -457,11 +616,15 @@ def simulate_eq33(
             f"R has shape {R.shape}, expected ({np.asarray(model.B(v0)).shape[1]}, {signals.u_e.shape[1]}) "
             "(inputs x excitation channels)"
         )
-    law = law or linear_lpv_law(model, R)
     kappa = config.kappa
+    fused = fused_eq33(model, signals, law, R, kappa, moving_equilibrium)
+    law = law or linear_lpv_law(model, R)
 
-    def f(t: float, x: np.ndarray, segment: Optional[int] = None) -> np.ndarray:
-        return eq33_rhs(t, x, model, signals, law, kappa, segment, moving_equilibrium)
+    if fused is not None:
+        f = fused
+    else:
+        def f(t: float, x: np.ndarray, segment: Optional[int] = None) -> np.ndarray:
+            return eq33_rhs(t, x, model, signals, law, kappa, segment, moving_equilibrium)
 
     t = signals.t
     info: dict = {}
@@ -484,10 +647,14 @@ def simulate_eq33(
     # Post-process on the grid (exact FOH samples).
     C = performance_matrix(Q, n_x, velocity_index)
     vi = list(velocity_index)
-    x0s = np.array([model.x0(vd) for vd in signals.v_d])
-    dx = x - x0s
     ue = kappa * signals.u_e
-    u = np.array([law(tk, xk, vd, uek) for tk, xk, vd, uek in zip(t, x, signals.v_d, ue)])
+    if fused is not None:
+        x0s = np.array([fused.at(vd)[3] for vd in signals.v_d.tolist()])
+        u = np.array([fused.law(tk, xk, vd, uek) for tk, xk, vd, uek in zip(t, x, signals.v_d, ue)])
+    else:
+        x0s = np.array([model.x0(vd) for vd in signals.v_d])
+        u = np.array([law(tk, xk, vd, uek) for tk, xk, vd, uek in zip(t, x, signals.v_d, ue)])
+    dx = x - x0s
     z_model = dx @ C.T
     err = x[:, vi] - signals.v_d
     z = np.linalg.solve(np.asarray(Q, dtype=float), err.T).T

@@ -22,6 +22,18 @@ moves the equilibrium); the reference feedforward of gains.yaml (``--feedforward
 its rate from the signal table; ``filtered``: the onboard derivative filter) removes most of it; :func:`excitation_gain_by_superposition` (``--superposition``) separates
 the excitation response by flying with and without u_e under identical sensor noise.
 
+What gamma bounds, and what the summary reports.  ``z = Q^-1 (v - v_d)`` holds three parts:
+the response to the excitation ``u_e`` (the only part Lemma 1 bounds, Eq. 29), the lag in
+following ``v_d`` (in Eq. 33 the response to the ``x0'`` forcing, on the vehicle the
+acceleration it must produce) and the equilibrium offset ``Q^-1 (v0(v_d) - v_d)`` (the vertex
+equilibria fly a velocity that differs from the commanded one, seed 0 Table 1).  Every run's
+ratio is split (:func:`gain_decomposition`): ``excitation_gain`` = ``||z_e||_2 / ||kappa u_e||_2``
+with ``z_e`` from superposition (Eq. 33 and ``linear_ff``: exact, a second run with ``-u_e``;
+nonlinear with ``--superposition``: two more flights) or, on the nonlinear run otherwise, from
+a FIR regression of ``z`` on ``u_e`` above the reference band (:func:`excitation_response_fir`);
+the offset part exactly from the schedule; tracking = the rest.  ``within_gamma`` refers to
+``excitation_gain``; ``total_ratio`` = ``||z||_2 / ||kappa u_e||_2`` mixes all three.
+
 Outputs in ``--out DIR`` (read by :mod:`lpv_sysid.report`): ``summary.yaml``,
 ``eq33.npz`` / ``nonlinear.npz`` (time histories), PNG figures, and ``bag/`` (rosbag2).
 """
@@ -53,7 +65,7 @@ log = logging.getLogger(__name__)
 
 REFERENCE_CHANNELS = ("u_d", "v_d", "w_d")
 EXCITATION_CHANNELS = ("ue_t", "ue_a", "ue_e", "ue_r")
-SUMMARY_FORMAT = "lpv_sysid/phase2_summary@1"
+SUMMARY_FORMAT = "lpv_sysid/phase2_summary@2"   # @2: excitation_gain / total_ratio / decomposition
 
 
 # --------------------------------------------------------------------------- configuration
@@ -429,14 +441,24 @@ class RunRecord:
     safety_event: Optional[str] = None
     extra: dict = field(default_factory=dict)        # additional arrays for the npz
     info: dict = field(default_factory=dict)         # additional summary entries
+    decomposition: Optional[dict] = None             # gain_decomposition of z
 
     @property
     def v(self) -> np.ndarray:
         return self.x12[:, list(VELOCITY_INDEX)]
 
+    @property
+    def excitation_gain(self) -> Optional[float]:
+        """``||z_e||_2 / ||kappa u_e||_2`` (what gamma bounds), None when not decomposed."""
+        d = self.decomposition
+        return None if not d or d.get("excitation", {}).get("gain") is None else float(d["excitation"]["gain"])
+
     def summary(self, gamma: Optional[float]) -> dict:
-        out = {"gain": float(self.gain), "z_norm": float(self.z_norm), "ue_norm": float(self.ue_norm),
-               "within_gamma": None if gamma is None else bool(self.gain <= gamma),
+        g = self.excitation_gain
+        out = {"excitation_gain": g,
+               "within_gamma": None if gamma is None or g is None else bool(g <= gamma),
+               "total_ratio": float(self.gain), "z_norm": float(self.z_norm), "ue_norm": float(self.ue_norm),
+               "decomposition": self.decomposition,
                "completed": bool(self.completed), "safety_event": self.safety_event,
                "duration": float(self.t[-1] - self.t[0]) if self.t.size else 0.0,
                "rms_tracking_error": [float(x) for x in np.sqrt(np.mean((self.v - self.v_d) ** 2, axis=0))],
@@ -508,11 +530,114 @@ def write_outputs(out_dir: str | Path, gamma: Optional[float], kappa: float,
     return written
 
 
+# --------------------------------------------------------------------------- what gamma bounds
+def offset_output(problem: "Phase2Problem", v_d: np.ndarray) -> np.ndarray:
+    """``Q^-1 (v0(v_d) - v_d)`` (N, 3): the equilibrium offset part of z, with ``v0(v_d)`` the
+    velocity of the scheduled equilibrium (multilinear weights of the vertex ``x0``, Eq. 21)."""
+    from lpv_sysid.models.lpv import multilinear_weights
+
+    vi = list(VELOCITY_INDEX)
+    v0 = np.array([multilinear_weights(np.asarray(vd, dtype=float), problem.vmin, problem.vmax)[0]
+                   @ problem.x0[:, vi] for vd in np.asarray(v_d, dtype=float)])
+    return np.linalg.solve(np.asarray(problem.Q, dtype=float), (v0 - v_d).T).T
+
+
+def gain_decomposition(t: np.ndarray, z: np.ndarray, ue: np.ndarray, z_offset: np.ndarray,
+                       z_e: Optional[np.ndarray], method: str, **info) -> dict:
+    """Norms of the parts of ``z`` (module docstring) and their ratios to ``||kappa u_e||_2``:
+    ``excitation`` (``z_e``; its ratio is the gain gamma bounds), ``offset``, ``tracking`` =
+    ``z - z_offset - z_e`` and ``total``.  The norms are not additive (the parts overlap in time)."""
+    ue_norm = l2_norm(t, ue)
+
+    def part(y):
+        n = l2_norm(t, y)
+        return {"z_norm": float(n), "ratio": float(n / ue_norm) if ue_norm > 0 else None}
+
+    out = {"method": method, "ue_norm": float(ue_norm), "total": part(z), "offset": part(z_offset)}
+    if z_e is None:
+        out["excitation"] = {"z_norm": None, "gain": None}
+        out["tracking_and_excitation"] = part(z - z_offset)
+    else:
+        ex = part(z_e)
+        out["excitation"] = {"z_norm": ex["z_norm"], "gain": ex["ratio"]}
+        out["tracking"] = part(z - z_offset - z_e)
+    out.update(info)
+    return out
+
+
+def excitation_response_fir(t: np.ndarray, z: np.ndarray, ue: np.ndarray, f_cut: float = 0.3,
+                            lags_s: float = 1.0, fs: float = 50.0, ridge: float = 1e-6) -> tuple[np.ndarray, dict]:
+    """The part of ``z`` driven by ``u_e`` on a flight without an unexcited twin (seed 0
+    Eqs. 26-29 by regression): a causal FIR ``u_e -> z`` (lags 0..``lags_s``) fitted by least
+    squares on the zero-phase high-passed (``f_cut``, below the excitation band, above most of
+    the reference band: the slow tracking error is not the response to ``u_e``; LTI filters
+    commute, so the FIR is unchanged) and decimated (``fs``) signals, then applied to the
+    unfiltered ``u_e`` on the original grid.  Returns ``(z_e (N, 3), info)``; ``info.fit_r2`` is
+    the share of the high-passed ``z`` it explains."""
+    from scipy.signal import butter, sosfiltfilt
+
+    t = np.asarray(t, dtype=float)
+    if t.size < 10:
+        raise ConfigError(f"FIR excitation response: {t.size} samples are too few")
+    dt = float(np.median(np.diff(t)))
+    tg = np.arange(t[0], t[-1], 1.0 / fs)
+    sos_aa = butter(4, 0.4 * fs, fs=1.0 / dt, output="sos") if 1.0 / dt > 1.25 * fs else None
+
+    def on_grid(y):
+        y = sosfiltfilt(sos_aa, y, axis=0) if sos_aa is not None and y.shape[0] > 30 else y
+        return np.column_stack([np.interp(tg, t, y[:, k]) for k in range(y.shape[1])])
+
+    zg, ug = on_grid(np.asarray(z, dtype=float)), on_grid(np.asarray(ue, dtype=float))
+    n, ne = ug.shape
+    L = max(1, int(round(lags_s * fs)))
+    if n < 4 * L * ne:
+        raise ConfigError(f"FIR excitation response: {n} samples at {fs:g} Hz too few for {L} lags x {ne} inputs")
+    sos = butter(4, f_cut, btype="highpass", fs=fs, output="sos")
+    zh, uh = sosfiltfilt(sos, zg, axis=0), sosfiltfilt(sos, ug, axis=0)
+
+    def lagged(u, m):
+        H = np.zeros((m, ne * L))
+        for lag in range(L):
+            H[lag:, lag * ne:(lag + 1) * ne] = u[:m - lag]
+        return H
+
+    H = lagged(uh, n)
+    G = H.T @ H
+    theta = np.linalg.solve(G + ridge * np.trace(G) / G.shape[0] * np.eye(G.shape[0]), H.T @ zh)
+    res = zh - H @ theta
+    r2 = 1.0 - float((res ** 2).sum()) / max(float((zh ** 2).sum()), 1e-300)
+    # the FIR on the original grid: u_e resampled at fs is exact for its band (<= 5 Hz < fs / 2)
+    ze_g = lagged(ug, n) @ theta
+    z_e = np.column_stack([np.interp(t, tg, ze_g[:, k]) for k in range(ze_g.shape[1])])
+    return z_e, {"fit_r2": float(r2), "f_cut_hz": float(f_cut), "lags_s": float(lags_s), "fs_hz": float(fs)}
+
+
+def decompose_eq33(problem: "Phase2Problem", signals: ReferenceSignals, res: ClosedLoopResult, cfg: "Phase2Config",
+                   law=None, moving_equilibrium: bool = True) -> dict:
+    """:func:`gain_decomposition` of an Eq. (33) run by exact superposition (the model is
+    linear in the excitation).  With the moving equilibrium and the Eq. (31) law, started at
+    ``x0(v_d(0))``, the unexcited solution is ``x0(v_d(t))`` itself (the ``x0'`` term of Eq. 34
+    carries it), so ``z - z_offset`` is ``z_e`` and there is no tracking part; otherwise (the
+    feedforward law without ``x0'``) the same closed loop with ``-u_e`` gives
+    ``z(+) - z(-) = 2 z_e``."""
+    z_off = offset_output(problem, res.v_d)
+    if moving_equilibrium and law is None:
+        return gain_decomposition(res.t, res.z, res.ue, z_off, res.z - z_off,
+                                  "superposition (exact: the unexcited Eq. 33 run stays at x0(v_d))")
+    mirrored = ReferenceSignals(signals.t, signals.v_d, -signals.u_e)
+    kw = {} if law is None else {"law": law}
+    neg = simulate_eq33(problem.scheduled(), mirrored, problem.R, problem.Q, problem.gamma,
+                        ClosedLoopConfig(kappa=cfg.kappa, method=cfg.eq33_method),
+                        moving_equilibrium=moving_equilibrium, **kw)
+    z_e = 0.5 * (res.z - neg.z)
+    return gain_decomposition(res.t, res.z, res.ue, z_off, z_e, "superposition (exact: the same run with -u_e)")
+
+
 # --------------------------------------------------------------------------- superposition estimate
 def excitation_gain_by_superposition(make_vehicle: Callable[[], Any], make_law: Callable[[], ControlLaw],
                                      signals: ReferenceSignals, Q: np.ndarray, vmin: Sequence[float],
                                      vmax: Sequence[float], kappa: float, box_margin: float = 1.0,
-                                     max_tilt: float = math.radians(60.0)) -> dict:
+                                     max_tilt: float = math.radians(60.0), arrays: bool = False) -> dict:
     """Excitation-attributable gain on the nonlinear quadrotor.
 
     On the nonlinear vehicle z = Q^-1 (v - v_d) also contains the lag in following v_d, which
@@ -522,6 +647,7 @@ def excitation_gain_by_superposition(make_vehicle: Callable[[], Any], make_law: 
     (exact for a linear plant, first-order for the nonlinear one); the returned
     ``gain = ||z_e||_2 / ||kappa u_e||_2`` is comparable with gamma. ``make_law`` must return a
     fresh law each call (the runtime law has state); pass one without a tripping bound monitor.
+    ``arrays``: also return ``t``, ``z_e`` and ``z_reference`` (not for summary.yaml).
     """
     quiet = ReferenceSignals(signals.t, signals.v_d, np.zeros_like(signals.u_e))
     runs = [simulate_nonlinear(make_vehicle(), make_law(), sig, Q, vmin, vmax, kappa=k,
@@ -540,6 +666,8 @@ def excitation_gain_by_superposition(make_vehicle: Callable[[], Any], make_law: 
               if r.safety_event]
     if events:
         out["safety_events"] = events
+    if arrays:
+        out.update(t=t, z_e=z_e, z_reference=ref.z[:n])
     return out
 
 
@@ -734,6 +862,7 @@ def run(problem: Phase2Problem, signals: ReferenceSignals, cfg: Phase2Config, qu
                 res = simulate_eq33(problem.scheduled(), signals, problem.R, problem.Q, problem.gamma,
                                     ClosedLoopConfig(kappa=cfg.kappa, method=cfg.eq33_method))
                 records["eq33"] = record_from_eq33(res)
+                records["eq33"].decomposition = decompose_eq33(problem, signals, res, cfg)
             except SafetyError as exc:
                 skipped["eq33"] = f"diverged: {exc}"
             if problem.F_ff is not None and cfg.feedforward != "off":
@@ -752,6 +881,9 @@ def run(problem: Phase2Problem, signals: ReferenceSignals, cfg: Phase2Config, qu
                                         law=feedforward_law(sched, problem.R, ffs, reference_acceleration(signals)),
                                         moving_equilibrium=False)
                     records["linear_ff"] = record_from_eq33(res, "linear_ff")
+                    records["linear_ff"].decomposition = decompose_eq33(
+                        problem, signals, res, cfg, feedforward_law(sched, problem.R, ffs, reference_acceleration(signals)),
+                        moving_equilibrium=False)
                 except SafetyError as exc:
                     skipped["linear_ff"] = f"diverged: {exc}"
     else:
@@ -779,13 +911,28 @@ def run(problem: Phase2Problem, signals: ReferenceSignals, cfg: Phase2Config, qu
             rec.info["bag_messages"] = dict(bag.counts)
         else:
             rec = simulate_nonlinear(vehicle, law, signals, problem.Q, *v_box, **kw)
+        z_off = offset_output(problem, rec.v_d)
         if cfg.superposition:
             # bound monitor effectively off: it would stop on the reference-tracking part of z
-            rec.info["superposition"] = excitation_gain_by_superposition(
+            sp = excitation_gain_by_superposition(
                 lambda: SimVehicle(quad, sensors, x0=trim.full_state),
                 lambda: runtime_law(problem, quad.mix, 1e12, cfg.feedforward, signals, None, cfg.ff_filter_tau,
                                     cfg.ff_jerk_tau), signals, problem.Q, *v_box, kappa=cfg.kappa,
-                box_margin=cfg.box_margin, max_tilt=math.radians(cfg.max_tilt_deg))
+                box_margin=cfg.box_margin, max_tilt=math.radians(cfg.max_tilt_deg), arrays=True)
+            t_sp, z_e = sp.pop("t"), sp.pop("z_e")
+            sp.pop("z_reference")
+            rec.info["superposition"] = sp
+            n = min(t_sp.size, rec.t.size)
+            rec.decomposition = gain_decomposition(
+                rec.t[:n], rec.z[:n], rec.ue[:n], z_off[:n], z_e[:n],
+                "superposition (two more flights, with and without u_e, same sensor noise)")
+        elif rec.t.size >= 10:
+            try:
+                z_e, info = excitation_response_fir(rec.t, rec.z - z_off, rec.ue)
+                rec.decomposition = gain_decomposition(rec.t, rec.z, rec.ue, z_off, z_e,
+                                                       "FIR regression of z on u_e above the reference band", **info)
+            except ConfigError as exc:
+                rec.decomposition = gain_decomposition(rec.t, rec.z, rec.ue, z_off, None, f"not separated: {exc}")
         records["nonlinear"] = rec
     else:
         skipped["nonlinear"] = "not requested"

@@ -109,32 +109,48 @@ class SimVehicle:
         self._vib_ph = self.rng.uniform(0, 2 * np.pi, (4, 2)).tolist()
         self.u = [0.0, 0.0, 0.0, 0.0]
         self._lo, self._hi = model.params.omega_min, model.params.omega_max
+        self._pool: list = []          # normals drawn ahead from self.rng (_normals)
+        self._pool_i = 0
+        self._vib_x = None             # the state _vib_out belongs to
+        self._vib_out = None
 
     # ------------------------------------------------------------------ physics
     def step(self, u) -> None:
-        """Advance one physics step with the virtual command u held constant (RK4)."""
-        f = self.model.derivatives_list
+        """Advance one physics step with the virtual command u held constant (RK4,
+        :meth:`lpv_sysid.models.quadrotor.Quadrotor.rk4_step`)."""
         h = self.dt
         x = self.x
         u = [float(v) for v in u]
         self.u = u
-        k1 = f(x, u)
-        k2 = f([a + 0.5 * h * b for a, b in zip(x, k1)], u)
-        k3 = f([a + 0.5 * h * b for a, b in zip(x, k2)], u)
-        k4 = f([a + h * b for a, b in zip(x, k3)], u)
-        h6 = h / 6.0
-        xn = [a + h6 * (b + 2.0 * c + 2.0 * d + e) for a, b, c, d, e in zip(x, k1, k2, k3, k4)]
+        xn = self.model.rk4_step(x, u, h)
         lo, hi = self._lo, self._hi
+        ph = self.rotor_phase
+        two_pi = 2.0 * math.pi
         for i in range(12, 16):
-            xn[i] = lo if xn[i] < lo else (hi if xn[i] > hi else xn[i])
-            self.rotor_phase[i - 12] = (self.rotor_phase[i - 12] + h * 0.5 * (x[i] + xn[i])) % (2 * math.pi)
-        if not all(math.isfinite(v) for v in xn):
+            v = xn[i]
+            v = xn[i] = lo if v < lo else (hi if v > hi else v)
+            ph[i - 12] = (ph[i - 12] + h * 0.5 * (x[i] + v)) % two_pi
+        if not math.isfinite(sum(xn)) and not all(math.isfinite(v) for v in xn):
             raise SafetyError(f"SimVehicle: state diverged at t={self.t:.3f} s (command {u})")
         self.x = xn
         self.t += h
 
     # ------------------------------------------------------------------ sensors
+    def _normals(self, n: int) -> list:
+        """The next ``n`` standard normals of ``self.rng``, drawn in blocks: numpy's
+        generator yields the same sequence whatever the block sizes, so this is the stream
+        ``self.rng.standard_normal(n)`` calls would give, at a fraction of the per-call cost."""
+        pool, i = self._pool, self._pool_i
+        if i + n > len(pool):
+            pool = self._pool = pool[i:] + self.rng.standard_normal(max(4096, n)).tolist()
+            i = 0
+        self._pool_i = i + n
+        return pool[i:i + n]
+
     def _vibration(self):
+        """(accelerometer, gyro) vibration of the current state; computed once per state."""
+        if self._vib_x is self.x:
+            return self._vib_out
         c = self.cfg
         acc = [0.0, 0.0, 0.0]
         gyr = [0.0, 0.0, 0.0]
@@ -147,29 +163,39 @@ class SimVehicle:
             for k in range(3):
                 acc[k] += c.vib_accel * d1[k] * s1 + c.vib_accel_blade * d2[k] * s2
                 gyr[k] += c.vib_gyro * gd[k] * s1
+        self._vib_x, self._vib_out = self.x, (acc, gyr)
         return acc, gyr
 
     def measure_state(self) -> np.ndarray:
         """Estimator output as a 16-vector (FULL_STATE_NAMES, rotor entries = truth)."""
         c = self.cfg
-        n = self.rng.standard_normal(12)
-        x = np.array(self.x)
+        n = self._normals(12)
+        x = self.x
         _, gyr = self._vibration()
-        x[0:3] += c.pos_std * n[0:3]
-        x[3:6] += math.radians(c.att_std_deg) * n[3:6]
-        x[6:9] += c.vel_std * n[6:9]
-        x[9:12] += c.rate_std * n[9:12] + c.vib_state_fraction * np.array(gyr)
-        return x
+        sp, sa, sv, sr, fv = c.pos_std, math.radians(c.att_std_deg), c.vel_std, c.rate_std, c.vib_state_fraction
+        return np.array([x[0] + sp * n[0], x[1] + sp * n[1], x[2] + sp * n[2],
+                         x[3] + sa * n[3], x[4] + sa * n[4], x[5] + sa * n[5],
+                         x[6] + sv * n[6], x[7] + sv * n[7], x[8] + sv * n[8],
+                         x[9] + (sr * n[9] + fv * gyr[0]), x[10] + (sr * n[10] + fv * gyr[1]),
+                         x[11] + (sr * n[11] + fv * gyr[2]), x[12], x[13], x[14], x[15]])
 
     def measure_imu(self):
         """(specific force FRD m/s^2, gyro FRD rad/s) with vibration and noise."""
         c = self.cfg
-        sf = self.model.specific_force(np.array(self.x), self.u)
+        x = self.x
+        m = self.model
+        F, _ = m._fm(x[6], x[7], x[8], x[9], x[10], x[11], x[12], x[13], x[14], x[15],
+                     *m._rotor_rates(x[12:16], [float(v) for v in self.u]))
+        mass = m.params.mass
         acc, gyr = self._vibration()
-        n = self.rng.standard_normal(6)
-        a = sf + np.array(acc) + c.accel_std * n[0:3]
-        w = np.array(self.x[9:12]) + np.array(gyr) + c.gyro_std * n[3:6]
+        n = self._normals(6)
+        sa, sg = c.accel_std, c.gyro_std
+        a = np.array([(F[0] / mass + acc[0]) + sa * n[0], (F[1] / mass + acc[1]) + sa * n[1],
+                      (F[2] / mass + acc[2]) + sa * n[2]])
+        w = np.array([(x[9] + gyr[0]) + sg * n[3], (x[10] + gyr[1]) + sg * n[4],
+                      (x[11] + gyr[2]) + sg * n[5]])
         return a, w
 
     def measure_rotors(self) -> np.ndarray:
-        return np.array(self.x[12:16]) + self.cfg.rotor_std * self.rng.standard_normal(4)
+        x, n, s = self.x, self._normals(4), self.cfg.rotor_std
+        return np.array([x[12] + s * n[0], x[13] + s * n[1], x[14] + s * n[2], x[15] + s * n[3]])

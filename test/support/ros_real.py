@@ -86,7 +86,11 @@ class DomainId:
 
 
 class RosEnv:
-    """Commands in a sourced ROS environment, isolated on one domain id, localhost only."""
+    """Commands in a sourced ROS environment, isolated on one domain id, localhost only.
+
+    ``ROS_PYTHON_CHECK_FIELDS=1``: message fields are type-checked on assignment, as the
+    in-repo stand-in does (Jazzy's default skips the checks; a wrong type then fails only
+    at publish with "bad argument type", or is converted silently)."""
 
     def __init__(self, setup: Path, workspace: Path, domain_id: int):
         self.setup = Path(setup)
@@ -98,7 +102,8 @@ class RosEnv:
         return (f"source {shlex.quote(str(self.setup))} >/dev/null && "
                 f"source {shlex.quote(str(ws))} >/dev/null && "
                 f"export ROS_DOMAIN_ID={self.domain_id} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST "
-                f"RMW_IMPLEMENTATION=${{RMW_IMPLEMENTATION:-rmw_cyclonedds_cpp}} && {cmd}")
+                f"RMW_IMPLEMENTATION=${{RMW_IMPLEMENTATION:-rmw_cyclonedds_cpp}} "
+                f"ROS_PYTHON_CHECK_FIELDS=1 && {cmd}")
 
     def run(self, cmd: str, timeout: float = 60.0, cwd: str | os.PathLike | None = None,
             check: bool = False) -> subprocess.CompletedProcess:

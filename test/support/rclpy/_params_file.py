@@ -51,6 +51,12 @@ def load_overrides(data, fqn, use_wildcard=True):
         flat = {}
         _flatten("", body["ros__parameters"] or {}, flat)
         for pname, value in flat.items():
+            if value == []:
+                # rcl's parser: an empty sequence gives no value (NOT_SET)
+                out.append(Parameter(pname, Parameter.Type.NOT_SET))
+                continue
+            if value is None:
+                value = "null"           # rcl: YAML null is the string 'null' (also ~)
             try:
                 out.append(Parameter(pname, value=value))
             except TypeError as exc:

@@ -6,7 +6,8 @@ due time when that is within ``timeout_sec`` (or ``timeout_sec`` is None), other
 ``timeout_sec``. Nothing to wait for and no timeout raises RuntimeError (a real executor
 would block forever). When the clock reaches the time set with
 ``rclpy._standin.shutdown_at`` the context is shut down and the executor raises
-ExternalShutdownException, as a real executor does on an external shutdown.
+ExternalShutdownException, as a real executor does on an external shutdown during its
+wait; a spin_once on a context already shut down raises RCLError, as rclpy's does.
 """
 
 from rclpy.utilities import get_default_context
@@ -90,7 +91,13 @@ class Executor:
         ctx._standin_now_ns = max(ctx._standin_now_ns, target_ns)
 
     def spin_once(self, timeout_sec=None):
-        if not self._context.ok() or self._is_shutdown:
+        if not self._context.ok():
+            # as rclpy: the wait set cannot be built on a shut-down context (RCLError);
+            # ExternalShutdownException only when the shutdown comes during the wait
+            from rclpy._params_file import RCLError
+            raise RCLError("failed to create wait set: the given context is not valid, "
+                           "either rcl_init() was not called or rcl_shutdown() was called.")
+        if self._is_shutdown:
             raise ExternalShutdownException()
         work = self._ready_work()
         if work is None:

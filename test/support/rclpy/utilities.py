@@ -9,11 +9,23 @@ _lock = threading.Lock()
 
 
 def get_default_context(*, shutting_down=False):
+    """As rclpy: ``shutting_down`` hands out the default context and forgets it, so the
+    next ``rclpy.init()`` starts a new one (nodes keep the context they were made in)."""
     global _default_context
     with _lock:
         if _default_context is None:
             _default_context = Context()
+        if shutting_down:
+            old, _default_context = _default_context, _successor(_default_context)
+            return old
         return _default_context
+
+
+def _successor(old):
+    """The next default context; the stand-in's simulated clock runs on in it."""
+    new = Context()
+    new._standin_now_ns = old._standin_now_ns
+    return new
 
 
 def _reset_default_context():
@@ -29,11 +41,21 @@ def ok(*, context=None):
 
 
 def shutdown(*, context=None, uninstall_handlers=None):
-    (context or get_default_context()).shutdown()
+    (context or get_default_context(shutting_down=True)).shutdown()
 
 
 def try_shutdown(*, context=None, uninstall_handlers=None):
-    (context or get_default_context()).try_shutdown()
+    """As rclpy: the default context is shut down (if it runs) and replaced by a new one."""
+    global _default_context
+    if context is not None:
+        context.try_shutdown()
+        return
+    with _lock:
+        if _default_context is None:
+            _default_context = Context()
+        _default_context.try_shutdown()
+        if not _default_context.ok():
+            _default_context = _successor(_default_context)
 
 
 def remove_ros_args(args=None):

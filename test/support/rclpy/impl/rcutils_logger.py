@@ -62,6 +62,10 @@ def _caller():
             frame.f_lasti)
 
 
+#: rcutils logger levels set with set_level, by logger name ("" = the default logger)
+_LEVELS = {}
+
+
 class RcutilsLogger:
     def __init__(self, name=""):
         self.name = name
@@ -74,17 +78,21 @@ class RcutilsLogger:
         return RcutilsLogger(f"{self.name}.{name}" if self.name else name)
 
     def set_level(self, level):
-        self._py.setLevel(_PY.get(LoggingSeverity(level), logging.NOTSET))
+        _LEVELS[self.name] = LoggingSeverity(level)
 
     def get_effective_level(self):
-        lvl = self._py.getEffectiveLevel()
-        for sev, py in _PY.items():
-            if py >= lvl:
-                return sev
-        return LoggingSeverity.FATAL
+        """As rcutils: the level set on this logger or its nearest dotted ancestor, else
+        the default logger's (INFO unless set). Python logging levels only filter what the
+        stand-in prints (caplog), never which rclpy calls count."""
+        name = self.name
+        while name:
+            if _LEVELS.get(name, LoggingSeverity.UNSET) != LoggingSeverity.UNSET:
+                return _LEVELS[name]
+            name = name.rpartition(".")[0]
+        return _LEVELS.get("", LoggingSeverity.INFO)
 
     def is_enabled_for(self, severity):
-        return self._py.isEnabledFor(_PY[LoggingSeverity(severity)])
+        return LoggingSeverity(severity) >= self.get_effective_level()
 
     def log(self, message, severity, **kwargs):
         """As rclpy: filters only when enabled for ``severity``; one context per call site

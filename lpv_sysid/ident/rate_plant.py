@@ -1,0 +1,238 @@
+"""Equation-error identification of the rate plant (lpv_sysid/models/rate_plant.py) from
+phase-1 bags that carry PX4's own thrust/body-rate setpoints (``rate_setpoint`` topic,
+``lpv-sysid fly phase1 --record-rate-setpoints``).
+
+Phase 1 flies velocity setpoints through PX4's cascade; PX4's velocity and attitude
+controllers turn them into the thrust and body-rate setpoints it streams as ATTITUDE_TARGET.
+Those are exactly the inputs the phase-2 law sends, so ordinary phase-1 flights identify the
+plant with the rate loop inside (seed 0 App. B equation error, with the known kinematic and
+gravity terms moved to the left-hand side):
+
+1. per bag: state (phi, theta, u, v, w, p, q, r) and setpoints (thrust, p_sp, q_sp, r_sp)
+   resampled on a uniform grid (``sample_rate``; setpoints zero-order held: they are piecewise
+   constant commands), both low-passed by one zero-phase Butterworth filter (``lowpass_hz``)
+   and the filtered state differentiated by central differences, so regressors and
+   derivatives see the same filter (a Savitzky-Golay smoother and its derivative kernel do
+   not commute with the ODE: on simulated data with content up to 3 Hz they biased the rate
+   bandwidth by -35 %, test/test_rate_plant.py);
+2. one least-squares problem per row, pooled over all bags (the identified part is common to
+   the vertices; the kinematics carry the scheduling dependence, models/rate_plant.py):
+   ``u' - (r v - q w - g sin theta) = X_u u + c_u``, likewise v, ``w' - (...) = Z_w w + Z_T
+   thrust + c_w``, ``p' = L_p p + L_sp p_sp(t - d) + c_p`` (q, r alike); the rate rows search a
+   delay d in ``delays`` (the loop's lag: PX4 filtering, motors) and keep the best fit's
+   coefficients (the LPV model has no delay: d is reported, not modelled). With
+   ``unit_dc_gain`` (default) the rate rows are ``p' = a (p_sp - p) + c`` (L_sp = -L_p = a):
+   PX4's rate integrator leaves no steady error, and the free fit's DC gain of ~1.3-1.4
+   on the first SIH flight is the closed-loop regressor bias of equation error (p_sp is
+   computed by PX4's attitude loop from the same state), reported as ``unconstrained``;
+3. standard deviations from the residual variance (white-residual formula scaled by the
+   correlation length of the residuals, ``(1 + 2 sum rho_k)``, so coloured residuals do not
+   give overconfident intervals), R^2 per row, and a one-step-free simulation check is left
+   to the phase-2 flight.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from lpv_sysid.errors import BagError, ConfigError
+from lpv_sysid.models import rate_plant as rp
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class RateRun:
+    """One bag on the identification grid."""
+
+    name: str
+    t: np.ndarray          # (K,)
+    x: np.ndarray          # (K, 8) smoothed
+    xdot: np.ndarray       # (K, 8)
+    u: np.ndarray          # (K, 4) zero-order held, smoothed
+    u_raw: np.ndarray      # (K, 4) zero-order held
+
+
+@dataclass(frozen=True)
+class RateIdConfig:
+    sample_rate: float = 50.0
+    lowpass_hz: float = 5.0            # zero-phase Butterworth (order 2, forward-backward) on x and u
+    delays: tuple = (0.0, 0.02, 0.04, 0.06, 0.08, 0.1, 0.12)
+    trim_edges_s: float = 0.5          # dropped at both ends of every run (filter edges)
+    unit_dc_gain: bool = True          # rate rows p' = a (p_sp - p) + c (PX4's rate I term: no steady error)
+
+    def validate(self) -> None:
+        if not (self.sample_rate > 0 and self.lowpass_hz > 0 and self.trim_edges_s >= 0):
+            raise ConfigError("rate-plant identification: sample_rate, lowpass_hz must be > 0, trim_edges_s >= 0")
+        if not self.delays or any(d < 0 for d in self.delays):
+            raise ConfigError("rate-plant identification: delays must be a non-empty list of values >= 0")
+
+
+def read_run(path: str | Path, cfg: RateIdConfig = RateIdConfig()) -> RateRun:
+    """One phase-1 bag -> :class:`RateRun` (topics ``state`` and ``rate_setpoint``)."""
+    from lpv_sysid.io import bag as iobag
+    from lpv_sysid.io import messages as M
+
+    path = Path(path)
+    topics = list(iobag.topic_info(str(path)))
+    st_t = [t for t in topics if t.endswith("/state")]
+    rs_t = [t for t in topics if t.endswith("/rate_setpoint")]
+    if not st_t or not rs_t:
+        raise BagError(f"{path}: needs topics 'state' and 'rate_setpoint' (fly phase1 --record-rate-setpoints), "
+                       f"has {sorted(topics)}")
+    data = iobag.read_bag(str(path), topics=[st_t[0], rs_t[0]])
+    states = [M.state_from_odometry(m) for _, m in data[st_t[0]]]
+    sps = [M.channels_from_joint_state(m, rp.INPUT_NAMES) for _, m in data[rs_t[0]]]
+    if len(states) < 20 or len(sps) < 20:
+        raise BagError(f"{path}: too few samples (state {len(states)}, rate_setpoint {len(sps)})")
+    ts = np.array([s.t for s in states])
+    xs = np.array([[s.euler[0], s.euler[1], *s.v_body, *s.omega] for s in states])
+    tu = np.array([r[0] for r in sps])
+    us = np.array([r[1] for r in sps])
+    return run_from_arrays(path.name, ts, xs, tu, us, cfg)
+
+
+def run_from_arrays(name: str, ts: np.ndarray, xs: np.ndarray, tu: np.ndarray, us: np.ndarray,
+                    cfg: RateIdConfig = RateIdConfig()) -> RateRun:
+    """Samples (state at ``ts``: (K, 8); setpoints at ``tu``: (J, 4)) -> :class:`RateRun` on
+    the identification grid (module docstring item 1)."""
+    from scipy.signal import butter, sosfiltfilt
+
+    path = name
+    ts, xs, tu, us = (np.asarray(a, dtype=float) for a in (ts, xs, tu, us))
+    if xs.ndim != 2 or xs.shape[1] != len(rp.STATE_NAMES) or us.ndim != 2 or us.shape[1] != len(rp.INPUT_NAMES):
+        raise ConfigError(f"{name}: states must be (K, 8) and setpoints (J, 4), got {xs.shape}, {us.shape}")
+    dt = 1.0 / cfg.sample_rate
+    a, b = max(ts[0], tu[0]) + cfg.trim_edges_s, min(ts[-1], tu[-1]) - cfg.trim_edges_s
+    if b - a < 3.0:
+        raise BagError(f"{path}: state and rate_setpoint overlap only {b - a:.1f} s")
+    t = np.arange(a, b, dt)
+    x = np.column_stack([np.interp(t, ts, xs[:, k]) for k in range(xs.shape[1])])
+    idx = np.clip(np.searchsorted(tu, t, side="right") - 1, 0, len(tu) - 1)
+    u_raw = us[idx]
+    sos = butter(2, min(cfg.lowpass_hz, 0.4 * cfg.sample_rate), fs=cfg.sample_rate, output="sos")
+    xf = sosfiltfilt(sos, x, axis=0)
+    xd = np.gradient(xf, dt, axis=0)        # differentiation commutes with the (same) filter
+    uf = sosfiltfilt(sos, u_raw, axis=0)
+    return RateRun(str(name), t, xf, xd, uf, u_raw)
+
+
+def _ls(y: np.ndarray, H: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """theta, std (correlation-corrected), R^2 of y = H theta."""
+    theta, *_ = np.linalg.lstsq(H, y, rcond=None)
+    e = y - H @ theta
+    n, k = H.shape
+    s2 = float(e @ e) / max(n - k, 1)
+    # residual correlation length (1 + 2 sum rho_k, lags up to the first non-positive rho)
+    ec = e - e.mean()
+    den = float(ec @ ec)
+    corr = 1.0
+    if den > 0:
+        for lag in range(1, min(200, n // 4)):
+            rho = float(ec[lag:] @ ec[:-lag]) / den
+            if rho <= 0:
+                break
+            corr += 2 * rho
+    cov = s2 * corr * np.linalg.pinv(H.T @ H)
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    sst = float(((y - y.mean()) ** 2).sum())
+    r2 = 1.0 - float(e @ e) / sst if sst > 0 else float("nan")
+    return theta, std, r2
+
+
+def identify(runs: Sequence[RateRun], cfg: RateIdConfig = RateIdConfig(), g: float = rp.GRAVITY
+             ) -> tuple[rp.RatePlantParams, dict]:
+    """Pooled equation-error fit (module docstring) -> (params, report dict)."""
+    cfg.validate()
+    if not runs:
+        raise ConfigError("rate-plant identification: no runs")
+    X = np.vstack([r.x for r in runs])
+    Xd = np.vstack([r.xdot for r in runs])
+    U = np.vstack([r.u for r in runs])
+    phi, th, ub, vb, wb, p, q, r = X.T
+    one = np.ones(len(X))
+    est, std, rep = {}, {}, {"rows": {}, "samples": int(len(X)), "runs": [r.name for r in runs]}
+
+    def put(names, theta, sd, r2, row, extra=None):
+        for k, nm in enumerate(names):
+            est[nm], std[nm] = float(theta[k]), float(sd[k])
+        rep["rows"][row] = {"r2": round(float(r2), 4), **(extra or {})}
+
+    y = Xd[:, 2] - (r * vb - q * wb - g * np.sin(th))
+    put(("X_u", "c_u"), *_ls(y, np.column_stack([ub, one])), "u")
+    y = Xd[:, 3] - (p * wb - r * ub + g * np.cos(th) * np.sin(phi))
+    put(("Y_v", "c_v"), *_ls(y, np.column_stack([vb, one])), "v")
+    y = Xd[:, 4] - (q * ub - p * vb + g * np.cos(th) * np.cos(phi))
+    put(("Z_w", "Z_T", "c_w"), *_ls(y, np.column_stack([wb, U[:, 0], one])), "w")
+    step = 1.0 / cfg.sample_rate
+    for row, col, names in ((5, 1, ("L_p", "L_sp", "c_p")), (6, 2, ("M_q", "M_sp", "c_q")),
+                            (7, 3, ("N_r", "N_sp", "c_r"))):
+        best = None
+        for d in cfg.delays:
+            k = int(round(d / step))
+            ys, Hs = [], []
+            for rn in runs:
+                n = len(rn.t)
+                if n - k < 10:
+                    continue
+                ys.append(rn.xdot[k:, row])
+                Hs.append(np.column_stack([rn.x[k:, row], rn.u[:n - k, col], np.ones(n - k)]))
+            y, H = np.concatenate(ys), np.vstack(Hs)
+            free = _ls(y, H)
+            if cfg.unit_dc_gain:
+                # p' = a (p_sp - p) + c: PX4's rate integrator removes steady error (DC gain 1)
+                th1, sd1, r21 = _ls(y, np.column_stack([H[:, 1] - H[:, 0], H[:, 2]]))
+                theta, sd, r2 = np.array([-th1[0], th1[0], th1[1]]), np.array([sd1[0], sd1[0], sd1[1]]), r21
+            else:
+                theta, sd, r2 = free
+            if best is None or r2 > best[2] + 1e-9:
+                best = (theta, sd, r2, k * step, free)
+        theta, sd, r2, d, free = best
+        put(names, theta, sd, r2, rp.STATE_NAMES[row], {
+            "delay_s": round(d, 3), "bandwidth_rad_s": round(-float(theta[0]), 3),
+            "unit_dc_gain": bool(cfg.unit_dc_gain),
+            "unconstrained": {"r2": round(float(free[2]), 4), "L": round(float(free[0][0]), 4),
+                              "L_sp": round(float(free[0][1]), 4),
+                              "dc_gain": round(float(-free[0][1] / free[0][0]), 3) if free[0][0] != 0 else None}})
+    params = rp.RatePlantParams(**est, std=std)
+    rep["params"] = params.as_dict()
+    return params, rep
+
+
+def identify_bags(bags: Sequence[str | Path], cfg: RateIdConfig = RateIdConfig()) -> tuple[rp.RatePlantParams, dict]:
+    runs = [read_run(b, cfg) for b in bags]
+    params, rep = identify(runs, cfg)
+    rep["bags"] = [str(b) for b in bags]
+    return params, rep
+
+
+def models_document(params: rp.RatePlantParams, vmin, vmax, k_sigma: float, report: dict) -> dict:
+    """vertex_models.yaml (MODELS_FORMAT, generic layout) of the rate plant, with the
+    identification report under ``identification`` (design = rate_plant)."""
+    from lpv_sysid.synthesis.files import models_dict
+
+    model, els = rp.polytope(params, vmin, vmax, k_sigma)
+    d = models_dict(model, els if k_sigma > 0 else None, rp.STATE_UNITS, rp.INPUT_UNITS)
+    d["meta"] = {"design": rp.DESIGN, "design_text": rp.DESIGN_TEXT,
+                 "identification": {"method": "pooled equation error, PX4 rate loop inside "
+                                              "(lpv_sysid/ident/rate_plant.py)",
+                                    "k_sigma": float(k_sigma), **_plain(report)}}
+    return d
+
+
+def _plain(x):
+    if isinstance(x, dict):
+        return {str(k): _plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_plain(v) for v in x]
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x

@@ -1,0 +1,203 @@
+"""The "rate plant": a multicopter *with PX4's rate loop inside*, as flown over MAVLink.
+
+PX4 >= 1.14 takes no actuator setpoints over MAVLink; what SET_ATTITUDE_TARGET delivers is
+collective thrust + body-rate setpoints, tracked by PX4's own rate controller (P, I, D, FF,
+allocation, motors). Instead of inverting that loop (omega_sp = omega + tau / K_p,
+:class:`lpv_sysid.mavlink.transport.AttitudeRateTransport`) this model takes the loop as part
+of the plant, so the seed 0 design (Lemma 1) and its certificate are about the inputs that
+really go out (docs/px4_chain.md):
+
+    x = (phi, theta, u, v, w, p, q, r)          Euler roll/pitch [rad], FRD body velocity [m/s],
+                                                FRD body rates [rad/s]
+    u = (thrust, p_sp, q_sp, r_sp)              normalised collective thrust [0, 1] and body-rate
+                                                setpoints [rad/s], as sent in SET_ATTITUDE_TARGET
+
+Dynamics (heading and position do not enter; seed 0 Eqs. (2)-(3) with the attitude and
+velocity rows kept and the rotor/moment rows replaced by the closed rate loop)::
+
+    phi'   = p + tan(theta) (sin(phi) q + cos(phi) r)                      (kinematics, known)
+    theta' = cos(phi) q - sin(phi) r
+    u'     = r v - q w - g sin(theta)            + X_u u + c_u             (Coriolis, gravity known;
+    v'     = p w - r u + g cos(theta) sin(phi)   + Y_v v + c_v              drag X_u, Y_v, Z_w,
+    w'     = q u - p v + g cos(theta) cos(phi)   + Z_w w + Z_T thrust + c_w  thrust gain Z_T, offsets c)
+    p'     = L_p p + L_sp p_sp + c_p             (closed rate loop, first order, identified)
+    q'     = M_q q + M_sp q_sp + c_q
+    r'     = N_r r + N_sp r_sp + c_r
+
+:class:`RatePlantParams` holds the identified coefficients; :func:`trim` the equilibrium at a
+body velocity, :func:`linearize` the Jacobians there (numerical central differences of
+:func:`dynamics`, checked against the analytic ones in the tests), :func:`polytope` the
+vertex models of the scheduling box (seed 0 Eqs. 20-23) with optional intervals on the
+identified entries. The scheduling is the body-velocity reference v_d as in seed 0; with the
+identified part common to all vertices, the vertices differ by the kinematic (Coriolis,
+gravity) terms evaluated at their trim.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Mapping, Optional, Sequence
+
+import numpy as np
+
+from lpv_sysid.errors import ConfigError
+
+STATE_NAMES = ("phi", "theta", "u", "v", "w", "p", "q", "r")
+STATE_UNITS = ("rad", "rad", "m/s", "m/s", "m/s", "rad/s", "rad/s", "rad/s")
+#: same names and order as lpv_sysid.mavlink.transport.RATE_INPUT_NAMES (one fact: imported there)
+INPUT_NAMES = ("thrust", "p_sp", "q_sp", "r_sp")
+INPUT_UNITS = ("1", "rad/s", "rad/s", "rad/s")
+SCHEDULING_NAMES = ("u_d", "v_d", "w_d")
+VELOCITY_INDEX = (2, 3, 4)
+RATE_INDEX = (5, 6, 7)
+GRAVITY = 9.80665
+DESIGN = "rate_plant"            # gains.yaml / report: which plant the law was designed for
+DESIGN_TEXT = ("rate plant: PX4 rate loop inside the model; inputs thrust + body-rate setpoints "
+               "(SET_ATTITUDE_TARGET), states phi, theta, u, v, w, p, q, r")
+
+#: identified coefficients: name -> (matrix, row, col) of the linear model they appear in
+#: (None: an offset, enters the trim only)
+PARAM_ENTRIES: dict[str, Optional[tuple[str, int, int]]] = {
+    "X_u": ("A", 2, 2), "Y_v": ("A", 3, 3), "Z_w": ("A", 4, 4), "Z_T": ("B", 4, 0),
+    "L_p": ("A", 5, 5), "L_sp": ("B", 5, 1), "M_q": ("A", 6, 6), "M_sp": ("B", 6, 2),
+    "N_r": ("A", 7, 7), "N_sp": ("B", 7, 3),
+    "c_u": None, "c_v": None, "c_w": None, "c_p": None, "c_q": None, "c_r": None,
+}
+
+
+@dataclass(frozen=True)
+class RatePlantParams:
+    """Identified coefficients (module docstring); ``std`` holds their standard deviations."""
+
+    X_u: float
+    Y_v: float
+    Z_w: float
+    Z_T: float
+    L_p: float
+    L_sp: float
+    M_q: float
+    M_sp: float
+    N_r: float
+    N_sp: float
+    c_u: float = 0.0
+    c_v: float = 0.0
+    c_w: float = 0.0
+    c_p: float = 0.0
+    c_q: float = 0.0
+    c_r: float = 0.0
+    std: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for k in PARAM_ENTRIES:
+            v = getattr(self, k)
+            if not (isinstance(v, (int, float)) and math.isfinite(v)):
+                raise ConfigError(f"rate plant parameter {k} must be a finite number, got {v!r}")
+        if self.Z_T >= 0:
+            raise ConfigError(f"rate plant: Z_T = {self.Z_T:g} must be negative (thrust accelerates up, -w)")
+        for k in ("L_sp", "M_sp", "N_sp"):
+            if getattr(self, k) <= 0:
+                raise ConfigError(f"rate plant: {k} = {getattr(self, k):g} must be positive (rate loop follows "
+                                  "its setpoint)")
+
+    def as_dict(self) -> dict:
+        d = {k: float(getattr(self, k)) for k in PARAM_ENTRIES}
+        d["std"] = {k: float(v) for k, v in self.std.items()}
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "RatePlantParams":
+        try:
+            kw = {k: float(d[k]) for k in PARAM_ENTRIES if k in d}
+        except (TypeError, ValueError) as exc:
+            raise ConfigError(f"rate plant parameters: {exc}") from None
+        missing = [k for k in PARAM_ENTRIES if k not in kw and not k.startswith("c_")]
+        if missing:
+            raise ConfigError(f"rate plant parameters: missing {missing}")
+        return cls(**kw, std={str(k): float(v) for k, v in (d.get("std") or {}).items()})
+
+
+def dynamics(x: np.ndarray, u: np.ndarray, P: RatePlantParams, g: float = GRAVITY) -> np.ndarray:
+    """x' of the module docstring (8 states, 4 inputs)."""
+    phi, th, ub, vb, wb, p, q, r = (float(a) for a in x)
+    T, psp, qsp, rsp = (float(a) for a in u)
+    sf, cf, st, ct = math.sin(phi), math.cos(phi), math.sin(th), math.cos(th)
+    return np.array([
+        p + math.tan(th) * (sf * q + cf * r),
+        cf * q - sf * r,
+        r * vb - q * wb - g * st + P.X_u * ub + P.c_u,
+        p * wb - r * ub + g * ct * sf + P.Y_v * vb + P.c_v,
+        q * ub - p * vb + g * ct * cf + P.Z_w * wb + P.Z_T * T + P.c_w,
+        P.L_p * p + P.L_sp * psp + P.c_p,
+        P.M_q * q + P.M_sp * qsp + P.c_q,
+        P.N_r * r + P.N_sp * rsp + P.c_r,
+    ])
+
+
+def trim(v_body: Sequence[float], P: RatePlantParams, g: float = GRAVITY) -> tuple[np.ndarray, np.ndarray]:
+    """Equilibrium (x0, u0) at body velocity ``v_body`` with zero body rates: the attitude that
+    balances drag by gravity and the thrust that holds w (module docstring rows set to 0)."""
+    ub, vb, wb = (float(a) for a in v_body)
+    s_th = (P.X_u * ub + P.c_u) / g
+    if abs(s_th) >= 0.9:
+        raise ConfigError(f"rate plant: no trim at v = {list(v_body)}: pitch would need sin(theta) = {s_th:.2f}")
+    th = math.asin(s_th)
+    s_phi = -(P.Y_v * vb + P.c_v) / (g * math.cos(th))
+    if abs(s_phi) >= 0.9:
+        raise ConfigError(f"rate plant: no trim at v = {list(v_body)}: roll would need sin(phi) = {s_phi:.2f}")
+    phi = math.asin(s_phi)
+    T = -(g * math.cos(th) * math.cos(phi) + P.Z_w * wb + P.c_w) / P.Z_T
+    if not 0.0 < T < 1.0:
+        raise ConfigError(f"rate plant: trim thrust {T:.3f} at v = {list(v_body)} is outside (0, 1)")
+    x0 = np.array([phi, th, ub, vb, wb, 0.0, 0.0, 0.0])
+    u0 = np.array([T, -P.c_p / P.L_sp, -P.c_q / P.M_sp, -P.c_r / P.N_sp])
+    return x0, u0
+
+
+def linearize(x0: np.ndarray, u0: np.ndarray, P: RatePlantParams, h: float = 1e-6,
+              g: float = GRAVITY) -> tuple[np.ndarray, np.ndarray]:
+    """(A, B) = Jacobians of :func:`dynamics` at (x0, u0) (central differences; exact to
+    ~1e-9 for these smooth trigonometric terms)."""
+    n, m = len(STATE_NAMES), len(INPUT_NAMES)
+    A, B = np.zeros((n, n)), np.zeros((n, m))
+    for k in range(n):
+        d = np.zeros(n)
+        d[k] = h
+        A[:, k] = (dynamics(x0 + d, u0, P, g) - dynamics(x0 - d, u0, P, g)) / (2 * h)
+    for k in range(m):
+        d = np.zeros(m)
+        d[k] = h
+        B[:, k] = (dynamics(x0, u0 + d, P, g) - dynamics(x0, u0 - d, P, g)) / (2 * h)
+    return A, B
+
+
+def polytope(P: RatePlantParams, vmin: Sequence[float], vmax: Sequence[float], k_sigma: float = 0.0):
+    """Vertex models at the box corners (``models.lpv.box_vertices`` order) as a
+    :class:`~lpv_sysid.models.lpv.PolytopicModel`, plus the per-vertex uncertain elements
+    (intervals ``nominal +- k_sigma * std`` of the identified linear entries; none when
+    ``k_sigma`` is 0 or no std is known)."""
+    from lpv_sysid.models.lpv import PolytopicModel, UncertainElement, box_vertices
+
+    corners = box_vertices(vmin, vmax)
+    As, Bs, x0s, u0s, els = [], [], [], [], []
+    for vd in corners:
+        x0, u0 = trim(vd, P)
+        A, B = linearize(x0, u0, P)
+        As.append(A)
+        Bs.append(B)
+        x0s.append(x0)
+        u0s.append(u0)
+        row = []
+        if k_sigma > 0:
+            for name, where in PARAM_ENTRIES.items():
+                s = float(P.std.get(name, 0.0))
+                if where is None or not s > 0:
+                    continue
+                mat, i, j = where
+                nom = float((A if mat == "A" else B)[i, j])
+                row.append(UncertainElement(mat, i, j, nom - k_sigma * s, nom + k_sigma * s, nom))
+        els.append(row)
+    model = PolytopicModel(vmin=np.asarray(vmin, float), vmax=np.asarray(vmax, float), A=np.array(As),
+                           B=np.array(Bs), x0=np.array(x0s), u0=np.array(u0s), state_names=STATE_NAMES,
+                           input_names=INPUT_NAMES, scheduling_names=SCHEDULING_NAMES)
+    return model, els
