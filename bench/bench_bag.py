@@ -1,84 +1,136 @@
-"""Throughput of rosbag2 writing and reading (io/bag.py) and of message building.
+"""rosbag2 reading and writing (io/bag.py; issue 15 rows "bag read (typed topics)", "bag
+write in bulk", and the bag side of "identify (9 bags)").
 
-Run: ``.venv/bin/python -m bench.bench_bag`` (prints medians of 3 runs).
+    .venv/bin/python -m bench.bench_bag
 
-A 500 Hz phase-1 experiment publishes about 500 (state) + 500 (rotor_speeds) + 500 (imu)
-+ 50 (reference/excitation/command) messages per second, so the logger must sustain
-~2000 msgs/s with margin.
+Bag: one phase-1 run as ``simulate phase1`` writes it (40 s, mcap, 44 040 messages;
+typed topics = state, rotor_speeds, imu, velocity_reference, actuator_command).
+
+* ``read_arrays`` (column-wise, the fixed-layout block decode) against the floor: the same
+  records already in memory, joined per topic and decoded with one numpy structured view;
+* ``read_bag`` (message objects, constructed from the decoded columns) against rosbags'
+  AnyReader + ``deserialize_cdr`` per message (what read_bag did before);
+* ``topic_info`` from the mcap summary and message indexes against the record walk;
+* writing: ``BagWriter.write`` per message, ``write_many`` of finished records.
 """
 
 from __future__ import annotations
 
 import shutil
-import statistics
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from lpv_sysid.io import bag as bg
-from lpv_sysid.io import messages as m
+from bench.harness import Page, Row, interleaved, load_average, status, timed
 
-N = 6000      # messages per run: 3000 Odometry + 3000 JointState
-
-
-def _messages(f):
-    rng = np.random.default_rng(0)
-    out = []
-    for i in range(N // 2):
-        ns = 1_700_000_000_000_000_000 + i * 2_000_000
-        out.append(("/state", ns, m.odometry_from_state(f, ns, *rng.normal(size=(4, 3)) * 0.3)))
-        out.append(("/rotor_speeds", ns, m.rotor_speeds_msg(f, ns, rng.uniform(300, 900, 4))))
-    return out
-
-
-def _run(storage: str, msgs, root: Path, k: int) -> tuple[float, float, int]:
-    path = root / f"{storage}_{k}"
-    t0 = time.perf_counter()
-    with bg.BagWriter(path, storage=storage) as b:
-        b.add_topic("/state", "nav_msgs/msg/Odometry")
-        b.add_topic("/rotor_speeds", "sensor_msgs/msg/JointState")
-        for topic, ns, msg in msgs:
-            b.write(topic, ns, msg)
-    t1 = time.perf_counter()
-    data = bg.read_bag(path)
-    t2 = time.perf_counter()
-    n = sum(len(v) for v in data.values())
-    assert n == len(msgs), (n, len(msgs))
-    size = sum(p.stat().st_size for p in path.iterdir())
-    return len(msgs) / (t1 - t0), len(msgs) / (t2 - t1), size
+TYPED = ("state", "rotor_speeds", "imu", "velocity_reference", "actuator_command")
 
 
 def main() -> None:
-    f = m.MsgFactory.rosbags()
-    t0 = time.perf_counter()
-    msgs = _messages(f)
-    build = len(msgs) / (time.perf_counter() - t0)
-    print(f"message building (Odometry+JointState, rosbags) : {build:9.0f} msgs/s")
-    t0 = time.perf_counter()
-    for topic, _, msg in msgs[:2000]:
-        if topic == "/state":
-            m.state_from_odometry(msg)
-        else:
-            m.rotor_speeds_from_joint_state(msg)
-    print(f"message parsing (state_from_odometry, ...)      : {2000 / (time.perf_counter() - t0):9.0f} msgs/s")
-    odom = [msg for topic, _, msg in msgs if topic == "/state"]
-    t0 = time.perf_counter()
-    m.states_from_odometry(odom)
-    print(f"batch parsing (states_from_odometry)            : {len(odom) / (time.perf_counter() - t0):9.0f} msgs/s")
+    from lpv_sysid.control.baseline import BaselineGains
+    from lpv_sysid.io import bag as bg
+    from lpv_sysid.io import messages as M
+    from lpv_sysid.models.quadrotor import Quadrotor
+    from lpv_sysid.sim import phase1
+    from lpv_sysid.sim.vehicle import SensorConfig
+
+    load0 = load_average()
+    page = Page("bag", "rosbag2 I/O (io/bag.py, issue 15)", ".venv/bin/python -m bench.bench_bag")
+    cfg = replace(phase1.Phase1Config(), hover_validation=False)
+    rec = phase1.run_phase1(Quadrotor(), BaselineGains(), SensorConfig(), cfg, [8])[0]
     root = Path(tempfile.mkdtemp(prefix="bench_bag_"))
     try:
-        for storage in ("mcap", "sqlite3"):
-            runs = [_run(storage, msgs, root, k) for k in range(3)]
-            w = statistics.median(r[0] for r in runs)
-            r = statistics.median(r[1] for r in runs)
-            size = runs[0][2]
-            print(f"{storage:7s} write {N} msgs (serialise + store)    : {w:9.0f} msgs/s "
-                  f"(median of 3, {size / N:.0f} B/msg on disk)")
-            print(f"{storage:7s} read_bag (read + deserialise)         : {r:9.0f} msgs/s (median of 3)")
+        path = phase1.write_run_bag(rec, root / "run")
+        topics = [f"/lpv_sysid/{t}" for t in TYPED]
+        info = bg.topic_info(path)
+        n_typed = sum(info[t].count for t in topics)
+        n_all = sum(s.count for s in info.values())
+        # floor: the records in memory, one join + one structured view per topic
+        src = bg._Source()
+        bg._read_fast(path, set(topics), src)
+        per = {}
+        for t, _ns, d in src.records:
+            per.setdefault(t, []).append(bytes(d))
+        ts = bg.jazzy_typestore()
+        lays = {t: bg._LAYOUTS.for_record(ts, info[t].msgtype, v[0]) for t, v in per.items()}
+
+        def floor():
+            for t, v in per.items():
+                lays[t].decode(np.frombuffer(b"".join(v), np.uint8).reshape(len(v), -1))
+
+        def before():
+            from rosbags.highlevel import AnyReader
+            with AnyReader([path], default_typestore=ts) as r:
+                conns = [c for c in r.connections if c.topic in topics]
+                for c, _ns, data in r.messages(connections=conns):
+                    ts.deserialize_cdr(data, c.msgtype)
+
+        st = interleaved({"arrays": lambda: bg.read_arrays(path, topics=topics), "floor": floor},
+                         number=1, repeat=9, clock=time.process_time)
+        rb = interleaved({"read_bag": lambda: bg.read_bag(path, topics=topics)}, number=1, repeat=5,
+                         clock=time.process_time)["read_bag"]
+        old = interleaved({"before": before}, number=1, repeat=2, clock=time.process_time)["before"]
+        ti = interleaved({"index": lambda: bg.topic_info(path),
+                          "walk": lambda: bg._collect(path, None, True)}, number=1, repeat=5,
+                         clock=time.process_time)
+        # writing
+        f = M.MsgFactory.rosbags()
+        items = phase1._message_items(rec, f)[:6000]
+        rows = [(f"/lpv_sysid/{n}", s, bytes(ts.serialize_cdr(m, M.TYPES[n]))) for s, n, m in items]
+        k = [0]
+
+        def write_each():
+            k[0] += 1
+            with bg.BagWriter(root / f"w{k[0]}") as w:
+                for n in phase1.BAG_TOPICS:
+                    w.add_topic(f"/lpv_sysid/{n}", M.TYPES[n])
+                for s, n, m in items:
+                    w.write(f"/lpv_sysid/{n}", s, m)
+
+        def write_many():
+            k[0] += 1
+            with bg.BagWriter(root / f"w{k[0]}") as w:
+                for n in phase1.BAG_TOPICS:
+                    w.add_topic(f"/lpv_sysid/{n}", M.TYPES[n])
+                w.write_many(rows)
+
+        wr = interleaved({"write": write_each, "many": write_many}, number=1, repeat=3, clock=time.process_time)
     finally:
         shutil.rmtree(root, ignore_errors=True)
+    rate = n_typed / st["arrays"].median
+    frate = n_typed / st["floor"].median
+    ratio = st["arrays"].median / st["floor"].median
+    page.add(f"## Reading ({n_all} messages, {n_typed} on the typed topics; CPU time per read)")
+    page.add()
+    page.table(["what", "median [p10-p90]", "msgs/s"], [
+        ["`read_arrays(typed topics)` (mcap index gather + block decode)", st["arrays"].fmt(1e3, "ms"), f"{rate:,.0f}"],
+        ["floor: records in memory, `np.frombuffer` + one structured view per topic", st["floor"].fmt(1e3, "ms"),
+         f"{frate:,.0f}"],
+        ["`read_bag(typed topics)` (message objects from the decoded columns)", rb.fmt(1e3, "ms"),
+         f"{n_typed / rb.median:,.0f}"],
+        ["before: rosbags AnyReader + `deserialize_cdr` per message", old.fmt(1e3, "ms"), f"{n_typed / old.median:,.0f}"],
+        ["`topic_info` (summary + message indexes)", ti["index"].fmt(1e3, "ms"), ""],
+        ["`topic_info` before (every record read to count)", ti["walk"].fmt(1e3, "ms"), ""],
+    ])
+    n_w = len(rows)
+    page.add(f"## Writing ({n_w} messages of the phase-1 mix, mcap; CPU time)")
+    page.add()
+    page.table(["what", "median [p10-p90]", "msgs/s"], [
+        ["`BagWriter.write` per message (rosbags CDR serialisation + store)", wr["write"].fmt(1, "s"),
+         f"{n_w / wr['write'].median:,.0f}"],
+        ["`BagWriter.write_many` of finished records (what `write_run_bag` uses)", wr["many"].fmt(1, "s"),
+         f"{n_w / wr['many'].median:,.0f}"],
+    ])
+    page.rows.append(Row("bag read (typed topics)", "15",
+                         f"`read_arrays` {rate:,.0f} msgs/s; `read_bag` {n_typed / rb.median:,.0f} msgs/s "
+                         f"(before {n_typed / old.median:,.0f}); `topic_info` {ti['index'].median * 1e3:.1f} ms "
+                         f"(before {ti['walk'].median * 1e3:.0f} ms)",
+                         f"numpy block decode {frate:,.0f} msgs/s", f"{ratio:.2f}x",
+                         ">= 500k msgs/s", status(rate >= 5e5), order=9))
+    page.write(load0)
 
 
 if __name__ == "__main__":

@@ -34,8 +34,9 @@ def _runtime():
     return ControllerRuntime(ControllerSettings(gains_file=GAINS), M.MsgFactory.rosbags())
 
 
-def bench_runtime(seconds: float = 4.0) -> float:
-    """Process time per simulated second (s/s) of inputs + 250 Hz ticks."""
+def bench_runtime(seconds: float = 4.0, ticks: list | None = None) -> float:
+    """Process time per simulated second (s/s) of inputs + 250 Hz ticks; ``ticks`` collects
+    the wall time of every ``tick`` (s)."""
     from lpv_sysid.io.bag import read_bag
     data = read_bag(SAMPLE, topics=[f"{NS}/{t}" for t in INPUTS])
     events = sorted((ns, t[len(NS) + 1:], m) for t in data for ns, m in data[t])
@@ -46,9 +47,13 @@ def bench_runtime(seconds: float = 4.0) -> float:
     period = 4_000_000
     nxt = t0 + period
     c0 = time.process_time()
+    pc = time.perf_counter
     for ns, topic, msg in events:
         while nxt <= ns:
+            w0 = pc()
             rt.tick(nxt * 1e-9)
+            if ticks is not None:
+                ticks.append(pc() - w0)
             nxt += period
         rt.on_message(topic, msg, ns * 1e-9)
     cpu = time.process_time() - c0
@@ -90,20 +95,39 @@ def bench_replay(tmp: str) -> tuple[float, float, dict]:
 
 
 def main() -> None:
-    cpu = [bench_runtime() for _ in range(3)]
-    print(f"controller runtime, 250 Hz state + 3 x 100 Hz inputs + 250 Hz ticks: "
-          f"median {100 * statistics.median(cpu):.2f} % of one core "
-          f"(runs {', '.join(f'{100 * c:.2f}' for c in cpu)} %)")
+    from bench.harness import Page, Row, Stat, load_average, status
+    load0 = load_average()
+    page = Page("nodes", "lpv_controller node path and replay (issues 6, 15)",
+                ".venv/bin/python -m bench.bench_controller_node")
+    ticks: list = []
+    cpu = [bench_runtime(ticks=ticks) for _ in range(3)]
+    tk = Stat(ticks)
+    page.add("## Controller runtime at 250 Hz (msg_samples/phase2_sim inputs, msg_samples/gains.yaml)")
+    page.add()
+    page.table(["what", "value"], [
+        ["CPU share of one core (inputs + ticks per simulated second)",
+         f"median {100 * Stat(cpu).median:.2f} % (runs {', '.join(f'{100 * c:.2f}' for c in cpu)} %)"],
+        ["one tick (supervisor + LPV law + actuator_command), wall", f"median {tk.median * 1e6:.1f} us, "
+         f"p90 {tk.p90 * 1e6:.1f} us, p99 {tk.p99 * 1e6:.1f} us, max {max(ticks) * 1e6:.0f} us (n={len(ticks)})"],
+    ])
     with tempfile.TemporaryDirectory() as tmp:
         times, cpus = [], []
         for _ in range(3):
             dt, dc, s = bench_replay(tmp)
             times.append(dt)
             cpus.append(dc)
-        print(f"replay of a {s['duration_s']:.1f} s bag ({s['inputs']} input messages, "
-              f"{s['commands']} commands): median wall {statistics.median(times):.2f} s "
-              f"(runs {', '.join(f'{t:.2f}' for t in times)} s), median CPU "
-              f"{statistics.median(cpus):.2f} s")
+    page.add(f"## `lpv-sysid replay` of a {s['duration_s']:.1f} s bag ({s['inputs']} input messages, "
+             f"{s['commands']} commands)")
+    page.add()
+    page.table(["what", "median [p10-p90]"], [["wall", Stat(times).fmt(1, "s")], ["CPU", Stat(cpus).fmt(1, "s")]])
+    page.rows.append(Row("controller node tick @ 250 Hz", "6, 15",
+                         f"median {tk.median * 1e6:.0f} us, p99 {tk.p99 * 1e6:.0f} us; {100 * Stat(cpu).median:.2f} % "
+                         "of one core", target="<= 30 us median; bounded tail",
+                         status=status(None, "measured only (nodes/ owned elsewhere)"), order=7))
+    page.rows.append(Row("replay of a 60 s 250 Hz bag", "6", f"{Stat(times).median:.2f} s wall, "
+                         f"{Stat(cpus).median:.2f} s CPU", target="< 2 s",
+                         status=status(Stat(times).median < 2.0), order=21))
+    page.write(load0)
 
 
 if __name__ == "__main__":

@@ -10,9 +10,11 @@ The graph runs on simulation time: sim_vehicle (``lockstep``) publishes ``/clock
 physics time, every other node has ``use_sim_time``, and the controller steps its law on each
 state sample (``tick_source: state``); sim_vehicle integrates past a state sample only once the
 command computed on it arrived. The controller follows the 100 Hz reference along its slope
-between messages (``reference_hold: foh``), as the offline simulation samples the signal. So the loop samples exactly like the offline ``lpv-sysid
-simulate phase2`` however loaded the machine is (a wall-clock Python graph on 2 loaded cores
-had more loop delay than the demo gains tolerate); the wall time of a run stretches instead.
+between messages (``reference_hold: foh``), as the offline simulation samples the signal.
+So the loop samples exactly like the offline ``lpv-sysid simulate phase2`` however loaded
+the machine is (a wall-clock Python graph on 2 loaded cores had more loop delay than the demo
+gains tolerate); the wall time of a run stretches instead (real-time factor 0.7 at load ~9
+on 2 cores: the 104 s signal in ~150 s, test/test_ros_phase2.py).
 Start phase 2 with the controller's, then the excitation's ``start`` service.
 """
 

@@ -133,6 +133,20 @@ def test_phase2_refuses_a_vehicle_on_the_ground_before_sending_anything(tmp_path
     assert veh.mode_log == [] and veh.setpoints_received == 0 and not veh.armed
 
 
+def test_phase2_law_refuses_gains_of_another_plant(tmp_path, design):
+    from lpv_sysid.cli.chain import load_phase2_law
+    from lpv_sysid.errors import ConfigError
+    from lpv_sysid.io.formats import certify_law
+
+    doc = yaml.safe_load((design / "gains.yaml").read_text())
+    doc["inputs"] = [{"name": n, "unit": "1"} for n in ("ut", "ua", "ue", "ur")]    # virtual actuators
+    (tmp_path / "g.yaml").write_text(yaml.safe_dump(certify_law(doc, layout=None)))
+    with pytest.raises(ConfigError, match="not the rate plant"):
+        load_phase2_law(tmp_path / "g.yaml")
+    ctrl, _ = load_phase2_law(design / "gains.yaml", design / "vertex_models.yaml")
+    assert (ctrl.n_x, ctrl.n_u) == (8, 4)
+
+
 # ====================================================================== real PX4 SITL
 def test_real_px4_phase1_records_rate_setpoints_and_identifies(tmp_path):
     from support.px4_sitl import Px4Sitl, find_px4

@@ -161,7 +161,7 @@ _DEL = object()
 
 MODEL_CASES = [
     # (id, path to edit, new value, expected message fragment)
-    ("format", ["format"], "lpv_sysid/vertex_models@2", r"format: expected 'lpv_sysid/vertex_models@1'"),
+    ("format", ["format"], "lpv_sysid/vertex_models@3", r"format: expected 'lpv_sysid/vertex_models@2' \(or 'lpv_sysid/vertex_models@1'\)"),
     ("missing-vertices", ["vertices"], _DEL, r"missing key\(s\) \['vertices'\]"),
     ("unknown-key", ["colour"], "red", r"unknown key\(s\) \['colour'\]"),
     ("time", ["time"], "discrete", r"time: expected 'continuous' or \{discrete: Ts\}"),

@@ -176,8 +176,10 @@ def test_full_run_writes_bag_summary_and_report(lpv, tmp_path):
     assert nl.completed and eq.completed
     summary = yaml.safe_load(res.summary_path.read_text())
     assert summary["kappa"] == 2.0 and summary["gamma"] == 1.0
-    assert summary["nonlinear"]["gain"] == pytest.approx(nl.gain)
-    assert summary["eq33"]["gain"] == pytest.approx(eq.gain)
+    assert summary["nonlinear"]["total_ratio"] == pytest.approx(nl.gain)
+    assert summary["eq33"]["total_ratio"] == pytest.approx(eq.gain)
+    # with --superposition the nonlinear u_e -> z gain is the two-flight difference
+    assert summary["nonlinear"]["excitation_gain"] == pytest.approx(summary["nonlinear"]["superposition"]["gain"])
     assert set(summary["regressor_correlation"]["axes"]) == set("XYZLMN")
     assert summary["regressor_correlation"]["source"] == "nonlinear"
     assert summary["regressor_correlation"]["complete_run"] is True
@@ -199,11 +201,12 @@ def test_full_run_writes_bag_summary_and_report(lpv, tmp_path):
     assert statuses[0].message == "phase 2 excitation complete"
 
     report = write_report(tmp_path).read_text()
-    assert f"| nonlinear quadrotor | {nl.z_norm:.4g} | {nl.ue_norm:.4g} | {nl.gain:.4g} | yes | completed |" in report
+    d = summary["nonlinear"]["decomposition"]
+    assert (f"| nonlinear quadrotor | {nl.excitation_gain:.4g} | yes | superposition | {d['offset']['ratio']:.4g} | "
+            f"{d['tracking']['ratio']:.4g} | {nl.gain:.4g} | completed |") in report
     assert "Computed from the nonlinear quadrotor simulation data, 151 samples." in report
     sp = summary["nonlinear"]["superposition"]
     assert sp["complete"] and 0 < sp["gain"] < 1.0
-    assert f"| nonlinear quadrotor, excitation only (superposition) | {sp['z_norm']:.4g} |" in report
 
 
 def _write_files(lpv, d):
@@ -255,7 +258,7 @@ def test_cli_entry_point_runs_from_files(lpv, tmp_path, capsys):
                    "--out", str(tmp_path / "phase2"), "--kappa", "1.5", "--ramp", "0.5", "--no-bag"])
     assert run_phase2(args) == 0
     out = capsys.readouterr().out
-    assert "eq33     : ||z||/||kappa u_e|| =" in out and "wrote " in out
+    assert "eq33     : u_e -> z gain " in out and "total ||z||/||kappa u_e|| " in out and "wrote " in out
     s = yaml.safe_load((tmp_path / "phase2" / "summary.yaml").read_text())
     assert s["kappa"] == 1.5 and s["eq33"]["completed"] and s["nonlinear"]["completed"]
     assert s["signals"]["duration"] == pytest.approx(0.5 + 3.0 + 0.5)   # ramp + one period + ramp (ExcitationCore)

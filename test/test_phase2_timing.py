@@ -6,10 +6,9 @@ on sim time. The same graph under a real Jazzy: test_ros_phase2.py.
 Measured under real Jazzy on 2 loaded cores before these changes: the shipped
 ``state_timeout_s: 0.02`` aborted 0.7 s after start (state delivery latency p99 31 ms, max
 62 ms), and the wall-clock loop (~14 ms mean delay) went unstable: the demo gains tolerate
-~12 ms at 250 Hz.
+8-12 ms of loop delay at 250 Hz.
 """
 
-import math
 import os
 
 import numpy as np

@@ -87,6 +87,29 @@ def test_identification_recovers_known_rate_plant():
     assert P.std["Z_T"] > 0
 
 
+def test_validate_scores_the_true_model_near_one_and_a_wrong_one_lower():
+    t, x, u = _simulate(P0, T=20.0, seed=3)
+    run = rid.run_from_arrays("sim", t[::2], x[::2], t[::4], u[::4])
+    good = rid.validate(P0, run)
+    assert min(good.values()) > 0.95
+    slow = rp.RatePlantParams(**{**{k: getattr(P0, k) for k in rp.PARAM_ENTRIES}, "L_p": -3.0, "L_sp": 3.0})
+    bad = rid.validate(slow, run)
+    assert bad["p"] < good["p"] - 0.2 and bad["q"] == pytest.approx(good["q"])
+
+
+def test_rate_row_never_takes_a_sign_flipped_fit():
+    # the roll loop "follows" -p_sp (a wrong channel/sign): the fits at these delays have L_sp < 0;
+    # such a fit is never taken (on one SIH flight an aliased 0.12 s delay gave R^2 0.92 with
+    # M_sp = -24.9 and stopped the chain): refused with the row named
+    t, x, u = _simulate(P0, T=20.0, seed=4)
+    u = u.copy()
+    u[:, 1] = -u[:, 1]
+    cfg = rid.RateIdConfig(unit_dc_gain=False, delays=(0.0, 0.02))   # free fit: L_sp carries the sign
+    run = rid.run_from_arrays("sim", t[::2], x[::2], t[::4], u[::4], cfg)
+    with pytest.raises(ConfigError, match="row p: no delay .* positive setpoint gain"):
+        rid.identify([run], cfg)
+
+
 def test_identification_refuses_short_or_malformed_data():
     with pytest.raises(ConfigError, match="states must be"):
         rid.run_from_arrays("x", np.arange(10.0), np.zeros((10, 7)), np.arange(10.0), np.zeros((10, 4)))

@@ -7,8 +7,9 @@ config the controller aborted 0.7 s after ``start`` (``stale: state: newest stam
 old ... timeout 0.02 s``: state delivery latency p99 31 ms, max 62 ms), and even with relaxed
 timeouts the wall-clock loop oscillated into ESC saturation within 0.3 s (72 of 156 commands):
 the ~14 ms mean loop delay of the Python graph (sim tick lateness + DDS + controller tick
-phase) exceeds the ~12 ms at which the demo gains lose stability at 250 Hz (spectral radius of
-the vertex closed loop >= 1 from 3 samples of input delay). The controller also died at its
+phase) exceeds the 8-12 ms at which the demo gains lose stability at 250 Hz (spectral radius
+of A + B K with a delayed input >= 1 from 2 samples on the worst certified system, 3 on the
+nominal vertex; the LQR test law of msg_samples tolerates 16 ms). The controller also died at its
 first abort (rclpy: "Logger severity cannot be changed between calls"). The graph now runs on
 sim time in lock-step (sim_vehicle ``lockstep``, controller ``tick_source: state``,
 ``use_sim_time``), see launch/sim.launch.py.
@@ -214,7 +215,10 @@ def test_the_graph_flies_the_whole_phase2_signal_without_abort(flight):
     from lpv_sysid.io import messages as M
     te, ue = M.channels_from_joint_states([m for _, m in flight["bag"][f"{NS}/excitation"]],
                                           M.EXCITATION_NAMES, field="position")
-    assert te[np.abs(ue).max(axis=1) > 1e-3].min() > cmd[0]   # ... from before the fade-in
+    # ... and from its start: the excitation energy played before the first command (the
+    # excitation node's clock may read a state period behind the controller's) is negligible
+    e = np.sum(ue[:-1] ** 2, axis=1) * np.diff(te)
+    assert e[te[:-1] < cmd[0]].sum() < 1e-3 * e.sum()
     # no abort on status while the signal ran (the shutdown's own "external: shutdown" after)
     for ns, m in flight["bag"][f"{NS}/status"]:
         for st in m.status:

@@ -264,6 +264,19 @@ def test_fused_eq33_with_the_feedforward_law_and_simulation():
         ref = cl.eq33_rhs(t, x, sched, sig, law, 1.0, seg, False)
         np.testing.assert_allclose(f(t, x, seg), ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
     # the whole simulation: fused (the law carries eq33_parts) vs the generic right-hand side
+    # a law on another schedule of the same box (its own K, x0, u0), as phase2 builds them
+    from lpv_sysid.models.lpv import ScheduledLpv
+    other = ScheduledLpv(_model(8).model, sched.Kv * 0.5)
+    other.model.vmin, other.model.vmax = sched.model.vmin, sched.model.vmax
+    law2 = cl.feedforward_law(other, R, ffs, accel)
+    f2 = cl.fused_eq33(sched, sig, law2, R, 1.0, moving_equilibrium=True)
+    assert f2 is not None
+    for _ in range(50):
+        t = float(rng.uniform(0, 4.0))
+        seg = sig.segment(t)
+        x = rng.normal(size=12)
+        ref = cl.eq33_rhs(t, x, sched, sig, law2, 1.0, seg, True)
+        np.testing.assert_allclose(f2(t, x, seg), ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
     plain = lambda t, x, v, e: law(t, x, v, e)   # noqa: E731 - a law simulate_eq33 cannot fuse
     assert cl.fused_eq33(sched, sig, plain, R, 1.0) is None
     Q = np.eye(3) * 2.0

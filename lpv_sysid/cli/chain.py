@@ -28,7 +28,8 @@ artefacts in ``DIR``:
    vehicle did.
 
 ``lpv-sysid fly phase2 --connect URL --gains G --models M --signals S --out DIR`` flies step 5
-alone (vehicle in the air, armed). The simulated ``lpv-sysid demo`` / ``make demo`` is unchanged.
+alone (vehicle in the air, armed); ``lpv-sysid chain ... --phase1 OLD/phase1`` reruns steps 2-6
+on the bags of an earlier phase-1 flight (the vehicle still in HOLD). The simulated ``lpv-sysid demo`` / ``make demo`` is unchanged.
 """
 
 from __future__ import annotations
@@ -98,9 +99,10 @@ def load_phase2_law(gains_path: str | Path, models_path: str | Path | None = Non
     from lpv_sysid.models import rate_plant as rp
 
     gs = GainSchedule.load(gains_path, models_path, layout=None)
-    names = tuple(gs.state_names) if hasattr(gs, "state_names") else None
-    if names is not None and tuple(names) != rp.STATE_NAMES:
-        raise ConfigError(f"{gains_path}: states {list(names)} are not the rate plant's {list(rp.STATE_NAMES)}")
+    if tuple(gs.state_names) != rp.STATE_NAMES or tuple(gs.input_names) != rp.INPUT_NAMES:
+        raise ConfigError(f"{gains_path}: states {list(gs.state_names)} / inputs {list(gs.input_names)} are not the "
+                          f"rate plant's {list(rp.STATE_NAMES)} / {list(rp.INPUT_NAMES)} (a virtual-actuator "
+                          "design cannot be flown through SET_ATTITUDE_TARGET rate setpoints)")
     ctrl = LpvController(gs, LpvControllerConfig(velocity_index=rp.VELOCITY_INDEX, feedforward=False))
     return ctrl, gs
 
@@ -441,8 +443,11 @@ def chain(url: str, out_dir: str | Path, params: Mapping[str, float] | None = No
           campaign_config: str | Path | None = None, kappa: float = 1.0, k_sigma: float = 2.0,
           echo: Callable[[str], None] = print, clock: Callable[[], float] = time.monotonic,
           sleep: Callable[[float], None] = time.sleep, link_factory: Callable[[], Any] | None = None,
-          phase2: Phase2Options | None = None, preflight: bool = True) -> int:
-    """The six steps of the module docstring; returns the exit status."""
+          phase2: Phase2Options | None = None, preflight: bool = True,
+          phase1_dir: str | Path | None = None) -> int:
+    """The six steps of the module docstring; returns the exit status. ``phase1_dir``: use the
+    bags of an earlier phase-1 flight (``--phase1``, e.g. after a chain stopped at a later
+    step with the vehicle still in HOLD) instead of flying phase 1."""
     from lpv_sysid.cli.fly import FlyConfig, fly
     from lpv_sysid.cli.main import main as cli_main
     from lpv_sysid.ident import rate_plant as rid
@@ -462,11 +467,22 @@ def chain(url: str, out_dir: str | Path, params: Mapping[str, float] | None = No
         _save(out / "chain_summary.yaml", summary)
 
     cfg = FlyConfig.load(campaign_config or config_file("campaign_chain.yaml"))
-    step("phase-1 campaign on the vehicle (PX4 cascade, ATTITUDE_TARGET recorded)")
-    res = fly(cfg, url, out / "phase1", params=params, clock=clock, sleep=sleep, echo=echo,
-              record_rate_setpoints=True, preflight=preflight,
-              link=link_factory() if link_factory else None)
-    bags = [out / "phase1" / b for b in (res.summary.get("bags") or {}).values()]
+    if phase1_dir is not None:
+        step(f"phase-1 bags of an earlier flight ({phase1_dir})")
+        p1 = Path(phase1_dir)
+        import yaml
+
+        cs = yaml.safe_load((p1 / "campaign_summary.yaml").read_text()) if (p1 / "campaign_summary.yaml").exists() else {}
+        ok1 = bool(cs.get("ok"))
+        res = type("Phase1", (), {"status": 0 if ok1 else EXIT_FAILED, "phase": cs.get("result", "unknown"),
+                                  "reason": cs.get("reason") or "", "summary": cs})()
+        bags = [p1 / b for b in (cs.get("bags") or {}).values()]
+    else:
+        step("phase-1 campaign on the vehicle (PX4 cascade, ATTITUDE_TARGET recorded)")
+        res = fly(cfg, url, out / "phase1", params=params, clock=clock, sleep=sleep, echo=echo,
+                  record_rate_setpoints=True, preflight=preflight,
+                  link=link_factory() if link_factory else None)
+        bags = [out / "phase1" / b for b in (res.summary.get("bags") or {}).values()]
     done(status=res.status, result=res.phase, reason=res.reason, bags=[str(b) for b in bags])
     usable = []
     for b in bags:
@@ -535,8 +551,17 @@ def chain(url: str, out_dir: str | Path, params: Mapping[str, float] | None = No
     except LpvSysidError as exc:
         p2 = {"ok": False, "reason": str(exc)}
     done(ok=p2.get("ok"), reason=p2.get("reason"))
+    # the identified rate plant against the phase-2 flight (rate setpoints from the law, not PX4)
+    bag2 = out / "phase2" / "bag_0000"           # state at the telemetry rate + the commands as sent
+    if bag2.exists():
+        try:
+            p2["model_check_r2"] = rid.validate(params_rp, rid.read_run(bag2))
+            echo("  identified rate plant vs the phase-2 flight, R^2 per row: "
+                 + ", ".join(f"{k} {v}" for k, v in p2["model_check_r2"].items()))
+        except LpvSysidError as exc:
+            p2["model_check_r2"] = {"error": str(exc)}
     summary["phase2"] = {k: v for k, v in p2.items() if k in ("ok", "reason", "tracking_rms", "gain_u_e_to_z",
-                                                               "handback")}
+                                                               "handback", "model_check_r2")}
     summary["result"] = "complete" if p2.get("ok") else f"phase 2: {p2.get('reason')}"
     summary["wall_s"] = round(clock() - t_all, 1)
     _save(out / "chain_summary.yaml", summary)
@@ -618,6 +643,10 @@ def _report(out: Path, summary: dict, p2: Optional[dict], rep: dict) -> None:
                   f"error (for reference only): {p2['raw_ratio_mixed_with_tracking']:.4g}.",
                   f"Commands clipped by the transport: {p2['commands_clipped']} of {p2['commands']}; control rate "
                   f"{p2['control_rate_hz']:.1f} Hz; signal flown {p2['flown_signal_s']:.1f} s."]
+        mc = p2.get("model_check_r2")
+        if mc:
+            L += ["", "Identified rate plant (phase-1 data) against the phase-2 flight (rate setpoints from the "
+                  "law), R^2 of x' per row: " + ", ".join(f"{k} {v}" for k, v in mc.items())]
     (out / "report.md").write_text("\n".join(L) + "\n")
 
 
@@ -629,6 +658,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--set-param", action="append", default=[], metavar="NAME=VALUE",
                         help="PARAM_SET before phase 1 (e.g. COM_OBL_RC_ACT=5 on a SITL without RC)")
     parser.add_argument("--kappa", type=float, default=1.0, help="phase-2 excitation multiplier (seed 0 Eq. 33)")
+    parser.add_argument("--phase1", default=None, metavar="DIR",
+                        help="use the bags of an earlier phase-1 flight (its DIR/phase1) instead of flying phase 1; "
+                             "the vehicle must be armed and in the air (HOLD) for phase 2")
     parser.add_argument("--k-sigma", type=float, default=2.0,
                         help="model intervals nominal +- k std of the identified entries (0: nominal only)")
 
@@ -637,4 +669,4 @@ def run(args: argparse.Namespace) -> int:
     from lpv_sysid.cli.fly import parse_params
 
     return chain(args.connect, args.out, params=parse_params(args.set_param), campaign_config=args.campaign,
-                 kappa=args.kappa, k_sigma=args.k_sigma)
+                 kappa=args.kappa, k_sigma=args.k_sigma, phase1_dir=args.phase1)

@@ -21,7 +21,10 @@ gravity terms moved to the left-hand side):
    thrust + c_w``, ``p' = L_p p + L_sp p_sp(t - d) + c_p`` (q, r alike); the rate rows search a
    delay d in ``delays`` (the loop's lag: PX4 filtering, motors) and keep the best fit's
    coefficients (the LPV model has no delay: d is reported, not modelled). With
-   ``unit_dc_gain`` (default) the rate rows are ``p' = a (p_sp - p) + c`` (L_sp = -L_p = a):
+   ``unit_dc_gain`` (default) the rate rows are ``p' = a (p_sp - p) + c`` (L_sp = -L_p = a);
+   only delays with a > 0 count (on one SIH flight the pitch row's best R^2, 0.92, came at
+   0.12 s with a = -24.9: half a period of PX4's ~4 Hz pitch-setpoint oscillation, an aliased
+   delay, not a loop that runs away from its setpoint):
    PX4's rate integrator leaves no steady error, and the free fit's DC gain of ~1.3-1.4
    on the first SIH flight is the closed-loop regressor bias of equation error (p_sp is
    computed by PX4's attitude loop from the same state), reported as ``unconstrained``;
@@ -191,8 +194,13 @@ def identify(runs: Sequence[RateRun], cfg: RateIdConfig = RateIdConfig(), g: flo
                 theta, sd, r2 = np.array([-th1[0], th1[0], th1[1]]), np.array([sd1[0], sd1[0], sd1[1]]), r21
             else:
                 theta, sd, r2 = free
+            if theta[1] <= 0:
+                continue          # the loop must follow its setpoint: a sign flip is an aliased delay
             if best is None or r2 > best[2] + 1e-9:
                 best = (theta, sd, r2, k * step, free)
+        if best is None:
+            raise ConfigError(f"rate-plant identification: row {rp.STATE_NAMES[row]}: no delay in {list(cfg.delays)} "
+                              "gives a positive setpoint gain (is the setpoint stream the right one?)")
         theta, sd, r2, d, free = best
         put(names, theta, sd, r2, rp.STATE_NAMES[row], {
             "delay_s": round(d, 3), "bandwidth_rad_s": round(-float(theta[0]), 3),
@@ -203,6 +211,20 @@ def identify(runs: Sequence[RateRun], cfg: RateIdConfig = RateIdConfig(), g: flo
     params = rp.RatePlantParams(**est, std=std)
     rep["params"] = params.as_dict()
     return params, rep
+
+
+def validate(params: rp.RatePlantParams, run: RateRun, g: float = rp.GRAVITY) -> dict:
+    """Equation-error check of identified ``params`` on another run (e.g. the phase-2 flight,
+    where the rate setpoints are the LPV law's and not PX4's): per row the R^2 of the model's
+    x' (:func:`lpv_sysid.models.rate_plant.dynamics`) against the measured derivative."""
+    pred = np.array([rp.dynamics(x, u, params, g) for x, u in zip(run.x, run.u)])
+    out = {}
+    for k, name in enumerate(rp.STATE_NAMES):
+        y = run.xdot[:, k]
+        sst = float(((y - y.mean()) ** 2).sum())
+        e = y - pred[:, k]
+        out[name] = round(1.0 - float(e @ e) / sst, 4) if sst > 0 else None
+    return out
 
 
 def identify_bags(bags: Sequence[str | Path], cfg: RateIdConfig = RateIdConfig()) -> tuple[rp.RatePlantParams, dict]:

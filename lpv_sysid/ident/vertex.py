@@ -78,6 +78,7 @@ class IdentificationConfig:
                                        # speed limit longer than this fraction of the fit segment
     motor_std: tuple[float, float] | None = None  # std of a_Omega, b_Omega where not identifiable
     instruments: bool = False          # taylor2: rotor speeds instrumented by the motor model (EIV check)
+    motor_instrument: bool = True      # motor rows: measured speeds instrumented by the model's (EIV)
     measurement_noise: dict = field(default_factory=dict)  # EIV: {state or "rotor": std | [std, rate_hz]}
     excitation_threshold: float = 1e-6 # |u_e| above which the excitation counts as on
     vmin: tuple[float, float, float] = (-5.0, -5.0, -5.0)
@@ -123,7 +124,7 @@ class IdentificationConfig:
                 if not isinstance(v, (list, tuple)) or len(v) != 3:
                     raise ConfigError(f"identification.{key} must be a list of 3 numbers, got {v!r}")
                 kw[key] = tuple(float(a) for a in v)
-        for key in ("intercept", "equilibrium", "instruments"):
+        for key in ("intercept", "equilibrium", "instruments", "motor_instrument"):
             if key in d:
                 v = d.pop(key)
                 if not isinstance(v, bool):
@@ -322,7 +323,7 @@ def _input(data: VertexData, params) -> np.ndarray:
 
 
 def pinned(e: np.ndarray, Om_start: np.ndarray, dt: float, params, a: float | None = None,
-           b: float | None = None) -> np.ndarray:
+           b: float | None = None, speeds: bool = False):
     """(N, 4) fraction of the interval ``[t_k - dt/2, t_k + dt/2)`` during which rotor i is
     held at a speed limit, where Eq. (8) does not hold (the speed is clamped).
 
@@ -333,6 +334,8 @@ def pinned(e: np.ndarray, Om_start: np.ndarray, dt: float, params, a: float | No
     limit after ``ln((Omega_s - Omega_inf) / (limit - Omega_inf)) / a``; a pinned rotor is released
     as soon as ``Omega_inf`` is back inside the limits.  The fraction, not a 0/1 flag per sample,
     keeps the gated regressors free of the half-sample bias at every entry into the pin.
+    ``speeds``: also return the model's rotor speeds at the sample times (N, 4), the noise-free
+    instrument of the motor regression.
     """
     import math
 
@@ -342,11 +345,14 @@ def pinned(e: np.ndarray, Om_start: np.ndarray, dt: float, params, a: float | No
     ad = math.exp(-a * dt)
     E = np.asarray(e, dtype=float)
     out = np.zeros(E.shape)
+    start = np.zeros(E.shape)                       # model speed at each interval start
     for i in range(E.shape[1]):
         Om = min(max(float(Om_start[i]), lo), hi)
         col = E[:, i].tolist()
         frac = out[:, i]
+        st = start[:, i]
         for k, ek in enumerate(col):
+            st[k] = Om
             inf = b * ek / a
             if (Om <= lo and inf <= lo) or (Om >= hi and inf >= hi):
                 frac[k] = 1.0                       # pinned through the interval
@@ -359,7 +365,10 @@ def pinned(e: np.ndarray, Om_start: np.ndarray, dt: float, params, a: float | No
                 Om = lim
             else:
                 Om = nxt
-    return out
+    if not speeds:
+        return out
+    mid = 0.5 * (start + np.vstack([start[1:], start[-1:]]))      # at t_k, mid-interval
+    return out, mid
 
 
 def motor_response(u: np.ndarray, delta_start: np.ndarray, dt: float, params) -> np.ndarray:
@@ -417,12 +426,15 @@ def _motor_design(data: VertexData, cfg: IdentificationConfig, params, full, kee
     ab = (params.a_omega, params.b_omega)
 
     def gated(ab):
-        g = 1.0 - pinned(e, Om[0], dt, params, *ab)
+        frac, Om_model = pinned(e, Om[0], dt, params, *ab, speeds=True)
+        g = 1.0 - frac
         Xa = np.concatenate([_smooth_keep(g[:, i] * (Om[:, i] - Om0[i]), dt, cfg, keep)[0] for i in range(4)])
+        # instrument of the measured speeds: the model's own, uncorrelated with telemetry noise
+        Za = np.concatenate([_smooth_keep(g[:, i] * (Om_model[:, i] - Om0[i]), dt, cfg, keep)[0] for i in range(4)])
         Xc = np.zeros((4 * n, 4))
         for i in range(4):
             Xc[i * n:(i + 1) * n, i] = _smooth_keep(g[:, i], dt, cfg, keep)[0]
-        return g, Xa, Xc
+        return g, (Xa, Za), Xc
 
     def inputs(tau):
         es, ed = spline(t - tau), spline(t - tau, 1)
@@ -435,8 +447,12 @@ def _motor_design(data: VertexData, cfg: IdentificationConfig, params, full, kee
         th = None
         for _ in range(12):
             Xb, Xd = inputs(tau)
-            H = np.column_stack([Xa, Xb, Xc] + ([-b_est * Xd] if b_est is not None else []))
-            if rotor_var > 0:
+            H = np.column_stack([Xa[0], Xb, Xc] + ([-b_est * Xd] if b_est is not None else []))
+            if cfg.motor_instrument:
+                Z = H.copy()
+                Z[:, 0] = Xa[1]
+                th = np.linalg.solve(Z.T @ H, Z.T @ y)
+            elif rotor_var > 0:
                 M = H.T @ H
                 M[0, 0] -= H.shape[0] * rotor_var        # bias-compensated (errors in variables)
                 th = np.linalg.solve(M, H.T @ y)
@@ -465,8 +481,12 @@ def _motor_design(data: VertexData, cfg: IdentificationConfig, params, full, kee
     if abs(tau) >= max_delay:
         return None, f"latency at the search bound {max_delay:g} s"
     Xb, Xd = inputs(tau)
-    H = np.column_stack([Xa, Xb, Xc, -b_est * Xd])
+    H = np.column_stack([Xa[0], Xb, Xc, -b_est * Xd])
     labels = ("a", "b", "bias0", "bias1", "bias2", "bias3", "delay")
+    if cfg.motor_instrument:
+        Z = H.copy()
+        Z[:, 0] = Xa[1]
+        return ee.RowDesign(8, y, H, (), (), labels, stack=4, Z=Z), tau
     noise = np.array([rotor_var] + [0.0] * 6) if rotor_var > 0 else None
     return ee.RowDesign(8, y, H, (), (), labels, stack=4, noise_var=noise), tau
 

@@ -1599,13 +1599,16 @@ def read_bag(path, topics: Iterable[str] | None = None, strict: bool = True,
             continue
         msgtype = out.types[topic]
         store = stores.get(msgtype)
-        items: list = []
+        times_l, order_l, msgs = [], [], []
         odd = r.raw
         if store is not None:
             dec = _decode_rows(store, msgtype, r)
             for times, order, lay, f in dec.parts:
-                items.extend(zip(times.tolist(), order.tolist(), _builder(store, lay)(f, times.size)))
+                times_l.append(times)
+                order_l.append(order)
+                msgs.extend(_builder(store, lay)(f, times.size))
             odd = dec.odd
+        items: list = []
         for ns, order, data in odd:
             try:
                 if store is None:
@@ -1618,8 +1621,18 @@ def read_bag(path, topics: Iterable[str] | None = None, strict: bool = True,
                 bad[topic] = bad.get(topic, 0) + 1
                 continue
             items.append((ns, order, msg))
-        items.sort(key=lambda it: (it[0], it[1]))
-        out[topic] = [(ns, msg) for ns, _, msg in items]
+        if items:
+            times_l.append(np.array([it[0] for it in items], np.int64))
+            order_l.append(np.array([it[1] for it in items], np.int64))
+            msgs.extend(it[2] for it in items)
+        if not msgs:
+            continue
+        times = np.concatenate(times_l)
+        idx = np.lexsort((np.concatenate(order_l), times))        # stamp, then file order
+        if np.array_equal(idx, np.arange(idx.size)):
+            out[topic] = list(zip(times.tolist(), msgs))
+        else:
+            out[topic] = list(zip(times[idx].tolist(), [msgs[i] for i in idx.tolist()]))
     for topic, n in bad.items():
         problems.append(f"bag {path}: topic {topic!r}: {n} message(s) could not be deserialised")
     for p in problems:

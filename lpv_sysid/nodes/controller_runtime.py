@@ -25,8 +25,9 @@ the newest samples received; ``state`` steps it on each state sample at that sam
 (:meth:`ControllerRuntime.on_input`), so the command is always computed on the freshest
 state and carries its stamp -- the lock-stepped ``sim_vehicle`` of ``sim.launch.py`` waits for
 exactly that command before it integrates on -- while the ``rate_hz`` timer only judges
-staleness. Why: the demo gains lose stability at ~12 ms of loop delay at 250 Hz (discrete
-closed loop of the vertex models, spectral radius >= 1 from 3 samples of input delay), and
+staleness. Why: the demo gains lose stability at 8-12 ms of loop delay at 250 Hz (discrete
+closed loop A + B K with the input delayed: spectral radius >= 1 from 2 samples on the worst
+of the 128 certified systems, from 3 on the nominal vertex model), and
 the wall-clock Python graph on a loaded 2-core machine measured ~14 ms mean loop delay
 (state delivery p99 31 ms): it oscillated into saturation within 0.3 s.
 
@@ -470,6 +471,9 @@ class ControllerRuntime:
             level, message = "OK", "commanding"
         else:
             level, message = "OK", "waiting for start (not commanding)"
+            missing = self.missing_inputs()
+            if missing:
+                message += f"; no {', '.join(missing)} received yet"
         values = {"armed": sup.armed, "aborted": sup.aborted, "commanding": sup.action.commanding,
                   "excitation_on": sup.action.excitation_on,
                   "reason": ev.reason if ev else "", "commands": self.commands,

@@ -8,8 +8,9 @@ closed loops must be stable and the design envelope present (controller_runtime)
 parameters are declared once, in ``ControllerSettings``. Subscribes ``state``,
 ``rotor_speeds`` (best effort), ``velocity_reference`` and ``excitation`` (reliable); after
 ``start`` publishes ``actuator_command`` at ``rate_hz`` (``tick_source: timer``) or one per
-state sample, stamped with it (``tick_source: state``, the lock-stepped sim of sim.launch.py). The core's log lines (the safety
-abort among them) go to this node's logger.
+state sample, stamped with it (``tick_source: state``, the lock-stepped sim of
+sim.launch.py); ``start`` and ``auto_start`` wait until every input stream has delivered a
+sample. The core's log lines (the safety abort among them) go to this node's logger.
 On a fault it publishes the abort on ``status`` and stops commanding, so the bridge hands
 control back to PX4. Services ``start`` / ``abort`` (std_srvs/Trigger).
 

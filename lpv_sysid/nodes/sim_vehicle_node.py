@@ -23,10 +23,10 @@ samples (an ``actuator_command`` stamped with a state instant: lpv_controller wi
 physics integrates on (and, once a ``velocity_reference`` arrives on sim time, for the
 reference to be at most ``lockstep_reference_lag_s`` old: a CPU-starved excitation node slows
 the simulation instead of going stale; measured at load 9 on 2 cores without this barrier: a
-104 ms sim-time gap in the reference and a stale abort), so the loop has exactly the sampling of the offline ``simulate
-phase2`` (command computed on the state at t_k, held over [t_k, t_k+1)) however loaded the
-machine is: the wall-clock graph on 2 loaded cores had ~14 ms of loop delay, beyond the
-~12 ms at which the demo gains go unstable. An unanswered sample is sent again every
+104 ms sim-time gap in the reference and a stale abort), so the loop has exactly the
+sampling of the offline ``simulate phase2`` (command computed on the state at t_k, held over
+[t_k, t_k+1)) however loaded the machine is: the wall-clock graph on 2 loaded cores had ~14 ms of loop delay, beyond the
+8-12 ms at which the demo gains go unstable. An unanswered sample is sent again every
 ``LOCKSTEP_RESEND_S`` (best-effort stream); after ``lockstep_timeout_s`` of wall time without
 an answer the simulation runs on alone (``command_timeout_s`` later: baseline hold). Status
 reports ``real_time_factor`` (sim time per wall time), resends and timeouts.

@@ -293,10 +293,11 @@ class _FusedEq33:
     vectors (``np.kron``, ``tensordot``). ``moving_equilibrium`` as in :func:`eq33_rhs`."""
 
     def __init__(self, sched: Any, law_parts: tuple, signals: "ReferenceSignals", kappa: float,
-                 moving_equilibrium: bool) -> None:
+                 moving_equilibrium: bool, law_sched: Any = None) -> None:
         kind, _model, R, ffs, accel = law_parts
         pm = sched.model
-        A, B, Kv = np.asarray(pm.A, float), np.asarray(pm.B, float), np.asarray(sched.Kv, float)
+        lm = (law_sched if law_sched is not None else sched)      # the law's schedule (K, x0, u0)
+        A, B, Kv = np.asarray(pm.A, float), np.asarray(pm.B, float), np.asarray(lm.Kv, float)
         N, n, m = A.shape[0], A.shape[1], B.shape[2]
         self.n, self.m = n, m
         self.lo = [float(v) for v in pm.vmin]
@@ -304,8 +305,10 @@ class _FusedEq33:
         self.p = len(self.lo)
         if N != 2 ** self.p:
             raise ConfigError(f"Eq. (33): {N} vertices for a {self.p}-axis box")
+        if not (np.array_equal(lm.model.vmin, pm.vmin) and np.array_equal(lm.model.vmax, pm.vmax)):
+            raise ConfigError("Eq. (33): the law's schedule and the model have different boxes")
         cols = [A.reshape(N, -1), B.reshape(N, -1), Kv.reshape(N, -1), np.asarray(pm.x0, float),
-                np.asarray(pm.u0, float)]
+                np.asarray(pm.u0, float), np.asarray(lm.model.x0, float), np.asarray(lm.model.u0, float)]
         self.ff = None
         if kind == "feedforward":
             if not (np.array_equal(ffs.vmin, pm.vmin) and np.array_equal(ffs.vmax, pm.vmax)):
@@ -354,7 +357,8 @@ class _FusedEq33:
         return alpha, beta
 
     def at(self, vd, vd_dot=None):
-        """Scheduled quantities at v_d: (A, B, K, x0, u0, x0_dot or None, F, F_jerk)."""
+        """Scheduled quantities at v_d: (A, B, K, x0, u0, x0_dot or None, F, F_jerk, x0 and
+        u0 of the law's schedule)."""
         key = (tuple(vd), None if vd_dot is None else tuple(vd_dot))
         if self._last is not None and self._last[0] == key:
             return self._last[1]
@@ -366,7 +370,8 @@ class _FusedEq33:
         row = P[0]
         out = (row[sl[0]].reshape(n, n), row[sl[1]].reshape(n, m), row[sl[2]].reshape(m, n),
                row[sl[3]], row[sl[4]], P[1, sl[3]] if beta is not None else None,
-               row[sl[5]] if len(sl) > 5 else None, row[sl[6]] if len(sl) > 6 else None)
+               row[sl[7]] if len(sl) > 7 else None, row[sl[8]] if len(sl) > 8 else None,
+               row[sl[5]], row[sl[6]])
         self._last = (key, out)
         return out
 
@@ -388,12 +393,12 @@ class _FusedEq33:
     # -- law and right-hand side ---------------------------------------------------
     def law(self, t: float, x: np.ndarray, v_d, ue_scaled) -> np.ndarray:
         """The total command u of the fused law (Eq. 17 / 31, with feedforward if any)."""
-        A, B, K, x0, u0, _, Fv, Fjv = self.at([float(v) for v in v_d])
+        _A, _B, K, _x0, _u0, _, Fv, Fjv, x0l, u0l = self.at([float(v) for v in v_d])
         Re = self.R @ np.asarray(ue_scaled, dtype=float)
         if self.ff is None:
-            return u0 + K @ (x - x0) + Re
+            return u0l + K @ (x - x0l) + Re
         dx, du = self._offsets(t, Fv, Fjv)
-        return u0 + du + K @ (x - x0 - dx) + Re
+        return u0l + du + K @ (x - x0l - dx) + Re
 
     def __call__(self, t: float, x: np.ndarray, segment: Optional[int] = None) -> np.ndarray:
         T, V = self._t, self._vd
@@ -405,15 +410,15 @@ class _FusedEq33:
         a, b = V[k], V[k + 1]
         vd = [r * a[0] + s * b[0], r * a[1] + s * b[1], r * a[2] + s * b[2]]
         vdot = [(b[0] - a[0]) / (t1 - t0), (b[1] - a[1]) / (t1 - t0), (b[2] - a[2]) / (t1 - t0)]
-        A, B, K, x0, u0, x0dot, Fv, Fjv = self.at(vd, vdot)
+        A, B, K, x0, u0, x0dot, Fv, Fjv, x0l, u0l = self.at(vd, vdot)
         ue = r * self._ue[k] + s * self._ue[k + 1]
-        dx = x - x0
+        Re = self.R @ (self.kappa * ue)
         if self.ff is None:
-            du = K @ dx + self.R @ (self.kappa * ue)
+            u = u0l + K @ (x - x0l) + Re
         else:
             dxf, duf = self._offsets(t, Fv, Fjv)
-            du = duf + K @ (dx - dxf) + self.R @ (self.kappa * ue)
-        xdot = A @ dx + B @ du
+            u = u0l + duf + K @ (x - x0l - dxf) + Re
+        xdot = A @ (x - x0) + B @ (u - u0)
         if x0dot is not None:
             xdot += x0dot
         return xdot
@@ -433,9 +438,12 @@ def fused_eq33(model: Any, signals: "ReferenceSignals", law: Optional[ControlLaw
     if parts is None:
         return None
     owner = parts[1].model if isinstance(parts[1], LastPointCache) else parts[1]
-    if owner is not inner:
+    if _vertex_stacks(owner) is None:
         return None
-    return _FusedEq33(inner, parts, signals, kappa, moving_equilibrium)
+    try:
+        return _FusedEq33(inner, parts, signals, kappa, moving_equilibrium, law_sched=owner)
+    except ConfigError:           # e.g. the law's schedule has another box: evaluate generically
+        return None
 
 
 def eq33_rhs(
