@@ -200,15 +200,23 @@ def topic_hz(env: RosEnv, topic: str, seconds: float = 6.0) -> float:
 
 
 def sigint_and_wait(proc: Proc, group: bool, timeout: float = 30.0) -> tuple[int, float]:
-    """SIGINT (to the process or its whole group); (exit status, seconds to exit)."""
+    """SIGINT (to the process or its whole group); (exit status, seconds to exit). For a
+    ``ros2 launch``, the seconds from the SIGINT to each node's "finished cleanly" line
+    go to MEASURED["launch_node_exit_s"]."""
     t0 = time.monotonic()
     proc.sigint(group=group)
-    try:
-        rc = proc.wait(timeout)
-    except subprocess.TimeoutExpired:
+    exits: dict = {}
+    while proc.p.poll() is None and time.monotonic() - t0 < timeout:
+        for name in CLEAN.findall(proc.log()):
+            exits.setdefault(name, round(time.monotonic() - t0, 2))
+        time.sleep(0.05)
+    if proc.p.poll() is None:
         proc.kill()
         raise AssertionError(f"{proc.log_path.name}: still running {timeout} s after SIGINT:\n"
-                             f"{proc.log()[-3000:]}") from None
+                             f"{proc.log()[-3000:]}")
+    rc = proc.wait(1.0)
+    if exits:
+        MEASURED.setdefault("launch_node_exit_s", {})[proc.log_path.parent.name] = exits
     return rc, round(time.monotonic() - t0, 2)
 
 

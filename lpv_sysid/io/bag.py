@@ -4,7 +4,9 @@ This module is the only owner of the bag format: writing, reading, salvaging and
 
 Writing
     :class:`BagWriter` is a context manager around ``rosbags.rosbag2.Writer`` (format
-    version 9). Messages are CDR-serialised with the ROS 2 Jazzy typestore and each topic
+    version 9); :meth:`BagWriter.write_many` writes finished records in bulk (e.g. the
+    blocks of :func:`encode_block`, which fills copies of one serialised template message
+    with columns of values). Messages are CDR-serialised with the ROS 2 Jazzy typestore and each topic
     is registered with its full message definition and RIHS01 type hash, so ``ros2 bag
     info`` / ``ros2 bag play`` accept the result, and with the offered QoS profile
     (default: reliable, volatile, keep-last 10 -- rclpy's default publisher profile).
@@ -43,12 +45,28 @@ Repair
     holds. A bag locked by a live writer is refused.
 
 Reading
-    :func:`read_bag` returns ``{topic: [(stamp_ns, msg), ...]}`` through ``AnyReader``.
-    Messages come back sorted by the bag timestamp: rosbag2 allows out-of-order writes
-    and stores them as written, but readers (``AnyReader`` and ``ros2 bag play``) deliver
-    them in time order. Messages whose definitions equal the Jazzy ones are returned as
-    instances of the Jazzy typestore classes (the same classes
-    :meth:`lpv_sysid.io.messages.MsgFactory.rosbags` builds).
+    :func:`read_bag` returns ``{topic: [(stamp_ns, msg), ...]}``, :func:`read_arrays` the
+    same records column-wise (``{topic: TopicArrays}``: one numpy array per numeric field,
+    e.g. ``fields["pose.pose.position.x"]``), :func:`topic_info` counts and time spans.
+    Messages come back sorted by the bag timestamp (equal stamps in file order): rosbag2
+    allows out-of-order writes and stores them as written, but readers (``AnyReader`` and
+    ``ros2 bag play``) deliver them in time order. Messages whose definitions equal the
+    Jazzy ones are returned as instances of the Jazzy typestore classes (the same classes
+    :meth:`lpv_sysid.io.messages.MsgFactory.rosbags` builds), with the values rosbags'
+    ``deserialize_cdr`` gives.
+
+    Fast paths (values identical to rosbags', checked in test_bag_codec.py): a healthy
+    indexed mcap bag is opened from its summary section and ``metadata.yaml`` directly
+    (rosbags' reader parses them with a pure-Python YAML library), its chunks are
+    decompressed by rosbags' ``decompress`` (size and CRC checked) and the records of each
+    topic are gathered through the message indexes with array indexing; the fixed-layout
+    records the package writes are then decoded a topic at a time by the CDR block codec
+    (:class:`CdrLayout`, probed against rosbags before use) and ``read_bag`` builds the
+    message objects from the decoded columns; ``topic_info`` reads only the summary and
+    the message indexes. Whatever these paths do not recognise -- sqlite3, compression,
+    IDL definitions, a metadata.yaml that disagrees with the file, a record or index that
+    is not as rosbags would read it -- goes through ``AnyReader`` and ``deserialize_cdr``
+    as before (which also names the problem of a damaged bag).
 
     A missing ``metadata.yaml`` or a truncated/corrupt storage file raises
     :class:`BagError`; with ``strict=False`` whatever can be read is returned instead and
