@@ -24,9 +24,13 @@ from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration, PythonExpression
 from launch_ros.actions import Node
 
+from lpv_sysid.nodes._common import LAUNCH_SIGTERM_TIMEOUT_S
 from lpv_sysid.nodes.launch_util import declare_arguments, params
 
 NAMESPACE = "lpv_sysid"
+#: launch's SIGINT -> SIGTERM escalation (5 s by default) after the nodes' orderly shutdown
+#: (nodes/_common.LAUNCH_SIGTERM_TIMEOUT_S); ``sigterm_timeout:=S`` overrides it
+SIGTERM_TIMEOUT = LaunchConfiguration("sigterm_timeout", default=str(LAUNCH_SIGTERM_TIMEOUT_S))
 #: every node but sim_vehicle (the clock source) runs on its /clock
 SIM_TIME = {"use_sim_time": True}
 
@@ -41,23 +45,23 @@ def generate_launch_description():
                            vertex="[0.0, 0.0, 0.0]", log_dir="sim_log",
                            notes={"gains_file": "phase 2 only", "vertex": "phase 1 only"}),
         Node(package="lpv_sysid", executable="sim_vehicle_node", name="sim_vehicle",
-             namespace=NAMESPACE, output="screen",
+             namespace=NAMESPACE, output="screen", sigterm_timeout=SIGTERM_TIMEOUT,
              parameters=[params("sim_vehicle.yaml"),
                          {"mode": PythonExpression(["'lpv' if '", phase, "' == '2' else 'baseline'"]),
                           "lockstep": True}]),
         Node(package="lpv_sysid", executable="excitation_node", name="excitation",
-             namespace=NAMESPACE, output="screen",
+             namespace=NAMESPACE, output="screen", sigterm_timeout=SIGTERM_TIMEOUT,
              parameters=[params("excitation_node.yaml"),
                          {"mode": PythonExpression(["'phase' + '", phase, "'"]),
                           "signals_file": LaunchConfiguration("signals_file"),
                           "vertex_frd": LaunchConfiguration("vertex"), **SIM_TIME}]),
         Node(package="lpv_sysid", executable="lpv_controller_node", name="lpv_controller",
-             namespace=NAMESPACE, output="screen", condition=is_phase2,
+             namespace=NAMESPACE, output="screen", sigterm_timeout=SIGTERM_TIMEOUT, condition=is_phase2,
              parameters=[params("lpv_controller.yaml"),
                          {"gains_file": LaunchConfiguration("gains_file"),
                           "tick_source": "state", "reference_hold": "foh", **SIM_TIME}]),
         Node(package="lpv_sysid", executable="data_logger_node", name="data_logger",
-             namespace=NAMESPACE, output="screen",
+             namespace=NAMESPACE, output="screen", sigterm_timeout=SIGTERM_TIMEOUT,
              parameters=[params("data_logger.yaml"),
                          {"out_dir": LaunchConfiguration("log_dir"), **SIM_TIME}]),
     ])

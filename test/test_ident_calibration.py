@@ -359,3 +359,19 @@ def test_coverage_study_on_an_unseen_airframe():
     assert doc["overall"]["elements"] == af.n and doc["overall"]["expected_fraction"] == pytest.approx(0.9973, abs=1e-4)
     table = cv.markdown_table(afs, QuadrotorParams())
     assert f"| {af.covered} ({100 * af.fraction:.2f} %) |" in table
+
+
+def test_coverage_cli(tmp_path, capsys):
+    from lpv_sysid.cli.main import main
+
+    out = tmp_path / "cov"
+    assert main(["coverage", "--airframes", "1", "--vertices", "3", "--seed", "2", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "airframe 1:" in text and f"wrote {out / 'coverage.yaml'}" in text
+    import yaml
+    doc = yaml.safe_load((out / "coverage.yaml").read_text())
+    assert doc["format"] == "lpv_sysid/identification_coverage@1" and doc["study"]["vertices"] == [3]
+    assert doc["overall"]["elements"] in (43, 51)
+    assert "| airframe | mass |" in (out / "coverage.md").read_text()
+    assert main(["coverage", "--vertices", "9", "--out", str(out)]) == 2
+    assert "1..8" in capsys.readouterr().err

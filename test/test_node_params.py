@@ -298,3 +298,28 @@ def test_yaml_parameters_reads_the_node_section(tmp_path):
     assert P.yaml_parameters(str(f), "lpv_controller") == {"rate_hz": 100.0}
     with pytest.raises(ConfigError, match="no parameters for node 'excitation'"):
         P.yaml_parameters(str(f), "excitation")
+
+
+def test_launch_files_leave_the_bridge_its_whole_hand_back_chain():
+    """launch's SIGINT -> SIGTERM escalation (5 s by default) cut orderly shutdowns short
+    (exit -15 under load); every launch_ros Node gets sigterm_timeout, and the shipped
+    bridge's worst-case hand-back chain plus the teardown margin fits in it."""
+    import ast
+
+    from lpv_sysid.mavlink.bridge import BridgeConfig
+    defaults = {n: d for n, (d, _) in mavlink_bridge_node.SPECS.items()}
+    _, bridge, _ = mavlink_bridge_node._split(
+        {**defaults, **yaml_values("mavlink_bridge_node.yaml", "mavlink_bridge")})
+    off = BridgeConfig.from_dict(bridge).offboard
+    # HOLD then LAND, each: 4 DO_SET_MODE attempts of 0.5 s + 2 s for the HEARTBEAT; + 1 s
+    assert mavlink_bridge_node.handback_bound_s(off) == 2 * (4 * 0.5 + 2.0) + 1.0
+    assert mavlink_bridge_node.handback_bound_s(off) + C.TEARDOWN_MARGIN_S <= \
+        C.LAUNCH_SIGTERM_TIMEOUT_S
+    for fname in sorted(os.listdir(os.path.join(ROOT, "launch"))):
+        tree = ast.parse(open(os.path.join(ROOT, "launch", fname)).read())
+        calls = [c for c in ast.walk(tree)
+                 if isinstance(c, ast.Call) and getattr(c.func, "id", "") == "Node"]
+        assert calls, fname
+        for c in calls:
+            kw = {k.arg: k.value for k in c.keywords}
+            assert getattr(kw.get("sigterm_timeout"), "id", None) == "SIGTERM_TIMEOUT", fname

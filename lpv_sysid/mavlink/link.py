@@ -11,7 +11,9 @@ Responsibilities
   ``serial:///dev/ttyACM0:921600``) translated;
 - codec: MAVLink 2 (:func:`lpv_sysid.mavlink.px4.make_codec`), robust parsing; bad
   bytes, CRC errors, unknown ids, bad signatures and truncated UDP datagrams are counted
-  in :class:`LinkStats`, never raised;
+  in :class:`LinkStats`, never raised; the high-rate telemetry (:data:`FAST_MESSAGES`) is
+  decoded by :class:`FastDecoder` (struct unpacking, X.25 CRC with CRC_EXTRA checked, the
+  same message objects as pymavlink's), everything else and anything unusual by pymavlink;
 - optional signing with a 32-byte secret key read from a file;
 - HEARTBEAT at ``heartbeat_period`` (MAV_TYPE_ONBOARD_CONTROLLER);
 - SET_MESSAGE_INTERVAL (MAV_CMD_SET_MESSAGE_INTERVAL, 511) for the telemetry streams,

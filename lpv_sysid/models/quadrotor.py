@@ -389,7 +389,11 @@ _HOT_PATH = compile(_hot_path_source(), "<lpv_sysid.models.quadrotor hot path>",
 
 
 class Quadrotor:
-    """Seed 0 Eqs. (3), (6)-(8) with analytic linearisation (Eqs. 10-16)."""
+    """Seed 0 Eqs. (3), (6)-(8) with analytic linearisation (Eqs. 10-16).
+
+    Hot path (plain floats, compiled per model from the equation sources above):
+    ``derivatives_list(x16, u) -> list`` and ``rk4_step(x16, u, h) -> list`` (one classical
+    RK4 step with ``u`` held), used by the simulators."""
 
     def __init__(self, params: QuadrotorParams | None = None) -> None:
         self.params = params if params is not None else QuadrotorParams()

@@ -213,7 +213,9 @@ class StopRequest:
     terminal's Ctrl-C plus launch's forwarded SIGINT raised ``KeyboardInterrupt`` inside
     rosbags' ``writer.close()``. Here a signal only sets ``requested``; repeated signals
     are counted, never raised, and the orderly shutdown of :func:`run` is bounded by
-    :attr:`ShellNode.SHUTDOWN_TIMEOUT_S` (below launch's 5 s SIGINT -> SIGTERM escalation).
+    :attr:`ShellNode.SHUTDOWN_TIMEOUT_S` (the bridge: its whole hand-back chain), below
+    :data:`LAUNCH_SIGTERM_TIMEOUT_S` (launch's SIGTERM; a SIGTERM during the orderly shutdown
+    is counted too, never fatal).
     """
 
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -249,7 +251,9 @@ def run(node_factory, args=None, name: str = NAMESPACE) -> int:
     :meth:`ShellNode.shutdown_complete` (e.g. PX4's HEARTBEAT confirmed the hand-back
     mode) or :attr:`ShellNode.SHUTDOWN_TIMEOUT_S` of wall time, then the node is destroyed
     and the context shut down. An external shutdown of the context (``ros2 lifecycle``,
-    another thread) skips straight to destruction. Exit status 0.
+    another thread) skips straight to destruction. Exit status 0. Once the node is built
+    it logs :data:`READY`; the launch files leave the orderly shutdown and the teardown
+    :data:`LAUNCH_SIGTERM_TIMEOUT_S` before launch escalates to SIGTERM.
 
     Bad configuration (LpvSysidError, e.g. an invalid gains file) ends the node with one
     FATAL log line naming the problem and exit status 2.
@@ -283,6 +287,15 @@ def run(node_factory, args=None, name: str = NAMESPACE) -> int:
 SPIN_PERIOD_S = 0.05
 #: logged by :func:`run` once the node is constructed (parameters, topics, services up)
 READY = "ready (SIGINT/SIGTERM: orderly shutdown)"
+#: what the launch files give every node between launch's SIGINT and its SIGTERM
+#: (``sigterm_timeout``, launch's default 5 s; ``ros2 launch ... sigterm_timeout:=S``
+#: overrides it): the orderly shutdown (the bridge's whole hand-back chain, 8 s worst case
+#: with the shipped offboard settings; the excitation's fade) plus the process teardown,
+#: which took up to 3 s on 2 cores under load 14 -- after 5 s launch's SIGTERM killed nodes
+#: whose shutdown was complete (exit -15, "process has died")
+LAUNCH_SIGTERM_TIMEOUT_S = 15.0
+#: process teardown after the orderly shutdown, kept free of the launch budget [s]
+TEARDOWN_MARGIN_S = 3.0
 
 
 def _orderly_shutdown(node, executor) -> None:

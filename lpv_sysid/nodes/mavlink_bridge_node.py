@@ -163,6 +163,15 @@ def _split(p: dict) -> tuple[dict, dict, dict]:
     return shell, bridge, P.nest(mavros)
 
 
+def handback_bound_s(offboard) -> float:
+    """Longest a hand-back can take (the orderly-shutdown bound of the bridge), from the
+    truth rules of mavlink/offboard.py: each mode of the chain gets ``max_retries + 1``
+    DO_SET_MODE attempts of ``ack_timeout`` and, once ACCEPTED, ``mode_confirm_timeout``
+    for the HEARTBEAT; plus one poll-and-heartbeat period of slack."""
+    per_mode = (offboard.max_retries + 1) * offboard.ack_timeout + offboard.mode_confirm_timeout
+    return round(len(offboard.chain) * per_mode + 1.0, 3)
+
+
 class MavlinkBridgeNode(C.ShellNode):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, PARAMETERS, **kwargs)
@@ -201,8 +210,17 @@ class MavlinkBridgeNode(C.ShellNode):
                                      C.qos_for("actuator_command"))
             self.core.open(self.now())
             self.create_timer(1.0 / s.poll_rate_hz, self.on_poll)
+            self.SHUTDOWN_TIMEOUT_S = handback_bound_s(self.core.config.offboard)
             self.get_logger().info(f"MAVLink {self.core.config.link.url}, "
-                                   f"command {self.core.config.command}")
+                                   f"command {self.core.config.command}; hand-back chain "
+                                   f"{list(self.core.config.offboard.handback_chain)} within "
+                                   f"{self.SHUTDOWN_TIMEOUT_S:g} s")
+            budget = C.LAUNCH_SIGTERM_TIMEOUT_S - C.TEARDOWN_MARGIN_S
+            if self.SHUTDOWN_TIMEOUT_S > budget:
+                self.get_logger().warning(
+                    f"the hand-back chain may need {self.SHUTDOWN_TIMEOUT_S:g} s, more than the "
+                    f"{budget:g} s a launch Ctrl-C leaves before SIGTERM: launch with "
+                    f"sigterm_timeout:={self.SHUTDOWN_TIMEOUT_S + C.TEARDOWN_MARGIN_S:g}")
         self.create_timer(1.0 / s.status_rate_hz, lambda: self.publish_status([]))
 
     # -- inputs -------------------------------------------------------------------------

@@ -32,6 +32,13 @@ the equilibrium does not move by itself) and flies :func:`feedforward_law`,
 reference a trajectory, which it does by construction of F_i from the same (A_i, B_i) up to the
 neglected dF/dt and snap terms; :mod:`lpv_sysid.sim.phase2` reports it as ``linear_ff``.
 
+Evaluation: for the product's models and laws (a ``models.lpv.ScheduledLpv`` with
+:func:`linear_lpv_law` or :func:`feedforward_law`) :func:`simulate_eq33` uses
+:func:`fused_eq33`: the weights of Eq. (21) and their rate (Eq. 34) as plain floats and all
+scheduled quantities from one ``[alpha; beta] @ W`` product -- the values of
+:func:`eq33_rhs` through the ``ScheduledModel`` methods up to summation order, ~25x faster;
+any other model or law goes through :func:`eq33_rhs`.
+
 Integration: ``method="RK45"`` uses ``scipy.integrate.solve_ivp`` (Dormand-Prince, the
 algorithm of Matlab's ode45 that the seed used), restarted on every sample interval so the
 kinks of the interpolated signals are step boundaries (one call over the whole horizon
@@ -313,10 +320,20 @@ class _FusedEq33:
         if kind == "feedforward":
             if not (np.array_equal(ffs.vmin, pm.vmin) and np.array_equal(ffs.vmax, pm.vmax)):
                 raise ConfigError("feedforward schedule and model have different boxes")
-            cols.append(ffs.F.reshape(N, -1))
-            if ffs.Fj is not None:
-                cols.append(ffs.Fj.reshape(N, -1))
-            self.ff = (ffs, accel)
+            # F_i (free states, inputs) and F_jerk,i (free, inputs, rate states) scattered into
+            # one (n + m) x (p + p_j) map per vertex: [dx_ff; du_ff] = M(v_d) [a; j]
+            nf, pa = len(ffs.free), ffs.F.shape[2]
+            pj = 0 if ffs.Fj is None else ffs.Fj.shape[2]
+            Mv = np.zeros((N, n + m, pa + pj))
+            Mv[:, ffs.free, :pa] = ffs.F[:, :nf]
+            Mv[:, n:, :pa] = ffs.F[:, nf:nf + m]
+            if pj:
+                Mv[:, ffs.free, pa:] = ffs.Fj[:, :nf]
+                Mv[:, n:, pa:] = ffs.Fj[:, nf:nf + m]
+                Mv[:, ffs.rate, pa:] += ffs.Fj[:, nf + m:]
+            cols.append(Mv.reshape(N, -1))
+            self.ff = (accel, pa, pj)
+            self._acc = (None, None)
         sizes = [c.shape[1] for c in cols]
         edges = np.cumsum([0] + sizes)
         self.sl = [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
@@ -370,25 +387,23 @@ class _FusedEq33:
         row = P[0]
         out = (row[sl[0]].reshape(n, n), row[sl[1]].reshape(n, m), row[sl[2]].reshape(m, n),
                row[sl[3]], row[sl[4]], P[1, sl[3]] if beta is not None else None,
-               row[sl[7]] if len(sl) > 7 else None, row[sl[8]] if len(sl) > 8 else None,
-               row[sl[5]], row[sl[6]])
+               row[sl[7]] if len(sl) > 7 else None, None, row[sl[5]], row[sl[6]])
         self._last = (key, out)
         return out
 
-    def _offsets(self, t, Fv, Fjv):
-        ffs, accel = self.ff
-        a, j = accel(t)
-        nf = len(ffs.free)
-        y = Fv.reshape(-1, len(a)) @ np.asarray(a, dtype=float)
-        dx = np.zeros(self.n)
-        dx[ffs.free] = y[:nf]
-        du = y[nf:].copy()
-        if Fjv is not None and j is not None:
-            yj = Fjv.reshape(-1, len(j)) @ np.asarray(j, dtype=float)
-            dx[ffs.free] += yj[:nf]
-            du += yj[nf:nf + self.m]
-            dx[ffs.rate] += yj[nf + self.m:]
-        return dx, du
+    def _offsets(self, t, Mv, _unused=None):
+        """(dx_ff, du_ff) of :meth:`FeedforwardSchedule.offsets` from the scattered map M(v_d);
+        ``accel(t)`` is asked once per time (RK4 stages 2 and 3 share it)."""
+        accel, pa, pj = self.ff
+        if self._acc[0] != t:
+            self._acc = (t, accel(t))
+        a, j = self._acc[1]
+        M = Mv.reshape(self.n + self.m, pa + pj)
+        if pj and j is not None:
+            dd = M @ np.concatenate([np.asarray(a, dtype=float), np.asarray(j, dtype=float)])
+        else:
+            dd = M[:, :pa] @ np.asarray(a, dtype=float)
+        return dd[:self.n], dd[self.n:]
 
     # -- law and right-hand side ---------------------------------------------------
     def law(self, t: float, x: np.ndarray, v_d, ue_scaled) -> np.ndarray:

@@ -11,8 +11,8 @@ excitation ``ue_t, ue_a, ue_e, ue_r``, excitation multiplier ``kappa``):
     (:mod:`lpv_sysid.control.lpv_controller`) fed with the simulated *measured* state (sensor
     model of :mod:`lpv_sysid.sim.vehicle`), recorded to a rosbag2 with the DESIGN.md topics.
 
-Both report the achieved ``||z||_2 / ||kappa u_e||_2`` (z = Q^-1 (v - v_d), Eq. 18) against the
-design gamma (Eq. 29), tracking (Figs. 8-9) and the correlation of the Eq. (6) regressors
+Both report the achieved u_e -> z gain (z = Q^-1 (v - v_d), Eq. 18) against the design gamma
+(Eq. 29, see below), tracking (Figs. 8-9) and the correlation of the Eq. (6) regressors
 (Fig. 10). The safety supervisor of :mod:`lpv_sysid.control.safety` stops run (b) -- excitation off, event reported -- when
 the vehicle leaves the scheduling box (plus a margin), tilts beyond a limit, or its state
 becomes non-finite; the runtime law's bound monitor flag stops it too.
