@@ -650,15 +650,17 @@ def test_phase2_launch_px4_sim_services_and_launch_sigint(ros, dom, tmp_path):
     check_recording(out, {"state": 20, "velocity_reference": 20, "excitation": 20, "status": 2})
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "campaign_node.publish_status logs several severities from one call site: under real "
-    "rclpy 'ValueError: Logger severity cannot be changed between calls' kills the node at "
-    "its first non-info campaign event (measured here); remove this mark with the fix"))
+#: campaign_node.publish_status logs several severities from one call site (lines
+#: ``log = {...}[ev.level]; log(...)``): rclpy raises this at its first non-info event
+CAMPAIGN_LOGGER_BUG = "Logger severity cannot be changed between calls"
+
+
 def test_campaign_launch_px4_sim_start_abort_process_group_sigint(ros, dom, tmp_path):
     """campaign.launch.py (mavlink_bridge arming, campaign, data_logger) against the
     simulated PX4: topics and types, the campaign's start (pre-stream, OFFBOARD, arm, take
     off) and abort (hand-back) services, then the terminal's Ctrl-C: every node exits 0
-    and the whole-flight recording opens in rosbags."""
+    and the whole-flight recording opens in rosbags. Expected to fail (xfail, only for that
+    reason) while campaign_node dies of :data:`CAMPAIGN_LOGGER_BUG`."""
     env = RosEnv(SETUP, ros["ws"], dom.value)
     port = free_udp_port()
     cfg = config_dir_with(ros, tmp_path, "mavlink_bridge_node.yaml",
@@ -683,11 +685,16 @@ def test_campaign_launch_px4_sim_start_abort_process_group_sigint(ros, dom, tmp_
         assert ok, msg
         assert proc.wait_for("hand-back confirmed", 30.0), proc.log()[-4000:]
         rc, dt = sigint_and_wait(proc, group=True)
+        MEASURED["campaign_group_sigint"] = {"rc": rc, "s": dt}
+        assert_launch_exit(proc, rc, ["mavlink_bridge_node", "campaign_node",
+                                      "data_logger_node"])
+    except AssertionError:
+        if CAMPAIGN_LOGGER_BUG in proc.log() and "[campaign_node-" in proc.log():
+            pytest.xfail(f"campaign_node died: {CAMPAIGN_LOGGER_BUG} (its publish_status)")
+        raise
     finally:
         proc.kill()
         sigint_and_wait(px4, group=False)
-    MEASURED["campaign_group_sigint"] = {"rc": rc, "s": dt}
-    assert_launch_exit(proc, rc, ["mavlink_bridge_node", "campaign_node", "data_logger_node"])
     check_recording(out, {"state": 20, "velocity_reference": 20, "status": 2})
 
 

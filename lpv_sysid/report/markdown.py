@@ -464,10 +464,11 @@ def _phase2_section(r: _Report) -> None:
             "||kappa u_e||_2; the norms overlap and do not add): the response to the excitation u_e, the "
             "only part gamma bounds; the equilibrium offset Q^-1 (v0(v_d) - v_d), because the vertex "
             "equilibria fly a velocity other than the commanded one (seed 0 Table 1); and the lag in "
-            "following v_d (in Eq. 33 the response to the x0' forcing of Eq. 34, on the vehicle the "
-            "acceleration it must produce). The excitation part comes from superposition (Eq. 33: the "
-            "same run with -u_e, exact for the linear model; nonlinear with --superposition: two more "
-            "flights with the same sensor noise) or, on the nonlinear flight otherwise, from a FIR "
+            "following v_d (none in Eq. 33, where x0' of Eq. 34 carries the equilibrium along; present "
+            "with the feedforward law instead of x0' and on the vehicle, which must accelerate). The "
+            "excitation part comes from superposition, exact for the linear model (Eq. 33: its unexcited "
+            "run stays at x0(v_d); the feedforward run: the same run with -u_e), on the nonlinear flight "
+            "from two more flights with the same sensor noise (--superposition) or otherwise from a FIR "
             "regression of z on u_e above the reference band; the offset part is exact.")
         details = []
         for name in ("eq33", "linear_ff", "nonlinear"):

@@ -24,12 +24,14 @@ import numpy as np
 import yaml
 
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.models.lpv import (CommonInputSet, PolytopicModel, UncertainElement, box_vertices, input_corners,
-                                  input_hull, product_systems, uncertainty_vertices)
+from lpv_sysid.models.lpv import (CommonInputSet, ElementBox, PolytopicModel, UncertainElement, box_vertices,
+                                  input_corners, input_hull, product_systems, uncertainty_vertices)
 
 log = logging.getLogger(__name__)
 
 MODELS_FORMAT = "lpv_sysid/vertex_models@1"
+#: models formats read here (io.formats.MODELS_FORMATS: @2 stores every element's k-sigma box)
+MODELS_FORMATS = ("lpv_sysid/vertex_models@1", "lpv_sysid/vertex_models@2")
 GAINS_FORMAT = "lpv_sysid/gains@1"
 
 
@@ -141,6 +143,16 @@ def _flag(v: Any, where: str) -> bool:
     raise ConfigError(f"{where} must be true or false, got {v!r}")
 
 
+#: ``uncertainty.set``: ``full_box`` = every element of the models file in its interval (the
+#: structured perturbation of models.lpv.ElementBox, certified by synthesis.robust_lmi);
+#: ``reduced_polytope`` = the corner polytope of Eq. (23) after the influence/box/hybrid reduction
+#: (what certificates written before the full box recorded, hence the default of an absent key).
+SETS = ("full_box", "reduced_polytope")
+DEFAULT_SET = "reduced_polytope"
+#: systems per vertex of the finite sample of a full box stored for the runtime re-check
+FULL_BOX_SAMPLE = 16
+
+
 def _reduced_systems(A: np.ndarray, B: np.ndarray, els: Sequence[UncertainElement], p_max: int, max_corners: int,
                      method: str, ucfg: dict) -> list:
     """Eq. (23) systems of one (A, B) from stored intervals: all corners when the free elements
@@ -160,6 +172,9 @@ def _reduced_systems(A: np.ndarray, B: np.ndarray, els: Sequence[UncertainElemen
 def uncertainty_settings(uncertainty: Optional[dict]) -> dict:
     """The effective ``uncertainty`` section (defaults filled in; recorded in the certificate)."""
     u = dict(uncertainty or {})
+    u.setdefault("set", DEFAULT_SET)
+    if u["set"] not in SETS:
+        raise ConfigError(f"uncertainty.set must be one of {SETS}, got {u['set']!r}")
     u.setdefault("p_max", 4)
     u.setdefault("max_corners", 4096)
     u.setdefault("method", "influence")
