@@ -108,7 +108,7 @@ def test_bridge_yaml_reaches_bridge_config_and_defaults_round_trip():
         {**defaults, **yaml_values("mavlink_bridge_node.yaml", "mavlink_bridge")})
     cfg = BridgeConfig.from_dict(bridge)
     assert cfg.offboard.handback_chain == ("HOLD", "LAND") and cfg.offboard.handback_mode is None
-    assert cfg.offboard.setpoint_rate_hz == 50.0 and cfg.offboard.input_timeout == 0.2
+    assert cfg.offboard.setpoint_rate_hz == 50.0 and cfg.offboard.input_timeout == 0.5
     assert dict(cfg.link.streams) == {"LOCAL_POSITION_NED": 50.0, "ATTITUDE_QUATERNION": 100.0,
                                       "HIGHRES_IMU": 100.0, "ESC_STATUS": 50.0}
     assert cfg.link.signing_key_file is None and cfg.rotor_estimate.a_omega is None

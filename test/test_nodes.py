@@ -78,7 +78,8 @@ def test_excitation_parameters_topics_qos(signals1):
     assert dict(node.get_topic_names_and_types()) == {
         "/lpv_sysid/velocity_reference": ["geometry_msgs/msg/TwistStamped"],
         "/lpv_sysid/excitation": ["sensor_msgs/msg/JointState"],
-        "/lpv_sysid/status": ["diagnostic_msgs/msg/DiagnosticArray"]}
+        "/lpv_sysid/status": ["diagnostic_msgs/msg/DiagnosticArray"],
+        "/diagnostics": ["diagnostic_msgs/msg/DiagnosticArray"]}
     for topic in ("velocity_reference", "excitation", "status"):
         pub = standin.find_publisher(node, topic)
         assert pub.qos_profile.reliability == QoSReliabilityPolicy.RELIABLE

@@ -95,7 +95,8 @@ def test_controller_wiring(gains):
                       "/lpv_sysid/velocity_reference": ["geometry_msgs/msg/TwistStamped"],
                       "/lpv_sysid/excitation": ["sensor_msgs/msg/JointState"],
                       "/lpv_sysid/actuator_command": ["sensor_msgs/msg/JointState"],
-                      "/lpv_sysid/status": ["diagnostic_msgs/msg/DiagnosticArray"]}
+                      "/lpv_sysid/status": ["diagnostic_msgs/msg/DiagnosticArray"],
+                      "/diagnostics": ["diagnostic_msgs/msg/DiagnosticArray"]}
     rel = QoSReliabilityPolicy
     assert standin.find_subscription(node, "state").qos_profile.reliability == rel.BEST_EFFORT
     assert standin.find_subscription(node, "excitation").qos_profile.reliability == rel.RELIABLE

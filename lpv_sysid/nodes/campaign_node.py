@@ -106,7 +106,7 @@ class CampaignNode(C.ShellNode):
         self._written = False
         self.pub_ref = self.create_publisher(TwistStamped, "velocity_reference", C.qos_for("velocity_reference"))
         self.pub_exc = self.create_publisher(JointState, "excitation", C.qos_for("excitation"))
-        self.pub_status = self.create_publisher(DiagnosticArray, "status", C.qos_for("status"))
+        self.pub_status = C.StatusPublisher(self)      # status and /diagnostics
         self.create_subscription(Odometry, "state", self.on_state, C.qos_for("state"))
         self.create_subscription(JointState, "rotor_speeds", self.on_rotors, C.qos_for("rotor_speeds"))
         self.create_subscription(Imu, "imu", self.on_imu, C.qos_for("imu"))
@@ -241,8 +241,11 @@ class CampaignNode(C.ShellNode):
     def _finish(self, now: float) -> None:
         self._written = True
         c = self.campaign
-        (self.get_logger().info if c.ok else self.get_logger().error)(
-            f"campaign {c.phase}: {c.reason or 'ok'}")
+        # one severity per call site: rclpy refuses to change it between calls
+        if c.ok:
+            self.get_logger().info(f"campaign {c.phase}: {c.reason or 'ok'}")
+        else:
+            self.get_logger().error(f"campaign {c.phase}: {c.reason or 'ok'}")
         if self.rec is None:
             return
         errors = self.rec.close(now)
@@ -264,9 +267,13 @@ class CampaignNode(C.ShellNode):
         c = self.campaign
         level, message = ("OK" if c.ok is not False else "ERROR"), f"campaign {c.phase}"
         for ev in events:
-            log = {"info": self.get_logger().info, "warn": self.get_logger().warning}.get(
-                ev.level, self.get_logger().error)
-            log(f"{ev.phase}: {ev.message}")
+            text = f"{ev.phase}: {ev.message}"
+            if ev.level == "info":          # one severity per call site (rclpy's rule)
+                self.get_logger().info(text)
+            elif ev.level == "warn":
+                self.get_logger().warning(text)
+            else:
+                self.get_logger().error(text)
             if ev.level in ("warn", "error"):
                 level = "ERROR" if ev.level == "error" or level == "ERROR" else "WARN"
                 message = ev.message

@@ -180,6 +180,7 @@ def uncertainty_settings(uncertainty: Optional[dict]) -> dict:
     u.setdefault("method", "influence")
     u["common_b"] = _flag(u.get("common_b", DEFAULT_COMMON_B), "uncertainty.common_b")
     u.setdefault("p_max_b", DEFAULT_P_MAX_B)
+    u.setdefault("motor_std", None)
     return u
 
 
@@ -202,13 +203,86 @@ def common_input_systems(As: np.ndarray, Bs: np.ndarray, els: Sequence[Sequence[
         b_method = method
     common = CommonInputSet(corners, tuple(hull), nlo, nhi, b_method)
     M_B = common.M
-    p_a = max(0, p_max - int(np.ceil(np.log2(M_B))))
+    p_list = _per_vertex(p_max, len(As))
     max_a = max(1, max_corners // M_B)
     a_corners = []
-    for A, B, e in zip(As, Bs, els):
+    for A, B, e, p_i in zip(As, Bs, els, p_list):
         a_els = [x for x in e if x.matrix == "A"]
+        p_a = max(0, p_i - int(np.ceil(np.log2(M_B))))
         a_corners.append([a for a, _ in _reduced_systems(A, B, a_els, p_a, max_a, method, ucfg)])
     return product_systems(a_corners, common), common
+
+
+def _per_vertex(p_max, N: int) -> list:
+    """``uncertainty.p_max``: one integer for every vertex or a list of N (the seed-size
+    configuration gives the vertices different corner counts, config/synthesis_seed_scale.yaml)."""
+    vals = list(p_max) if isinstance(p_max, (list, tuple)) else [p_max] * N
+    if len(vals) != N:
+        raise ConfigError(f"uncertainty.p_max: a list needs one entry per vertex ({N}), got {len(vals)}")
+    out = []
+    for v in vals:
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+            raise ConfigError(f"uncertainty.p_max entries must be integers >= 0, got {v!r}")
+        out.append(int(v))
+    return out
+
+
+#: the quadrotor's motor rows (seed 0 Eq. 15): A[d, d] = -a_Omega, B[d, u] = b_Omega
+MOTOR_STATES = ("dt", "da", "de", "dr")
+MOTOR_INPUTS = ("ut", "ua", "ue", "ur")
+
+
+def full_box_elements(d: dict, states: tuple, inputs: tuple, motor_std=None) -> tuple[list, list, dict]:
+    """Every uncertain element of the models file (raw mapping ``d``) in its interval, per vertex:
+    ([UncertainElement], [label]) lists and a description of the rule (certificate entry).
+
+    Interval: the stored [lower, upper] where lower < upper (format @2 stores nominal -/+ k std for
+    every element); an entry stored with lower = upper and std > 0 (format @1 kept only the reduced
+    polytope's corner parameters) gets nominal -/+ k std with k = ``meta.uncertainty.k_applied[i]``,
+    else ``meta.k_sigma``, else 3. ``motor_std`` = (std a_Omega, std b_Omega): for a quadrotor-layout
+    file whose vertex lists no motor element, A[d, d] and B[d, u] of the four motor rows get
+    nominal -/+ k std (k = ``meta.k_sigma`` or 3) -- seed 0 Sec. IV treats a_Omega, b_Omega as
+    uncertain (12.31 +/- 0.21, (1.399 +/- 0.182) 1e4)."""
+    meta = d.get("meta") or {}
+    k_meta = meta.get("k_sigma", 3.0) if isinstance(meta, dict) else 3.0
+    k_applied = ((meta.get("uncertainty") or {}).get("k_applied") if isinstance(meta, dict) else None) or []
+    quad = tuple(states[8:12]) == MOTOR_STATES and tuple(inputs) == MOTOR_INPUTS if len(states) >= 12 else False
+    n_stored = n_ksig = n_motor = 0
+    out, labels = [], []
+    for i, v in enumerate(d["vertices"]):
+        k_i = float(k_applied[i]) if i < len(k_applied) else float(k_meta)
+        els, labs, seen = [], [], set()
+        for e in v.get("uncertain") or []:
+            el = UncertainElement.from_dict(e)
+            seen.add((el.matrix, el.row, el.col))
+            std = float(e.get("std", 0.0) or 0.0)
+            if el.upper > el.lower:
+                els.append(el)
+                labs.append("stored")
+                n_stored += 1
+            elif std > 0:
+                nom = el.nominal if el.nominal is not None else el.lower
+                els.append(UncertainElement(el.matrix, el.row, el.col, nom - k_i * std, nom + k_i * std, nom))
+                labs.append(f"nominal +/- {k_i:g} std")
+                n_ksig += 1
+        if motor_std is not None and quad:
+            A = np.asarray(v["A"], dtype=float)
+            B = np.asarray(v["B"], dtype=float)
+            have = any((m_, 8 + q, c_) in seen for q in range(4) for m_, c_ in (("A", 8 + q), ("B", q)))
+            if not have:
+                for q in range(4):
+                    for mat, col, sd in (("A", 8 + q, motor_std[0]), ("B", q, motor_std[1])):
+                        nom = float((A if mat == "A" else B)[8 + q, col])
+                        els.append(UncertainElement(mat, 8 + q, col, nom - k_meta * sd, nom + k_meta * sd, nom))
+                        labs.append(f"motor constant, synthesis config motor_std +/- {k_meta:g} std")
+                        n_motor += 1
+        out.append(els)
+        labels.append(labs)
+    rule = {"intervals": "stored [lower, upper] where lower < upper; nominal +/- k std where a file stores "
+                         "lower = upper with std > 0 (k = meta.uncertainty.k_applied, meta.k_sigma or 3)",
+            "stored": n_stored, "k_std": n_ksig, "motor_from_config": n_motor,
+            "motor_std": None if motor_std is None else [float(x) for x in motor_std]}
+    return out, labels, rule
 
 
 def load_models(path: Path | str, uncertainty: Optional[dict] = None) -> tuple[PolytopicModel, dict]:
@@ -225,15 +299,22 @@ def load_models(path: Path | str, uncertainty: Optional[dict] = None) -> tuple[P
 
     ``common_b: true``: the product polytope of :func:`common_input_systems` (B^b common to all
     vertices, so Lemma 1 covers the interior; models.lpv module docstring); ``model.common_input``
-    holds the B corners. Returns (model, raw mapping).
+    holds the B corners. ``p_max`` may list one value per vertex.
+
+    ``set: full_box`` (config/synthesis.yaml): every element of the file in its interval
+    (:func:`full_box_elements`; ``motor_std`` adds the motor constants where the file has none),
+    ``model.box`` the :class:`~lpv_sysid.models.lpv.ElementBox` the certificate covers and
+    ``model.systems`` a finite sample of it (:data:`FULL_BOX_SAMPLE` per vertex: centre, nominal,
+    seeded corners) for the verifier's frozen checks and the runtime's eigenvalue re-check.
+    Returns (model, raw mapping).
     """
     fm = _formats()
     if fm is not None and hasattr(fm, "VertexModels"):
         fm.VertexModels.load(path, _layout(fm, path))   # strict validation by the io/formats contract
     d = read_yaml(path, "models")
     where = str(path)
-    if d.get("format") != MODELS_FORMAT:
-        raise ConfigError(f"{where}: 'format' must be {MODELS_FORMAT!r}, got {d.get('format')!r}")
+    if d.get("format") not in MODELS_FORMATS:
+        raise ConfigError(f"{where}: 'format' must be one of {list(MODELS_FORMATS)}, got {d.get('format')!r}")
     states = _names(d, "states", where)
     inputs = _names(d, "inputs", where)
     names, lo, hi = _box(d, where)
@@ -244,17 +325,25 @@ def load_models(path: Path | str, uncertainty: Optional[dict] = None) -> tuple[P
     if not isinstance(verts, list) or len(verts) != len(corners):
         raise ConfigError(f"{where}: 'vertices' must list {len(corners)} vertices (box corners)")
     ucfg = uncertainty_settings(uncertainty)
+    p_max = _per_vertex(ucfg.pop("p_max"), len(corners))
     try:
-        p_max = int(ucfg.pop("p_max"))
         max_corners = int(ucfg.pop("max_corners"))
         p_max_b = int(ucfg.pop("p_max_b"))
     except (TypeError, ValueError) as exc:
-        raise ConfigError(f"uncertainty: p_max, p_max_b and max_corners must be integers ({exc})") from None
-    if p_max < 0 or p_max_b < 0 or max_corners < 1:
-        raise ConfigError(f"uncertainty: need p_max >= 0, p_max_b >= 0, max_corners >= 1, got "
-                          f"{p_max}, {p_max_b}, {max_corners}")
+        raise ConfigError(f"uncertainty: p_max_b and max_corners must be integers ({exc})") from None
+    if p_max_b < 0 or max_corners < 1:
+        raise ConfigError(f"uncertainty: need p_max_b >= 0, max_corners >= 1, got {p_max_b}, {max_corners}")
     method = str(ucfg.pop("method"))
     common_b = ucfg.pop("common_b")
+    which = ucfg.pop("set")
+    motor_std = ucfg.pop("motor_std", None)
+    if motor_std is not None:
+        try:
+            motor_std = tuple(float(x) for x in motor_std)
+        except (TypeError, ValueError):
+            raise ConfigError(f"uncertainty.motor_std must be [std a_Omega, std b_Omega], got {motor_std!r}") from None
+        if len(motor_std) != 2 or not all(np.isfinite(x) and x > 0 for x in motor_std):
+            raise ConfigError(f"uncertainty.motor_std must be two numbers > 0, got {list(motor_std)}")
     As, Bs, x0s, u0s, elss = [], [], [], [], []
     for k, v in enumerate(verts):
         w = f"{where}: vertices[{k}]"
@@ -270,14 +359,23 @@ def load_models(path: Path | str, uncertainty: Optional[dict] = None) -> tuple[P
         u0s.append(_matrix(v.get("u0", [0.0] * m), (m,), f"{w}.u0"))
         elss.append([UncertainElement.from_dict(e) for e in (v.get("uncertain") or [])])
     As, Bs = np.array(As), np.array(Bs)
+    kw = dict(vmin=lo, vmax=hi, A=As, B=Bs, x0=np.array(x0s), u0=np.array(u0s), ts=ts, state_names=states,
+              input_names=inputs, scheduling_names=names)
+    if which == "full_box":
+        if not common_b:
+            raise ConfigError("uncertainty.set: full_box needs common_b: true (the B hull is what covers the "
+                              "interior of the scheduling box)")
+        fb, labels, _ = full_box_elements(d, states, inputs, motor_std)
+        box = ElementBox.from_elements(As, Bs, fb, labels)
+        model = PolytopicModel(systems=box.sample_systems(list(zip(As, Bs)), FULL_BOX_SAMPLE), box=box, **kw)
+        return model, d
     common = None
     if common_b:
         systems, common = common_input_systems(As, Bs, elss, p_max, p_max_b, max_corners, method, ucfg)
     else:
-        systems = [_reduced_systems(A, B, e, p_max, max_corners, method, ucfg) for A, B, e in zip(As, Bs, elss)]
-    model = PolytopicModel(vmin=lo, vmax=hi, A=As, B=Bs, x0=np.array(x0s), u0=np.array(u0s), systems=systems,
-                           ts=ts, state_names=states, input_names=inputs, scheduling_names=names,
-                           common_input=common)
+        systems = [_reduced_systems(A, B, e, p, max_corners, method, ucfg)
+                   for A, B, e, p in zip(As, Bs, elss, p_max)]
+    model = PolytopicModel(systems=systems, common_input=common, **kw)
     return model, d
 
 

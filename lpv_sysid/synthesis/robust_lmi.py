@@ -405,6 +405,10 @@ def solve_box(box: ElementBox, R: np.ndarray, C: np.ndarray, *, gamma: float, ly
         kw: dict = {"verbose": verbose}
         if sv == "SCS":
             kw.update(eps=1e-8, max_iters=100000)
+        if sv == "CLARABEL":
+            import os as _os
+            if _os.environ.get("LPV_CLARABEL_SOLVE"):
+                kw.update(direct_solve_method=_os.environ["LPV_CLARABEL_SOLVE"])
         t1 = time.perf_counter()
         try:
             prob.solve(solver=sv, **kw)
