@@ -2010,6 +2010,19 @@ class TopicStats:
         return (self.count - 1) / d if self.count > 1 and d > 0 else 0.0
 
 
+def merge_topic_stats(parts: Iterable[Mapping[str, TopicStats]]) -> dict[str, TopicStats]:
+    """Per-topic totals over several bags or files: counts added, time span widened."""
+    acc: dict[str, list] = {}
+    for part in parts:
+        for t, s in part.items():
+            a = acc.setdefault(t, [s.msgtype, 0, None, None])
+            a[1] += s.count
+            if s.count:
+                a[2] = s.start_ns if a[2] is None else min(a[2], s.start_ns)
+                a[3] = s.end_ns if a[3] is None else max(a[3], s.end_ns)
+    return {t: TopicStats(*v) for t, v in acc.items()}
+
+
 def topic_info(path, strict: bool = True) -> dict[str, TopicStats]:
     """Message counts, types, time spans and mean rates per topic (no deserialisation).
 
@@ -2377,16 +2390,8 @@ def _repair_bag(path: Path, dry_run: bool, _limit, _pending) -> RepairReport:
         except OSError as exc:
             raise BagError(f"bag {path}: cannot write metadata.yaml: {_describe(exc)}") from None
         _check_readable(path, infos)
-    topics: dict[str, list] = {}
-    for info in infos:
-        for t, s in info.topics.items():
-            acc = topics.setdefault(t, [s.msgtype, 0, None, None])
-            acc[1] += s.count
-            if s.count:
-                acc[2] = s.start_ns if acc[2] is None else min(acc[2], s.start_ns)
-                acc[3] = s.end_ns if acc[3] is None else max(acc[3], s.end_ns)
-    report = RepairReport(str(path), storage, action,
-                          {t: TopicStats(*v) for t, v in sorted(topics.items())},
+    topics = merge_topic_stats(info.topics for info in infos)
+    report = RepairReport(str(path), storage, action, dict(sorted(topics.items())),
                           sum(i.bytes for i in infos), sum(i.cut for i in infos), tuple(notes),
                           dry_run)
     if report.changed:

@@ -43,7 +43,8 @@ import yaml
 
 from lpv_sysid.errors import BagError, ConfigError
 from lpv_sysid.io.bag import (FLUSH_INTERVAL_S, FLUSH_MESSAGES, RESERVE_BYTES, DiskReserve,
-                              RepairReport, atomic_write_text, repair_bag, writer_alive)
+                              RepairReport, atomic_write_text, merge_topic_stats, repair_bag,
+                              writer_alive)
 from lpv_sysid.io.yaml_file import read_yaml
 
 LOG = logging.getLogger(__name__)
@@ -663,14 +664,8 @@ def repair_experiment(out_dir, dry_run: bool = False) -> ExperimentRepair:
         new["error"] = ("recording interrupted: the recorder ended without closing (killed, "
                         "crashed or lost power)")
     old_topics = meta.get("topics") if isinstance(meta.get("topics"), dict) else {}
-    merged: dict[str, list] = {}
-    for r in reports:
-        for t, s in r.topics.items():
-            acc = merged.setdefault(t, [s.msgtype, 0, None, None])
-            acc[1] += s.count
-            if s.count:
-                acc[2] = s.start_ns if acc[2] is None else min(acc[2], s.start_ns)
-                acc[3] = s.end_ns if acc[3] is None else max(acc[3], s.end_ns)
+    merged = {t: [s.msgtype, s.count, s.start_ns, s.end_ns]
+              for t, s in merge_topic_stats(r.topics for r in reports).items()}
     topics = {}
     for t in list(old_topics) + [t for t in merged if t not in old_topics]:
         entry = dict(old_topics.get(t) or {})
