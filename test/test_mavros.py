@@ -234,7 +234,7 @@ def test_node_mavros_parameters_topics_qos(fresh):
     try:
         assert node.get_parameter("transport").value == "mavros"
         assert node.get_parameter("mavros.odom_frame_id").value == "map"
-        assert node.core.config.setpoint_rate_hz == 50.0 and node.core.config.input_timeout == 0.2
+        assert node.core.config.setpoint_rate_hz == 50.0 and node.core.config.input_timeout == 0.5
         assert dict(node.get_topic_names_and_types()) == {
             "/lpv_sysid/state": ["nav_msgs/msg/Odometry"],
             "/lpv_sysid/imu": ["sensor_msgs/msg/Imu"],
@@ -308,13 +308,14 @@ def test_node_mavros_reference_to_enu_setpoint_and_stale_stop(fresh):
         q = states[-1].pose.pose.orientation
         assert abs(abs(np.dot([q.x, q.y, q.z, q.w], ros_q)) - 1) < 1e-9
         assert states[-1].header.frame_id == "odom"
-        # references stop: the stream stops within input_timeout (0.2 s) + one timer tick
+        # references stop: the stream stops within input_timeout (0.5 s, config) + one tick
         mavros.destroy_timer(ref_timer)
         t_stop = now_ns()
         spin([node, mavros], 1.0)
     finally:
         node.destroy_node()
-    late = [m for m in cmd if M.stamp_ns_of(m) > t_stop + 0.2e9 + 0.01e9 + 1]
+    timeout_ns = node.core.config.input_timeout * 1e9
+    late = [m for m in cmd if M.stamp_ns_of(m) > t_stop + timeout_ns + 0.01e9 + 1]
     assert late == [] and node.core.state == MavrosState.FAILED
     _, st = M.status_from_diagnostic_array(status[-1])
     assert st[0].values["transport"] == "mavros" and st[0].values["state"] == "FAILED"
