@@ -293,7 +293,7 @@ def test_fused_eq33_with_the_feedforward_law_and_simulation():
 # ------------------------------------------------------------------ CLI BLAS threads
 @pytest.mark.parametrize("argv, preset, want", [
     (["identify", "--bags", "x"], None, "1"), (["-v", "vrft", "--example", "lv100"], None, "1"),
-    (["synthesize", "--models", "m"], None, "None"), (["identify"], "2", "2")])
+    (["synthesize", "--models", "m"], None, "None"), (["identify"], "2", "2"), (["demo"], None, "1")])
 def test_cli_sets_single_thread_blas_before_numpy(argv, preset, want):
     import os
     import subprocess

@@ -74,8 +74,8 @@ def build_parser(commands: dict[str, ModuleType]) -> argparse.ArgumentParser:
 
 
 #: commands whose linear algebra is many small problems: there OpenBLAS' second thread costs
-#: more CPU than it saves wall time (both settings measured by bench/bench_blas.py)
-SINGLE_THREAD_BLAS = ("identify", "identify-nonlinear", "vrft")
+#: CPU and saves no wall time (measured both ways by bench/bench_ident.py; BENCHMARKS.md)
+SINGLE_THREAD_BLAS = ("identify", "identify-nonlinear", "vrft", "simulate", "demo")
 
 
 def _single_thread_blas(argv: Sequence[str]) -> None:

@@ -15,6 +15,13 @@ polytope is the interval hull over all vertices, common to every vertex (lpv_sys
 so Lemma 1 covers the interior of the scheduling box; ``certificate.input_structure`` records
 which structure was solved (B common | per_vertex, M_A, M_B, the B hull) and the verifier
 rebuilds and checks exactly that structure. Prints the sizes M_i = M_A x M_B and the wall time.
+
+With ``uncertainty.set: full_box`` (the shipped config) the certified set is every element of the
+models file in its interval (synthesis/robust_lmi.py); ``certificate.certified_set`` states
+exactly which plants (``kind``, the box in the sidecar) and which scheduling signals
+(``scheduling.variation``: frozen | arbitrary | rate_bounded, ``covers_design_signal``) the bound
+covers, and ``certificate.problem`` the sizes -- for a corner polytope also seed 0's Lemma 1 over
+the same systems counted the package's way and the way CVX reports them (docs/certificate.md).
 """
 
 from __future__ import annotations
@@ -141,7 +148,9 @@ def velocity_index(cfg: dict, state_names: tuple) -> tuple[int, ...]:
 def _structure_entry(model) -> dict:
     """certificate.input_structure: which Eq. (23) structure Lemma 1 was solved for."""
     st = dict(model.input_structure)
-    if model.common_input is not None:
+    if model.box is not None:
+        st["covers"] = "scheduling box interior (element box, B hull common to all vertices)"
+    elif model.common_input is not None:
         st["B_hull"] = [{"row": e.row, "col": e.col, "lower": e.lower, "upper": e.upper, "nominal": e.nominal}
                         for e in model.common_input.elements]
         st["covers"] = "scheduling box interior (Lemma 1, common B)"
@@ -150,12 +159,132 @@ def _structure_entry(model) -> dict:
     return st
 
 
+#: certified_set.scheduling.variation per hinf.lyapunov
+VARIATION = {"vertex": "frozen", "common": "arbitrary", "rate": "rate_bounded"}
+
+LMI_TEXT = {
+    "corners": "seed 0 Lemma 1, Eq. (30) at every Eq. (23) system (Rotondo et al. Thm. 2)",
+    "box": ("robust LMI over the element box: structured norm-bounded perturbation of the box centre, "
+            "S-procedure with diagonal multipliers (Petersen 1987; Khargonekar, Petersen & Zhou 1990; Boyd et "
+            "al. 1994 Sec. 5.1, 6.3.2), synthesis/robust_lmi.py"),
+}
+
+
+def _motor_summary(box, state_names, input_names) -> str:
+    if tuple(state_names[8:12]) != ("dt", "da", "de", "dr") or tuple(input_names) != ("ut", "ua", "ue", "ur"):
+        return "not a quadrotor layout"
+    labs = set()
+    for i in range(box.N):
+        r, c, _ = box.arrays(i)
+        for k, (a, b) in enumerate(zip(r, c)):
+            if 8 <= a < 12 and (b == a or b == box.n + a - 8):
+                labs.add(box.labels[i][k] if box.labels and k < len(box.labels[i]) else "")
+    if not labs:
+        return "not uncertain (the models file lists no motor element and uncertainty.motor_std is unset)"
+    if any(lb.startswith("motor constant") for lb in labs):
+        return "uncertain, intervals from uncertainty.motor_std of the synthesis config (nominal +/- k std)"
+    return "uncertain, intervals of the models file (a_Omega, b_Omega identified per vertex; each motor row " \
+           "entry its own element)"
+
+
+def certified_set_entry(model, res, opts, design: Optional[dict]) -> dict:
+    """certificate.certified_set: exactly which plants and which scheduling signals the bound covers."""
+    lyap = opts.lyapunov
+    method = res.info.get("method", "corners")
+    var = VARIATION[lyap]
+    sched = {"variation": var,
+             "lyapunov": {"vertex": "X_i per scheduling vertex (frozen v_d)" if method == "box" else
+                          "X_i^j per vertex and system (frozen v_d)",
+                          "common": "one X for all v_d and all plants in the set",
+                          "rate": "X(v_d) = sum_i alpha_i X_i, rate-bounded"}[lyap]}
+    design_rate = None if design is None else [float(x) for x in design["reference_rate"]]
+    if design_rate is not None:
+        sched["design_reference_rate"] = design_rate
+    if var == "arbitrary":
+        sched["covers_design_signal"] = True
+        sched["note"] = "V = x^T X^-1 x decreases along every trajectory of the set: any v_d(t) in the box"
+    elif var == "rate_bounded":
+        rate = [float(x) for x in opts.rate_bound]
+        sched["rate_bound"] = rate
+        sched["rate_source"] = "certificate.design.reference_rate" if res.info.get("rate_from_design") \
+            else "hinf.rate_bound of the synthesis config"
+        sched["covers_design_signal"] = (None if design_rate is None else
+                                         bool(all(d <= r * (1 + 1e-9) for d, r in zip(design_rate, rate))))
+    else:
+        sched["covers_design_signal"] = False
+        sched["note"] = ("frozen v_d only (seed 0 Lemma 1 with vertex-dependent X): the bound holds for every "
+                         "constant v_d in the box, not for the time-varying phase-2 reference")
+    entry: dict = {"scheduling": sched, "lmi": LMI_TEXT[method]}
+    rate_txt = {"arbitrary": "v_d(t) in the scheduling box, varying arbitrarily fast",
+                "frozen": "every constant (frozen) v_d in the scheduling box",
+                "rate_bounded": f"v_d(t) in the scheduling box with |dv_d,k/dt| <= {sched.get('rate_bound')} m/s^2"}[var]
+    if model.box is not None:
+        box = model.box
+        n = box.n
+        n_a = [int(np.sum(box.arrays(i)[1] < n)) for i in range(box.N)]
+        n_b = [int(np.sum(box.arrays(i)[1] >= n)) for i in range(box.N)]
+        counts: dict = {}
+        for labs in box.labels:
+            for lb in labs:
+                counts[lb] = counts.get(lb, 0) + 1
+        entry.update({
+            "kind": "full_identified_box",
+            "statement": ("||z||_2 <= gamma ||u_e||_2 from rest for u_c = K(v_d) dx (Eq. 31) on every plant "
+                          "[A, B] = [sum_i alpha_i(v_d) A_i(theta_i), B]: " + rate_txt + "; at every vertex i "
+                          "every A element listed in the models file in its interval (independently per vertex "
+                          "and element), B anywhere in the common hull below; the elements and intervals are "
+                          "in the sidecar (box_rows, box_cols, box_half about box_Ac, box_Bc)"),
+            "elements": {"per_vertex": box.p, "A_per_vertex": n_a, "B_hull": n_b[0] if n_b else 0,
+                         "interval_sources": counts,
+                         "rule": "stored [lower, upper] where lower < upper; nominal +/- k std where a file "
+                                 "stores lower = upper with std > 0 (format @1); motor rows from "
+                                 "uncertainty.motor_std where the file has none"},
+            "motor_constants": _motor_summary(box, model.state_names, model.input_names),
+            "B_hull": [{"row": int(r), "col": int(c - n), "lower": float(box.B_centre[r, c - n] - h),
+                        "upper": float(box.B_centre[r, c - n] + h)}
+                       for r, c, h in zip(*box.arrays(0)) if c >= n],
+            "runtime_systems": f"{len(model.systems[0])} per vertex from the box (centre, nominal, seeded corners)",
+        })
+    else:
+        Ms = [len(lst) for lst in model.systems]
+        entry.update({
+            "kind": "reduced_polytope",
+            "statement": ("||z||_2 <= gamma ||u_e||_2 from rest for u_c = K(v_d) dx on every plant in the convex "
+                          "hull of the Eq. (23) systems of each vertex (sidecar A_sys, B_sys; "
+                          f"sum M_i = {sum(Ms)}), interpolated over " + rate_txt + ". NOT the full identified "
+                          "box: the reduction keeps a few corner parameters and holds the other elements at "
+                          "their nominal values (uncertainty.set: full_box certifies every element)"),
+            "systems_per_vertex": Ms,
+        })
+        if model.common_input is None:
+            entry["statement"] += "; per-vertex B: the vertices are certified, the interior only spot-checked"
+    return entry
+
+
+def problem_entry(model, res, opts) -> dict:
+    """certificate.problem: the sizes of what was solved and, for a corner polytope, of seed 0's
+    Lemma 1 over the same systems counted the package's way and the way CVX reports them."""
+    from lpv_sysid.synthesis.hinf_lmi import seed_problem_size
+
+    out = dict(res.size.as_dict())
+    if res.info.get("size"):
+        out.update({k: v for k, v in res.info["size"].items() if k not in out})
+    out["method"] = res.info.get("method", "corners")
+    if model.box is None:
+        n, m = model.n_x, model.n_u
+        ne = res.info.get("n_e", m)
+        nz = res.info.get("n_z", 3)
+        out["seed_lemma1"] = seed_problem_size([len(lst) for lst in model.systems], n, m, ne, nz,
+                                               tied=out["method"] == "box")
+    return out
+
+
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from lpv_sysid.synthesis.files import (gains_dict, load_models, save_certificate_npz, save_yaml,
+    from lpv_sysid.synthesis.files import (box_arrays, gains_dict, load_models, save_certificate_npz, save_yaml,
                                            sha256_file, uncertainty_settings)
-    from lpv_sysid.synthesis.hinf_lmi import HinfOptions, performance_matrix, synthesize_hinf
+    from lpv_sysid.synthesis.hinf_lmi import HinfOptions, performance_matrix, resolve_method, synthesize_hinf
 
     cfg = load_config(args.config)
     opts = HinfOptions.from_dict(cfg.get("hinf"))
@@ -178,10 +307,24 @@ def run(args: argparse.Namespace) -> int:
     if model.ts is not None:
         raise ConfigError(f"{args.models}: Lemma 1 is a continuous-time result; the models are discrete "
                           f"(Ts={model.ts})")
-    if model.common_input is not None:
+    design = design_from_summary(source)
+    rate_from_design = False
+    if opts.lyapunov == "rate" and opts.rate_bound == "design":
+        if design is None:
+            raise ConfigError("hinf.rate_bound: design needs the phase-2 signals summary (--summary) for the "
+                              "design envelope's reference_rate")
+        opts = replace(opts, rate_bound=[float(x) for x in design["reference_rate"]])
+        rate_from_design = True
+    method = resolve_method(model, opts)
+    if model.box is not None:
+        box = model.box
+        print(f"certified set: the full identified box (uncertainty.set: full_box), {box.p[0] if len(set(box.p)) == 1 else box.p} "
+              f"elements per vertex as a structured perturbation (B hull common to all vertices); "
+              f"Lyapunov matrix: {opts.lyapunov} ({VARIATION[opts.lyapunov]} v_d)")
+    elif model.common_input is not None:
         els = ", ".join(f"B[{e.row},{e.col}] in [{e.lower:.6g}, {e.upper:.6g}]" for e in model.common_input.elements)
         print(f"input matrix common to all vertices (uncertainty.common_b): hull {els or '(B identical)'}; "
-              f"M_i = M_A x M_B = {st['M_A']} x {st['M_B']} = {Ms} ({st['B_method']} corners); "
+              f"M_i = M_A x M_B = {st['M_A']} x {st['M_B']} = {Ms} (sum {sum(Ms)}, {st['B_method']} corners); "
               "Lemma 1 covers the whole box")
     else:
         print(f"uncertainty vertices per scheduling vertex M_i = {Ms} (per-vertex B, uncertainty.common_b: false)")
@@ -196,19 +339,37 @@ def run(args: argparse.Namespace) -> int:
             hint = (" | the input matrix is the hull over all vertices (uncertainty.common_b: true); if B(v_d) varies "
                     "strongly across the box, narrow the box; common_b: false certifies the vertices only")
         raise SolverError(str(exc).replace("\n", " | ") + hint) from None
+    res.info["rate_from_design"] = rate_from_design
+    res.info["n_e"], res.info["n_z"] = R.shape[1], C.shape[0]
     wall = time.perf_counter() - t0
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     side = out.with_name(out.stem + ".cert.npz")
+    extra = None
+    form = 0
+    if method == "box":
+        rob = res.info["robust"]
+        form = {"common": 1, "vertex": 2, "rate": 3}[opts.lyapunov]
+        extra = box_arrays(res.info["box"], rob["t"], form, rob["rate"])
+        if rob["W"] is not None:
+            extra["W"] = np.array(rob["W"])
     side_sha = save_certificate_npz(side, res.X, res.S, res.H, res.scaling.t, res.scaling.s_u,
-                                    R, C, systems=model.systems)
+                                    R, C, systems=model.systems, extra=extra)
+    objective = opts.effective_objective
     cert = {
-        "lmi": "seed 0 Lemma 1" + (" (common B: scheduling box interior covered)" if model.common_input is not None
-                                   else " (per-vertex B: vertices certified)")
+        "lmi": ("seed 0 Lemma 1" + (" (common B: scheduling box interior covered)" if model.common_input is not None
+                                    else " (per-vertex B: vertices certified)")
+                if method == "corners" else "element-box robust LMI (" + {1: "direct form, common X",
+                                                                         2: "Eq. (30) form, X_i per vertex",
+                                                                         3: "Eq. (30) form, rate-bounded X(v_d)"}[form]
+                + ")")
                + (" + seed 2 Eq. (125) region (common H)" if opts.region else ""),
+        "lmi_form": form,
         "solver": res.solver,
         "status": res.status,
+        "objective": objective,
         "gamma_requested": float(opts.gamma),
+        "gamma_solved": float(res.gamma_solver),
         "gamma_achieved": float(res.gamma_certified),
         "min_margin": float(res.min_margin),
         "eps": float(opts.eps),
@@ -216,23 +377,28 @@ def run(args: argparse.Namespace) -> int:
         "uncertainty": unc_cfg,
         "uncertainty_vertices": Ms,
         "input_structure": _structure_entry(model),
+        "certified_set": certified_set_entry(model, res, opts, design),
         "velocity_states": [model.state_names[k] for k in vidx],
-        "problem": res.size.as_dict(),
+        "problem": problem_entry(model, res, opts),
         "compile_time_s": round(res.compile_time, 3),
         "solve_time_s": round(res.solve_time, 3),
         "synthesis_wall_s": round(wall, 3),
         "sidecar": {"file": side.name, "sha256": side_sha},
     }
+    if res.info.get("eq30"):
+        e30 = res.info["eq30"]
+        cert["eq30_check"] = {"systems": e30["systems"], "gamma": float(e30["gamma"]), "margin": float(e30["margin"]),
+                              "note": "seed 0 Eq. (30) re-evaluated with numpy at every Eq. (23) system with "
+                                      "X_i^j = X_i, S_i, H of the element-box solve"}
     if opts.region is not None:
         cert["region"] = opts.region.to_dict()
-    design = design_from_summary(source)
     if design is not None:
         cert["design"] = design
     else:
         print("note: no phase-2 signals summary (--summary): the certificate has no design "
               "envelope, so lpv_controller_node will refuse these gains (it bounds v_d and u_e "
               "by that envelope)")
-    gamma_file = float(opts.gamma) if not opts.minimize_gamma else float(max(res.gamma_certified, 1e-12))
+    gamma_file = float(opts.gamma) if objective != "min_gamma" else float(max(res.gamma_certified, 1e-12))
     F_ff = ff_layout = F_jerk = None
     if ff_enabled and "feedforward" not in cfg:
         # default on, but only for models that have the layout's states (generic plants: off)
@@ -248,12 +414,29 @@ def run(args: argparse.Namespace) -> int:
                                           FeedforwardLayout.from_dict(ff_layout_cfg), ff_cond_max)
         ff_layout = ff_layout_cfg
     save_yaml(gains_dict(raw, model, res.K, R, Q, gamma_file, cert, F_ff, ff_layout, F_jerk), out)
-    print(f"LMI: {res.size.lmi_blocks} blocks (total dim {res.size.lmi_total_dim}, {res.size.scalar_constraints} "
-          f"scalar constraints), {res.size.scalar_variables} scalar variables; "
+    pr = cert["problem"]
+    print(f"LMI ({pr['method']}): {res.size.lmi_blocks} blocks (total dim {res.size.lmi_total_dim}, "
+          f"{res.size.scalar_constraints} scalar constraints), {res.size.scalar_variables} scalar variables; "
           f"compile {res.compile_time:.2f} s, solve {res.solve_time:.2f} s, load + synthesis wall {wall:.2f} s "
-          f"({res.solver}, {res.status})")
-    print(f"gamma requested {opts.gamma:g}, certified (numpy re-evaluation of Eq. 30) {res.gamma_certified:.4g}, "
-          f"min margin {res.min_margin:.3g}")
+          f"({res.solver}, {res.status}, objective {objective})")
+    if "seed_lemma1" in pr:
+        sp = pr["seed_lemma1"]
+        print(f"seed 0 Lemma 1 over these sum M_i = {sp['sum_M']} systems (N = {sp['N']}): "
+              f"{sp['package']['scalar_variables']} scalar variables and {sp['package']['cone_entries']} cone "
+              f"entries in {sp['psd_cones']} PSD cones (package, primal); as CVX reports it (dual): "
+              f"{sp['as_cvx_reports']['variables']} variables with {sp['as_cvx_reports']['constraints']} constraints")
+    if res.info.get("eq30"):
+        e30 = res.info["eq30"]
+        print(f"Eq. (30) re-checked with numpy at all {e30['systems']} systems (X_i^j = X_i): gamma {e30['gamma']:.4g}, "
+              f"min margin {e30['margin']:.3g} ({e30['check_s']:.2f} s)")
+    cs = cert["certified_set"]
+    print(f"certified set: {cs['kind']}; scheduling: {cs['scheduling']['variation']} v_d"
+          + ("" if cs["scheduling"].get("covers_design_signal") is None else
+             f" (covers the designed v_d(t): {cs['scheduling']['covers_design_signal']})"))
+    print(f"gamma requested {opts.gamma:g}"
+          + (f" (solved at {res.gamma_solver:.4g} = gamma x design_gamma_fraction)"
+             if opts.design_gamma_fraction != 1 and objective != "min_gamma" else "")
+          + f", certified (numpy re-evaluation) {res.gamma_certified:.4g}, min margin {res.min_margin:.3g}")
     if F_ff is not None:
         print(f"reference feedforward F_ff ({F_ff.shape[1]}x{F_ff.shape[2]} per vertex, rows "
               f"{ff_layout['free_states']} + inputs) from the nominal vertex models"
@@ -265,9 +448,11 @@ def run(args: argparse.Namespace) -> int:
     from lpv_sysid.synthesis.verify import verify_files
 
     vcfg = cfg.get("verify") or {}
+    t1 = time.perf_counter()
     rep = verify_files(out, args.models, n_random=int(vcfg.get("n_random", 20)), seed=int(vcfg.get("seed", 0)),
                        velocity_index=vidx)
     print(rep.table())
+    print(f"verification took {time.perf_counter() - t1:.2f} s")
     if not rep.passed:
         print("independent verification FAILED (see table); the gains file was written but must not be flown")
         return 1

@@ -5,13 +5,17 @@
 Frozen-parameter closed-loop H-infinity norms (Hamiltonian bisection) at every vertex and
 uncertainty corner and at random interior scheduling points, closed-loop eigenvalues in the
 promised region, the Eq. (30) LMIs re-evaluated with numpy from the certificate sidecar, hashes,
-names and box.
+names and box. For a full-box certificate (``certified_set.kind: full_identified_box``,
+docs/certificate.md): the certified box against the models file read independently, the robust
+LMI in its uncompressed form, the scaled small-gain (KYP) condition at every vertex, the runtime's
+systems inside the box, and the scheduling claim (frozen / arbitrary / rate-bounded v_d).
 
 ``--full-box N`` (default 200, 0 disables) adds an *empirical* Monte Carlo check against the FULL
-identified uncertainty (every identified element in its Eq. 22 interval, not only the reduced
-polytope the certificate covers; :mod:`lpv_sysid.synthesis.verify` item 5). Because the
-certificate does not claim that set, a miss is reported as WARN and does not change the exit
-status, unless ``--strict-full-box`` is given (then it fails like any other check).
+identified uncertainty (every identified element in its Eq. 22 interval;
+:mod:`lpv_sysid.synthesis.verify` item 5). For a reduced-polytope certificate, which does not
+claim that set, a miss is reported as WARN and does not change the exit status unless
+``--strict-full-box`` is given; for a full-box certificate it is a cross-check of the claim and a
+miss fails (with the file's own k and intervals).
 
 Prints a table; exit status 1 when any (non-advisory) check fails, 2 on unreadable input.
 """

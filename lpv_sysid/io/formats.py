@@ -34,7 +34,13 @@ bytes of the models file the gains were synthesised for, ``gains_sha256`` = the 
 the certified law (:meth:`GainSchedule.law_sha256`), ``design`` = the phase-2 signal
 envelope the gains were designed for (:class:`DesignEnvelope`) and ``sidecar`` = the
 certificate sidecar holding the certified systems (:data:`SYSTEMS_ARRAYS`), all three
-required by the flight runtime. Optional reference feedforward
+required by the flight runtime; ``certified_set`` (written by ``lpv-sysid synthesize``,
+docs/certificate.md) says exactly which plants and which scheduling signals the bound covers:
+``kind`` (``full_identified_box``: every element of the models file in its interval, the box
+itself in the sidecar; ``reduced_polytope``: the convex hull of the sidecar's Eq. (23) systems)
+and ``scheduling.variation`` (``frozen`` v_d, ``arbitrary`` rate: one Lyapunov matrix, or
+``rate_bounded`` with ``rate_bound``); the systems the runtime re-checks (sidecar ``A_sys``,
+``B_sys``) are members of that set. Optional reference feedforward
 (:mod:`lpv_sysid.synthesis.feedforward`): a top-level ``feedforward: {free_states,
 accelerated_states, held_states}`` and, then required at every vertex, ``F_ff`` with
 ``len(free_states) + n_u`` rows (free states in the listed order, then the inputs) and one
@@ -731,6 +737,11 @@ class DesignEnvelope:
                    fade, out["excitation_peak"], source)
 
 
+#: ``certificate.certified_set.kind`` / ``.scheduling.variation`` (module docstring)
+CERTIFIED_SET_KINDS = ("full_identified_box", "reduced_polytope")
+SCHEDULING_VARIATIONS = ("frozen", "arbitrary", "rate_bounded")
+
+
 @dataclass(frozen=True)
 class Certificate:
     """What the synthesis proved (seed 0 Lemma 1) and for which models file.
@@ -778,6 +789,15 @@ class Certificate:
                      if d.get("gains_sha256") is not None else None)
         design = (DesignEnvelope.parse(v, d["design"], n_p, n_e, f"{path}.design")
                   if d.get("design") is not None else None)
+        cs = d.get("certified_set")
+        if cs is not None:
+            v.mapping(cs, f"{path}.certified_set", ("kind", "statement", "scheduling"), extra_ok=True)
+            if cs["kind"] not in CERTIFIED_SET_KINDS:
+                v.fail(f"{path}.certified_set.kind", f"expected one of {CERTIFIED_SET_KINDS}, got {cs['kind']!r}")
+            v.mapping(cs["scheduling"], f"{path}.certified_set.scheduling", ("variation",), extra_ok=True)
+            if cs["scheduling"]["variation"] not in SCHEDULING_VARIATIONS:
+                v.fail(f"{path}.certified_set.scheduling.variation",
+                       f"expected one of {SCHEDULING_VARIATIONS}, got {cs['scheduling']['variation']!r}")
         return cls(v.string(d["lmi"], f"{path}.lmi"), v.string(d["solver"], f"{path}.solver"), g,
                    v.number(d["min_margin"], f"{path}.min_margin"), sha,
                    {k: d[k] for k in d if k not in own}, gains_sha, design)

@@ -351,6 +351,8 @@ class _FusedEq33:
     def weights(self, vd, vd_dot=None):
         """(alpha, beta) as float lists: Eq. (21) weights (box clamped, first axis slowest as
         ``models.lpv.box_vertices``) and their rate along dv_d/dt (0 on a clamped axis)."""
+        if self.p == 3:
+            return self._weights3(vd, vd_dot)
         t, inside = [], []
         for v, lo, sp in zip(vd, self.lo, self.span):
             r = (v - lo) / sp
@@ -371,6 +373,38 @@ class _FusedEq33:
                 g = [a * w for a in g for w in d]
             dk = vd_dot[k]
             beta = [b + gi * dk for b, gi in zip(beta, g)]
+        return alpha, beta
+
+    def _weights3(self, vd, vd_dot):
+        """:meth:`weights` written out for the three axes (u_d, v_d, w_d) of the product."""
+        (l0, l1, l2), (s0, s1, s2) = self.lo, self.span
+        r0, r1, r2 = (vd[0] - l0) / s0, (vd[1] - l1) / s1, (vd[2] - l2) / s2
+        x = 0.0 if r0 < 0.0 else (1.0 if r0 > 1.0 else r0)
+        y = 0.0 if r1 < 0.0 else (1.0 if r1 > 1.0 else r1)
+        z = 0.0 if r2 < 0.0 else (1.0 if r2 > 1.0 else r2)
+        X, Y, Z = 1.0 - x, 1.0 - y, 1.0 - z
+        XY, Xy, xY, xy = X * Y, X * y, x * Y, x * y
+        alpha = [XY * Z, XY * z, Xy * Z, Xy * z, xY * Z, xY * z, xy * Z, xy * z]
+        if vd_dot is None:
+            return alpha, None
+        beta = [0.0] * 8
+        if 0.0 <= r0 <= 1.0 and vd_dot[0] != 0.0:
+            a, b = -1.0 / s0, 1.0 / s0
+            aY, ay, bY, by = a * Y, a * y, b * Y, b * y
+            g = (aY * Z, aY * z, ay * Z, ay * z, bY * Z, bY * z, by * Z, by * z)
+            d = vd_dot[0]
+            beta = [bi + gi * d for bi, gi in zip(beta, g)]
+        if 0.0 <= r1 <= 1.0 and vd_dot[1] != 0.0:
+            a, b = -1.0 / s1, 1.0 / s1
+            Xa, Xb, xa, xb = X * a, X * b, x * a, x * b
+            g = (Xa * Z, Xa * z, Xb * Z, Xb * z, xa * Z, xa * z, xb * Z, xb * z)
+            d = vd_dot[1]
+            beta = [bi + gi * d for bi, gi in zip(beta, g)]
+        if 0.0 <= r2 <= 1.0 and vd_dot[2] != 0.0:
+            a, b = -1.0 / s2, 1.0 / s2
+            g = (XY * a, XY * b, Xy * a, Xy * b, xY * a, xY * b, xy * a, xy * b)
+            d = vd_dot[2]
+            beta = [bi + gi * d for bi, gi in zip(beta, g)]
         return alpha, beta
 
     def at(self, vd, vd_dot=None):

@@ -418,11 +418,40 @@ def save_yaml(d: dict, path: Path | str) -> None:
 
 
 # --------------------------------------------------------------------------- gains
+#: sidecar arrays of an element-box certificate (synthesis.robust_lmi): the certified box per vertex
+#: (``box_rows``/``box_cols`` -1-padded, ``box_half`` NaN-padded, ``box_p``, centres ``box_Ac``,
+#: ``box_Bc``), the S-procedure multipliers ``box_t`` (unscaled, t_l of L = h_l e_r, R = e_c^T), the
+#: LMI form code ``lmi_form`` (:data:`LMI_FORMS`) and for the rate form the bound ``rate``
+BOX_ARRAYS = ("box_rows", "box_cols", "box_half", "box_p", "box_Ac", "box_Bc", "box_t", "lmi_form")
+#: ``lmi_form`` codes: which LMI the stored (X, S, H) satisfy
+LMI_FORMS = {0: "eq30 corners", 1: "box direct common X", 2: "box eq30 vertex X_i", 3: "box eq30 rate X(v_d)"}
+
+
+def box_arrays(box: ElementBox, t: Sequence[np.ndarray], form: int, rate: Optional[Sequence[float]] = None) -> dict:
+    """The :data:`BOX_ARRAYS` of an element box and its multipliers, for the sidecar."""
+    N, p = box.N, max(box.p) if box.p else 0
+    rows = np.full((N, p), -1, dtype=np.int64)
+    cols = np.full((N, p), -1, dtype=np.int64)
+    half = np.full((N, p), np.nan)
+    tt = np.full((N, p), np.nan)
+    for i in range(N):
+        r, c, h = box.arrays(i)
+        rows[i, :r.size], cols[i, :r.size], half[i, :r.size] = r, c, h
+        tt[i, :r.size] = np.asarray(t[i], dtype=float)
+    out = {"box_rows": rows, "box_cols": cols, "box_half": half, "box_p": np.array(box.p, dtype=np.int64),
+           "box_Ac": np.asarray(box.A_centre, dtype=float), "box_Bc": np.asarray(box.B_centre, dtype=float),
+           "box_t": tt, "lmi_form": np.array(int(form), dtype=np.int64)}
+    if rate is not None:
+        out["rate"] = np.asarray(rate, dtype=float)
+    return out
+
+
 def save_certificate_npz(path: Path | str, X: list, S: np.ndarray, H: np.ndarray, t: np.ndarray, s_u: np.ndarray,
-                         R: np.ndarray, C: np.ndarray, systems: Optional[Sequence] = None) -> str:
+                         R: np.ndarray, C: np.ndarray, systems: Optional[Sequence] = None,
+                         extra: Optional[dict] = None) -> str:
     """Write the sidecar; returns its sha256. ``systems`` (per vertex the certified (A_ij, B_ij),
     ``PolytopicModel.systems``) are stored as :data:`lpv_sysid.io.formats.SYSTEMS_ARRAYS` for the
-    flight runtime's closed-loop re-check."""
+    flight runtime's closed-loop re-check; ``extra`` adds arrays (e.g. :func:`box_arrays`)."""
     N = len(X)
     Mi = np.array([len(x) for x in X])
     n = H.shape[0]
@@ -435,9 +464,10 @@ def save_certificate_npz(path: Path | str, X: list, S: np.ndarray, H: np.ndarray
     p = Path(path)
     check_output(p)         # an existing FIFO or device is refused, not opened
     with open(p, "wb") as f:
-        extra = {} if systems is None else _formats().systems_arrays(systems)
+        arrays = {} if systems is None else _formats().systems_arrays(systems)
+        arrays.update(extra or {})
         np.savez(f, X=Xa, M=Mi, S=np.asarray(S), H=np.asarray(H), t=np.asarray(t), s_u=np.asarray(s_u),
-                 R=np.asarray(R), C=np.asarray(C), **extra)
+                 R=np.asarray(R), C=np.asarray(C), **arrays)
     return sha256_file(p)
 
 

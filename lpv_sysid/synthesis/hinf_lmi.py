@@ -15,7 +15,15 @@ gives the interior argument); with per-vertex B_i^j only the vertices are certif
 dual bounded-real-lemma matrix Phi0; eliminating H recovers A X + X A^T + B_e B_e^T + X C^T C X / g < 0.)
 
 Strictness: every LMI is imposed as ``<= -eps I`` and ``X >= eps I`` (in the scaled coordinates of
-:mod:`lpv_sysid.synthesis.scaling`). Options: fixed gamma (feasibility) or minimise g = gamma^2.
+:mod:`lpv_sysid.synthesis.scaling`). Options: fixed gamma (feasibility) or minimise g = gamma^2;
+``lyapunov: common`` ties every X_i^j to one X (the bound then holds for arbitrarily fast v_d).
+
+``method: box`` (:func:`resolve_method`) hands the problem to :mod:`lpv_sysid.synthesis.robust_lmi`:
+the full element box of a ``full_box`` model, or a corner polytope recognised as the corners of a
+box (:func:`lpv_sysid.models.lpv.corner_box`), one robust block per vertex with X_i^j = X_i; for a
+corner polytope the solution is then re-checked on Eq. (30) itself at every corner system
+(:func:`certificate_margins`, batched), so the seed's LMIs are what is certified however many
+systems there are -- the seed-size problem (sum M_i = 580, :func:`seed_problem_size`) in seconds.
 
 If the problem is infeasible at the requested gamma, the remedies of seed 0 Sec. VI are quantified.
 Scaling R by c (B_e -> c B_e, Eq. 27) maps a solution (X, S, H) at gamma to c^2 (X, S, H) at
@@ -32,6 +40,7 @@ is quantified by bisection on the shrink factor rho of the uncertainty vertices 
 from __future__ import annotations
 
 import logging
+import time
 from dataclasses import dataclass, field, replace
 from typing import Optional, Sequence
 
@@ -63,6 +72,19 @@ class HinfOptions:
     remedy_bisection_steps: int = 0  # >0: quantify uncertainty-reduction remedy by bisection
     region: Optional[Region] = None  # optional LMI region for the closed-loop poles (common-H, see _build)
     verbose: bool = False
+    #: "corners": Eq. (30) at every Eq. (23) system (the seed); "box": the structured-perturbation
+    #: LMI of synthesis.robust_lmi over the element box (one block per vertex); "auto": box when the
+    #: model is the full element box, else corners
+    method: str = "auto"
+    #: "vertex": X_i (box) / X_i^j (corners) per vertex, frozen v_d (the seed's Lemma 1);
+    #: "common": one X, any rate of v_d; "rate": X(v_d) with |dv_d/dt| <= rate_bound (box only)
+    lyapunov: str = "vertex"
+    #: "feasibility" | "min_gamma" | "min_effort" (None: min_gamma when minimize_gamma, else feasibility)
+    objective: Optional[str] = None
+    #: rate mode: "design" (certificate.design.reference_rate of the phase-2 signal) or per-axis bounds
+    rate_bound: Optional[object] = None
+    #: the LMI is solved at gamma x this (<= 1); min_effort otherwise uses the whole bound
+    design_gamma_fraction: float = 1.0
 
     @classmethod
     def from_dict(cls, d: Optional[dict]) -> "HinfOptions":
@@ -82,8 +104,36 @@ class HinfOptions:
             raise ConfigError(f"hinf.solver must be one of {SOLVERS}, got {opts.solver!r}")
         if opts.fallback is not None and str(opts.fallback).upper() not in SOLVERS:
             raise ConfigError(f"hinf.fallback must be one of {SOLVERS} or null, got {opts.fallback!r}")
-        return replace(opts, solver=str(opts.solver).upper(),
+        if opts.method not in ("auto", "corners", "box"):
+            raise ConfigError(f"hinf.method must be auto, corners or box, got {opts.method!r}")
+        if opts.lyapunov not in ("vertex", "common", "rate"):
+            raise ConfigError(f"hinf.lyapunov must be vertex, common or rate, got {opts.lyapunov!r}")
+        if opts.objective is not None and opts.objective not in ("feasibility", "min_gamma", "min_effort"):
+            raise ConfigError(f"hinf.objective must be feasibility, min_gamma or min_effort, got {opts.objective!r}")
+        if opts.objective is not None and opts.minimize_gamma and opts.objective != "min_gamma":
+            raise ConfigError("hinf: minimize_gamma: true contradicts objective "
+                              f"{opts.objective!r} (use objective: min_gamma)")
+        f = opts.design_gamma_fraction
+        if isinstance(f, bool) or not isinstance(f, (int, float)) or not (0 < f <= 1):
+            raise ConfigError(f"hinf.design_gamma_fraction must be in (0, 1], got {f!r}")
+        rb = opts.rate_bound
+        if rb is not None and rb != "design":
+            try:
+                rb = [float(x) for x in rb]
+            except (TypeError, ValueError):
+                raise ConfigError(f"hinf.rate_bound must be 'design' or a list of numbers, got {rb!r}") from None
+            if not all(np.isfinite(x) and x >= 0 for x in rb):
+                raise ConfigError(f"hinf.rate_bound entries must be finite and >= 0, got {rb}")
+        if opts.lyapunov == "rate" and rb is None:
+            raise ConfigError("hinf.lyapunov: rate needs hinf.rate_bound ('design' or per-axis bounds in m/s^2)")
+        return replace(opts, solver=str(opts.solver).upper(), rate_bound=rb,
                        fallback=None if opts.fallback is None else str(opts.fallback).upper())
+
+    @property
+    def effective_objective(self) -> str:
+        if self.objective is not None:
+            return self.objective
+        return "min_gamma" if self.minimize_gamma else "feasibility"
 
 
 @dataclass
@@ -207,7 +257,7 @@ def _build(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: HinfOption
     systems, Cs = _problem_systems(model, R, C, scaling, Be)
     H = cp.Variable((n, n), name="H")
     S = [cp.Variable((m, n), name=f"S_{i}") for i in range(model.n_vertices)]
-    if opts.minimize_gamma:
+    if opts.effective_objective == "min_gamma":
         g = cp.Variable(nonneg=True, name="gamma2")
         g_expr = g
     else:
@@ -225,8 +275,9 @@ def _build(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: HinfOption
     HpHt = H + H.T
     constraints = []
     Xs: dict = {}
+    X_common = cp.Variable((n, n), symmetric=True, name="X") if opts.lyapunov == "common" else None
     for i, j, A, Bc, Be_j in systems:
-        X = cp.Variable((n, n), symmetric=True, name=f"X_{i}_{j}")
+        X = X_common if X_common is not None else cp.Variable((n, n), symmetric=True, name=f"X_{i}_{j}")
         Xs[(i, j)] = X
         U = A @ H + Bc @ S[i]
         Ut = U.T
@@ -237,13 +288,15 @@ def _build(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: HinfOption
             [CH, -CH, Z_nz_ne, -g_expr * np.eye(nz)],
         ])
         constraints.append(M << -epsI)
-        constraints.append(X >> opts.eps * np.eye(n))
+        if X_common is None or (i, j) == systems[0][:2]:
+            constraints.append(X >> opts.eps * np.eye(n))
     n_lmi = len(systems)
+    n_x = 1 if X_common is not None else n_lmi
     size = ProblemSize(
-        scalar_variables=n_lmi * n * (n + 1) // 2 + model.n_vertices * m * n + n * n + (1 if g is not None else 0),
-        lmi_blocks=2 * n_lmi,
-        lmi_total_dim=n_lmi * (d + n),
-        scalar_constraints=n_lmi * (d * (d + 1) // 2 + n * (n + 1) // 2),
+        scalar_variables=n_x * n * (n + 1) // 2 + model.n_vertices * m * n + n * n + (1 if g is not None else 0),
+        lmi_blocks=n_lmi + n_x,
+        lmi_total_dim=n_lmi * d + n_x * n,
+        scalar_constraints=n_lmi * d * (d + 1) // 2 + n_x * n * (n + 1) // 2,
         eq30_block_dim=d,
     )
     if opts.region is not None:
@@ -284,6 +337,13 @@ def solve_lemma1(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: Hinf
 
     R = np.zeros((model.n_u, 0)) if R is None else np.asarray(R, dtype=float)
     C = np.asarray(C, dtype=float)
+    method = resolve_method(model, opts)
+    if method == "box":
+        return _solve_box(model, R, C, opts, Be)
+    if opts.lyapunov == "rate":
+        raise ConfigError("hinf.lyapunov: rate is offered for the element-box LMI (hinf.method: box)")
+    if opts.effective_objective == "min_effort":
+        raise ConfigError("hinf.objective: min_effort is offered for the element-box LMI (hinf.method: box)")
     if Be is None and R.shape[0] != model.n_u:
         raise ConfigError(f"R has {R.shape[0]} rows, the model has {model.n_u} inputs")
     if C.shape[1] != model.n_x:
@@ -318,13 +378,81 @@ def solve_lemma1(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: Hinf
             errors.append(f"{sv}: {exc}")
             continue
         # the solver's word is not the certificate: accept only what numpy re-checks (Eq. 30)
-        ok = res.min_margin > 0 if not opts.minimize_gamma else np.isfinite(res.gamma_certified)
+        ok = res.min_margin > 0 if opts.effective_objective != "min_gamma" else np.isfinite(res.gamma_certified)
         if ok:
             return res
         errors.append(f"{sv}: status {prob.status} but the numpy re-check of Eq. (30) fails "
                       f"(margin {res.min_margin:.3g}, gamma {res.gamma_certified:.4g})")
         log.warning("%s", errors[-1])
     raise SolverError("Lemma 1 LMI (seed 0 Eq. 30): no certified solution (" + "; ".join(errors) + ")")
+
+
+def resolve_method(model: PolytopicModel, opts: HinfOptions) -> str:
+    """``box`` for the full element box (``model.box``) or, with ``method: box``, for a corner
+    polytope that is the set of corners of an element box (:func:`lpv_sysid.models.lpv.corner_box`);
+    ``corners`` otherwise (Eq. 30 at every system, the seed's formulation)."""
+    if opts.method == "corners":
+        if model.box is not None:
+            raise ConfigError("hinf.method: corners cannot enumerate the full element box (2^p corners); "
+                              "use method: box (or uncertainty.set: reduced_polytope)")
+        return "corners"
+    if model.box is not None:
+        return "box"
+    if opts.method == "box":
+        return "box"
+    return "corners"
+
+
+def _solve_box(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: HinfOptions,
+               Be: Optional[np.ndarray]) -> HinfResult:
+    """The element-box LMI (synthesis.robust_lmi) as a :class:`HinfResult`. For a corner polytope
+    (``model.box`` None) the box is recovered from the corners and, with ``lyapunov: vertex``, the
+    solution X_i^j = X_i, S_i, H is re-checked on Eq. (30) at every corner system: the seed's LMIs
+    themselves, however many there are."""
+    from lpv_sysid.models.lpv import corner_box
+    from lpv_sysid.synthesis import robust_lmi
+
+    if Be is not None:
+        raise ConfigError("hinf.method: box needs the matched excitation B_e = B R (seed 0 Eq. 19)")
+    if opts.region is not None:
+        raise ConfigError("hinf.region is not offered with the element-box LMI (hinf.method: corners)")
+    box = model.box if model.box is not None else corner_box(model)
+    if box is None:
+        raise ConfigError("hinf.method: box: the Eq. (23) systems are not the corners of a box of single "
+                          "elements with a B part common to all vertices (use method: corners)")
+    rate = None
+    if opts.lyapunov == "rate":
+        if opts.rate_bound == "design":
+            raise ConfigError("hinf.rate_bound: design needs the phase-2 design envelope (synthesize --summary)")
+        rate = list(opts.rate_bound)
+    obj = opts.effective_objective
+    g_req = float(opts.gamma) * float(opts.design_gamma_fraction)
+    r = robust_lmi.solve_box(box, R, C, gamma=g_req, lyapunov=opts.lyapunov, objective=obj, eps=opts.eps,
+                             solver="CLARABEL" if opts.solver == "AUTO" else opts.solver,
+                             fallback=opts.fallback if opts.solver != "AUTO" else "SCS", scale=opts.scale,
+                             vmin=model.vmin, vmax=model.vmax, rate=rate, verbose=opts.verbose)
+    Ms = [len(lst) for lst in model.systems]
+    X = [[r["X"][i]] * (Ms[i] if model.box is None else 1) for i in range(model.n_vertices)]
+    sz = r["size"]
+    size = ProblemSize(scalar_variables=int(sz["scalar_variables"]), lmi_blocks=int(sz["lmi_blocks"]),
+                       lmi_total_dim=int(sum(sz["robust_block_dim"])), scalar_constraints=int(sz["scalar_constraints"]),
+                       eq30_block_dim=int(max(sz["robust_block_dim"])))
+    res = HinfResult(K=r["K"], X=X, S=r["S"], H=r["H"], gamma_requested=float(opts.gamma),
+                     gamma_solver=r["gamma_solver"], status=r["status"], solver=r["solver"], size=size,
+                     compile_time=r["compile_time"], solve_time=r["solve_time"], scaling=r["scaling"], eps=opts.eps,
+                     gamma_certified=r["gamma_certified"], min_margin=r["min_margin"],
+                     info={"method": "box", "box": box, "robust": r, "size": sz})
+    if model.box is None and opts.lyapunov == "vertex":
+        t0 = time.perf_counter()
+        g30, m30 = certificate_margins(model, R, C, X, r["S"], r["H"], r["scaling"],
+                                       gamma=float(opts.gamma) if obj != "min_gamma" else r["gamma_solver"])
+        res.info["eq30"] = {"gamma": g30, "margin": m30, "systems": int(sum(Ms)),
+                            "check_s": time.perf_counter() - t0}
+        res.gamma_certified, res.min_margin = g30, m30
+        if not (m30 > 0 or (obj == "min_gamma" and np.isfinite(g30))):
+            raise SolverError(f"element-box solution fails the Eq. (30) re-check at the {sum(Ms)} corner systems "
+                              f"(margin {m30:.3g})")
+    return res
 
 
 def _solver_order(opts: HinfOptions, n_blocks: int, installed: set) -> list:
@@ -358,7 +486,7 @@ def _extract(model, R, C, opts, Be, prob, H, S, Xs, g, size, scaling, used) -> H
     )
     # independent numpy re-evaluation in the scaled coordinates (a congruence, inertia-preserving)
     gam, margin = certificate_margins(model, R, C, res.X, res.S, res.H, scaling,
-                                      gamma=float(opts.gamma) if not opts.minimize_gamma else gamma_solver,
+                                      gamma=float(opts.gamma) if opts.effective_objective != "min_gamma" else gamma_solver,
                                       Be=Be)
     res.gamma_certified = gam
     res.min_margin = margin
@@ -375,27 +503,65 @@ def certificate_margins(model: PolytopicModel, R: np.ndarray, C: np.ndarray, X: 
     The matrices are first mapped through the congruence diag(T^-1, T^-1, I, I) of ``scaling``
     (inertia-preserving, so this is a preconditioner, not trust in the solver). Returns
     (gamma_certified, min_margin): the largest over all (i, j) of the smallest gamma for which
-    the LMI holds (:func:`lmi_gamma`) and min over (i, j) of min(-lambda_max(Eq. 30 at gamma),
-    lambda_min(X_i^j)) (negative = violated).
+    the LMI holds (the Schur complement of :func:`lmi_gamma`) and min over (i, j) of
+    min(-lambda_max(Eq. 30 at gamma), lambda_min(X_i^j)) (negative = violated). The blocks of a
+    vertex are evaluated as one stacked batch (the seed-size problem has 580 of them).
     """
     n, m = model.n_x, model.n_u
     sc = scaling or Scaling.identity(n, m)
     Hs = H / (sc.t[:, None] * sc.t[None, :])
     Cs = sc.C(C)
+    nz = Cs.shape[0]
     gam = 0.0
     margin = float("inf")
     for i, lst in enumerate(model.systems):
         Ss = S[i] / (sc.s_u[:, None] * sc.t[None, :])
+        Xs = np.array([X[i][j] for j in range(len(lst))]) / (sc.t[:, None] * sc.t[None, :])
+        Ms = []
         for j, (Aj, Bj) in enumerate(lst):
-            Xs = X[i][j] / (sc.t[:, None] * sc.t[None, :])
             A_, Bc_ = sc.A(np.asarray(Aj)), sc.Bc(np.asarray(Bj))
             Be_ = sc.Be(excitation_matrix(Bj, R, Be))
-            gam = max(gam, lmi_gamma(A_, Bc_, Be_, Cs, Xs, Ss, Hs))
-            M = eq30_matrix(A_, Bc_, Be_, Cs, Xs, Ss, Hs, gamma ** 2)
-            lam_M = np.max(np.linalg.eigvalsh(0.5 * (M + M.T)))
-            lam_X = np.min(np.linalg.eigvalsh(0.5 * (Xs + Xs.T)))
-            margin = min(margin, float(-lam_M), float(lam_X))
+            Ms.append(eq30_matrix(A_, Bc_, Be_, Cs, Xs[j], Ss, Hs, 0.0))
+        M = np.array(Ms)
+        M = 0.5 * (M + np.swapaxes(M, 1, 2))
+        P, F = M[:, :-nz, :-nz], M[:, -nz:, :-nz]
+        lamP = np.linalg.eigvalsh(P)[:, -1]
+        ok = lamP < 0
+        if not np.all(ok):
+            gam = float("inf")
+        if np.any(ok):
+            W = np.linalg.solve(-P[ok], np.swapaxes(F[ok], 1, 2))
+            G = F[ok] @ W
+            gam = max(gam, float(np.sqrt(max(np.max(np.linalg.eigvalsh(0.5 * (G + np.swapaxes(G, 1, 2)))), 0.0))))
+        Mg = M.copy()
+        Mg[:, -nz:, -nz:] -= gamma ** 2 * np.eye(nz)
+        lam_M = np.linalg.eigvalsh(Mg)[:, -1]
+        lam_X = np.linalg.eigvalsh(0.5 * (Xs + np.swapaxes(Xs, 1, 2)))[:, 0]
+        margin = min(margin, float(np.min(-lam_M)), float(np.min(lam_X)))
     return gam, margin
+
+
+def seed_problem_size(M: Sequence[int], n: int, m: int, n_e: int, n_z: int, tied: bool = False) -> dict:
+    """Sizes of seed 0 Lemma 1 for uncertainty-vertex counts M_i, counted two ways.
+
+    The package (primal, what cvxpy states): scalar variables sum_i M_i n(n+1)/2 (X_i^j) + N m n
+    (S_i) + n^2 (H); PSD cones: one Eq. (30) block (2n + n_e + n_z) and one X > 0 block (n) per
+    system; cone entries sum d(d+1)/2. CVX hands the *dual* problem to its solver and reports it
+    (seed 0 Sec. VI: "332,920 variables with 45,768 constraints"): its variables are the cone
+    entries and its equality constraints the primal variables. For N = 8, sum M_i = 580, n = 12,
+    n_e = 4, n_z = 3 this gives 45,768 primal variables and 332,920 cone entries, the seed's two
+    numbers swapped. ``tied``: X_i^j = X_i (what the element-box solve of the seed-size problem
+    returns) -- the variables of the problem as posed are still counted."""
+    N = len(M)
+    d = 2 * n + n_e + n_z
+    total = int(sum(M))
+    variables = total * n * (n + 1) // 2 + N * m * n + n * n
+    entries = total * (d * (d + 1) // 2 + n * (n + 1) // 2)
+    return {"N": N, "sum_M": total, "M": [int(x) for x in M], "eq30_block_dim": d,
+            "psd_cones": 2 * total,
+            "package": {"scalar_variables": variables, "cone_entries": entries},
+            "as_cvx_reports": {"variables": entries, "constraints": variables},
+            "X_tied_per_vertex": bool(tied)}
 
 
 # --------------------------------------------------------------------------- remedies
@@ -430,9 +596,14 @@ class Remedy:
 
 
 def _shrunk_model(model: PolytopicModel, rho: float) -> PolytopicModel:
-    """Uncertainty vertices shrunk by rho about the nominal (remedy 3). A common input set keeps
+    """Uncertainty vertices shrunk by rho about the nominal (remedy 3); an element box shrinks its
+    half-widths about the box centre (rho = 0: a 1e-9 residue, the box keeps its elements). A common input set keeps
     its product structure: its corners shrink about the hull of the vertex nominals
     (:meth:`lpv_sysid.models.lpv.CommonInputSet.shrunk`), so B stays common to all vertices."""
+    if model.box is not None:
+        b = model.box
+        box = replace(b, half=tuple(np.asarray(h, dtype=float) * max(rho, 1e-9) for h in b.half))
+        return replace(model, box=box, systems=box.sample_systems(list(zip(model.A, model.B)), len(model.systems[0])))
     if model.common_input is not None:
         common = model.common_input.shrunk(rho)
         MB = common.M
@@ -447,7 +618,7 @@ def _shrunk_model(model: PolytopicModel, rho: float) -> PolytopicModel:
 def remedy_analysis(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: HinfOptions,
                     Be: Optional[np.ndarray] = None) -> Remedy:
     """Quantify the remedies of seed 0 Sec. VI for a requested gamma (see module docstring)."""
-    g_opts = replace(opts, minimize_gamma=True)
+    g_opts = replace(opts, minimize_gamma=True, objective="min_gamma")
     gmin = solve_lemma1(model, R, C, g_opts, Be).gamma_solver
     factor = gmin / opts.gamma
     rem = Remedy(opts.gamma, gmin, excitation_shrink=factor, output_grow=factor)
@@ -462,7 +633,7 @@ def remedy_analysis(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: H
             rem.uncertainty_shrink = 0.0
         else:
             lo, hi = 0.0, 1.0
-            f_opts = replace(opts, minimize_gamma=False)
+            f_opts = replace(opts, minimize_gamma=False, objective="feasibility")
             for _ in range(opts.remedy_bisection_steps):
                 mid = 0.5 * (lo + hi)
                 try:
@@ -485,7 +656,7 @@ def synthesize_hinf(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: H
     try:
         res = solve_lemma1(model, R, C, opts, Be)
     except SolverError as exc:
-        if opts.minimize_gamma:
+        if opts.effective_objective == "min_gamma":
             raise
         try:
             rem = remedy_analysis(model, R, C, opts, Be)
@@ -495,7 +666,7 @@ def synthesize_hinf(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: H
         err = SolverError(rem.message())
         err.remedy = rem  # type: ignore[attr-defined]
         raise err from None
-    if opts.minimize_gamma and res.gamma_solver > opts.gamma * (1 + 1e-6):
+    if opts.effective_objective == "min_gamma" and res.gamma_solver > opts.gamma * (1 + 1e-6):
         factor = res.gamma_solver / opts.gamma
         rem = Remedy(opts.gamma, res.gamma_solver, factor, factor)
         err = SolverError(rem.message())

@@ -266,8 +266,12 @@ def box_margins(sb: ScaledBox, sol: BoxSolution, gamma: float, pairs: Optional[l
 def solve_box(box: ElementBox, R: np.ndarray, C: np.ndarray, *, gamma: float, lyapunov: str = "common",
               objective: str = "feasibility", eps: float = 1e-6, solver: str = "CLARABEL",
               fallback: Optional[str] = "SCS", scale: bool = True, vmin=None, vmax=None,
-              rate: Optional[Sequence[float]] = None, verbose: bool = False) -> dict:
-    """Solve the robust LMI of the module docstring. Returns a dict with the unscaled gains ``K``
+              rate: Optional[Sequence[float]] = None, verbose: bool = False,
+              K_fixed: Optional[np.ndarray] = None) -> dict:
+    """Solve the robust LMI of the module docstring. With ``K_fixed`` (N, m, n) the gains are
+    given and only the Lyapunov matrices, multipliers and gamma are sought (analysis: S_i = K_i X
+    or K_i H; the smallest gamma the element-box certificate can prove for that law with
+    ``objective: min_gamma``). Returns a dict with the unscaled gains ``K``
     (N, m, n), ``X`` (per vertex), ``S``, ``H``, multipliers ``t`` (per vertex, unscaled:
     t_l = t~_l tau_c^2), ``W`` (rate), ``gamma_solver``, ``gamma_certified``, ``min_margin``,
     ``scaling``, ``size``, ``status``, ``solver``, times. SolverError when no solver returns a
@@ -308,7 +312,16 @@ def solve_box(box: ElementBox, R: np.ndarray, C: np.ndarray, *, gamma: float, ly
         H = cp.Variable((n, n), name="H")
         Xs = [cp.Variable((n, n), symmetric=True, name=f"X_{i}") for i in range(N)]
         cons += [X >> eps * np.eye(n) for X in Xs]
-    S = [cp.Variable((m, n), name=f"S_{i}") for i in range(N)]
+    if K_fixed is not None:
+        Kf = np.asarray(K_fixed, dtype=float)
+        if Kf.shape != (N, m, n):
+            raise ConfigError(f"K_fixed must have shape ({N}, {m}, {n}), got {Kf.shape}")
+        if objective == "min_effort":
+            raise ConfigError("objective min_effort needs the gains as variables")
+        Ks = Kf * scaling.t[None, None, :] / scaling.s_u[None, :, None]      # K~ = S_u^-1 K T
+        S = [Ks[i] @ H for i in range(N)]
+    else:
+        S = [cp.Variable((m, n), name=f"S_{i}") for i in range(N)]
     T, W = [], []
     n_soc = 0
     dims = []
@@ -380,7 +393,7 @@ def solve_box(box: ElementBox, R: np.ndarray, C: np.ndarray, *, gamma: float, ly
     n_w = (N * len(pairs[0]) * n * (n + 1) // 2) if lyapunov == "rate" else 0
     sizes = {
         "form": "direct (common X)" if lyapunov == "common" else "Eq. (30) extended (common H)",
-        "scalar_variables": n_x_var + (0 if lyapunov == "common" else n * n) + N * m * n
+        "scalar_variables": n_x_var + (0 if lyapunov == "common" else n * n) + (0 if K_fixed is not None else N * m * n)
         + 2 * sum(box.p) + sum(np.unique(np.array([sb.used.index(int(c)) for c in sb.cols[i]])).size
                                 for i in range(N)) + n_w + (1 if objective != "feasibility" else 0),
         "lmi_blocks": N + (1 if lyapunov == "common" else N) + (2 * N * len(pairs[0]) if lyapunov == "rate" else 0)
@@ -394,7 +407,6 @@ def solve_box(box: ElementBox, R: np.ndarray, C: np.ndarray, *, gamma: float, ly
                                       + (2 * N * len(pairs[0]) * n * (n + 1) // 2 if lyapunov == "rate" else 0)
                                       + (N * (n + m) * (n + m + 1) // 2 if kappa is not None else 0)
                                       + 3 * n_soc)
-    import cvxpy as cp  # noqa: F811 (solver errors)
     installed = set(cp.installed_solvers())
     order = list(dict.fromkeys([solver] + ([fallback] if fallback else [])))
     errors = []
@@ -405,10 +417,6 @@ def solve_box(box: ElementBox, R: np.ndarray, C: np.ndarray, *, gamma: float, ly
         kw: dict = {"verbose": verbose}
         if sv == "SCS":
             kw.update(eps=1e-8, max_iters=100000)
-        if sv == "CLARABEL":
-            import os as _os
-            if _os.environ.get("LPV_CLARABEL_SOLVE"):
-                kw.update(direct_solve_method=_os.environ["LPV_CLARABEL_SOLVE"])
         t1 = time.perf_counter()
         try:
             prob.solve(solver=sv, **kw)
@@ -428,7 +436,7 @@ def solve_box(box: ElementBox, R: np.ndarray, C: np.ndarray, *, gamma: float, ly
             continue
         gs = float(g.value) if objective == "min_gamma" else float(gamma) ** 2
         sol = BoxSolution(lyapunov, [np.asarray(X.value, dtype=float) for X in Xs],
-                          np.array([np.asarray(s.value, dtype=float) for s in S]), Hs,
+                          np.array([np.asarray(s_.value, dtype=float) for s_ in S]), Hs,
                           [np.asarray(tt.value, dtype=float) for tt in T],
                           [[np.asarray(w.value, dtype=float) for w in Wi] for Wi in W] if W else None,
                           gs, float(kappa.value) if kappa is not None else float("nan"))

@@ -23,6 +23,22 @@ Checks, each a row of the report:
 4. ``lmi``: when the certificate sidecar is present (sha256 checked), K_i == S_i H^-1 and the
    Eq. (30) LMIs re-evaluated with numpy eigenvalues from the stored X, S, H (after the stored
    diagonal congruence, which preserves inertia) hold at the file's gamma;
+4b. element-box certificates (``certificate.certified_set.kind: full_identified_box``, sidecar
+   ``lmi_form`` 1-3, :mod:`lpv_sysid.synthesis.robust_lmi`), checked without the synthesis code:
+   ``box claim`` -- the certified box (sidecar ``box_*``) contains every element interval of the
+   models file read here from the raw YAML (:func:`full_box_intervals`, the stored [lower, upper]
+   or nominal +/- k std) and its nominal A_i, B_i (elements outside the box equal the file's);
+   ``box lmi`` -- the robust LMI re-assembled here in its *uncompressed* Schur form
+   [Phi + L T L^T, cal_R^T; cal_R, -T] < 0 (the solver used the compressed harmonic-sum form)
+   from the stored X, S, H and multipliers t_l, at every vertex (and, for the rate form, at every
+   sign pattern of dv_d/dt from the stored rate bound, the exact condition the solver's W
+   relaxation implies); ``small gain`` -- independent of X and H: the KYP-equivalent
+   frequency-domain condition at every vertex, ||[C/gamma; T^-1/2 R~ [I; K_i]] (sI - A_cl)^-1
+   [B R, L T^1/2] + [0 0; T^-1/2 R~ [0; R] 0]||_inf < 1 (scaled small gain: the vertex bound for
+   every delta in the box, Hamiltonian H-inf norm with feedthrough); ``runtime set`` -- every
+   system the flight runtime re-checks (sidecar A_sys, B_sys) lies in the certified box;
+   ``scheduling`` -- the claimed variation (frozen / arbitrary / rate-bounded) matches the stored
+   LMI form and, for rate bounds, the design envelope.
 5. ``full-box *`` (optional, :func:`full_box_check`, ``verify_files(full_box=N)``): an *empirical*
    Monte Carlo check against the FULL identified uncertainty, which the certificate does not
    claim. Identification estimates ~43 elements per vertex; Lemma 1 is solved on the reduced
@@ -39,8 +55,9 @@ Checks, each a row of the report:
    closed-loop H-inf norm (analytic sensitivity of sigma_max at the peak frequency) and (b) the
    spectral abscissa (eigenvalue sensitivity y^H dA x / y^H x). The rows are ``ok`` only when
    every sample is stable with norm <= gamma; otherwise they are *advisory* (printed ``WARN``) and
-   do not fail the report unless ``strict_full_box`` -- the certificate does not claim this set,
-   so a miss is information for the flight-test engineer, not a broken certificate.
+   do not fail the report unless ``strict_full_box`` -- a reduced-polytope certificate does not
+   claim this set, so a miss is information for the flight-test engineer. For a full-box
+   certificate (item 4b) the Monte Carlo is an empirical cross-check of the claim: a miss fails.
 
    Intervals (:func:`full_box_intervals`): identification (``ident.vertex.VertexResult.to_dict``)
    writes every element with its ``std``; only the kept corner parameters have ``lower < upper``
@@ -208,7 +225,11 @@ def verify_gains(model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.ndar
         if r.check == "hinf" and r.where.startswith("interior"):
             r.check = "hinf interior"
     if certificate is not None:
-        _check_lmi(rep, model, K, R, C, gamma, certificate, k_rtol)
+        form = int(np.asarray(certificate.get("lmi_form", 0))) if "lmi_form" in certificate else 0
+        if model.box is not None or form in (1, 3):
+            check_box_lmi(rep, model, K, R, C, gamma, certificate, k_rtol)
+        else:
+            _check_lmi(rep, model, K, R, C, gamma, certificate, k_rtol)
     return rep
 
 
@@ -221,6 +242,8 @@ def _check_input_claim(rep: VerifyReport, model: PolytopicModel, claim: Optional
     same = all(claim.get(k) == st.get(k) for k in ("B", "M_A", "M_B"))
     rep.add("structure", f"B {claim.get('B')} M_B {claim.get('M_B')}", 0.0 if same else 1.0, 0.0, bool(same),
             "" if same else f"rebuilt polytope is B {st['B']}, M_A {st['M_A']}, M_B {st['M_B']}")
+    if model.box is not None:
+        return                  # the element box's claim is checked against the raw file by check_box_claim
     if st["B"] != "common" or not same:
         if st["B"] == "per_vertex":
             rep.add("coverage", "scheduling box", 0.0, 0.0, True,
@@ -272,6 +295,268 @@ def _check_lmi(rep: VerifyReport, model: PolytopicModel, K: np.ndarray, R: np.nd
     rep.add("lmi gamma", "Eq. (30) all i,j", gam, gamma, gam <= gamma)
     rep.add("lmi margin", "Eq. (30) all i,j", margin, 0.0, margin > 0.0,
             "min(-lambda_max(LMI), lambda_min(X))")
+
+
+# --------------------------------------------------------------------------- element-box certificates
+#: relative tolerance of the box-containment checks (the intervals pass through YAML and npz)
+BOX_TOL = 1e-9
+
+
+def _sidecar_box(cert: dict, n: int, m: int) -> Optional[dict]:
+    """The certified element box from the sidecar arrays as plain arrays (None when absent)."""
+    need = ("box_rows", "box_cols", "box_half", "box_p", "box_Ac", "box_Bc", "box_t")
+    if not all(k in cert for k in need):
+        return None
+    p = np.asarray(cert["box_p"], dtype=int)
+    Ac, Bc = np.asarray(cert["box_Ac"], dtype=float), np.asarray(cert["box_Bc"], dtype=float)
+    if Ac.ndim != 3 or Ac.shape[1:] != (n, n) or Bc.shape != (n, m) or p.shape != (Ac.shape[0],):
+        return None
+    out = {"Ac": Ac, "Bc": Bc, "rows": [], "cols": [], "half": [], "t": []}
+    for i in range(Ac.shape[0]):
+        k = int(p[i])
+        for key, arr in (("rows", "box_rows"), ("cols", "box_cols"), ("half", "box_half"), ("t", "box_t")):
+            out[key].append(np.asarray(cert[arr][i, :k]))
+    out["rows"] = [r.astype(int) for r in out["rows"]]
+    out["cols"] = [c.astype(int) for c in out["cols"]]
+    return out
+
+
+def _bounds(bx: dict, i: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    AB = np.concatenate([bx["Ac"][i], bx["Bc"]], axis=1)
+    lo, hi = AB.copy(), AB.copy()
+    for r, c, h in zip(bx["rows"][i], bx["cols"][i], bx["half"][i]):
+        lo[r, c] -= h
+        hi[r, c] += h
+    return lo, hi
+
+
+def check_box_claim(rep: VerifyReport, model: PolytopicModel, raw: dict, cert_yaml: dict, bx: dict) -> None:
+    """``box claim``: every interval of the models file (read here from the raw YAML) and every
+    nominal A_i, B_i lie in the certified box; the motor constants of ``uncertainty.motor_std``
+    when the certificate says it added them; ``runtime set`` is checked in :func:`check_box_lmi`."""
+    n, m = model.n_x, model.n_u
+    boxes, k, _ = full_box_intervals(raw, None, "stored")
+    worst, where = 0.0, "all vertices"
+    motor_std = (cert_yaml.get("uncertainty") or {}).get("motor_std")
+    for i, v in enumerate(raw.get("vertices", [])):
+        lo, hi = _bounds(bx, i, n)
+        scale = np.maximum(1.0, np.abs(np.concatenate([bx["Ac"][i], bx["Bc"]], axis=1)))
+        AB = np.concatenate([np.asarray(v["A"], dtype=float), np.asarray(v["B"], dtype=float)], axis=1)
+        viol = np.max(np.maximum(lo - AB, AB - hi) / scale)
+        if viol > worst:
+            worst, where = float(viol), f"vertex {i} nominal A, B"
+        eb = boxes[i]
+        for isa, r, c, l_, u_ in zip(eb.is_a, eb.row, eb.col, eb.lower, eb.upper):
+            cc = c if isa else n + c
+            viol = max(lo[r, cc] - l_, u_ - hi[r, cc]) / scale[r, cc]
+            if viol > worst:
+                worst, where = float(viol), f"vertex {i} {'A' if isa else 'B'}[{r},{c}]"
+        have_motor = any((8 <= r < 12) and ((isa and c == r) or (not isa and c == r - 8))
+                         for isa, r, c in zip(eb.is_a, eb.row, eb.col))
+        if motor_std is not None and not have_motor and n >= 12 and m == 4:
+            k_m = float((raw.get("meta") or {}).get("k_sigma", DEFAULT_K_SIGMA))
+            for q in range(4):
+                for cc, sd in ((8 + q, float(motor_std[0])), (n + q, float(motor_std[1]))):
+                    nom = AB[8 + q, cc]
+                    viol = max(lo[8 + q, cc] - (nom - k_m * sd), (nom + k_m * sd) - hi[8 + q, cc]) / scale[8 + q, cc]
+                    if viol > worst:
+                        worst, where = float(viol), f"vertex {i} motor row {8 + q}"
+    ok = worst <= BOX_TOL
+    rep.add("box claim", where if not ok else f"{sum(b.row.size for b in boxes)} intervals, nominal A, B",
+            worst, BOX_TOL, ok, "" if ok else "the certified box does not contain the identified interval")
+
+
+def _vertex_edges(vmin: np.ndarray, vmax: np.ndarray) -> list:
+    """Per vertex and axis the (min, max) vertex indices of the edge through it (box order)."""
+    import itertools
+
+    V = np.array(list(itertools.product(*zip(vmin, vmax))), dtype=float)
+    out = []
+    for i in range(V.shape[0]):
+        per = []
+        for k in range(V.shape[1]):
+            a, b = V[i].copy(), V[i].copy()
+            a[k], b[k] = vmin[k], vmax[k]
+            per.append((int(np.flatnonzero((V == a).all(axis=1))[0]), int(np.flatnonzero((V == b).all(axis=1))[0]),
+                        float(vmax[k] - vmin[k])))
+        out.append(per)
+    return out
+
+
+def _box_block(form: int, A: np.ndarray, B: np.ndarray, R: np.ndarray, C: np.ndarray, L: np.ndarray,
+               Rt: np.ndarray, t: np.ndarray, X: np.ndarray, S: np.ndarray, H: np.ndarray,
+               Z: Optional[np.ndarray] = None) -> tuple[np.ndarray, np.ndarray]:
+    """Uncompressed robust block at g = 0 and the indices of its z rows (scaled data).
+    form 1: dual BRL with X (= H), Y = S; forms 2, 3: Eq. (30) with X_i, S_i, H (+ Z in (1,1))."""
+    n = A.shape[0]
+    ne, nz, p = R.shape[1], C.shape[0], t.size
+    Be = B @ R
+    T = np.diag(t)
+    LTL = L @ T @ L.T
+    if form == 1:
+        AX = A @ X + B @ S
+        Rx = Rt @ np.vstack([X, S])
+        Rw = Rt @ np.vstack([np.zeros((n, ne)), R])
+        M = np.block([
+            [AX + AX.T + LTL, Be, X @ C.T, Rx.T],
+            [Be.T, -np.eye(ne), np.zeros((ne, nz)), Rw.T],
+            [C @ X, np.zeros((nz, ne)), np.zeros((nz, nz)), np.zeros((nz, p))],
+            [Rx, Rw, np.zeros((p, nz)), -T]])
+        z = np.arange(n + ne, n + ne + nz)
+    else:
+        U = A @ H + B @ S
+        CH = C @ H
+        Rx = Rt @ np.vstack([H, S])
+        Rw = Rt @ np.vstack([np.zeros((n, ne)), R])
+        Zm = np.zeros((n, n)) if Z is None else Z
+        M = np.block([
+            [U + U.T + LTL + Zm, -X + H.T - U, Be, CH.T, Rx.T],
+            [-X + H - U.T, -(H + H.T), np.zeros((n, ne)), -CH.T, -Rx.T],
+            [Be.T, np.zeros((ne, n)), -np.eye(ne), np.zeros((ne, nz)), Rw.T],
+            [CH, -CH, np.zeros((nz, ne)), np.zeros((nz, nz)), np.zeros((nz, p))],
+            [Rx, -Rx, Rw, np.zeros((p, nz)), -T]])
+        z = np.arange(2 * n + ne, 2 * n + ne + nz)
+    return 0.5 * (M + M.T), z
+
+
+def _schur_gamma(M0: np.ndarray, z: np.ndarray) -> float:
+    keep = np.setdiff1d(np.arange(M0.shape[0]), z)
+    P = M0[np.ix_(keep, keep)]
+    if np.linalg.eigvalsh(P)[-1] >= 0:
+        return float("inf")
+    F = M0[np.ix_(z, keep)]
+    G = F @ np.linalg.solve(-P, F.T) + M0[np.ix_(z, z)]
+    return float(np.sqrt(max(np.linalg.eigvalsh(0.5 * (G + G.T))[-1], 0.0)))
+
+
+def check_box_lmi(rep: VerifyReport, model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.ndarray,
+                  gamma: float, cert: dict, k_rtol: float) -> None:
+    """Rows ``K = S H^-1``, ``box lmi``, ``small gain``, ``runtime set`` of an element-box
+    certificate (module docstring item 4b)."""
+    n, m = model.n_x, model.n_u
+    form = int(np.asarray(cert.get("lmi_form", 0)))
+    bx = _sidecar_box(cert, n, m)
+    if bx is None or form not in (1, 2, 3) or len(bx["Ac"]) != model.n_vertices:
+        rep.add("box lmi", "sidecar", float("nan"), float("nan"), False,
+                "element-box arrays (box_*, lmi_form 1-3) missing or malformed in the sidecar")
+        return
+    X_list, S, H = cert["X_list"], np.asarray(cert["S"], dtype=float), np.asarray(cert["H"], dtype=float)
+    sc = Scaling(t=np.asarray(cert["t"], float), s_u=np.asarray(cert["s_u"], float))
+    tau = np.r_[sc.t, sc.s_u]
+    for i in range(model.n_vertices):
+        K_cert = np.linalg.solve(H.T, S[i].T).T
+        Ks, Kc = K[i] * sc.t[None, :] / sc.s_u[:, None], K_cert * sc.t[None, :] / sc.s_u[:, None]
+        err = float(np.max(np.abs(Ks - Kc)) / max(np.max(np.abs(Kc)), 1e-300))
+        rep.add("K = S H^-1", f"vertex {i}", err, k_rtol, err <= k_rtol)
+    for key, ref in (("R", R), ("C", C)):
+        if key in cert:
+            same = np.shape(cert[key]) == np.shape(ref) and np.allclose(cert[key], ref, rtol=1e-12, atol=0)
+            rep.add("lmi data", key, 0.0 if same else 1.0, 0.0, bool(same),
+                    "" if same else f"{key} differs from the one the certificate was computed with")
+    # runtime set: every system the runtime re-checks lies in the certified box
+    if "A_sys" in cert and "B_sys" in cert and "M_sys" in cert:
+        worst = 0.0
+        for i in range(model.n_vertices):
+            lo, hi = _bounds(bx, i, n)
+            scale = np.maximum(1.0, np.abs(np.concatenate([bx["Ac"][i], bx["Bc"]], axis=1)))
+            for j in range(int(cert["M_sys"][i])):
+                AB = np.concatenate([cert["A_sys"][i, j], cert["B_sys"][i, j]], axis=1)
+                worst = max(worst, float(np.max(np.maximum(lo - AB, AB - hi) / scale)))
+        rep.add("runtime set", "sidecar A_sys, B_sys in the box", worst, BOX_TOL, worst <= BOX_TOL,
+                "" if worst <= BOX_TOL else "a system the runtime re-checks is outside the certified set")
+    # the LMI, uncompressed, in the stored scaling (congruence: inertia-preserving)
+    Cs = sc.C(C)
+    Rs = np.asarray(R, dtype=float) / sc.s_u[:, None]
+    Hs = H / (sc.t[:, None] * sc.t[None, :])
+    edges = _vertex_edges(model.vmin, model.vmax) if form == 3 else None
+    rate = np.asarray(cert.get("rate", []), dtype=float)
+    if form == 3 and rate.shape != (model.vmin.size,):
+        rep.add("box lmi", "rate", float("nan"), float("nan"), False, "rate form without its rate bound")
+        return
+    Xs_all = [np.asarray(X_list[i][0], dtype=float) / (sc.t[:, None] * sc.t[None, :])
+              for i in range(model.n_vertices)]
+    gam, margin = 0.0, float("inf")
+    for i in range(model.n_vertices):
+        r, c, h, t = bx["rows"][i], bx["cols"][i], bx["half"][i], np.asarray(bx["t"][i], dtype=float)
+        p = r.size
+        L = np.zeros((n, p))
+        L[r, np.arange(p)] = h * tau[c] / sc.t[r]
+        Rt = np.zeros((p, n + m))
+        Rt[np.arange(p), c] = 1.0
+        ts = t / tau[c] ** 2
+        A_ = sc.A(bx["Ac"][i])
+        B_ = sc.Bc(bx["Bc"])
+        Ss = S[i] / (sc.s_u[:, None] * sc.t[None, :])
+        Zs = [None]
+        if form == 3:
+            Zs = []
+            for signs in itertools_product_signs(model.vmin.size):
+                Z = np.zeros((n, n))
+                for k, (im, ip, w) in enumerate(edges[i]):
+                    Z -= signs[k] * rate[k] * (Xs_all[ip] - Xs_all[im]) / w
+                Zs.append(Z)
+        for Z in Zs:
+            M0, z = _box_block(form, A_, B_, Rs, Cs, L, Rt, ts, Xs_all[i], Ss, Hs, Z)
+            gam = max(gam, _schur_gamma(M0, z))
+            M = M0.copy()
+            M[z, z] -= gamma ** 2
+            margin = min(margin, float(-np.linalg.eigvalsh(M)[-1]))
+        margin = min(margin, float(np.linalg.eigvalsh(Xs_all[i])[0]), float(np.min(ts)) if p else np.inf)
+        # scaled small gain (KYP), independent of X and H, unscaled data
+        Acl = bx["Ac"][i] + bx["Bc"] @ K[i]
+        Lu = np.zeros((n, p))
+        Lu[r, np.arange(p)] = h * np.sqrt(t)
+        Ex = Rt @ np.vstack([np.eye(n), K[i]]) / np.sqrt(t)[:, None]
+        Fw = Rt @ np.vstack([np.zeros((n, R.shape[1])), R]) / np.sqrt(t)[:, None]
+        Baug = np.hstack([bx["Bc"] @ R, Lu])
+        Caug = np.vstack([C / gamma, Ex])
+        Daug = np.zeros((Caug.shape[0], Baug.shape[1]))
+        Daug[C.shape[0]:, :R.shape[1]] = Fw
+        hn = hinf_norm(Acl, Baug, Caug, D=Daug)
+        rep.add("small gain", f"vertex {i} (KYP, all delta)", hn.value, 1.0, bool(hn.stable and hn.value < 1.0),
+                "" if hn.stable else "vertex closed loop unstable")
+    what = {1: "common X", 2: "X_i per vertex", 3: "X(v_d), every dv_d/dt sign"}[form]
+    rep.add("box lmi gamma", f"robust LMI all vertices ({what})", gam, gamma, gam <= gamma)
+    rep.add("box lmi margin", "uncompressed Schur form", margin, 0.0, margin > 0.0,
+            "min(-lambda_max(LMI), lambda_min(X), min t)")
+
+
+def itertools_product_signs(p: int) -> list:
+    import itertools
+
+    return [np.array(s, dtype=float) for s in itertools.product((-1.0, 1.0), repeat=p)]
+
+
+def check_scheduling_claim(rep: VerifyReport, cert_yaml: dict, sidecar: Optional[dict]) -> None:
+    """``scheduling``: the certificate's variation claim is the one its stored LMI proves:
+    arbitrary <-> common X (form 1, or one X for every corner), rate_bounded <-> form 3 with the
+    stored rate >= the claimed bound (and covers_design_signal consistent with the design
+    envelope), frozen otherwise."""
+    cs = cert_yaml.get("certified_set")
+    if not isinstance(cs, dict) or sidecar is None:
+        return
+    sch = cs.get("scheduling") or {}
+    var = sch.get("variation")
+    form = int(np.asarray(sidecar.get("lmi_form", 0))) if "lmi_form" in sidecar else 0
+    X = sidecar["X_list"]
+    one_x = all(np.array_equal(X[0][0], x) for lst in X for x in lst)
+    if var == "arbitrary":
+        ok, why = (form == 1 or (form == 0 and one_x)), "arbitrary variation needs one Lyapunov matrix X"
+    elif var == "rate_bounded":
+        rate = np.asarray(sidecar.get("rate", []), dtype=float)
+        claim = np.asarray(sch.get("rate_bound", []), dtype=float)
+        ok = form == 3 and rate.shape == claim.shape and bool(np.all(rate >= claim * (1 - 1e-12)))
+        why = "rate-bounded claim needs the rate LMI with at least the claimed bound"
+        des = (cert_yaml.get("design") or {}).get("reference_rate")
+        if ok and des is not None and sch.get("covers_design_signal") is not None:
+            covers = bool(np.all(np.asarray(des, dtype=float) <= rate * (1 + 1e-9)))
+            if bool(sch["covers_design_signal"]) != covers:
+                ok, why = False, "covers_design_signal contradicts the design envelope's reference_rate"
+    elif var == "frozen":
+        ok, why = True, ""
+    else:
+        ok, why = False, f"unknown variation {var!r}"
+    rep.add("scheduling", f"{var} v_d (lmi_form {form})", 0.0 if ok else 1.0, 0.0, bool(ok), "" if ok else why)
 
 
 #: relative tolerance of the recomputed feedforward matrices (YAML keeps ~16 digits)
@@ -637,14 +922,16 @@ def full_box_check(model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.nd
     return res
 
 
-def add_full_box_rows(rep: VerifyReport, res: FullBoxResult, strict: bool = False) -> None:
+def add_full_box_rows(rep: VerifyReport, res: FullBoxResult, strict: bool = False, claimed: bool = False) -> None:
     """Rows ``full-box hinf`` / ``full-box frac`` / ``full-box stab``: ``ok`` only when every sample
-    passes; otherwise advisory (WARN) unless ``strict``."""
+    passes; otherwise advisory (WARN) unless ``strict``. ``claimed``: the certificate claims this box
+    (``certified_set.kind: full_identified_box``), so a miss is a broken certificate (strict)."""
     rep.full_box = res
-    adv = not strict
+    adv = not (strict or claimed)
     w = res.worst
     vd = "[" + ", ".join(f"{x:.3g}" for x in w.v_d) + "]" if w is not None else "-"
-    tag = f"empirical, {res.n} samples, k={res.k_sigma:g}; not certified"
+    tag = (f"empirical, {res.n} samples, k={res.k_sigma:g}; "
+           + ("cross-check of the certified full box" if claimed else "not certified"))
     if w is not None and not np.isnan(w.norm):
         rep.add("full-box hinf", f"worst v_d {vd}", w.norm, res.gamma, res.passed,
                 f"{w.where}; {tag}", advisory=adv)
@@ -666,7 +953,8 @@ def verify_files(gains_path: Path | str, models_path: Path | str, n_random: int 
     Also checks names, box, equilibria and the models_sha256 of the certificate. ``full_box`` > 0
     adds the empirical Monte Carlo check over the full identified box (module docstring item 5,
     :func:`full_box_check` with ``seed``); its rows are advisory (WARN, ``passed`` unaffected)
-    unless ``strict_full_box``. ``k_sigma`` overrides the models file's ``meta.k_sigma``.
+    unless ``strict_full_box`` or the certificate claims the full box (then a miss fails: the
+    Monte Carlo is a cross-check of the claim). ``k_sigma`` overrides the models file's ``meta.k_sigma``.
     """
     from lpv_sysid.synthesis.files import Gains, load_certificate_npz, load_models, sha256_file
     from lpv_sysid.synthesis.hinf_lmi import performance_matrix
@@ -728,6 +1016,13 @@ def verify_files(gains_path: Path | str, models_path: Path | str, n_random: int 
         velocity_index = (tuple(model.state_names.index(n) for n in names)
                           if all(n in model.state_names for n in names) else (2, 3, 4))
     C = performance_matrix(gains.Q, model.n_x, velocity_index)
+    if model.box is not None:
+        bx = _sidecar_box(sidecar, model.n_x, model.n_u) if sidecar is not None else None
+        if bx is None:
+            rep.add("box claim", "sidecar", 1.0, 0.0, False, "full-box certificate without its box arrays")
+        else:
+            check_box_claim(rep, model, raw, cert, bx)
+    check_scheduling_claim(rep, cert, sidecar)
     sub = verify_gains(model, gains.K, gains.R, C, gains.gamma, region, n_random, seed, certificate=sidecar)
     rep.rows.extend(sub.rows)
     ga = cert.get("gamma_achieved")
@@ -740,5 +1035,8 @@ def verify_files(gains_path: Path | str, models_path: Path | str, n_random: int 
         boxes, k, k_src = full_box_intervals(raw, k_sigma, full_box_kept)
         res = full_box_check(model, gains.K, gains.R, C, gains.gamma, boxes, n=full_box, seed=seed,
                              k_sigma=k, k_source=k_src)
-        add_full_box_rows(rep, res, strict=strict_full_box)
+        claimed = (isinstance(cert.get("certified_set"), dict)
+                   and cert["certified_set"].get("kind") == "full_identified_box"
+                   and k_sigma is None and full_box_kept == "stored")
+        add_full_box_rows(rep, res, strict=strict_full_box, claimed=claimed)
     return rep
