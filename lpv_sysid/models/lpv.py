@@ -439,7 +439,7 @@ def corner_box(model: "PolytopicModel") -> Optional[ElementBox]:
     at every vertex (the corner polytopes of :func:`uncertainty_vertices`, :func:`product_systems`
     and the influence / box reductions); None otherwise. Then the Eq. (23) polytope of each vertex
     is that box, and an LMI that holds on the box holds at every corner."""
-    n, m = model.n_x, model.n_u
+    n = model.n_x
     rows, cols, half, centres = [], [], [], []
     b_ref = None
     for lst in model.systems:

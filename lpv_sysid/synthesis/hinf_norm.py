@@ -142,7 +142,6 @@ def _hinf_norm_d(A, B, C, D, tol, max_iter, stability_margin) -> HinfNorm:
         g_lb, w_pk = s_inf, float("inf")
     if g_lb == 0.0:
         return HinfNorm(0.0, 0.0, 0.0, 0, True)
-    n = A.shape[0]
     scale = max(1.0, float(np.max(np.abs(A))))
     for it in range(1, max_iter + 1):
         gamma = (1.0 + 2.0 * tol) * g_lb

@@ -95,7 +95,6 @@ class ScaledBox:
 
 
 def scale_box(box: ElementBox, R: np.ndarray, C: np.ndarray, scaling: Scaling) -> ScaledBox:
-    n = box.n
     tau = np.r_[scaling.t, scaling.s_u]
     A = [scaling.A(np.asarray(a, dtype=float)) for a in box.A_centre]
     B = scaling.Bc(np.asarray(box.B_centre, dtype=float))
