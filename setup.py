@@ -18,7 +18,6 @@ NODES = [
 ]
 
 
-
 def tree_data_files(root: str, dest: str) -> list:
     """data_files entries installing every file below ``root`` under ``dest``, keeping the
     sub-directory layout (a rosbag2 directory must stay a directory)."""
@@ -26,7 +25,9 @@ def tree_data_files(root: str, dest: str) -> list:
     for dirpath, _dirs, files in sorted(os.walk(root)):
         paths = sorted(os.path.join(dirpath, f) for f in files)
         if paths:
-            entries.append((os.path.join(dest, os.path.relpath(dirpath, root)).rstrip("/."), paths))
+            entries.append(
+                (os.path.join(dest, os.path.relpath(dirpath, root)).rstrip("/."), paths)
+            )
     return entries
 
 
@@ -39,7 +40,8 @@ setup(
         ("share/" + PACKAGE, ["package.xml"]),
         ("share/" + PACKAGE + "/launch", glob("launch/*.launch.py")),
         ("share/" + PACKAGE + "/config", glob("config/*.yaml")),
-    ] + tree_data_files("msg_samples", "share/" + PACKAGE + "/msg_samples"),
+    ]
+    + tree_data_files("msg_samples", "share/" + PACKAGE + "/msg_samples"),
     package_data={PACKAGE: ["py.typed"]},
     install_requires=["setuptools"],
     zip_safe=True,

@@ -13,8 +13,20 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-ORDER = ["demo", "synthesis", "phase1", "phase2", "ident", "ident_notes", "lpv_law", "nodes", "mavlink", "bag",
-         "signals", "vrft"]
+ORDER = [
+    "demo",
+    "synthesis",
+    "phase1",
+    "phase2",
+    "ident",
+    "ident_notes",
+    "lpv_law",
+    "nodes",
+    "mavlink",
+    "bag",
+    "signals",
+    "vrft",
+]
 
 HEADER = """# Benchmarks
 
@@ -51,16 +63,31 @@ def main() -> None:
     for f in sorted(results.glob("*.rows.json")):
         rows.extend(json.loads(f.read_text()))
     rows.sort(key=lambda r: (r.get("order", 100), r["key"]))
-    table = [f"| {r['key']} ({r['issue']}) | {r['measured']} | {r['floor']} | {r['ratio']} | {r['target']} | "
-             f"{r['status']} |" for r in rows]
+    table = [
+        f"| {r['key']} ({r['issue']}) | {r['measured']} | {r['floor']} | {r['ratio']} | {r['target']} | "
+        f"{r['status']} |"
+        for r in rows
+    ]
     keys = {r["key"] for r in rows}
-    legacy = (root / "targets.md").read_text().splitlines() if (root / "targets.md").is_file() else []
+    legacy = (
+        (root / "targets.md").read_text().splitlines() if (root / "targets.md").is_file() else []
+    )
     synth = [ln for ln in legacy if "lemma 1" in ln.lower()]
     if not (results / "synthesis.rows.json").is_file():
-        table[1:1] = _legacy(synth, set())          # the synthesis row right after the demo row
-    table += _legacy([ln for ln in legacy if ln not in synth], keys | {"make demo", "MAVLink decode",
-                     "runtime LPV law", "controller node path", "replay of a 60 s", "identify 8 vertices",
-                     "telemetry-in"})
+        table[1:1] = _legacy(synth, set())  # the synthesis row right after the demo row
+    table += _legacy(
+        [ln for ln in legacy if ln not in synth],
+        keys
+        | {
+            "make demo",
+            "MAVLink decode",
+            "runtime LPV law",
+            "controller node path",
+            "replay of a 60 s",
+            "identify 8 vertices",
+            "telemetry-in",
+        },
+    )
     parts = [HEADER.format(rows="\n".join(table))]
     for name in ORDER + sorted(p.stem for p in results.glob("*.md") if p.stem not in ORDER):
         page = results / f"{name}.md"

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.harness import Page, Row, interleaved, load_average, status, timed
+from bench.harness import Page, Row, interleaved, load_average, status
 
 TYPED = ("state", "rotor_speeds", "imu", "velocity_reference", "actuator_command")
 
@@ -63,23 +63,39 @@ def main() -> None:
 
         def before():
             from rosbags.highlevel import AnyReader
+
             with AnyReader([path], default_typestore=ts) as r:
                 conns = [c for c in r.connections if c.topic in topics]
                 for c, _ns, data in r.messages(connections=conns):
                     ts.deserialize_cdr(data, c.msgtype)
 
-        st = interleaved({"arrays": lambda: bg.read_arrays(path, topics=topics), "floor": floor},
-                         number=1, repeat=9, clock=time.process_time)
-        rb = interleaved({"read_bag": lambda: bg.read_bag(path, topics=topics)}, number=1, repeat=5,
-                         clock=time.process_time)["read_bag"]
-        old = interleaved({"before": before}, number=1, repeat=2, clock=time.process_time)["before"]
-        ti = interleaved({"index": lambda: bg.topic_info(path),
-                          "walk": lambda: bg._collect(path, None, True)}, number=1, repeat=5,
-                         clock=time.process_time)
+        st = interleaved(
+            {"arrays": lambda: bg.read_arrays(path, topics=topics), "floor": floor},
+            number=1,
+            repeat=9,
+            clock=time.process_time,
+        )
+        rb = interleaved(
+            {"read_bag": lambda: bg.read_bag(path, topics=topics)},
+            number=1,
+            repeat=5,
+            clock=time.process_time,
+        )["read_bag"]
+        old = interleaved({"before": before}, number=1, repeat=2, clock=time.process_time)[
+            "before"
+        ]
+        ti = interleaved(
+            {"index": lambda: bg.topic_info(path), "walk": lambda: bg._collect(path, None, True)},
+            number=1,
+            repeat=5,
+            clock=time.process_time,
+        )
         # writing
         f = M.MsgFactory.rosbags()
         items = phase1._message_items(rec, f)[:6000]
-        rows = [(f"/lpv_sysid/{n}", s, bytes(ts.serialize_cdr(m, M.TYPES[n]))) for s, n, m in items]
+        rows = [
+            (f"/lpv_sysid/{n}", s, bytes(ts.serialize_cdr(m, M.TYPES[n]))) for s, n, m in items
+        ]
         k = [0]
 
         def write_each():
@@ -97,7 +113,9 @@ def main() -> None:
                     w.add_topic(f"/lpv_sysid/{n}", M.TYPES[n])
                 w.write_many(rows)
 
-        wr = interleaved({"write": write_each, "many": write_many}, number=1, repeat=3, clock=time.process_time)
+        wr = interleaved(
+            {"write": write_each, "many": write_many}, number=1, repeat=3, clock=time.process_time
+        )
     finally:
         shutil.rmtree(root, ignore_errors=True)
     rate = n_typed / st["arrays"].median
@@ -105,31 +123,65 @@ def main() -> None:
     ratio = st["arrays"].median / st["floor"].median
     page.add(f"## Reading ({n_all} messages, {n_typed} on the typed topics; CPU time per read)")
     page.add()
-    page.table(["what", "median [p10-p90]", "msgs/s"], [
-        ["`read_arrays(typed topics)` (mcap index gather + block decode)", st["arrays"].fmt(1e3, "ms"), f"{rate:,.0f}"],
-        ["floor: records in memory, `np.frombuffer` + one structured view per topic", st["floor"].fmt(1e3, "ms"),
-         f"{frate:,.0f}"],
-        ["`read_bag(typed topics)` (message objects from the decoded columns)", rb.fmt(1e3, "ms"),
-         f"{n_typed / rb.median:,.0f}"],
-        ["before: rosbags AnyReader + `deserialize_cdr` per message", old.fmt(1e3, "ms"), f"{n_typed / old.median:,.0f}"],
-        ["`topic_info` (summary + message indexes)", ti["index"].fmt(1e3, "ms"), ""],
-        ["`topic_info` before (every record read to count)", ti["walk"].fmt(1e3, "ms"), ""],
-    ])
+    page.table(
+        ["what", "median [p10-p90]", "msgs/s"],
+        [
+            [
+                "`read_arrays(typed topics)` (mcap index gather + block decode)",
+                st["arrays"].fmt(1e3, "ms"),
+                f"{rate:,.0f}",
+            ],
+            [
+                "floor: records in memory, `np.frombuffer` + one structured view per topic",
+                st["floor"].fmt(1e3, "ms"),
+                f"{frate:,.0f}",
+            ],
+            [
+                "`read_bag(typed topics)` (message objects from the decoded columns)",
+                rb.fmt(1e3, "ms"),
+                f"{n_typed / rb.median:,.0f}",
+            ],
+            [
+                "before: rosbags AnyReader + `deserialize_cdr` per message",
+                old.fmt(1e3, "ms"),
+                f"{n_typed / old.median:,.0f}",
+            ],
+            ["`topic_info` (summary + message indexes)", ti["index"].fmt(1e3, "ms"), ""],
+            ["`topic_info` before (every record read to count)", ti["walk"].fmt(1e3, "ms"), ""],
+        ],
+    )
     n_w = len(rows)
     page.add(f"## Writing ({n_w} messages of the phase-1 mix, mcap; CPU time)")
     page.add()
-    page.table(["what", "median [p10-p90]", "msgs/s"], [
-        ["`BagWriter.write` per message (rosbags CDR serialisation + store)", wr["write"].fmt(1, "s"),
-         f"{n_w / wr['write'].median:,.0f}"],
-        ["`BagWriter.write_many` of finished records (what `write_run_bag` uses)", wr["many"].fmt(1, "s"),
-         f"{n_w / wr['many'].median:,.0f}"],
-    ])
-    page.rows.append(Row("bag read (typed topics)", "15",
-                         f"`read_arrays` {rate:,.0f} msgs/s; `read_bag` {n_typed / rb.median:,.0f} msgs/s "
-                         f"(before {n_typed / old.median:,.0f}); `topic_info` {ti['index'].median * 1e3:.1f} ms "
-                         f"(before {ti['walk'].median * 1e3:.0f} ms)",
-                         f"numpy block decode {frate:,.0f} msgs/s", f"{ratio:.2f}x",
-                         ">= 500k msgs/s", status(rate >= 5e5), order=9))
+    page.table(
+        ["what", "median [p10-p90]", "msgs/s"],
+        [
+            [
+                "`BagWriter.write` per message (rosbags CDR serialisation + store)",
+                wr["write"].fmt(1, "s"),
+                f"{n_w / wr['write'].median:,.0f}",
+            ],
+            [
+                "`BagWriter.write_many` of finished records (what `write_run_bag` uses)",
+                wr["many"].fmt(1, "s"),
+                f"{n_w / wr['many'].median:,.0f}",
+            ],
+        ],
+    )
+    page.rows.append(
+        Row(
+            "bag read (typed topics)",
+            "15",
+            f"`read_arrays` {rate:,.0f} msgs/s; `read_bag` {n_typed / rb.median:,.0f} msgs/s "
+            f"(before {n_typed / old.median:,.0f}); `topic_info` {ti['index'].median * 1e3:.1f} ms "
+            f"(before {ti['walk'].median * 1e3:.0f} ms)",
+            f"numpy block decode {frate:,.0f} msgs/s",
+            f"{ratio:.2f}x",
+            ">= 500k msgs/s",
+            status(rate >= 5e5),
+            order=9,
+        )
+    )
     page.write(load0)
 
 

@@ -27,8 +27,12 @@ def run_once() -> tuple[float, float, dict]:
     try:
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         w0 = time.perf_counter()
-        p = subprocess.run([sys.executable, "-m", "lpv_sysid.cli.main", "demo", "--out", str(out / "demo_out")],
-                           cwd=repo_root(), capture_output=True, text=True)
+        p = subprocess.run(
+            [sys.executable, "-m", "lpv_sysid.cli.main", "demo", "--out", str(out / "demo_out")],
+            cwd=repo_root(),
+            capture_output=True,
+            text=True,
+        )
         wall = time.perf_counter() - w0
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         failure = None
@@ -61,7 +65,11 @@ def main(argv=None) -> None:
     ap.add_argument("--repeat", type=int, default=1)
     args = ap.parse_args(argv)
     load0 = load_average()
-    page = Page("demo", "`make demo` end to end (issue 15)", f".venv/bin/python -m bench.bench_demo --repeat {args.repeat}")
+    page = Page(
+        "demo",
+        "`make demo` end to end (issue 15)",
+        f".venv/bin/python -m bench.bench_demo --repeat {args.repeat}",
+    )
     runs = [run_once() for _ in range(args.repeat)]
     wall, cpu = Stat([r[0] for r in runs]), Stat([r[1] for r in runs])
     failures = [r[3] for r in runs if r[3]]
@@ -69,24 +77,40 @@ def main(argv=None) -> None:
     for _, _, s, _ in runs:
         for k, (title, sec) in s.items():
             steps.setdefault(k, (title, []))[1].append(sec)
-    page.add("`python -m lpv_sysid.cli.main demo --out DIR` in a subprocess (the venv exists: the "
-             "Makefile's install step is not timed).")
+    page.add(
+        "`python -m lpv_sysid.cli.main demo --out DIR` in a subprocess (the venv exists: the "
+        "Makefile's install step is not timed)."
+    )
     page.add()
     lines = [[f"{k}. {title}", Stat(v).fmt(1, "s")] for k, (title, v) in sorted(steps.items())]
     lines += [["total wall", wall.fmt(1, "s")], ["total CPU (user + sys)", cpu.fmt(1, "s")]]
     page.table(["step", "wall median [p10-p90]"], lines)
     if failures:
-        page.add(f"The demo did not finish: `{failures[0]}` (the totals cover the steps that ran).")
+        page.add(
+            f"The demo did not finish: `{failures[0]}` (the totals cover the steps that ran)."
+        )
         page.add()
     done = "" if not failures else f" (stopped: {failures[0]})"
-    page.rows.append(Row("`make demo` (after install)", "15",
-                         f"{wall.median:.0f} s wall, {cpu.median:.0f} s CPU; steps: " +
-                         ", ".join(f"{title.split(' (')[0].split(' at ')[0]} {Stat(v).median:.1f} s"
-                                   for _, (title, v) in sorted(steps.items())) + done,
-                         target="< 45 s", status=status(None if failures else wall.median < 45.0,
-                                                        "did not complete" if failures else
-                                                        ("" if wall.median < 45.0 else _largest(steps))),
-                         order=2))
+    page.rows.append(
+        Row(
+            "`make demo` (after install)",
+            "15",
+            f"{wall.median:.0f} s wall, {cpu.median:.0f} s CPU; steps: "
+            + ", ".join(
+                f"{title.split(' (')[0].split(' at ')[0]} {Stat(v).median:.1f} s"
+                for _, (title, v) in sorted(steps.items())
+            )
+            + done,
+            target="< 45 s",
+            status=status(
+                None if failures else wall.median < 45.0,
+                "did not complete"
+                if failures
+                else ("" if wall.median < 45.0 else _largest(steps)),
+            ),
+            order=2,
+        )
+    )
     page.write(load0)
 
 

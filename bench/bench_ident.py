@@ -53,7 +53,9 @@ def _datasets():
         tr = q.trim(c)
         A, B = q.linearize(tr)
         e = np.zeros((t.size, 4))
-        e[on] = syn.multisine(t[on], 4, (0.2, 3.0), 1.0, rng) * np.array([0.03, 0.002, 0.002, 0.03])
+        e[on] = syn.multisine(t[on], 4, (0.2, 3.0), 1.0, rng) * np.array(
+            [0.03, 0.002, 0.002, 0.03]
+        )
         d, _ = syn.closed_loop(A, B, t, e, Qw, Rw)
         x = tr.x0 + d.x + noise * rng.normal(size=d.x.shape)
         out.append(vx.VertexData(t, x, tr.u0 + d.u, c, (0.0, 10.0), (10.0, 40.0), str(c)))
@@ -66,8 +68,13 @@ def _child(argv, threads) -> tuple[float, float, int]:
     env["OPENBLAS_NUM_THREADS"] = str(threads)
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     w0 = time.perf_counter()
-    rc = subprocess.run([sys.executable, "-m", "lpv_sysid.cli.main", *argv], cwd=repo_root(), env=env,
-                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode
+    rc = subprocess.run(
+        [sys.executable, "-m", "lpv_sysid.cli.main", *argv],
+        cwd=repo_root(),
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    ).returncode
     wall = time.perf_counter() - w0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
@@ -76,7 +83,9 @@ def _child(argv, threads) -> tuple[float, float, int]:
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--repeat", type=int, default=2, help="runs per thread setting of identify / vrft")
+    ap.add_argument(
+        "--repeat", type=int, default=2, help="runs per thread setting of identify / vrft"
+    )
     args = ap.parse_args(argv)
     from lpv_sysid.ident import dataprep
     from lpv_sysid.ident import vertex as vx
@@ -84,33 +93,75 @@ def main(argv=None) -> None:
     from lpv_sysid.io import formats
 
     load0 = load_average()
-    page = Page("ident", "Identification (issues 4, 15)", f".venv/bin/python -m bench.bench_ident --repeat {args.repeat}")
+    page = Page(
+        "ident",
+        "Identification (issues 4, 15)",
+        f".venv/bin/python -m bench.bench_ident --repeat {args.repeat}",
+    )
     data = _datasets()
     rows = []
     for model in ("taylor2", "appendix_b"):
         cfg = vx.IdentificationConfig(model=model)
         w, c, _ = timed(lambda: [vx.identify_vertex(d, cfg) for d in data], repeat=5)
-        rows.append([f"8 vertices, model={model}, 40 s @ 100 Hz (synthetic)", w.fmt(1e3, "ms"), c.fmt(1e3, "ms")])
+        rows.append(
+            [
+                f"8 vertices, model={model}, 40 s @ 100 Hz (synthetic)",
+                w.fmt(1e3, "ms"),
+                c.fmt(1e3, "ms"),
+            ]
+        )
     page.add("## Vertex pipeline (issue 4 target: 8 vertices < 2 s)")
     page.add()
     page.table(["what", "wall median [p10-p90]", "CPU"], rows)
-    page.rows.append(Row("identify 8 vertices from 40 s / 100 Hz logs", "4",
-                         rows[0][1].split(" [")[0] + " (taylor2)", target="< 2 s", status="met"
-                         if float(rows[0][1].split()[0]) < 2000 else "not met", order=30))
+    page.rows.append(
+        Row(
+            "identify 8 vertices from 40 s / 100 Hz logs",
+            "4",
+            rows[0][1].split(" [")[0] + " (taylor2)",
+            target="< 2 s",
+            status="met" if float(rows[0][1].split()[0]) < 2000 else "not met",
+            order=30,
+        )
+    )
 
     root = Path(tempfile.mkdtemp(prefix="bench_ident_"))
     cfg_dir = repo_root() / "config"
     try:
         bags = root / "phase1"
-        assert cli(["simulate", "phase1", "--config", str(cfg_dir / "quadrotor.yaml"), "--out", str(bags)]) == 0
+        assert (
+            cli(
+                [
+                    "simulate",
+                    "phase1",
+                    "--config",
+                    str(cfg_dir / "quadrotor.yaml"),
+                    "--out",
+                    str(bags),
+                ]
+            )
+            == 0
+        )
         models = root / "vertex_models.yaml"
-        ident_argv = ["identify", "--bags", str(bags), "--config", str(cfg_dir / "identification.yaml"),
-                      "--quadrotor", str(cfg_dir / "quadrotor.yaml"), "--out", str(models)]
+        ident_argv = [
+            "identify",
+            "--bags",
+            str(bags),
+            "--config",
+            str(cfg_dir / "identification.yaml"),
+            "--quadrotor",
+            str(cfg_dir / "quadrotor.yaml"),
+            "--out",
+            str(models),
+        ]
         vrft_argv = ["vrft", "--example", "lv100", "--runs", "50", "--n", "10000"]
         res = {k: [] for k in ("ident2", "ident1", "vrft2", "vrft1")}
         for _ in range(args.repeat):
-            for key, argv_, th in (("ident2", ident_argv, 2), ("ident1", ident_argv, 1),
-                                   ("vrft2", vrft_argv, 2), ("vrft1", vrft_argv, 1)):
+            for key, argv_, th in (
+                ("ident2", ident_argv, 2),
+                ("ident1", ident_argv, 1),
+                ("vrft2", vrft_argv, 2),
+                ("vrft1", vrft_argv, 1),
+            ):
                 w, c, rc = _child(argv_, th)
                 assert rc == 0, (key, rc)
                 res[key].append((w, c))
@@ -134,6 +185,7 @@ def main(argv=None) -> None:
                 return orig_info(*a, **kw)
             finally:
                 t_read[0] += time.process_time() - s0
+
         bg.read_bag, bg.topic_info = read_bag, topic_info
         try:
             for r in runs:
@@ -144,68 +196,144 @@ def main(argv=None) -> None:
         info = bg.topic_info(runs[0])
         wanted = [t for t in info if t.rstrip("/").split("/")[-1] in dataprep.TOPICS]
         n_msgs = sum(info[t].count for t in wanted) * len(runs)
-        arr = interleaved({"arrays": lambda: [bg.read_arrays(r, topics=wanted) for r in runs]}, number=1,
-                          repeat=3, clock=time.process_time)["arrays"]
+        arr = interleaved(
+            {"arrays": lambda: [bg.read_arrays(r, topics=wanted) for r in runs]},
+            number=1,
+            repeat=3,
+            clock=time.process_time,
+        )["arrays"]
         # YAML
         text = models.read_text()
         import yaml
-        y = interleaved({"product": lambda: formats.load_yaml(models),
-                         "floor": lambda: yaml.load(text, Loader=yaml.CSafeLoader)},  # noqa: S506
-                        number=3, repeat=7, clock=time.process_time)
+
+        y = interleaved(
+            {
+                "product": lambda: formats.load_yaml(models),
+                "floor": lambda: yaml.load(text, Loader=yaml.CSafeLoader),
+            },  # noqa: S506
+            number=3,
+            repeat=7,
+            clock=time.process_time,
+        )
         size_kb = len(text.encode()) / 1024
     finally:
         shutil.rmtree(root, ignore_errors=True)
     st = {k: (Stat([w for w, _ in v]), Stat([c for _, c in v])) for k, v in res.items()}
     i1w, i1c = st["ident1"]
-    page.add("## `lpv-sysid identify` on the 9 phase-1 bags (subprocess; the CLI runs it with one BLAS thread)")
+    page.add(
+        "## `lpv-sysid identify` on the 9 phase-1 bags (subprocess; the CLI runs it with one BLAS thread)"
+    )
     page.add()
-    page.table(["what", "median [p10-p90]"], [
-        ["wall", i1w.fmt(1, "s")], ["CPU", i1c.fmt(1, "s")],
-        [f"of which reading the bags (`topic_info` + `read_bag`, {n_msgs} messages)", f"{t_read[0]:.2f} s CPU"],
-        ["of which `ident.dataprep` message -> array conversion", f"{t_streams - t_read[0]:.2f} s CPU"],
-        ["rest (Fourier smoothing, equation error, uncertainty, plot, YAML)", f"{i1c.median - t_streams:.2f} s CPU"],
-        ["bag side floor: `read_arrays` of the same topics, 9 bags", arr.fmt(1, "s") + f" ({n_msgs / arr.median:,.0f} msgs/s)"],
-    ])
-    page.add("What stands in the way of < 3 s: `ident.dataprep.streams_from_bag` asks `read_bag` for message "
-             "objects (rosbags dataclasses, ~5 us each to construct, the same as rosbags' own "
-             "deserialiser) and converts them one at a time through `io.messages`; the arrays of "
-             "`read_arrays` hold the same values and cost the time in the last line. Using them "
-             "needs column-wise parsers in `io.messages` and a dataprep change (owned elsewhere).")
+    page.table(
+        ["what", "median [p10-p90]"],
+        [
+            ["wall", i1w.fmt(1, "s")],
+            ["CPU", i1c.fmt(1, "s")],
+            [
+                f"of which reading the bags (`topic_info` + `read_bag`, {n_msgs} messages)",
+                f"{t_read[0]:.2f} s CPU",
+            ],
+            [
+                "of which `ident.dataprep` message -> array conversion",
+                f"{t_streams - t_read[0]:.2f} s CPU",
+            ],
+            [
+                "rest (Fourier smoothing, equation error, uncertainty, plot, YAML)",
+                f"{i1c.median - t_streams:.2f} s CPU",
+            ],
+            [
+                "bag side floor: `read_arrays` of the same topics, 9 bags",
+                arr.fmt(1, "s") + f" ({n_msgs / arr.median:,.0f} msgs/s)",
+            ],
+        ],
+    )
+    page.add(
+        "What stands in the way of < 3 s: `ident.dataprep.streams_from_bag` asks `read_bag` for message "
+        "objects (rosbags dataclasses, ~5 us each to construct, the same as rosbags' own "
+        "deserialiser) and converts them one at a time through `io.messages`; the arrays of "
+        "`read_arrays` hold the same values and cost the time in the last line. Using them "
+        "needs column-wise parsers in `io.messages` and a dataprep change (owned elsewhere)."
+    )
     page.add()
     page.add("## YAML load of `vertex_models.yaml` (%.0f kB, CPU time per load)" % size_kb)
     page.add()
-    page.table(["what", "median [p10-p90]", "vs floor"], [
-        ["`io.formats.load_yaml` (libyaml parser, strict composer/constructor)", y["product"].fmt(1e3, "ms"),
-         f"{y['product'].median / y['floor'].median:.2f}x"],
-        ["floor: `yaml.load(text, CSafeLoader)`", y["floor"].fmt(1e3, "ms"), "1"],
-    ])
+    page.table(
+        ["what", "median [p10-p90]", "vs floor"],
+        [
+            [
+                "`io.formats.load_yaml` (libyaml parser, strict composer/constructor)",
+                y["product"].fmt(1e3, "ms"),
+                f"{y['product'].median / y['floor'].median:.2f}x",
+            ],
+            ["floor: `yaml.load(text, CSafeLoader)`", y["floor"].fmt(1e3, "ms"), "1"],
+        ],
+    )
     page.add("## OpenBLAS threads (`OPENBLAS_NUM_THREADS`, subprocesses interleaved)")
     page.add()
     lines = []
-    for name, a, b in (("`lpv-sysid identify` (9 bags)", "ident2", "ident1"),
-                       ("`lpv-sysid vrft --example lv100 --runs 50 --n 10000`", "vrft2", "vrft1")):
-        lines.append([name, f"{st[a][0].median:.2f} s / {st[a][1].median:.2f} s",
-                      f"{st[b][0].median:.2f} s / {st[b][1].median:.2f} s"])
+    for name, a, b in (
+        ("`lpv-sysid identify` (9 bags)", "ident2", "ident1"),
+        ("`lpv-sysid vrft --example lv100 --runs 50 --n 10000`", "vrft2", "vrft1"),
+    ):
+        lines.append(
+            [
+                name,
+                f"{st[a][0].median:.2f} s / {st[a][1].median:.2f} s",
+                f"{st[b][0].median:.2f} s / {st[b][1].median:.2f} s",
+            ]
+        )
     page.table(["command", "2 threads: wall / CPU", "1 thread: wall / CPU"], lines)
-    page.rows.append(Row("identify (9 bags)", "15",
-                         f"{i1w.median:.1f} s wall / {i1c.median:.1f} s CPU; bag reading {t_read[0]:.2f} s, "
-                         f"message conversion {t_streams - t_read[0]:.2f} s",
-                         f"bag side with read_arrays {arr.median:.2f} s", "—", "< 3 s",
-                         status(i1w.median < 3.0, "" if i1w.median < 3.0 else
-                                "dataprep converts message objects one by one (see section)"), order=5))
-    page.rows.append(Row("YAML load of vertex_models.yaml", "15",
-                         f"{y['product'].median * 1e3:.1f} ms per load", f"CSafeLoader {y['floor'].median * 1e3:.1f} ms",
-                         f"{y['product'].median / y['floor'].median:.2f}x", "C loader everywhere",
-                         status(True, "libyaml parser in io.yaml_file; strict checks in Python"), order=10))
-    win = st["ident1"][1].median <= st["ident2"][1].median and st["vrft1"][1].median <= st["vrft2"][1].median
-    page.rows.append(Row("identification core, VRFT", "15",
-                         f"identify {st['ident2'][0].median:.1f} / {st['ident2'][1].median:.1f} s (2 threads) vs "
-                         f"{st['ident1'][0].median:.1f} / {st['ident1'][1].median:.1f} s (1); VRFT "
-                         f"{st['vrft2'][0].median:.1f} / {st['vrft2'][1].median:.1f} s vs "
-                         f"{st['vrft1'][0].median:.1f} / {st['vrft1'][1].median:.1f} s (wall / CPU)",
-                         "—", "—", "single-threaded BLAS where it wins",
-                         status(win, "OPENBLAS_NUM_THREADS=1 set by the CLI for identify, identify-nonlinear, vrft"),
-                         order=11))
+    page.rows.append(
+        Row(
+            "identify (9 bags)",
+            "15",
+            f"{i1w.median:.1f} s wall / {i1c.median:.1f} s CPU; bag reading {t_read[0]:.2f} s, "
+            f"message conversion {t_streams - t_read[0]:.2f} s",
+            f"bag side with read_arrays {arr.median:.2f} s",
+            "—",
+            "< 3 s",
+            status(
+                i1w.median < 3.0,
+                ""
+                if i1w.median < 3.0
+                else "dataprep converts message objects one by one (see section)",
+            ),
+            order=5,
+        )
+    )
+    page.rows.append(
+        Row(
+            "YAML load of vertex_models.yaml",
+            "15",
+            f"{y['product'].median * 1e3:.1f} ms per load",
+            f"CSafeLoader {y['floor'].median * 1e3:.1f} ms",
+            f"{y['product'].median / y['floor'].median:.2f}x",
+            "C loader everywhere",
+            status(True, "libyaml parser in io.yaml_file; strict checks in Python"),
+            order=10,
+        )
+    )
+    win = (
+        st["ident1"][1].median <= st["ident2"][1].median
+        and st["vrft1"][1].median <= st["vrft2"][1].median
+    )
+    page.rows.append(
+        Row(
+            "identification core, VRFT",
+            "15",
+            f"identify {st['ident2'][0].median:.1f} / {st['ident2'][1].median:.1f} s (2 threads) vs "
+            f"{st['ident1'][0].median:.1f} / {st['ident1'][1].median:.1f} s (1); VRFT "
+            f"{st['vrft2'][0].median:.1f} / {st['vrft2'][1].median:.1f} s vs "
+            f"{st['vrft1'][0].median:.1f} / {st['vrft1'][1].median:.1f} s (wall / CPU)",
+            "—",
+            "—",
+            "single-threaded BLAS where it wins",
+            status(
+                win, "OPENBLAS_NUM_THREADS=1 set by the CLI for identify, identify-nonlinear, vrft"
+            ),
+            order=11,
+        )
+    )
     page.write(load0)
 
 

@@ -43,7 +43,9 @@ def _telemetry_datagrams(n: int) -> list[bytes]:
         if k in (0, 3):
             m = tx.attitude_quaternion_encode(t, 0.99, 0.01, 0.02, 0.1, 0.1, 0.2, 0.3, [0.0] * 4)
         elif k in (1, 4):
-            m = tx.highres_imu_encode(t * 1000, 0.1, 0.2, -9.8, 0.01, 0.02, 0.03, 0.2, 0, 0.4, 1013, 0, 10, 25, 0x1FF, 0)
+            m = tx.highres_imu_encode(
+                t * 1000, 0.1, 0.2, -9.8, 0.01, 0.02, 0.03, 0.2, 0, 0.4, 1013, 0, 10, 25, 0x1FF, 0
+            )
         elif k == 2:
             m = tx.local_position_ned_encode(t, 1.0, 2.0, -3.0, 0.5, 0.1, -0.2)
         else:
@@ -57,7 +59,6 @@ def bench_decode(n: int = 30000, repeat: int = 9) -> dict:
     """msgs/s through ``MavlinkLink.feed`` (fast path on), through pymavlink's parser alone,
     feed + TelemetryDecoder, and the struct floor (unpack the payload of each datagram),
     batches interleaved; CPU time."""
-    import struct
 
     data = _telemetry_datagrams(n)
 
@@ -66,11 +67,13 @@ def bench_decode(n: int = 30000, repeat: int = 9) -> dict:
         link.codec = px4.make_codec(None, 2, 1)
         if not fast:
             link._no_fast = link.codec
-        def go():                     # as a poll loop: each datagram's messages handled, dropped
+
+        def go():  # as a poll loop: each datagram's messages handled, dropped
             got = 0
             for d in data:
                 got += len(link.feed(d, 0.0))
             assert got == n and link.stats.bad_data == 0
+
         return go
 
     def full():
@@ -85,15 +88,19 @@ def bench_decode(n: int = 30000, repeat: int = 9) -> dict:
     for d in data[:6]:
         mid = d[7] | d[8] << 8 | d[9] << 16
         cls = px4.dialect_module().mavlink_map.get(mid)
-        unpack[mid] = (cls.unpacker if cls is not None else px4._ESC_STATUS_STRUCT)
+        unpack[mid] = cls.unpacker if cls is not None else px4._ESC_STATUS_STRUCT
 
     def floor():
         for d in data:
             s = unpack[d[7] | d[8] << 8 | d[9] << 16]
-            s.unpack(d[10:-2].ljust(s.size, b"\0")[:s.size])
+            s.unpack(d[10:-2].ljust(s.size, b"\0")[: s.size])
 
-    st = interleaved({"feed": feeder(True), "pymavlink": feeder(False), "full": full, "floor": floor},
-                     number=1, repeat=repeat, clock=time.process_time)
+    st = interleaved(
+        {"feed": feeder(True), "pymavlink": feeder(False), "full": full, "floor": floor},
+        number=1,
+        repeat=repeat,
+        clock=time.process_time,
+    )
     return {k: v for k, v in st.items()}, n
 
 
@@ -102,9 +109,14 @@ def _active_bridge():
     vehicle's socket to the benchmark."""
     port = free_udp_port()
     veh = SimVehicle(SimVehicleConfig(url=f"udpout:127.0.0.1:{port}"))
-    core = BridgeCore(BridgeConfig(link=LinkConfig(url=f"udpin:127.0.0.1:{port}", link_timeout=30.0),
-                                   offboard=OffboardConfig(arm=True, input_timeout=30.0),
-                                   command="attitude_rate", telemetry_max_age=1e6))
+    core = BridgeCore(
+        BridgeConfig(
+            link=LinkConfig(url=f"udpin:127.0.0.1:{port}", link_timeout=30.0),
+            offboard=OffboardConfig(arm=True, input_timeout=30.0),
+            command="attitude_rate",
+            telemetry_max_age=1e6,
+        )
+    )
     core.open(0.0)
     veh.open()
     u = np.array([0.3, 0.0, 0.0, 0.0])
@@ -125,7 +137,7 @@ def _active_bridge():
 
 def bench_latency(n: int = 2000) -> dict[str, list[float]]:
     veh, core, t_sim = _active_bridge()
-    sock: socket.socket = veh.link.conn.port          # the vehicle's UDP socket
+    sock: socket.socket = veh.link.conn.port  # the vehicle's UDP socket
     sock.setblocking(True)
     sock.settimeout(1.0)
     dest = ("127.0.0.1", core.link.conn.port.getsockname()[1])
@@ -151,7 +163,9 @@ def bench_latency(n: int = 2000) -> dict[str, list[float]]:
         sock.settimeout(1.0)
 
     def one(i: int, poll_inline: bool) -> float | None:
-        msg = tx.attitude_quaternion_encode(int(t_sim * 1000) + 1000 + i, 1.0, 0, 0, 0, 0, 0, 0, [0.0] * 4)
+        msg = tx.attitude_quaternion_encode(
+            int(t_sim * 1000) + 1000 + i, 1.0, 0, 0, 0, 0, 0, 0, [0.0] * 4
+        )
         buf = msg.pack(tx)
         t0 = time.perf_counter()
         sock.sendto(buf, dest)
@@ -197,40 +211,83 @@ def bench_latency(n: int = 2000) -> dict[str, list[float]]:
 
 def main() -> None:
     load0 = load_average()
-    page = Page("mavlink", "MAVLink bridge (issues 7, 15)", ".venv/bin/python -m bench.bench_mavlink")
+    page = Page(
+        "mavlink", "MAVLink bridge (issues 7, 15)", ".venv/bin/python -m bench.bench_mavlink"
+    )
     st, n = bench_decode()
     rate = {k: n / v.median for k, v in st.items()}
-    page.add(f"## Decode ({n} MAVLink 2 datagrams, PX4 telemetry mix: ATTITUDE_QUATERNION, HIGHRES_IMU, "
-             "LOCAL_POSITION_NED, ESC_STATUS; CPU time)")
+    page.add(
+        f"## Decode ({n} MAVLink 2 datagrams, PX4 telemetry mix: ATTITUDE_QUATERNION, HIGHRES_IMU, "
+        "LOCAL_POSITION_NED, ESC_STATUS; CPU time)"
+    )
     page.add()
-    page.table(["what", "per pass median [p10-p90]", "msgs/s"], [
-        ["`MavlinkLink.feed` (struct fast path, CRC checked; counters, sequence tracking)",
-         st["feed"].fmt(1e3, "ms"), f"{rate['feed']:,.0f}"],
-        ["`MavlinkLink.feed` through pymavlink's parser (the previous path)", st["pymavlink"].fmt(1e3, "ms"),
-         f"{rate['pymavlink']:,.0f}"],
-        ["`feed` + `TelemetryDecoder` (samples)", st["full"].fmt(1e3, "ms"), f"{rate['full']:,.0f}"],
-        ["floor: `struct.unpack` of each payload", st["floor"].fmt(1e3, "ms"), f"{rate['floor']:,.0f}"],
-    ])
+    page.table(
+        ["what", "per pass median [p10-p90]", "msgs/s"],
+        [
+            [
+                "`MavlinkLink.feed` (struct fast path, CRC checked; counters, sequence tracking)",
+                st["feed"].fmt(1e3, "ms"),
+                f"{rate['feed']:,.0f}",
+            ],
+            [
+                "`MavlinkLink.feed` through pymavlink's parser (the previous path)",
+                st["pymavlink"].fmt(1e3, "ms"),
+                f"{rate['pymavlink']:,.0f}",
+            ],
+            [
+                "`feed` + `TelemetryDecoder` (samples)",
+                st["full"].fmt(1e3, "ms"),
+                f"{rate['full']:,.0f}",
+            ],
+            [
+                "floor: `struct.unpack` of each payload",
+                st["floor"].fmt(1e3, "ms"),
+                f"{rate['floor']:,.0f}",
+            ],
+        ],
+    )
     res = bench_latency()
     lines = []
     for k, v in res.items():
         a = np.array(v) * 1e3
-        lines.append([k.replace("_", " "), f"{np.median(a):.3f} ms", f"{np.percentile(a, 99):.3f} ms",
-                      f"{a.max():.3f} ms", len(a)])
+        lines.append(
+            [
+                k.replace("_", " "),
+                f"{np.median(a):.3f} ms",
+                f"{np.percentile(a, 99):.3f} ms",
+                f"{a.max():.3f} ms",
+                len(a),
+            ]
+        )
     page.add("## Latency telemetry in -> command out (127.0.0.1)")
     page.add()
     page.table(["driver", "median", "p99", "max", "n"], lines)
-    page.rows.append(Row("MAVLink decode", "7, 15",
-                         f"{rate['feed']:,.0f} msgs/s ({rate['full']:,.0f} with TelemetryDecoder); "
-                         f"pymavlink parser {rate['pymavlink']:,.0f} msgs/s",
-                         f"struct floor {rate['floor']:,.0f} msgs/s",
-                         f"{st['feed'].median / st['floor'].median:.1f}x", ">= 200k msgs/s, CRC checked",
-                         status(rate["feed"] >= 2e5, "" if rate["feed"] >= 2e5 else "machine load; see section"),
-                         order=8))
+    page.rows.append(
+        Row(
+            "MAVLink decode",
+            "7, 15",
+            f"{rate['feed']:,.0f} msgs/s ({rate['full']:,.0f} with TelemetryDecoder); "
+            f"pymavlink parser {rate['pymavlink']:,.0f} msgs/s",
+            f"struct floor {rate['floor']:,.0f} msgs/s",
+            f"{st['feed'].median / st['floor'].median:.1f}x",
+            ">= 200k msgs/s, CRC checked",
+            status(
+                rate["feed"] >= 2e5, "" if rate["feed"] >= 2e5 else "machine load; see section"
+            ),
+            order=8,
+        )
+    )
     lat = np.array(res["same_thread"]) * 1e3
-    page.rows.append(Row("telemetry-in -> command-out p99 on loopback", "7",
-                         f"median {np.median(lat):.2f} ms, p99 {np.percentile(lat, 99):.2f} ms (same thread)",
-                         target="p99 <= 2 ms", status=status(np.percentile(lat, 99) <= 2.0), order=20))
+    page.rows.append(
+        Row(
+            "telemetry-in -> command-out p99 on loopback",
+            "7",
+            f"median {np.median(lat):.2f} ms, p99 {np.percentile(lat, 99):.2f} ms (same thread)",
+            target="p99 <= 2 ms",
+            status=status(np.percentile(lat, 99) <= 2.0),
+            order=20,
+        )
+    )
     page.write(load0)
 
 

@@ -41,7 +41,7 @@ def _lookup_us(sig, batches: int = 50, per_batch: int = 2000) -> tuple[float, fl
     k = 0
     sample = core.sample
     for _ in range(batches):
-        chunk = ts[k:k + per_batch]
+        chunk = ts[k : k + per_batch]
         k += per_batch
         t0 = time.perf_counter()
         for t in chunk:
@@ -54,16 +54,22 @@ def main() -> None:
     print(f"load average before: {os.getloadavg()[0]:.2f} (2 cores shared)")
     for name, repeats in (("signals_phase2.yaml", 5), ("signals_phase1.yaml", 5)):
         med, best, sig = _design_times(os.path.join(ROOT, "config", name), repeats)
-        print(f"\n{name}: design median {med:.3f} s (min {best:.3f} s) over {repeats} runs, "
-              f"{len(sig.names)} channels, N = {sig.t.size}")
+        print(
+            f"\n{name}: design median {med:.3f} s (min {best:.3f} s) over {repeats} runs, "
+            f"{len(sig.names)} channels, N = {sig.t.size}"
+        )
         print(f"  max |corr| off-diagonal over one period: {max_cross_correlation(sig.u):.2e}")
         print("  channel   harmonics   RPF opt   RPF Schroeder")
         for j, n in enumerate(sig.names):
-            print(f"  {n:8s}  {sig.harmonics[j].size:9d}   {sig.rpf[j]:.4f}    {sig.rpf_schroeder[j]:.4f}")
+            print(
+                f"  {n:8s}  {sig.harmonics[j].size:9d}   {sig.rpf[j]:.4f}    {sig.rpf_schroeder[j]:.4f}"
+            )
         if name == "signals_phase2.yaml":
             med_us, best_us = _lookup_us(sig)
-            print(f"  ExcitationCore.sample: median {med_us:.2f} us/call (min batch {best_us:.2f} us), "
-                  "50 batches x 2000 calls")
+            print(
+                f"  ExcitationCore.sample: median {med_us:.2f} us/call (min batch {best_us:.2f} us), "
+                "50 batches x 2000 calls"
+            )
     print(f"\nload average after: {os.getloadavg()[0]:.2f}")
 
 

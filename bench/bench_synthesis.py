@@ -46,29 +46,82 @@ def demo_inputs(run: Path | None) -> tuple[Path, Path, Path | None]:
     tmp = Path(tempfile.mkdtemp(prefix="bench_synth_"))
     quad = str(CONFIG / "quadrotor.yaml")
     with contextlib.redirect_stdout(io.StringIO()):
-        assert cli(["simulate", "phase1", "--config", quad, "--out", str(tmp / "phase1"),
-                    "--duration-scale", "0.5"]) == 0
-        assert cli(["signals", "--config", str(CONFIG / "signals_phase2.yaml"), "--out", str(tmp / "signals")]) == 0
-        assert cli(["identify", "--bags", str(tmp / "phase1"), "--config", str(CONFIG / "identification.yaml"),
-                    "--quadrotor", quad, "--out", str(tmp / "vertex_models.yaml")]) == 0
+        assert (
+            cli(
+                [
+                    "simulate",
+                    "phase1",
+                    "--config",
+                    quad,
+                    "--out",
+                    str(tmp / "phase1"),
+                    "--duration-scale",
+                    "0.5",
+                ]
+            )
+            == 0
+        )
+        assert (
+            cli(
+                [
+                    "signals",
+                    "--config",
+                    str(CONFIG / "signals_phase2.yaml"),
+                    "--out",
+                    str(tmp / "signals"),
+                ]
+            )
+            == 0
+        )
+        assert (
+            cli(
+                [
+                    "identify",
+                    "--bags",
+                    str(tmp / "phase1"),
+                    "--config",
+                    str(CONFIG / "identification.yaml"),
+                    "--quadrotor",
+                    quad,
+                    "--out",
+                    str(tmp / "vertex_models.yaml"),
+                ]
+            )
+            == 0
+        )
     return tmp / "vertex_models.yaml", tmp / "signals" / "summary.yaml", tmp
 
 
-def synthesize(models: Path, summary: Path, config: Path, out: Path, verify: bool = True) -> tuple[float, dict, str]:
+def synthesize(
+    models: Path, summary: Path, config: Path, out: Path, verify: bool = True
+) -> tuple[float, dict, str]:
     """Wall of the CLI call, the written certificate, the printed text."""
     buf = io.StringIO()
-    argv = ["synthesize", "--models", str(models), "--config", str(config), "--summary", str(summary),
-            "--out", str(out)] + ([] if verify else ["--no-verify"])
+    argv = [
+        "synthesize",
+        "--models",
+        str(models),
+        "--config",
+        str(config),
+        "--summary",
+        str(summary),
+        "--out",
+        str(out),
+    ] + ([] if verify else ["--no-verify"])
     t0 = time.perf_counter()
     with contextlib.redirect_stdout(buf):
         rc = cli(argv)
     wall = time.perf_counter() - t0
     if rc != 0:
-        raise RuntimeError(f"synthesize {config.name} failed (exit {rc}):\n{buf.getvalue()[-2000:]}")
+        raise RuntimeError(
+            f"synthesize {config.name} failed (exit {rc}):\n{buf.getvalue()[-2000:]}"
+        )
     return wall, yaml.safe_load(out.read_text())["certificate"], buf.getvalue()
 
 
-def variant(base: Path, tmp: Path, name: str, hinf: dict | None = None, unc: dict | None = None) -> Path:
+def variant(
+    base: Path, tmp: Path, name: str, hinf: dict | None = None, unc: dict | None = None
+) -> Path:
     cfg = yaml.safe_load(base.read_text())
     cfg["hinf"].update(hinf or {})
     cfg["uncertainty"].update(unc or {})
@@ -88,39 +141,64 @@ def full_box_eval(models: Path, gains: Path, summary: Path) -> tuple[float, floa
     from lpv_sysid.synthesis.verify import verify_files
 
     g = Gains.load(gains)
-    model, _ = load_models(models, {"set": "full_box",
-                                    "motor_std": g.certificate["uncertainty"].get("motor_std") or [0.21, 1820.0]})
+    model, _ = load_models(
+        models,
+        {
+            "set": "full_box",
+            "motor_std": g.certificate["uncertainty"].get("motor_std") or [0.21, 1820.0],
+        },
+    )
     C = performance_matrix(g.Q, model.n_x, (2, 3, 4))
     from dataclasses import replace
 
     def analysis(box, K) -> float:
         try:
-            return solve_box(box, g.R, C, gamma=1.0, lyapunov="common", objective="min_gamma",
-                             K_fixed=K)["gamma_certified"]
+            return solve_box(
+                box, g.R, C, gamma=1.0, lyapunov="common", objective="min_gamma", K_fixed=K
+            )["gamma_certified"]
         except Exception:  # noqa: BLE001 - no common X proves any gamma for this law on this box
             return float("inf")
 
     b = model.box
     g_common = analysis(b, g.K)
-    g_vertex = max(analysis(replace(b, A_centre=b.A_centre[i:i + 1], rows=b.rows[i:i + 1], cols=b.cols[i:i + 1],
-                                    half=b.half[i:i + 1], labels=b.labels[i:i + 1]), g.K[i:i + 1])
-                   for i in range(b.N))
+    g_vertex = max(
+        analysis(
+            replace(
+                b,
+                A_centre=b.A_centre[i : i + 1],
+                rows=b.rows[i : i + 1],
+                cols=b.cols[i : i + 1],
+                half=b.half[i : i + 1],
+                labels=b.labels[i : i + 1],
+            ),
+            g.K[i : i + 1],
+        )
+        for i in range(b.N)
+    )
     rep = verify_files(gains, models, n_random=0, full_box=200)
     return g_common, g_vertex, float(rep.full_box.worst.norm)
 
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--run", type=Path, default=None, help="demo output directory (default: build one)")
+    ap.add_argument(
+        "--run", type=Path, default=None, help="demo output directory (default: build one)"
+    )
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--corners", action="store_true",
-                    help="also solve the seed-size problem in the seed's formulation (1,160 cones; ~2 min)")
+    ap.add_argument(
+        "--corners",
+        action="store_true",
+        help="also solve the seed-size problem in the seed's formulation (1,160 cones; ~2 min)",
+    )
     args = ap.parse_args(argv)
     load0 = load_average()
     models, summary, tmp_in = demo_inputs(args.run)
     tmp = Path(tempfile.mkdtemp(prefix="bench_synth_out_"))
-    page = Page("synthesis", "Synthesis: seed-size Lemma 1, the full-box certificate, conservatism",
-                "python -m bench.bench_synthesis" + (" --corners" if args.corners else ""))
+    page = Page(
+        "synthesis",
+        "Synthesis: seed-size Lemma 1, the full-box certificate, conservatism",
+        "python -m bench.bench_synthesis" + (" --corners" if args.corners else ""),
+    )
     try:
         # 1. seed size
         seed_cfg = CONFIG / "synthesis_seed_scale.yaml"
@@ -141,59 +219,114 @@ def main(argv=None) -> None:
             corners = (w, c_cert)
         page.add("## Lemma 1 at the seed's size (issue 13 item 4, issue 15 row 1)")
         page.add()
-        page.add(f"`lpv-sysid synthesize --config config/synthesis_seed_scale.yaml` on the demo's identified models: "
-                 f"N = {sp['N']}, M_i = {sp['M']} (sum {sp['sum_M']}). Seed 0 Lemma 1 over these systems has "
-                 f"**{sp['package']['scalar_variables']:,} scalar variables and {sp['package']['cone_entries']:,} cone "
-                 f"entries in {sp['psd_cones']:,} PSD cones** (the package's primal count); CVX reports the dual: "
-                 f"**{sp['as_cvx_reports']['variables']:,} variables with {sp['as_cvx_reports']['constraints']:,} "
-                 "constraints** -- seed 0's two numbers. (8 x 16 = 128 systems, which this page used to call the "
-                 "seed's size, is 4.5 x smaller.)")
+        page.add(
+            f"`lpv-sysid synthesize --config config/synthesis_seed_scale.yaml` on the demo's identified models: "
+            f"N = {sp['N']}, M_i = {sp['M']} (sum {sp['sum_M']}). Seed 0 Lemma 1 over these systems has "
+            f"**{sp['package']['scalar_variables']:,} scalar variables and {sp['package']['cone_entries']:,} cone "
+            f"entries in {sp['psd_cones']:,} PSD cones** (the package's primal count); CVX reports the dual: "
+            f"**{sp['as_cvx_reports']['variables']:,} variables with {sp['as_cvx_reports']['constraints']:,} "
+            "constraints** -- seed 0's two numbers. (8 x 16 = 128 systems, which this page used to call the "
+            "seed's size, is 4.5 x smaller.)"
+        )
         page.add()
-        page.add("The product solves it as the element-box LMI (the 580 systems are the corners of a box of single "
-                 "elements per vertex, `models.lpv.corner_box`; one robust block per vertex with X_i^j = X_i, "
-                 f"{cert['problem']['lmi_blocks']} LMI blocks, {cert['problem']['scalar_variables']} scalar variables) "
-                 "and then re-checks seed 0 Eq. (30) itself with numpy at all 580 systems (1,160 cones): "
-                 f"gamma {e30['gamma']:.4g} <= 1, min margin {e30['margin']:.3g}; the independent verification "
-                 "then re-checks the H-inf norm of all 580 corner closed loops, Eq. (30) from the sidecar, interior "
-                 "points.")
+        page.add(
+            "The product solves it as the element-box LMI (the 580 systems are the corners of a box of single "
+            "elements per vertex, `models.lpv.corner_box`; one robust block per vertex with X_i^j = X_i, "
+            f"{cert['problem']['lmi_blocks']} LMI blocks, {cert['problem']['scalar_variables']} scalar variables) "
+            "and then re-checks seed 0 Eq. (30) itself with numpy at all 580 systems (1,160 cones): "
+            f"gamma {e30['gamma']:.4g} <= 1, min margin {e30['margin']:.3g}; the independent verification "
+            "then re-checks the H-inf norm of all 580 corner closed loops, Eq. (30) from the sidecar, interior "
+            "points."
+        )
         page.add()
-        lines = [["load + synthesis + Eq. (30) certificate (`synthesis_wall_s`)", st_s.fmt(unit="s")],
-                 ["built-in independent verification", st_v.fmt(unit="s")],
-                 ["`synthesize` end to end (in-process)", st_w.fmt(unit="s")],
-                 ["certified gamma (Eq. 30 at 580 systems)", f"{cert['gamma_achieved']:.4g}"]]
+        lines = [
+            ["load + synthesis + Eq. (30) certificate (`synthesis_wall_s`)", st_s.fmt(unit="s")],
+            ["built-in independent verification", st_v.fmt(unit="s")],
+            ["`synthesize` end to end (in-process)", st_w.fmt(unit="s")],
+            ["certified gamma (Eq. 30 at 580 systems)", f"{cert['gamma_achieved']:.4g}"],
+        ]
         if corners is not None:
             cw, cc_ = corners
-            lines.append(["seed's formulation (X_i^j free, 1,160 cones, cvxpy + SCS), end to end, once",
-                          f"{cw:.1f} s (compile {cc_['compile_time_s']:.1f} s, solve {cc_['solve_time_s']:.1f} s; "
-                          f"gamma {cc_['gamma_achieved']:.4g})"])
+            lines.append(
+                [
+                    "seed's formulation (X_i^j free, 1,160 cones, cvxpy + SCS), end to end, once",
+                    f"{cw:.1f} s (compile {cc_['compile_time_s']:.1f} s, solve {cc_['solve_time_s']:.1f} s; "
+                    f"gamma {cc_['gamma_achieved']:.4g})",
+                ]
+            )
         page.table(["seed-size Lemma 1", "median [p10-p90, n]"], lines)
         ratio = f"{52.0 / st_s.median:.1f}x faster than the anchor"
         if corners is not None:
             ratio += f"; {corners[0] / st_w.median:.0f}x faster than the 1,160-cone formulation (same run)"
-        page.rows.append(Row("Lemma 1 at the seed's size (N = 8, sum M_i = 580)", "13, 15",
-                             f"{st_s.fmt(unit='s')} certified (Eq. 30 numpy at all 580 systems, gamma "
-                             f"{cert['gamma_achieved']:.3g}); + verification {st_v.median:.2f} s",
-                             "seed: 52 s (CVX + MOSEK)" + (f"; seed's formulation here: {corners[0]:.0f} s"
-                                                           if corners else ""),
-                             ratio, "< 10 s, certified",
-                             status(st_s.median < 10 and cert["gamma_achieved"] <= 1), order=2))
+        page.rows.append(
+            Row(
+                "Lemma 1 at the seed's size (N = 8, sum M_i = 580)",
+                "13, 15",
+                f"{st_s.fmt(unit='s')} certified (Eq. 30 numpy at all 580 systems, gamma "
+                f"{cert['gamma_achieved']:.3g}); + verification {st_v.median:.2f} s",
+                "seed: 52 s (CVX + MOSEK)"
+                + (f"; seed's formulation here: {corners[0]:.0f} s" if corners else ""),
+                ratio,
+                "< 10 s, certified",
+                status(st_s.median < 10 and cert["gamma_achieved"] <= 1),
+                order=2,
+            )
+        )
         # 2. demo default and 3. conservatism
         base = CONFIG / "synthesis.yaml"
         cases = [
-            ("reduced polytope (earlier default)", variant(base, tmp, "reduced", {"method": "auto", "lyapunov": "vertex",
-                                                                                 "objective": "feasibility",
-                                                                                 "design_gamma_fraction": 1.0},
-                                                          {"set": "reduced_polytope"})),
+            (
+                "reduced polytope (earlier default)",
+                variant(
+                    base,
+                    tmp,
+                    "reduced",
+                    {
+                        "method": "auto",
+                        "lyapunov": "vertex",
+                        "objective": "feasibility",
+                        "design_gamma_fraction": 1.0,
+                    },
+                    {"set": "reduced_polytope"},
+                ),
+            ),
             ("full box, common X, min_effort at 0.3 gamma (default)", base),
-            ("full box, common X, feasibility at gamma", variant(base, tmp, "fb_feas",
-                                                                 {"objective": "feasibility",
-                                                                  "design_gamma_fraction": 1.0})),
-            ("full box, X_i per vertex (frozen), feasibility", variant(base, tmp, "fb_vertex",
-                                                                       {"lyapunov": "vertex", "objective": "feasibility",
-                                                                        "design_gamma_fraction": 1.0})),
-            ("full box, rate-bounded X(v_d) (design reference_rate), feasibility",
-             variant(base, tmp, "fb_rate", {"lyapunov": "rate", "rate_bound": "design", "objective": "feasibility",
-                                            "design_gamma_fraction": 1.0})),
+            (
+                "full box, common X, feasibility at gamma",
+                variant(
+                    base,
+                    tmp,
+                    "fb_feas",
+                    {"objective": "feasibility", "design_gamma_fraction": 1.0},
+                ),
+            ),
+            (
+                "full box, X_i per vertex (frozen), feasibility",
+                variant(
+                    base,
+                    tmp,
+                    "fb_vertex",
+                    {
+                        "lyapunov": "vertex",
+                        "objective": "feasibility",
+                        "design_gamma_fraction": 1.0,
+                    },
+                ),
+            ),
+            (
+                "full box, rate-bounded X(v_d) (design reference_rate), feasibility",
+                variant(
+                    base,
+                    tmp,
+                    "fb_rate",
+                    {
+                        "lyapunov": "rate",
+                        "rate_bound": "design",
+                        "objective": "feasibility",
+                        "design_gamma_fraction": 1.0,
+                    },
+                ),
+            ),
         ]
         rows = []
         default_wall = None
@@ -206,34 +339,69 @@ def main(argv=None) -> None:
                     w, c, _ = synthesize(models, summary, cfg, out)
                     ws.append(w)
             except RuntimeError as exc:
-                rows.append([name, "failed", "-", "-", "-", "-", "-", str(exc).splitlines()[0][:80]])
+                rows.append(
+                    [name, "failed", "-", "-", "-", "-", "-", str(exc).splitlines()[0][:80]]
+                )
                 continue
             g_an, g_fr, mc = full_box_eval(models, out, summary)
             cs = c["certified_set"]
             w = Stat(ws)
             if cfg == base:
                 default_wall = w
-            rows.append([name, cs["kind"], cs["scheduling"]["variation"],
-                         f"{c['gamma_achieved']:.4g}", f"{g_an:.4g}", f"{g_fr:.4g}", f"{mc:.4g}",
-                         f"{w.fmt(unit='s')} (solve {c['solve_time_s']:.2f} s)"])
-        page.add("## The certificate over the full identified box, and its conservatism (issue 13 item 2)")
+            rows.append(
+                [
+                    name,
+                    cs["kind"],
+                    cs["scheduling"]["variation"],
+                    f"{c['gamma_achieved']:.4g}",
+                    f"{g_an:.4g}",
+                    f"{g_fr:.4g}",
+                    f"{mc:.4g}",
+                    f"{w.fmt(unit='s')} (solve {c['solve_time_s']:.2f} s)",
+                ]
+            )
+        page.add(
+            "## The certificate over the full identified box, and its conservatism (issue 13 item 2)"
+        )
         page.add()
-        page.add("Demo models (`demo --quick` identification: 51 elements per vertex incl. the identified motor "
-                 "constants, 408 intervals; 5 B entries in the common hull). Columns: the set the certificate "
-                 "covers; the scheduling variation it covers; the certified gamma (numpy re-evaluation of the "
-                 "solved LMI); **full-box analysis**: the smallest gamma the element-box LMI certifies for that "
-                 "law over the full box (gains fixed; `robust_lmi.solve_box(K_fixed=...)`) with a common X "
-                 "(any v_d(t); inf: no common X exists for that law), and at each vertex alone (its own X and "
-                 "multipliers: the vertex claims, frozen; the largest over the vertices); "
-                 "**full-box MC**: worst frozen closed-loop H-inf norm over 216 samples of the full box "
-                 "(`verify --full-box 200`, empirical lower bound); `synthesize` wall incl. verification.")
+        page.add(
+            "Demo models (`demo --quick` identification: 51 elements per vertex incl. the identified motor "
+            "constants, 408 intervals; 5 B entries in the common hull). Columns: the set the certificate "
+            "covers; the scheduling variation it covers; the certified gamma (numpy re-evaluation of the "
+            "solved LMI); **full-box analysis**: the smallest gamma the element-box LMI certifies for that "
+            "law over the full box (gains fixed; `robust_lmi.solve_box(K_fixed=...)`) with a common X "
+            "(any v_d(t); inf: no common X exists for that law), and at each vertex alone (its own X and "
+            "multipliers: the vertex claims, frozen; the largest over the vertices); "
+            "**full-box MC**: worst frozen closed-loop H-inf norm over 216 samples of the full box "
+            "(`verify --full-box 200`, empirical lower bound); `synthesize` wall incl. verification."
+        )
         page.add()
-        page.table(["law", "certified set", "v_d variation", "certified gamma", "full-box analysis, common X",
-                    "full-box analysis, per vertex", "full-box MC", "synthesize wall"], rows)
+        page.table(
+            [
+                "law",
+                "certified set",
+                "v_d variation",
+                "certified gamma",
+                "full-box analysis, common X",
+                "full-box analysis, per vertex",
+                "full-box MC",
+                "synthesize wall",
+            ],
+            rows,
+        )
         if default_wall is not None:
-            page.rows.append(Row("`lpv-sysid synthesize` on the demo (default: full box, common X)", "13, 15",
-                                 default_wall.fmt(unit="s") + " incl. verification", "—", "—",
-                                 "keep the demo fast", status(None, "was 24.9 s (reduced polytope, SCS)"), order=3))
+            page.rows.append(
+                Row(
+                    "`lpv-sysid synthesize` on the demo (default: full box, common X)",
+                    "13, 15",
+                    default_wall.fmt(unit="s") + " incl. verification",
+                    "—",
+                    "—",
+                    "keep the demo fast",
+                    status(None, "was 24.9 s (reduced polytope, SCS)"),
+                    order=3,
+                )
+            )
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
         if tmp_in is not None:

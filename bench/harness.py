@@ -68,12 +68,19 @@ class Stat:
     def fmt(self, scale: float = 1.0, unit: str = "", digits: int = 3) -> str:
         """``median [p10-p90]`` scaled (e.g. 1e6 for us)."""
         f = f"{{:.{digits}g}}"
-        return (f"{f.format(self.median * scale)} {unit} [{f.format(self.p10 * scale)}-"
-                f"{f.format(self.p90 * scale)}, n={len(self.samples)}]").replace("  ", " ")
+        return (
+            f"{f.format(self.median * scale)} {unit} [{f.format(self.p10 * scale)}-"
+            f"{f.format(self.p90 * scale)}, n={len(self.samples)}]"
+        ).replace("  ", " ")
 
 
-def interleaved(fns: Mapping[str, Callable[[], object]], number: int, repeat: int,
-                clock: Callable[[], float] = time.perf_counter, warmup: int = 1) -> dict[str, Stat]:
+def interleaved(
+    fns: Mapping[str, Callable[[], object]],
+    number: int,
+    repeat: int,
+    clock: Callable[[], float] = time.perf_counter,
+    warmup: int = 1,
+) -> dict[str, Stat]:
     """Per-call time of each callable: ``repeat`` rounds, each running every callable
     ``number`` times in turn (so a product and its floor share the machine's load)."""
     for fn in fns.values():
@@ -104,14 +111,14 @@ def timed(fn: Callable[[], object], repeat: int = 3) -> tuple[Stat, Stat, object
 class Row:
     """One row of the BENCHMARKS.md summary table."""
 
-    key: str                    # the issue's measure, e.g. "phase-1 simulation"
-    issue: str                  # issue number(s)
-    measured: str               # what was measured, with median and spread
-    floor: str = "—"            # the floor / anchor, measured in the same run
-    ratio: str = "—"            # product / floor
+    key: str  # the issue's measure, e.g. "phase-1 simulation"
+    issue: str  # issue number(s)
+    measured: str  # what was measured, with median and spread
+    floor: str = "—"  # the floor / anchor, measured in the same run
+    ratio: str = "—"  # product / floor
     target: str = "—"
-    status: str = ""            # "met", "not met: <why>", "recorded"
-    order: int = 100            # position in the summary table
+    status: str = ""  # "met", "not met: <why>", "recorded"
+    order: int = 100  # position in the summary table
 
 
 @dataclass
@@ -134,25 +141,33 @@ class Page:
 
     def write(self, load_before: float) -> Path:
         RESULTS.mkdir(exist_ok=True)
-        head = [f"# {self.title}", "",
-                f"Command: `{self.command}` ({machine()}; load average {load_before:.1f} before, "
-                f"{load_average():.1f} after; {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}).", ""]
+        head = [
+            f"# {self.title}",
+            "",
+            f"Command: `{self.command}` ({machine()}; load average {load_before:.1f} before, "
+            f"{load_average():.1f} after; {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}).",
+            "",
+        ]
         path = RESULTS / f"{self.topic}.md"
         path.write_text("\n".join(head + self.text).rstrip() + "\n")
         (RESULTS / f"{self.topic}.rows.json").write_text(
-            json.dumps([asdict(r) for r in self.rows], indent=1) + "\n")
+            json.dumps([asdict(r) for r in self.rows], indent=1) + "\n"
+        )
         print("\n".join(head + self.text))
         return path
 
 
 def machine() -> str:
-    return (f"{os.cpu_count()} cores, Python {platform.python_version()}, "
-            f"numpy {_version('numpy')}, rosbags {_version('rosbags')}")
+    return (
+        f"{os.cpu_count()} cores, Python {platform.python_version()}, "
+        f"numpy {_version('numpy')}, rosbags {_version('rosbags')}"
+    )
 
 
 def _version(mod: str) -> str:
     try:
         from importlib.metadata import version
+
         return version(mod)
     except Exception:  # noqa: BLE001
         return "?"
@@ -171,6 +186,7 @@ def status(met: Optional[bool], why: str = "") -> str:
 def cli(argv: Sequence[str]) -> int:
     """Run ``lpv-sysid argv`` in this process (the console script's code path)."""
     from lpv_sysid.cli.main import main
+
     return main(list(argv))
 
 

@@ -16,7 +16,9 @@ import bench
 
 def main(argv=None) -> int:
     only = list(sys.argv[1:] if argv is None else argv)
-    names = sorted(m.name for m in pkgutil.iter_modules(bench.__path__) if m.name.startswith("bench_"))
+    names = sorted(
+        m.name for m in pkgutil.iter_modules(bench.__path__) if m.name.startswith("bench_")
+    )
     if only:
         names = [n for n in names if n in only]
     failed = []
@@ -28,11 +30,14 @@ def main(argv=None) -> int:
         sys.stdout.write(f"\n=== {name}\n")
         sys.stdout.flush()
         try:
-            entry([]) if "argv" in entry.__code__.co_varnames[:entry.__code__.co_argcount] else entry()
+            entry([]) if "argv" in entry.__code__.co_varnames[
+                : entry.__code__.co_argcount
+            ] else entry()
         except Exception as exc:  # report and continue with the other benchmarks
             failed.append(name)
             sys.stdout.write(f"{name} failed: {exc!r}\n")
     from bench import assemble
+
     assemble.main()
     return 1 if failed else 0
 

@@ -31,24 +31,61 @@ SIGTERM_TIMEOUT = LaunchConfiguration("sigterm_timeout", default=str(LAUNCH_SIGT
 
 def generate_launch_description():
     share_config = os.path.join(get_package_share_directory(PACKAGE), "config")
-    return LaunchDescription([
-        *declare_arguments(signals_file="", log_dir="campaign_log",
-                           notes={"signals_file": "empty: designed from the campaign's signals_config"}),
-        DeclareLaunchArgument("campaign_file", default_value=os.path.join(share_config, "campaign.yaml"),
-                              description="config/campaign.yaml: box, altitude window, timeouts"),
-        DeclareLaunchArgument("runs_dir", default_value="campaign_runs",
-                              description="one rosbag2 per run (trim + excitation) for `lpv-sysid identify`"),
-        Node(package="lpv_sysid", executable="mavlink_bridge_node", name="mavlink_bridge",
-             namespace=NAMESPACE, output="screen", sigterm_timeout=SIGTERM_TIMEOUT,
-             parameters=[params("mavlink_bridge_node.yaml"),
-                         {"command": "velocity", "velocity_frame": "body_ned", "offboard.arm": True}]),
-        Node(package="lpv_sysid", executable="campaign_node", name="campaign",
-             namespace=NAMESPACE, output="screen", sigterm_timeout=SIGTERM_TIMEOUT,
-             parameters=[{"campaign_file": LaunchConfiguration("campaign_file"),
-                          "signals_file": LaunchConfiguration("signals_file"),
-                          "out_dir": LaunchConfiguration("runs_dir")}]),
-        Node(package="lpv_sysid", executable="data_logger_node", name="data_logger",
-             namespace=NAMESPACE, output="screen", sigterm_timeout=SIGTERM_TIMEOUT,
-             parameters=[params("data_logger.yaml"),
-                         {"out_dir": LaunchConfiguration("log_dir")}]),
-    ])
+    return LaunchDescription(
+        [
+            *declare_arguments(
+                signals_file="",
+                log_dir="campaign_log",
+                notes={"signals_file": "empty: designed from the campaign's signals_config"},
+            ),
+            DeclareLaunchArgument(
+                "campaign_file",
+                default_value=os.path.join(share_config, "campaign.yaml"),
+                description="config/campaign.yaml: box, altitude window, timeouts",
+            ),
+            DeclareLaunchArgument(
+                "runs_dir",
+                default_value="campaign_runs",
+                description="one rosbag2 per run (trim + excitation) for `lpv-sysid identify`",
+            ),
+            Node(
+                package="lpv_sysid",
+                executable="mavlink_bridge_node",
+                name="mavlink_bridge",
+                namespace=NAMESPACE,
+                output="screen",
+                sigterm_timeout=SIGTERM_TIMEOUT,
+                parameters=[
+                    params("mavlink_bridge_node.yaml"),
+                    {"command": "velocity", "velocity_frame": "body_ned", "offboard.arm": True},
+                ],
+            ),
+            Node(
+                package="lpv_sysid",
+                executable="campaign_node",
+                name="campaign",
+                namespace=NAMESPACE,
+                output="screen",
+                sigterm_timeout=SIGTERM_TIMEOUT,
+                parameters=[
+                    {
+                        "campaign_file": LaunchConfiguration("campaign_file"),
+                        "signals_file": LaunchConfiguration("signals_file"),
+                        "out_dir": LaunchConfiguration("runs_dir"),
+                    }
+                ],
+            ),
+            Node(
+                package="lpv_sysid",
+                executable="data_logger_node",
+                name="data_logger",
+                namespace=NAMESPACE,
+                output="screen",
+                sigterm_timeout=SIGTERM_TIMEOUT,
+                parameters=[
+                    params("data_logger.yaml"),
+                    {"out_dir": LaunchConfiguration("log_dir")},
+                ],
+            ),
+        ]
+    )

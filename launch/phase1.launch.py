@@ -22,20 +22,47 @@ SIGTERM_TIMEOUT = LaunchConfiguration("sigterm_timeout", default=str(LAUNCH_SIGT
 
 
 def generate_launch_description():
-    return LaunchDescription([
-        *declare_arguments(signals_file="signals.npz", vertex="[0.0, 0.0, 0.0]",
-                           log_dir="phase1_log"),
-        Node(package="lpv_sysid", executable="excitation_node", name="excitation",
-             namespace=NAMESPACE, output="screen", sigterm_timeout=SIGTERM_TIMEOUT,
-             parameters=[params("excitation_node.yaml"),
-                         {"mode": "phase1",
-                          "signals_file": LaunchConfiguration("signals_file"),
-                          "vertex_frd": LaunchConfiguration("vertex")}]),
-        Node(package="lpv_sysid", executable="mavlink_bridge_node", name="mavlink_bridge",
-             namespace=NAMESPACE, output="screen", sigterm_timeout=SIGTERM_TIMEOUT,
-             parameters=[params("mavlink_bridge_node.yaml"), {"command": "velocity"}]),
-        Node(package="lpv_sysid", executable="data_logger_node", name="data_logger",
-             namespace=NAMESPACE, output="screen", sigterm_timeout=SIGTERM_TIMEOUT,
-             parameters=[params("data_logger.yaml"),
-                         {"out_dir": LaunchConfiguration("log_dir")}]),
-    ])
+    return LaunchDescription(
+        [
+            *declare_arguments(
+                signals_file="signals.npz", vertex="[0.0, 0.0, 0.0]", log_dir="phase1_log"
+            ),
+            Node(
+                package="lpv_sysid",
+                executable="excitation_node",
+                name="excitation",
+                namespace=NAMESPACE,
+                output="screen",
+                sigterm_timeout=SIGTERM_TIMEOUT,
+                parameters=[
+                    params("excitation_node.yaml"),
+                    {
+                        "mode": "phase1",
+                        "signals_file": LaunchConfiguration("signals_file"),
+                        "vertex_frd": LaunchConfiguration("vertex"),
+                    },
+                ],
+            ),
+            Node(
+                package="lpv_sysid",
+                executable="mavlink_bridge_node",
+                name="mavlink_bridge",
+                namespace=NAMESPACE,
+                output="screen",
+                sigterm_timeout=SIGTERM_TIMEOUT,
+                parameters=[params("mavlink_bridge_node.yaml"), {"command": "velocity"}],
+            ),
+            Node(
+                package="lpv_sysid",
+                executable="data_logger_node",
+                name="data_logger",
+                namespace=NAMESPACE,
+                output="screen",
+                sigterm_timeout=SIGTERM_TIMEOUT,
+                parameters=[
+                    params("data_logger.yaml"),
+                    {"out_dir": LaunchConfiguration("log_dir")},
+                ],
+            ),
+        ]
+    )

@@ -22,20 +22,52 @@ SIGTERM_TIMEOUT = LaunchConfiguration("sigterm_timeout", default=str(LAUNCH_SIGT
 
 def generate_launch_description():
     gains = LaunchConfiguration("gains_file")
-    return LaunchDescription([
-        *declare_arguments(gains_file=REQUIRED, signals_file="signals.npz", log_dir="phase2_log"),
-        Node(package="lpv_sysid", executable="excitation_node", name="excitation",
-             namespace=NAMESPACE, output="screen", sigterm_timeout=SIGTERM_TIMEOUT,
-             parameters=[params("excitation_node.yaml"),
-                         {"mode": "phase2", "signals_file": LaunchConfiguration("signals_file")}]),
-        Node(package="lpv_sysid", executable="lpv_controller_node", name="lpv_controller",
-             namespace=NAMESPACE, output="screen", sigterm_timeout=SIGTERM_TIMEOUT,
-             parameters=[params("lpv_controller.yaml"), {"gains_file": gains}]),
-        Node(package="lpv_sysid", executable="mavlink_bridge_node", name="mavlink_bridge",
-             namespace=NAMESPACE, output="screen", sigterm_timeout=SIGTERM_TIMEOUT,
-             parameters=[params("mavlink_bridge_node.yaml"), {"command": "attitude_rate"}]),
-        Node(package="lpv_sysid", executable="data_logger_node", name="data_logger",
-             namespace=NAMESPACE, output="screen", sigterm_timeout=SIGTERM_TIMEOUT,
-             parameters=[params("data_logger.yaml"),
-                         {"out_dir": LaunchConfiguration("log_dir"), "gains_file": gains}]),
-    ])
+    return LaunchDescription(
+        [
+            *declare_arguments(
+                gains_file=REQUIRED, signals_file="signals.npz", log_dir="phase2_log"
+            ),
+            Node(
+                package="lpv_sysid",
+                executable="excitation_node",
+                name="excitation",
+                namespace=NAMESPACE,
+                output="screen",
+                sigterm_timeout=SIGTERM_TIMEOUT,
+                parameters=[
+                    params("excitation_node.yaml"),
+                    {"mode": "phase2", "signals_file": LaunchConfiguration("signals_file")},
+                ],
+            ),
+            Node(
+                package="lpv_sysid",
+                executable="lpv_controller_node",
+                name="lpv_controller",
+                namespace=NAMESPACE,
+                output="screen",
+                sigterm_timeout=SIGTERM_TIMEOUT,
+                parameters=[params("lpv_controller.yaml"), {"gains_file": gains}],
+            ),
+            Node(
+                package="lpv_sysid",
+                executable="mavlink_bridge_node",
+                name="mavlink_bridge",
+                namespace=NAMESPACE,
+                output="screen",
+                sigterm_timeout=SIGTERM_TIMEOUT,
+                parameters=[params("mavlink_bridge_node.yaml"), {"command": "attitude_rate"}],
+            ),
+            Node(
+                package="lpv_sysid",
+                executable="data_logger_node",
+                name="data_logger",
+                namespace=NAMESPACE,
+                output="screen",
+                sigterm_timeout=SIGTERM_TIMEOUT,
+                parameters=[
+                    params("data_logger.yaml"),
+                    {"out_dir": LaunchConfiguration("log_dir"), "gains_file": gains},
+                ],
+            ),
+        ]
+    )

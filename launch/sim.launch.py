@@ -38,30 +38,84 @@ SIM_TIME = {"use_sim_time": True}
 def generate_launch_description():
     phase = LaunchConfiguration("phase")
     is_phase2 = IfCondition(PythonExpression(["'", phase, "' == '2'"]))
-    return LaunchDescription([
-        DeclareLaunchArgument("phase", default_value="1", choices=["1", "2"],
-                              description="1: baseline + excitation, 2: LPV controller"),
-        *declare_arguments(signals_file="signals.npz", gains_file="gains.yaml",
-                           vertex="[0.0, 0.0, 0.0]", log_dir="sim_log",
-                           notes={"gains_file": "phase 2 only", "vertex": "phase 1 only"}),
-        Node(package="lpv_sysid", executable="sim_vehicle_node", name="sim_vehicle",
-             namespace=NAMESPACE, output="screen", sigterm_timeout=SIGTERM_TIMEOUT,
-             parameters=[params("sim_vehicle.yaml"),
-                         {"mode": PythonExpression(["'lpv' if '", phase, "' == '2' else 'baseline'"]),
-                          "lockstep": True}]),
-        Node(package="lpv_sysid", executable="excitation_node", name="excitation",
-             namespace=NAMESPACE, output="screen", sigterm_timeout=SIGTERM_TIMEOUT,
-             parameters=[params("excitation_node.yaml"),
-                         {"mode": PythonExpression(["'phase' + '", phase, "'"]),
-                          "signals_file": LaunchConfiguration("signals_file"),
-                          "vertex_frd": LaunchConfiguration("vertex"), **SIM_TIME}]),
-        Node(package="lpv_sysid", executable="lpv_controller_node", name="lpv_controller",
-             namespace=NAMESPACE, output="screen", sigterm_timeout=SIGTERM_TIMEOUT, condition=is_phase2,
-             parameters=[params("lpv_controller.yaml"),
-                         {"gains_file": LaunchConfiguration("gains_file"),
-                          "tick_source": "state", "reference_hold": "foh", **SIM_TIME}]),
-        Node(package="lpv_sysid", executable="data_logger_node", name="data_logger",
-             namespace=NAMESPACE, output="screen", sigterm_timeout=SIGTERM_TIMEOUT,
-             parameters=[params("data_logger.yaml"),
-                         {"out_dir": LaunchConfiguration("log_dir"), **SIM_TIME}]),
-    ])
+    return LaunchDescription(
+        [
+            DeclareLaunchArgument(
+                "phase",
+                default_value="1",
+                choices=["1", "2"],
+                description="1: baseline + excitation, 2: LPV controller",
+            ),
+            *declare_arguments(
+                signals_file="signals.npz",
+                gains_file="gains.yaml",
+                vertex="[0.0, 0.0, 0.0]",
+                log_dir="sim_log",
+                notes={"gains_file": "phase 2 only", "vertex": "phase 1 only"},
+            ),
+            Node(
+                package="lpv_sysid",
+                executable="sim_vehicle_node",
+                name="sim_vehicle",
+                namespace=NAMESPACE,
+                output="screen",
+                sigterm_timeout=SIGTERM_TIMEOUT,
+                parameters=[
+                    params("sim_vehicle.yaml"),
+                    {
+                        "mode": PythonExpression(
+                            ["'lpv' if '", phase, "' == '2' else 'baseline'"]
+                        ),
+                        "lockstep": True,
+                    },
+                ],
+            ),
+            Node(
+                package="lpv_sysid",
+                executable="excitation_node",
+                name="excitation",
+                namespace=NAMESPACE,
+                output="screen",
+                sigterm_timeout=SIGTERM_TIMEOUT,
+                parameters=[
+                    params("excitation_node.yaml"),
+                    {
+                        "mode": PythonExpression(["'phase' + '", phase, "'"]),
+                        "signals_file": LaunchConfiguration("signals_file"),
+                        "vertex_frd": LaunchConfiguration("vertex"),
+                        **SIM_TIME,
+                    },
+                ],
+            ),
+            Node(
+                package="lpv_sysid",
+                executable="lpv_controller_node",
+                name="lpv_controller",
+                namespace=NAMESPACE,
+                output="screen",
+                sigterm_timeout=SIGTERM_TIMEOUT,
+                condition=is_phase2,
+                parameters=[
+                    params("lpv_controller.yaml"),
+                    {
+                        "gains_file": LaunchConfiguration("gains_file"),
+                        "tick_source": "state",
+                        "reference_hold": "foh",
+                        **SIM_TIME,
+                    },
+                ],
+            ),
+            Node(
+                package="lpv_sysid",
+                executable="data_logger_node",
+                name="data_logger",
+                namespace=NAMESPACE,
+                output="screen",
+                sigterm_timeout=SIGTERM_TIMEOUT,
+                parameters=[
+                    params("data_logger.yaml"),
+                    {"out_dir": LaunchConfiguration("log_dir"), **SIM_TIME},
+                ],
+            ),
+        ]
+    )

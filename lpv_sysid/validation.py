@@ -25,8 +25,14 @@ def is_count(v: Any, minimum: int = 0) -> bool:
     return isinstance(v, int) and not isinstance(v, bool) and v >= minimum
 
 
-def check_keys(d: Any, allowed: Collection[str], where: str, *,
-               required: Collection[str] = (), list_allowed: bool = False) -> None:
+def check_keys(
+    d: Any,
+    allowed: Collection[str],
+    where: str,
+    *,
+    required: Collection[str] = (),
+    list_allowed: bool = False,
+) -> None:
     """Raise ConfigError unless ``d`` is a mapping whose keys are in ``allowed``.
 
     Messages (checked in this order): ``"{where}: expected a mapping, got {type}"``,

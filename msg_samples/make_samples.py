@@ -29,9 +29,22 @@ CONFIG = os.path.join(ROOT, "config")
 
 def _signals(config: str, tmp: str) -> str:
     out = os.path.join(tmp, os.path.basename(config).replace(".yaml", ""))
-    subprocess.run([sys.executable, "-m", "lpv_sysid.cli.main", "signals", "--config",
-                    os.path.join(CONFIG, config), "--out", out, "--no-plot"], check=True,
-                   cwd=ROOT, stdout=subprocess.DEVNULL)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "lpv_sysid.cli.main",
+            "signals",
+            "--config",
+            os.path.join(CONFIG, config),
+            "--out",
+            out,
+            "--no-plot",
+        ],
+        check=True,
+        cwd=ROOT,
+        stdout=subprocess.DEVNULL,
+    )
     return os.path.join(out, "signals.npz")
 
 
@@ -56,18 +69,34 @@ def phase1(out_dir: str, signals: str, seconds: float = 5.0) -> str:
     from lpv_sysid.nodes.data_logger_node import DataLoggerNode
     from lpv_sysid.nodes.excitation_node import ExcitationNode
     from lpv_sysid.nodes.sim_vehicle_node import SimVehicleNode
+
     standin.reset()
     rclpy.init()
     path = os.path.join(out_dir, "phase1_sim")
     nodes = [
-        SimVehicleNode(cli_args=_args("sim_vehicle.yaml", mode="baseline",
-                                      initial_velocity_frd="[2.0,0.0,0.0]", seed=1)),
-        ExcitationNode(cli_args=_args("excitation_node.yaml", signals_file=signals,
-                                      mode="phase1", vertex_frd="[2.0,0.0,0.0]", ramp_s=1.0,
-                                      auto_start=True)),
-        DataLoggerNode(cli_args=_args("data_logger.yaml", out_dir=path, split_size_mb=0.0,
-                                      description="phase 1 sample - sim_vehicle baseline, "
-                                                  "vertex (2, 0, 0) m/s FRD")),
+        SimVehicleNode(
+            cli_args=_args(
+                "sim_vehicle.yaml", mode="baseline", initial_velocity_frd="[2.0,0.0,0.0]", seed=1
+            )
+        ),
+        ExcitationNode(
+            cli_args=_args(
+                "excitation_node.yaml",
+                signals_file=signals,
+                mode="phase1",
+                vertex_frd="[2.0,0.0,0.0]",
+                ramp_s=1.0,
+                auto_start=True,
+            )
+        ),
+        DataLoggerNode(
+            cli_args=_args(
+                "data_logger.yaml",
+                out_dir=path,
+                split_size_mb=0.0,
+                description="phase 1 sample - sim_vehicle baseline, vertex (2, 0, 0) m/s FRD",
+            )
+        ),
     ]
     _run(nodes, seconds)
     rclpy.shutdown()
@@ -80,19 +109,33 @@ def phase2(out_dir: str, signals: str, gains: str, seconds: float = 5.0) -> str:
     from lpv_sysid.nodes.excitation_node import ExcitationNode
     from lpv_sysid.nodes.lpv_controller_node import LpvControllerNode
     from lpv_sysid.nodes.sim_vehicle_node import SimVehicleNode
+
     standin.reset()
     rclpy.init()
     path = os.path.join(out_dir, "phase2_sim")
     nodes = [
         SimVehicleNode(cli_args=_args("sim_vehicle.yaml", mode="lpv", seed=2)),
-        ExcitationNode(cli_args=_args("excitation_node.yaml", signals_file=signals,
-                                      mode="phase2", ramp_s=1.0, auto_start=True)),
-        LpvControllerNode(cli_args=_args("lpv_controller.yaml", gains_file=gains,
-                                         auto_start=True)),
-        DataLoggerNode(cli_args=_args("data_logger.yaml", out_dir=path, split_size_mb=0.0,
-                                      gains_file=gains,
-                                      description="phase 2 sample - LPV controller on "
-                                                  "sim_vehicle (lpv mode)")),
+        ExcitationNode(
+            cli_args=_args(
+                "excitation_node.yaml",
+                signals_file=signals,
+                mode="phase2",
+                ramp_s=1.0,
+                auto_start=True,
+            )
+        ),
+        LpvControllerNode(
+            cli_args=_args("lpv_controller.yaml", gains_file=gains, auto_start=True)
+        ),
+        DataLoggerNode(
+            cli_args=_args(
+                "data_logger.yaml",
+                out_dir=path,
+                split_size_mb=0.0,
+                gains_file=gains,
+                description="phase 2 sample - LPV controller on sim_vehicle (lpv mode)",
+            )
+        ),
     ]
     _run(nodes, seconds)
     rclpy.shutdown()
@@ -102,13 +145,16 @@ def phase2(out_dir: str, signals: str, gains: str, seconds: float = 5.0) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=HERE)
-    ap.add_argument("--gains", default=os.path.join(HERE, "gains.yaml"),
-                    help="gains.yaml for the phase-2 sample (written with LQR test gains "
-                         "when missing)")
+    ap.add_argument(
+        "--gains",
+        default=os.path.join(HERE, "gains.yaml"),
+        help="gains.yaml for the phase-2 sample (written with LQR test gains when missing)",
+    )
     args = ap.parse_args(argv)
     if not os.path.exists(args.gains):
         from lpv_test_gains import write_gains
-        print("wrote", write_gains(args.gains, box=5.0))   # the box of signals_phase2.yaml
+
+        print("wrote", write_gains(args.gains, box=5.0))  # the box of signals_phase2.yaml
     with tempfile.TemporaryDirectory() as tmp:
         for name in ("phase1_sim", "phase2_sim"):
             shutil.rmtree(os.path.join(args.out, name), ignore_errors=True)

@@ -35,13 +35,17 @@ def _uses_standin(path: str) -> bool:
 collect_ignore = []
 if REAL_RCLPY:
     here = os.path.dirname(os.path.abspath(__file__))
-    collect_ignore = sorted(f for f in os.listdir(here)
-                            if f.startswith("test_") and f.endswith(".py")
-                            and _uses_standin(os.path.join(here, f)))
+    collect_ignore = sorted(
+        f
+        for f in os.listdir(here)
+        if f.startswith("test_") and f.endswith(".py") and _uses_standin(os.path.join(here, f))
+    )
 
 
 def pytest_report_header(config):
     if REAL_RCLPY:
-        return [f"rclpy: real ({len(collect_ignore)} stand-in test files not collected: "
-                f"{', '.join(collect_ignore)})"]
+        return [
+            f"rclpy: real ({len(collect_ignore)} stand-in test files not collected: "
+            f"{', '.join(collect_ignore)})"
+        ]
     return ["rclpy: in-repo stand-in (test/support); real-ROS tests skip"]

@@ -23,8 +23,12 @@ def sample_set(i):
     """Values and messages for every topic of DESIGN.md at sample i."""
     ns = T0 + i * 10_000_000
     vals = {
-        "state": (RNG.normal(size=3), np.array([0.1, -0.2, 0.3]) * RNG.uniform(-1, 1, 3),
-                  RNG.normal(size=3), RNG.normal(size=3)),
+        "state": (
+            RNG.normal(size=3),
+            np.array([0.1, -0.2, 0.3]) * RNG.uniform(-1, 1, 3),
+            RNG.normal(size=3),
+            RNG.normal(size=3),
+        ),
         "rotor_speeds": RNG.uniform(300, 900, 4),
         "imu": (RNG.normal(size=3), RNG.normal(size=3)),
         "velocity_reference": (RNG.normal(size=3), float(RNG.normal())),
@@ -112,20 +116,25 @@ def test_metadata_definitions_and_qos(tmp_path, storage):
         b.add_topic("/s", "nav_msgs/msg/Odometry", qos={"reliability": "best_effort", "depth": 5})
         b.add_topic("/j", "sensor_msgs/msg/JointState")
         b.write("/j", 7, m.rotor_speeds_msg(F, 7, np.ones(4)))
-    meta = yaml.safe_load((tmp_path / "b" / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    meta = yaml.safe_load((tmp_path / "b" / "metadata.yaml").read_text())[
+        "rosbag2_bagfile_information"
+    ]
     assert meta["version"] == 9
     assert meta["storage_identifier"] == storage
     assert meta["message_count"] == 1
     ts = bg.jazzy_typestore()
     tops = {t["topic_metadata"]["name"]: t for t in meta["topics_with_message_count"]}
     assert tops["/s"]["message_count"] == 0 and tops["/j"]["message_count"] == 1
-    assert tops["/s"]["topic_metadata"]["type_description_hash"] == ts.hash_rihs01("nav_msgs/msg/Odometry")
+    assert tops["/s"]["topic_metadata"]["type_description_hash"] == ts.hash_rihs01(
+        "nav_msgs/msg/Odometry"
+    )
     assert tops["/s"]["topic_metadata"]["serialization_format"] == "cdr"
     qos = tops["/s"]["topic_metadata"]["offered_qos_profiles"][0]
     assert (qos["reliability"], qos["depth"], qos["durability"]) == ("best_effort", 5, "volatile")
     qos = tops["/j"]["topic_metadata"]["offered_qos_profiles"][0]
     assert (qos["reliability"], qos["depth"], qos["history"]) == ("reliable", 10, "keep_last")
     from rosbags.rosbag2 import Reader
+
     with Reader(tmp_path / "b") as r:
         for c in r.connections:
             assert c.msgdef.data == ts.generate_msgdef(c.msgtype, ros_version=2)[0]
@@ -140,7 +149,7 @@ def test_bad_qos(tmp_path):
 
 
 def test_counts_and_rates(tmp_path):
-    joint_bag(tmp_path / "b", 101, step=10_000_000)          # 100 Hz for exactly 1 s
+    joint_bag(tmp_path / "b", 101, step=10_000_000)  # 100 Hz for exactly 1 s
     info = bg.topic_info(tmp_path / "b")
     s = info["/e"]
     assert s.msgtype == "sensor_msgs/msg/JointState"
@@ -159,8 +168,10 @@ def test_out_of_order_writes_read_back_sorted(tmp_path):
             b.write("/e", ns, m.excitation_msg(F, ns, np.full(4, float(k))))
     data = bg.read_bag(tmp_path / "b")
     assert [ns for ns, _ in data["/e"]] == sorted(stamps)
-    assert values(data) == [1.0, 3.0, 2.0, 0.0]      # equal stamps keep write order
-    meta = yaml.safe_load((tmp_path / "b" / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert values(data) == [1.0, 3.0, 2.0, 0.0]  # equal stamps keep write order
+    meta = yaml.safe_load((tmp_path / "b" / "metadata.yaml").read_text())[
+        "rosbag2_bagfile_information"
+    ]
     assert meta["starting_time"]["nanoseconds_since_epoch"] == T0 + 10
     assert meta["duration"]["nanoseconds"] == 20
 
@@ -196,7 +207,7 @@ def test_truncated_mcap(tmp_path):
     data = bg.read_bag(tmp_path / "b", strict=False)
     got = values(data)
     assert 20 < len(got) < 200
-    assert got == [float(i) for i in range(len(got))]       # an exact prefix
+    assert got == [float(i) for i in range(len(got))]  # an exact prefix
     assert any("truncated record" in p for p in data.problems)
     assert bg.topic_info(tmp_path / "b", strict=False)["/e"].count == len(got)
 
@@ -230,7 +241,7 @@ def test_truncated_sqlite(tmp_path):
     assert any("truncated" in p for p in data.problems)
     got = values(data)
     assert 20 < len(got) < 400
-    assert got == [float(i) for i in range(len(got))]       # an exact prefix
+    assert got == [float(i) for i in range(len(got))]  # an exact prefix
 
 
 def test_truncated_sqlite_large_rows_never_zero_filled(tmp_path):
@@ -249,7 +260,9 @@ def test_truncated_sqlite_large_rows_never_zero_filled(tmp_path):
     assert 0 < len(got) < 30
     for i, (ns, msg) in enumerate(got):
         assert ns == i
-        np.testing.assert_array_equal(m.channels_from_joint_state(msg, names)[1], np.arange(1000) + 1.0 + i)
+        np.testing.assert_array_equal(
+            m.channels_from_joint_state(msg, names)[1], np.arange(1000) + 1.0 + i
+        )
 
 
 def test_crash_before_close_keeps_flushed_messages(tmp_path):
@@ -260,7 +273,7 @@ def test_crash_before_close_keeps_flushed_messages(tmp_path):
     b.flush(fsync=True)
     for i in range(40, 50):
         b.write("/e", T0 + i, m.excitation_msg(F, T0 + i, np.full(4, float(i))))
-    b._writer.storage.bio.close()             # process dies: no footer, no metadata.yaml
+    b._writer.storage.bio.close()  # process dies: no footer, no metadata.yaml
     data = bg.read_bag(tmp_path / "b", strict=False)
     assert values(data) == [float(i) for i in range(40)]
 
@@ -326,11 +339,14 @@ def test_disk_full_sqlite_closes_readable(tmp_path):
             raise sqlite3.OperationalError("database or disk is full")
 
     b._writer.storage.cursor = FullCursor()
-    with pytest.raises(BagError, match=r"writing '/e' failed \(OperationalError: database or "
-                       r"disk is full\); closed; all 10 message\(s\) written are readable"):
+    with pytest.raises(
+        BagError,
+        match=r"writing '/e' failed \(OperationalError: database or "
+        r"disk is full\); closed; all 10 message\(s\) written are readable",
+    ):
         b.write("/e", T0 + 10, m.excitation_msg(F, T0 + 10, np.zeros(4)))
     assert not b.is_open
-    data = bg.read_bag(tmp_path / "b")     # committed (not rolled back), metadata.yaml written
+    data = bg.read_bag(tmp_path / "b")  # committed (not rolled back), metadata.yaml written
     assert values(data) == [float(i) for i in range(10)]
     assert b.durable_counts == {"/e": 10}
 
@@ -348,7 +364,7 @@ def test_transient_write_error_closes_bag_cleanly(tmp_path):
     b._writer.write = fail_once
     with pytest.raises(BagError, match=r"writing '/e' failed \(EIO: Input/output error\); closed"):
         b.write("/e", 2, m.excitation_msg(F, 2, np.ones(4)))
-    data = bg.read_bag(tmp_path / "b")                 # strict: footer and metadata present
+    data = bg.read_bag(tmp_path / "b")  # strict: footer and metadata present
     assert len(data["/e"]) == 1
 
 
@@ -371,12 +387,14 @@ def test_writer_errors(tmp_path):
         with pytest.raises(BagError, match=r"unknown message type 'foo/msg/Bar'"):
             b.add_topic("/x", "foo/msg/Bar")
         b.add_topic("/e", "sensor_msgs/msg/JointState")
-        b.add_topic("/e", "sensor_msgs/msg/JointState")          # idempotent
+        b.add_topic("/e", "sensor_msgs/msg/JointState")  # idempotent
         with pytest.raises(BagError, match="already registered as sensor_msgs/msg/JointState"):
             b.add_topic("/e", "nav_msgs/msg/Odometry")
         with pytest.raises(BagError, match=r"topic '/y' was not added"):
             b.write("/y", 1, m.excitation_msg(F, 1, np.zeros(4)))
-        with pytest.raises(BagError, match=r"has type sensor_msgs/msg/JointState, got a nav_msgs/msg/Odometry"):
+        with pytest.raises(
+            BagError, match=r"has type sensor_msgs/msg/JointState, got a nav_msgs/msg/Odometry"
+        ):
             b.write("/e", 1, m.odometry_from_state(F, 1, *np.zeros((4, 3))))
         with pytest.raises(BagError, match=r"stamp -5 ns outside"):
             b.write("/e", -5, m.excitation_msg(F, 1, np.zeros(4)))

@@ -20,17 +20,42 @@ TOPICS = {f"/lpv_sysid/{k}": v for k, v in m.TYPES.items()}
 def sample_msgs(i, rng):
     ns = T0 + i * 10_000_000
     return ns, {
-        "state": m.odometry_from_state(F, ns, rng.normal(size=3), rng.uniform(-1, 1, 3) * 0.3,
-                                       rng.normal(size=3), rng.normal(size=3)),
-        "rotor_speeds": m.rotor_speeds_msg(F, ns, rng.uniform(300, 900, 4),
-                                           source="estimated" if i % 3 == 0 else "esc"),
-        "imu": m.imu_msg(F, ns, rng.normal(size=3), rng.normal(size=3),
-                         None if i % 2 else rng.uniform(-1, 1, 3) * 0.3),
-        "velocity_reference": m.twist_reference_msg(F, ns, rng.normal(size=3), float(rng.normal())),
+        "state": m.odometry_from_state(
+            F,
+            ns,
+            rng.normal(size=3),
+            rng.uniform(-1, 1, 3) * 0.3,
+            rng.normal(size=3),
+            rng.normal(size=3),
+        ),
+        "rotor_speeds": m.rotor_speeds_msg(
+            F, ns, rng.uniform(300, 900, 4), source="estimated" if i % 3 == 0 else "esc"
+        ),
+        "imu": m.imu_msg(
+            F,
+            ns,
+            rng.normal(size=3),
+            rng.normal(size=3),
+            None if i % 2 else rng.uniform(-1, 1, 3) * 0.3,
+        ),
+        "velocity_reference": m.twist_reference_msg(
+            F, ns, rng.normal(size=3), float(rng.normal())
+        ),
         "excitation": m.excitation_msg(F, ns, rng.uniform(-1, 1, 4)),
         "actuator_command": m.actuator_command_msg(F, ns, rng.normal(size=4)),
-        "status": m.diagnostic_array(F, ns, [m.diagnostic_status(
-            F, "WARN" if i % 2 else "OK", f"node{i % 4}", "x" * (i % 5), {"k": i / 3, "n": i})]),
+        "status": m.diagnostic_array(
+            F,
+            ns,
+            [
+                m.diagnostic_status(
+                    F,
+                    "WARN" if i % 2 else "OK",
+                    f"node{i % 4}",
+                    "x" * (i % 5),
+                    {"k": i / 3, "n": i},
+                )
+            ],
+        ),
     }
 
 
@@ -51,6 +76,7 @@ def reference(path, topics=None):
     """What rosbags gives: AnyReader's records deserialised one by one, per topic sorted by
     stamp (stable)."""
     from rosbags.highlevel import AnyReader
+
     out = {}
     p = path if not path.is_dir() else path
     with AnyReader([p], default_typestore=TS) as r:
@@ -68,11 +94,18 @@ def reference(path, topics=None):
 def same(a, b):
     """Deep equality of rosbags messages, including value types and array dtypes."""
     if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
-        return (type(a) is type(b) and a.dtype == b.dtype and a.shape == b.shape
-                and np.array_equal(a, b, equal_nan=True))
+        return (
+            type(a) is type(b)
+            and a.dtype == b.dtype
+            and a.shape == b.shape
+            and np.array_equal(a, b, equal_nan=True)
+        )
     if hasattr(a, "__dataclass_fields__"):
-        return type(a) is type(b) and all(same(getattr(a, f), getattr(b, f))
-                                          for f in a.__dataclass_fields__ if f != "__msgtype__")
+        return type(a) is type(b) and all(
+            same(getattr(a, f), getattr(b, f))
+            for f in a.__dataclass_fields__
+            if f != "__msgtype__"
+        )
     if isinstance(a, list):
         return isinstance(b, list) and len(a) == len(b) and all(same(x, y) for x, y in zip(a, b))
     if isinstance(a, float) and isinstance(b, float) and np.isnan(a) and np.isnan(b):
@@ -95,17 +128,21 @@ def test_read_bag_equals_rosbags_deserialisation(tmp_path, storage):
         assert [ns for ns, _ in got[t]] == [ns for ns, _ in ref[t]], t
         assert all(same(a, b) for (_, a), (_, b) in zip(got[t], ref[t])), t
     msg = got["/lpv_sysid/rotor_speeds"][0][1]
-    assert not msg.velocity.flags.writeable          # read-only like rosbags' arrays
+    assert not msg.velocity.flags.writeable  # read-only like rosbags' arrays
     sub = bg.read_bag(tmp_path / "b", topics=["/lpv_sysid/state"], optional=["/nope"])
     assert set(sub) == {"/lpv_sysid/state"}
-    assert all(same(a, b) for (_, a), (_, b) in zip(sub["/lpv_sysid/state"], ref["/lpv_sysid/state"]))
+    assert all(
+        same(a, b) for (_, a), (_, b) in zip(sub["/lpv_sysid/state"], ref["/lpv_sysid/state"])
+    )
 
 
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
 def test_read_arrays_equal_rosbags_values(tmp_path, storage):
     write_all(tmp_path / "b", storage)
     ref = reference(tmp_path / "b")
-    arr = bg.read_arrays(tmp_path / "b", topics=[t for t in TOPICS if not t.endswith("status")] + ["/empty"])
+    arr = bg.read_arrays(
+        tmp_path / "b", topics=[t for t in TOPICS if not t.endswith("status")] + ["/empty"]
+    )
     for t, rows in ref.items():
         if t.endswith("status"):
             continue
@@ -119,12 +156,13 @@ def test_read_arrays_equal_rosbags_values(tmp_path, storage):
                 assert np.array_equal(np.asarray(x), np.asarray(y)), (t, path)
                 if isinstance(y, np.ndarray):
                     assert x.dtype == y.dtype, (t, path)
-                else:                                # a scalar: same Python type
+                else:  # a scalar: same Python type
                     assert type(x.item()) is type(y), (t, path)
         for path, col in a.strings.items():
             want = [leaf(msg, path) for _, msg in rows]
-            assert [tuple(x) if isinstance(x, tuple) else x for x in col] == \
-                [tuple(y) if isinstance(y, list) else y for y in want], (t, path)
+            assert [tuple(x) if isinstance(x, tuple) else x for x in col] == [
+                tuple(y) if isinstance(y, list) else y for y in want
+            ], (t, path)
     odom = arr["/lpv_sysid/state"]
     assert set(odom.strings) == {"header.frame_id", "child_frame_id"}
     assert odom.fields["pose.covariance"].shape == (len(odom), 36)
@@ -140,26 +178,44 @@ def test_read_arrays_mixed_layouts_and_irregular_topics(tmp_path):
         b.add_topic("/r", "sensor_msgs/msg/JointState")
         b.add_topic("/j", "sensor_msgs/msg/JointState")
         for i in range(30):
-            b.write("/r", i, m.rotor_speeds_msg(F, i, np.full(4, i + 0.5),
-                                                source="estimated" if i % 4 == 1 else "esc"))
-            b.write("/j", i, m.joint_state(F, i, [f"a{k}" for k in range(1 + i % 3)],
-                                           position=np.arange(1 + i % 3, dtype=float)))
+            b.write(
+                "/r",
+                i,
+                m.rotor_speeds_msg(
+                    F, i, np.full(4, i + 0.5), source="estimated" if i % 4 == 1 else "esc"
+                ),
+            )
+            b.write(
+                "/j",
+                i,
+                m.joint_state(
+                    F,
+                    i,
+                    [f"a{k}" for k in range(1 + i % 3)],
+                    position=np.arange(1 + i % 3, dtype=float),
+                ),
+            )
     a = bg.read_arrays(tmp_path / "b", topics=["/r"])["/r"]
     assert a.fields["velocity"][:, 0].tolist() == [i + 0.5 for i in range(30)]
-    assert a.strings["header.frame_id"].tolist() == ["estimated" if i % 4 == 1 else "base_link"
-                                                     for i in range(30)]
+    assert a.strings["header.frame_id"].tolist() == [
+        "estimated" if i % 4 == 1 else "base_link" for i in range(30)
+    ]
     with pytest.raises(BagError, match="different structure"):
         bg.read_arrays(tmp_path / "b", topics=["/j"])
     lax = bg.read_arrays(tmp_path / "b", strict=False)
     assert "/j" not in lax and any("different structure" in p for p in lax.problems)
-    assert [len(msg.name) for _, msg in bg.read_bag(tmp_path / "b")["/j"]] == [1 + i % 3 for i in range(30)]
+    assert [len(msg.name) for _, msg in bg.read_bag(tmp_path / "b")["/j"]] == [
+        1 + i % 3 for i in range(30)
+    ]
 
 
 def test_block_decode_of_odd_bytes_matches_rosbags():
     """Bool bytes other than 0/1, signed ``byte``, unsigned ``char``: as rosbags reads them."""
-    for msgtype, raw in (("std_msgs/msg/Bool", b"\x00\x01\x00\x00\x02"),
-                         ("std_msgs/msg/Byte", b"\x00\x01\x00\x00\xf0"),
-                         ("std_msgs/msg/Char", b"\x00\x01\x00\x00\xf0")):
+    for msgtype, raw in (
+        ("std_msgs/msg/Bool", b"\x00\x01\x00\x00\x02"),
+        ("std_msgs/msg/Byte", b"\x00\x01\x00\x00\xf0"),
+        ("std_msgs/msg/Char", b"\x00\x01\x00\x00\xf0"),
+    ):
         lay = bg._LAYOUTS.for_record(TS, msgtype, raw)
         assert lay is not None
         got = lay.decode(np.frombuffer(raw, np.uint8).reshape(1, -1))["data"][0]
@@ -170,11 +226,13 @@ def test_block_decode_of_odd_bytes_matches_rosbags():
 def test_layout_probe_catches_a_wrong_offset():
     msg = m.odometry_from_state(F, 5, np.ones(3), np.zeros(3), np.ones(3), np.ones(3))
     lay = bg.CdrLayout.from_message(TS, "nav_msgs/msg/Odometry", msg)
-    lay.probe(TS)                                   # the real layout passes
+    lay.probe(TS)  # the real layout passes
     leaves = list(lay.leaves.values())
     k = next(i for i, lf in enumerate(leaves) if lf.path == "twist.twist.linear.y")
     leaves[k] = bg._Leaf(leaves[k].path, leaves[k].offset + 8, leaves[k].rostype, None)
-    broken = bg.CdrLayout(lay.msgtype, lay.template, leaves, lay.strings, lay.struct_index, lay.counts)
+    broken = bg.CdrLayout(
+        lay.msgtype, lay.template, leaves, lay.strings, lay.struct_index, lay.counts
+    )
     with pytest.raises(bg.LayoutError, match="disagrees with rosbags"):
         broken.probe(TS)
 
@@ -188,10 +246,14 @@ def test_topic_info_from_index_equals_records(tmp_path):
     for t, rows in ref.items():
         s = info[t]
         stamps = [ns for ns, _ in rows]
-        assert (s.count, s.start_ns, s.end_ns) == (len(rows), min(stamps, default=None), max(stamps, default=None))
+        assert (s.count, s.start_ns, s.end_ns) == (
+            len(rows),
+            min(stamps, default=None),
+            max(stamps, default=None),
+        )
         assert s.msgtype == (TOPICS.get(t) or "sensor_msgs/msg/Imu")
     mcap = next((tmp_path / "b").glob("*.mcap"))
-    assert bg.topic_info(mcap) == info               # bare file: the same summary
+    assert bg.topic_info(mcap) == info  # bare file: the same summary
 
 
 def test_metadata_that_disagrees_with_the_file_goes_through_rosbags(tmp_path):
@@ -246,7 +308,8 @@ def test_damaged_files_read_as_rosbags_reads_them(tmp_path):
         assert set(got) == set(ref), pos
         for t in ref:
             assert len(got[t]) == len(ref[t]) and all(
-                a0 == b0 and same(a1, b1) for (a0, a1), (b0, b1) in zip(got[t], ref[t])), (pos, t)
+                a0 == b0 and same(a1, b1) for (a0, a1), (b0, b1) in zip(got[t], ref[t])
+            ), (pos, t)
 
 
 # ------------------------------------------------------------------------- writing
@@ -255,7 +318,13 @@ def _rows(n, rng):
     for i in range(n):
         ns, msgs = sample_msgs(i, rng)
         for k, msg in msgs.items():
-            out.append((f"/lpv_sysid/{k}", ns + (k == "imu"), bytes(TS.serialize_cdr(msg, TOPICS[f"/lpv_sysid/{k}"]))))
+            out.append(
+                (
+                    f"/lpv_sysid/{k}",
+                    ns + (k == "imu"),
+                    bytes(TS.serialize_cdr(msg, TOPICS[f"/lpv_sysid/{k}"])),
+                )
+            )
     return out
 
 
@@ -265,8 +334,9 @@ def test_write_many_writes_the_file_write_raw_writes(tmp_path):
     for name, bulk in (("a", False), ("b", True)):
         (tmp_path / name).mkdir()
         tick = itertools.count(0.0, 0.011)
-        with bg.BagWriter(tmp_path / name / "bag", chunk_bytes=5000, flush_messages=37,
-                          clock=lambda: next(tick)) as w:
+        with bg.BagWriter(
+            tmp_path / name / "bag", chunk_bytes=5000, flush_messages=37, clock=lambda: next(tick)
+        ) as w:
             for t, ty in TOPICS.items():
                 w.add_topic(t, ty)
             if bulk:
@@ -277,15 +347,18 @@ def test_write_many_writes_the_file_write_raw_writes(tmp_path):
             results.append((w.flushes, dict(w.durable_counts)))
     fa, fb = ((tmp_path / n / "bag" / "bag.mcap").read_bytes() for n in "ab")
     assert fa == fb
-    assert (tmp_path / "a" / "bag" / "metadata.yaml").read_text() == \
-        (tmp_path / "b" / "bag" / "metadata.yaml").read_text()
+    assert (tmp_path / "a" / "bag" / "metadata.yaml").read_text() == (
+        tmp_path / "b" / "bag" / "metadata.yaml"
+    ).read_text()
     assert results[0] == results[1] and results[0][0] > 5
 
 
 def test_write_many_checks_like_write_raw(tmp_path):
     with bg.BagWriter(tmp_path / "b", storage="sqlite3") as w:
         w.add_topic("/e", "sensor_msgs/msg/JointState")
-        data = bytes(TS.serialize_cdr(m.excitation_msg(F, 1, np.ones(4)), "sensor_msgs/msg/JointState"))
+        data = bytes(
+            TS.serialize_cdr(m.excitation_msg(F, 1, np.ones(4)), "sensor_msgs/msg/JointState")
+        )
         assert w.write_many([("/e", 1, data), ("/e", 2, data)]) == 2
     assert len(bg.read_bag(tmp_path / "b")["/e"]) == 2
     with bg.BagWriter(tmp_path / "c") as w:
@@ -305,13 +378,26 @@ def test_encode_block_is_serialize_cdr():
     vel = rng.normal(size=(n, 4))
     vel[0, 1] = -0.0
     tmpl = m.rotor_speeds_msg(F, 0, np.zeros(4))
-    block = bg.encode_block("sensor_msgs/msg/JointState", tmpl, {
-        "header.stamp.sec": stamps // 10**9, "header.stamp.nanosec": stamps % 10**9, "velocity": vel})
+    block = bg.encode_block(
+        "sensor_msgs/msg/JointState",
+        tmpl,
+        {
+            "header.stamp.sec": stamps // 10**9,
+            "header.stamp.nanosec": stamps % 10**9,
+            "velocity": vel,
+        },
+    )
     for k in range(n):
-        want = bytes(TS.serialize_cdr(m.rotor_speeds_msg(F, int(stamps[k]), vel[k]), "sensor_msgs/msg/JointState"))
+        want = bytes(
+            TS.serialize_cdr(
+                m.rotor_speeds_msg(F, int(stamps[k]), vel[k]), "sensor_msgs/msg/JointState"
+            )
+        )
         assert block[k].tobytes() == want
     with pytest.raises(bg.LayoutError, match="outside uint32"):
-        bg.encode_block("sensor_msgs/msg/JointState", tmpl, {"header.stamp.nanosec": np.full(2, -1)})
+        bg.encode_block(
+            "sensor_msgs/msg/JointState", tmpl, {"header.stamp.nanosec": np.full(2, -1)}
+        )
     with pytest.raises(bg.LayoutError, match="expected shape"):
         bg.encode_block("sensor_msgs/msg/JointState", tmpl, {"velocity": np.zeros((2, 3))})
     with pytest.raises(bg.LayoutError, match="no numeric field"):

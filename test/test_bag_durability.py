@@ -60,8 +60,12 @@ def leftovers(root) -> list[str]:
     for dirpath, _, names in os.walk(root):
         for n in names:
             p = Path(dirpath) / n
-            if n.endswith(".tmp") or n.endswith("-journal") or n in (bg.LOCK_FILE, LOCK_FILE) \
-                    or p.stat().st_size == 0:
+            if (
+                n.endswith(".tmp")
+                or n.endswith("-journal")
+                or n in (bg.LOCK_FILE, LOCK_FILE)
+                or p.stat().st_size == 0
+            ):
                 bad.append(str(p.relative_to(root)))
     return bad
 
@@ -113,7 +117,7 @@ def record_and_kill(tmp_path, storage, seconds=3.0):
     written = []
     for line in side.read_text().splitlines():
         parts = line.split()
-        if len(parts) == 2:                 # the last line may be cut by the kill
+        if len(parts) == 2:  # the last line may be cut by the kill
             written.append((int(parts[0]), float(parts[1])))
     return out, written, t_kill
 
@@ -121,7 +125,7 @@ def record_and_kill(tmp_path, storage, seconds=3.0):
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
 def test_kill9_at_1khz_readable_by_anyreader_after_repair(tmp_path, storage, capsys):
     out, written, t_kill = record_and_kill(tmp_path, storage)
-    old = [k for k, t in written if t <= t_kill - 1.0]          # written > 1 s before the kill
+    old = [k for k, t in written if t <= t_kill - 1.0]  # written > 1 s before the kill
     assert len(old) > 1000 and len(written) > 2000
     bag = out / "bag_0000"
     # what the kill left: no metadata.yaml (AnyReader refuses), experiment.yaml "recording"
@@ -157,14 +161,17 @@ def test_kill9_at_1khz_readable_by_anyreader_after_repair(tmp_path, storage, cap
 def test_logger_restart_on_killed_recording_repairs_it(tmp_path):
     out, written, _ = record_and_kill(tmp_path, "mcap", seconds=1.5)
     cfg = RecorderConfig(out_dir=str(out), topics={"/a": JS})
-    with pytest.raises(BagError, match=r"not empty: it held an interrupted recording, now "
-                       r"repaired \(experiment.yaml: status recording -> incomplete; \d+ "
-                       r"message\(s\) readable in 1 bag\(s\)\); choose a new out_dir"):
+    with pytest.raises(
+        BagError,
+        match=r"not empty: it held an interrupted recording, now "
+        r"repaired \(experiment.yaml: status recording -> incomplete; \d+ "
+        r"message\(s\) readable in 1 bag\(s\)\); choose a new out_dir",
+    ):
         Recorder(cfg).start(T0)
     got = readable(out / "bag_0000")
     assert 0 < len(got) <= len(written) + 1
     assert meta_of(out)["topics"]["/a"]["count"] == len(got)
-    with pytest.raises(BagError, match=r"exists and is not empty$"):   # now intact: no repair
+    with pytest.raises(BagError, match=r"exists and is not empty$"):  # now intact: no repair
         Recorder(cfg).start(T0)
 
 
@@ -174,8 +181,11 @@ def small_disk(tmp_path):
     """A 4 MiB tmpfs (skipped when this process may not mount one)."""
     disk = tmp_path / "disk"
     disk.mkdir()
-    res = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=4m", "tmpfs", str(disk)],
-                         capture_output=True, text=True)
+    res = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", "size=4m", "tmpfs", str(disk)],
+        capture_output=True,
+        text=True,
+    )
     if res.returncode != 0:
         pytest.skip(f"cannot mount a tmpfs here ({(res.stderr or res.stdout).strip()})")
     try:
@@ -197,7 +207,7 @@ def test_disk_full_bag_opens_and_metadata_claims_no_more(small_disk, storage):
     assert accepted > 5000
     assert "No space left on device" in str(err.value) or "disk is full" in str(err.value)
     rec.stop()
-    got = readable(out / "bag_0000")                    # opens with AnyReader, strict
+    got = readable(out / "bag_0000")  # opens with AnyReader, strict
     # everything record() accepted is readable (the reserve made room for the pending
     # chunk / rows, the index and metadata.yaml); the failing message may be there too
     assert got[:accepted] == list(range(accepted)) and len(got) <= accepted + 1
@@ -230,19 +240,24 @@ def sim_writer(clock):
 
 def test_injected_enospc_mcap_recorder_keeps_every_accepted_message(tmp_path):
     clock = [0.0]
-    rec = Recorder(RecorderConfig(out_dir=str(tmp_path / "exp"), topics={"/a": JS}),
-                   writer_factory=sim_writer(clock))
+    rec = Recorder(
+        RecorderConfig(out_dir=str(tmp_path / "exp"), topics={"/a": JS}),
+        writer_factory=sim_writer(clock),
+    )
     rec.start(T0)
-    for k in range(1700):        # 1 kHz: flushes after k = 500, 1001, 1502 (oldest + 0.5 s)
+    for k in range(1700):  # 1 kHz: flushes after k = 500, 1001, 1502 (oldest + 0.5 s)
         clock[0] = k * 1e-3
         rec.record("/a", T0 + k * 1_000_000, joint(k))
     assert meta_of(tmp_path / "exp")["topics"]["/a"]["count"] == 1503
     storage = rec._writer._writer.storage
-    storage.bio = _FullBio(storage.bio)            # the disk is full from now on
+    storage.bio = _FullBio(storage.bio)  # the disk is full from now on
     accepted = 1700
-    with pytest.raises(BagError, match=r"ENOSPC.*closed; all 2004 message\(s\) written are "
-                       r"readable.*bag_0000 closed with 2004 message\(s\) readable"):
-        for k in range(1700, 2300):                # the next flush (k = 2003) fails
+    with pytest.raises(
+        BagError,
+        match=r"ENOSPC.*closed; all 2004 message\(s\) written are "
+        r"readable.*bag_0000 closed with 2004 message\(s\) readable",
+    ):
+        for k in range(1700, 2300):  # the next flush (k = 2003) fails
             clock[0] = k * 1e-3
             rec.record("/a", T0 + k * 1_000_000, joint(k))
             accepted += 1
@@ -264,8 +279,10 @@ def test_experiment_yaml_counts_committed_data_at_every_moment(tmp_path, storage
     than is on disk and at most 0.5 s of data is not yet in it."""
     clock = [0.0]
     out = tmp_path / "exp"
-    rec = Recorder(RecorderConfig(out_dir=str(out), storage=storage, topics={"/a": JS}),
-                   writer_factory=sim_writer(clock))
+    rec = Recorder(
+        RecorderConfig(out_dir=str(out), storage=storage, topics={"/a": JS}),
+        writer_factory=sim_writer(clock),
+    )
     rec.start(T0)
     seen = []
     for k in range(1600):
@@ -275,11 +292,11 @@ def test_experiment_yaml_counts_committed_data_at_every_moment(tmp_path, storage
         n = meta["topics"]["/a"]["count"]
         assert meta["status"] == "recording"
         assert n == rec._writer.durable_counts["/a"] <= k + 1
-        assert k + 1 - n <= 500                     # <= flush_interval_s of data at risk
+        assert k + 1 - n <= 500  # <= flush_interval_s of data at risk
         if not seen or seen[-1] != n:
             seen.append(n)
         assert not list(out.glob("*.tmp"))
-    assert seen == [0, 501, 1002, 1503]     # each time the oldest pending message is 0.5 s old
+    assert seen == [0, 501, 1002, 1503]  # each time the oldest pending message is 0.5 s old
     # the stream stops: a timer's flush_if_due commits the rest 0.5 s after the oldest
     clock[0] = 1.503 + 0.49
     assert rec.flush_if_due() is False and meta_of(out)["topics"]["/a"]["count"] == 1503
@@ -305,6 +322,7 @@ def test_bad_durability_options(tmp_path):
     with pytest.raises(BagError, match="flush_messages must be an integer >= 1"):
         bg.BagWriter(tmp_path / "b", flush_messages=0)
     from lpv_sysid.errors import ConfigError
+
     with pytest.raises(ConfigError, match=r"flush_interval_s must be in \(0, 1\] s"):
         RecorderConfig(out_dir="x", topics={"/a": JS}, flush_interval_s=5.0)
     with pytest.raises(ConfigError, match="fsync must be true or false"):
@@ -331,14 +349,18 @@ def test_mcap_cut_anywhere_keeps_every_complete_chunk(tmp_path):
     intact = f.read_bytes()
     reader = McapReader(f)
     reader.open()
-    chunks = [(c.chunk_start_offset + c.chunk_length, sum(c.channel_count.values()))
-              for c in reader.chunks]
+    chunks = [
+        (c.chunk_start_offset + c.chunk_length, sum(c.channel_count.values()))
+        for c in reader.chunks
+    ]
     data_end = reader.data_end
     reader.close()
     assert len(chunks) > 10
-    cuts = sorted({0, 5, 8, 20, 40, len(intact) - 1, len(intact) - 30, data_end, data_end + 5}
-                  | {e + d for e, _ in chunks[:4] for d in (-1, 0, 1, 9, 40)}
-                  | {e for e, _ in chunks})
+    cuts = sorted(
+        {0, 5, 8, 20, 40, len(intact) - 1, len(intact) - 30, data_end, data_end + 5}
+        | {e + d for e, _ in chunks[:4] for d in (-1, 0, 1, 9, 40)}
+        | {e for e, _ in chunks}
+    )
     for c in cuts:
         d = tmp_path / f"cut{c}"
         d.mkdir()
@@ -348,7 +370,7 @@ def test_mcap_cut_anywhere_keeps_every_complete_chunk(tmp_path):
         got = readable(d)
         assert got == list(range(want)), c
         assert rep.messages == want and rep.action in ("storage", "metadata")
-        assert bg.repair_bag(d).action == "none"         # idempotent
+        assert bg.repair_bag(d).action == "none"  # idempotent
 
 
 def test_repaired_metadata_equals_what_rosbags_writes(tmp_path):
@@ -364,11 +386,17 @@ def test_repaired_metadata_equals_what_rosbags_writes(tmp_path):
     raw = (src / "src.mcap").read_bytes()
     d = tmp_path / "d"
     d.mkdir()
-    (d / "d.mcap").write_bytes(raw[:data_end])             # killed just before the summary
+    (d / "d.mcap").write_bytes(raw[:data_end])  # killed just before the summary
     assert bg.repair_bag(d).action == "storage"
     got = yaml.safe_load((d / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
-    for key in ("version", "storage_identifier", "message_count", "topics_with_message_count",
-                "starting_time", "duration"):
+    for key in (
+        "version",
+        "storage_identifier",
+        "message_count",
+        "topics_with_message_count",
+        "starting_time",
+        "duration",
+    ):
         assert got[key] == want[key], key
     assert readable(d) == list(range(120))
 
@@ -380,7 +408,7 @@ def test_out_of_order_stamps_survive_repair(tmp_path):
     for k, s in enumerate(stamps):
         b.write("/e", T0 + s, joint(k, T0 + s))
     b.flush()
-    b._writer.storage.bio.close()               # the process dies here
+    b._writer.storage.bio.close()  # the process dies here
     b._reserve._fh.close()
     bg.repair_bag(tmp_path / "b")
     with AnyReader([tmp_path / "b"]) as reader:
@@ -397,7 +425,7 @@ def test_dry_run_changes_nothing_and_live_writer_is_refused(tmp_path):
     with pytest.raises(BagError, match=r"being written by a running process"):
         bg.repair_bag(tmp_path / "b")
     assert main(["bag", "repair", str(tmp_path / "b")]) == 2
-    b._writer.storage.bio.close()               # dies
+    b._writer.storage.bio.close()  # dies
     b._reserve._fh.close()
     before = {p.name: p.read_bytes() for p in (tmp_path / "b").iterdir()}
     rep = bg.repair_bag(tmp_path / "b", dry_run=True)
@@ -448,8 +476,12 @@ SPILL_CHILD = textwrap.dedent("""
 
 def test_sqlite_kill_inside_a_spilled_transaction_reads_only_committed_rows(tmp_path):
     path = tmp_path / "b"
-    proc = subprocess.Popen([sys.executable, "-c", SPILL_CHILD.format(root=ROOT, path=str(path))],
-                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", SPILL_CHILD.format(root=ROOT, path=str(path))],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert proc.stdout.readline().strip() == "ready"
         proc.send_signal(signal.SIGKILL)
@@ -459,10 +491,10 @@ def test_sqlite_kill_inside_a_spilled_transaction_reads_only_committed_rows(tmp_
             proc.kill()
     journal = path / "b.db3-journal"
     assert journal.exists() and journal.stat().st_size > 0
-    salvage = bg.read_bag(path, strict=False)     # rolls back in a copy: committed rows only
+    salvage = bg.read_bag(path, strict=False)  # rolls back in a copy: committed rows only
     assert len(salvage["/e"]) == 200
     assert any("hot journal" in p for p in salvage.problems)
-    assert journal.exists()                       # reading changed nothing
+    assert journal.exists()  # reading changed nothing
     rep = bg.repair_bag(path)
     assert rep.action == "storage" and rep.messages == 200
     assert "uncommitted transaction rolled back" in rep.summary()
@@ -480,11 +512,15 @@ def _die(rec):
 def test_cli_repairs_nested_experiments(tmp_path, capsys):
     """``lpv-sysid fly`` records DIR (runs) and DIR/flight (whole flight): both repaired."""
     clock = [0.0]
-    outer = Recorder(RecorderConfig(out_dir=str(tmp_path / "x"), topics={"/a": JS}),
-                     writer_factory=sim_writer(clock))
+    outer = Recorder(
+        RecorderConfig(out_dir=str(tmp_path / "x"), topics={"/a": JS}),
+        writer_factory=sim_writer(clock),
+    )
     outer.start(T0)
-    inner = Recorder(RecorderConfig(out_dir=str(tmp_path / "x" / "flight"), topics={"/a": JS}),
-                     writer_factory=sim_writer(clock))
+    inner = Recorder(
+        RecorderConfig(out_dir=str(tmp_path / "x" / "flight"), topics={"/a": JS}),
+        writer_factory=sim_writer(clock),
+    )
     inner.start(T0)
     for k in range(1200):
         clock[0] = k * 1e-3

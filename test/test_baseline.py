@@ -12,8 +12,18 @@ from lpv_sysid.sim.vehicle import SensorConfig, SimVehicle
 
 Q = Quadrotor()
 HOVER = Q.trim([0, 0, 0])
-NOISELESS = SensorConfig(pos_std=0, att_std_deg=0, vel_std=0, rate_std=0, accel_std=0, gyro_std=0,
-                         rotor_std=0, vib_accel=0, vib_accel_blade=0, vib_gyro=0)
+NOISELESS = SensorConfig(
+    pos_std=0,
+    att_std_deg=0,
+    vel_std=0,
+    rate_std=0,
+    accel_std=0,
+    gyro_std=0,
+    rotor_std=0,
+    vib_accel=0,
+    vib_accel_blade=0,
+    vib_gyro=0,
+)
 
 
 def _fly(ref, r_ref=0.0, seconds=8.0, x0=None, sensors=NOISELESS, warm=True):
@@ -28,7 +38,7 @@ def _fly(ref, r_ref=0.0, seconds=8.0, x0=None, sensors=NOISELESS, warm=True):
         if k % 2 == 0:
             u = c.step(k / 500, reduced_state(veh.measure_state()), ref, r_ref)
             esc = Q.mix_inv @ u
-            assert np.all(esc >= -1e-9) and np.all(esc <= 1 + 1e-9)   # mixer desaturation
+            assert np.all(esc >= -1e-9) and np.all(esc <= 1 + 1e-9)  # mixer desaturation
             log[k // 2] = veh.x[3:12] + [0.0, 0.0, 0.0]
         veh.step(u)
     return np.array(veh.x), log
@@ -80,8 +90,13 @@ def test_warm_start_reproduces_trim_command():
 
 def test_linearised_closed_loop_at_hover_is_stable():
     """Eigenvalues of the closed loop linearised numerically about hover (true state)."""
-    g = BaselineGains(hover_thrust=float(HOVER.u0[0]), velocity_rate_hz=250.0, rate_d_roll=0.0,
-                      rate_d_pitch=0.0, vel_d_xy=0.0)
+    g = BaselineGains(
+        hover_thrust=float(HOVER.u0[0]),
+        velocity_rate_hz=250.0,
+        rate_d_roll=0.0,
+        rate_d_pitch=0.0,
+        vel_d_xy=0.0,
+    )
     # the static part of the cascade at hover (no integrators, no filters): u = K dx
     K = np.zeros((4, 12))
     eps = 1e-6
@@ -98,7 +113,7 @@ def test_linearised_closed_loop_at_hover_is_stable():
     A, B = Q.linearize(HOVER)
     eig = np.linalg.eigvals(A + B @ K)
     assert np.max(eig.real) < -0.05
-    assert np.max(np.linalg.eigvals(A).real) >= 0    # open loop is not asymptotically stable
+    assert np.max(np.linalg.eigvals(A).real) >= 0  # open loop is not asymptotically stable
 
 
 def test_gains_validation():
@@ -133,7 +148,7 @@ def test_mixer_desaturation_priorities():
     cmd, sat = c._desaturate(0.5, 0.01, -0.01, 0.1)
     assert np.allclose(cmd, [0.5, 0.01, -0.01, 0.1]) and not any(sat)
     # too much yaw at high collective: yaw is reduced first, roll/pitch kept
-    cmd, sat = c._desaturate(0.8, 0.02, 0.0, 1.0)   # motors 0.8 +- 0.031 +- 0.25
+    cmd, sat = c._desaturate(0.8, 0.02, 0.0, 1.0)  # motors 0.8 +- 0.031 +- 0.25
     esc = mi @ np.array(cmd)
     assert sat[2] and not sat[0] and cmd[1] == pytest.approx(0.02) and cmd[3] < 1.0
     assert esc.max() == pytest.approx(1.0) and esc.min() >= 0
@@ -144,4 +159,6 @@ def test_mixer_desaturation_priorities():
     # impossible roll demand: scaled to the full [0, 1] spread
     cmd, sat = c._desaturate(0.5, 1.0, 0.0, 0.0)
     esc = mi @ np.array(cmd)
-    assert all(sat) and esc.min() == pytest.approx(0.0, abs=1e-12) and esc.max() == pytest.approx(1.0)
+    assert (
+        all(sat) and esc.min() == pytest.approx(0.0, abs=1e-12) and esc.max() == pytest.approx(1.0)
+    )

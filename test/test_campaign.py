@@ -45,29 +45,45 @@ def test_default_plan_alternates_climbs_and_descents_with_opposing_directions(ta
     assert sorted(r.table_index for r in runs[:8]) == list(range(1, 9))
     assert runs[-1].name == "hover_validation" and runs[-1].vertex == (0.0, 0.0, 0.0)
     kinds = [r.kind for r in runs[:8]]
-    assert all(a != b for a, b in zip(kinds, kinds[1:])) and kinds[0] == C.CLIMB   # take-off is low
-    for a, b in zip(runs[0:8:2], runs[1:8:2]):     # horizontal displacements cancel pairwise
+    assert all(a != b for a, b in zip(kinds, kinds[1:])) and kinds[0] == C.CLIMB  # take-off is low
+    for a, b in zip(runs[0:8:2], runs[1:8:2]):  # horizontal displacements cancel pairwise
         np.testing.assert_array_equal(np.add(a.vertex[:2], b.vertex[:2]), [0.0, 0.0])
     # room of a w segment: |w| (settle_timeout + trim + excitation) + span + 2 margins
     T = cfg.settle_timeout + cfg.trim_s + prof.duration
     r = runs[0]
     assert r.duration_worst == pytest.approx(T)
     assert r.altitude_room == pytest.approx(0.7 * T + prof.span[2] + 2 * cfg.altitude_margin)
-    assert r.start_window == pytest.approx((cfg.altitude_min + cfg.altitude_margin,
-                                            cfg.altitude_max - cfg.altitude_margin - 0.7 * T - prof.span[2]))
+    assert r.start_window == pytest.approx(
+        (
+            cfg.altitude_min + cfg.altitude_margin,
+            cfg.altitude_max - cfg.altitude_margin - 0.7 * T - prof.span[2],
+        )
+    )
     d = runs[1]
-    assert d.kind == C.DESCENT and d.start_window[1] == pytest.approx(cfg.altitude_max - cfg.altitude_margin)
+    assert d.kind == C.DESCENT and d.start_window[1] == pytest.approx(
+        cfg.altitude_max - cfg.altitude_margin
+    )
     # centred runs: half of |(u, v)| T + excitation + margin from home
-    assert r.horizontal_extent == pytest.approx(0.5 * math.hypot(3, 3) * T + math.hypot(*prof.span[:2]) + 2.0)
+    assert r.horizontal_extent == pytest.approx(
+        0.5 * math.hypot(3, 3) * T + math.hypot(*prof.span[:2]) + 2.0
+    )
     assert "vertex_m3_m3_m0.7" in plan.describe()
 
 
 def test_table_order_keeps_seed0_table1_order(table6):
-    cfg = C.CampaignConfig.from_dict({"order": "table", "box_min": [-1, -1, -0.2], "box_max": [1, 1, 0.2],
-                                      "settle_timeout": 5.0, "trim_s": 2.0, "trim_average_s": 1.0})
+    cfg = C.CampaignConfig.from_dict(
+        {
+            "order": "table",
+            "box_min": [-1, -1, -0.2],
+            "box_max": [1, 1, 0.2],
+            "settle_timeout": 5.0,
+            "trim_s": 2.0,
+            "trim_average_s": 1.0,
+        }
+    )
     plan = C.plan_campaign(cfg, C.ExcitationProfile.from_table(*table6, ramp=0.5))
     assert [r.table_index for r in plan.runs] == [1, 2, 3, 4, 5, 6, 7, 8, None]
-    assert plan.runs[1].vertex == (1.0, -1.0, -0.2)     # u fastest
+    assert plan.runs[1].vertex == (1.0, -1.0, -0.2)  # u fastest
 
 
 def test_plan_refuses_a_window_too_small_with_the_numbers(table30):
@@ -81,22 +97,39 @@ def test_plan_refuses_a_window_too_small_with_the_numbers(table30):
     assert f"= {0.7 * T:.1f} m" in msg and f"= {0.7 * T + prof.span[2] + 4:.1f} m" in msg
     # the seed's +-5 m/s box: 5 m/s x 62 s
     with pytest.raises(ConfigError, match="310.0 m"):
-        C.plan_campaign(C.CampaignConfig.from_dict({"box_min": [-5, -5, -5], "box_max": [5, 5, 5]}), prof)
+        C.plan_campaign(
+            C.CampaignConfig.from_dict({"box_min": [-5, -5, -5], "box_max": [5, 5, 5]}), prof
+        )
 
 
 def test_plan_refusals_name_the_conflict(table30):
     prof = C.ExcitationProfile.from_table(*table30, ramp=1.0)
     env = EnvelopeConfig()
     with pytest.raises(ConfigError, match="predictive floor .* would trip"):
-        C.plan_campaign(C.CampaignConfig.from_dict({"altitude_min": 8.0, "takeoff_altitude": 10.0,
-                                                    "altitude_max": 70.0}), prof, env)
+        C.plan_campaign(
+            C.CampaignConfig.from_dict(
+                {"altitude_min": 8.0, "takeoff_altitude": 10.0, "altitude_max": 70.0}
+            ),
+            prof,
+            env,
+        )
     with pytest.raises(ConfigError, match="predictive ceiling trips"):
         C.plan_campaign(C.CampaignConfig.from_dict({"altitude_max": 76.0}), prof, env)
     with pytest.raises(ConfigError, match="above the envelope's min"):
-        C.plan_campaign(C.CampaignConfig.from_dict({"box_min": [-9, -9, -0.2], "box_max": [9, 9, 0.2],
-                                                    "radius": 300.0, "trim_s": 1.0, "trim_average_s": 1.0,
-                                                    "settle_timeout": 2.0}),
-                        prof, EnvelopeConfig(radius=2000.0))
+        C.plan_campaign(
+            C.CampaignConfig.from_dict(
+                {
+                    "box_min": [-9, -9, -0.2],
+                    "box_max": [9, 9, 0.2],
+                    "radius": 300.0,
+                    "trim_s": 1.0,
+                    "trim_average_s": 1.0,
+                    "settle_timeout": 2.0,
+                }
+            ),
+            prof,
+            EnvelopeConfig(radius=2000.0),
+        )
     with pytest.raises(ConfigError, match="campaign.radius is 100"):
         C.plan_campaign(C.CampaignConfig.from_dict({"radius": 100.0}), prof, env)
     with pytest.raises(ConfigError, match="local_ned"):
@@ -117,17 +150,31 @@ def test_excitation_profile_displacement_of_a_sine_is_a_over_pi_f():
     u[:, 3] = 0.25 * np.cos(2 * np.pi * 0.2 * t)
     prof = C.ExcitationProfile.from_table(t, u, ("u_ref", "v_ref", "w_ref", "r_ref"), ramp=0.0)
     assert prof.duration == pytest.approx(T)
-    assert prof.span[0] == pytest.approx(A / (np.pi * f), rel=2e-3)      # int A sin = A (1 - cos)/(2 pi f)
+    assert prof.span[0] == pytest.approx(
+        A / (np.pi * f), rel=2e-3
+    )  # int A sin = A (1 - cos)/(2 pi f)
     assert prof.span[1] == 0.0 and prof.span[2] == 0.0
-    assert prof.peak[0] == pytest.approx(A, rel=1e-3) and prof.yaw_peak == pytest.approx(0.25, rel=1e-3)
+    assert prof.peak[0] == pytest.approx(A, rel=1e-3) and prof.yaw_peak == pytest.approx(
+        0.25, rel=1e-3
+    )
 
 
 # =========================================================================== runtime
 class StandIn:
     """Kinematic vehicle + bridge on a simulated clock (see module docstring)."""
 
-    def __init__(self, campaign, tau=0.4, gain=1.0, sink=0.0, psi=0.4, handback_delay=0.3,
-                 handback_mode="HOLD", dt=0.02, handback_end="DONE"):
+    def __init__(
+        self,
+        campaign,
+        tau=0.4,
+        gain=1.0,
+        sink=0.0,
+        psi=0.4,
+        handback_delay=0.3,
+        handback_mode="HOLD",
+        dt=0.02,
+        handback_end="DONE",
+    ):
         self.c = campaign
         self.tau, self.gain, self.sink, self.psi = tau, gain, sink, psi
         self.pos = np.zeros(3)
@@ -145,10 +192,12 @@ class StandIn:
         self.target = None
         self.actions: list = []
         self.events: list = []
-        self.commands: list = []      # (t, phase, v, r)
+        self.commands: list = []  # (t, phase, v, r)
         self.violation = None
         self.hook = None
-        self.handback_end = handback_end      # DONE | FAILED (fault, confirmed) | LOST (nothing confirmed)
+        self.handback_end = (
+            handback_end  # DONE | FAILED (fault, confirmed) | LOST (nothing confirmed)
+        )
         self.confirmed = None
 
     def _go(self, state, reason=""):
@@ -157,12 +206,19 @@ class StandIn:
     def sample(self):
         c, s = math.cos(self.psi), math.sin(self.psi)
         R = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
-        return SimpleNamespace(t=self.t, pos_ned=self.pos.copy(), euler=np.array([0.0, 0.0, self.psi]),
-                               vel_ned=self.vel.copy(), v_body=R.T @ self.vel, omega=np.zeros(3))
+        return SimpleNamespace(
+            t=self.t,
+            pos_ned=self.pos.copy(),
+            euler=np.array([0.0, 0.0, self.psi]),
+            vel_ned=self.vel.copy(),
+            v_body=R.T @ self.vel,
+            omega=np.zeros(3),
+        )
 
     def status(self):
-        return C.VehicleStatus(self.state, self.reason, self.mode, self.armed, None, self.violation,
-                               self.confirmed)
+        return C.VehicleStatus(
+            self.state, self.reason, self.mode, self.armed, None, self.violation, self.confirmed
+        )
 
     def handle(self, out):
         self.events += out.events
@@ -188,13 +244,18 @@ class StandIn:
             self._go("OFFBOARD_ACTIVE", "armed")
         if self.state == "HANDBACK" and self.t - self.t_state > self.handback_delay:
             if self.handback_end == "LOST":
-                self._go("FAILED", "hand-back NOT confirmed: HOLD: no COMMAND_ACK; PX4 failsafe in charge")
+                self._go(
+                    "FAILED",
+                    "hand-back NOT confirmed: HOLD: no COMMAND_ACK; PX4 failsafe in charge",
+                )
             else:
                 self.mode = self.confirmed = self.target
                 self._go(self.handback_end, f"hand-back confirmed: vehicle in {self.target}")
         if self.mode == "OFFBOARD":
             c, s = math.cos(self.psi), math.sin(self.psi)
-            want = np.array([c * self.cmd[0] - s * self.cmd[1], s * self.cmd[0] + c * self.cmd[1], self.cmd[2]])
+            want = np.array(
+                [c * self.cmd[0] - s * self.cmd[1], s * self.cmd[0] + c * self.cmd[1], self.cmd[2]]
+            )
             want = want * self.gain
         elif self.mode == "LAND":
             want = np.array([0.0, 0.0, 0.7])
@@ -230,13 +291,30 @@ class StandIn:
 
 
 def small_campaign(table, **kw):
-    d = dict(box_min=[-1.0, -1.0, -0.3], box_max=[1.0, 1.0, 0.3], trim_s=2.0, trim_average_s=1.0,
-             settle_timeout=4.0, settle_dwell=0.4, takeoff_altitude=8.0, altitude_min=5.0, altitude_max=22.0,
-             altitude_margin=1.0, ramp_s=0.5, radius=80.0, finish="LAND", land_timeout=40.0, rate_hz=25.0)
+    d = dict(
+        box_min=[-1.0, -1.0, -0.3],
+        box_max=[1.0, 1.0, 0.3],
+        trim_s=2.0,
+        trim_average_s=1.0,
+        settle_timeout=4.0,
+        settle_dwell=0.4,
+        takeoff_altitude=8.0,
+        altitude_min=5.0,
+        altitude_max=22.0,
+        altitude_margin=1.0,
+        ramp_s=0.5,
+        radius=80.0,
+        finish="LAND",
+        land_timeout=40.0,
+        rate_hz=25.0,
+    )
     d.update(kw)
     cfg = C.CampaignConfig.from_dict(d)
-    plan = C.plan_campaign(cfg, C.ExcitationProfile.from_table(*table, ramp=cfg.ramp_s),
-                           EnvelopeConfig(floor=2.0, ceiling=30.0, lookahead=2.0, radius=100.0))
+    plan = C.plan_campaign(
+        cfg,
+        C.ExcitationProfile.from_table(*table, ramp=cfg.ramp_s),
+        EnvelopeConfig(floor=2.0, ceiling=30.0, lookahead=2.0, radius=100.0),
+    )
     return C.Campaign(plan, table)
 
 
@@ -250,10 +328,15 @@ def test_whole_sequence_on_a_stand_in_vehicle(table6):
     assert ph.count(C.EXCITATION) == 3 and ph.count(C.SETTLE) == 3
     started = [a for _, a in sim.actions if isinstance(a, C.RunStarted)]
     ended = [a for _, a in sim.actions if isinstance(a, C.RunEnded)]
-    assert [a.run.name for a in started] == [a.run.name for a in ended] == [r.name for r in c.plan.runs]
+    assert (
+        [a.run.name for a in started]
+        == [a.run.name for a in ended]
+        == [r.name for r in c.plan.runs]
+    )
     assert all(a.complete for a in ended)
-    assert [type(a).__name__ for _, a in sim.actions if not isinstance(a, (C.RunStarted, C.RunEnded))] == \
-        ["StartBridge", "ActivateFloor", "FinishBridge"]
+    assert [
+        type(a).__name__ for _, a in sim.actions if not isinstance(a, (C.RunStarted, C.RunEnded))
+    ] == ["StartBridge", "ActivateFloor", "FinishBridge"]
     assert not sim.armed and sim.mode == "LAND" and sim.pos[2] == 0.0
     for res, run in zip(c.results, c.plan.runs):
         assert res.complete and 0.0 <= res.settle_time < 4.0 - 1.5
@@ -262,7 +345,9 @@ def test_whole_sequence_on_a_stand_in_vehicle(table6):
         trim = [cmd for t, ph, cmd, r in sim.commands if res.t_start <= t < res.t_excite]
         assert len(trim) >= 2.0 * 25 - 2
         assert np.ptp(np.array(trim), axis=0).max() == 0.0
-        np.testing.assert_allclose(trim[0], np.asarray(run.vertex) + [0, 0, res.hold_correction], atol=1e-12)
+        np.testing.assert_allclose(
+            trim[0], np.asarray(run.vertex) + [0, 0, res.hold_correction], atol=1e-12
+        )
         exc = np.array([cmd for t, ph, cmd, r in sim.commands if res.t_excite <= t < res.t_end])
         assert np.ptp(exc, axis=0).max() > 0.1
         # tracking of a first-order lag is not perfect but bounded by the excitation size
@@ -274,26 +359,34 @@ def test_whole_sequence_on_a_stand_in_vehicle(table6):
     # level runs held their height, climb/descent runs travelled |w| x (trim + excitation)
     assert hover.height_max - hover.height_min < 0.3
     climb = next(r for r in c.results if r.kind == C.CLIMB)
-    assert climb.height_max - climb.height_start == pytest.approx(0.3 * (climb.t_end - climb.t_command), abs=0.5)
+    assert climb.height_max - climb.height_start == pytest.approx(
+        0.3 * (climb.t_end - climb.t_command), abs=0.5
+    )
     s = c.summary()
-    assert s["ok"] and s["handback"]["mode"] == "LAND" and s["handback"]["duration_s"] == pytest.approx(0.3, abs=0.05)
+    assert (
+        s["ok"]
+        and s["handback"]["mode"] == "LAND"
+        and s["handback"]["duration_s"] == pytest.approx(0.3, abs=0.05)
+    )
     rows = C.trim_rows(c.results)
     assert [r["run"] for r in rows] == [r.name for r in c.plan.runs]
 
 
 def test_settle_timeout_aborts_with_the_errors_and_waits_for_the_handback(table6):
     c = small_campaign(table6, vertices=[2], settle_tolerance=[0.05, 0.05, 0.05])
-    sim = StandIn(c, gain=0.8).run()               # reaches only 80 % of every vertex
+    sim = StandIn(c, gain=0.8).run()  # reaches only 80 % of every vertex
     assert c.phase == C.ABORTED and c.ok is False
-    assert "not settled within settle_timeout 4 s" in c.reason and "(0.80, -0.80, -0.24)" in c.reason
+    assert (
+        "not settled within settle_timeout 4 s" in c.reason and "(0.80, -0.80, -0.24)" in c.reason
+    )
     aborts = [(t, a) for t, a in sim.actions if isinstance(a, C.AbortBridge)]
     assert len(aborts) == 1 and "not settled" in aborts[0][1].reason
     res = c.results[0]
-    assert not res.complete and math.isnan(res.t_start)             # never recorded
+    assert not res.complete and math.isnan(res.t_start)  # never recorded
     assert not any(isinstance(a, C.RunStarted) for _, a in sim.actions)
     assert aborts[0][0] - res.t_command == pytest.approx(4.0, abs=0.03)
     assert c.summary()["handback"]["duration_s"] == pytest.approx(0.3, abs=0.05)
-    assert sim.mode == "HOLD" and sim.armed          # PX4 holds; nothing commanded any more
+    assert sim.mode == "HOLD" and sim.armed  # PX4 holds; nothing commanded any more
     assert not [cm for cm in sim.commands if cm[0] > aborts[0][0]]
 
 
@@ -305,10 +398,14 @@ def test_bridge_leaving_offboard_ends_the_run_without_a_second_abort(table6):
             sim.violation = "floor: predictive floor ..."
             sim.target = "HOLD"
             sim._go("HANDBACK", "envelope violation (floor): predictive floor ...")
+
     sim = StandIn(c)
     sim.hook = trip
     sim.run()
-    assert c.phase == C.ABORTED and "bridge left OFFBOARD_ACTIVE (HANDBACK): envelope: floor" in c.reason
+    assert (
+        c.phase == C.ABORTED
+        and "bridge left OFFBOARD_ACTIVE (HANDBACK): envelope: floor" in c.reason
+    )
     assert not any(isinstance(a, C.AbortBridge) for _, a in sim.actions)
     ended = [a for _, a in sim.actions if isinstance(a, C.RunEnded)]
     assert len(ended) == 1 and not ended[0].complete and "envelope" in ended[0].result.reason
@@ -323,11 +420,12 @@ def test_external_abort_while_finishing_still_waits_for_the_confirmation(table6)
         if c.phase == C.FINISHING and "t" not in seen:
             seen["t"] = sim.t
             c.abort(sim.t, "interrupted (SIGINT)")
+
     sim.hook = interrupt
     sim.run()
     assert c.phase == C.ABORTED and c.reason == "interrupted (SIGINT)"
-    assert c.t_handback_done - seen["t"] == pytest.approx(1.0, abs=0.05)   # waited for DONE
-    assert sim.mode == "LAND"                   # the finish request itself was not withdrawn
+    assert c.t_handback_done - seen["t"] == pytest.approx(1.0, abs=0.05)  # waited for DONE
+    assert sim.mode == "LAND"  # the finish request itself was not withdrawn
 
 
 def test_finish_hold_and_a_land_request_that_ends_elsewhere(table6):
@@ -335,8 +433,11 @@ def test_finish_hold_and_a_land_request_that_ends_elsewhere(table6):
     sim = StandIn(c).run()
     assert c.phase == C.DONE and c.ok and sim.mode == "HOLD" and sim.armed
     c = small_campaign(table6, vertices=[2], hover_validation=False, finish="LAND")
-    sim = StandIn(c, handback_mode="POSCTL").run()      # the bridge's chain ended elsewhere
-    assert c.phase == C.FAILED and "finish LAND not confirmed: the hand-back ended in POSCTL" in c.reason
+    sim = StandIn(c, handback_mode="POSCTL").run()  # the bridge's chain ended elsewhere
+    assert (
+        c.phase == C.FAILED
+        and "finish LAND not confirmed: the hand-back ended in POSCTL" in c.reason
+    )
 
 
 def test_stale_state_and_start_timeout_abort(table6):
@@ -344,43 +445,63 @@ def test_stale_state_and_start_timeout_abort(table6):
 
     def freeze(sim):
         if c.phase == C.TRIM:
-            sim.c.on_state = lambda s: None          # telemetry stops
+            sim.c.on_state = lambda s: None  # telemetry stops
+
     sim = StandIn(c)
     sim.hook = freeze
     sim.run()
     assert c.phase == C.ABORTED and "no fresh state sample" in c.reason
     c = small_campaign(table6, vertices=[2], start_timeout=3.0)
     sim = StandIn(c)
-    sim.physics = lambda: None                        # the bridge never reaches OFFBOARD
+    sim.physics = lambda: None  # the bridge never reaches OFFBOARD
     sim.run(t_end=10.0)
-    assert c.phase == C.ABORTING and "not in OFFBOARD and armed within start_timeout 3 s" in c.reason
+    assert (
+        c.phase == C.ABORTING and "not in OFFBOARD and armed within start_timeout 3 s" in c.reason
+    )
 
 
 # =========================================================================== ROS node
 def _rclpy_is_the_standin() -> bool:
     import importlib.util
+
     spec = importlib.util.find_spec("rclpy")
-    return spec is not None and os.sep + os.path.join("test", "support") + os.sep in (spec.origin or "")
+    return spec is not None and os.sep + os.path.join("test", "support") + os.sep in (
+        spec.origin or ""
+    )
 
 
 def test_vehicle_status_from_the_bridge_node_status_values():
     pytest.importorskip("rclpy")
     from lpv_sysid.nodes.campaign_node import vehicle_status
 
-    vs = vehicle_status({"state": "OFFBOARD_ACTIVE", "reason": "armed", "vehicle_mode": "OFFBOARD",
-                         "armed": "True", "envelope_home": "position at start: 1.00 -2.00 -0.50",
-                         "envelope_violation": "floor: height 4.90 m below the floor 5 m"})
+    vs = vehicle_status(
+        {
+            "state": "OFFBOARD_ACTIVE",
+            "reason": "armed",
+            "vehicle_mode": "OFFBOARD",
+            "armed": "True",
+            "envelope_home": "position at start: 1.00 -2.00 -0.50",
+            "envelope_violation": "floor: height 4.90 m below the floor 5 m",
+        }
+    )
     assert (vs.bridge_state, vs.mode, vs.armed) == ("OFFBOARD_ACTIVE", "OFFBOARD", True)
     np.testing.assert_array_equal(vs.home_ned, [1.0, -2.0, -0.5])
     assert vs.violation.startswith("floor:")
-    vs = vehicle_status({"envelope_home": "position at start (armed, but no HOME_POSITION received: heights "
-                                          "are above this point): 3.00 4.00 -12.00", "vehicle_mode": "unknown"})
+    vs = vehicle_status(
+        {
+            "envelope_home": "position at start (armed, but no HOME_POSITION received: heights "
+            "are above this point): 3.00 4.00 -12.00",
+            "vehicle_mode": "unknown",
+        }
+    )
     np.testing.assert_array_equal(vs.home_ned, [3.0, 4.0, -12.0])
     assert vs.bridge_state == "IDLE" and vs.mode is None and vs.armed is False
     assert vehicle_status({"envelope_home": "unset"}).home_ned is None
 
 
-@pytest.mark.skipif(not _rclpy_is_the_standin(), reason="needs the simulated clock of the rclpy stand-in")
+@pytest.mark.skipif(
+    not _rclpy_is_the_standin(), reason="needs the simulated clock of the rclpy stand-in"
+)
 def test_campaign_node_flies_through_a_bridge_node_and_writes_one_bag_per_run(tmp_path, table6):
     import rclpy
     import yaml
@@ -403,11 +524,29 @@ def test_campaign_node_flies_through_a_bridge_node_and_writes_one_bag_per_run(tm
     bridge = yaml.safe_load(open(os.path.join(root, "config", "mavlink_bridge.yaml")))
     bridge["envelope"].update({"floor": 2.0, "ceiling": 30.0, "lookahead": 2.0, "radius": 100.0})
     (tmp_path / "bridge.yaml").write_text(yaml.safe_dump(bridge))
-    (tmp_path / "campaign.yaml").write_text(yaml.safe_dump({
-        "bridge_config": "bridge.yaml", "campaign": dict(
-            box_min=[-1.0, -1.0, -0.3], box_max=[1.0, 1.0, 0.3], vertices=[2], trim_s=2.0, trim_average_s=1.0,
-            settle_timeout=4.0, settle_dwell=0.4, takeoff_altitude=8.0, altitude_min=5.0, altitude_max=22.0,
-            altitude_margin=1.0, ramp_s=0.5, radius=80.0, finish="LAND")}))
+    (tmp_path / "campaign.yaml").write_text(
+        yaml.safe_dump(
+            {
+                "bridge_config": "bridge.yaml",
+                "campaign": dict(
+                    box_min=[-1.0, -1.0, -0.3],
+                    box_max=[1.0, 1.0, 0.3],
+                    vertices=[2],
+                    trim_s=2.0,
+                    trim_average_s=1.0,
+                    settle_timeout=4.0,
+                    settle_dwell=0.4,
+                    takeoff_altitude=8.0,
+                    altitude_min=5.0,
+                    altitude_max=22.0,
+                    altitude_margin=1.0,
+                    ramp_s=0.5,
+                    radius=80.0,
+                    finish="LAND",
+                ),
+            }
+        )
+    )
 
     class FakeBridge(Node):
         """mavlink_bridge_node stand-in: services, status values, a first-order vehicle."""
@@ -415,14 +554,29 @@ def test_campaign_node_flies_through_a_bridge_node_and_writes_one_bag_per_run(tm
         def __init__(self, context):
             super().__init__("mavlink_bridge", namespace="lpv_sysid", context=context)
             self.f = M.MsgFactory.rclpy()
-            self.state, self.reason, self.mode, self.armed, self.t_state = "IDLE", "", "HOLD", False, 0.0
+            self.state, self.reason, self.mode, self.armed, self.t_state = (
+                "IDLE",
+                "",
+                "HOLD",
+                False,
+                0.0,
+            )
             self.pos, self.vel, self.cmd = np.zeros(3), np.zeros(3), np.zeros(3)
             self.refs = 0
             self.pub_state = self.create_publisher(Odometry, "state", _common.qos_for("state"))
-            self.pub_rot = self.create_publisher(JointState, "rotor_speeds", _common.qos_for("rotor_speeds"))
+            self.pub_rot = self.create_publisher(
+                JointState, "rotor_speeds", _common.qos_for("rotor_speeds")
+            )
             self.pub_imu = self.create_publisher(Imu, "imu", _common.qos_for("imu"))
-            self.pub_status = self.create_publisher(DiagnosticArray, "status", _common.qos_for("status"))
-            self.create_subscription(TwistStamped, "velocity_reference", self.on_ref, _common.qos_for("velocity_reference"))
+            self.pub_status = self.create_publisher(
+                DiagnosticArray, "status", _common.qos_for("status")
+            )
+            self.create_subscription(
+                TwistStamped,
+                "velocity_reference",
+                self.on_ref,
+                _common.qos_for("velocity_reference"),
+            )
             self.create_service(Trigger, "~/start", self.on_start)
             self.create_service(Trigger, "~/abort", self.on_abort)
             self.create_timer(0.01, self.tick)
@@ -449,10 +603,19 @@ def test_campaign_node_flies_through_a_bridge_node_and_writes_one_bag_per_run(tm
             return resp
 
         def publish_status(self):
-            values = {"state": self.state, "reason": self.reason, "vehicle_mode": self.mode,
-                      "armed": str(self.armed), "envelope_home": "position at start: 0.00 0.00 0.00"}
-            st = M.diagnostic_status(self.f, "OK", self.get_fully_qualified_name(), self.state, values)
-            self.pub_status.publish(M.diagnostic_array(self.f, self.get_clock().now().nanoseconds, [st]))
+            values = {
+                "state": self.state,
+                "reason": self.reason,
+                "vehicle_mode": self.mode,
+                "armed": str(self.armed),
+                "envelope_home": "position at start: 0.00 0.00 0.00",
+            }
+            st = M.diagnostic_status(
+                self.f, "OK", self.get_fully_qualified_name(), self.state, values
+            )
+            self.pub_status.publish(
+                M.diagnostic_array(self.f, self.get_clock().now().nanoseconds, [st])
+            )
 
         def tick(self):
             t = self.now()
@@ -468,20 +631,32 @@ def test_campaign_node_flies_through_a_bridge_node_and_writes_one_bag_per_run(tm
             self.pos = self.pos + self.vel * 0.01
             self.pos[2] = min(self.pos[2], 0.0)
             ns = self.get_clock().now().nanoseconds
-            self.pub_state.publish(M.odometry_from_state(self.f, ns, self.pos, np.zeros(3), self.vel, np.zeros(3)))
+            self.pub_state.publish(
+                M.odometry_from_state(self.f, ns, self.pos, np.zeros(3), self.vel, np.zeros(3))
+            )
             self.pub_rot.publish(M.rotor_speeds_msg(self.f, ns, [600.0] * 4))
             self.pub_imu.publish(M.imu_msg(self.f, ns, [0.0, 0.0, -9.81], [0.0, 0.0, 0.0]))
 
     from rclpy.context import Context
 
-    ctx = Context()                           # its own context: independent of other tests
-    rclpy.init(args=["node", "--ros-args", "-p", f"campaign_file:={tmp_path / 'campaign.yaml'}",
-                     "-p", f"signals_file:={tmp_path / 'sig.npz'}", "-p", f"out_dir:={tmp_path / 'runs'}"],
-               context=ctx)
+    ctx = Context()  # its own context: independent of other tests
+    rclpy.init(
+        args=[
+            "node",
+            "--ros-args",
+            "-p",
+            f"campaign_file:={tmp_path / 'campaign.yaml'}",
+            "-p",
+            f"signals_file:={tmp_path / 'sig.npz'}",
+            "-p",
+            f"out_dir:={tmp_path / 'runs'}",
+        ],
+        context=ctx,
+    )
     try:
         fake = FakeBridge(ctx)
         node = CampaignNode(namespace="lpv_sysid", context=ctx)
-        assert node.campaign.plan.config.finish == "HOLD"      # LAND needs the CLI (no finish service)
+        assert node.campaign.plan.config.finish == "HOLD"  # LAND needs the CLI (no finish service)
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(fake)
         ex.add_node(node)
@@ -499,9 +674,11 @@ def test_campaign_node_flies_through_a_bridge_node_and_writes_one_bag_per_run(tm
         assert fake.state == "DONE" and fake.refs > 500
         runs = tmp_path / "runs"
         bags = sorted(p.name for p in runs.iterdir() if (p / "metadata.yaml").exists())
-        assert bags == ["bag_0000", "bag_0001"]                 # the vertex and the hover run
+        assert bags == ["bag_0000", "bag_0001"]  # the vertex and the hover run
         info = iobag.topic_info(str(runs / "bag_0000"))
-        assert info["/lpv_sysid/velocity_reference"].count > 0 and info["/lpv_sysid/state"].count > 0
+        assert (
+            info["/lpv_sysid/velocity_reference"].count > 0 and info["/lpv_sysid/state"].count > 0
+        )
         summary = yaml.safe_load((runs / "campaign_summary.yaml").read_text())
         assert [r["name"] for r in summary["runs"]] == ["vertex_p1_m1_m0.3", "hover_validation"]
         assert summary["bags"] == {"vertex_p1_m1_m0.3": "bag_0000", "hover_validation": "bag_0001"}
@@ -509,7 +686,9 @@ def test_campaign_node_flies_through_a_bridge_node_and_writes_one_bag_per_run(tm
         rclpy.try_shutdown(context=ctx)
 
 
-@pytest.mark.parametrize("end, phase", [("DONE", C.ABORTED), ("FAILED", C.ABORTED), ("LOST", C.FAILED)])
+@pytest.mark.parametrize(
+    "end, phase", [("DONE", C.ABORTED), ("FAILED", C.ABORTED), ("LOST", C.FAILED)]
+)
 def test_fault_handback_confirmed_or_not(table6, end, phase):
     # the bridge ends a fault hand-back (stale input, link loss) in FAILED *with* the confirmed
     # mode; only FAILED without a confirmed mode means nothing is confirmed
@@ -517,7 +696,10 @@ def test_fault_handback_confirmed_or_not(table6, end, phase):
     StandIn(c, gain=0.8, handback_end=end).run()
     assert c.phase == phase and c.ok is False
     if phase == C.ABORTED:
-        assert c.handback_mode == "HOLD" and c.t_handback_done - c.t_handback_request == pytest.approx(0.3, abs=0.05)
+        assert (
+            c.handback_mode == "HOLD"
+            and c.t_handback_done - c.t_handback_request == pytest.approx(0.3, abs=0.05)
+        )
     else:
         assert "HAND-BACK NOT CONFIRMED" in c.summary()["reason"] or "hand-back FAILED" in c.reason
         assert math.isnan(c.t_handback_done)

@@ -17,7 +17,13 @@ from lpv_sysid.errors import SolverError
 from lpv_sysid.io.formats import GainSchedule, load_certified_systems
 from lpv_sysid.control.safety import check_closed_loop
 from lpv_sysid.models.lpv import ElementBox, PolytopicModel, UncertainElement, multilinear_weights
-from lpv_sysid.models.quadrotor import INPUT_NAMES, INPUT_UNITS, STATE_NAMES, STATE_UNITS, Quadrotor
+from lpv_sysid.models.quadrotor import (
+    INPUT_NAMES,
+    INPUT_UNITS,
+    STATE_NAMES,
+    STATE_UNITS,
+    Quadrotor,
+)
 from lpv_sysid.synthesis.files import load_certificate_npz, load_models
 from lpv_sysid.synthesis.hinf_lmi import HinfOptions, performance_matrix, synthesize_hinf
 from lpv_sysid.synthesis.hinf_norm import hinf_norm
@@ -41,22 +47,51 @@ def quad_models(path: Path, box: float = 2.0, rel: float = 0.1, motor: bool = Fa
         for mat, M, mask in (("A", A, ma), ("B", B, mb)):
             for r, c in zip(*np.nonzero(mask)):
                 half = rel * abs(M[r, c]) + 1e-3 * (1.0 if mat == "A" else 0.1)
-                unc.append({"matrix": mat, "row": int(r), "col": int(c), "nominal": float(M[r, c]),
-                            "std": float(half / 3), "lower": float(M[r, c] - half), "upper": float(M[r, c] + half)})
+                unc.append(
+                    {
+                        "matrix": mat,
+                        "row": int(r),
+                        "col": int(c),
+                        "nominal": float(M[r, c]),
+                        "std": float(half / 3),
+                        "lower": float(M[r, c] - half),
+                        "upper": float(M[r, c] + half),
+                    }
+                )
         if motor:
             for q in range(4):
                 for mat, M, col in (("A", A, 8 + q), ("B", B, q)):
                     half = 0.01 * abs(M[8 + q, col])
-                    unc.append({"matrix": mat, "row": 8 + q, "col": col, "nominal": float(M[8 + q, col]),
-                                "std": float(half / 3), "lower": float(M[8 + q, col] - half),
-                                "upper": float(M[8 + q, col] + half)})
-        verts.append({"scheduling": [float(x) for x in v], "x0": tr.x0.tolist(), "u0": tr.u0.tolist(),
-                      "A": A.tolist(), "B": B.tolist(), "uncertain": unc})
-    doc = {"format": "lpv_sysid/vertex_models@2", "time": "continuous",
-           "states": [{"name": n, "unit": u} for n, u in zip(STATE_NAMES, STATE_UNITS)],
-           "inputs": [{"name": n, "unit": u} for n, u in zip(INPUT_NAMES, INPUT_UNITS)],
-           "scheduling": {"names": ["u_d", "v_d", "w_d"], "min": [-box] * 3, "max": [box] * 3},
-           "vertices": verts, "meta": {"k_sigma": 3.0}}
+                    unc.append(
+                        {
+                            "matrix": mat,
+                            "row": 8 + q,
+                            "col": col,
+                            "nominal": float(M[8 + q, col]),
+                            "std": float(half / 3),
+                            "lower": float(M[8 + q, col] - half),
+                            "upper": float(M[8 + q, col] + half),
+                        }
+                    )
+        verts.append(
+            {
+                "scheduling": [float(x) for x in v],
+                "x0": tr.x0.tolist(),
+                "u0": tr.u0.tolist(),
+                "A": A.tolist(),
+                "B": B.tolist(),
+                "uncertain": unc,
+            }
+        )
+    doc = {
+        "format": "lpv_sysid/vertex_models@2",
+        "time": "continuous",
+        "states": [{"name": n, "unit": u} for n, u in zip(STATE_NAMES, STATE_UNITS)],
+        "inputs": [{"name": n, "unit": u} for n, u in zip(INPUT_NAMES, INPUT_UNITS)],
+        "scheduling": {"names": ["u_d", "v_d", "w_d"], "min": [-box] * 3, "max": [box] * 3},
+        "vertices": verts,
+        "meta": {"k_sigma": 3.0},
+    }
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
     return path
 
@@ -73,7 +108,7 @@ def _config(path: Path, **hinf) -> Path:
 def full_box(tmp_path_factory):
     d = tmp_path_factory.mktemp("fullbox")
     models = quad_models(d / "vertex_models.yaml")
-    cfg = _config(d / "synthesis.yaml")                  # the shipped config: full box, common X, min_effort
+    cfg = _config(d / "synthesis.yaml")  # the shipped config: full box, common X, min_effort
     out = d / "gains.yaml"
     rc = main(["synthesize", "--models", str(models), "--config", str(cfg), "--out", str(out)])
     assert rc == 0
@@ -100,10 +135,12 @@ def _raw_boxes(models: Path):
 def test_element_box_is_exactly_the_intervals_with_a_common_b_hull():
     A = np.array([[[-1.0, 0.0], [0.0, -2.0]], [[-3.0, 0.0], [0.0, -2.0]]])
     B = np.array([[[1.0], [0.0]], [[1.5], [0.0]]])
-    els = [[UncertainElement("A", 0, 0, -1.2, -0.9), UncertainElement("B", 0, 0, 0.8, 1.1)],
-           [UncertainElement("A", 1, 0, -0.1, 0.3)]]
+    els = [
+        [UncertainElement("A", 0, 0, -1.2, -0.9), UncertainElement("B", 0, 0, 0.8, 1.1)],
+        [UncertainElement("A", 1, 0, -0.1, 0.3)],
+    ]
     box = ElementBox.from_elements(A, B, els)
-    assert box.p == [2, 2]                    # one A element each + the one B hull element
+    assert box.p == [2, 2]  # one A element each + the one B hull element
     lo0, hi0 = box.bounds(0)
     lo1, hi1 = box.bounds(1)
     assert (lo0[0, 0], hi0[0, 0]) == pytest.approx((-1.2, -0.9), abs=1e-15)
@@ -117,7 +154,9 @@ def test_element_box_is_exactly_the_intervals_with_a_common_b_hull():
     for i, lst in enumerate(sample):
         lo, hi = box.bounds(i)
         assert len(lst) == 6
-        assert any(np.array_equal(a, A[i]) and np.array_equal(b, B[i]) for a, b in lst)   # the nominal
+        assert any(
+            np.array_equal(a, A[i]) and np.array_equal(b, B[i]) for a, b in lst
+        )  # the nominal
         for a, b in lst:
             AB = np.concatenate([a, b], axis=1)
             assert np.all(AB >= lo - 1e-15) and np.all(AB <= hi + 1e-15)
@@ -133,23 +172,37 @@ def test_full_box_certificate_covers_every_identified_element_and_the_motor_cons
     assert cs["kind"] == "full_identified_box"
     raw = _raw_boxes(models)
     n_file = [len(v["uncertain"]) for v in yaml.safe_load(models.read_text())["vertices"]]
-    assert cs["elements"]["per_vertex"] == [k + 8 for k in n_file]          # + 4 A, 4 B motor entries
+    assert cs["elements"]["per_vertex"] == [k + 8 for k in n_file]  # + 4 A, 4 B motor entries
     assert "motor_std" in cs["motor_constants"]
     side = load_certificate_npz(out.with_name("gains.cert.npz"))
     for i, (A, B, els) in enumerate(raw):
         p = int(side["box_p"][i])
         lo = np.concatenate([side["box_Ac"][i], side["box_Bc"]], axis=1)
         hi = lo.copy()
-        for r, c, h in zip(side["box_rows"][i, :p], side["box_cols"][i, :p], side["box_half"][i, :p]):
+        for r, c, h in zip(
+            side["box_rows"][i, :p], side["box_cols"][i, :p], side["box_half"][i, :p]
+        ):
             lo[r, c] -= h
             hi[r, c] += h
         for mat, r, c, l_, u_ in els:
             cc = c if mat == "A" else 12 + c
-            assert lo[r, cc] <= l_ + 1e-12 * abs(l_) and hi[r, cc] >= u_ - 1e-12 * abs(u_), (i, mat, r, c)
+            assert lo[r, cc] <= l_ + 1e-12 * abs(l_) and hi[r, cc] >= u_ - 1e-12 * abs(u_), (
+                i,
+                mat,
+                r,
+                c,
+            )
     rep = verify_files(out, models, n_random=3)
     assert rep.passed, rep.table()
     checks = {r.check for r in rep.rows}
-    assert {"box claim", "small gain", "box lmi gamma", "box lmi margin", "runtime set", "scheduling"} <= checks
+    assert {
+        "box claim",
+        "small gain",
+        "box lmi gamma",
+        "box lmi margin",
+        "runtime set",
+        "scheduling",
+    } <= checks
 
 
 def test_full_box_bound_holds_at_corners_of_the_file_box(full_box):
@@ -204,7 +257,7 @@ def test_runtime_rechecks_systems_inside_the_certified_box(full_box):
             cc = c if mat == "A" else 12 + c
             lo[r, cc], hi[r, cc] = l_, u_
         # the B hull spans every vertex's B intervals: widen the B part to the hull over vertices
-        for (A2, B2, els2) in raw:
+        for A2, B2, els2 in raw:
             for mat, r, c, l_, u_ in els2:
                 if mat == "B":
                     lo[r, 12 + c], hi[r, 12 + c] = min(lo[r, 12 + c], l_), max(hi[r, 12 + c], u_)
@@ -218,11 +271,24 @@ def _scalar_box(a0, wa, b0, wb, vertices=2, a_step=0.0):
     """x' = a x + b (u + R w) on a 1-axis box, a = a0 + i a_step at vertex i, +/- wa; b0 +/- wb."""
     A = np.array([[[a0 + i * a_step]] for i in range(vertices)])
     B = np.array([[[b0]] for _ in range(vertices)])
-    els = [[UncertainElement("A", 0, 0, A[i, 0, 0] - wa, A[i, 0, 0] + wa),
-            UncertainElement("B", 0, 0, b0 - wb, b0 + wb)] for i in range(vertices)]
+    els = [
+        [
+            UncertainElement("A", 0, 0, A[i, 0, 0] - wa, A[i, 0, 0] + wa),
+            UncertainElement("B", 0, 0, b0 - wb, b0 + wb),
+        ]
+        for i in range(vertices)
+    ]
     box = ElementBox.from_elements(A, B, els)
-    return PolytopicModel(vmin=np.array([-1.0]), vmax=np.array([1.0]), A=A, B=B, x0=None, u0=None,
-                          systems=box.sample_systems(list(zip(A, B)), 4), box=box)
+    return PolytopicModel(
+        vmin=np.array([-1.0]),
+        vmax=np.array([1.0]),
+        A=A,
+        B=B,
+        x0=None,
+        u0=None,
+        systems=box.sample_systems(list(zip(A, B)), 4),
+        box=box,
+    )
 
 
 @pytest.mark.parametrize("lyapunov", ["common", "vertex"])
@@ -232,7 +298,9 @@ def test_scalar_box_certificate_against_the_analytic_worst_case(lyapunov):
     gain must meet gamma there."""
     model = _scalar_box(a0=1.0, wa=0.2, b0=1.0, wb=0.3, a_step=0.5)
     R, C, gamma = np.array([[0.5]]), np.array([[1.0]]), 0.4
-    res = synthesize_hinf(model, R, C, HinfOptions(gamma=gamma, lyapunov=lyapunov, solver="CLARABEL"))
+    res = synthesize_hinf(
+        model, R, C, HinfOptions(gamma=gamma, lyapunov=lyapunov, solver="CLARABEL")
+    )
     worst = 0.0
     for i, k in enumerate(res.K[:, 0, 0]):
         a_c = model.box.A_centre[i, 0, 0]
@@ -249,8 +317,12 @@ def test_scalar_box_with_a_sign_uncertain_input_is_infeasible():
     no certificate may exist (the S-procedure is sound, not vacuous)."""
     model = _scalar_box(a0=1.0, wa=0.1, b0=0.8, wb=1.0)
     with pytest.raises(SolverError):
-        synthesize_hinf(model, np.array([[0.5]]), np.array([[1.0]]),
-                        HinfOptions(gamma=10.0, lyapunov="common", solver="CLARABEL", minimize_gamma=True))
+        synthesize_hinf(
+            model,
+            np.array([[0.5]]),
+            np.array([[1.0]]),
+            HinfOptions(gamma=10.0, lyapunov="common", solver="CLARABEL", minimize_gamma=True),
+        )
 
 
 # ----------------------------------------------------------------------------- time variation
@@ -272,7 +344,10 @@ def test_common_lyapunov_matrix_certifies_arbitrarily_fast_scheduling(full_box):
     for k in range(40):
         vd = rng.uniform(-2, 2, 3) if k >= 8 else model.vertices[k]
         alpha, _ = multilinear_weights(vd, model.vmin, model.vmax)
-        A = sum(a * model.box.system(i, rng.choice([-1.0, 1.0], model.box.p[i]))[0] for i, a in enumerate(alpha))
+        A = sum(
+            a * model.box.system(i, rng.choice([-1.0, 1.0], model.box.p[i]))[0]
+            for i, a in enumerate(alpha)
+        )
         B = model.box.system(0, rng.choice([-1.0, 1.0], model.box.p[0]))[1]
         Acl = A + B @ np.tensordot(alpha, gs.K, axes=1)
         L = Acl.T @ P + P @ Acl
@@ -284,14 +359,44 @@ def small_models(path: Path) -> Path:
     x2' = a x2 + b u with a uncertain per vertex and b in a common interval."""
     verts = []
     for s_, a in ((-1.0, 0.5), (1.0, 1.5)):
-        unc = [{"matrix": "A", "row": 1, "col": 1, "nominal": a, "std": 0.05, "lower": a - 0.15, "upper": a + 0.15},
-               {"matrix": "B", "row": 1, "col": 0, "nominal": 1.0, "std": 0.05, "lower": 0.85, "upper": 1.15}]
-        verts.append({"scheduling": [s_], "x0": [0.0, 0.0], "u0": [0.0], "A": [[-1.0, 1.0], [0.0, a]],
-                      "B": [[0.0], [1.0]], "uncertain": unc})
-    doc = {"format": "lpv_sysid/vertex_models@2", "time": "continuous",
-           "states": [{"name": "x1", "unit": "m/s"}, {"name": "x2", "unit": "1"}],
-           "inputs": [{"name": "u", "unit": "1"}],
-           "scheduling": {"names": ["s"], "min": [-1.0], "max": [1.0]}, "vertices": verts}
+        unc = [
+            {
+                "matrix": "A",
+                "row": 1,
+                "col": 1,
+                "nominal": a,
+                "std": 0.05,
+                "lower": a - 0.15,
+                "upper": a + 0.15,
+            },
+            {
+                "matrix": "B",
+                "row": 1,
+                "col": 0,
+                "nominal": 1.0,
+                "std": 0.05,
+                "lower": 0.85,
+                "upper": 1.15,
+            },
+        ]
+        verts.append(
+            {
+                "scheduling": [s_],
+                "x0": [0.0, 0.0],
+                "u0": [0.0],
+                "A": [[-1.0, 1.0], [0.0, a]],
+                "B": [[0.0], [1.0]],
+                "uncertain": unc,
+            }
+        )
+    doc = {
+        "format": "lpv_sysid/vertex_models@2",
+        "time": "continuous",
+        "states": [{"name": "x1", "unit": "m/s"}, {"name": "x2", "unit": "1"}],
+        "inputs": [{"name": "u", "unit": "1"}],
+        "scheduling": {"names": ["s"], "min": [-1.0], "max": [1.0]},
+        "vertices": verts,
+    }
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
     return path
 
@@ -299,12 +404,26 @@ def small_models(path: Path) -> Path:
 def test_frozen_certificate_says_so_and_a_false_claim_fails_verify(tmp_path, capsys):
     models = small_models(tmp_path / "vertex_models.yaml")
     cfg = tmp_path / "synthesis.yaml"
-    cfg.write_text(yaml.safe_dump({
-        "hinf": {"gamma": 1.0, "lyapunov": "vertex", "objective": "feasibility", "solver": "CLARABEL"},
-        "weights": {"T": 2.0, "input_magnitudes": [0.5], "output_magnitudes": [2 ** -0.5]},
-        "velocity_states": ["x1"], "uncertainty": {"set": "full_box"}, "verify": {"n_random": 3, "seed": 0}}))
+    cfg.write_text(
+        yaml.safe_dump(
+            {
+                "hinf": {
+                    "gamma": 1.0,
+                    "lyapunov": "vertex",
+                    "objective": "feasibility",
+                    "solver": "CLARABEL",
+                },
+                "weights": {"T": 2.0, "input_magnitudes": [0.5], "output_magnitudes": [2**-0.5]},
+                "velocity_states": ["x1"],
+                "uncertainty": {"set": "full_box"},
+                "verify": {"n_random": 3, "seed": 0},
+            }
+        )
+    )
     out = tmp_path / "gains.yaml"
-    assert main(["synthesize", "--models", str(models), "--config", str(cfg), "--out", str(out)]) == 0
+    assert (
+        main(["synthesize", "--models", str(models), "--config", str(cfg), "--out", str(out)]) == 0
+    )
     capsys.readouterr()
     d = yaml.safe_load(out.read_text())
     sch = d["certificate"]["certified_set"]["scheduling"]
@@ -323,8 +442,9 @@ def test_rate_bounded_certificate_meets_the_dual_bounded_real_inequality_with_th
     (v, dv/dt) for the box centre plant (what V = x^T X(v)^-1 x needs; the H form implies it)."""
     model = _scalar_box(a0=1.0, wa=0.1, b0=1.0, wb=0.1, a_step=2.0)
     R, C, gamma, rho = np.array([[0.5]]), np.array([[1.0]]), 0.4, 3.0
-    res = synthesize_hinf(model, R, C, HinfOptions(gamma=gamma, lyapunov="rate", rate_bound=[rho],
-                                                   solver="CLARABEL"))
+    res = synthesize_hinf(
+        model, R, C, HinfOptions(gamma=gamma, lyapunov="rate", rate_bound=[rho], solver="CLARABEL")
+    )
     X = np.array([res.X[i][0] for i in range(2)])
     assert res.min_margin > 0
     rng = np.random.default_rng(0)
@@ -336,7 +456,7 @@ def test_rate_bounded_certificate_meets_the_dual_bounded_real_inequality_with_th
         a = alpha @ model.box.A_centre[:, 0, 0]
         b = model.box.B_centre[0, 0]
         k = alpha @ res.K[:, 0, 0]
-        lhs = 2 * (a + b * k) * Xv - Xdot + (b * R[0, 0]) ** 2 + Xv ** 2 * C[0, 0] ** 2 / gamma ** 2
+        lhs = 2 * (a + b * k) * Xv - Xdot + (b * R[0, 0]) ** 2 + Xv**2 * C[0, 0] ** 2 / gamma**2
         assert lhs < 0
 
 
@@ -363,13 +483,27 @@ def test_rate_bounded_certificate_round_trip_and_an_overstated_bound_fails(tmp_p
     from the stored bound; a certificate claiming a larger bound than the LMI proved is refused."""
     models = small_models(tmp_path / "vertex_models.yaml")
     cfg = tmp_path / "synthesis.yaml"
-    cfg.write_text(yaml.safe_dump({
-        "hinf": {"gamma": 1.0, "lyapunov": "rate", "rate_bound": [2.0], "objective": "feasibility",
-                 "solver": "CLARABEL"},
-        "weights": {"T": 2.0, "input_magnitudes": [0.5], "output_magnitudes": [2 ** -0.5]},
-        "velocity_states": ["x1"], "uncertainty": {"set": "full_box"}, "verify": {"n_random": 3, "seed": 0}}))
+    cfg.write_text(
+        yaml.safe_dump(
+            {
+                "hinf": {
+                    "gamma": 1.0,
+                    "lyapunov": "rate",
+                    "rate_bound": [2.0],
+                    "objective": "feasibility",
+                    "solver": "CLARABEL",
+                },
+                "weights": {"T": 2.0, "input_magnitudes": [0.5], "output_magnitudes": [2**-0.5]},
+                "velocity_states": ["x1"],
+                "uncertainty": {"set": "full_box"},
+                "verify": {"n_random": 3, "seed": 0},
+            }
+        )
+    )
     out = tmp_path / "gains.yaml"
-    assert main(["synthesize", "--models", str(models), "--config", str(cfg), "--out", str(out)]) == 0
+    assert (
+        main(["synthesize", "--models", str(models), "--config", str(cfg), "--out", str(out)]) == 0
+    )
     capsys.readouterr()
     d = yaml.safe_load(out.read_text())
     sch = d["certificate"]["certified_set"]["scheduling"]

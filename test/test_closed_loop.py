@@ -19,7 +19,7 @@ from lpv_sysid.sim.lpv_closed_loop import (
 )
 
 RNG = np.random.default_rng(7)
-N_X, N_U = 5, 5          # small system; velocity states are indices 2, 3, 4 as in DESIGN.md
+N_X, N_U = 5, 5  # small system; velocity states are indices 2, 3, 4 as in DESIGN.md
 
 
 class AffineModel:
@@ -91,12 +91,16 @@ def test_single_vertex_matches_lsim(method):
     """Constant v_d: Eq. (33) is LTI, dx' = (A+BK) dx + B R kappa u_e (FOH input, exact in lsim)."""
     model = _model(scheduled=False)
     sig = _signals(scheduled=False)
-    res = simulate_eq33(model, sig, R, Q, gamma=1.0, config=ClosedLoopConfig(kappa=1.7, method=method))
+    res = simulate_eq33(
+        model, sig, R, Q, gamma=1.0, config=ClosedLoopConfig(kappa=1.7, method=method)
+    )
     z_ref, dx_ref = _lsim_z(model, sig, 1.7)
     scale = np.max(np.abs(z_ref))
     assert scale > 1e-3
     np.testing.assert_allclose(res.z_model, z_ref, atol=2e-6 * scale, rtol=0)
-    np.testing.assert_allclose(res.x, dx_ref + model.x0(sig.v_d[0]), atol=1e-5 * np.max(np.abs(dx_ref)))
+    np.testing.assert_allclose(
+        res.x, dx_ref + model.x0(sig.v_d[0]), atol=1e-5 * np.max(np.abs(dx_ref))
+    )
     # z_model of Eq. (19b) is the velocity perturbation from x0 scaled by Q^-1; z of Eq. (18)
     # differs from it by the (constant here) offset Q^-1 (v0(v_d) - v_d)
     np.testing.assert_allclose(res.z_model, np.linalg.solve(Q, res.dx[:, 2:5].T).T, atol=1e-12)
@@ -133,7 +137,7 @@ def test_hinf_grid_first_order_oracle():
     nrm, w = hinf_norm_grid(np.array([[-2.0]]), np.array([[3.0]]), np.array([[1.0]]))
     assert nrm == pytest.approx(1.5, rel=1e-9) and w == 0.0
     wn, zeta = 3.0, 0.1
-    A = np.array([[0.0, 1.0], [-wn**2, -2 * zeta * wn]])
+    A = np.array([[0.0, 1.0], [-(wn**2), -2 * zeta * wn]])
     nrm, w = hinf_norm_grid(A, np.array([[0.0], [wn**2]]), np.array([[1.0, 0.0]]))
     assert nrm == pytest.approx(1 / (2 * zeta * np.sqrt(1 - zeta**2)), rel=1e-6)
     assert w == pytest.approx(wn * np.sqrt(1 - 2 * zeta**2), rel=1e-4)
@@ -160,7 +164,9 @@ def test_l2_gain_bounded_by_hinf_and_reaches_it_at_peak():
     res = simulate_eq33(model, peak, R, Q, gamma=hinf, config=ClosedLoopConfig(method="rk4"))
     assert 0.9 * hinf < res.gain_model <= hinf * (1 + 1e-6)
     # kappa scales u_e and z alike: the gain does not change (seed 0 Sec. VII)
-    res2 = simulate_eq33(model, peak, R, Q, gamma=hinf, config=ClosedLoopConfig(method="rk4", kappa=3.0))
+    res2 = simulate_eq33(
+        model, peak, R, Q, gamma=hinf, config=ClosedLoopConfig(method="rk4", kappa=3.0)
+    )
     assert res2.gain_model == pytest.approx(res.gain_model, rel=1e-9)
     assert res2.ue_norm == pytest.approx(3.0 * res.ue_norm, rel=1e-12)
 
@@ -174,10 +180,12 @@ def test_bad_inputs():
     with pytest.raises(ConfigError, match="increasing"):
         ReferenceSignals(t[::-1], np.zeros((5, 3)), np.zeros((5, 2)))
     model = _model(scheduled=False)
-    model.Acl = -model.Acl + 5 * np.eye(N_X)      # unstable closed loop
+    model.Acl = -model.Acl + 5 * np.eye(N_X)  # unstable closed loop
     sig = _signals(T=30.0, scheduled=False)
     with pytest.raises(SafetyError, match="diverged"):
-        simulate_eq33(model, sig, R, Q, config=ClosedLoopConfig(method="rk4", divergence_bound=1e3))
+        simulate_eq33(
+            model, sig, R, Q, config=ClosedLoopConfig(method="rk4", divergence_bound=1e3)
+        )
 
 
 def test_eq34_multilinear_model_against_finite_differences():
@@ -189,21 +197,29 @@ def test_eq34_multilinear_model_against_finite_differences():
     n, m = 4, 2
     A = rng.normal(size=(8, n, n))
     B = rng.normal(size=(8, n, m))
-    pm = PolytopicModel(vmin=[-5, -5, -5], vmax=[5, 5, 5], A=A, B=B,
-                        x0=rng.normal(size=(8, n)), u0=rng.normal(size=(8, m)))
+    pm = PolytopicModel(
+        vmin=[-5, -5, -5],
+        vmax=[5, 5, 5],
+        A=A,
+        B=B,
+        x0=rng.normal(size=(8, n)),
+        u0=rng.normal(size=(8, m)),
+    )
     sched = ScheduledLpv(pm, rng.normal(size=(8, m, n)))
     t = np.arange(0.0, 10.0, 0.01)
     vd = np.column_stack([4 * np.sin(0.7 * t), 3 * np.cos(0.4 * t), 2 * np.sin(1.1 * t + 0.3)])
     sig = ReferenceSignals(t, vd, np.zeros((t.size, 1)))
     h = 1e-6
-    for tk in (0.123, 2.505, 7.777):          # inside FOH segments (slope is one-sided at samples)
+    for tk in (0.123, 2.505, 7.777):  # inside FOH segments (slope is one-sided at samples)
         v, vdot, _ = sig.at(tk)
         fd = (sched.x0(sig.at(tk + h)[0]) - sched.x0(sig.at(tk - h)[0])) / (2 * h)
         np.testing.assert_allclose(x0_dot(sched, v, vdot), fd, rtol=1e-5, atol=1e-7)
     # and against the analytic derivative of the smooth reference (FOH slope -> true slope)
     tk = 3.3
     v_true = np.array([4 * np.sin(0.7 * tk), 3 * np.cos(0.4 * tk), 2 * np.sin(1.1 * tk + 0.3)])
-    vdot_true = np.array([2.8 * np.cos(0.7 * tk), -1.2 * np.sin(0.4 * tk), 2.2 * np.cos(1.1 * tk + 0.3)])
+    vdot_true = np.array(
+        [2.8 * np.cos(0.7 * tk), -1.2 * np.sin(0.4 * tk), 2.2 * np.cos(1.1 * tk + 0.3)]
+    )
     fd = (sched.x0(v_true + h * vdot_true) - sched.x0(v_true - h * vdot_true)) / (2 * h)
     np.testing.assert_allclose(x0_dot(sched, v_true, vdot_true), fd, rtol=1e-6, atol=1e-8)
 
@@ -223,8 +239,10 @@ def test_lemma1_gains_frozen_point_gain_below_certificate():
     sched = ScheduledLpv(pm, res.K)
     vd = np.array([1.5, -2.0, 0.7])
     t = np.arange(0.0, 20.0, 0.01)
-    ue = np.column_stack([np.sin(2 * np.pi * f * t + k) for k, f in enumerate((0.6, 1.1, 1.9, 2.7))])
-    ue /= np.sqrt(np.trapz(np.sum(ue**2, axis=1), t))          # unit energy, Eq. (26)
+    ue = np.column_stack(
+        [np.sin(2 * np.pi * f * t + k) for k, f in enumerate((0.6, 1.1, 1.9, 2.7))]
+    )
+    ue /= np.sqrt(np.trapz(np.sum(ue**2, axis=1), t))  # unit energy, Eq. (26)
     sig = ReferenceSignals(t, np.tile(vd, (t.size, 1)), ue)
     out = simulate_eq33(sched, sig, Rq, Qq, gamma=1.0, config=ClosedLoopConfig(method="rk4"))
     Acl = sched.A(vd) + sched.B(vd) @ sched.K(vd)

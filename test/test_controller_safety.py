@@ -40,11 +40,13 @@ def with_feedforward(d):
     """Add the reference feedforward (synthesis/feedforward.py) of the trim linearisations."""
     from lpv_sysid.models.quadrotor import STATE_NAMES
     from lpv_sysid.synthesis.feedforward import FeedforwardLayout, vertex_feedforward
+
     quad = Quadrotor()
     lins = [quad.linearize(quad.trim(np.array(v["scheduling"]))) for v in d["vertices"]]
     layout = FeedforwardLayout()
-    F, Fj = vertex_feedforward(np.array([a for a, _ in lins]), np.array([b for _, b in lins]),
-                               STATE_NAMES, layout)
+    F, Fj = vertex_feedforward(
+        np.array([a for a, _ in lins]), np.array([b for _, b in lins]), STATE_NAMES, layout
+    )
     d["feedforward"] = layout.to_dict()
     for i, v in enumerate(d["vertices"]):
         v["F_ff"], v["F_jerk"] = F[i].tolist(), Fj[i].tolist()
@@ -52,19 +54,21 @@ def with_feedforward(d):
 
 @pytest.fixture(scope="module")
 def gains5ff(tmp_path_factory):
-    return write_gains(tmp_path_factory.mktemp("g5ff") / "gains.yaml", box=5.0,
-                       edit=with_feedforward)
+    return write_gains(
+        tmp_path_factory.mktemp("g5ff") / "gains.yaml", box=5.0, edit=with_feedforward
+    )
 
 
 def runtime(gains, **kw):
-    return ControllerRuntime(ControllerSettings(gains_file=str(gains), **kw),
-                             M.MsgFactory.rosbags())
+    return ControllerRuntime(
+        ControllerSettings(gains_file=str(gains), **kw), M.MsgFactory.rosbags()
+    )
 
 
 def hover_inputs(rt):
     """State, rotor speeds and excitation holding the box-centre trim (v_d = 0)."""
     gs = rt.schedule
-    x0 = gs.x0.mean(axis=0)               # multilinear weights at the centre: 1/8 each
+    x0 = gs.x0.mean(axis=0)  # multilinear weights at the centre: 1/8 each
     return x0[:8], np.linalg.solve(rt.mix, x0[8:])
 
 
@@ -72,8 +76,12 @@ def feed(rt, t_now, *, stamp=None, v_d=(0.0, 0.0, 0.0), u_e=(0.0, 0.0, 0.0, 0.0)
     """One message of every input stream received at ``t_now`` stamped ``stamp``."""
     x8, om = hover_inputs(rt)
     st = t_now if stamp is None else stamp
-    vals = {"state": x8, "rotor_speeds": om, "velocity_reference": np.append(v_d, 0.0),
-            "excitation": np.asarray(u_e, float)}
+    vals = {
+        "state": x8,
+        "rotor_speeds": om,
+        "velocity_reference": np.append(v_d, 0.0),
+        "excitation": np.asarray(u_e, float),
+    }
     for topic in streams or vals:
         rt.on_sample(topic, st, vals[topic], t_now)
 
@@ -91,22 +99,25 @@ def fly(rt, t0, seconds, dt=0.004, stamp_offset=0.0, **kw):
 
 
 # ----------------------------------------------------------------- item 1: one validation
-@pytest.mark.parametrize("params, needle", [
-    ({"u_esc_min": 0.9, "u_esc_max": 0.1}, "u_esc_min < u_esc_max"),
-    ({"rate_limit": [-1.0, 1.0, 1.0, 1.0]}, "rate_limit' entry [0] must be > 0"),
-    ({"rate_limit": [0.0, 1.0, 1.0, 1.0]}, "rate_limit' entry [0] must be > 0"),
-    ({"rate_limit": [1.0, math.nan, 1.0, 1.0]}, "rate_limit' entry [1] must be finite"),
-    ({"rate_limit": [1.0, 1.0]}, "rate_limit' needs 0 or 4 entries"),
-    ({"monitor_margin": 0.0}, "monitor_margin' must be >= 1"),
-    ({"state_timeout_s": 1e9}, "state_timeout_s' must be <= 1"),
-    ({"box_margin": 100.0}, "box_margin' must be <= 1"),
-    ({"rate_hz": 10.0}, "state_timeout_s 0.02 s is shorter than one control period"),
-    ({"stamp_tolerance_s": 0.05}, "stamp_tolerance_s 0.05 s exceeds the shortest timeout"),
-    ({"monitor_window_s": 0.5}, "monitor_window_s must be 0 (running) or >= 1 s"),
-    ({"feedforward": 1}, "feedforward' must be true or false"),
-    ({"rate_hz": 250}, None),                       # an int for a double is fine off-ROS
-    ({"bogus": 1.0}, "unknown parameter(s) ['bogus']"),
-])
+@pytest.mark.parametrize(
+    "params, needle",
+    [
+        ({"u_esc_min": 0.9, "u_esc_max": 0.1}, "u_esc_min < u_esc_max"),
+        ({"rate_limit": [-1.0, 1.0, 1.0, 1.0]}, "rate_limit' entry [0] must be > 0"),
+        ({"rate_limit": [0.0, 1.0, 1.0, 1.0]}, "rate_limit' entry [0] must be > 0"),
+        ({"rate_limit": [1.0, math.nan, 1.0, 1.0]}, "rate_limit' entry [1] must be finite"),
+        ({"rate_limit": [1.0, 1.0]}, "rate_limit' needs 0 or 4 entries"),
+        ({"monitor_margin": 0.0}, "monitor_margin' must be >= 1"),
+        ({"state_timeout_s": 1e9}, "state_timeout_s' must be <= 1"),
+        ({"box_margin": 100.0}, "box_margin' must be <= 1"),
+        ({"rate_hz": 10.0}, "state_timeout_s 0.02 s is shorter than one control period"),
+        ({"stamp_tolerance_s": 0.05}, "stamp_tolerance_s 0.05 s exceeds the shortest timeout"),
+        ({"monitor_window_s": 0.5}, "monitor_window_s must be 0 (running) or >= 1 s"),
+        ({"feedforward": 1}, "feedforward' must be true or false"),
+        ({"rate_hz": 250}, None),  # an int for a double is fine off-ROS
+        ({"bogus": 1.0}, "unknown parameter(s) ['bogus']"),
+    ],
+)
 def test_settings_validate_every_rule(params, needle):
     d = {"gains_file": "g.yaml", **params}
     if needle is None:
@@ -137,32 +148,50 @@ def test_esc_limits_must_contain_every_trim(gains2):
     """u_esc_max 0.3 < the hover trim ESC command (~0.53): every command would be clamped
     (thrust 0.3 instead of the trim); refused at load naming the trim."""
     trims = np.linalg.solve(mixer(0.225), GainSchedule.load(gains2).u0.T).T
-    assert trims.max() > 0.5 and trims.min() > 0.3     # the oracle: hover needs ~0.53 per motor
+    assert trims.max() > 0.5 and trims.min() > 0.3  # the oracle: hover needs ~0.53 per motor
     with pytest.raises(ConfigError, match=r"do not contain the trim ESC commands .* of vertex 0"):
         runtime(gains2, u_esc_max=0.3)
-    rt = runtime(gains2, u_esc_min=0.1, u_esc_max=0.9)       # consistent limits fly
+    rt = runtime(gains2, u_esc_min=0.1, u_esc_max=0.9)  # consistent limits fly
     assert rt.law.cfg.u_esc_max == 0.9
 
 
 def test_box_margin_bounded_by_the_box(gains2):
     with pytest.raises(ConfigError, match="box_margin 0.5 m/s exceeds 0.1 of the narrowest"):
-        runtime(gains2, box_margin=0.5)            # box [-2, 2]: at most 0.4
+        runtime(gains2, box_margin=0.5)  # box [-2, 2]: at most 0.4
     assert runtime(gains2, box_margin=0.4).supervisor.config.box_margin == 0.4
 
 
-@pytest.mark.parametrize("line, needle", [
-    ("monitor_margin: 0.0", "monitor_margin' must be >= 1"),
-    ("state_timeout_s: 1.0e+9", "state_timeout_s' must be <= 1"),
-    ("box_margin: 100.0", "box_margin' must be <= 1"),
-    ("u_esc_min: 0.9", "u_esc_min < u_esc_max"),
-])
+@pytest.mark.parametrize(
+    "line, needle",
+    [
+        ("monitor_margin: 0.0", "monitor_margin' must be >= 1"),
+        ("state_timeout_s: 1.0e+9", "state_timeout_s' must be <= 1"),
+        ("box_margin: 100.0", "box_margin' must be <= 1"),
+        ("u_esc_min: 0.9", "u_esc_min < u_esc_max"),
+    ],
+)
 def test_replay_refuses_what_the_node_refuses(tmp_path, capsys, line, needle):
     params = tmp_path / "ctl.yaml"
-    params.write_text("/**/lpv_controller:\n  ros__parameters:\n    u_esc_max: 0.5\n"
-                      f"    {line}\n" if line.startswith("u_esc_min")
-                      else f"/**/lpv_controller:\n  ros__parameters:\n    {line}\n")
-    code = main(["replay", "--bag", P2, "--node", "lpv_controller", "--params", str(params),
-                 "--gains", SAMPLE_GAINS, "--out", str(tmp_path / "out")])
+    params.write_text(
+        f"/**/lpv_controller:\n  ros__parameters:\n    u_esc_max: 0.5\n    {line}\n"
+        if line.startswith("u_esc_min")
+        else f"/**/lpv_controller:\n  ros__parameters:\n    {line}\n"
+    )
+    code = main(
+        [
+            "replay",
+            "--bag",
+            P2,
+            "--node",
+            "lpv_controller",
+            "--params",
+            str(params),
+            "--gains",
+            SAMPLE_GAINS,
+            "--out",
+            str(tmp_path / "out"),
+        ]
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and needle in err[0]
     assert not (tmp_path / "out").exists()
@@ -199,8 +228,9 @@ def test_tampered_gains_are_refused(tmp_path):
     with pytest.raises(ConfigError, match=r"gains_sha256: \w+ does not match the gains"):
         runtime(g)
     g2 = write_gains(tmp_path / "g2.yaml", box=2.0)
-    _tamper(g2, lambda d: d["vertices"][0]["K"][0].__setitem__(
-        2, d["vertices"][0]["K"][0][2] + 1e-9))
+    _tamper(
+        g2, lambda d: d["vertices"][0]["K"][0].__setitem__(2, d["vertices"][0]["K"][0][2] + 1e-9)
+    )
     with pytest.raises(ConfigError, match="changed after certification"):
         runtime(g2)
 
@@ -216,18 +246,25 @@ def test_negated_gains_with_a_recomputed_hash_fail_the_stability_recheck(tmp_pat
     """Even a law whose hash was recomputed (e.g. a certifying tool fed the wrong K) must
     stabilise the certified systems: K -> -K makes A + B K unstable (oracle: the eigen-
     values of the fresh linearisation), refused naming the vertex."""
+
     def negate(d):
         for v in d["vertices"]:
             v["K"] = (-np.array(v["K"])).tolist()
+
     g = write_gains(tmp_path / "neg.yaml", box=2.0, edit=negate)
     gs = GainSchedule.load(g)
     quad = Quadrotor()
-    abscissa = [np.linalg.eigvals(a + b @ vx.K).real.max()
-                for vx in gs.vertices for a, b in [quad.linearize(quad.trim(vx.scheduling))]]
+    abscissa = [
+        np.linalg.eigvals(a + b @ vx.K).real.max()
+        for vx in gs.vertices
+        for a, b in [quad.linearize(quad.trim(vx.scheduling))]
+    ]
     worst = int(np.argmax(abscissa))
     assert min(abscissa) > 0
-    msg = (rf"unstable at vertex {worst}, certified system 0 "
-           rf"\(max Re\(eig\) = {abscissa[worst]:.4g}")
+    msg = (
+        rf"unstable at vertex {worst}, certified system 0 "
+        rf"\(max Re\(eig\) = {abscissa[worst]:.4g}"
+    )
     with pytest.raises(ConfigError, match=msg):
         runtime(g)
 
@@ -247,8 +284,9 @@ def test_sidecar_missing_or_changed_is_refused(tmp_path):
 
 
 def test_gains_without_design_envelope_are_refused(tmp_path):
-    g = write_gains(tmp_path / "gains.yaml", box=2.0,
-                    edit=lambda d: d["certificate"].pop("design"))
+    g = write_gains(
+        tmp_path / "gains.yaml", box=2.0, edit=lambda d: d["certificate"].pop("design")
+    )
     with pytest.raises(ConfigError, match=r"certificate.design missing.*--summary"):
         runtime(g)
 
@@ -259,11 +297,25 @@ def test_synthesize_writes_the_hash_and_the_certified_systems(tmp_path, capsys):
     from test_verify import _config, _models
 
     from lpv_sysid.synthesis.files import load_models
+
     models = _models(tmp_path / "vertex_models.yaml")
     cfg = _config(tmp_path / "synthesis.yaml", region=False)
     out = tmp_path / "gains.yaml"
-    assert main(["synthesize", "--models", str(models), "--config", str(cfg), "--out", str(out),
-                 "--no-verify"]) == 0
+    assert (
+        main(
+            [
+                "synthesize",
+                "--models",
+                str(models),
+                "--config",
+                str(cfg),
+                "--out",
+                str(out),
+                "--no-verify",
+            ]
+        )
+        == 0
+    )
     assert "no phase-2 signals summary" in capsys.readouterr().out
     gs = GainSchedule.load(out, layout=None)
     assert gs.certificate.gains_sha256 == gs.law_sha256() and gs.certificate.design is None
@@ -287,22 +339,23 @@ def test_excitation_beyond_the_design_aborts(gains2, value):
     cmds = fly(rt, 100.2, 0.2, u_e=(0.0, value, 0.0, 0.0))
     ev = rt.supervisor.event
     assert ev.reason == "excitation_bound" and ev.detail.startswith(f"excitation[1] = {value:.4g}")
-    assert "designed bound 1.5" in ev.detail          # design peak 1 x envelope_margin 1.5
-    assert cmds == []                                  # aborted on receipt, before the tick
+    assert "designed bound 1.5" in ev.detail  # design peak 1 x envelope_margin 1.5
+    assert cmds == []  # aborted on receipt, before the tick
 
 
 def test_excitation_gain_counts_against_the_design(gains2):
     rt = runtime(gains2, excitation_gain=4.0)
     feed(rt, 100.0)
     rt.start(100.0)
-    fly(rt, 100.004, 0.1, u_e=(0.3, 0.0, 0.0, 0.0))   # kappa u_e = 1.2 <= 1.5: flies
+    fly(rt, 100.004, 0.1, u_e=(0.3, 0.0, 0.0, 0.0))  # kappa u_e = 1.2 <= 1.5: flies
     assert rt.supervisor.event is None
-    fly(rt, 100.2, 0.1, u_e=(0.4, 0.0, 0.0, 0.0))     # 1.6 > 1.5
+    fly(rt, 100.2, 0.1, u_e=(0.4, 0.0, 0.0, 0.0))  # 1.6 > 1.5
     assert rt.supervisor.event.reason == "excitation_bound"
 
 
 def test_signals_file_with_huge_amplitude_is_refused(tmp_path):
     from lpv_sysid.signals.store import load_npz, save_npz
+
     t = np.arange(0.0, 1.0, 0.02)
     path = str(tmp_path / "s.npz")
     save_npz(path, t, np.stack([1e308 * np.sin(t), 0 * t], axis=1), ["ue_t", "u_d"])
@@ -313,23 +366,30 @@ def test_signals_file_with_huge_amplitude_is_refused(tmp_path):
 def test_signal_table_checked_against_the_design():
     from lpv_sysid.io.formats import DesignEnvelope
     from lpv_sysid.signals.excitation import check_design
+
     d = design_for(2.0)
-    env = DesignEnvelope(tuple(d["reference_peak"]), tuple(d["reference_rate"]),
-                         tuple(d["reference_accel"]), d["knot_interval_s"], d["fade_s"],
-                         tuple(d["excitation_peak"]))
+    env = DesignEnvelope(
+        tuple(d["reference_peak"]),
+        tuple(d["reference_rate"]),
+        tuple(d["reference_accel"]),
+        d["knot_interval_s"],
+        d["fade_s"],
+        tuple(d["excitation_peak"]),
+    )
     t = np.arange(0.0, 20.0, 0.02)
     names = ["u_d", "v_d", "w_d", "ue_t", "ue_a", "ue_e", "ue_r"]
-    ok = np.stack([0.8 * np.sin(2 * np.pi * 0.2 * t), 0 * t, 0 * t]
-                  + [0.5 * np.sin(3 * t)] * 4, axis=1)
+    ok = np.stack(
+        [0.8 * np.sin(2 * np.pi * 0.2 * t), 0 * t, 0 * t] + [0.5 * np.sin(3 * t)] * 4, axis=1
+    )
     check_design(t, ok, names, env, ramp=1.0)
     big = ok.copy()
-    big[:, 4] *= 3.0                                   # ue_a peak 1.5 > design 1
+    big[:, 4] *= 3.0  # ue_a peak 1.5 > design 1
     with pytest.raises(ConfigError, match="ue_a peak 1.5 exceeds the design excitation peak 1"):
         check_design(t, big, names, env, ramp=1.0)
     with pytest.raises(ConfigError, match="ramp_s 0.5 s is shorter than the fade"):
         check_design(t, ok, names, env, ramp=0.5)
     fast = ok.copy()
-    fast[:, 0] = 1.7 * np.sin(2 * np.pi * 2.0 * t)    # 21 m/s^2 > the design rate
+    fast[:, 0] = 1.7 * np.sin(2 * np.pi * 2.0 * t)  # 21 m/s^2 > the design rate
     with pytest.raises(ConfigError, match="u_d changes at"):
         check_design(t, fast, names, env, ramp=1.0)
 
@@ -350,10 +410,10 @@ def test_frozen_stamp_aborts(gains2):
     (state: 0.02 + 0.01 s)."""
     rt = _started(gains2)
     t0 = 100.5
-    for k in range(250):                                 # 1 s
+    for k in range(250):  # 1 s
         t = t0 + 0.004 * k
         feed(rt, t, streams=["rotor_speeds", "velocity_reference", "excitation"])
-        rt.on_sample("state", t0, hover_inputs(rt)[0], t)   # frozen stamp
+        rt.on_sample("state", t0, hover_inputs(rt)[0], t)  # frozen stamp
         rt.tick(t)
         if rt.supervisor.aborted:
             break
@@ -368,11 +428,11 @@ def test_frozen_stamp_of_a_silent_stream_ages_at_the_tick(gains2):
     rt = runtime(gains2)
     feed(rt, 100.0, stamp=100.0 - 0.025)
     assert rt.start(100.0)[0]
-    fly(rt, 100.004, 0.5, stamp_offset=-0.025)     # latency 25 ms: inside 0.02 + 0.01 s
+    fly(rt, 100.004, 0.5, stamp_offset=-0.025)  # latency 25 ms: inside 0.02 + 0.01 s
     assert rt.supervisor.event is None and rt.commands > 100
     t = 100.6
     feed(rt, t, stamp=t - 0.025)
-    rt.tick(t + 0.006)                             # receipt age 6 ms, stamp age 31 ms
+    rt.tick(t + 0.006)  # receipt age 6 ms, stamp age 31 ms
     ev = rt.supervisor.event
     assert ev.reason == "stale" and ev.detail.startswith("state: newest stamp")
 
@@ -384,8 +444,9 @@ def test_every_stream_stamped_in_the_past_aborts(gains2):
     assert rt.start(100.0)[0]
     cmds = fly(rt, 100.004, 0.1, stamp_offset=-10.0)
     ev = rt.supervisor.event
-    assert ev.reason == "stale" and ev.detail == ("state: stamp 10.000 s old at receipt "
-                                                   "(timeout 0.02 s + tolerance 0.01 s)")
+    assert ev.reason == "stale" and ev.detail == (
+        "state: stamp 10.000 s old at receipt (timeout 0.02 s + tolerance 0.01 s)"
+    )
     assert cmds == [] and ev.t == pytest.approx(100.004)
 
 
@@ -403,9 +464,9 @@ def test_small_latency_is_tolerated(gains2):
     rt = _started(gains2)
     for k in range(100):
         t = 100.6 + 0.004 * k
-        feed(rt, t, stamp=t - 0.008)                    # 8 ms transport latency
+        feed(rt, t, stamp=t - 0.008)  # 8 ms transport latency
         rt.tick(t)
-    feed(rt, 101.0, stamp=101.0 + 0.009)                # a 9 ms lead (clock offset)
+    feed(rt, 101.0, stamp=101.0 + 0.009)  # a 9 ms lead (clock offset)
     assert rt.supervisor.event is None
 
 
@@ -429,7 +490,7 @@ def test_reference_step_aborts_before_a_feedforward_spike(gains5ff):
     ev = rt.supervisor.event
     assert ev.reason == "reference_envelope" and "reference[0] changes at 1225 m/s^2" in ev.detail
     assert cmds == [] and rt.commands == n
-    assert np.abs(rt.law.a_filt).max() < 1e-9            # the law never saw the step
+    assert np.abs(rt.law.a_filt).max() < 1e-9  # the law never saw the step
 
 
 def test_reference_within_margin_is_rate_limited(gains5ff):
@@ -458,7 +519,7 @@ def test_reference_within_margin_is_rate_limited(gains5ff):
     assert rt.limiter.limited > 50
     assert a_max <= R1 * (1 + 1e-9) and a_max > 0.9 * R1
     assert v_in[-1] == pytest.approx(4.0, abs=0.05)
-    assert rt.v_d[0] == v_in[-1]                        # caught up once the ramp ended
+    assert rt.v_d[0] == v_in[-1]  # caught up once the ramp ended
 
 
 def test_limiter_passes_a_design_signal_unchanged():
@@ -466,17 +527,21 @@ def test_limiter_passes_a_design_signal_unchanged():
     raised-cosine fades, abort fade included) at 100 Hz with stamp jitter: followed bit for
     bit (the bounds are rigorous for it)."""
     from lpv_sysid.signals.excitation import ExcitationCore
+
     d = design_for(5.0)
     t = np.arange(0.0, 100.0, 0.02)
     rng = np.random.default_rng(3)
     cols = []
-    for _ in range(3):          # multisines up to 0.2 Hz scaled to peak 4.5
-        s = sum(rng.uniform(0.2, 1) * np.sin(2 * np.pi * 0.01 * h * t + rng.uniform(0, 6.3))
-                for h in range(1, 21))
+    for _ in range(3):  # multisines up to 0.2 Hz scaled to peak 4.5
+        s = sum(
+            rng.uniform(0.2, 1) * np.sin(2 * np.pi * 0.01 * h * t + rng.uniform(0, 6.3))
+            for h in range(1, 21)
+        )
         cols.append(4.5 * s / np.abs(s).max())
     u = np.stack(cols + [0 * t] * 4, axis=1)
-    core = ExcitationCore.phase2(t, u, ["u_d", "v_d", "w_d", "ue_t", "ue_a", "ue_e", "ue_r"],
-                                 start_time=1.0, ramp=1.0)
+    core = ExcitationCore.phase2(
+        t, u, ["u_d", "v_d", "w_d", "ue_t", "ue_a", "ue_e", "ue_r"], start_time=1.0, ramp=1.0
+    )
     lim = ReferenceLimiter(d["reference_rate"], d["reference_accel"], d["knot_interval_s"], 1.5)
     ts = np.sort(np.arange(0.0, 60.0, 0.01) + rng.uniform(-0.003, 0.003, 6000))
     for tk in ts:
@@ -497,12 +562,12 @@ def test_limiter_step_response_respects_the_bounds():
         ys.append(float(y[0]))
         ws.append(float(lim.w[0]))
     ys, ws = np.array(ys), np.array(ws)
-    assert np.abs(ws).max() <= 2.0 + 1e-12                    # rate bound
+    assert np.abs(ws).max() <= 2.0 + 1e-12  # rate bound
     # slope change over any window W <= R2 (W + 2 T + 2 dt) (class docstring)
     for lag in range(1, 150):
         dw = np.abs(ws[lag:] - ws[:-lag]).max()
         assert dw <= 4.0 * (0.01 * lag + 2 * 0.02 + 2 * 0.01) + 1e-12
-    assert ys.max() <= 3.0 + 2.0 * 0.01 and ys[-1] == 3.0       # no overshoot beyond one step
+    assert ys.max() <= 3.0 + 2.0 * 0.01 and ys[-1] == 3.0  # no overshoot beyond one step
     # time-optimal-ish: 3 m at 2 m/s plus the ramp up/down at 4 m/s^3 is ~2 s
     assert 1.9 < 0.01 * np.argmax(ys >= 3.0) - 0.5 < 2.3
 

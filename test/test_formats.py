@@ -21,18 +21,36 @@ def models_dict():
     vertices = []
     for c in CORNERS:
         A = RNG.normal(size=(12, 12))
-        vertices.append({
-            "scheduling": list(c),
-            "x0": RNG.normal(size=12).tolist(),
-            "u0": RNG.normal(size=4).tolist(),
-            "A": A.tolist(),
-            "B": RNG.normal(size=(12, 4)).tolist(),
-            "uncertain": [{"matrix": "A", "row": 2, "col": 0, "nominal": float(A[2, 0]),
-                           "std": 0.03, "lower": float(A[2, 0]) - 0.09, "upper": float(A[2, 0]) + 0.09},
-                          {"matrix": "B", "row": 11, "col": 3, "nominal": 1.0, "std": 0.0,
-                           "lower": 1.0, "upper": 1.0}],
-            "fit": {"r2": {"u": 0.97, "v": 0.95}, "tic": {"u": 0.1}},
-        })
+        vertices.append(
+            {
+                "scheduling": list(c),
+                "x0": RNG.normal(size=12).tolist(),
+                "u0": RNG.normal(size=4).tolist(),
+                "A": A.tolist(),
+                "B": RNG.normal(size=(12, 4)).tolist(),
+                "uncertain": [
+                    {
+                        "matrix": "A",
+                        "row": 2,
+                        "col": 0,
+                        "nominal": float(A[2, 0]),
+                        "std": 0.03,
+                        "lower": float(A[2, 0]) - 0.09,
+                        "upper": float(A[2, 0]) + 0.09,
+                    },
+                    {
+                        "matrix": "B",
+                        "row": 11,
+                        "col": 3,
+                        "nominal": 1.0,
+                        "std": 0.0,
+                        "lower": 1.0,
+                        "upper": 1.0,
+                    },
+                ],
+                "fit": {"r2": {"u": 0.97, "v": 0.95}, "tic": {"u": 0.1}},
+            }
+        )
     return {
         "format": "lpv_sysid/vertex_models@1",
         "time": "continuous",
@@ -49,13 +67,25 @@ def gains_dict(models, sha="0" * 64):
         "states": copy.deepcopy(models["states"]),
         "inputs": copy.deepcopy(models["inputs"]),
         "scheduling": copy.deepcopy(models["scheduling"]),
-        "vertices": [{"scheduling": list(v["scheduling"]), "K": RNG.normal(size=(4, 12)).tolist(),
-                      "x0": list(v["x0"]), "u0": list(v["u0"])} for v in models["vertices"]],
+        "vertices": [
+            {
+                "scheduling": list(v["scheduling"]),
+                "K": RNG.normal(size=(4, 12)).tolist(),
+                "x0": list(v["x0"]),
+                "u0": list(v["u0"]),
+            }
+            for v in models["vertices"]
+        ],
         "R": np.diag([0.1, 0.02, 0.02, 0.05]).tolist(),
         "Q": np.diag([1.0, 1.0, 0.5]).tolist(),
         "gamma": 1.0,
-        "certificate": {"lmi": "seed 0 Lemma 1", "solver": "CLARABEL", "gamma_achieved": 0.93,
-                        "min_margin": 1.0e-6, "models_sha256": sha},
+        "certificate": {
+            "lmi": "seed 0 Lemma 1",
+            "solver": "CLARABEL",
+            "gamma_achieved": 0.93,
+            "min_margin": 1.0e-6,
+            "models_sha256": sha,
+        },
     }
 
 
@@ -121,25 +151,31 @@ def test_vertices_reordered_into_box_order(good_models):
     np.testing.assert_array_equal(vm.A[0], np.array(good_models["vertices"][0]["A"]))
     # same order as the LPV module uses for interpolation
     from lpv_sysid.models.lpv import box_vertices
+
     np.testing.assert_array_equal(vm.scheduling.corners, box_vertices(LO, HI))
 
 
 def test_to_polytopic(good_models):
     pm = fm.VertexModels.from_dict(copy.deepcopy(good_models)).to_polytopic()
     assert pm.n_vertices == 8 and pm.n_x == 12 and pm.n_u == 4
-    assert len(pm.systems[0]) == 2          # one free interval -> 2 corners (Eq. 23)
+    assert len(pm.systems[0]) == 2  # one free interval -> 2 corners (Eq. 23)
     a20 = good_models["vertices"][0]["A"][2][0]
     vals = sorted(Aj[2, 0] for Aj, _ in pm.systems[0])
     np.testing.assert_allclose(vals, [a20 - 0.09, a20 + 0.09], rtol=1e-15)
 
 
 def test_generic_layout(tmp_path):
-    d = {"format": "lpv_sysid/vertex_models@1", "time": "continuous",
-         "states": [{"name": "x1", "unit": "m"}, {"name": "x2", "unit": "m/s"}],
-         "inputs": [{"name": "f", "unit": "N"}],
-         "scheduling": {"names": ["s"], "min": [0.0], "max": [1.0]},
-         "vertices": [{"scheduling": [s], "x0": [0, 0], "u0": [0], "A": [[0, 1], [-1, -s]],
-                       "B": [[0], [1]]} for s in (1.0, 0.0)]}
+    d = {
+        "format": "lpv_sysid/vertex_models@1",
+        "time": "continuous",
+        "states": [{"name": "x1", "unit": "m"}, {"name": "x2", "unit": "m/s"}],
+        "inputs": [{"name": "f", "unit": "N"}],
+        "scheduling": {"names": ["s"], "min": [0.0], "max": [1.0]},
+        "vertices": [
+            {"scheduling": [s], "x0": [0, 0], "u0": [0], "A": [[0, 1], [-1, -s]], "B": [[0], [1]]}
+            for s in (1.0, 0.0)
+        ],
+    }
     with pytest.raises(ConfigError, match=r"states: expected 12 entries"):
         fm.VertexModels.from_dict(d)
     vm = fm.VertexModels.from_dict(d, layout=None)
@@ -161,43 +197,170 @@ _DEL = object()
 
 MODEL_CASES = [
     # (id, path to edit, new value, expected message fragment)
-    ("format", ["format"], "lpv_sysid/vertex_models@3", r"format: expected 'lpv_sysid/vertex_models@2' \(or 'lpv_sysid/vertex_models@1'\)"),
+    (
+        "format",
+        ["format"],
+        "lpv_sysid/vertex_models@3",
+        r"format: expected 'lpv_sysid/vertex_models@2' \(or 'lpv_sysid/vertex_models@1'\)",
+    ),
     ("missing-vertices", ["vertices"], _DEL, r"missing key\(s\) \['vertices'\]"),
     ("unknown-key", ["colour"], "red", r"unknown key\(s\) \['colour'\]"),
     ("time", ["time"], "discrete", r"time: expected 'continuous' or \{discrete: Ts\}"),
     ("time-ts", ["time"], {"discrete": -0.01}, r"time.discrete: sample time must be > 0"),
     ("state-name", ["states", 3, "name"], "vv", r"states\[3\].name: expected 'v', got 'vv'"),
-    ("state-unit", ["states", 9, "unit"], "rad/s", r"states\[9\].unit: expected 'm\*rad/s' for 'da'"),
+    (
+        "state-unit",
+        ["states", 9, "unit"],
+        "rad/s",
+        r"states\[9\].unit: expected 'm\*rad/s' for 'da'",
+    ),
     ("state-count", ["states"], [{"name": "phi", "unit": "rad"}], r"states: expected 12 entries"),
-    ("input-unit", ["inputs", 0, "unit"], "rad/s", r"inputs\[0\].unit: expected '1' for 'ut', got 'rad/s'"),
-    ("input-missing-unit", ["inputs", 1], {"name": "ua"}, r"inputs\[1\]: missing key\(s\) \['unit'\]"),
-    ("sched-names", ["scheduling", "names"], ["u_d", "w_d", "v_d"], r"scheduling.names: expected \['u_d', 'v_d', 'w_d'\]"),
+    (
+        "input-unit",
+        ["inputs", 0, "unit"],
+        "rad/s",
+        r"inputs\[0\].unit: expected '1' for 'ut', got 'rad/s'",
+    ),
+    (
+        "input-missing-unit",
+        ["inputs", 1],
+        {"name": "ua"},
+        r"inputs\[1\]: missing key\(s\) \['unit'\]",
+    ),
+    (
+        "sched-names",
+        ["scheduling", "names"],
+        ["u_d", "w_d", "v_d"],
+        r"scheduling.names: expected \['u_d', 'v_d', 'w_d'\]",
+    ),
     ("box-order", ["scheduling", "min", 1], 4.0, r"scheduling: need min < max on axis 'v_d'"),
     ("box-nan", ["scheduling", "max", 2], float("nan"), r"scheduling.max\[2\]: must be finite"),
     ("box-len", ["scheduling", "min"], [-5.0, -4.0], r"scheduling.min: expected 3 values, got 2"),
-    ("A-shape", ["vertices", 3, "A", 5], [0.0] * 11, r"vertices\[3\].A: expected shape 12x12, got 12 rows of lengths \[11, 12\]"),
-    ("A-rows", ["vertices", 3, "A"], [[0.0] * 12] * 11, r"vertices\[3\].A: expected shape 12x12, got 11x12"),
-    ("B-shape", ["vertices", 0, "B"], [[0.0] * 3] * 12, r"vertices\[0\].B: expected shape 12x4, got 12x3"),
-    ("A-nan", ["vertices", 2, "A", 4, 7], float("nan"), r"vertices\[2\].A\[4\]\[7\]: must be finite, got nan"),
-    ("B-inf", ["vertices", 6, "B", 0, 1], float("inf"), r"vertices\[6\].B\[0\]\[1\]: must be finite, got inf"),
-    ("A-string", ["vertices", 1, "A", 0, 0], "1.0", r"vertices\[1\].A\[0\]\[0\]: expected a number, got string"),
-    ("A-bool", ["vertices", 1, "A", 0, 0], True, r"vertices\[1\].A\[0\]\[0\]: expected a number, got boolean"),
+    (
+        "A-shape",
+        ["vertices", 3, "A", 5],
+        [0.0] * 11,
+        r"vertices\[3\].A: expected shape 12x12, got 12 rows of lengths \[11, 12\]",
+    ),
+    (
+        "A-rows",
+        ["vertices", 3, "A"],
+        [[0.0] * 12] * 11,
+        r"vertices\[3\].A: expected shape 12x12, got 11x12",
+    ),
+    (
+        "B-shape",
+        ["vertices", 0, "B"],
+        [[0.0] * 3] * 12,
+        r"vertices\[0\].B: expected shape 12x4, got 12x3",
+    ),
+    (
+        "A-nan",
+        ["vertices", 2, "A", 4, 7],
+        float("nan"),
+        r"vertices\[2\].A\[4\]\[7\]: must be finite, got nan",
+    ),
+    (
+        "B-inf",
+        ["vertices", 6, "B", 0, 1],
+        float("inf"),
+        r"vertices\[6\].B\[0\]\[1\]: must be finite, got inf",
+    ),
+    (
+        "A-string",
+        ["vertices", 1, "A", 0, 0],
+        "1.0",
+        r"vertices\[1\].A\[0\]\[0\]: expected a number, got string",
+    ),
+    (
+        "A-bool",
+        ["vertices", 1, "A", 0, 0],
+        True,
+        r"vertices\[1\].A\[0\]\[0\]: expected a number, got boolean",
+    ),
     ("x0-len", ["vertices", 4, "x0"], [0.0] * 11, r"vertices\[4\].x0: expected 12 values, got 11"),
     ("u0-nan", ["vertices", 4, "u0", 2], float("nan"), r"vertices\[4\].u0\[2\]: must be finite"),
-    ("not-corner", ["vertices", 5, "scheduling"], [0.0, 0.0, 0.0], r"vertices\[5\].scheduling: \[0.0, 0.0, 0.0\] is not a corner"),
-    ("twice", ["vertices", 5, "scheduling"], list(CORNERS[0]), r"vertices\[5\].scheduling: corner \[-5.0, -4.0, -2.0\] already given by vertices\[0\]"),
+    (
+        "not-corner",
+        ["vertices", 5, "scheduling"],
+        [0.0, 0.0, 0.0],
+        r"vertices\[5\].scheduling: \[0.0, 0.0, 0.0\] is not a corner",
+    ),
+    (
+        "twice",
+        ["vertices", 5, "scheduling"],
+        list(CORNERS[0]),
+        r"vertices\[5\].scheduling: corner \[-5.0, -4.0, -2.0\] already given by vertices\[0\]",
+    ),
     ("seven", ["vertices", 7], _DEL, r"vertices: expected 8 vertices .* got 7"),
-    ("unc-matrix", ["vertices", 1, "uncertain", 0, "matrix"], "C", r"vertices\[1\].uncertain\[0\].matrix: expected 'A' or 'B'"),
-    ("unc-row", ["vertices", 1, "uncertain", 0, "row"], 12, r"vertices\[1\].uncertain\[0\].row: 12 outside 0..11 of A"),
-    ("unc-col-B", ["vertices", 1, "uncertain", 1, "col"], 4, r"vertices\[1\].uncertain\[1\].col: 4 outside 0..3 of B \(12x4\)"),
-    ("unc-col-neg", ["vertices", 1, "uncertain", 0, "col"], -1, r"vertices\[1\].uncertain\[0\].col: -1 outside"),
-    ("unc-row-float", ["vertices", 1, "uncertain", 0, "row"], 2.0, r"vertices\[1\].uncertain\[0\].row: expected an integer"),
-    ("unc-order", ["vertices", 2, "uncertain", 1, "lower"], 1.5, r"vertices\[2\].uncertain\[1\]: need lower <= nominal <= upper, got 1.5 <= 1.0 <= 1.0"),
-    ("unc-std", ["vertices", 2, "uncertain", 0, "std"], -0.1, r"vertices\[2\].uncertain\[0\].std: must be >= 0"),
-    ("unc-missing", ["vertices", 2, "uncertain", 0, "std"], _DEL, r"vertices\[2\].uncertain\[0\]: missing key\(s\) \['std'\]"),
-    ("unc-dup", ["vertices", 2, "uncertain", 1], {"matrix": "A", "row": 2, "col": 0, "nominal": 0.0, "std": 0.0, "lower": -1.0, "upper": 1.0},
-     r"vertices\[2\].uncertain\[1\]: A\[2\]\[0\] already given by uncertain\[0\]"),
-    ("fit-nan", ["vertices", 0, "fit", "r2", "u"], float("nan"), r"vertices\[0\].fit.r2.u: must be finite"),
+    (
+        "unc-matrix",
+        ["vertices", 1, "uncertain", 0, "matrix"],
+        "C",
+        r"vertices\[1\].uncertain\[0\].matrix: expected 'A' or 'B'",
+    ),
+    (
+        "unc-row",
+        ["vertices", 1, "uncertain", 0, "row"],
+        12,
+        r"vertices\[1\].uncertain\[0\].row: 12 outside 0..11 of A",
+    ),
+    (
+        "unc-col-B",
+        ["vertices", 1, "uncertain", 1, "col"],
+        4,
+        r"vertices\[1\].uncertain\[1\].col: 4 outside 0..3 of B \(12x4\)",
+    ),
+    (
+        "unc-col-neg",
+        ["vertices", 1, "uncertain", 0, "col"],
+        -1,
+        r"vertices\[1\].uncertain\[0\].col: -1 outside",
+    ),
+    (
+        "unc-row-float",
+        ["vertices", 1, "uncertain", 0, "row"],
+        2.0,
+        r"vertices\[1\].uncertain\[0\].row: expected an integer",
+    ),
+    (
+        "unc-order",
+        ["vertices", 2, "uncertain", 1, "lower"],
+        1.5,
+        r"vertices\[2\].uncertain\[1\]: need lower <= nominal <= upper, got 1.5 <= 1.0 <= 1.0",
+    ),
+    (
+        "unc-std",
+        ["vertices", 2, "uncertain", 0, "std"],
+        -0.1,
+        r"vertices\[2\].uncertain\[0\].std: must be >= 0",
+    ),
+    (
+        "unc-missing",
+        ["vertices", 2, "uncertain", 0, "std"],
+        _DEL,
+        r"vertices\[2\].uncertain\[0\]: missing key\(s\) \['std'\]",
+    ),
+    (
+        "unc-dup",
+        ["vertices", 2, "uncertain", 1],
+        {
+            "matrix": "A",
+            "row": 2,
+            "col": 0,
+            "nominal": 0.0,
+            "std": 0.0,
+            "lower": -1.0,
+            "upper": 1.0,
+        },
+        r"vertices\[2\].uncertain\[1\]: A\[2\]\[0\] already given by uncertain\[0\]",
+    ),
+    (
+        "fit-nan",
+        ["vertices", 0, "fit", "r2", "u"],
+        float("nan"),
+        r"vertices\[0\].fit.r2.u: must be finite",
+    ),
     ("vertex-unknown", ["vertices", 0, "K"], [[0.0]], r"vertices\[0\]: unknown key\(s\) \['K'\]"),
     ("vertices-not-list", ["vertices"], {"a": 1}, r"vertices: expected a list, got mapping"),
 ]
@@ -215,21 +378,61 @@ def test_broken_models(good_models, case):
 # ------------------------------------------------------------- broken gains files
 GAIN_CASES = [
     ("format", ["format"], "lpv_sysid/vertex_models@1", r"format: expected 'lpv_sysid/gains@1'"),
-    ("K-shape", ["vertices", 3, "K", 0], [0.0] * 11, r"vertices\[3\].K: expected shape 4x12, got 4 rows of lengths \[11, 12\]"),
-    ("K-shape-all", ["vertices", 3, "K"], [[0.0] * 11] * 4, r"vertices\[3\].K: expected shape 4x12, got 4x11"),
-    ("K-nan", ["vertices", 0, "K", 1, 1], float("nan"), r"vertices\[0\].K\[1\]\[1\]: must be finite"),
+    (
+        "K-shape",
+        ["vertices", 3, "K", 0],
+        [0.0] * 11,
+        r"vertices\[3\].K: expected shape 4x12, got 4 rows of lengths \[11, 12\]",
+    ),
+    (
+        "K-shape-all",
+        ["vertices", 3, "K"],
+        [[0.0] * 11] * 4,
+        r"vertices\[3\].K: expected shape 4x12, got 4x11",
+    ),
+    (
+        "K-nan",
+        ["vertices", 0, "K", 1, 1],
+        float("nan"),
+        r"vertices\[0\].K\[1\]\[1\]: must be finite",
+    ),
     ("R-shape", ["R"], np.eye(3).tolist(), r"R: expected shape 4x4, got 3x3"),
     ("Q-shape", ["Q"], np.eye(4).tolist(), r"Q: expected shape 3x3, got 4x4"),
     ("Q-singular", ["Q"], np.diag([1.0, 0.0, 1.0]).tolist(), r"Q: must be invertible"),
     ("gamma", ["gamma"], 0.0, r"gamma: must be > 0"),
     ("gamma-str", ["gamma"], "1.0", r"gamma: expected a number, got string"),
-    ("cert-missing", ["certificate", "models_sha256"], _DEL, r"certificate: missing key\(s\) \['models_sha256'\]"),
-    ("cert-sha", ["certificate", "models_sha256"], "abc", r"certificate.models_sha256: expected 64 lowercase hex digits"),
-    ("cert-gamma", ["certificate", "gamma_achieved"], 1.2, r"certificate.gamma_achieved: 1.2 exceeds gamma = 1.0"),
-    ("cert-solver", ["certificate", "solver"], "", r"certificate.solver: expected a non-empty string"),
+    (
+        "cert-missing",
+        ["certificate", "models_sha256"],
+        _DEL,
+        r"certificate: missing key\(s\) \['models_sha256'\]",
+    ),
+    (
+        "cert-sha",
+        ["certificate", "models_sha256"],
+        "abc",
+        r"certificate.models_sha256: expected 64 lowercase hex digits",
+    ),
+    (
+        "cert-gamma",
+        ["certificate", "gamma_achieved"],
+        1.2,
+        r"certificate.gamma_achieved: 1.2 exceeds gamma = 1.0",
+    ),
+    (
+        "cert-solver",
+        ["certificate", "solver"],
+        "",
+        r"certificate.solver: expected a non-empty string",
+    ),
     ("state-name", ["states", 0, "name"], "roll", r"states\[0\].name: expected 'phi', got 'roll'"),
     ("x0-len", ["vertices", 2, "x0"], [0.0] * 13, r"vertices\[2\].x0: expected 12 values, got 13"),
-    ("not-corner", ["vertices", 2, "scheduling"], [5.0, 4.0, 0.0], r"vertices\[2\].scheduling: \[5.0, 4.0, 0.0\] is not a corner"),
+    (
+        "not-corner",
+        ["vertices", 2, "scheduling"],
+        [5.0, 4.0, 0.0],
+        r"vertices\[2\].scheduling: \[5.0, 4.0, 0.0\] is not a corner",
+    ),
     ("unknown", ["vertices", 2, "A"], [[0.0]], r"vertices\[2\]: unknown key\(s\) \['A'\]"),
 ]
 
@@ -260,7 +463,11 @@ def _write(tmp_path, d, name="gains.yaml"):
 def test_gains_sha_mismatch(tmp_path, pair):
     mp, sha, g = pair
     g["certificate"]["models_sha256"] = "f" * 64
-    with pytest.raises(ConfigError, match=r"^gains.yaml: certificate.models_sha256: f{64} does not match vertex_models.yaml \(sha256 " + sha):
+    with pytest.raises(
+        ConfigError,
+        match=r"^gains.yaml: certificate.models_sha256: f{64} does not match vertex_models.yaml \(sha256 "
+        + sha,
+    ):
         fm.GainSchedule.load(_write(tmp_path, g), models_path=mp)
 
 
@@ -273,11 +480,23 @@ def test_models_file_changed_after_synthesis(tmp_path, pair):
         fm.GainSchedule.load(gp, models_path=mp)
 
 
-@pytest.mark.parametrize("edit,msg", [
-    (lambda g: g["scheduling"]["max"].__setitem__(0, 6.0), r"scheduling.max\[0\]|vertices\[\d\].scheduling"),
-    (lambda g: g["vertices"][4]["x0"].__setitem__(3, 99.0), r"vertices\[4\].x0: differs from vertex_models.yaml vertices\[4\].x0"),
-    (lambda g: g.__setitem__("time", {"discrete": 0.01}), r"time: \{'discrete': 0.01\} differs from vertex_models.yaml 'continuous'"),
-])
+@pytest.mark.parametrize(
+    "edit,msg",
+    [
+        (
+            lambda g: g["scheduling"]["max"].__setitem__(0, 6.0),
+            r"scheduling.max\[0\]|vertices\[\d\].scheduling",
+        ),
+        (
+            lambda g: g["vertices"][4]["x0"].__setitem__(3, 99.0),
+            r"vertices\[4\].x0: differs from vertex_models.yaml vertices\[4\].x0",
+        ),
+        (
+            lambda g: g.__setitem__("time", {"discrete": 0.01}),
+            r"time: \{'discrete': 0.01\} differs from vertex_models.yaml 'continuous'",
+        ),
+    ],
+)
 def test_gains_inconsistent_with_models(tmp_path, pair, edit, msg):
     mp, _, g = pair
     edit(g)
@@ -293,7 +512,9 @@ def test_gains_box_differs_from_models(tmp_path, pair):
         if v["scheduling"][0] == 5.0:
             v["scheduling"][0] = 6.0
     fm.GainSchedule.from_dict(copy.deepcopy(g))
-    with pytest.raises(ConfigError, match=r"^gains.yaml: scheduling: box .* differs from vertex_models.yaml"):
+    with pytest.raises(
+        ConfigError, match=r"^gains.yaml: scheduling: box .* differs from vertex_models.yaml"
+    ):
         fm.GainSchedule.load(_write(tmp_path, g), models_path=mp)
 
 
@@ -308,7 +529,10 @@ def test_malformed_yaml_names_line(tmp_path):
 def test_duplicate_key_names_line(tmp_path):
     p = tmp_path / "vertex_models.yaml"
     p.write_text("format: lpv_sysid/vertex_models@1\ntime: continuous\ntime: continuous\n")
-    with pytest.raises(ConfigError, match=r"malformed YAML at line 3, column 1: duplicate key 'time' \(first at line 2\)"):
+    with pytest.raises(
+        ConfigError,
+        match=r"malformed YAML at line 3, column 1: duplicate key 'time' \(first at line 2\)",
+    ):
         fm.VertexModels.load(p)
 
 

@@ -12,9 +12,9 @@ DEG = np.pi / 180
 
 
 def random_euler(n):
-    return np.column_stack([RNG.uniform(-np.pi, np.pi, n),
-                            RNG.uniform(-1.5, 1.5, n),
-                            RNG.uniform(-np.pi, np.pi, n)])
+    return np.column_stack(
+        [RNG.uniform(-np.pi, np.pi, n), RNG.uniform(-1.5, 1.5, n), RNG.uniform(-np.pi, np.pi, n)]
+    )
 
 
 def scipy_R(euler):
@@ -64,7 +64,9 @@ def test_rotation_from_euler_matches_scipy():
 
 def test_rotation_elementary_axes():
     # pure yaw +90: body x (front) points east in NED
-    np.testing.assert_allclose(fr.rotation_from_euler([0, 0, np.pi / 2]) @ [1, 0, 0], [0, 1, 0], atol=1e-15)
+    np.testing.assert_allclose(
+        fr.rotation_from_euler([0, 0, np.pi / 2]) @ [1, 0, 0], [0, 1, 0], atol=1e-15
+    )
     # pure pitch +30 deg (nose up): body x has negative down component
     x = fr.rotation_from_euler([0, 30 * DEG, 0]) @ [1, 0, 0]
     np.testing.assert_allclose(x, [np.cos(30 * DEG), 0, -np.sin(30 * DEG)], atol=1e-15)
@@ -113,7 +115,9 @@ def test_quaternion_multiply_matches_scipy_composition():
     oracle = (scipy_R(a) * scipy_R(b)).as_quat()
     assert same_quat(fr.xyzw_from_wxyz(qab), oracle)
     v = RNG.normal(size=(20, 3))
-    np.testing.assert_allclose(fr.quaternion_rotate(qab, v), (scipy_R(a) * scipy_R(b)).apply(v), atol=1e-13)
+    np.testing.assert_allclose(
+        fr.quaternion_rotate(qab, v), (scipy_R(a) * scipy_R(b)).apply(v), atol=1e-13
+    )
     inv = fr.quaternion_multiply(qa, fr.quaternion_conjugate(qa))
     np.testing.assert_allclose(inv, np.tile([1.0, 0, 0, 0], (20, 1)), atol=1e-15)
 
@@ -140,7 +144,7 @@ def test_static_transform_quaternions():
 
 def test_yaw_zero_ned_is_enu_yaw_plus_90():
     q = fr.ros_orientation_from_euler([0.0, 0.0, 0.0])
-    r = Rotation.from_quat(q)          # scipy uses (x, y, z, w) like ROS
+    r = Rotation.from_quat(q)  # scipy uses (x, y, z, w) like ROS
     np.testing.assert_allclose(r.as_euler("ZYX"), [np.pi / 2, 0, 0], atol=1e-14)
     # heading east in NED (psi = +90 deg) -> ENU yaw 0; heading west -> 180
     r = Rotation.from_quat(fr.ros_orientation_from_euler([0.0, 0.0, np.pi / 2]))
@@ -150,14 +154,16 @@ def test_yaw_zero_ned_is_enu_yaw_plus_90():
 def test_enu_yaw_equals_90_minus_ned_yaw():
     for psi in np.linspace(-3, 3, 13):
         r = Rotation.from_quat(fr.ros_orientation_from_euler([0.0, 0.0, psi]))
-        assert fr.wrap_angle(r.as_euler("ZYX")[0] - (np.pi / 2 - psi)) == pytest.approx(0, abs=1e-12)
+        assert fr.wrap_angle(r.as_euler("ZYX")[0] - (np.pi / 2 - psi)) == pytest.approx(
+            0, abs=1e-12
+        )
 
 
 def test_nose_up_and_right_wing_down_survive_conversion():
     # physical meaning: body forward axis points up in ENU for a nose-up pitch
     th = 20 * DEG
     r = Rotation.from_quat(fr.ros_orientation_from_euler([0.0, th, 0.4]))
-    fwd = r.apply([1.0, 0, 0])             # FLU x in ENU
+    fwd = r.apply([1.0, 0, 0])  # FLU x in ENU
     assert fwd[2] == pytest.approx(np.sin(th), abs=1e-14)
     # ROS pitch about the left axis: nose up is negative pitch
     assert r.as_euler("ZYX")[1] == pytest.approx(-th, abs=1e-14)
@@ -183,7 +189,9 @@ def test_ros_orientation_round_trip():
     assert q.shape == (60, 4)
     np.testing.assert_allclose(fr.euler_from_ros_orientation(q), e, atol=1e-12)
     qn = fr.quaternion_from_euler(e)
-    assert same_quat(fr.quaternion_ned_frd_from_enu_flu(fr.quaternion_enu_flu_from_ned_frd(qn)), qn)
+    assert same_quat(
+        fr.quaternion_ned_frd_from_enu_flu(fr.quaternion_enu_flu_from_ned_frd(qn)), qn
+    )
 
 
 # ------------------------------------------------------------------ kinematics
@@ -191,9 +199,13 @@ def test_kinematics_matrix_is_inverse_of_rate_map():
     # Independent derivation: omega = W(phi, theta) Theta_dot with
     # W = [[1, 0, -sin th], [0, cos ph, sin ph cos th], [0, -sin ph, cos ph cos th]]
     for phi, th in [(0.3, -0.4), (-1.0, 1.2), (2.5, 0.1)]:
-        W = np.array([[1, 0, -np.sin(th)],
-                      [0, np.cos(phi), np.sin(phi) * np.cos(th)],
-                      [0, -np.sin(phi), np.cos(phi) * np.cos(th)]])
+        W = np.array(
+            [
+                [1, 0, -np.sin(th)],
+                [0, np.cos(phi), np.sin(phi) * np.cos(th)],
+                [0, -np.sin(phi), np.cos(phi) * np.cos(th)],
+            ]
+        )
         np.testing.assert_allclose(fr.kinematics_matrix(phi, th) @ W, np.eye(3), atol=1e-13)
     L = fr.kinematics_matrix(np.array([0.1, 0.2]), np.array([0.3, 0.4]))
     assert L.shape == (2, 3, 3)
@@ -224,7 +236,9 @@ def test_body_world_velocity():
     np.testing.assert_allclose(fr.body_to_world(v, e), scipy_R(e).apply(v), atol=1e-13)
     np.testing.assert_allclose(fr.world_to_body(fr.body_to_world(v, e), e), v, atol=1e-13)
     # forward flight at 5 m/s with yaw 90 deg: moving east
-    np.testing.assert_allclose(fr.body_to_world([5.0, 0, 0], [0, 0, np.pi / 2]), [0, 5.0, 0], atol=1e-14)
+    np.testing.assert_allclose(
+        fr.body_to_world([5.0, 0, 0], [0, 0, np.pi / 2]), [0, 5.0, 0], atol=1e-14
+    )
 
 
 def test_body_forward_frd_is_flu_x():
@@ -234,8 +248,11 @@ def test_body_forward_frd_is_flu_x():
 
 
 def test_wrap_angle():
-    np.testing.assert_allclose(fr.wrap_angle([3 * np.pi, -np.pi, 0.5, -7.0]),
-                               [np.pi, np.pi, 0.5, -7.0 + 2 * np.pi], atol=1e-14)
+    np.testing.assert_allclose(
+        fr.wrap_angle([3 * np.pi, -np.pi, 0.5, -7.0]),
+        [np.pi, np.pi, 0.5, -7.0 + 2 * np.pi],
+        atol=1e-14,
+    )
 
 
 def test_scalar_quaternion_rotation_matches_vectorised_and_scipy():
@@ -248,7 +265,9 @@ def test_scalar_quaternion_rotation_matches_vectorised_and_scipy():
         q /= np.linalg.norm(q)
         R, euler = fr.rotation_euler_from_quaternion_scalar(*map(float, q))
         np.testing.assert_allclose(np.array(R), fr.rotation_from_quaternion(q), atol=1e-12)
-        np.testing.assert_allclose(np.array(R), Rotation.from_quat(q[[1, 2, 3, 0]]).as_matrix(), atol=1e-12)
+        np.testing.assert_allclose(
+            np.array(R), Rotation.from_quat(q[[1, 2, 3, 0]]).as_matrix(), atol=1e-12
+        )
         np.testing.assert_allclose(euler, fr.euler_from_quaternion(q), atol=1e-9)
 
 
@@ -258,7 +277,9 @@ def test_scalar_odometry_conversion_matches_the_vectorised_functions():
         pos, v, w = rng.normal(size=(3, 3))
         q = rng.normal(size=4)
         q /= np.linalg.norm(q)
-        pos_ned, euler, v_frd, w_frd = fr.odometry_ned_frd_from_ros_scalar(pos.tolist(), q.tolist(), v.tolist(), w.tolist())
+        pos_ned, euler, v_frd, w_frd = fr.odometry_ned_frd_from_ros_scalar(
+            pos.tolist(), q.tolist(), v.tolist(), w.tolist()
+        )
         np.testing.assert_allclose(pos_ned, fr.enu_to_ned(pos), atol=1e-15)
         np.testing.assert_allclose(euler, fr.euler_from_ros_orientation(q), atol=1e-9)
         np.testing.assert_allclose(v_frd, fr.flu_to_frd(v), atol=1e-15)

@@ -30,7 +30,9 @@ from lpv_sysid.models.quadrotor import Quadrotor, QuadrotorParams, mixer
 def test_t_factor_is_the_student_t_quantile_ratio():
     assert ee.t_factor(3.0, None) == 1.0
     for dof in (5.0, 27.0, 58.0):
-        assert ee.t_factor(3.0, dof) == pytest.approx(student_t.ppf(norm.cdf(3.0), dof) / 3.0, rel=1e-12)
+        assert ee.t_factor(3.0, dof) == pytest.approx(
+            student_t.ppf(norm.cdf(3.0), dof) / 3.0, rel=1e-12
+        )
     assert ee.t_factor(3.0, 27.0) > ee.t_factor(3.0, 58.0) > 1.0
     # the EWC default: as many cosines as fit below band_hz over the record, capped by 0.4 n^(2/3)
     assert ee.default_dof(3000, 0.01, 1.0) == 60
@@ -39,8 +41,9 @@ def test_t_factor_is_the_student_t_quantile_ratio():
 
 def _coloured_regression(rng, n=3000, rho=0.95):
     """y = H theta + v with AR(1) regressors and AR(1) errors (both strongly coloured)."""
-    H = np.column_stack([lfilter([1.0], [1.0, -0.9], rng.normal(size=n)), np.sin(np.arange(n) / 40.0),
-                         np.ones(n)])
+    H = np.column_stack(
+        [lfilter([1.0], [1.0, -0.9], rng.normal(size=n)), np.sin(np.arange(n) / 40.0), np.ones(n)]
+    )
     v = lfilter([1.0], [1.0, -rho], 0.3 * rng.normal(size=n))
     theta = np.array([1.5, -0.7, 0.2])
     return H @ theta + v, H, theta
@@ -83,7 +86,7 @@ def test_ewc_joint_covariance_has_the_cross_row_terms():
         est.append([fits[0].theta[0], fits[1].theta[0]])
         cross.append(joint[0, 1] / math.sqrt(joint[0, 0] * joint[1, 1]))
     mc = np.corrcoef(np.array(est).T)[0, 1]
-    assert mc > 0.8                                   # strongly correlated through the shared error
+    assert mc > 0.8  # strongly correlated through the shared error
     assert np.median(cross) == pytest.approx(mc, abs=0.1)
 
 
@@ -96,10 +99,14 @@ def test_bias_compensated_ls_removes_errors_in_variables():
         n = 3000
         x = lfilter([1.0], [1.0, -0.95], 0.1 * rng.normal(size=n))
         y = 3.0 * x + 0.05 * rng.normal(size=n)
-        xm = x + 0.1 * rng.normal(size=n)                     # var(noise) = 0.01 ~ var(x) / 2
-        ls = ee.solve_rows([ee.RowDesign(0, y, xm[:, None], (0,), (), ("x0",))], ee.CovarianceConfig(dof=30))[0][0]
-        bc = ee.solve_rows([ee.RowDesign(0, y, xm[:, None], (0,), (), ("x0",), noise_var=np.array([0.01]))],
-                           ee.CovarianceConfig(dof=30))[0][0]
+        xm = x + 0.1 * rng.normal(size=n)  # var(noise) = 0.01 ~ var(x) / 2
+        ls = ee.solve_rows(
+            [ee.RowDesign(0, y, xm[:, None], (0,), (), ("x0",))], ee.CovarianceConfig(dof=30)
+        )[0][0]
+        bc = ee.solve_rows(
+            [ee.RowDesign(0, y, xm[:, None], (0,), (), ("x0",), noise_var=np.array([0.01]))],
+            ee.CovarianceConfig(dof=30),
+        )[0][0]
         zl.append((ls.theta[0] - 3.0) / ls.std[0])
         zb.append((bc.theta[0] - 3.0) / bc.std[0])
         assert bc.eiv_bias[0] == pytest.approx(ls.theta[0] - bc.theta[0])
@@ -108,14 +115,18 @@ def test_bias_compensated_ls_removes_errors_in_variables():
 
 
 def test_measurement_noise_config_and_regressor_noise_variance():
-    cfg = vx.IdentificationConfig.from_dict({"measurement_noise": {"u": 0.03, "p": [0.008, 250.0],
-                                                                   "rotor": [2.0, 100.0]}})
-    assert cfg.measurement_noise["u"] == (0.03, None) and cfg.measurement_noise["p"] == (0.008, 250.0)
+    cfg = vx.IdentificationConfig.from_dict(
+        {"measurement_noise": {"u": 0.03, "p": [0.008, 250.0], "rotor": [2.0, 100.0]}}
+    )
+    assert cfg.measurement_noise["u"] == (0.03, None) and cfg.measurement_noise["p"] == (
+        0.008,
+        250.0,
+    )
     var, dvar, rotor = vx.regressor_noise_var(cfg, QuadrotorParams(), 0.01)
     # white noise of std s at r Hz through the Fourier low-pass: 2 s^2 / r * f_cut (1 + 3/8 taper)
     feff = cfg.derivatives.f_cut * (1 + 0.375 * cfg.derivatives.taper)
-    assert var[2] == pytest.approx(2 * 0.03 ** 2 / 100.0 * feff, rel=2e-3)
-    assert var[5] == pytest.approx(2 * 0.008 ** 2 / 250.0 * feff, rel=2e-3)
+    assert var[2] == pytest.approx(2 * 0.03**2 / 100.0 * feff, rel=2e-3)
+    assert var[5] == pytest.approx(2 * 0.008**2 / 250.0 * feff, rel=2e-3)
     mix = mixer(QuadrotorParams().arm_length)
     assert var[8] == pytest.approx(2 * 4.0 / 100.0 * feff * np.sum(mix[0] ** 2), rel=2e-3)
     assert var[0] == 0.0 and dvar[2] > 0
@@ -135,7 +146,7 @@ def test_cubic_resampling_keeps_the_band_where_linear_lost_a_percent():
     exact = np.sin(2 * np.pi * 6.0 * tg)
     lin = np.interp(tg, t, y[:, 0])
     spl = dp._interp(tg, t, y)[:, 0]
-    amp = lambda s: np.sqrt(2 * np.mean(s ** 2))  # noqa: E731
+    amp = lambda s: np.sqrt(2 * np.mean(s**2))  # noqa: E731
     assert 1 - amp(lin) / amp(exact) > 0.008
     assert abs(1 - amp(spl) / amp(exact)) < 5e-4
     assert np.max(np.abs(spl - exact)) < 2e-3
@@ -147,16 +158,18 @@ def test_pinned_fraction_is_the_exact_exponential_hit_time():
     dt = 0.01
     e = np.zeros((30, 4))
     start = np.array([p.omega_min + 40.0, 900.0, p.omega_min, 600.0])
-    e[:, 1] = 0.9 * p.a_omega * p.omega_max / p.b_omega      # stays inside the limits
-    e[:, 3] = p.a_omega * 600.0 / p.b_omega                  # at rest at 600
+    e[:, 1] = 0.9 * p.a_omega * p.omega_max / p.b_omega  # stays inside the limits
+    e[:, 3] = p.a_omega * 600.0 / p.b_omega  # at rest at 600
     frac = vx.pinned(e, start, dt, p)
-    t_hit = math.log(start[0] / p.omega_min) / p.a_omega     # Omega_inf = 0 with e = 0
+    t_hit = math.log(start[0] / p.omega_min) / p.a_omega  # Omega_inf = 0 with e = 0
     k = int(t_hit // dt)
-    assert np.all(frac[:k, 0] == 0) and frac[k, 0] == pytest.approx(1 - (t_hit - k * dt) / dt, abs=1e-9)
-    assert np.all(frac[k + 1:, 0] == 1)
+    assert np.all(frac[:k, 0] == 0) and frac[k, 0] == pytest.approx(
+        1 - (t_hit - k * dt) / dt, abs=1e-9
+    )
+    assert np.all(frac[k + 1 :, 0] == 1)
     assert np.all(frac[:, 1] == 0) and np.all(frac[:, 3] == 0)
-    assert np.all(frac[:, 2] == 1)                           # starts pinned, the command keeps it there
-    e[15:, 2] = 0.5                                          # released when the command lifts it
+    assert np.all(frac[:, 2] == 1)  # starts pinned, the command keeps it there
+    e[15:, 2] = 0.5  # released when the command lifts it
     assert np.all(vx.pinned(e, start, dt, p)[15:, 2] == 0)
 
 
@@ -169,9 +182,13 @@ def _motor_data(latency: float, seed: int = 0, jitter: float = 0.01, noise: floa
     mix = mixer(p.arm_length)
     tc = np.arange(0.0, 40.0, 0.004)
     f = np.array([0.3, 0.7, 1.3, 2.1, 3.1])
-    e = 0.45 + 0.08 * np.column_stack([np.sin(2 * np.pi * f[:, None] * tc + rng.uniform(0, 6, (5, 1))).sum(0) / 3
-                                       for _ in range(4)])
-    e += jitter * rng.normal(size=e.shape)                   # rate-loop jitter
+    e = 0.45 + 0.08 * np.column_stack(
+        [
+            np.sin(2 * np.pi * f[:, None] * tc + rng.uniform(0, 6, (5, 1))).sum(0) / 3
+            for _ in range(4)
+        ]
+    )
+    e += jitter * rng.normal(size=e.shape)  # rate-loop jitter
     fine = 2000.0
     tf = np.arange(0.0, 40.0, 1 / fine)
     ef = e[np.clip(np.floor((tf - latency) / 0.004 + 1e-9).astype(int), 0, tc.size - 1)]
@@ -183,9 +200,20 @@ def _motor_data(latency: float, seed: int = 0, jitter: float = 0.01, noise: floa
     tr = np.arange(0.0, 39.99, 0.01)
     ts = np.arange(0.0, 39.99, 0.004)
     zeros = np.zeros((ts.size, 3))
-    streams = dp.Streams("motor", ts, zeros, zeros, zeros, tr,
-                         Om[np.round(tr * fine).astype(int)] + noise * rng.normal(size=(tr.size, 4)),
-                         t_cmd=tc, u=e @ mix.T, t_ref=tc, ref=np.zeros((tc.size, 4)), t_excite=10.0)
+    streams = dp.Streams(
+        "motor",
+        ts,
+        zeros,
+        zeros,
+        zeros,
+        tr,
+        Om[np.round(tr * fine).astype(int)] + noise * rng.normal(size=(tr.size, 4)),
+        t_cmd=tc,
+        u=e @ mix.T,
+        t_ref=tc,
+        ref=np.zeros((tc.size, 4)),
+        t_excite=10.0,
+    )
     return dp.align(streams, vx.IdentificationConfig(), params=p).vertex, p
 
 
@@ -196,23 +224,29 @@ def test_motor_constants_with_latency_are_identified():
     bias-compensated estimate is closer."""
     data, p = _motor_data(0.004)
     out = {}
-    for name, kw in (("ls", {"motor_instrument": False}),
-                     ("bc", {"motor_instrument": False, "measurement_noise": {"rotor": [2.0, 100.0]}}),
-                     ("iv", {})):
+    for name, kw in (
+        ("ls", {"motor_instrument": False}),
+        ("bc", {"motor_instrument": False, "measurement_noise": {"rotor": [2.0, 100.0]}}),
+        ("iv", {}),
+    ):
         cfg = vx.IdentificationConfig.from_dict(kw)
         x0, u0 = vx.equilibrium(data, cfg)
         dt, full, keep = vx._fit_indices(data, cfg)
         rotor_var = vx.regressor_noise_var(cfg, p, dt)[2]
-        design, tau = vx._motor_design(data, cfg, p, full, keep, x0, u0, data.u_eff, rotor_var=rotor_var)
+        design, tau = vx._motor_design(
+            data, cfg, p, full, keep, x0, u0, data.u_eff, rotor_var=rotor_var
+        )
         assert tau == pytest.approx(0.004, abs=2e-4)
-        assert (design.Z is not None) == (name == "iv") and (design.noise_var is not None) == (name == "bc")
+        assert (design.Z is not None) == (name == "iv") and (design.noise_var is not None) == (
+            name == "bc"
+        )
         (rf,), joint, dof = ee.solve_rows([design], cfg.covariance, dt)
         out[name] = (-rf.theta[0], rf.theta[1], rf.std[:2])
-    a, b, s = out["iv"]                      # the default: the model's speeds instrument the measured ones
+    a, b, s = out["iv"]  # the default: the model's speeds instrument the measured ones
     k = 3.0 * ee.t_factor(3.0, 60.0)
     assert abs(a - p.a_omega) <= k * s[0] and abs(b - p.b_omega) <= k * s[1]
     assert abs(a / p.a_omega - 1) < 0.004 and abs(b / p.b_omega - 1) < 0.004
-    for name in ("bc", "iv"):                # plain LS is attenuated by the telemetry noise
+    for name in ("bc", "iv"):  # plain LS is attenuated by the telemetry noise
         assert abs(out["ls"][0] - p.a_omega) > abs(out[name][0] - p.a_omega)
     # without a latency the term finds none
     data0, _ = _motor_data(0.0, seed=1)
@@ -232,7 +266,9 @@ def descending_run():
 
     q = Quadrotor()
     cfg = p1.Phase1Config()
-    rec = p1.simulate_run(q, BaselineGains(), SensorConfig(), cfg, (5.0, -5.0, 5.0), "vertex_p5_m5_p5", seed=7)
+    rec = p1.simulate_run(
+        q, BaselineGains(), SensorConfig(), cfg, (5.0, -5.0, 5.0), "vertex_p5_m5_p5", seed=7
+    )
     return q, rec
 
 
@@ -248,7 +284,7 @@ def test_equilibrium_reexpansion_removes_the_trim_bias(descending_run):
     res = vx.identify_vertex(data, cfg)
     flat = vx.identify_vertex(data, dataclasses.replace(cfg, equilibrium=False))
     z, z_flat = cv.z_scores(res, A, B), cv.z_scores(flat, A, B)
-    assert abs(res.xdot_flown[4]) > 0.01                            # wdot at the flown mean
+    assert abs(res.xdot_flown[4]) > 0.01  # wdot at the flown mean
     assert max(abs(z_flat["A[p,da]"]), abs(z_flat["A[q,de]"])) > 4
     assert abs(z["A[p,da]"]) < 3 and abs(z["A[q,de]"]) < 3
     assert np.mean(np.abs(list(z.values())) <= 3) >= 0.97
@@ -256,7 +292,7 @@ def test_equilibrium_reexpansion_removes_the_trim_bias(descending_run):
     xd = q.derivatives12(res.x0, res.u0)
     assert np.max(np.abs(xd[2:5])) < 5e-3 and np.max(np.abs(xd[5:8])) < 0.05
     np.testing.assert_allclose(res.x0[8], x_e[8], atol=0.5)
-    assert abs(res.x_flown[8] - x_e[8]) > 1.0                        # the flown mean rotor speed is not
+    assert abs(res.x_flown[8] - x_e[8]) > 1.0  # the flown mean rotor speed is not
 
 
 def test_stored_box_is_every_element_with_calibrated_std(descending_run, tmp_path):
@@ -270,7 +306,7 @@ def test_stored_box_is_every_element_with_calibrated_std(descending_run, tmp_pat
     data = dp.align(dp.streams_from_record(rec), cfg).vertex
     res = vx.identify_vertex(data, cfg, motor_prior=((12.0, 0.2), (14000.0, 150.0)))
     assert res.motor["mode"] in ("identified", "prior")
-    assert len(res.uncertain.intervals) == 51                        # 43 aerodynamic + 8 motor
+    assert len(res.uncertain.intervals) == 51  # 43 aerodynamic + 8 motor
     results = [dataclasses.replace(res, scheduling=c) for c in box_vertices(cfg.vmin, cfg.vmax)]
     doc = vx.vertex_models_dict(results, cfg)
     assert doc["format"] == MODELS_FORMAT == "lpv_sysid/vertex_models@2"
@@ -280,7 +316,8 @@ def test_stored_box_is_every_element_with_calibrated_std(descending_run, tmp_pat
     assert all(e.upper - e.nominal == pytest.approx(3 * e.std) for e in es)
     motor = [e for e in es if e.row >= 8]
     assert sorted((e.matrix, e.row, e.col) for e in motor) == sorted(
-        [("A", 8 + j, 8 + j) for j in range(4)] + [("B", 8 + j, j) for j in range(4)])
+        [("A", 8 + j, 8 + j) for j in range(4)] + [("B", 8 + j, j) for j in range(4)]
+    )
     assert doc["meta"]["std"]["t_factor"][0] == pytest.approx(ee.t_factor(3.0, res.fit.dof))
     vm.save(tmp_path / "m.yaml")
     assert VertexModels.load(tmp_path / "m.yaml").format_version == 2
@@ -310,8 +347,10 @@ def test_motor_constants_pooled_where_a_rotor_is_pinned(descending_run):
     pooled = vx.identify_vertex(data, dataclasses.replace(cfg, motor="known"), motor_prior=prior)
     assert pooled.motor["mode"] == "prior" and len(pooled.uncertain.intervals) == 51
     iv = {(i.matrix, i.row, i.col): i for i in pooled.uncertain.intervals}
-    assert iv[("A", 8, 8)].nominal == pytest.approx(-a) and iv[("B", 9, 1)].nominal == pytest.approx(b)
-    assert iv[("B", 7, 3)].std > alone.fit.std_B[7, 3]             # J_z b_Omega with b uncertain
+    assert iv[("A", 8, 8)].nominal == pytest.approx(-a) and iv[
+        ("B", 9, 1)
+    ].nominal == pytest.approx(b)
+    assert iv[("B", 7, 3)].std > alone.fit.std_B[7, 3]  # J_z b_Omega with b uncertain
 
 
 def test_remainder_hessians_are_exact():
@@ -332,11 +371,17 @@ def test_random_airframes_and_what_identification_is_told():
     rng = np.random.default_rng(3)
     for _ in range(5):
         p = cv.random_airframe(base, rng, 0.25)
-        f = [p.mass / base.mass, p.arm_length / base.arm_length, p.a_omega / base.a_omega,
-             p.b_omega / base.b_omega] + [p.K[k] / base.K[k] for k in base.K if base.K[k] != 0]
+        f = [
+            p.mass / base.mass,
+            p.arm_length / base.arm_length,
+            p.a_omega / base.a_omega,
+            p.b_omega / base.b_omega,
+        ] + [p.K[k] / base.K[k] for k in base.K if base.K[k] != 0]
         assert all(0.75 <= x <= 1.25 for x in f) and len(set(np.round(f, 6))) > 10
         told = QuadrotorParams.from_dict(cv.identification_params(p, base))
-        assert told.mass == p.mass and told.inertia == p.inertia and told.arm_length == p.arm_length
+        assert (
+            told.mass == p.mass and told.inertia == p.inertia and told.arm_length == p.arm_length
+        )
         assert told.K == base.K and told.a_omega == base.a_omega and told.b_omega == base.b_omega
     with pytest.raises(ConfigError, match="spread"):
         cv.random_airframe(base, rng, 1.5)
@@ -350,13 +395,21 @@ def test_coverage_study_on_an_unseen_airframe():
     from lpv_sysid.sim.vehicle import SensorConfig
 
     cfg = cv.CoverageConfig(airframes=1, seed=4, vertices=(2,))
-    afs, _ = cv.run_study(cfg, QuadrotorParams(), BaselineGains(), SensorConfig(), p1.Phase1Config(),
-                          vx.IdentificationConfig())
+    afs, _ = cv.run_study(
+        cfg,
+        QuadrotorParams(),
+        BaselineGains(),
+        SensorConfig(),
+        p1.Phase1Config(),
+        vx.IdentificationConfig(),
+    )
     (af,) = afs
     assert af.params != QuadrotorParams() and af.n in (43, 51)
     assert af.fraction >= 0.97
     doc = cv.summary_dict(afs, QuadrotorParams(), cfg)
-    assert doc["overall"]["elements"] == af.n and doc["overall"]["expected_fraction"] == pytest.approx(0.9973, abs=1e-4)
+    assert doc["overall"]["elements"] == af.n and doc["overall"][
+        "expected_fraction"
+    ] == pytest.approx(0.9973, abs=1e-4)
     table = cv.markdown_table(afs, QuadrotorParams())
     assert f"| {af.covered} ({100 * af.fraction:.2f} %) |" in table
 
@@ -365,12 +418,18 @@ def test_coverage_cli(tmp_path, capsys):
     from lpv_sysid.cli.main import main
 
     out = tmp_path / "cov"
-    assert main(["coverage", "--airframes", "1", "--vertices", "3", "--seed", "2", "--out", str(out)]) == 0
+    assert (
+        main(["coverage", "--airframes", "1", "--vertices", "3", "--seed", "2", "--out", str(out)])
+        == 0
+    )
     text = capsys.readouterr().out
     assert "airframe 1:" in text and f"wrote {out / 'coverage.yaml'}" in text
     import yaml
+
     doc = yaml.safe_load((out / "coverage.yaml").read_text())
-    assert doc["format"] == "lpv_sysid/identification_coverage@1" and doc["study"]["vertices"] == [3]
+    assert doc["format"] == "lpv_sysid/identification_coverage@1" and doc["study"]["vertices"] == [
+        3
+    ]
     assert doc["overall"]["elements"] in (43, 51)
     assert "| airframe | mass |" in (out / "coverage.md").read_text()
     assert main(["coverage", "--vertices", "9", "--out", str(out)]) == 2

@@ -35,9 +35,9 @@ def test_savgol_gain_matches_closed_form_and_filtered_sinusoid():
     f = np.array([0.5, 1.0, 2.0, 5.0])
     k = np.arange(1, m + 1)
     w = 2 * np.pi * f * dt
-    closed = np.array([np.sum(k * np.sin(k * ww)) / (ww * np.sum(k ** 2)) for ww in w])
+    closed = np.array([np.sum(k * np.sin(k * ww)) / (ww * np.sum(k**2)) for ww in w])
     np.testing.assert_allclose(dv.savgol_gain(f, dt, window, 2), closed, rtol=1e-12)
-    assert closed[2] == pytest.approx(0.837, abs=1e-3)        # 17 % loss at 2 Hz (docstring)
+    assert closed[2] == pytest.approx(0.837, abs=1e-3)  # 17 % loss at 2 Hz (docstring)
     # the actual filter applied to a sinusoid shows exactly that gain in the interior
     t = np.arange(0, 10, dt)
     x = np.sin(2 * np.pi * 2.0 * t)
@@ -55,7 +55,11 @@ def test_fourier_derivative_exact_in_band_and_zero_above():
     # sine-series components + a ramp are represented exactly by the odd extension
     x = np.sin(np.pi * 7 * t / T) + 0.4 * np.sin(np.pi * 30 * t / T) + 0.1 * t + 2.0
     xs, xd = dv.fourier_smooth_differentiate(x, dt, f_cut=3.0, taper=0.0)
-    true = np.pi * 7 / T * np.cos(np.pi * 7 * t / T) + 0.4 * np.pi * 30 / T * np.cos(np.pi * 30 * t / T) + 0.1
+    true = (
+        np.pi * 7 / T * np.cos(np.pi * 7 * t / T)
+        + 0.4 * np.pi * 30 / T * np.cos(np.pi * 30 * t / T)
+        + 0.1
+    )
     np.testing.assert_allclose(xd, true, atol=1e-9)
     np.testing.assert_allclose(xs, x, atol=1e-10)
     # a 9.95 Hz component is removed completely by a 6 Hz cut-off
@@ -98,7 +102,7 @@ def test_noise_free_estimates_match_truth(lti):
     assert np.max(np.abs(f.A - A) / np.maximum(np.abs(A), 1e-12)) < 1e-6
     assert np.max(np.abs(f.B - B) / np.maximum(np.abs(B), 1e-12)) < 1e-6
     for rf in f.rows:
-        assert rf.r2 == pytest.approx(1.0, abs=1e-9)       # perfect fit -> R^2 = 1
+        assert rf.r2 == pytest.approx(1.0, abs=1e-9)  # perfect fit -> R^2 = 1
     # known elements are copied, not estimated
     np.testing.assert_array_equal(f.A[~maskA], A[~maskA])
     assert np.all(f.std_A[~maskA] == 0)
@@ -129,11 +133,19 @@ def test_coverage_white_noise(lti):
     """Eq. (44) white measurement noise: 3-sigma intervals cover the truth in >= 95 %."""
     A, B, maskA, maskB, d = lti
     rng = np.random.default_rng(7)
-    z = np.concatenate([_zscores(A, B, ee.fit(d.xdot + 0.5 * rng.normal(size=d.xdot.shape),
-                                               d.x, d.u, A, B, maskA, maskB)) for _ in range(25)])
+    z = np.concatenate(
+        [
+            _zscores(
+                A,
+                B,
+                ee.fit(d.xdot + 0.5 * rng.normal(size=d.xdot.shape), d.x, d.u, A, B, maskA, maskB),
+            )
+            for _ in range(25)
+        ]
+    )
     assert z.size > 400
     assert np.mean(np.abs(z) < 3) >= 0.95
-    assert 0.8 < np.std(z) < 1.25           # the standard errors are the right size
+    assert 0.8 < np.std(z) < 1.25  # the standard errors are the right size
 
 
 def test_coloured_residual_correction(lti):
@@ -149,7 +161,7 @@ def test_coloured_residual_correction(lti):
     zc, zw = np.concatenate(zc), np.concatenate(zw)
     assert np.mean(np.abs(zc) < 3) >= 0.95
     assert 0.7 < np.std(zc) < 1.5
-    assert np.std(zw) > 2.5                 # uncorrected errors bars are > 2.5x too small
+    assert np.std(zw) > 2.5  # uncorrected errors bars are > 2.5x too small
     assert np.mean(np.abs(zw) < 3) < 0.8
 
 
@@ -158,7 +170,9 @@ def test_coverage_with_noisy_states_and_fourier_derivatives(lti):
     rng = np.random.default_rng(5)
     z = []
     for _ in range(12):
-        xs, xd = dv.fourier_smooth_differentiate(d.x + 0.01 * rng.normal(size=d.x.shape), 0.01, 5.0)
+        xs, xd = dv.fourier_smooth_differentiate(
+            d.x + 0.01 * rng.normal(size=d.x.shape), 0.01, 5.0
+        )
         us = dv.smooth(d.u, 0.01, dv.DerivativeConfig(f_cut=5.0))
         f = ee.fit(xd[100:-100], xs[100:-100], us[100:-100], A, B, maskA, maskB)
         z.append(_zscores(A, B, f))
@@ -195,7 +209,7 @@ def test_tic_nrmse_hand_computed():
     assert mt.tic(xm, xf) == pytest.approx(np.sqrt(5 / 4) / (np.sqrt(30 / 4) + np.sqrt(45 / 4)))
     assert mt.nrmse(xm, xf) == pytest.approx(np.sqrt(5 / 4) / 5.0)
     assert mt.tic(xf, xf) == 0.0
-    assert mt.tic(-xf, xf) == pytest.approx(1.0)           # worst case
+    assert mt.tic(-xf, xf) == pytest.approx(1.0)  # worst case
     assert mt.r_squared(xf, xf) == 1.0
     with pytest.raises(ConfigError, match="range"):
         mt.nrmse(xm, np.ones(4))
@@ -217,9 +231,9 @@ def test_axis_metrics_and_plot(tmp_path):
 # ----------------------------------------------------------------------------- Eqs. (22)-(23)
 def _elements(A, B, maskA, maskB, rel=0.1):
     out = []
-    for (i, j) in np.argwhere(maskA):
+    for i, j in np.argwhere(maskA):
         out.append(("A", i, j, A[i, j], rel * abs(A[i, j]) + 1e-3))
-    for (i, j) in np.argwhere(maskB):
+    for i, j in np.argwhere(maskB):
         out.append(("B", i, j, B[i, j], rel * abs(B[i, j]) + 1e-3))
     return out
 
@@ -244,13 +258,15 @@ def test_uncertainty_box_and_reductions(lti):
     assert min(iv.influence for iv in kept) >= np.sort(infl)[-3] - 1e-15
     for iv, (m, i, j, nom, s) in zip(uv.intervals, els):
         if not iv.corner:
-            assert iv.lower == pytest.approx(nom - 3 * s) and iv.upper == pytest.approx(nom + 3 * s)
+            assert iv.lower == pytest.approx(nom - 3 * s) and iv.upper == pytest.approx(
+                nom + 3 * s
+            )
     # hybrid: strict containment of every point of the box (LP oracle)
     cfg_h = unc.UncertaintyConfig(method="hybrid", p_max=2, output_states=(0, 1, 2))
     uh = unc.build(A, B, els, cfg_h)
     assert uh.M == 4 * (p - 2 + 1)
     assert unc.contains(uh, A_t, B_t)
-    assert not unc.contains(uv, A_t, B_t)   # the 'influence' polytope is not a containment
+    assert not unc.contains(uv, A_t, B_t)  # the 'influence' polytope is not a containment
     # outside the box -> not contained
     m, i, j, nom, s = els[0]
     A_out = A_t.copy()
@@ -260,7 +276,9 @@ def test_uncertainty_box_and_reductions(lti):
     ub = unc.build(A, B, els[:4], unc.UncertaintyConfig(method="box", output_states=(0, 1, 2)))
     assert ub.M == 16
     with pytest.raises(ConfigError, match="corners"):
-        unc.build(A, B, els, unc.UncertaintyConfig(method="box", max_corners=64, output_states=(0, 1, 2)))
+        unc.build(
+            A, B, els, unc.UncertaintyConfig(method="box", max_corners=64, output_states=(0, 1, 2))
+        )
 
 
 def test_influence_matches_finite_difference(lti):
@@ -290,8 +308,13 @@ def test_sidak_joint_coverage():
     z = np.random.default_rng(0).normal(size=(20000, 43))
     joint = np.mean(np.max(np.abs(z), axis=1) < k)
     assert joint == pytest.approx(0.95, abs=0.006)
-    assert np.mean(np.max(np.abs(z), axis=1) < 3.0) == pytest.approx(0.9973 ** 43, abs=0.01)
+    assert np.mean(np.max(np.abs(z), axis=1) < 3.0) == pytest.approx(0.9973**43, abs=0.01)
     els = [("A", 0, j, 1.0, 0.1) for j in range(5)]
     A = -np.eye(5)
-    uv = unc.build(A, np.ones((5, 1)), els, unc.UncertaintyConfig(method="box", joint_alpha=0.05, output_states=(0,)))
+    uv = unc.build(
+        A,
+        np.ones((5, 1)),
+        els,
+        unc.UncertaintyConfig(method="box", joint_alpha=0.05, output_states=(0,)),
+    )
     assert uv.intervals[0].upper - 1.0 == pytest.approx(0.1 * max(3.0, unc.sidak_k(5, 0.05)))

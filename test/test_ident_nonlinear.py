@@ -14,11 +14,19 @@ def flight():
     q = Quadrotor()
     rng = np.random.default_rng(0)
     t = np.arange(0, 20, 0.01)
-    v_ref = np.stack([3 * np.sin(2 * np.pi * 0.05 * t), 3 * np.sin(2 * np.pi * 0.07 * t + 1),
-                      2 * np.sin(2 * np.pi * 0.03 * t + 2)], axis=1)
+    v_ref = np.stack(
+        [
+            3 * np.sin(2 * np.pi * 0.05 * t),
+            3 * np.sin(2 * np.pi * 0.07 * t + 1),
+            2 * np.sin(2 * np.pi * 0.03 * t + 2),
+        ],
+        axis=1,
+    )
     e = syn.multisine(t, 4, (0.5, 4.0), 1.0, rng) * np.array([0.05, 0.003, 0.003, 0.05])
     X, U, XD = syn.nonlinear_flight(q, t, v_ref, e)
-    d = nl.FlightData(t, X[:, 3:5], X[:, 6:9], X[:, 9:12], X[:, 12:16], XD[:, 6:9], XD[:, 9:12], XD[:, 12:16])
+    d = nl.FlightData(
+        t, X[:, 3:5], X[:, 6:9], X[:, 9:12], X[:, 12:16], XD[:, 6:9], XD[:, 9:12], XD[:, 12:16]
+    )
     return q, d
 
 
@@ -45,9 +53,16 @@ def test_regression_standard_errors_cover_truth(flight):
     rng = np.random.default_rng(4)
     z = []
     for _ in range(8):
-        dn = nl.FlightData(d.t, d.euler, d.v, d.omega, d.Omega,
-                           d.v_dot + 0.05 * rng.normal(size=d.v_dot.shape),
-                           d.omega_dot + 0.05 * rng.normal(size=d.omega_dot.shape), d.Omega_dot)
+        dn = nl.FlightData(
+            d.t,
+            d.euler,
+            d.v,
+            d.omega,
+            d.Omega,
+            d.v_dot + 0.05 * rng.normal(size=d.v_dot.shape),
+            d.omega_dot + 0.05 * rng.normal(size=d.omega_dot.shape),
+            d.Omega_dot,
+        )
         r = nl.regression(dn, q.params)
         z.extend((r.K[k] - q.params.K[k]) / r.std[k] for k in K_NAMES)
     assert np.mean(np.abs(np.array(z)) < 3) >= 0.95
@@ -68,14 +83,20 @@ def test_output_error_recovers_perturbed_parameters(flight):
     K0 = dict(q.params.K)
     for k in free:
         K0[k] *= 1.2
-    cfg = nl.OutputErrorConfig(segment_s=1.0, max_segments=12, free=free, max_nfev=80, estimate_initial=False)
+    cfg = nl.OutputErrorConfig(
+        segment_s=1.0, max_segments=12, free=free, max_nfev=80, estimate_initial=False
+    )
     res = nl.output_error(d, q.params, K0, cfg)
     for k in free:
         truth = q.params.K[k]
         # started 20 % off: back within 5 %, or within 3 of its own standard errors when the
         # segments carry little information on it (p q is small in this flight)
         assert res.refined_std[k] > 0
-        assert abs(res.K[k] - truth) < max(0.05 * abs(truth), 3 * res.refined_std[k]), (k, res.K[k], truth)
+        assert abs(res.K[k] - truth) < max(0.05 * abs(truth), 3 * res.refined_std[k]), (
+            k,
+            res.K[k],
+            truth,
+        )
     well = [k for k in free if res.refined_std[k] < 0.01 * abs(q.params.K[k])]
     assert len(well) >= 4
     with pytest.raises(ConfigError, match="initial value"):
@@ -84,14 +105,18 @@ def test_output_error_recovers_perturbed_parameters(flight):
 
 def test_bad_flight_data(flight):
     q, d = flight
-    bad = nl.FlightData(d.t, d.euler, d.v[:-1], d.omega, d.Omega, d.v_dot, d.omega_dot, d.Omega_dot)
+    bad = nl.FlightData(
+        d.t, d.euler, d.v[:-1], d.omega, d.Omega, d.v_dot, d.omega_dot, d.Omega_dot
+    )
     with pytest.raises(ConfigError, match="'v'"):
         nl.regression(bad, q.params)
     v = d.v.copy()
     v[3, 0] = np.nan
     with pytest.raises(ConfigError, match="NaN"):
-        nl.regression(nl.FlightData(d.t, d.euler, v, d.omega, d.Omega, d.v_dot, d.omega_dot, d.Omega_dot),
-                      q.params)
+        nl.regression(
+            nl.FlightData(d.t, d.euler, v, d.omega, d.Omega, d.v_dot, d.omega_dot, d.Omega_dot),
+            q.params,
+        )
 
 
 def test_output_error_consistent_with_noisy_rates(flight):

@@ -11,7 +11,7 @@ import pytest
 from lpv_sysid.control.baseline import BaselineGains
 from lpv_sysid.ident import dataprep as dp
 from lpv_sysid.ident import vertex as vx
-from lpv_sysid.models.quadrotor import Quadrotor, reduced_state
+from lpv_sysid.models.quadrotor import Quadrotor
 from lpv_sysid.sim import phase1 as p1
 from lpv_sysid.sim.vehicle import SensorConfig
 
@@ -20,8 +20,10 @@ from lpv_sysid.sim.vehicle import SensorConfig
 def runs():
     q = Quadrotor()
     cfg = p1.Phase1Config(trim_s=8.0, excite_s=24.0)
-    recs = [p1.simulate_run(q, BaselineGains(), SensorConfig(), cfg, v, p1.run_name(v), seed=s)
-            for s, v in ((3, (5.0, -5.0, 5.0)), (4, (0.0, 0.0, 0.0)))]
+    recs = [
+        p1.simulate_run(q, BaselineGains(), SensorConfig(), cfg, v, p1.run_name(v), seed=s)
+        for s, v in ((3, (5.0, -5.0, 5.0)), (4, (0.0, 0.0, 0.0)))
+    ]
     return q, recs
 
 
@@ -35,8 +37,12 @@ def _truth(q, rec, cfg):
 
 
 def _z(res, A, B):
-    return np.array([(iv.nominal - (A if iv.matrix == "A" else B)[iv.row, iv.col]) / iv.std
-                     for iv in res.uncertain.intervals])
+    return np.array(
+        [
+            (iv.nominal - (A if iv.matrix == "A" else B)[iv.row, iv.col]) / iv.std
+            for iv in res.uncertain.intervals
+        ]
+    )
 
 
 def test_taylor2_coverage_on_nonlinear_phase1_data(runs):
@@ -58,7 +64,7 @@ def test_taylor2_coverage_on_nonlinear_phase1_data(runs):
         res_b = vx.identify_vertex(ar.vertex, vx.IdentificationConfig(model="appendix_b"))
         z_b.append(_z(res_b, A, B))
     z_t, z_b = np.concatenate(z_t), np.concatenate(z_b)
-    assert z_t.size >= 86 + 8        # the hover run identifies a_Omega, b_Omega
+    assert z_t.size >= 86 + 8  # the hover run identifies a_Omega, b_Omega
     assert np.mean(np.abs(z_t) < 3) >= 0.98
     # the plain linear Appendix B fit is biased by the large-amplitude nonlinearity
     assert np.mean(np.abs(z_b) < 3) < np.mean(np.abs(z_t) < 3)
@@ -71,12 +77,14 @@ def test_missing_actuator_command_uses_rotor_speeds(runs):
     cfg = vx.IdentificationConfig()
     s = dp.streams_from_record(rec)
     import dataclasses
+
     s2 = dataclasses.replace(s, t_cmd=None, u=None)
     ar2 = dp.align(s2, cfg)
     assert ar2.input_source.startswith("rotor_speeds")
     ar = dp.align(s, cfg)
     # reconstructed u tracks the commanded one in the identification band
     from lpv_sysid.ident import derivatives as dv
+
     u1 = dv.smooth(ar.vertex.u, 0.01, dv.DerivativeConfig(f_cut=2.0))
     u2 = dv.smooth(ar2.vertex.u, 0.01, dv.DerivativeConfig(f_cut=2.0))
     t1, t2 = ar.vertex.t + ar.t0, ar2.vertex.t + ar2.t0
@@ -85,7 +93,7 @@ def test_missing_actuator_command_uses_rotor_speeds(runs):
     assert np.all(err < 0.1)
     res = vx.identify_vertex(ar2.vertex, cfg)
     (A, B), _ = _truth(q, rec, cfg)
-    rows = [5, 6]        # pdot, qdot: aerodynamic rows do not depend on the input source
+    rows = [5, 6]  # pdot, qdot: aerodynamic rows do not depend on the input source
     for r in rows:
         m = res.fit.maskA[r] & (np.abs(A[r]) > 0.1)
         np.testing.assert_allclose(res.fit.A[r, m], A[r, m], rtol=0.05)
@@ -95,11 +103,14 @@ def test_trim_detection_from_reference(runs):
     """Without a known excitation start, it is found where the reference departs."""
     q, recs = runs
     import dataclasses
+
     s = dataclasses.replace(dp.streams_from_record(recs[0]), t_excite=None, t_exc=None, exc=None)
     ar = dp.align(s, vx.IdentificationConfig())
     assert ar.vertex.trim[1] == pytest.approx(recs[0].t_excite, abs=0.05)
     np.testing.assert_allclose(ar.vertex.scheduling, recs[0].v_d, atol=1e-4)
-    np.testing.assert_array_equal(dp.snap_to_box(ar.vertex.scheduling, vx.IdentificationConfig()), recs[0].v_d)
+    np.testing.assert_array_equal(
+        dp.snap_to_box(ar.vertex.scheduling, vx.IdentificationConfig()), recs[0].v_d
+    )
     row = dp.trim_row(vx.equilibrium(ar.vertex, vx.IdentificationConfig())[0])
     assert row[0] == pytest.approx(recs[0].v_d[0], abs=0.5)
     table = dp.format_table1([(recs[0].v_d, row)])
@@ -109,6 +120,7 @@ def test_trim_detection_from_reference(runs):
 def test_bag_round_trip_and_broken_bags(runs, tmp_path):
     """Phase-1 run -> rosbag2 (io/bag + io/messages, ENU/FLU on the wire) -> same arrays."""
     from lpv_sysid.errors import BagError
+
     q, recs = runs
     rec = recs[1]
     path = p1.write_run_bag(rec, tmp_path / rec.name)
@@ -128,7 +140,7 @@ def test_bag_round_trip_and_broken_bags(runs, tmp_path):
     # same data, slightly different segment boundary: estimates agree within their errors
     m = r2.fit.maskA
     assert np.all(np.abs(r1.fit.A - r2.fit.A)[m] <= r2.fit.std_A[m])
-    np.testing.assert_allclose(r1.fit.A[~m], r2.fit.A[~m], atol=1e-3)     # known, at measured trims
+    np.testing.assert_allclose(r1.fit.A[~m], r2.fit.A[~m], atol=1e-3)  # known, at measured trims
     assert dp.find_bags(tmp_path) == [path]
     # broken inputs give BagError naming the problem
     with pytest.raises(BagError, match="no such bag"):
@@ -140,6 +152,7 @@ def test_bag_round_trip_and_broken_bags(runs, tmp_path):
         dp.find_bags(tmp_path / "empty")
     # a bag truncated by a crash: the storage file cut in half
     import shutil
+
     broken = tmp_path / "broken"
     shutil.copytree(path, broken)
     mcap = next(broken.glob("*.mcap"))
@@ -147,12 +160,21 @@ def test_bag_round_trip_and_broken_bags(runs, tmp_path):
     with pytest.raises(BagError):
         dp.streams_from_bag(broken)
     import dataclasses
-    short = dataclasses.replace(s_rec, t_state=s_rec.t_state[:2000], euler=s_rec.euler[:2000],
-                                v=s_rec.v[:2000], omega=s_rec.omega[:2000])
+
+    short = dataclasses.replace(
+        s_rec,
+        t_state=s_rec.t_state[:2000],
+        euler=s_rec.euler[:2000],
+        v=s_rec.v[:2000],
+        omega=s_rec.omega[:2000],
+    )
     with pytest.raises(BagError, match="too short|excitation segment"):
         dp.align(short, cfg)
-    gap = dataclasses.replace(s_rec, t_rotor=np.delete(s_rec.t_rotor, np.s_[1500:1600]),
-                              Omega=np.delete(s_rec.Omega, np.s_[1500:1600], axis=0))
+    gap = dataclasses.replace(
+        s_rec,
+        t_rotor=np.delete(s_rec.t_rotor, np.s_[1500:1600]),
+        Omega=np.delete(s_rec.Omega, np.s_[1500:1600], axis=0),
+    )
     with pytest.raises(BagError, match="gap"):
         dp.align(gap, cfg)
     nan = s_rec.v.copy()

@@ -34,8 +34,9 @@ def vertex_data(v_d, rng, noise=True, t_trim=10.0, t_exc=30.0, name=None):
     d, _ = syn.closed_loop(A, B, t, e, QW, RW)
     x = tr.x0 + d.x + (NOISE * rng.normal(size=d.x.shape) if noise else 0.0)
     u = tr.u0 + d.u
-    data = vx.VertexData(t, x, u, np.asarray(v_d, float), (0.0, t_trim), (t_trim, t[-1] + DT),
-                         name or str(v_d))
+    data = vx.VertexData(
+        t, x, u, np.asarray(v_d, float), (0.0, t_trim), (t_trim, t[-1] + DT), name or str(v_d)
+    )
     return data, A, B, tr, d
 
 
@@ -45,6 +46,7 @@ def test_noise_free_pipeline_recovers_linearisation():
     data, A, B, tr, d = vertex_data([5.0, -5.0, 5.0], rng, noise=False)
     known = vx.known_from_quadrotor(tr.x0)
     from lpv_sysid.ident import equation_error as ee
+
     f = ee.fit(d.xdot, d.x, d.u, known.A, known.B, known.maskA, known.maskB)
     m = known.maskA
     assert np.max(np.abs(f.A - A)[m] / np.maximum(np.abs(A[m]), 1e-12)) < 1e-6
@@ -70,14 +72,21 @@ def test_pipeline_coverage_and_box_containment():
     error (errors in variables); with the sensor noise given, the bias-compensated estimate
     and the EWC standard errors are calibrated (test_ident_calibration has the comparison)."""
     rng = np.random.default_rng(42)
-    cfg = vx.IdentificationConfig(model="appendix_b", uncertainty=unc.UncertaintyConfig(method="hybrid", p_max=2),
-                                  measurement_noise=vx.parse_measurement_noise(MEASUREMENT_NOISE))
+    cfg = vx.IdentificationConfig(
+        model="appendix_b",
+        uncertainty=unc.UncertaintyConfig(method="hybrid", p_max=2),
+        measurement_noise=vx.parse_measurement_noise(MEASUREMENT_NOISE),
+    )
     z, inside_all = [], []
     for v_d in ([5.0, 5.0, 5.0], [-5.0, 5.0, -5.0], [0.0, 0.0, 0.0]):
         for _ in range(2):
             data, A, B, tr, _ = vertex_data(v_d, rng)
             res = vx.identify_vertex(data, cfg)
-            assert len(res.uncertain.intervals) == int(res.fit.maskA.sum() + res.fit.maskB.sum()) == 43
+            assert (
+                len(res.uncertain.intervals)
+                == int(res.fit.maskA.sum() + res.fit.maskB.sum())
+                == 43
+            )
             inside = []
             for iv in res.uncertain.intervals:
                 truth = (A if iv.matrix == "A" else B)[iv.row, iv.col]
@@ -92,8 +101,8 @@ def test_pipeline_coverage_and_box_containment():
                 assert unc.contains(res.uncertain, A_t, B_t)
     z = np.array(z)
     assert np.mean(np.abs(z) < 3) >= 0.99
-    assert abs(np.mean(z)) < 0.3               # no gross bias from the smoother
-    assert 0.8 < np.std(z) < 1.2               # the standard errors are the right size
+    assert abs(np.mean(z)) < 0.3  # no gross bias from the smoother
+    assert 0.8 < np.std(z) < 1.2  # the standard errors are the right size
     assert np.mean(inside_all) >= 0.5
 
 
@@ -104,7 +113,7 @@ def test_vertex_models_document_and_validation():
     for i, c in enumerate(box_vertices(cfg.vmin, cfg.vmax)):
         data, *_ = vertex_data(list(c), rng, t_exc=15.0, name=f"vertex{i}")
         results.append(vx.identify_vertex(data, cfg))
-    doc = vx.vertex_models_dict(results[::-1], cfg)            # order restored by scheduling
+    doc = vx.vertex_models_dict(results[::-1], cfg)  # order restored by scheduling
     assert doc["format"] == "lpv_sysid/vertex_models@2"
     assert [v["scheduling"] for v in doc["vertices"]] == box_vertices(cfg.vmin, cfg.vmax).tolist()
     v0 = doc["vertices"][0]
@@ -120,22 +129,29 @@ def test_vertex_models_document_and_validation():
     # the stored std is the EWC standard error widened to the t_dof quantile of the same coverage
     first = [r for r in results if np.allclose(r.scheduling, cfg.vmin)][0]
     from scipy.stats import norm, t as student_t
+
     dof = doc["meta"]["std"]["dof"][0]
-    assert doc["meta"]["std"]["t_factor"][0] == pytest.approx(student_t.ppf(norm.cdf(3.0), dof) / 3.0)
+    assert doc["meta"]["std"]["t_factor"][0] == pytest.approx(
+        student_t.ppf(norm.cdf(3.0), dof) / 3.0
+    )
     raw = {(iv.matrix, iv.row, iv.col): iv.std for iv in first.uncertain.intervals}
     for m, r, c, nom, s in first.fit.elements():
         assert raw[(m, r, c)] == pytest.approx(s * doc["meta"]["std"]["t_factor"][0])
     # the reduced polytope of Eq. (23) is the identification's proposal, not what is stored
-    assert first.uncertain.M == 2 ** cfg.uncertainty.p_max
+    assert first.uncertain.M == 2**cfg.uncertainty.p_max
     infl = doc["meta"]["uncertainty"]["inflation"][0]
     assert infl >= 1.0
-    for iv in first.uncertain.intervals:     # corners: k sigma widened by the absorption factor
+    for iv in first.uncertain.intervals:  # corners: k sigma widened by the absorption factor
         assert iv.half == pytest.approx(3 * iv.std * infl if iv.corner else 0.0)
     from lpv_sysid.io.formats import VertexModels
+
     vm = VertexModels.from_dict(doc)
     assert vm.format_version == 2
     back = {(e.matrix, e.row, e.col): e for e in vm.vertices[0].uncertain}
-    assert all(back[(iv.matrix, iv.row, iv.col)].lower == pytest.approx(iv.lower) for iv in first.uncertain.intervals)
+    assert all(
+        back[(iv.matrix, iv.row, iv.col)].lower == pytest.approx(iv.lower)
+        for iv in first.uncertain.intervals
+    )
     assert set(v0["fit"]["r2"]) == {"udot", "vdot", "wdot", "pdot", "qdot", "rdot"}
     # independent hover maneuver: the interpolated LPV model predicts its derivatives
     hover, *_ = vertex_data([0.0, 0.0, 0.0], rng, t_exc=15.0, name="hover")
@@ -144,9 +160,26 @@ def test_vertex_models_document_and_validation():
     # rotational axes have high SNR here: a good model gives small TIC (seed 0 Table 3 scale)
     assert val["tic"]["pdot"] < 0.3 and val["tic"]["qdot"] < 0.3
     # a wrong model (B rows zeroed) validates much worse: the metric can fail
-    bad = [vx.VertexResult(r.name, r.scheduling, r.x0, r.u0,
-                           type(r.fit)(r.fit.A * 0, r.fit.B, r.fit.std_A, r.fit.std_B, r.fit.maskA,
-                                       r.fit.maskB, r.fit.rows), r.uncertain, r.r2_axes) for r in results]
+    bad = [
+        vx.VertexResult(
+            r.name,
+            r.scheduling,
+            r.x0,
+            r.u0,
+            type(r.fit)(
+                r.fit.A * 0,
+                r.fit.B,
+                r.fit.std_A,
+                r.fit.std_B,
+                r.fit.maskA,
+                r.fit.maskB,
+                r.fit.rows,
+            ),
+            r.uncertain,
+            r.r2_axes,
+        )
+        for r in results
+    ]
     assert vx.validate(bad, hover, cfg)["tic"]["pdot"] > 2 * val["tic"]["pdot"]
 
 
@@ -162,18 +195,32 @@ def test_too_short_and_broken_data():
     x = good.x.copy()
     x[100, 3] = np.nan
     with pytest.raises(ConfigError, match="NaN"):
-        vx.identify_vertex(vx.VertexData(good.t, x, good.u, good.scheduling, good.trim, good.fit), vx.IdentificationConfig(model="appendix_b"))
+        vx.identify_vertex(
+            vx.VertexData(good.t, x, good.u, good.scheduling, good.trim, good.fit),
+            vx.IdentificationConfig(model="appendix_b"),
+        )
     with pytest.raises(ConfigError, match=r"x \(N, 12\)"):
-        vx.identify_vertex(vx.VertexData(good.t, good.x[:, :8], good.u, good.scheduling, good.trim, good.fit),
-                           vx.IdentificationConfig(model="appendix_b"))
+        vx.identify_vertex(
+            vx.VertexData(good.t, good.x[:, :8], good.u, good.scheduling, good.trim, good.fit),
+            vx.IdentificationConfig(model="appendix_b"),
+        )
 
 
 def test_config_validation():
-    cfg = vx.IdentificationConfig.from_dict({"identification": {
-        "derivatives": {"method": "savgol", "window_s": 0.3},
-        "uncertainty": {"k_sigma": 2.0, "method": "hybrid", "p_max": 3},
-        "trim_duration": 8}})
-    assert cfg.derivatives.method == "savgol" and cfg.uncertainty.k_sigma == 2.0 and cfg.trim_duration == 8.0
+    cfg = vx.IdentificationConfig.from_dict(
+        {
+            "identification": {
+                "derivatives": {"method": "savgol", "window_s": 0.3},
+                "uncertainty": {"k_sigma": 2.0, "method": "hybrid", "p_max": 3},
+                "trim_duration": 8,
+            }
+        }
+    )
+    assert (
+        cfg.derivatives.method == "savgol"
+        and cfg.uncertainty.k_sigma == 2.0
+        and cfg.trim_duration == 8.0
+    )
     with pytest.raises(ConfigError, match="unknown key"):
         vx.IdentificationConfig.from_dict({"trim_lenght": 3})
     with pytest.raises(ConfigError, match="k_sigma"):

@@ -14,10 +14,18 @@ LAUNCH = os.path.join(ROOT, "launch")
 FILES = ["phase1.launch.py", "phase2.launch.py", "sim.launch.py"]
 EXPECTED = {
     "phase1.launch.py": {"excitation_node", "mavlink_bridge_node", "data_logger_node"},
-    "phase2.launch.py": {"excitation_node", "lpv_controller_node", "mavlink_bridge_node",
-                         "data_logger_node"},
-    "sim.launch.py": {"sim_vehicle_node", "excitation_node", "lpv_controller_node",
-                      "data_logger_node"},
+    "phase2.launch.py": {
+        "excitation_node",
+        "lpv_controller_node",
+        "mavlink_bridge_node",
+        "data_logger_node",
+    },
+    "sim.launch.py": {
+        "sim_vehicle_node",
+        "excitation_node",
+        "lpv_controller_node",
+        "data_logger_node",
+    },
 }
 
 
@@ -35,16 +43,20 @@ def _node_calls(tree):
     for call in ast.walk(tree):
         if isinstance(call, ast.Call) and getattr(call.func, "id", "") == "Node":
             kw = {k.arg: k.value for k in call.keywords}
-            files = [c.args[0].value for c in ast.walk(kw["parameters"])
-                     if isinstance(c, ast.Call) and getattr(c.func, "id", "") == "params"]
+            files = [
+                c.args[0].value
+                for c in ast.walk(kw["parameters"])
+                if isinstance(c, ast.Call) and getattr(c.func, "id", "") == "params"
+            ]
             out.append((kw["executable"].value, kw["name"].value, kw["namespace"].id, files))
     return out
 
 
 def _launch_importable():
     try:
-        return importlib.util.find_spec("launch_ros") is not None and \
-            hasattr(importlib.import_module("launch"), "LaunchDescription")
+        return importlib.util.find_spec("launch_ros") is not None and hasattr(
+            importlib.import_module("launch"), "LaunchDescription"
+        )
     except ImportError:
         return False
 
@@ -53,8 +65,10 @@ def _launch_importable():
 def test_launch_file_nodes_exist(fname):
     src = open(os.path.join(LAUNCH, fname)).read()
     tree = ast.parse(src, fname)
-    assert any(isinstance(n, ast.FunctionDef) and n.name == "generate_launch_description"
-               for n in tree.body)
+    assert any(
+        isinstance(n, ast.FunctionDef) and n.name == "generate_launch_description"
+        for n in tree.body
+    )
     calls = _node_calls(tree)
     execs = {c[0] for c in calls}
     assert execs == EXPECTED[fname]
@@ -78,5 +92,6 @@ def test_launch_description_builds(fname):  # pragma: no cover - needs ROS 2
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     from launch import LaunchDescription
+
     ld = mod.generate_launch_description()
     assert isinstance(ld, LaunchDescription) and len(ld.entities) >= 4

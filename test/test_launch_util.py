@@ -37,8 +37,9 @@ class LaunchDescription(_Recorded):
 
 class DeclareLaunchArgument(_Recorded):
     def __init__(self, name, *, default_value=None, description=None, choices=None):
-        super().__init__(name, default_value=default_value, description=description,
-                         choices=choices)
+        super().__init__(
+            name, default_value=default_value, description=description, choices=choices
+        )
         self.name, self.default_value, self.description = name, default_value, description
 
 
@@ -63,11 +64,28 @@ class IfCondition(_Recorded):
 
 
 class Node(_Recorded):
-    def __init__(self, *, executable, package=None, name=None, namespace=None, output="log",
-                 parameters=None, condition=None, **kwargs):
-        super().__init__(executable=executable, package=package, name=name,
-                         namespace=namespace, output=output, parameters=parameters,
-                         condition=condition, **kwargs)
+    def __init__(
+        self,
+        *,
+        executable,
+        package=None,
+        name=None,
+        namespace=None,
+        output="log",
+        parameters=None,
+        condition=None,
+        **kwargs,
+    ):
+        super().__init__(
+            executable=executable,
+            package=package,
+            name=name,
+            namespace=namespace,
+            output=output,
+            parameters=parameters,
+            condition=condition,
+            **kwargs,
+        )
         self.executable, self.parameters, self.condition = executable, parameters, condition
 
 
@@ -81,9 +99,11 @@ def fake_launch(monkeypatch):
     mods = {
         "launch": dict(LaunchDescription=LaunchDescription),
         "launch.actions": dict(DeclareLaunchArgument=DeclareLaunchArgument),
-        "launch.substitutions": dict(LaunchConfiguration=LaunchConfiguration,
-                                     PathJoinSubstitution=PathJoinSubstitution,
-                                     PythonExpression=PythonExpression),
+        "launch.substitutions": dict(
+            LaunchConfiguration=LaunchConfiguration,
+            PathJoinSubstitution=PathJoinSubstitution,
+            PythonExpression=PythonExpression,
+        ),
         "launch.conditions": dict(IfCondition=IfCondition),
         "launch_ros": {},
         "launch_ros.actions": dict(Node=Node),
@@ -100,13 +120,17 @@ def fake_launch(monkeypatch):
 
 
 def _describe(fname):
-    spec = importlib.util.spec_from_file_location("lf_" + fname.split(".")[0],
-                                                  os.path.join(ROOT, "launch", fname))
+    spec = importlib.util.spec_from_file_location(
+        "lf_" + fname.split(".")[0], os.path.join(ROOT, "launch", fname)
+    )
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     ld = mod.generate_launch_description()
-    args = {e.name: (e.default_value, e.description) for e in ld.entities
-            if isinstance(e, DeclareLaunchArgument)}
+    args = {
+        e.name: (e.default_value, e.description)
+        for e in ld.entities
+        if isinstance(e, DeclareLaunchArgument)
+    }
     order = [e.name for e in ld.entities if isinstance(e, DeclareLaunchArgument)]
     nodes = {e.executable: e for e in ld.entities if isinstance(e, Node)}
     return order, args, nodes
@@ -118,12 +142,13 @@ def test_declare_arguments_and_params(fake_launch):
     assert [a.name for a in out] == ["config_dir", "gains_file", "log_dir"]
     assert out[0].default_value == os.path.join(SHARE, "config")
     assert out[0].description == "directory holding the node parameter files"
-    assert out[1].default_value is None            # required: no default_value given at all
+    assert out[1].default_value is None  # required: no default_value given at all
     assert out[1].kwargs["default_value"] is None
     assert out[2].default_value == "x_log"
     assert out[2].description == "experiment directory of the data logger (test)"
-    assert L.params("a.yaml") == PathJoinSubstitution([LaunchConfiguration("config_dir"),
-                                                       "a.yaml"])
+    assert L.params("a.yaml") == PathJoinSubstitution(
+        [LaunchConfiguration("config_dir"), "a.yaml"]
+    )
     with pytest.raises(KeyError, match=r"\['colour'\]"):
         L.declare_arguments(colour="red")
     with pytest.raises(KeyError, match=r"\['speed'\]"):
@@ -134,22 +159,48 @@ CONFIG_DIR = os.path.join(SHARE, "config")
 SIGNALS = ("signals.npz", "signals.npz written by `lpv-sysid signals`")
 
 
-@pytest.mark.parametrize("fname, order, expected", [
-    ("phase1.launch.py", ["config_dir", "signals_file", "vertex", "log_dir"], {
-        "signals_file": SIGNALS,
-        "vertex": ("[0.0, 0.0, 0.0]", "vertex body velocity (u, v, w) FRD, m/s, for this run"),
-        "log_dir": ("phase1_log", "experiment directory of the data logger")}),
-    ("phase2.launch.py", ["config_dir", "gains_file", "signals_file", "log_dir"], {
-        "gains_file": (None, "gains.yaml from `lpv-sysid synthesize`"),
-        "signals_file": SIGNALS,
-        "log_dir": ("phase2_log", "experiment directory of the data logger")}),
-    ("sim.launch.py", ["phase", "config_dir", "signals_file", "gains_file", "vertex", "log_dir"], {
-        "phase": ("1", "1: baseline + excitation, 2: LPV controller"),
-        "gains_file": ("gains.yaml", "gains.yaml from `lpv-sysid synthesize` (phase 2 only)"),
-        "vertex": ("[0.0, 0.0, 0.0]",
-                   "vertex body velocity (u, v, w) FRD, m/s, for this run (phase 1 only)"),
-        "log_dir": ("sim_log", "experiment directory of the data logger")}),
-])
+@pytest.mark.parametrize(
+    "fname, order, expected",
+    [
+        (
+            "phase1.launch.py",
+            ["config_dir", "signals_file", "vertex", "log_dir"],
+            {
+                "signals_file": SIGNALS,
+                "vertex": (
+                    "[0.0, 0.0, 0.0]",
+                    "vertex body velocity (u, v, w) FRD, m/s, for this run",
+                ),
+                "log_dir": ("phase1_log", "experiment directory of the data logger"),
+            },
+        ),
+        (
+            "phase2.launch.py",
+            ["config_dir", "gains_file", "signals_file", "log_dir"],
+            {
+                "gains_file": (None, "gains.yaml from `lpv-sysid synthesize`"),
+                "signals_file": SIGNALS,
+                "log_dir": ("phase2_log", "experiment directory of the data logger"),
+            },
+        ),
+        (
+            "sim.launch.py",
+            ["phase", "config_dir", "signals_file", "gains_file", "vertex", "log_dir"],
+            {
+                "phase": ("1", "1: baseline + excitation, 2: LPV controller"),
+                "gains_file": (
+                    "gains.yaml",
+                    "gains.yaml from `lpv-sysid synthesize` (phase 2 only)",
+                ),
+                "vertex": (
+                    "[0.0, 0.0, 0.0]",
+                    "vertex body velocity (u, v, w) FRD, m/s, for this run (phase 1 only)",
+                ),
+                "log_dir": ("sim_log", "experiment directory of the data logger"),
+            },
+        ),
+    ],
+)
 def test_launch_files_declare_and_wire(fake_launch, fname, order, expected):
     got_order, args, nodes = _describe(fname)
     assert got_order == order
@@ -167,7 +218,8 @@ def test_launch_files_declare_and_wire(fake_launch, fname, order, expected):
                 assert v.args[0] in args, (executable, v)
     if fname == "phase2.launch.py":
         assert nodes["lpv_controller_node"].parameters[1] == {
-            "gains_file": LaunchConfiguration("gains_file")}
+            "gains_file": LaunchConfiguration("gains_file")
+        }
     if fname == "sim.launch.py":
         assert nodes["lpv_controller_node"].condition is not None
         assert all(n.condition is None for e, n in nodes.items() if e != "lpv_controller_node")

@@ -6,9 +6,16 @@ import numpy as np
 import pytest
 
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.models.lpv import (PolytopicModel, ScheduledLpv, UncertainElement, box_vertices,
-                                  interpolate_gain, multilinear_weight_gradient, multilinear_weights,
-                                  uncertainty_vertices)
+from lpv_sysid.models.lpv import (
+    PolytopicModel,
+    ScheduledLpv,
+    UncertainElement,
+    box_vertices,
+    interpolate_gain,
+    multilinear_weight_gradient,
+    multilinear_weights,
+    uncertainty_vertices,
+)
 
 LO = np.array([-5.0, -2.0, -1.0])
 HI = np.array([5.0, 4.0, 3.0])
@@ -18,8 +25,8 @@ def test_box_vertices_order_first_axis_slowest():
     v = box_vertices(LO, HI)
     assert v.shape == (8, 3)
     np.testing.assert_array_equal(v[0], LO)
-    np.testing.assert_array_equal(v[1], [-5, -2, 3])     # last axis fastest
-    np.testing.assert_array_equal(v[4], [5, -2, -1])     # first axis slowest
+    np.testing.assert_array_equal(v[1], [-5, -2, 3])  # last axis fastest
+    np.testing.assert_array_equal(v[4], [5, -2, -1])  # first axis slowest
     np.testing.assert_array_equal(v[7], HI)
     assert [tuple(r) for r in v] == list(itertools.product(*zip(LO, HI)))
 
@@ -35,8 +42,16 @@ def test_weights_hand_computed_point():
     # t = (0.25, 0.5, 0.75): alpha_i = prod of (1-t, t) chosen by the corner bits
     vd = LO + np.array([0.25, 0.5, 0.75]) * (HI - LO)
     a, _ = multilinear_weights(vd, LO, HI)
-    expect = [0.75 * 0.5 * 0.25, 0.75 * 0.5 * 0.75, 0.75 * 0.5 * 0.25, 0.75 * 0.5 * 0.75,
-              0.25 * 0.5 * 0.25, 0.25 * 0.5 * 0.75, 0.25 * 0.5 * 0.25, 0.25 * 0.5 * 0.75]
+    expect = [
+        0.75 * 0.5 * 0.25,
+        0.75 * 0.5 * 0.75,
+        0.75 * 0.5 * 0.25,
+        0.75 * 0.5 * 0.75,
+        0.25 * 0.5 * 0.25,
+        0.25 * 0.5 * 0.75,
+        0.25 * 0.5 * 0.25,
+        0.25 * 0.5 * 0.75,
+    ]
     np.testing.assert_allclose(a, expect, rtol=1e-15)
 
 
@@ -44,7 +59,7 @@ def test_weights_nonnegative_sum_one_and_reproduce_affine_functions():
     rng = np.random.default_rng(3)
     M = rng.normal(size=(5, 3))
     c = rng.normal(size=5)
-    f_vert = box_vertices(LO, HI) @ M.T + c            # affine function at the vertices
+    f_vert = box_vertices(LO, HI) @ M.T + c  # affine function at the vertices
     for _ in range(50):
         vd = LO + rng.random(3) * (HI - LO)
         a, clamped = multilinear_weights(vd, LO, HI)
@@ -70,7 +85,9 @@ def test_weight_gradient_matches_finite_difference():
     for k in range(3):
         e = np.zeros(3)
         e[k] = h
-        fd = (multilinear_weights(vd + e, LO, HI)[0] - multilinear_weights(vd - e, LO, HI)[0]) / (2 * h)
+        fd = (multilinear_weights(vd + e, LO, HI)[0] - multilinear_weights(vd - e, LO, HI)[0]) / (
+            2 * h
+        )
         np.testing.assert_allclose(g[:, k], fd, atol=1e-8)
 
 
@@ -94,7 +111,7 @@ def test_dx0_dvd_of_affine_equilibrium_is_its_matrix_eq34():
 def test_interpolated_gain_and_scheduled_model():
     model, _ = _model()
     K = np.arange(8 * 2 * 3, dtype=float).reshape(8, 2, 3)
-    vd = np.array([0.0, 1.0, 1.0])                     # centre of the box: all weights 1/8
+    vd = np.array([0.0, 1.0, 1.0])  # centre of the box: all weights 1/8
     np.testing.assert_allclose(interpolate_gain(K, vd, LO, HI), K.mean(axis=0))
     s = ScheduledLpv(model, K)
     np.testing.assert_allclose(s.K(vd), K.mean(axis=0))
@@ -106,8 +123,11 @@ def test_interpolated_gain_and_scheduled_model():
 def test_uncertainty_corners_eq23():
     A = np.diag([1.0, 2.0])
     B = np.array([[0.0], [1.0]])
-    els = [UncertainElement("A", 0, 0, 0.5, 1.5), UncertainElement("B", 1, 0, 0.8, 1.2),
-           UncertainElement("A", 1, 1, 2.0, 2.0)]          # fixed: does not double the count
+    els = [
+        UncertainElement("A", 0, 0, 0.5, 1.5),
+        UncertainElement("B", 1, 0, 0.8, 1.2),
+        UncertainElement("A", 1, 1, 2.0, 2.0),
+    ]  # fixed: does not double the count
     sys = uncertainty_vertices(A, B, els)
     assert len(sys) == 4
     vals = sorted((a[0, 0], b[1, 0]) for a, b in sys)
@@ -123,10 +143,18 @@ def test_uncertainty_corners_eq23():
 
 def test_polytopic_model_validates_shapes():
     with pytest.raises(ConfigError, match="A must have shape"):
-        PolytopicModel(vmin=LO, vmax=HI, A=np.zeros((4, 3, 3)), B=np.zeros((4, 3, 1)), x0=None, u0=None)
+        PolytopicModel(
+            vmin=LO, vmax=HI, A=np.zeros((4, 3, 3)), B=np.zeros((4, 3, 1)), x0=None, u0=None
+        )
     m = PolytopicModel.from_uncertain_elements(
-        LO, HI, np.zeros((8, 2, 2)), np.zeros((8, 2, 1)), None, None,
-        [[UncertainElement("A", 0, 1, -1, 1)]] * 8)
+        LO,
+        HI,
+        np.zeros((8, 2, 2)),
+        np.zeros((8, 2, 1)),
+        None,
+        None,
+        [[UncertainElement("A", 0, 1, -1, 1)]] * 8,
+    )
     assert [len(s) for s in m.systems] == [2] * 8
 
 
@@ -135,7 +163,12 @@ def test_from_vertex_systems_of_the_identification_helper():
 
     A = np.array([[-1.0, 0.5], [0.0, -2.0]])
     B = np.array([[0.0], [1.0]])
-    uv = unc.build(A, B, [("A", 0, 1, 0.5, 0.1), ("B", 1, 0, 1.0, 0.05)], unc.UncertaintyConfig(k_sigma=2.0, output_states=(0, 1)))
+    uv = unc.build(
+        A,
+        B,
+        [("A", 0, 1, 0.5, 0.1), ("B", 1, 0, 1.0, 0.05)],
+        unc.UncertaintyConfig(k_sigma=2.0, output_states=(0, 1)),
+    )
     m = PolytopicModel.from_vertex_systems([0.0], [1.0], [uv, uv], x0=None, u0=None)
     assert [len(s) for s in m.systems] == [4, 4]
     vals = sorted((round(a[0, 1], 12), round(b[1, 0], 12)) for a, b in m.systems[0])

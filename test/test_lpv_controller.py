@@ -15,8 +15,16 @@ def _schedule(gamma=1.0):
     K = np.array([i * np.ones((4, 12)) * 1e-3 for i in range(8)])
     x0 = np.array([i * 0.1 * np.ones(12) for i in range(8)])
     u0 = np.array([[0.5 + 0.01 * i, 0.0, 0.0, 0.0] for i in range(8)])
-    return SimpleNamespace(K=K, x0=x0, u0=u0, R=np.diag([0.1, 0.2, 0.3, 0.4]), Q=np.diag([2.0, 4.0, 5.0]),
-                           gamma=gamma, vmin=np.array([-5.0, -5.0, -5.0]), vmax=np.array([5.0, 5.0, 5.0]))
+    return SimpleNamespace(
+        K=K,
+        x0=x0,
+        u0=u0,
+        R=np.diag([0.1, 0.2, 0.3, 0.4]),
+        Q=np.diag([2.0, 4.0, 5.0]),
+        gamma=gamma,
+        vmin=np.array([-5.0, -5.0, -5.0]),
+        vmax=np.array([5.0, 5.0, 5.0]),
+    )
 
 
 def test_law_equals_formula_on_hand_computed_numbers():
@@ -27,7 +35,9 @@ def test_law_equals_formula_on_hand_computed_numbers():
     u_e = np.array([1.0, -1.0, 2.0, 0.5])
     u, info = ctl.step(0.0, x, np.array([0.0, -5.0, 5.0]), u_e)
     # K (x - x0) = 3e-3 * 12 * 1.0 = 0.036 per channel; R u_e = (0.1, -0.2, 0.6, 0.2)
-    np.testing.assert_allclose(u, [0.53 + 0.036 + 0.1, 0.036 - 0.2, 0.036 + 0.6, 0.036 + 0.2], rtol=1e-14)
+    np.testing.assert_allclose(
+        u, [0.53 + 0.036 + 0.1, 0.036 - 0.2, 0.036 + 0.6, 0.036 + 0.2], rtol=1e-14
+    )
     assert not info["clamped"] and not info["saturated"]
 
 
@@ -38,18 +48,25 @@ def test_weights_match_models_lpv():
     rng = np.random.default_rng(2)
     for _ in range(20):
         vd = rng.uniform(-5, 5, 3)
-        np.testing.assert_allclose(ctl.weights(vd)[0], multilinear_weights(vd, -5 * np.ones(3), 5 * np.ones(3))[0],
-                                   atol=1e-15)
+        np.testing.assert_allclose(
+            ctl.weights(vd)[0],
+            multilinear_weights(vd, -5 * np.ones(3), 5 * np.ones(3))[0],
+            atol=1e-15,
+        )
 
 
 def test_mixer_saturation_clips_per_motor_commands():
     mix = mixer(0.225)
     ctl = LpvController(_schedule(), mix=mix)
-    u, info = ctl.step(0.0, np.zeros(12), np.zeros(3), np.array([20.0, 0.0, 0.0, 0.0]))  # huge thrust
+    u, info = ctl.step(
+        0.0, np.zeros(12), np.zeros(3), np.array([20.0, 0.0, 0.0, 0.0])
+    )  # huge thrust
     esc = np.linalg.solve(mix, u)
     assert info["saturated"]
     assert np.all(esc <= 1.0 + 1e-12) and np.all(esc >= -1e-12)
-    unsat = LpvController(_schedule()).step(0.0, np.zeros(12), np.zeros(3), np.array([20.0, 0, 0, 0]))[0]
+    unsat = LpvController(_schedule()).step(
+        0.0, np.zeros(12), np.zeros(3), np.array([20.0, 0, 0, 0])
+    )[0]
     np.testing.assert_allclose(u, mix @ np.clip(np.linalg.solve(mix, unsat), 0, 1), rtol=1e-12)
 
 
@@ -57,7 +74,9 @@ def test_clamp_nan_time_and_shape_errors():
     ctl = LpvController(_schedule())
     u_out, info = ctl.step(0.0, np.zeros(12), np.array([9.0, 0.0, 0.0]), np.zeros(4))
     assert info["clamped"]
-    u_edge, _ = LpvController(_schedule()).step(0.0, np.zeros(12), np.array([5.0, 0.0, 0.0]), np.zeros(4))
+    u_edge, _ = LpvController(_schedule()).step(
+        0.0, np.zeros(12), np.array([5.0, 0.0, 0.0]), np.zeros(4)
+    )
     np.testing.assert_allclose(u_out, u_edge)
     with pytest.raises(SafetyError, match="x"):
         ctl.step(0.1, np.full(12, np.nan), np.zeros(3), np.zeros(4))
@@ -72,14 +91,18 @@ def test_clamp_nan_time_and_shape_errors():
 def test_rate_limit():
     ctl = LpvController(_schedule(), LpvControllerConfig(rate_limit=(1.0, 1.0, 1.0, 1.0)))
     u0, _ = ctl.step(0.0, np.zeros(12), np.zeros(3), np.zeros(4))
-    u1, info = ctl.step(0.01, np.zeros(12), np.zeros(3), np.array([1.0, 0, 0, 0]))   # wants +0.1 in ut
+    u1, info = ctl.step(
+        0.01, np.zeros(12), np.zeros(3), np.array([1.0, 0, 0, 0])
+    )  # wants +0.1 in ut
     assert info["rate_limited"]
     np.testing.assert_allclose(u1 - u0, [0.01, 0, 0, 0], atol=1e-15)
 
 
 def test_bound_monitor_gain_and_flag_only_after_enough_energy():
     # constant z: v - v_d = (2, 0, 0) -> z = Q^-1 dv = (1, 0, 0); |u_e| = 0.5 -> gain = 1 / 0.5 = 2
-    ctl = LpvController(_schedule(gamma=1.0), LpvControllerConfig(monitor_margin=1.5, monitor_min_energy=0.1))
+    ctl = LpvController(
+        _schedule(gamma=1.0), LpvControllerConfig(monitor_margin=1.5, monitor_min_energy=0.1)
+    )
     x = np.zeros(12)
     x[2] = 2.0
     ue = np.array([0.5, 0.0, 0.0, 0.0])
@@ -93,10 +116,12 @@ def test_bound_monitor_gain_and_flag_only_after_enough_energy():
     first_judged = [f[0] for f in flags].index(True)
     assert first_judged == 40
     assert not any(f[1] for f in flags[:first_judged]) and flags[-1][1]
-    ok = LpvController(_schedule(gamma=1.5), LpvControllerConfig(monitor_margin=1.5, monitor_min_energy=0.1))
+    ok = LpvController(
+        _schedule(gamma=1.5), LpvControllerConfig(monitor_margin=1.5, monitor_min_energy=0.1)
+    )
     for k in range(100):
         _, info = ok.step(k * dt, x, np.zeros(3), ue)
-    assert not info["bound_exceeded"]                # 2 < 1.5 * 1.5
+    assert not info["bound_exceeded"]  # 2 < 1.5 * 1.5
 
 
 def test_config_validation():

@@ -40,21 +40,49 @@ def packets(n: int, seed: int = 0, system: int = 1, component: int = 1) -> list[
         elif k == 3:
             m = tx.local_position_ned_encode(i, f(), f(), f(), f(), f(), f())
         elif k == 4:
-            m = tx.highres_imu_encode(i * 1000, *[f() for _ in range(12)], 0x1FF if not z else 0, i % 3)
+            m = tx.highres_imu_encode(
+                i * 1000, *[f() for _ in range(12)], 0x1FF if not z else 0, i % 3
+            )
         elif k == 5:
-            m = tx.odometry_encode(i * 1000, 1, 12, f(), f(), f(), f(4), f(), f(), f(), f(), f(), f(),
-                                   f(21, z), f(21, z), i % 7, 0, 50)
+            m = tx.odometry_encode(
+                i * 1000,
+                1,
+                12,
+                f(),
+                f(),
+                f(),
+                f(4),
+                f(),
+                f(),
+                f(),
+                f(),
+                f(),
+                f(),
+                f(21, z),
+                f(21, z),
+                i % 7,
+                0,
+                50,
+            )
         elif k == 6:
-            m = tx.servo_output_raw_encode(i, i % 2, *[int(x) for x in rng.integers(900, 2000, 8)],
-                                           *([0] * 8 if z else [int(x) for x in rng.integers(0, 2000, 8)]))
+            m = tx.servo_output_raw_encode(
+                i,
+                i % 2,
+                *[int(x) for x in rng.integers(900, 2000, 8)],
+                *([0] * 8 if z else [int(x) for x in rng.integers(0, 2000, 8)]),
+            )
         elif k == 7:
             m = tx.actuator_output_status_encode(i * 1000, 8, f(32, z))
         elif k == 8:
-            m = esc(i % 2 * 4, i * 1000, [int(x) for x in rng.integers(-9000, 9000, 4)], f(4), f(4, z))
+            m = esc(
+                i % 2 * 4, i * 1000, [int(x) for x in rng.integers(-9000, 9000, 4)], f(4), f(4, z)
+            )
         elif k == 9:
-            m = tx.sys_status_encode(1, 1, 1, 500, 12000, -1, 50, 0, 0, 0, 0, 0, 0)   # not a fast id
+            m = tx.sys_status_encode(
+                1, 1, 1, 500, 12000, -1, 50, 0, 0, 0, 0, 0, 0
+            )  # not a fast id
         else:
-            m = tx.statustext_encode(4, b"hello %d" % i)                                 # char[] field
+            m = tx.statustext_encode(4, b"hello %d" % i)  # char[] field
         out.append(m.pack(tx))
         tx.seq = (tx.seq + 1) % 256
     return out
@@ -64,7 +92,7 @@ def link(fast: bool = True) -> MavlinkLink:
     lk = MavlinkLink(LinkConfig(url="udpin:127.0.0.1:1"))
     lk.codec = px4.make_codec(None, 2, 1)
     if not fast:
-        lk._no_fast = lk.codec                      # pymavlink for everything
+        lk._no_fast = lk.codec  # pymavlink for everything
     return lk
 
 
@@ -74,7 +102,11 @@ def same_message(a, b) -> bool:
     for k, v in a.__dict__.items():
         w = b.__dict__[k]
         if k == "_header":
-            if type(v) is not type(w) or v.__dict__ != w.__dict__ or list(v.__dict__) != list(w.__dict__):
+            if (
+                type(v) is not type(w)
+                or v.__dict__ != w.__dict__
+                or list(v.__dict__) != list(w.__dict__)
+            ):
                 return False
         elif type(v) is not type(w) or v != w:
             return False
@@ -98,7 +130,10 @@ def assert_same_as_pymavlink(datagrams) -> MavlinkLink:
     for attr in ("total_packets_received", "total_bytes_received", "total_receive_errors"):
         assert getattr(fast.codec, attr) == getattr(slow.codec, attr), attr
     assert fast._counts == slow._counts and fast._last_seq == slow._last_seq
-    assert (fast.target_system, fast.last_heartbeat_t) == (slow.target_system, slow.last_heartbeat_t)
+    assert (fast.target_system, fast.last_heartbeat_t) == (
+        slow.target_system,
+        slow.last_heartbeat_t,
+    )
     return fast
 
 
@@ -115,10 +150,13 @@ def test_every_fast_type_round_trips_exactly():
     pk = packets(330)
     lk = assert_same_as_pymavlink(pk)
     assert lk._fast is not None
-    names = {MOD.mavlink_map[i].msgname if i in MOD.mavlink_map else "ESC_STATUS" for i in lk._fast.specs}
+    names = {
+        MOD.mavlink_map[i].msgname if i in MOD.mavlink_map else "ESC_STATUS"
+        for i in lk._fast.specs
+    }
     assert names == set(FAST_MESSAGES)
     # several packets per datagram, and a datagram with foreign ids in the middle
-    assert_same_as_pymavlink([b"".join(pk[i:i + 7]) for i in range(0, len(pk), 7)])
+    assert_same_as_pymavlink([b"".join(pk[i : i + 7]) for i in range(0, len(pk), 7)])
     # a second source system: its own sequence tracking
     mixed = [p for pair in zip(packets(60, 1, 1, 1), packets(60, 2, 7, 3)) for p in pair]
     lk = assert_same_as_pymavlink(mixed)
@@ -132,19 +170,19 @@ def test_corrupted_packets_are_pymavlinks_business():
     for i, p in enumerate(good):
         b = bytearray(p)
         kind = i % 8
-        if kind == 0:                       # bit flip anywhere (CRC, header, length, payload)
+        if kind == 0:  # bit flip anywhere (CRC, header, length, payload)
             b[rng.randrange(len(b))] ^= 1 << rng.randrange(8)
-        elif kind == 1:                     # cut
-            b = b[:rng.randrange(1, len(b))]
-        elif kind == 2:                     # junk before
+        elif kind == 1:  # cut
+            b = b[: rng.randrange(1, len(b))]
+        elif kind == 2:  # junk before
             b = bytes(rng.randrange(256) for _ in range(rng.randrange(1, 9))) + b
-        elif kind == 3:                     # two packets, the first damaged
+        elif kind == 3:  # two packets, the first damaged
             c = bytearray(good[(i + 1) % len(good)])
             c[-1] ^= 0xFF
             b = bytes(c) + b
-        elif kind == 4:                     # signed flag set (no signature block)
+        elif kind == 4:  # signed flag set (no signature block)
             b[2] |= 0x01
-        elif kind == 5:                     # MAVLink 1 marker
+        elif kind == 5:  # MAVLink 1 marker
             b[0] = 0xFE
         bad.append(bytes(b))
     lk = assert_same_as_pymavlink(bad)
@@ -152,7 +190,7 @@ def test_corrupted_packets_are_pymavlinks_business():
     assert st.bad_crc > 0 and st.bad_prefix > 0 and st.truncated > 0
     # a stream transport (TCP, serial): packets split across reads
     stream = b"".join(bad)
-    chunks = [stream[i:i + 53] for i in range(0, len(stream), 53)]
+    chunks = [stream[i : i + 53] for i in range(0, len(stream), 53)]
     fast, slow = link(True), link(False)
     fast._device = slow._device = "tcp:127.0.0.1:1"
     a, b = feed_all(fast, chunks), feed_all(slow, chunks)
@@ -174,7 +212,7 @@ def test_no_fast_path_with_signing_or_callbacks():
 def test_decoder_stops_at_the_first_packet_it_does_not_handle():
     pk = packets(22, seed=2)
     fd = FastDecoder(px4.make_codec(None, 2, 1), MOD)
-    data = b"".join(pk[:9]) + pk[9] + b"".join(pk[11:15])     # pk[9] is SYS_STATUS
+    data = b"".join(pk[:9]) + pk[9] + b"".join(pk[11:15])  # pk[9] is SYS_STATUS
     out, counts, seqs = [], {}, {}
     pos, got, lost, beats = fd.decode(data, out, counts, seqs)
     assert pos == sum(len(p) for p in pk[:9]) and got == 9 and lost == 0 and len(beats) == 1

@@ -33,6 +33,7 @@ async def _first(gen, timeout: float):
     async def take():
         async for x in gen:
             return x
+
     return await asyncio.wait_for(take(), timeout)
 
 
@@ -41,6 +42,7 @@ async def _until(gen, pred, timeout: float):
         async for x in gen:
             if pred(x):
                 return x
+
     return await asyncio.wait_for(take(), timeout)
 
 
@@ -50,11 +52,14 @@ def test_mavsdk_connects_reads_telemetry_arms_and_starts_offboard():
     from mavsdk.telemetry import FlightMode
 
     port = free_udp_port()
-    veh = SimVehicle(SimVehicleConfig(url=f"udpout:127.0.0.1:{port}", params={"COM_OBL_RC_ACT": 5}))
+    veh = SimVehicle(
+        SimVehicleConfig(url=f"udpout:127.0.0.1:{port}", params={"COM_OBL_RC_ACT": 5})
+    )
     veh.open()
     stop = threading.Event()
-    th = threading.Thread(target=veh.run_realtime, kwargs={"duration": 20.0, "stop": stop.is_set},
-                          daemon=True)
+    th = threading.Thread(
+        target=veh.run_realtime, kwargs={"duration": 20.0, "stop": stop.is_set}, daemon=True
+    )
     th.start()
     result: dict = {}
 
@@ -67,23 +72,30 @@ def test_mavsdk_connects_reads_telemetry_arms_and_starts_offboard():
             result["q"] = (q.w, q.x, q.y, q.z)
             result["mode0"] = await _first(drone.telemetry.flight_mode(), 5.0)
             # parameters and firmware version decoded by MAVSDK's own PX4 conventions
-            result["obl"] = await asyncio.wait_for(drone.param.get_param_int("COM_OBL_RC_ACT"), 5.0)
-            result["loss_t"] = await asyncio.wait_for(drone.param.get_param_float("COM_OF_LOSS_T"), 5.0)
+            result["obl"] = await asyncio.wait_for(
+                drone.param.get_param_int("COM_OBL_RC_ACT"), 5.0
+            )
+            result["loss_t"] = await asyncio.wait_for(
+                drone.param.get_param_float("COM_OF_LOSS_T"), 5.0
+            )
             v = await asyncio.wait_for(drone.info.get_version(), 5.0)
             result["version"] = (v.flight_sw_major, v.flight_sw_minor, v.flight_sw_patch)
             await asyncio.wait_for(drone.action.arm(), 5.0)
             result["armed"] = await _until(drone.telemetry.armed(), bool, 5.0)
             await drone.offboard.set_velocity_body(VelocityBodyYawspeed(0.0, 0.0, -1.0, 0.0))
-            await asyncio.sleep(0.3)              # let the setpoint stream establish
+            await asyncio.sleep(0.3)  # let the setpoint stream establish
             await asyncio.wait_for(drone.offboard.start(), 5.0)
-            result["mode1"] = await _until(drone.telemetry.flight_mode(),
-                                           lambda m: m == FlightMode.OFFBOARD, 5.0)
-            pv = await _until(drone.telemetry.position_velocity_ned(),
-                              lambda p: p.position.down_m < -0.5, 5.0)
+            result["mode1"] = await _until(
+                drone.telemetry.flight_mode(), lambda m: m == FlightMode.OFFBOARD, 5.0
+            )
+            pv = await _until(
+                drone.telemetry.position_velocity_ned(), lambda p: p.position.down_m < -0.5, 5.0
+            )
             result["climb"] = (pv.position.down_m, pv.velocity.down_m_s)
             await asyncio.wait_for(drone.offboard.stop(), 5.0)
-            result["mode2"] = await _until(drone.telemetry.flight_mode(),
-                                           lambda m: m != FlightMode.OFFBOARD, 5.0)
+            result["mode2"] = await _until(
+                drone.telemetry.flight_mode(), lambda m: m != FlightMode.OFFBOARD, 5.0
+            )
         finally:
             drone._stop_mavsdk_server()
 
@@ -93,14 +105,14 @@ def test_mavsdk_connects_reads_telemetry_arms_and_starts_offboard():
         stop.set()
         th.join(timeout=5.0)
         veh.close()
-    assert result["q"] == pytest.approx((1.0, 0.0, 0.0, 0.0), abs=1e-6)     # level on the ground
+    assert result["q"] == pytest.approx((1.0, 0.0, 0.0, 0.0), abs=1e-6)  # level on the ground
     assert result["mode0"] == FlightMode.HOLD
-    assert result["obl"] == 5 and result["loss_t"] == pytest.approx(1.0)     # INT32 byte-wise, REAL32
+    assert result["obl"] == 5 and result["loss_t"] == pytest.approx(1.0)  # INT32 byte-wise, REAL32
     assert result["version"] == (1, 16, 0)
     assert result["armed"] is True and veh.armed
     assert result["mode1"] == FlightMode.OFFBOARD
     down, vdown = result["climb"]
-    assert down < -0.5 and -1.3 < vdown < -0.5        # climbing at ~1 m/s as commanded
+    assert down < -0.5 and -1.3 < vdown < -0.5  # climbing at ~1 m/s as commanded
     assert result["mode2"] == FlightMode.HOLD and veh.mode == px4.HOLD
     modes = [m for _, m, _ in veh.mode_log]
     assert modes[:2] == ["OFFBOARD", "HOLD"]

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-pytest.importorskip("serial")            # pyserial (ROS: python3-serial)
+pytest.importorskip("serial")  # pyserial (ROS: python3-serial)
 
 from lpv_sysid.mavlink import px4  # noqa: E402
 from lpv_sysid.mavlink.link import DEFAULT_STREAMS, LinkConfig, MavlinkLink  # noqa: E402
@@ -34,14 +34,20 @@ class Peer:
         self.rx = px4.make_codec(None, 255, 0)
         self.received: list = []
 
-    def write(self, data: bytes) -> None:        # pymavlink's "file": codec.send() lands here
+    def write(self, data: bytes) -> None:  # pymavlink's "file": codec.send() lands here
         os.write(self.fd, bytes(data))
         self.written += len(data)
 
     def heartbeat(self) -> None:
-        self.tx.send(self.tx.heartbeat_encode(MAV_TYPE_QUADROTOR, MAV_AUTOPILOT_PX4,
-                                              px4.base_mode_flags(px4.POSCTL, False),
-                                              px4.POSCTL.custom_mode, 3))
+        self.tx.send(
+            self.tx.heartbeat_encode(
+                MAV_TYPE_QUADROTOR,
+                MAV_AUTOPILOT_PX4,
+                px4.base_mode_flags(px4.POSCTL, False),
+                px4.POSCTL.custom_mode,
+                3,
+            )
+        )
 
     def read(self, until, tries: int = 50) -> list:
         """Parse what the link wrote until ``until(received)`` or ``tries`` x 0.1 s."""
@@ -67,7 +73,7 @@ def drain(link: MavlinkLink, peer: Peer, now: float, tries: int = 50) -> list:
 @pytest.fixture
 def pty_pair():
     master, slave = os.openpty()
-    tty.setraw(slave)                # pyserial also sets raw mode when it opens the device
+    tty.setraw(slave)  # pyserial also sets raw mode when it opens the device
     yield master, os.ttyname(slave)
     for fd in (master, slave):
         try:
@@ -78,16 +84,17 @@ def pty_pair():
 
 def test_serial_link_over_pty_decodes_telemetry_survives_garbage_and_answers(pty_pair):
     master, path = pty_pair
-    link = MavlinkLink(LinkConfig(url=f"serial://{path}:921600", heartbeat_period=0.1,
-                                  link_timeout=0.5))
+    link = MavlinkLink(
+        LinkConfig(url=f"serial://{path}:921600", heartbeat_period=0.1, link_timeout=0.5)
+    )
     link.open(0.0)
-    assert type(link.conn).__name__ == "mavserial"      # the pyserial path, not a socket
+    assert type(link.conn).__name__ == "mavserial"  # the pyserial path, not a socket
     peer = Peer(master)
     dec = TelemetryDecoder()
     rng = np.random.default_rng(5)
     samples, msgs, sent = [], [], 0
     last = None
-    for k in range(25):                                   # 0.5 s of simulated time at 50 Hz
+    for k in range(25):  # 0.5 s of simulated time at 50 Hz
         t = 0.02 * k
         if k % 5 == 0:
             peer.heartbeat()
@@ -100,16 +107,21 @@ def test_serial_link_over_pty_decodes_telemetry_survives_garbage_and_answers(pty
         ms, us = 1000 + 20 * k, (1000 + 20 * k) * 1000
         peer.tx.send(peer.tx.attitude_quaternion_encode(ms, w, x, y, z, 0.1, -0.2, 0.3, [0.0] * 4))
         peer.tx.send(peer.tx.local_position_ned_encode(ms, 1.0, 2.0, -3.0, *v_ned))
-        peer.tx.send(peer.tx.highres_imu_encode(us, *acc, *gyr, 0.2, 0.0, 0.4, 1013.0, 0.0, 3.0,
-                                                25.0, 0x1FF, 0))
+        peer.tx.send(
+            peer.tx.highres_imu_encode(
+                us, *acc, *gyr, 0.2, 0.0, 0.4, 1013.0, 0.0, 3.0, 25.0, 0x1FF, 0
+            )
+        )
         peer.tx.send(px4.esc_status_class()(0, us, rpm, [16.0] * 4, [1.0] * 4))
         sent += 4
-        if k == 10:      # line noise without MAVLink magic bytes, then a cut-off packet's head
-            noise = bytes(b for b in rng.integers(0, 256, 64, dtype=np.uint8) if b not in (0xFD, 0xFE))
+        if k == 10:  # line noise without MAVLink magic bytes, then a cut-off packet's head
+            noise = bytes(
+                b for b in rng.integers(0, 256, 64, dtype=np.uint8) if b not in (0xFD, 0xFE)
+            )
             peer.write(noise)
         if k == 15:
             buf = peer.tx.heartbeat_encode(2, 12, 0, 0, 3).pack(peer.tx)
-            peer.write(buf[:7])                            # header only: swallows what follows
+            peer.write(buf[:7])  # header only: swallows what follows
         got = drain(link, peer, t)
         link.step(t)
         msgs += got
@@ -119,7 +131,7 @@ def test_serial_link_over_pty_decodes_telemetry_survives_garbage_and_answers(pty
             last = (rot, v_ned, acc, gyr, rpm)
     st = link.stats
     assert st.rx_bytes == peer.written
-    assert st.bad_prefix >= 1 and st.bad_data >= 2            # the noise and the broken packet
+    assert st.bad_prefix >= 1 and st.bad_data >= 2  # the noise and the broken packet
     # every packet except those the truncated head swallowed (at most the next step's 4 + HB)
     assert sent - 5 <= st.rx_messages <= sent and len(msgs) == st.rx_messages
     assert link.link_up(0.48) and link.target_system == 1 and link.target_component == 1
@@ -134,18 +146,25 @@ def test_serial_link_over_pty_decodes_telemetry_survives_garbage_and_answers(pty
     rot_s = [x for x in samples if isinstance(x, RotorSample)][-1]
     np.testing.assert_allclose(rot_s.omega, np.array(rpm) * 2 * math.pi / 60, rtol=1e-12)
     # what the link wrote back on the line: our HEARTBEAT and SET_MESSAGE_INTERVAL per stream
-    want = {int(getattr(MOD, f"MAVLINK_MSG_ID_{n}", px4.MAVLINK_MSG_ID_ESC_STATUS)): r
-            for n, r in DEFAULT_STREAMS}
+    want = {
+        int(getattr(MOD, f"MAVLINK_MSG_ID_{n}", px4.MAVLINK_MSG_ID_ESC_STATUS)): r
+        for n, r in DEFAULT_STREAMS
+    }
 
     def complete(rx):
         return sum(m.get_type() == "COMMAND_LONG" for m in rx) >= len(want)
+
     rx = peer.read(complete)
     hb = [m for m in rx if m.get_type() == "HEARTBEAT"]
-    assert hb and all((m.get_srcSystem(), m.get_srcComponent(), m.type, m.autopilot)
-                      == (1, 191, 18, 8) for m in hb)
+    assert hb and all(
+        (m.get_srcSystem(), m.get_srcComponent(), m.type, m.autopilot) == (1, 191, 18, 8)
+        for m in hb
+    )
     cmds = [m for m in rx if m.get_type() == "COMMAND_LONG"]
     assert all(m.command == 511 and (m.target_system, m.target_component) == (1, 1) for m in cmds)
-    assert {int(m.param1): m.param2 for m in cmds} == {mid: round(1e6 / r) for mid, r in want.items()}
+    assert {int(m.param1): m.param2 for m in cmds} == {
+        mid: round(1e6 / r) for mid, r in want.items()
+    }
     link.close()
 
 
@@ -163,7 +182,7 @@ def test_serial_link_loss_reopens_device_and_reports_dead_peer(pty_pair):
     link.step(0.7)
     kinds = [e.kind for e in link.events()]
     assert kinds == ["link_lost", "reconnect"] and link.stats.reconnects == 1 and link.is_open
-    peer.heartbeat()                                        # it talks again on the reopened port
+    peer.heartbeat()  # it talks again on the reopened port
     drain(link, peer, 0.8)
     link.step(0.8)
     assert link.link_up(0.8) and [e.kind for e in link.events()] == ["link_up"]
@@ -176,7 +195,7 @@ def test_serial_link_loss_reopens_device_and_reports_dead_peer(pty_pair):
             break
     ev = link.events()
     assert not link.is_open and ev and ev[0].kind == "io_error" and link.stats.io_errors == 1
-    link.step(2.0)              # the pty is gone: the reopen attempt is reported, not raised
+    link.step(2.0)  # the pty is gone: the reopen attempt is reported, not raised
     ev = link.events()
     assert [e.kind for e in ev] == ["link_lost", "io_error"] and path in ev[1].detail
     assert not link.is_open and link.stats.reconnects == 1

@@ -28,12 +28,18 @@ def cdr_round_trip(rb, msg, typename):
 
 
 def random_state():
-    return (RNG.normal(size=3) * 10, np.array([0.3, -0.2, 2.0]) * RNG.uniform(-1, 1, 3),
-            RNG.normal(size=3) * 3, RNG.normal(size=3))
+    return (
+        RNG.normal(size=3) * 10,
+        np.array([0.3, -0.2, 2.0]) * RNG.uniform(-1, 1, 3),
+        RNG.normal(size=3) * 3,
+        RNG.normal(size=3),
+    )
 
 
 # ------------------------------------------------------------------- stamps
-@pytest.mark.parametrize("ns", [0, 1, 999_999_999, 1_000_000_000, STAMP % 2**62 // 1000, -1, -1_500_000_000])
+@pytest.mark.parametrize(
+    "ns", [0, 1, 999_999_999, 1_000_000_000, STAMP % 2**62 // 1000, -1, -1_500_000_000]
+)
 def test_stamp_round_trip(rb, ns):
     t = m.time_msg(rb, ns)
     assert 0 <= t.nanosec < 1_000_000_000
@@ -70,14 +76,15 @@ def test_state_round_trip(fac):
 
 def test_state_wire_content_is_enu_flu(rb):
     # flying north at 2 m/s level, heading north, climbing 1 m/s, yawing right 0.1 rad/s
-    msg = m.odometry_from_state(rb, 5, [10.0, 20.0, -30.0], [0.0, 0.0, 0.0], [2.0, 0.0, -1.0],
-                                [0.0, 0.0, 0.1])
+    msg = m.odometry_from_state(
+        rb, 5, [10.0, 20.0, -30.0], [0.0, 0.0, 0.0], [2.0, 0.0, -1.0], [0.0, 0.0, 0.1]
+    )
     assert msg.header.frame_id == "odom" and msg.child_frame_id == "base_link"
     p = msg.pose.pose.position
-    assert (p.x, p.y, p.z) == (20.0, 10.0, 30.0)          # east, north, up
+    assert (p.x, p.y, p.z) == (20.0, 10.0, 30.0)  # east, north, up
     o = msg.pose.pose.orientation
     yaw = Rotation.from_quat([o.x, o.y, o.z, o.w]).as_euler("ZYX")[0]
-    assert yaw == pytest.approx(np.pi / 2, abs=1e-14)       # facing north = ENU yaw 90 deg
+    assert yaw == pytest.approx(np.pi / 2, abs=1e-14)  # facing north = ENU yaw 90 deg
     lin, ang = msg.twist.twist.linear, msg.twist.twist.angular
     assert (lin.x, lin.y, lin.z) == (2.0, -0.0, 1.0)
     assert ang.z == -0.1
@@ -93,14 +100,17 @@ def test_state_cdr_round_trip(rb):
 
 
 def test_state_wrong_frame_and_nan(rb):
-    msg = m.odometry_from_state(rb, 1, np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3),
-                                frame_id="map")
+    msg = m.odometry_from_state(
+        rb, 1, np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), frame_id="map"
+    )
     with pytest.raises(m.MessageError, match=r"state.header: expected frame_id 'odom', got 'map'"):
         m.state_from_odometry(msg)
     assert m.state_from_odometry(msg, frame_id=None).stamp_ns == 1
     msg = m.odometry_from_state(rb, 1, np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3))
     msg.twist.twist.linear.y = float("nan")
-    with pytest.raises(m.MessageError, match=r"state.twist.twist.linear: non-finite value\(s\) at index \[1\]"):
+    with pytest.raises(
+        m.MessageError, match=r"state.twist.twist.linear: non-finite value\(s\) at index \[1\]"
+    ):
         m.state_from_odometry(msg)
     msg = m.odometry_from_state(rb, 1, np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3))
     msg.pose.pose.orientation.w = 0.0
@@ -192,24 +202,41 @@ def test_reference_round_trip(fac):
 def test_reference_wire_content(rb):
     msg = m.twist_reference_msg(rb, 3, [4.0, 1.0, -0.5], 0.2)
     lin, ang = msg.twist.linear, msg.twist.angular
-    assert (lin.x, lin.y, lin.z) == (4.0, -1.0, 0.5)   # right -> -left, down -> -up
+    assert (lin.x, lin.y, lin.z) == (4.0, -1.0, 0.5)  # right -> -left, down -> -up
     assert (ang.x, ang.y, ang.z) == (0.0, -0.0, -0.2)
     assert msg.header.frame_id == "base_link"
     back = cdr_round_trip(rb, msg, "geometry_msgs/msg/TwistStamped")
     assert m.reference_from_twist(back)[2] == 0.2
     msg.header.frame_id = "odom"
-    with pytest.raises(m.MessageError, match="velocity_reference.header: expected frame_id 'base_link'"):
+    with pytest.raises(
+        m.MessageError, match="velocity_reference.header: expected frame_id 'base_link'"
+    ):
         m.reference_from_twist(msg)
 
 
 # ----------------------------------------------------------------------- status
 def test_status_round_trip(fac):
-    st = [m.diagnostic_status(fac, "WARN", "controller", "clamped",
-                              {"phase": "lpv", "margin": 0.1 + 0.2, "n": 3, "ok": True}),
-          m.diagnostic_status(fac, 0, "bridge", "link ok")]
+    st = [
+        m.diagnostic_status(
+            fac,
+            "WARN",
+            "controller",
+            "clamped",
+            {"phase": "lpv", "margin": 0.1 + 0.2, "n": 3, "ok": True},
+        ),
+        m.diagnostic_status(fac, 0, "bridge", "link ok"),
+    ]
     t, back = m.status_from_diagnostic_array(m.diagnostic_array(fac, STAMP, st))
-    assert [(s.level, s.name, s.message) for s in back] == [(1, "controller", "clamped"), (0, "bridge", "link ok")]
-    assert back[0].values == {"phase": "lpv", "margin": "0.30000000000000004", "n": "3", "ok": "true"}
+    assert [(s.level, s.name, s.message) for s in back] == [
+        (1, "controller", "clamped"),
+        (0, "bridge", "link ok"),
+    ]
+    assert back[0].values == {
+        "phase": "lpv",
+        "margin": "0.30000000000000004",
+        "n": "3",
+        "ok": "true",
+    }
     assert float(back[0].values["margin"]) == 0.1 + 0.2
 
 
@@ -252,7 +279,9 @@ def test_states_from_odometry_matches_single(fac):
         one = m.state_from_odometry(msgs[k])
         assert arr.t[k] == one.t
         for name, val in zip(("pos_ned", "euler", "v_body", "omega"), s):
-            np.testing.assert_allclose(getattr(arr, name)[k], getattr(one, name), rtol=0, atol=1e-15)
+            np.testing.assert_allclose(
+                getattr(arr, name)[k], getattr(one, name), rtol=0, atol=1e-15
+            )
             np.testing.assert_allclose(getattr(arr, name)[k], val, atol=1e-12)
 
 
@@ -263,7 +292,10 @@ def test_states_from_odometry_errors_name_index(rb):
         m.states_from_odometry(msgs)
     msgs[3].twist.twist.angular.z = 0.0
     msgs[2].child_frame_id = "imu_link"
-    with pytest.raises(m.MessageError, match=r"state\[2\].child_frame_id: expected frame_id 'base_link', got 'imu_link'"):
+    with pytest.raises(
+        m.MessageError,
+        match=r"state\[2\].child_frame_id: expected frame_id 'base_link', got 'imu_link'",
+    ):
         m.states_from_odometry(msgs)
     assert m.states_from_odometry(msgs, child_frame_id=None).euler.shape == (5, 3)
     assert m.states_from_odometry([]).pos_ned.shape == (0, 3)
@@ -276,5 +308,7 @@ def test_channels_from_joint_states(rb):
     np.testing.assert_array_equal(out, vals)
     np.testing.assert_array_equal(t, np.arange(6) / 1e9)
     msgs[4] = m.joint_state(rb, 4, ["ut", "ua", "ue"], position=[0.0, 0.0, 0.0])
-    with pytest.raises(m.MessageError, match=r"message 4: joint_state.name: missing channel\(s\) \['ur'\]"):
+    with pytest.raises(
+        m.MessageError, match=r"message 4: joint_state.name: missing channel\(s\) \['ur'\]"
+    ):
         m.channels_from_joint_states(msgs, m.INPUT_NAMES)

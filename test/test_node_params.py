@@ -30,13 +30,18 @@ from lpv_sysid.nodes.excitation_node import ExcitationSettings
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG = os.path.join(ROOT, "config")
 #: (params file, node name, {parameter: (default, ParamSpec)}, settings class or None)
-NODES = [("lpv_controller.yaml", "lpv_controller", P.specs(ControllerSettings),
-          ControllerSettings),
-         ("excitation_node.yaml", "excitation", P.specs(ExcitationSettings), ExcitationSettings),
-         ("data_logger.yaml", "data_logger", P.specs(data_logger_node.DataLoggerSettings),
-          data_logger_node.DataLoggerSettings),
-         ("mavlink_bridge_node.yaml", "mavlink_bridge", mavlink_bridge_node.SPECS, None),
-         ("sim_vehicle.yaml", "sim_vehicle", sim_vehicle_node.SPECS, None)]
+NODES = [
+    ("lpv_controller.yaml", "lpv_controller", P.specs(ControllerSettings), ControllerSettings),
+    ("excitation_node.yaml", "excitation", P.specs(ExcitationSettings), ExcitationSettings),
+    (
+        "data_logger.yaml",
+        "data_logger",
+        P.specs(data_logger_node.DataLoggerSettings),
+        data_logger_node.DataLoggerSettings,
+    ),
+    ("mavlink_bridge_node.yaml", "mavlink_bridge", mavlink_bridge_node.SPECS, None),
+    ("sim_vehicle.yaml", "sim_vehicle", sim_vehicle_node.SPECS, None),
+]
 IDS = [n[1] for n in NODES]
 
 
@@ -52,8 +57,11 @@ def ros_type(v):
     if isinstance(v, str):
         return P.STRING
     for kind, t in ((P.DOUBLE_ARRAY, float), (P.STRING_ARRAY, str), (P.INTEGER_ARRAY, int)):
-        if isinstance(v, list) and v and all(isinstance(x, t) and not isinstance(x, bool)
-                                             for x in v):
+        if (
+            isinstance(v, list)
+            and v
+            and all(isinstance(x, t) and not isinstance(x, bool) for x in v)
+        ):
             return kind
     return f"unsupported {type(v).__name__}"
 
@@ -72,7 +80,7 @@ def flatten(d, prefix=""):
 def yaml_values(yaml_file, node):
     with open(os.path.join(CONFIG, yaml_file)) as fh:
         doc = yaml.safe_load(fh)
-    (key, body), = doc.items()
+    ((key, body),) = doc.items()
     assert key == f"/**/{node}"
     return flatten(body["ros__parameters"])
 
@@ -80,18 +88,18 @@ def yaml_values(yaml_file, node):
 @pytest.mark.parametrize("yaml_file, node, declared, cls", NODES, ids=IDS)
 def test_yaml_and_declarations_agree(yaml_file, node, declared, cls):
     values = yaml_values(yaml_file, node)
-    assert sorted(set(values) - set(declared)) == []              # every YAML key declared
+    assert sorted(set(values) - set(declared)) == []  # every YAML key declared
     # every declaration in the YAML, except lists whose default is empty (a params file
     # cannot write one: rcl reads [] as no value; they are documented there as a comment)
     optional = {n for n, (d, _) in declared.items() if d == ()}
     assert sorted(set(declared) - set(values) - optional) == []
     for name, v in values.items():
-        assert ros_type(v) == declared[name][1].kind, name           # same types
+        assert ros_type(v) == declared[name][1].kind, name  # same types
     text = open(os.path.join(CONFIG, yaml_file)).read()
     for name in optional:
         assert f"# {name.rsplit('.', 1)[-1]}:" in text
     if cls is not None:
-        cls.from_dict(values)                                       # and valid together
+        cls.from_dict(values)  # and valid together
 
 
 def test_bridge_yaml_reaches_bridge_config_and_defaults_round_trip():
@@ -99,41 +107,58 @@ def test_bridge_yaml_reaches_bridge_config_and_defaults_round_trip():
     BridgeConfig()), and the node's YAML reaches every section, NaN / "" meaning unset."""
     from lpv_sysid.mavlink.bridge import BridgeConfig
     from lpv_sysid.mavlink.mavros import MavrosConfig
+
     specs = mavlink_bridge_node.SPECS
     defaults = {n: d for n, (d, _) in specs.items()}
     _, bridge, mavros = mavlink_bridge_node._split(defaults)
     assert BridgeConfig.from_dict(bridge) == BridgeConfig()
     assert MavrosConfig.from_dict(mavros) == MavrosConfig()
     _, bridge, mavros = mavlink_bridge_node._split(
-        {**defaults, **yaml_values("mavlink_bridge_node.yaml", "mavlink_bridge")})
+        {**defaults, **yaml_values("mavlink_bridge_node.yaml", "mavlink_bridge")}
+    )
     cfg = BridgeConfig.from_dict(bridge)
     assert cfg.offboard.handback_chain == ("HOLD", "LAND") and cfg.offboard.handback_mode is None
     assert cfg.offboard.setpoint_rate_hz == 50.0 and cfg.offboard.input_timeout == 0.5
-    assert dict(cfg.link.streams) == {"LOCAL_POSITION_NED": 50.0, "ATTITUDE_QUATERNION": 100.0,
-                                      "HIGHRES_IMU": 100.0, "ESC_STATUS": 50.0}
+    assert dict(cfg.link.streams) == {
+        "LOCAL_POSITION_NED": 50.0,
+        "ATTITUDE_QUATERNION": 100.0,
+        "HIGHRES_IMU": 100.0,
+        "ESC_STATUS": 50.0,
+    }
     assert cfg.link.signing_key_file is None and cfg.rotor_estimate.a_omega is None
     assert cfg.rotor_estimate.motor_outputs == (1, 2, 3, 4)
     assert cfg.envelope.floor == 5.0 and cfg.envelope.max_tilt_deg == 50.0
-    assert MavrosConfig.from_dict(mavros).setpoint_rate_hz == 50.0     # shared with offboard.*
+    assert MavrosConfig.from_dict(mavros).setpoint_rate_hz == 50.0  # shared with offboard.*
     # a value set through the generated parameter is what BridgeConfig gets
-    _, bridge, _ = mavlink_bridge_node._split({**defaults, "rotor_estimate.a_omega": 15.0,
-                                                "offboard.handback_chain": ["LAND"],
-                                                "envelope.radius": 50.0})
+    _, bridge, _ = mavlink_bridge_node._split(
+        {
+            **defaults,
+            "rotor_estimate.a_omega": 15.0,
+            "offboard.handback_chain": ["LAND"],
+            "envelope.radius": 50.0,
+        }
+    )
     cfg = BridgeConfig.from_dict(bridge)
-    assert (cfg.rotor_estimate.a_omega, cfg.offboard.handback_chain, cfg.envelope.radius) == \
-        (15.0, ("LAND",), 50.0)
+    assert (cfg.rotor_estimate.a_omega, cfg.offboard.handback_chain, cfg.envelope.radius) == (
+        15.0,
+        ("LAND",),
+        50.0,
+    )
     with pytest.raises(ConfigError, match="handback_chain"):
-        BridgeConfig.from_dict(mavlink_bridge_node._split(
-            {**defaults, "offboard.handback_chain": ["ACRO"]})[1])
+        BridgeConfig.from_dict(
+            mavlink_bridge_node._split({**defaults, "offboard.handback_chain": ["ACRO"]})[1]
+        )
 
 
 def test_sim_vehicle_sensor_parameters_are_sensor_config():
     from lpv_sysid.sim.vehicle import SensorConfig
+
     values = yaml_values("sim_vehicle.yaml", "sim_vehicle")
     sensors = {k: v for k, v in values.items() if k in SensorConfig.__dataclass_fields__}
-    assert SensorConfig.from_dict(sensors) == SensorConfig()     # the YAML restates its defaults
-    assert set(sim_vehicle_node.SPECS) == set(P.specs(sim_vehicle_node.SimVehicleSettings)) | \
-        set(SensorConfig.__dataclass_fields__)
+    assert SensorConfig.from_dict(sensors) == SensorConfig()  # the YAML restates its defaults
+    assert set(sim_vehicle_node.SPECS) == set(P.specs(sim_vehicle_node.SimVehicleSettings)) | set(
+        SensorConfig.__dataclass_fields__
+    )
 
 
 def test_config_specs_rules():
@@ -154,11 +179,16 @@ def test_config_specs_rules():
     d = {"name": "n", "gain": "g", "ids": "i", "inner.x": "x", "inner.table": "t"}
     specs = P.config_specs(Outer, d)
     assert {k: (v[0], v[1].kind) for k, v in specs.items() if k != "gain"} == {
-        "name": ("", P.STRING), "ids": ((1, 2), P.INTEGER_ARRAY), "inner.x": (1.0, P.DOUBLE),
-        "inner.table.A": (1.0, P.DOUBLE), "inner.table.B": (2.0, P.DOUBLE)}
+        "name": ("", P.STRING),
+        "ids": ((1, 2), P.INTEGER_ARRAY),
+        "inner.x": (1.0, P.DOUBLE),
+        "inner.table.A": (1.0, P.DOUBLE),
+        "inner.table.B": (2.0, P.DOUBLE),
+    }
     assert math.isnan(specs["gain"][0]) and specs["gain"][1].optional
-    assert P.nest({"name": "", "gain": math.nan, "inner.table.A": 3.0}, specs) == \
-        {"inner": {"table": {"A": 3.0}}}
+    assert P.nest({"name": "", "gain": math.nan, "inner.table.A": 3.0}, specs) == {
+        "inner": {"table": {"A": 3.0}}
+    }
     with pytest.raises(TypeError, match="'inner.x' has no description"):
         P.config_specs(Outer, {k: v for k, v in d.items() if k != "inner.x"})
     with pytest.raises(TypeError, match=r"descriptions of no generated parameter: \['extra'\]"):
@@ -167,6 +197,7 @@ def test_config_specs_rules():
     @dataclass(frozen=True)
     class Bad:
         m: dict = field(default_factory=dict)
+
     with pytest.raises(TypeError, match="no ROS parameter form"):
         P.config_specs(Bad, {"m": "m"})
 
@@ -183,19 +214,23 @@ def _free_udp_port():
 def node_inputs(tmp_path_factory):
     from lpv_sysid.signals.store import save_npz
     from lpv_test_gains import write_gains
+
     d = tmp_path_factory.mktemp("inputs")
     t = np.arange(0.0, 4.0, 0.02)
     save_npz(str(d / "s.npz"), t, np.zeros((t.size, 4)), ["u_ref", "v_ref", "w_ref", "r_ref"])
-    return {"lpv_controller": {"gains_file": write_gains(d / "gains.yaml")},
-            "excitation": {"signals_file": str(d / "s.npz")},
-            "data_logger": {"out_dir": str(d / "log")},
-            "mavlink_bridge": {"link.url": f"udpin:127.0.0.1:{_free_udp_port()}"},
-            "sim_vehicle": {}}
+    return {
+        "lpv_controller": {"gains_file": write_gains(d / "gains.yaml")},
+        "excitation": {"signals_file": str(d / "s.npz")},
+        "data_logger": {"out_dir": str(d / "log")},
+        "mavlink_bridge": {"link.url": f"udpin:127.0.0.1:{_free_udp_port()}"},
+        "sim_vehicle": {},
+    }
 
 
 @pytest.mark.parametrize("yaml_file, node, declared, cls", NODES, ids=IDS)
-def test_every_parameter_of_a_running_node_has_a_value(yaml_file, node, declared, cls,
-                                                       node_inputs):
+def test_every_parameter_of_a_running_node_has_a_value(
+    yaml_file, node, declared, cls, node_inputs
+):
     """Started from its YAML, a node has no uninitialized parameter: each reads back with
     its declared type (real rclpy answers no value at all to a get_parameters request
     naming one uninitialized parameter, so ``ros2 param dump`` printed nothing)."""
@@ -203,12 +238,23 @@ def test_every_parameter_of_a_running_node_has_a_value(yaml_file, node, declared
 
     import rclpy
     from rclpy.parameter import Parameter
-    exe = {"mavlink_bridge": "mavlink_bridge_node", "lpv_controller": "lpv_controller_node",
-           "data_logger": "data_logger_node", "sim_vehicle": "sim_vehicle_node",
-           "excitation": "excitation_node"}[node]
+
+    exe = {
+        "mavlink_bridge": "mavlink_bridge_node",
+        "lpv_controller": "lpv_controller_node",
+        "data_logger": "data_logger_node",
+        "sim_vehicle": "sim_vehicle_node",
+        "excitation": "excitation_node",
+    }[node]
     mod = importlib.import_module(f"lpv_sysid.nodes.{exe}")
-    cls_node = next(v for k, v in vars(mod).items() if k.endswith("Node") and
-                    isinstance(v, type) and issubclass(v, C.ShellNode) and v is not C.ShellNode)
+    cls_node = next(
+        v
+        for k, v in vars(mod).items()
+        if k.endswith("Node")
+        and isinstance(v, type)
+        and issubclass(v, C.ShellNode)
+        and v is not C.ShellNode
+    )
     args = ["n", "--ros-args", "--params-file", os.path.join(CONFIG, yaml_file)]
     for k, v in node_inputs[node].items():
         args += ["-p", f"{k}:={v}"]
@@ -217,7 +263,7 @@ def test_every_parameter_of_a_running_node_has_a_value(yaml_file, node, declared
         n = cls_node()
         try:
             for name, (_, spec) in declared.items():
-                p = n.get_parameter(name)                       # never uninitialized
+                p = n.get_parameter(name)  # never uninitialized
                 assert p.type_ == Parameter.Type[spec.kind], (name, p.type_)
         finally:
             n.destroy_node()
@@ -233,35 +279,60 @@ def test_rclpy_declarations_are_generated_from_the_settings(yaml_file, node, dec
         got_default, d = table[name]
         assert d.type == C.Parameter.Type[spec.kind].value and d.description == spec.description
         if spec.kind == P.DOUBLE and spec.lo is not None:
-            assert (d.floating_point_range[0].from_value, d.floating_point_range[0].to_value) == \
-                (spec.lo, spec.hi)
+            assert (d.floating_point_range[0].from_value, d.floating_point_range[0].to_value) == (
+                spec.lo,
+                spec.hi,
+            )
         elif spec.kind == P.DOUBLE:
-            assert list(d.floating_point_range) == []       # checked by the config class
+            assert list(d.floating_point_range) == []  # checked by the config class
             assert spec.checked_by and "checked at start by" in d.additional_constraints
         if spec.kind == P.DOUBLE:
             assert got_default == default or math.isnan(got_default) and math.isnan(default)
         assert d.additional_constraints == spec.constraints()
-        assert d.description                                # every parameter is described
+        assert d.description  # every parameter is described
 
 
-@pytest.mark.parametrize("module", ["excitation_node", "lpv_controller_node", "data_logger_node",
-                                    "mavlink_bridge_node", "sim_vehicle_node"])
+@pytest.mark.parametrize(
+    "module",
+    [
+        "excitation_node",
+        "lpv_controller_node",
+        "data_logger_node",
+        "mavlink_bridge_node",
+        "sim_vehicle_node",
+    ],
+)
 def test_each_node_declares_exactly_its_generated_table(module):
     import importlib
+
     mod = importlib.import_module(f"lpv_sysid.nodes.{module}")
-    declared = dict(NODES[[n[1] for n in NODES].index(
-        {"excitation_node": "excitation", "lpv_controller_node": "lpv_controller",
-         "data_logger_node": "data_logger", "mavlink_bridge_node": "mavlink_bridge",
-         "sim_vehicle_node": "sim_vehicle"}[module])][2])
+    declared = dict(
+        NODES[
+            [n[1] for n in NODES].index(
+                {
+                    "excitation_node": "excitation",
+                    "lpv_controller_node": "lpv_controller",
+                    "data_logger_node": "data_logger",
+                    "mavlink_bridge_node": "mavlink_bridge",
+                    "sim_vehicle_node": "sim_vehicle",
+                }[module]
+            )
+        ][2]
+    )
     assert [n for n, _, _ in mod.PARAMETERS] == list(declared)
 
 
 def test_the_node_tables_are_the_generated_ones():
     from lpv_sysid.nodes import lpv_controller_node
-    got = [(n, d.floating_point_range[0].to_value if d.floating_point_range else None)
-           for n, _, d in lpv_controller_node.PARAMETERS]
-    want = [(n, s.hi if s.kind == P.DOUBLE else None)
-            for n, (_, s) in P.specs(ControllerSettings).items()]
+
+    got = [
+        (n, d.floating_point_range[0].to_value if d.floating_point_range else None)
+        for n, _, d in lpv_controller_node.PARAMETERS
+    ]
+    want = [
+        (n, s.hi if s.kind == P.DOUBLE else None)
+        for n, (_, s) in P.specs(ControllerSettings).items()
+    ]
     assert got == want
     names = {n for n, _ in got}
     assert {"monitor_window_s", "feedforward", "ff_filter_tau", "ff_jerk_tau"} <= names
@@ -281,8 +352,13 @@ def test_array_constraints_are_described_and_enforced():
 def test_coerce_rules():
     spec = P.ParamSpec(P.DOUBLE, "x", 0.0, 1.0, lo_open=True)
     assert P.coerce("x", 1, spec, "w") == 1.0 and isinstance(P.coerce("x", 1, spec, "w"), float)
-    for bad, msg in ((0.0, "must be > 0"), (1.5, "must be <= 1"), (math.nan, "must be finite"),
-                     (True, "must be a number"), ("0.5", "must be a number")):
+    for bad, msg in (
+        (0.0, "must be > 0"),
+        (1.5, "must be <= 1"),
+        (math.nan, "must be finite"),
+        (True, "must be a number"),
+        ("0.5", "must be a number"),
+    ):
         with pytest.raises(ConfigError, match=msg):
             P.coerce("x", bad, spec, "w")
     arr = P.ParamSpec(P.DOUBLE_ARRAY, "a", -1.0, 1.0)
@@ -293,8 +369,10 @@ def test_coerce_rules():
 
 def test_yaml_parameters_reads_the_node_section(tmp_path):
     f = tmp_path / "p.yaml"
-    f.write_text("/**/other:\n  ros__parameters: {a: 1}\n/**/lpv_controller:\n"
-                 "  ros__parameters: {rate_hz: 100.0}\n")
+    f.write_text(
+        "/**/other:\n  ros__parameters: {a: 1}\n/**/lpv_controller:\n"
+        "  ros__parameters: {rate_hz: 100.0}\n"
+    )
     assert P.yaml_parameters(str(f), "lpv_controller") == {"rate_hz": 100.0}
     with pytest.raises(ConfigError, match="no parameters for node 'excitation'"):
         P.yaml_parameters(str(f), "excitation")
@@ -307,18 +385,25 @@ def test_launch_files_leave_the_bridge_its_whole_hand_back_chain():
     import ast
 
     from lpv_sysid.mavlink.bridge import BridgeConfig
+
     defaults = {n: d for n, (d, _) in mavlink_bridge_node.SPECS.items()}
     _, bridge, _ = mavlink_bridge_node._split(
-        {**defaults, **yaml_values("mavlink_bridge_node.yaml", "mavlink_bridge")})
+        {**defaults, **yaml_values("mavlink_bridge_node.yaml", "mavlink_bridge")}
+    )
     off = BridgeConfig.from_dict(bridge).offboard
     # HOLD then LAND, each: 4 DO_SET_MODE attempts of 0.5 s + 2 s for the HEARTBEAT; + 1 s
     assert mavlink_bridge_node.handback_bound_s(off) == 2 * (4 * 0.5 + 2.0) + 1.0
-    assert mavlink_bridge_node.handback_bound_s(off) + C.TEARDOWN_MARGIN_S <= \
-        C.LAUNCH_SIGTERM_TIMEOUT_S
+    assert (
+        mavlink_bridge_node.handback_bound_s(off) + C.TEARDOWN_MARGIN_S
+        <= C.LAUNCH_SIGTERM_TIMEOUT_S
+    )
     for fname in sorted(os.listdir(os.path.join(ROOT, "launch"))):
         tree = ast.parse(open(os.path.join(ROOT, "launch", fname)).read())
-        calls = [c for c in ast.walk(tree)
-                 if isinstance(c, ast.Call) and getattr(c.func, "id", "") == "Node"]
+        calls = [
+            c
+            for c in ast.walk(tree)
+            if isinstance(c, ast.Call) and getattr(c.func, "id", "") == "Node"
+        ]
         assert calls, fname
         for c in calls:
             kw = {k.arg: k.value for k in c.keywords}

@@ -36,8 +36,13 @@ def fresh():
 
 
 def test_every_node_shell_derives_from_shellnode():
-    for cls in (ExcitationNode, LpvControllerNode, MavlinkBridgeNode, DataLoggerNode,
-                SimVehicleNode):
+    for cls in (
+        ExcitationNode,
+        LpvControllerNode,
+        MavlinkBridgeNode,
+        DataLoggerNode,
+        SimVehicleNode,
+    ):
         assert issubclass(cls, C.ShellNode)
 
 
@@ -64,10 +69,15 @@ def test_parse_input_passes_good_and_drops_bad_messages(caplog):
     assert t == pytest.approx(1.5) and np.allclose(u, [0.5, 0.01, -0.02, 0.1])
     bad = M.joint_state(f, 1_500_000_000, ["ut", "ua", "ue"], position=[0.5, 0.0, 0.0])
     with caplog.at_level(logging.WARNING):
-        assert node.parse_input("actuator_command", M.actuator_command_from_joint_state,
-                                bad) is None
-    assert any(r.levelno == logging.WARNING and r.getMessage().startswith(
-        "actuator_command rejected: ") and "ur" in r.getMessage() for r in caplog.records)
+        assert (
+            node.parse_input("actuator_command", M.actuator_command_from_joint_state, bad) is None
+        )
+    assert any(
+        r.levelno == logging.WARNING
+        and r.getMessage().startswith("actuator_command rejected: ")
+        and "ur" in r.getMessage()
+        for r in caplog.records
+    )
     node.destroy_node()
 
 
@@ -81,22 +91,25 @@ def test_rejected_warnings_are_throttled_per_topic(caplog):
 
     def feed():
         for _ in range(3):
-            assert node.parse_input("actuator_command", M.actuator_command_from_joint_state,
-                                    bad_cmd) is None
+            assert (
+                node.parse_input("actuator_command", M.actuator_command_from_joint_state, bad_cmd)
+                is None
+            )
         assert node.parse_input("velocity_reference", M.reference_from_twist, bad_ref) is None
 
     def warned():
-        return [r.getMessage().split(":")[0] for r in caplog.records
-                if r.levelno == logging.WARNING]
+        return [
+            r.getMessage().split(":")[0] for r in caplog.records if r.levelno == logging.WARNING
+        ]
 
     with caplog.at_level(logging.WARNING):
-        feed()                                     # first of each topic is logged
+        feed()  # first of each topic is logged
         assert warned() == ["actuator_command rejected", "velocity_reference rejected"]
         ctx = rclpy.utilities.get_default_context()
         ctx._standin_now_ns += int(0.9e9)
-        feed()                                     # within the period: silent
+        feed()  # within the period: silent
         assert len(warned()) == 2
         ctx._standin_now_ns += int(0.1e9)
-        feed()                                     # period over: one more each
+        feed()  # period over: one more each
         assert warned() == ["actuator_command rejected", "velocity_reference rejected"] * 2
     node.destroy_node()

@@ -43,11 +43,13 @@ def gains(tmp_path_factory):
 def signals2(tmp_path_factory):
     """Phase-2 table: v_d = 0.8 sin(2 pi 0.2 t) on u_d, four sines on u_e (amplitude 0.5)."""
     t = np.arange(0.0, 20.0, 0.02)
-    cols = [0.8 * np.sin(2 * np.pi * 0.2 * t), 0 * t, 0 * t] + \
-        [0.5 * np.sin(2 * np.pi * f * t) for f in (1.3, 1.7, 2.3, 2.9)]
+    cols = [0.8 * np.sin(2 * np.pi * 0.2 * t), 0 * t, 0 * t] + [
+        0.5 * np.sin(2 * np.pi * f * t) for f in (1.3, 1.7, 2.3, 2.9)
+    ]
     path = str(tmp_path_factory.mktemp("s") / "sig2.npz")
-    save_npz(path, t, np.stack(cols, axis=1),
-             ["u_d", "v_d", "w_d", "ue_t", "ue_a", "ue_e", "ue_r"])
+    save_npz(
+        path, t, np.stack(cols, axis=1), ["u_d", "v_d", "w_d", "ue_t", "ue_a", "ue_e", "ue_r"]
+    )
     return path
 
 
@@ -63,18 +65,27 @@ def graph(gains, signals2, tmp_path, controller_start=True, **ctrl):
     from lpv_sysid.nodes.excitation_node import ExcitationNode
     from lpv_sysid.nodes.lpv_controller_node import LpvControllerNode
     from lpv_sysid.nodes.sim_vehicle_node import SimVehicleNode
+
     rclpy.init()
     return {
         "sim": SimVehicleNode(cli_args=args("sim_vehicle.yaml", mode="lpv")),
-        "exc": ExcitationNode(cli_args=args("excitation_node.yaml", signals_file=signals2,
-                                            mode="phase2", ramp_s=1.0, auto_start=True)),
-        "ctl": LpvControllerNode(cli_args=args("lpv_controller.yaml", gains_file=gains,
-                                               auto_start=controller_start, **ctrl)),
+        "exc": ExcitationNode(
+            cli_args=args(
+                "excitation_node.yaml",
+                signals_file=signals2,
+                mode="phase2",
+                ramp_s=1.0,
+                auto_start=True,
+            )
+        ),
+        "ctl": LpvControllerNode(
+            cli_args=args(
+                "lpv_controller.yaml", gains_file=gains, auto_start=controller_start, **ctrl
+            )
+        ),
         "log": DataLoggerNode(cli_args=args("data_logger.yaml", out_dir=str(tmp_path / "log"))),
         "probe": rclpy.create_node("probe"),
     }
-
-
 
 
 def statuses(msgs, name="/lpv_sysid/lpv_controller"):
@@ -87,16 +98,19 @@ def statuses(msgs, name="/lpv_sysid/lpv_controller"):
 
 def test_controller_wiring(gains):
     from lpv_sysid.nodes.lpv_controller_node import LpvControllerNode
+
     rclpy.init()
     node = LpvControllerNode(cli_args=args("lpv_controller.yaml", gains_file=gains))
     topics = dict(node.get_topic_names_and_types())
-    assert topics == {"/lpv_sysid/state": ["nav_msgs/msg/Odometry"],
-                      "/lpv_sysid/rotor_speeds": ["sensor_msgs/msg/JointState"],
-                      "/lpv_sysid/velocity_reference": ["geometry_msgs/msg/TwistStamped"],
-                      "/lpv_sysid/excitation": ["sensor_msgs/msg/JointState"],
-                      "/lpv_sysid/actuator_command": ["sensor_msgs/msg/JointState"],
-                      "/lpv_sysid/status": ["diagnostic_msgs/msg/DiagnosticArray"],
-                      "/diagnostics": ["diagnostic_msgs/msg/DiagnosticArray"]}
+    assert topics == {
+        "/lpv_sysid/state": ["nav_msgs/msg/Odometry"],
+        "/lpv_sysid/rotor_speeds": ["sensor_msgs/msg/JointState"],
+        "/lpv_sysid/velocity_reference": ["geometry_msgs/msg/TwistStamped"],
+        "/lpv_sysid/excitation": ["sensor_msgs/msg/JointState"],
+        "/lpv_sysid/actuator_command": ["sensor_msgs/msg/JointState"],
+        "/lpv_sysid/status": ["diagnostic_msgs/msg/DiagnosticArray"],
+        "/diagnostics": ["diagnostic_msgs/msg/DiagnosticArray"],
+    }
     rel = QoSReliabilityPolicy
     assert standin.find_subscription(node, "state").qos_profile.reliability == rel.BEST_EFFORT
     assert standin.find_subscription(node, "excitation").qos_profile.reliability == rel.RELIABLE
@@ -104,7 +118,9 @@ def test_controller_wiring(gains):
     assert node.get_parameter("rate_hz").value == 250.0
     assert node.describe_parameter("state_timeout_s").floating_point_range[0].to_value == 1.0
     assert [n for n, _ in node.get_service_names_and_types()] == [
-        "/lpv_sysid/lpv_controller/abort", "/lpv_sysid/lpv_controller/start"]
+        "/lpv_sysid/lpv_controller/abort",
+        "/lpv_sysid/lpv_controller/start",
+    ]
     # not started: no commands, status says so
     probe = rclpy.create_node("probe")
     st = []
@@ -115,21 +131,26 @@ def test_controller_wiring(gains):
     assert cmds == [] and statuses(st)[-1].message.startswith("waiting for start")
 
 
-@pytest.mark.parametrize("edit, field", [
-    (lambda d: d["vertices"][3].update(K=[[0.0] * 12] * 3), "vertices[3].K"),
-    (lambda d: d["states"][2].update(name="speed"), "states"),
-    (lambda d: d.update(gamma=-1.0), "gamma"),
-    (lambda d: d["scheduling"].update(max=[2.0, 2.0, -3.0]), "scheduling"),
-])
+@pytest.mark.parametrize(
+    "edit, field",
+    [
+        (lambda d: d["vertices"][3].update(K=[[0.0] * 12] * 3), "vertices[3].K"),
+        (lambda d: d["states"][2].update(name="speed"), "states"),
+        (lambda d: d.update(gamma=-1.0), "gamma"),
+        (lambda d: d["scheduling"].update(max=[2.0, 2.0, -3.0]), "scheduling"),
+    ],
+)
 def test_controller_refuses_invalid_gains(tmp_path, caplog, edit, field):
     from lpv_sysid.nodes import lpv_controller_node
+
     d = gains_dict()
     edit(d)
     bad = tmp_path / "bad_gains.yaml"
     bad.write_text(yaml.safe_dump(d))
     with caplog.at_level("CRITICAL"):
-        code = lpv_controller_node.main(args=["n"] + args("lpv_controller.yaml",
-                                                            gains_file=str(bad)))
+        code = lpv_controller_node.main(
+            args=["n"] + args("lpv_controller.yaml", gains_file=str(bad))
+        )
     assert code == 2
     msg = caplog.records[-1].getMessage()
     assert field in msg and "bad_gains.yaml" in msg
@@ -137,6 +158,7 @@ def test_controller_refuses_invalid_gains(tmp_path, caplog, edit, field):
 
 def test_controller_refuses_missing_gains_file(caplog):
     from lpv_sysid.nodes import lpv_controller_node
+
     with caplog.at_level("CRITICAL"):
         assert lpv_controller_node.main(args=["n", "--ros-args", "-p", "gains_file:=''"]) == 2
     assert "gains_file" in caplog.records[-1].getMessage()
@@ -146,15 +168,14 @@ def test_end_to_end_flow_and_tracking(gains, signals2, tmp_path):
     g = graph(gains, signals2, tmp_path)
     probe = g["probe"]
     states = []
-    probe.create_subscription(Odometry, "/lpv_sysid/state", states.append,
-                              qos_profile_sensor_data)
+    probe.create_subscription(Odometry, "/lpv_sysid/state", states.append, qos_profile_sensor_data)
     refs = []
     probe.create_subscription(TwistStamped, "/lpv_sysid/velocity_reference", refs.append, 100)
     spin(list(g.values()), 4.0)
     ctl = g["ctl"].runtime
     assert ctl.supervisor.event is None and not g["sim"].handed_back
     sent = standin.find_publisher(g["ctl"], "actuator_command").standin_published
-    assert sent == ctl.commands > 950          # 250 Hz for ~4 s (first tick waits for inputs)
+    assert sent == ctl.commands > 950  # 250 Hz for ~4 s (first tick waits for inputs)
     g["log"].destroy_node()
     bag = read_bag(str(tmp_path / "log" / "bag_0000"))
     assert len(bag["/lpv_sysid/actuator_command"]) == sent
@@ -164,9 +185,9 @@ def test_end_to_end_flow_and_tracking(gains, signals2, tmp_path):
     t_v = np.array([M.stamp_ns_of(m) for m in states[-500:]])
     t_r = np.array([M.stamp_ns_of(m) for m in refs])
     vd = np.interp(t_v, t_r, [M.reference_from_twist(m)[1][0] for m in refs])
-    rms = lambda a: np.sqrt(np.mean(a ** 2))  # noqa: E731
+    rms = lambda a: np.sqrt(np.mean(a**2))  # noqa: E731
     assert np.ptp(vd) > 0.5 and np.corrcoef(v, vd)[0, 1] > 0.9
-    assert rms(v - vd) < 0.5 * rms(vd)       # far better than not tracking at all
+    assert rms(v - vd) < 0.5 * rms(vd)  # far better than not tracking at all
 
 
 def _abort_case(gains, signals2, tmp_path, action, **ctrl):
@@ -193,7 +214,8 @@ def _abort_case(gains, signals2, tmp_path, action, **ctrl):
 
 def test_abort_on_stale_state(gains, signals2, tmp_path):
     def stop_sim(g, nodes):
-        nodes.remove(g["sim"])      # the state stream stops (estimator/link failure)
+        nodes.remove(g["sim"])  # the state stream stops (estimator/link failure)
+
     ev = _abort_case(gains, signals2, tmp_path, stop_sim)
     assert ev.reason == "stale" and ev.detail.startswith(("state", "rotor_speeds"))
 
@@ -207,6 +229,7 @@ def test_abort_service(gains, signals2, tmp_path):
             ex.add_node(n)
         ex.spin_until_future_complete(fut, timeout_sec=0.1)
         assert fut.result().success
+
     ev = _abort_case(gains, signals2, tmp_path, call_abort)
     assert ev.reason == "external"
 
@@ -220,6 +243,7 @@ def test_abort_on_nan_state(gains, signals2, tmp_path):
         msg.pose.pose.orientation.w = 1.0
         msg.twist.twist.linear.x = math.nan
         pub.publish(msg)
+
     ev = _abort_case(gains, signals2, tmp_path, inject_nan)
     assert ev.reason == "non_finite" and "state" in ev.detail
 
@@ -228,10 +252,12 @@ def test_abort_on_reference_step(gains, signals2, tmp_path):
     """A step to 3 m/s (outside the box, and far faster than the design envelope of the
     gains) aborts on the envelope before any command follows it (issue 12 item 6); the
     box abort itself is covered in test_controller_safety.py with a slow ramp."""
+
     def big_reference(g, nodes):
         pub = g["probe"].create_publisher(TwistStamped, "/lpv_sysid/velocity_reference", 10)
         stamp = g["probe"].get_clock().now().nanoseconds + 5_000_000
         pub.publish(M.twist_reference_msg(M.MsgFactory.rclpy(), stamp, [3.0, 0.0, 0.0]))
+
     ev = _abort_case(gains, signals2, tmp_path, big_reference)
     assert ev.reason == "reference_envelope" and ev.detail.startswith("reference[0] changes at")
 
@@ -239,6 +265,7 @@ def test_abort_on_reference_step(gains, signals2, tmp_path):
 # ------------------------------------------------ issue 12: vehicle safety at node level
 def _main_exit(caplog, **params):
     from lpv_sysid.nodes import lpv_controller_node
+
     with caplog.at_level("CRITICAL"):
         code = lpv_controller_node.main(args=["n"] + args("lpv_controller.yaml", **params))
     return code, caplog.records[-1].getMessage()
@@ -257,7 +284,8 @@ def test_node_refuses_gains_changed_after_certification(gains, tmp_path, caplog)
     bad = tmp_path / "gains.yaml"
     bad.write_text(yaml.safe_dump(d))
     (tmp_path / "gains.cert.npz").write_bytes(
-        open(os.path.join(os.path.dirname(gains), "gains.cert.npz"), "rb").read())
+        open(os.path.join(os.path.dirname(gains), "gains.cert.npz"), "rb").read()
+    )
     code, msg = _main_exit(caplog, gains_file=str(bad))
     assert code == 2 and "certificate.gains_sha256" in msg and "does not match" in msg
 
@@ -267,16 +295,24 @@ def test_node_runs_the_values_of_its_yaml(gains, tmp_path):
     ff_jerk_tau, which the node did not declare, so it silently ran the defaults (issue 14
     item 1): the node's law now gets the file's values, as replay does."""
     from lpv_sysid.nodes.lpv_controller_node import LpvControllerNode
+
     text = open(os.path.join(CONFIG, "lpv_controller.yaml")).read()
-    for key, value in (("monitor_window_s", "12.0"), ("ff_filter_tau", "0.3"),
-                       ("ff_jerk_tau", "0.7"), ("feedforward", "false")):
-        text = "\n".join(f"    {key}: {value}" if line.strip().startswith(f"{key}:") else line
-                         for line in text.splitlines())
+    for key, value in (
+        ("monitor_window_s", "12.0"),
+        ("ff_filter_tau", "0.3"),
+        ("ff_jerk_tau", "0.7"),
+        ("feedforward", "false"),
+    ):
+        text = "\n".join(
+            f"    {key}: {value}" if line.strip().startswith(f"{key}:") else line
+            for line in text.splitlines()
+        )
     f = tmp_path / "ctl.yaml"
     f.write_text(text)
     rclpy.init()
-    node = LpvControllerNode(cli_args=["--ros-args", "--params-file", str(f),
-                                       "-p", f"gains_file:={gains}"])
+    node = LpvControllerNode(
+        cli_args=["--ros-args", "--params-file", str(f), "-p", f"gains_file:={gains}"]
+    )
     law = node.runtime.law
     assert (law.window, law.tau, law.tau_j, law.cfg.feedforward) == (12.0, 0.3, 0.7, False)
     d = node.describe_parameter("monitor_window_s")
@@ -298,9 +334,17 @@ def _playing_excitation(signals2):
     """A phase-2 excitation node 1.5 s into its signal (ramp 1 s), a probe and its
     excitation messages."""
     from lpv_sysid.nodes.excitation_node import ExcitationNode
+
     rclpy.init()
-    exc = ExcitationNode(cli_args=args("excitation_node.yaml", signals_file=signals2,
-                                       mode="phase2", ramp_s=1.0, auto_start=True))
+    exc = ExcitationNode(
+        cli_args=args(
+            "excitation_node.yaml",
+            signals_file=signals2,
+            mode="phase2",
+            ramp_s=1.0,
+            auto_start=True,
+        )
+    )
     probe = rclpy.create_node("probe")
     _, out = _exc_outputs(probe)
     spin([exc, probe], 1.5)
@@ -313,7 +357,7 @@ def test_controller_abort_fades_the_excitation_within_one_ramp(gains, signals2, 
     refs, exc = _exc_outputs(g["probe"])
     nodes = list(g.values())
     spin(nodes, 1.5)
-    assert np.abs(_ue(exc[-20:])).max() > 0.1            # playing (ramp 1 s done)
+    assert np.abs(_ue(exc[-20:])).max() > 0.1  # playing (ramp 1 s done)
     assert call(g["probe"], nodes, "/lpv_sysid/lpv_controller/abort").success
     t_abort = g["ctl"].runtime.supervisor.event.t
     exc.clear()
@@ -322,24 +366,29 @@ def test_controller_abort_fades_the_excitation_within_one_ramp(gains, signals2, 
     ts = np.array([M.stamp_ns_of(m) * 1e-9 for m in exc])
     ue = np.abs(_ue(exc)).max(axis=1)
     assert g["exc"].aborted and "lpv_controller" in g["exc"].abort_reason
-    assert np.all(ue[ts > t_abort + 1.0 + 0.011] == 0.0)   # faded within the 1 s ramp (+1 tick)
-    assert ue[(ts > t_abort + 0.3) & (ts < t_abort + 0.5)].max() > 0   # a fade, not a cut
+    assert np.all(ue[ts > t_abort + 1.0 + 0.011] == 0.0)  # faded within the 1 s ramp (+1 tick)
+    assert ue[(ts > t_abort + 0.3) & (ts < t_abort + 0.5)].max() > 0  # a fade, not a cut
     v = np.array([[m.twist.linear.x, m.twist.linear.y, m.twist.linear.z] for m in refs])
     assert np.all(v[-5:] == 0.0)
 
 
-@pytest.mark.parametrize("sender, level, values, fades", [
-    ("mavlink_bridge", "WARN", {"state": "HANDBACK"}, True),     # stale commands -> hand-back
-    ("mavlink_bridge", "ERROR", {"state": "FAILED"}, True),
-    ("campaign", "ERROR", {"phase": "aborting"}, True),
-    ("lpv_controller", "ERROR", {"aborted": True}, True),
-    # an ERROR that is no abort (the bridge refusing one message) and an unwatched node
-    ("mavlink_bridge", "ERROR", {"state": "OFFBOARD_ACTIVE"}, False),
-    ("sim_vehicle", "ERROR", {"aborted": True}, False),
-])
-def test_abort_status_of_a_watched_node_fades_the_excitation(signals2, sender, level, values,
-                                                              fades):
+@pytest.mark.parametrize(
+    "sender, level, values, fades",
+    [
+        ("mavlink_bridge", "WARN", {"state": "HANDBACK"}, True),  # stale commands -> hand-back
+        ("mavlink_bridge", "ERROR", {"state": "FAILED"}, True),
+        ("campaign", "ERROR", {"phase": "aborting"}, True),
+        ("lpv_controller", "ERROR", {"aborted": True}, True),
+        # an ERROR that is no abort (the bridge refusing one message) and an unwatched node
+        ("mavlink_bridge", "ERROR", {"state": "OFFBOARD_ACTIVE"}, False),
+        ("sim_vehicle", "ERROR", {"aborted": True}, False),
+    ],
+)
+def test_abort_status_of_a_watched_node_fades_the_excitation(
+    signals2, sender, level, values, fades
+):
     from diagnostic_msgs.msg import DiagnosticArray as DA
+
     exc, probe, out = _playing_excitation(signals2)
     pub = probe.create_publisher(DA, "/lpv_sysid/status", 10)
     f = M.MsgFactory.rclpy()
@@ -367,16 +416,28 @@ def test_excitation_abort_survives_the_clock_going_back(signals2):
 
 def test_excitation_node_checks_the_signal_against_the_gains(gains, tmp_path, caplog):
     from lpv_sysid.nodes import excitation_node
+
     t = np.arange(0.0, 20.0, 0.02)
     cols = [0.8 * np.sin(2 * np.pi * 0.2 * t), 0 * t, 0 * t] + [3.0 * np.sin(9 * t)] * 4
     path = str(tmp_path / "loud.npz")
-    save_npz(path, t, np.stack(cols, axis=1),
-             ["u_d", "v_d", "w_d", "ue_t", "ue_a", "ue_e", "ue_r"])
+    save_npz(
+        path, t, np.stack(cols, axis=1), ["u_d", "v_d", "w_d", "ue_t", "ue_a", "ue_e", "ue_r"]
+    )
     with caplog.at_level("CRITICAL"):
-        code = excitation_node.main(args=["n"] + args("excitation_node.yaml", signals_file=path,
-                                                      mode="phase2", ramp_s=1.0, gains_file=gains))
-    assert code == 2 and "ue_t peak 3 exceeds the design excitation peak 1" in \
-        caplog.records[-1].getMessage()
+        code = excitation_node.main(
+            args=["n"]
+            + args(
+                "excitation_node.yaml",
+                signals_file=path,
+                mode="phase2",
+                ramp_s=1.0,
+                gains_file=gains,
+            )
+        )
+    assert (
+        code == 2
+        and "ue_t peak 3 exceeds the design excitation peak 1" in caplog.records[-1].getMessage()
+    )
 
 
 def test_safety_abort_is_logged_by_the_node_logger(gains, signals2, tmp_path, caplog):

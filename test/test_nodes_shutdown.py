@@ -41,7 +41,7 @@ def test_standin_default_sigint_handler_shuts_context_down():
     assert ctx.ok()
     with pytest.raises(KeyboardInterrupt):
         signal.raise_signal(signal.SIGINT)
-    assert not ctx.ok()                      # rclpy's handler ran first
+    assert not ctx.ok()  # rclpy's handler ran first
 
 
 class _HandBack(C.ShellNode):
@@ -71,7 +71,7 @@ class _HandBack(C.ShellNode):
 
     def begin_shutdown(self):
         self.began += 1
-        self.pub.publish(DiagnosticArray())            # would raise under rclpy's handler
+        self.pub.publish(DiagnosticArray())  # would raise under rclpy's handler
         self.published_in_shutdown += 1
 
     def shutdown_complete(self):
@@ -88,10 +88,10 @@ def test_run_sigint_twice_hands_back_before_context_goes():
     assert C.run(_HandBack) == 0
     node = _HandBack.instances[0]
     assert node.began == 1 and node.published_in_shutdown == 1
-    assert node.after >= 3                           # kept spinning until confirmed
-    assert node.destroyed_with_context_ok is True    # destroyed before try_shutdown
+    assert node.after >= 3  # kept spinning until confirmed
+    assert node.destroyed_with_context_ok is True  # destroyed before try_shutdown
     assert not rclpy.ok()
-    assert signal.getsignal(signal.SIGINT) is previous   # handlers restored
+    assert signal.getsignal(signal.SIGINT) is previous  # handlers restored
 
 
 class _NeverDone(_HandBack):

@@ -13,8 +13,16 @@ import pytest
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.mavlink import px4
-from lpv_sysid.mavlink.offboard import (MAV_CMD_COMPONENT_ARM_DISARM, MAV_CMD_DO_SET_MODE, OffboardConfig,
-                                        OffboardMachine, SendCommand, SendSetpoint, State, StatusEvent)
+from lpv_sysid.mavlink.offboard import (
+    MAV_CMD_COMPONENT_ARM_DISARM,
+    MAV_CMD_DO_SET_MODE,
+    OffboardConfig,
+    OffboardMachine,
+    SendCommand,
+    SendSetpoint,
+    State,
+    StatusEvent,
+)
 
 ACC, TMP, DEN = px4.MAV_RESULT_ACCEPTED, px4.MAV_RESULT_TEMPORARILY_REJECTED, px4.MAV_RESULT_DENIED
 DT = 0.01
@@ -90,13 +98,16 @@ def test_posctl_handback_without_rc_ends_in_confirmed_hold_never_done_posctl():
     s.active()
     acts = s.m.abort(s.t, "end of test")
     assert s.m.state == State.HANDBACK and kinds(acts, SendCommand) == [mode_cmd(px4.POSCTL)]
-    s.ack(0.01, MAV_CMD_DO_SET_MODE, ACC)                # PX4 mavlink receiver
+    s.ack(0.01, MAV_CMD_DO_SET_MODE, ACC)  # PX4 mavlink receiver
     s.run(0.02)
-    assert s.m.state == State.HANDBACK                   # not settled: the verdict may follow
-    acts = s.ack(0.02, MAV_CMD_DO_SET_MODE, TMP)        # commander: no RC for Position mode
+    assert s.m.state == State.HANDBACK  # not settled: the verdict may follow
+    acts = s.ack(0.02, MAV_CMD_DO_SET_MODE, TMP)  # commander: no RC for Position mode
     assert kinds(acts, SendCommand) == [mode_cmd(px4.HOLD)]
     warn = kinds(acts, StatusEvent)[0]
-    assert warn.level == "warn" and "POSCTL (command 176) accepted, then rejected: TEMPORARILY_REJECTED" in warn.reason
+    assert (
+        warn.level == "warn"
+        and "POSCTL (command 176) accepted, then rejected: TEMPORARILY_REJECTED" in warn.reason
+    )
     # a failsafe HEARTBEAT showing POSCTL is no confirmation of anything
     s.hb(0.3, px4.POSCTL, True)
     s.run(0.5)
@@ -109,7 +120,9 @@ def test_posctl_handback_without_rc_ends_in_confirmed_hold_never_done_posctl():
     assert s.m.reason.startswith("hand-back confirmed: vehicle in HOLD after POSCTL:")
     done = [e for e in kinds(s.log, StatusEvent) if e.state == "DONE" and e.previous == "HANDBACK"]
     assert len(done) == 1 and done[0].level == "info"
-    assert not any(e.state == "DONE" and "vehicle in POSCTL" in e.reason for e in kinds(s.log, StatusEvent))
+    assert not any(
+        e.state == "DONE" and "vehicle in POSCTL" in e.reason for e in kinds(s.log, StatusEvent)
+    )
 
 
 def test_rejection_within_the_settle_time_beats_a_heartbeat_showing_the_mode():
@@ -127,7 +140,9 @@ def test_rejection_within_the_settle_time_beats_a_heartbeat_showing_the_mode():
     assert s.m.state == State.FAILED and s.m.confirmed_mode is None
     failed = kinds(s.log, StatusEvent)[-1]
     assert failed.level == "error" and failed.state == "FAILED"
-    assert failed.reason.startswith("hand-back NOT confirmed: POSCTL: POSCTL (command 176) accepted, then rejected")
+    assert failed.reason.startswith(
+        "hand-back NOT confirmed: POSCTL: POSCTL (command 176) accepted, then rejected"
+    )
     assert "PX4 failsafe in charge" in failed.reason
 
 
@@ -146,7 +161,10 @@ def test_a_heartbeat_showing_another_mode_is_not_a_confirmation():
     assert s.m.state == State.HANDBACK and kinds(acts, SendCommand) == [mode_cmd(px4.LAND)]
     ev = [e for e in kinds(acts, StatusEvent) if "trying LAND" in e.reason]
     assert len(ev) == 1 and 1.0 < ev[0].t - t_acc <= 1.0 + DT + 1e-9
-    assert "HOLD (command 176) accepted but the HEARTBEAT did not show it within 1.0 s" in ev[0].reason
+    assert (
+        "HOLD (command 176) accepted but the HEARTBEAT did not show it within 1.0 s"
+        in ev[0].reason
+    )
     s.ack(0.01, MAV_CMD_DO_SET_MODE, ACC)
     s.ack(0.03, MAV_CMD_DO_SET_MODE, ACC)
     s.hb(0.5, px4.LAND, True)
@@ -159,10 +177,14 @@ def test_neutral_setpoint_streams_during_handback_and_stops_when_confirmed():
     s = Script(cfg)
     s.active()
     t_last_cmd = s.t
-    acts = s.run(1.0, cmd=False)                         # commands stop: stale input -> HANDBACK
-    hb = [e for e in kinds(acts, StatusEvent) if e.state == "HANDBACK" and e.previous != "HANDBACK"]
-    assert len(hb) == 1 and cfg.input_timeout < hb[0].t - t_last_cmd <= cfg.input_timeout + DT + 1e-9
-    after = acts[acts.index(hb[0]):]
+    acts = s.run(1.0, cmd=False)  # commands stop: stale input -> HANDBACK
+    hb = [
+        e for e in kinds(acts, StatusEvent) if e.state == "HANDBACK" and e.previous != "HANDBACK"
+    ]
+    assert (
+        len(hb) == 1 and cfg.input_timeout < hb[0].t - t_last_cmd <= cfg.input_timeout + DT + 1e-9
+    )
+    after = acts[acts.index(hb[0]) :]
     sps = kinds(after, SendSetpoint)
     # 20 Hz neutral stream for the ~0.79 s of hand-back so far: PX4 never sees a gap
     assert all(a.setpoint == "zero" for a in sps) and 14 <= len(sps) <= 17
@@ -170,9 +192,9 @@ def test_neutral_setpoint_streams_during_handback_and_stops_when_confirmed():
     s.ack(0.03, MAV_CMD_DO_SET_MODE, ACC)
     s.hb(0.3, px4.HOLD, True)
     s.run(0.05, cmd=False)
-    assert s.m.state == State.FAILED and s.m.confirmed_mode == px4.HOLD      # fault: stale input
+    assert s.m.state == State.FAILED and s.m.confirmed_mode == px4.HOLD  # fault: stale input
     assert kinds(s.log, StatusEvent)[-1].level == "warn"
-    assert kinds(s.run(1.0, cmd=False), SendSetpoint) == []                   # confirmed: stream off
+    assert kinds(s.run(1.0, cmd=False), SendSetpoint) == []  # confirmed: stream off
     # without a neutral setpoint (attitude_rate transport) nothing is streamed in HANDBACK
     s2 = Script(OffboardConfig(setpoint_rate_hz=20.0, input_timeout=0.5), neutral=None)
     s2.active()
@@ -190,12 +212,21 @@ def test_nothing_confirmed_ends_failed_loudly_and_stops_the_stream():
     s.m.abort(s.t, "operator abort")
     acts = s.run(3.0)
     cmds = kinds(acts, SendCommand)
-    assert cmds == [mode_cmd(px4.HOLD, 2), mode_cmd(px4.HOLD, 3), mode_cmd(px4.LAND, 1),
-                    mode_cmd(px4.LAND, 2), mode_cmd(px4.LAND, 3)]
+    assert cmds == [
+        mode_cmd(px4.HOLD, 2),
+        mode_cmd(px4.HOLD, 3),
+        mode_cmd(px4.LAND, 1),
+        mode_cmd(px4.LAND, 2),
+        mode_cmd(px4.LAND, 3),
+    ]
     failed = [e for e in kinds(s.log, StatusEvent) if e.state == "FAILED"]
     assert len(failed) == 1 and failed[0].level == "error"
-    assert failed[0].reason.startswith("hand-back NOT confirmed: HOLD: no COMMAND_ACK for command 176")
-    assert "; LAND: no COMMAND_ACK" in failed[0].reason and failed[0].reason.endswith("[operator abort]")
+    assert failed[0].reason.startswith(
+        "hand-back NOT confirmed: HOLD: no COMMAND_ACK for command 176"
+    )
+    assert "; LAND: no COMMAND_ACK" in failed[0].reason and failed[0].reason.endswith(
+        "[operator abort]"
+    )
     # 2 modes x 3 attempts x ack_timeout (each timeout seen at the next step)
     assert 1.8 < failed[0].t - t0 <= 1.8 + 6 * DT + 1e-9
     idx = s.log.index(failed[0])
@@ -207,7 +238,7 @@ def test_lost_acks_are_confirmed_by_a_heartbeat_showing_the_change():
     s = Script(OffboardConfig())
     s.active()
     s.m.abort(s.t, "abort")
-    s.hb(0.5, px4.HOLD, True)                            # both ACKs lost, the mode changed
+    s.hb(0.5, px4.HOLD, True)  # both ACKs lost, the mode changed
     s.run(0.05)
     assert s.m.state == State.DONE and s.m.confirmed_mode == px4.HOLD
 
@@ -220,11 +251,13 @@ def test_offboard_switch_accepted_then_rejected_is_retried_then_fails():
     s.run(1.3)
     assert s.m.state == State.SWITCHING
     s.ack(0.01, MAV_CMD_DO_SET_MODE, ACC)
-    acts = s.ack(0.03, MAV_CMD_DO_SET_MODE, TMP)        # e.g. stream not seen by the commander
+    acts = s.ack(0.03, MAV_CMD_DO_SET_MODE, TMP)  # e.g. stream not seen by the commander
     assert kinds(acts, SendCommand) == [mode_cmd(px4.OFFBOARD, 2)]
     s.ack(0.01, MAV_CMD_DO_SET_MODE, ACC)
     s.ack(0.03, MAV_CMD_DO_SET_MODE, TMP)
-    assert s.m.state == State.FAILED and s.m.reason.startswith("switch to OFFBOARD failed: OFFBOARD")
+    assert s.m.state == State.FAILED and s.m.reason.startswith(
+        "switch to OFFBOARD failed: OFFBOARD"
+    )
     assert "accepted, then rejected: TEMPORARILY_REJECTED" in s.m.reason
     assert kinds(s.run(0.5), SendSetpoint) == []
 
@@ -235,13 +268,15 @@ def test_stale_offboard_after_auto_disarm_is_no_confirmation():
     when it fails the machine hands back (clearing the stale OFFBOARD)."""
     cfg = OffboardConfig(ack_timeout=0.3, max_retries=1)
     s = Script(cfg)
-    s.m.on_heartbeat(0.0, px4.OFFBOARD, False)            # leftover of an auto-disarm
+    s.m.on_heartbeat(0.0, px4.OFFBOARD, False)  # leftover of an auto-disarm
     s.m.start(0.0)
     s.run(1.3)
     assert s.m.state == State.SWITCHING
-    s.hb(0.1, px4.OFFBOARD, False)                        # no ACK arrives
+    s.hb(0.1, px4.OFFBOARD, False)  # no ACK arrives
     s.run(0.7)
-    assert s.m.state == State.HANDBACK and "switch to OFFBOARD failed: no COMMAND_ACK" in s.m.reason
+    assert (
+        s.m.state == State.HANDBACK and "switch to OFFBOARD failed: no COMMAND_ACK" in s.m.reason
+    )
     # same start, but PX4 answers: ACCEPTED, ACCEPTED -> confirmed
     s2 = Script(cfg)
     s2.m.on_heartbeat(0.0, px4.OFFBOARD, False)
@@ -269,11 +304,12 @@ def test_arm_accepted_then_rejected_fails_and_hands_back(verdict):
     s.run(0.05)
     assert s.m.state == State.ARMING
     s.ack(0.01, MAV_CMD_COMPONENT_ARM_DISARM, ACC)
-    s.hb(0.01, px4.OFFBOARD, True)                         # even a HEARTBEAT armed in between
+    s.hb(0.01, px4.OFFBOARD, True)  # even a HEARTBEAT armed in between
     acts = s.ack(0.02, MAV_CMD_COMPONENT_ARM_DISARM, verdict)
     assert s.m.state == State.HANDBACK
-    assert s.m.reason == (f"ARMING failed: arm (command 400) accepted, then rejected: "
-                          f"{px4.result_name(verdict)}")
+    assert s.m.reason == (
+        f"ARMING failed: arm (command 400) accepted, then rejected: {px4.result_name(verdict)}"
+    )
     assert kinds(acts, SendCommand) == [mode_cmd(px4.HOLD)]
     assert not any(e.state == "OFFBOARD_ACTIVE" for e in kinds(s.log, StatusEvent))
 
@@ -300,7 +336,7 @@ def test_temporarily_rejected_arm_is_retried():
 def test_disarm_during_offboard_hands_back():
     s = Script(OffboardConfig(arm=True))
     s.active()
-    acts = s.hb(0.1, px4.OFFBOARD, False)                  # auto-disarm: mode still OFFBOARD
+    acts = s.hb(0.1, px4.OFFBOARD, False)  # auto-disarm: mode still OFFBOARD
     assert s.m.state == State.HANDBACK and "vehicle disarmed during OFFBOARD" in s.m.reason
     assert kinds(acts, SendCommand) == [mode_cmd(px4.HOLD)]
 
@@ -320,11 +356,11 @@ def test_finish_lands_and_reports_the_disarm():
     assert s.m.status(s.t)["disarmed"] == "False"
     s.hb(5.0, px4.LAND, True)
     assert s.m.status(s.t)["disarmed"] == "False"
-    acts = s.hb(1.0, px4.LAND, False)                      # landed, PX4 auto-disarms
+    acts = s.hb(1.0, px4.LAND, False)  # landed, PX4 auto-disarms
     ev = kinds(acts, StatusEvent)
     assert len(ev) == 1 and ev[0].reason == "vehicle disarmed in LAND (landed or auto-disarm)"
     assert s.m.status(s.t)["disarmed"] == "True" and s.m.state == State.DONE
-    assert kinds(s.hb(1.0, px4.LAND, False), StatusEvent) == []    # reported once
+    assert kinds(s.hb(1.0, px4.LAND, False), StatusEvent) == []  # reported once
 
 
 def test_finish_after_a_hold_handback_and_retarget_during_handback():
@@ -332,9 +368,9 @@ def test_finish_after_a_hold_handback_and_retarget_during_handback():
     s.active()
     s.m.abort(s.t, "vertex done")
     s.ack(0.01, MAV_CMD_DO_SET_MODE, ACC)
-    acts = s.m.finish(s.at(0.05), "LAND")                  # re-target while HOLD is pending
+    acts = s.m.finish(s.at(0.05), "LAND")  # re-target while HOLD is pending
     assert kinds(acts, SendCommand) == [mode_cmd(px4.LAND)]
-    assert kinds(s.ack(0.01, MAV_CMD_DO_SET_MODE, ACC), SendCommand) == []   # counted for LAND now
+    assert kinds(s.ack(0.01, MAV_CMD_DO_SET_MODE, ACC), SendCommand) == []  # counted for LAND now
     assert s.m.status(s.t)["handback_target"] == "LAND" and "ACCEPTED@" in s.m.status(s.t)["acks"]
     s.hb(0.4, px4.LAND, True)
     s.run(0.05)
@@ -348,13 +384,15 @@ def test_finish_after_a_hold_handback_and_retarget_during_handback():
     assert s2.m.state == State.DONE and s2.m.confirmed_mode == px4.HOLD
     acts = s2.m.finish(s2.t, px4.LAND)
     assert s2.m.state == State.HANDBACK and kinds(acts, SendCommand) == [mode_cmd(px4.LAND)]
-    s2.ack(0.01, MAV_CMD_DO_SET_MODE, DEN)                 # LAND refused: fall back along the chain
+    s2.ack(0.01, MAV_CMD_DO_SET_MODE, DEN)  # LAND refused: fall back along the chain
     assert kinds(s2.log, SendCommand)[-1] == mode_cmd(px4.HOLD)
     s2.ack(0.01, MAV_CMD_DO_SET_MODE, ACC)
     s2.run(0.25)
-    assert s2.m.state == State.HANDBACK                    # a HEARTBEAT after the command is needed
+    assert s2.m.state == State.HANDBACK  # a HEARTBEAT after the command is needed
     s2.hb(0.5, px4.HOLD, True)
-    assert s2.m.state == State.DONE and s2.m.confirmed_mode == px4.HOLD   # HOLD shown before: ACK needed
+    assert (
+        s2.m.state == State.DONE and s2.m.confirmed_mode == px4.HOLD
+    )  # HOLD shown before: ACK needed
     with pytest.raises(ConfigError, match="ACRO"):
         s2.m.finish(s2.t, "ACRO")
 
@@ -362,15 +400,22 @@ def test_finish_after_a_hold_handback_and_retarget_during_handback():
 # ---------------------------------------------------------------------- config
 def test_handback_chain_config():
     assert OffboardConfig().chain == (px4.HOLD, px4.LAND)
-    assert OffboardConfig.from_dict({"handback_chain": ["posctl", "HOLD"]}).chain == (px4.POSCTL, px4.HOLD)
+    assert OffboardConfig.from_dict({"handback_chain": ["posctl", "HOLD"]}).chain == (
+        px4.POSCTL,
+        px4.HOLD,
+    )
     # the bridge node's single-mode parameter: tried first, then the rest of the chain
     assert OffboardConfig(handback_mode="POSCTL").chain == (px4.POSCTL, px4.HOLD, px4.LAND)
     assert OffboardConfig(handback_mode="LAND").chain == (px4.LAND, px4.HOLD)
-    for bad, match in (({"handback_chain": []}, "handback_chain"), ({"handback_chain": "HOLD"}, "handback_chain"),
-                       ({"handback_chain": ["HOLD", "OFFBOARD"]}, "OFFBOARD"),
-                       ({"handback_chain": ["HOLD", "hold"]}, "twice"),
-                       ({"ack_settle_s": 2.0}, "ack_settle_s"), ({"ack_settle_s": -0.1}, "ack_settle_s"),
-                       ({"handback_mode": "ACRO"}, "handback_mode")):
+    for bad, match in (
+        ({"handback_chain": []}, "handback_chain"),
+        ({"handback_chain": "HOLD"}, "handback_chain"),
+        ({"handback_chain": ["HOLD", "OFFBOARD"]}, "OFFBOARD"),
+        ({"handback_chain": ["HOLD", "hold"]}, "twice"),
+        ({"ack_settle_s": 2.0}, "ack_settle_s"),
+        ({"ack_settle_s": -0.1}, "ack_settle_s"),
+        ({"handback_mode": "ACRO"}, "handback_mode"),
+    ):
         with pytest.raises(ConfigError, match=match):
             OffboardConfig.from_dict(bad)
 
@@ -391,9 +436,13 @@ def test_real_px4_posctl_handback_without_rc_ends_in_confirmed_hold():
     d, why = find_px4()
     if d is None:
         pytest.skip(why)
-    with Px4Sitl(d, instance=6) as sitl:                 # instance 6: hand-back test
-        core = BridgeCore(BridgeConfig(link=LinkConfig(url=sitl.url),
-                                       offboard=OffboardConfig(arm=True, handback_chain=("POSCTL", "HOLD", "LAND"))))
+    with Px4Sitl(d, instance=6) as sitl:  # instance 6: hand-back test
+        core = BridgeCore(
+            BridgeConfig(
+                link=LinkConfig(url=sitl.url),
+                offboard=OffboardConfig(arm=True, handback_chain=("POSCTL", "HOLD", "LAND")),
+            )
+        )
         acks: list = []
         events: list = []
         orig = core._on_message
@@ -436,11 +485,16 @@ def test_real_px4_posctl_handback_without_rc_ends_in_confirmed_hold():
             n_acks = len(acks)
             events.extend(core.abort(time.monotonic(), "end of test"))
             run(10.0, until=lambda: core.state in (State.DONE, State.FAILED))
-            final = [e for e in events if isinstance(e, StatusEvent) and e.previous == "HANDBACK"
-                     and e.state in ("DONE", "FAILED")]
+            final = [
+                e
+                for e in events
+                if isinstance(e, StatusEvent)
+                and e.previous == "HANDBACK"
+                and e.state in ("DONE", "FAILED")
+            ]
             assert len(final) == 1 and final[0].state == "DONE", final
             assert core.machine.confirmed_mode == px4.HOLD and "after POSCTL" in final[0].reason
-            assert [r for _, r in acks[n_acks:n_acks + 2]] == [ACC, TMP]    # PX4's two answers
+            assert [r for _, r in acks[n_acks : n_acks + 2]] == [ACC, TMP]  # PX4's two answers
             run(2.0)
             assert abs(z[-1] - z_abort) < 1.0 and core.machine.vehicle_mode == px4.HOLD
         finally:

@@ -13,7 +13,13 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-NODES = ["excitation_node", "lpv_controller_node", "mavlink_bridge_node", "data_logger_node", "sim_vehicle_node"]
+NODES = [
+    "excitation_node",
+    "lpv_controller_node",
+    "mavlink_bridge_node",
+    "data_logger_node",
+    "sim_vehicle_node",
+]
 
 
 @pytest.fixture(scope="module")
@@ -21,22 +27,42 @@ def installed(tmp_path_factory):
     work = tmp_path_factory.mktemp("pkg")
     root = work / "root"
     env = {**os.environ, "PYTHONDONTWRITEBYTECODE": "1"}
-    proc = subprocess.run([sys.executable, "setup.py", "-q", "build", "--build-base", str(work / "build"),
-                           "install", "--root", str(root), "--prefix", "/opt/ros_ws"],
-                          cwd=ROOT, capture_output=True, text=True, env=env, timeout=300)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "setup.py",
+            "-q",
+            "build",
+            "--build-base",
+            str(work / "build"),
+            "install",
+            "--root",
+            str(root),
+            "--prefix",
+            "/opt/ros_ws",
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
     assert proc.returncode == 0, proc.stderr[-2000:]
     for leftover in ("lpv_sysid.egg-info",):
         # setup.py writes egg-info into the source tree; keep the checkout clean
         p = ROOT / leftover
         if p.exists():
             import shutil
+
             shutil.rmtree(p)
     return root / "opt" / "ros_ws"
 
 
 def test_share_files_and_resource_index(installed):
     share = installed / "share" / "lpv_sysid"
-    assert (installed / "share" / "ament_index" / "resource_index" / "packages" / "lpv_sysid").is_file()
+    assert (
+        installed / "share" / "ament_index" / "resource_index" / "packages" / "lpv_sysid"
+    ).is_file()
     assert (share / "package.xml").is_file()
     for launch in ("phase1.launch.py", "phase2.launch.py", "sim.launch.py"):
         assert (share / "launch" / launch).is_file()
@@ -60,14 +86,20 @@ def test_node_entry_point_is_a_main_function(node):
 
 
 #: import name -> rosdep key, for the third-party modules the package imports
-ROSDEP_KEYS = {"numpy": "python3-numpy", "scipy": "python3-scipy", "yaml": "python3-yaml",
-               "matplotlib": "python3-matplotlib", "serial": "python3-serial"}
+ROSDEP_KEYS = {
+    "numpy": "python3-numpy",
+    "scipy": "python3-scipy",
+    "yaml": "python3-yaml",
+    "matplotlib": "python3-matplotlib",
+    "serial": "python3-serial",
+}
 #: imported, but with no Ubuntu 24.04 package / rosdep key: pip, from requirements-ros.txt
 PIP_ONLY = {"pymavlink", "rosbags", "cvxpy", "mavsdk", "scs", "clarabel"}
 
 
 def _third_party_imports():
     import sys
+
     mods = set()
     files = [*(ROOT / "lpv_sysid").rglob("*.py"), *(ROOT / "launch").glob("*.py")]
     for path in files:
@@ -78,9 +110,19 @@ def _third_party_imports():
                 mods.add(node.module.split(".")[0])
         # message types looked up by name ("std_msgs/msg/Header") through a MsgFactory
         text = path.read_text()
-        mods |= {p for p in ("std_msgs", "geometry_msgs", "sensor_msgs", "nav_msgs",
-                             "diagnostic_msgs", "std_srvs", "builtin_interfaces")
-                 if f"{p}/msg/" in text or f"{p}/srv/" in text}
+        mods |= {
+            p
+            for p in (
+                "std_msgs",
+                "geometry_msgs",
+                "sensor_msgs",
+                "nav_msgs",
+                "diagnostic_msgs",
+                "std_srvs",
+                "builtin_interfaces",
+            )
+            if f"{p}/msg/" in text or f"{p}/srv/" in text
+        }
     return {m for m in mods if m not in sys.stdlib_module_names and m != "lpv_sysid"}
 
 
@@ -88,7 +130,7 @@ def test_package_xml_declares_exactly_what_the_code_imports():
     xml = ET.parse(ROOT / "package.xml").getroot()
     assert xml.get("format") == "3" and xml.findtext("name") == "lpv_sysid"
     deps = {e.text for e in xml.findall("exec_depend")}
-    used = _third_party_imports() | {"serial"}       # pymavlink's serial links need pyserial
+    used = _third_party_imports() | {"serial"}  # pymavlink's serial links need pyserial
     expected = {ROSDEP_KEYS.get(m, m) for m in used - PIP_ONLY}
     assert deps == expected, (sorted(deps - expected), sorted(expected - deps))
     pip = (ROOT / "requirements-ros.txt").read_text().lower()
@@ -103,8 +145,13 @@ def test_library_code_never_imports_rclpy_outside_the_shells():
         if "nodes" in path.relative_to(ROOT / "lpv_sysid").parts[:1]:
             continue
         for node in ast.walk(ast.parse(path.read_text())):
-            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
-                     else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            names = (
+                [a.name for a in node.names]
+                if isinstance(node, ast.Import)
+                else [node.module or ""]
+                if isinstance(node, ast.ImportFrom)
+                else []
+            )
             if any(n == "rclpy" or n.startswith("rclpy.") for n in names):
                 offenders.append(str(path.relative_to(ROOT)))
     assert offenders == []

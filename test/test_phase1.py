@@ -19,7 +19,7 @@ from lpv_sysid.sim.vehicle import SensorConfig
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "config" / "quadrotor.yaml"
 Q = Quadrotor()
-SCALE = 0.15            # trim 1.5 s, excitation 4.5 s, averaging 0.75 s
+SCALE = 0.15  # trim 1.5 s, excitation 4.5 s, averaging 0.75 s
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +36,11 @@ def test_config_file_loads_and_matches_defaults():
     assert cfg == phase1.Phase1Config()
     with pytest.raises(ConfigError, match="start"):
         phase1.Phase1Config(start="cruise")
-    assert len(cfg.vertices()) == 8 and cfg.vertices()[0] == (-5, -5, -5) and cfg.vertices()[1] == (5, -5, -5)
+    assert (
+        len(cfg.vertices()) == 8
+        and cfg.vertices()[0] == (-5, -5, -5)
+        and cfg.vertices()[1] == (5, -5, -5)
+    )
 
 
 def test_record_shapes_and_sample_rates(short_runs):
@@ -44,11 +48,17 @@ def test_record_shapes_and_sample_rates(short_runs):
     assert [r.name for r in runs] == ["vertex_p5_p5_p5", "hover_validation"]
     rec = runs[0]
     T = cfg.trim_s + cfg.excite_s
-    assert rec.duration == pytest.approx(6.0)   # simulated record length (trim + excitation), not wall-clock time
-    assert rec.state_true.shape == (int(T * 250), 16) and rec.state_meas.shape == rec.state_true.shape
+    assert rec.duration == pytest.approx(
+        6.0
+    )  # simulated record length (trim + excitation), not wall-clock time
+    assert (
+        rec.state_true.shape == (int(T * 250), 16) and rec.state_meas.shape == rec.state_true.shape
+    )
     assert rec.imu_accel.shape == (int(T * 250), 3) and rec.rotor_meas.shape == (int(T * 100), 4)
     assert rec.command.shape == (int(T * 250), 4) and rec.reference.shape == rec.command.shape
-    assert np.allclose(np.diff(rec.state_t), 1 / 250) and np.allclose(np.diff(rec.rotor_t), 1 / 100)
+    assert np.allclose(np.diff(rec.state_t), 1 / 250) and np.allclose(
+        np.diff(rec.rotor_t), 1 / 100
+    )
     # reference = vertex before the excitation, vertex + multisine after it
     pre = rec.cmd_t < rec.t_excite
     assert np.allclose(rec.reference[pre], [5, 5, 5, 0])
@@ -88,9 +98,11 @@ def test_vertex_reached_from_hover_within_the_trim_segment():
 
 def test_excitation_moves_the_vehicle_and_stays_bounded(short_runs):
     cfg, runs = short_runs
-    rec = runs[1]                       # hover validation
+    rec = runs[1]  # hover validation
     on = rec.state_t >= rec.t_excite
-    ref = np.stack([np.interp(rec.state_t[on], rec.cmd_t, rec.reference[:, i]) for i in range(4)], 1)
+    ref = np.stack(
+        [np.interp(rec.state_t[on], rec.cmd_t, rec.reference[:, i]) for i in range(4)], 1
+    )
     v = rec.state_true[on][:, [6, 7, 8, 11]]
     # the PX4-like loop lags above ~0.5 Hz (docs/quadrotor_model.md), but every excited
     # axis responds with a sizeable share of the reference and nothing runs away
@@ -160,8 +172,22 @@ def test_config_errors_name_the_problem(tmp_path):
 
 def test_cli_phase1_writes_trims(tmp_path, capsys):
     out = tmp_path / "p1"
-    rc = cli_main(["simulate", "phase1", "--config", str(CONFIG), "--out", str(out),
-                   "--duration-scale", "0.1", "--vertices", "1", "--no-hover", "--no-bags"])
+    rc = cli_main(
+        [
+            "simulate",
+            "phase1",
+            "--config",
+            str(CONFIG),
+            "--out",
+            str(out),
+            "--duration-scale",
+            "0.1",
+            "--vertices",
+            "1",
+            "--no-hover",
+            "--no-bags",
+        ]
+    )
     assert rc == 0
     d = yaml.safe_load((out / "trims.yaml").read_text())
     assert d["runs"][0]["vertex"] == [-5.0, -5.0, -5.0]
@@ -194,7 +220,9 @@ def test_run_bag_round_trip(short_runs, tmp_path):
     stamp, msg = data[f"{ns}/state"][100]
     s = M.state_from_odometry(msg)
     assert stamp == round(rec.state_t[100] * 1e9)
-    assert np.allclose(s.v_body, rec.state_meas[100, 6:9]) and np.allclose(s.euler, rec.state_meas[100, 3:6])
+    assert np.allclose(s.v_body, rec.state_meas[100, 6:9]) and np.allclose(
+        s.euler, rec.state_meas[100, 3:6]
+    )
     _, msg = data[f"{ns}/velocity_reference"][-1]
     _, v_d, r_d = M.reference_from_twist(msg)
     assert np.allclose(v_d, rec.reference[-1, :3]) and r_d == pytest.approx(rec.reference[-1, 3])
@@ -212,17 +240,21 @@ def test_phase1_bag_read_independently_with_rosbags_anyreader(short_runs, tmp_pa
     rec = runs[0]
     path = phase1.write_run_bag(rec, tmp_path / rec.name)
     ns = phase1.TOPIC_NAMESPACE
-    expected = {f"{ns}/state": ("nav_msgs/msg/Odometry", 250.0),
-                f"{ns}/imu": ("sensor_msgs/msg/Imu", 250.0),
-                f"{ns}/rotor_speeds": ("sensor_msgs/msg/JointState", 100.0),
-                f"{ns}/velocity_reference": ("geometry_msgs/msg/TwistStamped", 250.0)}
+    expected = {
+        f"{ns}/state": ("nav_msgs/msg/Odometry", 250.0),
+        f"{ns}/imu": ("sensor_msgs/msg/Imu", 250.0),
+        f"{ns}/rotor_speeds": ("sensor_msgs/msg/JointState", 100.0),
+        f"{ns}/velocity_reference": ("geometry_msgs/msg/TwistStamped", 250.0),
+    }
     with AnyReader([Path(path)], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
         conns = {c.topic: c for c in reader.connections}
         for topic, (msgtype, hz) in expected.items():
             c = conns[topic]
-            assert c.msgtype == msgtype and c.msgdef.data.strip()      # definition stored in the bag
+            assert c.msgtype == msgtype and c.msgdef.data.strip()  # definition stored in the bag
             stamps = np.array([t for _, t, _ in reader.messages(connections=[c])], dtype=np.int64)
             period = np.diff(stamps) * 1e-9
             assert np.median(period) == pytest.approx(1.0 / hz, rel=1e-6), topic
-            assert stamps[-1] - stamps[0] == pytest.approx((rec.duration - 1.0 / hz) * 1e9, rel=1e-3)
+            assert stamps[-1] - stamps[0] == pytest.approx(
+                (rec.duration - 1.0 / hz) * 1e9, rel=1e-3
+            )
     shutil.rmtree(path)

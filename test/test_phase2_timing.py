@@ -24,14 +24,20 @@ from sensor_msgs.msg import JointState
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io import messages as M
-from lpv_sysid.nodes.controller_runtime import (TIMEOUT_PERIODS, ControllerRuntime,
-                                                ControllerSettings)
+from lpv_sysid.nodes.controller_runtime import (
+    TIMEOUT_PERIODS,
+    ControllerRuntime,
+    ControllerSettings,
+)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG = os.path.join(ROOT, "config")
-STREAMS = {"state_timeout_s": "state_rate_hz", "rotor_timeout_s": "rotor_rate_hz",
-           "reference_timeout_s": "reference_rate_hz",
-           "excitation_timeout_s": "excitation_rate_hz"}
+STREAMS = {
+    "state_timeout_s": "state_rate_hz",
+    "rotor_timeout_s": "rotor_rate_hz",
+    "reference_timeout_s": "reference_rate_hz",
+    "excitation_timeout_s": "excitation_rate_hz",
+}
 
 
 @pytest.fixture(scope="module")
@@ -48,10 +54,16 @@ def shipped() -> dict:
 # --------------------------------------------------------------- the declared timeout rule
 @pytest.mark.parametrize("timeout, rate", sorted(STREAMS.items()))
 def test_a_timeout_below_two_periods_plus_latency_is_refused(gains, timeout, rate):
-    base = {"gains_file": gains, "input_latency_s": 0.03, "state_timeout_s": 0.5,
-            "rotor_timeout_s": 0.5, "reference_timeout_s": 0.5, "excitation_timeout_s": 0.5}
-    least = 2.0 / 100.0 + 0.03                              # the rule, by hand: 2 / rate + latency
-    ControllerSettings(**{**base, rate: 100.0, timeout: least})      # exactly the rule: valid
+    base = {
+        "gains_file": gains,
+        "input_latency_s": 0.03,
+        "state_timeout_s": 0.5,
+        "rotor_timeout_s": 0.5,
+        "reference_timeout_s": 0.5,
+        "excitation_timeout_s": 0.5,
+    }
+    least = 2.0 / 100.0 + 0.03  # the rule, by hand: 2 / rate + latency
+    ControllerSettings(**{**base, rate: 100.0, timeout: least})  # exactly the rule: valid
     with pytest.raises(ConfigError) as exc:
         ControllerSettings(**{**base, rate: 100.0, timeout: least - 0.001})
     msg = str(exc.value)
@@ -107,8 +119,9 @@ def test_state_ticks_compute_each_command_on_its_own_sample(gains):
     for k in range(1, 6):
         t = t0 + 0.004 * k
         xk = x8 + rng.normal(0.0, 0.01, 8)
-        msg = M.odometry_from_state(f, round(t * 1e9), np.zeros(3), [xk[0], xk[1], 0.0],
-                                    xk[2:5], xk[5:8])
+        msg = M.odometry_from_state(
+            f, round(t * 1e9), np.zeros(3), [xk[0], xk[1], 0.0], xk[2:5], xk[5:8]
+        )
         # delivered 1 ms late: the command is the law at the sample's stamp, on the sample
         out = rt.on_input("state", msg, t + 0.001)
         assert [topic for topic, _ in out] == ["actuator_command"]
@@ -117,29 +130,36 @@ def test_state_ticks_compute_each_command_on_its_own_sample(gains):
         s = M.state_from_odometry(msg)
         x_sent = np.concatenate([s.euler[:2], s.v_body, s.omega])
         np.testing.assert_allclose(cmd.position, by_hand(rt, x_sent, om, ue), atol=1e-12)
-        assert rt.on_input("state", msg, t + 0.002) == []      # the same sample again: nothing
-        assert rt.on_timer(t + 0.002) == []                     # the timer only watches
+        assert rt.on_input("state", msg, t + 0.002) == []  # the same sample again: nothing
+        assert rt.on_timer(t + 0.002) == []  # the timer only watches
     assert rt.commands == 5
 
 
 def test_state_ticks_timer_still_aborts_a_silent_state_stream(gains):
     rt = runtime(gains, tick_source="state")
     x8, om = centre_inputs(rt)
-    for topic, v in (("state", x8), ("rotor_speeds", om), ("velocity_reference", np.zeros(4)),
-                     ("excitation", np.zeros(4))):
+    for topic, v in (
+        ("state", x8),
+        ("rotor_speeds", om),
+        ("velocity_reference", np.zeros(4)),
+        ("excitation", np.zeros(4)),
+    ):
         rt.on_sample(topic, 10.0, v, 10.0)
     rt.start(10.0)
     t, out = 10.0, []
     while not out:
         t += 0.004
-        for topic, v in (("rotor_speeds", om), ("velocity_reference", np.zeros(4)),
-                         ("excitation", np.zeros(4))):
+        for topic, v in (
+            ("rotor_speeds", om),
+            ("velocity_reference", np.zeros(4)),
+            ("excitation", np.zeros(4)),
+        ):
             rt.on_sample(topic, t, v, t)
         out = rt.on_timer(t)
     assert [topic for topic, _ in out] == ["status"]
     assert rt.supervisor.event.reason == "stale"
     assert "state" in rt.supervisor.event.detail
-    assert t - 10.0 == pytest.approx(0.02 + 0.004, abs=0.0041)   # default timeout 0.02 s
+    assert t - 10.0 == pytest.approx(0.02 + 0.004, abs=0.0041)  # default timeout 0.02 s
 
 
 def test_start_waits_for_every_input_stream(gains):
@@ -147,8 +167,12 @@ def test_start_waits_for_every_input_stream(gains):
     had matched the excitation node, the controller latched a stale abort 0.1 s later."""
     rt = runtime(gains)
     x8, om = centre_inputs(rt)
-    samples = [("state", x8), ("rotor_speeds", om), ("velocity_reference", np.zeros(4)),
-               ("excitation", np.zeros(4))]
+    samples = [
+        ("state", x8),
+        ("rotor_speeds", om),
+        ("velocity_reference", np.zeros(4)),
+        ("excitation", np.zeros(4)),
+    ]
     for i, (topic, v) in enumerate(samples):
         ok, why = rt.start(10.0, wait_for_inputs=True)
         assert not ok and not rt.supervisor.armed
@@ -158,17 +182,21 @@ def test_start_waits_for_every_input_stream(gains):
 
 
 def test_timer_ticks_are_unchanged_by_state_samples(gains):
-    rt = runtime(gains)                                    # tick_source: timer (default)
+    rt = runtime(gains)  # tick_source: timer (default)
     x8, om = centre_inputs(rt)
     f = M.MsgFactory.rosbags()
-    for topic, v in (("rotor_speeds", om), ("velocity_reference", np.zeros(4)),
-                     ("excitation", np.zeros(4))):
+    for topic, v in (
+        ("rotor_speeds", om),
+        ("velocity_reference", np.zeros(4)),
+        ("excitation", np.zeros(4)),
+    ):
         rt.on_sample(topic, 5.0, v, 5.0)
     rt.start(5.0)
-    msg = M.odometry_from_state(f, 5_004_000_000, np.zeros(3), [x8[0], x8[1], 0.0], x8[2:5],
-                                x8[5:8])
+    msg = M.odometry_from_state(
+        f, 5_004_000_000, np.zeros(3), [x8[0], x8[1], 0.0], x8[2:5], x8[5:8]
+    )
     assert rt.on_input("state", msg, 5.004) == []
-    (topic, cmd), = rt.on_timer(5.006)
+    ((topic, cmd),) = rt.on_timer(5.006)
     assert topic == "actuator_command" and M.stamp_ns_of(cmd) == 5_006_000_000
 
 
@@ -184,14 +212,14 @@ def test_reference_between_its_messages(gains, hold):
         tm = 1.0 + 0.01 * m
         rt.on_sample("velocity_reference", tm, np.array([slope * tm, 0.0, 0.0, 0.0]), tm)
         for k in range(3):
-            t = tm + 0.004 * k                  # before the next message
+            t = tm + 0.004 * k  # before the next message
             got = rt.reference_at(t)[0]
             want = slope * t if hold == "foh" else slope * tm
-            if m >= 1:                          # (a slope needs two messages)
+            if m >= 1:  # (a slope needs two messages)
                 assert got == pytest.approx(want, abs=1e-12)
                 worst = max(worst, abs(got - slope * t))
     assert (worst < 1e-12) == (hold == "foh")
-    assert rt.limiter.limited == 0                          # inside the design envelope
+    assert rt.limiter.limited == 0  # inside the design envelope
 
 
 def test_foh_extrapolation_is_bounded_by_the_reference_timeout(gains):
@@ -216,8 +244,17 @@ def fresh():
 
 def lockstep_vehicle(*pairs):
     from lpv_sysid.nodes.sim_vehicle_node import SimVehicleNode
-    args = ["n", "--ros-args", "--params-file", os.path.join(CONFIG, "sim_vehicle.yaml"),
-            "-p", "mode:=lpv", "-p", "lockstep:=true"]
+
+    args = [
+        "n",
+        "--ros-args",
+        "--params-file",
+        os.path.join(CONFIG, "sim_vehicle.yaml"),
+        "-p",
+        "mode:=lpv",
+        "-p",
+        "lockstep:=true",
+    ]
     for k, v in pairs:
         args += ["-p", f"{k}:={v}"]
     rclpy.init(args=args)
@@ -235,8 +272,9 @@ class Answerer:
         be = QoSProfile(depth=1000, reliability=QoSReliabilityPolicy.BEST_EFFORT)
         self.pub = node.create_publisher(JointState, "/lpv_sysid/actuator_command", 10)
         node.create_subscription(Odometry, "/lpv_sysid/state", self.on_state, be)
-        node.create_subscription(ClockMsg, "/clock", lambda m: self.clock.append(
-            M.stamp_ns_from_time(m.clock)), 1000)
+        node.create_subscription(
+            ClockMsg, "/clock", lambda m: self.clock.append(M.stamp_ns_from_time(m.clock)), 1000
+        )
 
     def on_state(self, msg):
         self.states.append(M.stamp_ns_of(msg))
@@ -250,7 +288,7 @@ def test_lockstep_sim_time_starts_at_zero_and_publishes_the_clock(fresh):
     standin.spin_nodes([node, probe.node], 0.2)
     # not engaged (nobody commands): free-runs paced by the steady clock, sim time from 0
     assert probe.states[:3] == [0, 4_000_000, 8_000_000]
-    assert probe.clock == probe.states                      # /clock: one per state, same time
+    assert probe.clock == probe.states  # /clock: one per state, same time
     assert not node.engaged and len(probe.states) >= 49
 
 
@@ -268,9 +306,9 @@ def test_lockstep_waits_for_the_command_of_each_state_sample(fresh):
     k_stuck = node.k
     assert k_stuck % node.d_state == 0 and node.awaiting[0] == k_stuck
     standin.spin_for(ex, 0.3)
-    assert node.k == k_stuck                             # ... and stays there (wall 0.8 s < 1 s)
-    assert node.lockstep_resends >= 5                    # the sample is sent again (best effort)
-    assert ctl.states[-1] == k_stuck * node.dt_ns        # the resent sample: same stamp
+    assert node.k == k_stuck  # ... and stays there (wall 0.8 s < 1 s)
+    assert node.lockstep_resends >= 5  # the sample is sent again (best effort)
+    assert ctl.states[-1] == k_stuck * node.dt_ns  # the resent sample: same stamp
     # its command arrives: exactly that command is held over the next physics steps
     u_new = [node.u[0] + 0.01, 0.0, 0.0, 0.0]
     ctl.pub.publish(M.actuator_command_msg(ctl.f, k_stuck * node.dt_ns, u_new))
@@ -279,7 +317,7 @@ def test_lockstep_waits_for_the_command_of_each_state_sample(fresh):
     assert node.k > k_stuck + node.d_state
     assert applied[-1][1] == pytest.approx(u_new) and applied[-1][0] > k_stuck
     first = next(u for k, u in applied if k == k_stuck)
-    assert first == pytest.approx(u_new)                  # computed on the state at k, held from k
+    assert first == pytest.approx(u_new)  # computed on the state at k, held from k
 
 
 def test_lockstep_runs_on_without_a_stopped_controller(fresh):
@@ -291,8 +329,8 @@ def test_lockstep_runs_on_without_a_stopped_controller(fresh):
     assert node.lockstep_timeouts == 1 and not node.engaged
     k = node.k
     standin.spin_for(ex, 0.5)
-    assert node.k - k >= 0.4 * 500                        # free again, paced at real time
-    assert node.handed_back                               # baseline hold after command_timeout_s
+    assert node.k - k >= 0.4 * 500  # free again, paced at real time
+    assert node.handed_back  # baseline hold after command_timeout_s
 
 
 def test_lockstep_waits_for_a_reference_on_sim_time(fresh):
@@ -300,18 +338,21 @@ def test_lockstep_waits_for_a_reference_on_sim_time(fresh):
     lockstep_reference_lag_s ahead of it (a starved excitation node slows the simulation
     instead of going stale at the controller)."""
     from geometry_msgs.msg import TwistStamped
+
     node = lockstep_vehicle(("lockstep_reference_lag_s", 0.03))
     exc = rclpy.create_node("excitation")
     f = M.MsgFactory.rclpy()
     pub = exc.create_publisher(TwistStamped, "/lpv_sysid/velocity_reference", 10)
     sim_now = {"ns": 0}
-    exc.create_subscription(ClockMsg, "/clock", lambda m: sim_now.update(
-        ns=M.stamp_ns_from_time(m.clock)), 10)
+    exc.create_subscription(
+        ClockMsg, "/clock", lambda m: sim_now.update(ns=M.stamp_ns_from_time(m.clock)), 10
+    )
     sending = {"on": True}
 
     def tick():
         if sending["on"]:
             pub.publish(M.twist_reference_msg(f, sim_now["ns"], [0.0, 0.0, 0.0], 0.0))
+
     exc.create_timer(0.01, tick)
     ex = standin.spin_nodes([node, exc], 0.3)
     assert node.ref_engaged

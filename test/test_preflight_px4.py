@@ -20,16 +20,34 @@ import pytest
 from lpv_sysid.mavlink import px4
 from lpv_sysid.mavlink.bridge import BridgeConfig, BridgeCore
 from lpv_sysid.mavlink.link import LinkConfig, MavlinkLink, free_udp_port
-from lpv_sysid.mavlink.preflight import GO, NOGO, WARN, Facts, format_table, judge, run_checks, verdict
+from lpv_sysid.mavlink.preflight import (
+    GO,
+    NOGO,
+    WARN,
+    Facts,
+    format_table,
+    judge,
+    run_checks,
+    verdict,
+)
 from lpv_sysid.mavlink.rotor_estimate import RotorEstimateConfig
 from lpv_sysid.mavlink.telemetry import RotorSample, StateSample
 
 MOD = px4.dialect_module()
 RC_BIT = MOD.MAV_SYS_STATUS_SENSOR_RC_RECEIVER
-CAPS = (MOD.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | MOD.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
-        | MOD.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET)
-PX4_DEFAULTS = {"COM_OF_LOSS_T": 1.0, "COM_OBL_RC_ACT": 0, "COM_DISARM_PRFLT": 10.0, "NAV_DLL_ACT": 0,
-                "COM_RCL_EXCEPT": 0, "COM_RC_IN_MODE": 1}
+CAPS = (
+    MOD.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    | MOD.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+    | MOD.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
+)
+PX4_DEFAULTS = {
+    "COM_OF_LOSS_T": 1.0,
+    "COM_OBL_RC_ACT": 0,
+    "COM_DISARM_PRFLT": 10.0,
+    "NAV_DLL_ACT": 0,
+    "COM_RCL_EXCEPT": 0,
+    "COM_RC_IN_MODE": 1,
+}
 INT_PARAMS = {"COM_OBL_RC_ACT", "NAV_DLL_ACT", "COM_RCL_EXCEPT", "COM_RC_IN_MODE"}
 C = px4.make_codec(None, 1, 1)
 
@@ -44,8 +62,9 @@ def _wire(msg):
 
 
 def _version():
-    return C.autopilot_version_encode(CAPS, px4.encode_flight_sw_version(1, 16, 0), 0, 0, 0,
-                                      [0] * 8, [0] * 8, [0] * 8, 0, 0, 0)
+    return C.autopilot_version_encode(
+        CAPS, px4.encode_flight_sw_version(1, 16, 0), 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0
+    )
 
 
 def _sys_status(rc=False):
@@ -58,7 +77,9 @@ def _rc(chancount=8, rssi=100):
 
 
 def _aos(values=(900.0, 900.0, 900.0, 900.0), active=16):
-    return C.actuator_output_status_encode(1_000_000, active, list(values) + [900.0] * (32 - len(values)))
+    return C.actuator_output_status_encode(
+        1_000_000, active, list(values) + [900.0] * (32 - len(values))
+    )
 
 
 def _servo(values=(900, 900, 900, 900)):
@@ -67,12 +88,27 @@ def _servo(values=(900, 900, 900, 900)):
 
 def sih_facts(**kw) -> Facts:
     """What a PX4 v1.16 SIH quad on the onboard link answers: no RC, no ESC_STATUS."""
-    f = Facts(hb=_wire(_hb(kw.pop("mode", px4.HOLD), kw.pop("armed", False))), version=_wire(_version()),
-              params={**PX4_DEFAULTS, **kw.pop("params", {})},
-              seen={"HEARTBEAT", "ATTITUDE_QUATERNION", "ATTITUDE", "LOCAL_POSITION_NED", "ODOMETRY",
-                    "HIGHRES_IMU", "SYS_STATUS", "ACTUATOR_OUTPUT_STATUS", "SERVO_OUTPUT_RAW"},
-              sys_status=_wire(_sys_status(kw.pop("sticks", False))),
-              motor_outputs={"ACTUATOR_OUTPUT_STATUS": _wire(_aos()), "SERVO_OUTPUT_RAW": _wire(_servo())})
+    f = Facts(
+        hb=_wire(_hb(kw.pop("mode", px4.HOLD), kw.pop("armed", False))),
+        version=_wire(_version()),
+        params={**PX4_DEFAULTS, **kw.pop("params", {})},
+        seen={
+            "HEARTBEAT",
+            "ATTITUDE_QUATERNION",
+            "ATTITUDE",
+            "LOCAL_POSITION_NED",
+            "ODOMETRY",
+            "HIGHRES_IMU",
+            "SYS_STATUS",
+            "ACTUATOR_OUTPUT_STATUS",
+            "SERVO_OUTPUT_RAW",
+        },
+        sys_status=_wire(_sys_status(kw.pop("sticks", False))),
+        motor_outputs={
+            "ACTUATOR_OUTPUT_STATUS": _wire(_aos()),
+            "SERVO_OUTPUT_RAW": _wire(_servo()),
+        },
+    )
     for k, v in kw.items():
         setattr(f, k, v)
     return f
@@ -98,10 +134,20 @@ def test_px4_default_offboard_loss_action_without_rc_is_nogo_with_the_fix():
     assert by["COM_OBL_RC_ACT"].verdict == GO and verdict(checks) is True, format_table(checks)
 
 
-@pytest.mark.parametrize("value,label,no_sticks,sticks", [
-    (0, "POSITION", NOGO, GO), (1, "ALTITUDE", NOGO, GO), (2, "STABILIZED", NOGO, WARN),
-    (3, "RETURN", GO, GO), (4, "LAND", GO, GO), (5, "HOLD", GO, GO),
-    (6, "TERMINATE", NOGO, NOGO), (7, "DISARM", NOGO, NOGO), (8, None, NOGO, NOGO)])
+@pytest.mark.parametrize(
+    "value,label,no_sticks,sticks",
+    [
+        (0, "POSITION", NOGO, GO),
+        (1, "ALTITUDE", NOGO, GO),
+        (2, "STABILIZED", NOGO, WARN),
+        (3, "RETURN", GO, GO),
+        (4, "LAND", GO, GO),
+        (5, "HOLD", GO, GO),
+        (6, "TERMINATE", NOGO, NOGO),
+        (7, "DISARM", NOGO, NOGO),
+        (8, None, NOGO, NOGO),
+    ],
+)
 def test_every_offboard_loss_action_with_its_v116_meaning(value, label, no_sticks, sticks):
     for have, expect in ((False, no_sticks), (True, sticks)):
         _, by = _judge(sih_facts(params={"COM_OBL_RC_ACT": value}, sticks=have))
@@ -120,7 +166,9 @@ def test_stick_input_evidence():
     # PX4's own verdict in SYS_STATUS wins (RC or joystick, valid and recent)
     assert sticks(sticks=True)[1] == GO
     v, verd = sticks(sticks=False, rc_channels=_wire(_rc()))
-    assert verd == NOGO and v.startswith("none: SYS_STATUS manual control absent (RC_CHANNELS 8 ch")
+    assert verd == NOGO and v.startswith(
+        "none: SYS_STATUS manual control absent (RC_CHANNELS 8 ch"
+    )
     # COM_RC_IN_MODE 4 disables stick input whatever else says
     v, verd = sticks(sticks=True, params={"COM_RC_IN_MODE": 4})
     assert verd == NOGO and v == "none: COM_RC_IN_MODE 4 (stick input disabled)"
@@ -130,7 +178,9 @@ def test_stick_input_evidence():
     assert sticks(sys_status=None, rc_channels=_wire(_rc(rssi=0)))[1] == NOGO
     assert sticks(sys_status=None, rc_channels=None)[1] == NOGO
     # RC present but COM_RC_IN_MODE 1 (joystick only): PX4 ignores the RC
-    assert sticks(sys_status=None, rc_channels=_wire(_rc()), params={"COM_RC_IN_MODE": 1})[1] == NOGO
+    assert (
+        sticks(sys_status=None, rc_channels=_wire(_rc()), params={"COM_RC_IN_MODE": 1})[1] == NOGO
+    )
     _, by = _judge(sih_facts())
     assert by["COM_RC_IN_MODE"].value == "1 (joystick only)"
 
@@ -141,7 +191,9 @@ def test_rotor_speed_source_without_esc_telemetry():
     c = by["rotor speeds"]
     assert c.verdict == GO
     assert c.value == "estimated (ACTUATOR_OUTPUT_STATUS)"
-    assert c.note.startswith("no ESC telemetry: estimated rotor speeds (ACTUATOR_OUTPUT_STATUS) will be used")
+    assert c.note.startswith(
+        "no ESC telemetry: estimated rotor speeds (ACTUATOR_OUTPUT_STATUS) will be used"
+    )
     f = sih_facts(motor_outputs={"SERVO_OUTPUT_RAW": _wire(_servo((1500, 1500, 1500, 1500)))})
     _, by = _judge(f)
     assert by["rotor speeds"].verdict == GO and "(SERVO_OUTPUT_RAW)" in by["rotor speeds"].value
@@ -180,9 +232,15 @@ def test_fallback_streams_and_foreign_systems_are_reported():
     f.seen -= {"ATTITUDE_QUATERNION", "LOCAL_POSITION_NED"}
     f.foreign = {(42, 1): 75}
     checks, by = _judge(f)
-    assert by["telemetry attitude"].verdict == WARN and by["telemetry attitude"].value.startswith("ATTITUDE ")
-    assert by["telemetry position"].verdict == WARN and "ODOMETRY" in by["telemetry position"].value
-    assert by["other systems"].verdict == WARN and by["other systems"].value == "system 42 comp 1: 75"
+    assert by["telemetry attitude"].verdict == WARN and by["telemetry attitude"].value.startswith(
+        "ATTITUDE "
+    )
+    assert (
+        by["telemetry position"].verdict == WARN and "ODOMETRY" in by["telemetry position"].value
+    )
+    assert (
+        by["other systems"].verdict == WARN and by["other systems"].value == "system 42 comp 1: 75"
+    )
     assert verdict(checks) is True
     f.seen -= {"ATTITUDE", "ODOMETRY"}
     _, by = _judge(f)
@@ -197,8 +255,9 @@ class ScriptedPx4:
     the onboard defaults; ACTUATOR_OUTPUT_STATUS only once requested; ESC_STATUS and
     RC_CHANNELS only if present. First HEARTBEAT at ``t_hb``, then 1 Hz."""
 
-    def __init__(self, port: int, params: dict, esc: bool = False, t_hb: float = 0.3,
-                 foreign: bool = False) -> None:
+    def __init__(
+        self, port: int, params: dict, esc: bool = False, t_hb: float = 0.3, foreign: bool = False
+    ) -> None:
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", 0))
         self.sock.setblocking(False)
@@ -208,8 +267,15 @@ class ScriptedPx4:
         self.rx = px4.make_codec(None, 1, 1)
         self.params = params
         self.esc, self.foreign = esc, foreign
-        self.rates = {"HEARTBEAT": 1.0, "ATTITUDE_QUATERNION": 50.0, "ATTITUDE": 100.0, "ODOMETRY": 30.0,
-                      "LOCAL_POSITION_NED": 30.0, "HIGHRES_IMU": 50.0, "SYS_STATUS": 5.0}
+        self.rates = {
+            "HEARTBEAT": 1.0,
+            "ATTITUDE_QUATERNION": 50.0,
+            "ATTITUDE": 100.0,
+            "ODOMETRY": 30.0,
+            "LOCAL_POSITION_NED": 30.0,
+            "HIGHRES_IMU": 50.0,
+            "SYS_STATUS": 5.0,
+        }
         self.next = {k: t_hb for k in self.rates}
         self.requested: list[int] = []
 
@@ -234,8 +300,11 @@ class ScriptedPx4:
             name = px4.param_id_str(m.param_id)
             if name in self.params:
                 typ = px4.MAV_PARAM_TYPE_INT32 if name in INT_PARAMS else px4.MAV_PARAM_TYPE_REAL32
-                self._send(self.c.param_value_encode(name.encode(), px4.param_to_wire(self.params[name], typ),
-                                                     typ, 900, 0))
+                self._send(
+                    self.c.param_value_encode(
+                        name.encode(), px4.param_to_wire(self.params[name], typ), typ, 900, 0
+                    )
+                )
         elif m.get_type() == "COMMAND_LONG":
             self._send(self.c.command_ack_encode(m.command, 0, 0, 0, 0, 0))
             if m.command == 512 and int(m.param1) == MOD.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
@@ -256,11 +325,18 @@ class ScriptedPx4:
         elif name == "ATTITUDE_QUATERNION":
             self._send(c.attitude_quaternion_encode(ms, 1, 0, 0, 0, 0, 0, 0, [0.0] * 4))
             if self.foreign:
-                self._send(self.other.attitude_quaternion_encode(ms, 1, 0, 0, 0, 0, 0, 0, [0.0] * 4), self.other)
+                self._send(
+                    self.other.attitude_quaternion_encode(ms, 1, 0, 0, 0, 0, 0, 0, [0.0] * 4),
+                    self.other,
+                )
         elif name == "ATTITUDE":
             self._send(c.attitude_encode(ms, 0, 0, 0, 0, 0, 0))
         elif name == "ODOMETRY":
-            self._send(c.odometry_encode(us, 1, 1, 0, 0, 0, [1, 0, 0, 0], 0, 0, 0, 0, 0, 0, [0.0] * 21, [0.0] * 21))
+            self._send(
+                c.odometry_encode(
+                    us, 1, 1, 0, 0, 0, [1, 0, 0, 0], 0, 0, 0, 0, 0, 0, [0.0] * 21, [0.0] * 21
+                )
+            )
         elif name == "LOCAL_POSITION_NED":
             self._send(c.local_position_ned_encode(ms, 0, 0, 0, 0, 0, 0))
         elif name == "HIGHRES_IMU":
@@ -288,7 +364,9 @@ def _gather(params, timeout=5.0, **kw):
         veh.step(clock["t"])
 
     try:
-        checks = run_checks(link, timeout=timeout, clock=lambda: clock["t"], sleep=sleep, grace=1.5)
+        checks = run_checks(
+            link, timeout=timeout, clock=lambda: clock["t"], sleep=sleep, grace=1.5
+        )
     finally:
         link.close()
         veh.close()
@@ -301,17 +379,21 @@ def test_gathering_ends_after_the_grace_period_without_esc_and_rc_not_at_the_tim
     assert 0.3 + 1.5 <= t_end <= 0.3 + 1.5 + 0.1
     assert by["COM_OBL_RC_ACT"].verdict == NOGO and verdict(checks) is False
     assert MOD.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS in veh.requested
-    assert by["rotor speeds"].note.startswith("no ESC telemetry: estimated rotor speeds (ACTUATOR_OUTPUT_STATUS)")
+    assert by["rotor speeds"].note.startswith(
+        "no ESC telemetry: estimated rotor speeds (ACTUATOR_OUTPUT_STATUS)"
+    )
     assert by["rotor speeds"].verdict == GO
     checks, by, t_end, _ = _gather({**PX4_DEFAULTS, "COM_OBL_RC_ACT": 5}, foreign=True)
     assert verdict(checks) is True, format_table(checks)
-    assert by["other systems"].verdict == WARN and by["other systems"].value.startswith("system 42 comp 1:")
+    assert by["other systems"].verdict == WARN and by["other systems"].value.startswith(
+        "system 42 comp 1:"
+    )
 
 
 def test_gathering_ends_as_soon_as_every_answer_is_in():
     checks, by, t_end, _ = _gather({**PX4_DEFAULTS, "COM_OBL_RC_ACT": 5}, esc=True)
     assert by["rotor speeds"].value == "measured (ESC_STATUS)"
-    assert t_end < 0.3 + 1.0            # HEARTBEAT at 0.3 s, answers and streams within 0.5 s
+    assert t_end < 0.3 + 1.0  # HEARTBEAT at 0.3 s, answers and streams within 0.5 s
     assert verdict(checks) is True
 
 
@@ -329,7 +411,7 @@ def _real_px4():
 def real_px4():
     from px4_sitl import Px4Sitl
 
-    with Px4Sitl(_real_px4(), instance=4) as sitl:      # instance 4: telemetry/preflight tests
+    with Px4Sitl(_real_px4(), instance=4) as sitl:  # instance 4: telemetry/preflight tests
         yield sitl
 
 
@@ -339,8 +421,14 @@ def _cli(*args):
     import sys
 
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    return subprocess.run([sys.executable, "-m", "lpv_sysid.cli", *args], cwd=root, capture_output=True,
-                          text=True, timeout=60, env={**os.environ, "PYTHONPATH": root})
+    return subprocess.run(
+        [sys.executable, "-m", "lpv_sysid.cli", *args],
+        cwd=root,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={**os.environ, "PYTHONPATH": root},
+    )
 
 
 def _set_param(url: str, name: str, value: int, duration: float = 5.0) -> float | int | None:
@@ -360,9 +448,15 @@ def _set_param(url: str, name: str, value: int, duration: float = 5.0) -> float 
                     got = px4.param_from_wire(m.param_value, m.param_type)
             link.step(now)
             if link.target_system and not sent:
-                link.send(link.codec.param_set_encode(link.target_system, link.target_component, name.encode(),
-                                                      px4.param_to_wire(value, px4.MAV_PARAM_TYPE_INT32),
-                                                      px4.MAV_PARAM_TYPE_INT32))
+                link.send(
+                    link.codec.param_set_encode(
+                        link.target_system,
+                        link.target_component,
+                        name.encode(),
+                        px4.param_to_wire(value, px4.MAV_PARAM_TYPE_INT32),
+                        px4.MAV_PARAM_TYPE_INT32,
+                    )
+                )
                 sent = True
             time.sleep(0.01)
     finally:
@@ -374,9 +468,13 @@ def test_real_px4_preflight_nogo_with_the_default_offboard_loss_action_and_go_wi
     r = _cli("preflight", "--connect", real_px4.url, "--config", "config/mavlink_bridge.yaml")
     assert r.returncode == 1, r.stdout + r.stderr
     out = r.stdout
-    assert "COM_OBL_RC_ACT" in out and "0 (POSITION)" in out and "`param set COM_OBL_RC_ACT 5`" in out
-    assert "stick input" in out and "none: SYS_STATUS manual control absent (no RC_CHANNELS)" in out
-    assert "COM_RC_IN_MODE" in out and "1 (joystick only)" in out           # SITL rcS default
+    assert (
+        "COM_OBL_RC_ACT" in out and "0 (POSITION)" in out and "`param set COM_OBL_RC_ACT 5`" in out
+    )
+    assert (
+        "stick input" in out and "none: SYS_STATUS manual control absent (no RC_CHANNELS)" in out
+    )
+    assert "COM_RC_IN_MODE" in out and "1 (joystick only)" in out  # SITL rcS default
     assert "estimated (ACTUATOR_OUTPUT_STATUS)" in out
     assert "no ESC telemetry: estimated rotor speeds (ACTUATOR_OUTPUT_STATUS) will be used" in out
     assert _set_param(real_px4.url, "COM_OBL_RC_ACT", 5) == 5
@@ -424,11 +522,19 @@ def test_real_px4_state_without_duplicates_and_estimated_rotor_speeds(real_px4):
         while time.monotonic() - t0 < 40.0:
             now = time.monotonic()
             for s in core.poll(now).samples:
-                (states if isinstance(s, StateSample) else rotors if isinstance(s, RotorSample) else []).append(s)
-            if 2.0 < now - t0 < 4.0 and injected < 100:            # another vehicle on the link
+                (
+                    states
+                    if isinstance(s, StateSample)
+                    else rotors
+                    if isinstance(s, RotorSample)
+                    else []
+                ).append(s)
+            if 2.0 < now - t0 < 4.0 and injected < 100:  # another vehicle on the link
                 ms = int((now - t0) * 1000)
-                intruder.sendto(other.local_position_ned_encode(ms, -500.0, 0, 0, 0, 0, 0).pack(other),
-                                ("127.0.0.1", 14544))
+                intruder.sendto(
+                    other.local_position_ned_encode(ms, -500.0, 0, 0, 0, 0, 0).pack(other),
+                    ("127.0.0.1", 14544),
+                )
                 injected += 1
             if phase["armed"] is None and now - t0 > 5.0:
                 core.link.command_long(400, 1.0)
@@ -436,27 +542,34 @@ def test_real_px4_state_without_duplicates_and_estimated_rotor_speeds(real_px4):
             if phase["armed"] and phase["takeoff"] is None and now - phase["armed"] > 1.0:
                 core.link.command_long(22, 0, 0, 0, math.nan, math.nan, math.nan, math.nan)
                 phase["takeoff"] = now
-            if phase["takeoff"] and states and states[-1].pos_ned[2] < -2.0 and now - phase["takeoff"] > 12.0:
+            if (
+                phase["takeoff"]
+                and states
+                and states[-1].pos_ned[2] < -2.0
+                and now - phase["takeoff"] > 12.0
+            ):
                 break
             time.sleep(0.002)
-        core.link.command_long(21)                                   # land
+        core.link.command_long(21)  # land
         st = core.status(time.monotonic())
     finally:
         intruder.close()
         core.close()
     tel = core.telemetry
     assert tel.stats.out_of_order == 0 and tel.stats.invalid == 0
-    assert counts["ATTITUDE"] > 0 and counts["ODOMETRY"] > 0           # streamed by PX4 ...
+    assert counts["ATTITUDE"] > 0 and counts["ODOMETRY"] > 0  # streamed by PX4 ...
     n_sel = counts["ATTITUDE_QUATERNION"] + counts["LOCAL_POSITION_NED"]
     # ... but never on state, except in the first moment before ATTITUDE_QUATERNION arrives
     assert n_sel - 2 <= len(states) <= n_sel + 5, (len(states), dict(counts))
-    assert injected == 100 and st["foreign_messages"] == "100" and st["foreign_sources"] == "42/1:100"
+    assert (
+        injected == 100 and st["foreign_messages"] == "100" and st["foreign_sources"] == "42/1:100"
+    )
     assert not any(abs(s.pos_ned[0] + 500.0) < 1.0 for s in states)
     assert {r.source for r in rotors} == {"estimated"} and st["rotor_source"] == "estimated"
     tv = np.array([r.t_vehicle for r in rotors])
-    rate = (len(tv) - 1) / (tv[-1] - tv[0])                            # vehicle clock
+    rate = (len(tv) - 1) / (tv[-1] - tv[0])  # vehicle clock
     assert 45.0 <= rate <= 55.0, rate
-    assert pwm[0] == [900.0] * 4 and not rotors[0].omega.any()        # disarmed: stopped
+    assert pwm[0] == [900.0] * 4 and not rotors[0].omega.any()  # disarmed: stopped
     hover = np.array([r.omega for r in rotors[-100:]])
     hover_pwm = np.array(pwm[-100:])
     # SIH hover: PWM ~1500 us (MPC_THR_HOVER 0.5) -> b/a * 0.5 = 568 rad/s with config/quadrotor.yaml

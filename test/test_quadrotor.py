@@ -8,8 +8,15 @@ from scipy.integrate import solve_ivp
 from scipy.spatial.transform import Rotation
 
 from lpv_sysid.errors import ConfigError, SolverError
-from lpv_sysid.models.quadrotor import (DEFAULT_K, K_NAMES, Quadrotor, QuadrotorParams,
-                                        full_state, mixer, reduced_state)
+from lpv_sysid.models.quadrotor import (
+    DEFAULT_K,
+    K_NAMES,
+    Quadrotor,
+    QuadrotorParams,
+    full_state,
+    mixer,
+    reduced_state,
+)
 
 Q = Quadrotor()
 P = Q.params
@@ -71,14 +78,14 @@ def test_euler_kinematics_eq2_against_rotation_derivative():
     rates = Q.derivatives(x, Q.mix @ np.full(4, P.a_omega * P.omega_min / P.b_omega))[3:6]
     h = 1e-6
     R0 = Rotation.from_euler("ZYX", [psi, th, phi])
-    R1 = R0 * Rotation.from_rotvec(om * h)   # R-dot = R [omega x] (Eq. 1b)
+    R1 = R0 * Rotation.from_rotvec(om * h)  # R-dot = R [omega x] (Eq. 1b)
     ypr = R1.as_euler("ZYX")
     assert np.allclose((np.array([ypr[2], ypr[1], ypr[0]]) - [phi, th, psi]) / h, rates, atol=1e-5)
 
 
 def test_hover_trim_is_level_with_equal_rotors():
     tr = Q.trim([0, 0, 0])
-    om_h = math.sqrt(P.mass * P.g / -P.K["z_T0"])   # z_mu0 = 0 in the defaults
+    om_h = math.sqrt(P.mass * P.g / -P.K["z_T0"])  # z_mu0 = 0 in the defaults
     assert tr.x0[0] == pytest.approx(0, abs=1e-9) and tr.x0[1] == pytest.approx(0, abs=1e-9)
     assert np.allclose(tr.full_state[12:], om_h, rtol=1e-8)
     assert 580 < om_h < 630
@@ -91,7 +98,7 @@ def test_trim_symmetry(axis):
     v = np.zeros(3)
     v[axis] = 5.0
     a, b = Q.trim(v), Q.trim(-v)
-    ang = 1 if axis == 0 else 0          # u -> theta, v -> phi
+    ang = 1 if axis == 0 else 0  # u -> theta, v -> phi
     assert a.x0[ang] == pytest.approx(-b.x0[ang], rel=1e-7)
     assert abs(a.x0[ang]) > math.radians(2)
     assert a.x0[8] == pytest.approx(b.x0[8], rel=1e-9)
@@ -100,10 +107,15 @@ def test_trim_symmetry(axis):
 
 
 SEED_TABLE1 = {  # vertex -> (phi0, theta0 [deg], delta_t0 [rad/s]) of seed 0 Table 1
-    (-5, -5, -5): (-10.87, 9.28, 691.4), (5, -5, -5): (-10.44, -8.05, 685.0),
-    (-5, 5, -5): (8.55, 8.11, 689.0), (5, 5, -5): (8.04, -8.98, 679.5),
-    (-5, -5, 5): (-5.00, 3.17, 554.9), (5, -5, 5): (-5.14, -4.08, 521.8),
-    (-5, 5, 5): (3.80, 3.00, 546.9), (5, 5, 5): (3.85, -4.83, 525.8)}
+    (-5, -5, -5): (-10.87, 9.28, 691.4),
+    (5, -5, -5): (-10.44, -8.05, 685.0),
+    (-5, 5, -5): (8.55, 8.11, 689.0),
+    (5, 5, -5): (8.04, -8.98, 679.5),
+    (-5, -5, 5): (-5.00, 3.17, 554.9),
+    (5, -5, 5): (-5.14, -4.08, 521.8),
+    (-5, 5, 5): (3.80, 3.00, 546.9),
+    (5, 5, 5): (3.85, -4.83, 525.8),
+}
 
 
 @pytest.mark.parametrize("vertex", list(SEED_TABLE1))
@@ -121,7 +133,7 @@ def test_yaw_rate_trim_is_a_steady_turn():
     tr = Q.trim([4, 1, -1], yaw_rate=0.4)
     xd = Q.derivatives(tr.full_state, tr.u0)
     assert np.max(np.abs(xd[3:5])) < 1e-9 and np.max(np.abs(xd[6:])) < 1e-7
-    assert xd[5] == pytest.approx(0.4, rel=1e-9)            # psi-dot, Eq. (2)
+    assert xd[5] == pytest.approx(0.4, rel=1e-9)  # psi-dot, Eq. (2)
 
 
 def test_trim_outside_rotor_limits_raises():
@@ -144,8 +156,15 @@ def _fd_jacobians(x, u):
     return A, B
 
 
-@pytest.mark.parametrize("vd,yaw_rate,pert", [
-    ([0, 0, 0], 0.0, 0.0), ([5, -5, -5], 0.0, 0.0), ([-5, 5, 5], 0.0, 1.0), ([3, 1, -2], 0.3, 1.0)])
+@pytest.mark.parametrize(
+    "vd,yaw_rate,pert",
+    [
+        ([0, 0, 0], 0.0, 0.0),
+        ([5, -5, -5], 0.0, 0.0),
+        ([-5, 5, 5], 0.0, 1.0),
+        ([3, 1, -2], 0.3, 1.0),
+    ],
+)
 def test_analytic_jacobians_match_finite_differences(vd, yaw_rate, pert):
     tr = Q.trim(vd, yaw_rate=yaw_rate)
     x = tr.x0 + pert * np.r_[0.05, -0.03, 0.2, -0.1, 0.1, 0.1, -0.2, 0.15, 5, 3, -2, 8]
@@ -168,12 +187,12 @@ def test_linearize_actuator_rows_and_trim_equilibrium():
 
 def test_unknown_masks_structure():
     mA, mB = Q.unknown_masks()
-    assert not mA[0:2].any() and not mA[8:].any()           # kinematics, motors known
-    assert not mA[2:5, 0:2].any()                             # gravity known
-    assert mA[2, 2] and mA[3, 3] and mA[4, 4] and mA[4, 8]    # drag, inflow, thrust
-    assert not mA[2, 3] and not mA[2, 7]                      # Coriolis only (v r, no aero)
-    assert mA[5, 9] and mA[6, 10] and mA[7, 11]               # control effectiveness
-    assert mB.sum() == 1 and mB[7, 3]                         # J_z delta_r-dot only
+    assert not mA[0:2].any() and not mA[8:].any()  # kinematics, motors known
+    assert not mA[2:5, 0:2].any()  # gravity known
+    assert mA[2, 2] and mA[3, 3] and mA[4, 4] and mA[4, 8]  # drag, inflow, thrust
+    assert not mA[2, 3] and not mA[2, 7]  # Coriolis only (v r, no aero)
+    assert mA[5, 9] and mA[6, 10] and mA[7, 11]  # control effectiveness
+    assert mB.sum() == 1 and mB[7, 3]  # J_z delta_r-dot only
     # an element outside the mask does not change when all K are perturbed
     Kp = {k: v * 1.3 + 1e-6 for k, v in DEFAULT_K.items()}
     Q2 = Quadrotor(QuadrotorParams(K=Kp, j_rotor=P.j_rotor * 1.3))
@@ -189,8 +208,13 @@ def test_motor_step_time_constant():
     """Rotor speed after a u_ESC step follows exp(-a t) (Eq. 8): 63.2 % at t = 1/a."""
     tr = Q.trim([0, 0, 0])
     u_esc = np.full(4, 0.6)
-    sol = solve_ivp(lambda t, x: Q.derivatives(x, Q.mix @ u_esc), (0, 1 / P.a_omega), tr.full_state,
-                    rtol=1e-10, atol=1e-8)
+    sol = solve_ivp(
+        lambda t, x: Q.derivatives(x, Q.mix @ u_esc),
+        (0, 1 / P.a_omega),
+        tr.full_state,
+        rtol=1e-10,
+        atol=1e-8,
+    )
     om0 = tr.full_state[12]
     om_ss = P.b_omega * 0.6 / P.a_omega
     frac = (sol.y[12, -1] - om0) / (om_ss - om0)

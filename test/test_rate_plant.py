@@ -12,14 +12,36 @@ import pytest
 from lpv_sysid.cli.chain import _fade, excitation_gain, inversion_error
 from lpv_sysid.errors import ConfigError, SafetyError
 from lpv_sysid.ident import rate_plant as rid
-from lpv_sysid.mavlink.transport import (ATTITUDE_TARGET_IGNORE_ATTITUDE, RATE_INPUT_NAMES, ActuatorSetpoint,
-                                         RateSetpointTransport, TransportContext, make_transport,
-                                         rate_setpoint_from_attitude_target)
+from lpv_sysid.mavlink.transport import (
+    ATTITUDE_TARGET_IGNORE_ATTITUDE,
+    RATE_INPUT_NAMES,
+    ActuatorSetpoint,
+    RateSetpointTransport,
+    TransportContext,
+    make_transport,
+    rate_setpoint_from_attitude_target,
+)
 from lpv_sysid.models import rate_plant as rp
 
 G = rp.GRAVITY
-P0 = rp.RatePlantParams(X_u=-0.9, Y_v=-0.85, Z_w=-0.5, Z_T=-12.5, L_p=-10.0, L_sp=10.0, M_q=-12.0, M_sp=12.0,
-                        N_r=-2.0, N_sp=2.0, c_u=0.02, c_v=-0.03, c_w=-3.5, c_p=0.01, c_q=-0.02, c_r=0.005)
+P0 = rp.RatePlantParams(
+    X_u=-0.9,
+    Y_v=-0.85,
+    Z_w=-0.5,
+    Z_T=-12.5,
+    L_p=-10.0,
+    L_sp=10.0,
+    M_q=-12.0,
+    M_sp=12.0,
+    N_r=-2.0,
+    N_sp=2.0,
+    c_u=0.02,
+    c_v=-0.03,
+    c_w=-3.5,
+    c_p=0.01,
+    c_q=-0.02,
+    c_r=0.005,
+)
 
 
 def test_trim_is_equilibrium_and_jacobian_matches_hand_derivation():
@@ -30,11 +52,15 @@ def test_trim_is_equilibrium_and_jacobian_matches_hand_derivation():
     # pitch balances drag: g sin(theta) = X_u u + c_u
     assert G * math.sin(th) == pytest.approx(P0.X_u * 1.2 + P0.c_u, rel=1e-12)
     A, B = rp.linearize(x0, u0, P0)
-    assert A[2, 1] == pytest.approx(-G * math.cos(th), rel=1e-7)           # du'/dtheta
+    assert A[2, 1] == pytest.approx(-G * math.cos(th), rel=1e-7)  # du'/dtheta
     assert A[3, 0] == pytest.approx(G * math.cos(th) * math.cos(phi), rel=1e-7)
     assert A[4, 0] == pytest.approx(-G * math.cos(th) * math.sin(phi), rel=1e-6)
-    assert A[2, 7] == pytest.approx(v[1], abs=1e-7) and A[2, 6] == pytest.approx(-v[2], abs=1e-7)  # r v - q w
-    assert A[4, 6] == pytest.approx(v[0], abs=1e-7) and A[4, 5] == pytest.approx(-v[1], abs=1e-7)  # q u - p v
+    assert A[2, 7] == pytest.approx(v[1], abs=1e-7) and A[2, 6] == pytest.approx(
+        -v[2], abs=1e-7
+    )  # r v - q w
+    assert A[4, 6] == pytest.approx(v[0], abs=1e-7) and A[4, 5] == pytest.approx(
+        -v[1], abs=1e-7
+    )  # q u - p v
     assert A[0, 5] == pytest.approx(1.0) and A[1, 6] == pytest.approx(math.cos(phi), rel=1e-7)
     assert A[4, 4] == pytest.approx(P0.Z_w) and B[4, 0] == pytest.approx(P0.Z_T)
     assert B[5, 1] == pytest.approx(P0.L_sp) and B[7, 3] == pytest.approx(P0.N_sp)
@@ -42,10 +68,12 @@ def test_trim_is_equilibrium_and_jacobian_matches_hand_derivation():
 
 
 def test_polytope_vertex_order_and_intervals():
-    P = rp.RatePlantParams(**{k: getattr(P0, k) for k in rp.PARAM_ENTRIES}, std={"Z_T": 0.5, "L_sp": 0.2})
+    P = rp.RatePlantParams(
+        **{k: getattr(P0, k) for k in rp.PARAM_ENTRIES}, std={"Z_T": 0.5, "L_sp": 0.2}
+    )
     model, els = rp.polytope(P, [-1, -1, -0.5], [1, 1, 0.5], k_sigma=2.0)
     assert model.n_vertices == 8 and model.state_names == rp.STATE_NAMES
-    assert np.allclose(model.x0[:, 2:5], model.vertices)          # trim velocity = the vertex
+    assert np.allclose(model.x0[:, 2:5], model.vertices)  # trim velocity = the vertex
     zt = [e for e in els[0] if e.matrix == "B" and (e.row, e.col) == (4, 0)][0]
     assert (zt.lower, zt.upper) == pytest.approx((P0.Z_T - 1.0, P0.Z_T + 1.0))
     assert len(els[0]) == 2
@@ -65,7 +93,7 @@ def _simulate(P, T=40.0, fs=200.0, seed=0, noise=0.0):
     x = np.zeros((len(t), 8))
     x[0] = x0
     dt = 1.0 / fs
-    for i in range(len(t) - 1):               # RK4
+    for i in range(len(t) - 1):  # RK4
         k1 = rp.dynamics(x[i], u[i], P)
         k2 = rp.dynamics(x[i] + dt / 2 * k1, u[i], P)
         k3 = rp.dynamics(x[i] + dt / 2 * k2, u[i], P)
@@ -92,7 +120,9 @@ def test_validate_scores_the_true_model_near_one_and_a_wrong_one_lower():
     run = rid.run_from_arrays("sim", t[::2], x[::2], t[::4], u[::4])
     good = rid.validate(P0, run)
     assert min(good.values()) > 0.95
-    slow = rp.RatePlantParams(**{**{k: getattr(P0, k) for k in rp.PARAM_ENTRIES}, "L_p": -3.0, "L_sp": 3.0})
+    slow = rp.RatePlantParams(
+        **{**{k: getattr(P0, k) for k in rp.PARAM_ENTRIES}, "L_p": -3.0, "L_sp": 3.0}
+    )
     bad = rid.validate(slow, run)
     assert bad["p"] < good["p"] - 0.2 and bad["q"] == pytest.approx(good["q"])
 
@@ -104,7 +134,9 @@ def test_rate_row_never_takes_a_sign_flipped_fit():
     t, x, u = _simulate(P0, T=20.0, seed=4)
     u = u.copy()
     u[:, 1] = -u[:, 1]
-    cfg = rid.RateIdConfig(unit_dc_gain=False, delays=(0.0, 0.02))   # free fit: L_sp carries the sign
+    cfg = rid.RateIdConfig(
+        unit_dc_gain=False, delays=(0.0, 0.02)
+    )  # free fit: L_sp carries the sign
     run = rid.run_from_arrays("sim", t[::2], x[::2], t[::4], u[::4], cfg)
     with pytest.raises(ConfigError, match="row p: no delay .* positive setpoint gain"):
         rid.identify([run], cfg)
@@ -112,10 +144,17 @@ def test_rate_row_never_takes_a_sign_flipped_fit():
 
 def test_identification_refuses_short_or_malformed_data():
     with pytest.raises(ConfigError, match="states must be"):
-        rid.run_from_arrays("x", np.arange(10.0), np.zeros((10, 7)), np.arange(10.0), np.zeros((10, 4)))
+        rid.run_from_arrays(
+            "x", np.arange(10.0), np.zeros((10, 7)), np.arange(10.0), np.zeros((10, 4))
+        )
     with pytest.raises(Exception, match="overlap only"):
-        rid.run_from_arrays("x", np.arange(0, 2, 0.01), np.zeros((200, 8)), np.arange(0, 2, 0.02),
-                            np.zeros((100, 4)))
+        rid.run_from_arrays(
+            "x",
+            np.arange(0, 2, 0.01),
+            np.zeros((200, 8)),
+            np.arange(0, 2, 0.02),
+            np.zeros((100, 4)),
+        )
 
 
 class _Codec:
@@ -125,8 +164,12 @@ class _Codec:
 
 def test_rate_setpoint_transport_sends_the_command_unchanged_and_clips():
     tr = make_transport("rate_setpoint", max_rate=1.5)
-    assert isinstance(tr, RateSetpointTransport) and tr.name == "attitude_rate" and tr.neutral() is None
-    ctx = TransportContext(1234, 1, 1, None, None)       # needs no telemetry (no inversion)
+    assert (
+        isinstance(tr, RateSetpointTransport)
+        and tr.name == "attitude_rate"
+        and tr.neutral() is None
+    )
+    ctx = TransportContext(1234, 1, 1, None, None)  # needs no telemetry (no inversion)
     (msg,) = tr.encode(_Codec(), ActuatorSetpoint((0.52, 0.1, -0.2, 0.05)), ctx)
     assert msg[:4] == (1234, 1, 1, ATTITUDE_TARGET_IGNORE_ATTITUDE)
     assert msg[5:] == pytest.approx((0.1, -0.2, 0.05, 0.52))
@@ -141,8 +184,9 @@ def test_attitude_target_round_trip_through_pymavlink():
     from pymavlink.dialects.v20 import common as mav
 
     codec = mav.MAVLink(None, srcSystem=1, srcComponent=1)
-    (m,) = RateSetpointTransport().encode(codec, ActuatorSetpoint((0.61, 0.25, -0.125, 0.5)),
-                                          TransportContext(5000, 1, 1))
+    (m,) = RateSetpointTransport().encode(
+        codec, ActuatorSetpoint((0.61, 0.25, -0.125, 0.5)), TransportContext(5000, 1, 1)
+    )
     (back,) = mav.MAVLink(None).parse_buffer(m.pack(codec))
     t, u = rate_setpoint_from_attitude_target(back)
     assert t == pytest.approx(5.0) and u == pytest.approx([0.61, 0.25, -0.125, 0.5], rel=1e-6)
@@ -156,21 +200,23 @@ def test_excitation_gain_recovers_known_fir_and_ignores_tracking_error():
     for k in range(4):
         for f in rng.uniform(0.5, 3.0, 20):
             ue[:, k] += np.sin(2 * np.pi * f * t + rng.uniform(0, 2 * np.pi))
-    ue /= math.sqrt((ue ** 2).sum() / fs)              # unit energy (Eq. 26)
+    ue /= math.sqrt((ue**2).sum() / fs)  # unit energy (Eq. 26)
     z = np.zeros((len(t), 3))
-    d = 5                                              # 0.1 s delay, static gain 0.3 from ue[:,1] to z[:,0]
+    d = 5  # 0.1 s delay, static gain 0.3 from ue[:,1] to z[:,0]
     z[d:, 0] = 0.3 * ue[:-d, 1]
     z[:, 1] = 0.1 * ue[:, 2]
-    slow = 2.0 * np.sin(2 * np.pi * 0.05 * t)          # tracking error of the slow reference: much larger
+    slow = 2.0 * np.sin(2 * np.pi * 0.05 * t)  # tracking error of the slow reference: much larger
     z[:, 0] += slow
     res = excitation_gain(t, z, ue, fs)
     # oracle: ||z_e||^2 = 0.09 ||ue_1||^2 + 0.01 ||ue_2||^2, peak singular value 0.3
-    a, b = res["window"]                               # rows kept (filter edges dropped)
-    e1 = (ue[a - d:b - d, 1] ** 2).sum()
+    a, b = res["window"]  # rows kept (filter edges dropped)
+    e1 = (ue[a - d : b - d, 1] ** 2).sum()
     e2 = (ue[a:b, 2] ** 2).sum()
-    assert res["energy_ratio"] == pytest.approx(math.sqrt((0.09 * e1 + 0.01 * e2) / (ue[a:b] ** 2).sum()), rel=0.03)
+    assert res["energy_ratio"] == pytest.approx(
+        math.sqrt((0.09 * e1 + 0.01 * e2) / (ue[a:b] ** 2).sum()), rel=0.03
+    )
     assert res["fir_peak_gain"] == pytest.approx(0.3, rel=0.03)
-    raw = math.sqrt((z ** 2).sum() / fs)               # mixed ratio would be >> 0.3
+    raw = math.sqrt((z**2).sum() / fs)  # mixed ratio would be >> 0.3
     assert raw > 5 * res["energy_ratio"]
 
 
@@ -188,10 +234,14 @@ def test_inversion_error_is_kp_times_rate_change_over_the_telemetry_age():
     res = inversion_error(t, om, rate_p=(0.15, 0.15, 0.2), delays=(0.02,))
     expect = A * math.sqrt(2) * abs(math.sin(math.pi * f * 0.02))
     e = res["by_delay"][0]["torque_error_rms"]
-    assert e[0] == pytest.approx(0.15 * expect, rel=0.01) and e[2] == pytest.approx(0.2 * expect, rel=0.01)
+    assert e[0] == pytest.approx(0.15 * expect, rel=0.01) and e[2] == pytest.approx(
+        0.2 * expect, rel=0.01
+    )
     s = 0.225 * math.sqrt(2) / 2
     assert res["design_torque"][0] == pytest.approx(0.01 / (4 * s))
-    assert res["by_delay"][0]["ratio_to_design_torque"][0] == pytest.approx(e[0] / (0.01 / (4 * s)))
+    assert res["by_delay"][0]["ratio_to_design_torque"][0] == pytest.approx(
+        e[0] / (0.01 / (4 * s))
+    )
 
 
 class _Msg:
@@ -219,12 +269,18 @@ class _Link:
 def test_attitude_target_tap_passes_only_the_targets_setpoints_and_keeps_messages():
     from lpv_sysid.cli.fly import tap_attitude_target
 
-    at = dict(time_boot_ms=1000, thrust=0.5, body_roll_rate=0.1, body_pitch_rate=-0.2, body_yaw_rate=0.3)
-    batch = [_Msg("ATTITUDE_TARGET", 3, **at), _Msg("ATTITUDE_TARGET", 7, **at),      # foreign system
-             _Msg("HEARTBEAT", 3), _Msg("ATTITUDE_TARGET", 3, **{**at, "thrust": float("nan")})]
+    at = dict(
+        time_boot_ms=1000, thrust=0.5, body_roll_rate=0.1, body_pitch_rate=-0.2, body_yaw_rate=0.3
+    )
+    batch = [
+        _Msg("ATTITUDE_TARGET", 3, **at),
+        _Msg("ATTITUDE_TARGET", 7, **at),  # foreign system
+        _Msg("HEARTBEAT", 3),
+        _Msg("ATTITUDE_TARGET", 3, **{**at, "thrust": float("nan")}),
+    ]
     link = _Link([batch])
     got = []
     tap_attitude_target(link, lambda t, u: got.append((t, list(u))))
     msgs = link.poll(12.5)
-    assert msgs == batch                                   # the bridge still sees every message
+    assert msgs == batch  # the bridge still sees every message
     assert got == [(12.5, pytest.approx([0.5, 0.1, -0.2, 0.3]))]

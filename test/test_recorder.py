@@ -22,19 +22,26 @@ from lpv_sysid.io.recorder import Recorder, RecorderConfig
 TS = get_typestore(Stores.ROS2_JAZZY)
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 T0 = 1_704_067_200 * 10**9
-TOPICS = {"/lpv_sysid/state": "nav_msgs/msg/Odometry",
-          "/lpv_sysid/actuator_command": "sensor_msgs/msg/JointState",
-          "/lpv_sysid/imu": "sensor_msgs/msg/Imu"}
+TOPICS = {
+    "/lpv_sysid/state": "nav_msgs/msg/Odometry",
+    "/lpv_sysid/actuator_command": "sensor_msgs/msg/JointState",
+    "/lpv_sysid/imu": "sensor_msgs/msg/Imu",
+}
 
 
 def joint_state(stamp_ns, values, names=("ut", "ua", "ue", "ur")):
     T = TS.types
     sec, ns = divmod(stamp_ns, 10**9)
-    hdr = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=ns),
-                                   frame_id="")
-    return T["sensor_msgs/msg/JointState"](header=hdr, name=list(names),
-                                           position=np.asarray(values, float),
-                                           velocity=np.zeros(0), effort=np.zeros(0))
+    hdr = T["std_msgs/msg/Header"](
+        stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=ns), frame_id=""
+    )
+    return T["sensor_msgs/msg/JointState"](
+        header=hdr,
+        name=list(names),
+        position=np.asarray(values, float),
+        velocity=np.zeros(0),
+        effort=np.zeros(0),
+    )
 
 
 def cdr(msg):
@@ -48,10 +55,11 @@ def count_messages(bagdir):
 
 def test_1khz_for_60s_no_loss(tmp_path):
     """1 kHz aggregate (250 Hz state-like + 750 Hz others) for 60 s simulated: every one."""
-    cfg = RecorderConfig(out_dir=str(tmp_path / "exp"),
-                         topics={"/a": "sensor_msgs/msg/JointState",
-                                 "/b": "sensor_msgs/msg/JointState"},
-                         split_duration_s=20.0)
+    cfg = RecorderConfig(
+        out_dir=str(tmp_path / "exp"),
+        topics={"/a": "sensor_msgs/msg/JointState", "/b": "sensor_msgs/msg/JointState"},
+        split_duration_s=20.0,
+    )
     rec = Recorder(cfg)
     rec.start(T0)
     raw = cdr(joint_state(T0, [0.1, 0.2, 0.3, 0.4]))
@@ -88,15 +96,22 @@ def test_split_by_size_and_metadata_content(tmp_path):
     conf = tmp_path / "logger.yaml"
     conf.write_text("data_logger:\n  ros__parameters: {}\n")
     msg_len = len(cdr(joint_state(T0, [1.0, 2.0, 3.0, 4.0])))
-    cfg = RecorderConfig(out_dir=str(tmp_path / "exp"),
-                         topics={"/lpv_sysid/actuator_command": "sensor_msgs/msg/JointState"},
-                         split_size_bytes=10 * msg_len, config_files=(str(conf),),
-                         gains_file=str(gains), storage="sqlite3")
+    cfg = RecorderConfig(
+        out_dir=str(tmp_path / "exp"),
+        topics={"/lpv_sysid/actuator_command": "sensor_msgs/msg/JointState"},
+        split_size_bytes=10 * msg_len,
+        config_files=(str(conf),),
+        gains_file=str(gains),
+        storage="sqlite3",
+    )
     rec = Recorder(cfg)
     rec.start(T0)
     for k in range(25):
-        rec.record("/lpv_sysid/actuator_command", T0 + k * 10**7,
-                   joint_state(T0 + k * 10**7, [1.0, 2.0, 3.0, 4.0]))
+        rec.record(
+            "/lpv_sysid/actuator_command",
+            T0 + k * 10**7,
+            joint_state(T0 + k * 10**7, [1.0, 2.0, 3.0, 4.0]),
+        )
     rec.note_dropped("/lpv_sysid/actuator_command", 3)
     rec.stop()
     meta = yaml.safe_load((tmp_path / "exp" / "experiment.yaml").read_text())
@@ -104,8 +119,7 @@ def test_split_by_size_and_metadata_content(tmp_path):
     assert meta["gains"]["sha256"] == hashlib.sha256(gains.read_bytes()).hexdigest()
     assert meta["config_files"][str(conf)] == conf.read_text()
     assert meta["topics"]["/lpv_sysid/actuator_command"]["dropped"] == 3
-    git = subprocess.run(["git", "-C", ROOT, "rev-parse", "HEAD"], capture_output=True,
-                         text=True)
+    git = subprocess.run(["git", "-C", ROOT, "rev-parse", "HEAD"], capture_output=True, text=True)
     assert meta["git_revision"] == (git.stdout.strip() or None)
     for b in meta["bags"]:
         assert len(count_messages(tmp_path / "exp" / b["path"])) == b["messages"]
@@ -113,6 +127,7 @@ def test_split_by_size_and_metadata_content(tmp_path):
 
 def test_write_error_keeps_bag_readable(tmp_path):
     """Disk full on the 8th write: clear error, the 7 written messages stay readable."""
+
     class FullDisk(BagWriter):
         writes = 0
 
@@ -122,7 +137,9 @@ def test_write_error_keeps_bag_readable(tmp_path):
                 raise OSError(errno.ENOSPC, "No space left on device")
             return super().write(topic, stamp_ns, msg)
 
-    cfg = RecorderConfig(out_dir=str(tmp_path / "exp"), topics={"/a": "sensor_msgs/msg/JointState"})
+    cfg = RecorderConfig(
+        out_dir=str(tmp_path / "exp"), topics={"/a": "sensor_msgs/msg/JointState"}
+    )
     rec = Recorder(cfg, writer_factory=lambda p, s: FullDisk(p, storage=s))
     rec.start(T0)
     with pytest.raises(BagError, match="No space left on device.*bag_0000 closed with 7"):
@@ -142,13 +159,17 @@ def test_bad_inputs(tmp_path):
         RecorderConfig(out_dir=str(tmp_path), topics={"state": "nav_msgs/msg/Odometry"})
     with pytest.raises(ConfigError, match="bogus"):
         RecorderConfig.from_dict({"out_dir": "x", "topics": {"/a": "a/msg/B"}, "bogus": 1})
-    rec = Recorder(RecorderConfig(out_dir=str(tmp_path / "e"), topics={"/a": "std_msgs/msg/Empty"}))
+    rec = Recorder(
+        RecorderConfig(out_dir=str(tmp_path / "e"), topics={"/a": "std_msgs/msg/Empty"})
+    )
     rec.start(T0)
     with pytest.raises(BagError, match="'/other' is not configured"):
         rec.record("/other", T0, b"")
     rec.stop()
     with pytest.raises(BagError, match="not empty"):
-        Recorder(RecorderConfig(out_dir=str(tmp_path / "e"), topics={"/a": "std_msgs/msg/Empty"})).start(T0)
+        Recorder(
+            RecorderConfig(out_dir=str(tmp_path / "e"), topics={"/a": "std_msgs/msg/Empty"})
+        ).start(T0)
 
 
 CHILD = textwrap.dedent("""
@@ -176,8 +197,9 @@ CHILD = textwrap.dedent("""
 
 def test_sigterm_leaves_readable_bag(tmp_path):
     out = str(tmp_path / "exp")
-    proc = subprocess.Popen([sys.executable, "-c", CHILD.format(root=ROOT, out=out)],
-                            stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", CHILD.format(root=ROOT, out=out)], stdout=subprocess.PIPE, text=True
+    )
     try:
         assert proc.stdout.readline().strip() == "ready"
         time.sleep(0.05)

@@ -24,8 +24,21 @@ NS = "/lpv_sysid"
 
 
 def replay(tmp_path, *extra, bag=P2, gains=GAINS, out="out"):
-    argv = ["replay", "--bag", bag, "--node", "lpv_controller", "--params", PARAMS,
-            "--out", str(tmp_path / out)] + (["--gains", gains] if gains else []) + list(extra)
+    argv = (
+        [
+            "replay",
+            "--bag",
+            bag,
+            "--node",
+            "lpv_controller",
+            "--params",
+            PARAMS,
+            "--out",
+            str(tmp_path / out),
+        ]
+        + (["--gains", gains] if gains else [])
+        + list(extra)
+    )
     return main(argv), tmp_path / out
 
 
@@ -49,11 +62,13 @@ def test_replay_reproduces_recorded_commands(tmp_path, capsys):
 def test_replay_matches_independent_law(tmp_path):
     """Other gains (K x 1.25): every unsaturated command equals u0 + K (x - x0) + R u_e
     computed here from the last inputs before the tick, multilinear weights by hand."""
+
     def scale_k(d):
         for v in d["vertices"]:
             v["K"] = (1.25 * np.array(v["K"])).tolist()
+
     g = tmp_path / "gains2.yaml"
-    write_gains(g, box=5.0, edit=scale_k)       # the test certifies the law it flies
+    write_gains(g, box=5.0, edit=scale_k)  # the test certifies the law it flies
     code, out = replay(tmp_path, gains=str(g))
     assert code == 0
     got = commands(out)
@@ -74,15 +89,19 @@ def test_replay_matches_independent_law(tmp_path):
         _, ue = M.excitation_from_joint_state(last_before("excitation", t))
         x = np.concatenate([st.euler[:2], st.v_body, st.omega, mix @ om])
         s = (vd - gs.scheduling.min) / (gs.scheduling.max - gs.scheduling.min)
-        w = np.array([np.prod([s[k] if c[k] == gs.scheduling.max[k] else 1 - s[k]
-                               for k in range(3)]) for c in gs.scheduling.corners])
+        w = np.array(
+            [
+                np.prod([s[k] if c[k] == gs.scheduling.max[k] else 1 - s[k] for k in range(3)])
+                for c in gs.scheduling.corners
+            ]
+        )
         assert w.sum() == pytest.approx(1.0)
         K = np.einsum("i,ijk->jk", w, gs.K)
         u_ref = w @ gs.u0 + K @ (x - w @ gs.x0) + gs.R @ ue
         esc = np.linalg.solve(mix, u_ref)
         if esc.min() < 0.0 or esc.max() > 1.0:
             np.testing.assert_allclose(u, mix @ np.clip(esc, 0.0, 1.0), rtol=1e-9, atol=1e-12)
-            continue                       # saturated (seed 0 Eq. 7 mixer limits)
+            continue  # saturated (seed 0 Eq. 7 mixer limits)
         np.testing.assert_allclose(u, u_ref, rtol=1e-9, atol=1e-12)
         checked += 1
     assert checked >= 10
@@ -93,14 +112,18 @@ def test_replay_reports_abort_outside_box(tmp_path, capsys):
     """Gains for a +-0.3 m/s box against a flight whose v_d leaves it: exit 1, reason
     printed, ERROR status in the output and no command after the abort."""
     g = tmp_path / "small.yaml"
-    write_gains(g, box=0.3, design=design_for(5.0))   # the flight's signal, a smaller box
+    write_gains(g, box=0.3, design=design_for(5.0))  # the flight's signal, a smaller box
     code, out = replay(tmp_path, gains=str(g))
     assert code == 1
     text = capsys.readouterr().out
     assert "SAFETY ABORT" in text and "out_of_box" in text
     data = read_bag(str(out))
-    errs = [(t, s) for t, m in data[f"{NS}/status"]
-            for s in M.status_from_diagnostic_array(m)[1] if s.level == 2]
+    errs = [
+        (t, s)
+        for t, m in data[f"{NS}/status"]
+        for s in M.status_from_diagnostic_array(m)[1]
+        if s.level == 2
+    ]
     t_abort = errs[0][0]
     assert errs[0][1].values["reason"] == "out_of_box"
     assert all(t <= t_abort for t, _ in data.get(f"{NS}/actuator_command", []))
@@ -112,16 +135,19 @@ def test_replay_rate_grid_on_phase1_sample(tmp_path):
     meta = yaml.safe_load(open(os.path.join(P1, "experiment.yaml")))
     dur = (meta["bags"][0]["end_ns"] - meta["bags"][0]["start_ns"]) * 1e-9
     got = commands(out)
-    assert 0 <= 250 * dur - len(got) <= 4     # ticks before every input has arrived: none
+    assert 0 <= 250 * dur - len(got) <= 4  # ticks before every input has arrived: none
     assert np.all(np.diff([t for t, _ in got]) == 4_000_000)
 
 
-@pytest.mark.parametrize("kind, needle", [
-    ("nobag", "no such file"),
-    ("badgains", "gamma"),
-    ("missing_topic", "not in bag"),
-    ("exists", "already exists"),
-])
+@pytest.mark.parametrize(
+    "kind, needle",
+    [
+        ("nobag", "no such file"),
+        ("badgains", "gamma"),
+        ("missing_topic", "not in bag"),
+        ("exists", "already exists"),
+    ],
+)
 def test_replay_bad_input(tmp_path, capsys, kind, needle):
     bag, gains = P2, GAINS
     if kind == "nobag":
@@ -135,6 +161,7 @@ def test_replay_bad_input(tmp_path, capsys, kind, needle):
     elif kind == "missing_topic":
         bag = str(tmp_path / "logonly")
         from lpv_sysid.io.bag import BagWriter
+
         with BagWriter(bag) as w:
             w.add_topic(f"{NS}/state", "nav_msgs/msg/Odometry")
     elif kind == "exists":
@@ -147,18 +174,35 @@ def test_replay_bad_input(tmp_path, capsys, kind, needle):
 def test_replay_bound_monitor_abort(tmp_path, capsys):
     """gamma = 0.05 (certificate alike) and a params file lowering monitor_min_energy: the
     bound monitor's L2 gain estimate exceeds gamma x margin -> bound_exceeded abort."""
+
     def tight(d):
         d["gamma"] = 0.05
         d["certificate"]["gamma_achieved"] = 0.05
+
     g = tmp_path / "tight.yaml"
     write_gains(g, box=5.0, edit=tight)
     params = tmp_path / "ctl.yaml"
-    params.write_text("/**/lpv_controller:\n  ros__parameters:\n    monitor_min_energy: 0.001\n"
-                      "    monitor_margin: 1.2\n")
+    params.write_text(
+        "/**/lpv_controller:\n  ros__parameters:\n    monitor_min_energy: 0.001\n"
+        "    monitor_margin: 1.2\n"
+    )
     out = tmp_path / "out"
-    code = main(["replay", "--bag", P2, "--node", "lpv_controller", "--params", str(params),
-                 "--gains", str(g), "--out", str(out)])
+    code = main(
+        [
+            "replay",
+            "--bag",
+            P2,
+            "--node",
+            "lpv_controller",
+            "--params",
+            str(params),
+            "--gains",
+            str(g),
+            "--out",
+            str(out),
+        ]
+    )
     text = capsys.readouterr().out
     assert code == 1 and "bound_exceeded: L2 gain estimate" in text
     got, rec = commands(out), commands(os.path.join(P2, "bag_0000"))
-    assert 0 < len(got) < len(rec)          # commanded until the monitor tripped
+    assert 0 < len(got) < len(rec)  # commanded until the monitor tripped

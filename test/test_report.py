@@ -19,10 +19,12 @@ from lpv_sysid.sim.phase1 import TRIM_COLUMNS, write_trim_table
 from lpv_sysid.sim.phase2 import RunRecord, regressor_correlation_block, write_outputs
 
 STATES = ["phi", "theta", "u", "v", "w", "p", "q", "r", "dt", "da", "de", "dr"]
-TABLE1_ROW0 = (-4.99, -5.04, -4.20, -10.87, 9.28, 691.4, -36.7, 29.0, 310.5)   # seed 0 Table 1
-TABLE2_ROW0 = (30.1, 39.3, 81.2, 83.2, 88.9, 95.5)                              # seed 0 Table 2
-TABLE3 = {"tic": (0.110, 0.049, 0.104, 0.274, 0.355, 0.352),                    # seed 0 Table 3
-          "nrmse": (0.036, 0.021, 0.035, 0.094, 0.119, 0.148)}
+TABLE1_ROW0 = (-4.99, -5.04, -4.20, -10.87, 9.28, 691.4, -36.7, 29.0, 310.5)  # seed 0 Table 1
+TABLE2_ROW0 = (30.1, 39.3, 81.2, 83.2, 88.9, 95.5)  # seed 0 Table 2
+TABLE3 = {
+    "tic": (0.110, 0.049, 0.104, 0.274, 0.355, 0.352),  # seed 0 Table 3
+    "nrmse": (0.036, 0.021, 0.035, 0.094, 0.119, 0.148),
+}
 AXES = ["udot", "vdot", "wdot", "pdot", "qdot", "rdot"]
 
 
@@ -34,36 +36,88 @@ def _x0(row):
 def _write_run(d: Path) -> None:
     vertices = []
     for k, sched in enumerate([[-5, -5, -5], [5, -5, -5]]):
-        row = TABLE1_ROW0 if k == 0 else (4.95, -5.04, -4.17, -10.44, -8.05, 685.0, -34.1, -1.5, 39.2)
-        r2 = dict(zip(AXES, [x / 100 for x in TABLE2_ROW0])) if k == 0 else dict(zip(AXES, [0.5] * 6))
-        vertices.append({"scheduling": sched, "x0": _x0(row), "u0": [0.5, 0, 0, 0],
-                         "A": np.eye(12).tolist(), "B": np.zeros((12, 4)).tolist(),
-                         "fit": {"r2": r2, "tic": dict(zip(AXES, [0.2] * 6))}})
-    models = {"format": "lpv_sysid/vertex_models@1", "time": "continuous",
-              "states": [{"name": n, "unit": "x"} for n in STATES], "vertices": vertices}
+        row = (
+            TABLE1_ROW0
+            if k == 0
+            else (4.95, -5.04, -4.17, -10.44, -8.05, 685.0, -34.1, -1.5, 39.2)
+        )
+        r2 = (
+            dict(zip(AXES, [x / 100 for x in TABLE2_ROW0]))
+            if k == 0
+            else dict(zip(AXES, [0.5] * 6))
+        )
+        vertices.append(
+            {
+                "scheduling": sched,
+                "x0": _x0(row),
+                "u0": [0.5, 0, 0, 0],
+                "A": np.eye(12).tolist(),
+                "B": np.zeros((12, 4)).tolist(),
+                "fit": {"r2": r2, "tic": dict(zip(AXES, [0.2] * 6))},
+            }
+        )
+    models = {
+        "format": "lpv_sysid/vertex_models@1",
+        "time": "continuous",
+        "states": [{"name": n, "unit": "x"} for n in STATES],
+        "vertices": vertices,
+    }
     (d / "vertex_models.yaml").write_text(yaml.safe_dump(models))
-    (d / "validation.yaml").write_text(yaml.safe_dump({k: dict(zip(AXES, v)) for k, v in TABLE3.items()}))
+    (d / "validation.yaml").write_text(
+        yaml.safe_dump({k: dict(zip(AXES, v)) for k, v in TABLE3.items()})
+    )
     (d / "signals").mkdir()
     names = ["u_d", "v_d", "w_d", "ue_t", "ue_a", "ue_e", "ue_r"]
     C = np.eye(7)
     C[0, 1] = C[1, 0] = 0.0752
     # summary.yaml in the layout of lpv_sysid.signals.store.summary, written by its writer
-    save_summary(str(d / "signals" / "summary.yaml"), {
-        "format": "lpv_sysid/signals_summary@1", "duration": 30.0, "sample_rate": 50.0,
-        "channels": [{"name": n, "group": "reference" if i < 3 else "excitation", "rpf": 1.1 + 0.1 * i,
-                      "n_harmonics": 10 + i} for i, n in enumerate(names)],
-        "correlation": {"names": names, "matrix": C.tolist(), "max_abs_offdiagonal": 0.0752}})
+    save_summary(
+        str(d / "signals" / "summary.yaml"),
+        {
+            "format": "lpv_sysid/signals_summary@1",
+            "duration": 30.0,
+            "sample_rate": 50.0,
+            "channels": [
+                {
+                    "name": n,
+                    "group": "reference" if i < 3 else "excitation",
+                    "rpf": 1.1 + 0.1 * i,
+                    "n_harmonics": 10 + i,
+                }
+                for i, n in enumerate(names)
+            ],
+            "correlation": {"names": names, "matrix": C.tolist(), "max_abs_offdiagonal": 0.0752},
+        },
+    )
     # trims.yaml written by the phase-1 simulation's own writer
-    write_trim_table([{"run": "v1", "vertex": [-5.0, -5.0, -5.0],
-                       "achieved": dict(zip(TRIM_COLUMNS, TABLE1_ROW0)),
-                       "model_trim": dict(zip(TRIM_COLUMNS, [-5.0, -5.0, -5.0, -11.5, 9.5, 690.0, -30.0, 25.0, 300.0]))}],
-                     d)
+    write_trim_table(
+        [
+            {
+                "run": "v1",
+                "vertex": [-5.0, -5.0, -5.0],
+                "achieved": dict(zip(TRIM_COLUMNS, TABLE1_ROW0)),
+                "model_trim": dict(
+                    zip(TRIM_COLUMNS, [-5.0, -5.0, -5.0, -11.5, 9.5, 690.0, -30.0, 25.0, 300.0])
+                ),
+            }
+        ],
+        d,
+    )
     t = np.arange(0, 2, 0.01)
-    np.savez(d / "signals" / "signals.npz", t=t, u=np.sin(np.outer(t, np.arange(1, 8))), names=np.array(names))
-    gains = {"format": "lpv_sysid/gains@1", "gamma": 1.0, "R": (0.1 * np.eye(4)).tolist(),
-             "Q": (5.0 * np.eye(3)).tolist(),
-             "vertices": [{"scheduling": [-5, -5, -5], "K": (2.0 * np.ones((4, 12))).tolist()}],
-             "certificate": {"lmi": "seed 0 Lemma 1", "solver": "CLARABEL", "gamma_achieved": 0.9321}}
+    np.savez(
+        d / "signals" / "signals.npz",
+        t=t,
+        u=np.sin(np.outer(t, np.arange(1, 8))),
+        names=np.array(names),
+    )
+    gains = {
+        "format": "lpv_sysid/gains@1",
+        "gamma": 1.0,
+        "R": (0.1 * np.eye(4)).tolist(),
+        "Q": (5.0 * np.eye(3)).tolist(),
+        "vertices": [{"scheduling": [-5, -5, -5], "K": (2.0 * np.ones((4, 12))).tolist()}],
+        "certificate": {"lmi": "seed 0 Lemma 1", "solver": "CLARABEL", "gamma_achieved": 0.9321},
+    }
     (d / "gains.yaml").write_text(yaml.safe_dump(gains))
     # phase 2 through the writer of sim/phase2.py (the real producer of these files)
     tt = np.linspace(0, 3, 301)
@@ -72,14 +126,36 @@ def _write_run(d: Path) -> None:
     x12[:, 2:5] = vd + 0.05 * np.sin(7 * tt)[:, None]
     x12[:, 8] = 600 + 10 * np.sin(11 * tt)
     x12[:, 9:12] = 5 * np.sin(np.outer(tt, [13, 17, 19]))
-    rec = RunRecord("eq33", tt, vd, x12, np.zeros((tt.size, 4)), np.zeros((tt.size, 4)),
-                    np.zeros((tt.size, 3)), gain=0.4321, z_norm=0.04321, ue_norm=0.1)
-    rec.decomposition = {"method": "superposition (exact: the same run with -u_e)", "ue_norm": 0.1,
-                         "total": {"z_norm": 0.04321, "ratio": 0.4321}, "offset": {"z_norm": 0.04, "ratio": 0.4},
-                         "excitation": {"z_norm": 0.005, "gain": 0.05}, "tracking": {"z_norm": 0.01, "ratio": 0.1}}
+    rec = RunRecord(
+        "eq33",
+        tt,
+        vd,
+        x12,
+        np.zeros((tt.size, 4)),
+        np.zeros((tt.size, 4)),
+        np.zeros((tt.size, 3)),
+        gain=0.4321,
+        z_norm=0.04321,
+        ue_norm=0.1,
+    )
+    rec.decomposition = {
+        "method": "superposition (exact: the same run with -u_e)",
+        "ue_norm": 0.1,
+        "total": {"z_norm": 0.04321, "ratio": 0.4321},
+        "offset": {"z_norm": 0.04, "ratio": 0.4},
+        "excitation": {"z_norm": 0.005, "gain": 0.05},
+        "tracking": {"z_norm": 0.01, "ratio": 0.1},
+    }
     block = regressor_correlation_block(tt, x12, 0.225, "eq33")
-    write_outputs(d / "phase2", 1.0, 2.5, [rec], skipped={"nonlinear": "no quadrotor model"},
-                  regressor_block=block, figures=False)
+    write_outputs(
+        d / "phase2",
+        1.0,
+        2.5,
+        [rec],
+        skipped={"nonlinear": "no quadrotor model"},
+        regressor_block=block,
+        figures=False,
+    )
 
 
 def test_report_contains_expected_numbers(tmp_path):
@@ -87,28 +163,43 @@ def test_report_contains_expected_numbers(tmp_path):
     out = write_report(tmp_path, tmp_path / "rep" / "report.md", verify=False)
     text = out.read_text()
     # Table 1: phi0/theta0 converted back to degrees, rotor states as stored
-    assert "| [-5 -5 -5] | -4.99 | -5.04 | -4.20 | -10.87 | 9.28 | 691.40 | -36.70 | 29.00 | 310.50 |" in text
+    assert (
+        "| [-5 -5 -5] | -4.99 | -5.04 | -4.20 | -10.87 | 9.28 | 691.40 | -36.70 | 29.00 | 310.50 |"
+        in text
+    )
     # Table 2: R^2 stored as fractions is printed in percent
     assert "| [-5 -5 -5] | 30.1 | 39.3 | 81.2 | 83.2 | 88.9 | 95.5 |" in text
     # Table 3
     assert "| TIC | 0.110 | 0.049 | 0.104 | 0.274 | 0.355 | 0.352 |" in text
     assert "| NRMSE | 0.036 | 0.021 | 0.035 | 0.094 | 0.119 | 0.148 |" in text
     # phase-1 trims: achieved row (Table 1 values) and model trim
-    assert "| v1 | [-5 -5 -5] | achieved | -4.99 | -5.04 | -4.20 | -10.87 | 9.28 | 691.40 |" in text
-    assert "| v1 | [-5 -5 -5] | model trim | -5.00 | -5.00 | -5.00 | -11.50 | 9.50 | 690.00 |" in text
+    assert (
+        "| v1 | [-5 -5 -5] | achieved | -4.99 | -5.04 | -4.20 | -10.87 | 9.28 | 691.40 |" in text
+    )
+    assert (
+        "| v1 | [-5 -5 -5] | model trim | -5.00 | -5.00 | -5.00 | -11.50 | 9.50 | 690.00 |" in text
+    )
     # signals: worst correlation and RPF
     assert "**0.0752**" in text and "| ue_r | excitation | 16 | 1.7 |" in text
     # certificate and gain vs gamma
     assert "gamma_achieved | 0.9321" in text
     # the u_e -> z gain, not the total ratio, is what is compared with gamma; the rest named apart
-    assert "| LPV closed loop, Eq. (33) | 0.05 | yes | superposition | 0.4 | 0.1 | 0.4321 | completed |" in text
+    assert (
+        "| LPV closed loop, Eq. (33) | 0.05 | yes | superposition | 0.4 | 0.1 | 0.4321 | completed |"
+        in text
+    )
     assert "skipped: no quadrotor model" in text
     assert "kappa = 2.5" in text
     # inputs that do not exist are named
     assert "**Input missing:** none of `verification.yaml`, `verify.yaml`" in text
     # figures exist and are referenced
-    for png in ("tracking_eq33.png", "perturbation_eq33.png", "regressor_correlation.png", "signals.png",
-                "signal_correlation.png"):
+    for png in (
+        "tracking_eq33.png",
+        "perturbation_eq33.png",
+        "regressor_correlation.png",
+        "signals.png",
+        "signal_correlation.png",
+    ):
         assert f"]({png})" in text
         assert (out.parent / png).stat().st_size > 1000
     # Fig. 10 table: the 'u' and 'u dt' X-axis regressors are strongly correlated here
@@ -120,6 +211,7 @@ def test_report_contains_expected_numbers(tmp_path):
 
 def block_max(x, axis):
     from lpv_sysid.models.quadrotor import mixer
+
     mix = mixer(0.225)
     Om = np.linalg.solve(mix, x["x"][:, 8:12].T).T
     d, d2 = virtual_actuators(Om, mix)
@@ -133,10 +225,27 @@ def test_verification_is_recomputed_and_failures_are_named(tmp_path):
     files here are not valid gains/models files, which the report must say (not crash)."""
     _write_run(tmp_path)
     text = write_report(tmp_path).read_text()
-    assert "| independent verification | UNREADABLE | verification of gains.yaml against vertex_models.yaml failed:" in text
+    assert (
+        "| independent verification | UNREADABLE | verification of gains.yaml against vertex_models.yaml failed:"
+        in text
+    )
     # a verification.yaml written by someone else is rendered as given
-    (tmp_path / "verification.yaml").write_text(yaml.safe_dump({"passed": False, "checks": [
-        {"check": "hinf", "where": "vertex 2", "value": 1.37, "limit": 1.0, "ok": False}]}))
+    (tmp_path / "verification.yaml").write_text(
+        yaml.safe_dump(
+            {
+                "passed": False,
+                "checks": [
+                    {
+                        "check": "hinf",
+                        "where": "vertex 2",
+                        "value": 1.37,
+                        "limit": 1.0,
+                        "ok": False,
+                    }
+                ],
+            }
+        )
+    )
     text = write_report(tmp_path).read_text()
     assert "Overall: **FAILED** (1 checks, 1 failed)" in text
     assert "| hinf | vertex 2 | 1.37 | 1 | NO |" in text
@@ -146,8 +255,15 @@ def test_empty_run_dir_lists_every_missing_input(tmp_path):
     out = write_report(tmp_path)
     text = out.read_text()
     assert out == tmp_path / "report" / "report.md"
-    for name in ("vertex_models.yaml", "gains.yaml", "phase2/summary.yaml", "signals/summary.yaml",
-                 "validation.yaml", "verification.yaml", "trims.yaml"):
+    for name in (
+        "vertex_models.yaml",
+        "gains.yaml",
+        "phase2/summary.yaml",
+        "signals/summary.yaml",
+        "validation.yaml",
+        "verification.yaml",
+        "trims.yaml",
+    ):
         assert f"`{name}`" in text
     assert text.count("**Input missing:**") >= 6
     assert "Missing or unreadable inputs:" in text
@@ -191,7 +307,9 @@ def test_regressors_match_eq6_by_hand():
     dt, da, de, dr = d[0]
     assert d2[0, 0] == pytest.approx(np.mean(Omega[0] ** 2))
     assert regs["Z"][0, 3] == pytest.approx(4 * 3.0 * dt - 0.1 * da - 0.2 * de)
-    assert regs["L"][0, 2] == pytest.approx(3.0 * da - 2 * ell**2 * 0.1 * dt - ell**2 * 0.2 * dr / 2)
+    assert regs["L"][0, 2] == pytest.approx(
+        3.0 * da - 2 * ell**2 * 0.1 * dt - ell**2 * 0.2 * dr / 2
+    )
     assert regs["M"][0, 6] == pytest.approx(2.0 * dr)
     assert regs["N"][0, 6] == pytest.approx((d[1, 3] - d[0, 3]) / 0.1)
     assert [regs[a].shape[1] for a in "XYZLMN"] == [len(REGRESSOR_NAMES[a]) for a in "XYZLMN"]
@@ -201,13 +319,26 @@ def test_regressors_match_eq6_by_hand():
 
 def test_table3_from_models_meta_validation(tmp_path):
     """identify stores the independent validation (Table 3) in vertex_models.yaml meta."""
-    models = {"states": [{"name": n} for n in STATES], "vertices": [],
-              "meta": {"validation": {"maneuver": "hover_validation",
-                                      "tic": dict(zip(AXES, TABLE3["tic"])),
-                                      "nrmse": dict(zip(AXES, TABLE3["nrmse"]))}}}
+    models = {
+        "states": [{"name": n} for n in STATES],
+        "vertices": [],
+        "meta": {
+            "validation": {
+                "maneuver": "hover_validation",
+                "tic": dict(zip(AXES, TABLE3["tic"])),
+                "nrmse": dict(zip(AXES, TABLE3["nrmse"])),
+            }
+        },
+    }
     (tmp_path / "vertex_models.yaml").write_text(yaml.safe_dump(models))
     text = write_report(tmp_path, verify=False).read_text()
-    assert "Independent validation maneuver `hover_validation` (from vertex_models.yaml meta.validation):" in text
-    assert "| independent validation (Table 3) | derived | from vertex_models.yaml meta.validation |" in text
+    assert (
+        "Independent validation maneuver `hover_validation` (from vertex_models.yaml meta.validation):"
+        in text
+    )
+    assert (
+        "| independent validation (Table 3) | derived | from vertex_models.yaml meta.validation |"
+        in text
+    )
     assert "| TIC | 0.110 | 0.049 | 0.104 | 0.274 | 0.355 | 0.352 |" in text
     assert "| metric | udot | vdot | wdot | pdot | qdot | rdot |" in text

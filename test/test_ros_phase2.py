@@ -45,7 +45,7 @@ from ros_real import DomainId, RosEnv, build_package, find_ros
 
 ROOT = Path(__file__).resolve().parents[1]
 NS = "/lpv_sysid"
-GAINS = ROOT / "msg_samples" / "gains.yaml"          # certified per-vertex LQR test law
+GAINS = ROOT / "msg_samples" / "gains.yaml"  # certified per-vertex LQR test law
 CONTROLLER_YAML = ROOT / "config" / "lpv_controller.yaml"
 #: wall-time bound of the flight (the signal is 104 s of sim time; real-time factor >= 0.5
 #: at load 10 on 2 cores)
@@ -124,8 +124,13 @@ def sigint_not_ignored():
 
 
 def cli(*args, cwd=ROOT, timeout=600):
-    r = subprocess.run([sys.executable, "-m", "lpv_sysid.cli.main", *map(str, args)],
-                       cwd=cwd, capture_output=True, text=True, timeout=timeout)
+    r = subprocess.run(
+        [sys.executable, "-m", "lpv_sysid.cli.main", *map(str, args)],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
     return r.stdout
 
@@ -137,6 +142,7 @@ def controller_config() -> dict:
 
 def stamps_ns(msgs) -> np.ndarray:
     from lpv_sysid.io import messages as M
+
     return np.array([M.stamp_ns_of(m) for _, m in msgs], dtype=np.int64)
 
 
@@ -146,8 +152,10 @@ def ws(tmp_path_factory):
     path = build_package(SETUP, tmp_path_factory.mktemp("ros_ws"))
     MEASURED["colcon_build_s"] = round(time.monotonic() - t0, 1)
     yield path
-    print("\nphase 2 through the real ROS 2 graph:\n" + json.dumps(MEASURED, indent=1,
-                                                                   sort_keys=True))
+    print(
+        "\nphase 2 through the real ROS 2 graph:\n"
+        + json.dumps(MEASURED, indent=1, sort_keys=True)
+    )
 
 
 @pytest.fixture(scope="module")
@@ -157,13 +165,34 @@ def flight(ws, tmp_path_factory):
 
     data = tmp_path_factory.mktemp("phase2_data")
     cli("signals", "--config", ROOT / "config" / "signals_phase2.yaml", "--out", data / "signals")
-    cli("simulate", "phase2", "--gains", GAINS, "--signals", data / "signals", "--out",
-        data / "offline", "--skip-eq33", "--no-bag", "--feedforward", "filtered")
+    cli(
+        "simulate",
+        "phase2",
+        "--gains",
+        GAINS,
+        "--signals",
+        data / "signals",
+        "--out",
+        data / "offline",
+        "--skip-eq33",
+        "--no-bag",
+        "--feedforward",
+        "filtered",
+    )
     offline = yaml.safe_load((data / "offline" / "summary.yaml").read_text())["nonlinear"]
     assert offline["completed"], offline
-    MEASURED["offline"] = {k: offline.get(k) for k in (
-        "total_ratio", "excitation_gain", "monitor_gain_estimate", "saturated_steps",
-        "law_steps", "control_hz", "duration")}
+    MEASURED["offline"] = {
+        k: offline.get(k)
+        for k in (
+            "total_ratio",
+            "excitation_gain",
+            "monitor_gain_estimate",
+            "saturated_steps",
+            "law_steps",
+            "control_hz",
+            "duration",
+        )
+    }
 
     dom = DomainId(os.getpid() % 50 + 23)
     env = RosEnv(SETUP, ws, dom.value)
@@ -171,9 +200,12 @@ def flight(ws, tmp_path_factory):
     log_dir = data / "graph"
     t0 = time.monotonic()
     with sigint_not_ignored():
-        proc = env.popen(f"ros2 launch lpv_sysid sim.launch.py phase:=2 gains_file:={GAINS} "
-                         f"signals_file:={data / 'signals' / 'signals.npz'} log_dir:={log_dir}",
-                         data / "launch.log", cwd=data)
+        proc = env.popen(
+            f"ros2 launch lpv_sysid sim.launch.py phase:=2 gains_file:={GAINS} "
+            f"signals_file:={data / 'signals' / 'signals.npz'} log_dir:={log_dir}",
+            data / "launch.log",
+            cwd=data,
+        )
     try:
         r = env.run(f"python3 {data / 'driver.py'} {FLIGHT_WALL_S}", timeout=FLIGHT_WALL_S + 180)
         lines = [ln for ln in r.stdout.splitlines() if ln.startswith("{")]
@@ -186,8 +218,15 @@ def flight(ws, tmp_path_factory):
         dom.release()
     wall = time.monotonic() - t0
     bag = read_bag(str(log_dir / "bag_0000"))
-    return {"offline": offline, "drive": drive, "rc": rc, "log": proc.log(), "bag": bag,
-            "wall_s": wall, "signals": data / "signals" / "signals.npz"}
+    return {
+        "offline": offline,
+        "drive": drive,
+        "rc": rc,
+        "log": proc.log(),
+        "bag": bag,
+        "wall_s": wall,
+        "signals": data / "signals" / "signals.npz",
+    }
 
 
 def excitation_window(flight) -> tuple[float, float]:
@@ -208,13 +247,16 @@ def test_the_graph_flies_the_whole_phase2_signal_without_abort(flight):
     assert flight["rc"] == 0, log[-4000:]
     t_start, t_end = excitation_window(flight)
     from lpv_sysid.signals.store import load_npz
+
     t, _, _ = load_npz(str(flight["signals"]))
-    assert t_end - t_start >= t[-1] - t[0]                  # the whole table, plus the fades
+    assert t_end - t_start >= t[-1] - t[0]  # the whole table, plus the fades
     cmd = stamps_ns(flight["bag"][f"{NS}/actuator_command"]) * 1e-9
-    assert cmd[-1] >= t_end                                 # commanded to the end ...
+    assert cmd[-1] >= t_end  # commanded to the end ...
     from lpv_sysid.io import messages as M
-    te, ue = M.channels_from_joint_states([m for _, m in flight["bag"][f"{NS}/excitation"]],
-                                          M.EXCITATION_NAMES, field="position")
+
+    te, ue = M.channels_from_joint_states(
+        [m for _, m in flight["bag"][f"{NS}/excitation"]], M.EXCITATION_NAMES, field="position"
+    )
     # ... and from its start: the excitation energy played before the first command (the
     # excitation node's clock may read a state period behind the controller's) is negligible
     e = np.sum(ue[:-1] ** 2, axis=1) * np.diff(te)
@@ -227,10 +269,12 @@ def test_the_graph_flies_the_whole_phase2_signal_without_abort(flight):
     last = drive["last"]["sim_vehicle"]
     MEASURED["graph"] = {
         "sim_s_commanded": round(cmd[-1] - cmd[0], 3),
-        "wall_s_flight": round(drive["wall_s"], 1), "wall_s_total": round(flight["wall_s"], 1),
+        "wall_s_flight": round(drive["wall_s"], 1),
+        "wall_s_total": round(flight["wall_s"], 1),
         "real_time_factor": round((t_end - t_start) / drive["wall_s"], 3),
         "lockstep_resends": int(last["lockstep_resends"]),
-        "lockstep_timeouts": int(last["lockstep_timeouts"])}
+        "lockstep_timeouts": int(last["lockstep_timeouts"]),
+    }
     assert int(last["lockstep_timeouts"]) == 0
 
 
@@ -238,7 +282,7 @@ def test_every_state_sample_is_answered_by_the_command_computed_on_it(flight):
     """Lock-step and freshest sample: state stamps exactly 1 / state_hz apart, and from the
     first command to the last every state sample has exactly one command with its stamp."""
     bag = flight["bag"]
-    st = np.unique(stamps_ns(bag[f"{NS}/state"]))        # resends repeat a sample
+    st = np.unique(stamps_ns(bag[f"{NS}/state"]))  # resends repeat a sample
     cmd = stamps_ns(bag[f"{NS}/actuator_command"])
     period = round(1e9 / controller_config()["state_rate_hz"])
     assert set(np.diff(st).tolist()) == {period}
@@ -246,41 +290,55 @@ def test_every_state_sample_is_answered_by_the_command_computed_on_it(flight):
     assert np.array_equal(cmd, window)
     ref = stamps_ns(bag[f"{NS}/velocity_reference"])
     ref = ref[(ref >= cmd[0]) & (ref <= cmd[-1])]
-    MEASURED["stamps"] = {"state_hz_sim": 1e9 / period, "commands": int(cmd.size),
-                          "command_gap_max_ms": float(np.diff(cmd).max() * 1e-6),
-                          "reference_gap_max_ms": float(np.diff(ref).max() * 1e-6),
-                          "reference_gap_p99_ms": float(np.percentile(np.diff(ref), 99) * 1e-6)}
+    MEASURED["stamps"] = {
+        "state_hz_sim": 1e9 / period,
+        "commands": int(cmd.size),
+        "command_gap_max_ms": float(np.diff(cmd).max() * 1e-6),
+        "reference_gap_max_ms": float(np.diff(ref).max() * 1e-6),
+        "reference_gap_p99_ms": float(np.percentile(np.diff(ref), 99) * 1e-6),
+    }
     # the reference is in lock-step too (lockstep_reference_lag_s): never near its timeout
     assert np.diff(ref).max() * 1e-9 < controller_config()["reference_timeout_s"]
 
 
 def test_commands_saturate_no_more_than_offline(flight):
     from lpv_sysid.models.quadrotor import mixer
+
     cfg = controller_config()
     u = np.array([list(m.position) for _, m in flight["bag"][f"{NS}/actuator_command"]])
-    esc = u @ np.linalg.inv(mixer(cfg["arm_length"])).T        # seed 0 Eq. (7)
-    sat = int(np.sum(np.any((esc <= cfg["u_esc_min"] + 1e-9) | (esc >= cfg["u_esc_max"] - 1e-9),
-                            axis=1)))
+    esc = u @ np.linalg.inv(mixer(cfg["arm_length"])).T  # seed 0 Eq. (7)
+    sat = int(
+        np.sum(np.any((esc <= cfg["u_esc_min"] + 1e-9) | (esc >= cfg["u_esc_max"] - 1e-9), axis=1))
+    )
     off = flight["offline"]
     allowed = math.ceil(off["saturated_steps"] * cfg["state_rate_hz"] / off["control_hz"])
-    MEASURED["saturated"] = {"graph": sat, "graph_commands": int(len(u)),
-                             "offline": off["saturated_steps"], "offline_steps": off["law_steps"]}
+    MEASURED["saturated"] = {
+        "graph": sat,
+        "graph_commands": int(len(u)),
+        "offline": off["saturated_steps"],
+        "offline_steps": off["law_steps"],
+    }
     assert sat <= allowed
 
 
 def test_bound_monitor_stays_below_the_offline_estimate_times_margin(flight):
     from lpv_sysid.io import messages as M
     from lpv_sysid.io.formats import GainSchedule
+
     cfg, bag, off = controller_config(), flight["bag"], flight["offline"]
     # when the monitor starts judging: int ||u_e||^2 dt of the played excitation reaches
     # monitor_min_energy (kappa = excitation_gain)
-    te, ue = M.channels_from_joint_states([m for _, m in bag[f"{NS}/excitation"]],
-                                          M.EXCITATION_NAMES, field="position")
+    te, ue = M.channels_from_joint_states(
+        [m for _, m in bag[f"{NS}/excitation"]], M.EXCITATION_NAMES, field="position"
+    )
     energy = np.cumsum(np.sum((cfg["excitation_gain"] * ue[:-1]) ** 2, axis=1) * np.diff(te))
     t_judged = te[1:][np.searchsorted(energy, cfg["monitor_min_energy"])]
-    est = [(ns * 1e-9, float({kv.key: kv.value for kv in st.values}["gain_estimate"]))
-           for ns, m in bag[f"{NS}/status"] for st in m.status
-           if st.name.endswith("lpv_controller")]
+    est = [
+        (ns * 1e-9, float({kv.key: kv.value for kv in st.values}["gain_estimate"]))
+        for ns, m in bag[f"{NS}/status"]
+        for st in m.status
+        if st.name.endswith("lpv_controller")
+    ]
     judged = [g for t, g in est if t >= t_judged]
     limit = off["monitor_gain_estimate"] * cfg["monitor_margin"]
     t_start, t_end = excitation_window(flight)
@@ -301,11 +359,16 @@ def test_bound_monitor_stays_below_the_offline_estimate_times_margin(flight):
     z = (v[k] - vd) @ np.linalg.inv(np.asarray(gs.Q)).T
     dt = np.diff(tc)
     ratio = math.sqrt(np.sum(np.sum(z[1:] ** 2, 1) * dt) / np.sum(np.sum(e[1:] ** 2, 1) * dt))
-    MEASURED["monitor"] = {"graph_max_judged": max(judged), "graph_final": final,
-                           "recomputed_from_bag": ratio, "offline": off["monitor_gain_estimate"],
-                           "limit_offline_x_margin": limit, "gamma": float(gs.gamma),
-                           "judged_from_s": float(t_judged)}
-    assert len(judged) > 100                                 # 2 Hz status over ~100 s
+    MEASURED["monitor"] = {
+        "graph_max_judged": max(judged),
+        "graph_final": final,
+        "recomputed_from_bag": ratio,
+        "offline": off["monitor_gain_estimate"],
+        "limit_offline_x_margin": limit,
+        "gamma": float(gs.gamma),
+        "judged_from_s": float(t_judged),
+    }
+    assert len(judged) > 100  # 2 Hz status over ~100 s
     assert max(judged) < limit
     assert final == pytest.approx(ratio, rel=0.02)
     assert final == pytest.approx(off["monitor_gain_estimate"], rel=0.1)
@@ -355,13 +418,15 @@ def test_controller_survives_its_safety_abort_under_real_rclpy(ws, tmp_path):
     with sigint_not_ignored():
         # the executable itself (``ros2 run`` would keep a SIGINT to itself from the node)
         exe = ws / "install" / "lpv_sysid" / "lib" / "lpv_sysid" / "lpv_controller_node"
-        proc = env.popen(f"{exe} --ros-args --params-file {CONTROLLER_YAML} "
-                         f"-p gains_file:={GAINS} -p auto_start:=true",
-                         tmp_path / "controller.log")
+        proc = env.popen(
+            f"{exe} --ros-args --params-file {CONTROLLER_YAML} "
+            f"-p gains_file:={GAINS} -p auto_start:=true",
+            tmp_path / "controller.log",
+        )
     try:
         assert proc.wait_for("auto_start: commanding once every input stream arrives", 60.0)
         time.sleep(1.0)
-        assert "safety abort" not in proc.log()           # not armed without its inputs
+        assert "safety abort" not in proc.log()  # not armed without its inputs
         feeder = env.popen(f"python3 {tmp_path / 'inputs.py'} 3.0", tmp_path / "inputs.log")
         assert proc.wait_for("safety abort: stale", 60.0), proc.log()[-3000:]
         assert "auto_start: LPV control started" in proc.log()
@@ -375,6 +440,9 @@ def test_controller_survives_its_safety_abort_under_real_rclpy(ws, tmp_path):
         dom.release()
     assert rc == 0, proc.log()[-3000:]
     line = next(ln for ln in proc.log().splitlines() if "safety abort: stale" in ln)
-    assert re.search(r"\[ERROR\] \[\d+\.\d+\] \[lpv_sysid\.lpv_controller\]: safety abort: "
-                     r"stale: ", line), line
+    assert re.search(
+        r"\[ERROR\] \[\d+\.\d+\] \[lpv_sysid\.lpv_controller\]: safety abort: "
+        r"stale: ",
+        line,
+    ), line
     assert "Logger severity cannot be changed" not in proc.log()

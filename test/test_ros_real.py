@@ -67,8 +67,11 @@ def readme_tables() -> tuple[dict, dict]:
         subs, pubs, srvs = [c.strip() for c in rest.split("|")[:3]]
         every = "every topic" in subs
         names = lambda c: [n for n in re.findall(r"`([a-z_.]+)`", c) if n in types]  # noqa: E731
-        nodes[exe] = (sorted(types) if every else names(subs), names(pubs),
-                      re.findall(r"`([a-z_]+)`", srvs))
+        nodes[exe] = (
+            sorted(types) if every else names(subs),
+            names(pubs),
+            re.findall(r"`([a-z_]+)`", srvs),
+        )
     assert types and nodes, "README.md: node / topic tables not found"
     return types, nodes
 
@@ -86,19 +89,35 @@ def ros(tmp_path_factory):
     data = tmp_path_factory.mktemp("ros_data")
     from lpv_sysid.signals.store import save_npz
     from lpv_test_gains import write_gains
+
     t = np.arange(0.0, 20.0, 0.02)
     s = 0.5 * np.sin(2 * np.pi * 0.5 * t)
-    save_npz(str(data / "sig1.npz"), t, np.stack([0 * t, s, 0 * t, 0.1 * s], axis=1),
-             ["u_ref", "v_ref", "w_ref", "r_ref"])
-    cols = [0.8 * np.sin(2 * np.pi * 0.2 * t), 0 * t, 0 * t] + \
-        [0.5 * np.sin(2 * np.pi * f * t) for f in (1.3, 1.7, 2.3, 2.9)]
-    save_npz(str(data / "sig2.npz"), t, np.stack(cols, axis=1),
-             ["u_d", "v_d", "w_d", "ue_t", "ue_a", "ue_e", "ue_r"])
+    save_npz(
+        str(data / "sig1.npz"),
+        t,
+        np.stack([0 * t, s, 0 * t, 0.1 * s], axis=1),
+        ["u_ref", "v_ref", "w_ref", "r_ref"],
+    )
+    cols = [0.8 * np.sin(2 * np.pi * 0.2 * t), 0 * t, 0 * t] + [
+        0.5 * np.sin(2 * np.pi * f * t) for f in (1.3, 1.7, 2.3, 2.9)
+    ]
+    save_npz(
+        str(data / "sig2.npz"),
+        t,
+        np.stack(cols, axis=1),
+        ["u_d", "v_d", "w_d", "ue_t", "ue_a", "ue_e", "ue_r"],
+    )
     gains = write_gains(data / "gains.yaml")
     prefix = ws / "install" / "lpv_sysid"
-    yield {"ws": ws, "lib": prefix / "lib" / "lpv_sysid", "share": prefix / "share" / "lpv_sysid",
-           "data": data, "sig1": str(data / "sig1.npz"), "sig2": str(data / "sig2.npz"),
-           "gains": gains}
+    yield {
+        "ws": ws,
+        "lib": prefix / "lib" / "lpv_sysid",
+        "share": prefix / "share" / "lpv_sysid",
+        "data": data,
+        "sig1": str(data / "sig1.npz"),
+        "sig2": str(data / "sig2.npz"),
+        "gains": gains,
+    }
     print("\nreal ROS 2 measurements:\n" + json.dumps(MEASURED, indent=1, sort_keys=True))
 
 
@@ -138,8 +157,13 @@ def yaml_parameters(path: Path, node: str) -> dict:
 
 def same(a, b) -> bool:
     if isinstance(a, float) or isinstance(b, float):
-        return isinstance(a, (int, float)) and isinstance(b, (int, float)) and \
-            (math.isclose(a, b, rel_tol=1e-12, abs_tol=1e-12) or math.isnan(a) and math.isnan(b))
+        return (
+            isinstance(a, (int, float))
+            and isinstance(b, (int, float))
+            and (
+                math.isclose(a, b, rel_tol=1e-12, abs_tol=1e-12) or math.isnan(a) and math.isnan(b)
+            )
+        )
     if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
         return len(a) == len(b) and all(same(x, y) for x, y in zip(a, b))
     return a == b
@@ -160,8 +184,7 @@ def node_info(env: RosEnv, fqn: str, publishers=(), timeout: float = 45.0) -> di
                 name, typ = line.strip().split(": ", 1)
                 cur[name] = typ
         have = sections.get("Publishers", {})
-        if r.returncode == 0 and all(p in have for p in publishers) \
-                or time.monotonic() > deadline:
+        if r.returncode == 0 and all(p in have for p in publishers) or time.monotonic() > deadline:
             assert r.returncode == 0, f"ros2 node info {fqn}: {r.stdout}\n{r.stderr}"
             return sections
         time.sleep(0.5)
@@ -169,7 +192,7 @@ def node_info(env: RosEnv, fqn: str, publishers=(), timeout: float = 45.0) -> di
 
 def param_dump(env: RosEnv, fqn: str) -> dict:
     r = env.run(f"ros2 param dump {fqn} --no-daemon", timeout=60, check=True)
-    (key, body), = yaml.safe_load(r.stdout).items()
+    ((key, body),) = yaml.safe_load(r.stdout).items()
     assert key == fqn
     return flatten(body["ros__parameters"])
 
@@ -212,8 +235,9 @@ def sigint_and_wait(proc: Proc, group: bool, timeout: float = 30.0) -> tuple[int
         time.sleep(0.05)
     if proc.p.poll() is None:
         proc.kill()
-        raise AssertionError(f"{proc.log_path.name}: still running {timeout} s after SIGINT:\n"
-                             f"{proc.log()[-3000:]}")
+        raise AssertionError(
+            f"{proc.log_path.name}: still running {timeout} s after SIGINT:\n{proc.log()[-3000:]}"
+        )
     rc = proc.wait(1.0)
     if exits:
         MEASURED.setdefault("launch_node_exit_s", {})[proc.log_path.parent.name] = exits
@@ -240,6 +264,7 @@ def check_recording(out_dir: Path, min_counts: dict) -> dict:
     recorded rates {topic: Hz}."""
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
+
     meta = yaml.safe_load((out_dir / "experiment.yaml").read_text())
     assert meta["closed_cleanly"] is True and meta["status"] == "closed_cleanly", meta
     counts: dict = {}
@@ -248,7 +273,7 @@ def check_recording(out_dir: Path, min_counts: dict) -> dict:
         assert (bag / "metadata.yaml").is_file(), f"{bag}: no metadata.yaml"
         with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
             for conn, _, raw in reader.messages():
-                if conn.topic not in counts:                 # one of each topic decodes
+                if conn.topic not in counts:  # one of each topic decodes
                     reader.deserialize(raw, conn.msgtype)
                 counts[conn.topic] = counts.get(conn.topic, 0) + 1
     for topic, n in min_counts.items():
@@ -267,9 +292,10 @@ def assert_topics_as_readme(info: dict, exe: str) -> None:
             assert got.get(f"{NS}/{n}") == README_TYPES[n], (exe, section, n, got)
     if "status" in pubs:
         assert info["Publishers"].get("/diagnostics") == README_TYPES["status"], info
-    servers = {k: v for k, v in info.get("Service Servers", {}).items()
-               if v == "std_srvs/srv/Trigger"}
-    node = exe[:-len("_node")] if exe != "mavlink_bridge_node" else "mavlink_bridge"
+    servers = {
+        k: v for k, v in info.get("Service Servers", {}).items() if v == "std_srvs/srv/Trigger"
+    }
+    node = exe[: -len("_node")] if exe != "mavlink_bridge_node" else "mavlink_bridge"
     assert sorted(servers) == sorted(f"{NS}/{node}/{s}" for s in srvs), (exe, servers)
 
 
@@ -287,13 +313,16 @@ NODES = {
 def declared(exe: str) -> set:
     """The node module's declared parameter names (the one declaration)."""
     import importlib
+
     mod = importlib.import_module(f"lpv_sysid.nodes.{exe}")
     return {name for name, _, _ in mod.PARAMETERS}
 
 
 #: a velocity reference stream for the bridge alone (ros2 topic pub stamps it "now")
-REFERENCE_PUB = ("ros2 topic pub -r 50 /lpv_sysid/velocity_reference geometry_msgs/msg/TwistStamped "
-                 "'{header: {stamp: now, frame_id: base_link}}'")
+REFERENCE_PUB = (
+    "ros2 topic pub -r 50 /lpv_sysid/velocity_reference geometry_msgs/msg/TwistStamped "
+    "'{header: {stamp: now, frame_id: base_link}}'"
+)
 #: the bridge's log line once PX4 (the simulated one) reports the hand-back mode
 HANDBACK_DONE = re.compile(r"hand-back confirmed: vehicle in ([A-Z]+)")
 
@@ -307,6 +336,7 @@ def parallel(**calls) -> dict:
     """Run the zero-argument ``calls`` in threads; {name: result} (a ros2 call is mostly
     waiting for discovery: ~1.5 s of wall time, 0.3 s of CPU)."""
     from concurrent.futures import ThreadPoolExecutor
+
     with ThreadPoolExecutor(len(calls)) as pool:
         futures = {k: pool.submit(fn) for k, fn in calls.items()}
         return {k: f.result() for k, f in futures.items()}
@@ -319,9 +349,12 @@ def probe_node(exe: str, s: dict) -> dict:
     env, fqn = s["env"], f"{NS}/{node}"
     assert s["proc"].wait_for(ready(node), 90.0), s["proc"].log()[-3000:]
     out = {"ready_s": round(time.monotonic() - s["t0"], 1)}
-    out.update(parallel(info=lambda: node_info(env, fqn, [f"{NS}/{t}" for t in
-                                                          README_NODES[exe][1]]),
-                        dump=lambda: param_dump(env, fqn)))
+    out.update(
+        parallel(
+            info=lambda: node_info(env, fqn, [f"{NS}/{t}" for t in README_NODES[exe][1]]),
+            dump=lambda: param_dump(env, fqn),
+        )
+    )
     services = README_NODES[exe][2]
     if exe == "mavlink_bridge_node":
         # start with a reference stream: OFFBOARD, then the hand-back is SIGINT's (the
@@ -342,6 +375,7 @@ def alone(ros, tmp_path_factory):
     """Every node started at once from its config file, each on its own domain (the bridge
     connected to the package's simulated PX4 over 127.0.0.1), and probed concurrently."""
     from concurrent.futures import ThreadPoolExecutor
+
     logs = tmp_path_factory.mktemp("alone")
     started = {}
     for exe, (node, params_file, extra) in NODES.items():
@@ -353,25 +387,38 @@ def alone(ros, tmp_path_factory):
             port = free_udp_port()
             # input_timeout: see the phase-1 launch test (a 207 ms gap in ros2 topic pub's
             # 50 Hz stream handed back before the SIGINT under load ~11)
-            overrides.update({"link.url": f"udpin:127.0.0.1:{port}",
-                              "offboard.input_timeout": 1.0})
-            procs.append(env.popen(f"{ros['lib']}/lpv-sysid sim-vehicle --udp 127.0.0.1:{port}",
-                                   logs / "px4_sim.log"))
+            overrides.update(
+                {"link.url": f"udpin:127.0.0.1:{port}", "offboard.input_timeout": 1.0}
+            )
+            procs.append(
+                env.popen(
+                    f"{ros['lib']}/lpv-sysid sim-vehicle --udp 127.0.0.1:{port}",
+                    logs / "px4_sim.log",
+                )
+            )
         if exe == "data_logger_node":
             overrides["out_dir"] = str(logs / "alone_log")
         args = " ".join(f"-p {k}:={v}" for k, v in overrides.items())
-        cmd = (f"{ros['lib']}/{exe} --ros-args --params-file "
-               f"{ros['share']}/config/{params_file} {args}")
-        started[exe] = {"env": env, "domain": dom, "proc": env.popen(cmd, logs / f"{exe}.log"),
-                        "helpers": procs, "overrides": overrides, "t0": time.monotonic(),
-                        "logs": logs}
+        cmd = (
+            f"{ros['lib']}/{exe} --ros-args --params-file "
+            f"{ros['share']}/config/{params_file} {args}"
+        )
+        started[exe] = {
+            "env": env,
+            "domain": dom,
+            "proc": env.popen(cmd, logs / f"{exe}.log"),
+            "helpers": procs,
+            "overrides": overrides,
+            "t0": time.monotonic(),
+            "logs": logs,
+        }
     try:
-        with ThreadPoolExecutor(len(started)) as pool:      # all nodes at once
+        with ThreadPoolExecutor(len(started)) as pool:  # all nodes at once
             futures = {exe: pool.submit(probe_node, exe, s) for exe, s in started.items()}
             for exe, fut in futures.items():
                 try:
                     started[exe]["probe"] = fut.result()
-                except Exception as exc:          # reported by that node's test
+                except Exception as exc:  # reported by that node's test
                     started[exe]["probe"] = exc
         yield started
     finally:
@@ -403,8 +450,10 @@ def test_node_from_config_params_topics_services_sigint(ros, alone, exe):
         assert same(dump[name], value), (exe, name, dump[name], value)
     # the dump lists every declared parameter only when each has a value (one
     # uninitialized parameter empties rclpy's get_parameters answer)
-    assert set(dump) - ROS_OWN_PARAMETERS == declared(exe), \
-        (exe, sorted((set(dump) - ROS_OWN_PARAMETERS) ^ declared(exe)))
+    assert set(dump) - ROS_OWN_PARAMETERS == declared(exe), (
+        exe,
+        sorted((set(dump) - ROS_OWN_PARAMETERS) ^ declared(exe)),
+    )
     # every service answers: abort succeeds; start succeeds or is refused with the reason
     # (the controller alone has no input streams to start on)
     for srv, (ok, message) in probe["services"].items():
@@ -423,7 +472,7 @@ def test_node_from_config_params_topics_services_sigint(ros, alone, exe):
         after = proc.log().split("OFFBOARD confirmed", 1)[1]
         m = HANDBACK_DONE.search(after)
         assert m and m.group(1) == "HOLD", proc.log()[-3000:]
-        MEASURED["bridge_alone_handback"] = after[m.start():].splitlines()[0]
+        MEASURED["bridge_alone_handback"] = after[m.start() :].splitlines()[0]
         MEASURED["bridge_alone_handback_confirmed_after_s"] = handback_latency(after)
 
 
@@ -469,6 +518,7 @@ def config_dir_with(ros, tmp: Path, file: str, overrides: dict) -> Path:
     """A copy of the installed config directory with ``overrides`` (dotted names) set in
     ``file``'s ros__parameters: the launch files' ``config_dir`` argument."""
     import shutil
+
     d = tmp / "config"
     shutil.copytree(ros["share"] / "config", d)
     doc = yaml.safe_load((d / file).read_text())
@@ -499,12 +549,18 @@ def test_sim_launch_phase2_process_group_sigint(ros, dom, tmp_path):
     in rosbags."""
     env = RosEnv(SETUP, ros["ws"], dom.value)
     out = tmp_path / "sim_log"
-    proc = launch(ros, env, "sim.launch.py", {"phase": 2, "gains_file": ros["gains"],
-                                              "signals_file": ros["sig2"], "log_dir": out},
-                  tmp_path / "launch.log")
+    proc = launch(
+        ros,
+        env,
+        "sim.launch.py",
+        {"phase": 2, "gains_file": ros["gains"], "signals_file": ros["sig2"], "log_dir": out},
+        tmp_path / "launch.log",
+    )
     try:
-        wait_all(proc, [ready(n) for n in ("sim_vehicle", "excitation", "lpv_controller",
-                                           "data_logger")])
+        wait_all(
+            proc,
+            [ready(n) for n in ("sim_vehicle", "excitation", "lpv_controller", "data_logger")],
+        )
 
         def fly():
             ok, msg = trigger(env, f"{NS}/lpv_controller/start", proc)
@@ -512,6 +568,7 @@ def test_sim_launch_phase2_process_group_sigint(ros, dom, tmp_path):
             ok, msg = trigger(env, f"{NS}/excitation/start", proc)
             assert ok, msg
             return topic_hz(env, f"{NS}/state", 5.0)
+
         got = parallel(topics=lambda: assert_graph_topics(env, README_TYPES), fly=fly)
         MEASURED["sim_phase2_state_hz_ros2_topic_hz"] = got["fly"]
         commanding = "safety abort" not in proc.log()
@@ -519,21 +576,39 @@ def test_sim_launch_phase2_process_group_sigint(ros, dom, tmp_path):
     finally:
         proc.kill()
     MEASURED["sim_phase2_group_sigint"] = {"rc": rc, "s": dt}
-    assert_launch_exit(proc, rc, ["sim_vehicle_node", "excitation_node", "lpv_controller_node",
-                                  "data_logger_node"])
+    assert_launch_exit(
+        proc,
+        rc,
+        ["sim_vehicle_node", "excitation_node", "lpv_controller_node", "data_logger_node"],
+    )
     text = proc.log()
-    abort = re.search(r"\[ERROR\] \[\d+\.\d+\] \[lpv_sysid\.lpv_controller\]: safety abort: "
-                      r"(.*); actuator commands stopped", text)
+    abort = re.search(
+        r"\[ERROR\] \[\d+\.\d+\] \[lpv_sysid\.lpv_controller\]: safety abort: "
+        r"(.*); actuator commands stopped",
+        text,
+    )
     assert abort, text[-4000:]
     MEASURED["sim_phase2_controller_abort"] = abort.group(1)
-    if commanding:                  # no other abort came first: it is the shutdown's
+    if commanding:  # no other abort came first: it is the shutdown's
         assert abort.group(1) == "external: shutdown", abort.group(1)
     # the excitation's final status: faded out, or its (sim-time) clock stopped with the sim
-    assert re.search(r"\[lpv_sysid\.excitation\]: excitation (faded out|node clock stopped "
-                     r"at [0-9.]+ s before the fade ended): shutdown", text), text[-4000:]
-    rates = check_recording(out, {"state": 100, "imu": 100, "rotor_speeds": 40,
-                                  "velocity_reference": 40, "excitation": 40,
-                                  "actuator_command": 1, "status": 2})
+    assert re.search(
+        r"\[lpv_sysid\.excitation\]: excitation (faded out|node clock stopped "
+        r"at [0-9.]+ s before the fade ended): shutdown",
+        text,
+    ), text[-4000:]
+    rates = check_recording(
+        out,
+        {
+            "state": 100,
+            "imu": 100,
+            "rotor_speeds": 40,
+            "velocity_reference": 40,
+            "excitation": 40,
+            "actuator_command": 1,
+            "status": 2,
+        },
+    )
     MEASURED["sim_phase2_recorded_rates_hz"] = rates
     # on sim time (lock-step) the simulated sensors keep their configured rates exactly,
     # however loaded the machine (10 %: re-sent unanswered state samples count twice)
@@ -554,28 +629,48 @@ def test_phase1_launch_px4_sim_handback_on_process_group_sigint(ros, dom, tmp_pa
     # input_timeout: the shipped 0.2 s of reference silence before a hand-back was exceeded
     # here (223 ms between two 100 Hz references, load ~10 on 2 cores from other processes);
     # this test is about the Ctrl-C, so a stale-input hand-back must not come first
-    cfg = config_dir_with(ros, tmp_path, "mavlink_bridge_node.yaml",
-                          {"link.url": f"udpin:127.0.0.1:{port}", "offboard.input_timeout": 1.0})
-    px4 = env.popen(f"{ros['lib']}/lpv-sysid sim-vehicle --udp 127.0.0.1:{port}",
-                    tmp_path / "px4_sim.log")
+    cfg = config_dir_with(
+        ros,
+        tmp_path,
+        "mavlink_bridge_node.yaml",
+        {"link.url": f"udpin:127.0.0.1:{port}", "offboard.input_timeout": 1.0},
+    )
+    px4 = env.popen(
+        f"{ros['lib']}/lpv-sysid sim-vehicle --udp 127.0.0.1:{port}", tmp_path / "px4_sim.log"
+    )
     out = tmp_path / "phase1_log"
-    proc = launch(ros, env, "phase1.launch.py",
-                  {"config_dir": cfg, "signals_file": ros["sig1"], "log_dir": out,
-                   "vertex": '"[1.0, 0.0, 0.0]"'}, tmp_path / "launch.log")
+    proc = launch(
+        ros,
+        env,
+        "phase1.launch.py",
+        {
+            "config_dir": cfg,
+            "signals_file": ros["sig1"],
+            "log_dir": out,
+            "vertex": '"[1.0, 0.0, 0.0]"',
+        },
+        tmp_path / "launch.log",
+    )
     try:
-        wait_all(proc, [ready(n) for n in ("excitation", "mavlink_bridge", "data_logger")] +
-                 ["[lpv_sysid.mavlink_bridge]: link_up"])
-        got = parallel(topics=lambda: assert_graph_topics(
-                           env, ["velocity_reference", "excitation", "state", "imu",
-                                 "rotor_speeds", "status"]),
-                       start=lambda: trigger(env, f"{NS}/mavlink_bridge/start", proc))
+        wait_all(
+            proc,
+            [ready(n) for n in ("excitation", "mavlink_bridge", "data_logger")]
+            + ["[lpv_sysid.mavlink_bridge]: link_up"],
+        )
+        got = parallel(
+            topics=lambda: assert_graph_topics(
+                env, ["velocity_reference", "excitation", "state", "imu", "rotor_speeds", "status"]
+            ),
+            start=lambda: trigger(env, f"{NS}/mavlink_bridge/start", proc),
+        )
         assert got["start"][0], got["start"]
         assert proc.wait_for("OFFBOARD confirmed", 30.0), proc.log()[-4000:]
         ok, msg = trigger(env, f"{NS}/excitation/start", proc)
         assert ok, msg
         MEASURED["phase1_state_hz_ros2_topic_hz"] = topic_hz(env, f"{NS}/state", 5.0)
-        assert "OFFBOARD" in proc.log().rsplit("OFFBOARD confirmed", 1)[1] or \
-            not HANDBACK_DONE.search(proc.log()), "left OFFBOARD before the Ctrl-C"
+        assert "OFFBOARD" in proc.log().rsplit("OFFBOARD confirmed", 1)[
+            1
+        ] or not HANDBACK_DONE.search(proc.log()), "left OFFBOARD before the Ctrl-C"
         rc, dt = sigint_and_wait(proc, group=True)
     finally:
         proc.kill()
@@ -586,22 +681,26 @@ def test_phase1_launch_px4_sim_handback_on_process_group_sigint(ros, dom, tmp_pa
     after = proc.log().rsplit("OFFBOARD confirmed", 1)[1]
     m = HANDBACK_DONE.search(after)
     assert m and m.group(1) == "HOLD", proc.log()[-4000:]
-    MEASURED["phase1_handback"] = after[m.start():].splitlines()[0]
+    MEASURED["phase1_handback"] = after[m.start() :].splitlines()[0]
     MEASURED["phase1_handback_confirmed_after_s"] = handback_latency(after)
     # the simulated PX4's own account: OFFBOARD, then HOLD commanded by the bridge
     assert px4_rc == 0
     modes = re.findall(r"t=\s*[0-9.]+ s\s+([A-Z_]+)", px4.log())
     assert "OFFBOARD" in modes and modes[-1] == "HOLD", px4.log()
-    rates = check_recording(out, {"state": 50, "imu": 50, "velocity_reference": 50,
-                                  "excitation": 50, "status": 2})
+    rates = check_recording(
+        out, {"state": 50, "imu": 50, "velocity_reference": 50, "excitation": 50, "status": 2}
+    )
     MEASURED["phase1_recorded_rates_hz"] = rates
     # wall-clock streams at their configured rates: PX4's (the bridge's stream requests)
     # and the excitation's timer (30 %: the other processes of a loaded machine)
     bridge = yaml_parameters(cfg / "mavlink_bridge_node.yaml", "mavlink_bridge")
     exc = yaml_parameters(cfg / "excitation_node.yaml", "excitation")
-    for topic, want in (("imu", bridge["link.streams.HIGHRES_IMU"]),
-                        ("rotor_speeds", bridge["link.streams.ESC_STATUS"]),
-                        ("velocity_reference", exc["rate_hz"]), ("excitation", exc["rate_hz"])):
+    for topic, want in (
+        ("imu", bridge["link.streams.HIGHRES_IMU"]),
+        ("rotor_speeds", bridge["link.streams.ESC_STATUS"]),
+        ("velocity_reference", exc["rate_hz"]),
+        ("excitation", exc["rate_hz"]),
+    ):
         assert rates[topic] == pytest.approx(want, rel=0.3), (topic, rates)
 
 
@@ -612,27 +711,46 @@ def test_phase2_launch_px4_sim_services_and_launch_sigint(ros, dom, tmp_path):
     signals each node once): every node exits 0, the recording opens in rosbags."""
     env = RosEnv(SETUP, ros["ws"], dom.value)
     port = free_udp_port()
-    cfg = config_dir_with(ros, tmp_path, "mavlink_bridge_node.yaml",
-                          {"link.url": f"udpin:127.0.0.1:{port}"})
-    px4 = env.popen(f"{ros['lib']}/lpv-sysid sim-vehicle --udp 127.0.0.1:{port}",
-                    tmp_path / "px4_sim.log")
+    cfg = config_dir_with(
+        ros, tmp_path, "mavlink_bridge_node.yaml", {"link.url": f"udpin:127.0.0.1:{port}"}
+    )
+    px4 = env.popen(
+        f"{ros['lib']}/lpv-sysid sim-vehicle --udp 127.0.0.1:{port}", tmp_path / "px4_sim.log"
+    )
     out = tmp_path / "phase2_log"
-    proc = launch(ros, env, "phase2.launch.py",
-                  {"config_dir": cfg, "gains_file": ros["gains"], "signals_file": ros["sig2"],
-                   "log_dir": out}, tmp_path / "launch.log")
+    proc = launch(
+        ros,
+        env,
+        "phase2.launch.py",
+        {
+            "config_dir": cfg,
+            "gains_file": ros["gains"],
+            "signals_file": ros["sig2"],
+            "log_dir": out,
+        },
+        tmp_path / "launch.log",
+    )
     answers = {}
     try:
-        wait_all(proc, [ready(n) for n in ("excitation", "lpv_controller", "mavlink_bridge",
-                                           "data_logger")] +
-                 ["[lpv_sysid.mavlink_bridge]: link_up"])
-        calls = {srv: (lambda srv=srv: trigger(env, f"{NS}/{srv}", proc)) for srv in
-                 ("mavlink_bridge/start", "lpv_controller/start", "excitation/start")}
-        answers.update(parallel(topics=lambda: assert_graph_topics(env, README_TYPES),
-                                **calls))
+        wait_all(
+            proc,
+            [ready(n) for n in ("excitation", "lpv_controller", "mavlink_bridge", "data_logger")]
+            + ["[lpv_sysid.mavlink_bridge]: link_up"],
+        )
+        calls = {
+            srv: (lambda srv=srv: trigger(env, f"{NS}/{srv}", proc))
+            for srv in ("mavlink_bridge/start", "lpv_controller/start", "excitation/start")
+        }
+        answers.update(parallel(topics=lambda: assert_graph_topics(env, README_TYPES), **calls))
         answers.pop("topics")
-        answers.update(parallel(**{srv: (lambda srv=srv: trigger(env, f"{NS}/{srv}", proc))
-                                   for srv in ("excitation/abort", "lpv_controller/abort",
-                                               "mavlink_bridge/abort")}))
+        answers.update(
+            parallel(
+                **{
+                    srv: (lambda srv=srv: trigger(env, f"{NS}/{srv}", proc))
+                    for srv in ("excitation/abort", "lpv_controller/abort", "mavlink_bridge/abort")
+                }
+            )
+        )
         rc, dt = sigint_and_wait(proc, group=False)
     finally:
         proc.kill()
@@ -645,8 +763,11 @@ def test_phase2_launch_px4_sim_services_and_launch_sigint(ros, dom, tmp_path):
         assert ok or srv.endswith("/start") and msg.startswith("aborted ("), (srv, msg)
     assert answers["mavlink_bridge/start"][0], answers
     assert answers["mavlink_bridge/abort"][1].startswith("handing control back to PX4"), answers
-    assert_launch_exit(proc, rc, ["excitation_node", "lpv_controller_node",
-                                  "mavlink_bridge_node", "data_logger_node"])
+    assert_launch_exit(
+        proc,
+        rc,
+        ["excitation_node", "lpv_controller_node", "mavlink_bridge_node", "data_logger_node"],
+    )
     check_recording(out, {"state": 20, "velocity_reference": 20, "excitation": 20, "status": 2})
 
 
@@ -663,19 +784,35 @@ def test_campaign_launch_px4_sim_start_abort_process_group_sigint(ros, dom, tmp_
     reason) while campaign_node dies of :data:`CAMPAIGN_LOGGER_BUG`."""
     env = RosEnv(SETUP, ros["ws"], dom.value)
     port = free_udp_port()
-    cfg = config_dir_with(ros, tmp_path, "mavlink_bridge_node.yaml",
-                          {"link.url": f"udpin:127.0.0.1:{port}"})
-    px4 = env.popen(f"{ros['lib']}/lpv-sysid sim-vehicle --udp 127.0.0.1:{port} "
-                    "--param COM_OBL_RC_ACT=5", tmp_path / "px4_sim.log")
+    cfg = config_dir_with(
+        ros, tmp_path, "mavlink_bridge_node.yaml", {"link.url": f"udpin:127.0.0.1:{port}"}
+    )
+    px4 = env.popen(
+        f"{ros['lib']}/lpv-sysid sim-vehicle --udp 127.0.0.1:{port} --param COM_OBL_RC_ACT=5",
+        tmp_path / "px4_sim.log",
+    )
     out = tmp_path / "campaign_log"
-    proc = launch(ros, env, "campaign.launch.py",
-                  {"config_dir": cfg, "signals_file": ros["sig1"], "log_dir": out,
-                   "runs_dir": tmp_path / "runs"}, tmp_path / "launch.log")
+    proc = launch(
+        ros,
+        env,
+        "campaign.launch.py",
+        {
+            "config_dir": cfg,
+            "signals_file": ros["sig1"],
+            "log_dir": out,
+            "runs_dir": tmp_path / "runs",
+        },
+        tmp_path / "launch.log",
+    )
     try:
-        wait_all(proc, [ready(n) for n in ("mavlink_bridge", "campaign", "data_logger")] +
-                 ["[lpv_sysid.mavlink_bridge]: link_up"])
-        assert_graph_topics(env, ["velocity_reference", "excitation", "state", "imu",
-                                  "rotor_speeds", "status"])
+        wait_all(
+            proc,
+            [ready(n) for n in ("mavlink_bridge", "campaign", "data_logger")]
+            + ["[lpv_sysid.mavlink_bridge]: link_up"],
+        )
+        assert_graph_topics(
+            env, ["velocity_reference", "excitation", "state", "imu", "rotor_speeds", "status"]
+        )
         ok, msg = trigger(env, f"{NS}/campaign/start", proc)
         MEASURED["campaign_start"] = msg
         assert ok, msg
@@ -686,8 +823,7 @@ def test_campaign_launch_px4_sim_start_abort_process_group_sigint(ros, dom, tmp_
         assert proc.wait_for("hand-back confirmed", 30.0), proc.log()[-4000:]
         rc, dt = sigint_and_wait(proc, group=True)
         MEASURED["campaign_group_sigint"] = {"rc": rc, "s": dt}
-        assert_launch_exit(proc, rc, ["mavlink_bridge_node", "campaign_node",
-                                      "data_logger_node"])
+        assert_launch_exit(proc, rc, ["mavlink_bridge_node", "campaign_node", "data_logger_node"])
     except AssertionError:
         if CAMPAIGN_LOGGER_BUG in proc.log() and "[campaign_node-" in proc.log():
             pytest.xfail(f"campaign_node died: {CAMPAIGN_LOGGER_BUG} (its publish_status)")
@@ -710,16 +846,24 @@ def test_standin_is_no_kinder_than_rclpy(ros, dom, tmp_path):
     (tmp_path / "real").mkdir()
     (tmp_path / "standin").mkdir()
     r = env.run(f"python3 {probe} {tmp_path / 'real'}", timeout=120, check=True)
-    real = json.loads(r.stdout[r.stdout.index("{"):])
+    real = json.loads(r.stdout[r.stdout.index("{") :])
     support = str(ROOT / "test" / "support")
     path = os.pathsep.join([support, str(ROOT), os.environ.get("PYTHONPATH", "")])
     import sys
-    s = subprocess.run([sys.executable, str(probe), str(tmp_path / "standin")],
-                       capture_output=True, text=True, timeout=120,
-                       env={**os.environ, "PYTHONPATH": path})
+
+    s = subprocess.run(
+        [sys.executable, str(probe), str(tmp_path / "standin")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "PYTHONPATH": path},
+    )
     assert s.returncode == 0, s.stderr
-    standin = json.loads(s.stdout[s.stdout.index("{"):])
+    standin = json.loads(s.stdout[s.stdout.index("{") :])
     assert len(real) >= 30
-    diff = {k: (real.get(k), standin.get(k)) for k in set(real) | set(standin)
-            if real.get(k) != standin.get(k)}
+    diff = {
+        k: (real.get(k), standin.get(k))
+        for k in set(real) | set(standin)
+        if real.get(k) != standin.get(k)
+    }
     assert diff == {}, diff

@@ -5,15 +5,27 @@ import math
 import pytest
 
 from lpv_sysid.control.safety import (
-    BOUND_EXCEEDED, EXTERNAL, NON_FINITE, OUT_OF_BOX, OUT_OF_ORDER, STALE, SafetyConfig,
-    SafetySupervisor)
+    BOUND_EXCEEDED,
+    EXTERNAL,
+    NON_FINITE,
+    OUT_OF_BOX,
+    OUT_OF_ORDER,
+    STALE,
+    SafetyConfig,
+    SafetySupervisor,
+)
 from lpv_sysid.errors import ConfigError, SafetyError
 
 
 def make(margin=0.0):
-    cfg = SafetyConfig.from_dict({"timeouts": {"state": 0.05, "reference": 0.2},
-                                  "box_min": [-5, -5, -2], "box_max": [5, 5, 2],
-                                  "box_margin": margin})
+    cfg = SafetyConfig.from_dict(
+        {
+            "timeouts": {"state": 0.05, "reference": 0.2},
+            "box_min": [-5, -5, -2],
+            "box_max": [5, 5, 2],
+            "box_margin": margin,
+        }
+    )
     sup = SafetySupervisor(cfg)
     sup.arm(10.0)
     return sup
@@ -44,7 +56,7 @@ def test_stale_stream_boundary():
     sup = make()
     feed(sup, 10.0)
     sup.on_input("state", 10.19, [0.0] * 12, 10.19)
-    assert sup.check(10.2) is None          # reference age exactly 0.2 s: not stale
+    assert sup.check(10.2) is None  # reference age exactly 0.2 s: not stale
     ev = sup.check(10.2000001)
     assert ev.reason == STALE and ev.detail.startswith("reference")
     assert not sup.action.commanding and not sup.action.excitation_on
@@ -88,12 +100,12 @@ def test_bound_flag_and_latching_first_reason_wins():
     sup.on_bound_flag(10.5, True, "phi = 0.61 rad > 0.6 rad")
     sup.check_scheduling(11.0, [99.0, 0.0, 0.0])
     assert sup.event.reason == BOUND_EXCEEDED and sup.event.t == 10.5
-    feed(sup, 12.0)   # fresh, valid data does not clear the abort
+    feed(sup, 12.0)  # fresh, valid data does not clear the abort
     assert sup.aborted and not sup.action.commanding
     with pytest.raises(SafetyError, match="bound_exceeded: phi"):
         raise sup.event.as_error()
     with pytest.raises(SafetyError):
-        sup.reset()   # still armed
+        sup.reset()  # still armed
     with pytest.raises(SafetyError):
         sup.arm(13.0)
     sup.disarm()
@@ -108,12 +120,15 @@ def test_external_abort():
     assert not sup.action.excitation_on
 
 
-@pytest.mark.parametrize("cfg, field", [
-    ({"timeouts": {"state": 0.0}}, "timeouts.state"),
-    ({"timeouts": {"state": 0.1}, "box_min": [1], "box_max": [0]}, "box_min"),
-    ({"timeouts": {"state": 0.1}, "bogus": 1}, "bogus"),
-    ({"timeout": {}}, "timeout"),
-])
+@pytest.mark.parametrize(
+    "cfg, field",
+    [
+        ({"timeouts": {"state": 0.0}}, "timeouts.state"),
+        ({"timeouts": {"state": 0.1}, "box_min": [1], "box_max": [0]}, "box_min"),
+        ({"timeouts": {"state": 0.1}, "bogus": 1}, "bogus"),
+        ({"timeout": {}}, "timeout"),
+    ],
+)
 def test_bad_config_names_field(cfg, field):
     with pytest.raises(ConfigError, match=field):
         SafetyConfig.from_dict(cfg)
@@ -128,34 +143,35 @@ def make_tol(tol=0.01):
 
 def test_future_stamp_beyond_tolerance():
     from lpv_sysid.control.safety import FUTURE_STAMP
+
     sup = make_tol()
-    assert sup.on_input("state", 10.01, [0.0], 10.0) is None        # at the tolerance
+    assert sup.on_input("state", 10.01, [0.0], 10.0) is None  # at the tolerance
     ev = sup.on_input("state", 10.0201, [0.0], 10.01)
     assert ev.reason == FUTURE_STAMP and "0.010 s ahead of the node clock 10.010000 s" in ev.detail
 
 
 def test_stamp_age_at_receipt_and_at_the_tick():
     sup = make_tol()
-    assert sup.on_input("state", 9.96, [0.0], 10.0) is None        # 40 ms latency < 50 + 10
+    assert sup.on_input("state", 9.96, [0.0], 10.0) is None  # 40 ms latency < 50 + 10
     assert sup.check(10.0) is None
     ev = sup.on_input("state", 9.9399, [0.0], 10.0)
-    assert ev.reason == OUT_OF_ORDER                                # went back: first reason
+    assert ev.reason == OUT_OF_ORDER  # went back: first reason
     sup = make_tol()
     sup.on_input("state", 10.0, [0.0], 10.0)
-    sup.on_input("state", 10.0, [0.0], 10.05)                       # frozen, 50 ms
+    sup.on_input("state", 10.0, [0.0], 10.05)  # frozen, 50 ms
     assert sup.check(10.05) is None
-    ev = sup.on_input("state", 10.0, [0.0], 10.0601)                # 60.1 ms > 50 + 10
+    ev = sup.on_input("state", 10.0, [0.0], 10.0601)  # 60.1 ms > 50 + 10
     assert ev.reason == STALE and ev.detail.startswith("state: stamp frozen at 10.000000 s")
     sup = make_tol()
     sup.on_input("state", 10.0, [0.0], 10.0)
     sup.on_input("state", 10.0, [0.0], 10.04)
-    ev = sup.check(10.0601)                                         # receipt 20 ms, stamp 60 ms
+    ev = sup.check(10.0601)  # receipt 20 ms, stamp 60 ms
     assert ev.reason == STALE and ev.detail.startswith("state: newest stamp 10.000000 s is 0.060")
 
 
 def test_stamp_checks_only_while_armed():
     sup = SafetySupervisor(SafetyConfig(timeouts={"state": 0.05}, stamp_tolerance=0.01))
-    assert sup.on_input("state", 1e9, [0.0], 0.0) is None            # before /clock, sim time
+    assert sup.on_input("state", 1e9, [0.0], 0.0) is None  # before /clock, sim time
     with pytest.raises(ConfigError, match="stamp_tolerance"):
         SafetyConfig(timeouts={"state": 0.05}, stamp_tolerance=-1.0)
 
@@ -164,13 +180,14 @@ def test_excitation_bound_and_closed_loop_check():
     import numpy as np
 
     from lpv_sysid.control.safety import EXCITATION_BOUND, check_closed_loop
+
     sup = make()
     assert sup.check_excitation(10.0, [0.1, -0.2, 0.0, 0.0], [0.2, 0.2, 0.2, 0.2]) is None
     ev = sup.check_excitation(10.0, [0.1, -0.3, 0.0, math.nan], [0.2] * 4)
     assert ev.reason == EXCITATION_BOUND and ev.detail.startswith("excitation[1] = -0.3")
-    A = np.array([[0.0, 1.0], [0.0, 0.0]])          # double integrator
+    A = np.array([[0.0, 1.0], [0.0, 0.0]])  # double integrator
     B = np.array([[0.0], [1.0]])
-    K_ok = np.array([[-1.0, -2.0]])                 # s^2 + 2 s + 1: poles -1, -1
+    K_ok = np.array([[-1.0, -2.0]])  # s^2 + 2 s + 1: poles -1, -1
     assert check_closed_loop(K_ok[None], [[(A, B)]]) == pytest.approx(-1.0, abs=1e-6)
     with pytest.raises(ConfigError, match="unstable at vertex 1"):
         check_closed_loop(np.stack([K_ok, -K_ok]), [[(A, B)], [(A, B)]])

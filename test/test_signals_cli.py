@@ -15,14 +15,23 @@ from lpv_sysid.signals.store import load_npz
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 SMALL = {
-    "duration": 20.0, "sample_rate": 20.0,
+    "duration": 20.0,
+    "sample_rate": 20.0,
     "groups": [
         {"name": "reference", "channels": ["u_d", "v_d", "w_d"], "band": [0.05, 0.5], "peak": 5.0},
-        {"name": "excitation", "channels": ["ue_t", "ue_a", "ue_e", "ue_r"], "band": [0.5, 4.0], "energy": 1.0},
+        {
+            "name": "excitation",
+            "channels": ["ue_t", "ue_a", "ue_e", "ue_r"],
+            "band": [0.5, 4.0],
+            "energy": 1.0,
+        },
     ],
     "optimisation": {"max_iter": 30, "clip_iter": 10, "restarts": 0},
-    "weights": {"group": "excitation", "excitation_magnitudes": [0.1, 0.2, 0.3, 0.4],
-                "velocity_magnitudes": [1.0, 1.0, 2.0]},
+    "weights": {
+        "group": "excitation",
+        "excitation_magnitudes": [0.1, 0.2, 0.3, 0.4],
+        "velocity_magnitudes": [1.0, 1.0, 2.0],
+    },
 }
 
 
@@ -52,10 +61,16 @@ def test_cli_writes_npz_summary_and_png(tmp_path, capsys):
     # the summary's RPF is the RPF of the written samples
     j = names.index("ue_a")
     x = u[:, j]
-    assert ch["ue_a"]["rpf"] == pytest.approx((x.max() - x.min()) / (2 * np.sqrt(2) * np.sqrt(np.mean(x * x))))
+    assert ch["ue_a"]["rpf"] == pytest.approx(
+        (x.max() - x.min()) / (2 * np.sqrt(2) * np.sqrt(np.mean(x * x)))
+    )
     assert ch["ue_a"]["rpf"] < ch["ue_a"]["rpf_schroeder"]
     c = np.array(s["correlation"]["matrix"])
-    assert c.shape == (7, 7) and np.allclose(np.diag(c), 1.0) and s["correlation"]["max_abs_offdiagonal"] < 1e-9
+    assert (
+        c.shape == (7, 7)
+        and np.allclose(np.diag(c), 1.0)
+        and s["correlation"]["max_abs_offdiagonal"] < 1e-9
+    )
     assert np.allclose(s["R"], np.sqrt(4 * 20 / 2) * np.diag([0.1, 0.2, 0.3, 0.4]))
     assert np.allclose(s["Q"], np.sqrt(3 * 20) * np.diag([1.0, 1.0, 2.0]))
     assert (out / "signals.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -68,22 +83,46 @@ def test_cli_help_lists_signals(capsys):
     assert "--config" in capsys.readouterr().out
 
 
-@pytest.mark.parametrize("bad, needle", [
-    ({**SMALL, "durration": 3}, "durration"),
-    ({**SMALL, "groups": [{**SMALL["groups"][0], "chanels": ["a"]}]}, "chanels"),
-    ({**SMALL, "sample_rate": "fast"}, "sample_rate"),
-    ({**SMALL, "groups": [{**SMALL["groups"][0], "band": [0.5, 0.1]}]}, "band"),
-    ({**SMALL, "groups": [{**SMALL["groups"][0], "band": [0.1, 12.0]}]}, "Nyquist"),
-    ({**SMALL, "groups": [{**SMALL["groups"][0], "peak": 1.0, "energy": 1.0}]}, "either 'peak' or 'energy'"),
-    ({**SMALL, "groups": [{**SMALL["groups"][0], "power_fraction": [0.5, 0.5, 0.0]}]}, "power_fraction"),
-    ({**SMALL, "weights": {"group": "reference", "excitation_magnitudes": [1, 1, 1]}}, "energy: 1.0"),
-    ({**SMALL, "weights": {**SMALL["weights"], "velocity_magnitudes": [1, 2]}}, "velocity_magnitudes"),
-    ({**SMALL, "optimisation": {"max_iter": -1}}, "max_iter"),
-    ({**SMALL, "groups": [SMALL["groups"][0], {**SMALL["groups"][1], "channels": ["u_d"]}]}, "more than once"),
-    ({**SMALL, "duration": 10.01}, "integer"),
-    ({**SMALL, "groups": [{**SMALL["groups"][0], "band": [0.05, 0.06]}, SMALL["groups"][1]]}, "free harmonics"),
-    ({**SMALL, "groups": [SMALL["groups"][0]]}, "no group named 'excitation'"),
-])
+@pytest.mark.parametrize(
+    "bad, needle",
+    [
+        ({**SMALL, "durration": 3}, "durration"),
+        ({**SMALL, "groups": [{**SMALL["groups"][0], "chanels": ["a"]}]}, "chanels"),
+        ({**SMALL, "sample_rate": "fast"}, "sample_rate"),
+        ({**SMALL, "groups": [{**SMALL["groups"][0], "band": [0.5, 0.1]}]}, "band"),
+        ({**SMALL, "groups": [{**SMALL["groups"][0], "band": [0.1, 12.0]}]}, "Nyquist"),
+        (
+            {**SMALL, "groups": [{**SMALL["groups"][0], "peak": 1.0, "energy": 1.0}]},
+            "either 'peak' or 'energy'",
+        ),
+        (
+            {**SMALL, "groups": [{**SMALL["groups"][0], "power_fraction": [0.5, 0.5, 0.0]}]},
+            "power_fraction",
+        ),
+        (
+            {**SMALL, "weights": {"group": "reference", "excitation_magnitudes": [1, 1, 1]}},
+            "energy: 1.0",
+        ),
+        (
+            {**SMALL, "weights": {**SMALL["weights"], "velocity_magnitudes": [1, 2]}},
+            "velocity_magnitudes",
+        ),
+        ({**SMALL, "optimisation": {"max_iter": -1}}, "max_iter"),
+        (
+            {**SMALL, "groups": [SMALL["groups"][0], {**SMALL["groups"][1], "channels": ["u_d"]}]},
+            "more than once",
+        ),
+        ({**SMALL, "duration": 10.01}, "integer"),
+        (
+            {
+                **SMALL,
+                "groups": [{**SMALL["groups"][0], "band": [0.05, 0.06]}, SMALL["groups"][1]],
+            },
+            "free harmonics",
+        ),
+        ({**SMALL, "groups": [SMALL["groups"][0]]}, "no group named 'excitation'"),
+    ],
+)
 def test_cli_bad_config_exit_2_names_problem(tmp_path, capsys, bad, needle):
     cfg = _write(tmp_path, bad)
     assert main(["signals", "--config", cfg, "--out", str(tmp_path / "o")]) == 2
@@ -96,7 +135,10 @@ def test_cli_malformed_and_missing_file(tmp_path, capsys):
     cfg = _write(tmp_path, "duration: [1, 2\n")
     assert main(["signals", "--config", cfg, "--out", str(tmp_path / "o")]) == 2
     assert "malformed YAML" in capsys.readouterr().err
-    assert main(["signals", "--config", str(tmp_path / "none.yaml"), "--out", str(tmp_path / "o")]) == 2
+    assert (
+        main(["signals", "--config", str(tmp_path / "none.yaml"), "--out", str(tmp_path / "o")])
+        == 2
+    )
     assert "no such file" in capsys.readouterr().err
 
 

@@ -8,8 +8,17 @@ import pytest
 
 from lpv_sysid.errors import ConfigError, LpvSysidError, SafetyError
 from lpv_sysid.signals.config import SignalsConfig
-from lpv_sysid.signals.excitation import (ABORTED, DONE, IDLE, RAMP_IN, RAMP_OUT, RUNNING, ExcitationCore,
-                                          TimeOrderError, phase1_reference)
+from lpv_sysid.signals.excitation import (
+    ABORTED,
+    DONE,
+    IDLE,
+    RAMP_IN,
+    RAMP_OUT,
+    RUNNING,
+    ExcitationCore,
+    TimeOrderError,
+    phase1_reference,
+)
 from lpv_sysid.signals.multisine import design
 from lpv_sysid.signals.prbs import prbs
 
@@ -18,27 +27,59 @@ FAST = {"max_iter": 20, "clip_iter": 10, "restarts": 0, "p_stages": [4, 64]}
 
 @pytest.fixture(scope="module")
 def sig2():
-    return design(SignalsConfig.from_dict({
-        "duration": 20.0, "sample_rate": 20.0, "optimisation": FAST,
-        "groups": [
-            {"name": "reference", "channels": ["u_d", "v_d", "w_d"], "band": [0.05, 0.5], "peak": 5.0},
-            {"name": "excitation", "channels": ["ue_t", "ue_a", "ue_e", "ue_r"], "band": [0.5, 4.0], "energy": 1.0},
-        ]}))
+    return design(
+        SignalsConfig.from_dict(
+            {
+                "duration": 20.0,
+                "sample_rate": 20.0,
+                "optimisation": FAST,
+                "groups": [
+                    {
+                        "name": "reference",
+                        "channels": ["u_d", "v_d", "w_d"],
+                        "band": [0.05, 0.5],
+                        "peak": 5.0,
+                    },
+                    {
+                        "name": "excitation",
+                        "channels": ["ue_t", "ue_a", "ue_e", "ue_r"],
+                        "band": [0.5, 4.0],
+                        "energy": 1.0,
+                    },
+                ],
+            }
+        )
+    )
 
 
 @pytest.fixture(scope="module")
 def sig1():
-    return design(SignalsConfig.from_dict({
-        "duration": 30.0, "sample_rate": 50.0, "optimisation": FAST,
-        "groups": [{"name": "reference", "channels": ["u_ref", "v_ref", "w_ref", "r_ref"],
-                    "band": [0.2, 2.0], "peak": [1.0, 1.0, 0.5, 0.5]}]}))
+    return design(
+        SignalsConfig.from_dict(
+            {
+                "duration": 30.0,
+                "sample_rate": 50.0,
+                "optimisation": FAST,
+                "groups": [
+                    {
+                        "name": "reference",
+                        "channels": ["u_ref", "v_ref", "w_ref", "r_ref"],
+                        "band": [0.2, 2.0],
+                        "peak": [1.0, 1.0, 0.5, 0.5],
+                    }
+                ],
+            }
+        )
+    )
 
 
 def _bound(sig, cols):
     # linear interpolation error <= dt^2/8 * max|x''| <= dt^2/8 * sum a_k w_k^2
     dt = 1 / sig.sample_rate
     w0 = 2 * np.pi / sig.duration
-    return np.array([dt ** 2 / 8 * np.sum(sig.amplitudes[j] * (w0 * sig.harmonics[j]) ** 2) for j in cols])
+    return np.array(
+        [dt**2 / 8 * np.sum(sig.amplitudes[j] * (w0 * sig.harmonics[j]) ** 2) for j in cols]
+    )
 
 
 def test_lookup_matches_analytic_multisine(sig2):
@@ -48,7 +89,7 @@ def test_lookup_matches_analytic_multisine(sig2):
     got = np.array([np.concatenate([s.velocity, s.u_e]) for s in map(core.sample, ts)])
     err = np.max(np.abs(got - exact), axis=0)
     assert np.all(err <= _bound(sig2, range(7)))
-    assert np.all(err > 0)            # the bound is not vacuous: points are off-grid
+    assert np.all(err > 0)  # the bound is not vacuous: points are off-grid
     # on the grid the lookup returns the table itself
     core = ExcitationCore.phase2(sig2.t, sig2.u, sig2.names, start_time=0.0, ramp=0.0)
     for k in (0, 1, 57, 399):
@@ -59,7 +100,9 @@ def test_lookup_matches_analytic_multisine(sig2):
 
 def test_fade_in_out_timeline(sig2):
     r, t0 = 2.0, 5.0
-    core = ExcitationCore.phase2(sig2.t, sig2.u, sig2.names, start_time=t0, ramp=r, offset=(1.0, 0.0, -1.0))
+    core = ExcitationCore.phase2(
+        sig2.t, sig2.u, sig2.names, start_time=t0, ramp=r, offset=(1.0, 0.0, -1.0)
+    )
     assert core.end_time == pytest.approx(t0 + 20.0 + 2 * r)
     s = core.sample(4.0)
     assert s.phase == IDLE and s.fraction == 0.0
@@ -70,7 +113,9 @@ def test_fade_in_out_timeline(sig2):
     x = sig2.evaluate([20.0 - 1.0])[0]
     tol = _bound(sig2, range(7))
     assert np.all(np.abs(s.u_e - 0.5 * x[3:]) <= 0.5 * tol[3:])
-    assert np.all(np.abs(s.velocity - np.array([1.0, 0.0, -1.0]) - 0.5 * x[:3]) <= 0.5 * tol[:3] + 1e-12)
+    assert np.all(
+        np.abs(s.velocity - np.array([1.0, 0.0, -1.0]) - 0.5 * x[:3]) <= 0.5 * tol[:3] + 1e-12
+    )
     # the whole central period is the untouched table
     s = core.sample(t0 + r + 3.0)
     assert s.phase == RUNNING
@@ -109,12 +154,14 @@ def test_evaluate_equals_sample(sig2):
 
 def test_abort_fades_to_zero_within_one_ramp(sig2):
     ramp = 1.0
-    core = ExcitationCore.phase2(sig2.t, sig2.u, sig2.names, start_time=0.0, ramp=ramp, offset=(2.0, 0.0, 0.0))
+    core = ExcitationCore.phase2(
+        sig2.t, sig2.u, sig2.names, start_time=0.0, ramp=ramp, offset=(2.0, 0.0, 0.0)
+    )
     before = core.sample(7.3)
     assert before.phase == RUNNING
     core.abort()
     assert core.aborted and core.progress.phase == ABORTED
-    at = core.sample(7.3)     # same instant: continuous, starts from the current value
+    at = core.sample(7.3)  # same instant: continuous, starts from the current value
     assert np.allclose(at.velocity, before.velocity) and np.allclose(at.u_e, before.u_e)
     mid = core.sample(7.3 + 0.5 * ramp)
     ref = sig2.evaluate([(7.3 + 0.5 - ramp) % 20.0])[0]
@@ -124,7 +171,7 @@ def test_abort_fades_to_zero_within_one_ramp(sig2):
         s = core.sample(t)
         assert s.phase == ABORTED
         assert not np.any(s.velocity) and s.yaw_rate == 0.0 and not np.any(s.u_e)
-    core.abort()   # idempotent
+    core.abort()  # idempotent
 
 
 def test_abort_during_ramp_in_starts_from_envelope(sig2):
@@ -134,7 +181,7 @@ def test_abort_during_ramp_in_starts_from_envelope(sig2):
     b = core.sample(0.5)
     assert np.allclose(a.u_e, b.u_e)
     # envelope at 0.5 s of a 2 s raised cosine is 0.1464...; the abort fade multiplies it
-    c = core.sample(1.5)   # 1 s into a 2 s fade -> 0.5
+    c = core.sample(1.5)  # 1 s into a 2 s fade -> 0.5
     ref = sig2.evaluate([(1.5 - 2.0) % 20.0])[0]
     env = (0.5 - 0.5 * math.cos(math.pi * 0.25)) * 0.5
     assert np.allclose(c.u_e, env * ref[3:], atol=_bound(sig2, range(3, 7)).max())
@@ -152,7 +199,7 @@ def test_abort_with_zero_ramp_is_immediate(sig1):
 def test_time_going_backwards_is_an_error(sig2):
     core = ExcitationCore.phase2(sig2.t, sig2.u, sig2.names, start_time=0.0)
     core.sample(1.0)
-    core.sample(1.0)   # same stamp is fine
+    core.sample(1.0)  # same stamp is fine
     with pytest.raises(TimeOrderError, match="before the last sample"):
         core.sample(0.999)
     with pytest.raises(TimeOrderError):
@@ -170,9 +217,9 @@ def test_monotonic_time_absorbs_a_clock_jump_back():
     clock = MonotonicTime(period=0.01)
     assert clock.map(100.0) == (100.0, 0.0)
     assert clock.map(100.01) == (100.01, 0.0)
-    t, jump = clock.map(3.0)                   # e.g. sim time restarted
+    t, jump = clock.map(3.0)  # e.g. sim time restarted
     assert jump == pytest.approx(97.01) and t == pytest.approx(100.02)
-    t2, jump2 = clock.map(3.5)                 # then runs on from there, re-based
+    t2, jump2 = clock.map(3.5)  # then runs on from there, re-based
     assert jump2 == 0.0 and t2 == pytest.approx(100.52)
     with pytest.raises(TimeOrderError):
         clock.map(float("nan"))
@@ -187,7 +234,9 @@ def test_progress(sig2):
 
 def test_bad_tables_and_channels(sig2):
     with pytest.raises(ConfigError, match="not in the signal set"):
-        ExcitationCore(sig2.t, sig2.u, sig2.names, start_time=0.0, velocity_channels=("u_d", "v_d", "nope"))
+        ExcitationCore(
+            sig2.t, sig2.u, sig2.names, start_time=0.0, velocity_channels=("u_d", "v_d", "nope")
+        )
     bad = sig2.u.copy()
     bad[5, 2] = np.nan
     with pytest.raises(ConfigError, match="NaN"):
@@ -203,8 +252,15 @@ def test_bad_tables_and_channels(sig2):
 def test_non_periodic_table_ramps_inside():
     t, x = prbs(10.0, 50.0, 0.2, 0.1, 0.4, seed=1)
     u = np.column_stack([x, np.zeros_like(x), np.zeros_like(x)])
-    core = ExcitationCore(t, u, ["a", "b", "c"], start_time=0.0, velocity_channels=("a", "b", "c"),
-                          ramp=1.0, periodic=False)
+    core = ExcitationCore(
+        t,
+        u,
+        ["a", "b", "c"],
+        start_time=0.0,
+        velocity_channels=("a", "b", "c"),
+        ramp=1.0,
+        periodic=False,
+    )
     assert core.end_time == pytest.approx(t[-1])
     assert core.sample(0.0).velocity[0] == 0.0
     s = core.sample(5.0)
@@ -235,8 +291,15 @@ def test_phase1_reference_default_design():
 
 def test_several_periods_repeat_exactly(sig2):
     core = ExcitationCore.phase2(sig2.t, sig2.u, sig2.names, start_time=0.0, ramp=1.0)
-    core2 = ExcitationCore(sig2.t, sig2.u, sig2.names, start_time=0.0, ramp=1.0, periods=3,
-                           excitation_channels=("ue_t", "ue_a", "ue_e", "ue_r"))
+    core2 = ExcitationCore(
+        sig2.t,
+        sig2.u,
+        sig2.names,
+        start_time=0.0,
+        ramp=1.0,
+        periods=3,
+        excitation_channels=("ue_t", "ue_a", "ue_e", "ue_r"),
+    )
     assert core2.end_time == pytest.approx(3 * 20.0 + 2.0) and core.end_time == pytest.approx(22.0)
     ts = np.arange(1.0, 21.0, 0.37)
     _, _, a = core2.evaluate(ts)
@@ -293,7 +356,11 @@ def test_from_file_and_status(sig2, tmp_path):
 def test_phase1_signals_parameters():
     from lpv_sysid.signals.excitation import phase1_signals
 
-    s = phase1_signals(duration=20.0, band=(0.25, 1.0), peaks=(0.5, 0.4, 0.3, 0.2), sample_rate=20.0)
+    s = phase1_signals(
+        duration=20.0, band=(0.25, 1.0), peaks=(0.5, 0.4, 0.3, 0.2), sample_rate=20.0
+    )
     assert s.names == ("u_ref", "v_ref", "w_ref", "r_ref") and s.t.size == 400
     assert np.max(np.abs(s.u), axis=0) == pytest.approx([0.5, 0.4, 0.3, 0.2], rel=1e-12)
-    assert sorted(np.concatenate(s.harmonics).tolist()) == list(range(5, 21))   # 0.25..1 Hz, f0 = 0.05
+    assert sorted(np.concatenate(s.harmonics).tolist()) == list(
+        range(5, 21)
+    )  # 0.25..1 Hz, f0 = 0.05

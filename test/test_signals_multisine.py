@@ -24,11 +24,25 @@ SMALL = {
     "duration": 40.0,
     "sample_rate": 25.0,
     "groups": [
-        {"name": "reference", "channels": ["u_d", "v_d", "w_d"], "band": [0.025, 0.5], "peak": [5.0, 4.0, 3.0]},
-        {"name": "excitation", "channels": ["ue_t", "ue_a", "ue_e", "ue_r"], "band": [0.5, 5.0],
-         "energy": 1.0, "power_fraction": [0.25, 0.25, 0.25, 0.25]},
+        {
+            "name": "reference",
+            "channels": ["u_d", "v_d", "w_d"],
+            "band": [0.025, 0.5],
+            "peak": [5.0, 4.0, 3.0],
+        },
+        {
+            "name": "excitation",
+            "channels": ["ue_t", "ue_a", "ue_e", "ue_r"],
+            "band": [0.5, 5.0],
+            "energy": 1.0,
+            "power_fraction": [0.25, 0.25, 0.25, 0.25],
+        },
     ],
-    "weights": {"group": "excitation", "excitation_magnitudes": DELTA_E, "velocity_magnitudes": DELTA_V},
+    "weights": {
+        "group": "excitation",
+        "excitation_magnitudes": DELTA_E,
+        "velocity_magnitudes": DELTA_V,
+    },
 }
 
 
@@ -47,17 +61,22 @@ def test_rpf_of_sine_square_triangle_by_hand():
     n = 400
     t = np.arange(n) / n
     # a sine sampled at its peaks: (max - min) = 2a, rms = a / sqrt(2) -> RPF = 1
-    assert metrics.relative_peak_factor(3.0 * np.sin(2 * np.pi * 5 * t)) == pytest.approx(1.0, abs=1e-12)
+    assert metrics.relative_peak_factor(3.0 * np.sin(2 * np.pi * 5 * t)) == pytest.approx(
+        1.0, abs=1e-12
+    )
     # square wave +-a: range 2a, rms a -> 2a / (2 sqrt(2) a) = 1/sqrt(2)
     sq = np.where(t < 0.5, 2.0, -2.0)
     assert metrics.relative_peak_factor(sq) == pytest.approx(1 / np.sqrt(2), abs=1e-12)
     # a hand-picked 4-sample signal: [1, 0, -3, 2] -> range 5, rms sqrt(14/4)
     assert metrics.relative_peak_factor(np.array([1.0, 0.0, -3.0, 2.0])) == pytest.approx(
-        5.0 / (2 * np.sqrt(2) * np.sqrt(3.5)), rel=1e-14)
+        5.0 / (2 * np.sqrt(2) * np.sqrt(3.5)), rel=1e-14
+    )
     # triangle: rms a/sqrt(3) -> sqrt(3)/sqrt(2) (sampled symmetric triangle, exact peaks)
     tri = 1.0 - 4.0 * np.abs(t - 0.5)
-    r = np.sqrt(np.mean(tri ** 2))
-    assert metrics.relative_peak_factor(tri) == pytest.approx(2.0 / (2 * np.sqrt(2) * r), rel=1e-14)
+    r = np.sqrt(np.mean(tri**2))
+    assert metrics.relative_peak_factor(tri) == pytest.approx(
+        2.0 / (2 * np.sqrt(2) * r), rel=1e-14
+    )
     assert r == pytest.approx(1 / np.sqrt(3), rel=1e-4)
     with pytest.raises(ConfigError, match="zero"):
         metrics.relative_peak_factor(np.zeros(5))
@@ -67,7 +86,7 @@ def test_schroeder_phases_flat_closed_form():
     m = 12
     phi = schroeder_phases(np.ones(m))
     k = np.arange(1, m + 1)
-    expected = np.mod(-np.pi * k * (k - 1) / m, 2 * np.pi)   # Schroeder 1970, flat spectrum
+    expected = np.mod(-np.pi * k * (k - 1) / m, 2 * np.pi)  # Schroeder 1970, flat spectrum
     d = np.angle(np.exp(1j * (phi - expected)))
     assert np.max(np.abs(d)) < 1e-12
 
@@ -86,15 +105,20 @@ def test_allocation_interleaved_disjoint(sig):
     for i in range(len(h)):
         for j in range(i + 1, len(h)):
             assert not h[i] & h[j]
-    assert sorted(set().union(*h[:3])) == list(range(1, 21))          # [0.025, 0.5] Hz, f0 = 0.025
-    assert sorted(set().union(*h[3:])) == list(range(21, 201))        # (0.5, 5] Hz
-    assert sig.harmonics[0].tolist() == list(range(1, 21, 3))          # interleaved: 1, 4, 7, ...
+    assert sorted(set().union(*h[:3])) == list(range(1, 21))  # [0.025, 0.5] Hz, f0 = 0.025
+    assert sorted(set().union(*h[3:])) == list(range(21, 201))  # (0.5, 5] Hz
+    assert sig.harmonics[0].tolist() == list(range(1, 21, 3))  # interleaved: 1, 4, 7, ...
     assert sig.harmonics[4].tolist() == list(range(22, 201, 4))
 
 
 def test_allocation_too_few_harmonics_names_group():
-    cfg = SignalsConfig.from_dict({"duration": 10.0, "sample_rate": 10.0, "groups": [
-        {"name": "narrow", "channels": ["a", "b", "c"], "band": [0.1, 0.2]}]})
+    cfg = SignalsConfig.from_dict(
+        {
+            "duration": 10.0,
+            "sample_rate": 10.0,
+            "groups": [{"name": "narrow", "channels": ["a", "b", "c"], "band": [0.1, 0.2]}],
+        }
+    )
     with pytest.raises(ConfigError, match="narrow"):
         allocate_harmonics(cfg.groups, 10.0, 10.0)
 
@@ -111,7 +135,7 @@ def test_orthogonality_over_one_period(sig):
 
 def test_energy_only_at_allocated_harmonics(sig):
     n = sig.t.size
-    X = np.fft.fft(sig.u, axis=0)        # independent of metrics.power_spectrum
+    X = np.fft.fft(sig.u, axis=0)  # independent of metrics.power_spectrum
     for j, h in enumerate(sig.harmonics):
         p = np.abs(X[: n // 2, j]) ** 2
         other = np.ones(p.size, dtype=bool)
@@ -126,11 +150,11 @@ def test_energy_only_at_allocated_harmonics(sig):
 def test_power_spectrum_parseval_and_amplitude():
     n, fs = 200, 20.0
     t = np.arange(n) / fs
-    x = 2.0 * np.cos(2 * np.pi * 1.0 * t + 0.3)   # 1 Hz = bin 10
+    x = 2.0 * np.cos(2 * np.pi * 1.0 * t + 0.3)  # 1 Hz = bin 10
     f, P = metrics.power_spectrum(x, fs)
     assert f[10] == pytest.approx(1.0)
-    assert P[10, 0] == pytest.approx(2.0, rel=1e-12)        # a^2 / 2
-    assert P.sum() == pytest.approx(np.mean(x ** 2), rel=1e-12)
+    assert P[10, 0] == pytest.approx(2.0, rel=1e-12)  # a^2 / 2
+    assert P.sum() == pytest.approx(np.mean(x**2), rel=1e-12)
 
 
 # ---------------------------------------------------------------- RPF targets
@@ -166,7 +190,7 @@ def test_channels_start_and_end_near_zero(sig):
         # chosen so both ends are small compared with the largest sample-to-sample step
         assert x[0] >= 0 > x[-1]
         assert ends < 0.5 * step
-        if sig.groups[j] == "reference":      # slow channels: within 5 % of the peak
+        if sig.groups[j] == "reference":  # slow channels: within 5 % of the peak
             assert ends < 0.05 * np.max(np.abs(x))
 
 
@@ -187,7 +211,7 @@ def test_unit_energy_eq26(sig):
     ue = sig.u[:, 3:]
     assert energy(ue, 1 / sig.sample_rate) == pytest.approx(1.0, rel=1e-12)
     # independent: Parseval on the designed amplitudes, int_0^T a^2 cos^2 = T a^2 / 2
-    e2 = sum(sig.duration * np.sum(a ** 2) / 2 for a in sig.amplitudes[3:])
+    e2 = sum(sig.duration * np.sum(a**2) / 2 for a in sig.amplitudes[3:])
     assert e2 == pytest.approx(1.0, rel=1e-10)
     # even power split: each channel 1/4 of the energy
     for j in range(3, 7):
@@ -196,12 +220,14 @@ def test_unit_energy_eq26(sig):
 
 def test_R_Q_formulas_by_hand(sig):
     T = 40.0
-    R = np.diag([np.sqrt(4 * T / 2) * d for d in DELTA_E])        # Eq. (27), n_u = 4
-    Q = np.diag([np.sqrt(3 * T) * d for d in DELTA_V])            # Eq. (28), n_z = 3
+    R = np.diag([np.sqrt(4 * T / 2) * d for d in DELTA_E])  # Eq. (27), n_u = 4
+    Q = np.diag([np.sqrt(3 * T) * d for d in DELTA_V])  # Eq. (28), n_z = 3
     assert np.allclose(sig.R, R, rtol=1e-14, atol=0)
     assert np.allclose(sig.Q, Q, rtol=1e-14, atol=0)
     assert sig.R[0, 0] == pytest.approx(np.sqrt(80.0) * 0.05)
-    assert excitation_weight([1.0, 2.0], 8.0) == pytest.approx(np.diag([np.sqrt(8.0), 2 * np.sqrt(8.0)]))
+    assert excitation_weight([1.0, 2.0], 8.0) == pytest.approx(
+        np.diag([np.sqrt(8.0), 2 * np.sqrt(8.0)])
+    )
     assert performance_weight([2.0], 9.0) == pytest.approx(np.array([[6.0]]))  # sqrt(1 * 9) * 2
     with pytest.raises(ConfigError):
         excitation_weight([1.0, -1.0], 10.0)
@@ -216,11 +242,23 @@ def test_R_ue_has_magnitude_delta(sig):
 
 
 def test_power_fraction_and_spectrum_shape():
-    cfg = SignalsConfig.from_dict({
-        "duration": 20.0, "sample_rate": 10.0,
-        "groups": [{"name": "g", "channels": ["a", "b"], "band": [0.5, 3.0], "energy": 2.0,
-                    "power_fraction": [0.8, 0.2], "spectrum": {"a": [[0.5, 2.0], [3.0, 1.0]]}}],
-        "optimisation": {"max_iter": 20, "clip_iter": 10}})
+    cfg = SignalsConfig.from_dict(
+        {
+            "duration": 20.0,
+            "sample_rate": 10.0,
+            "groups": [
+                {
+                    "name": "g",
+                    "channels": ["a", "b"],
+                    "band": [0.5, 3.0],
+                    "energy": 2.0,
+                    "power_fraction": [0.8, 0.2],
+                    "spectrum": {"a": [[0.5, 2.0], [3.0, 1.0]]},
+                }
+            ],
+            "optimisation": {"max_iter": 20, "clip_iter": 10},
+        }
+    )
     s = design(cfg)
     dt = 0.1
     assert energy(s.u[:, 0], dt) ** 2 == pytest.approx(0.8 * 4.0, rel=1e-12)

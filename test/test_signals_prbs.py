@@ -40,7 +40,7 @@ def test_prbs_bad_input():
 
 @pytest.mark.parametrize("nbits", [5, 8, 10])
 def test_mls_autocorrelation_and_balance(nbits):
-    n = 2 ** nbits - 1
+    n = 2**nbits - 1
     x = mls(nbits, amplitude=2.0)
     assert x.size == n
     # balance: 2^(n-1) ones and 2^(n-1) - 1 zeros -> sum = amplitude
@@ -73,7 +73,7 @@ def test_doublet_and_3211_shapes():
     assert x[int(1.0 * fs) - 1] == 0 and x[int(1.0 * fs)] == 2.0
     assert np.sum(x == 2.0) == int(2.0 * fs) and np.sum(x == -2.0) == int(1.5 * fs)
     assert x[int(2.5 * fs)] == -2.0 and x[int(3.5 * fs)] == 2.0 and x[int(4.4 * fs)] == -2.0
-    assert np.all(x[int(4.5 * fs):] == 0)
+    assert np.all(x[int(4.5 * fs) :] == 0)
     # integral: 2 * 0.5 * (3 - 2 + 1 - 1) = 1
     assert np.sum(x) / fs == pytest.approx(1.0)
     t, d = doublet(0.2, 1.0, fs, start=0.5, duration=2.0)

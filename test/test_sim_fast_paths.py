@@ -54,15 +54,47 @@ def reference_derivatives(q: Quadrotor, x, u):
     u_, v, w, p_, q_, r = uu, vv, ww, pp, qq, rr
     Fx = u_ * (K["x_mu0"] + K["x_muw"] * w + K["x_muh"] * dt)
     Fy = v * (K["y_mu0"] + K["y_muw"] * w + K["y_muh"] * dt)
-    Fz = (K["z_T0"] * dt2 + K["z_mu0"] * dt + K["z_mu"] * (u_ * u_ + v * v)
-          + K["z_muw"] * (4.0 * w * dt - p_ * da - q_ * de))
-    Mx = (K["l_T0"] * da2 + K["l_mu0"] * da + K["l_muw"] * (w * da - 2.0 * l2 * p_ * dt - 0.5 * l2 * q_ * dr)
-          + K["l_muh"] * v * dt + K["l_muh_mu0"] * v + K["l_muh_muw"] * v * w + K["l_dr"] * u_ * dr)
-    My = (K["m_T0"] * de2 + K["m_mu0"] * de + K["m_muw"] * (w * de - 2.0 * l2 * q_ * dt - 0.5 * l2 * p_ * dr)
-          + K["m_muh"] * u_ * dt + K["m_muh_mu0"] * u_ + K["m_muh_muw"] * u_ * w + K["m_dr"] * v * dr)
-    Mz = (K["n_Q0"] * dr2 + K["n_mu0"] * dr + K["n_muw"] * (w * dr + p_ * de + q_ * da) + K["n_muw2"] * p_ * q_
-          + K["n_muh"] * (u_ * da + v * de) + K["n_muh_muw"] * (u_ * p_ + v * q_) + p.j_rotor * ddr)
-    sf, cf, st, ct, sp, cp = math.sin(phi), math.cos(phi), math.sin(th), math.cos(th), math.sin(psi), math.cos(psi)
+    Fz = (
+        K["z_T0"] * dt2
+        + K["z_mu0"] * dt
+        + K["z_mu"] * (u_ * u_ + v * v)
+        + K["z_muw"] * (4.0 * w * dt - p_ * da - q_ * de)
+    )
+    Mx = (
+        K["l_T0"] * da2
+        + K["l_mu0"] * da
+        + K["l_muw"] * (w * da - 2.0 * l2 * p_ * dt - 0.5 * l2 * q_ * dr)
+        + K["l_muh"] * v * dt
+        + K["l_muh_mu0"] * v
+        + K["l_muh_muw"] * v * w
+        + K["l_dr"] * u_ * dr
+    )
+    My = (
+        K["m_T0"] * de2
+        + K["m_mu0"] * de
+        + K["m_muw"] * (w * de - 2.0 * l2 * q_ * dt - 0.5 * l2 * p_ * dr)
+        + K["m_muh"] * u_ * dt
+        + K["m_muh_mu0"] * u_
+        + K["m_muh_muw"] * u_ * w
+        + K["m_dr"] * v * dr
+    )
+    Mz = (
+        K["n_Q0"] * dr2
+        + K["n_mu0"] * dr
+        + K["n_muw"] * (w * dr + p_ * de + q_ * da)
+        + K["n_muw2"] * p_ * q_
+        + K["n_muh"] * (u_ * da + v * de)
+        + K["n_muh_muw"] * (u_ * p_ + v * q_)
+        + p.j_rotor * ddr
+    )
+    sf, cf, st, ct, sp, cp = (
+        math.sin(phi),
+        math.cos(phi),
+        math.sin(th),
+        math.cos(th),
+        math.sin(psi),
+        math.cos(psi),
+    )
     xd = ct * cp * uu + (sf * st * cp - cf * sp) * vv + (cf * st * cp + sf * sp) * ww
     yd = ct * sp * uu + (sf * st * sp + cf * cp) * vv + (cf * st * sp - sf * cp) * ww
     zd = -st * uu + sf * ct * vv + cf * ct * ww
@@ -91,18 +123,26 @@ def random_points(rng, n):
     for k in range(n):
         x = rng.normal(size=16) * np.r_[[10] * 3, [0.6] * 3, [5] * 3, [2] * 3, [0] * 4]
         x[12:16] = rng.uniform(100, 1150, 4)
-        if k % 5 == 0:                                  # at the rotor-speed limits
+        if k % 5 == 0:  # at the rotor-speed limits
             x[12:16] = rng.choice([120.0, 1100.0], 4)
         u = rng.normal(size=4) * np.r_[0.6, 0.05, 0.05, 0.3]
-        if k % 4 == 0:                                  # saturated ESC commands
+        if k % 4 == 0:  # saturated ESC commands
             u[0] = rng.choice([-0.5, 2.0])
         yield x.tolist(), u.tolist()
 
 
-@pytest.mark.parametrize("params", [QuadrotorParams(),
-                                    QuadrotorParams(mass=2.1, j_rotor=4e-5, omega_min=90.0,
-                                                    inertia=((0.03, 0.001, 0.0), (0.001, 0.025, 0.0),
-                                                             (0.0, 0.0, 0.05)))])
+@pytest.mark.parametrize(
+    "params",
+    [
+        QuadrotorParams(),
+        QuadrotorParams(
+            mass=2.1,
+            j_rotor=4e-5,
+            omega_min=90.0,
+            inertia=((0.03, 0.001, 0.0), (0.001, 0.025, 0.0), (0.0, 0.0, 0.05)),
+        ),
+    ],
+)
 def test_compiled_hot_path_is_the_reference_equations_bit_for_bit(params):
     q = Quadrotor(params)
     rng = np.random.default_rng(4)
@@ -116,7 +156,9 @@ def test_compiled_hot_path_is_the_reference_equations_bit_for_bit(params):
         k2 = f([a + 0.5 * h * b for a, b in zip(x, k1)], u)
         k3 = f([a + 0.5 * h * b for a, b in zip(x, k2)], u)
         k4 = f([a + h * b for a, b in zip(x, k3)], u)
-        rk4 = [a + h / 6.0 * (b + 2.0 * c + 2.0 * d + e) for a, b, c, d, e in zip(x, k1, k2, k3, k4)]
+        rk4 = [
+            a + h / 6.0 * (b + 2.0 * c + 2.0 * d + e) for a, b, c, d, e in zip(x, k1, k2, k3, k4)
+        ]
         assert q.rk4_step(x, u, h) == rk4
 
 
@@ -124,7 +166,9 @@ def test_quadrotor_pickles_with_its_hot_path():
     q = Quadrotor(QuadrotorParams(mass=1.9))
     q2 = pickle.loads(pickle.dumps(q))
     x = q.trim([1.0, 0.0, 0.0]).full_state.tolist()
-    assert q2.params == q.params and q2.rk4_step(x, [0.5, 0, 0, 0], 0.01) == q.rk4_step(x, [0.5, 0, 0, 0], 0.01)
+    assert q2.params == q.params and q2.rk4_step(x, [0.5, 0, 0, 0], 0.01) == q.rk4_step(
+        x, [0.5, 0, 0, 0], 0.01
+    )
 
 
 # ------------------------------------------------------------------------- sensors
@@ -136,7 +180,7 @@ def test_sensors_draw_the_same_noise_as_direct_generator_calls():
     tr = q.trim([2.0, -1.0, 0.5])
     veh = SimVehicle(q, cfg, tr.full_state)
     ref_rng = np.random.default_rng(7)
-    ref_rng.uniform(0, 2 * np.pi, 4)                # the draws SimVehicle makes at start
+    ref_rng.uniform(0, 2 * np.pi, 4)  # the draws SimVehicle makes at start
     ref_rng.normal(size=(4, 3)), ref_rng.normal(size=(4, 3)), ref_rng.normal(size=(4, 3))
     ref_rng.uniform(0, 2 * np.pi, (4, 2))
     u = tr.u0.tolist()
@@ -161,7 +205,7 @@ def test_sensors_draw_the_same_noise_as_direct_generator_calls():
             a, w = veh.measure_imu()
             assert np.array_equal(a, sf + np.array(acc) + cfg.accel_std * n[0:3])
             assert np.array_equal(w, x[9:12] + np.array(gyr) + cfg.gyro_std * n[3:6])
-    veh.x = list(veh.x)                                # a new state object: vibration recomputed
+    veh.x = list(veh.x)  # a new state object: vibration recomputed
     veh.rotor_phase[0] += 1.0
     assert veh._vibration() != (acc, gyr)
 
@@ -169,8 +213,15 @@ def test_sensors_draw_the_same_noise_as_direct_generator_calls():
 # ----------------------------------------------------------------- phase-1 bulk bag
 @pytest.fixture(scope="module")
 def short_run():
-    cfg = replace(phase1.Phase1Config(), hover_validation=False, trim_s=1.0, excite_s=2.0,
-                  trim_average_s=0.5, taper_s=0.2, start="trim")
+    cfg = replace(
+        phase1.Phase1Config(),
+        hover_validation=False,
+        trim_s=1.0,
+        excite_s=2.0,
+        trim_average_s=0.5,
+        taper_s=0.2,
+        start="trim",
+    )
     return phase1.run_phase1(Quadrotor(), BaselineGains(), SensorConfig(), cfg, [6])[0]
 
 
@@ -206,17 +257,25 @@ def test_bulk_phase1_bag_leaves_bad_samples_to_the_builders(tmp_path, short_run)
 # ---------------------------------------------------------------------------- Eq. 33
 def _model(seed=0, n=12, m=4):
     from lpv_sysid.models.lpv import PolytopicModel, ScheduledLpv
+
     rng = np.random.default_rng(seed)
-    pm = PolytopicModel(vmin=[-2.0, -1.0, -3.0], vmax=[2.0, 1.5, 3.0],
-                        A=rng.normal(size=(8, n, n)) - 3 * np.eye(n), B=rng.normal(size=(8, n, m)),
-                        x0=rng.normal(size=(8, n)), u0=rng.normal(size=(8, m)))
+    pm = PolytopicModel(
+        vmin=[-2.0, -1.0, -3.0],
+        vmax=[2.0, 1.5, 3.0],
+        A=rng.normal(size=(8, n, n)) - 3 * np.eye(n),
+        B=rng.normal(size=(8, n, m)),
+        x0=rng.normal(size=(8, n)),
+        u0=rng.normal(size=(8, m)),
+    )
     return ScheduledLpv(pm, 0.1 * rng.normal(size=(8, m, n)))
 
 
 def _signals(T=4.0, dt=0.05, far=False):
     t = np.arange(0.0, T + dt / 2, dt)
-    amp = 3.0 if far else 1.0                       # "far": v_d leaves the box (clamped weights)
-    vd = np.column_stack([amp * 1.5 * np.sin(1.3 * t), 0.8 * np.cos(0.7 * t), amp * 2 * np.sin(0.4 * t + 1)])
+    amp = 3.0 if far else 1.0  # "far": v_d leaves the box (clamped weights)
+    vd = np.column_stack(
+        [amp * 1.5 * np.sin(1.3 * t), 0.8 * np.cos(0.7 * t), amp * 2 * np.sin(0.4 * t + 1)]
+    )
     ue = np.column_stack([np.sin(f * t) for f in (1.1, 1.7, 2.3)])
     return cl.ReferenceSignals(t, vd, ue)
 
@@ -237,15 +296,26 @@ def test_fused_eq33_rhs_equals_eq33_rhs(far, moving):
         x = rng.normal(size=12)
         ref = cl.eq33_rhs(t, x, sched, sig, law, 1.3, seg, moving)
         np.testing.assert_allclose(f(t, x, seg), ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
-        np.testing.assert_allclose(f.law(t, x, sig.at(t, seg)[0], 1.3 * sig.at(t, seg)[2]),
-                                   law(t, x, sig.at(t, seg)[0], 1.3 * sig.at(t, seg)[2]), rtol=1e-12, atol=1e-13)
+        np.testing.assert_allclose(
+            f.law(t, x, sig.at(t, seg)[0], 1.3 * sig.at(t, seg)[2]),
+            law(t, x, sig.at(t, seg)[0], 1.3 * sig.at(t, seg)[2]),
+            rtol=1e-12,
+            atol=1e-13,
+        )
 
 
 def _feedforward(sched):
     rng = np.random.default_rng(3)
     pm = sched.model
-    ffs = cl.FeedforwardSchedule(pm.vmin, pm.vmax, rng.normal(size=(8, 4 + 4, 3)), [0, 1, 8, 9], 12,
-                                 rng.normal(size=(8, 4 + 4 + 3, 3)), [5, 6, 7])
+    ffs = cl.FeedforwardSchedule(
+        pm.vmin,
+        pm.vmax,
+        rng.normal(size=(8, 4 + 4, 3)),
+        [0, 1, 8, 9],
+        12,
+        rng.normal(size=(8, 4 + 4 + 3, 3)),
+        [5, 6, 7],
+    )
     return ffs, (lambda t: (np.array([np.cos(t), 0.5, -t]), np.array([0.1, np.sin(t), 0.0])))
 
 
@@ -266,6 +336,7 @@ def test_fused_eq33_with_the_feedforward_law_and_simulation():
     # the whole simulation: fused (the law carries eq33_parts) vs the generic right-hand side
     # a law on another schedule of the same box (its own K, x0, u0), as phase2 builds them
     from lpv_sysid.models.lpv import ScheduledLpv
+
     other = ScheduledLpv(_model(8).model, sched.Kv * 0.5)
     other.model.vmin, other.model.vmax = sched.model.vmin, sched.model.vmax
     law2 = cl.feedforward_law(other, R, ffs, accel)
@@ -277,13 +348,15 @@ def test_fused_eq33_with_the_feedforward_law_and_simulation():
         x = rng.normal(size=12)
         ref = cl.eq33_rhs(t, x, sched, sig, law2, 1.0, seg, True)
         np.testing.assert_allclose(f2(t, x, seg), ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
-    plain = lambda t, x, v, e: law(t, x, v, e)   # noqa: E731 - a law simulate_eq33 cannot fuse
+    plain = lambda t, x, v, e: law(t, x, v, e)  # noqa: E731 - a law simulate_eq33 cannot fuse
     assert cl.fused_eq33(sched, sig, plain, R, 1.0) is None
     Q = np.eye(3) * 2.0
     for lw, moving in ((None, True), (law, False)):
         cfg = cl.ClosedLoopConfig(method="rk4")
         a = cl.simulate_eq33(sched, sig, R, Q, 1.0, cfg, law=lw, moving_equilibrium=moving)
-        ref_law = (lambda t, x, v, e: cl.linear_lpv_law(sched, R)(t, x, v, e)) if lw is None else plain
+        ref_law = (
+            (lambda t, x, v, e: cl.linear_lpv_law(sched, R)(t, x, v, e)) if lw is None else plain
+        )
         b = cl.simulate_eq33(sched, sig, R, Q, 1.0, cfg, law=ref_law, moving_equilibrium=moving)
         np.testing.assert_allclose(a.x, b.x, rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(a.u, b.u, rtol=1e-9, atol=1e-9)
@@ -291,18 +364,34 @@ def test_fused_eq33_with_the_feedforward_law_and_simulation():
 
 
 # ------------------------------------------------------------------ CLI BLAS threads
-@pytest.mark.parametrize("argv, preset, want", [
-    (["identify", "--bags", "x"], None, "1"), (["-v", "vrft", "--example", "lv100"], None, "1"),
-    (["synthesize", "--models", "m"], None, "None"), (["identify"], "2", "2"), (["demo"], None, "1")])
+@pytest.mark.parametrize(
+    "argv, preset, want",
+    [
+        (["identify", "--bags", "x"], None, "1"),
+        (["-v", "vrft", "--example", "lv100"], None, "1"),
+        (["synthesize", "--models", "m"], None, "None"),
+        (["identify"], "2", "2"),
+        (["demo"], None, "1"),
+    ],
+)
 def test_cli_sets_single_thread_blas_before_numpy(argv, preset, want):
     import os
     import subprocess
     import sys
+
     env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
     if preset is not None:
         env["OPENBLAS_NUM_THREADS"] = preset
-    code = ("import os, sys; import lpv_sysid.cli.main as m; m._single_thread_blas(sys.argv[1:]); "
-            "print(os.environ.get('OPENBLAS_NUM_THREADS'), 'numpy' in sys.modules)")
-    out = subprocess.run([sys.executable, "-c", code, *argv], env=env, capture_output=True, text=True,
-                         check=True, timeout=60).stdout.split()
+    code = (
+        "import os, sys; import lpv_sysid.cli.main as m; m._single_thread_blas(sys.argv[1:]); "
+        "print(os.environ.get('OPENBLAS_NUM_THREADS'), 'numpy' in sys.modules)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code, *argv],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=60,
+    ).stdout.split()
     assert out == [want, "False"]

@@ -20,8 +20,12 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import (
-    QoSDurabilityPolicy, QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy,
-    qos_profile_sensor_data)
+    QoSDurabilityPolicy,
+    QoSHistoryPolicy,
+    QoSProfile,
+    QoSReliabilityPolicy,
+    qos_profile_sensor_data,
+)
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
@@ -34,61 +38,141 @@ E = inspect.Parameter.empty
 
 # (callable, [(name, kind, default)]) -- Jazzy signatures; "ANY" = default not compared
 JAZZY = {
-    "rclpy.init": (rclpy.init, [("args", P, None), ("context", K, None),
-                                ("domain_id", K, None), ("signal_handler_options", K, None)]),
+    "rclpy.init": (
+        rclpy.init,
+        [
+            ("args", P, None),
+            ("context", K, None),
+            ("domain_id", K, None),
+            ("signal_handler_options", K, None),
+        ],
+    ),
     "rclpy.spin": (rclpy.spin, [("node", P, E), ("executor", P, None)]),
-    "rclpy.spin_once": (rclpy.spin_once, [("node", P, E), ("executor", K, None),
-                                          ("timeout_sec", K, None)]),
+    "rclpy.spin_once": (
+        rclpy.spin_once,
+        [("node", P, E), ("executor", K, None), ("timeout_sec", K, None)],
+    ),
     "rclpy.spin_until_future_complete": (
         rclpy.spin_until_future_complete,
-        [("node", P, E), ("future", P, E), ("executor", P, None), ("timeout_sec", P, None)]),
+        [("node", P, E), ("future", P, E), ("executor", P, None), ("timeout_sec", P, None)],
+    ),
     "rclpy.shutdown": (rclpy.shutdown, [("context", K, None), ("uninstall_handlers", K, None)]),
-    "rclpy.try_shutdown": (rclpy.try_shutdown, [("context", K, None),
-                                                ("uninstall_handlers", K, None)]),
+    "rclpy.try_shutdown": (
+        rclpy.try_shutdown,
+        [("context", K, None), ("uninstall_handlers", K, None)],
+    ),
     "rclpy.ok": (rclpy.ok, [("context", K, None)]),
-    "Node.__init__": (Node.__init__, [
-        ("self", P, E), ("node_name", P, E), ("context", K, None), ("cli_args", K, None),
-        ("namespace", K, None), ("use_global_arguments", K, True), ("enable_rosout", K, True),
-        ("start_parameter_services", K, True), ("parameter_overrides", K, None),
-        ("allow_undeclared_parameters", K, False),
-        ("automatically_declare_parameters_from_overrides", K, False),
-        ("enable_logger_service", K, False)]),
-    "Node.declare_parameter": (Node.declare_parameter, [
-        ("self", P, E), ("name", P, E), ("value", P, None), ("descriptor", P, None),
-        ("ignore_override", P, False)]),
-    "Node.declare_parameters": (Node.declare_parameters, [
-        ("self", P, E), ("namespace", P, E), ("parameters", P, E),
-        ("ignore_override", P, False)]),
+    "Node.__init__": (
+        Node.__init__,
+        [
+            ("self", P, E),
+            ("node_name", P, E),
+            ("context", K, None),
+            ("cli_args", K, None),
+            ("namespace", K, None),
+            ("use_global_arguments", K, True),
+            ("enable_rosout", K, True),
+            ("start_parameter_services", K, True),
+            ("parameter_overrides", K, None),
+            ("allow_undeclared_parameters", K, False),
+            ("automatically_declare_parameters_from_overrides", K, False),
+            ("enable_logger_service", K, False),
+        ],
+    ),
+    "Node.declare_parameter": (
+        Node.declare_parameter,
+        [
+            ("self", P, E),
+            ("name", P, E),
+            ("value", P, None),
+            ("descriptor", P, None),
+            ("ignore_override", P, False),
+        ],
+    ),
+    "Node.declare_parameters": (
+        Node.declare_parameters,
+        [("self", P, E), ("namespace", P, E), ("parameters", P, E), ("ignore_override", P, False)],
+    ),
     "Node.get_parameter": (Node.get_parameter, [("self", P, E), ("name", P, E)]),
     "Node.set_parameters": (Node.set_parameters, [("self", P, E), ("parameter_list", P, E)]),
-    "Node.add_on_set_parameters_callback": (Node.add_on_set_parameters_callback,
-                                            [("self", P, E), ("callback", P, E)]),
-    "Node.add_post_set_parameters_callback": (Node.add_post_set_parameters_callback,
-                                              [("self", P, E), ("callback", P, E)]),
-    "Node.create_publisher": (Node.create_publisher, [
-        ("self", P, E), ("msg_type", P, E), ("topic", P, E), ("qos_profile", P, E),
-        ("callback_group", K, None), ("event_callbacks", K, None),
-        ("qos_overriding_options", K, None), ("publisher_class", K, "ANY")]),
-    "Node.create_subscription": (Node.create_subscription, [
-        ("self", P, E), ("msg_type", P, E), ("topic", P, E), ("callback", P, E),
-        ("qos_profile", P, E), ("callback_group", K, None), ("event_callbacks", K, None),
-        ("qos_overriding_options", K, None), ("raw", K, False)]),
-    "Node.create_timer": (Node.create_timer, [
-        ("self", P, E), ("timer_period_sec", P, E), ("callback", P, E),
-        ("callback_group", P, None), ("clock", P, None), ("autostart", P, True)]),
-    "Node.create_service": (Node.create_service, [
-        ("self", P, E), ("srv_type", P, E), ("srv_name", P, E), ("callback", P, E),
-        ("qos_profile", K, "ANY"), ("callback_group", K, None)]),
-    "Node.create_client": (Node.create_client, [
-        ("self", P, E), ("srv_type", P, E), ("srv_name", P, E), ("qos_profile", K, "ANY"),
-        ("callback_group", K, None)]),
+    "Node.add_on_set_parameters_callback": (
+        Node.add_on_set_parameters_callback,
+        [("self", P, E), ("callback", P, E)],
+    ),
+    "Node.add_post_set_parameters_callback": (
+        Node.add_post_set_parameters_callback,
+        [("self", P, E), ("callback", P, E)],
+    ),
+    "Node.create_publisher": (
+        Node.create_publisher,
+        [
+            ("self", P, E),
+            ("msg_type", P, E),
+            ("topic", P, E),
+            ("qos_profile", P, E),
+            ("callback_group", K, None),
+            ("event_callbacks", K, None),
+            ("qos_overriding_options", K, None),
+            ("publisher_class", K, "ANY"),
+        ],
+    ),
+    "Node.create_subscription": (
+        Node.create_subscription,
+        [
+            ("self", P, E),
+            ("msg_type", P, E),
+            ("topic", P, E),
+            ("callback", P, E),
+            ("qos_profile", P, E),
+            ("callback_group", K, None),
+            ("event_callbacks", K, None),
+            ("qos_overriding_options", K, None),
+            ("raw", K, False),
+        ],
+    ),
+    "Node.create_timer": (
+        Node.create_timer,
+        [
+            ("self", P, E),
+            ("timer_period_sec", P, E),
+            ("callback", P, E),
+            ("callback_group", P, None),
+            ("clock", P, None),
+            ("autostart", P, True),
+        ],
+    ),
+    "Node.create_service": (
+        Node.create_service,
+        [
+            ("self", P, E),
+            ("srv_type", P, E),
+            ("srv_name", P, E),
+            ("callback", P, E),
+            ("qos_profile", K, "ANY"),
+            ("callback_group", K, None),
+        ],
+    ),
+    "Node.create_client": (
+        Node.create_client,
+        [
+            ("self", P, E),
+            ("srv_type", P, E),
+            ("srv_name", P, E),
+            ("qos_profile", K, "ANY"),
+            ("callback_group", K, None),
+        ],
+    ),
     "Node.destroy_node": (Node.destroy_node, [("self", P, E)]),
     "Node.get_logger": (Node.get_logger, [("self", P, E)]),
     "Node.get_clock": (Node.get_clock, [("self", P, E)]),
-    "SingleThreadedExecutor.spin_once": (SingleThreadedExecutor.spin_once,
-                                         [("self", P, E), ("timeout_sec", P, None)]),
-    "Parameter.__init__": (Parameter.__init__, [("self", P, E), ("name", P, E),
-                                                ("type_", P, None), ("value", P, None)]),
+    "SingleThreadedExecutor.spin_once": (
+        SingleThreadedExecutor.spin_once,
+        [("self", P, E), ("timeout_sec", P, None)],
+    ),
+    "Parameter.__init__": (
+        Parameter.__init__,
+        [("self", P, E), ("name", P, E), ("type_", P, None), ("value", P, None)],
+    ),
 }
 
 
@@ -122,8 +206,12 @@ def test_init_returns_none_and_lifecycle():
 
 
 def test_node_requires_init_and_validates_names():
-    from rclpy.exceptions import (InvalidNodeNameException, InvalidTopicNameException,
-                                  NotInitializedException)
+    from rclpy.exceptions import (
+        InvalidNodeNameException,
+        InvalidTopicNameException,
+        NotInitializedException,
+    )
+
     with pytest.raises(NotInitializedException):
         Node("x")
     rclpy.init()
@@ -170,8 +258,10 @@ def test_serialization_identical_to_rosbags_cdr():
 def test_parameter_typing_rules():
     rclpy.init()
     n = Node("p")
-    desc = ParameterDescriptor(description="gain", floating_point_range=[
-        FloatingPointRange(from_value=0.0, to_value=10.0, step=0.0)])
+    desc = ParameterDescriptor(
+        description="gain",
+        floating_point_range=[FloatingPointRange(from_value=0.0, to_value=10.0, step=0.0)],
+    )
     assert n.declare_parameter("gain", 1.0, desc).value == 1.0
     assert n.get_parameter("gain").type_ == Parameter.Type.DOUBLE
     # int for a double parameter fails, as in Jazzy
@@ -182,14 +272,20 @@ def test_parameter_typing_rules():
     assert not res[0].successful and "out of range" in res[0].reason
     assert n.set_parameters([Parameter("gain", value=10.0)])[0].successful
     assert n.get_parameter("gain").value == 10.0
-    n.declare_parameter("rate", 100, ParameterDescriptor(
-        integer_range=[IntegerRange(from_value=1, to_value=1000, step=1)]))
+    n.declare_parameter(
+        "rate",
+        100,
+        ParameterDescriptor(integer_range=[IntegerRange(from_value=1, to_value=1000, step=1)]),
+    )
     assert not n.set_parameters([Parameter("rate", value=0)])[0].successful
     # empty list default infers BYTE_ARRAY (a Jazzy pitfall the shells must avoid)
     assert n.declare_parameter("names", []).type_ == Parameter.Type.BYTE_ARRAY
-    from rclpy.exceptions import (ParameterAlreadyDeclaredException,
-                                  ParameterNotDeclaredException,
-                                  ParameterUninitializedException)
+    from rclpy.exceptions import (
+        ParameterAlreadyDeclaredException,
+        ParameterNotDeclaredException,
+        ParameterUninitializedException,
+    )
+
     with pytest.raises(ParameterAlreadyDeclaredException):
         n.declare_parameter("gain", 3.0)
     with pytest.raises(ParameterNotDeclaredException):
@@ -202,7 +298,9 @@ def test_parameter_typing_rules():
     seen = []
     n.add_on_set_parameters_callback(
         lambda ps: __import__("rcl_interfaces.msg").msg.SetParametersResult(
-            successful=ps[0].value < 5.0, reason="too big"))
+            successful=ps[0].value < 5.0, reason="too big"
+        )
+    )
     n.add_post_set_parameters_callback(lambda ps: seen.append(ps[0].value))
     assert n.set_parameters([Parameter("gain", value=4.0)])[0].successful
     r = n.set_parameters([Parameter("gain", value=6.0)])[0]
@@ -212,9 +310,12 @@ def test_parameter_typing_rules():
 
 def test_params_file_and_wrong_type_override(tmp_path):
     from rclpy.exceptions import InvalidParameterTypeException
+
     f = tmp_path / "p.yaml"
-    f.write_text("/lpv_sysid/ctl:\n  ros__parameters:\n    rate: 250.0\n    nested:\n"
-                 "      k: 3\n/**:\n  ros__parameters:\n    common: 'x'\n")
+    f.write_text(
+        "/lpv_sysid/ctl:\n  ros__parameters:\n    rate: 250.0\n    nested:\n"
+        "      k: 3\n/**:\n  ros__parameters:\n    common: 'x'\n"
+    )
     rclpy.init(args=["prog", "--ros-args", "--params-file", str(f), "-p", "extra:=2.5"])
     n = Node("ctl", namespace="/lpv_sysid")
     assert n.declare_parameter("rate", 100.0).value == 250.0
@@ -228,6 +329,7 @@ def test_params_file_and_wrong_type_override(tmp_path):
 
 def test_qos_profile_rules_and_compatibility():
     from rclpy.qos import InvalidQoSProfileException
+
     with pytest.raises(InvalidQoSProfileException):
         QoSProfile(reliability=QoSReliabilityPolicy.RELIABLE)
     assert qos_profile_sensor_data.reliability == QoSReliabilityPolicy.BEST_EFFORT
@@ -237,11 +339,13 @@ def test_qos_profile_rules_and_compatibility():
     got = {"rel": [], "be": [], "tl": []}
     pub_be = n.create_publisher(Float64, "be_topic", qos_profile_sensor_data)
     n.create_subscription(Float64, "be_topic", lambda m: got["rel"].append(m.data), 10)
-    n.create_subscription(Float64, "be_topic", lambda m: got["be"].append(m.data),
-                          qos_profile_sensor_data)
+    n.create_subscription(
+        Float64, "be_topic", lambda m: got["be"].append(m.data), qos_profile_sensor_data
+    )
     pub_rel = n.create_publisher(Float64, "rel_topic", 10)
-    n.create_subscription(Float64, "rel_topic", lambda m: got["be"].append(10 + m.data),
-                          qos_profile_sensor_data)
+    n.create_subscription(
+        Float64, "rel_topic", lambda m: got["be"].append(10 + m.data), qos_profile_sensor_data
+    )
     latched = QoSProfile(depth=1, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
     pub_tl = n.create_publisher(Float64, "tl_topic", latched)
     pub_tl.publish(Float64(data=7.0))
@@ -250,9 +354,9 @@ def test_qos_profile_rules_and_compatibility():
     pub_rel.publish(Float64(data=2.0))
     for _ in range(5):
         rclpy.spin_once(n, timeout_sec=0.0)
-    assert got["rel"] == []          # reliable sub never hears a best-effort publisher
+    assert got["rel"] == []  # reliable sub never hears a best-effort publisher
     assert sorted(got["be"]) == [1.0, 12.0]
-    assert got["tl"] == [7.0]        # transient local: late joiner gets the last sample
+    assert got["tl"] == [7.0]  # transient local: late joiner gets the last sample
 
 
 def test_keep_last_depth_drops_oldest():
@@ -260,8 +364,9 @@ def test_keep_last_depth_drops_oldest():
     n = Node("d")
     got = []
     pub = n.create_publisher(Float64, "t", qos_profile_sensor_data)
-    sub = n.create_subscription(Float64, "t", lambda m: got.append(m.data),
-                                qos_profile_sensor_data)
+    sub = n.create_subscription(
+        Float64, "t", lambda m: got.append(m.data), qos_profile_sensor_data
+    )
     for i in range(8):
         pub.publish(Float64(data=float(i)))
     for _ in range(8):
@@ -299,6 +404,7 @@ def test_services_and_spin_until_shutdown():
         resp.success = True
         resp.message = "started"
         return resp
+
     n.create_service(Trigger, "start", cb)
     c = n.create_client(Trigger, "/lpv_sysid/start")
     assert c.wait_for_service(timeout_sec=0.1)
@@ -335,6 +441,7 @@ def test_history_keep_all_and_logger(caplog):
 def test_raw_subscription_message_lost_and_get_message():
     from rclpy.event_handler import SubscriptionEventCallbacks
     from rosidl_runtime_py.utilities import get_message
+
     assert get_message("sensor_msgs/msg/JointState") is JointState
     with pytest.raises(ValueError):
         get_message("sensor_msgs/msg/Nope")
@@ -343,8 +450,13 @@ def test_raw_subscription_message_lost_and_get_message():
     raw, lost = [], []
     pub = n.create_publisher(JointState, "js", 10)
     sub = n.create_subscription(
-        JointState, "js", raw.append, 10, raw=True,
-        event_callbacks=SubscriptionEventCallbacks(message_lost=lambda i: lost.append(i)))
+        JointState,
+        "js",
+        raw.append,
+        10,
+        raw=True,
+        event_callbacks=SubscriptionEventCallbacks(message_lost=lambda i: lost.append(i)),
+    )
     msg = JointState(name=["a"], position=[0.5])
     pub.publish(msg)
     rclpy.spin_once(n, timeout_sec=0.0)

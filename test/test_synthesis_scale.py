@@ -15,8 +15,15 @@ from lpv_sysid.cli.main import main
 from lpv_sysid.models.lpv import PolytopicModel, corner_box, product_systems, CommonInputSet
 from lpv_sysid.synthesis.example_models import quadrotor_like_polytope
 from lpv_sysid.synthesis.files import load_certificate_npz, load_models
-from lpv_sysid.synthesis.hinf_lmi import (HinfOptions, certificate_margins, excitation_R, output_Q,
-                                          performance_matrix, seed_problem_size, synthesize_hinf)
+from lpv_sysid.synthesis.hinf_lmi import (
+    HinfOptions,
+    certificate_margins,
+    excitation_R,
+    output_Q,
+    performance_matrix,
+    seed_problem_size,
+    synthesize_hinf,
+)
 from lpv_sysid.synthesis.hinf_norm import hinf_norm
 from lpv_sysid.synthesis.verify import verify_files
 from test_certificate_full_box import quad_models
@@ -35,7 +42,9 @@ def test_seed_counts_are_the_seeds_numbers_swapped():
     assert s["package"] == {"scalar_variables": 45768, "cone_entries": 332920}
     assert s["as_cvx_reports"] == {"variables": 332920, "constraints": 45768}
     s128 = seed_problem_size([16] * 8, 12, 4, 4, 3)
-    assert s128["package"]["scalar_variables"] != 45768 and s128["package"]["cone_entries"] != 332920
+    assert (
+        s128["package"]["scalar_variables"] != 45768 and s128["package"]["cone_entries"] != 332920
+    )
 
 
 @pytest.fixture(scope="module")
@@ -62,16 +71,34 @@ def test_corner_box_recognises_box_polytopes_and_rejects_others():
         AB = np.array([np.concatenate([a, b], axis=1) for a, b in lst])
         assert np.array_equal(AB.min(axis=0), lo) and np.array_equal(AB.max(axis=0), hi)
     # a corner dropped -> not all 2^q corners
-    broken = PolytopicModel(vmin=model.vmin, vmax=model.vmax, A=model.A, B=model.B, x0=model.x0, u0=model.u0,
-                            systems=[lst[:-1] for lst in model.systems])
+    broken = PolytopicModel(
+        vmin=model.vmin,
+        vmax=model.vmax,
+        A=model.A,
+        B=model.B,
+        x0=model.x0,
+        u0=model.u0,
+        systems=[lst[:-1] for lst in model.systems],
+    )
     assert corner_box(broken) is None
     # a B part that differs between vertices -> the interior argument fails, no box
     Bc = np.array([model.B[0], model.B[0] * 1.1])
     common = CommonInputSet(Bc)
-    per_vertex = [[(a, b * (1 + 0.01 * i)) for a, b in lst] for i, lst in
-                  enumerate(product_systems([[a for a, _ in lst] for lst in model.systems], common))]
-    pv = PolytopicModel(vmin=model.vmin, vmax=model.vmax, A=model.A, B=model.B, x0=model.x0, u0=model.u0,
-                        systems=per_vertex)
+    per_vertex = [
+        [(a, b * (1 + 0.01 * i)) for a, b in lst]
+        for i, lst in enumerate(
+            product_systems([[a for a, _ in lst] for lst in model.systems], common)
+        )
+    ]
+    pv = PolytopicModel(
+        vmin=model.vmin,
+        vmax=model.vmax,
+        A=model.A,
+        B=model.B,
+        x0=model.x0,
+        u0=model.u0,
+        systems=per_vertex,
+    )
     assert corner_box(pv) is None
 
 
@@ -82,12 +109,18 @@ def test_box_method_solution_satisfies_eq30_at_every_corner():
     model = quadrotor_like_polytope(4)
     R = excitation_R([0.1] * 4, 100.0)
     C = performance_matrix(output_Q([5.0] * 3, 100.0), 12, (2, 3, 4))
-    res = synthesize_hinf(model, R, C, HinfOptions(gamma=1.0, method="box", lyapunov="vertex", solver="CLARABEL"))
+    res = synthesize_hinf(
+        model, R, C, HinfOptions(gamma=1.0, method="box", lyapunov="vertex", solver="CLARABEL")
+    )
     assert res.info["method"] == "box" and res.info["eq30"]["systems"] == 8 * 16
     X = [[res.X[i][0]] * 16 for i in range(8)]
     g, margin = certificate_margins(model, R, C, X, res.S, res.H, res.scaling, 1.0)
     assert margin > 0 and g <= 1.0
-    worst = max(hinf_norm(A + B @ res.K[i], B @ R, C).value for i, lst in enumerate(model.systems) for A, B in lst)
+    worst = max(
+        hinf_norm(A + B @ res.K[i], B @ R, C).value
+        for i, lst in enumerate(model.systems)
+        for A, B in lst
+    )
     assert worst <= 1.0
 
 
@@ -95,8 +128,17 @@ def test_seed_scale_problem_from_the_cli(seed_models, tmp_path, capsys):
     """`synthesize --config config/synthesis_seed_scale.yaml`: 580 systems, both counts in the
     certificate, Eq. (30) certified at all 580, and the independent verification passes."""
     out = tmp_path / "gains.yaml"
-    rc = main(["synthesize", "--models", str(seed_models), "--config", str(ROOT / "config" / "synthesis_seed_scale.yaml"),
-               "--out", str(out)])
+    rc = main(
+        [
+            "synthesize",
+            "--models",
+            str(seed_models),
+            "--config",
+            str(ROOT / "config" / "synthesis_seed_scale.yaml"),
+            "--out",
+            str(out),
+        ]
+    )
     text = capsys.readouterr().out
     assert rc == 0, text
     assert "45768 scalar variables and 332920 cone entries in 1160 PSD cones" in text

@@ -22,10 +22,10 @@ from lpv_sysid.mavlink.link import LinkConfig, free_udp_port
 from lpv_sysid.mavlink.rotor_estimate import RotorEstimateConfig
 from lpv_sysid.mavlink.telemetry import RotorSample, StateSample, TelemetryDecoder
 
-A, B, LO, HI = 12.31, 13990.0, 120.0, 1100.0          # config/quadrotor.yaml, seed 0 Eq. (8)
-ROLL, ROLL_EULER_OFFSET = 0.2, 0.1                    # ATTITUDE reports a different roll
-ODOM_OFFSET = 100.0                                   # ODOMETRY reports a different position
-BOOT = 10.0                                           # vehicle clock = receive time + BOOT
+A, B, LO, HI = 12.31, 13990.0, 120.0, 1100.0  # config/quadrotor.yaml, seed 0 Eq. (8)
+ROLL, ROLL_EULER_OFFSET = 0.2, 0.1  # ATTITUDE reports a different roll
+ODOM_OFFSET = 100.0  # ODOMETRY reports a different position
+BOOT = 10.0  # vehicle clock = receive time + BOOT
 
 
 class Wire:
@@ -53,25 +53,69 @@ Q_ROLL = frames.quaternion_from_euler(np.array([ROLL, 0.0, 0.0]))
 
 
 def att_q(t, sysid=1, compid=1, roll_q=Q_ROLL):
-    return W.msg("attitude_quaternion", int(round((t + BOOT) * 1000)), *[float(v) for v in roll_q], 0.01, 0.02, 0.03,
-                 [0.0] * 4, sysid=sysid, compid=compid)
+    return W.msg(
+        "attitude_quaternion",
+        int(round((t + BOOT) * 1000)),
+        *[float(v) for v in roll_q],
+        0.01,
+        0.02,
+        0.03,
+        [0.0] * 4,
+        sysid=sysid,
+        compid=compid,
+    )
 
 
 def att_euler(t, sysid=1):
-    return W.msg("attitude", int(round((t + BOOT) * 1000)), ROLL + ROLL_EULER_OFFSET, 0.0, 0.0, 0.01, 0.02, 0.03,
-                 sysid=sysid)
+    return W.msg(
+        "attitude",
+        int(round((t + BOOT) * 1000)),
+        ROLL + ROLL_EULER_OFFSET,
+        0.0,
+        0.0,
+        0.01,
+        0.02,
+        0.03,
+        sysid=sysid,
+    )
 
 
 def lpos(t, sysid=1, compid=1, x=1.0, vx=2.0):
-    return W.msg("local_position_ned", int(round((t + BOOT) * 1000)), x, 2.0, -3.0, vx, 0.0, 0.0,
-                 sysid=sysid, compid=compid)
+    return W.msg(
+        "local_position_ned",
+        int(round((t + BOOT) * 1000)),
+        x,
+        2.0,
+        -3.0,
+        vx,
+        0.0,
+        0.0,
+        sysid=sysid,
+        compid=compid,
+    )
 
 
 def odom(t, lag=0.015, sysid=1):
     # PX4: time_usec = vehicle_odometry.timestamp_sample, behind the other streams' time
-    return W.msg("odometry", int(round((t + BOOT - lag) * 1e6)), 1, 1, 1.0 + ODOM_OFFSET, 2.0, -3.0,
-                 [float(v) for v in Q_ROLL], 2.0, 0.0, 0.0, 0.01, 0.02, 0.03,
-                 [float("nan")] * 21, [float("nan")] * 21, sysid=sysid)
+    return W.msg(
+        "odometry",
+        int(round((t + BOOT - lag) * 1e6)),
+        1,
+        1,
+        1.0 + ODOM_OFFSET,
+        2.0,
+        -3.0,
+        [float(v) for v in Q_ROLL],
+        2.0,
+        0.0,
+        0.0,
+        0.01,
+        0.02,
+        0.03,
+        [float("nan")] * 21,
+        [float("nan")] * 21,
+        sysid=sysid,
+    )
 
 
 def aos(t, pwm, sysid=1, active=16):
@@ -100,8 +144,12 @@ def schedule(t0, t1, rates):
     return [(t, name) for t, _, name in sorted(ev)]
 
 
-MAKE = {"ATTITUDE_QUATERNION": att_q, "ATTITUDE": att_euler, "LOCAL_POSITION_NED": lpos,
-        "ODOMETRY": odom}
+MAKE = {
+    "ATTITUDE_QUATERNION": att_q,
+    "ATTITUDE": att_euler,
+    "LOCAL_POSITION_NED": lpos,
+    "ODOMETRY": odom,
+}
 
 
 def feed(dec, events, make=MAKE):
@@ -116,22 +164,37 @@ def test_state_at_the_rate_of_one_attitude_and_one_position_stream_without_dupli
     # PX4 onboard link: ATTITUDE 100 Hz and ODOMETRY 30 Hz by default, plus the requested
     # ATTITUDE_QUATERNION 100 Hz and LOCAL_POSITION_NED 50 Hz (~280 state samples/s before)
     dec = TelemetryDecoder()
-    rates = {"ATTITUDE_QUATERNION": 100.0, "ATTITUDE": 100.0, "LOCAL_POSITION_NED": 50.0, "ODOMETRY": 30.0}
+    rates = {
+        "ATTITUDE_QUATERNION": 100.0,
+        "ATTITUDE": 100.0,
+        "LOCAL_POSITION_NED": 50.0,
+        "ODOMETRY": 30.0,
+    }
     events = schedule(0.0, 2.0, rates)
     states = [s for s in feed(dec, events) if isinstance(s, StateSample)]
     n_q = sum(1 for _, n in events if n == "ATTITUDE_QUATERNION")
     n_p = sum(1 for _, n in events if n == "LOCAL_POSITION_NED")
     assert (n_q, n_p) == (201, 101)
-    assert len(states) == n_q + n_p - 1              # the first quaternion precedes any position
+    assert len(states) == n_q + n_p - 1  # the first quaternion precedes any position
     assert dec.stats.out_of_order == 0 and dec.stats.invalid == 0
-    np.testing.assert_allclose([s.euler[0] for s in states], ROLL, atol=1e-6)   # never ATTITUDE's roll
-    np.testing.assert_allclose([s.pos_ned[0] for s in states], 1.0)            # never ODOMETRY's x
-    assert dec.attitude_source(2.0) == "ATTITUDE_QUATERNION" and dec.position_source(2.0) == "LOCAL_POSITION_NED"
+    np.testing.assert_allclose(
+        [s.euler[0] for s in states], ROLL, atol=1e-6
+    )  # never ATTITUDE's roll
+    np.testing.assert_allclose([s.pos_ned[0] for s in states], 1.0)  # never ODOMETRY's x
+    assert (
+        dec.attitude_source(2.0) == "ATTITUDE_QUATERNION"
+        and dec.position_source(2.0) == "LOCAL_POSITION_NED"
+    )
 
 
 def test_fallback_to_attitude_and_odometry_when_the_preferred_streams_stop():
     dec = TelemetryDecoder(max_age=0.2)
-    rates = {"ATTITUDE_QUATERNION": 100.0, "ATTITUDE": 100.0, "LOCAL_POSITION_NED": 50.0, "ODOMETRY": 30.0}
+    rates = {
+        "ATTITUDE_QUATERNION": 100.0,
+        "ATTITUDE": 100.0,
+        "LOCAL_POSITION_NED": 50.0,
+        "ODOMETRY": 30.0,
+    }
     feed(dec, schedule(0.0, 1.0, rates))
     # ATTITUDE_QUATERNION stops at 1 s: ATTITUDE takes over once the quaternion is 0.2 s old
     ev = schedule(1.005, 2.0, {"ATTITUDE": 100.0, "LOCAL_POSITION_NED": 50.0, "ODOMETRY": 30.0})
@@ -159,7 +222,7 @@ def test_odometry_keeps_its_own_ordering_no_good_sample_dropped():
     n_q = sum(1 for _, n in ev if n == "ATTITUDE_QUATERNION")
     n_o = sum(1 for _, n in ev if n == "ODOMETRY")
     assert dec.stats.out_of_order == 0
-    assert len(states) == n_q + n_o - 1              # every ODOMETRY update produced a sample
+    assert len(states) == n_q + n_o - 1  # every ODOMETRY update produced a sample
     np.testing.assert_allclose([s.pos_ned[0] for s in states], 1.0 + ODOM_OFFSET)
     # ODOMETRY alone (no other stream) is a complete state at its own rate
     dec = TelemetryDecoder()
@@ -209,8 +272,16 @@ class UdpPeer:
 
 
 def _heartbeat(sysid=1, compid=1):
-    return W.bytes("heartbeat", 2, 12, px4.base_mode_flags(px4.HOLD, False), px4.HOLD.custom_mode, 3,
-                   sysid=sysid, compid=compid)
+    return W.bytes(
+        "heartbeat",
+        2,
+        12,
+        px4.base_mode_flags(px4.HOLD, False),
+        px4.HOLD.custom_mode,
+        3,
+        sysid=sysid,
+        compid=compid,
+    )
 
 
 def _poll_all(core, t, want, tries=200):
@@ -237,22 +308,41 @@ def test_bridge_publishes_state_only_from_the_target_and_reports_the_rest():
         for k in range(1, 81):
             t = k * 0.01
             # 75 of 81 state samples came from sysid 42 on the unsigned SITL link
-            peer.send(W.bytes("attitude_quaternion", k * 10, 1.0, 0.0, 0.0, 0.0, 0, 0, 0, [0.0] * 4, sysid=42),
-                      W.bytes("local_position_ned", k * 10, -50.0, 0, 0, -9.0, 0, 0, sysid=42))
+            peer.send(
+                W.bytes(
+                    "attitude_quaternion", k * 10, 1.0, 0.0, 0.0, 0.0, 0, 0, 0, [0.0] * 4, sysid=42
+                ),
+                W.bytes("local_position_ned", k * 10, -50.0, 0, 0, -9.0, 0, 0, sysid=42),
+            )
             n_foreign += 2
             if k % 10 == 0:
-                peer.send(W.bytes("attitude_quaternion", k * 10, *[float(v) for v in Q_ROLL], 0, 0, 0,
-                                  [0.0] * 4),
-                          W.bytes("local_position_ned", k * 10, 1.0, 2.0, -3.0, 2.0, 0, 0))
+                peer.send(
+                    W.bytes(
+                        "attitude_quaternion",
+                        k * 10,
+                        *[float(v) for v in Q_ROLL],
+                        0,
+                        0,
+                        0,
+                        [0.0] * 4,
+                    ),
+                    W.bytes("local_position_ned", k * 10, 1.0, 2.0, -3.0, 2.0, 0, 0),
+                )
                 samples += _poll_all(core, t, 2)
         samples += _poll_all(core, 0.81, 0, tries=20)
         states = [s for s in samples if isinstance(s, StateSample)]
         assert len(states) == 2 * 8 - 1
         np.testing.assert_allclose([s.pos_ned[0] for s in states], 1.0)
-        np.testing.assert_allclose([s.v_body[0] for s in states], 2.0, atol=1e-6)   # roll keeps u
+        np.testing.assert_allclose([s.v_body[0] for s in states], 2.0, atol=1e-6)  # roll keeps u
         st = core.status(0.81)
-        assert st["foreign_messages"] == str(n_foreign) and st["foreign_sources"] == f"42/1:{n_foreign}"
-        assert st["attitude_source"] == "ATTITUDE_QUATERNION" and st["position_source"] == "LOCAL_POSITION_NED"
+        assert (
+            st["foreign_messages"] == str(n_foreign)
+            and st["foreign_sources"] == f"42/1:{n_foreign}"
+        )
+        assert (
+            st["attitude_source"] == "ATTITUDE_QUATERNION"
+            and st["position_source"] == "LOCAL_POSITION_NED"
+        )
     finally:
         peer.close()
         core.close()
@@ -267,7 +357,11 @@ def test_estimated_rotor_speeds_from_actuator_output_status():
     dec = TelemetryDecoder(rotor_estimate=RotorEstimateConfig())
     pwm0, pwm1 = [1500.0, 1500.0, 1500.0, 1500.0], [1600.0, 1400.0, 1550.0, 1450.0]
     (r,) = dec.on_message(aos(1.0, pwm0), 1.0)
-    assert isinstance(r, RotorSample) and r.source == "estimated" and r.t_vehicle == pytest.approx(1.0)
+    assert (
+        isinstance(r, RotorSample)
+        and r.source == "estimated"
+        and r.t_vehicle == pytest.approx(1.0)
+    )
     np.testing.assert_allclose(r.omega, _omega_pwm(pwm0))
     samples = [dec.on_message(aos(1.0 + 0.02 * k, pwm1), 1.0 + 0.02 * k)[0] for k in range(1, 26)]
     # the output pwm0 was held over [1.0, 1.02]: the speeds at 1.02 are still pwm0's
@@ -285,24 +379,24 @@ def test_servo_output_raw_is_the_fallback_and_never_a_duplicate():
     dec = TelemetryDecoder(rotor_estimate=RotorEstimateConfig())
     pwm = [1500, 1500, 1500, 1500]
     out = []
-    for k in range(50):                      # AOS 50 Hz + SERVO_OUTPUT_RAW 10 Hz (PX4 default)
+    for k in range(50):  # AOS 50 Hz + SERVO_OUTPUT_RAW 10 Hz (PX4 default)
         t = 0.02 * k
         out += dec.on_message(aos(t, pwm), t)
         if k % 5 == 0:
             out += dec.on_message(servo(t, pwm), t)
-    assert len(out) == 50                    # one rotor sample per AOS, none per SERVO
+    assert len(out) == 50  # one rotor sample per AOS, none per SERVO
     # AOS stops: SERVO_OUTPUT_RAW takes over after max_gap (0.25 s)
     out = []
     for k in range(1, 11):
         t = 1.0 + 0.1 * k
         out += dec.on_message(servo(t, [1700, 1700, 1700, 1700]), t)
-    assert len(out) == 8 and all(r.source == "estimated" for r in out)   # from t = 1.3 s
-    np.testing.assert_allclose(out[0].omega, _omega_pwm([1700] * 4))      # source switch: restart
+    assert len(out) == 8 and all(r.source == "estimated" for r in out)  # from t = 1.3 s
+    np.testing.assert_allclose(out[0].omega, _omega_pwm([1700] * 4))  # source switch: restart
     # another port (SERVO_OUTPUT_RAW_1) is not the motors
     assert dec.on_message(servo(2.2, [2000] * 4, port=1), 2.2) == []
     # uint32 time_usec wrap (every 71.6 min) is not a reboot or an ordering error
     dec = TelemetryDecoder(rotor_estimate=RotorEstimateConfig(source="servo_output_raw"))
-    t_wrap = 2 ** 32 * 1e-6
+    t_wrap = 2**32 * 1e-6
     r0 = dec.on_message(servo(t_wrap - 0.01, pwm), 5000.0)
     r1 = dec.on_message(servo(t_wrap + 0.01, [1800] * 4), 5000.02)
     r2 = dec.on_message(servo(t_wrap + 0.03, [1800] * 4), 5000.04)
@@ -322,11 +416,15 @@ def test_measured_esc_telemetry_wins_and_the_estimate_covers_when_it_goes_stale(
             got += dec.on_message(esc(t, rpm), t)
     src = [(round(r.t, 3), r.source) for r in got]
     esc_part = [s for t, s in src if t < 0.5]
-    assert esc_part[0] == "estimated" and set(esc_part[1:]) == {"esc"}   # ESC wins from its first sample
+    assert esc_part[0] == "estimated" and set(esc_part[1:]) == {
+        "esc"
+    }  # ESC wins from its first sample
     late = [(t, s) for t, s in src if t >= 0.5]
     assert all(s == "esc" or t > 0.48 + 0.2 - 1e-9 for t, s in late)
     assert {s for t, s in late if t > 0.7} == {"estimated"}
-    np.testing.assert_allclose([r.omega for r in got if r.source == "esc"][0], 5000 * 2 * math.pi / 60)
+    np.testing.assert_allclose(
+        [r.omega for r in got if r.source == "esc"][0], 5000 * 2 * math.pi / 60
+    )
     # ESC_STATUS with 0 rpm while the outputs say the motors run: not a measurement
     r = dec.on_message(esc(1.0, [0, 0, 0, 0]), 1.0)
     assert r == [] and dec.stats.esc_zero_while_running == 1
@@ -345,10 +443,14 @@ def test_bridge_requests_the_motor_outputs_the_estimate_needs():
     url = f"udpin:127.0.0.1:{free_udp_port()}"
     streams = dict(BridgeCore(BridgeConfig(link=LinkConfig(url=url))).link.config.streams)
     assert streams["ACTUATOR_OUTPUT_STATUS"] == 50.0 and streams["SERVO_OUTPUT_RAW"] == 10.0
-    assert streams["ATTITUDE_QUATERNION"] == 100.0                     # the link's own are kept
-    off = BridgeConfig(link=LinkConfig(url=url, streams=(("ACTUATOR_OUTPUT_STATUS", 0.0),)),
-                       rotor_estimate=RotorEstimateConfig(enabled=True))
-    assert dict(BridgeCore(off).link.config.streams)["ACTUATOR_OUTPUT_STATUS"] == 0.0   # configured: kept
+    assert streams["ATTITUDE_QUATERNION"] == 100.0  # the link's own are kept
+    off = BridgeConfig(
+        link=LinkConfig(url=url, streams=(("ACTUATOR_OUTPUT_STATUS", 0.0),)),
+        rotor_estimate=RotorEstimateConfig(enabled=True),
+    )
+    assert (
+        dict(BridgeCore(off).link.config.streams)["ACTUATOR_OUTPUT_STATUS"] == 0.0
+    )  # configured: kept
     no = BridgeConfig(link=LinkConfig(url=url), rotor_estimate=RotorEstimateConfig(enabled=False))
     assert "ACTUATOR_OUTPUT_STATUS" not in dict(BridgeCore(no).link.config.streams)
 
@@ -364,8 +466,10 @@ def test_bridge_publishes_estimated_rotor_speeds_from_the_target_only():
         rotors = []
         for k in range(1, 11):
             t = 0.02 * k
-            peer.send(W.bytes("actuator_output_status", int(t * 1e6), 16, [1500.0] * 4 + [900.0] * 28),
-                      W.bytes("actuator_output_status", int(t * 1e6), 16, [2000.0] * 32, sysid=42))
+            peer.send(
+                W.bytes("actuator_output_status", int(t * 1e6), 16, [1500.0] * 4 + [900.0] * 28),
+                W.bytes("actuator_output_status", int(t * 1e6), 16, [2000.0] * 32, sysid=42),
+            )
             rotors += [s for s in _poll_all(core, t, 1) if isinstance(s, RotorSample)]
         assert len(rotors) == 10 and {r.source for r in rotors} == {"estimated"}
         np.testing.assert_allclose([r.omega for r in rotors], [_omega_pwm([1500.0] * 4)] * 10)
@@ -390,7 +494,9 @@ def test_estimated_rotor_speeds_flow_from_the_sim_vehicle_without_esc_telemetry(
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     port = free_udp_port()
     cfg = BridgeConfig.load(os.path.join(root, "config", "mavlink_bridge.yaml"))
-    cfg = dataclasses.replace(cfg, link=dataclasses.replace(cfg.link, url=f"udpin:127.0.0.1:{port}"))
+    cfg = dataclasses.replace(
+        cfg, link=dataclasses.replace(cfg.link, url=f"udpin:127.0.0.1:{port}")
+    )
     core = BridgeCore(cfg)
     veh = SimVehicle(SimVehicleConfig(url=f"udpout:127.0.0.1:{port}", esc_telemetry=False))
     core.open(0.0)
@@ -407,9 +513,9 @@ def test_estimated_rotor_speeds_flow_from_the_sim_vehicle_without_esc_telemetry(
                     rotors.append(s)
                     truth.append(np.array(veh.x[12:16], dtype=float))
             if not armed_sent and t >= 2.0 and core.link.link_up(t):
-                core.link.command_long(400, 1.0)                          # arm
+                core.link.command_long(400, 1.0)  # arm
                 armed_sent = True
-            if armed_sent and not takeoff_sent and t >= 2.5:              # after the commander's verdict
+            if armed_sent and not takeoff_sent and t >= 2.5:  # after the commander's verdict
                 core.link.command_long(22, 0, 0, 0, math.nan, math.nan, math.nan, math.nan)
                 takeoff_sent = True
     finally:
@@ -417,11 +523,11 @@ def test_estimated_rotor_speeds_flow_from_the_sim_vehicle_without_esc_telemetry(
         veh.close()
     assert armed_sent and rotors and {r.source for r in rotors} == {"estimated"}
     assert core.status(12.0)["rotor_source"] == "estimated"
-    flight = [(r, w) for r, w in zip(rotors, truth) if r.t >= 2.6]      # take-off climb, then HOLD
-    assert 0.9 * 50 * 9.4 <= len(flight) <= 1.1 * 50 * 9.4             # 50 Hz (config) for 9.4 s
+    flight = [(r, w) for r, w in zip(rotors, truth) if r.t >= 2.6]  # take-off climb, then HOLD
+    assert 0.9 * 50 * 9.4 <= len(flight) <= 1.1 * 50 * 9.4  # 50 Hz (config) for 9.4 s
     est = np.array([r.omega for r, _ in flight])
     ref = np.array([w for _, w in flight])
-    assert ref.min() > LO and np.ptp(ref) > 50.0                       # spinning, and changing
+    assert ref.min() > LO and np.ptp(ref) > 50.0  # spinning, and changing
     rel = np.abs(est - ref) / ref
     # measured here: median 3e-7, max 0.042 (a 50 Hz zero-order hold of the 250 Hz control output)
     assert np.median(rel) < 0.02 and rel.max() < 0.1, (np.median(rel), rel.max())

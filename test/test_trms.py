@@ -7,10 +7,24 @@ import pytest
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.models.lpv import box_vertices
-from lpv_sysid.models.trms import (PSI_NAMES, REDUCED_PSI, Trms, TrmsParams, bounding_box_polytope,
-                                   euler_discrete, p_box, psi_bounds)
-from lpv_sysid.sim.trms_closed_loop import (C_TRACK, REGION_K_DEFAULT, REGION_L_PAPER, TrmsControlConfig,
-                                            design, simulate)
+from lpv_sysid.models.trms import (
+    PSI_NAMES,
+    REDUCED_PSI,
+    Trms,
+    TrmsParams,
+    bounding_box_polytope,
+    euler_discrete,
+    p_box,
+    psi_bounds,
+)
+from lpv_sysid.sim.trms_closed_loop import (
+    C_TRACK,
+    REGION_K_DEFAULT,
+    REGION_L_PAPER,
+    TrmsControlConfig,
+    design,
+    simulate,
+)
 from lpv_sysid.synthesis.regions import integral_augmentation
 
 M = Trms()
@@ -58,7 +72,7 @@ def test_derivatives_rejects_bad_input():
 def test_rotor_equation_steady_state_is_the_quadratic_root():
     # Eq. (1) at rest: k_a k_1 / R_a u = (B_tr + k_a^2/R_a) w + k_thp w^2 (w > 0) -> closed-form root
     u = 1.3
-    b = P.B_tr + P.k_a ** 2 / P.R_a
+    b = P.B_tr + P.k_a**2 / P.R_a
     w = (-b + math.sqrt(b * b + 4 * P.k_thp * P.k_a * P.k_1 / P.R_a * u)) / (2 * P.k_thp)
     assert M.derivatives([w, 0, 0, 0, 0, TV0], [u, 0])[0] == pytest.approx(0.0, abs=1e-14)
 
@@ -79,7 +93,9 @@ def test_embedding_reproduces_vector_field_exactly():
     for x, u in zip(X, U):
         A, B = M.lpv_matrices(x)
         f = M.derivatives(x, u)
-        worst = max(worst, float(np.max(np.abs(A @ M.shift(x) + B @ u - f)) / (1.0 + np.max(np.abs(f)))))
+        worst = max(
+            worst, float(np.max(np.abs(A @ M.shift(x) + B @ u - f)) / (1.0 + np.max(np.abs(f))))
+        )
     assert worst < 1e-13
 
 
@@ -94,7 +110,12 @@ def test_embedding_with_nonzero_k_t_couples_tail_into_pitch():
 
 def test_reference_equilibrium_zeroes_the_dynamics():
     # Eqs. (107)-(112) against Eqs. (1)-(6): all rates vanish; with Omega^r != 0 only the angles move
-    for th, dv, Wh, Wv in [(0.5, 0.2, 0.0, 0.0), (-0.6, -0.2, 0.0, 0.0), (1.0, 0.6, 0.1, -0.05), (-1.2, 0.1, -0.2, 0.1)]:
+    for th, dv, Wh, Wv in [
+        (0.5, 0.2, 0.0, 0.0),
+        (-0.6, -0.2, 0.0, 0.0),
+        (1.0, 0.6, 0.1, -0.05),
+        (-1.2, 0.1, -0.2, 0.1),
+    ]:
         x, u = M.reference_equilibrium(th, TV0 + dv, Wh, Wv)
         f = M.derivatives(x, u)
         np.testing.assert_allclose(f[[0, 1, 3, 4]], 0.0, atol=1e-12)
@@ -105,7 +126,7 @@ def test_reference_equilibrium_zeroes_the_dynamics():
 def _discrete_bounds(gaps=None):
     lo, hi, _ = psi_bounds(M, *p_box(P), gaps=gaps)
     dlo, dhi = lo * TS, hi * TS
-    for k in (0, 2, 7):       # psi_1d, psi_3d, psi_8d carry the identity (Eq. 60)
+    for k in (0, 2, 7):  # psi_1d, psi_3d, psi_8d carry the identity (Eq. 60)
         dlo[k] += 1.0
         dhi[k] += 1.0
     return dict(zip(PSI_NAMES, zip(dlo, dhi)))
@@ -113,9 +134,15 @@ def _discrete_bounds(gaps=None):
 
 def test_table8_bounds_reproduced_from_the_model():
     b = _discrete_bounds()
-    table8 = {"a22": (0.9122, 0.9697), "a23": (-0.0750, -0.0182), "a24": (-0.0041, -0.0003),
-              "a25": (-0.0019, 0.0019), "a26": (-0.1336, 0.1148), "a44": (0.8837, 0.9896),
-              "a54": (0.0, 0.2339)}
+    table8 = {
+        "a22": (0.9122, 0.9697),
+        "a23": (-0.0750, -0.0182),
+        "a24": (-0.0041, -0.0003),
+        "a25": (-0.0019, 0.0019),
+        "a26": (-0.1336, 0.1148),
+        "a44": (0.8837, 0.9896),
+        "a54": (0.0, 0.2339),
+    }
     for name, (lo, hi) in table8.items():
         assert b[name][0] == pytest.approx(lo, abs=6e-5), name
         assert b[name][1] == pytest.approx(hi, abs=6e-5), name
@@ -124,13 +151,15 @@ def test_table8_bounds_reproduced_from_the_model():
         assert b[name][1] == pytest.approx(hi, abs=6e-5), name
     # a11 lower: Eq. (67) takes max(k_thp w_max, -k_thn w_min) -> 0.7157; Table 8's 0.7207 is the k_thp branch
     assert b["a11"][0] == pytest.approx(0.7157, abs=6e-5)
-    k_thp_only = 1 - TS / P.J_tr * (P.k_a ** 2 / P.R_a + P.B_tr + P.k_thp * 2.9)
+    k_thp_only = 1 - TS / P.J_tr * (P.k_a**2 / P.R_a + P.B_tr + P.k_thp * 2.9)
     assert k_thp_only == pytest.approx(0.7207, abs=6e-5)
 
 
 def test_gaps_lift_the_input_gains_off_zero():
     b = _discrete_bounds({"omega_h": (-0.5, 0.5), "omega_v": (-0.5, 0.5)})
-    assert b["a54"][0] == pytest.approx(TS * P.l_m * P.k_fvn * 0.5 / P.J_v, rel=1e-12)   # k_fvn < k_fvp
+    assert b["a54"][0] == pytest.approx(
+        TS * P.l_m * P.k_fvn * 0.5 / P.J_v, rel=1e-12
+    )  # k_fvn < k_fvp
     assert b["a21"][0] > 0.0
     with pytest.raises(ConfigError, match="unknown variable"):
         psi_bounds(M, *p_box(P), gaps={"omega": (-1, 1)})
@@ -151,7 +180,19 @@ def test_polytope_vertices_and_interpolation_reproduce_the_lpv_matrix():
         np.testing.assert_allclose(poly.A_at(x), A_red, atol=1e-12)
         # scheduled entries are exactly the embedding's, frozen ones are the LS constants
         for k in poly.index:
-            r, c = [(0, 0), (1, 0), (1, 1), (1, 2), (1, 3), (1, 4), (1, 5), (3, 3), (4, 1), (4, 3), (4, 5)][k]
+            r, c = [
+                (0, 0),
+                (1, 0),
+                (1, 1),
+                (1, 2),
+                (1, 3),
+                (1, 4),
+                (1, 5),
+                (3, 3),
+                (4, 1),
+                (4, 3),
+                (4, 5),
+            ][k]
             assert A_red[r, c] == pytest.approx((r == c) + TS * A_lpv[r, c], abs=1e-12)
 
 
@@ -165,10 +206,10 @@ def test_vertex_order_follows_box_vertices():
 def test_without_gaps_the_pitch_integrator_is_uncontrollable_at_a_vertex():
     # a54 = 0 at omega_v = 0 (Table 8 lower bound 0): PBH rank of the augmented pair (Eq. 129) at z = 1
     poly = bounding_box_polytope(M, ("a21", "a54"), ts=TS, gaps=None)
-    Aa, Ba = integral_augmentation(poly.A[0], poly.B, C_TRACK, ts=TS)     # a21 = a54 = 0
+    Aa, Ba = integral_augmentation(poly.A[0], poly.B, C_TRACK, ts=TS)  # a21 = a54 = 0
     s = np.linalg.svd(np.hstack([Aa - np.eye(8), Ba]), compute_uv=False)
     assert s[-1] / s[0] < 1e-3
-    Aa, Ba = integral_augmentation(poly.A[3], poly.B, C_TRACK, ts=TS)     # both at their maximum
+    Aa, Ba = integral_augmentation(poly.A[3], poly.B, C_TRACK, ts=TS)  # both at their maximum
     s = np.linalg.svd(np.hstack([Aa - np.eye(8), Ba]), compute_uv=False)
     assert s[-1] / s[0] > 1e-3
 
@@ -179,7 +220,7 @@ def test_vertex_closed_loops_in_region(des):
     ev = des.controller_eigs()
     assert np.all(REGION_K_DEFAULT.contains(ev))
     ev_open = [np.linalg.eigvals(a) for a, _ in des.augmented_vertices()]
-    assert not np.all(REGION_K_DEFAULT.contains(np.array(ev_open)))      # integrators at z = 1
+    assert not np.all(REGION_K_DEFAULT.contains(np.array(ev_open)))  # integrators at z = 1
     assert np.all(REGION_L_PAPER.contains(des.observer_eigs()))
 
 
@@ -190,23 +231,24 @@ def test_observer_error_contracts_for_any_scheduling_sequence(des):
     Xl = des.result_L.X
     rng = np.random.default_rng(7)
     from lpv_sysid.sim.trms_closed_loop import C_MEAS
+
     e = rng.normal(size=6)
     for _ in range(40):
         w = rng.dirichlet(np.full(len(des.K), 0.2))
         Acl = np.tensordot(w, des.poly.A, axes=1) + np.tensordot(w, des.L, axes=1) @ C_MEAS
         e_next = Acl @ e
-        assert e_next @ Xl @ e_next <= 0.7 ** 2 * (e @ Xl @ e) * (1 + 1e-7)
+        assert e_next @ Xl @ e_next <= 0.7**2 * (e @ Xl @ e) * (1 + 1e-7)
         e = e_next
 
 
 def test_nonlinear_step_tracking_zero_steady_state_error(des):
     x0, _ = M.reference_equilibrium(0.9, TV0 + 0.25)
-    ref = lambda t: (0.9, TV0 + 0.25) if t < 1.0 else (1.1, TV0 + 0.30)   # noqa: E731
+    ref = lambda t: (0.9, TV0 + 0.25) if t < 1.0 else (1.1, TV0 + 0.30)  # noqa: E731
     run = simulate(des, ref, x0, t_end=40.0)
     err = run.x[:, [2, 5]] - run.r
-    assert np.max(np.abs(err[-1])) < 1e-4                     # integral action: no offset
+    assert np.max(np.abs(err[-1])) < 1e-4  # integral action: no offset
     assert np.max(np.abs(err[run.t > 30.0])) < 1e-3
-    assert np.max(np.abs(err[run.t > 2.0, 0])) > 0.05          # it did have to move (not trivially 0)
+    assert np.max(np.abs(err[run.t > 2.0, 0])) > 0.05  # it did have to move (not trivially 0)
     assert run.in_box.all() and not run.saturated.any()
     x_end, u_end = M.reference_equilibrium(1.1, TV0 + 0.30)
     np.testing.assert_allclose(run.u[-1], u_end, atol=1e-3)  # settles on the Eq. (111)-(112) input
@@ -229,7 +271,9 @@ def test_control_config_validation():
         TrmsControlConfig.from_dict({"tau": 1.0})
     with pytest.raises(ConfigError, match="unit disk"):
         TrmsControlConfig.from_dict({"region_K": {"disk": {"centre": 0.5, "radius": 0.9}}})
-    cfg = TrmsControlConfig.from_dict({"tau_h": 2.0, "region_L": {"disk": {"centre": 0.0, "radius": 0.6}}})
+    cfg = TrmsControlConfig.from_dict(
+        {"tau_h": 2.0, "region_L": {"disk": {"centre": 0.0, "radius": 0.6}}}
+    )
     assert cfg.tau_h == 2.0 and cfg.region_L.disk_r == 0.6
     with pytest.raises(ConfigError, match="tau_v"):
         TrmsControlConfig(tau_v=-1.0)
@@ -239,9 +283,9 @@ def test_yaw_second_order_identification_formulas_match_the_model():
     # Eqs. (72)-(81), (87): with u_v = 0 (theta_v = theta_v^0) the yaw subsystem is
     # K_p / (1 + 2 xi_p T_p s + T_p^2 s^2) from omega_h^2 to theta_h; check against the Jacobian of Eq. (2)
     D0 = P.K_D * math.cos(TV0) ** 2 + P.K_E * math.sin(TV0) ** 2 + P.K_F
-    Tp2 = D0 / P.k_chp                               # Eq. (80)
-    two_xi_T = P.k_oh / P.k_chp                      # Eq. (78)
-    Kp = P.l_t * P.k_fhp * math.cos(TV0) / P.k_chp   # Eq. (76)
+    Tp2 = D0 / P.k_chp  # Eq. (80)
+    two_xi_T = P.k_oh / P.k_chp  # Eq. (78)
+    Kp = P.l_t * P.k_fhp * math.cos(TV0) / P.k_chp  # Eq. (76)
     wh = 0.8
     A, _ = M.jacobian(np.array([wh, 0.0, 0.3, 0.0, 0.0, TV0]), np.zeros(2))
     assert A[1, 2] == pytest.approx(-1.0 / Tp2, rel=1e-7)

@@ -14,11 +14,18 @@ from lpv_sysid.synthesis.verify import verify_files
 
 def _models(path: Path, a=1.0, b=1.0):
     """x' = a x + b u (scalar, unstable), 1-axis box; z = Q^-1 x."""
-    verts = [{"scheduling": [s], "x0": [0.0], "u0": [0.0], "A": [[a]], "B": [[b]], "uncertain": []}
-             for s in (-1.0, 1.0)]
-    doc = {"format": "lpv_sysid/vertex_models@1", "time": "continuous",
-           "states": [{"name": "x", "unit": "m/s"}], "inputs": [{"name": "u", "unit": "1"}],
-           "scheduling": {"names": ["s"], "min": [-1.0], "max": [1.0]}, "vertices": verts}
+    verts = [
+        {"scheduling": [s], "x0": [0.0], "u0": [0.0], "A": [[a]], "B": [[b]], "uncertain": []}
+        for s in (-1.0, 1.0)
+    ]
+    doc = {
+        "format": "lpv_sysid/vertex_models@1",
+        "time": "continuous",
+        "states": [{"name": "x", "unit": "m/s"}],
+        "inputs": [{"name": "u", "unit": "1"}],
+        "scheduling": {"names": ["s"], "min": [-1.0], "max": [1.0]},
+        "vertices": verts,
+    }
     path.write_text(yaml.safe_dump(doc))
     return path
 
@@ -28,8 +35,12 @@ def _config(path: Path, region: bool):
     hinf = {"gamma": 0.5, "solver": "CLARABEL", "fallback": "SCS"}
     if region:
         hinf["region"] = {"strip": {"min": -2.5, "max": -1.0}}
-    cfg = {"hinf": hinf, "weights": {"T": 2.0, "input_magnitudes": [1.0], "output_magnitudes": [2 ** -0.5]},
-           "velocity_states": ["x"], "verify": {"n_random": 5, "seed": 1}}
+    cfg = {
+        "hinf": hinf,
+        "weights": {"T": 2.0, "input_magnitudes": [1.0], "output_magnitudes": [2**-0.5]},
+        "velocity_states": ["x"],
+        "verify": {"n_random": 5, "seed": 1},
+    }
     path.write_text(yaml.safe_dump(cfg))
     return path
 
@@ -63,7 +74,7 @@ def test_tampered_gain_breaks_the_bound_and_fails_verify(synthesized, capsys):
     models, out = synthesized
     d = yaml.safe_load(out.read_text())
     k = d["vertices"][0]["K"][0][0]
-    d["vertices"][0]["K"][0][0] = 0.8 * k                        # one entry changed by 20%
+    d["vertices"][0]["K"][0][0] = 0.8 * k  # one entry changed by 20%
     out.write_text(yaml.safe_dump(d, sort_keys=False))
     # the bound is really broken at that vertex (independent oracle: 1 / |1 + 0.8 k| > 0.5)
     assert 1.0 / abs(1 + 0.8 * k) > 0.5
@@ -74,7 +85,9 @@ def test_tampered_gain_breaks_the_bound_and_fails_verify(synthesized, capsys):
     rep = verify_files(out, models, n_random=3)
     failed = {r.check for r in rep.rows if not r.ok}
     assert {"hinf", "K = S H^-1", "gamma claim"} <= failed
-    assert not [r for r in rep.rows if r.check == "hinf" and r.where.startswith("vertex 1") and not r.ok]
+    assert not [
+        r for r in rep.rows if r.check == "hinf" and r.where.startswith("vertex 1") and not r.ok
+    ]
 
 
 def test_verify_refuses_other_models_and_tampered_sidecar(synthesized, capsys):
@@ -94,7 +107,17 @@ def test_bad_input_exit_2(tmp_path, capsys):
     bad = tmp_path / "m.yaml"
     bad.write_text("format: [unclosed\n")
     cfg = _config(tmp_path / "c.yaml", region=False)
-    rc = main(["synthesize", "--models", str(bad), "--config", str(cfg), "--out", str(tmp_path / "g.yaml")])
+    rc = main(
+        [
+            "synthesize",
+            "--models",
+            str(bad),
+            "--config",
+            str(cfg),
+            "--out",
+            str(tmp_path / "g.yaml"),
+        ]
+    )
     assert rc == 2
     assert "m.yaml" in capsys.readouterr().err
 
@@ -108,14 +131,24 @@ def test_vertex_dependent_B_is_caught_in_the_interior(tmp_path, capsys):
     models.write_text(yaml.safe_dump(d))
     cfg = _config(tmp_path / "c.yaml", region=False)
     c = yaml.safe_load(cfg.read_text())
-    c["uncertainty"] = {"common_b": False}   # the old per-vertex B structure (not the default)
+    c["uncertainty"] = {"common_b": False}  # the old per-vertex B structure (not the default)
     cfg.write_text(yaml.safe_dump(c))
-    rc = main(["synthesize", "--models", str(models), "--config", str(cfg), "--out", str(tmp_path / "g.yaml")])
+    rc = main(
+        [
+            "synthesize",
+            "--models",
+            str(models),
+            "--config",
+            str(cfg),
+            "--out",
+            str(tmp_path / "g.yaml"),
+        ]
+    )
     out = capsys.readouterr().out
     assert rc == 1 and "B differs between scheduling vertices" in out and "FAIL" in out
     rep = verify_files(tmp_path / "g.yaml", models, n_random=20)
-    assert all(r.ok for r in rep.rows if r.check == "hinf")                      # vertices certified
-    assert any(not r.ok for r in rep.rows if r.check == "hinf interior")         # interior is not
+    assert all(r.ok for r in rep.rows if r.check == "hinf")  # vertices certified
+    assert any(not r.ok for r in rep.rows if r.check == "hinf interior")  # interior is not
 
 
 def test_infeasible_request_explains_remedy(tmp_path, capsys):
@@ -123,12 +156,31 @@ def test_infeasible_request_explains_remedy(tmp_path, capsys):
     models = _models(tmp_path / "vertex_models.yaml")
     d = yaml.safe_load(models.read_text())
     for v in d["vertices"]:
-        v["uncertain"] = [{"matrix": "B", "row": 0, "col": 0, "nominal": 0.0, "std": 0.5, "lower": -1.0,
-                           "upper": 1.0}]
+        v["uncertain"] = [
+            {
+                "matrix": "B",
+                "row": 0,
+                "col": 0,
+                "nominal": 0.0,
+                "std": 0.5,
+                "lower": -1.0,
+                "upper": 1.0,
+            }
+        ]
         v["B"] = [[0.0]]
     models.write_text(yaml.safe_dump(d))
     cfg = _config(tmp_path / "c.yaml", region=False)
-    rc = main(["synthesize", "--models", str(models), "--config", str(cfg), "--out", str(tmp_path / "g.yaml")])
+    rc = main(
+        [
+            "synthesize",
+            "--models",
+            str(models),
+            "--config",
+            str(cfg),
+            "--out",
+            str(tmp_path / "g.yaml"),
+        ]
+    )
     err = capsys.readouterr().err
     assert rc == 2 and "Lemma 1" in err and "reduce the uncertainty" in err
     assert not (tmp_path / "g.yaml").exists()
@@ -138,8 +190,17 @@ def test_load_models_corner_enumeration(tmp_path):
     models = _models(tmp_path / "vertex_models.yaml")
     d = yaml.safe_load(models.read_text())
     for v in d["vertices"]:
-        v["uncertain"] = [{"matrix": "A", "row": 0, "col": 0, "nominal": 1.0, "std": 0.1, "lower": 0.8,
-                           "upper": 1.2}]
+        v["uncertain"] = [
+            {
+                "matrix": "A",
+                "row": 0,
+                "col": 0,
+                "nominal": 1.0,
+                "std": 0.1,
+                "lower": 0.8,
+                "upper": 1.2,
+            }
+        ]
     models.write_text(yaml.safe_dump(d))
     m, _ = load_models(models)
     assert [len(s) for s in m.systems] == [2, 2]
@@ -151,8 +212,10 @@ def test_written_gains_load_with_io_formats_and_drive_the_runtime_law(synthesize
     from lpv_sysid.io.formats import GainSchedule
 
     models, out = synthesized
-    gs = GainSchedule.load(out, models_path=models, layout=None)     # checks hash, names, box, equilibria
+    gs = GainSchedule.load(
+        out, models_path=models, layout=None
+    )  # checks hash, names, box, equilibria
     ctl = LpvController(gs, LpvControllerConfig(velocity_index=(0,)))
     u, info = ctl.step(0.0, np.array([0.2]), np.array([0.3]), np.array([0.5]))
-    k = 0.35 * gs.K[0, 0, 0] + 0.65 * gs.K[1, 0, 0]                  # s = 0.3 in [-1, 1]: alpha = (0.35, 0.65)
+    k = 0.35 * gs.K[0, 0, 0] + 0.65 * gs.K[1, 0, 0]  # s = 0.3 in [-1, 1]: alpha = (0.35, 0.65)
     np.testing.assert_allclose(u, [k * 0.2 + 1.0 * 0.5], rtol=1e-12)  # u0 = 0, x0 = 0, R = 1

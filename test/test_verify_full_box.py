@@ -24,8 +24,15 @@ K_SIGMA = 3.0
 
 
 def _el(r, c, nom, std, lo=None, hi=None):
-    return {"matrix": "A", "row": r, "col": c, "nominal": nom, "std": std,
-            "lower": nom if lo is None else lo, "upper": nom if hi is None else hi}
+    return {
+        "matrix": "A",
+        "row": r,
+        "col": c,
+        "nominal": nom,
+        "std": std,
+        "lower": nom if lo is None else lo,
+        "upper": nom if hi is None else hi,
+    }
 
 
 def _write(tmp: Path, std_v0_a2: float) -> tuple[Path, Path]:
@@ -34,24 +41,65 @@ def _write(tmp: Path, std_v0_a2: float) -> tuple[Path, Path]:
     stored (widened) interval [-1.1, -0.8]; the other elements have std 0.02."""
     v0 = [_el(0, 0, -1.0, 0.02), _el(1, 1, -1.0, std_v0_a2)]
     v1 = [_el(0, 0, -1.0, 0.05, -1.1, -0.8), _el(1, 1, -1.0, 0.02)]
-    verts = [{"scheduling": [s], "x0": [0.0, 0.0], "u0": [0.0, 0.0], "A": [[-1.0, 0.0], [0.0, -1.0]],
-              "B": [[1.0, 0.0], [0.0, 1.0]], "uncertain": u} for s, u in ((-1.0, v0), (1.0, v1))]
+    verts = [
+        {
+            "scheduling": [s],
+            "x0": [0.0, 0.0],
+            "u0": [0.0, 0.0],
+            "A": [[-1.0, 0.0], [0.0, -1.0]],
+            "B": [[1.0, 0.0], [0.0, 1.0]],
+            "uncertain": u,
+        }
+        for s, u in ((-1.0, v0), (1.0, v1))
+    ]
     names = [{"name": "x1", "unit": "m/s"}, {"name": "x2", "unit": "m/s"}]
     inputs = [{"name": "u1", "unit": "1"}, {"name": "u2", "unit": "1"}]
     sched = {"names": ["s"], "min": [-1.0], "max": [1.0]}
     models = tmp / "vertex_models.yaml"
-    models.write_text(yaml.safe_dump({"format": "lpv_sysid/vertex_models@1", "time": "continuous",
-                                      "states": names, "inputs": inputs, "scheduling": sched,
-                                      "vertices": verts, "meta": {"k_sigma": K_SIGMA}}, sort_keys=False))
-    cert = {"lmi": "hand-made for the test", "solver": "none", "gamma_achieved": 0.9, "min_margin": 0.0,
-            "models_sha256": sha256_file(models), "uncertainty": {}, "velocity_states": ["x2"]}
-    gverts = [{"scheduling": [s], "K": [[-1.0, 0.0], [0.0, -1.0]], "x0": [0.0, 0.0], "u0": [0.0, 0.0]}
-              for s in (-1.0, 1.0)]
+    models.write_text(
+        yaml.safe_dump(
+            {
+                "format": "lpv_sysid/vertex_models@1",
+                "time": "continuous",
+                "states": names,
+                "inputs": inputs,
+                "scheduling": sched,
+                "vertices": verts,
+                "meta": {"k_sigma": K_SIGMA},
+            },
+            sort_keys=False,
+        )
+    )
+    cert = {
+        "lmi": "hand-made for the test",
+        "solver": "none",
+        "gamma_achieved": 0.9,
+        "min_margin": 0.0,
+        "models_sha256": sha256_file(models),
+        "uncertainty": {},
+        "velocity_states": ["x2"],
+    }
+    gverts = [
+        {"scheduling": [s], "K": [[-1.0, 0.0], [0.0, -1.0]], "x0": [0.0, 0.0], "u0": [0.0, 0.0]}
+        for s in (-1.0, 1.0)
+    ]
     gains = tmp / "gains.yaml"
-    gains.write_text(yaml.safe_dump({"format": "lpv_sysid/gains@1", "states": names, "inputs": inputs,
-                                     "scheduling": sched, "vertices": gverts, "R": [[1.0, 0.0], [0.0, 1.0]],
-                                     "Q": [[1.0]], "gamma": 1.0, "certificate": cert},
-                                    sort_keys=False))
+    gains.write_text(
+        yaml.safe_dump(
+            {
+                "format": "lpv_sysid/gains@1",
+                "states": names,
+                "inputs": inputs,
+                "scheduling": sched,
+                "vertices": gverts,
+                "R": [[1.0, 0.0], [0.0, 1.0]],
+                "Q": [[1.0]],
+                "gamma": 1.0,
+                "certificate": cert,
+            },
+            sort_keys=False,
+        )
+    )
     return gains, models
 
 
@@ -59,8 +107,10 @@ def _grid_norm(Acl, Be, C):
     """Independent oracle: peak of sigma_max(C (jwI - Acl)^-1 Be) on a dense grid (0 included)."""
     w = np.concatenate([[0.0], np.logspace(-4, 3, 4000)])
     n = Acl.shape[0]
-    return max(np.linalg.svd(C @ np.linalg.solve(1j * wk * np.eye(n) - Acl, Be), compute_uv=False)[0]
-               for wk in w)
+    return max(
+        np.linalg.svd(C @ np.linalg.solve(1j * wk * np.eye(n) - Acl, Be), compute_uv=False)[0]
+        for wk in w
+    )
 
 
 def test_intervals_follow_the_stored_bounds_or_k_std(tmp_path):
@@ -68,13 +118,19 @@ def test_intervals_follow_the_stored_bounds_or_k_std(tmp_path):
     boxes, k, src = full_box_intervals(yaml.safe_load(models.read_text()))
     assert k == K_SIGMA and "meta.k_sigma" in src
     # vertex 0: lower = upper = nominal with std -> nominal +/- 3 std
-    assert boxes[0].lower.tolist() == pytest.approx([-1.06, -1.3]) and boxes[0].upper.tolist() == pytest.approx([-0.94, -0.7])
+    assert boxes[0].lower.tolist() == pytest.approx([-1.06, -1.3]) and boxes[
+        0
+    ].upper.tolist() == pytest.approx([-0.94, -0.7])
     assert boxes[0].source == ("k*std", "k*std")
     # vertex 1: a1 has lower < upper -> the stored interval, not -1 +/- 0.15
-    assert boxes[1].lower.tolist() == pytest.approx([-1.1, -1.06]) and boxes[1].upper.tolist() == pytest.approx([-0.8, -0.94])
+    assert boxes[1].lower.tolist() == pytest.approx([-1.1, -1.06]) and boxes[
+        1
+    ].upper.tolist() == pytest.approx([-0.8, -0.94])
     assert boxes[1].source == ("stored", "k*std")
     boxes2, _, _ = full_box_intervals(yaml.safe_load(models.read_text()), kept="ksigma")
-    assert boxes2[1].lower[0] == pytest.approx(-1.15) and boxes2[1].upper[0] == pytest.approx(-0.85)
+    assert boxes2[1].lower[0] == pytest.approx(-1.15) and boxes2[1].upper[0] == pytest.approx(
+        -0.85
+    )
     boxes3, k3, _ = full_box_intervals(yaml.safe_load(models.read_text()), k_sigma=1.0)
     assert k3 == 1.0 and boxes3[0].upper[1] == pytest.approx(-0.9)
 
@@ -91,14 +147,30 @@ def test_small_intervals_pass_and_worst_norm_matches_the_oracles(tmp_path, capsy
     assert fb.worst.v_d.tolist() == [-1.0] and "vertex 0 worst-norm corner" in fb.worst.where
     Acl = fb.worst_A + fb.worst_B @ fb.worst_K
     assert np.allclose(Acl, np.diag([Acl[0, 0], -1.7]))
-    assert fb.worst.norm == pytest.approx(_grid_norm(Acl, fb.worst_B, np.array([[0.0, 1.0]])), rel=1e-5)
+    assert fb.worst.norm == pytest.approx(
+        _grid_norm(Acl, fb.worst_B, np.array([[0.0, 1.0]])), rel=1e-5
+    )
     # no sample exceeds the analytic sup (hinf_norm returns the bracket's upper end, +2e-6 rel)
     assert all(s.norm <= 1 / 1.7 * (1 + 1e-5) for s in fb.samples)
-    assert all(s.norm >= 1 / (1 + 1.3) * (1 - 1e-9) for s in fb.samples)      # a2 >= -1.3 everywhere
+    assert all(s.norm >= 1 / (1 + 1.3) * (1 - 1e-9) for s in fb.samples)  # a2 >= -1.3 everywhere
     assert fb.max_abscissa == pytest.approx(-1.7, abs=1e-9)
     rows = {r.check: r for r in rep.rows if r.check.startswith("full-box")}
-    assert set(rows) == {"full-box hinf", "full-box frac", "full-box stab"} and all(r.ok for r in rows.values())
-    rc = main(["verify", "--gains", str(gains), "--models", str(models), "--full-box", "20", "--random", "2"])
+    assert set(rows) == {"full-box hinf", "full-box frac", "full-box stab"} and all(
+        r.ok for r in rows.values()
+    )
+    rc = main(
+        [
+            "verify",
+            "--gains",
+            str(gains),
+            "--models",
+            str(models),
+            "--full-box",
+            "20",
+            "--random",
+            "2",
+        ]
+    )
     out = capsys.readouterr().out
     assert rc == 0 and "PASS" in out and "WARN" not in out
     worst = float(re.search(r"worst norm ([0-9.eE+-]+) vs gamma 1 at v_d \[-1.0\]", out).group(1))
@@ -110,16 +182,26 @@ def test_destabilising_interval_is_found_and_warns_unless_strict(tmp_path, capsy
     gains, models = _write(tmp_path, 1.0)
     rep = verify_files(gains, models, n_random=4, seed=0, full_box=60)
     fb = rep.full_box
-    assert rep.passed                              # the certificate's own checks still hold
+    assert rep.passed  # the certificate's own checks still hold
     assert not fb.passed and 0.0 < fb.fraction_ok < 1.0 and not fb.all_stable
-    assert fb.max_abscissa == pytest.approx(1.0, abs=1e-9)   # analytic: a2 = 2 at s = -1
+    assert fb.max_abscissa == pytest.approx(1.0, abs=1e-9)  # analytic: a2 = 2 at s = -1
     assert fb.worst.v_d.tolist() == [-1.0] or fb.worst.norm == np.inf
     unstable = [s for s in fb.samples if s.abscissa >= 0]
     assert unstable and all(s.norm == np.inf and not s.ok for s in unstable)
     warn = [r for r in rep.rows if r.check.startswith("full-box") and not r.ok]
     assert warn and all(r.advisory and r.result == "WARN" for r in warn)
     assert "WARN" in rep.table() and "0 failed" in rep.table()
-    args = ["verify", "--gains", str(gains), "--models", str(models), "--full-box", "30", "--random", "2"]
+    args = [
+        "verify",
+        "--gains",
+        str(gains),
+        "--models",
+        str(models),
+        "--full-box",
+        "30",
+        "--random",
+        "2",
+    ]
     assert main(args) == 0
     out = capsys.readouterr().out
     assert "WARN" in out and "PASS" in out
@@ -128,7 +210,9 @@ def test_destabilising_interval_is_found_and_warns_unless_strict(tmp_path, capsy
     assert "FAIL" in out and "full-box frac" in out
     assert main(args[:-4] + ["--full-box", "-1"]) == 2 and "--full-box" in capsys.readouterr().err
     strict = verify_files(gains, models, n_random=2, full_box=30, strict_full_box=True)
-    assert not strict.passed and any(r.check == "full-box frac" and r.result == "FAIL" for r in strict.rows)
+    assert not strict.passed and any(
+        r.check == "full-box frac" and r.result == "FAIL" for r in strict.rows
+    )
 
 
 def test_seed_reproduces_the_samples(tmp_path):
@@ -146,7 +230,9 @@ def test_report_verification_carries_the_full_box(tmp_path):
 
     gains, models = _write(tmp_path, 1.0)
     v = verification_from_files(gains, models, n_random=2, full_box=20)
-    assert v["passed"] and v["full_box"]["samples"] == 20 + 2 * 2 and v["full_box"]["fraction_ok"] < 1
+    assert (
+        v["passed"] and v["full_box"]["samples"] == 20 + 2 * 2 and v["full_box"]["fraction_ok"] < 1
+    )
     assert any(c.get("advisory") and not c["ok"] for c in v["checks"])
     text = write_report(tmp_path, tmp_path / "rep" / "report.md").read_text()
     assert "Full identified uncertainty box (empirical Monte Carlo, not certified)" in text
@@ -166,8 +252,15 @@ def test_element_sensitivities_match_finite_differences():
     K = -0.3 * B.T
     R = np.diag([0.7, 1.2])
     C = np.array([[1.0, 0.0, 0.5]])
-    box = ElementBox(np.array([True, True, False, False]), np.array([0, 1, 2, 0]), np.array([1, 1, 0, 1]),
-                     np.zeros(4), np.full(4, -1.0), np.full(4, 1.0), ("stored",) * 4)
+    box = ElementBox(
+        np.array([True, True, False, False]),
+        np.array([0, 1, 2, 0]),
+        np.array([1, 1, 0, 1]),
+        np.zeros(4),
+        np.full(4, -1.0),
+        np.full(4, 1.0),
+        ("stored",) * 4,
+    )
     theta = np.array([A[0, 1], A[1, 1], B[2, 0], B[0, 1]])
     (n1, g_norm), (n2, g_abs) = element_sensitivities(A, B, K, R, C, box, theta)
     assert n1 == "worst-norm corner" and n2 == "worst-abscissa corner"
@@ -175,7 +268,9 @@ def test_element_sensitivities_match_finite_differences():
     def f(th):
         Ap, Bp = box.apply(A, B, th)
         Acl = Ap + Bp @ K
-        return hinf_norm(Acl, Bp @ R, C, tol=1e-10).lower, float(np.max(np.linalg.eigvals(Acl).real))
+        return hinf_norm(Acl, Bp @ R, C, tol=1e-10).lower, float(
+            np.max(np.linalg.eigvals(Acl).real)
+        )
 
     h = 1e-6
     for l in range(4):

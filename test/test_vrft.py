@@ -8,16 +8,25 @@ from scipy import signal
 from lpv_sysid.cli.main import main
 from lpv_sysid.errors import ConfigError, LpvSysidError, SolverError
 from lpv_sysid.ident import vrft_examples as ex
-from lpv_sysid.ident.vrft import (Tf, VrftResult, controller_tf, diagonal_model,
-                                  first_order_model, invert_controller, model_reference_h2,
-                                  pid_class, velocity_class, vrft)
+from lpv_sysid.ident.vrft import (
+    Tf,
+    VrftResult,
+    controller_tf,
+    diagonal_model,
+    first_order_model,
+    invert_controller,
+    model_reference_h2,
+    pid_class,
+    velocity_class,
+    vrft,
+)
 from lpv_sysid.ident.vrft_cascade import cascaded_vrft
 from lpv_sysid.ident.vrft_config import VrftConfig
 
 
 def _siso_data(a, b, n=400, seed=0):
     u = ex.prbs(n, 1, np.random.default_rng(seed), 1, 4)
-    y = signal.lfilter([0.0, b], [1.0, -a], u[:, 0])[:, None]      # P = b/(z - a), from rest
+    y = signal.lfilter([0.0, b], [1.0, -a], u[:, 0])[:, None]  # P = b/(z - a), from rest
     return u, y
 
 
@@ -62,7 +71,7 @@ def test_table53_noise_free_reproduces_published_mimo_controller():
     t, u, y, _ = ex.table53_data(400, seed=3)
     res = vrft(u, y, ex.table53_model(), pid_class(2, 2, 1.0, ("p", "i")))
     Kp, Ki = res.K
-    a, b = Kp + Ki, Kp                      # C = (a z - b)/(z - 1), Ts = 1
+    a, b = Kp + Ki, Kp  # C = (a z - b)/(z - 1), Ts = 1
     a_star, b_star = ex.table53_ideal_pi()
     np.testing.assert_allclose(a, a_star, atol=1e-10)
     np.testing.assert_allclose(b, b_star, atol=1e-10)
@@ -89,18 +98,20 @@ def test_table53_diagonal_class_is_not_exact():
 def test_table53_noisy_eiv_unbiased_ls_biased():
     cls = pid_class(2, 2, 1.0, ("p", "i"))
     a_star, b_star = ex.table53_ideal_pi()
-    th_star = np.r_[b_star.T.ravel(), (a_star - b_star).T.ravel()]   # vec([Kp, Ki]) (Eq. 3.23)
+    th_star = np.r_[b_star.T.ravel(), (a_star - b_star).T.ravel()]  # vec([Kp, Ki]) (Eq. 3.23)
     ls, eiv, iv = [], [], []
     for s in range(4):
         t, u, y, yc = ex.table53_data(2000, seed=10 + s, noise_std=0.1)
         ls.append(vrft(u, y, ex.table53_model(), cls).theta)
         eiv.append(vrft(u, y, ex.table53_model(), cls, method="eiv", window=5).theta)
-        y2 = yc + 0.1 * np.random.default_rng(100 + s).standard_normal(yc.shape)   # second experiment
+        y2 = yc + 0.1 * np.random.default_rng(100 + s).standard_normal(
+            yc.shape
+        )  # second experiment
         iv.append(vrft(u, y, ex.table53_model(), cls, method="iv", y2=y2).theta)
     rel = lambda th: np.abs(np.mean(th, 0) - th_star) / np.abs(th_star)
     assert rel(eiv).max() < 0.06
     assert rel(iv).max() < 0.06
-    assert rel(ls).max() > 0.3          # errors-in-variables bias of plain LS (Sec. 3.3.2)
+    assert rel(ls).max() > 0.3  # errors-in-variables bias of plain LS (Sec. 3.3.2)
 
 
 def test_non_scalar_diagonal_reference_model_is_exact():
@@ -109,8 +120,8 @@ def test_non_scalar_diagonal_reference_model_is_exact():
     t, u, y, _ = ex.table53_data(400, seed=4)
     res = vrft(u, y, first_order_model(p), pid_class(2, 2, 1.0, ("p", "i")))
     Ki0 = np.linalg.inv(ex.TABLE53_K0) * (1 - np.array(p))[None, :]
-    np.testing.assert_allclose(res.K[0] + res.K[1], Ki0, atol=1e-9)          # a
-    np.testing.assert_allclose(res.K[0], ex.TABLE53_POLE * Ki0, atol=1e-9)   # b
+    np.testing.assert_allclose(res.K[0] + res.K[1], Ki0, atol=1e-9)  # a
+    np.testing.assert_allclose(res.K[0], ex.TABLE53_POLE * Ki0, atol=1e-9)  # b
 
 
 def test_full_reference_model_is_exact():
@@ -131,7 +142,7 @@ def test_full_reference_model_is_exact():
     assert not T[0][1].is_zero and not T[1][0].is_zero
     t, u, y, _ = ex.table53_data(400, seed=5)
     res = vrft(u, y, T, pid_class(2, 2, 1.0, ("p", "i")))
-    np.testing.assert_allclose(res.K[0], B, atol=1e-5)   # degree-8 filters: ~1e-6 round-off
+    np.testing.assert_allclose(res.K[0], B, atol=1e-5)  # degree-8 filters: ~1e-6 round-off
     np.testing.assert_allclose(res.K[0] + res.K[1], A, atol=1e-5)
 
 
@@ -141,12 +152,14 @@ def test_full_reference_model_is_exact():
 def test_cascade_recovers_inner_pi_and_outer_p():
     a, b, p, Ts, K = 0.8, 0.5, 0.6, 0.1, 0.4
     u, y_i = _siso_data(a, b, n=600)
-    y_o = signal.lfilter([0.0, Ts], [1.0, -1.0], y_i[:, 0])[:, None]        # y_o = Ts/(z-1) y_i
+    y_o = signal.lfilter([0.0, Ts], [1.0, -1.0], y_i[:, 0])[:, None]  # y_o = Ts/(z-1) y_i
     M_i = first_order_model([p])
     # outer plant = M_i Ts/(z-1); with C_o = K: M_o = K(1-p)Ts / ((z-p)(z-1) + K(1-p)Ts)
     g = K * (1 - p) * Ts
     M_o = diagonal_model([Tf.make([g], np.polyadd(np.polymul([1, -p], [1, -1]), [g]))])
-    res = cascaded_vrft(u, y_i, y_o, M_i, M_o, pid_class(1, 1, Ts, ("p", "i")), pid_class(1, 1, Ts, ("p",)))
+    res = cascaded_vrft(
+        u, y_i, y_o, M_i, M_o, pid_class(1, 1, Ts, ("p", "i")), pid_class(1, 1, Ts, ("p",))
+    )
     assert res.inner.K[0][0, 0] == pytest.approx((1 - p) * a / b, rel=1e-9)
     assert res.outer.K[0][0, 0] == pytest.approx(K, rel=1e-8)
 
@@ -154,9 +167,17 @@ def test_cascade_recovers_inner_pi_and_outer_p():
 def test_invert_controller_round_trip_and_non_minimum_phase():
     cls = pid_class(1, 1, 1.0, ("p", "i"))
     e = np.random.default_rng(0).standard_normal((50, 1))
-    mk = lambda kp, ki: VrftResult(np.r_[kp, ki], [np.array([[kp]]), np.array([[ki]])], cls, "ls", 0.0,
-                                   50, 1.0, cls.param_names())
-    ok = mk(0.8, 0.3)              # C = (1.1 z - 0.8)/(z - 1): zero 0.727
+    mk = lambda kp, ki: VrftResult(
+        np.r_[kp, ki],
+        [np.array([[kp]]), np.array([[ki]])],
+        cls,
+        "ls",
+        0.0,
+        50,
+        1.0,
+        cls.param_names(),
+    )
+    ok = mk(0.8, 0.3)  # C = (1.1 z - 0.8)/(z - 1): zero 0.727
     u = signal.lfilter([1.1, -0.8], [1.0, -1.0], e[:, 0])[:, None]
     np.testing.assert_allclose(invert_controller(ok, u), e, atol=1e-10)
     with pytest.raises(SolverError, match="not minimum phase"):
@@ -184,7 +205,7 @@ def test_lv100_eiv_close_to_table52_ls_is_not():
         ls.append(vrft(u, y, ex.lv100_model(), cls).K)
     Kp, Ki = np.mean([k[0] for k in eiv], 0), np.mean([k[1] for k in eiv], 0)
     well = np.ones((2, 2), bool)
-    well[0, 0] = False                        # Kp(1,1): sigma/theta = 0.42 in Table 5.2
+    well[0, 0] = False  # Kp(1,1): sigma/theta = 0.42 in Table 5.2
     assert np.all(np.abs(Kp / kp - 1)[well] < 0.25)
     assert np.all(np.abs(Ki / ki - 1) < 0.25)
     assert abs(Kp[0, 0] - kp[0, 0]) < 3 * ex.LV100_T52_KP[(0, 0)][1]
@@ -226,15 +247,22 @@ def test_errors_name_the_problem():
 
 
 def test_config_from_dict_validates():
-    cfg = VrftConfig.from_dict({"reference_model": {"poles": [0.9, 0.9]},
-                                "controller": {"basis": "velocity", "order": 2}, "method": "eiv"})
+    cfg = VrftConfig.from_dict(
+        {
+            "reference_model": {"poles": [0.9, 0.9]},
+            "controller": {"basis": "velocity", "order": 2},
+            "method": "eiv",
+        }
+    )
     assert cfg.loop.controller_class(2, 1.0).names == ("B0", "B1", "B2")
-    for bad, msg in [({"controller": {}}, "reference_model"),
-                     ({"reference_model": {"poles": [0.9]}, "controller": {}, "bogus": 1}, "bogus"),
-                     ({"reference_model": {"poles": "x"}, "controller": {}}, "poles"),
-                     ({"reference_model": {"poles": [0.9]}, "controller": {"basis": "lqr"}}, "basis"),
-                     ({"reference_model": {"poles": [0.9]}, "controller": {}, "window": -1}, "window"),
-                     ({"reference_model": {"diagonal": [{"num": [1]}]}, "controller": {}}, "diagonal")]:
+    for bad, msg in [
+        ({"controller": {}}, "reference_model"),
+        ({"reference_model": {"poles": [0.9]}, "controller": {}, "bogus": 1}, "bogus"),
+        ({"reference_model": {"poles": "x"}, "controller": {}}, "poles"),
+        ({"reference_model": {"poles": [0.9]}, "controller": {"basis": "lqr"}}, "basis"),
+        ({"reference_model": {"poles": [0.9]}, "controller": {}, "window": -1}, "window"),
+        ({"reference_model": {"diagonal": [{"num": [1]}]}, "controller": {}}, "diagonal"),
+    ]:
         with pytest.raises(ConfigError, match=msg):
             VrftConfig.from_dict(bad)
 
@@ -243,8 +271,11 @@ def test_config_from_dict_validates():
 # CLI
 # ---------------------------------------------------------------------------------------------
 def _cfg(tmp_path, **over):
-    d = {"reference_model": {"poles": [0.9, 0.9]},
-         "controller": {"basis": "pid", "terms": ["p", "i"], "structure": "full"}, "method": "ls"}
+    d = {
+        "reference_model": {"poles": [0.9, 0.9]},
+        "controller": {"basis": "pid", "terms": ["p", "i"], "structure": "full"},
+        "method": "ls",
+    }
     d.update(over)
     p = tmp_path / "vrft.yaml"
     p.write_text(yaml.safe_dump(d))
@@ -255,7 +286,17 @@ def test_cli_round_trip_through_npz_and_yaml(tmp_path, capsys):
     t, u, y, _ = ex.table53_data(300, seed=2)
     np.savez(tmp_path / "d.npz", t=t, u=u, y=y)
     out = tmp_path / "c.yaml"
-    rc = main(["vrft", "--data", str(tmp_path / "d.npz"), "--config", str(_cfg(tmp_path)), "--out", str(out)])
+    rc = main(
+        [
+            "vrft",
+            "--data",
+            str(tmp_path / "d.npz"),
+            "--config",
+            str(_cfg(tmp_path)),
+            "--out",
+            str(out),
+        ]
+    )
     assert rc == 0
     assert "J_VR" in capsys.readouterr().out
     doc = yaml.safe_load(out.read_text())
@@ -272,11 +313,19 @@ def test_cli_cascade_from_npz(tmp_path):
     y_o = signal.lfilter([0.0, Ts], [1.0, -1.0], y_i[:, 0])[:, None]
     np.savez(tmp_path / "d.npz", t=np.arange(500) * Ts, u=u, y=y_i, y_outer=y_o)
     g = 0.4 * (1 - p) * Ts
-    cfg = _cfg(tmp_path, reference_model={"poles": [p]},
-               outer={"reference_model": {"diagonal": [{"num": [g], "den": [1.0, -(1 + p), p + g]}]},
-                      "controller": {"terms": ["p"]}})
+    cfg = _cfg(
+        tmp_path,
+        reference_model={"poles": [p]},
+        outer={
+            "reference_model": {"diagonal": [{"num": [g], "den": [1.0, -(1 + p), p + g]}]},
+            "controller": {"terms": ["p"]},
+        },
+    )
     out = tmp_path / "c.yaml"
-    assert main(["vrft", "--data", str(tmp_path / "d.npz"), "--config", str(cfg), "--out", str(out)]) == 0
+    assert (
+        main(["vrft", "--data", str(tmp_path / "d.npz"), "--config", str(cfg), "--out", str(out)])
+        == 0
+    )
     doc = yaml.safe_load(out.read_text())
     assert doc["outer"]["matrices"]["Kp"][0][0] == pytest.approx(0.4, rel=1e-8)
 
@@ -296,7 +345,7 @@ def test_cli_bad_input_exit_2_one_line(tmp_path, capsys, case):
     if case == "nan":
         y[5, 0] = np.nan
     if case == "nonuniform":
-        t = t ** 1.01
+        t = t**1.01
     arrays = {"t": t, "u": u} if case == "missing" else {"t": t, "u": u, "y": y}
     np.savez(tmp_path / "d.npz", **arrays)
     if case == "badkey":
@@ -311,11 +360,12 @@ def test_cli_bad_input_exit_2_one_line(tmp_path, capsys, case):
 def test_lv100_closed_loop_eiv_needs_external_instrument():
     """Closed-loop data (Fig. 3.2): u is correlated with the fed-back noise, so the thesis' u-window
     instrument (Eq. 3.26) is biased; the injected excitation u_bar as instrument is not."""
-    K0 = np.array([[1.0, 0.1], [1.0, -1.0]])          # Eq. (5.2) with row 2 sign-flipped: stabilising
+    K0 = np.array([[1.0, 0.1], [1.0, -1.0]])  # Eq. (5.2) with row 2 sign-flipped: stabilising
     assert ex.lv100_c0_spectral_radius(K0) < 1.0
     cls = pid_class(2, 2, ex.LV100_TS, ("p", "i"))
-    ki_tab = np.array([[1, 1], [1, -1]]) * np.array([[ex.LV100_T52_KI[(i, j)][0] for j in range(2)]
-                                                     for i in range(2)])
+    ki_tab = np.array([[1, 1], [1, -1]]) * np.array(
+        [[ex.LV100_T52_KI[(i, j)][0] for j in range(2)] for i in range(2)]
+    )
     ext, own = [], []
     for s in range(3):
         t, u, y, ub = ex.lv100_data(10000, seed=s, c0_gain=K0)
@@ -327,10 +377,14 @@ def test_lv100_closed_loop_eiv_needs_external_instrument():
 
 def test_cli_lv100_statistics(tmp_path, capsys):
     out = tmp_path / "s.yaml"
-    assert main(["vrft", "--example", "lv100", "--runs", "3", "--n", "1000", "--out", str(out)]) == 0
+    assert (
+        main(["vrft", "--example", "lv100", "--runs", "3", "--n", "1000", "--out", str(out)]) == 0
+    )
     assert "Table 5.2" in capsys.readouterr().out
     rows = yaml.safe_load(out.read_text())["rows"]
-    assert [r["param"] for r in rows][:2] == ["Kp(1,1)", "Kp(2,1)"] and all(r["std"] > 0 for r in rows)
+    assert [r["param"] for r in rows][:2] == ["Kp(1,1)", "Kp(2,1)"] and all(
+        r["std"] > 0 for r in rows
+    )
     assert main(["vrft", "--example", "table5.3", "--runs", "3"]) == 2
 
 
@@ -340,13 +394,33 @@ def test_eiv_residual_weight_unbiased_and_cuts_kp11_spread_on_lv100():
     cls = pid_class(2, 2, 1.0, ("p", "i"))
     a_star, b_star = ex.table53_ideal_pi()
     th_star = np.r_[b_star.T.ravel(), (a_star - b_star).T.ravel()]
-    th = [vrft(*ex.table53_data(2000, seed=20 + s, noise_std=0.1)[1:3], ex.table53_model(), cls,
-               method="eiv", window=5, eiv_weight="residual").theta for s in range(4)]
+    th = [
+        vrft(
+            *ex.table53_data(2000, seed=20 + s, noise_std=0.1)[1:3],
+            ex.table53_model(),
+            cls,
+            method="eiv",
+            window=5,
+            eiv_weight="residual",
+        ).theta
+        for s in range(4)
+    ]
     assert np.max(np.abs(np.mean(th, 0) - th_star) / np.abs(th_star)) < 0.06
     cl = pid_class(2, 2, ex.LV100_TS, ("p", "i"))
-    kp11 = {w: [vrft(*ex.lv100_data(4000, 0, closed_loop=False, noise_seed=r)[1:3], ex.lv100_model(), cl,
-                     method="eiv", window=20, eiv_weight=w).K[0][0, 0] for r in range(6)]
-            for w in ("identity", "residual")}
+    kp11 = {
+        w: [
+            vrft(
+                *ex.lv100_data(4000, 0, closed_loop=False, noise_seed=r)[1:3],
+                ex.lv100_model(),
+                cl,
+                method="eiv",
+                window=20,
+                eiv_weight=w,
+            ).K[0][0, 0]
+            for r in range(6)
+        ]
+        for w in ("identity", "residual")
+    }
     assert np.std(kp11["residual"]) < 0.5 * np.std(kp11["identity"])
     with pytest.raises(ConfigError, match="eiv_weight"):
         vrft(*ex.table53_data(200)[1:3], ex.table53_model(), cls, method="eiv", eiv_weight="bogus")
@@ -358,7 +432,21 @@ def test_shipped_example_config_runs(tmp_path):
     t, u, y, _ = ex.table53_data(300, seed=7)
     np.savez(tmp_path / "d.npz", t=t, u=u, y=y)
     out = tmp_path / "c.yaml"
-    assert main(["vrft", "--data", str(tmp_path / "d.npz"), "--config", str(config_file("vrft_example.yaml")),
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "vrft",
+                "--data",
+                str(tmp_path / "d.npz"),
+                "--config",
+                str(config_file("vrft_example.yaml")),
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     a_star, b_star = ex.table53_ideal_pi()
-    np.testing.assert_allclose(yaml.safe_load(out.read_text())["controller"]["matrices"]["Kp"], b_star, atol=1e-9)
+    np.testing.assert_allclose(
+        yaml.safe_load(out.read_text())["controller"]["matrices"]["Kp"], b_star, atol=1e-9
+    )

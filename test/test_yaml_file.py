@@ -11,7 +11,7 @@ from lpv_sysid.report.data import load_run
 from lpv_sysid.signals.config import load_config as load_signals
 from lpv_sysid.sim.phase1 import load_config as load_phase1
 
-BAD = "a: [1, 2\nb: 3\n"            # unclosed flow sequence
+BAD = "a: [1, 2\nb: 3\n"  # unclosed flow sequence
 
 
 def test_read_yaml_values_and_errors(tmp_path):
@@ -22,17 +22,29 @@ def test_read_yaml_values_and_errors(tmp_path):
     (tmp_path / "empty.yaml").write_text("")
     assert read_yaml(tmp_path / "empty.yaml") is None
     (tmp_path / "bad.yaml").write_text(BAD)
-    with pytest.raises(ConfigError,
-                       match=r"^.*bad\.yaml: malformed YAML \(while parsing a flow sequence\)$"):
+    with pytest.raises(
+        ConfigError, match=r"^.*bad\.yaml: malformed YAML \(while parsing a flow sequence\)$"
+    ):
         read_yaml(tmp_path / "bad.yaml")
-    with pytest.raises(ConfigError, match=r"^.*nope\.yaml: cannot read \(No such file or directory\)$"):
+    with pytest.raises(
+        ConfigError, match=r"^.*nope\.yaml: cannot read \(No such file or directory\)$"
+    ):
         read_yaml(tmp_path / "nope.yaml")
     with pytest.raises(ConfigError, match=r"^vehicle_file x: cannot read \(Is a directory\)$"):
         read_yaml(tmp_path, "vehicle_file x")
 
 
-@pytest.mark.parametrize("reader", [load_identification, quadrotor_section, nonlinear_params,
-                                    BridgeConfig.load, load_signals, load_phase1])
+@pytest.mark.parametrize(
+    "reader",
+    [
+        load_identification,
+        quadrotor_section,
+        nonlinear_params,
+        BridgeConfig.load,
+        load_signals,
+        load_phase1,
+    ],
+)
 def test_readers_name_the_file_on_bad_yaml(tmp_path, reader):
     f = tmp_path / "cfg.yaml"
     f.write_text(BAD)
@@ -66,4 +78,6 @@ def test_signals_config_keeps_missing_and_empty_wording(tmp_path):
 def test_report_names_malformed_input(tmp_path):
     (tmp_path / "gains.yaml").write_text(BAD)
     data = load_run(tmp_path, verify=False)
-    assert data.problems["gains"].endswith("gains.yaml: malformed YAML (while parsing a flow sequence)")
+    assert data.problems["gains"].endswith(
+        "gains.yaml: malformed YAML (while parsing a flow sequence)"
+    )

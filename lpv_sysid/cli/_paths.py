@@ -21,7 +21,9 @@ def config_dir() -> Path:
             return share
     except (ImportError, LookupError):
         pass
-    raise ConfigError(f"cannot find the lpv_sysid config directory (looked in {here} and the ament share)")
+    raise ConfigError(
+        f"cannot find the lpv_sysid config directory (looked in {here} and the ament share)"
+    )
 
 
 def config_file(name: str) -> Path:

@@ -24,18 +24,29 @@ import argparse
 from pathlib import Path
 
 COMMAND = "bag"
-HELP = "rosbag2 maintenance: repair (reindex) a killed or starved recording so standard tools open it"
+HELP = (
+    "rosbag2 maintenance: repair (reindex) a killed or starved recording so standard tools open it"
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     actions = parser.add_subparsers(dest="action", metavar="ACTION")
     actions.required = True
-    p = actions.add_parser("repair", help="cut an unfinished tail, rebuild the index and "
-                                          "metadata.yaml, make experiment.yaml truthful",
-                           description=__doc__.split("\n\n")[1])
-    p.add_argument("dirs", nargs="+", metavar="DIR",
-                   help="experiment directory (with experiment.yaml) or rosbag2 directory")
-    p.add_argument("--dry-run", action="store_true", help="report what would be done, change nothing")
+    p = actions.add_parser(
+        "repair",
+        help="cut an unfinished tail, rebuild the index and "
+        "metadata.yaml, make experiment.yaml truthful",
+        description=__doc__.split("\n\n")[1],
+    )
+    p.add_argument(
+        "dirs",
+        nargs="+",
+        metavar="DIR",
+        help="experiment directory (with experiment.yaml) or rosbag2 directory",
+    )
+    p.add_argument(
+        "--dry-run", action="store_true", help="report what would be done, change nothing"
+    )
     p.set_defaults(_action_run=run_repair)
 
 

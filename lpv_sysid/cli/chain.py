@@ -50,8 +50,10 @@ from lpv_sysid.cli._paths import config_file
 from lpv_sysid.errors import ConfigError, LpvSysidError, SafetyError
 
 COMMAND = "chain"
-HELP = ("on a connected PX4: phase-1 campaign -> rate-plant identification -> signals -> synthesis + "
-        "verification -> phase-2 flight under the LPV law -> report")
+HELP = (
+    "on a connected PX4: phase-1 campaign -> rate-plant identification -> signals -> synthesis + "
+    "verification -> phase-2 flight under the LPV law -> report"
+)
 
 log = logging.getLogger(__name__)
 EXIT_FAILED = 1
@@ -62,21 +64,27 @@ EXIT_FAILED = 1
 class Phase2Options:
     """Flight options of :func:`fly_phase2`."""
 
-    kappa: float = 1.0                 # excitation multiplier (seed 0 Eq. 33)
-    control_rate_hz: float = 50.0      # law evaluations per second (on the newest state sample)
-    ramp_s: float = 3.0                # raised-cosine fade of v_d and u_e at both ends
-    lead_in_s: float = 2.0             # hover (v_d = 0) under the law before the signal starts
-    duration: Optional[float] = None   # s of the signal (None: one period)
-    max_tracking_error: float = 2.5    # m/s |v - v_d| per axis -> hand back
-    start_timeout: float = 15.0        # s for OFFBOARD to be confirmed
+    kappa: float = 1.0  # excitation multiplier (seed 0 Eq. 33)
+    control_rate_hz: float = 50.0  # law evaluations per second (on the newest state sample)
+    ramp_s: float = 3.0  # raised-cosine fade of v_d and u_e at both ends
+    lead_in_s: float = 2.0  # hover (v_d = 0) under the law before the signal starts
+    duration: Optional[float] = None  # s of the signal (None: one period)
+    max_tracking_error: float = 2.5  # m/s |v - v_d| per axis -> hand back
+    start_timeout: float = 15.0  # s for OFFBOARD to be confirmed
     handback_timeout: float = 15.0
-    finish: str = "LAND"               # mode after the signal (LAND | HOLD)
-    max_rate: float = 2.0              # rad/s clip of the rate setpoints (transport)
-    min_height: float = 8.0            # m above home needed to start
+    finish: str = "LAND"  # mode after the signal (LAND | HOLD)
+    max_rate: float = 2.0  # rad/s clip of the rate setpoints (transport)
+    min_height: float = 8.0  # m above home needed to start
 
     def validate(self) -> None:
-        if not (self.kappa >= 0 and self.control_rate_hz > 0 and self.ramp_s >= 0 and self.lead_in_s >= 0
-                and self.max_tracking_error > 0 and self.max_rate > 0):
+        if not (
+            self.kappa >= 0
+            and self.control_rate_hz > 0
+            and self.ramp_s >= 0
+            and self.lead_in_s >= 0
+            and self.max_tracking_error > 0
+            and self.max_rate > 0
+        ):
             raise ConfigError(f"phase 2 options out of range: {self}")
         if self.finish.upper() not in ("LAND", "HOLD"):
             raise ConfigError(f"phase 2 finish must be LAND or HOLD, got {self.finish!r}")
@@ -100,10 +108,14 @@ def load_phase2_law(gains_path: str | Path, models_path: str | Path | None = Non
 
     gs = GainSchedule.load(gains_path, models_path, layout=None)
     if tuple(gs.state_names) != rp.STATE_NAMES or tuple(gs.input_names) != rp.INPUT_NAMES:
-        raise ConfigError(f"{gains_path}: states {list(gs.state_names)} / inputs {list(gs.input_names)} are not the "
-                          f"rate plant's {list(rp.STATE_NAMES)} / {list(rp.INPUT_NAMES)} (a virtual-actuator "
-                          "design cannot be flown through SET_ATTITUDE_TARGET rate setpoints)")
-    ctrl = LpvController(gs, LpvControllerConfig(velocity_index=rp.VELOCITY_INDEX, feedforward=False))
+        raise ConfigError(
+            f"{gains_path}: states {list(gs.state_names)} / inputs {list(gs.input_names)} are not the "
+            f"rate plant's {list(rp.STATE_NAMES)} / {list(rp.INPUT_NAMES)} (a virtual-actuator "
+            "design cannot be flown through SET_ATTITUDE_TARGET rate setpoints)"
+        )
+    ctrl = LpvController(
+        gs, LpvControllerConfig(velocity_index=rp.VELOCITY_INDEX, feedforward=False)
+    )
     return ctrl, gs
 
 
@@ -115,15 +127,30 @@ def phase2_bridge_config(path: str | Path, url: str | None):
     cfg = BridgeConfig.load(str(path))
     link = dataclasses.replace(cfg.link, url=url) if url else cfg.link
     link.validate()
-    return dataclasses.replace(cfg, link=link, command="attitude_rate", auto_start=False,
-                               offboard=dataclasses.replace(cfg.offboard, arm=False))
+    return dataclasses.replace(
+        cfg,
+        link=link,
+        command="attitude_rate",
+        auto_start=False,
+        offboard=dataclasses.replace(cfg.offboard, arm=False),
+    )
 
 
-def fly_phase2(gains: str | Path, signals: str | Path, out_dir: str | Path, url: str | None = None,
-               models: str | Path | None = None, bridge_config: str | Path | None = None,
-               opts: Phase2Options = Phase2Options(), clock: Callable[[], float] = time.monotonic,
-               sleep: Callable[[float], None] = time.sleep, echo: Callable[[str], None] = print,
-               link=None, handle_signals: bool = True, storage: str = "mcap") -> dict:
+def fly_phase2(
+    gains: str | Path,
+    signals: str | Path,
+    out_dir: str | Path,
+    url: str | None = None,
+    models: str | Path | None = None,
+    bridge_config: str | Path | None = None,
+    opts: Phase2Options = Phase2Options(),
+    clock: Callable[[], float] = time.monotonic,
+    sleep: Callable[[float], None] = time.sleep,
+    echo: Callable[[str], None] = print,
+    link=None,
+    handle_signals: bool = True,
+    storage: str = "mcap",
+) -> dict:
     """Fly the phase-2 signal under the LPV law on a PX4 vehicle that is armed and in the air
     (module docstring step 5); returns the summary (also ``DIR/phase2_summary.yaml``).
     Raises SafetyError before sending anything when the vehicle is not airborne."""
@@ -144,15 +171,23 @@ def fly_phase2(gains: str | Path, signals: str | Path, out_dir: str | Path, url:
     dt_sig = float(np.median(np.diff(sig.t)))
     bcfg = phase2_bridge_config(bridge_config or config_file("mavlink_bridge_chain.yaml"), url)
     core = BridgeCore(bcfg, link=link)
-    core.transport = RateSetpointTransport(max_rate=opts.max_rate)      # the rate plant's inputs as sent
+    core.transport = RateSetpointTransport(
+        max_rate=opts.max_rate
+    )  # the rate plant's inputs as sent
     core.open(clock())
     px4_sp: list = []
     tap_attitude_target(core.link, lambda t, u: px4_sp.append((t, np.asarray(u, float).copy())))
     interrupts = [0]
     prev_handlers: dict = {}
-    summary: dict = {"design": "rate_plant", "gains": str(gains), "signals": str(signals),
-                     "connect": bcfg.link.url, "gamma": float(ctrl.gamma), "kappa": opts.kappa,
-                     "signal_duration_s": T}
+    summary: dict = {
+        "design": "rate_plant",
+        "gains": str(gains),
+        "signals": str(signals),
+        "connect": bcfg.link.url,
+        "gamma": float(ctrl.gamma),
+        "kappa": opts.kappa,
+        "signal_duration_s": T,
+    }
     log_rows: dict[str, list] = {k: [] for k in ("t", "x", "v_d", "u_e", "u", "sent", "tsig")}
     rec = None
     state: Optional[StateSample] = None
@@ -168,7 +203,10 @@ def fly_phase2(gains: str | Path, signals: str | Path, out_dir: str | Path, url:
                 if rec is not None:
                     rec.state(s.t, s.pos_ned, s.euler, s.v_body, s.omega)
         for ev in o.events:
-            text = getattr(ev, "reason", None) or f"{getattr(ev, 'kind', '')}: {getattr(ev, 'detail', '')}"
+            text = (
+                getattr(ev, "reason", None)
+                or f"{getattr(ev, 'kind', '')}: {getattr(ev, 'detail', '')}"
+            )
             lvl = getattr(ev, "level", "warn")
             if lvl != "info" or getattr(ev, "previous", None) != getattr(ev, "state", None):
                 echo(f"[{now - t0:8.2f} s] bridge: {text}")
@@ -177,7 +215,9 @@ def fly_phase2(gains: str | Path, signals: str | Path, out_dir: str | Path, url:
     try:
         if handle_signals and threading.current_thread() is threading.main_thread():
             for sgn in (signal.SIGINT, signal.SIGTERM):
-                prev_handlers[sgn] = signal.signal(sgn, lambda *_: interrupts.__setitem__(0, interrupts[0] + 1))
+                prev_handlers[sgn] = signal.signal(
+                    sgn, lambda *_: interrupts.__setitem__(0, interrupts[0] + 1)
+                )
         wait_for_vehicle(core.link, 15.0, clock, sleep)
         # telemetry + HOME_POSITION (the envelope's home when started armed)
         tw = clock()
@@ -185,25 +225,40 @@ def fly_phase2(gains: str | Path, signals: str | Path, out_dir: str | Path, url:
         while clock() - tw < 8.0:
             now = clock()
             poll(now)
-            if state is not None and core.machine.vehicle_mode is not None and (
-                    core.envelope.home_position is not None or not core.machine.armed):
+            if (
+                state is not None
+                and core.machine.vehicle_mode is not None
+                and (core.envelope.home_position is not None or not core.machine.armed)
+            ):
                 break
             if now >= next_req:
                 next_req = now + 1.0
-                core.link.command_long(512, 242.0)          # MAV_CMD_REQUEST_MESSAGE HOME_POSITION
+                core.link.command_long(512, 242.0)  # MAV_CMD_REQUEST_MESSAGE HOME_POSITION
             sleep(0.005)
         if state is None or not core.machine.armed:
-            raise SafetyError("phase 2 starts in the air: the vehicle is not armed (fly phase 1 with "
-                              "finish: HOLD first, or take off)" if state is not None else
-                              "phase 2: no state telemetry from the vehicle")
+            raise SafetyError(
+                "phase 2 starts in the air: the vehicle is not armed (fly phase 1 with "
+                "finish: HOLD first, or take off)"
+                if state is not None
+                else "phase 2: no state telemetry from the vehicle"
+            )
         hp = core.envelope.home_position
         height = -(state.pos_ned[2] - (hp[2] if hp is not None else 0.0))
         if height < opts.min_height:
-            raise SafetyError(f"phase 2 needs >= {opts.min_height:g} m above home, vehicle at {height:.1f} m")
-        echo(f"phase 2: vehicle armed at {height:.1f} m, mode {core.machine.vehicle_mode.name}; "
-             f"signal {T:.1f} s, kappa {opts.kappa:g}, gamma {ctrl.gamma:.4g}, design rate_plant")
-        rec = CampaignRecorder(out, storage, False, description=f"lpv-sysid phase 2 (rate plant) on {bcfg.link.url}",
-                               rate_setpoints=True)
+            raise SafetyError(
+                f"phase 2 needs >= {opts.min_height:g} m above home, vehicle at {height:.1f} m"
+            )
+        echo(
+            f"phase 2: vehicle armed at {height:.1f} m, mode {core.machine.vehicle_mode.name}; "
+            f"signal {T:.1f} s, kappa {opts.kappa:g}, gamma {ctrl.gamma:.4g}, design rate_plant"
+        )
+        rec = CampaignRecorder(
+            out,
+            storage,
+            False,
+            description=f"lpv-sysid phase 2 (rate plant) on {bcfg.link.url}",
+            rate_setpoints=True,
+        )
         rec.start(clock())
         rec.begin_run("phase2")
         period = 1.0 / opts.control_rate_hz
@@ -222,8 +277,10 @@ def fly_phase2(gains: str | Path, signals: str | Path, out_dir: str | Path, url:
                 break
             if st == State.OFFBOARD_ACTIVE and t_active is None:
                 t_active = now
-                echo(f"[{now - t0:8.2f} s] phase 2: OFFBOARD active, law in control; signal after "
-                     f"{opts.lead_in_s:g} s lead-in")
+                echo(
+                    f"[{now - t0:8.2f} s] phase 2: OFFBOARD active, law in control; signal after "
+                    f"{opts.lead_in_s:g} s lead-in"
+                )
             if not started and now - t0 > opts.start_timeout + 10.0:
                 reason = "OFFBOARD not confirmed"
                 break
@@ -251,13 +308,22 @@ def fly_phase2(gains: str | Path, signals: str | Path, out_dir: str | Path, url:
                 if rec is not None:
                     rec.reference(now, v_d, 0.0)
                     rec.rate_setpoint(now, sent)
-                for key, val in (("t", now), ("x", x), ("v_d", v_d), ("u_e", u_e), ("u", u), ("sent", sent),
-                                 ("tsig", tsig)):
+                for key, val in (
+                    ("t", now),
+                    ("x", x),
+                    ("v_d", v_d),
+                    ("u_e", u_e),
+                    ("u", u),
+                    ("sent", sent),
+                    ("tsig", tsig),
+                ):
                     log_rows[key].append(val)
                 err = np.abs(x[2:5] - v_d)
                 if t_active is not None and err.max() > opts.max_tracking_error:
-                    reason = (f"tracking error {err.max():.2f} m/s > {opts.max_tracking_error:g} m/s "
-                              f"(axis {'uvw'[int(err.argmax())]}) -> hand back")
+                    reason = (
+                        f"tracking error {err.max():.2f} m/s > {opts.max_tracking_error:g} m/s "
+                        f"(axis {'uvw'[int(err.argmax())]}) -> hand back"
+                    )
                     break
             sleep(0.002)
         # hand back: finish mode after a complete signal, the abort chain otherwise
@@ -265,18 +331,26 @@ def fly_phase2(gains: str | Path, signals: str | Path, out_dir: str | Path, url:
         if core.machine.state in STREAMING:
             if ok:
                 core.finish(now, opts.finish.upper())
-                echo(f"[{now - t0:8.2f} s] phase 2: signal complete; hand-back to {opts.finish.upper()}")
+                echo(
+                    f"[{now - t0:8.2f} s] phase 2: signal complete; hand-back to {opts.finish.upper()}"
+                )
             else:
                 core.abort(now, reason)
                 echo(f"[{now - t0:8.2f} s] phase 2: ABORT: {reason}")
         th = clock()
-        while core.machine.state in STREAMING + (State.HANDBACK,) and clock() - th < opts.handback_timeout:
+        while (
+            core.machine.state in STREAMING + (State.HANDBACK,)
+            and clock() - th < opts.handback_timeout
+        ):
             poll(clock())
             sleep(0.005)
         hb = core.machine.state
-        summary["handback"] = {"state": hb.value, "reason": core.machine.reason,
-                               "mode": core.machine.vehicle_mode.name if core.machine.vehicle_mode else None,
-                               "duration_s": round(clock() - th, 3)}
+        summary["handback"] = {
+            "state": hb.value,
+            "reason": core.machine.reason,
+            "mode": core.machine.vehicle_mode.name if core.machine.vehicle_mode else None,
+            "duration_s": round(clock() - th, 3),
+        }
         echo(f"phase 2: hand-back {hb.value}: {core.machine.reason}")
         if hb != State.DONE:
             ok = False
@@ -313,8 +387,15 @@ def fly_phase2(gains: str | Path, signals: str | Path, out_dir: str | Path, url:
     return summary
 
 
-def excitation_gain(tsig: np.ndarray, z: np.ndarray, u_e: np.ndarray, fs: float, lags_s: float = 1.0,
-                    f_cut: float = 0.3, ridge: float = 1e-6) -> dict:
+def excitation_gain(
+    tsig: np.ndarray,
+    z: np.ndarray,
+    u_e: np.ndarray,
+    fs: float,
+    lags_s: float = 1.0,
+    f_cut: float = 0.3,
+    ridge: float = 1e-6,
+) -> dict:
     """The u_e -> z gain of seed 0 Eqs. (26)-(29) on flight data, not mixed with tracking error:
     the part of z explained by the excitation through a causal FIR (lags 0..``lags_s``) fitted
     by least squares on the high-passed z (below ``f_cut``, the reference band, removed: the
@@ -328,7 +409,10 @@ def excitation_gain(tsig: np.ndarray, z: np.ndarray, u_e: np.ndarray, fs: float,
     n, ne = u_e.shape
     L = max(1, int(round(lags_s * fs)))
     if n < 4 * L * ne:
-        return {"method": "FIR regression", "error": f"too few samples ({n}) for {L} lags x {ne} inputs"}
+        return {
+            "method": "FIR regression",
+            "error": f"too few samples ({n}) for {L} lags x {ne} inputs",
+        }
     # the same zero-phase high-pass on z and u_e: the FIR between them is unchanged (LTI
     # filters commute), the slow tracking error is removed (order 4: -100 dB/decade)
     sos = butter(4, f_cut, btype="highpass", fs=fs, output="sos")
@@ -336,35 +420,47 @@ def excitation_gain(tsig: np.ndarray, z: np.ndarray, u_e: np.ndarray, fs: float,
     uh = sosfiltfilt(sos, u_e, axis=0)
     H = np.zeros((n, ne * L))
     for lag in range(L):
-        H[lag:, lag * ne:(lag + 1) * ne] = uh[:n - lag]
-    edge = min(int(round(2.0 / f_cut * fs)), n // 6)    # filter transients at both ends dropped
+        H[lag:, lag * ne : (lag + 1) * ne] = uh[: n - lag]
+    edge = min(int(round(2.0 / f_cut * fs)), n // 6)  # filter transients at both ends dropped
     rows = slice(L + edge, n - edge)
     H, zh, uh = H[rows], zh[rows], uh[rows]
     G = H.T @ H + ridge * np.trace(H.T @ H) / H.shape[1] * np.eye(H.shape[1])
-    theta = np.linalg.solve(G, H.T @ zh)               # (ne L, nz)
+    theta = np.linalg.solve(G, H.T @ zh)  # (ne L, nz)
     ze = H @ theta
     dt = 1.0 / fs
-    Ee = float((uh ** 2).sum() * dt)                    # = ||u_e||^2 for an excitation above f_cut
-    Ez = float((ze ** 2).sum() * dt)
+    Ee = float((uh**2).sum() * dt)  # = ||u_e||^2 for an excitation above f_cut
+    Ez = float((ze**2).sum() * dt)
     res = zh - ze
-    r2 = 1.0 - float((res ** 2).sum()) / max(float((zh ** 2).sum()), 1e-300)
-    h = theta.reshape(L, ne, -1)                       # h[lag, input, output]
+    r2 = 1.0 - float((res**2).sum()) / max(float((zh**2).sum()), 1e-300)
+    h = theta.reshape(L, ne, -1)  # h[lag, input, output]
     # the FIR is determined only where u_e has power (a multisine: its harmonics): evaluate there
     spec = (np.abs(np.fft.rfft(u_e, axis=0)) ** 2).sum(axis=1)
     fb = np.fft.rfftfreq(n, dt)
     freqs = fb[(spec >= 0.05 * spec.max()) & (fb > f_cut)]
     smax = 0.0
     for f in freqs:
-        Hf = np.tensordot(np.exp(-2j * np.pi * f * np.arange(L) * dt), h, axes=(0, 0)).T   # (nz, ne)
+        Hf = np.tensordot(
+            np.exp(-2j * np.pi * f * np.arange(L) * dt), h, axes=(0, 0)
+        ).T  # (nz, ne)
         smax = max(smax, float(np.linalg.svd(Hf, compute_uv=False)[0]))
-    return {"method": f"FIR regression of high-passed z (> {f_cut:g} Hz) on u_e, {L} lags ({lags_s:g} s)",
-            "energy_ratio": math.sqrt(Ez / Ee) if Ee > 0 else float("nan"),
-            "fir_peak_gain": smax, "fit_r2": r2, "excitation_energy": Ee,
-            "window": [int(rows.start), int(rows.stop)]}
+    return {
+        "method": f"FIR regression of high-passed z (> {f_cut:g} Hz) on u_e, {L} lags ({lags_s:g} s)",
+        "energy_ratio": math.sqrt(Ez / Ee) if Ee > 0 else float("nan"),
+        "fir_peak_gain": smax,
+        "fit_r2": r2,
+        "excitation_energy": Ee,
+        "window": [int(rows.start), int(rows.stop)],
+    }
 
 
-def inversion_error(t: np.ndarray, omega: np.ndarray, rate_p=(0.15, 0.15, 0.2), delays=(0.01, 0.02, 0.04),
-                    arm_length: float = 0.225, design_magnitudes=(0.01, 0.01, 0.05)) -> dict:
+def inversion_error(
+    t: np.ndarray,
+    omega: np.ndarray,
+    rate_p=(0.15, 0.15, 0.2),
+    delays=(0.01, 0.02, 0.04),
+    arm_length: float = 0.225,
+    design_magnitudes=(0.01, 0.01, 0.05),
+) -> dict:
     """How closely the rate-loop inversion of :class:`~lpv_sysid.mavlink.transport.AttitudeRateTransport`
     (omega_sp = omega_measured + tau / K_p) can make PX4 apply a commanded virtual torque,
     measured on flown body rates ``omega`` (N, 3) at times ``t``.
@@ -389,9 +485,19 @@ def inversion_error(t: np.ndarray, omega: np.ndarray, rate_p=(0.15, 0.15, 0.2), 
     for d in delays:
         k = max(1, int(round(d / dt)))
         e = kp * np.sqrt(((w[k:] - w[:-k]) ** 2).mean(axis=0))
-        rows.append({"delay_s": float(d), "torque_error_rms": e.tolist(), "ratio_to_design_torque": (e / tau).tolist()})
-    return {"rate_p": kp.tolist(), "design_torque": tau.tolist(), "omega_rms": np.sqrt((w ** 2).mean(axis=0)).tolist(),
-            "by_delay": rows}
+        rows.append(
+            {
+                "delay_s": float(d),
+                "torque_error_rms": e.tolist(),
+                "ratio_to_design_torque": (e / tau).tolist(),
+            }
+        )
+    return {
+        "rate_p": kp.tolist(),
+        "design_torque": tau.tolist(),
+        "omega_rms": np.sqrt((w**2).mean(axis=0)).tolist(),
+        "by_delay": rows,
+    }
 
 
 def analyse_phase2(arr: Mapping[str, np.ndarray], gs, gamma: float, opts: Phase2Options) -> dict:
@@ -412,20 +518,28 @@ def analyse_phase2(arr: Mapping[str, np.ndarray], gs, gamma: float, opts: Phase2
     uei = np.column_stack([np.interp(tg, t, ue[:, k]) for k in range(ue.shape[1])])
     gain = excitation_gain(tg - tg[0], zi, uei, fs)
     dt = np.diff(t, prepend=t[0])
-    raw = math.sqrt(float((z ** 2 * dt[:, None]).sum()) / max(float((ue ** 2 * dt[:, None]).sum()), 1e-300))
+    raw = math.sqrt(
+        float((z**2 * dt[:, None]).sum()) / max(float((ue**2 * dt[:, None]).sum()), 1e-300)
+    )
     sent, u = arr["sent"][keep], arr["u"][keep]
     clipped = int(np.any(np.abs(sent - u) > 1e-9, axis=1).sum())
     return {
         "tracking_rms": {a: float(np.sqrt(np.mean(e[:, k] ** 2))) for k, a in enumerate("uvw")},
         "tracking_max": {a: float(np.max(np.abs(e[:, k]))) for k, a in enumerate("uvw")},
         "reference_rms": {a: float(np.sqrt(np.mean(vd[:, k] ** 2))) for k, a in enumerate("uvw")},
-        "gain_u_e_to_z": {**gain, "gamma": float(gamma),
-                          "within_gamma": bool(gain.get("fir_peak_gain", math.inf) <= gamma
-                                               and gain.get("energy_ratio", math.inf) <= gamma)},
+        "gain_u_e_to_z": {
+            **gain,
+            "gamma": float(gamma),
+            "within_gamma": bool(
+                gain.get("fir_peak_gain", math.inf) <= gamma
+                and gain.get("energy_ratio", math.inf) <= gamma
+            ),
+        },
         "raw_ratio_mixed_with_tracking": raw,
         "control_rate_hz": fs,
         "flown_signal_s": float(t[-1] - t[0]),
-        "commands_clipped": clipped, "commands": int(len(t)),
+        "commands_clipped": clipped,
+        "commands": int(len(t)),
     }
 
 
@@ -439,12 +553,21 @@ def _save(path: Path, d: dict) -> None:
 
 
 # =============================================================================== chain
-def chain(url: str, out_dir: str | Path, params: Mapping[str, float] | None = None,
-          campaign_config: str | Path | None = None, kappa: float = 1.0, k_sigma: float = 2.0,
-          echo: Callable[[str], None] = print, clock: Callable[[], float] = time.monotonic,
-          sleep: Callable[[float], None] = time.sleep, link_factory: Callable[[], Any] | None = None,
-          phase2: Phase2Options | None = None, preflight: bool = True,
-          phase1_dir: str | Path | None = None) -> int:
+def chain(
+    url: str,
+    out_dir: str | Path,
+    params: Mapping[str, float] | None = None,
+    campaign_config: str | Path | None = None,
+    kappa: float = 1.0,
+    k_sigma: float = 2.0,
+    echo: Callable[[str], None] = print,
+    clock: Callable[[], float] = time.monotonic,
+    sleep: Callable[[float], None] = time.sleep,
+    link_factory: Callable[[], Any] | None = None,
+    phase2: Phase2Options | None = None,
+    preflight: bool = True,
+    phase1_dir: str | Path | None = None,
+) -> int:
     """The six steps of the module docstring; returns the exit status. ``phase1_dir``: use the
     bags of an earlier phase-1 flight (``--phase1``, e.g. after a chain stopped at a later
     step with the vehicle still in HOLD) instead of flying phase 1."""
@@ -472,16 +595,37 @@ def chain(url: str, out_dir: str | Path, params: Mapping[str, float] | None = No
         p1 = Path(phase1_dir)
         import yaml
 
-        cs = yaml.safe_load((p1 / "campaign_summary.yaml").read_text()) if (p1 / "campaign_summary.yaml").exists() else {}
+        cs = (
+            yaml.safe_load((p1 / "campaign_summary.yaml").read_text())
+            if (p1 / "campaign_summary.yaml").exists()
+            else {}
+        )
         ok1 = bool(cs.get("ok"))
-        res = type("Phase1", (), {"status": 0 if ok1 else EXIT_FAILED, "phase": cs.get("result", "unknown"),
-                                  "reason": cs.get("reason") or "", "summary": cs})()
+        res = type(
+            "Phase1",
+            (),
+            {
+                "status": 0 if ok1 else EXIT_FAILED,
+                "phase": cs.get("result", "unknown"),
+                "reason": cs.get("reason") or "",
+                "summary": cs,
+            },
+        )()
         bags = [p1 / b for b in (cs.get("bags") or {}).values()]
     else:
         step("phase-1 campaign on the vehicle (PX4 cascade, ATTITUDE_TARGET recorded)")
-        res = fly(cfg, url, out / "phase1", params=params, clock=clock, sleep=sleep, echo=echo,
-                  record_rate_setpoints=True, preflight=preflight,
-                  link=link_factory() if link_factory else None)
+        res = fly(
+            cfg,
+            url,
+            out / "phase1",
+            params=params,
+            clock=clock,
+            sleep=sleep,
+            echo=echo,
+            record_rate_setpoints=True,
+            preflight=preflight,
+            link=link_factory() if link_factory else None,
+        )
         bags = [out / "phase1" / b for b in (res.summary.get("bags") or {}).values()]
     done(status=res.status, result=res.phase, reason=res.reason, bags=[str(b) for b in bags])
     usable = []
@@ -496,33 +640,66 @@ def chain(url: str, out_dir: str | Path, params: Mapping[str, float] | None = No
         echo(summary["result"])
         return EXIT_FAILED
     if res.status:
-        echo(f"  phase 1 ended early ({res.reason}); identifying from the {len(usable)} usable run(s), "
-             "phase 2 will not be flown")
+        echo(
+            f"  phase 1 ended early ({res.reason}); identifying from the {len(usable)} usable run(s), "
+            "phase 2 will not be flown"
+        )
     step("rate-plant identification (pooled equation error)")
     params_rp, rep = rid.identify(usable)
     c = cfg.campaign
-    save_yaml(rid.models_document(params_rp, c.box_min, c.box_max, k_sigma, rep), out / "vertex_models.yaml")
+    save_yaml(
+        rid.models_document(params_rp, c.box_min, c.box_max, k_sigma, rep),
+        out / "vertex_models.yaml",
+    )
     echo(format_identification(rep))
-    done(result=f"{len(usable)} run(s), {rep['samples']} samples", rows=rep["rows"], runs=rep["runs"],
-         k_sigma=k_sigma)
+    done(
+        result=f"{len(usable)} run(s), {rep['samples']} samples",
+        rows=rep["rows"],
+        runs=rep["runs"],
+        k_sigma=k_sigma,
+    )
     # the measurement behind the choice of plant: the inversion's torque error on these flights
     last = usable[-1]
     t_raw, om_raw = _raw_rates(next(b for b in bags if b.name == last.name))
-    inv = inversion_error(t_raw, om_raw)          # unfiltered telemetry rates (noise included)
+    inv = inversion_error(t_raw, om_raw)  # unfiltered telemetry rates (noise included)
     inv["run"] = last.name
     summary["inversion_error"] = inv
     r20 = [r for r in inv["by_delay"] if abs(r["delay_s"] - 0.02) < 1e-9]
     if r20:
-        echo("  rate-loop inversion (AttitudeRateTransport) on this flight: torque error at 20 ms telemetry age "
-             + ", ".join(f"{a} {e:.3g} ({q:.1f} x design)" for a, e, q in
-                         zip("pqr", r20[0]["torque_error_rms"], r20[0]["ratio_to_design_torque"])))
+        echo(
+            "  rate-loop inversion (AttitudeRateTransport) on this flight: torque error at 20 ms telemetry age "
+            + ", ".join(
+                f"{a} {e:.3g} ({q:.1f} x design)"
+                for a, e, q in zip(
+                    "pqr", r20[0]["torque_error_rms"], r20[0]["ratio_to_design_torque"]
+                )
+            )
+        )
     steps = [
-        ("phase-2 signals", ["signals", "--config", str(config_file("signals_chain_phase2.yaml")),
-                             "--out", str(out / "signals")]),
-        ("Lemma 1 synthesis + independent verification (rate plant)",
-         ["synthesize", "--models", str(out / "vertex_models.yaml"),
-          "--config", str(config_file("synthesis_chain.yaml")),
-          "--summary", str(out / "signals" / "summary.yaml"), "--out", str(out / "gains.yaml")]),
+        (
+            "phase-2 signals",
+            [
+                "signals",
+                "--config",
+                str(config_file("signals_chain_phase2.yaml")),
+                "--out",
+                str(out / "signals"),
+            ],
+        ),
+        (
+            "Lemma 1 synthesis + independent verification (rate plant)",
+            [
+                "synthesize",
+                "--models",
+                str(out / "vertex_models.yaml"),
+                "--config",
+                str(config_file("synthesis_chain.yaml")),
+                "--summary",
+                str(out / "signals" / "summary.yaml"),
+                "--out",
+                str(out / "gains.yaml"),
+            ],
+        ),
     ]
     for title, argv in steps:
         step(title)
@@ -546,23 +723,37 @@ def chain(url: str, out_dir: str | Path, params: Mapping[str, float] | None = No
     step("phase-2 flight under the LPV law (rate plant)")
     opts = phase2 or Phase2Options(kappa=kappa)
     try:
-        p2 = fly_phase2(out / "gains.yaml", out / "signals", out / "phase2", url=url,
-                        models=out / "vertex_models.yaml", opts=opts, clock=clock, sleep=sleep, echo=echo,
-                        link=link_factory() if link_factory else None)
+        p2 = fly_phase2(
+            out / "gains.yaml",
+            out / "signals",
+            out / "phase2",
+            url=url,
+            models=out / "vertex_models.yaml",
+            opts=opts,
+            clock=clock,
+            sleep=sleep,
+            echo=echo,
+            link=link_factory() if link_factory else None,
+        )
     except LpvSysidError as exc:
         p2 = {"ok": False, "reason": str(exc)}
     done(ok=p2.get("ok"), reason=p2.get("reason"))
     # the identified rate plant against the phase-2 flight (rate setpoints from the law, not PX4)
-    bag2 = out / "phase2" / "bag_0000"           # state at the telemetry rate + the commands as sent
+    bag2 = out / "phase2" / "bag_0000"  # state at the telemetry rate + the commands as sent
     if bag2.exists():
         try:
             p2["model_check_r2"] = rid.validate(params_rp, rid.read_run(bag2))
-            echo("  identified rate plant vs the phase-2 flight, R^2 per row: "
-                 + ", ".join(f"{k} {v}" for k, v in p2["model_check_r2"].items()))
+            echo(
+                "  identified rate plant vs the phase-2 flight, R^2 per row: "
+                + ", ".join(f"{k} {v}" for k, v in p2["model_check_r2"].items())
+            )
         except LpvSysidError as exc:
             p2["model_check_r2"] = {"error": str(exc)}
-    summary["phase2"] = {k: v for k, v in p2.items() if k in ("ok", "reason", "tracking_rms", "gain_u_e_to_z",
-                                                               "handback", "model_check_r2")}
+    summary["phase2"] = {
+        k: v
+        for k, v in p2.items()
+        if k in ("ok", "reason", "tracking_rms", "gain_u_e_to_z", "handback", "model_check_r2")
+    }
     summary["result"] = "complete" if p2.get("ok") else f"phase 2: {p2.get('reason')}"
     summary["wall_s"] = round(clock() - t_all, 1)
     _save(out / "chain_summary.yaml", summary)
@@ -589,8 +780,10 @@ def _mark_design(gains: Path) -> None:
 
     text = gains.read_text()
     if not text.startswith("# design: "):
-        gains.write_text(f"# design: {rp.DESIGN} -- {rp.DESIGN_TEXT}; flown by `lpv-sysid chain` / "
-                         "`lpv-sysid fly phase2` (docs/px4_chain.md)\n" + text)
+        gains.write_text(
+            f"# design: {rp.DESIGN} -- {rp.DESIGN_TEXT}; flown by `lpv-sysid chain` / "
+            "`lpv-sysid fly phase2` (docs/px4_chain.md)\n" + text
+        )
 
 
 def format_identification(rep: dict) -> str:
@@ -598,8 +791,10 @@ def format_identification(rep: dict) -> str:
     for row, d in rep["rows"].items():
         extra = ""
         if "delay_s" in d:
-            extra = (f"bandwidth {d['bandwidth_rad_s']:.2f} rad/s, best delay {d['delay_s']:.2f} s, free-fit DC gain "
-                     f"{d['unconstrained']['dc_gain']}")
+            extra = (
+                f"bandwidth {d['bandwidth_rad_s']:.2f} rad/s, best delay {d['delay_s']:.2f} s, free-fit DC gain "
+                f"{d['unconstrained']['dc_gain']}"
+            )
         lines.append(f"  {row:<5} {d['r2']:.3f}   {extra}")
     p = rep["params"]
     lines.append("  " + ", ".join(f"{k} {p[k]:.3g}" for k in ("X_u", "Y_v", "Z_w", "Z_T")))
@@ -609,75 +804,149 @@ def format_identification(rep: dict) -> str:
 def _report(out: Path, summary: dict, p2: Optional[dict], rep: dict) -> None:
     from lpv_sysid.io.yaml_file import read_yaml
 
-    L = ["# PX4 chain report", "",
-         "Design (plant) of every flight: phase 1 = PX4's own velocity/attitude/rate cascade (velocity "
-         "setpoints); phase 2 = **rate plant** (PX4 rate loop inside the LPV model; inputs thrust + body-rate "
-         "setpoints sent as SET_ATTITUDE_TARGET; lpv_sysid/models/rate_plant.py).", "",
-         f"Vehicle: `{summary.get('connect')}`. Result: **{summary.get('result')}**.", "", "## Steps", "",
-         "| step | start [s] | end [s] | outcome |", "|---|---|---|---|"]
+    L = [
+        "# PX4 chain report",
+        "",
+        "Design (plant) of every flight: phase 1 = PX4's own velocity/attitude/rate cascade (velocity "
+        "setpoints); phase 2 = **rate plant** (PX4 rate loop inside the LPV model; inputs thrust + body-rate "
+        "setpoints sent as SET_ATTITUDE_TARGET; lpv_sysid/models/rate_plant.py).",
+        "",
+        f"Vehicle: `{summary.get('connect')}`. Result: **{summary.get('result')}**.",
+        "",
+        "## Steps",
+        "",
+        "| step | start [s] | end [s] | outcome |",
+        "|---|---|---|---|",
+    ]
     for s in summary["steps"]:
-        outcome = s.get("reason") or s.get("result") or ("status %s" % s.get("status") if "status" in s else "")
+        outcome = (
+            s.get("reason")
+            or s.get("result")
+            or ("status %s" % s.get("status") if "status" in s else "")
+        )
         L.append(f"| {s['step']} | {s.get('t_start_s')} | {s.get('t_end_s', '-')} | {outcome} |")
-    L += ["", "## Identification (pooled equation error)", "", "```", format_identification(rep), "```"]
+    L += [
+        "",
+        "## Identification (pooled equation error)",
+        "",
+        "```",
+        format_identification(rep),
+        "```",
+    ]
     inv = summary.get("inversion_error")
     if inv:
-        L += ["", "## Why the rate plant (measured on this flight's phase-1 run "
-              f"`{inv.get('run')}`)", "",
-              "Torque error of the rate-loop inversion omega_sp = omega + tau/K_p, K_p (omega(t-d) - omega(t)) rms "
-              "(PX4 normalised torque), against the seed's design virtual torques "
-              f"{', '.join(f'{x:.3g}' for x in inv['design_torque'])} (roll, pitch, yaw):", "",
-              "| telemetry age d [s] | roll | pitch | yaw | ratio to design (roll, pitch, yaw) |", "|---|---|---|---|---|"]
+        L += [
+            "",
+            f"## Why the rate plant (measured on this flight's phase-1 run `{inv.get('run')}`)",
+            "",
+            "Torque error of the rate-loop inversion omega_sp = omega + tau/K_p, K_p (omega(t-d) - omega(t)) rms "
+            "(PX4 normalised torque), against the seed's design virtual torques "
+            f"{', '.join(f'{x:.3g}' for x in inv['design_torque'])} (roll, pitch, yaw):",
+            "",
+            "| telemetry age d [s] | roll | pitch | yaw | ratio to design (roll, pitch, yaw) |",
+            "|---|---|---|---|---|",
+        ]
         for r in inv["by_delay"]:
             e, q = r["torque_error_rms"], r["ratio_to_design_torque"]
-            L.append(f"| {r['delay_s']:.2f} | {e[0]:.3g} | {e[1]:.3g} | {e[2]:.3g} | "
-                     f"{q[0]:.1f}, {q[1]:.1f}, {q[2]:.1f} |")
+            L.append(
+                f"| {r['delay_s']:.2f} | {e[0]:.3g} | {e[1]:.3g} | {e[2]:.3g} | "
+                f"{q[0]:.1f}, {q[1]:.1f}, {q[2]:.1f} |"
+            )
     gains = out / "gains.yaml"
     if gains.exists():
         g = read_yaml(gains)
         cert = g.get("certificate", {})
-        L += ["", "## Certificate", "", f"gamma (file) {g.get('gamma'):.4g}, certified {cert.get('gamma_achieved')}, "
-              f"solver {cert.get('solver')}, {cert.get('lmi')}"]
+        L += [
+            "",
+            "## Certificate",
+            "",
+            f"gamma (file) {g.get('gamma'):.4g}, certified {cert.get('gamma_achieved')}, "
+            f"solver {cert.get('solver')}, {cert.get('lmi')}",
+        ]
     if p2:
-        L += ["", "## Phase 2 (what the vehicle did)", "", f"ok: {p2.get('ok')}; {p2.get('reason')}"]
+        L += [
+            "",
+            "## Phase 2 (what the vehicle did)",
+            "",
+            f"ok: {p2.get('ok')}; {p2.get('reason')}",
+        ]
         hb = p2.get("handback") or {}
         L.append(f"hand-back: {hb.get('state')} {hb.get('mode')} ({hb.get('reason')})")
         if "tracking_rms" in p2:
             tr, ref = p2["tracking_rms"], p2["reference_rms"]
-            L += ["", "| axis | tracking RMS [m/s] | max [m/s] | reference RMS [m/s] |", "|---|---|---|---|"]
+            L += [
+                "",
+                "| axis | tracking RMS [m/s] | max [m/s] | reference RMS [m/s] |",
+                "|---|---|---|---|",
+            ]
             for a in "uvw":
                 L.append(f"| {a} | {tr[a]:.3f} | {p2['tracking_max'][a]:.3f} | {ref[a]:.3f} |")
             gi = p2["gain_u_e_to_z"]
-            L += ["", f"u_e -> z (seed 0 Eqs. 26-29; {gi.get('method')}): energy ratio "
-                  f"{gi.get('energy_ratio', float('nan')):.4g}, FIR peak gain {gi.get('fir_peak_gain', float('nan')):.4g}, "
-                  f"fit R^2 {gi.get('fit_r2', float('nan')):.3f} vs gamma {gi['gamma']:.4g} -> "
-                  f"{'within' if gi['within_gamma'] else 'NOT within'} gamma. Raw ||z||/||u_e|| mixed with tracking "
-                  f"error (for reference only): {p2['raw_ratio_mixed_with_tracking']:.4g}.",
-                  f"Commands clipped by the transport: {p2['commands_clipped']} of {p2['commands']}; control rate "
-                  f"{p2['control_rate_hz']:.1f} Hz; signal flown {p2['flown_signal_s']:.1f} s."]
+            L += [
+                "",
+                f"u_e -> z (seed 0 Eqs. 26-29; {gi.get('method')}): energy ratio "
+                f"{gi.get('energy_ratio', float('nan')):.4g}, FIR peak gain {gi.get('fir_peak_gain', float('nan')):.4g}, "
+                f"fit R^2 {gi.get('fit_r2', float('nan')):.3f} vs gamma {gi['gamma']:.4g} -> "
+                f"{'within' if gi['within_gamma'] else 'NOT within'} gamma. Raw ||z||/||u_e|| mixed with tracking "
+                f"error (for reference only): {p2['raw_ratio_mixed_with_tracking']:.4g}.",
+                f"Commands clipped by the transport: {p2['commands_clipped']} of {p2['commands']}; control rate "
+                f"{p2['control_rate_hz']:.1f} Hz; signal flown {p2['flown_signal_s']:.1f} s.",
+            ]
         mc = p2.get("model_check_r2")
         if mc:
-            L += ["", "Identified rate plant (phase-1 data) against the phase-2 flight (rate setpoints from the "
-                  "law), R^2 of x' per row: " + ", ".join(f"{k} {v}" for k, v in mc.items())]
+            L += [
+                "",
+                "Identified rate plant (phase-1 data) against the phase-2 flight (rate setpoints from the "
+                "law), R^2 of x' per row: " + ", ".join(f"{k} {v}" for k, v in mc.items()),
+            ]
     (out / "report.md").write_text("\n".join(L) + "\n")
 
 
 # ================================================================================== CLI
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--connect", required=True, metavar="URL", help="MAVLink URL of the PX4 vehicle")
+    parser.add_argument(
+        "--connect", required=True, metavar="URL", help="MAVLink URL of the PX4 vehicle"
+    )
     parser.add_argument("--out", required=True, type=Path, help="output directory")
-    parser.add_argument("--campaign", default=None, help="phase-1 campaign config (default config/campaign_chain.yaml)")
-    parser.add_argument("--set-param", action="append", default=[], metavar="NAME=VALUE",
-                        help="PARAM_SET before phase 1 (e.g. COM_OBL_RC_ACT=5 on a SITL without RC)")
-    parser.add_argument("--kappa", type=float, default=1.0, help="phase-2 excitation multiplier (seed 0 Eq. 33)")
-    parser.add_argument("--phase1", default=None, metavar="DIR",
-                        help="use the bags of an earlier phase-1 flight (its DIR/phase1) instead of flying phase 1; "
-                             "the vehicle must be armed and in the air (HOLD) for phase 2")
-    parser.add_argument("--k-sigma", type=float, default=2.0,
-                        help="model intervals nominal +- k std of the identified entries (0: nominal only)")
+    parser.add_argument(
+        "--campaign",
+        default=None,
+        help="phase-1 campaign config (default config/campaign_chain.yaml)",
+    )
+    parser.add_argument(
+        "--set-param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="PARAM_SET before phase 1 (e.g. COM_OBL_RC_ACT=5 on a SITL without RC)",
+    )
+    parser.add_argument(
+        "--kappa", type=float, default=1.0, help="phase-2 excitation multiplier (seed 0 Eq. 33)"
+    )
+    parser.add_argument(
+        "--phase1",
+        default=None,
+        metavar="DIR",
+        help="use the bags of an earlier phase-1 flight (its DIR/phase1) instead of flying phase 1; "
+        "the vehicle must be armed and in the air (HOLD) for phase 2",
+    )
+    parser.add_argument(
+        "--k-sigma",
+        type=float,
+        default=2.0,
+        help="model intervals nominal +- k std of the identified entries (0: nominal only)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     from lpv_sysid.cli.fly import parse_params
 
-    return chain(args.connect, args.out, params=parse_params(args.set_param), campaign_config=args.campaign,
-                 kappa=args.kappa, k_sigma=args.k_sigma, phase1_dir=args.phase1)
+    return chain(
+        args.connect,
+        args.out,
+        params=parse_params(args.set_param),
+        campaign_config=args.campaign,
+        kappa=args.kappa,
+        k_sigma=args.k_sigma,
+        phase1_dir=args.phase1,
+    )

@@ -21,22 +21,51 @@ HELP = "truth coverage of the identified vertex-model intervals on simulated air
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--airframes", type=int, default=3, help="number of random airframes (default 3)")
+    parser.add_argument(
+        "--airframes", type=int, default=3, help="number of random airframes (default 3)"
+    )
     parser.add_argument("--out", required=True, type=Path, help="output directory (created)")
-    parser.add_argument("--config", type=Path, default=None,
-                        help="vehicle, controller, sensors and phase-1 YAML (default config/quadrotor.yaml)")
-    parser.add_argument("--identification", type=Path, default=None,
-                        help="identification YAML (default config/identification.yaml)")
-    parser.add_argument("--spread", type=float, default=0.25, help="parameter variation +/- fraction (default 0.25)")
-    parser.add_argument("--seed", type=int, default=0, help="study seed: airframes and sensor noise (default 0)")
-    parser.add_argument("--vertices", type=int, nargs="+", default=None, metavar="I",
-                        help="1-based vertex indices in seed 0 Table 1 order (default: all 8)")
-    parser.add_argument("--eiv", action="store_true",
-                        help="give identification the simulated sensors' noise (errors-in-variables "
-                             "compensation, identification.measurement_noise) and report its largest shift")
-    parser.add_argument("--ablations", action="store_true",
-                        help="also re-identify the same flights without the re-expansion and with the "
-                             "residual-ACF standard errors")
+    parser.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        help="vehicle, controller, sensors and phase-1 YAML (default config/quadrotor.yaml)",
+    )
+    parser.add_argument(
+        "--identification",
+        type=Path,
+        default=None,
+        help="identification YAML (default config/identification.yaml)",
+    )
+    parser.add_argument(
+        "--spread",
+        type=float,
+        default=0.25,
+        help="parameter variation +/- fraction (default 0.25)",
+    )
+    parser.add_argument(
+        "--seed", type=int, default=0, help="study seed: airframes and sensor noise (default 0)"
+    )
+    parser.add_argument(
+        "--vertices",
+        type=int,
+        nargs="+",
+        default=None,
+        metavar="I",
+        help="1-based vertex indices in seed 0 Table 1 order (default: all 8)",
+    )
+    parser.add_argument(
+        "--eiv",
+        action="store_true",
+        help="give identification the simulated sensors' noise (errors-in-variables "
+        "compensation, identification.measurement_noise) and report its largest shift",
+    )
+    parser.add_argument(
+        "--ablations",
+        action="store_true",
+        help="also re-identify the same flights without the re-expansion and with the "
+        "residual-ACF standard errors",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -48,8 +77,12 @@ def run(args: argparse.Namespace) -> int:
     from lpv_sysid.ident import coverage as cv
     from lpv_sysid.sim import phase1
 
-    cfg = cv.CoverageConfig(airframes=args.airframes, spread=args.spread, seed=args.seed,
-                            vertices=tuple(args.vertices) if args.vertices else None)
+    cfg = cv.CoverageConfig(
+        airframes=args.airframes,
+        spread=args.spread,
+        seed=args.seed,
+        vertices=tuple(args.vertices) if args.vertices else None,
+    )
     if args.seed < 0:
         raise ConfigError(f"--seed must be >= 0, got {args.seed}")
     if args.vertices and any(not 1 <= i <= 8 for i in args.vertices):
@@ -60,15 +93,19 @@ def run(args: argparse.Namespace) -> int:
         import dataclasses
 
         from lpv_sysid.ident.vertex import parse_measurement_noise
-        ident_cfg = dataclasses.replace(ident_cfg, measurement_noise=parse_measurement_noise(cv.sensor_noise(sensors)))
+
+        ident_cfg = dataclasses.replace(
+            ident_cfg, measurement_noise=parse_measurement_noise(cv.sensor_noise(sensors))
+        )
     out = Path(args.out)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise ConfigError(f"--out {out}: cannot create ({exc.strerror})") from None
     t0 = time.perf_counter()
-    airframes, runs = cv.run_study(cfg, qp, gains, sensors, ph1, ident_cfg, progress=print,
-                                   keep_runs=args.ablations)
+    airframes, runs = cv.run_study(
+        cfg, qp, gains, sensors, ph1, ident_cfg, progress=print, keep_runs=args.ablations
+    )
     ablation = cv.ablations(runs, airframes, qp, ident_cfg) if args.ablations else None
     doc = cv.summary_dict(airframes, qp, cfg, ablation)
     table = cv.markdown_table(airframes, qp, ablation)
@@ -77,11 +114,14 @@ def run(args: argparse.Namespace) -> int:
     (out / "coverage.md").write_text(
         f"{table}\n\nAll: {o['covered']} of {o['elements']} identified elements within "
         f"{doc['study']['k_sigma']:g} sigma ({100 * o['fraction']:.2f} %; a calibrated Gaussian "
-        f"estimate: {100 * o['expected_fraction']:.2f} %), z mean {o['z_mean']:+.3f}, z std {o['z_std']:.3f}.\n")
+        f"estimate: {100 * o['expected_fraction']:.2f} %), z mean {o['z_mean']:+.3f}, z std {o['z_std']:.3f}.\n"
+    )
     print(table)
-    print(f"all: {o['covered']}/{o['elements']} = {100 * o['fraction']:.2f} % within {doc['study']['k_sigma']:g} "
-          f"sigma (calibrated: {100 * o['expected_fraction']:.2f} %), z std {o['z_std']:.3f}; "
-          f"{time.perf_counter() - t0:.0f} s")
+    print(
+        f"all: {o['covered']}/{o['elements']} = {100 * o['fraction']:.2f} % within {doc['study']['k_sigma']:g} "
+        f"sigma (calibrated: {100 * o['expected_fraction']:.2f} %), z std {o['z_std']:.3f}; "
+        f"{time.perf_counter() - t0:.0f} s"
+    )
     print(f"wrote {out / 'coverage.yaml'}")
     print(f"wrote {out / 'coverage.md'}")
     return 0

@@ -20,21 +20,37 @@ from lpv_sysid.cli._paths import config_file
 from lpv_sysid.errors import LpvSysidError
 
 COMMAND = "demo"
-HELP = "run phase 1 -> identify -> synthesize -> verify -> phase 2 -> report on the simulated vehicle"
+HELP = (
+    "run phase 1 -> identify -> synthesize -> verify -> phase 2 -> report on the simulated vehicle"
+)
 
 log = logging.getLogger(__name__)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="demo_out", help="output directory (default demo_out)")
-    parser.add_argument("--quick", action="store_true",
-                        help="short flights (phase-1 durations x0.5, 2 phase-2 periods less) for a fast look")
-    parser.add_argument("--kappa", type=float, default=1.0, help="phase-2 excitation multiplier (seed 0 Eq. 33)")
-    parser.add_argument("--connect", default=None, metavar="URL",
-                        help="fly the chain on a connected PX4 instead (same as `lpv-sysid chain --connect URL "
-                             "--out DIR`: rate plant, docs/px4_chain.md); without it: the simulated vehicle")
-    parser.add_argument("--set-param", action="append", default=[], metavar="NAME=VALUE",
-                        help="with --connect: PARAM_SET before phase 1 (e.g. COM_OBL_RC_ACT=5 COM_OF_LOSS_T=2)")
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="short flights (phase-1 durations x0.5, 2 phase-2 periods less) for a fast look",
+    )
+    parser.add_argument(
+        "--kappa", type=float, default=1.0, help="phase-2 excitation multiplier (seed 0 Eq. 33)"
+    )
+    parser.add_argument(
+        "--connect",
+        default=None,
+        metavar="URL",
+        help="fly the chain on a connected PX4 instead (same as `lpv-sysid chain --connect URL "
+        "--out DIR`: rate plant, docs/px4_chain.md); without it: the simulated vehicle",
+    )
+    parser.add_argument(
+        "--set-param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="with --connect: PARAM_SET before phase 1 (e.g. COM_OBL_RC_ACT=5 COM_OF_LOSS_T=2)",
+    )
 
 
 def plan(out: Path, quick: bool, kappa: float) -> list[tuple[str, list[str]]]:
@@ -45,23 +61,77 @@ def plan(out: Path, quick: bool, kappa: float) -> list[tuple[str, list[str]]]:
         phase1 += ["--duration-scale", "0.5"]
     return [
         ("phase-1 flights at the 8 box vertices + hover validation", phase1),
-        ("phase-2 reference and excitation multisines",
-         ["signals", "--config", str(config_file("signals_phase2.yaml")), "--out", str(out / "signals")]),
-        ("vertex identification (equation error, seed 0 App. B)",
-         ["identify", "--bags", str(out / "phase1"), "--config", str(config_file("identification.yaml")),
-          "--quadrotor", quad, "--out", str(out / "vertex_models.yaml"),
-          "--plot", str(out / "identification.png")]),
-        ("robust LPV H-infinity synthesis (seed 0 Lemma 1)",
-         ["synthesize", "--models", str(out / "vertex_models.yaml"),
-          "--config", str(config_file("synthesis.yaml")),
-          "--summary", str(out / "signals" / "summary.yaml"), "--out", str(out / "gains.yaml")]),
-        ("independent verification of the certificate",
-         ["verify", "--gains", str(out / "gains.yaml"), "--models", str(out / "vertex_models.yaml")]),
-        ("phase-2 flight under the LPV law",
-         ["simulate", "phase2", "--gains", str(out / "gains.yaml"), "--models", str(out / "vertex_models.yaml"),
-          "--signals", str(out / "signals"), "--config", quad, "--kappa", str(kappa),
-          "--feedforward", "filtered",           # the onboard path: derivatives of the v_d stream
-          "--out", str(out / "phase2")]),
+        (
+            "phase-2 reference and excitation multisines",
+            [
+                "signals",
+                "--config",
+                str(config_file("signals_phase2.yaml")),
+                "--out",
+                str(out / "signals"),
+            ],
+        ),
+        (
+            "vertex identification (equation error, seed 0 App. B)",
+            [
+                "identify",
+                "--bags",
+                str(out / "phase1"),
+                "--config",
+                str(config_file("identification.yaml")),
+                "--quadrotor",
+                quad,
+                "--out",
+                str(out / "vertex_models.yaml"),
+                "--plot",
+                str(out / "identification.png"),
+            ],
+        ),
+        (
+            "robust LPV H-infinity synthesis (seed 0 Lemma 1)",
+            [
+                "synthesize",
+                "--models",
+                str(out / "vertex_models.yaml"),
+                "--config",
+                str(config_file("synthesis.yaml")),
+                "--summary",
+                str(out / "signals" / "summary.yaml"),
+                "--out",
+                str(out / "gains.yaml"),
+            ],
+        ),
+        (
+            "independent verification of the certificate",
+            [
+                "verify",
+                "--gains",
+                str(out / "gains.yaml"),
+                "--models",
+                str(out / "vertex_models.yaml"),
+            ],
+        ),
+        (
+            "phase-2 flight under the LPV law",
+            [
+                "simulate",
+                "phase2",
+                "--gains",
+                str(out / "gains.yaml"),
+                "--models",
+                str(out / "vertex_models.yaml"),
+                "--signals",
+                str(out / "signals"),
+                "--config",
+                quad,
+                "--kappa",
+                str(kappa),
+                "--feedforward",
+                "filtered",  # the onboard path: derivatives of the v_d stream
+                "--out",
+                str(out / "phase2"),
+            ],
+        ),
         ("report", ["report", "--run", str(out), "--out", str(out / "report" / "report.md")]),
     ]
 
@@ -83,7 +153,9 @@ def run(args: argparse.Namespace) -> int:
         t0 = time.monotonic()
         rc = cli_main(argv)
         if rc != 0:
-            raise LpvSysidError(f"step {k} ({title}) failed with exit status {rc}; artefacts so far are in {out}")
+            raise LpvSysidError(
+                f"step {k} ({title}) failed with exit status {rc}; artefacts so far are in {out}"
+            )
         print(f"[{k}/{len(steps)}] done in {time.monotonic() - t0:.1f} s", flush=True)
     print(f"\ndemo finished in {time.monotonic() - t_start:.0f} s")
     print(f"gains file: {out / 'gains.yaml'}")

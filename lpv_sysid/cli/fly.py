@@ -46,16 +46,26 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
-from lpv_sysid.errors import BagError, ConfigError, LpvSysidError, SafetyError
+from lpv_sysid.errors import ConfigError, LpvSysidError, SafetyError
 
 COMMAND = "fly"
-HELP = ("fly on a PX4 vehicle over MAVLink: phase1 = campaign (take-off, vertices, hover, land, rosbag2); "
-        "phase2 = LPV law on the rate plant (lpv_sysid/cli/chain.py)")
+HELP = (
+    "fly on a PX4 vehicle over MAVLink: phase1 = campaign (take-off, vertices, hover, land, rosbag2); "
+    "phase2 = LPV law on the rate plant (lpv_sysid/cli/chain.py)"
+)
 
 log = logging.getLogger(__name__)
 
 NAMESPACE = "/lpv_sysid"
-TOPICS = ("state", "rotor_speeds", "imu", "velocity_reference", "excitation", "actuator_command", "status")
+TOPICS = (
+    "state",
+    "rotor_speeds",
+    "imu",
+    "velocity_reference",
+    "excitation",
+    "actuator_command",
+    "status",
+)
 #: with ``record_rate_setpoints``: PX4's ATTITUDE_TARGET (thrust + body-rate setpoints of its own
 #: cascade) as a JointState (names ``transport.RATE_INPUT_NAMES``, ``position``), receive-time stamps
 RATE_TOPIC = "rate_setpoint"
@@ -68,23 +78,32 @@ EXIT_INTERRUPTED = 130
 class FlyConfig:
     """``config/campaign.yaml`` (paths relative to the file's directory)."""
 
-    campaign: Any                              # CampaignConfig
+    campaign: Any  # CampaignConfig
     bridge_config: str = "mavlink_bridge.yaml"
     signals_config: str = "signals_phase1.yaml"
     identification_config: str = "identification.yaml"
     storage: str = "mcap"
     flight_log: bool = True
     preflight_timeout: float = 8.0
-    link_timeout: float = 15.0                 # s to wait for the vehicle's first HEARTBEAT
-    loop_period: float = 0.005                 # s, link poll period
-    status_period: float = 1.0                 # s, periodic status message in the bags
+    link_timeout: float = 15.0  # s to wait for the vehicle's first HEARTBEAT
+    loop_period: float = 0.005  # s, link poll period
+    status_period: float = 1.0  # s, periodic status message in the bags
     source: str = ""
 
-    KEYS = ("bridge_config", "signals_config", "identification_config", "campaign", "recording",
-            "preflight", "runner")
+    KEYS = (
+        "bridge_config",
+        "signals_config",
+        "identification_config",
+        "campaign",
+        "recording",
+        "preflight",
+        "runner",
+    )
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any], base: str | Path = ".", source: str = "") -> "FlyConfig":
+    def from_dict(
+        cls, d: Mapping[str, Any], base: str | Path = ".", source: str = ""
+    ) -> "FlyConfig":
         from lpv_sysid.control.campaign import CampaignConfig
         from lpv_sysid.validation import check_keys, is_finite_number
 
@@ -106,7 +125,9 @@ class FlyConfig:
         rec = d.get("recording") or {}
         check_keys(rec, ("storage", "flight_log"), f"{where}: recording", list_allowed=True)
         if rec.get("storage", "mcap") not in ("mcap", "sqlite3"):
-            raise ConfigError(f"{where}: recording.storage must be mcap or sqlite3, got {rec['storage']!r}")
+            raise ConfigError(
+                f"{where}: recording.storage must be mcap or sqlite3, got {rec['storage']!r}"
+            )
         kw["storage"] = rec.get("storage", "mcap")
         if not isinstance(rec.get("flight_log", True), bool):
             raise ConfigError(f"{where}: recording.flight_log must be true or false")
@@ -114,15 +135,24 @@ class FlyConfig:
         pre = d.get("preflight") or {}
         check_keys(pre, ("timeout",), f"{where}: preflight", list_allowed=True)
         run = d.get("runner") or {}
-        check_keys(run, ("link_timeout", "loop_period", "status_period"), f"{where}: runner", list_allowed=True)
-        for sect, key, name, lo, hi in ((pre, "timeout", "preflight_timeout", 0.5, 120.0),
-                                        (run, "link_timeout", "link_timeout", 0.5, 600.0),
-                                        (run, "loop_period", "loop_period", 0.0005, 0.05),
-                                        (run, "status_period", "status_period", 0.05, 60.0)):
+        check_keys(
+            run,
+            ("link_timeout", "loop_period", "status_period"),
+            f"{where}: runner",
+            list_allowed=True,
+        )
+        for sect, key, name, lo, hi in (
+            (pre, "timeout", "preflight_timeout", 0.5, 120.0),
+            (run, "link_timeout", "link_timeout", 0.5, 600.0),
+            (run, "loop_period", "loop_period", 0.0005, 0.05),
+            (run, "status_period", "status_period", 0.05, 60.0),
+        ):
             if key in sect:
                 v = sect[key]
                 if not is_finite_number(v) or not lo <= v <= hi:
-                    raise ConfigError(f"{where}: {name} must be a number in [{lo}, {hi}], got {v!r}")
+                    raise ConfigError(
+                        f"{where}: {name} must be a number in [{lo}, {hi}], got {v!r}"
+                    )
                 kw[name] = float(v)
         return cls(**kw)
 
@@ -157,14 +187,19 @@ def bridge_config_for(path: str, url: str | None, campaign) -> Any:
 
     cfg = BridgeConfig.load(path)
     if cfg.command != "velocity":
-        raise ConfigError(f"{path}: command must be 'velocity' for the phase-1 campaign, got {cfg.command!r}")
+        raise ConfigError(
+            f"{path}: command must be 'velocity' for the phase-1 campaign, got {cfg.command!r}"
+        )
     if cfg.velocity_frame != campaign.velocity_frame:
-        raise ConfigError(f"{path}: velocity_frame {cfg.velocity_frame!r} differs from the campaign's "
-                          f"{campaign.velocity_frame!r} (the settle check measures in the command frame)")
+        raise ConfigError(
+            f"{path}: velocity_frame {cfg.velocity_frame!r} differs from the campaign's "
+            f"{campaign.velocity_frame!r} (the settle check measures in the command frame)"
+        )
     link = dataclasses.replace(cfg.link, url=url) if url else cfg.link
     link.validate()
-    return dataclasses.replace(cfg, link=link, offboard=dataclasses.replace(cfg.offboard, arm=True),
-                               auto_start=False)
+    return dataclasses.replace(
+        cfg, link=link, offboard=dataclasses.replace(cfg.offboard, arm=True), auto_start=False
+    )
 
 
 def parse_params(items) -> dict[str, float]:
@@ -173,7 +208,9 @@ def parse_params(items) -> dict[str, float]:
         name, sep, value = str(it).partition("=")
         name = name.strip().upper()
         if not sep or not name or len(name) > 16:
-            raise ConfigError(f"--set-param {it!r}: expected NAME=VALUE (PX4 names have <= 16 characters)")
+            raise ConfigError(
+                f"--set-param {it!r}: expected NAME=VALUE (PX4 names have <= 16 characters)"
+            )
         try:
             v = float(value)
         except ValueError:
@@ -197,7 +234,9 @@ def wait_for_vehicle(link, timeout: float, clock, sleep) -> None:
     raise SafetyError(f"no autopilot HEARTBEAT on {link.config.url} within {timeout:g} s")
 
 
-def set_params(link, params: Mapping[str, float], clock, sleep, timeout: float = 5.0) -> list[dict]:
+def set_params(
+    link, params: Mapping[str, float], clock, sleep, timeout: float = 5.0
+) -> list[dict]:
     """PARAM_SET each value (type from a PARAM_REQUEST_READ first) and wait for the
     vehicle's PARAM_VALUE echo with that value; SafetyError when one is not confirmed."""
     from lpv_sysid.mavlink import px4
@@ -217,26 +256,39 @@ def set_params(link, params: Mapping[str, float], clock, sleep, timeout: float =
                 if px4.param_id_str(m.param_id) != name:
                     continue
                 v = px4.param_from_wire(m.param_value, m.param_type)
-                same = math.isclose(float(v), value, rel_tol=1e-6, abs_tol=1e-6)   # float32 on the wire
+                same = math.isclose(
+                    float(v), value, rel_tol=1e-6, abs_tol=1e-6
+                )  # float32 on the wire
                 if ptype is None:
                     ptype, old = int(m.param_type), v
-                    confirmed = same                 # already set: nothing to change
+                    confirmed = same  # already set: nothing to change
                 elif sent_set > -math.inf and same:
                     confirmed = True
             link.step(now)
             if ptype is None and now - sent_read >= 0.5:
                 sent_read = now
-                link.send(link.codec.param_request_read_encode(link.target_system, link.target_component,
-                                                               name.encode("ascii"), -1))
+                link.send(
+                    link.codec.param_request_read_encode(
+                        link.target_system, link.target_component, name.encode("ascii"), -1
+                    )
+                )
             elif ptype is not None and not confirmed and now - sent_set >= 0.5:
                 sent_set = now
-                link.send(link.codec.param_set_encode(link.target_system, link.target_component,
-                                                      name.encode("ascii"), px4.param_to_wire(value, ptype),
-                                                      ptype))
+                link.send(
+                    link.codec.param_set_encode(
+                        link.target_system,
+                        link.target_component,
+                        name.encode("ascii"),
+                        px4.param_to_wire(value, ptype),
+                        ptype,
+                    )
+                )
             sleep(0.005)
         if not confirmed:
             what = "unknown parameter or no answer" if ptype is None else f"vehicle kept {old}"
-            raise SafetyError(f"PARAM_SET {name}={value:g} not confirmed within {timeout:g} s ({what})")
+            raise SafetyError(
+                f"PARAM_SET {name}={value:g} not confirmed within {timeout:g} s ({what})"
+            )
         done.append({"name": name, "old": old, "new": value})
     return done
 
@@ -245,8 +297,15 @@ def set_params(link, params: Mapping[str, float], clock, sleep, timeout: float =
 class CampaignRecorder:
     """One rosbag2 per run (the runs recorder, split at each run) + the whole flight."""
 
-    def __init__(self, out_dir: Path, storage: str, flight_log: bool, config_files=(), description="",
-                 rate_setpoints: bool = False) -> None:
+    def __init__(
+        self,
+        out_dir: Path,
+        storage: str,
+        flight_log: bool,
+        config_files=(),
+        description="",
+        rate_setpoints: bool = False,
+    ) -> None:
         from lpv_sysid.io import messages as M
         from lpv_sysid.io.recorder import Recorder, RecorderConfig
 
@@ -254,14 +313,30 @@ class CampaignRecorder:
         self.f = M.MsgFactory.rosbags()
         topics = {f"{NAMESPACE}/{n}": M.TYPES[n] for n in TOPICS}
         if rate_setpoints:
-            topics[f"{NAMESPACE}/{RATE_TOPIC}"] = M.TYPES["actuator_command"]    # JointState
-        self.runs = Recorder(RecorderConfig(out_dir=str(out_dir), topics=topics, storage=storage,
-                                            config_files=tuple(config_files), description=description))
-        self.flight = (Recorder(RecorderConfig(out_dir=str(out_dir / "flight"), topics=topics, storage=storage,
-                                               description="whole flight (not a maneuver)"))
-                       if flight_log else None)
-        self.active: str | None = None          # run being recorded
-        self.bags: dict[str, str] = {}          # run name -> bag directory name
+            topics[f"{NAMESPACE}/{RATE_TOPIC}"] = M.TYPES["actuator_command"]  # JointState
+        self.runs = Recorder(
+            RecorderConfig(
+                out_dir=str(out_dir),
+                topics=topics,
+                storage=storage,
+                config_files=tuple(config_files),
+                description=description,
+            )
+        )
+        self.flight = (
+            Recorder(
+                RecorderConfig(
+                    out_dir=str(out_dir / "flight"),
+                    topics=topics,
+                    storage=storage,
+                    description="whole flight (not a maneuver)",
+                )
+            )
+            if flight_log
+            else None
+        )
+        self.active: str | None = None  # run being recorded
+        self.bags: dict[str, str] = {}  # run name -> bag directory name
         self.started = False
         self.error: str | None = None
 
@@ -294,7 +369,9 @@ class CampaignRecorder:
 
     def state(self, t: float, pos_ned, euler, v_body, omega) -> None:
         st = _ns(t)
-        self._write("state", st, self.M.odometry_from_state(self.f, st, pos_ned, euler, v_body, omega))
+        self._write(
+            "state", st, self.M.odometry_from_state(self.f, st, pos_ned, euler, v_body, omega)
+        )
 
     def imu(self, t: float, accel_frd, gyro_frd) -> None:
         st = _ns(t)
@@ -319,8 +396,9 @@ class CampaignRecorder:
     def status(self, t: float, level: str, message: str, values: Mapping[str, Any]) -> None:
         st = _ns(t)
         lv = {"info": "OK", "warn": "WARN", "error": "ERROR"}.get(level, level)
-        msg = self.M.diagnostic_array(self.f, st, [self.M.diagnostic_status(self.f, lv, "lpv_sysid/fly",
-                                                                             message, values)])
+        msg = self.M.diagnostic_array(
+            self.f, st, [self.M.diagnostic_status(self.f, lv, "lpv_sysid/fly", message, values)]
+        )
         self._write("status", st, msg)
 
     def close(self, now: float) -> list[str]:
@@ -350,8 +428,9 @@ def tap_attitude_target(link, callback: Callable[[float, Any], None]) -> None:
     def tapped(now, *a, **kw):
         msgs = poll(now, *a, **kw)
         for m in msgs:
-            if m.get_type() == "ATTITUDE_TARGET" and (not link.target_system
-                                                       or m.get_srcSystem() == link.target_system):
+            if m.get_type() == "ATTITUDE_TARGET" and (
+                not link.target_system or m.get_srcSystem() == link.target_system
+            ):
                 got = rate_setpoint_from_attitude_target(m)
                 if got is not None:
                     callback(now, got[1])
@@ -363,7 +442,7 @@ def tap_attitude_target(link, callback: Callable[[float, Any], None]) -> None:
 # =============================================================================== runner
 @dataclass
 class FlyResult:
-    status: int                      # exit status
+    status: int  # exit status
     phase: str
     reason: str
     summary: dict = field(default_factory=dict)
@@ -373,9 +452,17 @@ class FlyResult:
 class FlightRunner:
     """Drives bridge + campaign + recorder on ``clock`` (see module docstring)."""
 
-    def __init__(self, bridge, campaign, recorder: CampaignRecorder | None, clock: Callable[[], float],
-                 sleep: Callable[[float], None], period: float = 0.005, status_period: float = 1.0,
-                 echo: Callable[[str], None] | None = None) -> None:
+    def __init__(
+        self,
+        bridge,
+        campaign,
+        recorder: CampaignRecorder | None,
+        clock: Callable[[], float],
+        sleep: Callable[[float], None],
+        period: float = 0.005,
+        status_period: float = 1.0,
+        echo: Callable[[str], None] | None = None,
+    ) -> None:
         self.bridge = bridge
         self.campaign = campaign
         self.rec = recorder
@@ -400,7 +487,9 @@ class FlightRunner:
         self._interrupt_name = signal.Signals(signo).name
 
     def _event(self, t: float, source: str, level: str, message: str, show: bool = False) -> None:
-        self.events.append({"t": round(t - self.t0, 3), "source": source, "level": level, "message": message})
+        self.events.append(
+            {"t": round(t - self.t0, 3), "source": source, "level": level, "message": message}
+        )
         if level != "info" or source == "campaign" or show:
             self.echo(f"[{t - self.t0:8.2f} s] {source}: {message}")
         if self.rec is not None and self.rec.started:
@@ -410,10 +499,15 @@ class FlightRunner:
         c = self.campaign
         run = c.run
         st = self.bridge.machine
-        d = {"phase": c.phase, "run": run.name if run is not None and c.phase in ("settle", "trim", "excitation")
-             else "", "bridge_state": st.state.value,
-             "vehicle_mode": st.vehicle_mode.name if st.vehicle_mode is not None else "unknown",
-             "armed": st.armed}
+        d = {
+            "phase": c.phase,
+            "run": run.name
+            if run is not None and c.phase in ("settle", "trim", "excitation")
+            else "",
+            "bridge_state": st.state.value,
+            "vehicle_mode": st.vehicle_mode.name if st.vehicle_mode is not None else "unknown",
+            "armed": st.armed,
+        }
         if run is not None and c.phase in ("trim", "excitation"):
             d["v_d"] = " ".join(f"{x:g}" for x in run.vertex)
             res = c.results[-1] if c.results else None
@@ -437,10 +531,15 @@ class FlightRunner:
         env = self.bridge.envelope
         v = env.violation
         confirmed = getattr(m, "confirmed_mode", None)
-        return VehicleStatus(m.state.value, m.reason, m.vehicle_mode.name if m.vehicle_mode is not None else None,
-                             bool(m.armed), env.home if env.home is not None else None,
-                             f"{v.kind}: {v.message}" if v is not None else None,
-                             confirmed.name if confirmed is not None else None)
+        return VehicleStatus(
+            m.state.value,
+            m.reason,
+            m.vehicle_mode.name if m.vehicle_mode is not None else None,
+            bool(m.armed),
+            env.home if env.home is not None else None,
+            f"{v.kind}: {v.message}" if v is not None else None,
+            confirmed.name if confirmed is not None else None,
+        )
 
     # ------------------------------------------------------------------ loop
     def run(self) -> None:
@@ -460,15 +559,25 @@ class FlightRunner:
             if gap > warn_gap:
                 # the computer did not keep up (load, swapping): PX4 got no setpoints meanwhile
                 self.late_loops += 1
-                self._event(now, "runner", "warn", f"loop stalled {gap:.3f} s (> {warn_gap:.3f} s = half the "
-                                                   "bridge input_timeout): the companion computer is overloaded")
+                self._event(
+                    now,
+                    "runner",
+                    "warn",
+                    f"loop stalled {gap:.3f} s (> {warn_gap:.3f} s = half the "
+                    "bridge input_timeout): the companion computer is overloaded",
+                )
             if self.interrupts > self._interrupts_handled and c.phase not in C.TERMINAL:
                 self._interrupts_handled = self.interrupts
                 if self.interrupts >= 2:
                     self._bridge_events(now, b.shutdown(now))
                     self.gave_up = True
-                    self._event(now, "campaign", "error", "interrupted twice: stopped waiting for the "
-                                "hand-back confirmation (HAND-BACK NOT CONFIRMED)")
+                    self._event(
+                        now,
+                        "campaign",
+                        "error",
+                        "interrupted twice: stopped waiting for the "
+                        "hand-back confirmation (HAND-BACK NOT CONFIRMED)",
+                    )
                     break
                 c.abort(now, f"interrupted ({getattr(self, '_interrupt_name', 'SIGINT')})")
             out = b.poll(now)
@@ -476,7 +585,9 @@ class FlightRunner:
                 if isinstance(s, StateSample):
                     c.on_state(s)
                     if self.rec is not None:
-                        self._safe(lambda s=s: self.rec.state(s.t, s.pos_ned, s.euler, s.v_body, s.omega))
+                        self._safe(
+                            lambda s=s: self.rec.state(s.t, s.pos_ned, s.euler, s.v_body, s.omega)
+                        )
                 elif isinstance(s, RotorSample):
                     c.on_rotor(s.t, s.omega)
                     src = getattr(s, "source", "esc")
@@ -490,10 +601,13 @@ class FlightRunner:
             self._handle(now, co)
             if self.rec is not None and now >= self._next_status:
                 self._next_status = now + self.status_period
-                self._safe(lambda: self.rec.status(now, "info", f"campaign {c.phase}", self._values()))
+                self._safe(
+                    lambda: self.rec.status(now, "info", f"campaign {c.phase}", self._values())
+                )
             self.sleep(max(0.0, self.period - (self.clock() - t_loop)))
         from lpv_sysid.mavlink.offboard import STREAMING
-        if b.machine.state in STREAMING:          # never leave a stream behind
+
+        if b.machine.state in STREAMING:  # never leave a stream behind
             self.drain_handback(c.cfg.handback_timeout)
 
     def _bridge_events(self, now: float, events) -> None:
@@ -526,8 +640,12 @@ class FlightRunner:
                 b.envelope.activate_floor(now, a.reason)
             elif isinstance(a, C.RunStarted):
                 if self.rec is not None:
-                    self._safe(lambda a=a: self.echo(f"[{now - self.t0:8.2f} s] recording {a.run.name} -> "
-                                                     f"{self.rec.begin_run(a.run.name)}"))
+                    self._safe(
+                        lambda a=a: self.echo(
+                            f"[{now - self.t0:8.2f} s] recording {a.run.name} -> "
+                            f"{self.rec.begin_run(a.run.name)}"
+                        )
+                    )
             elif isinstance(a, C.RunEnded):
                 if self.rec is not None:
                     self.rec.end_run()
@@ -550,12 +668,15 @@ class FlightRunner:
                 if hasattr(s, "v_body"):
                     self.campaign.on_state(s)
             self._bridge_events(now, out.events)
-            if self.campaign.state is not None and b.machine.vehicle_mode is not None and (
-                    b.envelope.home_position is not None or not b.machine.armed):
-                return                # disarmed: the home is where PX4 arms (envelope docstring)
+            if (
+                self.campaign.state is not None
+                and b.machine.vehicle_mode is not None
+                and (b.envelope.home_position is not None or not b.machine.armed)
+            ):
+                return  # disarmed: the home is where PX4 arms (envelope docstring)
             if now >= next_req:
                 next_req = now + 1.0
-                b.link.command_long(512, 242.0)      # MAV_CMD_REQUEST_MESSAGE HOME_POSITION
+                b.link.command_long(512, 242.0)  # MAV_CMD_REQUEST_MESSAGE HOME_POSITION
             self.sleep(self.period)
 
     def drain_handback(self, timeout: float) -> None:
@@ -573,11 +694,20 @@ class FlightRunner:
 
 
 # =============================================================================== fly()
-def fly(cfg: FlyConfig, url: str | None, out_dir: str | Path, signals: str | None = None,
-        params: Mapping[str, float] | None = None, clock: Callable[[], float] = time.monotonic,
-        sleep: Callable[[float], None] = time.sleep, echo: Callable[[str], None] = print,
-        handle_signals: bool = True, preflight: bool = True, link=None,
-        record_rate_setpoints: bool = False) -> FlyResult:
+def fly(
+    cfg: FlyConfig,
+    url: str | None,
+    out_dir: str | Path,
+    signals: str | None = None,
+    params: Mapping[str, float] | None = None,
+    clock: Callable[[], float] = time.monotonic,
+    sleep: Callable[[float], None] = time.sleep,
+    echo: Callable[[str], None] = print,
+    handle_signals: bool = True,
+    preflight: bool = True,
+    link=None,
+    record_rate_setpoints: bool = False,
+) -> FlyResult:
     """The whole CLI sequence of the module docstring (also used by the tests with a
     simulated clock); returns the exit status and the summary. Bad input raises
     :class:`~lpv_sysid.errors.ConfigError` before anything is sent to the vehicle.
@@ -600,17 +730,24 @@ def fly(cfg: FlyConfig, url: str | None, out_dir: str | Path, signals: str | Non
     prof = ExcitationProfile.from_table(*table, ramp=ccfg.ramp_s, periods=ccfg.periods)
     plan = plan_campaign(ccfg, prof, bcfg.envelope)
     ident_template = _identification_template(cfg.identification_config)
-    echo(f"fly phase1: {len(plan.runs)} runs, excitation {prof.duration:.1f} s (peaks u v w "
-         f"{' '.join(f'{p:.2f}' for p in prof.peak)} m/s, r {prof.yaw_peak:.2f} rad/s), window "
-         f"[{ccfg.altitude_min:g}, {ccfg.altitude_max:g}] m, envelope floor {bcfg.envelope.floor:g} m "
-         f"ceiling {bcfg.envelope.ceiling:g} m radius {bcfg.envelope.radius:g} m")
+    echo(
+        f"fly phase1: {len(plan.runs)} runs, excitation {prof.duration:.1f} s (peaks u v w "
+        f"{' '.join(f'{p:.2f}' for p in prof.peak)} m/s, r {prof.yaw_peak:.2f} rad/s), window "
+        f"[{ccfg.altitude_min:g}, {ccfg.altitude_max:g}] m, envelope floor {bcfg.envelope.floor:g} m "
+        f"ceiling {bcfg.envelope.ceiling:g} m radius {bcfg.envelope.radius:g} m"
+    )
     echo(plan.describe())
 
     bridge = BridgeCore(bcfg, link=link)
     bridge.open(clock())
-    summary: dict = {"connect": bcfg.link.url, "config": cfg.source, "signals": signals or cfg.signals_config}
-    runner = FlightRunner(bridge, Campaign(plan, table), None, clock, sleep, cfg.loop_period,
-                          cfg.status_period, echo)
+    summary: dict = {
+        "connect": bcfg.link.url,
+        "config": cfg.source,
+        "signals": signals or cfg.signals_config,
+    }
+    runner = FlightRunner(
+        bridge, Campaign(plan, table), None, clock, sleep, cfg.loop_period, cfg.status_period, echo
+    )
     previous_handlers: dict = {}
     try:
         wait_for_vehicle(bridge.link, cfg.link_timeout, clock, sleep)
@@ -623,26 +760,42 @@ def fly(cfg: FlyConfig, url: str | None, out_dir: str | Path, signals: str | Non
         if preflight:
             from lpv_sysid.mavlink import preflight as pf
 
-            checks = pf.run_checks(bridge.link, timeout=cfg.preflight_timeout, clock=clock, sleep=sleep,
-                                   rotor_estimate=bcfg.rotor_estimate)
+            checks = pf.run_checks(
+                bridge.link,
+                timeout=cfg.preflight_timeout,
+                clock=clock,
+                sleep=sleep,
+                rotor_estimate=bcfg.rotor_estimate,
+            )
             echo(pf.format_table(checks))
             summary["preflight"] = [dataclasses.asdict(c) for c in checks]
             if not pf.verdict(checks):
-                bad = [f"{c.name} ({c.value}{': ' + c.note if c.note else ''})" for c in checks
-                       if c.verdict == pf.NOGO]
+                bad = [
+                    f"{c.name} ({c.value}{': ' + c.note if c.note else ''})"
+                    for c in checks
+                    if c.verdict == pf.NOGO
+                ]
                 reason = "preflight NO-GO, not flying: " + "; ".join(bad)
                 echo(f"fly phase1: {reason}")
                 return FlyResult(EXIT_FAILED, "idle", reason, summary)
-        rec = CampaignRecorder(out, cfg.storage, cfg.flight_log,
-                               config_files=[p for p in (cfg.source, cfg.bridge_config) if p and Path(p).is_file()],
-                               description=f"lpv-sysid fly phase1 on {bcfg.link.url}: one bag per run, "
-                                           "see campaign_summary.yaml", rate_setpoints=record_rate_setpoints)
+        rec = CampaignRecorder(
+            out,
+            cfg.storage,
+            cfg.flight_log,
+            config_files=[p for p in (cfg.source, cfg.bridge_config) if p and Path(p).is_file()],
+            description=f"lpv-sysid fly phase1 on {bcfg.link.url}: one bag per run, "
+            "see campaign_summary.yaml",
+            rate_setpoints=record_rate_setpoints,
+        )
         rec.start(clock())
         runner.rec = rec
         if record_rate_setpoints:
-            tap_attitude_target(bridge.link, lambda t, u: runner._safe(lambda: rec.rate_setpoint(t, u)))
+            tap_attitude_target(
+                bridge.link, lambda t, u: runner._safe(lambda: rec.rate_setpoint(t, u))
+            )
         (out / "signals").mkdir(exist_ok=True)
         from lpv_sysid.signals.store import save_npz
+
         save_npz(str(out / "signals" / "signals.npz"), *table)
         if handle_signals and threading.current_thread() is threading.main_thread():
             for s in (signal.SIGINT, signal.SIGTERM):
@@ -662,8 +815,11 @@ def fly(cfg: FlyConfig, url: str | None, out_dir: str | Path, signals: str | Non
     summary.update(c.summary())
     summary["bags"] = dict(runner.rec.bags) if runner.rec is not None else {}
     summary["rotor_speeds_source"] = dict(runner.rotor_sources)
-    summary["runner"] = {"max_loop_gap_s": round(runner.max_gap, 4), "stalled_loops": runner.late_loops,
-                         "loop_period_s": cfg.loop_period}
+    summary["runner"] = {
+        "max_loop_gap_s": round(runner.max_gap, 4),
+        "stalled_loops": runner.late_loops,
+        "loop_period_s": cfg.loop_period,
+    }
     summary["bridge_status"] = bridge.status(clock())
     summary["events"] = runner.events
     if close_errors:
@@ -672,8 +828,14 @@ def fly(cfg: FlyConfig, url: str | None, out_dir: str | Path, signals: str | Non
     echo(format_results(summary))
     if runner.gave_up:
         summary["result"], summary["ok"] = "failed", False
-        summary["reason"] = (c.reason + "; " if c.reason else "") + "hand-back NOT confirmed (interrupted twice)"
-    status = 0 if c.ok and not runner.gave_up else (EXIT_INTERRUPTED if runner.interrupts else EXIT_FAILED)
+        summary["reason"] = (
+            c.reason + "; " if c.reason else ""
+        ) + "hand-back NOT confirmed (interrupted twice)"
+    status = (
+        0
+        if c.ok and not runner.gave_up
+        else (EXIT_INTERRUPTED if runner.interrupts else EXIT_FAILED)
+    )
     if close_errors:
         status = status or EXIT_FAILED
     return FlyResult(status, summary["result"], summary["reason"], summary, str(out))
@@ -704,12 +866,15 @@ def _write_outputs(out: Path, summary: dict, c, ident_template: dict, plan, trim
     sect["vmin"] = [float(x) for x in cfg.box_min]
     sect["vmax"] = [float(x) for x in cfg.box_max]
     sect["trim_duration"] = float(cfg.trim_s)
-    sect["trim_average"] = float(min(sect.get("trim_average", cfg.trim_average_s), cfg.trim_average_s))
+    sect["trim_average"] = float(
+        min(sect.get("trim_average", cfg.trim_average_s), cfg.trim_average_s)
+    )
     ident["identification"] = sect
     (out / "identification.yaml").write_text(
         "# written by `lpv-sysid fly phase1`: the identification config with the campaign's box and\n"
         f"# trim duration; lpv-sysid identify --bags {out} --config {out / 'identification.yaml'} --out "
-        "vertex_models.yaml\n" + yaml.safe_dump(ident, sort_keys=False))
+        "vertex_models.yaml\n" + yaml.safe_dump(ident, sort_keys=False)
+    )
 
 
 def _plain(x):
@@ -734,8 +899,10 @@ def format_results(summary: dict) -> str:
     hb = summary.get("handback") or {}
     if hb.get("duration_s") is not None:
         lines.append(f"hand-back: {hb['duration_s']:.2f} s -> {hb.get('mode')}")
-    lines.append(f"{'run':<22} {'bag':<9} {'settle [s]':>10} {'rms u':>7} {'rms v':>7} {'rms w':>7} "
-                 f"{'rms r':>7}  achieved (command frame) [m/s]")
+    lines.append(
+        f"{'run':<22} {'bag':<9} {'settle [s]':>10} {'rms u':>7} {'rms v':>7} {'rms w':>7} "
+        f"{'rms r':>7}  achieved (command frame) [m/s]"
+    )
     bags = summary.get("bags") or {}
     for r in summary.get("runs") or []:
         rms = r.get("tracking_rms") or {}
@@ -743,12 +910,15 @@ def format_results(summary: dict) -> str:
         def f(k):
             v = rms.get(k)
             return f"{v:7.3f}" if v is not None else f"{'-':>7}"
+
         st = r.get("settle_time_s")
         settle = f"{st:10.2f}" if st is not None else f"{'-':>10}"
         ach = " ".join(f"{v:+.2f}" for v in r.get("achieved_frame") or [] if v is not None)
         tag = "" if r.get("complete") else f"  INCOMPLETE: {r.get('reason')}"
         bag = bags.get(r["name"], "-")
-        lines.append(f"{r['name']:<22} {bag:<9} {settle} {f('u')} {f('v')} {f('w')} {f('r')}  {ach}{tag}")
+        lines.append(
+            f"{r['name']:<22} {bag:<9} {settle} {f('u')} {f('v')} {f('w')} {f('r')}  {ach}{tag}"
+        )
     return "\n".join(lines)
 
 
@@ -756,46 +926,93 @@ def format_results(summary: dict) -> str:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     modes = parser.add_subparsers(dest="mode", metavar="MODE")
     modes.required = True
-    p = modes.add_parser("phase1", help="phase-1 campaign: take-off, every vertex + hover validation, land",
-                         description="Arm and take off in OFFBOARD, fly every vertex of the body-velocity "
-                                     "box (settle, trim, phase-1 multisine) and the hover validation run, "
-                                     "then HOLD or LAND; one rosbag2 per run for `lpv-sysid identify`. "
-                                     "Preflight NO-GO refuses to fly; Ctrl-C hands control back.")
-    p.add_argument("--connect", required=True, metavar="URL",
-                   help="MAVLink URL, e.g. udpin:127.0.0.1:14540 (PX4 SITL) or /dev/ttyAMA0:921600")
+    p = modes.add_parser(
+        "phase1",
+        help="phase-1 campaign: take-off, every vertex + hover validation, land",
+        description="Arm and take off in OFFBOARD, fly every vertex of the body-velocity "
+        "box (settle, trim, phase-1 multisine) and the hover validation run, "
+        "then HOLD or LAND; one rosbag2 per run for `lpv-sysid identify`. "
+        "Preflight NO-GO refuses to fly; Ctrl-C hands control back.",
+    )
+    p.add_argument(
+        "--connect",
+        required=True,
+        metavar="URL",
+        help="MAVLink URL, e.g. udpin:127.0.0.1:14540 (PX4 SITL) or /dev/ttyAMA0:921600",
+    )
     p.add_argument("--config", required=True, type=Path, help="config/campaign.yaml")
     p.add_argument("--out", required=True, type=Path, help="output directory (new or empty)")
-    p.add_argument("--signals", default=None, help="phase-1 signals.npz (`lpv-sysid signals`); "
-                                                    "default: designed from the config's signals_config")
-    p.add_argument("--set-param", action="append", default=[], metavar="NAME=VALUE",
-                   help="PARAM_SET before preflight, confirmed by the vehicle (repeatable), "
-                        "e.g. COM_OBL_RC_ACT=5 on a SITL without RC")
-    p.add_argument("--dry-run", action="store_true", help="load and plan only; print the plan and exit")
-    p2 = modes.add_parser("phase2", help="phase-2 flight under the LPV law (rate plant) on a vehicle in the air",
-                          description="Take the armed, airborne vehicle (e.g. in HOLD after `fly phase1` with "
-                                      "finish: HOLD) into OFFBOARD with the LPV law's thrust + body-rate "
-                                      "setpoints (rate plant, lpv_sysid/cli/chain.py), fly the phase-2 signal, "
-                                      "hand back (LAND); bag, phase2_summary.yaml with the measured u_e -> z gain.")
+    p.add_argument(
+        "--signals",
+        default=None,
+        help="phase-1 signals.npz (`lpv-sysid signals`); "
+        "default: designed from the config's signals_config",
+    )
+    p.add_argument(
+        "--set-param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="PARAM_SET before preflight, confirmed by the vehicle (repeatable), "
+        "e.g. COM_OBL_RC_ACT=5 on a SITL without RC",
+    )
+    p.add_argument(
+        "--dry-run", action="store_true", help="load and plan only; print the plan and exit"
+    )
+    p2 = modes.add_parser(
+        "phase2",
+        help="phase-2 flight under the LPV law (rate plant) on a vehicle in the air",
+        description="Take the armed, airborne vehicle (e.g. in HOLD after `fly phase1` with "
+        "finish: HOLD) into OFFBOARD with the LPV law's thrust + body-rate "
+        "setpoints (rate plant, lpv_sysid/cli/chain.py), fly the phase-2 signal, "
+        "hand back (LAND); bag, phase2_summary.yaml with the measured u_e -> z gain.",
+    )
     p2.add_argument("--connect", required=True, metavar="URL", help="MAVLink URL")
-    p2.add_argument("--gains", required=True, help="rate-plant gains.yaml (lpv-sysid chain / synthesize)")
-    p2.add_argument("--models", default=None, help="vertex_models.yaml the gains were designed for (checked)")
-    p2.add_argument("--signals", required=True, help="phase-2 signals directory (lpv-sysid signals)")
-    p2.add_argument("--bridge-config", default=None, help="bridge config (default config/mavlink_bridge_chain.yaml)")
+    p2.add_argument(
+        "--gains", required=True, help="rate-plant gains.yaml (lpv-sysid chain / synthesize)"
+    )
+    p2.add_argument(
+        "--models", default=None, help="vertex_models.yaml the gains were designed for (checked)"
+    )
+    p2.add_argument(
+        "--signals", required=True, help="phase-2 signals directory (lpv-sysid signals)"
+    )
+    p2.add_argument(
+        "--bridge-config",
+        default=None,
+        help="bridge config (default config/mavlink_bridge_chain.yaml)",
+    )
     p2.add_argument("--out", required=True, type=Path, help="output directory (new or empty)")
-    p2.add_argument("--kappa", type=float, default=1.0, help="excitation multiplier (seed 0 Eq. 33)")
-    p2.add_argument("--finish", default="LAND", choices=("LAND", "HOLD"), help="mode after the signal")
-    p.add_argument("--record-rate-setpoints", action="store_true",
-                   help="also record PX4's ATTITUDE_TARGET (thrust + body-rate setpoints) on rate_setpoint "
-                        "(rate-plant identification; request the stream, e.g. config/mavlink_bridge_chain.yaml)")
+    p2.add_argument(
+        "--kappa", type=float, default=1.0, help="excitation multiplier (seed 0 Eq. 33)"
+    )
+    p2.add_argument(
+        "--finish", default="LAND", choices=("LAND", "HOLD"), help="mode after the signal"
+    )
+    p.add_argument(
+        "--record-rate-setpoints",
+        action="store_true",
+        help="also record PX4's ATTITUDE_TARGET (thrust + body-rate setpoints) on rate_setpoint "
+        "(rate-plant identification; request the stream, e.g. config/mavlink_bridge_chain.yaml)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     if args.mode == "phase2":
         from lpv_sysid.cli.chain import Phase2Options, fly_phase2
 
-        s = fly_phase2(args.gains, args.signals, args.out, url=args.connect, models=args.models,
-                       bridge_config=args.bridge_config, opts=Phase2Options(kappa=args.kappa, finish=args.finish))
-        print(f"phase 2 {'complete' if s.get('ok') else 'FAILED'}: {s.get('reason')}; {args.out / 'phase2_summary.yaml'}")
+        s = fly_phase2(
+            args.gains,
+            args.signals,
+            args.out,
+            url=args.connect,
+            models=args.models,
+            bridge_config=args.bridge_config,
+            opts=Phase2Options(kappa=args.kappa, finish=args.finish),
+        )
+        print(
+            f"phase 2 {'complete' if s.get('ok') else 'FAILED'}: {s.get('reason')}; {args.out / 'phase2_summary.yaml'}"
+        )
         return 0 if s.get("ok") else EXIT_FAILED
     cfg = FlyConfig.load(args.config)
     if args.dry_run:
@@ -803,18 +1020,30 @@ def run(args: argparse.Namespace) -> int:
 
         bcfg = bridge_config_for(cfg.bridge_config, args.connect, cfg.campaign)
         table = load_signals(args.signals, cfg.signals_config)
-        prof = ExcitationProfile.from_table(*table, ramp=cfg.campaign.ramp_s, periods=cfg.campaign.periods)
+        prof = ExcitationProfile.from_table(
+            *table, ramp=cfg.campaign.ramp_s, periods=cfg.campaign.periods
+        )
         print(plan_campaign(cfg.campaign, prof, bcfg.envelope).describe())
         return 0
-    res = fly(cfg, args.connect, args.out, signals=args.signals, params=parse_params(args.set_param),
-              record_rate_setpoints=args.record_rate_setpoints)
+    res = fly(
+        cfg,
+        args.connect,
+        args.out,
+        signals=args.signals,
+        params=parse_params(args.set_param),
+        record_rate_setpoints=args.record_rate_setpoints,
+    )
     if res.status:
         import sys
 
         print(f"lpv-sysid fly: {res.phase}: {res.reason}", file=sys.stderr)
     else:
-        print(f"wrote {res.out_dir}: {len(res.summary.get('bags', {}))} bags, campaign_summary.yaml, "
-              f"trims.yaml, identification.yaml")
-        print(f"next: lpv-sysid identify --bags {res.out_dir} --config {Path(res.out_dir) / 'identification.yaml'} "
-              f"--out vertex_models.yaml")
+        print(
+            f"wrote {res.out_dir}: {len(res.summary.get('bags', {}))} bags, campaign_summary.yaml, "
+            f"trims.yaml, identification.yaml"
+        )
+        print(
+            f"next: lpv-sysid identify --bags {res.out_dir} --config {Path(res.out_dir) / 'identification.yaml'} "
+            f"--out vertex_models.yaml"
+        )
     return res.status

@@ -17,14 +17,28 @@ HELP = "identify the uncertain vertex LTI models from phase-1 bags (seed 0 Sec. 
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--bags", required=True, type=Path, help="directory holding one rosbag2 per maneuver")
-    parser.add_argument("--config", type=Path, default=None,
-                        help="identification YAML (default: built-in values = config/identification.yaml)")
+    parser.add_argument(
+        "--bags", required=True, type=Path, help="directory holding one rosbag2 per maneuver"
+    )
+    parser.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        help="identification YAML (default: built-in values = config/identification.yaml)",
+    )
     parser.add_argument("--out", required=True, type=Path, help="vertex_models.yaml to write")
-    parser.add_argument("--plot", type=Path, default=None,
-                        help="validation figure (default: next to --out, <stem>_validation.png)")
-    parser.add_argument("--quadrotor", type=Path, default=None,
-                        help="config/quadrotor.yaml: vehicle parameters for the known elements")
+    parser.add_argument(
+        "--plot",
+        type=Path,
+        default=None,
+        help="validation figure (default: next to --out, <stem>_validation.png)",
+    )
+    parser.add_argument(
+        "--quadrotor",
+        type=Path,
+        default=None,
+        help="config/quadrotor.yaml: vehicle parameters for the known elements",
+    )
 
 
 def load_config(path: Path | None):
@@ -34,7 +48,7 @@ def load_config(path: Path | None):
 
     if path is None:
         return IdentificationConfig()
-    d = read_yaml_mapping(path)     # an explicitly given empty or non-mapping file is an error
+    d = read_yaml_mapping(path)  # an explicitly given empty or non-mapping file is an error
     try:
         return IdentificationConfig.from_dict(d)
     except ConfigError as exc:
@@ -58,8 +72,10 @@ def quadrotor_section(path: Path | None) -> dict:
 def format_r2_table(results) -> str:
     from lpv_sysid.ident.metrics import AXES
 
-    lines = ["LTI equation-error coefficient of determination R^2 [%] (seed 0 Table 2)",
-             f"{'Nominal vertex':>18} " + " ".join(f"{a:>7}" for a in AXES)]
+    lines = [
+        "LTI equation-error coefficient of determination R^2 [%] (seed 0 Table 2)",
+        f"{'Nominal vertex':>18} " + " ".join(f"{a:>7}" for a in AXES),
+    ]
     for r in results:
         vtx = "[" + " ".join(f"{c:+g}" for c in r.scheduling) + "]"
         lines.append(f"{vtx:>18} " + " ".join(f"{100 * r.r2_axes[a]:7.1f}" for a in AXES))
@@ -69,11 +85,14 @@ def format_r2_table(results) -> str:
 def format_validation_table(val: dict) -> str:
     from lpv_sysid.ident.metrics import AXES
 
-    return "\n".join([
-        "LPV model validation metrics (seed 0 Table 3)",
-        f"{'Axis':>6} " + " ".join(f"{a:>7}" for a in AXES),
-        f"{'TIC':>6} " + " ".join(f"{val['tic'][a]:7.3f}" for a in AXES),
-        f"{'NRMSE':>6} " + " ".join(f"{val['nrmse'][a]:7.3f}" for a in AXES)])
+    return "\n".join(
+        [
+            "LPV model validation metrics (seed 0 Table 3)",
+            f"{'Axis':>6} " + " ".join(f"{a:>7}" for a in AXES),
+            f"{'TIC':>6} " + " ".join(f"{val['tic'][a]:7.3f}" for a in AXES),
+            f"{'NRMSE':>6} " + " ".join(f"{val['nrmse'][a]:7.3f}" for a in AXES),
+        ]
+    )
 
 
 def format_offset_table(results) -> str:
@@ -81,8 +100,10 @@ def format_offset_table(results) -> str:
     the vertex models are re-expanded about the equilibrium instead)."""
     from lpv_sysid.ident.metrics import AXES
 
-    lines = ["Identified state derivative at the flown trim mean (not an equilibrium)",
-             f"{'Vertex':>18} " + " ".join(f"{a:>8}" for a in AXES)]
+    lines = [
+        "Identified state derivative at the flown trim mean (not an equilibrium)",
+        f"{'Vertex':>18} " + " ".join(f"{a:>8}" for a in AXES),
+    ]
     for r in results:
         if r.xdot_flown is not None:
             vtx = "[" + " ".join(f"{c:+g}" for c in r.scheduling) + "]"
@@ -95,22 +116,32 @@ def format_uncertainty_summary(results, cfg) -> str:
     from lpv_sysid.ident.equation_error import t_factor
     from lpv_sysid.ident.uncertainty import applied_k
 
-    lines = [f"uncertainty box of Eq. (22): every identified element, nominal +/- k std (k = "
-             f"{cfg.uncertainty.k_sigma:g}); std {cfg.covariance.method}"]
+    lines = [
+        f"uncertainty box of Eq. (22): every identified element, nominal +/- k std (k = "
+        f"{cfg.uncertainty.k_sigma:g}); std {cfg.covariance.method}"
+    ]
     for r in results:
         vtx = "[" + " ".join(f"{c:+g}" for c in r.scheduling) + "]"
         k = applied_k(cfg.uncertainty, len(r.uncertain.intervals))
         m = r.motor.get("mode", "known")
         if m == "identified":
-            mot = (f"a_Omega {-r.fit.A[8, 8]:.4g} +/- {r.fit.std_A[8, 8]:.2g}, b_Omega {r.fit.B[8, 0]:.5g} +/- "
-                   f"{r.fit.std_B[8, 0]:.3g}, latency {1e3 * r.motor.get('delay', 0.0):.3f} ms")
+            mot = (
+                f"a_Omega {-r.fit.A[8, 8]:.4g} +/- {r.fit.std_A[8, 8]:.2g}, b_Omega {r.fit.B[8, 0]:.5g} +/- "
+                f"{r.fit.std_B[8, 0]:.3g}, latency {1e3 * r.motor.get('delay', 0.0):.3f} ms"
+            )
         elif m == "prior":
             mot = f"a_Omega, b_Omega from the other maneuvers ({r.motor.get('reason', '')})"
         else:
             mot = f"a_Omega, b_Omega known ({r.motor.get('reason', '')})"
-        dof = "" if r.fit.dof is None else f", dof {r.fit.dof:.0f} (std x {t_factor(k, r.fit.dof):.3f})"
-        lines.append(f"{vtx:>18}: {len(r.uncertain.intervals)} elements{dof}; {mot}; reduced polytope "
-                     f"M_i = {r.uncertain.M} ({cfg.uncertainty.method}, p_max={cfg.uncertainty.p_max})")
+        dof = (
+            ""
+            if r.fit.dof is None
+            else f", dof {r.fit.dof:.0f} (std x {t_factor(k, r.fit.dof):.3f})"
+        )
+        lines.append(
+            f"{vtx:>18}: {len(r.uncertain.intervals)} elements{dof}; {mot}; reduced polytope "
+            f"M_i = {r.uncertain.M} ({cfg.uncertainty.method}, p_max={cfg.uncertainty.p_max})"
+        )
     return "\n".join(lines)
 
 
@@ -137,30 +168,44 @@ def run(args: argparse.Namespace) -> int:
         data = dataclasses.replace(aligned.vertex, scheduling=v_d)
         if np.allclose(v_d, centre):
             if validation is not None:
-                raise ConfigError(f"{bag}: second validation maneuver at the box centre "
-                                  f"(first: {validation.name})")
+                raise ConfigError(
+                    f"{bag}: second validation maneuver at the box centre "
+                    f"(first: {validation.name})"
+                )
             validation = data
             continue
         key = tuple(v_d)
         if key in vertices:
             raise ConfigError(f"{bag}: vertex {list(key)} already given by {vertices[key].name}")
         if aligned.input_source != "actuator_command":
-            print(f"{bag.name}: no actuator_command, input reconstructed from rotor speeds (Eq. 8)")
+            print(
+                f"{bag.name}: no actuator_command, input reconstructed from rotor speeds (Eq. 8)"
+            )
         vertices[key] = data
     missing = [c.tolist() for c in vx.box_corners(cfg) if tuple(c) not in vertices]
     if missing:
         raise ConfigError(f"{args.bags}: no maneuver for vertex/vertices {missing}")
     datas = list(vertices.values())
     results = vx.identify_vertices(datas, cfg)
-    results = [dataclasses.replace(res, validation=vx.in_sample_metrics(res, data, cfg))
-               for res, data in zip(results, datas)]
+    results = [
+        dataclasses.replace(res, validation=vx.in_sample_metrics(res, data, cfg))
+        for res, data in zip(results, datas)
+    ]
     results = [results[k] for k in vx.vertex_order(results, cfg)]
     print("Flight data vertex equilibria (seed 0 Table 1: the flown trim means)")
-    print(dp.format_table1([(r.scheduling, dp.trim_row(r.x_flown if r.x_flown is not None else r.x0))
-                            for r in results]))
+    print(
+        dp.format_table1(
+            [
+                (r.scheduling, dp.trim_row(r.x_flown if r.x_flown is not None else r.x0))
+                for r in results
+            ]
+        )
+    )
     if cfg.model == "taylor2" and cfg.equilibrium:
         print()
-        print("Equilibria of the identified models at the flown velocities (the models' x0, Eq. 13)")
+        print(
+            "Equilibria of the identified models at the flown velocities (the models' x0, Eq. 13)"
+        )
         print(dp.format_table1([(r.scheduling, dp.trim_row(r.x0)) for r in results]))
         print()
         print(format_offset_table(results))

@@ -19,20 +19,45 @@ HELP = "identify the nonlinear aerodynamic model (seed 0 Eq. 6) from flight bags
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--bags", required=True, type=Path,
-                        help="a rosbag2 directory, or a directory holding several")
+    parser.add_argument(
+        "--bags",
+        required=True,
+        type=Path,
+        help="a rosbag2 directory, or a directory holding several",
+    )
     parser.add_argument("--out", required=True, type=Path, help="YAML file to write")
-    parser.add_argument("--quadrotor", type=Path, default=None,
-                        help="config/quadrotor.yaml: mass, inertia, arm length, J_z (known constants)")
-    parser.add_argument("--config", type=Path, default=None,
-                        help="identification YAML (derivative settings, sample rate)")
-    parser.add_argument("--refine", action="store_true", help="output-error refinement (seed 2 Sec. 4)")
-    parser.add_argument("--segment", type=float, default=2.0, help="output-error segment length, s")
+    parser.add_argument(
+        "--quadrotor",
+        type=Path,
+        default=None,
+        help="config/quadrotor.yaml: mass, inertia, arm length, J_z (known constants)",
+    )
+    parser.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        help="identification YAML (derivative settings, sample rate)",
+    )
+    parser.add_argument(
+        "--refine", action="store_true", help="output-error refinement (seed 2 Sec. 4)"
+    )
+    parser.add_argument(
+        "--segment", type=float, default=2.0, help="output-error segment length, s"
+    )
     parser.add_argument("--max-segments", type=int, default=40, help="output-error segments used")
-    parser.add_argument("--max-nfev", type=int, default=60, help="output-error function evaluations")
-    parser.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
-                        help="hold a lumped parameter at a value (repeatable)")
-    parser.add_argument("--plot", type=Path, default=None, help="regressor-correlation figure (Fig. 10)")
+    parser.add_argument(
+        "--max-nfev", type=int, default=60, help="output-error function evaluations"
+    )
+    parser.add_argument(
+        "--fix",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="hold a lumped parameter at a value (repeatable)",
+    )
+    parser.add_argument(
+        "--plot", type=Path, default=None, help="regressor-correlation figure (Fig. 10)"
+    )
 
 
 def _params(path: Path | None):
@@ -119,14 +144,17 @@ def run(args: argparse.Namespace) -> int:
     for bag in bags:
         g = dp.resample(dp.streams_from_bag(bag), cfg.sample_rate)
         st = g["state"]
-        data, smoother, keep = nl.flight_data(g["t"], st[:, 0:3], st[:, 3:6], st[:, 6:9], g["Omega"],
-                                              cfg.derivatives, cfg.edge)
+        data, smoother, keep = nl.flight_data(
+            g["t"], st[:, 0:3], st[:, 3:6], st[:, 6:9], g["Omega"], cfg.derivatives, cfg.edge
+        )
         pieces.append((bag, data, smoother, keep))
         print(f"{bag.name}: {g['t'].size} samples, {g['t'][-1] - g['t'][0]:.1f} s")
     if not pieces:
         raise BagError(f"{args.bags}: no usable bags")
     # stack the records: regression per bag is combined by concatenating the filtered rows
-    res = nl.regression_stacked([(d, sm, kp) for _, d, sm, kp in pieces], params, cfg.max_lag, fixed)
+    res = nl.regression_stacked(
+        [(d, sm, kp) for _, d, sm, kp in pieces], params, cfg.max_lag, fixed
+    )
     print()
     print("Lumped parameters of seed 0 Eq. (6), equation-error regression")
     print(f"{'K':>12} {'estimate':>13} {'std':>11}")
@@ -136,26 +164,48 @@ def run(args: argparse.Namespace) -> int:
     print("Regressor correlation (seed 0 Fig. 10)")
     for a in res.axes.values():
         print(format_correlation(a))
-    doc = {"format": "lpv_sysid/nonlinear_model@1", "model": "seed 0 Eq. (6)",
-           "bags": [str(b) for b, *_ in pieces],
-           "K": {k: float(res.K[k]) for k in K_NAMES}, "std": {k: float(res.std[k]) for k in K_NAMES},
-           "fixed": fixed,
-           "axes": {a.axis: {"r2": float(a.r2), "regressors": list(a.labels), "parameters": list(a.names),
-                             "correlation": np.where(np.isfinite(a.correlation), a.correlation, 0.0).tolist()}
-                    for a in res.axes.values()}}
+    doc = {
+        "format": "lpv_sysid/nonlinear_model@1",
+        "model": "seed 0 Eq. (6)",
+        "bags": [str(b) for b, *_ in pieces],
+        "K": {k: float(res.K[k]) for k in K_NAMES},
+        "std": {k: float(res.std[k]) for k in K_NAMES},
+        "fixed": fixed,
+        "axes": {
+            a.axis: {
+                "r2": float(a.r2),
+                "regressors": list(a.labels),
+                "parameters": list(a.names),
+                "correlation": np.where(np.isfinite(a.correlation), a.correlation, 0.0).tolist(),
+            }
+            for a in res.axes.values()
+        },
+    }
     if args.refine:
         bag, data, sm_sel, _ = max(pieces, key=lambda p: p[1].t.size)
         free = tuple(k for k in K_NAMES if k not in fixed)
-        oe = nl.output_error(data, params, res.K, nl.OutputErrorConfig(args.segment, args.max_segments,
-                                                                       args.max_nfev, free), res.std, sm_sel)
+        oe = nl.output_error(
+            data,
+            params,
+            res.K,
+            nl.OutputErrorConfig(args.segment, args.max_segments, args.max_nfev, free),
+            res.std,
+            sm_sel,
+        )
         print()
         print(f"Output-error refinement on {bag.name} (seed 2 Sec. 4): cost {oe.cost:.4g}")
         print(f"{'K':>12} {'regression':>13} {'refined':>13} {'std':>11}")
         for k in free:
-            print(f"{k:>12} {res.K[k]:13.5e} {oe.K[k]:13.5e} {oe.refined_std.get(k, float('nan')):11.3e}")
-        doc["refined"] = {"method": "output error, short segments (seed 2 Sec. 4)", "cost": oe.cost,
-                          "segment_s": args.segment, "K": {k: float(oe.K[k]) for k in K_NAMES},
-                          "std": {k: float(v) for k, v in oe.refined_std.items()}}
+            print(
+                f"{k:>12} {res.K[k]:13.5e} {oe.K[k]:13.5e} {oe.refined_std.get(k, float('nan')):11.3e}"
+            )
+        doc["refined"] = {
+            "method": "output error, short segments (seed 2 Sec. 4)",
+            "cost": oe.cost,
+            "segment_s": args.segment,
+            "K": {k: float(oe.K[k]) for k in K_NAMES},
+            "std": {k: float(v) for k, v in oe.refined_std.items()},
+        }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     try:
         args.out.write_text(yaml.safe_dump(doc, sort_keys=False))

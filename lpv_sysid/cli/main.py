@@ -101,7 +101,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return EXIT_BAD_INPUT
     shown = warnings.showwarning
-    warnings.showwarning = _warning_line     # a Python warning is one log line, not source text
+    warnings.showwarning = _warning_line  # a Python warning is one log line, not source text
     try:
         return int(args._run(args) or 0)
     except LpvSysidError as exc:
@@ -109,7 +109,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         return _fail(args, "interrupted", EXIT_INTERRUPTED)
     except Exception as exc:  # noqa: BLE001 - the exit-status layer: no traceback, never status 1
-        if args.verbose:        # the traceback only on request, before the one-line verdict
+        if args.verbose:  # the traceback only on request, before the one-line verdict
             traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
         return _fail(args, describe_unexpected(exc, _inputs(args)))
     finally:
@@ -117,8 +117,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _warning_line(message, category, filename, lineno, file=None, line=None) -> None:
-    logging.getLogger("py.warnings").warning("%s: %s (%s:%s)", category.__name__, one_line(str(message)),
-                                             os.path.basename(str(filename)), lineno)
+    logging.getLogger("py.warnings").warning(
+        "%s: %s (%s:%s)",
+        category.__name__,
+        one_line(str(message)),
+        os.path.basename(str(filename)),
+        lineno,
+    )
 
 
 def _fail(args: argparse.Namespace, message: str, status: int = EXIT_BAD_INPUT) -> int:
@@ -141,7 +146,7 @@ def one_line(message: str) -> str:
     text = "; ".join(parts) if parts else "(no message)"
     if len(text) > MAX_MESSAGE:
         cut = len(text) - MAX_MESSAGE
-        text = f"{text[:MAX_MESSAGE // 2]} ... ({cut} characters omitted) ... {text[-MAX_MESSAGE // 2:]}"
+        text = f"{text[: MAX_MESSAGE // 2]} ... ({cut} characters omitted) ... {text[-MAX_MESSAGE // 2 :]}"
     return text
 
 

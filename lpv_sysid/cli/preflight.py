@@ -20,18 +20,40 @@ HELP = "check link, firmware, modes and failsafe parameters of a PX4 vehicle; pr
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--connect", required=True, metavar="URL",
-                        help="udpin:H:P, udpout:H:P, tcp:H:P, serial device[:baud], or udp://:14540")
-    parser.add_argument("--timeout", type=float, default=5.0, help="seconds to gather facts at most (default 5)")
-    parser.add_argument("--grace", type=float, default=1.5,
-                        help="seconds to wait for streams that may be absent (ESC_STATUS, RC) after the "
-                             "stream requests (default 1.5)")
-    parser.add_argument("--config", default=None, metavar="FILE",
-                        help="bridge config (config/mavlink_bridge.yaml): link streams and rotor_estimate")
-    parser.add_argument("--signing-key", default=None, metavar="FILE",
-                        help="MAVLink 2 signing secret (32 raw bytes or 64 hex chars)")
-    parser.add_argument("--baud", type=int, default=None,
-                        help="serial baud rate (default: the config's, else 921600)")
+    parser.add_argument(
+        "--connect",
+        required=True,
+        metavar="URL",
+        help="udpin:H:P, udpout:H:P, tcp:H:P, serial device[:baud], or udp://:14540",
+    )
+    parser.add_argument(
+        "--timeout", type=float, default=5.0, help="seconds to gather facts at most (default 5)"
+    )
+    parser.add_argument(
+        "--grace",
+        type=float,
+        default=1.5,
+        help="seconds to wait for streams that may be absent (ESC_STATUS, RC) after the "
+        "stream requests (default 1.5)",
+    )
+    parser.add_argument(
+        "--config",
+        default=None,
+        metavar="FILE",
+        help="bridge config (config/mavlink_bridge.yaml): link streams and rotor_estimate",
+    )
+    parser.add_argument(
+        "--signing-key",
+        default=None,
+        metavar="FILE",
+        help="MAVLink 2 signing secret (32 raw bytes or 64 hex chars)",
+    )
+    parser.add_argument(
+        "--baud",
+        type=int,
+        default=None,
+        help="serial baud rate (default: the config's, else 921600)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -53,7 +75,9 @@ def run(args: argparse.Namespace) -> int:
             kw["signing_key_file"] = args.signing_key
         cfg, rotor = dataclasses.replace(bridge.link, **kw), bridge.rotor_estimate
     else:
-        cfg = LinkConfig(url=args.connect, baud=args.baud or 921600, signing_key_file=args.signing_key)
+        cfg = LinkConfig(
+            url=args.connect, baud=args.baud or 921600, signing_key_file=args.signing_key
+        )
         rotor = RotorEstimateConfig()
     cfg.validate()
     link = MavlinkLink(cfg)

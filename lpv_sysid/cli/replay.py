@@ -33,19 +33,27 @@ LOG = logging.getLogger(__name__)
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--bag", required=True,
-                        help="rosbag2 directory, or a data_logger experiment directory")
+    parser.add_argument(
+        "--bag", required=True, help="rosbag2 directory, or a data_logger experiment directory"
+    )
     parser.add_argument("--node", required=True, choices=NODES, help="node core to drive")
-    parser.add_argument("--params", required=True,
-                        help="ROS parameter file of the node, e.g. config/lpv_controller.yaml")
+    parser.add_argument(
+        "--params",
+        required=True,
+        help="ROS parameter file of the node, e.g. config/lpv_controller.yaml",
+    )
     parser.add_argument("--out", required=True, help="output bag directory (must not exist)")
     parser.add_argument("--gains", default=None, help="gains.yaml (overrides gains_file)")
     parser.add_argument("--namespace", default="/lpv_sysid", help="topic namespace in the bag")
     parser.add_argument("--storage", default="mcap", choices=("mcap", "sqlite3"))
-    parser.add_argument("--ticks", default="auto", choices=("auto", "recorded", "rate"),
-                        help="controller tick times: the stamps of the recorded "
-                             "actuator_command (reproduces the flight exactly), a rate_hz grid "
-                             "from the first input, or auto (recorded when present)")
+    parser.add_argument(
+        "--ticks",
+        default="auto",
+        choices=("auto", "recorded", "rate"),
+        help="controller tick times: the stamps of the recorded "
+        "actuator_command (reproduces the flight exactly), a rate_hz grid "
+        "from the first input, or auto (recorded when present)",
+    )
 
 
 def bag_directories(path: str) -> list[Path]:
@@ -57,8 +65,10 @@ def bag_directories(path: str) -> list[Path]:
         return [p]
     parts = sorted(d for d in p.glob("bag_*") if d.is_dir())
     if not parts:
-        raise BagError(f"--bag {path}: neither a rosbag2 directory nor an experiment "
-                       "directory with bag_NNNN/ parts")
+        raise BagError(
+            f"--bag {path}: neither a rosbag2 directory nor an experiment "
+            "directory with bag_NNNN/ parts"
+        )
     return parts
 
 
@@ -66,12 +76,15 @@ def read_inputs(path: str, topics: list[str], optional: str | None = None):
     """``{topic: [(stamp_ns, msg), ...]}`` of every part of ``path`` (sorted by stamp) and
     the stamps of the ``optional`` topic (empty when not recorded)."""
     from lpv_sysid.io.bag import read_bag
+
     per_topic = {t: [] for t in topics}
     extra = []
     want = topics + ([optional] if optional else [])
     for part in bag_directories(path):
         # only the inputs (and the optional topic) are deserialised, not e.g. imu
-        data = read_bag(str(part), topics=topics, strict=True, optional=[optional] if optional else ())
+        data = read_bag(
+            str(part), topics=topics, strict=True, optional=[optional] if optional else ()
+        )
         for t in want:
             if t == optional:
                 extra.extend(ns for ns, _ in data.get(t, []))
@@ -86,6 +99,7 @@ def parsed_stream(topic: str, rel: str, msgs: list) -> list:
     as the node would, and aborts at that message)."""
     from lpv_sysid.io.messages import MessageError
     from lpv_sysid.nodes.controller_runtime import parse_inputs
+
     try:
         t, values = parse_inputs(rel, [m for _, m in msgs])
     except MessageError:
@@ -93,19 +107,34 @@ def parsed_stream(topic: str, rel: str, msgs: list) -> list:
     return [(ns, rel, (t[i], values[i])) for i, (ns, _) in enumerate(msgs)]
 
 
-def replay_controller(bag: str, params: dict, out: str, namespace: str = "/lpv_sysid",
-                      storage: str = "mcap", ticks: str = "auto") -> dict:
+def replay_controller(
+    bag: str,
+    params: dict,
+    out: str,
+    namespace: str = "/lpv_sysid",
+    storage: str = "mcap",
+    ticks: str = "auto",
+) -> dict:
     """Run :class:`ControllerRuntime` over the bag; returns a summary dict."""
     from lpv_sysid.io import messages as M
     from lpv_sysid.io.bag import BagWriter
-    from lpv_sysid.nodes.controller_runtime import (INPUT_TOPICS, ControllerRuntime,
-                                                    ControllerSettings)
+    from lpv_sysid.nodes.controller_runtime import (
+        INPUT_TOPICS,
+        ControllerRuntime,
+        ControllerSettings,
+    )
+
     settings = ControllerSettings.from_dict(params)
     ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
-    per_topic, recorded = read_inputs(bag, [f"{ns}/{t}" for t in INPUT_TOPICS],
-                                      f"{ns}/actuator_command")
-    inputs = list(heapq.merge(*[parsed_stream(f"{ns}/{t}", t, per_topic[f"{ns}/{t}"])
-                                for t in INPUT_TOPICS], key=lambda e: e[0]))
+    per_topic, recorded = read_inputs(
+        bag, [f"{ns}/{t}" for t in INPUT_TOPICS], f"{ns}/actuator_command"
+    )
+    inputs = list(
+        heapq.merge(
+            *[parsed_stream(f"{ns}/{t}", t, per_topic[f"{ns}/{t}"]) for t in INPUT_TOPICS],
+            key=lambda e: e[0],
+        )
+    )
     if ticks == "recorded" and not recorded:
         raise BagError(f"bag {bag}: --ticks recorded needs {ns}/actuator_command in the bag")
     use_recorded = ticks == "recorded" or (ticks == "auto" and bool(recorded))
@@ -122,8 +151,10 @@ def replay_controller(bag: str, params: dict, out: str, namespace: str = "/lpv_s
     period = round(1e9 / settings.rate_hz)
     t0 = inputs[0][0]
     rt.start(t0 * 1e-9)
-    outputs = {f"{ns}/actuator_command": M.TYPES["actuator_command"],
-               f"{ns}/status": M.TYPES["status"]}
+    outputs = {
+        f"{ns}/actuator_command": M.TYPES["actuator_command"],
+        f"{ns}/status": M.TYPES["status"],
+    }
     n_out = {t: 0 for t in outputs}
     if os.path.exists(out):
         raise BagError(f"--out {out}: already exists")
@@ -153,35 +184,50 @@ def replay_controller(bag: str, params: dict, out: str, namespace: str = "/lpv_s
                 rt.on_sample(topic, msg[0], msg[1], stamp * 1e-9)
             else:
                 rt.on_message(topic, msg, stamp * 1e-9)
-        last = inputs[-1][0]          # no tick after the recording ends
+        last = inputs[-1][0]  # no tick after the recording ends
         w.write(f"{ns}/status", last, rt.status(last * 1e-9))
         n_out[f"{ns}/status"] += 1
     ev = rt.supervisor.event
-    return {"inputs": len(inputs), "duration_s": (inputs[-1][0] - t0) * 1e-9,
-            "outputs": n_out, "commands": rt.commands, "event": ev,
-            "gain_estimate": rt.law.gain(), "gamma": rt.law.gamma,
-            "ticks": "recorded" if use_recorded else "rate"}
+    return {
+        "inputs": len(inputs),
+        "duration_s": (inputs[-1][0] - t0) * 1e-9,
+        "outputs": n_out,
+        "commands": rt.commands,
+        "event": ev,
+        "gain_estimate": rt.law.gain(),
+        "gamma": rt.law.gamma,
+        "ticks": "recorded" if use_recorded else "rate",
+    }
 
 
 def run(args) -> int:
     from lpv_sysid.nodes.parameters import yaml_parameters
+
     params = yaml_parameters(args.params, args.node)
     if args.gains:
         params["gains_file"] = args.gains
-    elif params.get("gains_file") and not os.path.isabs(params["gains_file"]) \
-            and not os.path.exists(params["gains_file"]):
-        raise ConfigError(f"{args.params}: gains_file {params['gains_file']!r} not found "
-                          "(give --gains)")
+    elif (
+        params.get("gains_file")
+        and not os.path.isabs(params["gains_file"])
+        and not os.path.exists(params["gains_file"])
+    ):
+        raise ConfigError(
+            f"{args.params}: gains_file {params['gains_file']!r} not found (give --gains)"
+        )
     s = replay_controller(args.bag, params, args.out, args.namespace, args.storage, args.ticks)
-    print(f"replayed {s['inputs']} input messages ({s['duration_s']:.2f} s) through "
-          f"{args.node} ({s['ticks']} ticks): {s['commands']} actuator commands")
+    print(
+        f"replayed {s['inputs']} input messages ({s['duration_s']:.2f} s) through "
+        f"{args.node} ({s['ticks']} ticks): {s['commands']} actuator commands"
+    )
     for topic, n in s["outputs"].items():
         print(f"  {topic}: {n} messages")
     print(f"bound monitor: L2 gain estimate {s['gain_estimate']:.4g} (gamma {s['gamma']:g})")
     print(f"wrote {args.out}")
     ev = s["event"]
     if ev is not None:
-        print(f"SAFETY ABORT at t={ev.t:.6f} s: {ev.reason}: {ev.detail} -- the controller "
-              "would have stopped commanding here")
+        print(
+            f"SAFETY ABORT at t={ev.t:.6f} s: {ev.reason}: {ev.detail} -- the controller "
+            "would have stopped commanding here"
+        )
         return 1
     return 0

@@ -12,12 +12,20 @@ HELP = "write a Markdown report with figures from the artefacts of a run directo
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--run", required=True, type=Path, help="run directory (e.g. demo_out)")
-    parser.add_argument("--out", type=Path, default=None,
-                        help="report path, ending in .md (default: RUN/report/report.md); figures go next to it")
-    parser.add_argument("--no-verify", action="store_true",
-                        help="do not re-run the independent verifier when verification.yaml is absent")
-    parser.add_argument("--strict", action="store_true",
-                        help="exit 2 when an input file exists but cannot be read")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="report path, ending in .md (default: RUN/report/report.md); figures go next to it",
+    )
+    parser.add_argument(
+        "--no-verify",
+        action="store_true",
+        help="do not re-run the independent verifier when verification.yaml is absent",
+    )
+    parser.add_argument(
+        "--strict", action="store_true", help="exit 2 when an input file exists but cannot be read"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -28,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
     if args.strict:
         data_log = logging.getLogger("lpv_sysid.report.data")
         level = data_log.level
-        data_log.setLevel(logging.ERROR)    # the problems are the one error line, not also warnings
+        data_log.setLevel(logging.ERROR)  # the problems are the one error line, not also warnings
         try:
             problems = load_run(args.run, verify=not args.no_verify).problems
         finally:

@@ -12,7 +12,9 @@ HELP = "design orthogonal phase-optimised multisines (seed 0 Sec. V) and write s
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--config", required=True, help="signal design YAML, e.g. config/signals_phase2.yaml")
+    parser.add_argument(
+        "--config", required=True, help="signal design YAML, e.g. config/signals_phase2.yaml"
+    )
     parser.add_argument("--out", required=True, help="output directory (created)")
     parser.add_argument("--no-plot", action="store_true", help="skip signals.png")
 
@@ -36,12 +38,16 @@ def run(args: argparse.Namespace) -> int:
         written.append(png)
     from lpv_sysid.signals.metrics import max_cross_correlation
 
-    print(f"designed {len(sig.names)} channels, T = {sig.duration:g} s, {sig.sample_rate:g} Hz, "
-          f"{sig.t.size} samples in {elapsed:.2f} s; max |corr| = {max_cross_correlation(sig.u):.1e}")
+    print(
+        f"designed {len(sig.names)} channels, T = {sig.duration:g} s, {sig.sample_rate:g} Hz, "
+        f"{sig.t.size} samples in {elapsed:.2f} s; max |corr| = {max_cross_correlation(sig.u):.1e}"
+    )
     for j, name in enumerate(sig.names):
-        print(f"  {name:8s} {sig.groups[j]:12s} {sig.harmonics[j].size:4d} harmonics "
-              f"{sig.harmonics[j].min() * sig.f0:.3g}-{sig.harmonics[j].max() * sig.f0:.3g} Hz  "
-              f"RPF {sig.rpf[j]:.4f} (Schroeder {sig.rpf_schroeder[j]:.4f})")
+        print(
+            f"  {name:8s} {sig.groups[j]:12s} {sig.harmonics[j].size:4d} harmonics "
+            f"{sig.harmonics[j].min() * sig.f0:.3g}-{sig.harmonics[j].max() * sig.f0:.3g} Hz  "
+            f"RPF {sig.rpf[j]:.4f} (Schroeder {sig.rpf_schroeder[j]:.4f})"
+        )
     for path in written:
         print(f"wrote {path}")
     return 0

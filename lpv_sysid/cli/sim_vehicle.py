@@ -25,36 +25,91 @@ log = logging.getLogger(__name__)
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     g = parser.add_mutually_exclusive_group()
-    g.add_argument("--udp", metavar="HOST:PORT", default=None,
-                   help="send to HOST:PORT like PX4 SITL (default 127.0.0.1:14540)")
-    g.add_argument("--connect", metavar="URL", default=None,
-                   help="any link URL instead (udpin:H:P, udpout:H:P, tcpin:H:P, serial device)")
-    parser.add_argument("--config", metavar="FILE", default=None,
-                        help="YAML with SimVehicleConfig keys (e.g. config/sim_vehicle_px4.yaml)")
-    parser.add_argument("--bind", metavar="HOST[:PORT]", default=None,
-                        help="local address of the UDP socket (default: the interface that routes to "
-                             "the destination, 127.0.0.1 for a loopback destination)")
-    parser.add_argument("--duration", type=float, default=None,
-                        help="stop after this many simulated seconds (default: run until Ctrl-C)")
-    parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
-                        help="override a PX4 parameter, e.g. COM_OBL_RC_ACT=5 (repeatable)")
+    g.add_argument(
+        "--udp",
+        metavar="HOST:PORT",
+        default=None,
+        help="send to HOST:PORT like PX4 SITL (default 127.0.0.1:14540)",
+    )
+    g.add_argument(
+        "--connect",
+        metavar="URL",
+        default=None,
+        help="any link URL instead (udpin:H:P, udpout:H:P, tcpin:H:P, serial device)",
+    )
+    parser.add_argument(
+        "--config",
+        metavar="FILE",
+        default=None,
+        help="YAML with SimVehicleConfig keys (e.g. config/sim_vehicle_px4.yaml)",
+    )
+    parser.add_argument(
+        "--bind",
+        metavar="HOST[:PORT]",
+        default=None,
+        help="local address of the UDP socket (default: the interface that routes to "
+        "the destination, 127.0.0.1 for a loopback destination)",
+    )
+    parser.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        help="stop after this many simulated seconds (default: run until Ctrl-C)",
+    )
+    parser.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="override a PX4 parameter, e.g. COM_OBL_RC_ACT=5 (repeatable)",
+    )
     parser.add_argument("--mode", default=None, help="initial PX4 mode name (default HOLD)")
-    parser.add_argument("--system-id", type=int, default=None, help="MAVLink system id (default 1)")
-    parser.add_argument("--physics-hz", type=float, default=None, help="physics/controller rate (default 250)")
-    parser.add_argument("--signing-key", default=None, metavar="FILE",
-                        help="MAVLink 2 signing secret (32 raw bytes or 64 hex chars): unsigned "
-                             "messages are then ignored")
-    parser.add_argument("--allow-unsigned", action="store_true", default=None,
-                        help="with --signing-key: still accept unsigned messages")
-    parser.add_argument("--rc", action="store_true", default=None,
-                        help="an RC transmitter is present (sticks centred); default: no RC, as SITL")
-    parser.add_argument("--no-esc-telemetry", action="store_true", default=None,
-                        help="no ESC_STATUS (like SIH or PWM ESCs); motor outputs only")
-    parser.add_argument("--actuator-output-scale", choices=("pwm", "normalized"), default=None,
-                        help="ACTUATOR_OUTPUT_STATUS values (default pwm)")
-    parser.add_argument("--noise", action="store_true", default=None, help="add sensor noise to the telemetry")
-    parser.add_argument("--speed", type=float, default=1.0,
-                        help="simulated seconds per wall-clock second (default 1 = real time)")
+    parser.add_argument(
+        "--system-id", type=int, default=None, help="MAVLink system id (default 1)"
+    )
+    parser.add_argument(
+        "--physics-hz", type=float, default=None, help="physics/controller rate (default 250)"
+    )
+    parser.add_argument(
+        "--signing-key",
+        default=None,
+        metavar="FILE",
+        help="MAVLink 2 signing secret (32 raw bytes or 64 hex chars): unsigned "
+        "messages are then ignored",
+    )
+    parser.add_argument(
+        "--allow-unsigned",
+        action="store_true",
+        default=None,
+        help="with --signing-key: still accept unsigned messages",
+    )
+    parser.add_argument(
+        "--rc",
+        action="store_true",
+        default=None,
+        help="an RC transmitter is present (sticks centred); default: no RC, as SITL",
+    )
+    parser.add_argument(
+        "--no-esc-telemetry",
+        action="store_true",
+        default=None,
+        help="no ESC_STATUS (like SIH or PWM ESCs); motor outputs only",
+    )
+    parser.add_argument(
+        "--actuator-output-scale",
+        choices=("pwm", "normalized"),
+        default=None,
+        help="ACTUATOR_OUTPUT_STATUS values (default pwm)",
+    )
+    parser.add_argument(
+        "--noise", action="store_true", default=None, help="add sensor noise to the telemetry"
+    )
+    parser.add_argument(
+        "--speed",
+        type=float,
+        default=1.0,
+        help="simulated seconds per wall-clock second (default 1 = real time)",
+    )
 
 
 def _params(items: list[str]) -> dict[str, float]:
@@ -84,11 +139,18 @@ def build_config(args: argparse.Namespace):
         if hostport.count(":") != 1:
             raise ConfigError(f"--udp {hostport!r}: expected HOST:PORT")
         kw["url"] = f"udpout:{hostport}"
-    flags = {"bind": args.bind, "initial_mode": args.mode, "system_id": args.system_id,
-             "physics_hz": args.physics_hz, "signing_key_file": args.signing_key,
-             "allow_unsigned": args.allow_unsigned, "rc_present": args.rc,
-             "esc_telemetry": False if args.no_esc_telemetry else None,
-             "actuator_output_scale": args.actuator_output_scale, "sensor_noise": args.noise}
+    flags = {
+        "bind": args.bind,
+        "initial_mode": args.mode,
+        "system_id": args.system_id,
+        "physics_hz": args.physics_hz,
+        "signing_key_file": args.signing_key,
+        "allow_unsigned": args.allow_unsigned,
+        "rc_present": args.rc,
+        "esc_telemetry": False if args.no_esc_telemetry else None,
+        "actuator_output_scale": args.actuator_output_scale,
+        "sensor_noise": args.noise,
+    }
     kw.update({k: v for k, v in flags.items() if v is not None})
     if args.param:
         kw["params"] = {**dict(base.params), **_params(args.param)}
@@ -110,23 +172,29 @@ def run(args: argparse.Namespace) -> int:
     veh = SimVehicle(cfg)
     veh.open()
     local = f"{veh.local_address[0]}:{veh.local_address[1]}" if veh.local_address else "n/a"
-    print(f"sim-vehicle: PX4-like quadrotor (system {cfg.system_id}, autopilot PX4 v1.16 emulation) "
-          f"on {cfg.url} (local socket {local}); mode {veh.mode.name}; "
-          f"RC {'present' if cfg.rc_present else 'absent'}; ESC telemetry "
-          f"{'on' if cfg.esc_telemetry else 'off'}; signing "
-          f"{'on' if cfg.signing_key_file else 'off'}; "
-          + ", ".join(f"{k}={veh.param(k):g}" for k in ("COM_OF_LOSS_T", "COM_OBL_RC_ACT", "COM_DISARM_PRFLT",
-                                                         "COM_RC_IN_MODE")),
-          flush=True)
+    print(
+        f"sim-vehicle: PX4-like quadrotor (system {cfg.system_id}, autopilot PX4 v1.16 emulation) "
+        f"on {cfg.url} (local socket {local}); mode {veh.mode.name}; "
+        f"RC {'present' if cfg.rc_present else 'absent'}; ESC telemetry "
+        f"{'on' if cfg.esc_telemetry else 'off'}; signing "
+        f"{'on' if cfg.signing_key_file else 'off'}; "
+        + ", ".join(
+            f"{k}={veh.param(k):g}"
+            for k in ("COM_OF_LOSS_T", "COM_OBL_RC_ACT", "COM_DISARM_PRFLT", "COM_RC_IN_MODE")
+        ),
+        flush=True,
+    )
     try:
         veh.run_realtime(args.duration, speed=args.speed)
     except KeyboardInterrupt:
         pass
     finally:
         veh.close()
-    print(f"sim-vehicle: stopped after {veh.t:.1f} s; received {veh.setpoints_received} setpoints; "
-          f"final mode {veh.mode.name}, {'armed' if veh.armed else 'disarmed'}, "
-          f"position NED {[round(float(v), 2) for v in veh.x[0:3]]}")
+    print(
+        f"sim-vehicle: stopped after {veh.t:.1f} s; received {veh.setpoints_received} setpoints; "
+        f"final mode {veh.mode.name}, {'armed' if veh.armed else 'disarmed'}, "
+        f"position NED {[round(float(v), 2) for v in veh.x[0:3]]}"
+    )
     for t, mode, reason in veh.mode_log:
         print(f"  t={t:7.2f} s  {mode:<10} {reason}")
     for t, err in veh.param_rejections:

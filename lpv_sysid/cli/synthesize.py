@@ -37,7 +37,9 @@ import numpy as np
 from lpv_sysid.errors import ConfigError, SolverError
 
 COMMAND = "synthesize"
-HELP = "robust polytopic LPV H-infinity state feedback (seed 0 Lemma 1) -> gains.yaml + certificate"
+HELP = (
+    "robust polytopic LPV H-infinity state feedback (seed 0 Lemma 1) -> gains.yaml + certificate"
+)
 
 log = logging.getLogger(__name__)
 
@@ -57,7 +59,9 @@ def feedforward_settings(cfg: dict, cfg_path: str) -> tuple[bool, dict, float]:
     v = dict(v)
     enabled = v.pop("enabled", True)
     if not isinstance(enabled, bool):
-        raise ConfigError(f"{cfg_path}: feedforward.enabled must be true or false, got {enabled!r}")
+        raise ConfigError(
+            f"{cfg_path}: feedforward.enabled must be true or false, got {enabled!r}"
+        )
     try:
         cond_max = float(v.pop("cond_max", COND_MAX_DEFAULT))
     except (TypeError, ValueError):
@@ -68,11 +72,19 @@ def feedforward_settings(cfg: dict, cfg_path: str) -> tuple[bool, dict, float]:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--models", required=True, help="vertex_models.yaml (identify)")
     parser.add_argument("--config", required=True, help="config/synthesis.yaml")
-    parser.add_argument("--out", required=True, help="gains.yaml to write (sidecar <stem>.cert.npz next to it)")
-    parser.add_argument("--summary", default=None, help="signals summary.yaml with R and Q (overrides weights)")
+    parser.add_argument(
+        "--out", required=True, help="gains.yaml to write (sidecar <stem>.cert.npz next to it)"
+    )
+    parser.add_argument(
+        "--summary", default=None, help="signals summary.yaml with R and Q (overrides weights)"
+    )
     parser.add_argument("--gamma", type=float, default=None, help="override hinf.gamma")
-    parser.add_argument("--solver", default=None, help="override hinf.solver (CLARABEL, SCS, MOSEK)")
-    parser.add_argument("--no-verify", action="store_true", help="skip the independent verification")
+    parser.add_argument(
+        "--solver", default=None, help="override hinf.solver (CLARABEL, SCS, MOSEK)"
+    )
+    parser.add_argument(
+        "--no-verify", action="store_true", help="skip the independent verification"
+    )
 
 
 def load_config(path: str) -> dict:
@@ -82,13 +94,15 @@ def load_config(path: str) -> dict:
     bad = set(cfg) - _TOP_KEYS
     if bad:
         raise ConfigError(f"{path}: unknown key(s) {sorted(bad)}; known: {sorted(_TOP_KEYS)}")
-    for key in ("hinf", "weights", "uncertainty", "verify"):     # sections: mappings (or empty)
+    for key in ("hinf", "weights", "uncertainty", "verify"):  # sections: mappings (or empty)
         if cfg.get(key) is not None and not isinstance(cfg[key], dict):
             raise ConfigError(f"{path}: {key}: expected a mapping, got {type(cfg[key]).__name__}")
     return cfg
 
 
-def weights_from_config(cfg: dict, n_u: int, summary_path: str | None, cfg_path: str) -> tuple[np.ndarray, np.ndarray, str]:
+def weights_from_config(
+    cfg: dict, n_u: int, summary_path: str | None, cfg_path: str
+) -> tuple[np.ndarray, np.ndarray, str]:
     """(R, Q, source) from a signals summary (R, Q entries) or from Eqs. (27)-(28)."""
     from lpv_sysid.synthesis.files import read_yaml
     from lpv_sysid.synthesis.hinf_lmi import excitation_R, output_Q
@@ -101,7 +115,9 @@ def weights_from_config(cfg: dict, n_u: int, summary_path: str | None, cfg_path:
             p = Path(cfg_path).parent / p
         s = read_yaml(p, "signals summary")
         if "R" not in s or "Q" not in s:
-            raise ConfigError(f"{p}: signals summary has no 'R'/'Q' (write it with weights in the signals config)")
+            raise ConfigError(
+                f"{p}: signals summary has no 'R'/'Q' (write it with weights in the signals config)"
+            )
         R = np.array(s["R"], dtype=float)
         Q = np.array(s["Q"], dtype=float)
         if R.shape[0] != n_u or Q.ndim != 2 or Q.shape[0] != Q.shape[1]:
@@ -117,7 +133,9 @@ def weights_from_config(cfg: dict, n_u: int, summary_path: str | None, cfg_path:
     except KeyError as exc:
         raise ConfigError(f"{cfg_path}: weights.{exc.args[0]} missing") from None
     if R.shape[0] != n_u:
-        raise ConfigError(f"{cfg_path}: weights.input_magnitudes has {R.shape[0]} entries, the model {n_u} inputs")
+        raise ConfigError(
+            f"{cfg_path}: weights.input_magnitudes has {R.shape[0]} entries, the model {n_u} inputs"
+        )
     return R, Q, "Eqs. (27)-(28)"
 
 
@@ -130,8 +148,9 @@ def design_from_summary(source: str) -> Optional[dict]:
     if source.startswith("Eqs."):
         return None
     try:
-        return design_envelope(read_yaml(source, "signals summary"),
-                               source=f"signals summary {Path(source).name}")
+        return design_envelope(
+            read_yaml(source, "signals summary"), source=f"signals summary {Path(source).name}"
+        )
     except ConfigError as exc:
         print(f"note: {exc}")
         return None
@@ -142,7 +161,9 @@ def velocity_index(cfg: dict, state_names: tuple) -> tuple[int, ...]:
     try:
         return tuple(state_names.index(n) for n in names)
     except ValueError:
-        raise ConfigError(f"velocity_states {names} not all among the model states {list(state_names)}") from None
+        raise ConfigError(
+            f"velocity_states {names} not all among the model states {list(state_names)}"
+        ) from None
 
 
 def _structure_entry(model) -> dict:
@@ -151,8 +172,10 @@ def _structure_entry(model) -> dict:
     if model.box is not None:
         st["covers"] = "scheduling box interior (element box, B hull common to all vertices)"
     elif model.common_input is not None:
-        st["B_hull"] = [{"row": e.row, "col": e.col, "lower": e.lower, "upper": e.upper, "nominal": e.nominal}
-                        for e in model.common_input.elements]
+        st["B_hull"] = [
+            {"row": e.row, "col": e.col, "lower": e.lower, "upper": e.upper, "nominal": e.nominal}
+            for e in model.common_input.elements
+        ]
         st["covers"] = "scheduling box interior (Lemma 1, common B)"
     else:
         st["covers"] = "scheduling vertices (per-vertex B: interior only spot-checked)"
@@ -164,14 +187,21 @@ VARIATION = {"vertex": "frozen", "common": "arbitrary", "rate": "rate_bounded"}
 
 LMI_TEXT = {
     "corners": "seed 0 Lemma 1, Eq. (30) at every Eq. (23) system (Rotondo et al. Thm. 2)",
-    "box": ("robust LMI over the element box: structured norm-bounded perturbation of the box centre, "
-            "S-procedure with diagonal multipliers (Petersen 1987; Khargonekar, Petersen & Zhou 1990; Boyd et "
-            "al. 1994 Sec. 5.1, 6.3.2), synthesis/robust_lmi.py"),
+    "box": (
+        "robust LMI over the element box: structured norm-bounded perturbation of the box centre, "
+        "S-procedure with diagonal multipliers (Petersen 1987; Khargonekar, Petersen & Zhou 1990; Boyd et "
+        "al. 1994 Sec. 5.1, 6.3.2), synthesis/robust_lmi.py"
+    ),
 }
 
 
 def _motor_summary(box, state_names, input_names) -> str:
-    if tuple(state_names[8:12]) != ("dt", "da", "de", "dr") or tuple(input_names) != ("ut", "ua", "ue", "ur"):
+    if tuple(state_names[8:12]) != ("dt", "da", "de", "dr") or tuple(input_names) != (
+        "ut",
+        "ua",
+        "ue",
+        "ur",
+    ):
         return "not a quadrotor layout"
     labs = set()
     for i in range(box.N):
@@ -183,8 +213,10 @@ def _motor_summary(box, state_names, input_names) -> str:
         return "not uncertain (the models file lists no motor element and uncertainty.motor_std is unset)"
     if any(lb.startswith("motor constant") for lb in labs):
         return "uncertain, intervals from uncertainty.motor_std of the synthesis config (nominal +/- k std)"
-    return "uncertain, intervals of the models file (a_Omega, b_Omega identified per vertex; each motor row " \
-           "entry its own element)"
+    return (
+        "uncertain, intervals of the models file (a_Omega, b_Omega identified per vertex; each motor row "
+        "entry its own element)"
+    )
 
 
 def certified_set_entry(model, res, opts, design: Optional[dict]) -> dict:
@@ -192,32 +224,49 @@ def certified_set_entry(model, res, opts, design: Optional[dict]) -> dict:
     lyap = opts.lyapunov
     method = res.info.get("method", "corners")
     var = VARIATION[lyap]
-    sched = {"variation": var,
-             "lyapunov": {"vertex": "X_i per scheduling vertex (frozen v_d)" if method == "box" else
-                          "X_i^j per vertex and system (frozen v_d)",
-                          "common": "one X for all v_d and all plants in the set",
-                          "rate": "X(v_d) = sum_i alpha_i X_i, rate-bounded"}[lyap]}
+    sched = {
+        "variation": var,
+        "lyapunov": {
+            "vertex": "X_i per scheduling vertex (frozen v_d)"
+            if method == "box"
+            else "X_i^j per vertex and system (frozen v_d)",
+            "common": "one X for all v_d and all plants in the set",
+            "rate": "X(v_d) = sum_i alpha_i X_i, rate-bounded",
+        }[lyap],
+    }
     design_rate = None if design is None else [float(x) for x in design["reference_rate"]]
     if design_rate is not None:
         sched["design_reference_rate"] = design_rate
     if var == "arbitrary":
         sched["covers_design_signal"] = True
-        sched["note"] = "V = x^T X^-1 x decreases along every trajectory of the set: any v_d(t) in the box"
+        sched["note"] = (
+            "V = x^T X^-1 x decreases along every trajectory of the set: any v_d(t) in the box"
+        )
     elif var == "rate_bounded":
         rate = [float(x) for x in opts.rate_bound]
         sched["rate_bound"] = rate
-        sched["rate_source"] = "certificate.design.reference_rate" if res.info.get("rate_from_design") \
+        sched["rate_source"] = (
+            "certificate.design.reference_rate"
+            if res.info.get("rate_from_design")
             else "hinf.rate_bound of the synthesis config"
-        sched["covers_design_signal"] = (None if design_rate is None else
-                                         bool(all(d <= r * (1 + 1e-9) for d, r in zip(design_rate, rate))))
+        )
+        sched["covers_design_signal"] = (
+            None
+            if design_rate is None
+            else bool(all(d <= r * (1 + 1e-9) for d, r in zip(design_rate, rate)))
+        )
     else:
         sched["covers_design_signal"] = False
-        sched["note"] = ("frozen v_d only (seed 0 Lemma 1 with vertex-dependent X): the bound holds for every "
-                         "constant v_d in the box, not for the time-varying phase-2 reference")
+        sched["note"] = (
+            "frozen v_d only (seed 0 Lemma 1 with vertex-dependent X): the bound holds for every "
+            "constant v_d in the box, not for the time-varying phase-2 reference"
+        )
     entry: dict = {"scheduling": sched, "lmi": LMI_TEXT[method]}
-    rate_txt = {"arbitrary": "v_d(t) in the scheduling box, varying arbitrarily fast",
-                "frozen": "every constant (frozen) v_d in the scheduling box",
-                "rate_bounded": f"v_d(t) in the scheduling box with |dv_d,k/dt| <= {sched.get('rate_bound')} m/s^2"}[var]
+    rate_txt = {
+        "arbitrary": "v_d(t) in the scheduling box, varying arbitrarily fast",
+        "frozen": "every constant (frozen) v_d in the scheduling box",
+        "rate_bounded": f"v_d(t) in the scheduling box with |dv_d,k/dt| <= {sched.get('rate_bound')} m/s^2",
+    }[var]
     if model.box is not None:
         box = model.box
         n = box.n
@@ -227,37 +276,62 @@ def certified_set_entry(model, res, opts, design: Optional[dict]) -> dict:
         for labs in box.labels:
             for lb in labs:
                 counts[lb] = counts.get(lb, 0) + 1
-        entry.update({
-            "kind": "full_identified_box",
-            "statement": ("||z||_2 <= gamma ||u_e||_2 from rest for u_c = K(v_d) dx (Eq. 31) on every plant "
-                          "[A, B] = [sum_i alpha_i(v_d) A_i(theta_i), B]: " + rate_txt + "; at every vertex i "
-                          "every A element listed in the models file in its interval (independently per vertex "
-                          "and element), B anywhere in the common hull below; the elements and intervals are "
-                          "in the sidecar (box_rows, box_cols, box_half about box_Ac, box_Bc)"),
-            "elements": {"per_vertex": box.p, "A_per_vertex": n_a, "B_hull": n_b[0] if n_b else 0,
-                         "interval_sources": counts,
-                         "rule": "stored [lower, upper] where lower < upper; nominal +/- k std where a file "
-                                 "stores lower = upper with std > 0 (format @1); motor rows from "
-                                 "uncertainty.motor_std where the file has none"},
-            "motor_constants": _motor_summary(box, model.state_names, model.input_names),
-            "B_hull": [{"row": int(r), "col": int(c - n), "lower": float(box.B_centre[r, c - n] - h),
-                        "upper": float(box.B_centre[r, c - n] + h)}
-                       for r, c, h in zip(*box.arrays(0)) if c >= n],
-            "runtime_systems": f"{len(model.systems[0])} per vertex from the box (centre, nominal, seeded corners)",
-        })
+        entry.update(
+            {
+                "kind": "full_identified_box",
+                "statement": (
+                    "||z||_2 <= gamma ||u_e||_2 from rest for u_c = K(v_d) dx (Eq. 31) on every plant "
+                    "[A, B] = [sum_i alpha_i(v_d) A_i(theta_i), B]: "
+                    + rate_txt
+                    + "; at every vertex i "
+                    "every A element listed in the models file in its interval (independently per vertex "
+                    "and element), B anywhere in the common hull below; the elements and intervals are "
+                    "in the sidecar (box_rows, box_cols, box_half about box_Ac, box_Bc)"
+                ),
+                "elements": {
+                    "per_vertex": box.p,
+                    "A_per_vertex": n_a,
+                    "B_hull": n_b[0] if n_b else 0,
+                    "interval_sources": counts,
+                    "rule": "stored [lower, upper] where lower < upper; nominal +/- k std where a file "
+                    "stores lower = upper with std > 0 (format @1); motor rows from "
+                    "uncertainty.motor_std where the file has none",
+                },
+                "motor_constants": _motor_summary(box, model.state_names, model.input_names),
+                "B_hull": [
+                    {
+                        "row": int(r),
+                        "col": int(c - n),
+                        "lower": float(box.B_centre[r, c - n] - h),
+                        "upper": float(box.B_centre[r, c - n] + h),
+                    }
+                    for r, c, h in zip(*box.arrays(0))
+                    if c >= n
+                ],
+                "runtime_systems": f"{len(model.systems[0])} per vertex from the box (centre, nominal, seeded corners)",
+            }
+        )
     else:
         Ms = [len(lst) for lst in model.systems]
-        entry.update({
-            "kind": "reduced_polytope",
-            "statement": ("||z||_2 <= gamma ||u_e||_2 from rest for u_c = K(v_d) dx on every plant in the convex "
-                          "hull of the Eq. (23) systems of each vertex (sidecar A_sys, B_sys; "
-                          f"sum M_i = {sum(Ms)}), interpolated over " + rate_txt + ". NOT the full identified "
-                          "box: the reduction keeps a few corner parameters and holds the other elements at "
-                          "their nominal values (uncertainty.set: full_box certifies every element)"),
-            "systems_per_vertex": Ms,
-        })
+        entry.update(
+            {
+                "kind": "reduced_polytope",
+                "statement": (
+                    "||z||_2 <= gamma ||u_e||_2 from rest for u_c = K(v_d) dx on every plant in the convex "
+                    "hull of the Eq. (23) systems of each vertex (sidecar A_sys, B_sys; "
+                    f"sum M_i = {sum(Ms)}), interpolated over "
+                    + rate_txt
+                    + ". NOT the full identified "
+                    "box: the reduction keeps a few corner parameters and holds the other elements at "
+                    "their nominal values (uncertainty.set: full_box certifies every element)"
+                ),
+                "systems_per_vertex": Ms,
+            }
+        )
         if model.common_input is None:
-            entry["statement"] += "; per-vertex B: the vertices are certified, the interior only spot-checked"
+            entry["statement"] += (
+                "; per-vertex B: the vertices are certified, the interior only spot-checked"
+            )
     return entry
 
 
@@ -274,25 +348,39 @@ def problem_entry(model, res, opts) -> dict:
         n, m = model.n_x, model.n_u
         ne = res.info.get("n_e", m)
         nz = res.info.get("n_z", 3)
-        out["seed_lemma1"] = seed_problem_size([len(lst) for lst in model.systems], n, m, ne, nz,
-                                               tied=out["method"] == "box")
+        out["seed_lemma1"] = seed_problem_size(
+            [len(lst) for lst in model.systems], n, m, ne, nz, tied=out["method"] == "box"
+        )
     return out
 
 
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from lpv_sysid.synthesis.files import (box_arrays, gains_dict, load_models, save_certificate_npz, save_yaml,
-                                           sha256_file, uncertainty_settings)
-    from lpv_sysid.synthesis.hinf_lmi import HinfOptions, performance_matrix, resolve_method, synthesize_hinf
+    from lpv_sysid.synthesis.files import (
+        box_arrays,
+        gains_dict,
+        load_models,
+        save_certificate_npz,
+        save_yaml,
+        sha256_file,
+        uncertainty_settings,
+    )
+    from lpv_sysid.synthesis.hinf_lmi import (
+        HinfOptions,
+        performance_matrix,
+        resolve_method,
+        synthesize_hinf,
+    )
 
     cfg = load_config(args.config)
     opts = HinfOptions.from_dict(cfg.get("hinf"))
     if args.gamma is not None:
         opts = replace(opts, gamma=float(args.gamma))
     if args.solver is not None:
-        opts = HinfOptions.from_dict({**{k: getattr(opts, k) for k in opts.__dataclass_fields__},
-                                      "solver": args.solver})
+        opts = HinfOptions.from_dict(
+            {**{k: getattr(opts, k) for k in opts.__dataclass_fields__}, "solver": args.solver}
+        )
     unc_cfg = uncertainty_settings(cfg.get("uncertainty"))
     ff_enabled, ff_layout_cfg, ff_cond_max = feedforward_settings(cfg, args.config)
     t0 = time.perf_counter()
@@ -302,42 +390,69 @@ def run(args: argparse.Namespace) -> int:
     C = performance_matrix(Q, model.n_x, vidx)
     st = model.input_structure
     Ms = st["M"]
-    print(f"models: {args.models} ({model.n_vertices} vertices, {model.n_x} states, {model.n_u} inputs); "
-          f"R, Q from {source}")
+    print(
+        f"models: {args.models} ({model.n_vertices} vertices, {model.n_x} states, {model.n_u} inputs); "
+        f"R, Q from {source}"
+    )
     if model.ts is not None:
-        raise ConfigError(f"{args.models}: Lemma 1 is a continuous-time result; the models are discrete "
-                          f"(Ts={model.ts})")
+        raise ConfigError(
+            f"{args.models}: Lemma 1 is a continuous-time result; the models are discrete "
+            f"(Ts={model.ts})"
+        )
     design = design_from_summary(source)
     rate_from_design = False
     if opts.lyapunov == "rate" and opts.rate_bound == "design":
         if design is None:
-            raise ConfigError("hinf.rate_bound: design needs the phase-2 signals summary (--summary) for the "
-                              "design envelope's reference_rate")
+            raise ConfigError(
+                "hinf.rate_bound: design needs the phase-2 signals summary (--summary) for the "
+                "design envelope's reference_rate"
+            )
         opts = replace(opts, rate_bound=[float(x) for x in design["reference_rate"]])
         rate_from_design = True
     method = resolve_method(model, opts)
     if model.box is not None:
         box = model.box
-        print(f"certified set: the full identified box (uncertainty.set: full_box), {box.p[0] if len(set(box.p)) == 1 else box.p} "
-              f"elements per vertex as a structured perturbation (B hull common to all vertices); "
-              f"Lyapunov matrix: {opts.lyapunov} ({VARIATION[opts.lyapunov]} v_d)")
+        print(
+            f"certified set: the full identified box (uncertainty.set: full_box), {box.p[0] if len(set(box.p)) == 1 else box.p} "
+            f"elements per vertex as a structured perturbation (B hull common to all vertices); "
+            f"Lyapunov matrix: {opts.lyapunov} ({VARIATION[opts.lyapunov]} v_d)"
+        )
     elif model.common_input is not None:
-        els = ", ".join(f"B[{e.row},{e.col}] in [{e.lower:.6g}, {e.upper:.6g}]" for e in model.common_input.elements)
-        print(f"input matrix common to all vertices (uncertainty.common_b): hull {els or '(B identical)'}; "
-              f"M_i = M_A x M_B = {st['M_A']} x {st['M_B']} = {Ms} (sum {sum(Ms)}, {st['B_method']} corners); "
-              "Lemma 1 covers the whole box")
+        els = ", ".join(
+            f"B[{e.row},{e.col}] in [{e.lower:.6g}, {e.upper:.6g}]"
+            for e in model.common_input.elements
+        )
+        print(
+            f"input matrix common to all vertices (uncertainty.common_b): hull {els or '(B identical)'}; "
+            f"M_i = M_A x M_B = {st['M_A']} x {st['M_B']} = {Ms} (sum {sum(Ms)}, {st['B_method']} corners); "
+            "Lemma 1 covers the whole box"
+        )
     else:
-        print(f"uncertainty vertices per scheduling vertex M_i = {Ms} (per-vertex B, uncertainty.common_b: false)")
-        if len({tuple(np.round(np.array([b for _, b in lst]), 12).ravel()) for lst in model.systems}) > 1:
-            print("note: B differs between scheduling vertices; Lemma 1 certifies the vertices, the interior "
-                  "(B(v_d) S(v_d) is bilinear) is only checked by the verifier's random interior points")
+        print(
+            f"uncertainty vertices per scheduling vertex M_i = {Ms} (per-vertex B, uncertainty.common_b: false)"
+        )
+        if (
+            len(
+                {
+                    tuple(np.round(np.array([b for _, b in lst]), 12).ravel())
+                    for lst in model.systems
+                }
+            )
+            > 1
+        ):
+            print(
+                "note: B differs between scheduling vertices; Lemma 1 certifies the vertices, the interior "
+                "(B(v_d) S(v_d) is bilinear) is only checked by the verifier's random interior points"
+            )
     try:
         res = synthesize_hinf(model, R, C, opts)
     except SolverError as exc:
         hint = ""
         if model.common_input is not None and model.common_input.elements:
-            hint = (" | the input matrix is the hull over all vertices (uncertainty.common_b: true); if B(v_d) varies "
-                    "strongly across the box, narrow the box; common_b: false certifies the vertices only")
+            hint = (
+                " | the input matrix is the hull over all vertices (uncertainty.common_b: true); if B(v_d) varies "
+                "strongly across the box, narrow the box; common_b: false certifies the vertices only"
+            )
         raise SolverError(str(exc).replace("\n", " | ") + hint) from None
     res.info["rate_from_design"] = rate_from_design
     res.info["n_e"], res.info["n_z"] = R.shape[1], C.shape[0]
@@ -353,17 +468,37 @@ def run(args: argparse.Namespace) -> int:
         extra = box_arrays(res.info["box"], rob["t"], form, rob["rate"])
         if rob["W"] is not None:
             extra["W"] = np.array(rob["W"])
-    side_sha = save_certificate_npz(side, res.X, res.S, res.H, res.scaling.t, res.scaling.s_u,
-                                    R, C, systems=model.systems, extra=extra)
+    side_sha = save_certificate_npz(
+        side,
+        res.X,
+        res.S,
+        res.H,
+        res.scaling.t,
+        res.scaling.s_u,
+        R,
+        C,
+        systems=model.systems,
+        extra=extra,
+    )
     objective = opts.effective_objective
     cert = {
-        "lmi": ("seed 0 Lemma 1" + (" (common B: scheduling box interior covered)" if model.common_input is not None
-                                    else " (per-vertex B: vertices certified)")
-                if method == "corners" else "element-box robust LMI (" + {1: "direct form, common X",
-                                                                         2: "Eq. (30) form, X_i per vertex",
-                                                                         3: "Eq. (30) form, rate-bounded X(v_d)"}[form]
-                + ")")
-               + (" + seed 2 Eq. (125) region (common H)" if opts.region else ""),
+        "lmi": (
+            "seed 0 Lemma 1"
+            + (
+                " (common B: scheduling box interior covered)"
+                if model.common_input is not None
+                else " (per-vertex B: vertices certified)"
+            )
+            if method == "corners"
+            else "element-box robust LMI ("
+            + {
+                1: "direct form, common X",
+                2: "Eq. (30) form, X_i per vertex",
+                3: "Eq. (30) form, rate-bounded X(v_d)",
+            }[form]
+            + ")"
+        )
+        + (" + seed 2 Eq. (125) region (common H)" if opts.region else ""),
         "lmi_form": form,
         "solver": res.solver,
         "status": res.status,
@@ -387,60 +522,97 @@ def run(args: argparse.Namespace) -> int:
     }
     if res.info.get("eq30"):
         e30 = res.info["eq30"]
-        cert["eq30_check"] = {"systems": e30["systems"], "gamma": float(e30["gamma"]), "margin": float(e30["margin"]),
-                              "note": "seed 0 Eq. (30) re-evaluated with numpy at every Eq. (23) system with "
-                                      "X_i^j = X_i, S_i, H of the element-box solve"}
+        cert["eq30_check"] = {
+            "systems": e30["systems"],
+            "gamma": float(e30["gamma"]),
+            "margin": float(e30["margin"]),
+            "note": "seed 0 Eq. (30) re-evaluated with numpy at every Eq. (23) system with "
+            "X_i^j = X_i, S_i, H of the element-box solve",
+        }
     if opts.region is not None:
         cert["region"] = opts.region.to_dict()
     if design is not None:
         cert["design"] = design
     else:
-        print("note: no phase-2 signals summary (--summary): the certificate has no design "
-              "envelope, so lpv_controller_node will refuse these gains (it bounds v_d and u_e "
-              "by that envelope)")
-    gamma_file = float(opts.gamma) if objective != "min_gamma" else float(max(res.gamma_certified, 1e-12))
+        print(
+            "note: no phase-2 signals summary (--summary): the certificate has no design "
+            "envelope, so lpv_controller_node will refuse these gains (it bounds v_d and u_e "
+            "by that envelope)"
+        )
+    gamma_file = (
+        float(opts.gamma) if objective != "min_gamma" else float(max(res.gamma_certified, 1e-12))
+    )
     F_ff = ff_layout = F_jerk = None
     if ff_enabled and "feedforward" not in cfg:
         # default on, but only for models that have the layout's states (generic plants: off)
         names = set(model.state_names)
         if not all(set(ff_layout_cfg[k]) <= names for k in ff_layout_cfg):
-            print(f"feedforward: off (default layout {ff_layout_cfg['free_states']} not among the model states)")
+            print(
+                f"feedforward: off (default layout {ff_layout_cfg['free_states']} not among the model states)"
+            )
             ff_enabled = False
     if ff_enabled:
         from lpv_sysid.synthesis.feedforward import FeedforwardLayout, vertex_feedforward
 
         # from the nominal vertex models (theta0), synthesis/feedforward.py
-        F_ff, F_jerk = vertex_feedforward(model.A, model.B, model.state_names,
-                                          FeedforwardLayout.from_dict(ff_layout_cfg), ff_cond_max)
+        F_ff, F_jerk = vertex_feedforward(
+            model.A,
+            model.B,
+            model.state_names,
+            FeedforwardLayout.from_dict(ff_layout_cfg),
+            ff_cond_max,
+        )
         ff_layout = ff_layout_cfg
     save_yaml(gains_dict(raw, model, res.K, R, Q, gamma_file, cert, F_ff, ff_layout, F_jerk), out)
     pr = cert["problem"]
-    print(f"LMI ({pr['method']}): {res.size.lmi_blocks} blocks (total dim {res.size.lmi_total_dim}, "
-          f"{res.size.scalar_constraints} scalar constraints), {res.size.scalar_variables} scalar variables; "
-          f"compile {res.compile_time:.2f} s, solve {res.solve_time:.2f} s, load + synthesis wall {wall:.2f} s "
-          f"({res.solver}, {res.status}, objective {objective})")
+    print(
+        f"LMI ({pr['method']}): {res.size.lmi_blocks} blocks (total dim {res.size.lmi_total_dim}, "
+        f"{res.size.scalar_constraints} scalar constraints), {res.size.scalar_variables} scalar variables; "
+        f"compile {res.compile_time:.2f} s, solve {res.solve_time:.2f} s, load + synthesis wall {wall:.2f} s "
+        f"({res.solver}, {res.status}, objective {objective})"
+    )
     if "seed_lemma1" in pr:
         sp = pr["seed_lemma1"]
-        print(f"seed 0 Lemma 1 over these sum M_i = {sp['sum_M']} systems (N = {sp['N']}): "
-              f"{sp['package']['scalar_variables']} scalar variables and {sp['package']['cone_entries']} cone "
-              f"entries in {sp['psd_cones']} PSD cones (package, primal); as CVX reports it (dual): "
-              f"{sp['as_cvx_reports']['variables']} variables with {sp['as_cvx_reports']['constraints']} constraints")
+        print(
+            f"seed 0 Lemma 1 over these sum M_i = {sp['sum_M']} systems (N = {sp['N']}): "
+            f"{sp['package']['scalar_variables']} scalar variables and {sp['package']['cone_entries']} cone "
+            f"entries in {sp['psd_cones']} PSD cones (package, primal); as CVX reports it (dual): "
+            f"{sp['as_cvx_reports']['variables']} variables with {sp['as_cvx_reports']['constraints']} constraints"
+        )
     if res.info.get("eq30"):
         e30 = res.info["eq30"]
-        print(f"Eq. (30) re-checked with numpy at all {e30['systems']} systems (X_i^j = X_i): gamma {e30['gamma']:.4g}, "
-              f"min margin {e30['margin']:.3g} ({e30['check_s']:.2f} s)")
+        print(
+            f"Eq. (30) re-checked with numpy at all {e30['systems']} systems (X_i^j = X_i): gamma {e30['gamma']:.4g}, "
+            f"min margin {e30['margin']:.3g} ({e30['check_s']:.2f} s)"
+        )
     cs = cert["certified_set"]
-    print(f"certified set: {cs['kind']}; scheduling: {cs['scheduling']['variation']} v_d"
-          + ("" if cs["scheduling"].get("covers_design_signal") is None else
-             f" (covers the designed v_d(t): {cs['scheduling']['covers_design_signal']})"))
-    print(f"gamma requested {opts.gamma:g}"
-          + (f" (solved at {res.gamma_solver:.4g} = gamma x design_gamma_fraction)"
-             if opts.design_gamma_fraction != 1 and objective != "min_gamma" else "")
-          + f", certified (numpy re-evaluation) {res.gamma_certified:.4g}, min margin {res.min_margin:.3g}")
+    print(
+        f"certified set: {cs['kind']}; scheduling: {cs['scheduling']['variation']} v_d"
+        + (
+            ""
+            if cs["scheduling"].get("covers_design_signal") is None
+            else f" (covers the designed v_d(t): {cs['scheduling']['covers_design_signal']})"
+        )
+    )
+    print(
+        f"gamma requested {opts.gamma:g}"
+        + (
+            f" (solved at {res.gamma_solver:.4g} = gamma x design_gamma_fraction)"
+            if opts.design_gamma_fraction != 1 and objective != "min_gamma"
+            else ""
+        )
+        + f", certified (numpy re-evaluation) {res.gamma_certified:.4g}, min margin {res.min_margin:.3g}"
+    )
     if F_ff is not None:
-        print(f"reference feedforward F_ff ({F_ff.shape[1]}x{F_ff.shape[2]} per vertex, rows "
-              f"{ff_layout['free_states']} + inputs) from the nominal vertex models"
-              + (f", jerk term F_jerk ({F_jerk.shape[1]}x{F_jerk.shape[2]})" if F_jerk is not None else ""))
+        print(
+            f"reference feedforward F_ff ({F_ff.shape[1]}x{F_ff.shape[2]} per vertex, rows "
+            f"{ff_layout['free_states']} + inputs) from the nominal vertex models"
+            + (
+                f", jerk term F_jerk ({F_jerk.shape[1]}x{F_jerk.shape[2]})"
+                if F_jerk is not None
+                else ""
+            )
+        )
     print(f"wrote {out}")
     print(f"wrote {side}")
     if args.no_verify:
@@ -449,11 +621,18 @@ def run(args: argparse.Namespace) -> int:
 
     vcfg = cfg.get("verify") or {}
     t1 = time.perf_counter()
-    rep = verify_files(out, args.models, n_random=int(vcfg.get("n_random", 20)), seed=int(vcfg.get("seed", 0)),
-                       velocity_index=vidx)
+    rep = verify_files(
+        out,
+        args.models,
+        n_random=int(vcfg.get("n_random", 20)),
+        seed=int(vcfg.get("seed", 0)),
+        velocity_index=vidx,
+    )
     print(rep.table())
     print(f"verification took {time.perf_counter() - t1:.2f} s")
     if not rep.passed:
-        print("independent verification FAILED (see table); the gains file was written but must not be flown")
+        print(
+            "independent verification FAILED (see table); the gains file was written but must not be flown"
+        )
         return 1
     return 0

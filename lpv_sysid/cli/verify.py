@@ -31,26 +31,52 @@ HELP = "independently re-check gains.yaml against vertex_models.yaml (H-inf norm
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--gains", required=True, help="gains.yaml (synthesize)")
-    parser.add_argument("--models", required=True, help="vertex_models.yaml the gains were synthesised for")
-    parser.add_argument("--random", type=int, default=20, help="random interior scheduling points (default 20)")
-    parser.add_argument("--seed", type=int, default=0,
-                        help="seed of the interior points and of the --full-box samples (default 0)")
-    parser.add_argument("--full-box", type=int, default=200, metavar="N",
-                        help="empirical Monte Carlo over the FULL identified uncertainty box: N scheduling "
-                             "points (corners, then random interior), every identified element drawn "
-                             "independently from [lower, upper] where the models file stores lower < upper, "
-                             "else nominal +/- k std (k = meta.k_sigma), plus 2 first-order worst corners per "
-                             "vertex; frozen closed-loop H-inf norm and spectral abscissa (default 200, 0 = off). "
-                             "Not claimed by the certificate: a miss prints WARN and keeps exit 0 unless "
-                             "--strict-full-box")
-    parser.add_argument("--strict-full-box", action="store_true",
-                        help="make a --full-box miss (any sample unstable or above gamma) fail verify (exit 1)")
-    parser.add_argument("--k-sigma", type=float, default=None,
-                        help="half-width in std of the full box (default: the models file's meta.k_sigma, else 3)")
-    parser.add_argument("--full-box-kept", choices=("stored", "ksigma"), default="stored",
-                        help="intervals of the kept corner parameters: 'stored' (the widened [lower, upper] "
-                             "of the file, default) or 'ksigma' (nominal +/- k std, the Eq. 22 box itself)")
-    parser.add_argument("--all-rows", action="store_true", help="print every check, not only failures + worst")
+    parser.add_argument(
+        "--models", required=True, help="vertex_models.yaml the gains were synthesised for"
+    )
+    parser.add_argument(
+        "--random", type=int, default=20, help="random interior scheduling points (default 20)"
+    )
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="seed of the interior points and of the --full-box samples (default 0)",
+    )
+    parser.add_argument(
+        "--full-box",
+        type=int,
+        default=200,
+        metavar="N",
+        help="empirical Monte Carlo over the FULL identified uncertainty box: N scheduling "
+        "points (corners, then random interior), every identified element drawn "
+        "independently from [lower, upper] where the models file stores lower < upper, "
+        "else nominal +/- k std (k = meta.k_sigma), plus 2 first-order worst corners per "
+        "vertex; frozen closed-loop H-inf norm and spectral abscissa (default 200, 0 = off). "
+        "Not claimed by the certificate: a miss prints WARN and keeps exit 0 unless "
+        "--strict-full-box",
+    )
+    parser.add_argument(
+        "--strict-full-box",
+        action="store_true",
+        help="make a --full-box miss (any sample unstable or above gamma) fail verify (exit 1)",
+    )
+    parser.add_argument(
+        "--k-sigma",
+        type=float,
+        default=None,
+        help="half-width in std of the full box (default: the models file's meta.k_sigma, else 3)",
+    )
+    parser.add_argument(
+        "--full-box-kept",
+        choices=("stored", "ksigma"),
+        default="stored",
+        help="intervals of the kept corner parameters: 'stored' (the widened [lower, upper] "
+        "of the file, default) or 'ksigma' (nominal +/- k std, the Eq. 22 box itself)",
+    )
+    parser.add_argument(
+        "--all-rows", action="store_true", help="print every check, not only failures + worst"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -60,24 +86,35 @@ def run(args: argparse.Namespace) -> int:
     if args.full_box < 0:
         raise ConfigError(f"--full-box must be >= 0, got {args.full_box}")
     t0 = time.perf_counter()
-    rep = verify_files(args.gains, args.models, n_random=args.random, seed=args.seed, full_box=args.full_box,
-                       strict_full_box=args.strict_full_box, k_sigma=args.k_sigma,
-                       full_box_kept=args.full_box_kept)
-    print(rep.table(max_rows=10 ** 6) if not args.all_rows else _all(rep))
+    rep = verify_files(
+        args.gains,
+        args.models,
+        n_random=args.random,
+        seed=args.seed,
+        full_box=args.full_box,
+        strict_full_box=args.strict_full_box,
+        k_sigma=args.k_sigma,
+        full_box_kept=args.full_box_kept,
+    )
+    print(rep.table(max_rows=10**6) if not args.all_rows else _all(rep))
     fb = rep.full_box
     if fb is not None:
         s = fb.summary()
-        print(f"full identified box (empirical, {s['samples']} samples, seed {s['seed']}, k = {s['k_sigma']:g} "
-              f"[{s['k_sigma_source']}], {s['intervals_stored']} stored / {s['intervals_k_std']} k*std intervals): "
-              f"worst norm {s['worst_norm']:.6g} vs gamma {s['gamma']:g} at v_d {s['worst_v_d']} "
-              f"({s['worst_where']}), fraction ok {s['fraction_ok']:.3f}, all stable {s['all_stable']}"
-              f"{'' if fb.passed else (' -> FAIL (--strict-full-box)' if args.strict_full_box else ' -> WARN (not certified; --strict-full-box to fail)')}")
+        print(
+            f"full identified box (empirical, {s['samples']} samples, seed {s['seed']}, k = {s['k_sigma']:g} "
+            f"[{s['k_sigma_source']}], {s['intervals_stored']} stored / {s['intervals_k_std']} k*std intervals): "
+            f"worst norm {s['worst_norm']:.6g} vs gamma {s['gamma']:g} at v_d {s['worst_v_d']} "
+            f"({s['worst_where']}), fraction ok {s['fraction_ok']:.3f}, all stable {s['all_stable']}"
+            f"{'' if fb.passed else (' -> FAIL (--strict-full-box)' if args.strict_full_box else ' -> WARN (not certified; --strict-full-box to fail)')}"
+        )
     print(f"verify took {time.perf_counter() - t0:.2f} s")
     print("PASS" if rep.passed else "FAIL")
     return 0 if rep.passed else 1
 
 
 def _all(rep) -> str:
-    lines = [f"{r.check:<14} {r.where:<28} {r.value:>12.6g} {r.limit:>12.6g}  {r.result} {r.note}"
-             for r in rep.rows]
+    lines = [
+        f"{r.check:<14} {r.where:<28} {r.value:>12.6g} {r.limit:>12.6g}  {r.result} {r.note}"
+        for r in rep.rows
+    ]
     return "\n".join(lines)

@@ -26,28 +26,51 @@ HELP = "tune a (MIMO, optionally cascaded) controller from I/O data by VRFT (see
 
 FORMAT = "lpv_sysid/vrft_controller@1"
 
-TABLE53_CONFIG = {"reference_model": {"poles": [0.9, 0.9]},
-                  "controller": {"basis": "pid", "terms": ["p", "i"], "structure": "full"},
-                  "method": "ls", "window": 10, "Ts": 1.0}
-LV100_CONFIG = {"reference_model": {"poles": [0.6, 0.6]},
-                "controller": {"basis": "pid", "terms": ["p", "i"], "structure": "full"},
-                "method": "eiv", "window": 20, "Ts": 0.1}
+TABLE53_CONFIG = {
+    "reference_model": {"poles": [0.9, 0.9]},
+    "controller": {"basis": "pid", "terms": ["p", "i"], "structure": "full"},
+    "method": "ls",
+    "window": 10,
+    "Ts": 1.0,
+}
+LV100_CONFIG = {
+    "reference_model": {"poles": [0.6, 0.6]},
+    "controller": {"basis": "pid", "terms": ["p", "i"], "structure": "full"},
+    "method": "eiv",
+    "window": 20,
+    "Ts": 0.1,
+}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--data", help="npz with t, u, y (optional y2, instrument, y_outer)")
     parser.add_argument("--config", help="VRFT YAML (see config/vrft_example.yaml)")
     parser.add_argument("--out", help="controller YAML to write")
-    parser.add_argument("--example", choices=["table5.3", "lv100"],
-                        help="generate the thesis benchmark data (seed 1 Table 5.3 / Tables 5.1-5.2) and run it")
-    parser.add_argument("--noise", type=float, default=0.0,
-                        help="table5.3: output noise std (then method eiv is used unless --config says otherwise)")
+    parser.add_argument(
+        "--example",
+        choices=["table5.3", "lv100"],
+        help="generate the thesis benchmark data (seed 1 Table 5.3 / Tables 5.1-5.2) and run it",
+    )
+    parser.add_argument(
+        "--noise",
+        type=float,
+        default=0.0,
+        help="table5.3: output noise std (then method eiv is used unless --config says otherwise)",
+    )
     parser.add_argument("--n", type=int, default=None, help="example: number of samples")
     parser.add_argument("--seed", type=int, default=0, help="example: random seed")
-    parser.add_argument("--runs", type=int, default=0,
-                        help="lv100: Table 5.2 statistics over this many noise realisations (same PRBS)")
-    parser.add_argument("--eiv-weight", choices=["identity", "residual"], default="identity",
-                        help="lv100 --runs: EIV weight W of Eq. (3.31) (default identity)")
+    parser.add_argument(
+        "--runs",
+        type=int,
+        default=0,
+        help="lv100: Table 5.2 statistics over this many noise realisations (same PRBS)",
+    )
+    parser.add_argument(
+        "--eiv-weight",
+        choices=["identity", "residual"],
+        default="identity",
+        help="lv100 --runs: EIV weight W of Eq. (3.31) (default identity)",
+    )
 
 
 def _read_yaml(path: str) -> dict:
@@ -68,7 +91,7 @@ def _load_npz(path: str) -> dict:
     p = Path(path)
     if not os.path.lexists(p):
         raise ConfigError(f"data file not found: {p}")
-    d = read_npz(p)     # regular file, size cap, no pickles, no complex arrays
+    d = read_npz(p)  # regular file, size cap, no pickles, no complex arrays
     for k in ("t", "u", "y"):
         if k not in d:
             raise ConfigError(f"{p}: missing array {k!r} (have {sorted(d)})")
@@ -96,8 +119,10 @@ def _fmt_matrix(name: str, K: np.ndarray) -> str:
 
 
 def _report(title: str, res) -> list[str]:
-    lines = [f"{title}: method {res.method}, N = {res.n_samples}, cond = {res.condition:.3g}, "
-             f"J_VR (Eq. 3.13) = {res.J_vr:.6g}"]
+    lines = [
+        f"{title}: method {res.method}, N = {res.n_samples}, cond = {res.condition:.3g}, "
+        f"J_VR (Eq. 3.13) = {res.J_vr:.6g}"
+    ]
     for nm, K in zip(res.cls.names, res.K):
         lines.append(_fmt_matrix(nm, K))
     return lines
@@ -107,7 +132,9 @@ def run(args: argparse.Namespace) -> int:
     from lpv_sysid.ident.vrft_config import VrftConfig
 
     if args.example is None and (args.data is None or args.config is None):
-        raise ConfigError("give --data FILE.npz and --config FILE.yaml, or --example table5.3|lv100")
+        raise ConfigError(
+            "give --data FILE.npz and --config FILE.yaml, or --example table5.3|lv100"
+        )
     if args.example is not None and args.data is not None:
         raise ConfigError("--example generates its own data; do not combine it with --data")
     if args.example is not None:
@@ -140,26 +167,55 @@ def _tune(cfg, data: dict, args) -> dict:
     y = data["y"].reshape(t.size, -1).astype(float)
     cls = cfg.loop.controller_class(u.shape[1], Ts)
     W = cfg.loop.prefilter_tf()
-    doc = {"format": FORMAT, "Ts": Ts, "method": cfg.method, "window": cfg.window, "eiv_weight": cfg.eiv_weight,
-           "source": str(getattr(args, "data", None) or f"example {getattr(args, 'example', '')}")}
+    doc = {
+        "format": FORMAT,
+        "Ts": Ts,
+        "method": cfg.method,
+        "window": cfg.window,
+        "eiv_weight": cfg.eiv_weight,
+        "source": str(getattr(args, "data", None) or f"example {getattr(args, 'example', '')}"),
+    }
     if cfg.outer is not None:
         if cfg.method == "iv":
             raise ConfigError("cascade (outer:) supports method ls or eiv, not iv")
         if "y_outer" not in data:
-            raise ConfigError("config has an 'outer' loop but the data file has no 'y_outer' array")
+            raise ConfigError(
+                "config has an 'outer' loop but the data file has no 'y_outer' array"
+            )
         yo = data["y_outer"].reshape(t.size, -1).astype(float)
         cls_o = cfg.outer.controller_class(y.shape[1], Ts)
-        res = cascaded_vrft(u, y, yo, cfg.loop.M, cfg.outer.M, cls, cls_o, method=cfg.method,
-                            window=cfg.window, prefilter_inner=W,
-                            prefilter_outer=cfg.outer.prefilter_tf("outer.prefilter"), discard=cfg.discard,
-                            eiv_weight=cfg.eiv_weight)
+        res = cascaded_vrft(
+            u,
+            y,
+            yo,
+            cfg.loop.M,
+            cfg.outer.M,
+            cls,
+            cls_o,
+            method=cfg.method,
+            window=cfg.window,
+            prefilter_inner=W,
+            prefilter_outer=cfg.outer.prefilter_tf("outer.prefilter"),
+            discard=cfg.discard,
+            eiv_weight=cfg.eiv_weight,
+        )
         doc["inner"] = res.inner.to_dict()
         doc["outer"] = res.outer.to_dict()
         lines = _report("inner loop", res.inner) + _report("outer loop", res.outer)
         return {"doc": doc, "lines": lines, "result": res}
-    res = vrft(u, y, cfg.loop.M, cls, method=cfg.method, prefilter=W, window=cfg.window,
-               instrument=data.get("instrument"), y2=data.get("y2"), discard=cfg.discard,
-               eiv_weight=cfg.eiv_weight)
+    res = vrft(
+        u,
+        y,
+        cfg.loop.M,
+        cls,
+        method=cfg.method,
+        prefilter=W,
+        window=cfg.window,
+        instrument=data.get("instrument"),
+        y2=data.get("y2"),
+        discard=cfg.discard,
+        eiv_weight=cfg.eiv_weight,
+    )
     doc["controller"] = res.to_dict()
     return {"doc": doc, "lines": _report("controller", res), "result": res}
 
@@ -186,7 +242,9 @@ def _run_example(args: argparse.Namespace) -> int:
         base = dict(TABLE53_CONFIG)
         if args.noise > 0:
             base["method"] = "eiv"
-        t, u, y, _ = ex.table53_data(args.n or (2000 if args.noise > 0 else 500), args.seed, args.noise)
+        t, u, y, _ = ex.table53_data(
+            args.n or (2000 if args.noise > 0 else 500), args.seed, args.noise
+        )
         G, M = ex.table53_plant_ss(), ex.table53_model()
     else:
         base = dict(LV100_CONFIG)
@@ -197,25 +255,43 @@ def _run_example(args: argparse.Namespace) -> int:
     res = out["result"]
     if args.example == "table5.3":
         a, b = ex.table53_ideal_pi()
-        print(f"seed 1 Table 5.3 example: G of Eq. (5.4), M = 0.1/(z-0.9) I, N = {t.size}, noise std {args.noise}")
+        print(
+            f"seed 1 Table 5.3 example: G of Eq. (5.4), M = 0.1/(z-0.9) I, N = {t.size}, noise std {args.noise}"
+        )
     else:
-        print(f"seed 1 LV100 (Eq. 5.1, Tustin 0.1 s), open-loop PRBS, noise var 0.0025, N = {t.size}")
+        print(
+            f"seed 1 LV100 (Eq. 5.1, Tustin 0.1 s), open-loop PRBS, noise var 0.0025, N = {t.size}"
+        )
     for line in out["lines"]:
         print(line)
     if cfg.outer is None and hasattr(res, "K") and res.cls.kind == "pid" and len(res.K) == 2:
         Kp, Ki = res.K
         A_, B_ = Kp + Ki * res.cls.Ts, Kp
-        print("  C_ij = (a z - b)/(z - 1):  a = " + np.array2string(A_, precision=4) .replace("\n", "")
-              + "  b = " + np.array2string(B_, precision=4).replace("\n", ""))
+        print(
+            "  C_ij = (a z - b)/(z - 1):  a = "
+            + np.array2string(A_, precision=4).replace("\n", "")
+            + "  b = "
+            + np.array2string(B_, precision=4).replace("\n", "")
+        )
         if args.example == "table5.3":
-            print("  Table 5.3 MIMO (published): a = " + np.array2string(ex.TABLE53_MIMO_A).replace("\n", "")
-                  + "  b = " + np.array2string(ex.TABLE53_MIMO_B).replace("\n", ""))
-            print(f"  max |a - a_pub|, |b - b_pub| = {max(np.abs(A_ - ex.TABLE53_MIMO_A).max(), np.abs(B_ - ex.TABLE53_MIMO_B).max()):.2e}")
+            print(
+                "  Table 5.3 MIMO (published): a = "
+                + np.array2string(ex.TABLE53_MIMO_A).replace("\n", "")
+                + "  b = "
+                + np.array2string(ex.TABLE53_MIMO_B).replace("\n", "")
+            )
+            print(
+                f"  max |a - a_pub|, |b - b_pub| = {max(np.abs(A_ - ex.TABLE53_MIMO_A).max(), np.abs(B_ - ex.TABLE53_MIMO_B).max()):.2e}"
+            )
         else:
             kp = np.array([[ex.LV100_T52_KP[(i, j)][0] for j in range(2)] for i in range(2)])
             ki = np.array([[ex.LV100_T52_KI[(i, j)][0] for j in range(2)] for i in range(2)])
-            print("  Table 5.2 (N=1e4, magnitudes; Table 5.1 gives (2,2) negative): Kp = "
-                  + np.array2string(kp).replace("\n", "") + "  Ki = " + np.array2string(ki).replace("\n", ""))
+            print(
+                "  Table 5.2 (N=1e4, magnitudes; Table 5.1 gives (2,2) negative): Kp = "
+                + np.array2string(kp).replace("\n", "")
+                + "  Ki = "
+                + np.array2string(ki).replace("\n", "")
+            )
         jmr = model_reference_h2(res, G, M, n_imp=2000)
         print(f"  model-reference cost ||M - T||_2^2 (Eq. 3.4, true plant) = {jmr:.6g}")
         out["doc"]["controller"]["J_mr_true_plant"] = float(jmr)
@@ -232,25 +308,57 @@ def _run_statistics(args: argparse.Namespace) -> int:
     if args.example != "lv100":
         raise ConfigError("--runs is only available with --example lv100 (Table 5.2)")
     if args.runs < 2:
-        raise ConfigError(f"--runs {args.runs}: need at least 2 realisations for a standard deviation")
+        raise ConfigError(
+            f"--runs {args.runs}: need at least 2 realisations for a standard deviation"
+        )
     n = args.n or 1000
-    mkp, skp, mki, ski = ex.lv100_statistics(n, args.runs, seed=args.seed, eiv_weight=args.eiv_weight)
-    print(f"seed 1 Table 5.2 protocol: LV100 open loop, one PRBS (seed {args.seed}), {args.runs} noise "
-          f"realisations (var 0.0025), N = {n}, EIV l = 20, W = {args.eiv_weight}")
-    print(f"{'':4}{'entry':7}{'theta':>10}{'sigma':>9}{'s/|th|':>8}   | thesis theta  sigma  (N=1e3 / 1e4)")
-    t3 = {"Kp": {(0, 0): (0.070, 0.116), (1, 0): (14.037, 1.172), (0, 1): (0.310, 0.022), (1, 1): (1.477, 0.175)},
-          "Ki": {(0, 0): (2.874, 0.189), (1, 0): (6.449, 1.006), (0, 1): (1.121, 0.060), (1, 1): (8.579, 0.510)}}
+    mkp, skp, mki, ski = ex.lv100_statistics(
+        n, args.runs, seed=args.seed, eiv_weight=args.eiv_weight
+    )
+    print(
+        f"seed 1 Table 5.2 protocol: LV100 open loop, one PRBS (seed {args.seed}), {args.runs} noise "
+        f"realisations (var 0.0025), N = {n}, EIV l = 20, W = {args.eiv_weight}"
+    )
+    print(
+        f"{'':4}{'entry':7}{'theta':>10}{'sigma':>9}{'s/|th|':>8}   | thesis theta  sigma  (N=1e3 / 1e4)"
+    )
+    t3 = {
+        "Kp": {
+            (0, 0): (0.070, 0.116),
+            (1, 0): (14.037, 1.172),
+            (0, 1): (0.310, 0.022),
+            (1, 1): (1.477, 0.175),
+        },
+        "Ki": {
+            (0, 0): (2.874, 0.189),
+            (1, 0): (6.449, 1.006),
+            (0, 1): (1.121, 0.060),
+            (1, 1): (8.579, 0.510),
+        },
+    }
     t4 = {"Kp": ex.LV100_T52_KP, "Ki": ex.LV100_T52_KI}
     rows = []
     for name, m, sd in (("Kp", mkp, skp), ("Ki", mki, ski)):
         for ij in ((0, 0), (1, 0), (0, 1), (1, 1)):
             th, sg = m[ij], sd[ij]
-            line = (f"{name:4}({ij[0] + 1},{ij[1] + 1})  {th:10.3f}{sg:9.3f}{sg / max(abs(th), 1e-12):8.3f}   | "
-                    f"{t3[name][ij][0]:7.3f} {t3[name][ij][1]:6.3f} / {t4[name][ij][0]:7.3f} {t4[name][ij][1]:6.3f}")
+            line = (
+                f"{name:4}({ij[0] + 1},{ij[1] + 1})  {th:10.3f}{sg:9.3f}{sg / max(abs(th), 1e-12):8.3f}   | "
+                f"{t3[name][ij][0]:7.3f} {t3[name][ij][1]:6.3f} / {t4[name][ij][0]:7.3f} {t4[name][ij][1]:6.3f}"
+            )
             print(line)
-            rows.append({"param": f"{name}({ij[0] + 1},{ij[1] + 1})", "mean": float(th), "std": float(sg)})
+            rows.append(
+                {"param": f"{name}({ij[0] + 1},{ij[1] + 1})", "mean": float(th), "std": float(sg)}
+            )
     if args.out:
-        _write(args.out, {"format": "lpv_sysid/vrft_statistics@1", "example": "lv100", "n": n,
-                          "runs": args.runs, "rows": rows})
+        _write(
+            args.out,
+            {
+                "format": "lpv_sysid/vrft_statistics@1",
+                "example": "lv100",
+                "n": n,
+                "runs": args.runs,
+                "rows": rows,
+            },
+        )
         print(f"wrote {args.out}")
     return 0

@@ -40,40 +40,40 @@ from lpv_sysid.validation import check_keys, is_finite_number
 class BaselineGains:
     """Gains and limits (PX4 parameter in brackets where one exists)."""
 
-    vel_p_xy: float = 1.8        # [MPC_XY_VEL_P_ACC] 1/s
-    vel_i_xy: float = 0.4        # [MPC_XY_VEL_I_ACC] 1/s^2
-    vel_d_xy: float = 0.2        # [MPC_XY_VEL_D_ACC] -
-    vel_p_z: float = 4.0         # [MPC_Z_VEL_P_ACC]
-    vel_i_z: float = 2.0         # [MPC_Z_VEL_I_ACC]
-    vel_d_z: float = 0.0         # [MPC_Z_VEL_D_ACC]
-    vel_int_limit: float = 6.0   # |integral| per axis, m/s^2
+    vel_p_xy: float = 1.8  # [MPC_XY_VEL_P_ACC] 1/s
+    vel_i_xy: float = 0.4  # [MPC_XY_VEL_I_ACC] 1/s^2
+    vel_d_xy: float = 0.2  # [MPC_XY_VEL_D_ACC] -
+    vel_p_z: float = 4.0  # [MPC_Z_VEL_P_ACC]
+    vel_i_z: float = 2.0  # [MPC_Z_VEL_I_ACC]
+    vel_d_z: float = 0.0  # [MPC_Z_VEL_D_ACC]
+    vel_int_limit: float = 6.0  # |integral| per axis, m/s^2
     vel_d_cutoff_hz: float = 5.0
-    ref_att_tau: float = 2.0     # s, low-pass of the attitude that rotates v_d (see module doc)
-    max_vel_up: float = 8.0      # [MPC_Z_VEL_MAX_UP] m/s, world frame
-    max_vel_down: float = 8.0    # [MPC_Z_VEL_MAX_DN] m/s, world frame
-    tilt_max_deg: float = 35.0   # [MPC_TILTMAX_AIR]
-    hover_thrust: float = 0.54   # [MPC_THR_HOVER] collective u_t at hover
-    thr_min: float = 0.12        # [MPC_THR_MIN]
-    thr_max: float = 0.90        # [MPC_THR_MAX]
-    att_p_roll: float = 5.0      # [MC_ROLL_P] 1/s
-    att_p_pitch: float = 5.0     # [MC_PITCH_P]
-    rate_max_rp_deg: float = 220.0   # [MC_ROLLRATE_MAX]
+    ref_att_tau: float = 2.0  # s, low-pass of the attitude that rotates v_d (see module doc)
+    max_vel_up: float = 8.0  # [MPC_Z_VEL_MAX_UP] m/s, world frame
+    max_vel_down: float = 8.0  # [MPC_Z_VEL_MAX_DN] m/s, world frame
+    tilt_max_deg: float = 35.0  # [MPC_TILTMAX_AIR]
+    hover_thrust: float = 0.54  # [MPC_THR_HOVER] collective u_t at hover
+    thr_min: float = 0.12  # [MPC_THR_MIN]
+    thr_max: float = 0.90  # [MPC_THR_MAX]
+    att_p_roll: float = 5.0  # [MC_ROLL_P] 1/s
+    att_p_pitch: float = 5.0  # [MC_PITCH_P]
+    rate_max_rp_deg: float = 220.0  # [MC_ROLLRATE_MAX]
     rate_max_yaw_deg: float = 200.0  # [MC_YAWRATE_MAX]
-    rate_p_roll: float = 0.030   # m / (rad/s) of virtual command u_a
+    rate_p_roll: float = 0.030  # m / (rad/s) of virtual command u_a
     rate_i_roll: float = 0.030
     rate_d_roll: float = 0.0008
     rate_p_pitch: float = 0.030
     rate_i_pitch: float = 0.030
     rate_d_pitch: float = 0.0008
-    rate_p_yaw: float = 0.60     # 1 / (rad/s) of u_r
+    rate_p_yaw: float = 0.60  # 1 / (rad/s) of u_r
     rate_i_yaw: float = 0.30
     rate_d_yaw: float = 0.0
     rate_int_limit_rp: float = 0.05  # m
     rate_int_limit_yaw: float = 0.6
     rate_d_cutoff_hz: float = 30.0
-    rate_hz: float = 250.0       # attitude + rate loop
+    rate_hz: float = 250.0  # attitude + rate loop
     velocity_rate_hz: float = 50.0
-    arm_length: float = 0.225    # for the output mixer (seed 0 Eq. 7)
+    arm_length: float = 0.225  # for the output mixer (seed 0 Eq. 7)
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -95,8 +95,12 @@ class BaselineGains:
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "BaselineGains":
         check_keys(d, {f.name for f in fields(cls)}, "controller")
-        return cls(**{k: (float(v) if isinstance(v, int) and not isinstance(v, bool) else v)
-                      for k, v in d.items()})
+        return cls(
+            **{
+                k: (float(v) if isinstance(v, int) and not isinstance(v, bool) else v)
+                for k, v in d.items()
+            }
+        )
 
     def to_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -123,15 +127,15 @@ class BaselineController:
 
     # ------------------------------------------------------------------ state
     def reset(self) -> None:
-        self.vel_int = [0.0, 0.0, 0.0]     # heading-frame acceleration integral, m/s^2
-        self.rate_int = [0.0, 0.0, 0.0]    # output units (m, m, 1)
-        self._vel_f = None                 # filtered heading-frame velocity (for D)
+        self.vel_int = [0.0, 0.0, 0.0]  # heading-frame acceleration integral, m/s^2
+        self.rate_int = [0.0, 0.0, 0.0]  # output units (m, m, 1)
+        self._vel_f = None  # filtered heading-frame velocity (for D)
         self._vel_d = [0.0, 0.0, 0.0]
         self._rate_prev = None
         self._rate_d = [0.0, 0.0, 0.0]
         self._n_step = 0
         self._att_f = None
-        self.att_sp = (0.0, 0.0)           # roll, pitch setpoint, rad
+        self.att_sp = (0.0, 0.0)  # roll, pitch setpoint, rad
         self.thrust_sp = self.gains.hover_thrust
         self.rate_sp = (0.0, 0.0, 0.0)
         self._sat = {"thrust_lo": False, "thrust_hi": False, "tilt": False}
@@ -164,9 +168,11 @@ class BaselineController:
     def _heading(phi: float, th: float, vb) -> list[float]:
         """Body (FRD) -> heading frame: R_IB of seed 0 Eq. (2) with psi = 0."""
         sf, cf, st, ct = math.sin(phi), math.cos(phi), math.sin(th), math.cos(th)
-        return [ct * vb[0] + sf * st * vb[1] + cf * st * vb[2],
-                cf * vb[1] - sf * vb[2],
-                -st * vb[0] + sf * ct * vb[1] + cf * ct * vb[2]]
+        return [
+            ct * vb[0] + sf * st * vb[1] + cf * st * vb[2],
+            cf * vb[1] - sf * vb[2],
+            -st * vb[0] + sf * ct * vb[1] + cf * ct * vb[2],
+        ]
 
     # ------------------------------------------------------------------ loops
     def _velocity_loop(self, dt: float, phi: float, th: float, v, v_ref) -> None:
@@ -216,10 +222,14 @@ class BaselineController:
             e_i = e[i]
             if tilt_sat and kp[i] > 0:
                 e_i = e[i] - (acc[i] - acc_lim[i]) * (2.0 / kp[i])
-            self.vel_int[i] = _clip(self.vel_int[i] + ki[i] * e_i * dt, -g.vel_int_limit, g.vel_int_limit)
+            self.vel_int[i] = _clip(
+                self.vel_int[i] + ki[i] * e_i * dt, -g.vel_int_limit, g.vel_int_limit
+            )
         # NED z: negative e pushes thrust up; stop integrating into saturation
         if not ((thr > g.thr_max and e[2] < 0) or (thr < g.thr_min and e[2] > 0)):
-            self.vel_int[2] = _clip(self.vel_int[2] + ki[2] * e[2] * dt, -g.vel_int_limit, g.vel_int_limit)
+            self.vel_int[2] = _clip(
+                self.vel_int[2] + ki[2] * e[2] * dt, -g.vel_int_limit, g.vel_int_limit
+            )
         zb = [-c / fmag for c in f]
         phi_d = math.asin(_clip(-zb[1], -1.0, 1.0))
         th_d = math.atan2(zb[0], zb[2])
@@ -276,7 +286,9 @@ class BaselineController:
         g = self.gains
         for i in range(8):
             if not math.isfinite(float(x12[i])):
-                raise SafetyError(f"baseline controller: measured state {_STATE8[i]} is not finite")
+                raise SafetyError(
+                    f"baseline controller: measured state {_STATE8[i]} is not finite"
+                )
         for i, name in enumerate(("u_d", "v_d", "w_d")):
             if not math.isfinite(float(v_ref[i])):
                 raise SafetyError(f"baseline controller: reference {name} is not finite")

@@ -75,7 +75,13 @@ from lpv_sysid.validation import check_keys, is_count, is_finite_number
 log = logging.getLogger(__name__)
 
 IDLE, STARTING, TAKEOFF, REPOSITION, SETTLE = "idle", "starting", "takeoff", "reposition", "settle"
-TRIM, EXCITATION, RECOVER, FINISHING, LANDING = "trim", "excitation", "recover", "finishing", "landing"
+TRIM, EXCITATION, RECOVER, FINISHING, LANDING = (
+    "trim",
+    "excitation",
+    "recover",
+    "finishing",
+    "landing",
+)
 DONE, ABORTING, ABORTED, FAILED = "done", "aborting", "aborted", "failed"
 TERMINAL = (DONE, ABORTED, FAILED)
 FLYING = (TAKEOFF, REPOSITION, SETTLE, TRIM, EXCITATION, RECOVER)
@@ -92,7 +98,7 @@ ORDERS = ("alternate", "table")
 #: tolerance [m/s] with which ``lpv-sysid identify`` snaps a trim reference to the box
 #: (lpv_sysid.ident.dataprep.snap_to_box)
 IDENTIFY_SNAP_TOLERANCE = 0.25
-_NOMINAL_ACCEL = 2.0        # m/s^2, for the expected settle transient of the horizontal plan
+_NOMINAL_ACCEL = 2.0  # m/s^2, for the expected settle transient of the horizontal plan
 
 
 # =============================================================================== config
@@ -102,42 +108,42 @@ class CampaignConfig:
 
     box_min: tuple = (-3.0, -3.0, -0.7)
     box_max: tuple = (3.0, 3.0, 0.7)
-    vertices: tuple | None = None          # 1-based seed 0 Table 1 indices; None: all 8
+    vertices: tuple | None = None  # 1-based seed 0 Table 1 indices; None: all 8
     hover_validation: bool = True
-    order: str = "alternate"               # alternate | table
-    velocity_frame: str = "body_ned"       # the bridge's velocity_frame (body_ned only, see FRAMES)
-    rate_hz: float = 50.0                  # velocity reference rate
+    order: str = "alternate"  # alternate | table
+    velocity_frame: str = "body_ned"  # the bridge's velocity_frame (body_ned only, see FRAMES)
+    rate_hz: float = 50.0  # velocity reference rate
     takeoff_altitude: float = 20.0
-    altitude_min: float = 15.0             # campaign altitude window
+    altitude_min: float = 15.0  # campaign altitude window
     altitude_max: float = 70.0
-    altitude_margin: float = 2.0           # kept free at both ends of every segment
-    altitude_tolerance: float = 1.0        # reached a target height
-    position_tolerance: float = 3.0        # reached a horizontal start point
-    climb_rate: float = 1.5                # take-off / reposition limits
+    altitude_margin: float = 2.0  # kept free at both ends of every segment
+    altitude_tolerance: float = 1.0  # reached a target height
+    position_tolerance: float = 3.0  # reached a horizontal start point
+    climb_rate: float = 1.5  # take-off / reposition limits
     descent_rate: float = 1.0
     horizontal_speed: float = 3.0
-    position_gain: float = 0.5             # 1/s, take-off / reposition P loop
-    hold_gain: float = 0.2                 # 1/s, altitude hold on level runs
-    hold_max: float = 0.2                  # m/s
-    radius: float = 250.0                  # m, campaign horizontal limit around home
-    center_runs: bool = True               # reposition so each run is centred on home
+    position_gain: float = 0.5  # 1/s, take-off / reposition P loop
+    hold_gain: float = 0.2  # 1/s, altitude hold on level runs
+    hold_max: float = 0.2  # m/s
+    radius: float = 250.0  # m, campaign horizontal limit around home
+    center_runs: bool = True  # reposition so each run is centred on home
     settle_tolerance: tuple = (0.3, 0.3, 0.3)
     settle_dwell: float = 1.0
     settle_timeout: float = 20.0
-    hover_tolerance: float = 0.3           # m/s speed: hover reached (take-off, recover)
+    hover_tolerance: float = 0.3  # m/s speed: hover reached (take-off, recover)
     trim_s: float = 10.0
-    trim_average_s: float = 5.0            # end of the trim averaged for the equilibrium
-    ramp_s: float = 1.0                    # excitation raised-cosine ramps
-    periods: int = 1                       # excitation periods per run
+    trim_average_s: float = 5.0  # end of the trim averaged for the equilibrium
+    ramp_s: float = 1.0  # excitation raised-cosine ramps
+    periods: int = 1  # excitation periods per run
     start_timeout: float = 20.0
     takeoff_timeout: float = 60.0
     reposition_timeout: float = 90.0
     recover_timeout: float = 20.0
     state_timeout: float = 0.5
     handback_timeout: float = 15.0
-    finish: str = "LAND"                   # LAND | HOLD
+    finish: str = "LAND"  # LAND | HOLD
     land_timeout: float = 180.0
-    arm_length: float | None = None        # m, for the Table 1 delta columns; None: quadrotor default
+    arm_length: float | None = None  # m, for the Table 1 delta columns; None: quadrotor default
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "CampaignConfig":
@@ -154,40 +160,74 @@ class CampaignConfig:
         def num(name: str, lo: float = 0.0, strict: bool = True) -> None:
             v = getattr(self, name)
             if not is_finite_number(v) or (v <= lo if strict else v < lo):
-                raise ConfigError(f"campaign.{name} must be a finite number {'>' if strict else '>='} "
-                                  f"{lo:g}, got {v!r}")
+                raise ConfigError(
+                    f"campaign.{name} must be a finite number {'>' if strict else '>='} "
+                    f"{lo:g}, got {v!r}"
+                )
 
         for name, n in (("box_min", 3), ("box_max", 3), ("settle_tolerance", 3)):
             v = getattr(self, name)
             if not (isinstance(v, tuple) and len(v) == n and all(is_finite_number(x) for x in v)):
                 raise ConfigError(f"campaign.{name} must be {n} finite numbers, got {v!r}")
         if any(a >= b for a, b in zip(self.box_min, self.box_max)):
-            raise ConfigError(f"campaign.box_min {list(self.box_min)} must be below box_max "
-                              f"{list(self.box_max)} in every component")
+            raise ConfigError(
+                f"campaign.box_min {list(self.box_min)} must be below box_max "
+                f"{list(self.box_max)} in every component"
+            )
         if any(x <= 0 for x in self.settle_tolerance):
             raise ConfigError("campaign.settle_tolerance must be positive")
         if self.vertices is not None:
             v = self.vertices
-            if not (isinstance(v, tuple) and v and all(is_count(i, 1) and i <= 8 for i in v)
-                    and len(set(v)) == len(v)):
-                raise ConfigError(f"campaign.vertices must be distinct seed 0 Table 1 indices 1..8, got {v!r}")
+            if not (
+                isinstance(v, tuple)
+                and v
+                and all(is_count(i, 1) and i <= 8 for i in v)
+                and len(set(v)) == len(v)
+            ):
+                raise ConfigError(
+                    f"campaign.vertices must be distinct seed 0 Table 1 indices 1..8, got {v!r}"
+                )
         for name in ("hover_validation", "center_runs"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"campaign.{name} must be true or false")
         if self.order not in ORDERS:
             raise ConfigError(f"campaign.order must be one of {list(ORDERS)}, got {self.order!r}")
         if self.velocity_frame not in FRAMES:
-            raise ConfigError(f"campaign.velocity_frame must be 'body_ned', got {self.velocity_frame!r}: with "
-                              "local_ned the bridge rotates the FRD vertex by the full attitude, so a w = 0 vertex "
-                              "sinks u sin(theta) at pitch theta and no altitude hold can keep the vertex")
+            raise ConfigError(
+                f"campaign.velocity_frame must be 'body_ned', got {self.velocity_frame!r}: with "
+                "local_ned the bridge rotates the FRD vertex by the full attitude, so a w = 0 vertex "
+                "sinks u sin(theta) at pitch theta and no altitude hold can keep the vertex"
+            )
         if str(self.finish).upper() not in FINISH_MODES:
-            raise ConfigError(f"campaign.finish must be one of {list(FINISH_MODES)}, got {self.finish!r}")
-        for name in ("rate_hz", "takeoff_altitude", "altitude_max", "altitude_tolerance",
-                     "position_tolerance", "climb_rate", "descent_rate", "horizontal_speed",
-                     "position_gain", "hold_gain", "hold_max", "radius", "settle_dwell",
-                     "settle_timeout", "hover_tolerance", "trim_s", "trim_average_s",
-                     "start_timeout", "takeoff_timeout", "reposition_timeout", "recover_timeout",
-                     "state_timeout", "handback_timeout", "land_timeout"):
+            raise ConfigError(
+                f"campaign.finish must be one of {list(FINISH_MODES)}, got {self.finish!r}"
+            )
+        for name in (
+            "rate_hz",
+            "takeoff_altitude",
+            "altitude_max",
+            "altitude_tolerance",
+            "position_tolerance",
+            "climb_rate",
+            "descent_rate",
+            "horizontal_speed",
+            "position_gain",
+            "hold_gain",
+            "hold_max",
+            "radius",
+            "settle_dwell",
+            "settle_timeout",
+            "hover_tolerance",
+            "trim_s",
+            "trim_average_s",
+            "start_timeout",
+            "takeoff_timeout",
+            "reposition_timeout",
+            "recover_timeout",
+            "state_timeout",
+            "handback_timeout",
+            "land_timeout",
+        ):
             num(name)
         for name in ("altitude_min", "altitude_margin", "ramp_s"):
             num(name, strict=False)
@@ -196,26 +236,39 @@ class CampaignConfig:
         if self.arm_length is not None:
             num("arm_length")
         if self.altitude_min >= self.altitude_max:
-            raise ConfigError(f"campaign.altitude_min ({self.altitude_min} m) must be below "
-                              f"altitude_max ({self.altitude_max} m)")
+            raise ConfigError(
+                f"campaign.altitude_min ({self.altitude_min} m) must be below "
+                f"altitude_max ({self.altitude_max} m)"
+            )
         if not self.altitude_min <= self.takeoff_altitude <= self.altitude_max:
-            raise ConfigError(f"campaign.takeoff_altitude {self.takeoff_altitude} m must lie in the "
-                              f"window [{self.altitude_min}, {self.altitude_max}] m")
+            raise ConfigError(
+                f"campaign.takeoff_altitude {self.takeoff_altitude} m must lie in the "
+                f"window [{self.altitude_min}, {self.altitude_max}] m"
+            )
         if self.hold_max >= IDENTIFY_SNAP_TOLERANCE:
-            raise ConfigError(f"campaign.hold_max {self.hold_max} m/s must stay below "
-                              f"{IDENTIFY_SNAP_TOLERANCE} m/s: the altitude correction is part of the "
-                              "recorded trim reference that `lpv-sysid identify` snaps to the box")
+            raise ConfigError(
+                f"campaign.hold_max {self.hold_max} m/s must stay below "
+                f"{IDENTIFY_SNAP_TOLERANCE} m/s: the altitude correction is part of the "
+                "recorded trim reference that `lpv-sysid identify` snaps to the box"
+            )
         if self.trim_average_s > self.trim_s:
-            raise ConfigError(f"campaign.trim_average_s ({self.trim_average_s} s) must not exceed "
-                              f"trim_s ({self.trim_s} s)")
+            raise ConfigError(
+                f"campaign.trim_average_s ({self.trim_average_s} s) must not exceed "
+                f"trim_s ({self.trim_s} s)"
+            )
         if self.settle_dwell >= self.settle_timeout:
-            raise ConfigError(f"campaign.settle_dwell ({self.settle_dwell} s) must be shorter than "
-                              f"settle_timeout ({self.settle_timeout} s)")
+            raise ConfigError(
+                f"campaign.settle_dwell ({self.settle_dwell} s) must be shorter than "
+                f"settle_timeout ({self.settle_timeout} s)"
+            )
 
     def corners(self) -> list[tuple[float, float, float]]:
         """The 2^3 box corners in seed 0 Table 1 order (u fastest, then v, then w)."""
         lo, hi = self.box_min, self.box_max
-        return [(u, v, w) for w, v, u in itertools.product((lo[2], hi[2]), (lo[1], hi[1]), (lo[0], hi[0]))]
+        return [
+            (u, v, w)
+            for w, v, u in itertools.product((lo[2], hi[2]), (lo[1], hi[1]), (lo[0], hi[0]))
+        ]
 
 
 # ============================================================================= planning
@@ -223,11 +276,11 @@ class CampaignConfig:
 class ExcitationProfile:
     """What the planner needs to know about the phase-1 excitation of one run."""
 
-    duration: float                 # s, including both ramps
-    peak: tuple                     # per-axis |v| peak (u, v, w) [m/s]
-    peak_norm: float                # max |v| [m/s]
-    yaw_peak: float                 # [rad/s]
-    span: tuple                     # per-axis max - min of the displacement int v dt [m]
+    duration: float  # s, including both ramps
+    peak: tuple  # per-axis |v| peak (u, v, w) [m/s]
+    peak_norm: float  # max |v| [m/s]
+    yaw_peak: float  # [rad/s]
+    span: tuple  # per-axis max - min of the displacement int v dt [m]
 
     @classmethod
     def from_table(cls, t, u, names, ramp: float, periods: int = 1) -> "ExcitationProfile":
@@ -236,9 +289,13 @@ class ExcitationProfile:
         tg = np.arange(0.0, core.duration + dt, dt)
         v, r, _ = core.evaluate(tg)
         disp = np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * (v[1:] + v[:-1]) * dt, axis=0)])
-        return cls(float(core.duration), tuple(float(x) for x in np.max(np.abs(v), axis=0)),
-                   float(np.max(np.linalg.norm(v, axis=1))), float(np.max(np.abs(r))),
-                   tuple(float(x) for x in disp.max(axis=0) - disp.min(axis=0)))
+        return cls(
+            float(core.duration),
+            tuple(float(x) for x in np.max(np.abs(v), axis=0)),
+            float(np.max(np.linalg.norm(v, axis=1))),
+            float(np.max(np.abs(r))),
+            tuple(float(x) for x in disp.max(axis=0) - disp.min(axis=0)),
+        )
 
 
 def make_excitation(t, u, names, *, start_time: float, ramp: float, periods: int = 1):
@@ -246,31 +303,44 @@ def make_excitation(t, u, names, *, start_time: float, ramp: float, periods: int
     added by the campaign), channels ``u_ref, v_ref, w_ref, r_ref``."""
     from lpv_sysid.signals.excitation import PHASE1_CHANNELS, PHASE1_YAW_CHANNEL, ExcitationCore
 
-    return ExcitationCore(t, u, names, start_time=start_time, velocity_channels=PHASE1_CHANNELS,
-                          yaw_rate_channel=PHASE1_YAW_CHANNEL, ramp=ramp, periods=periods)
+    return ExcitationCore(
+        t,
+        u,
+        names,
+        start_time=start_time,
+        velocity_channels=PHASE1_CHANNELS,
+        yaw_rate_channel=PHASE1_YAW_CHANNEL,
+        ramp=ramp,
+        periods=periods,
+    )
 
 
 @dataclass(frozen=True)
 class PlannedRun:
-    order: int                      # 1-based position in the campaign
-    name: str                       # bag / run name (sim.phase1.run_name, hover_validation)
-    table_index: int | None         # seed 0 Table 1 index of the vertex (None: hover)
-    vertex: tuple                   # commanded (u, v, w) [m/s] in the command frame
-    kind: str                       # climb | descent | level
-    start_window: tuple             # allowed start heights above home [m]
-    altitude_room: float            # height the segment needs [m]
-    horizontal_extent: float        # worst distance from home during the run [m]
-    duration_worst: float           # settle_timeout + trim + excitation [s]
-    duration_nominal: float         # expected settle + trim + excitation [s]
+    order: int  # 1-based position in the campaign
+    name: str  # bag / run name (sim.phase1.run_name, hover_validation)
+    table_index: int | None  # seed 0 Table 1 index of the vertex (None: hover)
+    vertex: tuple  # commanded (u, v, w) [m/s] in the command frame
+    kind: str  # climb | descent | level
+    start_window: tuple  # allowed start heights above home [m]
+    altitude_room: float  # height the segment needs [m]
+    horizontal_extent: float  # worst distance from home during the run [m]
+    duration_worst: float  # settle_timeout + trim + excitation [s]
+    duration_nominal: float  # expected settle + trim + excitation [s]
 
     def to_dict(self) -> dict:
-        return {"order": self.order, "name": self.name, "table_index": self.table_index,
-                "vertex": list(self.vertex), "kind": self.kind,
-                "start_window_m": [round(x, 3) for x in self.start_window],
-                "altitude_room_m": round(self.altitude_room, 3),
-                "horizontal_extent_m": round(self.horizontal_extent, 3),
-                "duration_worst_s": round(self.duration_worst, 3),
-                "duration_nominal_s": round(self.duration_nominal, 3)}
+        return {
+            "order": self.order,
+            "name": self.name,
+            "table_index": self.table_index,
+            "vertex": list(self.vertex),
+            "kind": self.kind,
+            "start_window_m": [round(x, 3) for x in self.start_window],
+            "altitude_room_m": round(self.altitude_room, 3),
+            "horizontal_extent_m": round(self.horizontal_extent, 3),
+            "duration_worst_s": round(self.duration_worst, 3),
+            "duration_nominal_s": round(self.duration_nominal, 3),
+        }
 
 
 @dataclass(frozen=True)
@@ -280,22 +350,29 @@ class CampaignPlan:
     excitation: ExcitationProfile
 
     def describe(self) -> str:
-        lines = [f"{'#':>2} {'run':<22} {'kind':<8} {'vertex [m/s]':<20} {'start h [m]':<14} "
-                 f"{'room [m]':>8} {'extent [m]':>10} {'T_worst [s]':>11}"]
+        lines = [
+            f"{'#':>2} {'run':<22} {'kind':<8} {'vertex [m/s]':<20} {'start h [m]':<14} "
+            f"{'room [m]':>8} {'extent [m]':>10} {'T_worst [s]':>11}"
+        ]
         for r in self.runs:
             vtx = "[" + " ".join(f"{c:+.2g}" for c in r.vertex) + "]"
             win = f"{r.start_window[0]:.1f}-{r.start_window[1]:.1f}"
-            lines.append(f"{r.order:>2} {r.name:<22} {r.kind:<8} {vtx:<20} {win:<14} "
-                         f"{r.altitude_room:8.1f} {r.horizontal_extent:10.1f} {r.duration_worst:11.1f}")
+            lines.append(
+                f"{r.order:>2} {r.name:<22} {r.kind:<8} {vtx:<20} {win:<14} "
+                f"{r.altitude_room:8.1f} {r.horizontal_extent:10.1f} {r.duration_worst:11.1f}"
+            )
         return "\n".join(lines)
 
 
 def run_name(vertex) -> str:
     from lpv_sysid.sim.phase1 import run_name as _run_name
+
     return _run_name(vertex)
 
 
-def plan_campaign(cfg: CampaignConfig, excitation: ExcitationProfile, envelope=None) -> CampaignPlan:
+def plan_campaign(
+    cfg: CampaignConfig, excitation: ExcitationProfile, envelope=None
+) -> CampaignPlan:
     """Order the runs and check that each fits the altitude window, the radius and the
     envelope (``lpv_sysid.control.envelope.EnvelopeConfig``, optional); raises
     ConfigError naming the run and the numbers otherwise (module docstring)."""
@@ -331,17 +408,31 @@ def plan_campaign(cfg: CampaignConfig, excitation: ExcitationProfile, envelope=N
                 f"|w| x (settle_timeout + trim_s + excitation) = {abs(w):g} m/s x ({cfg.settle_timeout:g} + "
                 f"{cfg.trim_s:g} + {t_exc:.4g}) s = {travel:.1f} m + excitation displacement "
                 f"{ex.span[2]:.2f} m + 2 x altitude_margin {m:g} m = {room:.1f} m; widen the window, "
-                f"shorten the segment or reduce |w|")
-        h_ext = (0.5 if cfg.center_runs else 1.0) * uv * t_worst + math.hypot(ex.span[0], ex.span[1]) + m
+                f"shorten the segment or reduce |w|"
+            )
+        h_ext = (
+            (0.5 if cfg.center_runs else 1.0) * uv * t_worst
+            + math.hypot(ex.span[0], ex.span[1])
+            + m
+        )
         if h_ext > cfg.radius:
             raise ConfigError(
                 f"campaign: run {name} (vertex {list(vertex)} m/s) needs {h_ext:.1f} m of horizontal "
                 f"room ({'half of ' if cfg.center_runs else ''}{uv:.3g} m/s x {t_worst:.4g} s + "
                 f"excitation {math.hypot(ex.span[0], ex.span[1]):.2f} m + margin {m:g} m) but "
-                f"campaign.radius is {cfg.radius:g} m")
-        return dict(name=name, table_index=table_index, vertex=vertex, kind=kind, start_window=sw,
-                    altitude_room=room, horizontal_extent=h_ext, duration_worst=t_worst,
-                    duration_nominal=t_nom)
+                f"campaign.radius is {cfg.radius:g} m"
+            )
+        return dict(
+            name=name,
+            table_index=table_index,
+            vertex=vertex,
+            kind=kind,
+            start_window=sw,
+            altitude_room=room,
+            horizontal_extent=h_ext,
+            duration_worst=t_worst,
+            duration_nominal=t_nom,
+        )
 
     for i, vtx in entries:
         planned.append(plan_one(i, vtx, run_name(vtx)))
@@ -349,7 +440,9 @@ def plan_campaign(cfg: CampaignConfig, excitation: ExcitationProfile, envelope=N
     if cfg.hover_validation:
         # `lpv-sysid identify` takes the run at the box centre as the validation maneuver
         centre = tuple(0.5 * (a + b) for a, b in zip(cfg.box_min, cfg.box_max))
-        order.append(plan_one(None, centre, "hover_validation" if not any(centre) else "centre_validation"))
+        order.append(
+            plan_one(None, centre, "hover_validation" if not any(centre) else "centre_validation")
+        )
     runs = tuple(PlannedRun(order=k + 1, **p) for k, p in enumerate(order))
     if envelope is not None:
         _check_envelope(cfg, runs, ex, envelope)
@@ -382,6 +475,7 @@ def _order_runs(planned: list[dict], cfg: CampaignConfig) -> list[dict]:
                 na, nb = np.linalg.norm(a), np.linalg.norm(b)
                 dot = float(a @ b / (na * nb)) if na > 0 and nb > 0 else 0.0
                 return (alt + dot, left.index(p))
+
             best = min(left, key=cost)
         out.append(best)
         left.remove(best)
@@ -399,19 +493,25 @@ def _check_envelope(cfg: CampaignConfig, runs, ex: ExcitationProfile, env) -> No
                 f"campaign: altitude_min {cfg.altitude_min:g} m - altitude_margin {cfg.altitude_margin:g} m "
                 f"is too close to the envelope floor: descending at up to {max_down:.2f} m/s, the "
                 f"predictive floor (floor {env.floor:g} m + {max_down:.2f} m/s x lookahead "
-                f"{env.lookahead:g} s = {lo:.1f} m) would trip; raise altitude_min")
+                f"{env.lookahead:g} s = {lo:.1f} m) would trip; raise altitude_min"
+            )
         if cfg.takeoff_altitude <= env.floor + env.floor_arm_margin:
-            raise ConfigError(f"campaign: takeoff_altitude {cfg.takeoff_altitude:g} m must be above the "
-                              f"envelope floor + floor_arm_margin ({env.floor + env.floor_arm_margin:g} m)")
+            raise ConfigError(
+                f"campaign: takeoff_altitude {cfg.takeoff_altitude:g} m must be above the "
+                f"envelope floor + floor_arm_margin ({env.floor + env.floor_arm_margin:g} m)"
+            )
         hi = env.ceiling - max_up * env.lookahead
         if cfg.altitude_max + cfg.altitude_margin > hi:
             raise ConfigError(
                 f"campaign: altitude_max {cfg.altitude_max:g} m + altitude_margin {cfg.altitude_margin:g} m "
                 f"is too close to the envelope ceiling: climbing at up to {max_up:.2f} m/s the "
                 f"predictive ceiling trips above {hi:.1f} m (ceiling {env.ceiling:g} m - {max_up:.2f} m/s x "
-                f"{env.lookahead:g} s); lower altitude_max")
+                f"{env.lookahead:g} s); lower altitude_max"
+            )
         if cfg.radius > env.radius:
-            raise ConfigError(f"campaign.radius {cfg.radius:g} m exceeds the envelope radius {env.radius:g} m")
+            raise ConfigError(
+                f"campaign.radius {cfg.radius:g} m exceeds the envelope radius {env.radius:g} m"
+            )
         for r in runs:
             top = math.hypot(*r.vertex) + ex.peak_norm + cfg.hold_max
             lim = min(env.max_setpoint, env.max_speed)
@@ -419,17 +519,24 @@ def _check_envelope(cfg: CampaignConfig, runs, ex: ExcitationProfile, env) -> No
                 raise ConfigError(
                     f"campaign: run {r.name} commands up to |v| = {math.hypot(*r.vertex):.2f} + excitation "
                     f"{ex.peak_norm:.2f} + hold {cfg.hold_max:g} = {top:.2f} m/s, above the envelope's "
-                    f"min(max_setpoint, max_speed) = {lim:g} m/s")
+                    f"min(max_setpoint, max_speed) = {lim:g} m/s"
+                )
             h_ext = r.horizontal_extent + math.hypot(*r.vertex[:2]) * env.lookahead
             if h_ext > env.radius:
-                raise ConfigError(f"campaign: run {r.name} reaches {r.horizontal_extent:.1f} m from home; "
-                                  f"with the envelope's predictive fence (lookahead {env.lookahead:g} s) "
-                                  f"that needs {h_ext:.1f} m > radius {env.radius:g} m")
+                raise ConfigError(
+                    f"campaign: run {r.name} reaches {r.horizontal_extent:.1f} m from home; "
+                    f"with the envelope's predictive fence (lookahead {env.lookahead:g} s) "
+                    f"that needs {h_ext:.1f} m > radius {env.radius:g} m"
+                )
         if ex.yaw_peak > env.max_setpoint_yaw_rate:
-            raise ConfigError(f"campaign: excitation yaw-rate peak {ex.yaw_peak:.3g} rad/s exceeds the "
-                              f"envelope's max_setpoint_yaw_rate {env.max_setpoint_yaw_rate:g} rad/s")
+            raise ConfigError(
+                f"campaign: excitation yaw-rate peak {ex.yaw_peak:.3g} rad/s exceeds the "
+                f"envelope's max_setpoint_yaw_rate {env.max_setpoint_yaw_rate:g} rad/s"
+            )
         if cfg.horizontal_speed > min(env.max_setpoint, env.max_speed):
-            raise ConfigError(f"campaign.horizontal_speed {cfg.horizontal_speed:g} m/s exceeds the envelope")
+            raise ConfigError(
+                f"campaign.horizontal_speed {cfg.horizontal_speed:g} m/s exceeds the envelope"
+            )
 
 
 # ============================================================================ runtime
@@ -437,14 +544,14 @@ def _check_envelope(cfg: CampaignConfig, runs, ex: ExcitationProfile, env) -> No
 class VehicleStatus:
     """What the runner knows about the bridge and the vehicle at ``step`` time."""
 
-    bridge_state: str                   # OffboardMachine state value (IDLE ... FAILED)
+    bridge_state: str  # OffboardMachine state value (IDLE ... FAILED)
     bridge_reason: str = ""
-    mode: str | None = None             # PX4 mode name from the HEARTBEAT
+    mode: str | None = None  # PX4 mode name from the HEARTBEAT
     armed: bool = False
-    home_ned: Any = None                # the envelope's home (NED), when armed
-    violation: str | None = None        # the envelope's latched violation, if any
-    confirmed_mode: str | None = None   # hand-back mode the bridge confirmed (DONE, or FAILED
-                                        # after a fault hand-back that PX4 confirmed)
+    home_ned: Any = None  # the envelope's home (NED), when armed
+    violation: str | None = None  # the envelope's latched violation, if any
+    confirmed_mode: str | None = None  # hand-back mode the bridge confirmed (DONE, or FAILED
+    # after a fault hand-back that PX4 confirmed)
 
 
 @dataclass(frozen=True)
@@ -489,12 +596,12 @@ class CampaignEvent:
     t: float
     phase: str
     message: str
-    level: str = "info"                 # info | warn | error
+    level: str = "info"  # info | warn | error
 
 
 @dataclass
 class CampaignOutput:
-    command: tuple | None = None        # (v (3,) in the command frame [m/s], yaw rate [rad/s])
+    command: tuple | None = None  # (v (3,) in the command frame [m/s], yaw rate [rad/s])
     actions: list = field(default_factory=list)
     events: list = field(default_factory=list)
 
@@ -508,19 +615,19 @@ class RunResult:
     kind: str
     complete: bool = False
     reason: str = ""
-    t_command: float = math.nan         # vertex first commanded
-    settle_time: float = math.nan       # s from the vertex command to the settled dwell start
-    t_start: float = math.nan           # recorded run (trim) start
-    t_excite: float = math.nan          # excitation start
+    t_command: float = math.nan  # vertex first commanded
+    settle_time: float = math.nan  # s from the vertex command to the settled dwell start
+    t_start: float = math.nan  # recorded run (trim) start
+    t_excite: float = math.nan  # excitation start
     t_end: float = math.nan
     height_start: float = math.nan
     height_min: float = math.inf
     height_max: float = -math.inf
     distance_max: float = 0.0
-    tracking_rms: dict = field(default_factory=dict)     # u, v, w [m/s], r [rad/s] (trim+excitation)
-    achieved: dict = field(default_factory=dict)         # Table 1 columns (FRD) over the trim average
-    achieved_frame: tuple = ()                           # mean velocity in the command frame
-    hold_correction: float = 0.0                         # frozen trim correction (NED z) [m/s]
+    tracking_rms: dict = field(default_factory=dict)  # u, v, w [m/s], r [rad/s] (trim+excitation)
+    achieved: dict = field(default_factory=dict)  # Table 1 columns (FRD) over the trim average
+    achieved_frame: tuple = ()  # mean velocity in the command frame
+    hold_correction: float = 0.0  # frozen trim correction (NED z) [m/s]
     _sq: np.ndarray = field(default_factory=lambda: np.zeros(4))
     _n: int = 0
     _trim_v: list = field(default_factory=list)
@@ -530,18 +637,32 @@ class RunResult:
 
     def to_dict(self) -> dict:
         def r(x, n=4):
-            return None if x is None or (isinstance(x, float) and not math.isfinite(x)) else round(float(x), n)
-        return {"name": self.name, "vertex": list(self.vertex), "kind": self.kind,
-                "complete": self.complete, "reason": self.reason,
-                "settle_time_s": r(self.settle_time), "t_command": r(self.t_command, 3),
-                "t_start": r(self.t_start, 3), "t_excite": r(self.t_excite, 3), "t_end": r(self.t_end, 3),
-                "height_start_m": r(self.height_start, 2),
-                "height_min_m": r(self.height_min, 2), "height_max_m": r(self.height_max, 2),
-                "distance_max_m": r(self.distance_max, 2),
-                "tracking_rms": {k: r(v) for k, v in self.tracking_rms.items()},
-                "achieved_frame": [r(v) for v in self.achieved_frame],
-                "achieved": {k: r(v) for k, v in self.achieved.items()},
-                "hold_correction_m_s": r(self.hold_correction)}
+            return (
+                None
+                if x is None or (isinstance(x, float) and not math.isfinite(x))
+                else round(float(x), n)
+            )
+
+        return {
+            "name": self.name,
+            "vertex": list(self.vertex),
+            "kind": self.kind,
+            "complete": self.complete,
+            "reason": self.reason,
+            "settle_time_s": r(self.settle_time),
+            "t_command": r(self.t_command, 3),
+            "t_start": r(self.t_start, 3),
+            "t_excite": r(self.t_excite, 3),
+            "t_end": r(self.t_end, 3),
+            "height_start_m": r(self.height_start, 2),
+            "height_min_m": r(self.height_min, 2),
+            "height_max_m": r(self.height_max, 2),
+            "distance_max_m": r(self.distance_max, 2),
+            "tracking_rms": {k: r(v) for k, v in self.tracking_rms.items()},
+            "achieved_frame": [r(v) for v in self.achieved_frame],
+            "achieved": {k: r(v) for k, v in self.achieved.items()},
+            "hold_correction_m_s": r(self.hold_correction),
+        }
 
 
 class Campaign:
@@ -577,7 +698,7 @@ class Campaign:
         self._rotor: tuple | None = None
         self._abort_request: str | None = None
         self._vs = VehicleStatus("IDLE")
-        self._arm_length = (self.cfg.arm_length if self.cfg.arm_length is not None else None)
+        self._arm_length = self.cfg.arm_length if self.cfg.arm_length is not None else None
 
     # ------------------------------------------------------------------ inputs
     @property
@@ -586,7 +707,9 @@ class Campaign:
 
     @property
     def run(self) -> PlannedRun | None:
-        return self.plan.runs[self.run_index] if 0 <= self.run_index < len(self.plan.runs) else None
+        return (
+            self.plan.runs[self.run_index] if 0 <= self.run_index < len(self.plan.runs) else None
+        )
 
     def on_state(self, sample: Any) -> None:
         """A state sample (``t``, ``pos_ned``, ``euler``, ``v_body``, ``omega``)."""
@@ -637,13 +760,25 @@ class Campaign:
         if self._abort_request is not None and ph == FINISHING:
             # the hand-back is already under way: keep waiting for its confirmation
             self.reason, self._abort_request = self._abort_request, None
-            self._go(now, ABORTING, f"abort: {self.reason}; waiting for the hand-back confirmation", out, "warn")
+            self._go(
+                now,
+                ABORTING,
+                f"abort: {self.reason}; waiting for the hand-back confirmation",
+                out,
+                "warn",
+            )
             ph = ABORTING
         if self._abort_request is not None and ph == LANDING:
             reason, self._abort_request = self._abort_request, None
             self.ok = False
             self.reason = reason
-            self._go(now, ABORTED, f"{reason} while landing: vehicle stays with PX4 in {vs.mode}", out, "warn")
+            self._go(
+                now,
+                ABORTED,
+                f"{reason} while landing: vehicle stays with PX4 in {vs.mode}",
+                out,
+                "warn",
+            )
             return out
         if ph == ABORTING:
             self._wait_handback(now, vs, out, aborting=True)
@@ -657,21 +792,41 @@ class Campaign:
         # ---- phases in which we command the vehicle
         if ph == STARTING:
             if vs.bridge_state in ("HANDBACK", "DONE", "FAILED") or (
-                    vs.bridge_state == "IDLE" and now - self.t_phase > 1.0):
-                self._fault(now, f"offboard start failed: bridge {vs.bridge_state}: {vs.bridge_reason}", out, vs)
+                vs.bridge_state == "IDLE" and now - self.t_phase > 1.0
+            ):
+                self._fault(
+                    now,
+                    f"offboard start failed: bridge {vs.bridge_state}: {vs.bridge_reason}",
+                    out,
+                    vs,
+                )
                 return out
             if now - self.t_phase > self.cfg.start_timeout:
-                self._fault(now, f"not in OFFBOARD and armed within start_timeout {self.cfg.start_timeout:g} s "
-                                 f"(bridge {vs.bridge_state}, mode {vs.mode}, armed {vs.armed}"
-                                 + ("; the bridge must arm: offboard.arm true" if vs.bridge_state == "OFFBOARD_ACTIVE"
-                                    else "") + ")", out, vs)
+                self._fault(
+                    now,
+                    f"not in OFFBOARD and armed within start_timeout {self.cfg.start_timeout:g} s "
+                    f"(bridge {vs.bridge_state}, mode {vs.mode}, armed {vs.armed}"
+                    + (
+                        "; the bridge must arm: offboard.arm true"
+                        if vs.bridge_state == "OFFBOARD_ACTIVE"
+                        else ""
+                    )
+                    + ")",
+                    out,
+                    vs,
+                )
                 return out
             if vs.bridge_state == "OFFBOARD_ACTIVE" and vs.armed and self._fresh(now):
                 if self.home is None:
                     self.home = np.asarray(self.state.pos_ned, dtype=float).copy()
                 self._h_target = self.cfg.takeoff_altitude
                 self._xy_target = self.home[:2].copy()
-                self._go(now, TAKEOFF, f"OFFBOARD, armed; climbing to {self.cfg.takeoff_altitude:g} m", out)
+                self._go(
+                    now,
+                    TAKEOFF,
+                    f"OFFBOARD, armed; climbing to {self.cfg.takeoff_altitude:g} m",
+                    out,
+                )
             self._send(now, np.zeros(3), out)
             return out
         if vs.bridge_state != "OFFBOARD_ACTIVE":
@@ -680,8 +835,13 @@ class Campaign:
             return out
         if not self._fresh(now):
             age = now - self.state.t if self.state is not None else math.inf
-            self._fault(now, f"no fresh state sample for {age:.2f} s (> state_timeout "
-                             f"{self.cfg.state_timeout:g} s)", out, vs)
+            self._fault(
+                now,
+                f"no fresh state sample for {age:.2f} s (> state_timeout "
+                f"{self.cfg.state_timeout:g} s)",
+                out,
+                vs,
+            )
             return out
         s = self.state
         h = self._height(s)
@@ -698,11 +858,19 @@ class Campaign:
     def _takeoff(self, now, s, h, out) -> None:
         cfg = self.cfg
         if now - self.t_phase > cfg.takeoff_timeout:
-            return self._fault(now, f"take-off not complete within {cfg.takeoff_timeout:g} s "
-                                    f"(height {h:.2f} m of {self._h_target:g} m)", out, self._vs)
+            return self._fault(
+                now,
+                f"take-off not complete within {cfg.takeoff_timeout:g} s "
+                f"(height {h:.2f} m of {self._h_target:g} m)",
+                out,
+                self._vs,
+            )
         v = self._goto(s, h)
-        if self._dwell(now, abs(h - self._h_target) < cfg.altitude_tolerance
-                       and self._speed(s) < cfg.hover_tolerance):
+        if self._dwell(
+            now,
+            abs(h - self._h_target) < cfg.altitude_tolerance
+            and self._speed(s) < cfg.hover_tolerance,
+        ):
             self.t_takeoff_done = now
             out.actions.append(ActivateFloor(f"take-off complete at {h:.1f} m"))
             self._next_run(now, s, h, out)
@@ -712,13 +880,22 @@ class Campaign:
     def _reposition(self, now, s, h, out) -> None:
         cfg = self.cfg
         if now - self.t_phase > cfg.reposition_timeout:
-            return self._fault(now, f"{self.run.name}: start point not reached within reposition_timeout "
-                                    f"{cfg.reposition_timeout:g} s (height {h:.1f} m, target "
-                                    f"{self._h_target:.1f} m)", out, self._vs)
+            return self._fault(
+                now,
+                f"{self.run.name}: start point not reached within reposition_timeout "
+                f"{cfg.reposition_timeout:g} s (height {h:.1f} m, target "
+                f"{self._h_target:.1f} m)",
+                out,
+                self._vs,
+            )
         v = self._goto(s, h)
         d = float(np.linalg.norm(np.asarray(s.pos_ned)[:2] - self._xy_target))
-        if self._dwell(now, abs(h - self._h_target) < cfg.altitude_tolerance and d < cfg.position_tolerance
-                       and self._speed(s) < cfg.hover_tolerance):
+        if self._dwell(
+            now,
+            abs(h - self._h_target) < cfg.altitude_tolerance
+            and d < cfg.position_tolerance
+            and self._speed(s) < cfg.hover_tolerance,
+        ):
             run = self.run
             res = RunResult(run.name, run.vertex, run.kind, t_command=now, height_start=h)
             self.results.append(res)
@@ -756,17 +933,27 @@ class Campaign:
                 self._frozen = np.zeros(3)
             res.hold_correction = float(self._frozen[2])
             res.t_start = now
-            self._go(now, TRIM, f"{run.name}: settled after {res.settle_time:.2f} s; trim {cfg.trim_s:g} s", out)
+            self._go(
+                now,
+                TRIM,
+                f"{run.name}: settled after {res.settle_time:.2f} s; trim {cfg.trim_s:g} s",
+                out,
+            )
             out.actions.append(RunStarted(run, now))
             self._recording = True
             self._send(now, np.asarray(run.vertex) + self._frozen, out, force=True)
             return
         if now - res.t_command > cfg.settle_timeout:
             vf = self._frame_velocity(s)
-            return self._fault(now, f"{run.name}: not settled within settle_timeout {cfg.settle_timeout:g} s: "
-                                    f"velocity ({', '.join(f'{x:.2f}' for x in vf)}) of commanded "
-                                    f"({', '.join(f'{x:.2f}' for x in cmd)}) m/s ({cfg.velocity_frame}), "
-                                    f"tolerance {list(cfg.settle_tolerance)}", out, self._vs)
+            return self._fault(
+                now,
+                f"{run.name}: not settled within settle_timeout {cfg.settle_timeout:g} s: "
+                f"velocity ({', '.join(f'{x:.2f}' for x in vf)}) of commanded "
+                f"({', '.join(f'{x:.2f}' for x in cmd)}) m/s ({cfg.velocity_frame}), "
+                f"tolerance {list(cfg.settle_tolerance)}",
+                out,
+                self._vs,
+            )
         self._send(now, cmd, out)
 
     def _trim(self, now, s, h, out) -> None:
@@ -774,8 +961,9 @@ class Campaign:
         if now - res.t_start >= self.cfg.trim_s:
             self._finish_trim(res)
             t, u, names = self.table
-            self._exc = make_excitation(t, u, names, start_time=now, ramp=self.cfg.ramp_s,
-                                        periods=self.cfg.periods)
+            self._exc = make_excitation(
+                t, u, names, start_time=now, ramp=self.cfg.ramp_s, periods=self.cfg.periods
+            )
             res.t_excite = now
             self._go(now, EXCITATION, f"{run.name}: excitation {self._exc.duration:.1f} s", out)
             return self._excitation(now, s, h, out)
@@ -800,8 +988,13 @@ class Campaign:
     def _recover(self, now, s, h, out) -> None:
         cfg = self.cfg
         if now - self.t_phase > cfg.recover_timeout:
-            return self._fault(now, f"hover not regained within recover_timeout {cfg.recover_timeout:g} s "
-                                    f"(speed {self._speed(s):.2f} m/s)", out, self._vs)
+            return self._fault(
+                now,
+                f"hover not regained within recover_timeout {cfg.recover_timeout:g} s "
+                f"(speed {self._speed(s):.2f} m/s)",
+                out,
+                self._vs,
+            )
         v = np.zeros(3) + self._hold_vector(s, h)
         if self._dwell(now, self._speed(s) < cfg.hover_tolerance):
             return self._next_run(now, s, h, out)
@@ -813,7 +1006,12 @@ class Campaign:
         run = self.run
         if run is None:
             mode = str(self.cfg.finish).upper()
-            self._go(now, FINISHING, f"all {len(self.plan.runs)} runs complete; handing back in {mode}", out)
+            self._go(
+                now,
+                FINISHING,
+                f"all {len(self.plan.runs)} runs complete; handing back in {mode}",
+                out,
+            )
             self.t_handback_request = now
             out.actions.append(FinishBridge(mode))
             return
@@ -827,9 +1025,14 @@ class Campaign:
             self._xy_target = self.home[:2] - 0.5 * d
         else:
             self._xy_target = np.asarray(s.pos_ned, dtype=float)[:2].copy()
-        self._go(now, REPOSITION, f"run {run.order}/{len(self.plan.runs)} {run.name}: start at "
-                                  f"{self._h_target:.1f} m, {np.linalg.norm(self._xy_target - self.home[:2]):.1f} m "
-                                  "from home", out)
+        self._go(
+            now,
+            REPOSITION,
+            f"run {run.order}/{len(self.plan.runs)} {run.name}: start at "
+            f"{self._h_target:.1f} m, {np.linalg.norm(self._xy_target - self.home[:2]):.1f} m "
+            "from home",
+            out,
+        )
         self._send(now, self._goto(s, h), out)
 
     def _fault(self, now: float, reason: str, out: CampaignOutput, vs: VehicleStatus) -> None:
@@ -857,21 +1060,41 @@ class Campaign:
         elif st == "DONE":
             self.t_handback_done = now
             self.handback_mode = vs.mode or ""
-            self._go(now, ABORTED, f"abort: {reason}; control already back with PX4 ({vs.mode})", out, "error")
+            self._go(
+                now,
+                ABORTED,
+                f"abort: {reason}; control already back with PX4 ({vs.mode})",
+                out,
+                "error",
+            )
         elif st == "FAILED" and vs.confirmed_mode:
             self.t_handback_done = now
             self.handback_mode = vs.confirmed_mode
-            self._go(now, ABORTED, f"abort: {reason}; control already back with PX4 ({vs.confirmed_mode}, "
-                                   f"{vs.bridge_reason})", out, "error")
+            self._go(
+                now,
+                ABORTED,
+                f"abort: {reason}; control already back with PX4 ({vs.confirmed_mode}, "
+                f"{vs.bridge_reason})",
+                out,
+                "error",
+            )
         elif st == "FAILED":
-            self._go(now, FAILED, f"abort: {reason}; HAND-BACK NOT CONFIRMED ({vs.bridge_reason}); "
-                                  f"PX4's offboard-loss failsafe is in charge", out, "error")
+            self._go(
+                now,
+                FAILED,
+                f"abort: {reason}; HAND-BACK NOT CONFIRMED ({vs.bridge_reason}); "
+                f"PX4's offboard-loss failsafe is in charge",
+                out,
+                "error",
+            )
         else:
             self._go(now, ABORTING, f"abort: {reason}; excitation off, handing back", out, "error")
             if st != "HANDBACK":
                 out.actions.append(AbortBridge(reason))
 
-    def _wait_handback(self, now: float, vs: VehicleStatus, out: CampaignOutput, aborting: bool) -> None:
+    def _wait_handback(
+        self, now: float, vs: VehicleStatus, out: CampaignOutput, aborting: bool
+    ) -> None:
         """DONE, or FAILED with a confirmed mode (the bridge ends a *fault* hand-back, e.g.
         stale input or link loss, in FAILED even when PX4 confirmed the mode): control is
         back with PX4. FAILED without a confirmed mode: nothing confirmed, failsafe."""
@@ -880,9 +1103,17 @@ class Campaign:
             self.handback_mode = vs.confirmed_mode
             self.ok = False
             if not aborting:
-                self.reason = (self.reason + "; " if self.reason else "") + f"bridge: {vs.bridge_reason}"
-            self._go(now, ABORTED, f"hand-back confirmed in {now - self.t_handback_request:.2f} s after a "
-                                   f"fault, vehicle in {vs.confirmed_mode}: {self.reason}", out, "error")
+                self.reason = (
+                    self.reason + "; " if self.reason else ""
+                ) + f"bridge: {vs.bridge_reason}"
+            self._go(
+                now,
+                ABORTED,
+                f"hand-back confirmed in {now - self.t_handback_request:.2f} s after a "
+                f"fault, vehicle in {vs.confirmed_mode}: {self.reason}",
+                out,
+                "error",
+            )
             return
         if vs.bridge_state == "DONE":
             self.t_handback_done = now
@@ -890,34 +1121,63 @@ class Campaign:
             dt = now - self.t_handback_request
             if aborting:
                 self.ok = False
-                self._go(now, ABORTED, f"hand-back confirmed in {dt:.2f} s, vehicle in {vs.mode}: {self.reason}",
-                         out, "error")
+                self._go(
+                    now,
+                    ABORTED,
+                    f"hand-back confirmed in {dt:.2f} s, vehicle in {vs.mode}: {self.reason}",
+                    out,
+                    "error",
+                )
                 return
             want = str(self.cfg.finish).upper()
             if (vs.confirmed_mode or vs.mode) != want:
                 self.ok = False
                 self.reason = f"finish {want} not confirmed: the hand-back ended in {vs.confirmed_mode or vs.mode}"
-                self._go(now, FAILED, self.reason + ("; land the vehicle manually" if want == "LAND" else ""),
-                         out, "error")
+                self._go(
+                    now,
+                    FAILED,
+                    self.reason + ("; land the vehicle manually" if want == "LAND" else ""),
+                    out,
+                    "error",
+                )
                 return
             if want == "LAND":
-                self._go(now, LANDING, f"LAND confirmed {dt:.2f} s after the request; waiting for disarm", out)
+                self._go(
+                    now,
+                    LANDING,
+                    f"LAND confirmed {dt:.2f} s after the request; waiting for disarm",
+                    out,
+                )
                 return self._landing(now, vs, out)
             self.ok = True
-            self._go(now, DONE, f"campaign complete; vehicle in {vs.mode} (hand-back {dt:.2f} s)", out)
+            self._go(
+                now, DONE, f"campaign complete; vehicle in {vs.mode} (hand-back {dt:.2f} s)", out
+            )
             return
         if vs.bridge_state == "FAILED" or vs.bridge_state in ("IDLE",):
             self.ok = False
             why = vs.bridge_reason
             self.reason = (self.reason + "; " if self.reason else "") + f"hand-back FAILED: {why}"
-            self._go(now, FAILED, f"HAND-BACK NOT CONFIRMED: {why} (vehicle mode {vs.mode}, armed "
-                                  f"{vs.armed}); PX4's offboard-loss failsafe is in charge", out, "error")
+            self._go(
+                now,
+                FAILED,
+                f"HAND-BACK NOT CONFIRMED: {why} (vehicle mode {vs.mode}, armed "
+                f"{vs.armed}); PX4's offboard-loss failsafe is in charge",
+                out,
+                "error",
+            )
             return
         if now - self.t_handback_request > self.cfg.handback_timeout:
             self.ok = False
             self.reason = (self.reason + "; " if self.reason else "") + "hand-back timeout"
-            self._go(now, FAILED, f"HAND-BACK NOT CONFIRMED within {self.cfg.handback_timeout:g} s "
-                                  f"(bridge {vs.bridge_state}, mode {vs.mode})", out, "error")
+            self._go(
+                now,
+                FAILED,
+                f"HAND-BACK NOT CONFIRMED within {self.cfg.handback_timeout:g} s "
+                f"(bridge {vs.bridge_state}, mode {vs.mode})",
+                out,
+                "error",
+            )
 
     def _landing(self, now: float, vs: VehicleStatus, out: CampaignOutput) -> None:
         """LAND is confirmed (bridge DONE in LAND): wait for PX4 to land and disarm."""
@@ -925,7 +1185,12 @@ class Campaign:
         if not vs.armed:
             self.t_land_done = now
             self.ok = True
-            self._go(now, DONE, f"landed and disarmed {now - self.t_phase:.1f} s after LAND was confirmed", out)
+            self._go(
+                now,
+                DONE,
+                f"landed and disarmed {now - self.t_phase:.1f} s after LAND was confirmed",
+                out,
+            )
             return
         if vs.mode != "LAND":
             self.ok = False
@@ -934,14 +1199,18 @@ class Campaign:
             return
         if now - self.t_phase > cfg.land_timeout:
             self.ok = False
-            self.reason = f"not disarmed within land_timeout {cfg.land_timeout:g} s (mode {vs.mode})"
+            self.reason = (
+                f"not disarmed within land_timeout {cfg.land_timeout:g} s (mode {vs.mode})"
+            )
             self._go(now, FAILED, self.reason, out, "error")
 
-    def _go(self, now: float, phase: str, message: str, out: CampaignOutput, level: str = "info") -> None:
+    def _go(
+        self, now: float, phase: str, message: str, out: CampaignOutput, level: str = "info"
+    ) -> None:
         self.phase = phase
         self.t_phase = now
         self._dwell_since = None
-        log.debug("campaign %s: %s (%s)", phase, message, level)     # the runners present events
+        log.debug("campaign %s: %s (%s)", phase, message, level)  # the runners present events
         out.events.append(CampaignEvent(now, phase, message, level))
 
     # ------------------------------------------------------------- helpers
@@ -953,7 +1222,11 @@ class Campaign:
 
     def _vel_ned(self, s) -> np.ndarray:
         v = getattr(s, "vel_ned", None)
-        return np.asarray(v, dtype=float) if v is not None else frames.body_to_world(s.v_body, s.euler)
+        return (
+            np.asarray(v, dtype=float)
+            if v is not None
+            else frames.body_to_world(s.v_body, s.euler)
+        )
 
     def _speed(self, s) -> float:
         return float(np.linalg.norm(self._vel_ned(s)))
@@ -1008,11 +1281,15 @@ class Campaign:
         cfg = self.cfg
         tol = cfg.altitude_margin
         if h < cfg.altitude_min - tol or h > cfg.altitude_max + tol:
-            return (f"{self.run.name}: height {h:.1f} m left the altitude window "
-                    f"[{cfg.altitude_min:g}, {cfg.altitude_max:g}] m (+- margin {tol:g} m)")
+            return (
+                f"{self.run.name}: height {h:.1f} m left the altitude window "
+                f"[{cfg.altitude_min:g}, {cfg.altitude_max:g}] m (+- margin {tol:g} m)"
+            )
         d = float(np.linalg.norm(np.asarray(s.pos_ned)[:2] - self.home[:2]))
         if d > cfg.radius:
-            return f"{self.run.name}: {d:.1f} m from home, outside campaign.radius {cfg.radius:g} m"
+            return (
+                f"{self.run.name}: {d:.1f} m from home, outside campaign.radius {cfg.radius:g} m"
+            )
         if self.results:
             res = self.results[-1]
             res.height_min = min(res.height_min, h)
@@ -1020,12 +1297,20 @@ class Campaign:
             res.distance_max = max(res.distance_max, d)
         return ""
 
-    def _send(self, now: float, v: np.ndarray, out: CampaignOutput, yaw_rate: float = 0.0,
-              force: bool = False) -> None:
+    def _send(
+        self,
+        now: float,
+        v: np.ndarray,
+        out: CampaignOutput,
+        yaw_rate: float = 0.0,
+        force: bool = False,
+    ) -> None:
         if not force and now < self._next_cmd:
             return
         period = 1.0 / self.cfg.rate_hz
-        self._next_cmd = self._next_cmd + period if 0 <= now - self._next_cmd < period else now + period
+        self._next_cmd = (
+            self._next_cmd + period if 0 <= now - self._next_cmd < period else now + period
+        )
         cmd = (np.asarray(v, dtype=float).copy(), float(yaw_rate))
         self._last_cmd = cmd
         out.command = cmd
@@ -1039,7 +1324,10 @@ class Campaign:
         e = np.r_[vf - self._last_cmd[0], float(np.asarray(s.omega)[2]) - self._last_cmd[1]]
         res._sq += e * e
         res._n += 1
-        if self.phase == TRIM and float(s.t) >= res.t_start + self.cfg.trim_s - self.cfg.trim_average_s:
+        if (
+            self.phase == TRIM
+            and float(s.t) >= res.t_start + self.cfg.trim_s - self.cfg.trim_average_s
+        ):
             res._trim_v.append(np.asarray(s.v_body, dtype=float))
             res._trim_vf.append(vf)
             res._trim_e.append(np.asarray(s.euler, dtype=float))
@@ -1054,7 +1342,9 @@ class Campaign:
         if res._trim_rotor:
             from lpv_sysid.models.quadrotor import QuadrotorParams, mixer
 
-            arm = self._arm_length if self._arm_length is not None else QuadrotorParams().arm_length
+            arm = (
+                self._arm_length if self._arm_length is not None else QuadrotorParams().arm_length
+            )
             delta = mixer(arm) @ np.mean(res._trim_rotor, axis=0)
             ach.update(dict(zip(("dt0", "da0", "de0", "dr0"), delta)))
         res.achieved = {k: float(x) for k, x in ach.items()}
@@ -1068,15 +1358,24 @@ class Campaign:
     def summary(self) -> dict:
         def r(x, n=3):
             return round(float(x), n) if math.isfinite(x) else None
-        return {"format": "lpv_sysid/campaign_summary@1", "result": self.phase, "ok": bool(self.ok),
-                "reason": self.reason, "velocity_frame": self.cfg.velocity_frame,
-                "t_takeoff_done": r(self.t_takeoff_done),
-                "handback": {"requested": r(self.t_handback_request), "confirmed": r(self.t_handback_done),
-                             "duration_s": r(self.t_handback_done - self.t_handback_request),
-                             "mode": self.handback_mode},
-                "t_landed": r(self.t_land_done),
-                "plan": [p.to_dict() for p in self.plan.runs],
-                "runs": [res.to_dict() for res in self.results]}
+
+        return {
+            "format": "lpv_sysid/campaign_summary@1",
+            "result": self.phase,
+            "ok": bool(self.ok),
+            "reason": self.reason,
+            "velocity_frame": self.cfg.velocity_frame,
+            "t_takeoff_done": r(self.t_takeoff_done),
+            "handback": {
+                "requested": r(self.t_handback_request),
+                "confirmed": r(self.t_handback_done),
+                "duration_s": r(self.t_handback_done - self.t_handback_request),
+                "mode": self.handback_mode,
+            },
+            "t_landed": r(self.t_land_done),
+            "plan": [p.to_dict() for p in self.plan.runs],
+            "runs": [res.to_dict() for res in self.results],
+        }
 
 
 def trim_rows(results: Sequence[RunResult]) -> list[dict]:

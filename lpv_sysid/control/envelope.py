@@ -59,15 +59,15 @@ class EnvelopeConfig:
     """``envelope`` section of ``config/mavlink_bridge.yaml`` (module docstring)."""
 
     enabled: bool = True
-    home: str = "auto"                  # auto | home_position | start
-    floor: float = 5.0                  # m above home
-    ceiling: float = 80.0               # m above home
-    floor_arm_margin: float = 1.0       # floor active once above floor + margin
-    lookahead: float = 3.0              # s, predictive floor/ceiling/fence
-    radius: float = 300.0               # m, horizontal distance from home
+    home: str = "auto"  # auto | home_position | start
+    floor: float = 5.0  # m above home
+    ceiling: float = 80.0  # m above home
+    floor_arm_margin: float = 1.0  # floor active once above floor + margin
+    lookahead: float = 3.0  # s, predictive floor/ceiling/fence
+    radius: float = 300.0  # m, horizontal distance from home
     max_tilt_deg: float = 50.0
-    max_speed: float = 12.0             # m/s, NED velocity norm
-    max_setpoint: float = 12.0          # m/s, velocity reference norm
+    max_speed: float = 12.0  # m/s, NED velocity norm
+    max_setpoint: float = 12.0  # m/s, velocity reference norm
     max_setpoint_yaw_rate: float = 2.0  # rad/s
 
     @classmethod
@@ -81,7 +81,9 @@ class EnvelopeConfig:
         if not isinstance(self.enabled, bool):
             raise ConfigError(f"envelope.enabled must be true or false, got {self.enabled!r}")
         if self.home not in HOME_MODES:
-            raise ConfigError(f"envelope.home must be one of {list(HOME_MODES)}, got {self.home!r}")
+            raise ConfigError(
+                f"envelope.home must be one of {list(HOME_MODES)}, got {self.home!r}"
+            )
         for f in fields(self):
             if f.name in ("enabled", "home"):
                 continue
@@ -95,10 +97,14 @@ class EnvelopeConfig:
             if getattr(self, name) <= 0:
                 raise ConfigError(f"envelope.{name} must be > 0, got {getattr(self, name)!r}")
         if not 0 < self.max_tilt_deg < 90:
-            raise ConfigError(f"envelope.max_tilt_deg must be in (0, 90), got {self.max_tilt_deg!r}")
+            raise ConfigError(
+                f"envelope.max_tilt_deg must be in (0, 90), got {self.max_tilt_deg!r}"
+            )
         if self.ceiling <= self.floor + self.floor_arm_margin:
-            raise ConfigError(f"envelope.ceiling ({self.ceiling} m) must be above floor + "
-                              f"floor_arm_margin ({self.floor} + {self.floor_arm_margin} m)")
+            raise ConfigError(
+                f"envelope.ceiling ({self.ceiling} m) must be above floor + "
+                f"floor_arm_margin ({self.floor} + {self.floor_arm_margin} m)"
+            )
 
 
 @dataclass(frozen=True)
@@ -126,9 +132,9 @@ class Envelope:
         self.config = config or EnvelopeConfig()
         self.config.validate()
         self.armed = False
-        self.home: np.ndarray | None = None        # NED
+        self.home: np.ndarray | None = None  # NED
         self.home_source = ""
-        self.home_position: np.ndarray | None = None   # latest HOME_POSITION (NED)
+        self.home_position: np.ndarray | None = None  # latest HOME_POSITION (NED)
         self.floor_active = False
         self.violation: Violation | None = None
         self.height: float = math.nan
@@ -148,7 +154,9 @@ class Envelope:
         if p.shape == (3,) and np.isfinite(p).all():
             self.home_position = p
 
-    def arm(self, now: float, pos_ned: Any = None, vehicle_armed: bool = False) -> Violation | None:
+    def arm(
+        self, now: float, pos_ned: Any = None, vehicle_armed: bool = False
+    ) -> Violation | None:
         """Start enforcing; home per ``config.home`` and ``vehicle_armed`` (module
         docstring). Without a position yet (no telemetry) the home is taken from the first
         state sample."""
@@ -164,11 +172,22 @@ class Envelope:
         if use_hp and self.home_position is not None:
             self._set_home(now, self.home_position, "HOME_POSITION")
         elif mode == "home_position":
-            return self._trip(now, HOME, "no HOME_POSITION received from the vehicle "
-                                         "(envelope.home: home_position)")
+            return self._trip(
+                now,
+                HOME,
+                "no HOME_POSITION received from the vehicle (envelope.home: home_position)",
+            )
         elif pos_ned is not None:
-            self._set_home(now, pos_ned, "position at start" + (
-                " (armed, but no HOME_POSITION received: heights are above this point)" if use_hp else ""))
+            self._set_home(
+                now,
+                pos_ned,
+                "position at start"
+                + (
+                    " (armed, but no HOME_POSITION received: heights are above this point)"
+                    if use_hp
+                    else ""
+                ),
+            )
             if use_hp:
                 self._notices[-1] = EnvelopeNotice(now, self._notices[-1].message, "warn")
         return None
@@ -179,7 +198,9 @@ class Envelope:
     def activate_floor(self, now: float, reason: str = "requested") -> None:
         if not self.floor_active and self.enabled:
             self.floor_active = True
-            self._notices.append(EnvelopeNotice(now, f"envelope: floor {self.config.floor:g} m active ({reason})"))
+            self._notices.append(
+                EnvelopeNotice(now, f"envelope: floor {self.config.floor:g} m active ({reason})")
+            )
 
     def notices(self) -> list[EnvelopeNotice]:
         out, self._notices = self._notices, []
@@ -195,7 +216,11 @@ class Envelope:
         pos = np.asarray(sample.pos_ned, dtype=float)
         euler = np.asarray(sample.euler, dtype=float)
         vel = getattr(sample, "vel_ned", None)
-        vel = frames.body_to_world(sample.v_body, euler) if vel is None else np.asarray(vel, dtype=float)
+        vel = (
+            frames.body_to_world(sample.v_body, euler)
+            if vel is None
+            else np.asarray(vel, dtype=float)
+        )
         if not (np.isfinite(pos).all() and np.isfinite(euler).all() and np.isfinite(vel).all()):
             return self._trip(t, NON_FINITE, "non-finite state sample")
         if self.home is None:
@@ -213,30 +238,44 @@ class Envelope:
         speed = float(np.linalg.norm(vel))
         self.height, self.distance, self.tilt_deg, self.speed = h, d, tilt, speed
         if not self.floor_active and h > cfg.floor + cfg.floor_arm_margin:
-            self.activate_floor(t, f"airborne at {h:.1f} m > floor + margin "
-                                   f"{cfg.floor + cfg.floor_arm_margin:g} m")
+            self.activate_floor(
+                t, f"airborne at {h:.1f} m > floor + margin {cfg.floor + cfg.floor_arm_margin:g} m"
+            )
         if self.floor_active:
             if h < cfg.floor:
                 return self._trip(t, FLOOR, f"height {h:.2f} m below the floor {cfg.floor:g} m")
             if h_pred < cfg.floor:
                 rate = float(vel[2])
-                return self._trip(t, FLOOR, f"predictive floor: descending {rate:.2f} m/s at "
-                                            f"{h:.2f} m reaches the floor {cfg.floor:g} m in "
-                                            f"{(h - cfg.floor) / max(rate, 1e-9):.2f} s "
-                                            f"(< lookahead {T:g} s)")
+                return self._trip(
+                    t,
+                    FLOOR,
+                    f"predictive floor: descending {rate:.2f} m/s at "
+                    f"{h:.2f} m reaches the floor {cfg.floor:g} m in "
+                    f"{(h - cfg.floor) / max(rate, 1e-9):.2f} s "
+                    f"(< lookahead {T:g} s)",
+                )
         if h > cfg.ceiling:
             return self._trip(t, CEILING, f"height {h:.2f} m above the ceiling {cfg.ceiling:g} m")
         if h_pred > cfg.ceiling:
-            return self._trip(t, CEILING, f"predictive ceiling: climbing {-vel[2]:.2f} m/s at "
-                                          f"{h:.2f} m reaches the ceiling {cfg.ceiling:g} m within "
-                                          f"the lookahead {T:g} s")
+            return self._trip(
+                t,
+                CEILING,
+                f"predictive ceiling: climbing {-vel[2]:.2f} m/s at "
+                f"{h:.2f} m reaches the ceiling {cfg.ceiling:g} m within "
+                f"the lookahead {T:g} s",
+            )
         if d > cfg.radius:
-            return self._trip(t, RADIUS, f"{d:.1f} m from home, outside the geofence radius "
-                                         f"{cfg.radius:g} m")
+            return self._trip(
+                t, RADIUS, f"{d:.1f} m from home, outside the geofence radius {cfg.radius:g} m"
+            )
         if d_pred > cfg.radius:
-            return self._trip(t, RADIUS, f"predictive geofence: {d:.1f} m from home, moving "
-                                         f"{math.hypot(vel[0], vel[1]):.2f} m/s horizontally, "
-                                         f"crosses the radius {cfg.radius:g} m within {T:g} s")
+            return self._trip(
+                t,
+                RADIUS,
+                f"predictive geofence: {d:.1f} m from home, moving "
+                f"{math.hypot(vel[0], vel[1]):.2f} m/s horizontally, "
+                f"crosses the radius {cfg.radius:g} m within {T:g} s",
+            )
         if tilt > cfg.max_tilt_deg:
             return self._trip(t, TILT, f"tilt {tilt:.1f} deg > max_tilt_deg {cfg.max_tilt_deg:g}")
         if speed > cfg.max_speed:
@@ -256,16 +295,25 @@ class Envelope:
         if a.shape != (3,):
             return Violation(now, NON_FINITE, f"setpoint needs 3 values, got shape {a.shape}")
         if not (np.isfinite(a).all() and math.isfinite(r)):
-            return Violation(now, NON_FINITE, f"non-finite setpoint {a.tolist()!r}, yaw rate {r!r}")
+            return Violation(
+                now, NON_FINITE, f"non-finite setpoint {a.tolist()!r}, yaw rate {r!r}"
+            )
         if not self.enabled:
             return None
         n = float(np.linalg.norm(a))
         if n > self.config.max_setpoint:
-            return Violation(now, SETPOINT, f"setpoint |v| = {n:.4g} m/s > max_setpoint "
-                                            f"{self.config.max_setpoint:g} m/s")
+            return Violation(
+                now,
+                SETPOINT,
+                f"setpoint |v| = {n:.4g} m/s > max_setpoint {self.config.max_setpoint:g} m/s",
+            )
         if abs(r) > self.config.max_setpoint_yaw_rate:
-            return Violation(now, SETPOINT, f"yaw-rate setpoint {r:.4g} rad/s exceeds "
-                                            f"max_setpoint_yaw_rate {self.config.max_setpoint_yaw_rate:g}")
+            return Violation(
+                now,
+                SETPOINT,
+                f"yaw-rate setpoint {r:.4g} rad/s exceeds "
+                f"max_setpoint_yaw_rate {self.config.max_setpoint_yaw_rate:g}",
+            )
         return None
 
     def trip(self, violation: Violation) -> Violation:
@@ -284,12 +332,19 @@ class Envelope:
         if not self.enabled:
             return {"envelope": "disabled"}
         state = "tripped" if self.violation else ("armed" if self.armed else "disarmed")
-        d = {"envelope": state,
-             "envelope_floor_active": str(self.floor_active),
-             "envelope_home": ("unset" if self.home is None else
-                               f"{self.home_source}: " + " ".join(f"{v:.2f}" for v in self.home)),
-             "envelope_height_m": _fmt(self.height), "envelope_distance_m": _fmt(self.distance),
-             "envelope_tilt_deg": _fmt(self.tilt_deg), "envelope_speed_m_s": _fmt(self.speed)}
+        d = {
+            "envelope": state,
+            "envelope_floor_active": str(self.floor_active),
+            "envelope_home": (
+                "unset"
+                if self.home is None
+                else f"{self.home_source}: " + " ".join(f"{v:.2f}" for v in self.home)
+            ),
+            "envelope_height_m": _fmt(self.height),
+            "envelope_distance_m": _fmt(self.distance),
+            "envelope_tilt_deg": _fmt(self.tilt_deg),
+            "envelope_speed_m_s": _fmt(self.speed),
+        }
         if self.violation is not None:
             d["envelope_violation"] = f"{self.violation.kind}: {self.violation.message}"
         return d
@@ -298,8 +353,11 @@ class Envelope:
     def _set_home(self, now: float, pos: Any, source: str) -> None:
         self.home = np.asarray(pos, dtype=float).copy()
         self.home_source = source
-        self._notices.append(EnvelopeNotice(now, f"envelope: home = {source} (NED "
-                                                 f"{[round(float(x), 2) for x in self.home]})"))
+        self._notices.append(
+            EnvelopeNotice(
+                now, f"envelope: home = {source} (NED {[round(float(x), 2) for x in self.home]})"
+            )
+        )
 
     def _trip(self, t: float, kind: str, message: str) -> Violation:
         return self.trip(Violation(t, kind, message))

@@ -71,14 +71,16 @@ class LpvControllerConfig:
 
     u_esc_min: float = 0.0
     u_esc_max: float = 1.0
-    rate_limit: Optional[tuple] = None      # per virtual channel, units of u per second
-    monitor_margin: float = 1.2             # flag when gain > gamma * margin (>= 1)
-    monitor_min_energy: float = 0.05        # ||u_e||_2^2 needed before the gain is judged
-    velocity_index: tuple = (2, 3, 4)       # u, v, w in the 12-state of DESIGN.md
-    feedforward: bool = True                # use the schedule's F_ff when it has one
-    ff_filter_tau: float = 0.05             # s, derivative filter of v_d when a is not given
-    ff_jerk_tau: float = 0.2                # s, second stage (jerk) filter when j is not given
-    monitor_window: Optional[float] = None  # s, exponential forgetting of the monitor (None: running)
+    rate_limit: Optional[tuple] = None  # per virtual channel, units of u per second
+    monitor_margin: float = 1.2  # flag when gain > gamma * margin (>= 1)
+    monitor_min_energy: float = 0.05  # ||u_e||_2^2 needed before the gain is judged
+    velocity_index: tuple = (2, 3, 4)  # u, v, w in the 12-state of DESIGN.md
+    feedforward: bool = True  # use the schedule's F_ff when it has one
+    ff_filter_tau: float = 0.05  # s, derivative filter of v_d when a is not given
+    ff_jerk_tau: float = 0.2  # s, second stage (jerk) filter when j is not given
+    monitor_window: Optional[float] = (
+        None  # s, exponential forgetting of the monitor (None: running)
+    )
 
     def __post_init__(self) -> None:
         self.validate()
@@ -86,6 +88,7 @@ class LpvControllerConfig:
     def validate(self) -> None:
         """Every rule, for every construction (node, replay, simulation, library): a config
         that exists is one the law can fly."""
+
         def bad(msg: str):
             raise ConfigError(f"lpv_controller: {msg}")
 
@@ -107,12 +110,16 @@ class LpvControllerConfig:
             num("monitor_window", 0.0, lo_open=True)
         if self.rate_limit is not None:
             if not all(is_finite_number(r) and r > 0 for r in self.rate_limit):
-                bad(f"rate_limit entries must be finite and > 0 (units of u per second), "
-                    f"got {list(self.rate_limit)}")
+                bad(
+                    f"rate_limit entries must be finite and > 0 (units of u per second), "
+                    f"got {list(self.rate_limit)}"
+                )
         if not isinstance(self.feedforward, bool):
             bad(f"feedforward must be true or false, got {self.feedforward!r}")
-        if not all(isinstance(i, (int, np.integer)) and not isinstance(i, bool) and i >= 0
-                   for i in self.velocity_index):
+        if not all(
+            isinstance(i, (int, np.integer)) and not isinstance(i, bool) and i >= 0
+            for i in self.velocity_index
+        ):
             bad(f"velocity_index must be state indices, got {self.velocity_index!r}")
 
     @classmethod
@@ -137,8 +144,16 @@ def _schedule_arrays(schedule: Any) -> tuple:
         vmin, vmax = schedule.scheduling.min, schedule.scheduling.max
     else:
         vmin, vmax = schedule.vmin, schedule.vmax
-    return (K, x0, u0, np.asarray(schedule.R, float), np.asarray(schedule.Q, float), float(schedule.gamma),
-            np.asarray(vmin, float), np.asarray(vmax, float))
+    return (
+        K,
+        x0,
+        u0,
+        np.asarray(schedule.R, float),
+        np.asarray(schedule.Q, float),
+        float(schedule.gamma),
+        np.asarray(vmin, float),
+        np.asarray(vmax, float),
+    )
 
 
 def _feedforward_arrays(schedule: Any, n_x: int) -> Optional[tuple]:
@@ -159,24 +174,36 @@ def _feedforward_arrays(schedule: Any, n_x: int) -> Optional[tuple]:
     rate = (spec.get("rate_states") or []) if isinstance(spec, dict) else spec.rate_states
     Fj = getattr(schedule, "F_jerk", None)
     if len(names) != n_x or any(s not in names for s in list(free) + list(rate)):
-        raise ConfigError(f"feedforward states {list(free) + list(rate)} not among the schedule's states {names}")
+        raise ConfigError(
+            f"feedforward states {list(free) + list(rate)} not among the schedule's states {names}"
+        )
     if Fj is None or not rate:
         Fj, rate = None, []
-    return (np.asarray(F, dtype=float), [names.index(s) for s in free],
-            None if Fj is None else np.asarray(Fj, dtype=float), [names.index(s) for s in rate])
+    return (
+        np.asarray(F, dtype=float),
+        [names.index(s) for s in free],
+        None if Fj is None else np.asarray(Fj, dtype=float),
+        [names.index(s) for s in rate],
+    )
 
 
 class LpvController:
     """The runtime law; ``schedule`` is a loaded gains file (io.formats.GainSchedule)."""
 
-    def __init__(self, schedule: Any, config: LpvControllerConfig = LpvControllerConfig(),
-                 mix: Optional[np.ndarray] = None) -> None:
+    def __init__(
+        self,
+        schedule: Any,
+        config: LpvControllerConfig = LpvControllerConfig(),
+        mix: Optional[np.ndarray] = None,
+    ) -> None:
         K, x0, u0, R, Q, gamma, vmin, vmax = _schedule_arrays(schedule)
         N, m, n = K.shape
         p = vmin.size
-        if N != 2 ** p or x0.shape != (N, n) or u0.shape != (N, m) or R.shape[0] != m:
-            raise ConfigError(f"gain schedule shapes inconsistent: K {K.shape}, x0 {x0.shape}, u0 {u0.shape}, "
-                              f"R {R.shape} for a {p}-axis box")
+        if N != 2**p or x0.shape != (N, n) or u0.shape != (N, m) or R.shape[0] != m:
+            raise ConfigError(
+                f"gain schedule shapes inconsistent: K {K.shape}, x0 {x0.shape}, u0 {u0.shape}, "
+                f"R {R.shape} for a {p}-axis box"
+            )
         if np.any(vmax <= vmin):
             raise ConfigError("gain schedule: scheduling box needs max > min")
         self.n_x, self.n_u, self.n_p = n, m, p
@@ -191,7 +218,9 @@ class LpvController:
         if ff is not None:
             F, free, Fj, rate = ff
             if F.shape != (N, len(free) + m, p):
-                raise ConfigError(f"gain schedule: F_ff has shape {F.shape}, expected ({N}, {len(free) + m}, {p})")
+                raise ConfigError(
+                    f"gain schedule: F_ff has shape {F.shape}, expected ({N}, {len(free) + m}, {p})"
+                )
             if not np.all(np.isfinite(F)):
                 raise ConfigError("gain schedule: F_ff contains NaN/inf")
             self._ff_shape = F.shape[1:]
@@ -206,13 +235,15 @@ class LpvController:
             Gu[:, :, :p] = F[:, nf:, :]
             if Fj is not None:
                 if Fj.shape != (N, len(free) + m + len(rate), p) or not np.all(np.isfinite(Fj)):
-                    raise ConfigError(f"gain schedule: F_jerk has shape {Fj.shape} (expected "
-                                      f"({N}, {len(free) + m + len(rate)}, {p})) or is not finite")
+                    raise ConfigError(
+                        f"gain schedule: F_jerk has shape {Fj.shape} (expected "
+                        f"({N}, {len(free) + m + len(rate)}, {p})) or is not finite"
+                    )
                 self.has_jerk = True
                 self._fj_shape = Fj.shape[1:]
-                self._fj_x = np.array(list(free) + list(rate), dtype=int)   # state rows of F_jerk
-                Gx[:, self._fj_x, p:] = np.concatenate([Fj[:, :nf, :], Fj[:, nf + m:, :]], axis=1)
-                Gu[:, :, p:] = Fj[:, nf:nf + m, :]
+                self._fj_x = np.array(list(free) + list(rate), dtype=int)  # state rows of F_jerk
+                Gx[:, self._fj_x, p:] = np.concatenate([Fj[:, :nf, :], Fj[:, nf + m :, :]], axis=1)
+                Gu[:, :, p:] = Fj[:, nf : nf + m, :]
             # G(v_d) = sum alpha_i G_i, G_i = [G_x; G_u], rides on the same product as K, x0, u0
             stack.append(np.concatenate([Gx, Gu], axis=1).reshape(N, -1))
             self._aj = np.zeros(2 * p)
@@ -223,12 +254,17 @@ class LpvController:
         self.Qinv = np.linalg.inv(Q)
         vi = tuple(config.velocity_index)
         # a contiguous index set becomes a slice (a view, cheaper than fancy indexing)
-        self.vel = (slice(vi[0], vi[-1] + 1) if vi == tuple(range(vi[0], vi[-1] + 1))
-                    else np.array(vi, dtype=int))
+        self.vel = (
+            slice(vi[0], vi[-1] + 1)
+            if vi == tuple(range(vi[0], vi[-1] + 1))
+            else np.array(vi, dtype=int)
+        )
         self._vel_max = max(vi)
         self._n_vel = len(vi)
         if self.Qinv.shape[0] != self._n_vel or self._vel_max >= n:
-            raise ConfigError(f"Q is {Q.shape[0]}x{Q.shape[0]} but velocity_index is {config.velocity_index}")
+            raise ConfigError(
+                f"Q is {Q.shape[0]}x{Q.shape[0]} but velocity_index is {config.velocity_index}"
+            )
         self.gamma = gamma
         self.cfg = config
         if mix is not None:
@@ -241,7 +277,9 @@ class LpvController:
             self.mix = self.mix_inv = None
         if config.rate_limit is not None and len(config.rate_limit) != m:
             raise ConfigError(f"rate_limit needs {m} entries, got {len(config.rate_limit)}")
-        self.rate = None if config.rate_limit is None else np.asarray(config.rate_limit, dtype=float)
+        self.rate = (
+            None if config.rate_limit is None else np.asarray(config.rate_limit, dtype=float)
+        )
         self._rate_list = None if self.rate is None else self.rate.tolist()
         self.threshold = gamma * config.monitor_margin
         self.tau = float(config.ff_filter_tau)
@@ -252,13 +290,13 @@ class LpvController:
     def reset(self) -> None:
         self.t_prev: Optional[float] = None
         self.u_prev: Optional[np.ndarray] = None
-        self.energy_z = 0.0           # monitor energies (windowed when monitor_window is set)
+        self.energy_z = 0.0  # monitor energies (windowed when monitor_window is set)
         self.energy_e = 0.0
-        self.energy_e_total = 0.0     # running excitation energy (decides when to judge)
+        self.energy_e_total = 0.0  # running excitation energy (decides when to judge)
         self.bound_exceeded = False
-        self.vd_filt: Optional[np.ndarray] = None   # low-passed v_d of the derivative filter
+        self.vd_filt: Optional[np.ndarray] = None  # low-passed v_d of the derivative filter
         self.a_filt = np.zeros(self.n_p)
-        self.a_lp: Optional[np.ndarray] = None      # low-passed a (second stage, jerk)
+        self.a_lp: Optional[np.ndarray] = None  # low-passed a (second stage, jerk)
         self.j_filt = np.zeros(self.n_p)
 
     def reference_rate(self, t: float, v_d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -310,7 +348,9 @@ class LpvController:
             a, b, c = t
             a0, b0, c0 = 1.0 - a, 1.0 - b, 1.0 - c
             p00, p01, p10, p11 = a0 * b0, a0 * b, a * b0, a * b
-            return np.array((p00 * c0, p00 * c, p01 * c0, p01 * c, p10 * c0, p10 * c, p11 * c0, p11 * c)), clamped
+            return np.array(
+                (p00 * c0, p00 * c, p01 * c0, p01 * c, p10 * c0, p10 * c, p11 * c0, p11 * c)
+            ), clamped
         alpha = np.ones(1)
         for tk in t:
             alpha = np.kron(alpha, np.array((1.0 - tk, tk)))
@@ -321,18 +361,29 @@ class LpvController:
         return math.sqrt(self.energy_z / self.energy_e) if self.energy_e > 0 else float("nan")
 
     # -- the step ----------------------------------------------------------------------
-    def step(self, t: float, x: np.ndarray, v_d: np.ndarray, u_e: np.ndarray,
-             a: Optional[np.ndarray] = None, j: Optional[np.ndarray] = None) -> tuple[np.ndarray, dict]:
+    def step(
+        self,
+        t: float,
+        x: np.ndarray,
+        v_d: np.ndarray,
+        u_e: np.ndarray,
+        a: Optional[np.ndarray] = None,
+        j: Optional[np.ndarray] = None,
+    ) -> tuple[np.ndarray, dict]:
         """One control step; ``a`` = dv_d/dt and ``j`` = d2v_d/dt2 for the feedforward (None: the
         filtered derivatives of v_d)."""
         if a is not None:
             a = np.asarray(a, dtype=float)
             if a.shape != (self.n_p,) or not np.all(np.isfinite(a)):
-                raise SafetyError(f"lpv law: reference acceleration must be {self.n_p} finite values, got {a}")
+                raise SafetyError(
+                    f"lpv law: reference acceleration must be {self.n_p} finite values, got {a}"
+                )
         if j is not None:
             j = np.asarray(j, dtype=float)
             if j.shape != (self.n_p,) or not np.all(np.isfinite(j)):
-                raise SafetyError(f"lpv law: reference jerk must be {self.n_p} finite values, got {j}")
+                raise SafetyError(
+                    f"lpv law: reference jerk must be {self.n_p} finite values, got {j}"
+                )
         try:
             x = np.asarray(x, dtype=float)
             v_d = np.asarray(v_d, dtype=float)
@@ -341,8 +392,10 @@ class LpvController:
         except (TypeError, ValueError) as exc:
             raise SafetyError(f"lpv law: non-numeric input ({exc})") from None
         if x.shape != (self.n_x,) or v_d.shape != (self.n_p,) or u_e.shape != (self.n_e,):
-            raise SafetyError(f"lpv law: shapes x {x.shape}, v_d {v_d.shape}, u_e {u_e.shape}; expected "
-                              f"({self.n_x},), ({self.n_p},), ({self.n_e},)")
+            raise SafetyError(
+                f"lpv law: shapes x {x.shape}, v_d {v_d.shape}, u_e {u_e.shape}; expected "
+                f"({self.n_x},), ({self.n_p},), ({self.n_e},)"
+            )
         # one finiteness test for all inputs: a sum of squares is NaN/inf iff an entry is (or
         # overflows, which is also refused); ee is reused by the monitor
         ee = float(u_e @ u_e)
@@ -360,17 +413,17 @@ class LpvController:
         alpha, clamped = self.weights(v_d)
         row = alpha @ self.W
         mn, n, m = self._mn, self.n_x, self.n_u
-        x_ref = row[mn:mn + n]
-        u_ref = row[mn + n:mn + n + m]
+        x_ref = row[mn : mn + n]
+        u_ref = row[mn + n : mn + n + m]
         a_used = j_used = None
         if self.has_ff:
             a_used = a_filt if a is None else a
             j_used = (j_filt if j is None else j) if self.has_jerk else None
             aj = self._aj
-            aj[:self.n_p] = a_used
+            aj[: self.n_p] = a_used
             if j_used is not None:
-                aj[self.n_p:] = j_used
-            g = row[mn + n + m:].reshape(n + m, -1) @ aj
+                aj[self.n_p :] = j_used
+            g = row[mn + n + m :].reshape(n + m, -1) @ aj
             x_ref = x_ref + g[:n]
             u_ref = u_ref + g[n:]
         u = u_ref + row[:mn].reshape(m, n) @ (x - x_ref) + self.R @ u_e
@@ -402,9 +455,16 @@ class LpvController:
         judged = self.energy_e_total >= self.cfg.monitor_min_energy and self.energy_e > 0.0
         if judged and self.energy_z > self.threshold * self.threshold * self.energy_e:
             self.bound_exceeded = True
-        return u, {"clamped": clamped, "saturated": saturated, "rate_limited": rate_limited,
-                   "bound_judged": judged, "bound_exceeded": self.bound_exceeded,
-                   "feedforward": self.has_ff, "a_ff": a_used, "j_ff": j_used}
+        return u, {
+            "clamped": clamped,
+            "saturated": saturated,
+            "rate_limited": rate_limited,
+            "bound_judged": judged,
+            "bound_exceeded": self.bound_exceeded,
+            "feedforward": self.has_ff,
+            "a_ff": a_used,
+            "j_ff": j_used,
+        }
 
     def _saturate(self, u: np.ndarray) -> tuple[np.ndarray, bool]:
         esc = self.mix_inv @ u
@@ -441,14 +501,24 @@ class ReferenceLimiter:
     def __init__(self, rate_max, accel_max, knot_interval: float, margin: float) -> None:
         self.R1 = np.asarray(rate_max, dtype=float)
         self.R2 = np.asarray(accel_max, dtype=float)
-        if self.R1.shape != self.R2.shape or self.R1.ndim != 1 or not (
-                np.all(self.R1 > 0) and np.all(self.R2 > 0) and np.all(np.isfinite(self.R1))
-                and np.all(np.isfinite(self.R2))):
-            raise ConfigError(f"reference limiter: rate {self.R1.tolist()} and acceleration "
-                              f"{self.R2.tolist()} bounds must be positive, finite, one per axis")
+        if (
+            self.R1.shape != self.R2.shape
+            or self.R1.ndim != 1
+            or not (
+                np.all(self.R1 > 0)
+                and np.all(self.R2 > 0)
+                and np.all(np.isfinite(self.R1))
+                and np.all(np.isfinite(self.R2))
+            )
+        ):
+            raise ConfigError(
+                f"reference limiter: rate {self.R1.tolist()} and acceleration "
+                f"{self.R2.tolist()} bounds must be positive, finite, one per axis"
+            )
         if not (is_finite_number(knot_interval) and knot_interval >= 0.0):
-            raise ConfigError("reference limiter: knot interval must be >= 0, got "
-                              f"{knot_interval!r}")
+            raise ConfigError(
+                f"reference limiter: knot interval must be >= 0, got {knot_interval!r}"
+            )
         if not (is_finite_number(margin) and margin >= 1.0):
             raise ConfigError(f"reference limiter: margin must be >= 1, got {margin!r}")
         self.T = float(knot_interval)
@@ -456,13 +526,13 @@ class ReferenceLimiter:
         self.reset()
 
     def reset(self) -> None:
-        self.y: Optional[np.ndarray] = None     # the limited reference
-        self.w = np.zeros(self.R1.size)        # its slope
-        self.wc = np.zeros(self.R1.size)       # the smooth rate it stays close to
+        self.y: Optional[np.ndarray] = None  # the limited reference
+        self.w = np.zeros(self.R1.size)  # its slope
+        self.wc = np.zeros(self.R1.size)  # the smooth rate it stays close to
         self.t: Optional[float] = None
         self.r_prev: Optional[np.ndarray] = None
         self.w_in: Optional[np.ndarray] = None  # chord slope of the incoming reference
-        self.limited = 0                        # messages on which the limiter acted
+        self.limited = 0  # messages on which the limiter acted
 
     def update(self, t: float, r) -> tuple[np.ndarray, Optional[str]]:
         """The limited reference after the message ``(t, r)``, and a description of how the
@@ -480,27 +550,34 @@ class ReferenceLimiter:
         over = np.flatnonzero(np.abs(w_in) > self.margin * self.R1)
         if over.size:
             k = int(over[0])
-            excess = (f"reference[{k}] changes at {w_in[k]:.4g} m/s^2, beyond the design rate "
-                      f"{self.R1[k]:.4g} m/s^2 x margin {self.margin:g}")
+            excess = (
+                f"reference[{k}] changes at {w_in[k]:.4g} m/s^2, beyond the design rate "
+                f"{self.R1[k]:.4g} m/s^2 x margin {self.margin:g}"
+            )
         elif self.w_in is not None:
             jump = np.abs(w_in - self.w_in)
             allowed = self.margin * 2.0 * self.R2 * (dt + self.T)
             over = np.flatnonzero(jump > allowed)
             if over.size:
                 k = int(over[0])
-                excess = (f"reference[{k}] slope changed by {jump[k]:.4g} m/s^2 in {dt:.4g} s, "
-                          f"beyond the design acceleration {self.R2[k]:.4g} m/s^3 x margin "
-                          f"{self.margin:g} (allowed {allowed[k]:.4g} m/s^2)")
-        band = self.R2 * (self.T + dt)         # slope tolerance around the smooth rate
-        step = self.R2 * dt                     # change of the smooth rate per message
+                excess = (
+                    f"reference[{k}] slope changed by {jump[k]:.4g} m/s^2 in {dt:.4g} s, "
+                    f"beyond the design acceleration {self.R2[k]:.4g} m/s^3 x margin "
+                    f"{self.margin:g} (allowed {allowed[k]:.4g} m/s^2)"
+                )
+        band = self.R2 * (self.T + dt)  # slope tolerance around the smooth rate
+        step = self.R2 * dt  # change of the smooth rate per message
         w_des = (r - self.y) / dt
         if np.all(np.abs(w_des) <= self.R1) and np.all(np.abs(w_des - self.wc) <= step + band):
-            y, w = r, w_des                      # inside the envelope: followed exactly
+            y, w = r, w_des  # inside the envelope: followed exactly
         else:
-            e0 = self.r_prev - self.y            # gap before this message
+            e0 = self.r_prev - self.y  # gap before this message
             catch = np.sign(e0) * np.minimum(np.abs(e0) / dt, np.sqrt(2.0 * self.R2 * np.abs(e0)))
-            w = np.clip(np.clip(w_in, -self.R1, self.R1) + catch,
-                        self.wc - step - band, self.wc + step + band)
+            w = np.clip(
+                np.clip(w_in, -self.R1, self.R1) + catch,
+                self.wc - step - band,
+                self.wc + step + band,
+            )
             w = np.clip(w, -self.R1, self.R1)
             y = self.y + w * dt
             self.limited += 1
@@ -510,6 +587,9 @@ class ReferenceLimiter:
 
 
 def _nonfinite_message(t, x, v_d, u_e) -> str:
-    bad = [name for name, a in (("t", np.atleast_1d(t)), ("x", x), ("v_d", v_d), ("u_e", u_e))
-           if not np.all(np.isfinite(np.asarray(a, dtype=float)))]
+    bad = [
+        name
+        for name, a in (("t", np.atleast_1d(t)), ("x", x), ("v_d", v_d), ("u_e", u_e))
+        if not np.all(np.isfinite(np.asarray(a, dtype=float)))
+    ]
     return f"lpv law: non-finite input in {', '.join(bad) or 'inputs (overflow)'}"

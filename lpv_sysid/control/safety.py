@@ -51,8 +51,17 @@ EXTERNAL = "external"
 FUTURE_STAMP = "future_stamp"
 EXCITATION_BOUND = "excitation_bound"
 REFERENCE_ENVELOPE = "reference_envelope"
-REASONS = (STALE, OUT_OF_ORDER, NON_FINITE, OUT_OF_BOX, BOUND_EXCEEDED, EXTERNAL, FUTURE_STAMP,
-           EXCITATION_BOUND, REFERENCE_ENVELOPE)
+REASONS = (
+    STALE,
+    OUT_OF_ORDER,
+    NON_FINITE,
+    OUT_OF_BOX,
+    BOUND_EXCEEDED,
+    EXTERNAL,
+    FUTURE_STAMP,
+    EXCITATION_BOUND,
+    REFERENCE_ENVELOPE,
+)
 
 
 @dataclass(frozen=True)
@@ -69,11 +78,14 @@ class SafetyConfig:
     def __post_init__(self):
         for name, tmo in self.timeouts.items():
             if not isinstance(tmo, (int, float)) or not math.isfinite(tmo) or tmo <= 0.0:
-                raise ConfigError(f"safety: timeouts.{name} must be a positive number, "
-                                  f"got {tmo!r}")
+                raise ConfigError(
+                    f"safety: timeouts.{name} must be a positive number, got {tmo!r}"
+                )
         if len(self.box_min) != len(self.box_max):
-            raise ConfigError("safety: box_min and box_max have different lengths "
-                              f"({len(self.box_min)} vs {len(self.box_max)})")
+            raise ConfigError(
+                "safety: box_min and box_max have different lengths "
+                f"({len(self.box_min)} vs {len(self.box_max)})"
+            )
         lo, hi = np.asarray(self.box_min, float), np.asarray(self.box_max, float)
         if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo < hi)):
             raise ConfigError("safety: box_min must be finite and below box_max")
@@ -91,11 +103,13 @@ class SafetyConfig:
             raise ConfigError(f"safety: unknown key(s) {sorted(bad)}")
         if "timeouts" not in d or not isinstance(d["timeouts"], Mapping):
             raise ConfigError("safety: 'timeouts' must be a mapping stream -> seconds")
-        return cls(timeouts=dict(d["timeouts"]),
-                   box_min=tuple(float(v) for v in d.get("box_min", ())),
-                   box_max=tuple(float(v) for v in d.get("box_max", ())),
-                   box_margin=float(d.get("box_margin", 0.0)),
-                   stamp_tolerance=float(d.get("stamp_tolerance", 0.0)))
+        return cls(
+            timeouts=dict(d["timeouts"]),
+            box_min=tuple(float(v) for v in d.get("box_min", ())),
+            box_max=tuple(float(v) for v in d.get("box_max", ())),
+            box_margin=float(d.get("box_margin", 0.0)),
+            stamp_tolerance=float(d.get("stamp_tolerance", 0.0)),
+        )
 
 
 @dataclass(frozen=True)
@@ -169,36 +183,49 @@ class SafetySupervisor:
         return self.event
 
     # -- inputs -----------------------------------------------------------------------
-    def on_input(self, stream: str, stamp: float, values: Sequence[float] | np.ndarray,
-                 t_now: float) -> SafetyEvent | None:
+    def on_input(
+        self, stream: str, stamp: float, values: Sequence[float] | np.ndarray, t_now: float
+    ) -> SafetyEvent | None:
         """One message of ``stream`` stamped ``stamp`` received at ``t_now``."""
         vals = np.asarray(values, dtype=float)
         # fast path: a sum is finite only if every term is (an overflow to inf is re-checked)
-        if not (math.isfinite(stamp) and math.isfinite(float(vals.sum()))) and \
-                not (math.isfinite(stamp) and np.all(np.isfinite(vals))):
+        if not (math.isfinite(stamp) and math.isfinite(float(vals.sum()))) and not (
+            math.isfinite(stamp) and np.all(np.isfinite(vals))
+        ):
             bad = np.flatnonzero(~np.isfinite(vals)).tolist()
             what = f"indices {bad}" if bad else f"stamp {stamp!r}"
             return self.abort(t_now, NON_FINITE, f"{stream}: non-finite value at {what}")
         last = self._last_stamp.get(stream)
         if last is not None and stamp < last:
-            return self.abort(t_now, OUT_OF_ORDER,
-                              f"{stream}: stamp {stamp:.6f} s before previous {last:.6f} s")
+            return self.abort(
+                t_now, OUT_OF_ORDER, f"{stream}: stamp {stamp:.6f} s before previous {last:.6f} s"
+            )
         self._last_stamp[stream] = float(stamp)
         self._last_rx[stream] = float(t_now)
         if self.armed and stream in self.config.timeouts:
             tol = self.config.stamp_tolerance
             if stamp - t_now > tol:
-                return self.abort(t_now, FUTURE_STAMP,
-                                  f"{stream}: stamp {stamp:.6f} s is {stamp - t_now:.3f} s ahead "
-                                  f"of the node clock {t_now:.6f} s (tolerance {tol:g} s; same "
-                                  "clock source? use_sim_time on every node or on none)")
+                return self.abort(
+                    t_now,
+                    FUTURE_STAMP,
+                    f"{stream}: stamp {stamp:.6f} s is {stamp - t_now:.3f} s ahead "
+                    f"of the node clock {t_now:.6f} s (tolerance {tol:g} s; same "
+                    "clock source? use_sim_time on every node or on none)",
+                )
             limit = self.config.timeouts[stream] + tol
             if t_now - stamp > limit:
                 age = t_now - stamp
-                what = (f"stamp frozen at {stamp:.6f} s for {age:.3f} s while messages keep "
-                        "arriving" if last == stamp else f"stamp {age:.3f} s old at receipt")
-                return self.abort(t_now, STALE, f"{stream}: {what} (timeout "
-                                  f"{self.config.timeouts[stream]:g} s + tolerance {tol:g} s)")
+                what = (
+                    f"stamp frozen at {stamp:.6f} s for {age:.3f} s while messages keep arriving"
+                    if last == stamp
+                    else f"stamp {age:.3f} s old at receipt"
+                )
+                return self.abort(
+                    t_now,
+                    STALE,
+                    f"{stream}: {what} (timeout "
+                    f"{self.config.timeouts[stream]:g} s + tolerance {tol:g} s)",
+                )
         return self.event
 
     def check_scheduling(self, t: float, v_d: Sequence[float] | np.ndarray) -> SafetyEvent | None:
@@ -208,17 +235,24 @@ class SafetySupervisor:
             return self.event
         v = [float(c) for c in v_d]
         if len(v) != len(cfg.box_min):
-            return self.abort(t, NON_FINITE, f"scheduling vector has {len(v)} entries, "
-                              f"expected {len(cfg.box_min)}")
+            return self.abort(
+                t,
+                NON_FINITE,
+                f"scheduling vector has {len(v)} entries, expected {len(cfg.box_min)}",
+            )
         if not all(math.isfinite(c) for c in v):
             return self.abort(t, NON_FINITE, f"scheduling vector {v} not finite")
         m = cfg.box_margin
         out = [i for i, c in enumerate(v) if c < cfg.box_min[i] - m or c > cfg.box_max[i] + m]
         if out:
             i = out[0]
-            return self.abort(t, OUT_OF_BOX, f"scheduling[{i}] = {v[i]:.4g} outside "
-                              f"[{cfg.box_min[i]:.4g}, {cfg.box_max[i]:.4g}]"
-                              + (f" + margin {cfg.box_margin:g}" if cfg.box_margin else ""))
+            return self.abort(
+                t,
+                OUT_OF_BOX,
+                f"scheduling[{i}] = {v[i]:.4g} outside "
+                f"[{cfg.box_min[i]:.4g}, {cfg.box_max[i]:.4g}]"
+                + (f" + margin {cfg.box_margin:g}" if cfg.box_margin else ""),
+            )
         return self.event
 
     def on_bound_flag(self, t: float, exceeded: bool, detail: str = "") -> SafetyEvent | None:
@@ -244,14 +278,18 @@ class SafetySupervisor:
             # the data's own age: a stamp frozen while messages keep arriving ages too
             stamp = max(self._last_stamp.get(stream, self._t_arm), self._t_arm)
             if t_now - stamp > timeout + tol:
-                return self.abort(t_now, STALE,
-                                  f"{stream}: newest stamp {stamp:.6f} s is {t_now - stamp:.3f} s "
-                                  f"old although messages arrive (stamp frozen or delayed; "
-                                  f"timeout {timeout:g} s + tolerance {tol:g} s)")
+                return self.abort(
+                    t_now,
+                    STALE,
+                    f"{stream}: newest stamp {stamp:.6f} s is {t_now - stamp:.3f} s "
+                    f"old although messages arrive (stamp frozen or delayed; "
+                    f"timeout {timeout:g} s + tolerance {tol:g} s)",
+                )
         return self.event
 
-    def check_excitation(self, t: float, u_e: Sequence[float] | np.ndarray,
-                         limit: Sequence[float] | np.ndarray) -> SafetyEvent | None:
+    def check_excitation(
+        self, t: float, u_e: Sequence[float] | np.ndarray, limit: Sequence[float] | np.ndarray
+    ) -> SafetyEvent | None:
         """Abort when ``|u_e[k]| > limit[k]`` for a channel (the excitation the gains were
         designed for times the margin; the law applies ``R u_e``, seed 0 Eq. 31)."""
         u = np.abs(np.asarray(u_e, dtype=float))
@@ -260,13 +298,18 @@ class SafetySupervisor:
         if bad.size:
             k = int(bad[0])
             value = float(np.asarray(u_e)[k])
-            return self.abort(t, EXCITATION_BOUND, f"excitation[{k}] = {value:.4g} beyond the "
-                              f"designed bound {lim[k]:.4g} (design peak x margin)")
+            return self.abort(
+                t,
+                EXCITATION_BOUND,
+                f"excitation[{k}] = {value:.4g} beyond the "
+                f"designed bound {lim[k]:.4g} (design peak x margin)",
+            )
         return self.event
 
 
-def closed_loop_abscissa(K: np.ndarray,
-                         systems: Sequence[Sequence[tuple]]) -> tuple[float, int, int]:
+def closed_loop_abscissa(
+    K: np.ndarray, systems: Sequence[Sequence[tuple]]
+) -> tuple[float, int, int]:
     """Largest real part of the eigenvalues of ``A_ij + B_ij K_i`` over every vertex i and
     certified system j (seed 0 Eq. 23 polytope; continuous time), with its (i, j)."""
     worst, where = -math.inf, (-1, -1)
@@ -278,20 +321,24 @@ def closed_loop_abscissa(K: np.ndarray,
     return worst, where[0], where[1]
 
 
-def check_closed_loop(K: np.ndarray, systems: Sequence[Sequence[tuple]],
-                      label: str = "gains") -> float:
+def check_closed_loop(
+    K: np.ndarray, systems: Sequence[Sequence[tuple]], label: str = "gains"
+) -> float:
     """ConfigError unless every ``A_ij + B_ij K_i`` is Hurwitz (the stability the Lemma 1
     certificate implies, Eq. 30, re-checked by eigenvalues only: N x M_i eigenproblems of
     size n, e.g. 8 x 16 of 12 x 12 for the demo, milliseconds on a Raspberry Pi). Returns the
     worst spectral abscissa."""
     K = np.asarray(K, dtype=float)
     if len(systems) != K.shape[0]:
-        raise ConfigError(f"{label}: {len(systems)} certified vertex system sets for "
-                          f"{K.shape[0]} gains")
+        raise ConfigError(
+            f"{label}: {len(systems)} certified vertex system sets for {K.shape[0]} gains"
+        )
     worst, i, j = closed_loop_abscissa(K, systems)
     if not worst < 0.0:
-        raise ConfigError(f"{label}: closed loop A + B K unstable at vertex {i}, certified "
-                          f"system {j} (max Re(eig) = {worst:.4g} >= 0): the gains are not the "
-                          "certified ones or do not stabilise the certified models; refusing to "
-                          "fly them")
+        raise ConfigError(
+            f"{label}: closed loop A + B K unstable at vertex {i}, certified "
+            f"system {j} (max Re(eig) = {worst:.4g} >= 0): the gains are not the "
+            "certified ones or do not stabilise the certified models; refusing to "
+            "fly them"
+        )
     return worst

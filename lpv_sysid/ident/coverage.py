@@ -38,7 +38,13 @@ from typing import Callable, Sequence
 import numpy as np
 
 from lpv_sysid.errors import ConfigError, SafetyError, SolverError
-from lpv_sysid.models.quadrotor import INPUT_NAMES, STATE_NAMES, Quadrotor, QuadrotorParams, reduced_state
+from lpv_sysid.models.quadrotor import (
+    INPUT_NAMES,
+    STATE_NAMES,
+    Quadrotor,
+    QuadrotorParams,
+    reduced_state,
+)
 
 log = logging.getLogger(__name__)
 
@@ -46,7 +52,9 @@ log = logging.getLogger(__name__)
 KNOWN_KEYS = ("mass", "inertia", "arm_length", "hub_height", "omega_min", "omega_max", "g")
 
 
-def random_airframe(base: QuadrotorParams, rng: np.random.Generator, spread: float = 0.25) -> QuadrotorParams:
+def random_airframe(
+    base: QuadrotorParams, rng: np.random.Generator, spread: float = 0.25
+) -> QuadrotorParams:
     """``base`` with mass, principal inertias, arm, motor constants, ``J_z`` and every ``K``
     multiplied by independent ``1 + U(-spread, spread)`` factors."""
     if not 0 <= spread < 1:
@@ -57,10 +65,16 @@ def random_airframe(base: QuadrotorParams, rng: np.random.Generator, spread: flo
 
     I = np.array(base.inertia, dtype=float)
     I = np.diag([I[i, i] * f() for i in range(3)]) + (I - np.diag(np.diag(I)))
-    return dataclasses.replace(base, mass=base.mass * f(), inertia=tuple(map(tuple, I)),
-                               arm_length=base.arm_length * f(), a_omega=base.a_omega * f(),
-                               b_omega=base.b_omega * f(), j_rotor=base.j_rotor * f(),
-                               K={k: v * f() for k, v in base.K.items()})
+    return dataclasses.replace(
+        base,
+        mass=base.mass * f(),
+        inertia=tuple(map(tuple, I)),
+        arm_length=base.arm_length * f(),
+        a_omega=base.a_omega * f(),
+        b_omega=base.b_omega * f(),
+        j_rotor=base.j_rotor * f(),
+        K={k: v * f() for k, v in base.K.items()},
+    )
 
 
 def identification_params(true: QuadrotorParams, nominal: QuadrotorParams) -> dict:
@@ -122,8 +136,11 @@ def z_scores(result, A: np.ndarray, B: np.ndarray) -> dict[str, float]:
     out = {}
     for iv in result.uncertain.intervals:
         truth = (A if iv.matrix == "A" else B)[iv.row, iv.col]
-        out[element_label(iv.matrix, iv.row, iv.col)] = float((iv.nominal - truth) / iv.std) if iv.std > 0 \
+        out[element_label(iv.matrix, iv.row, iv.col)] = (
+            float((iv.nominal - truth) / iv.std)
+            if iv.std > 0
             else (0.0 if iv.nominal == truth else float("inf"))
+        )
     return out
 
 
@@ -132,12 +149,14 @@ class CoverageConfig:
     airframes: int = 3
     spread: float = 0.25
     seed: int = 0
-    vertices: tuple[int, ...] | None = None     # 1-based seed 0 Table 1 indices (None: all 8)
-    max_draws: int = 20                         # redraws of an airframe that cannot be flown
+    vertices: tuple[int, ...] | None = None  # 1-based seed 0 Table 1 indices (None: all 8)
+    max_draws: int = 20  # redraws of an airframe that cannot be flown
 
     def __post_init__(self) -> None:
         if int(self.airframes) != self.airframes or self.airframes < 1:
-            raise ConfigError(f"coverage.airframes must be an integer >= 1, got {self.airframes!r}")
+            raise ConfigError(
+                f"coverage.airframes must be an integer >= 1, got {self.airframes!r}"
+            )
         if not 0 <= self.spread < 1:
             raise ConfigError(f"coverage.spread must be in [0, 1), got {self.spread!r}")
 
@@ -163,7 +182,7 @@ class AirframeCoverage:
     index: int
     params: QuadrotorParams
     vertices: list[VertexCoverage] = field(default_factory=list)
-    eiv_shift: float = 0.0        # largest errors-in-variables correction in std (eiv_shift)
+    eiv_shift: float = 0.0  # largest errors-in-variables correction in std (eiv_shift)
 
     @property
     def covered(self) -> int:
@@ -181,35 +200,75 @@ class AirframeCoverage:
         """Parameter ratios to the base airframe (for the table)."""
         I, I0 = np.array(self.params.inertia), np.array(base.inertia)
         K = [self.params.K[k] / base.K[k] for k in base.K if base.K[k] != 0]
-        return {"mass": self.params.mass / base.mass, "Ixx": I[0, 0] / I0[0, 0], "Iyy": I[1, 1] / I0[1, 1],
-                "Izz": I[2, 2] / I0[2, 2], "arm": self.params.arm_length / base.arm_length,
-                "a_Omega": self.params.a_omega / base.a_omega, "b_Omega": self.params.b_omega / base.b_omega,
-                "J_z": self.params.j_rotor / base.j_rotor if base.j_rotor else 1.0,
-                "K_min": float(min(K)), "K_max": float(max(K))}
+        return {
+            "mass": self.params.mass / base.mass,
+            "Ixx": I[0, 0] / I0[0, 0],
+            "Iyy": I[1, 1] / I0[1, 1],
+            "Izz": I[2, 2] / I0[2, 2],
+            "arm": self.params.arm_length / base.arm_length,
+            "a_Omega": self.params.a_omega / base.a_omega,
+            "b_Omega": self.params.b_omega / base.b_omega,
+            "J_z": self.params.j_rotor / base.j_rotor if base.j_rotor else 1.0,
+            "K_min": float(min(K)),
+            "K_max": float(max(K)),
+        }
 
 
-def fly_airframe(params: QuadrotorParams, gains, sensors, phase1_cfg, vertices: Sequence[int], seed: int,
-                 signals=None) -> list:
+def fly_airframe(
+    params: QuadrotorParams,
+    gains,
+    sensors,
+    phase1_cfg,
+    vertices: Sequence[int],
+    seed: int,
+    signals=None,
+) -> list:
     """Phase-1 runs of one airframe at ``vertices`` (1-based), noise seed ``seed + i``."""
     from lpv_sysid.sim import phase1 as p1
 
     model = Quadrotor(params)
     signals = signals if signals is not None else p1.design_excitation(phase1_cfg)
     verts = phase1_cfg.vertices()
-    return [p1.simulate_run(model, gains, sensors, phase1_cfg, verts[i - 1], p1.run_name(verts[i - 1]),
-                            seed=seed + i, signals=signals) for i in vertices]
+    return [
+        p1.simulate_run(
+            model,
+            gains,
+            sensors,
+            phase1_cfg,
+            verts[i - 1],
+            p1.run_name(verts[i - 1]),
+            seed=seed + i,
+            signals=signals,
+        )
+        for i in vertices
+    ]
 
 
-def draw_flyable(base: QuadrotorParams, k: int, cfg: CoverageConfig, gains, sensors, phase1_cfg,
-                 vertices: Sequence[int], signals=None):
+def draw_flyable(
+    base: QuadrotorParams,
+    k: int,
+    cfg: CoverageConfig,
+    gains,
+    sensors,
+    phase1_cfg,
+    vertices: Sequence[int],
+    signals=None,
+):
     """Airframe ``k`` (1-based) and its runs; redrawn while a trim is missing or a run fails."""
     rng = np.random.default_rng([cfg.seed, k])
     last = None
     for _ in range(cfg.max_draws):
         params = random_airframe(base, rng, cfg.spread)
         try:
-            runs = fly_airframe(params, gains, sensors, phase1_cfg, vertices, 10_000 * (cfg.seed + 1) + 100 * k,
-                                signals)
+            runs = fly_airframe(
+                params,
+                gains,
+                sensors,
+                phase1_cfg,
+                vertices,
+                10_000 * (cfg.seed + 1) + 100 * k,
+                signals,
+            )
             return params, runs
         except (SolverError, SafetyError, ConfigError) as exc:
             last = exc
@@ -236,12 +295,22 @@ def score(runs, results, params: QuadrotorParams, ident_cfg) -> list[VertexCover
     for rec, res in zip(runs, results):
         A, B, _ = truth_model(params, rec, vx.trim_window((0.0, rec.t_excite), ident_cfg))
         k = unc.applied_k(ident_cfg.uncertainty, len(res.uncertain.intervals))
-        out.append(VertexCoverage(rec.name, tuple(float(c) for c in rec.v_d), z_scores(res, A, B), k))
+        out.append(
+            VertexCoverage(rec.name, tuple(float(c) for c in rec.v_d), z_scores(res, A, B), k)
+        )
     return out
 
 
-def run_study(cfg: CoverageConfig, base: QuadrotorParams, gains, sensors, phase1_cfg, ident_cfg,
-              progress: Callable[[str], None] | None = None, keep_runs: bool = False):
+def run_study(
+    cfg: CoverageConfig,
+    base: QuadrotorParams,
+    gains,
+    sensors,
+    phase1_cfg,
+    ident_cfg,
+    progress: Callable[[str], None] | None = None,
+    keep_runs: bool = False,
+):
     """The study of the module docstring: ``(airframes, runs per airframe or None)``."""
     from lpv_sysid.sim import phase1 as p1
 
@@ -251,12 +320,16 @@ def run_study(cfg: CoverageConfig, base: QuadrotorParams, gains, sensors, phase1
     for k in range(1, cfg.airframes + 1):
         params, runs = draw_flyable(base, k, cfg, gains, sensors, phase1_cfg, vertices, signals)
         results = identify_runs(runs, params, base, ident_cfg)
-        af = AirframeCoverage(k, params, score(runs, results, params, ident_cfg), eiv_shift(results))
+        af = AirframeCoverage(
+            k, params, score(runs, results, params, ident_cfg), eiv_shift(results)
+        )
         out.append(af)
         kept.append(runs if keep_runs else None)
         if progress:
-            progress(f"airframe {k}: {af.covered}/{af.n} elements within {af.vertices[0].k_sigma:g} sigma "
-                     f"({100 * af.fraction:.2f} %)")
+            progress(
+                f"airframe {k}: {af.covered}/{af.n} elements within {af.vertices[0].k_sigma:g} sigma "
+                f"({100 * af.fraction:.2f} %)"
+            )
     return out, kept
 
 
@@ -267,7 +340,9 @@ ABLATIONS = {
 }
 
 
-def ablations(runs_per_airframe, airframes: Sequence[AirframeCoverage], base: QuadrotorParams, ident_cfg) -> dict:
+def ablations(
+    runs_per_airframe, airframes: Sequence[AirframeCoverage], base: QuadrotorParams, ident_cfg
+) -> dict:
     """Coverage fraction per airframe of each :data:`ABLATIONS` variant on the same flights."""
     from lpv_sysid.ident import equation_error as ee
 
@@ -275,7 +350,9 @@ def ablations(runs_per_airframe, airframes: Sequence[AirframeCoverage], base: Qu
     for name, change in ABLATIONS.items():
         kw = dict(change)
         if kw.get("covariance") == "residual_acf":
-            kw["covariance"] = ee.CovarianceConfig(method="residual_acf", max_lag=ident_cfg.max_lag)
+            kw["covariance"] = ee.CovarianceConfig(
+                method="residual_acf", max_lag=ident_cfg.max_lag
+            )
         cfg = dataclasses.replace(ident_cfg, **kw)
         fr = []
         for af, runs in zip(airframes, runs_per_airframe):
@@ -285,29 +362,58 @@ def ablations(runs_per_airframe, airframes: Sequence[AirframeCoverage], base: Qu
     return out
 
 
-def summary_dict(airframes: Sequence[AirframeCoverage], base: QuadrotorParams, cfg: CoverageConfig,
-                 ablation: dict | None = None) -> dict:
+def summary_dict(
+    airframes: Sequence[AirframeCoverage],
+    base: QuadrotorParams,
+    cfg: CoverageConfig,
+    ablation: dict | None = None,
+) -> dict:
     """``coverage.yaml``: per airframe its parameter factors, per vertex the count and the
     elements outside ``k`` sigma with their z."""
     all_z = np.array([z for af in airframes for v in af.vertices for z in v.z.values()])
     k = airframes[0].vertices[0].k_sigma if airframes and airframes[0].vertices else 3.0
-    d = {"format": "lpv_sysid/identification_coverage@1",
-         "study": {"airframes": cfg.airframes, "spread": cfg.spread, "seed": cfg.seed,
-                   "vertices": list(cfg.vertices) if cfg.vertices else list(range(1, 9)), "k_sigma": float(k)},
-         "overall": {"covered": int(np.sum(np.abs(all_z) <= k)), "elements": int(all_z.size),
-                     "fraction": float(np.mean(np.abs(all_z) <= k)) if all_z.size else float("nan"),
-                     "z_mean": float(np.mean(all_z)) if all_z.size else float("nan"),
-                     "z_std": float(np.std(all_z)) if all_z.size else float("nan"),
-                     "expected_fraction": float(_normal_coverage(k))},
-         "airframes": []}
+    d = {
+        "format": "lpv_sysid/identification_coverage@1",
+        "study": {
+            "airframes": cfg.airframes,
+            "spread": cfg.spread,
+            "seed": cfg.seed,
+            "vertices": list(cfg.vertices) if cfg.vertices else list(range(1, 9)),
+            "k_sigma": float(k),
+        },
+        "overall": {
+            "covered": int(np.sum(np.abs(all_z) <= k)),
+            "elements": int(all_z.size),
+            "fraction": float(np.mean(np.abs(all_z) <= k)) if all_z.size else float("nan"),
+            "z_mean": float(np.mean(all_z)) if all_z.size else float("nan"),
+            "z_std": float(np.std(all_z)) if all_z.size else float("nan"),
+            "expected_fraction": float(_normal_coverage(k)),
+        },
+        "airframes": [],
+    }
     for af in airframes:
-        d["airframes"].append({
-            "index": af.index, "factors": {n: round(float(v), 4) for n, v in af.factors(base).items()},
-            "covered": af.covered, "elements": af.n, "fraction": float(af.fraction),
-            "eiv_max_shift_std": float(af.eiv_shift),
-            "vertices": [{"run": v.name, "vertex": list(v.vertex), "covered": v.covered, "elements": v.n,
-                          "outside": {lab: round(z, 2) for lab, z in v.z.items() if abs(z) > v.k_sigma}}
-                         for v in af.vertices]})
+        d["airframes"].append(
+            {
+                "index": af.index,
+                "factors": {n: round(float(v), 4) for n, v in af.factors(base).items()},
+                "covered": af.covered,
+                "elements": af.n,
+                "fraction": float(af.fraction),
+                "eiv_max_shift_std": float(af.eiv_shift),
+                "vertices": [
+                    {
+                        "run": v.name,
+                        "vertex": list(v.vertex),
+                        "covered": v.covered,
+                        "elements": v.n,
+                        "outside": {
+                            lab: round(z, 2) for lab, z in v.z.items() if abs(z) > v.k_sigma
+                        },
+                    }
+                    for v in af.vertices
+                ],
+            }
+        )
     if ablation:
         d["ablations"] = {n: [float(x) for x in fr] for n, fr in ablation.items()}
     return d
@@ -319,17 +425,27 @@ def _normal_coverage(k: float) -> float:
     return float(2 * norm.cdf(k) - 1)
 
 
-def markdown_table(airframes: Sequence[AirframeCoverage], base: QuadrotorParams, ablation: dict | None = None) -> str:
+def markdown_table(
+    airframes: Sequence[AirframeCoverage], base: QuadrotorParams, ablation: dict | None = None
+) -> str:
     """The coverage table (one row per airframe, plus the ablations as extra columns)."""
     k = airframes[0].vertices[0].k_sigma
     names = list(ablation or {})
-    head = (f"| airframe | mass | Ixx | Iyy | Izz | arm | a_Omega | b_Omega | K range | elements | "
-            f"within {k:g} sigma |" + "".join(f" {n} |" for n in names))
+    head = (
+        f"| airframe | mass | Ixx | Iyy | Izz | arm | a_Omega | b_Omega | K range | elements | "
+        f"within {k:g} sigma |" + "".join(f" {n} |" for n in names)
+    )
     lines = [head, "|" + "---|" * (11 + len(names))]
     for i, af in enumerate(airframes):
         f = af.factors(base)
-        cells = [str(af.index)] + [f"{f[n]:.2f}" for n in ("mass", "Ixx", "Iyy", "Izz", "arm", "a_Omega", "b_Omega")]
-        cells += [f"{f['K_min']:.2f}-{f['K_max']:.2f}", str(af.n), f"{af.covered} ({100 * af.fraction:.2f} %)"]
+        cells = [str(af.index)] + [
+            f"{f[n]:.2f}" for n in ("mass", "Ixx", "Iyy", "Izz", "arm", "a_Omega", "b_Omega")
+        ]
+        cells += [
+            f"{f['K_min']:.2f}-{f['K_max']:.2f}",
+            str(af.n),
+            f"{af.covered} ({100 * af.fraction:.2f} %)",
+        ]
         cells += [f"{100 * ablation[n][i]:.2f} %" for n in names]
         lines.append("| " + " | ".join(cells) + " |")
     cov = sum(a.covered for a in airframes)

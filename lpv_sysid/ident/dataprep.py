@@ -58,19 +58,19 @@ class Streams:
 
     name: str
     t_state: np.ndarray
-    euler: np.ndarray          # (N, 3) phi, theta, psi
-    v: np.ndarray              # (N, 3)
-    omega: np.ndarray          # (N, 3)
+    euler: np.ndarray  # (N, 3) phi, theta, psi
+    v: np.ndarray  # (N, 3)
+    omega: np.ndarray  # (N, 3)
     t_rotor: np.ndarray
-    Omega: np.ndarray          # (M, 4) rotor speeds, PX4 numbering
+    Omega: np.ndarray  # (M, 4) rotor speeds, PX4 numbering
     t_cmd: np.ndarray | None = None
-    u: np.ndarray | None = None        # (L, 4) virtual actuator command
+    u: np.ndarray | None = None  # (L, 4) virtual actuator command
     t_ref: np.ndarray | None = None
-    ref: np.ndarray | None = None      # (R, 4) u_d, v_d, w_d, r_d (FRD)
+    ref: np.ndarray | None = None  # (R, 4) u_d, v_d, w_d, r_d (FRD)
     t_exc: np.ndarray | None = None
-    exc: np.ndarray | None = None      # (E, 4)
-    t_excite: float | None = None      # known excitation start (simulation)
-    rotor_estimated: bool = False      # rotor_speeds computed from the motor outputs, not measured
+    exc: np.ndarray | None = None  # (E, 4)
+    t_excite: float | None = None  # known excitation start (simulation)
+    rotor_estimated: bool = False  # rotor_speeds computed from the motor outputs, not measured
 
 
 @dataclass(frozen=True)
@@ -78,23 +78,33 @@ class AlignedRun:
     """One run on the common grid plus what identification needs."""
 
     vertex: VertexData
-    Omega: np.ndarray                  # (N, 4) on the grid
-    euler: np.ndarray                  # (N, 3) on the grid
-    reference: np.ndarray | None       # (N, 4)
-    input_source: str                  # "actuator_command" or "rotor_speeds (Eq. 8 inverted)"
-    t0: float = 0.0                    # absolute time (s, stamp clock) of the first grid sample
+    Omega: np.ndarray  # (N, 4) on the grid
+    euler: np.ndarray  # (N, 3) on the grid
+    reference: np.ndarray | None  # (N, 4)
+    input_source: str  # "actuator_command" or "rotor_speeds (Eq. 8 inverted)"
+    t0: float = 0.0  # absolute time (s, stamp clock) of the first grid sample
 
 
 # ----------------------------------------------------------------------------- sources
 def streams_from_record(rec: Any) -> Streams:
     """Adapter for ``lpv_sysid.sim.phase1.RunRecord`` (measured channels only)."""
     xm = np.asarray(rec.state_meas, dtype=float)
-    return Streams(name=str(rec.name), t_state=np.asarray(rec.state_t, float), euler=xm[:, 3:6],
-                   v=xm[:, 6:9], omega=xm[:, 9:12], t_rotor=np.asarray(rec.rotor_t, float),
-                   Omega=np.asarray(rec.rotor_meas, float), t_cmd=np.asarray(rec.cmd_t, float),
-                   u=np.asarray(rec.command, float), t_ref=np.asarray(rec.cmd_t, float),
-                   ref=np.asarray(rec.reference, float), t_exc=np.asarray(rec.cmd_t, float),
-                   exc=np.asarray(rec.excitation, float), t_excite=float(rec.t_excite))
+    return Streams(
+        name=str(rec.name),
+        t_state=np.asarray(rec.state_t, float),
+        euler=xm[:, 3:6],
+        v=xm[:, 6:9],
+        omega=xm[:, 9:12],
+        t_rotor=np.asarray(rec.rotor_t, float),
+        Omega=np.asarray(rec.rotor_meas, float),
+        t_cmd=np.asarray(rec.cmd_t, float),
+        u=np.asarray(rec.command, float),
+        t_ref=np.asarray(rec.cmd_t, float),
+        ref=np.asarray(rec.reference, float),
+        t_exc=np.asarray(rec.cmd_t, float),
+        exc=np.asarray(rec.excitation, float),
+        t_excite=float(rec.t_excite),
+    )
 
 
 def _topic_for(available: Sequence[str], short: str) -> str | None:
@@ -109,14 +119,14 @@ def streams_from_bag(path: str | Path) -> Streams:
     try:
         from lpv_sysid.io import bag as iobag
         from lpv_sysid.io import messages as msgs
-    except ImportError as exc:          # io/bag.py is written by another module owner
+    except ImportError as exc:  # io/bag.py is written by another module owner
         raise BagError(f"{path}: rosbag support unavailable ({exc})") from None
     path = Path(path)
     if not path.exists():
         raise BagError(f"{path}: no such bag")
     available = list(iobag.topic_info(str(path)))
     wanted = [t for t in (_topic_for(available, short) for short in TOPICS) if t is not None]
-    data = iobag.read_bag(str(path), topics=wanted)     # skip imu/status: not needed here
+    data = iobag.read_bag(str(path), topics=wanted)  # skip imu/status: not needed here
     name = path.name
 
     def series(short, parse, required):
@@ -130,16 +140,24 @@ def streams_from_bag(path: str | Path) -> Streams:
             try:
                 rows.append(parse(msg))
             except ConfigError as exc:
-                raise BagError(f"{path}: topic '{topic}' at {stamp_ns * 1e-9:.3f} s: {exc}") from None
+                raise BagError(
+                    f"{path}: topic '{topic}' at {stamp_ns * 1e-9:.3f} s: {exc}"
+                ) from None
         return rows
 
     st = series("state", msgs.state_from_odometry, True)
     rs = series("rotor_speeds", msgs.rotor_speeds_from_joint_state, True)
-    estimated = any(msgs.rotor_source_of(m) == "estimated" for _, m in data[_topic_for(list(data), "rotor_speeds")])
+    estimated = any(
+        msgs.rotor_source_of(m) == "estimated"
+        for _, m in data[_topic_for(list(data), "rotor_speeds")]
+    )
     if estimated:
-        log.warning("%s: rotor_speeds estimated from the motor outputs (seed 0 Eq. 8 with the airframe's "
-                    "a_Omega, b_Omega): the actuator rows reproduce that model, not a measurement; "
-                    "a_Omega, b_Omega are not identified from this bag", path)
+        log.warning(
+            "%s: rotor_speeds estimated from the motor outputs (seed 0 Eq. 8 with the airframe's "
+            "a_Omega, b_Omega): the actuator rows reproduce that model, not a measurement; "
+            "a_Omega, b_Omega are not identified from this bag",
+            path,
+        )
     ac = series("actuator_command", msgs.actuator_command_from_joint_state, False)
     vr = series("velocity_reference", msgs.reference_from_twist, False)
     ex = series("excitation", msgs.excitation_from_joint_state, False)
@@ -153,10 +171,17 @@ def streams_from_bag(path: str | Path) -> Streams:
     if ex:
         kw["t_exc"] = np.array([r[0] for r in ex])
         kw["exc"] = np.array([r[1] for r in ex])
-    return Streams(name=name, t_state=np.array([s.t for s in st]), euler=np.array([s.euler for s in st]),
-                   v=np.array([s.v_body for s in st]), omega=np.array([s.omega for s in st]),
-                   t_rotor=np.array([r[0] for r in rs]), Omega=np.array([r[1] for r in rs]),
-                   rotor_estimated=estimated, **kw)
+    return Streams(
+        name=name,
+        t_state=np.array([s.t for s in st]),
+        euler=np.array([s.euler for s in st]),
+        v=np.array([s.v_body for s in st]),
+        omega=np.array([s.omega for s in st]),
+        t_rotor=np.array([r[0] for r in rs]),
+        Omega=np.array([r[1] for r in rs]),
+        rotor_estimated=estimated,
+        **kw,
+    )
 
 
 # ----------------------------------------------------------------------------- alignment
@@ -183,8 +208,10 @@ def _check_gaps(name: str, t: np.ndarray, a: float, b: float, max_gap: float, ru
     gaps = np.diff(inside)
     if gaps.size and np.max(gaps) > max_gap:
         k = int(np.argmax(gaps))
-        raise BagError(f"{run}: topic '{name}' has a {gaps[k]:.3f} s gap at t = {inside[k]:.3f} s "
-                       f"(max {max_gap:.3f} s): lost link or dropped messages")
+        raise BagError(
+            f"{run}: topic '{name}' has a {gaps[k]:.3f} s gap at t = {inside[k]:.3f} s "
+            f"(max {max_gap:.3f} s): lost link or dropped messages"
+        )
 
 
 def _interp(tg: np.ndarray, t: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -233,8 +260,11 @@ def resample(s: Streams, sample_rate: float, max_gap: float = 0.25) -> dict[str,
     ts, st = _clean("state", s.t_state, np.concatenate([s.euler, s.v, s.omega], axis=1), run)
     tr, Om = _clean("rotor_speeds", s.t_rotor, s.Omega, run)
     series = {"state": (ts, st), "rotor_speeds": (tr, Om)}
-    for nm, t, y in (("actuator_command", s.t_cmd, s.u), ("velocity_reference", s.t_ref, s.ref),
-                     ("excitation", s.t_exc, s.exc)):
+    for nm, t, y in (
+        ("actuator_command", s.t_cmd, s.u),
+        ("velocity_reference", s.t_ref, s.ref),
+        ("excitation", s.t_exc, s.exc),
+    ):
         if t is not None and y is not None and len(t):
             series[nm] = _clean(nm, t, y, run)
     if "actuator_command" in series:
@@ -256,8 +286,12 @@ def resample(s: Streams, sample_rate: float, max_gap: float = 0.25) -> dict[str,
         # put the grid on its stamps so that it is not interpolated between aliased samples
         a = float(tr[np.searchsorted(tr, a - 1e-9)])
     tg = a + dt * np.arange(int(np.floor((b - a) / dt)) + 1)
-    out = {"t": tg, "state": _interp(tg, *series["state"]), "Omega": _interp(tg, *series["rotor_speeds"]),
-           "series": series}
+    out = {
+        "t": tg,
+        "state": _interp(tg, *series["state"]),
+        "Omega": _interp(tg, *series["rotor_speeds"]),
+        "series": series,
+    }
     if "actuator_command" in series:
         out["u"] = _interp(tg, *series["actuator_command"])
     if "velocity_reference" in series:
@@ -269,7 +303,9 @@ def align(s: Streams, cfg: IdentificationConfig, params=None, max_gap: float = 0
     """Resample a run onto the common grid and segment it (module docstring, steps 1-6)."""
     from lpv_sysid.models.quadrotor import QuadrotorParams, mixer
 
-    params = params or (QuadrotorParams.from_dict(cfg.quadrotor) if cfg.quadrotor else QuadrotorParams())
+    params = params or (
+        QuadrotorParams.from_dict(cfg.quadrotor) if cfg.quadrotor else QuadrotorParams()
+    )
     run = s.name or "run"
     g = resample(s, cfg.sample_rate, max_gap)
     series, tg, sg, Og = g["series"], g["t"], g["state"], g["Omega"]
@@ -297,26 +333,44 @@ def align(s: Streams, cfg: IdentificationConfig, params=None, max_gap: float = 0
     t_exc = s.t_excite
     how = "given"
     if t_exc is None and "excitation" in series:
-        t_exc, how = _first_departure(*series["excitation"], cfg.excitation_threshold), "excitation topic"
+        t_exc, how = (
+            _first_departure(*series["excitation"], cfg.excitation_threshold),
+            "excitation topic",
+        )
     if t_exc is None and "velocity_reference" in series:
         t_exc, how = _first_departure(*series["velocity_reference"], 1e-3), "velocity reference"
     if t_exc is None:
         t_exc, how = tg[0] + cfg.trim_duration, "configured trim_duration"
     trim = (max(tg[0], t_exc - cfg.trim_duration), t_exc)
     if trim[1] - trim[0] < min(1.0, 0.5 * cfg.trim_average):
-        raise BagError(f"{run}: only {trim[1] - trim[0]:.2f} s of trim before the excitation at "
-                       f"{t_exc:.2f} s ({how}); need >= {min(1.0, 0.5 * cfg.trim_average):.2f} s")
+        raise BagError(
+            f"{run}: only {trim[1] - trim[0]:.2f} s of trim before the excitation at "
+            f"{t_exc:.2f} s ({how}); need >= {min(1.0, 0.5 * cfg.trim_average):.2f} s"
+        )
     fit = (t_exc, tg[-1] + dt)
     if fit[1] - fit[0] < cfg.min_fit_duration + 2 * cfg.edge:
-        raise BagError(f"{run}: excitation segment is {fit[1] - fit[0]:.2f} s long, need >= "
-                       f"{cfg.min_fit_duration + 2 * cfg.edge:.2f} s (bag too short or truncated)")
+        raise BagError(
+            f"{run}: excitation segment is {fit[1] - fit[0]:.2f} s long, need >= "
+            f"{cfg.min_fit_duration + 2 * cfg.edge:.2f} s (bag too short or truncated)"
+        )
     if ref is None:
-        raise BagError(f"{run}: topic 'velocity_reference' missing: the scheduling vertex is unknown")
+        raise BagError(
+            f"{run}: topic 'velocity_reference' missing: the scheduling vertex is unknown"
+        )
     in_trim = (tg >= trim[0]) & (tg < trim[1])
     v_d = ref[in_trim, :3].mean(axis=0)
     log.info("%s: excitation at %.2f s (%s), v_d = %s", run, t_exc, how, np.round(v_d, 3).tolist())
-    vd = VertexData(tg - tg[0], x, u, v_d, (trim[0] - tg[0], trim[1] - tg[0]), (fit[0] - tg[0], fit[1] - tg[0]), run,
-                    u_eff=u_eff, motor_identifiable=source == "actuator_command" and not s.rotor_estimated)
+    vd = VertexData(
+        tg - tg[0],
+        x,
+        u,
+        v_d,
+        (trim[0] - tg[0], trim[1] - tg[0]),
+        (fit[0] - tg[0], fit[1] - tg[0]),
+        run,
+        u_eff=u_eff,
+        motor_identifiable=source == "actuator_command" and not s.rotor_estimated,
+    )
     return AlignedRun(vd, Og, sg[:, 0:3], ref, source, float(tg[0]))
 
 
@@ -329,8 +383,10 @@ def snap_to_box(v_d: np.ndarray, cfg: IdentificationConfig, tol: float = 0.25) -
     d = [np.max(np.abs(v_d - c)) for c in cands]
     k = int(np.argmin(d))
     if d[k] > tol:
-        raise ConfigError(f"velocity reference {np.round(v_d, 3).tolist()} is neither a box vertex nor "
-                          f"the centre of [{lo.tolist()}, {hi.tolist()}]")
+        raise ConfigError(
+            f"velocity reference {np.round(v_d, 3).tolist()} is neither a box vertex nor "
+            f"the centre of [{lo.tolist()}, {hi.tolist()}]"
+        )
     return cands[k]
 
 
@@ -347,8 +403,14 @@ def find_bags(directory: str | Path) -> list[Path]:
 
 def trim_row(x0: np.ndarray) -> list[float]:
     """Seed 0 Table 1 columns from an equilibrium state (angles in degrees)."""
-    return [float(x0[2]), float(x0[3]), float(x0[4]), float(np.degrees(x0[0])),
-            float(np.degrees(x0[1])), *[float(v) for v in x0[8:12]]]
+    return [
+        float(x0[2]),
+        float(x0[3]),
+        float(x0[4]),
+        float(np.degrees(x0[0])),
+        float(np.degrees(x0[1])),
+        *[float(v) for v in x0[8:12]],
+    ]
 
 
 def format_table1(rows: Sequence[tuple[Sequence[float], Sequence[float]]]) -> str:
@@ -358,5 +420,7 @@ def format_table1(rows: Sequence[tuple[Sequence[float], Sequence[float]]]) -> st
     lines = [head, units]
     for vd, vals in rows:
         vtx = "[" + " ".join(f"{c:+g}" for c in vd) + "]"
-        lines.append(f"{vtx:>18} " + " ".join(f"{v:8.2f}" if abs(v) < 100 else f"{v:8.1f}" for v in vals))
+        lines.append(
+            f"{vtx:>18} " + " ".join(f"{v:8.2f}" if abs(v) < 100 else f"{v:8.1f}" for v in vals)
+        )
     return "\n".join(lines)

@@ -55,10 +55,10 @@ class DerivativeConfig:
     """How state derivatives are estimated (see module docstring for the bias)."""
 
     method: str = "fourier"
-    f_cut: float = 6.0          # Hz, Fourier pass band edge (excitation tops out at 2-5 Hz)
-    taper: float = 0.3          # raised-cosine roll-off width as a fraction of f_cut
-    window_s: float = 0.21      # s, Savitzky-Golay window length
-    polyorder: int = 4          # Savitzky-Golay polynomial order
+    f_cut: float = 6.0  # Hz, Fourier pass band edge (excitation tops out at 2-5 Hz)
+    taper: float = 0.3  # raised-cosine roll-off width as a fraction of f_cut
+    window_s: float = 0.21  # s, Savitzky-Golay window length
+    polyorder: int = 4  # Savitzky-Golay polynomial order
 
     @classmethod
     def from_dict(cls, d: dict | None) -> "DerivativeConfig":
@@ -74,7 +74,9 @@ class DerivativeConfig:
         if not (cfg.window_s > 0):
             raise ConfigError(f"derivatives.window_s must be > 0, got {cfg.window_s!r}")
         if int(cfg.polyorder) != cfg.polyorder or cfg.polyorder < 1:
-            raise ConfigError(f"derivatives.polyorder must be an integer >= 1, got {cfg.polyorder!r}")
+            raise ConfigError(
+                f"derivatives.polyorder must be an integer >= 1, got {cfg.polyorder!r}"
+            )
         return cfg
 
 
@@ -98,8 +100,9 @@ def fourier_gain(f: np.ndarray, f_cut: float, taper: float = 0.3) -> np.ndarray:
     return gain
 
 
-def fourier_smooth_differentiate(x: np.ndarray, dt: float, f_cut: float,
-                                 taper: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
+def fourier_smooth_differentiate(
+    x: np.ndarray, dt: float, f_cut: float, taper: float = 0.3
+) -> tuple[np.ndarray, np.ndarray]:
     """Global Fourier smoothing and differentiation; returns ``(x_smooth, xdot)``.
 
     Uses ``numpy.fft`` on the odd extension of the end-point-detrended record (a DST-I in
@@ -116,7 +119,7 @@ def fourier_smooth_differentiate(x: np.ndarray, dt: float, f_cut: float,
     slope = (xs[-1] - xs[0]) / span
     trend = xs[0] + t[:, None] * slope
     r = xs - trend
-    ext = np.concatenate([r, -r[-2:0:-1]], axis=0)          # odd extension, period 2(n-1)
+    ext = np.concatenate([r, -r[-2:0:-1]], axis=0)  # odd extension, period 2(n-1)
     m = ext.shape[0]
     spec = np.fft.rfft(ext, axis=0)
     f = np.fft.rfftfreq(m, dt)
@@ -135,6 +138,7 @@ def fast_length(n: int) -> int:
     pocketfft 4x slower, so callers may drop the last ``n - m`` samples (< 2 % for
     n > 2000, < 2.5 % for n > 500; 11-smooth numbers are dense).
     """
+
     def smooth11(k: int) -> bool:
         for p in (2, 3, 5, 7, 11):
             while k % p == 0:
@@ -157,8 +161,9 @@ def _savgol_window(window_s: float, dt: float, polyorder: int, n: int) -> int:
     return w
 
 
-def savgol_smooth_differentiate(x: np.ndarray, dt: float, window_s: float = 0.21,
-                                polyorder: int = 4) -> tuple[np.ndarray, np.ndarray]:
+def savgol_smooth_differentiate(
+    x: np.ndarray, dt: float, window_s: float = 0.21, polyorder: int = 4
+) -> tuple[np.ndarray, np.ndarray]:
     """Savitzky-Golay smoothing (``deriv=0``) and differentiation (``deriv=1``)."""
     xs, squeeze = _as_2d(x, "x")
     w = _savgol_window(window_s, dt, polyorder, xs.shape[0])
@@ -169,7 +174,9 @@ def savgol_smooth_differentiate(x: np.ndarray, dt: float, window_s: float = 0.21
     return smooth, deriv
 
 
-def savgol_gain(f: np.ndarray, dt: float, window: int, polyorder: int, deriv: int = 1) -> np.ndarray:
+def savgol_gain(
+    f: np.ndarray, dt: float, window: int, polyorder: int, deriv: int = 1
+) -> np.ndarray:
     """Complex gain of the centred Savitzky-Golay filter relative to the ideal operator.
 
     ``deriv=1``: ``H1(f) / (j 2 pi f)`` (1 means an unbiased derivative); ``deriv=0``: ``H0(f)``.
@@ -180,7 +187,7 @@ def savgol_gain(f: np.ndarray, dt: float, window: int, polyorder: int, deriv: in
     m = (window - 1) // 2
     k = np.arange(-m, m + 1)
     w = 2 * np.pi * f
-    h = np.exp(1j * np.outer(w, k) * dt) @ c      # y(t) = sum c_k x(t + k dt)
+    h = np.exp(1j * np.outer(w, k) * dt) @ c  # y(t) = sum c_k x(t + k dt)
     if deriv == 1:
         with np.errstate(divide="ignore", invalid="ignore"):
             g = np.where(w == 0, 1.0, h / (1j * np.where(w == 0, 1.0, w)))
@@ -188,8 +195,9 @@ def savgol_gain(f: np.ndarray, dt: float, window: int, polyorder: int, deriv: in
     return np.real(h)
 
 
-def smooth_and_differentiate(x: np.ndarray, dt: float,
-                             config: DerivativeConfig = DerivativeConfig()) -> tuple[np.ndarray, np.ndarray]:
+def smooth_and_differentiate(
+    x: np.ndarray, dt: float, config: DerivativeConfig = DerivativeConfig()
+) -> tuple[np.ndarray, np.ndarray]:
     """Dispatch on ``config.method``; returns ``(x_smooth, xdot)`` with the same filter."""
     if config.method == "fourier":
         return fourier_smooth_differentiate(x, dt, config.f_cut, config.taper)

@@ -68,9 +68,9 @@ class CovarianceConfig:
     """How the parameter covariance is estimated (module docstring)."""
 
     method: str = "ewc"
-    dof: int | None = None          # ewc: cosine terms nu (None: default_dof)
-    band_hz: float = 1.0            # ewc default: nu / (2 T) <= band_hz (flat score spectrum)
-    max_lag: int | None = None      # residual_acf: lags (None: auto_max_lag)
+    dof: int | None = None  # ewc: cosine terms nu (None: default_dof)
+    band_hz: float = 1.0  # ewc default: nu / (2 T) <= band_hz (flat score spectrum)
+    max_lag: int | None = None  # residual_acf: lags (None: auto_max_lag)
 
     @classmethod
     def from_dict(cls, d: dict | None) -> "CovarianceConfig":
@@ -79,11 +79,15 @@ class CovarianceConfig:
         d = dict(d or {})
         check_keys(d, ("method", "dof", "band_hz", "max_lag"), "covariance")
         if d.get("method", "ewc") not in COV_METHODS:
-            raise ConfigError(f"covariance.method must be one of {COV_METHODS}, got {d['method']!r}")
+            raise ConfigError(
+                f"covariance.method must be one of {COV_METHODS}, got {d['method']!r}"
+            )
         for key, low in (("dof", 2), ("max_lag", 0)):
             v = d.get(key)
             if v is not None and (not is_count(v) or v < low):
-                raise ConfigError(f"covariance.{key} must be null or an integer >= {low}, got {v!r}")
+                raise ConfigError(
+                    f"covariance.{key} must be null or an integer >= {low}, got {v!r}"
+                )
         if "band_hz" in d and (not is_finite_number(d["band_hz"]) or d["band_hz"] <= 0):
             raise ConfigError(f"covariance.band_hz must be a number > 0, got {d['band_hz']!r}")
         if "band_hz" in d:
@@ -96,20 +100,20 @@ class RowFit:
     """Result for one state-equation row ``i`` (Eqs. 40-47)."""
 
     row: int
-    cols_A: tuple[int, ...]          # unknown A columns j, (i, j) in I_A (Eq. 36)
-    cols_B: tuple[int, ...]          # unknown B columns k, (i, k) in I_B (Eq. 37)
-    theta: np.ndarray                # Eq. (42)/(47), then intercept / auxiliary / nuisance terms
-    cov: np.ndarray                  # reported covariance
-    cov_white: np.ndarray            # s^2 (H^T H)^-1
-    cov_coloured: np.ndarray         # the coloured-residual estimate (ewc or residual_acf)
-    sigma2: float                    # residual variance s^2
-    r2: float                        # coefficient of determination of the row
+    cols_A: tuple[int, ...]  # unknown A columns j, (i, j) in I_A (Eq. 36)
+    cols_B: tuple[int, ...]  # unknown B columns k, (i, k) in I_B (Eq. 37)
+    theta: np.ndarray  # Eq. (42)/(47), then intercept / auxiliary / nuisance terms
+    cov: np.ndarray  # reported covariance
+    cov_white: np.ndarray  # s^2 (H^T H)^-1
+    cov_coloured: np.ndarray  # the coloured-residual estimate (ewc or residual_acf)
+    sigma2: float  # residual variance s^2
+    r2: float  # coefficient of determination of the row
     n_samples: int
     max_lag: int
-    labels: tuple[str, ...] = ()     # one per theta entry (x<j>, u<k>, bias, aux names, nuisance)
-    offset: int = 0                  # index of theta[0] in the joint parameter vector
-    dof: float | None = None         # Student-t degrees of freedom of studentised errors
-    eiv_bias: np.ndarray | None = None   # LS minus bias-compensated estimate (errors in variables)
+    labels: tuple[str, ...] = ()  # one per theta entry (x<j>, u<k>, bias, aux names, nuisance)
+    offset: int = 0  # index of theta[0] in the joint parameter vector
+    dof: float | None = None  # Student-t degrees of freedom of studentised errors
+    eiv_bias: np.ndarray | None = None  # LS minus bias-compensated estimate (errors in variables)
 
     @property
     def std(self) -> np.ndarray:
@@ -122,13 +126,13 @@ class Fit:
 
     A: np.ndarray
     B: np.ndarray
-    std_A: np.ndarray                # 0 for known elements
+    std_A: np.ndarray  # 0 for known elements
     std_B: np.ndarray
-    maskA: np.ndarray                # True = identified
+    maskA: np.ndarray  # True = identified
     maskB: np.ndarray
     rows: tuple[RowFit, ...] = field(default_factory=tuple)
-    cov_joint: np.ndarray | None = None   # all rows' theta stacked (RowFit.offset), ewc only
-    dof: float | None = None              # Student-t dof of every studentised element error
+    cov_joint: np.ndarray | None = None  # all rows' theta stacked (RowFit.offset), ewc only
+    dof: float | None = None  # Student-t dof of every studentised element error
     cov_method: str = "residual_acf"
 
     @property
@@ -161,9 +165,11 @@ class RowDesign:
     cols_B: tuple[int, ...]
     labels: tuple[str, ...]
     use: np.ndarray | None = None
-    Z: np.ndarray | None = None      # instruments (same shape as H): theta = (Z^T H)^-1 Z^T y
-    stack: int = 1                   # equations per time sample, stacked block-wise in y, H (score summed)
-    noise_var: np.ndarray | None = None  # (p,) variance of each regressor's measurement error (EIV)
+    Z: np.ndarray | None = None  # instruments (same shape as H): theta = (Z^T H)^-1 Z^T y
+    stack: int = 1  # equations per time sample, stacked block-wise in y, H (score summed)
+    noise_var: np.ndarray | None = (
+        None  # (p,) variance of each regressor's measurement error (EIV)
+    )
 
 
 def _check(name: str, a: np.ndarray, shape: tuple) -> np.ndarray:
@@ -189,20 +195,21 @@ def auto_max_lag(v: np.ndarray) -> int:
     return int(min(max(2 * first, 1), k // 4))
 
 
-def coloured_covariance(H: np.ndarray, v: np.ndarray, HtH_inv: np.ndarray,
-                        max_lag: int) -> np.ndarray:
+def coloured_covariance(
+    H: np.ndarray, v: np.ndarray, HtH_inv: np.ndarray, max_lag: int
+) -> np.ndarray:
     """``(H^T H)^-1 [sum_ij h(i)^T R_vv(i-j) h(j)] (H^T H)^-1`` with Bartlett-weighted lags."""
     k = H.shape[0]
     L = int(min(max_lag, k - 1))
     n = 1 << int(np.ceil(np.log2(2 * k)))
     spec = np.fft.rfft(v, n)
-    acf = np.fft.irfft(np.abs(spec) ** 2, n)[: L + 1] / k          # R_vv(0..L), biased
-    acf = acf * (1.0 - np.arange(L + 1) / (L + 1.0))                # Bartlett / Newey-West
-    kernel = np.concatenate([acf[:0:-1], acf])                      # lags -L..L
+    acf = np.fft.irfft(np.abs(spec) ** 2, n)[: L + 1] / k  # R_vv(0..L), biased
+    acf = acf * (1.0 - np.arange(L + 1) / (L + 1.0))  # Bartlett / Newey-West
+    kernel = np.concatenate([acf[:0:-1], acf])  # lags -L..L
     # (R H)[i] = sum_l R(l) h(i + l): same-length convolution of every column with the kernel
     m = 1 << int(np.ceil(np.log2(k + 2 * L + 1)))
     conv = np.fft.irfft(np.fft.rfft(H, m, axis=0) * np.fft.rfft(kernel, m)[:, None], m, axis=0)
-    RH = conv[L: L + k]
+    RH = conv[L : L + k]
     middle = H.T @ RH
     middle = 0.5 * (middle + middle.T)
     return HtH_inv @ middle @ HtH_inv
@@ -223,7 +230,7 @@ def ewc_long_run(S: np.ndarray, nu: int) -> np.ndarray:
     if not 1 <= nu < k:
         raise SolverError(f"EWC: need 1 <= nu < {k} samples, got nu = {nu}")
     # DCT-II: y_j = 2 sum_t s_t cos(pi j (2t + 1) / (2K))  ->  L_j = sqrt(2/K) y_j / 2
-    lam = dct(S, type=2, axis=0)[1: nu + 1] * np.sqrt(2.0 / k) / 2.0
+    lam = dct(S, type=2, axis=0)[1 : nu + 1] * np.sqrt(2.0 / k) / 2.0
     return lam.T @ lam / nu
 
 
@@ -240,18 +247,20 @@ def t_factor(k_sigma: float, dof: float | None) -> float:
 def _solve_iv(i: int, y: np.ndarray, H: np.ndarray, Z: np.ndarray, labels, rcond: float = 1e-10):
     """Instrumental variables ``theta = (Z^T H)^-1 Z^T y``: ``(theta, (Z^T H)^-1)`` (the bread of
     the sandwich; the scores are ``z(t) v(t)``)."""
-    _solve(i, y, H, labels, rcond)                  # rank checks on the regressors
-    _solve(i, y, Z, labels, rcond)                  # ... and on the instruments
+    _solve(i, y, H, labels, rcond)  # rank checks on the regressors
+    _solve(i, y, Z, labels, rcond)  # ... and on the instruments
     scale = np.linalg.norm(H, axis=0)
     zscale = np.linalg.norm(Z, axis=0)
     M = (Z / zscale).T @ (H / scale)
     sv = np.linalg.svd(M, compute_uv=False)
     if sv[-1] < rcond * sv[0]:
-        raise SolverError(f"row {i}: instruments uncorrelated with regressors {list(labels)} "
-                          f"(condition {sv[0] / max(sv[-1], 1e-300):.3g})")
+        raise SolverError(
+            f"row {i}: instruments uncorrelated with regressors {list(labels)} "
+            f"(condition {sv[0] / max(sv[-1], 1e-300):.3g})"
+        )
     Minv = np.linalg.inv(M)
     theta = (Minv @ ((Z / zscale).T @ y)) / scale
-    bread = Minv / np.outer(scale, zscale)          # (Z^T H)^-1
+    bread = Minv / np.outer(scale, zscale)  # (Z^T H)^-1
     return theta, bread
 
 
@@ -271,7 +280,8 @@ def _solve(i: int, y: np.ndarray, H: np.ndarray, labels, rcond: float = 1e-10):
         raise SolverError(
             f"row {i}: regressors {list(labels)} are linearly dependent "
             f"(rank {rank} of {p}, condition {s[0] / max(s[-1], 1e-300):.3g}); excite them "
-            "independently or mark some elements known")
+            "independently or mark some elements known"
+        )
     theta_s = vt.T @ ((vt @ (Hs.T @ y)) / s**2)
     # (H^T H)^-1 from the SVD of the scaled regressors: V diag(1/s^2) V^T, unscaled.
     HtH_inv = ((vt.T / s**2) @ vt) / np.outer(scale, scale)
@@ -284,8 +294,15 @@ def _r2(y: np.ndarray, v: np.ndarray) -> float:
     return 1.0 - float(v @ v) / sst if sst > 0 else (1.0 if float(v @ v) == 0 else 0.0)
 
 
-def fit_row(i: int, y: np.ndarray, H: np.ndarray, cols_A, cols_B,
-            max_lag: int | None = None, rcond: float = 1e-10) -> RowFit:
+def fit_row(
+    i: int,
+    y: np.ndarray,
+    H: np.ndarray,
+    cols_A,
+    cols_B,
+    max_lag: int | None = None,
+    rcond: float = 1e-10,
+) -> RowFit:
     """Least squares for one row, Eq. (47), with white and ``residual_acf`` covariance."""
     k, p = H.shape
     labels = _labels(cols_A, cols_B, p)
@@ -302,12 +319,28 @@ def fit_row(i: int, y: np.ndarray, H: np.ndarray, cols_A, cols_B,
     else:
         ratio = np.sqrt(np.maximum(dc, dw) / np.where(dc > 0, dc, dw))
         cov = cov_c * np.outer(ratio, ratio) if np.all(dc > 0) else cov_w
-    return RowFit(i, tuple(cols_A), tuple(cols_B), theta, cov, cov_w, cov_c, sigma2, _r2(y, v), k, L,
-                  tuple(labels))
+    return RowFit(
+        i,
+        tuple(cols_A),
+        tuple(cols_B),
+        theta,
+        cov,
+        cov_w,
+        cov_c,
+        sigma2,
+        _r2(y, v),
+        k,
+        L,
+        tuple(labels),
+    )
 
 
-def solve_rows(designs, covariance: CovarianceConfig = CovarianceConfig(), dt: float = 0.01,
-               rcond: float = 1e-10) -> tuple[list[RowFit], np.ndarray | None, float | None]:
+def solve_rows(
+    designs,
+    covariance: CovarianceConfig = CovarianceConfig(),
+    dt: float = 0.01,
+    rcond: float = 1e-10,
+) -> tuple[list[RowFit], np.ndarray | None, float | None]:
     """Least squares for every :class:`RowDesign` and their joint covariance.
 
     Returns ``(row fits, joint covariance of all theta stacked or None, dof or None)``; with
@@ -346,13 +379,17 @@ def solve_rows(designs, covariance: CovarianceConfig = CovarianceConfig(), dt: f
             if d.noise_var is not None and np.any(np.asarray(d.noise_var) > 0):
                 # bias-compensated LS: E[h h^T] = E[h0 h0^T] + Sigma, so (H^T H - N Sigma)^-1 H^T y
                 theta_ls = theta
-                M = np.linalg.inv(HtH_inv) - Hu.shape[0] * np.diag(np.asarray(d.noise_var, dtype=float))
+                M = np.linalg.inv(HtH_inv) - Hu.shape[0] * np.diag(
+                    np.asarray(d.noise_var, dtype=float)
+                )
                 HtH_inv = np.linalg.inv(M)
                 theta = HtH_inv @ (Hu.T @ yu)
                 eiv = theta_ls - theta
         else:
             if d.Z.shape != d.H.shape:
-                raise ConfigError(f"row {d.row}: instruments {d.Z.shape} must match regressors {d.H.shape}")
+                raise ConfigError(
+                    f"row {d.row}: instruments {d.Z.shape} must match regressors {d.H.shape}"
+                )
             theta, HtH_inv = _solve_iv(d.row, yu, Hu, d.Z[use], d.labels, rcond)
             Zs = d.Z
             cw = HtH_inv @ (d.Z[use].T @ d.Z[use]) @ HtH_inv.T
@@ -367,12 +404,17 @@ def solve_rows(designs, covariance: CovarianceConfig = CovarianceConfig(), dt: f
     nu = int(min(nu, n - 1))
     # scores; the bias-compensation term N Sigma theta is constant in t and the cosines j >= 1
     # of the EWC are orthogonal to constants, so it drops out
-    S = np.concatenate([(Zs * v[:, None]).reshape(d.stack, n, -1).sum(axis=0)
-                        for d, _, _, v, _, _, Zs, _, _ in parts], axis=1)
+    S = np.concatenate(
+        [
+            (Zs * v[:, None]).reshape(d.stack, n, -1).sum(axis=0)
+            for d, _, _, v, _, _, Zs, _, _ in parts
+        ],
+        axis=1,
+    )
     Omega = n * ewc_long_run(S, nu)
     Hinv = np.zeros((P, P))
     for (d, theta, HtH_inv, *_), o in zip(parts, offs):
-        Hinv[o: o + theta.size, o: o + theta.size] = HtH_inv
+        Hinv[o : o + theta.size, o : o + theta.size] = HtH_inv
     joint = Hinv @ Omega @ Hinv.T
     joint = 0.5 * (joint + joint.T)
     fits = []
@@ -380,12 +422,31 @@ def solve_rows(designs, covariance: CovarianceConfig = CovarianceConfig(), dt: f
         sl = slice(o, o + theta.size)
         c = joint[sl, sl]
         white = sigma2 * (HtH_inv if cw is None else cw)
-        fits.append(RowFit(d.row, tuple(d.cols_A), tuple(d.cols_B), theta, c, white, c, sigma2,
-                           _r2(d.y[use], v[use]), int(use.sum()), 0, tuple(d.labels), o, float(nu), eiv))
+        fits.append(
+            RowFit(
+                d.row,
+                tuple(d.cols_A),
+                tuple(d.cols_B),
+                theta,
+                c,
+                white,
+                c,
+                sigma2,
+                _r2(d.y[use], v[use]),
+                int(use.sum()),
+                0,
+                tuple(d.labels),
+                o,
+                float(nu),
+                eiv,
+            )
+        )
     return fits, joint, float(nu)
 
 
-def _append_independent(H: np.ndarray, E: np.ndarray, rtol: float = 1e-8) -> tuple[np.ndarray, list[int]]:
+def _append_independent(
+    H: np.ndarray, E: np.ndarray, rtol: float = 1e-8
+) -> tuple[np.ndarray, list[int]]:
     """Append the columns of ``E`` that are linearly independent of ``H`` and of each other;
     returns the new matrix and the indices of the appended columns of ``E``."""
     from scipy.linalg import qr
@@ -414,9 +475,17 @@ def _labels(cols_A, cols_B, n: int | None = None) -> list[str]:
     return labels
 
 
-def row_designs(xdot: np.ndarray, x: np.ndarray, u: np.ndarray, A_known: np.ndarray, B_known: np.ndarray,
-                maskA: np.ndarray, maskB: np.ndarray, intercept: bool = False,
-                extra: dict[int, np.ndarray] | None = None) -> tuple[list[RowDesign], np.ndarray, np.ndarray]:
+def row_designs(
+    xdot: np.ndarray,
+    x: np.ndarray,
+    u: np.ndarray,
+    A_known: np.ndarray,
+    B_known: np.ndarray,
+    maskA: np.ndarray,
+    maskB: np.ndarray,
+    intercept: bool = False,
+    extra: dict[int, np.ndarray] | None = None,
+) -> tuple[list[RowDesign], np.ndarray, np.ndarray]:
     """The :class:`RowDesign` of every row with an unknown element (Eqs. 40-41, 45), plus
     ``A, B`` holding the known elements (unknown ones zero).  See :func:`fit` for the arguments."""
     x = np.asarray(x, dtype=float)
@@ -449,15 +518,27 @@ def row_designs(xdot: np.ndarray, x: np.ndarray, u: np.ndarray, A_known: np.ndar
             H = np.concatenate([H, np.ones((n_s, 1))], axis=1)
             labels.append("bias")
         if extra is not None and i in extra and np.shape(extra[i])[1] > 0:
-            E = _check(f"extra[{i}]", np.asarray(extra[i], dtype=float), (n_s, np.shape(extra[i])[1]))
+            E = _check(
+                f"extra[{i}]", np.asarray(extra[i], dtype=float), (n_s, np.shape(extra[i])[1])
+            )
             H, chosen = _append_independent(H, E)
             labels.extend(f"nuisance{c}" for c in chosen)
-        designs.append(RowDesign(i, y, H, tuple(int(j) for j in ja), tuple(int(k) for k in kb), tuple(labels)))
+        designs.append(
+            RowDesign(i, y, H, tuple(int(j) for j in ja), tuple(int(k) for k in kb), tuple(labels))
+        )
     return designs, A, B
 
 
-def assemble(fits, A: np.ndarray, B: np.ndarray, maskA: np.ndarray, maskB: np.ndarray,
-             joint: np.ndarray | None = None, dof: float | None = None, method: str = "residual_acf") -> Fit:
+def assemble(
+    fits,
+    A: np.ndarray,
+    B: np.ndarray,
+    maskA: np.ndarray,
+    maskB: np.ndarray,
+    joint: np.ndarray | None = None,
+    dof: float | None = None,
+    method: str = "residual_acf",
+) -> Fit:
     """Write every row's leading parameters (its unknown A then B columns) into ``A, B``."""
     A, B = A.copy(), B.copy()
     std_A, std_B = np.zeros_like(A), np.zeros_like(B)
@@ -465,17 +546,37 @@ def assemble(fits, A: np.ndarray, B: np.ndarray, maskA: np.ndarray, maskB: np.nd
         na, nb = len(rf.cols_A), len(rf.cols_B)
         s = rf.std
         A[rf.row, list(rf.cols_A)] = rf.theta[:na]
-        B[rf.row, list(rf.cols_B)] = rf.theta[na: na + nb]
+        B[rf.row, list(rf.cols_B)] = rf.theta[na : na + nb]
         std_A[rf.row, list(rf.cols_A)] = s[:na]
-        std_B[rf.row, list(rf.cols_B)] = s[na: na + nb]
-    return Fit(A, B, std_A, std_B, np.asarray(maskA, bool).copy(), np.asarray(maskB, bool).copy(), tuple(fits),
-               joint, dof, method)
+        std_B[rf.row, list(rf.cols_B)] = s[na : na + nb]
+    return Fit(
+        A,
+        B,
+        std_A,
+        std_B,
+        np.asarray(maskA, bool).copy(),
+        np.asarray(maskB, bool).copy(),
+        tuple(fits),
+        joint,
+        dof,
+        method,
+    )
 
 
-def fit(xdot: np.ndarray, x: np.ndarray, u: np.ndarray, A_known: np.ndarray, B_known: np.ndarray,
-        maskA: np.ndarray, maskB: np.ndarray, max_lag: int | None = None,
-        intercept: bool = False, extra: dict[int, np.ndarray] | None = None,
-        covariance: CovarianceConfig | None = None, dt: float = 0.01) -> Fit:
+def fit(
+    xdot: np.ndarray,
+    x: np.ndarray,
+    u: np.ndarray,
+    A_known: np.ndarray,
+    B_known: np.ndarray,
+    maskA: np.ndarray,
+    maskB: np.ndarray,
+    max_lag: int | None = None,
+    intercept: bool = False,
+    extra: dict[int, np.ndarray] | None = None,
+    covariance: CovarianceConfig | None = None,
+    dt: float = 0.01,
+) -> Fit:
     """Seed 0 Appendix B for all rows.
 
     ``xdot``, ``x`` (N, n_x), ``u`` (N, n_u) are *perturbation* variables (x - x0, u - u0,
@@ -494,6 +595,10 @@ def fit(xdot: np.ndarray, x: np.ndarray, u: np.ndarray, A_known: np.ndarray, B_k
     estimate (``dt`` = sample interval, for its default dof).
     """
     designs, A, B = row_designs(xdot, x, u, A_known, B_known, maskA, maskB, intercept, extra)
-    cov = covariance if covariance is not None else CovarianceConfig(method="residual_acf", max_lag=max_lag)
+    cov = (
+        covariance
+        if covariance is not None
+        else CovarianceConfig(method="residual_acf", max_lag=max_lag)
+    )
     fits, joint, dof = solve_rows(designs, cov, dt)
     return assemble(fits, A, B, maskA, maskB, joint, dof, cov.method)

@@ -21,7 +21,9 @@ def _pair(xm: np.ndarray, xf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     xm = np.asarray(xm, dtype=float)
     xf = np.asarray(xf, dtype=float)
     if xm.shape != xf.shape or xm.ndim != 1 or xm.size == 0:
-        raise ConfigError(f"modelled and measured series must be equal-length 1-D, got {xm.shape}, {xf.shape}")
+        raise ConfigError(
+            f"modelled and measured series must be equal-length 1-D, got {xm.shape}, {xf.shape}"
+        )
     if not (np.all(np.isfinite(xm)) and np.all(np.isfinite(xf))):
         raise ConfigError("modelled or measured series contains NaN or inf")
     return xm, xf
@@ -53,30 +55,48 @@ def r_squared(y: np.ndarray, y_hat: np.ndarray) -> float:
     return 1.0 - sse / sst if sst > 0 else float(sse == 0)
 
 
-def axis_metrics(xdot_m: np.ndarray, xdot_f: np.ndarray,
-                 axes: Sequence[str] = AXES, index: Sequence[int] = AXIS_INDEX) -> dict[str, dict[str, float]]:
+def axis_metrics(
+    xdot_m: np.ndarray,
+    xdot_f: np.ndarray,
+    axes: Sequence[str] = AXES,
+    index: Sequence[int] = AXIS_INDEX,
+) -> dict[str, dict[str, float]]:
     """TIC and NRMSE per axis (seed 0 Table 3) from (K, n_x) modelled/measured derivatives."""
     xm = np.asarray(xdot_m, dtype=float)
     xf = np.asarray(xdot_f, dtype=float)
     if xm.shape != xf.shape or xm.ndim != 2:
-        raise ConfigError(f"modelled/measured derivatives must be equal (K, n_x), got {xm.shape}, {xf.shape}")
+        raise ConfigError(
+            f"modelled/measured derivatives must be equal (K, n_x), got {xm.shape}, {xf.shape}"
+        )
     return {
         "tic": {a: tic(xm[:, i], xf[:, i]) for a, i in zip(axes, index)},
         "nrmse": {a: nrmse(xm[:, i], xf[:, i]) for a, i in zip(axes, index)},
     }
 
 
-def plot_validation(t: np.ndarray, xdot_m: np.ndarray, xdot_f: np.ndarray, path: str,
-                    axes: Sequence[str] = AXES, index: Sequence[int] = AXIS_INDEX,
-                    title: str = "LPV model independent validation (seed 0 Fig. 4)") -> str:
+def plot_validation(
+    t: np.ndarray,
+    xdot_m: np.ndarray,
+    xdot_f: np.ndarray,
+    path: str,
+    axes: Sequence[str] = AXES,
+    index: Sequence[int] = AXIS_INDEX,
+    title: str = "LPV model independent validation (seed 0 Fig. 4)",
+) -> str:
     """Measured vs modelled state derivatives, one panel per axis (matplotlib Agg); returns path."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    units = {"udot": "m/s^2", "vdot": "m/s^2", "wdot": "m/s^2",
-             "pdot": "rad/s^2", "qdot": "rad/s^2", "rdot": "rad/s^2"}
+    units = {
+        "udot": "m/s^2",
+        "vdot": "m/s^2",
+        "wdot": "m/s^2",
+        "pdot": "rad/s^2",
+        "qdot": "rad/s^2",
+        "rdot": "rad/s^2",
+    }
     fig, axs = plt.subplots(len(axes), 1, figsize=(8, 1.6 * len(axes)), sharex=True)
     axs = np.atleast_1d(axs)
     for ax, a, i in zip(axs, axes, index):

@@ -40,13 +40,38 @@ AXES = ("X", "Y", "Z", "L", "M", "N")
 REGRESSORS = {
     "X": (("x_mu0", "u"), ("x_muw", "u w"), ("x_muh", "u dt")),
     "Y": (("y_mu0", "v"), ("y_muw", "v w"), ("y_muh", "v dt")),
-    "Z": (("z_T0", "dt^2"), ("z_mu0", "dt"), ("z_mu", "u^2+v^2"), ("z_muw", "4w dt - p da - q de")),
-    "L": (("l_T0", "da^2"), ("l_mu0", "da"), ("l_muw", "w da - 2l^2 p dt - l^2 q dr/2"), ("l_muh", "v dt"),
-          ("l_muh_mu0", "v"), ("l_muh_muw", "v w"), ("l_dr", "u dr")),
-    "M": (("m_T0", "de^2"), ("m_mu0", "de"), ("m_muw", "w de - 2l^2 q dt - l^2 p dr/2"), ("m_muh", "u dt"),
-          ("m_muh_mu0", "u"), ("m_muh_muw", "u w"), ("m_dr", "v dr")),
-    "N": (("n_Q0", "dr^2"), ("n_mu0", "dr"), ("n_muw", "w dr + p de + q da"), ("n_muw2", "p q"),
-          ("n_muh", "u da + v de"), ("n_muh_muw", "u p + v q")),
+    "Z": (
+        ("z_T0", "dt^2"),
+        ("z_mu0", "dt"),
+        ("z_mu", "u^2+v^2"),
+        ("z_muw", "4w dt - p da - q de"),
+    ),
+    "L": (
+        ("l_T0", "da^2"),
+        ("l_mu0", "da"),
+        ("l_muw", "w da - 2l^2 p dt - l^2 q dr/2"),
+        ("l_muh", "v dt"),
+        ("l_muh_mu0", "v"),
+        ("l_muh_muw", "v w"),
+        ("l_dr", "u dr"),
+    ),
+    "M": (
+        ("m_T0", "de^2"),
+        ("m_mu0", "de"),
+        ("m_muw", "w de - 2l^2 q dt - l^2 p dr/2"),
+        ("m_muh", "u dt"),
+        ("m_muh_mu0", "u"),
+        ("m_muh_muw", "u w"),
+        ("m_dr", "v dr"),
+    ),
+    "N": (
+        ("n_Q0", "dr^2"),
+        ("n_mu0", "dr"),
+        ("n_muw", "w dr + p de + q da"),
+        ("n_muw2", "p q"),
+        ("n_muh", "u da + v de"),
+        ("n_muh_muw", "u p + v q"),
+    ),
 }
 
 
@@ -54,17 +79,19 @@ REGRESSORS = {
 class FlightData:
     """Aligned measurements on a uniform grid (NED/FRD, SI)."""
 
-    t: np.ndarray          # (N,)
-    euler: np.ndarray      # (N, 2) phi, theta (psi does not enter Eq. 3c-3d)
-    v: np.ndarray          # (N, 3) body velocity
-    omega: np.ndarray      # (N, 3) body rates
-    Omega: np.ndarray      # (N, 4) rotor speeds
-    v_dot: np.ndarray      # (N, 3)
+    t: np.ndarray  # (N,)
+    euler: np.ndarray  # (N, 2) phi, theta (psi does not enter Eq. 3c-3d)
+    v: np.ndarray  # (N, 3) body velocity
+    omega: np.ndarray  # (N, 3) body rates
+    Omega: np.ndarray  # (N, 4) rotor speeds
+    v_dot: np.ndarray  # (N, 3)
     omega_dot: np.ndarray  # (N, 3)
     Omega_dot: np.ndarray  # (N, 4)
 
 
-def regressors(v, omega, Omega, Omega_dot, arm_length: float, mix: np.ndarray) -> dict[str, np.ndarray]:
+def regressors(
+    v, omega, Omega, Omega_dot, arm_length: float, mix: np.ndarray
+) -> dict[str, np.ndarray]:
     """Regressor matrices (N, n_axis) of Eq. (6a)-(6f) in the order of :data:`REGRESSORS`."""
     v = np.atleast_2d(v)
     omega = np.atleast_2d(omega)
@@ -74,17 +101,39 @@ def regressors(v, omega, Omega, Omega_dot, arm_length: float, mix: np.ndarray) -
     d = Omega @ mix.T
     d2 = (Omega * Omega) @ mix.T
     dt, da, de, dr = d.T
-    l2 = arm_length ** 2
+    l2 = arm_length**2
     return {
         "X": np.stack([u, u * w, u * dt], axis=1),
         "Y": np.stack([vv, vv * w, vv * dt], axis=1),
         "Z": np.stack([d2[:, 0], dt, u * u + vv * vv, 4 * w * dt - p * da - q * de], axis=1),
-        "L": np.stack([d2[:, 1], da, w * da - 2 * l2 * p * dt - 0.5 * l2 * q * dr, vv * dt, vv, vv * w,
-                       u * dr], axis=1),
-        "M": np.stack([d2[:, 2], de, w * de - 2 * l2 * q * dt - 0.5 * l2 * p * dr, u * dt, u, u * w,
-                       vv * dr], axis=1),
-        "N": np.stack([d2[:, 3], dr, w * dr + p * de + q * da, p * q, u * da + vv * de, u * p + vv * q],
-                      axis=1),
+        "L": np.stack(
+            [
+                d2[:, 1],
+                da,
+                w * da - 2 * l2 * p * dt - 0.5 * l2 * q * dr,
+                vv * dt,
+                vv,
+                vv * w,
+                u * dr,
+            ],
+            axis=1,
+        ),
+        "M": np.stack(
+            [
+                d2[:, 2],
+                de,
+                w * de - 2 * l2 * q * dt - 0.5 * l2 * p * dr,
+                u * dt,
+                u,
+                u * w,
+                vv * dr,
+            ],
+            axis=1,
+        ),
+        "N": np.stack(
+            [d2[:, 3], dr, w * dr + p * de + q * da, p * q, u * da + vv * de, u * p + vv * q],
+            axis=1,
+        ),
     }
 
 
@@ -99,14 +148,23 @@ def generalized_force(data: FlightData, params, smoother=None) -> tuple[np.ndarr
     m, g = params.mass, params.g
     I = np.asarray(params.inertia, dtype=float)
     sm = smoother or (lambda a: a)
-    known_v = sm(np.cross(data.v, data.omega) + _gravity_body(data.euler[:, 0], data.euler[:, 1], g))
+    known_v = sm(
+        np.cross(data.v, data.omega) + _gravity_body(data.euler[:, 0], data.euler[:, 1], g)
+    )
     F = m * (data.v_dot - known_v)
     M = data.omega_dot @ I.T - sm(np.cross(data.omega @ I.T, data.omega))
     return F, M
 
 
-def flight_data(t: np.ndarray, euler: np.ndarray, v: np.ndarray, omega: np.ndarray, Omega: np.ndarray,
-                deriv_cfg=None, edge_s: float = 0.5):
+def flight_data(
+    t: np.ndarray,
+    euler: np.ndarray,
+    v: np.ndarray,
+    omega: np.ndarray,
+    Omega: np.ndarray,
+    deriv_cfg=None,
+    edge_s: float = 0.5,
+):
     """Measured arrays on a uniform grid -> ``(FlightData, smoother, keep)`` for :func:`regression`.
 
     Derivatives of ``v``, ``omega``, ``Omega`` by the global Fourier (or Savitzky-Golay)
@@ -125,8 +183,16 @@ def flight_data(t: np.ndarray, euler: np.ndarray, v: np.ndarray, omega: np.ndarr
     _, v_dot = dv.smooth_and_differentiate(v, dt, cfg)
     _, w_dot = dv.smooth_and_differentiate(omega, dt, cfg)
     _, O_dot = dv.smooth_and_differentiate(Omega, dt, cfg)
-    data = FlightData(t, np.asarray(euler)[:, :2], np.asarray(v), np.asarray(omega), np.asarray(Omega),
-                      v_dot, w_dot, O_dot)
+    data = FlightData(
+        t,
+        np.asarray(euler)[:, :2],
+        np.asarray(v),
+        np.asarray(omega),
+        np.asarray(Omega),
+        v_dot,
+        w_dot,
+        O_dot,
+    )
     return data, (lambda a: dv.smooth(a, dt, cfg)), slice(n_edge, t.size - n_edge)
 
 
@@ -170,9 +236,14 @@ def _check(data: FlightData) -> int:
     return n
 
 
-def regression(data: FlightData, params, max_lag: int | None = None,
-               fixed: dict[str, float] | None = None, smoother=None,
-               keep: slice | None = None) -> NonlinearResult:
+def regression(
+    data: FlightData,
+    params,
+    max_lag: int | None = None,
+    fixed: dict[str, float] | None = None,
+    smoother=None,
+    keep: slice | None = None,
+) -> NonlinearResult:
     """Step 1: per-axis least squares of Eq. (6) on the measured generalised force.
 
     ``fixed`` maps K names to known values; their regressors move to the measured side
@@ -201,13 +272,20 @@ def _axis_data(data: FlightData, params, smoother, keep):
     if keep is not None:
         regs = {a: r[keep] for a, r in regs.items()}
         F, M, ddr = F[keep], M[keep], ddr[keep]
-    meas = {"X": F[:, 0], "Y": F[:, 1], "Z": F[:, 2], "L": M[:, 0], "M": M[:, 1],
-            "N": M[:, 2] - params.j_rotor * ddr}
+    meas = {
+        "X": F[:, 0],
+        "Y": F[:, 1],
+        "Z": F[:, 2],
+        "L": M[:, 0],
+        "M": M[:, 1],
+        "N": M[:, 2] - params.j_rotor * ddr,
+    }
     return meas, regs
 
 
-def regression_stacked(records, params, max_lag: int | None = None,
-                       fixed: dict[str, float] | None = None) -> NonlinearResult:
+def regression_stacked(
+    records, params, max_lag: int | None = None, fixed: dict[str, float] | None = None
+) -> NonlinearResult:
     """:func:`regression` over several records ``[(data, smoother, keep), ...]`` stacked
     row-wise (one least-squares problem per axis over all records)."""
     fixed = dict(fixed or {})
@@ -230,8 +308,15 @@ def regression_stacked(records, params, max_lag: int | None = None,
         for j, c in enumerate(free):
             K[names[c]] = float(rf.theta[j])
             std[names[c]] = float(rf.std[j])
-        axes[ax] = AxisFit(ax, tuple(names[c] for c in free), tuple(labels[c] for c in free),
-                           rf.theta, rf.std, rf.r2, correlation(H))
+        axes[ax] = AxisFit(
+            ax,
+            tuple(names[c] for c in free),
+            tuple(labels[c] for c in free),
+            rf.theta,
+            rf.std,
+            rf.r2,
+            correlation(H),
+        )
     return NonlinearResult(K, std, axes)
 
 
@@ -241,22 +326,30 @@ class OutputErrorConfig:
     segment_s: float = 2.0
     max_segments: int = 40
     max_nfev: int = 60
-    free: tuple[str, ...] | None = None      # K names to refine (default: all regression ones)
-    bounds_sigma: float | None = 5.0         # search box K0 +/- bounds_sigma * std0 (seed 2 Eq. 89)
-    estimate_initial: bool = True            # segment initial states projected out (see output_error)
+    free: tuple[str, ...] | None = None  # K names to refine (default: all regression ones)
+    bounds_sigma: float | None = 5.0  # search box K0 +/- bounds_sigma * std0 (seed 2 Eq. 89)
+    estimate_initial: bool = True  # segment initial states projected out (see output_error)
 
 
 def _segments(n: int, seg: int, max_segments: int) -> np.ndarray:
     starts = np.arange(0, n - seg, seg)
     if starts.size == 0:
-        raise ConfigError(f"record of {n} samples is shorter than one output-error segment ({seg})")
+        raise ConfigError(
+            f"record of {n} samples is shorter than one output-error segment ({seg})"
+        )
     if starts.size > max_segments:
         starts = starts[np.linspace(0, starts.size - 1, max_segments).astype(int)]
     return starts
 
 
-def simulate_segments(K: dict[str, float], params, data: FlightData, starts: np.ndarray, seg: int,
-                      nu0: np.ndarray | None = None) -> np.ndarray:
+def simulate_segments(
+    K: dict[str, float],
+    params,
+    data: FlightData,
+    starts: np.ndarray,
+    seg: int,
+    nu0: np.ndarray | None = None,
+) -> np.ndarray:
     """RK4 integration of Eqs. (3c)-(3d) + (6) over each segment, vectorised over segments;
     attitude and rotor speeds are the measured ones (linearly interpolated at the half step). Returns (S, seg, 6) predicted ``nu = (v, omega)``."""
     from lpv_sysid.models.quadrotor import mixer
@@ -273,7 +366,7 @@ def simulate_segments(K: dict[str, float], params, data: FlightData, starts: np.
     ddr_step = np.diff(dr) / dt
 
     kk = {nm: float(K[nm]) for ax in AXES for nm, _ in REGRESSORS[ax]}
-    l2 = params.arm_length ** 2
+    l2 = params.arm_length**2
     Id = np.diag(I)
     diag_inertia = bool(np.allclose(I, np.diag(Id)))
 
@@ -286,15 +379,39 @@ def simulate_segments(K: dict[str, float], params, data: FlightData, starts: np.
         dt_, da, de, dr = d[:, 0], d[:, 1], d[:, 2], d[:, 3]
         Fx = u * (kk["x_mu0"] + kk["x_muw"] * w + kk["x_muh"] * dt_)
         Fy = v * (kk["y_mu0"] + kk["y_muw"] * w + kk["y_muh"] * dt_)
-        Fz = (kk["z_T0"] * d2[:, 0] + kk["z_mu0"] * dt_ + kk["z_mu"] * (u * u + v * v)
-              + kk["z_muw"] * (4 * w * dt_ - p * da - q * de))
-        Mx = (kk["l_T0"] * d2[:, 1] + kk["l_mu0"] * da + kk["l_muw"] * (w * da - 2 * l2 * p * dt_ - 0.5 * l2 * q * dr)
-              + kk["l_muh"] * v * dt_ + kk["l_muh_mu0"] * v + kk["l_muh_muw"] * v * w + kk["l_dr"] * u * dr)
-        My = (kk["m_T0"] * d2[:, 2] + kk["m_mu0"] * de + kk["m_muw"] * (w * de - 2 * l2 * q * dt_ - 0.5 * l2 * p * dr)
-              + kk["m_muh"] * u * dt_ + kk["m_muh_mu0"] * u + kk["m_muh_muw"] * u * w + kk["m_dr"] * v * dr)
-        Mz = (kk["n_Q0"] * d2[:, 3] + kk["n_mu0"] * dr + kk["n_muw"] * (w * dr + p * de + q * da)
-              + kk["n_muw2"] * p * q + kk["n_muh"] * (u * da + v * de) + kk["n_muh_muw"] * (u * p + v * q)
-              + params.j_rotor * dd)
+        Fz = (
+            kk["z_T0"] * d2[:, 0]
+            + kk["z_mu0"] * dt_
+            + kk["z_mu"] * (u * u + v * v)
+            + kk["z_muw"] * (4 * w * dt_ - p * da - q * de)
+        )
+        Mx = (
+            kk["l_T0"] * d2[:, 1]
+            + kk["l_mu0"] * da
+            + kk["l_muw"] * (w * da - 2 * l2 * p * dt_ - 0.5 * l2 * q * dr)
+            + kk["l_muh"] * v * dt_
+            + kk["l_muh_mu0"] * v
+            + kk["l_muh_muw"] * v * w
+            + kk["l_dr"] * u * dr
+        )
+        My = (
+            kk["m_T0"] * d2[:, 2]
+            + kk["m_mu0"] * de
+            + kk["m_muw"] * (w * de - 2 * l2 * q * dt_ - 0.5 * l2 * p * dr)
+            + kk["m_muh"] * u * dt_
+            + kk["m_muh_mu0"] * u
+            + kk["m_muh_muw"] * u * w
+            + kk["m_dr"] * v * dr
+        )
+        Mz = (
+            kk["n_Q0"] * d2[:, 3]
+            + kk["n_mu0"] * dr
+            + kk["n_muw"] * (w * dr + p * de + q * da)
+            + kk["n_muw2"] * p * q
+            + kk["n_muh"] * (u * da + v * de)
+            + kk["n_muh_muw"] * (u * p + v * q)
+            + params.j_rotor * dd
+        )
         out = np.empty_like(nu)
         # v x omega + g R^T e3 + F / m  (Eq. 3c)
         out[:, 0] = v * r - w * q + gr[:, 0] + Fx / m
@@ -311,7 +428,11 @@ def simulate_segments(K: dict[str, float], params, data: FlightData, starts: np.
             out[:, 3:] = (np.cross(wv @ I.T, wv) + np.stack([Mx, My, Mz], axis=1)) @ Ii.T
         return out
 
-    nu = np.concatenate([data.v[starts], data.omega[starts]], axis=1) if nu0 is None else np.array(nu0)
+    nu = (
+        np.concatenate([data.v[starts], data.omega[starts]], axis=1)
+        if nu0 is None
+        else np.array(nu0)
+    )
     out = np.empty((starts.size, seg, 6))
     out[:, 0] = nu
     for k in range(seg - 1):
@@ -330,9 +451,14 @@ def simulate_segments(K: dict[str, float], params, data: FlightData, starts: np.
     return out
 
 
-def output_error(data: FlightData, params, K0: dict[str, float],
-                 cfg: OutputErrorConfig = OutputErrorConfig(),
-                 std0: dict[str, float] | None = None, smoother=None) -> NonlinearResult:
+def output_error(
+    data: FlightData,
+    params,
+    K0: dict[str, float],
+    cfg: OutputErrorConfig = OutputErrorConfig(),
+    std0: dict[str, float] | None = None,
+    smoother=None,
+) -> NonlinearResult:
     """Step 2: refine K by output-error NLS over short segments (seed 2 Sec. 4).
 
     As in seed 2 Eqs. (89), (95), (101), the preliminary estimates bound the search: with
@@ -353,14 +479,18 @@ def output_error(data: FlightData, params, K0: dict[str, float],
     dt = float(data.t[1] - data.t[0])
     seg = max(3, int(round(cfg.segment_s / dt)))
     starts = _segments(n, seg, cfg.max_segments)
-    free = list(cfg.free) if cfg.free is not None else [nm for ax in AXES for nm, _ in REGRESSORS[ax]]
+    free = (
+        list(cfg.free) if cfg.free is not None else [nm for ax in AXES for nm, _ in REGRESSORS[ax]]
+    )
     unknown = [nm for nm in free if nm not in K0]
     if unknown:
         raise ConfigError(f"output error: no initial value for {unknown}")
-    meas = np.stack([np.concatenate([data.v[s:s + seg], data.omega[s:s + seg]], axis=1) for s in starts])
+    meas = np.stack(
+        [np.concatenate([data.v[s : s + seg], data.omega[s : s + seg]], axis=1) for s in starts]
+    )
     scale_out = np.maximum(meas.reshape(-1, 6).std(axis=0), 1e-6)
     x0 = np.array([K0[nm] for nm in free])
-    xs = np.where(np.abs(x0) > 0, np.abs(x0), 1e-6)       # parameter scaling
+    xs = np.where(np.abs(x0) > 0, np.abs(x0), 1e-6)  # parameter scaling
     nu0 = None
     if smoother is not None:
         nus = smoother(np.concatenate([data.v, data.omega], axis=1))
@@ -379,11 +509,16 @@ def output_error(data: FlightData, params, K0: dict[str, float],
         K = dict(K0)
         K.update(dict(zip(free, z * xs)))
         pred = simulate_segments(K, params, data, starts_all, seg, nu_all)
-        r0 = (pred[:n_seg, 1:] - meas[:, 1:]) / scale_out               # (S, seg-1, 6)
+        r0 = (pred[:n_seg, 1:] - meas[:, 1:]) / scale_out  # (S, seg-1, 6)
         if not cfg.estimate_initial:
             return r0.ravel()
-        sens = np.stack([(pred[(j + 1) * n_seg:(j + 2) * n_seg, 1:] - pred[:n_seg, 1:]) / scale_out / h[j]
-                         for j in range(6)], axis=-1).reshape(n_seg, -1, 6)
+        sens = np.stack(
+            [
+                (pred[(j + 1) * n_seg : (j + 2) * n_seg, 1:] - pred[:n_seg, 1:]) / scale_out / h[j]
+                for j in range(6)
+            ],
+            axis=-1,
+        ).reshape(n_seg, -1, 6)
         r = r0.reshape(n_seg, -1)
         StS = np.einsum("snj,snk->sjk", sens, sens) + 1e-12 * np.eye(6)
         delta = np.linalg.solve(StS, -np.einsum("snj,sn->sj", sens, r)[..., None])[..., 0]
@@ -397,8 +532,9 @@ def output_error(data: FlightData, params, K0: dict[str, float],
             if s > 0 and np.isfinite(s):
                 lo[i] = (x0[i] - cfg.bounds_sigma * s) / xs[i]
                 hi[i] = (x0[i] + cfg.bounds_sigma * s) / xs[i]
-    sol = least_squares(resid, x0 / xs, method="trf", x_scale="jac", max_nfev=cfg.max_nfev,
-                        bounds=(lo, hi))
+    sol = least_squares(
+        resid, x0 / xs, method="trf", x_scale="jac", max_nfev=cfg.max_nfev, bounds=(lo, hi)
+    )
     if not np.all(np.isfinite(sol.x)):
         raise SolverError("output-error refinement diverged")
     Kr = dict(K0)
@@ -411,6 +547,12 @@ def output_error(data: FlightData, params, K0: dict[str, float],
         rstd = {nm: float(np.sqrt(max(cov[i, i], 0.0)) * xs[i]) for i, nm in enumerate(free)}
     except np.linalg.LinAlgError:
         rstd = {}
-    log.info("output error: cost %.4g -> %.4g in %d evaluations", 0.5 * float(resid(x0 / xs) @ resid(x0 / xs)),
-             sol.cost, sol.nfev)
-    return NonlinearResult(Kr, {}, {}, method="output-error", cost=float(sol.cost), refined_std=rstd)
+    log.info(
+        "output error: cost %.4g -> %.4g in %d evaluations",
+        0.5 * float(resid(x0 / xs) @ resid(x0 / xs)),
+        sol.cost,
+        sol.nfev,
+    )
+    return NonlinearResult(
+        Kr, {}, {}, method="output-error", cost=float(sol.cost), refined_std=rstd
+    )

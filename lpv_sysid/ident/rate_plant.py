@@ -55,26 +55,32 @@ class RateRun:
     """One bag on the identification grid."""
 
     name: str
-    t: np.ndarray          # (K,)
-    x: np.ndarray          # (K, 8) smoothed
-    xdot: np.ndarray       # (K, 8)
-    u: np.ndarray          # (K, 4) zero-order held, smoothed
-    u_raw: np.ndarray      # (K, 4) zero-order held
+    t: np.ndarray  # (K,)
+    x: np.ndarray  # (K, 8) smoothed
+    xdot: np.ndarray  # (K, 8)
+    u: np.ndarray  # (K, 4) zero-order held, smoothed
+    u_raw: np.ndarray  # (K, 4) zero-order held
 
 
 @dataclass(frozen=True)
 class RateIdConfig:
     sample_rate: float = 50.0
-    lowpass_hz: float = 5.0            # zero-phase Butterworth (order 2, forward-backward) on x and u
+    lowpass_hz: float = 5.0  # zero-phase Butterworth (order 2, forward-backward) on x and u
     delays: tuple = (0.0, 0.02, 0.04, 0.06, 0.08, 0.1, 0.12)
-    trim_edges_s: float = 0.5          # dropped at both ends of every run (filter edges)
-    unit_dc_gain: bool = True          # rate rows p' = a (p_sp - p) + c (PX4's rate I term: no steady error)
+    trim_edges_s: float = 0.5  # dropped at both ends of every run (filter edges)
+    unit_dc_gain: bool = (
+        True  # rate rows p' = a (p_sp - p) + c (PX4's rate I term: no steady error)
+    )
 
     def validate(self) -> None:
         if not (self.sample_rate > 0 and self.lowpass_hz > 0 and self.trim_edges_s >= 0):
-            raise ConfigError("rate-plant identification: sample_rate, lowpass_hz must be > 0, trim_edges_s >= 0")
+            raise ConfigError(
+                "rate-plant identification: sample_rate, lowpass_hz must be > 0, trim_edges_s >= 0"
+            )
         if not self.delays or any(d < 0 for d in self.delays):
-            raise ConfigError("rate-plant identification: delays must be a non-empty list of values >= 0")
+            raise ConfigError(
+                "rate-plant identification: delays must be a non-empty list of values >= 0"
+            )
 
 
 def read_run(path: str | Path, cfg: RateIdConfig = RateIdConfig()) -> RateRun:
@@ -87,8 +93,10 @@ def read_run(path: str | Path, cfg: RateIdConfig = RateIdConfig()) -> RateRun:
     st_t = [t for t in topics if t.endswith("/state")]
     rs_t = [t for t in topics if t.endswith("/rate_setpoint")]
     if not st_t or not rs_t:
-        raise BagError(f"{path}: needs topics 'state' and 'rate_setpoint' (fly phase1 --record-rate-setpoints), "
-                       f"has {sorted(topics)}")
+        raise BagError(
+            f"{path}: needs topics 'state' and 'rate_setpoint' (fly phase1 --record-rate-setpoints), "
+            f"has {sorted(topics)}"
+        )
     data = iobag.read_bag(str(path), topics=[st_t[0], rs_t[0]])
     states = [M.state_from_odometry(m) for _, m in data[st_t[0]]]
     sps = [M.channels_from_joint_state(m, rp.INPUT_NAMES) for _, m in data[rs_t[0]]]
@@ -101,16 +109,29 @@ def read_run(path: str | Path, cfg: RateIdConfig = RateIdConfig()) -> RateRun:
     return run_from_arrays(path.name, ts, xs, tu, us, cfg)
 
 
-def run_from_arrays(name: str, ts: np.ndarray, xs: np.ndarray, tu: np.ndarray, us: np.ndarray,
-                    cfg: RateIdConfig = RateIdConfig()) -> RateRun:
+def run_from_arrays(
+    name: str,
+    ts: np.ndarray,
+    xs: np.ndarray,
+    tu: np.ndarray,
+    us: np.ndarray,
+    cfg: RateIdConfig = RateIdConfig(),
+) -> RateRun:
     """Samples (state at ``ts``: (K, 8); setpoints at ``tu``: (J, 4)) -> :class:`RateRun` on
     the identification grid (module docstring item 1)."""
     from scipy.signal import butter, sosfiltfilt
 
     path = name
     ts, xs, tu, us = (np.asarray(a, dtype=float) for a in (ts, xs, tu, us))
-    if xs.ndim != 2 or xs.shape[1] != len(rp.STATE_NAMES) or us.ndim != 2 or us.shape[1] != len(rp.INPUT_NAMES):
-        raise ConfigError(f"{name}: states must be (K, 8) and setpoints (J, 4), got {xs.shape}, {us.shape}")
+    if (
+        xs.ndim != 2
+        or xs.shape[1] != len(rp.STATE_NAMES)
+        or us.ndim != 2
+        or us.shape[1] != len(rp.INPUT_NAMES)
+    ):
+        raise ConfigError(
+            f"{name}: states must be (K, 8) and setpoints (J, 4), got {xs.shape}, {us.shape}"
+        )
     dt = 1.0 / cfg.sample_rate
     a, b = max(ts[0], tu[0]) + cfg.trim_edges_s, min(ts[-1], tu[-1]) - cfg.trim_edges_s
     if b - a < 3.0:
@@ -121,7 +142,7 @@ def run_from_arrays(name: str, ts: np.ndarray, xs: np.ndarray, tu: np.ndarray, u
     u_raw = us[idx]
     sos = butter(2, min(cfg.lowpass_hz, 0.4 * cfg.sample_rate), fs=cfg.sample_rate, output="sos")
     xf = sosfiltfilt(sos, x, axis=0)
-    xd = np.gradient(xf, dt, axis=0)        # differentiation commutes with the (same) filter
+    xd = np.gradient(xf, dt, axis=0)  # differentiation commutes with the (same) filter
     uf = sosfiltfilt(sos, u_raw, axis=0)
     return RateRun(str(name), t, xf, xd, uf, u_raw)
 
@@ -149,8 +170,9 @@ def _ls(y: np.ndarray, H: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     return theta, std, r2
 
 
-def identify(runs: Sequence[RateRun], cfg: RateIdConfig = RateIdConfig(), g: float = rp.GRAVITY
-             ) -> tuple[rp.RatePlantParams, dict]:
+def identify(
+    runs: Sequence[RateRun], cfg: RateIdConfig = RateIdConfig(), g: float = rp.GRAVITY
+) -> tuple[rp.RatePlantParams, dict]:
     """Pooled equation-error fit (module docstring) -> (params, report dict)."""
     cfg.validate()
     if not runs:
@@ -174,8 +196,11 @@ def identify(runs: Sequence[RateRun], cfg: RateIdConfig = RateIdConfig(), g: flo
     y = Xd[:, 4] - (q * ub - p * vb + g * np.cos(th) * np.cos(phi))
     put(("Z_w", "Z_T", "c_w"), *_ls(y, np.column_stack([wb, U[:, 0], one])), "w")
     step = 1.0 / cfg.sample_rate
-    for row, col, names in ((5, 1, ("L_p", "L_sp", "c_p")), (6, 2, ("M_q", "M_sp", "c_q")),
-                            (7, 3, ("N_r", "N_sp", "c_r"))):
+    for row, col, names in (
+        (5, 1, ("L_p", "L_sp", "c_p")),
+        (6, 2, ("M_q", "M_sp", "c_q")),
+        (7, 3, ("N_r", "N_sp", "c_r")),
+    ):
         best = None
         for d in cfg.delays:
             k = int(round(d / step))
@@ -185,29 +210,49 @@ def identify(runs: Sequence[RateRun], cfg: RateIdConfig = RateIdConfig(), g: flo
                 if n - k < 10:
                     continue
                 ys.append(rn.xdot[k:, row])
-                Hs.append(np.column_stack([rn.x[k:, row], rn.u[:n - k, col], np.ones(n - k)]))
+                Hs.append(np.column_stack([rn.x[k:, row], rn.u[: n - k, col], np.ones(n - k)]))
             y, H = np.concatenate(ys), np.vstack(Hs)
             free = _ls(y, H)
             if cfg.unit_dc_gain:
                 # p' = a (p_sp - p) + c: PX4's rate integrator removes steady error (DC gain 1)
                 th1, sd1, r21 = _ls(y, np.column_stack([H[:, 1] - H[:, 0], H[:, 2]]))
-                theta, sd, r2 = np.array([-th1[0], th1[0], th1[1]]), np.array([sd1[0], sd1[0], sd1[1]]), r21
+                theta, sd, r2 = (
+                    np.array([-th1[0], th1[0], th1[1]]),
+                    np.array([sd1[0], sd1[0], sd1[1]]),
+                    r21,
+                )
             else:
                 theta, sd, r2 = free
             if theta[1] <= 0:
-                continue          # the loop must follow its setpoint: a sign flip is an aliased delay
+                continue  # the loop must follow its setpoint: a sign flip is an aliased delay
             if best is None or r2 > best[2] + 1e-9:
                 best = (theta, sd, r2, k * step, free)
         if best is None:
-            raise ConfigError(f"rate-plant identification: row {rp.STATE_NAMES[row]}: no delay in {list(cfg.delays)} "
-                              "gives a positive setpoint gain (is the setpoint stream the right one?)")
+            raise ConfigError(
+                f"rate-plant identification: row {rp.STATE_NAMES[row]}: no delay in {list(cfg.delays)} "
+                "gives a positive setpoint gain (is the setpoint stream the right one?)"
+            )
         theta, sd, r2, d, free = best
-        put(names, theta, sd, r2, rp.STATE_NAMES[row], {
-            "delay_s": round(d, 3), "bandwidth_rad_s": round(-float(theta[0]), 3),
-            "unit_dc_gain": bool(cfg.unit_dc_gain),
-            "unconstrained": {"r2": round(float(free[2]), 4), "L": round(float(free[0][0]), 4),
-                              "L_sp": round(float(free[0][1]), 4),
-                              "dc_gain": round(float(-free[0][1] / free[0][0]), 3) if free[0][0] != 0 else None}})
+        put(
+            names,
+            theta,
+            sd,
+            r2,
+            rp.STATE_NAMES[row],
+            {
+                "delay_s": round(d, 3),
+                "bandwidth_rad_s": round(-float(theta[0]), 3),
+                "unit_dc_gain": bool(cfg.unit_dc_gain),
+                "unconstrained": {
+                    "r2": round(float(free[2]), 4),
+                    "L": round(float(free[0][0]), 4),
+                    "L_sp": round(float(free[0][1]), 4),
+                    "dc_gain": round(float(-free[0][1] / free[0][0]), 3)
+                    if free[0][0] != 0
+                    else None,
+                },
+            },
+        )
     params = rp.RatePlantParams(**est, std=std)
     rep["params"] = params.as_dict()
     return params, rep
@@ -227,7 +272,9 @@ def validate(params: rp.RatePlantParams, run: RateRun, g: float = rp.GRAVITY) ->
     return out
 
 
-def identify_bags(bags: Sequence[str | Path], cfg: RateIdConfig = RateIdConfig()) -> tuple[rp.RatePlantParams, dict]:
+def identify_bags(
+    bags: Sequence[str | Path], cfg: RateIdConfig = RateIdConfig()
+) -> tuple[rp.RatePlantParams, dict]:
     runs = [read_run(b, cfg) for b in bags]
     params, rep = identify(runs, cfg)
     rep["bags"] = [str(b) for b in bags]
@@ -241,10 +288,16 @@ def models_document(params: rp.RatePlantParams, vmin, vmax, k_sigma: float, repo
 
     model, els = rp.polytope(params, vmin, vmax, k_sigma)
     d = models_dict(model, els if k_sigma > 0 else None, rp.STATE_UNITS, rp.INPUT_UNITS)
-    d["meta"] = {"design": rp.DESIGN, "design_text": rp.DESIGN_TEXT,
-                 "identification": {"method": "pooled equation error, PX4 rate loop inside "
-                                              "(lpv_sysid/ident/rate_plant.py)",
-                                    "k_sigma": float(k_sigma), **_plain(report)}}
+    d["meta"] = {
+        "design": rp.DESIGN,
+        "design_text": rp.DESIGN_TEXT,
+        "identification": {
+            "method": "pooled equation error, PX4 rate loop inside "
+            "(lpv_sysid/ident/rate_plant.py)",
+            "k_sigma": float(k_sigma),
+            **_plain(report),
+        },
+    }
     return d
 
 

@@ -21,13 +21,18 @@ from lpv_sysid.errors import ConfigError
 @dataclass(frozen=True)
 class LtiData:
     t: np.ndarray
-    x: np.ndarray        # (N, n_x) exact states
-    u: np.ndarray        # (N, n_u)
-    xdot: np.ndarray     # (N, n_x) exact derivatives A x + B u
+    x: np.ndarray  # (N, n_x) exact states
+    u: np.ndarray  # (N, n_u)
+    xdot: np.ndarray  # (N, n_x) exact derivatives A x + B u
 
 
-def multisine(t: np.ndarray, n_u: int, band_hz=(0.2, 2.0), amplitude: float = 1.0,
-              rng: np.random.Generator | None = None) -> np.ndarray:
+def multisine(
+    t: np.ndarray,
+    n_u: int,
+    band_hz=(0.2, 2.0),
+    amplitude: float = 1.0,
+    rng: np.random.Generator | None = None,
+) -> np.ndarray:
     """Orthogonal Schroeder-phased multisine, one harmonic set per input, (N, n_u)."""
     t = np.asarray(t, dtype=float)
     T = t[-1] - t[0] + (t[1] - t[0])
@@ -38,7 +43,7 @@ def multisine(t: np.ndarray, n_u: int, band_hz=(0.2, 2.0), amplitude: float = 1.
     for j in range(n_u):
         kj = k[j::n_u]
         m = kj.size
-        phase = -np.pi * np.arange(1, m + 1) * np.arange(m) / m      # Schroeder phases
+        phase = -np.pi * np.arange(1, m + 1) * np.arange(m) / m  # Schroeder phases
         if rng is not None:
             phase = phase + rng.uniform(0, 2 * np.pi)
         sig = np.sin(2 * np.pi * np.outer(t - t[0], kj) / T + phase).sum(axis=1)
@@ -46,8 +51,9 @@ def multisine(t: np.ndarray, n_u: int, band_hz=(0.2, 2.0), amplitude: float = 1.
     return u
 
 
-def simulate(A: np.ndarray, B: np.ndarray, u: np.ndarray, t: np.ndarray,
-             x0: np.ndarray | None = None) -> LtiData:
+def simulate(
+    A: np.ndarray, B: np.ndarray, u: np.ndarray, t: np.ndarray, x0: np.ndarray | None = None
+) -> LtiData:
     """Exact FOH simulation of ``xdot = A x + B u`` with ``scipy.signal.lsim``."""
     n = A.shape[0]
     C = np.eye(n)
@@ -57,8 +63,9 @@ def simulate(A: np.ndarray, B: np.ndarray, u: np.ndarray, t: np.ndarray,
     return LtiData(t, x, u, x @ A.T + u @ B.T)
 
 
-def random_stable_system(n_x: int, n_u: int, rng: np.random.Generator,
-                         max_real: float = -0.3) -> tuple[np.ndarray, np.ndarray]:
+def random_stable_system(
+    n_x: int, n_u: int, rng: np.random.Generator, max_real: float = -0.3
+) -> tuple[np.ndarray, np.ndarray]:
     """A random well-damped ``(A, B)``: eigenvalues with real part <= ``max_real``."""
     Q, _ = np.linalg.qr(rng.normal(size=(n_x, n_x)))
     lam = -rng.uniform(-max_real, 3.0, size=n_x)
@@ -70,8 +77,14 @@ def random_stable_system(n_x: int, n_u: int, rng: np.random.Generator,
     return A, B
 
 
-def closed_loop(A: np.ndarray, B: np.ndarray, t: np.ndarray, excitation: np.ndarray,
-                Q: np.ndarray | None = None, R: np.ndarray | None = None) -> tuple[LtiData, np.ndarray]:
+def closed_loop(
+    A: np.ndarray,
+    B: np.ndarray,
+    t: np.ndarray,
+    excitation: np.ndarray,
+    Q: np.ndarray | None = None,
+    R: np.ndarray | None = None,
+) -> tuple[LtiData, np.ndarray]:
     """Perturbation data of ``A, B`` under an LQR state feedback plus excitation.
 
     ``du = K dx + e`` with ``K = -R^-1 B^T P`` (``scipy.linalg.solve_continuous_are``), the
@@ -92,8 +105,14 @@ def closed_loop(A: np.ndarray, B: np.ndarray, t: np.ndarray, excitation: np.ndar
     return LtiData(t, cl.x, du, cl.x @ A.T + du @ B.T), K
 
 
-def nonlinear_flight(model, t: np.ndarray, v_ref: np.ndarray, excitation: np.ndarray,
-                     controller=None, x16_0: np.ndarray | None = None):
+def nonlinear_flight(
+    model,
+    t: np.ndarray,
+    v_ref: np.ndarray,
+    excitation: np.ndarray,
+    controller=None,
+    x16_0: np.ndarray | None = None,
+):
     """Closed-loop flight of the nonlinear quadrotor (``models.quadrotor``) for identification
     oracles: RK4 at the grid step with the command held (ZOH) over each step, command
     ``u = controller.step(t, x12, v_ref) + excitation``. Returns ``(x16 (N,16), u (N,4),
@@ -114,7 +133,10 @@ def nonlinear_flight(model, t: np.ndarray, v_ref: np.ndarray, excitation: np.nda
     XD = np.empty((n, 16))
     arm = model.params.arm_length
     for k in range(n):
-        uk = np.asarray(ctrl.step(t[k], reduced_state(x, arm), v_ref[k]), dtype=float) + excitation[k]
+        uk = (
+            np.asarray(ctrl.step(t[k], reduced_state(x, arm), v_ref[k]), dtype=float)
+            + excitation[k]
+        )
         X[k], U[k] = x, uk
         f = model.derivatives
         k1 = f(x, uk)

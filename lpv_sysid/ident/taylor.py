@@ -67,7 +67,9 @@ def known_linear(x0: np.ndarray, params, model=None) -> tuple[np.ndarray, np.nda
 
 
 def _phi(x12: np.ndarray, params, mix: np.ndarray, mix_inv: np.ndarray) -> dict[str, np.ndarray]:
-    return nl.regressors(x12[:, 2:5], x12[:, 5:8], x12[:, 8:12] @ mix_inv.T, None, params.arm_length, mix)
+    return nl.regressors(
+        x12[:, 2:5], x12[:, 5:8], x12[:, 8:12] @ mix_inv.T, None, params.arm_length, mix
+    )
 
 
 def remainders(x0: np.ndarray, dx: np.ndarray, params) -> dict[str, np.ndarray]:
@@ -83,14 +85,20 @@ def remainders(x0: np.ndarray, dx: np.ndarray, params) -> dict[str, np.ndarray]:
     return {a: 0.5 * (rp[a] + rm[a]) - r0[a] for a in rp}
 
 
-def nuisance_index(rem: dict[str, np.ndarray], params, tol: float = 1e-9) -> dict[int, list[tuple[str, int]]]:
+def nuisance_index(
+    rem: dict[str, np.ndarray], params, tol: float = 1e-9
+) -> dict[int, list[tuple[str, int]]]:
     """Per fitted row, the ``(axis, column)`` of the non-vanishing remainders of the axes that
     act on it: force rows take their own axis, moment rows every moment axis with a nonzero
     entry in the corresponding row of ``I^-1`` (one axis for a diagonal inertia)."""
     Ii = np.linalg.inv(np.asarray(params.inertia, dtype=float))
     out = {}
     for n, row in enumerate(ROWS):
-        axes = [FORCE_AXES[n]] if n < 3 else [MOMENT_AXES[j] for j in range(3) if abs(Ii[n - 3, j]) > 0]
+        axes = (
+            [FORCE_AXES[n]]
+            if n < 3
+            else [MOMENT_AXES[j] for j in range(3) if abs(Ii[n - 3, j]) > 0]
+        )
         cols = [(a, c) for a in axes for c in range(rem[a].shape[1])]
         norms = np.array([np.linalg.norm(rem[a][:, c]) for a, c in cols])
         big = float(np.max(norms)) if norms.size else 1.0
@@ -98,16 +106,22 @@ def nuisance_index(rem: dict[str, np.ndarray], params, tol: float = 1e-9) -> dic
     return out
 
 
-def select_nuisance(rem: dict[str, np.ndarray], params, tol: float = 1e-9) -> dict[int, np.ndarray]:
+def select_nuisance(
+    rem: dict[str, np.ndarray], params, tol: float = 1e-9
+) -> dict[int, np.ndarray]:
     """Per fitted row, the non-vanishing remainders of the axes that act on it (the columns of
     :func:`nuisance_index`), (N, k) per row."""
     idx = nuisance_index(rem, params, tol)
     n = next(iter(rem.values())).shape[0]
-    return {row: (np.stack([rem[a][:, c] for a, c in cols], axis=1) if cols else np.zeros((n, 0)))
-            for row, cols in idx.items()}
+    return {
+        row: (np.stack([rem[a][:, c] for a, c in cols], axis=1) if cols else np.zeros((n, 0)))
+        for row, cols in idx.items()
+    }
 
 
-def nuisance_regressors(x0: np.ndarray, dx: np.ndarray, params, tol: float = 1e-9) -> dict[int, np.ndarray]:
+def nuisance_regressors(
+    x0: np.ndarray, dx: np.ndarray, params, tol: float = 1e-9
+) -> dict[int, np.ndarray]:
     """:func:`select_nuisance` of :func:`remainders` (unsmoothed data)."""
     return select_nuisance(remainders(x0, dx, params), params, tol)
 
@@ -138,15 +152,15 @@ def remainder_hessians(x0: np.ndarray, params) -> dict[str, np.ndarray]:
 class Reexpansion:
     """The identified second-order model re-expanded about its own equilibrium."""
 
-    x_e: np.ndarray              # equilibrium state (v fixed at the flown mean, yaw rate psi_dot)
+    x_e: np.ndarray  # equilibrium state (v fixed at the flown mean, yaw rate psi_dot)
     u_e: np.ndarray
-    A: np.ndarray                # Jacobians of the identified model at (x_e, u_e)
+    A: np.ndarray  # Jacobians of the identified model at (x_e, u_e)
     B: np.ndarray
-    std_A: np.ndarray            # delta-method standard errors (joint covariance), 0 if not identified
+    std_A: np.ndarray  # delta-method standard errors (joint covariance), 0 if not identified
     std_B: np.ndarray
-    cov: np.ndarray              # covariance of the identified elements (Fit.elements order)
-    xdot_flown: np.ndarray       # (12,) identified model's derivative at the flown mean attitude,
-                                 # velocity, rotor speeds and input (body rates: pure yaw rate)
+    cov: np.ndarray  # covariance of the identified elements (Fit.elements order)
+    xdot_flown: np.ndarray  # (12,) identified model's derivative at the flown mean attitude,
+    # velocity, rotor speeds and input (body rates: pure yaw rate)
     iterations: int
 
 
@@ -196,7 +210,7 @@ class IdentifiedModel:
             elif lab == "aux":
                 out.append(0.0)
             else:
-                H = self.nuis[row][int(lab[len("nuisance"):])]
+                H = self.nuis[row][int(lab[len("nuisance") :])]
                 out.append(0.5 * dx @ H @ dx)
         return np.array(out)
 
@@ -210,7 +224,7 @@ class IdentifiedModel:
                 out.append(du[j])
             elif lab.startswith("bias"):
                 out.append(self.mix[j, int(lab[4:])])
-            else:                      # delay
+            else:  # delay
                 out.append(0.0)
         return np.array(out)
 
@@ -220,7 +234,9 @@ class IdentifiedModel:
         o = self.motor.offset
         return float(theta[o]), float(theta[o + 1])
 
-    def residual(self, w: np.ndarray, theta: np.ndarray, v0: np.ndarray, psi_dot: float) -> np.ndarray:
+    def residual(
+        self, w: np.ndarray, theta: np.ndarray, v0: np.ndarray, psi_dot: float
+    ) -> np.ndarray:
         """Identified state derivative of rows u..r and of the four motor rows at
         ``w = (phi, theta, delta_1..4, u_1..4)``."""
         x = _x_of(w[:6], v0, psi_dot)
@@ -229,17 +245,23 @@ class IdentifiedModel:
         out = np.zeros(10)
         for n, row in enumerate(ROWS):
             rf = self.fits.get(row)
-            out[n] = kr[n] + (0.0 if rf is None else theta[rf.offset: rf.offset + rf.theta.size] @ self.phi(row, dx, du))
+            out[n] = kr[n] + (
+                0.0
+                if rf is None
+                else theta[rf.offset : rf.offset + rf.theta.size] @ self.phi(row, dx, du)
+            )
         for j in range(4):
             if self.motor is None:
                 ta, tb = self._ab(theta)
                 out[6 + j] = ta * dx[8 + j] + tb * du[j]
             else:
                 o = self.motor.offset
-                out[6 + j] = theta[o: o + self.motor.theta.size] @ self.motor_phi(j, dx, du)
+                out[6 + j] = theta[o : o + self.motor.theta.size] @ self.motor_phi(j, dx, du)
         return out
 
-    def jacobians(self, x: np.ndarray, u: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def jacobians(
+        self, x: np.ndarray, u: np.ndarray, theta: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """``A, B`` of the identified model at ``(x, u)`` where the rotor acceleration vanishes
         (the ``aux`` term then contributes ``theta_aux * d(delta_r row)/d(x, u)``)."""
         A, B = known_linear(x, self.params, self.known)
@@ -248,14 +270,14 @@ class IdentifiedModel:
         A[8:12, 8:12] = ta * np.eye(4)
         B[8:12, :] = tb * np.eye(4)
         for row, rf in self.fits.items():
-            th = theta[rf.offset: rf.offset + rf.theta.size]
+            th = theta[rf.offset : rf.offset + rf.theta.size]
             for lab, c in zip(rf.labels, th):
                 if lab.startswith("x"):
                     A[row, int(lab[1:])] += c
                 elif lab.startswith("u"):
                     B[row, int(lab[1:])] += c
                 elif lab.startswith("nuisance"):
-                    A[row] += c * (self.nuis[row][int(lab[len("nuisance"):])] @ dx)
+                    A[row] += c * (self.nuis[row][int(lab[len("nuisance") :])] @ dx)
         for row, rf in self.fits.items():
             if "aux" in rf.labels:
                 c = theta[rf.offset + rf.labels.index("aux")]
@@ -264,8 +286,17 @@ class IdentifiedModel:
         return A, B
 
 
-def reexpand(model: IdentifiedModel, theta: np.ndarray, cov: np.ndarray, v0: np.ndarray, psi_dot: float,
-             maskA: np.ndarray, maskB: np.ndarray, max_iter: int = 20, tol: float = 1e-10) -> Reexpansion:
+def reexpand(
+    model: IdentifiedModel,
+    theta: np.ndarray,
+    cov: np.ndarray,
+    v0: np.ndarray,
+    psi_dot: float,
+    maskA: np.ndarray,
+    maskB: np.ndarray,
+    max_iter: int = 20,
+    tol: float = 1e-10,
+) -> Reexpansion:
     """Equilibrium of the identified model at the flown velocity, its Jacobians there and their
     covariance (seed 0 Eq. 13: the model is the expansion about an equilibrium).
 
@@ -278,8 +309,13 @@ def reexpand(model: IdentifiedModel, theta: np.ndarray, cov: np.ndarray, v0: np.
 
     x0, u0 = model.x0, model.u0
     w = np.concatenate([x0[:2], x0[8:12], u0])
-    scale = np.concatenate([[1e-3, 1e-3], np.maximum(1.0, np.abs(x0[8:12])) * 1e-4,
-                            np.maximum(1e-3, np.abs(u0)) * 1e-3])
+    scale = np.concatenate(
+        [
+            [1e-3, 1e-3],
+            np.maximum(1.0, np.abs(x0[8:12])) * 1e-4,
+            np.maximum(1e-3, np.abs(u0)) * 1e-3,
+        ]
+    )
 
     def G(wv, th=theta):
         return model.residual(wv, th, v0, psi_dot)
@@ -302,8 +338,10 @@ def reexpand(model: IdentifiedModel, theta: np.ndarray, cov: np.ndarray, v0: np.
         if np.all(np.abs(step) <= tol * np.maximum(1.0, np.abs(w))):
             break
     else:
-        raise SolverError(f"equilibrium of the identified model not found in {max_iter} Newton steps "
-                          f"(|xdot| = {np.max(np.abs(g)):.3g})")
+        raise SolverError(
+            f"equilibrium of the identified model not found in {max_iter} Newton steps "
+            f"(|xdot| = {np.max(np.abs(g)):.3g})"
+        )
     x_e = _x_of(w[:6], v0, psi_dot)
     u_e = w[6:10]
     A, B = model.jacobians(x_e, u_e, theta)
@@ -323,20 +361,20 @@ def reexpand(model: IdentifiedModel, theta: np.ndarray, cov: np.ndarray, v0: np.
     for n, row in enumerate(ROWS):
         rf = model.fits.get(row)
         if rf is not None:
-            Gth[n, rf.offset: rf.offset + rf.theta.size] = model.phi(row, dx, du)
+            Gth[n, rf.offset : rf.offset + rf.theta.size] = model.phi(row, dx, du)
     if model.motor is not None:
         o = model.motor.offset
         for j in range(4):
-            Gth[6 + j, o: o + model.motor.theta.size] = model.motor_phi(j, dx, du)
-    dw = -np.linalg.solve(G_w(w), Gth)                          # (10, P)
+            Gth[6 + j, o : o + model.motor.theta.size] = model.motor_phi(j, dx, du)
+    dw = -np.linalg.solve(G_w(w), Gth)  # (10, P)
     D = np.zeros((len(idx), P))
-    for k in range(10):                                         # d elements / d w (finite differences)
+    for k in range(10):  # d elements / d w (finite differences)
         e = np.zeros(10)
         e[k] = scale[k]
         D += np.outer((elems(w + e, theta) - elems(w - e, theta)) / (2 * scale[k]), dw[k])
     th_scale = np.maximum(np.abs(theta), 1e-12) * 1e-6
     nz = np.nonzero(np.any(cov != 0, axis=0))[0]
-    for p in nz:                                                # d elements / d theta (linear but for aux)
+    for p in nz:  # d elements / d theta (linear but for aux)
         e = np.zeros(P)
         e[p] = th_scale[p]
         D[:, p] += (elems(w, theta + e) - elems(w, theta - e)) / (2 * th_scale[p])

@@ -56,14 +56,26 @@ class UncertaintyConfig:
     max_corners: int = 4096
     freq_hz: tuple[float, float] = (0.05, 10.0)
     n_freq: int = 40
-    output_states: tuple[int, ...] = (2, 3, 4)      # u, v, w: z = Q^-1 (v - v_d), Eq. (18)
-    joint_alpha: float | None = None                # see sidak_k: widen k for joint coverage
+    output_states: tuple[int, ...] = (2, 3, 4)  # u, v, w: z = Q^-1 (v - v_d), Eq. (18)
+    joint_alpha: float | None = None  # see sidak_k: widen k for joint coverage
 
     @classmethod
     def from_dict(cls, d: dict | None) -> "UncertaintyConfig":
         d = dict(d or {})
-        check_keys(d, ("k_sigma", "method", "p_max", "max_corners", "freq_hz", "n_freq",
-                       "output_states", "joint_alpha"), "uncertainty")
+        check_keys(
+            d,
+            (
+                "k_sigma",
+                "method",
+                "p_max",
+                "max_corners",
+                "freq_hz",
+                "n_freq",
+                "output_states",
+                "joint_alpha",
+            ),
+            "uncertainty",
+        )
         if "freq_hz" in d:
             d["freq_hz"] = tuple(float(v) for v in d["freq_hz"])
         if "output_states" in d:
@@ -74,13 +86,19 @@ class UncertaintyConfig:
         if cfg.method not in METHODS:
             raise ConfigError(f"uncertainty.method must be one of {METHODS}, got {cfg.method!r}")
         if int(cfg.p_max) != cfg.p_max or not 0 <= cfg.p_max <= 16:
-            raise ConfigError(f"uncertainty.p_max must be an integer in [0, 16], got {cfg.p_max!r}")
+            raise ConfigError(
+                f"uncertainty.p_max must be an integer in [0, 16], got {cfg.p_max!r}"
+            )
         if len(cfg.freq_hz) != 2 or not 0 < cfg.freq_hz[0] < cfg.freq_hz[1]:
-            raise ConfigError(f"uncertainty.freq_hz must be [low, high] with 0 < low < high, got {cfg.freq_hz}")
+            raise ConfigError(
+                f"uncertainty.freq_hz must be [low, high] with 0 < low < high, got {cfg.freq_hz}"
+            )
         if cfg.n_freq < 2:
             raise ConfigError("uncertainty.n_freq must be >= 2")
         if cfg.joint_alpha is not None and not 0 < cfg.joint_alpha < 1:
-            raise ConfigError(f"uncertainty.joint_alpha must be in (0, 1) or null, got {cfg.joint_alpha!r}")
+            raise ConfigError(
+                f"uncertainty.joint_alpha must be in (0, 1) or null, got {cfg.joint_alpha!r}"
+            )
         return cfg
 
 
@@ -94,7 +112,7 @@ class Interval(UncertainEntry):
 
     influence: float = 0.0
     corner: bool = False  # varied over the corners of Eq. (23)
-    half: float = 0.0     # half-width used in the Eq. (23) systems
+    half: float = 0.0  # half-width used in the Eq. (23) systems
 
     def as_dict(self) -> dict:
         return self.to_dict()
@@ -107,7 +125,7 @@ class UncertainVertex:
     A: np.ndarray
     B: np.ndarray
     intervals: tuple[Interval, ...]
-    systems: tuple[tuple[np.ndarray, np.ndarray], ...]    # (A_i^j, B^j), j = 1..M_i
+    systems: tuple[tuple[np.ndarray, np.ndarray], ...]  # (A_i^j, B^j), j = 1..M_i
     method: str
     inflation: float = 1.0
 
@@ -136,18 +154,24 @@ def intervals_from_elements(elements, k_sigma: float, std_factor: float = 1.0) -
         if not (np.isfinite(nom) and np.isfinite(s) and s >= 0):
             raise ConfigError(f"{m}[{r},{c}]: non-finite nominal or standard error ({nom}, {s})")
         s = s * std_factor
-        out.append(Interval(m, int(r), int(c), float(nom), float(s), nom - k_sigma * s, nom + k_sigma * s))
+        out.append(
+            Interval(m, int(r), int(c), float(nom), float(s), nom - k_sigma * s, nom + k_sigma * s)
+        )
     return out
 
 
-def influence(A: np.ndarray, B: np.ndarray, intervals: Sequence[Interval],
-              cfg: UncertaintyConfig = UncertaintyConfig()) -> np.ndarray:
+def influence(
+    A: np.ndarray,
+    B: np.ndarray,
+    intervals: Sequence[Interval],
+    cfg: UncertaintyConfig = UncertaintyConfig(),
+) -> np.ndarray:
     """``halfwidth_l * max_w ||dG(jw)/dtheta_l||_F`` for every interval (see module docstring)."""
     n = A.shape[0]
     C = np.eye(n)[list(cfg.output_states)]
     w = 2 * np.pi * np.geomspace(cfg.freq_hz[0], cfg.freq_hz[1], cfg.n_freq)
-    col_norm = np.zeros((w.size, n))       # ||C R e_a||
-    row_norm = np.zeros((w.size, n))       # ||e_b^T R B||
+    col_norm = np.zeros((w.size, n))  # ||C R e_a||
+    row_norm = np.zeros((w.size, n))  # ||e_b^T R B||
     eye = np.eye(n)
     for q, wq in enumerate(w):
         # scipy.linalg.solve would do the same; numpy's batched solve is enough for 12 x 12
@@ -181,8 +205,13 @@ def applied_k(cfg: UncertaintyConfig, p: int) -> float:
     return float(k)
 
 
-def build(A: np.ndarray, B: np.ndarray, elements, cfg: UncertaintyConfig = UncertaintyConfig(),
-          dof: float | None = None) -> UncertainVertex:
+def build(
+    A: np.ndarray,
+    B: np.ndarray,
+    elements,
+    cfg: UncertaintyConfig = UncertaintyConfig(),
+    dof: float | None = None,
+) -> UncertainVertex:
     """Intervals (Eq. 22) and uncertain vertex systems (Eq. 23) for one LPV vertex.
 
     ``dof``: Student-t degrees of freedom of the studentised estimates (``Fit.dof``); the
@@ -197,13 +226,17 @@ def build(A: np.ndarray, B: np.ndarray, elements, cfg: UncertaintyConfig = Uncer
     k = applied_k(cfg, len(elements))
     ivs = intervals_from_elements(elements, k, t_factor(k, dof))
     if cfg.output_states and max(cfg.output_states) >= A.shape[0]:
-        raise ConfigError(f"uncertainty.output_states {cfg.output_states} out of range for n_x={A.shape[0]}")
+        raise ConfigError(
+            f"uncertainty.output_states {cfg.output_states} out of range for n_x={A.shape[0]}"
+        )
     infl = influence(A, B, ivs, cfg) if ivs else np.zeros(0)
     p = len(ivs)
     if cfg.method == "box" or p <= cfg.p_max:
-        if 2 ** p > cfg.max_corners:
-            raise ConfigError(f"uncertainty.method 'box' needs 2^{p} corners (> max_corners "
-                              f"{cfg.max_corners}); use 'influence' or 'hybrid'")
+        if 2**p > cfg.max_corners:
+            raise ConfigError(
+                f"uncertainty.method 'box' needs 2^{p} corners (> max_corners "
+                f"{cfg.max_corners}); use 'influence' or 'hybrid'"
+            )
         kept = list(range(p))
     else:
         kept = sorted(np.argsort(-infl, kind="stable")[: cfg.p_max].tolist())
@@ -218,11 +251,25 @@ def build(A: np.ndarray, B: np.ndarray, elements, cfg: UncertaintyConfig = Uncer
         half = 0.5 * (iv.upper - iv.lower) * (inflation if is_kept else 1.0)
         if not is_kept and cfg.method != "hybrid":
             half = 0.0
-        marked.append(Interval(iv.matrix, iv.row, iv.col, iv.nominal, iv.std, iv.lower, iv.upper,
-                               float(infl[l]), is_kept, float(half)))
+        marked.append(
+            Interval(
+                iv.matrix,
+                iv.row,
+                iv.col,
+                iv.nominal,
+                iv.std,
+                iv.lower,
+                iv.upper,
+                float(infl[l]),
+                is_kept,
+                float(half),
+            )
+        )
     corner_ivs = [marked[l] for l in kept]
     systems = []
-    box_corners = list(itertools.product(*[(iv.nominal - iv.half, iv.nominal + iv.half) for iv in corner_ivs]))
+    box_corners = list(
+        itertools.product(*[(iv.nominal - iv.half, iv.nominal + iv.half) for iv in corner_ivs])
+    )
     if cfg.method == "hybrid" and dropped:
         d_ivs = [marked[l] for l in dropped]
         q = len(d_ivs)
@@ -230,8 +277,10 @@ def build(A: np.ndarray, B: np.ndarray, elements, cfg: UncertaintyConfig = Uncer
         widths = np.array([iv.upper - iv.lower for iv in d_ivs])
         simplex = [lows] + [lows + q * widths * np.eye(q)[j] for j in range(q)]
         if len(box_corners) * len(simplex) > cfg.max_corners:
-            raise ConfigError(f"uncertainty 'hybrid' needs {len(box_corners) * len(simplex)} systems "
-                              f"(> max_corners {cfg.max_corners}); lower p_max")
+            raise ConfigError(
+                f"uncertainty 'hybrid' needs {len(box_corners) * len(simplex)} systems "
+                f"(> max_corners {cfg.max_corners}); lower p_max"
+            )
         for corner in box_corners:
             Ak, Bk = _apply(A, B, corner_ivs, corner)
             for s in simplex:
@@ -242,7 +291,9 @@ def build(A: np.ndarray, B: np.ndarray, elements, cfg: UncertaintyConfig = Uncer
     return UncertainVertex(A, B, tuple(marked), tuple(systems), cfg.method, inflation)
 
 
-def contains(uv: UncertainVertex, A_true: np.ndarray, B_true: np.ndarray, tol: float = 1e-9) -> bool:
+def contains(
+    uv: UncertainVertex, A_true: np.ndarray, B_true: np.ndarray, tol: float = 1e-9
+) -> bool:
     """Is ``(A_true, B_true)`` a convex combination of the systems ``Lambda_i^j`` (Eq. 23)?
 
     Solved as a linear feasibility problem with ``scipy.optimize.linprog`` over the
@@ -251,16 +302,21 @@ def contains(uv: UncertainVertex, A_true: np.ndarray, B_true: np.ndarray, tol: f
     from scipy.optimize import linprog
 
     idx = [(iv.matrix, iv.row, iv.col) for iv in uv.intervals]
+
     def vec(Am, Bm):
         return np.array([(Am if m == "A" else Bm)[r, c] for m, r, c in idx])
-    V = np.array([vec(Aj, Bj) for Aj, Bj in uv.systems]).T          # (p, M)
+
+    V = np.array([vec(Aj, Bj) for Aj, Bj in uv.systems]).T  # (p, M)
     target = vec(A_true, B_true)
     # every element outside the identified set must equal the nominal one
     mask = np.ones_like(uv.A, dtype=bool)
     maskb = np.ones_like(uv.B, dtype=bool)
     for m, r, c in idx:
         (mask if m == "A" else maskb)[r, c] = False
-    if not (np.allclose(A_true[mask], uv.A[mask], atol=tol) and np.allclose(B_true[maskb], uv.B[maskb], atol=tol)):
+    if not (
+        np.allclose(A_true[mask], uv.A[mask], atol=tol)
+        and np.allclose(B_true[maskb], uv.B[maskb], atol=tol)
+    ):
         return False
     M = V.shape[1]
     scale = np.maximum(np.abs(V).max(axis=1), 1e-12)

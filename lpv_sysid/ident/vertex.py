@@ -51,10 +51,14 @@ from lpv_sysid.ident import uncertainty as unc
 
 log = logging.getLogger(__name__)
 
-from lpv_sysid.models.quadrotor import (INPUT_NAMES, INPUT_UNITS, SCHEDULING_NAMES, STATE_NAMES,
-                                        STATE_UNITS)
+from lpv_sysid.models.quadrotor import (
+    INPUT_NAMES,
+    INPUT_UNITS,
+    SCHEDULING_NAMES,
+    STATE_NAMES,
+    STATE_UNITS,
+)
 from lpv_sysid.validation import check_keys, is_count, is_finite_number
-
 
 
 @dataclass(frozen=True)
@@ -63,27 +67,29 @@ class IdentificationConfig:
 
     derivatives: deriv.DerivativeConfig = field(default_factory=deriv.DerivativeConfig)
     uncertainty: unc.UncertaintyConfig = field(default_factory=unc.UncertaintyConfig)
-    trim_duration: float = 10.0        # s of steady reference before the excitation (seed 0 Sec. IV)
-    trim_average: float = 5.0          # s at the end of the trim segment averaged for x0, u0
-    edge: float = 0.5                  # s dropped at both ends of the fit segment (smoother end effects)
-    min_fit_duration: float = 5.0      # s, shorter excitation segments are refused
-    sample_rate: float = 100.0         # Hz, common grid of dataprep
-    max_lag: int | None = None         # residual autocorrelation lags (covariance.method residual_acf)
-    intercept: bool = True             # per-row bias term (Klein & Morelli), see equation_error
-    model: str = "taylor2"             # "taylor2" (ident.taylor) or "appendix_b" (plain seed 0 App. B)
+    trim_duration: float = 10.0  # s of steady reference before the excitation (seed 0 Sec. IV)
+    trim_average: float = 5.0  # s at the end of the trim segment averaged for x0, u0
+    edge: float = 0.5  # s dropped at both ends of the fit segment (smoother end effects)
+    min_fit_duration: float = 5.0  # s, shorter excitation segments are refused
+    sample_rate: float = 100.0  # Hz, common grid of dataprep
+    max_lag: int | None = None  # residual autocorrelation lags (covariance.method residual_acf)
+    intercept: bool = True  # per-row bias term (Klein & Morelli), see equation_error
+    model: str = "taylor2"  # "taylor2" (ident.taylor) or "appendix_b" (plain seed 0 App. B)
     covariance: ee.CovarianceConfig = field(default_factory=ee.CovarianceConfig)
-    equilibrium: bool = True           # taylor2: re-expand about the identified equilibrium (Eq. 13)
-    motor: str = "identify"            # a_Omega, b_Omega: "identify" (motor rows, Eq. 8) or "known"
-    motor_max_pinned: float = 0.01     # identify a_Omega, b_Omega only if no rotor is pinned at a
-                                       # speed limit longer than this fraction of the fit segment
+    equilibrium: bool = True  # taylor2: re-expand about the identified equilibrium (Eq. 13)
+    motor: str = "identify"  # a_Omega, b_Omega: "identify" (motor rows, Eq. 8) or "known"
+    motor_max_pinned: float = 0.01  # identify a_Omega, b_Omega only if no rotor is pinned at a
+    # speed limit longer than this fraction of the fit segment
     motor_std: tuple[float, float] | None = None  # std of a_Omega, b_Omega where not identifiable
-    instruments: bool = False          # taylor2: rotor speeds instrumented by the motor model (EIV check)
-    motor_instrument: bool = True      # motor rows: measured speeds instrumented by the model's (EIV)
-    measurement_noise: dict = field(default_factory=dict)  # EIV: {state or "rotor": std | [std, rate_hz]}
-    excitation_threshold: float = 1e-6 # |u_e| above which the excitation counts as on
+    instruments: bool = False  # taylor2: rotor speeds instrumented by the motor model (EIV check)
+    motor_instrument: bool = True  # motor rows: measured speeds instrumented by the model's (EIV)
+    measurement_noise: dict = field(
+        default_factory=dict
+    )  # EIV: {state or "rotor": std | [std, rate_hz]}
+    excitation_threshold: float = 1e-6  # |u_e| above which the excitation counts as on
     vmin: tuple[float, float, float] = (-5.0, -5.0, -5.0)
     vmax: tuple[float, float, float] = (5.0, 5.0, 5.0)
-    validation: str = "hover"          # name pattern of the validation bag
+    validation: str = "hover"  # name pattern of the validation bag
     quadrotor: dict = field(default_factory=dict)  # QuadrotorParams overrides (known elements)
 
     @classmethod
@@ -103,26 +109,43 @@ class IdentificationConfig:
         kw["derivatives"] = deriv.DerivativeConfig.from_dict(d.pop("derivatives", None))
         kw["uncertainty"] = unc.UncertaintyConfig.from_dict(d.pop("uncertainty", None))
         kw["covariance"] = ee.CovarianceConfig.from_dict(d.pop("covariance", None))
-        for key in ("trim_duration", "trim_average", "edge", "min_fit_duration", "sample_rate",
-                    "excitation_threshold", "motor_max_pinned"):
+        for key in (
+            "trim_duration",
+            "trim_average",
+            "edge",
+            "min_fit_duration",
+            "sample_rate",
+            "excitation_threshold",
+            "motor_max_pinned",
+        ):
             if key in d:
                 v = d.pop(key)
                 if not is_finite_number(v) or v < 0:
-                    raise ConfigError(f"identification.{key} must be a finite number >= 0, got {v!r}")
-                if key == "sample_rate" and v > MAX_SAMPLE_RATE:     # the common grid is allocated from it
-                    raise ConfigError(f"identification.sample_rate: {v:g} Hz exceeds the limit of "
-                                      f"{MAX_SAMPLE_RATE:g} Hz")
+                    raise ConfigError(
+                        f"identification.{key} must be a finite number >= 0, got {v!r}"
+                    )
+                if (
+                    key == "sample_rate" and v > MAX_SAMPLE_RATE
+                ):  # the common grid is allocated from it
+                    raise ConfigError(
+                        f"identification.sample_rate: {v:g} Hz exceeds the limit of "
+                        f"{MAX_SAMPLE_RATE:g} Hz"
+                    )
                 kw[key] = float(v)
         if "max_lag" in d:
             v = d.pop("max_lag")
             if v is not None and not is_count(v):
-                raise ConfigError(f"identification.max_lag must be null or an integer >= 0, got {v!r}")
+                raise ConfigError(
+                    f"identification.max_lag must be null or an integer >= 0, got {v!r}"
+                )
             kw["max_lag"] = v
         for key in ("vmin", "vmax"):
             if key in d:
                 v = d.pop(key)
                 if not isinstance(v, (list, tuple)) or len(v) != 3:
-                    raise ConfigError(f"identification.{key} must be a list of 3 numbers, got {v!r}")
+                    raise ConfigError(
+                        f"identification.{key} must be a list of 3 numbers, got {v!r}"
+                    )
                 kw[key] = tuple(float(a) for a in v)
         for key in ("intercept", "equilibrium", "instruments", "motor_instrument"):
             if key in d:
@@ -134,10 +157,15 @@ class IdentificationConfig:
             kw["measurement_noise"] = parse_measurement_noise(d.pop("measurement_noise"))
         if "motor_std" in d:
             v = d.pop("motor_std")
-            if v is not None and (not isinstance(v, (list, tuple)) or len(v) != 2
-                                  or not all(is_finite_number(a) and a > 0 for a in v)):
-                raise ConfigError(f"identification.motor_std must be null or [std a_Omega, std b_Omega] > 0, "
-                                  f"got {v!r}")
+            if v is not None and (
+                not isinstance(v, (list, tuple))
+                or len(v) != 2
+                or not all(is_finite_number(a) and a > 0 for a in v)
+            ):
+                raise ConfigError(
+                    f"identification.motor_std must be null or [std a_Omega, std b_Omega] > 0, "
+                    f"got {v!r}"
+                )
             kw["motor_std"] = None if v is None else (float(v[0]), float(v[1]))
         if "motor" in d:
             v = d.pop("motor")
@@ -147,7 +175,9 @@ class IdentificationConfig:
         if "model" in d:
             v = d.pop("model")
             if v not in ("taylor2", "appendix_b"):
-                raise ConfigError(f"identification.model must be 'taylor2' or 'appendix_b', got {v!r}")
+                raise ConfigError(
+                    f"identification.model must be 'taylor2' or 'appendix_b', got {v!r}"
+                )
             kw["model"] = v
         if "validation" in d:
             kw["validation"] = str(d.pop("validation"))
@@ -170,22 +200,34 @@ def parse_measurement_noise(v) -> dict:
     if v is None:
         return {}
     if not isinstance(v, dict):
-        raise ConfigError(f"identification.measurement_noise must be a mapping, got {type(v).__name__}")
+        raise ConfigError(
+            f"identification.measurement_noise must be a mapping, got {type(v).__name__}"
+        )
     out = {}
     for k, x in v.items():
         if k not in STATE_NAMES and k != "rotor":
-            raise ConfigError(f"identification.measurement_noise: unknown channel {k!r}; "
-                              f"allowed: {list(STATE_NAMES) + ['rotor']}")
+            raise ConfigError(
+                f"identification.measurement_noise: unknown channel {k!r}; "
+                f"allowed: {list(STATE_NAMES) + ['rotor']}"
+            )
         pair = list(x) if isinstance(x, (list, tuple)) else [x, None]
-        if len(pair) != 2 or not is_finite_number(pair[0]) or pair[0] < 0 \
-                or (pair[1] is not None and (not is_finite_number(pair[1]) or pair[1] <= 0)):
-            raise ConfigError(f"identification.measurement_noise.{k} must be std >= 0 or [std, rate_hz > 0], "
-                              f"got {x!r}")
+        if (
+            len(pair) != 2
+            or not is_finite_number(pair[0])
+            or pair[0] < 0
+            or (pair[1] is not None and (not is_finite_number(pair[1]) or pair[1] <= 0))
+        ):
+            raise ConfigError(
+                f"identification.measurement_noise.{k} must be std >= 0 or [std, rate_hz > 0], "
+                f"got {x!r}"
+            )
         out[k] = (float(pair[0]), None if pair[1] is None else float(pair[1]))
     return out
 
 
-def regressor_noise_var(cfg: IdentificationConfig, params, dt: float) -> tuple[np.ndarray, np.ndarray, float]:
+def regressor_noise_var(
+    cfg: IdentificationConfig, params, dt: float
+) -> tuple[np.ndarray, np.ndarray, float]:
     """Errors-in-variables input: ``(var (12,), var of d/dt (12,), rotor-speed var)`` of the
     *smoothed* measured states (white noise of std ``s`` sampled at ``r`` Hz has the one-sided
     density ``2 s^2 / r``; the smoother passes ``int L(f)^2 df``, the differentiator
@@ -196,7 +238,7 @@ def regressor_noise_var(cfg: IdentificationConfig, params, dt: float) -> tuple[n
     if cfg.derivatives.method == "fourier":
         L2 = deriv.fourier_gain(f, cfg.derivatives.f_cut, cfg.derivatives.taper) ** 2
     else:
-        w = deriv._savgol_window(cfg.derivatives.window_s, dt, cfg.derivatives.polyorder, 10 ** 6)
+        w = deriv._savgol_window(cfg.derivatives.window_s, dt, cfg.derivatives.polyorder, 10**6)
         L2 = deriv.savgol_gain(f, dt, w, cfg.derivatives.polyorder, deriv=0) ** 2
     g0 = float(np.trapz(L2, f))
     g1 = float(np.trapz((2 * np.pi * f) ** 2 * L2, f))
@@ -205,14 +247,14 @@ def regressor_noise_var(cfg: IdentificationConfig, params, dt: float) -> tuple[n
     rotor = 0.0
     if "rotor" in noise:
         s, r = noise["rotor"]
-        rotor = 2 * s ** 2 / (r or 1.0 / dt)
+        rotor = 2 * s**2 / (r or 1.0 / dt)
         mix = mixer(params.arm_length)
-        var[8:12] = rotor * g0 * np.sum(mix ** 2, axis=1)
-        dvar[8:12] = rotor * g1 * np.sum(mix ** 2, axis=1)
+        var[8:12] = rotor * g0 * np.sum(mix**2, axis=1)
+        dvar[8:12] = rotor * g1 * np.sum(mix**2, axis=1)
     for k, (s, r) in noise.items():
         if k != "rotor":
             j = STATE_NAMES.index(k)
-            dens = 2 * s ** 2 / (r or 1.0 / dt)
+            dens = 2 * s**2 / (r or 1.0 / dt)
             var[j], dvar[j] = dens * g0, dens * g1
     return var, dvar, rotor * g0
 
@@ -234,15 +276,15 @@ def _design_noise(labels, var: np.ndarray, dvar: np.ndarray) -> np.ndarray | Non
 class VertexData:
     """Aligned arrays of one phase-1 maneuver on a uniform grid (from dataprep or a simulator)."""
 
-    t: np.ndarray            # (N,) s
-    x: np.ndarray            # (N, 12) STATE_NAMES
-    u: np.ndarray            # (N, 4) INPUT_NAMES
-    scheduling: np.ndarray   # (3,) commanded vertex v_d
+    t: np.ndarray  # (N,) s
+    x: np.ndarray  # (N, 12) STATE_NAMES
+    u: np.ndarray  # (N, 4) INPUT_NAMES
+    scheduling: np.ndarray  # (3,) commanded vertex v_d
     trim: tuple[float, float]  # [t_start, t_end) of the trim segment
-    fit: tuple[float, float]   # [t_start, t_end) of the excitation (fit) segment
+    fit: tuple[float, float]  # [t_start, t_end) of the excitation (fit) segment
     name: str = ""
-    u_eff: np.ndarray | None = None   # (N, 4) command after the ESC clip of Eq. (8) (None: from u)
-    motor_identifiable: bool = True   # rotor speeds measured and u independent of them
+    u_eff: np.ndarray | None = None  # (N, 4) command after the ESC clip of Eq. (8) (None: from u)
+    motor_identifiable: bool = True  # rotor speeds measured and u independent of them
 
 
 @dataclass(frozen=True)
@@ -259,15 +301,17 @@ class KnownModel:
 class VertexResult:
     name: str
     scheduling: np.ndarray
-    x0: np.ndarray               # operating point of the model (the identified equilibrium, taylor2)
+    x0: np.ndarray  # operating point of the model (the identified equilibrium, taylor2)
     u0: np.ndarray
     fit: ee.Fit
     uncertain: unc.UncertainVertex
     r2_axes: dict
     validation: dict = field(default_factory=dict)
-    x_flown: np.ndarray | None = None     # mean over the trim window (seed 0 Table 1)
+    x_flown: np.ndarray | None = None  # mean over the trim window (seed 0 Table 1)
     u_flown: np.ndarray | None = None
-    xdot_flown: np.ndarray | None = None  # identified model's derivative there (not an equilibrium)
+    xdot_flown: np.ndarray | None = (
+        None  # identified model's derivative there (not an equilibrium)
+    )
     motor: dict = field(default_factory=lambda: {"mode": "known"})  # how a_Omega, b_Omega entered
 
     def to_dict(self) -> dict:
@@ -322,8 +366,15 @@ def _input(data: VertexData, params) -> np.ndarray:
     return np.clip(np.asarray(data.u, dtype=float) @ np.linalg.inv(mix).T, 0.0, 1.0) @ mix.T
 
 
-def pinned(e: np.ndarray, Om_start: np.ndarray, dt: float, params, a: float | None = None,
-           b: float | None = None, speeds: bool = False):
+def pinned(
+    e: np.ndarray,
+    Om_start: np.ndarray,
+    dt: float,
+    params,
+    a: float | None = None,
+    b: float | None = None,
+    speeds: bool = False,
+):
     """(N, 4) fraction of the interval ``[t_k - dt/2, t_k + dt/2)`` during which rotor i is
     held at a speed limit, where Eq. (8) does not hold (the speed is clamped).
 
@@ -345,7 +396,7 @@ def pinned(e: np.ndarray, Om_start: np.ndarray, dt: float, params, a: float | No
     ad = math.exp(-a * dt)
     E = np.asarray(e, dtype=float)
     out = np.zeros(E.shape)
-    start = np.zeros(E.shape)                       # model speed at each interval start
+    start = np.zeros(E.shape)  # model speed at each interval start
     for i in range(E.shape[1]):
         Om = min(max(float(Om_start[i]), lo), hi)
         col = E[:, i].tolist()
@@ -355,10 +406,10 @@ def pinned(e: np.ndarray, Om_start: np.ndarray, dt: float, params, a: float | No
             st[k] = Om
             inf = b * ek / a
             if (Om <= lo and inf <= lo) or (Om >= hi and inf >= hi):
-                frac[k] = 1.0                       # pinned through the interval
+                frac[k] = 1.0  # pinned through the interval
                 continue
             nxt = inf + (Om - inf) * ad
-            if nxt < lo or nxt > hi:                # reaches the limit inside the interval
+            if nxt < lo or nxt > hi:  # reaches the limit inside the interval
                 lim = lo if nxt < lo else hi
                 t_hit = math.log((Om - inf) / (lim - inf)) / a
                 frac[k] = max(0.0, 1.0 - t_hit / dt)
@@ -367,7 +418,7 @@ def pinned(e: np.ndarray, Om_start: np.ndarray, dt: float, params, a: float | No
                 Om = nxt
     if not speeds:
         return out
-    mid = 0.5 * (start + np.vstack([start[1:], start[-1:]]))      # at t_k, mid-interval
+    mid = 0.5 * (start + np.vstack([start[1:], start[-1:]]))  # at t_k, mid-interval
     return out, mid
 
 
@@ -383,13 +434,25 @@ def motor_response(u: np.ndarray, delta_start: np.ndarray, dt: float, params) ->
     return lfilter([0.0, g], [1.0, -ad], u, axis=0, zi=zi)[0]
 
 
-def _smooth_keep(x: np.ndarray, dt: float, cfg: IdentificationConfig, keep) -> tuple[np.ndarray, np.ndarray]:
+def _smooth_keep(
+    x: np.ndarray, dt: float, cfg: IdentificationConfig, keep
+) -> tuple[np.ndarray, np.ndarray]:
     xs, xd = deriv.smooth_and_differentiate(x, dt, cfg.derivatives)
     return xs[keep], xd[keep]
 
 
-def _motor_design(data: VertexData, cfg: IdentificationConfig, params, full, keep, x0, u0,
-                  u_in: np.ndarray, max_delay: float = 0.05, rotor_var: float = 0.0):
+def _motor_design(
+    data: VertexData,
+    cfg: IdentificationConfig,
+    params,
+    full,
+    keep,
+    x0,
+    u0,
+    u_in: np.ndarray,
+    max_delay: float = 0.05,
+    rotor_var: float = 0.0,
+):
     """The motor model Eq. (8) per rotor, ``Omega_i' = g_i(t) [theta_a (Omega_i - Omega_i0)
     + theta_b (e_i(t - tau) - e_i0) + c_i]`` with ``e = Mix^-1 u`` after the ESC clip, stacked
     over the four rotors (one ``theta_a = -a_Omega``, ``theta_b = b_Omega``, seed 0 Eq. 15).
@@ -428,17 +491,23 @@ def _motor_design(data: VertexData, cfg: IdentificationConfig, params, full, kee
     def gated(ab):
         frac, Om_model = pinned(e, Om[0], dt, params, *ab, speeds=True)
         g = 1.0 - frac
-        Xa = np.concatenate([_smooth_keep(g[:, i] * (Om[:, i] - Om0[i]), dt, cfg, keep)[0] for i in range(4)])
+        Xa = np.concatenate(
+            [_smooth_keep(g[:, i] * (Om[:, i] - Om0[i]), dt, cfg, keep)[0] for i in range(4)]
+        )
         # instrument of the measured speeds: the model's own, uncorrelated with telemetry noise
-        Za = np.concatenate([_smooth_keep(g[:, i] * (Om_model[:, i] - Om0[i]), dt, cfg, keep)[0] for i in range(4)])
+        Za = np.concatenate(
+            [_smooth_keep(g[:, i] * (Om_model[:, i] - Om0[i]), dt, cfg, keep)[0] for i in range(4)]
+        )
         Xc = np.zeros((4 * n, 4))
         for i in range(4):
-            Xc[i * n:(i + 1) * n, i] = _smooth_keep(g[:, i], dt, cfg, keep)[0]
+            Xc[i * n : (i + 1) * n, i] = _smooth_keep(g[:, i], dt, cfg, keep)[0]
         return g, (Xa, Za), Xc
 
     def inputs(tau):
         es, ed = spline(t - tau), spline(t - tau, 1)
-        Xb = np.concatenate([_smooth_keep(g[:, i] * (es[:, i] - e0[i]), dt, cfg, keep)[0] for i in range(4)])
+        Xb = np.concatenate(
+            [_smooth_keep(g[:, i] * (es[:, i] - e0[i]), dt, cfg, keep)[0] for i in range(4)]
+        )
         Xd = np.concatenate([_smooth_keep(g[:, i] * ed[:, i], dt, cfg, keep)[0] for i in range(4)])
         return Xb, Xd
 
@@ -454,7 +523,7 @@ def _motor_design(data: VertexData, cfg: IdentificationConfig, params, full, kee
                 th = np.linalg.solve(Z.T @ H, Z.T @ y)
             elif rotor_var > 0:
                 M = H.T @ H
-                M[0, 0] -= H.shape[0] * rotor_var        # bias-compensated (errors in variables)
+                M[0, 0] -= H.shape[0] * rotor_var  # bias-compensated (errors in variables)
                 th = np.linalg.solve(M, H.T @ y)
             else:
                 th = np.linalg.lstsq(H, y, rcond=None)[0]
@@ -467,7 +536,7 @@ def _motor_design(data: VertexData, cfg: IdentificationConfig, params, full, kee
 
     g, Xa, Xc = gated(ab)
     tau, b_est = 0.0, None
-    for _ in range(8):              # the pinned intervals of the identified motors (a fixed point)
+    for _ in range(8):  # the pinned intervals of the identified motors (a fixed point)
         th, tau, b_est = fit(Xa, Xc, tau, b_est)
         if not np.any(g == 0) or not th[0] < 0 < th[1]:
             break
@@ -491,7 +560,9 @@ def _motor_design(data: VertexData, cfg: IdentificationConfig, params, full, kee
     return ee.RowDesign(8, y, H, (), (), labels, stack=4, noise_var=noise), tau
 
 
-def _fit_taylor2(data: VertexData, x0, u0, known: KnownModel, cfg: IdentificationConfig, motor_prior=None):
+def _fit_taylor2(
+    data: VertexData, x0, u0, known: KnownModel, cfg: IdentificationConfig, motor_prior=None
+):
     """Equation error with the known part nonlinear and second-order nuisance regressors
     (:mod:`lpv_sysid.ident.taylor`), re-expanded about the identified equilibrium.
 
@@ -509,7 +580,9 @@ def _fit_taylor2(data: VertexData, x0, u0, known: KnownModel, cfg: Identificatio
         kr = taylor.known_rigid_body(x_raw, params)
         rem = taylor.remainders(x0, x_raw - x0, params)
         widths.update({a: r.shape[1] for a, r in rem.items()})
-        return np.concatenate([kr] + [rem[a] for a in taylor.FORCE_AXES + taylor.MOMENT_AXES], axis=1)
+        return np.concatenate(
+            [kr] + [rem[a] for a in taylor.FORCE_AXES + taylor.MOMENT_AXES], axis=1
+        )
 
     dt, full, keep = _fit_indices(data, cfg)
     u_in = _input(data, params)
@@ -518,7 +591,7 @@ def _fit_taylor2(data: VertexData, x0, u0, known: KnownModel, cfg: Identificatio
     u0 = np.asarray(u0, dtype=float)
     rem, off = {}, 6
     for a in taylor.FORCE_AXES + taylor.MOMENT_AXES:
-        rem[a] = nl_s[:, off: off + widths[a]]
+        rem[a] = nl_s[:, off : off + widths[a]]
         off += widths[a]
     iv = None
     if cfg.instruments:
@@ -526,10 +599,12 @@ def _fit_taylor2(data: VertexData, x0, u0, known: KnownModel, cfg: Identificatio
         # to the command (Eq. 8): uncorrelated with telemetry noise and aliasing (errors in variables)
         x_iv = np.array(data.x, dtype=float)
         x_iv[:, 8:12] = motor_response(u_in, x_iv[0, 8:12], dt, params)
-        _, _, dx_iv, _, nl_iv = prepare(dataclasses.replace(data, x=x_iv), cfg, x0, u0, nonlin, u=u_in)
+        _, _, dx_iv, _, nl_iv = prepare(
+            dataclasses.replace(data, x=x_iv), cfg, x0, u0, nonlin, u=u_in
+        )
         rem_iv, off = {}, 6
         for a in taylor.FORCE_AXES + taylor.MOMENT_AXES:
-            rem_iv[a] = nl_iv[:, off: off + widths[a]]
+            rem_iv[a] = nl_iv[:, off : off + widths[a]]
             off += widths[a]
         iv = (dx_iv, rem_iv)
     nuis_idx = taylor.nuisance_index(rem, params)
@@ -542,7 +617,7 @@ def _fit_taylor2(data: VertexData, x0, u0, known: KnownModel, cfg: Identificatio
         y = xdot[:, row] - nl_s[:, k]
         H = [dx[:, ja]]
         labels = [f"x{j}" for j in ja]
-        aux = 3 in kb             # J_z delta_r' (seed 0 Eq. 6f): the measured rotor acceleration
+        aux = 3 in kb  # J_z delta_r' (seed 0 Eq. 6f): the measured rotor acceleration
         kb = [c for c in kb if c != 3]
         H.append(du[:, kb])
         labels += [f"u{c}" for c in kb]
@@ -555,26 +630,59 @@ def _fit_taylor2(data: VertexData, x0, u0, known: KnownModel, cfg: Identificatio
         Z = None
         if iv is not None:
             Z = Hm.copy()
-            Z[:, :len(ja)] = iv[0][:, ja]
+            Z[:, : len(ja)] = iv[0][:, ja]
         cols = nuis_idx[row]
         if cols:
             E = np.stack([rem[a][:, c] for a, c in cols], axis=1)
             Hm, chosen = ee._append_independent(Hm, E)
             labels += [f"nuisance{c}" for c in chosen]
             if Z is not None:
-                Z = np.concatenate([Z] + [iv[1][cols[c][0]][:, cols[c][1]: cols[c][1] + 1] for c in chosen], axis=1)
-        designs.append(ee.RowDesign(row, y, Hm, tuple(ja), tuple(kb), tuple(labels), Z=Z,
-                                    noise_var=None if Z is not None else _design_noise(labels, nvar, ndvar)))
+                Z = np.concatenate(
+                    [Z] + [iv[1][cols[c][0]][:, cols[c][1] : cols[c][1] + 1] for c in chosen],
+                    axis=1,
+                )
+        designs.append(
+            ee.RowDesign(
+                row,
+                y,
+                Hm,
+                tuple(ja),
+                tuple(kb),
+                tuple(labels),
+                Z=Z,
+                noise_var=None if Z is not None else _design_noise(labels, nvar, ndvar),
+            )
+        )
         nuis_kept[row] = cols
     motor_d, info = _motor_design(data, cfg, params, full, keep, x0, u0, u_in, rotor_var=rotor_var)
-    fits, joint, dof = ee.solve_rows(designs + ([motor_d] if motor_d is not None else []), cfg.covariance, dt)
-    motor = {"mode": "identified", "delay": info} if motor_d is not None else {"mode": "known", "reason": info}
+    fits, joint, dof = ee.solve_rows(
+        designs + ([motor_d] if motor_d is not None else []), cfg.covariance, dt
+    )
+    motor = (
+        {"mode": "identified", "delay": info}
+        if motor_d is not None
+        else {"mode": "known", "reason": info}
+    )
     if motor_d is None and motor_prior is not None:
         # a_Omega, b_Omega not identifiable here: uncertain with the prior (seed 0 Sec. IV values)
         (a, sa), (b, sb) = motor_prior
         P = joint.shape[0]
-        prior = ee.RowFit(8, (), (), np.array([-a, b]), np.diag([sa ** 2, sb ** 2]), np.diag([sa ** 2, sb ** 2]),
-                          np.diag([sa ** 2, sb ** 2]), 0.0, float("nan"), 0, 0, taylor.MOTOR_LABELS, P, dof)
+        prior = ee.RowFit(
+            8,
+            (),
+            (),
+            np.array([-a, b]),
+            np.diag([sa**2, sb**2]),
+            np.diag([sa**2, sb**2]),
+            np.diag([sa**2, sb**2]),
+            0.0,
+            float("nan"),
+            0,
+            0,
+            taylor.MOTOR_LABELS,
+            P,
+            dof,
+        )
         fits = list(fits) + [prior]
         joint = np.block([[joint, np.zeros((P, 2))], [np.zeros((2, P)), prior.cov]])
         motor = {"mode": "prior", "reason": info, "a_omega": [a, sa], "b_omega": [b, sb]}
@@ -588,12 +696,28 @@ def _fit_taylor2(data: VertexData, x0, u0, known: KnownModel, cfg: Identificatio
     psi_dot = float((np.sin(x0[0]) * x0[6] + np.cos(x0[0]) * x0[7]) / np.cos(x0[1]))
     if cfg.equilibrium:
         rx = taylor.reexpand(model, theta, joint, x0[2:5], psi_dot, maskA, maskB)
-        x_e, u_e, A, B, sA, sB, flown = rx.x_e, rx.u_e, rx.A, rx.B, rx.std_A, rx.std_B, rx.xdot_flown
-        log.debug("%s: equilibrium re-expansion in %d Newton steps, shift %s", data.name, rx.iterations,
-                 np.round(x_e - x0, 4).tolist())
+        x_e, u_e, A, B, sA, sB, flown = (
+            rx.x_e,
+            rx.u_e,
+            rx.A,
+            rx.B,
+            rx.std_A,
+            rx.std_B,
+            rx.xdot_flown,
+        )
+        log.debug(
+            "%s: equilibrium re-expansion in %d Newton steps, shift %s",
+            data.name,
+            rx.iterations,
+            np.round(x_e - x0, 4).tolist(),
+        )
     else:
-        flown = np.concatenate([[0.0, 0.0], model.residual(np.concatenate([x0[:2], x0[8:12], u0]), theta,
-                                                             x0[2:5], psi_dot)])
+        flown = np.concatenate(
+            [
+                [0.0, 0.0],
+                model.residual(np.concatenate([x0[:2], x0[8:12], u0]), theta, x0[2:5], psi_dot),
+            ]
+        )
         A, B = model.jacobians(x0, u0, theta)
         x_e, u_e = x0, np.asarray(u0, dtype=float)
         sA, sB = _direct_std(model, theta, joint, x0, u0, maskA, maskB)
@@ -603,8 +727,12 @@ def _fit_taylor2(data: VertexData, x0, u0, known: KnownModel, cfg: Identificatio
 
 def _direct_std(model, theta, cov, x, u, maskA, maskB):
     """Delta-method standard errors of the Jacobians at a fixed point (no re-expansion)."""
-    idx = [(m, i, int(j)) for i in range(maskA.shape[0])
-           for m, msk in (("A", maskA), ("B", maskB)) for j in np.nonzero(msk[i])[0]]
+    idx = [
+        (m, i, int(j))
+        for i in range(maskA.shape[0])
+        for m, msk in (("A", maskA), ("B", maskB))
+        for j in np.nonzero(msk[i])[0]
+    ]
 
     def elems(th):
         Aw, Bw = model.jacobians(x, u, th)
@@ -626,8 +754,10 @@ def _segment(t: np.ndarray, a: float, b: float, what: str, min_len: float) -> np
     idx = np.nonzero((t >= a) & (t < b))[0]
     if idx.size < 2 or (t[idx[-1]] - t[idx[0]]) < min_len:
         have = 0.0 if idx.size < 2 else t[idx[-1]] - t[idx[0]]
-        raise ConfigError(f"{what}: segment [{a:.2f}, {b:.2f}) s has {have:.2f} s of data, "
-                          f"need at least {min_len:.2f} s")
+        raise ConfigError(
+            f"{what}: segment [{a:.2f}, {b:.2f}) s has {have:.2f} s of data, "
+            f"need at least {min_len:.2f} s"
+        )
     return idx
 
 
@@ -655,15 +785,23 @@ def _fit_indices(data: VertexData, cfg: IdentificationConfig):
     if not np.allclose(np.diff(t), dt, rtol=1e-6, atol=1e-9):
         raise ConfigError(f"{data.name or 'vertex'}: samples must be on a uniform grid")
     a, b = data.fit
-    full = _segment(t, a, b, f"{data.name or 'vertex'} excitation", cfg.min_fit_duration + 2 * cfg.edge)
+    full = _segment(
+        t, a, b, f"{data.name or 'vertex'} excitation", cfg.min_fit_duration + 2 * cfg.edge
+    )
     if cfg.derivatives.method == "fourier":
-        full = full[: deriv.fast_length(full.size)]      # FFT-friendly length, drops < 2 % (n > 2000)
+        full = full[: deriv.fast_length(full.size)]  # FFT-friendly length, drops < 2 % (n > 2000)
     n_edge = int(round(cfg.edge / dt))
     return dt, full, slice(n_edge, full.size - n_edge)
 
 
-def prepare(data: VertexData, cfg: IdentificationConfig, x0: np.ndarray, u0: np.ndarray,
-            nonlinear=None, u: np.ndarray | None = None):
+def prepare(
+    data: VertexData,
+    cfg: IdentificationConfig,
+    x0: np.ndarray,
+    u0: np.ndarray,
+    nonlinear=None,
+    u: np.ndarray | None = None,
+):
     """Smoothed perturbations and derivatives over the fit segment: ``(t, dxdot, dx, du)``.
 
     ``nonlinear(x_raw) -> (N, k)``: optional function of the *raw* states whose value is
@@ -681,16 +819,25 @@ def prepare(data: VertexData, cfg: IdentificationConfig, x0: np.ndarray, u0: np.
     return out
 
 
-def identify_vertex(data: VertexData, cfg: IdentificationConfig,
-                    known: KnownModel | None = None, motor_prior=None) -> VertexResult:
+def identify_vertex(
+    data: VertexData, cfg: IdentificationConfig, known: KnownModel | None = None, motor_prior=None
+) -> VertexResult:
     """Full pipeline for one vertex (see module docstring).  ``motor_prior``:
     ``((a_Omega, std), (b_Omega, std))`` used when this maneuver cannot identify them."""
     x = np.asarray(data.x, dtype=float)
     u = np.asarray(data.u, dtype=float)
-    if x.ndim != 2 or x.shape[1] != 12 or u.ndim != 2 or u.shape[1] != 4 or x.shape[0] != u.shape[0] \
-            or x.shape[0] != np.asarray(data.t).size:
-        raise ConfigError(f"{data.name}: need t (N,), x (N, 12), u (N, 4); got {np.shape(data.t)}, "
-                          f"{x.shape}, {u.shape}")
+    if (
+        x.ndim != 2
+        or x.shape[1] != 12
+        or u.ndim != 2
+        or u.shape[1] != 4
+        or x.shape[0] != u.shape[0]
+        or x.shape[0] != np.asarray(data.t).size
+    ):
+        raise ConfigError(
+            f"{data.name}: need t (N,), x (N, 12), u (N, 4); got {np.shape(data.t)}, "
+            f"{x.shape}, {u.shape}"
+        )
     if not (np.all(np.isfinite(x)) and np.all(np.isfinite(u))):
         raise ConfigError(f"{data.name}: states or inputs contain NaN/inf")
     x0, u0 = equilibrium(data, cfg)
@@ -706,18 +853,39 @@ def identify_vertex(data: VertexData, cfg: IdentificationConfig,
         _, xdot, dx, du = prepare(data, cfg, x0, u0, u=_input(data, _params(cfg)))
         dt = float(np.median(np.diff(data.t)))
         var, dvar, _ = regressor_noise_var(cfg, _params(cfg), dt)
-        designs, A0, B0 = ee.row_designs(xdot, dx, du, known.A, known.B, known.maskA, known.maskB, cfg.intercept)
-        designs = [dataclasses.replace(d, noise_var=_design_noise(d.labels, var, dvar)) for d in designs]
+        designs, A0, B0 = ee.row_designs(
+            xdot, dx, du, known.A, known.B, known.maskA, known.maskB, cfg.intercept
+        )
+        designs = [
+            dataclasses.replace(d, noise_var=_design_noise(d.labels, var, dvar)) for d in designs
+        ]
         fits, joint, dof = ee.solve_rows(designs, cfg.covariance, dt)
-        fit = ee.assemble(fits, A0, B0, known.maskA, known.maskB, joint, dof, cfg.covariance.method)
+        fit = ee.assemble(
+            fits, A0, B0, known.maskA, known.maskB, joint, dof, cfg.covariance.method
+        )
     uv = unc.build(fit.A, fit.B, fit.elements(), cfg.uncertainty, dof=fit.dof)
     r2 = {a: fit.r2.get(i, float("nan")) for a, i in zip(metrics.AXES, metrics.AXIS_INDEX)}
-    log.info("%s: %d identified elements, M=%d uncertain systems", data.name, len(uv.intervals), uv.M)
-    return VertexResult(data.name, np.asarray(data.scheduling, dtype=float), x0, u0, fit, uv, r2,
-                        x_flown=x_flown, u_flown=u_flown, xdot_flown=flown, motor=motor)
+    log.info(
+        "%s: %d identified elements, M=%d uncertain systems", data.name, len(uv.intervals), uv.M
+    )
+    return VertexResult(
+        data.name,
+        np.asarray(data.scheduling, dtype=float),
+        x0,
+        u0,
+        fit,
+        uv,
+        r2,
+        x_flown=x_flown,
+        u_flown=u_flown,
+        xdot_flown=flown,
+        motor=motor,
+    )
 
 
-def pooled_motor(results: Sequence[VertexResult]) -> tuple[tuple[float, float], tuple[float, float]] | None:
+def pooled_motor(
+    results: Sequence[VertexResult],
+) -> tuple[tuple[float, float], tuple[float, float]] | None:
     """``((a_Omega, std), (b_Omega, std))`` over the vertices that identified them: the mean,
     with a std covering both the single-vertex errors and the scatter between vertices (the
     constants may change with the flight condition, e.g. battery voltage)."""
@@ -733,11 +901,13 @@ def pooled_motor(results: Sequence[VertexResult]) -> tuple[tuple[float, float], 
     out = []
     for m, s_ in ((v[:, 0], v[:, 1]), (v[:, 2], v[:, 3])):
         spread = float(np.std(m, ddof=1)) if m.size > 1 else 0.0
-        out.append((float(np.mean(m)), float(np.sqrt(np.mean(s_ ** 2) + spread ** 2))))
+        out.append((float(np.mean(m)), float(np.sqrt(np.mean(s_**2) + spread**2))))
     return out[0], out[1]
 
 
-def identify_vertices(datas: Sequence[VertexData], cfg: IdentificationConfig) -> list[VertexResult]:
+def identify_vertices(
+    datas: Sequence[VertexData], cfg: IdentificationConfig
+) -> list[VertexResult]:
     """:func:`identify_vertex` for every maneuver; where a maneuver cannot identify the motor
     constants (a rotor pinned at a speed limit longer than ``motor_max_pinned``, no independent
     rotor-speed measurement), they enter as uncertain with the :func:`pooled_motor` estimate of
@@ -759,8 +929,11 @@ def identify_vertices(datas: Sequence[VertexData], cfg: IdentificationConfig) ->
     out = []
     for d, r, again in zip(datas, results, redo):
         if again:
-            log.debug("%s: a_Omega, b_Omega not identifiable (%s): pooled estimate of the maneuvers",
-                      d.name, r.motor.get("reason"))
+            log.debug(
+                "%s: a_Omega, b_Omega not identifiable (%s): pooled estimate of the maneuvers",
+                d.name,
+                r.motor.get("reason"),
+            )
             reason = r.motor.get("reason", "")
             r = identify_vertex(d, dataclasses.replace(cfg, motor="known"), motor_prior=prior)
             r.motor["reason"] = f"{reason}; pooled estimate of the maneuvers that identified them"
@@ -802,13 +975,16 @@ def vertex_order(results: Sequence[VertexResult], cfg: IdentificationConfig) -> 
     for c in corners:
         hits = [k for k, r in enumerate(results) if np.allclose(r.scheduling, c)]
         if len(hits) != 1:
-            raise ConfigError(f"need exactly one identified maneuver at vertex {c.tolist()}, found {len(hits)}")
+            raise ConfigError(
+                f"need exactly one identified maneuver at vertex {c.tolist()}, found {len(hits)}"
+            )
         order.append(hits[0])
     return order
 
 
-def vertex_models_dict(results: Sequence[VertexResult], cfg: IdentificationConfig,
-                       validation: dict | None = None) -> dict:
+def vertex_models_dict(
+    results: Sequence[VertexResult], cfg: IdentificationConfig, validation: dict | None = None
+) -> dict:
     """The ``vertex_models.yaml`` document (format ``@2``, io/formats.py), vertices in box order.
 
     ``meta`` records how the file was made: the method, ``k_sigma`` of Eq. (22) (and the
@@ -836,33 +1012,46 @@ def vertex_models_dict(results: Sequence[VertexResult], cfg: IdentificationConfi
         "k_sigma": cfg.uncertainty.k_sigma,
         "joint_alpha": cfg.uncertainty.joint_alpha,
         "intervals": "every identified element, lower/upper = nominal -/+ k std (Eq. 22)",
-        "std": {"method": results[order[0]].fit.cov_method,
-                "meaning": "standard error widened so that nominal +/- k std keeps the normal coverage "
-                           "2 Phi(k) - 1 under Student-t(dof) errors",
-                "dof": [None if d is None else float(d) for d in dofs],
-                "t_factor": [t_factor(k, d) for k, d in zip(ks, dofs)]},
+        "std": {
+            "method": results[order[0]].fit.cov_method,
+            "meaning": "standard error widened so that nominal +/- k std keeps the normal coverage "
+            "2 Phi(k) - 1 under Student-t(dof) errors",
+            "dof": [None if d is None else float(d) for d in dofs],
+            "t_factor": [t_factor(k, d) for k, d in zip(ks, dofs)],
+        },
         "motor": [dict(results[k].motor) for k in order],
         "operating_point": {
-            "x0": "equilibrium of the identified model at the flown velocity" if cfg.model == "taylor2"
-                  and cfg.equilibrium else "mean over the trim window (flown)",
+            "x0": "equilibrium of the identified model at the flown velocity"
+            if cfg.model == "taylor2" and cfg.equilibrium
+            else "mean over the trim window (flown)",
             "x_flown": [vec(results[k].x_flown) for k in order],
             "u_flown": [vec(results[k].u_flown) for k in order],
-            "xdot_flown": [vec(results[k].xdot_flown) for k in order]},
-        "uncertainty": {"method": cfg.uncertainty.method, "p_max": cfg.uncertainty.p_max,
-                        "k_applied": ks,
-                        "M": [results[k].uncertain.M for k in order],
-                        "inflation": [results[k].uncertain.inflation for k in order]},
+            "xdot_flown": [vec(results[k].xdot_flown) for k in order],
+        },
+        "uncertainty": {
+            "method": cfg.uncertainty.method,
+            "p_max": cfg.uncertainty.p_max,
+            "k_applied": ks,
+            "M": [results[k].uncertain.M for k in order],
+            "inflation": [results[k].uncertain.inflation for k in order],
+        },
     }
     if validation:
-        meta["validation"] = {"maneuver": validation.get("name", ""),
-                              "tic": {k: float(v) for k, v in validation["tic"].items()},
-                              "nrmse": {k: float(v) for k, v in validation["nrmse"].items()}}
+        meta["validation"] = {
+            "maneuver": validation.get("name", ""),
+            "tic": {k: float(v) for k, v in validation["tic"].items()},
+            "nrmse": {k: float(v) for k, v in validation["nrmse"].items()},
+        }
     return {
         "format": MODELS_FORMAT,
         "time": "continuous",
         "states": [{"name": n, "unit": s} for n, s in zip(STATE_NAMES, STATE_UNITS)],
         "inputs": [{"name": n, "unit": s} for n, s in zip(INPUT_NAMES, INPUT_UNITS)],
-        "scheduling": {"names": list(SCHEDULING_NAMES), "min": list(cfg.vmin), "max": list(cfg.vmax)},
+        "scheduling": {
+            "names": list(SCHEDULING_NAMES),
+            "min": list(cfg.vmin),
+            "max": list(cfg.vmax),
+        },
         "vertices": [results[k].to_dict() for k in order],
         "meta": meta,
     }

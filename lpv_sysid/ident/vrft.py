@@ -42,9 +42,18 @@ from lpv_sysid.errors import ConfigError, SolverError
 log = logging.getLogger(__name__)
 
 __all__ = [
-    "Tf", "ControllerClass", "VrftResult", "pid_class", "velocity_class",
-    "first_order_model", "diagonal_model", "vrft", "vrft_filtered_signals",
-    "controller_tf", "invert_controller", "model_reference_h2",
+    "Tf",
+    "ControllerClass",
+    "VrftResult",
+    "pid_class",
+    "velocity_class",
+    "first_order_model",
+    "diagonal_model",
+    "vrft",
+    "vrft_filtered_signals",
+    "controller_tf",
+    "invert_controller",
+    "model_reference_h2",
 ]
 
 
@@ -69,8 +78,10 @@ class Tf:
         if n.size == 0:
             n = np.zeros(1)
         if n.size > d.size:
-            raise ConfigError(f"{what}: improper (numerator degree {n.size - 1} > "
-                              f"denominator degree {d.size - 1}); not causal")
+            raise ConfigError(
+                f"{what}: improper (numerator degree {n.size - 1} > "
+                f"denominator degree {d.size - 1}); not causal"
+            )
         return Tf(tuple(n), tuple(d))
 
     @property
@@ -101,8 +112,10 @@ class Tf:
             return self
         if len(self.den) == len(o.den) and np.allclose(self.den, o.den, rtol=0, atol=0):
             return Tf.make(np.polyadd(self.num, o.num), self.den)
-        return Tf.make(np.polyadd(np.polymul(self.num, o.den), np.polymul(o.num, self.den)),
-                       np.polymul(self.den, o.den))
+        return Tf.make(
+            np.polyadd(np.polymul(self.num, o.den), np.polymul(o.num, self.den)),
+            np.polymul(self.den, o.den),
+        )
 
     def __neg__(self) -> "Tf":
         return Tf(tuple(-np.asarray(self.num)), self.den)
@@ -135,7 +148,9 @@ def first_order_model(poles: Sequence[float]) -> TfMatrix:
     ps = [float(p) for p in poles]
     for p in ps:
         if not np.isfinite(p) or abs(p) >= 1.0:
-            raise ConfigError(f"reference model pole {p} must be finite and inside the unit circle")
+            raise ConfigError(
+                f"reference model pole {p} must be finite and inside the unit circle"
+            )
     return diagonal_model([Tf.make([1.0 - p], [1.0, -p]) for p in ps])
 
 
@@ -147,13 +162,17 @@ def diagonal_model(entries: Sequence[Tf]) -> TfMatrix:
 def _check_model(M: TfMatrix) -> int:
     n = len(M)
     if n == 0 or any(len(row) != n for row in M):
-        raise ConfigError("reference model M must be a square n_y x n_y matrix of transfer functions")
+        raise ConfigError(
+            "reference model M must be a square n_y x n_y matrix of transfer functions"
+        )
     for i, row in enumerate(M):
         for j, m in enumerate(row):
             if m.is_zero:
                 continue
             if np.any(np.abs(np.roots(m.den)) >= 1.0):
-                raise ConfigError(f"reference model M[{i}][{j}] has a pole on/outside the unit circle")
+                raise ConfigError(
+                    f"reference model M[{i}][{j}] has a pole on/outside the unit circle"
+                )
     return n
 
 
@@ -186,8 +205,9 @@ def _adj(M: TfMatrix) -> TfMatrix:
 
 def _is_scalar_identity(M: TfMatrix) -> bool:
     n = len(M)
-    return all(M[i][j].is_zero for i in range(n) for j in range(n) if i != j) and \
-        all(M[i][i].same(M[0][0]) for i in range(n))
+    return all(M[i][j].is_zero for i in range(n) for j in range(n) if i != j) and all(
+        M[i][i].same(M[0][0]) for i in range(n)
+    )
 
 
 def _apply(H: TfMatrix, x: np.ndarray) -> np.ndarray:
@@ -208,9 +228,9 @@ class ControllerClass:
 
     basis: tuple[Tf, ...]
     names: tuple[str, ...]
-    mask: np.ndarray = field(compare=False)   # (n_u, n_y) bool: tuned entries
+    mask: np.ndarray = field(compare=False)  # (n_u, n_y) bool: tuned entries
     Ts: float = 1.0
-    kind: str = "custom"                      # "pid" | "velocity" | "custom"
+    kind: str = "custom"  # "pid" | "velocity" | "custom"
 
     @property
     def n_u(self) -> int:
@@ -240,40 +260,61 @@ def _mask(structure, n_u: int, n_y: int) -> np.ndarray:
             return np.ones((n_u, n_y), dtype=bool)
         if structure == "diagonal":
             if n_u != n_y:
-                raise ConfigError(f"controller structure 'diagonal' needs n_u == n_y, got {n_u} x {n_y}")
+                raise ConfigError(
+                    f"controller structure 'diagonal' needs n_u == n_y, got {n_u} x {n_y}"
+                )
             return np.eye(n_u, dtype=bool)
-        raise ConfigError(f"controller structure {structure!r}: use 'full', 'diagonal' or a 0/1 matrix")
+        raise ConfigError(
+            f"controller structure {structure!r}: use 'full', 'diagonal' or a 0/1 matrix"
+        )
     m = np.asarray(structure)
     if m.shape != (n_u, n_y):
-        raise ConfigError(f"controller structure mask has shape {m.shape}, expected ({n_u}, {n_y})")
+        raise ConfigError(
+            f"controller structure mask has shape {m.shape}, expected ({n_u}, {n_y})"
+        )
     return m.astype(bool)
 
 
-def pid_class(n_u: int, n_y: int, Ts: float, terms: Sequence[str] = ("p", "i"),
-              structure="full") -> ControllerClass:
+def pid_class(
+    n_u: int, n_y: int, Ts: float, terms: Sequence[str] = ("p", "i"), structure="full"
+) -> ControllerClass:
     """Parallel PID, backward-Euler (seed 1 Eq. A.22): Kp + Ki Ts z/(z-1) + Kd (z-1)/(Ts z)."""
     if not np.isfinite(Ts) or Ts <= 0:
         raise ConfigError(f"sample time Ts={Ts} must be positive")
-    lib = {"p": Tf.make([1.0], [1.0]),
-           "i": Tf.make([Ts, 0.0], [1.0, -1.0]),
-           "d": Tf.make([1.0, -1.0], [Ts, 0.0])}
+    lib = {
+        "p": Tf.make([1.0], [1.0]),
+        "i": Tf.make([Ts, 0.0], [1.0, -1.0]),
+        "d": Tf.make([1.0, -1.0], [Ts, 0.0]),
+    }
     terms = [str(t).lower() for t in terms]
     bad = [t for t in terms if t not in lib]
     if bad or not terms or len(set(terms)) != len(terms):
         raise ConfigError(f"controller terms {list(terms)}: choose distinct items of p, i, d")
-    return ControllerClass(tuple(lib[t] for t in terms), tuple("K" + t for t in terms),
-                           _mask(structure, n_u, n_y), float(Ts), "pid")
+    return ControllerClass(
+        tuple(lib[t] for t in terms),
+        tuple("K" + t for t in terms),
+        _mask(structure, n_u, n_y),
+        float(Ts),
+        "pid",
+    )
 
 
-def velocity_class(n_u: int, n_y: int, order: int, structure="full", Ts: float = 1.0) -> ControllerClass:
+def velocity_class(
+    n_u: int, n_y: int, order: int, structure="full", Ts: float = 1.0
+) -> ControllerClass:
     """u(k) = u(k-1) + sum_{i=0..n} B_i e(k-i) (seed 1 Eqs. 3.19-3.25): beta_i = z/(z-1) z^-i."""
     if int(order) != order or order < 0:
         raise ConfigError(f"velocity controller order {order} must be a non-negative integer")
     n = int(order)
     den = np.polymul([1.0, -1.0], np.r_[1.0, np.zeros(n)])
     basis = tuple(Tf.make(np.r_[1.0, np.zeros(n + 1 - i)], den) for i in range(n + 1))
-    return ControllerClass(basis, tuple(f"B{i}" for i in range(n + 1)), _mask(structure, n_u, n_y),
-                           float(Ts), "velocity")
+    return ControllerClass(
+        basis,
+        tuple(f"B{i}" for i in range(n + 1)),
+        _mask(structure, n_u, n_y),
+        float(Ts),
+        "velocity",
+    )
 
 
 # ----------------------------------------------------------------------------------------------
@@ -281,23 +322,31 @@ def velocity_class(n_u: int, n_y: int, order: int, structure="full", Ts: float =
 # ----------------------------------------------------------------------------------------------
 @dataclass
 class VrftResult:
-    theta: np.ndarray                 # (n_theta,), vec([K_1..K_p]) masked, Eq. (3.23)
-    K: list                           # p matrices (n_u, n_y), zeros where masked out
+    theta: np.ndarray  # (n_theta,), vec([K_1..K_p]) masked, Eq. (3.23)
+    K: list  # p matrices (n_u, n_y), zeros where masked out
     cls: ControllerClass
     method: str
-    J_vr: float                       # Eq. (3.13) at theta, on the (filtered) data
+    J_vr: float  # Eq. (3.13) at theta, on the (filtered) data
     n_samples: int
-    condition: float                  # 2-norm condition number of the solved LS matrix
+    condition: float  # 2-norm condition number of the solved LS matrix
     param_names: list
 
     def to_dict(self) -> dict:
         C = controller_tf(self)
-        d = {"method": self.method, "J_vr": float(self.J_vr), "n_samples": int(self.n_samples),
-             "condition_number": float(self.condition), "kind": self.cls.kind, "Ts": self.cls.Ts,
-             "parameters": {n: float(v) for n, v in zip(self.param_names, self.theta)},
-             "matrices": {nm: np.asarray(k).tolist() for nm, k in zip(self.cls.names, self.K)},
-             "transfer_functions": [[{"num": list(map(float, c.num)), "den": list(map(float, c.den))}
-                                     for c in row] for row in C]}
+        d = {
+            "method": self.method,
+            "J_vr": float(self.J_vr),
+            "n_samples": int(self.n_samples),
+            "condition_number": float(self.condition),
+            "kind": self.cls.kind,
+            "Ts": self.cls.Ts,
+            "parameters": {n: float(v) for n, v in zip(self.param_names, self.theta)},
+            "matrices": {nm: np.asarray(k).tolist() for nm, k in zip(self.cls.names, self.K)},
+            "transfer_functions": [
+                [{"num": list(map(float, c.num)), "den": list(map(float, c.den))} for c in row]
+                for row in C
+            ],
+        }
         return d
 
 
@@ -332,7 +381,9 @@ def vrft_filtered_signals(u, y, M: TfMatrix, prefilter: Tf | None = None):
     else:
         L = _det(M)
         if L.is_zero:
-            raise ConfigError("reference model M is singular (det M = 0): no virtual reference exists")
+            raise ConfigError(
+                "reference model M is singular (det M = 0): no virtual reference exists"
+            )
         LMinv = _adj(M)
     W = prefilter or ONE
     u_L = (W * L).filter(u)
@@ -345,7 +396,7 @@ def _regressor(e_L: np.ndarray, cls: ControllerClass) -> np.ndarray:
     """phi_L^T(k) stacked: array (N, n_u, n_theta), Eqs. (3.22)-(3.25)."""
     N = e_L.shape[0]
     idx = cls.param_index()
-    filt = [b.filter(e_L) for b in cls.basis]          # (beta_q e_L)(k), (N, n_y)
+    filt = [b.filter(e_L) for b in cls.basis]  # (beta_q e_L)(k), (N, n_y)
     Phi = np.zeros((N, cls.n_u, len(idx)))
     for c, (q, i, j) in enumerate(idx):
         Phi[:, i, c] = filt[q][:, j]
@@ -360,8 +411,10 @@ def _rank_check(A: np.ndarray, names: list, what: str, rtol: float = 1e-9) -> fl
         _, _, vt = np.linalg.svd(A)
         v = vt[-1]
         involved = [names[k] for k in np.argsort(-np.abs(v)) if abs(v[k]) > 0.1 * np.abs(v).max()]
-        raise SolverError(f"{what} is rank deficient (sigma_min/sigma_max = {s[-1] / s[0]:.2e}): "
-                          f"collinear basis functions {involved}; excite more / use a smaller class")
+        raise SolverError(
+            f"{what} is rank deficient (sigma_min/sigma_max = {s[-1] / s[0]:.2e}): "
+            f"collinear basis functions {involved}; excite more / use a smaller class"
+        )
     return float(s[0] / s[-1])
 
 
@@ -372,9 +425,20 @@ def _assemble(theta: np.ndarray, cls: ControllerClass) -> list:
     return K
 
 
-def vrft(u, y, M: TfMatrix, cls: ControllerClass, *, method: str = "ls", prefilter: Tf | None = None,
-         window: int = 5, instrument=None, y2=None, discard: int = 0,
-         eiv_weight: str = "identity") -> VrftResult:
+def vrft(
+    u,
+    y,
+    M: TfMatrix,
+    cls: ControllerClass,
+    *,
+    method: str = "ls",
+    prefilter: Tf | None = None,
+    window: int = 5,
+    instrument=None,
+    y2=None,
+    discard: int = 0,
+    eiv_weight: str = "identity",
+) -> VrftResult:
     """Identify theta of ``C(z; theta)`` so that the closed loop approaches ``M`` (seed 1 Sec. 3.3).
 
     method:
@@ -392,8 +456,10 @@ def vrft(u, y, M: TfMatrix, cls: ControllerClass, *, method: str = "ls", prefilt
     u = _as_data(u, "u")
     y = _as_data(y, "y")
     if u.shape[1] != cls.n_u or y.shape[1] != cls.n_y:
-        raise ConfigError(f"data have n_u={u.shape[1]}, n_y={y.shape[1]} but the controller class is "
-                          f"{cls.n_u} x {cls.n_y}")
+        raise ConfigError(
+            f"data have n_u={u.shape[1]}, n_y={y.shape[1]} but the controller class is "
+            f"{cls.n_u} x {cls.n_y}"
+        )
     names = cls.param_names()
     n_th = len(names)
     if n_th == 0:
@@ -404,8 +470,10 @@ def vrft(u, y, M: TfMatrix, cls: ControllerClass, *, method: str = "ls", prefilt
         raise ConfigError(f"EIV window l={window} must be >= 0")
     need = int(discard) + n_th + (2 * window + 1 if method == "eiv" else 0) + 10
     if N < need:
-        raise ConfigError(f"data too short: N={N} samples, need at least {need} for {n_th} parameters"
-                          + (f" and EIV window l={window}" if method == "eiv" else ""))
+        raise ConfigError(
+            f"data too short: N={N} samples, need at least {need} for {n_th} parameters"
+            + (f" and EIV window l={window}" if method == "eiv" else "")
+        )
     u_L, e_L = vrft_filtered_signals(u, y, M, prefilter)
     Phi = _regressor(e_L, cls)
     s = slice(int(discard), N)
@@ -422,25 +490,27 @@ def vrft(u, y, M: TfMatrix, cls: ControllerClass, *, method: str = "ls", prefilt
             z = _as_data(instrument, "instrument")
             if z.shape[0] != N:
                 raise ConfigError(f"instrument has {z.shape[0]} samples, data have {N}")
-            z_L = _scalar_L(M, prefilter).filter(z)          # same filter as u_L (Eq. 3.26)
+            z_L = _scalar_L(M, prefilter).filter(z)  # same filter as u_L (Eq. 3.26)
         l = window
         ks = np.arange(max(int(discard), l), N - l)
         # zeta_L(k) = [z_L(k+l); ...; z_L(k-l)]  (Eq. 3.26)
         Z = np.concatenate([z_L[ks + d] for d in range(l, -l - 1, -1)], axis=1)
         nk = ks.size
-        R = np.einsum("ka,kbt->abt", Z, Phi[ks]).reshape(-1, n_th) / nk      # Eq. (3.28)
-        r = np.einsum("ka,kb->ab", Z, u_L[ks]).reshape(-1) / nk              # Eq. (3.29)
+        R = np.einsum("ka,kbt->abt", Z, Phi[ks]).reshape(-1, n_th) / nk  # Eq. (3.28)
+        r = np.einsum("ka,kb->ab", Z, u_L[ks]).reshape(-1) / nk  # Eq. (3.29)
         cond = _rank_check(R, names, "EIV correlation matrix R (Eq. 3.28)")
-        theta = np.linalg.lstsq(R, r, rcond=None)[0]                         # Eq. (3.31), W = I
+        theta = np.linalg.lstsq(R, r, rcond=None)[0]  # Eq. (3.31), W = I
         if eiv_weight == "residual":
             eps = u_L[ks] - np.einsum("kbt,t->kb", Phi[ks], theta)
-            g = (Z[:, :, None] * eps[:, None, :]).reshape(nk, -1)          # zeta (x) eps
-            W = g.T @ g / nk                                                # Eq. (3.30)
+            g = (Z[:, :, None] * eps[:, None, :]).reshape(nk, -1)  # zeta (x) eps
+            W = g.T @ g / nk  # Eq. (3.30)
             W += 1e-9 * np.trace(W) / W.shape[0] * np.eye(W.shape[0])
             try:
                 Lw = np.linalg.cholesky(W)
             except np.linalg.LinAlgError:
-                raise SolverError("EIV residual covariance W (Eq. 3.30) is not positive definite") from None
+                raise SolverError(
+                    "EIV residual covariance W (Eq. 3.30) is not positive definite"
+                ) from None
             Rw = np.linalg.solve(Lw, R)
             cond = _rank_check(Rw, names, "weighted EIV matrix W^-1/2 R (Eq. 3.31)")
             theta = np.linalg.lstsq(Rw, np.linalg.solve(Lw, r), rcond=None)[0]
@@ -496,8 +566,13 @@ def _common_den(cls: ControllerClass) -> tuple[np.ndarray, list]:
 def controller_tf(res: VrftResult) -> list:
     """C_ij(z) = sum_q K_q[i, j] beta_q(z) as Tf over the common denominator of the basis."""
     d, nums = _common_den(res.cls)
-    return [[Tf.make(sum(res.K[q][i, j] * nums[q] for q in range(len(nums))), d)
-             for j in range(res.cls.n_y)] for i in range(res.cls.n_u)]
+    return [
+        [
+            Tf.make(sum(res.K[q][i, j] * nums[q] for q in range(len(nums))), d)
+            for j in range(res.cls.n_y)
+        ]
+        for i in range(res.cls.n_u)
+    ]
 
 
 def _matrix_poly(res: VrftResult) -> tuple[np.ndarray, np.ndarray]:
@@ -520,10 +595,14 @@ def invert_controller(res: VrftResult, u) -> np.ndarray:
     d, Nk = _matrix_poly(res)
     n_u, n_y = Nk.shape[1:]
     if n_u != n_y:
-        raise SolverError(f"controller is {n_u} x {n_y}: only square controllers can be inverted (Eq. 3.33)")
+        raise SolverError(
+            f"controller is {n_u} x {n_y}: only square controllers can be inverted (Eq. 3.33)"
+        )
     N0 = Nk[0]
     if np.linalg.cond(N0) > 1e12:
-        raise SolverError("controller direct-feedthrough matrix N_0 is singular: C^-1 is not causal")
+        raise SolverError(
+            "controller direct-feedthrough matrix N_0 is singular: C^-1 is not causal"
+        )
     N0i = np.linalg.inv(N0)
     A = [N0i @ Nk[k] for k in range(1, Nk.shape[0])]
     if A:
@@ -533,10 +612,12 @@ def invert_controller(res: VrftResult, u) -> np.ndarray:
         comp[n:, :-n] = np.eye(n * (len(A) - 1))
         zeros = np.linalg.eigvals(comp)
         if zeros.size and np.max(np.abs(zeros)) >= 1.0 - 1e-9:
-            raise SolverError(f"identified controller is not minimum phase (transmission zero at "
-                              f"|z| = {np.max(np.abs(zeros)):.4f}): C^-1 is unstable (Eq. 3.33)")
+            raise SolverError(
+                f"identified controller is not minimum phase (transmission zero at "
+                f"|z| = {np.max(np.abs(zeros)):.4f}): C^-1 is unstable (Eq. 3.33)"
+            )
     T = u.shape[0]
-    du = signal.lfilter(d, [1.0], u, axis=0)               # d(q^-1) u
+    du = signal.lfilter(d, [1.0], u, axis=0)  # d(q^-1) u
     e = np.zeros((T, n_u))
     for k in range(T):
         acc = du[k].copy()
@@ -579,8 +660,9 @@ def simulate_loop(G_ss, res: VrftResult, r: np.ndarray, v: np.ndarray | None = N
     I = np.eye(n_u)
     S = np.linalg.inv(I + Nk[0] @ D)
     for k in range(T):
-        past = -sum(d[m] * u_hist[m - 1] for m in range(1, d.size)) + \
-            sum(Nk[m] @ e_hist[m - 1] for m in range(1, Nk.shape[0]))
+        past = -sum(d[m] * u_hist[m - 1] for m in range(1, d.size)) + sum(
+            Nk[m] @ e_hist[m - 1] for m in range(1, Nk.shape[0])
+        )
         e_free = r[k] - C @ x - vv[k]
         uk = S @ (past + Nk[0] @ e_free)
         ek = e_free - D @ uk

@@ -22,17 +22,37 @@ from typing import Any
 import numpy as np
 
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.ident.vrft import (ONE, ControllerClass, Tf, TfMatrix, _is_scalar_identity,
-                                  diagonal_model, first_order_model, pid_class, velocity_class)
+from lpv_sysid.ident.vrft import (
+    ONE,
+    ControllerClass,
+    Tf,
+    TfMatrix,
+    _is_scalar_identity,
+    diagonal_model,
+    first_order_model,
+    pid_class,
+    velocity_class,
+)
 
-_TOP = {"reference_model", "controller", "prefilter", "method", "window", "discard", "Ts", "outer",
-        "eiv_weight"}
+_TOP = {
+    "reference_model",
+    "controller",
+    "prefilter",
+    "method",
+    "window",
+    "discard",
+    "Ts",
+    "outer",
+    "eiv_weight",
+}
 _LOOP = {"reference_model", "controller", "prefilter"}
 
 
 def _tf(d: Any, where: str) -> Tf:
     if not isinstance(d, dict) or set(d) != {"num", "den"}:
-        raise ConfigError(f"{where}: expected {{num: [...], den: [...]}} (descending powers of z), got {d!r}")
+        raise ConfigError(
+            f"{where}: expected {{num: [...], den: [...]}} (descending powers of z), got {d!r}"
+        )
     try:
         return Tf.make(d["num"], d["den"], where)
     except (TypeError, ValueError) as exc:
@@ -42,7 +62,7 @@ def _tf(d: Any, where: str) -> Tf:
 def parse_model(d: Any, where: str = "reference_model") -> TfMatrix:
     if not isinstance(d, dict) or len(d) != 1:
         raise ConfigError(f"{where}: give exactly one of poles / diagonal / full")
-    (key, val), = d.items()
+    ((key, val),) = d.items()
     if key == "poles":
         if not isinstance(val, list) or not val:
             raise ConfigError(f"{where}.poles: expected a non-empty list of numbers")
@@ -57,7 +77,9 @@ def parse_model(d: Any, where: str = "reference_model") -> TfMatrix:
     if key == "full":
         if not isinstance(val, list) or not val or not all(isinstance(r, list) for r in val):
             raise ConfigError(f"{where}.full: expected a square list of lists of {{num, den}}")
-        return [[_tf(e, f"{where}.full[{i}][{j}]") for j, e in enumerate(r)] for i, r in enumerate(val)]
+        return [
+            [_tf(e, f"{where}.full[{i}][{j}]") for j, e in enumerate(r)] for i, r in enumerate(val)
+        ]
     raise ConfigError(f"{where}: unknown key {key!r}; use poles, diagonal or full")
 
 
@@ -104,7 +126,9 @@ class LoopConfig:
             return None
         if pf == "one_minus_m":
             if not _is_scalar_identity(self.M):
-                raise ConfigError(f"{where}: one_minus_m needs M = m(z) I (equal diagonal, zero off-diagonal)")
+                raise ConfigError(
+                    f"{where}: one_minus_m needs M = m(z) I (equal diagonal, zero off-diagonal)"
+                )
             return ONE - self.M[0][0]
         return _tf(pf, where)
 
@@ -138,7 +162,12 @@ class VrftConfig:
             ints[k] = v
         Ts = d.get("Ts")
         if Ts is not None:
-            if isinstance(Ts, bool) or not isinstance(Ts, (int, float)) or not np.isfinite(Ts) or Ts <= 0:
+            if (
+                isinstance(Ts, bool)
+                or not isinstance(Ts, (int, float))
+                or not np.isfinite(Ts)
+                or Ts <= 0
+            ):
                 raise ConfigError(f"Ts: expected a positive number of seconds, got {Ts!r}")
             Ts = float(Ts)
         outer = LoopConfig.from_dict(d["outer"], "outer.") if d.get("outer") is not None else None

@@ -13,7 +13,7 @@ from lpv_sysid.ident.vrft import first_order_model
 # Eq. (5.4): G(z) = K0 / (z - 0.9048), Ts = 1 s
 TABLE53_K0 = np.array([[0.09516, 0.03807], [-0.02974, 0.04758]])
 TABLE53_POLE = 0.9048
-TABLE53_M_POLE = 0.9                                      # Eq. (5.5): M = 0.1/(z-0.9) I
+TABLE53_M_POLE = 0.9  # Eq. (5.5): M = 0.1/(z-0.9) I
 # Table 5.3, MIMO column: C_ij = (a_ij z - b_ij)/(z - 1)
 TABLE53_MIMO_A = np.array([[0.8406, -0.6726], [0.5254, 1.681]])
 TABLE53_MIMO_B = np.array([[0.7606, -0.6086], [0.4754, 1.521]])
@@ -37,7 +37,9 @@ def table53_ideal_pi() -> tuple[np.ndarray, np.ndarray]:
     return g * Ki, g * TABLE53_POLE * Ki
 
 
-def prbs(n: int, channels: int, rng: np.random.Generator, min_hold: int = 1, max_hold: int = 5) -> np.ndarray:
+def prbs(
+    n: int, channels: int, rng: np.random.Generator, min_hold: int = 1, max_hold: int = 5
+) -> np.ndarray:
     """+-1 random binary sequence with random hold times in [min_hold, max_hold] samples."""
     out = np.empty((n, channels))
     for c in range(channels):
@@ -45,7 +47,7 @@ def prbs(n: int, channels: int, rng: np.random.Generator, min_hold: int = 1, max
         level = rng.choice([-1.0, 1.0])
         while k < n:
             h = int(rng.integers(min_hold, max_hold + 1))
-            out[k:k + h, c] = level
+            out[k : k + h, c] = level
             level = -level
             k += h
     return out
@@ -69,31 +71,52 @@ def table53_model():
 # ---------------------------------------------------------------------------------------------
 # LV100 gas turbine, Eqs. (5.1)-(5.3)
 # ---------------------------------------------------------------------------------------------
-LV100_A = np.array([[-1.4, -0.055, 0.0, 43.0, 6.3],
-                    [0.093, -0.11, 0.0, 4.2, -0.76],
-                    [-7.8, -0.26, -3.3, 300.0, -4.5],
-                    [0.0, 0.0, 0.0, -25.0, 0.0],
-                    [0.0, 0.0, 0.0, 0.0, -33.0]])
+LV100_A = np.array(
+    [
+        [-1.4, -0.055, 0.0, 43.0, 6.3],
+        [0.093, -0.11, 0.0, 4.2, -0.76],
+        [-7.8, -0.26, -3.3, 300.0, -4.5],
+        [0.0, 0.0, 0.0, -25.0, 0.0],
+        [0.0, 0.0, 0.0, 0.0, -33.0],
+    ]
+)
 LV100_B = np.vstack([np.zeros((3, 2)), np.eye(2)])
 LV100_C = np.array([[1.0, 0, 0, 0, 0], [0, 0, 1.0, 0, 0]])
 LV100_TS = 0.1
-LV100_M_POLE = 0.6                     # Eq. (5.3): 0.4/(z - 0.6) I
-LV100_C0_K = np.array([[1.0, 0.1], [-1.0, 1.0]])     # Eq. (5.2): C0 = C0_K (z - 0.99)/(z - 1)
+LV100_M_POLE = 0.6  # Eq. (5.3): 0.4/(z - 0.6) I
+LV100_C0_K = np.array([[1.0, 0.1], [-1.0, 1.0]])  # Eq. (5.2): C0 = C0_K (z - 0.99)/(z - 1)
 # Table 5.2, N = 1e4 column: mean (sigma) of Kp, Ki for entries (1,1), (2,1), (1,2), (2,2)
-LV100_T52_KP = {(0, 0): (0.075, 0.031), (1, 0): (18.698, 0.925), (0, 1): (0.288, 0.014), (1, 1): (2.149, 0.117)}
-LV100_T52_KI = {(0, 0): (2.823, 0.132), (1, 0): (6.238, 0.443), (0, 1): (1.086, 0.050), (1, 1): (9.268, 0.439)}
+LV100_T52_KP = {
+    (0, 0): (0.075, 0.031),
+    (1, 0): (18.698, 0.925),
+    (0, 1): (0.288, 0.014),
+    (1, 1): (2.149, 0.117),
+}
+LV100_T52_KI = {
+    (0, 0): (2.823, 0.132),
+    (1, 0): (6.238, 0.443),
+    (0, 1): (1.086, 0.050),
+    (1, 1): (9.268, 0.439),
+}
 
 
 def lv100_plant_ss():
     """Eq. (5.1) discretised with Tustin at Ts = 0.1 s, as in the thesis."""
-    A, B, C, D, _ = signal.cont2discrete((LV100_A, LV100_B, LV100_C, np.zeros((2, 2))), LV100_TS,
-                                         method="bilinear")
+    A, B, C, D, _ = signal.cont2discrete(
+        (LV100_A, LV100_B, LV100_C, np.zeros((2, 2))), LV100_TS, method="bilinear"
+    )
     return A, B, C, D
 
 
-def lv100_data(n: int = 5000, seed: int = 0, noise_var: float = 0.0025, amplitude: float = 1.0,
-               closed_loop: bool = True, noise_seed: int | None = None,
-               c0_gain: np.ndarray | None = None):
+def lv100_data(
+    n: int = 5000,
+    seed: int = 0,
+    noise_var: float = 0.0025,
+    amplitude: float = 1.0,
+    closed_loop: bool = True,
+    noise_seed: int | None = None,
+    c0_gain: np.ndarray | None = None,
+):
     """PRBS experiment on the LV100 (seed 1 Sec. 5.1.1): returns (t, u, y_meas, excitation).
 
     Closed loop with C0 of Eq. (5.2), PRBS injected at the plant input (Fig. 3.2, u = C0 e + u_bar),
@@ -116,7 +139,11 @@ def lv100_data(n: int = 5000, seed: int = 0, noise_var: float = 0.0025, amplitud
     y = np.zeros((n, 2))
     uc_prev = np.zeros(2)
     e_prev = np.zeros(2)
-    K = (LV100_C0_K if c0_gain is None else np.asarray(c0_gain, float)) if closed_loop else np.zeros((2, 2))
+    K = (
+        (LV100_C0_K if c0_gain is None else np.asarray(c0_gain, float))
+        if closed_loop
+        else np.zeros((2, 2))
+    )
     # C0: uc(k) = uc(k-1) + K (e(k) - 0.99 e(k-1)), e = -(y + v); y = Cx + D u (algebraic loop)
     S = np.linalg.inv(np.eye(2) + K @ D)
     for k in range(n):
@@ -153,8 +180,14 @@ def lv100_c0_spectral_radius(K: np.ndarray = LV100_C0_K) -> float:
     return float(np.max(np.abs(np.linalg.eigvals(Acl))))
 
 
-def lv100_statistics(n: int, runs: int, method: str = "eiv", window: int = 20, seed: int = 0,
-                     eiv_weight: str = "identity"):
+def lv100_statistics(
+    n: int,
+    runs: int,
+    method: str = "eiv",
+    window: int = 20,
+    seed: int = 0,
+    eiv_weight: str = "identity",
+):
     """Table 5.2 protocol: one PRBS input, ``runs`` noise realisations; mean and std of Kp, Ki.
 
     Returns (mean_Kp, std_Kp, mean_Ki, std_Ki), each 2x2, for the PI class of Sec. 5.1.1.

@@ -105,10 +105,29 @@ from lpv_sysid.errors import BagError
 
 LOG = logging.getLogger(__name__)
 
-__all__ = ["BagWriter", "BagContents", "BagArrays", "TopicArrays", "TopicStats", "RepairReport",
-           "read_bag", "read_arrays", "topic_info", "encode_block", "records_close", "CdrLayout",
-           "LayoutError", "repair_bag", "writer_alive", "atomic_write_text", "DiskReserve",
-           "jazzy_typestore", "DEFAULT_QOS", "make_qos", "LOCK_FILE"]
+__all__ = [
+    "BagWriter",
+    "BagContents",
+    "BagArrays",
+    "TopicArrays",
+    "TopicStats",
+    "RepairReport",
+    "read_bag",
+    "read_arrays",
+    "topic_info",
+    "encode_block",
+    "records_close",
+    "CdrLayout",
+    "LayoutError",
+    "repair_bag",
+    "writer_alive",
+    "atomic_write_text",
+    "DiskReserve",
+    "jazzy_typestore",
+    "DEFAULT_QOS",
+    "make_qos",
+    "LOCK_FILE",
+]
 
 STORAGES = ("mcap", "sqlite3")
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -120,28 +139,41 @@ RESERVE_BYTES = 1 << 20
 #: rosbags 0.11.9 ``McapWriter.write`` closes a chunk by itself above 2**20 bytes; the
 #: writer flushes before that so chunk boundaries (= what is durable) stay its own
 MAX_CHUNK_BYTES = 1 << 20
-_MSG_RECORD_OVERHEAD = 9 + 22       # mcap Message record: opcode + length + header
-_MCAP_MSG_RECORD = struct.Struct("<BQHIQQ")   # opcode, length, channel, sequence, log, publish
+_MSG_RECORD_OVERHEAD = 9 + 22  # mcap Message record: opcode + length + header
+_MCAP_MSG_RECORD = struct.Struct("<BQHIQQ")  # opcode, length, channel, sequence, log, publish
 
 
 @functools.lru_cache(maxsize=1)
 def jazzy_typestore():
     """The rosbags ROS 2 Jazzy typestore (built once; its classes are shared)."""
     from rosbags.typesys import Stores, get_typestore
+
     return get_typestore(Stores.ROS2_JAZZY)
 
 
 # ---------------------------------------------------------------------------- QoS
-DEFAULT_QOS = {"history": "keep_last", "depth": 10, "reliability": "reliable",
-               "durability": "volatile", "liveliness": "automatic"}
+DEFAULT_QOS = {
+    "history": "keep_last",
+    "depth": 10,
+    "reliability": "reliable",
+    "durability": "volatile",
+    "liveliness": "automatic",
+}
 
 
 def make_qos(profile: Mapping | None = None):
     """A ``rosbags.interfaces.Qos`` from a dict such as ``{"reliability": "best_effort",
     "depth": 5}``; missing keys take :data:`DEFAULT_QOS` (deadline, lifespan and lease
     0 = RMW default)."""
-    from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness,
-                                    QosReliability, QosTime)
+    from rosbags.interfaces import (
+        Qos,
+        QosDurability,
+        QosHistory,
+        QosLiveliness,
+        QosReliability,
+        QosTime,
+    )
+
     p = dict(DEFAULT_QOS)
     if profile:
         unknown = set(profile) - set(DEFAULT_QOS)
@@ -153,16 +185,26 @@ def make_qos(profile: Mapping | None = None):
         try:
             return cls[str(p[key]).upper()]
         except KeyError:
-            raise BagError(f"qos.{key}: unknown value {p[key]!r}; expected one of "
-                           f"{[m.name.lower() for m in cls]}") from None
+            raise BagError(
+                f"qos.{key}: unknown value {p[key]!r}; expected one of "
+                f"{[m.name.lower() for m in cls]}"
+            ) from None
 
     depth = p["depth"]
     if isinstance(depth, bool) or not isinstance(depth, int) or depth < 0:
         raise BagError(f"qos.depth: expected a non-negative integer, got {depth!r}")
     zero = QosTime(0, 0)
-    return Qos(enum(QosHistory, "history"), depth, enum(QosReliability, "reliability"),
-               enum(QosDurability, "durability"), zero, zero, enum(QosLiveliness, "liveliness"),
-               zero, False)
+    return Qos(
+        enum(QosHistory, "history"),
+        depth,
+        enum(QosReliability, "reliability"),
+        enum(QosDurability, "durability"),
+        zero,
+        zero,
+        enum(QosLiveliness, "liveliness"),
+        zero,
+        False,
+    )
 
 
 # --------------------------------------------------------------------- durability helpers
@@ -242,7 +284,7 @@ def writer_alive(lock_path) -> bool:
     except FileNotFoundError:
         return False
     except OSError:
-        return True            # cannot tell: assume alive, never repair under a writer
+        return True  # cannot tell: assume alive, never repair under a writer
     try:
         fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
@@ -250,7 +292,7 @@ def writer_alive(lock_path) -> bool:
     except OSError:
         return True
     finally:
-        fh.close()             # closing drops our own lock, if we got it
+        fh.close()  # closing drops our own lock, if we got it
     return False
 
 
@@ -296,20 +338,39 @@ class BagWriter:
     for closing on a full disk. ``clock`` (seconds, monotonic) times the flushes.
     """
 
-    def __init__(self, path, storage: str = "mcap", *, typestore=None,
-                 chunk_bytes: int = MAX_CHUNK_BYTES, flush_interval_s: float = FLUSH_INTERVAL_S,
-                 flush_messages: int = FLUSH_MESSAGES, fsync: bool = False,
-                 reserve_bytes: int = RESERVE_BYTES, clock: Callable[[], float] = time.monotonic):
+    def __init__(
+        self,
+        path,
+        storage: str = "mcap",
+        *,
+        typestore=None,
+        chunk_bytes: int = MAX_CHUNK_BYTES,
+        flush_interval_s: float = FLUSH_INTERVAL_S,
+        flush_messages: int = FLUSH_MESSAGES,
+        fsync: bool = False,
+        reserve_bytes: int = RESERVE_BYTES,
+        clock: Callable[[], float] = time.monotonic,
+    ):
         if storage not in STORAGES:
             raise BagError(f"bag {path}: storage must be one of {STORAGES}, got {storage!r}")
         if isinstance(chunk_bytes, bool) or not isinstance(chunk_bytes, int) or chunk_bytes <= 0:
-            raise BagError(f"bag {path}: chunk_bytes must be a positive integer, got {chunk_bytes!r}")
-        if isinstance(flush_interval_s, bool) or not isinstance(flush_interval_s, (int, float)) \
-                or not math.isfinite(flush_interval_s) or flush_interval_s <= 0:
-            raise BagError(f"bag {path}: flush_interval_s must be a finite number > 0, "
-                           f"got {flush_interval_s!r}")
-        for name, value, lo in (("flush_messages", flush_messages, 1),
-                                ("reserve_bytes", reserve_bytes, 0)):
+            raise BagError(
+                f"bag {path}: chunk_bytes must be a positive integer, got {chunk_bytes!r}"
+            )
+        if (
+            isinstance(flush_interval_s, bool)
+            or not isinstance(flush_interval_s, (int, float))
+            or not math.isfinite(flush_interval_s)
+            or flush_interval_s <= 0
+        ):
+            raise BagError(
+                f"bag {path}: flush_interval_s must be a finite number > 0, "
+                f"got {flush_interval_s!r}"
+            )
+        for name, value, lo in (
+            ("flush_messages", flush_messages, 1),
+            ("reserve_bytes", reserve_bytes, 0),
+        ):
             if isinstance(value, bool) or not isinstance(value, int) or value < lo:
                 raise BagError(f"bag {path}: {name} must be an integer >= {lo}, got {value!r}")
         self.path = Path(path)
@@ -336,7 +397,7 @@ class BagWriter:
         self._failed: str | None = None
         self._reserve: DiskReserve | None = None
         self._header_end = 0
-        self._pending_rows: list = []         # sqlite3: rows of the open transaction
+        self._pending_rows: list = []  # sqlite3: rows of the open transaction
         self._pending_n = 0
         self._oldest = 0.0
 
@@ -347,6 +408,7 @@ class BagWriter:
     # -- lifecycle ---------------------------------------------------------------
     def open(self) -> "BagWriter":
         from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
+
         if self._writer is not None or self._closed:
             raise BagError(f"bag {self.path}: already opened")
         plugin = StoragePlugin.MCAP if self._mcap else StoragePlugin.SQLITE3
@@ -357,7 +419,7 @@ class BagWriter:
             writer.open()
             storage = writer.storage
             if self._mcap:
-                storage.bio.flush()               # the header is on disk from the start
+                storage.bio.flush()  # the header is on disk from the start
                 self._header_end = storage.bio.tell()
             else:
                 storage.conn.execute(f"PRAGMA synchronous={'FULL' if self.fsync else 'OFF'}")
@@ -408,7 +470,9 @@ class BagWriter:
             writer.close()
         except Exception as exc:  # noqa: BLE001 - every failure must become a BagError
             state = self._recover(writer)
-            raise BagError(f"bag {self.path}: closing failed ({_describe(exc)}); {state}") from None
+            raise BagError(
+                f"bag {self.path}: closing failed ({_describe(exc)}); {state}"
+            ) from None
         self.durable_counts = dict(self.counts)
         self._pending_n = 0
         self._pending_rows.clear()
@@ -421,18 +485,23 @@ class BagWriter:
         """Register ``topic`` with type ``pkg/msg/Name`` and its offered QoS profile."""
         self._check_open()
         if not isinstance(topic, str) or not topic:
-            raise BagError(f"bag {self.path}: topic name must be a non-empty string, got {topic!r}")
+            raise BagError(
+                f"bag {self.path}: topic name must be a non-empty string, got {topic!r}"
+            )
         if topic in self._connections:
             if self.types[topic] != msgtype:
-                raise BagError(f"bag {self.path}: topic {topic!r} already registered as "
-                               f"{self.types[topic]}, not {msgtype}")
+                raise BagError(
+                    f"bag {self.path}: topic {topic!r} already registered as "
+                    f"{self.types[topic]}, not {msgtype}"
+                )
             return
         if msgtype not in self.typestore.types:
             raise BagError(f"bag {self.path}: topic {topic!r}: unknown message type {msgtype!r}")
         profile = make_qos(qos)
         try:
-            conn = self._writer.add_connection(topic, msgtype, typestore=self.typestore,
-                                               offered_qos_profiles=[profile])
+            conn = self._writer.add_connection(
+                topic, msgtype, typestore=self.typestore, offered_qos_profiles=[profile]
+            )
         except Exception as exc:  # noqa: BLE001
             self._fail(f"registering topic {topic!r} failed", exc)
         self._connections[topic] = conn
@@ -450,8 +519,10 @@ class BagWriter:
         try:
             data = self.typestore.serialize_cdr(msg, msgtype)
         except Exception as exc:  # noqa: BLE001 - rosbags raises several kinds
-            raise BagError(f"bag {self.path}: topic {topic!r}: cannot serialise message as "
-                           f"{msgtype}: {_describe(exc)}") from None
+            raise BagError(
+                f"bag {self.path}: topic {topic!r}: cannot serialise message as "
+                f"{msgtype}: {_describe(exc)}"
+            ) from None
         self._write(topic, stamp_ns, data)
 
     def write_raw(self, topic: str, stamp_ns: int, data: bytes) -> None:
@@ -467,8 +538,11 @@ class BagWriter:
         them). ``data`` is bytes or a row of the uint8 block of :func:`encode_block`.
         Returns the number of messages written."""
         self._check_open()
-        if not self._mcap or getattr(self._writer, "compression_mode", None) is None or \
-                self._writer.compression_mode.name != "NONE":
+        if (
+            not self._mcap
+            or getattr(self._writer, "compression_mode", None) is None
+            or self._writer.compression_mode.name != "NONE"
+        ):
             n = 0
             for topic, stamp_ns, data in rows:
                 self.write_raw(topic, stamp_ns, data)
@@ -477,7 +551,7 @@ class BagWriter:
         writer, storage = self._writer, self._writer.storage
         conns: dict = {}
         rec_head = _MCAP_MSG_RECORD.pack
-        limit, big = self.chunk_bytes, 2 ** 20
+        limit, big = self.chunk_bytes, 2**20
         n = 0
         topic = None
         try:
@@ -487,10 +561,14 @@ class BagWriter:
                     self._topic_type(topic)
                     cid = conns[topic] = self._connections[topic].id
                 if isinstance(stamp_ns, float) and not math.isfinite(stamp_ns):
-                    raise BagError(f"bag {self.path}: topic {topic!r}: stamp {stamp_ns!r} is not finite")
+                    raise BagError(
+                        f"bag {self.path}: topic {topic!r}: stamp {stamp_ns!r} is not finite"
+                    )
                 ns = int(stamp_ns)
                 if not 0 <= ns < 2**63:
-                    raise BagError(f"bag {self.path}: topic {topic!r}: stamp {ns} ns outside [0, 2^63)")
+                    raise BagError(
+                        f"bag {self.path}: topic {topic!r}: stamp {ns} ns outside [0, 2^63)"
+                    )
                 size = len(data)
                 chunk = storage.chunk
                 if chunk.msgs and chunk.bio.tell() + _MSG_RECORD_OVERHEAD + size > limit:
@@ -525,8 +603,11 @@ class BagWriter:
                 if not self._pending_n:
                     self._oldest = now
                 self._pending_n += 1
-                if len(storage.chunks) != nchunks or self._pending_n >= self.flush_messages \
-                        or now - self._oldest >= self.flush_interval_s:
+                if (
+                    len(storage.chunks) != nchunks
+                    or self._pending_n >= self.flush_messages
+                    or now - self._oldest >= self.flush_interval_s
+                ):
                     self._flush()
         except BagError:
             raise
@@ -569,8 +650,10 @@ class BagWriter:
         try:
             return self.types[topic]
         except KeyError:
-            raise BagError(f"bag {self.path}: topic {topic!r} was not added "
-                           f"(add_topic first); known: {sorted(self.types)}") from None
+            raise BagError(
+                f"bag {self.path}: topic {topic!r} was not added "
+                f"(add_topic first); known: {sorted(self.types)}"
+            ) from None
 
     def _write(self, topic: str, stamp_ns: int, data: bytes) -> None:
         if isinstance(stamp_ns, float) and not math.isfinite(stamp_ns):
@@ -581,8 +664,11 @@ class BagWriter:
         conn = self._connections[topic]
         storage = self._writer.storage
         try:
-            if self._mcap and storage.chunk.msgs and \
-                    storage.chunk.bio.tell() + _MSG_RECORD_OVERHEAD + len(data) > self.chunk_bytes:
+            if (
+                self._mcap
+                and storage.chunk.msgs
+                and storage.chunk.bio.tell() + _MSG_RECORD_OVERHEAD + len(data) > self.chunk_bytes
+            ):
                 self._flush()
             nchunks = len(storage.chunks) if self._mcap else 0
             self._writer.write(conn, ns, data)
@@ -593,9 +679,11 @@ class BagWriter:
             if not self._pending_n:
                 self._oldest = now
             self._pending_n += 1
-            if (self._mcap and len(storage.chunks) != nchunks) \
-                    or self._pending_n >= self.flush_messages \
-                    or now - self._oldest >= self.flush_interval_s:
+            if (
+                (self._mcap and len(storage.chunks) != nchunks)
+                or self._pending_n >= self.flush_messages
+                or now - self._oldest >= self.flush_interval_s
+            ):
                 self._flush()
         except Exception as exc:  # noqa: BLE001
             self._fail(f"writing {topic!r} failed", exc)
@@ -611,7 +699,7 @@ class BagWriter:
                 os.fsync(storage.bio.fileno())
         else:
             storage.conn.commit()
-            if sync and not self.fsync:         # synchronous=OFF: sync the file ourselves
+            if sync and not self.fsync:  # synchronous=OFF: sync the file ourselves
                 fd = os.open(storage.path, os.O_RDONLY)
                 try:
                     os.fsync(fd)
@@ -648,23 +736,28 @@ class BagWriter:
                     pending = _pending_chunk(storage)
                     limit = _completed_end(storage, self._header_end)
                     with contextlib.suppress(Exception):
-                        storage.bio.close()   # hands over what it can; the walk checks
+                        storage.bio.close()  # hands over what it can; the walk checks
                 rep = repair_bag(self.path, _limit=limit, _pending=pending)
             else:
                 if storage is not None:
                     self._settle_sqlite(storage)
                 rep = repair_bag(self.path)
         except Exception as exc:  # noqa: BLE001 - the write error is what gets raised
-            return (f"what reached the disk stays there, but it could not be indexed ({exc}); "
-                    f"run `lpv-sysid bag repair {self.path}` once there is space")
+            return (
+                f"what reached the disk stays there, but it could not be indexed ({exc}); "
+                f"run `lpv-sysid bag repair {self.path}` once there is space"
+            )
         self.repair = rep
-        self.durable_counts = {t: rep.topics[t].count if t in rep.topics else 0
-                               for t in self.counts}
+        self.durable_counts = {
+            t: rep.topics[t].count if t in rep.topics else 0 for t in self.counts
+        }
         lost = sum(self.counts.values()) - rep.messages
         if lost <= 0:
             return f"closed; all {rep.messages} message(s) written are readable"
-        return (f"closed; {rep.messages} message(s) readable, the last {lost} written could "
-                "not be saved")
+        return (
+            f"closed; {rep.messages} message(s) readable, the last {lost} written could "
+            "not be saved"
+        )
 
     def _settle_sqlite(self, storage) -> None:
         """Commit what the failed transaction still holds; if SQLite rolled it back, write
@@ -678,8 +771,10 @@ class BagWriter:
                     conn.rollback()
             (have,) = conn.execute("SELECT count(*) FROM messages").fetchone()
             if self._pending_rows and have == sum(self.durable_counts.values()):
-                conn.executemany("INSERT INTO messages (topic_id, timestamp, data) "
-                                 "VALUES(?, ?, ?)", self._pending_rows)
+                conn.executemany(
+                    "INSERT INTO messages (topic_id, timestamp, data) VALUES(?, ?, ?)",
+                    self._pending_rows,
+                )
                 conn.commit()
         except sqlite3.Error as exc:
             LOG.error("bag %s: saving the uncommitted rows failed: %s", self.path, exc)
@@ -706,7 +801,7 @@ def _completed_end(storage, header_end: int) -> int:
     to its buffer; beyond it the file holds at most a partial write of the pending chunk."""
     if not storage.chunks:
         return header_end
-    rec = storage.chunks[-1].getvalue()                     # a ChunkIndex record body
+    rec = storage.chunks[-1].getvalue()  # a ChunkIndex record body
     _t0, _t1, start, length = struct.unpack_from("<QQQQ", rec, 0)
     (map_len,) = struct.unpack_from("<I", rec, 32)
     (index_len,) = struct.unpack_from("<Q", rec, 36 + map_len)
@@ -725,12 +820,22 @@ def _completed_end(storage, header_end: int) -> int:
 # encapsulation header, string lengths and contents, sequence counts) differ from the
 # template's form another group; anything the layout cannot describe goes through
 # rosbags' own ``deserialize_cdr``.
-_CDR_PRIMITIVES = {          # ROS 2 base type -> little-endian numpy dtype (size = alignment)
-    "bool": "?", "byte": "i1", "char": "u1", "int8": "i1", "uint8": "u1",   # as rosbags
-    "int16": "<i2", "uint16": "<u2", "int32": "<i4", "uint32": "<u4",
-    "int64": "<i8", "uint64": "<u8", "float32": "<f4", "float64": "<f8",
+_CDR_PRIMITIVES = {  # ROS 2 base type -> little-endian numpy dtype (size = alignment)
+    "bool": "?",
+    "byte": "i1",
+    "char": "u1",
+    "int8": "i1",
+    "uint8": "u1",  # as rosbags
+    "int16": "<i2",
+    "uint16": "<u2",
+    "int32": "<i4",
+    "uint32": "<u4",
+    "int64": "<i8",
+    "uint64": "<u8",
+    "float32": "<f4",
+    "float64": "<f8",
 }
-_MAX_LAYOUT_GROUPS = 8       # distinct layouts per topic before the rest goes through rosbags
+_MAX_LAYOUT_GROUPS = 8  # distinct layouts per topic before the rest goes through rosbags
 
 
 class LayoutError(BagError):
@@ -739,10 +844,10 @@ class LayoutError(BagError):
 
 @dataclass(frozen=True)
 class _Leaf:
-    path: str                 # "pose.pose.position.x", "velocity", "status[0].level"
-    offset: int               # byte offset in the record (the 4 header bytes included)
+    path: str  # "pose.pose.position.x", "velocity", "status[0].level"
+    offset: int  # byte offset in the record (the 4 header bytes included)
     rostype: str
-    count: int | None         # None: scalar; n: fixed array or sequence of n elements
+    count: int | None  # None: scalar; n: fixed array or sequence of n elements
 
     @property
     def dtype(self) -> np.dtype:
@@ -757,7 +862,7 @@ class _Leaf:
 class _LayoutWalk:
     leaves: list = field(default_factory=list)
     strings: dict = field(default_factory=dict)
-    struct: list = field(default_factory=lambda: [np.arange(4)])   # the encapsulation header
+    struct: list = field(default_factory=lambda: [np.arange(4)])  # the encapsulation header
     counts: dict = field(default_factory=dict)
 
 
@@ -769,20 +874,33 @@ class CdrLayout:
     into copies of the template record.
     """
 
-    def __init__(self, msgtype: str, template: bytes, leaves: list, strings: dict,
-                 struct_index: np.ndarray, counts: dict | None = None):
+    def __init__(
+        self,
+        msgtype: str,
+        template: bytes,
+        leaves: list,
+        strings: dict,
+        struct_index: np.ndarray,
+        counts: dict | None = None,
+    ):
         self.msgtype = msgtype
         self.counts = dict(counts or {})  # path -> length of every array / sequence
         self.template = bytes(template)
         self.size = len(self.template)
         self.leaves = {lf.path: lf for lf in leaves}
-        self.strings = strings            # path -> str, or tuple of str for string arrays
+        self.strings = strings  # path -> str, or tuple of str for string arrays
         self.struct_index = struct_index  # byte positions that must equal the template's
         self.struct_bytes = np.frombuffer(self.template, np.uint8)[struct_index]
-        self.dtype = np.dtype({
-            "names": [lf.path for lf in leaves],
-            "formats": [lf.dtype if lf.count is None else (lf.dtype, (lf.count,)) for lf in leaves],
-            "offsets": [lf.offset for lf in leaves], "itemsize": self.size})
+        self.dtype = np.dtype(
+            {
+                "names": [lf.path for lf in leaves],
+                "formats": [
+                    lf.dtype if lf.count is None else (lf.dtype, (lf.count,)) for lf in leaves
+                ],
+                "offsets": [lf.offset for lf in leaves],
+                "itemsize": self.size,
+            }
+        )
 
     # -- construction ---------------------------------------------------------
     @classmethod
@@ -794,13 +912,23 @@ class CdrLayout:
             data = bytes(typestore.serialize_cdr(msg, msgtype))
         data = bytes(data)
         if data[:2] != b"\x00\x01":
-            raise LayoutError(f"{msgtype}: CDR encapsulation {data[:2].hex()} is not little-endian")
+            raise LayoutError(
+                f"{msgtype}: CDR encapsulation {data[:2].hex()} is not little-endian"
+            )
         acc = _LayoutWalk()
         end = cls._walk(typestore, msgtype, msg, 0, "", acc)
         if not 4 + end <= len(data) <= 4 + end + 3:
-            raise LayoutError(f"{msgtype}: layout covers {4 + end} bytes, the record has {len(data)}")
-        return cls(msgtype, data, acc.leaves, acc.strings,
-                   np.concatenate(acc.struct).astype(np.intp), acc.counts)
+            raise LayoutError(
+                f"{msgtype}: layout covers {4 + end} bytes, the record has {len(data)}"
+            )
+        return cls(
+            msgtype,
+            data,
+            acc.leaves,
+            acc.strings,
+            np.concatenate(acc.struct).astype(np.intp),
+            acc.counts,
+        )
 
     @classmethod
     def _walk(cls, ts, msgtype, msg, pos, prefix, acc) -> int:
@@ -815,6 +943,7 @@ class CdrLayout:
     @classmethod
     def _field(cls, ts, desc, val, pos, path, acc) -> int:
         from rosbags.interfaces import Nodetype
+
         kind, arg = desc
         if kind == Nodetype.NAME:
             return cls._walk(ts, arg, val, pos, path + ".", acc)
@@ -843,7 +972,7 @@ class CdrLayout:
                 pos = -(-pos // size) * size
             acc.leaves.append(_Leaf(path, 4 + pos, sub[1][0], n))
             return pos + n * size
-        if sub[0] == Nodetype.BASE:               # strings
+        if sub[0] == Nodetype.BASE:  # strings
             acc.strings[path] = tuple(val)
             for item in val:
                 pos = cls._string(item, pos, acc)
@@ -877,7 +1006,7 @@ class CdrLayout:
         out = {}
         for name in self.dtype.names:
             a = np.array(rec[name])
-            if a.dtype.kind == "b":           # any non-zero byte is True, as for rosbags
+            if a.dtype.kind == "b":  # any non-zero byte is True, as for rosbags
                 a = a.view(np.uint8) != 0
             out[name] = a
         return out
@@ -887,8 +1016,9 @@ class CdrLayout:
         (path -> array of n rows) replaced; integers must fit their field."""
         unknown = sorted(set(values) - set(self.leaves))
         if unknown:
-            raise LayoutError(f"{self.msgtype}: no numeric field(s) {unknown}; "
-                              f"fields: {list(self.leaves)}")
+            raise LayoutError(
+                f"{self.msgtype}: no numeric field(s) {unknown}; fields: {list(self.leaves)}"
+            )
         block = np.empty((n, self.size), np.uint8)
         block[:] = np.frombuffer(self.template, np.uint8)
         rec = block.reshape(-1).view(self.dtype)
@@ -917,14 +1047,17 @@ class CdrLayout:
                 v = rng.integers(0, 2, shape).astype(bool)
             elif lf.dtype.kind in "iu":
                 info = np.iinfo(lf.dtype)
-                v = rng.integers(max(info.min, -2**40), min(info.max, 2**40), shape, endpoint=True
-                                 ).astype(lf.dtype)
+                v = rng.integers(
+                    max(info.min, -(2**40)), min(info.max, 2**40), shape, endpoint=True
+                ).astype(lf.dtype)
             else:
                 v = rng.normal(size=shape).astype(lf.dtype) * 1e3
             values[path] = v
             _set_path(msg, path, v if lf.count is not None else v.item())
         data = np.frombuffer(bytes(typestore.serialize_cdr(msg, self.msgtype)), np.uint8)
-        if data.size != self.size or not np.array_equal(data[self.struct_index], self.struct_bytes):
+        if data.size != self.size or not np.array_equal(
+            data[self.struct_index], self.struct_bytes
+        ):
             raise LayoutError(f"{self.msgtype}: probe record does not have the template's shape")
         got = self.decode(data.reshape(1, -1))
         for path, v in values.items():
@@ -934,7 +1067,7 @@ class CdrLayout:
         keep = np.zeros(self.size, bool)
         keep[self.struct_index] = True
         for lf in self.leaves.values():
-            keep[lf.offset:lf.offset + lf.nbytes] = True
+            keep[lf.offset : lf.offset + lf.nbytes] = True
         if not np.array_equal(back[keep], data[keep]):
             raise LayoutError(f"{self.msgtype}: layout encoding disagrees with rosbags")
 
@@ -967,7 +1100,13 @@ class _LayoutCache:
         key = None
         try:
             lay = CdrLayout.from_message(typestore, msgtype, msg, data)
-            key = (id(typestore), msgtype, lay.size, lay.struct_bytes.tobytes(), lay.struct_index.tobytes())
+            key = (
+                id(typestore),
+                msgtype,
+                lay.size,
+                lay.struct_bytes.tobytes(),
+                lay.struct_index.tobytes(),
+            )
             hit = self._by_key.get(key)
             if hit is not None:
                 return hit
@@ -985,7 +1124,13 @@ class _LayoutCache:
     def for_message(self, typestore, msgtype: str, msg) -> CdrLayout:
         """The probed layout of the message ``msg`` (raises :class:`LayoutError`)."""
         lay = CdrLayout.from_message(typestore, msgtype, msg)
-        key = (id(typestore), msgtype, lay.size, lay.struct_bytes.tobytes(), lay.struct_index.tobytes())
+        key = (
+            id(typestore),
+            msgtype,
+            lay.size,
+            lay.struct_bytes.tobytes(),
+            lay.struct_index.tobytes(),
+        )
         if key not in self._by_key:
             lay.probe(typestore)
         self._by_key[key] = lay
@@ -995,8 +1140,9 @@ class _LayoutCache:
 _LAYOUTS = _LayoutCache()
 
 
-def encode_block(msgtype: str, template, values: Mapping, n: int | None = None,
-                 typestore=None) -> np.ndarray:
+def encode_block(
+    msgtype: str, template, values: Mapping, n: int | None = None, typestore=None
+) -> np.ndarray:
     """CDR records of ``n`` messages that equal ``template`` (a rosbags message of
     ``msgtype``) except for the numeric fields in ``values`` (leaf path such as
     ``"pose.pose.position.x"`` or ``"velocity"`` -> array of n rows): an (n, size) uint8 array,
@@ -1011,8 +1157,9 @@ def encode_block(msgtype: str, template, values: Mapping, n: int | None = None,
     return lay.encode(int(n), values)
 
 
-def records_close(msgtype: str, a, b, rtol: float = 1e-12, atol: float = 1e-12,
-                  typestore=None) -> bool:
+def records_close(
+    msgtype: str, a, b, rtol: float = 1e-12, atol: float = 1e-12, typestore=None
+) -> bool:
     """Whether two CDR records of ``msgtype`` have the same structure (strings, sequence
     lengths) and numeric fields equal within ``rtol``/``atol`` (integers exactly): the check
     of a block-built record against one serialised from a message builder."""
@@ -1049,7 +1196,7 @@ class _Source:
 
     def __init__(self):
         self.types: dict[str, str] = {}
-        self.msgdefs: dict[str, str] = {}         # msgtype -> ros2msg definition text
+        self.msgdefs: dict[str, str] = {}  # msgtype -> ros2msg definition text
         self.records: list[tuple[str, int, bytes]] = []
 
 
@@ -1067,6 +1214,7 @@ def _read_with_rosbags(target: Path, topics: set | None, src: _Source) -> None:
         src.records.clear()
     from rosbags.highlevel import AnyReader
     from rosbags.interfaces import MessageDefinitionFormat
+
     with AnyReader([target], default_typestore=jazzy_typestore()) as reader:
         for c in reader.connections:
             src.types[c.topic] = c.msgtype
@@ -1087,7 +1235,7 @@ def _read_with_rosbags(target: Path, topics: set | None, src: _Source) -> None:
 # or encoding differ between metadata.yaml and the file -- raises _FastPathUnavailable and
 # the bag is read by rosbags' AnyReader, which also names the problem of a damaged bag.
 _MCAP_OPLEN = struct.Struct("<BQ")
-_MCAP_MSG = struct.Struct("<HIQ")          # channel id, sequence, log time
+_MCAP_MSG = struct.Struct("<HIQ")  # channel id, sequence, log time
 _MCAP_CHUNK_HEAD = struct.Struct("<QQQI")  # start, end, uncompressed size, crc
 _MCAP_FOOTER_HEAD = b"\x02\x14\x00\x00\x00\x00\x00\x00\x00"
 
@@ -1099,6 +1247,7 @@ class _FastPathUnavailable(Exception):
 def _yaml_load(text: str):
     """metadata.yaml / QoS text through the package's YAML loader (libyaml parser)."""
     from lpv_sysid.io.yaml_file import strict_load
+
     return strict_load(text)
 
 
@@ -1106,12 +1255,12 @@ def _yaml_load(text: str):
 class _ChunkRef:
     """A ChunkIndex record of the summary (what rosbags' reader relies on)."""
 
-    start: int                  # file offset of the Chunk record
+    start: int  # file offset of the Chunk record
     length: int
-    index: dict                 # channel id -> file offset of its MessageIndex record
+    index: dict  # channel id -> file offset of its MessageIndex record
     index_length: int
-    counts: dict                # channel id -> messages (from the index lengths)
-    t0: int = 0                 # message start / end time
+    counts: dict  # channel id -> messages (from the index lengths)
+    t0: int = 0  # message start / end time
     t1: int = 0
     compression: str = ""
     csize: int = 0
@@ -1121,10 +1270,10 @@ class _ChunkRef:
 @dataclass
 class _McapSummary:
     path: Path
-    schemas: dict = field(default_factory=dict)      # id -> (name, encoding, text)
-    channels: dict = field(default_factory=dict)     # id -> (schema id, topic, encoding, qos)
+    schemas: dict = field(default_factory=dict)  # id -> (name, encoding, text)
+    channels: dict = field(default_factory=dict)  # id -> (schema id, topic, encoding, qos)
     chunks: list = field(default_factory=list)
-    counts: dict | None = None                       # statistics: channel id -> messages
+    counts: dict | None = None  # statistics: channel id -> messages
 
 
 def _mcap_summary(path: Path) -> _McapSummary:
@@ -1156,7 +1305,7 @@ def _mcap_summary(path: Path) -> _McapSummary:
     try:
         while pos < len(summary):
             op, length = _MCAP_OPLEN.unpack_from(summary, pos)
-            body = summary[pos + 9:pos + 9 + length]
+            body = summary[pos + 9 : pos + 9 + length]
             if len(body) != length:
                 raise _FastPathUnavailable("truncated summary record")
             pos += 9 + length
@@ -1177,17 +1326,19 @@ def _mcap_summary(path: Path) -> _McapSummary:
             elif op == 0x08:
                 t0, t1, start, clen = struct.unpack_from("<QQQQ", body, 0)
                 (n,) = struct.unpack_from("<I", body, 32)
-                index = dict(struct.iter_unpack("<HQ", body[36:36 + n]))
+                index = dict(struct.iter_unpack("<HQ", body[36 : 36 + n]))
                 (ilen,) = struct.unpack_from("<Q", body, 36 + n)
                 comp, p = _read_str(body, 44 + n)
                 csize, usize = struct.unpack_from("<QQ", body, p)
                 ends = sorted(index.values()) + [start + clen + ilen]
                 byoff = {off: cid for cid, off in index.items()}
                 counts = {byoff[a]: (b - a - 15) // 16 for a, b in zip(ends, ends[1:])}
-                out.chunks.append(_ChunkRef(start, clen, index, ilen, counts, t0, t1, comp, csize, usize))
+                out.chunks.append(
+                    _ChunkRef(start, clen, index, ilen, counts, t0, t1, comp, csize, usize)
+                )
             elif op == 0x0B:
                 (n,) = struct.unpack_from("<I", body, 42)
-                out.counts = dict(struct.iter_unpack("<HQ", body[46:46 + n]))
+                out.counts = dict(struct.iter_unpack("<HQ", body[46 : 46 + n]))
     except (struct.error, UnicodeDecodeError, KeyError) as exc:
         raise _FastPathUnavailable(f"summary unreadable: {exc}") from None
     if not out.chunks:
@@ -1209,9 +1360,9 @@ def _channel_qos(meta: bytes):
 
 @dataclass
 class _FastBag:
-    types: dict = field(default_factory=dict)       # topic -> msgtype
-    msgdefs: dict = field(default_factory=dict)     # msgtype -> ros2msg text
-    files: list = field(default_factory=list)       # [(_McapSummary, {channel id: topic})]
+    types: dict = field(default_factory=dict)  # topic -> msgtype
+    msgdefs: dict = field(default_factory=dict)  # msgtype -> ros2msg text
+    files: list = field(default_factory=list)  # [(_McapSummary, {channel id: topic})]
 
 
 def _open_fast(target: Path) -> _FastBag:
@@ -1224,7 +1375,9 @@ def _open_fast(target: Path) -> _FastBag:
             info = _yaml_load(meta_path.read_text())["rosbag2_bagfile_information"]
             if info["version"] > 9 or info["storage_identifier"] != "mcap":
                 raise _FastPathUnavailable("not a version <= 9 mcap bag")
-            if info.get("compression_format") or (info.get("compression_mode") or "").lower() not in ("", "none"):
+            if info.get("compression_format") or (
+                info.get("compression_mode") or ""
+            ).lower() not in ("", "none"):
                 raise _FastPathUnavailable("compressed bag")
             files = [target / Path(p).name for p in info["relative_file_paths"]]
             wanted = {}
@@ -1250,7 +1403,9 @@ def _open_fast(target: Path) -> _FastBag:
                 if typ != wanted[topic][0]:
                     continue
                 if enc != "cdr" or qos != wanted[topic][1]:
-                    raise _FastPathUnavailable(f"{topic}: QoS or encoding differ from metadata.yaml")
+                    raise _FastPathUnavailable(
+                        f"{topic}: QoS or encoding differ from metadata.yaml"
+                    )
                 cmap[cid] = topic
             bag.files.append((sm, cmap))
     elif target.suffix == ".mcap":
@@ -1270,7 +1425,7 @@ def _open_fast(target: Path) -> _FastBag:
                 raise _FastPathUnavailable("IDL definitions")
             if enc == "ros2msg" and text and name in set(bag.types.values()):
                 bag.msgdefs.setdefault(name, text)
-    for msgtype, text in bag.msgdefs.items():   # AnyReader's definition and hash check
+    for msgtype, text in bag.msgdefs.items():  # AnyReader's definition and hash check
         if not _definition_ok(msgtype, text, digests.get(msgtype, "")):
             raise _FastPathUnavailable(f"{msgtype}: definition does not match its hash")
     return bag
@@ -1281,6 +1436,7 @@ def _definition_ok(msgtype: str, text: str, digest: str) -> bool:
     """AnyReader's check of a stored definition, cached: the ros2msg text parses and, when
     the bag stores a RIHS01 type hash, hashes to it."""
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
     store = get_typestore(Stores.EMPTY)
     store.register(get_types_from_msg(text, msgtype))
     return not digest or store.hash_rihs01(msgtype) == digest
@@ -1301,6 +1457,7 @@ def _read_fast(target: Path, topics: set | None, src: _Source) -> None:
 def _chunk_payload(fh, ch: _ChunkRef) -> bytes:
     """Decompressed records of one chunk (size and CRC checked by rosbags' decompress)."""
     from rosbags.rosbag2.storage_mcap import decompress
+
     fh.seek(ch.start)
     rec = fh.read(ch.length)
     if len(rec) != ch.length or rec[0] != 0x06:
@@ -1312,7 +1469,7 @@ def _chunk_payload(fh, ch: _ChunkRef) -> bytes:
         raise _FastPathUnavailable("chunk data beyond its record")
     if (t0, t1, usize, comp, csize) != (ch.t0, ch.t1, ch.usize, ch.compression, ch.csize):
         raise _FastPathUnavailable(f"chunk at {ch.start} disagrees with its index")
-    return decompress(rec[p + 8:p + 8 + csize], comp, usize, crc)
+    return decompress(rec[p + 8 : p + 8 + csize], comp, usize, crc)
 
 
 def _mcap_chunk_records(sm: _McapSummary, cmap: dict, out: list) -> None:
@@ -1338,9 +1495,9 @@ def _mcap_chunk_records(sm: _McapSummary, cmap: dict, out: list) -> None:
                     cid, _seq, log_time = msg_hdr(buf, pos + 9)
                     topic = cmap.get(cid)
                     if topic is not None:
-                        if not ch.t0 <= log_time <= ch.t1:     # rosbags would drop it
+                        if not ch.t0 <= log_time <= ch.t1:  # rosbags would drop it
                             raise _FastPathUnavailable("message time outside its chunk")
-                        append((topic, log_time, view[pos + 31:end]))
+                        append((topic, log_time, view[pos + 31 : end]))
                 pos = end
 
 
@@ -1377,7 +1534,9 @@ def _topic_info_fast(path: Path) -> dict[str, TopicStats]:
                     seen[cid] = seen.get(cid, 0) + int(times.size)
                     s[1] = lo if s[1] is None else min(s[1], lo)
                     s[2] = hi if s[2] is None else max(s[2], hi)
-        if sm.counts is not None and any(sm.counts.get(cid, 0) != seen.get(cid, 0) for cid in cmap):
+        if sm.counts is not None and any(
+            sm.counts.get(cid, 0) != seen.get(cid, 0) for cid in cmap
+        ):
             raise _FastPathUnavailable("message indexes disagree with the statistics")
     return {t: TopicStats(bag.types[t], *s) for t, s in sorted(stats.items())}
 
@@ -1427,8 +1586,9 @@ def _salvage_sqlite(path: Path, topics: set | None, src: _Source, problems: list
     _read_sqlite_rows(path, path, topics, src, problems)
 
 
-def _read_sqlite_rows(path: Path, name: Path, topics: set | None, src: _Source,
-                      problems: list) -> None:
+def _read_sqlite_rows(
+    path: Path, name: Path, topics: set | None, src: _Source, problems: list
+) -> None:
     try:
         con = sqlite3.connect(f"file:{path}?mode=ro&immutable=1", uri=True)
     except sqlite3.Error as exc:
@@ -1437,7 +1597,8 @@ def _read_sqlite_rows(path: Path, name: Path, topics: set | None, src: _Source,
     try:
         try:
             for msgtype, enc, text in con.execute(
-                    "SELECT topic_type, encoding, encoded_message_definition FROM message_definitions"):
+                "SELECT topic_type, encoding, encoded_message_definition FROM message_definitions"
+            ):
                 if enc == "ros2msg":
                     src.msgdefs.setdefault(msgtype, text)
         except sqlite3.Error as exc:
@@ -1523,8 +1684,10 @@ def _collect(path, topics, strict: bool) -> tuple[list[_Source], list[str]]:
         else:
             why = f"bag {path}: missing metadata.yaml (recording not closed?)"
         if strict:
-            raise BagError(why + f" -- `lpv-sysid bag repair {path}` makes it readable by standard "
-                           "tools; read_bag(path, strict=False) recovers what is readable")
+            raise BagError(
+                why + f" -- `lpv-sysid bag repair {path}` makes it readable by standard "
+                "tools; read_bag(path, strict=False) recovers what is readable"
+            )
         problems.append(why)
         files = _storage_files(path)
         if not files:
@@ -1538,8 +1701,10 @@ def _collect(path, topics, strict: bool) -> tuple[list[_Source], list[str]]:
             with _settled(path, problems) as g:
                 _read_with_rosbags(g, want, src)
         except Exception as exc:  # noqa: BLE001
-            raise BagError(f"bag {path}: cannot be read ({_describe(exc)}); truncated or "
-                           "corrupt? -- read_bag(path, strict=False) recovers what is readable") from None
+            raise BagError(
+                f"bag {path}: cannot be read ({_describe(exc)}); truncated or "
+                "corrupt? -- read_bag(path, strict=False) recovers what is readable"
+            ) from None
         return [src], problems
     return [_read_file_tolerant(path, want, problems)], problems
 
@@ -1548,14 +1713,16 @@ def _deserializers(sources: list[_Source]) -> dict[str, object]:
     """msgtype -> typestore: the Jazzy store when the bag's definition equals Jazzy's (or
     the bag has none), else a store built from the definitions stored in the bag."""
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
     jazzy = jazzy_typestore()
     out: dict[str, object] = {}
     custom = None
     for src in sources:
         for msgtype in set(src.types.values()):
             text = src.msgdefs.get(msgtype)
-            if msgtype in jazzy.types and (not text or
-                                           jazzy.generate_msgdef(msgtype, ros_version=2)[0] == text):
+            if msgtype in jazzy.types and (
+                not text or jazzy.generate_msgdef(msgtype, ros_version=2)[0] == text
+            ):
                 out[msgtype] = jazzy
             elif text:
                 if custom is None:
@@ -1568,8 +1735,9 @@ def _deserializers(sources: list[_Source]) -> dict[str, object]:
     return out
 
 
-def read_bag(path, topics: Iterable[str] | None = None, strict: bool = True,
-             optional: Iterable[str] = ()) -> BagContents:
+def read_bag(
+    path, topics: Iterable[str] | None = None, strict: bool = True, optional: Iterable[str] = ()
+) -> BagContents:
     """Read a rosbag2 directory (or a bare ``.mcap`` / ``.db3`` file).
 
     Returns :class:`BagContents` ``{topic: [(stamp_ns, msg), ...]}`` sorted by stamp for
@@ -1634,8 +1802,10 @@ def read_bag(path, topics: Iterable[str] | None = None, strict: bool = True,
                 msg = store.deserialize_cdr(data, msgtype)
             except Exception as exc:  # noqa: BLE001
                 if strict:
-                    raise BagError(f"bag {path}: topic {topic!r}: message at {ns} ns cannot be "
-                                   f"deserialised as {msgtype}: {_describe(exc)}") from None
+                    raise BagError(
+                        f"bag {path}: topic {topic!r}: message at {ns} ns cannot be "
+                        f"deserialised as {msgtype}: {_describe(exc)}"
+                    ) from None
                 bad[topic] = bad.get(topic, 0) + 1
                 continue
             items.append((ns, order, msg))
@@ -1646,7 +1816,7 @@ def read_bag(path, topics: Iterable[str] | None = None, strict: bool = True,
         if not msgs:
             continue
         times = np.concatenate(times_l)
-        idx = np.lexsort((np.concatenate(order_l), times))        # stamp, then file order
+        idx = np.lexsort((np.concatenate(order_l), times))  # stamp, then file order
         if np.array_equal(idx, np.arange(idx.size)):
             out[topic] = list(zip(times.tolist(), msgs))
         else:
@@ -1693,8 +1863,8 @@ class BagArrays(dict):
 class _Rows:
     """Records of one topic: per length, a block of rows plus their stamps and file order."""
 
-    blocks: dict = field(default_factory=dict)      # length -> [(times, order, (n, L) uint8)]
-    raw: list = field(default_factory=list)         # (time, order, bytes) of odd records
+    blocks: dict = field(default_factory=dict)  # length -> [(times, order, (n, L) uint8)]
+    raw: list = field(default_factory=list)  # (time, order, bytes) of odd records
 
     def add_bytes(self, t: int, order: int, data) -> None:
         self.raw.append((t, order, data))
@@ -1714,8 +1884,11 @@ class _Rows:
             if len(parts) == 1:
                 yield parts[0]
             else:
-                yield (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]),
-                       np.concatenate([p[2] for p in parts]))
+                yield (
+                    np.concatenate([p[0] for p in parts]),
+                    np.concatenate([p[1] for p in parts]),
+                    np.concatenate([p[2] for p in parts]),
+                )
 
 
 def _rows_from_index(bag: _FastBag, topics) -> dict[str, _Rows]:
@@ -1744,15 +1917,21 @@ def _rows_from_index(bag: _FastBag, topics) -> dict[str, _Rows]:
                     (nbytes,) = struct.unpack_from("<I", index, off + 11)
                     ent = np.frombuffer(index, "<u8", nbytes // 8, off + 15).reshape(-1, 2)
                     times, offs = ent[:, 0].astype(np.int64), ent[:, 1].astype(np.int64)
-                    if offs.size and (offs.max() + 31 > payload.size or
-                                      np.any(payload[offs] != 0x05)):
+                    if offs.size and (
+                        offs.max() + 31 > payload.size or np.any(payload[offs] != 0x05)
+                    ):
                         raise _FastPathUnavailable("message index does not point at messages")
                     rec_len = payload[offs[:, None] + np.arange(1, 9)].copy().view("<u8")[:, 0]
                     ids = payload[offs[:, None] + np.arange(9, 11)].copy().view("<u2")[:, 0]
                     rec_t = payload[offs[:, None] + np.arange(15, 23)].copy().view("<u8")[:, 0]
-                    if np.any(ids != cid) or np.any(rec_len < 22) or \
-                            np.any(offs + 9 + rec_len.astype(np.int64) > payload.size) or \
-                            np.any(rec_t != ent[:, 0]) or np.any(rec_t < ch.t0) or np.any(rec_t > ch.t1):
+                    if (
+                        np.any(ids != cid)
+                        or np.any(rec_len < 22)
+                        or np.any(offs + 9 + rec_len.astype(np.int64) > payload.size)
+                        or np.any(rec_t != ent[:, 0])
+                        or np.any(rec_t < ch.t0)
+                        or np.any(rec_t > ch.t1)
+                    ):
                         raise _FastPathUnavailable("message index inconsistent")
                     lens = rec_len.astype(np.int64) - 22
                     order = (np.int64(fno) << 56) | (np.int64(cno) << 32) | offs
@@ -1760,8 +1939,11 @@ def _rows_from_index(bag: _FastBag, topics) -> dict[str, _Rows]:
                     for n in np.unique(lens).tolist():
                         k = lens == n
                         start = offs[k] + 31
-                        block = np.lib.stride_tricks.sliding_window_view(payload, n)[start] if n else \
-                            np.zeros((int(k.sum()), 0), np.uint8)
+                        block = (
+                            np.lib.stride_tricks.sliding_window_view(payload, n)[start]
+                            if n
+                            else np.zeros((int(k.sum()), 0), np.uint8)
+                        )
                         r.blocks.setdefault(n, []).append((times[k], order[k], block))
     return rows
 
@@ -1780,8 +1962,8 @@ class _Decoded:
     """Per-group decoding result of one topic: layouts with their rows, plus odd rows."""
 
     def __init__(self):
-        self.parts: list = []     # (times, order, layout, fields dict) per layout group
-        self.odd: list = []       # (time, order, bytes) for rosbags
+        self.parts: list = []  # (times, order, layout, fields dict) per layout group
+        self.odd: list = []  # (time, order, bytes) for rosbags
 
 
 def _decode_rows(store, msgtype: str, rows: _Rows) -> _Decoded:
@@ -1818,8 +2000,9 @@ def _leaf_values(store, msgtype: str, msg) -> tuple[dict, dict]:
     return vals, strings
 
 
-def read_arrays(path, topics: Iterable[str] | None = None, strict: bool = True,
-                optional: Iterable[str] = ()) -> BagArrays:
+def read_arrays(
+    path, topics: Iterable[str] | None = None, strict: bool = True, optional: Iterable[str] = ()
+) -> BagArrays:
     """Read a bag column-wise: ``{topic: TopicArrays}`` (arguments as :func:`read_bag`).
 
     The fixed-layout records this package writes are decoded per topic as numpy blocks (see
@@ -1891,35 +2074,47 @@ def _topic_arrays(path, topic, msgtype, store, rows: _Rows, strict, problems) ->
             msg = store.deserialize_cdr(data, msgtype)
         except Exception as exc:  # noqa: BLE001
             if strict:
-                raise BagError(f"bag {path}: topic {topic!r}: message at {t} ns cannot be "
-                               f"deserialised as {msgtype}: {_describe(exc)}") from None
+                raise BagError(
+                    f"bag {path}: topic {topic!r}: message at {t} ns cannot be "
+                    f"deserialised as {msgtype}: {_describe(exc)}"
+                ) from None
             bad += 1
             continue
         vals, strings = _leaf_values(store, msgtype, msg)
-        f = {k: (np.asarray(v)[None] if not isinstance(v, np.ndarray) else v[None]) for k, v in vals.items()}
+        f = {
+            k: (np.asarray(v)[None] if not isinstance(v, np.ndarray) else v[None])
+            for k, v in vals.items()
+        }
         parts.append((np.array([t], np.int64), np.array([o], np.int64), None, f, strings))
     if bad:
         problems.append(f"bag {path}: topic {topic!r}: {bad} message(s) could not be deserialised")
     if not parts:
         return TopicArrays(msgtype, np.zeros(0, np.int64), {}, {})
-    keys = [(tuple(sorted((k, v.shape[1:]) for k, v in f.items())), tuple(sorted(s))) for _, _, _, f, s in parts]
+    keys = [
+        (tuple(sorted((k, v.shape[1:]) for k, v in f.items())), tuple(sorted(s)))
+        for _, _, _, f, s in parts
+    ]
     if any(k != keys[0] for k in keys):
-        raise BagError(f"bag {path}: topic {topic!r}: messages of different structure (sequence "
-                       "lengths or fields differ); read it with read_bag()")
+        raise BagError(
+            f"bag {path}: topic {topic!r}: messages of different structure (sequence "
+            "lengths or fields differ); read it with read_bag()"
+        )
     times = np.concatenate([pt[0] for pt in parts])
     order = np.concatenate([pt[1] for pt in parts])
     idx = np.lexsort((order, times))
     if len(parts) == 1 and np.array_equal(idx, np.arange(idx.size)):
-        idx = slice(None)                 # already in order: no copy
-    fields_ = {k: (np.concatenate([pt[3][k] for pt in parts]) if len(parts) > 1 else parts[0][3][k])[idx]
-               for k in parts[0][3]}
+        idx = slice(None)  # already in order: no copy
+    fields_ = {
+        k: (np.concatenate([pt[3][k] for pt in parts]) if len(parts) > 1 else parts[0][3][k])[idx]
+        for k in parts[0][3]
+    }
     strings = {}
     for k in parts[0][4]:
         col = np.empty(times.size, dtype=object)
         pos = 0
         for pt in parts:
             n = pt[0].size
-            col[pos:pos + n].fill(pt[4][k])
+            col[pos : pos + n].fill(pt[4][k])
             pos += n
         strings[k] = col[idx]
     return TopicArrays(msgtype, times[idx], fields_, strings)
@@ -1932,11 +2127,18 @@ def _builder(store, lay: CdrLayout):
     """A function ``build(fields, n) -> [msg, ...]`` constructing ``n`` rosbags messages of
     ``lay``'s shape from decoded columns (what ``deserialize_cdr`` returns, field by field:
     Python scalars, read-only numpy arrays, lists of strings)."""
-    key = (id(store), lay.msgtype, lay.size, lay.struct_bytes.tobytes(), lay.struct_index.tobytes())
+    key = (
+        id(store),
+        lay.msgtype,
+        lay.size,
+        lay.struct_bytes.tobytes(),
+        lay.struct_index.tobytes(),
+    )
     fn = _BUILDERS.get(key)
     if fn is not None:
         return fn
     from rosbags.interfaces import Nodetype
+
     ns: dict = {}
     scalars: list = []
     arrays: list = []
@@ -1971,8 +2173,7 @@ def _builder(store, lay: CdrLayout):
 
     expr = msg_expr(lay.msgtype, "")
     args = [f"v{k}" for k in range(len(scalars))] + [f"a{k}" for k in range(len(arrays))]
-    src = (f"def build({', '.join(args + ['n'])}):\n"
-           f"    return [{expr} for i in range(n)]\n")
+    src = f"def build({', '.join(args + ['n'])}):\n    return [{expr} for i in range(n)]\n"
     exec(compile(src, f"<lpv_sysid.io.bag builder {lay.msgtype}>", "exec"), ns)  # noqa: S102
     inner = ns["build"]
 
@@ -1981,7 +2182,7 @@ def _builder(store, lay: CdrLayout):
         arrs = []
         for p in arrays:
             a = fields_[p]
-            a.flags.writeable = False           # rosbags' arrays are read-only views too
+            a.flags.writeable = False  # rosbags' arrays are read-only views too
             arrs.append(a)
         return inner(*cols, *arrs, n)
 
@@ -2047,13 +2248,15 @@ def topic_info(path, strict: bool = True) -> dict[str, TopicStats]:
             s[1] = ns if s[1] is None else min(s[1], ns)
             s[2] = ns if s[2] is None else max(s[2], ns)
     return {t: TopicStats(types.get(t, "?"), *s) for t, s in sorted(stats.items())}
+
+
 # ------------------------------------------------------------------- mcap record walk
 # MCAP records are (opcode u8, length u64, body). rosbags 0.11.9 writes: magic, Header,
 # then Chunks (its first chunk also holds the Schema and Channel records), each followed
 # by one MessageIndex per channel, and at close Metadata, DataEnd, the summary section and
 # the Footer. A killed or starved writer leaves the file cut anywhere after a chunk.
 _DATA_OPS = frozenset({0x03, 0x04, 0x05, 0x06, 0x07, 0x09, 0x0C})
-_END_OPS = frozenset({0x02, 0x08, 0x0A, 0x0B, 0x0D, 0x0E, 0x0F})   # footer / summary / data end
+_END_OPS = frozenset({0x02, 0x08, 0x0A, 0x0B, 0x0D, 0x0E, 0x0F})  # footer / summary / data end
 
 
 class _Damaged(Exception):
@@ -2070,7 +2273,7 @@ def _read_bytes(buf, pos: int) -> tuple[bytes, int]:
     end = pos + 4 + n
     if end > len(buf):
         raise struct.error("string beyond record")
-    return bytes(buf[pos + 4:end]), end
+    return bytes(buf[pos + 4 : end]), end
 
 
 def _enc_str(text: str) -> bytes:
@@ -2086,16 +2289,16 @@ def _record(op: int, body: bytes) -> bytes:
 class _Chunk:
     """A complete Chunk record found in (or appended to) an mcap file."""
 
-    start: int                      # file offset of the record
-    length: int                     # record length including opcode and length field
+    start: int  # file offset of the record
+    length: int  # record length including opcode and length field
     t0: int
     t1: int
     usize: int
     csize: int
     compression: str
-    msgs: dict                      # channel id -> [(log_time, offset in the records)]
-    nbytes: dict                    # channel id -> payload bytes
-    index: dict = field(default_factory=dict)   # channel id -> file offset of its MessageIndex
+    msgs: dict  # channel id -> [(log_time, offset in the records)]
+    nbytes: dict  # channel id -> payload bytes
+    index: dict = field(default_factory=dict)  # channel id -> file offset of its MessageIndex
     index_end: int = 0
 
     @property
@@ -2108,16 +2311,16 @@ class _Chunk:
 
 @dataclass
 class _McapWalk:
-    schemas: dict = field(default_factory=dict)     # id -> (name, encoding, data)
-    channels: dict = field(default_factory=dict)    # id -> (schema id, topic, encoding, metadata)
+    schemas: dict = field(default_factory=dict)  # id -> (name, encoding, data)
+    channels: dict = field(default_factory=dict)  # id -> (schema id, topic, encoding, metadata)
     chunks: list = field(default_factory=list)
     metadata_records: int = 0
     unchunked: int = 0
     header_ok: bool = False
     data_start: int = 0
-    data_end: int = 0               # offset after the last complete data record
-    size: int = 0                   # file size
-    ended: bool = False             # reached data end / summary / footer
+    data_end: int = 0  # offset after the last complete data record
+    size: int = 0  # file size
+    ended: bool = False  # reached data end / summary / footer
     problems: list = field(default_factory=list)
 
 
@@ -2150,8 +2353,10 @@ def _walk_records(buf, walk: _McapWalk, on_message, where: str):
         (length,) = struct.unpack_from("<Q", buf, pos + 1)
         body, end = pos + 9, pos + 9 + length
         if end > n:
-            raise _Damaged(f"{where}: truncated record (op 0x{op:02x}) at byte {pos}: "
-                           f"{n - body} of {length} bytes present")
+            raise _Damaged(
+                f"{where}: truncated record (op 0x{op:02x}) at byte {pos}: "
+                f"{n - body} of {length} bytes present"
+            )
         try:
             if op == 0x05:
                 if length < 22:
@@ -2163,27 +2368,29 @@ def _walk_records(buf, walk: _McapWalk, on_message, where: str):
                     msgs.setdefault(cid, []).append((log_time, pos))
                     nbytes[cid] = nbytes.get(cid, 0) + length - 22
                     if on_message is not None:
-                        on_message(cid, log_time, bytes(buf[body + 22:end]))
+                        on_message(cid, log_time, bytes(buf[body + 22 : end]))
             elif op == 0x03:
                 _parse_schema(buf[:end], body, walk)
             elif op == 0x04:
                 _parse_channel(buf[:end], body, walk)
         except (struct.error, UnicodeDecodeError) as exc:
-            raise _Damaged(f"{where}: unreadable record (op 0x{op:02x}) at byte {pos}: "
-                           f"{_describe(exc)}") from None
+            raise _Damaged(
+                f"{where}: unreadable record (op 0x{op:02x}) at byte {pos}: {_describe(exc)}"
+            ) from None
         pos = end
     return msgs, nbytes
 
 
 def _parse_chunk(body: bytes, pos: int, walk: _McapWalk, on_message, where: str) -> _Chunk:
     from rosbags.rosbag2.storage_mcap import decompress
+
     try:
         t0, t1, usize, crc = struct.unpack_from("<QQQI", body, 0)
         comp, p = _read_str(body, 28)
         (csize,) = struct.unpack_from("<Q", body, p)
     except (struct.error, UnicodeDecodeError) as exc:
         raise _Damaged(f"{where}: chunk at byte {pos}: unreadable header ({exc})") from None
-    data = body[p + 8:p + 8 + csize]
+    data = body[p + 8 : p + 8 + csize]
     if len(data) != csize:
         raise _Damaged(f"{where}: chunk at byte {pos}: {len(data)} of {csize} data bytes")
     try:
@@ -2206,8 +2413,11 @@ def _walk_mcap(path: Path, on_message=None, limit: int | None = None) -> _McapWa
             size = min(size, limit)
         head = fh.read(17)
         if len(head) < 8 or head[:8] != MCAP_MAGIC:
-            walk.problems.append(f"{where}: not an mcap file (bad magic)" if len(head) >= 8
-                                 else f"{where}: {len(head)}-byte file, no mcap header")
+            walk.problems.append(
+                f"{where}: not an mcap file (bad magic)"
+                if len(head) >= 8
+                else f"{where}: {len(head)}-byte file, no mcap header"
+            )
             return walk
         if len(head) < 17 or head[8] != 0x01:
             walk.problems.append(f"{where}: no mcap header record")
@@ -2221,8 +2431,10 @@ def _walk_mcap(path: Path, on_message=None, limit: int | None = None) -> _McapWa
         last = None
         while True:
             if pos >= size:
-                walk.problems.append(f"{where}: ends at byte {pos} without data end or footer "
-                                     "(recording not closed)")
+                walk.problems.append(
+                    f"{where}: ends at byte {pos} without data end or footer "
+                    "(recording not closed)"
+                )
                 break
             if pos + 9 > size:
                 walk.problems.append(f"{where}: truncated record header at byte {pos}")
@@ -2236,8 +2448,10 @@ def _walk_mcap(path: Path, on_message=None, limit: int | None = None) -> _McapWa
                 walk.ended = True
                 break
             if end > size:
-                walk.problems.append(f"{where}: truncated record (op 0x{op:02x}) at byte {pos}: "
-                                     f"{size - pos - 9} of {length} bytes present")
+                walk.problems.append(
+                    f"{where}: truncated record (op 0x{op:02x}) at byte {pos}: "
+                    f"{size - pos - 9} of {length} bytes present"
+                )
                 break
             if op not in _DATA_OPS and op < 0x80:
                 walk.problems.append(f"{where}: invalid record (op 0x{op:02x}) at byte {pos}")
@@ -2253,8 +2467,10 @@ def _walk_mcap(path: Path, on_message=None, limit: int | None = None) -> _McapWa
                         last.index[cid] = pos
                         last.index_end = end
                     else:
-                        walk.problems.append(f"{where}: message index at byte {pos} does not "
-                                             "follow a chunk; ignored")
+                        walk.problems.append(
+                            f"{where}: message index at byte {pos} does not "
+                            "follow a chunk; ignored"
+                        )
                 elif op in (0x03, 0x04, 0x05):
                     body = fh.read(length)
                     rec = _record(op, body)
@@ -2299,25 +2515,32 @@ class RepairReport:
         return self.action != "none"
 
     def summary(self) -> str:
-        what = {"none": "intact, nothing to do",
-                "metadata": "metadata.yaml regenerated",
-                "storage": "storage file repaired and metadata.yaml regenerated"}[self.action]
+        what = {
+            "none": "intact, nothing to do",
+            "metadata": "metadata.yaml regenerated",
+            "storage": "storage file repaired and metadata.yaml regenerated",
+        }[self.action]
         if self.dry_run and self.changed:
             what = "needs repair: " + what.replace("regenerated", "to regenerate").replace(
-                "repaired", "to repair")
-        parts = [f"{Path(self.path).name}: {self.storage}, {what}",
-                 f"{self.messages} message(s) readable"]
+                "repaired", "to repair"
+            )
+        parts = [
+            f"{Path(self.path).name}: {self.storage}, {what}",
+            f"{self.messages} message(s) readable",
+        ]
         if self.cut_bytes:
-            parts.append(f"{self.cut_bytes} byte(s) of an unfinished write "
-                         + ("to cut" if self.dry_run else "cut"))
+            parts.append(
+                f"{self.cut_bytes} byte(s) of an unfinished write "
+                + ("to cut" if self.dry_run else "cut")
+            )
         return "; ".join(parts + list(self.notes))
 
 
 @dataclass
 class _FileInfo:
     name: str
-    conns: list                     # [(topic, msgtype, serialization_format, [Qos], digest, count)]
-    topics: dict                    # topic -> TopicStats
+    conns: list  # [(topic, msgtype, serialization_format, [Qos], digest, count)]
+    topics: dict  # topic -> TopicStats
     bytes: int = 0
     changed: bool = False
     cut: int = 0
@@ -2335,8 +2558,9 @@ class _FileInfo:
         return min(a for a, _ in spans), max(b for _, b in spans)
 
 
-def repair_bag(path, dry_run: bool = False, *, _limit: int | None = None,
-               _pending=None) -> RepairReport:
+def repair_bag(
+    path, dry_run: bool = False, *, _limit: int | None = None, _pending=None
+) -> RepairReport:
     """Make the rosbag2 directory ``path`` readable by standard tools (``ros2 bag``,
     rosbags' ``AnyReader``), keeping every complete record; see the module docstring.
 
@@ -2357,8 +2581,10 @@ def _repair_bag(path: Path, dry_run: bool, _limit, _pending) -> RepairReport:
     if not path.is_dir():
         raise BagError(f"bag {path}: not a bag directory")
     if writer_alive(path / LOCK_FILE):
-        raise BagError(f"bag {path}: being written by a running process ({LOCK_FILE} is "
-                       "locked); stop the recorder first")
+        raise BagError(
+            f"bag {path}: being written by a running process ({LOCK_FILE} is "
+            "locked); stop the recorder first"
+        )
     files = _storage_files(path)
     if not files:
         raise BagError(f"bag {path}: no .mcap or .db3 storage file")
@@ -2366,7 +2592,7 @@ def _repair_bag(path: Path, dry_run: bool, _limit, _pending) -> RepairReport:
     if len(suffixes) > 1:
         raise BagError(f"bag {path}: mixed storage files {[f.name for f in files]}")
     storage = "mcap" if suffixes == {".mcap"} else "sqlite3"
-    if not dry_run:                       # stale leftovers; the reserve frees room for the repair
+    if not dry_run:  # stale leftovers; the reserve frees room for the repair
         for stale in (path / LOCK_FILE, path / "metadata.yaml.tmp"):
             with contextlib.suppress(FileNotFoundError):
                 stale.unlink()
@@ -2374,8 +2600,9 @@ def _repair_bag(path: Path, dry_run: bool, _limit, _pending) -> RepairReport:
     for i, f in enumerate(files):
         last = i == len(files) - 1
         if storage == "mcap":
-            infos.append(_repair_mcap_file(f, dry_run, _limit if last else None,
-                                           _pending if last else None))
+            infos.append(
+                _repair_mcap_file(f, dry_run, _limit if last else None, _pending if last else None)
+            )
         else:
             infos.append(_repair_sqlite_file(f, dry_run))
     if any(i.changed for i in infos):
@@ -2391,9 +2618,16 @@ def _repair_bag(path: Path, dry_run: bool, _limit, _pending) -> RepairReport:
             raise BagError(f"bag {path}: cannot write metadata.yaml: {_describe(exc)}") from None
         _check_readable(path, infos)
     topics = merge_topic_stats(info.topics for info in infos)
-    report = RepairReport(str(path), storage, action, dict(sorted(topics.items())),
-                          sum(i.bytes for i in infos), sum(i.cut for i in infos), tuple(notes),
-                          dry_run)
+    report = RepairReport(
+        str(path),
+        storage,
+        action,
+        dict(sorted(topics.items())),
+        sum(i.bytes for i in infos),
+        sum(i.cut for i in infos),
+        tuple(notes),
+        dry_run,
+    )
     if report.changed:
         LOG.warning("%s", report.summary())
     return report
@@ -2403,12 +2637,15 @@ def _check_readable(path: Path, infos) -> None:
     """rosbags' AnyReader opens the repaired bag and delivers a message of every topic
     that has some (the metadata's topic entries must match the storage's connections)."""
     from rosbags.highlevel import AnyReader
+
     try:
         with AnyReader([path], default_typestore=jazzy_typestore()) as reader:
             for c in reader.connections:
                 if c.msgcount and next(iter(reader.messages(connections=[c])), None) is None:
-                    raise BagError(f"bag {path}: after repair rosbags reads no message of "
-                                   f"{c.topic} (metadata says {c.msgcount})")
+                    raise BagError(
+                        f"bag {path}: after repair rosbags reads no message of "
+                        f"{c.topic} (metadata says {c.msgcount})"
+                    )
             total = sum(c.msgcount for c in reader.connections)
     except BagError:
         raise
@@ -2416,13 +2653,15 @@ def _check_readable(path: Path, infos) -> None:
         raise BagError(f"bag {path}: still unreadable after repair: {_describe(exc)}") from None
     want = sum(i.count for i in infos)
     if total != want:
-        raise BagError(f"bag {path}: after repair rosbags counts {total} messages, the files "
-                       f"hold {want}")
+        raise BagError(
+            f"bag {path}: after repair rosbags counts {total} messages, the files hold {want}"
+        )
 
 
 def _rihs01(msgtype: str, encoding: str, text: str) -> str:
     """RIHS01 hash of a stored definition ('' when it cannot be computed)."""
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
     jazzy = jazzy_typestore()
     try:
         if msgtype in jazzy.types and jazzy.generate_msgdef(msgtype, ros_version=2)[0] == text:
@@ -2438,6 +2677,7 @@ def _rihs01(msgtype: str, encoding: str, text: str) -> str:
 
 def _mcap_info(f: Path, walk: _McapWalk, chunks, changed: bool, cut: int, notes) -> _FileInfo:
     from rosbags.rosbag2.storage_mcap import get_qos
+
     counts: dict = {}
     spans: dict = {}
     nbytes = 0
@@ -2483,7 +2723,8 @@ def _index_records(chunk: _Chunk, base: int) -> bytes:
             continue
         chunk.index[cid] = base + len(out)
         body = struct.pack("<HI", cid, 16 * len(entries)) + b"".join(
-            struct.pack("<QQ", t, off) for t, off in entries)
+            struct.pack("<QQ", t, off) for t, off in entries
+        )
         out += _record(0x07, body)
     chunk.index_end = base + len(out)
     return bytes(out)
@@ -2498,24 +2739,43 @@ def _summary(walk: _McapWalk, chunks, base: int) -> bytes:
     start = len(out)
     for sid, (name, enc, data) in sorted(walk.schemas.items()):
         raw = data.encode("utf-8")
-        out += _record(0x03, struct.pack("<H", sid) + _enc_str(name) + _enc_str(enc)
-                       + struct.pack("<I", len(raw)) + raw)
+        out += _record(
+            0x03,
+            struct.pack("<H", sid)
+            + _enc_str(name)
+            + _enc_str(enc)
+            + struct.pack("<I", len(raw))
+            + raw,
+        )
     groups.append((0x03, start, len(out)))
     start = len(out)
     for cid, (sid, topic, enc, meta) in sorted(walk.channels.items()):
-        out += _record(0x04, struct.pack("<HH", cid, sid) + _enc_str(topic) + _enc_str(enc)
-                       + struct.pack("<I", len(meta)) + meta)
+        out += _record(
+            0x04,
+            struct.pack("<HH", cid, sid)
+            + _enc_str(topic)
+            + _enc_str(enc)
+            + struct.pack("<I", len(meta))
+            + meta,
+        )
     groups.append((0x04, start, len(out)))
     start = len(out)
     counts: dict = {}
     t_lo, t_hi = None, None
     for ch in chunks:
-        offsets = b"".join(struct.pack("<HQ", cid, off) for cid, off in sorted(
-            ch.index.items(), key=lambda kv: kv[1]))
-        out += _record(0x08, struct.pack("<QQQQ", ch.t0, ch.t1, ch.start, ch.length)
-                       + struct.pack("<I", len(offsets)) + offsets
-                       + struct.pack("<Q", ch.index_end - ch.end) + _enc_str(ch.compression)
-                       + struct.pack("<QQ", ch.csize, ch.usize))
+        offsets = b"".join(
+            struct.pack("<HQ", cid, off)
+            for cid, off in sorted(ch.index.items(), key=lambda kv: kv[1])
+        )
+        out += _record(
+            0x08,
+            struct.pack("<QQQQ", ch.t0, ch.t1, ch.start, ch.length)
+            + struct.pack("<I", len(offsets))
+            + offsets
+            + struct.pack("<Q", ch.index_end - ch.end)
+            + _enc_str(ch.compression)
+            + struct.pack("<QQ", ch.csize, ch.usize),
+        )
         for cid, entries in ch.msgs.items():
             if entries:
                 counts[cid] = counts.get(cid, 0) + len(entries)
@@ -2525,10 +2785,22 @@ def _summary(walk: _McapWalk, chunks, base: int) -> bytes:
     groups.append((0x08, start, len(out)))
     start = len(out)
     stats = b"".join(struct.pack("<HQ", cid, n) for cid, n in sorted(counts.items()))
-    out += _record(0x0B, struct.pack("<QHIIIIQQ", sum(counts.values()), len(walk.schemas),
-                                     len(walk.channels), 0, walk.metadata_records, len(chunks),
-                                     t_lo or 0, t_hi or 0)
-                   + struct.pack("<I", len(stats)) + stats)
+    out += _record(
+        0x0B,
+        struct.pack(
+            "<QHIIIIQQ",
+            sum(counts.values()),
+            len(walk.schemas),
+            len(walk.channels),
+            0,
+            walk.metadata_records,
+            len(chunks),
+            t_lo or 0,
+            t_hi or 0,
+        )
+        + struct.pack("<I", len(stats))
+        + stats,
+    )
     groups.append((0x0B, start, len(out)))
     offsets_start = base + len(out)
     for op, a, b in groups:
@@ -2540,11 +2812,13 @@ def _summary(walk: _McapWalk, chunks, base: int) -> bytes:
 
 def _empty_mcap_head() -> bytes:
     from importlib.metadata import version
+
     return MCAP_MAGIC + _record(0x01, _enc_str("ros2") + _enc_str(f"rosbags-{version('rosbags')}"))
 
 
 def _repair_mcap_file(f: Path, dry_run: bool, limit: int | None, pending) -> _FileInfo:
     from rosbags.rosbag2.storage_mcap import McapReader
+
     if limit is None and pending is None:
         reader = McapReader(f)
         try:
@@ -2563,20 +2837,22 @@ def _repair_mcap_file(f: Path, dry_run: bool, limit: int | None, pending) -> _Fi
     else:
         start = f.read_bytes()[:64]
         sig = MCAP_MAGIC + b"\x01"
-        if walk.size >= 64 or start[:len(sig)] != sig[:len(start)]:
+        if walk.size >= 64 or start[: len(sig)] != sig[: len(start)]:
             raise BagError(f"bag {f.parent}: {walk.problems[0]}; not repaired")
-        head = _empty_mcap_head()           # killed before its header reached the disk
+        head = _empty_mcap_head()  # killed before its header reached the disk
         base = len(head)
         notes.append(f"{f.name}: no complete header; rewritten as an empty mcap")
     chunks = list(walk.chunks)
     old_tail = b""
     if chunks and not chunks[-1].index_complete():
-        base = chunks[-1].end                # cut its partial message index, write it anew
+        base = chunks[-1].end  # cut its partial message index, write it anew
         old_tail = _index_records(chunks[-1], base)
     for ch in chunks[:-1]:
         if not ch.index_complete():
-            notes.append(f"{f.name}: chunk at byte {ch.start} has no complete message index; "
-                         "left out of the index")
+            notes.append(
+                f"{f.name}: chunk at byte {ch.start} has no complete message index; "
+                "left out of the index"
+            )
     indexed = [ch for ch in chunks if ch.index_complete()]
     if walk.unchunked:
         notes.append(f"{f.name}: {walk.unchunked} message(s) outside chunks are not indexed")
@@ -2588,11 +2864,26 @@ def _repair_mcap_file(f: Path, dry_run: bool, limit: int | None, pending) -> _Fi
         except _Damaged as exc:
             notes.append(str(exc))
         else:
-            body = (struct.pack("<QQQI", t0, t1, len(data), 0) + _enc_str("")
-                    + struct.pack("<Q", len(data)) + data)
+            body = (
+                struct.pack("<QQQI", t0, t1, len(data), 0)
+                + _enc_str("")
+                + struct.pack("<Q", len(data))
+                + data
+            )
             start = base + len(old_tail)
-            ch = _Chunk(start, 9 + len(body), t0, t1, len(data), len(data), "", msgs, nbytes,
-                        {}, start + 9 + len(body))
+            ch = _Chunk(
+                start,
+                9 + len(body),
+                t0,
+                t1,
+                len(data),
+                len(data),
+                "",
+                msgs,
+                nbytes,
+                {},
+                start + 9 + len(body),
+            )
             new_tail = _record(0x06, body) + _index_records(ch, ch.end)
             extra = [ch]
     cut = max(0, walk.size - base) if walk.header_ok else walk.size
@@ -2603,30 +2894,35 @@ def _repair_mcap_file(f: Path, dry_run: bool, limit: int | None, pending) -> _Fi
         _write_tail(f, head, base, tail + _summary(walk, indexed + extra, base + len(tail)))
     except OSError as exc:
         if not extra:
-            raise BagError(f"bag {f.parent}: cannot write the index of {f.name}: "
-                           f"{_describe(exc)}") from None
+            raise BagError(
+                f"bag {f.parent}: cannot write the index of {f.name}: {_describe(exc)}"
+            ) from None
         lost = sum(len(v) for v in extra[0].msgs.values())
         notes.append(f"{f.name}: no room for the last {lost} message(s) ({_describe(exc)})")
         extra = []
         try:
             _write_tail(f, head, base, old_tail + _summary(walk, indexed, base + len(old_tail)))
         except OSError as exc2:
-            raise BagError(f"bag {f.parent}: cannot write the index of {f.name}: "
-                           f"{_describe(exc2)}") from None
+            raise BagError(
+                f"bag {f.parent}: cannot write the index of {f.name}: {_describe(exc2)}"
+            ) from None
     info = _mcap_info(f, walk, indexed + extra, True, cut, notes)
     reader = McapReader(f)
     try:
         reader.open()
         got = reader.metadata.message_count
     except Exception as exc:  # noqa: BLE001
-        raise BagError(f"bag {f.parent}: {f.name} fails rosbags' check after repair: "
-                       f"{_describe(exc)}") from None
+        raise BagError(
+            f"bag {f.parent}: {f.name} fails rosbags' check after repair: {_describe(exc)}"
+        ) from None
     finally:
         with contextlib.suppress(Exception):
             reader.close()
     if got != info.count:
-        raise BagError(f"bag {f.parent}: {f.name} after repair: rosbags counts {got} "
-                       f"messages, the index {info.count}")
+        raise BagError(
+            f"bag {f.parent}: {f.name} after repair: rosbags counts {got} "
+            f"messages, the index {info.count}"
+        )
     return info
 
 
@@ -2651,43 +2947,55 @@ def _write_tail(f: Path, head: bytes, base: int, tail: bytes) -> None:
 
 def _repair_sqlite_file(f: Path, dry_run: bool) -> _FileInfo:
     from rosbags.rosbag2.metadata import parse_qos
+
     journal = f.with_name(f.name + "-journal")
     hot = journal.exists() and journal.stat().st_size > 0
     notes = []
     with tempfile.TemporaryDirectory() as tmp:
         work = f
-        if dry_run and hot:               # roll back in a copy, never in the original
+        if dry_run and hot:  # roll back in a copy, never in the original
             work = Path(tmp) / f.name
             shutil.copyfile(f, work)
             shutil.copyfile(journal, Path(tmp) / journal.name)
         try:
-            con = sqlite3.connect(str(work))     # read-write: SQLite rolls a hot journal back
+            con = sqlite3.connect(str(work))  # read-write: SQLite rolls a hot journal back
         except sqlite3.Error as exc:
             raise BagError(f"bag {f.parent}: {f.name}: cannot open: {exc}") from None
         try:
             (check,) = con.execute("PRAGMA quick_check").fetchone()
             if check != "ok":
-                raise BagError(f"bag {f.parent}: {f.name} is damaged ({check}); not repairable "
-                               "in place -- read_bag(path, strict=False) recovers the "
-                               "readable rows")
+                raise BagError(
+                    f"bag {f.parent}: {f.name} is damaged ({check}); not repairable "
+                    "in place -- read_bag(path, strict=False) recovers the "
+                    "readable rows"
+                )
             cols = {r[1] for r in con.execute("PRAGMA table_info(topics)")}
             qos_col = "offered_qos_profiles" if "offered_qos_profiles" in cols else "''"
             hash_col = "type_description_hash" if "type_description_hash" in cols else "''"
-            rows = con.execute(f"SELECT id, name, type, serialization_format, {qos_col}, "
-                               f"{hash_col} FROM topics ORDER BY id").fetchall()
-            stats = {tid: (n, lo, hi, nb) for tid, n, lo, hi, nb in con.execute(
-                "SELECT topic_id, count(*), min(timestamp), max(timestamp), "
-                "coalesce(sum(length(data)), 0) FROM messages GROUP BY topic_id")}
+            rows = con.execute(
+                f"SELECT id, name, type, serialization_format, {qos_col}, "
+                f"{hash_col} FROM topics ORDER BY id"
+            ).fetchall()
+            stats = {
+                tid: (n, lo, hi, nb)
+                for tid, n, lo, hi, nb in con.execute(
+                    "SELECT topic_id, count(*), min(timestamp), max(timestamp), "
+                    "coalesce(sum(length(data)), 0) FROM messages GROUP BY topic_id"
+                )
+            }
         except sqlite3.Error as exc:
-            raise BagError(f"bag {f.parent}: {f.name} is damaged ({exc}); not repairable in "
-                           "place -- read_bag(path, strict=False) recovers the readable "
-                           "rows") from None
+            raise BagError(
+                f"bag {f.parent}: {f.name} is damaged ({exc}); not repairable in "
+                "place -- read_bag(path, strict=False) recovers the readable "
+                "rows"
+            ) from None
         finally:
             con.close()
         rolled = hot and not work.with_name(work.name + "-journal").exists()
     if rolled:
-        notes.append(f"{f.name}: uncommitted transaction rolled back"
-                     + (" (in a copy)" if dry_run else ""))
+        notes.append(
+            f"{f.name}: uncommitted transaction rolled back" + (" (in a copy)" if dry_run else "")
+        )
     conns, topics, nbytes = [], {}, 0
     for tid, name, typ, fmt, qos, digest in rows:
         n, lo, hi, nb = stats.get(tid, (0, None, None, 0))
@@ -2733,6 +3041,7 @@ def _write_bag_metadata(path: Path, storage: str, infos, note: str) -> None:
     """``metadata.yaml`` (rosbag2 format version 9, as rosbags' Writer writes it) from what
     the storage files hold."""
     from rosbags.rosbag2.metadata import dump_qos_v9
+
     merged: dict = {}
     for info in infos:
         for topic, typ, fmt, qos, digest, n in info.conns:
@@ -2740,11 +3049,16 @@ def _write_bag_metadata(path: Path, storage: str, infos, note: str) -> None:
             if key in merged:
                 merged[key]["message_count"] += n
             else:
-                merged[key] = {"topic_metadata": {"name": topic, "type": typ,
-                                                  "serialization_format": fmt,
-                                                  "offered_qos_profiles": dump_qos_v9(qos),
-                                                  "type_description_hash": digest},
-                               "message_count": n}
+                merged[key] = {
+                    "topic_metadata": {
+                        "name": topic,
+                        "type": typ,
+                        "serialization_format": fmt,
+                        "offered_qos_profiles": dump_qos_v9(qos),
+                        "type_description_hash": digest,
+                    },
+                    "message_count": n,
+                }
 
     def span(spans):
         spans = [s for s in spans if s is not None]
@@ -2757,20 +3071,28 @@ def _write_bag_metadata(path: Path, storage: str, infos, note: str) -> None:
     files = []
     for i in infos:
         s, d = span([i.span])
-        files.append({"path": i.name, "starting_time": {"nanoseconds_since_epoch": s},
-                      "duration": {"nanoseconds": d}, "message_count": i.count})
-    meta = {"rosbag2_bagfile_information": {
-        "version": 9,
-        "storage_identifier": storage,
-        "relative_file_paths": [i.name for i in infos],
-        "duration": {"nanoseconds": duration},
-        "starting_time": {"nanoseconds_since_epoch": start},
-        "message_count": sum(i.count for i in infos),
-        "topics_with_message_count": list(merged.values()),
-        "compression_format": "",
-        "compression_mode": "",
-        "files": files,
-        "custom_data": {"lpv_sysid.repair": note},
-        "ros_distro": "rosbags",
-    }}
+        files.append(
+            {
+                "path": i.name,
+                "starting_time": {"nanoseconds_since_epoch": s},
+                "duration": {"nanoseconds": d},
+                "message_count": i.count,
+            }
+        )
+    meta = {
+        "rosbag2_bagfile_information": {
+            "version": 9,
+            "storage_identifier": storage,
+            "relative_file_paths": [i.name for i in infos],
+            "duration": {"nanoseconds": duration},
+            "starting_time": {"nanoseconds_since_epoch": start},
+            "message_count": sum(i.count for i in infos),
+            "topics_with_message_count": list(merged.values()),
+            "compression_format": "",
+            "compression_mode": "",
+            "files": files,
+            "custom_data": {"lpv_sysid.repair": note},
+            "ros_distro": "rosbags",
+        }
+    }
     atomic_write_text(path / "metadata.yaml", yaml.safe_dump(meta, sort_keys=False), fsync=True)

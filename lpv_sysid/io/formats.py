@@ -76,11 +76,28 @@ import yaml
 from lpv_sysid.errors import ConfigError
 
 __all__ = [
-    "MODELS_FORMAT", "MODELS_FORMAT_V1", "MODELS_FORMATS", "GAINS_FORMAT", "Layout", "QUADROTOR_LAYOUT",
-    "SchedulingBox", "UncertainEntry", "VertexModel", "VertexModels",
-    "GainVertex", "FeedforwardSpec", "Certificate", "GainSchedule",
-    "load_yaml", "sha256_file", "sha256_bytes", "DesignEnvelope", "certify_law",
-    "SYSTEMS_ARRAYS", "systems_arrays", "load_certified_systems",
+    "MODELS_FORMAT",
+    "MODELS_FORMAT_V1",
+    "MODELS_FORMATS",
+    "GAINS_FORMAT",
+    "Layout",
+    "QUADROTOR_LAYOUT",
+    "SchedulingBox",
+    "UncertainEntry",
+    "VertexModel",
+    "VertexModels",
+    "GainVertex",
+    "FeedforwardSpec",
+    "Certificate",
+    "GainSchedule",
+    "load_yaml",
+    "sha256_file",
+    "sha256_bytes",
+    "DesignEnvelope",
+    "certify_law",
+    "SYSTEMS_ARRAYS",
+    "systems_arrays",
+    "load_certified_systems",
 ]
 
 MODELS_FORMAT = "lpv_sysid/vertex_models@2"
@@ -104,8 +121,14 @@ class Layout:
 def _quadrotor_layout() -> Layout:
     # The single place the expected names live: models/quadrotor.py (DESIGN.md state order).
     from lpv_sysid.models import quadrotor as qr
-    return Layout(tuple(qr.STATE_NAMES), tuple(qr.STATE_UNITS), tuple(qr.INPUT_NAMES),
-                  tuple(qr.INPUT_UNITS), tuple(qr.SCHEDULING_NAMES))
+
+    return Layout(
+        tuple(qr.STATE_NAMES),
+        tuple(qr.STATE_UNITS),
+        tuple(qr.INPUT_NAMES),
+        tuple(qr.INPUT_UNITS),
+        tuple(qr.SCHEDULING_NAMES),
+    )
 
 
 QUADROTOR_LAYOUT = _quadrotor_layout()
@@ -135,7 +158,9 @@ def parse_yaml(text: str, label: str) -> Any:
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-        problem = getattr(exc, "problem", None) or (str(exc).splitlines() or [type(exc).__name__])[0]
+        problem = (
+            getattr(exc, "problem", None) or (str(exc).splitlines() or [type(exc).__name__])[0]
+        )
         raise ConfigError(f"{label}: malformed YAML{where}: {problem}") from None
 
 
@@ -154,8 +179,14 @@ _Dumper.add_representer(list, _represent_list)
 def _write_yaml(path, doc: dict, label: str) -> None:
     """Atomic write (temporary file + rename) so a failure never leaves half a file."""
     path = Path(path)
-    text = yaml.dump(doc, Dumper=_Dumper, sort_keys=False, default_flow_style=False, width=100,
-                     allow_unicode=True)
+    text = yaml.dump(
+        doc,
+        Dumper=_Dumper,
+        sort_keys=False,
+        default_flow_style=False,
+        width=100,
+        allow_unicode=True,
+    )
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
@@ -194,8 +225,14 @@ class _V:
     def fail(self, path: str, msg: str):
         raise ConfigError(f"{self.label}: {path}: {msg}" if path else f"{self.label}: {msg}")
 
-    def mapping(self, d, path: str, required: Sequence[str], optional: Sequence[str] = (),
-                extra_ok: bool = False) -> Mapping:
+    def mapping(
+        self,
+        d,
+        path: str,
+        required: Sequence[str],
+        optional: Sequence[str] = (),
+        extra_ok: bool = False,
+    ) -> Mapping:
         if not isinstance(d, Mapping):
             self.fail(path, f"expected a mapping, got {_kind(d)}")
         bad = [k for k in d if not isinstance(k, str)]
@@ -207,7 +244,9 @@ class _V:
         if not extra_ok:
             unknown = [k for k in d if k not in required and k not in optional]
             if unknown:
-                self.fail(path, f"unknown key(s) {unknown}; allowed: {list(required) + list(optional)}")
+                self.fail(
+                    path, f"unknown key(s) {unknown}; allowed: {list(required) + list(optional)}"
+                )
         return d
 
     def number(self, v, path: str, bounded: bool = True) -> float:
@@ -220,7 +259,9 @@ class _V:
         try:
             x = float(v)
         except OverflowError:
-            self.fail(path, f"out of range for a double, got an integer of {len(str(abs(v)))} digits")
+            self.fail(
+                path, f"out of range for a double, got an integer of {len(str(abs(v)))} digits"
+            )
         if not math.isfinite(x):
             self.fail(path, f"must be finite, got {x}")
         if bounded and abs(x) > MAX_MAGNITUDE:
@@ -234,12 +275,16 @@ class _V:
 
     def string(self, v, path: str, nonempty: bool = True) -> str:
         if not isinstance(v, str) or (nonempty and not v):
-            self.fail(path, f"expected a{' non-empty' if nonempty else ''} string, got {_kind(v)} {v!r}")
+            self.fail(
+                path, f"expected a{' non-empty' if nonempty else ''} string, got {_kind(v)} {v!r}"
+            )
         return v
 
     def vector(self, v, n: Optional[int], path: str) -> np.ndarray:
         if not isinstance(v, (list, tuple, np.ndarray)):
-            self.fail(path, f"expected a list of {n if n is not None else ''} numbers, got {_kind(v)}")
+            self.fail(
+                path, f"expected a list of {n if n is not None else ''} numbers, got {_kind(v)}"
+            )
         vals = [self.number(x, f"{path}[{i}]") for i, x in enumerate(v)]
         if n is not None and len(vals) != n:
             self.fail(path, f"expected {n} values, got {len(vals)}")
@@ -248,19 +293,26 @@ class _V:
     def matrix(self, v, shape: tuple, path: str) -> np.ndarray:
         rows, cols = shape
         if not isinstance(v, (list, tuple, np.ndarray)) or any(
-                not isinstance(r, (list, tuple, np.ndarray)) for r in v):
+            not isinstance(r, (list, tuple, np.ndarray)) for r in v
+        ):
             self.fail(path, f"expected a {rows}x{cols} matrix as a list of rows, got {_kind(v)}")
         lens = sorted({len(r) for r in v})
         if len(v) != rows or lens != [cols]:
             got = f"{len(v)}x{lens[0]}" if len(lens) == 1 else f"{len(v)} rows of lengths {lens}"
             self.fail(path, f"expected shape {rows}x{cols}, got {got}")
-        return np.array([[self.number(x, f"{path}[{i}][{j}]") for j, x in enumerate(r)]
-                         for i, r in enumerate(v)], dtype=float).reshape(rows, cols)
+        return np.array(
+            [
+                [self.number(x, f"{path}[{i}][{j}]") for j, x in enumerate(r)]
+                for i, r in enumerate(v)
+            ],
+            dtype=float,
+        ).reshape(rows, cols)
 
 
 def _kind(v) -> str:
-    return {dict: "mapping", list: "list", str: "string", type(None): "null",
-            bool: "boolean"}.get(type(v), type(v).__name__)
+    return {dict: "mapping", list: "list", str: "string", type(None): "null", bool: "boolean"}.get(
+        type(v), type(v).__name__
+    )
 
 
 def _floats(a) -> list:
@@ -346,8 +398,11 @@ class SchedulingBox:
         return cls(got, lo, hi)
 
     def same_as(self, other: "SchedulingBox") -> bool:
-        return (self.names == other.names and np.array_equal(self.min, other.min)
-                and np.array_equal(self.max, other.max))
+        return (
+            self.names == other.names
+            and np.array_equal(self.min, other.min)
+            and np.array_equal(self.max, other.max)
+        )
 
 
 def _order_vertices(v: _V, points: list, box: SchedulingBox) -> list[int]:
@@ -355,19 +410,26 @@ def _order_vertices(v: _V, points: list, box: SchedulingBox) -> list[int]:
     corners = box.corners
     scale = np.maximum(1.0, np.maximum(np.abs(box.min), np.abs(box.max)))
     if len(points) != len(corners):
-        v.fail("vertices", f"expected {len(corners)} vertices (the corners of the "
-                           f"{len(box.names)}-axis box), got {len(points)}")
+        v.fail(
+            "vertices",
+            f"expected {len(corners)} vertices (the corners of the "
+            f"{len(box.names)}-axis box), got {len(points)}",
+        )
     where: dict[int, int] = {}
     for i, p in enumerate(points):
-        hits = [c for c in range(len(corners))
-                if np.all(np.abs(p - corners[c]) <= 1e-9 * scale)]
+        hits = [c for c in range(len(corners)) if np.all(np.abs(p - corners[c]) <= 1e-9 * scale)]
         if not hits:
-            v.fail(f"vertices[{i}].scheduling", f"{_floats(p)} is not a corner of the box "
-                                                f"min={_floats(box.min)} max={_floats(box.max)}")
+            v.fail(
+                f"vertices[{i}].scheduling",
+                f"{_floats(p)} is not a corner of the box "
+                f"min={_floats(box.min)} max={_floats(box.max)}",
+            )
         c = hits[0]
         if c in where:
-            v.fail(f"vertices[{i}].scheduling", f"corner {_floats(corners[c])} already given "
-                                                f"by vertices[{where[c]}]")
+            v.fail(
+                f"vertices[{i}].scheduling",
+                f"corner {_floats(corners[c])} already given by vertices[{where[c]}]",
+            )
         where[c] = i
     return [where[c] for c in range(len(corners))]
 
@@ -386,9 +448,15 @@ class UncertainEntry:
     upper: float
 
     def to_dict(self) -> dict:
-        return {"matrix": self.matrix, "row": int(self.row), "col": int(self.col),
-                "nominal": float(self.nominal), "std": float(self.std),
-                "lower": float(self.lower), "upper": float(self.upper)}
+        return {
+            "matrix": self.matrix,
+            "row": int(self.row),
+            "col": int(self.col),
+            "nominal": float(self.nominal),
+            "std": float(self.std),
+            "lower": float(self.lower),
+            "upper": float(self.upper),
+        }
 
     @classmethod
     def parse(cls, v: _V, d, path: str, n_x: int, n_u: int) -> "UncertainEntry":
@@ -414,8 +482,15 @@ class UncertainEntry:
     def to_lpv(self):
         """The :class:`lpv_sysid.models.lpv.UncertainElement` of this entry."""
         from lpv_sysid.models.lpv import UncertainElement
-        return UncertainElement(matrix=self.matrix, row=self.row, col=self.col,
-                                lower=self.lower, upper=self.upper, nominal=self.nominal)
+
+        return UncertainElement(
+            matrix=self.matrix,
+            row=self.row,
+            col=self.col,
+            lower=self.lower,
+            upper=self.upper,
+            nominal=self.nominal,
+        )
 
 
 def _fit(v: _V, d, path: str) -> dict:
@@ -425,7 +500,9 @@ def _fit(v: _V, d, path: str) -> dict:
         v.mapping(per, f"{path}.{metric}", (), extra_ok=True)
         out[metric] = {}
         for ch, x in per.items():
-            out[metric][str(ch)] = v.number(x, f"{path}.{metric}.{ch}", bounded=False)  # r2 of a flat axis: -1e20
+            out[metric][str(ch)] = v.number(
+                x, f"{path}.{metric}.{ch}", bounded=False
+            )  # r2 of a flat axis: -1e20
     return out
 
 
@@ -442,9 +519,14 @@ class VertexModel:
     fit: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
-        d = {"scheduling": _floats(self.scheduling), "x0": _floats(self.x0), "u0": _floats(self.u0),
-             "A": _rows(self.A), "B": _rows(self.B),
-             "uncertain": [e.to_dict() for e in self.uncertain]}
+        d = {
+            "scheduling": _floats(self.scheduling),
+            "x0": _floats(self.x0),
+            "u0": _floats(self.u0),
+            "A": _rows(self.A),
+            "B": _rows(self.B),
+            "uncertain": [e.to_dict() for e in self.uncertain],
+        }
         if self.fit:
             d["fit"] = {m: {k: float(x) for k, x in per.items()} for m, per in self.fit.items()}
         return d
@@ -456,20 +538,27 @@ class VertexModel:
         unc = d.get("uncertain") or []
         if not isinstance(unc, list):
             v.fail(f"{p}.uncertain", f"expected a list, got {_kind(unc)}")
-        entries = tuple(UncertainEntry.parse(v, e, f"{p}.uncertain[{k}]", n_x, n_u)
-                        for k, e in enumerate(unc))
+        entries = tuple(
+            UncertainEntry.parse(v, e, f"{p}.uncertain[{k}]", n_x, n_u) for k, e in enumerate(unc)
+        )
         seen = {}
         for k, e in enumerate(entries):
             key = (e.matrix, e.row, e.col)
             if key in seen:
-                v.fail(f"{p}.uncertain[{k}]", f"{e.matrix}[{e.row}][{e.col}] already given by "
-                                              f"uncertain[{seen[key]}]")
+                v.fail(
+                    f"{p}.uncertain[{k}]",
+                    f"{e.matrix}[{e.row}][{e.col}] already given by uncertain[{seen[key]}]",
+                )
             seen[key] = k
-        return cls(scheduling=v.vector(d["scheduling"], n_p, f"{p}.scheduling"),
-                   x0=v.vector(d["x0"], n_x, f"{p}.x0"), u0=v.vector(d["u0"], n_u, f"{p}.u0"),
-                   A=v.matrix(d["A"], (n_x, n_x), f"{p}.A"), B=v.matrix(d["B"], (n_x, n_u), f"{p}.B"),
-                   uncertain=entries,
-                   fit=_fit(v, d["fit"], f"{p}.fit") if d.get("fit") is not None else {})
+        return cls(
+            scheduling=v.vector(d["scheduling"], n_p, f"{p}.scheduling"),
+            x0=v.vector(d["x0"], n_x, f"{p}.x0"),
+            u0=v.vector(d["u0"], n_u, f"{p}.u0"),
+            A=v.matrix(d["A"], (n_x, n_x), f"{p}.A"),
+            B=v.matrix(d["B"], (n_x, n_u), f"{p}.B"),
+            uncertain=entries,
+            fit=_fit(v, d["fit"], f"{p}.fit") if d.get("fit") is not None else {},
+        )
 
 
 class _StackedVertices:
@@ -500,9 +589,9 @@ class VertexModels(_StackedVertices):
     input_units: tuple
     scheduling: SchedulingBox
     vertices: tuple
-    ts: Optional[float] = None          # None: continuous time
+    ts: Optional[float] = None  # None: continuous time
     meta: dict = field(default_factory=dict)
-    format_version: int = 2             # 1: lower/upper span the reduced polytope (module docstring)
+    format_version: int = 2  # 1: lower/upper span the reduced polytope (module docstring)
 
     @property
     def A(self) -> np.ndarray:
@@ -515,47 +604,77 @@ class VertexModels(_StackedVertices):
     def to_polytopic(self, max_corners: Optional[int] = None):
         """:class:`lpv_sysid.models.lpv.PolytopicModel` with the Eq. (23) uncertainty vertices."""
         from lpv_sysid.models import lpv
+
         kw = {} if max_corners is None else {"max_corners": max_corners}
         return lpv.PolytopicModel.from_uncertain_elements(
-            self.scheduling.min, self.scheduling.max, self.A, self.B, self.x0, self.u0,
-            [[e.to_lpv() for e in vx.uncertain] for vx in self.vertices], ts=self.ts,
-            state_names=self.state_names, input_names=self.input_names,
-            scheduling_names=self.scheduling.names, **kw)
+            self.scheduling.min,
+            self.scheduling.max,
+            self.A,
+            self.B,
+            self.x0,
+            self.u0,
+            [[e.to_lpv() for e in vx.uncertain] for vx in self.vertices],
+            ts=self.ts,
+            state_names=self.state_names,
+            input_names=self.input_names,
+            scheduling_names=self.scheduling.names,
+            **kw,
+        )
 
     def to_dict(self) -> dict:
         tag = {v: k for k, v in MODELS_FORMATS.items()}[self.format_version]
-        d = {"format": tag, "time": _time_dict(self.ts),
-             "states": [{"name": n, "unit": u} for n, u in zip(self.state_names, self.state_units)],
-             "inputs": [{"name": n, "unit": u} for n, u in zip(self.input_names, self.input_units)],
-             "scheduling": self.scheduling.to_dict(),
-             "vertices": [vx.to_dict() for vx in self.vertices]}
+        d = {
+            "format": tag,
+            "time": _time_dict(self.ts),
+            "states": [{"name": n, "unit": u} for n, u in zip(self.state_names, self.state_units)],
+            "inputs": [{"name": n, "unit": u} for n, u in zip(self.input_names, self.input_units)],
+            "scheduling": self.scheduling.to_dict(),
+            "vertices": [vx.to_dict() for vx in self.vertices],
+        }
         if self.meta:
             d["meta"] = self.meta
         return d
 
     @classmethod
-    def from_dict(cls, d, layout: Optional[Layout] = QUADROTOR_LAYOUT,
-                  label: str = "vertex_models.yaml") -> "VertexModels":
+    def from_dict(
+        cls, d, layout: Optional[Layout] = QUADROTOR_LAYOUT, label: str = "vertex_models.yaml"
+    ) -> "VertexModels":
         """Validate and build; ``layout=None`` accepts any names/units (shapes from the lists)."""
         v = _V(label)
         lay = layout or Layout()
-        v.mapping(d, "", ("format", "time", "states", "inputs", "scheduling", "vertices"), ("meta",))
+        v.mapping(
+            d, "", ("format", "time", "states", "inputs", "scheduling", "vertices"), ("meta",)
+        )
         if not isinstance(d["format"], str) or d["format"] not in MODELS_FORMATS:
-            v.fail("format", f"expected {MODELS_FORMAT!r} (or {MODELS_FORMAT_V1!r}), got {d['format']!r}")
+            v.fail(
+                "format",
+                f"expected {MODELS_FORMAT!r} (or {MODELS_FORMAT_V1!r}), got {d['format']!r}",
+            )
         ts = _time(v, d["time"])
         sn, su = _channels(v, d["states"], "states", lay.state_names, lay.state_units)
         inn, inu = _channels(v, d["inputs"], "inputs", lay.input_names, lay.input_units)
         box = SchedulingBox.parse(v, d["scheduling"], lay.scheduling_names)
         if not isinstance(d["vertices"], list):
             v.fail("vertices", f"expected a list, got {_kind(d['vertices'])}")
-        vxs = [VertexModel.parse(v, e, i, len(sn), len(inn), len(box.names))
-               for i, e in enumerate(d["vertices"])]
+        vxs = [
+            VertexModel.parse(v, e, i, len(sn), len(inn), len(box.names))
+            for i, e in enumerate(d["vertices"])
+        ]
         order = _order_vertices(v, [vx.scheduling for vx in vxs], box)
         meta = d.get("meta") or {}
         if not isinstance(meta, Mapping):
             v.fail("meta", f"expected a mapping, got {_kind(meta)}")
-        return cls(sn, su, inn, inu, box, tuple(vxs[k] for k in order), ts, dict(meta),
-                   MODELS_FORMATS[d["format"]])
+        return cls(
+            sn,
+            su,
+            inn,
+            inu,
+            box,
+            tuple(vxs[k] for k in order),
+            ts,
+            dict(meta),
+            MODELS_FORMATS[d["format"]],
+        )
 
     @classmethod
     def load(cls, path, layout: Optional[Layout] = QUADROTOR_LAYOUT) -> "VertexModels":
@@ -565,7 +684,7 @@ class VertexModels(_StackedVertices):
     def save(self, path) -> str:
         """Write the file (validated first, written atomically); returns its SHA-256."""
         doc = self.to_dict()
-        self.from_dict(doc, layout=None, label=Path(path).name)   # never write an invalid file
+        self.from_dict(doc, layout=None, label=Path(path).name)  # never write an invalid file
         _write_yaml(path, doc, Path(path).name)
         return sha256_file(path)
 
@@ -588,8 +707,12 @@ class GainVertex:
     F_jerk: Optional[np.ndarray] = None
 
     def to_dict(self) -> dict:
-        d = {"scheduling": _floats(self.scheduling), "K": _rows(self.K),
-             "x0": _floats(self.x0), "u0": _floats(self.u0)}
+        d = {
+            "scheduling": _floats(self.scheduling),
+            "K": _rows(self.K),
+            "x0": _floats(self.x0),
+            "u0": _floats(self.u0),
+        }
         if self.F_ff is not None:
             d["F_ff"] = _rows(self.F_ff)
         if self.F_jerk is not None:
@@ -597,13 +720,24 @@ class GainVertex:
         return d
 
     @classmethod
-    def parse(cls, v: _V, d, i: int, n_x: int, n_u: int, n_p: int,
-              ff_shape: Optional[tuple] = None, jerk_shape: Optional[tuple] = None) -> "GainVertex":
+    def parse(
+        cls,
+        v: _V,
+        d,
+        i: int,
+        n_x: int,
+        n_u: int,
+        n_p: int,
+        ff_shape: Optional[tuple] = None,
+        jerk_shape: Optional[tuple] = None,
+    ) -> "GainVertex":
         p = f"vertices[{i}]"
         v.mapping(d, p, ("scheduling", "K", "x0", "u0"), ("F_ff", "F_jerk"))
         mats = {}
-        for key, shape, why in (("F_ff", ff_shape, "'feedforward'"),
-                                ("F_jerk", jerk_shape, "'feedforward' with kinematic_states/rate_states")):
+        for key, shape, why in (
+            ("F_ff", ff_shape, "'feedforward'"),
+            ("F_jerk", jerk_shape, "'feedforward' with kinematic_states/rate_states"),
+        ):
             mats[key] = None
             if key in d:
                 if shape is None:
@@ -611,10 +745,14 @@ class GainVertex:
                 mats[key] = v.matrix(d[key], shape, f"{p}.{key}")
             elif shape is not None:
                 v.fail(p, f"missing key {key!r} (the file declares {why}: every vertex needs it)")
-        return cls(v.vector(d["scheduling"], n_p, f"{p}.scheduling"),
-                   v.matrix(d["K"], (n_u, n_x), f"{p}.K"),
-                   v.vector(d["x0"], n_x, f"{p}.x0"), v.vector(d["u0"], n_u, f"{p}.u0"),
-                   mats["F_ff"], mats["F_jerk"])
+        return cls(
+            v.vector(d["scheduling"], n_p, f"{p}.scheduling"),
+            v.matrix(d["K"], (n_u, n_x), f"{p}.K"),
+            v.vector(d["x0"], n_x, f"{p}.x0"),
+            v.vector(d["u0"], n_u, f"{p}.u0"),
+            mats["F_ff"],
+            mats["F_jerk"],
+        )
 
 
 @dataclass(frozen=True)
@@ -625,7 +763,7 @@ class FeedforwardSpec:
     free_states: tuple
     accelerated_states: tuple
     held_states: tuple
-    kinematic_states: tuple = ()       # jerk term (both non-empty): per-vertex F_jerk
+    kinematic_states: tuple = ()  # jerk term (both non-empty): per-vertex F_jerk
     rate_states: tuple = ()
 
     @property
@@ -633,8 +771,11 @@ class FeedforwardSpec:
         return bool(self.kinematic_states) and bool(self.rate_states)
 
     def to_dict(self) -> dict:
-        d = {"free_states": list(self.free_states), "accelerated_states": list(self.accelerated_states),
-             "held_states": list(self.held_states)}
+        d = {
+            "free_states": list(self.free_states),
+            "accelerated_states": list(self.accelerated_states),
+            "held_states": list(self.held_states),
+        }
         if self.has_jerk:
             d["kinematic_states"] = list(self.kinematic_states)
             d["rate_states"] = list(self.rate_states)
@@ -649,20 +790,33 @@ class FeedforwardSpec:
         return (len(self.free_states) + n_u + len(self.rate_states), len(self.accelerated_states))
 
     @classmethod
-    def parse(cls, v: _V, d, state_names: tuple, n_u: int, n_p: int,
-              path: str = "feedforward") -> "FeedforwardSpec":
-        v.mapping(d, path, ("free_states", "accelerated_states", "held_states"),
-                  ("kinematic_states", "rate_states"))
+    def parse(
+        cls, v: _V, d, state_names: tuple, n_u: int, n_p: int, path: str = "feedforward"
+    ) -> "FeedforwardSpec":
+        v.mapping(
+            d,
+            path,
+            ("free_states", "accelerated_states", "held_states"),
+            ("kinematic_states", "rate_states"),
+        )
         if ("kinematic_states" in d) != ("rate_states" in d):
             v.fail(path, "kinematic_states and rate_states go together (the jerk term needs both)")
         got = {}
-        for k in ("free_states", "accelerated_states", "held_states", "kinematic_states", "rate_states"):
+        for k in (
+            "free_states",
+            "accelerated_states",
+            "held_states",
+            "kinematic_states",
+            "rate_states",
+        ):
             if k not in d:
                 got[k] = ()
                 continue
             lst = d[k]
             if not isinstance(lst, list) or not lst:
-                v.fail(f"{path}.{k}", f"expected a non-empty list of state names, got {_kind(lst)}")
+                v.fail(
+                    f"{path}.{k}", f"expected a non-empty list of state names, got {_kind(lst)}"
+                )
             names = tuple(v.string(s, f"{path}.{k}[{j}]") for j, s in enumerate(lst))
             bad = [s for s in names if s not in state_names]
             if bad:
@@ -671,16 +825,30 @@ class FeedforwardSpec:
                 v.fail(f"{path}.{k}", f"duplicate names in {list(names)}")
             got[k] = names
         if len(got["accelerated_states"]) != n_p:
-            v.fail(f"{path}.accelerated_states", f"expected {n_p} entries (one per scheduling axis), "
-                                                 f"got {len(got['accelerated_states'])}")
+            v.fail(
+                f"{path}.accelerated_states",
+                f"expected {n_p} entries (one per scheduling axis), "
+                f"got {len(got['accelerated_states'])}",
+            )
         if set(got["free_states"]) & set(got["accelerated_states"]):
             v.fail(path, "a state cannot be both free and accelerated")
-        if len(got["accelerated_states"]) + len(got["held_states"]) != len(got["free_states"]) + n_u:
-            v.fail(path, "the feedforward system must be square: accelerated + held rows = free states + inputs")
+        if (
+            len(got["accelerated_states"]) + len(got["held_states"])
+            != len(got["free_states"]) + n_u
+        ):
+            v.fail(
+                path,
+                "the feedforward system must be square: accelerated + held rows = free states + inputs",
+            )
         if not set(got["kinematic_states"]) <= set(got["free_states"]):
             v.fail(f"{path}.kinematic_states", "must be among the free states")
-        return cls(got["free_states"], got["accelerated_states"], got["held_states"],
-                   got["kinematic_states"], got["rate_states"])
+        return cls(
+            got["free_states"],
+            got["accelerated_states"],
+            got["held_states"],
+            got["kinematic_states"],
+            got["rate_states"],
+        )
 
 
 @dataclass(frozen=True)
@@ -705,23 +873,38 @@ class DesignEnvelope:
     excitation_peak: tuple
     source: str = ""
 
-    KEYS = ("reference_peak", "reference_rate", "reference_accel", "knot_interval_s", "fade_s",
-            "excitation_peak")
+    KEYS = (
+        "reference_peak",
+        "reference_rate",
+        "reference_accel",
+        "knot_interval_s",
+        "fade_s",
+        "excitation_peak",
+    )
 
     def to_dict(self) -> dict:
-        return {"reference_peak": list(self.reference_peak),
-                "reference_rate": list(self.reference_rate),
-                "reference_accel": list(self.reference_accel),
-                "knot_interval_s": float(self.knot_interval_s), "fade_s": float(self.fade_s),
-                "excitation_peak": list(self.excitation_peak), "source": self.source}
+        return {
+            "reference_peak": list(self.reference_peak),
+            "reference_rate": list(self.reference_rate),
+            "reference_accel": list(self.reference_accel),
+            "knot_interval_s": float(self.knot_interval_s),
+            "fade_s": float(self.fade_s),
+            "excitation_peak": list(self.excitation_peak),
+            "source": self.source,
+        }
 
     @classmethod
-    def parse(cls, v: _V, d, n_p: Optional[int], n_e: Optional[int],
-              path: str = "certificate.design") -> "DesignEnvelope":
+    def parse(
+        cls, v: _V, d, n_p: Optional[int], n_e: Optional[int], path: str = "certificate.design"
+    ) -> "DesignEnvelope":
         v.mapping(d, path, cls.KEYS, ("source",))
         out = {}
-        for key, n in (("reference_peak", n_p), ("reference_rate", n_p), ("reference_accel", n_p),
-                       ("excitation_peak", n_e)):
+        for key, n in (
+            ("reference_peak", n_p),
+            ("reference_rate", n_p),
+            ("reference_accel", n_p),
+            ("excitation_peak", n_e),
+        ):
             vec = v.vector(d[key], n, f"{path}.{key}")
             if np.any(vec <= 0):
                 v.fail(f"{path}.{key}", f"entries must be > 0, got {_floats(vec)}")
@@ -733,8 +916,15 @@ class DesignEnvelope:
         if not fade > 0:
             v.fail(f"{path}.fade_s", f"must be > 0, got {fade}")
         source = v.string(d.get("source", ""), f"{path}.source", nonempty=False)
-        return cls(out["reference_peak"], out["reference_rate"], out["reference_accel"], knot,
-                   fade, out["excitation_peak"], source)
+        return cls(
+            out["reference_peak"],
+            out["reference_rate"],
+            out["reference_accel"],
+            knot,
+            fade,
+            out["excitation_peak"],
+            source,
+        )
 
 
 #: ``certificate.certified_set.kind`` / ``.scheduling.variation`` (module docstring)
@@ -759,8 +949,13 @@ class Certificate:
     design: Optional[DesignEnvelope] = None
 
     def to_dict(self) -> dict:
-        d = {"lmi": self.lmi, "solver": self.solver, "gamma_achieved": float(self.gamma_achieved),
-             "min_margin": float(self.min_margin), "models_sha256": self.models_sha256}
+        d = {
+            "lmi": self.lmi,
+            "solver": self.solver,
+            "gamma_achieved": float(self.gamma_achieved),
+            "min_margin": float(self.min_margin),
+            "models_sha256": self.models_sha256,
+        }
         d.update(self.extra)
         if self.gains_sha256 is not None:
             d["gains_sha256"] = self.gains_sha256
@@ -776,8 +971,14 @@ class Certificate:
         return sha
 
     @classmethod
-    def parse(cls, v: _V, d, path: str = "certificate", n_p: Optional[int] = None,
-              n_e: Optional[int] = None) -> "Certificate":
+    def parse(
+        cls,
+        v: _V,
+        d,
+        path: str = "certificate",
+        n_p: Optional[int] = None,
+        n_e: Optional[int] = None,
+    ) -> "Certificate":
         req = ("lmi", "solver", "gamma_achieved", "min_margin", "models_sha256")
         own = req + ("gains_sha256", "design")
         v.mapping(d, path, req, extra_ok=True)
@@ -785,22 +986,44 @@ class Certificate:
         g = v.number(d["gamma_achieved"], f"{path}.gamma_achieved")
         if g <= 0:
             v.fail(f"{path}.gamma_achieved", f"must be > 0, got {g}")
-        gains_sha = (cls._sha(v, d["gains_sha256"], f"{path}.gains_sha256")
-                     if d.get("gains_sha256") is not None else None)
-        design = (DesignEnvelope.parse(v, d["design"], n_p, n_e, f"{path}.design")
-                  if d.get("design") is not None else None)
+        gains_sha = (
+            cls._sha(v, d["gains_sha256"], f"{path}.gains_sha256")
+            if d.get("gains_sha256") is not None
+            else None
+        )
+        design = (
+            DesignEnvelope.parse(v, d["design"], n_p, n_e, f"{path}.design")
+            if d.get("design") is not None
+            else None
+        )
         cs = d.get("certified_set")
         if cs is not None:
-            v.mapping(cs, f"{path}.certified_set", ("kind", "statement", "scheduling"), extra_ok=True)
+            v.mapping(
+                cs, f"{path}.certified_set", ("kind", "statement", "scheduling"), extra_ok=True
+            )
             if cs["kind"] not in CERTIFIED_SET_KINDS:
-                v.fail(f"{path}.certified_set.kind", f"expected one of {CERTIFIED_SET_KINDS}, got {cs['kind']!r}")
-            v.mapping(cs["scheduling"], f"{path}.certified_set.scheduling", ("variation",), extra_ok=True)
+                v.fail(
+                    f"{path}.certified_set.kind",
+                    f"expected one of {CERTIFIED_SET_KINDS}, got {cs['kind']!r}",
+                )
+            v.mapping(
+                cs["scheduling"], f"{path}.certified_set.scheduling", ("variation",), extra_ok=True
+            )
             if cs["scheduling"]["variation"] not in SCHEDULING_VARIATIONS:
-                v.fail(f"{path}.certified_set.scheduling.variation",
-                       f"expected one of {SCHEDULING_VARIATIONS}, got {cs['scheduling']['variation']!r}")
-        return cls(v.string(d["lmi"], f"{path}.lmi"), v.string(d["solver"], f"{path}.solver"), g,
-                   v.number(d["min_margin"], f"{path}.min_margin"), sha,
-                   {k: d[k] for k in d if k not in own}, gains_sha, design)
+                v.fail(
+                    f"{path}.certified_set.scheduling.variation",
+                    f"expected one of {SCHEDULING_VARIATIONS}, got {cs['scheduling']['variation']!r}",
+                )
+        return cls(
+            v.string(d["lmi"], f"{path}.lmi"),
+            v.string(d["solver"], f"{path}.solver"),
+            g,
+            v.number(d["min_margin"], f"{path}.min_margin"),
+            sha,
+            {k: d[k] for k in d if k not in own},
+            gains_sha,
+            design,
+        )
 
 
 @dataclass(frozen=True)
@@ -874,37 +1097,67 @@ class GainSchedule(_StackedVertices):
         v = _V(label)
         got = self.certificate.gains_sha256
         if got is None:
-            v.fail("certificate.gains_sha256", "missing: the file does not record which gains "
-                   "were certified (written before this check existed); re-run `lpv-sysid "
-                   "synthesize` to regenerate the gains and their certificate")
+            v.fail(
+                "certificate.gains_sha256",
+                "missing: the file does not record which gains "
+                "were certified (written before this check existed); re-run `lpv-sysid "
+                "synthesize` to regenerate the gains and their certificate",
+            )
         if got != self.law_sha256():
-            v.fail("certificate.gains_sha256", f"{got} does not match the gains in the file "
-                   f"(sha256 {self.law_sha256()}): K, x0, u0, R, Q, gamma or the feedforward "
-                   "were changed after certification; re-run `lpv-sysid synthesize` (and "
-                   "`lpv-sysid verify`) instead of editing gains")
+            v.fail(
+                "certificate.gains_sha256",
+                f"{got} does not match the gains in the file "
+                f"(sha256 {self.law_sha256()}): K, x0, u0, R, Q, gamma or the feedforward "
+                "were changed after certification; re-run `lpv-sysid synthesize` (and "
+                "`lpv-sysid verify`) instead of editing gains",
+            )
 
     def to_dict(self) -> dict:
         d = {"format": GAINS_FORMAT}
         if self.ts is not None:
             d["time"] = _time_dict(self.ts)
-        d.update({
-            "states": [{"name": n, "unit": u} for n, u in zip(self.state_names, self.state_units)],
-            "inputs": [{"name": n, "unit": u} for n, u in zip(self.input_names, self.input_units)],
-            "scheduling": self.scheduling.to_dict(),
-            "vertices": [vx.to_dict() for vx in self.vertices],
-            "R": _rows(self.R), "Q": _rows(self.Q), "gamma": float(self.gamma),
-            "certificate": self.certificate.to_dict()})
+        d.update(
+            {
+                "states": [
+                    {"name": n, "unit": u} for n, u in zip(self.state_names, self.state_units)
+                ],
+                "inputs": [
+                    {"name": n, "unit": u} for n, u in zip(self.input_names, self.input_units)
+                ],
+                "scheduling": self.scheduling.to_dict(),
+                "vertices": [vx.to_dict() for vx in self.vertices],
+                "R": _rows(self.R),
+                "Q": _rows(self.Q),
+                "gamma": float(self.gamma),
+                "certificate": self.certificate.to_dict(),
+            }
+        )
         if self.feedforward is not None:
             d["feedforward"] = self.feedforward.to_dict()
         return d
 
     @classmethod
-    def from_dict(cls, d, layout: Optional[Layout] = QUADROTOR_LAYOUT,
-                  label: str = "gains.yaml") -> "GainSchedule":
+    def from_dict(
+        cls, d, layout: Optional[Layout] = QUADROTOR_LAYOUT, label: str = "gains.yaml"
+    ) -> "GainSchedule":
         v = _V(label)
         lay = layout or Layout()
-        v.mapping(d, "", ("format", "states", "inputs", "scheduling", "vertices", "R", "Q", "gamma",
-                          "certificate"), ("time", "feedforward"))
+        v.mapping(
+            d,
+            "",
+            (
+                "format",
+                "states",
+                "inputs",
+                "scheduling",
+                "vertices",
+                "R",
+                "Q",
+                "gamma",
+                "certificate",
+            ),
+            ("time", "feedforward"),
+        )
         if d["format"] != GAINS_FORMAT:
             v.fail("format", f"expected {GAINS_FORMAT!r}, got {d['format']!r}")
         ts = _time(v, d["time"]) if "time" in d else None
@@ -919,7 +1172,10 @@ class GainSchedule(_StackedVertices):
             ff = FeedforwardSpec.parse(v, d["feedforward"], sn, n_u, n_p)
         ff_shape = None if ff is None else ff.shape(n_u)
         jerk_shape = None if ff is None else ff.jerk_shape(n_u)
-        vxs = [GainVertex.parse(v, e, i, n_x, n_u, n_p, ff_shape, jerk_shape) for i, e in enumerate(d["vertices"])]
+        vxs = [
+            GainVertex.parse(v, e, i, n_x, n_u, n_p, ff_shape, jerk_shape)
+            for i, e in enumerate(d["vertices"])
+        ]
         order = _order_vertices(v, [vx.scheduling for vx in vxs], box)
         R = v.matrix(d["R"], (n_u, n_u), "R")
         Q = v.matrix(d["Q"], (n_p, n_p), "Q")
@@ -934,49 +1190,82 @@ class GainSchedule(_StackedVertices):
         return cls(sn, su, inn, inu, box, tuple(vxs[k] for k in order), R, Q, gamma, cert, ts, ff)
 
     @classmethod
-    def load(cls, path, models_path=None,
-             layout: Optional[Layout] = QUADROTOR_LAYOUT) -> "GainSchedule":
+    def load(
+        cls, path, models_path=None, layout: Optional[Layout] = QUADROTOR_LAYOUT
+    ) -> "GainSchedule":
         """Load and validate; with ``models_path`` also check it against the models file
         (:meth:`check_models`)."""
         path = Path(path)
         gs = cls.from_dict(load_yaml(path), layout, label=path.name)
         if models_path is not None:
             models = VertexModels.load(models_path, layout)
-            gs.check_models(models, sha256_file(models_path), label=path.name,
-                            models_label=Path(models_path).name)
+            gs.check_models(
+                models,
+                sha256_file(models_path),
+                label=path.name,
+                models_label=Path(models_path).name,
+            )
         return gs
 
-    def check_models(self, models: VertexModels, models_sha256: Optional[str] = None,
-                     label: str = "gains.yaml", models_label: str = "vertex_models.yaml",
-                     rtol: float = 1e-9) -> None:
+    def check_models(
+        self,
+        models: VertexModels,
+        models_sha256: Optional[str] = None,
+        label: str = "gains.yaml",
+        models_label: str = "vertex_models.yaml",
+        rtol: float = 1e-9,
+    ) -> None:
         """Refuse gains synthesised for other models: names, units, box, time base, vertex
         equilibria and (when given) the models file's SHA-256."""
         v = _V(label)
-        for what, mine, theirs in (("states", (self.state_names, self.state_units),
-                                    (models.state_names, models.state_units)),
-                                   ("inputs", (self.input_names, self.input_units),
-                                    (models.input_names, models.input_units))):
+        for what, mine, theirs in (
+            (
+                "states",
+                (self.state_names, self.state_units),
+                (models.state_names, models.state_units),
+            ),
+            (
+                "inputs",
+                (self.input_names, self.input_units),
+                (models.input_names, models.input_units),
+            ),
+        ):
             if mine != theirs:
-                v.fail(what, f"names/units {list(zip(*mine))} differ from {models_label} "
-                             f"{list(zip(*theirs))}")
+                v.fail(
+                    what,
+                    f"names/units {list(zip(*mine))} differ from {models_label} "
+                    f"{list(zip(*theirs))}",
+                )
         if not self.scheduling.same_as(models.scheduling):
-            v.fail("scheduling", f"box {self.scheduling.to_dict()} differs from {models_label} "
-                                 f"{models.scheduling.to_dict()}")
+            v.fail(
+                "scheduling",
+                f"box {self.scheduling.to_dict()} differs from {models_label} "
+                f"{models.scheduling.to_dict()}",
+            )
         if self.ts != models.ts:
-            v.fail("time", f"{_time_dict(self.ts)!r} differs from {models_label} {_time_dict(models.ts)!r}")
+            v.fail(
+                "time",
+                f"{_time_dict(self.ts)!r} differs from {models_label} {_time_dict(models.ts)!r}",
+            )
         for i, (g, m) in enumerate(zip(self.vertices, models.vertices)):
             for name in ("x0", "u0"):
                 a, b = getattr(g, name), getattr(m, name)
                 if not np.allclose(a, b, rtol=rtol, atol=rtol):
-                    v.fail(f"vertices[{i}].{name}", f"differs from {models_label} vertices[{i}].{name} "
-                                                    f"(max |diff| {np.max(np.abs(a - b)):.3g})")
+                    v.fail(
+                        f"vertices[{i}].{name}",
+                        f"differs from {models_label} vertices[{i}].{name} "
+                        f"(max |diff| {np.max(np.abs(a - b)):.3g})",
+                    )
         if models_sha256 is not None and models_sha256 != self.certificate.models_sha256:
-            v.fail("certificate.models_sha256", f"{self.certificate.models_sha256} does not match "
-                                                f"{models_label} (sha256 {models_sha256})")
+            v.fail(
+                "certificate.models_sha256",
+                f"{self.certificate.models_sha256} does not match "
+                f"{models_label} (sha256 {models_sha256})",
+            )
 
     def save(self, path) -> None:
         doc = self.to_dict()
-        self.from_dict(doc, layout=None, label=Path(path).name)   # never write an invalid file
+        self.from_dict(doc, layout=None, label=Path(path).name)  # never write an invalid file
         _write_yaml(path, doc, Path(path).name)
 
 
@@ -1008,8 +1297,9 @@ def systems_arrays(systems: Sequence[Sequence[tuple]]) -> dict:
     return {"A_sys": A, "B_sys": B, "M_sys": Ms}
 
 
-def load_certified_systems(gains_path, certificate: Certificate, n_x: int, n_u: int,
-                           label: Optional[str] = None) -> list:
+def load_certified_systems(
+    gains_path, certificate: Certificate, n_x: int, n_u: int, label: Optional[str] = None
+) -> list:
     """Per-vertex lists of the certified ``(A_ij, B_ij)`` from the sidecar named in
     ``certificate.sidecar`` (``{file, sha256}``, next to the gains file); ConfigError when
     the entry, the file, its sha256 or the :data:`SYSTEMS_ARRAYS` are missing or wrong."""
@@ -1018,34 +1308,59 @@ def load_certified_systems(gains_path, certificate: Certificate, n_x: int, n_u: 
     gains_path = Path(gains_path)
     v = _V(label or gains_path.name)
     side = certificate.extra.get("sidecar")
-    if not isinstance(side, Mapping) or not isinstance(side.get("file"), str) \
-            or not isinstance(side.get("sha256"), str):
-        v.fail("certificate.sidecar", "missing {file, sha256}: the certified systems cannot be "
-               "re-checked; re-run `lpv-sysid synthesize`")
+    if (
+        not isinstance(side, Mapping)
+        or not isinstance(side.get("file"), str)
+        or not isinstance(side.get("sha256"), str)
+    ):
+        v.fail(
+            "certificate.sidecar",
+            "missing {file, sha256}: the certified systems cannot be "
+            "re-checked; re-run `lpv-sysid synthesize`",
+        )
     path = gains_path.parent / side["file"]
     if not path.exists():
         v.fail("certificate.sidecar", f"sidecar {path} not found (copy it next to the gains file)")
     sha = sha256_file(path)
     if sha != side["sha256"]:
-        v.fail("certificate.sidecar.sha256", f"{side['sha256']} does not match {path.name} "
-               f"(sha256 {sha}): the sidecar was changed or belongs to other gains")
+        v.fail(
+            "certificate.sidecar.sha256",
+            f"{side['sha256']} does not match {path.name} "
+            f"(sha256 {sha}): the sidecar was changed or belongs to other gains",
+        )
     d = read_npz(path, path.name)
     missing = [k for k in SYSTEMS_ARRAYS if k not in d]
     if missing:
-        v.fail("certificate.sidecar", f"{path.name} has no certified systems {missing} "
-               "(written before this check existed); re-run `lpv-sysid synthesize`")
+        v.fail(
+            "certificate.sidecar",
+            f"{path.name} has no certified systems {missing} "
+            "(written before this check existed); re-run `lpv-sysid synthesize`",
+        )
     A, B, Ms = d["A_sys"], d["B_sys"], d["M_sys"]
     N = len(Ms)
-    if A.ndim != 4 or B.ndim != 4 or A.shape[:2] != B.shape[:2] or A.shape[0] != N \
-            or A.shape[2:] != (n_x, n_x) or B.shape[2:] != (n_x, n_u) \
-            or Ms.ndim != 1 or np.any(Ms < 1) or np.any(Ms > A.shape[1]):
-        v.fail("certificate.sidecar", f"{path.name}: certified systems have shapes A {A.shape}, "
-               f"B {B.shape}, M {Ms.shape}; expected (N, M, {n_x}, {n_x}), (N, M, {n_x}, {n_u})")
+    if (
+        A.ndim != 4
+        or B.ndim != 4
+        or A.shape[:2] != B.shape[:2]
+        or A.shape[0] != N
+        or A.shape[2:] != (n_x, n_x)
+        or B.shape[2:] != (n_x, n_u)
+        or Ms.ndim != 1
+        or np.any(Ms < 1)
+        or np.any(Ms > A.shape[1])
+    ):
+        v.fail(
+            "certificate.sidecar",
+            f"{path.name}: certified systems have shapes A {A.shape}, "
+            f"B {B.shape}, M {Ms.shape}; expected (N, M, {n_x}, {n_x}), (N, M, {n_x}, {n_u})",
+        )
     out = []
     for i in range(N):
-        a, b = A[i, :int(Ms[i])], B[i, :int(Ms[i])]
+        a, b = A[i, : int(Ms[i])], B[i, : int(Ms[i])]
         if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
-            v.fail("certificate.sidecar",
-                   f"{path.name}: certified systems of vertex {i} are not finite")
+            v.fail(
+                "certificate.sidecar",
+                f"{path.name}: certified systems of vertex {i} are not finite",
+            )
         out.append([(a[j], b[j]) for j in range(int(Ms[i]))])
     return out

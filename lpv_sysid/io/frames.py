@@ -40,18 +40,34 @@ from lpv_sysid.errors import LpvSysidError
 
 __all__ = [
     "FrameError",
-    "T_NED_ENU", "T_FRD_FLU",
-    "ned_to_enu", "enu_to_ned", "frd_to_flu", "flu_to_frd",
-    "xyzw_from_wxyz", "wxyz_from_xyzw",
-    "quaternion_multiply", "quaternion_conjugate", "quaternion_normalize", "quaternion_rotate",
-    "rotation_from_euler", "euler_from_rotation",
-    "quaternion_from_rotation", "rotation_from_quaternion",
-    "quaternion_from_euler", "euler_from_quaternion",
-    "Q_NED_TO_ENU", "Q_FRD_TO_FLU",
-    "quaternion_enu_flu_from_ned_frd", "quaternion_ned_frd_from_enu_flu",
-    "ros_orientation_from_euler", "euler_from_ros_orientation",
-    "kinematics_matrix", "euler_rates",
-    "body_to_world", "world_to_body",
+    "T_NED_ENU",
+    "T_FRD_FLU",
+    "ned_to_enu",
+    "enu_to_ned",
+    "frd_to_flu",
+    "flu_to_frd",
+    "xyzw_from_wxyz",
+    "wxyz_from_xyzw",
+    "quaternion_multiply",
+    "quaternion_conjugate",
+    "quaternion_normalize",
+    "quaternion_rotate",
+    "rotation_from_euler",
+    "euler_from_rotation",
+    "quaternion_from_rotation",
+    "rotation_from_quaternion",
+    "quaternion_from_euler",
+    "euler_from_quaternion",
+    "Q_NED_TO_ENU",
+    "Q_FRD_TO_FLU",
+    "quaternion_enu_flu_from_ned_frd",
+    "quaternion_ned_frd_from_enu_flu",
+    "ros_orientation_from_euler",
+    "euler_from_ros_orientation",
+    "kinematics_matrix",
+    "euler_rates",
+    "body_to_world",
+    "world_to_body",
     "wrap_angle",
 ]
 
@@ -139,17 +155,22 @@ def quaternion_multiply(a, b) -> np.ndarray:
     b = _vec(b, 4, "quaternion_multiply(b)")
     aw, ax, ay, az = (a[..., i] for i in range(4))
     bw, bx, by, bz = (b[..., i] for i in range(4))
-    return np.stack([
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    ], axis=-1)
+    return np.stack(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ],
+        axis=-1,
+    )
 
 
 def quaternion_rotate(q, v) -> np.ndarray:
     """Rotate vector(s) ``v`` by the unit quaternion(s) ``q`` (``(w,x,y,z)``): ``q v q*``."""
-    return np.einsum("...ij,...j->...i", rotation_from_quaternion(q), _vec(v, 3, "quaternion_rotate"))
+    return np.einsum(
+        "...ij,...j->...i", rotation_from_quaternion(q), _vec(v, 3, "quaternion_rotate")
+    )
 
 
 # ----------------------------------------------------------- Euler / rotation matrix
@@ -184,8 +205,9 @@ def euler_from_rotation(R) -> np.ndarray:
     theta = np.arcsin(s)
     lock = np.abs(s) > 1.0 - 1e-12
     phi = np.where(lock, 0.0, np.arctan2(R[..., 2, 1], R[..., 2, 2]))
-    psi = np.where(lock, np.arctan2(-R[..., 0, 1], R[..., 1, 1]),
-                   np.arctan2(R[..., 1, 0], R[..., 0, 0]))
+    psi = np.where(
+        lock, np.arctan2(-R[..., 0, 1], R[..., 1, 1]), np.arctan2(R[..., 1, 0], R[..., 0, 0])
+    )
     return np.stack([phi, theta, psi], axis=-1)
 
 
@@ -220,19 +242,32 @@ def quaternion_from_rotation(R) -> np.ndarray:
     k = np.argmax(np.stack([m00 + m11 + m22, m00, m11, m22], axis=1), axis=1)
     # 4 * (largest component) from the diagonal; the other components from the
     # off-diagonal sums/differences divided by it (each branch is well conditioned).
-    big = 0.5 * np.sqrt(np.maximum(np.choose(k, [1.0 + m00 + m11 + m22,
-                                                  1.0 + m00 - m11 - m22,
-                                                  1.0 - m00 + m11 - m22,
-                                                  1.0 - m00 - m11 + m22]), 1e-300))
+    big = 0.5 * np.sqrt(
+        np.maximum(
+            np.choose(
+                k,
+                [
+                    1.0 + m00 + m11 + m22,
+                    1.0 + m00 - m11 - m22,
+                    1.0 - m00 + m11 - m22,
+                    1.0 - m00 - m11 + m22,
+                ],
+            ),
+            1e-300,
+        )
+    )
     f = 0.25 / big
     d21, d02, d10 = m21 - m12, m02 - m20, m10 - m01
     s01, s02, s12 = m01 + m10, m02 + m20, m12 + m21
-    q = np.stack([
-        np.choose(k, [big, d21 * f, d02 * f, d10 * f]),
-        np.choose(k, [d21 * f, big, s01 * f, s02 * f]),
-        np.choose(k, [d02 * f, s01 * f, big, s12 * f]),
-        np.choose(k, [d10 * f, s02 * f, s12 * f, big]),
-    ], axis=1)
+    q = np.stack(
+        [
+            np.choose(k, [big, d21 * f, d02 * f, d10 * f]),
+            np.choose(k, [d21 * f, big, s01 * f, s02 * f]),
+            np.choose(k, [d02 * f, s01 * f, big, s12 * f]),
+            np.choose(k, [d10 * f, s02 * f, s12 * f, big]),
+        ],
+        axis=1,
+    )
     return quaternion_normalize(q).reshape(R.shape[:-2] + (4,))
 
 
@@ -243,12 +278,15 @@ def quaternion_from_euler(euler) -> np.ndarray:
     cf, sf = np.cos(e[..., 0] / 2), np.sin(e[..., 0] / 2)
     ct, st = np.cos(e[..., 1] / 2), np.sin(e[..., 1] / 2)
     cp, sp = np.cos(e[..., 2] / 2), np.sin(e[..., 2] / 2)
-    q = np.stack([
-        cp * ct * cf + sp * st * sf,
-        cp * ct * sf - sp * st * cf,
-        cp * st * cf + sp * ct * sf,
-        sp * ct * cf - cp * st * sf,
-    ], axis=-1)
+    q = np.stack(
+        [
+            cp * ct * cf + sp * st * sf,
+            cp * ct * sf - sp * st * cf,
+            cp * st * cf + sp * ct * sf,
+            sp * ct * cf - cp * st * sf,
+        ],
+        axis=-1,
+    )
     return np.where(q[..., :1] < 0.0, -q, q)
 
 
@@ -258,8 +296,8 @@ def euler_from_quaternion(q) -> np.ndarray:
 
 
 # ------------------------------------------------------------- NED/FRD <-> ENU/FLU
-Q_NED_TO_ENU = quaternion_from_rotation(T_NED_ENU)   # (0, sqrt(2)/2, sqrt(2)/2, 0)
-Q_FRD_TO_FLU = quaternion_from_rotation(T_FRD_FLU)   # (0, 1, 0, 0)
+Q_NED_TO_ENU = quaternion_from_rotation(T_NED_ENU)  # (0, sqrt(2)/2, sqrt(2)/2, 0)
+Q_FRD_TO_FLU = quaternion_from_rotation(T_FRD_FLU)  # (0, 1, 0, 0)
 
 
 def _left_matrix(a) -> np.ndarray:
@@ -316,8 +354,12 @@ def odometry_ned_frd_from_ros_scalar(pos_enu, q_xyzw, v_flu, w_flu):
     qw, qx, qy, qz = (float(c) for c in _attitude_map_scalar(w, x, y, z))
     norm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
     _R, euler = rotation_euler_from_quaternion_scalar(qw / norm, qx / norm, qy / norm, qz / norm)
-    return ((n, e, -u), tuple(euler.tolist()), (v_flu[0], -v_flu[1], -v_flu[2]),
-            (w_flu[0], -w_flu[1], -w_flu[2]))
+    return (
+        (n, e, -u),
+        tuple(euler.tolist()),
+        (v_flu[0], -v_flu[1], -v_flu[2]),
+        (w_flu[0], -w_flu[1], -w_flu[2]),
+    )
 
 
 _M_ATTITUDE_LIST = _M_ATTITUDE.tolist()
@@ -337,11 +379,18 @@ def rotation_euler_from_quaternion_scalar(w: float, x: float, y: float, z: float
     attitude message) where the numpy versions cost ~40 us and this closed form ~3 us.
     test_mavlink_core.py checks it against the vectorised functions and scipy.
     """
-    R = [[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-         [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-         [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]]
-    euler = np.array([math.atan2(R[2][1], R[2][2]), math.asin(max(-1.0, min(1.0, -R[2][0]))),
-                      math.atan2(R[1][0], R[0][0])])
+    R = [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ]
+    euler = np.array(
+        [
+            math.atan2(R[2][1], R[2][2]),
+            math.asin(max(-1.0, min(1.0, -R[2][0]))),
+            math.atan2(R[1][0], R[0][0]),
+        ]
+    )
     return R, euler
 
 

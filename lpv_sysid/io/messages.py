@@ -46,22 +46,44 @@ from lpv_sysid.errors import ConfigError
 from lpv_sysid.io import frames
 
 __all__ = [
-    "MessageError", "MsgFactory",
-    "ROTOR_NAMES", "EXCITATION_NAMES", "INPUT_NAMES",
-    "ODOM_FRAME", "BASE_FRAME",
+    "MessageError",
+    "MsgFactory",
+    "ROTOR_NAMES",
+    "EXCITATION_NAMES",
+    "INPUT_NAMES",
+    "ODOM_FRAME",
+    "BASE_FRAME",
     "TYPES",
-    "StateSample", "StateArrays", "ImuSample", "StatusSample",
-    "states_from_odometry", "channels_from_joint_states",
-    "time_msg", "stamp_ns_from_time", "stamp_ns_of", "header_msg",
-    "odometry_from_state", "state_from_odometry",
-    "joint_state", "channels_from_joint_state",
-    "rotor_speeds_msg", "rotor_speeds_from_joint_state", "rotor_source_of",
-    "ROTOR_SOURCES", "ROTOR_ESTIMATED_FRAME",
-    "excitation_msg", "excitation_from_joint_state",
-    "actuator_command_msg", "actuator_command_from_joint_state",
-    "imu_msg", "imu_from_msg",
-    "twist_reference_msg", "reference_from_twist",
-    "diagnostic_status", "diagnostic_array", "status_from_diagnostic_array",
+    "StateSample",
+    "StateArrays",
+    "ImuSample",
+    "StatusSample",
+    "states_from_odometry",
+    "channels_from_joint_states",
+    "time_msg",
+    "stamp_ns_from_time",
+    "stamp_ns_of",
+    "header_msg",
+    "odometry_from_state",
+    "state_from_odometry",
+    "joint_state",
+    "channels_from_joint_state",
+    "rotor_speeds_msg",
+    "rotor_speeds_from_joint_state",
+    "rotor_source_of",
+    "ROTOR_SOURCES",
+    "ROTOR_ESTIMATED_FRAME",
+    "excitation_msg",
+    "excitation_from_joint_state",
+    "actuator_command_msg",
+    "actuator_command_from_joint_state",
+    "imu_msg",
+    "imu_from_msg",
+    "twist_reference_msg",
+    "reference_from_twist",
+    "diagnostic_status",
+    "diagnostic_array",
+    "status_from_diagnostic_array",
     "DIAGNOSTIC_LEVELS",
 ]
 
@@ -75,7 +97,7 @@ except ImportError:  # pragma: no cover - only while models/quadrotor.py is miss
     EXCITATION_NAMES = ("ue_t", "ue_a", "ue_e", "ue_r")
 EXCITATION_NAMES = tuple(EXCITATION_NAMES)
 INPUT_NAMES = tuple(INPUT_NAMES)
-ROTOR_NAMES = ("rotor_1", "rotor_2", "rotor_3", "rotor_4")   # PX4 quad-X numbering
+ROTOR_NAMES = ("rotor_1", "rotor_2", "rotor_3", "rotor_4")  # PX4 quad-X numbering
 #: where rotor speeds come from: "esc" (measured, ESC telemetry) or "estimated" (motor
 #: outputs through the motor model); the JointState's header.frame_id tells them apart
 ROTOR_SOURCES = ("esc", "estimated")
@@ -93,7 +115,7 @@ TYPES = {
 }
 
 DIAGNOSTIC_LEVELS = {"OK": 0, "WARN": 1, "ERROR": 2, "STALE": 3}
-_INT32 = (-2**31, 2**31 - 1)
+_INT32 = (-(2**31), 2**31 - 1)
 
 
 class MessageError(ConfigError, ValueError):
@@ -127,6 +149,7 @@ class MsgFactory:
         """rosbags dataclasses from the ROS 2 Jazzy typestore (serialisable to CDR)."""
         if typestore is None:
             from rosbags.typesys import Stores, get_typestore
+
             typestore = get_typestore(Stores.ROS2_JAZZY)
         types = typestore.types
 
@@ -134,8 +157,9 @@ class MsgFactory:
             try:
                 return types[typename]
             except KeyError:
-                raise MessageError(f"unknown message type {typename!r} "
-                                   "(not in the rosbags ROS2_JAZZY typestore)") from None
+                raise MessageError(
+                    f"unknown message type {typename!r} (not in the rosbags ROS2_JAZZY typestore)"
+                ) from None
 
         def f64(values):
             return np.array(values, dtype=np.float64).reshape(-1)
@@ -149,8 +173,10 @@ class MsgFactory:
         try:
             from rosidl_runtime_py.utilities import get_message
         except ImportError as exc:
-            raise ConfigError(f"MsgFactory.rclpy(): rosidl_runtime_py is not available ({exc}); "
-                              "source a ROS 2 Jazzy installation") from None
+            raise ConfigError(
+                f"MsgFactory.rclpy(): rosidl_runtime_py is not available ({exc}); "
+                "source a ROS 2 Jazzy installation"
+            ) from None
 
         def lookup(typename: str) -> type:
             try:
@@ -204,8 +230,13 @@ def _point(f: MsgFactory, v):
 
 
 def _quaternion(f: MsgFactory, q_xyzw):
-    return f("geometry_msgs/msg/Quaternion", x=float(q_xyzw[0]), y=float(q_xyzw[1]),
-             z=float(q_xyzw[2]), w=float(q_xyzw[3]))
+    return f(
+        "geometry_msgs/msg/Quaternion",
+        x=float(q_xyzw[0]),
+        y=float(q_xyzw[1]),
+        z=float(q_xyzw[2]),
+        w=float(q_xyzw[3]),
+    )
 
 
 def _covariance(f: MsgFactory, cov, n: int, what: str):
@@ -267,9 +298,19 @@ class StateSample:
     stamp_ns: int = 0
 
 
-def odometry_from_state(f: MsgFactory, stamp_ns: int, pos_ned, euler, v_body, omega, *,
-                        frame_id: str = ODOM_FRAME, child_frame_id: str = BASE_FRAME,
-                        pose_covariance=None, twist_covariance=None):
+def odometry_from_state(
+    f: MsgFactory,
+    stamp_ns: int,
+    pos_ned,
+    euler,
+    v_body,
+    omega,
+    *,
+    frame_id: str = ODOM_FRAME,
+    child_frame_id: str = BASE_FRAME,
+    pose_covariance=None,
+    twist_covariance=None,
+):
     """``nav_msgs/Odometry`` for the ``state`` topic from NED/FRD core quantities."""
     pos = frames.ned_to_enu(_finite(pos_ned, 3, "state.pos_ned"))
     q = frames.ros_orientation_from_euler(_finite(euler, 3, "state.euler"))
@@ -281,15 +322,22 @@ def odometry_from_state(f: MsgFactory, stamp_ns: int, pos_ned, euler, v_body, om
         "nav_msgs/msg/Odometry",
         header=header_msg(f, stamp_ns, frame_id),
         child_frame_id=str(child_frame_id),
-        pose=f("geometry_msgs/msg/PoseWithCovariance", pose=pose,
-               covariance=_covariance(f, pose_covariance, 6, "state.pose.covariance")),
-        twist=f("geometry_msgs/msg/TwistWithCovariance", twist=twist,
-                covariance=_covariance(f, twist_covariance, 6, "state.twist.covariance")),
+        pose=f(
+            "geometry_msgs/msg/PoseWithCovariance",
+            pose=pose,
+            covariance=_covariance(f, pose_covariance, 6, "state.pose.covariance"),
+        ),
+        twist=f(
+            "geometry_msgs/msg/TwistWithCovariance",
+            twist=twist,
+            covariance=_covariance(f, twist_covariance, 6, "state.twist.covariance"),
+        ),
     )
 
 
-def state_from_odometry(msg, *, frame_id: str | None = ODOM_FRAME,
-                        child_frame_id: str | None = BASE_FRAME) -> StateSample:
+def state_from_odometry(
+    msg, *, frame_id: str | None = ODOM_FRAME, child_frame_id: str | None = BASE_FRAME
+) -> StateSample:
     """Core state from a ``nav_msgs/Odometry`` (``None`` skips a frame check)."""
     _check_frame(msg.header.frame_id, frame_id, "state.header")
     _check_frame(msg.child_frame_id, child_frame_id, "state.child_frame_id")
@@ -300,25 +348,43 @@ def state_from_odometry(msg, *, frame_id: str | None = ODOM_FRAME,
         f = [float(c) for c in vals]
     except (TypeError, ValueError):
         f = None
-    if f is not None and all(map(math.isfinite, f)) and \
-            abs(math.sqrt(f[3] * f[3] + f[4] * f[4] + f[5] * f[5] + f[6] * f[6]) - 1.0) <= 1e-3:
+    if (
+        f is not None
+        and all(map(math.isfinite, f))
+        and abs(math.sqrt(f[3] * f[3] + f[4] * f[4] + f[5] * f[5] + f[6] * f[6]) - 1.0) <= 1e-3
+    ):
         # fast path (the controller's state rate): plain floats through io.frames
-        pos_ned, euler, v_frd, w_frd = frames.odometry_ned_frd_from_ros_scalar(f[0:3], f[3:7], f[7:10], f[10:13])
+        pos_ned, euler, v_frd, w_frd = frames.odometry_ned_frd_from_ros_scalar(
+            f[0:3], f[3:7], f[7:10], f[10:13]
+        )
         ns = stamp_ns_of(msg)
-        return StateSample(t=ns / 1e9, pos_ned=np.array(pos_ned), euler=np.array(euler),
-                           v_body=np.array(v_frd), omega=np.array(w_frd), stamp_ns=ns)
+        return StateSample(
+            t=ns / 1e9,
+            pos_ned=np.array(pos_ned),
+            euler=np.array(euler),
+            v_body=np.array(v_frd),
+            omega=np.array(w_frd),
+            stamp_ns=ns,
+        )
     # validating path: names the offending field
     pos = _finite(_xyz(p.position), 3, "state.pose.pose.position")
     o = p.orientation
     q = _finite([o.x, o.y, o.z, o.w], 4, "state.pose.pose.orientation")
     if abs(np.linalg.norm(q) - 1.0) > 1e-3:
-        raise MessageError(f"state.pose.pose.orientation: not a unit quaternion (norm {np.linalg.norm(q):.6g})")
+        raise MessageError(
+            f"state.pose.pose.orientation: not a unit quaternion (norm {np.linalg.norm(q):.6g})"
+        )
     v = _finite(_xyz(tw.linear), 3, "state.twist.twist.linear")
     w = _finite(_xyz(tw.angular), 3, "state.twist.twist.angular")
     ns = stamp_ns_of(msg)
-    return StateSample(t=ns / 1e9, pos_ned=frames.enu_to_ned(pos),
-                       euler=frames.euler_from_ros_orientation(q),
-                       v_body=frames.flu_to_frd(v), omega=frames.flu_to_frd(w), stamp_ns=ns)
+    return StateSample(
+        t=ns / 1e9,
+        pos_ned=frames.enu_to_ned(pos),
+        euler=frames.euler_from_ros_orientation(q),
+        v_body=frames.flu_to_frd(v),
+        omega=frames.flu_to_frd(w),
+        stamp_ns=ns,
+    )
 
 
 @dataclass(frozen=True)
@@ -334,8 +400,9 @@ class StateArrays:
     omega: np.ndarray
 
 
-def states_from_odometry(msgs: Sequence, *, frame_id: str | None = ODOM_FRAME,
-                         child_frame_id: str | None = BASE_FRAME) -> StateArrays:
+def states_from_odometry(
+    msgs: Sequence, *, frame_id: str | None = ODOM_FRAME, child_frame_id: str | None = BASE_FRAME
+) -> StateArrays:
     """Vectorised :func:`state_from_odometry` for a list of messages (bag replay): the
     fields are gathered in one pass and converted with array operations. Errors name the
     index of the offending message."""
@@ -344,11 +411,14 @@ def states_from_odometry(msgs: Sequence, *, frame_id: str | None = ODOM_FRAME,
     raw = np.empty((n, 13))
     for i, msg in enumerate(msgs):
         if frame_id is not None and msg.header.frame_id != frame_id:
-            raise MessageError(f"state[{i}].header: expected frame_id {frame_id!r}, "
-                               f"got {msg.header.frame_id!r}")
+            raise MessageError(
+                f"state[{i}].header: expected frame_id {frame_id!r}, got {msg.header.frame_id!r}"
+            )
         if child_frame_id is not None and msg.child_frame_id != child_frame_id:
-            raise MessageError(f"state[{i}].child_frame_id: expected frame_id {child_frame_id!r}, "
-                               f"got {msg.child_frame_id!r}")
+            raise MessageError(
+                f"state[{i}].child_frame_id: expected frame_id {child_frame_id!r}, "
+                f"got {msg.child_frame_id!r}"
+            )
         p, o = msg.pose.pose.position, msg.pose.pose.orientation
         lin, ang = msg.twist.twist.linear, msg.twist.twist.angular
         raw[i] = (p.x, p.y, p.z, o.x, o.y, o.z, o.w, lin.x, lin.y, lin.z, ang.x, ang.y, ang.z)
@@ -356,25 +426,44 @@ def states_from_odometry(msgs: Sequence, *, frame_id: str | None = ODOM_FRAME,
     bad = ~np.isfinite(raw)
     if np.any(bad):
         i, j = np.argwhere(bad)[0]
-        field_name = ["pose.pose.position"] * 3 + ["pose.pose.orientation"] * 4 + \
-            ["twist.twist.linear"] * 3 + ["twist.twist.angular"] * 3
+        field_name = (
+            ["pose.pose.position"] * 3
+            + ["pose.pose.orientation"] * 4
+            + ["twist.twist.linear"] * 3
+            + ["twist.twist.angular"] * 3
+        )
         raise MessageError(f"state[{i}].{field_name[j]}: non-finite value")
     norm = np.linalg.norm(raw[:, 3:7], axis=1)
     off = np.abs(norm - 1.0) > 1e-3
     if np.any(off):
         i = int(np.argmax(off))
-        raise MessageError(f"state[{i}].pose.pose.orientation: not a unit quaternion (norm {norm[i]:.6g})")
-    return StateArrays(t=ns / 1e9, stamp_ns=ns, pos_ned=frames.enu_to_ned(raw[:, 0:3]),
-                       euler=frames.euler_from_ros_orientation(raw[:, 3:7]),
-                       v_body=frames.flu_to_frd(raw[:, 7:10]), omega=frames.flu_to_frd(raw[:, 10:13]))
+        raise MessageError(
+            f"state[{i}].pose.pose.orientation: not a unit quaternion (norm {norm[i]:.6g})"
+        )
+    return StateArrays(
+        t=ns / 1e9,
+        stamp_ns=ns,
+        pos_ned=frames.enu_to_ned(raw[:, 0:3]),
+        euler=frames.euler_from_ros_orientation(raw[:, 3:7]),
+        v_body=frames.flu_to_frd(raw[:, 7:10]),
+        omega=frames.flu_to_frd(raw[:, 10:13]),
+    )
 
 
 # --------------------------------------------------------------------- joint state
 _JS_FIELDS = ("position", "velocity", "effort")
 
 
-def joint_state(f: MsgFactory, stamp_ns: int, names: Sequence[str], *, position=None,
-                velocity=None, effort=None, frame_id: str = ""):
+def joint_state(
+    f: MsgFactory,
+    stamp_ns: int,
+    names: Sequence[str],
+    *,
+    position=None,
+    velocity=None,
+    effort=None,
+    frame_id: str = "",
+):
     """``sensor_msgs/JointState`` with named channels; unused value arrays stay empty."""
     names = [str(n) for n in names]
     if len(set(names)) != len(names):
@@ -382,8 +471,9 @@ def joint_state(f: MsgFactory, stamp_ns: int, names: Sequence[str], *, position=
     vals = {}
     for key, v in zip(_JS_FIELDS, (position, velocity, effort)):
         vals[key] = f.float_seq([] if v is None else _finite(v, len(names), f"joint_state.{key}"))
-    return f("sensor_msgs/msg/JointState", header=header_msg(f, stamp_ns, frame_id), name=names,
-             **vals)
+    return f(
+        "sensor_msgs/msg/JointState", header=header_msg(f, stamp_ns, frame_id), name=names, **vals
+    )
 
 
 def channels_from_joint_state(msg, names: Sequence[str], field: str = "position"):
@@ -397,7 +487,9 @@ def channels_from_joint_state(msg, names: Sequence[str], field: str = "position"
     have = list(msg.name)
     values = np.asarray(getattr(msg, field), dtype=float)
     if values.size != len(have):
-        raise MessageError(f"joint_state.{field}: {values.size} values for {len(have)} names {have}")
+        raise MessageError(
+            f"joint_state.{field}: {values.size} values for {len(have)} names {have}"
+        )
     index = {n: i for i, n in enumerate(have)}
     missing = [n for n in names if n not in index]
     if missing:
@@ -478,8 +570,15 @@ class ImuSample:
     stamp_ns: int = 0
 
 
-def imu_msg(f: MsgFactory, stamp_ns: int, specific_force_frd, omega_frd, euler=None, *,
-            frame_id: str = BASE_FRAME):
+def imu_msg(
+    f: MsgFactory,
+    stamp_ns: int,
+    specific_force_frd,
+    omega_frd,
+    euler=None,
+    *,
+    frame_id: str = BASE_FRAME,
+):
     """``sensor_msgs/Imu`` (FLU). Without ``euler`` the orientation is marked unknown
     (``orientation_covariance[0] = -1``, as sensor_msgs/Imu documents)."""
     a = frames.frd_to_flu(_finite(specific_force_frd, 3, "imu.specific_force"))
@@ -490,11 +589,16 @@ def imu_msg(f: MsgFactory, stamp_ns: int, specific_force_frd, omega_frd, euler=N
         ocov[0] = -1.0
     else:
         q = frames.ros_orientation_from_euler(_finite(euler, 3, "imu.euler"))
-    return f("sensor_msgs/msg/Imu", header=header_msg(f, stamp_ns, frame_id),
-             orientation=_quaternion(f, q), orientation_covariance=f.float_array(ocov),
-             angular_velocity=_vector3(f, w), angular_velocity_covariance=f.float_array(np.zeros(9)),
-             linear_acceleration=_vector3(f, a),
-             linear_acceleration_covariance=f.float_array(np.zeros(9)))
+    return f(
+        "sensor_msgs/msg/Imu",
+        header=header_msg(f, stamp_ns, frame_id),
+        orientation=_quaternion(f, q),
+        orientation_covariance=f.float_array(ocov),
+        angular_velocity=_vector3(f, w),
+        angular_velocity_covariance=f.float_array(np.zeros(9)),
+        linear_acceleration=_vector3(f, a),
+        linear_acceleration_covariance=f.float_array(np.zeros(9)),
+    )
 
 
 def imu_from_msg(msg, *, frame_id: str | None = BASE_FRAME) -> ImuSample:
@@ -505,33 +609,48 @@ def imu_from_msg(msg, *, frame_id: str | None = BASE_FRAME) -> ImuSample:
     if float(np.asarray(msg.orientation_covariance, dtype=float)[0]) != -1.0:
         o = msg.orientation
         euler = frames.euler_from_ros_orientation(
-            _finite([o.x, o.y, o.z, o.w], 4, "imu.orientation"))
+            _finite([o.x, o.y, o.z, o.w], 4, "imu.orientation")
+        )
     ns = stamp_ns_of(msg)
-    return ImuSample(t=ns / 1e9, specific_force=frames.flu_to_frd(a),
-                     omega=frames.flu_to_frd(w), euler=euler, stamp_ns=ns)
+    return ImuSample(
+        t=ns / 1e9,
+        specific_force=frames.flu_to_frd(a),
+        omega=frames.flu_to_frd(w),
+        euler=euler,
+        stamp_ns=ns,
+    )
 
 
 # --------------------------------------------------------------- velocity reference
-def twist_reference_msg(f: MsgFactory, stamp_ns: int, v_d_frd, r_d_frd: float = 0.0, *,
-                        frame_id: str = BASE_FRAME):
+def twist_reference_msg(
+    f: MsgFactory, stamp_ns: int, v_d_frd, r_d_frd: float = 0.0, *, frame_id: str = BASE_FRAME
+):
     """``geometry_msgs/TwistStamped``: body velocity reference (FLU) and yaw-rate reference
     in ``angular.z`` (FLU, i.e. ``-r_d``)."""
     v = frames.frd_to_flu(_finite(v_d_frd, 3, "velocity_reference.v_d"))
     r = _finite([r_d_frd], 1, "velocity_reference.r_d")[0]
     w = frames.frd_to_flu([0.0, 0.0, r])
     twist = f("geometry_msgs/msg/Twist", linear=_vector3(f, v), angular=_vector3(f, w))
-    return f("geometry_msgs/msg/TwistStamped", header=header_msg(f, stamp_ns, frame_id), twist=twist)
+    return f(
+        "geometry_msgs/msg/TwistStamped", header=header_msg(f, stamp_ns, frame_id), twist=twist
+    )
 
 
-def enu_velocity_setpoint_msg(f: MsgFactory, stamp_ns: int, v_enu, yaw_rate_enu: float, frame_id: str):
+def enu_velocity_setpoint_msg(
+    f: MsgFactory, stamp_ns: int, v_enu, yaw_rate_enu: float, frame_id: str
+):
     """``geometry_msgs/TwistStamped`` already in a local ENU frame (MAVROS
     ``setpoint_velocity/cmd_vel``): linear = ENU velocity, angular = (0, 0, ENU yaw rate).
     The NED/FRD -> ENU conversion happens before, through :mod:`lpv_sysid.io.frames`."""
     v = _finite(v_enu, 3, "v_enu")
     r = _finite([yaw_rate_enu], 1, "yaw_rate_enu")[0]
-    return f("geometry_msgs/msg/TwistStamped", header=header_msg(f, stamp_ns, frame_id),
-             twist=f("geometry_msgs/msg/Twist", linear=_vector3(f, v),
-                     angular=_vector3(f, [0.0, 0.0, r])))
+    return f(
+        "geometry_msgs/msg/TwistStamped",
+        header=header_msg(f, stamp_ns, frame_id),
+        twist=f(
+            "geometry_msgs/msg/Twist", linear=_vector3(f, v), angular=_vector3(f, [0.0, 0.0, r])
+        ),
+    )
 
 
 def reference_from_twist(msg, *, frame_id: str | None = BASE_FRAME):
@@ -558,8 +677,9 @@ def _level(level) -> int:
         try:
             return DIAGNOSTIC_LEVELS[level.upper()]
         except KeyError:
-            raise MessageError(f"status.level: unknown level {level!r}; "
-                               f"expected one of {list(DIAGNOSTIC_LEVELS)}") from None
+            raise MessageError(
+                f"status.level: unknown level {level!r}; expected one of {list(DIAGNOSTIC_LEVELS)}"
+            ) from None
     if isinstance(level, (bytes, bytearray)):
         if len(level) != 1:
             raise MessageError(f"status.level: expected one byte, got {level!r}")
@@ -574,24 +694,41 @@ def _value_text(v) -> str:
     if isinstance(v, bool) or v is None:
         return str(v).lower() if isinstance(v, bool) else ""
     if isinstance(v, (float, np.floating)):
-        return repr(float(v))          # shortest round-trip representation
+        return repr(float(v))  # shortest round-trip representation
     return str(v)
 
 
-def diagnostic_status(f: MsgFactory, level, name: str, message: str = "",
-                      values: Mapping[str, Any] | None = None, hardware_id: str = ""):
+def diagnostic_status(
+    f: MsgFactory,
+    level,
+    name: str,
+    message: str = "",
+    values: Mapping[str, Any] | None = None,
+    hardware_id: str = "",
+):
     """``diagnostic_msgs/DiagnosticStatus`` from a level (0-3 or ``"OK"``/``"WARN"``/
     ``"ERROR"``/``"STALE"``), name, message and a dict of values (stored as text;
     floats with ``repr`` so they parse back exactly)."""
-    kvs = [f("diagnostic_msgs/msg/KeyValue", key=str(k), value=_value_text(v))
-           for k, v in (values or {}).items()]
-    return f("diagnostic_msgs/msg/DiagnosticStatus", level=f.byte(_level(level)), name=str(name),
-             message=str(message), hardware_id=str(hardware_id), values=kvs)
+    kvs = [
+        f("diagnostic_msgs/msg/KeyValue", key=str(k), value=_value_text(v))
+        for k, v in (values or {}).items()
+    ]
+    return f(
+        "diagnostic_msgs/msg/DiagnosticStatus",
+        level=f.byte(_level(level)),
+        name=str(name),
+        message=str(message),
+        hardware_id=str(hardware_id),
+        values=kvs,
+    )
 
 
 def diagnostic_array(f: MsgFactory, stamp_ns: int, statuses: Sequence):
-    return f("diagnostic_msgs/msg/DiagnosticArray", header=header_msg(f, stamp_ns, ""),
-             status=list(statuses))
+    return f(
+        "diagnostic_msgs/msg/DiagnosticArray",
+        header=header_msg(f, stamp_ns, ""),
+        status=list(statuses),
+    )
 
 
 def status_from_diagnostic_array(msg):
@@ -602,8 +739,14 @@ def status_from_diagnostic_array(msg):
             lv = _level(s.level)
         except MessageError as exc:
             raise MessageError(f"status.status[{i}]: {exc}") from None
-        out.append(StatusSample(level=lv, name=s.name, message=s.message,
-                                values={kv.key: kv.value for kv in s.values},
-                                hardware_id=s.hardware_id))
+        out.append(
+            StatusSample(
+                level=lv,
+                name=s.name,
+                message=s.message,
+                values={kv.key: kv.value for kv in s.values},
+                hardware_id=s.hardware_id,
+            )
+        )
     ns = stamp_ns_of(msg)
     return ns / 1e9, out

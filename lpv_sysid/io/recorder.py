@@ -42,9 +42,17 @@ from typing import Callable, Mapping
 import yaml
 
 from lpv_sysid.errors import BagError, ConfigError
-from lpv_sysid.io.bag import (FLUSH_INTERVAL_S, FLUSH_MESSAGES, RESERVE_BYTES, DiskReserve,
-                              RepairReport, atomic_write_text, merge_topic_stats, repair_bag,
-                              writer_alive)
+from lpv_sysid.io.bag import (
+    FLUSH_INTERVAL_S,
+    FLUSH_MESSAGES,
+    RESERVE_BYTES,
+    DiskReserve,
+    RepairReport,
+    atomic_write_text,
+    merge_topic_stats,
+    repair_bag,
+    writer_alive,
+)
 from lpv_sysid.io.yaml_file import read_yaml
 
 LOG = logging.getLogger(__name__)
@@ -91,20 +99,28 @@ class RecorderConfig:
             if not isinstance(topic, str) or not topic.startswith("/"):
                 raise ConfigError(f"recorder: topic {topic!r} must be an absolute name")
             if not isinstance(msgtype, str) or msgtype.count("/") != 2:
-                raise ConfigError(f"recorder: topics[{topic!r}] type {msgtype!r} is not "
-                                  "'pkg/msg/Name'")
+                raise ConfigError(
+                    f"recorder: topics[{topic!r}] type {msgtype!r} is not 'pkg/msg/Name'"
+                )
         if self.storage not in ("mcap", "sqlite3"):
-            raise ConfigError(f"recorder: storage must be 'mcap' or 'sqlite3', "
-                              f"got {self.storage!r}")
+            raise ConfigError(
+                f"recorder: storage must be 'mcap' or 'sqlite3', got {self.storage!r}"
+            )
         if self.split_size_bytes < 0:
             raise ConfigError("recorder: split_size_bytes must be >= 0")
         if self.split_duration_s < 0:
             raise ConfigError("recorder: split_duration_s must be >= 0")
         f = self.flush_interval_s
-        if isinstance(f, bool) or not isinstance(f, (int, float)) or not math.isfinite(f) \
-                or not 0 < f <= 1.0:
-            raise ConfigError(f"recorder: flush_interval_s must be in (0, 1] s (the data a "
-                              f"killed recorder may lose), got {f!r}")
+        if (
+            isinstance(f, bool)
+            or not isinstance(f, (int, float))
+            or not math.isfinite(f)
+            or not 0 < f <= 1.0
+        ):
+            raise ConfigError(
+                f"recorder: flush_interval_s must be in (0, 1] s (the data a "
+                f"killed recorder may lose), got {f!r}"
+            )
         for name, lo in (("flush_messages", 1), ("reserve_bytes", 0)):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
@@ -157,15 +173,25 @@ class _BagInfo:
 
     def entry(self) -> dict:
         d = self.durable or {"topics": {}, "bytes": 0, "start_ns": None, "end_ns": None}
-        return {"path": self.path, "messages": sum(d["topics"].values()), "bytes": d["bytes"],
-                "start_ns": d["start_ns"], "end_ns": d["end_ns"]}
+        return {
+            "path": self.path,
+            "messages": sum(d["topics"].values()),
+            "bytes": d["bytes"],
+            "start_ns": d["start_ns"],
+            "end_ns": d["end_ns"],
+        }
 
 
 def git_revision(path: str | os.PathLike) -> str | None:
     """``git rev-parse HEAD`` of the repository containing ``path`` (None when unavailable)."""
     try:
-        out = subprocess.run(["git", "-C", str(path), "rev-parse", "HEAD"], check=True,
-                             capture_output=True, text=True, timeout=5)
+        out = subprocess.run(
+            ["git", "-C", str(path), "rev-parse", "HEAD"],
+            check=True,
+            capture_output=True,
+            text=True,
+            timeout=5,
+        )
     except (OSError, subprocess.SubprocessError):
         return None
     return out.stdout.strip() or None
@@ -175,7 +201,7 @@ def sha256_file(path: str | os.PathLike) -> str:
     from lpv_sysid.io.safe_open import MAX_NPZ_BYTES, open_regular
 
     h = hashlib.sha256()
-    with open_regular(path, max_bytes=MAX_NPZ_BYTES) as fh:     # regular file: a FIFO would block
+    with open_regular(path, max_bytes=MAX_NPZ_BYTES) as fh:  # regular file: a FIFO would block
         for chunk in iter(lambda: fh.read(1 << 16), b""):
             h.update(chunk)
     return h.hexdigest()
@@ -183,6 +209,7 @@ def sha256_file(path: str | os.PathLike) -> str:
 
 def _default_writer_factory(path: str, storage: str):
     from lpv_sysid.io.bag import BagWriter
+
     return BagWriter(path, storage=storage)
 
 
@@ -206,7 +233,7 @@ class Recorder:
     _exit_code: int | None = None
     _lock: object = None
     _flushes_seen: int = 0
-    rotor_sources: dict = field(default_factory=dict)    # rotor_speeds messages per source
+    rotor_sources: dict = field(default_factory=dict)  # rotor_speeds messages per source
 
     def __post_init__(self):
         self.stats = {t: TopicStats(m) for t, m in self.config.topics.items()}
@@ -233,13 +260,15 @@ class Recorder:
             raise BagError(f"recorder: cannot create {out}: {exc.strerror or exc}") from None
         self._static_meta = self._collect_static_metadata()
         # room for experiment.yaml on a full disk: twice its largest part, plus 64 kB
-        reserve = (1 << 16) + 2 * sum(len(t.encode()) for t in
-                                      self._static_meta["config_files"].values())
+        reserve = (1 << 16) + 2 * sum(
+            len(t.encode()) for t in self._static_meta["config_files"].values()
+        )
         try:
             self._lock = DiskReserve(out / LOCK_FILE, reserve).acquire()
         except OSError as exc:
-            raise BagError(f"recorder: cannot create {out / LOCK_FILE}: "
-                           f"{exc.strerror or exc}") from None
+            raise BagError(
+                f"recorder: cannot create {out / LOCK_FILE}: {exc.strerror or exc}"
+            ) from None
         self._started_ns = int(stamp_ns)
         self._wall_start = _now_iso()
         try:
@@ -257,13 +286,15 @@ class Recorder:
             self._record(topic, stamp_ns, msg)
         finally:
             self._busy = False
-        if self._exit_code is not None:      # a signal arrived during the write
+        if self._exit_code is not None:  # a signal arrived during the write
             raise SystemExit(self._exit_code)
 
     def _record(self, topic: str, stamp_ns: int, msg) -> None:
         if self._writer is None:
-            raise BagError(f"recorder: {self.out_dir} is not recording"
-                           + (f" (stopped after error: {self.error})" if self.error else ""))
+            raise BagError(
+                f"recorder: {self.out_dir} is not recording"
+                + (f" (stopped after error: {self.error})" if self.error else "")
+            )
         st = self.stats.get(topic)
         if st is None:
             raise BagError(f"recorder: topic {topic!r} is not configured for recording")
@@ -281,8 +312,10 @@ class Recorder:
                 nbytes = 0
                 self._writer.write(topic, stamp_ns, msg)
         except (OSError, BagError) as exc:
-            self._fail(f"write of {topic} at {stamp_ns} ns failed: "
-                       f"{getattr(exc, 'strerror', None) or exc}")
+            self._fail(
+                f"write of {topic} at {stamp_ns} ns failed: "
+                f"{getattr(exc, 'strerror', None) or exc}"
+            )
         bag = self.bags[-1]
         if not raw:
             nbytes = self._size_of(msg, st.msgtype)
@@ -310,8 +343,10 @@ class Recorder:
             try:
                 did = writer.flush_if_due()
             except (OSError, BagError) as exc:
-                self._fail(f"flush of {self.bags[-1].path} failed: "
-                           f"{getattr(exc, 'strerror', None) or exc}")
+                self._fail(
+                    f"flush of {self.bags[-1].path} failed: "
+                    f"{getattr(exc, 'strerror', None) or exc}"
+                )
             if did:
                 self._note_flush()
         finally:
@@ -325,8 +360,10 @@ class Recorder:
         phase-1 campaign of ``lpv-sysid fly``); a bag that holds no message yet is kept, not
         split. Returns the directory name of the bag that records from now on."""
         if self._writer is None:
-            raise BagError(f"recorder: {self.out_dir} is not recording"
-                           + (f" (stopped after error: {self.error})" if self.error else ""))
+            raise BagError(
+                f"recorder: {self.out_dir} is not recording"
+                + (f" (stopped after error: {self.error})" if self.error else "")
+            )
         if self.bags[-1].messages:
             self._close_current()
             self._open_next()
@@ -342,8 +379,11 @@ class Recorder:
         """Close the current bag and finalise the metadata (idempotent)."""
         if self._started_ns is None or self._stopped_ns is not None:
             return
-        self._stopped_ns = int(stamp_ns) if stamp_ns is not None else (
-            max((b.end_ns or 0) for b in self.bags) if self.bags else self._started_ns)
+        self._stopped_ns = (
+            int(stamp_ns)
+            if stamp_ns is not None
+            else (max((b.end_ns or 0) for b in self.bags) if self.bags else self._started_ns)
+        )
         self._wall_stop = _now_iso()
         try:
             self._close_current()
@@ -354,8 +394,10 @@ class Recorder:
         LOG.info("recording stopped: %s", self.summary())
 
     def summary(self) -> str:
-        parts = [f"{t}: {s.count} msgs {s.rate_hz:.1f} Hz {s.dropped} dropped"
-                 for t, s in self.stats.items()]
+        parts = [
+            f"{t}: {s.count} msgs {s.rate_hz:.1f} Hz {s.dropped} dropped"
+            for t, s in self.stats.items()
+        ]
         return f"{len(self.bags)} bag(s) in {self.out_dir}; " + "; ".join(parts)
 
     # -- internals --------------------------------------------------------------------
@@ -366,8 +408,11 @@ class Recorder:
             return False
         if cfg.split_size_bytes and bag.bytes >= cfg.split_size_bytes:
             return True
-        if cfg.split_duration_s and bag.start_ns is not None and \
-                stamp_ns - bag.start_ns >= cfg.split_duration_s * 1e9:
+        if (
+            cfg.split_duration_s
+            and bag.start_ns is not None
+            and stamp_ns - bag.start_ns >= cfg.split_duration_s * 1e9
+        ):
             return True
         return False
 
@@ -390,10 +435,16 @@ class Recorder:
         if self.writer_factory is not _default_writer_factory:
             return self.writer_factory(path, self.config.storage)
         from lpv_sysid.io.bag import BagWriter
+
         c = self.config
-        return BagWriter(path, storage=c.storage, flush_interval_s=c.flush_interval_s,
-                         flush_messages=c.flush_messages, fsync=c.fsync,
-                         reserve_bytes=c.reserve_bytes)
+        return BagWriter(
+            path,
+            storage=c.storage,
+            flush_interval_s=c.flush_interval_s,
+            flush_messages=c.flush_messages,
+            fsync=c.fsync,
+            reserve_bytes=c.reserve_bytes,
+        )
 
     def _note_flush(self) -> None:
         """After the writer flushed: record what is on disk now and rewrite the metadata."""
@@ -403,8 +454,12 @@ class Recorder:
             return
         self._flushes_seen = n
         bag = self.bags[-1]
-        bag.durable = {"topics": dict(writer.durable_counts), "bytes": bag.bytes,
-                       "start_ns": bag.start_ns, "end_ns": bag.end_ns}
+        bag.durable = {
+            "topics": dict(writer.durable_counts),
+            "bytes": bag.bytes,
+            "start_ns": bag.start_ns,
+            "end_ns": bag.end_ns,
+        }
         self._write_metadata(closed=False)
 
     @staticmethod
@@ -424,8 +479,7 @@ class Recorder:
             span = (bag.durable["bytes"], bag.durable["start_ns"], bag.durable["end_ns"])
         else:
             span = (0, None, None)
-        bag.durable = {"topics": topics, "bytes": span[0], "start_ns": span[1],
-                       "end_ns": span[2]}
+        bag.durable = {"topics": topics, "bytes": span[0], "start_ns": span[1], "end_ns": span[2]}
 
     def _close_current(self) -> None:
         writer, self._writer = self._writer, None
@@ -448,23 +502,27 @@ class Recorder:
         except BagError:
             pass
         if self._lock is not None:
-            self._lock.free_space()        # room for the metadata below, lock kept
+            self._lock.free_space()  # room for the metadata below, lock kept
         self._write_metadata(closed=False)
-        raise BagError(f"recorder: {reason}; {bag.path} closed with "
-                       f"{bag.entry()['messages']} message(s) readable")
+        raise BagError(
+            f"recorder: {reason}; {bag.path} closed with "
+            f"{bag.entry()['messages']} message(s) readable"
+        )
 
     def _note_rotor_source(self, msg, raw: bool, msgtype: str) -> None:
         """Count rotor_speeds per source ("esc" measured / "estimated", io.messages)."""
         from lpv_sysid.io.messages import rotor_source_of
+
         try:
             src = rotor_source_of(self._ts().deserialize_cdr(bytes(msg), msgtype) if raw else msg)
-        except Exception:        # noqa: BLE001 - not a JointState: recorded, source unknown
+        except Exception:  # noqa: BLE001 - not a JointState: recorded, source unknown
             src = "unknown"
         self.rotor_sources[src] = self.rotor_sources.get(src, 0) + 1
 
     def _ts(self):
         if self._typestore is None:
             from rosbags.typesys import Stores, get_typestore
+
             self._typestore = get_typestore(Stores.ROS2_JAZZY)
         return self._typestore
 
@@ -478,18 +536,23 @@ class Recorder:
         files = {}
         from lpv_sysid.io.safe_open import read_text
 
-        for path in cfg.config_files:       # regular UTF-8 files of at most the YAML cap
+        for path in cfg.config_files:  # regular UTF-8 files of at most the YAML cap
             files[str(path)] = read_text(path, f"recorder: config file {path}")
         gains = None
         if cfg.gains_file:
             try:
                 gains = {"path": str(cfg.gains_file), "sha256": sha256_file(cfg.gains_file)}
             except OSError as exc:
-                raise ConfigError(f"recorder: gains file {cfg.gains_file}: "
-                                  f"{exc.strerror or exc}") from None
+                raise ConfigError(
+                    f"recorder: gains file {cfg.gains_file}: {exc.strerror or exc}"
+                ) from None
         here = Path(__file__).resolve().parent
-        return {"description": cfg.description, "config_files": files, "gains": gains,
-                "git_revision": git_revision(here)}
+        return {
+            "description": cfg.description,
+            "config_files": files,
+            "gains": gains,
+            "git_revision": git_revision(here),
+        }
 
     def _write_metadata(self, closed: bool) -> None:
         meta = {
@@ -504,21 +567,29 @@ class Recorder:
             "closed_cleanly": bool(closed),
             "error": self.error,
             "updated_time": _now_iso(),
-            "split": {"size_bytes": self.config.split_size_bytes,
-                      "duration_s": self.config.split_duration_s},
-            "rotor_speeds_source": dict(self.rotor_sources) or None,   # {"esc"|"estimated": count}
+            "split": {
+                "size_bytes": self.config.split_size_bytes,
+                "duration_s": self.config.split_duration_s,
+            },
+            "rotor_speeds_source": dict(self.rotor_sources) or None,  # {"esc"|"estimated": count}
             # counts: what is on disk (committed), never more -- see the module docstring
-            "topics": {t: {"type": s.msgtype, "count": self._durable_count(t),
-                           "dropped": s.dropped, "rate_hz": round(s.rate_hz, 6)}
-                       for t, s in self.stats.items()},
+            "topics": {
+                t: {
+                    "type": s.msgtype,
+                    "count": self._durable_count(t),
+                    "dropped": s.dropped,
+                    "rate_hz": round(s.rate_hz, 6),
+                }
+                for t, s in self.stats.items()
+            },
             "bags": [b.entry() for b in self.bags],
         }
         path = self.out_dir / METADATA_FILE
         text = yaml.safe_dump(meta, sort_keys=False)
         try:
             atomic_write_text(path, text, fsync=self.config.fsync)
-        except OSError as exc:
-            if self._lock is not None and self._lock.free_space():   # disk full: use the reserve
+        except OSError:
+            if self._lock is not None and self._lock.free_space():  # disk full: use the reserve
                 try:
                     atomic_write_text(path, text, fsync=self.config.fsync)
                     return
@@ -542,8 +613,11 @@ def _now_iso() -> str:
 
 
 @contextlib.contextmanager
-def stop_on_signals(recorder: Recorder, stamp_ns: Callable[[], int] | None = None,
-                    signals=(signal.SIGINT, signal.SIGTERM)):
+def stop_on_signals(
+    recorder: Recorder,
+    stamp_ns: Callable[[], int] | None = None,
+    signals=(signal.SIGINT, signal.SIGTERM),
+):
     """Close ``recorder`` cleanly on SIGINT/SIGTERM, then exit (status 128 + signo).
 
     For processes that own the recorder without rclpy's signal handling (tests, CLI).
@@ -607,8 +681,10 @@ def _occupied(out: Path) -> str:
     except (BagError, ConfigError) as exc:
         return f"{msg} ({exc})"
     if rep.changed:
-        return (f"{msg}: it held an interrupted recording, now repaired ({rep.summary()}); "
-                "choose a new out_dir")
+        return (
+            f"{msg}: it held an interrupted recording, now repaired ({rep.summary()}); "
+            "choose a new out_dir"
+        )
     return msg
 
 
@@ -621,14 +697,18 @@ def repair_experiment(out_dir, dry_run: bool = False) -> ExperimentRepair:
     recorder is alive. ``dry_run`` changes nothing."""
     out = Path(out_dir)
     path = out / METADATA_FILE
-    meta = read_yaml(path, finite=False)      # a package output: rates may be .nan
+    meta = read_yaml(path, finite=False)  # a package output: rates may be .nan
     if not isinstance(meta, dict) or meta.get("format") != METADATA_FORMAT:
         got = meta.get("format") if isinstance(meta, dict) else type(meta).__name__
-        raise BagError(f"recorder: {path}: not an lpv_sysid experiment file "
-                       f"(format {got!r}, expected {METADATA_FORMAT!r})")
+        raise BagError(
+            f"recorder: {path}: not an lpv_sysid experiment file "
+            f"(format {got!r}, expected {METADATA_FORMAT!r})"
+        )
     if writer_alive(out / LOCK_FILE):
-        raise BagError(f"recorder: {out} is being recorded by a running process "
-                       f"({LOCK_FILE} is locked); stop it first")
+        raise BagError(
+            f"recorder: {out} is being recorded by a running process "
+            f"({LOCK_FILE} is locked); stop it first"
+        )
     names: list[str] = []
     for b in meta.get("bags") or []:
         name = b.get("path") if isinstance(b, dict) else None
@@ -647,25 +727,39 @@ def repair_experiment(out_dir, dry_run: bool = False) -> ExperimentRepair:
         except BagError as exc:
             errors.append(f"{name}: not repaired: {exc}")
     before = meta.get("status")
-    if before not in STATUSES:                   # written before the status field existed
-        before = "closed_cleanly" if meta.get("closed_cleanly") else (
-            "incomplete" if meta.get("error") else "recording")
-    interrupted = before == "recording"          # ... and its lock is gone: the recorder died
-    changed = interrupted or bool(errors) or any(r.changed for r in reports) \
+    if before not in STATUSES:  # written before the status field existed
+        before = (
+            "closed_cleanly"
+            if meta.get("closed_cleanly")
+            else ("incomplete" if meta.get("error") else "recording")
+        )
+    interrupted = before == "recording"  # ... and its lock is gone: the recorder died
+    changed = (
+        interrupted
+        or bool(errors)
+        or any(r.changed for r in reports)
         or (out / LOCK_FILE).exists()
-    status = "closed_cleanly" if before == "closed_cleanly" and not errors and \
-        not any(r.changed for r in reports) else "incomplete"
+    )
+    status = (
+        "closed_cleanly"
+        if before == "closed_cleanly" and not errors and not any(r.changed for r in reports)
+        else "incomplete"
+    )
     if not changed:
         return ExperimentRepair(str(out), tuple(reports), before, before, False, (), dry_run)
     new = dict(meta)
     new["status"] = status
     new["closed_cleanly"] = status == "closed_cleanly"
     if interrupted and not new.get("error"):
-        new["error"] = ("recording interrupted: the recorder ended without closing (killed, "
-                        "crashed or lost power)")
+        new["error"] = (
+            "recording interrupted: the recorder ended without closing (killed, "
+            "crashed or lost power)"
+        )
     old_topics = meta.get("topics") if isinstance(meta.get("topics"), dict) else {}
-    merged = {t: [s.msgtype, s.count, s.start_ns, s.end_ns]
-              for t, s in merge_topic_stats(r.topics for r in reports).items()}
+    merged = {
+        t: [s.msgtype, s.count, s.start_ns, s.end_ns]
+        for t, s in merge_topic_stats(r.topics for r in reports).items()
+    }
     topics = {}
     for t in list(old_topics) + [t for t in merged if t not in old_topics]:
         entry = dict(old_topics.get(t) or {})
@@ -676,20 +770,29 @@ def repair_experiment(out_dir, dry_run: bool = False) -> ExperimentRepair:
         entry["rate_hz"] = round((n - 1) / ((hi - lo) * 1e-9), 6) if n > 1 and hi > lo else 0.0
         topics[t] = entry
     new["topics"] = topics
-    new["bags"] = [{"path": Path(r.path).name, "messages": r.messages, "bytes": r.bytes,
-                    "start_ns": min((s.start_ns for s in r.topics.values() if s.count),
-                                    default=None),
-                    "end_ns": max((s.end_ns for s in r.topics.values() if s.count),
-                                  default=None)} for r in reports]
+    new["bags"] = [
+        {
+            "path": Path(r.path).name,
+            "messages": r.messages,
+            "bytes": r.bytes,
+            "start_ns": min((s.start_ns for s in r.topics.values() if s.count), default=None),
+            "end_ns": max((s.end_ns for s in r.topics.values() if s.count), default=None),
+        }
+        for r in reports
+    ]
     if new.get("stop_stamp_ns") is None:
         ends = [b["end_ns"] for b in new["bags"] if b["end_ns"] is not None]
         new["stop_stamp_ns"] = max(ends) if ends else None
-    new["repaired"] = {"time": _now_iso(), "by": "lpv_sysid.io.recorder.repair_experiment",
-                       "status_before": before,
-                       "bags": {Path(r.path).name: r.summary() for r in reports},
-                       "errors": errors or None}
-    result = ExperimentRepair(str(out), tuple(reports), before, status, True, tuple(errors),
-                              dry_run)
+    new["repaired"] = {
+        "time": _now_iso(),
+        "by": "lpv_sysid.io.recorder.repair_experiment",
+        "status_before": before,
+        "bags": {Path(r.path).name: r.summary() for r in reports},
+        "errors": errors or None,
+    }
+    result = ExperimentRepair(
+        str(out), tuple(reports), before, status, True, tuple(errors), dry_run
+    )
     if dry_run:
         return result
     try:

@@ -49,9 +49,13 @@ MAX_YAML_BYTES = 64 * MiB
 #: Largest ``.npz`` file read, and largest total of the array data it may hold.
 MAX_NPZ_BYTES = 256 * MiB
 
-_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
-          (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"),
-          (stat.S_ISBLK, "a block device"))
+_KINDS = (
+    (stat.S_ISDIR, "a directory"),
+    (stat.S_ISFIFO, "a FIFO (named pipe)"),
+    (stat.S_ISSOCK, "a socket"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+)
 
 
 def _size(n: int) -> str:
@@ -91,8 +95,9 @@ def _shown(path, label: Optional[str], show_path: bool) -> tuple[str, str]:
 
 
 @contextmanager
-def open_regular(path, label: Optional[str] = None, max_bytes: int = MAX_YAML_BYTES, *,
-                 show_path: bool = False) -> Iterator[BinaryIO]:
+def open_regular(
+    path, label: Optional[str] = None, max_bytes: int = MAX_YAML_BYTES, *, show_path: bool = False
+) -> Iterator[BinaryIO]:
     """Open ``path`` for binary reading if it is a regular file of at most ``max_bytes``.
 
     ``stat`` before ``open`` (non-regular files are never opened), ``O_NONBLOCK`` and
@@ -102,12 +107,17 @@ def open_regular(path, label: Optional[str] = None, max_bytes: int = MAX_YAML_BY
     label, shown = _shown(p, label, show_path)
     try:
         _check_stat(os.stat(p), label, max_bytes, shown, p)
-        flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0) \
-            | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_BINARY", 0)
+        flags = (
+            os.O_RDONLY
+            | getattr(os, "O_NONBLOCK", 0)
+            | getattr(os, "O_NOCTTY", 0)
+            | getattr(os, "O_CLOEXEC", 0)
+            | getattr(os, "O_BINARY", 0)
+        )
         fd = os.open(p, flags)
     except OSError as exc:
         raise _oserror(exc, label, shown, p) from None
-    except (ValueError, UnicodeError) as exc:        # embedded NUL or unencodable path
+    except (ValueError, UnicodeError) as exc:  # embedded NUL or unencodable path
         raise _cannot(label, shown, f"invalid path: {exc}", p) from None
     try:
         _check_stat(os.fstat(fd), label, max_bytes, shown, p)
@@ -119,13 +129,14 @@ def open_regular(path, label: Optional[str] = None, max_bytes: int = MAX_YAML_BY
         yield fh
 
 
-def read_bytes(path, label: Optional[str] = None, max_bytes: int = MAX_YAML_BYTES, *,
-               show_path: bool = False) -> bytes:
+def read_bytes(
+    path, label: Optional[str] = None, max_bytes: int = MAX_YAML_BYTES, *, show_path: bool = False
+) -> bytes:
     """All bytes of the regular file ``path`` (at most ``max_bytes``, else ConfigError)."""
     label, shown = _shown(path, label, show_path)
     chunks, total = [], 0
     with open_regular(path, label, max_bytes, show_path=show_path) as fh:
-        try:    # in chunks up to one byte past the cap: a file that grows (or /proc, size 0) is caught
+        try:  # in chunks up to one byte past the cap: a file that grows (or /proc, size 0) is caught
             while total <= max_bytes:
                 chunk = fh.read(min(1 << 20, max_bytes + 1 - total))
                 if not chunk:
@@ -141,16 +152,22 @@ def read_bytes(path, label: Optional[str] = None, max_bytes: int = MAX_YAML_BYTE
     return data
 
 
-_WIDE_BOMS = ((codecs.BOM_UTF32_LE, "UTF-32"), (codecs.BOM_UTF32_BE, "UTF-32"),
-              (codecs.BOM_UTF16_LE, "UTF-16"), (codecs.BOM_UTF16_BE, "UTF-16"))
+_WIDE_BOMS = (
+    (codecs.BOM_UTF32_LE, "UTF-32"),
+    (codecs.BOM_UTF32_BE, "UTF-32"),
+    (codecs.BOM_UTF16_LE, "UTF-16"),
+    (codecs.BOM_UTF16_BE, "UTF-16"),
+)
 
 
 def decode_text(data: bytes, label: str) -> str:
     """UTF-8 text of ``data`` (optional UTF-8 BOM dropped); UTF-16/32, NUL bytes and invalid
     UTF-8 are ConfigErrors naming the encoding or the byte offset."""
-    for bom, name in _WIDE_BOMS:               # UTF-32-LE starts with the UTF-16-LE BOM: order matters
+    for bom, name in _WIDE_BOMS:  # UTF-32-LE starts with the UTF-16-LE BOM: order matters
         if data.startswith(bom):
-            raise ConfigError(f"{label}: not UTF-8 text ({name} byte-order mark); save the file as UTF-8")
+            raise ConfigError(
+                f"{label}: not UTF-8 text ({name} byte-order mark); save the file as UTF-8"
+            )
     nul = data.find(b"\x00")
     if nul >= 0:
         hint = "UTF-16/32 text without a byte-order mark, or a binary file"
@@ -161,8 +178,9 @@ def decode_text(data: bytes, label: str) -> str:
         raise ConfigError(f"{label}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
 
 
-def read_text(path, label: Optional[str] = None, max_bytes: int = MAX_YAML_BYTES, *,
-              show_path: bool = False) -> str:
+def read_text(
+    path, label: Optional[str] = None, max_bytes: int = MAX_YAML_BYTES, *, show_path: bool = False
+) -> str:
     """UTF-8 text of the regular file ``path`` (:func:`read_bytes` + :func:`decode_text`)."""
     label, shown = _shown(path, label, show_path)
     data = read_bytes(path, label, max_bytes, show_path=show_path)
@@ -179,15 +197,28 @@ def check_output(path, label: Optional[str] = None) -> None:
     except FileNotFoundError:
         return
     except OSError as exc:
-        raise FileReadError(f"{label}: cannot write ({exc.strerror or exc})", p, str(exc.strerror or exc)) from None
+        raise FileReadError(
+            f"{label}: cannot write ({exc.strerror or exc})", p, str(exc.strerror or exc)
+        ) from None
     if not stat.S_ISREG(st.st_mode):
         reason = f"not a regular file: {_kind(st.st_mode)}"
         raise FileReadError(f"{label}: cannot write ({reason})", p, reason)
 
 
 # ----------------------------------------------------------------------------- npz
-_ZIP_ERRORS = (zipfile.BadZipFile, zipfile.LargeZipFile, zlib.error, EOFError, ValueError, OSError,
-               struct.error, NotImplementedError, RuntimeError, KeyError, OverflowError)
+_ZIP_ERRORS = (
+    zipfile.BadZipFile,
+    zipfile.LargeZipFile,
+    zlib.error,
+    EOFError,
+    ValueError,
+    OSError,
+    struct.error,
+    NotImplementedError,
+    RuntimeError,
+    KeyError,
+    OverflowError,
+)
 
 
 def _npy_header(fp) -> tuple[tuple, np.dtype]:
@@ -196,13 +227,19 @@ def _npy_header(fp) -> tuple[tuple, np.dtype]:
         shape, _, dtype = np.lib.format.read_array_header_1_0(fp)
     elif version == (2, 0):
         shape, _, dtype = np.lib.format.read_array_header_2_0(fp)
-    else:   # (3, 0): utf-8 field names; read_array handles it, the header check needs the private reader
+    else:  # (3, 0): utf-8 field names; read_array handles it, the header check needs the private reader
         shape, _, dtype = np.lib.format._read_array_header(fp, version)  # noqa: SLF001
     return shape, dtype
 
 
-def read_npz(path, label: Optional[str] = None, max_bytes: int = MAX_NPZ_BYTES, *,
-             allow_complex: bool = False, show_path: bool = False) -> dict[str, np.ndarray]:
+def read_npz(
+    path,
+    label: Optional[str] = None,
+    max_bytes: int = MAX_NPZ_BYTES,
+    *,
+    allow_complex: bool = False,
+    show_path: bool = False,
+) -> dict[str, np.ndarray]:
     """The arrays of the ``.npz`` archive ``path`` as a dict (member name without ``.npy``).
 
     Refused with a ConfigError naming the file: anything :func:`open_regular` refuses, an
@@ -222,32 +259,44 @@ def read_npz(path, label: Optional[str] = None, max_bytes: int = MAX_NPZ_BYTES, 
             head = fh.read(6)
             fh.seek(0)
             if head == b"\x93NUMPY":
-                raise ConfigError(f"{label}: not a readable .npz archive (a single-array .npy file)")
+                raise ConfigError(
+                    f"{label}: not a readable .npz archive (a single-array .npy file)"
+                )
             total = 0
             with zipfile.ZipFile(fh) as zf:
                 for info in zf.infolist():
                     name = info.filename
                     if not name.endswith(".npy"):
-                        raise ConfigError(f"{label}: not a readable .npz archive (member {name!r} is not a .npy array)")
+                        raise ConfigError(
+                            f"{label}: not a readable .npz archive (member {name!r} is not a .npy array)"
+                        )
                     key = name[:-4]
                     if key in out:
-                        raise ConfigError(f"{label}: not a readable .npz archive (member {name!r} appears twice)")
+                        raise ConfigError(
+                            f"{label}: not a readable .npz archive (member {name!r} appears twice)"
+                        )
                     with zf.open(info) as m:
                         shape, dtype = _npy_header(m)
                     if dtype.hasobject:
-                        raise ConfigError(f"{label}: array {key!r} holds Python objects (dtype {dtype}); "
-                                          "only numeric and string arrays are read (no pickles)")
+                        raise ConfigError(
+                            f"{label}: array {key!r} holds Python objects (dtype {dtype}); "
+                            "only numeric and string arrays are read (no pickles)"
+                        )
                     if dtype.kind == "c" and not allow_complex:
-                        raise ConfigError(f"{label}: array {key!r} is complex-valued (dtype {dtype}); "
-                                          "a real-valued array is required")
+                        raise ConfigError(
+                            f"{label}: array {key!r} is complex-valued (dtype {dtype}); "
+                            "a real-valued array is required"
+                        )
                     count = 1
                     for s in shape:
                         count *= int(s)
                     total += count * dtype.itemsize
                     if total > max_bytes:
-                        raise ConfigError(f"{label}: arrays too large (array {key!r} of shape {tuple(shape)}, "
-                                          f"{dtype}: more than {_size(max_bytes)} of array data in total; "
-                                          f"the limit is {_size(max_bytes)})")
+                        raise ConfigError(
+                            f"{label}: arrays too large (array {key!r} of shape {tuple(shape)}, "
+                            f"{dtype}: more than {_size(max_bytes)} of array data in total; "
+                            f"the limit is {_size(max_bytes)})"
+                        )
                     with zf.open(info) as m:
                         out[key] = np.lib.format.read_array(m, allow_pickle=False)
         except ConfigError:
@@ -262,5 +311,13 @@ def read_npz(path, label: Optional[str] = None, max_bytes: int = MAX_NPZ_BYTES, 
     return out
 
 
-__all__ = ["MAX_NPZ_BYTES", "MAX_YAML_BYTES", "check_output", "decode_text", "open_regular", "read_bytes",
-           "read_npz", "read_text"]
+__all__ = [
+    "MAX_NPZ_BYTES",
+    "MAX_YAML_BYTES",
+    "check_output",
+    "decode_text",
+    "open_regular",
+    "read_bytes",
+    "read_npz",
+    "read_text",
+]

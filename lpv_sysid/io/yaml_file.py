@@ -46,7 +46,7 @@ MAX_DEPTH = 100
 #: Most nodes aliases may add to a document when expanded.
 MAX_ALIAS_NODES = 1_000_000
 #: Integers must satisfy ``|x| <= INT_LIMIT`` (int64).
-INT_LIMIT = 2 ** 63 - 1
+INT_LIMIT = 2**63 - 1
 #: Largest magnitude of a float in a configuration file, and of a matrix entry in a models or
 #: gains file: no SI quantity of the package comes near it, and products of up to ~20 such
 #: factors (Gramians, Hamiltonians, ``B R R^T B^T``, squared norms) stay finite in double
@@ -92,20 +92,29 @@ class _StrictComposer(Composer):
             event = self.get_event()
             node = self.anchors.get(event.anchor)
             if node is None:
-                raise ComposerError(None, None, f"found undefined alias {event.anchor!r}", event.start_mark)
+                raise ComposerError(
+                    None, None, f"found undefined alias {event.anchor!r}", event.start_mark
+                )
             n = getattr(node, "_n", None)
             if n is None:
-                raise StrictYAMLError(f"alias *{event.anchor} refers to its own enclosing anchor "
-                                      "(cyclic document)", event.start_mark)
+                raise StrictYAMLError(
+                    f"alias *{event.anchor} refers to its own enclosing anchor (cyclic document)",
+                    event.start_mark,
+                )
             self._alias_nodes += n
             if self._alias_nodes > MAX_ALIAS_NODES:
-                raise StrictYAMLError(f"aliases expand the document by more than {MAX_ALIAS_NODES} nodes "
-                                      f"(alias *{event.anchor}; an alias bomb?)", event.start_mark)
+                raise StrictYAMLError(
+                    f"aliases expand the document by more than {MAX_ALIAS_NODES} nodes "
+                    f"(alias *{event.anchor}; an alias bomb?)",
+                    event.start_mark,
+                )
             return node
         if self.check_event(SequenceStartEvent, MappingStartEvent):
             self._depth += 1
             if self._depth > MAX_DEPTH:
-                raise StrictYAMLError(f"nesting deeper than {MAX_DEPTH} levels", self.peek_event().start_mark)
+                raise StrictYAMLError(
+                    f"nesting deeper than {MAX_DEPTH} levels", self.peek_event().start_mark
+                )
             node = super().compose_node(parent, index)
             self._depth -= 1
             if isinstance(node, MappingNode):
@@ -113,7 +122,7 @@ class _StrictComposer(Composer):
             else:
                 node._n = 1 + sum(c._n for c in node.value)
             return node
-        node = super().compose_node(parent, index)   # scalar
+        node = super().compose_node(parent, index)  # scalar
         node._n = 1
         return node
 
@@ -130,35 +139,51 @@ class _StrictConstructor(SafeConstructor):
                 key = self.construct_object(key_node, deep=deep)
                 try:
                     first = seen.get(key)
-                except TypeError:        # unhashable key: SafeConstructor says so below
+                except TypeError:  # unhashable key: SafeConstructor says so below
                     continue
                 if first is not None:
-                    raise ConstructorError(None, None, f"duplicate key {key!r} (first at line {first + 1})",
-                                           key_node.start_mark)
+                    raise ConstructorError(
+                        None,
+                        None,
+                        f"duplicate key {key!r} (first at line {first + 1})",
+                        key_node.start_mark,
+                    )
                 seen[key] = key_node.start_mark.line
         return super().construct_mapping(node, deep=deep)
 
     def construct_yaml_int(self, node):
         text = str(node.value)
         if len(text.replace("_", "")) > 80:
-            raise ConstructorError(None, None, f"integer {text[:20]}... ({len(text)} characters) is out of "
-                                   f"range (|x| <= 2**63 - 1)", node.start_mark)
+            raise ConstructorError(
+                None,
+                None,
+                f"integer {text[:20]}... ({len(text)} characters) is out of "
+                f"range (|x| <= 2**63 - 1)",
+                node.start_mark,
+            )
         value = super().construct_yaml_int(node)
         if abs(value) > INT_LIMIT:
-            raise ConstructorError(None, None, f"integer {text} is out of range (|x| <= 2**63 - 1)",
-                                   node.start_mark)
+            raise ConstructorError(
+                None, None, f"integer {text} is out of range (|x| <= 2**63 - 1)", node.start_mark
+            )
         return value
 
     def construct_yaml_float(self, node):
         value = super().construct_yaml_float(node)
         if math.isinf(value) and str(node.value).lstrip("+-").lower() != ".inf":
-            raise ConstructorError(None, None, f"float {node.value} overflows a double (|x| > 1.8e308)",
-                                   node.start_mark)
+            raise ConstructorError(
+                None,
+                None,
+                f"float {node.value} overflows a double (|x| > 1.8e308)",
+                node.start_mark,
+            )
         return value
 
 
 _StrictConstructor.add_constructor("tag:yaml.org,2002:int", _StrictConstructor.construct_yaml_int)
-_StrictConstructor.add_constructor("tag:yaml.org,2002:float", _StrictConstructor.construct_yaml_float)
+_StrictConstructor.add_constructor(
+    "tag:yaml.org,2002:float", _StrictConstructor.construct_yaml_float
+)
 
 
 class StrictLoader(_StrictComposer, _Parser, _StrictConstructor, Resolver):
@@ -202,11 +227,16 @@ class StrictLoader(_StrictComposer, _Parser, _StrictConstructor, Resolver):
                 x = self.construct_yaml_float(node)
                 where = f"{path}: " if path else ""
                 if not math.isfinite(x):
-                    raise NonFiniteError(f"{where}{node.value} is not a finite number (a finite number "
-                                         "is required)", node.start_mark)
+                    raise NonFiniteError(
+                        f"{where}{node.value} is not a finite number (a finite number "
+                        "is required)",
+                        node.start_mark,
+                    )
                 if abs(x) > MAX_MAGNITUDE:
-                    raise NonFiniteError(f"{where}{node.value} is too large (|x| <= {MAX_MAGNITUDE:g})",
-                                         node.start_mark)
+                    raise NonFiniteError(
+                        f"{where}{node.value} is too large (|x| <= {MAX_MAGNITUDE:g})",
+                        node.start_mark,
+                    )
 
 
 class FiniteLoader(StrictLoader):
@@ -223,15 +253,24 @@ def strict_load(text: str, finite: bool = False) -> Any:
 
 def describe_yaml_error(exc: yaml.YAMLError) -> str:
     """First line of a parser error; the refusals of this loader with their line and column."""
-    if isinstance(exc, (StrictYAMLError, ConstructorError)) and exc.context is None and exc.problem:
+    if (
+        isinstance(exc, (StrictYAMLError, ConstructorError))
+        and exc.context is None
+        and exc.problem
+    ):
         mark = exc.problem_mark
         where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
         return f"{where}{exc.problem}"
     return (str(exc).splitlines() or [type(exc).__name__])[0]
 
 
-def read_yaml(path: str | Path, label: Optional[str] = None, max_bytes: int = MAX_YAML_BYTES, *,
-              finite: bool = True) -> Any:
+def read_yaml(
+    path: str | Path,
+    label: Optional[str] = None,
+    max_bytes: int = MAX_YAML_BYTES,
+    *,
+    finite: bool = True,
+) -> Any:
     """The strictly loaded YAML document of ``path`` (UTF-8, regular file <= ``max_bytes``).
 
     Errors name ``label`` (default: the path): ``"{label}: cannot read ({reason})"`` when
@@ -245,7 +284,7 @@ def read_yaml(path: str | Path, label: Optional[str] = None, max_bytes: int = MA
     """
     label = str(path) if label is None else label
     data = read_bytes(path, label, max_bytes)
-    where = label if str(path) in label else f"{label} ({path})"    # content errors name the file
+    where = label if str(path) in label else f"{label} ({path})"  # content errors name the file
     text = decode_text(data, where)
     try:
         return strict_load(text, finite=finite)
@@ -253,12 +292,17 @@ def read_yaml(path: str | Path, label: Optional[str] = None, max_bytes: int = MA
         raise ConfigError(f"{where}: {describe_yaml_error(exc)}") from None
     except yaml.YAMLError as exc:
         raise ConfigError(f"{where}: malformed YAML ({describe_yaml_error(exc)})") from None
-    except RecursionError:      # defensive: MAX_DEPTH keeps the composer far from the limit
+    except RecursionError:  # defensive: MAX_DEPTH keeps the composer far from the limit
         raise ConfigError(f"{where}: malformed YAML (nesting too deep)") from None
 
 
-def read_yaml_mapping(path: str | Path, label: Optional[str] = None, *, allow_empty: bool = False,
-                      finite: bool = True) -> dict:
+def read_yaml_mapping(
+    path: str | Path,
+    label: Optional[str] = None,
+    *,
+    allow_empty: bool = False,
+    finite: bool = True,
+) -> dict:
     """:func:`read_yaml` of a file whose top level must be a mapping.
 
     ``"{label}: empty file"`` (``{}`` with ``allow_empty``), ``"{label}: expected a mapping
@@ -280,10 +324,27 @@ def read_yaml_mapping(path: str | Path, label: Optional[str] = None, *, allow_em
 
 
 def _kind(v: Any) -> str:
-    return {list: "a list", str: "a string", bool: "a boolean", int: "a number", float: "a number"}.get(
-        type(v), type(v).__name__)
+    return {
+        list: "a list",
+        str: "a string",
+        bool: "a boolean",
+        int: "a number",
+        float: "a number",
+    }.get(type(v), type(v).__name__)
 
 
-__all__ = ["FiniteLoader", "INT_LIMIT", "MAX_ALIAS_NODES", "MAX_DEPTH", "MAX_MAGNITUDE", "MAX_YAML_BYTES",
-           "NonFiniteError", "StrictLoader", "StrictYAMLError", "describe_yaml_error", "read_yaml",
-           "read_yaml_mapping", "strict_load"]
+__all__ = [
+    "FiniteLoader",
+    "INT_LIMIT",
+    "MAX_ALIAS_NODES",
+    "MAX_DEPTH",
+    "MAX_MAGNITUDE",
+    "MAX_YAML_BYTES",
+    "NonFiniteError",
+    "StrictLoader",
+    "StrictYAMLError",
+    "describe_yaml_error",
+    "read_yaml",
+    "read_yaml_mapping",
+    "strict_load",
+]

@@ -42,13 +42,24 @@ from lpv_sysid.control.envelope import Envelope, EnvelopeConfig, Violation
 from lpv_sysid.errors import ConfigError, LpvSysidError, SafetyError
 from lpv_sysid.mavlink import px4
 from lpv_sysid.mavlink.link import LinkConfig, LinkEvent, MavlinkLink
-from lpv_sysid.mavlink.offboard import (STREAMING, OffboardConfig, OffboardMachine, SendCommand,
-                                        SendSetpoint, State, StatusEvent)
+from lpv_sysid.mavlink.offboard import (
+    STREAMING,
+    OffboardConfig,
+    OffboardMachine,
+    SendCommand,
+    SendSetpoint,
+    State,
+    StatusEvent,
+)
 from lpv_sysid.mavlink.rotor_estimate import RotorEstimateConfig, with_motor_output_streams
 from lpv_sysid.mavlink.telemetry import StateSample, TelemetryDecoder
 from lpv_sysid.validation import check_config_keys
-from lpv_sysid.mavlink.transport import (ActuatorSetpoint, TransportContext, VelocitySetpoint,
-                                         make_transport)
+from lpv_sysid.mavlink.transport import (
+    ActuatorSetpoint,
+    TransportContext,
+    VelocitySetpoint,
+    make_transport,
+)
 
 log = logging.getLogger(__name__)
 
@@ -59,16 +70,18 @@ class BridgeConfig:
 
     link: LinkConfig = field(default_factory=LinkConfig)
     offboard: OffboardConfig = field(default_factory=OffboardConfig)
-    command: str = "velocity"                 # velocity | attitude_rate
-    velocity_frame: str = "body_ned"          # body_ned | local_ned
+    command: str = "velocity"  # velocity | attitude_rate
+    velocity_frame: str = "body_ned"  # body_ned | local_ned
     use_yaw_rate: bool = True
-    arm_length: float = 0.225                 # attitude_rate: seed 0 Eq. (7) geometry
+    arm_length: float = 0.225  # attitude_rate: seed 0 Eq. (7) geometry
     rate_p: tuple[float, float, float] = (0.15, 0.15, 0.2)
-    auto_start: bool = False                  # start the machine on the first command
+    auto_start: bool = False  # start the machine on the first command
     telemetry_max_age: float = 0.5
     n_rotors: int = 4
-    rotor_estimate: RotorEstimateConfig = field(default_factory=RotorEstimateConfig)  # no ESC telemetry
-    envelope: EnvelopeConfig = field(default_factory=EnvelopeConfig)   # control/envelope.py
+    rotor_estimate: RotorEstimateConfig = field(
+        default_factory=RotorEstimateConfig
+    )  # no ESC telemetry
+    envelope: EnvelopeConfig = field(default_factory=EnvelopeConfig)  # control/envelope.py
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "BridgeConfig":
@@ -84,14 +97,14 @@ class BridgeConfig:
             except (TypeError, ValueError):
                 raise ConfigError("rate_p must be a list of 3 numbers") from None
         cfg = cls(**kw)
-        cfg.transport()          # validates command/frame/geometry
+        cfg.transport()  # validates command/frame/geometry
         return cfg
 
     @classmethod
     def load(cls, path: str) -> "BridgeConfig":
         from lpv_sysid.io.yaml_file import read_yaml_mapping
 
-        d = read_yaml_mapping(path)     # an explicitly given empty or non-mapping file is an error
+        d = read_yaml_mapping(path)  # an explicitly given empty or non-mapping file is an error
         try:
             return cls.from_dict(d)
         except ConfigError as exc:
@@ -99,7 +112,9 @@ class BridgeConfig:
 
     def transport(self):
         if self.command == "velocity":
-            return make_transport("velocity", frame=self.velocity_frame, use_yaw_rate=self.use_yaw_rate)
+            return make_transport(
+                "velocity", frame=self.velocity_frame, use_yaw_rate=self.use_yaw_rate
+            )
         if self.command == "attitude_rate":
             return make_transport("attitude_rate", arm_length=self.arm_length, rate_p=self.rate_p)
         return make_transport(self.command)
@@ -108,19 +123,29 @@ class BridgeConfig:
 @dataclass
 class BridgeOutput:
     samples: list[Any] = field(default_factory=list)
-    events: list[Any] = field(default_factory=list)     # StatusEvent | LinkEvent
+    events: list[Any] = field(default_factory=list)  # StatusEvent | LinkEvent
 
 
 class BridgeCore:
     """See module docstring."""
 
-    def __init__(self, config: BridgeConfig, link: MavlinkLink | None = None,
-                 sample_callback: Callable[[Any], None] | None = None) -> None:
+    def __init__(
+        self,
+        config: BridgeConfig,
+        link: MavlinkLink | None = None,
+        sample_callback: Callable[[Any], None] | None = None,
+    ) -> None:
         self.config = config
-        self.link = link or MavlinkLink(with_motor_output_streams(config.link, config.rotor_estimate))
+        self.link = link or MavlinkLink(
+            with_motor_output_streams(config.link, config.rotor_estimate)
+        )
         # telemetry only from the link's target (configured, or the first autopilot HEARTBEAT)
-        self.telemetry = TelemetryDecoder(config.n_rotors, config.telemetry_max_age,
-                                          rotor_estimate=config.rotor_estimate, source_filter=True)
+        self.telemetry = TelemetryDecoder(
+            config.n_rotors,
+            config.telemetry_max_age,
+            rotor_estimate=config.rotor_estimate,
+            source_filter=True,
+        )
         self.transport = config.transport()
         self.machine = OffboardMachine(config.offboard, self.transport.neutral())
         self.sample_callback = sample_callback
@@ -141,8 +166,11 @@ class BridgeCore:
             self.link.open(now)
         except LpvSysidError as exc:
             self.link.stats.io_errors += 1
-            self._pending_events.append(LinkEvent(now, "io_error", f"{exc}; retrying every "
-                                                  f"{self.config.link.reconnect_period} s"))
+            self._pending_events.append(
+                LinkEvent(
+                    now, "io_error", f"{exc}; retrying every {self.config.link.reconnect_period} s"
+                )
+            )
 
     def close(self) -> None:
         self.link.close()
@@ -200,8 +228,9 @@ class BridgeCore:
                 self.sample_callback(s)
 
     # ------------------------------------------------------------- inputs
-    def on_velocity_reference(self, now: float, v_frd: Any, yaw_rate: float = 0.0,
-                              stamp: float | None = None) -> bool:
+    def on_velocity_reference(
+        self, now: float, v_frd: Any, yaw_rate: float = 0.0, stamp: float | None = None
+    ) -> bool:
         bad = self.envelope.check_setpoint(now, v_frd, yaw_rate)
         if bad is not None:
             # never encoded; while streaming it is an envelope violation -> hand-back
@@ -210,14 +239,20 @@ class BridgeCore:
                 out = BridgeOutput()
                 self.rejected_commands += 1
                 log.warning(reason)
-                self._envelope_abort(now, self.envelope.trip(Violation(now, bad.kind, reason)), out)
+                self._envelope_abort(
+                    now, self.envelope.trip(Violation(now, bad.kind, reason)), out
+                )
                 self._pending_events.extend(out.events)
                 return False
             return self._reject(now, reason)
         v = np.asarray(v_frd, dtype=float)
         if self.config.command != "velocity":
-            return self._reject(now, f"velocity reference ignored: bridge command is {self.config.command!r}")
-        return self._command(now, VelocitySetpoint(tuple(float(x) for x in v), float(yaw_rate)), stamp)
+            return self._reject(
+                now, f"velocity reference ignored: bridge command is {self.config.command!r}"
+            )
+        return self._command(
+            now, VelocitySetpoint(tuple(float(x) for x in v), float(yaw_rate)), stamp
+        )
 
     def on_actuator_command(self, now: float, u: Any, stamp: float | None = None) -> bool:
         try:
@@ -225,10 +260,15 @@ class BridgeCore:
         except (TypeError, ValueError):
             return self._reject(now, f"actuator command rejected: not numeric ({u!r})")
         if a.shape != (4,) or not np.isfinite(a).all():
-            return self._reject(now, f"actuator command rejected: needs 4 finite values (ut, ua, ue, ur), "
-                                     f"got {a.tolist()!r}")
+            return self._reject(
+                now,
+                f"actuator command rejected: needs 4 finite values (ut, ua, ue, ur), "
+                f"got {a.tolist()!r}",
+            )
         if self.config.command != "attitude_rate":
-            return self._reject(now, f"actuator command ignored: bridge command is {self.config.command!r}")
+            return self._reject(
+                now, f"actuator command ignored: bridge command is {self.config.command!r}"
+            )
         return self._command(now, ActuatorSetpoint(tuple(float(x) for x in a)), stamp)
 
     def start(self, now: float) -> list[Any]:
@@ -267,7 +307,9 @@ class BridgeCore:
         tel = self.telemetry
         d["telemetry_out_of_order"] = str(tel.stats.out_of_order)
         d["foreign_messages"] = str(tel.stats.foreign)
-        d["foreign_sources"] = " ".join(f"{s}/{c}:{n}" for (s, c), n in sorted(tel.foreign_sources.items()))
+        d["foreign_sources"] = " ".join(
+            f"{s}/{c}:{n}" for (s, c), n in sorted(tel.foreign_sources.items())
+        )
         d["attitude_source"] = tel.attitude_source(now) or "none"
         d["position_source"] = tel.position_source(now) or "none"
         d["rotor_source"] = tel.rotor_source or "none"
@@ -284,7 +326,9 @@ class BridgeCore:
     def _command(self, now: float, sp: Any, stamp: float | None) -> bool:
         if stamp is not None:
             if stamp < self._last_stamp:
-                return self._reject(now, f"out-of-order command (stamp {stamp:.6f} < {self._last_stamp:.6f})")
+                return self._reject(
+                    now, f"out-of-order command (stamp {stamp:.6f} < {self._last_stamp:.6f})"
+                )
             self._last_stamp = stamp
         out = BridgeOutput()
         self._run(self.machine.on_command(now, sp), now, out)
@@ -297,42 +341,56 @@ class BridgeCore:
         if self.machine.state not in STREAMING and self.machine.state != State.HANDBACK:
             s = self._state
             fresh = s is not None and now - s.t <= self.config.telemetry_max_age
-            bad = self.envelope.arm(now, s.pos_ned if fresh else None, vehicle_armed=self.machine.armed)
+            bad = self.envelope.arm(
+                now, s.pos_ned if fresh else None, vehicle_armed=self.machine.armed
+            )
             self._envelope_notices(out)
             if bad is not None:
                 reason = f"start refused: envelope: {bad.message}"
                 log.error(reason)
-                out.events.append(StatusEvent(now, self.machine.state.value, self.machine.state.value,
-                                              reason, "error"))
+                out.events.append(
+                    StatusEvent(
+                        now, self.machine.state.value, self.machine.state.value, reason, "error"
+                    )
+                )
                 return
         self._run(self.machine.start(now), now, out)
 
     def _envelope_notices(self, out: BridgeOutput) -> None:
         for n in self.envelope.notices():
             log.info(n.message)
-            out.events.append(StatusEvent(n.t, self.machine.state.value, self.machine.state.value,
-                                          n.message, n.level))
+            out.events.append(
+                StatusEvent(
+                    n.t, self.machine.state.value, self.machine.state.value, n.message, n.level
+                )
+            )
 
     def _envelope_abort(self, now: float, v: Violation, out: BridgeOutput) -> None:
         reason = f"envelope violation ({v.kind}): {v.message}"
         log.error(reason)
-        out.events.append(StatusEvent(now, self.machine.state.value, self.machine.state.value,
-                                      reason, "error"))
+        out.events.append(
+            StatusEvent(now, self.machine.state.value, self.machine.state.value, reason, "error")
+        )
         self._run(self.machine.abort(now, reason), now, out)
 
     def _reject(self, now: float, reason: str) -> bool:
         self.rejected_commands += 1
         log.warning(reason)
-        self._pending_events.append(StatusEvent(now, self.machine.state.value, self.machine.state.value,
-                                                reason, "error"))
+        self._pending_events.append(
+            StatusEvent(now, self.machine.state.value, self.machine.state.value, reason, "error")
+        )
         return False
 
     def _ctx(self, now: float) -> TransportContext:
         s = self._state
         fresh = s is not None and now - s.t <= self.config.telemetry_max_age
-        return TransportContext(int(max(now - (self._t0 or now), 0.0) * 1000) & 0xFFFFFFFF,
-                                self.link.target_system or 1, self.link.target_component,
-                                s.q_wxyz if fresh else None, s.omega if fresh else None)
+        return TransportContext(
+            int(max(now - (self._t0 or now), 0.0) * 1000) & 0xFFFFFFFF,
+            self.link.target_system or 1,
+            self.link.target_component,
+            s.q_wxyz if fresh else None,
+            s.omega if fresh else None,
+        )
 
     def _run(self, actions: list[Any], now: float, out: BridgeOutput) -> None:
         for a in actions:
@@ -341,11 +399,18 @@ class BridgeCore:
                     continue
                 try:
                     for m in self.transport.encode(self.link.codec, a.setpoint, self._ctx(now)):
-                        self.link.send(m)          # packing (float32) can overflow too
+                        self.link.send(m)  # packing (float32) can overflow too
                 except (SafetyError, OverflowError, struct.error, ValueError) as exc:
                     self._run(self.machine.abort(now, f"setpoint not encodable: {exc}"), now, out)
-                    out.events.append(StatusEvent(now, self.machine.state.value, self.machine.state.value,
-                                                  f"setpoint not encodable: {exc}", "error"))
+                    out.events.append(
+                        StatusEvent(
+                            now,
+                            self.machine.state.value,
+                            self.machine.state.value,
+                            f"setpoint not encodable: {exc}",
+                            "error",
+                        )
+                    )
                     continue
             elif isinstance(a, SendCommand):
                 self.link.command_long(a.command, *a.params, confirmation=a.attempt - 1)

@@ -61,9 +61,9 @@ class LinkConfig:
     url: str = "udpin:127.0.0.1:14540"
     baud: int = 921600
     source_system: int = 1
-    source_component: int = 191          # MAV_COMP_ID_ONBOARD_COMPUTER
-    target_system: int = 0               # 0: learn from the first autopilot HEARTBEAT
-    target_component: int = 1            # MAV_COMP_ID_AUTOPILOT1
+    source_component: int = 191  # MAV_COMP_ID_ONBOARD_COMPUTER
+    target_system: int = 0  # 0: learn from the first autopilot HEARTBEAT
+    target_component: int = 1  # MAV_COMP_ID_AUTOPILOT1
     dialect: str = px4.DEFAULT_DIALECT
     heartbeat_period: float = 1.0
     link_timeout: float = 1.5
@@ -83,8 +83,9 @@ class LinkConfig:
             s = kw["streams"]
             if not isinstance(s, Mapping):
                 raise ConfigError("link.streams must be a mapping MESSAGE_NAME: rate_hz")
-            kw["streams"] = tuple((str(k), _positive(f"link.streams.{k}", v, allow_zero=True))
-                                  for k, v in s.items())
+            kw["streams"] = tuple(
+                (str(k), _positive(f"link.streams.{k}", v, allow_zero=True)) for k, v in s.items()
+            )
         cfg = cls(**kw)
         cfg.validate()
         return cfg
@@ -99,7 +100,12 @@ class LinkConfig:
                 raise ConfigError(f"link.{name} must be an integer 0..255, got {v!r}")
         if self.source_system == 0:
             raise ConfigError("link.source_system must be 1..255")
-        for name in ("heartbeat_period", "link_timeout", "reconnect_period", "stream_request_period"):
+        for name in (
+            "heartbeat_period",
+            "link_timeout",
+            "reconnect_period",
+            "stream_request_period",
+        ):
             _positive(f"link.{name}", getattr(self, name))
         mod = px4.dialect_module(self.dialect)
         for name, rate in self.streams:
@@ -114,7 +120,9 @@ def _positive(name: str, v: Any, allow_zero: bool = False) -> float:
     except (TypeError, ValueError):
         raise ConfigError(f"{name} must be a number, got {v!r}") from None
     if f != f or f in (float("inf"), float("-inf")) or f < 0 or (f == 0 and not allow_zero):
-        raise ConfigError(f"{name} must be a finite {'non-negative' if allow_zero else 'positive'} number, got {v!r}")
+        raise ConfigError(
+            f"{name} must be a finite {'non-negative' if allow_zero else 'positive'} number, got {v!r}"
+        )
     return f
 
 
@@ -150,17 +158,19 @@ def parse_url(url: str, baud: int = 921600) -> tuple[str, int]:
         raise ConfigError(f"connection URL {url!r}: unsupported scheme {scheme!r}")
     for prefix in ("udpin:", "udpout:", "udp:", "tcp:", "tcpin:"):
         if u.startswith(prefix):
-            parts = u[len(prefix):].split(":")
+            parts = u[len(prefix) :].split(":")
             if len(parts) != 2 or not parts[0]:
                 raise ConfigError(f"connection URL {url!r}: expected {prefix}HOST:PORT")
             _port(parts[1], url)
             if prefix == "udp:":
-                return "udpin:" + u[len(prefix):], baud
+                return "udpin:" + u[len(prefix) :], baud
             return u, baud
     if u.startswith("/dev/") or u.upper().startswith("COM"):
         dev, _, b = u.partition(":") if u.startswith("/dev/") else (u, "", "")
         return dev, _baud(b, baud, url)
-    raise ConfigError(f"connection URL {url!r} not understood (udpin:H:P, udpout:H:P, tcp:H:P, /dev/ttyX, udp://:P)")
+    raise ConfigError(
+        f"connection URL {url!r} not understood (udpin:H:P, udpout:H:P, tcp:H:P, /dev/ttyX, udp://:P)"
+    )
 
 
 #: bind addresses that listen on every network interface
@@ -172,10 +182,13 @@ def warn_if_all_interfaces(what: str, host: str) -> bool:
     machine is on can then send commands, parameters and setpoints to the port."""
     if host.strip("[]") not in ALL_INTERFACES:
         return False
-    log.warning("%s listens on ALL network interfaces (%s): any host that can reach this port can "
-                "send it commands, PARAM_SETs and setpoints. Bind to 127.0.0.1 or one interface "
-                "address (e.g. udpin:127.0.0.1:14540) and use MAVLink signing on shared networks",
-                what, host or "no host given")
+    log.warning(
+        "%s listens on ALL network interfaces (%s): any host that can reach this port can "
+        "send it commands, PARAM_SETs and setpoints. Bind to 127.0.0.1 or one interface "
+        "address (e.g. udpin:127.0.0.1:14540) and use MAVLink signing on shared networks",
+        what,
+        host or "no host given",
+    )
     return True
 
 
@@ -206,7 +219,7 @@ def load_signing_key(path: str) -> bytes:
     from lpv_sysid.errors import FileReadError
     from lpv_sysid.io.safe_open import read_bytes
 
-    try:    # regular files only (a FIFO would block the reader), at most 4 KiB
+    try:  # regular files only (a FIFO would block the reader), at most 4 KiB
         raw = read_bytes(path, f"signing key file {path!r}", max_bytes=4096)
     except FileReadError as exc:
         raise ConfigError(f"signing key file {path!r} cannot be read: {exc.reason}") from None
@@ -217,9 +230,13 @@ def load_signing_key(path: str) -> bytes:
         try:
             return binascii.unhexlify(text)
         except (binascii.Error, ValueError):
-            raise ConfigError(f"signing key file {path!r}: 64 characters but not hexadecimal") from None
-    raise ConfigError(f"signing key file {path!r}: expected 32 raw bytes or 64 hex characters, "
-                      f"got {len(raw)} bytes")
+            raise ConfigError(
+                f"signing key file {path!r}: 64 characters but not hexadecimal"
+            ) from None
+    raise ConfigError(
+        f"signing key file {path!r}: expected 32 raw bytes or 64 hex characters, "
+        f"got {len(raw)} bytes"
+    )
 
 
 @dataclass
@@ -252,18 +269,26 @@ class LinkEvent:
     """A change of link health (for the ``status`` topic)."""
 
     t: float
-    kind: str            # "link_up" | "link_lost" | "reconnect" | "io_error"
+    kind: str  # "link_up" | "link_lost" | "reconnect" | "io_error"
     detail: str = ""
 
 
 # ------------------------------------------------------------------ fast decode
 #: telemetry the bridge receives at high rate: decoded by :class:`FastDecoder` (the rest, and
 #: anything unusual, by pymavlink)
-FAST_MESSAGES = ("HEARTBEAT", "ATTITUDE", "ATTITUDE_QUATERNION", "LOCAL_POSITION_NED",
-                 "HIGHRES_IMU", "ODOMETRY", "SERVO_OUTPUT_RAW", "ACTUATOR_OUTPUT_STATUS",
-                 "ESC_STATUS")
+FAST_MESSAGES = (
+    "HEARTBEAT",
+    "ATTITUDE",
+    "ATTITUDE_QUATERNION",
+    "LOCAL_POSITION_NED",
+    "HIGHRES_IMU",
+    "ODOMETRY",
+    "SERVO_OUTPUT_RAW",
+    "ACTUATOR_OUTPUT_STATUS",
+    "ESC_STATUS",
+)
 _REV8 = bytes(int(f"{i:08b}"[::-1], 2) for i in range(256))
-_V2_HEADER = struct.Struct("<BBBBBBBHB")     # magic, len, incompat, compat, seq, sys, comp, id
+_V2_HEADER = struct.Struct("<BBBBBBBHB")  # magic, len, incompat, compat, seq, sys, comp, id
 
 
 def x25_crc(data: bytes, extra: int | None = None) -> int:
@@ -272,7 +297,7 @@ def x25_crc(data: bytes, extra: int | None = None) -> int:
     reflected form with the same polynomial and initial value."""
     c = binascii.crc_hqx(data.translate(_REV8), 0xFFFF)
     if extra is not None:
-        c = binascii.crc_hqx(_REV8[extra:extra + 1], c)
+        c = binascii.crc_hqx(_REV8[extra : extra + 1], c)
     return (_REV8[c & 0xFF] << 8) | _REV8[c >> 8]
 
 
@@ -293,8 +318,11 @@ class FastDecoder:
         #: sys, comp, compat, msgbuf, crc))
         self.specs: dict[int, tuple] = {}
         for name in FAST_MESSAGES:
-            mid = px4.MAVLINK_MSG_ID_ESC_STATUS if name == "ESC_STATUS" else \
-                getattr(mod, f"MAVLINK_MSG_ID_{name}", None)
+            mid = (
+                px4.MAVLINK_MSG_ID_ESC_STATUS
+                if name == "ESC_STATUS"
+                else getattr(mod, f"MAVLINK_MSG_ID_{name}", None)
+            )
             if mid is not None:
                 spec = self._spec(codec, mod, int(mid))
                 if spec is not None:
@@ -312,28 +340,43 @@ class FastDecoder:
             crc_extra, unpacker = cls.crc_extra, cls.unpacker
         # the codec decodes a packet of this id (1-byte payload: MAVLink 2 zero truncation)
         body = _V2_HEADER.pack(0xFD, 1, 0, 0, 0, 1, 1, mid & 0xFFFF, mid >> 16)[1:] + b"\x00"
-        probe = codec.decode(bytearray(b"\xfd" + body + struct.pack("<H", x25_crc(body, crc_extra))))
+        probe = codec.decode(
+            bytearray(b"\xfd" + body + struct.pack("<H", x25_crc(body, crc_extra)))
+        )
         if probe is None or probe.get_msgId() != mid:
             return None
         cls = type(probe)
-        if esc:     # px4._decode_esc_status: cls(index, time_usec, rpm, voltage, current)
-            fields = {"index": "int(t[13])", "time_usec": "int(t[0])",
-                      "rpm": "[int(t[1]), int(t[2]), int(t[3]), int(t[4])]",
-                      "voltage": "[float(t[5]), float(t[6]), float(t[7]), float(t[8])]",
-                      "current": "[float(t[9]), float(t[10]), float(t[11]), float(t[12])]"}
+        if esc:  # px4._decode_esc_status: cls(index, time_usec, rpm, voltage, current)
+            fields = {
+                "index": "int(t[13])",
+                "time_usec": "int(t[0])",
+                "rpm": "[int(t[1]), int(t[2]), int(t[3]), int(t[4])]",
+                "voltage": "[float(t[5]), float(t[6]), float(t[7]), float(t[8])]",
+                "current": "[float(t[9]), float(t[10]), float(t[11]), float(t[12])]",
+            }
             payload = "msgbuf[10:10 + mlen]"
-        else:       # pymavlink's decode: wire order -> field order, arrays as lists
+        else:  # pymavlink's decode: wire order -> field order, arrays as lists
             lengths, orders = list(cls.lengths), list(cls.orders)
             fmt = unpacker.format
             fields = {}
             for name, o in zip(cls.fieldnames, orders):
                 tip, n = (sum(lengths[:o]), lengths[o]) if sum(lengths) != len(lengths) else (o, 1)
-                fields[name] = f"t[{tip}]" if n == 1 else "[" + ", ".join(f"t[{tip + k}]" for k in range(n)) + "]"
-            if "s" in fmt:      # char[] fields (bytes values): left to pymavlink
+                fields[name] = (
+                    f"t[{tip}]"
+                    if n == 1
+                    else "[" + ", ".join(f"t[{tip + k}]" for k in range(n)) + "]"
+                )
+            if "s" in fmt:  # char[] fields (bytes values): left to pymavlink
                 return None
             payload = "msgbuf[6:-2]"
-        variable = {"_header": "h", "_msgbuf": "msgbuf", "_payload": payload, "_crc": "crc",
-                    "_signed": "False", **fields}
+        variable = {
+            "_header": "h",
+            "_msgbuf": "msgbuf",
+            "_payload": payload,
+            "_crc": "crc",
+            "_signed": "False",
+            **fields,
+        }
         consts = {}
         items = []
         for key, val in probe.__dict__.items():
@@ -346,23 +389,44 @@ class FastDecoder:
         if missing:
             return None
         hkeys = list(probe._header.__dict__)
-        hexpr = {"mlen": "mlen", "seq": "seq", "srcSystem": "sysid", "srcComponent": "compid",
-                 "msgId": str(mid), "incompat_flags": "0", "compat_flags": "compat"}
+        hexpr = {
+            "mlen": "mlen",
+            "seq": "seq",
+            "srcSystem": "sysid",
+            "srcComponent": "compid",
+            "msgId": str(mid),
+            "incompat_flags": "0",
+            "compat_flags": "compat",
+        }
         if set(hkeys) != set(hexpr):
             return None
-        src = ("def make(t, mlen, seq, sysid, compid, compat, msgbuf, crc):\n"
-               "    h = _new(_H)\n"
-               "    h.__dict__ = {" + ", ".join(f"{k!r}: {hexpr[k]}" for k in hkeys) + "}\n"
-               "    m = _new(_C)\n"
-               "    m.__dict__ = {" + ", ".join(items) + "}\n"
-               "    return m\n")
-        ns = {"_new": object.__new__, "_H": type(probe._header), "_C": cls,
-              "_strip": lambda b: b.rstrip(b"\x00"), **consts}
+        src = (
+            "def make(t, mlen, seq, sysid, compid, compat, msgbuf, crc):\n"
+            "    h = _new(_H)\n"
+            "    h.__dict__ = {" + ", ".join(f"{k!r}: {hexpr[k]}" for k in hkeys) + "}\n"
+            "    m = _new(_C)\n"
+            "    m.__dict__ = {" + ", ".join(items) + "}\n"
+            "    return m\n"
+        )
+        ns = {
+            "_new": object.__new__,
+            "_H": type(probe._header),
+            "_C": cls,
+            "_strip": lambda b: b.rstrip(b"\x00"),
+            **consts,
+        }
         exec(compile(src, f"<lpv_sysid.mavlink fast decode {cls.__name__}>", "exec"), ns)  # noqa: S102
-        return (_REV8[crc_extra:crc_extra + 1], unpacker.size, unpacker.unpack_from,
-                unpacker.unpack, ns["make"])
+        return (
+            _REV8[crc_extra : crc_extra + 1],
+            unpacker.size,
+            unpacker.unpack_from,
+            unpacker.unpack,
+            ns["make"],
+        )
 
-    def decode(self, data: bytes, out: list, counts: dict, last_seq: dict) -> tuple[int, int, int, list]:
+    def decode(
+        self, data: bytes, out: list, counts: dict, last_seq: dict
+    ) -> tuple[int, int, int, list]:
         """Decode packets of ``data`` from offset 0, appending the messages to ``out`` and
         counting them per id (``counts``) and source (``last_seq``: last sequence number).
         Returns (offset of the first byte not handled, messages, sequence numbers lost,
@@ -373,7 +437,7 @@ class FastDecoder:
         pos, n, got, lost = 0, len(data), 0, 0
         beats = []
         while pos + 12 <= n:
-            if data[pos] != 0xFD or data[pos + 2]:      # MAVLink 1, bad prefix, incompat flags
+            if data[pos] != 0xFD or data[pos + 2]:  # MAVLink 1, bad prefix, incompat flags
                 break
             mlen = data[pos + 1]
             end = pos + 12 + mlen
@@ -384,27 +448,35 @@ class FastDecoder:
             extra, csize, unpack_from, unpack, make = spec
             if rev is None:
                 rev = data.translate(_REV8)
-            c = crc_hqx(extra, crc_hqx(rev[pos + 1:pos + 10 + mlen], 0xFFFF))
+            c = crc_hqx(extra, crc_hqx(rev[pos + 1 : pos + 10 + mlen], 0xFFFF))
             crc = data[end - 2] | data[end - 1] << 8
             if crc != (_REV8[c & 0xFF] << 8) | _REV8[c >> 8]:
-                break                                    # pymavlink reports the bad CRC
+                break  # pymavlink reports the bad CRC
             try:
                 if mlen >= csize:
                     t = unpack_from(data, pos + 10)
                 else:
-                    t = unpack(data[pos + 10:pos + 10 + mlen] + bytes(csize - mlen))
+                    t = unpack(data[pos + 10 : pos + 10 + mlen] + bytes(csize - mlen))
             except struct.error:
                 break
             seq, sysid, compid = data[pos + 4], data[pos + 5], data[pos + 6]
-            m = make(t, mlen, seq, sysid, compid, data[pos + 3],
-                     bytearray(data) if pos == 0 and end == n else bytearray(data[pos:end]), crc)
+            m = make(
+                t,
+                mlen,
+                seq,
+                sysid,
+                compid,
+                data[pos + 3],
+                bytearray(data) if pos == 0 and end == n else bytearray(data[pos:end]),
+                crc,
+            )
             out.append(m)
             counts[mid] = counts.get(mid, 0) + 1
             key = (sysid, compid)
             last = last_seq.get(key)
             if last is not None:
                 gap = (seq - last - 1) % 256
-                if gap < 128:          # larger jumps are restarts, not losses
+                if gap < 128:  # larger jumps are restarts, not losses
                     lost += gap
             last_seq[key] = seq
             if mid == MSG_HEARTBEAT:
@@ -421,8 +493,9 @@ class MavlinkLink:
     (tests); by default ``mavutil.mavlink_connection`` is used.
     """
 
-    def __init__(self, config: LinkConfig,
-                 connection_factory: Callable[..., Any] | None = None) -> None:
+    def __init__(
+        self, config: LinkConfig, connection_factory: Callable[..., Any] | None = None
+    ) -> None:
         config.validate()
         self.config = config
         self.stats = LinkStats()
@@ -434,7 +507,7 @@ class MavlinkLink:
         self.codec: Any = None
         self.target_system = config.target_system
         self.target_component = config.target_component
-        self.last_heartbeat: Any = None          # last HEARTBEAT message of the target
+        self.last_heartbeat: Any = None  # last HEARTBEAT message of the target
         self.last_heartbeat_t: float | None = None
         self._up = False
         self._next_hb = 0.0
@@ -447,26 +520,33 @@ class MavlinkLink:
         self._stream_ids = [(self._msg_id(n), r) for n, r in config.streams]
         self._events: list[LinkEvent] = []
         self._fast: FastDecoder | None = None
-        self._no_fast: Any = None                # a codec FastDecoder could not be built for
+        self._no_fast: Any = None  # a codec FastDecoder could not be built for
 
     # ------------------------------------------------------------------ lifecycle
     def open(self, now: float = 0.0) -> None:
         """Open the transport (raises :class:`LpvSysidError` if the device cannot be opened)."""
         try:
-            self.conn = self._factory(self._device, self._baud, self.config.source_system,
-                                      self.config.source_component)
+            self.conn = self._factory(
+                self._device, self._baud, self.config.source_system, self.config.source_component
+            )
         except ImportError as exc:
-            raise LpvSysidError(f"cannot open MAVLink connection {self.config.url!r}: {exc} "
-                                "(serial links need pyserial, ROS package python3-serial)") from None
+            raise LpvSysidError(
+                f"cannot open MAVLink connection {self.config.url!r}: {exc} "
+                "(serial links need pyserial, ROS package python3-serial)"
+            ) from None
         except (OSError, ValueError) as exc:
-            raise LpvSysidError(f"cannot open MAVLink connection {self.config.url!r}: {exc}") from None
+            raise LpvSysidError(
+                f"cannot open MAVLink connection {self.config.url!r}: {exc}"
+            ) from None
         if self._device.startswith(("udpin:", "tcpin:")):
             warn_if_all_interfaces(f"MAVLink link {self.config.url!r}", self._device.split(":")[1])
-        self.codec = px4.make_codec(self.conn, self.config.source_system,
-                                    self.config.source_component, self.config.dialect)
+        self.codec = px4.make_codec(
+            self.conn, self.config.source_system, self.config.source_component, self.config.dialect
+        )
         if self._key is not None:
-            px4.setup_signing(self.codec, self._key, self.config.signing_link_id,
-                              self.config.allow_unsigned)
+            px4.setup_signing(
+                self.codec, self._key, self.config.signing_link_id, self.config.allow_unsigned
+            )
         # the connection object keeps its own (mavutil) parser; ours replaces it
         self.conn.mav = self.codec
         self.conn.WIRE_PROTOCOL_VERSION = "2.0"
@@ -491,8 +571,10 @@ class MavlinkLink:
         return self.conn is not None
 
     def link_up(self, now: float) -> bool:
-        return (self.last_heartbeat_t is not None
-                and now - self.last_heartbeat_t <= self.config.link_timeout)
+        return (
+            self.last_heartbeat_t is not None
+            and now - self.last_heartbeat_t <= self.config.link_timeout
+        )
 
     # ---------------------------------------------------------------------- I/O
     def poll(self, now: float, max_reads: int = 1000) -> list[Any]:
@@ -592,8 +674,12 @@ class MavlinkLink:
         signing configured (signatures, unsigned-message policy), a parser callback, CRC
         checks disabled in pymavlink, or a codec the decoder was not built for."""
         codec = self.codec
-        if codec is None or codec.signing.secret_key is not None or codec.callback is not None \
-                or getattr(self._mod, "MAVLINK_IGNORE_CRC", 0):
+        if (
+            codec is None
+            or codec.signing.secret_key is not None
+            or codec.callback is not None
+            or getattr(self._mod, "MAVLINK_IGNORE_CRC", 0)
+        ):
             return None
         fd = self._fast
         if fd is None or fd.codec is not codec:
@@ -641,16 +727,22 @@ class MavlinkLink:
         if self._up and not up:
             self._up = False
             self.stats.link_losses += 1
-            self._events.append(LinkEvent(now, "link_lost",
-                                          f"no HEARTBEAT for {now - self.last_heartbeat_t:.2f} s"))
+            self._events.append(
+                LinkEvent(
+                    now, "link_lost", f"no HEARTBEAT for {now - self.last_heartbeat_t:.2f} s"
+                )
+            )
         if self.conn is None:
             if now - self._last_reopen >= self.config.reconnect_period:
                 self._reopen(now)
             return
         if now >= self._next_hb:
             self._next_hb = now + self.config.heartbeat_period
-            self.send(self.codec.heartbeat_encode(self.config.mav_type, MAV_AUTOPILOT_INVALID,
-                                                  0, 0, MAV_STATE_ACTIVE))
+            self.send(
+                self.codec.heartbeat_encode(
+                    self.config.mav_type, MAV_AUTOPILOT_INVALID, 0, 0, MAV_STATE_ACTIVE
+                )
+            )
         if up and now >= self._next_stream_req:
             self._next_stream_req = now + self.config.stream_request_period
             self.request_streams(only_missing=self._requested_once)
@@ -685,8 +777,11 @@ class MavlinkLink:
 
     def command_long(self, command: int, *params: float, confirmation: int = 0) -> None:
         p = list(params) + [0.0] * (7 - len(params))
-        self.send(self.codec.command_long_encode(self.target_system or 1, self.target_component,
-                                                 command, confirmation, *p[:7]))
+        self.send(
+            self.codec.command_long_encode(
+                self.target_system or 1, self.target_component, command, confirmation, *p[:7]
+            )
+        )
 
     # ---------------------------------------------------------------- internals
     def _msg_id(self, name: str) -> int:
@@ -695,7 +790,10 @@ class MavlinkLink:
         return int(getattr(self._mod, f"MAVLINK_MSG_ID_{name}"))
 
     def _on_heartbeat(self, m: Any, now: float) -> None:
-        if m.autopilot == MAV_AUTOPILOT_INVALID or m.type in (MAV_TYPE_GCS, MAV_TYPE_ONBOARD_CONTROLLER):
+        if m.autopilot == MAV_AUTOPILOT_INVALID or m.type in (
+            MAV_TYPE_GCS,
+            MAV_TYPE_ONBOARD_CONTROLLER,
+        ):
             return
         src = m.get_srcSystem()
         if self.target_system == 0:
@@ -719,7 +817,7 @@ class MavlinkLink:
         last = self._last_seq.get(key)
         if last is not None:
             gap = (seq - last - 1) % 256
-            if gap < 128:          # larger jumps are restarts, not losses
+            if gap < 128:  # larger jumps are restarts, not losses
                 self.stats.seq_lost += gap
         self._last_seq[key] = seq
 
@@ -768,9 +866,15 @@ def _mavutil_connection(device: str, baud: int, source_system: int, source_compo
     from pymavlink import mavutil  # imported lazily: it loads a dialect on import
 
     # retries=0: one connection attempt (no blocking sleeps); MavlinkLink.step() retries
-    return mavutil.mavlink_connection(device, baud=baud, source_system=source_system,
-                                      source_component=source_component, autoreconnect=False,
-                                      robust_parsing=True, retries=0)
+    return mavutil.mavlink_connection(
+        device,
+        baud=baud,
+        source_system=source_system,
+        source_component=source_component,
+        autoreconnect=False,
+        robust_parsing=True,
+        retries=0,
+    )
 
 
 def free_udp_port(host: str = "127.0.0.1") -> int:
@@ -785,5 +889,14 @@ def free_udp_port(host: str = "127.0.0.1") -> int:
         s.close()
 
 
-__all__ = ["LinkConfig", "LinkStats", "LinkEvent", "MavlinkLink", "parse_url",
-           "load_signing_key", "free_udp_port", "warn_if_all_interfaces", "DEFAULT_STREAMS"]
+__all__ = [
+    "LinkConfig",
+    "LinkStats",
+    "LinkEvent",
+    "MavlinkLink",
+    "parse_url",
+    "load_signing_key",
+    "free_udp_port",
+    "warn_if_all_interfaces",
+    "DEFAULT_STREAMS",
+]

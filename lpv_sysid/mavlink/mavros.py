@@ -73,16 +73,18 @@ TOPICS = {
 DIAGNOSTICS_TOPIC = "/diagnostics"
 HEARTBEAT_STATUS_SUFFIX = ": Heartbeat"
 OFFBOARD_MODE = "OFFBOARD"
-MODE_CONTROL = ("none: mavros_msgs is not a dependency (switch OFFBOARD / arm / hand back "
-                "with RC, GCS or `ros2 service call /mavros/set_mode mavros_msgs/srv/SetMode`)")
+MODE_CONTROL = (
+    "none: mavros_msgs is not a dependency (switch OFFBOARD / arm / hand back "
+    "with RC, GCS or `ros2 service call /mavros/set_mode mavros_msgs/srv/SetMode`)"
+)
 
 
 class MavrosState(enum.Enum):
     IDLE = "IDLE"
-    PRESTREAM = "PRESTREAM"      # zero-velocity stream, waiting for the first reference
-    STREAMING = "STREAMING"      # forwarding the body reference rotated to local ENU
-    DONE = "DONE"                # stream stopped on request (abort / shutdown)
-    FAILED = "FAILED"            # stream stopped by a fault (stale input / attitude, pilot)
+    PRESTREAM = "PRESTREAM"  # zero-velocity stream, waiting for the first reference
+    STREAMING = "STREAMING"  # forwarding the body reference rotated to local ENU
+    DONE = "DONE"  # stream stopped on request (abort / shutdown)
+    FAILED = "FAILED"  # stream stopped by a fault (stale input / attitude, pilot)
 
 
 STREAMING_STATES = (MavrosState.PRESTREAM, MavrosState.STREAMING)
@@ -93,15 +95,15 @@ class MavrosConfig:
     """MAVROS-mode parameters (node parameters ``mavros.*`` plus the shared ones)."""
 
     namespace: str = "/mavros"
-    odom_frame_id: str = "map"           # MAVROS local_position ``frame_id`` (default map)
-    base_frame_id: str = "base_link"     # MAVROS ``tf.child_frame_id`` / imu ``frame_id``
-    setpoint_rate_hz: float = 20.0       # PX4 needs > 2 Hz
-    input_timeout: float = 0.5           # no velocity_reference for longer -> stop
-    prestream_timeout: float = 30.0      # zero-velocity stream without any reference -> stop
-    telemetry_max_age: float = 0.5       # odometry older than this cannot rotate the reference
+    odom_frame_id: str = "map"  # MAVROS local_position ``frame_id`` (default map)
+    base_frame_id: str = "base_link"  # MAVROS ``tf.child_frame_id`` / imu ``frame_id``
+    setpoint_rate_hz: float = 20.0  # PX4 needs > 2 Hz
+    input_timeout: float = 0.5  # no velocity_reference for longer -> stop
+    prestream_timeout: float = 30.0  # zero-velocity stream without any reference -> stop
+    telemetry_max_age: float = 0.5  # odometry older than this cannot rotate the reference
     send_on_command: bool = True
     auto_start: bool = False
-    use_diagnostics: bool = True         # observe the PX4 mode on /diagnostics (read-only)
+    use_diagnostics: bool = True  # observe the PX4 mode on /diagnostics (read-only)
     command: str = "velocity"
 
     @classmethod
@@ -116,6 +118,7 @@ class MavrosConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (lo <= v <= hi):
                 raise ConfigError(f"mavros.{name} must be a number in [{lo}, {hi}], got {v!r}")
+
         num("setpoint_rate_hz", 2.0001, 1000.0)
         num("input_timeout", 0.01, 60.0)
         num("prestream_timeout", 1.0001, 3600.0)
@@ -125,14 +128,18 @@ class MavrosConfig:
                 raise ConfigError(f"mavros.{name} must be a boolean, got {getattr(self, name)!r}")
         ns = self.namespace
         if not isinstance(ns, str) or not ns.startswith("/") or ns.endswith("/") or "//" in ns:
-            raise ConfigError(f"mavros.namespace must be an absolute name like '/mavros', got {ns!r}")
+            raise ConfigError(
+                f"mavros.namespace must be an absolute name like '/mavros', got {ns!r}"
+            )
         for name in ("odom_frame_id", "base_frame_id"):
             if not isinstance(getattr(self, name), str) or not getattr(self, name):
                 raise ConfigError(f"mavros.{name} must be a non-empty string")
         if self.command != "velocity":
-            raise ConfigError(f"command {self.command!r} is not available with transport mavros: "
-                              "MAVROS's attitude/actuator setpoints need mavros_msgs; use "
-                              "command velocity or transport mavlink")
+            raise ConfigError(
+                f"command {self.command!r} is not available with transport mavros: "
+                "MAVROS's attitude/actuator setpoints need mavros_msgs; use "
+                "command velocity or transport mavlink"
+            )
 
     def topic(self, key: str) -> str:
         """Absolute MAVROS topic name of ``odom`` / ``imu`` / ``cmd_vel``."""
@@ -207,8 +214,8 @@ class MavrosCore:
         self._cmd: tuple[np.ndarray, float] | None = None
         self._t_cmd = -math.inf
         self._last_ref_stamp = -math.inf
-        self._att: np.ndarray | None = None     # latest Euler [phi, theta, psi] NED/FRD
-        self._t_att = -math.inf                 # its receive time
+        self._att: np.ndarray | None = None  # latest Euler [phi, theta, psi] NED/FRD
+        self._t_att = -math.inf  # its receive time
         self._last_odom_stamp = -1
         self._last_imu_stamp = -1
         self._t_imu = -math.inf
@@ -246,9 +253,13 @@ class MavrosCore:
             if mode == OFFBOARD_MODE:
                 self._saw_offboard = True
             elif self._saw_offboard:
-                self._pending += self._stop(now, MavrosState.FAILED,
-                                            f"vehicle left OFFBOARD (now {mode}); setpoint stream "
-                                            "stopped, control stays with PX4/pilot", "warn")
+                self._pending += self._stop(
+                    now,
+                    MavrosState.FAILED,
+                    f"vehicle left OFFBOARD (now {mode}); setpoint stream "
+                    "stopped, control stays with PX4/pilot",
+                    "warn",
+                )
 
     def reject(self, now: float, reason: str) -> None:
         """An input the shell could not parse (named by ``reason``); counted and reported."""
@@ -257,8 +268,9 @@ class MavrosCore:
         self._pending.append(StatusEvent(now, self.state.value, self.state.value, reason, "error"))
 
     # ---------------------------------------------------------------- command in
-    def on_velocity_reference(self, now: float, v_frd: Any, yaw_rate: float = 0.0,
-                              stamp: float | None = None) -> MavrosOutput:
+    def on_velocity_reference(
+        self, now: float, v_frd: Any, yaw_rate: float = 0.0, stamp: float | None = None
+    ) -> MavrosOutput:
         """Body velocity reference ``v_d`` FRD [m/s] and yaw-rate reference ``r_d`` [rad/s]."""
         out = MavrosOutput()
         try:
@@ -268,13 +280,19 @@ class MavrosCore:
             self.reject(now, f"velocity reference rejected: not numeric ({v_frd!r}, {yaw_rate!r})")
             return self._flush(out)
         if v.shape != (3,) or not np.isfinite(v).all() or not math.isfinite(r):
-            self.reject(now, f"velocity reference rejected: needs 3 finite values and a finite yaw "
-                             f"rate, got {v.tolist()!r}, {yaw_rate!r}")
+            self.reject(
+                now,
+                f"velocity reference rejected: needs 3 finite values and a finite yaw "
+                f"rate, got {v.tolist()!r}, {yaw_rate!r}",
+            )
             return self._flush(out)
         if stamp is not None:
             if stamp < self._last_ref_stamp:
-                self.reject(now, f"out-of-order velocity reference (stamp {stamp:.6f} < "
-                                 f"{self._last_ref_stamp:.6f})")
+                self.reject(
+                    now,
+                    f"out-of-order velocity reference (stamp {stamp:.6f} < "
+                    f"{self._last_ref_stamp:.6f})",
+                )
                 return self._flush(out)
             self._last_ref_stamp = stamp
         self._cmd, self._t_cmd = (v, r), now
@@ -294,10 +312,18 @@ class MavrosCore:
         self._t_start, self._next_sp, self._saw_offboard = now, now, False
         fresh = self._cmd is not None and now - self._t_cmd <= self.config.input_timeout
         if fresh:
-            return self._go(now, MavrosState.STREAMING, "start requested (reference is live); "
-                            "switch to OFFBOARD from RC/GCS: this node has no mode control")
-        return self._go(now, MavrosState.PRESTREAM, "start requested: streaming zero velocity "
-                        "until the first reference; OFFBOARD/arming are the operator's")
+            return self._go(
+                now,
+                MavrosState.STREAMING,
+                "start requested (reference is live); "
+                "switch to OFFBOARD from RC/GCS: this node has no mode control",
+            )
+        return self._go(
+            now,
+            MavrosState.PRESTREAM,
+            "start requested: streaming zero velocity "
+            "until the first reference; OFFBOARD/arming are the operator's",
+        )
 
     def abort(self, now: float, reason: str = "abort requested") -> list[StatusEvent]:
         if self.state in STREAMING_STATES:
@@ -321,18 +347,34 @@ class MavrosCore:
         cfg = self.config
         st = self.state
         if st == MavrosState.PRESTREAM and now - self._t_start > cfg.prestream_timeout:
-            out.events += self._stop(now, MavrosState.FAILED,
-                                     f"no velocity_reference within prestream_timeout "
-                                     f"{cfg.prestream_timeout} s; stream stopped", "warn")
+            out.events += self._stop(
+                now,
+                MavrosState.FAILED,
+                f"no velocity_reference within prestream_timeout "
+                f"{cfg.prestream_timeout} s; stream stopped",
+                "warn",
+            )
         elif st == MavrosState.STREAMING and now - self._t_cmd > cfg.input_timeout:
-            out.events += self._stop(now, MavrosState.FAILED, self._stopped_text(
-                f"stale input: no velocity_reference for {now - self._t_cmd:.3f} s "
-                f"(> {cfg.input_timeout} s)"), "warn")
+            out.events += self._stop(
+                now,
+                MavrosState.FAILED,
+                self._stopped_text(
+                    f"stale input: no velocity_reference for {now - self._t_cmd:.3f} s "
+                    f"(> {cfg.input_timeout} s)"
+                ),
+                "warn",
+            )
         elif st == MavrosState.STREAMING and now - self._t_att > cfg.telemetry_max_age:
             age = now - self._t_att
-            out.events += self._stop(now, MavrosState.FAILED, self._stopped_text(
-                f"no fresh {cfg.topic('odom')} for {age:.3f} s (> {cfg.telemetry_max_age} s): "
-                "the body reference cannot be rotated to local ENU"), "error")
+            out.events += self._stop(
+                now,
+                MavrosState.FAILED,
+                self._stopped_text(
+                    f"no fresh {cfg.topic('odom')} for {age:.3f} s (> {cfg.telemetry_max_age} s): "
+                    "the body reference cannot be rotated to local ENU"
+                ),
+                "error",
+            )
         elif st in STREAMING_STATES and now >= self._next_sp:
             self._emit(now, out)
         return self._flush(out)
@@ -341,6 +383,7 @@ class MavrosCore:
     def status(self, now: float) -> dict[str, str]:
         def age(t: float) -> str:
             return f"{now - t:.3f}" if math.isfinite(t) else "inf"
+
         return {
             "transport": "mavros",
             "state": self.state.value,
@@ -348,7 +391,9 @@ class MavrosCore:
             "reason": self.reason,
             "mode_control": MODE_CONTROL,
             "vehicle_mode": self.vehicle_mode or "unknown",
-            "vehicle_mode_source": "/diagnostics (read-only)" if self.config.use_diagnostics else "none",
+            "vehicle_mode_source": "/diagnostics (read-only)"
+            if self.config.use_diagnostics
+            else "none",
             "armed": "unknown (mavros_msgs/State not used)",
             "streaming": str(self.state in STREAMING_STATES),
             "setpoint_topic": self.config.topic("cmd_vel"),
@@ -364,28 +409,34 @@ class MavrosCore:
     def _emit(self, now: float, out: MavrosOutput) -> None:
         if self.state == MavrosState.PRESTREAM or self._cmd is None:
             v, r = np.zeros(3), 0.0
-            v_enu, yr = np.zeros(3), 0.0           # zero is zero in every frame
+            v_enu, yr = np.zeros(3), 0.0  # zero is zero in every frame
         else:
             v, r = self._cmd
             if self._att is None or now - self._t_att > self.config.telemetry_max_age:
-                return                              # step() stops the stream on its next call
+                return  # step() stops the stream on its next call
             v_enu, yr = body_reference_to_local_enu(v, r, self._att)
         out.setpoints.append(CmdVel(now, v_enu, yr, v.copy(), r))
         self.setpoints_sent += 1
         period = 1.0 / self.config.setpoint_rate_hz
-        self._next_sp = self._next_sp + period if 0.0 <= now - self._next_sp < period else now + period
+        self._next_sp = (
+            self._next_sp + period if 0.0 <= now - self._next_sp < period else now + period
+        )
 
     def _stopped_text(self, reason: str) -> str:
-        return (f"{reason}; setpoint stream stopped (no mode command: mavros_msgs not used) - "
-                "if the vehicle is in OFFBOARD, PX4's offboard-loss failsafe COM_OBL_RC_ACT "
-                "takes over after COM_OF_LOSS_T")
+        return (
+            f"{reason}; setpoint stream stopped (no mode command: mavros_msgs not used) - "
+            "if the vehicle is in OFFBOARD, PX4's offboard-loss failsafe COM_OBL_RC_ACT "
+            "takes over after COM_OF_LOSS_T"
+        )
 
-    def _go(self, now: float, new: MavrosState, reason: str, level: str = "info") -> list[StatusEvent]:
+    def _go(
+        self, now: float, new: MavrosState, reason: str, level: str = "info"
+    ) -> list[StatusEvent]:
         prev, self.state, self.reason, self._t_state = self.state, new, reason, now
         return [StatusEvent(now, prev.value, new.value, reason, level)]
 
     def _stop(self, now: float, new: MavrosState, reason: str, level: str) -> list[StatusEvent]:
-        self._cmd, self._t_cmd = None, -math.inf     # a restart needs a new reference
+        self._cmd, self._t_cmd = None, -math.inf  # a restart needs a new reference
         return self._go(now, new, reason, level)
 
     def _flush(self, out: MavrosOutput) -> MavrosOutput:
@@ -394,6 +445,16 @@ class MavrosCore:
         return out
 
 
-__all__ = ["MavrosConfig", "MavrosCore", "MavrosState", "CmdVel", "MavrosOutput", "TOPICS",
-           "DIAGNOSTICS_TOPIC", "MODE_CONTROL", "body_reference_to_local_enu", "cmd_vel_msg",
-           "vehicle_mode_from_statuses"]
+__all__ = [
+    "MavrosConfig",
+    "MavrosCore",
+    "MavrosState",
+    "CmdVel",
+    "MavrosOutput",
+    "TOPICS",
+    "DIAGNOSTICS_TOPIC",
+    "MODE_CONTROL",
+    "body_reference_to_local_enu",
+    "cmd_vel_msg",
+    "vehicle_mode_from_statuses",
+]

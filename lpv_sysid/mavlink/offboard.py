@@ -116,12 +116,12 @@ class OffboardConfig:
     arm: bool = False
     handback_chain: tuple[str, ...] = ("HOLD", "LAND")
     handback_mode: str | None = None
-    input_timeout: float = 0.5            # no ROS command for longer -> hand back
-    ack_timeout: float = 0.5              # per attempt, for the first COMMAND_ACK
-    ack_settle_s: float = 0.2             # quiet time after the last ACK before a step counts
+    input_timeout: float = 0.5  # no ROS command for longer -> hand back
+    ack_timeout: float = 0.5  # per attempt, for the first COMMAND_ACK
+    ack_settle_s: float = 0.2  # quiet time after the last ACK before a step counts
     max_retries: int = 3
-    mode_confirm_timeout: float = 2.0     # HEARTBEAT must show the mode/arming after ACCEPTED
-    send_on_command: bool = True          # forward a new command at once (latency)
+    mode_confirm_timeout: float = 2.0  # HEARTBEAT must show the mode/arming after ACCEPTED
+    send_on_command: bool = True  # forward a new command at once (latency)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "OffboardConfig":
@@ -130,7 +130,9 @@ class OffboardConfig:
         chain = kw.get("handback_chain")
         if chain is not None:
             if isinstance(chain, (str, bytes)) or not isinstance(chain, Sequence):
-                raise ConfigError(f"offboard.handback_chain must be a list of PX4 mode names, got {chain!r}")
+                raise ConfigError(
+                    f"offboard.handback_chain must be a list of PX4 mode names, got {chain!r}"
+                )
             kw["handback_chain"] = tuple(chain)
         cfg = cls(**kw)
         cfg.validate()
@@ -139,34 +141,56 @@ class OffboardConfig:
     def validate(self) -> None:
         def num(name: str, lo: float, hi: float = math.inf) -> None:
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (lo <= v <= hi) or v != v:
+            if (
+                isinstance(v, bool)
+                or not isinstance(v, (int, float))
+                or not (lo <= v <= hi)
+                or v != v
+            ):
                 raise ConfigError(f"offboard.{name} must be a number in [{lo}, {hi}], got {v!r}")
-        num("setpoint_rate_hz", 2.0001, 1000.0)   # PX4 needs > 2 Hz
-        num("prestream_time", 1.0001, 60.0)       # PX4 needs > 1 s
+
+        num("setpoint_rate_hz", 2.0001, 1000.0)  # PX4 needs > 2 Hz
+        num("prestream_time", 1.0001, 60.0)  # PX4 needs > 1 s
         num("input_timeout", 0.01, 60.0)
         num("ack_timeout", 0.01, 60.0)
         num("ack_settle_s", 0.0, 10.0)
         num("mode_confirm_timeout", 0.01, 60.0)
         if self.ack_settle_s >= self.mode_confirm_timeout:
-            raise ConfigError(f"offboard.ack_settle_s ({self.ack_settle_s}) must be below "
-                              f"offboard.mode_confirm_timeout ({self.mode_confirm_timeout})")
-        if not isinstance(self.max_retries, int) or isinstance(self.max_retries, bool) or not 0 <= self.max_retries <= 100:
-            raise ConfigError(f"offboard.max_retries must be an integer 0..100, got {self.max_retries!r}")
+            raise ConfigError(
+                f"offboard.ack_settle_s ({self.ack_settle_s}) must be below "
+                f"offboard.mode_confirm_timeout ({self.mode_confirm_timeout})"
+            )
+        if (
+            not isinstance(self.max_retries, int)
+            or isinstance(self.max_retries, bool)
+            or not 0 <= self.max_retries <= 100
+        ):
+            raise ConfigError(
+                f"offboard.max_retries must be an integer 0..100, got {self.max_retries!r}"
+            )
         if not isinstance(self.arm, bool) or not isinstance(self.send_on_command, bool):
             raise ConfigError("offboard.arm and offboard.send_on_command must be booleans")
         chain = self.handback_chain
         if isinstance(chain, (str, bytes)) or not isinstance(chain, Sequence) or not chain:
-            raise ConfigError(f"offboard.handback_chain must be a non-empty list of mode names, got {chain!r}")
+            raise ConfigError(
+                f"offboard.handback_chain must be a non-empty list of mode names, got {chain!r}"
+            )
         for name in chain:
             if not isinstance(name, str) or name.upper() not in px4.HANDBACK_MODES:
-                raise ConfigError(f"offboard.handback_chain: {name!r} is not a hand-back mode; use "
-                                  f"{sorted(px4.HANDBACK_MODES)}")
+                raise ConfigError(
+                    f"offboard.handback_chain: {name!r} is not a hand-back mode; use "
+                    f"{sorted(px4.HANDBACK_MODES)}"
+                )
         if len({n.upper() for n in chain}) != len(chain):
             raise ConfigError(f"offboard.handback_chain lists a mode twice: {list(chain)}")
-        if self.handback_mode is not None and (not isinstance(self.handback_mode, str)
-                                               or self.handback_mode.upper() not in px4.HANDBACK_MODES):
-            raise ConfigError(f"offboard.handback_mode must be one of {sorted(px4.HANDBACK_MODES)}, "
-                              f"got {self.handback_mode!r}")
+        if self.handback_mode is not None and (
+            not isinstance(self.handback_mode, str)
+            or self.handback_mode.upper() not in px4.HANDBACK_MODES
+        ):
+            raise ConfigError(
+                f"offboard.handback_mode must be one of {sorted(px4.HANDBACK_MODES)}, "
+                f"got {self.handback_mode!r}"
+            )
 
     @property
     def chain(self) -> tuple[px4.Px4Mode, ...]:
@@ -201,7 +225,7 @@ class StatusEvent:
     previous: str
     state: str
     reason: str
-    level: str = "info"       # info | warn | error
+    level: str = "info"  # info | warn | error
 
 
 @dataclass
@@ -210,10 +234,10 @@ class _Pending:
 
     command: int
     params: tuple[float, ...]
-    what: str                        # "OFFBOARD", "arm", "HOLD", ...
-    t_first: float                   # first attempt sent
-    t_sent: float                    # current attempt sent
-    already: bool = False            # the vehicle showed the wanted state before the command
+    what: str  # "OFFBOARD", "arm", "HOLD", ...
+    t_first: float  # first attempt sent
+    t_sent: float  # current attempt sent
+    already: bool = False  # the vehicle showed the wanted state before the command
     attempts: int = 1
     acks: list[tuple[float, int]] = field(default_factory=list)
     t_last_ack: float = -math.inf
@@ -297,7 +321,7 @@ class OffboardMachine:
         """Every COMMAND_ACK of the pending command counts (PX4 sends two, see module doc)."""
         p = self._pending
         if p is None or p.command != command:
-            return []                     # unrelated, or for a step already decided
+            return []  # unrelated, or for a step already decided
         p.acks.append((now, int(result)))
         p.t_last_ack = now
         self._last_acks = ",".join(f"{px4.result_name(r)}@{t:.3f}" for t, r in p.acks[-6:])
@@ -306,7 +330,7 @@ class OffboardMachine:
                 p.t_accepted = now
             return self.step(now)
         if result == MAV_RESULT_IN_PROGRESS:
-            p.t_sent = now                # keep waiting
+            p.t_sent = now  # keep waiting
             return []
         p.rejected = int(result)
         how = "accepted, then rejected" if p.t_accepted is not None else "rejected"
@@ -320,8 +344,12 @@ class OffboardMachine:
     def on_link(self, now: float, up: bool) -> list[Any]:
         was, self.link_up = self.link_up, up
         if was and not up and self.state in STREAMING:
-            return self._handback(now, "link lost (no HEARTBEAT); PX4 failsafe COM_OBL_RC_ACT "
-                                       "expected after COM_OF_LOSS_T", fault=True)
+            return self._handback(
+                now,
+                "link lost (no HEARTBEAT); PX4 failsafe COM_OBL_RC_ACT "
+                "expected after COM_OF_LOSS_T",
+                fault=True,
+            )
         return []
 
     def abort(self, now: float, reason: str = "abort requested") -> list[Any]:
@@ -338,7 +366,9 @@ class OffboardMachine:
         else:
             m = px4.HANDBACK_MODES.get(str(mode).upper())
             if m is None:
-                raise ConfigError(f"finish mode {mode!r} is not a hand-back mode; use {sorted(px4.HANDBACK_MODES)}")
+                raise ConfigError(
+                    f"finish mode {mode!r} is not a hand-back mode; use {sorted(px4.HANDBACK_MODES)}"
+                )
         reason = f"finish requested: {m.name}"
         if self.state in STREAMING:
             return self._handback(now, reason, fault=False, first=m, force=True)
@@ -346,8 +376,11 @@ class OffboardMachine:
             self._chain = [x for x in self.config.chain if x != m]
             self._pending = None
             self._handback_reason = reason
-            return ([StatusEvent(now, self.state.value, self.state.value, f"hand-back re-targeted: {reason}")]
-                    + self._request_next(now, first=m))
+            return [
+                StatusEvent(
+                    now, self.state.value, self.state.value, f"hand-back re-targeted: {reason}"
+                )
+            ] + self._request_next(now, first=m)
         self._fault = False
         self.disarmed_after_run = False
         return self._handback(now, reason, fault=False, first=m, force=True)
@@ -363,27 +396,51 @@ class OffboardMachine:
         fresh = now - self._t_cmd <= cfg.input_timeout
         if st in STREAMING:
             if st in (State.SWITCHING, State.ARMING) and not fresh and self.neutral is None:
-                return self._handback(now, f"stale input during {st.value}: no command for "
-                                           f"{now - self._t_cmd:.3f} s and no neutral setpoint", fault=True)
+                return self._handback(
+                    now,
+                    f"stale input during {st.value}: no command for "
+                    f"{now - self._t_cmd:.3f} s and no neutral setpoint",
+                    fault=True,
+                )
             if st == State.OFFBOARD_ACTIVE:
                 if not fresh:
-                    return self._handback(now, f"stale input: no command for {now - self._t_cmd:.3f} s "
-                                               f"(> {cfg.input_timeout} s)", fault=True)
+                    return self._handback(
+                        now,
+                        f"stale input: no command for {now - self._t_cmd:.3f} s "
+                        f"(> {cfg.input_timeout} s)",
+                        fault=True,
+                    )
                 if self.vehicle_mode is not None and self.vehicle_mode != px4.OFFBOARD:
-                    return self._stop(now, State.FAILED, f"vehicle left OFFBOARD (now {self.vehicle_mode.name}); "
-                                                         "control stays with PX4/pilot", "warn")
+                    return self._stop(
+                        now,
+                        State.FAILED,
+                        f"vehicle left OFFBOARD (now {self.vehicle_mode.name}); "
+                        "control stays with PX4/pilot",
+                        "warn",
+                    )
                 if self.armed:
                     self._armed_active = True
                 elif cfg.arm or self._armed_active:
-                    return self._handback(now, "vehicle disarmed during OFFBOARD (landed or auto-disarm); "
-                                               "handing back so PX4 does not keep reporting OFFBOARD", fault=True)
+                    return self._handback(
+                        now,
+                        "vehicle disarmed during OFFBOARD (landed or auto-disarm); "
+                        "handing back so PX4 does not keep reporting OFFBOARD",
+                        fault=True,
+                    )
         if st in STREAMING or st == State.HANDBACK:
             out += self._stream(now, fresh)
         if st == State.PRESTREAM:
             if now - self._t_stream0 > cfg.prestream_time:
-                out += self._go(now, State.SWITCHING, f"pre-streamed {now - self._t_stream0:.2f} s")
-                out += self._send(now, MAV_CMD_DO_SET_MODE, _set_mode_params(px4.OFFBOARD), "OFFBOARD",
-                                  self.vehicle_mode == px4.OFFBOARD)
+                out += self._go(
+                    now, State.SWITCHING, f"pre-streamed {now - self._t_stream0:.2f} s"
+                )
+                out += self._send(
+                    now,
+                    MAV_CMD_DO_SET_MODE,
+                    _set_mode_params(px4.OFFBOARD),
+                    "OFFBOARD",
+                    self.vehicle_mode == px4.OFFBOARD,
+                )
         elif st == State.SWITCHING:
             if self._confirmed(now, mode=px4.OFFBOARD):
                 self._pending = None
@@ -407,11 +464,22 @@ class OffboardMachine:
             else:
                 out += self._check_pending(now)
         elif st in (State.DONE, State.FAILED):
-            if (self._was_armed and not self.armed and not self.disarmed_after_run
-                    and self._t_hb > self._t_state and self.vehicle_mode is not None):
+            if (
+                self._was_armed
+                and not self.armed
+                and not self.disarmed_after_run
+                and self._t_hb > self._t_state
+                and self.vehicle_mode is not None
+            ):
                 self.disarmed_after_run = True
-                out.append(StatusEvent(now, st.value, st.value,
-                                       f"vehicle disarmed in {self.vehicle_mode.name} (landed or auto-disarm)"))
+                out.append(
+                    StatusEvent(
+                        now,
+                        st.value,
+                        st.value,
+                        f"vehicle disarmed in {self.vehicle_mode.name} (landed or auto-disarm)",
+                    )
+                )
         return out
 
     # ------------------------------------------------------------- helpers
@@ -444,12 +512,14 @@ class OffboardMachine:
             if self._t_stream0 == math.inf:
                 self._t_stream0 = now
         else:
-            self._t_stream0 = math.inf     # nothing to stream: pre-stream restarts
+            self._t_stream0 = math.inf  # nothing to stream: pre-stream restarts
         period = 1.0 / self.config.setpoint_rate_hz
         self._next_sp = self._next_sp + period if now - self._next_sp < period else now + period
         return out
 
-    def _confirmed(self, now: float, mode: px4.Px4Mode | None = None, armed: bool | None = None) -> bool:
+    def _confirmed(
+        self, now: float, mode: px4.Px4Mode | None = None, armed: bool | None = None
+    ) -> bool:
         p = self._pending
         if p is None or p.rejected is not None or self._t_hb <= p.t_first:
             return False
@@ -458,15 +528,16 @@ class OffboardMachine:
         if armed is not None and self.armed != armed:
             return False
         if p.already and p.t_accepted is None:
-            return False                  # the HEARTBEAT showed this before the command
+            return False  # the HEARTBEAT showed this before the command
         return now - max(p.t_sent, p.t_last_ack) >= self.config.ack_settle_s
 
     def _go(self, now: float, new: State, reason: str, level: str = "info") -> list[Any]:
         prev, self.state, self.reason, self._t_state = self.state, new, reason, now
         return [StatusEvent(now, prev.value, new.value, reason, level)]
 
-    def _send(self, now: float, command: int, params: tuple[float, ...], what: str,
-              already: bool) -> list[Any]:
+    def _send(
+        self, now: float, command: int, params: tuple[float, ...], what: str, already: bool
+    ) -> list[Any]:
         self._pending = _Pending(command, params, what, now, now, already)
         self._last_acks = ""
         return [SendCommand(command, params, 1)]
@@ -478,15 +549,19 @@ class OffboardMachine:
         cfg = self.config
         if p.t_accepted is not None:
             if now - p.t_accepted > cfg.mode_confirm_timeout:
-                reason = (f"{p.what} (command {p.command}) accepted but the HEARTBEAT did not show it "
-                          f"within {cfg.mode_confirm_timeout} s")
+                reason = (
+                    f"{p.what} (command {p.command}) accepted but the HEARTBEAT did not show it "
+                    f"within {cfg.mode_confirm_timeout} s"
+                )
                 if self.state == State.HANDBACK:
                     return self._next_handback(now, reason)
                 return self._retry_or_fail(now, reason)
             return []
         if now - p.t_sent > cfg.ack_timeout:
-            return self._retry_or_fail(now, f"no COMMAND_ACK for command {p.command} "
-                                            f"within {cfg.ack_timeout} s ({p.what})")
+            return self._retry_or_fail(
+                now,
+                f"no COMMAND_ACK for command {p.command} within {cfg.ack_timeout} s ({p.what})",
+            )
         return []
 
     def _retry_or_fail(self, now: float, reason: str) -> list[Any]:
@@ -494,9 +569,16 @@ class OffboardMachine:
         assert p is not None
         if p.attempts <= self.config.max_retries:
             p.resend(now)
-            return [StatusEvent(now, self.state.value, self.state.value,
-                                f"{reason}; retry {p.attempts - 1}/{self.config.max_retries}", "warn"),
-                    SendCommand(p.command, p.params, p.attempts)]
+            return [
+                StatusEvent(
+                    now,
+                    self.state.value,
+                    self.state.value,
+                    f"{reason}; retry {p.attempts - 1}/{self.config.max_retries}",
+                    "warn",
+                ),
+                SendCommand(p.command, p.params, p.attempts),
+            ]
         return self._fail_step(now, reason)
 
     def _fail_step(self, now: float, reason: str) -> list[Any]:
@@ -509,12 +591,19 @@ class OffboardMachine:
             return self._stop(now, State.FAILED, f"switch to OFFBOARD failed: {reason}", "error")
         return self._handback(now, f"{self.state.value} failed: {reason}", fault=True)
 
-    def _handback(self, now: float, reason: str, fault: bool, first: px4.Px4Mode | None = None,
-                  force: bool = False) -> list[Any]:
+    def _handback(
+        self,
+        now: float,
+        reason: str,
+        fault: bool,
+        first: px4.Px4Mode | None = None,
+        force: bool = False,
+    ) -> list[Any]:
         if not force and self.state == State.PRESTREAM and self.vehicle_mode != px4.OFFBOARD:
             # nothing was handed over yet: just stop streaming
-            return self._stop(now, State.FAILED if fault else State.DONE, reason,
-                              "warn" if fault else "info")
+            return self._stop(
+                now, State.FAILED if fault else State.DONE, reason, "warn" if fault else "info"
+            )
         self._fault = fault
         self._handback_reason = reason
         self._failures = []
@@ -529,8 +618,9 @@ class OffboardMachine:
     def _request_next(self, now: float, first: px4.Px4Mode | None = None) -> list[Any]:
         mode = first if first is not None else self._chain.pop(0)
         self._target = mode
-        return self._send(now, MAV_CMD_DO_SET_MODE, _set_mode_params(mode), mode.name,
-                          self.vehicle_mode == mode)
+        return self._send(
+            now, MAV_CMD_DO_SET_MODE, _set_mode_params(mode), mode.name, self.vehicle_mode == mode
+        )
 
     def _next_handback(self, now: float, reason: str) -> list[Any]:
         failed = self._target.name if self._target is not None else "?"
@@ -538,14 +628,23 @@ class OffboardMachine:
         self._pending = None
         if self._chain:
             nxt = self._chain[0]
-            return ([StatusEvent(now, self.state.value, self.state.value,
-                                 f"hand-back to {failed} failed ({reason}); trying {nxt.name}", "warn")]
-                    + self._request_next(now))
+            return [
+                StatusEvent(
+                    now,
+                    self.state.value,
+                    self.state.value,
+                    f"hand-back to {failed} failed ({reason}); trying {nxt.name}",
+                    "warn",
+                )
+            ] + self._request_next(now)
         self._target = None
-        return self._stop(now, State.FAILED,
-                          f"hand-back NOT confirmed: {'; '.join(self._failures)}; PX4 failsafe in charge "
-                          f"(COM_OF_LOSS_T -> COM_OBL_RC_ACT once the stream stops) [{self._handback_reason}]",
-                          "error")
+        return self._stop(
+            now,
+            State.FAILED,
+            f"hand-back NOT confirmed: {'; '.join(self._failures)}; PX4 failsafe in charge "
+            f"(COM_OF_LOSS_T -> COM_OBL_RC_ACT once the stream stops) [{self._handback_reason}]",
+            "error",
+        )
 
     def _handback_confirmed(self, now: float) -> list[Any]:
         mode = self._target

@@ -113,8 +113,19 @@ HANDBACK_MODES = {"HOLD": HOLD, "POSCTL": POSCTL, "ALTCTL": ALTCTL, "LAND": LAND
 STICK_MODES = frozenset({MANUAL, STABILIZED, ACRO, ALTCTL, POSCTL})
 
 #: vehicle_status.nav_state of each mode (PX4 v1.16 VehicleStatus.msg), as PX4 logs it
-NAV_STATES = {MANUAL: 0, ALTCTL: 1, POSCTL: 2, MISSION: 3, HOLD: 4, RTL: 5, ACRO: 10,
-              OFFBOARD: 14, STABILIZED: 15, TAKEOFF: 17, LAND: 18}
+NAV_STATES = {
+    MANUAL: 0,
+    ALTCTL: 1,
+    POSCTL: 2,
+    MISSION: 3,
+    HOLD: 4,
+    RTL: 5,
+    ACRO: 10,
+    OFFBOARD: 14,
+    STABILIZED: 15,
+    TAKEOFF: 17,
+    LAND: 18,
+}
 
 
 def encode_custom_mode(main: int, sub: int = 0) -> int:
@@ -150,8 +161,11 @@ def base_mode_flags(mode: Px4Mode, armed: bool) -> int:
         if mode.main == MAIN_POSCTL:
             flags |= MAV_MODE_FLAG_GUIDED_ENABLED
     elif mode.main in (MAIN_AUTO, MAIN_OFFBOARD):
-        flags |= (MAV_MODE_FLAG_AUTO_ENABLED | MAV_MODE_FLAG_STABILIZE_ENABLED
-                  | MAV_MODE_FLAG_GUIDED_ENABLED)
+        flags |= (
+            MAV_MODE_FLAG_AUTO_ENABLED
+            | MAV_MODE_FLAG_STABILIZE_ENABLED
+            | MAV_MODE_FLAG_GUIDED_ENABLED
+        )
     return flags
 
 
@@ -172,8 +186,8 @@ class OblAction(enum.IntEnum):
 
     POSITION = 0
     ALTITUDE = 1
-    STABILIZED = 2      # "Stabilized" in v1.16 (older releases called it "Manual")
-    MANUAL = 2          # alias of STABILIZED (pre-v1.16 name); .name reports STABILIZED
+    STABILIZED = 2  # "Stabilized" in v1.16 (older releases called it "Manual")
+    MANUAL = 2  # alias of STABILIZED (pre-v1.16 name); .name reports STABILIZED
     RETURN = 3
     LAND = 4
     HOLD = 5
@@ -182,27 +196,39 @@ class OblAction(enum.IntEnum):
 
 
 #: flight mode PX4 enters for each COM_OBL_RC_ACT (6 Terminate / 7 Disarm: none, motors off)
-OBL_ACTION_MODES = {OblAction.POSITION: POSCTL, OblAction.ALTITUDE: ALTCTL,
-                    OblAction.STABILIZED: STABILIZED, OblAction.RETURN: RTL,
-                    OblAction.LAND: LAND, OblAction.HOLD: HOLD}
+OBL_ACTION_MODES = {
+    OblAction.POSITION: POSCTL,
+    OblAction.ALTITUDE: ALTCTL,
+    OblAction.STABILIZED: STABILIZED,
+    OblAction.RETURN: RTL,
+    OblAction.LAND: LAND,
+    OblAction.HOLD: HOLD,
+}
 
 
 class RcInMode(enum.IntEnum):
     """COM_RC_IN_MODE (PX4 v1.16): where manual control (stick) input may come from."""
 
     RC_ONLY = 0
-    JOYSTICK_ONLY = 1            # MAVLink MANUAL_CONTROL only
-    RC_AND_JOYSTICK = 2          # both, with fallback
-    RC_OR_JOYSTICK = 3           # both, the first one seen is kept
-    DISABLED = 4                 # stick input disabled
+    JOYSTICK_ONLY = 1  # MAVLink MANUAL_CONTROL only
+    RC_AND_JOYSTICK = 2  # both, with fallback
+    RC_OR_JOYSTICK = 3  # both, the first one seen is kept
+    DISABLED = 4  # stick input disabled
 
 
 def sticks_available(rc_in_mode: int, rc_present: bool, joystick_present: bool) -> bool:
     """Whether PX4 has manual control input for STICK_MODES under COM_RC_IN_MODE."""
     m = int(rc_in_mode)
-    rc_ok = rc_present and m in (RcInMode.RC_ONLY, RcInMode.RC_AND_JOYSTICK, RcInMode.RC_OR_JOYSTICK)
-    joy_ok = joystick_present and m in (RcInMode.JOYSTICK_ONLY, RcInMode.RC_AND_JOYSTICK,
-                                        RcInMode.RC_OR_JOYSTICK)
+    rc_ok = rc_present and m in (
+        RcInMode.RC_ONLY,
+        RcInMode.RC_AND_JOYSTICK,
+        RcInMode.RC_OR_JOYSTICK,
+    )
+    joy_ok = joystick_present and m in (
+        RcInMode.JOYSTICK_ONLY,
+        RcInMode.RC_AND_JOYSTICK,
+        RcInMode.RC_OR_JOYSTICK,
+    )
     return bool(rc_ok or joy_ok)
 
 
@@ -248,8 +274,15 @@ MAV_RESULT_DENIED = 2
 MAV_RESULT_UNSUPPORTED = 3
 MAV_RESULT_FAILED = 4
 MAV_RESULT_IN_PROGRESS = 5
-MAV_RESULT_NAMES = {0: "ACCEPTED", 1: "TEMPORARILY_REJECTED", 2: "DENIED", 3: "UNSUPPORTED",
-                    4: "FAILED", 5: "IN_PROGRESS", 6: "CANCELLED"}
+MAV_RESULT_NAMES = {
+    0: "ACCEPTED",
+    1: "TEMPORARILY_REJECTED",
+    2: "DENIED",
+    3: "UNSUPPORTED",
+    4: "FAILED",
+    5: "IN_PROGRESS",
+    6: "CANCELLED",
+}
 
 #: commands PX4 v1.16 answers twice: ACCEPTED at once from its MAVLink receiver, then the
 #: commander's verdict 0-15 ms later (measured on v1.16.0 SIH SITL; e.g. TEMPORARILY_REJECTED
@@ -279,9 +312,11 @@ def pwm_from_u_esc(u_esc: float) -> float:
 # --------------------------------------------------------------------- MAVLink codec
 MAVLINK_MSG_ID_ESC_STATUS = 291
 ESC_STATUS_CRC_EXTRA = 10
-_ESC_STATUS_STRUCT = struct.Struct("<Q4i4f4fB")   # wire order: time_usec, rpm, voltage, current, index
+_ESC_STATUS_STRUCT = struct.Struct(
+    "<Q4i4f4fB"
+)  # wire order: time_usec, rpm, voltage, current, index
 
-DEFAULT_DIALECT = "development"   # PX4 builds its MAVLink with development.xml (includes common)
+DEFAULT_DIALECT = "development"  # PX4 builds its MAVLink with development.xml (includes common)
 _DIALECTS = ("development", "common", "ardupilotmega", "all")
 
 
@@ -329,8 +364,9 @@ def _codec_classes(name: str) -> tuple[type, type]:
             self.current = [float(x) for x in current]
 
         def pack(self, mav: Any, force_mavlink1: bool = False) -> bytes:
-            payload = _ESC_STATUS_STRUCT.pack(self.time_usec, *self.rpm, *self.voltage,
-                                              *self.current, self.index)
+            payload = _ESC_STATUS_STRUCT.pack(
+                self.time_usec, *self.rpm, *self.voltage, *self.current, self.index
+            )
             return self._pack(mav, self.crc_extra, payload, force_mavlink1=force_mavlink1)
 
     class Px4Codec(mod.MAVLink):  # type: ignore[name-defined,misc]
@@ -342,8 +378,11 @@ def _codec_classes(name: str) -> tuple[type, type]:
 
         def decode(self, msgbuf: bytearray):  # noqa: D102 - pymavlink API
             m = super().decode(msgbuf)
-            if (isinstance(m, mod.MAVLink_unknown) and msgbuf[0] == mod.PROTOCOL_MARKER_V2
-                    and (msgbuf[7] | msgbuf[8] << 8 | msgbuf[9] << 16) == MAVLINK_MSG_ID_ESC_STATUS):
+            if (
+                isinstance(m, mod.MAVLink_unknown)
+                and msgbuf[0] == mod.PROTOCOL_MARKER_V2
+                and (msgbuf[7] | msgbuf[8] << 8 | msgbuf[9] << 16) == MAVLINK_MSG_ID_ESC_STATUS
+            ):
                 return _decode_esc_status(self, mod, EscStatusMessage, msgbuf)
             return m
 
@@ -357,41 +396,49 @@ def _decode_esc_status(codec: Any, mod: ModuleType, cls: type, msgbuf: bytearray
     signed = bool(msgbuf[2] & mod.MAVLINK_IFLAG_SIGNED)
     sig_len = mod.MAVLINK_SIGNATURE_BLOCK_LEN if signed else 0
     mlen = msgbuf[1]
-    crc = struct.unpack("<H", bytes(msgbuf[10 + mlen:12 + mlen]))[0]
-    crcbuf = bytearray(msgbuf[1:10 + mlen])
+    crc = struct.unpack("<H", bytes(msgbuf[10 + mlen : 12 + mlen]))[0]
+    crcbuf = bytearray(msgbuf[1 : 10 + mlen])
     crcbuf.append(ESC_STATUS_CRC_EXTRA)
     if crc != mod.x25crc(crcbuf).crc:
         raise mod.MAVError("invalid MAVLink CRC in msgID 291")
     src_sys, src_comp = msgbuf[5], msgbuf[6]
     if codec.signing.secret_key is not None:
         ok = signed and codec.check_signature(msgbuf, src_sys, src_comp)
-        if not ok and not (codec.signing.allow_unsigned_callback is not None
-                           and codec.signing.allow_unsigned_callback(codec, 291)):
+        if not ok and not (
+            codec.signing.allow_unsigned_callback is not None
+            and codec.signing.allow_unsigned_callback(codec, 291)
+        ):
             codec.signing.badsig_count += 1
             raise mod.MAVError("Invalid signature")
-    payload = bytes(msgbuf[10:10 + mlen]).ljust(_ESC_STATUS_STRUCT.size, b"\0")
-    t = _ESC_STATUS_STRUCT.unpack(payload[:_ESC_STATUS_STRUCT.size])
+    payload = bytes(msgbuf[10 : 10 + mlen]).ljust(_ESC_STATUS_STRUCT.size, b"\0")
+    t = _ESC_STATUS_STRUCT.unpack(payload[: _ESC_STATUS_STRUCT.size])
     m = cls(t[13], t[0], t[1:5], t[5:9], t[9:13])
     m._msgbuf = msgbuf
-    m._payload = msgbuf[10:10 + mlen]
+    m._payload = msgbuf[10 : 10 + mlen]
     m._crc = crc
     m._signed = signed
     m._header = mod.MAVLink_header(291, msgbuf[2], msgbuf[3], mlen, msgbuf[4], src_sys, src_comp)
     return m
 
 
-def make_codec(file: Any, source_system: int, source_component: int,
-               dialect: str = DEFAULT_DIALECT) -> Any:
+def make_codec(
+    file: Any, source_system: int, source_component: int, dialect: str = DEFAULT_DIALECT
+) -> Any:
     """A MAVLink 2 parser/packer for ``file`` (anything with ``write(bytes)``)."""
     cls, _ = _codec_classes(dialect)
     return cls(file, srcSystem=source_system, srcComponent=source_component)
 
 
-SIGNING_EPOCH = 1420070400   # 2015-01-01T00:00:00Z, MAVLink signing timestamp origin
+SIGNING_EPOCH = 1420070400  # 2015-01-01T00:00:00Z, MAVLink signing timestamp origin
 
 
-def setup_signing(codec: Any, key: bytes, link_id: int = 0, allow_unsigned: bool = False,
-                  wall_time: float | None = None) -> None:
+def setup_signing(
+    codec: Any,
+    key: bytes,
+    link_id: int = 0,
+    allow_unsigned: bool = False,
+    wall_time: float | None = None,
+) -> None:
     """Enable MAVLink 2 signing on ``codec`` (timestamp in 10 us since 2015-01-01)."""
     if len(key) != 32:
         raise ConfigError(f"MAVLink signing key must be 32 bytes, got {len(key)}")

@@ -64,12 +64,14 @@ MAPPINGS: dict[str, tuple[float, float]] = {
 #: message sources of the motor outputs; ``auto``: ACTUATOR_OUTPUT_STATUS, SERVO_OUTPUT_RAW
 #: only while ACTUATOR_OUTPUT_STATUS is not streamed
 SOURCES = ("auto", "actuator_output_status", "servo_output_raw")
-ESC, ESTIMATED = ROTOR_SOURCES            # RotorSample.source values (rotor_speeds frame_id)
+ESC, ESTIMATED = ROTOR_SOURCES  # RotorSample.source values (rotor_speeds frame_id)
 #: streams the estimate needs [Hz]; PX4 sends ACTUATOR_OUTPUT_STATUS only when requested
 #: (SITL onboard link: SERVO_OUTPUT_RAW 10 Hz by default); 50 Hz keeps rotor_speeds within
 #: the controller runtime's 0.05 s staleness limit
-MOTOR_OUTPUT_STREAMS: tuple[tuple[str, float], ...] = (("ACTUATOR_OUTPUT_STATUS", 50.0),
-                                                       ("SERVO_OUTPUT_RAW", 10.0))
+MOTOR_OUTPUT_STREAMS: tuple[tuple[str, float], ...] = (
+    ("ACTUATOR_OUTPUT_STATUS", 50.0),
+    ("SERVO_OUTPUT_RAW", 10.0),
+)
 
 
 @dataclass(frozen=True)
@@ -85,27 +87,41 @@ class MotorModel:
         for name in ("a_omega", "b_omega", "omega_max"):
             v = getattr(self, name)
             if not (is_finite_number(v) and v > 0):
-                raise ConfigError(f"rotor_estimate.{name} must be a positive finite number, got {v!r}")
+                raise ConfigError(
+                    f"rotor_estimate.{name} must be a positive finite number, got {v!r}"
+                )
         if not (is_finite_number(self.omega_min) and 0 <= self.omega_min < self.omega_max):
-            raise ConfigError(f"rotor_estimate.omega_min must be in [0, omega_max = {self.omega_max}), "
-                              f"got {self.omega_min!r}")
+            raise ConfigError(
+                f"rotor_estimate.omega_min must be in [0, omega_max = {self.omega_max}), "
+                f"got {self.omega_min!r}"
+            )
 
     @classmethod
     def from_params(cls, params: Any) -> "MotorModel":
         """From a :class:`lpv_sysid.models.quadrotor.QuadrotorParams`."""
-        return cls(float(params.a_omega), float(params.b_omega), float(params.omega_min),
-                   float(params.omega_max))
+        return cls(
+            float(params.a_omega),
+            float(params.b_omega),
+            float(params.omega_min),
+            float(params.omega_max),
+        )
 
     def steady(self, u_esc: np.ndarray) -> np.ndarray:
         """Steady-state speed b_Omega u / a_Omega, held in the limits."""
-        return np.clip(self.b_omega / self.a_omega * np.asarray(u_esc, dtype=float),
-                       self.omega_min, self.omega_max)
+        return np.clip(
+            self.b_omega / self.a_omega * np.asarray(u_esc, dtype=float),
+            self.omega_min,
+            self.omega_max,
+        )
 
     def propagate(self, omega: np.ndarray, u_esc: np.ndarray, dt: float) -> np.ndarray:
         """Exact solution after ``dt`` s with ``u_esc`` held (zero-order hold), in the limits."""
         ss = self.b_omega / self.a_omega * np.asarray(u_esc, dtype=float)
-        return np.clip(ss + (np.asarray(omega, dtype=float) - ss) * math.exp(-self.a_omega * dt),
-                       self.omega_min, self.omega_max)
+        return np.clip(
+            ss + (np.asarray(omega, dtype=float) - ss) * math.exp(-self.a_omega * dt),
+            self.omega_min,
+            self.omega_max,
+        )
 
 
 @dataclass(frozen=True)
@@ -144,8 +160,10 @@ class RotorEstimateConfig:
         if "motor_outputs" in kw:
             mo = kw["motor_outputs"]
             if isinstance(mo, (str, bytes)) or not isinstance(mo, Sequence):
-                raise ConfigError(f"rotor_estimate.motor_outputs must be a list of output channels "
-                                  f"(1-based), got {mo!r}")
+                raise ConfigError(
+                    f"rotor_estimate.motor_outputs must be a list of output channels "
+                    f"(1-based), got {mo!r}"
+                )
             kw["motor_outputs"] = tuple(mo)
         if kw.get("airframe") is None:
             kw["airframe"] = ""
@@ -155,45 +173,70 @@ class RotorEstimateConfig:
 
     def validate(self) -> None:
         if not isinstance(self.enabled, bool):
-            raise ConfigError(f"rotor_estimate.enabled must be true or false, got {self.enabled!r}")
+            raise ConfigError(
+                f"rotor_estimate.enabled must be true or false, got {self.enabled!r}"
+            )
         if self.source not in SOURCES:
-            raise ConfigError(f"rotor_estimate.source must be one of {SOURCES}, got {self.source!r}")
+            raise ConfigError(
+                f"rotor_estimate.source must be one of {SOURCES}, got {self.source!r}"
+            )
         if self.mapping not in MAPPINGS:
-            raise ConfigError(f"rotor_estimate.mapping must be one of {sorted(MAPPINGS)}, got {self.mapping!r}")
+            raise ConfigError(
+                f"rotor_estimate.mapping must be one of {sorted(MAPPINGS)}, got {self.mapping!r}"
+            )
         for name in ("output_min", "output_max", "a_omega", "b_omega", "omega_min", "omega_max"):
             v = getattr(self, name)
             if v is not None and not is_finite_number(v):
-                raise ConfigError(f"rotor_estimate.{name} must be a finite number or null, got {v!r}")
+                raise ConfigError(
+                    f"rotor_estimate.{name} must be a finite number or null, got {v!r}"
+                )
         lo, hi = self.output_range()
         if not lo < hi:
-            raise ConfigError(f"rotor_estimate: output_min ({lo:g}) must be below output_max ({hi:g})")
+            raise ConfigError(
+                f"rotor_estimate: output_min ({lo:g}) must be below output_max ({hi:g})"
+            )
         mo = self.motor_outputs
         if not mo or not all(is_count(c, 1) and c <= 32 for c in mo) or len(set(mo)) != len(mo):
-            raise ConfigError(f"rotor_estimate.motor_outputs must list distinct output channels 1..32, "
-                              f"got {list(mo)!r}")
+            raise ConfigError(
+                f"rotor_estimate.motor_outputs must list distinct output channels 1..32, "
+                f"got {list(mo)!r}"
+            )
         if not (is_count(self.servo_port) and self.servo_port <= 255):
-            raise ConfigError(f"rotor_estimate.servo_port must be an integer 0..255, got {self.servo_port!r}")
+            raise ConfigError(
+                f"rotor_estimate.servo_port must be an integer 0..255, got {self.servo_port!r}"
+            )
         if self.source == "servo_output_raw" and max(mo) > 16:
-            raise ConfigError(f"rotor_estimate.motor_outputs: SERVO_OUTPUT_RAW carries outputs 1..16, "
-                              f"got {list(mo)}")
+            raise ConfigError(
+                f"rotor_estimate.motor_outputs: SERVO_OUTPUT_RAW carries outputs 1..16, "
+                f"got {list(mo)}"
+            )
         if not isinstance(self.airframe, str):
-            raise ConfigError(f"rotor_estimate.airframe must be a file path or empty, got {self.airframe!r}")
+            raise ConfigError(
+                f"rotor_estimate.airframe must be a file path or empty, got {self.airframe!r}"
+            )
         for name in ("max_gap", "esc_timeout"):
             v = getattr(self, name)
             if not (is_finite_number(v) and v > 0):
-                raise ConfigError(f"rotor_estimate.{name} must be a positive number of seconds, got {v!r}")
+                raise ConfigError(
+                    f"rotor_estimate.{name} must be a positive number of seconds, got {v!r}"
+                )
 
     def output_range(self) -> tuple[float, float]:
         """(output_min, output_max): the mapping's range unless overridden."""
         lo, hi = MAPPINGS.get(self.mapping, (math.nan, math.nan))
-        return (float(self.output_min) if self.output_min is not None else lo,
-                float(self.output_max) if self.output_max is not None else hi)
+        return (
+            float(self.output_min) if self.output_min is not None else lo,
+            float(self.output_max) if self.output_max is not None else hi,
+        )
 
     def motor_model(self) -> MotorModel:
         """Eq. (8) parameters: the airframe's, with this section's overrides."""
         base = MotorModel.from_params(load_airframe(self.airframe))
-        over = {f.name: float(getattr(self, f.name)) for f in fields(MotorModel)
-                if getattr(self, f.name) is not None}
+        over = {
+            f.name: float(getattr(self, f.name))
+            for f in fields(MotorModel)
+            if getattr(self, f.name) is not None
+        }
         return MotorModel(**{**base.__dict__, **over})
 
 
@@ -230,8 +273,10 @@ def load_airframe(path: str) -> Any:
             shipped = p
         p = shipped if shipped.is_file() else p
     if not p.is_file():
-        raise ConfigError(f"rotor_estimate.airframe: {path}: no such file (looked in the working "
-                          "directory and the shipped config/)")
+        raise ConfigError(
+            f"rotor_estimate.airframe: {path}: no such file (looked in the working "
+            "directory and the shipped config/)"
+        )
     d = read_yaml(p, f"rotor_estimate.airframe {p}")
     if not isinstance(d, Mapping) or not isinstance(d.get("quadrotor"), Mapping):
         raise ConfigError(f"rotor_estimate.airframe {p}: no 'quadrotor' section")
@@ -244,13 +289,15 @@ def load_airframe(path: str) -> Any:
 @dataclass
 class EstimatorStats:
     samples: int = 0
-    restarts: int = 0          # first sample, gaps > max_gap, time not advancing
+    restarts: int = 0  # first sample, gaps > max_gap, time not advancing
 
 
 class RotorSpeedEstimator:
     """Omega (rad/s, one per motor) from motor output samples; see the module docstring."""
 
-    def __init__(self, model: MotorModel, output_range: tuple[float, float], max_gap: float = 0.25) -> None:
+    def __init__(
+        self, model: MotorModel, output_range: tuple[float, float], max_gap: float = 0.25
+    ) -> None:
         lo, hi = float(output_range[0]), float(output_range[1])
         if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
             raise ConfigError(f"rotor_estimate: invalid output range {output_range!r}")
@@ -289,17 +336,33 @@ class RotorSpeedEstimator:
         ``outputs`` then becomes the held output."""
         u, stopped = self.u_esc(outputs)
         dt = None if self._t is None else t_vehicle - self._t
-        if dt is None or not (0.0 < dt <= self.max_gap) or self._u is None or self._u.shape != u.shape:
+        if (
+            dt is None
+            or not (0.0 < dt <= self.max_gap)
+            or self._u is None
+            or self._u.shape != u.shape
+        ):
             omega = self.model.steady(u)
             omega[stopped] = 0.0
             self.stats.restarts += 1
         else:
             omega = self.model.propagate(self._omega, self._u, dt)
-            omega[self._stopped] = 0.0       # stopped over the interval: not turning
+            omega[self._stopped] = 0.0  # stopped over the interval: not turning
         self._t, self._u, self._stopped, self._omega = float(t_vehicle), u, stopped, omega
         self.stats.samples += 1
         return omega.copy()
 
 
-__all__ = ["ESC", "ESTIMATED", "MAPPINGS", "MOTOR_OUTPUT_STREAMS", "SOURCES", "with_motor_output_streams", "MotorModel", "RotorEstimateConfig",
-           "RotorSpeedEstimator", "EstimatorStats", "load_airframe"]
+__all__ = [
+    "ESC",
+    "ESTIMATED",
+    "MAPPINGS",
+    "MOTOR_OUTPUT_STREAMS",
+    "SOURCES",
+    "with_motor_output_streams",
+    "MotorModel",
+    "RotorEstimateConfig",
+    "RotorSpeedEstimator",
+    "EstimatorStats",
+    "load_airframe",
+]

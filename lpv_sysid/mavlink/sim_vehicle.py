@@ -103,9 +103,9 @@ MAV_LANDED_STATE_ON_GROUND, MAV_LANDED_STATE_IN_AIR = 1, 2
 MAV_FRAME_LOCAL_NED = 1
 MAV_ESTIMATOR_TYPE_AUTOPILOT = 8
 MAV_SYS_STATUS_SENSOR_RC_RECEIVER = 0x10000
-SENSORS_BASE = 0x3FFF          # gyro .. motor outputs, all present/enabled/healthy
+SENSORS_BASE = 0x3FFF  # gyro .. motor outputs, all present/enabled/healthy
 MANUAL_CONTROL_TIMEOUT_S = 0.5  # a MAVLink joystick counts this long after its last message
-N_OUTPUTS = 16                  # actuator outputs PX4 SIH reports (ACTUATOR_OUTPUT_STATUS.active)
+N_OUTPUTS = 16  # actuator outputs PX4 SIH reports (ACTUATOR_OUTPUT_STATUS.active)
 
 
 @dataclass(frozen=True)
@@ -116,7 +116,7 @@ class ParamSpec:
     ptype: int
     lo: float
     hi: float
-    values: frozenset[int] | None = None      # enum parameters: the allowed values
+    values: frozenset[int] | None = None  # enum parameters: the allowed values
 
     def check(self, name: str, value: float | int) -> str | None:
         """Why ``value`` is refused (None: accepted)."""
@@ -139,9 +139,11 @@ PARAMS: dict[str, ParamSpec] = {
     "COM_OBL_RC_ACT": ParamSpec(0, _I32, 0, 7, frozenset(range(8))),
     "COM_DISARM_PRFLT": ParamSpec(10.0, _R32, -1.0, 3600.0),
     "COM_DISARM_LAND": ParamSpec(2.0, _R32, -1.0, 3600.0),
-    "COM_RC_IN_MODE": ParamSpec(1, _I32, 0, 4, frozenset(range(5))),   # v1.16 SIH SITL: 1 joystick only
+    "COM_RC_IN_MODE": ParamSpec(
+        1, _I32, 0, 4, frozenset(range(5))
+    ),  # v1.16 SIH SITL: 1 joystick only
     "COM_RC_LOSS_T": ParamSpec(0.5, _R32, 0.0, 35.0),
-    "COM_RCL_EXCEPT": ParamSpec(4, _I32, 0, 15),        # bit 2: ignore RC loss in offboard (sim default)
+    "COM_RCL_EXCEPT": ParamSpec(4, _I32, 0, 15),  # bit 2: ignore RC loss in offboard (sim default)
     "NAV_DLL_ACT": ParamSpec(0, _I32, 0, 6, frozenset({0, 1, 2, 3, 5, 6})),
     "MPC_XY_VEL_MAX": ParamSpec(12.0, _R32, 0.0, 20.0),
     "MPC_Z_VEL_MAX_UP": ParamSpec(3.0, _R32, 0.5, 8.0),
@@ -159,12 +161,21 @@ DEFAULT_PARAMS: dict[str, tuple[float, int]] = {k: (v.default, v.ptype) for k, v
 #: default stream rates [Hz] before any SET_MESSAGE_INTERVAL: PX4 v1.16 mavlink_main.cpp,
 #: MAVLINK_MODE_ONBOARD (the SITL offboard link); 0 = off until requested
 DEFAULT_RATES: dict[str, float] = {
-    "ATTITUDE": 100.0, "ATTITUDE_QUATERNION": 50.0, "LOCAL_POSITION_NED": 30.0, "ODOMETRY": 30.0,
-    "GLOBAL_POSITION_INT": 50.0, "HIGHRES_IMU": 50.0, "ESC_STATUS": 10.0, "SERVO_OUTPUT_RAW": 10.0,
-    "ACTUATOR_OUTPUT_STATUS": 0.0, "RC_CHANNELS": 20.0, "SYS_STATUS": 5.0, "EXTENDED_SYS_STATE": 5.0,
+    "ATTITUDE": 100.0,
+    "ATTITUDE_QUATERNION": 50.0,
+    "LOCAL_POSITION_NED": 30.0,
+    "ODOMETRY": 30.0,
+    "GLOBAL_POSITION_INT": 50.0,
+    "HIGHRES_IMU": 50.0,
+    "ESC_STATUS": 10.0,
+    "SERVO_OUTPUT_RAW": 10.0,
+    "ACTUATOR_OUTPUT_STATUS": 0.0,
+    "RC_CHANNELS": 20.0,
+    "SYS_STATUS": 5.0,
+    "EXTENDED_SYS_STATE": 5.0,
     "HOME_POSITION": 0.5,
 }
-HOME_LAT, HOME_LON, HOME_ALT = 47.397742, 8.545594, 488.0   # PX4 SITL default home
+HOME_LAT, HOME_LON, HOME_ALT = 47.397742, 8.545594, 488.0  # PX4 SITL default home
 ACTUATOR_OUTPUT_SCALES = ("pwm", "normalized")
 
 
@@ -188,25 +199,25 @@ def parse_hostport(text: str, what: str) -> tuple[str, int]:
 class SimVehicleConfig:
     """Options of the simulated vehicle (``config/sim_vehicle_px4.yaml``, module docstring)."""
 
-    url: str = "udpout:127.0.0.1:14540"     # PX4 SITL sends to the offboard port 14540
-    bind: str | None = None                 # udpout: local HOST[:PORT]; None: route to url's host
+    url: str = "udpout:127.0.0.1:14540"  # PX4 SITL sends to the offboard port 14540
+    bind: str | None = None  # udpout: local HOST[:PORT]; None: route to url's host
     system_id: int = 1
     component_id: int = 1
     physics_hz: float = 250.0
-    params: Mapping[str, float] = field(default_factory=dict)    # overrides of PARAMS defaults
+    params: Mapping[str, float] = field(default_factory=dict)  # overrides of PARAMS defaults
     initial_mode: str = "HOLD"
     signing_key_file: str | None = None
     allow_unsigned: bool = False
     sensor_noise: bool = False
     seed: int = 0
-    rc_present: bool = False                # an RC transmitter is bound (sticks centred)
-    esc_telemetry: bool = True              # ESC_STATUS (False: SIH / PWM ESCs)
-    actuator_output_scale: str = "pwm"      # ACTUATOR_OUTPUT_STATUS values: pwm | normalized
-    stream_rates: Mapping[str, float] = field(default_factory=dict)   # overrides of DEFAULT_RATES
-    double_ack: bool = True                 # PX4 v1.16: DO_SET_MODE ACCEPTED, then the verdict
-    verdict_delay_s: float = 0.01           # commander verdict after the first ACK (0-15 ms measured)
-    odometry_lag_s: float = 0.004           # ODOMETRY time_usec behind the other stamps
-    duplicate_acks: bool = False            # additionally send every COMMAND_ACK twice
+    rc_present: bool = False  # an RC transmitter is bound (sticks centred)
+    esc_telemetry: bool = True  # ESC_STATUS (False: SIH / PWM ESCs)
+    actuator_output_scale: str = "pwm"  # ACTUATOR_OUTPUT_STATUS values: pwm | normalized
+    stream_rates: Mapping[str, float] = field(default_factory=dict)  # overrides of DEFAULT_RATES
+    double_ack: bool = True  # PX4 v1.16: DO_SET_MODE ACCEPTED, then the verdict
+    verdict_delay_s: float = 0.01  # commander verdict after the first ACK (0-15 ms measured)
+    odometry_lag_s: float = 0.004  # ODOMETRY time_usec behind the other stamps
+    duplicate_acks: bool = False  # additionally send every COMMAND_ACK twice
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "SimVehicleConfig":
@@ -239,8 +250,10 @@ class SimVehicleConfig:
             raise ConfigError(f"sim vehicle physics_hz must be a number, got {self.physics_hz!r}")
         from lpv_sysid.sim.vehicle import MAX_PHYSICS_HZ
 
-        if not (50.0 <= self.physics_hz <= MAX_PHYSICS_HZ):     # NaN fails too
-            raise ConfigError(f"sim vehicle physics_hz must be in [50, {MAX_PHYSICS_HZ:g}] Hz, got {self.physics_hz!r}")
+        if not (50.0 <= self.physics_hz <= MAX_PHYSICS_HZ):  # NaN fails too
+            raise ConfigError(
+                f"sim vehicle physics_hz must be in [50, {MAX_PHYSICS_HZ:g}] Hz, got {self.physics_hz!r}"
+            )
         for name in ("system_id", "component_id"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 255:
@@ -257,29 +270,47 @@ class SimVehicleConfig:
             raise ConfigError("sim vehicle stream_rates must be a mapping MESSAGE: rate_hz")
         for k, v in self.stream_rates.items():
             if k not in DEFAULT_RATES:
-                raise ConfigError(f"sim vehicle stream_rates: unknown stream {k!r}; known: {sorted(DEFAULT_RATES)}")
+                raise ConfigError(
+                    f"sim vehicle stream_rates: unknown stream {k!r}; known: {sorted(DEFAULT_RATES)}"
+                )
             if not (is_finite_number(v) and 0 <= v <= 1000):
-                raise ConfigError(f"sim vehicle stream_rates.{k} must be a rate in [0, 1000] Hz, got {v!r}")
-        for name in ("allow_unsigned", "sensor_noise", "rc_present", "esc_telemetry", "double_ack",
-                     "duplicate_acks"):
+                raise ConfigError(
+                    f"sim vehicle stream_rates.{k} must be a rate in [0, 1000] Hz, got {v!r}"
+                )
+        for name in (
+            "allow_unsigned",
+            "sensor_noise",
+            "rc_present",
+            "esc_telemetry",
+            "double_ack",
+            "duplicate_acks",
+        ):
             if not isinstance(getattr(self, name), bool):
-                raise ConfigError(f"sim vehicle {name} must be true or false, got {getattr(self, name)!r}")
+                raise ConfigError(
+                    f"sim vehicle {name} must be true or false, got {getattr(self, name)!r}"
+                )
         if self.actuator_output_scale not in ACTUATOR_OUTPUT_SCALES:
-            raise ConfigError(f"sim vehicle actuator_output_scale must be one of {ACTUATOR_OUTPUT_SCALES}, "
-                              f"got {self.actuator_output_scale!r}")
+            raise ConfigError(
+                f"sim vehicle actuator_output_scale must be one of {ACTUATOR_OUTPUT_SCALES}, "
+                f"got {self.actuator_output_scale!r}"
+            )
         for name, hi in (("verdict_delay_s", 1.0), ("odometry_lag_s", 0.1)):
             v = getattr(self, name)
             if not (is_finite_number(v) and 0 <= v <= hi):
                 raise ConfigError(f"sim vehicle {name} must be in [0, {hi}] s, got {v!r}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise ConfigError(f"sim vehicle seed must be a non-negative integer, got {self.seed!r}")
+            raise ConfigError(
+                f"sim vehicle seed must be a non-negative integer, got {self.seed!r}"
+            )
         if px4.mode_by_name(self.initial_mode) == px4.OFFBOARD:
-            raise ConfigError("sim vehicle initial_mode cannot be OFFBOARD (PX4 needs a setpoint stream)")
+            raise ConfigError(
+                "sim vehicle initial_mode cannot be OFFBOARD (PX4 needs a setpoint stream)"
+            )
 
 
 @dataclass
 class _Setpoint:
-    kind: str                         # "velocity" | "position" | "rates"
+    kind: str  # "velocity" | "position" | "rates"
     t: float
     v_ned: np.ndarray | None = None
     pos_ned: np.ndarray | None = None
@@ -291,13 +322,18 @@ class _Setpoint:
 class SimVehicle:
     """See module docstring."""
 
-    def __init__(self, config: SimVehicleConfig | None = None, model: Any = None,
-                 controller_factory: Callable[[], Any] | None = None,
-                 link: MavlinkLink | None = None) -> None:
+    def __init__(
+        self,
+        config: SimVehicleConfig | None = None,
+        model: Any = None,
+        controller_factory: Callable[[], Any] | None = None,
+        link: MavlinkLink | None = None,
+    ) -> None:
         self.config = config or SimVehicleConfig()
         self.config.validate()
         if model is None:
             from lpv_sysid.models.quadrotor import Quadrotor
+
             model = Quadrotor()
         if controller_factory is None:
             from lpv_sysid.control.baseline import BaselineController, BaselineGains
@@ -310,31 +346,37 @@ class SimVehicle:
         self.params: dict[str, tuple[float, int]] = dict(DEFAULT_PARAMS)
         for k, v in self.config.params.items():
             self.params[k] = (v, PARAMS[k].ptype)
-        self.link = link or MavlinkLink(LinkConfig(
-            url=self.config.url, source_system=self.config.system_id,
-            source_component=self.config.component_id, streams=(),
-            signing_key_file=self.config.signing_key_file, allow_unsigned=self.config.allow_unsigned,
-            mav_type=MAV_TYPE_QUADROTOR))
+        self.link = link or MavlinkLink(
+            LinkConfig(
+                url=self.config.url,
+                source_system=self.config.system_id,
+                source_component=self.config.component_id,
+                streams=(),
+                signing_key_file=self.config.signing_key_file,
+                allow_unsigned=self.config.allow_unsigned,
+                mav_type=MAV_TYPE_QUADROTOR,
+            )
+        )
         self._rng = np.random.default_rng(self.config.seed)
         self.dt = 1.0 / self.config.physics_hz
-        self.t = 0.0                      # simulated time since boot [s]
-        self.x = np.zeros(16)             # FULL_STATE_NAMES, on the ground, motors off
+        self.t = 0.0  # simulated time since boot [s]
+        self.x = np.zeros(16)  # FULL_STATE_NAMES, on the ground, motors off
         self.u = np.zeros(4)
         self.armed = False
-        self.mode = px4.mode_by_name(self.config.initial_mode)   # what the HEARTBEAT shows
-        self.user_mode = self.mode        # the mode last chosen by a user (PX4 user intention)
+        self.mode = px4.mode_by_name(self.config.initial_mode)  # what the HEARTBEAT shows
+        self.user_mode = self.mode  # the mode last chosen by a user (PX4 user intention)
         self.failsafe_active = False
         self.landed = True
         self.took_off = False
         self.t_armed = 0.0
         self.t_landed = 0.0
         self.hold_pos = np.zeros(3)
-        self.descending = False           # emergency Descend task (stick mode without sticks)
+        self.descending = False  # emergency Descend task (stick mode without sticks)
         self.setpoint: _Setpoint | None = None
         self._sp_times: list[float] = []
         self.setpoints_received = 0
-        self.mode_log: list[tuple[float, str, str]] = []   # (t, mode name, reason)
-        self.px4_log: list[tuple[float, str]] = []         # what PX4 would print (errors, warnings)
+        self.mode_log: list[tuple[float, str, str]] = []  # (t, mode name, reason)
+        self.px4_log: list[tuple[float, str]] = []  # what PX4 would print (errors, warnings)
         self.acks_sent: list[tuple[float, int, int]] = []  # (t, command, result)
         self.param_rejections: list[tuple[float, str]] = []
         self.failsafe_reason = ""
@@ -348,9 +390,14 @@ class SimVehicle:
         self._opened = False
         mod = px4.dialect_module(px4.DEFAULT_DIALECT)
         self._mod = mod
-        self._stream_ids = {name: (px4.MAVLINK_MSG_ID_ESC_STATUS if name == "ESC_STATUS"
-                                   else getattr(mod, f"MAVLINK_MSG_ID_{name}"))
-                            for name in DEFAULT_RATES}
+        self._stream_ids = {
+            name: (
+                px4.MAVLINK_MSG_ID_ESC_STATUS
+                if name == "ESC_STATUS"
+                else getattr(mod, f"MAVLINK_MSG_ID_{name}")
+            )
+            for name in DEFAULT_RATES
+        }
         rates = {**DEFAULT_RATES, **dict(self.config.stream_rates)}
         for name, rate in rates.items():
             self.intervals[self._stream_ids[name]] = 1.0 / rate if rate > 0 else -1.0
@@ -386,8 +433,10 @@ class SimVehicle:
                 sock.bind((host, port))
             except OSError as exc:
                 self.close()
-                raise LpvSysidError(f"sim vehicle: cannot bind {host}:{port} for {self.config.url!r}: "
-                                    f"{exc.strerror or exc}") from None
+                raise LpvSysidError(
+                    f"sim vehicle: cannot bind {host}:{port} for {self.config.url!r}: "
+                    f"{exc.strerror or exc}"
+                ) from None
         try:
             name = sock.getsockname()
             self.local_address = (str(name[0]), int(name[1]))
@@ -408,8 +457,13 @@ class SimVehicle:
         if self._opened:
             self._send_telemetry(now)
 
-    def run_realtime(self, duration: float | None = None, stop: Callable[[], bool] | None = None,
-                     period: float = 0.002, speed: float = 1.0) -> None:
+    def run_realtime(
+        self,
+        duration: float | None = None,
+        stop: Callable[[], bool] | None = None,
+        period: float = 0.002,
+        speed: float = 1.0,
+    ) -> None:
         """Drive :meth:`step` from the wall clock (bounded by ``duration`` simulated seconds).
 
         ``speed`` > 1 runs faster than real time (simulated time = speed x wall time); the
@@ -448,8 +502,12 @@ class SimVehicle:
         k2 = f([a + 0.5 * dt * b for a, b in zip(xl, k1)], u)
         k3 = f([a + 0.5 * dt * b for a, b in zip(xl, k2)], u)
         k4 = f([a + dt * b for a, b in zip(xl, k3)], u)
-        xn = np.array([a + dt / 6.0 * (b1 + 2 * b2 + 2 * b3 + b4)
-                       for a, b1, b2, b3, b4 in zip(xl, k1, k2, k3, k4)])
+        xn = np.array(
+            [
+                a + dt / 6.0 * (b1 + 2 * b2 + 2 * b3 + b4)
+                for a, b1, b2, b3, b4 in zip(xl, k1, k2, k3, k4)
+            ]
+        )
         if not self.armed:
             xn[12:16] = 0.0
         self.t += dt
@@ -485,7 +543,7 @@ class SimVehicle:
             return self._rate_mode(sp)
         v_ned, yaw_rate = self._velocity_setpoint()
         if self.landed and v_ned[2] > -0.2:
-            self.ctrl.reset()                       # PX4 keeps idle and resets integrators on ground
+            self.ctrl.reset()  # PX4 keeps idle and resets integrators on ground
             return self.model.mix @ np.full(4, 0.1)
         v_body = self._R(x).T @ v_ned
         x12 = np.concatenate([x[3:5], x[6:12], np.zeros(4)])
@@ -534,10 +592,18 @@ class SimVehicle:
 
     def _rate_mode(self, sp: _Setpoint) -> np.ndarray:
         """PX4 rate loop, P term: tau = K_p (omega_sp - omega); unit quad-X allocation."""
-        kp = np.array([self.param("MC_ROLLRATE_P"), self.param("MC_PITCHRATE_P"), self.param("MC_YAWRATE_P")])
+        kp = np.array(
+            [self.param("MC_ROLLRATE_P"), self.param("MC_PITCHRATE_P"), self.param("MC_YAWRATE_P")]
+        )
         tau = kp * (sp.rates - self.x[9:12])
-        alloc = np.array([[1.0, -1.0, 1.0, 1.0], [1.0, 1.0, -1.0, 1.0],
-                          [1.0, 1.0, 1.0, -1.0], [1.0, -1.0, -1.0, -1.0]])
+        alloc = np.array(
+            [
+                [1.0, -1.0, 1.0, 1.0],
+                [1.0, 1.0, -1.0, 1.0],
+                [1.0, 1.0, 1.0, -1.0],
+                [1.0, -1.0, -1.0, -1.0],
+            ]
+        )
         u_esc = np.clip(alloc @ np.r_[sp.thrust, tau], 0.0, 1.0)
         return self.model.mix @ u_esc
 
@@ -546,10 +612,12 @@ class SimVehicle:
         """Manual control input as PX4 sees it (RC and/or MAVLink joystick, COM_RC_IN_MODE)."""
         t = self.t if now is None else now
         joystick = t - self._t_joystick <= MANUAL_CONTROL_TIMEOUT_S
-        return px4.sticks_available(int(self.param("COM_RC_IN_MODE")), self.config.rc_present, joystick)
+        return px4.sticks_available(
+            int(self.param("COM_RC_IN_MODE")), self.config.rc_present, joystick
+        )
 
     def _supervise(self, t: float) -> None:
-        if self.mode == px4.OFFBOARD and self.armed:       # PX4's failsafes act only while armed
+        if self.mode == px4.OFFBOARD and self.armed:  # PX4's failsafes act only while armed
             last = self.setpoint.t if self.setpoint is not None else -math.inf
             if t - last > self.param("COM_OF_LOSS_T"):
                 self._offboard_lost(t)
@@ -567,7 +635,7 @@ class SimVehicle:
         log.warning(reason)
         self.px4_log.append((t, "Failsafe activated"))
         target = px4.OBL_ACTION_MODES.get(act)
-        if target is None:                            # 6 terminate, 7 disarm: motors off
+        if target is None:  # 6 terminate, 7 disarm: motors off
             self.mode_log.append((t, self.mode.name, reason))
             self._disarm(t, reason)
             return
@@ -578,7 +646,7 @@ class SimVehicle:
             self.px4_log.append((t, msg))
             self.mode_log[-1] = (t, target.name, f"{reason}; {msg}: emergency descent")
             self.descending = True
-            if hasattr(self.ctrl, "vel_int"):         # Descend task: no horizontal acceleration
+            if hasattr(self.ctrl, "vel_int"):  # Descend task: no horizontal acceleration
                 self.ctrl.vel_int[0] = self.ctrl.vel_int[1] = 0.0
 
     def _set_mode(self, mode: px4.Px4Mode, t: float, reason: str, failsafe: bool = False) -> None:
@@ -605,7 +673,7 @@ class SimVehicle:
             self.mode_log.append((t, "DISARMED", reason))
         self.armed = False
         self.x[12:16] = 0.0
-        if self.failsafe_active:                      # cleared on disarm: the user's mode again
+        if self.failsafe_active:  # cleared on disarm: the user's mode again
             self._set_mode(self.user_mode, t, "failsafe cleared on disarm")
 
     # ------------------------------------------------------------- messages
@@ -647,8 +715,14 @@ class SimVehicle:
         value = px4.param_from_wire(m.param_value, spec.ptype)
         err = spec.check(name, value)
         if err is not None:
-            log.warning("PARAM_SET from %d/%d refused: %s; %s stays %g", m.get_srcSystem(),
-                        m.get_srcComponent(), err, name, self.param(name))
+            log.warning(
+                "PARAM_SET from %d/%d refused: %s; %s stays %g",
+                m.get_srcSystem(),
+                m.get_srcComponent(),
+                err,
+                name,
+                self.param(name),
+            )
             self.param_rejections.append((now, err))
         else:
             self.params[name] = (value, spec.ptype)
@@ -657,8 +731,15 @@ class SimVehicle:
     def _send_param(self, name: str) -> None:
         names = list(self.params)
         value, ptype = self.params[name]
-        self.link.send(self.link.codec.param_value_encode(
-            name.encode("ascii"), px4.param_to_wire(value, ptype), ptype, len(names), names.index(name)))
+        self.link.send(
+            self.link.codec.param_value_encode(
+                name.encode("ascii"),
+                px4.param_to_wire(value, ptype),
+                ptype,
+                len(names),
+                names.index(name),
+            )
+        )
 
     def _ack(self, cmd: int, result: int) -> None:
         self.acks_sent.append((self.t, cmd, result))
@@ -757,7 +838,7 @@ class SimVehicle:
             mode = px4.HOLD
         if mode.name.startswith("UNKNOWN"):
             return px4.MAV_RESULT_UNSUPPORTED
-        if self.armed and not self._can_run(mode):   # disarmed: PX4 always allows the change
+        if self.armed and not self._can_run(mode):  # disarmed: PX4 always allows the change
             msg = f"Switching to {mode.name} is currently not possible"
             log.warning(msg)
             self.px4_log.append((self.t, msg))
@@ -767,8 +848,11 @@ class SimVehicle:
 
     def _stream_alive(self, now: float) -> bool:
         self._sp_times = [t for t in self._sp_times if now - t <= 1.0]
-        return (len(self._sp_times) >= 2 and self.setpoint is not None
-                and now - self._sp_times[-1] <= self.param("COM_OF_LOSS_T"))
+        return (
+            len(self._sp_times) >= 2
+            and self.setpoint is not None
+            and now - self._sp_times[-1] <= self.param("COM_OF_LOSS_T")
+        )
 
     def _sp_received(self, now: float, sp: _Setpoint) -> None:
         self.setpoint = sp
@@ -780,7 +864,7 @@ class SimVehicle:
     def _position_target(self, m: Any, now: float) -> None:
         mask = m.type_mask
         frame = m.coordinate_frame
-        if frame in (8, 12):           # BODY_NED / BODY_FRD: PX4 rotates by yaw only
+        if frame in (8, 12):  # BODY_NED / BODY_FRD: PX4 rotates by yaw only
             R = self._yaw_R()
         elif frame == 1:
             R = np.eye(3)
@@ -795,7 +879,9 @@ class SimVehicle:
         if use_pos:
             pos = np.array([m.x, m.y, m.z], dtype=float)
             pos = (R @ pos + self.x[0:3]) if frame in (8, 12) else pos
-            sp = _Setpoint("position", self.t, v_ned=vel if use_vel else None, pos_ned=pos, yaw_rate=yaw_rate)
+            sp = _Setpoint(
+                "position", self.t, v_ned=vel if use_vel else None, pos_ned=pos, yaw_rate=yaw_rate
+            )
         elif use_vel:
             sp = _Setpoint("velocity", self.t, v_ned=vel, yaw_rate=yaw_rate)
         else:
@@ -804,7 +890,7 @@ class SimVehicle:
         self._sp_received(now, sp)
 
     def _attitude_target(self, m: Any, now: float) -> None:
-        if not m.type_mask & 128:     # attitude quaternion setpoints: not modelled
+        if not m.type_mask & 128:  # attitude quaternion setpoints: not modelled
             return
         rates = np.array([m.body_roll_rate, m.body_pitch_rate, m.body_yaw_rate], dtype=float)
         if not np.isfinite(rates).all() or not math.isfinite(m.thrust):
@@ -824,7 +910,9 @@ class SimVehicle:
         """All 16 outputs (normalised, PWM): motors first, the unused ones idle at 0 / 900 us."""
         u_esc, pwm = self.motor_outputs()
         pad = N_OUTPUTS - len(pwm)
-        return [float(u) for u in u_esc] + [0.0] * pad, [float(p) for p in pwm] + [px4.PWM_DISARMED_US] * pad
+        return [float(u) for u in u_esc] + [0.0] * pad, [float(p) for p in pwm] + [
+            px4.PWM_DISARMED_US
+        ] * pad
 
     def _stream_has_data(self, mid: int) -> bool:
         sid = self._stream_ids
@@ -851,20 +939,46 @@ class SimVehicle:
         state = MAV_STATE_ACTIVE if self.armed else MAV_STATE_STANDBY
         if self.failsafe_reason and self.armed:
             state = MAV_STATE_CRITICAL
-        self.link.send(self.link.codec.heartbeat_encode(
-            MAV_TYPE_QUADROTOR, MAV_AUTOPILOT_PX4, px4.base_mode_flags(self.mode, self.armed),
-            self.mode.custom_mode, state))
+        self.link.send(
+            self.link.codec.heartbeat_encode(
+                MAV_TYPE_QUADROTOR,
+                MAV_AUTOPILOT_PX4,
+                px4.base_mode_flags(self.mode, self.armed),
+                self.mode.custom_mode,
+                state,
+            )
+        )
 
     def _send_autopilot_version(self) -> None:
         mod = self._mod
         caps = 0
-        for name in ("MISSION_FLOAT", "PARAM_FLOAT", "MISSION_INT", "COMMAND_INT",
-                     "PARAM_ENCODE_BYTEWISE", "SET_ATTITUDE_TARGET",
-                     "SET_POSITION_TARGET_LOCAL_NED", "MAVLINK2"):
+        for name in (
+            "MISSION_FLOAT",
+            "PARAM_FLOAT",
+            "MISSION_INT",
+            "COMMAND_INT",
+            "PARAM_ENCODE_BYTEWISE",
+            "SET_ATTITUDE_TARGET",
+            "SET_POSITION_TARGET_LOCAL_NED",
+            "MAVLINK2",
+        ):
             caps |= int(getattr(mod, f"MAV_PROTOCOL_CAPABILITY_{name}"))
-        self.link.send(self.link.codec.autopilot_version_encode(
-            caps, px4.encode_flight_sw_version(1, 16, 0), 0, 0, 0,
-            b"\0" * 8, b"\0" * 8, b"\0" * 8, 0, 0, 0x1234ABCD, [0] * 18))
+        self.link.send(
+            self.link.codec.autopilot_version_encode(
+                caps,
+                px4.encode_flight_sw_version(1, 16, 0),
+                0,
+                0,
+                0,
+                b"\0" * 8,
+                b"\0" * 8,
+                b"\0" * 8,
+                0,
+                0,
+                0x1234ABCD,
+                [0] * 18,
+            )
+        )
 
     def _send_stream(self, mid: int, now: float) -> None:
         c = self.link.codec
@@ -872,14 +986,18 @@ class SimVehicle:
         ms = int(self.t * 1000) & 0xFFFFFFFF
         us = int(self.t * 1e6)
         noise = self.config.sensor_noise
-        rn = (lambda s, n=3: self._rng.normal(0.0, s, n)) if noise else (lambda s, n=3: np.zeros(n))
+        rn = (
+            (lambda s, n=3: self._rng.normal(0.0, s, n)) if noise else (lambda s, n=3: np.zeros(n))
+        )
         R = self._R(x)
         v_ned = R @ x[6:9]
         sid = self._stream_ids
         if mid == sid["ATTITUDE_QUATERNION"]:
             q = euler_to_quat(*x[3:6])
             w = x[9:12] + rn(0.005)
-            c_msg = c.attitude_quaternion_encode(ms, *[float(v) for v in q], *[float(v) for v in w], [0.0] * 4)
+            c_msg = c.attitude_quaternion_encode(
+                ms, *[float(v) for v in q], *[float(v) for v in w], [0.0] * 4
+            )
         elif mid == sid["ATTITUDE"]:
             w = x[9:12] + rn(0.005)
             c_msg = c.attitude_encode(ms, *[float(v) for v in x[3:6]], *[float(v) for v in w])
@@ -891,9 +1009,15 @@ class SimVehicle:
             lat = HOME_LAT + x[0] / 111319.5
             lon = HOME_LON + x[1] / (111319.5 * math.cos(math.radians(HOME_LAT)))
             hdg = int(math.degrees(x[5]) % 360 * 100)
-            c_msg = c.global_position_int_encode(ms, int(lat * 1e7), int(lon * 1e7),
-                                                 int((HOME_ALT - x[2]) * 1000), int(-x[2] * 1000),
-                                                 *[int(v * 100) for v in v_ned], hdg)
+            c_msg = c.global_position_int_encode(
+                ms,
+                int(lat * 1e7),
+                int(lon * 1e7),
+                int((HOME_ALT - x[2]) * 1000),
+                int(-x[2] * 1000),
+                *[int(v * 100) for v in v_ned],
+                hdg,
+            )
         elif mid == sid["HIGHRES_IMU"]:
             if self.armed and not self.landed:
                 acc = np.asarray(self.model.specific_force(x, self.u), dtype=float)
@@ -901,8 +1025,20 @@ class SimVehicle:
                 acc = R.T @ np.array([0.0, 0.0, -9.80665])
             acc = acc + rn(0.05)
             gyr = x[9:12] + rn(0.005)
-            c_msg = c.highres_imu_encode(us, *[float(a) for a in acc], *[float(a) for a in gyr],
-                                         0.2, 0.0, 0.4, 1013.0, 0.0, float(-x[2]), 25.0, 0x1FF, 0)
+            c_msg = c.highres_imu_encode(
+                us,
+                *[float(a) for a in acc],
+                *[float(a) for a in gyr],
+                0.2,
+                0.0,
+                0.4,
+                1013.0,
+                0.0,
+                float(-x[2]),
+                25.0,
+                0x1FF,
+                0,
+            )
         elif mid == sid["ESC_STATUS"]:
             rpm = [int(round(o * 60.0 / (2 * math.pi))) for o in x[12:16]]
             c_msg = self._esc_cls(0, us, rpm, [16.0] * 4, [0.0] * 4)
@@ -914,17 +1050,33 @@ class SimVehicle:
             vals = pwm if self.config.actuator_output_scale == "pwm" else u16
             c_msg = c.actuator_output_status_encode(us, N_OUTPUTS, vals + [0.0] * (32 - N_OUTPUTS))
         elif mid == sid["RC_CHANNELS"]:
-            chans = [1500, 1500, 1500, 1500, 1000, 1000, 1000, 1000] + [0] * 10   # sticks centred
+            chans = [1500, 1500, 1500, 1500, 1000, 1000, 1000, 1000] + [0] * 10  # sticks centred
             c_msg = c.rc_channels_encode(ms, 8, *chans, 200)
         elif mid == sid["SYS_STATUS"]:
-            sensors = SENSORS_BASE | (MAV_SYS_STATUS_SENSOR_RC_RECEIVER if self.sticks_available(now) else 0)
-            c_msg = c.sys_status_encode(sensors, sensors, sensors, 100, 16000, 500, 80, 0, 0, 0, 0, 0, 0)
+            sensors = SENSORS_BASE | (
+                MAV_SYS_STATUS_SENSOR_RC_RECEIVER if self.sticks_available(now) else 0
+            )
+            c_msg = c.sys_status_encode(
+                sensors, sensors, sensors, 100, 16000, 500, 80, 0, 0, 0, 0, 0, 0
+            )
         elif mid == sid["EXTENDED_SYS_STATE"]:
-            c_msg = c.extended_sys_state_encode(0, MAV_LANDED_STATE_ON_GROUND if self.landed
-                                                else MAV_LANDED_STATE_IN_AIR)
+            c_msg = c.extended_sys_state_encode(
+                0, MAV_LANDED_STATE_ON_GROUND if self.landed else MAV_LANDED_STATE_IN_AIR
+            )
         elif mid == sid["HOME_POSITION"]:
-            c_msg = c.home_position_encode(int(HOME_LAT * 1e7), int(HOME_LON * 1e7), int(HOME_ALT * 1000),
-                                           0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, us)
+            c_msg = c.home_position_encode(
+                int(HOME_LAT * 1e7),
+                int(HOME_LON * 1e7),
+                int(HOME_ALT * 1000),
+                0.0,
+                0.0,
+                0.0,
+                [1.0, 0.0, 0.0, 0.0],
+                0.0,
+                0.0,
+                0.0,
+                us,
+            )
         elif mid == sid["ODOMETRY"]:
             # EKF2 vehicle_odometry: timestamp_sample = IMU sample time (before the publish
             # time that stamps ATTITUDE_QUATERNION / LOCAL_POSITION_NED); pose and velocity NED
@@ -937,10 +1089,20 @@ class SimVehicle:
                 pose_cov[i] = var
             for i in (0, 6, 11):
                 vel_cov[i] = 1e-4
-            c_msg = c.odometry_encode(int(tv * 1e6), MAV_FRAME_LOCAL_NED, MAV_FRAME_LOCAL_NED,
-                                      *[float(a) for a in x[0:3]], [float(a) for a in q],
-                                      *[float(a) for a in v_ned], *[float(a) for a in x[9:12]],
-                                      pose_cov, vel_cov, 0, MAV_ESTIMATOR_TYPE_AUTOPILOT, 0)
+            c_msg = c.odometry_encode(
+                int(tv * 1e6),
+                MAV_FRAME_LOCAL_NED,
+                MAV_FRAME_LOCAL_NED,
+                *[float(a) for a in x[0:3]],
+                [float(a) for a in q],
+                *[float(a) for a in v_ned],
+                *[float(a) for a in x[9:12]],
+                pose_cov,
+                vel_cov,
+                0,
+                MAV_ESTIMATOR_TYPE_AUTOPILOT,
+                0,
+            )
         else:
             return
         self.link.send(c_msg)
@@ -953,8 +1115,10 @@ def _route_source(host: str, port: int) -> str:
         s.connect((host, port))
         return str(s.getsockname()[0])
     except OSError as exc:
-        raise LpvSysidError(f"sim vehicle: no local interface routes to {host}:{port} ({exc}); "
-                            "give the local address with bind (--bind HOST[:PORT])") from None
+        raise LpvSysidError(
+            f"sim vehicle: no local interface routes to {host}:{port} ({exc}); "
+            "give the local address with bind (--bind HOST[:PORT])"
+        ) from None
     finally:
         s.close()
 

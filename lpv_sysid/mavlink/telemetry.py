@@ -52,12 +52,16 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io import frames
-from lpv_sysid.mavlink.rotor_estimate import (ESC, ESTIMATED, RotorEstimateConfig,
-                                              RotorSpeedEstimator)
+from lpv_sysid.mavlink.rotor_estimate import (
+    ESC,
+    ESTIMATED,
+    RotorEstimateConfig,
+    RotorSpeedEstimator,
+)
 
 RPM_TO_RAD_S = 2.0 * math.pi / 60.0
-REBOOT_JUMP_S = 10.0          # vehicle time more than this far back: reboot, accept
-_U32_US = 2 ** 32             # SERVO_OUTPUT_RAW.time_usec is uint32 (wraps after 71.6 min)
+REBOOT_JUMP_S = 10.0  # vehicle time more than this far back: reboot, accept
+_U32_US = 2**32  # SERVO_OUTPUT_RAW.time_usec is uint32 (wraps after 71.6 min)
 
 #: attitude / position sources in order of preference (message types)
 ATTITUDE_SOURCES = ("ATTITUDE_QUATERNION", "ATTITUDE", "ODOMETRY")
@@ -90,25 +94,25 @@ class StateSample:
     vel_ned: np.ndarray
     q_wxyz: np.ndarray
     euler: np.ndarray
-    v_body: np.ndarray          # (u, v, w) FRD
-    omega: np.ndarray           # (p, q, r) FRD
-    skew: float = 0.0           # |vehicle time of attitude - vehicle time of velocity| [s]
+    v_body: np.ndarray  # (u, v, w) FRD
+    omega: np.ndarray  # (p, q, r) FRD
+    skew: float = 0.0  # |vehicle time of attitude - vehicle time of velocity| [s]
 
 
 @dataclass(frozen=True)
 class ImuSample:
     t: float
     t_vehicle: float
-    accel_frd: np.ndarray       # specific force [m/s^2]
-    gyro_frd: np.ndarray        # [rad/s]
+    accel_frd: np.ndarray  # specific force [m/s^2]
+    gyro_frd: np.ndarray  # [rad/s]
 
 
 @dataclass(frozen=True)
 class RotorSample:
     t: float
     t_vehicle: float
-    omega: np.ndarray           # rotor speeds rad/s, PX4 motor numbering 1..n
-    source: str = ESC           # "esc" (ESC_STATUS) | "estimated" (motor outputs, Eq. 8)
+    omega: np.ndarray  # rotor speeds rad/s, PX4 motor numbering 1..n
+    source: str = ESC  # "esc" (ESC_STATUS) | "estimated" (motor outputs, Eq. 8)
 
 
 @dataclass
@@ -116,22 +120,31 @@ class TelemetryStats:
     decoded: int = 0
     out_of_order: int = 0
     invalid: int = 0
-    foreign: int = 0            # telemetry from a source other than the target
-    untargeted: int = 0         # telemetry before the target was known
+    foreign: int = 0  # telemetry from a source other than the target
+    untargeted: int = 0  # telemetry before the target was known
     esc_zero_while_running: int = 0
 
 
 @dataclass
 class _Latest:
-    t: float = -math.inf            # receive time
-    tv: float = -math.inf           # vehicle time
+    t: float = -math.inf  # receive time
+    tv: float = -math.inf  # vehicle time
     value: Any = None
 
 
 #: staleness keys: what reached the decoder, per quantity (newest of its sources)
 STREAMS = ("attitude", "position", "imu", "rotors", "esc", "motor_outputs")
-_SLOTS = ("ATTITUDE_QUATERNION", "ATTITUDE", "LOCAL_POSITION_NED", "ODOMETRY", "HIGHRES_IMU",
-          "ESC_STATUS", "ACTUATOR_OUTPUT_STATUS", "SERVO_OUTPUT_RAW", "rotors")
+_SLOTS = (
+    "ATTITUDE_QUATERNION",
+    "ATTITUDE",
+    "LOCAL_POSITION_NED",
+    "ODOMETRY",
+    "HIGHRES_IMU",
+    "ESC_STATUS",
+    "ACTUATOR_OUTPUT_STATUS",
+    "SERVO_OUTPUT_RAW",
+    "rotors",
+)
 
 
 class TelemetryDecoder:
@@ -144,9 +157,14 @@ class TelemetryDecoder:
     ``source_filter``: decode only messages from :attr:`target` ``(system, component)``.
     """
 
-    def __init__(self, n_rotors: int = 4, max_age: float = 0.5,
-                 rotor_estimate: RotorEstimateConfig | None = None,
-                 source_filter: bool = False, target: tuple[int, int] | None = None) -> None:
+    def __init__(
+        self,
+        n_rotors: int = 4,
+        max_age: float = 0.5,
+        rotor_estimate: RotorEstimateConfig | None = None,
+        source_filter: bool = False,
+        target: tuple[int, int] | None = None,
+    ) -> None:
         self.n_rotors = n_rotors
         self.max_age = max_age
         self.stats = TelemetryStats()
@@ -157,15 +175,19 @@ class TelemetryDecoder:
         self._rotors = np.full(n_rotors, np.nan)
         self._esc_valid_t = -math.inf
         self._servo_wraps = 0
-        self.rotor_config = rotor_estimate if rotor_estimate is not None and rotor_estimate.enabled else None
+        self.rotor_config = (
+            rotor_estimate if rotor_estimate is not None and rotor_estimate.enabled else None
+        )
         self.estimator: RotorSpeedEstimator | None = None
         if self.rotor_config is not None:
             if len(self.rotor_config.motor_outputs) != n_rotors:
-                raise ConfigError(f"rotor_estimate.motor_outputs lists {len(self.rotor_config.motor_outputs)} "
-                                  f"channels for {n_rotors} rotors")
+                raise ConfigError(
+                    f"rotor_estimate.motor_outputs lists {len(self.rotor_config.motor_outputs)} "
+                    f"channels for {n_rotors} rotors"
+                )
             self.estimator = RotorSpeedEstimator.from_config(self.rotor_config)
         self._motor_source: str | None = None
-        self.rotor_source: str | None = None          # source of the newest RotorSample
+        self.rotor_source: str | None = None  # source of the newest RotorSample
         self._handlers = {
             "ATTITUDE_QUATERNION": self._attitude_quaternion,
             "ATTITUDE": self._attitude_euler,
@@ -208,9 +230,14 @@ class TelemetryDecoder:
         def age(*slots: str) -> float:
             return now - max(L[s].t for s in slots)
 
-        return {"attitude": age(*ATTITUDE_SOURCES), "position": age(*POSITION_SOURCES),
-                "imu": age("HIGHRES_IMU"), "rotors": age("rotors"), "esc": age("ESC_STATUS"),
-                "motor_outputs": age(*MOTOR_OUTPUT_SOURCES)}
+        return {
+            "attitude": age(*ATTITUDE_SOURCES),
+            "position": age(*POSITION_SOURCES),
+            "imu": age("HIGHRES_IMU"),
+            "rotors": age("rotors"),
+            "esc": age("ESC_STATUS"),
+            "motor_outputs": age(*MOTOR_OUTPUT_SOURCES),
+        }
 
     def latest_state(self, now: float) -> StateSample | None:
         return self._state(now)
@@ -257,7 +284,11 @@ class TelemetryDecoder:
             raise ValueError("invalid quaternion")
         q = np.array([m.q1 / n, m.q2 / n, m.q3 / n, m.q4 / n])
         omega = np.array([m.rollspeed, m.pitchspeed, m.yawspeed], dtype=float)
-        if not (math.isfinite(m.rollspeed) and math.isfinite(m.pitchspeed) and math.isfinite(m.yawspeed)):
+        if not (
+            math.isfinite(m.rollspeed)
+            and math.isfinite(m.pitchspeed)
+            and math.isfinite(m.yawspeed)
+        ):
             raise ValueError("invalid rates")
         if not self._accept("ATTITUDE_QUATERNION", m.time_boot_ms * 1e-3, now, (q, omega)):
             return None
@@ -301,7 +332,14 @@ class TelemetryDecoder:
         return self._on_state_source("ODOMETRY", now)
 
     def _highres_imu(self, m: Any, now: float) -> list[Any] | None:
-        v = (float(m.xacc), float(m.yacc), float(m.zacc), float(m.xgyro), float(m.ygyro), float(m.zgyro))
+        v = (
+            float(m.xacc),
+            float(m.yacc),
+            float(m.zacc),
+            float(m.xgyro),
+            float(m.ygyro),
+            float(m.zgyro),
+        )
         if not all(map(math.isfinite, v)):
             raise ValueError("invalid imu")
         acc = np.array(v[0:3])
@@ -326,11 +364,15 @@ class TelemetryDecoder:
             if k < self.n_rotors:
                 self._rotors[k] = abs(float(rpm)) * RPM_TO_RAD_S
         if base + len(m.rpm) < self.n_rotors or np.isnan(self._rotors).any():
-            return None      # wait for the rest of the ESCs
+            return None  # wait for the rest of the ESCs
         est = self.estimator.omega if self.estimator is not None else None
-        if (not self._rotors.any() and est is not None and est.any()
-                and now - self._latest_motor_t() <= self.rotor_config.max_gap):
-            self.stats.esc_zero_while_running += 1      # no rpm telemetry: not a measurement
+        if (
+            not self._rotors.any()
+            and est is not None
+            and est.any()
+            and now - self._latest_motor_t() <= self.rotor_config.max_gap
+        ):
+            self.stats.esc_zero_while_running += 1  # no rpm telemetry: not a measurement
             return None
         self._esc_valid_t = now
         lat = self._latest["rotors"]
@@ -343,67 +385,94 @@ class TelemetryDecoder:
 
     def _actuator_output_status(self, m: Any, now: float) -> list[Any] | None:
         if self.estimator is None or self.rotor_config.source == "servo_output_raw":
-            self._latest["ACTUATOR_OUTPUT_STATUS"].t = now      # seen (staleness), not used
+            self._latest["ACTUATOR_OUTPUT_STATUS"].t = now  # seen (staleness), not used
             return None
         act = list(m.actuator)
         n_active = int(m.active)
         chans = self.rotor_config.motor_outputs
         if max(chans) > min(n_active, len(act)):
             raise ValueError(f"motor output {max(chans)} not among the {n_active} active outputs")
-        return self._motor_outputs("ACTUATOR_OUTPUT_STATUS", m.time_usec * 1e-6,
-                                   [float(act[c - 1]) for c in chans], now)
+        return self._motor_outputs(
+            "ACTUATOR_OUTPUT_STATUS", m.time_usec * 1e-6, [float(act[c - 1]) for c in chans], now
+        )
 
     def _servo_output_raw(self, m: Any, now: float) -> list[Any] | None:
         cfg = self.rotor_config
-        if self.estimator is None or cfg.source == "actuator_output_status" or int(m.port) != cfg.servo_port:
-            self._latest["SERVO_OUTPUT_RAW"].t = now            # seen (staleness), not used
+        if (
+            self.estimator is None
+            or cfg.source == "actuator_output_status"
+            or int(m.port) != cfg.servo_port
+        ):
+            self._latest["SERVO_OUTPUT_RAW"].t = now  # seen (staleness), not used
             return None
-        if (cfg.source == "auto"
-                and now - self._latest["ACTUATOR_OUTPUT_STATUS"].t <= cfg.max_gap):
-            return None       # ACTUATOR_OUTPUT_STATUS is streamed: one source only
+        if cfg.source == "auto" and now - self._latest["ACTUATOR_OUTPUT_STATUS"].t <= cfg.max_gap:
+            return None  # ACTUATOR_OUTPUT_STATUS is streamed: one source only
         us = int(m.time_usec) + self._servo_wraps * _U32_US
         last = self._latest["SERVO_OUTPUT_RAW"].tv
         if math.isfinite(last) and last * 1e6 - us > _U32_US / 2:
-            self._servo_wraps += 1            # uint32 microseconds wrapped
+            self._servo_wraps += 1  # uint32 microseconds wrapped
             us += _U32_US
         raw = [getattr(m, f"servo{c}_raw") for c in cfg.motor_outputs]
         return self._motor_outputs("SERVO_OUTPUT_RAW", us * 1e-6, [float(x) for x in raw], now)
 
-    def _motor_outputs(self, slot: str, tv: float, outputs: list[float], now: float) -> list[Any] | None:
+    def _motor_outputs(
+        self, slot: str, tv: float, outputs: list[float], now: float
+    ) -> list[Any] | None:
         if not self._accept(slot, tv, now, outputs):
             return None
         if slot != self._motor_source:
-            self.estimator.reset()            # other source, other clock: restart
+            self.estimator.reset()  # other source, other clock: restart
             self._motor_source = slot
         omega = self.estimator.update(tv, outputs)
         if self.esc_fresh(now):
-            return None                       # measured speeds win
+            return None  # measured speeds win
         lat = self._latest["rotors"]
         lat.t, lat.tv, lat.value = now, tv, ESTIMATED
         self.rotor_source = ESTIMATED
         return [RotorSample(now, tv, omega, ESTIMATED)]
 
     # -------------------------------------------------------------- state
-    def _state(self, now: float, sa: str | None = None, sp: str | None = None) -> StateSample | None:
-        if sa is None or sp is None:        # the caller may pass the selected sources
+    def _state(
+        self, now: float, sa: str | None = None, sp: str | None = None
+    ) -> StateSample | None:
+        if sa is None or sp is None:  # the caller may pass the selected sources
             sa, sp = self._selected(ATTITUDE_SOURCES, now), self._selected(POSITION_SOURCES, now)
         if sa is None or sp is None:
             return None
         a, p = self._latest[sa], self._latest[sp]
         q, omega = a.value[0], a.value[1]
         pos, vel = (p.value[2], p.value[3]) if sp == "ODOMETRY" else p.value
-        R, euler = frames.rotation_euler_from_quaternion_scalar(float(q[0]), float(q[1]), float(q[2]), float(q[3]))
+        R, euler = frames.rotation_euler_from_quaternion_scalar(
+            float(q[0]), float(q[1]), float(q[2]), float(q[3])
+        )
         vn, ve, vd = float(vel[0]), float(vel[1]), float(vel[2])
-        v_body = np.array([R[0][0] * vn + R[1][0] * ve + R[2][0] * vd,      # R_IB^T v_ned
-                           R[0][1] * vn + R[1][1] * ve + R[2][1] * vd,
-                           R[0][2] * vn + R[1][2] * ve + R[2][2] * vd])
-        return StateSample(now, max(a.tv, p.tv), pos, vel, q, euler, v_body, omega, abs(a.tv - p.tv))
+        v_body = np.array(
+            [
+                R[0][0] * vn + R[1][0] * ve + R[2][0] * vd,  # R_IB^T v_ned
+                R[0][1] * vn + R[1][1] * ve + R[2][1] * vd,
+                R[0][2] * vn + R[1][2] * ve + R[2][2] * vd,
+            ]
+        )
+        return StateSample(
+            now, max(a.tv, p.tv), pos, vel, q, euler, v_body, omega, abs(a.tv - p.tv)
+        )
 
     def _state_list(self, now: float) -> list[Any]:
         s = self._state(now)
         return [s] if s is not None else []
 
 
-__all__ = ["TelemetryDecoder", "TelemetryStats", "StateSample", "ImuSample", "RotorSample",
-           "ATTITUDE_SOURCES", "POSITION_SOURCES", "MOTOR_OUTPUT_SOURCES", "RPM_TO_RAD_S",
-           "quat_to_dcm", "quat_to_euler", "euler_to_quat"]
+__all__ = [
+    "TelemetryDecoder",
+    "TelemetryStats",
+    "StateSample",
+    "ImuSample",
+    "RotorSample",
+    "ATTITUDE_SOURCES",
+    "POSITION_SOURCES",
+    "MOTOR_OUTPUT_SOURCES",
+    "RPM_TO_RAD_S",
+    "quat_to_dcm",
+    "quat_to_euler",
+    "euler_to_quat",
+]

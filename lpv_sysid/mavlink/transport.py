@@ -36,7 +36,7 @@ from lpv_sysid.errors import ConfigError, SafetyError
 
 MAV_FRAME_LOCAL_NED = 1
 MAV_FRAME_BODY_NED = 8
-TYPE_MASK_VELOCITY = 0x0FC7          # ignore position, acceleration, force, yaw, yaw rate
+TYPE_MASK_VELOCITY = 0x0FC7  # ignore position, acceleration, force, yaw, yaw rate
 TYPE_MASK_VELOCITY_YAW_RATE = 0x07C7  # as above but yaw rate used
 ATTITUDE_TARGET_IGNORE_ATTITUDE = 128  # ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE
 _SQ2 = math.sqrt(2.0) / 2.0
@@ -64,8 +64,8 @@ class TransportContext:
     time_boot_ms: int
     target_system: int
     target_component: int
-    q_wxyz: np.ndarray | None = None      # latest attitude (FRD -> NED)
-    omega: np.ndarray | None = None       # latest body rates FRD
+    q_wxyz: np.ndarray | None = None  # latest attitude (FRD -> NED)
+    omega: np.ndarray | None = None  # latest body rates FRD
 
 
 class SetpointTransport(Protocol):
@@ -110,16 +110,35 @@ class VelocityTransport:
             raise SafetyError("yaw-rate setpoint is not finite")
         if self.frame == "local_ned":
             if ctx.q_wxyz is None:
-                raise SafetyError("local_ned velocity setpoint needs the vehicle attitude (no telemetry)")
+                raise SafetyError(
+                    "local_ned velocity setpoint needs the vehicle attitude (no telemetry)"
+                )
             from lpv_sysid.mavlink.telemetry import quat_to_dcm
+
             v = quat_to_dcm(ctx.q_wxyz) @ v
             frame = MAV_FRAME_LOCAL_NED
         else:
             frame = MAV_FRAME_BODY_NED
-        return [codec.set_position_target_local_ned_encode(
-            ctx.time_boot_ms, ctx.target_system, ctx.target_component, frame, self.type_mask,
-            0.0, 0.0, 0.0, float(v[0]), float(v[1]), float(v[2]), 0.0, 0.0, 0.0,
-            0.0, r if self.use_yaw_rate else 0.0)]
+        return [
+            codec.set_position_target_local_ned_encode(
+                ctx.time_boot_ms,
+                ctx.target_system,
+                ctx.target_component,
+                frame,
+                self.type_mask,
+                0.0,
+                0.0,
+                0.0,
+                float(v[0]),
+                float(v[1]),
+                float(v[2]),
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                r if self.use_yaw_rate else 0.0,
+            )
+        ]
 
 
 class AttitudeRateTransport:
@@ -146,8 +165,12 @@ class AttitudeRateTransport:
 
     name = "attitude_rate"
 
-    def __init__(self, arm_length: float, rate_p: tuple[float, float, float] = (0.15, 0.15, 0.2),
-                 max_rate: float = 4.0) -> None:
+    def __init__(
+        self,
+        arm_length: float,
+        rate_p: tuple[float, float, float] = (0.15, 0.15, 0.2),
+        max_rate: float = 4.0,
+    ) -> None:
         if not (arm_length > 0 and math.isfinite(arm_length)):
             raise ConfigError(f"attitude_rate.arm_length must be positive, got {arm_length!r}")
         kp = np.asarray(rate_p, dtype=float)
@@ -158,7 +181,7 @@ class AttitudeRateTransport:
         self.max_rate = float(max_rate)
 
     def neutral(self) -> None:
-        return None     # no safe neutral without a model of the hover thrust: stream nothing
+        return None  # no safe neutral without a model of the hover thrust: stream nothing
 
     def thrust_torque(self, u: Any) -> tuple[float, np.ndarray]:
         ut, ua, ue, ur = _finite("actuator command", u, 4)
@@ -168,13 +191,23 @@ class AttitudeRateTransport:
         if ctx.omega is None:
             raise SafetyError("attitude_rate transport needs the body rates (no telemetry)")
         thrust, tau = self.thrust_torque(sp.u)
-        omega_sp = np.clip(np.asarray(ctx.omega, dtype=float) + tau / self.rate_p,
-                           -self.max_rate, self.max_rate)
+        omega_sp = np.clip(
+            np.asarray(ctx.omega, dtype=float) + tau / self.rate_p, -self.max_rate, self.max_rate
+        )
         thrust = min(max(thrust, 0.0), 1.0)
-        return [codec.set_attitude_target_encode(
-            ctx.time_boot_ms, ctx.target_system, ctx.target_component,
-            ATTITUDE_TARGET_IGNORE_ATTITUDE, [1.0, 0.0, 0.0, 0.0],
-            float(omega_sp[0]), float(omega_sp[1]), float(omega_sp[2]), thrust)]
+        return [
+            codec.set_attitude_target_encode(
+                ctx.time_boot_ms,
+                ctx.target_system,
+                ctx.target_component,
+                ATTITUDE_TARGET_IGNORE_ATTITUDE,
+                [1.0, 0.0, 0.0, 0.0],
+                float(omega_sp[0]),
+                float(omega_sp[1]),
+                float(omega_sp[2]),
+                thrust,
+            )
+        ]
 
 
 #: inputs of the rate plant, in the order of SET_ATTITUDE_TARGET's fields (thrust last there)
@@ -196,18 +229,22 @@ class RateSetpointTransport:
     name = "attitude_rate"
     input_form = "rate_setpoint"
 
-    def __init__(self, max_rate: float = 2.0, thrust_min: float = 0.05, thrust_max: float = 0.95) -> None:
+    def __init__(
+        self, max_rate: float = 2.0, thrust_min: float = 0.05, thrust_max: float = 0.95
+    ) -> None:
         if not (math.isfinite(max_rate) and max_rate > 0):
             raise ConfigError(f"rate_setpoint.max_rate must be positive, got {max_rate!r}")
         if not (0.0 <= thrust_min < thrust_max <= 1.0):
-            raise ConfigError(f"rate_setpoint thrust range must satisfy 0 <= min < max <= 1, got "
-                              f"[{thrust_min!r}, {thrust_max!r}]")
+            raise ConfigError(
+                f"rate_setpoint thrust range must satisfy 0 <= min < max <= 1, got "
+                f"[{thrust_min!r}, {thrust_max!r}]"
+            )
         self.max_rate = float(max_rate)
         self.thrust_min = float(thrust_min)
         self.thrust_max = float(thrust_max)
 
     def neutral(self) -> None:
-        return None     # the hover thrust is vehicle-specific: stream only what the law commands
+        return None  # the hover thrust is vehicle-specific: stream only what the law commands
 
     def clip(self, u: Any) -> np.ndarray:
         """The command PX4 receives: thrust in [thrust_min, thrust_max], rates in +-max_rate."""
@@ -218,17 +255,28 @@ class RateSetpointTransport:
 
     def encode(self, codec: Any, sp: ActuatorSetpoint, ctx: TransportContext) -> list[Any]:
         a = self.clip(sp.u)
-        return [codec.set_attitude_target_encode(
-            ctx.time_boot_ms, ctx.target_system, ctx.target_component,
-            ATTITUDE_TARGET_IGNORE_ATTITUDE, [1.0, 0.0, 0.0, 0.0],
-            float(a[1]), float(a[2]), float(a[3]), float(a[0]))]
+        return [
+            codec.set_attitude_target_encode(
+                ctx.time_boot_ms,
+                ctx.target_system,
+                ctx.target_component,
+                ATTITUDE_TARGET_IGNORE_ATTITUDE,
+                [1.0, 0.0, 0.0, 0.0],
+                float(a[1]),
+                float(a[2]),
+                float(a[3]),
+                float(a[0]),
+            )
+        ]
 
 
 def rate_setpoint_from_attitude_target(msg: Any) -> tuple[float, np.ndarray] | None:
     """(time_boot_ms / 1000, [thrust, p_sp, q_sp, r_sp]) of a PX4 ATTITUDE_TARGET, or None
     when a field is not finite. PX4 fills body_*_rate from vehicle_rates_setpoint and thrust
     from the attitude setpoint's -thrust_body[2] (normalised, as SET_ATTITUDE_TARGET takes it)."""
-    vals = np.array([msg.thrust, msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate], dtype=float)
+    vals = np.array(
+        [msg.thrust, msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate], dtype=float
+    )
     if not np.isfinite(vals).all():
         return None
     return float(msg.time_boot_ms) * 1e-3, vals
@@ -241,5 +289,7 @@ def make_transport(kind: str, **kw: Any) -> SetpointTransport:
         return AttitudeRateTransport(**kw)
     if kind == "rate_setpoint":
         return RateSetpointTransport(**kw)
-    raise ConfigError(f"command transport {kind!r} unknown; use 'velocity', 'attitude_rate' or 'rate_setpoint' "
-                      "(direct motor control needs uXRCE-DDS, see docs/px4_transport.md)")
+    raise ConfigError(
+        f"command transport {kind!r} unknown; use 'velocity', 'attitude_rate' or 'rate_setpoint' "
+        "(direct motor control needs uXRCE-DDS, see docs/px4_transport.md)"
+    )

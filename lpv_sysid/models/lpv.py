@@ -85,16 +85,21 @@ def _check_box(vmin: Sequence[float], vmax: Sequence[float]) -> tuple[np.ndarray
     lo = np.asarray(vmin, dtype=float).ravel()
     hi = np.asarray(vmax, dtype=float).ravel()
     if lo.shape != hi.shape or lo.size == 0:
-        raise ConfigError(f"scheduling box: min {lo.shape} and max {hi.shape} must be equal, non-empty")
+        raise ConfigError(
+            f"scheduling box: min {lo.shape} and max {hi.shape} must be equal, non-empty"
+        )
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
         raise ConfigError("scheduling box: min/max must be finite")
     if np.any(hi <= lo):
-        raise ConfigError(f"scheduling box: need max > min on every axis, got min={lo.tolist()} max={hi.tolist()}")
+        raise ConfigError(
+            f"scheduling box: need max > min on every axis, got min={lo.tolist()} max={hi.tolist()}"
+        )
     return lo, hi
 
 
-def multilinear_weights(v: Sequence[float], vmin: Sequence[float], vmax: Sequence[float]
-                        ) -> tuple[np.ndarray, bool]:
+def multilinear_weights(
+    v: Sequence[float], vmin: Sequence[float], vmax: Sequence[float]
+) -> tuple[np.ndarray, bool]:
     """alpha_i(v) of seed 0 Eq. (21) for the vertex order of :func:`box_vertices`.
 
     Returns (alpha (2**p,), clamped). ``clamped`` is True when v was outside the box and was
@@ -111,12 +116,13 @@ def multilinear_weights(v: Sequence[float], vmin: Sequence[float], vmax: Sequenc
     t = np.clip(t, 0.0, 1.0)
     alpha = np.ones(1)
     for tk in t:
-        alpha = np.kron(alpha, np.array([1.0 - tk, tk]))   # kron: first factor slowest
+        alpha = np.kron(alpha, np.array([1.0 - tk, tk]))  # kron: first factor slowest
     return alpha, clamped
 
 
-def multilinear_weight_gradient(v: Sequence[float], vmin: Sequence[float], vmax: Sequence[float]
-                                ) -> np.ndarray:
+def multilinear_weight_gradient(
+    v: Sequence[float], vmin: Sequence[float], vmax: Sequence[float]
+) -> np.ndarray:
     """d alpha_i / d v_k, shape (2**p, p), at a point clamped into the box (used by Eq. 34).
 
     Outside the box the clamped coordinate has zero derivative (the clamped model is flat).
@@ -129,7 +135,7 @@ def multilinear_weight_gradient(v: Sequence[float], vmin: Sequence[float], vmax:
     t = np.clip(t_raw, 0.0, 1.0)
     inside = (t_raw >= 0.0) & (t_raw <= 1.0)
     p = lo.size
-    grad = np.empty((2 ** p, p))
+    grad = np.empty((2**p, p))
     for k in range(p):
         g = np.ones(1)
         for l_ in range(p):
@@ -147,7 +153,7 @@ def multilinear_weight_gradient(v: Sequence[float], vmin: Sequence[float], vmax:
 class UncertainElement:
     """One identified matrix element with its interval (seed 0 Eq. 22)."""
 
-    matrix: str          # "A" or "B"
+    matrix: str  # "A" or "B"
     row: int
     col: int
     lower: float
@@ -157,9 +163,14 @@ class UncertainElement:
     @classmethod
     def from_dict(cls, d: dict) -> "UncertainElement":
         try:
-            el = cls(matrix=str(d["matrix"]), row=int(d["row"]), col=int(d["col"]),
-                     lower=float(d["lower"]), upper=float(d["upper"]),
-                     nominal=None if d.get("nominal") is None else float(d["nominal"]))
+            el = cls(
+                matrix=str(d["matrix"]),
+                row=int(d["row"]),
+                col=int(d["col"]),
+                lower=float(d["lower"]),
+                upper=float(d["upper"]),
+                nominal=None if d.get("nominal") is None else float(d["nominal"]),
+            )
         except KeyError as exc:
             raise ConfigError(f"uncertain element {d!r}: missing key {exc}") from None
         except (TypeError, ValueError) as exc:
@@ -167,13 +178,19 @@ class UncertainElement:
         if el.matrix not in ("A", "B"):
             raise ConfigError(f"uncertain element: 'matrix' must be 'A' or 'B', got {el.matrix!r}")
         if not (np.isfinite(el.lower) and np.isfinite(el.upper)) or el.upper < el.lower:
-            raise ConfigError(f"uncertain element {el.matrix}[{el.row},{el.col}]: need finite lower <= upper, "
-                              f"got [{el.lower}, {el.upper}]")
+            raise ConfigError(
+                f"uncertain element {el.matrix}[{el.row},{el.col}]: need finite lower <= upper, "
+                f"got [{el.lower}, {el.upper}]"
+            )
         return el
 
 
-def uncertainty_vertices(A: np.ndarray, B: np.ndarray, elements: Sequence[UncertainElement],
-                         max_corners: int = MAX_CORNERS_DEFAULT) -> list[tuple[np.ndarray, np.ndarray]]:
+def uncertainty_vertices(
+    A: np.ndarray,
+    B: np.ndarray,
+    elements: Sequence[UncertainElement],
+    max_corners: int = MAX_CORNERS_DEFAULT,
+) -> list[tuple[np.ndarray, np.ndarray]]:
     """Lambda_i^j of seed 0 Eq. (23): all 2**p corners of the interval box of the elements.
 
     Corner order: itertools.product over (lower, upper) per element, first element slowest.
@@ -186,14 +203,17 @@ def uncertainty_vertices(A: np.ndarray, B: np.ndarray, elements: Sequence[Uncert
     for el in elements:
         mat = A if el.matrix == "A" else B
         if not (0 <= el.row < mat.shape[0] and 0 <= el.col < mat.shape[1]):
-            raise ConfigError(f"uncertain element {el.matrix}[{el.row},{el.col}] outside shape {mat.shape}")
+            raise ConfigError(
+                f"uncertain element {el.matrix}[{el.row},{el.col}] outside shape {mat.shape}"
+            )
         if el.upper > el.lower:
             free.append(el)
     n_corners = 2 ** len(free)
     if n_corners > max_corners:
         raise ConfigError(
             f"{len(free)} uncertain elements give {n_corners} corners (> max_corners={max_corners}); "
-            "pass an explicit list of vertex systems (ident.uncertainty) or raise max_corners")
+            "pass an explicit list of vertex systems (ident.uncertainty) or raise max_corners"
+        )
     base_A, base_B = A.copy(), B.copy()
     for el in elements:
         if el.upper == el.lower:
@@ -243,8 +263,9 @@ class CommonInputSet:
         return replace(self, corners=c + rho * (corners - c))
 
 
-def input_hull(B: np.ndarray, elements: Sequence[Sequence[UncertainElement]]
-               ) -> tuple[np.ndarray, list[UncertainElement], np.ndarray, np.ndarray]:
+def input_hull(
+    B: np.ndarray, elements: Sequence[Sequence[UncertainElement]]
+) -> tuple[np.ndarray, list[UncertainElement], np.ndarray, np.ndarray]:
     """Interval hull over all scheduling vertices of the input matrix (module docstring).
 
     ``B`` (N, n, m) nominal vertex input matrices, ``elements[i]`` the uncertain elements of vertex
@@ -257,8 +278,10 @@ def input_hull(B: np.ndarray, elements: Sequence[Sequence[UncertainElement]]
     """
     B = np.asarray(B, dtype=float)
     if B.ndim != 3 or len(elements) != B.shape[0]:
-        raise ConfigError(f"input_hull: need B (N, n, m) and one element list per vertex, got {B.shape} "
-                          f"and {len(elements)} lists")
+        raise ConfigError(
+            f"input_hull: need B (N, n, m) and one element list per vertex, got {B.shape} "
+            f"and {len(elements)} lists"
+        )
     lo = B.min(axis=0)
     hi = B.max(axis=0)
     nom_lo, nom_hi = lo.copy(), hi.copy()
@@ -267,8 +290,10 @@ def input_hull(B: np.ndarray, elements: Sequence[Sequence[UncertainElement]]
             if el.matrix != "B":
                 continue
             if not (0 <= el.row < B.shape[1] and 0 <= el.col < B.shape[2]):
-                raise ConfigError(f"uncertain element B[{el.row},{el.col}] outside shape {B.shape[1:]} "
-                                  f"(vertex {i})")
+                raise ConfigError(
+                    f"uncertain element B[{el.row},{el.col}] outside shape {B.shape[1:]} "
+                    f"(vertex {i})"
+                )
             lo[el.row, el.col] = min(lo[el.row, el.col], el.lower)
             hi[el.row, el.col] = max(hi[el.row, el.col], el.upper)
     base = B[0].copy()
@@ -276,22 +301,35 @@ def input_hull(B: np.ndarray, elements: Sequence[Sequence[UncertainElement]]
     hull = []
     for r, c in zip(*np.nonzero(hi > lo)):
         base[r, c] = mean[r, c]
-        hull.append(UncertainElement("B", int(r), int(c), float(lo[r, c]), float(hi[r, c]), float(mean[r, c])))
+        hull.append(
+            UncertainElement(
+                "B", int(r), int(c), float(lo[r, c]), float(hi[r, c]), float(mean[r, c])
+            )
+        )
     return base, hull, nom_lo, nom_hi
 
 
-def input_corners(base_B: np.ndarray, hull: Sequence[UncertainElement],
-                  max_corners: int = MAX_CORNERS_DEFAULT) -> np.ndarray:
+def input_corners(
+    base_B: np.ndarray, hull: Sequence[UncertainElement], max_corners: int = MAX_CORNERS_DEFAULT
+) -> np.ndarray:
     """All 2**p corners B^b of the hull box (order of :func:`uncertainty_vertices`), (M_B, n, m)."""
     base_B = np.asarray(base_B, dtype=float)
     n = base_B.shape[0]
-    return np.array([b for _, b in uncertainty_vertices(np.zeros((n, n)), base_B, hull, max_corners)])
+    return np.array(
+        [b for _, b in uncertainty_vertices(np.zeros((n, n)), base_B, hull, max_corners)]
+    )
 
 
 def product_systems(a_corners: Sequence[Sequence[np.ndarray]], common: CommonInputSet) -> list:
     """Lambda_i^(a,b) = (A_i^a, B^b), flattened as j = a * M_B + b (A slowest), module docstring."""
-    return [[(np.asarray(Aa, dtype=float), np.asarray(Bb, dtype=float)) for Aa in lst for Bb in common.corners]
-            for lst in a_corners]
+    return [
+        [
+            (np.asarray(Aa, dtype=float), np.asarray(Bb, dtype=float))
+            for Aa in lst
+            for Bb in common.corners
+        ]
+        for lst in a_corners
+    ]
 
 
 # --------------------------------------------------------------------------- element box (LFT)
@@ -325,9 +363,13 @@ class ElementBox:
         for i, (r, c, h) in enumerate(zip(self.rows, self.cols, self.half)):
             r, c, h = np.asarray(r), np.asarray(c), np.asarray(h, dtype=float)
             if not (r.shape == c.shape == h.shape) or r.ndim != 1:
-                raise ConfigError(f"element box: vertex {i}: rows/cols/half must be 1-D of one length")
+                raise ConfigError(
+                    f"element box: vertex {i}: rows/cols/half must be 1-D of one length"
+                )
             if r.size and (r.min() < 0 or r.max() >= n or c.min() < 0 or c.max() >= n + m):
-                raise ConfigError(f"element box: vertex {i}: element outside [A, B] ({n} x {n + m})")
+                raise ConfigError(
+                    f"element box: vertex {i}: element outside [A, B] ({n} x {n + m})"
+                )
             if not np.all(np.isfinite(h)) or np.any(h <= 0):
                 raise ConfigError(f"element box: vertex {i}: half-widths must be finite and > 0")
             if len(set(zip(r.tolist(), c.tolist()))) != r.size:
@@ -351,8 +393,11 @@ class ElementBox:
         return [int(np.size(r)) for r in self.rows]
 
     def arrays(self, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return (np.asarray(self.rows[i], dtype=int), np.asarray(self.cols[i], dtype=int),
-                np.asarray(self.half[i], dtype=float))
+        return (
+            np.asarray(self.rows[i], dtype=int),
+            np.asarray(self.cols[i], dtype=int),
+            np.asarray(self.half[i], dtype=float),
+        )
 
     def system(self, i: int, delta: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
         """(A_i(delta), B(delta)) for delta in [-1, 1]^p_i (module docstring)."""
@@ -360,16 +405,20 @@ class ElementBox:
         d = np.asarray(delta, dtype=float)
         if d.shape != h.shape:
             raise ConfigError(f"element box: vertex {i} has {h.size} elements, delta has {d.size}")
-        AB = np.concatenate([np.asarray(self.A_centre[i], dtype=float), np.asarray(self.B_centre, dtype=float)],
-                            axis=1)
+        AB = np.concatenate(
+            [np.asarray(self.A_centre[i], dtype=float), np.asarray(self.B_centre, dtype=float)],
+            axis=1,
+        )
         np.add.at(AB, (r, c), d * h)
-        return AB[:, :self.n].copy(), AB[:, self.n:].copy()
+        return AB[:, : self.n].copy(), AB[:, self.n :].copy()
 
     def bounds(self, i: int) -> tuple[np.ndarray, np.ndarray]:
         """Elementwise [lower, upper] of [A_i, B] over the box ((n, n + m) each)."""
         r, c, h = self.arrays(i)
-        AB = np.concatenate([np.asarray(self.A_centre[i], dtype=float), np.asarray(self.B_centre, dtype=float)],
-                            axis=1)
+        AB = np.concatenate(
+            [np.asarray(self.A_centre[i], dtype=float), np.asarray(self.B_centre, dtype=float)],
+            axis=1,
+        )
         lo, hi = AB.copy(), AB.copy()
         np.add.at(lo, (r, c), -h)
         np.add.at(hi, (r, c), h)
@@ -386,7 +435,9 @@ class ElementBox:
             lo, hi = self.bounds(i)
             A_i, B_i = (np.asarray(x, dtype=float) for x in nominal[i])
             AB = np.concatenate([A_i, B_i], axis=1)
-            if np.all(AB >= lo - 1e-12 * (1 + np.abs(lo))) and np.all(AB <= hi + 1e-12 * (1 + np.abs(hi))):
+            if np.all(AB >= lo - 1e-12 * (1 + np.abs(lo))) and np.all(
+                AB <= hi + 1e-12 * (1 + np.abs(hi))
+            ):
                 lst.append((A_i.copy(), B_i.copy()))
             while len(lst) < count:
                 lst.append(self.system(i, rng.choice([-1.0, 1.0], size=self.p[i])))
@@ -394,14 +445,21 @@ class ElementBox:
         return out
 
     @classmethod
-    def from_elements(cls, A: np.ndarray, B: np.ndarray, elements: Sequence[Sequence[UncertainElement]],
-                      labels: Optional[Sequence[Sequence[str]]] = None) -> "ElementBox":
+    def from_elements(
+        cls,
+        A: np.ndarray,
+        B: np.ndarray,
+        elements: Sequence[Sequence[UncertainElement]],
+        labels: Optional[Sequence[Sequence[str]]] = None,
+    ) -> "ElementBox":
         """The box of ``elements[i]`` (A and B elements of vertex i with [lower, upper]); the B
         elements become the common hull of :func:`input_hull` (vertex-varying B entries too)."""
         A = np.asarray(A, dtype=float)
         B = np.asarray(B, dtype=float)
         if len(elements) != A.shape[0]:
-            raise ConfigError(f"element box: {len(elements)} element lists for {A.shape[0]} vertices")
+            raise ConfigError(
+                f"element box: {len(elements)} element lists for {A.shape[0]} vertices"
+            )
         n, m = B.shape[1:]
         base, hull, _, _ = input_hull(B, elements)
         Bc = base.copy()
@@ -419,7 +477,9 @@ class ElementBox:
                 if e.matrix != "A":
                     continue
                 if not (0 <= e.row < n and 0 <= e.col < n):
-                    raise ConfigError(f"element box: vertex {i}: A[{e.row},{e.col}] outside {n} x {n}")
+                    raise ConfigError(
+                        f"element box: vertex {i}: A[{e.row},{e.col}] outside {n} x {n}"
+                    )
                 Ac[i, e.row, e.col] = 0.5 * (e.lower + e.upper)
                 if e.upper > e.lower:
                     r_.append(e.row)
@@ -443,35 +503,51 @@ def corner_box(model: "PolytopicModel") -> Optional[ElementBox]:
     rows, cols, half, centres = [], [], [], []
     b_ref = None
     for lst in model.systems:
-        AB = np.array([np.concatenate([np.asarray(a, dtype=float), np.asarray(b, dtype=float)], axis=1)
-                       for a, b in lst])
+        AB = np.array(
+            [
+                np.concatenate([np.asarray(a, dtype=float), np.asarray(b, dtype=float)], axis=1)
+                for a, b in lst
+            ]
+        )
         lo, hi = AB.min(axis=0), AB.max(axis=0)
         r, c = np.nonzero(hi > lo)
         q = r.size
-        if len(lst) != 2 ** q:
+        if len(lst) != 2**q:
             return None
         # every system must be a corner (each varying entry at lo or hi), each corner once
         at_hi = np.isclose(AB[:, r, c], hi[r, c], rtol=0, atol=0)
         at_lo = np.isclose(AB[:, r, c], lo[r, c], rtol=0, atol=0)
         if not np.all(at_hi | at_lo):
             return None
-        codes = at_hi.astype(np.int64) @ (1 << np.arange(q, dtype=np.int64)) if q else np.zeros(1, np.int64)
+        codes = (
+            at_hi.astype(np.int64) @ (1 << np.arange(q, dtype=np.int64))
+            if q
+            else np.zeros(1, np.int64)
+        )
         if np.unique(codes).size != len(lst):
             return None
-        bpart = [(int(a), int(b), float(lo[a, b]), float(hi[a, b])) for a, b in zip(r, c) if b >= n]
+        bpart = [
+            (int(a), int(b), float(lo[a, b]), float(hi[a, b])) for a, b in zip(r, c) if b >= n
+        ]
         fixed_b = 0.5 * (lo[:, n:] + hi[:, n:])
         if b_ref is None:
             b_ref = (bpart, fixed_b)
         elif bpart != b_ref[0] or not np.array_equal(fixed_b, b_ref[1]):
             return None
-        order = np.argsort(c >= n, kind="stable")       # A elements first, then the B part
+        order = np.argsort(c >= n, kind="stable")  # A elements first, then the B part
         rows.append(r[order])
         cols.append(c[order])
         half.append(0.5 * (hi[r, c] - lo[r, c])[order])
         centres.append(0.5 * (lo + hi))
     Ac = np.array([ctr[:, :n] for ctr in centres])
-    return ElementBox(Ac, centres[0][:, n:], tuple(rows), tuple(cols), tuple(half),
-                      tuple(("corner polytope",) * int(np.size(r)) for r in rows))
+    return ElementBox(
+        Ac,
+        centres[0][:, n:],
+        tuple(rows),
+        tuple(cols),
+        tuple(half),
+        tuple(("corner polytope",) * int(np.size(r)) for r in rows),
+    )
 
 
 # --------------------------------------------------------------------------- the polytope
@@ -505,11 +581,13 @@ class PolytopicModel:
     def __post_init__(self) -> None:
         self.vmin, self.vmax = _check_box(self.vmin, self.vmax)
         p = self.vmin.size
-        N = 2 ** p
+        N = 2**p
         self.A = np.asarray(self.A, dtype=float)
         self.B = np.asarray(self.B, dtype=float)
         if self.A.ndim != 3 or self.A.shape[0] != N or self.A.shape[1] != self.A.shape[2]:
-            raise ConfigError(f"A must have shape ({N}, n, n) for a {p}-axis box, got {self.A.shape}")
+            raise ConfigError(
+                f"A must have shape ({N}, n, n) for a {p}-axis box, got {self.A.shape}"
+            )
         n = self.A.shape[1]
         if self.B.ndim != 3 or self.B.shape[:2] != (N, n):
             raise ConfigError(f"B must have shape ({N}, {n}, m), got {self.B.shape}")
@@ -526,31 +604,41 @@ class PolytopicModel:
         if not self.systems:
             self.systems = [[(self.A[i], self.B[i])] for i in range(N)]
         if len(self.systems) != N:
-            raise ConfigError(f"systems: need one list of uncertainty vertices per scheduling vertex ({N}), "
-                              f"got {len(self.systems)}")
+            raise ConfigError(
+                f"systems: need one list of uncertainty vertices per scheduling vertex ({N}), "
+                f"got {len(self.systems)}"
+            )
         for i, lst in enumerate(self.systems):
             if len(lst) == 0:
                 raise ConfigError(f"systems[{i}] is empty")
             for j, (Aj, Bj) in enumerate(lst):
                 if np.shape(Aj) != (n, n) or np.shape(Bj) != (n, m):
-                    raise ConfigError(f"systems[{i}][{j}]: shapes {np.shape(Aj)}, {np.shape(Bj)} "
-                                      f"!= ({n},{n}), ({n},{m})")
+                    raise ConfigError(
+                        f"systems[{i}][{j}]: shapes {np.shape(Aj)}, {np.shape(Bj)} "
+                        f"!= ({n},{n}), ({n},{m})"
+                    )
                 if not (np.all(np.isfinite(Aj)) and np.all(np.isfinite(Bj))):
                     raise ConfigError(f"systems[{i}][{j}] contains NaN/inf")
         if self.common_input is not None:
             MB = self.common_input.M
             if np.shape(self.common_input.corners)[1:] != (n, m) or MB == 0:
-                raise ConfigError(f"common_input.corners must have shape (M_B, {n}, {m}), "
-                                  f"got {np.shape(self.common_input.corners)}")
+                raise ConfigError(
+                    f"common_input.corners must have shape (M_B, {n}, {m}), "
+                    f"got {np.shape(self.common_input.corners)}"
+                )
             bad = [i for i, lst in enumerate(self.systems) if len(lst) % MB]
             if bad:
-                raise ConfigError(f"common_input: systems of vertices {bad} are not a product with the "
-                                  f"M_B = {MB} input corners")
+                raise ConfigError(
+                    f"common_input: systems of vertices {bad} are not a product with the "
+                    f"M_B = {MB} input corners"
+                )
         if self.ts is not None and not (np.isfinite(self.ts) and self.ts > 0):
             raise ConfigError(f"sample time must be > 0, got {self.ts!r}")
         if self.box is not None and (self.box.N != N or self.box.n != n or self.box.m != m):
-            raise ConfigError(f"box: {self.box.N} vertices, {self.box.n} states, {self.box.m} inputs do not match "
-                              f"the model ({N}, {n}, {m})")
+            raise ConfigError(
+                f"box: {self.box.N} vertices, {self.box.n} states, {self.box.m} inputs do not match "
+                f"the model ({N}, {n}, {m})"
+            )
 
     # sizes
     @property
@@ -570,54 +658,122 @@ class PolytopicModel:
         """{"B": "common" | "per_vertex", "M": [M_i], "M_A": [M_A,i], "M_B": M_B} (certificate entry)."""
         M = [len(lst) for lst in self.systems]
         if self.box is not None:
-            return {"B": "common", "M": M, "M_A": M, "M_B": 1, "B_method": "element box",
-                    "p": self.box.p}
+            return {
+                "B": "common",
+                "M": M,
+                "M_A": M,
+                "M_B": 1,
+                "B_method": "element box",
+                "p": self.box.p,
+            }
         if self.common_input is None:
             return {"B": "per_vertex", "M": M, "M_A": M, "M_B": 1}
         MB = self.common_input.M
-        return {"B": "common", "M": M, "M_A": [k // MB for k in M], "M_B": MB,
-                "B_method": self.common_input.method}
+        return {
+            "B": "common",
+            "M": M,
+            "M_A": [k // MB for k in M],
+            "M_B": MB,
+            "B_method": self.common_input.method,
+        }
 
     @property
     def vertices(self) -> np.ndarray:
         return box_vertices(self.vmin, self.vmax)
 
     @classmethod
-    def from_uncertain_elements(cls, vmin, vmax, A, B, x0, u0, elements: Sequence[Sequence[UncertainElement]],
-                                max_corners: int = MAX_CORNERS_DEFAULT, **kw) -> "PolytopicModel":
+    def from_uncertain_elements(
+        cls,
+        vmin,
+        vmax,
+        A,
+        B,
+        x0,
+        u0,
+        elements: Sequence[Sequence[UncertainElement]],
+        max_corners: int = MAX_CORNERS_DEFAULT,
+        **kw,
+    ) -> "PolytopicModel":
         """Build the nested polytope of Eq. (23) by corner enumeration per vertex."""
         A = np.asarray(A, dtype=float)
         B = np.asarray(B, dtype=float)
         if len(elements) != A.shape[0]:
-            raise ConfigError(f"need one list of uncertain elements per vertex ({A.shape[0]}), got {len(elements)}")
-        systems = [uncertainty_vertices(A[i], B[i], elements[i], max_corners) for i in range(A.shape[0])]
+            raise ConfigError(
+                f"need one list of uncertain elements per vertex ({A.shape[0]}), got {len(elements)}"
+            )
+        systems = [
+            uncertainty_vertices(A[i], B[i], elements[i], max_corners) for i in range(A.shape[0])
+        ]
         return cls(vmin=vmin, vmax=vmax, A=A, B=B, x0=x0, u0=u0, systems=systems, **kw)
 
     @classmethod
-    def from_common_input(cls, vmin, vmax, A, B, x0, u0, elements: Sequence[Sequence[UncertainElement]],
-                          max_corners: int = MAX_CORNERS_DEFAULT, **kw) -> "PolytopicModel":
+    def from_common_input(
+        cls,
+        vmin,
+        vmax,
+        A,
+        B,
+        x0,
+        u0,
+        elements: Sequence[Sequence[UncertainElement]],
+        max_corners: int = MAX_CORNERS_DEFAULT,
+        **kw,
+    ) -> "PolytopicModel":
         """Eq. (23) with a common input set: per-vertex A corners (the A elements of
         ``elements[i]``) times the corners of the B hull (:func:`input_hull`), module docstring."""
         A = np.asarray(A, dtype=float)
         B = np.asarray(B, dtype=float)
         if len(elements) != A.shape[0]:
-            raise ConfigError(f"need one list of uncertain elements per vertex ({A.shape[0]}), got {len(elements)}")
+            raise ConfigError(
+                f"need one list of uncertain elements per vertex ({A.shape[0]}), got {len(elements)}"
+            )
         base, hull, nlo, nhi = input_hull(B, elements)
-        common = CommonInputSet(input_corners(base, hull, max_corners), tuple(hull), nlo, nhi, "box")
-        a_corners = [[a for a, _ in uncertainty_vertices(A[i], B[i], [e for e in elements[i] if e.matrix == "A"],
-                                                         max(1, max_corners // common.M))]
-                     for i in range(A.shape[0])]
-        return cls(vmin=vmin, vmax=vmax, A=A, B=B, x0=x0, u0=u0, systems=product_systems(a_corners, common),
-                   common_input=common, **kw)
+        common = CommonInputSet(
+            input_corners(base, hull, max_corners), tuple(hull), nlo, nhi, "box"
+        )
+        a_corners = [
+            [
+                a
+                for a, _ in uncertainty_vertices(
+                    A[i],
+                    B[i],
+                    [e for e in elements[i] if e.matrix == "A"],
+                    max(1, max_corners // common.M),
+                )
+            ]
+            for i in range(A.shape[0])
+        ]
+        return cls(
+            vmin=vmin,
+            vmax=vmax,
+            A=A,
+            B=B,
+            x0=x0,
+            u0=u0,
+            systems=product_systems(a_corners, common),
+            common_input=common,
+            **kw,
+        )
 
     @classmethod
-    def from_vertex_systems(cls, vmin, vmax, uncertain_vertices: Sequence, x0, u0, **kw) -> "PolytopicModel":
+    def from_vertex_systems(
+        cls, vmin, vmax, uncertain_vertices: Sequence, x0, u0, **kw
+    ) -> "PolytopicModel":
         """Build from per-vertex objects with ``A``, ``B`` and ``systems`` (the explicit list of
         Eq. (23) systems, e.g. :class:`lpv_sysid.ident.uncertainty.UncertainVertex`)."""
-        return cls(vmin=vmin, vmax=vmax, A=np.array([uv.A for uv in uncertain_vertices]),
-                   B=np.array([uv.B for uv in uncertain_vertices]), x0=x0, u0=u0,
-                   systems=[[(np.asarray(a), np.asarray(b)) for a, b in uv.systems] for uv in uncertain_vertices],
-                   **kw)
+        return cls(
+            vmin=vmin,
+            vmax=vmax,
+            A=np.array([uv.A for uv in uncertain_vertices]),
+            B=np.array([uv.B for uv in uncertain_vertices]),
+            x0=x0,
+            u0=u0,
+            systems=[
+                [(np.asarray(a), np.asarray(b)) for a, b in uv.systems]
+                for uv in uncertain_vertices
+            ],
+            **kw,
+        )
 
     # interpolation (seed 0 Eq. 21, Eq. 31, Eq. 34)
     def weights(self, v_d) -> tuple[np.ndarray, bool]:
@@ -656,7 +812,9 @@ class ScheduledLpv:
     def __init__(self, model: PolytopicModel, K: np.ndarray) -> None:
         K = np.asarray(K, dtype=float)
         if K.shape != (model.n_vertices, model.n_u, model.n_x):
-            raise ConfigError(f"K must have shape ({model.n_vertices}, {model.n_u}, {model.n_x}), got {K.shape}")
+            raise ConfigError(
+                f"K must have shape ({model.n_vertices}, {model.n_u}, {model.n_x}), got {K.shape}"
+            )
         self.model = model
         self.Kv = K
 
@@ -708,5 +866,14 @@ def common_input_deviation(model: PolytopicModel, M_B: int) -> tuple[float, floa
         for j, (Aj, Bj) in enumerate(lst):
             a, b = divmod(j, M_B)
             dB = max(dB, float(np.max(np.abs(np.asarray(Bj, dtype=float) - ref[b]))))
-            dA = max(dA, float(np.max(np.abs(np.asarray(Aj, dtype=float) - np.asarray(lst[a * M_B][0], dtype=float)))))
+            dA = max(
+                dA,
+                float(
+                    np.max(
+                        np.abs(
+                            np.asarray(Aj, dtype=float) - np.asarray(lst[a * M_B][0], dtype=float)
+                        )
+                    )
+                ),
+            )
     return dB, dA

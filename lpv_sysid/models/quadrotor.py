@@ -66,36 +66,109 @@ from lpv_sysid.errors import ConfigError, SolverError
 log = logging.getLogger(__name__)
 
 STATE_NAMES = ("phi", "theta", "u", "v", "w", "p", "q", "r", "dt", "da", "de", "dr")
-STATE_UNITS = ("rad", "rad", "m/s", "m/s", "m/s", "rad/s", "rad/s", "rad/s",
-               "rad/s", "m*rad/s", "m*rad/s", "rad/s")
+STATE_UNITS = (
+    "rad",
+    "rad",
+    "m/s",
+    "m/s",
+    "m/s",
+    "rad/s",
+    "rad/s",
+    "rad/s",
+    "rad/s",
+    "m*rad/s",
+    "m*rad/s",
+    "rad/s",
+)
 INPUT_NAMES = ("ut", "ua", "ue", "ur")
 INPUT_UNITS = ("1", "m", "m", "1")
-FULL_STATE_NAMES = ("x", "y", "z", "phi", "theta", "psi", "u", "v", "w", "p", "q", "r",
-                    "Omega1", "Omega2", "Omega3", "Omega4")
+FULL_STATE_NAMES = (
+    "x",
+    "y",
+    "z",
+    "phi",
+    "theta",
+    "psi",
+    "u",
+    "v",
+    "w",
+    "p",
+    "q",
+    "r",
+    "Omega1",
+    "Omega2",
+    "Omega3",
+    "Omega4",
+)
 SCHEDULING_NAMES = ("u_d", "v_d", "w_d")
 EXCITATION_NAMES = ("ue_t", "ue_a", "ue_e", "ue_r")
 
 K_NAMES = (
-    "x_mu0", "x_muw", "x_muh",
-    "y_mu0", "y_muw", "y_muh",
-    "z_T0", "z_mu0", "z_mu", "z_muw",
-    "l_T0", "l_mu0", "l_muw", "l_muh", "l_muh_mu0", "l_muh_muw", "l_dr",
-    "m_T0", "m_mu0", "m_muw", "m_muh", "m_muh_mu0", "m_muh_muw", "m_dr",
-    "n_Q0", "n_mu0", "n_muw", "n_muw2", "n_muh", "n_muh_muw",
+    "x_mu0",
+    "x_muw",
+    "x_muh",
+    "y_mu0",
+    "y_muw",
+    "y_muh",
+    "z_T0",
+    "z_mu0",
+    "z_mu",
+    "z_muw",
+    "l_T0",
+    "l_mu0",
+    "l_muw",
+    "l_muh",
+    "l_muh_mu0",
+    "l_muh_muw",
+    "l_dr",
+    "m_T0",
+    "m_mu0",
+    "m_muw",
+    "m_muh",
+    "m_muh_mu0",
+    "m_muh_muw",
+    "m_dr",
+    "n_Q0",
+    "n_mu0",
+    "n_muw",
+    "n_muw2",
+    "n_muh",
+    "n_muh_muw",
 )
 
 # FlameWheel-450-like lumped parameters (SI, Omega in rad/s). Calibrated so that the trims
 # at the vertices of the [-5, 5]^3 m/s box resemble seed 0 Table 1; see docs/quadrotor_model.md.
 DEFAULT_K = {
-    "x_mu0": -0.1323, "x_muw": 0.02062, "x_muh": -3.359e-4,
-    "y_mu0": -0.1589, "y_muw": 0.02155, "y_muh": -3.62e-4,
-    "z_T0": -4.17e-5, "z_mu0": 0.0, "z_mu": -0.00594, "z_muw": -3.22e-4,
-    "l_T0": 1.09e-5, "l_mu0": 0.0, "l_muw": 1.2e-4, "l_muh": -7.77e-5,
-    "l_muh_mu0": -0.004, "l_muh_muw": -0.00259, "l_dr": 1.5e-5,
-    "m_T0": 1.09e-5, "m_mu0": 0.0, "m_muw": 1.2e-4, "m_muh": 7.09e-5,
-    "m_muh_mu0": 0.004, "m_muh_muw": 0.00194, "m_dr": -1.5e-5,
-    "n_Q0": 1.75e-7, "n_mu0": 0.0, "n_muw": 2.0e-6, "n_muw2": -5.0e-4,
-    "n_muh": 1.4e-4, "n_muh_muw": -2.0e-4,
+    "x_mu0": -0.1323,
+    "x_muw": 0.02062,
+    "x_muh": -3.359e-4,
+    "y_mu0": -0.1589,
+    "y_muw": 0.02155,
+    "y_muh": -3.62e-4,
+    "z_T0": -4.17e-5,
+    "z_mu0": 0.0,
+    "z_mu": -0.00594,
+    "z_muw": -3.22e-4,
+    "l_T0": 1.09e-5,
+    "l_mu0": 0.0,
+    "l_muw": 1.2e-4,
+    "l_muh": -7.77e-5,
+    "l_muh_mu0": -0.004,
+    "l_muh_muw": -0.00259,
+    "l_dr": 1.5e-5,
+    "m_T0": 1.09e-5,
+    "m_mu0": 0.0,
+    "m_muw": 1.2e-4,
+    "m_muh": 7.09e-5,
+    "m_muh_mu0": 0.004,
+    "m_muh_muw": 0.00194,
+    "m_dr": -1.5e-5,
+    "n_Q0": 1.75e-7,
+    "n_mu0": 0.0,
+    "n_muw": 2.0e-6,
+    "n_muw2": -5.0e-4,
+    "n_muh": 1.4e-4,
+    "n_muh_muw": -2.0e-4,
 }
 
 _SQ2 = math.sqrt(2.0) / 2.0
@@ -140,7 +213,9 @@ class QuadrotorParams:
         for name in ("mass", "arm_length", "a_omega", "b_omega", "g", "omega_max"):
             val = getattr(self, name)
             if not (isinstance(val, (int, float)) and math.isfinite(val) and val > 0):
-                raise ConfigError(f"quadrotor.{name}: must be a positive finite number, got {val!r}")
+                raise ConfigError(
+                    f"quadrotor.{name}: must be a positive finite number, got {val!r}"
+                )
         for name in ("hub_height", "j_rotor", "omega_min"):
             val = getattr(self, name)
             if not (isinstance(val, (int, float)) and math.isfinite(val) and val >= 0):
@@ -158,7 +233,9 @@ class QuadrotorParams:
         if missing:
             raise ConfigError(f"quadrotor.K: missing parameter(s) {missing}")
         if unknown:
-            raise ConfigError(f"quadrotor.K: unknown parameter(s) {unknown}; known: {list(K_NAMES)}")
+            raise ConfigError(
+                f"quadrotor.K: unknown parameter(s) {unknown}; known: {list(K_NAMES)}"
+            )
         K = {}
         for k in K_NAMES:
             v = self.K[k]
@@ -171,8 +248,19 @@ class QuadrotorParams:
     def from_dict(cls, d: Mapping[str, Any]) -> "QuadrotorParams":
         if not isinstance(d, Mapping):
             raise ConfigError(f"quadrotor: expected a mapping, got {type(d).__name__}")
-        allowed = {"mass", "inertia", "arm_length", "hub_height", "a_omega", "b_omega",
-                   "j_rotor", "K", "omega_min", "omega_max", "g"}
+        allowed = {
+            "mass",
+            "inertia",
+            "arm_length",
+            "hub_height",
+            "a_omega",
+            "b_omega",
+            "j_rotor",
+            "K",
+            "omega_min",
+            "omega_max",
+            "g",
+        }
         bad = sorted(set(d) - allowed)
         if bad:
             raise ConfigError(f"quadrotor: unknown key(s) {bad}; allowed: {sorted(allowed)}")
@@ -184,10 +272,21 @@ class QuadrotorParams:
             merged.update(kw["K"])
             unknown = [k for k in kw["K"] if k not in K_NAMES]
             if unknown:
-                raise ConfigError(f"quadrotor.K: unknown parameter(s) {unknown}; known: {list(K_NAMES)}")
+                raise ConfigError(
+                    f"quadrotor.K: unknown parameter(s) {unknown}; known: {list(K_NAMES)}"
+                )
             kw["K"] = merged
-        for key in ("mass", "arm_length", "hub_height", "a_omega", "b_omega", "j_rotor",
-                    "omega_min", "omega_max", "g"):
+        for key in (
+            "mass",
+            "arm_length",
+            "hub_height",
+            "a_omega",
+            "b_omega",
+            "j_rotor",
+            "omega_min",
+            "omega_max",
+            "g",
+        ):
             if key in kw:
                 v = kw[key]
                 if isinstance(v, bool) or not isinstance(v, (int, float)):
@@ -196,32 +295,39 @@ class QuadrotorParams:
         return cls(**kw)
 
     def to_dict(self) -> dict:
-        return {"mass": self.mass, "inertia": [list(r) for r in self.inertia],
-                "arm_length": self.arm_length, "hub_height": self.hub_height,
-                "a_omega": self.a_omega, "b_omega": self.b_omega, "j_rotor": self.j_rotor,
-                "K": dict(self.K), "omega_min": self.omega_min, "omega_max": self.omega_max,
-                "g": self.g}
+        return {
+            "mass": self.mass,
+            "inertia": [list(r) for r in self.inertia],
+            "arm_length": self.arm_length,
+            "hub_height": self.hub_height,
+            "a_omega": self.a_omega,
+            "b_omega": self.b_omega,
+            "j_rotor": self.j_rotor,
+            "K": dict(self.K),
+            "omega_min": self.omega_min,
+            "omega_max": self.omega_max,
+            "g": self.g,
+        }
 
 
 @dataclass(frozen=True)
 class Trim:
     """Equilibrium of seed 0 Sec. III: v = v_d, constant Euler angles, Omega = Omega_0."""
 
-    v_d: np.ndarray          # (3,) commanded body velocity, FRD, m/s
-    yaw_rate: float          # psi-dot, rad/s
-    x0: np.ndarray           # (12,) STATE_NAMES
-    u0: np.ndarray           # (4,) INPUT_NAMES
-    full_state: np.ndarray   # (16,) FULL_STATE_NAMES (position 0, psi 0)
-    residual: float          # max |xdot| of phi, theta, v, omega, Omega at the solution
+    v_d: np.ndarray  # (3,) commanded body velocity, FRD, m/s
+    yaw_rate: float  # psi-dot, rad/s
+    x0: np.ndarray  # (12,) STATE_NAMES
+    u0: np.ndarray  # (4,) INPUT_NAMES
+    full_state: np.ndarray  # (16,) FULL_STATE_NAMES (position 0, psi 0)
+    residual: float  # max |xdot| of phi, theta, v, omega, Omega at the solution
 
 
 def mixer(arm_length: float) -> np.ndarray:
     """Mix of seed 0 Eq. (7) for the PX4 quad-X rotor numbering."""
     s = arm_length * _SQ2
-    return np.array([[0.25, 0.25, 0.25, 0.25],
-                     [-s, s, s, -s],
-                     [s, -s, s, -s],
-                     [1.0, 1.0, -1.0, -1.0]])
+    return np.array(
+        [[0.25, 0.25, 0.25, 0.25], [-s, s, s, -s], [s, -s, s, -s], [1.0, 1.0, -1.0, -1.0]]
+    )
 
 
 def reduced_state(x16: np.ndarray, arm_length: float = QuadrotorParams.arm_length) -> np.ndarray:
@@ -233,8 +339,9 @@ def reduced_state(x16: np.ndarray, arm_length: float = QuadrotorParams.arm_lengt
     return np.concatenate([x16[..., 3:5], x16[..., 6:12], delta], axis=-1)
 
 
-def full_state(x12: np.ndarray, pos_ned=0.0, psi: float = 0.0,
-               arm_length: float = QuadrotorParams.arm_length) -> np.ndarray:
+def full_state(
+    x12: np.ndarray, pos_ned=0.0, psi: float = 0.0, arm_length: float = QuadrotorParams.arm_length
+) -> np.ndarray:
     """x12 (STATE_NAMES) -> x16 with the given NED position and yaw; Omega = Mix^-1 delta."""
     x12 = np.asarray(x12, dtype=float)
     if x12.shape != (12,):
@@ -357,32 +464,68 @@ def _indent(src: str, n: int = 4) -> str:
 
 def _hot_path_source() -> str:
     """Source of the factory that compiles the hot-path functions of one model."""
-    fm = ("def _fm(u, v, w, p, q, r, O1, O2, O3, O4, D1, D2, D3, D4):\n" + _indent(_SRC_FM)
-          + "    return (Fx, Fy, Fz), (Mx, My, Mz)\n")
-    rates = ("def _rotor_rates(O, c):\n    O1, O2, O3, O4 = O\n    c0, c1, c2, c3 = c\n"
-             + _indent(_SRC_ESC) + _indent(_SRC_ROTOR) + "    return [D1, D2, D3, D4]\n")
-    deriv = ("def derivatives_list(x, c):\n    " + ", ".join(_X16) + " = x\n    c0, c1, c2, c3 = c\n"
-             + _indent(_SRC_ESC) + _indent(_SRC_ROTOR) + _indent(_SRC_FM) + _indent(_SRC_EQ3)
-             + "    return [" + ", ".join(f"d{i}" for i in range(16)) + "]\n")
+    fm = (
+        "def _fm(u, v, w, p, q, r, O1, O2, O3, O4, D1, D2, D3, D4):\n"
+        + _indent(_SRC_FM)
+        + "    return (Fx, Fy, Fz), (Mx, My, Mz)\n"
+    )
+    rates = (
+        "def _rotor_rates(O, c):\n    O1, O2, O3, O4 = O\n    c0, c1, c2, c3 = c\n"
+        + _indent(_SRC_ESC)
+        + _indent(_SRC_ROTOR)
+        + "    return [D1, D2, D3, D4]\n"
+    )
+    deriv = (
+        "def derivatives_list(x, c):\n    "
+        + ", ".join(_X16)
+        + " = x\n    c0, c1, c2, c3 = c\n"
+        + _indent(_SRC_ESC)
+        + _indent(_SRC_ROTOR)
+        + _indent(_SRC_FM)
+        + _indent(_SRC_EQ3)
+        + "    return ["
+        + ", ".join(f"d{i}" for i in range(16))
+        + "]\n"
+    )
     # rk4_step: the command is held, so Eq. (8)'s u_ESC is computed once; stage k evaluates
     # the derivative at x + a_k h k_(k-1) (positions are not needed by any derivative)
     body = "def rk4_step(x, c, h):\n    " + ", ".join(n + "_0" for n in _X16) + " = x\n"
     body += "    c0, c1, c2, c3 = c\n" + _indent(_SRC_ESC) + "    hh = 0.5 * h\n"
     for k, coef in ((1, None), (2, "hh"), (3, "hh"), (4, "h")):
         for i, n in enumerate(_X16[3:], start=3):
-            body += (f"    {n} = {n}_0\n" if coef is None else f"    {n} = {n}_0 + {coef} * k{k - 1}_{i}\n")
+            body += (
+                f"    {n} = {n}_0\n"
+                if coef is None
+                else f"    {n} = {n}_0 + {coef} * k{k - 1}_{i}\n"
+            )
         stage = _SRC_ROTOR + _SRC_FM + _SRC_EQ3
         for i in range(16):
             stage = stage.replace(f"d{i} = ", f"k{k}_{i} = ")
         body += _indent(stage)
-    body += "    h6 = h / 6.0\n    return [" + ", ".join(
-        f"{n}_0 + h6 * (k1_{i} + 2.0 * k2_{i} + 2.0 * k3_{i} + k4_{i})" for i, n in enumerate(_X16)) + "]\n"
-    consts = (list(K_NAMES) + ["s_arm", "l2", "j_rot", "a_om", "b_om", "om_lo", "om_hi", "g", "m"]
-              + [f"{n}{i}{j}" for n in ("I", "Ii") for i in range(3) for j in range(3)]
-              + [f"mi{i}{j}" for i in range(4) for j in range(4)])
-    return ("def _factory(" + ", ".join(consts) + "):\n    from math import sin, cos\n"
-            + _indent(fm) + _indent(rates) + _indent(deriv) + _indent(body)
-            + "    return _fm, _rotor_rates, derivatives_list, rk4_step\n")
+    body += (
+        "    h6 = h / 6.0\n    return ["
+        + ", ".join(
+            f"{n}_0 + h6 * (k1_{i} + 2.0 * k2_{i} + 2.0 * k3_{i} + k4_{i})"
+            for i, n in enumerate(_X16)
+        )
+        + "]\n"
+    )
+    consts = (
+        list(K_NAMES)
+        + ["s_arm", "l2", "j_rot", "a_om", "b_om", "om_lo", "om_hi", "g", "m"]
+        + [f"{n}{i}{j}" for n in ("I", "Ii") for i in range(3) for j in range(3)]
+        + [f"mi{i}{j}" for i in range(4) for j in range(4)]
+    )
+    return (
+        "def _factory("
+        + ", ".join(consts)
+        + "):\n    from math import sin, cos\n"
+        + _indent(fm)
+        + _indent(rates)
+        + _indent(deriv)
+        + _indent(body)
+        + "    return _fm, _rotor_rates, derivatives_list, rk4_step\n"
+    )
 
 
 _HOT_PATH = compile(_hot_path_source(), "<lpv_sysid.models.quadrotor hot path>", "exec")
@@ -406,8 +549,17 @@ class Quadrotor:
         # the functions compiled from the equation sources above, parameters bound.
         ell = p.arm_length
         consts = dict(zip(K_NAMES, (p.K[k] for k in K_NAMES)))
-        consts.update(s_arm=ell * _SQ2, l2=ell * ell, j_rot=p.j_rotor, a_om=p.a_omega,
-                      b_om=p.b_omega, om_lo=p.omega_min, om_hi=p.omega_max, g=p.g, m=p.mass)
+        consts.update(
+            s_arm=ell * _SQ2,
+            l2=ell * ell,
+            j_rot=p.j_rotor,
+            a_om=p.a_omega,
+            b_om=p.b_omega,
+            om_lo=p.omega_min,
+            om_hi=p.omega_max,
+            g=p.g,
+            m=p.mass,
+        )
         for i in range(3):
             for j in range(3):
                 consts[f"I{i}{j}"] = p.inertia[i][j]
@@ -417,7 +569,9 @@ class Quadrotor:
                 consts[f"mi{i}{j}"] = float(self.mix_inv[i][j])
         ns: dict = {}
         exec(_HOT_PATH, ns)  # noqa: S102 - compiled from this module's own source text
-        self._fm, self._rotor_rates, self.derivatives_list, self.rk4_step = ns["_factory"](**consts)
+        self._fm, self._rotor_rates, self.derivatives_list, self.rk4_step = ns["_factory"](
+            **consts
+        )
 
     def __reduce__(self):
         return (Quadrotor, (self.params,))
@@ -425,8 +579,12 @@ class Quadrotor:
     # ------------------------------------------------------------------ Eq. (6)
     def forces_moments(self, v, omega, Omega, Omega_dot=(0.0, 0.0, 0.0, 0.0)):
         """Applied force F and moment M in F_B (seed 0 Eq. 6) -> (F(3), M(3))."""
-        F, M = self._fm(*[float(a) for a in v], *[float(a) for a in omega],
-                        *[float(a) for a in Omega], *[float(a) for a in Omega_dot])
+        F, M = self._fm(
+            *[float(a) for a in v],
+            *[float(a) for a in omega],
+            *[float(a) for a in Omega],
+            *[float(a) for a in Omega_dot],
+        )
         return np.array(F), np.array(M)
 
     # ------------------------------------------------------------------ Eq. (8)
@@ -443,7 +601,9 @@ class Quadrotor:
         x16 = np.asarray(x16, dtype=float)
         u = np.asarray(u, dtype=float)
         if x16.shape != (16,) or u.shape != (4,):
-            raise ValueError(f"derivatives: expected x (16,) and u (4,), got {x16.shape}, {u.shape}")
+            raise ValueError(
+                f"derivatives: expected x (16,) and u (4,), got {x16.shape}, {u.shape}"
+            )
         return np.array(self.derivatives_list(x16.tolist(), u.tolist()))
 
     def derivatives12(self, x12, u) -> np.ndarray:
@@ -479,8 +639,11 @@ class Quadrotor:
 
         def body_rates(phi, th):
             # Eq. (2) inverted for Euler rates (0, 0, psi-dot)
-            return (-math.sin(th) * yaw_rate, math.sin(phi) * math.cos(th) * yaw_rate,
-                    math.cos(phi) * math.cos(th) * yaw_rate)
+            return (
+                -math.sin(th) * yaw_rate,
+                math.sin(phi) * math.cos(th) * yaw_rate,
+                math.cos(phi) * math.cos(th) * yaw_rate,
+            )
 
         def resid(z):
             w = body_rates(z[0], z[1])
@@ -489,8 +652,16 @@ class Quadrotor:
             return np.array(xd[6:12]) * np.array([1, 1, 1, 50, 50, 50])
 
         try:
-            sol = optimize.least_squares(resid, x0g, bounds=(lo, hi), x_scale=np.r_[0.1, 0.1, [100.0] * 4],
-                                         xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=2000)
+            sol = optimize.least_squares(
+                resid,
+                x0g,
+                bounds=(lo, hi),
+                x_scale=np.r_[0.1, 0.1, [100.0] * 4],
+                xtol=1e-14,
+                ftol=1e-14,
+                gtol=1e-14,
+                max_nfev=2000,
+            )
         except (ValueError, np.linalg.LinAlgError) as exc:
             raise SolverError(f"trim v_d={v_d.tolist()}: solver failed ({exc})") from None
         res = float(np.max(np.abs(resid(sol.x))))
@@ -498,20 +669,35 @@ class Quadrotor:
             raise SolverError(
                 f"trim v_d={v_d.tolist()} yaw_rate={yaw_rate}: no equilibrium inside the rotor "
                 f"limits [{p.omega_min}, {p.omega_max}] rad/s (residual {res:.3g}, "
-                f"Omega={np.round(sol.x[2:], 1).tolist()})")
+                f"Omega={np.round(sol.x[2:], 1).tolist()})"
+            )
         phi, th = float(sol.x[0]), float(sol.x[1])
         Om = sol.x[2:].copy()
         u_esc = p.a_omega * Om / p.b_omega
-        if np.any(u_esc > 1.0) or np.any(Om >= p.omega_max - 1e-6) or np.any(Om <= p.omega_min + 1e-6):
-            raise SolverError(f"trim v_d={v_d.tolist()}: equilibrium needs rotor speeds "
-                              f"{np.round(Om, 1).tolist()} at the limits [{p.omega_min}, {p.omega_max}] rad/s")
+        if (
+            np.any(u_esc > 1.0)
+            or np.any(Om >= p.omega_max - 1e-6)
+            or np.any(Om <= p.omega_min + 1e-6)
+        ):
+            raise SolverError(
+                f"trim v_d={v_d.tolist()}: equilibrium needs rotor speeds "
+                f"{np.round(Om, 1).tolist()} at the limits [{p.omega_min}, {p.omega_max}] rad/s"
+            )
         w = body_rates(phi, th)
         x16 = np.array([0, 0, 0, phi, th, 0.0, *v_d, *w, *Om])
         x12 = reduced_state(x16, p.arm_length)
         u0 = self.mix @ u_esc
-        resid_max = float(np.max(np.abs(self.derivatives(x16, u0)[[3, 4, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15]])))
-        return Trim(v_d=v_d.copy(), yaw_rate=float(yaw_rate), x0=x12, u0=u0, full_state=x16,
-                    residual=resid_max)
+        resid_max = float(
+            np.max(np.abs(self.derivatives(x16, u0)[[3, 4, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15]]))
+        )
+        return Trim(
+            v_d=v_d.copy(),
+            yaw_rate=float(yaw_rate),
+            x0=x12,
+            u0=u0,
+            full_state=x16,
+            residual=resid_max,
+        )
 
     # ------------------------------------------------------------------ Eqs. (10)-(16)
     def _aero_jacobians(self, K: Mapping[str, float], j_rotor: float, x12):
@@ -529,7 +715,7 @@ class Quadrotor:
         u, v, w, p, q, r = (float(t) for t in x12[2:8])
         dt, da, de, dr = (float(t) for t in x12[8:12])
         Om = self.mix_inv @ np.asarray(x12[8:12], dtype=float)
-        D2 = self.mix @ np.diag(2.0 * Om) @ self.mix_inv      # d(delta^2)/d(delta)
+        D2 = self.mix @ np.diag(2.0 * Om) @ self.mix_inv  # d(delta^2)/d(delta)
         k = K
         dF_nu = np.zeros((3, 6))
         dF_d = np.zeros((3, 4))

@@ -52,17 +52,31 @@ SCHEDULING_NAMES = ("u_d", "v_d", "w_d")
 VELOCITY_INDEX = (2, 3, 4)
 RATE_INDEX = (5, 6, 7)
 GRAVITY = 9.80665
-DESIGN = "rate_plant"            # gains.yaml / report: which plant the law was designed for
-DESIGN_TEXT = ("rate plant: PX4 rate loop inside the model; inputs thrust + body-rate setpoints "
-               "(SET_ATTITUDE_TARGET), states phi, theta, u, v, w, p, q, r")
+DESIGN = "rate_plant"  # gains.yaml / report: which plant the law was designed for
+DESIGN_TEXT = (
+    "rate plant: PX4 rate loop inside the model; inputs thrust + body-rate setpoints "
+    "(SET_ATTITUDE_TARGET), states phi, theta, u, v, w, p, q, r"
+)
 
 #: identified coefficients: name -> (matrix, row, col) of the linear model they appear in
 #: (None: an offset, enters the trim only)
 PARAM_ENTRIES: dict[str, Optional[tuple[str, int, int]]] = {
-    "X_u": ("A", 2, 2), "Y_v": ("A", 3, 3), "Z_w": ("A", 4, 4), "Z_T": ("B", 4, 0),
-    "L_p": ("A", 5, 5), "L_sp": ("B", 5, 1), "M_q": ("A", 6, 6), "M_sp": ("B", 6, 2),
-    "N_r": ("A", 7, 7), "N_sp": ("B", 7, 3),
-    "c_u": None, "c_v": None, "c_w": None, "c_p": None, "c_q": None, "c_r": None,
+    "X_u": ("A", 2, 2),
+    "Y_v": ("A", 3, 3),
+    "Z_w": ("A", 4, 4),
+    "Z_T": ("B", 4, 0),
+    "L_p": ("A", 5, 5),
+    "L_sp": ("B", 5, 1),
+    "M_q": ("A", 6, 6),
+    "M_sp": ("B", 6, 2),
+    "N_r": ("A", 7, 7),
+    "N_sp": ("B", 7, 3),
+    "c_u": None,
+    "c_v": None,
+    "c_w": None,
+    "c_p": None,
+    "c_q": None,
+    "c_r": None,
 }
 
 
@@ -94,11 +108,15 @@ class RatePlantParams:
             if not (isinstance(v, (int, float)) and math.isfinite(v)):
                 raise ConfigError(f"rate plant parameter {k} must be a finite number, got {v!r}")
         if self.Z_T >= 0:
-            raise ConfigError(f"rate plant: Z_T = {self.Z_T:g} must be negative (thrust accelerates up, -w)")
+            raise ConfigError(
+                f"rate plant: Z_T = {self.Z_T:g} must be negative (thrust accelerates up, -w)"
+            )
         for k in ("L_sp", "M_sp", "N_sp"):
             if getattr(self, k) <= 0:
-                raise ConfigError(f"rate plant: {k} = {getattr(self, k):g} must be positive (rate loop follows "
-                                  "its setpoint)")
+                raise ConfigError(
+                    f"rate plant: {k} = {getattr(self, k):g} must be positive (rate loop follows "
+                    "its setpoint)"
+                )
 
     def as_dict(self) -> dict:
         d = {k: float(getattr(self, k)) for k in PARAM_ENTRIES}
@@ -122,40 +140,51 @@ def dynamics(x: np.ndarray, u: np.ndarray, P: RatePlantParams, g: float = GRAVIT
     phi, th, ub, vb, wb, p, q, r = (float(a) for a in x)
     T, psp, qsp, rsp = (float(a) for a in u)
     sf, cf, st, ct = math.sin(phi), math.cos(phi), math.sin(th), math.cos(th)
-    return np.array([
-        p + math.tan(th) * (sf * q + cf * r),
-        cf * q - sf * r,
-        r * vb - q * wb - g * st + P.X_u * ub + P.c_u,
-        p * wb - r * ub + g * ct * sf + P.Y_v * vb + P.c_v,
-        q * ub - p * vb + g * ct * cf + P.Z_w * wb + P.Z_T * T + P.c_w,
-        P.L_p * p + P.L_sp * psp + P.c_p,
-        P.M_q * q + P.M_sp * qsp + P.c_q,
-        P.N_r * r + P.N_sp * rsp + P.c_r,
-    ])
+    return np.array(
+        [
+            p + math.tan(th) * (sf * q + cf * r),
+            cf * q - sf * r,
+            r * vb - q * wb - g * st + P.X_u * ub + P.c_u,
+            p * wb - r * ub + g * ct * sf + P.Y_v * vb + P.c_v,
+            q * ub - p * vb + g * ct * cf + P.Z_w * wb + P.Z_T * T + P.c_w,
+            P.L_p * p + P.L_sp * psp + P.c_p,
+            P.M_q * q + P.M_sp * qsp + P.c_q,
+            P.N_r * r + P.N_sp * rsp + P.c_r,
+        ]
+    )
 
 
-def trim(v_body: Sequence[float], P: RatePlantParams, g: float = GRAVITY) -> tuple[np.ndarray, np.ndarray]:
+def trim(
+    v_body: Sequence[float], P: RatePlantParams, g: float = GRAVITY
+) -> tuple[np.ndarray, np.ndarray]:
     """Equilibrium (x0, u0) at body velocity ``v_body`` with zero body rates: the attitude that
     balances drag by gravity and the thrust that holds w (module docstring rows set to 0)."""
     ub, vb, wb = (float(a) for a in v_body)
     s_th = (P.X_u * ub + P.c_u) / g
     if abs(s_th) >= 0.9:
-        raise ConfigError(f"rate plant: no trim at v = {list(v_body)}: pitch would need sin(theta) = {s_th:.2f}")
+        raise ConfigError(
+            f"rate plant: no trim at v = {list(v_body)}: pitch would need sin(theta) = {s_th:.2f}"
+        )
     th = math.asin(s_th)
     s_phi = -(P.Y_v * vb + P.c_v) / (g * math.cos(th))
     if abs(s_phi) >= 0.9:
-        raise ConfigError(f"rate plant: no trim at v = {list(v_body)}: roll would need sin(phi) = {s_phi:.2f}")
+        raise ConfigError(
+            f"rate plant: no trim at v = {list(v_body)}: roll would need sin(phi) = {s_phi:.2f}"
+        )
     phi = math.asin(s_phi)
     T = -(g * math.cos(th) * math.cos(phi) + P.Z_w * wb + P.c_w) / P.Z_T
     if not 0.0 < T < 1.0:
-        raise ConfigError(f"rate plant: trim thrust {T:.3f} at v = {list(v_body)} is outside (0, 1)")
+        raise ConfigError(
+            f"rate plant: trim thrust {T:.3f} at v = {list(v_body)} is outside (0, 1)"
+        )
     x0 = np.array([phi, th, ub, vb, wb, 0.0, 0.0, 0.0])
     u0 = np.array([T, -P.c_p / P.L_sp, -P.c_q / P.M_sp, -P.c_r / P.N_sp])
     return x0, u0
 
 
-def linearize(x0: np.ndarray, u0: np.ndarray, P: RatePlantParams, h: float = 1e-6,
-              g: float = GRAVITY) -> tuple[np.ndarray, np.ndarray]:
+def linearize(
+    x0: np.ndarray, u0: np.ndarray, P: RatePlantParams, h: float = 1e-6, g: float = GRAVITY
+) -> tuple[np.ndarray, np.ndarray]:
     """(A, B) = Jacobians of :func:`dynamics` at (x0, u0) (central differences; exact to
     ~1e-9 for these smooth trigonometric terms)."""
     n, m = len(STATE_NAMES), len(INPUT_NAMES)
@@ -171,7 +200,9 @@ def linearize(x0: np.ndarray, u0: np.ndarray, P: RatePlantParams, h: float = 1e-
     return A, B
 
 
-def polytope(P: RatePlantParams, vmin: Sequence[float], vmax: Sequence[float], k_sigma: float = 0.0):
+def polytope(
+    P: RatePlantParams, vmin: Sequence[float], vmax: Sequence[float], k_sigma: float = 0.0
+):
     """Vertex models at the box corners (``models.lpv.box_vertices`` order) as a
     :class:`~lpv_sysid.models.lpv.PolytopicModel`, plus the per-vertex uncertain elements
     (intervals ``nominal +- k_sigma * std`` of the identified linear entries; none when
@@ -197,7 +228,15 @@ def polytope(P: RatePlantParams, vmin: Sequence[float], vmax: Sequence[float], k
                 nom = float((A if mat == "A" else B)[i, j])
                 row.append(UncertainElement(mat, i, j, nom - k_sigma * s, nom + k_sigma * s, nom))
         els.append(row)
-    model = PolytopicModel(vmin=np.asarray(vmin, float), vmax=np.asarray(vmax, float), A=np.array(As),
-                           B=np.array(Bs), x0=np.array(x0s), u0=np.array(u0s), state_names=STATE_NAMES,
-                           input_names=INPUT_NAMES, scheduling_names=SCHEDULING_NAMES)
+    model = PolytopicModel(
+        vmin=np.asarray(vmin, float),
+        vmax=np.asarray(vmax, float),
+        A=np.array(As),
+        B=np.array(Bs),
+        x0=np.array(x0s),
+        u0=np.array(u0s),
+        state_names=STATE_NAMES,
+        input_names=INPUT_NAMES,
+        scheduling_names=SCHEDULING_NAMES,
+    )
     return model, els

@@ -39,14 +39,33 @@ INPUT_UNITS = ("V", "V")
 P_NAMES = ("theta_h", "theta_v", "omega_h", "omega_v", "Omega_h")
 #: psi of Eq. (41): matrix element (row, col) of A (0-based) for psi_1..psi_11.
 PSI_NAMES = ("a11", "a21", "a22", "a23", "a24", "a25", "a26", "a44", "a52", "a54", "a56")
-PSI_INDEX = ((0, 0), (1, 0), (1, 1), (1, 2), (1, 3), (1, 4), (1, 5), (3, 3), (4, 1), (4, 3), (4, 5))
+PSI_INDEX = (
+    (0, 0),
+    (1, 0),
+    (1, 1),
+    (1, 2),
+    (1, 3),
+    (1, 4),
+    (1, 5),
+    (3, 3),
+    (4, 1),
+    (4, 3),
+    (4, 5),
+)
 #: Reduced scheduling vector of Sec. 6.3 (N~ = 8): the others are frozen at constants.
 REDUCED_PSI = ("a11", "a21", "a22", "a23", "a26", "a44", "a54", "a56")
 #: Table 7 operating ranges: (min, max) of the p variables; theta_v is given as theta_v - theta_v^0.
-TABLE7_RANGES = {"omega_h": (-2.9, 2.9), "omega_v": (-1.6, 1.6), "Omega_h": (-1.0, 1.0),
-                 "Omega_v": (-0.6, 0.6), "theta_h": (-1.7, 1.2), "dtheta_v": (-0.5, 1.0),
-                 "u_h": (-2.5, 2.5), "u_v": (-2.0, 2.0)}
-TS_PAPER = 0.1   # Sec. 6.2, Euler sample time
+TABLE7_RANGES = {
+    "omega_h": (-2.9, 2.9),
+    "omega_v": (-1.6, 1.6),
+    "Omega_h": (-1.0, 1.0),
+    "Omega_v": (-0.6, 0.6),
+    "theta_h": (-1.7, 1.2),
+    "dtheta_v": (-0.5, 1.0),
+    "u_h": (-2.5, 2.5),
+    "u_v": (-2.0, 2.0),
+}
+TS_PAPER = 0.1  # Sec. 6.2, Euler sample time
 
 
 @dataclass(frozen=True)
@@ -96,8 +115,27 @@ class TrmsParams:
     k_cvn: float = 0.0563
     g: float = 9.81
 
-    _POSITIVE = ("l_t", "l_m", "l_b", "l_cb", "r_ts", "r_ms", "m_cb", "m_b", "m_m", "m_mr", "m_ms",
-                 "m_t", "m_tr", "m_ts", "k_a", "R_a", "J_tr", "J_mr", "g")
+    _POSITIVE = (
+        "l_t",
+        "l_m",
+        "l_b",
+        "l_cb",
+        "r_ts",
+        "r_ms",
+        "m_cb",
+        "m_b",
+        "m_m",
+        "m_mr",
+        "m_ms",
+        "m_t",
+        "m_tr",
+        "m_ts",
+        "k_a",
+        "R_a",
+        "J_tr",
+        "J_mr",
+        "g",
+    )
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -105,7 +143,9 @@ class TrmsParams:
             if not is_finite_number(v):
                 raise ConfigError(f"trms.{f.name}: must be a finite number, got {v!r}")
             if v < 0 or (f.name in self._POSITIVE and v == 0):
-                raise ConfigError(f"trms.{f.name}: must be {'> 0' if f.name in self._POSITIVE else '>= 0'}, got {v}")
+                raise ConfigError(
+                    f"trms.{f.name}: must be {'> 0' if f.name in self._POSITIVE else '>= 0'}, got {v}"
+                )
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "TrmsParams":
@@ -119,40 +159,54 @@ class TrmsParams:
     @property
     def J_v(self) -> float:
         """J_v = sum of J_v1..J_v8, Eqs. (7)-(14)."""
-        return (self.m_mr * self.l_m ** 2 + self.m_m * self.l_m ** 2 / 3 + self.m_cb * self.l_cb ** 2
-                + self.m_b * self.l_b ** 2 / 3 + self.m_tr * self.l_t ** 2 + self.m_t * self.l_t ** 2 / 3
-                + self.m_ms * self.r_ms ** 2 / 2 + self.m_ms * self.l_m ** 2
-                + self.m_ts * self.r_ts ** 2 / 2 + self.m_ts * self.l_t ** 2)
+        return (
+            self.m_mr * self.l_m**2
+            + self.m_m * self.l_m**2 / 3
+            + self.m_cb * self.l_cb**2
+            + self.m_b * self.l_b**2 / 3
+            + self.m_tr * self.l_t**2
+            + self.m_t * self.l_t**2 / 3
+            + self.m_ms * self.r_ms**2 / 2
+            + self.m_ms * self.l_m**2
+            + self.m_ts * self.r_ts**2 / 2
+            + self.m_ts * self.l_t**2
+        )
 
     @property
-    def K_A(self) -> float:   # Eq. (21)
+    def K_A(self) -> float:  # Eq. (21)
         return (self.m_t / 2 + self.m_tr + self.m_ts) * self.l_t
 
     @property
-    def K_B(self) -> float:   # Eq. (22)
+    def K_B(self) -> float:  # Eq. (22)
         return (self.m_m / 2 + self.m_mr + self.m_ms) * self.l_m
 
     @property
-    def K_C(self) -> float:   # Eq. (23)
+    def K_C(self) -> float:  # Eq. (23)
         return self.m_b * self.l_b / 2 + self.m_cb * self.l_cb
 
     @property
-    def K_D(self) -> float:   # Eq. (24)
-        return ((self.m_m / 3 + self.m_mr + self.m_ms) * self.l_m ** 2
-                + (self.m_t / 3 + self.m_tr + self.m_ts) * self.l_t ** 2)
+    def K_D(self) -> float:  # Eq. (24)
+        return (self.m_m / 3 + self.m_mr + self.m_ms) * self.l_m**2 + (
+            self.m_t / 3 + self.m_tr + self.m_ts
+        ) * self.l_t**2
 
     @property
-    def K_E(self) -> float:   # Eq. (25)
-        return self.m_b * self.l_b ** 2 / 3 + self.m_cb * self.l_cb ** 2
+    def K_E(self) -> float:  # Eq. (25)
+        return self.m_b * self.l_b**2 / 3 + self.m_cb * self.l_cb**2
 
     @property
-    def K_F(self) -> float:   # Eq. (26)
-        return self.m_ms * self.r_ms ** 2 + self.m_ts * self.r_ts ** 2 / 2
+    def K_F(self) -> float:  # Eq. (26)
+        return self.m_ms * self.r_ms**2 + self.m_ts * self.r_ts**2 / 2
 
     @property
     def K_H(self) -> float:
         """Eq. (27), read with m_cb l_cb^2 (the printed m_cb l_cb is not a moment of inertia)."""
-        return self.K_A * self.l_t + self.K_B * self.l_m + self.m_b * self.l_b ** 2 / 2 + self.m_cb * self.l_cb ** 2
+        return (
+            self.K_A * self.l_t
+            + self.K_B * self.l_m
+            + self.m_b * self.l_b**2 / 2
+            + self.m_cb * self.l_cb**2
+        )
 
     @property
     def theta_v0(self) -> float:
@@ -195,14 +249,16 @@ class Trms:
     def den(self, tv):
         """K_D cos^2 + K_E sin^2 + K_F (denominator of Eq. 2)."""
         c, s = np.cos(tv), np.sin(tv)
-        return self.p.K_D * c ** 2 + self.p.K_E * s ** 2 + self.p.K_F
+        return self.p.K_D * c**2 + self.p.K_E * s**2 + self.p.K_F
 
     def derivatives(self, x: Sequence[float], u: Sequence[float]) -> np.ndarray:
         """dx/dt of seed 2 Eqs. (1)-(6). ``x`` (6,), ``u`` (2,) in the order of STATE_NAMES/INPUT_NAMES."""
         x = np.asarray(x, dtype=float)
         u = np.asarray(u, dtype=float)
         if x.shape != (6,) or u.shape != (2,):
-            raise ConfigError(f"trms.derivatives: need x (6,) and u (2,), got {x.shape}, {u.shape}")
+            raise ConfigError(
+                f"trms.derivatives: need x (6,) and u (2,), got {x.shape}, {u.shape}"
+            )
         if not (np.all(np.isfinite(x)) and np.all(np.isfinite(u))):
             raise ConfigError(f"trms.derivatives: NaN/inf in x={x.tolist()} or u={u.tolist()}")
         p = self.p
@@ -210,19 +266,29 @@ class Trms:
         uh, uv = u
         c, s = math.cos(tv), math.sin(tv)
         D = float(self.den(tv))
-        ka2 = p.k_a ** 2 / p.R_a
-        tail = p.k_a * p.k_1 / p.R_a * uh - (p.B_tr + ka2) * wh - float(self.f1(wh))     # J_tr dwh/dt
-        main = p.k_a * p.k_2 / p.R_a * uv - (p.B_mr + ka2) * wv - float(self.f4(wv))     # J_mr dwv/dt
+        ka2 = p.k_a**2 / p.R_a
+        tail = p.k_a * p.k_1 / p.R_a * uh - (p.B_tr + ka2) * wh - float(self.f1(wh))  # J_tr dwh/dt
+        main = p.k_a * p.k_2 / p.R_a * uv - (p.B_mr + ka2) * wv - float(self.f4(wv))  # J_mr dwv/dt
         f5 = float(self.f5(wv))
-        d_wh = tail / p.J_tr                                                              # Eq. (1)
-        d_Wh = ((p.l_t * float(self.f2(wh)) * c - p.k_oh * Wh - float(self.f3(th)) + float(self.f6(tv))) / D
-                + p.k_m * wv * s * Wv * (p.K_D * c ** 2 - p.K_E * s ** 2 - p.K_F - 2 * p.K_E * c ** 2) / D ** 2
-                + p.k_m * c * main / (p.J_mr * D))                                      # Eq. (2)
-        d_wv = main / p.J_mr                                                              # Eq. (4)
-        d_Wv = ((p.l_m * f5 + p.k_g * Wh * f5 * c - p.k_ov * Wv) / p.J_v
-                + (p.g * ((p.K_A - p.K_B) * c - p.K_C * s) - Wh ** 2 * p.K_H * s * c) / p.J_v
-                + p.k_t * tail / (p.J_v * p.J_tr))                                        # Eq. (5)
-        return np.array([d_wh, d_Wh, Wh, d_wv, d_Wv, Wv])                                # Eqs. (3), (6)
+        d_wh = tail / p.J_tr  # Eq. (1)
+        d_Wh = (
+            (
+                p.l_t * float(self.f2(wh)) * c
+                - p.k_oh * Wh
+                - float(self.f3(th))
+                + float(self.f6(tv))
+            )
+            / D
+            + p.k_m * wv * s * Wv * (p.K_D * c**2 - p.K_E * s**2 - p.K_F - 2 * p.K_E * c**2) / D**2
+            + p.k_m * c * main / (p.J_mr * D)
+        )  # Eq. (2)
+        d_wv = main / p.J_mr  # Eq. (4)
+        d_Wv = (
+            (p.l_m * f5 + p.k_g * Wh * f5 * c - p.k_ov * Wv) / p.J_v
+            + (p.g * ((p.K_A - p.K_B) * c - p.K_C * s) - Wh**2 * p.K_H * s * c) / p.J_v
+            + p.k_t * tail / (p.J_v * p.J_tr)
+        )  # Eq. (5)
+        return np.array([d_wh, d_Wh, Wh, d_wv, d_Wv, Wv])  # Eqs. (3), (6)
 
     # --------------------------------------------------------------- quasi-LPV form, Eqs. (41)-(58)
     def shift(self, x) -> np.ndarray:
@@ -243,27 +309,28 @@ class Trms:
         th, tv, wh, wv, Wh = (P[..., k] for k in range(5))
         c, s = np.cos(tv), np.sin(tv)
         D = self.den(tv)
-        ka2 = pr.k_a ** 2 / pr.R_a
-        f1_w = _pn(wh, pr.k_thp, -pr.k_thn) * wh            # f1(wh)/wh (limit 0 at wh = 0)
+        ka2 = pr.k_a**2 / pr.R_a
+        f1_w = _pn(wh, pr.k_thp, -pr.k_thn) * wh  # f1(wh)/wh (limit 0 at wh = 0)
         f2_w = _pn(wh, pr.k_fhp, -pr.k_fhn) * wh
         f4_w = _pn(wv, pr.k_tvp, -pr.k_tvn) * wv
         f5_w = _pn(wv, pr.k_fvp, -pr.k_fvn) * wv
-        f3_t = _pn(th, pr.k_chp, pr.k_chn)                  # f3(th)/th
+        f3_t = _pn(th, pr.k_chp, pr.k_chn)  # f3(th)/th
         dv = tv - pr.theta_v0
-        f6_t = _pn(dv, pr.k_cvp, pr.k_cvn) * dv             # f6/(tv - tv0)
+        f6_t = _pn(dv, pr.k_cvp, pr.k_cvn) * dv  # f6/(tv - tv0)
         rho = math.hypot(pr.K_A - pr.K_B, pr.K_C)
         out = np.empty(P.shape[:-1] + (11,))
-        out[..., 0] = -(ka2 + pr.B_tr + f1_w) / pr.J_tr                                        # (43)
-        out[..., 1] = pr.l_t * c * f2_w / D                                                    # (44)
-        out[..., 2] = -pr.k_oh / D                                                             # (45)
-        out[..., 3] = -f3_t / D                                                                # (46)
-        out[..., 4] = -pr.k_m * (ka2 + pr.B_mr + f4_w) * c / (D * pr.J_mr)                     # (47)
-        out[..., 5] = pr.k_m * wv * s * (pr.K_D * c ** 2 - pr.K_E * s ** 2 - pr.K_F
-                                         - 2 * pr.K_E * c ** 2) / D ** 2                        # (48)
-        out[..., 6] = f6_t / D                                                                 # (49)
-        out[..., 7] = -(ka2 + pr.B_mr + f4_w) / pr.J_mr                                        # (50)
-        out[..., 8] = (pr.k_g * c * f5_w * wv - Wh * pr.K_H * s * c) / pr.J_v                  # (51)
-        out[..., 9] = pr.l_m * f5_w / pr.J_v                                                   # (52)
+        out[..., 0] = -(ka2 + pr.B_tr + f1_w) / pr.J_tr  # (43)
+        out[..., 1] = pr.l_t * c * f2_w / D  # (44)
+        out[..., 2] = -pr.k_oh / D  # (45)
+        out[..., 3] = -f3_t / D  # (46)
+        out[..., 4] = -pr.k_m * (ka2 + pr.B_mr + f4_w) * c / (D * pr.J_mr)  # (47)
+        out[..., 5] = (
+            pr.k_m * wv * s * (pr.K_D * c**2 - pr.K_E * s**2 - pr.K_F - 2 * pr.K_E * c**2) / D**2
+        )  # (48)
+        out[..., 6] = f6_t / D  # (49)
+        out[..., 7] = -(ka2 + pr.B_mr + f4_w) / pr.J_mr  # (50)
+        out[..., 8] = (pr.k_g * c * f5_w * wv - Wh * pr.K_H * s * c) / pr.J_v  # (51)
+        out[..., 9] = pr.l_m * f5_w / pr.J_v  # (52)
         # (54): g((K_A - K_B) cos tv - K_C sin tv) = -g rho sin(tv - tv0); np.sinc(x) = sin(pi x)/(pi x)
         out[..., 10] = -pr.g * rho * np.sinc(dv / np.pi) / pr.J_v
         return out
@@ -282,7 +349,7 @@ class Trms:
         A[..., 2, 1] = 1.0
         A[..., 5, 4] = 1.0
         A[..., 4, 0] = self.p.k_t / self.p.J_v * psi[..., 0]
-        A[..., 4, 4] = -self.p.k_ov / self.p.J_v                                            # (53)
+        A[..., 4, 4] = -self.p.k_ov / self.p.J_v  # (53)
         return A
 
     def b22(self, theta_v):
@@ -306,21 +373,37 @@ class Trms:
         return self.A_of_psi(self.psi(self.p_of_x(x))), self.B_of(x[5])
 
     # --------------------------------------------------------------- equilibria, Sec. 5.1
-    def reference_equilibrium(self, theta_h_r: float, theta_v_r: float, Omega_h_r: float = 0.0,
-                              Omega_v_r: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    def reference_equilibrium(
+        self, theta_h_r: float, theta_v_r: float, Omega_h_r: float = 0.0, Omega_v_r: float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray]:
         """State reference x_r and feedforward u_r of Eqs. (107)-(112) (x_r in the unshifted state)."""
         pr = self.p
         c, s = math.cos(theta_v_r), math.sin(theta_v_r)
         D = float(self.den(theta_v_r))
-        f5r = ((pr.g * (pr.K_C * s + (pr.K_B - pr.K_A) * c) + pr.k_ov * Omega_v_r
-                + Omega_h_r ** 2 * pr.K_H * s * c) / (pr.l_m + pr.k_g * Omega_h_r * c))          # (107)
-        wv = math.sqrt(f5r / pr.k_fvp) if f5r >= 0 else -math.sqrt(-f5r / pr.k_fvn)             # (110)
-        f2r = (float(self.f3(theta_h_r)) - float(self.f6(theta_v_r)) + pr.k_oh * Omega_h_r
-               - pr.k_m * wv * s * Omega_v_r * (pr.K_D * c ** 2 - pr.K_E * s ** 2 - pr.K_F
-                                               - 2 * pr.K_E * c ** 2) / D) / (pr.l_t * c)        # (108)
-        wh = math.sqrt(f2r / pr.k_fhp) if f2r >= 0 else -math.sqrt(-f2r / pr.k_fhn)             # (109)
-        uh = ((pr.B_tr * pr.R_a + pr.k_a ** 2) * wh + float(self.f1(wh)) * pr.R_a) / (pr.k_a * pr.k_1)  # (111)
-        uv = ((pr.B_mr * pr.R_a + pr.k_a ** 2) * wv + float(self.f4(wv)) * pr.R_a) / (pr.k_a * pr.k_2)  # (112)
+        f5r = (
+            pr.g * (pr.K_C * s + (pr.K_B - pr.K_A) * c)
+            + pr.k_ov * Omega_v_r
+            + Omega_h_r**2 * pr.K_H * s * c
+        ) / (pr.l_m + pr.k_g * Omega_h_r * c)  # (107)
+        wv = math.sqrt(f5r / pr.k_fvp) if f5r >= 0 else -math.sqrt(-f5r / pr.k_fvn)  # (110)
+        f2r = (
+            float(self.f3(theta_h_r))
+            - float(self.f6(theta_v_r))
+            + pr.k_oh * Omega_h_r
+            - pr.k_m
+            * wv
+            * s
+            * Omega_v_r
+            * (pr.K_D * c**2 - pr.K_E * s**2 - pr.K_F - 2 * pr.K_E * c**2)
+            / D
+        ) / (pr.l_t * c)  # (108)
+        wh = math.sqrt(f2r / pr.k_fhp) if f2r >= 0 else -math.sqrt(-f2r / pr.k_fhn)  # (109)
+        uh = ((pr.B_tr * pr.R_a + pr.k_a**2) * wh + float(self.f1(wh)) * pr.R_a) / (
+            pr.k_a * pr.k_1
+        )  # (111)
+        uv = ((pr.B_mr * pr.R_a + pr.k_a**2) * wv + float(self.f4(wv)) * pr.R_a) / (
+            pr.k_a * pr.k_2
+        )  # (112)
         return np.array([wh, Omega_h_r, theta_h_r, wv, Omega_v_r, theta_v_r]), np.array([uh, uv])
 
     def jacobian(self, x, u, h: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
@@ -345,20 +428,44 @@ class Trms:
 PSI_DEPENDS = ((2,), (1, 2), (1,), (0, 1), (1, 3), (1, 3), (1,), (3,), (1, 3, 4), (3,), (1,))
 
 
-def p_box(params: TrmsParams, ranges: Optional[Mapping[str, tuple]] = None) -> tuple[np.ndarray, np.ndarray]:
+def p_box(
+    params: TrmsParams, ranges: Optional[Mapping[str, tuple]] = None
+) -> tuple[np.ndarray, np.ndarray]:
     """(min, max) of p = (theta_h, theta_v, omega_h, omega_v, Omega_h) from Table 7 (theta_v absolute)."""
     r = dict(TABLE7_RANGES)
     r.update(ranges or {})
     tv0 = params.theta_v0
-    lo = np.array([r["theta_h"][0], r["dtheta_v"][0] + tv0, r["omega_h"][0], r["omega_v"][0], r["Omega_h"][0]])
-    hi = np.array([r["theta_h"][1], r["dtheta_v"][1] + tv0, r["omega_h"][1], r["omega_v"][1], r["Omega_h"][1]])
+    lo = np.array(
+        [
+            r["theta_h"][0],
+            r["dtheta_v"][0] + tv0,
+            r["omega_h"][0],
+            r["omega_v"][0],
+            r["Omega_h"][0],
+        ]
+    )
+    hi = np.array(
+        [
+            r["theta_h"][1],
+            r["dtheta_v"][1] + tv0,
+            r["omega_h"][1],
+            r["omega_v"][1],
+            r["Omega_h"][1],
+        ]
+    )
     if np.any(hi <= lo):
         raise ConfigError(f"trms p box: need max > min, got {lo.tolist()} / {hi.tolist()}")
     return lo, hi
 
 
-def psi_bounds(model: Trms, plo, phi, n_grid: int = 201, gaps: Optional[Mapping[str, tuple]] = None,
-               max_points: int = 200_000) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def psi_bounds(
+    model: Trms,
+    plo,
+    phi,
+    n_grid: int = 201,
+    gaps: Optional[Mapping[str, tuple]] = None,
+    max_points: int = 200_000,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Bounding box of psi over the p box (Eq. 62): (min (11,), max (11,), least-squares constant (11,)).
 
     Seed 2 Sec. 3.5 takes the extremes "by numerical optimization"; here each psi_j is gridded
@@ -444,6 +551,7 @@ class TrmsPolytope:
     def weights(self, x) -> tuple[np.ndarray, bool]:
         """pi_i(psi(x)) of Eq. (65) (multilinear, seed 0 Eq. 21); True when psi left the box."""
         from lpv_sysid.models.lpv import multilinear_weights
+
         return multilinear_weights(self.scheduled(x), self.lo, self.hi)
 
     def A_at(self, x) -> np.ndarray:
@@ -456,9 +564,14 @@ class TrmsPolytope:
         return bool(np.all(v >= self.lo - tol) and np.all(v <= self.hi + tol))
 
 
-def bounding_box_polytope(model: Trms, names: Sequence[str] = REDUCED_PSI, ts: Optional[float] = TS_PAPER,
-                          ranges: Optional[Mapping[str, tuple]] = None, gaps: Optional[Mapping[str, tuple]] = None,
-                          n_grid: int = 201) -> TrmsPolytope:
+def bounding_box_polytope(
+    model: Trms,
+    names: Sequence[str] = REDUCED_PSI,
+    ts: Optional[float] = TS_PAPER,
+    ranges: Optional[Mapping[str, tuple]] = None,
+    gaps: Optional[Mapping[str, tuple]] = None,
+    n_grid: int = 201,
+) -> TrmsPolytope:
     """Polytopic quasi-LPV model of Sec. 3.5 / 6.2 (bounding box over Table 7), vertices per Eq. (65).
 
     psi not in ``names`` are frozen at their least-squares constant over the box (Sec. 6.3), and so
@@ -468,7 +581,9 @@ def bounding_box_polytope(model: Trms, names: Sequence[str] = REDUCED_PSI, ts: O
 
     bad = [n for n in names if n not in PSI_NAMES]
     if bad or len(set(names)) != len(names) or not names:
-        raise ConfigError(f"trms polytope: scheduled parameters must be distinct names from {PSI_NAMES}, got {list(names)}")
+        raise ConfigError(
+            f"trms polytope: scheduled parameters must be distinct names from {PSI_NAMES}, got {list(names)}"
+        )
     plo, phi = p_box(model.p, ranges)
     lo, hi, mean = psi_bounds(model, plo, phi, n_grid, gaps)
     idx = [PSI_NAMES.index(n) for n in names]
@@ -487,8 +602,24 @@ def bounding_box_polytope(model: Trms, names: Sequence[str] = REDUCED_PSI, ts: O
     B[1, 1] = frozen["b22"]
     if ts is not None:
         A, B = euler_discrete(A, B, ts)
-    return TrmsPolytope(model=model, names=tuple(names), lo=lo[idx], hi=hi[idx], frozen=frozen, A=A, B=B, ts=ts)
+    return TrmsPolytope(
+        model=model, names=tuple(names), lo=lo[idx], hi=hi[idx], frozen=frozen, A=A, B=B, ts=ts
+    )
 
 
-__all__ = ["INPUT_NAMES", "P_NAMES", "PSI_NAMES", "REDUCED_PSI", "STATE_NAMES", "TABLE7_RANGES", "TS_PAPER",
-           "Trms", "TrmsParams", "TrmsPolytope", "bounding_box_polytope", "euler_discrete", "p_box", "psi_bounds"]
+__all__ = [
+    "INPUT_NAMES",
+    "P_NAMES",
+    "PSI_NAMES",
+    "REDUCED_PSI",
+    "STATE_NAMES",
+    "TABLE7_RANGES",
+    "TS_PAPER",
+    "Trms",
+    "TrmsParams",
+    "TrmsPolytope",
+    "bounding_box_polytope",
+    "euler_discrete",
+    "p_box",
+    "psi_bounds",
+]

@@ -18,8 +18,13 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
-from rclpy.qos import (QoSDurabilityPolicy, QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy,
-                       qos_profile_sensor_data)
+from rclpy.qos import (
+    QoSDurabilityPolicy,
+    QoSHistoryPolicy,
+    QoSProfile,
+    QoSReliabilityPolicy,
+    qos_profile_sensor_data,
+)
 
 from lpv_sysid.errors import ConfigError, LpvSysidError
 from lpv_sysid.io.messages import TYPES
@@ -33,9 +38,12 @@ TOPIC_TYPES = dict(TYPES)
 SENSOR_TOPICS = frozenset({"state", "rotor_speeds", "imu"})
 
 QOS_SENSOR = qos_profile_sensor_data
-QOS_RELIABLE = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=10,
-                          reliability=QoSReliabilityPolicy.RELIABLE,
-                          durability=QoSDurabilityPolicy.VOLATILE)
+QOS_RELIABLE = QoSProfile(
+    history=QoSHistoryPolicy.KEEP_LAST,
+    depth=10,
+    reliability=QoSReliabilityPolicy.RELIABLE,
+    durability=QoSDurabilityPolicy.VOLATILE,
+)
 
 
 def qos_for(topic: str) -> QoSProfile:
@@ -53,8 +61,9 @@ class StatusPublisher:
 
     def __init__(self, node) -> None:
         self.status = node.create_publisher(DiagnosticArray, "status", qos_for("status"))
-        self.diagnostics = node.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC,
-                                                 qos_for("status"))
+        self.diagnostics = node.create_publisher(
+            DiagnosticArray, DIAGNOSTICS_TOPIC, qos_for("status")
+        )
 
     def publish(self, msg) -> None:
         self.status.publish(msg)
@@ -63,15 +72,21 @@ class StatusPublisher:
 
 def double(description: str, lo: float, hi: float, read_only: bool = False) -> ParameterDescriptor:
     return ParameterDescriptor(
-        type=Parameter.Type.DOUBLE.value, description=description, read_only=read_only,
-        floating_point_range=[FloatingPointRange(from_value=float(lo), to_value=float(hi),
-                                                 step=0.0)])
+        type=Parameter.Type.DOUBLE.value,
+        description=description,
+        read_only=read_only,
+        floating_point_range=[
+            FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)
+        ],
+    )
 
 
 def integer(description: str, lo: int, hi: int) -> ParameterDescriptor:
     return ParameterDescriptor(
-        type=Parameter.Type.INTEGER.value, description=description,
-        integer_range=[IntegerRange(from_value=int(lo), to_value=int(hi), step=1)])
+        type=Parameter.Type.INTEGER.value,
+        description=description,
+        integer_range=[IntegerRange(from_value=int(lo), to_value=int(hi), step=1)],
+    )
 
 
 def typed(kind: Parameter.Type, description: str, read_only: bool = False) -> ParameterDescriptor:
@@ -83,9 +98,11 @@ def clock_source(node) -> str:
     time under ``use_sim_time`` (``/clock``), else the system (wall) time."""
     clock = node.get_clock()
     sim = bool(getattr(clock, "ros_time_is_active", False))
-    return (f"node clock {clock.clock_type.name}: "
-            f"{'simulation time (/clock, use_sim_time)' if sim else 'system time'}; "
-            "input stamps are judged against it")
+    return (
+        f"node clock {clock.clock_type.name}: "
+        f"{'simulation time (/clock, use_sim_time)' if sim else 'system time'}; "
+        "input stamps are judged against it"
+    )
 
 
 def settings_table(settings_cls) -> list:
@@ -136,18 +153,24 @@ def declare(node, table) -> dict:
             # no default, or a params file wrote ``name: []`` (rcl reads it as no value)
             kind = Parameter.Type(descriptor.type)
             if kind not in _ARRAY_TYPES:
-                raise ConfigError(f"parameter '{name}' has no value (a params file wrote [] "
-                                  f"for a {kind.name} parameter)")
+                raise ConfigError(
+                    f"parameter '{name}' has no value (a params file wrote [] "
+                    f"for a {kind.name} parameter)"
+                )
             p = Parameter(name, kind, [])
-            result, = node.set_parameters([p])
+            (result,) = node.set_parameters([p])
             if not result.successful:
                 raise ConfigError(f"parameter '{name}': {result.reason}")
         values[name] = list(p.value) if isinstance(default, (list, Parameter.Type)) else p.value
     return values
 
 
-_ARRAY_TYPES = (Parameter.Type.DOUBLE_ARRAY, Parameter.Type.STRING_ARRAY,
-                Parameter.Type.INTEGER_ARRAY, Parameter.Type.BOOL_ARRAY)
+_ARRAY_TYPES = (
+    Parameter.Type.DOUBLE_ARRAY,
+    Parameter.Type.STRING_ARRAY,
+    Parameter.Type.INTEGER_ARRAY,
+    Parameter.Type.BOOL_ARRAY,
+)
 
 
 class ShellNode(Node):
@@ -304,5 +327,6 @@ def _orderly_shutdown(node, executor) -> None:
     while rclpy.ok() and not node.shutdown_complete() and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=SPIN_PERIOD_S)
     if not node.shutdown_complete():
-        node.get_logger().error(f"shutdown not complete after {node.SHUTDOWN_TIMEOUT_S} s: "
-                                f"{node.shutdown_state()}")
+        node.get_logger().error(
+            f"shutdown not complete after {node.SHUTDOWN_TIMEOUT_S} s: {node.shutdown_state()}"
+        )

@@ -49,14 +49,25 @@ NODE_NAME = "campaign"
 S = Parameter.Type.STRING
 
 PARAMETERS = [
-    ("campaign_file", "campaign.yaml", C.typed(S, "config/campaign.yaml (campaign, bridge_config, "
-                                                  "signals_config)")),
+    (
+        "campaign_file",
+        "campaign.yaml",
+        C.typed(S, "config/campaign.yaml (campaign, bridge_config, signals_config)"),
+    ),
     ("signals_file", "", C.typed(S, "phase-1 signals.npz (empty: designed from signals_config)")),
     ("out_dir", "", C.typed(S, "directory for one rosbag2 per run (empty: no per-run bags)")),
-    ("bridge_node", "mavlink_bridge", C.typed(S, "name of the bridge node in this namespace "
-                                                 "(its start/abort services and status)")),
-    ("rate_hz", 100.0, C.double("campaign step rate [Hz] (references go out at campaign.rate_hz)",
-                                10.0, 1000.0)),
+    (
+        "bridge_node",
+        "mavlink_bridge",
+        C.typed(
+            S, "name of the bridge node in this namespace (its start/abort services and status)"
+        ),
+    ),
+    (
+        "rate_hz",
+        100.0,
+        C.double("campaign step rate [Hz] (references go out at campaign.rate_hz)", 10.0, 1000.0),
+    ),
     ("status_rate_hz", 2.0, C.double("status publication rate [Hz]", 0.1, 100.0)),
     ("auto_start", False, C.typed(Parameter.Type.BOOL, "start the campaign without the service")),
 ]
@@ -74,10 +85,15 @@ def vehicle_status(values: dict) -> CP.VehicleStatus:
         except ValueError:
             home = None
     mode = values.get("vehicle_mode") or None
-    return CP.VehicleStatus(values.get("state", "IDLE"), values.get("reason", ""),
-                            None if mode in (None, "unknown") else mode, values.get("armed") == "True",
-                            home, values.get("envelope_violation") or None,
-                            values.get("confirmed_mode") or None)
+    return CP.VehicleStatus(
+        values.get("state", "IDLE"),
+        values.get("reason", ""),
+        None if mode in (None, "unknown") else mode,
+        values.get("armed") == "True",
+        home,
+        values.get("envelope_violation") or None,
+        values.get("confirmed_mode") or None,
+    )
 
 
 class CampaignNode(C.ShellNode):
@@ -89,8 +105,10 @@ class CampaignNode(C.ShellNode):
         cfg = FlyConfig.load(p["campaign_file"])
         ccfg = cfg.campaign
         if str(ccfg.finish).upper() == "LAND":
-            self.get_logger().warning("campaign finish LAND: mavlink_bridge_node has no finish service; "
-                                      "the campaign ends with the bridge's hand-back chain (HOLD)")
+            self.get_logger().warning(
+                "campaign finish LAND: mavlink_bridge_node has no finish service; "
+                "the campaign ends with the bridge's hand-back chain (HOLD)"
+            )
             ccfg = dataclasses.replace(ccfg, finish="HOLD")
         bcfg = bridge_config_for(cfg.bridge_config, None, ccfg)
         self.table = load_signals(p["signals_file"] or None, cfg.signals_config)
@@ -104,11 +122,15 @@ class CampaignNode(C.ShellNode):
         self.rec = None
         self.out_dir = Path(p["out_dir"]) if p["out_dir"] else None
         self._written = False
-        self.pub_ref = self.create_publisher(TwistStamped, "velocity_reference", C.qos_for("velocity_reference"))
+        self.pub_ref = self.create_publisher(
+            TwistStamped, "velocity_reference", C.qos_for("velocity_reference")
+        )
         self.pub_exc = self.create_publisher(JointState, "excitation", C.qos_for("excitation"))
-        self.pub_status = C.StatusPublisher(self)      # status and /diagnostics
+        self.pub_status = C.StatusPublisher(self)  # status and /diagnostics
         self.create_subscription(Odometry, "state", self.on_state, C.qos_for("state"))
-        self.create_subscription(JointState, "rotor_speeds", self.on_rotors, C.qos_for("rotor_speeds"))
+        self.create_subscription(
+            JointState, "rotor_speeds", self.on_rotors, C.qos_for("rotor_speeds")
+        )
         self.create_subscription(Imu, "imu", self.on_imu, C.qos_for("imu"))
         self.create_subscription(DiagnosticArray, "status", self.on_status, C.qos_for("status"))
         self.cli_start = self.create_client(Trigger, f"{self.bridge_name}/start")
@@ -117,9 +139,11 @@ class CampaignNode(C.ShellNode):
         self.create_service(Trigger, "~/abort", self.on_abort)
         self.create_timer(1.0 / p["rate_hz"], self.on_step)
         self.create_timer(1.0 / p["status_rate_hz"], lambda: self.publish_status([]))
-        self.get_logger().info(f"{len(self.plan.runs)} runs planned, excitation {prof.duration:.1f} s; "
-                               f"bridge {self.bridge_name}\n{self.plan.describe()}")
-        self._auto_start = bool(p["auto_start"])     # once the bridge's services are up
+        self.get_logger().info(
+            f"{len(self.plan.runs)} runs planned, excitation {prof.duration:.1f} s; "
+            f"bridge {self.bridge_name}\n{self.plan.describe()}"
+        )
+        self._auto_start = bool(p["auto_start"])  # once the bridge's services are up
 
     # -- inputs ---------------------------------------------------------------------
     def on_state(self, msg):
@@ -166,8 +190,12 @@ class CampaignNode(C.ShellNode):
         if self.out_dir is not None:
             from lpv_sysid.cli.fly import CampaignRecorder
 
-            self.rec = CampaignRecorder(self.out_dir, self.fly_cfg.storage, False,
-                                        description="campaign_node: one bag per run")
+            self.rec = CampaignRecorder(
+                self.out_dir,
+                self.fly_cfg.storage,
+                False,
+                description="campaign_node: one bag per run",
+            )
             self.rec.start(now)
         self._handle(now, self.campaign.start(now))
         return f"campaign started: {len(self.plan.runs)} runs"
@@ -209,8 +237,11 @@ class CampaignNode(C.ShellNode):
             elif isinstance(a, (CP.AbortBridge, CP.FinishBridge)):
                 self._call(self.cli_abort, "abort")
             elif isinstance(a, CP.RunStarted) and self.rec is not None:
-                self._record(lambda: self.get_logger().info(f"recording {a.run.name} -> "
-                                                            f"{self.rec.begin_run(a.run.name)}"))
+                self._record(
+                    lambda: self.get_logger().info(
+                        f"recording {a.run.name} -> {self.rec.begin_run(a.run.name)}"
+                    )
+                )
             elif isinstance(a, CP.RunEnded) and self.rec is not None:
                 self.rec.end_run()
         if out.command is not None and not self.campaign.finished:
@@ -227,8 +258,11 @@ class CampaignNode(C.ShellNode):
         if not client.service_is_ready():
             self.get_logger().error(f"bridge service {client.srv_name} not available ({what})")
         fut = client.call_async(Trigger.Request())
-        fut.add_done_callback(lambda f: self.get_logger().info(
-            f"bridge {what}: {f.result().message if f.result() is not None else 'no answer'}"))
+        fut.add_done_callback(
+            lambda f: self.get_logger().info(
+                f"bridge {what}: {f.result().message if f.result() is not None else 'no answer'}"
+            )
+        )
 
     def _record(self, fn) -> None:
         try:
@@ -236,7 +270,9 @@ class CampaignNode(C.ShellNode):
         except LpvSysidError as exc:
             self.get_logger().error(f"recording failed: {exc}", once=True)
             if not self.campaign.finished:
-                self._handle(self.now(), self.campaign.abort(self.now(), f"recording failed: {exc}"))
+                self._handle(
+                    self.now(), self.campaign.abort(self.now(), f"recording failed: {exc}")
+                )
 
     def _finish(self, now: float) -> None:
         self._written = True
@@ -256,7 +292,9 @@ class CampaignNode(C.ShellNode):
 
         summary = {**c.summary(), "bags": dict(self.rec.bags), "recording_errors": errors or None}
         try:
-            (self.out_dir / "campaign_summary.yaml").write_text(yaml.safe_dump(_plain(summary), sort_keys=False))
+            (self.out_dir / "campaign_summary.yaml").write_text(
+                yaml.safe_dump(_plain(summary), sort_keys=False)
+            )
             rows = CP.trim_rows(c.results)
             if rows:
                 write_trim_table(rows, self.out_dir)
@@ -268,7 +306,7 @@ class CampaignNode(C.ShellNode):
         level, message = ("OK" if c.ok is not False else "ERROR"), f"campaign {c.phase}"
         for ev in events:
             text = f"{ev.phase}: {ev.message}"
-            if ev.level == "info":          # one severity per call site (rclpy's rule)
+            if ev.level == "info":  # one severity per call site (rclpy's rule)
                 self.get_logger().info(text)
             elif ev.level == "warn":
                 self.get_logger().warning(text)
@@ -278,9 +316,13 @@ class CampaignNode(C.ShellNode):
                 level = "ERROR" if ev.level == "error" or level == "ERROR" else "WARN"
                 message = ev.message
         run = c.run
-        values = {"phase": c.phase, "run": run.name if run is not None else "",
-                  "runs_done": sum(1 for r in c.results if r.complete), "runs": len(self.plan.runs),
-                  "reason": c.reason}
+        values = {
+            "phase": c.phase,
+            "run": run.name if run is not None else "",
+            "runs_done": sum(1 for r in c.results if r.complete),
+            "runs": len(self.plan.runs),
+            "reason": c.reason,
+        }
         if run is not None and c.phase in (CP.TRIM, CP.EXCITATION):
             values["v_d"] = " ".join(f"{x:g}" for x in run.vertex)
         st = M.diagnostic_status(self.f, level, self.get_fully_qualified_name(), message, values)

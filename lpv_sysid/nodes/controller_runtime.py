@@ -60,11 +60,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lpv_sysid.control.lpv_controller import (LpvController, LpvControllerConfig,
-                                              ReferenceLimiter)
-from lpv_sysid.control.safety import (EXTERNAL, NON_FINITE, OUT_OF_ORDER,
-                                      REFERENCE_ENVELOPE, SafetyConfig, SafetySupervisor,
-                                      check_closed_loop)
+from lpv_sysid.control.lpv_controller import LpvController, LpvControllerConfig, ReferenceLimiter
+from lpv_sysid.control.safety import (
+    EXTERNAL,
+    NON_FINITE,
+    OUT_OF_ORDER,
+    REFERENCE_ENVELOPE,
+    SafetyConfig,
+    SafetySupervisor,
+    check_closed_loop,
+)
 from lpv_sysid.errors import ConfigError, SafetyError
 from lpv_sysid.io import messages as M
 from lpv_sysid.io.formats import GainSchedule, load_certified_systems
@@ -77,9 +82,12 @@ INPUT_TOPICS = ("state", "rotor_speeds", "velocity_reference", "excitation")
 OUTPUT_TOPICS = ("actuator_command", "status")
 _TIMEOUTS = ("state_timeout_s", "rotor_timeout_s", "reference_timeout_s", "excitation_timeout_s")
 #: timeout parameter -> the parameter holding its stream's publication rate (the timeout rule)
-_RATES = {"state_timeout_s": "state_rate_hz", "rotor_timeout_s": "rotor_rate_hz",
-          "reference_timeout_s": "reference_rate_hz",
-          "excitation_timeout_s": "excitation_rate_hz"}
+_RATES = {
+    "state_timeout_s": "state_rate_hz",
+    "rotor_timeout_s": "rotor_rate_hz",
+    "reference_timeout_s": "reference_rate_hz",
+    "excitation_timeout_s": "excitation_rate_hz",
+}
 #: the timeout rule: ``timeout >= TIMEOUT_PERIODS / rate + input_latency_s``. At any check the
 #: newest sample of a healthy stream is at most one period old plus its delivery latency; one
 #: lost sample (the sensor streams are best effort) makes it two periods
@@ -100,72 +108,120 @@ class ControllerSettings(P.Settings):
 
     WHERE = "lpv_controller"
 
-    gains_file: str = P.text("", "gains.yaml from `lpv-sysid synthesize` (validated, hash, "
-                             "closed-loop stability and design envelope checked at start)",
-                             nonempty=True)
+    gains_file: str = P.text(
+        "",
+        "gains.yaml from `lpv-sysid synthesize` (validated, hash, "
+        "closed-loop stability and design envelope checked at start)",
+        nonempty=True,
+    )
     models_file: str = P.text("", "vertex_models.yaml the gains must match (optional)")
     rate_hz: float = P.double(250.0, "actuator command rate [Hz]", 1.0, 2000.0)
     state_timeout_s: float = P.double(0.02, "state older than this -> abort [s]", 0.001, 1.0)
-    rotor_timeout_s: float = P.double(0.05, "rotor_speeds older than this -> abort [s]",
-                                      0.001, 1.0)
-    reference_timeout_s: float = P.double(0.1, "velocity_reference older than this -> abort [s]",
-                                          0.001, 1.0)
-    excitation_timeout_s: float = P.double(0.1, "excitation older than this -> abort [s]",
-                                           0.001, 1.0)
+    rotor_timeout_s: float = P.double(
+        0.05, "rotor_speeds older than this -> abort [s]", 0.001, 1.0
+    )
+    reference_timeout_s: float = P.double(
+        0.1, "velocity_reference older than this -> abort [s]", 0.001, 1.0
+    )
+    excitation_timeout_s: float = P.double(
+        0.1, "excitation older than this -> abort [s]", 0.001, 1.0
+    )
     stamp_tolerance_s: float = P.double(
-        0.01, "header stamps may lead the node clock, or lag it beyond a stream's timeout, "
+        0.01,
+        "header stamps may lead the node clock, or lag it beyond a stream's timeout, "
         "by this much (transport latency) [s]; node clock = sim time under use_sim_time",
-        0.0, 0.5)
+        0.0,
+        0.5,
+    )
     tick_source: str = P.text(
-        "timer", "timer: a law step every 1 / rate_hz of the node clock, on the newest samples "
+        "timer",
+        "timer: a law step every 1 / rate_hz of the node clock, on the newest samples "
         "received; state: a law step on each state sample, at its stamp (the freshest sample, "
         "no tick phase; the lock-stepped sim_vehicle waits for exactly that command), the "
-        "timer then only judges staleness", choices=TICK_SOURCES)
+        "timer then only judges staleness",
+        choices=TICK_SOURCES,
+    )
     reference_hold: str = P.text(
-        "zoh", "the reference between its messages: zoh holds it (a staircase: its steps reach "
+        "zoh",
+        "the reference between its messages: zoh holds it (a staircase: its steps reach "
         "the feedforward's derivative filter), foh extrapolates the last limited value along "
         "its slope (the played table is piecewise linear; at most reference_timeout_s ahead)",
-        choices=REFERENCE_HOLDS)
-    state_rate_hz: float = P.double(250.0, "publication rate of state [Hz] (timeout rule)",
-                                    1.0, 5000.0)
-    rotor_rate_hz: float = P.double(100.0, "publication rate of rotor_speeds [Hz] (timeout "
-                                    "rule)", 1.0, 5000.0)
-    reference_rate_hz: float = P.double(100.0, "publication rate of velocity_reference [Hz] "
-                                        "(timeout rule)", 1.0, 5000.0)
-    excitation_rate_hz: float = P.double(100.0, "publication rate of excitation [Hz] (timeout "
-                                         "rule)", 1.0, 5000.0)
+        choices=REFERENCE_HOLDS,
+    )
+    state_rate_hz: float = P.double(
+        250.0, "publication rate of state [Hz] (timeout rule)", 1.0, 5000.0
+    )
+    rotor_rate_hz: float = P.double(
+        100.0, "publication rate of rotor_speeds [Hz] (timeout rule)", 1.0, 5000.0
+    )
+    reference_rate_hz: float = P.double(
+        100.0, "publication rate of velocity_reference [Hz] (timeout rule)", 1.0, 5000.0
+    )
+    excitation_rate_hz: float = P.double(
+        100.0, "publication rate of excitation [Hz] (timeout rule)", 1.0, 5000.0
+    )
     input_latency_s: float = P.double(
-        0.0, "p99 of receipt time minus header stamp of the input streams, measured on the "
+        0.0,
+        "p99 of receipt time minus header stamp of the input streams, measured on the "
         f"target machine (config/lpv_controller.yaml: this machine's) [s]; every timeout >= "
-        f"{TIMEOUT_PERIODS} / rate + this", 0.0, 1.0)
-    box_margin: float = P.double(0.0, "tolerance around the scheduling box [m/s] (at most "
-                                 f"{BOX_MARGIN_MAX_FRACTION:g} of its narrowest axis)", 0.0, 1.0)
-    excitation_gain: float = P.double(1.0, "excitation multiplier kappa (seed 0 Eq. 33)",
-                                      0.0, 10.0)
-    arm_length: float = P.double(0.225, "arm length of the mixer (seed 0 Eq. 7) [m]",
-                                 0.01, 10.0)
-    u_esc_min: float = P.double(0.0, "lower ESC command limit (< u_esc_max, below every "
-                                "vertex trim)", 0.0, 1.0)
-    u_esc_max: float = P.double(1.0, "upper ESC command limit (> u_esc_min, above every "
-                                "vertex trim)", 0.0, 1.0)
-    rate_limit: tuple = P.doubles((), "per-channel rate limit of u [1/s] (unset: none)",
-                                  lo=0.0, hi=1000.0, lengths=(0, 4), lo_open=True)
-    monitor_margin: float = P.double(1.2, "bound monitor: abort when gain > gamma x margin",
-                                     1.0, 10.0)
+        f"{TIMEOUT_PERIODS} / rate + this",
+        0.0,
+        1.0,
+    )
+    box_margin: float = P.double(
+        0.0,
+        "tolerance around the scheduling box [m/s] (at most "
+        f"{BOX_MARGIN_MAX_FRACTION:g} of its narrowest axis)",
+        0.0,
+        1.0,
+    )
+    excitation_gain: float = P.double(
+        1.0, "excitation multiplier kappa (seed 0 Eq. 33)", 0.0, 10.0
+    )
+    arm_length: float = P.double(0.225, "arm length of the mixer (seed 0 Eq. 7) [m]", 0.01, 10.0)
+    u_esc_min: float = P.double(
+        0.0, "lower ESC command limit (< u_esc_max, below every vertex trim)", 0.0, 1.0
+    )
+    u_esc_max: float = P.double(
+        1.0, "upper ESC command limit (> u_esc_min, above every vertex trim)", 0.0, 1.0
+    )
+    rate_limit: tuple = P.doubles(
+        (),
+        "per-channel rate limit of u [1/s] (unset: none)",
+        lo=0.0,
+        hi=1000.0,
+        lengths=(0, 4),
+        lo_open=True,
+    )
+    monitor_margin: float = P.double(
+        1.2, "bound monitor: abort when gain > gamma x margin", 1.0, 10.0
+    )
     monitor_min_energy: float = P.double(
-        0.05, "bound monitor: ||u_e||^2 before judging (the design signal has 1 per period, "
-        "Eq. 26)", 1e-6, 1.0)
+        0.05,
+        "bound monitor: ||u_e||^2 before judging (the design signal has 1 per period, Eq. 26)",
+        1e-6,
+        1.0,
+    )
     monitor_window_s: float = P.double(
-        0.0, "> 0: exponentially forgetting monitor window [s] (>= 1 s); 0: running from start",
-        0.0, 1e4)
+        0.0,
+        "> 0: exponentially forgetting monitor window [s] (>= 1 s); 0: running from start",
+        0.0,
+        1e4,
+    )
     feedforward: bool = P.flag(True, "reference feedforward when gains.yaml has F_ff")
-    ff_filter_tau: float = P.double(0.05, "derivative filter of velocity_reference (a) [s]",
-                                    0.0, 2.0)
-    ff_jerk_tau: float = P.double(0.2, "jerk stage of the derivative filter (F_jerk) [s]",
-                                  0.0, 5.0)
+    ff_filter_tau: float = P.double(
+        0.05, "derivative filter of velocity_reference (a) [s]", 0.0, 2.0
+    )
+    ff_jerk_tau: float = P.double(
+        0.2, "jerk stage of the derivative filter (F_jerk) [s]", 0.0, 5.0
+    )
     envelope_margin: float = P.double(
-        1.5, "abort when the reference rate/acceleration or kappa u_e exceed the gains' design "
-        "envelope (certificate.design) by this factor", 1.0, 10.0)
+        1.5,
+        "abort when the reference rate/acceleration or kappa u_e exceed the gains' design "
+        "envelope (certificate.design) by this factor",
+        1.0,
+        10.0,
+    )
     auto_start: bool = P.flag(False, "start commanding without the service")
     status_rate_hz: float = P.double(2.0, "status publication rate [Hz]", 0.1, 100.0)
 
@@ -175,26 +231,35 @@ class ControllerSettings(P.Settings):
         period = 1.0 / self.rate_hz
         for name in _TIMEOUTS:
             if getattr(self, name) < period:
-                self.fail(f"{name} {getattr(self, name):g} s is shorter than one control period "
-                          f"(1 / rate_hz = {period:g} s): staleness cannot be judged that finely")
+                self.fail(
+                    f"{name} {getattr(self, name):g} s is shorter than one control period "
+                    f"(1 / rate_hz = {period:g} s): staleness cannot be judged that finely"
+                )
             rate = _RATES[name]
             least = self.min_timeout(name)
             if getattr(self, name) < least - 1e-12:
-                self.fail(f"{name} {getattr(self, name):g} s is below {TIMEOUT_PERIODS} / {rate} + "
-                          f"input_latency_s = {TIMEOUT_PERIODS} / {getattr(self, rate):g} Hz + "
-                          f"{self.input_latency_s:g} s = {least:.4g} s: a healthy stream would "
-                          "abort on its own delivery jitter")
+                self.fail(
+                    f"{name} {getattr(self, name):g} s is below {TIMEOUT_PERIODS} / {rate} + "
+                    f"input_latency_s = {TIMEOUT_PERIODS} / {getattr(self, rate):g} Hz + "
+                    f"{self.input_latency_s:g} s = {least:.4g} s: a healthy stream would "
+                    "abort on its own delivery jitter"
+                )
         shortest = min(getattr(self, n) for n in _TIMEOUTS)
         if self.stamp_tolerance_s > shortest:
-            self.fail(f"stamp_tolerance_s {self.stamp_tolerance_s:g} s exceeds the shortest "
-                      f"timeout {shortest:g} s (stale data would pass)")
+            self.fail(
+                f"stamp_tolerance_s {self.stamp_tolerance_s:g} s exceeds the shortest "
+                f"timeout {shortest:g} s (stale data would pass)"
+            )
         if self.stamp_tolerance_s < 1.0 / self.state_rate_hz - 1e-12:
-            self.fail(f"stamp_tolerance_s {self.stamp_tolerance_s:g} s is below one state period "
-                      f"(1 / state_rate_hz = {1.0 / self.state_rate_hz:g} s): under use_sim_time "
-                      "a sample may arrive before the /clock message of its instant")
+            self.fail(
+                f"stamp_tolerance_s {self.stamp_tolerance_s:g} s is below one state period "
+                f"(1 / state_rate_hz = {1.0 / self.state_rate_hz:g} s): under use_sim_time "
+                "a sample may arrive before the /clock message of its instant"
+            )
         if 0.0 < self.monitor_window_s < 1.0:
-            self.fail("monitor_window_s must be 0 (running) or >= 1 s, got "
-                      f"{self.monitor_window_s:g}")
+            self.fail(
+                f"monitor_window_s must be 0 (running) or >= 1 s, got {self.monitor_window_s:g}"
+            )
 
     def min_timeout(self, name: str) -> float:
         """The least value the timeout rule allows for the timeout parameter ``name``."""
@@ -202,64 +267,86 @@ class ControllerSettings(P.Settings):
 
     @property
     def timeouts(self) -> dict:
-        return {"state": self.state_timeout_s, "rotor_speeds": self.rotor_timeout_s,
-                "velocity_reference": self.reference_timeout_s,
-                "excitation": self.excitation_timeout_s}
+        return {
+            "state": self.state_timeout_s,
+            "rotor_speeds": self.rotor_timeout_s,
+            "velocity_reference": self.reference_timeout_s,
+            "excitation": self.excitation_timeout_s,
+        }
 
     def law_config(self) -> LpvControllerConfig:
         return LpvControllerConfig(
-            u_esc_min=self.u_esc_min, u_esc_max=self.u_esc_max,
-            rate_limit=self.rate_limit or None, monitor_margin=self.monitor_margin,
-            monitor_min_energy=self.monitor_min_energy, feedforward=self.feedforward,
-            ff_filter_tau=self.ff_filter_tau, ff_jerk_tau=self.ff_jerk_tau,
-            monitor_window=self.monitor_window_s or None)
+            u_esc_min=self.u_esc_min,
+            u_esc_max=self.u_esc_max,
+            rate_limit=self.rate_limit or None,
+            monitor_margin=self.monitor_margin,
+            monitor_min_energy=self.monitor_min_energy,
+            feedforward=self.feedforward,
+            ff_filter_tau=self.ff_filter_tau,
+            ff_jerk_tau=self.ff_jerk_tau,
+            monitor_window=self.monitor_window_s or None,
+        )
 
 
-def load_flight_schedule(settings: ControllerSettings,
-                         mix: np.ndarray) -> tuple[GainSchedule, list]:
+def load_flight_schedule(
+    settings: ControllerSettings, mix: np.ndarray
+) -> tuple[GainSchedule, list]:
     """The gains to fly, after every start-up check of the module docstring; returns the
     schedule and the info lines describing what was checked. ConfigError names the reason."""
     path = settings.gains_file
     label = str(path)
     gs = GainSchedule.load(path, settings.models_file or None)
     gs.check_law_sha256(label)
-    systems = load_certified_systems(path, gs.certificate, len(gs.state_names),
-                                     len(gs.input_names), label)
+    systems = load_certified_systems(
+        path, gs.certificate, len(gs.state_names), len(gs.input_names), label
+    )
     abscissa = check_closed_loop(gs.K, systems, label)
     design = gs.certificate.design
     if design is None:
-        raise ConfigError(f"{label}: certificate.design missing: the gains do not say which "
-                          "phase-2 signal they were designed for (reference rates, excitation "
-                          "peak); re-run `lpv-sysid synthesize --summary <signals>/summary.yaml`")
+        raise ConfigError(
+            f"{label}: certificate.design missing: the gains do not say which "
+            "phase-2 signal they were designed for (reference rates, excitation "
+            "peak); re-run `lpv-sysid synthesize --summary <signals>/summary.yaml`"
+        )
     m = gs.K.shape[1]
     if mix.shape != (m, m):
         raise ConfigError(f"{label}: {m} inputs, but the mixer is {mix.shape[0]}x{mix.shape[1]}")
-    esc = np.linalg.solve(mix, gs.u0.T).T            # vertex trims as ESC commands (Eq. 7)
+    esc = np.linalg.solve(mix, gs.u0.T).T  # vertex trims as ESC commands (Eq. 7)
     lo, hi = settings.u_esc_min, settings.u_esc_max
     for i, e in enumerate(esc):
         if e.min() < lo or e.max() > hi:
-            raise ConfigError(f"lpv_controller: ESC limits [{lo:g}, {hi:g}] do not contain the "
-                              f"trim ESC commands {np.round(e, 4).tolist()} of vertex {i} "
-                              f"({label}): every command would be clamped")
+            raise ConfigError(
+                f"lpv_controller: ESC limits [{lo:g}, {hi:g}] do not contain the "
+                f"trim ESC commands {np.round(e, 4).tolist()} of vertex {i} "
+                f"({label}): every command would be clamped"
+            )
     width = float(np.min(gs.scheduling.max - gs.scheduling.min))
     if settings.box_margin > BOX_MARGIN_MAX_FRACTION * width:
-        raise ConfigError(f"lpv_controller: box_margin {settings.box_margin:g} m/s exceeds "
-                          f"{BOX_MARGIN_MAX_FRACTION:g} of the narrowest box axis ({width:g} m/s, "
-                          f"{label}): the certificate covers the box only")
+        raise ConfigError(
+            f"lpv_controller: box_margin {settings.box_margin:g} m/s exceeds "
+            f"{BOX_MARGIN_MAX_FRACTION:g} of the narrowest box axis ({width:g} m/s, "
+            f"{label}): the certificate covers the box only"
+        )
     n_sys = sum(len(s) for s in systems)
-    info = [f"gains {path}: law sha256 {gs.certificate.gains_sha256[:12]} matches the "
-            f"certificate; closed loop stable on {n_sys} certified systems (max Re(eig) "
-            f"{abscissa:.3g}); design envelope ({design.source or 'certificate.design'}): "
-            f"|dv_d/dt| <= {np.round(design.reference_rate, 3).tolist()} m/s^2, |u_e| <= "
-            f"{np.round(design.excitation_peak, 4).tolist()}"]
+    info = [
+        f"gains {path}: law sha256 {gs.certificate.gains_sha256[:12]} matches the "
+        f"certificate; closed loop stable on {n_sys} certified systems (max Re(eig) "
+        f"{abscissa:.3g}); design envelope ({design.source or 'certificate.design'}): "
+        f"|dv_d/dt| <= {np.round(design.reference_rate, 3).tolist()} m/s^2, |u_e| <= "
+        f"{np.round(design.excitation_peak, 4).tolist()}"
+    ]
     return gs, info
 
 
 class ControllerRuntime:
     """See module docstring. ``factory`` builds the output messages (MsgFactory)."""
 
-    def __init__(self, settings: ControllerSettings, factory: M.MsgFactory,
-                 name: str = "/lpv_sysid/lpv_controller"):
+    def __init__(
+        self,
+        settings: ControllerSettings,
+        factory: M.MsgFactory,
+        name: str = "/lpv_sysid/lpv_controller",
+    ):
         self.settings = settings
         self.f = factory
         self.name = name
@@ -269,25 +356,37 @@ class ControllerRuntime:
         self._log += [("info", line) for line in info]
         self.law = LpvController(self.schedule, settings.law_config(), mix=self.mix)
         design = self.schedule.certificate.design
-        self.limiter = ReferenceLimiter(design.reference_rate, design.reference_accel,
-                                        design.knot_interval_s, settings.envelope_margin)
+        self.limiter = ReferenceLimiter(
+            design.reference_rate,
+            design.reference_accel,
+            design.knot_interval_s,
+            settings.envelope_margin,
+        )
         self.excitation_limit = np.asarray(design.excitation_peak) * settings.envelope_margin
         if self.excitation_limit.size != self.law.n_e:
-            raise ConfigError(f"{settings.gains_file}: certificate.design.excitation_peak has "
-                              f"{self.excitation_limit.size} entries, R has {self.law.n_e} "
-                              "columns")
+            raise ConfigError(
+                f"{settings.gains_file}: certificate.design.excitation_peak has "
+                f"{self.excitation_limit.size} entries, R has {self.law.n_e} "
+                "columns"
+            )
         box = self.schedule.scheduling
-        self.supervisor = SafetySupervisor(SafetyConfig(
-            timeouts=settings.timeouts, box_min=tuple(box.min), box_max=tuple(box.max),
-            box_margin=settings.box_margin, stamp_tolerance=settings.stamp_tolerance_s))
-        self.x8 = None            # phi, theta, u, v, w, p, q, r (FRD)
-        self.omega = None         # rotor speeds (4), rad/s
-        self.v_d_in = None        # velocity reference as received (3), FRD
-        self.v_d = None           # the reference the law follows (envelope-limited)
-        self.u_e = None           # normalised excitation (4)
+        self.supervisor = SafetySupervisor(
+            SafetyConfig(
+                timeouts=settings.timeouts,
+                box_min=tuple(box.min),
+                box_max=tuple(box.max),
+                box_margin=settings.box_margin,
+                stamp_tolerance=settings.stamp_tolerance_s,
+            )
+        )
+        self.x8 = None  # phi, theta, u, v, w, p, q, r (FRD)
+        self.omega = None  # rotor speeds (4), rad/s
+        self.v_d_in = None  # velocity reference as received (3), FRD
+        self.v_d = None  # the reference the law follows (envelope-limited)
+        self.u_e = None  # normalised excitation (4)
         self._ref_stamp = None
-        self._t_sample = None     # stamp of the last state sample ticked (tick_source: state)
-        self._ref_slope = None    # slope of the limited reference at its last message
+        self._t_sample = None  # stamp of the last state sample ticked (tick_source: state)
+        self._ref_slope = None  # slope of the limited reference at its last message
         self.commands = 0
         self.flags = {"clamped": 0, "saturated": 0, "rate_limited": 0}
         self._abort_reported = False
@@ -314,8 +413,12 @@ class ControllerRuntime:
         """:meth:`on_message`, then what to publish: with ``tick_source: state`` a state
         sample newer than the last one ticked runs the law at its stamp (:meth:`tick`)."""
         t = self.on_message(topic, msg, t_now)
-        if (self.settings.tick_source == "state" and topic == "state" and t is not None
-                and (self._t_sample is None or t > self._t_sample)):
+        if (
+            self.settings.tick_source == "state"
+            and topic == "state"
+            and t is not None
+            and (self._t_sample is None or t > self._t_sample)
+        ):
             self._t_sample = t
             return self.tick(t_now, t_sample=t)
         return []
@@ -354,13 +457,18 @@ class ControllerRuntime:
         else:
             self.u_e = values
             if sup.armed and not sup.aborted:
-                sup.check_excitation(t_now, self.settings.excitation_gain * values,
-                                     self.excitation_limit)
+                sup.check_excitation(
+                    t_now, self.settings.excitation_gain * values, self.excitation_limit
+                )
 
     def missing_inputs(self) -> list:
         """The input streams of which no sample has arrived yet."""
-        have = {"state": self.x8, "rotor_speeds": self.omega,
-                "velocity_reference": self.v_d_in, "excitation": self.u_e}
+        have = {
+            "state": self.x8,
+            "rotor_speeds": self.omega,
+            "velocity_reference": self.v_d_in,
+            "excitation": self.u_e,
+        }
         return [topic for topic in INPUT_TOPICS if have[topic] is None]
 
     def start(self, t_now: float, wait_for_inputs: bool = False) -> tuple[bool, str]:
@@ -374,16 +482,19 @@ class ControllerRuntime:
         if sup.armed:
             return False, "already started"
         if not t_now > 0.0:
-            return False, (f"node clock reads {t_now:g} s: under use_sim_time no /clock has "
-                           "arrived yet; start once the clock runs")
+            return False, (
+                f"node clock reads {t_now:g} s: under use_sim_time no /clock has "
+                "arrived yet; start once the clock runs"
+            )
         missing = self.missing_inputs() if wait_for_inputs else []
         if missing:
-            return False, (f"no {', '.join(missing)} received yet: start once every input "
-                           "stream arrives")
+            return False, (
+                f"no {', '.join(missing)} received yet: start once every input stream arrives"
+            )
         sup.arm(t_now)
         self.law.reset()
         self.limiter.reset()
-        if self.v_d_in is not None:          # follow from the current reference, not a ramp to it
+        if self.v_d_in is not None:  # follow from the current reference, not a ramp to it
             self.v_d, _ = self.limiter.update(self._ref_stamp, self.v_d_in)
             self._ref_slope = self.limiter.w.copy()
         return True, "LPV control started"
@@ -405,15 +516,20 @@ class ControllerRuntime:
             return out
         t_law = t_now if t_sample is None else float(t_sample)
         sup.check(t_now)
-        ready = self.x8 is not None and self.omega is not None and self.v_d is not None \
+        ready = (
+            self.x8 is not None
+            and self.omega is not None
+            and self.v_d is not None
             and self.u_e is not None
+        )
         if not sup.aborted and ready:
             sup.check_scheduling(t_now, self.v_d_in)
         if not sup.aborted and ready:
             x12 = np.concatenate([self.x8, self.mix @ self.omega])
             try:
-                u, info = self.law.step(t_law, x12, self.reference_at(t_law),
-                                        self.settings.excitation_gain * self.u_e)
+                u, info = self.law.step(
+                    t_law, x12, self.reference_at(t_law), self.settings.excitation_gain * self.u_e
+                )
             except SafetyError as exc:
                 kind = OUT_OF_ORDER if "backwards" in str(exc) else NON_FINITE
                 sup.abort(t_now, kind, str(exc))
@@ -421,14 +537,18 @@ class ControllerRuntime:
                 for k in self.flags:
                     self.flags[k] += bool(info[k])
                 if info["bound_exceeded"]:
-                    sup.on_bound_flag(t_now, True,
-                                      f"L2 gain estimate {self.law.gain():.4g} > gamma "
-                                      f"{self.law.gamma:g} x margin "
-                                      f"{self.settings.monitor_margin:g}")
+                    sup.on_bound_flag(
+                        t_now,
+                        True,
+                        f"L2 gain estimate {self.law.gain():.4g} > gamma "
+                        f"{self.law.gamma:g} x margin "
+                        f"{self.settings.monitor_margin:g}",
+                    )
                 if not sup.aborted:
                     self.commands += 1
-                    out.append(("actuator_command",
-                                M.actuator_command_msg(self.f, round(t_law * 1e9), u)))
+                    out.append(
+                        ("actuator_command", M.actuator_command_msg(self.f, round(t_law * 1e9), u))
+                    )
         return self._report_abort(t_now, out)
 
     def reference_at(self, t: float) -> np.ndarray:
@@ -457,8 +577,13 @@ class ControllerRuntime:
         sup = self.supervisor
         if sup.aborted and sup.armed and not self._abort_reported:
             self._abort_reported = True
-            self._log.append(("error", f"safety abort: {sup.event.reason}: {sup.event.detail}; "
-                                       "actuator commands stopped"))
+            self._log.append(
+                (
+                    "error",
+                    f"safety abort: {sup.event.reason}: {sup.event.detail}; "
+                    "actuator commands stopped",
+                )
+            )
             out.append(("status", self.status(t_now)))
         return out
 
@@ -474,12 +599,18 @@ class ControllerRuntime:
             missing = self.missing_inputs()
             if missing:
                 message += f"; no {', '.join(missing)} received yet"
-        values = {"armed": sup.armed, "aborted": sup.aborted, "commanding": sup.action.commanding,
-                  "excitation_on": sup.action.excitation_on,
-                  "reason": ev.reason if ev else "", "commands": self.commands,
-                  "gain_estimate": self.law.gain(), "gamma": self.law.gamma,
-                  "reference_limited_count": self.limiter.limited,
-                  **{f"{k}_count": v for k, v in self.flags.items()}}
+        values = {
+            "armed": sup.armed,
+            "aborted": sup.aborted,
+            "commanding": sup.action.commanding,
+            "excitation_on": sup.action.excitation_on,
+            "reason": ev.reason if ev else "",
+            "commands": self.commands,
+            "gain_estimate": self.law.gain(),
+            "gamma": self.law.gamma,
+            "reference_limited_count": self.limiter.limited,
+            **{f"{k}_count": v for k, v in self.flags.items()},
+        }
         st = M.diagnostic_status(self.f, level, self.name, message, values)
         return M.diagnostic_array(self.f, round(t_now * 1e9), [st])
 
@@ -520,5 +651,12 @@ def parse_inputs(topic: str, msgs: list) -> tuple[np.ndarray, np.ndarray]:
     return t, out
 
 
-__all__ = ["ControllerRuntime", "ControllerSettings", "INPUT_TOPICS", "OUTPUT_TOPICS",
-           "load_flight_schedule", "parse_input", "parse_inputs"]
+__all__ = [
+    "ControllerRuntime",
+    "ControllerSettings",
+    "INPUT_TOPICS",
+    "OUTPUT_TOPICS",
+    "load_flight_schedule",
+    "parse_input",
+    "parse_inputs",
+]

@@ -46,26 +46,36 @@ class DataLoggerSettings(P.Settings):
 
     WHERE = "data_logger"
 
-    out_dir: str = P.text("lpv_sysid_log", "experiment directory (must not exist or be empty)",
-                          nonempty=True)
+    out_dir: str = P.text(
+        "lpv_sysid_log", "experiment directory (must not exist or be empty)", nonempty=True
+    )
     storage: str = P.text("mcap", "rosbag2 storage", choices=STORAGES)
-    topics: tuple = P.texts(tuple(C.TOPIC_TYPES),
-                            "topics to record, relative to the namespace; 'name' for the "
-                            "lpv_sysid topics or 'name:pkg/msg/Type' for any other")
-    split_size_mb: float = P.double(0.0, "start a new bag after this many MB (0: never)",
-                                    0.0, 1.0e6)
-    split_duration_s: float = P.double(0.0, "start a new bag after this long (0: never)",
-                                       0.0, 1.0e6)
+    topics: tuple = P.texts(
+        tuple(C.TOPIC_TYPES),
+        "topics to record, relative to the namespace; 'name' for the "
+        "lpv_sysid topics or 'name:pkg/msg/Type' for any other",
+    )
+    split_size_mb: float = P.double(
+        0.0, "start a new bag after this many MB (0: never)", 0.0, 1.0e6
+    )
+    split_duration_s: float = P.double(
+        0.0, "start a new bag after this long (0: never)", 0.0, 1.0e6
+    )
     queue_depth: int = P.integer(1000, "subscription queue depth per topic", 1, 100000)
     config_files: tuple = P.texts((), "files copied verbatim into experiment.yaml")
     gains_file: str = P.text("", "gains.yaml to hash into the metadata")
     description: str = P.text("", "free text for experiment.yaml")
     status_rate_hz: float = P.double(1.0, "status publication rate [Hz]", 0.1, 100.0)
     flush_interval_s: float = P.double(
-        FLUSH_INTERVAL_S, "flush the bag (mcap chunk to the OS / sqlite3 commit) at least this "
-        "often: the most a kill -9 of the logger can lose [s]", 0.01, 1.0)
-    fsync: bool = P.flag(False, "fsync at every flush (also survives a power cut; slower on "
-                         "SD cards)")
+        FLUSH_INTERVAL_S,
+        "flush the bag (mcap chunk to the OS / sqlite3 commit) at least this "
+        "often: the most a kill -9 of the logger can lose [s]",
+        0.01,
+        1.0,
+    )
+    fsync: bool = P.flag(
+        False, "fsync at every flush (also survives a power cut; slower on SD cards)"
+    )
 
     def validate(self) -> None:
         parse_topics(self.topics)
@@ -82,8 +92,10 @@ def parse_topics(entries) -> dict[str, str]:
         name, _, typ = str(e).partition(":")
         if not typ:
             if name not in C.TOPIC_TYPES:
-                raise ConfigError(f"parameter 'topics': {name!r} is not an lpv_sysid topic "
-                                  f"{sorted(C.TOPIC_TYPES)}; write 'name:pkg/msg/Type'")
+                raise ConfigError(
+                    f"parameter 'topics': {name!r} is not an lpv_sysid topic "
+                    f"{sorted(C.TOPIC_TYPES)}; write 'name:pkg/msg/Type'"
+                )
             typ = C.TOPIC_TYPES[name]
         out[name] = typ
     return out
@@ -95,25 +107,41 @@ class DataLoggerNode(C.ShellNode):
         self.settings = p = DataLoggerSettings.from_dict(self.params)
         rel = parse_topics(p.topics)
         topics = {self.resolve_topic_name(n): t for n, t in rel.items()}
-        cfg = RecorderConfig(out_dir=p.out_dir, topics=topics, storage=p.storage,
-                             split_size_bytes=int(p.split_size_mb * 1e6),
-                             split_duration_s=p.split_duration_s,
-                             config_files=tuple(p.config_files),
-                             gains_file=p.gains_file, description=p.description,
-                             flush_interval_s=p.flush_interval_s, fsync=p.fsync)
+        cfg = RecorderConfig(
+            out_dir=p.out_dir,
+            topics=topics,
+            storage=p.storage,
+            split_size_bytes=int(p.split_size_mb * 1e6),
+            split_duration_s=p.split_duration_s,
+            config_files=tuple(p.config_files),
+            gains_file=p.gains_file,
+            description=p.description,
+            flush_interval_s=p.flush_interval_s,
+            fsync=p.fsync,
+        )
         self.recorder = Recorder(cfg)
         self.recorder.start(self.now_ns())
         self.f = M.MsgFactory.rclpy()
-        self.pub_status = C.StatusPublisher(self)      # status and /diagnostics
+        self.pub_status = C.StatusPublisher(self)  # status and /diagnostics
         for name, typ in rel.items():
             full = self.resolve_topic_name(name)
-            reliability = (QoSReliabilityPolicy.BEST_EFFORT if name in C.SENSOR_TOPICS
-                           else QoSReliabilityPolicy.RELIABLE)
-            qos = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=p.queue_depth,
-                             reliability=reliability)
+            reliability = (
+                QoSReliabilityPolicy.BEST_EFFORT
+                if name in C.SENSOR_TOPICS
+                else QoSReliabilityPolicy.RELIABLE
+            )
+            qos = QoSProfile(
+                history=QoSHistoryPolicy.KEEP_LAST, depth=p.queue_depth, reliability=reliability
+            )
             events = SubscriptionEventCallbacks(message_lost=self._lost_cb(full))
-            self.create_subscription(get_message(typ), name, self._record_cb(full), qos,
-                                     event_callbacks=events, raw=True)
+            self.create_subscription(
+                get_message(typ),
+                name,
+                self._record_cb(full),
+                qos,
+                event_callbacks=events,
+                raw=True,
+            )
         self.create_timer(1.0 / p.status_rate_hz, self.publish_status)
         # a stream that stops still reaches the disk within flush_interval_s
         self.create_timer(p.flush_interval_s / 2, self._flush_cb)
@@ -132,11 +160,13 @@ class DataLoggerNode(C.ShellNode):
             except LpvSysidError as exc:
                 # disk full / write error: what was written is closed and readable; say so
                 self.get_logger().error(str(exc), once=True)
+
         return cb
 
     def _lost_cb(self, topic):
         def cb(info):
             self.recorder.note_dropped(topic, info.total_count_change)
+
         return cb
 
     def publish_status(self):
@@ -150,8 +180,7 @@ class DataLoggerNode(C.ShellNode):
         level = "ERROR" if rec.error else "OK"
         msg = rec.error or ("recording" if rec.recording else "stopped")
         st = M.diagnostic_status(self.f, level, self.get_fully_qualified_name(), msg, values)
-        self.pub_status.publish(
-            M.diagnostic_array(self.f, self.now_ns(), [st]))
+        self.pub_status.publish(M.diagnostic_array(self.f, self.now_ns(), [st]))
 
     def begin_shutdown(self):
         """Close the bag while the context is valid (nodes/_common.run): metadata.yaml and
@@ -169,7 +198,7 @@ class DataLoggerNode(C.ShellNode):
             self.get_logger().error(str(exc))
 
     def destroy_node(self):
-        self._close_recording()        # no-op when begin_shutdown already closed it
+        self._close_recording()  # no-op when begin_shutdown already closed it
         super().destroy_node()
 
 

@@ -39,8 +39,12 @@ from lpv_sysid.errors import ConfigError
 from lpv_sysid.io import messages as M
 from lpv_sysid.nodes import _common as C
 from lpv_sysid.nodes import parameters as P
-from lpv_sysid.signals.excitation import (DEFAULT_RAMP_S, ExcitationCore, MonotonicTime,
-                                          check_design)
+from lpv_sysid.signals.excitation import (
+    DEFAULT_RAMP_S,
+    ExcitationCore,
+    MonotonicTime,
+    check_design,
+)
 from lpv_sysid.signals.store import load_npz
 
 NODE_NAME = "excitation"
@@ -50,8 +54,11 @@ _NEVER_S = 1e9
 #: status values by which a node reports an abort: lpv_controller ``aborted: true`` (its
 #: safety abort, ERROR), mavlink_bridge ``state: HANDBACK | FAILED`` (control going or gone
 #: back to PX4, mavlink/offboard.py), campaign ``phase: aborting | aborted | failed``
-ABORT_MARKERS = {"aborted": ("true",), "state": ("HANDBACK", "FAILED"),
-                 "phase": ("aborting", "aborted", "failed")}
+ABORT_MARKERS = {
+    "aborted": ("true",),
+    "state": ("HANDBACK", "FAILED"),
+    "phase": ("aborting", "aborted", "failed"),
+}
 
 
 def reports_abort(status) -> bool:
@@ -66,24 +73,38 @@ class ExcitationSettings(P.Settings):
     WHERE = "excitation"
 
     signals_file: str = P.text("", "signals.npz (lpv-sysid signals)", nonempty=True)
-    mode: str = P.text("phase1", "phase1: vertex + multisine on u, v, w, yaw rate; "
-                       "phase2: v_d(t) and u_e(t)", choices=MODES)
+    mode: str = P.text(
+        "phase1",
+        "phase1: vertex + multisine on u, v, w, yaw rate; phase2: v_d(t) and u_e(t)",
+        choices=MODES,
+    )
     rate_hz: float = P.double(100.0, "publication rate [Hz]", 1.0, 1000.0)
     status_rate_hz: float = P.double(2.0, "status publication rate [Hz]", 0.1, 100.0)
-    vertex_frd: tuple = P.doubles((0.0, 0.0, 0.0), "phase1: vertex body velocity (u, v, w) "
-                                  "FRD [m/s]", lo=-20.0, hi=20.0, lengths=(3,))
-    yaw_rate_offset: float = P.double(0.0, "phase1: yaw-rate reference offset FRD [rad/s]",
-                                      -3.0, 3.0)
-    ramp_s: float = P.double(DEFAULT_RAMP_S, "raised-cosine fade in/out and abort fade [s]",
-                             0.0, 60.0)
+    vertex_frd: tuple = P.doubles(
+        (0.0, 0.0, 0.0),
+        "phase1: vertex body velocity (u, v, w) FRD [m/s]",
+        lo=-20.0,
+        hi=20.0,
+        lengths=(3,),
+    )
+    yaw_rate_offset: float = P.double(
+        0.0, "phase1: yaw-rate reference offset FRD [rad/s]", -3.0, 3.0
+    )
+    ramp_s: float = P.double(
+        DEFAULT_RAMP_S, "raised-cosine fade in/out and abort fade [s]", 0.0, 60.0
+    )
     start_delay_s: float = P.double(0.0, "delay between start and the signal [s]", 0.0, 60.0)
     auto_start: bool = P.flag(False, "start on launch without the service")
-    gains_file: str = P.text("", "phase2: gains.yaml whose design envelope the signal must "
-                             "fit (checked at load; empty: no check)")
+    gains_file: str = P.text(
+        "",
+        "phase2: gains.yaml whose design envelope the signal must "
+        "fit (checked at load; empty: no check)",
+    )
     abort_on_status_from: tuple = P.texts(
         ("lpv_controller", "mavlink_bridge", "campaign"),
         "fade out when one of these nodes (last component of the status name) reports an "
-        "abort or a hand-back on status")
+        "abort or a hand-back on status",
+    )
 
     def validate(self) -> None:
         if self.gains_file and self.mode != "phase2":
@@ -102,7 +123,7 @@ class ExcitationNode(C.ShellNode):
         self.table = load_npz(s.signals_file)
         self.offset = np.asarray(s.vertex_frd) if self.mode == "phase1" else np.zeros(3)
         self.yaw_offset = s.yaw_rate_offset if self.mode == "phase1" else 0.0
-        self.core = self._make_core(start_time=0.0)   # validates channels now, not at start
+        self.core = self._make_core(start_time=0.0)  # validates channels now, not at start
         if s.gains_file:
             self._check_gains(s.gains_file)
         self.clock = MonotonicTime(1.0 / s.rate_hz)
@@ -110,10 +131,11 @@ class ExcitationNode(C.ShellNode):
         self.aborted = False
         self.abort_reason = ""
         self.f = M.MsgFactory.rclpy()
-        self.pub_ref = self.create_publisher(TwistStamped, "velocity_reference",
-                                             C.qos_for("velocity_reference"))
+        self.pub_ref = self.create_publisher(
+            TwistStamped, "velocity_reference", C.qos_for("velocity_reference")
+        )
         self.pub_exc = self.create_publisher(JointState, "excitation", C.qos_for("excitation"))
-        self.pub_status = C.StatusPublisher(self)      # status and /diagnostics
+        self.pub_status = C.StatusPublisher(self)  # status and /diagnostics
         self.create_subscription(DiagnosticArray, "status", self.on_status, C.qos_for("status"))
         self.create_service(Trigger, "~/start", self.on_start)
         self.create_service(Trigger, "~/abort", self.on_abort)
@@ -121,25 +143,34 @@ class ExcitationNode(C.ShellNode):
         self.create_timer(1.0 / s.status_rate_hz, self.publish_status)
         self.get_logger().info(
             f"{self.mode}: {self.table[1].shape[0]} samples of {list(self.table[2])} "
-            f"({self.core.duration:.1f} s), {s.rate_hz:g} Hz; {C.clock_source(self)}")
+            f"({self.core.duration:.1f} s), {s.rate_hz:g} Hz; {C.clock_source(self)}"
+        )
         if s.auto_start:
             self._start()
 
     def _make_core(self, start_time: float) -> ExcitationCore:
         t, u, names = self.table
         if self.mode == "phase1":
-            return ExcitationCore.phase1(t, u, names, start_time=start_time,
-                                         vertex_velocity=self.offset, ramp=self.settings.ramp_s,
-                                         yaw_rate_offset=self.yaw_offset)
-        return ExcitationCore.phase2(t, u, names, start_time=start_time,
-                                     ramp=self.settings.ramp_s)
+            return ExcitationCore.phase1(
+                t,
+                u,
+                names,
+                start_time=start_time,
+                vertex_velocity=self.offset,
+                ramp=self.settings.ramp_s,
+                yaw_rate_offset=self.yaw_offset,
+            )
+        return ExcitationCore.phase2(t, u, names, start_time=start_time, ramp=self.settings.ramp_s)
 
     def _check_gains(self, path: str) -> None:
         from lpv_sysid.io.formats import GainSchedule
+
         design = GainSchedule.load(path).certificate.design
         if design is None:
-            raise ConfigError(f"{path}: certificate.design missing: cannot check the signal "
-                              "against what the gains were designed for")
+            raise ConfigError(
+                f"{path}: certificate.design missing: cannot check the signal "
+                "against what the gains were designed for"
+            )
         check_design(*self.table, design, self.settings.ramp_s, where=self.settings.signals_file)
 
     # -- abort (every source) -----------------------------------------------------------
@@ -157,8 +188,9 @@ class ExcitationNode(C.ShellNode):
             self.core.sample(t)
             self.started = True
         self.core.abort()
-        self.get_logger().warning(f"excitation aborted ({reason}): fading to zero within "
-                                  f"{self.settings.ramp_s:g} s")
+        self.get_logger().warning(
+            f"excitation aborted ({reason}): fading to zero within {self.settings.ramp_s:g} s"
+        )
         self.publish_status()
 
     def on_status(self, msg):
@@ -179,8 +211,10 @@ class ExcitationNode(C.ShellNode):
         t, _ = self.clock.map(self.now())
         self.core = self._make_core(start_time=t + self.settings.start_delay_s)
         self.started = True
-        return f"{self.mode} excitation starts at t={self.core.start_time:.3f} s, " \
-               f"ends at {self.core.end_time:.3f} s"
+        return (
+            f"{self.mode} excitation starts at t={self.core.start_time:.3f} s, "
+            f"ends at {self.core.end_time:.3f} s"
+        )
 
     def on_start(self, request, response):
         if self.aborted:
@@ -262,9 +296,13 @@ class ExcitationNode(C.ShellNode):
         prog = self.core.progress if self.started else None
         phase = "aborted" if self.aborted else (prog.phase if prog else "waiting_for_start")
         level = "WARN" if self.aborted else "OK"
-        values = {"mode": self.mode, "phase": phase,
-                  "fraction": prog.fraction if prog else 0.0,
-                  "aborted": self.aborted, "abort_reason": self.abort_reason}
+        values = {
+            "mode": self.mode,
+            "phase": phase,
+            "fraction": prog.fraction if prog else 0.0,
+            "aborted": self.aborted,
+            "abort_reason": self.abort_reason,
+        }
         st = M.diagnostic_status(self.f, level, self.get_fully_qualified_name(), phase, values)
         self.pub_status.publish(M.diagnostic_array(self.f, self.now_ns(), [st]))
 

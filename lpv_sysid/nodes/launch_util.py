@@ -47,8 +47,7 @@ def declare_arguments(notes: dict[str, str] | None = None, **defaults) -> list:
         if default is REQUIRED:
             out.append(DeclareLaunchArgument(name, description=description))
         else:
-            out.append(DeclareLaunchArgument(name, default_value=default,
-                                             description=description))
+            out.append(DeclareLaunchArgument(name, default_value=default, description=description))
     return out
 
 

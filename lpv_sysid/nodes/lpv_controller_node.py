@@ -39,21 +39,31 @@ class LpvControllerNode(C.ShellNode):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, PARAMETERS, **kwargs)
         settings = ControllerSettings.from_dict(self.params)
-        self.runtime = ControllerRuntime(settings, M.MsgFactory.rclpy(),
-                                         self.get_fully_qualified_name())
-        self.pub = {"actuator_command": self.create_publisher(
-                        JointState, "actuator_command", C.qos_for("actuator_command")),
-                    "status": C.StatusPublisher(self)}      # status and /diagnostics
-        for topic, typ in (("state", Odometry), ("rotor_speeds", JointState),
-                           ("velocity_reference", TwistStamped), ("excitation", JointState)):
+        self.runtime = ControllerRuntime(
+            settings, M.MsgFactory.rclpy(), self.get_fully_qualified_name()
+        )
+        self.pub = {
+            "actuator_command": self.create_publisher(
+                JointState, "actuator_command", C.qos_for("actuator_command")
+            ),
+            "status": C.StatusPublisher(self),
+        }  # status and /diagnostics
+        for topic, typ in (
+            ("state", Odometry),
+            ("rotor_speeds", JointState),
+            ("velocity_reference", TwistStamped),
+            ("excitation", JointState),
+        ):
             self.create_subscription(typ, topic, self._input(topic), C.qos_for(topic))
         self.create_service(Trigger, "~/start", self.on_start)
         self.create_service(Trigger, "~/abort", self.on_abort)
         self.create_timer(1.0 / settings.rate_hz, self.on_tick)
         self.create_timer(1.0 / settings.status_rate_hz, self.publish_status)
-        self.get_logger().info(f"gains {settings.gains_file}: box "
-                               f"{self.runtime.schedule.scheduling.to_dict()}, "
-                               f"gamma {self.runtime.schedule.gamma:g}; {C.clock_source(self)}")
+        self.get_logger().info(
+            f"gains {settings.gains_file}: box "
+            f"{self.runtime.schedule.scheduling.to_dict()}, "
+            f"gamma {self.runtime.schedule.gamma:g}; {C.clock_source(self)}"
+        )
         self.log_core()
         # auto_start: started by the timer once every input stream has delivered a sample
         self._auto_start = settings.auto_start
@@ -80,6 +90,7 @@ class LpvControllerNode(C.ShellNode):
             for out, m in self.runtime.on_input(topic, msg, self.now()):
                 self.pub[out].publish(m)
             self.log_core()
+
         return cb
 
     def on_tick(self):
@@ -96,8 +107,7 @@ class LpvControllerNode(C.ShellNode):
         self.pub["status"].publish(self.runtime.status(self.now()))
 
     def on_start(self, request, response):
-        response.success, response.message = self.runtime.start(self.now(),
-                                                                wait_for_inputs=True)
+        response.success, response.message = self.runtime.start(self.now(), wait_for_inputs=True)
         self.get_logger().info(f"start: {response.message}")
         return response
 
@@ -108,7 +118,6 @@ class LpvControllerNode(C.ShellNode):
         self.on_tick()
         return response
 
-
     # -- orderly shutdown (nodes/_common.run) ----------------------------------------
     def begin_shutdown(self):
         """Latch an abort "shutdown" while the context is valid and publish the final
@@ -117,10 +126,10 @@ class LpvControllerNode(C.ShellNode):
         now = self.now()
         self.runtime.abort(now, "shutdown")
         published = False
-        for topic, msg in self.runtime.tick(now):      # aborted: the abort status, no command
+        for topic, msg in self.runtime.tick(now):  # aborted: the abort status, no command
             self.pub[topic].publish(msg)
             published |= topic == "status"
-        if not published:                              # not started, or abort already reported
+        if not published:  # not started, or abort already reported
             self.publish_status()
         self.log_core()
 

@@ -43,11 +43,14 @@ NODE_NAME = "mavlink_bridge"
 TRANSPORTS = ("mavlink", "mavros")
 
 #: MavrosConfig fields supplied by the bridge's own parameters (one value for both transports)
-MAVROS_SHARED = {"setpoint_rate_hz": "offboard.setpoint_rate_hz",
-                 "input_timeout": "offboard.input_timeout",
-                 "send_on_command": "offboard.send_on_command",
-                 "telemetry_max_age": "telemetry_max_age", "auto_start": "auto_start",
-                 "command": "command"}
+MAVROS_SHARED = {
+    "setpoint_rate_hz": "offboard.setpoint_rate_hz",
+    "input_timeout": "offboard.input_timeout",
+    "send_on_command": "offboard.send_on_command",
+    "telemetry_max_age": "telemetry_max_age",
+    "auto_start": "auto_start",
+    "command": "command",
+}
 
 
 @dataclass(frozen=True)
@@ -56,8 +59,10 @@ class BridgeNodeSettings(P.Settings):
 
     WHERE = "mavlink_bridge"
 
-    transport: str = P.text("mavlink", "mavlink (own MAVLink link to PX4) | mavros (MAVROS "
-                            "topics, docs/px4_transport.md)")
+    transport: str = P.text(
+        "mavlink",
+        "mavlink (own MAVLink link to PX4) | mavros (MAVROS topics, docs/px4_transport.md)",
+    )
     poll_rate_hz: float = P.double(250.0, "link poll rate [Hz]", 10.0, 2000.0)
     status_rate_hz: float = P.double(2.0, "status publication rate [Hz]", 0.1, 100.0)
 
@@ -82,16 +87,16 @@ BRIDGE_DESCRIPTIONS = {
     "link.stream_request_period": "SET_MESSAGE_INTERVAL retry period for missing streams [s]",
     "link.streams": "requested telemetry rate [Hz] (0: off)",
     "link.signing_key_file": "MAVLink 2 signing key file (32 raw bytes or 64 hex chars); "
-                             "empty: unsigned",
+    "empty: unsigned",
     "link.signing_link_id": "signing link id",
     "link.allow_unsigned": "with a signing key: still accept unsigned messages",
     "offboard.setpoint_rate_hz": "setpoint stream rate [Hz] (PX4 needs > 2 Hz)",
     "offboard.prestream_time": "setpoints before OFFBOARD is requested [s] (PX4 needs > 1 s)",
     "offboard.arm": "arm the vehicle on start",
     "offboard.handback_chain": "PX4 modes tried in turn on hand-back until the HEARTBEAT "
-                               "confirms one (HOLD, POSCTL, ALTCTL, LAND, RTL)",
+    "confirms one (HOLD, POSCTL, ALTCTL, LAND, RTL)",
     "offboard.handback_mode": "tried before the chain (single-mode key of earlier releases); "
-                              "empty: the chain alone",
+    "empty: the chain alone",
     "offboard.input_timeout": "no command for this long -> hand back [s]",
     "offboard.ack_timeout": "per attempt, for a COMMAND_ACK [s]",
     "offboard.ack_settle_s": "quiet time after the last ACK before a step counts [s]",
@@ -107,7 +112,7 @@ BRIDGE_DESCRIPTIONS = {
     "telemetry_max_age": "attitude/velocity older than this is not fused [s]",
     "n_rotors": "number of rotors (ESC_STATUS / motor outputs)",
     "rotor_estimate.enabled": "estimate rotor speeds from motor outputs while no fresh ESC "
-                              "telemetry (seed 0 Eq. 8)",
+    "telemetry (seed 0 Eq. 8)",
     "rotor_estimate.source": "auto | actuator_output_status | servo_output_raw",
     "rotor_estimate.mapping": "motor output -> u_ESC: pwm | dshot | normalized | symmetric",
     "rotor_estimate.output_min": "override of the mapping's output range (NaN: the mapping's)",
@@ -146,10 +151,16 @@ MAVROS_DESCRIPTIONS = {
 
 #: the rclpy declarations: the shell's settings, then BridgeConfig's and MavrosConfig's
 #: fields (generated; nothing restated)
-SPECS = {**P.specs(BridgeNodeSettings),
-         **P.config_specs(BridgeConfig, BRIDGE_DESCRIPTIONS, exclude=BRIDGE_EXCLUDED),
-         **P.config_specs(MR.MavrosConfig, MAVROS_DESCRIPTIONS, prefix="mavros.",
-                          exclude=tuple(f"mavros.{k}" for k in MAVROS_SHARED))}
+SPECS = {
+    **P.specs(BridgeNodeSettings),
+    **P.config_specs(BridgeConfig, BRIDGE_DESCRIPTIONS, exclude=BRIDGE_EXCLUDED),
+    **P.config_specs(
+        MR.MavrosConfig,
+        MAVROS_DESCRIPTIONS,
+        prefix="mavros.",
+        exclude=tuple(f"mavros.{k}" for k in MAVROS_SHARED),
+    ),
+}
 PARAMETERS = C.spec_table(SPECS)
 
 
@@ -158,8 +169,9 @@ def _split(p: dict) -> tuple[dict, dict, dict]:
     shell = {k: p[k] for k in P.specs(BridgeNodeSettings)}
     mavros = {k.split(".", 1)[1]: v for k, v in p.items() if k.startswith("mavros.")}
     mavros.update({k: p[v] for k, v in MAVROS_SHARED.items()})
-    bridge = P.nest({k: v for k, v in p.items()
-                     if k not in shell and not k.startswith("mavros.")}, SPECS)
+    bridge = P.nest(
+        {k: v for k, v in p.items() if k not in shell and not k.startswith("mavros.")}, SPECS
+    )
     return shell, bridge, P.nest(mavros)
 
 
@@ -179,48 +191,65 @@ class MavlinkBridgeNode(C.ShellNode):
         shell, bridge, mavros = _split(p)
         self.settings = s = BridgeNodeSettings.from_dict(shell)
         self.mavros = s.transport == "mavros"
-        self.core = MR.MavrosCore(MR.MavrosConfig.from_dict(mavros)) if self.mavros \
+        self.core = (
+            MR.MavrosCore(MR.MavrosConfig.from_dict(mavros))
+            if self.mavros
             else BridgeCore(BridgeConfig.from_dict(bridge))
+        )
         self.f = M.MsgFactory.rclpy()
         self.pub_state = self.create_publisher(Odometry, "state", C.qos_for("state"))
         self.pub_imu = self.create_publisher(Imu, "imu", C.qos_for("imu"))
-        self.pub_status = C.StatusPublisher(self)      # status and /diagnostics
-        self.create_subscription(TwistStamped, "velocity_reference", self.on_reference,
-                                 C.qos_for("velocity_reference"))
+        self.pub_status = C.StatusPublisher(self)  # status and /diagnostics
+        self.create_subscription(
+            TwistStamped, "velocity_reference", self.on_reference, C.qos_for("velocity_reference")
+        )
         self.create_service(Trigger, "~/start", self.on_start)
         self.create_service(Trigger, "~/abort", self.on_abort)
         if self.mavros:
             cfg = self.core.config
-            self.pub_cmd = self.create_publisher(TwistStamped, cfg.topic("cmd_vel"), C.QOS_RELIABLE)
-            self.create_subscription(Odometry, cfg.topic("odom"), self.on_mavros_odom, C.QOS_SENSOR)
+            self.pub_cmd = self.create_publisher(
+                TwistStamped, cfg.topic("cmd_vel"), C.QOS_RELIABLE
+            )
+            self.create_subscription(
+                Odometry, cfg.topic("odom"), self.on_mavros_odom, C.QOS_SENSOR
+            )
             self.create_subscription(Imu, cfg.topic("imu"), self.on_mavros_imu, C.QOS_SENSOR)
             if cfg.use_diagnostics:
-                self.create_subscription(DiagnosticArray, MR.DIAGNOSTICS_TOPIC,
-                                         self.on_mavros_diagnostics, C.QOS_SENSOR)
+                self.create_subscription(
+                    DiagnosticArray, MR.DIAGNOSTICS_TOPIC, self.on_mavros_diagnostics, C.QOS_SENSOR
+                )
             # twice the setpoint rate: the core sends when due; stale input is seen within
             # half a setpoint period
-            self.create_timer(0.5 / cfg.setpoint_rate_hz,
-                              lambda: self.publish_mavros(self.core.step(self.now())))
-            self.get_logger().info(f"MAVROS {cfg.namespace}: setpoints on {cfg.topic('cmd_vel')}; "
-                                   f"mode control: {MR.MODE_CONTROL}")
+            self.create_timer(
+                0.5 / cfg.setpoint_rate_hz, lambda: self.publish_mavros(self.core.step(self.now()))
+            )
+            self.get_logger().info(
+                f"MAVROS {cfg.namespace}: setpoints on {cfg.topic('cmd_vel')}; "
+                f"mode control: {MR.MODE_CONTROL}"
+            )
         else:
-            self.pub_rot = self.create_publisher(JointState, "rotor_speeds",
-                                                 C.qos_for("rotor_speeds"))
-            self.create_subscription(JointState, "actuator_command", self.on_command,
-                                     C.qos_for("actuator_command"))
+            self.pub_rot = self.create_publisher(
+                JointState, "rotor_speeds", C.qos_for("rotor_speeds")
+            )
+            self.create_subscription(
+                JointState, "actuator_command", self.on_command, C.qos_for("actuator_command")
+            )
             self.core.open(self.now())
             self.create_timer(1.0 / s.poll_rate_hz, self.on_poll)
             self.SHUTDOWN_TIMEOUT_S = handback_bound_s(self.core.config.offboard)
-            self.get_logger().info(f"MAVLink {self.core.config.link.url}, "
-                                   f"command {self.core.config.command}; hand-back chain "
-                                   f"{list(self.core.config.offboard.handback_chain)} within "
-                                   f"{self.SHUTDOWN_TIMEOUT_S:g} s")
+            self.get_logger().info(
+                f"MAVLink {self.core.config.link.url}, "
+                f"command {self.core.config.command}; hand-back chain "
+                f"{list(self.core.config.offboard.handback_chain)} within "
+                f"{self.SHUTDOWN_TIMEOUT_S:g} s"
+            )
             budget = C.LAUNCH_SIGTERM_TIMEOUT_S - C.TEARDOWN_MARGIN_S
             if self.SHUTDOWN_TIMEOUT_S > budget:
                 self.get_logger().warning(
                     f"the hand-back chain may need {self.SHUTDOWN_TIMEOUT_S:g} s, more than the "
                     f"{budget:g} s a launch Ctrl-C leaves before SIGTERM: launch with "
-                    f"sigterm_timeout:={self.SHUTDOWN_TIMEOUT_S + C.TEARDOWN_MARGIN_S:g}")
+                    f"sigterm_timeout:={self.SHUTDOWN_TIMEOUT_S + C.TEARDOWN_MARGIN_S:g}"
+                )
         self.create_timer(1.0 / s.status_rate_hz, lambda: self.publish_status([]))
 
     # -- inputs -------------------------------------------------------------------------
@@ -237,14 +266,16 @@ class MavlinkBridgeNode(C.ShellNode):
     def on_mavros_odom(self, msg):
         cfg = self.core.config
         try:
-            s = M.state_from_odometry(msg, frame_id=cfg.odom_frame_id,
-                                      child_frame_id=cfg.base_frame_id)
+            s = M.state_from_odometry(
+                msg, frame_id=cfg.odom_frame_id, child_frame_id=cfg.base_frame_id
+            )
         except LpvSysidError as exc:
             return self.core.reject(self.now(), f"{cfg.topic('odom')} rejected: {exc}")
         s = self.core.on_odometry(self.now(), s)
         if s is not None:
-            self.pub_state.publish(M.odometry_from_state(self.f, s.stamp_ns, s.pos_ned, s.euler,
-                                                         s.v_body, s.omega))
+            self.pub_state.publish(
+                M.odometry_from_state(self.f, s.stamp_ns, s.pos_ned, s.euler, s.v_body, s.omega)
+            )
 
     def on_mavros_imu(self, msg):
         try:
@@ -259,13 +290,14 @@ class MavlinkBridgeNode(C.ShellNode):
         try:
             _, statuses = M.status_from_diagnostic_array(msg)
         except LpvSysidError:
-            return                       # other nodes' diagnostics are not ours to judge
+            return  # other nodes' diagnostics are not ours to judge
         self.core.on_diagnostics(self.now(), statuses)
 
     def publish_mavros(self, out):
         for sp in out.setpoints:
-            self.pub_cmd.publish(MR.cmd_vel_msg(self.f, round(sp.t * 1e9), sp,
-                                                self.core.config.odom_frame_id))
+            self.pub_cmd.publish(
+                MR.cmd_vel_msg(self.f, round(sp.t * 1e9), sp, self.core.config.odom_frame_id)
+            )
         if out.events:
             self.publish_status(out.events)
 
@@ -295,8 +327,9 @@ class MavlinkBridgeNode(C.ShellNode):
         for s in out.samples:
             stamp = round(s.t * 1e9)
             if isinstance(s, StateSample):
-                self.pub_state.publish(M.odometry_from_state(f, stamp, s.pos_ned, s.euler,
-                                                             s.v_body, s.omega))
+                self.pub_state.publish(
+                    M.odometry_from_state(f, stamp, s.pos_ned, s.euler, s.v_body, s.omega)
+                )
             elif isinstance(s, ImuSample):
                 self.pub_imu.publish(M.imu_msg(f, stamp, s.accel_frd, s.gyro_frd))
             elif isinstance(s, RotorSample):
@@ -336,12 +369,14 @@ class MavlinkBridgeNode(C.ShellNode):
         return self.core.state.value in ("IDLE", "DONE", "FAILED")
 
     def shutdown_state(self):
-        return f"hand-back {self.core.state.value}: {self.core.status(self.now()).get('reason', '')}"
+        return (
+            f"hand-back {self.core.state.value}: {self.core.status(self.now()).get('reason', '')}"
+        )
 
     def destroy_node(self):
         try:
             if not getattr(self, "_shutting_down", False) and self.context_ok():
-                self.publish_status(self.core.shutdown(self.now()))   # destroyed without run()
+                self.publish_status(self.core.shutdown(self.now()))  # destroyed without run()
         finally:
             self.core.close()
             super().destroy_node()

@@ -48,7 +48,14 @@ from lpv_sysid.errors import ConfigError
 
 #: rcl_interfaces ParameterType names used here (rclpy ``Parameter.Type`` members)
 DOUBLE, INTEGER, BOOL, STRING, DOUBLE_ARRAY, STRING_ARRAY, INTEGER_ARRAY = (
-    "DOUBLE", "INTEGER", "BOOL", "STRING", "DOUBLE_ARRAY", "STRING_ARRAY", "INTEGER_ARRAY")
+    "DOUBLE",
+    "INTEGER",
+    "BOOL",
+    "STRING",
+    "DOUBLE_ARRAY",
+    "STRING_ARRAY",
+    "INTEGER_ARRAY",
+)
 ARRAYS = (DOUBLE_ARRAY, STRING_ARRAY, INTEGER_ARRAY)
 #: the value of an optional (``X | None``) parameter that means "unset": rclpy cannot keep a
 #: declared parameter without value -- one uninitialized parameter makes the node's
@@ -64,12 +71,12 @@ class ParamSpec:
     description: str
     lo: Optional[float] = None
     hi: Optional[float] = None
-    lo_open: bool = False            # lower bound exclusive (x > lo)
-    choices: tuple = ()              # STRING: allowed values
-    lengths: tuple = ()              # arrays: allowed lengths (empty: any)
-    nonempty: bool = False           # STRING: must not be ""
-    checked_by: str = ""             # the configuration class whose from_dict checks it
-    optional: bool = False           # the field may be None: "" (STRING) / NaN (DOUBLE) = unset
+    lo_open: bool = False  # lower bound exclusive (x > lo)
+    choices: tuple = ()  # STRING: allowed values
+    lengths: tuple = ()  # arrays: allowed lengths (empty: any)
+    nonempty: bool = False  # STRING: must not be ""
+    checked_by: str = ""  # the configuration class whose from_dict checks it
+    optional: bool = False  # the field may be None: "" (STRING) / NaN (DOUBLE) = unset
 
     def constraints(self) -> str:
         """Human-readable constraints (``ParameterDescriptor.additional_constraints``)."""
@@ -110,26 +117,42 @@ def flag(default: bool, description: str):
 
 
 def text(default: str, description: str, choices: tuple = (), nonempty: bool = False):
-    return _field(str(default), ParamSpec(STRING, description, choices=tuple(choices),
-                                          nonempty=nonempty))
+    return _field(
+        str(default), ParamSpec(STRING, description, choices=tuple(choices), nonempty=nonempty)
+    )
 
 
-def doubles(default: tuple, description: str, lo: Optional[float] = None,
-            hi: Optional[float] = None, lengths: tuple = (), lo_open: bool = False):
+def doubles(
+    default: tuple,
+    description: str,
+    lo: Optional[float] = None,
+    hi: Optional[float] = None,
+    lengths: tuple = (),
+    lo_open: bool = False,
+):
     """A DOUBLE_ARRAY parameter (a tuple of floats), entries in ``[lo, hi]``."""
-    return _field(tuple(float(x) for x in default),
-                  ParamSpec(DOUBLE_ARRAY, description, lo, hi, lo_open, lengths=tuple(lengths)))
+    return _field(
+        tuple(float(x) for x in default),
+        ParamSpec(DOUBLE_ARRAY, description, lo, hi, lo_open, lengths=tuple(lengths)),
+    )
 
 
 def texts(default: tuple, description: str):
     return _field(tuple(str(x) for x in default), ParamSpec(STRING_ARRAY, description))
 
 
-def integers(default: tuple, description: str, lo: Optional[int] = None,
-             hi: Optional[int] = None, lengths: tuple = ()):
+def integers(
+    default: tuple,
+    description: str,
+    lo: Optional[int] = None,
+    hi: Optional[int] = None,
+    lengths: tuple = (),
+):
     """An INTEGER_ARRAY parameter (a tuple of ints), entries in ``[lo, hi]``."""
-    return _field(tuple(int(x) for x in default),
-                  ParamSpec(INTEGER_ARRAY, description, lo, hi, lengths=tuple(lengths)))
+    return _field(
+        tuple(int(x) for x in default),
+        ParamSpec(INTEGER_ARRAY, description, lo, hi, lengths=tuple(lengths)),
+    )
 
 
 def specs(cls) -> dict:
@@ -152,6 +175,7 @@ def _number(v) -> bool:
 def coerce(name: str, value: Any, spec: ParamSpec, where: str) -> Any:
     """``value`` checked against ``spec`` and converted (int -> float, sequence -> tuple);
     ConfigError naming ``where`` and the parameter otherwise."""
+
     def fail(msg: str):
         raise ConfigError(f"{where}: parameter '{name}' {msg}, got {value!r}")
 
@@ -237,13 +261,16 @@ class Settings:
         known = specs(cls)
         bad = sorted(set(d) - set(known))
         if bad:
-            raise ConfigError(f"{cls.WHERE}: unknown parameter(s) {bad}; "
-                              f"declared: {sorted(known)}")
+            raise ConfigError(
+                f"{cls.WHERE}: unknown parameter(s) {bad}; declared: {sorted(known)}"
+            )
         return cls(**dict(d))
 
     def to_dict(self) -> dict:
-        return {name: (list(v) if isinstance(v, tuple) else v)
-                for name, v in ((n, getattr(self, n)) for n in specs(type(self)))}
+        return {
+            name: (list(v) if isinstance(v, tuple) else v)
+            for name, v in ((n, getattr(self, n)) for n in specs(type(self)))
+        }
 
 
 # -- parameters generated from a core's configuration dataclass ---------------------------
@@ -265,8 +292,12 @@ def _table_hint(hint) -> bool:
     if typing.get_origin(hint) is not tuple:
         return False
     args = typing.get_args(hint)
-    return (len(args) == 2 and args[1] is Ellipsis and typing.get_origin(args[0]) is tuple
-            and typing.get_args(args[0]) in ((str, float), (str, int)))
+    return (
+        len(args) == 2
+        and args[1] is Ellipsis
+        and typing.get_origin(args[0]) is tuple
+        and typing.get_args(args[0]) in ((str, float), (str, int))
+    )
 
 
 def _kind_of(hint, where: str) -> str:
@@ -276,12 +307,15 @@ def _kind_of(hint, where: str) -> str:
         elems = {a for a in typing.get_args(hint) if a is not Ellipsis}
         if len(elems) == 1 and next(iter(elems)) in _ARRAYS:
             return _ARRAYS[next(iter(elems))]
-    raise TypeError(f"{where}: type {hint!r} has no ROS parameter form; exclude it or give "
-                    "the field a scalar, tuple or table type")
+    raise TypeError(
+        f"{where}: type {hint!r} has no ROS parameter form; exclude it or give "
+        "the field a scalar, tuple or table type"
+    )
 
 
-def config_specs(cls, descriptions: Mapping[str, str], prefix: str = "",
-                 exclude: tuple = ()) -> dict:
+def config_specs(
+    cls, descriptions: Mapping[str, str], prefix: str = "", exclude: tuple = ()
+) -> dict:
     """``{name: (default, ParamSpec)}`` for every leaf field of the frozen configuration
     dataclass ``cls`` (see the module docstring), names prefixed with ``prefix``.
 
@@ -314,8 +348,9 @@ def _config_specs(cls, descriptions, prefix, exclude, owner, used) -> dict:
         else:
             raise TypeError(f"{cls.__name__}.{f.name}: a parameter needs a default")
         if dataclasses.is_dataclass(default):
-            out.update(_config_specs(type(default), descriptions, name + ".", exclude, owner,
-                                     used))
+            out.update(
+                _config_specs(type(default), descriptions, name + ".", exclude, owner, used)
+            )
             continue
         if name not in descriptions:
             raise TypeError(f"{owner}: parameter '{name}' has no description")
@@ -325,19 +360,27 @@ def _config_specs(cls, descriptions, prefix, exclude, owner, used) -> dict:
         if _table_hint(hint):
             value_kind = _SCALARS[typing.get_args(typing.get_args(hint)[0])[1]]
             for key, value in default:
-                out[f"{name}.{key}"] = (value, ParamSpec(value_kind, f"{description}: {key}",
-                                                          checked_by=owner))
+                out[f"{name}.{key}"] = (
+                    value,
+                    ParamSpec(value_kind, f"{description}: {key}", checked_by=owner),
+                )
             continue
         kind = _kind_of(hint, f"{owner} parameter '{name}'")
         if default is None:
             if not optional or kind not in UNSET:
-                raise TypeError(f"{owner}: parameter '{name}' defaults to None: only an "
-                                f"optional {' or '.join(UNSET)} can (its unset value)")
-            out[name] = (UNSET[kind], ParamSpec(kind, description, checked_by=owner,
-                                                optional=True))
+                raise TypeError(
+                    f"{owner}: parameter '{name}' defaults to None: only an "
+                    f"optional {' or '.join(UNSET)} can (its unset value)"
+                )
+            out[name] = (
+                UNSET[kind],
+                ParamSpec(kind, description, checked_by=owner, optional=True),
+            )
             continue
-        out[name] = (tuple(default) if isinstance(default, (list, tuple)) else default,
-                     ParamSpec(kind, description, checked_by=owner))
+        out[name] = (
+            tuple(default) if isinstance(default, (list, tuple)) else default,
+            ParamSpec(kind, description, checked_by=owner),
+        )
     return out
 
 
@@ -374,7 +417,9 @@ def yaml_parameters(path: str, node_name: str) -> dict:
     ``/**/node_name``, ``lpv_sysid/node_name`` or ``/**``)."""
     from lpv_sysid.io.yaml_file import read_yaml
 
-    data = read_yaml(path)      # strict: safe open, duplicate keys, .nan/.inf refused with their key path
+    data = read_yaml(
+        path
+    )  # strict: safe open, duplicate keys, .nan/.inf refused with their key path
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping of node names")
     for key, body in data.items():
@@ -383,11 +428,34 @@ def yaml_parameters(path: str, node_name: str) -> dict:
             if not isinstance(body, dict) or not isinstance(body.get("ros__parameters"), dict):
                 raise ConfigError(f"{path}: '{key}' has no 'ros__parameters' mapping")
             return dict(body["ros__parameters"])
-    raise ConfigError(f"{path}: no parameters for node '{node_name}' "
-                      f"(keys: {sorted(map(str, data))})")
+    raise ConfigError(
+        f"{path}: no parameters for node '{node_name}' (keys: {sorted(map(str, data))})"
+    )
 
 
-__all__ = ["ARRAYS", "BOOL", "DOUBLE", "DOUBLE_ARRAY", "INTEGER", "INTEGER_ARRAY", "STRING",
-           "STRING_ARRAY", "UNSET", "ParamSpec", "Settings", "coerce", "config_specs", "double",
-           "doubles", "flag", "integer", "integers", "is_unset", "nest", "specs", "text", "texts",
-           "yaml_parameters"]
+__all__ = [
+    "ARRAYS",
+    "BOOL",
+    "DOUBLE",
+    "DOUBLE_ARRAY",
+    "INTEGER",
+    "INTEGER_ARRAY",
+    "STRING",
+    "STRING_ARRAY",
+    "UNSET",
+    "ParamSpec",
+    "Settings",
+    "coerce",
+    "config_specs",
+    "double",
+    "doubles",
+    "flag",
+    "integer",
+    "integers",
+    "is_unset",
+    "nest",
+    "specs",
+    "text",
+    "texts",
+    "yaml_parameters",
+]

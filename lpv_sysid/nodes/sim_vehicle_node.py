@@ -67,41 +67,75 @@ class SimVehicleSettings(P.Settings):
 
     WHERE = "sim_vehicle"
 
-    mode: str = P.text("baseline", "baseline: fly velocity_reference (phase 1); lpv: apply "
-                       "actuator_command (phase 2)", choices=MODES)
-    initial_velocity_frd: tuple = P.doubles((0.0, 0.0, 0.0), "start in trim at this body "
-                                            "velocity FRD [m/s]", lo=-20.0, hi=20.0,
-                                            lengths=(3,))
+    mode: str = P.text(
+        "baseline",
+        "baseline: fly velocity_reference (phase 1); lpv: apply actuator_command (phase 2)",
+        choices=MODES,
+    )
+    initial_velocity_frd: tuple = P.doubles(
+        (0.0, 0.0, 0.0),
+        "start in trim at this body velocity FRD [m/s]",
+        lo=-20.0,
+        hi=20.0,
+        lengths=(3,),
+    )
     vehicle_file: str = P.text("", "YAML of QuadrotorParams (empty: FlameWheel-450 defaults)")
     baseline_file: str = P.text("", "YAML of BaselineGains (empty: defaults)")
-    command_timeout_s: float = P.double(0.1, "lpv mode: actuator_command older than this -> "
-                                        "baseline hold (PX4 hand-back) [s]", 0.001, 10.0)
-    reference_timeout_s: float = P.double(0.5, "velocity_reference older than this -> hold "
-                                          "zero velocity [s]", 0.001, 60.0)
+    command_timeout_s: float = P.double(
+        0.1,
+        "lpv mode: actuator_command older than this -> baseline hold (PX4 hand-back) [s]",
+        0.001,
+        10.0,
+    )
+    reference_timeout_s: float = P.double(
+        0.5, "velocity_reference older than this -> hold zero velocity [s]", 0.001, 60.0
+    )
     status_rate_hz: float = P.double(1.0, "status publication rate [Hz]", 0.1, 100.0)
-    lockstep: bool = P.flag(False, "sim time: publish /clock (the physics time, from 0) and, "
-                            "while a controller commands, integrate past a state sample only "
-                            "once the actuator_command stamped with that sample arrived (the "
-                            "graph on use_sim_time, controller tick_source state; sim.launch.py)")
-    lockstep_timeout_s: float = P.double(1.0, "lockstep: wall time to wait for the command of "
-                                         "a state sample before running on without it (the "
-                                         "controller stopped; baseline hold after "
-                                         "command_timeout_s of sim time) [s]", 0.01, 60.0)
+    lockstep: bool = P.flag(
+        False,
+        "sim time: publish /clock (the physics time, from 0) and, "
+        "while a controller commands, integrate past a state sample only "
+        "once the actuator_command stamped with that sample arrived (the "
+        "graph on use_sim_time, controller tick_source state; sim.launch.py)",
+    )
+    lockstep_timeout_s: float = P.double(
+        1.0,
+        "lockstep: wall time to wait for the command of "
+        "a state sample before running on without it (the "
+        "controller stopped; baseline hold after "
+        "command_timeout_s of sim time) [s]",
+        0.01,
+        60.0,
+    )
     lockstep_reference_lag_s: float = P.double(
-        0.03, "lockstep: the physics waits at a state sample while the newest "
+        0.03,
+        "lockstep: the physics waits at a state sample while the newest "
         "velocity_reference (once one arrives on sim time) is older than this [s]; at least one "
         "reference period plus one state period, or it waits for a sample not yet due",
-        0.001, 1.0)
-    real_time_factor: float = P.double(1.0, "lockstep: sim time runs at most this fast "
-                                       "against wall time (slower when the controller is "
-                                       "slower)", 0.01, 100.0)
-    max_catch_up_s: float = P.double(0.1, "largest lag behind the clock made up in one tick; "
-                                     "more slips real time [s]", 0.001, 10.0)
+        0.001,
+        1.0,
+    )
+    real_time_factor: float = P.double(
+        1.0,
+        "lockstep: sim time runs at most this fast "
+        "against wall time (slower when the controller is "
+        "slower)",
+        0.01,
+        100.0,
+    )
+    max_catch_up_s: float = P.double(
+        0.1,
+        "largest lag behind the clock made up in one tick; more slips real time [s]",
+        0.001,
+        10.0,
+    )
 
     def validate(self) -> None:
         if self.real_time_factor != 1.0 and not self.lockstep:
-            self.fail(f"real_time_factor {self.real_time_factor:g} needs lockstep: without it "
-                      "the physics follows the node clock (real time)")
+            self.fail(
+                f"real_time_factor {self.real_time_factor:g} needs lockstep: without it "
+                "the physics follows the node clock (real time)"
+            )
 
 
 #: descriptions of the parameters generated from SensorConfig (its fields: types, defaults,
@@ -126,8 +160,7 @@ SENSOR_DESCRIPTIONS = {
     "seed": "noise seed",
 }
 
-SPECS = {**P.specs(SimVehicleSettings),
-         **P.config_specs(SensorConfig, SENSOR_DESCRIPTIONS)}
+SPECS = {**P.specs(SimVehicleSettings), **P.config_specs(SensorConfig, SENSOR_DESCRIPTIONS)}
 PARAMETERS = C.spec_table(SPECS)
 
 
@@ -145,9 +178,11 @@ class SimVehicleNode(C.ShellNode):
         super().__init__(NODE_NAME, PARAMETERS, **kwargs)
         own = P.specs(SimVehicleSettings)
         self.settings = p = SimVehicleSettings.from_dict(
-            {k: v for k, v in self.params.items() if k in own})
-        sensors = SensorConfig.from_dict({f.name: self.params[f.name]
-                                          for f in fields(SensorConfig)})
+            {k: v for k, v in self.params.items() if k in own}
+        )
+        sensors = SensorConfig.from_dict(
+            {f.name: self.params[f.name] for f in fields(SensorConfig)}
+        )
         vehicle = _yaml_mapping(p.vehicle_file, "vehicle_file")
         model = Quadrotor(QuadrotorParams.from_dict(vehicle) if vehicle else None)
         gains = BaselineGains.from_dict(_yaml_mapping(p.baseline_file, "baseline_file"))
@@ -168,21 +203,21 @@ class SimVehicleNode(C.ShellNode):
         self.slip_ns = 0
         self._max_behind = max(1, round(p.max_catch_up_s * sensors.physics_hz))
         self.xm = self.vehicle.measure_state()
-        self.ref = (v0.copy(), 0.0, -np.inf)          # (v_d FRD, r_d, receive time)
-        self.cmd = (None, -np.inf)                    # (u, receive time)
+        self.ref = (v0.copy(), 0.0, -np.inf)  # (v_d FRD, r_d, receive time)
+        self.cmd = (None, -np.inf)  # (u, receive time)
         self.handed_back = False
         # lockstep: the physics is paced by a steady (wall) clock and is itself the time of
         # the graph; otherwise it follows the node clock (system time)
         self.lockstep = p.lockstep
         self.pace_clock = Clock(clock_type=ClockType.STEADY_TIME) if p.lockstep else None
         self.t0_ns = self._pace_ns()
-        self.engaged = False          # lockstep: a controller answers the state samples
-        self.awaiting = None          # lockstep: [k, wall ns, resends] of the sample waiting
+        self.engaged = False  # lockstep: a controller answers the state samples
+        self.awaiting = None  # lockstep: [k, wall ns, resends] of the sample waiting
         self.lockstep_timeouts = 0
         self.lockstep_resends = 0
-        self.ref_engaged = False      # lockstep: a reference publisher runs on this sim time
-        self._cmd_k = -1              # lockstep: the state instant the last command answered
-        self._ref_stamp_ns = -1       # lockstep: stamp of the newest velocity_reference
+        self.ref_engaged = False  # lockstep: a reference publisher runs on this sim time
+        self._cmd_k = -1  # lockstep: the state instant the last command answered
+        self._ref_stamp_ns = -1  # lockstep: stamp of the newest velocity_reference
         self._ref_lag_ns = round(p.lockstep_reference_lag_s * 1e9)
         self._published_k = -1
         self._rtf_mark = (self.t0_ns, 0)
@@ -190,11 +225,13 @@ class SimVehicleNode(C.ShellNode):
         self.pub_state = self.create_publisher(Odometry, "state", C.qos_for("state"))
         self.pub_imu = self.create_publisher(Imu, "imu", C.qos_for("imu"))
         self.pub_rot = self.create_publisher(JointState, "rotor_speeds", C.qos_for("rotor_speeds"))
-        self.pub_status = C.StatusPublisher(self)      # status and /diagnostics
-        self.create_subscription(TwistStamped, "velocity_reference", self.on_reference,
-                                 C.qos_for("velocity_reference"))
-        self.create_subscription(JointState, "actuator_command", self.on_command,
-                                 C.qos_for("actuator_command"))
+        self.pub_status = C.StatusPublisher(self)  # status and /diagnostics
+        self.create_subscription(
+            TwistStamped, "velocity_reference", self.on_reference, C.qos_for("velocity_reference")
+        )
+        self.create_subscription(
+            JointState, "actuator_command", self.on_command, C.qos_for("actuator_command")
+        )
         if p.lockstep:
             self.pub_clock = self.create_publisher(ClockMsg, "/clock", C.QOS_RELIABLE)
         self.create_timer(1.0 / sensors.state_hz, self.on_tick, clock=self.pace_clock)
@@ -213,8 +250,9 @@ class SimVehicleNode(C.ShellNode):
             # a reference publisher on this sim time (excitation node, use_sim_time): from
             # now on the physics never runs more than lockstep_reference_lag_s ahead of it
             self.ref_engaged = True
-            self.get_logger().info("lockstep: velocity_reference on sim time; the physics "
-                                   "waits for it")
+            self.get_logger().info(
+                "lockstep: velocity_reference on sim time; the physics waits for it"
+            )
         self._release()
 
     def on_command(self, msg):
@@ -231,10 +269,13 @@ class SimVehicleNode(C.ShellNode):
         on_grid = abs(t_cmd - round(t_cmd / period) * period) * 2 <= self.dt_ns
         if on_grid and not self.engaged:
             self.engaged = True
-            self.get_logger().info("lockstep engaged: each state sample waits for its "
-                                   "actuator_command")
-        if self.awaiting is not None and \
-                abs(t_cmd - self.awaiting[0] * self.dt_ns) * 2 <= self.dt_ns:
+            self.get_logger().info(
+                "lockstep engaged: each state sample waits for its actuator_command"
+            )
+        if (
+            self.awaiting is not None
+            and abs(t_cmd - self.awaiting[0] * self.dt_ns) * 2 <= self.dt_ns
+        ):
             self._cmd_k = self.awaiting[0]
         self._release()
 
@@ -254,8 +295,7 @@ class SimVehicleNode(C.ShellNode):
             self.on_tick()
 
     def _pace_ns(self) -> int:
-        return (self.pace_clock.now().nanoseconds if self.pace_clock is not None
-                else self.now_ns())
+        return self.pace_clock.now().nanoseconds if self.pace_clock is not None else self.now_ns()
 
     def on_tick(self):
         """Advance the physics to the pace clock (see the module docstring)."""
@@ -266,11 +306,12 @@ class SimVehicleNode(C.ShellNode):
         behind = due - self.k
         if behind > self._max_behind:
             self.slip_ns += (behind - self._max_behind) * self.dt_ns
-            if not self.lockstep:      # lockstep: waiting for the graph is the design
+            if not self.lockstep:  # lockstep: waiting for the graph is the design
                 self.get_logger().warning(
                     f"simulation {behind * self.dt_ns * 1e-9:.3f} s behind the "
                     f"clock: slipping real time (total {self.slip_ns * 1e-9:.3f} s)",
-                    throttle_duration_sec=5.0)
+                    throttle_duration_sec=5.0,
+                )
             behind = self._max_behind
         until = self.k + int(behind)
         while self.k < until:
@@ -287,8 +328,10 @@ class SimVehicleNode(C.ShellNode):
             return True
         waited = self._pace_ns() - self.awaiting[1]
         if waited <= self.settings.lockstep_timeout_s * 1e9:
-            if "actuator_command" in missing and \
-                    waited >= (self.awaiting[2] + 1) * LOCKSTEP_RESEND_S * 1e9:
+            if (
+                "actuator_command" in missing
+                and waited >= (self.awaiting[2] + 1) * LOCKSTEP_RESEND_S * 1e9
+            ):
                 self.awaiting[2] += 1
                 self.lockstep_resends += 1
                 self._publish_state(self.physics_stamp_ns())
@@ -300,7 +343,8 @@ class SimVehicleNode(C.ShellNode):
         self.get_logger().warning(
             f"lockstep: no {' / '.join(missing)} for the state at "
             f"t={self.k * self.dt_ns * 1e-9:.3f} s within {self.settings.lockstep_timeout_s:g} s "
-            "of wall time: running on without it")
+            "of wall time: running on without it"
+        )
         return True
 
     def physics_stamp_ns(self) -> int:
@@ -336,8 +380,9 @@ class SimVehicleNode(C.ShellNode):
         veh = self.vehicle
         if self.lockstep and k % self.d_state == 0:
             # the clock first: a sample then never arrives ahead of its instant's /clock
-            self.pub_clock.publish(self.f("rosgraph_msgs/msg/Clock",
-                                          clock=M.time_msg(self.f, stamp)))
+            self.pub_clock.publish(
+                self.f("rosgraph_msgs/msg/Clock", clock=M.time_msg(self.f, stamp))
+            )
         if k % self.d_state == 0:
             self.xm = veh.measure_state()
             self._publish_state(stamp)
@@ -349,8 +394,9 @@ class SimVehicleNode(C.ShellNode):
 
     def _publish_state(self, stamp: int) -> None:
         x = self.xm
-        self.pub_state.publish(M.odometry_from_state(self.f, stamp, x[0:3], x[3:6], x[6:9],
-                                                     x[9:12]))
+        self.pub_state.publish(
+            M.odometry_from_state(self.f, stamp, x[0:3], x[3:6], x[6:9], x[9:12])
+        )
 
     def _command(self, now: float):
         xm = self.xm
@@ -371,23 +417,39 @@ class SimVehicleNode(C.ShellNode):
 
     def publish_status(self):
         x = self.vehicle.x
-        values = {"mode": self.settings.mode, "t_sim": round(self.vehicle.t, 6),
-                  "u": float(x[6]), "v": float(x[7]), "w": float(x[8]),
-                  "handed_back": self.handed_back,
-                  "realtime_slips_s": round(self.slip_ns * 1e-9, 6)}
+        values = {
+            "mode": self.settings.mode,
+            "t_sim": round(self.vehicle.t, 6),
+            "u": float(x[6]),
+            "v": float(x[7]),
+            "w": float(x[8]),
+            "handed_back": self.handed_back,
+            "realtime_slips_s": round(self.slip_ns * 1e-9, 6),
+        }
         if self.lockstep:
             wall, k = self._pace_ns(), self.k
             w0, k0 = self._rtf_mark
             self._rtf_mark = (wall, k)
-            values.update(lockstep_engaged=self.engaged, lockstep_timeouts=self.lockstep_timeouts,
-                          lockstep_resends=self.lockstep_resends,
-                          lockstep_reference=self.ref_engaged,
-                          real_time_factor=round((k - k0) * self.dt_ns / max(wall - w0, 1), 4))
+            values.update(
+                lockstep_engaged=self.engaged,
+                lockstep_timeouts=self.lockstep_timeouts,
+                lockstep_resends=self.lockstep_resends,
+                lockstep_reference=self.ref_engaged,
+                real_time_factor=round((k - k0) * self.dt_ns / max(wall - w0, 1), 4),
+            )
         message = "baseline hold" if self.handed_back else self.settings.mode
-        st = M.diagnostic_status(self.f, "WARN" if self.handed_back else "OK",
-                                 self.get_fully_qualified_name(), message, values)
-        self.pub_status.publish(M.diagnostic_array(
-            self.f, self.physics_stamp_ns() if self.lockstep else self.now_ns(), [st]))
+        st = M.diagnostic_status(
+            self.f,
+            "WARN" if self.handed_back else "OK",
+            self.get_fully_qualified_name(),
+            message,
+            values,
+        )
+        self.pub_status.publish(
+            M.diagnostic_array(
+                self.f, self.physics_stamp_ns() if self.lockstep else self.now_ns(), [st]
+            )
+        )
 
 
 def main(args=None):

@@ -54,7 +54,7 @@ class RunData:
     found: dict[str, Path] = field(default_factory=dict)
     missing: dict[str, tuple[str, ...]] = field(default_factory=dict)
     problems: dict[str, str] = field(default_factory=dict)
-    derived: dict[str, str] = field(default_factory=dict)    # input -> how it was obtained instead
+    derived: dict[str, str] = field(default_factory=dict)  # input -> how it was obtained instead
     trims: Optional[Any] = None
     models: Optional[dict] = None
     validation: Optional[dict] = None
@@ -77,13 +77,16 @@ def read_npz(path: Path) -> dict[str, np.ndarray]:
 def _find(run_dir: Path, key: str) -> Optional[Path]:
     for rel in CANDIDATES[key]:
         p = run_dir / rel
-        if os.path.lexists(p):      # present but not a readable file (FIFO, directory, loop): a problem
+        if os.path.lexists(
+            p
+        ):  # present but not a readable file (FIFO, directory, loop): a problem
             return p
     return None
 
 
-def verification_from_files(gains: Path, models: Path, n_random: int = 20, seed: int = 0,
-                            full_box: int = 200) -> dict:
+def verification_from_files(
+    gains: Path, models: Path, n_random: int = 20, seed: int = 0, full_box: int = 200
+) -> dict:
     """Run the independent verifier (:func:`lpv_sysid.synthesis.verify.verify_files`: frozen-point
     H-inf norms, closed-loop poles, Eq. 30 re-evaluated, file consistency, and with ``full_box`` > 0
     the empirical Monte Carlo over the full identified uncertainty box) and return its rows
@@ -95,15 +98,23 @@ def verification_from_files(gains: Path, models: Path, n_random: int = 20, seed:
     rep = verify_files(gains, models, n_random=n_random, seed=seed, full_box=full_box)
     checks = []
     for r in rep.rows:
-        c = {"check": r.check, "where": r.where, "value": float(r.value), "limit": float(r.limit),
-             "ok": bool(r.ok), "note": r.note}
+        c = {
+            "check": r.check,
+            "where": r.where,
+            "value": float(r.value),
+            "limit": float(r.limit),
+            "ok": bool(r.ok),
+            "note": r.note,
+        }
         if getattr(r, "advisory", False) and not r.ok:
-            c["advisory"] = True       # WARN: empirical check the certificate does not claim
+            c["advisory"] = True  # WARN: empirical check the certificate does not claim
         checks.append(c)
-    out = {"passed": bool(rep.passed),
-           "source": f"computed by the report: synthesis.verify.verify_files({gains.name}, {models.name}, "
-                     f"n_random={n_random}, seed={seed}, full_box={full_box})",
-           "checks": checks}
+    out = {
+        "passed": bool(rep.passed),
+        "source": f"computed by the report: synthesis.verify.verify_files({gains.name}, {models.name}, "
+        f"n_random={n_random}, seed={seed}, full_box={full_box})",
+        "checks": checks,
+    }
     if getattr(rep, "full_box", None) is not None:
         out["full_box"] = rep.full_box.summary()
     return out
@@ -126,25 +137,52 @@ def load_run(run_dir: str | Path, verify: bool = True) -> RunData:
             continue
         data.found[key] = path
         try:
-            value = read_npz(path) if path.suffix == ".npz" else read_yaml(path, finite=False)  # outputs may hold .nan
-            if key in ("models", "gains", "signals_summary", "phase2_summary", "validation") and not isinstance(value, dict):
-                raise ConfigError(f"{path}: expected a mapping at the top level, got {type(value).__name__}")
+            value = (
+                read_npz(path) if path.suffix == ".npz" else read_yaml(path, finite=False)
+            )  # outputs may hold .nan
+            if key in (
+                "models",
+                "gains",
+                "signals_summary",
+                "phase2_summary",
+                "validation",
+            ) and not isinstance(value, dict):
+                raise ConfigError(
+                    f"{path}: expected a mapping at the top level, got {type(value).__name__}"
+                )
         except ConfigError as exc:
             data.problems[key] = str(exc)
             log.warning("%s", exc)
             continue
         setattr(data, key, value)
-    if (verify and data.verification is None and "verification" not in data.problems
-            and data.gains is not None and data.models is not None):
+    if (
+        verify
+        and data.verification is None
+        and "verification" not in data.problems
+        and data.gains is not None
+        and data.models is not None
+    ):
         try:
             data.verification = verification_from_files(data.found["gains"], data.found["models"])
-            data.derived["verification"] = "computed: synthesis.verify on gains.yaml + vertex_models.yaml"
+            data.derived["verification"] = (
+                "computed: synthesis.verify on gains.yaml + vertex_models.yaml"
+            )
             data.missing.pop("verification", None)
         except Exception as exc:  # noqa: BLE001 - any verifier failure is reported, not fatal
-            data.problems["verification"] = f"verification of gains.yaml against vertex_models.yaml failed: {exc}"
+            data.problems["verification"] = (
+                f"verification of gains.yaml against vertex_models.yaml failed: {exc}"
+            )
             data.missing.pop("verification", None)
-    meta_val = (data.models.get("meta") or {}).get("validation") if isinstance(data.models, dict) else None
-    if data.validation is None and "validation" not in data.problems and isinstance(meta_val, dict):
+    meta_val = (
+        (data.models.get("meta") or {}).get("validation")
+        if isinstance(data.models, dict)
+        else None
+    )
+    if (
+        data.validation is None
+        and "validation" not in data.problems
+        and isinstance(meta_val, dict)
+    ):
         data.validation = meta_val
         data.derived["validation"] = "from vertex_models.yaml meta.validation"
         data.missing.pop("validation", None)
@@ -163,6 +201,7 @@ def load_run(run_dir: str | Path, verify: bool = True) -> RunData:
 # Table extraction (pure functions on the loaded objects)
 # ---------------------------------------------------------------------------------------------
 
+
 def _names(block: Any) -> list[str]:
     """['phi', ...] from [{name: phi, unit: rad}, ...] or ['phi', ...]."""
     if not isinstance(block, list):
@@ -170,9 +209,17 @@ def _names(block: Any) -> list[str]:
     return [str(b.get("name")) if isinstance(b, dict) else str(b) for b in block]
 
 
-TRIM_COLUMNS = (("u", "m/s", 1.0), ("v", "m/s", 1.0), ("w", "m/s", 1.0), ("phi", "deg", 180 / np.pi),
-                ("theta", "deg", 180 / np.pi), ("dt", "rad/s", 1.0), ("da", "m*rad/s", 1.0),
-                ("de", "m*rad/s", 1.0), ("dr", "rad/s", 1.0))
+TRIM_COLUMNS = (
+    ("u", "m/s", 1.0),
+    ("v", "m/s", 1.0),
+    ("w", "m/s", 1.0),
+    ("phi", "deg", 180 / np.pi),
+    ("theta", "deg", 180 / np.pi),
+    ("dt", "rad/s", 1.0),
+    ("da", "m*rad/s", 1.0),
+    ("de", "m*rad/s", 1.0),
+    ("dr", "rad/s", 1.0),
+)
 
 
 def equilibrium_table(models: dict) -> tuple[list[str], list[list[Any]]]:
@@ -185,7 +232,9 @@ def equilibrium_table(models: dict) -> tuple[list[str], list[list[Any]]]:
         x0 = vx.get("x0") if isinstance(vx, dict) else None
         sched = vx.get("scheduling") if isinstance(vx, dict) else None
         if not isinstance(x0, list) or len(x0) != len(names):
-            raise ConfigError(f"vertex_models.yaml: vertices[{k}].x0 missing or not {len(names)} long")
+            raise ConfigError(
+                f"vertex_models.yaml: vertices[{k}].x0 missing or not {len(names)} long"
+            )
         row: list[Any] = [_fmt_vec(sched)]
         for n, _, scale in TRIM_COLUMNS:
             row.append(float(x0[names.index(n)]) * scale if n in names else None)
@@ -203,7 +252,9 @@ def trims_table(trims: Any) -> tuple[list[str], list[list[Any]]]:
     units = trims.get("units") or [""] * len(columns)
     if not columns:
         raise ConfigError("trims.yaml: 'columns' missing")
-    header = ["run", "vertex [m/s]", "source"] + [f"{c} [{u}]" if u else str(c) for c, u in zip(columns, units)]
+    header = ["run", "vertex [m/s]", "source"] + [
+        f"{c} [{u}]" if u else str(c) for c, u in zip(columns, units)
+    ]
     rows = []
     for k, run in enumerate(trims["runs"]):
         if not isinstance(run, dict):
@@ -211,8 +262,10 @@ def trims_table(trims: Any) -> tuple[list[str], list[list[Any]]]:
         for source in ("achieved", "model_trim", "seed0_table1"):
             vals = run.get(source)
             if isinstance(vals, dict):
-                rows.append([run.get("run", k), _fmt_vec(run.get("vertex")), source.replace("_", " ")]
-                            + [None if vals.get(c) is None else float(vals[c]) for c in columns])
+                rows.append(
+                    [run.get("run", k), _fmt_vec(run.get("vertex")), source.replace("_", " ")]
+                    + [None if vals.get(c) is None else float(vals[c]) for c in columns]
+                )
     return header, rows
 
 
@@ -230,9 +283,11 @@ def _axis_key(name: str) -> str:
 
 def order_axes(axes: list[str]) -> list[str]:
     """Sort axis keys like udot, vdot, ... (or u, v, ...) in the seed's table order."""
+
     def rank(a: str) -> tuple[int, int]:
         k = _axis_key(a)
         return (AXIS_ORDER.index(k), 0) if k in AXIS_ORDER else (len(AXIS_ORDER), axes.index(a))
+
     return sorted(axes, key=rank)
 
 
@@ -253,8 +308,10 @@ def fit_table(models: dict, metric: str) -> tuple[list[str], list[list[Any]], bo
     percent = metric == "r2" and bool(flat) and max(abs(v) for v in flat) <= 1.0
     rows = []
     for vx, vals in zip(vertices, values):
-        rows.append([_fmt_vec(vx.get("scheduling"))] +
-                    [None if v is None else float(v) * (100.0 if percent else 1.0) for v in vals])
+        rows.append(
+            [_fmt_vec(vx.get("scheduling"))]
+            + [None if v is None else float(v) * (100.0 if percent else 1.0) for v in vals]
+        )
     return ["vertex [m/s]"] + axes, rows, percent
 
 
@@ -271,7 +328,9 @@ def validation_table(validation: dict) -> tuple[list[str], list[list[Any]]]:
     rows = []
     for m in ("tic", "nrmse"):
         block = validation.get(m) or validation.get(m.upper()) or {}
-        rows.append([m.upper()] + [None if block.get(a) is None else float(block[a]) for a in axes])
+        rows.append(
+            [m.upper()] + [None if block.get(a) is None else float(block[a]) for a in axes]
+        )
     return ["metric"] + axes, rows
 
 

@@ -45,6 +45,7 @@ SECTION_INPUTS = {
 
 def md_table(header: Sequence[str], rows: Iterable[Sequence[Any]], fmt: str = "{:.3g}") -> str:
     """GitHub-flavoured Markdown table; floats with ``fmt``, None as '-'."""
+
     def cell(v: Any) -> str:
         if v is None:
             return "-"
@@ -54,8 +55,10 @@ def md_table(header: Sequence[str], rows: Iterable[Sequence[Any]], fmt: str = "{
             return "yes" if v else "NO"
         return str(v).replace("|", "\\|")
 
-    lines = ["| " + " | ".join(str(h).replace("|", "\\|") for h in header) + " |",
-             "|" + "|".join("---" for _ in header) + "|"]
+    lines = [
+        "| " + " | ".join(str(h).replace("|", "\\|") for h in header) + " |",
+        "|" + "|".join("---" for _ in header) + "|",
+    ]
     lines += ["| " + " | ".join(cell(v) for v in row) + " |" for row in rows]
     return "\n".join(lines)
 
@@ -65,7 +68,9 @@ def _flatten(d: Any, prefix: str = "") -> list[tuple[str, Any]]:
     if isinstance(d, dict):
         for k, v in d.items():
             out += _flatten(v, f"{prefix}.{k}" if prefix else str(k))
-    elif isinstance(d, list) and d and all(isinstance(x, (int, float)) for x in d) and len(d) <= 16:
+    elif (
+        isinstance(d, list) and d and all(isinstance(x, (int, float)) for x in d) and len(d) <= 16
+    ):
         out.append((prefix, "[" + ", ".join(f"{x:g}" for x in d) + "]"))
     elif isinstance(d, list) and d and all(isinstance(x, dict) for x in d):
         for i, x in enumerate(d):
@@ -103,7 +108,9 @@ class _Report:
         if key in self.data.problems:
             self.p(f"**Input unreadable:** {self.data.problems[key]}")
         else:
-            self.p(f"**Input missing:** none of `{'`, `'.join(CANDIDATES[key])}` in the run directory.")
+            self.p(
+                f"**Input missing:** none of `{'`, `'.join(CANDIDATES[key])}` in the run directory."
+            )
 
     def guard(self, label: str, fn) -> None:
         """Run one section; a malformed (but parseable) file ends that section only."""
@@ -135,16 +142,27 @@ def _inputs_section(r: _Report) -> None:
         elif key in d.found:
             rows.append([label, "found", f"`{d.found[key].relative_to(d.run_dir)}`"])
         else:
-            rows.append([label, "missing", "looked for " + ", ".join(f"`{c}`" for c in CANDIDATES[key])])
+            rows.append(
+                [label, "missing", "looked for " + ", ".join(f"`{c}`" for c in CANDIDATES[key])]
+            )
     for name in ("eq33", "nonlinear"):
         key = f"phase2_{name}"
         if key in d.found:
-            rows.append([f"phase-2 {name} time histories", "found", f"`{d.found[key].relative_to(d.run_dir)}`"])
+            rows.append(
+                [
+                    f"phase-2 {name} time histories",
+                    "found",
+                    f"`{d.found[key].relative_to(d.run_dir)}`",
+                ]
+            )
         elif key in d.problems:
             rows.append([f"phase-2 {name} time histories", "UNREADABLE", d.problems[key]])
     r.p(md_table(["input", "status", "file"], rows))
-    absent = [SECTION_INPUTS[k] for k in SECTION_INPUTS
-              if (k not in d.found and k not in d.derived) or k in d.problems]
+    absent = [
+        SECTION_INPUTS[k]
+        for k in SECTION_INPUTS
+        if (k not in d.found and k not in d.derived) or k in d.problems
+    ]
     if absent:
         r.p("Missing or unreadable inputs: " + "; ".join(absent) + ".")
     else:
@@ -157,16 +175,23 @@ def _phase1_section(r: _Report) -> None:
 
     def table1() -> None:
         header, rows = equilibrium_table(d.models)
-        r.p("Equilibria `x0` of the identified vertex models (from flight data in the seed; "
-            "here from the phase-1 runs).")
+        r.p(
+            "Equilibria `x0` of the identified vertex models (from flight data in the seed; "
+            "here from the phase-1 runs)."
+        )
         r.p(md_table(header, rows, fmt="{:.2f}"))
+
     r.with_input("models", "Table 1", table1)
     if d.trims is not None:
+
         def trims() -> None:
             header, rows = trims_table(d.trims)
-            r.p("Phase-1 runs (`trims.yaml`): achieved equilibrium (mean over the trim segment, as "
-                "seed 0 Table 1), the model trim, and the seed's Table 1 row where the vertex matches.")
+            r.p(
+                "Phase-1 runs (`trims.yaml`): achieved equilibrium (mean over the trim segment, as "
+                "seed 0 Table 1), the model trim, and the seed's Table 1 row where the vertex matches."
+            )
             r.p(md_table(header, rows, fmt="{:.2f}"))
+
         r.guard("trims", trims)
     elif "trims" in d.problems:
         r.missing("trims")
@@ -187,11 +212,23 @@ def uncertainty_rows(models: dict | None) -> list[list]:
             continue
         vtx = "[" + " ".join(f"{float(c):+g}" for c in v.get("scheduling", [])) + "]"
         dof = (std.get("dof") or [None] * (i + 1))[i] if i < len(std.get("dof") or []) else None
-        tf = (std.get("t_factor") or [None] * (i + 1))[i] if i < len(std.get("t_factor") or []) else None
+        tf = (
+            (std.get("t_factor") or [None] * (i + 1))[i]
+            if i < len(std.get("t_factor") or [])
+            else None
+        )
         m = motor[i].get("mode") if i < len(motor) and isinstance(motor[i], dict) else "known"
         xd = flown[i] if i < len(flown) and flown[i] is not None else None
-        rows.append([vtx, len(v.get("uncertain") or []), dof, tf, m,
-                     None if xd is None else ", ".join(f"{float(a):+.3f}" for a in xd[2:5])])
+        rows.append(
+            [
+                vtx,
+                len(v.get("uncertain") or []),
+                dof,
+                tf,
+                m,
+                None if xd is None else ", ".join(f"{float(a):+.3f}" for a in xd[2:5]),
+            ]
+        )
     return rows
 
 
@@ -209,13 +246,28 @@ def _ident_section(r: _Report) -> None:
         box = uncertainty_rows(d.models)
         if box:
             meta = d.models.get("meta") or {}
-            r.p(f"Identified uncertainty box (Eq. 22, `{d.models.get('format', '?')}`): every identified "
+            r.p(
+                f"Identified uncertainty box (Eq. 22, `{d.models.get('format', '?')}`): every identified "
                 f"element with lower/upper = nominal -/+ k std, k = {meta.get('k_sigma', '?')}; std = "
                 f"{(meta.get('std') or {}).get('method', 'per-row')} standard error widened to the Student-t "
                 "quantile of the same coverage; the operating point x0 is the identified model's equilibrium "
-                "at the flown velocity (the flown trim mean is not one: its derivative below).")
-            r.p(md_table(["vertex", "elements", "dof", "std widening", "a_Omega, b_Omega",
-                          "|d/dt| at the flown mean (u, v, w)"], box, fmt="{:.3g}"))
+                "at the flown velocity (the flown trim mean is not one: its derivative below)."
+            )
+            r.p(
+                md_table(
+                    [
+                        "vertex",
+                        "elements",
+                        "dof",
+                        "std widening",
+                        "a_Omega, b_Omega",
+                        "|d/dt| at the flown mean (u, v, w)",
+                    ],
+                    box,
+                    fmt="{:.3g}",
+                )
+            )
+
     r.with_input("models", "Table 2", table2)
 
     r.h(2, "Validation: TIC and NRMSE (seed 0 Table 3, Eqs. 24-25)")
@@ -223,26 +275,36 @@ def _ident_section(r: _Report) -> None:
     def table3() -> None:
         header, rows = validation_table(d.validation)
         if "validation" in d.derived:
-            r.p(f"Independent validation maneuver `{d.validation.get('maneuver', '?')}` "
-                f"({d.derived['validation']}):")
+            r.p(
+                f"Independent validation maneuver `{d.validation.get('maneuver', '?')}` "
+                f"({d.derived['validation']}):"
+            )
         r.p(md_table(header, rows, fmt="{:.3f}"))
-        for name in ("identification.png", "vertex_models_validation.png"):   # identify --plot
+        for name in ("identification.png", "vertex_models_validation.png"):  # identify --plot
             fig4 = d.run_dir / name
             if fig4.is_file():
                 dst = r.fig_dir / "validation.png"
                 shutil.copyfile(fig4, dst)
-                r.fig(dst, "Independent validation time histories, model vs flight-data state "
-                           f"derivatives (Fig. 4; from `{name}`)")
+                r.fig(
+                    dst,
+                    "Independent validation time histories, model vs flight-data state "
+                    f"derivatives (Fig. 4; from `{name}`)",
+                )
                 break
+
     if not r.with_input("validation", "Table 3", table3):
         if d.models is not None:
             r.p("`vertex_models.yaml` carries no `meta.validation` either.")
+
             def fit_metrics() -> None:
                 for metric in ("tic", "nrmse"):
                     header, rows, _ = fit_table(d.models, metric)
                     if rows:
-                        r.p(f"{metric.upper()} on the identification data per vertex (from `vertex_models.yaml`):")
+                        r.p(
+                            f"{metric.upper()} on the identification data per vertex (from `vertex_models.yaml`):"
+                        )
                         r.p(md_table(header, rows, fmt="{:.3f}"))
+
             r.guard("fit metrics", fit_metrics)
 
 
@@ -268,17 +330,39 @@ def _signals_section(r: _Report) -> None:
     def summary() -> None:
         rpf = _get(s, "rpf", "RPF", "relative_peak_factor")
         if rpf is None and channels and all(isinstance(c, dict) for c in channels):
-            keys = [k for k in ("group", "frequency_range_hz", "n_harmonics", "rpf", "peak", "rms",
-                                "leakage_fraction") if any(k in c for c in channels)]
+            keys = [
+                k
+                for k in (
+                    "group",
+                    "frequency_range_hz",
+                    "n_harmonics",
+                    "rpf",
+                    "peak",
+                    "rms",
+                    "leakage_fraction",
+                )
+                if any(k in c for c in channels)
+            ]
             r.p("Channels (`signals/summary.yaml`):")
-            r.p(md_table(["channel"] + keys, [[c.get("name")] + [_short(c.get(k)) for k in keys]
-                                              for c in channels], fmt="{:.4g}"))
+            r.p(
+                md_table(
+                    ["channel"] + keys,
+                    [[c.get("name")] + [_short(c.get(k)) for k in keys] for c in channels],
+                    fmt="{:.4g}",
+                )
+            )
         if isinstance(rpf, dict):
             r.p("Relative peak factor per channel:")
-            r.p(md_table(["channel", "RPF"], [[k, float(v)] for k, v in rpf.items()], fmt="{:.3f}"))
+            r.p(
+                md_table(["channel", "RPF"], [[k, float(v)] for k, v in rpf.items()], fmt="{:.3f}")
+            )
         elif isinstance(rpf, list) and names and len(rpf) == len(names):
             r.p("Relative peak factor per channel:")
-            r.p(md_table(["channel", "RPF"], [[n, float(v)] for n, v in zip(names, rpf)], fmt="{:.3f}"))
+            r.p(
+                md_table(
+                    ["channel", "RPF"], [[n, float(v)] for n, v in zip(names, rpf)], fmt="{:.3f}"
+                )
+            )
         corr = _get(s, "correlation", "corr", "correlation_matrix")
         if isinstance(corr, dict):
             names_c = corr.get("names", names)
@@ -287,28 +371,50 @@ def _signals_section(r: _Report) -> None:
             names_c = names
         if isinstance(corr, list) and corr:
             C = np.asarray(corr, dtype=float)
-            labels = list(names_c) if names_c and len(names_c) == C.shape[0] else [str(i) for i in range(C.shape[0])]
+            labels = (
+                list(names_c)
+                if names_c and len(names_c) == C.shape[0]
+                else [str(i) for i in range(C.shape[0])]
+            )
             off = np.abs(C - np.diag(np.diag(C)))
-            r.p(f"Largest |correlation| between distinct channels: **{off.max():.4f}** "
-                "(seed 0 Fig. 7 reports at most 0.075).")
-            r.p(md_table([""] + labels, [[labels[i]] + [float(x) for x in C[i]] for i in range(C.shape[0])],
-                         fmt="{:+.4f}"))
-            r.fig(plots.plot_correlation_matrix(labels, C, r.fig_dir / "signal_correlation.png",
-                                                "signal correlation"), "Signal channel correlation (Fig. 7)")
+            r.p(
+                f"Largest |correlation| between distinct channels: **{off.max():.4f}** "
+                "(seed 0 Fig. 7 reports at most 0.075)."
+            )
+            r.p(
+                md_table(
+                    [""] + labels,
+                    [[labels[i]] + [float(x) for x in C[i]] for i in range(C.shape[0])],
+                    fmt="{:+.4f}",
+                )
+            )
+            r.fig(
+                plots.plot_correlation_matrix(
+                    labels, C, r.fig_dir / "signal_correlation.png", "signal correlation"
+                ),
+                "Signal channel correlation (Fig. 7)",
+            )
         scalars = {k: v for k, v in s.items() if isinstance(v, (int, float, str))}
         if scalars:
             r.p(_kv_table(scalars))
+
     r.with_input("signals_summary", "signals summary", summary)
 
     if d.signals is not None:
+
         def sig_plot() -> None:
             t = np.asarray(d.signals["t"], dtype=float)
             u = np.asarray(d.signals["u"], dtype=float)
             nm = [str(x) for x in d.signals.get("names", np.arange(u.shape[1]))]
-            r.p(f"`signals.npz`: {u.shape[1]} channels ({', '.join(nm)}), {t.size} samples, "
-                f"T = {t[-1] - t[0]:.2f} s, dt = {np.median(np.diff(t)):.4g} s.")
-            r.fig(plots.plot_signals(t, u, nm, r.fig_dir / "signals.png", "normalised channels"),
-                  "Reference and excitation signals normalised to unit amplitude (Fig. 5)")
+            r.p(
+                f"`signals.npz`: {u.shape[1]} channels ({', '.join(nm)}), {t.size} samples, "
+                f"T = {t[-1] - t[0]:.2f} s, dt = {np.median(np.diff(t)):.4g} s."
+            )
+            r.fig(
+                plots.plot_signals(t, u, nm, r.fig_dir / "signals.png", "normalised channels"),
+                "Reference and excitation signals normalised to unit amplitude (Fig. 5)",
+            )
+
         r.guard("signals plot", sig_plot)
 
 
@@ -338,6 +444,7 @@ def _synthesis_section(r: _Report) -> None:
             r.p(_kv_table(cert))
         else:
             r.p("**gains.yaml carries no certificate.**")
+
     r.with_input("gains", "synthesis", body)
 
 
@@ -353,7 +460,11 @@ def _failing_and_worst(checks: list[dict]) -> list[dict]:
 
 def _short(v: Any) -> Any:
     if isinstance(v, list):
-        return "[" + ", ".join(f"{float(x):g}" if isinstance(x, (int, float)) else str(x) for x in v) + "]"
+        return (
+            "["
+            + ", ".join(f"{float(x):g}" if isinstance(x, (int, float)) else str(x) for x in v)
+            + "]"
+        )
     return v
 
 
@@ -362,15 +473,20 @@ def _full_box_paragraph(r: _Report, fb: dict) -> None:
     r.h(3, "Full identified uncertainty box (empirical Monte Carlo, not certified)")
     try:
         worst, gamma, frac = float(fb["worst_norm"]), float(fb["gamma"]), float(fb["fraction_ok"])
-        r.p(f"Every identified element drawn independently from its full interval (k = {float(fb['k_sigma']):g} "
+        r.p(
+            f"Every identified element drawn independently from its full interval (k = {float(fb['k_sigma']):g} "
             f"std, {fb.get('k_sigma_source', '')}; {fb.get('intervals_stored', '?')} stored / "
             f"{fb.get('intervals_k_std', '?')} nominal +/- k std intervals), {fb['samples']} frozen samples "
             f"(scheduling corners, random interior points and first-order worst corners; seed {fb.get('seed', '?')}): worst closed-loop H-inf norm u_e -> z **{worst:.4g}** vs "
             f"gamma {gamma:g} at v_d {_short(fb.get('worst_v_d', []))} ({fb.get('worst_where', '')}); "
             f"{100 * frac:.1f} % of samples stable with norm <= gamma; all stable: "
             f"{'yes' if fb.get('all_stable') else 'NO'}; max spectral abscissa {float(fb['max_abscissa']):.4g}. "
-            + ("All samples within the bound." if fb.get("passed") else
-               "**WARNING:** samples outside the bound -- the certificate covers the reduced polytope only."))
+            + (
+                "All samples within the bound."
+                if fb.get("passed")
+                else "**WARNING:** samples outside the bound -- the certificate covers the reduced polytope only."
+            )
+        )
     except (KeyError, TypeError, ValueError):
         r.p(_kv_table(fb))
 
@@ -385,14 +501,34 @@ def _verification_section(r: _Report) -> None:
             ok = _get(v, "passed", "ok", "pass")
             checks = _get(v, "checks", "results")
             if ok is not None:
-                n_fail = sum(1 for c in checks if isinstance(c, dict) and c.get("ok") is False
-                             and not c.get("advisory")) if isinstance(checks, list) else None
-                n_warn = sum(1 for c in checks if isinstance(c, dict) and c.get("ok") is False
-                             and c.get("advisory")) if isinstance(checks, list) else 0
-                r.p(f"Overall: **{'PASSED' if ok else 'FAILED'}**"
-                    + (f" ({len(checks)} checks, {n_fail} failed" + (f", {n_warn} advisory warnings"
-                                                                     if n_warn else "") + ")"
-                       if n_fail is not None else ""))
+                n_fail = (
+                    sum(
+                        1
+                        for c in checks
+                        if isinstance(c, dict) and c.get("ok") is False and not c.get("advisory")
+                    )
+                    if isinstance(checks, list)
+                    else None
+                )
+                n_warn = (
+                    sum(
+                        1
+                        for c in checks
+                        if isinstance(c, dict) and c.get("ok") is False and c.get("advisory")
+                    )
+                    if isinstance(checks, list)
+                    else 0
+                )
+                r.p(
+                    f"Overall: **{'PASSED' if ok else 'FAILED'}**"
+                    + (
+                        f" ({len(checks)} checks, {n_fail} failed"
+                        + (f", {n_warn} advisory warnings" if n_warn else "")
+                        + ")"
+                        if n_fail is not None
+                        else ""
+                    )
+                )
             if v.get("source"):
                 r.p(f"Source: {v['source']}.")
             elif "verification" in d.derived:
@@ -407,9 +543,14 @@ def _verification_section(r: _Report) -> None:
                 if len(checks) > 20 and "check" in keys:
                     shown = _failing_and_worst(checks)
                     r.p("Failing checks, then the worst passing row of each check:")
-                r.p(md_table(keys, [[_short(c.get(k)) for k in keys] for c in shown], fmt="{:.4g}"))
-                rest = {k: x for k, x in v.items()
-                        if k not in ("checks", "results", "source", "passed", "full_box")}
+                r.p(
+                    md_table(keys, [[_short(c.get(k)) for k in keys] for c in shown], fmt="{:.4g}")
+                )
+                rest = {
+                    k: x
+                    for k, x in v.items()
+                    if k not in ("checks", "results", "source", "passed", "full_box")
+                }
                 if rest:
                     r.p(_kv_table(rest))
             else:
@@ -420,11 +561,15 @@ def _verification_section(r: _Report) -> None:
             r.p(_kv_table({"checks": v}))
         else:
             raise ConfigError(f"{d.found['verification']}: expected a mapping or a list")
+
     r.with_input("verification", "verification", body)
 
 
-RUN_LABELS = (("eq33", "LPV closed loop, Eq. (33)"), ("linear_ff", "LPV model + feedforward, no x0'"),
-              ("nonlinear", "nonlinear quadrotor"))
+RUN_LABELS = (
+    ("eq33", "LPV closed loop, Eq. (33)"),
+    ("linear_ff", "LPV model + feedforward, no x0'"),
+    ("nonlinear", "nonlinear quadrotor"),
+)
 
 
 def gain_row(label: str, e: dict, gamma) -> list:
@@ -436,8 +581,19 @@ def gain_row(label: str, e: dict, gamma) -> list:
     total = e.get("total_ratio", e.get("gain"))
     track = (d.get("tracking") or d.get("tracking_and_excitation") or {}).get("ratio")
     note = e.get("safety_event") or ("completed" if e.get("completed", True) else "stopped")
-    how = str(d.get("method", "not separated (older summary: the ratio mixes tracking and offset)"))
-    return [label, g, within, how.split(" (")[0], (d.get("offset") or {}).get("ratio"), track, total, note]
+    how = str(
+        d.get("method", "not separated (older summary: the ratio mixes tracking and offset)")
+    )
+    return [
+        label,
+        g,
+        within,
+        how.split(" (")[0],
+        (d.get("offset") or {}).get("ratio"),
+        track,
+        total,
+        note,
+    ]
 
 
 def _phase2_section(r: _Report) -> None:
@@ -453,14 +609,33 @@ def _phase2_section(r: _Report) -> None:
             if not isinstance(e, dict):
                 continue
             if e.get("skipped"):
-                rows.append([label, None, None, "", None, None, None, "skipped: " + str(e["skipped"])])
+                rows.append(
+                    [label, None, None, "", None, None, None, "skipped: " + str(e["skipped"])]
+                )
                 continue
             rows.append(gain_row(label, e, gamma))
-        r.p(f"Excitation multiplier kappa = {s.get('kappa')}, design gamma = {gamma}: the bound of Lemma 1 "
-            "on ||z_e||_2 / ||kappa u_e||_2, the gain from the excitation to the performance output (Eq. 29).")
-        r.p(md_table(["simulation", "u_e -> z gain", "<= gamma", "separated by", "equilibrium offset",
-                      "tracking", "total ||z||/||kappa u_e||", "run"], rows, fmt="{:.4g}"))
-        r.p("z = Q^-1 (v - v_d) (Eq. 18) holds three parts, reported apart (each as its L2 norm over "
+        r.p(
+            f"Excitation multiplier kappa = {s.get('kappa')}, design gamma = {gamma}: the bound of Lemma 1 "
+            "on ||z_e||_2 / ||kappa u_e||_2, the gain from the excitation to the performance output (Eq. 29)."
+        )
+        r.p(
+            md_table(
+                [
+                    "simulation",
+                    "u_e -> z gain",
+                    "<= gamma",
+                    "separated by",
+                    "equilibrium offset",
+                    "tracking",
+                    "total ||z||/||kappa u_e||",
+                    "run",
+                ],
+                rows,
+                fmt="{:.4g}",
+            )
+        )
+        r.p(
+            "z = Q^-1 (v - v_d) (Eq. 18) holds three parts, reported apart (each as its L2 norm over "
             "||kappa u_e||_2; the norms overlap and do not add): the response to the excitation u_e, the "
             "only part gamma bounds; the equilibrium offset Q^-1 (v0(v_d) - v_d), because the vertex "
             "equilibria fly a velocity other than the commanded one (seed 0 Table 1); and the lag in "
@@ -469,24 +644,44 @@ def _phase2_section(r: _Report) -> None:
             "excitation part comes from superposition, exact for the linear model (Eq. 33: its unexcited "
             "run stays at x0(v_d); the feedforward run: the same run with -u_e), on the nonlinear flight "
             "from two more flights with the same sensor noise (--superposition) or otherwise from a FIR "
-            "regression of z on u_e above the reference band; the offset part is exact.")
+            "regression of z on u_e above the reference band; the offset part is exact."
+        )
         details = []
         for name in ("eq33", "linear_ff", "nonlinear"):
             e = s.get(name)
             if isinstance(e, dict) and not e.get("skipped"):
                 for k, v in e.items():
-                    if k not in ("gain", "z_norm", "ue_norm", "within_gamma", "completed", "safety_event",
-                                 "excitation_gain", "total_ratio", "decomposition"):
-                        details.append([f"{name}.{k}", _short(v) if not isinstance(v, dict) else
-                                        ", ".join(f"{a}: {b}" for a, b in v.items())])
+                    if k not in (
+                        "gain",
+                        "z_norm",
+                        "ue_norm",
+                        "within_gamma",
+                        "completed",
+                        "safety_event",
+                        "excitation_gain",
+                        "total_ratio",
+                        "decomposition",
+                    ):
+                        details.append(
+                            [
+                                f"{name}.{k}",
+                                _short(v)
+                                if not isinstance(v, dict)
+                                else ", ".join(f"{a}: {b}" for a, b in v.items()),
+                            ]
+                        )
         if details:
             r.p(md_table(["run detail", "value"], details, fmt="{:.4g}"))
         events = s.get("safety_events") or []
         if events:
             r.p("**Safety events:** " + "; ".join(str(e) for e in events))
+
     r.with_input("phase2_summary", "phase-2 gains", gains_table)
 
-    for name, label in (("eq33", "LPV closed loop Eq. (33)"), ("nonlinear", "nonlinear quadrotor")):
+    for name, label in (
+        ("eq33", "LPV closed loop Eq. (33)"),
+        ("nonlinear", "nonlinear quadrotor"),
+    ):
         ser = d.phase2_series.get(name)
         if ser is None:
             continue
@@ -497,31 +692,50 @@ def _phase2_section(r: _Report) -> None:
             v = np.asarray(ser["v"], dtype=float)
             err = v - vd
             rms = np.sqrt(np.mean(err**2, axis=0))
-            r.p(f"{label}: {t.size} samples over {t[-1] - t[0]:.2f} s; RMS tracking error "
+            r.p(
+                f"{label}: {t.size} samples over {t[-1] - t[0]:.2f} s; RMS tracking error "
                 f"u/v/w = {rms[0]:.3f} / {rms[1]:.3f} / {rms[2]:.3f} m/s, max |v - v_d| = "
-                f"{np.max(np.abs(err)):.3f} m/s.")
-            r.fig(plots.plot_tracking(t, vd, v, r.fig_dir / f"tracking_{name}.png", label),
-                  f"Body velocity and reference, {label} (Fig. 8)")
-            r.fig(plots.plot_perturbation(t, err, r.fig_dir / f"perturbation_{name}.png", label),
-                  f"Body velocity perturbation, {label} (Fig. 9)")
+                f"{np.max(np.abs(err)):.3f} m/s."
+            )
+            r.fig(
+                plots.plot_tracking(t, vd, v, r.fig_dir / f"tracking_{name}.png", label),
+                f"Body velocity and reference, {label} (Fig. 8)",
+            )
+            r.fig(
+                plots.plot_perturbation(t, err, r.fig_dir / f"perturbation_{name}.png", label),
+                f"Body velocity perturbation, {label} (Fig. 9)",
+            )
+
         r.guard(f"phase-2 {name} plots", tracking)
 
     if s is not None and isinstance(s.get("regressor_correlation"), dict):
+
         def fig10() -> None:
             rc = s["regressor_correlation"]
             corrs = regressor_correlations_from_summary(rc)
             r.h(3, "Regressor correlation (seed 0 Eq. 6, Fig. 10)")
             src = {"eq33": "Eq. (33) LPV closed-loop", "nonlinear": "nonlinear quadrotor"}.get(
-                rc.get("source"), str(rc.get("source", "phase-2")))
+                rc.get("source"), str(rc.get("source", "phase-2"))
+            )
             partial = "" if rc.get("complete_run", True) else " (run stopped early: partial data)"
-            r.p(f"Computed from the {src} simulation data{partial}, {rc.get('n_samples', '?')} samples. "
-                "Largest |correlation| between distinct regressors of each axis:")
-            r.p(md_table(["axis", "regressors", "max |corr|", "pair"],
-                         [[c.axis, len(c.names), c.max_offdiag(), _worst_pair(c)] for c in corrs],
-                         fmt="{:.3f}"))
-            r.fig(plots.plot_regressor_correlations(corrs, r.fig_dir / "regressor_correlation.png",
-                                                    "Eq. (6) regressor correlation"),
-                  "Regressor correlation coefficients per axis (Fig. 10)")
+            r.p(
+                f"Computed from the {src} simulation data{partial}, {rc.get('n_samples', '?')} samples. "
+                "Largest |correlation| between distinct regressors of each axis:"
+            )
+            r.p(
+                md_table(
+                    ["axis", "regressors", "max |corr|", "pair"],
+                    [[c.axis, len(c.names), c.max_offdiag(), _worst_pair(c)] for c in corrs],
+                    fmt="{:.3f}",
+                )
+            )
+            r.fig(
+                plots.plot_regressor_correlations(
+                    corrs, r.fig_dir / "regressor_correlation.png", "Eq. (6) regressor correlation"
+                ),
+                "Regressor correlation coefficients per axis (Fig. 10)",
+            )
+
         r.guard("Fig. 10", fig10)
 
 
@@ -537,7 +751,9 @@ def regressor_correlations_from_summary(rc: dict) -> list[RegressorCorrelation]:
         names = tuple(axes[a].get("names") or REGRESSOR_NAMES[a])
         C = np.array([[np.nan if x is None else float(x) for x in row] for row in axes[a]["corr"]])
         if C.shape != (len(names), len(names)):
-            raise ConfigError(f"phase2/summary.yaml: regressor_correlation.axes.{a}.corr has shape {C.shape}")
+            raise ConfigError(
+                f"phase2/summary.yaml: regressor_correlation.axes.{a}.corr has shape {C.shape}"
+            )
         out.append(RegressorCorrelation(a, names, C))
     return out
 
@@ -551,7 +767,9 @@ def _worst_pair(c: RegressorCorrelation) -> str:
     return f"{c.names[i]} / {c.names[j]}"
 
 
-def write_report(run_dir: str | Path, out_path: Optional[str | Path] = None, verify: bool = True) -> Path:
+def write_report(
+    run_dir: str | Path, out_path: Optional[str | Path] = None, verify: bool = True
+) -> Path:
     """Write ``report.md`` (default ``RUN/report/report.md``) and its PNG figures; return its path.
 
     ``verify``: without a ``verification.yaml``, re-run the independent verifier on
@@ -565,9 +783,12 @@ def write_report(run_dir: str | Path, out_path: Optional[str | Path] = None, ver
     except OSError as exc:
         raise ConfigError(f"--out: cannot create {out.parent} ({exc.strerror})") from None
     r = _Report(data, out)
-    r.lines = ["# lpv_sysid run report", "",
-               f"Run directory: `{data.run_dir}`. Method: Hopwood & Woolsey, robust LPV control for "
-               "safe and effective unstable-aircraft system identification (seed 0)."]
+    r.lines = [
+        "# lpv_sysid run report",
+        "",
+        f"Run directory: `{data.run_dir}`. Method: Hopwood & Woolsey, robust LPV control for "
+        "safe and effective unstable-aircraft system identification (seed 0).",
+    ]
     _inputs_section(r)
     _phase1_section(r)
     _ident_section(r)

@@ -28,7 +28,9 @@ def _save(fig, path: Path) -> Path:
     return path
 
 
-def plot_tracking(t: np.ndarray, v_d: np.ndarray, v: np.ndarray, path: Path, title: str = "") -> Path:
+def plot_tracking(
+    t: np.ndarray, v_d: np.ndarray, v: np.ndarray, path: Path, title: str = ""
+) -> Path:
     """Body velocity (solid) and reference (black dashed), like seed 0 Fig. 8."""
     fig, axes = plt.subplots(3, 1, figsize=(8, 6), sharex=True)
     for i, ax in enumerate(axes):
@@ -43,8 +45,13 @@ def plot_tracking(t: np.ndarray, v_d: np.ndarray, v: np.ndarray, path: Path, tit
     return _save(fig, path)
 
 
-def plot_perturbation(t: np.ndarray, err: np.ndarray, path: Path, title: str = "",
-                      bounds: Optional[Sequence[float]] = None) -> Path:
+def plot_perturbation(
+    t: np.ndarray,
+    err: np.ndarray,
+    path: Path,
+    title: str = "",
+    bounds: Optional[Sequence[float]] = None,
+) -> Path:
     """Velocity perturbation v - v_d, like seed 0 Fig. 9 (optional +-Delta lines of Eq. 32)."""
     fig, ax = plt.subplots(figsize=(8, 3.5))
     for i, name in enumerate(("u - u_d", "v - v_d", "w - w_d")):
@@ -74,13 +81,22 @@ def _heatmap(ax, names: Sequence[str], C: np.ndarray, title: str) -> None:
         for j in range(n):
             val = C[i, j]
             txt = "-" if not np.isfinite(val) else f"{val:+.2f}"
-            ax.text(j, i, txt, ha="center", va="center", fontsize=5,
-                    color="w" if not np.isfinite(val) or abs(val) < 0.6 else "k")
+            ax.text(
+                j,
+                i,
+                txt,
+                ha="center",
+                va="center",
+                fontsize=5,
+                color="w" if not np.isfinite(val) or abs(val) < 0.6 else "k",
+            )
     ax.set_title(title, fontsize=8)
     return im
 
 
-def plot_regressor_correlations(corrs: Sequence[RegressorCorrelation], path: Path, title: str = "") -> Path:
+def plot_regressor_correlations(
+    corrs: Sequence[RegressorCorrelation], path: Path, title: str = ""
+) -> Path:
     """Correlation coefficients of the Eq. (6) regressors per axis, like seed 0 Fig. 10."""
     fig, axes = plt.subplots(2, 3, figsize=(12, 8))
     for ax, rc in zip(axes.ravel(), corrs):
@@ -90,14 +106,18 @@ def plot_regressor_correlations(corrs: Sequence[RegressorCorrelation], path: Pat
     return _save(fig, path)
 
 
-def plot_correlation_matrix(names: Sequence[str], C: np.ndarray, path: Path, title: str = "") -> Path:
+def plot_correlation_matrix(
+    names: Sequence[str], C: np.ndarray, path: Path, title: str = ""
+) -> Path:
     """One correlation matrix (signal channels, seed 0 Fig. 7)."""
     fig, ax = plt.subplots(figsize=(5.5, 5))
     _heatmap(ax, names, np.asarray(C, dtype=float), title)
     return _save(fig, path)
 
 
-def plot_signals(t: np.ndarray, u: np.ndarray, names: Sequence[str], path: Path, title: str = "") -> Path:
+def plot_signals(
+    t: np.ndarray, u: np.ndarray, names: Sequence[str], path: Path, title: str = ""
+) -> Path:
     """Reference and excitation channels normalised to unit amplitude (seed 0 Fig. 5)."""
     n = u.shape[1]
     fig, axes = plt.subplots(n, 1, figsize=(8, 1.1 * n + 1), sharex=True)

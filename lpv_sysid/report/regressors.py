@@ -16,7 +16,14 @@ import numpy as np
 from lpv_sysid.errors import ConfigError
 
 AXES = ("X", "Y", "Z", "L", "M", "N")
-AXIS_TITLES = {"X": "F_x (6a)", "Y": "F_y (6b)", "Z": "F_z (6c)", "L": "M_x (6d)", "M": "M_y (6e)", "N": "M_z (6f)"}
+AXIS_TITLES = {
+    "X": "F_x (6a)",
+    "Y": "F_y (6b)",
+    "Z": "F_z (6c)",
+    "L": "M_x (6d)",
+    "M": "M_y (6e)",
+    "N": "M_z (6f)",
+}
 REGRESSOR_NAMES = {
     "X": ("u", "u w", "u dt"),
     "Y": ("v", "v w", "v dt"),
@@ -34,8 +41,14 @@ def virtual_actuators(Omega: np.ndarray, mix: np.ndarray) -> tuple[np.ndarray, n
     return Omega @ mix.T, (Omega * Omega) @ mix.T
 
 
-def regressors(t: np.ndarray, v: np.ndarray, omega: np.ndarray, delta: np.ndarray,
-               delta_sq: np.ndarray, arm_length: float) -> dict[str, np.ndarray]:
+def regressors(
+    t: np.ndarray,
+    v: np.ndarray,
+    omega: np.ndarray,
+    delta: np.ndarray,
+    delta_sq: np.ndarray,
+    arm_length: float,
+) -> dict[str, np.ndarray]:
     """Regressor matrices (N, n_axis) of seed 0 Eq. (6a)-(6f), keyed by axis X, Y, Z, L, M, N.
 
     ``dr_dot`` is the numerical derivative of dr on ``t``. The seed prints the last term of
@@ -49,7 +62,9 @@ def regressors(t: np.ndarray, v: np.ndarray, omega: np.ndarray, delta: np.ndarra
         arr = np.asarray(arr, dtype=float)
         want = 3 if name in ("v", "omega") else 4
         if arr.shape != (n, want):
-            raise ConfigError(f"regressors: '{name}' must have shape ({n}, {want}), got {arr.shape}")
+            raise ConfigError(
+                f"regressors: '{name}' must have shape ({n}, {want}), got {arr.shape}"
+            )
     u, vv, w = np.asarray(v, dtype=float).T
     p, q, r = np.asarray(omega, dtype=float).T
     dt, da, de, dr = np.asarray(delta, dtype=float).T
@@ -81,8 +96,10 @@ class RegressorCorrelation:
         return float(np.nanmax(c)) if np.any(np.isfinite(c)) else float("nan")
 
     def to_dict(self) -> dict:
-        return {"names": list(self.names),
-                "corr": [[None if not np.isfinite(x) else float(x) for x in row] for row in self.corr]}
+        return {
+            "names": list(self.names),
+            "corr": [[None if not np.isfinite(x) else float(x) for x in row] for row in self.corr],
+        }
 
 
 def correlation(X: np.ndarray) -> np.ndarray:
@@ -91,11 +108,15 @@ def correlation(X: np.ndarray) -> np.ndarray:
     Xc = X - X.mean(axis=0)
     s = np.sqrt(np.sum(Xc * Xc, axis=0))
     with np.errstate(invalid="ignore", divide="ignore"):
-        scale = np.where(s > 1e-12 * max(1.0, float(np.max(np.abs(X))) * np.sqrt(X.shape[0])), s, np.nan)
+        scale = np.where(
+            s > 1e-12 * max(1.0, float(np.max(np.abs(X))) * np.sqrt(X.shape[0])), s, np.nan
+        )
         C = (Xc.T @ Xc) / np.outer(scale, scale)
     return np.clip(C, -1.0, 1.0)
 
 
 def regressor_correlations(regs: dict[str, np.ndarray]) -> list[RegressorCorrelation]:
     """Correlation matrices per axis (seed 0 Fig. 10)."""
-    return [RegressorCorrelation(axis, REGRESSOR_NAMES[axis], correlation(regs[axis])) for axis in AXES]
+    return [
+        RegressorCorrelation(axis, REGRESSOR_NAMES[axis], correlation(regs[axis])) for axis in AXES
+    ]

@@ -94,8 +94,8 @@ class GroupConfig:
     name: str
     channels: tuple[str, ...]
     band: tuple[float, float]
-    peak: Optional[tuple[float, ...]] = None           # per channel peak |x|; default 1
-    energy: Optional[float] = None                     # group energy, Eq. (26)
+    peak: Optional[tuple[float, ...]] = None  # per channel peak |x|; default 1
+    energy: Optional[float] = None  # group energy, Eq. (26)
     power_fraction: Optional[tuple[float, ...]] = None  # with ``energy`` only
     spectra: Mapping[str, tuple[tuple[float, float], ...]] = field(default_factory=dict)
 
@@ -108,7 +108,11 @@ class GroupConfig:
         if not isinstance(name, str) or not name:
             raise ConfigError(f"{where}.name: expected a non-empty string, got {name!r}")
         ch = d["channels"]
-        if not isinstance(ch, (list, tuple)) or not ch or not all(isinstance(c, str) and c for c in ch):
+        if (
+            not isinstance(ch, (list, tuple))
+            or not ch
+            or not all(isinstance(c, str) and c for c in ch)
+        ):
             raise ConfigError(f"{where}.channels: expected a non-empty list of names, got {ch!r}")
         if len(set(ch)) != len(ch):
             raise ConfigError(f"{where}.channels: duplicate names in {list(ch)}")
@@ -121,14 +125,19 @@ class GroupConfig:
             raise ConfigError(f"{where}: give either 'peak' or 'energy', not both")
         if "peak" in d:
             p = d["peak"]
-            peak = (_num(p, f"{where}.peak", positive=True),) * n if not isinstance(p, (list, tuple)) \
+            peak = (
+                (_num(p, f"{where}.peak", positive=True),) * n
+                if not isinstance(p, (list, tuple))
                 else _num_list(p, f"{where}.peak", n, positive=True)
+            )
         if "energy" in d:
             energy = _num(d["energy"], f"{where}.energy", positive=True)
         if "power_fraction" in d:
             if energy is None:
-                raise ConfigError(f"{where}.power_fraction: only meaningful with 'energy' "
-                                  "(with 'peak' every channel is scaled to its own peak)")
+                raise ConfigError(
+                    f"{where}.power_fraction: only meaningful with 'energy' "
+                    "(with 'peak' every channel is scaled to its own peak)"
+                )
             pf = _num_list(d["power_fraction"], f"{where}.power_fraction", n, positive=True)
             if abs(sum(pf) - 1.0) > 1e-9:
                 raise ConfigError(f"{where}.power_fraction: must sum to 1, got {sum(pf)}")
@@ -151,8 +160,8 @@ class WeightsConfig:
     """Magnitudes for the weights R (Eq. 27) and Q (Eq. 28) of seed 0 Sec. V."""
 
     group: Optional[str] = None
-    excitation_magnitudes: Optional[tuple[float, ...]] = None   # Delta_t, Delta_a, Delta_e, Delta_r
-    velocity_magnitudes: Optional[tuple[float, ...]] = None     # Delta_u, Delta_v, Delta_w
+    excitation_magnitudes: Optional[tuple[float, ...]] = None  # Delta_t, Delta_a, Delta_e, Delta_r
+    velocity_magnitudes: Optional[tuple[float, ...]] = None  # Delta_u, Delta_v, Delta_w
 
     KEYS = frozenset({"group", "excitation_magnitudes", "velocity_magnitudes"})
 
@@ -165,15 +174,29 @@ class WeightsConfig:
         ex = vel = None
         if "excitation_magnitudes" in d:
             if g is None:
-                raise ConfigError(f"{where}.group: required with excitation_magnitudes (the u_e group)")
-            ex = _num_list(d["excitation_magnitudes"], f"{where}.excitation_magnitudes", positive=True)
+                raise ConfigError(
+                    f"{where}.group: required with excitation_magnitudes (the u_e group)"
+                )
+            ex = _num_list(
+                d["excitation_magnitudes"], f"{where}.excitation_magnitudes", positive=True
+            )
         if "velocity_magnitudes" in d:
-            vel = _num_list(d["velocity_magnitudes"], f"{where}.velocity_magnitudes", 3, positive=True)
+            vel = _num_list(
+                d["velocity_magnitudes"], f"{where}.velocity_magnitudes", 3, positive=True
+            )
         return cls(g, ex, vel)
 
 
 def _options_from_dict(d: Mapping[str, Any], where: str = "optimisation") -> PhaseOptOptions:
-    keys = {"p_stages", "max_iter", "clip_iter", "clip_level", "restarts", "restart_max_harmonics", "seed"}
+    keys = {
+        "p_stages",
+        "max_iter",
+        "clip_iter",
+        "clip_level",
+        "restarts",
+        "restart_max_harmonics",
+        "seed",
+    }
     check_keys(d, keys, where, list_allowed=True)
     kw: dict[str, Any] = {}
     if "p_stages" in d:
@@ -181,7 +204,7 @@ def _options_from_dict(d: Mapping[str, Any], where: str = "optimisation") -> Pha
     for k in ("max_iter", "clip_iter", "restarts", "restart_max_harmonics", "seed"):
         if k in d:
             kw[k] = _int(d[k], f"{where}.{k}")
-            if k in MAX_COUNTS and kw[k] > MAX_COUNTS[k]:      # a count of 10**18 never finishes
+            if k in MAX_COUNTS and kw[k] > MAX_COUNTS[k]:  # a count of 10**18 never finishes
                 raise ConfigError(f"{where}.{k}: {kw[k]} exceeds the limit of {MAX_COUNTS[k]}")
     if "clip_level" in d:
         kw["clip_level"] = _num(d["clip_level"], f"{where}.clip_level", positive=True)
@@ -210,19 +233,24 @@ class SignalsConfig:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], where: str = "signals config") -> "SignalsConfig":
-        check_keys(d, cls.KEYS, where, required={"duration", "sample_rate", "groups"},
-                   list_allowed=True)
+        check_keys(
+            d, cls.KEYS, where, required={"duration", "sample_rate", "groups"}, list_allowed=True
+        )
         T = _num(d["duration"], f"{where}.duration", positive=True)
         fs = _num(d["sample_rate"], f"{where}.sample_rate", positive=True)
         # before anything is allocated: the table is duration * sample_rate rows per channel
         if T > MAX_DURATION:
             raise ConfigError(f"{where}.duration: {T:g} s exceeds the limit of {MAX_DURATION:g} s")
         if fs > MAX_SAMPLE_RATE:
-            raise ConfigError(f"{where}.sample_rate: {fs:g} Hz exceeds the limit of {MAX_SAMPLE_RATE:g} Hz")
+            raise ConfigError(
+                f"{where}.sample_rate: {fs:g} Hz exceeds the limit of {MAX_SAMPLE_RATE:g} Hz"
+            )
         n = T * fs
         if n > MAX_SAMPLES:
-            raise ConfigError(f"{where}: duration * sample_rate = {n:g} samples exceeds the limit of "
-                              f"{MAX_SAMPLES} samples per channel")
+            raise ConfigError(
+                f"{where}: duration * sample_rate = {n:g} samples exceeds the limit of "
+                f"{MAX_SAMPLES} samples per channel"
+            )
         if abs(n - round(n)) > 1e-6 * max(1.0, n) or round(n) < 4:
             raise ConfigError(f"{where}: duration * sample_rate must be an integer >= 4, got {n}")
         gs = d["groups"]
@@ -238,8 +266,10 @@ class SignalsConfig:
             raise ConfigError(f"{where}.groups: duplicate group names {gnames}")
         for i, g in enumerate(groups):
             if g.band[1] >= fs / 2:
-                raise ConfigError(f"{where}.groups[{i}].band: upper edge {g.band[1]} Hz must be "
-                                  f"below the Nyquist frequency {fs / 2} Hz")
+                raise ConfigError(
+                    f"{where}.groups[{i}].band: upper edge {g.band[1]} Hz must be "
+                    f"below the Nyquist frequency {fs / 2} Hz"
+                )
         opts = _options_from_dict(d.get("optimisation") or {}, f"{where}.optimisation")
         w = WeightsConfig.from_dict(d.get("weights") or {}, f"{where}.weights")
         if w.group is not None:
@@ -248,11 +278,17 @@ class SignalsConfig:
                 raise ConfigError(f"{where}.weights.group: no group named {w.group!r} in {gnames}")
             g = match[0]
             if g.energy is None or abs(g.energy - 1.0) > 1e-12:
-                raise ConfigError(f"{where}.weights.group: group {w.group!r} must have energy: 1.0 "
-                                  "(unit-energy u_e, seed 0 Eq. 26) for R of Eq. (27)")
-            if w.excitation_magnitudes is not None and len(w.excitation_magnitudes) != len(g.channels):
-                raise ConfigError(f"{where}.weights.excitation_magnitudes: {len(w.excitation_magnitudes)} "
-                                  f"values for {len(g.channels)} channels of group {w.group!r}")
+                raise ConfigError(
+                    f"{where}.weights.group: group {w.group!r} must have energy: 1.0 "
+                    "(unit-energy u_e, seed 0 Eq. 26) for R of Eq. (27)"
+                )
+            if w.excitation_magnitudes is not None and len(w.excitation_magnitudes) != len(
+                g.channels
+            ):
+                raise ConfigError(
+                    f"{where}.weights.excitation_magnitudes: {len(w.excitation_magnitudes)} "
+                    f"values for {len(g.channels)} channels of group {w.group!r}"
+                )
         return cls(T, fs, groups, opts, w)
 
 
@@ -274,9 +310,18 @@ PHASE1_DEFAULT: dict[str, Any] = {
     "duration": 30.0,
     "sample_rate": 50.0,
     "groups": [
-        {"name": "reference", "channels": ["u_ref", "v_ref", "w_ref", "r_ref"],
-         "band": [0.2, 2.0], "peak": [1.0, 1.0, 0.5, 0.5]},
+        {
+            "name": "reference",
+            "channels": ["u_ref", "v_ref", "w_ref", "r_ref"],
+            "band": [0.2, 2.0],
+            "peak": [1.0, 1.0, 0.5, 0.5],
+        },
     ],
-    "optimisation": {"p_stages": [4, 16, 64, 256, 1024], "max_iter": 150, "clip_iter": 100, "restarts": 3,
-                     "restart_max_harmonics": 40},
+    "optimisation": {
+        "p_stages": [4, 16, 64, 256, 1024],
+        "max_iter": 150,
+        "clip_iter": 100,
+        "restarts": 3,
+        "restart_max_harmonics": 40,
+    },
 }

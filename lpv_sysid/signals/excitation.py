@@ -44,7 +44,14 @@ import numpy as np
 from lpv_sysid.errors import ConfigError, SafetyError
 from lpv_sysid.signals.store import validate_table
 
-IDLE, RAMP_IN, RUNNING, RAMP_OUT, DONE, ABORTED = "idle", "ramp_in", "running", "ramp_out", "done", "aborted"
+IDLE, RAMP_IN, RUNNING, RAMP_OUT, DONE, ABORTED = (
+    "idle",
+    "ramp_in",
+    "running",
+    "ramp_out",
+    "done",
+    "aborted",
+)
 
 PHASE1_CHANNELS = ("u_ref", "v_ref", "w_ref")
 PHASE1_YAW_CHANNEL = "r_ref"
@@ -64,11 +71,11 @@ class ExcitationSample(NamedTuple):
     """One output of :meth:`ExcitationCore.sample` (a NamedTuple: cheap to build)."""
 
     t: float
-    velocity: np.ndarray     # (3,) body velocity reference, FRD, m/s
-    yaw_rate: float          # yaw-rate reference, FRD, rad/s
-    u_e: np.ndarray          # (4,) normalised excitation, EXCITATION_NAMES order
+    velocity: np.ndarray  # (3,) body velocity reference, FRD, m/s
+    yaw_rate: float  # yaw-rate reference, FRD, rad/s
+    u_e: np.ndarray  # (4,) normalised excitation, EXCITATION_NAMES order
     phase: str
-    fraction: float          # progress in [0, 1] over the whole timeline
+    fraction: float  # progress in [0, 1] over the whole timeline
 
 
 @dataclass(frozen=True)
@@ -111,17 +118,27 @@ class ExcitationCore:
             if name is None:
                 return np.zeros(n)
             if name not in names:
-                raise ConfigError(f"excitation: channel {name!r} not in the signal set {list(names)}")
+                raise ConfigError(
+                    f"excitation: channel {name!r} not in the signal set {list(names)}"
+                )
             return u[:, names.index(name)]
 
         if len(velocity_channels) != 3:
-            raise ConfigError(f"excitation: velocity_channels needs 3 entries, got {list(velocity_channels)}")
+            raise ConfigError(
+                f"excitation: velocity_channels needs 3 entries, got {list(velocity_channels)}"
+            )
         if len(excitation_channels) not in (0, 4):
-            raise ConfigError(f"excitation: excitation_channels needs 0 or 4 names, got {list(excitation_channels)}")
+            raise ConfigError(
+                f"excitation: excitation_channels needs 0 or 4 names, got {list(excitation_channels)}"
+            )
         cols = [col(c) for c in velocity_channels] + [col(yaw_rate_channel)]
         cols += [col(c) for c in excitation_channels] or [np.zeros(n)] * 4
-        tab = np.stack(cols, axis=1)                      # (N, 8): v(3), r, u_e(4)
-        for name, v in (("start_time", start_time), ("ramp", ramp), ("yaw_rate_offset", yaw_rate_offset)):
+        tab = np.stack(cols, axis=1)  # (N, 8): v(3), r, u_e(4)
+        for name, v in (
+            ("start_time", start_time),
+            ("ramp", ramp),
+            ("yaw_rate_offset", yaw_rate_offset),
+        ):
             if not math.isfinite(v):
                 raise ConfigError(f"excitation: {name} must be finite, got {v}")
         if ramp < 0:
@@ -134,14 +151,16 @@ class ExcitationCore:
         self.periodic = bool(periodic)
         if self.periodic:
             self.period = n * self.dt
-            tab = np.vstack([tab, tab[:1]])               # wrap row: O(1) lookup of i + 1
+            tab = np.vstack([tab, tab[:1]])  # wrap row: O(1) lookup of i + 1
             self.duration = periods * self.period + 2.0 * ramp
         else:
             self.period = (n - 1) * self.dt
             if periods != 1:
                 raise ConfigError("excitation: periods > 1 needs a periodic table")
             if 2.0 * ramp > self.period:
-                raise ConfigError(f"excitation: two ramps of {ramp} s do not fit the {self.period} s signal")
+                raise ConfigError(
+                    f"excitation: two ramps of {ramp} s do not fit the {self.period} s signal"
+                )
             tab = np.vstack([tab, tab[-1:]])
             self.duration = self.period
         self._tab = tab
@@ -162,19 +181,52 @@ class ExcitationCore:
 
     # ------------------------------------------------------------------ construction helpers
     @classmethod
-    def phase1(cls, t, u, names, *, start_time: float, vertex_velocity: Sequence[float],
-               ramp: float = 0.0, yaw_rate_offset: float = 0.0) -> "ExcitationCore":
+    def phase1(
+        cls,
+        t,
+        u,
+        names,
+        *,
+        start_time: float,
+        vertex_velocity: Sequence[float],
+        ramp: float = 0.0,
+        yaw_rate_offset: float = 0.0,
+    ) -> "ExcitationCore":
         """Phase 1 (seed 0 Sec. IV): vertex velocity + ``u_ref, v_ref, w_ref, r_ref``."""
-        return cls(t, u, names, start_time=start_time, velocity_channels=PHASE1_CHANNELS,
-                   yaw_rate_channel=PHASE1_YAW_CHANNEL, offset=vertex_velocity,
-                   yaw_rate_offset=yaw_rate_offset, ramp=ramp)
+        return cls(
+            t,
+            u,
+            names,
+            start_time=start_time,
+            velocity_channels=PHASE1_CHANNELS,
+            yaw_rate_channel=PHASE1_YAW_CHANNEL,
+            offset=vertex_velocity,
+            yaw_rate_offset=yaw_rate_offset,
+            ramp=ramp,
+        )
 
     @classmethod
-    def phase2(cls, t, u, names, *, start_time: float, ramp: float = DEFAULT_RAMP_S,
-               offset: Sequence[float] = (0.0, 0.0, 0.0)) -> "ExcitationCore":
+    def phase2(
+        cls,
+        t,
+        u,
+        names,
+        *,
+        start_time: float,
+        ramp: float = DEFAULT_RAMP_S,
+        offset: Sequence[float] = (0.0, 0.0, 0.0),
+    ) -> "ExcitationCore":
         """Phase 2 (seed 0 Sec. V): v_d(t) from ``u_d, v_d, w_d``, u_e(t) from ``ue_*``."""
-        return cls(t, u, names, start_time=start_time, velocity_channels=PHASE2_CHANNELS,
-                   excitation_channels=PHASE2_EXCITATION, offset=offset, ramp=ramp)
+        return cls(
+            t,
+            u,
+            names,
+            start_time=start_time,
+            velocity_channels=PHASE2_CHANNELS,
+            excitation_channels=PHASE2_EXCITATION,
+            offset=offset,
+            ramp=ramp,
+        )
 
     @classmethod
     def from_file(cls, path: str, phase: str, *, start_time: float, **kwargs) -> "ExcitationCore":
@@ -199,11 +251,21 @@ class ExcitationCore:
 
     def status(self) -> dict[str, str]:
         """Key/values for a diagnostic_msgs/DiagnosticStatus (strings only)."""
-        remaining = max(0.0, self.end_time - self._last_t) if math.isfinite(self._last_t) else self.duration
-        return {"phase": self._phase, "progress": f"{self._fraction:.4f}",
-                "aborted": str(self.aborted).lower(), "start_time": f"{self.start_time:.3f}",
-                "end_time": f"{self.end_time:.3f}", "remaining_s": f"{remaining:.3f}",
-                "ramp_s": f"{self.ramp:.3f}", "channels": ",".join(self.names)}
+        remaining = (
+            max(0.0, self.end_time - self._last_t)
+            if math.isfinite(self._last_t)
+            else self.duration
+        )
+        return {
+            "phase": self._phase,
+            "progress": f"{self._fraction:.4f}",
+            "aborted": str(self.aborted).lower(),
+            "start_time": f"{self.start_time:.3f}",
+            "end_time": f"{self.end_time:.3f}",
+            "remaining_s": f"{remaining:.3f}",
+            "ramp_s": f"{self.ramp:.3f}",
+            "channels": ",".join(self.names),
+        }
 
     @property
     def aborted(self) -> bool:
@@ -246,9 +308,11 @@ class ExcitationCore:
     def sample(self, t: float) -> ExcitationSample:
         """Reference and excitation at time ``t`` (monotonic; see module docstring)."""
         t = float(t)
-        if not t >= self._last_t:        # also catches NaN
-            raise TimeOrderError(f"excitation: time {t} is before the last sample {self._last_t} "
-                                 "(stale or out-of-order)")
+        if not t >= self._last_t:  # also catches NaN
+            raise TimeOrderError(
+                f"excitation: time {t} is before the last sample {self._last_t} "
+                "(stale or out-of-order)"
+            )
         self._last_t = t
         tau = t - self.start_time
         env, phase = self._envelope(tau)
@@ -261,7 +325,9 @@ class ExcitationCore:
                 off_gain = fade
             phase = ABORTED
         self._phase = phase
-        self._fraction = 0.0 if tau <= 0.0 else (1.0 if tau >= self.duration else tau / self.duration)
+        self._fraction = (
+            0.0 if tau <= 0.0 else (1.0 if tau >= self.duration else tau / self.duration)
+        )
         # Hot path in plain floats (numpy calls on 8-vectors cost ~0.5 us each); the table
         # rows are tuples, so one lookup is an index computation and 8 multiply-adds.
         ox, oy, oz = self._offset_t
@@ -273,12 +339,22 @@ class ExcitationCore:
             w = x - i
             a = self._rows[i]
             d = self._drows[i]
-            vel = np.array(((a[0] + w * d[0]) * env + off_gain * ox,
-                            (a[1] + w * d[1]) * env + off_gain * oy,
-                            (a[2] + w * d[2]) * env + off_gain * oz))
+            vel = np.array(
+                (
+                    (a[0] + w * d[0]) * env + off_gain * ox,
+                    (a[1] + w * d[1]) * env + off_gain * oy,
+                    (a[2] + w * d[2]) * env + off_gain * oz,
+                )
+            )
             yaw = (a[3] + w * d[3]) * env + off_gain * self.yaw_rate_offset
-            ue = np.array(((a[4] + w * d[4]) * env, (a[5] + w * d[5]) * env,
-                           (a[6] + w * d[6]) * env, (a[7] + w * d[7]) * env))
+            ue = np.array(
+                (
+                    (a[4] + w * d[4]) * env,
+                    (a[5] + w * d[5]) * env,
+                    (a[6] + w * d[6]) * env,
+                    (a[7] + w * d[7]) * env,
+                )
+            )
         else:
             vel = np.array((off_gain * ox, off_gain * oy, off_gain * oz))
             yaw = off_gain * self.yaw_rate_offset
@@ -296,7 +372,9 @@ class ExcitationCore:
         env = np.where((tau >= 0) & (tau < D), 1.0, 0.0)
         if r > 0:
             env = np.where((tau >= 0) & (tau < r), 0.5 - 0.5 * np.cos(np.pi * tau / r), env)
-            env = np.where((tau > D - r) & (tau < D), 0.5 - 0.5 * np.cos(np.pi * (D - tau) / r), env)
+            env = np.where(
+                (tau > D - r) & (tau < D), 0.5 - 0.5 * np.cos(np.pi * (D - tau) / r), env
+            )
         s = np.mod(tau - r, self.period) if self.periodic else np.clip(tau, 0.0, self.period)
         x = s * self.rate
         i = np.minimum(x.astype(int), self._n - 1)
@@ -333,8 +411,9 @@ class MonotonicTime:
         return self._last, jump
 
 
-def played_envelope(peak: Sequence[float], f_max: Sequence[float],
-                    fade_s: float) -> tuple[np.ndarray, np.ndarray]:
+def played_envelope(
+    peak: Sequence[float], f_max: Sequence[float], fade_s: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Rate and acceleration bounds ``(R1, R2)`` of a played reference channel: a signal with
     harmonics up to ``f_max`` Hz and peak ``P`` (Bernstein: ``|s'| <= 2 pi f P``,
     ``|s''| <= (2 pi f)^2 P``) multiplied by a raised-cosine fade of length ``r = fade_s``
@@ -345,26 +424,39 @@ def played_envelope(peak: Sequence[float], f_max: Sequence[float],
     w = 2.0 * math.pi * np.asarray(f_max, dtype=float)
     r = float(fade_s)
     if not (r > 0 and np.all(P > 0) and np.all(w > 0)):
-        raise ConfigError(f"design envelope: need peaks, frequencies and fade > 0, got "
-                          f"{P.tolist()}, {(w / (2 * math.pi)).tolist()}, {r}")
+        raise ConfigError(
+            f"design envelope: need peaks, frequencies and fade > 0, got "
+            f"{P.tolist()}, {(w / (2 * math.pi)).tolist()}, {r}"
+        )
     R1 = w * P + math.pi * P / (2.0 * r)
-    R2 = w * w * P + math.pi * w * P / r + math.pi ** 2 * P / (2.0 * r * r)
+    R2 = w * w * P + math.pi * w * P / r + math.pi**2 * P / (2.0 * r * r)
     return R1, R2
 
 
-def envelope_dict(reference_peak: Sequence[float], reference_f_max: Sequence[float],
-                  knot_interval_s: float, excitation_peak: Sequence[float],
-                  fade_s: float = DEFAULT_RAMP_S, source: str = "") -> dict:
+def envelope_dict(
+    reference_peak: Sequence[float],
+    reference_f_max: Sequence[float],
+    knot_interval_s: float,
+    excitation_peak: Sequence[float],
+    fade_s: float = DEFAULT_RAMP_S,
+    source: str = "",
+) -> dict:
     """The ``certificate.design`` mapping (:class:`lpv_sysid.io.formats.DesignEnvelope`)."""
     R1, R2 = played_envelope(reference_peak, reference_f_max, fade_s)
-    return {"reference_peak": [float(x) for x in reference_peak], "reference_rate": R1.tolist(),
-            "reference_accel": R2.tolist(), "knot_interval_s": float(knot_interval_s),
-            "fade_s": float(fade_s), "excitation_peak": [float(x) for x in excitation_peak],
-            "source": source}
+    return {
+        "reference_peak": [float(x) for x in reference_peak],
+        "reference_rate": R1.tolist(),
+        "reference_accel": R2.tolist(),
+        "knot_interval_s": float(knot_interval_s),
+        "fade_s": float(fade_s),
+        "excitation_peak": [float(x) for x in excitation_peak],
+        "source": source,
+    }
 
 
-def design_envelope(summary: dict, fade_s: float = DEFAULT_RAMP_S,
-                    source: str = "signals summary") -> dict:
+def design_envelope(
+    summary: dict, fade_s: float = DEFAULT_RAMP_S, source: str = "signals summary"
+) -> dict:
     """``certificate.design`` from a phase-2 signals summary (``lpv-sysid signals``,
     :func:`lpv_sysid.signals.store.summary`): per reference channel (``u_d, v_d, w_d``) its
     peak and highest harmonic (``frequency_range_hz``), per excitation channel
@@ -376,13 +468,18 @@ def design_envelope(summary: dict, fade_s: float = DEFAULT_RAMP_S,
         if missing:
             raise ConfigError(f"{source}: not a phase-2 signal (channels {missing} missing)")
         ref = [chans[n] for n in PHASE2_CHANNELS]
-        return envelope_dict([float(c["peak"]) for c in ref],
-                             [float(c["frequency_range_hz"][1]) for c in ref],
-                             1.0 / float(summary["sample_rate"]),
-                             [float(chans[n]["peak"]) for n in PHASE2_EXCITATION], fade_s, source)
+        return envelope_dict(
+            [float(c["peak"]) for c in ref],
+            [float(c["frequency_range_hz"][1]) for c in ref],
+            1.0 / float(summary["sample_rate"]),
+            [float(chans[n]["peak"]) for n in PHASE2_EXCITATION],
+            fade_s,
+            source,
+        )
     except (KeyError, TypeError, ValueError, IndexError) as exc:
-        raise ConfigError(f"{source}: cannot read the phase-2 channels "
-                          f"({type(exc).__name__}: {exc})") from None
+        raise ConfigError(
+            f"{source}: cannot read the phase-2 channels ({type(exc).__name__}: {exc})"
+        ) from None
 
 
 def check_design(t, u, names, design, ramp: float, where: str = "signals") -> None:
@@ -397,27 +494,37 @@ def check_design(t, u, names, design, ramp: float, where: str = "signals") -> No
     dt = float(t[1] - t[0])
     tol = 1e-9
     if ramp < design.fade_s * (1 - tol):
-        raise ConfigError(f"{where}: ramp_s {ramp:g} s is shorter than the fade the gains were "
-                          f"designed for ({design.fade_s:g} s): the fades would exceed the "
-                          "designed reference rates")
+        raise ConfigError(
+            f"{where}: ramp_s {ramp:g} s is shorter than the fade the gains were "
+            f"designed for ({design.fade_s:g} s): the fades would exceed the "
+            "designed reference rates"
+        )
     if dt > design.knot_interval_s * (1 + tol):
-        raise ConfigError(f"{where}: sample interval {dt:g} s is coarser than the design's "
-                          f"{design.knot_interval_s:g} s")
+        raise ConfigError(
+            f"{where}: sample interval {dt:g} s is coarser than the design's "
+            f"{design.knot_interval_s:g} s"
+        )
     for k, n in enumerate(PHASE2_CHANNELS):
         x = u[:, names.index(n)]
         peak, rate = float(np.max(np.abs(x))), float(np.max(np.abs(np.diff(x)))) / dt
         if peak > design.reference_peak[k] * (1 + tol):
-            raise ConfigError(f"{where}: {n} peak {peak:.4g} m/s exceeds the design peak "
-                              f"{design.reference_peak[k]:.4g} m/s the gains were designed for")
+            raise ConfigError(
+                f"{where}: {n} peak {peak:.4g} m/s exceeds the design peak "
+                f"{design.reference_peak[k]:.4g} m/s the gains were designed for"
+            )
         if rate > design.reference_rate[k] * (1 + tol):
-            raise ConfigError(f"{where}: {n} changes at {rate:.4g} m/s^2, beyond the design rate "
-                              f"{design.reference_rate[k]:.4g} m/s^2")
+            raise ConfigError(
+                f"{where}: {n} changes at {rate:.4g} m/s^2, beyond the design rate "
+                f"{design.reference_rate[k]:.4g} m/s^2"
+            )
     for k, n in enumerate(PHASE2_EXCITATION):
         peak = float(np.max(np.abs(u[:, names.index(n)])))
         if peak > design.excitation_peak[k] * (1 + tol):
-            raise ConfigError(f"{where}: {n} peak {peak:.4g} exceeds the design excitation peak "
-                              f"{design.excitation_peak[k]:.4g} (the gains' R is designed for "
-                              "that signal)")
+            raise ConfigError(
+                f"{where}: {n} peak {peak:.4g} exceeds the design excitation peak "
+                f"{design.excitation_peak[k]:.4g} (the gains' R is designed for "
+                "that signal)"
+            )
 
 
 def phase1_signals(
@@ -433,8 +540,12 @@ def phase1_signals(
     from lpv_sysid.signals.config import PHASE1_DEFAULT, SignalsConfig
     from lpv_sysid.signals.multisine import design
 
-    d = {**PHASE1_DEFAULT, "duration": duration, "sample_rate": sample_rate,
-         "groups": [{**PHASE1_DEFAULT["groups"][0], "band": list(band), "peak": list(peaks)}]}
+    d = {
+        **PHASE1_DEFAULT,
+        "duration": duration,
+        "sample_rate": sample_rate,
+        "groups": [{**PHASE1_DEFAULT["groups"][0], "band": list(band), "peak": list(peaks)}],
+    }
     return design(SignalsConfig.from_dict(d, where="phase1_signals"))
 
 
@@ -465,5 +576,12 @@ def phase1_reference(
         t, u, names = signals.t, signals.u, signals.names
     else:
         t, u, names = signals
-    return ExcitationCore.phase1(t, u, names, start_time=trim, vertex_velocity=vertex_velocity,
-                                 ramp=ramp, yaw_rate_offset=yaw_rate_offset)
+    return ExcitationCore.phase1(
+        t,
+        u,
+        names,
+        start_time=trim,
+        vertex_velocity=vertex_velocity,
+        ramp=ramp,
+        yaw_rate_offset=yaw_rate_offset,
+    )

@@ -14,8 +14,12 @@ from lpv_sysid.errors import ConfigError
 
 
 def _grid(duration: float, sample_rate: float) -> np.ndarray:
-    if not (np.isfinite(duration) and duration > 0 and np.isfinite(sample_rate) and sample_rate > 0):
-        raise ConfigError(f"manoeuvre: duration and sample_rate must be positive, got {duration}, {sample_rate}")
+    if not (
+        np.isfinite(duration) and duration > 0 and np.isfinite(sample_rate) and sample_rate > 0
+    ):
+        raise ConfigError(
+            f"manoeuvre: duration and sample_rate must be positive, got {duration}, {sample_rate}"
+        )
     return np.arange(int(round(duration * sample_rate))) / sample_rate
 
 
@@ -32,7 +36,9 @@ def sweep(
     if method not in ("linear", "logarithmic", "quadratic", "hyperbolic"):
         raise ConfigError(f"sweep: unknown method {method!r}")
     if f_start <= 0 or f_end <= 0 or max(f_start, f_end) >= sample_rate / 2:
-        raise ConfigError(f"sweep: frequencies must be in (0, {sample_rate / 2}) Hz, got {f_start}, {f_end}")
+        raise ConfigError(
+            f"sweep: frequencies must be in (0, {sample_rate / 2}) Hz, got {f_start}, {f_end}"
+        )
     t = _grid(duration, sample_rate)
     return t, amplitude * chirp(t, f_start, duration, f_end, method=method, phi=-90.0)
 
@@ -49,11 +55,15 @@ def pulse_train(
     """Consecutive square pulses ``signs[i] * amplitude`` lasting ``widths[i] * pulse_width``
     seconds after ``start``, zero elsewhere; ``duration`` defaults to the end of the train + start."""
     if pulse_width <= 0 or start < 0:
-        raise ConfigError(f"pulse train: pulse_width must be > 0 and start >= 0, got {pulse_width}, {start}")
+        raise ConfigError(
+            f"pulse train: pulse_width must be > 0 and start >= 0, got {pulse_width}, {start}"
+        )
     total = start + pulse_width * sum(widths)
     duration = 2.0 * start + pulse_width * sum(widths) if duration is None else duration
     if duration < total - 1e-12:
-        raise ConfigError(f"pulse train: duration {duration} s shorter than the manoeuvre {total} s")
+        raise ConfigError(
+            f"pulse train: duration {duration} s shorter than the manoeuvre {total} s"
+        )
     t = _grid(duration, sample_rate)
     x = np.zeros_like(t)
     # sample n belongs to a pulse when start + a <= t_n < start + b (1e-9 guards round-off)
@@ -65,13 +75,25 @@ def pulse_train(
     return t, x
 
 
-def doublet(pulse_width: float, amplitude: float, sample_rate: float, start: float = 0.0,
-            duration: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+def doublet(
+    pulse_width: float,
+    amplitude: float,
+    sample_rate: float,
+    start: float = 0.0,
+    duration: float | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Doublet: +A for one pulse width, then -A for one pulse width."""
     return pulse_train((1, 1), (1.0, -1.0), pulse_width, amplitude, sample_rate, start, duration)
 
 
-def maneuver_3211(pulse_width: float, amplitude: float, sample_rate: float, start: float = 0.0,
-                  duration: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+def maneuver_3211(
+    pulse_width: float,
+    amplitude: float,
+    sample_rate: float,
+    start: float = 0.0,
+    duration: float | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """3-2-1-1: +A for 3 dt_p, -A for 2 dt_p, +A for 1 dt_p, -A for 1 dt_p."""
-    return pulse_train((3, 2, 1, 1), (1.0, -1.0, 1.0, -1.0), pulse_width, amplitude, sample_rate, start, duration)
+    return pulse_train(
+        (3, 2, 1, 1), (1.0, -1.0, 1.0, -1.0), pulse_width, amplitude, sample_rate, start, duration
+    )

@@ -83,20 +83,20 @@ def power_spectrum(u: np.ndarray, sample_rate: float) -> tuple[np.ndarray, np.nd
 class HarmonicContent:
     """Energy bookkeeping of one channel against its allocated harmonics."""
 
-    allocated_fraction: float      # share of the channel's power in its own harmonics
-    leakage_fraction: float        # share anywhere else (numerical zero for a clean design)
-    foreign_fraction: float        # share in harmonics allocated to *other* channels
+    allocated_fraction: float  # share of the channel's power in its own harmonics
+    leakage_fraction: float  # share anywhere else (numerical zero for a clean design)
+    foreign_fraction: float  # share in harmonics allocated to *other* channels
 
 
-def harmonic_content(
-    u: np.ndarray, harmonics: Sequence[Sequence[int]]
-) -> list[HarmonicContent]:
+def harmonic_content(u: np.ndarray, harmonics: Sequence[Sequence[int]]) -> list[HarmonicContent]:
     """Check that channel j of ``u`` (N, n, one period) has power only at ``harmonics[j]``."""
     u = np.asarray(u, dtype=float)
     if u.ndim == 1:
         u = u[:, None]
     if len(harmonics) != u.shape[1]:
-        raise ConfigError(f"harmonic_content: {len(harmonics)} harmonic sets for {u.shape[1]} channels")
+        raise ConfigError(
+            f"harmonic_content: {len(harmonics)} harmonic sets for {u.shape[1]} channels"
+        )
     _, P = power_spectrum(u, 1.0)
     total = P.sum(axis=0)
     out = []
@@ -107,6 +107,11 @@ def harmonic_content(
         foreign = P[np.concatenate(others), j].sum() if others else 0.0
         tot = total[j] if total[j] > 0 else 1.0
         # the complement is summed directly (not total - own) so round-off does not mask leakage
-        out.append(HarmonicContent(float(P[own_mask, j].sum() / tot), float(P[~own_mask, j].sum() / tot),
-                                   float(foreign / tot)))
+        out.append(
+            HarmonicContent(
+                float(P[own_mask, j].sum() / tot),
+                float(P[~own_mask, j].sum() / tot),
+                float(foreign / tot),
+            )
+        )
     return out

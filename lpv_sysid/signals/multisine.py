@@ -26,7 +26,13 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.signals.config import GroupConfig, SignalsConfig
-from lpv_sysid.signals.phase_opt import optimise_phases, rpf_of, schroeder_phases, synthesize, zero_start_shift
+from lpv_sysid.signals.phase_opt import (
+    optimise_phases,
+    rpf_of,
+    schroeder_phases,
+    synthesize,
+    zero_start_shift,
+)
 from lpv_sysid.signals.weights import channel_energy_scales, excitation_weight, performance_weight
 
 log = logging.getLogger(__name__)
@@ -36,20 +42,20 @@ log = logging.getLogger(__name__)
 class SignalSet:
     """A designed multisine set: ``u[:, j]`` sampled at ``t`` (one period, N samples)."""
 
-    t: np.ndarray                         # (N,), t_n = n / fs, n = 0..N-1
-    u: np.ndarray                         # (N, n)
+    t: np.ndarray  # (N,), t_n = n / fs, n = 0..N-1
+    u: np.ndarray  # (N, n)
     names: tuple[str, ...]
-    groups: tuple[str, ...]               # group name of each channel
+    groups: tuple[str, ...]  # group name of each channel
     bands: tuple[tuple[float, float], ...]  # configured band of each channel, Hz
-    harmonics: tuple[np.ndarray, ...]     # harmonic indices h_k of f0 per channel
-    amplitudes: tuple[np.ndarray, ...]    # a_k per channel, in the channel's final scale
-    phases: tuple[np.ndarray, ...]        # phi_k per channel (after the time shift)
-    rpf: np.ndarray                       # optimised RPF per channel
-    rpf_schroeder: np.ndarray             # RPF with Schroeder phases only
+    harmonics: tuple[np.ndarray, ...]  # harmonic indices h_k of f0 per channel
+    amplitudes: tuple[np.ndarray, ...]  # a_k per channel, in the channel's final scale
+    phases: tuple[np.ndarray, ...]  # phi_k per channel (after the time shift)
+    rpf: np.ndarray  # optimised RPF per channel
+    rpf_schroeder: np.ndarray  # RPF with Schroeder phases only
     sample_rate: float
     duration: float
-    R: Optional[np.ndarray] = None        # Eq. (27), when configured
-    Q: Optional[np.ndarray] = None        # Eq. (28), when configured
+    R: Optional[np.ndarray] = None  # Eq. (27), when configured
+    Q: Optional[np.ndarray] = None  # Eq. (28), when configured
 
     @property
     def f0(self) -> float:
@@ -59,7 +65,9 @@ class SignalSet:
         try:
             return self.names.index(name)
         except ValueError:
-            raise ConfigError(f"signal set has no channel {name!r}; channels are {list(self.names)}") from None
+            raise ConfigError(
+                f"signal set has no channel {name!r}; channels are {list(self.names)}"
+            ) from None
 
     def evaluate(self, t: np.ndarray) -> np.ndarray:
         """Exact sum of sinusoids at arbitrary times ``t`` (K,) -> (K, n); periodic in T."""
@@ -80,7 +88,7 @@ def allocate_harmonics(
     ``[0.5, 5]``) give ``(0.5, 5]`` to the second group."""
     n = int(round(duration * sample_rate))
     f0 = 1.0 / duration
-    k_all = np.arange(1, (n - 1) // 2 + 1)       # strictly below Nyquist
+    k_all = np.arange(1, (n - 1) // 2 + 1)  # strictly below Nyquist
     taken = np.zeros(k_all.size + 1, dtype=bool)
     out: list[np.ndarray] = []
     tol = 1e-9 * f0
@@ -91,7 +99,8 @@ def allocate_harmonics(
         if ks.size < nc:
             raise ConfigError(
                 f"group {g.name!r}: band {list(g.band)} Hz holds {ks.size} free harmonics of "
-                f"f0 = {f0:g} Hz for {nc} channels; widen the band or lengthen the duration")
+                f"f0 = {f0:g} Hz for {nc} channels; widen the band or lengthen the duration"
+            )
         taken[ks] = True
         out.extend(ks[j::nc].copy() for j in range(nc))
     return out
@@ -123,7 +132,7 @@ def design(config: SignalsConfig) -> SignalSet:
         for c in g.channels:
             h = harmonics[j]
             a = _channel_amplitudes(h, f0, g.spectra.get(c))
-            a = a / np.sqrt(0.5 * np.sum(a * a))   # unit rms before scaling
+            a = a / np.sqrt(0.5 * np.sum(a * a))  # unit rms before scaling
             phi_s = schroeder_phases(a)
             rpf0.append(rpf_of(synthesize(n, h, a, phi_s)))
             phi, r = optimise_phases(n, h, a, phi_s, config.optimisation)
@@ -132,7 +141,9 @@ def design(config: SignalsConfig) -> SignalSet:
             phi = np.mod(phi + 2.0 * np.pi * h * s / n, 2.0 * np.pi)
             u[:, j] = synthesize(n, h, a, phi)
             rpf.append(rpf_of(u[:, j]))
-            log.debug("channel %s: %d harmonics, RPF %.4f (Schroeder %.4f)", c, h.size, rpf[-1], rpf0[-1])
+            log.debug(
+                "channel %s: %d harmonics, RPF %.4f (Schroeder %.4f)", c, h.size, rpf[-1], rpf0[-1]
+            )
             names.append(c)
             gnames.append(g.name)
             bands.append(tuple(g.band))

@@ -27,7 +27,9 @@ from scipy.optimize import minimize
 from lpv_sysid.errors import ConfigError
 
 
-def synthesize(n_samples: int, harmonics: np.ndarray, amplitudes: np.ndarray, phases: np.ndarray) -> np.ndarray:
+def synthesize(
+    n_samples: int, harmonics: np.ndarray, amplitudes: np.ndarray, phases: np.ndarray
+) -> np.ndarray:
     """``x_n = sum_k a_k cos(2 pi h_k n / N + phi_k)`` by one inverse real FFT."""
     X = np.zeros(n_samples // 2 + 1, dtype=complex)
     X[harmonics] = 0.5 * n_samples * amplitudes * np.exp(1j * phases)
@@ -48,7 +50,7 @@ def schroeder_phases(amplitudes: np.ndarray, phi1: float = 0.0) -> np.ndarray:
     phi = np.empty(m)
     for j in range(m):  # O(M^2) with M <= a few hundred: negligible next to the optimiser
         i = np.arange(1, j + 1)
-        phi[j] = phi1 - 2.0 * np.pi * np.sum((k[j] - i) * p[: j])
+        phi[j] = phi1 - 2.0 * np.pi * np.sum((k[j] - i) * p[:j])
     return np.mod(phi, 2.0 * np.pi)
 
 
@@ -61,16 +63,18 @@ class PhaseOptOptions:
     """Options of :func:`optimise_phases` (config key ``optimisation``)."""
 
     p_stages: tuple[float, ...] = (4.0, 16.0, 64.0, 256.0, 1024.0)
-    max_iter: int = 150           # L-BFGS-B iterations per stage
-    clip_iter: int = 100          # iterative-clipping iterations before the L_p stages
-    clip_level: float = 0.9       # clipping level, fraction of the current half range
-    restarts: int = 3             # extra starts from random phases (best kept) ...
-    restart_max_harmonics: int = 40   # ... for channels with at most this many harmonics
-    seed: int = 0                 # for the random restarts
+    max_iter: int = 150  # L-BFGS-B iterations per stage
+    clip_iter: int = 100  # iterative-clipping iterations before the L_p stages
+    clip_level: float = 0.9  # clipping level, fraction of the current half range
+    restarts: int = 3  # extra starts from random phases (best kept) ...
+    restart_max_harmonics: int = 40  # ... for channels with at most this many harmonics
+    seed: int = 0  # for the random restarts
 
     def __post_init__(self) -> None:
         if not self.p_stages or any(not np.isfinite(p) or p < 2 for p in self.p_stages):
-            raise ConfigError(f"optimisation.p_stages: need values >= 2, got {list(self.p_stages)}")
+            raise ConfigError(
+                f"optimisation.p_stages: need values >= 2, got {list(self.p_stages)}"
+            )
         if self.max_iter < 0:
             raise ConfigError(f"optimisation.max_iter: must be >= 0, got {self.max_iter}")
         if self.clip_iter < 0:
@@ -103,7 +107,7 @@ class _PNormObjective:
         s = np.sum((ay[act] / m) ** self.p) / self.n
         f = m * s ** (1.0 / self.p)
         g = np.zeros(self.n)
-        g[act] = (ay[act] / f) ** (self.p - 1.0) * np.sign(y[act]) / self.n    # df/dy_n
+        g[act] = (ay[act] / f) ** (self.p - 1.0) * np.sign(y[act]) / self.n  # df/dy_n
         G = sfft.rfft(g)
         grad = np.empty_like(z)
         grad[:-1] = -self.a * np.imag(e * np.conj(G[self.h]))
@@ -134,8 +138,13 @@ def _optimise_from(n, h, a, phi0, options) -> tuple[np.ndarray, float]:
     z = np.concatenate([best_phi, [0.0]])
     for p in options.p_stages:
         obj = _PNormObjective(n, h, a, p)
-        res = minimize(obj, z, jac=True, method="L-BFGS-B",
-                       options={"maxiter": options.max_iter, "gtol": 1e-12, "ftol": 1e-13})
+        res = minimize(
+            obj,
+            z,
+            jac=True,
+            method="L-BFGS-B",
+            options={"maxiter": options.max_iter, "gtol": 1e-12, "ftol": 1e-13},
+        )
         z = res.x
         val = rpf_of(synthesize(n, h, a, z[:-1]))
         if val < best:

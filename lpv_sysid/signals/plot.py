@@ -46,10 +46,12 @@ def signal_figure(sig: SignalSet) -> Figure:
         h = sig.harmonics[j]
         ax2.vlines(f[h], -60, db[h], lw=0.6)
         ax2.set_xscale("log")
-        ax2.xaxis.set_major_formatter(FormatStrFormatter("%g"))   # plain labels, no mathtext
+        ax2.xaxis.set_major_formatter(FormatStrFormatter("%g"))  # plain labels, no mathtext
         ax2.set_xlim(sig.f0 * 0.9, fmax)
         ax2.set_ylim(-60, 5)
-        ax2.text(0.98, 0.1, f"RPF {sig.rpf[j]:.3f}", transform=ax2.transAxes, ha="right", fontsize=8)
+        ax2.text(
+            0.98, 0.1, f"RPF {sig.rpf[j]:.3f}", transform=ax2.transAxes, ha="right", fontsize=8
+        )
         _label_column(ax2, j, n, "frequency, Hz", "power, dB (Fig. 6)")
     axc = fig.add_subplot(gs[:, 2])
     c = metrics.correlation_matrix(sig.u)
@@ -58,7 +60,9 @@ def signal_figure(sig: SignalSet) -> Figure:
     axc.set_yticks(range(n), sig.names)
     for i in range(n):
         for k in range(i + 1):
-            axc.text(k, i, f"{c[i, k]:+.0e}" if i != k else "1", ha="center", va="center", fontsize=5)
+            axc.text(
+                k, i, f"{c[i, k]:+.0e}" if i != k else "1", ha="center", va="center", fontsize=5
+            )
     axc.set_title("correlation (Fig. 7)")
     fig.colorbar(im, ax=axc, shrink=0.6)
     return fig

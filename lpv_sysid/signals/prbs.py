@@ -32,8 +32,13 @@ def prbs(
     Hold times are integer numbers of samples m with ``min_interval <= m dt <= max_interval``
     (at least one such m must exist); the first level's sign is drawn from the seed too.
     """
-    for name, v in (("duration", duration), ("sample_rate", sample_rate), ("amplitude", amplitude),
-                    ("min_interval", min_interval), ("max_interval", max_interval)):
+    for name, v in (
+        ("duration", duration),
+        ("sample_rate", sample_rate),
+        ("amplitude", amplitude),
+        ("min_interval", min_interval),
+        ("max_interval", max_interval),
+    ):
         if not np.isfinite(v) or v <= 0:
             raise ConfigError(f"prbs: {name} must be positive and finite, got {v}")
     if max_interval < min_interval:
@@ -43,8 +48,10 @@ def prbs(
     m_hi = int(np.floor(max_interval / dt + 1e-9))
     m_lo = max(m_lo, 1)
     if m_hi < m_lo:
-        raise ConfigError(f"prbs: no whole number of samples (dt = {dt} s) lies in "
-                          f"[{min_interval}, {max_interval}] s")
+        raise ConfigError(
+            f"prbs: no whole number of samples (dt = {dt} s) lies in "
+            f"[{min_interval}, {max_interval}] s"
+        )
     n = int(round(duration * sample_rate))
     if n < 1:
         raise ConfigError(f"prbs: duration {duration} s is shorter than one sample")
@@ -54,7 +61,7 @@ def prbs(
     i = 0
     while i < n:
         m = int(rng.integers(m_lo, m_hi + 1))
-        x[i:i + m] = level
+        x[i : i + m] = level
         level = -level
         i += m
     return np.arange(n) * dt, amplitude * x

@@ -17,10 +17,15 @@ def save_npz(path: str, t: np.ndarray, u: np.ndarray, names) -> None:
     """Write ``t``, ``u``, ``names`` (unicode array) to ``path`` (numpy .npz, uncompressed)."""
     from lpv_sysid.io.safe_open import check_output
 
-    check_output(path)      # an existing FIFO or device is refused, not opened
+    check_output(path)  # an existing FIFO or device is refused, not opened
     try:
         with open(path, "wb") as fh:
-            np.savez(fh, t=np.asarray(t, float), u=np.asarray(u, float), names=np.asarray(list(names), dtype=str))
+            np.savez(
+                fh,
+                t=np.asarray(t, float),
+                u=np.asarray(u, float),
+                names=np.asarray(list(names), dtype=str),
+            )
     except OSError as exc:
         raise ConfigError(f"{path}: cannot write ({exc.strerror})") from None
 
@@ -32,18 +37,22 @@ def load_npz(path: str) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
 
     if not os.path.lexists(path):
         raise ConfigError(f"{path}: no such file")
-    z = read_npz(path)      # regular file, size cap, no pickles, complex arrays refused
+    z = read_npz(path)  # regular file, size cap, no pickles, complex arrays refused
     missing = [k for k in ("t", "u", "names") if k not in z]
     if missing:
         raise ConfigError(f"{path}: missing array(s) {missing}")
     return validate_table(z["t"], z["u"], z["names"], where=path)
 
 
-def validate_table(t, u, names, where: str = "signals") -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+def validate_table(
+    t, u, names, where: str = "signals"
+) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
     for key, a in (("t", t), ("u", u)):
         kind = np.asarray(a).dtype.kind
-        if kind == "c":     # a cast to float would silently drop the imaginary part
-            raise ConfigError(f"{where}: '{key}' is complex-valued; a real-valued signal is required")
+        if kind == "c":  # a cast to float would silently drop the imaginary part
+            raise ConfigError(
+                f"{where}: '{key}' is complex-valued; a real-valued signal is required"
+            )
         if kind not in "fiu":
             raise ConfigError(f"{where}: '{key}' must be numeric, got dtype {np.asarray(a).dtype}")
     t = np.asarray(t, dtype=float)
@@ -76,11 +85,16 @@ def check_magnitude(t: np.ndarray, u: np.ndarray, names, where: str = "signals")
     with np.errstate(over="ignore", invalid="ignore"):
         energy = dt * np.sum(u * u, axis=0)
         rate = np.max(np.abs(np.diff(u, axis=0)), axis=0) / dt
-    bad = [str(names[j]) for j in range(u.shape[1])
-           if not (np.isfinite(energy[j]) and np.isfinite(rate[j]))]
+    bad = [
+        str(names[j])
+        for j in range(u.shape[1])
+        if not (np.isfinite(energy[j]) and np.isfinite(rate[j]))
+    ]
     if bad:
-        raise ConfigError(f"{where}: channel(s) {bad} too large (max |u| "
-                          f"{float(np.max(np.abs(u))):.3g}): energy or rate overflows")
+        raise ConfigError(
+            f"{where}: channel(s) {bad} too large (max |u| "
+            f"{float(np.max(np.abs(u))):.3g}): energy or rate overflows"
+        )
 
 
 def summary(sig: SignalSet) -> dict[str, Any]:
@@ -91,21 +105,26 @@ def summary(sig: SignalSet) -> dict[str, Any]:
     chans = []
     for j, name in enumerate(sig.names):
         x = sig.u[:, j]
-        chans.append({
-            "name": name,
-            "group": sig.groups[j],
-            "band_hz": [float(b) for b in sig.bands[j]],
-            "harmonics": [int(h) for h in sig.harmonics[j]],
-            "n_harmonics": int(sig.harmonics[j].size),
-            "frequency_range_hz": [float(sig.harmonics[j].min() * sig.f0), float(sig.harmonics[j].max() * sig.f0)],
-            "rpf": float(sig.rpf[j]),
-            "rpf_schroeder": float(sig.rpf_schroeder[j]),
-            "peak": float(np.max(np.abs(x))),
-            "rms": float(metrics.rms(x)),
-            "start_value": float(x[0]),
-            "end_value": float(x[-1]),
-            "leakage_fraction": float(content[j].leakage_fraction),
-        })
+        chans.append(
+            {
+                "name": name,
+                "group": sig.groups[j],
+                "band_hz": [float(b) for b in sig.bands[j]],
+                "harmonics": [int(h) for h in sig.harmonics[j]],
+                "n_harmonics": int(sig.harmonics[j].size),
+                "frequency_range_hz": [
+                    float(sig.harmonics[j].min() * sig.f0),
+                    float(sig.harmonics[j].max() * sig.f0),
+                ],
+                "rpf": float(sig.rpf[j]),
+                "rpf_schroeder": float(sig.rpf_schroeder[j]),
+                "peak": float(np.max(np.abs(x))),
+                "rms": float(metrics.rms(x)),
+                "start_value": float(x[0]),
+                "end_value": float(x[-1]),
+                "leakage_fraction": float(content[j].leakage_fraction),
+            }
+        )
     off = corr - np.diag(np.diag(corr))
     out: dict[str, Any] = {
         "format": "lpv_sysid/signals_summary@1",
@@ -114,8 +133,11 @@ def summary(sig: SignalSet) -> dict[str, Any]:
         "n_samples": int(sig.t.size),
         "f0_hz": float(sig.f0),
         "channels": chans,
-        "correlation": {"names": list(sig.names), "matrix": corr.tolist(),
-                        "max_abs_offdiagonal": float(np.max(np.abs(off))) if corr.shape[0] > 1 else 0.0},
+        "correlation": {
+            "names": list(sig.names),
+            "matrix": corr.tolist(),
+            "max_abs_offdiagonal": float(np.max(np.abs(off))) if corr.shape[0] > 1 else 0.0,
+        },
     }
     if sig.R is not None:
         out["R"] = sig.R.tolist()

@@ -38,7 +38,9 @@ def channel_energy_scales(
     n = u.shape[1]
     pf = np.full(n, 1.0 / n) if power_fraction is None else np.asarray(power_fraction, dtype=float)
     if pf.shape != (n,) or np.any(pf <= 0) or abs(pf.sum() - 1.0) > 1e-9:
-        raise ConfigError(f"power_fraction: need {n} positive values summing to 1, got {pf.tolist()}")
+        raise ConfigError(
+            f"power_fraction: need {n} positive values summing to 1, got {pf.tolist()}"
+        )
     e = np.sqrt(dt * np.sum(u * u, axis=0))
     if np.any(e == 0):
         raise ConfigError("channel_energy_scales: a channel is identically zero")

@@ -69,12 +69,12 @@ VELOCITY_INDEX = (2, 3, 4)
 class ScheduledModel(Protocol):
     """Nominal polytopic LPV model plus LPV gains, evaluated at a scheduling point v_d (3,)."""
 
-    def A(self, v_d: np.ndarray) -> np.ndarray: ...          # (n_x, n_x), Eq. (21)
-    def B(self, v_d: np.ndarray) -> np.ndarray: ...          # (n_x, n_u), B_c of Eq. (19)
-    def K(self, v_d: np.ndarray) -> np.ndarray: ...          # (n_u, n_x), Eq. (31)
-    def x0(self, v_d: np.ndarray) -> np.ndarray: ...         # (n_x,)
-    def u0(self, v_d: np.ndarray) -> np.ndarray: ...         # (n_u,)
-    def dx0_dvd(self, v_d: np.ndarray) -> np.ndarray: ...    # (n_x, 3), Eq. (34)
+    def A(self, v_d: np.ndarray) -> np.ndarray: ...  # (n_x, n_x), Eq. (21)
+    def B(self, v_d: np.ndarray) -> np.ndarray: ...  # (n_x, n_u), B_c of Eq. (19)
+    def K(self, v_d: np.ndarray) -> np.ndarray: ...  # (n_u, n_x), Eq. (31)
+    def x0(self, v_d: np.ndarray) -> np.ndarray: ...  # (n_x,)
+    def u0(self, v_d: np.ndarray) -> np.ndarray: ...  # (n_u,)
+    def dx0_dvd(self, v_d: np.ndarray) -> np.ndarray: ...  # (n_x, 3), Eq. (34)
 
 
 # A control law u = law(t, x, v_d, ue_scaled) returning the total virtual command (Eq. 17).
@@ -97,16 +97,22 @@ class ReferenceSignals:
         v_d = np.atleast_2d(np.asarray(self.v_d, dtype=float))
         u_e = np.atleast_2d(np.asarray(self.u_e, dtype=float))
         if t.ndim != 1 or t.size < 2:
-            raise ConfigError(f"signals: 't' must be a 1-D grid with >= 2 samples, got shape {t.shape}")
+            raise ConfigError(
+                f"signals: 't' must be a 1-D grid with >= 2 samples, got shape {t.shape}"
+            )
         if not np.all(np.diff(t) > 0):
             raise ConfigError("signals: 't' must be strictly increasing")
         for name, arr in (("v_d", v_d), ("u_e", u_e)):
             if arr.shape[0] != t.size:
-                raise ConfigError(f"signals: '{name}' has {arr.shape[0]} samples, 't' has {t.size}")
+                raise ConfigError(
+                    f"signals: '{name}' has {arr.shape[0]} samples, 't' has {t.size}"
+                )
             if not np.all(np.isfinite(arr)):
                 raise ConfigError(f"signals: '{name}' contains NaN or inf")
         if v_d.shape[1] != 3:
-            raise ConfigError(f"signals: 'v_d' must have 3 columns (u_d, v_d, w_d), got {v_d.shape[1]}")
+            raise ConfigError(
+                f"signals: 'v_d' must have 3 columns (u_d, v_d, w_d), got {v_d.shape[1]}"
+            )
         object.__setattr__(self, "t", t)
         object.__setattr__(self, "v_d", v_d)
         object.__setattr__(self, "u_e", u_e)
@@ -120,7 +126,9 @@ class ReferenceSignals:
         k = int(np.searchsorted(self.t, t, side="right")) - 1
         return min(max(k, 0), self.t.size - 2)
 
-    def at(self, t: float, segment: Optional[int] = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def at(
+        self, t: float, segment: Optional[int] = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(v_d(t), dv_d/dt(t), u_e(t)) with first-order hold.
 
         ``segment`` forces the FOH segment (a fixed-step integrator on the grid passes it so
@@ -143,7 +151,7 @@ def fast_weights(v_d: np.ndarray, vmin: np.ndarray, vmax: np.ndarray) -> np.ndar
     t = np.clip((np.asarray(v_d, dtype=float) - vmin) / (vmax - vmin), 0.0, 1.0)
     alpha = np.ones(1)
     for tk in t.tolist():
-        alpha = np.outer(alpha, (1.0 - tk, tk)).ravel()   # first axis slowest, as kron
+        alpha = np.outer(alpha, (1.0 - tk, tk)).ravel()  # first axis slowest, as kron
     return alpha
 
 
@@ -173,7 +181,9 @@ class LastPointCache:
             if w is None or w[0] != key:
                 pm = self.model.model
                 if not np.all(np.isfinite(v_d)):
-                    raise ConfigError(f"scheduling point contains NaN/inf: {np.asarray(v_d).tolist()}")
+                    raise ConfigError(
+                        f"scheduling point contains NaN/inf: {np.asarray(v_d).tolist()}"
+                    )
                 w = (key, fast_weights(v_d, pm.vmin, pm.vmax))
                 self._cache["_alpha"] = w
             val = np.tensordot(w[1], stacks[name], axes=1)
@@ -182,12 +192,23 @@ class LastPointCache:
         self._cache[name] = (key, val)
         return val
 
-    def A(self, v_d): return self._get("A", v_d)            # noqa: E704
-    def B(self, v_d): return self._get("B", v_d)            # noqa: E704
-    def K(self, v_d): return self._get("K", v_d)            # noqa: E704
-    def x0(self, v_d): return self._get("x0", v_d)          # noqa: E704
-    def u0(self, v_d): return self._get("u0", v_d)          # noqa: E704
-    def dx0_dvd(self, v_d): return self._get("dx0_dvd", v_d)  # noqa: E704
+    def A(self, v_d):
+        return self._get("A", v_d)  # noqa: E704
+
+    def B(self, v_d):
+        return self._get("B", v_d)  # noqa: E704
+
+    def K(self, v_d):
+        return self._get("K", v_d)  # noqa: E704
+
+    def x0(self, v_d):
+        return self._get("x0", v_d)  # noqa: E704
+
+    def u0(self, v_d):
+        return self._get("u0", v_d)  # noqa: E704
+
+    def dx0_dvd(self, v_d):
+        return self._get("dx0_dvd", v_d)  # noqa: E704
 
 
 def _vertex_stacks(model: Any) -> Optional[dict[str, np.ndarray]]:
@@ -198,7 +219,9 @@ def _vertex_stacks(model: Any) -> Optional[dict[str, np.ndarray]]:
     return {"A": pm.A, "B": pm.B, "K": Kv, "x0": pm.x0, "u0": pm.u0}
 
 
-def performance_matrix(Q: np.ndarray, n_x: int, velocity_index: Sequence[int] = VELOCITY_INDEX) -> np.ndarray:
+def performance_matrix(
+    Q: np.ndarray, n_x: int, velocity_index: Sequence[int] = VELOCITY_INDEX
+) -> np.ndarray:
     """C of Eq. (19b): z = Q^-1 dv = C dx (Eq. 18)."""
     Q = np.asarray(Q, dtype=float)
     S = np.zeros((len(velocity_index), n_x))
@@ -221,7 +244,7 @@ def linear_lpv_law(model: ScheduledModel, R: np.ndarray) -> ControlLaw:
     def law(t: float, x: np.ndarray, v_d: np.ndarray, ue_scaled: np.ndarray) -> np.ndarray:
         return model.u0(v_d) + model.K(v_d) @ (x - model.x0(v_d)) + R @ ue_scaled
 
-    law.eq33_parts = ("linear", model, R, None, None)    # lets simulate_eq33 fuse it (_FusedEq33)
+    law.eq33_parts = ("linear", model, R, None, None)  # lets simulate_eq33 fuse it (_FusedEq33)
     return law
 
 
@@ -232,8 +255,16 @@ class FeedforwardSchedule:
     rows free states, inputs, rate states (synthesis/feedforward.py); ``free_index`` /
     ``rate_index`` positions of those states in x."""
 
-    def __init__(self, vmin, vmax, F: np.ndarray, free_index: Sequence[int], n_x: int,
-                 F_jerk: Optional[np.ndarray] = None, rate_index: Sequence[int] = ()) -> None:
+    def __init__(
+        self,
+        vmin,
+        vmax,
+        F: np.ndarray,
+        free_index: Sequence[int],
+        n_x: int,
+        F_jerk: Optional[np.ndarray] = None,
+        rate_index: Sequence[int] = (),
+    ) -> None:
         self.vmin = np.asarray(vmin, dtype=float)
         self.vmax = np.asarray(vmax, dtype=float)
         self.F = np.asarray(F, dtype=float)
@@ -250,12 +281,16 @@ class FeedforwardSchedule:
         key = np.asarray(v_d, dtype=float).tobytes()
         if self._last is None or self._last[0] != key:
             alpha = fast_weights(v_d, self.vmin, self.vmax)
-            self._last = (key, np.tensordot(alpha, self.F, axes=1),
-                          None if self.Fj is None else np.tensordot(alpha, self.Fj, axes=1))
+            self._last = (
+                key,
+                np.tensordot(alpha, self.F, axes=1),
+                None if self.Fj is None else np.tensordot(alpha, self.Fj, axes=1),
+            )
         return self._last[1], self._last[2]
 
-    def offsets(self, v_d: np.ndarray, a: np.ndarray, j: Optional[np.ndarray] = None
-                ) -> tuple[np.ndarray, np.ndarray]:
+    def offsets(
+        self, v_d: np.ndarray, a: np.ndarray, j: Optional[np.ndarray] = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(dx_ff (n_x,), du_ff (m,)) = F(v_d) a (+ F_jerk(v_d) j)."""
         Fv, Fjv = self._at(v_d)
         nf = len(self.free)
@@ -267,13 +302,14 @@ class FeedforwardSchedule:
             yj = Fjv @ np.asarray(j, dtype=float)
             m = du.size
             dx[self.free] += yj[:nf]
-            du += yj[nf:nf + m]
-            dx[self.rate] += yj[nf + m:]
+            du += yj[nf : nf + m]
+            dx[self.rate] += yj[nf + m :]
         return dx, du
 
 
-def feedforward_law(model: ScheduledModel, R: np.ndarray, ffs: FeedforwardSchedule,
-                    accel: Callable[[float], tuple]) -> ControlLaw:
+def feedforward_law(
+    model: ScheduledModel, R: np.ndarray, ffs: FeedforwardSchedule, accel: Callable[[float], tuple]
+) -> ControlLaw:
     """u = u0 + du_ff + K (x - x0 - dx_ff) + R (kappa u_e), (dx_ff, du_ff) from ``ffs`` at
     ``accel(t) = (a, j)`` (seed 2 Eq. 102 on seed 0 Eq. 31)."""
     R = np.asarray(R, dtype=float)
@@ -299,23 +335,37 @@ class _FusedEq33:
     rounding (summation order), without numpy's per-call overhead on 8-element weight
     vectors (``np.kron``, ``tensordot``). ``moving_equilibrium`` as in :func:`eq33_rhs`."""
 
-    def __init__(self, sched: Any, law_parts: tuple, signals: "ReferenceSignals", kappa: float,
-                 moving_equilibrium: bool, law_sched: Any = None) -> None:
+    def __init__(
+        self,
+        sched: Any,
+        law_parts: tuple,
+        signals: "ReferenceSignals",
+        kappa: float,
+        moving_equilibrium: bool,
+        law_sched: Any = None,
+    ) -> None:
         kind, _model, R, ffs, accel = law_parts
         pm = sched.model
-        lm = (law_sched if law_sched is not None else sched)      # the law's schedule (K, x0, u0)
+        lm = law_sched if law_sched is not None else sched  # the law's schedule (K, x0, u0)
         A, B, Kv = np.asarray(pm.A, float), np.asarray(pm.B, float), np.asarray(lm.Kv, float)
         N, n, m = A.shape[0], A.shape[1], B.shape[2]
         self.n, self.m = n, m
         self.lo = [float(v) for v in pm.vmin]
         self.span = [float(b - a) for a, b in zip(pm.vmin, pm.vmax)]
         self.p = len(self.lo)
-        if N != 2 ** self.p:
+        if N != 2**self.p:
             raise ConfigError(f"Eq. (33): {N} vertices for a {self.p}-axis box")
         if not (np.array_equal(lm.model.vmin, pm.vmin) and np.array_equal(lm.model.vmax, pm.vmax)):
             raise ConfigError("Eq. (33): the law's schedule and the model have different boxes")
-        cols = [A.reshape(N, -1), B.reshape(N, -1), Kv.reshape(N, -1), np.asarray(pm.x0, float),
-                np.asarray(pm.u0, float), np.asarray(lm.model.x0, float), np.asarray(lm.model.u0, float)]
+        cols = [
+            A.reshape(N, -1),
+            B.reshape(N, -1),
+            Kv.reshape(N, -1),
+            np.asarray(pm.x0, float),
+            np.asarray(pm.u0, float),
+            np.asarray(lm.model.x0, float),
+            np.asarray(lm.model.u0, float),
+        ]
         self.ff = None
         if kind == "feedforward":
             if not (np.array_equal(ffs.vmin, pm.vmin) and np.array_equal(ffs.vmax, pm.vmax)):
@@ -326,11 +376,11 @@ class _FusedEq33:
             pj = 0 if ffs.Fj is None else ffs.Fj.shape[2]
             Mv = np.zeros((N, n + m, pa + pj))
             Mv[:, ffs.free, :pa] = ffs.F[:, :nf]
-            Mv[:, n:, :pa] = ffs.F[:, nf:nf + m]
+            Mv[:, n:, :pa] = ffs.F[:, nf : nf + m]
             if pj:
                 Mv[:, ffs.free, pa:] = ffs.Fj[:, :nf]
-                Mv[:, n:, pa:] = ffs.Fj[:, nf:nf + m]
-                Mv[:, ffs.rate, pa:] += ffs.Fj[:, nf + m:]
+                Mv[:, n:, pa:] = ffs.Fj[:, nf : nf + m]
+                Mv[:, ffs.rate, pa:] += ffs.Fj[:, nf + m :]
             cols.append(Mv.reshape(N, -1))
             self.ff = (accel, pa, pj)
             self._acc = (None, None)
@@ -419,9 +469,18 @@ class _FusedEq33:
         P = (np.array([alpha, beta]) if beta is not None else np.array([alpha])) @ self.W
         n, m, sl = self.n, self.m, self.sl
         row = P[0]
-        out = (row[sl[0]].reshape(n, n), row[sl[1]].reshape(n, m), row[sl[2]].reshape(m, n),
-               row[sl[3]], row[sl[4]], P[1, sl[3]] if beta is not None else None,
-               row[sl[7]] if len(sl) > 7 else None, None, row[sl[5]], row[sl[6]])
+        out = (
+            row[sl[0]].reshape(n, n),
+            row[sl[1]].reshape(n, m),
+            row[sl[2]].reshape(m, n),
+            row[sl[3]],
+            row[sl[4]],
+            P[1, sl[3]] if beta is not None else None,
+            row[sl[7]] if len(sl) > 7 else None,
+            None,
+            row[sl[5]],
+            row[sl[6]],
+        )
         self._last = (key, out)
         return out
 
@@ -437,7 +496,7 @@ class _FusedEq33:
             dd = M @ np.concatenate([np.asarray(a, dtype=float), np.asarray(j, dtype=float)])
         else:
             dd = M[:, :pa] @ np.asarray(a, dtype=float)
-        return dd[:self.n], dd[self.n:]
+        return dd[: self.n], dd[self.n :]
 
     # -- law and right-hand side ---------------------------------------------------
     def law(self, t: float, x: np.ndarray, v_d, ue_scaled) -> np.ndarray:
@@ -473,8 +532,14 @@ class _FusedEq33:
         return xdot
 
 
-def fused_eq33(model: Any, signals: "ReferenceSignals", law: Optional[ControlLaw], R: np.ndarray,
-               kappa: float, moving_equilibrium: bool = True) -> Optional[_FusedEq33]:
+def fused_eq33(
+    model: Any,
+    signals: "ReferenceSignals",
+    law: Optional[ControlLaw],
+    R: np.ndarray,
+    kappa: float,
+    moving_equilibrium: bool = True,
+) -> Optional[_FusedEq33]:
     """The fused Eq. (33) right-hand side ``f(t, x, segment)`` (:class:`_FusedEq33`) for
     ``model`` (a ScheduledLpv, possibly wrapped in :class:`LastPointCache`) and ``law``
     (None: :func:`linear_lpv_law` with ``R``; else a law made by :func:`linear_lpv_law` or
@@ -491,7 +556,7 @@ def fused_eq33(model: Any, signals: "ReferenceSignals", law: Optional[ControlLaw
         return None
     try:
         return _FusedEq33(inner, parts, signals, kappa, moving_equilibrium, law_sched=owner)
-    except ConfigError:           # e.g. the law's schedule has another box: evaluate generically
+    except ConfigError:  # e.g. the law's schedule has another box: evaluate generically
         return None
 
 
@@ -547,22 +612,22 @@ class ClosedLoopResult:
     """Time histories on the signal grid and the achieved L2 gain (seed 0 Eq. 29)."""
 
     t: np.ndarray
-    x: np.ndarray            # (N, n_x) absolute state
-    dx: np.ndarray           # (N, n_x) x - x0(v_d)
-    v_d: np.ndarray          # (N, 3)
-    ue: np.ndarray           # (N, n_e) kappa u_e actually applied
-    u: np.ndarray            # (N, n_u) total virtual command
-    z: np.ndarray            # (N, 3) Q^-1 (v - v_d), Eq. (18)
-    z_model: np.ndarray      # (N, 3) C dx, Eq. (19b)
-    tracking_error: np.ndarray   # (N, 3) v - v_d (Fig. 9)
+    x: np.ndarray  # (N, n_x) absolute state
+    dx: np.ndarray  # (N, n_x) x - x0(v_d)
+    v_d: np.ndarray  # (N, 3)
+    ue: np.ndarray  # (N, n_e) kappa u_e actually applied
+    u: np.ndarray  # (N, n_u) total virtual command
+    z: np.ndarray  # (N, 3) Q^-1 (v - v_d), Eq. (18)
+    z_model: np.ndarray  # (N, 3) C dx, Eq. (19b)
+    tracking_error: np.ndarray  # (N, 3) v - v_d (Fig. 9)
     z_norm: float
     ue_norm: float
-    gain: float              # ||z||_2 / ||kappa u_e||_2
-    gain_model: float        # ||C dx||_2 / ||kappa u_e||_2
+    gain: float  # ||z||_2 / ||kappa u_e||_2
+    gain_model: float  # ||C dx||_2 / ||kappa u_e||_2
     gamma: Optional[float]
     kappa: float
     method: str
-    n_steps: int = 0         # right-hand-side evaluations
+    n_steps: int = 0  # right-hand-side evaluations
     info: dict = field(default_factory=dict)
 
     @property
@@ -581,8 +646,13 @@ def _closed_loop_rate(model: ScheduledModel, signals: ReferenceSignals) -> float
     return rate
 
 
-def _rk4(f: Callable[[float, np.ndarray, int], np.ndarray], t: np.ndarray, x_init: np.ndarray,
-         n_sub: int, bound: float) -> tuple[np.ndarray, int]:
+def _rk4(
+    f: Callable[[float, np.ndarray, int], np.ndarray],
+    t: np.ndarray,
+    x_init: np.ndarray,
+    n_sub: int,
+    bound: float,
+) -> tuple[np.ndarray, int]:
     """Classical RK4 on grid t with n_sub equal sub-steps per interval (results on t)."""
     x = np.empty((t.size, x_init.size))
     x[0] = x_init
@@ -601,14 +671,15 @@ def _rk4(f: Callable[[float, np.ndarray, int], np.ndarray], t: np.ndarray, x_ini
             xi = xi + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
             steps += 4
         if not np.all(np.isfinite(xi)) or np.max(np.abs(xi)) > bound:
-            x[k + 1:] = np.nan
+            x[k + 1 :] = np.nan
             raise _Diverged(t[k + 1], x, steps)
         x[k + 1] = xi
     return x, steps
 
 
-def _rk45_segments(f: Callable[..., np.ndarray], t: np.ndarray, x_init: np.ndarray,
-                   config: ClosedLoopConfig) -> tuple[np.ndarray, int]:
+def _rk45_segments(
+    f: Callable[..., np.ndarray], t: np.ndarray, x_init: np.ndarray, config: ClosedLoopConfig
+) -> tuple[np.ndarray, int]:
     """solve_ivp RK45 (ode45's Dormand-Prince pair) restarted on every FOH interval.
 
     The right-hand side has a kink at every sample (slope of the interpolated signals), which
@@ -621,15 +692,25 @@ def _rk45_segments(f: Callable[..., np.ndarray], t: np.ndarray, x_init: np.ndarr
     nfev = 0
     h = None
     for k in range(t.size - 1):
-        sol = solve_ivp(f, (t[k], t[k + 1]), xi, method="RK45", args=(k,), rtol=config.rtol,
-                        atol=config.atol, first_step=h)
+        sol = solve_ivp(
+            f,
+            (t[k], t[k + 1]),
+            xi,
+            method="RK45",
+            args=(k,),
+            rtol=config.rtol,
+            atol=config.atol,
+            first_step=h,
+        )
         nfev += int(sol.nfev)
         if sol.status != 0 or not np.all(np.isfinite(sol.y[:, -1])):
             raise SafetyError(f"Eq. (33) integration failed at t={t[k]:.3f} s: {sol.message}")
         xi = sol.y[:, -1]
         if np.max(np.abs(xi)) > config.divergence_bound:
-            raise SafetyError(f"Eq. (33) closed loop diverged at t={t[k + 1]:.3f} s "
-                              f"(|x| > {config.divergence_bound:g})")
+            raise SafetyError(
+                f"Eq. (33) closed loop diverged at t={t[k + 1]:.3f} s "
+                f"(|x| > {config.divergence_bound:g})"
+            )
         if sol.t.size > 1 and k + 2 < t.size:
             h = min(2.0 * float(sol.t[-1] - sol.t[-2]), float(t[k + 2] - t[k + 1]))
         x[k + 1] = xi
@@ -666,7 +747,11 @@ def simulate_eq33(
     R = np.asarray(R, dtype=float)
     model = LastPointCache(model)
     v0 = signals.v_d[0]
-    x_start = np.asarray(model.x0(v0), dtype=float) if x_init is None else np.asarray(x_init, dtype=float)
+    x_start = (
+        np.asarray(model.x0(v0), dtype=float)
+        if x_init is None
+        else np.asarray(x_init, dtype=float)
+    )
     n_x = x_start.size
     if R.shape != (np.asarray(model.B(v0)).shape[1], signals.u_e.shape[1]):
         raise ConfigError(
@@ -680,6 +765,7 @@ def simulate_eq33(
     if fused is not None:
         f = fused
     else:
+
         def f(t: float, x: np.ndarray, segment: Optional[int] = None) -> np.ndarray:
             return eq33_rhs(t, x, model, signals, law, kappa, segment, moving_equilibrium)
 
@@ -696,8 +782,10 @@ def simulate_eq33(
         try:
             x, n_steps = _rk4(f, t, x_start, n_sub, config.divergence_bound)
         except _Diverged as exc:
-            raise SafetyError(f"Eq. (33) closed loop diverged at t={exc.t_fail:.3f} s "
-                              f"(non-finite state or |x| > {config.divergence_bound:g})") from None
+            raise SafetyError(
+                f"Eq. (33) closed loop diverged at t={exc.t_fail:.3f} s "
+                f"(non-finite state or |x| > {config.divergence_bound:g})"
+            ) from None
     if np.max(np.abs(x)) > config.divergence_bound:
         raise SafetyError(f"Eq. (33) closed loop diverged (|x| > {config.divergence_bound:g})")
 
@@ -707,7 +795,9 @@ def simulate_eq33(
     ue = kappa * signals.u_e
     if fused is not None:
         x0s = np.array([fused.at(vd)[3] for vd in signals.v_d.tolist()])
-        u = np.array([fused.law(tk, xk, vd, uek) for tk, xk, vd, uek in zip(t, x, signals.v_d, ue)])
+        u = np.array(
+            [fused.law(tk, xk, vd, uek) for tk, xk, vd, uek in zip(t, x, signals.v_d, ue)]
+        )
     else:
         x0s = np.array([model.x0(vd) for vd in signals.v_d])
         u = np.array([law(tk, xk, vd, uek) for tk, xk, vd, uek in zip(t, x, signals.v_d, ue)])
@@ -718,17 +808,38 @@ def simulate_eq33(
     z_norm = l2_norm(t, z)
     ue_norm = l2_norm(t, ue)
     if ue_norm <= 0:
-        raise ConfigError("signals: the excitation u_e is identically zero, the L2 gain is undefined")
+        raise ConfigError(
+            "signals: the excitation u_e is identically zero, the L2 gain is undefined"
+        )
     return ClosedLoopResult(
-        t=t, x=x, dx=dx, v_d=signals.v_d, ue=ue, u=u, z=z, z_model=z_model, tracking_error=err,
-        z_norm=z_norm, ue_norm=ue_norm, gain=z_norm / ue_norm,
-        gain_model=l2_norm(t, z_model) / ue_norm, gamma=gamma, kappa=kappa,
-        method=config.method, n_steps=n_steps, info={**info, "moving_equilibrium": bool(moving_equilibrium)},
+        t=t,
+        x=x,
+        dx=dx,
+        v_d=signals.v_d,
+        ue=ue,
+        u=u,
+        z=z,
+        z_model=z_model,
+        tracking_error=err,
+        z_norm=z_norm,
+        ue_norm=ue_norm,
+        gain=z_norm / ue_norm,
+        gain_model=l2_norm(t, z_model) / ue_norm,
+        gamma=gamma,
+        kappa=kappa,
+        method=config.method,
+        n_steps=n_steps,
+        info={**info, "moving_equilibrium": bool(moving_equilibrium)},
     )
 
 
-def hinf_norm_grid(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: Optional[np.ndarray] = None,
-                   w: Optional[np.ndarray] = None) -> tuple[float, float]:
+def hinf_norm_grid(
+    A: np.ndarray,
+    B: np.ndarray,
+    C: np.ndarray,
+    D: Optional[np.ndarray] = None,
+    w: Optional[np.ndarray] = None,
+) -> tuple[float, float]:
     """Peak max singular value of G(jw) = C (jwI - A)^-1 B + D over a frequency grid.
 
     An independent check of Eq. (29) at a frozen parameter: it does not use any LMI. The
@@ -760,8 +871,12 @@ def hinf_norm_grid(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: Optional[np.n
     a = w[max(k - 1, 0)]
     b = w[min(k + 1, w.size - 1)]
     if b > a:
-        res = minimize_scalar(lambda wk: -sigma(wk), bounds=(a, b), method="bounded",
-                              options={"xatol": 1e-10 * max(1.0, b)})
+        res = minimize_scalar(
+            lambda wk: -sigma(wk),
+            bounds=(a, b),
+            method="bounded",
+            options={"xatol": 1e-10 * max(1.0, b)},
+        )
         if -res.fun > best:
             best, wbest = float(-res.fun), float(res.x)
     return best, wbest

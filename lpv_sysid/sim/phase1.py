@@ -64,12 +64,14 @@ class Phase1Config:
     trim_s: float = 10.0
     excite_s: float = 30.0
     trim_average_s: float = 5.0
-    amplitudes: tuple = (1.5, 1.5, 1.0, 0.4)   # peak u, v, w [m/s], yaw rate [rad/s]
+    amplitudes: tuple = (1.5, 1.5, 1.0, 0.4)  # peak u, v, w [m/s], yaw rate [rad/s]
     f_min_hz: float = 0.2
     f_max_hz: float = 2.0
     taper_s: float = 1.0
     hover_validation: bool = True
-    start: str = "hover"      # "hover": reference steps from hover at t=0; "trim": start at the model trim
+    start: str = (
+        "hover"  # "hover": reference steps from hover at t=0; "trim": start at the model trim
+    )
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -94,8 +96,10 @@ class Phase1Config:
             v = getattr(self, name)
             if not is_finite_number(v) or v < 0:
                 raise ConfigError(f"phase1.{name}: must be a finite number >= 0, got {v!r}")
-            if name.endswith("_s") and v > MAX_DURATION:     # simulated before anything is written
-                raise ConfigError(f"phase1.{name}: {v:g} s exceeds the limit of {MAX_DURATION:g} s")
+            if name.endswith("_s") and v > MAX_DURATION:  # simulated before anything is written
+                raise ConfigError(
+                    f"phase1.{name}: {v:g} s exceeds the limit of {MAX_DURATION:g} s"
+                )
             object.__setattr__(self, name, float(v))
         if self.trim_s <= 0 or self.excite_s <= 0:
             raise ConfigError("phase1.trim_s and phase1.excite_s: must be > 0")
@@ -122,9 +126,14 @@ class Phase1Config:
 
     def vertices(self) -> list[tuple[float, float, float]]:
         """The 2^3 box corners in seed 0 Table 1 order (u fastest, then v, then w)."""
-        return [(u, v, w) for w, v, u in itertools.product(
-            (self.box_min[2], self.box_max[2]), (self.box_min[1], self.box_max[1]),
-            (self.box_min[0], self.box_max[0]))]
+        return [
+            (u, v, w)
+            for w, v, u in itertools.product(
+                (self.box_min[2], self.box_max[2]),
+                (self.box_min[1], self.box_max[1]),
+                (self.box_min[0], self.box_max[0]),
+            )
+        ]
 
 
 @dataclass
@@ -132,22 +141,22 @@ class RunRecord:
     """Everything one simulated run produced (arrays in NED/FRD, SI units)."""
 
     name: str
-    v_d: np.ndarray                 # (3,) vertex body-velocity reference
-    t_excite: float                 # start of the excitation segment, s
+    v_d: np.ndarray  # (3,) vertex body-velocity reference
+    t_excite: float  # start of the excitation segment, s
     duration: float
     model_trim: Trim
-    state_t: np.ndarray             # (N,)
-    state_true: np.ndarray          # (N, 16) FULL_STATE_NAMES
-    state_meas: np.ndarray          # (N, 16) estimator output (rotor columns = truth)
-    rotor_t: np.ndarray             # (M,)
-    rotor_meas: np.ndarray          # (M, 4) rad/s
-    imu_t: np.ndarray               # (K,)
-    imu_accel: np.ndarray           # (K, 3) specific force FRD
-    imu_gyro: np.ndarray            # (K, 3) FRD
-    cmd_t: np.ndarray               # (L,) control-rate time
-    reference: np.ndarray           # (L, 4) u_d, v_d, w_d [m/s], r_d [rad/s]
-    excitation: np.ndarray          # (L, 4) multisine part of the reference
-    command: np.ndarray             # (L, 4) virtual command u = [ut, ua, ue, ur]
+    state_t: np.ndarray  # (N,)
+    state_true: np.ndarray  # (N, 16) FULL_STATE_NAMES
+    state_meas: np.ndarray  # (N, 16) estimator output (rotor columns = truth)
+    rotor_t: np.ndarray  # (M,)
+    rotor_meas: np.ndarray  # (M, 4) rad/s
+    imu_t: np.ndarray  # (K,)
+    imu_accel: np.ndarray  # (K, 3) specific force FRD
+    imu_gyro: np.ndarray  # (K, 3) FRD
+    cmd_t: np.ndarray  # (L,) control-rate time
+    reference: np.ndarray  # (L, 4) u_d, v_d, w_d [m/s], r_d [rad/s]
+    excitation: np.ndarray  # (L, 4) multisine part of the reference
+    command: np.ndarray  # (L, 4) virtual command u = [ut, ua, ue, ur]
     meta: dict = field(default_factory=dict)
 
     def achieved_trim(self, average_s: float, arm_length: float) -> dict:
@@ -159,7 +168,11 @@ class RunRecord:
             raise ConfigError(f"run {self.name}: no samples in the trim averaging window")
         xm = self.state_meas[s]
         delta = self.rotor_meas[r] @ mixer(arm_length).T
-        vals = [*xm[:, 6:9].mean(axis=0), *np.degrees(xm[:, 3:5].mean(axis=0)), *delta.mean(axis=0)]
+        vals = [
+            *xm[:, 6:9].mean(axis=0),
+            *np.degrees(xm[:, 3:5].mean(axis=0)),
+            *delta.mean(axis=0),
+        ]
         return {k: float(v) for k, v in zip(TRIM_COLUMNS, vals)}
 
 
@@ -169,8 +182,12 @@ def design_excitation(cfg: Phase1Config):
     reference scaled to ``cfg.amplitudes`` (designed by :mod:`lpv_sysid.signals`)."""
     from lpv_sysid.signals.excitation import phase1_signals
 
-    return phase1_signals(duration=cfg.excite_s, band=(cfg.f_min_hz, cfg.f_max_hz),
-                          peaks=cfg.amplitudes, sample_rate=50.0)
+    return phase1_signals(
+        duration=cfg.excite_s,
+        band=(cfg.f_min_hz, cfg.f_max_hz),
+        peaks=cfg.amplitudes,
+        sample_rate=50.0,
+    )
 
 
 def excitation_signal(cfg: Phase1Config, t: np.ndarray, signals=None) -> np.ndarray:
@@ -193,8 +210,16 @@ def excitation_signal(cfg: Phase1Config, t: np.ndarray, signals=None) -> np.ndar
     return u
 
 
-def simulate_run(model: Quadrotor, gains: BaselineGains, sensors: SensorConfig,
-                 cfg: Phase1Config, v_d, name: str, seed: int, signals=None) -> RunRecord:
+def simulate_run(
+    model: Quadrotor,
+    gains: BaselineGains,
+    sensors: SensorConfig,
+    cfg: Phase1Config,
+    v_d,
+    name: str,
+    seed: int,
+    signals=None,
+) -> RunRecord:
     """Fly one phase-1 run (trim then excitation) about body velocity ``v_d``.
 
     ``signals``: the designed excitation (:func:`design_excitation`), shared by all runs."""
@@ -208,7 +233,9 @@ def simulate_run(model: Quadrotor, gains: BaselineGains, sensors: SensorConfig,
     if abs(d_ctrl - round(d_ctrl)) > 1e-9 or d_ctrl < 1:
         raise ConfigError(f"controller.rate_hz={gains.rate_hz} must divide sim.physics_hz={phys}")
     d_ctrl = int(round(d_ctrl))
-    d_state, d_imu, d_rot = (sensors.decimation(r) for r in (sensors.state_hz, sensors.imu_hz, sensors.rotor_hz))
+    d_state, d_imu, d_rot = (
+        sensors.decimation(r) for r in (sensors.state_hz, sensors.imu_hz, sensors.rotor_hz)
+    )
     T = cfg.trim_s + cfg.excite_s
     n = int(round(T * phys))
     rng = np.random.default_rng(seed)
@@ -257,19 +284,41 @@ def simulate_run(model: Quadrotor, gains: BaselineGains, sensors: SensorConfig,
             veh.step(u)
         except SafetyError as exc_:
             raise SafetyError(f"run {name}: {exc_}; check gains/limits") from None
-    return RunRecord(name=name, v_d=v_d, t_excite=cfg.trim_s, duration=T, model_trim=trim,
-                     state_t=state_t, state_true=state_true, state_meas=state_meas,
-                     rotor_t=rot_t, rotor_meas=rot_m, imu_t=imu_t, imu_accel=imu_a,
-                     imu_gyro=imu_g, cmd_t=t_c, reference=ref, excitation=exc, command=cmd,
-                     meta={"seed": seed, "physics_hz": phys, "control_hz": gains.rate_hz})
+    return RunRecord(
+        name=name,
+        v_d=v_d,
+        t_excite=cfg.trim_s,
+        duration=T,
+        model_trim=trim,
+        state_t=state_t,
+        state_true=state_true,
+        state_meas=state_meas,
+        rotor_t=rot_t,
+        rotor_meas=rot_m,
+        imu_t=imu_t,
+        imu_accel=imu_a,
+        imu_gyro=imu_g,
+        cmd_t=t_c,
+        reference=ref,
+        excitation=exc,
+        command=cmd,
+        meta={"seed": seed, "physics_hz": phys, "control_hz": gains.rate_hz},
+    )
 
 
 def run_name(v_d) -> str:
-    return "vertex_" + "_".join(f"{'p' if c > 0 else ('m' if c < 0 else '0')}{abs(c):g}" for c in v_d)
+    return "vertex_" + "_".join(
+        f"{'p' if c > 0 else ('m' if c < 0 else '0')}{abs(c):g}" for c in v_d
+    )
 
 
-def run_phase1(model: Quadrotor, gains: BaselineGains, sensors: SensorConfig, cfg: Phase1Config,
-               vertex_indices: Sequence[int] | None = None) -> list[RunRecord]:
+def run_phase1(
+    model: Quadrotor,
+    gains: BaselineGains,
+    sensors: SensorConfig,
+    cfg: Phase1Config,
+    vertex_indices: Sequence[int] | None = None,
+) -> list[RunRecord]:
     """All vertex runs (1-based Table 1 indices, default all) plus the hover validation."""
     verts = cfg.vertices()
     idx = list(range(1, len(verts) + 1)) if vertex_indices is None else list(vertex_indices)
@@ -280,11 +329,31 @@ def run_phase1(model: Quadrotor, gains: BaselineGains, sensors: SensorConfig, cf
     runs = []
     for i in idx:
         log.info("phase 1: vertex %d %s", i, verts[i - 1])
-        runs.append(simulate_run(model, gains, sensors, cfg, verts[i - 1], run_name(verts[i - 1]),
-                                 seed=cfg.seed * 100 + i, signals=signals))
+        runs.append(
+            simulate_run(
+                model,
+                gains,
+                sensors,
+                cfg,
+                verts[i - 1],
+                run_name(verts[i - 1]),
+                seed=cfg.seed * 100 + i,
+                signals=signals,
+            )
+        )
     if cfg.hover_validation:
-        runs.append(simulate_run(model, gains, sensors, cfg, (0.0, 0.0, 0.0), "hover_validation",
-                                 seed=cfg.seed * 100 + 99, signals=signals))
+        runs.append(
+            simulate_run(
+                model,
+                gains,
+                sensors,
+                cfg,
+                (0.0, 0.0, 0.0),
+                "hover_validation",
+                seed=cfg.seed * 100 + 99,
+                signals=signals,
+            )
+        )
     return runs
 
 
@@ -294,8 +363,12 @@ def trim_table(runs: Sequence[RunRecord], cfg: Phase1Config, arm_length: float) 
         ach = rec.achieved_trim(cfg.trim_average_s, arm_length)
         x0 = rec.model_trim.x0
         model = dict(zip(TRIM_COLUMNS, [*x0[2:5], *np.degrees(x0[0:2]), *x0[8:12]]))
-        row = {"run": rec.name, "vertex": [float(c) for c in rec.v_d], "achieved": ach,
-               "model_trim": {k: float(v) for k, v in model.items()}}
+        row = {
+            "run": rec.name,
+            "vertex": [float(c) for c in rec.v_d],
+            "achieved": ach,
+            "model_trim": {k: float(v) for k, v in model.items()},
+        }
         key = tuple(int(round(c)) for c in rec.v_d)
         if key in SEED0_TABLE1:
             row["seed0_table1"] = dict(zip(TRIM_COLUMNS, SEED0_TABLE1[key]))
@@ -307,9 +380,27 @@ def write_trim_table(rows: Sequence[dict], out_dir: str | Path) -> tuple[Path, P
     """trims.yaml (machine-readable) and trims.md (seed 0 Table 1 layout)."""
     out = Path(out_dir)
     y = out / "trims.yaml"
-    y.write_text(yaml.safe_dump({"format": "lpv_sysid/phase1_trims@1", "columns": list(TRIM_COLUMNS),
-                                 "units": ["m/s", "m/s", "m/s", "deg", "deg", "rad/s", "m*rad/s",
-                                           "m*rad/s", "rad/s"], "runs": list(rows)}, sort_keys=False))
+    y.write_text(
+        yaml.safe_dump(
+            {
+                "format": "lpv_sysid/phase1_trims@1",
+                "columns": list(TRIM_COLUMNS),
+                "units": [
+                    "m/s",
+                    "m/s",
+                    "m/s",
+                    "deg",
+                    "deg",
+                    "rad/s",
+                    "m*rad/s",
+                    "m*rad/s",
+                    "rad/s",
+                ],
+                "runs": list(rows),
+            },
+            sort_keys=False,
+        )
+    )
     m = out / "trims.md"
     m.write_text(format_trim_table(rows) + "\n")
     return y, m
@@ -322,13 +413,17 @@ def format_trim_table(rows: Sequence[dict]) -> str:
         vtx = "[" + " ".join(f"{c:+g}" for c in row["vertex"]) + "]"
         for src in ("achieved", "model_trim", "seed0_table1"):
             if src in row:
-                vals = " | ".join(f"{row[src][k]:.2f}" if abs(row[src][k]) < 100 else f"{row[src][k]:.1f}"
-                                  for k in TRIM_COLUMNS)
+                vals = " | ".join(
+                    f"{row[src][k]:.2f}" if abs(row[src][k]) < 100 else f"{row[src][k]:.1f}"
+                    for k in TRIM_COLUMNS
+                )
                 lines.append(f"| {vtx} | {src} | {vals} |")
     return "\n".join(lines)
 
 
-def load_config(path: str | Path) -> tuple[QuadrotorParams, BaselineGains, SensorConfig, Phase1Config]:
+def load_config(
+    path: str | Path,
+) -> tuple[QuadrotorParams, BaselineGains, SensorConfig, Phase1Config]:
     """Read config/quadrotor.yaml (sections quadrotor, controller, sim, phase1)."""
     p = Path(path)
     d = read_yaml(p)
@@ -354,8 +449,9 @@ TOPIC_NAMESPACE = "/lpv_sysid"
 BAG_TOPICS = ("state", "rotor_speeds", "imu", "velocity_reference", "actuator_command", "status")
 
 
-def write_run_bag(record: RunRecord, path: str | Path, storage: str = "mcap",
-                  namespace: str = TOPIC_NAMESPACE) -> Path:
+def write_run_bag(
+    record: RunRecord, path: str | Path, storage: str = "mcap", namespace: str = TOPIC_NAMESPACE
+) -> Path:
     """Write one run as a rosbag2 directory with the topics of docs/DESIGN.md.
 
     Topics (``namespace``/name): ``state`` (estimator output), ``rotor_speeds``, ``imu``
@@ -409,17 +505,28 @@ def _status_items(record: RunRecord, f) -> list:
     items = []
     for t in np.arange(0.0, record.duration, 1.0):
         phase = "trim" if t < record.t_excite else "excitation"
-        st = M.diagnostic_status(f, "OK", "sim_phase1", f"{record.name}: {phase}", {
-            "phase": phase, "run": record.name, "v_d": " ".join(f"{c:g}" for c in record.v_d),
-            "t_excite": record.t_excite, "seed": record.meta.get("seed", "")})
+        st = M.diagnostic_status(
+            f,
+            "OK",
+            "sim_phase1",
+            f"{record.name}: {phase}",
+            {
+                "phase": phase,
+                "run": record.name,
+                "v_d": " ".join(f"{c:g}" for c in record.v_d),
+                "t_excite": record.t_excite,
+                "seed": record.meta.get("seed", ""),
+            },
+        )
         items.append((_stamp_ns(t), "status", M.diagnostic_array(f, _stamp_ns(t), [st])))
     return items
 
 
 def _imu_state_index(record: RunRecord) -> np.ndarray:
     """Index of the estimator sample whose attitude each IMU message carries."""
-    return np.clip(np.searchsorted(record.state_t, record.imu_t, side="right") - 1, 0,
-                   len(record.state_t) - 1)
+    return np.clip(
+        np.searchsorted(record.state_t, record.imu_t, side="right") - 1, 0, len(record.state_t) - 1
+    )
 
 
 def _message_items(record: RunRecord, f) -> list:
@@ -430,13 +537,19 @@ def _message_items(record: RunRecord, f) -> list:
     items: list[tuple[int, str, Any]] = []
     xm = record.state_meas
     for t, x in zip(record.state_t, xm):
-        items.append((ns(t), "state", M.odometry_from_state(f, ns(t), x[0:3], x[3:6], x[6:9], x[9:12])))
+        items.append(
+            (ns(t), "state", M.odometry_from_state(f, ns(t), x[0:3], x[3:6], x[6:9], x[9:12]))
+        )
     for t, om in zip(record.rotor_t, record.rotor_meas):
         items.append((ns(t), "rotor_speeds", M.rotor_speeds_msg(f, ns(t), om)))
-    for t, a, w, i in zip(record.imu_t, record.imu_accel, record.imu_gyro, _imu_state_index(record)):
+    for t, a, w, i in zip(
+        record.imu_t, record.imu_accel, record.imu_gyro, _imu_state_index(record)
+    ):
         items.append((ns(t), "imu", M.imu_msg(f, ns(t), a, w, xm[i, 3:6])))
     for t, r, u in zip(record.cmd_t, record.reference, record.command):
-        items.append((ns(t), "velocity_reference", M.twist_reference_msg(f, ns(t), r[0:3], float(r[3]))))
+        items.append(
+            (ns(t), "velocity_reference", M.twist_reference_msg(f, ns(t), r[0:3], float(r[3])))
+        )
         items.append((ns(t), "actuator_command", M.actuator_command_msg(f, ns(t), u)))
     items.extend(_status_items(record, f))
     items.sort(key=lambda it: it[0])
@@ -457,7 +570,7 @@ def _bulk_rows(record: RunRecord, f, topic: Mapping[str, str]):
             return None
         ns = np.round(t * 1e9).astype(np.int64)
         sec, nsec = np.divmod(ns, 1_000_000_000)
-        if sec.min() < -2**31 or sec.max() > 2**31 - 1:
+        if sec.min() < -(2**31) or sec.max() > 2**31 - 1:
             return None
         return ns, {"header.stamp.sec": sec, "header.stamp.nanosec": nsec}
 
@@ -483,7 +596,9 @@ def _bulk_rows(record: RunRecord, f, topic: Mapping[str, str]):
         acc, gyr = frames.frd_to_flu(record.imu_accel), frames.frd_to_flu(record.imu_gyro)
         ref = np.asarray(record.reference, dtype=float)
         vref = frames.frd_to_flu(ref[:, 0:3])
-        wref = frames.frd_to_flu(np.column_stack([np.zeros(len(ref)), np.zeros(len(ref)), ref[:, 3]]))
+        wref = frames.frd_to_flu(
+            np.column_stack([np.zeros(len(ref)), np.zeros(len(ref)), ref[:, 3]])
+        )
 
         def xyz(prefix, a):
             return {f"{prefix}.x": a[:, 0], f"{prefix}.y": a[:, 1], f"{prefix}.z": a[:, 2]}
@@ -493,43 +608,82 @@ def _bulk_rows(record: RunRecord, f, topic: Mapping[str, str]):
 
         k0 = 0
         templates = {
-            "state": (M.odometry_from_state, lambda k: (xm[k, 0:3], xm[k, 3:6], xm[k, 6:9], xm[k, 9:12]),
-                      {**xyz("pose.pose.position", pos), **quat("pose.pose.orientation", q),
-                       **xyz("twist.twist.linear", v), **xyz("twist.twist.angular", w)}),
-            "rotor_speeds": (M.rotor_speeds_msg, lambda k: (record.rotor_meas[k],),
-                             {"velocity": np.asarray(record.rotor_meas, dtype=float)}),
-            "imu": (M.imu_msg, lambda k: (record.imu_accel[k], record.imu_gyro[k], xm[ii[k], 3:6]),
-                    {**quat("orientation", q[ii]), **xyz("angular_velocity", gyr),
-                     **xyz("linear_acceleration", acc)}),
-            "velocity_reference": (M.twist_reference_msg, lambda k: (ref[k, 0:3], float(ref[k, 3])),
-                                   {**xyz("twist.linear", vref), **xyz("twist.angular", wref)}),
-            "actuator_command": (M.actuator_command_msg, lambda k: (record.command[k],),
-                                 {"position": np.asarray(record.command, dtype=float)}),
+            "state": (
+                M.odometry_from_state,
+                lambda k: (xm[k, 0:3], xm[k, 3:6], xm[k, 6:9], xm[k, 9:12]),
+                {
+                    **xyz("pose.pose.position", pos),
+                    **quat("pose.pose.orientation", q),
+                    **xyz("twist.twist.linear", v),
+                    **xyz("twist.twist.angular", w),
+                },
+            ),
+            "rotor_speeds": (
+                M.rotor_speeds_msg,
+                lambda k: (record.rotor_meas[k],),
+                {"velocity": np.asarray(record.rotor_meas, dtype=float)},
+            ),
+            "imu": (
+                M.imu_msg,
+                lambda k: (record.imu_accel[k], record.imu_gyro[k], xm[ii[k], 3:6]),
+                {
+                    **quat("orientation", q[ii]),
+                    **xyz("angular_velocity", gyr),
+                    **xyz("linear_acceleration", acc),
+                },
+            ),
+            "velocity_reference": (
+                M.twist_reference_msg,
+                lambda k: (ref[k, 0:3], float(ref[k, 3])),
+                {**xyz("twist.linear", vref), **xyz("twist.angular", wref)},
+            ),
+            "actuator_command": (
+                M.actuator_command_msg,
+                lambda k: (record.command[k],),
+                {"position": np.asarray(record.command, dtype=float)},
+            ),
         }
         ts = jazzy_typestore()
         data = {}
         for name, (build, args, values) in templates.items():
             ns, head = blocks[name]
             msgtype = M.TYPES[name]
-            block = encode_block(msgtype, build(f, int(ns[k0]), *args(k0)), {**head, **values}, len(ns), ts)
-            for k in sorted({0, len(ns) // 2, len(ns) - 1}):      # the builders agree?
+            block = encode_block(
+                msgtype, build(f, int(ns[k0]), *args(k0)), {**head, **values}, len(ns), ts
+            )
+            for k in sorted({0, len(ns) // 2, len(ns) - 1}):  # the builders agree?
                 ref_k = bytes(ts.serialize_cdr(build(f, int(ns[k]), *args(k)), msgtype))
-                if not records_close(msgtype, block[k], ref_k, rtol=1e-14, atol=1e-15, typestore=ts):
-                    log.warning("run %s: bulk %s record %d disagrees with io.messages; writing "
-                                "message by message", record.name, name, k)
+                if not records_close(
+                    msgtype, block[k], ref_k, rtol=1e-14, atol=1e-15, typestore=ts
+                ):
+                    log.warning(
+                        "run %s: bulk %s record %d disagrees with io.messages; writing "
+                        "message by message",
+                        record.name,
+                        name,
+                        k,
+                    )
                     return None
             data[name] = (ns, block)
     except (LayoutError, M.MessageError, ValueError) as exc:
-        log.warning("run %s: bulk bag writing unavailable (%s); writing message by message",
-                    record.name, exc)
+        log.warning(
+            "run %s: bulk bag writing unavailable (%s); writing message by message",
+            record.name,
+            exc,
+        )
         return None
-    status = [(ns, "status", bytes(ts.serialize_cdr(msg, M.TYPES["status"])))
-              for ns, _, msg in _status_items(record, f)]
+    status = [
+        (ns, "status", bytes(ts.serialize_cdr(msg, M.TYPES["status"])))
+        for ns, _, msg in _status_items(record, f)
+    ]
     # the order of _message_items: stamp, then state, rotor, imu, (reference, command) per
     # control sample, status
     ns_c = data["velocity_reference"][0]
-    parts = [("state", data["state"][0]), ("rotor_speeds", data["rotor_speeds"][0]),
-             ("imu", data["imu"][0])]
+    parts = [
+        ("state", data["state"][0]),
+        ("rotor_speeds", data["rotor_speeds"][0]),
+        ("imu", data["imu"][0]),
+    ]
     names = [np.full(len(a), i, np.int8) for i, (_, a) in enumerate(parts)]
     idx = [np.arange(len(a)) for _, a in parts]
     stamps_ = [a for _, a in parts]
@@ -541,9 +695,28 @@ def _bulk_rows(record: RunRecord, f, topic: Mapping[str, str]):
     idx.append(np.arange(len(status)))
     all_ns, all_name, all_idx = np.concatenate(stamps_), np.concatenate(names), np.concatenate(idx)
     order = np.argsort(all_ns, kind="stable")
-    src = [data["state"][1], data["rotor_speeds"][1], data["imu"][1],
-           data["velocity_reference"][1], data["actuator_command"][1], [d for _, _, d in status]]
-    tnames = [topic[n] for n in ("state", "rotor_speeds", "imu", "velocity_reference",
-                                 "actuator_command", "status")]
-    return [(tnames[c], s, src[c][i]) for s, c, i in
-            zip(all_ns[order].tolist(), all_name[order].tolist(), all_idx[order].tolist())]
+    src = [
+        data["state"][1],
+        data["rotor_speeds"][1],
+        data["imu"][1],
+        data["velocity_reference"][1],
+        data["actuator_command"][1],
+        [d for _, _, d in status],
+    ]
+    tnames = [
+        topic[n]
+        for n in (
+            "state",
+            "rotor_speeds",
+            "imu",
+            "velocity_reference",
+            "actuator_command",
+            "status",
+        )
+    ]
+    return [
+        (tnames[c], s, src[c][i])
+        for s, c, i in zip(
+            all_ns[order].tolist(), all_name[order].tolist(), all_idx[order].tolist()
+        )
+    ]

@@ -38,16 +38,30 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from lpv_sysid.errors import ConfigError, SolverError
-from lpv_sysid.models.trms import TABLE7_RANGES, TS_PAPER, Trms, TrmsPolytope, bounding_box_polytope
-from lpv_sysid.synthesis.regions import PlacementResult, Region, integral_augmentation, place_observer, place_poles
+from lpv_sysid.models.trms import (
+    TABLE7_RANGES,
+    TS_PAPER,
+    Trms,
+    TrmsPolytope,
+    bounding_box_polytope,
+)
+from lpv_sysid.synthesis.regions import (
+    PlacementResult,
+    Region,
+    integral_augmentation,
+    place_observer,
+    place_poles,
+)
 
 log = logging.getLogger(__name__)
 
 #: tracked outputs (theta_h, theta_v) of Eq. (128); measured outputs (omega_h, theta_h, omega_v, theta_v).
 C_TRACK = np.array([[0, 0, 1, 0, 0, 0], [0, 0, 0, 0, 0, 1]], dtype=float)
-C_MEAS = np.array([[1, 0, 0, 0, 0, 0], [0, 0, 1, 0, 0, 0], [0, 0, 0, 1, 0, 0], [0, 0, 0, 0, 0, 1]], dtype=float)
-REGION_K_PAPER = Region(disk_q=-0.7, disk_r=0.29, s_min=0.41, s_max=0.99)   # Sec. 6.3
-REGION_L_PAPER = Region(disk_q=0.0, disk_r=0.7, s_min=0.0, s_max=0.7)       # Sec. 6.3
+C_MEAS = np.array(
+    [[1, 0, 0, 0, 0, 0], [0, 0, 1, 0, 0, 0], [0, 0, 0, 1, 0, 0], [0, 0, 0, 0, 0, 1]], dtype=float
+)
+REGION_K_PAPER = Region(disk_q=-0.7, disk_r=0.29, s_min=0.41, s_max=0.99)  # Sec. 6.3
+REGION_L_PAPER = Region(disk_q=0.0, disk_r=0.7, s_min=0.0, s_max=0.7)  # Sec. 6.3
 #: D_K used by default: the paper's D_K is infeasible for the (correctly bounded) Table 7 box with
 #: the Eq. (69) gaps below (docs/trms.md); this disk (centre 0.6, radius 0.395) contains it.
 REGION_K_DEFAULT = Region(disk_q=-0.6, disk_r=0.395, s_min=0.21, s_max=0.995)
@@ -83,11 +97,23 @@ class TrmsControlConfig:
         for reg, name in ((self.region_K, "region_K"), (self.region_L, "region_L")):
             reg.check()
             if not reg.stable_for(self.ts):
-                raise ConfigError(f"trms control: {name} {reg.to_dict()} is not inside the unit disk")
+                raise ConfigError(
+                    f"trms control: {name} {reg.to_dict()} is not inside the unit disk"
+                )
 
     @classmethod
     def from_dict(cls, d: dict) -> "TrmsControlConfig":
-        allowed = {"scheduled", "ts", "gaps", "region_K", "region_L", "tau_h", "tau_v", "u_min", "u_max"}
+        allowed = {
+            "scheduled",
+            "ts",
+            "gaps",
+            "region_K",
+            "region_L",
+            "tau_h",
+            "tau_v",
+            "u_min",
+            "u_max",
+        }
         if not isinstance(d, dict):
             raise ConfigError(f"trms control: expected a mapping, got {type(d).__name__}")
         bad = sorted(set(d) - allowed)
@@ -119,27 +145,43 @@ class TrmsDesign:
 
     def augmented_vertices(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """(A_a,i, B_a) of Eq. (129) at every vertex."""
-        return [integral_augmentation(A, self.poly.B, C_TRACK, ts=self.config.ts) for A in self.poly.A]
+        return [
+            integral_augmentation(A, self.poly.B, C_TRACK, ts=self.config.ts) for A in self.poly.A
+        ]
 
     def controller_eigs(self) -> np.ndarray:
         """eig(A_a,i + B_a K_i) for every vertex, (N, 8)."""
-        return np.array([np.linalg.eigvals(A + B @ K) for (A, B), K in zip(self.augmented_vertices(), self.K)])
+        return np.array(
+            [np.linalg.eigvals(A + B @ K) for (A, B), K in zip(self.augmented_vertices(), self.K)]
+        )
 
     def observer_eigs(self) -> np.ndarray:
         """eig(A_d,i + L_i C) for every vertex (error e = x_hat - x, Eq. 130), (N, 6)."""
         return np.array([np.linalg.eigvals(A + L @ C_MEAS) for A, L in zip(self.poly.A, self.L)])
 
 
-def design(model: Trms, config: Optional[TrmsControlConfig] = None, solver: str = "CLARABEL") -> TrmsDesign:
+def design(
+    model: Trms, config: Optional[TrmsControlConfig] = None, solver: str = "CLARABEL"
+) -> TrmsDesign:
     """LPV state feedback with integral action (Eqs. 125-129) and LPV observer (Eqs. 130-134)."""
     config = config or TrmsControlConfig()
     poly = bounding_box_polytope(model, config.scheduled, ts=config.ts, gaps=config.gaps)
     sysK = [[integral_augmentation(A, poly.B, C_TRACK, ts=config.ts)] for A in poly.A]
     resK = place_poles(sysK, config.region_K, solver=solver)
-    L, resL = place_observer([[(A, poly.B)] for A in poly.A], C_MEAS, config.region_L, solver=solver)
-    log.info("TRMS LPV design: %d vertices, controller %s (%.2f s), observer %s (%.2f s)", len(poly.A),
-             resK.status, resK.solve_time, resL.status, resL.solve_time)
-    return TrmsDesign(model=model, config=config, poly=poly, K=resK.K, L=L, result_K=resK, result_L=resL)
+    L, resL = place_observer(
+        [[(A, poly.B)] for A in poly.A], C_MEAS, config.region_L, solver=solver
+    )
+    log.info(
+        "TRMS LPV design: %d vertices, controller %s (%.2f s), observer %s (%.2f s)",
+        len(poly.A),
+        resK.status,
+        resK.solve_time,
+        resL.status,
+        resL.solve_time,
+    )
+    return TrmsDesign(
+        model=model, config=config, poly=poly, K=resK.K, L=L, result_K=resK, result_L=resL
+    )
 
 
 @dataclass
@@ -160,13 +202,21 @@ class TrmsRun:
 def _reference(ref, t: float) -> np.ndarray:
     r = np.asarray(ref(t) if callable(ref) else ref, dtype=float)
     if r.shape != (2,) or not np.all(np.isfinite(r)):
-        raise ConfigError(f"trms reference must be finite (theta_h^r, theta_v^r), got {r!r} at t={t}")
+        raise ConfigError(
+            f"trms reference must be finite (theta_h^r, theta_v^r), got {r!r} at t={t}"
+        )
     return r
 
 
-def simulate(des: TrmsDesign, reference: Callable[[float], Sequence[float]] | Sequence[float], x0: Sequence[float],
-             x_hat0: Optional[Sequence[float]] = None, t_end: float = 20.0, rtol: float = 1e-7,
-             atol: float = 1e-9) -> TrmsRun:
+def simulate(
+    des: TrmsDesign,
+    reference: Callable[[float], Sequence[float]] | Sequence[float],
+    x0: Sequence[float],
+    x_hat0: Optional[Sequence[float]] = None,
+    t_end: float = 20.0,
+    rtol: float = 1e-7,
+    atol: float = 1e-9,
+) -> TrmsRun:
     """Nonlinear TRMS (Eqs. 1-6) under the sampled LPV law of the module docstring.
 
     ``reference`` gives (theta_h^r, theta_v^r) in absolute pitch (rad); ``x0``/``x_hat0`` absolute
@@ -199,8 +249,16 @@ def simulate(des: TrmsDesign, reference: Callable[[float], Sequence[float]] | Se
         x_abs_hat[5] += tv0
         u_raw = u_r + Kk[:, :6] @ (x_abs_hat - x_r) + Kk[:, 6:] @ xI
         u = np.clip(u_raw, umin, umax)
-        for key, val in (("t", t), ("x", x.copy()), ("x_hat", x_abs_hat), ("u", u), ("r", r), ("x_I", xI.copy()),
-                         ("in_box", poly.contains(x)), ("saturated", bool(np.any(u != u_raw)))):
+        for key, val in (
+            ("t", t),
+            ("x", x.copy()),
+            ("x_hat", x_abs_hat),
+            ("u", u),
+            ("r", r),
+            ("x_I", xI.copy()),
+            ("in_box", poly.contains(x)),
+            ("saturated", bool(np.any(u != u_raw))),
+        ):
             out[key].append(val)
         if k == n_steps:
             break
@@ -210,7 +268,9 @@ def simulate(des: TrmsDesign, reference: Callable[[float], Sequence[float]] | Se
         y_s = C_MEAS @ m.shift(x)
         xh = Ak @ xh + Lk @ (C_MEAS @ xh - y_s) + poly.B @ u
         xI = xI + C_TRACK @ x - r
-        sol = solve_ivp(lambda _t, z: m.derivatives(z, u), (t, t + ts), x, method="RK45", rtol=rtol, atol=atol)
+        sol = solve_ivp(
+            lambda _t, z: m.derivatives(z, u), (t, t + ts), x, method="RK45", rtol=rtol, atol=atol
+        )
         if not sol.success:
             raise SolverError(f"trms simulate: integration failed at t={t:.2f}: {sol.message}")
         x = sol.y[:, -1]
@@ -219,6 +279,17 @@ def simulate(des: TrmsDesign, reference: Callable[[float], Sequence[float]] | Se
     return TrmsRun(**{k: np.asarray(v) for k, v in out.items()})
 
 
-__all__ = ["C_MEAS", "C_TRACK", "GAPS_DEFAULT", "REGION_K_DEFAULT", "REGION_K_PAPER", "REGION_L_PAPER",
-           "SCHEDULED_DEFAULT", "TrmsControlConfig",
-           "TrmsDesign", "TrmsRun", "design", "simulate"]
+__all__ = [
+    "C_MEAS",
+    "C_TRACK",
+    "GAPS_DEFAULT",
+    "REGION_K_DEFAULT",
+    "REGION_K_PAPER",
+    "REGION_L_PAPER",
+    "SCHEDULED_DEFAULT",
+    "TrmsControlConfig",
+    "TrmsDesign",
+    "TrmsRun",
+    "design",
+    "simulate",
+]

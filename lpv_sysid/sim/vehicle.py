@@ -40,18 +40,18 @@ class SensorConfig:
     state_hz: float = 250.0
     imu_hz: float = 250.0
     rotor_hz: float = 100.0
-    pos_std: float = 0.02            # m
-    att_std_deg: float = 0.15        # deg
-    vel_std: float = 0.03            # m/s
-    rate_std: float = 0.008          # rad/s
-    accel_std: float = 0.08          # m/s^2
-    gyro_std: float = 0.006          # rad/s
-    rotor_std: float = 2.0           # rad/s
-    vib_accel: float = 2.0           # m/s^2, once-per-rev amplitude at omega_ref
-    vib_accel_blade: float = 1.0     # m/s^2, blade-pass (2/rev) amplitude at omega_ref
-    vib_gyro: float = 0.03           # rad/s at omega_ref
+    pos_std: float = 0.02  # m
+    att_std_deg: float = 0.15  # deg
+    vel_std: float = 0.03  # m/s
+    rate_std: float = 0.008  # rad/s
+    accel_std: float = 0.08  # m/s^2
+    gyro_std: float = 0.006  # rad/s
+    rotor_std: float = 2.0  # rad/s
+    vib_accel: float = 2.0  # m/s^2, once-per-rev amplitude at omega_ref
+    vib_accel_blade: float = 1.0  # m/s^2, blade-pass (2/rev) amplitude at omega_ref
+    vib_gyro: float = 0.03  # rad/s at omega_ref
     vib_state_fraction: float = 0.1  # share of the gyro vibration in the estimated rates
-    omega_ref: float = 600.0         # rad/s
+    omega_ref: float = 600.0  # rad/s
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -66,8 +66,10 @@ class SensorConfig:
         for name in ("physics_hz", "state_hz", "imu_hz", "rotor_hz", "omega_ref"):
             if getattr(self, name) <= 0:
                 raise ConfigError(f"sim.{name}: must be > 0")
-        if self.physics_hz > MAX_PHYSICS_HZ:    # every simulated second costs physics_hz RK4 steps
-            raise ConfigError(f"sim.physics_hz: {self.physics_hz:g} Hz exceeds the limit of {MAX_PHYSICS_HZ:g} Hz")
+        if self.physics_hz > MAX_PHYSICS_HZ:  # every simulated second costs physics_hz RK4 steps
+            raise ConfigError(
+                f"sim.physics_hz: {self.physics_hz:g} Hz exceeds the limit of {MAX_PHYSICS_HZ:g} Hz"
+            )
         for name in ("state_hz", "imu_hz", "rotor_hz"):
             ratio = self.physics_hz / getattr(self, name)
             if abs(ratio - round(ratio)) > 1e-9 or ratio < 1:
@@ -76,8 +78,16 @@ class SensorConfig:
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "SensorConfig":
         check_keys(d, {f.name for f in fields(cls)}, "sim")
-        return cls(**{k: (float(v) if k != "seed" and isinstance(v, int) and not isinstance(v, bool) else v)
-                      for k, v in d.items()})
+        return cls(
+            **{
+                k: (
+                    float(v)
+                    if k != "seed" and isinstance(v, int) and not isinstance(v, bool)
+                    else v
+                )
+                for k, v in d.items()
+            }
+        )
 
     def to_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -95,7 +105,9 @@ class SimVehicle:
         self.dt = 1.0 / self.cfg.physics_hz
         x0 = np.zeros(16) if x0 is None else np.asarray(x0, dtype=float)
         if x0.shape != (16,) or not np.all(np.isfinite(x0)):
-            raise ConfigError(f"SimVehicle: initial state must be 16 finite values, got {x0.shape}")
+            raise ConfigError(
+                f"SimVehicle: initial state must be 16 finite values, got {x0.shape}"
+            )
         self.x = x0.tolist()
         self.t = 0.0
         self.rng = np.random.default_rng(self.cfg.seed)
@@ -109,9 +121,9 @@ class SimVehicle:
         self._vib_ph = self.rng.uniform(0, 2 * np.pi, (4, 2)).tolist()
         self.u = [0.0, 0.0, 0.0, 0.0]
         self._lo, self._hi = model.params.omega_min, model.params.omega_max
-        self._pool: list = []          # normals drawn ahead from self.rng (_normals)
+        self._pool: list = []  # normals drawn ahead from self.rng (_normals)
         self._pool_i = 0
-        self._vib_x = None             # the state _vib_out belongs to
+        self._vib_x = None  # the state _vib_out belongs to
         self._vib_out = None
 
     # ------------------------------------------------------------------ physics
@@ -145,7 +157,7 @@ class SimVehicle:
             pool = self._pool = pool[i:] + self.rng.standard_normal(max(4096, n)).tolist()
             i = 0
         self._pool_i = i + n
-        return pool[i:i + n]
+        return pool[i : i + n]
 
     def _vibration(self):
         """(accelerometer, gyro) vibration of the current state; computed once per state."""
@@ -172,28 +184,70 @@ class SimVehicle:
         n = self._normals(12)
         x = self.x
         _, gyr = self._vibration()
-        sp, sa, sv, sr, fv = c.pos_std, math.radians(c.att_std_deg), c.vel_std, c.rate_std, c.vib_state_fraction
-        return np.array([x[0] + sp * n[0], x[1] + sp * n[1], x[2] + sp * n[2],
-                         x[3] + sa * n[3], x[4] + sa * n[4], x[5] + sa * n[5],
-                         x[6] + sv * n[6], x[7] + sv * n[7], x[8] + sv * n[8],
-                         x[9] + (sr * n[9] + fv * gyr[0]), x[10] + (sr * n[10] + fv * gyr[1]),
-                         x[11] + (sr * n[11] + fv * gyr[2]), x[12], x[13], x[14], x[15]])
+        sp, sa, sv, sr, fv = (
+            c.pos_std,
+            math.radians(c.att_std_deg),
+            c.vel_std,
+            c.rate_std,
+            c.vib_state_fraction,
+        )
+        return np.array(
+            [
+                x[0] + sp * n[0],
+                x[1] + sp * n[1],
+                x[2] + sp * n[2],
+                x[3] + sa * n[3],
+                x[4] + sa * n[4],
+                x[5] + sa * n[5],
+                x[6] + sv * n[6],
+                x[7] + sv * n[7],
+                x[8] + sv * n[8],
+                x[9] + (sr * n[9] + fv * gyr[0]),
+                x[10] + (sr * n[10] + fv * gyr[1]),
+                x[11] + (sr * n[11] + fv * gyr[2]),
+                x[12],
+                x[13],
+                x[14],
+                x[15],
+            ]
+        )
 
     def measure_imu(self):
         """(specific force FRD m/s^2, gyro FRD rad/s) with vibration and noise."""
         c = self.cfg
         x = self.x
         m = self.model
-        F, _ = m._fm(x[6], x[7], x[8], x[9], x[10], x[11], x[12], x[13], x[14], x[15],
-                     *m._rotor_rates(x[12:16], [float(v) for v in self.u]))
+        F, _ = m._fm(
+            x[6],
+            x[7],
+            x[8],
+            x[9],
+            x[10],
+            x[11],
+            x[12],
+            x[13],
+            x[14],
+            x[15],
+            *m._rotor_rates(x[12:16], [float(v) for v in self.u]),
+        )
         mass = m.params.mass
         acc, gyr = self._vibration()
         n = self._normals(6)
         sa, sg = c.accel_std, c.gyro_std
-        a = np.array([(F[0] / mass + acc[0]) + sa * n[0], (F[1] / mass + acc[1]) + sa * n[1],
-                      (F[2] / mass + acc[2]) + sa * n[2]])
-        w = np.array([(x[9] + gyr[0]) + sg * n[3], (x[10] + gyr[1]) + sg * n[4],
-                      (x[11] + gyr[2]) + sg * n[5]])
+        a = np.array(
+            [
+                (F[0] / mass + acc[0]) + sa * n[0],
+                (F[1] / mass + acc[1]) + sa * n[1],
+                (F[2] / mass + acc[2]) + sa * n[2],
+            ]
+        )
+        w = np.array(
+            [
+                (x[9] + gyr[0]) + sg * n[3],
+                (x[10] + gyr[1]) + sg * n[4],
+                (x[11] + gyr[2]) + sg * n[5],
+            ]
+        )
         return a, w
 
     def measure_rotors(self) -> np.ndarray:

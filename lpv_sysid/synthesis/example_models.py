@@ -17,7 +17,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from lpv_sysid.models.lpv import PolytopicModel, UncertainElement, box_vertices, uncertainty_vertices
+from lpv_sysid.models.lpv import (
+    PolytopicModel,
+    UncertainElement,
+    box_vertices,
+    uncertainty_vertices,
+)
 
 A_OMEGA = 12.31
 B_OMEGA = 1.399e4
@@ -32,30 +37,32 @@ def quadrotor_like_vertex(vd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ud, vd_, wd = (float(x) for x in vd)
     A = np.zeros((12, 12))
     B = np.zeros((12, 4))
-    A[0, 5] = 1.0                  # phi' = p
-    A[1, 6] = 1.0                  # theta' = q
-    A[2, 1] = -G                   # u' = -g theta + X_u u + X_q q
+    A[0, 5] = 1.0  # phi' = p
+    A[1, 6] = 1.0  # theta' = q
+    A[2, 1] = -G  # u' = -g theta + X_u u + X_q q
     A[2, 2] = -0.25 - 0.02 * ud
-    A[3, 0] = G                    # v' = g phi + Y_v v
+    A[3, 0] = G  # v' = g phi + Y_v v
     A[3, 3] = -0.25 - 0.02 * vd_
-    A[4, 4] = -0.6 - 0.04 * wd     # w' = Z_w w + Z_dt dt
+    A[4, 4] = -0.6 - 0.04 * wd  # w' = Z_w w + Z_dt dt
     A[4, 8] = -8.3e-3 * (1.0 + 0.02 * ud)
-    A[2, 8] = -1.0e-3 * ud / 5.0   # thrust tilt with forward speed
-    A[5, 3] = -0.35 - 0.03 * vd_   # p' = L_v v + L_p p + L_da da (dihedral-like)
+    A[2, 8] = -1.0e-3 * ud / 5.0  # thrust tilt with forward speed
+    A[5, 3] = -0.35 - 0.03 * vd_  # p' = L_v v + L_p p + L_da da (dihedral-like)
     A[5, 5] = -0.8
     A[5, 9] = 0.66
-    A[6, 2] = 0.35 + 0.03 * ud     # q' = M_u u + M_q q + M_de de  (M_u > 0: unstable mode)
+    A[6, 2] = 0.35 + 0.03 * ud  # q' = M_u u + M_q q + M_de de  (M_u > 0: unstable mode)
     A[6, 6] = -0.8
     A[6, 10] = 0.66
-    A[7, 7] = -0.3 - 0.01 * wd     # r' = N_r r + N_dr dr
+    A[7, 7] = -0.3 - 0.01 * wd  # r' = N_r r + N_dr dr
     A[7, 11] = 4.5e-3
-    for k in range(4):             # rotor speeds: delta' = -a delta + b u  (seed 0 Eq. 8, 15)
+    for k in range(4):  # rotor speeds: delta' = -a delta + b u  (seed 0 Eq. 8, 15)
         A[8 + k, 8 + k] = -A_OMEGA
         B[8 + k, k] = B_OMEGA
     return A, B
 
 
-def quadrotor_like_polytope(n_uncertain: int = 0, rel: float = 0.2, vmax: float = 5.0) -> PolytopicModel:
+def quadrotor_like_polytope(
+    n_uncertain: int = 0, rel: float = 0.2, vmax: float = 5.0
+) -> PolytopicModel:
     """Polytope over [-vmax, vmax]^3 with 2**n_uncertain uncertainty vertices per vertex (Eq. 23).
 
     The first ``n_uncertain`` entries of :data:`UNCERTAIN_SLOTS` get the interval
@@ -78,21 +85,36 @@ def quadrotor_like_polytope(n_uncertain: int = 0, rel: float = 0.2, vmax: float 
         systems.append(uncertainty_vertices(A, B, els))
     x0 = np.zeros((8, 12))
     x0[:, 2:5] = verts
-    x0[:, 0] = np.arctan(0.02 * verts[:, 1])     # small trim angles, linear in v_d (Assumption 1)
+    x0[:, 0] = np.arctan(0.02 * verts[:, 1])  # small trim angles, linear in v_d (Assumption 1)
     x0[:, 1] = -np.arctan(0.02 * verts[:, 0])
     u0 = np.full((8, 4), 0.0)
     u0[:, 0] = 0.45 + 0.002 * verts[:, 2]
-    return PolytopicModel(vmin=lo, vmax=hi, A=np.array(As), B=np.array(Bs), x0=x0, u0=u0, systems=systems,
-                          state_names=("phi", "theta", "u", "v", "w", "p", "q", "r", "dt", "da", "de", "dr"),
-                          input_names=("ut", "ua", "ue", "ur"), scheduling_names=("u_d", "v_d", "w_d"))
+    return PolytopicModel(
+        vmin=lo,
+        vmax=hi,
+        A=np.array(As),
+        B=np.array(Bs),
+        x0=x0,
+        u0=u0,
+        systems=systems,
+        state_names=("phi", "theta", "u", "v", "w", "p", "q", "r", "dt", "da", "de", "dr"),
+        input_names=("ut", "ua", "ue", "ur"),
+        scheduling_names=("u_d", "v_d", "w_d"),
+    )
 
 
 def first_order_plant(a: float, b: float, be: float, vmin=(-1.0,), vmax=(1.0,)) -> PolytopicModel:
     """x' = a x + b u + b_e w on a 1-axis box with identical vertices (so B_e = B R, R = be / b)."""
     A = np.array([[[a]], [[a]]])
     B = np.array([[[b]], [[b]]])
-    return PolytopicModel(vmin=np.array(vmin, float), vmax=np.array(vmax, float), A=A, B=B,
-                          x0=np.zeros((2, 1)), u0=np.zeros((2, 1)))
+    return PolytopicModel(
+        vmin=np.array(vmin, float),
+        vmax=np.array(vmax, float),
+        A=A,
+        B=B,
+        x0=np.zeros((2, 1)),
+        u0=np.zeros((2, 1)),
+    )
 
 
 def first_order_min_gain(a: float, b: float, be: float, c: float, gamma: float) -> float:
@@ -106,7 +128,9 @@ def first_order_min_gain(a: float, b: float, be: float, c: float, gamma: float) 
     return -(a + abs(c * be) / gamma) / b
 
 
-def uncontrollable_disturbance_plant(a1: float, a2: float) -> tuple[PolytopicModel, np.ndarray, np.ndarray, float]:
+def uncontrollable_disturbance_plant(
+    a1: float, a2: float
+) -> tuple[PolytopicModel, np.ndarray, np.ndarray, float]:
     """2-state plant with an analytic optimal H-inf state-feedback bound.
 
         x1' = -a1 x1 + w,   x2' = a2 x2 + x1 + u,   z = x1     (a1 > 0, a2 > 0: x2 unstable)
@@ -118,6 +142,12 @@ def uncontrollable_disturbance_plant(a1: float, a2: float) -> tuple[PolytopicMod
     """
     A = np.array([[-a1, 0.0], [1.0, a2]])
     B = np.array([[0.0], [1.0]])
-    model = PolytopicModel(vmin=np.array([-1.0]), vmax=np.array([1.0]), A=np.array([A, A]), B=np.array([B, B]),
-                           x0=np.zeros((2, 2)), u0=np.zeros((2, 1)))
+    model = PolytopicModel(
+        vmin=np.array([-1.0]),
+        vmax=np.array([1.0]),
+        A=np.array([A, A]),
+        B=np.array([B, B]),
+        x0=np.zeros((2, 2)),
+        u0=np.zeros((2, 1)),
+    )
     return model, np.array([[1.0], [0.0]]), np.array([[1.0, 0.0]]), 1.0 / a1

@@ -84,7 +84,13 @@ class FeedforwardLayout(FeedforwardSpec):
             # an explicit layout without the jerk keys has no jerk term (older gains files)
             d.setdefault("kinematic_states", [])
             d.setdefault("rate_states", [])
-        bad = set(d) - {"free_states", "accelerated_states", "held_states", "kinematic_states", "rate_states"}
+        bad = set(d) - {
+            "free_states",
+            "accelerated_states",
+            "held_states",
+            "kinematic_states",
+            "rate_states",
+        }
         if bad:
             raise ConfigError(f"feedforward: unknown key(s) {sorted(bad)}")
         kw = {}
@@ -101,12 +107,16 @@ class FeedforwardLayout(FeedforwardSpec):
             sel = getattr(self, what)
             missing = [s for s in sel if s not in names]
             if missing:
-                raise ConfigError(f"feedforward.{what}: {missing} not among the model states {names}")
+                raise ConfigError(
+                    f"feedforward.{what}: {missing} not among the model states {names}"
+                )
             if len(set(sel)) != len(sel):
                 raise ConfigError(f"feedforward.{what}: duplicate names in {list(sel)}")
             out.append([names.index(s) for s in sel])
         if set(out[0]) & set(out[1]):
-            raise ConfigError("feedforward: a state cannot be both free and accelerated (Delta v = 0)")
+            raise ConfigError(
+                "feedforward: a state cannot be both free and accelerated (Delta v = 0)"
+            )
         return out[0], out[1], out[2]
 
     def jerk_indices(self, state_names: Sequence[str]) -> tuple[list, list]:
@@ -116,7 +126,9 @@ class FeedforwardLayout(FeedforwardSpec):
             sel = getattr(self, what)
             missing = [s for s in sel if s not in names]
             if missing:
-                raise ConfigError(f"feedforward.{what}: {missing} not among the model states {names}")
+                raise ConfigError(
+                    f"feedforward.{what}: {missing} not among the model states {names}"
+                )
             out.append([names.index(s) for s in sel])
         if not set(self.kinematic_states) <= set(self.free_states):
             raise ConfigError("feedforward.kinematic_states must be among the free states")
@@ -126,8 +138,9 @@ class FeedforwardLayout(FeedforwardSpec):
         return len(self.free_states) + n_u
 
 
-def _system(A: np.ndarray, B: np.ndarray, state_names: Sequence[str], layout: FeedforwardLayout,
-            where: str) -> tuple[np.ndarray, list, list, list]:
+def _system(
+    A: np.ndarray, B: np.ndarray, state_names: Sequence[str], layout: FeedforwardLayout, where: str
+) -> tuple[np.ndarray, list, list, list]:
     """M = [A[rows, free] B[rows, :]] with rows = accelerated + held states (module docstring)."""
     A = np.asarray(A, dtype=float)
     B = np.asarray(B, dtype=float)
@@ -138,8 +151,10 @@ def _system(A: np.ndarray, B: np.ndarray, state_names: Sequence[str], layout: Fe
     rows = acc + held
     M = np.hstack([A[np.ix_(rows, free)], B[rows, :]])
     if M.shape[0] != M.shape[1]:
-        raise ConfigError(f"{where}: feedforward system is {M.shape[0]} x {M.shape[1]} "
-                          f"({len(rows)} imposed rows, {len(free)} free states + {m} inputs); it must be square")
+        raise ConfigError(
+            f"{where}: feedforward system is {M.shape[0]} x {M.shape[1]} "
+            f"({len(rows)} imposed rows, {len(free)} free states + {m} inputs); it must be square"
+        )
     return M, free, acc, rows
 
 
@@ -153,9 +168,11 @@ def _solve(M: np.ndarray, rhs: np.ndarray, cond_max: float, where: str) -> np.nd
     F = Fs / scale[:, None]
     cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
     if rank < M.shape[0] or not cond <= cond_max:
-        raise ConfigError(f"{where}: feedforward system [A[rows, free] B[rows]] is ill-conditioned "
-                          f"(rank {rank}/{M.shape[0]}, cond {cond:.3g} > {cond_max:.3g}): the model cannot "
-                          "produce the requested accelerations; set feedforward: false in the synthesis config")
+        raise ConfigError(
+            f"{where}: feedforward system [A[rows, free] B[rows]] is ill-conditioned "
+            f"(rank {rank}/{M.shape[0]}, cond {cond:.3g} > {cond_max:.3g}): the model cannot "
+            "produce the requested accelerations; set feedforward: false in the synthesis config"
+        )
     if cond > 1e6:
         log.warning("%s: feedforward system condition number %.3g (> 1e6)", where, cond)
     if not np.all(np.isfinite(F)):
@@ -163,9 +180,14 @@ def _solve(M: np.ndarray, rhs: np.ndarray, cond_max: float, where: str) -> np.nd
     return F
 
 
-def feedforward_matrix(A: np.ndarray, B: np.ndarray, state_names: Sequence[str],
-                       layout: FeedforwardLayout = FeedforwardLayout(), cond_max: float = COND_MAX_DEFAULT,
-                       where: str = "model") -> np.ndarray:
+def feedforward_matrix(
+    A: np.ndarray,
+    B: np.ndarray,
+    state_names: Sequence[str],
+    layout: FeedforwardLayout = FeedforwardLayout(),
+    cond_max: float = COND_MAX_DEFAULT,
+    where: str = "model",
+) -> np.ndarray:
     """F (n_free + n_u, n_acc) of the module docstring for one linear model (A, B)."""
     M, _, acc, rows = _system(A, B, state_names, layout, where)
     E = np.zeros((len(rows), len(acc)))
@@ -173,9 +195,15 @@ def feedforward_matrix(A: np.ndarray, B: np.ndarray, state_names: Sequence[str],
     return _solve(M, E, cond_max, where)
 
 
-def jerk_matrix(A: np.ndarray, B: np.ndarray, state_names: Sequence[str], F: np.ndarray,
-                layout: FeedforwardLayout = FeedforwardLayout(), cond_max: float = COND_MAX_DEFAULT,
-                where: str = "model") -> np.ndarray:
+def jerk_matrix(
+    A: np.ndarray,
+    B: np.ndarray,
+    state_names: Sequence[str],
+    F: np.ndarray,
+    layout: FeedforwardLayout = FeedforwardLayout(),
+    cond_max: float = COND_MAX_DEFAULT,
+    where: str = "model",
+) -> np.ndarray:
     """F_j (n_free + n_u + n_rate, n_acc) of the jerk term (module docstring) for one model.
 
     The attitude reference moves, (d/dt) dx_ff[kin] = F[kin] j (j = da/dt, dF/dt neglected), so
@@ -191,25 +219,39 @@ def jerk_matrix(A: np.ndarray, B: np.ndarray, state_names: Sequence[str], F: np.
     A_kr = A[np.ix_(kin, rate)]
     Gw, _, rank, _ = scipy.linalg.lstsq(A_kr, F_kin)
     if rank < len(kin):
-        raise ConfigError(f"{where}: the rate states {list(layout.rate_states)} cannot move the attitude rows "
-                          f"{list(layout.kinematic_states)} (rank {rank}); drop the jerk term")
+        raise ConfigError(
+            f"{where}: the rate states {list(layout.rate_states)} cannot move the attitude rows "
+            f"{list(layout.kinematic_states)} (rank {rank}); drop the jerk term"
+        )
     Fj = _solve(M, -A[np.ix_(rows, rate)] @ Gw, cond_max, where)
     return np.vstack([Fj, Gw])
 
 
-def vertex_feedforward(A: np.ndarray, B: np.ndarray, state_names: Sequence[str],
-                       layout: FeedforwardLayout = FeedforwardLayout(),
-                       cond_max: float = COND_MAX_DEFAULT) -> tuple[np.ndarray, Optional[np.ndarray]]:
+def vertex_feedforward(
+    A: np.ndarray,
+    B: np.ndarray,
+    state_names: Sequence[str],
+    layout: FeedforwardLayout = FeedforwardLayout(),
+    cond_max: float = COND_MAX_DEFAULT,
+) -> tuple[np.ndarray, Optional[np.ndarray]]:
     """(F_i (N, n_free + n_u, n_acc), F_jerk,i (N, n_free + n_u + n_rate, n_acc) or None) for every
     vertex; A (N, n, n), B (N, n, m) nominal models."""
     A = np.asarray(A, dtype=float)
     B = np.asarray(B, dtype=float)
-    F = np.array([feedforward_matrix(A[i], B[i], state_names, layout, cond_max, f"vertex {i}")
-                  for i in range(A.shape[0])])
+    F = np.array(
+        [
+            feedforward_matrix(A[i], B[i], state_names, layout, cond_max, f"vertex {i}")
+            for i in range(A.shape[0])
+        ]
+    )
     if not layout.has_jerk:
         return F, None
-    Fj = np.array([jerk_matrix(A[i], B[i], state_names, F[i], layout, cond_max, f"vertex {i}")
-                   for i in range(A.shape[0])])
+    Fj = np.array(
+        [
+            jerk_matrix(A[i], B[i], state_names, F[i], layout, cond_max, f"vertex {i}")
+            for i in range(A.shape[0])
+        ]
+    )
     return F, Fj
 
 
@@ -223,8 +265,14 @@ def split(F: np.ndarray, n_x: int, free_index: Sequence[int]) -> tuple[np.ndarra
     return Gx, F[..., nf:, :].copy()
 
 
-def feedforward_residual(A: np.ndarray, B: np.ndarray, F: np.ndarray, free_index: Sequence[int],
-                         acc_index: Sequence[int], a: np.ndarray) -> np.ndarray:
+def feedforward_residual(
+    A: np.ndarray,
+    B: np.ndarray,
+    F: np.ndarray,
+    free_index: Sequence[int],
+    acc_index: Sequence[int],
+    a: np.ndarray,
+) -> np.ndarray:
     """A dx_ff + B du_ff - (a on the accelerated rows): the full 12-row residual (kinematic rows
     included) for a test acceleration a."""
     A = np.asarray(A, dtype=float)

@@ -24,8 +24,17 @@ import numpy as np
 import yaml
 
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.models.lpv import (CommonInputSet, ElementBox, PolytopicModel, UncertainElement, box_vertices,
-                                  input_corners, input_hull, product_systems, uncertainty_vertices)
+from lpv_sysid.models.lpv import (
+    CommonInputSet,
+    ElementBox,
+    PolytopicModel,
+    UncertainElement,
+    box_vertices,
+    input_corners,
+    input_hull,
+    product_systems,
+    uncertainty_vertices,
+)
 
 log = logging.getLogger(__name__)
 
@@ -59,7 +68,9 @@ def _layout(fm, path) -> Any:
     """The quadrotor layout (names + units strictly checked) for files with the quadrotor's
     state names, otherwise no layout (generic plants: shapes/finiteness/box still checked)."""
     try:
-        d = read_yaml(path, "file", finite=False)    # a probe for the names; io.formats checks values
+        d = read_yaml(
+            path, "file", finite=False
+        )  # a probe for the names; io.formats checks values
         names = tuple(e.get("name") if isinstance(e, dict) else e for e in d.get("states", []))
     except (ConfigError, AttributeError):
         return fm.QUADROTOR_LAYOUT
@@ -153,8 +164,15 @@ DEFAULT_SET = "reduced_polytope"
 FULL_BOX_SAMPLE = 16
 
 
-def _reduced_systems(A: np.ndarray, B: np.ndarray, els: Sequence[UncertainElement], p_max: int, max_corners: int,
-                     method: str, ucfg: dict) -> list:
+def _reduced_systems(
+    A: np.ndarray,
+    B: np.ndarray,
+    els: Sequence[UncertainElement],
+    p_max: int,
+    max_corners: int,
+    method: str,
+    ucfg: dict,
+) -> list:
     """Eq. (23) systems of one (A, B) from stored intervals: all corners when the free elements
     fit (p <= p_max, 2**p <= max_corners), else the reduction of ident.uncertainty.build applied to
     the stored intervals (centre = midpoint, half-width = k_sigma * std with k_sigma = 1)."""
@@ -163,9 +181,12 @@ def _reduced_systems(A: np.ndarray, B: np.ndarray, els: Sequence[UncertainElemen
         return uncertainty_vertices(A, B, els, max_corners)
     from lpv_sysid.ident import uncertainty as unc
 
-    cfg = unc.UncertaintyConfig.from_dict({"k_sigma": 1.0, "method": method, "p_max": p_max,
-                                           "max_corners": max_corners, **ucfg})
-    elements = [(e.matrix, e.row, e.col, 0.5 * (e.lower + e.upper), 0.5 * (e.upper - e.lower)) for e in els]
+    cfg = unc.UncertaintyConfig.from_dict(
+        {"k_sigma": 1.0, "method": method, "p_max": p_max, "max_corners": max_corners, **ucfg}
+    )
+    elements = [
+        (e.matrix, e.row, e.col, 0.5 * (e.lower + e.upper), 0.5 * (e.upper - e.lower)) for e in els
+    ]
     return [(np.asarray(a), np.asarray(b)) for a, b in unc.build(A, B, elements, cfg).systems]
 
 
@@ -184,8 +205,16 @@ def uncertainty_settings(uncertainty: Optional[dict]) -> dict:
     return u
 
 
-def common_input_systems(As: np.ndarray, Bs: np.ndarray, els: Sequence[Sequence[UncertainElement]], p_max: int,
-                         p_max_b: int, max_corners: int, method: str, ucfg: dict) -> tuple[list, CommonInputSet]:
+def common_input_systems(
+    As: np.ndarray,
+    Bs: np.ndarray,
+    els: Sequence[Sequence[UncertainElement]],
+    p_max: int,
+    p_max_b: int,
+    max_corners: int,
+    method: str,
+    ucfg: dict,
+) -> tuple[list, CommonInputSet]:
     """Product polytope Lambda_i^(a,b) = (A_i^a, B^b) (models.lpv module docstring).
 
     B part: the hull of :func:`lpv_sysid.models.lpv.input_hull`; all corners when its p_B
@@ -199,7 +228,9 @@ def common_input_systems(As: np.ndarray, Bs: np.ndarray, els: Sequence[Sequence[
         corners, b_method = input_corners(base, hull, max_corners), "box"
     else:
         A_ref = np.mean(As, axis=0)
-        corners = np.array([b for _, b in _reduced_systems(A_ref, base, hull, p_max_b, max_corners, method, ucfg)])
+        corners = np.array(
+            [b for _, b in _reduced_systems(A_ref, base, hull, p_max_b, max_corners, method, ucfg)]
+        )
         b_method = method
     common = CommonInputSet(corners, tuple(hull), nlo, nhi, b_method)
     M_B = common.M
@@ -218,7 +249,9 @@ def _per_vertex(p_max, N: int) -> list:
     configuration gives the vertices different corner counts, config/synthesis_seed_scale.yaml)."""
     vals = list(p_max) if isinstance(p_max, (list, tuple)) else [p_max] * N
     if len(vals) != N:
-        raise ConfigError(f"uncertainty.p_max: a list needs one entry per vertex ({N}), got {len(vals)}")
+        raise ConfigError(
+            f"uncertainty.p_max: a list needs one entry per vertex ({N}), got {len(vals)}"
+        )
     out = []
     for v in vals:
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
@@ -232,7 +265,9 @@ MOTOR_STATES = ("dt", "da", "de", "dr")
 MOTOR_INPUTS = ("ut", "ua", "ue", "ur")
 
 
-def full_box_elements(d: dict, states: tuple, inputs: tuple, motor_std=None) -> tuple[list, list, dict]:
+def full_box_elements(
+    d: dict, states: tuple, inputs: tuple, motor_std=None
+) -> tuple[list, list, dict]:
     """Every uncertain element of the models file (raw mapping ``d``) in its interval, per vertex:
     ([UncertainElement], [label]) lists and a description of the rule (certificate entry).
 
@@ -245,8 +280,14 @@ def full_box_elements(d: dict, states: tuple, inputs: tuple, motor_std=None) -> 
     uncertain (12.31 +/- 0.21, (1.399 +/- 0.182) 1e4)."""
     meta = d.get("meta") or {}
     k_meta = meta.get("k_sigma", 3.0) if isinstance(meta, dict) else 3.0
-    k_applied = ((meta.get("uncertainty") or {}).get("k_applied") if isinstance(meta, dict) else None) or []
-    quad = tuple(states[8:12]) == MOTOR_STATES and tuple(inputs) == MOTOR_INPUTS if len(states) >= 12 else False
+    k_applied = (
+        (meta.get("uncertainty") or {}).get("k_applied") if isinstance(meta, dict) else None
+    ) or []
+    quad = (
+        tuple(states[8:12]) == MOTOR_STATES and tuple(inputs) == MOTOR_INPUTS
+        if len(states) >= 12
+        else False
+    )
     n_stored = n_ksig = n_motor = 0
     out, labels = [], []
     for i, v in enumerate(d["vertices"]):
@@ -262,30 +303,48 @@ def full_box_elements(d: dict, states: tuple, inputs: tuple, motor_std=None) -> 
                 n_stored += 1
             elif std > 0:
                 nom = el.nominal if el.nominal is not None else el.lower
-                els.append(UncertainElement(el.matrix, el.row, el.col, nom - k_i * std, nom + k_i * std, nom))
+                els.append(
+                    UncertainElement(
+                        el.matrix, el.row, el.col, nom - k_i * std, nom + k_i * std, nom
+                    )
+                )
                 labs.append(f"nominal +/- {k_i:g} std")
                 n_ksig += 1
         if motor_std is not None and quad:
             A = np.asarray(v["A"], dtype=float)
             B = np.asarray(v["B"], dtype=float)
-            have = any((m_, 8 + q, c_) in seen for q in range(4) for m_, c_ in (("A", 8 + q), ("B", q)))
+            have = any(
+                (m_, 8 + q, c_) in seen for q in range(4) for m_, c_ in (("A", 8 + q), ("B", q))
+            )
             if not have:
                 for q in range(4):
                     for mat, col, sd in (("A", 8 + q, motor_std[0]), ("B", q, motor_std[1])):
                         nom = float((A if mat == "A" else B)[8 + q, col])
-                        els.append(UncertainElement(mat, 8 + q, col, nom - k_meta * sd, nom + k_meta * sd, nom))
-                        labs.append(f"motor constant, synthesis config motor_std +/- {k_meta:g} std")
+                        els.append(
+                            UncertainElement(
+                                mat, 8 + q, col, nom - k_meta * sd, nom + k_meta * sd, nom
+                            )
+                        )
+                        labs.append(
+                            f"motor constant, synthesis config motor_std +/- {k_meta:g} std"
+                        )
                         n_motor += 1
         out.append(els)
         labels.append(labs)
-    rule = {"intervals": "stored [lower, upper] where lower < upper; nominal +/- k std where a file stores "
-                         "lower = upper with std > 0 (k = meta.uncertainty.k_applied, meta.k_sigma or 3)",
-            "stored": n_stored, "k_std": n_ksig, "motor_from_config": n_motor,
-            "motor_std": None if motor_std is None else [float(x) for x in motor_std]}
+    rule = {
+        "intervals": "stored [lower, upper] where lower < upper; nominal +/- k std where a file stores "
+        "lower = upper with std > 0 (k = meta.uncertainty.k_applied, meta.k_sigma or 3)",
+        "stored": n_stored,
+        "k_std": n_ksig,
+        "motor_from_config": n_motor,
+        "motor_std": None if motor_std is None else [float(x) for x in motor_std],
+    }
     return out, labels, rule
 
 
-def load_models(path: Path | str, uncertainty: Optional[dict] = None) -> tuple[PolytopicModel, dict]:
+def load_models(
+    path: Path | str, uncertainty: Optional[dict] = None
+) -> tuple[PolytopicModel, dict]:
     """Read vertex_models.yaml into the nested polytope of seed 0 Eq. (23).
 
     ``uncertainty`` config (see config/synthesis.yaml): ``p_max`` (default 4) corner parameters
@@ -310,11 +369,15 @@ def load_models(path: Path | str, uncertainty: Optional[dict] = None) -> tuple[P
     """
     fm = _formats()
     if fm is not None and hasattr(fm, "VertexModels"):
-        fm.VertexModels.load(path, _layout(fm, path))   # strict validation by the io/formats contract
+        fm.VertexModels.load(
+            path, _layout(fm, path)
+        )  # strict validation by the io/formats contract
     d = read_yaml(path, "models")
     where = str(path)
     if d.get("format") not in MODELS_FORMATS:
-        raise ConfigError(f"{where}: 'format' must be one of {list(MODELS_FORMATS)}, got {d.get('format')!r}")
+        raise ConfigError(
+            f"{where}: 'format' must be one of {list(MODELS_FORMATS)}, got {d.get('format')!r}"
+        )
     states = _names(d, "states", where)
     inputs = _names(d, "inputs", where)
     names, lo, hi = _box(d, where)
@@ -330,9 +393,13 @@ def load_models(path: Path | str, uncertainty: Optional[dict] = None) -> tuple[P
         max_corners = int(ucfg.pop("max_corners"))
         p_max_b = int(ucfg.pop("p_max_b"))
     except (TypeError, ValueError) as exc:
-        raise ConfigError(f"uncertainty: p_max_b and max_corners must be integers ({exc})") from None
+        raise ConfigError(
+            f"uncertainty: p_max_b and max_corners must be integers ({exc})"
+        ) from None
     if p_max_b < 0 or max_corners < 1:
-        raise ConfigError(f"uncertainty: need p_max_b >= 0, max_corners >= 1, got {p_max_b}, {max_corners}")
+        raise ConfigError(
+            f"uncertainty: need p_max_b >= 0, max_corners >= 1, got {p_max_b}, {max_corners}"
+        )
     method = str(ucfg.pop("method"))
     common_b = ucfg.pop("common_b")
     which = ucfg.pop("set")
@@ -341,9 +408,13 @@ def load_models(path: Path | str, uncertainty: Optional[dict] = None) -> tuple[P
         try:
             motor_std = tuple(float(x) for x in motor_std)
         except (TypeError, ValueError):
-            raise ConfigError(f"uncertainty.motor_std must be [std a_Omega, std b_Omega], got {motor_std!r}") from None
+            raise ConfigError(
+                f"uncertainty.motor_std must be [std a_Omega, std b_Omega], got {motor_std!r}"
+            ) from None
         if len(motor_std) != 2 or not all(np.isfinite(x) and x > 0 for x in motor_std):
-            raise ConfigError(f"uncertainty.motor_std must be two numbers > 0, got {list(motor_std)}")
+            raise ConfigError(
+                f"uncertainty.motor_std must be two numbers > 0, got {list(motor_std)}"
+            )
     As, Bs, x0s, u0s, elss = [], [], [], [], []
     for k, v in enumerate(verts):
         w = f"{where}: vertices[{k}]"
@@ -351,36 +422,60 @@ def load_models(path: Path | str, uncertainty: Optional[dict] = None) -> tuple[P
             raise ConfigError(f"{w}: must be a mapping")
         sch = _matrix(v.get("scheduling"), (len(names),), f"{w}.scheduling")
         if not np.allclose(sch, corners[k], rtol=1e-9, atol=1e-9):
-            raise ConfigError(f"{w}.scheduling {sch.tolist()} is not box corner {corners[k].tolist()} "
-                              "(order: itertools.product over (min, max), first axis slowest)")
+            raise ConfigError(
+                f"{w}.scheduling {sch.tolist()} is not box corner {corners[k].tolist()} "
+                "(order: itertools.product over (min, max), first axis slowest)"
+            )
         As.append(_matrix(v.get("A"), (n, n), f"{w}.A"))
         Bs.append(_matrix(v.get("B"), (n, m), f"{w}.B"))
         x0s.append(_matrix(v.get("x0", [0.0] * n), (n,), f"{w}.x0"))
         u0s.append(_matrix(v.get("u0", [0.0] * m), (m,), f"{w}.u0"))
         elss.append([UncertainElement.from_dict(e) for e in (v.get("uncertain") or [])])
     As, Bs = np.array(As), np.array(Bs)
-    kw = dict(vmin=lo, vmax=hi, A=As, B=Bs, x0=np.array(x0s), u0=np.array(u0s), ts=ts, state_names=states,
-              input_names=inputs, scheduling_names=names)
+    kw = dict(
+        vmin=lo,
+        vmax=hi,
+        A=As,
+        B=Bs,
+        x0=np.array(x0s),
+        u0=np.array(u0s),
+        ts=ts,
+        state_names=states,
+        input_names=inputs,
+        scheduling_names=names,
+    )
     if which == "full_box":
         if not common_b:
-            raise ConfigError("uncertainty.set: full_box needs common_b: true (the B hull is what covers the "
-                              "interior of the scheduling box)")
+            raise ConfigError(
+                "uncertainty.set: full_box needs common_b: true (the B hull is what covers the "
+                "interior of the scheduling box)"
+            )
         fb, labels, _ = full_box_elements(d, states, inputs, motor_std)
         box = ElementBox.from_elements(As, Bs, fb, labels)
-        model = PolytopicModel(systems=box.sample_systems(list(zip(As, Bs)), FULL_BOX_SAMPLE), box=box, **kw)
+        model = PolytopicModel(
+            systems=box.sample_systems(list(zip(As, Bs)), FULL_BOX_SAMPLE), box=box, **kw
+        )
         return model, d
     common = None
     if common_b:
-        systems, common = common_input_systems(As, Bs, elss, p_max, p_max_b, max_corners, method, ucfg)
+        systems, common = common_input_systems(
+            As, Bs, elss, p_max, p_max_b, max_corners, method, ucfg
+        )
     else:
-        systems = [_reduced_systems(A, B, e, p, max_corners, method, ucfg)
-                   for A, B, e, p in zip(As, Bs, elss, p_max)]
+        systems = [
+            _reduced_systems(A, B, e, p, max_corners, method, ucfg)
+            for A, B, e, p in zip(As, Bs, elss, p_max)
+        ]
     model = PolytopicModel(systems=systems, common_input=common, **kw)
     return model, d
 
 
-def models_dict(model: PolytopicModel, elements: Optional[Sequence[Sequence[UncertainElement]]] = None,
-                state_units: Optional[Sequence[str]] = None, input_units: Optional[Sequence[str]] = None) -> dict:
+def models_dict(
+    model: PolytopicModel,
+    elements: Optional[Sequence[Sequence[UncertainElement]]] = None,
+    state_units: Optional[Sequence[str]] = None,
+    input_units: Optional[Sequence[str]] = None,
+) -> dict:
     """Inverse of :func:`load_models` (for tests and examples)."""
     n, m = model.n_x, model.n_u
     sn = model.state_names or tuple(f"x{k}" for k in range(n))
@@ -390,20 +485,40 @@ def models_dict(model: PolytopicModel, elements: Optional[Sequence[Sequence[Unce
     schn = model.scheduling_names or tuple(f"s{k}" for k in range(model.vmin.size))
     verts = []
     for i, vd in enumerate(model.vertices):
-        e = {"scheduling": vd.tolist(), "x0": model.x0[i].tolist(), "u0": model.u0[i].tolist(),
-             "A": model.A[i].tolist(), "B": model.B[i].tolist(), "uncertain": []}
+        e = {
+            "scheduling": vd.tolist(),
+            "x0": model.x0[i].tolist(),
+            "u0": model.u0[i].tolist(),
+            "A": model.A[i].tolist(),
+            "B": model.B[i].tolist(),
+            "uncertain": [],
+        }
         if elements is not None:
-            e["uncertain"] = [{"matrix": el.matrix, "row": el.row, "col": el.col,
-                               "nominal": float(el.nominal if el.nominal is not None else 0.5 * (el.lower + el.upper)),
-                               "std": float(0.5 * (el.upper - el.lower)),
-                               "lower": float(el.lower), "upper": float(el.upper)} for el in elements[i]]
+            e["uncertain"] = [
+                {
+                    "matrix": el.matrix,
+                    "row": el.row,
+                    "col": el.col,
+                    "nominal": float(
+                        el.nominal if el.nominal is not None else 0.5 * (el.lower + el.upper)
+                    ),
+                    "std": float(0.5 * (el.upper - el.lower)),
+                    "lower": float(el.lower),
+                    "upper": float(el.upper),
+                }
+                for el in elements[i]
+            ]
         verts.append(e)
     return {
         "format": MODELS_FORMAT,
         "time": "continuous" if model.ts is None else {"discrete": float(model.ts)},
         "states": [{"name": a, "unit": b} for a, b in zip(sn, su)],
         "inputs": [{"name": a, "unit": b} for a, b in zip(inn, iu)],
-        "scheduling": {"names": list(schn), "min": model.vmin.tolist(), "max": model.vmax.tolist()},
+        "scheduling": {
+            "names": list(schn),
+            "min": model.vmin.tolist(),
+            "max": model.vmax.tolist(),
+        },
         "vertices": verts,
     }
 
@@ -424,10 +539,17 @@ def save_yaml(d: dict, path: Path | str) -> None:
 #: LMI form code ``lmi_form`` (:data:`LMI_FORMS`) and for the rate form the bound ``rate``
 BOX_ARRAYS = ("box_rows", "box_cols", "box_half", "box_p", "box_Ac", "box_Bc", "box_t", "lmi_form")
 #: ``lmi_form`` codes: which LMI the stored (X, S, H) satisfy
-LMI_FORMS = {0: "eq30 corners", 1: "box direct common X", 2: "box eq30 vertex X_i", 3: "box eq30 rate X(v_d)"}
+LMI_FORMS = {
+    0: "eq30 corners",
+    1: "box direct common X",
+    2: "box eq30 vertex X_i",
+    3: "box eq30 rate X(v_d)",
+}
 
 
-def box_arrays(box: ElementBox, t: Sequence[np.ndarray], form: int, rate: Optional[Sequence[float]] = None) -> dict:
+def box_arrays(
+    box: ElementBox, t: Sequence[np.ndarray], form: int, rate: Optional[Sequence[float]] = None
+) -> dict:
     """The :data:`BOX_ARRAYS` of an element box and its multipliers, for the sidecar."""
     N, p = box.N, max(box.p) if box.p else 0
     rows = np.full((N, p), -1, dtype=np.int64)
@@ -436,19 +558,35 @@ def box_arrays(box: ElementBox, t: Sequence[np.ndarray], form: int, rate: Option
     tt = np.full((N, p), np.nan)
     for i in range(N):
         r, c, h = box.arrays(i)
-        rows[i, :r.size], cols[i, :r.size], half[i, :r.size] = r, c, h
-        tt[i, :r.size] = np.asarray(t[i], dtype=float)
-    out = {"box_rows": rows, "box_cols": cols, "box_half": half, "box_p": np.array(box.p, dtype=np.int64),
-           "box_Ac": np.asarray(box.A_centre, dtype=float), "box_Bc": np.asarray(box.B_centre, dtype=float),
-           "box_t": tt, "lmi_form": np.array(int(form), dtype=np.int64)}
+        rows[i, : r.size], cols[i, : r.size], half[i, : r.size] = r, c, h
+        tt[i, : r.size] = np.asarray(t[i], dtype=float)
+    out = {
+        "box_rows": rows,
+        "box_cols": cols,
+        "box_half": half,
+        "box_p": np.array(box.p, dtype=np.int64),
+        "box_Ac": np.asarray(box.A_centre, dtype=float),
+        "box_Bc": np.asarray(box.B_centre, dtype=float),
+        "box_t": tt,
+        "lmi_form": np.array(int(form), dtype=np.int64),
+    }
     if rate is not None:
         out["rate"] = np.asarray(rate, dtype=float)
     return out
 
 
-def save_certificate_npz(path: Path | str, X: list, S: np.ndarray, H: np.ndarray, t: np.ndarray, s_u: np.ndarray,
-                         R: np.ndarray, C: np.ndarray, systems: Optional[Sequence] = None,
-                         extra: Optional[dict] = None) -> str:
+def save_certificate_npz(
+    path: Path | str,
+    X: list,
+    S: np.ndarray,
+    H: np.ndarray,
+    t: np.ndarray,
+    s_u: np.ndarray,
+    R: np.ndarray,
+    C: np.ndarray,
+    systems: Optional[Sequence] = None,
+    extra: Optional[dict] = None,
+) -> str:
     """Write the sidecar; returns its sha256. ``systems`` (per vertex the certified (A_ij, B_ij),
     ``PolytopicModel.systems``) are stored as :data:`lpv_sysid.io.formats.SYSTEMS_ARRAYS` for the
     flight runtime's closed-loop re-check; ``extra`` adds arrays (e.g. :func:`box_arrays`)."""
@@ -462,12 +600,22 @@ def save_certificate_npz(path: Path | str, X: list, S: np.ndarray, H: np.ndarray
     from lpv_sysid.io.safe_open import check_output
 
     p = Path(path)
-    check_output(p)         # an existing FIFO or device is refused, not opened
+    check_output(p)  # an existing FIFO or device is refused, not opened
     with open(p, "wb") as f:
         arrays = {} if systems is None else _formats().systems_arrays(systems)
         arrays.update(extra or {})
-        np.savez(f, X=Xa, M=Mi, S=np.asarray(S), H=np.asarray(H), t=np.asarray(t), s_u=np.asarray(s_u),
-                 R=np.asarray(R), C=np.asarray(C), **arrays)
+        np.savez(
+            f,
+            X=Xa,
+            M=Mi,
+            S=np.asarray(S),
+            H=np.asarray(H),
+            t=np.asarray(t),
+            s_u=np.asarray(s_u),
+            R=np.asarray(R),
+            C=np.asarray(C),
+            **arrays,
+        )
     return sha256_file(p)
 
 
@@ -482,9 +630,18 @@ def load_certificate_npz(path: Path | str) -> dict:
     return d
 
 
-def gains_dict(models_raw: dict, model: PolytopicModel, K: np.ndarray, R: np.ndarray, Q: np.ndarray, gamma: float,
-               certificate: dict, F_ff: Optional[np.ndarray] = None, ff_layout: Optional[dict] = None,
-               F_jerk: Optional[np.ndarray] = None) -> dict:
+def gains_dict(
+    models_raw: dict,
+    model: PolytopicModel,
+    K: np.ndarray,
+    R: np.ndarray,
+    Q: np.ndarray,
+    gamma: float,
+    certificate: dict,
+    F_ff: Optional[np.ndarray] = None,
+    ff_layout: Optional[dict] = None,
+    F_jerk: Optional[np.ndarray] = None,
+) -> dict:
     """The gains.yaml document of ARCHITECTURE.md section 5.
 
     With ``F_ff`` (N, n_free + m, p) and its layout (``FeedforwardLayout.to_dict()``) every vertex
@@ -495,8 +652,15 @@ def gains_dict(models_raw: dict, model: PolytopicModel, K: np.ndarray, R: np.nda
         "states": models_raw["states"],
         "inputs": models_raw["inputs"],
         "scheduling": models_raw["scheduling"],
-        "vertices": [{"scheduling": model.vertices[i].tolist(), "K": np.asarray(K[i]).tolist(),
-                      "x0": model.x0[i].tolist(), "u0": model.u0[i].tolist()} for i in range(model.n_vertices)],
+        "vertices": [
+            {
+                "scheduling": model.vertices[i].tolist(),
+                "K": np.asarray(K[i]).tolist(),
+                "x0": model.x0[i].tolist(),
+                "u0": model.u0[i].tolist(),
+            }
+            for i in range(model.n_vertices)
+        ],
         "R": np.asarray(R).tolist(),
         "Q": np.asarray(Q).tolist(),
         "gamma": float(gamma),
@@ -520,7 +684,9 @@ class Gains:
     def __init__(self, d: dict, path: Optional[Path] = None) -> None:
         where = str(path) if path else "gains"
         if d.get("format") != GAINS_FORMAT:
-            raise ConfigError(f"{where}: 'format' must be {GAINS_FORMAT!r}, got {d.get('format')!r}")
+            raise ConfigError(
+                f"{where}: 'format' must be {GAINS_FORMAT!r}, got {d.get('format')!r}"
+            )
         self.raw = d
         self.path = path
         self.state_names = _names(d, "states", where)
@@ -541,7 +707,9 @@ class Gains:
                 raise ConfigError(f"{w}: must be a mapping")
             sch = _matrix(v.get("scheduling"), (corners.shape[1],), f"{w}.scheduling")
             if not np.allclose(sch, corners[k]):
-                raise ConfigError(f"{w}.scheduling {sch.tolist()} is not box corner {corners[k].tolist()}")
+                raise ConfigError(
+                    f"{w}.scheduling {sch.tolist()} is not box corner {corners[k].tolist()}"
+                )
             K.append(_matrix(v.get("K"), (m, n), f"{w}.K"))
             x0.append(_matrix(v.get("x0"), (n,), f"{w}.x0"))
             u0.append(_matrix(v.get("u0"), (m,), f"{w}.u0"))
@@ -550,7 +718,9 @@ class Gains:
                     raise ConfigError(f"{w}: missing F_ff (the file declares 'feedforward')")
                 for key, lst in (("F_ff", F), ("F_jerk", Fj)):
                     if key in v:
-                        lst.append(_matrix(v[key], np.array(v[key], dtype=float).shape, f"{w}.{key}"))
+                        lst.append(
+                            _matrix(v[key], np.array(v[key], dtype=float).shape, f"{w}.{key}")
+                        )
         self.K, self.x0, self.u0 = np.array(K), np.array(x0), np.array(u0)
         #: feedforward layout (dict) and stacked F_ff (N, r, p), or None (synthesis/feedforward.py)
         self.feedforward = ff

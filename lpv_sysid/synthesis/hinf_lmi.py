@@ -63,14 +63,20 @@ AUTO_CLARABEL_MAX_BLOCKS = 8
 class HinfOptions:
     """Options of the Lemma 1 synthesis (keys of ``config/synthesis.yaml: hinf``)."""
 
-    gamma: float = 1.0              # requested bound (Eq. 29)
-    minimize_gamma: bool = False    # True: minimise gamma^2 as a variable; False: feasibility at gamma
-    eps: float = 1e-6               # strictness margin: LMI <= -eps I, X >= eps I (scaled coords)
-    solver: str = "CLARABEL"        # CLARABEL (default) | SCS | MOSEK | AUTO (MOSEK if installed, else by size)
+    gamma: float = 1.0  # requested bound (Eq. 29)
+    minimize_gamma: bool = (
+        False  # True: minimise gamma^2 as a variable; False: feasibility at gamma
+    )
+    eps: float = 1e-6  # strictness margin: LMI <= -eps I, X >= eps I (scaled coords)
+    solver: str = (
+        "CLARABEL"  # CLARABEL (default) | SCS | MOSEK | AUTO (MOSEK if installed, else by size)
+    )
     fallback: Optional[str] = "SCS"  # tried when the first solver errors out (not when infeasible)
-    scale: bool = True              # diagonal similarity scaling (synthesis.scaling)
+    scale: bool = True  # diagonal similarity scaling (synthesis.scaling)
     remedy_bisection_steps: int = 0  # >0: quantify uncertainty-reduction remedy by bisection
-    region: Optional[Region] = None  # optional LMI region for the closed-loop poles (common-H, see _build)
+    region: Optional[Region] = (
+        None  # optional LMI region for the closed-loop poles (common-H, see _build)
+    )
     verbose: bool = False
     #: "corners": Eq. (30) at every Eq. (23) system (the seed); "box": the structured-perturbation
     #: LMI of synthesis.robust_lmi over the element box (one block per vertex); "auto": box when the
@@ -96,23 +102,37 @@ class HinfOptions:
         if "region" in d and not isinstance(d["region"], Region):
             d["region"] = Region.from_dict(d["region"])
         opts = cls(**d)
-        if not (isinstance(opts.gamma, (int, float)) and np.isfinite(opts.gamma) and opts.gamma > 0):
+        if not (
+            isinstance(opts.gamma, (int, float)) and np.isfinite(opts.gamma) and opts.gamma > 0
+        ):
             raise ConfigError(f"hinf.gamma must be a finite number > 0, got {opts.gamma!r}")
         if not (opts.eps >= 0 and np.isfinite(opts.eps)):
             raise ConfigError(f"hinf.eps must be >= 0, got {opts.eps!r}")
         if str(opts.solver).upper() not in SOLVERS:
             raise ConfigError(f"hinf.solver must be one of {SOLVERS}, got {opts.solver!r}")
         if opts.fallback is not None and str(opts.fallback).upper() not in SOLVERS:
-            raise ConfigError(f"hinf.fallback must be one of {SOLVERS} or null, got {opts.fallback!r}")
+            raise ConfigError(
+                f"hinf.fallback must be one of {SOLVERS} or null, got {opts.fallback!r}"
+            )
         if opts.method not in ("auto", "corners", "box"):
             raise ConfigError(f"hinf.method must be auto, corners or box, got {opts.method!r}")
         if opts.lyapunov not in ("vertex", "common", "rate"):
-            raise ConfigError(f"hinf.lyapunov must be vertex, common or rate, got {opts.lyapunov!r}")
-        if opts.objective is not None and opts.objective not in ("feasibility", "min_gamma", "min_effort"):
-            raise ConfigError(f"hinf.objective must be feasibility, min_gamma or min_effort, got {opts.objective!r}")
+            raise ConfigError(
+                f"hinf.lyapunov must be vertex, common or rate, got {opts.lyapunov!r}"
+            )
+        if opts.objective is not None and opts.objective not in (
+            "feasibility",
+            "min_gamma",
+            "min_effort",
+        ):
+            raise ConfigError(
+                f"hinf.objective must be feasibility, min_gamma or min_effort, got {opts.objective!r}"
+            )
         if opts.objective is not None and opts.minimize_gamma and opts.objective != "min_gamma":
-            raise ConfigError("hinf: minimize_gamma: true contradicts objective "
-                              f"{opts.objective!r} (use objective: min_gamma)")
+            raise ConfigError(
+                "hinf: minimize_gamma: true contradicts objective "
+                f"{opts.objective!r} (use objective: min_gamma)"
+            )
         f = opts.design_gamma_fraction
         if isinstance(f, bool) or not isinstance(f, (int, float)) or not (0 < f <= 1):
             raise ConfigError(f"hinf.design_gamma_fraction must be in (0, 1], got {f!r}")
@@ -121,13 +141,21 @@ class HinfOptions:
             try:
                 rb = [float(x) for x in rb]
             except (TypeError, ValueError):
-                raise ConfigError(f"hinf.rate_bound must be 'design' or a list of numbers, got {rb!r}") from None
+                raise ConfigError(
+                    f"hinf.rate_bound must be 'design' or a list of numbers, got {rb!r}"
+                ) from None
             if not all(np.isfinite(x) and x >= 0 for x in rb):
                 raise ConfigError(f"hinf.rate_bound entries must be finite and >= 0, got {rb}")
         if opts.lyapunov == "rate" and rb is None:
-            raise ConfigError("hinf.lyapunov: rate needs hinf.rate_bound ('design' or per-axis bounds in m/s^2)")
-        return replace(opts, solver=str(opts.solver).upper(), rate_bound=rb,
-                       fallback=None if opts.fallback is None else str(opts.fallback).upper())
+            raise ConfigError(
+                "hinf.lyapunov: rate needs hinf.rate_bound ('design' or per-axis bounds in m/s^2)"
+            )
+        return replace(
+            opts,
+            solver=str(opts.solver).upper(),
+            rate_bound=rb,
+            fallback=None if opts.fallback is None else str(opts.fallback).upper(),
+        )
 
     @property
     def effective_objective(self) -> str:
@@ -138,11 +166,11 @@ class HinfOptions:
 
 @dataclass
 class ProblemSize:
-    scalar_variables: int       # free scalars (symmetric matrices counted n(n+1)/2)
-    lmi_blocks: int             # number of matrix inequalities (Eq. 30 blocks + X > 0)
-    lmi_total_dim: int          # sum of the dimensions of those blocks
-    scalar_constraints: int     # sum of d(d+1)/2 over the blocks
-    eq30_block_dim: int         # dimension of one Eq. (30) block (2n + n_e + n_z)
+    scalar_variables: int  # free scalars (symmetric matrices counted n(n+1)/2)
+    lmi_blocks: int  # number of matrix inequalities (Eq. 30 blocks + X > 0)
+    lmi_total_dim: int  # sum of the dimensions of those blocks
+    scalar_constraints: int  # sum of d(d+1)/2 over the blocks
+    eq30_block_dim: int  # dimension of one Eq. (30) block (2n + n_e + n_z)
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -152,12 +180,12 @@ class ProblemSize:
 class HinfResult:
     """Solution of Lemma 1 in unscaled coordinates (K_i = S_i H^-1)."""
 
-    K: np.ndarray                    # (N, m, n)
-    X: list                          # X[i][j] (n, n)
-    S: np.ndarray                    # (N, m, n)
-    H: np.ndarray                    # (n, n)
+    K: np.ndarray  # (N, m, n)
+    X: list  # X[i][j] (n, n)
+    S: np.ndarray  # (N, m, n)
+    H: np.ndarray  # (n, n)
     gamma_requested: float
-    gamma_solver: float              # gamma used (requested) or minimised by the solver
+    gamma_solver: float  # gamma used (requested) or minimised by the solver
     status: str
     solver: str
     size: ProblemSize
@@ -165,7 +193,7 @@ class HinfResult:
     solve_time: float
     scaling: Scaling
     eps: float
-    gamma_certified: float = float("nan")   # numpy re-evaluation of Eq. (30), see lmi_check
+    gamma_certified: float = float("nan")  # numpy re-evaluation of Eq. (30), see lmi_check
     min_margin: float = float("nan")
     info: dict = field(default_factory=dict)
 
@@ -185,7 +213,9 @@ def excitation_R(deltas: Sequence[float], T: float) -> np.ndarray:
     """R = sqrt(n_u T / 2) diag(Delta_t, Delta_a, Delta_e, Delta_r), seed 0 Eq. (27)."""
     d = np.asarray(deltas, dtype=float)
     if d.ndim != 1 or not np.all(np.isfinite(d)) or np.any(d <= 0) or not (T > 0):
-        raise ConfigError(f"R: need positive input magnitudes and T > 0, got {d.tolist()}, T={T!r}")
+        raise ConfigError(
+            f"R: need positive input magnitudes and T > 0, got {d.tolist()}, T={T!r}"
+        )
     return np.sqrt(d.size * T / 2.0) * np.diag(d)
 
 
@@ -193,24 +223,36 @@ def output_Q(deltas: Sequence[float], T: float) -> np.ndarray:
     """Q = sqrt(n_z T) diag(Delta_u, Delta_v, Delta_w), seed 0 Eq. (28)."""
     d = np.asarray(deltas, dtype=float)
     if d.ndim != 1 or not np.all(np.isfinite(d)) or np.any(d <= 0) or not (T > 0):
-        raise ConfigError(f"Q: need positive output magnitudes and T > 0, got {d.tolist()}, T={T!r}")
+        raise ConfigError(
+            f"Q: need positive output magnitudes and T > 0, got {d.tolist()}, T={T!r}"
+        )
     return np.sqrt(d.size * T) * np.diag(d)
 
 
 # --------------------------------------------------------------------------- the LMI
-def eq30_matrix(A: np.ndarray, Bc: np.ndarray, Be: np.ndarray, C: np.ndarray, X: np.ndarray,
-                S: np.ndarray, H: np.ndarray, g: float) -> np.ndarray:
+def eq30_matrix(
+    A: np.ndarray,
+    Bc: np.ndarray,
+    Be: np.ndarray,
+    C: np.ndarray,
+    X: np.ndarray,
+    S: np.ndarray,
+    H: np.ndarray,
+    g: float,
+) -> np.ndarray:
     """Numeric left-hand side of seed 0 Eq. (30) (numpy; used by the independent check)."""
     n = A.shape[0]
     ne, nz = Be.shape[1], C.shape[0]
     U = A @ H + Bc @ S
     CH = C @ H
-    return np.block([
-        [U + U.T, -X + H.T - U, Be, CH.T],
-        [-X + H - U.T, -(H + H.T), np.zeros((n, ne)), -CH.T],
-        [Be.T, np.zeros((ne, n)), -np.eye(ne), np.zeros((ne, nz))],
-        [CH, -CH, np.zeros((nz, ne)), -g * np.eye(nz)],
-    ])
+    return np.block(
+        [
+            [U + U.T, -X + H.T - U, Be, CH.T],
+            [-X + H - U.T, -(H + H.T), np.zeros((n, ne)), -CH.T],
+            [Be.T, np.zeros((ne, n)), -np.eye(ne), np.zeros((ne, nz))],
+            [CH, -CH, np.zeros((nz, ne)), -g * np.eye(nz)],
+        ]
+    )
 
 
 def lmi_gamma(A, Bc, Be, C, X, S, H) -> float:
@@ -232,24 +274,39 @@ def lmi_gamma(A, Bc, Be, C, X, S, H) -> float:
     return float(np.sqrt(max(np.max(np.linalg.eigvalsh(0.5 * (G + G.T))), 0.0)))
 
 
-def excitation_matrix(Bj: np.ndarray, R: np.ndarray, Be: Optional[np.ndarray] = None) -> np.ndarray:
+def excitation_matrix(
+    Bj: np.ndarray, R: np.ndarray, Be: Optional[np.ndarray] = None
+) -> np.ndarray:
     """B_e^j = B_c^j R (seed 0 Eq. 19) unless an explicit (unmatched) B_e is given."""
     return np.asarray(Be, dtype=float) if Be is not None else np.asarray(Bj, dtype=float) @ R
 
 
-def _problem_systems(model: PolytopicModel, R: np.ndarray, C: np.ndarray, scaling: Scaling,
-                     Be: Optional[np.ndarray] = None):
+def _problem_systems(
+    model: PolytopicModel,
+    R: np.ndarray,
+    C: np.ndarray,
+    scaling: Scaling,
+    Be: Optional[np.ndarray] = None,
+):
     out = []
     for i, lst in enumerate(model.systems):
         for j, (Aj, Bj) in enumerate(lst):
             Aj = np.asarray(Aj, float)
             Bj = np.asarray(Bj, float)
-            out.append((i, j, scaling.A(Aj), scaling.Bc(Bj), scaling.Be(excitation_matrix(Bj, R, Be))))
+            out.append(
+                (i, j, scaling.A(Aj), scaling.Bc(Bj), scaling.Be(excitation_matrix(Bj, R, Be)))
+            )
     return out, scaling.C(C)
 
 
-def _build(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: HinfOptions, scaling: Scaling,
-           Be: Optional[np.ndarray] = None):
+def _build(
+    model: PolytopicModel,
+    R: np.ndarray,
+    C: np.ndarray,
+    opts: HinfOptions,
+    scaling: Scaling,
+    Be: Optional[np.ndarray] = None,
+):
     import cvxpy as cp
 
     n, m = model.n_x, model.n_u
@@ -277,23 +334,32 @@ def _build(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: HinfOption
     Xs: dict = {}
     X_common = cp.Variable((n, n), symmetric=True, name="X") if opts.lyapunov == "common" else None
     for i, j, A, Bc, Be_j in systems:
-        X = X_common if X_common is not None else cp.Variable((n, n), symmetric=True, name=f"X_{i}_{j}")
+        X = (
+            X_common
+            if X_common is not None
+            else cp.Variable((n, n), symmetric=True, name=f"X_{i}_{j}")
+        )
         Xs[(i, j)] = X
         U = A @ H + Bc @ S[i]
         Ut = U.T
-        M = cp.bmat([
-            [U + Ut, -X + H.T - U, Be_j, HC],
-            [-X + H - Ut, -HpHt, Z_n_ne, -HC],
-            [Be_j.T, Z_ne_n, -I_ne, Z_ne_nz],
-            [CH, -CH, Z_nz_ne, -g_expr * np.eye(nz)],
-        ])
+        M = cp.bmat(
+            [
+                [U + Ut, -X + H.T - U, Be_j, HC],
+                [-X + H - Ut, -HpHt, Z_n_ne, -HC],
+                [Be_j.T, Z_ne_n, -I_ne, Z_ne_nz],
+                [CH, -CH, Z_nz_ne, -g_expr * np.eye(nz)],
+            ]
+        )
         constraints.append(M << -epsI)
         if X_common is None or (i, j) == systems[0][:2]:
             constraints.append(X >> opts.eps * np.eye(n))
     n_lmi = len(systems)
     n_x = 1 if X_common is not None else n_lmi
     size = ProblemSize(
-        scalar_variables=n_x * n * (n + 1) // 2 + model.n_vertices * m * n + n * n + (1 if g is not None else 0),
+        scalar_variables=n_x * n * (n + 1) // 2
+        + model.n_vertices * m * n
+        + n * n
+        + (1 if g is not None else 0),
         lmi_blocks=n_lmi + n_x,
         lmi_total_dim=n_lmi * d + n_x * n,
         scalar_constraints=n_lmi * d * (d + 1) // 2 + n_x * n * (n + 1) // 2,
@@ -324,8 +390,13 @@ def _solve(prob, solver: str, verbose: bool) -> None:
     prob.solve(solver=solver, **kw)
 
 
-def solve_lemma1(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: HinfOptions = HinfOptions(),
-                 Be: Optional[np.ndarray] = None) -> HinfResult:
+def solve_lemma1(
+    model: PolytopicModel,
+    R: np.ndarray,
+    C: np.ndarray,
+    opts: HinfOptions = HinfOptions(),
+    Be: Optional[np.ndarray] = None,
+) -> HinfResult:
     """Solve seed 0 Lemma 1 (Eq. 30) once; no remedy analysis (see :func:`synthesize_hinf`).
 
     ``R`` gives B_e^j = B_c^j R (Eq. 19); an explicit ``Be`` (n, n_e) replaces it for plants whose
@@ -341,9 +412,13 @@ def solve_lemma1(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: Hinf
     if method == "box":
         return _solve_box(model, R, C, opts, Be)
     if opts.lyapunov == "rate":
-        raise ConfigError("hinf.lyapunov: rate is offered for the element-box LMI (hinf.method: box)")
+        raise ConfigError(
+            "hinf.lyapunov: rate is offered for the element-box LMI (hinf.method: box)"
+        )
     if opts.effective_objective == "min_effort":
-        raise ConfigError("hinf.objective: min_effort is offered for the element-box LMI (hinf.method: box)")
+        raise ConfigError(
+            "hinf.objective: min_effort is offered for the element-box LMI (hinf.method: box)"
+        )
     if Be is None and R.shape[0] != model.n_u:
         raise ConfigError(f"R has {R.shape[0]} rows, the model has {model.n_u} inputs")
     if C.shape[1] != model.n_x:
@@ -351,8 +426,11 @@ def solve_lemma1(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: Hinf
     all_A = [a for lst in model.systems for a, _ in lst]
     all_B = [b for lst in model.systems for _, b in lst]
     all_Be = [excitation_matrix(b, R, Be) for b in all_B]
-    scaling = (choose_scaling(all_A, all_B, all_Be, C) if opts.scale
-               else Scaling.identity(model.n_x, model.n_u))
+    scaling = (
+        choose_scaling(all_A, all_B, all_Be, C)
+        if opts.scale
+        else Scaling.identity(model.n_x, model.n_u)
+    )
     prob, H, S, Xs, g, size, systems, Cs = _build(model, R, C, opts, scaling, Be)
     installed = set(cp.installed_solvers())
     solvers = _solver_order(opts, len(systems), installed)
@@ -378,13 +456,21 @@ def solve_lemma1(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: Hinf
             errors.append(f"{sv}: {exc}")
             continue
         # the solver's word is not the certificate: accept only what numpy re-checks (Eq. 30)
-        ok = res.min_margin > 0 if opts.effective_objective != "min_gamma" else np.isfinite(res.gamma_certified)
+        ok = (
+            res.min_margin > 0
+            if opts.effective_objective != "min_gamma"
+            else np.isfinite(res.gamma_certified)
+        )
         if ok:
             return res
-        errors.append(f"{sv}: status {prob.status} but the numpy re-check of Eq. (30) fails "
-                      f"(margin {res.min_margin:.3g}, gamma {res.gamma_certified:.4g})")
+        errors.append(
+            f"{sv}: status {prob.status} but the numpy re-check of Eq. (30) fails "
+            f"(margin {res.min_margin:.3g}, gamma {res.gamma_certified:.4g})"
+        )
         log.warning("%s", errors[-1])
-    raise SolverError("Lemma 1 LMI (seed 0 Eq. 30): no certified solution (" + "; ".join(errors) + ")")
+    raise SolverError(
+        "Lemma 1 LMI (seed 0 Eq. 30): no certified solution (" + "; ".join(errors) + ")"
+    )
 
 
 def resolve_method(model: PolytopicModel, opts: HinfOptions) -> str:
@@ -393,8 +479,10 @@ def resolve_method(model: PolytopicModel, opts: HinfOptions) -> str:
     ``corners`` otherwise (Eq. 30 at every system, the seed's formulation)."""
     if opts.method == "corners":
         if model.box is not None:
-            raise ConfigError("hinf.method: corners cannot enumerate the full element box (2^p corners); "
-                              "use method: box (or uncertainty.set: reduced_polytope)")
+            raise ConfigError(
+                "hinf.method: corners cannot enumerate the full element box (2^p corners); "
+                "use method: box (or uncertainty.set: reduced_polytope)"
+            )
         return "corners"
     if model.box is not None:
         return "box"
@@ -403,8 +491,13 @@ def resolve_method(model: PolytopicModel, opts: HinfOptions) -> str:
     return "corners"
 
 
-def _solve_box(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: HinfOptions,
-               Be: Optional[np.ndarray]) -> HinfResult:
+def _solve_box(
+    model: PolytopicModel,
+    R: np.ndarray,
+    C: np.ndarray,
+    opts: HinfOptions,
+    Be: Optional[np.ndarray],
+) -> HinfResult:
     """The element-box LMI (synthesis.robust_lmi) as a :class:`HinfResult`. For a corner polytope
     (``model.box`` None) the box is recovered from the corners and, with ``lyapunov: vertex``, the
     solution X_i^j = X_i, S_i, H is re-checked on Eq. (30) at every corner system: the seed's LMIs
@@ -413,45 +506,96 @@ def _solve_box(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: HinfOp
     from lpv_sysid.synthesis import robust_lmi
 
     if Be is not None:
-        raise ConfigError("hinf.method: box needs the matched excitation B_e = B R (seed 0 Eq. 19)")
+        raise ConfigError(
+            "hinf.method: box needs the matched excitation B_e = B R (seed 0 Eq. 19)"
+        )
     if opts.region is not None:
-        raise ConfigError("hinf.region is not offered with the element-box LMI (hinf.method: corners)")
+        raise ConfigError(
+            "hinf.region is not offered with the element-box LMI (hinf.method: corners)"
+        )
     box = model.box if model.box is not None else corner_box(model)
     if box is None:
-        raise ConfigError("hinf.method: box: the Eq. (23) systems are not the corners of a box of single "
-                          "elements with a B part common to all vertices (use method: corners)")
+        raise ConfigError(
+            "hinf.method: box: the Eq. (23) systems are not the corners of a box of single "
+            "elements with a B part common to all vertices (use method: corners)"
+        )
     rate = None
     if opts.lyapunov == "rate":
         if opts.rate_bound == "design":
-            raise ConfigError("hinf.rate_bound: design needs the phase-2 design envelope (synthesize --summary)")
+            raise ConfigError(
+                "hinf.rate_bound: design needs the phase-2 design envelope (synthesize --summary)"
+            )
         rate = list(opts.rate_bound)
     obj = opts.effective_objective
     g_req = float(opts.gamma) * float(opts.design_gamma_fraction)
-    r = robust_lmi.solve_box(box, R, C, gamma=g_req, lyapunov=opts.lyapunov, objective=obj, eps=opts.eps,
-                             solver="CLARABEL" if opts.solver == "AUTO" else opts.solver,
-                             fallback=opts.fallback if opts.solver != "AUTO" else "SCS", scale=opts.scale,
-                             vmin=model.vmin, vmax=model.vmax, rate=rate, verbose=opts.verbose)
+    r = robust_lmi.solve_box(
+        box,
+        R,
+        C,
+        gamma=g_req,
+        lyapunov=opts.lyapunov,
+        objective=obj,
+        eps=opts.eps,
+        solver="CLARABEL" if opts.solver == "AUTO" else opts.solver,
+        fallback=opts.fallback if opts.solver != "AUTO" else "SCS",
+        scale=opts.scale,
+        vmin=model.vmin,
+        vmax=model.vmax,
+        rate=rate,
+        verbose=opts.verbose,
+    )
     Ms = [len(lst) for lst in model.systems]
     X = [[r["X"][i]] * (Ms[i] if model.box is None else 1) for i in range(model.n_vertices)]
     sz = r["size"]
-    size = ProblemSize(scalar_variables=int(sz["scalar_variables"]), lmi_blocks=int(sz["lmi_blocks"]),
-                       lmi_total_dim=int(sum(sz["robust_block_dim"])), scalar_constraints=int(sz["scalar_constraints"]),
-                       eq30_block_dim=int(max(sz["robust_block_dim"])))
-    res = HinfResult(K=r["K"], X=X, S=r["S"], H=r["H"], gamma_requested=float(opts.gamma),
-                     gamma_solver=r["gamma_solver"], status=r["status"], solver=r["solver"], size=size,
-                     compile_time=r["compile_time"], solve_time=r["solve_time"], scaling=r["scaling"], eps=opts.eps,
-                     gamma_certified=r["gamma_certified"], min_margin=r["min_margin"],
-                     info={"method": "box", "box": box, "robust": r, "size": sz})
+    size = ProblemSize(
+        scalar_variables=int(sz["scalar_variables"]),
+        lmi_blocks=int(sz["lmi_blocks"]),
+        lmi_total_dim=int(sum(sz["robust_block_dim"])),
+        scalar_constraints=int(sz["scalar_constraints"]),
+        eq30_block_dim=int(max(sz["robust_block_dim"])),
+    )
+    res = HinfResult(
+        K=r["K"],
+        X=X,
+        S=r["S"],
+        H=r["H"],
+        gamma_requested=float(opts.gamma),
+        gamma_solver=r["gamma_solver"],
+        status=r["status"],
+        solver=r["solver"],
+        size=size,
+        compile_time=r["compile_time"],
+        solve_time=r["solve_time"],
+        scaling=r["scaling"],
+        eps=opts.eps,
+        gamma_certified=r["gamma_certified"],
+        min_margin=r["min_margin"],
+        info={"method": "box", "box": box, "robust": r, "size": sz},
+    )
     if model.box is None and opts.lyapunov == "vertex":
         t0 = time.perf_counter()
-        g30, m30 = certificate_margins(model, R, C, X, r["S"], r["H"], r["scaling"],
-                                       gamma=float(opts.gamma) if obj != "min_gamma" else r["gamma_solver"])
-        res.info["eq30"] = {"gamma": g30, "margin": m30, "systems": int(sum(Ms)),
-                            "check_s": time.perf_counter() - t0}
+        g30, m30 = certificate_margins(
+            model,
+            R,
+            C,
+            X,
+            r["S"],
+            r["H"],
+            r["scaling"],
+            gamma=float(opts.gamma) if obj != "min_gamma" else r["gamma_solver"],
+        )
+        res.info["eq30"] = {
+            "gamma": g30,
+            "margin": m30,
+            "systems": int(sum(Ms)),
+            "check_s": time.perf_counter() - t0,
+        }
         res.gamma_certified, res.min_margin = g30, m30
         if not (m30 > 0 or (obj == "min_gamma" and np.isfinite(g30))):
-            raise SolverError(f"element-box solution fails the Eq. (30) re-check at the {sum(Ms)} corner systems "
-                              f"(margin {m30:.3g})")
+            raise SolverError(
+                f"element-box solution fails the Eq. (30) re-check at the {sum(Ms)} corner systems "
+                f"(margin {m30:.3g})"
+            )
     return res
 
 
@@ -459,7 +603,9 @@ def _solver_order(opts: HinfOptions, n_blocks: int, installed: set) -> list:
     """Solvers to try in order (``AUTO``: MOSEK if installed, else Clarabel/SCS by problem size)."""
     if opts.solver == "AUTO":
         first = ["MOSEK"] if "MOSEK" in installed else []
-        by_size = ["CLARABEL", "SCS"] if n_blocks <= AUTO_CLARABEL_MAX_BLOCKS else ["SCS", "CLARABEL"]
+        by_size = (
+            ["CLARABEL", "SCS"] if n_blocks <= AUTO_CLARABEL_MAX_BLOCKS else ["SCS", "CLARABEL"]
+        )
         order = first + by_size
     else:
         order = [opts.solver] + ([opts.fallback] if opts.fallback else [])
@@ -469,35 +615,75 @@ def _solver_order(opts: HinfOptions, n_blocks: int, installed: set) -> list:
 def _extract(model, R, C, opts, Be, prob, H, S, Xs, g, size, scaling, used) -> HinfResult:
     compile_time = float(getattr(prob, "compilation_time", float("nan")) or float("nan"))
     stats = prob.solver_stats
-    solve_time = float(stats.solve_time) if stats is not None and stats.solve_time is not None else float("nan")
+    solve_time = (
+        float(stats.solve_time)
+        if stats is not None and stats.solve_time is not None
+        else float("nan")
+    )
     Hs = np.asarray(H.value)
     if not np.all(np.isfinite(Hs)) or np.linalg.cond(Hs) > 1e12:
-        raise SolverError(f"Lemma 1: H is numerically singular (cond {np.linalg.cond(Hs):.2e}); K = S H^-1 undefined")
+        raise SolverError(
+            f"Lemma 1: H is numerically singular (cond {np.linalg.cond(Hs):.2e}); K = S H^-1 undefined"
+        )
     Ss = np.array([np.asarray(s.value) for s in S])
-    K_s = np.array([np.linalg.solve(Hs.T, s.T).T for s in Ss])   # S H^-1
+    K_s = np.array([np.linalg.solve(Hs.T, s.T).T for s in Ss])  # S H^-1
     X_un = [[None] * len(model.systems[i]) for i in range(model.n_vertices)]
     for (i, j), X in Xs.items():
         X_un[i][j] = scaling.unscale_sym(np.asarray(X.value))
     gamma_solver = float(np.sqrt(max(g.value, 0.0))) if g is not None else float(opts.gamma)
     res = HinfResult(
-        K=scaling.unscale_K(K_s), X=X_un, S=scaling.unscale_S(Ss), H=scaling.unscale_sym(Hs),
-        gamma_requested=float(opts.gamma), gamma_solver=gamma_solver, status=prob.status, solver=used,
-        size=size, compile_time=compile_time, solve_time=solve_time, scaling=scaling, eps=opts.eps,
+        K=scaling.unscale_K(K_s),
+        X=X_un,
+        S=scaling.unscale_S(Ss),
+        H=scaling.unscale_sym(Hs),
+        gamma_requested=float(opts.gamma),
+        gamma_solver=gamma_solver,
+        status=prob.status,
+        solver=used,
+        size=size,
+        compile_time=compile_time,
+        solve_time=solve_time,
+        scaling=scaling,
+        eps=opts.eps,
     )
     # independent numpy re-evaluation in the scaled coordinates (a congruence, inertia-preserving)
-    gam, margin = certificate_margins(model, R, C, res.X, res.S, res.H, scaling,
-                                      gamma=float(opts.gamma) if opts.effective_objective != "min_gamma" else gamma_solver,
-                                      Be=Be)
+    gam, margin = certificate_margins(
+        model,
+        R,
+        C,
+        res.X,
+        res.S,
+        res.H,
+        scaling,
+        gamma=float(opts.gamma) if opts.effective_objective != "min_gamma" else gamma_solver,
+        Be=Be,
+    )
     res.gamma_certified = gam
     res.min_margin = margin
-    log.info("Lemma 1: %s/%s, gamma_solver=%.4g, certified=%.4g, margin=%.3g, compile %.2fs, solve %.2fs",
-             used, prob.status, gamma_solver, gam, margin, compile_time, solve_time)
+    log.info(
+        "Lemma 1: %s/%s, gamma_solver=%.4g, certified=%.4g, margin=%.3g, compile %.2fs, solve %.2fs",
+        used,
+        prob.status,
+        gamma_solver,
+        gam,
+        margin,
+        compile_time,
+        solve_time,
+    )
     return res
 
 
-def certificate_margins(model: PolytopicModel, R: np.ndarray, C: np.ndarray, X: list, S: np.ndarray,
-                        H: np.ndarray, scaling: Optional[Scaling] = None, gamma: float = 1.0,
-                        Be: Optional[np.ndarray] = None) -> tuple[float, float]:
+def certificate_margins(
+    model: PolytopicModel,
+    R: np.ndarray,
+    C: np.ndarray,
+    X: list,
+    S: np.ndarray,
+    H: np.ndarray,
+    scaling: Optional[Scaling] = None,
+    gamma: float = 1.0,
+    Be: Optional[np.ndarray] = None,
+) -> tuple[float, float]:
     """Re-evaluate Eq. (30) with numpy from (X, S, H) in unscaled coordinates.
 
     The matrices are first mapped through the congruence diag(T^-1, T^-1, I, I) of ``scaling``
@@ -532,16 +718,23 @@ def certificate_margins(model: PolytopicModel, R: np.ndarray, C: np.ndarray, X: 
         if np.any(ok):
             W = np.linalg.solve(-P[ok], np.swapaxes(F[ok], 1, 2))
             G = F[ok] @ W
-            gam = max(gam, float(np.sqrt(max(np.max(np.linalg.eigvalsh(0.5 * (G + np.swapaxes(G, 1, 2)))), 0.0))))
+            gam = max(
+                gam,
+                float(
+                    np.sqrt(max(np.max(np.linalg.eigvalsh(0.5 * (G + np.swapaxes(G, 1, 2)))), 0.0))
+                ),
+            )
         Mg = M.copy()
-        Mg[:, -nz:, -nz:] -= gamma ** 2 * np.eye(nz)
+        Mg[:, -nz:, -nz:] -= gamma**2 * np.eye(nz)
         lam_M = np.linalg.eigvalsh(Mg)[:, -1]
         lam_X = np.linalg.eigvalsh(0.5 * (Xs + np.swapaxes(Xs, 1, 2)))[:, 0]
         margin = min(margin, float(np.min(-lam_M)), float(np.min(lam_X)))
     return gam, margin
 
 
-def seed_problem_size(M: Sequence[int], n: int, m: int, n_e: int, n_z: int, tied: bool = False) -> dict:
+def seed_problem_size(
+    M: Sequence[int], n: int, m: int, n_e: int, n_z: int, tied: bool = False
+) -> dict:
     """Sizes of seed 0 Lemma 1 for uncertainty-vertex counts M_i, counted two ways.
 
     The package (primal, what cvxpy states): scalar variables sum_i M_i n(n+1)/2 (X_i^j) + N m n
@@ -557,11 +750,16 @@ def seed_problem_size(M: Sequence[int], n: int, m: int, n_e: int, n_z: int, tied
     total = int(sum(M))
     variables = total * n * (n + 1) // 2 + N * m * n + n * n
     entries = total * (d * (d + 1) // 2 + n * (n + 1) // 2)
-    return {"N": N, "sum_M": total, "M": [int(x) for x in M], "eq30_block_dim": d,
-            "psd_cones": 2 * total,
-            "package": {"scalar_variables": variables, "cone_entries": entries},
-            "as_cvx_reports": {"variables": entries, "constraints": variables},
-            "X_tied_per_vertex": bool(tied)}
+    return {
+        "N": N,
+        "sum_M": total,
+        "M": [int(x) for x in M],
+        "eq30_block_dim": d,
+        "psd_cones": 2 * total,
+        "package": {"scalar_variables": variables, "cone_entries": entries},
+        "as_cvx_reports": {"variables": entries, "constraints": variables},
+        "X_tied_per_vertex": bool(tied),
+    }
 
 
 # --------------------------------------------------------------------------- remedies
@@ -569,9 +767,9 @@ def seed_problem_size(M: Sequence[int], n: int, m: int, n_e: int, n_z: int, tied
 class Remedy:
     gamma_requested: float
     gamma_min: float
-    excitation_shrink: float     # divide Delta_t..Delta_r (R) by this factor
-    output_grow: float           # multiply Delta_u..Delta_w (Q) by this factor
-    uncertainty_shrink: Optional[float] = None   # largest rho in [0,1] found feasible (bisection)
+    excitation_shrink: float  # divide Delta_t..Delta_r (R) by this factor
+    output_grow: float  # multiply Delta_u..Delta_w (Q) by this factor
+    uncertainty_shrink: Optional[float] = None  # largest rho in [0,1] found feasible (bisection)
     nominal_gamma_min: Optional[float] = None
 
     def message(self) -> str:
@@ -584,14 +782,20 @@ class Remedy:
         ]
         if self.uncertainty_shrink is not None:
             if self.uncertainty_shrink > 0:
-                lines.append(f"  (3) reduce the model uncertainty intervals to <= {100 * self.uncertainty_shrink:.1f}% "
-                             "of their identified width (bisection) by refined identification.")
+                lines.append(
+                    f"  (3) reduce the model uncertainty intervals to <= {100 * self.uncertainty_shrink:.1f}% "
+                    "of their identified width (bisection) by refined identification."
+                )
             else:
-                lines.append(f"  (3) reducing the model uncertainty alone does not suffice (nominal gamma_min = "
-                             f"{self.nominal_gamma_min:.4g}).")
+                lines.append(
+                    f"  (3) reducing the model uncertainty alone does not suffice (nominal gamma_min = "
+                    f"{self.nominal_gamma_min:.4g})."
+                )
         else:
-            lines.append("  (3) reduce the model uncertainty by refined identification "
-                         "(set hinf.remedy_bisection_steps > 0 to quantify).")
+            lines.append(
+                "  (3) reduce the model uncertainty by refined identification "
+                "(set hinf.remedy_bisection_steps > 0 to quantify)."
+            )
         return "\n".join(lines)
 
 
@@ -603,20 +807,39 @@ def _shrunk_model(model: PolytopicModel, rho: float) -> PolytopicModel:
     if model.box is not None:
         b = model.box
         box = replace(b, half=tuple(np.asarray(h, dtype=float) * max(rho, 1e-9) for h in b.half))
-        return replace(model, box=box, systems=box.sample_systems(list(zip(model.A, model.B)), len(model.systems[0])))
+        return replace(
+            model,
+            box=box,
+            systems=box.sample_systems(list(zip(model.A, model.B)), len(model.systems[0])),
+        )
     if model.common_input is not None:
         common = model.common_input.shrunk(rho)
         MB = common.M
-        systems = [[(model.A[i] + rho * (a - model.A[i]), common.corners[j % MB]) for j, (a, _) in enumerate(lst)]
-                   for i, lst in enumerate(model.systems)]
+        systems = [
+            [
+                (model.A[i] + rho * (a - model.A[i]), common.corners[j % MB])
+                for j, (a, _) in enumerate(lst)
+            ]
+            for i, lst in enumerate(model.systems)
+        ]
         return replace(model, systems=systems, common_input=common)
-    systems = [[(model.A[i] + rho * (a - model.A[i]), model.B[i] + rho * (b - model.B[i])) for a, b in lst]
-               for i, lst in enumerate(model.systems)]
+    systems = [
+        [
+            (model.A[i] + rho * (a - model.A[i]), model.B[i] + rho * (b - model.B[i]))
+            for a, b in lst
+        ]
+        for i, lst in enumerate(model.systems)
+    ]
     return replace(model, systems=systems)
 
 
-def remedy_analysis(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: HinfOptions,
-                    Be: Optional[np.ndarray] = None) -> Remedy:
+def remedy_analysis(
+    model: PolytopicModel,
+    R: np.ndarray,
+    C: np.ndarray,
+    opts: HinfOptions,
+    Be: Optional[np.ndarray] = None,
+) -> Remedy:
     """Quantify the remedies of seed 0 Sec. VI for a requested gamma (see module docstring)."""
     g_opts = replace(opts, minimize_gamma=True, objective="min_gamma")
     gmin = solve_lemma1(model, R, C, g_opts, Be).gamma_solver
@@ -645,8 +868,13 @@ def remedy_analysis(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: H
     return rem
 
 
-def synthesize_hinf(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: HinfOptions = HinfOptions(),
-                    Be: Optional[np.ndarray] = None) -> HinfResult:
+def synthesize_hinf(
+    model: PolytopicModel,
+    R: np.ndarray,
+    C: np.ndarray,
+    opts: HinfOptions = HinfOptions(),
+    Be: Optional[np.ndarray] = None,
+) -> HinfResult:
     """Lemma 1 with the remedy advice of Sec. VI on failure.
 
     Feasibility mode: solve at ``opts.gamma``; if infeasible, compute gamma_min and raise
@@ -661,8 +889,10 @@ def synthesize_hinf(model: PolytopicModel, R: np.ndarray, C: np.ndarray, opts: H
         try:
             rem = remedy_analysis(model, R, C, opts, Be)
         except SolverError as exc2:
-            raise SolverError(f"{exc}; gamma minimisation also failed ({exc2}): the polytope may not be "
-                              "quadratically stabilisable with a common H (reduce the uncertainty)") from None
+            raise SolverError(
+                f"{exc}; gamma minimisation also failed ({exc2}): the polytope may not be "
+                "quadratically stabilisable with a common H (reduce the uncertainty)"
+            ) from None
         err = SolverError(rem.message())
         err.remedy = rem  # type: ignore[attr-defined]
         raise err from None

@@ -26,14 +26,16 @@ from scipy.linalg import eigvals, matrix_balance
 
 @dataclass(frozen=True)
 class HinfNorm:
-    value: float          # upper end of the bracket (guaranteed >= the true norm within tol)
-    lower: float          # lower end (attained at `frequency`)
-    frequency: float      # rad/s (continuous) where sigma_max reaches `lower`
+    value: float  # upper end of the bracket (guaranteed >= the true norm within tol)
+    lower: float  # lower end (attained at `frequency`)
+    frequency: float  # rad/s (continuous) where sigma_max reaches `lower`
     iterations: int
     stable: bool
 
 
-def sigma_max(A: np.ndarray, B: np.ndarray, C: np.ndarray, w: float, D: np.ndarray | None = None) -> float:
+def sigma_max(
+    A: np.ndarray, B: np.ndarray, C: np.ndarray, w: float, D: np.ndarray | None = None
+) -> float:
     """Largest singular value of C (j w I - A)^-1 B (+ D)."""
     n = A.shape[0]
     G = C @ np.linalg.solve(1j * w * np.eye(n) - A, B)
@@ -42,7 +44,9 @@ def sigma_max(A: np.ndarray, B: np.ndarray, C: np.ndarray, w: float, D: np.ndarr
     return float(np.linalg.svd(G, compute_uv=False)[0])
 
 
-def balance(A: np.ndarray, B: np.ndarray, C: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def balance(
+    A: np.ndarray, B: np.ndarray, C: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Diagonal similarity (powers of 2) balancing [[|A|, |B| 1], [1^T |C|, 0]] (LAPACK gebal).
 
     The transfer function, hence the norm, is unchanged; it keeps the Hamiltonian's entries of
@@ -58,8 +62,16 @@ def balance(A: np.ndarray, B: np.ndarray, C: np.ndarray) -> tuple[np.ndarray, np
     return A * t[None, :] / t[:, None], B / t[:, None], C * t[None, :]
 
 
-def hinf_norm(A: np.ndarray, B: np.ndarray, C: np.ndarray, tol: float = 1e-6, max_iter: int = 60,
-              stability_margin: float = 0.0, balanced: bool = True, D: np.ndarray | None = None) -> HinfNorm:
+def hinf_norm(
+    A: np.ndarray,
+    B: np.ndarray,
+    C: np.ndarray,
+    tol: float = 1e-6,
+    max_iter: int = 60,
+    stability_margin: float = 0.0,
+    balanced: bool = True,
+    D: np.ndarray | None = None,
+) -> HinfNorm:
     """||C (sI - A)^-1 B + D||_inf for continuous-time (A, B, C, D); inf when A is not Hurwitz.
 
     ``stability_margin``: A counts as Hurwitz when max Re(eig) < -stability_margin.
@@ -137,7 +149,7 @@ def _hinf_norm_d(A, B, C, D, tol, max_iter, stability_margin) -> HinfNorm:
     vals = [sigma_max(A, B, C, w, D) for w in cand]
     k = int(np.argmax(vals))
     g_lb, w_pk = vals[k], cand[k]
-    s_inf = float(np.linalg.svd(D, compute_uv=False)[0])       # sigma_max at w -> inf
+    s_inf = float(np.linalg.svd(D, compute_uv=False)[0])  # sigma_max at w -> inf
     if s_inf > g_lb:
         g_lb, w_pk = s_inf, float("inf")
     if g_lb == 0.0:
@@ -145,11 +157,13 @@ def _hinf_norm_d(A, B, C, D, tol, max_iter, stability_margin) -> HinfNorm:
     scale = max(1.0, float(np.max(np.abs(A))))
     for it in range(1, max_iter + 1):
         gamma = (1.0 + 2.0 * tol) * g_lb
-        Rm = gamma ** 2 * np.eye(D.shape[1]) - D.T @ D
-        Sm = gamma ** 2 * np.eye(D.shape[0]) - D @ D.T
+        Rm = gamma**2 * np.eye(D.shape[1]) - D.T @ D
+        Sm = gamma**2 * np.eye(D.shape[0]) - D @ D.T
         Ri = np.linalg.inv(Rm)
         Ah = A + B @ Ri @ D.T @ C
-        Ham = np.block([[Ah, gamma * B @ Ri @ B.T], [-gamma * C.T @ np.linalg.solve(Sm, C), -Ah.T]])
+        Ham = np.block(
+            [[Ah, gamma * B @ Ri @ B.T], [-gamma * C.T @ np.linalg.solve(Sm, C), -Ah.T]]
+        )
         ev = eigvals(Ham)
         on_axis = np.abs(ev.real) <= 1e-9 * max(scale, 1.0) * (1.0 + np.abs(ev))
         w = np.sort(np.unique(np.round(np.abs(ev[on_axis].imag), 12)))
@@ -164,7 +178,9 @@ def _hinf_norm_d(A, B, C, D, tol, max_iter, stability_margin) -> HinfNorm:
     return HinfNorm((1.0 + 2.0 * tol) * g_lb, g_lb, w_pk, max_iter, True)
 
 
-def hinf_norm_sweep(A: np.ndarray, B: np.ndarray, C: np.ndarray, w: np.ndarray) -> tuple[float, float]:
+def hinf_norm_sweep(
+    A: np.ndarray, B: np.ndarray, C: np.ndarray, w: np.ndarray
+) -> tuple[float, float]:
     """Peak of sigma_max over a frequency grid (the dense-sweep oracle for the tests)."""
     vals = np.array([sigma_max(A, B, C, wk) for wk in w])
     k = int(np.argmax(vals))

@@ -36,9 +36,9 @@ from lpv_sysid.errors import ConfigError, SolverError
 class Region:
     """Intersection of a disk and a vertical strip (either may be absent)."""
 
-    disk_q: Optional[float] = None      # disk centre is (-q, 0) (seed 2 Eq. 117)
+    disk_q: Optional[float] = None  # disk centre is (-q, 0) (seed 2 Eq. 117)
     disk_r: Optional[float] = None
-    s_min: Optional[float] = None       # strip S_min < Re z < S_max (Eq. 119)
+    s_min: Optional[float] = None  # strip S_min < Re z < S_max (Eq. 119)
     s_max: Optional[float] = None
 
     @classmethod
@@ -70,7 +70,9 @@ class Region:
                 hp = -float(d["half_plane"]["alpha"])
                 kw["s_max"] = hp if prev is None else min(prev, hp)
             except (KeyError, TypeError, ValueError):
-                raise ConfigError("region.half_plane needs {alpha: real} (Re z < -alpha)") from None
+                raise ConfigError(
+                    "region.half_plane needs {alpha: real} (Re z < -alpha)"
+                ) from None
         reg = cls(**kw)
         reg.check()
         return reg
@@ -83,7 +85,10 @@ class Region:
             if self.s_min is None:
                 out["half_plane"] = {"alpha": -float(self.s_max)}
             else:
-                out["strip"] = {"min": float(self.s_min), "max": None if self.s_max is None else float(self.s_max)}
+                out["strip"] = {
+                    "min": float(self.s_min),
+                    "max": None if self.s_max is None else float(self.s_max),
+                }
         return out
 
     def check(self) -> None:
@@ -98,8 +103,12 @@ class Region:
         """(alpha, beta) of Eq. (114), block-diagonal over the components."""
         blocks: list[tuple[np.ndarray, np.ndarray]] = []
         if self.disk_r is not None:
-            blocks.append((np.array([[-self.disk_r, self.disk_q], [self.disk_q, -self.disk_r]]),
-                           np.array([[0.0, 1.0], [0.0, 0.0]])))
+            blocks.append(
+                (
+                    np.array([[-self.disk_r, self.disk_q], [self.disk_q, -self.disk_r]]),
+                    np.array([[0.0, 1.0], [0.0, 0.0]]),
+                )
+            )
         if self.s_min is not None:
             blocks.append((np.array([[self.s_min]]), np.array([[-0.5]])))
         if self.s_max is not None and np.isfinite(self.s_max):
@@ -112,8 +121,8 @@ class Region:
         k = 0
         for a, b in blocks:
             d = a.shape[0]
-            alpha[k:k + d, k:k + d] = a
-            beta[k:k + d, k:k + d] = b
+            alpha[k : k + d, k : k + d] = a
+            beta[k : k + d, k : k + d] = b
             k += d
         return alpha, beta
 
@@ -149,15 +158,19 @@ def region_lmi(alpha: np.ndarray, beta: np.ndarray, X, AX):
 
 @dataclass
 class PlacementResult:
-    K: np.ndarray          # (N, m, n) vertex gains, K_i = Gamma_i X^-1
-    X: np.ndarray          # common Lyapunov matrix
+    K: np.ndarray  # (N, m, n) vertex gains, K_i = Gamma_i X^-1
+    X: np.ndarray  # common Lyapunov matrix
     status: str
     solver: str
     solve_time: float
 
 
-def place_poles(systems: Sequence[Sequence[tuple[np.ndarray, np.ndarray]]], region: Region, eps: float = 1e-6,
-                solver: str = "CLARABEL") -> PlacementResult:
+def place_poles(
+    systems: Sequence[Sequence[tuple[np.ndarray, np.ndarray]]],
+    region: Region,
+    eps: float = 1e-6,
+    solver: str = "CLARABEL",
+) -> PlacementResult:
     """Quadratic D-stabilisation of a nested polytope, seed 2 Eqs. (125)-(127).
 
     ``systems[i]`` is the list of (A_i^j, B_i^j); one Gamma_i per scheduling vertex i, one X.
@@ -181,18 +194,32 @@ def place_poles(systems: Sequence[Sequence[tuple[np.ndarray, np.ndarray]]], regi
     try:
         prob.solve(solver=solver)
     except cp.error.SolverError as exc:
-        raise SolverError(f"pole placement LMI (seed 2 Eq. 125): solver {solver} failed: {exc}") from None
+        raise SolverError(
+            f"pole placement LMI (seed 2 Eq. 125): solver {solver} failed: {exc}"
+        ) from None
     if prob.status not in ("optimal", "optimal_inaccurate"):
-        raise SolverError(f"pole placement LMI (seed 2 Eq. 125): {prob.status}; the polytope is not "
-                          f"quadratically D-stabilisable for region {region.to_dict()}")
+        raise SolverError(
+            f"pole placement LMI (seed 2 Eq. 125): {prob.status}; the polytope is not "
+            f"quadratically D-stabilisable for region {region.to_dict()}"
+        )
     Xv = np.asarray(X.value)
     K = np.array([np.linalg.solve(Xv.T, np.asarray(g.value).T).T for g in G])
-    return PlacementResult(K=K, X=Xv, status=prob.status, solver=solver,
-                           solve_time=float(prob.solver_stats.solve_time or np.nan))
+    return PlacementResult(
+        K=K,
+        X=Xv,
+        status=prob.status,
+        solver=solver,
+        solve_time=float(prob.solver_stats.solve_time or np.nan),
+    )
 
 
-def place_observer(systems: Sequence[Sequence[tuple[np.ndarray, np.ndarray]]], C: np.ndarray, region: Region,
-                   eps: float = 1e-6, solver: str = "CLARABEL") -> tuple[np.ndarray, PlacementResult]:
+def place_observer(
+    systems: Sequence[Sequence[tuple[np.ndarray, np.ndarray]]],
+    C: np.ndarray,
+    region: Region,
+    eps: float = 1e-6,
+    solver: str = "CLARABEL",
+) -> tuple[np.ndarray, PlacementResult]:
     """LPV observer gains L_i (seed 2 Sec. 5.5, Eqs. 130-131) with eig(A_i^j + L_i C) in D.
 
     Duality: L_i^T is the state-feedback gain of (A_i^j^T, C^T). Returns (L (N, n, p), dual result).
@@ -203,8 +230,9 @@ def place_observer(systems: Sequence[Sequence[tuple[np.ndarray, np.ndarray]]], C
     return np.transpose(res.K, (0, 2, 1)), res
 
 
-def integral_augmentation(A: np.ndarray, B: np.ndarray, C: np.ndarray, ts: Optional[float] = None
-                          ) -> tuple[np.ndarray, np.ndarray]:
+def integral_augmentation(
+    A: np.ndarray, B: np.ndarray, C: np.ndarray, ts: Optional[float] = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Augmented (A, B) of seed 2 Eq. (129) with x_I the integral of e = C x - r.
 
     Discrete time (ts given): x_I(k+1) = x_I(k) + C x(k) - r(k) (Eq. 128) -> [[A, 0], [C, I]].

@@ -82,16 +82,16 @@ OBJECTIVES = ("feasibility", "min_gamma", "min_effort")
 class ScaledBox:
     """The element box and the LMI data in the scaled coordinates of :mod:`scaling`."""
 
-    A: list            # per vertex A_c~ (n, n)
-    B: np.ndarray      # B_c~ (n, m)
-    Be: np.ndarray     # B_c~ R~ = T^-1 B_c R (n, n_e)
-    Rs: np.ndarray     # R in the scaled input coordinates, S_u^-1 R (m, n_e)
-    C: np.ndarray      # C T (n_z, n)
+    A: list  # per vertex A_c~ (n, n)
+    B: np.ndarray  # B_c~ (n, m)
+    Be: np.ndarray  # B_c~ R~ = T^-1 B_c R (n, n_e)
+    Rs: np.ndarray  # R in the scaled input coordinates, S_u^-1 R (m, n_e)
+    C: np.ndarray  # C T (n_z, n)
     rows: list
     cols: list
-    half: list         # scaled half-widths h_l tau_c / t_r
-    used: list         # columns of [x; u] that carry elements (sorted, union over the vertices)
-    tau: np.ndarray    # [t; s_u]
+    half: list  # scaled half-widths h_l tau_c / t_r
+    used: list  # columns of [x; u] that carry elements (sorted, union over the vertices)
+    tau: np.ndarray  # [t; s_u]
 
 
 def scale_box(box: ElementBox, R: np.ndarray, C: np.ndarray, scaling: Scaling) -> ScaledBox:
@@ -106,8 +106,18 @@ def scale_box(box: ElementBox, R: np.ndarray, C: np.ndarray, scaling: Scaling) -
         half.append(h * tau[c] / scaling.t[r])
     used = sorted({int(c) for cc in cols for c in cc})
     Rs = np.asarray(R, dtype=float) / scaling.s_u[:, None]
-    return ScaledBox(A, B, scaling.Be(np.asarray(box.B_centre, dtype=float) @ R), Rs, scaling.C(C),
-                     rows, cols, half, used, tau)
+    return ScaledBox(
+        A,
+        B,
+        scaling.Be(np.asarray(box.B_centre, dtype=float) @ R),
+        Rs,
+        scaling.C(C),
+        rows,
+        cols,
+        half,
+        used,
+        tau,
+    )
 
 
 def box_scaling(box: ElementBox, R: np.ndarray, C: np.ndarray) -> Scaling:
@@ -116,8 +126,8 @@ def box_scaling(box: ElementBox, R: np.ndarray, C: np.ndarray) -> Scaling:
     for i in range(box.N):
         lo, hi = box.bounds(i)
         for AB in (lo, hi):
-            As.append(np.abs(AB[:, :box.n]))
-            Bs.append(np.abs(AB[:, box.n:]))
+            As.append(np.abs(AB[:, : box.n]))
+            Bs.append(np.abs(AB[:, box.n :]))
     return choose_scaling(As, Bs, [b @ R for b in Bs], C)
 
 
@@ -145,7 +155,7 @@ def _element_maps(sb: ScaledBox, i: int):
     n = sb.A[0].shape[0]
     p = r.size
     Srow = np.zeros((n, p))
-    Srow[r, np.arange(p)] = h ** 2
+    Srow[r, np.arange(p)] = h**2
     colk = np.array([sb.used.index(int(x)) for x in c], dtype=int)
     Scol = np.zeros((len(sb.used), p))
     Scol[colk, np.arange(p)] = 1.0
@@ -160,8 +170,17 @@ def _harmonic(t: np.ndarray, colk: np.ndarray, nc: int) -> np.ndarray:
         return np.where(w > 0, 1.0 / w, np.inf)
 
 
-def block_numeric(sb: ScaledBox, i: int, lyapunov: str, X: np.ndarray, S: np.ndarray, H: Optional[np.ndarray],
-                  t: np.ndarray, g: float, Z: Optional[np.ndarray] = None) -> np.ndarray:
+def block_numeric(
+    sb: ScaledBox,
+    i: int,
+    lyapunov: str,
+    X: np.ndarray,
+    S: np.ndarray,
+    H: Optional[np.ndarray],
+    t: np.ndarray,
+    g: float,
+    Z: Optional[np.ndarray] = None,
+) -> np.ndarray:
     """The compressed robust block of vertex i (module docstring) in scaled coordinates, numpy.
     Columns of the used set without elements at this vertex get omega = inf (dropped)."""
     n = X.shape[0]
@@ -177,12 +196,17 @@ def block_numeric(sb: ScaledBox, i: int, lyapunov: str, X: np.ndarray, S: np.nda
     DL = np.diag(Srow @ t)
     if lyapunov == "common":
         AX = sb.A[i] @ X + sb.B @ S
-        G = P @ np.block([[X, np.zeros((n, ne)), np.zeros((n, nz))], [S, sb.Rs, np.zeros((m, nz))]])
-        M = np.block([
-            [AX + AX.T + DL, sb.Be, X @ sb.C.T, G[:, :n].T],
-            [sb.Be.T, -np.eye(ne), np.zeros((ne, nz)), G[:, n:n + ne].T],
-            [sb.C @ X, np.zeros((nz, ne)), -g * np.eye(nz), np.zeros((nz, P.shape[0]))],
-            [G[:, :n], G[:, n:n + ne], np.zeros((P.shape[0], nz)), -np.diag(om)]])
+        G = P @ np.block(
+            [[X, np.zeros((n, ne)), np.zeros((n, nz))], [S, sb.Rs, np.zeros((m, nz))]]
+        )
+        M = np.block(
+            [
+                [AX + AX.T + DL, sb.Be, X @ sb.C.T, G[:, :n].T],
+                [sb.Be.T, -np.eye(ne), np.zeros((ne, nz)), G[:, n : n + ne].T],
+                [sb.C @ X, np.zeros((nz, ne)), -g * np.eye(nz), np.zeros((nz, P.shape[0]))],
+                [G[:, :n], G[:, n : n + ne], np.zeros((P.shape[0], nz)), -np.diag(om)],
+            ]
+        )
         return 0.5 * (M + M.T)
     U = sb.A[i] @ H + sb.B @ S
     CH = sb.C @ H
@@ -190,12 +214,15 @@ def block_numeric(sb: ScaledBox, i: int, lyapunov: str, X: np.ndarray, S: np.nda
     F = P @ np.vstack([np.zeros((n, ne)), sb.Rs])
     Z = np.zeros((n, n)) if Z is None else Z
     k = P.shape[0]
-    M = np.block([
-        [U + U.T + DL + Z, -X + H.T - U, sb.Be, CH.T, Gx.T],
-        [-X + H - U.T, -(H + H.T), np.zeros((n, ne)), -CH.T, -Gx.T],
-        [sb.Be.T, np.zeros((ne, n)), -np.eye(ne), np.zeros((ne, nz)), F.T],
-        [CH, -CH, np.zeros((nz, ne)), -g * np.eye(nz), np.zeros((nz, k))],
-        [Gx, -Gx, F, np.zeros((k, nz)), -np.diag(om)]])
+    M = np.block(
+        [
+            [U + U.T + DL + Z, -X + H.T - U, sb.Be, CH.T, Gx.T],
+            [-X + H - U.T, -(H + H.T), np.zeros((n, ne)), -CH.T, -Gx.T],
+            [sb.Be.T, np.zeros((ne, n)), -np.eye(ne), np.zeros((ne, nz)), F.T],
+            [CH, -CH, np.zeros((nz, ne)), -g * np.eye(nz), np.zeros((nz, k))],
+            [Gx, -Gx, F, np.zeros((k, nz)), -np.diag(om)],
+        ]
+    )
     return 0.5 * (M + M.T)
 
 
@@ -222,17 +249,22 @@ class BoxSolution:
     """Decision variables in scaled coordinates (``unscaled`` gives the file's)."""
 
     lyapunov: str
-    X: list            # per vertex (common: the same matrix N times)
-    S: np.ndarray      # (N, m, n): Y_i (common) or S_i
-    H: np.ndarray      # X (common) or H
-    t: list            # per vertex multipliers (p_i,)
+    X: list  # per vertex (common: the same matrix N times)
+    S: np.ndarray  # (N, m, n): Y_i (common) or S_i
+    H: np.ndarray  # X (common) or H
+    t: list  # per vertex multipliers (p_i,)
     W: Optional[list]  # rate: per vertex per axis (n, n)
     g: float
     kappa: float = float("nan")
 
 
-def box_margins(sb: ScaledBox, sol: BoxSolution, gamma: float, pairs: Optional[list] = None,
-                rate: Optional[np.ndarray] = None) -> tuple[float, float]:
+def box_margins(
+    sb: ScaledBox,
+    sol: BoxSolution,
+    gamma: float,
+    pairs: Optional[list] = None,
+    rate: Optional[np.ndarray] = None,
+) -> tuple[float, float]:
     """(gamma_certified, min_margin) of the compressed robust blocks with numpy: the largest over
     the vertices of the smallest gamma for which the block holds, and the smallest of
     -lambda_max(block at gamma), lambda_min(X_i), min t_l (negative = violated). For ``rate`` the
@@ -255,18 +287,34 @@ def box_margins(sb: ScaledBox, sol: BoxSolution, gamma: float, pairs: Optional[l
             M0 = block_numeric(sb, i, sol.lyapunov, sol.X[i], sol.S[i], sol.H, sol.t[i], 0.0, Z)
             gam = max(gam, block_gamma(M0, z))
             M = M0.copy()
-            M[z, z] -= gamma ** 2
+            M[z, z] -= gamma**2
             margin = min(margin, float(-np.linalg.eigvalsh(M)[-1]))
-        margin = min(margin, float(np.linalg.eigvalsh(0.5 * (sol.X[i] + sol.X[i].T))[0]),
-                     float(np.min(sol.t[i])) if sol.t[i].size else float("inf"))
+        margin = min(
+            margin,
+            float(np.linalg.eigvalsh(0.5 * (sol.X[i] + sol.X[i].T))[0]),
+            float(np.min(sol.t[i])) if sol.t[i].size else float("inf"),
+        )
     return gam, margin
 
 
-def solve_box(box: ElementBox, R: np.ndarray, C: np.ndarray, *, gamma: float, lyapunov: str = "common",
-              objective: str = "feasibility", eps: float = 1e-6, solver: str = "CLARABEL",
-              fallback: Optional[str] = "SCS", scale: bool = True, vmin=None, vmax=None,
-              rate: Optional[Sequence[float]] = None, verbose: bool = False,
-              K_fixed: Optional[np.ndarray] = None) -> dict:
+def solve_box(
+    box: ElementBox,
+    R: np.ndarray,
+    C: np.ndarray,
+    *,
+    gamma: float,
+    lyapunov: str = "common",
+    objective: str = "feasibility",
+    eps: float = 1e-6,
+    solver: str = "CLARABEL",
+    fallback: Optional[str] = "SCS",
+    scale: bool = True,
+    vmin=None,
+    vmax=None,
+    rate: Optional[Sequence[float]] = None,
+    verbose: bool = False,
+    K_fixed: Optional[np.ndarray] = None,
+) -> dict:
     """Solve the robust LMI of the module docstring. With ``K_fixed`` (N, m, n) the gains are
     given and only the Lyapunov matrices, multipliers and gamma are sought (analysis: S_i = K_i X
     or K_i H; the smallest gamma the element-box certificate can prove for that law with
@@ -287,10 +335,14 @@ def solve_box(box: ElementBox, R: np.ndarray, C: np.ndarray, *, gamma: float, ly
     pairs, rho = None, None
     if lyapunov == "rate":
         if rate is None or vmin is None or vmax is None:
-            raise ConfigError("hinf.lyapunov: rate needs the scheduling box and a rate bound (hinf.rate_bound)")
+            raise ConfigError(
+                "hinf.lyapunov: rate needs the scheduling box and a rate bound (hinf.rate_bound)"
+            )
         rho = np.asarray(rate, dtype=float)
         if rho.shape != (np.size(vmin),) or not np.all(np.isfinite(rho)) or np.any(rho < 0):
-            raise ConfigError(f"rate bound must be {np.size(vmin)} finite numbers >= 0, got {rho.tolist()}")
+            raise ConfigError(
+                f"rate bound must be {np.size(vmin)} finite numbers >= 0, got {rho.tolist()}"
+            )
         pairs = rate_vertex_pairs(np.asarray(vmin, float), np.asarray(vmax, float))
     scaling = box_scaling(box, R, C) if scale else Scaling.identity(n, m)
     sb = scale_box(box, R, C, scaling)
@@ -317,7 +369,7 @@ def solve_box(box: ElementBox, R: np.ndarray, C: np.ndarray, *, gamma: float, ly
             raise ConfigError(f"K_fixed must have shape ({N}, {m}, {n}), got {Kf.shape}")
         if objective == "min_effort":
             raise ConfigError("objective min_effort needs the gains as variables")
-        Ks = Kf * scaling.t[None, None, :] / scaling.s_u[None, :, None]      # K~ = S_u^-1 K T
+        Ks = Kf * scaling.t[None, None, :] / scaling.s_u[None, :, None]  # K~ = S_u^-1 K T
         S = [Ks[i] @ H for i in range(N)]
     else:
         S = [cp.Variable((m, n), name=f"S_{i}") for i in range(N)]
@@ -328,7 +380,9 @@ def solve_box(box: ElementBox, R: np.ndarray, C: np.ndarray, *, gamma: float, ly
         Srow, Scol, colk = _element_maps(sb, i)
         p = sb.rows[i].size
         if p == 0:
-            raise ConfigError(f"element box: vertex {i} has no uncertain element (use the polytope method)")
+            raise ConfigError(
+                f"element box: vertex {i} has no uncertain element (use the polytope method)"
+            )
         tt = cp.Variable(p, name=f"t_{i}")
         uu = cp.Variable(p, name=f"u_{i}")
         have = np.unique(colk)
@@ -349,11 +403,14 @@ def solve_box(box: ElementBox, R: np.ndarray, C: np.ndarray, *, gamma: float, ly
             AX = sb.A[i] @ X0 + sb.B @ S[i]
             Gx = Pi @ cp.vstack([X0, S[i]])
             Gw = Pi @ np.vstack([np.zeros((n, ne)), sb.Rs])
-            M = cp.bmat([
-                [AX + AX.T + DL, sb.Be, X0 @ sb.C.T, Gx.T],
-                [sb.Be.T, -np.eye(ne), np.zeros((ne, nz)), Gw.T],
-                [sb.C @ X0, np.zeros((nz, ne)), -g * np.eye(nz), np.zeros((nz, k))],
-                [Gx, Gw, np.zeros((k, nz)), -cp.diag(om)]])
+            M = cp.bmat(
+                [
+                    [AX + AX.T + DL, sb.Be, X0 @ sb.C.T, Gx.T],
+                    [sb.Be.T, -np.eye(ne), np.zeros((ne, nz)), Gw.T],
+                    [sb.C @ X0, np.zeros((nz, ne)), -g * np.eye(nz), np.zeros((nz, k))],
+                    [Gx, Gw, np.zeros((k, nz)), -cp.diag(om)],
+                ]
+            )
             dim = n + ne + nz + k
         else:
             Zsum = 0
@@ -370,12 +427,15 @@ def solve_box(box: ElementBox, R: np.ndarray, C: np.ndarray, *, gamma: float, ly
             CH = sb.C @ H
             Gx = Pi @ cp.vstack([H, S[i]])
             F = Pi @ np.vstack([np.zeros((n, ne)), sb.Rs])
-            M = cp.bmat([
-                [U + U.T + DL + Zsum, -Xs[i] + H.T - U, sb.Be, CH.T, Gx.T],
-                [-Xs[i] + H - U.T, -(H + H.T), np.zeros((n, ne)), -CH.T, -Gx.T],
-                [sb.Be.T, np.zeros((ne, n)), -np.eye(ne), np.zeros((ne, nz)), F.T],
-                [CH, -CH, np.zeros((nz, ne)), -g * np.eye(nz), np.zeros((nz, k))],
-                [Gx, -Gx, F, np.zeros((k, nz)), -cp.diag(om)]])
+            M = cp.bmat(
+                [
+                    [U + U.T + DL + Zsum, -Xs[i] + H.T - U, sb.Be, CH.T, Gx.T],
+                    [-Xs[i] + H - U.T, -(H + H.T), np.zeros((n, ne)), -CH.T, -Gx.T],
+                    [sb.Be.T, np.zeros((ne, n)), -np.eye(ne), np.zeros((ne, nz)), F.T],
+                    [CH, -CH, np.zeros((nz, ne)), -g * np.eye(nz), np.zeros((nz, k))],
+                    [Gx, -Gx, F, np.zeros((k, nz)), -cp.diag(om)],
+                ]
+            )
             dim = 2 * n + ne + nz + k
         cons.append(0.5 * (M + M.T) << -eps * np.eye(dim))
         dims.append(dim)
@@ -384,28 +444,41 @@ def solve_box(box: ElementBox, R: np.ndarray, C: np.ndarray, *, gamma: float, ly
                 cons.append(cp.bmat([[X0, S[i].T], [S[i], kappa * np.eye(m)]]) >> 0)
             else:
                 cons.append(cp.bmat([[H + H.T - Xs[i], S[i].T], [S[i], kappa * np.eye(m)]]) >> 0)
-    obj = cp.Minimize(g) if objective == "min_gamma" else (cp.Minimize(kappa) if kappa is not None
-                                                            else cp.Minimize(0))
+    obj = (
+        cp.Minimize(g)
+        if objective == "min_gamma"
+        else (cp.Minimize(kappa) if kappa is not None else cp.Minimize(0))
+    )
     prob = cp.Problem(obj, cons)
     build_s = time.perf_counter() - t0
     n_x_var = n * (n + 1) // 2 * (1 if lyapunov == "common" else N)
     n_w = (N * len(pairs[0]) * n * (n + 1) // 2) if lyapunov == "rate" else 0
     sizes = {
         "form": "direct (common X)" if lyapunov == "common" else "Eq. (30) extended (common H)",
-        "scalar_variables": n_x_var + (0 if lyapunov == "common" else n * n) + (0 if K_fixed is not None else N * m * n)
-        + 2 * sum(box.p) + sum(np.unique(np.array([sb.used.index(int(c)) for c in sb.cols[i]])).size
-                                for i in range(N)) + n_w + (1 if objective != "feasibility" else 0),
-        "lmi_blocks": N + (1 if lyapunov == "common" else N) + (2 * N * len(pairs[0]) if lyapunov == "rate" else 0)
+        "scalar_variables": n_x_var
+        + (0 if lyapunov == "common" else n * n)
+        + (0 if K_fixed is not None else N * m * n)
+        + 2 * sum(box.p)
+        + sum(
+            np.unique(np.array([sb.used.index(int(c)) for c in sb.cols[i]])).size for i in range(N)
+        )
+        + n_w
+        + (1 if objective != "feasibility" else 0),
+        "lmi_blocks": N
+        + (1 if lyapunov == "common" else N)
+        + (2 * N * len(pairs[0]) if lyapunov == "rate" else 0)
         + (N if kappa is not None else 0),
         "robust_block_dim": dims,
         "elements_per_vertex": box.p,
         "second_order_cones": n_soc,
     }
-    sizes["scalar_constraints"] = int(sum(d * (d + 1) // 2 for d in dims)
-                                      + (1 if lyapunov == "common" else N) * n * (n + 1) // 2
-                                      + (2 * N * len(pairs[0]) * n * (n + 1) // 2 if lyapunov == "rate" else 0)
-                                      + (N * (n + m) * (n + m + 1) // 2 if kappa is not None else 0)
-                                      + 3 * n_soc)
+    sizes["scalar_constraints"] = int(
+        sum(d * (d + 1) // 2 for d in dims)
+        + (1 if lyapunov == "common" else N) * n * (n + 1) // 2
+        + (2 * N * len(pairs[0]) * n * (n + 1) // 2 if lyapunov == "rate" else 0)
+        + (N * (n + m) * (n + m + 1) // 2 if kappa is not None else 0)
+        + 3 * n_soc
+    )
     installed = set(cp.installed_solvers())
     order = list(dict.fromkeys([solver] + ([fallback] if fallback else [])))
     errors = []
@@ -425,7 +498,9 @@ def solve_box(box: ElementBox, R: np.ndarray, C: np.ndarray, *, gamma: float, ly
             continue
         wall = time.perf_counter() - t1
         if prob.status == "infeasible":
-            raise SolverError(f"robust LMI over the element box ({lyapunov} Lyapunov matrix): infeasible ({sv})")
+            raise SolverError(
+                f"robust LMI over the element box ({lyapunov} Lyapunov matrix): infeasible ({sv})"
+            )
         if prob.status not in ("optimal", "optimal_inaccurate"):
             errors.append(f"{sv}: status {prob.status}")
             continue
@@ -434,17 +509,33 @@ def solve_box(box: ElementBox, R: np.ndarray, C: np.ndarray, *, gamma: float, ly
             errors.append(f"{sv}: H (or X) numerically singular")
             continue
         gs = float(g.value) if objective == "min_gamma" else float(gamma) ** 2
-        sol = BoxSolution(lyapunov, [np.asarray(X.value, dtype=float) for X in Xs],
-                          np.array([np.asarray(s_.value, dtype=float) for s_ in S]), Hs,
-                          [np.asarray(tt.value, dtype=float) for tt in T],
-                          [[np.asarray(w.value, dtype=float) for w in Wi] for Wi in W] if W else None,
-                          gs, float(kappa.value) if kappa is not None else float("nan"))
+        sol = BoxSolution(
+            lyapunov,
+            [np.asarray(X.value, dtype=float) for X in Xs],
+            np.array([np.asarray(s_.value, dtype=float) for s_ in S]),
+            Hs,
+            [np.asarray(tt.value, dtype=float) for tt in T],
+            [[np.asarray(w.value, dtype=float) for w in Wi] for Wi in W] if W else None,
+            gs,
+            float(kappa.value) if kappa is not None else float("nan"),
+        )
         g_cert, margin = box_margins(sb, sol, float(np.sqrt(gs)) * (1 + 1e-9), pairs, rho)
         ok = margin > 0 if objective != "min_gamma" else np.isfinite(g_cert)
-        log.info("robust LMI (%s, %s): %s/%s, gamma %.4g, certified %.4g, margin %.3g, %.2f s",
-                 lyapunov, objective, sv, prob.status, np.sqrt(gs), g_cert, margin, wall)
+        log.info(
+            "robust LMI (%s, %s): %s/%s, gamma %.4g, certified %.4g, margin %.3g, %.2f s",
+            lyapunov,
+            objective,
+            sv,
+            prob.status,
+            np.sqrt(gs),
+            g_cert,
+            margin,
+            wall,
+        )
         if not ok:
-            errors.append(f"{sv}: status {prob.status} but the numpy re-check fails (margin {margin:.3g})")
+            errors.append(
+                f"{sv}: status {prob.status} but the numpy re-check fails (margin {margin:.3g})"
+            )
             continue
         K_s = np.array([np.linalg.solve(Hs.T, s.T).T for s in sol.S])
         stats = prob.solver_stats
@@ -464,11 +555,15 @@ def solve_box(box: ElementBox, R: np.ndarray, C: np.ndarray, *, gamma: float, ly
             "status": prob.status,
             "solver": sv,
             "compile_time": float(getattr(prob, "compilation_time", build_s) or build_s) + build_s,
-            "solve_time": float(stats.solve_time) if stats is not None and stats.solve_time is not None else wall,
+            "solve_time": float(stats.solve_time)
+            if stats is not None and stats.solve_time is not None
+            else wall,
             "rate": None if rho is None else rho.tolist(),
             "lyapunov": lyapunov,
             "objective": objective,
             "scaled": sb,
             "solution": sol,
         }
-    raise SolverError("robust LMI over the element box: no certified solution (" + "; ".join(errors) + ")")
+    raise SolverError(
+        "robust LMI over the element box: no certified solution (" + "; ".join(errors) + ")"
+    )

@@ -35,8 +35,8 @@ from scipy.linalg import matrix_balance
 
 @dataclass(frozen=True)
 class Scaling:
-    t: np.ndarray     # (n,) state scale, x = diag(t) x~
-    s_u: np.ndarray   # (m,) input scale, u = diag(s_u) u~
+    t: np.ndarray  # (n,) state scale, x = diag(t) x~
+    s_u: np.ndarray  # (m,) input scale, u = diag(s_u) u~
 
     @classmethod
     def identity(cls, n: int, m: int) -> "Scaling":
@@ -71,8 +71,12 @@ def _pow2(x: np.ndarray) -> np.ndarray:
     return 2.0 ** np.round(np.log2(x))
 
 
-def choose_scaling(As: Sequence[np.ndarray], Bs: Sequence[np.ndarray], Bes: Sequence[np.ndarray] | None = None,
-                   C: np.ndarray | None = None) -> Scaling:
+def choose_scaling(
+    As: Sequence[np.ndarray],
+    Bs: Sequence[np.ndarray],
+    Bes: Sequence[np.ndarray] | None = None,
+    C: np.ndarray | None = None,
+) -> Scaling:
     """Balancing scaling for a family of (A, B) (see module docstring).
 
     With ``Bes`` and ``C`` the balanced matrix is [[|A|, |B_e| 1], [1^T |C|, 0]]: the exogenous

@@ -98,7 +98,7 @@ class CheckRow:
     limit: float
     ok: bool
     note: str = ""
-    advisory: bool = False      # empirical check the certificate does not claim: WARN, not FAIL
+    advisory: bool = False  # empirical check the certificate does not claim: WARN, not FAIL
 
     @property
     def result(self) -> str:
@@ -127,7 +127,11 @@ class VerifyReport:
         if not rows:
             return None
         bad = [r for r in rows if not r.ok]
-        return bad[0] if bad else max(rows, key=lambda r: r.value if np.isfinite(r.value) else -np.inf)
+        return (
+            bad[0]
+            if bad
+            else max(rows, key=lambda r: r.value if np.isfinite(r.value) else -np.inf)
+        )
 
     def table(self, max_rows: int = 40) -> str:
         """Failing rows first, then the worst passing row per check."""
@@ -138,16 +142,31 @@ class VerifyReport:
             if w is not None and w.ok:
                 shown.append(w)
         for r in shown:
-            lines.append(f"{r.check:<14} {r.where:<28} {r.value:>12.6g} {r.limit:>12.6g}  "
-                         f"{r.result}{('  ' + r.note) if r.note else ''}")
+            lines.append(
+                f"{r.check:<14} {r.where:<28} {r.value:>12.6g} {r.limit:>12.6g}  "
+                f"{r.result}{('  ' + r.note) if r.note else ''}"
+            )
         n_bad = sum(not (r.ok or r.advisory) for r in self.rows)
-        lines.append(f"{len(self.rows)} checks, {n_bad} failed"
-                     + (f", {self.warnings} warnings (empirical, not certified)" if self.warnings else ""))
+        lines.append(
+            f"{len(self.rows)} checks, {n_bad} failed"
+            + (f", {self.warnings} warnings (empirical, not certified)" if self.warnings else "")
+        )
         return "\n".join(lines)
 
 
-def _check_point(rep: VerifyReport, where: str, A: np.ndarray, B: np.ndarray, K: np.ndarray, R: np.ndarray,
-                 C: np.ndarray, gamma: float, region: Optional[Region], rtol: float, ts: Optional[float]) -> None:
+def _check_point(
+    rep: VerifyReport,
+    where: str,
+    A: np.ndarray,
+    B: np.ndarray,
+    K: np.ndarray,
+    R: np.ndarray,
+    C: np.ndarray,
+    gamma: float,
+    region: Optional[Region],
+    rtol: float,
+    ts: Optional[float],
+) -> None:
     Acl = A + B @ K
     eig = np.linalg.eigvals(Acl)
     if ts is not None:
@@ -156,13 +175,25 @@ def _check_point(rep: VerifyReport, where: str, A: np.ndarray, B: np.ndarray, K:
         rep.add("stability", where, rho, 1.0, rho < 1.0)
     else:
         h = hinf_norm(Acl, B @ R, C)
-        rep.add("hinf", where, h.value, gamma, bool(h.stable and h.lower <= gamma * (1 + rtol)),
-                "" if h.stable else "closed loop unstable")
+        rep.add(
+            "hinf",
+            where,
+            h.value,
+            gamma,
+            bool(h.stable and h.lower <= gamma * (1 + rtol)),
+            "" if h.stable else "closed loop unstable",
+        )
     if region is not None:
         ok = region.contains(eig, tol=1e-9 * max(1.0, float(np.max(np.abs(eig)))))
         k = int(np.argmin(ok)) if not np.all(ok) else int(np.argmax(eig.real))
-        rep.add("region", where, float(eig[k].real), float("nan"), bool(np.all(ok)),
-                f"eig {eig[k]:.4g}" + ("" if np.all(ok) else " outside region"))
+        rep.add(
+            "region",
+            where,
+            float(eig[k].real),
+            float("nan"),
+            bool(np.all(ok)),
+            f"eig {eig[k]:.4g}" + ("" if np.all(ok) else " outside region"),
+        )
     elif ts is None:
         mx = float(np.max(eig.real))
         rep.add("stability", where, mx, 0.0, mx < 0.0)
@@ -181,9 +212,20 @@ def _mix_weights(model: PolytopicModel, rng: np.random.Generator) -> list:
     return [np.kron(rng.dirichlet(np.ones(len(lst) // MB)), beta_b) for lst in model.systems]
 
 
-def verify_gains(model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.ndarray, gamma: float,
-                 region: Optional[Region] = None, n_random: int = 20, seed: int = 0, rtol: float = 1e-6,
-                 certificate: Optional[dict] = None, k_rtol: float = 1e-6, n_mix: int = 3) -> VerifyReport:
+def verify_gains(
+    model: PolytopicModel,
+    K: np.ndarray,
+    R: np.ndarray,
+    C: np.ndarray,
+    gamma: float,
+    region: Optional[Region] = None,
+    n_random: int = 20,
+    seed: int = 0,
+    rtol: float = 1e-6,
+    certificate: Optional[dict] = None,
+    k_rtol: float = 1e-6,
+    n_mix: int = 3,
+) -> VerifyReport:
     """Run the checks of the module docstring; ``certificate`` is the loaded sidecar (or None)."""
     rep = VerifyReport()
     K = np.asarray(K, dtype=float)
@@ -191,14 +233,39 @@ def verify_gains(model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.ndar
     C = np.asarray(C, dtype=float)
     if model.common_input is not None:
         dB, dA = common_input_deviation(model, model.common_input.M)
-        rep.add("common B", "B_i^(a,b) vs B^b, all i, a", dB, COMMON_B_TOL, dB <= COMMON_B_TOL,
-                "" if dB <= COMMON_B_TOL else "input matrix differs between vertices: interior not certified")
-        rep.add("product A", "A_i^(a,b) vs A_i^(a,0)", dA, COMMON_B_TOL, dA <= COMMON_B_TOL,
-                "" if dA <= COMMON_B_TOL else "systems are not the product A-corners x B-corners")
+        rep.add(
+            "common B",
+            "B_i^(a,b) vs B^b, all i, a",
+            dB,
+            COMMON_B_TOL,
+            dB <= COMMON_B_TOL,
+            ""
+            if dB <= COMMON_B_TOL
+            else "input matrix differs between vertices: interior not certified",
+        )
+        rep.add(
+            "product A",
+            "A_i^(a,b) vs A_i^(a,0)",
+            dA,
+            COMMON_B_TOL,
+            dA <= COMMON_B_TOL,
+            "" if dA <= COMMON_B_TOL else "systems are not the product A-corners x B-corners",
+        )
     for i, lst in enumerate(model.systems):
         for j, (A, B) in enumerate(lst):
-            _check_point(rep, f"vertex {i} unc {j}", np.asarray(A), np.asarray(B), K[i], R, C, gamma, region,
-                         rtol, model.ts)
+            _check_point(
+                rep,
+                f"vertex {i} unc {j}",
+                np.asarray(A),
+                np.asarray(B),
+                K[i],
+                R,
+                C,
+                gamma,
+                region,
+                rtol,
+                model.ts,
+            )
     rng = np.random.default_rng(seed)
     Ms = {len(lst) for lst in model.systems}
     same_M = len(Ms) == 1
@@ -208,19 +275,36 @@ def verify_gains(model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.ndar
         vd = model.vmin + rng.random(model.vmin.size) * (model.vmax - model.vmin)
         alpha, _ = multilinear_weights(vd, model.vmin, model.vmax)
         Kv = np.tensordot(alpha, K, axes=1)
-        cases = [("nom", np.tensordot(alpha, model.A, axes=1), np.tensordot(alpha, model.B, axes=1))]
+        cases = [
+            ("nom", np.tensordot(alpha, model.A, axes=1), np.tensordot(alpha, model.B, axes=1))
+        ]
         if same_M and next(iter(Ms)) > 1:
             for j in range(next(iter(Ms))):
-                cases.append((f"unc {j}", sum(a * As_all[i][j] for i, a in enumerate(alpha)),
-                              sum(a * Bs_all[i][j] for i, a in enumerate(alpha))))
+                cases.append(
+                    (
+                        f"unc {j}",
+                        sum(a * As_all[i][j] for i, a in enumerate(alpha)),
+                        sum(a * Bs_all[i][j] for i, a in enumerate(alpha)),
+                    )
+                )
         if max(Ms) > 1:
             for r in range(n_mix):
                 w = _mix_weights(model, rng)
-                cases.append((f"mix {r}",
-                              sum(a * np.tensordot(w[i], As_all[i], axes=1) for i, a in enumerate(alpha)),
-                              sum(a * np.tensordot(w[i], Bs_all[i], axes=1) for i, a in enumerate(alpha))))
+                cases.append(
+                    (
+                        f"mix {r}",
+                        sum(
+                            a * np.tensordot(w[i], As_all[i], axes=1) for i, a in enumerate(alpha)
+                        ),
+                        sum(
+                            a * np.tensordot(w[i], Bs_all[i], axes=1) for i, a in enumerate(alpha)
+                        ),
+                    )
+                )
         for name, A, B in cases:
-            _check_point(rep, f"interior {k} {name}", A, B, Kv, R, C, gamma, region, rtol, model.ts)
+            _check_point(
+                rep, f"interior {k} {name}", A, B, Kv, R, C, gamma, region, rtol, model.ts
+            )
     for r in rep.rows:
         if r.check == "hinf" and r.where.startswith("interior"):
             r.check = "hinf interior"
@@ -233,21 +317,35 @@ def verify_gains(model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.ndar
     return rep
 
 
-def _check_input_claim(rep: VerifyReport, model: PolytopicModel, claim: Optional[dict], raw: dict) -> None:
+def _check_input_claim(
+    rep: VerifyReport, model: PolytopicModel, claim: Optional[dict], raw: dict
+) -> None:
     """The certificate's input_structure vs the rebuilt polytope, and the B hull's coverage of the
     models file (read from the raw YAML, not through models.lpv.input_hull)."""
     if not isinstance(claim, dict):
         return
     st = model.input_structure
     same = all(claim.get(k) == st.get(k) for k in ("B", "M_A", "M_B"))
-    rep.add("structure", f"B {claim.get('B')} M_B {claim.get('M_B')}", 0.0 if same else 1.0, 0.0, bool(same),
-            "" if same else f"rebuilt polytope is B {st['B']}, M_A {st['M_A']}, M_B {st['M_B']}")
+    rep.add(
+        "structure",
+        f"B {claim.get('B')} M_B {claim.get('M_B')}",
+        0.0 if same else 1.0,
+        0.0,
+        bool(same),
+        "" if same else f"rebuilt polytope is B {st['B']}, M_A {st['M_A']}, M_B {st['M_B']}",
+    )
     if model.box is not None:
-        return                  # the element box's claim is checked against the raw file by check_box_claim
+        return  # the element box's claim is checked against the raw file by check_box_claim
     if st["B"] != "common" or not same:
         if st["B"] == "per_vertex":
-            rep.add("coverage", "scheduling box", 0.0, 0.0, True,
-                    "per-vertex B: Lemma 1 certifies the vertices; interior only spot-checked")
+            rep.add(
+                "coverage",
+                "scheduling box",
+                0.0,
+                0.0,
+                True,
+                "per-vertex B: Lemma 1 certifies the vertices; interior only spot-checked",
+            )
         return
     corners = np.asarray(model.common_input.corners, dtype=float)
     lo, hi = corners.min(axis=0), corners.max(axis=0)
@@ -262,18 +360,41 @@ def _check_input_claim(rep: VerifyReport, model: PolytopicModel, claim: Optional
     tol = 1e-12 * max(1.0, float(np.max(np.abs(corners))))
     exact = model.common_input.method in ("box", "hybrid")
     ok = worst <= tol or not exact
-    note = "" if worst <= tol else ("identified B interval outside the common B corners" if exact else
-                                    "influence reduction of B: first-order, not a set containment")
+    note = (
+        ""
+        if worst <= tol
+        else (
+            "identified B interval outside the common B corners"
+            if exact
+            else "influence reduction of B: first-order, not a set containment"
+        )
+    )
     rep.add("B hull", "B^b span all vertex B intervals", max(worst, 0.0), tol, bool(ok), note)
 
 
-def _check_lmi(rep: VerifyReport, model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.ndarray, gamma: float,
-               cert: dict, k_rtol: float) -> None:
+def _check_lmi(
+    rep: VerifyReport,
+    model: PolytopicModel,
+    K: np.ndarray,
+    R: np.ndarray,
+    C: np.ndarray,
+    gamma: float,
+    cert: dict,
+    k_rtol: float,
+) -> None:
     X, S, H = cert["X_list"], np.asarray(cert["S"]), np.asarray(cert["H"])
     sc = Scaling(t=np.asarray(cert["t"], float), s_u=np.asarray(cert["s_u"], float))
-    if len(X) != model.n_vertices or any(len(X[i]) != len(model.systems[i]) for i in range(model.n_vertices)):
-        rep.add("lmi", "shapes", float("nan"), float("nan"), False,
-                "certificate X does not match the models' uncertainty vertices")
+    if len(X) != model.n_vertices or any(
+        len(X[i]) != len(model.systems[i]) for i in range(model.n_vertices)
+    ):
+        rep.add(
+            "lmi",
+            "shapes",
+            float("nan"),
+            float("nan"),
+            False,
+            "certificate X does not match the models' uncertainty vertices",
+        )
         return
     for i in range(model.n_vertices):
         try:
@@ -288,13 +409,27 @@ def _check_lmi(rep: VerifyReport, model: PolytopicModel, K: np.ndarray, R: np.nd
     for key in ("R", "C"):
         if key in cert:
             ref = R if key == "R" else C
-            same = np.shape(cert[key]) == np.shape(ref) and np.allclose(cert[key], ref, rtol=1e-12, atol=0)
-            rep.add("lmi data", key, 0.0 if same else 1.0, 0.0, bool(same),
-                    "" if same else f"{key} differs from the one the certificate was computed with")
+            same = np.shape(cert[key]) == np.shape(ref) and np.allclose(
+                cert[key], ref, rtol=1e-12, atol=0
+            )
+            rep.add(
+                "lmi data",
+                key,
+                0.0 if same else 1.0,
+                0.0,
+                bool(same),
+                "" if same else f"{key} differs from the one the certificate was computed with",
+            )
     gam, margin = certificate_margins(model, R, C, X, S, H, sc, gamma=gamma)
     rep.add("lmi gamma", "Eq. (30) all i,j", gam, gamma, gam <= gamma)
-    rep.add("lmi margin", "Eq. (30) all i,j", margin, 0.0, margin > 0.0,
-            "min(-lambda_max(LMI), lambda_min(X))")
+    rep.add(
+        "lmi margin",
+        "Eq. (30) all i,j",
+        margin,
+        0.0,
+        margin > 0.0,
+        "min(-lambda_max(LMI), lambda_min(X))",
+    )
 
 
 # --------------------------------------------------------------------------- element-box certificates
@@ -314,7 +449,12 @@ def _sidecar_box(cert: dict, n: int, m: int) -> Optional[dict]:
     out = {"Ac": Ac, "Bc": Bc, "rows": [], "cols": [], "half": [], "t": []}
     for i in range(Ac.shape[0]):
         k = int(p[i])
-        for key, arr in (("rows", "box_rows"), ("cols", "box_cols"), ("half", "box_half"), ("t", "box_t")):
+        for key, arr in (
+            ("rows", "box_rows"),
+            ("cols", "box_cols"),
+            ("half", "box_half"),
+            ("t", "box_t"),
+        ):
             out[key].append(np.asarray(cert[arr][i, :k]))
     out["rows"] = [r.astype(int) for r in out["rows"]]
     out["cols"] = [c.astype(int) for c in out["cols"]]
@@ -330,7 +470,9 @@ def _bounds(bx: dict, i: int, n: int) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def check_box_claim(rep: VerifyReport, model: PolytopicModel, raw: dict, cert_yaml: dict, bx: dict) -> None:
+def check_box_claim(
+    rep: VerifyReport, model: PolytopicModel, raw: dict, cert_yaml: dict, bx: dict
+) -> None:
     """``box claim``: every interval of the models file (read here from the raw YAML) and every
     nominal A_i, B_i lie in the certified box; the motor constants of ``uncertainty.motor_std``
     when the certificate says it added them; ``runtime set`` is checked in :func:`check_box_lmi`."""
@@ -341,7 +483,9 @@ def check_box_claim(rep: VerifyReport, model: PolytopicModel, raw: dict, cert_ya
     for i, v in enumerate(raw.get("vertices", [])):
         lo, hi = _bounds(bx, i, n)
         scale = np.maximum(1.0, np.abs(np.concatenate([bx["Ac"][i], bx["Bc"]], axis=1)))
-        AB = np.concatenate([np.asarray(v["A"], dtype=float), np.asarray(v["B"], dtype=float)], axis=1)
+        AB = np.concatenate(
+            [np.asarray(v["A"], dtype=float), np.asarray(v["B"], dtype=float)], axis=1
+        )
         viol = np.max(np.maximum(lo - AB, AB - hi) / scale)
         if viol > worst:
             worst, where = float(viol), f"vertex {i} nominal A, B"
@@ -351,19 +495,30 @@ def check_box_claim(rep: VerifyReport, model: PolytopicModel, raw: dict, cert_ya
             viol = max(lo[r, cc] - l_, u_ - hi[r, cc]) / scale[r, cc]
             if viol > worst:
                 worst, where = float(viol), f"vertex {i} {'A' if isa else 'B'}[{r},{c}]"
-        have_motor = any((8 <= r < 12) and ((isa and c == r) or (not isa and c == r - 8))
-                         for isa, r, c in zip(eb.is_a, eb.row, eb.col))
+        have_motor = any(
+            (8 <= r < 12) and ((isa and c == r) or (not isa and c == r - 8))
+            for isa, r, c in zip(eb.is_a, eb.row, eb.col)
+        )
         if motor_std is not None and not have_motor and n >= 12 and m == 4:
             k_m = float((raw.get("meta") or {}).get("k_sigma", DEFAULT_K_SIGMA))
             for q in range(4):
                 for cc, sd in ((8 + q, float(motor_std[0])), (n + q, float(motor_std[1]))):
                     nom = AB[8 + q, cc]
-                    viol = max(lo[8 + q, cc] - (nom - k_m * sd), (nom + k_m * sd) - hi[8 + q, cc]) / scale[8 + q, cc]
+                    viol = (
+                        max(lo[8 + q, cc] - (nom - k_m * sd), (nom + k_m * sd) - hi[8 + q, cc])
+                        / scale[8 + q, cc]
+                    )
                     if viol > worst:
                         worst, where = float(viol), f"vertex {i} motor row {8 + q}"
     ok = worst <= BOX_TOL
-    rep.add("box claim", where if not ok else f"{sum(b.row.size for b in boxes)} intervals, nominal A, B",
-            worst, BOX_TOL, ok, "" if ok else "the certified box does not contain the identified interval")
+    rep.add(
+        "box claim",
+        where if not ok else f"{sum(b.row.size for b in boxes)} intervals, nominal A, B",
+        worst,
+        BOX_TOL,
+        ok,
+        "" if ok else "the certified box does not contain the identified interval",
+    )
 
 
 def _vertex_edges(vmin: np.ndarray, vmax: np.ndarray) -> list:
@@ -377,15 +532,31 @@ def _vertex_edges(vmin: np.ndarray, vmax: np.ndarray) -> list:
         for k in range(V.shape[1]):
             a, b = V[i].copy(), V[i].copy()
             a[k], b[k] = vmin[k], vmax[k]
-            per.append((int(np.flatnonzero((V == a).all(axis=1))[0]), int(np.flatnonzero((V == b).all(axis=1))[0]),
-                        float(vmax[k] - vmin[k])))
+            per.append(
+                (
+                    int(np.flatnonzero((V == a).all(axis=1))[0]),
+                    int(np.flatnonzero((V == b).all(axis=1))[0]),
+                    float(vmax[k] - vmin[k]),
+                )
+            )
         out.append(per)
     return out
 
 
-def _box_block(form: int, A: np.ndarray, B: np.ndarray, R: np.ndarray, C: np.ndarray, L: np.ndarray,
-               Rt: np.ndarray, t: np.ndarray, X: np.ndarray, S: np.ndarray, H: np.ndarray,
-               Z: Optional[np.ndarray] = None) -> tuple[np.ndarray, np.ndarray]:
+def _box_block(
+    form: int,
+    A: np.ndarray,
+    B: np.ndarray,
+    R: np.ndarray,
+    C: np.ndarray,
+    L: np.ndarray,
+    Rt: np.ndarray,
+    t: np.ndarray,
+    X: np.ndarray,
+    S: np.ndarray,
+    H: np.ndarray,
+    Z: Optional[np.ndarray] = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Uncompressed robust block at g = 0 and the indices of its z rows (scaled data).
     form 1: dual BRL with X (= H), Y = S; forms 2, 3: Eq. (30) with X_i, S_i, H (+ Z in (1,1))."""
     n = A.shape[0]
@@ -397,11 +568,14 @@ def _box_block(form: int, A: np.ndarray, B: np.ndarray, R: np.ndarray, C: np.nda
         AX = A @ X + B @ S
         Rx = Rt @ np.vstack([X, S])
         Rw = Rt @ np.vstack([np.zeros((n, ne)), R])
-        M = np.block([
-            [AX + AX.T + LTL, Be, X @ C.T, Rx.T],
-            [Be.T, -np.eye(ne), np.zeros((ne, nz)), Rw.T],
-            [C @ X, np.zeros((nz, ne)), np.zeros((nz, nz)), np.zeros((nz, p))],
-            [Rx, Rw, np.zeros((p, nz)), -T]])
+        M = np.block(
+            [
+                [AX + AX.T + LTL, Be, X @ C.T, Rx.T],
+                [Be.T, -np.eye(ne), np.zeros((ne, nz)), Rw.T],
+                [C @ X, np.zeros((nz, ne)), np.zeros((nz, nz)), np.zeros((nz, p))],
+                [Rx, Rw, np.zeros((p, nz)), -T],
+            ]
+        )
         z = np.arange(n + ne, n + ne + nz)
     else:
         U = A @ H + B @ S
@@ -409,12 +583,15 @@ def _box_block(form: int, A: np.ndarray, B: np.ndarray, R: np.ndarray, C: np.nda
         Rx = Rt @ np.vstack([H, S])
         Rw = Rt @ np.vstack([np.zeros((n, ne)), R])
         Zm = np.zeros((n, n)) if Z is None else Z
-        M = np.block([
-            [U + U.T + LTL + Zm, -X + H.T - U, Be, CH.T, Rx.T],
-            [-X + H - U.T, -(H + H.T), np.zeros((n, ne)), -CH.T, -Rx.T],
-            [Be.T, np.zeros((ne, n)), -np.eye(ne), np.zeros((ne, nz)), Rw.T],
-            [CH, -CH, np.zeros((nz, ne)), np.zeros((nz, nz)), np.zeros((nz, p))],
-            [Rx, -Rx, Rw, np.zeros((p, nz)), -T]])
+        M = np.block(
+            [
+                [U + U.T + LTL + Zm, -X + H.T - U, Be, CH.T, Rx.T],
+                [-X + H - U.T, -(H + H.T), np.zeros((n, ne)), -CH.T, -Rx.T],
+                [Be.T, np.zeros((ne, n)), -np.eye(ne), np.zeros((ne, nz)), Rw.T],
+                [CH, -CH, np.zeros((nz, ne)), np.zeros((nz, nz)), np.zeros((nz, p))],
+                [Rx, -Rx, Rw, np.zeros((p, nz)), -T],
+            ]
+        )
         z = np.arange(2 * n + ne, 2 * n + ne + nz)
     return 0.5 * (M + M.T), z
 
@@ -429,18 +606,36 @@ def _schur_gamma(M0: np.ndarray, z: np.ndarray) -> float:
     return float(np.sqrt(max(np.linalg.eigvalsh(0.5 * (G + G.T))[-1], 0.0)))
 
 
-def check_box_lmi(rep: VerifyReport, model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.ndarray,
-                  gamma: float, cert: dict, k_rtol: float) -> None:
+def check_box_lmi(
+    rep: VerifyReport,
+    model: PolytopicModel,
+    K: np.ndarray,
+    R: np.ndarray,
+    C: np.ndarray,
+    gamma: float,
+    cert: dict,
+    k_rtol: float,
+) -> None:
     """Rows ``K = S H^-1``, ``box lmi``, ``small gain``, ``runtime set`` of an element-box
     certificate (module docstring item 4b)."""
     n, m = model.n_x, model.n_u
     form = int(np.asarray(cert.get("lmi_form", 0)))
     bx = _sidecar_box(cert, n, m)
     if bx is None or form not in (1, 2, 3) or len(bx["Ac"]) != model.n_vertices:
-        rep.add("box lmi", "sidecar", float("nan"), float("nan"), False,
-                "element-box arrays (box_*, lmi_form 1-3) missing or malformed in the sidecar")
+        rep.add(
+            "box lmi",
+            "sidecar",
+            float("nan"),
+            float("nan"),
+            False,
+            "element-box arrays (box_*, lmi_form 1-3) missing or malformed in the sidecar",
+        )
         return
-    X_list, S, H = cert["X_list"], np.asarray(cert["S"], dtype=float), np.asarray(cert["H"], dtype=float)
+    X_list, S, H = (
+        cert["X_list"],
+        np.asarray(cert["S"], dtype=float),
+        np.asarray(cert["H"], dtype=float),
+    )
     sc = Scaling(t=np.asarray(cert["t"], float), s_u=np.asarray(cert["s_u"], float))
     tau = np.r_[sc.t, sc.s_u]
     for i in range(model.n_vertices):
@@ -450,9 +645,17 @@ def check_box_lmi(rep: VerifyReport, model: PolytopicModel, K: np.ndarray, R: np
         rep.add("K = S H^-1", f"vertex {i}", err, k_rtol, err <= k_rtol)
     for key, ref in (("R", R), ("C", C)):
         if key in cert:
-            same = np.shape(cert[key]) == np.shape(ref) and np.allclose(cert[key], ref, rtol=1e-12, atol=0)
-            rep.add("lmi data", key, 0.0 if same else 1.0, 0.0, bool(same),
-                    "" if same else f"{key} differs from the one the certificate was computed with")
+            same = np.shape(cert[key]) == np.shape(ref) and np.allclose(
+                cert[key], ref, rtol=1e-12, atol=0
+            )
+            rep.add(
+                "lmi data",
+                key,
+                0.0 if same else 1.0,
+                0.0,
+                bool(same),
+                "" if same else f"{key} differs from the one the certificate was computed with",
+            )
     # runtime set: every system the runtime re-checks lies in the certified box
     if "A_sys" in cert and "B_sys" in cert and "M_sys" in cert:
         worst = 0.0
@@ -462,8 +665,16 @@ def check_box_lmi(rep: VerifyReport, model: PolytopicModel, K: np.ndarray, R: np
             for j in range(int(cert["M_sys"][i])):
                 AB = np.concatenate([cert["A_sys"][i, j], cert["B_sys"][i, j]], axis=1)
                 worst = max(worst, float(np.max(np.maximum(lo - AB, AB - hi) / scale)))
-        rep.add("runtime set", "sidecar A_sys, B_sys in the box", worst, BOX_TOL, worst <= BOX_TOL,
-                "" if worst <= BOX_TOL else "a system the runtime re-checks is outside the certified set")
+        rep.add(
+            "runtime set",
+            "sidecar A_sys, B_sys in the box",
+            worst,
+            BOX_TOL,
+            worst <= BOX_TOL,
+            ""
+            if worst <= BOX_TOL
+            else "a system the runtime re-checks is outside the certified set",
+        )
     # the LMI, uncompressed, in the stored scaling (congruence: inertia-preserving)
     Cs = sc.C(C)
     Rs = np.asarray(R, dtype=float) / sc.s_u[:, None]
@@ -471,13 +682,27 @@ def check_box_lmi(rep: VerifyReport, model: PolytopicModel, K: np.ndarray, R: np
     edges = _vertex_edges(model.vmin, model.vmax) if form == 3 else None
     rate = np.asarray(cert.get("rate", []), dtype=float)
     if form == 3 and rate.shape != (model.vmin.size,):
-        rep.add("box lmi", "rate", float("nan"), float("nan"), False, "rate form without its rate bound")
+        rep.add(
+            "box lmi",
+            "rate",
+            float("nan"),
+            float("nan"),
+            False,
+            "rate form without its rate bound",
+        )
         return
-    Xs_all = [np.asarray(X_list[i][0], dtype=float) / (sc.t[:, None] * sc.t[None, :])
-              for i in range(model.n_vertices)]
+    Xs_all = [
+        np.asarray(X_list[i][0], dtype=float) / (sc.t[:, None] * sc.t[None, :])
+        for i in range(model.n_vertices)
+    ]
     gam, margin = 0.0, float("inf")
     for i in range(model.n_vertices):
-        r, c, h, t = bx["rows"][i], bx["cols"][i], bx["half"][i], np.asarray(bx["t"][i], dtype=float)
+        r, c, h, t = (
+            bx["rows"][i],
+            bx["cols"][i],
+            bx["half"][i],
+            np.asarray(bx["t"][i], dtype=float),
+        )
         p = r.size
         L = np.zeros((n, p))
         L[r, np.arange(p)] = h * tau[c] / sc.t[r]
@@ -499,9 +724,11 @@ def check_box_lmi(rep: VerifyReport, model: PolytopicModel, K: np.ndarray, R: np
             M0, z = _box_block(form, A_, B_, Rs, Cs, L, Rt, ts, Xs_all[i], Ss, Hs, Z)
             gam = max(gam, _schur_gamma(M0, z))
             M = M0.copy()
-            M[z, z] -= gamma ** 2
+            M[z, z] -= gamma**2
             margin = min(margin, float(-np.linalg.eigvalsh(M)[-1]))
-        margin = min(margin, float(np.linalg.eigvalsh(Xs_all[i])[0]), float(np.min(ts)) if p else np.inf)
+        margin = min(
+            margin, float(np.linalg.eigvalsh(Xs_all[i])[0]), float(np.min(ts)) if p else np.inf
+        )
         # scaled small gain (KYP), independent of X and H, unscaled data
         Acl = bx["Ac"][i] + bx["Bc"] @ K[i]
         Lu = np.zeros((n, p))
@@ -511,14 +738,26 @@ def check_box_lmi(rep: VerifyReport, model: PolytopicModel, K: np.ndarray, R: np
         Baug = np.hstack([bx["Bc"] @ R, Lu])
         Caug = np.vstack([C / gamma, Ex])
         Daug = np.zeros((Caug.shape[0], Baug.shape[1]))
-        Daug[C.shape[0]:, :R.shape[1]] = Fw
+        Daug[C.shape[0] :, : R.shape[1]] = Fw
         hn = hinf_norm(Acl, Baug, Caug, D=Daug)
-        rep.add("small gain", f"vertex {i} (KYP, all delta)", hn.value, 1.0, bool(hn.stable and hn.value < 1.0),
-                "" if hn.stable else "vertex closed loop unstable")
+        rep.add(
+            "small gain",
+            f"vertex {i} (KYP, all delta)",
+            hn.value,
+            1.0,
+            bool(hn.stable and hn.value < 1.0),
+            "" if hn.stable else "vertex closed loop unstable",
+        )
     what = {1: "common X", 2: "X_i per vertex", 3: "X(v_d), every dv_d/dt sign"}[form]
     rep.add("box lmi gamma", f"robust LMI all vertices ({what})", gam, gamma, gam <= gamma)
-    rep.add("box lmi margin", "uncompressed Schur form", margin, 0.0, margin > 0.0,
-            "min(-lambda_max(LMI), lambda_min(X), min t)")
+    rep.add(
+        "box lmi margin",
+        "uncompressed Schur form",
+        margin,
+        0.0,
+        margin > 0.0,
+        "min(-lambda_max(LMI), lambda_min(X), min t)",
+    )
 
 
 def itertools_product_signs(p: int) -> list:
@@ -541,7 +780,10 @@ def check_scheduling_claim(rep: VerifyReport, cert_yaml: dict, sidecar: Optional
     X = sidecar["X_list"]
     one_x = all(np.array_equal(X[0][0], x) for lst in X for x in lst)
     if var == "arbitrary":
-        ok, why = (form == 1 or (form == 0 and one_x)), "arbitrary variation needs one Lyapunov matrix X"
+        ok, why = (
+            (form == 1 or (form == 0 and one_x)),
+            "arbitrary variation needs one Lyapunov matrix X",
+        )
     elif var == "rate_bounded":
         rate = np.asarray(sidecar.get("rate", []), dtype=float)
         claim = np.asarray(sch.get("rate_bound", []), dtype=float)
@@ -551,26 +793,46 @@ def check_scheduling_claim(rep: VerifyReport, cert_yaml: dict, sidecar: Optional
         if ok and des is not None and sch.get("covers_design_signal") is not None:
             covers = bool(np.all(np.asarray(des, dtype=float) <= rate * (1 + 1e-9)))
             if bool(sch["covers_design_signal"]) != covers:
-                ok, why = False, "covers_design_signal contradicts the design envelope's reference_rate"
+                ok, why = (
+                    False,
+                    "covers_design_signal contradicts the design envelope's reference_rate",
+                )
     elif var == "frozen":
         ok, why = True, ""
     else:
         ok, why = False, f"unknown variation {var!r}"
-    rep.add("scheduling", f"{var} v_d (lmi_form {form})", 0.0 if ok else 1.0, 0.0, bool(ok), "" if ok else why)
+    rep.add(
+        "scheduling",
+        f"{var} v_d (lmi_form {form})",
+        0.0 if ok else 1.0,
+        0.0,
+        bool(ok),
+        "" if ok else why,
+    )
 
 
 #: relative tolerance of the recomputed feedforward matrices (YAML keeps ~16 digits)
 FF_RTOL = 1e-8
 
 
-def check_feedforward(rep: VerifyReport, model: PolytopicModel, F_ff: np.ndarray, layout: dict,
-                      F_jerk: Optional[np.ndarray] = None, rtol: float = FF_RTOL) -> None:
+def check_feedforward(
+    rep: VerifyReport,
+    model: PolytopicModel,
+    F_ff: np.ndarray,
+    layout: dict,
+    F_jerk: Optional[np.ndarray] = None,
+    rtol: float = FF_RTOL,
+) -> None:
     """Recompute F_i (and F_jerk,i) from the nominal vertex models (synthesis/feedforward.py) and
     compare with the stored ones; also the defining property: A_i dx_ff + B_i du_ff has the
     accelerated rows = a and the held rows = 0 for a = each unit vector (independent of how F was
     computed)."""
-    from lpv_sysid.synthesis.feedforward import (FeedforwardLayout, feedforward_matrix, feedforward_residual,
-                                                 jerk_matrix)
+    from lpv_sysid.synthesis.feedforward import (
+        FeedforwardLayout,
+        feedforward_matrix,
+        feedforward_residual,
+        jerk_matrix,
+    )
 
     try:
         lay = FeedforwardLayout.from_dict(layout)
@@ -581,39 +843,87 @@ def check_feedforward(rep: VerifyReport, model: PolytopicModel, F_ff: np.ndarray
     F_ff = np.asarray(F_ff, dtype=float)
     want = (model.n_vertices, len(free) + model.n_u, len(acc))
     if F_ff.shape != want:
-        rep.add("feedforward", "F_ff shape", 1.0, 0.0, False, f"shape {F_ff.shape}, expected {want}")
+        rep.add(
+            "feedforward", "F_ff shape", 1.0, 0.0, False, f"shape {F_ff.shape}, expected {want}"
+        )
         return
     for i in range(model.n_vertices):
         try:
-            F = feedforward_matrix(model.A[i], model.B[i], model.state_names, lay, where=f"vertex {i}")
+            F = feedforward_matrix(
+                model.A[i], model.B[i], model.state_names, lay, where=f"vertex {i}"
+            )
         except ConfigError as exc:
             rep.add("feedforward", f"vertex {i}", float("inf"), rtol, False, str(exc))
             continue
         err = float(np.max(np.abs(F_ff[i] - F)) / max(1.0, float(np.max(np.abs(F)))))
-        rep.add("feedforward", f"vertex {i} F_ff vs recomputed", err, rtol, err <= rtol,
-                "" if err <= rtol else "stored F_ff differs from the one of the nominal model")
+        rep.add(
+            "feedforward",
+            f"vertex {i} F_ff vs recomputed",
+            err,
+            rtol,
+            err <= rtol,
+            "" if err <= rtol else "stored F_ff differs from the one of the nominal model",
+        )
         scale = max(1.0, float(np.max(np.abs(model.A[i]))), float(np.max(np.abs(model.B[i]))))
-        res = max(float(np.max(np.abs(feedforward_residual(model.A[i], model.B[i], F_ff[i], free, acc, e)[acc + held])))
-                  for e in np.eye(len(acc)))
+        res = max(
+            float(
+                np.max(
+                    np.abs(
+                        feedforward_residual(model.A[i], model.B[i], F_ff[i], free, acc, e)[
+                            acc + held
+                        ]
+                    )
+                )
+            )
+            for e in np.eye(len(acc))
+        )
         ok = res <= 1e-9 * scale
-        rep.add("ff residual", f"vertex {i} A dx_ff + B du_ff - a", res, 1e-9 * scale, ok,
-                "" if ok else "stored F_ff does not produce the requested acceleration")
+        rep.add(
+            "ff residual",
+            f"vertex {i} A dx_ff + B du_ff - a",
+            res,
+            1e-9 * scale,
+            ok,
+            "" if ok else "stored F_ff does not produce the requested acceleration",
+        )
         if lay.has_jerk:
             if F_jerk is None:
-                rep.add("ff jerk", f"vertex {i}", 1.0, 0.0, False, "layout declares the jerk term, F_jerk missing")
+                rep.add(
+                    "ff jerk",
+                    f"vertex {i}",
+                    1.0,
+                    0.0,
+                    False,
+                    "layout declares the jerk term, F_jerk missing",
+                )
                 continue
             try:
-                Fj = jerk_matrix(model.A[i], model.B[i], model.state_names, F, lay, where=f"vertex {i}")
+                Fj = jerk_matrix(
+                    model.A[i], model.B[i], model.state_names, F, lay, where=f"vertex {i}"
+                )
             except ConfigError as exc:
                 rep.add("ff jerk", f"vertex {i}", float("inf"), rtol, False, str(exc))
                 continue
             Fj_s = np.asarray(F_jerk[i], dtype=float)
             if Fj_s.shape != Fj.shape:
-                rep.add("ff jerk", f"vertex {i} F_jerk shape", 1.0, 0.0, False, f"{Fj_s.shape} != {Fj.shape}")
+                rep.add(
+                    "ff jerk",
+                    f"vertex {i} F_jerk shape",
+                    1.0,
+                    0.0,
+                    False,
+                    f"{Fj_s.shape} != {Fj.shape}",
+                )
                 continue
             err = float(np.max(np.abs(Fj_s - Fj)) / max(1.0, float(np.max(np.abs(Fj)))))
-            rep.add("ff jerk", f"vertex {i} F_jerk vs recomputed", err, rtol, err <= rtol,
-                    "" if err <= rtol else "stored F_jerk differs from the one of the nominal model")
+            rep.add(
+                "ff jerk",
+                f"vertex {i} F_jerk vs recomputed",
+                err,
+                rtol,
+                err <= rtol,
+                "" if err <= rtol else "stored F_jerk differs from the one of the nominal model",
+            )
 
 
 # --------------------------------------------------------------------------- full identified box
@@ -626,15 +936,17 @@ class ElementBox:
     """Full identified intervals of one scheduling vertex (seed 0 Eq. 22): element l is
     ``A[row, col]`` (is_a) or ``B[row, col]`` in ``[lower_l, upper_l]``."""
 
-    is_a: np.ndarray       # (p,) bool
-    row: np.ndarray        # (p,) int
-    col: np.ndarray        # (p,) int
-    nominal: np.ndarray    # (p,)
-    lower: np.ndarray      # (p,)
-    upper: np.ndarray      # (p,)
-    source: tuple          # (p,) "stored" | "k*std" | "fixed"
+    is_a: np.ndarray  # (p,) bool
+    row: np.ndarray  # (p,) int
+    col: np.ndarray  # (p,) int
+    nominal: np.ndarray  # (p,)
+    lower: np.ndarray  # (p,)
+    upper: np.ndarray  # (p,)
+    source: tuple  # (p,) "stored" | "k*std" | "fixed"
 
-    def apply(self, A: np.ndarray, B: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def apply(
+        self, A: np.ndarray, B: np.ndarray, theta: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         A, B = A.copy(), B.copy()
         A[self.row[self.is_a], self.col[self.is_a]] = theta[self.is_a]
         B[self.row[~self.is_a], self.col[~self.is_a]] = theta[~self.is_a]
@@ -647,14 +959,19 @@ def full_box_k(raw: dict, k_sigma: Optional[float] = None) -> tuple[float, str]:
         k, where = float(k_sigma), "given"
     else:
         meta = raw.get("meta") if isinstance(raw.get("meta"), dict) else {}
-        k, where = (float(meta["k_sigma"]), "models meta.k_sigma") if meta.get("k_sigma") is not None \
+        k, where = (
+            (float(meta["k_sigma"]), "models meta.k_sigma")
+            if meta.get("k_sigma") is not None
             else (DEFAULT_K_SIGMA, "default (models file records no k_sigma)")
+        )
     if not (np.isfinite(k) and k > 0):
         raise ConfigError(f"full-box check: k_sigma must be > 0, got {k!r}")
     return k, where
 
 
-def full_box_intervals(raw: dict, k_sigma: Optional[float] = None, kept: str = "stored") -> tuple[list, float, str]:
+def full_box_intervals(
+    raw: dict, k_sigma: Optional[float] = None, kept: str = "stored"
+) -> tuple[list, float, str]:
     """One :class:`ElementBox` per vertex (box order) from the raw ``vertex_models.yaml`` mapping.
 
     Rule (module docstring, item 5): stored ``[lower, upper]`` where ``lower < upper`` (``kept ==
@@ -682,10 +999,14 @@ def full_box_intervals(raw: dict, k_sigma: Optional[float] = None, kept: str = "
                 lo, hi = float(e["lower"]), float(e["upper"])
                 isa, r, c = e["matrix"] == "A", int(e["row"]), int(e["col"])
             except (KeyError, TypeError, ValueError) as exc:
-                raise ConfigError(f"models: vertices[{i}].uncertain: bad entry {e!r} ({exc})") from None
+                raise ConfigError(
+                    f"models: vertices[{i}].uncertain: bad entry {e!r} ({exc})"
+                ) from None
             if not all(np.isfinite([nom, std, lo, hi])) or std < 0:
-                raise ConfigError(f"models: vertices[{i}].uncertain {e.get('matrix')}[{r},{c}]: "
-                                  "non-finite bounds or negative std")
+                raise ConfigError(
+                    f"models: vertices[{i}].uncertain {e.get('matrix')}[{r},{c}]: "
+                    "non-finite bounds or negative std"
+                )
             if hi > lo and kept == "stored":
                 src = "stored"
             elif std > 0:
@@ -694,19 +1015,26 @@ def full_box_intervals(raw: dict, k_sigma: Optional[float] = None, kept: str = "
                 src = "fixed" if hi == lo else "stored"
             for key, val in zip(cols, (isa, r, c, nom, lo, hi, src)):
                 cols[key].append(val)
-        out.append(ElementBox(np.array(cols["is_a"], dtype=bool), np.array(cols["row"], dtype=int),
-                              np.array(cols["col"], dtype=int), np.array(cols["nominal"], dtype=float),
-                              np.array(cols["lower"], dtype=float), np.array(cols["upper"], dtype=float),
-                              tuple(cols["source"])))
+        out.append(
+            ElementBox(
+                np.array(cols["is_a"], dtype=bool),
+                np.array(cols["row"], dtype=int),
+                np.array(cols["col"], dtype=int),
+                np.array(cols["nominal"], dtype=float),
+                np.array(cols["lower"], dtype=float),
+                np.array(cols["upper"], dtype=float),
+                tuple(cols["source"]),
+            )
+        )
     return out, k0, where
 
 
 @dataclass
 class FullBoxSample:
-    where: str               # "corner 3 uniform", "interior 17 corner-draw", "vertex 2 worst-norm corner"
+    where: str  # "corner 3 uniform", "interior 17 corner-draw", "vertex 2 worst-norm corner"
     v_d: np.ndarray
-    norm: float              # H-inf norm u_e -> z (inf when unstable; nan in discrete time)
-    abscissa: float          # max Re eig (continuous) or spectral radius - 1 (discrete)
+    norm: float  # H-inf norm u_e -> z (inf when unstable; nan in discrete time)
+    abscissa: float  # max Re eig (continuous) or spectral radius - 1 (discrete)
     ok: bool
 
 
@@ -719,11 +1047,11 @@ class FullBoxResult:
     k_sigma: float
     k_source: str
     seed: int
-    n_elements: list         # identified elements per vertex
-    n_stored: int            # elements using the stored [lower, upper] (all vertices)
-    n_ksigma: int            # elements using nominal +/- k std
+    n_elements: list  # identified elements per vertex
+    n_stored: int  # elements using the stored [lower, upper] (all vertices)
+    n_ksigma: int  # elements using nominal +/- k std
     worst: Optional[FullBoxSample] = None
-    worst_A: Optional[np.ndarray] = None      # frozen closed-loop data of the worst sample
+    worst_A: Optional[np.ndarray] = None  # frozen closed-loop data of the worst sample
     worst_B: Optional[np.ndarray] = None
     worst_K: Optional[np.ndarray] = None
 
@@ -750,20 +1078,36 @@ class FullBoxResult:
     def summary(self) -> dict:
         """Plain mapping for verification.yaml / the report."""
         w = self.worst
-        return {"samples": self.n, "seed": int(self.seed), "gamma": float(self.gamma),
-                "k_sigma": float(self.k_sigma), "k_sigma_source": self.k_source,
-                "elements_per_vertex": [int(x) for x in self.n_elements],
-                "intervals_stored": int(self.n_stored), "intervals_k_std": int(self.n_ksigma),
-                "worst_norm": float(w.norm) if w is not None else float("nan"),
-                "worst_where": w.where if w is not None else "",
-                "worst_v_d": [float(x) for x in w.v_d] if w is not None else [],
-                "fraction_ok": float(self.fraction_ok), "all_stable": bool(self.all_stable),
-                "max_abscissa": float(self.max_abscissa), "passed": bool(self.passed),
-                "note": "empirical Monte Carlo over the full identified box; not claimed by the certificate"}
+        return {
+            "samples": self.n,
+            "seed": int(self.seed),
+            "gamma": float(self.gamma),
+            "k_sigma": float(self.k_sigma),
+            "k_sigma_source": self.k_source,
+            "elements_per_vertex": [int(x) for x in self.n_elements],
+            "intervals_stored": int(self.n_stored),
+            "intervals_k_std": int(self.n_ksigma),
+            "worst_norm": float(w.norm) if w is not None else float("nan"),
+            "worst_where": w.where if w is not None else "",
+            "worst_v_d": [float(x) for x in w.v_d] if w is not None else [],
+            "fraction_ok": float(self.fraction_ok),
+            "all_stable": bool(self.all_stable),
+            "max_abscissa": float(self.max_abscissa),
+            "passed": bool(self.passed),
+            "note": "empirical Monte Carlo over the full identified box; not claimed by the certificate",
+        }
 
 
-def _frozen(A: np.ndarray, B: np.ndarray, K: np.ndarray, R: np.ndarray, C: np.ndarray, gamma: float,
-            rtol: float, ts: Optional[float]) -> tuple[float, float, bool]:
+def _frozen(
+    A: np.ndarray,
+    B: np.ndarray,
+    K: np.ndarray,
+    R: np.ndarray,
+    C: np.ndarray,
+    gamma: float,
+    rtol: float,
+    ts: Optional[float],
+) -> tuple[float, float, bool]:
     """(norm, abscissa, ok) of the frozen closed loop A + B K (seed 0 Eq. 19 with Eq. 31)."""
     Acl = A + B @ K
     eig = np.linalg.eigvals(Acl)
@@ -777,20 +1121,37 @@ def _frozen(A: np.ndarray, B: np.ndarray, K: np.ndarray, R: np.ndarray, C: np.nd
     return float(h.value), absc, bool(h.stable and h.lower <= gamma * (1 + rtol))
 
 
-def _worst_corners(A: np.ndarray, B: np.ndarray, K: np.ndarray, R: np.ndarray, C: np.ndarray,
-                   box: ElementBox, ts: Optional[float]) -> list:
+def _worst_corners(
+    A: np.ndarray,
+    B: np.ndarray,
+    K: np.ndarray,
+    R: np.ndarray,
+    C: np.ndarray,
+    box: ElementBox,
+    ts: Optional[float],
+) -> list:
     """First-order worst corners of the element box at one scheduling vertex: every element at the
     end of its interval that increases (a) the H-inf norm and (b) the spectral abscissa, to first
     order at the box centre (:func:`element_sensitivities`)."""
     if box.is_a.size == 0:
         return []
     th0 = 0.5 * (box.lower + box.upper)
-    return [(name, np.where(g > 0, box.upper, box.lower))
-            for name, g in element_sensitivities(A, B, K, R, C, box, th0, ts)]
+    return [
+        (name, np.where(g > 0, box.upper, box.lower))
+        for name, g in element_sensitivities(A, B, K, R, C, box, th0, ts)
+    ]
 
 
-def element_sensitivities(A: np.ndarray, B: np.ndarray, K: np.ndarray, R: np.ndarray, C: np.ndarray,
-                          box: ElementBox, theta: np.ndarray, ts: Optional[float] = None) -> list:
+def element_sensitivities(
+    A: np.ndarray,
+    B: np.ndarray,
+    K: np.ndarray,
+    R: np.ndarray,
+    C: np.ndarray,
+    box: ElementBox,
+    theta: np.ndarray,
+    ts: Optional[float] = None,
+) -> list:
     """[("worst-norm corner", d||G||_inf/d theta), ("worst-abscissa corner", d max Re lambda/d theta)]
     of the frozen closed loop at ``theta`` (the norm entry only when stable, continuous time).
 
@@ -815,8 +1176,8 @@ def element_sensitivities(A: np.ndarray, B: np.ndarray, K: np.ndarray, R: np.nda
         G = C @ Rz @ (B0 @ R)
         U, _, Vh = np.linalg.svd(G)
         u, v = U[:, 0], Vh[0].conj()
-        p = u.conj() @ C @ Rz                     # (n,)
-        q = Rz @ (B0 @ R) @ v                      # (n,)
+        p = u.conj() @ C @ Rz  # (n,)
+        q = Rz @ (B0 @ R) @ v  # (n,)
         g = np.empty(box.is_a.size)
         a, b = box.is_a, ~box.is_a
         g[a] = np.real(p[box.row[a]] * q[box.col[a]])
@@ -840,8 +1201,12 @@ def _refine_peak(A: np.ndarray, B: np.ndarray, C: np.ndarray, w0: float) -> floa
 
     if w0 <= 0.0:
         return 0.0
-    r = minimize_scalar(lambda w: -sigma_max(A, B, C, w), bounds=(0.8 * w0, 1.25 * w0), method="bounded",
-                        options={"xatol": 1e-10 * w0})
+    r = minimize_scalar(
+        lambda w: -sigma_max(A, B, C, w),
+        bounds=(0.8 * w0, 1.25 * w0),
+        method="bounded",
+        options={"xatol": 1e-10 * w0},
+    )
     return float(r.x) if -r.fun >= sigma_max(A, B, C, w0) else w0
 
 
@@ -852,9 +1217,20 @@ def _eig_lr(M: np.ndarray):
     return w, vl, vr
 
 
-def full_box_check(model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.ndarray, gamma: float,
-                   boxes: list, n: int = 200, seed: int = 0, rtol: float = 1e-6, extremes: bool = True,
-                   k_sigma: float = DEFAULT_K_SIGMA, k_source: str = "") -> FullBoxResult:
+def full_box_check(
+    model: PolytopicModel,
+    K: np.ndarray,
+    R: np.ndarray,
+    C: np.ndarray,
+    gamma: float,
+    boxes: list,
+    n: int = 200,
+    seed: int = 0,
+    rtol: float = 1e-6,
+    extremes: bool = True,
+    k_sigma: float = DEFAULT_K_SIGMA,
+    k_source: str = "",
+) -> FullBoxResult:
     """Monte Carlo over the full identified box (module docstring, item 5); empirical only.
 
     ``boxes``: :func:`full_box_intervals` (one per vertex, box order). Samples: the 2^p scheduling
@@ -864,13 +1240,21 @@ def full_box_check(model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.nd
     vertex (:func:`_worst_corners`). Seeded: same inputs and seed -> same samples.
     """
     if len(boxes) != model.n_vertices:
-        raise ConfigError(f"full-box check: {len(boxes)} element boxes for {model.n_vertices} vertices")
+        raise ConfigError(
+            f"full-box check: {len(boxes)} element boxes for {model.n_vertices} vertices"
+        )
     for i, b in enumerate(boxes):
         n_col = np.where(b.is_a, model.n_x, model.n_u)
-        if b.row.size and (np.any(b.row < 0) or np.any(b.row >= model.n_x) or np.any(b.col < 0)
-                           or np.any(b.col >= n_col)):
-            raise ConfigError(f"full-box check: vertex {i}: uncertain element outside A ({model.n_x}x{model.n_x}) "
-                              f"/ B ({model.n_x}x{model.n_u})")
+        if b.row.size and (
+            np.any(b.row < 0)
+            or np.any(b.row >= model.n_x)
+            or np.any(b.col < 0)
+            or np.any(b.col >= n_col)
+        ):
+            raise ConfigError(
+                f"full-box check: vertex {i}: uncertain element outside A ({model.n_x}x{model.n_x}) "
+                f"/ B ({model.n_x}x{model.n_u})"
+            )
         if np.any(b.lower > b.upper) or not np.all(np.isfinite(np.r_[b.lower, b.upper])):
             raise ConfigError(f"full-box check: vertex {i}: need finite lower <= upper")
     K = np.asarray(K, dtype=float)
@@ -878,9 +1262,16 @@ def full_box_check(model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.nd
     C = np.asarray(C, dtype=float)
     rng = np.random.default_rng(seed)
     verts = model.vertices
-    res = FullBoxResult([], float(gamma), float(k_sigma), k_source, int(seed), [b.is_a.size for b in boxes],
-                        sum(s == "stored" for b in boxes for s in b.source),
-                        sum(s == "k*std" for b in boxes for s in b.source))
+    res = FullBoxResult(
+        [],
+        float(gamma),
+        float(k_sigma),
+        k_source,
+        int(seed),
+        [b.is_a.size for b in boxes],
+        sum(s == "stored" for b in boxes for s in b.source),
+        sum(s == "k*std" for b in boxes for s in b.source),
+    )
     worst_key = (-np.inf, -np.inf)
 
     def record(where, vd, A, B, Kv):
@@ -897,7 +1288,10 @@ def full_box_check(model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.nd
         if k < len(verts):
             vd, tag = verts[k], f"corner {k}"
         else:
-            vd, tag = model.vmin + rng.random(model.vmin.size) * (model.vmax - model.vmin), f"interior {k}"
+            vd, tag = (
+                model.vmin + rng.random(model.vmin.size) * (model.vmax - model.vmin),
+                f"interior {k}",
+            )
         alpha, _ = multilinear_weights(vd, model.vmin, model.vmax)
         corner_draw = k % 2 == 1
         A = np.zeros_like(model.A[0])
@@ -913,7 +1307,13 @@ def full_box_check(model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.nd
             Ai, Bi = b.apply(model.A[i], model.B[i], th)
             A += a * Ai
             B += a * Bi
-        record(f"{tag} {'corner-draw' if corner_draw else 'uniform'}", vd, A, B, np.tensordot(alpha, K, axes=1))
+        record(
+            f"{tag} {'corner-draw' if corner_draw else 'uniform'}",
+            vd,
+            A,
+            B,
+            np.tensordot(alpha, K, axes=1),
+        )
     if extremes and n > 0:
         for i, vd in enumerate(verts):
             for name, th in _worst_corners(model.A[i], model.B[i], K[i], R, C, boxes[i], model.ts):
@@ -922,7 +1322,9 @@ def full_box_check(model: PolytopicModel, K: np.ndarray, R: np.ndarray, C: np.nd
     return res
 
 
-def add_full_box_rows(rep: VerifyReport, res: FullBoxResult, strict: bool = False, claimed: bool = False) -> None:
+def add_full_box_rows(
+    rep: VerifyReport, res: FullBoxResult, strict: bool = False, claimed: bool = False
+) -> None:
     """Rows ``full-box hinf`` / ``full-box frac`` / ``full-box stab``: ``ok`` only when every sample
     passes; otherwise advisory (WARN) unless ``strict``. ``claimed``: the certificate claims this box
     (``certified_set.kind: full_identified_box``), so a miss is a broken certificate (strict)."""
@@ -930,24 +1332,53 @@ def add_full_box_rows(rep: VerifyReport, res: FullBoxResult, strict: bool = Fals
     adv = not (strict or claimed)
     w = res.worst
     vd = "[" + ", ".join(f"{x:.3g}" for x in w.v_d) + "]" if w is not None else "-"
-    tag = (f"empirical, {res.n} samples, k={res.k_sigma:g}; "
-           + ("cross-check of the certified full box" if claimed else "not certified"))
+    tag = f"empirical, {res.n} samples, k={res.k_sigma:g}; " + (
+        "cross-check of the certified full box" if claimed else "not certified"
+    )
     if w is not None and not np.isnan(w.norm):
-        rep.add("full-box hinf", f"worst v_d {vd}", w.norm, res.gamma, res.passed,
-                f"{w.where}; {tag}", advisory=adv)
+        rep.add(
+            "full-box hinf",
+            f"worst v_d {vd}",
+            w.norm,
+            res.gamma,
+            res.passed,
+            f"{w.where}; {tag}",
+            advisory=adv,
+        )
     n_ok = sum(s.ok for s in res.samples)
-    rep.add("full-box frac", f"{n_ok}/{res.n} samples ok", res.fraction_ok, 1.0, res.passed,
-            "fraction with norm <= gamma and stable", advisory=adv)
+    rep.add(
+        "full-box frac",
+        f"{n_ok}/{res.n} samples ok",
+        res.fraction_ok,
+        1.0,
+        res.passed,
+        "fraction with norm <= gamma and stable",
+        advisory=adv,
+    )
     n_unst = sum(s.abscissa >= 0 for s in res.samples)
-    rep.add("full-box stab", "max Re eig" if res.worst is None or not np.isnan(res.worst.norm)
-            else "max |eig| - 1", res.max_abscissa, 0.0, res.all_stable,
-            "" if res.all_stable else f"{n_unst} unstable samples", advisory=adv)
+    rep.add(
+        "full-box stab",
+        "max Re eig" if res.worst is None or not np.isnan(res.worst.norm) else "max |eig| - 1",
+        res.max_abscissa,
+        0.0,
+        res.all_stable,
+        "" if res.all_stable else f"{n_unst} unstable samples",
+        advisory=adv,
+    )
 
 
-def verify_files(gains_path: Path | str, models_path: Path | str, n_random: int = 20, seed: int = 0,
-                 uncertainty: Optional[dict] = None, velocity_index=None, full_box: int = 0,
-                 strict_full_box: bool = False, k_sigma: Optional[float] = None,
-                 full_box_kept: str = "stored") -> VerifyReport:
+def verify_files(
+    gains_path: Path | str,
+    models_path: Path | str,
+    n_random: int = 20,
+    seed: int = 0,
+    uncertainty: Optional[dict] = None,
+    velocity_index=None,
+    full_box: int = 0,
+    strict_full_box: bool = False,
+    k_sigma: Optional[float] = None,
+    full_box_kept: str = "stored",
+) -> VerifyReport:
     """Load gains.yaml (+ sidecar) and vertex_models.yaml and run :func:`verify_gains`.
 
     Also checks names, box, equilibria and the models_sha256 of the certificate. ``full_box`` > 0
@@ -969,17 +1400,29 @@ def verify_files(gains_path: Path | str, models_path: Path | str, n_random: int 
         # input_structure entry predate the common-B option and are per-vertex
         unc_raw = cert.get("uncertainty") or {}
         if not isinstance(unc_raw, dict):
-            raise ConfigError(f"{gains_path}: certificate.uncertainty must be a mapping, got {unc_raw!r}")
+            raise ConfigError(
+                f"{gains_path}: certificate.uncertainty must be a mapping, got {unc_raw!r}"
+            )
         unc_cfg = dict(unc_raw)
         unc_cfg["common_b"] = isinstance(claim, dict) and claim.get("B") == "common"
     model, raw = load_models(models_path, unc_cfg)
     rep = VerifyReport()
     sha = sha256_file(models_path)
-    rep.add("models hash", Path(models_path).name, 0.0 if sha == cert.get("models_sha256") else 1.0, 0.0,
-            sha == cert.get("models_sha256"), "" if sha == cert.get("models_sha256") else
-            "models file differs from the one the gains were synthesised for")
-    same_names = (gains.state_names == model.state_names and gains.input_names == model.input_names
-                  and gains.scheduling_names == model.scheduling_names)
+    rep.add(
+        "models hash",
+        Path(models_path).name,
+        0.0 if sha == cert.get("models_sha256") else 1.0,
+        0.0,
+        sha == cert.get("models_sha256"),
+        ""
+        if sha == cert.get("models_sha256")
+        else "models file differs from the one the gains were synthesised for",
+    )
+    same_names = (
+        gains.state_names == model.state_names
+        and gains.input_names == model.input_names
+        and gains.scheduling_names == model.scheduling_names
+    )
     rep.add("names", "states/inputs/scheduling", 0.0 if same_names else 1.0, 0.0, same_names)
     same_box = np.allclose(gains.vmin, model.vmin) and np.allclose(gains.vmax, model.vmax)
     rep.add("box", "scheduling min/max", 0.0 if same_box else 1.0, 0.0, bool(same_box))
@@ -1002,41 +1445,82 @@ def verify_files(gains_path: Path | str, models_path: Path | str, n_random: int 
             # input, ConfigError (exit 2), not a failed verification; readable but altered: FAIL
             load_certificate_npz(p)
             ok = sha256_file(p) == side.get("sha256")
-            rep.add("sidecar", p.name, 0.0 if ok else 1.0, 0.0, ok, "" if ok else "sha256 mismatch")
+            rep.add(
+                "sidecar", p.name, 0.0 if ok else 1.0, 0.0, ok, "" if ok else "sha256 mismatch"
+            )
             if ok:
                 sidecar = load_certificate_npz(p)
     if velocity_index is None and cert.get("velocity_states"):
         try:
             velocity_index = tuple(model.state_names.index(nm) for nm in cert["velocity_states"])
         except ValueError:
-            rep.add("velocity", "certificate.velocity_states", 1.0, 0.0, False, "names not among the states")
+            rep.add(
+                "velocity",
+                "certificate.velocity_states",
+                1.0,
+                0.0,
+                False,
+                "names not among the states",
+            )
             return rep
     if velocity_index is None:
         names = ("u", "v", "w")
-        velocity_index = (tuple(model.state_names.index(n) for n in names)
-                          if all(n in model.state_names for n in names) else (2, 3, 4))
+        velocity_index = (
+            tuple(model.state_names.index(n) for n in names)
+            if all(n in model.state_names for n in names)
+            else (2, 3, 4)
+        )
     C = performance_matrix(gains.Q, model.n_x, velocity_index)
     if model.box is not None:
         bx = _sidecar_box(sidecar, model.n_x, model.n_u) if sidecar is not None else None
         if bx is None:
-            rep.add("box claim", "sidecar", 1.0, 0.0, False, "full-box certificate without its box arrays")
+            rep.add(
+                "box claim",
+                "sidecar",
+                1.0,
+                0.0,
+                False,
+                "full-box certificate without its box arrays",
+            )
         else:
             check_box_claim(rep, model, raw, cert, bx)
     check_scheduling_claim(rep, cert, sidecar)
-    sub = verify_gains(model, gains.K, gains.R, C, gains.gamma, region, n_random, seed, certificate=sidecar)
+    sub = verify_gains(
+        model, gains.K, gains.R, C, gains.gamma, region, n_random, seed, certificate=sidecar
+    )
     rep.rows.extend(sub.rows)
     ga = cert.get("gamma_achieved")
     if ga is not None:
-        worst = max((r.value for r in rep.rows if r.check.startswith("hinf")), default=float("nan"))
-        rep.add("gamma claim", "certificate.gamma_achieved", worst, float(ga) * (1 + 1e-3) + 1e-12,
-                bool(worst <= float(ga) * (1 + 1e-3) + 1e-12),
-                "worst independent H-inf norm vs the claimed gamma_achieved")
+        worst = max(
+            (r.value for r in rep.rows if r.check.startswith("hinf")), default=float("nan")
+        )
+        rep.add(
+            "gamma claim",
+            "certificate.gamma_achieved",
+            worst,
+            float(ga) * (1 + 1e-3) + 1e-12,
+            bool(worst <= float(ga) * (1 + 1e-3) + 1e-12),
+            "worst independent H-inf norm vs the claimed gamma_achieved",
+        )
     if full_box > 0:
         boxes, k, k_src = full_box_intervals(raw, k_sigma, full_box_kept)
-        res = full_box_check(model, gains.K, gains.R, C, gains.gamma, boxes, n=full_box, seed=seed,
-                             k_sigma=k, k_source=k_src)
-        claimed = (isinstance(cert.get("certified_set"), dict)
-                   and cert["certified_set"].get("kind") == "full_identified_box"
-                   and k_sigma is None and full_box_kept == "stored")
+        res = full_box_check(
+            model,
+            gains.K,
+            gains.R,
+            C,
+            gains.gamma,
+            boxes,
+            n=full_box,
+            seed=seed,
+            k_sigma=k,
+            k_source=k_src,
+        )
+        claimed = (
+            isinstance(cert.get("certified_set"), dict)
+            and cert["certified_set"].get("kind") == "full_identified_box"
+            and k_sigma is None
+            and full_box_kept == "stored"
+        )
         add_full_box_rows(rep, res, strict=strict_full_box, claimed=claimed)
     return rep

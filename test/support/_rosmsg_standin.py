@@ -44,17 +44,41 @@ for _name, _text in _EXTRA.items():
     TYPESTORE.register({_name: v for v in get_types_from_msg(_text, _name).values()})
 
 _TYPECODE = {
-    "float32": "f", "float64": "d", "int8": "b", "uint8": "B", "int16": "h",
-    "uint16": "H", "int32": "i", "uint32": "I", "int64": "q", "uint64": "Q",
+    "float32": "f",
+    "float64": "d",
+    "int8": "b",
+    "uint8": "B",
+    "int16": "h",
+    "uint16": "H",
+    "int32": "i",
+    "uint32": "I",
+    "int64": "q",
+    "uint64": "Q",
 }
-_DTYPE = {k: np.dtype(v) for k, v in {
-    "float32": "f4", "float64": "f8", "int8": "i1", "uint8": "u1", "int16": "i2",
-    "uint16": "u2", "int32": "i4", "uint32": "u4", "int64": "i8", "uint64": "u8",
-}.items()}
+_DTYPE = {
+    k: np.dtype(v)
+    for k, v in {
+        "float32": "f4",
+        "float64": "f8",
+        "int8": "i1",
+        "uint8": "u1",
+        "int16": "i2",
+        "uint16": "u2",
+        "int32": "i4",
+        "uint32": "u4",
+        "int64": "i8",
+        "uint64": "u8",
+    }.items()
+}
 _INT_RANGE = {
-    "int8": (-2**7, 2**7 - 1), "uint8": (0, 2**8 - 1), "int16": (-2**15, 2**15 - 1),
-    "uint16": (0, 2**16 - 1), "int32": (-2**31, 2**31 - 1), "uint32": (0, 2**32 - 1),
-    "int64": (-2**63, 2**63 - 1), "uint64": (0, 2**64 - 1),
+    "int8": (-(2**7), 2**7 - 1),
+    "uint8": (0, 2**8 - 1),
+    "int16": (-(2**15), 2**15 - 1),
+    "uint16": (0, 2**16 - 1),
+    "int32": (-(2**31), 2**31 - 1),
+    "uint32": (0, 2**32 - 1),
+    "int64": (-(2**63), 2**63 - 1),
+    "uint64": (0, 2**64 - 1),
 }
 _FLOAT_MAX = {"float32": 3.4028234663852886e38, "float64": 1.7976931348623157e308}
 
@@ -62,10 +86,9 @@ _CLASSES: dict[str, type] = {}
 
 
 def _is_sequence(value) -> bool:
-    return (
-        isinstance(value, (collections.abc.Sequence, collections.abc.Set, UserList))
-        and not isinstance(value, (str, UserString, bytes))
-    )
+    return isinstance(
+        value, (collections.abc.Sequence, collections.abc.Set, UserList)
+    ) and not isinstance(value, (str, UserString, bytes))
 
 
 def _check_base(tname: str, value, field: str):
@@ -74,7 +97,8 @@ def _check_base(tname: str, value, field: str):
         assert isinstance(value, float), f"The '{field}' field must be of type 'float'"
         m = _FLOAT_MAX[tname]
         assert not (value < -m or value > m) or np.isinf(value), (
-            f"The '{field}' field must be a {tname.replace('float', 'float ')}")
+            f"The '{field}' field must be a {tname.replace('float', 'float ')}"
+        )
         return value
     if tname in _INT_RANGE:
         assert isinstance(value, int), f"The '{field}' field must be of type 'int'"
@@ -86,11 +110,13 @@ def _check_base(tname: str, value, field: str):
         return value
     if tname == "byte":
         assert isinstance(value, (bytes, bytearray)) and len(value) == 1, (
-            f"The '{field}' field must be of type 'bytes' or 'ByteString' with length 1")
+            f"The '{field}' field must be of type 'bytes' or 'ByteString' with length 1"
+        )
         return bytes(value)
     if tname == "char":
         assert isinstance(value, str) and len(value) == 1, (
-            f"The '{field}' field must be of type 'str' with length 1")
+            f"The '{field}' field must be of type 'str' with length 1"
+        )
         return value
     if tname == "string":
         assert isinstance(value, str), f"The '{field}' field must be of type 'str'"
@@ -136,7 +162,8 @@ def _check(desc, value, field: str):
     if kind == NAME:
         cls = get_class(detail)
         assert isinstance(value, cls), (
-            f"The '{field}' field must be a sub message of type '{cls.__name__}'")
+            f"The '{field}' field must be a sub message of type '{cls.__name__}'"
+        )
         return value
     (ekind, edetail), size = detail
     etname = edetail[0] if ekind == BASE else edetail
@@ -144,26 +171,31 @@ def _check(desc, value, field: str):
     if kind == ARRAY:
         if numeric and isinstance(value, np.ndarray):
             assert value.dtype == _DTYPE[etname], (
-                f"The '{field}' numpy.ndarray() must have the dtype of '{_DTYPE[etname]}'")
+                f"The '{field}' numpy.ndarray() must have the dtype of '{_DTYPE[etname]}'"
+            )
             assert value.size == size, f"The '{field}' numpy.ndarray() must have a size of {size}"
             return value
         assert _is_sequence(value) and len(value) == size, (
-            f"The '{field}' field must be a set or sequence with length {size}")
+            f"The '{field}' field must be a set or sequence with length {size}"
+        )
         items = [_check((ekind, edetail), v, field) for v in value]
         return np.array(items, dtype=_DTYPE[etname]) if numeric else items
     # SEQUENCE (size 0: unbounded, else upper bound)
     if numeric and isinstance(value, array.array):
         assert value.typecode == _TYPECODE[etname], (
-            f"The '{field}' array.array() must have the type code of '{_TYPECODE[etname]}'")
+            f"The '{field}' array.array() must have the type code of '{_TYPECODE[etname]}'"
+        )
         stored = value
     else:
         assert _is_sequence(value), (
             f"The '{field}' field must be a set or sequence and each value of type "
-            f"'{etname if isinstance(etname, str) else etname}'")
+            f"'{etname if isinstance(etname, str) else etname}'"
+        )
         items = [_check((ekind, edetail), v, field) for v in value]
         stored = array.array(_TYPECODE[etname], items) if numeric else items
     assert size == 0 or len(stored) <= size, (
-        f"The '{field}' field must be a set or sequence with length <= {size}")
+        f"The '{field}' field must be a set or sequence with length <= {size}"
+    )
     return stored
 
 
@@ -177,7 +209,8 @@ class _StandinMessage:
         fields = dict(self._lpv_fields)
         assert all(k in fields for k in kwargs), (
             "Invalid arguments passed to constructor: %s"
-            % ", ".join(sorted(k for k in kwargs if k not in fields)))
+            % ", ".join(sorted(k for k in kwargs if k not in fields))
+        )
         for name, desc in self._lpv_fields:
             if name in kwargs:
                 setattr(self, name, kwargs[name])
@@ -187,8 +220,7 @@ class _StandinMessage:
     def __setattr__(self, name, value):
         fields = dict(self._lpv_fields)
         if name not in fields:
-            raise AttributeError(
-                f"'{type(self).__name__}' object has no attribute '{name}'")
+            raise AttributeError(f"'{type(self).__name__}' object has no attribute '{name}'")
         object.__setattr__(self, name, _check(fields[name], value, name))
 
     def __eq__(self, other):
@@ -220,8 +252,11 @@ class _StandinMessage:
             else:
                 (ek, ed), size = detail
                 et = ed[0] if ek == BASE else ed.replace("/msg/", "/")
-                out[name] = (f"{et}[{size}]" if kind == ARRAY
-                             else f"sequence<{et}{', %d' % size if size else ''}>")
+                out[name] = (
+                    f"{et}[{size}]"
+                    if kind == ARRAY
+                    else f"sequence<{et}{', %d' % size if size else ''}>"
+                )
         return out
 
 
@@ -253,7 +288,7 @@ def populate(module_globals: dict, package: str, kind: str = "msg") -> None:
     for typename in sorted(TYPESTORE.fielddefs):
         if typename.startswith(prefix):
             cls = get_class(typename)
-            module_globals[typename[len(prefix):]] = cls
+            module_globals[typename[len(prefix) :]] = cls
 
 
 def make_service(package: str, name: str) -> type:
@@ -262,8 +297,16 @@ def make_service(package: str, name: str) -> type:
     resp = get_class(f"{package}/srv/{name}_Response")
     req.__qualname__ = req.__name__ = f"{name}_Request"
     resp.__qualname__ = resp.__name__ = f"{name}_Response"
-    svc = type(name, (), {"Request": req, "Response": resp, "__module__": f"{package}.srv",
-                          "_lpv_typename": f"{package}/srv/{name}"})
+    svc = type(
+        name,
+        (),
+        {
+            "Request": req,
+            "Response": resp,
+            "__module__": f"{package}.srv",
+            "_lpv_typename": f"{package}/srv/{name}",
+        },
+    )
     return svc
 
 
@@ -341,8 +384,12 @@ def is_message_class(obj) -> bool:
 
 
 def is_service_class(obj) -> bool:
-    return isinstance(obj, type) and hasattr(obj, "Request") and hasattr(obj, "Response") \
+    return (
+        isinstance(obj, type)
+        and hasattr(obj, "Request")
+        and hasattr(obj, "Response")
         and is_message_class(obj.Request)
+    )
 
 
 def module(name: str) -> ModuleType:

@@ -27,10 +27,15 @@ from pathlib import Path
 import numpy as np
 from scipy.linalg import solve_continuous_are
 
-from lpv_sysid.io.formats import (GainSchedule, certify_law, sha256_file, systems_arrays)
+from lpv_sysid.io.formats import GainSchedule, certify_law, sha256_file, systems_arrays
 from lpv_sysid.models.lpv import box_vertices
-from lpv_sysid.models.quadrotor import (INPUT_NAMES, INPUT_UNITS, STATE_NAMES, STATE_UNITS,
-                                        Quadrotor)
+from lpv_sysid.models.quadrotor import (
+    INPUT_NAMES,
+    INPUT_UNITS,
+    STATE_NAMES,
+    STATE_UNITS,
+    Quadrotor,
+)
 from lpv_sysid.signals.excitation import envelope_dict
 
 QW = np.diag([1, 1, 20, 20, 20, 0.1, 0.1, 0.1, 1e-6, 1e-4, 1e-4, 1e-6])
@@ -51,15 +56,28 @@ def _vertices(box: float) -> list:
 
 def design_for(box: float) -> dict:
     """``certificate.design`` of the test law (module docstring)."""
-    return envelope_dict([0.9 * box] * 3, [0.2] * 3, 0.02, [1.0] * 4, fade_s=1.0,
-                         source="LQR test law: phase-2 reference band <= 0.2 Hz "
-                                "(config/signals_phase2.yaml), fades >= 1 s, |u_e| <= 1")
+    return envelope_dict(
+        [0.9 * box] * 3,
+        [0.2] * 3,
+        0.02,
+        [1.0] * 4,
+        fade_s=1.0,
+        source="LQR test law: phase-2 reference band <= 0.2 Hz "
+        "(config/signals_phase2.yaml), fades >= 1 s, |u_e| <= 1",
+    )
 
 
 def gains_dict(box: float = 2.0, design: dict | None = None) -> dict:
     """The document without sidecar and hash (what :func:`write_gains` completes)."""
-    vertices = [{"scheduling": [float(c) for c in v], "K": K.tolist(), "x0": tr.x0.tolist(),
-                 "u0": tr.u0.tolist()} for v, tr, _, _, K in _vertices(box)]
+    vertices = [
+        {
+            "scheduling": [float(c) for c in v],
+            "K": K.tolist(),
+            "x0": tr.x0.tolist(),
+            "u0": tr.u0.tolist(),
+        }
+        for v, tr, _, _, K in _vertices(box)
+    ]
     return {
         "format": "lpv_sysid/gains@1",
         "states": [{"name": n, "unit": u} for n, u in zip(STATE_NAMES, STATE_UNITS)],
@@ -69,10 +87,14 @@ def gains_dict(box: float = 2.0, design: dict | None = None) -> dict:
         "R": (0.02 * np.eye(4)).tolist(),
         "Q": (5.0 * np.eye(3)).tolist(),
         "gamma": 10.0,
-        "certificate": {"lmi": "none: LQR test gains (not seed 0 Lemma 1)", "solver": "scipy CARE",
-                        "gamma_achieved": 10.0, "min_margin": 0.0,
-                        "models_sha256": hashlib.sha256(b"quadrotor defaults").hexdigest(),
-                        "design": design if design is not None else design_for(box)},
+        "certificate": {
+            "lmi": "none: LQR test gains (not seed 0 Lemma 1)",
+            "solver": "scipy CARE",
+            "gamma_achieved": 10.0,
+            "min_margin": 0.0,
+            "models_sha256": hashlib.sha256(b"quadrotor defaults").hexdigest(),
+            "design": design if design is not None else design_for(box),
+        },
     }
 
 

@@ -20,8 +20,8 @@ import time
 from pathlib import Path
 
 ENV = "PX4_SITL_DIR"
-OFFBOARD_PORT = 14540          # + instance
-GCS_PORT = 14550               # + instance
+OFFBOARD_PORT = 14540  # + instance
+GCS_PORT = 14550  # + instance
 
 
 def find_px4() -> tuple[Path | None, str]:
@@ -38,8 +38,14 @@ def find_px4() -> tuple[Path | None, str]:
 class Px4Sitl:
     """One headless SIH instance (``with Px4Sitl(instance=3) as px4: px4.url``)."""
 
-    def __init__(self, build_dir: Path, instance: int = 0, model: str = "sihsim_quadx",
-                 boot_timeout: float = 60.0, workdir: str | None = None):
+    def __init__(
+        self,
+        build_dir: Path,
+        instance: int = 0,
+        model: str = "sihsim_quadx",
+        boot_timeout: float = 60.0,
+        workdir: str | None = None,
+    ):
         self.build_dir = Path(build_dir)
         self.instance = int(instance)
         self.model = model
@@ -61,14 +67,23 @@ class Px4Sitl:
     def start(self) -> "Px4Sitl":
         for f in ("parameters.bson", "parameters_backup.bson"):
             (self.workdir / f).unlink(missing_ok=True)
-        env = dict(os.environ, PX4_SIMULATOR="sihsim", PX4_SIM_MODEL=self.model,
-                   HEADLESS="1")
+        env = dict(os.environ, PX4_SIMULATOR="sihsim", PX4_SIM_MODEL=self.model, HEADLESS="1")
         with open(self.log_path, "wb") as log:
             self.proc = subprocess.Popen(
-                [str(self.build_dir / "bin" / "px4"), "-d", "-i", str(self.instance),
-                 str(self.build_dir / "etc")],
-                cwd=self.workdir, env=env, stdout=log, stderr=subprocess.STDOUT,
-                stdin=subprocess.DEVNULL, start_new_session=True)
+                [
+                    str(self.build_dir / "bin" / "px4"),
+                    "-d",
+                    "-i",
+                    str(self.instance),
+                    str(self.build_dir / "etc"),
+                ],
+                cwd=self.workdir,
+                env=env,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL,
+                start_new_session=True,
+            )
         return self
 
     def wait_ready(self, predicate_text: str = "Ready for takeoff") -> float:

@@ -6,6 +6,7 @@ path); test_ros_real.py requires the same outcomes, so the stand-in is no kinder
 rclpy in any case listed here (an exception is compared by its type, messages differ in
 wording). ``python rclpy_probe.py WORKDIR`` (parameter files are written there).
 """
+
 import json
 import math
 import sys
@@ -39,6 +40,7 @@ def case(name, params_file=None, args=()):
         finally:
             rclpy.try_shutdown()
         return fn
+
     return deco
 
 
@@ -73,6 +75,7 @@ def _(node):
 @case("publish_after_context_shutdown")
 def _(node):
     from std_msgs.msg import String
+
     pub = node.create_publisher(String, "t", 10)
     rclpy.shutdown()
     pub.publish(String())
@@ -82,6 +85,7 @@ def _(node):
 def _(node):
     from std_msgs.msg import String
     from sensor_msgs.msg import JointState
+
     node.create_publisher(String, "t", 10).publish(JointState())
 
 
@@ -93,8 +97,14 @@ def _(node):
 @case("parameter_out_of_range_from_file", "/**/probe:\n  ros__parameters:\n    x: 5.0\n")
 def _(node):
     from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
-    node.declare_parameter("x", 0.5, ParameterDescriptor(
-        floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1.0, step=0.0)]))
+
+    node.declare_parameter(
+        "x",
+        0.5,
+        ParameterDescriptor(
+            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1.0, step=0.0)]
+        ),
+    )
 
 
 @case("typed_parameter_without_default")
@@ -116,7 +126,7 @@ def _(node):
 @case("typed_empty_list_set")
 def _(node):
     node.declare_parameter("x", Parameter.Type.STRING_ARRAY)
-    r, = node.set_parameters([Parameter("x", Parameter.Type.STRING_ARRAY, [])])
+    (r,) = node.set_parameters([Parameter("x", Parameter.Type.STRING_ARRAY, [])])
     p = node.get_parameter("x")
     return (r.successful, p.type_.name, list(p.value))
 
@@ -148,6 +158,7 @@ def _(node):
 
     def boom():
         raise RuntimeError("boom")
+
     node.create_timer(0.001, boom)
     ex = SingleThreadedExecutor()
     ex.add_node(node)
@@ -158,6 +169,7 @@ def _(node):
 @case("float_field_from_int_list")
 def _(node):
     from sensor_msgs.msg import JointState
+
     m = JointState()
     m.position = [1, 2]
     return list(m.position)
@@ -167,18 +179,21 @@ def _(node):
 def _(node):
     import numpy as np
     from builtin_interfaces.msg import Time
+
     Time().sec = np.int64(1)
 
 
 @case("diagnostic_level_int")
 def _(node):
     from diagnostic_msgs.msg import DiagnosticStatus
+
     DiagnosticStatus().level = 0
 
 
 @case("keyvalue_value_float")
 def _(node):
     from diagnostic_msgs.msg import KeyValue
+
     KeyValue().value = 1.0
 
 
@@ -186,6 +201,7 @@ def _(node):
 def _(node):
     import numpy as np
     from geometry_msgs.msg import Vector3
+
     v = Vector3()
     v.x = np.float64(1.5)
     return v.x
@@ -199,12 +215,14 @@ def _(node):
 @case("invalid_topic_name")
 def _(node):
     from std_msgs.msg import String
+
     node.create_publisher(String, "a b", 10)
 
 
 @case("info_enabled_by_default")
 def _(node):
     from rclpy.logging import LoggingSeverity
+
     return node.get_logger().is_enabled_for(LoggingSeverity.INFO)
 
 
@@ -221,6 +239,7 @@ def _(node):
 @case("publish_after_destroy_publisher")
 def _(node):
     from std_msgs.msg import String
+
     pub = node.create_publisher(String, "t", 10)
     node.destroy_publisher(pub)
     pub.publish(String())
@@ -234,6 +253,7 @@ def _(node):
 @case("spin_once_after_shutdown")
 def _(node):
     from rclpy.executors import SingleThreadedExecutor
+
     ex = SingleThreadedExecutor()
     ex.add_node(node)
     rclpy.shutdown()

@@ -27,8 +27,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 ENV = "LPV_SYSID_ROS_SETUP"
 DEFAULT_SETUP = Path("/opt/ros/jazzy/setup.bash")
-PROBE = ("import rclpy, launch_ros, std_srvs.srv, nav_msgs.msg, diagnostic_msgs.msg; "
-         "import numpy, scipy, yaml, pymavlink, rosbags")
+PROBE = (
+    "import rclpy, launch_ros, std_srvs.srv, nav_msgs.msg, diagnostic_msgs.msg; "
+    "import numpy, scipy, yaml, pymavlink, rosbags"
+)
 
 
 def _setup_candidates() -> list[Path]:
@@ -47,15 +49,28 @@ def find_ros() -> tuple[Path | None, str]:
     for setup in _setup_candidates():
         if not setup.is_file():
             continue
-        r = subprocess.run(["bash", "-c", f"source {shlex.quote(str(setup))} >/dev/null 2>&1 "
-                            f"&& python3 -c {shlex.quote(PROBE)}"],
-                           capture_output=True, text=True, timeout=60)
+        r = subprocess.run(
+            [
+                "bash",
+                "-c",
+                f"source {shlex.quote(str(setup))} >/dev/null 2>&1 "
+                f"&& python3 -c {shlex.quote(PROBE)}",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
         if r.returncode == 0:
             return setup, ""
         last = (r.stderr.strip().splitlines() or ["?"])[-1]
-        return None, f"ROS 2 at {setup} unusable for lpv_sysid ({last}); pip install -r requirements-ros.txt"
-    return None, (f"real ROS 2 not available: source a Jazzy setup.bash or set {ENV} "
-                  f"(tried {', '.join(str(p) for p in _setup_candidates())})")
+        return (
+            None,
+            f"ROS 2 at {setup} unusable for lpv_sysid ({last}); pip install -r requirements-ros.txt",
+        )
+    return None, (
+        f"real ROS 2 not available: source a Jazzy setup.bash or set {ENV} "
+        f"(tried {', '.join(str(p) for p in _setup_candidates())})"
+    )
 
 
 #: as ROS's domain_coordinator (launch_testing): a ROS_DOMAIN_ID d in 1..100 is taken while
@@ -69,6 +84,7 @@ class DomainId:
 
     def __init__(self, start: int = 0):
         import socket
+
         for k in range(100):
             d = (start + k) % 100 + 1
             s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
@@ -99,25 +115,42 @@ class RosEnv:
 
     def _script(self, cmd: str) -> str:
         ws = self.workspace / "install" / "setup.bash"
-        return (f"source {shlex.quote(str(self.setup))} >/dev/null && "
-                f"source {shlex.quote(str(ws))} >/dev/null && "
-                f"export ROS_DOMAIN_ID={self.domain_id} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST "
-                f"RMW_IMPLEMENTATION=${{RMW_IMPLEMENTATION:-rmw_cyclonedds_cpp}} "
-                f"ROS_PYTHON_CHECK_FIELDS=1 && {cmd}")
+        return (
+            f"source {shlex.quote(str(self.setup))} >/dev/null && "
+            f"source {shlex.quote(str(ws))} >/dev/null && "
+            f"export ROS_DOMAIN_ID={self.domain_id} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST "
+            f"RMW_IMPLEMENTATION=${{RMW_IMPLEMENTATION:-rmw_cyclonedds_cpp}} "
+            f"ROS_PYTHON_CHECK_FIELDS=1 && {cmd}"
+        )
 
-    def run(self, cmd: str, timeout: float = 60.0, cwd: str | os.PathLike | None = None,
-            check: bool = False) -> subprocess.CompletedProcess:
-        r = subprocess.run(["bash", "-c", self._script(cmd)], capture_output=True, text=True,
-                           timeout=timeout, cwd=cwd)
+    def run(
+        self,
+        cmd: str,
+        timeout: float = 60.0,
+        cwd: str | os.PathLike | None = None,
+        check: bool = False,
+    ) -> subprocess.CompletedProcess:
+        r = subprocess.run(
+            ["bash", "-c", self._script(cmd)],
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+            cwd=cwd,
+        )
         if check and r.returncode != 0:
             raise AssertionError(f"{cmd!r} exited {r.returncode}:\n{r.stdout}\n{r.stderr}")
         return r
 
     def popen(self, cmd: str, log: Path, cwd: str | os.PathLike | None = None) -> "Proc":
         f = open(log, "wb")
-        p = subprocess.Popen(["bash", "-c", self._script("exec " + cmd)],
-                             stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                             cwd=cwd, start_new_session=True)
+        p = subprocess.Popen(
+            ["bash", "-c", self._script("exec " + cmd)],
+            stdout=f,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            cwd=cwd,
+            start_new_session=True,
+        )
         return Proc(p, Path(log), f)
 
 
@@ -172,12 +205,30 @@ def build_package(setup: Path, base: Path | None = None) -> Path:
     src = ws / "src" / "lpv_sysid"
     if src.exists():
         shutil.rmtree(src)
-    ignore = shutil.ignore_patterns(".venv", ".git", "__pycache__", "*.egg-info", "build",
-                                    "install", "log", "demo_out", ".pytest_cache")
+    ignore = shutil.ignore_patterns(
+        ".venv",
+        ".git",
+        "__pycache__",
+        "*.egg-info",
+        "build",
+        "install",
+        "log",
+        "demo_out",
+        ".pytest_cache",
+    )
     shutil.copytree(ROOT, src, ignore=ignore)
-    r = subprocess.run(["bash", "-c", f"source {shlex.quote(str(setup))} >/dev/null && "
-                        f"colcon build --packages-select lpv_sysid"],
-                       cwd=ws, capture_output=True, text=True, timeout=600)
+    r = subprocess.run(
+        [
+            "bash",
+            "-c",
+            f"source {shlex.quote(str(setup))} >/dev/null && "
+            f"colcon build --packages-select lpv_sysid",
+        ],
+        cwd=ws,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     if r.returncode != 0:
         raise RuntimeError(f"colcon build failed:\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}")
     return ws

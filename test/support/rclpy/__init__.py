@@ -9,9 +9,18 @@ rclpy equivalent live in ``rclpy._standin``.
 from rclpy.utilities import get_default_context, ok, remove_ros_args, shutdown  # noqa: F401
 from rclpy.utilities import try_shutdown  # noqa: F401
 
-__all__ = ["init", "ok", "shutdown", "try_shutdown", "spin", "spin_once",
-           "spin_until_future_complete", "create_node", "get_global_executor",
-           "get_default_context"]
+__all__ = [
+    "init",
+    "ok",
+    "shutdown",
+    "try_shutdown",
+    "spin",
+    "spin_once",
+    "spin_until_future_complete",
+    "create_node",
+    "get_global_executor",
+    "get_default_context",
+]
 
 _global_executor = None
 
@@ -36,6 +45,7 @@ def _install_signal_handlers(context, options):
     default raises KeyboardInterrupt. Restored by shutdown()/try_shutdown()."""
     import signal
     import threading
+
     if threading.current_thread() is not threading.main_thread():
         return
     wanted = []
@@ -50,6 +60,7 @@ def _install_signal_handlers(context, options):
             context.try_shutdown()
             if s == signal.SIGINT and callable(prev):
                 prev(s, frame)
+
         _previous_handlers.setdefault(signo, prev)
         signal.signal(signo, handler)
     context.on_shutdown(uninstall_signal_handlers)
@@ -58,6 +69,7 @@ def _install_signal_handlers(context, options):
 def uninstall_signal_handlers():
     import signal
     import threading
+
     if threading.current_thread() is not threading.main_thread():
         return
     for signo, prev in list(_previous_handlers.items()):
@@ -68,25 +80,43 @@ def uninstall_signal_handlers():
 def get_global_executor():
     global _global_executor
     from rclpy.executors import SingleThreadedExecutor
+
     if _global_executor is None or _global_executor.context is not get_default_context():
         _global_executor = SingleThreadedExecutor()
     return _global_executor
 
 
-def create_node(node_name, *, context=None, cli_args=None, namespace=None,
-                use_global_arguments=True, enable_rosout=True, start_parameter_services=True,
-                parameter_overrides=None, allow_undeclared_parameters=False,
-                automatically_declare_parameters_from_overrides=False,
-                enable_logger_service=False):
+def create_node(
+    node_name,
+    *,
+    context=None,
+    cli_args=None,
+    namespace=None,
+    use_global_arguments=True,
+    enable_rosout=True,
+    start_parameter_services=True,
+    parameter_overrides=None,
+    allow_undeclared_parameters=False,
+    automatically_declare_parameters_from_overrides=False,
+    enable_logger_service=False,
+):
     from rclpy.node import Node
-    return Node(node_name, context=context, cli_args=cli_args, namespace=namespace,
-                use_global_arguments=use_global_arguments, enable_rosout=enable_rosout,
-                start_parameter_services=start_parameter_services,
-                parameter_overrides=parameter_overrides,
-                allow_undeclared_parameters=allow_undeclared_parameters,
-                automatically_declare_parameters_from_overrides=(
-                    automatically_declare_parameters_from_overrides),
-                enable_logger_service=enable_logger_service)
+
+    return Node(
+        node_name,
+        context=context,
+        cli_args=cli_args,
+        namespace=namespace,
+        use_global_arguments=use_global_arguments,
+        enable_rosout=enable_rosout,
+        start_parameter_services=start_parameter_services,
+        parameter_overrides=parameter_overrides,
+        allow_undeclared_parameters=allow_undeclared_parameters,
+        automatically_declare_parameters_from_overrides=(
+            automatically_declare_parameters_from_overrides
+        ),
+        enable_logger_service=enable_logger_service,
+    )
 
 
 def spin(node, executor=None):

@@ -42,8 +42,11 @@ def load_overrides(data, fqn, use_wildcard=True):
     out = []
     for key, body in data.items():
         k = str(key)
-        matches = (k.lstrip("/") == fqn if "*" not in k
-                   else use_wildcard and (_node_pattern(k).match(fqn) is not None))
+        matches = (
+            k.lstrip("/") == fqn
+            if "*" not in k
+            else use_wildcard and (_node_pattern(k).match(fqn) is not None)
+        )
         if not matches:
             continue
         if not isinstance(body, dict) or "ros__parameters" not in body:
@@ -56,7 +59,7 @@ def load_overrides(data, fqn, use_wildcard=True):
                 out.append(Parameter(pname, Parameter.Type.NOT_SET))
                 continue
             if value is None:
-                value = "null"           # rcl: YAML null is the string 'null' (also ~)
+                value = "null"  # rcl: YAML null is the string 'null' (also ~)
             try:
                 out.append(Parameter(pname, value=value))
             except TypeError as exc:
@@ -98,9 +101,13 @@ def parse_ros_args(args):
             params.append(Parameter(pname, value=yaml.safe_load(text)))
         elif a in ("--log-level", "--enclave"):
             next(it, None)
-        elif a in ("--disable-rosout-logs", "--enable-rosout-logs",
-                   "--disable-stdout-logs", "--enable-stdout-logs",
-                   "--disable-external-lib-logs"):
+        elif a in (
+            "--disable-rosout-logs",
+            "--enable-rosout-logs",
+            "--disable-stdout-logs",
+            "--enable-stdout-logs",
+            "--disable-external-lib-logs",
+        ):
             pass
         else:
             raise RCLError(f"Found unknown ROS argument: '{a}'")

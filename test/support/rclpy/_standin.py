@@ -6,6 +6,7 @@ from rclpy.utilities import _reset_default_context, get_default_context
 def reset():
     """Fresh default context (call before each test)."""
     import rclpy
+
     rclpy._global_executor = None
     rclpy.uninstall_signal_handlers()
     return _reset_default_context()

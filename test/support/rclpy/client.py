@@ -16,8 +16,10 @@ class Client(ServiceEndpoint):
 
     def _service(self):
         for s in self._node.context._standin_entities("services"):
-            if s.service_name == self._srv_name and \
-                    s.srv_type._lpv_typename == self.srv_type._lpv_typename:
+            if (
+                s.service_name == self._srv_name
+                and s.srv_type._lpv_typename == self.srv_type._lpv_typename
+            ):
                 return s
         return None
 
@@ -28,8 +30,10 @@ class Client(ServiceEndpoint):
         if self.service_is_ready():
             return True
         if timeout_sec is None:
-            raise RuntimeError("stand-in: wait_for_service would block forever "
-                               f"(no server for '{self._srv_name}')")
+            raise RuntimeError(
+                "stand-in: wait_for_service would block forever "
+                f"(no server for '{self._srv_name}')"
+            )
         self._node.context._standin_now_ns += int(timeout_sec * 1e9)
         return self.service_is_ready()
 

@@ -21,6 +21,7 @@ class Clock:
 
     def now(self):
         from rclpy.utilities import get_default_context
+
         ctx = self._context or get_default_context()
         return Time(nanoseconds=ctx._standin_now_ns, clock_type=self._clock_type)
 

@@ -38,14 +38,17 @@ class Context:
     def _check_ok(self):
         if not self.ok():
             from rclpy.exceptions import NotInitializedException
+
             raise NotInitializedException()
 
     def shutdown(self):
         with self._lock:
             if not self.ok():
                 from rclpy._params_file import RCLError
-                raise RCLError("failed to shutdown: rcl_shutdown already called on the given "
-                               "context")
+
+                raise RCLError(
+                    "failed to shutdown: rcl_shutdown already called on the given context"
+                )
             self._shut = True
             for cb in list(self._callbacks):
                 cb()

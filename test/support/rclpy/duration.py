@@ -8,7 +8,7 @@ S_TO_NS = 1000 * 1000 * 1000
 class Duration:
     def __init__(self, *, seconds=0, nanoseconds=0):
         total = int(seconds * S_TO_NS) + int(nanoseconds)
-        if not -2**63 <= total < 2**63:
+        if not -(2**63) <= total < 2**63:
             raise OverflowError("Total nanoseconds value is too large to store in C duration.")
         self._nanoseconds = total
 

@@ -21,9 +21,17 @@ class QoSRequestedIncompatibleQoSInfo:
 
 
 class SubscriptionEventCallbacks:
-    def __init__(self, *, deadline=None, incompatible_qos=None, liveliness=None,
-                 message_lost=None, use_default_callbacks=True, incompatible_type=None,
-                 matched=None):
+    def __init__(
+        self,
+        *,
+        deadline=None,
+        incompatible_qos=None,
+        liveliness=None,
+        message_lost=None,
+        use_default_callbacks=True,
+        incompatible_type=None,
+        matched=None,
+    ):
         self.deadline = deadline
         self.incompatible_qos = incompatible_qos
         self.liveliness = liveliness
@@ -34,8 +42,16 @@ class SubscriptionEventCallbacks:
 
 
 class PublisherEventCallbacks:
-    def __init__(self, *, deadline=None, liveliness=None, incompatible_qos=None,
-                 use_default_callbacks=True, incompatible_type=None, matched=None):
+    def __init__(
+        self,
+        *,
+        deadline=None,
+        liveliness=None,
+        incompatible_qos=None,
+        use_default_callbacks=True,
+        incompatible_type=None,
+        matched=None,
+    ):
         self.deadline = deadline
         self.liveliness = liveliness
         self.incompatible_qos = incompatible_qos

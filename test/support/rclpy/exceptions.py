@@ -13,8 +13,9 @@ class NoTypeSupportImportedException(Exception):
 
 class NameValidationException(Exception):
     def __init__(self, name_type, name, error_msg, invalid_index):
-        Exception.__init__(self, f"Invalid {name_type}: {error_msg}:\n  '{name}'\n   "
-                           + " " * invalid_index + "^")
+        Exception.__init__(
+            self, f"Invalid {name_type}: {error_msg}:\n  '{name}'\n   " + " " * invalid_index + "^"
+        )
 
 
 class InvalidNodeNameException(NameValidationException):
@@ -44,8 +45,9 @@ class ParameterException(Exception):
 
 class ParameterNotDeclaredException(ParameterException):
     def __init__(self, parameters, *args):
-        ParameterException.__init__(self, "Invalid access to undeclared parameter(s)",
-                                    parameters, *args)
+        ParameterException.__init__(
+            self, "Invalid access to undeclared parameter(s)", parameters, *args
+        )
 
 
 class ParameterAlreadyDeclaredException(ParameterException):
@@ -61,28 +63,39 @@ class InvalidParameterException(ParameterException):
 class InvalidParameterTypeException(ParameterException):
     def __init__(self, desired_parameter, expected_type, *args):
         ParameterException.__init__(
-            self, f"Trying to set parameter '{desired_parameter._name}' to "
+            self,
+            f"Trying to set parameter '{desired_parameter._name}' to "
             f"'{desired_parameter._value}' of type '{desired_parameter._type_.name}', "
-            f"expecting type '{expected_type}'", desired_parameter, *args)
+            f"expecting type '{expected_type}'",
+            desired_parameter,
+            *args,
+        )
 
 
 class InvalidParameterValueException(ParameterException):
     def __init__(self, parameter, value, reason, *args):
         ParameterException.__init__(
-            self, "Invalid parameter value ({value}) for parameter. Reason: {reason}".format(
-                value=value, reason=reason), parameter, *args)
+            self,
+            "Invalid parameter value ({value}) for parameter. Reason: {reason}".format(
+                value=value, reason=reason
+            ),
+            parameter,
+            *args,
+        )
 
 
 class ParameterImmutableException(ParameterException):
     def __init__(self, parameters, *args):
-        ParameterException.__init__(self, "Attempted to modify read-only parameter",
-                                    parameters, *args)
+        ParameterException.__init__(
+            self, "Attempted to modify read-only parameter", parameters, *args
+        )
 
 
 class ParameterUninitializedException(ParameterException):
     def __init__(self, parameter_name, *args):
         ParameterException.__init__(
-            self, f"The parameter '{parameter_name}' is not initialized", parameter_name, *args)
+            self, f"The parameter '{parameter_name}' is not initialized", parameter_name, *args
+        )
 
 
 class ROSInterruptException(Exception):

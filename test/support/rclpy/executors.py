@@ -95,16 +95,20 @@ class Executor:
             # as rclpy: the wait set cannot be built on a shut-down context (RCLError);
             # ExternalShutdownException only when the shutdown comes during the wait
             from rclpy._params_file import RCLError
-            raise RCLError("failed to create wait set: the given context is not valid, "
-                           "either rcl_init() was not called or rcl_shutdown() was called.")
+
+            raise RCLError(
+                "failed to create wait set: the given context is not valid, "
+                "either rcl_init() was not called or rcl_shutdown() was called."
+            )
         if self._is_shutdown:
             raise ExternalShutdownException()
         work = self._ready_work()
         if work is None:
             now = self._context._standin_now_ns
             nxt = self._next_timer_ns()
-            limit = None if timeout_sec is None or timeout_sec < 0 else \
-                now + int(timeout_sec * 1e9)
+            limit = (
+                None if timeout_sec is None or timeout_sec < 0 else now + int(timeout_sec * 1e9)
+            )
             if nxt is not None and (limit is None or nxt <= limit):
                 self._advance_to(nxt)
                 work = self._ready_work()
@@ -114,8 +118,9 @@ class Executor:
             elif self._context._standin_shutdown_at_ns is not None:
                 self._advance_to(self._context._standin_shutdown_at_ns + 1)
             else:
-                raise RuntimeError("stand-in: spin_once() would block forever: nothing to "
-                                   "wait for and no timeout")
+                raise RuntimeError(
+                    "stand-in: spin_once() would block forever: nothing to wait for and no timeout"
+                )
         if work is not None:
             work._standin_execute()
 

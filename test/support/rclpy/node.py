@@ -12,16 +12,28 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.client import Client
 from rclpy.clock import ROSClock
 from rclpy.exceptions import (
-    InvalidNamespaceException, InvalidNodeNameException, InvalidParameterException,
-    InvalidParameterTypeException, InvalidParameterValueException,
-    InvalidServiceNameException, InvalidTopicNameException, NoTypeSupportImportedException,
-    ParameterAlreadyDeclaredException, ParameterImmutableException,
-    ParameterNotDeclaredException, ParameterUninitializedException)
+    InvalidNamespaceException,
+    InvalidNodeNameException,
+    InvalidParameterException,
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
+    InvalidServiceNameException,
+    InvalidTopicNameException,
+    NoTypeSupportImportedException,
+    ParameterAlreadyDeclaredException,
+    ParameterImmutableException,
+    ParameterNotDeclaredException,
+    ParameterUninitializedException,
+)
 from rclpy.impl.rcutils_logger import RcutilsLogger
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
-from rclpy.qos import (QoSCompatibility, QoSProfile, qos_check_compatible,
-                       qos_profile_services_default)
+from rclpy.qos import (
+    QoSCompatibility,
+    QoSProfile,
+    qos_check_compatible,
+    qos_profile_services_default,
+)
 from rclpy.service import Service
 from rclpy.subscription import Subscription
 from rclpy.timer import Timer
@@ -49,11 +61,21 @@ def validate_parameter_name(name):
 class Node:
     PARAM_REL_TOL = 1e-6
 
-    def __init__(self, node_name, *, context=None, cli_args=None, namespace=None,
-                 use_global_arguments=True, enable_rosout=True, start_parameter_services=True,
-                 parameter_overrides=None, allow_undeclared_parameters=False,
-                 automatically_declare_parameters_from_overrides=False,
-                 enable_logger_service=False):
+    def __init__(
+        self,
+        node_name,
+        *,
+        context=None,
+        cli_args=None,
+        namespace=None,
+        use_global_arguments=True,
+        enable_rosout=True,
+        start_parameter_services=True,
+        parameter_overrides=None,
+        allow_undeclared_parameters=False,
+        automatically_declare_parameters_from_overrides=False,
+        enable_logger_service=False,
+    ):
         self._context = get_default_context() if context is None else context
         self._context._check_ok()
         remaps, files, params = [], [], []
@@ -73,8 +95,11 @@ class Node:
                 namespace = dst
         if not node_name or not _NODE_RX.match(node_name):
             raise InvalidNodeNameException(
-                node_name, "node name must not be empty and contain only alphanumerics and "
-                "underscores, not starting with a number", _first_bad(node_name, r"[A-Za-z0-9_]"))
+                node_name,
+                "node name must not be empty and contain only alphanumerics and "
+                "underscores, not starting with a number",
+                _first_bad(node_name, r"[A-Za-z0-9_]"),
+            )
         namespace = namespace or "/"
         if not namespace.startswith("/"):
             namespace = "/" + namespace
@@ -84,7 +109,8 @@ class Node:
         self._namespace = namespace
         self._remaps = [(s, d) for s, d in remaps if not s.startswith("__")]
         self._logger = RcutilsLogger(
-            ".".join([t for t in namespace.split("/") if t] + [node_name]))
+            ".".join([t for t in namespace.split("/") if t] + [node_name])
+        )
         self._clock = ROSClock(_context=self._context)
         self._allow_undeclared_parameters = allow_undeclared_parameters
         self._parameters = {}
@@ -108,8 +134,9 @@ class Node:
         self._context._standin_nodes.append(self)
         self.declare_parameter("use_sim_time", False)
         if automatically_declare_parameters_from_overrides:
-            self._parameters.update({k: v for k, v in self._parameter_overrides.items()
-                                     if k not in self._parameters})
+            self._parameters.update(
+                {k: v for k, v in self._parameter_overrides.items() if k not in self._parameters}
+            )
             for k in self._parameter_overrides:
                 self._descriptors.setdefault(k, ParameterDescriptor(name=k, dynamic_typing=True))
 
@@ -133,7 +160,7 @@ class Node:
         return self._namespace
 
     def get_fully_qualified_name(self):
-        return (self._namespace.rstrip("/") + "/" + self._name)
+        return self._namespace.rstrip("/") + "/" + self._name
 
     def get_logger(self):
         return self._logger
@@ -165,9 +192,12 @@ class Node:
                     full = self._expand(dst, exc, True)
                     break
         if not _NAME_RX.match(full):
-            raise exc(name, "must not contain characters other than alphanumerics, '_', '~', "
-                      "'{', or '}', must not end with '/', tokens must not start with a number",
-                      _first_bad(name))
+            raise exc(
+                name,
+                "must not contain characters other than alphanumerics, '_', '~', "
+                "'{', or '}', must not end with '/', tokens must not start with a number",
+                _first_bad(name),
+            )
         return full
 
     # -- parameters -------------------------------------------------------------------
@@ -186,40 +216,50 @@ class Node:
             if len(parameter_tuple) < 1 or len(parameter_tuple) > 3:
                 raise TypeError(
                     f"Invalid parameter tuple length at index {index} in parameters list: "
-                    f"{parameter_tuple}; expecting length between 1 and 3")
+                    f"{parameter_tuple}; expecting length between 1 and 3"
+                )
             value = None
             name = parameter_tuple[0]
             if not isinstance(name, str):
-                raise TypeError(f"First element {name} at index {index} in parameters list "
-                                "is not a str.")
+                raise TypeError(
+                    f"First element {name} at index {index} in parameters list is not a str."
+                )
             if namespace:
                 name = f"{namespace}.{name}"
             validate_parameter_name(name)
             second_arg = parameter_tuple[1] if 1 < len(parameter_tuple) else None
             descriptor = parameter_tuple[2] if 2 < len(parameter_tuple) else ParameterDescriptor()
             if not isinstance(descriptor, ParameterDescriptor):
-                raise TypeError(f"Third element {descriptor} at index {index} in parameters "
-                                "list is not a ParameterDescriptor.")
+                raise TypeError(
+                    f"Third element {descriptor} at index {index} in parameters "
+                    "list is not a ParameterDescriptor."
+                )
             if len(parameter_tuple) == 1:
-                warnings.warn(f"when declaring parameter named '{name}', declaring a parameter "
-                              "only providing its name is deprecated.")
+                warnings.warn(
+                    f"when declaring parameter named '{name}', declaring a parameter "
+                    "only providing its name is deprecated."
+                )
                 descriptor.dynamic_typing = True
             if isinstance(second_arg, Parameter.Type):
                 if second_arg == Parameter.Type.NOT_SET:
                     raise ValueError(
-                        f"Cannot declare parameter {{{name}}} as statically typed of type NOT_SET")
+                        f"Cannot declare parameter {{{name}}} as statically typed of type NOT_SET"
+                    )
                 if descriptor.dynamic_typing is True:
                     raise ValueError(
                         f"When declaring parameter {{{name}}} passing a descriptor with"
-                        "`dynamic_typing=True` is not allowed when the parameter type is provided")
+                        "`dynamic_typing=True` is not allowed when the parameter type is provided"
+                    )
                 descriptor.type = second_arg.value
             else:
                 value = second_arg
                 if not descriptor.dynamic_typing:
                     descriptor.type = Parameter.Type.from_parameter_value(value).value
                     if descriptor.type == ParameterType.PARAMETER_NOT_SET:
-                        raise ValueError("Cannot declare a statically typed parameter with "
-                                         "default value of type PARAMETER_NOT_SET")
+                        raise ValueError(
+                            "Cannot declare a statically typed parameter with "
+                            "default value of type PARAMETER_NOT_SET"
+                        )
             if not ignore_override and name in self._parameter_overrides:
                 value = self._parameter_overrides[name].value
             parameter_list.append(Parameter(name, value=value))
@@ -232,7 +272,8 @@ class Node:
             if not result.successful:
                 if result.reason.startswith("Wrong parameter type"):
                     raise InvalidParameterTypeException(
-                        param, Parameter.Type(descriptors[param.name].type).name)
+                        param, Parameter.Type(descriptors[param.name].type).name
+                    )
                 raise InvalidParameterValueException(param.name, param.value, result.reason)
         return [self._parameters[p.name] for p in parameter_list]
 
@@ -265,14 +306,13 @@ class Node:
     def get_parameter_or(self, name, alternative_value=None):
         if alternative_value is None:
             alternative_value = Parameter(name, Parameter.Type.NOT_SET)
-        if not self.has_parameter(name) or \
-                self._parameters[name].type_ == Parameter.Type.NOT_SET:
+        if not self.has_parameter(name) or self._parameters[name].type_ == Parameter.Type.NOT_SET:
             return alternative_value
         return self._parameters[name]
 
     def get_parameters_by_prefix(self, prefix):
         prefix = prefix + "." if prefix else ""
-        return {k[len(prefix):]: v for k, v in self._parameters.items() if k.startswith(prefix)}
+        return {k[len(prefix) :]: v for k, v in self._parameters.items() if k.startswith(prefix)}
 
     def describe_parameter(self, name):
         try:
@@ -297,8 +337,7 @@ class Node:
         results = []
         for param in parameter_list:
             if not isinstance(param, Parameter):
-                raise TypeError("parameter must be instance of type '{}'".format(
-                    repr(Parameter)))
+                raise TypeError("parameter must be instance of type '{}'".format(repr(Parameter)))
             if param.name not in self._parameters and not self._allow_undeclared_parameters:
                 raise ParameterNotDeclaredException(param.name)
             results.append(self._set_one(param, None))
@@ -328,44 +367,54 @@ class Node:
         if descriptor.dynamic_typing:
             descriptor.type = param.type_.value
         elif descriptor.type != param.type_.value and not (
-                allow_not_set_type and param.type_ == Parameter.Type.NOT_SET):
+            allow_not_set_type and param.type_ == Parameter.Type.NOT_SET
+        ):
             return SetParametersResult(
                 successful=False,
                 reason=f"Wrong parameter type, expected '{Parameter.Type(descriptor.type)}' "
-                       f"got '{param.type_}'")
+                f"got '{param.type_}'",
+            )
         if param.type_ == Parameter.Type.INTEGER and descriptor.integer_range:
             rng = descriptor.integer_range[0]
             if not rng.from_value <= param.value <= rng.to_value:
                 return SetParametersResult(
                     successful=False,
                     reason=f"Parameter {param.name} out of range. Min: {rng.from_value}, "
-                           f"Max: {rng.to_value}, value: {param.value}")
-            if rng.step != 0 and (param.value - rng.from_value) % rng.step != 0 \
-                    and param.value != rng.to_value:
+                    f"Max: {rng.to_value}, value: {param.value}",
+                )
+            if (
+                rng.step != 0
+                and (param.value - rng.from_value) % rng.step != 0
+                and param.value != rng.to_value
+            ):
                 return SetParametersResult(
                     successful=False,
                     reason=f"The parameter value ({param.value}) is not close enough to a "
-                           f"valid step. Min: {rng.from_value}, Max: {rng.to_value}, "
-                           f"step: {rng.step}")
+                    f"valid step. Min: {rng.from_value}, Max: {rng.to_value}, "
+                    f"step: {rng.step}",
+                )
         if param.type_ == Parameter.Type.DOUBLE and descriptor.floating_point_range:
             rng = descriptor.floating_point_range[0]
             v = param.value
             tol = self.PARAM_REL_TOL
-            edge = math.isclose(v, rng.from_value, rel_tol=tol) or \
-                math.isclose(v, rng.to_value, rel_tol=tol)
+            edge = math.isclose(v, rng.from_value, rel_tol=tol) or math.isclose(
+                v, rng.to_value, rel_tol=tol
+            )
             if not edge and not rng.from_value <= v <= rng.to_value:
                 return SetParametersResult(
                     successful=False,
                     reason=f"Parameter {param.name} out of range. Min: {rng.from_value}, "
-                           f"Max: {rng.to_value}, value: {v}")
+                    f"Max: {rng.to_value}, value: {v}",
+                )
             if not edge and rng.step != 0.0:
                 k = round((v - rng.from_value) / rng.step)
                 if not math.isclose(rng.from_value + k * rng.step, v, rel_tol=tol):
                     return SetParametersResult(
                         successful=False,
                         reason=f"The parameter value ({v}) is not close enough to a valid "
-                               f"step. Min: {rng.from_value}, Max: {rng.to_value}, "
-                               f"step: {rng.step}")
+                        f"step. Min: {rng.from_value}, Max: {rng.to_value}, "
+                        f"step: {rng.step}",
+                    )
         return SetParametersResult(successful=True)
 
     def _set_one(self, param, descriptors, allow_not_set_type=False, declaring=False):
@@ -376,8 +425,9 @@ class Node:
                     return SetParametersResult(
                         successful=False,
                         reason="parameter list cannot be empty, this might be due to "
-                               "pre_set_parameters_callback modifying the original parameters "
-                               "list.")
+                        "pre_set_parameters_callback modifying the original parameters "
+                        "list.",
+                    )
                 param = modified[0]
         if descriptors is not None:
             descriptor = descriptors[param.name]
@@ -385,8 +435,8 @@ class Node:
             descriptor = self._descriptors.get(param.name)
             if descriptor is not None and descriptor.read_only:
                 return SetParametersResult(
-                    successful=False,
-                    reason=f"Trying to set a read-only parameter: {param.name}.")
+                    successful=False, reason=f"Trying to set a read-only parameter: {param.name}."
+                )
         result = self._check(param, descriptor, allow_not_set_type)
         if not result.successful:
             return result
@@ -399,7 +449,8 @@ class Node:
             self._descriptors[param.name] = descriptor
         elif param.name not in self._descriptors:
             self._descriptors[param.name] = ParameterDescriptor(
-                name=param.name, type=param.type_.value, dynamic_typing=True)
+                name=param.name, type=param.type_.value, dynamic_typing=True
+            )
         if param.type_ == Parameter.Type.NOT_SET and not declaring:
             self._parameters.pop(param.name, None)
         else:
@@ -433,12 +484,19 @@ class Node:
             return qos_profile
         if isinstance(qos_profile, int):
             return QoSProfile(depth=qos_profile)
-        raise TypeError(
-            "Expected QoSProfile or int, but received {!r}".format(type(qos_profile)))
+        raise TypeError("Expected QoSProfile or int, but received {!r}".format(type(qos_profile)))
 
-    def create_publisher(self, msg_type, topic, qos_profile, *, callback_group=None,
-                         event_callbacks=None, qos_overriding_options=None,
-                         publisher_class=Publisher):
+    def create_publisher(
+        self,
+        msg_type,
+        topic,
+        qos_profile,
+        *,
+        callback_group=None,
+        event_callbacks=None,
+        qos_overriding_options=None,
+        publisher_class=Publisher,
+    ):
         qos = self._qos(qos_profile)
         if not _msgs.is_message_class(msg_type):
             raise NoTypeSupportImportedException()
@@ -449,16 +507,32 @@ class Node:
             self._standin_match(pub, sub)
         return pub
 
-    def create_subscription(self, msg_type, topic, callback, qos_profile, *,
-                            callback_group=None, event_callbacks=None,
-                            qos_overriding_options=None, raw=False):
+    def create_subscription(
+        self,
+        msg_type,
+        topic,
+        callback,
+        qos_profile,
+        *,
+        callback_group=None,
+        event_callbacks=None,
+        qos_overriding_options=None,
+        raw=False,
+    ):
         qos = self._qos(qos_profile)
         if not _msgs.is_message_class(msg_type):
             raise NoTypeSupportImportedException()
         name = self.resolve_topic_name(topic)
-        sub = Subscription(self, msg_type, name, callback,
-                           callback_group or self._default_callback_group, qos, raw=raw,
-                           event_callbacks=event_callbacks)
+        sub = Subscription(
+            self,
+            msg_type,
+            name,
+            callback,
+            callback_group or self._default_callback_group,
+            qos,
+            raw=raw,
+            event_callbacks=event_callbacks,
+        )
         self.subscriptions.append(sub)
         for pub in self._context._standin_entities("publishers"):
             if self._standin_match(pub, sub) and pub._latched:
@@ -473,44 +547,70 @@ class Node:
             self._logger.warning(
                 f"stand-in: topic '{pub.topic_name}' has publisher type "
                 f"{pub.msg_type._lpv_typename} and subscription type "
-                f"{sub.msg_type._lpv_typename}; they do not communicate")
+                f"{sub.msg_type._lpv_typename}; they do not communicate"
+            )
             return False
         comp, reason = qos_check_compatible(pub.qos_profile, sub.qos_profile)
         if comp == QoSCompatibility.ERROR:
             self._logger.warning(
                 f"New publisher discovered on topic '{pub.topic_name}', offering incompatible "
-                f"QoS. No messages will be received from it. {reason}")
+                f"QoS. No messages will be received from it. {reason}"
+            )
             return False
         return True
 
-    def create_timer(self, timer_period_sec, callback, callback_group=None, clock=None,
-                     autostart=True):
+    def create_timer(
+        self, timer_period_sec, callback, callback_group=None, clock=None, autostart=True
+    ):
         period_ns = int(float(timer_period_sec) * 1e9)
-        timer = Timer(callback, callback_group or self._default_callback_group, period_ns,
-                      clock or self._clock, context=self._context, autostart=autostart)
+        timer = Timer(
+            callback,
+            callback_group or self._default_callback_group,
+            period_ns,
+            clock or self._clock,
+            context=self._context,
+            autostart=autostart,
+        )
         self.timers.append(timer)
         return timer
 
-    def create_service(self, srv_type, srv_name, callback, *,
-                       qos_profile=qos_profile_services_default, callback_group=None):
+    def create_service(
+        self,
+        srv_type,
+        srv_name,
+        callback,
+        *,
+        qos_profile=qos_profile_services_default,
+        callback_group=None,
+    ):
         if not _msgs.is_service_class(srv_type):
             raise NoTypeSupportImportedException()
         name = self.resolve_service_name(srv_name)
         if any(s.service_name == name for s in self._context._standin_entities("services")):
-            self._logger.warning(f"stand-in: a second server for service '{name}': with real "
-                                 "DDS every server answers and the client takes the first")
-        srv = Service(self, srv_type, name, callback,
-                      callback_group or self._default_callback_group, qos_profile)
+            self._logger.warning(
+                f"stand-in: a second server for service '{name}': with real "
+                "DDS every server answers and the client takes the first"
+            )
+        srv = Service(
+            self,
+            srv_type,
+            name,
+            callback,
+            callback_group or self._default_callback_group,
+            qos_profile,
+        )
         self.services.append(srv)
         return srv
 
-    def create_client(self, srv_type, srv_name, *, qos_profile=qos_profile_services_default,
-                      callback_group=None):
+    def create_client(
+        self, srv_type, srv_name, *, qos_profile=qos_profile_services_default, callback_group=None
+    ):
         if not _msgs.is_service_class(srv_type):
             raise NoTypeSupportImportedException()
         name = self.resolve_service_name(srv_name)
-        cli = Client(self, srv_type, name, qos_profile,
-                     callback_group or self._default_callback_group)
+        cli = Client(
+            self, srv_type, name, qos_profile, callback_group or self._default_callback_group
+        )
         self.clients.append(cli)
         return cli
 
@@ -558,24 +658,29 @@ class Node:
     # -- graph ------------------------------------------------------------------------
     def get_topic_names_and_types(self, no_demangle=False):
         topics = {}
-        for e in list(self._context._standin_entities("publishers")) + \
-                list(self._context._standin_entities("subscriptions")):
+        for e in list(self._context._standin_entities("publishers")) + list(
+            self._context._standin_entities("subscriptions")
+        ):
             topics.setdefault(e.topic_name, set()).add(e.msg_type._lpv_typename)
         return sorted((k, sorted(v)) for k, v in topics.items())
 
     def get_service_names_and_types(self):
-        return sorted((s.service_name, [s.srv_type._lpv_typename])
-                      for s in self._context._standin_entities("services"))
+        return sorted(
+            (s.service_name, [s.srv_type._lpv_typename])
+            for s in self._context._standin_entities("services")
+        )
 
     def get_node_names(self):
         return [n.get_name() for n in self._context._standin_nodes]
 
     def count_publishers(self, topic_name):
         name = self.resolve_topic_name(topic_name)
-        return sum(1 for p in self._context._standin_entities("publishers")
-                   if p.topic_name == name)
+        return sum(
+            1 for p in self._context._standin_entities("publishers") if p.topic_name == name
+        )
 
     def count_subscribers(self, topic_name):
         name = self.resolve_topic_name(topic_name)
-        return sum(1 for s in self._context._standin_entities("subscriptions")
-                   if s.topic_name == name)
+        return sum(
+            1 for s in self._context._standin_entities("subscriptions") if s.topic_name == name
+        )

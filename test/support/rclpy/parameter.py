@@ -47,9 +47,11 @@ class Parameter:
                     return Parameter.Type.STRING_ARRAY
                 raise TypeError(
                     f"The given value is not a list of one of the allowed types "
-                    f"'{parameter_value}'.")
+                    f"'{parameter_value}'."
+                )
             raise TypeError(
-                f"The given value is not one of the allowed types '{parameter_value}'.")
+                f"The given value is not one of the allowed types '{parameter_value}'."
+            )
 
         def check(self, parameter_value):
             T = Parameter.Type
@@ -65,8 +67,7 @@ class Parameter:
                 return isinstance(parameter_value, str)
             seq = isinstance(parameter_value, (list, tuple, array.array))
             if self == T.BYTE_ARRAY:
-                return seq and all(isinstance(v, bytes) and len(v) == 1
-                                   for v in parameter_value)
+                return seq and all(isinstance(v, bytes) and len(v) == 1 for v in parameter_value)
             if self == T.BOOL_ARRAY:
                 return seq and all(isinstance(v, bool) for v in parameter_value)
             if self == T.INTEGER_ARRAY:
@@ -79,8 +80,11 @@ class Parameter:
 
     @classmethod
     def from_parameter_msg(cls, param_msg):
-        return cls(param_msg.name, Parameter.Type(param_msg.value.type),
-                   parameter_value_to_python(param_msg.value))
+        return cls(
+            param_msg.name,
+            Parameter.Type(param_msg.value.type),
+            parameter_value_to_python(param_msg.value),
+        )
 
     def __init__(self, name, type_=None, value=None):
         if type_ is None:
@@ -161,14 +165,16 @@ def parameter_value_to_python(parameter_value):
     raise RuntimeError(f"unexpected parameter type {t}")
 
 
-def parameter_dict_from_yaml_file(parameter_file, use_wildcard=False, target_nodes=None,
-                                  namespace=""):
+def parameter_dict_from_yaml_file(
+    parameter_file, use_wildcard=False, target_nodes=None, namespace=""
+):
     """``{name: ParameterMsg}`` for the nodes of a ``ros__parameters`` file (rclpy API)."""
     from rclpy._params_file import load_overrides
     from rclpy._params_file import read as _read
+
     data = _read(parameter_file)
     out = {}
-    for node in (target_nodes or list(data)):
+    for node in target_nodes or list(data):
         for p in load_overrides(data, node.lstrip("/"), use_wildcard):
             out[p.name] = p.to_parameter_msg()
     return out

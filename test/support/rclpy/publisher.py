@@ -11,8 +11,9 @@ class Publisher(TopicEndpoint):
     def __init__(self, node, msg_type, topic, qos_profile, event_callbacks=None):
         super().__init__(node, msg_type, topic, qos_profile, event_callbacks)
         self._destroyed = False
-        keep = qos_profile.depth if qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL \
-            else 0
+        keep = (
+            qos_profile.depth if qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL else 0
+        )
         self._latched = collections.deque(maxlen=keep or None) if keep else None
         self.standin_published = 0
 
@@ -21,16 +22,21 @@ class Publisher(TopicEndpoint):
         return self._topic
 
     def get_subscription_count(self):
-        return sum(1 for s in self._node.context._standin_entities("subscriptions")
-                   if s.topic_name == self._topic)
+        return sum(
+            1
+            for s in self._node.context._standin_entities("subscriptions")
+            if s.topic_name == self._topic
+        )
 
     def publish(self, msg):
         if self._destroyed:
             from rclpy.exceptions import InvalidHandle
+
             raise InvalidHandle("cannot use Destroyable because destruction was requested")
         if not self._node.context.ok():
             # as rclpy_pybind11 once the context is shut down (e.g. by rclpy's SIGINT handler)
             from rclpy._params_file import RCLError
+
             raise RCLError("Failed to publish: publisher's context is invalid")
         if isinstance(msg, (bytes, bytearray)):
             data = bytes(msg)

@@ -60,9 +60,17 @@ QoSLivelinessPolicy = LivelinessPolicy
 class QoSProfile:
     """QoS settings; ``history`` and/or ``depth`` are required as in rclpy >= Galactic."""
 
-    __slots__ = ["_history", "_depth", "_reliability", "_durability", "_lifespan",
-                 "_deadline", "_liveliness", "_liveliness_lease_duration",
-                 "_avoid_ros_namespace_conventions"]
+    __slots__ = [
+        "_history",
+        "_depth",
+        "_reliability",
+        "_durability",
+        "_lifespan",
+        "_deadline",
+        "_liveliness",
+        "_liveliness_lease_duration",
+        "_avoid_ros_namespace_conventions",
+    ]
 
     def __init__(self, **kwargs):
         allowed = {s[1:] for s in self.__slots__}
@@ -82,8 +90,7 @@ class QoSProfile:
         self.deadline = kwargs.get("deadline", Duration())
         self.liveliness = kwargs.get("liveliness", LivelinessPolicy.SYSTEM_DEFAULT)
         self.liveliness_lease_duration = kwargs.get("liveliness_lease_duration", Duration())
-        self.avoid_ros_namespace_conventions = kwargs.get(
-            "avoid_ros_namespace_conventions", False)
+        self.avoid_ros_namespace_conventions = kwargs.get("avoid_ros_namespace_conventions", False)
 
     def _prop(name, enum_cls=None):  # noqa: N805 - class-body helper
         def get(self):
@@ -95,6 +102,7 @@ class QoSProfile:
             elif name == "depth":
                 assert isinstance(value, int) and value >= 0, "depth must be a non-negative int"
             setattr(self, "_" + name, value)
+
         return property(get, set_)
 
     history = _prop("history", HistoryPolicy)
@@ -114,28 +122,49 @@ class QoSProfile:
         return all(getattr(self, s) == getattr(other, s) for s in self.__slots__)
 
     def __repr__(self):
-        return ("QoSProfile(history=%s, depth=%d, reliability=%s, durability=%s)" % (
-            self.history.name, self.depth, self.reliability.name, self.durability.name))
+        return "QoSProfile(history=%s, depth=%d, reliability=%s, durability=%s)" % (
+            self.history.name,
+            self.depth,
+            self.reliability.name,
+            self.durability.name,
+        )
 
 
 qos_profile_sensor_data = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST, depth=5,
-    reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE)
+    history=HistoryPolicy.KEEP_LAST,
+    depth=5,
+    reliability=ReliabilityPolicy.BEST_EFFORT,
+    durability=DurabilityPolicy.VOLATILE,
+)
 qos_profile_system_default = QoSProfile(
-    history=HistoryPolicy.SYSTEM_DEFAULT, reliability=ReliabilityPolicy.SYSTEM_DEFAULT,
-    durability=DurabilityPolicy.SYSTEM_DEFAULT)
+    history=HistoryPolicy.SYSTEM_DEFAULT,
+    reliability=ReliabilityPolicy.SYSTEM_DEFAULT,
+    durability=DurabilityPolicy.SYSTEM_DEFAULT,
+)
 qos_profile_services_default = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST, depth=10,
-    reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+    history=HistoryPolicy.KEEP_LAST,
+    depth=10,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
 qos_profile_parameters = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST, depth=1000,
-    reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1000,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
 qos_profile_parameter_events = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST, depth=1000,
-    reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1000,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
 qos_profile_rosout_default = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST, depth=1000,
-    reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1000,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
 
 
 class QoSPresetProfiles(enum.Enum):
@@ -161,6 +190,7 @@ def qos_check_compatible(publisher_qos, subscription_qos):
 
     SYSTEM_DEFAULT resolves to RELIABLE / VOLATILE (the defaults of every Jazzy rmw).
     """
+
     def rel(p):
         r = p.reliability
         return ReliabilityPolicy.RELIABLE if r == ReliabilityPolicy.SYSTEM_DEFAULT else r
@@ -169,12 +199,17 @@ def qos_check_compatible(publisher_qos, subscription_qos):
         d = p.durability
         return DurabilityPolicy.VOLATILE if d == DurabilityPolicy.SYSTEM_DEFAULT else d
 
-    if (rel(publisher_qos) == ReliabilityPolicy.BEST_EFFORT
-            and rel(subscription_qos) == ReliabilityPolicy.RELIABLE):
-        return (QoSCompatibility.ERROR,
-                "ERROR: Best effort publisher and reliable subscription;")
-    if (dur(publisher_qos) == DurabilityPolicy.VOLATILE
-            and dur(subscription_qos) == DurabilityPolicy.TRANSIENT_LOCAL):
-        return (QoSCompatibility.ERROR,
-                "ERROR: Volatile publisher and transient local subscription;")
+    if (
+        rel(publisher_qos) == ReliabilityPolicy.BEST_EFFORT
+        and rel(subscription_qos) == ReliabilityPolicy.RELIABLE
+    ):
+        return (QoSCompatibility.ERROR, "ERROR: Best effort publisher and reliable subscription;")
+    if (
+        dur(publisher_qos) == DurabilityPolicy.VOLATILE
+        and dur(subscription_qos) == DurabilityPolicy.TRANSIENT_LOCAL
+    ):
+        return (
+            QoSCompatibility.ERROR,
+            "ERROR: Volatile publisher and transient local subscription;",
+        )
     return QoSCompatibility.OK, ""

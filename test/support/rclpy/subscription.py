@@ -8,14 +8,26 @@ from rclpy.qos import HistoryPolicy
 
 
 class Subscription(TopicEndpoint):
-    def __init__(self, node, msg_type, topic, callback, callback_group, qos_profile,
-                 raw=False, event_callbacks=None):
+    def __init__(
+        self,
+        node,
+        msg_type,
+        topic,
+        callback,
+        callback_group,
+        qos_profile,
+        raw=False,
+        event_callbacks=None,
+    ):
         super().__init__(node, msg_type, topic, qos_profile, event_callbacks)
         self.callback = callback
         self.callback_group = callback_group
         self.raw = raw
-        depth = None if qos_profile.history == HistoryPolicy.KEEP_ALL else \
-            max(int(qos_profile.depth), 1)
+        depth = (
+            None
+            if qos_profile.history == HistoryPolicy.KEEP_ALL
+            else max(int(qos_profile.depth), 1)
+        )
         self._queue = collections.deque(maxlen=depth)
         self.standin_received = 0
         self.standin_dropped = 0
@@ -40,8 +52,10 @@ class Subscription(TopicEndpoint):
         cbs = self.event_callbacks
         if cbs is not None and cbs.message_lost is not None:
             from rclpy.event_handler import QoSMessageLostInfo
-            cbs.message_lost(QoSMessageLostInfo(total_count=self.standin_lost,
-                                                total_count_change=n))
+
+            cbs.message_lost(
+                QoSMessageLostInfo(total_count=self.standin_lost, total_count_change=n)
+            )
 
     def destroy(self):
         self._node.destroy_subscription(self)

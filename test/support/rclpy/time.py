@@ -5,7 +5,7 @@ import builtin_interfaces.msg
 from rclpy.clock_type import ClockType
 from rclpy.duration import Duration
 
-CONVERSION_CONSTANT = 10 ** 9
+CONVERSION_CONSTANT = 10**9
 
 
 class Time:
@@ -38,8 +38,9 @@ class Time:
 
     def __add__(self, other):
         if isinstance(other, Duration):
-            return Time(nanoseconds=self._nanoseconds + other.nanoseconds,
-                        clock_type=self._clock_type)
+            return Time(
+                nanoseconds=self._nanoseconds + other.nanoseconds, clock_type=self._clock_type
+            )
         return NotImplemented
 
     __radd__ = __add__
@@ -50,8 +51,9 @@ class Time:
                 raise TypeError("Can't subtract times with different clock types")
             return Duration(nanoseconds=self._nanoseconds - other._nanoseconds)
         if isinstance(other, Duration):
-            return Time(nanoseconds=self._nanoseconds - other.nanoseconds,
-                        clock_type=self._clock_type)
+            return Time(
+                nanoseconds=self._nanoseconds - other.nanoseconds, clock_type=self._clock_type
+            )
         return NotImplemented
 
     def _cmp(self, other):

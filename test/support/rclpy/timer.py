@@ -5,8 +5,9 @@ from rclpy.exceptions import InvalidHandle
 
 
 class Timer(Entity):
-    def __init__(self, callback, callback_group, timer_period_ns, clock, *, context=None,
-                 autostart=True):
+    def __init__(
+        self, callback, callback_group, timer_period_ns, clock, *, context=None, autostart=True
+    ):
         self._context = context
         self._clock = clock
         self.callback = callback

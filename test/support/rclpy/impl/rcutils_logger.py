@@ -22,29 +22,37 @@ class LoggingSeverity(enum.IntEnum):
     FATAL = 50
 
 
-_PY = {LoggingSeverity.DEBUG: logging.DEBUG, LoggingSeverity.INFO: logging.INFO,
-       LoggingSeverity.WARN: logging.WARNING, LoggingSeverity.ERROR: logging.ERROR,
-       LoggingSeverity.FATAL: logging.CRITICAL}
+_PY = {
+    LoggingSeverity.DEBUG: logging.DEBUG,
+    LoggingSeverity.INFO: logging.INFO,
+    LoggingSeverity.WARN: logging.WARNING,
+    LoggingSeverity.ERROR: logging.ERROR,
+    LoggingSeverity.FATAL: logging.CRITICAL,
+}
 #: filter -> {parameter: default} as rclpy (None: required); the order is rclpy's
-_FILTERS = {"throttle": {"throttle_duration_sec": None, "throttle_time_source_type": "clock"},
-            "skip_first": {"skip_first": None},
-            "once": {"once": None}}
+_FILTERS = {
+    "throttle": {"throttle_duration_sec": None, "throttle_time_source_type": "clock"},
+    "skip_first": {"skip_first": None},
+    "once": {"once": None},
+}
 
 
 def _filters_from_kwargs(kwargs):
     """rclpy's get_filters_from_kwargs: the filters named by truthy keyword arguments."""
-    detected = [name for name, params in _FILTERS.items()
-                if any(kwargs.get(p) for p in params)]
+    detected = [name for name, params in _FILTERS.items() if any(kwargs.get(p) for p in params)]
     known = [p for params in _FILTERS.values() for p in params]
     for name in detected:
         for p, default in _FILTERS[name].items():
             if p not in kwargs and default is None:
-                raise TypeError(f'required parameter "{p}" not specified but is required for '
-                                f'the the logging filter "{name}"')
+                raise TypeError(
+                    f'required parameter "{p}" not specified but is required for '
+                    f'the the logging filter "{name}"'
+                )
     for k in kwargs:
         if k not in known:
-            raise TypeError(f'parameter "{k}" is not one of the recognized logging options '
-                            f'"{known}"')
+            raise TypeError(
+                f'parameter "{k}" is not one of the recognized logging options "{known}"'
+            )
     return detected
 
 
@@ -53,13 +61,20 @@ def _caller():
     file, line and bytecode offset (two calls on one line are two callers)."""
     import inspect
     import os
-    here = {os.path.realpath(__file__),
-            os.path.realpath(os.path.join(os.path.dirname(__file__), "..", "logging.py"))}
+
+    here = {
+        os.path.realpath(__file__),
+        os.path.realpath(os.path.join(os.path.dirname(__file__), "..", "logging.py")),
+    }
     frame = inspect.currentframe()
     while os.path.realpath(frame.f_code.co_filename) in here:
         frame = frame.f_back
-    return (frame.f_code.co_name, os.path.abspath(frame.f_code.co_filename), frame.f_lineno,
-            frame.f_lasti)
+    return (
+        frame.f_code.co_name,
+        os.path.abspath(frame.f_code.co_filename),
+        frame.f_lineno,
+        frame.f_lasti,
+    )
 
 
 #: rcutils logger levels set with set_level, by logger name ("" = the default logger)
@@ -106,10 +121,15 @@ class RcutilsLogger:
         key = _caller()
         ctx = self.contexts.get(key)
         if ctx is None:
-            ctx = {"name": name, "severity": severity, "filters": filters,
-                   "params": {p: kwargs.get(p, d) for f in filters
-                              for p, d in _FILTERS[f].items()},
-                   "logged_once": False, "first_skipped": False, "last_ns": 0}
+            ctx = {
+                "name": name,
+                "severity": severity,
+                "filters": filters,
+                "params": {p: kwargs.get(p, d) for f in filters for p, d in _FILTERS[f].items()},
+                "logged_once": False,
+                "first_skipped": False,
+                "last_ns": 0,
+            }
             self.contexts[key] = ctx
         else:
             if severity != ctx["severity"]:
@@ -118,8 +138,11 @@ class RcutilsLogger:
                 raise ValueError("Logger name cannot be changed between calls.")
             if filters != ctx["filters"]:
                 raise ValueError("Requested logging filters cannot be changed between calls.")
-            if any(ctx["params"][p] != kwargs.get(p, d) for f in filters
-                   for p, d in _FILTERS[f].items()):
+            if any(
+                ctx["params"][p] != kwargs.get(p, d)
+                for f in filters
+                for p, d in _FILTERS[f].items()
+            ):
                 raise ValueError("Logging filter parameters cannot be changed between calls.")
         for f in ctx["filters"]:
             if not self._should_log(f, ctx, kwargs):
@@ -138,6 +161,7 @@ class RcutilsLogger:
         clock = kwargs.get("throttle_time_source_type")
         if clock is None:
             from rclpy.clock import Clock
+
             clock = Clock()
         now = clock.now().nanoseconds
         if now >= ctx["last_ns"] + ctx["params"]["throttle_duration_sec"] * 1e9:
