@@ -1,4 +1,13 @@
-"""ament_python build description for lpv_sysid (ROS 2 Jazzy)."""
+"""Build description of lpv_sysid: an ament_python package (ROS 2 Jazzy, colcon) that is also
+an ordinary pip-installable Python package.
+
+colcon runs ``setup.py install`` with setup.cfg's ``[install]`` script directory, so every
+executable lands in ``lib/lpv_sysid`` where ``ros2 run lpv_sysid <name>`` looks; pip builds a
+wheel and puts the same console scripts in the environment's ``bin`` (setup.cfg does not
+apply there). The shipped default configs live once, in ``lpv_sysid/config`` (package data,
+read through importlib.resources: lpv_sysid/default_configs.py); the same files are installed
+again into ``share/lpv_sysid/config`` for launch files and ``--params-file``.
+"""
 
 import os
 from glob import glob
@@ -6,6 +15,8 @@ from glob import glob
 from setuptools import find_packages, setup
 
 PACKAGE = "lpv_sysid"
+#: the shipped default configs (package data), relative to the package directory
+CONFIG_GLOB = "config/*.yaml"
 
 # Node entry points: `ros2 run lpv_sysid <name>`.
 NODES = [
@@ -34,23 +45,23 @@ def tree_data_files(root: str, dest: str) -> list:
 setup(
     name=PACKAGE,
     version="0.1.0",
-    packages=find_packages(exclude=["test", "test.*"]),
+    packages=find_packages(include=[PACKAGE, PACKAGE + ".*"]),  # not bench/, test/
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
         ("share/" + PACKAGE, ["package.xml"]),
         ("share/" + PACKAGE + "/launch", glob("launch/*.launch.py")),
-        ("share/" + PACKAGE + "/config", glob("config/*.yaml")),
+        ("share/" + PACKAGE + "/config", sorted(glob(os.path.join(PACKAGE, CONFIG_GLOB)))),
     ]
     + tree_data_files("msg_samples", "share/" + PACKAGE + "/msg_samples"),
-    package_data={PACKAGE: ["py.typed"]},
+    package_data={PACKAGE: ["py.typed", CONFIG_GLOB]},
+    python_requires=">=3.10",
     install_requires=["setuptools"],
-    zip_safe=True,
+    zip_safe=False,  # the configs are read as files (lpv_sysid/default_configs.py)
     maintainer="lpv_sysid maintainers",
     maintainer_email="maintainers@example.com",
     description="Safe large-domain system identification of unstable multirotors "
     "with robust LPV control (PX4, MAVLink/MAVROS, rosbag2).",
     license="BSD-3-Clause",
-    tests_require=["pytest"],
     entry_points={
         "console_scripts": [f"{n} = {PACKAGE}.nodes.{n}:main" for n in NODES]
         + [f"lpv-sysid = {PACKAGE}.cli.main:main"],

@@ -64,7 +64,8 @@ def main() -> None:
         rows.extend(json.loads(f.read_text()))
     rows.sort(key=lambda r: (r.get("order", 100), r["key"]))
     table = [
-        f"| {r['key']} ({r['issue']}) | {r['measured']} | {r['floor']} | {r['ratio']} | {r['target']} | "
+        f"| {r['key']} ({r['issue']}) | {r['measured']} | {r['floor']} | {r['ratio']} | "
+        f"{r['target']} | "
         f"{r['status']} |"
         for r in rows
     ]

@@ -1,4 +1,4 @@
-"""rosbag2 reading and writing (io/bag.py; issue 15 rows "bag read (typed topics)", "bag
+"""rosbag2 reading and writing (io/bag; issue 15 rows "bag read (typed topics)", "bag
 write in bulk", and the bag side of "identify (9 bags)").
 
     .venv/bin/python -m bench.bench_bag
@@ -32,13 +32,14 @@ TYPED = ("state", "rotor_speeds", "imu", "velocity_reference", "actuator_command
 def main() -> None:
     from lpv_sysid.control.baseline import BaselineGains
     from lpv_sysid.io import bag as bg
+    from lpv_sysid.io.bag import collect, layout, mcap_index, records
     from lpv_sysid.io import messages as M
     from lpv_sysid.models.quadrotor import Quadrotor
     from lpv_sysid.sim import phase1
     from lpv_sysid.sim.vehicle import SensorConfig
 
     load0 = load_average()
-    page = Page("bag", "rosbag2 I/O (io/bag.py, issue 15)", ".venv/bin/python -m bench.bench_bag")
+    page = Page("bag", "rosbag2 I/O (io/bag, issue 15)", ".venv/bin/python -m bench.bench_bag")
     cfg = replace(phase1.Phase1Config(), hover_validation=False)
     rec = phase1.run_phase1(Quadrotor(), BaselineGains(), SensorConfig(), cfg, [8])[0]
     root = Path(tempfile.mkdtemp(prefix="bench_bag_"))
@@ -49,13 +50,13 @@ def main() -> None:
         n_typed = sum(info[t].count for t in topics)
         n_all = sum(s.count for s in info.values())
         # floor: the records in memory, one join + one structured view per topic
-        src = bg._Source()
-        bg._read_fast(path, set(topics), src)
+        src = records._Source()
+        mcap_index._read_fast(path, set(topics), src)
         per = {}
         for t, _ns, d in src.records:
             per.setdefault(t, []).append(bytes(d))
         ts = bg.jazzy_typestore()
-        lays = {t: bg._LAYOUTS.for_record(ts, info[t].msgtype, v[0]) for t, v in per.items()}
+        lays = {t: layout._LAYOUTS.for_record(ts, info[t].msgtype, v[0]) for t, v in per.items()}
 
         def floor():
             for t, v in per.items():
@@ -85,7 +86,10 @@ def main() -> None:
             "before"
         ]
         ti = interleaved(
-            {"index": lambda: bg.topic_info(path), "walk": lambda: bg._collect(path, None, True)},
+            {
+                "index": lambda: bg.topic_info(path),
+                "walk": lambda: collect._collect(path, None, True),
+            },
             number=1,
             repeat=5,
             clock=time.process_time,
@@ -173,7 +177,8 @@ def main() -> None:
             "bag read (typed topics)",
             "15",
             f"`read_arrays` {rate:,.0f} msgs/s; `read_bag` {n_typed / rb.median:,.0f} msgs/s "
-            f"(before {n_typed / old.median:,.0f}); `topic_info` {ti['index'].median * 1e3:.1f} ms "
+            f"(before {n_typed / old.median:,.0f}); "
+            f"`topic_info` {ti['index'].median * 1e3:.1f} ms "
             f"(before {ti['walk'].median * 1e3:.0f} ms)",
             f"numpy block decode {frate:,.0f} msgs/s",
             f"{ratio:.2f}x",

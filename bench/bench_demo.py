@@ -57,7 +57,8 @@ def run_once() -> tuple[float, float, dict]:
 def _largest(steps: dict) -> str:
     k, (title, v) = max(steps.items(), key=lambda kv: Stat(kv[1][1]).median)
     rest = sum(Stat(x).median for kk, (_, x) in steps.items() if kk != k)
-    return f"step {k} ({title.split(' (')[0]}) takes {Stat(v).median:.0f} s, the other steps {rest:.0f} s together"
+    name = title.split(" (")[0]
+    return f"step {k} ({name}) takes {Stat(v).median:.0f} s, the other steps {rest:.0f} s together"
 
 
 def main(argv=None) -> None:

@@ -217,7 +217,8 @@ def main() -> None:
     st, n = bench_decode()
     rate = {k: n / v.median for k, v in st.items()}
     page.add(
-        f"## Decode ({n} MAVLink 2 datagrams, PX4 telemetry mix: ATTITUDE_QUATERNION, HIGHRES_IMU, "
+        f"## Decode ({n} MAVLink 2 datagrams, PX4 telemetry mix: ATTITUDE_QUATERNION, "
+        "HIGHRES_IMU, "
         "LOCAL_POSITION_NED, ESC_STATUS; CPU time)"
     )
     page.add()

@@ -62,12 +62,14 @@ def main() -> None:
         print("  channel   harmonics   RPF opt   RPF Schroeder")
         for j, n in enumerate(sig.names):
             print(
-                f"  {n:8s}  {sig.harmonics[j].size:9d}   {sig.rpf[j]:.4f}    {sig.rpf_schroeder[j]:.4f}"
+                f"  {n:8s}  {sig.harmonics[j].size:9d}   {sig.rpf[j]:.4f}    "
+                f"{sig.rpf_schroeder[j]:.4f}"
             )
         if name == "signals_phase2.yaml":
             med_us, best_us = _lookup_us(sig)
             print(
-                f"  ExcitationCore.sample: median {med_us:.2f} us/call (min batch {best_us:.2f} us), "
+                f"  ExcitationCore.sample: median {med_us:.2f} us/call (min batch {best_us:.2f} "
+                "us), "
                 "50 batches x 2000 calls"
             )
     print(f"\nload average after: {os.getloadavg()[0]:.2f}")

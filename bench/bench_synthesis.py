@@ -135,17 +135,18 @@ def full_box_eval(models: Path, gains: Path, summary: Path) -> tuple[float, floa
     the largest over the vertices of what it certifies at each vertex alone (its own X and
     multipliers: frozen at the vertices, no interior claim), empirical worst frozen H-inf norm over
     the full box: verify --full-box 200 samples)."""
-    from lpv_sysid.synthesis.files import Gains, load_models
+    from lpv_sysid.io.formats import GainSchedule
     from lpv_sysid.synthesis.hinf_lmi import performance_matrix
     from lpv_sysid.synthesis.robust_lmi import solve_box
+    from lpv_sysid.synthesis.uncertainty_set import load_models
     from lpv_sysid.synthesis.verify import verify_files
 
-    g = Gains.load(gains)
+    g = GainSchedule.load(gains, auto_layout=True)
     model, _ = load_models(
         models,
         {
             "set": "full_box",
-            "motor_std": g.certificate["uncertainty"].get("motor_std") or [0.21, 1820.0],
+            "motor_std": g.certificate.extra["uncertainty"].get("motor_std") or [0.21, 1820.0],
         },
     )
     C = performance_matrix(g.Q, model.n_x, (2, 3, 4))
@@ -220,23 +221,25 @@ def main(argv=None) -> None:
         page.add("## Lemma 1 at the seed's size (issue 13 item 4, issue 15 row 1)")
         page.add()
         page.add(
-            f"`lpv-sysid synthesize --config config/synthesis_seed_scale.yaml` on the demo's identified models: "
-            f"N = {sp['N']}, M_i = {sp['M']} (sum {sp['sum_M']}). Seed 0 Lemma 1 over these systems has "
-            f"**{sp['package']['scalar_variables']:,} scalar variables and {sp['package']['cone_entries']:,} cone "
-            f"entries in {sp['psd_cones']:,} PSD cones** (the package's primal count); CVX reports the dual: "
-            f"**{sp['as_cvx_reports']['variables']:,} variables with {sp['as_cvx_reports']['constraints']:,} "
-            "constraints** -- seed 0's two numbers. (8 x 16 = 128 systems, which this page used to call the "
-            "seed's size, is 4.5 x smaller.)"
+            "`lpv-sysid synthesize --config config/synthesis_seed_scale.yaml` on the demo's "
+            f"identified models: N = {sp['N']}, M_i = {sp['M']} (sum {sp['sum_M']}). Seed 0 Lemma "
+            f"1 over these systems has **{sp['package']['scalar_variables']:,} scalar variables "
+            f"and {sp['package']['cone_entries']:,} cone entries in {sp['psd_cones']:,} PSD "
+            "cones** (the package's primal count); CVX reports the dual: "
+            f"**{sp['as_cvx_reports']['variables']:,} variables with "
+            f"{sp['as_cvx_reports']['constraints']:,} constraints** -- seed 0's two numbers. (8 x "
+            "16 = 128 systems, which this page used to call the seed's size, is 4.5 x smaller.)"
         )
         page.add()
         page.add(
-            "The product solves it as the element-box LMI (the 580 systems are the corners of a box of single "
-            "elements per vertex, `models.lpv.corner_box`; one robust block per vertex with X_i^j = X_i, "
-            f"{cert['problem']['lmi_blocks']} LMI blocks, {cert['problem']['scalar_variables']} scalar variables) "
-            "and then re-checks seed 0 Eq. (30) itself with numpy at all 580 systems (1,160 cones): "
-            f"gamma {e30['gamma']:.4g} <= 1, min margin {e30['margin']:.3g}; the independent verification "
-            "then re-checks the H-inf norm of all 580 corner closed loops, Eq. (30) from the sidecar, interior "
-            "points."
+            "The product solves it as the element-box LMI (the 580 systems are the corners of a "
+            "box of single elements per vertex, `models.lpv.corner_box`; one robust block per "
+            f"vertex with X_i^j = X_i, {cert['problem']['lmi_blocks']} LMI blocks, "
+            f"{cert['problem']['scalar_variables']} scalar variables) and then re-checks seed 0 "
+            "Eq. (30) itself with numpy at all 580 systems (1,160 cones): gamma "
+            f"{e30['gamma']:.4g} <= 1, min margin {e30['margin']:.3g}; the independent "
+            "verification then re-checks the H-inf norm of all 580 corner closed loops, Eq. (30) "
+            "from the sidecar, interior points."
         )
         page.add()
         lines = [
@@ -250,14 +253,17 @@ def main(argv=None) -> None:
             lines.append(
                 [
                     "seed's formulation (X_i^j free, 1,160 cones, cvxpy + SCS), end to end, once",
-                    f"{cw:.1f} s (compile {cc_['compile_time_s']:.1f} s, solve {cc_['solve_time_s']:.1f} s; "
-                    f"gamma {cc_['gamma_achieved']:.4g})",
+                    f"{cw:.1f} s (compile {cc_['compile_time_s']:.1f} s, solve "
+                    f"{cc_['solve_time_s']:.1f} s; gamma {cc_['gamma_achieved']:.4g})",
                 ]
             )
         page.table(["seed-size Lemma 1", "median [p10-p90, n]"], lines)
         ratio = f"{52.0 / st_s.median:.1f}x faster than the anchor"
         if corners is not None:
-            ratio += f"; {corners[0] / st_w.median:.0f}x faster than the 1,160-cone formulation (same run)"
+            ratio += (
+                f"; {corners[0] / st_w.median:.0f}x faster than the 1,160-cone formulation "
+                "(same run)"
+            )
         page.rows.append(
             Row(
                 "Lemma 1 at the seed's size (N = 8, sum M_i = 580)",
@@ -361,19 +367,21 @@ def main(argv=None) -> None:
                 ]
             )
         page.add(
-            "## The certificate over the full identified box, and its conservatism (issue 13 item 2)"
+            "## The certificate over the full identified box, and its conservatism (issue 13 item "
+            "2)"
         )
         page.add()
         page.add(
-            "Demo models (`demo --quick` identification: 51 elements per vertex incl. the identified motor "
-            "constants, 408 intervals; 5 B entries in the common hull). Columns: the set the certificate "
-            "covers; the scheduling variation it covers; the certified gamma (numpy re-evaluation of the "
-            "solved LMI); **full-box analysis**: the smallest gamma the element-box LMI certifies for that "
-            "law over the full box (gains fixed; `robust_lmi.solve_box(K_fixed=...)`) with a common X "
-            "(any v_d(t); inf: no common X exists for that law), and at each vertex alone (its own X and "
-            "multipliers: the vertex claims, frozen; the largest over the vertices); "
-            "**full-box MC**: worst frozen closed-loop H-inf norm over 216 samples of the full box "
-            "(`verify --full-box 200`, empirical lower bound); `synthesize` wall incl. verification."
+            "Demo models (`demo --quick` identification: 51 elements per vertex incl. the "
+            "identified motor constants, 408 intervals; 5 B entries in the common hull). "
+            "Columns: the set the certificate covers; the scheduling variation it covers; the "
+            "certified gamma (numpy re-evaluation of the solved LMI); **full-box analysis**: the "
+            "smallest gamma the element-box LMI certifies for that law over the full box (gains "
+            "fixed; `robust_lmi.solve_box(K_fixed=...)`) with a common X (any v_d(t); inf: no "
+            "common X exists for that law), and at each vertex alone (its own X and multipliers: "
+            "the vertex claims, frozen; the largest over the vertices); **full-box MC**: worst "
+            "frozen closed-loop H-inf norm over 216 samples of the full box (`verify --full-box "
+            "200`, empirical lower bound); `synthesize` wall incl. verification."
         )
         page.add()
         page.table(

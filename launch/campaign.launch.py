@@ -3,7 +3,7 @@
     ros2 launch lpv_sysid campaign.launch.py [campaign_file:=...] [signals_file:=signals.npz] \
         [runs_dir:=campaign_runs] [log_dir:=campaign_log]
     ros2 service call /lpv_sysid/campaign/start std_srvs/srv/Trigger      # fly it
-    ros2 service call /lpv_sysid/campaign/abort std_srvs/srv/Trigger      # excitation off, hand back
+    ros2 service call /lpv_sysid/campaign/abort std_srvs/srv/Trigger      # stop, hand back
 
 Nodes (namespace /lpv_sysid): mavlink_bridge (velocity setpoints to PX4, arming on start,
 safety envelope), campaign (lpv_sysid/nodes/campaign_node.py: the sequence, one rosbag2
@@ -14,14 +14,13 @@ ends with the bridge's hand-back (HOLD); ``lpv-sysid fly phase1`` also lands.
 
 import os
 
-from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 from lpv_sysid.nodes._common import LAUNCH_SIGTERM_TIMEOUT_S
-from lpv_sysid.nodes.launch_util import PACKAGE, declare_arguments, params
+from lpv_sysid.nodes.launch_util import declare_arguments, params, share_config_dir
 
 NAMESPACE = "lpv_sysid"
 #: launch's SIGINT -> SIGTERM escalation (5 s by default) after the nodes' orderly shutdown
@@ -30,7 +29,6 @@ SIGTERM_TIMEOUT = LaunchConfiguration("sigterm_timeout", default=str(LAUNCH_SIGT
 
 
 def generate_launch_description():
-    share_config = os.path.join(get_package_share_directory(PACKAGE), "config")
     return LaunchDescription(
         [
             *declare_arguments(
@@ -40,7 +38,7 @@ def generate_launch_description():
             ),
             DeclareLaunchArgument(
                 "campaign_file",
-                default_value=os.path.join(share_config, "campaign.yaml"),
+                default_value=os.path.join(share_config_dir(), "campaign.yaml"),
                 description="config/campaign.yaml: box, altitude window, timeouts",
             ),
             DeclareLaunchArgument(

@@ -1,4 +1,4 @@
-"""io/bag.py: rosbag2 round trips (mcap, sqlite3) of every topic type, metadata, rates,
+"""io/bag: rosbag2 round trips (mcap, sqlite3) of every topic type, metadata, rates,
 out-of-order stamps, truncated / metadata-less / crashed bags and write errors."""
 
 import errno

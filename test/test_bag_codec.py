@@ -1,4 +1,4 @@
-"""io/bag.py fast paths: the CDR block codec, the chunk/index readers (read_bag, read_arrays,
+"""io/bag fast paths: the CDR block codec, the chunk/index readers (read_bag, read_arrays,
 topic_info) and bulk writing (write_many, encode_block), each against rosbags itself."""
 
 import itertools
@@ -9,6 +9,7 @@ import yaml
 
 from lpv_sysid.errors import BagError
 from lpv_sysid.io import bag as bg
+from lpv_sysid.io.bag import layout, mcap_index
 from lpv_sysid.io import messages as m
 
 F = m.MsgFactory.rosbags()
@@ -114,7 +115,7 @@ def same(a, b):
 
 
 def leaf(msg, path):
-    return bg._get_path(msg, path)
+    return layout._get_path(msg, path)
 
 
 # ------------------------------------------------------------------ read_bag / arrays
@@ -216,7 +217,7 @@ def test_block_decode_of_odd_bytes_matches_rosbags():
         ("std_msgs/msg/Byte", b"\x00\x01\x00\x00\xf0"),
         ("std_msgs/msg/Char", b"\x00\x01\x00\x00\xf0"),
     ):
-        lay = bg._LAYOUTS.for_record(TS, msgtype, raw)
+        lay = layout._LAYOUTS.for_record(TS, msgtype, raw)
         assert lay is not None
         got = lay.decode(np.frombuffer(raw, np.uint8).reshape(1, -1))["data"][0]
         want = TS.deserialize_cdr(raw, msgtype).data
@@ -229,7 +230,7 @@ def test_layout_probe_catches_a_wrong_offset():
     lay.probe(TS)  # the real layout passes
     leaves = list(lay.leaves.values())
     k = next(i for i, lf in enumerate(leaves) if lf.path == "twist.twist.linear.y")
-    leaves[k] = bg._Leaf(leaves[k].path, leaves[k].offset + 8, leaves[k].rostype, None)
+    leaves[k] = layout._Leaf(leaves[k].path, leaves[k].offset + 8, leaves[k].rostype, None)
     broken = bg.CdrLayout(
         lay.msgtype, lay.template, leaves, lay.strings, lay.struct_index, lay.counts
     )
@@ -265,8 +266,8 @@ def test_metadata_that_disagrees_with_the_file_goes_through_rosbags(tmp_path):
     tm = meta["rosbag2_bagfile_information"]["topics_with_message_count"][0]["topic_metadata"]
     tm["offered_qos_profiles"][0]["depth"] = 3
     meta_path.write_text(yaml.safe_dump(meta, sort_keys=False))
-    with pytest.raises(bg._FastPathUnavailable):
-        bg._open_fast(tmp_path / "b")
+    with pytest.raises(mcap_index._FastPathUnavailable):
+        mcap_index._open_fast(tmp_path / "b")
     ref = reference(tmp_path / "b")
     got = bg.read_bag(tmp_path / "b")
     assert {t: len(v) for t, v in got.items()} == {t: len(v) for t, v in ref.items()}

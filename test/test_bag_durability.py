@@ -462,7 +462,8 @@ SPILL_CHILD = textwrap.dedent("""
     from lpv_sysid.io import bag as bg
     from lpv_sysid.io import messages as m
     F = m.MsgFactory.rosbags()
-    b = bg.BagWriter({path!r}, storage="sqlite3", flush_messages=10**9, flush_interval_s=1e9).open()
+    b = bg.BagWriter({path!r}, storage="sqlite3", flush_messages=10**9, flush_interval_s=1e9)
+    b.open()
     b.add_topic("/e", "sensor_msgs/msg/JointState")
     for k in range(200):
         b.write("/e", k, m.excitation_msg(F, k, np.full(4, float(k))))

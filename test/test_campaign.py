@@ -514,7 +514,7 @@ def test_campaign_node_flies_through_a_bridge_node_and_writes_one_bag_per_run(tm
     from std_srvs.srv import Trigger
 
     from lpv_sysid.io import bag as iobag
-    from lpv_sysid.io import messages as M
+    from lpv_sysid.io import messages
     from lpv_sysid.nodes import _common
     from lpv_sysid.nodes.campaign_node import CampaignNode
     from lpv_sysid.signals.store import save_npz
@@ -553,7 +553,7 @@ def test_campaign_node_flies_through_a_bridge_node_and_writes_one_bag_per_run(tm
 
         def __init__(self, context):
             super().__init__("mavlink_bridge", namespace="lpv_sysid", context=context)
-            self.f = M.MsgFactory.rclpy()
+            self.f = messages.MsgFactory.rclpy()
             self.state, self.reason, self.mode, self.armed, self.t_state = (
                 "IDLE",
                 "",
@@ -589,7 +589,7 @@ def test_campaign_node_flies_through_a_bridge_node_and_writes_one_bag_per_run(tm
             self.publish_status()
 
         def on_ref(self, msg):
-            self.cmd = M.reference_from_twist(msg)[1]
+            self.cmd = messages.reference_from_twist(msg)[1]
             self.refs += 1
 
         def on_start(self, req, resp):
@@ -610,11 +610,11 @@ def test_campaign_node_flies_through_a_bridge_node_and_writes_one_bag_per_run(tm
                 "armed": str(self.armed),
                 "envelope_home": "position at start: 0.00 0.00 0.00",
             }
-            st = M.diagnostic_status(
+            st = messages.diagnostic_status(
                 self.f, "OK", self.get_fully_qualified_name(), self.state, values
             )
             self.pub_status.publish(
-                M.diagnostic_array(self.f, self.get_clock().now().nanoseconds, [st])
+                messages.diagnostic_array(self.f, self.get_clock().now().nanoseconds, [st])
             )
 
         def tick(self):
@@ -632,10 +632,12 @@ def test_campaign_node_flies_through_a_bridge_node_and_writes_one_bag_per_run(tm
             self.pos[2] = min(self.pos[2], 0.0)
             ns = self.get_clock().now().nanoseconds
             self.pub_state.publish(
-                M.odometry_from_state(self.f, ns, self.pos, np.zeros(3), self.vel, np.zeros(3))
+                messages.odometry_from_state(
+                    self.f, ns, self.pos, np.zeros(3), self.vel, np.zeros(3)
+                )
             )
-            self.pub_rot.publish(M.rotor_speeds_msg(self.f, ns, [600.0] * 4))
-            self.pub_imu.publish(M.imu_msg(self.f, ns, [0.0, 0.0, -9.81], [0.0, 0.0, 0.0]))
+            self.pub_rot.publish(messages.rotor_speeds_msg(self.f, ns, [600.0] * 4))
+            self.pub_imu.publish(messages.imu_msg(self.f, ns, [0.0, 0.0, -9.81], [0.0, 0.0, 0.0]))
 
     from rclpy.context import Context
 

@@ -24,7 +24,8 @@ from lpv_sysid.models.quadrotor import (
     STATE_UNITS,
     Quadrotor,
 )
-from lpv_sysid.synthesis.files import load_certificate_npz, load_models
+from lpv_sysid.io.formats import load_certificate_npz
+from lpv_sysid.synthesis.uncertainty_set import load_models
 from lpv_sysid.synthesis.hinf_lmi import HinfOptions, performance_matrix, synthesize_hinf
 from lpv_sysid.synthesis.hinf_norm import hinf_norm
 from lpv_sysid.synthesis.verify import verify_files
@@ -145,7 +146,8 @@ def test_element_box_is_exactly_the_intervals_with_a_common_b_hull():
     lo1, hi1 = box.bounds(1)
     assert (lo0[0, 0], hi0[0, 0]) == pytest.approx((-1.2, -0.9), abs=1e-15)
     assert (lo1[1, 0], hi1[1, 0]) == pytest.approx((-0.1, 0.3), abs=1e-15)
-    # B hull: vertex 0's interval [0.8, 1.1] and vertex 1's nominal 1.5 -> [0.8, 1.5], at both vertices
+    # B hull: vertex 0's interval [0.8, 1.1] and vertex 1's nominal 1.5 -> [0.8, 1.5], at both
+    # vertices
     for lo, hi in ((lo0, hi0), (lo1, hi1)):
         assert (lo[0, 2], hi[0, 2]) == pytest.approx((0.8, 1.5), abs=1e-15)
     Ac, Bc = box.system(1, np.array([1.0, -1.0]))

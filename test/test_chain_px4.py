@@ -30,7 +30,8 @@ from lpv_sysid.io import messages as M
 from lpv_sysid.mavlink.link import free_udp_port
 from lpv_sysid.mavlink.sim_vehicle import SimVehicle, SimVehicleConfig
 from lpv_sysid.models import rate_plant as rp
-from lpv_sysid.synthesis.files import save_yaml
+from lpv_sysid.io.yaml_file import save_yaml
+from support.lockstep import LockStep
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / "config"
@@ -91,28 +92,26 @@ def design(tmp_path_factory):
     return d
 
 
-class LockStep:
-    def __init__(self, veh: SimVehicle, dt: float = 0.004) -> None:
-        self.veh, self.dt, self.t = veh, dt, 0.0
-        self.steps = 0
-        self.received = []
+class RateLog:
+    """LockStep hook: every new rates setpoint the vehicle received, (t, thrust, rates)."""
 
-    def clock(self) -> float:
-        return self.t
+    def __init__(self) -> None:
+        self.received: list = []
 
-    def sleep(self, d: float) -> None:
-        for _ in range(max(1, int(round(d / self.dt)))):
-            self.t += self.dt
-            self.steps += 1
-            assert self.steps < 200000, "lock-step flight did not end"
-            self.veh.step(self.t)
-            sp = self.veh.setpoint
-            if (
-                sp is not None
-                and getattr(sp, "kind", None) == "rates"
-                and (not self.received or self.received[-1][0] != sp.t)
-            ):
-                self.received.append((sp.t, float(sp.thrust), np.array(sp.rates)))
+    def __call__(self, ls: LockStep) -> None:
+        sp = ls.veh.setpoint
+        if (
+            sp is not None
+            and getattr(sp, "kind", None) == "rates"
+            and (not self.received or self.received[-1][0] != sp.t)
+        ):
+            self.received.append((sp.t, float(sp.thrust), np.array(sp.rates)))
+
+
+def _lockstep(veh: SimVehicle) -> tuple[LockStep, RateLog]:
+    ls = LockStep(veh, max_steps=200_000)
+    ls.hook = log = RateLog()
+    return ls, log
 
 
 def _vehicle(tmp: Path, airborne: bool):
@@ -134,7 +133,7 @@ def _vehicle(tmp: Path, airborne: bool):
 def test_phase2_takes_the_airborne_vehicle_flies_the_law_and_lands(tmp_path, design):
     veh, bcfg = _vehicle(tmp_path, airborne=True)
     try:
-        ls = LockStep(veh)
+        ls, rates = _lockstep(veh)
         lines: list[str] = []
         s = fly_phase2(
             design / "gains.yaml",
@@ -160,7 +159,7 @@ def test_phase2_takes_the_airborne_vehicle_flies_the_law_and_lands(tmp_path, des
     log = np.load(tmp_path / "p2" / "phase2_log.npz")
     # every command PX4 received is one the law computed (transport: no inversion, only clipping)
     sent = log["sent"]
-    got = np.array([[th, *r] for _, th, r in ls.received])
+    got = np.array([[th, *r] for _, th, r in rates.received])
     assert len(got) > 100
     for row in got[::25]:
         assert np.min(np.abs(sent - row).max(axis=1)) < 1e-6  # float32 on the wire
@@ -184,7 +183,7 @@ def test_phase2_takes_the_airborne_vehicle_flies_the_law_and_lands(tmp_path, des
 def test_phase2_refuses_a_vehicle_on_the_ground_before_sending_anything(tmp_path, design):
     veh, bcfg = _vehicle(tmp_path, airborne=False)
     try:
-        ls = LockStep(veh)
+        ls, rates = _lockstep(veh)
         with pytest.raises(SafetyError, match="not armed"):
             fly_phase2(
                 design / "gains.yaml",

@@ -88,7 +88,8 @@ def _lsim_z(model, sig, kappa):
 
 @pytest.mark.parametrize("method", ["RK45", "rk4"])
 def test_single_vertex_matches_lsim(method):
-    """Constant v_d: Eq. (33) is LTI, dx' = (A+BK) dx + B R kappa u_e (FOH input, exact in lsim)."""
+    """Constant v_d: Eq. (33) is LTI, dx' = (A+BK) dx + B R kappa u_e (FOH input, exact in
+    lsim)."""
     model = _model(scheduled=False)
     sig = _signals(scheduled=False)
     res = simulate_eq33(
@@ -133,7 +134,8 @@ def test_x0_dot_is_chain_rule():
 
 
 def test_hinf_grid_first_order_oracle():
-    """G(s) = b / (s + a): ||G||_inf = b / a at w = 0; resonant 2nd order: peak 1/(2 zeta sqrt(1-zeta^2))."""
+    """G(s) = b / (s + a): ||G||_inf = b / a at w = 0; resonant 2nd order:
+    peak 1/(2 zeta sqrt(1-zeta^2))."""
     nrm, w = hinf_norm_grid(np.array([[-2.0]]), np.array([[3.0]]), np.array([[1.0]]))
     assert nrm == pytest.approx(1.5, rel=1e-9) and w == 0.0
     wn, zeta = 3.0, 0.1

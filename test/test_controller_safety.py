@@ -15,7 +15,7 @@ from lpv_sysid.cli.main import main
 from lpv_sysid.control.lpv_controller import LpvControllerConfig, ReferenceLimiter
 from lpv_sysid.control.safety import check_closed_loop
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.io import messages as M
+from lpv_sysid.io import messages
 from lpv_sysid.io.formats import GainSchedule, load_certified_systems
 from lpv_sysid.models.quadrotor import Quadrotor, mixer
 from lpv_sysid.nodes.controller_runtime import ControllerRuntime, ControllerSettings
@@ -61,7 +61,7 @@ def gains5ff(tmp_path_factory):
 
 def runtime(gains, **kw):
     return ControllerRuntime(
-        ControllerSettings(gains_file=str(gains), **kw), M.MsgFactory.rosbags()
+        ControllerSettings(gains_file=str(gains), **kw), messages.MsgFactory.rosbags()
     )
 
 
@@ -293,10 +293,11 @@ def test_gains_without_design_envelope_are_refused(tmp_path):
 
 def test_synthesize_writes_the_hash_and_the_certified_systems(tmp_path, capsys):
     """The one writer (lpv-sysid synthesize): gains_sha256 equals the hash of the law it
-    wrote, and the sidecar's systems are the polytope it certified (files.load_models)."""
+    wrote, and the sidecar's systems are the polytope it certified
+    (uncertainty_set.load_models)."""
     from test_verify import _config, _models
 
-    from lpv_sysid.synthesis.files import load_models
+    from lpv_sysid.synthesis.uncertainty_set import load_models
 
     models = _models(tmp_path / "vertex_models.yaml")
     cfg = _config(tmp_path / "synthesis.yaml", region=False)

@@ -94,10 +94,10 @@ def test_quadrotor_F_matches_the_nonlinear_quasi_steady_tilt(v_body):
         assert y[1] == pytest.approx(-np.arctan(a[0] / G), rel=0.02)
         assert y[0] == pytest.approx(np.arctan(a[1] / G), rel=0.02)
     # the nonlinear model at (trim + dx_ff, u0 + du_ff) accelerates by ~a, omega' ~ 0 (Eq. 3, 6)
-    x12 = trim.x0.copy()
-    x12[[0, 1, 8, 9, 10, 11]] += y[:6]
+    controller_state = trim.x0.copy()
+    controller_state[[0, 1, 8, 9, 10, 11]] += y[:6]
     u = trim.u0 + y[6:]
-    x16 = qr.full_state(x12)
+    x16 = qr.full_state(controller_state)
     xd = quad.derivatives(x16, u)
     np.testing.assert_allclose(xd[6:9], a, atol=0.02)  # body acceleration, second-order error
     np.testing.assert_allclose(xd[9:12], 0.0, atol=0.05)  # angular acceleration
@@ -114,9 +114,8 @@ def _toy_schedule(jerk=False):
     Fj = np.array(
         [[[0.01], [0.02], [0.03], [0.04]], [[0.03], [0.04], [0.05], [0.06]]]
     )  # th, d, u, q
-    spec = {"free_states": ["th", "d"], "accelerated_states": ["v"], "held_states": ["q", "d"]}
-    if jerk:
-        spec.update(kinematic_states=["th"], rate_states=["q"])
+    jerk_states = {"kinematic_states": ("th",), "rate_states": ("q",)} if jerk else {}
+    spec = fm.FeedforwardSpec(("th", "d"), ("v",), ("q", "d"), **jerk_states)
     return SimpleNamespace(
         K=K,
         x0=x0,
@@ -140,7 +139,8 @@ def test_runtime_law_with_feedforward_equals_the_formula():
     # u0 = 0.55, F = (-0.25, 0, 0.35); a = 2 -> dx_ff = (-0.5, 0, 0, 0), du_ff = 0.7
     x = np.array([0.1, 0.4, 0.2, 2.0])
     u, info = ctl.step(0.0, x, np.array([0.5]), np.array([0.1]), a=np.array([2.0]))
-    e = x - np.array([0.15 - 0.5, 0.5, 0.0, 2.5])  # (0.45, -0.1, 0.2, -0.5)
+    e = x - np.array([0.15 - 0.5, 0.5, 0.0, 2.5])
+    assert e == pytest.approx([0.45, -0.1, 0.2, -0.5])  # the numbers written out below
     expected = 0.55 + 0.7 + (0.25 * 0.45 - 0.35 * 0.1 + 0.45 * 0.2 - 0.55 * 0.5) + 2.0 * 0.1
     assert u[0] == pytest.approx(expected, rel=1e-13)
     assert info["feedforward"] and info["a_ff"][0] == 2.0
@@ -160,7 +160,8 @@ def test_runtime_law_jerk_term_equals_the_formula():
     u, info = ctl.step(
         0.0, x, np.array([0.5]), np.array([0.0]), a=np.array([2.0]), j=np.array([-1.0])
     )
-    # F_jerk(0.5) = (0.025, 0.035, 0.045, 0.055) * j = -1 -> th -0.025, d -0.035, u -0.045, q -0.055
+    # F_jerk(0.5) = (0.025, 0.035, 0.045, 0.055) * j = -1 -> th -0.025, d -0.035, u -0.045, q
+    # -0.055
     x_ref = np.array([0.15 - 0.5 - 0.025, 0.5, -0.055, 2.5 - 0.035])
     K = np.array([0.25, 0.35, 0.45, 0.55])
     assert u[0] == pytest.approx(0.55 + 0.7 - 0.045 + K @ (x - x_ref), rel=1e-13)
@@ -348,9 +349,11 @@ def test_verify_recomputes_and_catches_a_tampered_F(quad_ff):
     assert {(r.check, r.where.split()[1]) for r in rep.rows if not r.ok} == {("ff jerk", "2")}
 
 
-# ------------------------------------------------------------------ linear model without x0' (lpv_closed_loop)
+# ------------------------------------------------------------------ linear model without x0'
+# (lpv_closed_loop)
 def test_feedforward_makes_a_ramp_an_exact_trajectory_of_the_linear_model():
-    """Hover model at every vertex, x0(v_d) = v_d in the velocity entries: under the feedforward law
+    """Hover model at every vertex, x0(v_d) = v_d in the velocity entries: under the feedforward
+    law
     and x' = A (x - x0) + B (u - u0) (no x0' term) the ramp v_d = c t is tracked exactly (z = 0);
     without the feedforward the same loop lags."""
     import scipy.linalg

@@ -31,6 +31,7 @@ from lpv_sysid.mavlink.link import free_udp_port
 from lpv_sysid.mavlink.sim_vehicle import SimVehicle, SimVehicleConfig
 from lpv_sysid.signals.excitation import phase1_signals
 from lpv_sysid.signals.store import save_npz
+from support.lockstep import LockStep
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / "config"
@@ -50,28 +51,6 @@ TOPICS = {
 
 def topics(path) -> dict[str, str]:
     return {k: v.msgtype for k, v in iobag.topic_info(str(path)).items()}
-
-
-class LockStep:
-    """Simulated clock: the runner's ``sleep`` advances the vehicle (``hook`` after each step)."""
-
-    def __init__(self, veh: SimVehicle, dt: float = 0.004) -> None:
-        self.veh, self.dt, self.t = veh, dt, 0.0
-        self.hook = None
-        self.max_tilt = 0.0
-        self.steps = 0
-
-    def clock(self) -> float:
-        return self.t
-
-    def sleep(self, d: float) -> None:
-        for _ in range(max(1, int(round(d / self.dt)))):
-            self.t += self.dt
-            self.steps += 1
-            assert self.steps < 400000, "lock-step flight did not end"
-            self.veh.step(self.t)
-            if self.hook is not None:
-                self.hook(self)
 
 
 def setup(
@@ -238,9 +217,11 @@ def test_campaign_takes_off_flies_every_vertex_and_hover_lands_and_identify_acce
 
 
 def test_level_vertex_at_a_tilted_vertex_holds_altitude(tmp_path, vehicles):
+    max_tilt = [0.0]
+
     def tilt(ls):
         x = ls.veh.x
-        ls.max_tilt = max(ls.max_tilt, math.degrees(math.acos(math.cos(x[3]) * math.cos(x[4]))))
+        max_tilt[0] = max(max_tilt[0], math.degrees(math.acos(math.cos(x[3]) * math.cos(x[4]))))
 
     veh, cfg, sig, ls = setup(
         tmp_path,
@@ -259,10 +240,10 @@ def test_level_vertex_at_a_tilted_vertex_holds_altitude(tmp_path, vehicles):
     vehicles.append(veh)
     heights = []
 
-    def hook(l):
+    def hook(step):
         if res_phase() in ("trim", "excitation"):
-            tilt(l)
-            heights.append(-float(l.veh.x[2]))
+            tilt(step)
+            heights.append(-float(step.veh.x[2]))
 
     state = {}
     res_phase = lambda: state["c"].phase if "c" in state else ""  # noqa: E731
@@ -292,7 +273,7 @@ def test_level_vertex_at_a_tilted_vertex_holds_altitude(tmp_path, vehicles):
     assert res.status == 0, res.reason
     r = res.summary["runs"][0]
     assert r["vertex"] == [3.0, 3.0, 0.0] and r["kind"] == "level"
-    assert ls.max_tilt > 3.0  # the vertex is flown tilted
+    assert max_tilt[0] > 3.0  # the vertex is flown tilted
     # issue 10: a w = 0 vertex sank 0.7-1.1 m/s (7-12 m over these 11 s); here it stays level
     assert max(heights) - min(heights) < 0.8, (min(heights), max(heights))
     assert abs(heights[-1] - heights[0]) < 0.5
@@ -339,7 +320,7 @@ def test_interrupt_hands_back_and_leaves_readable_bags(tmp_path, vehicles):
 
     F.FlightRunner.__init__ = init
 
-    def hook(l):  # Ctrl-C in the middle of the first excitation
+    def hook(step):  # Ctrl-C in the middle of the first excitation
         r = runners[0] if runners else None
         if r is not None and r.campaign.phase == "excitation" and not r.interrupts:
             r.interrupt(signal.SIGINT)

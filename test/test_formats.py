@@ -465,8 +465,8 @@ def test_gains_sha_mismatch(tmp_path, pair):
     g["certificate"]["models_sha256"] = "f" * 64
     with pytest.raises(
         ConfigError,
-        match=r"^gains.yaml: certificate.models_sha256: f{64} does not match vertex_models.yaml \(sha256 "
-        + sha,
+        match=r"^gains.yaml: certificate.models_sha256: f{64} does not match "
+        r"vertex_models.yaml \(sha256 " + sha,
     ):
         fm.GainSchedule.load(_write(tmp_path, g), models_path=mp)
 

@@ -11,7 +11,7 @@ import yaml
 
 from lpv_sysid.cli.main import main
 from lpv_sysid.ident import synthetic as syn
-from lpv_sysid.io import messages as M
+from lpv_sysid.io import messages
 from lpv_sysid.io.bag import BagWriter
 from lpv_sysid.io.formats import VertexModels
 from lpv_sysid.models.lpv import box_vertices
@@ -21,9 +21,9 @@ RATE = 50.0
 NOISE = np.array([2e-3, 2e-3, 0.02, 0.02, 0.02, 5e-3, 5e-3, 5e-3, 2.0, 0.02, 0.02, 2.0])
 
 
-def write_bag(path, t, x12, u, v_d, exc, arm):
+def write_bag(path, t, states, u, v_d, exc, arm):
     """Topics state, rotor_speeds, actuator_command, velocity_reference, excitation."""
-    f = M.MsgFactory.rosbags()
+    f = messages.MsgFactory.rosbags()
     mix_inv = np.linalg.inv(mixer(arm))
     with BagWriter(str(path)) as w:
         for name in (
@@ -33,19 +33,23 @@ def write_bag(path, t, x12, u, v_d, exc, arm):
             "velocity_reference",
             "excitation",
         ):
-            w.add_topic(f"/lpv_sysid/{name}", M.TYPES[name])
+            w.add_topic(f"/lpv_sysid/{name}", messages.TYPES[name])
         for k, tk in enumerate(t):
             ns = int(round(tk * 1e9))
-            x = x12[k]
+            x = states[k]
             w.write(
                 "/lpv_sysid/state",
                 ns,
-                M.odometry_from_state(f, ns, [0, 0, 0], [x[0], x[1], 0.0], x[2:5], x[5:8]),
+                messages.odometry_from_state(f, ns, [0, 0, 0], [x[0], x[1], 0.0], x[2:5], x[5:8]),
             )
-            w.write("/lpv_sysid/rotor_speeds", ns, M.rotor_speeds_msg(f, ns, mix_inv @ x[8:12]))
-            w.write("/lpv_sysid/actuator_command", ns, M.actuator_command_msg(f, ns, u[k]))
-            w.write("/lpv_sysid/velocity_reference", ns, M.twist_reference_msg(f, ns, v_d, 0.0))
-            w.write("/lpv_sysid/excitation", ns, M.excitation_msg(f, ns, exc[k]))
+            w.write(
+                "/lpv_sysid/rotor_speeds", ns, messages.rotor_speeds_msg(f, ns, mix_inv @ x[8:12])
+            )
+            w.write("/lpv_sysid/actuator_command", ns, messages.actuator_command_msg(f, ns, u[k]))
+            w.write(
+                "/lpv_sysid/velocity_reference", ns, messages.twist_reference_msg(f, ns, v_d, 0.0)
+            )
+            w.write("/lpv_sysid/excitation", ns, messages.excitation_msg(f, ns, exc[k]))
     return path
 
 
@@ -162,11 +166,11 @@ def test_identify_nonlinear_cli(tmp_path, capsys):
     amp = np.array([0.05, 0.003, 0.003, 0.05])
     e = syn.multisine(t, 4, (0.5, 4.0), 1.0, rng) * amp
     X, U, _ = syn.nonlinear_flight(q, t, v_ref, e)
-    x12 = np.concatenate(
+    states = np.concatenate(
         [X[:, 3:5], X[:, 6:12], X[:, 12:16] @ mixer(q.params.arm_length).T], axis=1
     )
-    x12[:, 2:8] += 0.01 * rng.normal(size=(t.size, 6))
-    write_bag(tmp_path / "phase2", t, x12, U, [0, 0, 0], e / amp, q.params.arm_length)
+    states[:, 2:8] += 0.01 * rng.normal(size=(t.size, 6))
+    write_bag(tmp_path / "phase2", t, states, U, [0, 0, 0], e / amp, q.params.arm_length)
     out = tmp_path / "nl.yaml"
     assert (
         main(

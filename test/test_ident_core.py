@@ -224,7 +224,7 @@ def test_axis_metrics_and_plot(tmp_path):
     m = mt.axis_metrics(xm, xf)
     assert set(m["tic"]) == set(mt.AXES)
     assert m["tic"]["pdot"] == pytest.approx(mt.tic(xm[:, 5], xf[:, 5]))
-    p = mt.plot_validation(np.arange(200) * 0.01, xm, xf, str(tmp_path / "fig4.png"))
+    mt.plot_validation(np.arange(200) * 0.01, xm, xf, str(tmp_path / "fig4.png"))
     assert (tmp_path / "fig4.png").stat().st_size > 1000
 
 
@@ -293,12 +293,12 @@ def test_influence_matches_finite_difference(lti):
     def G(Am, Bm, wq):
         return C @ np.linalg.solve(1j * wq * np.eye(5) - Am, Bm)
 
-    for l, iv in enumerate(ivs):
+    for k, iv in enumerate(ivs):
         h = 1e-7
         Ap, Bp = A.copy(), B.copy()
         (Ap if iv.matrix == "A" else Bp)[iv.row, iv.col] += h
         sens = max(np.linalg.norm((G(Ap, Bp, wq) - G(A, B, wq)) / h) for wq in w)
-        assert infl[l] == pytest.approx(0.5 * (iv.upper - iv.lower) * sens, rel=1e-4)
+        assert infl[k] == pytest.approx(0.5 * (iv.upper - iv.lower) * sens, rel=1e-4)
 
 
 def test_sidak_joint_coverage():

@@ -223,3 +223,15 @@ def test_launch_files_declare_and_wire(fake_launch, fname, order, expected):
     if fname == "sim.launch.py":
         assert nodes["lpv_controller_node"].condition is not None
         assert all(n.condition is None for e, n in nodes.items() if e != "lpv_controller_node")
+
+
+def test_campaign_launch_reads_the_share_copy_of_the_configs(fake_launch):
+    """campaign.launch.py's campaign file and node parameter files come from the one ROS share
+    lookup (default_configs.share_config_dir), the same directory as every launch file's
+    ``config_dir``."""
+    order, args, nodes = _describe("campaign.launch.py")
+    assert order[0] == "config_dir" and args["config_dir"][0] == CONFIG_DIR
+    assert args["campaign_file"][0] == os.path.join(CONFIG_DIR, "campaign.yaml")
+    for executable in ("mavlink_bridge_node", "data_logger_node"):
+        assert nodes[executable].parameters[0].args[0][0] == LaunchConfiguration("config_dir")
+    assert os.path.isfile(os.path.join(ROOT, "lpv_sysid", "config", "campaign.yaml"))

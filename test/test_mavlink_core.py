@@ -438,7 +438,6 @@ def test_machine_stale_input_hands_back_and_stops_stream():
         if isinstance(a, StatusEvent) and a.state == "HANDBACK" and a.previous != "HANDBACK"
     ]
     assert len(ev) == 1 and cfg.input_timeout < ev[0].t - last <= cfg.input_timeout + 0.01 + 1e-9
-    t_hb = ev[0].t
     idx = acts.index(ev[0])
     # hand-back in progress: only the neutral setpoint is streamed, never the last command
     assert {a.setpoint for a in _kinds(acts[idx:], SendSetpoint)} <= {"zero"}

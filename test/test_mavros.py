@@ -14,7 +14,7 @@ from rclpy._standin import call_trigger as call, spin_nodes as spin
 from scipy.spatial.transform import Rotation
 
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.io import messages as M
+from lpv_sysid.io import messages
 from lpv_sysid.mavlink.mavros import (
     MODE_CONTROL,
     MavrosConfig,
@@ -51,7 +51,7 @@ def enu_flu_quat_xyzw(euler):
 
 
 def state(t, euler, stamp_ns=None):
-    return M.StateSample(
+    return messages.StateSample(
         t=t,
         pos_ned=np.zeros(3),
         euler=np.asarray(euler, float),
@@ -88,12 +88,12 @@ def test_body_reference_to_local_enu_against_scipy():
 def test_odometry_message_to_enu_setpoint_round_trip():
     """MAVROS odom (map/base_link, ENU/FLU, built with scipy) -> io/messages -> core ->
     cmd_vel message -> CDR -> fields equal the oracle."""
-    f = M.MsgFactory.rosbags()
+    f = messages.MsgFactory.rosbags()
     e = np.array([0.15, -0.25, 2.1])
     x, y, z, w = enu_flu_quat_xyzw(e)
     odom = f(
         "nav_msgs/msg/Odometry",
-        header=M.header_msg(f, 1_000_000_000, "map"),
+        header=messages.header_msg(f, 1_000_000_000, "map"),
         child_frame_id="base_link",
         pose=f(
             "geometry_msgs/msg/PoseWithCovariance",
@@ -115,7 +115,7 @@ def test_odometry_message_to_enu_setpoint_round_trip():
         ),
     )
     core = MavrosCore(MavrosConfig())
-    s = core.on_odometry(1.0, M.state_from_odometry(odom, frame_id="map"))
+    s = core.on_odometry(1.0, messages.state_from_odometry(odom, frame_id="map"))
     np.testing.assert_allclose(s.pos_ned, [2.0, 1.0, -3.0])
     core.start(1.0)
     v_frd, r = np.array([1.0, -0.5, 0.2]), 0.3
@@ -194,15 +194,19 @@ def test_stale_attitude_abort_and_auto_start():
 def test_prestream_timeout_and_pilot_leaving_offboard():
     core = MavrosCore(MavrosConfig(prestream_timeout=2.0))
     core.start(0.0)
-    st = [M.StatusSample(0, "mavros: Heartbeat", "Normal", {"Mode": "POSCTL"})]
+    st = [messages.StatusSample(0, "mavros: Heartbeat", "Normal", {"Mode": "POSCTL"})]
     assert vehicle_mode_from_statuses(st) == "POSCTL"
     core.on_diagnostics(0.5, st)  # not yet in OFFBOARD: keep streaming
     assert core.step(1.0).setpoints and core.state == MavrosState.PRESTREAM
     out = core.step(2.5)
     assert core.state == MavrosState.FAILED and "prestream_timeout" in out.events[0].reason
     core.start(3.0)
-    core.on_diagnostics(3.1, [M.StatusSample(0, "mavros: Heartbeat", "", {"Mode": "OFFBOARD"})])
-    core.on_diagnostics(3.2, [M.StatusSample(0, "mavros: Heartbeat", "", {"Mode": "AUTO.LOITER"})])
+    core.on_diagnostics(
+        3.1, [messages.StatusSample(0, "mavros: Heartbeat", "", {"Mode": "OFFBOARD"})]
+    )
+    core.on_diagnostics(
+        3.2, [messages.StatusSample(0, "mavros: Heartbeat", "", {"Mode": "AUTO.LOITER"})]
+    )
     out = core.step(3.3)
     assert core.state == MavrosState.FAILED and out.setpoints == []
     assert "left OFFBOARD (now AUTO.LOITER)" in out.events[0].reason
@@ -310,7 +314,7 @@ def test_node_mavros_reference_to_enu_setpoint_and_stale_stop(fresh):
     rclpy.init(args=ros_args(("transport", "mavros")))
     node = MavlinkBridgeNode(namespace=NS)
     mavros = rclpy.create_node("mavros")  # fake MAVROS + excitation source
-    f = M.MsgFactory.rclpy()
+    f = messages.MsgFactory.rclpy()
     e = np.array([-0.1, 0.2, 0.7])  # NED/FRD attitude of the vehicle
     ros_q = enu_flu_quat_xyzw(e)
     pub_odom = mavros.create_publisher(
@@ -320,11 +324,11 @@ def test_node_mavros_reference_to_enu_setpoint_and_stale_stop(fresh):
     now_ns = lambda: mavros.get_clock().now().nanoseconds  # noqa: E731
 
     def odom_tick():
-        m = M.odometry_from_state(
+        m = messages.odometry_from_state(
             f, now_ns(), [1.0, 2.0, -3.0], e, [0.5, 0, 0], [0, 0, 0.1], frame_id="map"
         )
         pub_odom.publish(m)
-        pub_imu.publish(M.imu_msg(f, now_ns(), [0.0, 0.0, -9.81], [0.0, 0.0, 0.1], e))
+        pub_imu.publish(messages.imu_msg(f, now_ns(), [0.0, 0.0, -9.81], [0.0, 0.0, 0.1], e))
 
     mavros.create_timer(0.02, odom_tick)
     cmd = []
@@ -337,7 +341,7 @@ def test_node_mavros_reference_to_enu_setpoint_and_stale_stop(fresh):
     pub_ref = mavros.create_publisher(TwistStamped, "/lpv_sysid/velocity_reference", 10)
     v_frd, r = np.array([1.0, 0.5, -0.2]), 0.1
     ref_timer = mavros.create_timer(
-        0.02, lambda: pub_ref.publish(M.twist_reference_msg(f, now_ns(), v_frd, r))
+        0.02, lambda: pub_ref.publish(messages.twist_reference_msg(f, now_ns(), v_frd, r))
     )
     try:
         spin([node, mavros], 0.5)
@@ -363,11 +367,13 @@ def test_node_mavros_reference_to_enu_setpoint_and_stale_stop(fresh):
     finally:
         node.destroy_node()
     timeout_ns = node.core.config.input_timeout * 1e9
-    late = [m for m in cmd if M.stamp_ns_of(m) > t_stop + timeout_ns + 0.01e9 + 1]
+    late = [m for m in cmd if messages.stamp_ns_of(m) > t_stop + timeout_ns + 0.01e9 + 1]
     assert late == [] and node.core.state == MavrosState.FAILED
-    _, st = M.status_from_diagnostic_array(status[-1])
+    _, st = messages.status_from_diagnostic_array(status[-1])
     assert st[0].values["transport"] == "mavros" and st[0].values["state"] == "FAILED"
-    assert any("stale input" in M.status_from_diagnostic_array(s)[1][0].message for s in status)
+    assert any(
+        "stale input" in messages.status_from_diagnostic_array(s)[1][0].message for s in status
+    )
 
 
 def test_node_mavros_rejects_wrong_frame_and_republishes_imu(fresh):
@@ -381,7 +387,7 @@ def test_node_mavros_rejects_wrong_frame_and_republishes_imu(fresh):
     rclpy.init(args=ros_args(("transport", "mavros")))
     node = MavlinkBridgeNode(namespace=NS)
     mavros = rclpy.create_node("mavros")
-    f = M.MsgFactory.rclpy()
+    f = messages.MsgFactory.rclpy()
     e = [0.05, -0.1, 1.2]
     pub_odom = mavros.create_publisher(
         Odometry, "/mavros/local_position/odom", qos_profile_sensor_data
@@ -394,15 +400,15 @@ def test_node_mavros_rejects_wrong_frame_and_republishes_imu(fresh):
     mavros.create_subscription(Imu, "/lpv_sysid/imu", imus.append, qos_profile_sensor_data)
     mavros.create_subscription(DiagnosticArray, "/lpv_sysid/status", status.append, 100)
     pub_odom.publish(
-        M.odometry_from_state(f, 10**9, [0, 0, 0], e, [0, 0, 0], [0, 0, 0], frame_id="odom")
+        messages.odometry_from_state(f, 10**9, [0, 0, 0], e, [0, 0, 0], [0, 0, 0], frame_id="odom")
     )  # MAVROS configured otherwise
-    pub_imu.publish(M.imu_msg(f, 10**9, [0.3, -0.2, -9.7], [0.01, 0.02, -0.03], e))
+    pub_imu.publish(messages.imu_msg(f, 10**9, [0.3, -0.2, -9.7], [0.01, 0.02, -0.03], e))
     try:
         spin([node, mavros], 0.1)
     finally:
         node.destroy_node()
     assert states == [] and node.core.rejected_inputs == 1
-    msgs = [M.status_from_diagnostic_array(s)[1][0] for s in status]
+    msgs = [messages.status_from_diagnostic_array(s)[1][0] for s in status]
     assert any(
         s.level == 2
         and "/mavros/local_position/odom rejected" in s.message
@@ -410,7 +416,7 @@ def test_node_mavros_rejects_wrong_frame_and_republishes_imu(fresh):
         for s in msgs
     )
     (imu,) = imus
-    back = M.imu_from_msg(imu)
+    back = messages.imu_from_msg(imu)
     np.testing.assert_allclose(back.specific_force, [0.3, -0.2, -9.7], atol=1e-12)
     np.testing.assert_allclose(back.omega, [0.01, 0.02, -0.03], atol=1e-12)
     np.testing.assert_allclose(back.euler, e, atol=1e-12)

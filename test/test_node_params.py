@@ -21,7 +21,7 @@ import pytest
 import yaml
 
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.nodes import _common as C
+from lpv_sysid.nodes import _common as common
 from lpv_sysid.nodes import data_logger_node, mavlink_bridge_node, sim_vehicle_node
 from lpv_sysid.nodes import parameters as P
 from lpv_sysid.nodes.controller_runtime import ControllerSettings
@@ -252,8 +252,8 @@ def test_every_parameter_of_a_running_node_has_a_value(
         for k, v in vars(mod).items()
         if k.endswith("Node")
         and isinstance(v, type)
-        and issubclass(v, C.ShellNode)
-        and v is not C.ShellNode
+        and issubclass(v, common.ShellNode)
+        and v is not common.ShellNode
     )
     args = ["n", "--ros-args", "--params-file", os.path.join(CONFIG, yaml_file)]
     for k, v in node_inputs[node].items():
@@ -273,11 +273,13 @@ def test_every_parameter_of_a_running_node_has_a_value(
 
 @pytest.mark.parametrize("yaml_file, node, declared, cls", NODES, ids=IDS)
 def test_rclpy_declarations_are_generated_from_the_settings(yaml_file, node, declared, cls):
-    table = {name: (default, d) for name, default, d in C.spec_table(declared)}
+    table = {name: (default, d) for name, default, d in common.spec_table(declared)}
     assert list(table) == list(declared)
     for name, (default, spec) in declared.items():
         got_default, d = table[name]
-        assert d.type == C.Parameter.Type[spec.kind].value and d.description == spec.description
+        assert (
+            d.type == common.Parameter.Type[spec.kind].value and d.description == spec.description
+        )
         if spec.kind == P.DOUBLE and spec.lo is not None:
             assert (d.floating_point_range[0].from_value, d.floating_point_range[0].to_value) == (
                 spec.lo,
@@ -339,7 +341,7 @@ def test_the_node_tables_are_the_generated_ones():
 
 
 def test_array_constraints_are_described_and_enforced():
-    rl = dict((n, d) for n, _, d in C.settings_table(ControllerSettings))["rate_limit"]
+    rl = dict((n, d) for n, _, d in common.settings_table(ControllerSettings))["rate_limit"]
     assert rl.additional_constraints == "each entry in (0, 1000]; length 0 or 4"
     with pytest.raises(ConfigError, match=r"parameter 'vertex_frd' needs 3 entries"):
         ExcitationSettings(signals_file="s.npz", vertex_frd=(1.0, 2.0))
@@ -394,8 +396,8 @@ def test_launch_files_leave_the_bridge_its_whole_hand_back_chain():
     # HOLD then LAND, each: 4 DO_SET_MODE attempts of 0.5 s + 2 s for the HEARTBEAT; + 1 s
     assert mavlink_bridge_node.handback_bound_s(off) == 2 * (4 * 0.5 + 2.0) + 1.0
     assert (
-        mavlink_bridge_node.handback_bound_s(off) + C.TEARDOWN_MARGIN_S
-        <= C.LAUNCH_SIGTERM_TIMEOUT_S
+        mavlink_bridge_node.handback_bound_s(off) + common.TEARDOWN_MARGIN_S
+        <= common.LAUNCH_SIGTERM_TIMEOUT_S
     )
     for fname in sorted(os.listdir(os.path.join(ROOT, "launch"))):
         tree = ast.parse(open(os.path.join(ROOT, "launch", fname)).read())

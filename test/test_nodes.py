@@ -15,7 +15,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from lpv_sysid.io import messages as M
+from lpv_sysid.io import messages
 from lpv_sysid.io.bag import read_bag
 from lpv_sysid.signals.excitation import ExcitationCore
 from lpv_sysid.signals.store import save_npz
@@ -121,13 +121,13 @@ def test_excitation_phase1_plays_core_in_flu(signals1):
     oracle = ExcitationCore.phase1(
         t, u, names, start_time=t_start, vertex_velocity=[2.0, 1.0, -0.5], ramp=1.0
     )
-    ts = np.array([M.stamp_ns_of(m) * 1e-9 for m in refs])
+    ts = np.array([messages.stamp_ns_of(m) * 1e-9 for m in refs])
     v_exp, r_exp, _ = oracle.evaluate(ts)
     got = np.array([[m.twist.linear.x, m.twist.linear.y, m.twist.linear.z] for m in refs])
     np.testing.assert_allclose(got, v_exp * [1, -1, -1], atol=1e-12)
     np.testing.assert_allclose([m.twist.angular.z for m in refs], -r_exp, atol=1e-12)
     assert np.ptp(got[:, 1]) > 0.5  # the multisine is really there
-    ns = np.array([M.stamp_ns_of(m) for m in refs])
+    ns = np.array([messages.stamp_ns_of(m) for m in refs])
     assert np.all(np.diff(ns) == 10_000_000)  # 100 Hz, no accumulated drift
 
 
@@ -154,7 +154,7 @@ def test_excitation_abort_fades_to_zero(signals1):
     spin([node, probe], 1.0)
     last = refs[-1].twist.linear
     assert (last.x, last.y, last.z) == (0.0, 0.0, 0.0)
-    _, st = M.status_from_diagnostic_array(status[-1])
+    _, st = messages.status_from_diagnostic_array(status[-1])
     assert st[0].level == 1 and st[0].values["phase"] == "aborted"
     assert not call(probe, [node], "/lpv_sysid/excitation/start").success
 
@@ -194,18 +194,20 @@ def test_sim_vehicle_baseline_tracks_reference():
     states = collect(probe, Odometry, "/lpv_sysid/state", qos_profile_sensor_data)
     rotors = collect(probe, JointState, "/lpv_sysid/rotor_speeds", qos_profile_sensor_data)
     pub = probe.create_publisher(TwistStamped, "/lpv_sysid/velocity_reference", 10)
-    f = M.MsgFactory.rclpy()
+    f = messages.MsgFactory.rclpy()
     probe.create_timer(
         0.02,
         lambda: pub.publish(
-            M.twist_reference_msg(f, probe.get_clock().now().nanoseconds, [1.0, 0.0, 0.0], 0.0)
+            messages.twist_reference_msg(
+                f, probe.get_clock().now().nanoseconds, [1.0, 0.0, 0.0], 0.0
+            )
         ),
     )
     spin([node, probe], 4.0)
     # 250 Hz state and 100 Hz rotor speeds over 4 s (probe's KEEP_LAST depth 5 never overflows
     # because the executor runs each callback as soon as its message is queued)
     assert len(states) == 1000 and len(rotors) == 400
-    s = M.state_from_odometry(states[-1])
+    s = messages.state_from_odometry(states[-1])
     assert abs(s.v_body[0] - 1.0) < 0.2 and abs(node.vehicle.x[6] - 1.0) < 0.1
     assert np.all(np.diff([m.header.stamp.nanosec for m in states[:10]]) == 4_000_000)
 
@@ -340,12 +342,14 @@ def test_bridge_publishes_telemetry_of_mavlink_vehicle():
         status = collect(probe, DiagnosticArray, "/lpv_sysid/status")
         spin([node, probe], 2.0)
         # phase-1 path: start offboard, stream velocity references (FLU forward 1 m/s)
-        f = M.MsgFactory.rclpy()
+        f = messages.MsgFactory.rclpy()
         pub = probe.create_publisher(TwistStamped, "/lpv_sysid/velocity_reference", 10)
         probe.create_timer(
             0.02,
             lambda: pub.publish(
-                M.twist_reference_msg(f, probe.get_clock().now().nanoseconds, [1.0, 0.0, 0.0])
+                messages.twist_reference_msg(
+                    f, probe.get_clock().now().nanoseconds, [1.0, 0.0, 0.0]
+                )
             ),
         )
         assert call(probe, [node], "/lpv_sysid/mavlink_bridge/start").success
@@ -367,7 +371,7 @@ def test_bridge_publishes_telemetry_of_mavlink_vehicle():
     q = s.pose.pose.orientation
     np.testing.assert_allclose([q.x, q.y, q.z, q.w], [0, 0, np.sqrt(0.5), np.sqrt(0.5)], atol=1e-3)
     assert s.header.frame_id == "odom" and s.child_frame_id == "base_link"
-    _, st = M.status_from_diagnostic_array(status[-1])
+    _, st = messages.status_from_diagnostic_array(status[-1])
     assert st[0].values["link_up"] == "True"
 
 

@@ -8,8 +8,8 @@ import rclpy
 import rclpy._standin as standin
 from rclpy.parameter import Parameter
 
-from lpv_sysid.io import messages as M
-from lpv_sysid.nodes import _common as C
+from lpv_sysid.io import messages
+from lpv_sysid.nodes import _common as common
 from lpv_sysid.nodes.data_logger_node import DataLoggerNode
 from lpv_sysid.nodes.excitation_node import ExcitationNode
 from lpv_sysid.nodes.lpv_controller_node import LpvControllerNode
@@ -17,13 +17,13 @@ from lpv_sysid.nodes.mavlink_bridge_node import MavlinkBridgeNode
 from lpv_sysid.nodes.sim_vehicle_node import SimVehicleNode
 
 TABLE = [
-    ("rate_hz", 50.0, C.double("a rate [Hz]", 1.0, 100.0)),
-    ("label", "x", C.typed(Parameter.Type.STRING, "a label")),
-    ("names", Parameter.Type.STRING_ARRAY, C.typed(Parameter.Type.STRING_ARRAY, "a list")),
+    ("rate_hz", 50.0, common.double("a rate [Hz]", 1.0, 100.0)),
+    ("label", "x", common.typed(Parameter.Type.STRING, "a label")),
+    ("names", Parameter.Type.STRING_ARRAY, common.typed(Parameter.Type.STRING_ARRAY, "a list")),
 ]
 
 
-class _Probe(C.ShellNode):
+class _Probe(common.ShellNode):
     def __init__(self, **kwargs):
         super().__init__("probe", TABLE, **kwargs)
 
@@ -43,7 +43,7 @@ def test_every_node_shell_derives_from_shellnode():
         DataLoggerNode,
         SimVehicleNode,
     ):
-        assert issubclass(cls, C.ShellNode)
+        assert issubclass(cls, common.ShellNode)
 
 
 def test_namespace_parameters_and_clock():
@@ -63,14 +63,15 @@ def test_namespace_parameters_and_clock():
 def test_parse_input_passes_good_and_drops_bad_messages(caplog):
     rclpy.init(args=["n"])
     node = _Probe()
-    f = M.MsgFactory.rclpy()
-    good = M.actuator_command_msg(f, 1_500_000_000, [0.5, 0.01, -0.02, 0.1])
-    t, u = node.parse_input("actuator_command", M.actuator_command_from_joint_state, good)
+    f = messages.MsgFactory.rclpy()
+    good = messages.actuator_command_msg(f, 1_500_000_000, [0.5, 0.01, -0.02, 0.1])
+    t, u = node.parse_input("actuator_command", messages.actuator_command_from_joint_state, good)
     assert t == pytest.approx(1.5) and np.allclose(u, [0.5, 0.01, -0.02, 0.1])
-    bad = M.joint_state(f, 1_500_000_000, ["ut", "ua", "ue"], position=[0.5, 0.0, 0.0])
+    bad = messages.joint_state(f, 1_500_000_000, ["ut", "ua", "ue"], position=[0.5, 0.0, 0.0])
     with caplog.at_level(logging.WARNING):
         assert (
-            node.parse_input("actuator_command", M.actuator_command_from_joint_state, bad) is None
+            node.parse_input("actuator_command", messages.actuator_command_from_joint_state, bad)
+            is None
         )
     assert any(
         r.levelno == logging.WARNING
@@ -85,17 +86,21 @@ def test_rejected_warnings_are_throttled_per_topic(caplog):
     """One warning per topic and REJECT_LOG_PERIOD_S of node (here: simulated) time."""
     rclpy.init(args=["n"])
     node = _Probe()
-    f = M.MsgFactory.rclpy()
-    bad_cmd = M.joint_state(f, 0, ["ut"], position=[0.5])
-    bad_ref = M.twist_reference_msg(f, 0, [1.0, 0.0, 0.0], 0.0, frame_id="map")
+    f = messages.MsgFactory.rclpy()
+    bad_cmd = messages.joint_state(f, 0, ["ut"], position=[0.5])
+    bad_ref = messages.twist_reference_msg(f, 0, [1.0, 0.0, 0.0], 0.0, frame_id="map")
 
     def feed():
         for _ in range(3):
             assert (
-                node.parse_input("actuator_command", M.actuator_command_from_joint_state, bad_cmd)
+                node.parse_input(
+                    "actuator_command", messages.actuator_command_from_joint_state, bad_cmd
+                )
                 is None
             )
-        assert node.parse_input("velocity_reference", M.reference_from_twist, bad_ref) is None
+        assert (
+            node.parse_input("velocity_reference", messages.reference_from_twist, bad_ref) is None
+        )
 
     def warned():
         return [

@@ -452,3 +452,50 @@ def test_safety_abort_is_logged_by_the_node_logger(gains, signals2, tmp_path, ca
     lines = [r for r in caplog.records if r.getMessage().startswith("safety abort: external")]
     assert lines and {r.name for r in lines} == {g["ctl"].get_logger().name}
     assert not [r for r in caplog.records if r.name.startswith("lpv_sysid.nodes.")]
+
+
+# ------------------------------------------------------- the tick's command builder, GC policy
+@pytest.mark.parametrize("kind", ["rosbags", "rclpy"])
+def test_command_builder_equals_io_messages(kind):
+    """The tick's actuator_command equals io.messages.actuator_command_msg field by field (both
+    factories: rosbags for replay, rclpy for the node), and a stamp beyond builtin_interfaces/
+    Time is refused by io.messages' own check."""
+    from lpv_sysid.nodes.controller_runtime import CommandBuilder
+
+    f = M.MsgFactory.rosbags() if kind == "rosbags" else M.MsgFactory.rclpy()
+    build = CommandBuilder(f)
+    u = np.array([0.51, -0.012, 0.034, 1e-3])
+    for stamp in (0, 1_704_067_205_004_000_000, 999_999_999, -1_500_000_000):
+        a, b = build(stamp, u), M.actuator_command_msg(f, stamp, u)
+        assert type(a) is type(b)
+        assert (a.header.stamp.sec, a.header.stamp.nanosec, a.header.frame_id) == (
+            b.header.stamp.sec,
+            b.header.stamp.nanosec,
+            b.header.frame_id,
+        )
+        assert list(a.name) == list(b.name) == list(M.INPUT_NAMES)
+        for field in ("position", "velocity", "effort"):
+            assert type(getattr(a, field)) is type(getattr(b, field))
+            assert list(getattr(a, field)) == list(getattr(b, field))
+        assert M.actuator_command_from_joint_state(a)[1].tolist() == u.tolist()
+    with pytest.raises(M.MessageError, match="int32"):
+        build(2**31 * 10**9, u)
+
+
+def test_node_freezes_the_loaded_heap(gains):
+    """settle_gc after loading: the objects alive then are in the permanent generation (the
+    full collections during flight no longer walk them)."""
+    import gc
+
+    from lpv_sysid.nodes.lpv_controller_node import LpvControllerNode
+
+    gc.unfreeze()
+    assert gc.get_freeze_count() == 0
+    rclpy.init()
+    node = LpvControllerNode(cli_args=args("lpv_controller.yaml", gains_file=gains))
+    try:
+        assert gc.get_freeze_count() > 10_000
+        assert gc.get_count()[2] == 0  # a full collection just ran
+    finally:
+        node.destroy_node()
+        gc.unfreeze()

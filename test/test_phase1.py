@@ -204,7 +204,7 @@ def test_cli_bad_config_exits_2(tmp_path, capsys):
 
 def test_run_bag_round_trip(short_runs, tmp_path):
     pytest.importorskip("lpv_sysid.io.bag")
-    from lpv_sysid.io import messages as M
+    from lpv_sysid.io import messages
     from lpv_sysid.io.bag import read_bag
 
     cfg, runs = short_runs
@@ -218,13 +218,13 @@ def test_run_bag_round_trip(short_runs, tmp_path):
     assert len(data[f"{ns}/actuator_command"]) == len(rec.cmd_t)
     assert len(data[f"{ns}/status"]) == math.ceil(rec.duration)
     stamp, msg = data[f"{ns}/state"][100]
-    s = M.state_from_odometry(msg)
+    s = messages.state_from_odometry(msg)
     assert stamp == round(rec.state_t[100] * 1e9)
     assert np.allclose(s.v_body, rec.state_meas[100, 6:9]) and np.allclose(
         s.euler, rec.state_meas[100, 3:6]
     )
     _, msg = data[f"{ns}/velocity_reference"][-1]
-    _, v_d, r_d = M.reference_from_twist(msg)
+    _, v_d, r_d = messages.reference_from_twist(msg)
     assert np.allclose(v_d, rec.reference[-1, :3]) and r_d == pytest.approx(rec.reference[-1, 3])
     shutil.rmtree(path)
 

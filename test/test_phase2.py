@@ -278,7 +278,8 @@ def test_full_run_writes_bag_summary_and_report(lpv, tmp_path):
     report = write_report(tmp_path).read_text()
     d = summary["nonlinear"]["decomposition"]
     assert (
-        f"| nonlinear quadrotor | {nl.excitation_gain:.4g} | yes | superposition | {d['offset']['ratio']:.4g} | "
+        f"| nonlinear quadrotor | {nl.excitation_gain:.4g} | yes | superposition | "
+        f"{d['offset']['ratio']:.4g} | "
         f"{d['tracking']['ratio']:.4g} | {nl.gain:.4g} | completed |"
     ) in report
     assert "Computed from the nonlinear quadrotor simulation data, 151 samples." in report
@@ -411,7 +412,7 @@ def test_cli_entry_point_runs_from_files(lpv, tmp_path, capsys):
     )
     with pytest.raises(ConfigError, match="models_sha256"):
         run_phase2(args)
-    with pytest.raises(ConfigError, match="--gains"):
+    with pytest.raises(ConfigError, match="gains file .*nope.yaml not found"):
         run_phase2(
             _parse(["--gains", str(tmp_path / "nope.yaml"), "--signals", "x", "--out", "y"])
         )
@@ -502,14 +503,19 @@ def test_bag_failure_keeps_results_and_names_the_problem(lpv, tmp_path, monkeypa
         B=pm.B,
     )
     sig = _signals(1.0, lambda t: np.zeros((t.size, 3)))
-    real_write = P.Phase2Bag._write
+    from lpv_sysid.io.bag import BagWriter
 
-    def failing_write(self, name, ns, msg):
-        if ns > 0.5e9:
+    real_write_many = BagWriter.write_many
+
+    def failing_write_many(self, rows):
+        rows = list(rows)
+        ok = [r for r in rows if r[1] <= 0.5e9]
+        real_write_many(self, ok)  # the disk fills up after 0.5 s of flight
+        if len(ok) < len(rows):
             raise BagError(f"bag {self.path}: write failed: [Errno 28] No space left on device")
-        real_write(self, name, ns, msg)
+        return len(rows)
 
-    monkeypatch.setattr(P.Phase2Bag, "_write", failing_write)
+    monkeypatch.setattr(BagWriter, "write_many", failing_write_many)
     with pytest.raises(BagError, match="No space left"):
         P.run(problem, sig, P.Phase2Config(), quad.params, QUIET, tmp_path / "p2")
     s = yaml.safe_load((tmp_path / "p2" / "summary.yaml").read_text())

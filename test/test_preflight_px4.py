@@ -572,7 +572,8 @@ def test_real_px4_state_without_duplicates_and_estimated_rotor_speeds(real_px4):
     assert pwm[0] == [900.0] * 4 and not rotors[0].omega.any()  # disarmed: stopped
     hover = np.array([r.omega for r in rotors[-100:]])
     hover_pwm = np.array(pwm[-100:])
-    # SIH hover: PWM ~1500 us (MPC_THR_HOVER 0.5) -> b/a * 0.5 = 568 rad/s with config/quadrotor.yaml
+    # SIH hover: PWM ~1500 us (MPC_THR_HOVER 0.5) -> b/a * 0.5 = 568 rad/s with
+    # config/quadrotor.yaml
     assert 1400.0 < hover_pwm.mean() < 1600.0
     expect = np.clip(13990.0 / 12.31 * (hover_pwm.mean(axis=0) - 1000.0) / 1000.0, 120.0, 1100.0)
     np.testing.assert_allclose(hover.mean(axis=0), expect, rtol=0.03)

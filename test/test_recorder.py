@@ -186,7 +186,8 @@ CHILD = textwrap.dedent("""
     with stop_on_signals(rec):
         while True:
             k += 1
-            hdr = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=k, nanosec=0), frame_id="")
+            stamp = T["builtin_interfaces/msg/Time"](sec=k, nanosec=0)
+            hdr = T["std_msgs/msg/Header"](stamp=stamp, frame_id="")
             rec.record("/a", k * 10**9, T["sensor_msgs/msg/JointState"](header=hdr, name=["x"],
                        position=np.array([float(k)]), velocity=np.zeros(0), effort=np.zeros(0)))
             if k == 50:

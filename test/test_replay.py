@@ -206,3 +206,85 @@ def test_replay_bound_monitor_abort(tmp_path, capsys):
     assert code == 1 and "bound_exceeded: L2 gain estimate" in text
     got, rec = commands(out), commands(os.path.join(P2, "bag_0000"))
     assert 0 < len(got) < len(rec)  # commanded until the monitor tripped
+
+
+# ------------------------------------------------- command count from the bag's own stamps
+def _receipt_stamps(bag):
+    data = read_bag(os.path.join(bag, "bag_0000"))
+    return {t: [ns for ns, _ in data[f"{NS}/{t}"]] for t in INPUTS}, data
+
+
+INPUTS = ("state", "rotor_speeds", "velocity_reference", "excitation")
+
+
+def _params(tmp_path, **values):
+    """config/lpv_controller.yaml with ``values`` replacing its entries."""
+    import re
+
+    text = open(PARAMS).read()
+    for k, v in values.items():
+        text, n = re.subn(rf"(?m)^(\s+{k}:)\s*\S+", rf"\g<1> {v}", text)
+        assert n == 1, k
+    p = tmp_path / "ctl.yaml"
+    p.write_text(text)
+    return str(p)
+
+
+def test_replay_command_count_timer_grid(tmp_path):
+    """tick_source timer, --ticks rate: one command per grid tick t0 + k / rate_hz (k >= 1) up
+    to the last input, once every input stream has delivered a sample before the tick (the
+    merge puts a tick before inputs of the same stamp) -- counted here from the bag's
+    receipt stamps alone; at 250 Hz state and rate_hz 250 that is one per state sample."""
+    stamps, _ = _receipt_stamps(P2)
+    t0 = min(s[0] for s in stamps.values())
+    t_last = max(s[-1] for s in stamps.values())
+    ready = max(s[0] for s in stamps.values())
+    period = 4_000_000
+    expected = sum(1 for k in range(1, (t_last - t0) // period + 1) if t0 + k * period > ready)
+    code, out = replay(tmp_path, "--ticks", "rate")
+    assert code == 0
+    got = commands(out)
+    assert len(got) == expected
+    assert abs(len(got) - len(stamps["state"])) <= 3  # ~ a command per state sample
+    assert [t for t, _ in got] == [
+        t0 + k * period for k in range(1, (t_last - t0) // period + 1) if t0 + k * period > ready
+    ]
+
+
+def test_replay_command_count_state_ticks(tmp_path):
+    """tick_source state (as the node: on_input): one command per state sample whose header
+    stamp is newer than the last one ticked and that arrives after every other stream's first
+    sample, stamped with its header stamp -- counted from the bag, not from the runtime. The
+    replay used to tick a rate grid whatever tick_source said (the node did not)."""
+    stamps, data = _receipt_stamps(P2)
+    first_other = max(stamps[t][0] for t in INPUTS if t != "state")
+    expected, last = [], None
+    for ns, msg in data[f"{NS}/state"]:
+        h = M.stamp_ns_from_time(msg.header.stamp)
+        if ns > first_other and (last is None or h > last):
+            expected.append(h)
+        last = h if last is None or h > last else last
+    code, out = main_replay(tmp_path, _params(tmp_path, tick_source="state"))
+    assert code == 0
+    got = commands(out)
+    assert [t for t, _ in got] == expected and len(expected) > 1000
+
+
+def main_replay(tmp_path, params):
+    out = tmp_path / "out_state"
+    code = main(
+        [
+            "replay",
+            "--bag",
+            P2,
+            "--node",
+            "lpv_controller",
+            "--params",
+            params,
+            "--gains",
+            GAINS,
+            "--out",
+            str(out),
+        ]
+    )
+    return code, out

@@ -154,6 +154,7 @@ def _write_run(d: Path) -> None:
         [rec],
         skipped={"nonlinear": "no quadrotor model"},
         regressor_block=block,
+        extra={"box": {"min": [-5.0, -5.0, -5.0], "max": [5.0, 5.0, 5.0]}},
         figures=False,
     )
 
@@ -185,20 +186,25 @@ def test_report_contains_expected_numbers(tmp_path):
     assert "gamma_achieved | 0.9321" in text
     # the u_e -> z gain, not the total ratio, is what is compared with gamma; the rest named apart
     assert (
-        "| LPV closed loop, Eq. (33) | 0.05 | yes | superposition | 0.4 | 0.1 | 0.4321 | completed |"
-        in text
+        "| LPV closed loop, Eq. (33) | 0.05 | yes | superposition | 0.4 | 0.1 | 0.4321 | "
+        "completed |" in text
     )
     assert "skipped: no quadrotor model" in text
     assert "kappa = 2.5" in text
     # inputs that do not exist are named
-    assert "**Input missing:** none of `verification.yaml`, `verify.yaml`" in text
+    assert "**Input missing:** none of `verification.yaml` in the run directory." in text
+    # ... so the go/no-go table says so instead of re-running the verifier
+    assert (
+        "| independent verification | not verified | verification.yaml, passed | NO-GO |" in text
+    )
     # figures exist and are referenced
     for png in (
         "tracking_eq33.png",
         "perturbation_eq33.png",
         "regressor_correlation.png",
-        "signals.png",
+        "spectra.png",
         "signal_correlation.png",
+        "margins_eq33.png",
     ):
         assert f"]({png})" in text
         assert (out.parent / png).stat().st_size > 1000
@@ -220,35 +226,20 @@ def block_max(x, axis):
     return float(np.nanmax(C))
 
 
-def test_verification_is_recomputed_and_failures_are_named(tmp_path):
-    """Without verification.yaml the report runs synthesis.verify on gains + models; the synthetic
-    files here are not valid gains/models files, which the report must say (not crash)."""
+def test_verification_is_read_never_recomputed_and_bad_files_are_named(tmp_path):
+    """Without verification.yaml the report does not run the verifier (NO-GO: not verified); a
+    hand-written file that is not the verify record is unreadable (NO-GO), not trusted."""
     _write_run(tmp_path)
     text = write_report(tmp_path).read_text()
-    assert (
-        "| independent verification | UNREADABLE | verification of gains.yaml against vertex_models.yaml failed:"
-        in text
-    )
-    # a verification.yaml written by someone else is rendered as given
+    assert "## Go / no-go: **NO-GO**" in text and "not verified" in text
+    assert "| independent verification | missing |" in text
     (tmp_path / "verification.yaml").write_text(
-        yaml.safe_dump(
-            {
-                "passed": False,
-                "checks": [
-                    {
-                        "check": "hinf",
-                        "where": "vertex 2",
-                        "value": 1.37,
-                        "limit": 1.0,
-                        "ok": False,
-                    }
-                ],
-            }
-        )
+        yaml.safe_dump({"passed": True, "checks": [{"check": "hinf", "ok": True}]})
     )
     text = write_report(tmp_path).read_text()
-    assert "Overall: **FAILED** (1 checks, 1 failed)" in text
-    assert "| hinf | vertex 2 | 1.37 | 1 | NO |" in text
+    assert "| independent verification | UNREADABLE | " in text
+    assert "format: expected 'lpv_sysid/verification@1'" in text
+    assert "| independent verification | unreadable | verification.yaml, passed | NO-GO |" in text
 
 
 def test_empty_run_dir_lists_every_missing_input(tmp_path):
@@ -333,8 +324,8 @@ def test_table3_from_models_meta_validation(tmp_path):
     (tmp_path / "vertex_models.yaml").write_text(yaml.safe_dump(models))
     text = write_report(tmp_path, verify=False).read_text()
     assert (
-        "Independent validation maneuver `hover_validation` (from vertex_models.yaml meta.validation):"
-        in text
+        "Independent validation maneuver `hover_validation` "
+        "(from vertex_models.yaml meta.validation):" in text
     )
     assert (
         "| independent validation (Table 3) | derived | from vertex_models.yaml meta.validation |"

@@ -141,9 +141,9 @@ def controller_config() -> dict:
 
 
 def stamps_ns(msgs) -> np.ndarray:
-    from lpv_sysid.io import messages as M
+    from lpv_sysid.io import messages
 
-    return np.array([M.stamp_ns_of(m) for _, m in msgs], dtype=np.int64)
+    return np.array([messages.stamp_ns_of(m) for _, m in msgs], dtype=np.int64)
 
 
 @pytest.fixture(scope="module")
@@ -252,10 +252,12 @@ def test_the_graph_flies_the_whole_phase2_signal_without_abort(flight):
     assert t_end - t_start >= t[-1] - t[0]  # the whole table, plus the fades
     cmd = stamps_ns(flight["bag"][f"{NS}/actuator_command"]) * 1e-9
     assert cmd[-1] >= t_end  # commanded to the end ...
-    from lpv_sysid.io import messages as M
+    from lpv_sysid.io import messages
 
-    te, ue = M.channels_from_joint_states(
-        [m for _, m in flight["bag"][f"{NS}/excitation"]], M.EXCITATION_NAMES, field="position"
+    te, ue = messages.channels_from_joint_states(
+        [m for _, m in flight["bag"][f"{NS}/excitation"]],
+        messages.EXCITATION_NAMES,
+        field="position",
     )
     # ... and from its start: the excitation energy played before the first command (the
     # excitation node's clock may read a state period behind the controller's) is negligible
@@ -322,14 +324,14 @@ def test_commands_saturate_no_more_than_offline(flight):
 
 
 def test_bound_monitor_stays_below_the_offline_estimate_times_margin(flight):
-    from lpv_sysid.io import messages as M
+    from lpv_sysid.io import messages
     from lpv_sysid.io.formats import GainSchedule
 
     cfg, bag, off = controller_config(), flight["bag"], flight["offline"]
     # when the monitor starts judging: int ||u_e||^2 dt of the played excitation reaches
     # monitor_min_energy (kappa = excitation_gain)
-    te, ue = M.channels_from_joint_states(
-        [m for _, m in bag[f"{NS}/excitation"]], M.EXCITATION_NAMES, field="position"
+    te, ue = messages.channels_from_joint_states(
+        [m for _, m in bag[f"{NS}/excitation"]], messages.EXCITATION_NAMES, field="position"
     )
     energy = np.cumsum(np.sum((cfg["excitation_gain"] * ue[:-1]) ** 2, axis=1) * np.diff(te))
     t_judged = te[1:][np.searchsorted(energy, cfg["monitor_min_energy"])]
@@ -347,11 +349,11 @@ def test_bound_monitor_stays_below_the_offline_estimate_times_margin(flight):
     gs = GainSchedule.load(str(GAINS))
     st_msgs = bag[f"{NS}/state"]
     sn, first = np.unique(stamps_ns(st_msgs), return_index=True)
-    v = M.states_from_odometry([st_msgs[i][1] for i in first]).v_body
+    v = messages.states_from_odometry([st_msgs[i][1] for i in first]).v_body
     cmd = stamps_ns(bag[f"{NS}/actuator_command"])
     cmd = cmd[cmd * 1e-9 <= t_end]
     k = np.searchsorted(sn, cmd)
-    ref = [M.reference_from_twist(m) for _, m in bag[f"{NS}/velocity_reference"]]
+    ref = [messages.reference_from_twist(m) for _, m in bag[f"{NS}/velocity_reference"]]
     tr, vr = np.array([r[0] for r in ref]), np.array([r[1] for r in ref])
     tc = cmd * 1e-9
     vd = np.column_stack([np.interp(tc, tr, vr[:, i]) for i in range(3)])
@@ -384,22 +386,23 @@ from geometry_msgs.msg import TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
-from lpv_sysid.io import messages as M
+from lpv_sysid.io import messages
 rclpy.init()
 n = rclpy.create_node("inputs")
-f = M.MsgFactory.rclpy()
+f = messages.MsgFactory.rclpy()
 pubs = {"state": n.create_publisher(Odometry, "/lpv_sysid/state", qos_profile_sensor_data),
-        "rotor": n.create_publisher(JointState, "/lpv_sysid/rotor_speeds", qos_profile_sensor_data),
+        "rotor": n.create_publisher(
+            JointState, "/lpv_sysid/rotor_speeds", qos_profile_sensor_data),
         "ref": n.create_publisher(TwistStamped, "/lpv_sysid/velocity_reference", 10),
         "exc": n.create_publisher(JointState, "/lpv_sysid/excitation", 10)}
 t_end = time.monotonic() + float(sys.argv[1])
 while time.monotonic() < t_end:
     ns = n.get_clock().now().nanoseconds
-    pubs["state"].publish(M.odometry_from_state(f, ns, np.zeros(3), np.zeros(3), np.zeros(3),
-                                                np.zeros(3)))
-    pubs["rotor"].publish(M.rotor_speeds_msg(f, ns, np.full(4, 600.0)))
-    pubs["ref"].publish(M.twist_reference_msg(f, ns, np.zeros(3), 0.0))
-    pubs["exc"].publish(M.excitation_msg(f, ns, np.zeros(4)))
+    pubs["state"].publish(messages.odometry_from_state(
+        f, ns, np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3)))
+    pubs["rotor"].publish(messages.rotor_speeds_msg(f, ns, np.full(4, 600.0)))
+    pubs["ref"].publish(messages.twist_reference_msg(f, ns, np.zeros(3), 0.0))
+    pubs["exc"].publish(messages.excitation_msg(f, ns, np.zeros(4)))
     rclpy.spin_once(n, timeout_sec=0.1)
 n.destroy_node()
 rclpy.shutdown()

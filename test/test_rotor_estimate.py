@@ -199,35 +199,35 @@ def test_disarm_and_rearm():
 
 # ------------------------------------------------- rotor_speeds topic, recorder, consumers
 def test_rotor_speeds_message_marks_the_source_and_every_consumer_reads_both():
-    from lpv_sysid.io import messages as M
+    from lpv_sysid.io import messages
     from lpv_sysid.nodes.controller_runtime import parse_input, parse_inputs
 
-    f = M.MsgFactory.rosbags()
+    f = messages.MsgFactory.rosbags()
     om = [500.0, 510.0, 520.0, 530.0]
-    meas = M.rotor_speeds_msg(f, 1_000_000_000, om)
-    est = M.rotor_speeds_msg(f, 1_010_000_000, om, source="estimated")
-    assert meas.header.frame_id == M.BASE_FRAME and est.header.frame_id == "estimated"
-    assert list(est.name) == list(meas.name) == list(M.ROTOR_NAMES)
-    assert [M.rotor_source_of(m) for m in (meas, est)] == ["esc", "estimated"]
+    meas = messages.rotor_speeds_msg(f, 1_000_000_000, om)
+    est = messages.rotor_speeds_msg(f, 1_010_000_000, om, source="estimated")
+    assert meas.header.frame_id == messages.BASE_FRAME and est.header.frame_id == "estimated"
+    assert list(est.name) == list(meas.name) == list(messages.ROTOR_NAMES)
+    assert [messages.rotor_source_of(m) for m in (meas, est)] == ["esc", "estimated"]
     for m in (meas, est):  # identification (ident/dataprep) and the controller runtime
-        t, values = M.rotor_speeds_from_joint_state(m)
+        t, values = messages.rotor_speeds_from_joint_state(m)
         np.testing.assert_array_equal(values, om)
         t2, v2 = parse_input("rotor_speeds", m)
         assert t2 == t and np.array_equal(v2, values)
     t, v = parse_inputs("rotor_speeds", [meas, est])
     np.testing.assert_array_equal(t, [1.0, 1.01])
-    with pytest.raises(M.MessageError, match="source"):
-        M.rotor_speeds_msg(f, 0, om, source="model")
+    with pytest.raises(messages.MessageError, match="source"):
+        messages.rotor_speeds_msg(f, 0, om, source="model")
 
 
 def test_recorder_writes_the_rotor_speed_source_into_experiment_yaml(tmp_path):
     from rosbags.typesys import Stores, get_typestore
 
-    from lpv_sysid.io import messages as M
+    from lpv_sysid.io import messages
     from lpv_sysid.io.recorder import Recorder, RecorderConfig
 
     ts = get_typestore(Stores.ROS2_JAZZY)
-    f = M.MsgFactory.rosbags()
+    f = messages.MsgFactory.rosbags()
     rec = Recorder(
         RecorderConfig(
             out_dir=str(tmp_path / "exp"),
@@ -238,7 +238,9 @@ def test_recorder_writes_the_rotor_speed_source_into_experiment_yaml(tmp_path):
     rec.start(t0)
     for k in range(30):
         stamp = t0 + k * 10_000_000
-        msg = M.rotor_speeds_msg(f, stamp, [400.0] * 4, source="estimated" if k >= 10 else "esc")
+        msg = messages.rotor_speeds_msg(
+            f, stamp, [400.0] * 4, source="estimated" if k >= 10 else "esc"
+        )
         # the node records raw CDR bytes; objects work the same
         rec.record(
             "/lpv_sysid/rotor_speeds",

@@ -27,20 +27,20 @@ def reference_derivatives(q: Quadrotor, x, u):
     K = p.K
     phi, th, psi = x[3], x[4], x[5]
     uu, vv, ww, pp, qq, rr = x[6:12]
-    O = list(x[12:16])
+    Om = list(x[12:16])
     Od = []
     for i in range(4):
         row = q.mix_inv[i].tolist()
         e = row[0] * u[0] + row[1] * u[1] + row[2] * u[2] + row[3] * u[3]
         e = 0.0 if e < 0.0 else (1.0 if e > 1.0 else e)
-        d = -p.a_omega * O[i] + p.b_omega * e
-        if (O[i] >= p.omega_max and d > 0.0) or (O[i] <= p.omega_min and d < 0.0):
+        d = -p.a_omega * Om[i] + p.b_omega * e
+        if (Om[i] >= p.omega_max and d > 0.0) or (Om[i] <= p.omega_min and d < 0.0):
             d = 0.0
         Od.append(d)
     ell = p.arm_length
     s = ell * math.sqrt(2.0) / 2.0
     l2 = ell * ell
-    O1, O2, O3, O4 = O
+    O1, O2, O3, O4 = Om
     dt = 0.25 * (O1 + O2 + O3 + O4)
     da = s * (-O1 + O2 + O3 - O4)
     de = s * (O1 - O2 + O3 - O4)
@@ -51,7 +51,7 @@ def reference_derivatives(q: Quadrotor, x, u):
     de2 = s * (S1 - S2 + S3 - S4)
     dr2 = S1 + S2 - S3 - S4
     ddr = Od[0] + Od[1] - Od[2] - Od[3]
-    u_, v, w, p_, q_, r = uu, vv, ww, pp, qq, rr
+    u_, v, w, p_, q_ = uu, vv, ww, pp, qq
     Fx = u_ * (K["x_mu0"] + K["x_muw"] * w + K["x_muh"] * dt)
     Fy = v * (K["y_mu0"] + K["y_muw"] * w + K["y_muh"] * dt)
     Fz = (
@@ -106,10 +106,10 @@ def reference_derivatives(q: Quadrotor, x, u):
     ud = vv * rr - ww * qq - g * st + Fx / m
     vd = ww * pp - uu * rr + g * sf * ct + Fy / m
     wd = uu * qq - vv * pp + g * cf * ct + Fz / m
-    I, Ii = p.inertia, q.inertia_inv.tolist()
-    h0 = I[0][0] * pp + I[0][1] * qq + I[0][2] * rr
-    h1 = I[1][0] * pp + I[1][1] * qq + I[1][2] * rr
-    h2 = I[2][0] * pp + I[2][1] * qq + I[2][2] * rr
+    J, Ii = p.inertia, q.inertia_inv.tolist()
+    h0 = J[0][0] * pp + J[0][1] * qq + J[0][2] * rr
+    h1 = J[1][0] * pp + J[1][1] * qq + J[1][2] * rr
+    h2 = J[2][0] * pp + J[2][1] * qq + J[2][2] * rr
     t0 = h1 * rr - h2 * qq + Mx
     t1 = h2 * pp - h0 * rr + My
     t2 = h0 * qq - h1 * pp + Mz
@@ -160,6 +160,38 @@ def test_compiled_hot_path_is_the_reference_equations_bit_for_bit(params):
             a + h / 6.0 * (b + 2.0 * c + 2.0 * d + e) for a, b, c, d, e in zip(x, k1, k2, k3, k4)
         ]
         assert q.rk4_step(x, u, h) == rk4
+
+
+def test_specialised_hot_path_drops_the_zero_terms_and_keeps_the_bits():
+    """The hot path is compiled per model with the parameters folded in: the default model
+    (diagonal inertia, four zero aerodynamic coefficients) runs >= 10 % fewer float
+    operations than the source as written, with the same results bit for bit; a parameter
+    set whose zeros are elsewhere gets its own code (the cache keys on the values)."""
+    import dis
+
+    from lpv_sysid.models import quadrotor as Q
+
+    def n_ops(fn):
+        return sum(
+            1
+            for ins in dis.get_instructions(fn.__code__)
+            if ins.opname.startswith("BINARY") or ins.opname == "UNARY_NEGATIVE"
+        )
+
+    rng = np.random.default_rng(11)
+    for params in (
+        QuadrotorParams(),
+        QuadrotorParams(K={**QuadrotorParams().K, "z_mu0": -0.01, "x_mu0": 0.0}),
+    ):
+        q = Quadrotor(params)
+        ns: dict = {}
+        exec(compile(Q._HOT_PATH_SOURCE, "<as written>", "exec"), ns)
+        generic = ns["_factory"](**q.hot_path_constants)
+        assert n_ops(q.rk4_step) <= 0.9 * n_ops(generic[3])
+        for x, u in random_points(rng, 300):
+            assert q.rk4_step(x, u, 0.002) == generic[3](x, u, 0.002)
+            assert q.derivatives_list(x, u) == generic[2](x, u)
+    assert Quadrotor().rk4_step is not q.rk4_step
 
 
 def test_quadrotor_pickles_with_its_hot_path():

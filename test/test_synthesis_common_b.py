@@ -17,7 +17,8 @@ from lpv_sysid.models.lpv import (
     multilinear_weights,
     product_systems,
 )
-from lpv_sysid.synthesis.files import Gains, load_models
+from lpv_sysid.io.formats import GainSchedule
+from lpv_sysid.synthesis.uncertainty_set import load_models
 from lpv_sysid.synthesis.hinf_lmi import HinfOptions, _shrunk_model, solve_lemma1
 from lpv_sysid.synthesis.hinf_norm import hinf_norm
 from lpv_sysid.synthesis.verify import verify_files, verify_gains
@@ -72,7 +73,8 @@ def _loop_norm(A, B, K):
     return hinf_norm(A + B @ K, B, np.array([[1.0, 0.0]])).value  # R = 1, z = Q^-1 x1, Q = 1
 
 
-# ------------------------------------------------------------------ hull and product on hand numbers
+# ------------------------------------------------------------------ hull and product on hand
+# numbers
 def test_input_hull_on_hand_numbers():
     B = np.array([[[1.0, 0.0], [0.0, 2.0]], [[1.0, 0.0], [0.5, 3.0]]])
     els = [
@@ -80,7 +82,8 @@ def test_input_hull_on_hand_numbers():
         [UncertainElement("B", 1, 1, 2.5, 3.5, 3.0), UncertainElement("B", 0, 0, 0.9, 1.1, 1.0)],
     ]
     base, hull, nlo, nhi = input_hull(B, els)
-    # B[0,0]: {1} u [0.9, 1.1]; B[1,0]: nominals 0 and 0.5; B[1,1]: [1.8, 2.2] u [2.5, 3.5]; B[0,1] = 0 fixed
+    # B[0,0]: {1} u [0.9, 1.1]; B[1,0]: nominals 0 and 0.5; B[1,1]: [1.8, 2.2] u [2.5, 3.5];
+    # B[0,1] = 0 fixed
     assert [(e.row, e.col) for e in hull] == [(0, 0), (1, 0), (1, 1)]
     assert [(e.lower, e.upper) for e in hull] == [(0.9, 1.1), (0.0, 0.5), (1.8, 3.5)]
     assert [e.nominal for e in hull] == [1.0, 0.25, 2.5]  # mean of the vertex nominals
@@ -154,7 +157,8 @@ def test_product_weights_make_the_B_part_vertex_independent():
     np.testing.assert_allclose(
         lhs, A_v @ H + B_t @ (alpha[0] * S[0] + alpha[1] * S[1]), atol=1e-12
     )
-    # per-vertex B_i: the weighted sum differs from B(v) S(v) by -alpha_0 alpha_1 (B_0 - B_1)(S_0 - S_1)
+    # per-vertex B_i: the weighted sum differs from B(v) S(v) by -alpha_0 alpha_1 (B_0 - B_1)(S_0
+    # - S_1)
     Bv = rng.normal(size=(2, n, m_))
     lhs_pv = sum(alpha[i] * Bv[i] @ S[i] for i in range(2))
     rhs_pv = (alpha[0] * Bv[0] + alpha[1] * Bv[1]) @ (alpha[0] * S[0] + alpha[1] * S[1])
@@ -164,7 +168,8 @@ def test_product_weights_make_the_B_part_vertex_independent():
     assert np.max(np.abs(lhs_pv - rhs_pv)) > 1e-3
 
 
-# ------------------------------------------------------------------ synthesis: per-vertex vs common B
+# ------------------------------------------------------------------ synthesis: per-vertex vs
+# common B
 def test_per_vertex_B_fails_inside_while_common_B_certifies_the_interior(tmp_path, capsys):
     models = _write_models(tmp_path / "vertex_models.yaml")
     # old structure: vertices certified, the interpolated law breaks the bound inside the box
@@ -181,8 +186,8 @@ def test_per_vertex_B_fails_inside_while_common_B_certifies_the_interior(tmp_pat
     )
     out = capsys.readouterr().out
     assert rc == 1 and "B differs between scheduling vertices" in out
-    g = Gains.load(tmp_path / "pv" / "gains.yaml")
-    assert g.certificate["input_structure"]["B"] == "per_vertex"
+    g = GainSchedule.load(tmp_path / "pv" / "gains.yaml", auto_layout=True)
+    assert g.certificate.extra["input_structure"]["B"] == "per_vertex"
     for i in range(2):
         assert _loop_norm(A2[i], B2[i], g.K[i]) <= GAMMA  # vertices: certified
     worst = 0.0
@@ -212,11 +217,11 @@ def test_per_vertex_B_fails_inside_while_common_B_certifies_the_interior(tmp_pat
     out = capsys.readouterr().out
     assert rc == 0, out
     assert "M_i = M_A x M_B = [1, 1] x 4 = [4, 4]" in out and "covers the whole box" in out
-    g = Gains.load(out_c)
-    st = g.certificate["input_structure"]
+    g = GainSchedule.load(out_c, auto_layout=True)
+    st = g.certificate.extra["input_structure"]
     assert st["B"] == "common" and st["M_B"] == 4 and st["M_A"] == [1, 1]
     assert [(h["lower"], h["upper"]) for h in st["B_hull"]] == [(0.4, 1.1), (0.2, 2.9)]
-    assert g.certificate["uncertainty"]["common_b"] is True
+    assert g.certificate.extra["uncertainty"]["common_b"] is True
     # independent oracle: frozen loops on a grid of s and of the B hull (corners + true B(s))
     corners = [np.array([[b0], [b1]]) for b0 in (0.4, 1.1) for b1 in (0.2, 2.9)]
     rng = np.random.default_rng(0)
@@ -240,7 +245,8 @@ def test_per_vertex_B_fails_inside_while_common_B_certifies_the_interior(tmp_pat
         "structure",
         "hinf interior",
     }
-    # re-verifying the common-B certificate against a per-vertex rebuild is refused (structure + LMIs)
+    # re-verifying the common-B certificate against a per-vertex rebuild is refused (structure +
+    # LMIs)
     rep = verify_files(out_c, models, n_random=2, uncertainty={"common_b": False})
     assert {r.check for r in rep.rows if not r.ok} >= {"structure", "lmi"}
 
@@ -373,7 +379,8 @@ def test_load_models_budget_and_config_errors(tmp_path):
     # budget p_max = 3: the A part keeps 3 - 2 = 1 corner parameter (influence reduction)
     m3, _ = load_models(models, {"common_b": True, "p_max": 3, "output_states": [0, 1]})
     assert m3.input_structure["M_A"] == [2, 1] and m3.input_structure["M"] == [8, 4]
-    # more B hull elements than p_max_b: reduction of ident.uncertainty on the hull (once, not per vertex)
+    # more B hull elements than p_max_b: reduction of ident.uncertainty on the hull (once, not per
+    # vertex)
     mi, _ = load_models(
         models, {"common_b": True, "p_max": 4, "p_max_b": 1, "output_states": [0, 1]}
     )

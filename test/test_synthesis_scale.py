@@ -14,7 +14,8 @@ import yaml
 from lpv_sysid.cli.main import main
 from lpv_sysid.models.lpv import PolytopicModel, corner_box, product_systems, CommonInputSet
 from lpv_sysid.synthesis.example_models import quadrotor_like_polytope
-from lpv_sysid.synthesis.files import load_certificate_npz, load_models
+from lpv_sysid.io.formats import load_certificate_npz
+from lpv_sysid.synthesis.uncertainty_set import load_models
 from lpv_sysid.synthesis.hinf_lmi import (
     HinfOptions,
     certificate_margins,

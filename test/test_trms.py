@@ -1,4 +1,5 @@
-"""TRMS (seed 2, Rotondo et al. 2013): nonlinear model, quasi-LPV embedding, polytope, LPV control."""
+"""TRMS (seed 2, Rotondo et al. 2013): nonlinear model, quasi-LPV embedding, polytope, LPV
+control."""
 
 import math
 
@@ -70,7 +71,8 @@ def test_derivatives_rejects_bad_input():
 
 
 def test_rotor_equation_steady_state_is_the_quadratic_root():
-    # Eq. (1) at rest: k_a k_1 / R_a u = (B_tr + k_a^2/R_a) w + k_thp w^2 (w > 0) -> closed-form root
+    # Eq. (1) at rest: k_a k_1 / R_a u = (B_tr + k_a^2/R_a) w + k_thp w^2 (w > 0) -> closed-form
+    # root
     u = 1.3
     b = P.B_tr + P.k_a**2 / P.R_a
     w = (-b + math.sqrt(b * b + 4 * P.k_thp * P.k_a * P.k_1 / P.R_a * u)) / (2 * P.k_thp)
@@ -109,7 +111,8 @@ def test_embedding_with_nonzero_k_t_couples_tail_into_pitch():
 
 
 def test_reference_equilibrium_zeroes_the_dynamics():
-    # Eqs. (107)-(112) against Eqs. (1)-(6): all rates vanish; with Omega^r != 0 only the angles move
+    # Eqs. (107)-(112) against Eqs. (1)-(6): all rates vanish; with Omega^r != 0 only the angles
+    # move
     for th, dv, Wh, Wv in [
         (0.5, 0.2, 0.0, 0.0),
         (-0.6, -0.2, 0.0, 0.0),
@@ -149,7 +152,8 @@ def test_table8_bounds_reproduced_from_the_model():
     # upper ends only (the lower ends of a21 / a56 need the paper's unprinted Eq. (69) gaps)
     for name, hi in {"a11": 0.8534, "a21": 0.1124, "a56": -0.3464}.items():
         assert b[name][1] == pytest.approx(hi, abs=6e-5), name
-    # a11 lower: Eq. (67) takes max(k_thp w_max, -k_thn w_min) -> 0.7157; Table 8's 0.7207 is the k_thp branch
+    # a11 lower: Eq. (67) takes max(k_thp w_max, -k_thn w_min) -> 0.7157; Table 8's 0.7207 is the
+    # k_thp branch
     assert b["a11"][0] == pytest.approx(0.7157, abs=6e-5)
     k_thp_only = 1 - TS / P.J_tr * (P.k_a**2 / P.R_a + P.B_tr + P.k_thp * 2.9)
     assert k_thp_only == pytest.approx(0.7207, abs=6e-5)
@@ -204,7 +208,8 @@ def test_vertex_order_follows_box_vertices():
 
 
 def test_without_gaps_the_pitch_integrator_is_uncontrollable_at_a_vertex():
-    # a54 = 0 at omega_v = 0 (Table 8 lower bound 0): PBH rank of the augmented pair (Eq. 129) at z = 1
+    # a54 = 0 at omega_v = 0 (Table 8 lower bound 0): PBH rank of the augmented pair (Eq. 129) at
+    # z = 1
     poly = bounding_box_polytope(M, ("a21", "a54"), ts=TS, gaps=None)
     Aa, Ba = integral_augmentation(poly.A[0], poly.B, C_TRACK, ts=TS)  # a21 = a54 = 0
     s = np.linalg.svd(np.hstack([Aa - np.eye(8), Ba]), compute_uv=False)
@@ -260,7 +265,8 @@ def test_observer_converges_in_closed_loop(des):
     run = simulate(des, (1.0, TV0 + 0.25), x0, x_hat0, t_end=30.0)
     e = run.x_hat - run.x
     assert np.max(np.abs(e[0])) == pytest.approx(0.2)
-    # the unmeasured rates converge; the residual on omega is the Euler/frozen-parameter model mismatch
+    # the unmeasured rates converge; the residual on omega is the Euler/frozen-parameter model
+    # mismatch
     assert np.max(np.abs(e[-1, [1, 4]])) < 1e-3
     assert np.max(np.abs(e[-1])) < 0.1
     assert np.max(np.abs(run.x[-1, [2, 5]] - run.r[-1])) < 1e-3
@@ -281,7 +287,8 @@ def test_control_config_validation():
 
 def test_yaw_second_order_identification_formulas_match_the_model():
     # Eqs. (72)-(81), (87): with u_v = 0 (theta_v = theta_v^0) the yaw subsystem is
-    # K_p / (1 + 2 xi_p T_p s + T_p^2 s^2) from omega_h^2 to theta_h; check against the Jacobian of Eq. (2)
+    # K_p / (1 + 2 xi_p T_p s + T_p^2 s^2) from omega_h^2 to theta_h; check against the Jacobian
+    # of Eq. (2)
     D0 = P.K_D * math.cos(TV0) ** 2 + P.K_E * math.sin(TV0) ** 2 + P.K_F
     Tp2 = D0 / P.k_chp  # Eq. (80)
     two_xi_T = P.k_oh / P.k_chp  # Eq. (78)

@@ -1,4 +1,5 @@
-"""lpv_sysid.validation: the shared config checks, and the config classes that use them."""
+"""lpv_sysid.config_fields: the shared config checks, the declared-field validator, and the config
+classes that use them."""
 
 import math
 
@@ -13,7 +14,7 @@ from lpv_sysid.mavlink.link import LinkConfig
 from lpv_sysid.mavlink.mavros import MavrosConfig
 from lpv_sysid.mavlink.offboard import OffboardConfig
 from lpv_sysid.mavlink.sim_vehicle import SimVehicleConfig
-from lpv_sysid.validation import check_config_keys, check_keys, is_count, is_finite_number
+from lpv_sysid.config_fields import check_config_keys, check_keys, is_count, is_finite_number
 
 
 @pytest.mark.parametrize(
@@ -160,3 +161,64 @@ def test_config_valid_values_round_trip():
     assert s.seed == 3 and s.physics_hz == 1000.0 and s.decimation(s.state_hz) == 4
     p = Phase1Config.from_dict({"seed": 4, "taper_s": 0})
     assert p.seed == 4 and p.taper_s == 0.0
+
+
+# ----------------------------------------------------------- declared-field validator
+def test_declared_fields_check_type_range_and_keys_with_the_field_path():
+    from dataclasses import dataclass
+
+    from lpv_sysid import config_fields as cf
+
+    @dataclass(frozen=True)
+    class Demo:
+        rate: float = cf.number(doc="Hz", lo=0.0, lo_open=True, hi=100.0, unit=" Hz")
+        order: int = cf.count(2, lo=1)
+        mode: str = cf.choice("a", ("a", "b", "c"))
+        band: tuple = cf.numbers((0.0, 1.0), length=2, lo=0.0)
+        on: bool = cf.flag(True)
+
+    assert cf.parse_fields(Demo, {"rate": 50, "band": [1, 2]}, "f.yaml") == {
+        "rate": 50.0,
+        "band": (1.0, 2.0),
+    }
+    for d, msg in [
+        ({}, "f.yaml: missing key(s) ['rate']"),
+        ({"rate": 1, "x": 2}, "f.yaml: unknown key(s) ['x']; allowed"),
+        ({"rate": 0}, "f.yaml.rate: must be > 0, got 0.0"),
+        ({"rate": 200}, "f.yaml.rate: 200 Hz exceeds the limit of 100 Hz"),
+        ({"rate": True}, "f.yaml.rate: expected a number, got True"),
+        ({"rate": 1, "order": 0}, "f.yaml.order: expected an integer >= 1, got 0"),
+        ({"rate": 1, "mode": "d"}, "f.yaml.mode: 'd'; use a, b or c"),
+        ({"rate": 1, "band": [1]}, "f.yaml.band: expected 2 values, got 1"),
+        ({"rate": 1, "band": [1, -2]}, "f.yaml.band[1]: must be >= 0, got -2.0"),
+        ({"rate": 1, "on": "yes"}, "f.yaml.on: expected true or false, got 'yes'"),
+    ]:
+        with pytest.raises(ConfigError) as e:
+            cf.parse_fields(Demo, d, "f.yaml")
+        assert str(e.value).startswith(msg), (d, str(e.value))
+    # the declaration is the one place the rules live: specs() exposes them
+    assert cf.specs(Demo)["rate"].hi == 100.0 and cf.specs(Demo)["mode"].choices == ("a", "b", "c")
+
+
+def test_signals_and_vrft_configs_use_the_declared_fields():
+    from lpv_sysid import config_fields as cf
+    from lpv_sysid.ident.vrft_config import VrftConfig
+    from lpv_sysid.signals.config import GroupConfig, SignalsConfig
+
+    assert cf.specs(SignalsConfig)["duration"].hi == 3600.0
+    assert set(cf.specs(GroupConfig)) == {"name", "channels", "band", "energy", "power_fraction"}
+    assert set(cf.specs(VrftConfig)) == {"method", "window", "discard", "Ts", "eiv_weight"}
+    base = {"duration": 10.0, "sample_rate": 10.0}
+    grp = {"name": "g", "channels": ["a"], "band": [0.1, 1.0]}
+    with pytest.raises(ConfigError, match=r"^s\.yaml\.groups\[0\]\.band\[0\]: must be >= 0"):
+        SignalsConfig.from_dict({**base, "groups": [{**grp, "band": [-1, 1]}]}, "s.yaml")
+    with pytest.raises(
+        ConfigError, match=r"^s\.yaml\.duration: 4000 s exceeds the limit of 3600 s"
+    ):
+        SignalsConfig.from_dict({**base, "duration": 4000.0, "groups": [grp]}, "s.yaml")
+    with pytest.raises(ConfigError, match=r"^window: expected an integer >= 0, got -1$"):
+        VrftConfig.from_dict({"reference_model": {"poles": [0.9]}, "controller": {}, "window": -1})
+    cfg = VrftConfig.from_dict(
+        {"reference_model": {"poles": [0.9]}, "controller": {}, "Ts": 0.02, "method": "eiv"}
+    )
+    assert (cfg.method, cfg.window, cfg.Ts, cfg.eiv_weight) == ("eiv", 5, 0.02, "identity")

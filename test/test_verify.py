@@ -1,4 +1,5 @@
-"""`lpv-sysid synthesize` -> `lpv-sysid verify` round trip, tampering, and the verifier's checks."""
+"""`lpv-sysid synthesize` -> `lpv-sysid verify` round trip, tampering, and the verifier's
+checks."""
 
 from pathlib import Path
 
@@ -7,7 +8,8 @@ import pytest
 import yaml
 
 from lpv_sysid.cli.main import main
-from lpv_sysid.synthesis.files import Gains, load_models
+from lpv_sysid.io.formats import GainSchedule
+from lpv_sysid.synthesis.uncertainty_set import load_models
 from lpv_sysid.synthesis.hinf_norm import hinf_norm
 from lpv_sysid.synthesis.verify import verify_files
 
@@ -59,12 +61,12 @@ def synthesized(tmp_path, capsys):
 
 def test_synthesize_writes_certified_gains_and_verify_passes(synthesized, capsys):
     models, out = synthesized
-    g = Gains.load(out)
+    g = GainSchedule.load(out, auto_layout=True)
     k = g.K[0, 0, 0]
     # analytic: ||G||_inf = 1 / |1 + k| <= 0.5 needs 1 + k <= -2; region strip needs 1 + k > -2.5
     assert -2.5 < 1 + k <= -2.0 + 1e-6
-    assert g.certificate["gamma_achieved"] <= 0.5 and g.certificate["min_margin"] > 0
-    assert g.certificate["region"] == {"strip": {"min": -2.5, "max": -1.0}}
+    assert g.certificate.gamma_achieved <= 0.5 and g.certificate.min_margin > 0
+    assert g.certificate.to_dict()["region"] == {"strip": {"min": -2.5, "max": -1.0}}
     rc = main(["verify", "--gains", str(out), "--models", str(models)])
     text = capsys.readouterr().out
     assert rc == 0 and "PASS" in text and "0 failed" in text

@@ -49,7 +49,8 @@ def test_siso_integrating_plant_gives_pure_p_and_velocity_form():
     u, y = _siso_data(1.0, b)
     res = vrft(u, y, first_order_model([p]), pid_class(1, 1, 1.0, ("p",)))
     assert res.K[0][0, 0] == pytest.approx((1 - p) / b, rel=1e-10)
-    # velocity form u(k) = u(k-1) + B0 e(k) + B1 e(k-1) (Eq. 3.19) for a = 0.8: B0 = (1-p)/b, B1 = -a B0
+    # velocity form u(k) = u(k-1) + B0 e(k) + B1 e(k-1) (Eq. 3.19) for a = 0.8: B0 = (1-p)/b, B1 =
+    # -a B0
     u, y = _siso_data(0.8, b)
     rv = vrft(u, y, first_order_model([p]), velocity_class(1, 1, 1))
     assert rv.K[0][0, 0] == pytest.approx((1 - p) / b, rel=1e-10)
@@ -108,14 +109,18 @@ def test_table53_noisy_eiv_unbiased_ls_biased():
             yc.shape
         )  # second experiment
         iv.append(vrft(u, y, ex.table53_model(), cls, method="iv", y2=y2).theta)
-    rel = lambda th: np.abs(np.mean(th, 0) - th_star) / np.abs(th_star)
+
+    def rel(th):
+        return np.abs(np.mean(th, 0) - th_star) / np.abs(th_star)
+
     assert rel(eiv).max() < 0.06
     assert rel(iv).max() < 0.06
     assert rel(ls).max() > 0.3  # errors-in-variables bias of plain LS (Sec. 3.3.2)
 
 
 def test_non_scalar_diagonal_reference_model_is_exact():
-    """M = diag(m1, m2), m1 != m2 -> L = det M (module docstring); C* = K0^-1 (z - a) diag((1-p_j)/(z-1))."""
+    """M = diag(m1, m2), m1 != m2 -> L = det M (module docstring); C* = K0^-1 (z - a)
+    diag((1-p_j)/(z-1))."""
     p = [0.9, 0.7]
     t, u, y, _ = ex.table53_data(400, seed=4)
     res = vrft(u, y, first_order_model(p), pid_class(2, 2, 1.0, ("p", "i")))
@@ -125,7 +130,8 @@ def test_non_scalar_diagonal_reference_model_is_exact():
 
 
 def test_full_reference_model_is_exact():
-    """M := closed loop of a known 2x2 PI on the Table 5.3 plant (non-diagonal); VRFT recovers the PI."""
+    """M := closed loop of a known 2x2 PI on the Table 5.3 plant (non-diagonal); VRFT recovers the
+    PI."""
     A = np.array([[0.5, 0.2], [-0.1, 0.8]])
     B = np.array([[0.4, 0.1], [-0.05, 0.6]])
     a, K0 = ex.TABLE53_POLE, ex.TABLE53_K0
@@ -167,16 +173,19 @@ def test_cascade_recovers_inner_pi_and_outer_p():
 def test_invert_controller_round_trip_and_non_minimum_phase():
     cls = pid_class(1, 1, 1.0, ("p", "i"))
     e = np.random.default_rng(0).standard_normal((50, 1))
-    mk = lambda kp, ki: VrftResult(
-        np.r_[kp, ki],
-        [np.array([[kp]]), np.array([[ki]])],
-        cls,
-        "ls",
-        0.0,
-        50,
-        1.0,
-        cls.param_names(),
-    )
+
+    def mk(kp, ki):
+        return VrftResult(
+            np.r_[kp, ki],
+            [np.array([[kp]]), np.array([[ki]])],
+            cls,
+            "ls",
+            0.0,
+            50,
+            1.0,
+            cls.param_names(),
+        )
+
     ok = mk(0.8, 0.3)  # C = (1.1 z - 0.8)/(z - 1): zero 0.727
     u = signal.lfilter([1.1, -0.8], [1.0, -1.0], e[:, 0])[:, None]
     np.testing.assert_allclose(invert_controller(ok, u), e, atol=1e-10)
@@ -193,7 +202,8 @@ def test_lv100_printed_initial_controller_does_not_stabilise_printed_plant():
 
 def test_lv100_eiv_close_to_table52_ls_is_not():
     """Open-loop PRBS, noise var 0.0025, N = 1e4 (Table 5.2 right block). Table 5.2 prints
-    magnitudes; Table 5.1 (VRFT row) gives the (2,2) entry negative, as the plant's DC gain implies."""
+    magnitudes; Table 5.1 (VRFT row) gives the (2,2) entry negative, as the plant's DC gain
+    implies."""
     cls = pid_class(2, 2, ex.LV100_TS, ("p", "i"))
     sign = np.array([[1, 1], [1, -1]])
     kp = sign * np.array([[ex.LV100_T52_KP[(i, j)][0] for j in range(2)] for i in range(2)])
@@ -358,7 +368,8 @@ def test_cli_bad_input_exit_2_one_line(tmp_path, capsys, case):
 
 
 def test_lv100_closed_loop_eiv_needs_external_instrument():
-    """Closed-loop data (Fig. 3.2): u is correlated with the fed-back noise, so the thesis' u-window
+    """Closed-loop data (Fig. 3.2): u is correlated with the fed-back noise, so the thesis'
+    u-window
     instrument (Eq. 3.26) is biased; the injected excitation u_bar as instrument is not."""
     K0 = np.array([[1.0, 0.1], [1.0, -1.0]])  # Eq. (5.2) with row 2 sign-flipped: stabilising
     assert ex.lv100_c0_spectral_radius(K0) < 1.0
@@ -389,7 +400,8 @@ def test_cli_lv100_statistics(tmp_path, capsys):
 
 
 def test_eiv_residual_weight_unbiased_and_cuts_kp11_spread_on_lv100():
-    """Two-step W of Eq. (3.30): still consistent on Table 5.3; on the LV100 it shrinks the spread of
+    """Two-step W of Eq. (3.30): still consistent on Table 5.3; on the LV100 it shrinks the spread
+    of
     the worst-determined parameter Kp(1,1) (Table 5.2: sigma/theta = 0.42) several-fold."""
     cls = pid_class(2, 2, 1.0, ("p", "i"))
     a_star, b_star = ex.table53_ideal_pi()
@@ -427,7 +439,7 @@ def test_eiv_residual_weight_unbiased_and_cuts_kp11_spread_on_lv100():
 
 
 def test_shipped_example_config_runs(tmp_path):
-    from lpv_sysid.cli._paths import config_file
+    from lpv_sysid.default_configs import config_file
 
     t, u, y, _ = ex.table53_data(300, seed=7)
     np.savez(tmp_path / "d.npz", t=t, u=u, y=y)

@@ -81,3 +81,29 @@ def test_report_names_malformed_input(tmp_path):
     assert data.problems["gains"].endswith(
         "gains.yaml: malformed YAML (while parsing a flow sequence)"
     )
+
+
+def test_save_yaml_round_trips_atomically_and_read_located_names_the_line(tmp_path):
+    from lpv_sysid.io.yaml_file import read_located, save_yaml
+
+    doc = {"format": "x@1", "K": [[0.1, -2.5e-7], [3.0, 4.0]], "names": ["a", "b"]}
+    p = tmp_path / "sub" / "f.yaml"
+    save_yaml(doc, p)
+    assert read_located(p) == doc
+    assert "- [0.1, -2.5e-07]" in p.read_text()  # matrix rows in flow style
+    assert [q.name for q in p.parent.iterdir()] == ["f.yaml"]  # no temporary file left
+    p.write_text("a: 1\nb: [1\nc: 2\n")
+    with pytest.raises(ConfigError, match=r"^f\.yaml: malformed YAML at line 3, column 2"):
+        read_located(p)
+
+
+def test_one_sha256_for_every_file_hash(tmp_path):
+    import hashlib
+
+    from lpv_sysid.io import file_hash, formats, recorder
+
+    p = tmp_path / "b.bin"
+    p.write_bytes(b"lpv" * 1000)
+    want = hashlib.sha256(b"lpv" * 1000).hexdigest()
+    assert file_hash.sha256_file(p) == want
+    assert formats.sha256_file is file_hash.sha256_file is recorder.sha256_file

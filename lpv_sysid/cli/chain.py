@@ -29,7 +29,8 @@ artefacts in ``DIR``:
 
 ``lpv-sysid fly phase2 --connect URL --gains G --models M --signals S --out DIR`` flies step 5
 alone (vehicle in the air, armed); ``lpv-sysid chain ... --phase1 OLD/phase1`` reruns steps 2-6
-on the bags of an earlier phase-1 flight (the vehicle still in HOLD). The simulated ``lpv-sysid demo`` / ``make demo`` is unchanged.
+on the bags of an earlier phase-1 flight (the vehicle still in HOLD). The simulated ``lpv-sysid
+demo`` / ``make demo`` is unchanged.
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ from typing import Any, Callable, Mapping, Optional
 
 import numpy as np
 
-from lpv_sysid.cli._paths import config_file
+from lpv_sysid.default_configs import config_file
 from lpv_sysid.errors import ConfigError, LpvSysidError, SafetyError
 
 COMMAND = "chain"
@@ -109,7 +110,8 @@ def load_phase2_law(gains_path: str | Path, models_path: str | Path | None = Non
     gs = GainSchedule.load(gains_path, models_path, layout=None)
     if tuple(gs.state_names) != rp.STATE_NAMES or tuple(gs.input_names) != rp.INPUT_NAMES:
         raise ConfigError(
-            f"{gains_path}: states {list(gs.state_names)} / inputs {list(gs.input_names)} are not the "
+            f"{gains_path}: states {list(gs.state_names)} / inputs {list(gs.input_names)} are not "
+            "the "
             f"rate plant's {list(rp.STATE_NAMES)} / {list(rp.INPUT_NAMES)} (a virtual-actuator "
             "design cannot be flown through SET_ATTITUDE_TARGET rate setpoints)"
         )
@@ -248,8 +250,10 @@ def fly_phase2(
             raise SafetyError(
                 f"phase 2 needs >= {opts.min_height:g} m above home, vehicle at {height:.1f} m"
             )
+        mode = core.machine.vehicle_mode
         echo(
-            f"phase 2: vehicle armed at {height:.1f} m, mode {core.machine.vehicle_mode.name}; "
+            f"phase 2: vehicle armed at {height:.1f} m, mode "
+            f"{mode.name if mode is not None else 'unknown'}; "
             f"signal {T:.1f} s, kappa {opts.kappa:g}, gamma {ctrl.gamma:.4g}, design rate_plant"
         )
         rec = CampaignRecorder(
@@ -332,7 +336,8 @@ def fly_phase2(
             if ok:
                 core.finish(now, opts.finish.upper())
                 echo(
-                    f"[{now - t0:8.2f} s] phase 2: signal complete; hand-back to {opts.finish.upper()}"
+                    f"[{now - t0:8.2f} s] phase 2: signal complete; hand-back to "
+                    f"{opts.finish.upper()}"
                 )
             else:
                 core.abort(now, reason)
@@ -396,60 +401,33 @@ def excitation_gain(
     f_cut: float = 0.3,
     ridge: float = 1e-6,
 ) -> dict:
-    """The u_e -> z gain of seed 0 Eqs. (26)-(29) on flight data, not mixed with tracking error:
-    the part of z explained by the excitation through a causal FIR (lags 0..``lags_s``) fitted
-    by least squares on the high-passed z (below ``f_cut``, the reference band, removed: the
-    tracking error of the slow reference is not the response to u_e). Returns the energy
-    ratio ||z_e||_2 / ||u_e||_2 of the fitted response (the flown signal's Eq. 29 ratio), the
-    peak singular value of the FIR at the frequencies where u_e has power (>= 5 % of its
-    strongest bin; elsewhere the FIR is not determined by the data) -- a lower estimate of the
-    H-inf norm the certificate bounds -- and the fit's R^2."""
-    from scipy.signal import butter, sosfiltfilt
+    """The u_e -> z gain of seed 0 Eqs. (26)-(29) on flight data (uniform grid ``tsig`` at
+    ``fs``), not mixed with tracking error: the part z_e of z explained by the excitation through
+    the FIR regression of :func:`lpv_sysid.sim.excitation_fir.excitation_response_fir`. Returns
+    the energy ratio ||z_e||_2 / ||u_e||_2 over the fitted window (the flown signal's Eq. 29
+    ratio), the FIR's peak gain at the excited frequencies (a lower estimate of the H-inf norm
+    the certificate bounds), the fit's R^2 and the window (rows of ``tsig``)."""
+    from lpv_sysid.sim.excitation_fir import excitation_response_fir
 
-    n, ne = u_e.shape
-    L = max(1, int(round(lags_s * fs)))
-    if n < 4 * L * ne:
-        return {
-            "method": "FIR regression",
-            "error": f"too few samples ({n}) for {L} lags x {ne} inputs",
-        }
-    # the same zero-phase high-pass on z and u_e: the FIR between them is unchanged (LTI
-    # filters commute), the slow tracking error is removed (order 4: -100 dB/decade)
-    sos = butter(4, f_cut, btype="highpass", fs=fs, output="sos")
-    zh = sosfiltfilt(sos, z, axis=0)
-    uh = sosfiltfilt(sos, u_e, axis=0)
-    H = np.zeros((n, ne * L))
-    for lag in range(L):
-        H[lag:, lag * ne : (lag + 1) * ne] = uh[: n - lag]
-    edge = min(int(round(2.0 / f_cut * fs)), n // 6)  # filter transients at both ends dropped
-    rows = slice(L + edge, n - edge)
-    H, zh, uh = H[rows], zh[rows], uh[rows]
-    G = H.T @ H + ridge * np.trace(H.T @ H) / H.shape[1] * np.eye(H.shape[1])
-    theta = np.linalg.solve(G, H.T @ zh)  # (ne L, nz)
-    ze = H @ theta
-    dt = 1.0 / fs
-    Ee = float((uh**2).sum() * dt)  # = ||u_e||^2 for an excitation above f_cut
-    Ez = float((ze**2).sum() * dt)
-    res = zh - ze
-    r2 = 1.0 - float((res**2).sum()) / max(float((zh**2).sum()), 1e-300)
-    h = theta.reshape(L, ne, -1)  # h[lag, input, output]
-    # the FIR is determined only where u_e has power (a multisine: its harmonics): evaluate there
-    spec = (np.abs(np.fft.rfft(u_e, axis=0)) ** 2).sum(axis=1)
-    fb = np.fft.rfftfreq(n, dt)
-    freqs = fb[(spec >= 0.05 * spec.max()) & (fb > f_cut)]
-    smax = 0.0
-    for f in freqs:
-        Hf = np.tensordot(
-            np.exp(-2j * np.pi * f * np.arange(L) * dt), h, axes=(0, 0)
-        ).T  # (nz, ne)
-        smax = max(smax, float(np.linalg.svd(Hf, compute_uv=False)[0]))
+    try:
+        z_e, info = excitation_response_fir(tsig, z, u_e, f_cut, lags_s, fs, ridge)
+    except ConfigError as exc:
+        return {"method": "FIR regression", "error": str(exc)}
+    half = 0.5 / fs
+    a = int(np.searchsorted(tsig, info["window_s"][0] - half))
+    b = int(np.searchsorted(tsig, info["window_s"][1] + half))
+    Ee = float((u_e[a:b] ** 2).sum() / fs)
+    Ez = float((z_e[a:b] ** 2).sum() / fs)
     return {
-        "method": f"FIR regression of high-passed z (> {f_cut:g} Hz) on u_e, {L} lags ({lags_s:g} s)",
+        "method": (
+            f"FIR regression of high-passed z (> {f_cut:g} Hz) on u_e, {info['lags']} lags "
+            f"({lags_s:g} s)"
+        ),
         "energy_ratio": math.sqrt(Ez / Ee) if Ee > 0 else float("nan"),
-        "fir_peak_gain": smax,
-        "fit_r2": r2,
+        "fir_peak_gain": info["fir_peak_gain"],
+        "fit_r2": info["fit_r2"],
         "excitation_energy": Ee,
-        "window": [int(rows.start), int(rows.stop)],
+        "window": [a, b],
     }
 
 
@@ -461,7 +439,8 @@ def inversion_error(
     arm_length: float = 0.225,
     design_magnitudes=(0.01, 0.01, 0.05),
 ) -> dict:
-    """How closely the rate-loop inversion of :class:`~lpv_sysid.mavlink.transport.AttitudeRateTransport`
+    """How closely the rate-loop inversion of
+    :class:`~lpv_sysid.mavlink.transport.AttitudeRateTransport`
     (omega_sp = omega_measured + tau / K_p) can make PX4 apply a commanded virtual torque,
     measured on flown body rates ``omega`` (N, 3) at times ``t``.
 
@@ -574,7 +553,7 @@ def chain(
     from lpv_sysid.cli.fly import FlyConfig, fly
     from lpv_sysid.cli.main import main as cli_main
     from lpv_sysid.ident import rate_plant as rid
-    from lpv_sysid.synthesis.files import save_yaml
+    from lpv_sysid.io.yaml_file import save_yaml
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -593,10 +572,10 @@ def chain(
     if phase1_dir is not None:
         step(f"phase-1 bags of an earlier flight ({phase1_dir})")
         p1 = Path(phase1_dir)
-        import yaml
+        from lpv_sysid.io.yaml_file import read_yaml_mapping
 
         cs = (
-            yaml.safe_load((p1 / "campaign_summary.yaml").read_text())
+            read_yaml_mapping(p1 / "campaign_summary.yaml", finite=False)
             if (p1 / "campaign_summary.yaml").exists()
             else {}
         )
@@ -641,7 +620,8 @@ def chain(
         return EXIT_FAILED
     if res.status:
         echo(
-            f"  phase 1 ended early ({res.reason}); identifying from the {len(usable)} usable run(s), "
+            f"  phase 1 ended early ({res.reason}); identifying from the {len(usable)} usable "
+            "run(s), "
             "phase 2 will not be flown"
         )
     step("rate-plant identification (pooled equation error)")
@@ -667,7 +647,8 @@ def chain(
     r20 = [r for r in inv["by_delay"] if abs(r["delay_s"] - 0.02) < 1e-9]
     if r20:
         echo(
-            "  rate-loop inversion (AttitudeRateTransport) on this flight: torque error at 20 ms telemetry age "
+            "  rate-loop inversion (AttitudeRateTransport) on this flight: torque error at 20 ms "
+            "telemetry age "
             + ", ".join(
                 f"{a} {e:.3g} ({q:.1f} x design)"
                 for a, e, q in zip(
@@ -712,6 +693,7 @@ def chain(
             _report(out, summary, None, rep)
             return EXIT_FAILED
     _mark_design(out / "gains.yaml")
+    cli_main(["verify", "--gains", f"{out}/gains.yaml", "--models", f"{out}/vertex_models.yaml"])
     if res.status:
         # models and gains from the usable runs are written; flying phase 2 after a phase-1 fault
         # (stall, envelope, failsafe) would start from a state nobody checked
@@ -792,7 +774,8 @@ def format_identification(rep: dict) -> str:
         extra = ""
         if "delay_s" in d:
             extra = (
-                f"bandwidth {d['bandwidth_rad_s']:.2f} rad/s, best delay {d['delay_s']:.2f} s, free-fit DC gain "
+                f"bandwidth {d['bandwidth_rad_s']:.2f} rad/s, best delay {d['delay_s']:.2f} s, "
+                "free-fit DC gain "
                 f"{d['unconstrained']['dc_gain']}"
             )
         lines.append(f"  {row:<5} {d['r2']:.3f}   {extra}")
@@ -807,8 +790,10 @@ def _report(out: Path, summary: dict, p2: Optional[dict], rep: dict) -> None:
     L = [
         "# PX4 chain report",
         "",
-        "Design (plant) of every flight: phase 1 = PX4's own velocity/attitude/rate cascade (velocity "
-        "setpoints); phase 2 = **rate plant** (PX4 rate loop inside the LPV model; inputs thrust + body-rate "
+        "Design (plant) of every flight: phase 1 = PX4's own velocity/attitude/rate cascade "
+        "(velocity "
+        "setpoints); phase 2 = **rate plant** (PX4 rate loop inside the LPV model; inputs thrust "
+        "+ body-rate "
         "setpoints sent as SET_ATTITUDE_TARGET; lpv_sysid/models/rate_plant.py).",
         "",
         f"Vehicle: `{summary.get('connect')}`. Result: **{summary.get('result')}**.",
@@ -839,7 +824,8 @@ def _report(out: Path, summary: dict, p2: Optional[dict], rep: dict) -> None:
             "",
             f"## Why the rate plant (measured on this flight's phase-1 run `{inv.get('run')}`)",
             "",
-            "Torque error of the rate-loop inversion omega_sp = omega + tau/K_p, K_p (omega(t-d) - omega(t)) rms "
+            "Torque error of the rate-loop inversion omega_sp = omega + tau/K_p, K_p (omega(t-d) "
+            "- omega(t)) rms "
             "(PX4 normalised torque), against the seed's design virtual torques "
             f"{', '.join(f'{x:.3g}' for x in inv['design_torque'])} (roll, pitch, yaw):",
             "",
@@ -885,18 +871,22 @@ def _report(out: Path, summary: dict, p2: Optional[dict], rep: dict) -> None:
             L += [
                 "",
                 f"u_e -> z (seed 0 Eqs. 26-29; {gi.get('method')}): energy ratio "
-                f"{gi.get('energy_ratio', float('nan')):.4g}, FIR peak gain {gi.get('fir_peak_gain', float('nan')):.4g}, "
+                f"{gi.get('energy_ratio', float('nan')):.4g}, FIR peak gain "
+                f"{gi.get('fir_peak_gain', float('nan')):.4g}, "
                 f"fit R^2 {gi.get('fit_r2', float('nan')):.3f} vs gamma {gi['gamma']:.4g} -> "
-                f"{'within' if gi['within_gamma'] else 'NOT within'} gamma. Raw ||z||/||u_e|| mixed with tracking "
+                f"{'within' if gi['within_gamma'] else 'NOT within'} gamma. Raw ||z||/||u_e|| "
+                "mixed with tracking "
                 f"error (for reference only): {p2['raw_ratio_mixed_with_tracking']:.4g}.",
-                f"Commands clipped by the transport: {p2['commands_clipped']} of {p2['commands']}; control rate "
+                f"Commands clipped by the transport: {p2['commands_clipped']} of "
+                f"{p2['commands']}; control rate "
                 f"{p2['control_rate_hz']:.1f} Hz; signal flown {p2['flown_signal_s']:.1f} s.",
             ]
         mc = p2.get("model_check_r2")
         if mc:
             L += [
                 "",
-                "Identified rate plant (phase-1 data) against the phase-2 flight (rate setpoints from the "
+                "Identified rate plant (phase-1 data) against the phase-2 flight (rate setpoints "
+                "from the "
                 "law), R^2 of x' per row: " + ", ".join(f"{k} {v}" for k, v in mc.items()),
             ]
     (out / "report.md").write_text("\n".join(L) + "\n")
@@ -927,8 +917,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--phase1",
         default=None,
         metavar="DIR",
-        help="use the bags of an earlier phase-1 flight (its DIR/phase1) instead of flying phase 1; "
-        "the vehicle must be armed and in the air (HOLD) for phase 2",
+        help="use the bags of an earlier phase-1 flight (its DIR/phase1) instead of flying "
+        "phase 1; the vehicle must be armed and in the air (HOLD) for phase 2",
     )
     parser.add_argument(
         "--k-sigma",

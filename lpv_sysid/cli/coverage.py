@@ -71,7 +71,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import yaml
 
-    from lpv_sysid.cli._paths import config_file
+    from lpv_sysid.default_configs import config_file
     from lpv_sysid.cli.identify import load_config
     from lpv_sysid.errors import ConfigError
     from lpv_sysid.ident import coverage as cv
@@ -114,11 +114,13 @@ def run(args: argparse.Namespace) -> int:
     (out / "coverage.md").write_text(
         f"{table}\n\nAll: {o['covered']} of {o['elements']} identified elements within "
         f"{doc['study']['k_sigma']:g} sigma ({100 * o['fraction']:.2f} %; a calibrated Gaussian "
-        f"estimate: {100 * o['expected_fraction']:.2f} %), z mean {o['z_mean']:+.3f}, z std {o['z_std']:.3f}.\n"
+        f"estimate: {100 * o['expected_fraction']:.2f} %), z mean {o['z_mean']:+.3f}, z std "
+        f"{o['z_std']:.3f}.\n"
     )
     print(table)
     print(
-        f"all: {o['covered']}/{o['elements']} = {100 * o['fraction']:.2f} % within {doc['study']['k_sigma']:g} "
+        f"all: {o['covered']}/{o['elements']} = {100 * o['fraction']:.2f} % within "
+        f"{doc['study']['k_sigma']:g} "
         f"sigma (calibrated: {100 * o['expected_fraction']:.2f} %), z std {o['z_std']:.3f}; "
         f"{time.perf_counter() - t0:.0f} s"
     )

@@ -13,10 +13,11 @@ from __future__ import annotations
 
 import argparse
 import logging
+import sys
 import time
 from pathlib import Path
 
-from lpv_sysid.cli._paths import config_file
+from lpv_sysid.default_configs import config_file
 from lpv_sysid.errors import LpvSysidError
 
 COMMAND = "demo"
@@ -148,15 +149,18 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     steps = plan(out, args.quick, args.kappa)
     t_start = time.monotonic()
+    verbosity = ["-v"] * getattr(args, "verbose", 0)  # a step's traceback with the demo's -v
     for k, (title, argv) in enumerate(steps, 1):
-        print(f"\n[{k}/{len(steps)}] {title}\n$ lpv-sysid {' '.join(argv)}", flush=True)
+        sys.stdout.flush()  # progress (stderr) after the previous step's results (stdout)
+        log.info("[%d/%d] %s: lpv-sysid %s", k, len(steps), title, " ".join(argv))
         t0 = time.monotonic()
-        rc = cli_main(argv)
+        rc = cli_main(verbosity + argv)
         if rc != 0:
             raise LpvSysidError(
                 f"step {k} ({title}) failed with exit status {rc}; artefacts so far are in {out}"
             )
-        print(f"[{k}/{len(steps)}] done in {time.monotonic() - t0:.1f} s", flush=True)
+        sys.stdout.flush()
+        log.info("[%d/%d] done in %.1f s", k, len(steps), time.monotonic() - t0)
     print(f"\ndemo finished in {time.monotonic() - t_start:.0f} s")
     print(f"gains file: {out / 'gains.yaml'}")
     print(f"report:     {out / 'report' / 'report.md'}")

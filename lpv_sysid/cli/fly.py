@@ -44,13 +44,17 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import TYPE_CHECKING, Any, Callable, Mapping
 
 from lpv_sysid.errors import ConfigError, LpvSysidError, SafetyError
 
+if TYPE_CHECKING:
+    import numpy as np  # annotations only: the CLI imports numpy when a command runs
+
 COMMAND = "fly"
 HELP = (
-    "fly on a PX4 vehicle over MAVLink: phase1 = campaign (take-off, vertices, hover, land, rosbag2); "
+    "fly on a PX4 vehicle over MAVLink: phase1 = campaign (take-off, vertices, hover, land, "
+    "rosbag2); "
     "phase2 = LPV law on the rate plant (lpv_sysid/cli/chain.py)"
 )
 
@@ -67,7 +71,8 @@ TOPICS = (
     "status",
 )
 #: with ``record_rate_setpoints``: PX4's ATTITUDE_TARGET (thrust + body-rate setpoints of its own
-#: cascade) as a JointState (names ``transport.RATE_INPUT_NAMES``, ``position``), receive-time stamps
+#: cascade) as a JointState (names ``transport.RATE_INPUT_NAMES``, ``position``), receive-time
+#: stamps
 RATE_TOPIC = "rate_setpoint"
 EXIT_FAILED = 1
 EXIT_INTERRUPTED = 130
@@ -105,7 +110,7 @@ class FlyConfig:
         cls, d: Mapping[str, Any], base: str | Path = ".", source: str = ""
     ) -> "FlyConfig":
         from lpv_sysid.control.campaign import CampaignConfig
-        from lpv_sysid.validation import check_keys, is_finite_number
+        from lpv_sysid.config_fields import check_keys, is_finite_number
 
         where = source or "campaign config"
         check_keys(d, cls.KEYS, where, list_allowed=True)
@@ -166,7 +171,9 @@ class FlyConfig:
         return cls.from_dict(d, Path(path).resolve().parent, str(path))
 
 
-def load_signals(path: str | None, signals_config: str) -> tuple:
+def load_signals(
+    path: str | None, signals_config: str
+) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
     """The phase-1 excitation table ``(t, u, names)``: ``signals.npz`` when given, else
     designed from the signal config (``lpv-sysid signals``)."""
     from lpv_sysid.signals.store import load_npz
@@ -306,14 +313,14 @@ class CampaignRecorder:
         description="",
         rate_setpoints: bool = False,
     ) -> None:
-        from lpv_sysid.io import messages as M
+        from lpv_sysid.io import messages
         from lpv_sysid.io.recorder import Recorder, RecorderConfig
 
-        self.M = M
-        self.f = M.MsgFactory.rosbags()
-        topics = {f"{NAMESPACE}/{n}": M.TYPES[n] for n in TOPICS}
+        self.messages = messages
+        self.f = messages.MsgFactory.rosbags()
+        topics = {f"{NAMESPACE}/{n}": messages.TYPES[n] for n in TOPICS}
         if rate_setpoints:
-            topics[f"{NAMESPACE}/{RATE_TOPIC}"] = M.TYPES["actuator_command"]  # JointState
+            topics[f"{NAMESPACE}/{RATE_TOPIC}"] = messages.TYPES["actuator_command"]  # JointState
         self.runs = Recorder(
             RecorderConfig(
                 out_dir=str(out_dir),
@@ -370,34 +377,43 @@ class CampaignRecorder:
     def state(self, t: float, pos_ned, euler, v_body, omega) -> None:
         st = _ns(t)
         self._write(
-            "state", st, self.M.odometry_from_state(self.f, st, pos_ned, euler, v_body, omega)
+            "state",
+            st,
+            self.messages.odometry_from_state(self.f, st, pos_ned, euler, v_body, omega),
         )
 
     def imu(self, t: float, accel_frd, gyro_frd) -> None:
         st = _ns(t)
-        self._write("imu", st, self.M.imu_msg(self.f, st, accel_frd, gyro_frd))
+        self._write("imu", st, self.messages.imu_msg(self.f, st, accel_frd, gyro_frd))
 
     def rotors(self, t: float, omega, source: str = "esc") -> None:
         st = _ns(t)
-        self._write("rotor_speeds", st, self.M.rotor_speeds_msg(self.f, st, omega, source))
+        self._write("rotor_speeds", st, self.messages.rotor_speeds_msg(self.f, st, omega, source))
 
     def rate_setpoint(self, t: float, u) -> None:
-        """(thrust, p_sp, q_sp, r_sp) on ``rate_setpoint`` (PX4's ATTITUDE_TARGET or our command)."""
+        """(thrust, p_sp, q_sp, r_sp) on ``rate_setpoint`` (PX4's ATTITUDE_TARGET or our
+        command)."""
         from lpv_sysid.mavlink.transport import RATE_INPUT_NAMES
 
         st = _ns(t)
-        self._write(RATE_TOPIC, st, self.M.joint_state(self.f, st, RATE_INPUT_NAMES, position=u))
+        self._write(
+            RATE_TOPIC, st, self.messages.joint_state(self.f, st, RATE_INPUT_NAMES, position=u)
+        )
 
     def reference(self, t: float, v, r: float) -> None:
         st = _ns(t)
-        self._write("velocity_reference", st, self.M.twist_reference_msg(self.f, st, v, r))
-        self._write("excitation", st, self.M.excitation_msg(self.f, st, (0.0, 0.0, 0.0, 0.0)))
+        self._write("velocity_reference", st, self.messages.twist_reference_msg(self.f, st, v, r))
+        self._write(
+            "excitation", st, self.messages.excitation_msg(self.f, st, (0.0, 0.0, 0.0, 0.0))
+        )
 
     def status(self, t: float, level: str, message: str, values: Mapping[str, Any]) -> None:
         st = _ns(t)
         lv = {"info": "OK", "warn": "WARN", "error": "ERROR"}.get(level, level)
-        msg = self.M.diagnostic_array(
-            self.f, st, [self.M.diagnostic_status(self.f, lv, "lpv_sysid/fly", message, values)]
+        msg = self.messages.diagnostic_array(
+            self.f,
+            st,
+            [self.messages.diagnostic_status(self.f, lv, "lpv_sysid/fly", message, values)],
         )
         self._write("status", st, msg)
 
@@ -543,7 +559,7 @@ class FlightRunner:
 
     # ------------------------------------------------------------------ loop
     def run(self) -> None:
-        from lpv_sysid.control import campaign as C
+        from lpv_sysid.control import campaign
         from lpv_sysid.mavlink.telemetry import ImuSample, RotorSample, StateSample
 
         c, b = self.campaign, self.bridge
@@ -566,7 +582,7 @@ class FlightRunner:
                     f"loop stalled {gap:.3f} s (> {warn_gap:.3f} s = half the "
                     "bridge input_timeout): the companion computer is overloaded",
                 )
-            if self.interrupts > self._interrupts_handled and c.phase not in C.TERMINAL:
+            if self.interrupts > self._interrupts_handled and c.phase not in campaign.TERMINAL:
                 self._interrupts_handled = self.interrupts
                 if self.interrupts >= 2:
                     self._bridge_events(now, b.shutdown(now))
@@ -624,21 +640,21 @@ class FlightRunner:
             self._event(getattr(ev, "t", now), "bridge", level, text, show=moved)
 
     def _handle(self, now: float, co) -> None:
-        from lpv_sysid.control import campaign as C
+        from lpv_sysid.control import campaign
 
         b = self.bridge
         for ev in co.events:
             self._event(ev.t, "campaign", ev.level, f"{ev.phase}: {ev.message}")
         for a in co.actions:
-            if isinstance(a, C.StartBridge):
+            if isinstance(a, campaign.StartBridge):
                 self._bridge_events(now, b.start(now))
-            elif isinstance(a, C.AbortBridge):
+            elif isinstance(a, campaign.AbortBridge):
                 self._bridge_events(now, b.abort(now, a.reason))
-            elif isinstance(a, C.FinishBridge):
+            elif isinstance(a, campaign.FinishBridge):
                 self._bridge_events(now, b.finish(now, a.mode))
-            elif isinstance(a, C.ActivateFloor):
+            elif isinstance(a, campaign.ActivateFloor):
                 b.envelope.activate_floor(now, a.reason)
-            elif isinstance(a, C.RunStarted):
+            elif isinstance(a, campaign.RunStarted):
                 if self.rec is not None:
                     self._safe(
                         lambda a=a: self.echo(
@@ -646,7 +662,7 @@ class FlightRunner:
                             f"{self.rec.begin_run(a.run.name)}"
                         )
                     )
-            elif isinstance(a, C.RunEnded):
+            elif isinstance(a, campaign.RunEnded):
                 if self.rec is not None:
                     self.rec.end_run()
         if co.command is not None and not self.campaign.finished:
@@ -733,7 +749,8 @@ def fly(
     echo(
         f"fly phase1: {len(plan.runs)} runs, excitation {prof.duration:.1f} s (peaks u v w "
         f"{' '.join(f'{p:.2f}' for p in prof.peak)} m/s, r {prof.yaw_peak:.2f} rad/s), window "
-        f"[{ccfg.altitude_min:g}, {ccfg.altitude_max:g}] m, envelope floor {bcfg.envelope.floor:g} m "
+        f"[{ccfg.altitude_min:g}, {ccfg.altitude_max:g}] m, envelope floor "
+        f"{bcfg.envelope.floor:g} m "
         f"ceiling {bcfg.envelope.ceiling:g} m radius {bcfg.envelope.radius:g} m"
     )
     echo(plan.describe())
@@ -871,8 +888,10 @@ def _write_outputs(out: Path, summary: dict, c, ident_template: dict, plan, trim
     )
     ident["identification"] = sect
     (out / "identification.yaml").write_text(
-        "# written by `lpv-sysid fly phase1`: the identification config with the campaign's box and\n"
-        f"# trim duration; lpv-sysid identify --bags {out} --config {out / 'identification.yaml'} --out "
+        "# written by `lpv-sysid fly phase1`: the identification config with the campaign's box "
+        "and\n"
+        f"# trim duration; lpv-sysid identify --bags {out} --config {out / 'identification.yaml'} "
+        "--out "
         "vertex_models.yaml\n" + yaml.safe_dump(ident, sort_keys=False)
     )
 
@@ -1011,7 +1030,8 @@ def run(args: argparse.Namespace) -> int:
             opts=Phase2Options(kappa=args.kappa, finish=args.finish),
         )
         print(
-            f"phase 2 {'complete' if s.get('ok') else 'FAILED'}: {s.get('reason')}; {args.out / 'phase2_summary.yaml'}"
+            f"phase 2 {'complete' if s.get('ok') else 'FAILED'}: {s.get('reason')}; "
+            f"{args.out / 'phase2_summary.yaml'}"
         )
         return 0 if s.get("ok") else EXIT_FAILED
     cfg = FlyConfig.load(args.config)
@@ -1039,11 +1059,13 @@ def run(args: argparse.Namespace) -> int:
         print(f"lpv-sysid fly: {res.phase}: {res.reason}", file=sys.stderr)
     else:
         print(
-            f"wrote {res.out_dir}: {len(res.summary.get('bags', {}))} bags, campaign_summary.yaml, "
+            f"wrote {res.out_dir}: {len(res.summary.get('bags', {}))} bags, "
+            "campaign_summary.yaml, "
             f"trims.yaml, identification.yaml"
         )
         print(
-            f"next: lpv-sysid identify --bags {res.out_dir} --config {Path(res.out_dir) / 'identification.yaml'} "
+            f"next: lpv-sysid identify --bags {res.out_dir} --config "
+            f"{Path(res.out_dir) / 'identification.yaml'} "
             f"--out vertex_models.yaml"
         )
     return res.status

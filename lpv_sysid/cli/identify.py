@@ -126,7 +126,8 @@ def format_uncertainty_summary(results, cfg) -> str:
         m = r.motor.get("mode", "known")
         if m == "identified":
             mot = (
-                f"a_Omega {-r.fit.A[8, 8]:.4g} +/- {r.fit.std_A[8, 8]:.2g}, b_Omega {r.fit.B[8, 0]:.5g} +/- "
+                f"a_Omega {-r.fit.A[8, 8]:.4g} +/- {r.fit.std_A[8, 8]:.2g}, b_Omega "
+                f"{r.fit.B[8, 0]:.5g} +/- "
                 f"{r.fit.std_B[8, 0]:.3g}, latency {1e3 * r.motor.get('delay', 0.0):.3f} ms"
             )
         elif m == "prior":
@@ -161,7 +162,8 @@ def run(args: argparse.Namespace) -> int:
         cfg = dataclasses.replace(cfg, quadrotor=quadrotor_section(args.quadrotor))
     bags = dp.find_bags(args.bags)
     centre = 0.5 * (np.asarray(cfg.vmin) + np.asarray(cfg.vmax))
-    vertices, validation = {}, None
+    vertices: dict[tuple[float, ...], dp.VertexData] = {}
+    validation = None
     for bag in bags:
         aligned = dp.align(dp.streams_from_bag(bag), cfg)
         v_d = dp.snap_to_box(aligned.vertex.scheduling, cfg)
@@ -196,7 +198,10 @@ def run(args: argparse.Namespace) -> int:
     print(
         dp.format_table1(
             [
-                (r.scheduling, dp.trim_row(r.x_flown if r.x_flown is not None else r.x0))
+                (
+                    [float(c) for c in r.scheduling],
+                    dp.trim_row(r.x_flown if r.x_flown is not None else r.x0),
+                )
                 for r in results
             ]
         )
@@ -206,7 +211,11 @@ def run(args: argparse.Namespace) -> int:
         print(
             "Equilibria of the identified models at the flown velocities (the models' x0, Eq. 13)"
         )
-        print(dp.format_table1([(r.scheduling, dp.trim_row(r.x0)) for r in results]))
+        print(
+            dp.format_table1(
+                [([float(c) for c in r.scheduling], dp.trim_row(r.x0)) for r in results]
+            )
+        )
         print()
         print(format_offset_table(results))
     print()

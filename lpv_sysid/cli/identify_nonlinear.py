@@ -197,7 +197,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"{'K':>12} {'regression':>13} {'refined':>13} {'std':>11}")
         for k in free:
             print(
-                f"{k:>12} {res.K[k]:13.5e} {oe.K[k]:13.5e} {oe.refined_std.get(k, float('nan')):11.3e}"
+                f"{k:>12} {res.K[k]:13.5e} {oe.K[k]:13.5e} "
+                f"{oe.refined_std.get(k, float('nan')):11.3e}"
             )
         doc["refined"] = {
             "method": "output error, short segments (seed 2 Sec. 4)",

@@ -13,11 +13,18 @@ exception escaping a subcommand (``OSError``, ``MemoryError``, ``RecursionError`
 is described with its type and the input files of the command; its traceback is logged only
 with ``-v``. Status 1 therefore always means a subcommand's own verdict, never a crash.
 Ctrl-C gives one line and status 130.
+
+Logging is configured here, once per run (:func:`logging_level`, :func:`configured_logging`):
+INFO by default (progress of the long steps), DEBUG with ``-v``, WARNING with ``-q``
+(ERROR with ``-qq``), one ``LEVEL logger: message`` line per record on stderr; stdout stays
+the command's results. A subcommand that runs others through :func:`main` (``demo``) keeps
+the outer run's logging.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import logging
 import os
@@ -27,7 +34,7 @@ import traceback
 import warnings
 from pathlib import Path
 from types import ModuleType
-from typing import Sequence
+from typing import Iterator, NoReturn, Sequence
 
 from lpv_sysid import __version__
 from lpv_sysid.errors import LpvSysidError
@@ -35,11 +42,19 @@ from lpv_sysid.errors import LpvSysidError
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130
 
+#: format of a log line on stderr
+LOG_FORMAT = "%(levelname)s %(name)s: %(message)s"
+
+log = logging.getLogger(__name__)
+
+#: set while :func:`configured_logging` is in force (a nested :func:`main` leaves it alone)
+_logging_configured = False
+
 
 class _Parser(argparse.ArgumentParser):
     """ArgumentParser whose usage errors are one line and exit 2."""
 
-    def error(self, message: str) -> None:  # noqa: D401 - argparse API
+    def error(self, message: str) -> NoReturn:  # argparse API: never returns
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
 
 
@@ -61,10 +76,23 @@ def discover_commands() -> dict[str, ModuleType]:
     return commands
 
 
+DESCRIPTION = (
+    "Safe large-domain system identification of an unstable multirotor with robust LPV "
+    "control (Hopwood & Woolsey): the offline commands. Global options go before COMMAND "
+    "(lpv-sysid -v COMMAND ...)."
+)
+
+
 def build_parser(commands: dict[str, ModuleType]) -> argparse.ArgumentParser:
-    parser = _Parser(prog="lpv-sysid", description=__doc__.splitlines()[0])
+    parser = _Parser(prog="lpv-sysid", description=DESCRIPTION)
     parser.add_argument("--version", action="version", version=f"lpv_sysid {__version__}")
-    parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output")
+    loud = parser.add_mutually_exclusive_group()
+    loud.add_argument(
+        "-v", "--verbose", action="count", default=0, help="debug log output (default: INFO)"
+    )
+    loud.add_argument(
+        "-q", "--quiet", action="count", default=0, help="warnings only (-qq: errors only)"
+    )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name, module in sorted(commands.items()):
         p = sub.add_parser(name, help=module.HELP, description=module.HELP)
@@ -93,13 +121,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     commands = discover_commands()
     parser = build_parser(commands)
     args = parser.parse_args(argv)
-    logging.basicConfig(
-        level=logging.WARNING - 10 * min(args.verbose, 2) if args.verbose else logging.INFO,
-        format="%(levelname)s %(name)s: %(message)s",
-    )
     if args.command is None:
         parser.print_help()
         return EXIT_BAD_INPUT
+    with configured_logging(logging_level(args.verbose, args.quiet)):
+        log.debug(
+            "lpv_sysid %s (Python %s) from %s: %s",
+            __version__,
+            sys.version.split()[0],
+            Path(__file__).resolve().parents[1],
+            args.command,
+        )
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
+    """``args._run(args)`` with the exit-status layer (module docstring)."""
     shown = warnings.showwarning
     warnings.showwarning = _warning_line  # a Python warning is one log line, not source text
     try:
@@ -114,6 +151,44 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _fail(args, describe_unexpected(exc, _inputs(args)))
     finally:
         warnings.showwarning = shown
+
+
+def logging_level(verbose: int = 0, quiet: int = 0) -> int:
+    """The root log level for ``-v`` x ``verbose`` / ``-q`` x ``quiet``: INFO by default,
+    DEBUG with ``-v``, WARNING with ``-q``, ERROR with ``-qq``."""
+    if verbose:
+        return logging.DEBUG
+    return min(logging.INFO + 10 * quiet, logging.ERROR)
+
+
+@contextlib.contextmanager
+def configured_logging(level: int) -> Iterator[None]:
+    """Root logger at ``level`` for the duration of one run, restored afterwards.
+
+    A stderr handler (:data:`LOG_FORMAT`) is added only when the root logger has none: an
+    application that calls :func:`main` with its own logging set up (pytest's capture,
+    a ROS launch) keeps its handlers and only gets the level. Inside a run (a nested
+    :func:`main`) nothing changes."""
+    global _logging_configured
+    if _logging_configured:
+        yield
+        return
+    root = logging.getLogger()
+    previous = root.level
+    handler = None
+    if not root.handlers:
+        handler = logging.StreamHandler()
+        handler.setFormatter(logging.Formatter(LOG_FORMAT))
+        root.addHandler(handler)
+    root.setLevel(level)
+    _logging_configured = True
+    try:
+        yield
+    finally:
+        _logging_configured = False
+        root.setLevel(previous)
+        if handler is not None:
+            root.removeHandler(handler)
 
 
 def _warning_line(message, category, filename, lineno, file=None, line=None) -> None:
@@ -146,7 +221,8 @@ def one_line(message: str) -> str:
     text = "; ".join(parts) if parts else "(no message)"
     if len(text) > MAX_MESSAGE:
         cut = len(text) - MAX_MESSAGE
-        text = f"{text[: MAX_MESSAGE // 2]} ... ({cut} characters omitted) ... {text[-MAX_MESSAGE // 2 :]}"
+        head, tail = text[: MAX_MESSAGE // 2], text[-MAX_MESSAGE // 2 :]
+        text = f"{head} ... ({cut} characters omitted) ... {tail}"
     return text
 
 

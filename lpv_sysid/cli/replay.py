@@ -7,7 +7,11 @@ The node's message-level runtime (the same code the node runs,
 :mod:`lpv_sysid.nodes.controller_runtime`) receives the bag's input messages in
 timestamp order (bag receive time) and its timer ticks at ``rate_hz`` on the bag's clock;
 what it would have published (``actuator_command``, abort ``status``) is written to a new
-bag. The runtime is started at the first input message, as with ``auto_start``. The
+bag. Ticks follow the node's ``tick_source``: ``timer`` steps the law at each timer tick
+(one command per tick once every input has arrived: about one per state sample at 250 Hz
+state and ``rate_hz`` 250), ``state`` steps it on each new state sample at its stamp (one
+command per state sample) while the timer only judges staleness. The runtime is started
+at the first input message, as with ``auto_start``. The
 parameter file goes through the node's own declaration and validation
 (:class:`~lpv_sysid.nodes.controller_runtime.ControllerSettings`: the same types, ranges and
 cross-field rules, so a value the node would refuse is refused here too), and the gains
@@ -23,6 +27,7 @@ import heapq
 import logging
 import os
 from pathlib import Path
+from typing import Any
 
 from lpv_sysid.errors import BagError, ConfigError
 
@@ -77,8 +82,8 @@ def read_inputs(path: str, topics: list[str], optional: str | None = None):
     the stamps of the ``optional`` topic (empty when not recorded)."""
     from lpv_sysid.io.bag import read_bag
 
-    per_topic = {t: [] for t in topics}
-    extra = []
+    per_topic: dict[str, list[tuple[int, Any]]] = {t: [] for t in topics}
+    extra: list[int] = []
     want = topics + ([optional] if optional else [])
     for part in bag_directories(path):
         # only the inputs (and the optional topic) are deserialised, not e.g. imu
@@ -137,7 +142,9 @@ def replay_controller(
     )
     if ticks == "recorded" and not recorded:
         raise BagError(f"bag {bag}: --ticks recorded needs {ns}/actuator_command in the bag")
-    use_recorded = ticks == "recorded" or (ticks == "auto" and bool(recorded))
+    use_recorded = settings.tick_source == "timer" and (
+        ticks == "recorded" or (ticks == "auto" and bool(recorded))
+    )
     if not inputs:
         raise BagError(f"bag {bag}: the input topics hold no messages")
     rt = ControllerRuntime(settings, M.MsgFactory.rosbags(), f"{ns}/lpv_controller")
@@ -162,13 +169,16 @@ def replay_controller(
         for topic, typ in outputs.items():
             w.add_topic(topic, typ)
 
-        def tick(t_ns):
-            for rel, msg in rt.tick(t_ns * 1e-9):
+        def publish(t_ns, outs):
+            for rel, msg in outs:
                 w.write(f"{ns}/{rel}", t_ns, msg)
                 n_out[f"{ns}/{rel}"] += 1
             drain()
 
-        # tick times: the recorded command stamps (then the grid continues after them)
+        # the node's timer: the law step (tick_source timer) or only the staleness watch
+        # (tick_source state: the law steps on each state sample, below, as in the node).
+        # Its times: the recorded command stamps (then the grid continues after them); with
+        # tick_source state the recorded commands are the state stamps, so the grid is the rate
         grid = iter(recorded if use_recorded else ())
         state = {"next": next(grid, t0 + period)}
 
@@ -178,12 +188,13 @@ def replay_controller(
 
         for stamp, topic, msg in inputs:
             while state["next"] <= stamp:
-                tick(state["next"])
+                publish(state["next"], rt.on_timer(state["next"] * 1e-9))
                 advance()
             if isinstance(msg, tuple):
-                rt.on_sample(topic, msg[0], msg[1], stamp * 1e-9)
+                outs = rt.on_parsed_input(topic, msg[0], msg[1], stamp * 1e-9)
             else:
-                rt.on_message(topic, msg, stamp * 1e-9)
+                outs = rt.on_input(topic, msg, stamp * 1e-9)
+            publish(stamp, outs)
         last = inputs[-1][0]  # no tick after the recording ends
         w.write(f"{ns}/status", last, rt.status(last * 1e-9))
         n_out[f"{ns}/status"] += 1
@@ -196,7 +207,9 @@ def replay_controller(
         "event": ev,
         "gain_estimate": rt.law.gain(),
         "gamma": rt.law.gamma,
-        "ticks": "recorded" if use_recorded else "rate",
+        "ticks": "state"
+        if settings.tick_source == "state"
+        else ("recorded" if use_recorded else "rate"),
     }
 
 

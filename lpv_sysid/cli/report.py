@@ -1,4 +1,7 @@
-"""`lpv-sysid report`: Markdown report (+ PNG figures) of a run directory."""
+"""`lpv-sysid report`: Markdown report (+ PNG figures) of a run directory.
+
+Opens with the go/no-go table (:mod:`lpv_sysid.report.gonogo`); the verification result is
+read from ``RUN/verification.yaml`` (absent: "not verified", NO-GO)."""
 
 from __future__ import annotations
 
@@ -21,7 +24,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--no-verify",
         action="store_true",
-        help="do not re-run the independent verifier when verification.yaml is absent",
+        help="accepted for compatibility, no effect: the report reads verification.yaml "
+        "(`lpv-sysid verify` writes it) and never re-runs the verifier",
     )
     parser.add_argument(
         "--strict", action="store_true", help="exit 2 when an input file exists but cannot be read"

@@ -8,7 +8,10 @@ import os
 import time
 
 COMMAND = "signals"
-HELP = "design orthogonal phase-optimised multisines (seed 0 Sec. V) and write signals.npz, summary.yaml, signals.png"
+HELP = (
+    "design orthogonal phase-optimised multisines (seed 0 Sec. V) and write signals.npz, "
+    "summary.yaml, signals.png"
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -15,7 +15,10 @@ from pathlib import Path
 from lpv_sysid.errors import ConfigError
 
 COMMAND = "simulate"
-HELP = "simulate the phase-1 (baseline control) or phase-2 (LPV control) experiment and write rosbag2 logs"
+HELP = (
+    "simulate the phase-1 (baseline control) or phase-2 (LPV control) experiment and write "
+    "rosbag2 logs"
+)
 
 log = logging.getLogger(__name__)
 

@@ -1,6 +1,7 @@
 """`lpv-sysid verify`: re-check a gains certificate without trusting the LMI solver.
 
-    lpv-sysid verify --gains gains.yaml --models vertex_models.yaml [--full-box 200] [--strict-full-box]
+    lpv-sysid verify --gains gains.yaml --models vertex_models.yaml [--full-box 200]
+        [--strict-full-box] [--out verification.yaml]
 
 Frozen-parameter closed-loop H-infinity norms (Hamiltonian bisection) at every vertex and
 uncertainty corner and at random interior scheduling points, closed-loop eigenvalues in the
@@ -12,21 +13,30 @@ systems inside the box, and the scheduling claim (frozen / arbitrary / rate-boun
 
 ``--full-box N`` (default 200, 0 disables) adds an *empirical* Monte Carlo check against the FULL
 identified uncertainty (every identified element in its Eq. 22 interval;
-:mod:`lpv_sysid.synthesis.verify` item 5). For a reduced-polytope certificate, which does not
+:mod:`lpv_sysid.synthesis.full_box_montecarlo`). For a reduced-polytope certificate, which does not
 claim that set, a miss is reported as WARN and does not change the exit status unless
 ``--strict-full-box`` is given; for a full-box certificate it is a cross-check of the claim and a
 miss fails (with the file's own k and intervals).
 
-Prints a table; exit status 1 when any (non-advisory) check fails, 2 on unreadable input.
+Prints a table and writes ``verification.yaml`` next to the gains file (``--out`` elsewhere;
+:mod:`lpv_sysid.synthesis.verify_report`: pass/fail per check, gamma, LMI margins, eigenvalues,
+the SHA-256 of the gains and models files checked, the tool version), which ``lpv-sysid report``
+reads instead of re-running the checks; also when a check fails. Exit status 1 when any
+(non-advisory) check fails, 2 on unreadable input.
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
+from typing import Any
 
 COMMAND = "verify"
-HELP = "independently re-check gains.yaml against vertex_models.yaml (H-inf norms, poles, LMIs, full-box MC)"
+HELP = (
+    "independently re-check gains.yaml against vertex_models.yaml (H-inf norms, poles, LMIs, "
+    "full-box MC); writes verification.yaml"
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -75,20 +85,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "of the file, default) or 'ksigma' (nominal +/- k std, the Eq. 22 box itself)",
     )
     parser.add_argument(
+        "--out",
+        default=None,
+        metavar="PATH",
+        help="where to write the verification record (default: verification.yaml next to the "
+        "gains file)",
+    )
+    parser.add_argument(
         "--all-rows", action="store_true", help="print every check, not only failures + worst"
     )
 
 
 def run(args: argparse.Namespace) -> int:
     from lpv_sysid.errors import ConfigError
-    from lpv_sysid.synthesis.verify import verify_files
+    from lpv_sysid.synthesis import verify as sv
 
     if args.full_box < 0:
         raise ConfigError(f"--full-box must be >= 0, got {args.full_box}")
-    t0 = time.perf_counter()
-    rep = verify_files(
-        args.gains,
-        args.models,
+    settings = dict(
         n_random=args.random,
         seed=args.seed,
         full_box=args.full_box,
@@ -96,23 +110,41 @@ def run(args: argparse.Namespace) -> int:
         k_sigma=args.k_sigma,
         full_box_kept=args.full_box_kept,
     )
+    t0 = time.perf_counter()
+    rep = sv.verify_files(args.gains, args.models, **settings)
+    out = Path(args.out) if args.out else Path(args.gains).parent / sv.VERIFICATION_FILE
+    sv.write_verification(out, sv.verification_record(rep, args.gains, args.models, settings))
     print(rep.table(max_rows=10**6) if not args.all_rows else _all(rep))
     fb = rep.full_box
     if fb is not None:
-        s = fb.summary()
-        print(
-            f"full identified box (empirical, {s['samples']} samples, seed {s['seed']}, k = {s['k_sigma']:g} "
-            f"[{s['k_sigma_source']}], {s['intervals_stored']} stored / {s['intervals_k_std']} k*std intervals): "
-            f"worst norm {s['worst_norm']:.6g} vs gamma {s['gamma']:g} at v_d {s['worst_v_d']} "
-            f"({s['worst_where']}), fraction ok {s['fraction_ok']:.3f}, all stable {s['all_stable']}"
-            f"{'' if fb.passed else (' -> FAIL (--strict-full-box)' if args.strict_full_box else ' -> WARN (not certified; --strict-full-box to fail)')}"
-        )
+        print(_full_box_line(fb, args.strict_full_box))
+    print(f"wrote {out}")
     print(f"verify took {time.perf_counter() - t0:.2f} s")
     print("PASS" if rep.passed else "FAIL")
     return 0 if rep.passed else 1
 
 
-def _all(rep) -> str:
+def _full_box_line(fb: Any, strict: bool) -> str:
+    s = fb.summary()
+    verdict = (
+        ""
+        if fb.passed
+        else (
+            " -> FAIL (--strict-full-box)"
+            if strict
+            else " -> WARN (not certified; --strict-full-box to fail)"
+        )
+    )
+    return (
+        f"full identified box (empirical, {s['samples']} samples, seed {s['seed']}, "
+        f"k = {s['k_sigma']:g} [{s['k_sigma_source']}], {s['intervals_stored']} stored / "
+        f"{s['intervals_k_std']} k*std intervals): worst norm {s['worst_norm']:.6g} vs gamma "
+        f"{s['gamma']:g} at v_d {s['worst_v_d']} ({s['worst_where']}), fraction ok "
+        f"{s['fraction_ok']:.3f}, all stable {s['all_stable']}{verdict}"
+    )
+
+
+def _all(rep: Any) -> str:
     lines = [
         f"{r.check:<14} {r.where:<28} {r.value:>12.6g} {r.limit:>12.6g}  {r.result} {r.note}"
         for r in rep.rows

@@ -1,4 +1,5 @@
-"""`lpv-sysid vrft`: data-driven controller tuning by MIMO Virtual Reference Feedback Tuning (seed 1).
+"""`lpv-sysid vrft`: data-driven controller tuning by MIMO Virtual Reference Feedback Tuning (seed
+1).
 
     lpv-sysid vrft --data FILE.npz --config config/vrft_example.yaml --out controller.yaml
     lpv-sysid vrft --example table5.3 [--noise 0.05] [--out controller.yaml]
@@ -184,7 +185,7 @@ def _tune(cfg, data: dict, args) -> dict:
             )
         yo = data["y_outer"].reshape(t.size, -1).astype(float)
         cls_o = cfg.outer.controller_class(y.shape[1], Ts)
-        res = cascaded_vrft(
+        cascade = cascaded_vrft(
             u,
             y,
             yo,
@@ -199,10 +200,10 @@ def _tune(cfg, data: dict, args) -> dict:
             discard=cfg.discard,
             eiv_weight=cfg.eiv_weight,
         )
-        doc["inner"] = res.inner.to_dict()
-        doc["outer"] = res.outer.to_dict()
-        lines = _report("inner loop", res.inner) + _report("outer loop", res.outer)
-        return {"doc": doc, "lines": lines, "result": res}
+        doc["inner"] = cascade.inner.to_dict()
+        doc["outer"] = cascade.outer.to_dict()
+        lines = _report("inner loop", cascade.inner) + _report("outer loop", cascade.outer)
+        return {"doc": doc, "lines": lines, "result": cascade}
     res = vrft(
         u,
         y,
@@ -256,7 +257,8 @@ def _run_example(args: argparse.Namespace) -> int:
     if args.example == "table5.3":
         a, b = ex.table53_ideal_pi()
         print(
-            f"seed 1 Table 5.3 example: G of Eq. (5.4), M = 0.1/(z-0.9) I, N = {t.size}, noise std {args.noise}"
+            f"seed 1 Table 5.3 example: G of Eq. (5.4), M = 0.1/(z-0.9) I, N = {t.size}, noise "
+            f"std {args.noise}"
         )
     else:
         print(
@@ -280,9 +282,8 @@ def _run_example(args: argparse.Namespace) -> int:
                 + "  b = "
                 + np.array2string(ex.TABLE53_MIMO_B).replace("\n", "")
             )
-            print(
-                f"  max |a - a_pub|, |b - b_pub| = {max(np.abs(A_ - ex.TABLE53_MIMO_A).max(), np.abs(B_ - ex.TABLE53_MIMO_B).max()):.2e}"
-            )
+            dev = max(np.abs(A_ - ex.TABLE53_MIMO_A).max(), np.abs(B_ - ex.TABLE53_MIMO_B).max())
+            print(f"  max |a - a_pub|, |b - b_pub| = {dev:.2e}")
         else:
             kp = np.array([[ex.LV100_T52_KP[(i, j)][0] for j in range(2)] for i in range(2)])
             ki = np.array([[ex.LV100_T52_KI[(i, j)][0] for j in range(2)] for i in range(2)])
@@ -316,11 +317,13 @@ def _run_statistics(args: argparse.Namespace) -> int:
         n, args.runs, seed=args.seed, eiv_weight=args.eiv_weight
     )
     print(
-        f"seed 1 Table 5.2 protocol: LV100 open loop, one PRBS (seed {args.seed}), {args.runs} noise "
+        f"seed 1 Table 5.2 protocol: LV100 open loop, one PRBS (seed {args.seed}), {args.runs} "
+        "noise "
         f"realisations (var 0.0025), N = {n}, EIV l = 20, W = {args.eiv_weight}"
     )
     print(
-        f"{'':4}{'entry':7}{'theta':>10}{'sigma':>9}{'s/|th|':>8}   | thesis theta  sigma  (N=1e3 / 1e4)"
+        f"{'':4}{'entry':7}{'theta':>10}{'sigma':>9}{'s/|th|':>8}   | thesis theta  sigma  (N=1e3 "
+        "/ 1e4)"
     )
     t3 = {
         "Kp": {
@@ -342,8 +345,10 @@ def _run_statistics(args: argparse.Namespace) -> int:
         for ij in ((0, 0), (1, 0), (0, 1), (1, 1)):
             th, sg = m[ij], sd[ij]
             line = (
-                f"{name:4}({ij[0] + 1},{ij[1] + 1})  {th:10.3f}{sg:9.3f}{sg / max(abs(th), 1e-12):8.3f}   | "
-                f"{t3[name][ij][0]:7.3f} {t3[name][ij][1]:6.3f} / {t4[name][ij][0]:7.3f} {t4[name][ij][1]:6.3f}"
+                f"{name:4}({ij[0] + 1},{ij[1] + 1})  "
+                f"{th:10.3f}{sg:9.3f}{sg / max(abs(th), 1e-12):8.3f}   | "
+                f"{t3[name][ij][0]:7.3f} {t3[name][ij][1]:6.3f} / {t4[name][ij][0]:7.3f} "
+                f"{t4[name][ij][1]:6.3f}"
             )
             print(line)
             rows.append(

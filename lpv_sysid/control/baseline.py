@@ -20,7 +20,7 @@ Structure (after PX4 ``mc_pos_control`` / ``mc_att_control`` / ``mc_rate_control
    [0, 1]; yaw authority is given up first, then collective is shifted, then roll/pitch
    are scaled.
 
-The controller is a pure core: ``step(t, x12, v_ref, r_ref) -> u``; no I/O.
+The controller is a pure core: ``step(t, state, v_ref, r_ref) -> u``; no I/O.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError, SafetyError
 from lpv_sysid.models.quadrotor import mixer
-from lpv_sysid.validation import check_keys, is_finite_number
+from lpv_sysid.config_fields import check_keys, is_finite_number
 
 
 @dataclass(frozen=True)
@@ -106,7 +106,8 @@ class BaselineGains:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
-_STATE8 = ("phi", "theta", "u", "v", "w", "p", "q", "r")
+#: the leading STATE_NAMES the controller reads: attitude, body velocity, body rates
+_RIGID_BODY_STATES = ("phi", "theta", "u", "v", "w", "p", "q", "r")
 
 
 def _clip(x: float, lo: float, hi: float) -> float:
@@ -129,40 +130,40 @@ class BaselineController:
     def reset(self) -> None:
         self.vel_int = [0.0, 0.0, 0.0]  # heading-frame acceleration integral, m/s^2
         self.rate_int = [0.0, 0.0, 0.0]  # output units (m, m, 1)
-        self._vel_f = None  # filtered heading-frame velocity (for D)
+        self._vel_f: list[float] | None = None  # filtered heading-frame velocity (for D)
         self._vel_d = [0.0, 0.0, 0.0]
-        self._rate_prev = None
+        self._rate_prev: list[float] | None = None
         self._rate_d = [0.0, 0.0, 0.0]
         self._n_step = 0
-        self._att_f = None
+        self._att_f: list[float] | None = None
         self.att_sp = (0.0, 0.0)  # roll, pitch setpoint, rad
         self.thrust_sp = self.gains.hover_thrust
         self.rate_sp = (0.0, 0.0, 0.0)
         self._sat = {"thrust_lo": False, "thrust_hi": False, "tilt": False}
 
-    def warm_start(self, x12, u0, v_ref, r_ref: float = 0.0) -> None:
-        """Set the integrators so that ``x12`` with command ``u0`` is a steady state.
+    def warm_start(self, state, u0, v_ref, r_ref: float = 0.0) -> None:
+        """Set the integrators so that ``state`` with command ``u0`` is a steady state.
 
         Emulates a recording that starts with the vehicle already established at the
         reference condition (seed 0 Sec. IV: 10 s of constant reference before excitation).
         """
         self.reset()
-        x12 = np.asarray(x12, dtype=float)
+        state = np.asarray(state, dtype=float)
         u0 = np.asarray(u0, dtype=float)
-        phi, th = float(x12[0]), float(x12[1])
+        phi, th = float(state[0]), float(state[1])
         g = self.gains
         fmag = self.grav * (float(u0[0]) / g.hover_thrust) ** 2
         zb = (math.cos(phi) * math.sin(th), -math.sin(phi), math.cos(phi) * math.cos(th))
         f = [-fmag * c for c in zb]
         acc = [f[0], f[1], f[2] + self.grav]
-        e_h = self._heading(phi, th, [float(a) - float(b) for a, b in zip(v_ref, x12[2:5])])
+        e_h = self._heading(phi, th, [float(a) - float(b) for a, b in zip(v_ref, state[2:5])])
         self._att_f = [phi, th]
         kp = (g.vel_p_xy, g.vel_p_xy, g.vel_p_z)
         self.vel_int = [acc[i] - kp[i] * e_h[i] for i in range(3)]
         self.rate_int = [float(u0[1]), float(u0[2]), float(u0[3])]
         self.att_sp = (phi, th)
         self.thrust_sp = float(u0[0])
-        self._rate_prev = [float(v) for v in x12[5:8]]
+        self._rate_prev = [float(v) for v in state[5:8]]
 
     @staticmethod
     def _heading(phi: float, th: float, vb) -> list[float]:
@@ -274,29 +275,28 @@ class BaselineController:
         ut += -min(m) if min(m) < 0 else (1.0 - max(m) if max(m) > 1 else 0.0)
         return (ut, ua, ue, ur), [True, True, True]
 
-    def step(self, t: float, x12, v_ref, r_ref: float = 0.0) -> np.ndarray:
+    def step(self, t: float, state, v_ref, r_ref: float = 0.0) -> np.ndarray:
         """One attitude/rate update at ``rate_hz``; the velocity loop runs at its own rate.
 
-        x12: measured controller state (STATE_NAMES; the delta entries are not used).
+        state: measured controller state in STATE_NAMES order; only its leading
+            ``_RIGID_BODY_STATES`` are read (the delta entries may be left out).
         A non-finite measurement or reference raises SafetyError (the caller hands control
         back / holds position) instead of producing a NaN command.
         v_ref: body-velocity reference (FRD, m/s); r_ref: yaw-rate reference (rad/s, FRD).
         Returns the virtual actuator command u = [ut, ua, ue, ur] (seed 0 Eq. 8).
         """
         g = self.gains
-        for i in range(8):
-            if not math.isfinite(float(x12[i])):
-                raise SafetyError(
-                    f"baseline controller: measured state {_STATE8[i]} is not finite"
-                )
+        for i, name in enumerate(_RIGID_BODY_STATES):
+            if not math.isfinite(float(state[i])):
+                raise SafetyError(f"baseline controller: measured state {name} is not finite")
         for i, name in enumerate(("u_d", "v_d", "w_d")):
             if not math.isfinite(float(v_ref[i])):
                 raise SafetyError(f"baseline controller: reference {name} is not finite")
         if not math.isfinite(float(r_ref)):
             raise SafetyError("baseline controller: yaw-rate reference is not finite")
-        phi, th = float(x12[0]), float(x12[1])
-        v = (float(x12[2]), float(x12[3]), float(x12[4]))
-        p, q, r = float(x12[5]), float(x12[6]), float(x12[7])
+        phi, th = float(state[0]), float(state[1])
+        v = (float(state[2]), float(state[3]), float(state[4]))
+        p, q, r = float(state[5]), float(state[6]), float(state[7])
         n_dec = max(1, int(round(g.rate_hz / g.velocity_rate_hz)))
         if self._n_step % n_dec == 0:
             self._velocity_loop(n_dec / g.rate_hz, phi, th, v, v_ref)

@@ -38,7 +38,8 @@ dwell (a vehicle sinking 0.1 m/s more than commanded gets dw_ff = -0.1). The cor
 then frozen at ``dw_ff`` during the trim segment (the identification takes the trim mean as
 the scheduling vertex and finds the excitation start where the reference first leaves its
 trim value; ``hold_max`` therefore stays below the 0.25 m/s with which ``lpv-sysid identify``
-snaps a trim reference to the box) and active again during the excitation. A w != 0 vertex is a climb (w < 0, NED) or descent segment bounded by the altitude
+snaps a trim reference to the box) and active again during the excitation. A w != 0 vertex is a
+climb (w < 0, NED) or descent segment bounded by the altitude
 window: the plan (:func:`plan_campaign`) orders the vertices so that climbs and descents
 alternate (and consecutive horizontal directions oppose, so the runs return towards
 home), and refuses at load time, with the numbers, a window that cannot hold a segment of
@@ -64,13 +65,16 @@ import itertools
 import logging
 import math
 from dataclasses import dataclass, field, fields
-from typing import Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io import frames
-from lpv_sysid.validation import check_keys, is_count, is_finite_number
+from lpv_sysid.config_fields import check_keys, is_count, is_finite_number
+
+if TYPE_CHECKING:
+    from lpv_sysid.signals.excitation import ExcitationCore
 
 log = logging.getLogger(__name__)
 
@@ -195,7 +199,8 @@ class CampaignConfig:
         if self.velocity_frame not in FRAMES:
             raise ConfigError(
                 f"campaign.velocity_frame must be 'body_ned', got {self.velocity_frame!r}: with "
-                "local_ned the bridge rotates the FRD vertex by the full attitude, so a w = 0 vertex "
+                "local_ned the bridge rotates the FRD vertex by the full attitude, so a w = 0 "
+                "vertex "
                 "sinks u sin(theta) at pitch theta and no altitude hold can keep the vertex"
             )
         if str(self.finish).upper() not in FINISH_MODES:
@@ -298,7 +303,9 @@ class ExcitationProfile:
         )
 
 
-def make_excitation(t, u, names, *, start_time: float, ramp: float, periods: int = 1):
+def make_excitation(
+    t, u, names, *, start_time: float, ramp: float, periods: int = 1
+) -> ExcitationCore:
     """The phase-1 excitation core of one run: the multisine part only (the vertex is
     added by the campaign), channels ``u_ref, v_ref, w_ref, r_ref``."""
     from lpv_sysid.signals.excitation import PHASE1_CHANNELS, PHASE1_YAW_CHANNEL, ExcitationCore
@@ -403,11 +410,14 @@ def plan_campaign(
             sw = (win[0] + m + ex.span[2], win[1] - m - ex.span[2])
         if sw[0] > sw[1]:
             raise ConfigError(
-                f"campaign: run {name} ({kind}, vertex {list(vertex)} m/s) does not fit the altitude "
+                f"campaign: run {name} ({kind}, vertex {list(vertex)} m/s) does not fit the "
+                "altitude "
                 f"window [{win[0]:g}, {win[1]:g}] m ({win[1] - win[0]:g} m): it needs "
-                f"|w| x (settle_timeout + trim_s + excitation) = {abs(w):g} m/s x ({cfg.settle_timeout:g} + "
+                f"|w| x (settle_timeout + trim_s + excitation) = {abs(w):g} m/s x "
+                f"({cfg.settle_timeout:g} + "
                 f"{cfg.trim_s:g} + {t_exc:.4g}) s = {travel:.1f} m + excitation displacement "
-                f"{ex.span[2]:.2f} m + 2 x altitude_margin {m:g} m = {room:.1f} m; widen the window, "
+                f"{ex.span[2]:.2f} m + 2 x altitude_margin {m:g} m = {room:.1f} m; widen the "
+                "window, "
                 f"shorten the segment or reduce |w|"
             )
         h_ext = (
@@ -417,7 +427,8 @@ def plan_campaign(
         )
         if h_ext > cfg.radius:
             raise ConfigError(
-                f"campaign: run {name} (vertex {list(vertex)} m/s) needs {h_ext:.1f} m of horizontal "
+                f"campaign: run {name} (vertex {list(vertex)} m/s) needs {h_ext:.1f} m of "
+                "horizontal "
                 f"room ({'half of ' if cfg.center_runs else ''}{uv:.3g} m/s x {t_worst:.4g} s + "
                 f"excitation {math.hypot(ex.span[0], ex.span[1]):.2f} m + margin {m:g} m) but "
                 f"campaign.radius is {cfg.radius:g} m"
@@ -490,7 +501,8 @@ def _check_envelope(cfg: CampaignConfig, runs, ex: ExcitationProfile, env) -> No
         lo = env.floor + max_down * env.lookahead
         if cfg.altitude_min - cfg.altitude_margin < lo:
             raise ConfigError(
-                f"campaign: altitude_min {cfg.altitude_min:g} m - altitude_margin {cfg.altitude_margin:g} m "
+                f"campaign: altitude_min {cfg.altitude_min:g} m - altitude_margin "
+                f"{cfg.altitude_margin:g} m "
                 f"is too close to the envelope floor: descending at up to {max_down:.2f} m/s, the "
                 f"predictive floor (floor {env.floor:g} m + {max_down:.2f} m/s x lookahead "
                 f"{env.lookahead:g} s = {lo:.1f} m) would trip; raise altitude_min"
@@ -503,9 +515,11 @@ def _check_envelope(cfg: CampaignConfig, runs, ex: ExcitationProfile, env) -> No
         hi = env.ceiling - max_up * env.lookahead
         if cfg.altitude_max + cfg.altitude_margin > hi:
             raise ConfigError(
-                f"campaign: altitude_max {cfg.altitude_max:g} m + altitude_margin {cfg.altitude_margin:g} m "
+                f"campaign: altitude_max {cfg.altitude_max:g} m + altitude_margin "
+                f"{cfg.altitude_margin:g} m "
                 f"is too close to the envelope ceiling: climbing at up to {max_up:.2f} m/s the "
-                f"predictive ceiling trips above {hi:.1f} m (ceiling {env.ceiling:g} m - {max_up:.2f} m/s x "
+                f"predictive ceiling trips above {hi:.1f} m (ceiling {env.ceiling:g} m - "
+                f"{max_up:.2f} m/s x "
                 f"{env.lookahead:g} s); lower altitude_max"
             )
         if cfg.radius > env.radius:
@@ -517,8 +531,10 @@ def _check_envelope(cfg: CampaignConfig, runs, ex: ExcitationProfile, env) -> No
             lim = min(env.max_setpoint, env.max_speed)
             if top > lim:
                 raise ConfigError(
-                    f"campaign: run {r.name} commands up to |v| = {math.hypot(*r.vertex):.2f} + excitation "
-                    f"{ex.peak_norm:.2f} + hold {cfg.hold_max:g} = {top:.2f} m/s, above the envelope's "
+                    f"campaign: run {r.name} commands up to |v| = {math.hypot(*r.vertex):.2f} + "
+                    "excitation "
+                    f"{ex.peak_norm:.2f} + hold {cfg.hold_max:g} = {top:.2f} m/s, above the "
+                    "envelope's "
                     f"min(max_setpoint, max_speed) = {lim:g} m/s"
                 )
             h_ext = r.horizontal_extent + math.hypot(*r.vertex[:2]) * env.lookahead
@@ -689,10 +705,10 @@ class Campaign:
         self._dwell_since: float | None = None
         self._h_target = math.nan
         self._xy_target: np.ndarray | None = None
-        self._frozen: np.ndarray | None = None
+        self._frozen = np.zeros(3)  # the trim/hold offset of the run, set when it settles
         self._ff = 0.0
         self._bias_sum, self._bias_n = 0.0, 0
-        self._exc = None
+        self._exc: ExcitationCore | None = None
         self._last_cmd: tuple | None = None
         self._recording = False
         self._rotor: tuple | None = None
@@ -710,6 +726,21 @@ class Campaign:
         return (
             self.plan.runs[self.run_index] if 0 <= self.run_index < len(self.plan.runs) else None
         )
+
+    @property
+    def _active_run(self) -> PlannedRun:
+        """The run of a run phase (REPOSITION to EXCITATION), which always has one."""
+        run = self.run
+        if run is None:
+            raise RuntimeError(f"campaign: phase {self.phase} has no current run")
+        return run
+
+    @property
+    def _home_ned(self) -> np.ndarray:
+        """Home (NED, m), known before the take-off starts."""
+        if self.home is None:
+            raise RuntimeError(f"campaign: phase {self.phase} needs the home position")
+        return self.home
 
     def on_state(self, sample: Any) -> None:
         """A state sample (``t``, ``pos_ned``, ``euler``, ``v_body``, ``omega``)."""
@@ -882,7 +913,7 @@ class Campaign:
         if now - self.t_phase > cfg.reposition_timeout:
             return self._fault(
                 now,
-                f"{self.run.name}: start point not reached within reposition_timeout "
+                f"{self._active_run.name}: start point not reached within reposition_timeout "
                 f"{cfg.reposition_timeout:g} s (height {h:.1f} m, target "
                 f"{self._h_target:.1f} m)",
                 out,
@@ -896,7 +927,7 @@ class Campaign:
             and d < cfg.position_tolerance
             and self._speed(s) < cfg.hover_tolerance,
         ):
-            run = self.run
+            run = self._active_run
             res = RunResult(run.name, run.vertex, run.kind, t_command=now, height_start=h)
             self.results.append(res)
             self._h_target = h
@@ -908,7 +939,7 @@ class Campaign:
 
     def _settle(self, now, s, h, out) -> None:
         cfg = self.cfg
-        run, res = self.run, self.results[-1]
+        run, res = self._active_run, self.results[-1]
         cmd = self._vertex_command(s, h)
         err = self._frame_velocity(s) - cmd
         inside = bool(np.all(np.abs(err) <= np.asarray(cfg.settle_tolerance)))
@@ -957,21 +988,25 @@ class Campaign:
         self._send(now, cmd, out)
 
     def _trim(self, now, s, h, out) -> None:
-        run, res = self.run, self.results[-1]
+        run, res = self._active_run, self.results[-1]
         if now - res.t_start >= self.cfg.trim_s:
             self._finish_trim(res)
             t, u, names = self.table
-            self._exc = make_excitation(
+            exc = make_excitation(
                 t, u, names, start_time=now, ramp=self.cfg.ramp_s, periods=self.cfg.periods
             )
+            self._exc = exc
             res.t_excite = now
-            self._go(now, EXCITATION, f"{run.name}: excitation {self._exc.duration:.1f} s", out)
+            self._go(now, EXCITATION, f"{run.name}: excitation {exc.duration:.1f} s", out)
             return self._excitation(now, s, h, out)
         self._send(now, np.asarray(run.vertex) + self._frozen, out)
 
     def _excitation(self, now, s, h, out) -> None:
-        run, res = self.run, self.results[-1]
-        if now >= self._exc.end_time:
+        run, res = self._active_run, self.results[-1]
+        exc = self._exc
+        if exc is None:  # abort() dropped it; the next step() runs the abort
+            return
+        if now >= exc.end_time:
             res.t_end = now
             res.complete = True
             self._finish_tracking(res)
@@ -981,7 +1016,7 @@ class Campaign:
             self._ff = 0.0
             self._go(now, RECOVER, f"{run.name}: complete; returning to hover", out)
             return self._recover(now, s, h, out)
-        ex = self._exc.sample(now)
+        ex = exc.sample(now)
         base = np.asarray(run.vertex) + (self._hold_vector(s, h) if run.kind == LEVEL else 0.0)
         self._send(now, base + ex.velocity, out, yaw_rate=float(ex.yaw_rate))
 
@@ -1022,14 +1057,15 @@ class Campaign:
             uv = np.asarray(run.vertex[:2], dtype=float)
             c, sn = math.cos(psi), math.sin(psi)
             d = np.array([c * uv[0] - sn * uv[1], sn * uv[0] + c * uv[1]]) * run.duration_nominal
-            self._xy_target = self.home[:2] - 0.5 * d
+            self._xy_target = self._home_ned[:2] - 0.5 * d
         else:
             self._xy_target = np.asarray(s.pos_ned, dtype=float)[:2].copy()
         self._go(
             now,
             REPOSITION,
             f"run {run.order}/{len(self.plan.runs)} {run.name}: start at "
-            f"{self._h_target:.1f} m, {np.linalg.norm(self._xy_target - self.home[:2]):.1f} m "
+            f"{self._h_target:.1f} m, {np.linalg.norm(self._xy_target - self._home_ned[:2]):.1f} "
+            "m "
             "from home",
             out,
         )
@@ -1046,7 +1082,7 @@ class Campaign:
             res.reason = reason
             res.t_end = now
             self._finish_tracking(res)
-            out.actions.append(RunEnded(self.run, now, False, res))
+            out.actions.append(RunEnded(self._active_run, now, False, res))
             self._recording = False
         elif self.phase == SETTLE and self.results:
             self.results[-1].reason = reason
@@ -1130,9 +1166,10 @@ class Campaign:
                 )
                 return
             want = str(self.cfg.finish).upper()
-            if (vs.confirmed_mode or vs.mode) != want:
+            ended = vs.confirmed_mode or vs.mode
+            if ended != want:
                 self.ok = False
-                self.reason = f"finish {want} not confirmed: the hand-back ended in {vs.confirmed_mode or vs.mode}"
+                self.reason = f"finish {want} not confirmed: the hand-back ended in {ended}"
                 self._go(
                     now,
                     FAILED,
@@ -1218,7 +1255,7 @@ class Campaign:
         return self.state is not None and now - float(self.state.t) <= self.cfg.state_timeout
 
     def _height(self, s) -> float:
-        return float(self.home[2] - float(s.pos_ned[2]))
+        return float(self._home_ned[2] - float(s.pos_ned[2]))
 
     def _vel_ned(self, s) -> np.ndarray:
         v = getattr(s, "vel_ned", None)
@@ -1265,7 +1302,7 @@ class Campaign:
         return np.array([0.0, 0.0, self._hold_dz(h)])
 
     def _vertex_command(self, s, h) -> np.ndarray:
-        run = self.run
+        run = self._active_run
         v = np.asarray(run.vertex, dtype=float)
         return v + self._hold_vector(s, h) if run.kind == LEVEL else v
 
@@ -1282,13 +1319,14 @@ class Campaign:
         tol = cfg.altitude_margin
         if h < cfg.altitude_min - tol or h > cfg.altitude_max + tol:
             return (
-                f"{self.run.name}: height {h:.1f} m left the altitude window "
+                f"{self._active_run.name}: height {h:.1f} m left the altitude window "
                 f"[{cfg.altitude_min:g}, {cfg.altitude_max:g}] m (+- margin {tol:g} m)"
             )
-        d = float(np.linalg.norm(np.asarray(s.pos_ned)[:2] - self.home[:2]))
+        d = float(np.linalg.norm(np.asarray(s.pos_ned)[:2] - self._home_ned[:2]))
         if d > cfg.radius:
             return (
-                f"{self.run.name}: {d:.1f} m from home, outside campaign.radius {cfg.radius:g} m"
+                f"{self._active_run.name}: {d:.1f} m from home, outside campaign.radius "
+                f"{cfg.radius:g} m"
             )
         if self.results:
             res = self.results[-1]
@@ -1389,7 +1427,8 @@ def trim_rows(results: Sequence[RunResult]) -> list[dict]:
             continue
         ach = {k: float(res.achieved.get(k, math.nan)) for k in TRIM_COLUMNS}
         row = {"run": res.name, "vertex": [float(c) for c in res.vertex], "achieved": ach}
-        key = tuple(int(round(c)) for c in res.vertex)
+        u, v, w = (int(round(c)) for c in res.vertex)  # a vertex is (u, v, w)
+        key = (u, v, w)
         if key in SEED0_TABLE1 and np.allclose(res.vertex, key):
             row["seed0_table1"] = dict(zip(TRIM_COLUMNS, SEED0_TABLE1[key]))
         rows.append(row)

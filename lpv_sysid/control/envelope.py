@@ -45,7 +45,7 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io import frames
-from lpv_sysid.validation import check_config_keys, is_finite_number
+from lpv_sysid.config_fields import check_config_keys, is_finite_number
 
 HOME_MODES = ("auto", "home_position", "start")
 
@@ -223,10 +223,10 @@ class Envelope:
         )
         if not (np.isfinite(pos).all() and np.isfinite(euler).all() and np.isfinite(vel).all()):
             return self._trip(t, NON_FINITE, "non-finite state sample")
-        if self.home is None:
-            self._set_home(t, pos, "first state sample after start")
-        cfg = self.config
         home = self.home
+        if home is None:
+            home = self._set_home(t, pos, "first state sample after start")
+        cfg = self.config
         h = float(home[2] - pos[2])
         d = float(math.hypot(pos[0] - home[0], pos[1] - home[1]))
         T = cfg.lookahead
@@ -350,14 +350,17 @@ class Envelope:
         return d
 
     # ------------------------------------------------------------------ internals
-    def _set_home(self, now: float, pos: Any, source: str) -> None:
-        self.home = np.asarray(pos, dtype=float).copy()
+    def _set_home(self, now: float, pos: Any, source: str) -> np.ndarray:
+        """Set and return the home position (NED, m)."""
+        home = np.asarray(pos, dtype=float).copy()
+        self.home = home
         self.home_source = source
         self._notices.append(
             EnvelopeNotice(
-                now, f"envelope: home = {source} (NED {[round(float(x), 2) for x in self.home]})"
+                now, f"envelope: home = {source} (NED {[round(float(x), 2) for x in home]})"
             )
         )
+        return home
 
     def _trip(self, t: float, kind: str, message: str) -> Violation:
         return self.trip(Violation(t, kind, message))

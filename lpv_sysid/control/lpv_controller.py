@@ -44,7 +44,10 @@ One :meth:`LpvController.step` does, in this order:
    feedforward does not remove (model error, saturation); the monitor judges that too, on purpose.
    ``info["bound_exceeded"]`` latches.
 
-Pure numpy, no allocation beyond a few small temporaries; see bench/bench_lpv_law.py.
+Cost (bench/bench_lpv_law.py, default path ~9 us): the 3- and 4-vectors as plain floats,
+one ``alpha @ W_step`` into preallocated buffers (:meth:`LpvController._prepare_step`), every
+check that does not depend on the inputs precomputed at load; test_lpv_controller replays
+recorded sequences against the law written from the equations above (1e-12).
 
 :class:`LpvControllerConfig` validates itself on construction (every path: node, replay,
 simulation, library). :class:`ReferenceLimiter` is the input conditioning the flight runtime
@@ -61,7 +64,7 @@ from typing import Any, Optional
 import numpy as np
 
 from lpv_sysid.errors import ConfigError, SafetyError
-from lpv_sysid.validation import is_finite_number
+from lpv_sysid.config_fields import is_finite_number
 
 
 @dataclass(frozen=True)
@@ -136,14 +139,11 @@ class LpvControllerConfig:
 
 
 def _schedule_arrays(schedule: Any) -> tuple:
-    """(K, x0, u0, R, Q, gamma, vmin, vmax) from io.formats.GainSchedule or synthesis.files.Gains."""
+    """(K, x0, u0, R, Q, gamma, vmin, vmax): the attributes of io.formats.GainSchedule."""
     K = np.asarray(schedule.K, dtype=float)
     x0 = np.asarray(schedule.x0, dtype=float)
     u0 = np.asarray(schedule.u0, dtype=float)
-    if hasattr(schedule, "scheduling") and hasattr(schedule.scheduling, "min"):
-        vmin, vmax = schedule.scheduling.min, schedule.scheduling.max
-    else:
-        vmin, vmax = schedule.vmin, schedule.vmax
+    vmin, vmax = schedule.vmin, schedule.vmax
     return (
         K,
         x0,
@@ -160,18 +160,25 @@ def _feedforward_arrays(schedule: Any, n_x: int) -> Optional[tuple]:
     """(F (N, r, p), free state indices, F_jerk (N, r + n_rate, p) or None, rate state indices)
     of a schedule with feedforward, else None.
 
-    ``schedule.feedforward`` is io.formats.FeedforwardSpec or the raw mapping (synthesis.files.Gains);
-    state names from ``schedule.state_names`` (quadrotor layout when the schedule has none)."""
+    ``schedule.feedforward`` is the io.formats.FeedforwardSpec of the gains file (any other
+    layout object is refused); state names from ``schedule.state_names`` (quadrotor layout when
+    the schedule has none)."""
+    from lpv_sysid.io.formats import FeedforwardSpec
+
     F = getattr(schedule, "F_ff", None)
     spec = getattr(schedule, "feedforward", None)
     if F is None or spec is None:
         return None
-    free = spec["free_states"] if isinstance(spec, dict) else spec.free_states
-    names = getattr(schedule, "state_names", None)
-    if not names:
-        from lpv_sysid.models.quadrotor import STATE_NAMES as names
-    names = list(names)
-    rate = (spec.get("rate_states") or []) if isinstance(spec, dict) else spec.rate_states
+    if not isinstance(spec, FeedforwardSpec):
+        raise ConfigError(
+            "gain schedule: feedforward must be the io.formats FeedforwardSpec of a gains file "
+            f"read by io.formats.GainSchedule, got {type(spec).__name__}"
+        )
+    from lpv_sysid.models.quadrotor import STATE_NAMES
+
+    free = list(spec.free_states)
+    names = list(getattr(schedule, "state_names", None) or STATE_NAMES)
+    rate = list(spec.rate_states)
     Fj = getattr(schedule, "F_jerk", None)
     if len(names) != n_x or any(s not in names for s in list(free) + list(rate)):
         raise ConfigError(
@@ -188,7 +195,11 @@ def _feedforward_arrays(schedule: Any, n_x: int) -> Optional[tuple]:
 
 
 class LpvController:
-    """The runtime law; ``schedule`` is a loaded gains file (io.formats.GainSchedule)."""
+    """The runtime law; ``schedule`` is a loaded gains file,
+    :class:`lpv_sysid.io.formats.GainSchedule` (the one reading of gains.yaml, also the one
+    ``lpv-sysid verify`` checks), or an object with its attributes ``K, x0, u0, R, Q, gamma,
+    vmin, vmax`` (+ ``F_ff, F_jerk, feedforward, state_names``), e.g. the phase-2 simulation's
+    problem built from a GainSchedule."""
 
     def __init__(
         self,
@@ -219,7 +230,8 @@ class LpvController:
             F, free, Fj, rate = ff
             if F.shape != (N, len(free) + m, p):
                 raise ConfigError(
-                    f"gain schedule: F_ff has shape {F.shape}, expected ({N}, {len(free) + m}, {p})"
+                    f"gain schedule: F_ff has shape {F.shape}, "
+                    f"expected ({N}, {len(free) + m}, {p})"
                 )
             if not np.all(np.isfinite(F)):
                 raise ConfigError("gain schedule: F_ff contains NaN/inf")
@@ -267,14 +279,14 @@ class LpvController:
             )
         self.gamma = gamma
         self.cfg = config
+        self.mix: Optional[np.ndarray] = None
+        self.mix_inv: Optional[np.ndarray] = None
         if mix is not None:
             mix = np.asarray(mix, dtype=float)
             if mix.shape != (m, m):
                 raise ConfigError(f"mixer must be {m}x{m}, got {mix.shape}")
             self.mix = mix
             self.mix_inv = np.linalg.inv(mix)
-        else:
-            self.mix = self.mix_inv = None
         if config.rate_limit is not None and len(config.rate_limit) != m:
             raise ConfigError(f"rate_limit needs {m} entries, got {len(config.rate_limit)}")
         self.rate = (
@@ -285,7 +297,74 @@ class LpvController:
         self.tau = float(config.ff_filter_tau)
         self.tau_j = float(config.ff_jerk_tau)
         self.window = config.monitor_window
+        self._prepare_step()
         self.reset()
+
+    def _prepare_step(self) -> None:
+        """Everything :meth:`step` can precompute from the schedule and config (load time).
+
+        The law of the module docstring, items 3-5, is affine in alpha, so it is one stack
+        W_step with, per vertex i,
+
+        - ``[K_i | R | G_u,i | u0_i]`` (m x c, c = n + n_e + q + 1): u = that(alpha) @ b with
+          b = [x - x_ref; u_e; [a; j]; 1]; with a mixer the rows ``Mix^-1 [K_i | ...]`` follow,
+          so the same product gives the ESC commands the saturation test needs;
+        - ``[G_x,i | x0_i]`` (n x (q + 1)): x_ref = that(alpha) @ [[a; j]; 1] (feedforward only;
+          without it x_ref = x0(alpha)),
+
+        so a step is one ``alpha @ W_step`` into a preallocated row whose views are the blended
+        matrices, and two small products (R rides on the blend: sum alpha_i = 1, the result
+        equals R u_e to rounding). ``q`` = p (F_ff), 2p (F_ff and F_jerk), 0 (no feedforward)."""
+        N, n, m, p, ne = self.W.shape[0], self.n_x, self.n_u, self.n_p, self.n_e
+        mn = self._mn
+        K = self.W[:, :mn].reshape(N, m, n)
+        x0 = self.W[:, mn : mn + n]
+        u0 = self.W[:, mn + n : mn + n + m]
+        q = 0
+        if self.has_ff:
+            q = 2 * p if self.has_jerk else p
+            G = self.W[:, mn + n + m :].reshape(N, n + m, 2 * p)[:, :, :q]
+            Gx, Gu = G[:, :n, :], G[:, n:, :]
+        else:
+            Gx, Gu = np.zeros((N, n, 0)), np.zeros((N, m, 0))
+        c = n + ne + q + 1
+        Kext = np.concatenate([K, np.broadcast_to(self.R, (N, m, ne)), Gu, u0[:, :, None]], axis=2)
+        if self.mix_inv is not None:
+            Kext = np.concatenate([Kext, np.einsum("ij,njk->nik", self.mix_inv, Kext)], axis=1)
+        rows_k = Kext.shape[1]
+        parts = [Kext.reshape(N, rows_k * c)]
+        if self.has_ff:
+            parts.append(np.concatenate([Gx, x0[:, :, None]], axis=2).reshape(N, n * (q + 1)))
+        else:
+            parts.append(x0)
+        self.W_step = np.ascontiguousarray(np.hstack(parts))
+        self._q = q
+        self._row = np.empty(self.W_step.shape[1])
+        self._Kext = self._row[: rows_k * c].reshape(rows_k, c)  # views of the blended row
+        self._xref_src = self._row[rows_k * c :]  # x0(alpha), or [G_x | x0](alpha)
+        self._Gx = self._xref_src.reshape(n, q + 1)  # (n, 1) = x0(alpha) without feedforward
+        self._xref = np.empty(n)
+        self._b = np.zeros(c)
+        self._b[-1] = 1.0
+        self._bx = self._b[:n]
+        self._be = self._b[n : n + ne]
+        self._ba = self._b[n + ne : n + ne + q]
+        self._bs = self._b[n + ne :]  # [a; j; 1]
+        self._vmin_l = self.vmin.tolist()
+        self._ir_l = self.inv_range.tolist()
+        vel = self.vel
+        self._vel_l = list(range(vel.start, vel.stop)) if isinstance(vel, slice) else vel.tolist()
+        self._vel_slice = vel if isinstance(vel, slice) else None
+        qi = self.Qinv
+        # z = Q^-1 (v - v_d): a diagonal Q (the usual weight) needs one product per axis
+        self._qinv_diag = (
+            np.diag(qi).tolist() if np.count_nonzero(qi - np.diag(np.diag(qi))) == 0 else None
+        )
+        self._qinv_l = qi.tolist()
+        self._thr2 = self.threshold * self.threshold
+        self._min_energy = float(self.cfg.monitor_min_energy)
+        self._shapes = ((n,), (p,), (ne,))
+        self._esc_lo, self._esc_hi = float(self.cfg.u_esc_min), float(self.cfg.u_esc_max)
 
     def reset(self) -> None:
         self.t_prev: Optional[float] = None
@@ -294,33 +373,62 @@ class LpvController:
         self.energy_e = 0.0
         self.energy_e_total = 0.0  # running excitation energy (decides when to judge)
         self.bound_exceeded = False
-        self.vd_filt: Optional[np.ndarray] = None  # low-passed v_d of the derivative filter
-        self.a_filt = np.zeros(self.n_p)
-        self.a_lp: Optional[np.ndarray] = None  # low-passed a (second stage, jerk)
-        self.j_filt = np.zeros(self.n_p)
+        # derivative filter state on plain floats (3-vectors: numpy's per-call overhead costs
+        # more than the arithmetic); the arrays vd_filt, a_lp, a_filt, j_filt are views of it
+        self._vf: Optional[list] = None  # low-passed v_d
+        self._alp: Optional[list] = None  # low-passed a (second stage, jerk)
+        self._af: list = [0.0] * self.n_p
+        self._jf: list = [0.0] * self.n_p
+        self._k_dt = math.nan  # step of the cached filter gains k1, k2
+        self._k1 = self._k2 = 0.0
 
-    def reference_rate(self, t: float, v_d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Filtered first and second derivative (a, j) of the reference (module docstring, item 4);
-        updates the filter. The jerk is the derivative filter (time constant ``ff_jerk_tau``)
-        applied to a (two cascaded stages).
+    @property
+    def vd_filt(self) -> Optional[np.ndarray]:
+        """Low-passed v_d of the derivative filter (None before the first step)."""
+        return None if self._vf is None else np.array(self._vf)
 
-        Uses the time since the previous call of :meth:`step` (``t_prev``)."""
-        if self.vd_filt is None or self.t_prev is None:
-            self.vd_filt = np.array(v_d, dtype=float)
-            self.a_filt = np.zeros(self.n_p)
-            self.a_lp = np.zeros(self.n_p)
-            self.j_filt = np.zeros(self.n_p)
-            return self.a_filt, self.j_filt
-        dt = t - self.t_prev
+    @property
+    def a_lp(self) -> Optional[np.ndarray]:
+        """Low-passed a (the jerk stage's state; None before the first step)."""
+        return None if self._alp is None else np.array(self._alp)
+
+    @property
+    def a_filt(self) -> np.ndarray:
+        """Filtered reference rate a = dv_d/dt of the last step."""
+        return np.array(self._af)
+
+    @property
+    def j_filt(self) -> np.ndarray:
+        """Filtered reference jerk j of the last step."""
+        return np.array(self._jf)
+
+    def _rates(self, t: float, vd: list) -> tuple:
+        """The derivative filter's step (module docstring, item 4) on plain floats, without
+        committing it: ``(a, j, state)``, state for :meth:`_commit_rates` (None: unchanged)."""
+        vf, alp, t_prev = self._vf, self._alp, self.t_prev
+        if vf is None or alp is None or t_prev is None:
+            zero = [0.0] * self.n_p
+            return zero, zero, (list(vd), zero, zero, zero)
+        dt = t - t_prev
         if dt <= 0.0:
-            return self.a_filt, self.j_filt
-        k = 1.0 if self.tau == 0.0 else -math.expm1(-dt / self.tau)
-        k2 = 1.0 if self.tau_j == 0.0 else -math.expm1(-dt / self.tau_j)
-        # first-order low-pass + difference per axis on plain floats: for 3-vectors numpy's
-        # per-call overhead (~1 us an operation) costs more than the arithmetic
-        vf, alp = self.vd_filt.tolist(), self.a_lp.tolist()
+            return self._af, self._jf, None
+        if dt != self._k_dt:  # the gains of a constant period are computed once
+            self._k_dt = dt
+            self._k1 = 1.0 if self.tau == 0.0 else -math.expm1(-dt / self.tau)
+            self._k2 = 1.0 if self.tau_j == 0.0 else -math.expm1(-dt / self.tau_j)
+        k, k2 = self._k1, self._k2
+        if self.n_p == 3:  # unrolled: the quadrotor's (u, v, w)
+            v0, v1, v2 = vd
+            f0, f1, f2 = vf
+            l0, l1, l2 = alp
+            y0, y1, y2 = f0 + k * (v0 - f0), f1 + k * (v1 - f1), f2 + k * (v2 - f2)
+            a0, a1, a2 = (y0 - f0) / dt, (y1 - f1) / dt, (y2 - f2) / dt
+            m0, m1, m2 = l0 + k2 * (a0 - l0), l1 + k2 * (a1 - l1), l2 + k2 * (a2 - l2)
+            a3 = [a0, a1, a2]
+            j3 = [(m0 - l0) / dt, (m1 - l1) / dt, (m2 - l2) / dt]
+            return a3, j3, ([y0, y1, y2], [m0, m1, m2], a3, j3)
         a_new, j_new, vf_new, alp_new = [], [], [], []
-        for vdk, vfk, alk in zip(v_d.tolist(), vf, alp):
+        for vdk, vfk, alk in zip(vd, vf, alp):
             y = vfk + k * (vdk - vfk)
             ak = (y - vfk) / dt
             y2 = alk + k2 * (ak - alk)
@@ -328,33 +436,63 @@ class LpvController:
             j_new.append((y2 - alk) / dt)
             vf_new.append(y)
             alp_new.append(y2)
-        self.vd_filt = np.array(vf_new)
-        self.a_lp = np.array(alp_new)
-        self.a_filt = np.array(a_new)
-        self.j_filt = np.array(j_new)
-        return self.a_filt, self.j_filt
+        return a_new, j_new, (vf_new, alp_new, a_new, j_new)
+
+    def _commit_rates(self, state: Optional[tuple]) -> None:
+        if state is not None:
+            self._vf, self._alp, self._af, self._jf = state
+
+    def reference_rate(self, t: float, v_d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Filtered first and second derivative (a, j) of the reference (module docstring, item 4);
+        updates the filter. The jerk is the derivative filter (time constant ``ff_jerk_tau``)
+        applied to a (two cascaded stages).
+
+        Uses the time since the previous call of :meth:`step` (``t_prev``)."""
+        a, j, state = self._rates(float(t), np.asarray(v_d, dtype=float).tolist())
+        self._commit_rates(state)
+        return np.array(a), np.array(j)
 
     # -- pieces (public for tests) -----------------------------------------------------
-    def weights(self, v_d: np.ndarray) -> tuple[np.ndarray, bool]:
-        """alpha(v_d) (clamped) and the clamp flag; box order of models.lpv.box_vertices."""
-        t = ((v_d - self.vmin) * self.inv_range).tolist()
+    def _weights_list(self, vd: list) -> tuple[list, bool]:
+        """alpha(v_d) as floats (clamped onto the box) and the clamp flag."""
+        if self.n_p == 3:
+            # unrolled kron((1-a, a), (1-b, b), (1-c, c)): plain floats are faster than 3 np.kron
+            v0, v1, v2 = vd
+            l0, l1, l2 = self._vmin_l
+            i0, i1, i2 = self._ir_l
+            a, b, c = (v0 - l0) * i0, (v1 - l1) * i1, (v2 - l2) * i2
+            clamped = not (0.0 <= a <= 1.0 and 0.0 <= b <= 1.0 and 0.0 <= c <= 1.0)
+            if clamped:
+                a = 0.0 if a < 0.0 else 1.0 if a > 1.0 else a
+                b = 0.0 if b < 0.0 else 1.0 if b > 1.0 else b
+                c = 0.0 if c < 0.0 else 1.0 if c > 1.0 else c
+            a0, b0, c0 = 1.0 - a, 1.0 - b, 1.0 - c
+            p00, p01, p10, p11 = a0 * b0, a0 * b, a * b0, a * b
+            return [
+                p00 * c0,
+                p00 * c,
+                p01 * c0,
+                p01 * c,
+                p10 * c0,
+                p10 * c,
+                p11 * c0,
+                p11 * c,
+            ], clamped
+        t = [(v - lo) * ir for v, lo, ir in zip(vd, self._vmin_l, self._ir_l)]
         clamped = False
         for k, tk in enumerate(t):
             if tk < 0.0 or tk > 1.0:
                 clamped = True
                 t[k] = 0.0 if tk < 0.0 else 1.0
-        if self.n_p == 3:
-            # unrolled kron((1-a, a), (1-b, b), (1-c, c)): plain floats are faster than 3 np.kron
-            a, b, c = t
-            a0, b0, c0 = 1.0 - a, 1.0 - b, 1.0 - c
-            p00, p01, p10, p11 = a0 * b0, a0 * b, a * b0, a * b
-            return np.array(
-                (p00 * c0, p00 * c, p01 * c0, p01 * c, p10 * c0, p10 * c, p11 * c0, p11 * c)
-            ), clamped
-        alpha = np.ones(1)
+        alpha = [1.0]
         for tk in t:
-            alpha = np.kron(alpha, np.array((1.0 - tk, tk)))
+            alpha = [w * f for w in alpha for f in (1.0 - tk, tk)]
         return alpha, clamped
+
+    def weights(self, v_d: np.ndarray) -> tuple[np.ndarray, bool]:
+        """alpha(v_d) (clamped) and the clamp flag; box order of models.lpv.box_vertices."""
+        alpha, clamped = self._weights_list(np.asarray(v_d, dtype=float).tolist())
+        return np.array(alpha), clamped
 
     def gain(self) -> float:
         """Running (or windowed) estimate ||z||_2 / ||u_e||_2 (NaN before any excitation)."""
@@ -371,19 +509,29 @@ class LpvController:
         j: Optional[np.ndarray] = None,
     ) -> tuple[np.ndarray, dict]:
         """One control step; ``a`` = dv_d/dt and ``j`` = d2v_d/dt2 for the feedforward (None: the
-        filtered derivatives of v_d)."""
+        filtered derivatives of v_d). Returns ``(u, info)``; ``u`` is a new array every step,
+        ``info["a_ff"]`` / ``info["j_ff"]`` the rates the feedforward used (tuples of floats,
+        None when off).
+
+        Cost (bench/bench_lpv_law.py): the 3- and 4-vectors are handled as plain floats, the
+        blend is one ``alpha @ W_step`` into a preallocated row whose views are the blended
+        matrices (:meth:`_prepare_step`), products use ``ndarray.dot`` (a third of the call
+        overhead of ``@`` on these sizes), and no check allocates what the load precomputed."""
+        a_l = j_l = None
         if a is not None:
             a = np.asarray(a, dtype=float)
             if a.shape != (self.n_p,) or not np.all(np.isfinite(a)):
                 raise SafetyError(
                     f"lpv law: reference acceleration must be {self.n_p} finite values, got {a}"
                 )
+            a_l = a.tolist()
         if j is not None:
             j = np.asarray(j, dtype=float)
             if j.shape != (self.n_p,) or not np.all(np.isfinite(j)):
                 raise SafetyError(
                     f"lpv law: reference jerk must be {self.n_p} finite values, got {j}"
                 )
+            j_l = j.tolist()
         try:
             x = np.asarray(x, dtype=float)
             v_d = np.asarray(v_d, dtype=float)
@@ -391,69 +539,110 @@ class LpvController:
             t = float(t)
         except (TypeError, ValueError) as exc:
             raise SafetyError(f"lpv law: non-numeric input ({exc})") from None
-        if x.shape != (self.n_x,) or v_d.shape != (self.n_p,) or u_e.shape != (self.n_e,):
+        sx, sv, se = self._shapes
+        if x.shape != sx or v_d.shape != sv or u_e.shape != se:
             raise SafetyError(
                 f"lpv law: shapes x {x.shape}, v_d {v_d.shape}, u_e {u_e.shape}; expected "
                 f"({self.n_x},), ({self.n_p},), ({self.n_e},)"
             )
-        # one finiteness test for all inputs: a sum of squares is NaN/inf iff an entry is (or
-        # overflows, which is also refused); ee is reused by the monitor
-        ee = float(u_e @ u_e)
-        if not math.isfinite(t + float(x @ x) + float(v_d @ v_d) + ee):
+        vd = v_d.tolist()
+        ee = float(u_e.dot(u_e))
+        # one finiteness test of t, v_d and u_e: a sum of squares is NaN/inf iff an entry is
+        # (or overflows, which is also refused); x follows with b below, before any state changes
+        if not math.isfinite(t + float(v_d.dot(v_d)) + ee):
             raise SafetyError(_nonfinite_message(t, x, v_d, u_e))
         dt = 0.0
-        if self.t_prev is not None:
-            dt = t - self.t_prev
+        t_prev = self.t_prev
+        if t_prev is not None:
+            dt = t - t_prev
             if dt < 0.0:
-                raise SafetyError(f"lpv law: time went backwards ({self.t_prev} -> {t})")
-        a_filt = j_filt = None
-        if self.has_ff and (a is None or (self.has_jerk and j is None)):
-            # the derivative filter only runs when the caller does not supply a (and j)
-            a_filt, j_filt = self.reference_rate(t, v_d)
-        alpha, clamped = self.weights(v_d)
-        row = alpha @ self.W
-        mn, n, m = self._mn, self.n_x, self.n_u
-        x_ref = row[mn : mn + n]
-        u_ref = row[mn + n : mn + n + m]
-        a_used = j_used = None
-        if self.has_ff:
-            a_used = a_filt if a is None else a
-            j_used = (j_filt if j is None else j) if self.has_jerk else None
-            aj = self._aj
-            aj[: self.n_p] = a_used
-            if j_used is not None:
-                aj[self.n_p :] = j_used
-            g = row[mn + n + m :].reshape(n + m, -1) @ aj
-            x_ref = x_ref + g[:n]
-            u_ref = u_ref + g[n:]
-        u = u_ref + row[:mn].reshape(m, n) @ (x - x_ref) + self.R @ u_e
+                raise SafetyError(f"lpv law: time went backwards ({t_prev} -> {t})")
+        rates = None
+        has_ff = self.has_ff
+        if has_ff:
+            if a_l is None or (self.has_jerk and j_l is None):
+                # the derivative filter only runs when the caller does not supply a (and j)
+                af, jf, rates = self._rates(t, vd)
+                if a_l is None:
+                    a_l = af
+                if j_l is None:
+                    j_l = jf
+            if not self.has_jerk:
+                j_l = None
+        alpha, clamped = self._weights_list(vd)
+        np.array(alpha).dot(self.W_step, out=self._row)  # K, R, G, x0, u0 blended (Eq. 31)
+        b = self._b
+        if has_ff:
+            self._ba[:] = a_l if j_l is None else a_l + j_l
+            self._Gx.dot(self._bs, out=self._xref)  # x_ref = x0 + G_x [a; j]
+            np.subtract(x, self._xref, out=self._bx)
+        else:
+            np.subtract(x, self._xref_src, out=self._bx)
+        self._be[:] = u_e
+        # x (through x - x_ref) and the feedforward rates: finite, without overflow
+        if not math.isfinite(b.dot(b)):
+            raise SafetyError(_nonfinite_message(t, x, v_d, u_e))
+        if rates is not None:  # commit the derivative filter
+            self._vf, self._alp, self._af, self._jf = rates
+        uy = self._Kext.dot(b)  # u0 + du_ff + K (x - x_ref) + R u_e [; Mix^-1 of it]
+        m = self.n_u
         saturated = False
         if self.mix is not None:
-            u, saturated = self._saturate(u)
+            u = uy[:m]
+            lst = uy[m:].tolist()  # ESC commands Mix^-1 u (seed 0 Eq. 7)
+            lo, hi = self._esc_lo, self._esc_hi
+            if min(lst) < lo or max(lst) > hi:
+                u = self.mix.dot(np.array([lo if e < lo else hi if e > hi else e for e in lst]))
+                saturated = True
+        else:
+            u = uy
         rate_limited = False
-        if self.rate is not None and self.u_prev is not None:
-            du = u - self.u_prev
-            if any(abs(d) > r * dt for d, r in zip(du.tolist(), self._rate_list)):
-                step_max = self.rate * dt
-                u = self.u_prev + np.clip(du, -step_max, step_max)
+        if self._rate_list is not None and self.u_prev is not None:
+            du = (u - self.u_prev).tolist()
+            if any(abs(d) > r * dt for d, r in zip(du, self._rate_list)):
+                steps = [r * dt for r in self._rate_list]
+                u = self.u_prev + np.array(
+                    [-s if d < -s else s if d > s else d for d, s in zip(du, steps)]
+                )
                 rate_limited = True
                 if self.mix is not None:
                     u, sat2 = self._saturate(u)
                     saturated = saturated or sat2
         self.u_prev = u
         self.t_prev = t
-        # bound monitor (Eq. 18 performance output, Eq. 26/29 energies)
+        # bound monitor (Eq. 18 performance output z = Q^-1 (v - v_d), Eq. 26/29 energies)
         if dt > 0.0:
-            z = self.Qinv @ (x[self.vel] - v_d)
+            vs = self._vel_slice
+            xv = x[vs].tolist() if vs is not None else [float(x[i]) for i in self._vel_l]
+            qd = self._qinv_diag
+            if qd is not None and len(qd) == 3:  # unrolled: diagonal Q, 3 velocities
+                q0, q1, q2 = qd
+                w0, w1, w2 = xv
+                v0, v1, v2 = vd
+                z0, z1, z2 = q0 * (w0 - v0), q1 * (w1 - v1), q2 * (w2 - v2)
+                zz = z0 * z0 + z1 * z1 + z2 * z2
+            elif qd is not None:
+                zz = 0.0
+                for qk, xk, vk in zip(qd, xv, vd):
+                    zk = qk * (xk - vk)
+                    zz += zk * zk
+            else:
+                dv = [xi - v for xi, v in zip(xv, vd)]
+                zz = 0.0
+                for qrow in self._qinv_l:
+                    zk = 0.0
+                    for qk, dk in zip(qrow, dv):
+                        zk += qk * dk
+                    zz += zk * zk
             if self.window is not None:
                 lam = math.exp(-dt / self.window)
                 self.energy_z *= lam
                 self.energy_e *= lam
-            self.energy_z += float(z @ z) * dt
+            self.energy_z += zz * dt
             self.energy_e += ee * dt
             self.energy_e_total += ee * dt
-        judged = self.energy_e_total >= self.cfg.monitor_min_energy and self.energy_e > 0.0
-        if judged and self.energy_z > self.threshold * self.threshold * self.energy_e:
+        judged = self.energy_e_total >= self._min_energy and self.energy_e > 0.0
+        if judged and self.energy_z > self._thr2 * self.energy_e:
             self.bound_exceeded = True
         return u, {
             "clamped": clamped,
@@ -461,17 +650,20 @@ class LpvController:
             "rate_limited": rate_limited,
             "bound_judged": judged,
             "bound_exceeded": self.bound_exceeded,
-            "feedforward": self.has_ff,
-            "a_ff": a_used,
-            "j_ff": j_used,
+            "feedforward": has_ff,
+            "a_ff": None if a_l is None else tuple(a_l),
+            "j_ff": None if j_l is None else tuple(j_l),
         }
 
     def _saturate(self, u: np.ndarray) -> tuple[np.ndarray, bool]:
-        esc = self.mix_inv @ u
-        lo, hi = self.cfg.u_esc_min, self.cfg.u_esc_max
-        lst = esc.tolist()
+        """Seed 0 Eq. 7 limits: ``u = Mix clip(Mix^-1 u, u_esc_min, u_esc_max)``."""
+        mix, mix_inv = self.mix, self.mix_inv
+        if mix is None or mix_inv is None:
+            return u, False
+        lst = mix_inv.dot(u).tolist()
+        lo, hi = self._esc_lo, self._esc_hi
         if min(lst) < lo or max(lst) > hi:
-            return self.mix @ np.clip(esc, lo, hi), True
+            return mix.dot(np.array([lo if e < lo else hi if e > hi else e for e in lst])), True
         return u, False
 
 
@@ -539,7 +731,7 @@ class ReferenceLimiter:
         incoming reference exceeds the envelope by the margin (None when it does not). A
         stamp not after the previous one changes nothing (the supervisor judges stamps)."""
         r = np.array(r, dtype=float)
-        if self.y is None:
+        if self.y is None or self.t is None:
             self.y, self.t, self.r_prev = r.copy(), float(t), r
             return self.y, None
         dt = float(t) - self.t

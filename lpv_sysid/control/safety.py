@@ -27,8 +27,9 @@ the future, never silently accepted.
 systems (eigenvalues of ``A_ij + B_ij K_i``, no LMI).
 
 Once aborted, :attr:`action` is the safe state: excitation off and no actuator command
-(the bridge then stops offboard streaming so PX4 takes control back, ARCHITECTURE.md
-Sec. 4). The abort stays latched until :meth:`reset` is called while disarmed.
+(the bridge then stops offboard streaming so PX4 takes control back: the hand-back of
+docs/px4_transport.md, "Offboard safety path"). The abort stays latched until
+:meth:`reset` is called while disarmed.
 The supervisor is pure: it never reads a clock; every call carries its time.
 """
 
@@ -157,7 +158,7 @@ class SafetySupervisor:
 
     def arm(self, t: float) -> None:
         """Start monitoring at time ``t``; every stream must arrive within its timeout."""
-        if self.aborted:
+        if self.event is not None:  # aborted
             raise self.event.as_error()
         self.armed = True
         self._t_arm = float(t)

@@ -33,7 +33,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -63,12 +63,13 @@ def random_airframe(
     def f() -> float:
         return float(1.0 + rng.uniform(-spread, spread))
 
-    I = np.array(base.inertia, dtype=float)
-    I = np.diag([I[i, i] * f() for i in range(3)]) + (I - np.diag(np.diag(I)))
+    inertia = np.array(base.inertia, dtype=float)
+    off_diagonal = inertia - np.diag(np.diag(inertia))
+    inertia = np.diag([inertia[i, i] * f() for i in range(3)]) + off_diagonal
     return dataclasses.replace(
         base,
         mass=base.mass * f(),
-        inertia=tuple(map(tuple, I)),
+        inertia=tuple(map(tuple, inertia)),
         arm_length=base.arm_length * f(),
         a_omega=base.a_omega * f(),
         b_omega=base.b_omega * f(),
@@ -118,10 +119,10 @@ def truth_model(params: QuadrotorParams, rec, trim_window: tuple[float, float]):
     if not sel.any():
         raise ConfigError(f"run {rec.name}: no true states in the trim window {trim_window}")
     xs = rec.state_true[sel]
-    x12 = reduced_state(xs, params.arm_length)
-    phi, th, q_, r_ = x12[:, 0], x12[:, 1], x12[:, 6], x12[:, 7]
+    reduced = reduced_state(xs, params.arm_length)
+    phi, th, q_, r_ = reduced[:, 0], reduced[:, 1], reduced[:, 6], reduced[:, 7]
     psi_dot = float(np.mean((np.sin(phi) * q_ + np.cos(phi) * r_) / np.cos(th)))
-    tr = q.trim(x12[:, 2:5].mean(axis=0), psi_dot)
+    tr = q.trim(reduced[:, 2:5].mean(axis=0), psi_dot)
     A, B = q.linearize(tr)
     return A, B, tr.x0
 
@@ -198,13 +199,13 @@ class AirframeCoverage:
 
     def factors(self, base: QuadrotorParams) -> dict[str, float]:
         """Parameter ratios to the base airframe (for the table)."""
-        I, I0 = np.array(self.params.inertia), np.array(base.inertia)
+        inertia, inertia_base = np.array(self.params.inertia), np.array(base.inertia)
         K = [self.params.K[k] / base.K[k] for k in base.K if base.K[k] != 0]
         return {
             "mass": self.params.mass / base.mass,
-            "Ixx": I[0, 0] / I0[0, 0],
-            "Iyy": I[1, 1] / I0[1, 1],
-            "Izz": I[2, 2] / I0[2, 2],
+            "Ixx": inertia[0, 0] / inertia_base[0, 0],
+            "Iyy": inertia[1, 1] / inertia_base[1, 1],
+            "Izz": inertia[2, 2] / inertia_base[2, 2],
             "arm": self.params.arm_length / base.arm_length,
             "a_Omega": self.params.a_omega / base.a_omega,
             "b_Omega": self.params.b_omega / base.b_omega,
@@ -295,9 +296,8 @@ def score(runs, results, params: QuadrotorParams, ident_cfg) -> list[VertexCover
     for rec, res in zip(runs, results):
         A, B, _ = truth_model(params, rec, vx.trim_window((0.0, rec.t_excite), ident_cfg))
         k = unc.applied_k(ident_cfg.uncertainty, len(res.uncertain.intervals))
-        out.append(
-            VertexCoverage(rec.name, tuple(float(c) for c in rec.v_d), z_scores(res, A, B), k)
-        )
+        u_d, v_d, w_d = (float(c) for c in rec.v_d)
+        out.append(VertexCoverage(rec.name, (u_d, v_d, w_d), z_scores(res, A, B), k))
     return out
 
 
@@ -327,14 +327,15 @@ def run_study(
         kept.append(runs if keep_runs else None)
         if progress:
             progress(
-                f"airframe {k}: {af.covered}/{af.n} elements within {af.vertices[0].k_sigma:g} sigma "
+                f"airframe {k}: {af.covered}/{af.n} elements within {af.vertices[0].k_sigma:g} "
+                "sigma "
                 f"({100 * af.fraction:.2f} %)"
             )
     return out, kept
 
 
 #: re-identification variants of :func:`ablations` (name -> IdentificationConfig changes)
-ABLATIONS = {
+ABLATIONS: dict[str, dict[str, Any]] = {
     "no re-expansion (Jacobian at the flown mean)": {"equilibrium": False},
     "residual-ACF standard errors (no EWC, no Student-t)": {"covariance": "residual_acf"},
 }
@@ -372,7 +373,7 @@ def summary_dict(
     elements outside ``k`` sigma with their z."""
     all_z = np.array([z for af in airframes for v in af.vertices for z in v.z.values()])
     k = airframes[0].vertices[0].k_sigma if airframes and airframes[0].vertices else 3.0
-    d = {
+    d: dict[str, Any] = {
         "format": "lpv_sysid/identification_coverage@1",
         "study": {
             "airframes": cfg.airframes,
@@ -430,7 +431,8 @@ def markdown_table(
 ) -> str:
     """The coverage table (one row per airframe, plus the ablations as extra columns)."""
     k = airframes[0].vertices[0].k_sigma
-    names = list(ablation or {})
+    ablation = ablation or {}
+    names = list(ablation)
     head = (
         f"| airframe | mass | Ixx | Iyy | Izz | arm | a_Omega | b_Omega | K range | elements | "
         f"within {k:g} sigma |" + "".join(f" {n} |" for n in names)

@@ -1,8 +1,8 @@
 """Phase-1 recordings -> aligned arrays for identification (seed 0 Sec. IV, Table 1).
 
-Sources: a rosbag2 directory (via :func:`lpv_sysid.io.bag.read_bag` and the parsers of
-:mod:`lpv_sysid.io.messages`, so every frame conversion stays in ``io/``) or an in-memory
-simulated run (anything with the attributes of ``lpv_sysid.sim.phase1.RunRecord``).
+Sources: a rosbag2 directory (via :func:`lpv_sysid.io.bag.read_arrays` and the column
+parsers of :mod:`lpv_sysid.io.message_columns`, so every frame conversion stays in ``io/``) or an
+in-memory simulated run (anything with the attributes of ``lpv_sysid.sim.phase1.RunRecord``).
 
 Steps:
 
@@ -115,19 +115,94 @@ def _topic_for(available: Sequence[str], short: str) -> str | None:
 
 
 def streams_from_bag(path: str | Path) -> Streams:
-    """Read a phase-1 rosbag2 directory (topics of DESIGN.md, any namespace)."""
-    try:
-        from lpv_sysid.io import bag as iobag
-        from lpv_sysid.io import messages as msgs
-    except ImportError as exc:  # io/bag.py is written by another module owner
-        raise BagError(f"{path}: rosbag support unavailable ({exc})") from None
+    """Read a phase-1 rosbag2 directory (topics of DESIGN.md, any namespace).
+
+    Column-wise: :func:`lpv_sysid.io.bag.read_arrays` (numpy block decode of the records)
+    and the column parsers of :mod:`lpv_sysid.io.message_columns`. A bag whose topics cannot be
+    given as columns (messages of one topic with different structure, e.g. channel lists
+    of different lengths) or that :func:`read_arrays` refuses is read message by message
+    (:func:`lpv_sysid.io.bag.read_bag` and the per-message parsers), which gives the same
+    values or names the problem."""
+    from lpv_sysid.io import bag as iobag
+
     path = Path(path)
     if not path.exists():
         raise BagError(f"{path}: no such bag")
     available = list(iobag.topic_info(str(path)))
     wanted = [t for t in (_topic_for(available, short) for short in TOPICS) if t is not None]
-    data = iobag.read_bag(str(path), topics=wanted)  # skip imu/status: not needed here
-    name = path.name
+    try:
+        data = iobag.read_arrays(str(path), topics=wanted)  # skip imu/status: not needed
+    except iobag.UnsafeBagFile:
+        raise
+    except BagError as exc:
+        log.debug("%s: not read column-wise (%s); reading message by message", path, exc)
+        return _streams_from_messages(path, wanted)
+    return _streams_from_columns(path, data)
+
+
+def _note_estimated(path: Path) -> None:
+    log.warning(
+        "%s: rotor_speeds estimated from the motor outputs (seed 0 Eq. 8 with the airframe's "
+        "a_Omega, b_Omega): the actuator rows reproduce that model, not a measurement; "
+        "a_Omega, b_Omega are not identified from this bag",
+        path,
+    )
+
+
+def _streams_from_columns(path: Path, data: Any) -> Streams:
+    """:class:`Streams` of the ``{topic: TopicArrays}`` of :func:`read_arrays`."""
+    from lpv_sysid.io import message_columns as cols_of
+
+    def series(short: str, parse, required: bool):
+        topic = _topic_for(list(data), short)
+        if topic is None or not len(data[topic]):
+            if required:
+                raise BagError(f"{path}: topic '{short}' missing or empty (have {sorted(data)})")
+            return None
+        cols = data[topic]
+        try:
+            return parse(cols)
+        except ConfigError as exc:
+            row = getattr(exc, "row", None)
+            ns = int(cols.log_time[row if row is not None else 0])
+            raise BagError(f"{path}: topic '{topic}' at {ns * 1e-9:.3f} s: {exc}") from None
+
+    st = series("state", cols_of.states_from_odometry_columns, True)
+    t_rotor, omega = series("rotor_speeds", cols_of.rotor_speeds_from_joint_state_columns, True)
+    rotor = data[_topic_for(list(data), "rotor_speeds")]
+    estimated = bool(np.any(cols_of.rotor_sources_of_columns(rotor) == "estimated"))
+    if estimated:
+        _note_estimated(path)
+    ac = series("actuator_command", cols_of.actuator_command_from_joint_state_columns, False)
+    vr = series("velocity_reference", cols_of.reference_from_twist_columns, False)
+    ex = series("excitation", cols_of.excitation_from_joint_state_columns, False)
+    kw: dict = {}
+    if ac is not None:
+        kw["t_cmd"], kw["u"] = ac
+    if vr is not None:
+        kw["t_ref"] = vr[0]
+        kw["ref"] = np.column_stack([vr[1], vr[2]])
+    if ex is not None:
+        kw["t_exc"], kw["exc"] = ex
+    return Streams(
+        name=path.name,
+        t_state=st.t,
+        euler=st.euler,
+        v=st.v_body,
+        omega=st.omega,
+        t_rotor=t_rotor,
+        Omega=omega,
+        rotor_estimated=estimated,
+        **kw,
+    )
+
+
+def _streams_from_messages(path: Path, wanted: Sequence[str]) -> Streams:
+    """:class:`Streams` through :func:`read_bag` and the per-message parsers."""
+    from lpv_sysid.io import bag as iobag
+    from lpv_sysid.io import messages as msgs
+
+    data = iobag.read_bag(str(path), topics=wanted)
 
     def series(short, parse, required):
         topic = _topic_for(list(data), short)
@@ -152,12 +227,7 @@ def streams_from_bag(path: str | Path) -> Streams:
         for _, m in data[_topic_for(list(data), "rotor_speeds")]
     )
     if estimated:
-        log.warning(
-            "%s: rotor_speeds estimated from the motor outputs (seed 0 Eq. 8 with the airframe's "
-            "a_Omega, b_Omega): the actuator rows reproduce that model, not a measurement; "
-            "a_Omega, b_Omega are not identified from this bag",
-            path,
-        )
+        _note_estimated(path)
     ac = series("actuator_command", msgs.actuator_command_from_joint_state, False)
     vr = series("velocity_reference", msgs.reference_from_twist, False)
     ex = series("excitation", msgs.excitation_from_joint_state, False)
@@ -172,7 +242,7 @@ def streams_from_bag(path: str | Path) -> Streams:
         kw["t_exc"] = np.array([r[0] for r in ex])
         kw["exc"] = np.array([r[1] for r in ex])
     return Streams(
-        name=name,
+        name=path.name,
         t_state=np.array([s.t for s in st]),
         euler=np.array([s.euler for s in st]),
         v=np.array([s.v_body for s in st]),
@@ -333,12 +403,11 @@ def align(s: Streams, cfg: IdentificationConfig, params=None, max_gap: float = 0
     t_exc = s.t_excite
     how = "given"
     if t_exc is None and "excitation" in series:
-        t_exc, how = (
-            _first_departure(*series["excitation"], cfg.excitation_threshold),
-            "excitation topic",
-        )
+        t_e, y_e = series["excitation"]
+        t_exc, how = _first_departure(t_e, y_e, cfg.excitation_threshold), "excitation topic"
     if t_exc is None and "velocity_reference" in series:
-        t_exc, how = _first_departure(*series["velocity_reference"], 1e-3), "velocity reference"
+        t_r, y_r = series["velocity_reference"]
+        t_exc, how = _first_departure(t_r, y_r, 1e-3), "velocity reference"
     if t_exc is None:
         t_exc, how = tg[0] + cfg.trim_duration, "configured trim_duration"
     trim = (max(tg[0], t_exc - cfg.trim_duration), t_exc)

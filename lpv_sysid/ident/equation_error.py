@@ -36,7 +36,8 @@ Uncertainty.  Three covariance estimates of ``theta`` are computed:
   autocorrelation-robust sandwich on the *score* ``s(t) = h(t) v(t)`` of all rows stacked,
   ``Cov(theta) = (H^T H)^-1 [K Omega] (H^T H)^-1`` (block-diagonal ``(H^T H)^-1``), with the
   long-run variance ``Omega`` estimated by the equal-weighted cosine estimator
-  ``Omega = (1/nu) sum_{j=1..nu} L_j L_j^T``, ``L_j = sqrt(2/K) sum_t s(t) cos(pi j (t + 1/2) / K)``
+  ``Omega = (1/nu) sum_{j=1..nu} L_j L_j^T``, ``L_j = sqrt(2/K) sum_t s(t) cos(pi j (t + 1/2) /
+  K)``
   (Mueller 2004; Lazarus, Lewis, Stock & Watson, "HAR inference: recommendations for
   practice", JBES 36, 2018).  It makes no assumption on how residuals and regressors are
   coloured or coupled, it gives the cross-row covariances (needed when an estimate combines
@@ -74,7 +75,7 @@ class CovarianceConfig:
 
     @classmethod
     def from_dict(cls, d: dict | None) -> "CovarianceConfig":
-        from lpv_sysid.validation import check_keys, is_count, is_finite_number
+        from lpv_sysid.config_fields import check_keys, is_count, is_finite_number
 
         d = dict(d or {})
         check_keys(d, ("method", "dof", "band_hz", "max_lag"), "covariance")

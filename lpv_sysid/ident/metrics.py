@@ -83,7 +83,8 @@ def plot_validation(
     index: Sequence[int] = AXIS_INDEX,
     title: str = "LPV model independent validation (seed 0 Fig. 4)",
 ) -> str:
-    """Measured vs modelled state derivatives, one panel per axis (matplotlib Agg); returns path."""
+    """Measured vs modelled state derivatives, one panel per axis (matplotlib Agg); returns
+    path."""
     import matplotlib
 
     matplotlib.use("Agg")

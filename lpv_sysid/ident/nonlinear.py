@@ -97,7 +97,7 @@ def regressors(
     omega = np.atleast_2d(omega)
     Omega = np.atleast_2d(Omega)
     u, vv, w = v[:, 0], v[:, 1], v[:, 2]
-    p, q, r = omega[:, 0], omega[:, 1], omega[:, 2]
+    p, q = omega[:, 0], omega[:, 1]  # the regressors of Eq. (6) do not use r
     d = Omega @ mix.T
     d2 = (Omega * Omega) @ mix.T
     dt, da, de, dr = d.T
@@ -146,13 +146,13 @@ def generalized_force(data: FlightData, params, smoother=None) -> tuple[np.ndarr
     """Measured F (N, 3) and M (N, 3) from Eqs. (3c)-(3d) (nonlinear terms smoothed by
     ``smoother`` when given, see :func:`regression`)."""
     m, g = params.mass, params.g
-    I = np.asarray(params.inertia, dtype=float)
+    inertia = np.asarray(params.inertia, dtype=float)
     sm = smoother or (lambda a: a)
     known_v = sm(
         np.cross(data.v, data.omega) + _gravity_body(data.euler[:, 0], data.euler[:, 1], g)
     )
     F = m * (data.v_dot - known_v)
-    M = data.omega_dot @ I.T - sm(np.cross(data.omega @ I.T, data.omega))
+    M = data.omega_dot @ inertia.T - sm(np.cross(data.omega @ inertia.T, data.omega))
     return F, M
 
 
@@ -165,7 +165,8 @@ def flight_data(
     deriv_cfg=None,
     edge_s: float = 0.5,
 ):
-    """Measured arrays on a uniform grid -> ``(FlightData, smoother, keep)`` for :func:`regression`.
+    """Measured arrays on a uniform grid -> ``(FlightData, smoother, keep)`` for
+    :func:`regression`.
 
     Derivatives of ``v``, ``omega``, ``Omega`` by the global Fourier (or Savitzky-Golay)
     differentiator of :mod:`lpv_sysid.ident.derivatives`; the states stay raw (the smoother
@@ -351,13 +352,14 @@ def simulate_segments(
     nu0: np.ndarray | None = None,
 ) -> np.ndarray:
     """RK4 integration of Eqs. (3c)-(3d) + (6) over each segment, vectorised over segments;
-    attitude and rotor speeds are the measured ones (linearly interpolated at the half step). Returns (S, seg, 6) predicted ``nu = (v, omega)``."""
+    attitude and rotor speeds are the measured ones (linearly interpolated at the half step).
+    Returns (S, seg, 6) predicted ``nu = (v, omega)``."""
     from lpv_sysid.models.quadrotor import mixer
 
     mix = mixer(params.arm_length)
     m, g = params.mass, params.g
-    I = np.asarray(params.inertia, dtype=float)
-    Ii = np.linalg.inv(I)
+    inertia = np.asarray(params.inertia, dtype=float)
+    Ii = np.linalg.inv(inertia)
     dt = float(data.t[1] - data.t[0])
     grav = _gravity_body(data.euler[:, 0], data.euler[:, 1], g)
     # rotor reaction torque J_z delta_r': the step mean (delta_r(k+1) - delta_r(k)) / dt, which
@@ -367,8 +369,8 @@ def simulate_segments(
 
     kk = {nm: float(K[nm]) for ax in AXES for nm, _ in REGRESSORS[ax]}
     l2 = params.arm_length**2
-    Id = np.diag(I)
-    diag_inertia = bool(np.allclose(I, np.diag(Id)))
+    Id = np.diag(inertia)
+    diag_inertia = bool(np.allclose(inertia, np.diag(Id)))
 
     def f(nu, Om, gr, dd):
         # Eq. (6) written out (same terms as :func:`regressors` @ K, without building the
@@ -425,7 +427,7 @@ def simulate_segments(
             out[:, 5] = (h0 * q - h1 * p + Mz) / Id[2]
         else:
             wv = nu[:, 3:]
-            out[:, 3:] = (np.cross(wv @ I.T, wv) + np.stack([Mx, My, Mz], axis=1)) @ Ii.T
+            out[:, 3:] = (np.cross(wv @ inertia.T, wv) + np.stack([Mx, My, Mz], axis=1)) @ Ii.T
         return out
 
     nu = (

@@ -86,7 +86,7 @@ class RateIdConfig:
 def read_run(path: str | Path, cfg: RateIdConfig = RateIdConfig()) -> RateRun:
     """One phase-1 bag -> :class:`RateRun` (topics ``state`` and ``rate_setpoint``)."""
     from lpv_sysid.io import bag as iobag
-    from lpv_sysid.io import messages as M
+    from lpv_sysid.io import messages
 
     path = Path(path)
     topics = list(iobag.topic_info(str(path)))
@@ -94,12 +94,13 @@ def read_run(path: str | Path, cfg: RateIdConfig = RateIdConfig()) -> RateRun:
     rs_t = [t for t in topics if t.endswith("/rate_setpoint")]
     if not st_t or not rs_t:
         raise BagError(
-            f"{path}: needs topics 'state' and 'rate_setpoint' (fly phase1 --record-rate-setpoints), "
+            f"{path}: needs topics 'state' and 'rate_setpoint' (fly phase1 "
+            "--record-rate-setpoints), "
             f"has {sorted(topics)}"
         )
     data = iobag.read_bag(str(path), topics=[st_t[0], rs_t[0]])
-    states = [M.state_from_odometry(m) for _, m in data[st_t[0]]]
-    sps = [M.channels_from_joint_state(m, rp.INPUT_NAMES) for _, m in data[rs_t[0]]]
+    states = [messages.state_from_odometry(m) for _, m in data[st_t[0]]]
+    sps = [messages.channels_from_joint_state(m, rp.INPUT_NAMES) for _, m in data[rs_t[0]]]
     if len(states) < 20 or len(sps) < 20:
         raise BagError(f"{path}: too few samples (state {len(states)}, rate_setpoint {len(sps)})")
     ts = np.array([s.t for s in states])
@@ -229,7 +230,8 @@ def identify(
                 best = (theta, sd, r2, k * step, free)
         if best is None:
             raise ConfigError(
-                f"rate-plant identification: row {rp.STATE_NAMES[row]}: no delay in {list(cfg.delays)} "
+                f"rate-plant identification: row {rp.STATE_NAMES[row]}: no delay in "
+                f"{list(cfg.delays)} "
                 "gives a positive setpoint gain (is the setpoint stream the right one?)"
             )
         theta, sd, r2, d, free = best
@@ -284,7 +286,7 @@ def identify_bags(
 def models_document(params: rp.RatePlantParams, vmin, vmax, k_sigma: float, report: dict) -> dict:
     """vertex_models.yaml (MODELS_FORMAT, generic layout) of the rate plant, with the
     identification report under ``identification`` (design = rate_plant)."""
-    from lpv_sysid.synthesis.files import models_dict
+    from lpv_sysid.io.formats import models_dict
 
     model, els = rp.polytope(params, vmin, vmax, k_sigma)
     d = models_dict(model, els if k_sigma > 0 else None, rp.STATE_UNITS, rp.INPUT_UNITS)

@@ -115,7 +115,7 @@ def nonlinear_flight(
 ):
     """Closed-loop flight of the nonlinear quadrotor (``models.quadrotor``) for identification
     oracles: RK4 at the grid step with the command held (ZOH) over each step, command
-    ``u = controller.step(t, x12, v_ref) + excitation``. Returns ``(x16 (N,16), u (N,4),
+    ``u = controller.step(t, state, v_ref) + excitation``. Returns ``(x16 (N,16), u (N,4),
     xdot16 (N,16))`` with the exact model derivative at every sample."""
     from lpv_sysid.control.baseline import BaselineController
     from lpv_sysid.models.quadrotor import reduced_state

@@ -41,15 +41,15 @@ FORCE_AXES = ("X", "Y", "Z")
 MOMENT_AXES = ("L", "M", "N")
 
 
-def known_rigid_body(x12: np.ndarray, params, Ii: np.ndarray | None = None) -> np.ndarray:
-    """Known part of ``[u', v', w', p', q', r']`` (Eq. 3c-3d with F = M = 0), (N, 6);
-    ``Ii``: the inverse inertia when already at hand."""
-    x12 = np.atleast_2d(x12)
-    I = np.asarray(params.inertia, dtype=float)
-    Ii = np.linalg.inv(I) if Ii is None else Ii
-    v, w = x12[:, 2:5], x12[:, 5:8]
-    vd = np.cross(v, w) + nl._gravity_body(x12[:, 0], x12[:, 1], params.g)
-    wd = np.cross(w @ I.T, w) @ Ii.T
+def known_rigid_body(states: np.ndarray, params, Ii: np.ndarray | None = None) -> np.ndarray:
+    """Known part of ``[u', v', w', p', q', r']`` (Eq. 3c-3d with F = M = 0), (N, 6), at
+    ``states`` (N, 12) in STATE_NAMES order; ``Ii``: the inverse inertia when already at hand."""
+    states = np.atleast_2d(states)
+    inertia = np.asarray(params.inertia, dtype=float)
+    Ii = np.linalg.inv(inertia) if Ii is None else Ii
+    v, w = states[:, 2:5], states[:, 5:8]
+    vd = np.cross(v, w) + nl._gravity_body(states[:, 0], states[:, 1], params.g)
+    wd = np.cross(w @ inertia.T, w) @ Ii.T
     return np.concatenate([vd, wd], axis=1)
 
 
@@ -66,9 +66,11 @@ def known_linear(x0: np.ndarray, params, model=None) -> tuple[np.ndarray, np.nda
     return (model or known_model(params)).linearize(np.asarray(x0, dtype=float))
 
 
-def _phi(x12: np.ndarray, params, mix: np.ndarray, mix_inv: np.ndarray) -> dict[str, np.ndarray]:
+def _phi(
+    states: np.ndarray, params, mix: np.ndarray, mix_inv: np.ndarray
+) -> dict[str, np.ndarray]:
     return nl.regressors(
-        x12[:, 2:5], x12[:, 5:8], x12[:, 8:12] @ mix_inv.T, None, params.arm_length, mix
+        states[:, 2:5], states[:, 5:8], states[:, 8:12] @ mix_inv.T, None, params.arm_length, mix
     )
 
 
@@ -215,9 +217,9 @@ class IdentifiedModel:
         return np.array(out)
 
     def motor_phi(self, j: int, dx: np.ndarray, du: np.ndarray) -> np.ndarray:
-        """d(motor row j)/d(motor theta) at a point at rest."""
+        """d(motor row j)/d(motor theta) at a point at rest (empty without a motor fit)."""
         out = []
-        for lab in self.motor.labels:
+        for lab in self.motor.labels if self.motor is not None else ():
             if lab == "a":
                 out.append(dx[8 + j])
             elif lab == "b":

@@ -43,7 +43,7 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io.formats import UncertainEntry
-from lpv_sysid.validation import check_keys
+from lpv_sysid.config_fields import check_keys
 
 METHODS = ("box", "influence", "hybrid")
 
@@ -179,13 +179,13 @@ def influence(
         col_norm[q] = np.linalg.norm(C @ R, axis=0)
         row_norm[q] = np.linalg.norm(R @ B, axis=1)
     out = np.zeros(len(intervals))
-    for l, iv in enumerate(intervals):
+    for idx, iv in enumerate(intervals):
         half = 0.5 * (iv.upper - iv.lower)
         if iv.matrix == "A":
             sens = np.max(col_norm[:, iv.row] * row_norm[:, iv.col])
         else:
             sens = np.max(col_norm[:, iv.row])
-        out[l] = half * sens
+        out[idx] = half * sens
     return out
 
 
@@ -240,14 +240,14 @@ def build(
         kept = list(range(p))
     else:
         kept = sorted(np.argsort(-infl, kind="stable")[: cfg.p_max].tolist())
-    dropped = [l for l in range(p) if l not in kept]
+    dropped = [idx for idx in range(p) if idx not in kept]
     inflation = 1.0
     if cfg.method == "influence" and dropped:
         s_kept = float(np.sum(infl[kept]))
         inflation = float(np.sum(infl) / s_kept) if s_kept > 0 else 1.0
     marked = []
-    for l, iv in enumerate(ivs):
-        is_kept = l in kept
+    for idx, iv in enumerate(ivs):
+        is_kept = idx in kept
         half = 0.5 * (iv.upper - iv.lower) * (inflation if is_kept else 1.0)
         if not is_kept and cfg.method != "hybrid":
             half = 0.0
@@ -260,18 +260,18 @@ def build(
                 iv.std,
                 iv.lower,
                 iv.upper,
-                float(infl[l]),
+                float(infl[idx]),
                 is_kept,
                 float(half),
             )
         )
-    corner_ivs = [marked[l] for l in kept]
+    corner_ivs = [marked[idx] for idx in kept]
     systems = []
     box_corners = list(
         itertools.product(*[(iv.nominal - iv.half, iv.nominal + iv.half) for iv in corner_ivs])
     )
     if cfg.method == "hybrid" and dropped:
-        d_ivs = [marked[l] for l in dropped]
+        d_ivs = [marked[idx] for idx in dropped]
         q = len(d_ivs)
         lows = np.array([iv.lower for iv in d_ivs])
         widths = np.array([iv.upper - iv.lower for iv in d_ivs])

@@ -48,9 +48,6 @@ from lpv_sysid.ident import equation_error as ee
 from lpv_sysid.ident import metrics
 from lpv_sysid.ident import taylor
 from lpv_sysid.ident import uncertainty as unc
-
-log = logging.getLogger(__name__)
-
 from lpv_sysid.models.quadrotor import (
     INPUT_NAMES,
     INPUT_UNITS,
@@ -58,7 +55,9 @@ from lpv_sysid.models.quadrotor import (
     STATE_NAMES,
     STATE_UNITS,
 )
-from lpv_sysid.validation import check_keys, is_count, is_finite_number
+from lpv_sysid.config_fields import check_keys, is_count, is_finite_number
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -544,6 +543,7 @@ def _motor_design(
         if np.array_equal(g_new, g):
             break
         g, Xa, Xc = g_new, Xa_new, Xc_new
+    assert b_est is not None  # the loop above fits at least once
     held = float(np.max(1.0 - np.mean(g[keep], axis=0)))
     if held > cfg.motor_max_pinned:
         return None, f"a rotor at its speed limit {100 * held:.1f} % of the time"
@@ -596,7 +596,8 @@ def _fit_taylor2(
     iv = None
     if cfg.instruments:
         # the same regressors with the measured rotor speeds replaced by the motor model's response
-        # to the command (Eq. 8): uncorrelated with telemetry noise and aliasing (errors in variables)
+        # to the command (Eq. 8): uncorrelated with telemetry noise and aliasing (errors in
+        # variables)
         x_iv = np.array(data.x, dtype=float)
         x_iv[:, 8:12] = motor_response(u_in, x_iv[0, 8:12], dt, params)
         _, _, dx_iv, _, nl_iv = prepare(
@@ -636,7 +637,7 @@ def _fit_taylor2(
             E = np.stack([rem[a][:, c] for a, c in cols], axis=1)
             Hm, chosen = ee._append_independent(Hm, E)
             labels += [f"nuisance{c}" for c in chosen]
-            if Z is not None:
+            if iv is not None and Z is not None:
                 Z = np.concatenate(
                     [Z] + [iv[1][cols[c][0]][:, cols[c][1] : cols[c][1] + 1] for c in chosen],
                     axis=1,
@@ -658,6 +659,8 @@ def _fit_taylor2(
     fits, joint, dof = ee.solve_rows(
         designs + ([motor_d] if motor_d is not None else []), cfg.covariance, dt
     )
+    if joint is None:  # solve_rows has no covariance only without designs
+        raise ConfigError("vertex identification: no state rows to fit")
     motor = (
         {"mode": "identified", "delay": info}
         if motor_d is not None
@@ -813,7 +816,12 @@ def prepare(
     dt, full, keep = _fit_indices(data, cfg)
     xs, xdot = deriv.smooth_and_differentiate(data.x[full], dt, cfg.derivatives)
     us = deriv.smooth((data.u if u is None else u)[full], dt, cfg.derivatives)
-    out = (np.asarray(data.t, dtype=float)[full][keep], xdot[keep], xs[keep] - x0, us[keep] - u0)
+    out: tuple[np.ndarray, ...] = (
+        np.asarray(data.t, dtype=float)[full][keep],
+        xdot[keep],
+        xs[keep] - x0,
+        us[keep] - u0,
+    )
     if nonlinear is not None:
         out = out + (deriv.smooth(nonlinear(data.x[full]), dt, cfg.derivatives)[keep],)
     return out
@@ -1014,8 +1022,8 @@ def vertex_models_dict(
         "intervals": "every identified element, lower/upper = nominal -/+ k std (Eq. 22)",
         "std": {
             "method": results[order[0]].fit.cov_method,
-            "meaning": "standard error widened so that nominal +/- k std keeps the normal coverage "
-            "2 Phi(k) - 1 under Student-t(dof) errors",
+            "meaning": "standard error widened so that nominal +/- k std keeps the normal "
+            "coverage 2 Phi(k) - 1 under Student-t(dof) errors",
             "dof": [None if d is None else float(d) for d in dofs],
             "t_factor": [t_factor(k, d) for k, d in zip(ks, dofs)],
         },

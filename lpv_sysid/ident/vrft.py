@@ -144,7 +144,8 @@ TfMatrix = list  # list[list[Tf]]
 
 
 def first_order_model(poles: Sequence[float]) -> TfMatrix:
-    """Diagonal reference model M_jj = (1 - p_j)/(z - p_j) (unit DC gain), seed 1 Eqs. (5.3), (5.5)."""
+    """Diagonal reference model M_jj = (1 - p_j)/(z - p_j) (unit DC gain),
+    seed 1 Eqs. (5.3), (5.5)."""
     ps = [float(p) for p in poles]
     for p in ps:
         if not np.isfinite(p) or abs(p) >= 1.0:
@@ -241,7 +242,8 @@ class ControllerClass:
         return int(self.mask.shape[1])
 
     def param_index(self) -> list[tuple[int, int, int]]:
-        """(q, i, j) of each entry of theta: vec([K_1, ..., K_p]) (column-major, Eq. 3.23), masked."""
+        """(q, i, j) of each entry of theta: vec([K_1, ..., K_p]) (column-major, Eq. 3.23),
+        masked."""
         idx = []
         for q in range(len(self.basis)):
             for j in range(self.n_y):
@@ -439,16 +441,20 @@ def vrft(
     discard: int = 0,
     eiv_weight: str = "identity",
 ) -> VrftResult:
-    """Identify theta of ``C(z; theta)`` so that the closed loop approaches ``M`` (seed 1 Sec. 3.3).
+    """Identify theta of ``C(z; theta)`` so that the closed loop approaches ``M`` (seed 1 Sec.
+    3.3).
 
     method:
       ``"ls"``  least squares, Eqs. (3.13)-(3.14);
-      ``"eiv"`` extended IV, Eqs. (3.26)-(3.31) with zeta_L = [s_L(k+l) .. s_L(k-l)], l=window, where
-              s = u (the thesis' choice, valid for open-loop data) or ``instrument`` (N x q, e.g. the
+      ``"eiv"`` extended IV, Eqs. (3.26)-(3.31) with zeta_L = [s_L(k+l) .. s_L(k-l)], l=window,
+      where
+              s = u (the thesis' choice, valid for open-loop data) or ``instrument`` (N x q, e.g.
+              the
               external excitation of a closed-loop experiment, which is independent of the noise);
       ``"iv"``  second experiment / model-based instrument of Sec. 3.3.2: phi rebuilt from ``y2``
               (same input u, independent noise, or a model-simulated noise-free output).
-    discard: samples dropped at the start of the regression (transient when data are not from rest).
+    discard: samples dropped at the start of the regression (transient when data are not from
+    rest).
     eiv_weight: ``"identity"`` (W = I, pseudo-code step 5) or ``"residual"``: two-step estimate of
       the residual covariance of Eq. (3.30), W = 1/N sum g g^T with g(k) = zeta_L(k) (x) eps(k) and
       eps the residual of the W = I solution, then Eq. (3.31) with that W.
@@ -491,10 +497,9 @@ def vrft(
             if z.shape[0] != N:
                 raise ConfigError(f"instrument has {z.shape[0]} samples, data have {N}")
             z_L = _scalar_L(M, prefilter).filter(z)  # same filter as u_L (Eq. 3.26)
-        l = window
-        ks = np.arange(max(int(discard), l), N - l)
-        # zeta_L(k) = [z_L(k+l); ...; z_L(k-l)]  (Eq. 3.26)
-        Z = np.concatenate([z_L[ks + d] for d in range(l, -l - 1, -1)], axis=1)
+        # zeta_L(k) = [z_L(k+l); ...; z_L(k-l)] with l = window (Eq. 3.26)
+        ks = np.arange(max(int(discard), window), N - window)
+        Z = np.concatenate([z_L[ks + d] for d in range(window, -window - 1, -1)], axis=1)
         nk = ks.size
         R = np.einsum("ka,kbt->abt", Z, Phi[ks]).reshape(-1, n_th) / nk  # Eq. (3.28)
         r = np.einsum("ka,kb->ab", Z, u_L[ks]).reshape(-1) / nk  # Eq. (3.29)
@@ -646,7 +651,8 @@ def model_reference_h2(res: VrftResult, G_ss, M: TfMatrix, n_imp: int = 2000) ->
 
 
 def simulate_loop(G_ss, res: VrftResult, r: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
-    """Closed loop y = G u, u = C(theta)(r - y - v) from rest; returns y (noise-free). For evaluation."""
+    """Closed loop y = G u, u = C(theta)(r - y - v) from rest; returns y (noise-free). For
+    evaluation."""
     A, B, C, D = (np.atleast_2d(np.asarray(x, dtype=float)) for x in G_ss)
     d, Nk = _matrix_poly(res)
     T = r.shape[0]
@@ -656,9 +662,9 @@ def simulate_loop(G_ss, res: VrftResult, r: np.ndarray, v: np.ndarray | None = N
     u_hist = np.zeros((d.size, n_u))
     y = np.zeros((T, n_y))
     vv = np.zeros_like(r) if v is None else v
-    # u(k) = -sum_{m>=1} d_m u(k-m) + sum_m N_m e(k-m); e(k) = r - C x - D u(k) - v (algebraic loop)
-    I = np.eye(n_u)
-    S = np.linalg.inv(I + Nk[0] @ D)
+    # u(k) = -sum_{m>=1} d_m u(k-m) + sum_m N_m e(k-m); e(k) = r - C x - D u(k) - v (algebraic
+    # loop)
+    S = np.linalg.inv(np.eye(n_u) + Nk[0] @ D)
     for k in range(T):
         past = -sum(d[m] * u_hist[m - 1] for m in range(1, d.size)) + sum(
             Nk[m] @ e_hist[m - 1] for m in range(1, Nk.shape[0])

@@ -1,4 +1,5 @@
-"""Configuration of a VRFT run (seed 1 Sec. 3.3): reference model, controller class, filter, method.
+"""Configuration of a VRFT run (seed 1 Sec. 3.3): reference model, controller class, filter,
+method. The scalar keys are declared once as fields (:mod:`lpv_sysid.config_fields`).
 
 YAML layout (config/vrft_example.yaml)::
 
@@ -11,7 +12,7 @@ YAML layout (config/vrft_example.yaml)::
     eiv_weight: identity     # identity (pseudo-code step 5) | residual (two-step W of Eq. 3.30)
     discard: 0               # initial samples left out of the regression
     Ts: null                 # sample time [s]; default: spacing of t in the data file
-    outer: {reference_model: ..., controller: ..., prefilter: ...}   # optional: cascade (Sec. 3.3.4)
+    outer: {reference_model: ..., controller: ..., prefilter: ...}  # optional: cascade, Sec. 3.3.4
 """
 
 from __future__ import annotations
@@ -19,8 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
+from lpv_sysid import config_fields as cf
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.ident.vrft import (
     ONE,
@@ -136,12 +136,14 @@ class LoopConfig:
 @dataclass(frozen=True)
 class VrftConfig:
     loop: LoopConfig
-    method: str = "ls"
-    window: int = 5
-    discard: int = 0
-    Ts: float | None = None
+    method: str = cf.choice("ls", ("ls", "eiv", "iv"), "Eq. 3.14 | Eqs. 3.26-3.31 | Sec. 3.3.2")
+    window: int = cf.count(5, "EIV window l (Eq. 3.26)")
+    discard: int = cf.count(0, "initial samples left out of the regression")
+    Ts: float | None = cf.number(
+        None, "sample time [s]; default: spacing of t", lo=0.0, lo_open=True, optional=True
+    )
     outer: LoopConfig | None = None
-    eiv_weight: str = "identity"
+    eiv_weight: str = cf.choice("identity", ("identity", "residual"), "EIV weighting")
 
     @classmethod
     def from_dict(cls, d: Any) -> "VrftConfig":
@@ -150,28 +152,7 @@ class VrftConfig:
         bad = set(d) - _TOP
         if bad:
             raise ConfigError(f"vrft config: unknown key(s) {sorted(bad)}; known: {sorted(_TOP)}")
+        kw = cf.parse_fields(cls, d, "", other_keys=_LOOP | {"outer"}, required=())
         loop = LoopConfig.from_dict({k: d[k] for k in _LOOP if k in d}, "")
-        method = d.get("method", "ls")
-        if method not in ("ls", "eiv", "iv"):
-            raise ConfigError(f"method: {method!r}; use ls, eiv or iv")
-        ints = {}
-        for k, default in (("window", 5), ("discard", 0)):
-            v = d.get(k, default)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-                raise ConfigError(f"{k}: expected a non-negative integer, got {v!r}")
-            ints[k] = v
-        Ts = d.get("Ts")
-        if Ts is not None:
-            if (
-                isinstance(Ts, bool)
-                or not isinstance(Ts, (int, float))
-                or not np.isfinite(Ts)
-                or Ts <= 0
-            ):
-                raise ConfigError(f"Ts: expected a positive number of seconds, got {Ts!r}")
-            Ts = float(Ts)
         outer = LoopConfig.from_dict(d["outer"], "outer.") if d.get("outer") is not None else None
-        w = d.get("eiv_weight", "identity")
-        if w not in ("identity", "residual"):
-            raise ConfigError(f"eiv_weight: {w!r}; use identity or residual")
-        return cls(loop, method, ints["window"], ints["discard"], Ts, outer, w)
+        return cls(loop, outer=outer, **kw)

@@ -1,4 +1,5 @@
-"""Seed 1 (Zangarini) VRFT benchmarks as data generators: Table 5.3 (Eqs. 5.4-5.5), LV100 (Eqs. 5.1-5.3).
+"""Seed 1 (Zangarini) VRFT benchmarks as data generators: Table 5.3 (Eqs. 5.4-5.5), LV100 (Eqs.
+5.1-5.3).
 
 The plants are used only to *generate* data and to evaluate the tuned loop; VRFT never sees them.
 """
@@ -28,9 +29,11 @@ def table53_plant_ss():
 
 
 def table53_ideal_pi() -> tuple[np.ndarray, np.ndarray]:
-    """Ideal controller C* = G^-1 M (I - M)^-1 (seed 1 Eq. 3.3) = K0^-1 (0.1 z - 0.1*0.9048)/(z - 1).
+    """Ideal controller C* = G^-1 M (I - M)^-1 (seed 1 Eq. 3.3) = K0^-1 (0.1 z - 0.1*0.9048)/(z -
+    1).
 
-    Returns (a, b) of C_ij = (a_ij z - b_ij)/(z - 1); it lies in the 2x2 PI class, so VRFT is exact.
+    Returns (a, b) of C_ij = (a_ij z - b_ij)/(z - 1); it lies in the 2x2 PI class, so VRFT is
+    exact.
     """
     Ki = np.linalg.inv(TABLE53_K0)
     g = 1.0 - TABLE53_M_POLE
@@ -119,7 +122,8 @@ def lv100_data(
 ):
     """PRBS experiment on the LV100 (seed 1 Sec. 5.1.1): returns (t, u, y_meas, excitation).
 
-    Closed loop with C0 of Eq. (5.2), PRBS injected at the plant input (Fig. 3.2, u = C0 e + u_bar),
+    Closed loop with C0 of Eq. (5.2), PRBS injected at the plant input (Fig. 3.2, u = C0 e +
+    u_bar),
     the two channels excited one after the other, white measurement noise of variance ``noise_var``
     fed back through C0. With ``closed_loop=False`` u = u_bar (open loop). ``noise_seed`` (default:
     ``seed``) draws the noise separately, so the same PRBS can be reused across noise realisations.
@@ -201,5 +205,5 @@ def lv100_statistics(
         res = vrft(u, y, lv100_model(), cls, method=method, window=window, eiv_weight=eiv_weight)
         kps.append(res.K[0])
         kis.append(res.K[1])
-    kps, kis = np.array(kps), np.array(kis)
-    return kps.mean(0), kps.std(0, ddof=1), kis.mean(0), kis.std(0, ddof=1)
+    kp, ki = np.array(kps), np.array(kis)
+    return kp.mean(0), kp.std(0, ddof=1), ki.mean(0), ki.std(0, ddof=1)

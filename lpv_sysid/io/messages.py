@@ -44,6 +44,7 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io import frames
+from lpv_sysid.models.quadrotor import EXCITATION_NAMES, INPUT_NAMES  # owner of the names
 
 __all__ = [
     "MessageError",
@@ -90,13 +91,6 @@ __all__ = [
 ODOM_FRAME = "odom"
 BASE_FRAME = "base_link"
 
-try:  # the quadrotor module owns the channel names; fall back to DESIGN.md's values
-    from lpv_sysid.models.quadrotor import EXCITATION_NAMES, INPUT_NAMES
-except ImportError:  # pragma: no cover - only while models/quadrotor.py is missing
-    INPUT_NAMES = ("ut", "ua", "ue", "ur")
-    EXCITATION_NAMES = ("ue_t", "ue_a", "ue_e", "ue_r")
-EXCITATION_NAMES = tuple(EXCITATION_NAMES)
-INPUT_NAMES = tuple(INPUT_NAMES)
 ROTOR_NAMES = ("rotor_1", "rotor_2", "rotor_3", "rotor_4")  # PX4 quad-X numbering
 #: where rotor speeds come from: "esc" (measured, ESC telemetry) or "estimated" (motor
 #: outputs through the motor model); the JointState's header.frame_id tells them apart
@@ -119,7 +113,12 @@ _INT32 = (-(2**31), 2**31 - 1)
 
 
 class MessageError(ConfigError, ValueError):
-    """A message cannot be built or parsed; the text names the field and the problem."""
+    """A message cannot be built or parsed; the text names the field and the problem.
+    ``row``: the index of the offending message for the parsers of many messages."""
+
+    def __init__(self, message: str, row: int | None = None):
+        super().__init__(message)
+        self.row = row
 
 
 # ------------------------------------------------------------------------ factory
@@ -412,33 +411,56 @@ def states_from_odometry(
     for i, msg in enumerate(msgs):
         if frame_id is not None and msg.header.frame_id != frame_id:
             raise MessageError(
-                f"state[{i}].header: expected frame_id {frame_id!r}, got {msg.header.frame_id!r}"
+                f"state[{i}].header: expected frame_id {frame_id!r}, got {msg.header.frame_id!r}",
+                row=i,
             )
         if child_frame_id is not None and msg.child_frame_id != child_frame_id:
             raise MessageError(
                 f"state[{i}].child_frame_id: expected frame_id {child_frame_id!r}, "
-                f"got {msg.child_frame_id!r}"
+                f"got {msg.child_frame_id!r}",
+                row=i,
             )
         p, o = msg.pose.pose.position, msg.pose.pose.orientation
         lin, ang = msg.twist.twist.linear, msg.twist.twist.angular
         raw[i] = (p.x, p.y, p.z, o.x, o.y, o.z, o.w, lin.x, lin.y, lin.z, ang.x, ang.y, ang.z)
         ns[i] = stamp_ns_from_time(msg.header.stamp)
+    return _state_arrays(ns, raw)
+
+
+#: Odometry leaves in the order of the (N, 13) array :func:`_state_arrays` converts
+_ODOM_LEAVES = (
+    "pose.pose.position.x",
+    "pose.pose.position.y",
+    "pose.pose.position.z",
+    "pose.pose.orientation.x",
+    "pose.pose.orientation.y",
+    "pose.pose.orientation.z",
+    "pose.pose.orientation.w",
+    "twist.twist.linear.x",
+    "twist.twist.linear.y",
+    "twist.twist.linear.z",
+    "twist.twist.angular.x",
+    "twist.twist.angular.y",
+    "twist.twist.angular.z",
+)
+
+
+def _state_arrays(ns: np.ndarray, raw: np.ndarray) -> StateArrays:
+    """:class:`StateArrays` of stamps ``ns`` and the (N, 13) Odometry values
+    ``raw`` (:data:`_ODOM_LEAVES`), checked finite and unit-quaternion row by row
+    (:class:`MessageError` naming the first bad row, ``row`` set)."""
     bad = ~np.isfinite(raw)
     if np.any(bad):
-        i, j = np.argwhere(bad)[0]
-        field_name = (
-            ["pose.pose.position"] * 3
-            + ["pose.pose.orientation"] * 4
-            + ["twist.twist.linear"] * 3
-            + ["twist.twist.angular"] * 3
-        )
-        raise MessageError(f"state[{i}].{field_name[j]}: non-finite value")
+        i, j = (int(k) for k in np.argwhere(bad)[0])
+        where = _ODOM_LEAVES[j].rsplit(".", 1)[0]
+        raise MessageError(f"state[{i}].{where}: non-finite value", row=i)
     norm = np.linalg.norm(raw[:, 3:7], axis=1)
     off = np.abs(norm - 1.0) > 1e-3
     if np.any(off):
         i = int(np.argmax(off))
         raise MessageError(
-            f"state[{i}].pose.pose.orientation: not a unit quaternion (norm {norm[i]:.6g})"
+            f"state[{i}].pose.pose.orientation: not a unit quaternion (norm {norm[i]:.6g})",
+            row=i,
         )
     return StateArrays(
         t=ns / 1e9,
@@ -549,7 +571,8 @@ def excitation_from_joint_state(msg):
 
 
 def actuator_command_msg(f: MsgFactory, stamp_ns: int, u):
-    """``actuator_command``: virtual command ``u = [ut, ua, ue, ur]`` (seed 0 Eq. 7) in ``position``."""
+    """``actuator_command``: virtual command ``u = [ut, ua, ue, ur]`` (seed 0 Eq. 7) in
+    ``position``."""
     return joint_state(f, stamp_ns, INPUT_NAMES, position=u)
 
 

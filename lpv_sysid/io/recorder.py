@@ -27,21 +27,19 @@ a recorder is started on that directory again.
 from __future__ import annotations
 
 import contextlib
-import datetime as _dt
-import hashlib
 import logging
 import math
 import os
-import re
 import signal
 import subprocess
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Mapping
+from typing import Any, Callable, Mapping
 
 import yaml
 
 from lpv_sysid.errors import BagError, ConfigError
+from lpv_sysid.io.file_hash import sha256_file
 from lpv_sysid.io.bag import (
     FLUSH_INTERVAL_S,
     FLUSH_MESSAGES,
@@ -49,19 +47,18 @@ from lpv_sysid.io.bag import (
     DiskReserve,
     RepairReport,
     atomic_write_text,
-    merge_topic_stats,
-    repair_bag,
-    writer_alive,
 )
-from lpv_sysid.io.yaml_file import read_yaml
+from lpv_sysid.io.bag.durability import now_iso
+from lpv_sysid.io.experiment import (  # re-exported: the directory layout and its repair
+    LOCK_FILE,
+    METADATA_FILE,
+    METADATA_FORMAT,
+    STATUSES,
+    ExperimentRepair,
+    repair_experiment,
+)
 
 LOG = logging.getLogger(__name__)
-METADATA_FORMAT = "lpv_sysid/experiment@1"
-METADATA_FILE = "experiment.yaml"
-#: lock + metadata disk reserve of a running :class:`Recorder`, in the experiment directory
-LOCK_FILE = ".lpv_sysid_recording"
-STATUSES = ("recording", "incomplete", "closed_cleanly")
-_BAG_DIR = re.compile(r"bag_[0-9]{4}")
 
 
 @dataclass(frozen=True)
@@ -153,7 +150,9 @@ class TopicStats:
 
     @property
     def rate_hz(self) -> float:
-        if self.count < 2 or self.last_ns == self.first_ns:
+        if self.count < 2 or self.first_ns is None or self.last_ns is None:
+            return 0.0
+        if self.last_ns == self.first_ns:
             return 0.0
         return (self.count - 1) / ((self.last_ns - self.first_ns) * 1e-9)
 
@@ -197,16 +196,6 @@ def git_revision(path: str | os.PathLike) -> str | None:
     return out.stdout.strip() or None
 
 
-def sha256_file(path: str | os.PathLike) -> str:
-    from lpv_sysid.io.safe_open import MAX_NPZ_BYTES, open_regular
-
-    h = hashlib.sha256()
-    with open_regular(path, max_bytes=MAX_NPZ_BYTES) as fh:  # regular file: a FIFO would block
-        for chunk in iter(lambda: fh.read(1 << 16), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
 def _default_writer_factory(path: str, storage: str):
     from lpv_sysid.io.bag import BagWriter
 
@@ -222,7 +211,7 @@ class Recorder:
     stats: dict = field(default_factory=dict)
     bags: list = field(default_factory=list)
     error: str | None = None
-    _writer: object = None
+    _writer: Any = None  # a BagWriter (or what writer_factory makes: duck-typed)
     _started_ns: int | None = None
     _stopped_ns: int | None = None
     _wall_start: str = ""
@@ -231,7 +220,7 @@ class Recorder:
     _static_meta: dict = field(default_factory=dict)
     _busy: bool = False
     _exit_code: int | None = None
-    _lock: object = None
+    _lock: DiskReserve | None = None
     _flushes_seen: int = 0
     rotor_sources: dict = field(default_factory=dict)  # rotor_speeds messages per source
 
@@ -270,7 +259,7 @@ class Recorder:
                 f"recorder: cannot create {out / LOCK_FILE}: {exc.strerror or exc}"
             ) from None
         self._started_ns = int(stamp_ns)
-        self._wall_start = _now_iso()
+        self._wall_start = now_iso()
         try:
             self._open_next()
         except BagError:
@@ -384,7 +373,7 @@ class Recorder:
             if stamp_ns is not None
             else (max((b.end_ns or 0) for b in self.bags) if self.bags else self._started_ns)
         )
-        self._wall_stop = _now_iso()
+        self._wall_stop = now_iso()
         try:
             self._close_current()
         finally:
@@ -472,8 +461,8 @@ class Recorder:
         if n >= bag.messages:
             span = (bag.bytes, bag.start_ns, bag.end_ns)
         elif isinstance(rep, RepairReport):
-            starts = [s.start_ns for s in rep.topics.values() if s.count]
-            ends = [s.end_ns for s in rep.topics.values() if s.count]
+            starts = [s.start_ns for s in rep.topics.values() if s.start_ns is not None]
+            ends = [s.end_ns for s in rep.topics.values() if s.end_ns is not None]
             span = (rep.bytes, min(starts) if starts else None, max(ends) if ends else None)
         elif bag.durable is not None:
             span = (bag.durable["bytes"], bag.durable["start_ns"], bag.durable["end_ns"])
@@ -566,7 +555,7 @@ class Recorder:
             "status": self._status(closed),
             "closed_cleanly": bool(closed),
             "error": self.error,
-            "updated_time": _now_iso(),
+            "updated_time": now_iso(),
             "split": {
                 "size_bytes": self.config.split_size_bytes,
                 "duration_s": self.config.split_duration_s,
@@ -608,10 +597,6 @@ class Recorder:
         return sum((b.durable or {"topics": {}})["topics"].get(topic, 0) for b in self.bags)
 
 
-def _now_iso() -> str:
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
-
-
 @contextlib.contextmanager
 def stop_on_signals(
     recorder: Recorder,
@@ -641,35 +626,6 @@ def stop_on_signals(
         recorder.stop(stamp_ns() if stamp_ns else None)
 
 
-# ------------------------------------------------------------------ repair after a kill
-@dataclass(frozen=True)
-class ExperimentRepair:
-    """What :func:`repair_experiment` found and did: one
-    :class:`~lpv_sysid.io.bag.RepairReport` per bag, the status before and after, and the
-    bags that could not be repaired (``errors``)."""
-
-    out_dir: str
-    bags: tuple
-    status_before: str
-    status: str
-    changed: bool
-    errors: tuple = ()
-    dry_run: bool = False
-
-    @property
-    def messages(self) -> int:
-        return sum(r.messages for r in self.bags)
-
-    def summary(self) -> str:
-        head = f"{METADATA_FILE}: status {self.status_before}"
-        if self.changed:
-            head += (" -> " if not self.dry_run else " -> would be ") + self.status
-        else:
-            head += ", nothing to do"
-        parts = [head, f"{self.messages} message(s) readable in {len(self.bags)} bag(s)"]
-        return "; ".join(parts + list(self.errors))
-
-
 def _occupied(out: Path) -> str:
     """Why ``out`` cannot be recorded into; an interrupted recording there is repaired
     first (the logger's next start is the first chance to do it automatically)."""
@@ -688,118 +644,17 @@ def _occupied(out: Path) -> str:
     return msg
 
 
-def repair_experiment(out_dir, dry_run: bool = False) -> ExperimentRepair:
-    """Make an experiment directory whose recorder was killed (or starved) readable by
-    standard tools and its ``experiment.yaml`` truthful: :func:`~lpv_sysid.io.bag.repair_bag`
-    on every bag, then the counts, spans and bags from what the bags hold, ``status:
-    incomplete`` (kept ``closed_cleanly`` when nothing needed repair), the ``error`` (an
-    interrupted recording says so) and a ``repaired`` record. Refuses a directory whose
-    recorder is alive. ``dry_run`` changes nothing."""
-    out = Path(out_dir)
-    path = out / METADATA_FILE
-    meta = read_yaml(path, finite=False)  # a package output: rates may be .nan
-    if not isinstance(meta, dict) or meta.get("format") != METADATA_FORMAT:
-        got = meta.get("format") if isinstance(meta, dict) else type(meta).__name__
-        raise BagError(
-            f"recorder: {path}: not an lpv_sysid experiment file "
-            f"(format {got!r}, expected {METADATA_FORMAT!r})"
-        )
-    if writer_alive(out / LOCK_FILE):
-        raise BagError(
-            f"recorder: {out} is being recorded by a running process "
-            f"({LOCK_FILE} is locked); stop it first"
-        )
-    names: list[str] = []
-    for b in meta.get("bags") or []:
-        name = b.get("path") if isinstance(b, dict) else None
-        if isinstance(name, str) and _BAG_DIR.fullmatch(name) and name not in names:
-            names.append(name)
-    for p in sorted(out.iterdir()):
-        if p.is_dir() and _BAG_DIR.fullmatch(p.name) and p.name not in names:
-            names.append(p.name)
-    reports, errors = [], []
-    for name in names:
-        if not (out / name).is_dir():
-            errors.append(f"{name}: missing")
-            continue
-        try:
-            reports.append(repair_bag(out / name, dry_run))
-        except BagError as exc:
-            errors.append(f"{name}: not repaired: {exc}")
-    before = meta.get("status")
-    if before not in STATUSES:  # written before the status field existed
-        before = (
-            "closed_cleanly"
-            if meta.get("closed_cleanly")
-            else ("incomplete" if meta.get("error") else "recording")
-        )
-    interrupted = before == "recording"  # ... and its lock is gone: the recorder died
-    changed = (
-        interrupted
-        or bool(errors)
-        or any(r.changed for r in reports)
-        or (out / LOCK_FILE).exists()
-    )
-    status = (
-        "closed_cleanly"
-        if before == "closed_cleanly" and not errors and not any(r.changed for r in reports)
-        else "incomplete"
-    )
-    if not changed:
-        return ExperimentRepair(str(out), tuple(reports), before, before, False, (), dry_run)
-    new = dict(meta)
-    new["status"] = status
-    new["closed_cleanly"] = status == "closed_cleanly"
-    if interrupted and not new.get("error"):
-        new["error"] = (
-            "recording interrupted: the recorder ended without closing (killed, "
-            "crashed or lost power)"
-        )
-    old_topics = meta.get("topics") if isinstance(meta.get("topics"), dict) else {}
-    merged = {
-        t: [s.msgtype, s.count, s.start_ns, s.end_ns]
-        for t, s in merge_topic_stats(r.topics for r in reports).items()
-    }
-    topics = {}
-    for t in list(old_topics) + [t for t in merged if t not in old_topics]:
-        entry = dict(old_topics.get(t) or {})
-        typ, n, lo, hi = merged.get(t, [entry.get("type"), 0, None, None])
-        entry["type"] = entry.get("type") or typ
-        entry["count"] = n
-        entry.setdefault("dropped", 0)
-        entry["rate_hz"] = round((n - 1) / ((hi - lo) * 1e-9), 6) if n > 1 and hi > lo else 0.0
-        topics[t] = entry
-    new["topics"] = topics
-    new["bags"] = [
-        {
-            "path": Path(r.path).name,
-            "messages": r.messages,
-            "bytes": r.bytes,
-            "start_ns": min((s.start_ns for s in r.topics.values() if s.count), default=None),
-            "end_ns": max((s.end_ns for s in r.topics.values() if s.count), default=None),
-        }
-        for r in reports
-    ]
-    if new.get("stop_stamp_ns") is None:
-        ends = [b["end_ns"] for b in new["bags"] if b["end_ns"] is not None]
-        new["stop_stamp_ns"] = max(ends) if ends else None
-    new["repaired"] = {
-        "time": _now_iso(),
-        "by": "lpv_sysid.io.recorder.repair_experiment",
-        "status_before": before,
-        "bags": {Path(r.path).name: r.summary() for r in reports},
-        "errors": errors or None,
-    }
-    result = ExperimentRepair(
-        str(out), tuple(reports), before, status, True, tuple(errors), dry_run
-    )
-    if dry_run:
-        return result
-    try:
-        atomic_write_text(path, yaml.safe_dump(new, sort_keys=False), fsync=True)
-    except OSError as exc:
-        raise BagError(f"recorder: cannot write {path}: {exc.strerror or exc}") from None
-    with contextlib.suppress(FileNotFoundError):
-        (out / LOCK_FILE).unlink()
-    LOG.warning("%s: %s", out, result.summary())
-    return result
+__all__ = [
+    "RecorderConfig",
+    "Recorder",
+    "TopicStats",
+    "stop_on_signals",
+    "git_revision",
+    "sha256_file",
+    "LOCK_FILE",
+    "METADATA_FILE",
+    "METADATA_FORMAT",
+    "STATUSES",
+    "ExperimentRepair",
+    "repair_experiment",
+]

@@ -73,12 +73,14 @@ def _cannot(label: str, shown: str, reason: str, path) -> FileReadError:
     return FileReadError(f"{label}: cannot read {shown}({reason})", os.fspath(path), reason)
 
 
-def _check_stat(st: os.stat_result, label: str, max_bytes: int, shown: str, path) -> None:
+def _check_stat(
+    st: os.stat_result, label: str, max_bytes: Optional[int], shown: str, path
+) -> None:
     if stat.S_ISDIR(st.st_mode):
         raise _cannot(label, shown, "Is a directory", path)
     if not stat.S_ISREG(st.st_mode):
         raise _cannot(label, shown, f"not a regular file: {_kind(st.st_mode)}", path)
-    if st.st_size > max_bytes:
+    if max_bytes is not None and st.st_size > max_bytes:
         reason = f"file too large ({_size(st.st_size)}; the limit is {_size(max_bytes)})"
         raise FileReadError(f"{label}: {shown}{reason}", os.fspath(path), reason)
 
@@ -94,21 +96,45 @@ def _shown(path, label: Optional[str], show_path: bool) -> tuple[str, str]:
     return label, (f"{p} " if show_path and p != label else "")
 
 
+def check_regular(
+    path, label: Optional[str] = None, max_bytes: Optional[int] = None, *, show_path: bool = False
+) -> None:
+    """Refuse (ConfigError ``"{label}: ..."``) ``path`` unless it is a regular file (after
+    following symlinks) of at most ``max_bytes`` (None: any size): for files that a library
+    opens by name (rosbags, sqlite3), checked just before it does."""
+    p = os.fspath(path)
+    label, shown = _shown(p, label, show_path)
+    try:
+        st = os.stat(p)
+    except OSError as exc:
+        raise _oserror(exc, label, shown, p) from None
+    except (ValueError, UnicodeError) as exc:
+        raise _cannot(label, shown, f"invalid path: {exc}", p) from None
+    _check_stat(st, label, max_bytes, shown, p)
+
+
 @contextmanager
 def open_regular(
-    path, label: Optional[str] = None, max_bytes: int = MAX_YAML_BYTES, *, show_path: bool = False
+    path,
+    label: Optional[str] = None,
+    max_bytes: Optional[int] = MAX_YAML_BYTES,
+    *,
+    show_path: bool = False,
+    writable: bool = False,
 ) -> Iterator[BinaryIO]:
-    """Open ``path`` for binary reading if it is a regular file of at most ``max_bytes``.
+    """Open ``path`` for binary reading if it is a regular file of at most ``max_bytes``
+    (None: any size; e.g. a recording read in chunks).
 
     ``stat`` before ``open`` (non-regular files are never opened), ``O_NONBLOCK`` and
-    ``fstat`` after it; every failure is a ConfigError ``"{label}: ..."``.
+    ``fstat`` after it; every failure is a ConfigError ``"{label}: ..."``. ``writable``
+    opens it read-write (``r+b``, e.g. an in-place repair) after the same checks.
     """
     p = os.fspath(path)
     label, shown = _shown(p, label, show_path)
     try:
         _check_stat(os.stat(p), label, max_bytes, shown, p)
         flags = (
-            os.O_RDONLY
+            (os.O_RDWR if writable else os.O_RDONLY)
             | getattr(os, "O_NONBLOCK", 0)
             | getattr(os, "O_NOCTTY", 0)
             | getattr(os, "O_CLOEXEC", 0)
@@ -121,7 +147,7 @@ def open_regular(
         raise _cannot(label, shown, f"invalid path: {exc}", p) from None
     try:
         _check_stat(os.fstat(fd), label, max_bytes, shown, p)
-        fh = os.fdopen(fd, "rb")
+        fh = os.fdopen(fd, "r+b" if writable else "rb")
     except BaseException:
         os.close(fd)
         raise
@@ -136,7 +162,8 @@ def read_bytes(
     label, shown = _shown(path, label, show_path)
     chunks, total = [], 0
     with open_regular(path, label, max_bytes, show_path=show_path) as fh:
-        try:  # in chunks up to one byte past the cap: a file that grows (or /proc, size 0) is caught
+        # in chunks up to one byte past the cap: a file that grows (or /proc, size 0) is caught
+        try:
             while total <= max_bytes:
                 chunk = fh.read(min(1 << 20, max_bytes + 1 - total))
                 if not chunk:
@@ -227,8 +254,10 @@ def _npy_header(fp) -> tuple[tuple, np.dtype]:
         shape, _, dtype = np.lib.format.read_array_header_1_0(fp)
     elif version == (2, 0):
         shape, _, dtype = np.lib.format.read_array_header_2_0(fp)
-    else:  # (3, 0): utf-8 field names; read_array handles it, the header check needs the private reader
-        shape, _, dtype = np.lib.format._read_array_header(fp, version)  # noqa: SLF001
+    else:  # (3, 0): utf-8 field names; read_array handles it, the header check needs the
+        # private reader (not in numpy's type stubs, hence getattr)
+        private_reader = getattr(np.lib.format, "_read_array_header")
+        shape, _, dtype = private_reader(fp, version)
     return shape, dtype
 
 
@@ -268,7 +297,8 @@ def read_npz(
                     name = info.filename
                     if not name.endswith(".npy"):
                         raise ConfigError(
-                            f"{label}: not a readable .npz archive (member {name!r} is not a .npy array)"
+                            f"{label}: not a readable .npz archive (member {name!r} is not a "
+                            ".npy array)"
                         )
                     key = name[:-4]
                     if key in out:
@@ -315,6 +345,7 @@ __all__ = [
     "MAX_NPZ_BYTES",
     "MAX_YAML_BYTES",
     "check_output",
+    "check_regular",
     "decode_text",
     "open_regular",
     "read_bytes",

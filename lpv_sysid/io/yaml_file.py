@@ -1,9 +1,11 @@
 """Read a YAML file strictly; every failure is a ConfigError naming the file.
 
-The one YAML reader of the package: the plain configuration files (config/*.yaml,
-identification YAML, node side files) come through :func:`read_yaml`, the versioned
-model/gains files of :mod:`lpv_sysid.io.formats` through :func:`strict_load` (same loader,
-their own line-numbered wording). Files are opened by :mod:`lpv_sysid.io.safe_open`
+The one YAML reader and writer of the package: the plain configuration files
+(config/*.yaml, identification YAML, node side files) come through :func:`read_yaml`, the
+versioned model/gains files of :mod:`lpv_sysid.io.formats` through :func:`read_located`
+(same loader, every parse error with its line and column), rosbag2 metadata through
+:func:`strict_load`; every YAML file the package writes goes through :func:`save_yaml`
+(atomic: temporary file + rename). Files are opened by :mod:`lpv_sysid.io.safe_open`
 (regular files only, never blocks on a FIFO, size cap :data:`MAX_YAML_BYTES`, UTF-8 only).
 
 The loader is the libyaml parser (``yaml.CParser``, about 5x faster than the pure-Python
@@ -28,6 +30,8 @@ one) under a Python composer and ``SafeConstructor`` that add what PyYAML does n
 from __future__ import annotations
 
 import math
+import os
+import tempfile
 from pathlib import Path
 from typing import Any, Optional
 
@@ -39,7 +43,7 @@ from yaml.nodes import MappingNode, ScalarNode, SequenceNode
 from yaml.resolver import Resolver
 
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.io.safe_open import MAX_YAML_BYTES, decode_text, read_bytes
+from lpv_sysid.io.safe_open import MAX_YAML_BYTES, decode_text, read_bytes, read_text
 
 #: Deepest nesting of collections accepted (the package's files nest <= 8 levels).
 MAX_DEPTH = 100
@@ -54,7 +58,8 @@ INT_LIMIT = 2**63 - 1
 MAX_MAGNITUDE = 1e15
 
 if getattr(yaml, "__with_libyaml__", False):
-    from yaml.cyaml import CParser as _Parser
+    # the libyaml binding; types-PyYAML does not list it among yaml.cyaml's exports
+    from yaml.cyaml import CParser as _Parser  # type: ignore[attr-defined]
 else:  # pragma: no cover - PyYAML without libyaml: same checks, slower parser
     from yaml.parser import Parser
     from yaml.reader import Reader
@@ -180,8 +185,11 @@ class _StrictConstructor(SafeConstructor):
         return value
 
 
-_StrictConstructor.add_constructor("tag:yaml.org,2002:int", _StrictConstructor.construct_yaml_int)
-_StrictConstructor.add_constructor(
+# (the stubs type add_constructor for the stock constructor classes only)
+_StrictConstructor.add_constructor(  # type: ignore[type-var]
+    "tag:yaml.org,2002:int", _StrictConstructor.construct_yaml_int
+)
+_StrictConstructor.add_constructor(  # type: ignore[type-var]
     "tag:yaml.org,2002:float", _StrictConstructor.construct_yaml_float
 )
 
@@ -248,7 +256,9 @@ class FiniteLoader(StrictLoader):
 def strict_load(text: str, finite: bool = False) -> Any:
     """One YAML document of ``text`` with :class:`StrictLoader` (``finite``:
     :class:`FiniteLoader`); raises ``yaml.YAMLError``."""
-    return yaml.load(text, Loader=FiniteLoader if finite else StrictLoader)  # noqa: S506 - SafeConstructor
+    # SafeConstructor-based Loader; the stubs list only PyYAML's own Loader classes
+    loader = FiniteLoader if finite else StrictLoader
+    return yaml.load(text, Loader=loader)  # type: ignore[arg-type]
 
 
 def describe_yaml_error(exc: yaml.YAMLError) -> str:
@@ -323,6 +333,81 @@ def read_yaml_mapping(
     return d
 
 
+def read_located(path: str | Path, label: Optional[str] = None) -> Any:
+    """:func:`strict_load` of the file ``path`` (not ``finite``: the versioned files check
+    each field themselves) with the wording of the versioned files: ``"{label}: malformed YAML
+    at line L, column C: {problem}"`` (``label`` defaults to the file name)."""
+    path = Path(path)
+    label = label or path.name
+    return parse_located(read_text(path, label, show_path=True), label)
+
+
+def parse_located(text: str, label: str) -> Any:
+    """:func:`strict_load` of ``text``; a parse error is ``ConfigError`` with line and column."""
+    try:
+        return strict_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        problem = (
+            getattr(exc, "problem", None) or (str(exc).splitlines() or [type(exc).__name__])[0]
+        )
+        raise ConfigError(f"{label}: malformed YAML{where}: {problem}") from None
+
+
+class _Dumper(yaml.SafeDumper):
+    """Block style for mappings, flow style for vectors and matrix rows."""
+
+
+def _represent_list(dumper: yaml.SafeDumper, data: list) -> yaml.Node:
+    flow = all(not isinstance(v, (list, dict)) for v in data)
+    return dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=flow)
+
+
+_Dumper.add_representer(list, _represent_list)
+
+
+def dump_yaml(doc: Any) -> str:
+    """The YAML text :func:`save_yaml` writes: keys in insertion order, mappings in block
+    style, lists of scalars (vectors, matrix rows) in flow style."""
+    return yaml.dump(
+        doc,
+        Dumper=_Dumper,
+        sort_keys=False,
+        default_flow_style=False,
+        width=100,
+        allow_unicode=True,
+    )
+
+
+def save_yaml(doc: Any, path: str | Path, label: Optional[str] = None) -> None:
+    """Write ``doc`` to ``path`` atomically (temporary file in the same directory + rename), so
+    a failure never leaves half a file; parent directories are created. An existing
+    non-regular ``path`` (FIFO, device) is refused; errors are ``ConfigError("{label}: cannot
+    write {path}: ...")`` (``label`` defaults to the file name)."""
+    from lpv_sysid.io.safe_open import check_output
+
+    path = Path(path)
+    label = label or path.name
+    text = dump_yaml(doc)
+    check_output(path, label)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+        try:
+            with os.fdopen(fd, "w", encoding="utf-8") as fh:
+                fh.write(text)
+            os.replace(tmp, path)
+        except BaseException:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+            raise
+    except OSError as exc:
+        raise ConfigError(f"{label}: cannot write {path}: {exc.strerror or exc}") from None
+
+
 def _kind(v: Any) -> str:
     return {
         list: "a list",
@@ -344,7 +429,11 @@ __all__ = [
     "StrictLoader",
     "StrictYAMLError",
     "describe_yaml_error",
+    "dump_yaml",
+    "parse_located",
+    "read_located",
     "read_yaml",
     "read_yaml_mapping",
+    "save_yaml",
     "strict_load",
 ]

@@ -53,7 +53,7 @@ from lpv_sysid.mavlink.offboard import (
 )
 from lpv_sysid.mavlink.rotor_estimate import RotorEstimateConfig, with_motor_output_streams
 from lpv_sysid.mavlink.telemetry import StateSample, TelemetryDecoder
-from lpv_sysid.validation import check_config_keys
+from lpv_sysid.config_fields import check_config_keys
 from lpv_sysid.mavlink.transport import (
     ActuatorSetpoint,
     TransportContext,
@@ -66,7 +66,8 @@ log = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class BridgeConfig:
-    """``config/mavlink_bridge.yaml``: sections ``link``, ``offboard``, ``envelope``, ``command``."""
+    """``config/mavlink_bridge.yaml``: sections ``link``, ``offboard``, ``envelope``,
+    ``command``."""
 
     link: LinkConfig = field(default_factory=LinkConfig)
     offboard: OffboardConfig = field(default_factory=OffboardConfig)
@@ -250,9 +251,8 @@ class BridgeCore:
             return self._reject(
                 now, f"velocity reference ignored: bridge command is {self.config.command!r}"
             )
-        return self._command(
-            now, VelocitySetpoint(tuple(float(x) for x in v), float(yaw_rate)), stamp
-        )
+        v_cmd = (float(v[0]), float(v[1]), float(v[2]))
+        return self._command(now, VelocitySetpoint(v_cmd, float(yaw_rate)), stamp)
 
     def on_actuator_command(self, now: float, u: Any, stamp: float | None = None) -> bool:
         try:
@@ -269,7 +269,8 @@ class BridgeCore:
             return self._reject(
                 now, f"actuator command ignored: bridge command is {self.config.command!r}"
             )
-        return self._command(now, ActuatorSetpoint(tuple(float(x) for x in a)), stamp)
+        u_cmd = (float(a[0]), float(a[1]), float(a[2]), float(a[3]))
+        return self._command(now, ActuatorSetpoint(u_cmd), stamp)
 
     def start(self, now: float) -> list[Any]:
         """Begin pre-streaming (service ``start``) and arm the envelope; returns the status
@@ -341,9 +342,8 @@ class BridgeCore:
         if self.machine.state not in STREAMING and self.machine.state != State.HANDBACK:
             s = self._state
             fresh = s is not None and now - s.t <= self.config.telemetry_max_age
-            bad = self.envelope.arm(
-                now, s.pos_ned if fresh else None, vehicle_armed=self.machine.armed
-            )
+            pos = s.pos_ned if s is not None and fresh else None
+            bad = self.envelope.arm(now, pos, vehicle_armed=self.machine.armed)
             self._envelope_notices(out)
             if bad is not None:
                 reason = f"start refused: envelope: {bad.message}"
@@ -383,13 +383,14 @@ class BridgeCore:
 
     def _ctx(self, now: float) -> TransportContext:
         s = self._state
-        fresh = s is not None and now - s.t <= self.config.telemetry_max_age
+        if s is not None and now - s.t > self.config.telemetry_max_age:
+            s = None  # stale: no attitude or rates for the transport
         return TransportContext(
             int(max(now - (self._t0 or now), 0.0) * 1000) & 0xFFFFFFFF,
             self.link.target_system or 1,
             self.link.target_component,
-            s.q_wxyz if fresh else None,
-            s.omega if fresh else None,
+            s.q_wxyz if s is not None else None,
+            s.omega if s is not None else None,
         )
 
     def _run(self, actions: list[Any], now: float, out: BridgeOutput) -> None:

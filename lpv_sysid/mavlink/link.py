@@ -26,13 +26,14 @@ from __future__ import annotations
 
 import binascii
 import logging
+import math
 import struct
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping
 
 from lpv_sysid.errors import ConfigError, LpvSysidError
 from lpv_sysid.mavlink import px4
-from lpv_sysid.validation import check_config_keys
+from lpv_sysid.config_fields import check_config_keys
 
 log = logging.getLogger(__name__)
 
@@ -121,7 +122,8 @@ def _positive(name: str, v: Any, allow_zero: bool = False) -> float:
         raise ConfigError(f"{name} must be a number, got {v!r}") from None
     if f != f or f in (float("inf"), float("-inf")) or f < 0 or (f == 0 and not allow_zero):
         raise ConfigError(
-            f"{name} must be a finite {'non-negative' if allow_zero else 'positive'} number, got {v!r}"
+            f"{name} must be a finite {'non-negative' if allow_zero else 'positive'} number, got "
+            f"{v!r}"
         )
     return f
 
@@ -377,7 +379,7 @@ class FastDecoder:
             "_signed": "False",
             **fields,
         }
-        consts = {}
+        consts: dict[str, Any] = {}
         items = []
         for key, val in probe.__dict__.items():
             if key in variable:
@@ -678,7 +680,7 @@ class MavlinkLink:
             codec is None
             or codec.signing.secret_key is not None
             or codec.callback is not None
-            or getattr(self._mod, "MAVLINK_IGNORE_CRC", 0)
+            or getattr(self._mod, "MAVLINK_IGNORE_CRC", False)
         ):
             return None
         fd = self._fast
@@ -702,7 +704,11 @@ class MavlinkLink:
         if self.conn is None:
             return False
         sock = getattr(self.conn, "port", None)
-        fd = sock.fileno() if hasattr(sock, "fileno") else getattr(self.conn, "fd", None)
+        fd = (
+            sock.fileno()
+            if sock is not None and hasattr(sock, "fileno")
+            else getattr(self.conn, "fd", None)
+        )
         if fd is None:
             return True
         try:
@@ -727,11 +733,9 @@ class MavlinkLink:
         if self._up and not up:
             self._up = False
             self.stats.link_losses += 1
-            self._events.append(
-                LinkEvent(
-                    now, "link_lost", f"no HEARTBEAT for {now - self.last_heartbeat_t:.2f} s"
-                )
-            )
+            last = self.last_heartbeat_t
+            silent = now - last if last is not None else math.inf
+            self._events.append(LinkEvent(now, "link_lost", f"no HEARTBEAT for {silent:.2f} s"))
         if self.conn is None:
             if now - self._last_reopen >= self.config.reconnect_period:
                 self._reopen(now)

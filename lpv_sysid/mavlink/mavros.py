@@ -3,7 +3,7 @@
 For vehicles already running MAVROS (ROS 2 ``mavros`` node talking MAVLink to PX4) the
 ``mavlink_bridge_node`` with ``transport: mavros`` does not open a MAVLink link; it
 subscribes and publishes MAVROS's topics instead. Only common_interfaces types are used
-(ARCHITECTURE.md Sec. 3), which fixes what is possible:
+(docs/DESIGN.md, Conventions), which fixes what is possible:
 
 ======================================  ==============================  ======================
 MAVROS topic                            type                            used
@@ -56,9 +56,9 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io import frames
-from lpv_sysid.io import messages as M
+from lpv_sysid.io import messages
 from lpv_sysid.mavlink.offboard import StatusEvent
-from lpv_sysid.validation import check_config_keys
+from lpv_sysid.config_fields import check_config_keys
 
 log = logging.getLogger(__name__)
 
@@ -173,11 +173,11 @@ def body_reference_to_local_enu(v_frd, r_frd: float, euler) -> tuple[np.ndarray,
     return frames.ned_to_enu(v_ned), float(-psi_dot)
 
 
-def cmd_vel_msg(f: M.MsgFactory, stamp_ns: int, sp: CmdVel, frame_id: str = "map"):
+def cmd_vel_msg(f: messages.MsgFactory, stamp_ns: int, sp: CmdVel, frame_id: str = "map"):
     """``geometry_msgs/TwistStamped`` for ``/mavros/setpoint_velocity/cmd_vel``: linear =
     local ENU velocity, angular = (0, 0, ENU yaw rate); ``frame_id`` names the local ENU
     frame (MAVROS reads only the stamp)."""
-    return M.enu_velocity_setpoint_msg(f, stamp_ns, sp.v_enu, sp.yaw_rate_enu, frame_id)
+    return messages.enu_velocity_setpoint_msg(f, stamp_ns, sp.v_enu, sp.yaw_rate_enu, frame_id)
 
 
 def vehicle_mode_from_statuses(statuses: Sequence[Any]) -> str | None:
@@ -223,7 +223,7 @@ class MavrosCore:
         self._pending: list[StatusEvent] = []
 
     # -------------------------------------------------------------- telemetry in
-    def on_odometry(self, now: float, s: M.StateSample) -> M.StateSample | None:
+    def on_odometry(self, now: float, s: messages.StateSample) -> messages.StateSample | None:
         """A parsed ``/mavros/local_position/odom`` sample; returns it for the ``state``
         topic, or None when its stamp is not newer than the previous one (dropped)."""
         if s.stamp_ns <= self._last_odom_stamp:
@@ -233,8 +233,9 @@ class MavrosCore:
         self._att, self._t_att = np.asarray(s.euler, dtype=float), now
         return s
 
-    def on_imu(self, now: float, s: M.ImuSample) -> M.ImuSample | None:
-        """A parsed ``/mavros/imu/data`` sample; returned for the ``imu`` topic unless out of order."""
+    def on_imu(self, now: float, s: messages.ImuSample) -> messages.ImuSample | None:
+        """A parsed ``/mavros/imu/data`` sample; returned for the ``imu`` topic unless out of
+        order."""
         if s.stamp_ns <= self._last_imu_stamp:
             self.out_of_order += 1
             return None

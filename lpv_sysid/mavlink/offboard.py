@@ -75,7 +75,7 @@ from typing import Any, Mapping, Sequence
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.mavlink import px4
-from lpv_sysid.validation import check_config_keys
+from lpv_sysid.config_fields import check_config_keys
 
 MAV_CMD_DO_SET_MODE = px4.MAV_CMD_DO_SET_MODE
 MAV_CMD_COMPONENT_ARM_DISARM = px4.MAV_CMD_COMPONENT_ARM_DISARM
@@ -364,11 +364,13 @@ class OffboardMachine:
         if isinstance(mode, px4.Px4Mode):
             m = mode
         else:
-            m = px4.HANDBACK_MODES.get(str(mode).upper())
-            if m is None:
+            found = px4.HANDBACK_MODES.get(str(mode).upper())
+            if found is None:
                 raise ConfigError(
-                    f"finish mode {mode!r} is not a hand-back mode; use {sorted(px4.HANDBACK_MODES)}"
+                    f"finish mode {mode!r} is not a hand-back mode; "
+                    f"use {sorted(px4.HANDBACK_MODES)}"
                 )
+            m = found
         reason = f"finish requested: {m.name}"
         if self.state in STREAMING:
             return self._handback(now, reason, fault=False, first=m, force=True)

@@ -241,7 +241,7 @@ def _sticks(facts: Facts) -> tuple[bool, str]:
             f"{'present' if present else 'absent'} ({rc_txt})"
         )
     ok = px4.sticks_available(
-        mode if mode is not None else px4.RcInMode.RC_OR_JOYSTICK, _rc_present(rc), False
+        int(mode) if mode is not None else px4.RcInMode.RC_OR_JOYSTICK, _rc_present(rc), False
     )
     return ok, f"{'present' if ok else 'none'}: {rc_txt}, no SYS_STATUS"
 
@@ -264,7 +264,8 @@ def _obl_check(a: float | int | None, sticks: bool, sticks_txt: str) -> Check:
             value,
             expected,
             NOGO,
-            f"offboard loss -> {act.name.lower()}: motors off in the air, the vehicle falls; {HOLD_FIX}",
+            f"offboard loss -> {act.name.lower()}: motors off in the air, the vehicle falls; "
+            f"{HOLD_FIX}",
         )
     if mode in px4.STICK_MODES:
         if not sticks:
@@ -273,7 +274,8 @@ def _obl_check(a: float | int | None, sticks: bool, sticks_txt: str) -> Check:
                 value,
                 expected,
                 NOGO,
-                f"offboard loss -> {mode.name} needs stick input and there is none ({sticks_txt}); "
+                f"offboard loss -> {mode.name} needs stick input and there is none "
+                f"({sticks_txt}); "
                 f"PX4 cannot run it and descends without position control; {HOLD_FIX}",
             )
         if mode == px4.STABILIZED:
@@ -301,7 +303,9 @@ def _rotor_check(facts: Facts, cfg: RotorEstimateConfig) -> Check:
         why = (
             "rotor_estimate is disabled"
             if not cfg.enabled
-            else f"no {' / '.join(MOTOR_OUTPUT_SOURCES) if cfg.source == 'auto' else cfg.source.upper()} either"
+            else "no "
+            + (" / ".join(MOTOR_OUTPUT_SOURCES) if cfg.source == "auto" else cfg.source.upper())
+            + " either"
         )
         return Check(
             "rotor speeds",
@@ -423,8 +427,10 @@ def judge(
                 "OFFBOARD (disarmed: stale)",
                 "known PX4 mode, not OFFBOARD",
                 WARN,
-                "PX4 keeps reporting OFFBOARD after an auto-disarm; no offboard session is active. "
-                "Not a reason for NO-GO: the bridge switches to OFFBOARD itself after pre-streaming",
+                "PX4 keeps reporting OFFBOARD after an auto-disarm; no offboard session is "
+                "active. "
+                "Not a reason for NO-GO: the bridge switches to OFFBOARD itself after "
+                "pre-streaming",
             )
         )
     elif mode == px4.OFFBOARD:

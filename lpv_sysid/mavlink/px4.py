@@ -182,7 +182,8 @@ def encode_flight_sw_version(major: int, minor: int, patch: int, fw_type: int = 
 
 # ------------------------------------------------------------------------ parameters
 class OblAction(enum.IntEnum):
-    """COM_OBL_RC_ACT (PX4 v1.16 commander_params.c): action after offboard loss (COM_OF_LOSS_T)."""
+    """COM_OBL_RC_ACT (PX4 v1.16 commander_params.c): action after offboard loss
+    (COM_OF_LOSS_T)."""
 
     POSITION = 0
     ALTITUDE = 1
@@ -244,7 +245,8 @@ def param_to_wire(value: float | int, param_type: int) -> float:
 
 
 def param_from_wire(wire: float, param_type: int) -> float | int:
-    """Inverse of :func:`param_to_wire` (PX4 byte-wise encoding, MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE)."""
+    """Inverse of :func:`param_to_wire` (PX4 byte-wise encoding,
+    MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE)."""
     if param_type == MAV_PARAM_TYPE_INT32:
         return struct.unpack("<i", struct.pack("<f", wire))[0]
     return float(wire)
@@ -340,7 +342,8 @@ def _codec_classes(name: str) -> tuple[type, type]:
         return _CODEC_CLASSES[name], _CODEC_CLASSES[name + ":esc"]
     mod = dialect_module(name)
 
-    class EscStatusMessage(mod.MAVLink_message):  # type: ignore[name-defined,misc]
+    # the dialect's classes are attributes of a module loaded at run time (name-defined)
+    class EscStatusMessage(mod.MAVLink_message):  # type: ignore[name-defined]
         """ESC_STATUS (291): index, time_usec [us], rpm[4], voltage[4] [V], current[4] [A]."""
 
         id = MAVLINK_MSG_ID_ESC_STATUS
@@ -369,7 +372,7 @@ def _codec_classes(name: str) -> tuple[type, type]:
             )
             return self._pack(mav, self.crc_extra, payload, force_mavlink1=force_mavlink1)
 
-    class Px4Codec(mod.MAVLink):  # type: ignore[name-defined,misc]
+    class Px4Codec(mod.MAVLink):  # type: ignore[name-defined]  # see EscStatusMessage
         """The dialect's MAVLink parser plus ESC_STATUS; robust parsing always on."""
 
         def __init__(self, *args: Any, **kwargs: Any) -> None:
@@ -394,7 +397,6 @@ def _codec_classes(name: str) -> tuple[type, type]:
 def _decode_esc_status(codec: Any, mod: ModuleType, cls: type, msgbuf: bytearray):
     """Decode ESC_STATUS with CRC and signature checks, mirroring pymavlink's decode()."""
     signed = bool(msgbuf[2] & mod.MAVLINK_IFLAG_SIGNED)
-    sig_len = mod.MAVLINK_SIGNATURE_BLOCK_LEN if signed else 0
     mlen = msgbuf[1]
     crc = struct.unpack("<H", bytes(msgbuf[10 + mlen : 12 + mlen]))[0]
     crcbuf = bytearray(msgbuf[1 : 10 + mlen])

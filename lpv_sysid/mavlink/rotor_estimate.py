@@ -52,7 +52,7 @@ import numpy as np
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io.messages import ROTOR_SOURCES
 from lpv_sysid.mavlink import px4
-from lpv_sysid.validation import check_config_keys, is_count, is_finite_number
+from lpv_sysid.config_fields import check_config_keys, is_count, is_finite_number
 
 #: output range (output_min, output_max) of each mapping name
 MAPPINGS: dict[str, tuple[float, float]] = {
@@ -266,7 +266,7 @@ def load_airframe(path: str) -> Any:
     p = Path(path)
     if not p.is_absolute() and not p.is_file():
         try:
-            from lpv_sysid.cli._paths import config_dir
+            from lpv_sysid.default_configs import config_dir
 
             shipped = config_dir() / p
         except ConfigError:
@@ -341,6 +341,7 @@ class RotorSpeedEstimator:
             or not (0.0 < dt <= self.max_gap)
             or self._u is None
             or self._u.shape != u.shape
+            or self._omega is None
         ):
             omega = self.model.steady(u)
             omega[stopped] = 0.0

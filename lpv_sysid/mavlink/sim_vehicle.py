@@ -92,7 +92,7 @@ from lpv_sysid.io import frames
 from lpv_sysid.mavlink import px4
 from lpv_sysid.mavlink.link import LinkConfig, MavlinkLink, parse_url, warn_if_all_interfaces
 from lpv_sysid.mavlink.telemetry import euler_to_quat
-from lpv_sysid.validation import check_config_keys, is_finite_number
+from lpv_sysid.config_fields import check_config_keys, is_finite_number
 
 log = logging.getLogger(__name__)
 
@@ -252,7 +252,8 @@ class SimVehicleConfig:
 
         if not (50.0 <= self.physics_hz <= MAX_PHYSICS_HZ):  # NaN fails too
             raise ConfigError(
-                f"sim vehicle physics_hz must be in [50, {MAX_PHYSICS_HZ:g}] Hz, got {self.physics_hz!r}"
+                f"sim vehicle physics_hz must be in [50, {MAX_PHYSICS_HZ:g}] Hz, got "
+                f"{self.physics_hz!r}"
             )
         for name in ("system_id", "component_id"):
             v = getattr(self, name)
@@ -271,7 +272,8 @@ class SimVehicleConfig:
         for k, v in self.stream_rates.items():
             if k not in DEFAULT_RATES:
                 raise ConfigError(
-                    f"sim vehicle stream_rates: unknown stream {k!r}; known: {sorted(DEFAULT_RATES)}"
+                    f"sim vehicle stream_rates: unknown stream {k!r}; known: "
+                    f"{sorted(DEFAULT_RATES)}"
                 )
             if not (is_finite_number(v) and 0 <= v <= 1000):
                 raise ConfigError(
@@ -546,8 +548,9 @@ class SimVehicle:
             self.ctrl.reset()  # PX4 keeps idle and resets integrators on ground
             return self.model.mix @ np.full(4, 0.1)
         v_body = self._R(x).T @ v_ned
-        x12 = np.concatenate([x[3:5], x[6:12], np.zeros(4)])
-        return np.asarray(self.ctrl.step(self.t, x12, v_body, yaw_rate), dtype=float)
+        # STATE_NAMES order: phi, theta, body velocity, body rates, delta (unused) = 0
+        controller_state = np.concatenate([x[3:5], x[6:12], np.zeros(4)])
+        return np.asarray(self.ctrl.step(self.t, controller_state, v_body, yaw_rate), dtype=float)
 
     def _velocity_setpoint(self) -> tuple[np.ndarray, float]:
         x = self.x
@@ -560,9 +563,9 @@ class SimVehicle:
             return np.array([v[0], v[1], self.param("MPC_LAND_SPEED")]), 0.0
         if m == px4.OFFBOARD and self.setpoint is not None:
             sp = self.setpoint
-            if sp.kind == "velocity":
+            if sp.kind == "velocity" and sp.v_ned is not None:
                 return sp.v_ned.copy(), sp.yaw_rate
-            if sp.kind == "position":
+            if sp.kind == "position" and sp.pos_ned is not None:
                 v = 1.0 * (sp.pos_ned - pos) + (sp.v_ned if sp.v_ned is not None else 0.0)
                 return _clip_norm(v, 5.0), sp.yaw_rate
         if m == px4.LAND:
@@ -595,7 +598,8 @@ class SimVehicle:
         kp = np.array(
             [self.param("MC_ROLLRATE_P"), self.param("MC_PITCHRATE_P"), self.param("MC_YAWRATE_P")]
         )
-        tau = kp * (sp.rates - self.x[9:12])
+        rates = sp.rates if sp.rates is not None else np.zeros(3)  # set with kind "rates"
+        tau = kp * (rates - self.x[9:12])
         alloc = np.array(
             [
                 [1.0, -1.0, 1.0, 1.0],
@@ -630,11 +634,14 @@ class SimVehicle:
 
     def _offboard_lost(self, t: float) -> None:
         act = int(self.param("COM_OBL_RC_ACT"))
-        reason = f"offboard lost for > COM_OF_LOSS_T = {self.param('COM_OF_LOSS_T')} s (COM_OBL_RC_ACT={act})"
+        reason = (
+            f"offboard lost for > COM_OF_LOSS_T = {self.param('COM_OF_LOSS_T')} s "
+            f"(COM_OBL_RC_ACT={act})"
+        )
         self.failsafe_reason = reason
         log.warning(reason)
         self.px4_log.append((t, "Failsafe activated"))
-        target = px4.OBL_ACTION_MODES.get(act)
+        target = next((mode for a, mode in px4.OBL_ACTION_MODES.items() if a == act), None)
         if target is None:  # 6 terminate, 7 disarm: motors off
             self.mode_log.append((t, self.mode.name, reason))
             self._disarm(t, reason)
@@ -650,7 +657,8 @@ class SimVehicle:
                 self.ctrl.vel_int[0] = self.ctrl.vel_int[1] = 0.0
 
     def _set_mode(self, mode: px4.Px4Mode, t: float, reason: str, failsafe: bool = False) -> None:
-        """Enter ``mode``: a failsafe's (the user's choice is kept) or a user's (ends a failsafe)."""
+        """Enter ``mode``: a failsafe's (the user's choice is kept) or a user's (ends a
+        failsafe)."""
         if mode != self.mode or self.descending:
             self.mode_log.append((t, mode.name, reason))
         self.mode = mode
@@ -819,7 +827,10 @@ class SimVehicle:
             if not self.landed or self.mode in (px4.LAND, px4.RTL):
                 return px4.MAV_RESULT_DENIED
             if not self._can_run(self.mode):
-                msg = f"Arming denied: Resolve system health failures first ({self.mode.name} cannot run)"
+                msg = (
+                    "Arming denied: Resolve system health failures first "
+                    f"({self.mode.name} cannot run)"
+                )
                 log.warning(msg)
                 self.px4_log.append((t, msg))
                 return px4.MAV_RESULT_TEMPORARILY_REJECTED
@@ -986,9 +997,11 @@ class SimVehicle:
         ms = int(self.t * 1000) & 0xFFFFFFFF
         us = int(self.t * 1e6)
         noise = self.config.sensor_noise
-        rn = (
-            (lambda s, n=3: self._rng.normal(0.0, s, n)) if noise else (lambda s, n=3: np.zeros(n))
-        )
+
+        def rn(s: float, n: int = 3) -> np.ndarray:
+            """Sensor noise of standard deviation ``s`` (zeros with sensor_noise off)."""
+            return self._rng.normal(0.0, s, n) if noise else np.zeros(n)
+
         R = self._R(x)
         v_ned = R @ x[6:9]
         sid = self._stream_ids

@@ -366,11 +366,13 @@ class TelemetryDecoder:
         if base + len(m.rpm) < self.n_rotors or np.isnan(self._rotors).any():
             return None  # wait for the rest of the ESCs
         est = self.estimator.omega if self.estimator is not None else None
+        cfg = self.rotor_config
         if (
             not self._rotors.any()
             and est is not None
+            and cfg is not None
             and est.any()
-            and now - self._latest_motor_t() <= self.rotor_config.max_gap
+            and now - self._latest_motor_t() <= cfg.max_gap
         ):
             self.stats.esc_zero_while_running += 1  # no rpm telemetry: not a measurement
             return None
@@ -384,22 +386,25 @@ class TelemetryDecoder:
         return max(self._latest[s].t for s in MOTOR_OUTPUT_SOURCES)
 
     def _actuator_output_status(self, m: Any, now: float) -> list[Any] | None:
-        if self.estimator is None or self.rotor_config.source == "servo_output_raw":
+        estimator, cfg = self.estimator, self.rotor_config
+        if estimator is None or cfg is None or cfg.source == "servo_output_raw":
             self._latest["ACTUATOR_OUTPUT_STATUS"].t = now  # seen (staleness), not used
             return None
         act = list(m.actuator)
         n_active = int(m.active)
-        chans = self.rotor_config.motor_outputs
+        chans = cfg.motor_outputs
         if max(chans) > min(n_active, len(act)):
             raise ValueError(f"motor output {max(chans)} not among the {n_active} active outputs")
+        outputs = [float(act[c - 1]) for c in chans]
         return self._motor_outputs(
-            "ACTUATOR_OUTPUT_STATUS", m.time_usec * 1e-6, [float(act[c - 1]) for c in chans], now
+            estimator, "ACTUATOR_OUTPUT_STATUS", m.time_usec * 1e-6, outputs, now
         )
 
     def _servo_output_raw(self, m: Any, now: float) -> list[Any] | None:
-        cfg = self.rotor_config
+        estimator, cfg = self.estimator, self.rotor_config
         if (
-            self.estimator is None
+            estimator is None
+            or cfg is None
             or cfg.source == "actuator_output_status"
             or int(m.port) != cfg.servo_port
         ):
@@ -413,17 +418,23 @@ class TelemetryDecoder:
             self._servo_wraps += 1  # uint32 microseconds wrapped
             us += _U32_US
         raw = [getattr(m, f"servo{c}_raw") for c in cfg.motor_outputs]
-        return self._motor_outputs("SERVO_OUTPUT_RAW", us * 1e-6, [float(x) for x in raw], now)
+        outputs = [float(x) for x in raw]
+        return self._motor_outputs(estimator, "SERVO_OUTPUT_RAW", us * 1e-6, outputs, now)
 
     def _motor_outputs(
-        self, slot: str, tv: float, outputs: list[float], now: float
+        self,
+        estimator: RotorSpeedEstimator,
+        slot: str,
+        tv: float,
+        outputs: list[float],
+        now: float,
     ) -> list[Any] | None:
         if not self._accept(slot, tv, now, outputs):
             return None
         if slot != self._motor_source:
-            self.estimator.reset()  # other source, other clock: restart
+            estimator.reset()  # other source, other clock: restart
             self._motor_source = slot
-        omega = self.estimator.update(tv, outputs)
+        omega = estimator.update(tv, outputs)
         if self.esc_fresh(now):
             return None  # measured speeds win
         lat = self._latest["rotors"]

@@ -155,7 +155,8 @@ class AttitudeRateTransport:
     PX4's rate controller produces tau = K_p (omega_sp - omega) (+ I, D, FF terms), so
     the rate setpoint that makes its proportional term reproduce tau is::
 
-        omega_sp = omega_measured + tau / K_p,   K_p = (MC_ROLLRATE_P, MC_PITCHRATE_P, MC_YAWRATE_P)
+        omega_sp = omega_measured + tau / K_p,   K_p = (MC_ROLLRATE_P, MC_PITCHRATE_P,
+        MC_YAWRATE_P)
 
     Lost on this path: the rate integrator/derivative of PX4 act on top (set MC_*RATE_I
     to 0 for identification flights), per-axis effectiveness scaling of PX4's control

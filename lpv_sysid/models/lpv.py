@@ -25,7 +25,8 @@ conservatively: every B element that is uncertain or differs across vertices get
 hull over all vertices of [lower_i, upper_i] and of the nominal values B_i (so it contains
 B(v_d, theta) = sum_i alpha_i B_i(theta_i) for every v_d in the box and theta in Eq. 22); its
 corners B^b, b = 1..M_B, are enumerated once and combined as a product with each vertex's
-A-corners A_i^a (:func:`product_systems`): Lambda_i^(a,b) = (A_i^a, B^b, B^b R, C), M_i = M_A,i M_B.
+A-corners A_i^a (:func:`product_systems`): Lambda_i^(a,b) = (A_i^a, B^b, B^b R, C), M_i = M_A,i
+M_B.
 With product weights beta_i^(a,b) = beta_i^a beta^b (beta_i^a the A-weights of vertex i, beta^b
 the B-weights, both summing to 1) the B part's weight is independent of i:
 sum_a beta_i^a beta^b = beta^b. Summing Eq. (30) with the non-negative weights
@@ -33,7 +34,8 @@ alpha_i beta_i^a beta^b (sum 1) gives, because Eq. (30) is affine in (A, B_c, B_
 (S_i, H) and U = A H + B_c S_i,
 
     sum_i alpha_i sum_(a,b) beta_i^a beta^b U_i^(a,b)
-        = A(v_d, theta) H + (sum_b beta^b B^b)(sum_i alpha_i S_i) = A(v_d, theta) H + B(theta) S(v_d),
+        = A(v_d, theta) H + (sum_b beta^b B^b)(sum_i alpha_i S_i) = A(v_d, theta) H + B(theta)
+        S(v_d),
 
 i.e. Eq. (30) for the frozen system (A(v_d, theta), B(theta)) with X(v_d, theta) =
 sum alpha_i beta_i^a beta^b X_i^(a,b) > 0 and the gain S(v_d) H^-1 = sum_i alpha_i K_i = K(v_d)
@@ -65,6 +67,7 @@ from dataclasses import dataclass, field, replace
 from typing import Iterable, Optional, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from lpv_sysid.errors import ConfigError
 
@@ -75,13 +78,13 @@ MAX_CORNERS_DEFAULT = 4096
 
 
 # --------------------------------------------------------------------------- box and weights
-def box_vertices(vmin: Sequence[float], vmax: Sequence[float]) -> np.ndarray:
+def box_vertices(vmin: ArrayLike, vmax: ArrayLike) -> np.ndarray:
     """Corners of the box [vmin, vmax] (seed 0 Eq. 20), shape (2**p, p), first axis slowest."""
-    vmin, vmax = _check_box(vmin, vmax)
-    return np.array(list(itertools.product(*zip(vmin, vmax))), dtype=float)
+    lo, hi = _check_box(vmin, vmax)
+    return np.array(list(itertools.product(*zip(lo, hi))), dtype=float)
 
 
-def _check_box(vmin: Sequence[float], vmax: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+def _check_box(vmin: ArrayLike, vmax: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     lo = np.asarray(vmin, dtype=float).ravel()
     hi = np.asarray(vmax, dtype=float).ravel()
     if lo.shape != hi.shape or lo.size == 0:
@@ -92,14 +95,13 @@ def _check_box(vmin: Sequence[float], vmax: Sequence[float]) -> tuple[np.ndarray
         raise ConfigError("scheduling box: min/max must be finite")
     if np.any(hi <= lo):
         raise ConfigError(
-            f"scheduling box: need max > min on every axis, got min={lo.tolist()} max={hi.tolist()}"
+            f"scheduling box: need max > min on every axis, got min={lo.tolist()} "
+            f"max={hi.tolist()}"
         )
     return lo, hi
 
 
-def multilinear_weights(
-    v: Sequence[float], vmin: Sequence[float], vmax: Sequence[float]
-) -> tuple[np.ndarray, bool]:
+def multilinear_weights(v: ArrayLike, vmin: ArrayLike, vmax: ArrayLike) -> tuple[np.ndarray, bool]:
     """alpha_i(v) of seed 0 Eq. (21) for the vertex order of :func:`box_vertices`.
 
     Returns (alpha (2**p,), clamped). ``clamped`` is True when v was outside the box and was
@@ -120,9 +122,7 @@ def multilinear_weights(
     return alpha, clamped
 
 
-def multilinear_weight_gradient(
-    v: Sequence[float], vmin: Sequence[float], vmax: Sequence[float]
-) -> np.ndarray:
+def multilinear_weight_gradient(v: ArrayLike, vmin: ArrayLike, vmax: ArrayLike) -> np.ndarray:
     """d alpha_i / d v_k, shape (2**p, p), at a point clamped into the box (used by Eq. 34).
 
     Outside the box the clamped coordinate has zero derivative (the clamped model is flat).
@@ -211,7 +211,8 @@ def uncertainty_vertices(
     n_corners = 2 ** len(free)
     if n_corners > max_corners:
         raise ConfigError(
-            f"{len(free)} uncertain elements give {n_corners} corners (> max_corners={max_corners}); "
+            f"{len(free)} uncertain elements give {n_corners} corners (> "
+            f"max_corners={max_corners}); "
             "pass an explicit list of vertex systems (ident.uncertainty) or raise max_corners"
         )
     base_A, base_B = A.copy(), B.copy()
@@ -312,7 +313,8 @@ def input_hull(
 def input_corners(
     base_B: np.ndarray, hull: Sequence[UncertainElement], max_corners: int = MAX_CORNERS_DEFAULT
 ) -> np.ndarray:
-    """All 2**p corners B^b of the hull box (order of :func:`uncertainty_vertices`), (M_B, n, m)."""
+    """All 2**p corners B^b of the hull box (order of :func:`uncertainty_vertices`),
+    shape (M_B, n, m)."""
     base_B = np.asarray(base_B, dtype=float)
     n = base_B.shape[0]
     return np.array(
@@ -321,7 +323,8 @@ def input_corners(
 
 
 def product_systems(a_corners: Sequence[Sequence[np.ndarray]], common: CommonInputSet) -> list:
-    """Lambda_i^(a,b) = (A_i^a, B^b), flattened as j = a * M_B + b (A slowest), module docstring."""
+    """Lambda_i^(a,b) = (A_i^a, B^b), flattened as j = a * M_B + b (A slowest), module
+    docstring."""
     return [
         [
             (np.asarray(Aa, dtype=float), np.asarray(Bb, dtype=float))
@@ -399,7 +402,7 @@ class ElementBox:
             np.asarray(self.half[i], dtype=float),
         )
 
-    def system(self, i: int, delta: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+    def system(self, i: int, delta: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """(A_i(delta), B(delta)) for delta in [-1, 1]^p_i (module docstring)."""
         r, c, h = self.arrays(i)
         d = np.asarray(delta, dtype=float)
@@ -425,7 +428,8 @@ class ElementBox:
         return lo, hi
 
     def sample_systems(self, nominal: Sequence[tuple], count: int = 16, seed: int = 0) -> list:
-        """A finite subset of the box per vertex (the certified systems the flight runtime re-checks
+        """A finite subset of the box per vertex (the certified systems the flight runtime
+        re-checks
         by eigenvalues): the centre, the given nominal (A_i, B_i) when it lies in the box, then
         corners delta in {-1, 1}^p drawn with a fixed seed (the same list every call)."""
         rng = np.random.default_rng(seed)
@@ -636,7 +640,8 @@ class PolytopicModel:
             raise ConfigError(f"sample time must be > 0, got {self.ts!r}")
         if self.box is not None and (self.box.N != N or self.box.n != n or self.box.m != m):
             raise ConfigError(
-                f"box: {self.box.N} vertices, {self.box.n} states, {self.box.m} inputs do not match "
+                f"box: {self.box.N} vertices, {self.box.n} states, {self.box.m} inputs do not "
+                "match "
                 f"the model ({N}, {n}, {m})"
             )
 
@@ -655,7 +660,8 @@ class PolytopicModel:
 
     @property
     def input_structure(self) -> dict:
-        """{"B": "common" | "per_vertex", "M": [M_i], "M_A": [M_A,i], "M_B": M_B} (certificate entry)."""
+        """{"B": "common" | "per_vertex", "M": [M_i], "M_A": [M_A,i], "M_B": M_B} (certificate
+        entry)."""
         M = [len(lst) for lst in self.systems]
         if self.box is not None:
             return {
@@ -699,7 +705,8 @@ class PolytopicModel:
         B = np.asarray(B, dtype=float)
         if len(elements) != A.shape[0]:
             raise ConfigError(
-                f"need one list of uncertain elements per vertex ({A.shape[0]}), got {len(elements)}"
+                f"need one list of uncertain elements per vertex ({A.shape[0]}), got "
+                f"{len(elements)}"
             )
         systems = [
             uncertainty_vertices(A[i], B[i], elements[i], max_corners) for i in range(A.shape[0])
@@ -725,7 +732,8 @@ class PolytopicModel:
         B = np.asarray(B, dtype=float)
         if len(elements) != A.shape[0]:
             raise ConfigError(
-                f"need one list of uncertain elements per vertex ({A.shape[0]}), got {len(elements)}"
+                f"need one list of uncertain elements per vertex ({A.shape[0]}), got "
+                f"{len(elements)}"
             )
         base, hull, nlo, nhi = input_hull(B, elements)
         common = CommonInputSet(

@@ -17,9 +17,11 @@ velocity rows kept and the rotor/moment rows replaced by the closed rate loop)::
 
     phi'   = p + tan(theta) (sin(phi) q + cos(phi) r)                      (kinematics, known)
     theta' = cos(phi) q - sin(phi) r
-    u'     = r v - q w - g sin(theta)            + X_u u + c_u             (Coriolis, gravity known;
+    u'     = r v - q w - g sin(theta)            + X_u u + c_u             (Coriolis, gravity
+    known;
     v'     = p w - r u + g cos(theta) sin(phi)   + Y_v v + c_v              drag X_u, Y_v, Z_w,
-    w'     = q u - p v + g cos(theta) cos(phi)   + Z_w w + Z_T thrust + c_w  thrust gain Z_T, offsets c)
+    w'     = q u - p v + g cos(theta) cos(phi)   + Z_w w + Z_T thrust + c_w  thrust gain Z_T,
+    offsets c)
     p'     = L_p p + L_sp p_sp + c_p             (closed rate loop, first order, identified)
     q'     = M_q q + M_sp q_sp + c_q
     r'     = N_r r + N_sp r_sp + c_r
@@ -37,7 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Mapping, Optional, Sequence
+from typing import Any, Mapping, Optional, Sequence
 
 import numpy as np
 
@@ -119,7 +121,7 @@ class RatePlantParams:
                 )
 
     def as_dict(self) -> dict:
-        d = {k: float(getattr(self, k)) for k in PARAM_ENTRIES}
+        d: dict[str, Any] = {k: float(getattr(self, k)) for k in PARAM_ENTRIES}
         d["std"] = {k: float(v) for k, v in self.std.items()}
         return d
 

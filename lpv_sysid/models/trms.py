@@ -1,4 +1,5 @@
-"""Twin Rotor MIMO System (TRMS) of seed 2 (Rotondo, Nejjari & Puig 2013), Eqs. (1)-(27), (41)-(69).
+"""Twin Rotor MIMO System (TRMS) of seed 2 (Rotondo, Nejjari & Puig 2013), Eqs. (1)-(27),
+(41)-(69).
 
 State (seed 2 Sec. 2): ``x = [omega_h, Omega_h, theta_h, omega_v, Omega_v, theta_v]`` (tail rotor
 speed [V, the paper's calibrated unit, Table 7 note 4], yaw rate [rad/s], yaw [rad], main rotor
@@ -27,9 +28,10 @@ from dataclasses import asdict, dataclass, fields
 from typing import Any, Mapping, Optional, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.validation import check_keys, is_finite_number
+from lpv_sysid.config_fields import check_keys, is_finite_number
 
 STATE_NAMES = ("omega_h", "Omega_h", "theta_h", "omega_v", "Omega_v", "theta_v")
 STATE_UNITS = ("V", "rad/s", "rad", "V", "rad/s", "rad")
@@ -54,7 +56,8 @@ PSI_INDEX = (
 )
 #: Reduced scheduling vector of Sec. 6.3 (N~ = 8): the others are frozen at constants.
 REDUCED_PSI = ("a11", "a21", "a22", "a23", "a26", "a44", "a54", "a56")
-#: Table 7 operating ranges: (min, max) of the p variables; theta_v is given as theta_v - theta_v^0.
+#: Table 7 operating ranges: (min, max) of the p variables; theta_v is given as theta_v -
+#: theta_v^0.
 TABLE7_RANGES = {
     "omega_h": (-2.9, 2.9),
     "omega_v": (-1.6, 1.6),
@@ -70,7 +73,8 @@ TS_PAPER = 0.1  # Sec. 6.2, Euler sample time
 
 @dataclass(frozen=True)
 class TrmsParams:
-    """TRMS constants, seed 2 Tables 5 (manufacturer) and 6 (identified). SI units, rotor speeds in V."""
+    """TRMS constants, seed 2 Tables 5 (manufacturer) and 6 (identified). SI units, rotor speeds
+    in V."""
 
     # Table 5 (known)
     k_g: float = 0.2
@@ -144,7 +148,8 @@ class TrmsParams:
                 raise ConfigError(f"trms.{f.name}: must be a finite number, got {v!r}")
             if v < 0 or (f.name in self._POSITIVE and v == 0):
                 raise ConfigError(
-                    f"trms.{f.name}: must be {'> 0' if f.name in self._POSITIVE else '>= 0'}, got {v}"
+                    f"trms.{f.name}: must be {'> 0' if f.name in self._POSITIVE else '>= 0'}, got "
+                    f"{v}"
                 )
 
     @classmethod
@@ -210,7 +215,8 @@ class TrmsParams:
 
     @property
     def theta_v0(self) -> float:
-        """Pitch equilibrium for u_v = 0 (Table 4): root of (K_A - K_B) cos th - K_C sin th (Eq. 5)."""
+        """Pitch equilibrium for u_v = 0 (Table 4): the root of
+        (K_A - K_B) cos th - K_C sin th (Eq. 5)."""
         return math.atan2(self.K_A - self.K_B, self.K_C)
 
 
@@ -251,8 +257,9 @@ class Trms:
         c, s = np.cos(tv), np.sin(tv)
         return self.p.K_D * c**2 + self.p.K_E * s**2 + self.p.K_F
 
-    def derivatives(self, x: Sequence[float], u: Sequence[float]) -> np.ndarray:
-        """dx/dt of seed 2 Eqs. (1)-(6). ``x`` (6,), ``u`` (2,) in the order of STATE_NAMES/INPUT_NAMES."""
+    def derivatives(self, x: ArrayLike, u: ArrayLike) -> np.ndarray:
+        """dx/dt of seed 2 Eqs. (1)-(6). ``x`` (6,), ``u`` (2,) in the order of
+        STATE_NAMES/INPUT_NAMES."""
         x = np.asarray(x, dtype=float)
         u = np.asarray(u, dtype=float)
         if x.shape != (6,) or u.shape != (2,):
@@ -290,7 +297,8 @@ class Trms:
         )  # Eq. (5)
         return np.array([d_wh, d_Wh, Wh, d_wv, d_Wv, Wv])  # Eqs. (3), (6)
 
-    # --------------------------------------------------------------- quasi-LPV form, Eqs. (41)-(58)
+    # --------------------------------------------------------------- quasi-LPV form, Eqs.
+    # (41)-(58)
     def shift(self, x) -> np.ndarray:
         """x~ = x - theta_v^0 e_6, the state of Eq. (41)."""
         xs = np.array(x, dtype=float)
@@ -298,7 +306,8 @@ class Trms:
         return xs
 
     def psi(self, P) -> np.ndarray:
-        """psi_1..psi_11 of Eqs. (43)-(54) at p = (theta_h, theta_v, omega_h, omega_v, Omega_h) (Eq. 41).
+        """psi_1..psi_11 of Eqs. (43)-(54) at p = (theta_h, theta_v, omega_h, omega_v, Omega_h)
+        (Eq. 41).
 
         Vectorised: ``P`` (..., 5) -> (..., 11). Removable singularities take their limits.
         """
@@ -331,7 +340,8 @@ class Trms:
         out[..., 7] = -(ka2 + pr.B_mr + f4_w) / pr.J_mr  # (50)
         out[..., 8] = (pr.k_g * c * f5_w * wv - Wh * pr.K_H * s * c) / pr.J_v  # (51)
         out[..., 9] = pr.l_m * f5_w / pr.J_v  # (52)
-        # (54): g((K_A - K_B) cos tv - K_C sin tv) = -g rho sin(tv - tv0); np.sinc(x) = sin(pi x)/(pi x)
+        # (54): g((K_A - K_B) cos tv - K_C sin tv) = -g rho sin(tv - tv0); np.sinc(x) = sin(pi
+        # x)/(pi x)
         out[..., 10] = -pr.g * rho * np.sinc(dv / np.pi) / pr.J_v
         return out
 
@@ -376,7 +386,8 @@ class Trms:
     def reference_equilibrium(
         self, theta_h_r: float, theta_v_r: float, Omega_h_r: float = 0.0, Omega_v_r: float = 0.0
     ) -> tuple[np.ndarray, np.ndarray]:
-        """State reference x_r and feedforward u_r of Eqs. (107)-(112) (x_r in the unshifted state)."""
+        """State reference x_r and feedforward u_r of Eqs. (107)-(112) (x_r in the unshifted
+        state)."""
         pr = self.p
         c, s = math.cos(theta_v_r), math.sin(theta_v_r)
         D = float(self.den(theta_v_r))
@@ -407,7 +418,8 @@ class Trms:
         return np.array([wh, Omega_h_r, theta_h_r, wv, Omega_v_r, theta_v_r]), np.array([uh, uv])
 
     def jacobian(self, x, u, h: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
-        """Central-difference Jacobians of :meth:`derivatives` (the model is only piecewise smooth)."""
+        """Central-difference Jacobians of :meth:`derivatives` (the model is only piecewise
+        smooth)."""
         x = np.asarray(x, dtype=float)
         u = np.asarray(u, dtype=float)
         A = np.empty((6, 6))
@@ -423,7 +435,8 @@ class Trms:
         return A, B
 
 
-# --------------------------------------------------------------------------- bounding box, Sec. 3.4-3.5
+# --------------------------------------------------------------------------- bounding box, Sec.
+# 3.4-3.5
 #: which p variables each psi_j depends on (indices into P_NAMES); used to grid only those.
 PSI_DEPENDS = ((2,), (1, 2), (1,), (0, 1), (1, 3), (1, 3), (1,), (3,), (1, 3, 4), (3,), (1,))
 
@@ -431,7 +444,8 @@ PSI_DEPENDS = ((2,), (1, 2), (1,), (0, 1), (1, 3), (1, 3), (1,), (3,), (1, 3, 4)
 def p_box(
     params: TrmsParams, ranges: Optional[Mapping[str, tuple]] = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(min, max) of p = (theta_h, theta_v, omega_h, omega_v, Omega_h) from Table 7 (theta_v absolute)."""
+    """(min, max) of p = (theta_h, theta_v, omega_h, omega_v, Omega_h) from Table 7 (theta_v
+    absolute)."""
     r = dict(TABLE7_RANGES)
     r.update(ranges or {})
     tv0 = params.theta_v0
@@ -466,14 +480,16 @@ def psi_bounds(
     gaps: Optional[Mapping[str, tuple]] = None,
     max_points: int = 200_000,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Bounding box of psi over the p box (Eq. 62): (min (11,), max (11,), least-squares constant (11,)).
+    """Bounding box of psi over the p box (Eq. 62): (min (11,), max (11,), least-squares constant
+    (11,)).
 
     Seed 2 Sec. 3.5 takes the extremes "by numerical optimization"; here each psi_j is gridded
     over only the p variables it depends on (PSI_DEPENDS, <= 3 of them; at most ``max_points``
     points per psi), with the box edges, 0 and the sign switches of Eqs. (15)-(20) added to the
     grid. ``gaps`` = {name: (minus, plus)} removes the open interval (minus, plus) of a p variable
     (Eq. 69; names of P_NAMES, theta_v given as the offset from theta_v^0) and adds its edges.
-    The third output is the grid mean, the least-squares constant used for frozen parameters (Sec. 6.3).
+    The third output is the grid mean, the least-squares constant used for frozen parameters (Sec.
+    6.3).
     """
     plo = np.asarray(plo, dtype=float)
     phi = np.asarray(phi, dtype=float)
@@ -515,7 +531,8 @@ def euler_discrete(A: np.ndarray, B: np.ndarray, ts: float) -> tuple[np.ndarray,
 
 @dataclass
 class TrmsPolytope:
-    """Bounding-box polytope of the (reduced) scheduling vector, Eqs. (62)-(65), discrete or continuous.
+    """Bounding-box polytope of the (reduced) scheduling vector, Eqs. (62)-(65), discrete or
+    continuous.
 
     ``names`` the scheduled psi (a subset of PSI_NAMES), ``lo``/``hi`` their box, ``frozen`` the
     constants used for the other psi and for b22 (Sec. 6.3 and footnote 1), ``A`` (2**q, 6, 6) the
@@ -555,7 +572,8 @@ class TrmsPolytope:
         return multilinear_weights(self.scheduled(x), self.lo, self.hi)
 
     def A_at(self, x) -> np.ndarray:
-        """sum_i pi_i A_i; equals the reduced A(psi(x)) (Euler-discretised if ts) inside the box."""
+        """sum_i pi_i A_i; equals the reduced A(psi(x)) (Euler-discretised if ts) inside the
+        box."""
         alpha, _ = self.weights(x)
         return np.tensordot(alpha, self.A, axes=1)
 
@@ -572,7 +590,8 @@ def bounding_box_polytope(
     gaps: Optional[Mapping[str, tuple]] = None,
     n_grid: int = 201,
 ) -> TrmsPolytope:
-    """Polytopic quasi-LPV model of Sec. 3.5 / 6.2 (bounding box over Table 7), vertices per Eq. (65).
+    """Polytopic quasi-LPV model of Sec. 3.5 / 6.2 (bounding box over Table 7), vertices per Eq.
+    (65).
 
     psi not in ``names`` are frozen at their least-squares constant over the box (Sec. 6.3), and so
     is b22 (footnote 1 of Eq. 41). With ``ts`` the vertices are the Euler A_d of Eq. (60).
@@ -582,7 +601,8 @@ def bounding_box_polytope(
     bad = [n for n in names if n not in PSI_NAMES]
     if bad or len(set(names)) != len(names) or not names:
         raise ConfigError(
-            f"trms polytope: scheduled parameters must be distinct names from {PSI_NAMES}, got {list(names)}"
+            f"trms polytope: scheduled parameters must be distinct names from {PSI_NAMES}, got "
+            f"{list(names)}"
         )
     plo, phi = p_box(model.p, ranges)
     lo, hi, mean = psi_bounds(model, plo, phi, n_grid, gaps)
@@ -592,12 +612,12 @@ def bounding_box_polytope(
     frozen["b22"] = float(np.mean(model.b22(tv)))
     base = mean.copy()
     verts = box_vertices(lo[idx], hi[idx])
-    A = []
+    vertex_A = []
     for v in verts:
         psi = base.copy()
         psi[idx] = v
-        A.append(model.A_of_psi(psi))
-    A = np.array(A)
+        vertex_A.append(model.A_of_psi(psi))
+    A = np.array(vertex_A)
     B = model.B_of(model.p.theta_v0)
     B[1, 1] = frozen["b22"]
     if ts is not None:

@@ -31,7 +31,7 @@ from lpv_sysid.io.messages import TYPES
 
 NAMESPACE = "lpv_sysid"
 
-# ARCHITECTURE.md Sec. 4 / DESIGN.md: topic (relative to /lpv_sysid) -> type
+# topic (relative to /lpv_sysid) -> type: the topic table of docs/DESIGN.md (io/messages.py)
 TOPIC_TYPES = dict(TYPES)
 # high-rate measurement streams: best effort (a late sample is worthless); the rest
 # (references, excitation, commands, status) reliable.

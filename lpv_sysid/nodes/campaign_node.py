@@ -40,40 +40,55 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import Imu, JointState
 from std_srvs.srv import Trigger
 
-from lpv_sysid.control import campaign as CP
+from lpv_sysid.control import campaign
 from lpv_sysid.errors import LpvSysidError
-from lpv_sysid.io import messages as M
-from lpv_sysid.nodes import _common as C
+from lpv_sysid.io import messages
+from lpv_sysid.nodes import _common as common
 
 NODE_NAME = "campaign"
-S = Parameter.Type.STRING
+STRING = Parameter.Type.STRING
 
 PARAMETERS = [
     (
         "campaign_file",
         "campaign.yaml",
-        C.typed(S, "config/campaign.yaml (campaign, bridge_config, signals_config)"),
+        common.typed(STRING, "config/campaign.yaml (campaign, bridge_config, signals_config)"),
     ),
-    ("signals_file", "", C.typed(S, "phase-1 signals.npz (empty: designed from signals_config)")),
-    ("out_dir", "", C.typed(S, "directory for one rosbag2 per run (empty: no per-run bags)")),
+    (
+        "signals_file",
+        "",
+        common.typed(STRING, "phase-1 signals.npz (empty: designed from signals_config)"),
+    ),
+    (
+        "out_dir",
+        "",
+        common.typed(STRING, "directory for one rosbag2 per run (empty: no per-run bags)"),
+    ),
     (
         "bridge_node",
         "mavlink_bridge",
-        C.typed(
-            S, "name of the bridge node in this namespace (its start/abort services and status)"
+        common.typed(
+            STRING,
+            "name of the bridge node in this namespace (its start/abort services and status)",
         ),
     ),
     (
         "rate_hz",
         100.0,
-        C.double("campaign step rate [Hz] (references go out at campaign.rate_hz)", 10.0, 1000.0),
+        common.double(
+            "campaign step rate [Hz] (references go out at campaign.rate_hz)", 10.0, 1000.0
+        ),
     ),
-    ("status_rate_hz", 2.0, C.double("status publication rate [Hz]", 0.1, 100.0)),
-    ("auto_start", False, C.typed(Parameter.Type.BOOL, "start the campaign without the service")),
+    ("status_rate_hz", 2.0, common.double("status publication rate [Hz]", 0.1, 100.0)),
+    (
+        "auto_start",
+        False,
+        common.typed(Parameter.Type.BOOL, "start the campaign without the service"),
+    ),
 ]
 
 
-def vehicle_status(values: dict) -> CP.VehicleStatus:
+def vehicle_status(values: dict) -> campaign.VehicleStatus:
     """:class:`~lpv_sysid.control.campaign.VehicleStatus` from the bridge node's status
     values (``BridgeCore.status``: strings)."""
     home = None
@@ -85,7 +100,7 @@ def vehicle_status(values: dict) -> CP.VehicleStatus:
         except ValueError:
             home = None
     mode = values.get("vehicle_mode") or None
-    return CP.VehicleStatus(
+    return campaign.VehicleStatus(
         values.get("state", "IDLE"),
         values.get("reason", ""),
         None if mode in (None, "unknown") else mode,
@@ -96,7 +111,7 @@ def vehicle_status(values: dict) -> CP.VehicleStatus:
     )
 
 
-class CampaignNode(C.ShellNode):
+class CampaignNode(common.ShellNode):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, PARAMETERS, **kwargs)
         from lpv_sysid.cli.fly import FlyConfig, bridge_config_for, load_signals
@@ -112,27 +127,33 @@ class CampaignNode(C.ShellNode):
             ccfg = dataclasses.replace(ccfg, finish="HOLD")
         bcfg = bridge_config_for(cfg.bridge_config, None, ccfg)
         self.table = load_signals(p["signals_file"] or None, cfg.signals_config)
-        prof = CP.ExcitationProfile.from_table(*self.table, ramp=ccfg.ramp_s, periods=ccfg.periods)
-        self.plan = CP.plan_campaign(ccfg, prof, bcfg.envelope)
-        self.campaign = CP.Campaign(self.plan, self.table)
+        prof = campaign.ExcitationProfile.from_table(
+            *self.table, ramp=ccfg.ramp_s, periods=ccfg.periods
+        )
+        self.plan = campaign.plan_campaign(ccfg, prof, bcfg.envelope)
+        self.campaign = campaign.Campaign(self.plan, self.table)
         self.fly_cfg = cfg
-        self.f = M.MsgFactory.rclpy()
+        self.f = messages.MsgFactory.rclpy()
         self.bridge_name = self.resolve_topic_name(p["bridge_node"])
         self.bridge_values: dict = {}
         self.rec = None
         self.out_dir = Path(p["out_dir"]) if p["out_dir"] else None
         self._written = False
         self.pub_ref = self.create_publisher(
-            TwistStamped, "velocity_reference", C.qos_for("velocity_reference")
+            TwistStamped, "velocity_reference", common.qos_for("velocity_reference")
         )
-        self.pub_exc = self.create_publisher(JointState, "excitation", C.qos_for("excitation"))
-        self.pub_status = C.StatusPublisher(self)  # status and /diagnostics
-        self.create_subscription(Odometry, "state", self.on_state, C.qos_for("state"))
+        self.pub_exc = self.create_publisher(
+            JointState, "excitation", common.qos_for("excitation")
+        )
+        self.pub_status = common.StatusPublisher(self)  # status and /diagnostics
+        self.create_subscription(Odometry, "state", self.on_state, common.qos_for("state"))
         self.create_subscription(
-            JointState, "rotor_speeds", self.on_rotors, C.qos_for("rotor_speeds")
+            JointState, "rotor_speeds", self.on_rotors, common.qos_for("rotor_speeds")
         )
-        self.create_subscription(Imu, "imu", self.on_imu, C.qos_for("imu"))
-        self.create_subscription(DiagnosticArray, "status", self.on_status, C.qos_for("status"))
+        self.create_subscription(Imu, "imu", self.on_imu, common.qos_for("imu"))
+        self.create_subscription(
+            DiagnosticArray, "status", self.on_status, common.qos_for("status")
+        )
         self.cli_start = self.create_client(Trigger, f"{self.bridge_name}/start")
         self.cli_abort = self.create_client(Trigger, f"{self.bridge_name}/abort")
         self.create_service(Trigger, "~/start", self.on_start)
@@ -147,7 +168,7 @@ class CampaignNode(C.ShellNode):
 
     # -- inputs ---------------------------------------------------------------------
     def on_state(self, msg):
-        s = self.parse_input("state", M.state_from_odometry, msg)
+        s = self.parse_input("state", messages.state_from_odometry, msg)
         if s is None:
             return
         self.campaign.on_state(s)
@@ -155,25 +176,25 @@ class CampaignNode(C.ShellNode):
             self._record(lambda: self.rec.state(s.t, s.pos_ned, s.euler, s.v_body, s.omega))
 
     def on_rotors(self, msg):
-        parsed = self.parse_input("rotor_speeds", M.rotor_speeds_from_joint_state, msg)
+        parsed = self.parse_input("rotor_speeds", messages.rotor_speeds_from_joint_state, msg)
         if parsed is None:
             return
         t, omega = parsed
         self.campaign.on_rotor(t, omega)
         if self.rec is not None and self.rec.active is not None:
-            src = M.rotor_source_of(msg)
+            src = messages.rotor_source_of(msg)
             self._record(lambda: self.rec.rotors(t, omega, src))
 
     def on_imu(self, msg):
         if self.rec is None or self.rec.active is None:
             return
-        s = self.parse_input("imu", M.imu_from_msg, msg)
+        s = self.parse_input("imu", messages.imu_from_msg, msg)
         if s is not None:
             self._record(lambda: self.rec.imu(s.t, s.specific_force, s.omega))
 
     def on_status(self, msg):
         try:
-            _, statuses = M.status_from_diagnostic_array(msg)
+            _, statuses = messages.status_from_diagnostic_array(msg)
         except LpvSysidError:
             return
         for st in statuses:
@@ -182,10 +203,13 @@ class CampaignNode(C.ShellNode):
 
     # -- services -------------------------------------------------------------------
     def _start(self) -> str:
-        if self.campaign.phase != CP.IDLE:
+        if self.campaign.phase != campaign.IDLE:
             return f"already {self.campaign.phase}"
         if not (self.cli_start.service_is_ready() and self.cli_abort.service_is_ready()):
-            return f"not started: the bridge services {self.bridge_name}/start|abort are not available"
+            return (
+                f"not started: the bridge services {self.bridge_name}/start|abort "
+                "are not available"
+            )
         now = self.now()
         if self.out_dir is not None:
             from lpv_sysid.cli.fly import CampaignRecorder
@@ -203,7 +227,7 @@ class CampaignNode(C.ShellNode):
     def on_start(self, request, response):
         try:
             response.message = self._start()
-            response.success = self.campaign.phase != CP.IDLE
+            response.success = self.campaign.phase != campaign.IDLE
         except LpvSysidError as exc:
             response.success, response.message = False, str(exc)
         self.get_logger().info(f"start: {response.message}")
@@ -222,7 +246,7 @@ class CampaignNode(C.ShellNode):
         if self._auto_start and self.bridge_values and self.cli_start.service_is_ready():
             self._auto_start = False
             self.get_logger().info(f"auto start: {self._start()}")
-        if self.campaign.phase == CP.IDLE:
+        if self.campaign.phase == campaign.IDLE:
             return
         now = self.now()
         if not self.campaign.finished:
@@ -232,23 +256,23 @@ class CampaignNode(C.ShellNode):
 
     def _handle(self, now: float, out) -> None:
         for a in out.actions:
-            if isinstance(a, CP.StartBridge):
+            if isinstance(a, campaign.StartBridge):
                 self._call(self.cli_start, "start")
-            elif isinstance(a, (CP.AbortBridge, CP.FinishBridge)):
+            elif isinstance(a, (campaign.AbortBridge, campaign.FinishBridge)):
                 self._call(self.cli_abort, "abort")
-            elif isinstance(a, CP.RunStarted) and self.rec is not None:
+            elif isinstance(a, campaign.RunStarted) and self.rec is not None:
                 self._record(
                     lambda: self.get_logger().info(
                         f"recording {a.run.name} -> {self.rec.begin_run(a.run.name)}"
                     )
                 )
-            elif isinstance(a, CP.RunEnded) and self.rec is not None:
+            elif isinstance(a, campaign.RunEnded) and self.rec is not None:
                 self.rec.end_run()
         if out.command is not None and not self.campaign.finished:
             v, r = out.command
             ns = round(now * 1e9)
-            self.pub_ref.publish(M.twist_reference_msg(self.f, ns, v, r))
-            self.pub_exc.publish(M.excitation_msg(self.f, ns, (0.0, 0.0, 0.0, 0.0)))
+            self.pub_ref.publish(messages.twist_reference_msg(self.f, ns, v, r))
+            self.pub_exc.publish(messages.excitation_msg(self.f, ns, (0.0, 0.0, 0.0, 0.0)))
             if self.rec is not None and self.rec.active is not None:
                 self._record(lambda: self.rec.reference(now, v, r))
         if out.events:
@@ -295,7 +319,7 @@ class CampaignNode(C.ShellNode):
             (self.out_dir / "campaign_summary.yaml").write_text(
                 yaml.safe_dump(_plain(summary), sort_keys=False)
             )
-            rows = CP.trim_rows(c.results)
+            rows = campaign.trim_rows(c.results)
             if rows:
                 write_trim_table(rows, self.out_dir)
         except OSError as exc:
@@ -323,19 +347,21 @@ class CampaignNode(C.ShellNode):
             "runs": len(self.plan.runs),
             "reason": c.reason,
         }
-        if run is not None and c.phase in (CP.TRIM, CP.EXCITATION):
+        if run is not None and c.phase in (campaign.TRIM, campaign.EXCITATION):
             values["v_d"] = " ".join(f"{x:g}" for x in run.vertex)
-        st = M.diagnostic_status(self.f, level, self.get_fully_qualified_name(), message, values)
-        self.pub_status.publish(M.diagnostic_array(self.f, round(self.now() * 1e9), [st]))
+        st = messages.diagnostic_status(
+            self.f, level, self.get_fully_qualified_name(), message, values
+        )
+        self.pub_status.publish(messages.diagnostic_array(self.f, round(self.now() * 1e9), [st]))
 
     # -- orderly shutdown (nodes/_common.run) ----------------------------------------
     def begin_shutdown(self):
         now = self.now()
-        if self.campaign.phase not in CP.TERMINAL and self.campaign.phase != CP.IDLE:
+        if self.campaign.phase not in campaign.TERMINAL and self.campaign.phase != campaign.IDLE:
             self._handle(now, self.campaign.abort(now, "shutdown"))
 
     def shutdown_complete(self):
-        return self.campaign.phase in CP.TERMINAL or self.campaign.phase == CP.IDLE
+        return self.campaign.phase in campaign.TERMINAL or self.campaign.phase == campaign.IDLE
 
     def shutdown_state(self):
         return f"campaign {self.campaign.phase}: {self.campaign.reason}"
@@ -349,7 +375,7 @@ class CampaignNode(C.ShellNode):
 
 
 def main(args=None):
-    return C.run(CampaignNode, args, NODE_NAME)
+    return common.run(CampaignNode, args, NODE_NAME)
 
 
 if __name__ == "__main__":

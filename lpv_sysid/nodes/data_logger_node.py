@@ -29,10 +29,10 @@ from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 from rosidl_runtime_py.utilities import get_message
 
 from lpv_sysid.errors import ConfigError, LpvSysidError
-from lpv_sysid.io import messages as M
+from lpv_sysid.io import messages
 from lpv_sysid.io.bag import FLUSH_INTERVAL_S, STORAGES
 from lpv_sysid.io.recorder import Recorder, RecorderConfig
-from lpv_sysid.nodes import _common as C
+from lpv_sysid.nodes import _common as common
 from lpv_sysid.nodes import parameters as P
 
 NODE_NAME = "data_logger"
@@ -51,7 +51,7 @@ class DataLoggerSettings(P.Settings):
     )
     storage: str = P.text("mcap", "rosbag2 storage", choices=STORAGES)
     topics: tuple = P.texts(
-        tuple(C.TOPIC_TYPES),
+        tuple(common.TOPIC_TYPES),
         "topics to record, relative to the namespace; 'name' for the "
         "lpv_sysid topics or 'name:pkg/msg/Type' for any other",
     )
@@ -82,7 +82,7 @@ class DataLoggerSettings(P.Settings):
 
 
 #: the rclpy declarations, generated from the one declaration (DataLoggerSettings)
-PARAMETERS = C.settings_table(DataLoggerSettings)
+PARAMETERS = common.settings_table(DataLoggerSettings)
 
 
 def parse_topics(entries) -> dict[str, str]:
@@ -91,17 +91,17 @@ def parse_topics(entries) -> dict[str, str]:
     for e in entries:
         name, _, typ = str(e).partition(":")
         if not typ:
-            if name not in C.TOPIC_TYPES:
+            if name not in common.TOPIC_TYPES:
                 raise ConfigError(
                     f"parameter 'topics': {name!r} is not an lpv_sysid topic "
-                    f"{sorted(C.TOPIC_TYPES)}; write 'name:pkg/msg/Type'"
+                    f"{sorted(common.TOPIC_TYPES)}; write 'name:pkg/msg/Type'"
                 )
-            typ = C.TOPIC_TYPES[name]
+            typ = common.TOPIC_TYPES[name]
         out[name] = typ
     return out
 
 
-class DataLoggerNode(C.ShellNode):
+class DataLoggerNode(common.ShellNode):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, PARAMETERS, **kwargs)
         self.settings = p = DataLoggerSettings.from_dict(self.params)
@@ -121,13 +121,13 @@ class DataLoggerNode(C.ShellNode):
         )
         self.recorder = Recorder(cfg)
         self.recorder.start(self.now_ns())
-        self.f = M.MsgFactory.rclpy()
-        self.pub_status = C.StatusPublisher(self)  # status and /diagnostics
+        self.f = messages.MsgFactory.rclpy()
+        self.pub_status = common.StatusPublisher(self)  # status and /diagnostics
         for name, typ in rel.items():
             full = self.resolve_topic_name(name)
             reliability = (
                 QoSReliabilityPolicy.BEST_EFFORT
-                if name in C.SENSOR_TOPICS
+                if name in common.SENSOR_TOPICS
                 else QoSReliabilityPolicy.RELIABLE
             )
             qos = QoSProfile(
@@ -179,8 +179,10 @@ class DataLoggerNode(C.ShellNode):
         values["bags"] = len(rec.bags)
         level = "ERROR" if rec.error else "OK"
         msg = rec.error or ("recording" if rec.recording else "stopped")
-        st = M.diagnostic_status(self.f, level, self.get_fully_qualified_name(), msg, values)
-        self.pub_status.publish(M.diagnostic_array(self.f, self.now_ns(), [st]))
+        st = messages.diagnostic_status(
+            self.f, level, self.get_fully_qualified_name(), msg, values
+        )
+        self.pub_status.publish(messages.diagnostic_array(self.f, self.now_ns(), [st]))
 
     def begin_shutdown(self):
         """Close the bag while the context is valid (nodes/_common.run): metadata.yaml and
@@ -203,7 +205,7 @@ class DataLoggerNode(C.ShellNode):
 
 
 def main(args=None):
-    return C.run(DataLoggerNode, args, NODE_NAME)
+    return common.run(DataLoggerNode, args, NODE_NAME)
 
 
 if __name__ == "__main__":

@@ -11,7 +11,8 @@ Abort, from any source, fades everything (signal and offset) to zero within one 
 starting at once: the ``abort`` service, a ``status`` of another node named in
 ``abort_on_status_from`` that reports an abort (:data:`ABORT_MARKERS`: the controller's
 safety abort, the bridge handing control back to PX4, the campaign aborting; a mere ERROR
-such as a rejected message does not count), or the node clock jumping backwards (the signal's time base is lost; the fade
+such as a rejected message does not count), or the node clock jumping backwards (the signal's time
+base is lost; the fade
 then runs on a re-based monotonic time, :class:`~lpv_sysid.signals.excitation.MonotonicTime`).
 The core clamps the abort time to the last sample, so no abort waits for a future stamp.
 
@@ -36,8 +37,8 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.io import messages as M
-from lpv_sysid.nodes import _common as C
+from lpv_sysid.io import messages
+from lpv_sysid.nodes import _common as common
 from lpv_sysid.nodes import parameters as P
 from lpv_sysid.signals.excitation import (
     DEFAULT_RAMP_S,
@@ -112,10 +113,10 @@ class ExcitationSettings(P.Settings):
 
 
 #: the rclpy declarations, generated from the one declaration (ExcitationSettings)
-PARAMETERS = C.settings_table(ExcitationSettings)
+PARAMETERS = common.settings_table(ExcitationSettings)
 
 
-class ExcitationNode(C.ShellNode):
+class ExcitationNode(common.ShellNode):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, PARAMETERS, **kwargs)
         self.settings = s = ExcitationSettings.from_dict(self.params)
@@ -130,20 +131,24 @@ class ExcitationNode(C.ShellNode):
         self.started = False
         self.aborted = False
         self.abort_reason = ""
-        self.f = M.MsgFactory.rclpy()
+        self.f = messages.MsgFactory.rclpy()
         self.pub_ref = self.create_publisher(
-            TwistStamped, "velocity_reference", C.qos_for("velocity_reference")
+            TwistStamped, "velocity_reference", common.qos_for("velocity_reference")
         )
-        self.pub_exc = self.create_publisher(JointState, "excitation", C.qos_for("excitation"))
-        self.pub_status = C.StatusPublisher(self)  # status and /diagnostics
-        self.create_subscription(DiagnosticArray, "status", self.on_status, C.qos_for("status"))
+        self.pub_exc = self.create_publisher(
+            JointState, "excitation", common.qos_for("excitation")
+        )
+        self.pub_status = common.StatusPublisher(self)  # status and /diagnostics
+        self.create_subscription(
+            DiagnosticArray, "status", self.on_status, common.qos_for("status")
+        )
         self.create_service(Trigger, "~/start", self.on_start)
         self.create_service(Trigger, "~/abort", self.on_abort)
         self.create_timer(1.0 / s.rate_hz, self.on_timer)
         self.create_timer(1.0 / s.status_rate_hz, self.publish_status)
         self.get_logger().info(
             f"{self.mode}: {self.table[1].shape[0]} samples of {list(self.table[2])} "
-            f"({self.core.duration:.1f} s), {s.rate_hz:g} Hz; {C.clock_source(self)}"
+            f"({self.core.duration:.1f} s), {s.rate_hz:g} Hz; {common.clock_source(self)}"
         )
         if s.auto_start:
             self._start()
@@ -171,7 +176,8 @@ class ExcitationNode(C.ShellNode):
                 f"{path}: certificate.design missing: cannot check the signal "
                 "against what the gains were designed for"
             )
-        check_design(*self.table, design, self.settings.ramp_s, where=self.settings.signals_file)
+        t, u, names = self.table
+        check_design(t, u, names, design, self.settings.ramp_s, where=self.settings.signals_file)
 
     # -- abort (every source) -----------------------------------------------------------
     def _abort(self, reason: str) -> None:
@@ -195,8 +201,8 @@ class ExcitationNode(C.ShellNode):
 
     def on_status(self, msg):
         try:
-            _, statuses = M.status_from_diagnostic_array(msg)
-        except M.MessageError:
+            _, statuses = messages.status_from_diagnostic_array(msg)
+        except messages.MessageError:
             return
         own = self.get_fully_qualified_name()
         watched = self.settings.abort_on_status_from
@@ -246,8 +252,8 @@ class ExcitationNode(C.ShellNode):
             v, r, u_e = s.velocity, s.yaw_rate, s.u_e
         else:
             v, r, u_e = self.offset, self.yaw_offset, np.zeros(4)
-        self.pub_ref.publish(M.twist_reference_msg(self.f, ns, v, r))
-        self.pub_exc.publish(M.excitation_msg(self.f, ns, u_e))
+        self.pub_ref.publish(messages.twist_reference_msg(self.f, ns, v, r))
+        self.pub_exc.publish(messages.excitation_msg(self.f, ns, u_e))
         self._shutdown_tick(ns * 1e-9)
 
     # -- orderly shutdown (nodes/_common.run) ----------------------------------------
@@ -303,12 +309,14 @@ class ExcitationNode(C.ShellNode):
             "aborted": self.aborted,
             "abort_reason": self.abort_reason,
         }
-        st = M.diagnostic_status(self.f, level, self.get_fully_qualified_name(), phase, values)
-        self.pub_status.publish(M.diagnostic_array(self.f, self.now_ns(), [st]))
+        st = messages.diagnostic_status(
+            self.f, level, self.get_fully_qualified_name(), phase, values
+        )
+        self.pub_status.publish(messages.diagnostic_array(self.f, self.now_ns(), [st]))
 
 
 def main(args=None):
-    return C.run(ExcitationNode, args, NODE_NAME)
+    return common.run(ExcitationNode, args, NODE_NAME)
 
 
 if __name__ == "__main__":

@@ -2,19 +2,18 @@
 
 The launch files are installed on their own under ``share/lpv_sysid/launch``, so what they
 share lives in the package and they import it from here: the launch arguments every
-experiment uses (one description each) and the parameter-file lookup in ``config_dir``.
-Needs ROS 2 ``launch`` and ``ament_index_python`` (imported only by the launch files).
+experiment uses (one description each) and the parameter-file lookup in ``config_dir``,
+whose default is the ROS share copy of the shipped configs
+(:func:`lpv_sysid.default_configs.share_config_dir`). Needs ROS 2 ``launch`` and
+``ament_index_python`` (imported only by the launch files).
 """
 
 from __future__ import annotations
 
-import os
-
-from ament_index_python.packages import get_package_share_directory
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 
-PACKAGE = "lpv_sysid"
+from lpv_sysid.default_configs import PACKAGE, share_config_dir
 
 #: launch argument -> description (shared by every launch file that declares it)
 DESCRIPTIONS = {
@@ -40,9 +39,8 @@ def declare_arguments(notes: dict[str, str] | None = None, **defaults) -> list:
     if unknown:
         raise KeyError(f"launch arguments without a description: {unknown}")
     notes = notes or {}
-    config_dir = os.path.join(get_package_share_directory(PACKAGE), "config")
     out = []
-    for name, default in {"config_dir": config_dir, **defaults}.items():
+    for name, default in {"config_dir": share_config_dir(), **defaults}.items():
         description = DESCRIPTIONS[name] + (f" ({notes[name]})" if name in notes else "")
         if default is REQUIRED:
             out.append(DeclareLaunchArgument(name, description=description))
@@ -56,4 +54,11 @@ def params(name: str) -> PathJoinSubstitution:
     return PathJoinSubstitution([LaunchConfiguration("config_dir"), name])
 
 
-__all__ = ["DESCRIPTIONS", "PACKAGE", "REQUIRED", "declare_arguments", "params"]
+__all__ = [
+    "DESCRIPTIONS",
+    "PACKAGE",
+    "REQUIRED",
+    "declare_arguments",
+    "params",
+    "share_config_dir",
+]

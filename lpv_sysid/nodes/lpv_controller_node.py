@@ -27,7 +27,7 @@ from std_srvs.srv import Trigger
 
 from lpv_sysid.io import messages as M
 from lpv_sysid.nodes import _common as C
-from lpv_sysid.nodes.controller_runtime import ControllerRuntime, ControllerSettings
+from lpv_sysid.nodes.controller_runtime import ControllerRuntime, ControllerSettings, settle_gc
 
 NODE_NAME = "lpv_controller"
 
@@ -69,6 +69,7 @@ class LpvControllerNode(C.ShellNode):
         self._auto_start = settings.auto_start
         if settings.auto_start:
             self.get_logger().info("auto_start: commanding once every input stream arrives")
+        settle_gc()  # loaded: the GC policy of the flying controller (controller_runtime)
 
     def log_core(self):
         """Log what the core queued, with this node's logger (timestamp, /rosout)."""

@@ -32,11 +32,11 @@ from sensor_msgs.msg import Imu, JointState
 from std_srvs.srv import Trigger
 
 from lpv_sysid.errors import LpvSysidError
-from lpv_sysid.io import messages as M
+from lpv_sysid.io import messages
 from lpv_sysid.mavlink import mavros as MR
 from lpv_sysid.mavlink.bridge import BridgeConfig, BridgeCore
 from lpv_sysid.mavlink.telemetry import ImuSample, RotorSample, StateSample
-from lpv_sysid.nodes import _common as C
+from lpv_sysid.nodes import _common as common
 from lpv_sysid.nodes import parameters as P
 
 NODE_NAME = "mavlink_bridge"
@@ -161,7 +161,7 @@ SPECS = {
         exclude=tuple(f"mavros.{k}" for k in MAVROS_SHARED),
     ),
 }
-PARAMETERS = C.spec_table(SPECS)
+PARAMETERS = common.spec_table(SPECS)
 
 
 def _split(p: dict) -> tuple[dict, dict, dict]:
@@ -184,7 +184,7 @@ def handback_bound_s(offboard) -> float:
     return round(len(offboard.chain) * per_mode + 1.0, 3)
 
 
-class MavlinkBridgeNode(C.ShellNode):
+class MavlinkBridgeNode(common.ShellNode):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, PARAMETERS, **kwargs)
         p = self.params
@@ -196,27 +196,33 @@ class MavlinkBridgeNode(C.ShellNode):
             if self.mavros
             else BridgeCore(BridgeConfig.from_dict(bridge))
         )
-        self.f = M.MsgFactory.rclpy()
-        self.pub_state = self.create_publisher(Odometry, "state", C.qos_for("state"))
-        self.pub_imu = self.create_publisher(Imu, "imu", C.qos_for("imu"))
-        self.pub_status = C.StatusPublisher(self)  # status and /diagnostics
+        self.f = messages.MsgFactory.rclpy()
+        self.pub_state = self.create_publisher(Odometry, "state", common.qos_for("state"))
+        self.pub_imu = self.create_publisher(Imu, "imu", common.qos_for("imu"))
+        self.pub_status = common.StatusPublisher(self)  # status and /diagnostics
         self.create_subscription(
-            TwistStamped, "velocity_reference", self.on_reference, C.qos_for("velocity_reference")
+            TwistStamped,
+            "velocity_reference",
+            self.on_reference,
+            common.qos_for("velocity_reference"),
         )
         self.create_service(Trigger, "~/start", self.on_start)
         self.create_service(Trigger, "~/abort", self.on_abort)
         if self.mavros:
             cfg = self.core.config
             self.pub_cmd = self.create_publisher(
-                TwistStamped, cfg.topic("cmd_vel"), C.QOS_RELIABLE
+                TwistStamped, cfg.topic("cmd_vel"), common.QOS_RELIABLE
             )
             self.create_subscription(
-                Odometry, cfg.topic("odom"), self.on_mavros_odom, C.QOS_SENSOR
+                Odometry, cfg.topic("odom"), self.on_mavros_odom, common.QOS_SENSOR
             )
-            self.create_subscription(Imu, cfg.topic("imu"), self.on_mavros_imu, C.QOS_SENSOR)
+            self.create_subscription(Imu, cfg.topic("imu"), self.on_mavros_imu, common.QOS_SENSOR)
             if cfg.use_diagnostics:
                 self.create_subscription(
-                    DiagnosticArray, MR.DIAGNOSTICS_TOPIC, self.on_mavros_diagnostics, C.QOS_SENSOR
+                    DiagnosticArray,
+                    MR.DIAGNOSTICS_TOPIC,
+                    self.on_mavros_diagnostics,
+                    common.QOS_SENSOR,
                 )
             # twice the setpoint rate: the core sends when due; stale input is seen within
             # half a setpoint period
@@ -229,10 +235,10 @@ class MavlinkBridgeNode(C.ShellNode):
             )
         else:
             self.pub_rot = self.create_publisher(
-                JointState, "rotor_speeds", C.qos_for("rotor_speeds")
+                JointState, "rotor_speeds", common.qos_for("rotor_speeds")
             )
             self.create_subscription(
-                JointState, "actuator_command", self.on_command, C.qos_for("actuator_command")
+                JointState, "actuator_command", self.on_command, common.qos_for("actuator_command")
             )
             self.core.open(self.now())
             self.create_timer(1.0 / s.poll_rate_hz, self.on_poll)
@@ -243,18 +249,18 @@ class MavlinkBridgeNode(C.ShellNode):
                 f"{list(self.core.config.offboard.handback_chain)} within "
                 f"{self.SHUTDOWN_TIMEOUT_S:g} s"
             )
-            budget = C.LAUNCH_SIGTERM_TIMEOUT_S - C.TEARDOWN_MARGIN_S
+            budget = common.LAUNCH_SIGTERM_TIMEOUT_S - common.TEARDOWN_MARGIN_S
             if self.SHUTDOWN_TIMEOUT_S > budget:
                 self.get_logger().warning(
                     f"the hand-back chain may need {self.SHUTDOWN_TIMEOUT_S:g} s, more than the "
                     f"{budget:g} s a launch Ctrl-C leaves before SIGTERM: launch with "
-                    f"sigterm_timeout:={self.SHUTDOWN_TIMEOUT_S + C.TEARDOWN_MARGIN_S:g}"
+                    f"sigterm_timeout:={self.SHUTDOWN_TIMEOUT_S + common.TEARDOWN_MARGIN_S:g}"
                 )
         self.create_timer(1.0 / s.status_rate_hz, lambda: self.publish_status([]))
 
     # -- inputs -------------------------------------------------------------------------
     def on_reference(self, msg):
-        parsed = self.parse_input("velocity_reference", M.reference_from_twist, msg)
+        parsed = self.parse_input("velocity_reference", messages.reference_from_twist, msg)
         if parsed is None:
             return
         t, v, r = parsed
@@ -266,7 +272,7 @@ class MavlinkBridgeNode(C.ShellNode):
     def on_mavros_odom(self, msg):
         cfg = self.core.config
         try:
-            s = M.state_from_odometry(
+            s = messages.state_from_odometry(
                 msg, frame_id=cfg.odom_frame_id, child_frame_id=cfg.base_frame_id
             )
         except LpvSysidError as exc:
@@ -274,21 +280,25 @@ class MavlinkBridgeNode(C.ShellNode):
         s = self.core.on_odometry(self.now(), s)
         if s is not None:
             self.pub_state.publish(
-                M.odometry_from_state(self.f, s.stamp_ns, s.pos_ned, s.euler, s.v_body, s.omega)
+                messages.odometry_from_state(
+                    self.f, s.stamp_ns, s.pos_ned, s.euler, s.v_body, s.omega
+                )
             )
 
     def on_mavros_imu(self, msg):
         try:
-            s = M.imu_from_msg(msg, frame_id=self.core.config.base_frame_id)
+            s = messages.imu_from_msg(msg, frame_id=self.core.config.base_frame_id)
         except LpvSysidError as exc:
             return self.core.reject(self.now(), f"{self.core.config.topic('imu')} rejected: {exc}")
         s = self.core.on_imu(self.now(), s)
         if s is not None:
-            self.pub_imu.publish(M.imu_msg(self.f, s.stamp_ns, s.specific_force, s.omega, s.euler))
+            self.pub_imu.publish(
+                messages.imu_msg(self.f, s.stamp_ns, s.specific_force, s.omega, s.euler)
+            )
 
     def on_mavros_diagnostics(self, msg):
         try:
-            _, statuses = M.status_from_diagnostic_array(msg)
+            _, statuses = messages.status_from_diagnostic_array(msg)
         except LpvSysidError:
             return  # other nodes' diagnostics are not ours to judge
         self.core.on_diagnostics(self.now(), statuses)
@@ -302,7 +312,9 @@ class MavlinkBridgeNode(C.ShellNode):
             self.publish_status(out.events)
 
     def on_command(self, msg):
-        parsed = self.parse_input("actuator_command", M.actuator_command_from_joint_state, msg)
+        parsed = self.parse_input(
+            "actuator_command", messages.actuator_command_from_joint_state, msg
+        )
         if parsed is not None:
             self.core.on_actuator_command(self.now(), parsed[1], stamp=parsed[0])
 
@@ -328,12 +340,12 @@ class MavlinkBridgeNode(C.ShellNode):
             stamp = round(s.t * 1e9)
             if isinstance(s, StateSample):
                 self.pub_state.publish(
-                    M.odometry_from_state(f, stamp, s.pos_ned, s.euler, s.v_body, s.omega)
+                    messages.odometry_from_state(f, stamp, s.pos_ned, s.euler, s.v_body, s.omega)
                 )
             elif isinstance(s, ImuSample):
-                self.pub_imu.publish(M.imu_msg(f, stamp, s.accel_frd, s.gyro_frd))
+                self.pub_imu.publish(messages.imu_msg(f, stamp, s.accel_frd, s.gyro_frd))
             elif isinstance(s, RotorSample):
-                self.pub_rot.publish(M.rotor_speeds_msg(f, stamp, s.omega, s.source))
+                self.pub_rot.publish(messages.rotor_speeds_msg(f, stamp, s.omega, s.source))
         if out.events:
             self.publish_status(out.events)
 
@@ -355,8 +367,10 @@ class MavlinkBridgeNode(C.ShellNode):
             if lv in ("warn", "error"):
                 level = "ERROR" if lv == "error" or level == "ERROR" else "WARN"
                 message = text
-        st = M.diagnostic_status(self.f, level, self.get_fully_qualified_name(), message, values)
-        self.pub_status.publish(M.diagnostic_array(self.f, round(now * 1e9), [st]))
+        st = messages.diagnostic_status(
+            self.f, level, self.get_fully_qualified_name(), message, values
+        )
+        self.pub_status.publish(messages.diagnostic_array(self.f, round(now * 1e9), [st]))
 
     # -- orderly shutdown (nodes/_common.run) ----------------------------------------
     def begin_shutdown(self):
@@ -383,7 +397,7 @@ class MavlinkBridgeNode(C.ShellNode):
 
 
 def main(args=None):
-    return C.run(MavlinkBridgeNode, args, NODE_NAME)
+    return common.run(MavlinkBridgeNode, args, NODE_NAME)
 
 
 if __name__ == "__main__":

@@ -8,7 +8,8 @@ timer jitters); ``state`` (Odometry), ``imu`` and ``rotor_speeds`` are published
 sensor rates (best effort), stamped with the *physics* time of the sample (evenly spaced,
 never the jittery callback time). If the node falls more than ``max_catch_up_s`` behind
 (an overloaded machine), the simulation slips: it runs slower than real time, counts the
-slip (``realtime_slips_s`` on ``status``) and warns, rather than integrating a huge step. Mode ``baseline`` (phase 1): the baseline
+slip (``realtime_slips_s`` on ``status``) and warns, rather than integrating a huge step. Mode
+``baseline`` (phase 1): the baseline
 flies ``velocity_reference``. Mode ``lpv`` (phase 2): ``actuator_command`` is applied
 directly; when it is older than ``command_timeout_s`` (the controller stopped commanding
 after a safety abort) the vehicle falls back to the baseline holding zero velocity, which
@@ -25,7 +26,8 @@ reference to be at most ``lockstep_reference_lag_s`` old: a CPU-starved excitati
 the simulation instead of going stale; measured at load 9 on 2 cores without this barrier: a
 104 ms sim-time gap in the reference and a stale abort), so the loop has exactly the
 sampling of the offline ``simulate phase2`` (command computed on the state at t_k, held over
-[t_k, t_k+1)) however loaded the machine is: the wall-clock graph on 2 loaded cores had ~14 ms of loop delay, beyond the
+[t_k, t_k+1)) however loaded the machine is: the wall-clock graph on 2 loaded cores had ~14 ms of
+loop delay, beyond the
 8-12 ms at which the demo gains go unstable. An unanswered sample is sent again every
 ``LOCKSTEP_RESEND_S`` (best-effort stream); after ``lockstep_timeout_s`` of wall time without
 an answer the simulation runs on alone (``command_timeout_s`` later: baseline hold). Status
@@ -47,10 +49,10 @@ from sensor_msgs.msg import Imu, JointState
 
 from lpv_sysid.control.baseline import BaselineController, BaselineGains
 from lpv_sysid.errors import ConfigError, LpvSysidError
-from lpv_sysid.io import messages as M
+from lpv_sysid.io import messages
 from lpv_sysid.io.yaml_file import read_yaml
 from lpv_sysid.models.quadrotor import Quadrotor, QuadrotorParams
-from lpv_sysid.nodes import _common as C
+from lpv_sysid.nodes import _common as common
 from lpv_sysid.nodes import parameters as P
 from lpv_sysid.sim.vehicle import SensorConfig, SimVehicle
 
@@ -161,7 +163,7 @@ SENSOR_DESCRIPTIONS = {
 }
 
 SPECS = {**P.specs(SimVehicleSettings), **P.config_specs(SensorConfig, SENSOR_DESCRIPTIONS)}
-PARAMETERS = C.spec_table(SPECS)
+PARAMETERS = common.spec_table(SPECS)
 
 
 def _yaml_mapping(path: str, what: str) -> dict:
@@ -173,7 +175,7 @@ def _yaml_mapping(path: str, what: str) -> dict:
     return d
 
 
-class SimVehicleNode(C.ShellNode):
+class SimVehicleNode(common.ShellNode):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, PARAMETERS, **kwargs)
         own = P.specs(SimVehicleSettings)
@@ -221,24 +223,29 @@ class SimVehicleNode(C.ShellNode):
         self._ref_lag_ns = round(p.lockstep_reference_lag_s * 1e9)
         self._published_k = -1
         self._rtf_mark = (self.t0_ns, 0)
-        self.f = M.MsgFactory.rclpy()
-        self.pub_state = self.create_publisher(Odometry, "state", C.qos_for("state"))
-        self.pub_imu = self.create_publisher(Imu, "imu", C.qos_for("imu"))
-        self.pub_rot = self.create_publisher(JointState, "rotor_speeds", C.qos_for("rotor_speeds"))
-        self.pub_status = C.StatusPublisher(self)  # status and /diagnostics
+        self.f = messages.MsgFactory.rclpy()
+        self.pub_state = self.create_publisher(Odometry, "state", common.qos_for("state"))
+        self.pub_imu = self.create_publisher(Imu, "imu", common.qos_for("imu"))
+        self.pub_rot = self.create_publisher(
+            JointState, "rotor_speeds", common.qos_for("rotor_speeds")
+        )
+        self.pub_status = common.StatusPublisher(self)  # status and /diagnostics
         self.create_subscription(
-            TwistStamped, "velocity_reference", self.on_reference, C.qos_for("velocity_reference")
+            TwistStamped,
+            "velocity_reference",
+            self.on_reference,
+            common.qos_for("velocity_reference"),
         )
         self.create_subscription(
-            JointState, "actuator_command", self.on_command, C.qos_for("actuator_command")
+            JointState, "actuator_command", self.on_command, common.qos_for("actuator_command")
         )
         if p.lockstep:
-            self.pub_clock = self.create_publisher(ClockMsg, "/clock", C.QOS_RELIABLE)
+            self.pub_clock = self.create_publisher(ClockMsg, "/clock", common.QOS_RELIABLE)
         self.create_timer(1.0 / sensors.state_hz, self.on_tick, clock=self.pace_clock)
         self.create_timer(1.0 / p.status_rate_hz, self.publish_status)
 
     def on_reference(self, msg):
-        parsed = self.parse_input("velocity_reference", M.reference_from_twist, msg)
+        parsed = self.parse_input("velocity_reference", messages.reference_from_twist, msg)
         if parsed is None:
             return
         self.ref = (parsed[1], parsed[2], self.physics_stamp_ns() * 1e-9)
@@ -256,7 +263,9 @@ class SimVehicleNode(C.ShellNode):
         self._release()
 
     def on_command(self, msg):
-        parsed = self.parse_input("actuator_command", M.actuator_command_from_joint_state, msg)
+        parsed = self.parse_input(
+            "actuator_command", messages.actuator_command_from_joint_state, msg
+        )
         if parsed is None:
             return
         self.cmd = (parsed[1], self.physics_stamp_ns() * 1e-9)
@@ -381,26 +390,27 @@ class SimVehicleNode(C.ShellNode):
         if self.lockstep and k % self.d_state == 0:
             # the clock first: a sample then never arrives ahead of its instant's /clock
             self.pub_clock.publish(
-                self.f("rosgraph_msgs/msg/Clock", clock=M.time_msg(self.f, stamp))
+                self.f("rosgraph_msgs/msg/Clock", clock=messages.time_msg(self.f, stamp))
             )
         if k % self.d_state == 0:
             self.xm = veh.measure_state()
             self._publish_state(stamp)
         if k % self.d_imu == 0:
             a, w = veh.measure_imu()
-            self.pub_imu.publish(M.imu_msg(self.f, stamp, a, w))
+            self.pub_imu.publish(messages.imu_msg(self.f, stamp, a, w))
         if k % self.d_rot == 0:
-            self.pub_rot.publish(M.rotor_speeds_msg(self.f, stamp, veh.measure_rotors()))
+            self.pub_rot.publish(messages.rotor_speeds_msg(self.f, stamp, veh.measure_rotors()))
 
     def _publish_state(self, stamp: int) -> None:
         x = self.xm
         self.pub_state.publish(
-            M.odometry_from_state(self.f, stamp, x[0:3], x[3:6], x[6:9], x[9:12])
+            messages.odometry_from_state(self.f, stamp, x[0:3], x[3:6], x[6:9], x[9:12])
         )
 
     def _command(self, now: float):
         xm = self.xm
-        x8 = (xm[3], xm[4], xm[6], xm[7], xm[8], xm[9], xm[10], xm[11])
+        # phi, theta, u, v, w, p, q, r of the measured FULL_STATE_NAMES sample
+        rigid_body_state = (xm[3], xm[4], xm[6], xm[7], xm[8], xm[9], xm[10], xm[11])
         if self.settings.mode == "lpv":
             u, t_rx = self.cmd
             if u is not None and now - t_rx <= self.settings.command_timeout_s:
@@ -409,11 +419,11 @@ class SimVehicleNode(C.ShellNode):
             if u is not None and not self.handed_back:
                 self.handed_back = True
                 self.get_logger().warning("actuator_command stale: baseline holds (hand-back)")
-            return self.baseline.step(now, x8, (0.0, 0.0, 0.0), 0.0).tolist()
+            return self.baseline.step(now, rigid_body_state, (0.0, 0.0, 0.0), 0.0).tolist()
         v, r, t_rx = self.ref
         if now - t_rx > self.settings.reference_timeout_s and np.isfinite(t_rx):
             v, r = np.zeros(3), 0.0
-        return self.baseline.step(now, x8, tuple(v), r).tolist()
+        return self.baseline.step(now, rigid_body_state, tuple(v), r).tolist()
 
     def publish_status(self):
         x = self.vehicle.x
@@ -438,7 +448,7 @@ class SimVehicleNode(C.ShellNode):
                 real_time_factor=round((k - k0) * self.dt_ns / max(wall - w0, 1), 4),
             )
         message = "baseline hold" if self.handed_back else self.settings.mode
-        st = M.diagnostic_status(
+        st = messages.diagnostic_status(
             self.f,
             "WARN" if self.handed_back else "OK",
             self.get_fully_qualified_name(),
@@ -446,14 +456,14 @@ class SimVehicleNode(C.ShellNode):
             values,
         )
         self.pub_status.publish(
-            M.diagnostic_array(
+            messages.diagnostic_array(
                 self.f, self.physics_stamp_ns() if self.lockstep else self.now_ns(), [st]
             )
         )
 
 
 def main(args=None):
-    return C.run(SimVehicleNode, args, NODE_NAME)
+    return common.run(SimVehicleNode, args, NODE_NAME)
 
 
 if __name__ == "__main__":

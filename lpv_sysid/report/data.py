@@ -12,9 +12,14 @@ vertex models         ``vertex_models.yaml`` (x0/u0 -> Table 1, fit.r2 -> Table 
 validation            ``validation.yaml``, ``ident/validation.yaml`` (TIC/NRMSE -> Table 3)
 signals               ``signals/summary.yaml`` and ``signals/signals.npz``
 gains + certificate   ``gains.yaml``
-verification          ``verification.yaml``, ``verify.yaml``
+verification          ``verification.yaml`` (written by ``lpv-sysid verify``, read through
+                      :func:`lpv_sysid.synthesis.verify_report.read_verification`; the report
+                      never re-runs the verifier: absent means "not verified")
 phase 2               ``phase2/summary.yaml`` and ``phase2/*.npz`` (written by
                       :mod:`lpv_sysid.sim.phase2`)
+provenance            ``phase1/experiment.yaml`` / ``phase1/campaign_summary.yaml`` (recorder and
+                      campaign of ``lpv-sysid fly phase1``: flown over MAVLink) and
+                      ``phase2/phase2_summary.yaml`` (``lpv-sysid fly phase2``)
 ====================  =========================================================================
 """
 
@@ -30,6 +35,7 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io.yaml_file import read_yaml
+from lpv_sysid.synthesis.verify_report import Verification, read_verification
 
 log = logging.getLogger(__name__)
 
@@ -40,9 +46,14 @@ CANDIDATES: dict[str, tuple[str, ...]] = {
     "signals_summary": ("signals/summary.yaml", "summary.yaml"),
     "signals": ("signals/signals.npz", "signals.npz"),
     "gains": ("gains.yaml",),
-    "verification": ("verification.yaml", "verify.yaml"),
+    "verification": ("verification.yaml",),
     "phase2_summary": ("phase2/summary.yaml",),
+    "experiment": ("phase1/experiment.yaml", "experiment.yaml"),
+    "campaign": ("phase1/campaign_summary.yaml", "campaign_summary.yaml"),
+    "flight_phase2": ("phase2/phase2_summary.yaml", "phase2_summary.yaml"),
 }
+#: inputs only used to say where the data came from (not listed as missing sections)
+PROVENANCE_INPUTS = ("experiment", "campaign", "flight_phase2")
 PHASE2_SERIES = ("eq33", "nonlinear")
 
 
@@ -61,8 +72,11 @@ class RunData:
     signals_summary: Optional[dict] = None
     signals: Optional[dict[str, np.ndarray]] = None
     gains: Optional[dict] = None
-    verification: Optional[Any] = None
+    verification: Optional["Verification"] = None
     phase2_summary: Optional[dict] = None
+    experiment: Optional[dict] = None
+    campaign: Optional[dict] = None
+    flight_phase2: Optional[dict] = None
     phase2_series: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
 
 
@@ -84,48 +98,13 @@ def _find(run_dir: Path, key: str) -> Optional[Path]:
     return None
 
 
-def verification_from_files(
-    gains: Path, models: Path, n_random: int = 20, seed: int = 0, full_box: int = 200
-) -> dict:
-    """Run the independent verifier (:func:`lpv_sysid.synthesis.verify.verify_files`: frozen-point
-    H-inf norms, closed-loop poles, Eq. 30 re-evaluated, file consistency, and with ``full_box`` > 0
-    the empirical Monte Carlo over the full identified uncertainty box) and return its rows
-    in the layout of a ``verification.yaml``: {passed, source, checks: [{check, where, value,
-    limit, ok, note[, advisory]}], full_box: {...}}. Failed advisory rows (the full-box check, which
-    the certificate does not claim: WARN) carry ``advisory: true`` and do not change ``passed``."""
-    from lpv_sysid.synthesis.verify import verify_files
-
-    rep = verify_files(gains, models, n_random=n_random, seed=seed, full_box=full_box)
-    checks = []
-    for r in rep.rows:
-        c = {
-            "check": r.check,
-            "where": r.where,
-            "value": float(r.value),
-            "limit": float(r.limit),
-            "ok": bool(r.ok),
-            "note": r.note,
-        }
-        if getattr(r, "advisory", False) and not r.ok:
-            c["advisory"] = True  # WARN: empirical check the certificate does not claim
-        checks.append(c)
-    out = {
-        "passed": bool(rep.passed),
-        "source": f"computed by the report: synthesis.verify.verify_files({gains.name}, {models.name}, "
-        f"n_random={n_random}, seed={seed}, full_box={full_box})",
-        "checks": checks,
-    }
-    if getattr(rep, "full_box", None) is not None:
-        out["full_box"] = rep.full_box.summary()
-    return out
-
-
 def load_run(run_dir: str | Path, verify: bool = True) -> RunData:
     """Collect the artefacts of ``run_dir``. Raises ConfigError only if the directory is absent.
 
-    With ``verify`` and no ``verification.yaml``, but both ``gains.yaml`` and
-    ``vertex_models.yaml`` readable, the verification is computed (:func:`verification_from_files`).
+    ``verify`` is accepted for compatibility and has no effect: the verification is read from
+    ``verification.yaml`` (``lpv-sysid verify`` writes it), never recomputed here.
     """
+    del verify
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise ConfigError(f"--run: {run_dir} is not a directory")
@@ -137,16 +116,14 @@ def load_run(run_dir: str | Path, verify: bool = True) -> RunData:
             continue
         data.found[key] = path
         try:
-            value = (
-                read_npz(path) if path.suffix == ".npz" else read_yaml(path, finite=False)
-            )  # outputs may hold .nan
-            if key in (
-                "models",
-                "gains",
-                "signals_summary",
-                "phase2_summary",
-                "validation",
-            ) and not isinstance(value, dict):
+            value: Any
+            if key == "verification":
+                value = read_verification(path)
+            elif path.suffix == ".npz":
+                value = read_npz(path)
+            else:
+                value = read_yaml(path, finite=False)  # outputs may hold .nan
+            if key not in ("verification", "signals", "trims") and not isinstance(value, dict):
                 raise ConfigError(
                     f"{path}: expected a mapping at the top level, got {type(value).__name__}"
                 )
@@ -155,24 +132,6 @@ def load_run(run_dir: str | Path, verify: bool = True) -> RunData:
             log.warning("%s", exc)
             continue
         setattr(data, key, value)
-    if (
-        verify
-        and data.verification is None
-        and "verification" not in data.problems
-        and data.gains is not None
-        and data.models is not None
-    ):
-        try:
-            data.verification = verification_from_files(data.found["gains"], data.found["models"])
-            data.derived["verification"] = (
-                "computed: synthesis.verify on gains.yaml + vertex_models.yaml"
-            )
-            data.missing.pop("verification", None)
-        except Exception as exc:  # noqa: BLE001 - any verifier failure is reported, not fatal
-            data.problems["verification"] = (
-                f"verification of gains.yaml against vertex_models.yaml failed: {exc}"
-            )
-            data.missing.pop("verification", None)
     meta_val = (
         (data.models.get("meta") or {}).get("validation")
         if isinstance(data.models, dict)

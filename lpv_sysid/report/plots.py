@@ -5,8 +5,9 @@ Each function takes arrays and an output path, writes one PNG and returns the pa
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import Any, Optional, Sequence
 
 import matplotlib
 
@@ -14,15 +15,17 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from lpv_sysid.report.margins import RunMargins  # noqa: E402
 from lpv_sysid.report.regressors import AXIS_TITLES, RegressorCorrelation  # noqa: E402
 
 VEL_LABELS = ("u [m/s]", "v [m/s]", "w [m/s]")
 
 
-def _save(fig, path: Path) -> Path:
+def _save(fig: Any, path: Path, layout: bool = True) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
+    if layout:
+        fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
@@ -69,65 +72,160 @@ def plot_perturbation(
     return _save(fig, path)
 
 
-def _heatmap(ax, names: Sequence[str], C: np.ndarray, title: str) -> None:
+#: |r| at or above which two regressors are called near-collinear (report text and plots)
+COLLINEAR = 0.95
+
+
+def _heatmap(
+    ax: Any, names: Sequence[str], C: np.ndarray, title: str, mark: float = COLLINEAR
+) -> Any:
+    """Signed correlation on a diverging map fixed to [-1, 1]; cells with |r| >= ``mark`` off the
+    diagonal are outlined in black and their value printed bold."""
     M = np.ma.masked_invalid(C)
-    im = ax.imshow(np.abs(M), vmin=0.0, vmax=1.0, cmap="viridis")
+    im = ax.imshow(M, vmin=-1.0, vmax=1.0, cmap="RdBu_r")
     n = len(names)
     ax.set_xticks(range(n))
     ax.set_yticks(range(n))
-    ax.set_xticklabels(names, rotation=60, ha="right", fontsize=6)
-    ax.set_yticklabels(names, fontsize=6)
+    fs = 7 if n <= 7 else 6
+    ax.set_xticklabels(names, rotation=40, ha="right", fontsize=fs)
+    ax.set_yticklabels(names, fontsize=fs)
     for i in range(n):
         for j in range(n):
             val = C[i, j]
-            txt = "-" if not np.isfinite(val) else f"{val:+.2f}"
+            hot = i != j and np.isfinite(val) and abs(val) >= mark
             ax.text(
                 j,
                 i,
-                txt,
+                "-" if not np.isfinite(val) else f"{val:+.2f}",
                 ha="center",
                 va="center",
-                fontsize=5,
-                color="w" if not np.isfinite(val) or abs(val) < 0.6 else "k",
+                fontsize=fs,
+                fontweight="bold" if hot else "normal",
+                color="w" if np.isfinite(val) and abs(val) > 0.6 else "k",
             )
-    ax.set_title(title, fontsize=8)
+            if hot:
+                ax.add_patch(plt.Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, ec="k", lw=1.6))
+    ax.set_title(title, fontsize=9)
     return im
 
 
 def plot_regressor_correlations(
     corrs: Sequence[RegressorCorrelation], path: Path, title: str = ""
 ) -> Path:
-    """Correlation coefficients of the Eq. (6) regressors per axis, like seed 0 Fig. 10."""
-    fig, axes = plt.subplots(2, 3, figsize=(12, 8))
+    """Signed correlation coefficients of the Eq. (6) regressors per axis (seed 0 Fig. 10), one
+    colour bar for all panels; near-collinear pairs (|r| >= :data:`COLLINEAR`) outlined."""
+    fig, axes = plt.subplots(2, 3, figsize=(14, 9.5))
+    im = None
     for ax, rc in zip(axes.ravel(), corrs):
-        _heatmap(ax, rc.names, rc.corr, AXIS_TITLES.get(rc.axis, rc.axis))
-    if title:
-        fig.suptitle(title)
-    return _save(fig, path)
+        im = _heatmap(ax, rc.names, rc.corr, AXIS_TITLES.get(rc.axis, rc.axis))
+    for ax in axes.ravel()[len(corrs) :]:
+        ax.axis("off")
+    fig.suptitle(
+        (title + "\n" if title else "") + f"outlined: near-collinear pairs, |r| >= {COLLINEAR:g}",
+        fontsize=10,
+    )
+    fig.tight_layout(rect=(0, 0, 0.92, 1))
+    if im is not None:
+        cax = fig.add_axes((0.935, 0.15, 0.015, 0.7))
+        fig.colorbar(im, cax=cax, label="correlation coefficient r")
+    return _save(fig, path, layout=False)
 
 
 def plot_correlation_matrix(
     names: Sequence[str], C: np.ndarray, path: Path, title: str = ""
 ) -> Path:
-    """One correlation matrix (signal channels, seed 0 Fig. 7)."""
-    fig, ax = plt.subplots(figsize=(5.5, 5))
-    _heatmap(ax, names, np.asarray(C, dtype=float), title)
+    """One signed correlation matrix (signal channels, seed 0 Fig. 7) with its colour bar."""
+    fig, ax = plt.subplots(figsize=(6.5, 5.5))
+    im = _heatmap(ax, names, np.asarray(C, dtype=float), title)
+    fig.colorbar(im, ax=ax, label="correlation coefficient r", fraction=0.046, pad=0.04)
     return _save(fig, path)
 
 
-def plot_signals(
-    t: np.ndarray, u: np.ndarray, names: Sequence[str], path: Path, title: str = ""
+def plot_spectra(
+    t: np.ndarray,
+    u: np.ndarray,
+    names: Sequence[str],
+    harmonics: Sequence[Optional[Sequence[int]]],
+    f0: float,
+    path: Path,
+    title: str = "",
 ) -> Path:
-    """Reference and excitation channels normalised to unit amplitude (seed 0 Fig. 5)."""
-    n = u.shape[1]
-    fig, axes = plt.subplots(n, 1, figsize=(8, 1.1 * n + 1), sharex=True)
-    axes = np.atleast_1d(axes)
-    for i, ax in enumerate(axes):
-        peak = np.max(np.abs(u[:, i])) or 1.0
-        ax.plot(t, u[:, i] / peak, lw=0.7)
-        ax.set_ylabel(str(names[i]), fontsize=7)
-        ax.set_ylim(-1.1, 1.1)
-    axes[-1].set_xlabel("t [s]")
+    """Amplitude spectra of the designed multisines, one panel per channel (seed 0 Sec. V):
+    |DFT| x 2/N of one period on the grid k f0, the channel's excited harmonics marked (dots) and
+    the other bins (leakage, other channels' harmonics) in grey; x range up to 1.25x the
+    channel's highest harmonic."""
+    u = np.asarray(u, dtype=float)
+    N, n = u.shape
+    amp = np.abs(np.fft.rfft(u, axis=0)) * 2.0 / N
+    freq = np.fft.rfftfreq(N, d=float(np.median(np.diff(t))))
+    cols = 2 if n > 3 else 1
+    rows = int(math.ceil(n / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(11, 2.1 * rows + 0.8), squeeze=False)
+    for i in range(n):
+        ax = axes[i // cols][i % cols]
+        h = np.asarray(harmonics[i] if harmonics[i] is not None else [], dtype=int)
+        h = h[(h >= 0) & (h < freq.size)]
+        fmax = 1.25 * float(freq[h].max()) if h.size else float(freq[-1])
+        sel = freq <= fmax
+        ax.vlines(freq[sel], 0, amp[sel, i], color="0.65", lw=0.8)
+        if h.size:
+            ax.vlines(freq[h], 0, amp[h, i], color="C0", lw=1.2)
+            ax.plot(freq[h], amp[h, i], "o", color="C0", ms=3, label="excited harmonic")
+        ax.set_xlim(0, fmax)
+        ax.set_ylim(bottom=0)
+        ax.set_title(f"{names[i]}: {h.size} harmonics", fontsize=9)
+        ax.set_ylabel("amplitude", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+        if i == 0 and h.size:
+            ax.legend(fontsize=7, loc="upper right")
+    for i in range(n, rows * cols):
+        axes[i // cols][i % cols].axis("off")
+    for ax in axes[-1]:
+        ax.set_xlabel("frequency [Hz]", fontsize=8)
+    if n % cols:
+        axes[-2][-1].set_xlabel("frequency [Hz]", fontsize=8)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    return _save(fig, path)
+
+
+def plot_margins(m: RunMargins, path: Path, title: str = "") -> Path:
+    """Safety margins over time (:mod:`lpv_sysid.report.margins`): tilt vs its limit, ESC
+    headroom vs saturation, distance to the box edge vs the box and the supervisor's margin, and
+    the bound-monitor ratio vs gamma x margin (and gamma)."""
+    L = m.limits
+    fig, axes = plt.subplots(4, 1, figsize=(9, 9), sharex=True)
+    ax = axes[0]
+    ax.plot(m.t, m.tilt_deg, lw=0.8, label=f"max(|phi|, |theta|) ({m.state_source})")
+    ax.axhline(L.max_tilt_deg, color="r", ls="--", lw=1, label=f"limit {L.max_tilt_deg:g} deg")
+    ax.set_ylim(0, 1.08 * max(L.max_tilt_deg, float(np.nanmax(m.tilt_deg))))
+    ax.set_ylabel("tilt [deg]")
+    ax = axes[1]
+    ax.plot(m.t, 100 * m.esc_headroom, lw=0.8, label="min over motors of min(u_ESC, 1 - u_ESC)")
+    ax.axhline(0, color="r", ls="--", lw=1, label="saturation")
+    ax.set_ylim(-2, 52)
+    ax.set_ylabel("ESC headroom [%]")
+    ax = axes[2]
+    ax.plot(m.t, m.box_distance, lw=0.8, label="distance of (u, v, w) to the nearest box face")
+    ax.axhline(0, color="k", ls="-", lw=0.8, label="box edge")
+    ax.axhline(-L.box_margin, color="r", ls="--", lw=1, label="supervisor stop")
+    ax.set_ylabel("to box edge [m/s]")
+    ax = axes[3]
+    ax.plot(m.t, m.monitor_ratio, lw=0.8, label="running ||z|| / ||u_e||")
+    if L.monitor_limit is not None:
+        ax.axhline(L.monitor_limit, color="r", ls="--", lw=1, label="limit gamma x margin")
+        ax.axhline(float(L.gamma or 0.0), color="0.4", ls=":", lw=1, label="gamma")
+        top = max(
+            L.monitor_limit,
+            float(np.nanmax(m.monitor_ratio)) if np.any(np.isfinite(m.monitor_ratio)) else 0.0,
+        )
+        ax.set_ylim(0, 1.1 * top)
+    ax.set_ylabel("bound monitor")
+    ax.set_xlabel("t [s]")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="best", ncol=3, framealpha=0.85)
     if title:
         axes[0].set_title(title)
     return _save(fig, path)

@@ -28,15 +28,13 @@ the amplitude of harmonic f is the piecewise-linear interpolation of the breakpo
 
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Optional
 
+from lpv_sysid import config_fields as cf
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.signals.phase_opt import PhaseOptOptions
-from lpv_sysid.validation import check_keys, is_count
-
 
 #: Limits checked before a table is allocated: one period of at most an hour (a flight is
 #: minutes), at most 10 kHz (PX4 offboard streams run at <= 1 kHz), at most 2e6 samples per
@@ -47,98 +45,67 @@ MAX_SAMPLES = 2_000_000
 #: Iteration counts of the phase optimiser (defaults 150, 100, 3): larger values never finish.
 MAX_COUNTS = {"max_iter": 100_000, "clip_iter": 100_000, "restarts": 1_000}
 
-
-def _num(v: Any, where: str, *, positive: bool = False, nonneg: bool = False) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise ConfigError(f"{where}: expected a number, got {v!r}")
-    x = float(v)
-    if not math.isfinite(x):
-        raise ConfigError(f"{where}: must be finite, got {v!r}")
-    if positive and x <= 0:
-        raise ConfigError(f"{where}: must be > 0, got {v!r}")
-    if nonneg and x < 0:
-        raise ConfigError(f"{where}: must be >= 0, got {v!r}")
-    return x
-
-
-def _int(v: Any, where: str, *, minimum: int = 0) -> int:
-    if not is_count(v, minimum):
-        raise ConfigError(f"{where}: expected an integer >= {minimum}, got {v!r}")
-    return int(v)
-
-
-def _num_list(v: Any, where: str, n: Optional[int] = None, **kw) -> tuple[float, ...]:
-    if not isinstance(v, (list, tuple)):
-        raise ConfigError(f"{where}: expected a list, got {v!r}")
-    if n is not None and len(v) != n:
-        raise ConfigError(f"{where}: expected {n} values, got {len(v)}")
-    return tuple(_num(x, f"{where}[{i}]", **kw) for i, x in enumerate(v))
+_BREAKPOINT = cf.FieldSpec(cf.NUMBERS, length=2, lo=0.0)
+_POSITIVE = cf.FieldSpec(cf.NUMBER, lo=0.0, lo_open=True)
+_POSITIVES = cf.FieldSpec(cf.NUMBERS, lo=0.0, lo_open=True)
 
 
 def _breakpoints(v: Any, where: str) -> tuple[tuple[float, float], ...]:
     if not isinstance(v, (list, tuple)) or len(v) < 1:
         raise ConfigError(f"{where}: expected a list of [frequency, amplitude] pairs")
-    pts = tuple(tuple(_num_list(p, f"{where}[{i}]", 2, nonneg=True)) for i, p in enumerate(v))
+    pts = tuple(cf.check_value(_BREAKPOINT, p, f"{where}[{i}]") for i, p in enumerate(v))
     fs = [p[0] for p in pts]
     if any(b <= a for a, b in zip(fs, fs[1:])):
         raise ConfigError(f"{where}: breakpoint frequencies must increase strictly")
     if all(p[1] == 0 for p in pts):
         raise ConfigError(f"{where}: all amplitudes are zero")
-    return pts  # type: ignore[return-value]
+    return pts
 
 
 @dataclass(frozen=True)
 class GroupConfig:
     """Channels that share one frequency band (interleaved harmonics)."""
 
-    name: str
-    channels: tuple[str, ...]
-    band: tuple[float, float]
-    peak: Optional[tuple[float, ...]] = None  # per channel peak |x|; default 1
-    energy: Optional[float] = None  # group energy, Eq. (26)
-    power_fraction: Optional[tuple[float, ...]] = None  # with ``energy`` only
+    name: str = cf.text(doc="group name (weights.group refers to it)")
+    channels: tuple[str, ...] = cf.texts(doc="channel names, unique", unique=True)
+    band: tuple[float, float] = cf.numbers(doc="[low, high] Hz, low < high", length=2, lo=0.0)
+    #: per channel peak |x| (a scalar applies to every channel); default 1
+    peak: Optional[tuple[float, ...]] = None
+    energy: Optional[float] = cf.number(
+        None, "group energy sqrt(int u^T u dt), Eq. (26)", lo=0.0, lo_open=True
+    )
+    power_fraction: Optional[tuple[float, ...]] = cf.numbers(
+        None, "share of the energy per channel (with energy)", lo=0.0, lo_open=True
+    )
     spectra: Mapping[str, tuple[tuple[float, float], ...]] = field(default_factory=dict)
-
-    KEYS = frozenset({"name", "channels", "band", "peak", "energy", "power_fraction", "spectrum"})
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], where: str = "group") -> "GroupConfig":
-        check_keys(d, cls.KEYS, where, required={"name", "channels", "band"}, list_allowed=True)
-        name = d["name"]
-        if not isinstance(name, str) or not name:
-            raise ConfigError(f"{where}.name: expected a non-empty string, got {name!r}")
-        ch = d["channels"]
-        if (
-            not isinstance(ch, (list, tuple))
-            or not ch
-            or not all(isinstance(c, str) and c for c in ch)
-        ):
-            raise ConfigError(f"{where}.channels: expected a non-empty list of names, got {ch!r}")
-        if len(set(ch)) != len(ch):
-            raise ConfigError(f"{where}.channels: duplicate names in {list(ch)}")
-        n = len(ch)
-        band = _num_list(d["band"], f"{where}.band", 2, nonneg=True)
+        kw = cf.parse_fields(cls, d, where, other_keys=("peak", "spectrum"))
+        ch, n = kw["channels"], len(kw["channels"])
+        band = kw["band"]
         if not band[1] > band[0]:
             raise ConfigError(f"{where}.band: need low < high, got {list(band)}")
-        peak = energy = pf = None
         if "peak" in d and "energy" in d:
             raise ConfigError(f"{where}: give either 'peak' or 'energy', not both")
         if "peak" in d:
             p = d["peak"]
-            peak = (
-                (_num(p, f"{where}.peak", positive=True),) * n
+            kw["peak"] = (
+                (cf.check_value(_POSITIVE, p, f"{where}.peak"),) * n
                 if not isinstance(p, (list, tuple))
-                else _num_list(p, f"{where}.peak", n, positive=True)
+                else cf.check_value(_POSITIVES, p, f"{where}.peak")
             )
-        if "energy" in d:
-            energy = _num(d["energy"], f"{where}.energy", positive=True)
-        if "power_fraction" in d:
-            if energy is None:
+            if len(kw["peak"]) != n:
+                raise ConfigError(f"{where}.peak: expected {n} values, got {len(kw['peak'])}")
+        pf = kw.get("power_fraction")
+        if pf is not None:
+            if kw.get("energy") is None:
                 raise ConfigError(
                     f"{where}.power_fraction: only meaningful with 'energy' "
                     "(with 'peak' every channel is scaled to its own peak)"
                 )
-            pf = _num_list(d["power_fraction"], f"{where}.power_fraction", n, positive=True)
+            if len(pf) != n:
+                raise ConfigError(f"{where}.power_fraction: expected {n} values, got {len(pf)}")
             if abs(sum(pf) - 1.0) > 1e-9:
                 raise ConfigError(f"{where}.power_fraction: must sum to 1, got {sum(pf)}")
         spectra: dict[str, tuple[tuple[float, float], ...]] = {}
@@ -152,62 +119,46 @@ class GroupConfig:
             else:
                 bp = _breakpoints(s, f"{where}.spectrum")
                 spectra = {c: bp for c in ch}
-        return cls(name, tuple(ch), band, peak, energy, pf, spectra)  # type: ignore[arg-type]
+        return cls(spectra=spectra, **kw)
 
 
 @dataclass(frozen=True)
 class WeightsConfig:
     """Magnitudes for the weights R (Eq. 27) and Q (Eq. 28) of seed 0 Sec. V."""
 
-    group: Optional[str] = None
-    excitation_magnitudes: Optional[tuple[float, ...]] = None  # Delta_t, Delta_a, Delta_e, Delta_r
-    velocity_magnitudes: Optional[tuple[float, ...]] = None  # Delta_u, Delta_v, Delta_w
-
-    KEYS = frozenset({"group", "excitation_magnitudes", "velocity_magnitudes"})
+    group: Optional[str] = cf.text(None, "the unit-energy group u_e", optional=True)
+    excitation_magnitudes: Optional[tuple[float, ...]] = cf.numbers(
+        None, "Delta_t, Delta_a, Delta_e, Delta_r (one per u_e channel)", lo=0.0, lo_open=True
+    )
+    velocity_magnitudes: Optional[tuple[float, ...]] = cf.numbers(
+        None, "Delta_u, Delta_v, Delta_w", length=3, lo=0.0, lo_open=True
+    )
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], where: str = "weights") -> "WeightsConfig":
-        check_keys(d, cls.KEYS, where, list_allowed=True)
-        g = d.get("group")
-        if g is not None and not isinstance(g, str):
-            raise ConfigError(f"{where}.group: expected a group name, got {g!r}")
-        ex = vel = None
-        if "excitation_magnitudes" in d:
-            if g is None:
-                raise ConfigError(
-                    f"{where}.group: required with excitation_magnitudes (the u_e group)"
-                )
-            ex = _num_list(
-                d["excitation_magnitudes"], f"{where}.excitation_magnitudes", positive=True
+        kw = cf.parse_fields(cls, d, where)
+        if kw.get("excitation_magnitudes") is not None and kw.get("group") is None:
+            raise ConfigError(
+                f"{where}.group: required with excitation_magnitudes (the u_e group)"
             )
-        if "velocity_magnitudes" in d:
-            vel = _num_list(
-                d["velocity_magnitudes"], f"{where}.velocity_magnitudes", 3, positive=True
-            )
-        return cls(g, ex, vel)
+        return cls(**kw)
+
+
+#: ``optimisation`` keys -> what their values must be (PhaseOptOptions checks the rest)
+_OPTIONS = {
+    "p_stages": _POSITIVES,
+    "max_iter": cf.FieldSpec(cf.COUNT, hi=MAX_COUNTS["max_iter"]),
+    "clip_iter": cf.FieldSpec(cf.COUNT, hi=MAX_COUNTS["clip_iter"]),
+    "restarts": cf.FieldSpec(cf.COUNT, hi=MAX_COUNTS["restarts"]),
+    "restart_max_harmonics": cf.FieldSpec(cf.COUNT),
+    "seed": cf.FieldSpec(cf.COUNT),
+    "clip_level": _POSITIVE,
+}
 
 
 def _options_from_dict(d: Mapping[str, Any], where: str = "optimisation") -> PhaseOptOptions:
-    keys = {
-        "p_stages",
-        "max_iter",
-        "clip_iter",
-        "clip_level",
-        "restarts",
-        "restart_max_harmonics",
-        "seed",
-    }
-    check_keys(d, keys, where, list_allowed=True)
-    kw: dict[str, Any] = {}
-    if "p_stages" in d:
-        kw["p_stages"] = _num_list(d["p_stages"], f"{where}.p_stages", positive=True)
-    for k in ("max_iter", "clip_iter", "restarts", "restart_max_harmonics", "seed"):
-        if k in d:
-            kw[k] = _int(d[k], f"{where}.{k}")
-            if k in MAX_COUNTS and kw[k] > MAX_COUNTS[k]:  # a count of 10**18 never finishes
-                raise ConfigError(f"{where}.{k}: {kw[k]} exceeds the limit of {MAX_COUNTS[k]}")
-    if "clip_level" in d:
-        kw["clip_level"] = _num(d["clip_level"], f"{where}.clip_level", positive=True)
+    cf.check_keys(d, _OPTIONS, where, list_allowed=True)
+    kw = {k: cf.check_value(_OPTIONS[k], v, f"{where}.{k}") for k, v in d.items()}
     return PhaseOptOptions(**kw)
 
 
@@ -215,13 +166,15 @@ def _options_from_dict(d: Mapping[str, Any], where: str = "optimisation") -> Pha
 class SignalsConfig:
     """A full multisine design: period, rate, groups, optimiser options, weights."""
 
-    duration: float
-    sample_rate: float
-    groups: tuple[GroupConfig, ...]
+    duration: float = cf.number(
+        doc="T, s: one period", lo=0.0, lo_open=True, hi=MAX_DURATION, unit=" s"
+    )
+    sample_rate: float = cf.number(
+        doc="Hz; T * sample_rate an integer", lo=0.0, lo_open=True, hi=MAX_SAMPLE_RATE, unit=" Hz"
+    )
+    groups: tuple[GroupConfig, ...] = ()
     optimisation: PhaseOptOptions = PhaseOptOptions()
     weights: WeightsConfig = WeightsConfig()
-
-    KEYS = frozenset({"duration", "sample_rate", "groups", "optimisation", "weights"})
 
     @property
     def n_samples(self) -> int:
@@ -233,18 +186,15 @@ class SignalsConfig:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], where: str = "signals config") -> "SignalsConfig":
-        check_keys(
-            d, cls.KEYS, where, required={"duration", "sample_rate", "groups"}, list_allowed=True
+        kw = cf.parse_fields(
+            cls,
+            d,
+            where,
+            other_keys=("groups", "optimisation", "weights"),
+            required=("duration", "sample_rate", "groups"),
         )
-        T = _num(d["duration"], f"{where}.duration", positive=True)
-        fs = _num(d["sample_rate"], f"{where}.sample_rate", positive=True)
+        T, fs = kw["duration"], kw["sample_rate"]
         # before anything is allocated: the table is duration * sample_rate rows per channel
-        if T > MAX_DURATION:
-            raise ConfigError(f"{where}.duration: {T:g} s exceeds the limit of {MAX_DURATION:g} s")
-        if fs > MAX_SAMPLE_RATE:
-            raise ConfigError(
-                f"{where}.sample_rate: {fs:g} Hz exceeds the limit of {MAX_SAMPLE_RATE:g} Hz"
-            )
         n = T * fs
         if n > MAX_SAMPLES:
             raise ConfigError(

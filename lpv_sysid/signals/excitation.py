@@ -129,7 +129,8 @@ class ExcitationCore:
             )
         if len(excitation_channels) not in (0, 4):
             raise ConfigError(
-                f"excitation: excitation_channels needs 0 or 4 names, got {list(excitation_channels)}"
+                "excitation: excitation_channels needs 0 or 4 names, got "
+                f"{list(excitation_channels)}"
             )
         cols = [col(c) for c in velocity_channels] + [col(yaw_rate_channel)]
         cols += [col(c) for c in excitation_channels] or [np.zeros(n)] * 4

@@ -53,7 +53,8 @@ def pulse_train(
     duration: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Consecutive square pulses ``signs[i] * amplitude`` lasting ``widths[i] * pulse_width``
-    seconds after ``start``, zero elsewhere; ``duration`` defaults to the end of the train + start."""
+    seconds after ``start``, zero elsewhere; ``duration`` defaults to the end of the train +
+    start."""
     if pulse_width <= 0 or start < 0:
         raise ConfigError(
             f"pulse train: pulse_width must be > 0 and start >= 0, got {pulse_width}, {start}"

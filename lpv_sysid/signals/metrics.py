@@ -88,7 +88,9 @@ class HarmonicContent:
     foreign_fraction: float  # share in harmonics allocated to *other* channels
 
 
-def harmonic_content(u: np.ndarray, harmonics: Sequence[Sequence[int]]) -> list[HarmonicContent]:
+def harmonic_content(
+    u: np.ndarray, harmonics: Sequence[Sequence[int] | np.ndarray]
+) -> list[HarmonicContent]:
     """Check that channel j of ``u`` (N, n, one period) has power only at ``harmonics[j]``."""
     u = np.asarray(u, dtype=float)
     if u.ndim == 1:

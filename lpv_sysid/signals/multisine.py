@@ -124,7 +124,8 @@ def design(config: SignalsConfig) -> SignalSet:
     f0 = 1.0 / T
     dt = 1.0 / fs
     harmonics = allocate_harmonics(config.groups, T, fs)
-    names, gnames, bands, amps, phases, rpf, rpf0 = [], [], [], [], [], [], []
+    names, gnames, amps, phases, rpf, rpf0 = [], [], [], [], [], []
+    bands: list[tuple[float, float]] = []
     u = np.empty((n, len(harmonics)))
     j = 0
     for g in config.groups:
@@ -146,7 +147,7 @@ def design(config: SignalsConfig) -> SignalSet:
             )
             names.append(c)
             gnames.append(g.name)
-            bands.append(tuple(g.band))
+            bands.append((float(g.band[0]), float(g.band[1])))
             amps.append(a)
             phases.append(phi)
             cols.append(j)

@@ -164,7 +164,8 @@ def optimise_phases(
     Starts from ``phases0`` (Schroeder) and, for channels of at most
     ``options.restart_max_harmonics`` harmonics, ``options.restarts`` random phase vectors
     (with many harmonics the Schroeder start beat every random start in our trials, with
-    few harmonics random starts often find a better optimum); from each start runs iterative clipping,
+    few harmonics random starts often find a better optimum); from each start runs iterative
+    clipping,
     then the L_p continuation of the module docstring, and keeps the phases of the lowest
     sampled RPF seen (never worse than the start). A single sinusoid is returned as is.
     """

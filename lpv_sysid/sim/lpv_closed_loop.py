@@ -53,7 +53,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
-from typing import Any, Callable, Optional, Protocol, Sequence
+from typing import Any, Callable, Optional, Protocol, Sequence, cast
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -179,7 +179,7 @@ class LastPointCache:
             # one weight evaluation for all interpolated quantities at this point (Eq. 21, 31)
             w = self._cache.get("_alpha")
             if w is None or w[0] != key:
-                pm = self.model.model
+                pm = cast(Any, self.model).model  # a ScheduledLpv (_vertex_stacks found it)
                 if not np.all(np.isfinite(v_d)):
                     raise ConfigError(
                         f"scheduling point contains NaN/inf: {np.asarray(v_d).tolist()}"
@@ -193,22 +193,22 @@ class LastPointCache:
         return val
 
     def A(self, v_d):
-        return self._get("A", v_d)  # noqa: E704
+        return self._get("A", v_d)
 
     def B(self, v_d):
-        return self._get("B", v_d)  # noqa: E704
+        return self._get("B", v_d)
 
     def K(self, v_d):
-        return self._get("K", v_d)  # noqa: E704
+        return self._get("K", v_d)
 
     def x0(self, v_d):
-        return self._get("x0", v_d)  # noqa: E704
+        return self._get("x0", v_d)
 
     def u0(self, v_d):
-        return self._get("u0", v_d)  # noqa: E704
+        return self._get("u0", v_d)
 
     def dx0_dvd(self, v_d):
-        return self._get("dx0_dvd", v_d)  # noqa: E704
+        return self._get("dx0_dvd", v_d)
 
 
 def _vertex_stacks(model: Any) -> Optional[dict[str, np.ndarray]]:
@@ -244,7 +244,7 @@ def linear_lpv_law(model: ScheduledModel, R: np.ndarray) -> ControlLaw:
     def law(t: float, x: np.ndarray, v_d: np.ndarray, ue_scaled: np.ndarray) -> np.ndarray:
         return model.u0(v_d) + model.K(v_d) @ (x - model.x0(v_d)) + R @ ue_scaled
 
-    law.eq33_parts = ("linear", model, R, None, None)  # lets simulate_eq33 fuse it (_FusedEq33)
+    setattr(law, "eq33_parts", ("linear", model, R, None, None))  # lets simulate_eq33 fuse it
     return law
 
 
@@ -321,7 +321,7 @@ def feedforward_law(
         dx, du = ffs.offsets(v_d, a, j)
         return model.u0(v_d) + du + model.K(v_d) @ (x - model.x0(v_d) - dx) + R @ ue_scaled
 
-    law.eq33_parts = ("feedforward", model, R, ffs, accel)
+    setattr(law, "eq33_parts", ("feedforward", model, R, ffs, accel))  # for _FusedEq33
     return law
 
 
@@ -755,19 +755,19 @@ def simulate_eq33(
     n_x = x_start.size
     if R.shape != (np.asarray(model.B(v0)).shape[1], signals.u_e.shape[1]):
         raise ConfigError(
-            f"R has shape {R.shape}, expected ({np.asarray(model.B(v0)).shape[1]}, {signals.u_e.shape[1]}) "
-            "(inputs x excitation channels)"
+            f"R has shape {R.shape}, expected ({np.asarray(model.B(v0)).shape[1]}, "
+            f"{signals.u_e.shape[1]}) (inputs x excitation channels)"
         )
     kappa = config.kappa
     fused = fused_eq33(model, signals, law, R, kappa, moving_equilibrium)
     law = law or linear_lpv_law(model, R)
 
-    if fused is not None:
-        f = fused
-    else:
+    def generic(t: float, x: np.ndarray, segment: Optional[int] = None) -> np.ndarray:
+        return eq33_rhs(t, x, model, signals, law, kappa, segment, moving_equilibrium)
 
-        def f(t: float, x: np.ndarray, segment: Optional[int] = None) -> np.ndarray:
-            return eq33_rhs(t, x, model, signals, law, kappa, segment, moving_equilibrium)
+    f: Callable[[float, np.ndarray, Optional[int]], np.ndarray] = (
+        fused if fused is not None else generic
+    )
 
     t = signals.t
     info: dict = {}

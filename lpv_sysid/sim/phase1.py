@@ -35,7 +35,7 @@ from lpv_sysid.errors import ConfigError, SafetyError
 from lpv_sysid.io.yaml_file import read_yaml
 from lpv_sysid.models.quadrotor import Quadrotor, QuadrotorParams, Trim, mixer
 from lpv_sysid.sim.vehicle import SensorConfig, SimVehicle
-from lpv_sysid.validation import check_keys, is_count, is_finite_number
+from lpv_sysid.config_fields import check_keys, is_count, is_finite_number
 
 log = logging.getLogger(__name__)
 
@@ -238,7 +238,6 @@ def simulate_run(
     )
     T = cfg.trim_s + cfg.excite_s
     n = int(round(T * phys))
-    rng = np.random.default_rng(seed)
     t_c = np.arange(0, n, d_ctrl) / phys
     exc = np.zeros((t_c.size, 4))
     on = t_c >= cfg.trim_s
@@ -256,7 +255,7 @@ def simulate_run(
     imu_t, imu_a, imu_g = np.empty(ni), np.empty((ni, 3)), np.empty((ni, 3))
     rot_t, rot_m = np.empty(nr), np.empty((nr, 4))
     cmd = np.empty((t_c.size, 4))
-    xm = None
+    xm = np.empty(16)  # the measured state: set at k = 0 (d_state divides 0) before any use
     u = start.u0.tolist()
     for k in range(n):
         t = k / phys
@@ -369,7 +368,8 @@ def trim_table(runs: Sequence[RunRecord], cfg: Phase1Config, arm_length: float) 
             "achieved": ach,
             "model_trim": {k: float(v) for k, v in model.items()},
         }
-        key = tuple(int(round(c)) for c in rec.v_d)
+        k0, k1, k2 = (int(round(c)) for c in rec.v_d)
+        key = (k0, k1, k2)
         if key in SEED0_TABLE1:
             row["seed0_table1"] = dict(zip(TRIM_COLUMNS, SEED0_TABLE1[key]))
         rows.append(row)
@@ -607,7 +607,7 @@ def _bulk_rows(record: RunRecord, f, topic: Mapping[str, str]):
             return {**xyz(prefix, a), f"{prefix}.w": a[:, 3]}
 
         k0 = 0
-        templates = {
+        templates: dict[str, tuple[Any, Any, dict]] = {
             "state": (
                 M.odometry_from_state,
                 lambda k: (xm[k, 0:3], xm[k, 3:6], xm[k, 6:9], xm[k, 9:12]),

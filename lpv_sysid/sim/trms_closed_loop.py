@@ -1,10 +1,11 @@
-"""LPV observer-based tracking control of the TRMS, seed 2 Sec. 5 (Eqs. 102-134), and its simulation.
+"""LPV observer-based tracking control of the TRMS (seed 2 Sec. 5, Eqs. 102-134), simulated.
 
 Design (:func:`design`): the Euler-discretised bounding-box polytope of
 :func:`lpv_sysid.models.trms.bounding_box_polytope` (Eqs. 59-65), augmented with the discrete
 integral of the tracking error e = (theta_h, theta_v) - r (Eqs. 128-129), is quadratically
 D_K-stabilised with :func:`lpv_sysid.synthesis.regions.place_poles` (Eqs. 125-127); the LPV
-observer gains come from :func:`~lpv_sysid.synthesis.regions.place_observer` (duality, Eqs. 130-134).
+observer gains come from :func:`~lpv_sysid.synthesis.regions.place_observer` (duality, Eqs.
+130-134).
 The observer region is the paper's (Sec. 6.3), D_L = disk centre 0 radius 0.7 intersected with
 0 < Re z < 0.7. The paper's D_K (disk centre 0.7 radius 0.29, strip 0.41 < Re z < 0.99,
 ``REGION_K_PAPER``) is infeasible on our box (docs/trms.md), so D_K defaults to the larger
@@ -15,11 +16,11 @@ Runtime law at sample k (Eqs. 105-112, 124, 128, 132), with pi_i the multilinear
 scheduled psi evaluated at the *measured* outputs (the reduced psi of Sec. 6.3 depend on omega_h,
 theta_h, omega_v, theta_v only, all measured; Omega_h, Omega_v are not measured, Sec. 6.3):
 
-    Omega_h^r = (theta_h^r - theta_h) / tau_h,  Omega_v^r = (theta_v^r - theta_v) / tau_v     (105-106)
-    (x_r, u_r) = equilibrium of Eqs. (1)-(6) for (theta^r, Omega^r)                            (107-112)
-    u      = sat(u_r + sum_i pi_i [K_x,i (x_hat - x_r) + K_I,i x_I])                          (124, 129)
-    x_I   <- x_I + C_t x - r                                                                   (128)
-    x_hat <- sum_i pi_i [A_d,i x_hat + L_i (C x_hat - y)] + B_d u      (shifted coordinates)   (132)
+    Omega_h^r = (theta_h^r - theta_h) / tau_h, Omega_v^r = (theta_v^r - theta_v) / tau_v (105-106)
+    (x_r, u_r) = equilibrium of Eqs. (1)-(6) for (theta^r, Omega^r)                 (107-112)
+    u      = sat(u_r + sum_i pi_i [K_x,i (x_hat - x_r) + K_I,i x_I])               (124, 129)
+    x_I   <- x_I + C_t x - r                                                        (128)
+    x_hat <- sum_i pi_i [A_d,i x_hat + L_i (C x_hat - y)] + B_d u  (shifted coords)  (132)
 
 ``tau_h``/``tau_v`` are not printed in the seed; ``None`` (the default) sets Omega^r = 0, i.e. the
 state reference is the equilibrium of the reference angles.
@@ -55,7 +56,8 @@ from lpv_sysid.synthesis.regions import (
 
 log = logging.getLogger(__name__)
 
-#: tracked outputs (theta_h, theta_v) of Eq. (128); measured outputs (omega_h, theta_h, omega_v, theta_v).
+#: tracked outputs (theta_h, theta_v) of Eq. (128); measured outputs (omega_h, theta_h, omega_v,
+#: theta_v).
 C_TRACK = np.array([[0, 0, 1, 0, 0, 0], [0, 0, 0, 0, 0, 1]], dtype=float)
 C_MEAS = np.array(
     [[1, 0, 0, 0, 0, 0], [0, 0, 1, 0, 0, 0], [0, 0, 0, 1, 0, 0], [0, 0, 0, 0, 0, 1]], dtype=float
@@ -68,8 +70,9 @@ REGION_K_DEFAULT = Region(disk_q=-0.6, disk_r=0.395, s_min=0.21, s_max=0.995)
 #: Scheduled psi by default (32 vertices): the paper's N~ = 8 set of Sec. 6.3 minus a11, a22, a44
 #: (rotor poles and yaw damping, frozen at their least-squares constants) to keep the LMI small.
 SCHEDULED_DEFAULT = ("a21", "a23", "a26", "a54", "a56")
-#: Eq. (69) gaps (V) around omega = 0: without them a21 (resp. a54) reaches 0 at a vertex, where the
-#: yaw (pitch) integrator of Eq. (129) is uncontrollable and the LMIs (125) are infeasible.
+#: Eq. (69) gaps (V) around omega = 0: without them a21 (resp. a54) reaches 0 at a vertex,
+#: where the yaw (pitch) integrator of Eq. (129) is uncontrollable and the LMIs (125) are
+#: infeasible.
 GAPS_DEFAULT = {"omega_h": (-0.5, 0.5), "omega_v": (-0.5, 0.5)}
 
 
@@ -232,7 +235,9 @@ def simulate(
     n_steps = int(round(t_end / ts))
     umin, umax = np.asarray(cfg.u_min), np.asarray(cfg.u_max)
     tv0 = m.p.theta_v0
-    out = {k: [] for k in ("t", "x", "x_hat", "u", "r", "x_I", "in_box", "saturated")}
+    out: dict[str, list] = {
+        k: [] for k in ("t", "x", "x_hat", "u", "r", "x_I", "in_box", "saturated")
+    }
     for k in range(n_steps + 1):
         t = k * ts
         r = _reference(reference, t)

@@ -27,8 +27,10 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError, SafetyError
 from lpv_sysid.models.quadrotor import Quadrotor
-from lpv_sysid.validation import check_keys, is_count, is_finite_number
+from lpv_sysid.config_fields import check_keys, is_count, is_finite_number
 
+
+_TWO_PI = 2.0 * math.pi
 
 #: Highest physics rate (RK4 steps per simulated second) accepted; 100x the default.
 MAX_PHYSICS_HZ = 50_000.0
@@ -68,7 +70,8 @@ class SensorConfig:
                 raise ConfigError(f"sim.{name}: must be > 0")
         if self.physics_hz > MAX_PHYSICS_HZ:  # every simulated second costs physics_hz RK4 steps
             raise ConfigError(
-                f"sim.physics_hz: {self.physics_hz:g} Hz exceeds the limit of {MAX_PHYSICS_HZ:g} Hz"
+                f"sim.physics_hz: {self.physics_hz:g} Hz exceeds the limit of "
+                f"{MAX_PHYSICS_HZ:g} Hz"
             )
         for name in ("state_hz", "imu_hz", "rotor_hz"):
             ratio = self.physics_hz / getattr(self, name)
@@ -78,16 +81,11 @@ class SensorConfig:
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "SensorConfig":
         check_keys(d, {f.name for f in fields(cls)}, "sim")
-        return cls(
-            **{
-                k: (
-                    float(v)
-                    if k != "seed" and isinstance(v, int) and not isinstance(v, bool)
-                    else v
-                )
-                for k, v in d.items()
-            }
-        )
+        values: dict[str, Any] = {
+            k: (float(v) if k != "seed" and isinstance(v, int) and not isinstance(v, bool) else v)
+            for k, v in d.items()
+        }
+        return cls(**values)
 
     def to_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -136,12 +134,19 @@ class SimVehicle:
         self.u = u
         xn = self.model.rk4_step(x, u, h)
         lo, hi = self._lo, self._hi
+        # rotor speeds clamped to the motor range (RK4 may step a hair past a held limit) and
+        # the blade phases integrated (trapezoid), unrolled: 4 rotors, plain floats
+        o1, o2, o3, o4 = xn[12:16]
+        o1 = xn[12] = lo if o1 < lo else (hi if o1 > hi else o1)
+        o2 = xn[13] = lo if o2 < lo else (hi if o2 > hi else o2)
+        o3 = xn[14] = lo if o3 < lo else (hi if o3 > hi else o3)
+        o4 = xn[15] = lo if o4 < lo else (hi if o4 > hi else o4)
+        hh = h * 0.5
         ph = self.rotor_phase
-        two_pi = 2.0 * math.pi
-        for i in range(12, 16):
-            v = xn[i]
-            v = xn[i] = lo if v < lo else (hi if v > hi else v)
-            ph[i - 12] = (ph[i - 12] + h * 0.5 * (x[i] + v)) % two_pi
+        ph[0] = (ph[0] + hh * (x[12] + o1)) % _TWO_PI
+        ph[1] = (ph[1] + hh * (x[13] + o2)) % _TWO_PI
+        ph[2] = (ph[2] + hh * (x[14] + o3)) % _TWO_PI
+        ph[3] = (ph[3] + hh * (x[15] + o4)) % _TWO_PI
         if not math.isfinite(sum(xn)) and not all(math.isfinite(v) for v in xn):
             raise SafetyError(f"SimVehicle: state diverged at t={self.t:.3f} s (command {u})")
         self.x = xn

@@ -7,6 +7,7 @@
 * ``scaling``        similarity scaling used inside the LMIs (undone for K)
 * ``hinf_norm``      H-infinity norm by Hamiltonian bisection (the independent check)
 * ``verify``         certificate re-check (``lpv-sysid verify``)
-* ``files``          vertex_models.yaml -> polytope, gains.yaml + certificate sidecar
+* ``uncertainty_set`` vertex_models.yaml -> the uncertainty set Lemma 1 certifies (the files
+                     themselves: lpv_sysid.io.formats)
 * ``example_models`` small reference plants (tests, benchmarks)
 """

@@ -104,7 +104,8 @@ def quadrotor_like_polytope(
 
 
 def first_order_plant(a: float, b: float, be: float, vmin=(-1.0,), vmax=(1.0,)) -> PolytopicModel:
-    """x' = a x + b u + b_e w on a 1-axis box with identical vertices (so B_e = B R, R = be / b)."""
+    """x' = a x + b u + b_e w on a 1-axis box with identical vertices
+    (so B_e = B R, R = be / b)."""
     A = np.array([[[a]], [[a]]])
     B = np.array([[[b]], [[b]]])
     return PolytopicModel(

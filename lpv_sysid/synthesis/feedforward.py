@@ -59,7 +59,8 @@ from lpv_sysid.io.formats import FeedforwardSpec
 
 log = logging.getLogger(__name__)
 
-#: largest accepted condition number of the 10 x 10 system (1/eps^(1/2) would lose half the digits).
+#: largest accepted condition number of the 10 x 10 system (1/eps^(1/2) would lose half the
+#: digits).
 COND_MAX_DEFAULT = 1e10
 
 

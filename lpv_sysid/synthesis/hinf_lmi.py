@@ -11,14 +11,17 @@ S_i and one common (general square) H with
 with g = gamma^2; then K_i = S_i H^-1 (Eq. 31) gives ||u_e -> z||_inf < gamma for all v_d in the
 box and all theta in the uncertainty box -- provided B_c^j is common to all scheduling vertices
 (``model.common_input``, the product polytope of :mod:`lpv_sysid.models.lpv`, whose docstring
-gives the interior argument); with per-vertex B_i^j only the vertices are certified. (Eq. 30 is Phi0 + He([A;I;0;C] H [I,-I,0,0]) with the
-dual bounded-real-lemma matrix Phi0; eliminating H recovers A X + X A^T + B_e B_e^T + X C^T C X / g < 0.)
+gives the interior argument); with per-vertex B_i^j only the vertices are certified. (Eq. 30 is
+Phi0 + He([A;I;0;C] H [I,-I,0,0]) with the
+dual bounded-real-lemma matrix Phi0; eliminating H recovers A X + X A^T + B_e B_e^T + X C^T C X /
+g < 0.)
 
 Strictness: every LMI is imposed as ``<= -eps I`` and ``X >= eps I`` (in the scaled coordinates of
 :mod:`lpv_sysid.synthesis.scaling`). Options: fixed gamma (feasibility) or minimise g = gamma^2;
 ``lyapunov: common`` ties every X_i^j to one X (the bound then holds for arbitrarily fast v_d).
 
-``method: box`` (:func:`resolve_method`) hands the problem to :mod:`lpv_sysid.synthesis.robust_lmi`:
+``method: box`` (:func:`resolve_method`) hands the problem to
+:mod:`lpv_sysid.synthesis.robust_lmi`:
 the full element box of a ``full_box`` model, or a corner polytope recognised as the corners of a
 box (:func:`lpv_sysid.models.lpv.corner_box`), one robust block per vertex with X_i^j = X_i; for a
 corner polytope the solution is then re-checked on Eq. (30) itself at every corner system
@@ -27,8 +30,10 @@ systems there are -- the seed-size problem (sum M_i = 580, :func:`seed_problem_s
 
 If the problem is infeasible at the requested gamma, the remedies of seed 0 Sec. VI are quantified.
 Scaling R by c (B_e -> c B_e, Eq. 27) maps a solution (X, S, H) at gamma to c^2 (X, S, H) at
-c gamma: the new Eq. (30) matrix is the congruence diag(cI, cI, I, cI) of the old one, and K = S H^-1
-is unchanged. The same holds for Q -> Q / c (C -> c C, Eq. 28) with (X, S, H) kept and the congruence
+c gamma: the new Eq. (30) matrix is the congruence diag(cI, cI, I, cI) of the old one, and K = S
+H^-1
+is unchanged. The same holds for Q -> Q / c (C -> c C, Eq. 28) with (X, S, H) kept and the
+congruence
 diag(I, I, I, I/c). So the LMI feasible set is exactly
 {gamma >= c gamma_min}: the factor by which the excitation magnitudes Delta_t..Delta_r must shrink
 (or Delta_u..Delta_w grow) is gamma_min / gamma_req, read off one gamma minimisation; a bisection
@@ -42,7 +47,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field, replace
-from typing import Optional, Sequence
+from typing import Any, Optional, Sequence, Union
 
 import numpy as np
 
@@ -79,16 +84,19 @@ class HinfOptions:
     )
     verbose: bool = False
     #: "corners": Eq. (30) at every Eq. (23) system (the seed); "box": the structured-perturbation
-    #: LMI of synthesis.robust_lmi over the element box (one block per vertex); "auto": box when the
+    #: LMI of synthesis.robust_lmi over the element box (one block per vertex); "auto": box when
+    #: the
     #: model is the full element box, else corners
     method: str = "auto"
     #: "vertex": X_i (box) / X_i^j (corners) per vertex, frozen v_d (the seed's Lemma 1);
     #: "common": one X, any rate of v_d; "rate": X(v_d) with |dv_d/dt| <= rate_bound (box only)
     lyapunov: str = "vertex"
-    #: "feasibility" | "min_gamma" | "min_effort" (None: min_gamma when minimize_gamma, else feasibility)
+    #: "feasibility" | "min_gamma" | "min_effort" (None: min_gamma when minimize_gamma, else
+    #: feasibility)
     objective: Optional[str] = None
-    #: rate mode: "design" (certificate.design.reference_rate of the phase-2 signal) or per-axis bounds
-    rate_bound: Optional[object] = None
+    #: rate mode: "design" (certificate.design.reference_rate of the phase-2 signal) or per-axis
+    #: bounds
+    rate_bound: Union[None, str, Sequence[float]] = None
     #: the LMI is solved at gamma x this (<= 1); min_effort otherwise uses the whole bound
     design_gamma_fraction: float = 1.0
 
@@ -126,7 +134,8 @@ class HinfOptions:
             "min_effort",
         ):
             raise ConfigError(
-                f"hinf.objective must be feasibility, min_gamma or min_effort, got {opts.objective!r}"
+                "hinf.objective must be feasibility, min_gamma or min_effort, got "
+                f"{opts.objective!r}"
             )
         if opts.objective is not None and opts.minimize_gamma and opts.objective != "min_gamma":
             raise ConfigError(
@@ -314,6 +323,7 @@ def _build(
     systems, Cs = _problem_systems(model, R, C, scaling, Be)
     H = cp.Variable((n, n), name="H")
     S = [cp.Variable((m, n), name=f"S_{i}") for i in range(model.n_vertices)]
+    g_expr: Any  # the cvxpy variable gamma^2 or its fixed value
     if opts.effective_objective == "min_gamma":
         g = cp.Variable(nonneg=True, name="gamma2")
         g_expr = g
@@ -431,6 +441,16 @@ def solve_lemma1(
         if opts.scale
         else Scaling.identity(model.n_x, model.n_u)
     )
+    log.info(
+        "Lemma 1 (seed 0 Eq. 30): building the LMI over %d systems (%d vertices, %d states, "
+        "%d inputs, %s Lyapunov matrix, objective %s)",
+        sum(len(lst) for lst in model.systems),
+        model.n_vertices,
+        model.n_x,
+        model.n_u,
+        opts.lyapunov,
+        opts.effective_objective,
+    )
     prob, H, S, Xs, g, size, systems, Cs = _build(model, R, C, opts, scaling, Be)
     installed = set(cp.installed_solvers())
     solvers = _solver_order(opts, len(systems), installed)
@@ -439,6 +459,15 @@ def solve_lemma1(
         if sv not in installed:
             errors.append(f"solver {sv} is not installed")
             continue
+        log.info(
+            "Lemma 1: solving with %s (%d scalar variables, %d LMI blocks of total dimension "
+            "%d, %d scalar constraints)",
+            sv,
+            size.scalar_variables,
+            size.lmi_blocks,
+            size.lmi_total_dim,
+            size.scalar_constraints,
+        )
         try:
             _solve(prob, sv, opts.verbose)
         except cp.error.SolverError as exc:
@@ -475,7 +504,8 @@ def solve_lemma1(
 
 def resolve_method(model: PolytopicModel, opts: HinfOptions) -> str:
     """``box`` for the full element box (``model.box``) or, with ``method: box``, for a corner
-    polytope that is the set of corners of an element box (:func:`lpv_sysid.models.lpv.corner_box`);
+    polytope that is the set of corners of an element box
+    (:func:`lpv_sysid.models.lpv.corner_box`);
     ``corners`` otherwise (Eq. 30 at every system, the seed's formulation)."""
     if opts.method == "corners":
         if model.box is not None:
@@ -521,11 +551,15 @@ def _solve_box(
         )
     rate = None
     if opts.lyapunov == "rate":
-        if opts.rate_bound == "design":
+        rb = opts.rate_bound
+        if rb is None or isinstance(rb, str):
             raise ConfigError(
-                "hinf.rate_bound: design needs the phase-2 design envelope (synthesize --summary)"
+                "hinf.rate_bound: design needs the phase-2 design envelope (reference_rate of a "
+                "signals summary)"
+                if rb == "design"
+                else "hinf.lyapunov: rate needs hinf.rate_bound (per-axis bounds or design)"
             )
-        rate = list(opts.rate_bound)
+        rate = [float(x) for x in rb]
     obj = opts.effective_objective
     g_req = float(opts.gamma) * float(opts.design_gamma_fraction)
     r = robust_lmi.solve_box(
@@ -573,6 +607,7 @@ def _solve_box(
         info={"method": "box", "box": box, "robust": r, "size": sz},
     )
     if model.box is None and opts.lyapunov == "vertex":
+        log.info("re-checking seed 0 Eq. (30) with numpy at the %d corner systems", sum(Ms))
         t0 = time.perf_counter()
         g30, m30 = certificate_margins(
             model,
@@ -593,14 +628,16 @@ def _solve_box(
         res.gamma_certified, res.min_margin = g30, m30
         if not (m30 > 0 or (obj == "min_gamma" and np.isfinite(g30))):
             raise SolverError(
-                f"element-box solution fails the Eq. (30) re-check at the {sum(Ms)} corner systems "
+                f"element-box solution fails the Eq. (30) re-check at the {sum(Ms)} corner "
+                "systems "
                 f"(margin {m30:.3g})"
             )
     return res
 
 
 def _solver_order(opts: HinfOptions, n_blocks: int, installed: set) -> list:
-    """Solvers to try in order (``AUTO``: MOSEK if installed, else Clarabel/SCS by problem size)."""
+    """Solvers to try in order (``AUTO``: MOSEK if installed, else Clarabel/SCS by problem
+    size)."""
     if opts.solver == "AUTO":
         first = ["MOSEK"] if "MOSEK" in installed else []
         by_size = (
@@ -623,7 +660,8 @@ def _extract(model, R, C, opts, Be, prob, H, S, Xs, g, size, scaling, used) -> H
     Hs = np.asarray(H.value)
     if not np.all(np.isfinite(Hs)) or np.linalg.cond(Hs) > 1e12:
         raise SolverError(
-            f"Lemma 1: H is numerically singular (cond {np.linalg.cond(Hs):.2e}); K = S H^-1 undefined"
+            f"Lemma 1: H is numerically singular (cond {np.linalg.cond(Hs):.2e}); K = S H^-1 "
+            "undefined"
         )
     Ss = np.array([np.asarray(s.value) for s in S])
     K_s = np.array([np.linalg.solve(Hs.T, s.T).T for s in Ss])  # S H^-1
@@ -661,7 +699,8 @@ def _extract(model, R, C, opts, Be, prob, H, S, Xs, g, size, scaling, used) -> H
     res.gamma_certified = gam
     res.min_margin = margin
     log.info(
-        "Lemma 1: %s/%s, gamma_solver=%.4g, certified=%.4g, margin=%.3g, compile %.2fs, solve %.2fs",
+        "Lemma 1: %s/%s, gamma_solver=%.4g, certified=%.4g, margin=%.3g, compile %.2fs, solve "
+        "%.2fs",
         used,
         prob.status,
         gamma_solver,
@@ -774,21 +813,27 @@ class Remedy:
 
     def message(self) -> str:
         lines = [
-            f"Lemma 1 infeasible at gamma={self.gamma_requested:g}: the smallest achievable bound is "
+            f"Lemma 1 infeasible at gamma={self.gamma_requested:g}: the smallest achievable bound "
+            "is "
             f"gamma_min={self.gamma_min:.4g}.",
-            "Remedies of seed 0 Sec. VI (the map u_e -> z scales linearly with R and with Q^-1, Eqs. 27-28):",
-            f"  (1) reduce the excitation magnitudes Delta_t..Delta_r (R) by a factor >= {self.excitation_shrink:.4g}, or",
-            f"  (2) enlarge the allowed output magnitudes Delta_u..Delta_w (Q) by a factor >= {self.output_grow:.4g}, or",
+            "Remedies of seed 0 Sec. VI (the map u_e -> z scales linearly with R and with Q^-1, "
+            "Eqs. 27-28):",
+            "  (1) reduce the excitation magnitudes Delta_t..Delta_r (R) by a factor >= "
+            f"{self.excitation_shrink:.4g}, or",
+            "  (2) enlarge the allowed output magnitudes Delta_u..Delta_w (Q) by a factor >= "
+            f"{self.output_grow:.4g}, or",
         ]
         if self.uncertainty_shrink is not None:
             if self.uncertainty_shrink > 0:
                 lines.append(
-                    f"  (3) reduce the model uncertainty intervals to <= {100 * self.uncertainty_shrink:.1f}% "
+                    "  (3) reduce the model uncertainty intervals to <= "
+                    f"{100 * self.uncertainty_shrink:.1f}% "
                     "of their identified width (bisection) by refined identification."
                 )
             else:
                 lines.append(
-                    f"  (3) reducing the model uncertainty alone does not suffice (nominal gamma_min = "
+                    "  (3) reducing the model uncertainty alone does not suffice (nominal "
+                    "gamma_min = "
                     f"{self.nominal_gamma_min:.4g})."
                 )
         else:
@@ -801,7 +846,8 @@ class Remedy:
 
 def _shrunk_model(model: PolytopicModel, rho: float) -> PolytopicModel:
     """Uncertainty vertices shrunk by rho about the nominal (remedy 3); an element box shrinks its
-    half-widths about the box centre (rho = 0: a 1e-9 residue, the box keeps its elements). A common input set keeps
+    half-widths about the box centre (rho = 0: a 1e-9 residue, the box keeps its elements). A
+    common input set keeps
     its product structure: its corners shrink about the hull of the vertex nominals
     (:meth:`lpv_sysid.models.lpv.CommonInputSet.shrunk`), so B stays common to all vertices."""
     if model.box is not None:
@@ -842,11 +888,14 @@ def remedy_analysis(
 ) -> Remedy:
     """Quantify the remedies of seed 0 Sec. VI for a requested gamma (see module docstring)."""
     g_opts = replace(opts, minimize_gamma=True, objective="min_gamma")
+    log.info("remedies (seed 0 Sec. VI): the smallest feasible gamma")
     gmin = solve_lemma1(model, R, C, g_opts, Be).gamma_solver
+    log.info("remedies: gamma_min %.4g for gamma %.4g requested", gmin, opts.gamma)
     factor = gmin / opts.gamma
     rem = Remedy(opts.gamma, gmin, excitation_shrink=factor, output_grow=factor)
     if opts.remedy_bisection_steps > 0 and factor > 1:
         nominal = _shrunk_model(model, 0.0)
+        log.info("remedies: gamma_min of the nominal model (no uncertainty)")
         try:
             g0 = solve_lemma1(nominal, R, C, g_opts, Be).gamma_solver
         except SolverError:
@@ -857,8 +906,16 @@ def remedy_analysis(
         else:
             lo, hi = 0.0, 1.0
             f_opts = replace(opts, minimize_gamma=False, objective="feasibility")
-            for _ in range(opts.remedy_bisection_steps):
+            for step in range(opts.remedy_bisection_steps):
                 mid = 0.5 * (lo + hi)
+                log.info(
+                    "remedies: uncertainty shrink bisection %d/%d, trying %.4g of the set "
+                    "(feasible up to %.4g)",
+                    step + 1,
+                    opts.remedy_bisection_steps,
+                    mid,
+                    lo,
+                )
                 try:
                     solve_lemma1(_shrunk_model(model, mid), R, C, f_opts, Be)
                     lo = mid
@@ -886,6 +943,9 @@ def synthesize_hinf(
     except SolverError as exc:
         if opts.effective_objective == "min_gamma":
             raise
+        log.info(
+            "Lemma 1 not solved at gamma %.4g (%s); quantifying the remedies", opts.gamma, exc
+        )
         try:
             rem = remedy_analysis(model, R, C, opts, Be)
         except SolverError as exc2:

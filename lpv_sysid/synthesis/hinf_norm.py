@@ -115,7 +115,6 @@ def hinf_norm(
                 g_lb, w_pk = s, w
         if g_lb == 0.0:
             return HinfNorm(0.0, 0.0, 0.0, 0, True)
-    n = A.shape[0]
     BBt = B @ B.T
     CtC = C.T @ C
     scale = max(1.0, float(np.max(np.abs(A))))

@@ -14,7 +14,8 @@ LMIs; only the meaning differs (``Region.stable_for(time)`` checks that D lies i
 left half-plane, resp. in the open unit disk).
 
 State feedback (Eqs. 125-127): one common X = X^T > 0 and Gamma_i per scheduling vertex with
-M_D(A_i^j X + B_i^j Gamma_i, X) = alpha (x) X + beta (x) (A X + B Gamma) + beta^T (x) (A X + B Gamma)^T < 0
+M_D(A_i^j X + B_i^j Gamma_i, X) = alpha (x) X + beta (x) (A X + B Gamma) + beta^T (x) (A X + B
+Gamma)^T < 0
 for all vertices i and uncertainty vertices j; K_i = Gamma_i X^-1 (quadratic D-stability of the
 polytope with the law of Eq. 124). Observer (Sec. 5.5, Eqs. 130-131): by duality the gain L_i^T is
 a state feedback for (A_i^T, C^T); the error e = x_hat - x obeys e' = (A_i + L_i C) e.
@@ -77,18 +78,25 @@ class Region:
         reg.check()
         return reg
 
+    @property
+    def disk(self) -> Optional[tuple[float, float]]:
+        """(q, r) of the disk (centre (-q, 0), radius r; Eq. 117), None without one."""
+        if self.disk_q is None or self.disk_r is None:
+            return None
+        return self.disk_q, self.disk_r
+
     def to_dict(self) -> dict:
         out: dict = {}
-        if self.disk_r is not None:
-            out["disk"] = {"centre": -float(self.disk_q), "radius": float(self.disk_r)}
-        if self.s_min is not None or self.s_max is not None:
-            if self.s_min is None:
-                out["half_plane"] = {"alpha": -float(self.s_max)}
-            else:
-                out["strip"] = {
-                    "min": float(self.s_min),
-                    "max": None if self.s_max is None else float(self.s_max),
-                }
+        if self.disk is not None:
+            q, r = self.disk
+            out["disk"] = {"centre": -float(q), "radius": float(r)}
+        if self.s_min is not None:
+            out["strip"] = {
+                "min": float(self.s_min),
+                "max": None if self.s_max is None else float(self.s_max),
+            }
+        elif self.s_max is not None:
+            out["half_plane"] = {"alpha": -float(self.s_max)}
         return out
 
     def check(self) -> None:
@@ -143,8 +151,8 @@ class Region:
         if ts is None:
             if self.s_max is not None and self.s_max <= 0:
                 return True
-            return self.disk_r is not None and -self.disk_q + self.disk_r <= 0
-        if self.disk_r is not None and abs(self.disk_q) + self.disk_r <= 1:
+            return self.disk is not None and -self.disk[0] + self.disk[1] <= 0
+        if self.disk is not None and abs(self.disk[0]) + self.disk[1] <= 1:
             return True
         return False
 
@@ -222,7 +230,8 @@ def place_observer(
 ) -> tuple[np.ndarray, PlacementResult]:
     """LPV observer gains L_i (seed 2 Sec. 5.5, Eqs. 130-131) with eig(A_i^j + L_i C) in D.
 
-    Duality: L_i^T is the state-feedback gain of (A_i^j^T, C^T). Returns (L (N, n, p), dual result).
+    Duality: L_i^T is the state-feedback gain of (A_i^j^T, C^T). Returns (L (N, n, p), dual
+    result).
     """
     C = np.asarray(C, dtype=float)
     dual = [[(np.asarray(A).T, C.T) for A, _B in lst] for lst in systems]

@@ -3,7 +3,8 @@ interval), polynomial in size: the structured-perturbation form of seed 0 Lemma 
 
 The uncertain vertex systems are the :class:`lpv_sysid.models.lpv.ElementBox`
 
-    [A_i(delta), B(delta)] = [A_c,i, B_c] + L_i Delta R~_i,   Delta = diag(delta_l), |delta_l| <= 1,
+    [A_i(delta), B(delta)] = [A_c,i, B_c] + L_i Delta R~_i,   Delta = diag(delta_l), |delta_l| <=
+    1,
 
 with L_i = [h_l e_(r_l)]_l (n x p_i) and R~_i = [e_(c_l)^T]_l (p_i x (n + m)). For a fixed
 Lyapunov-type matrix the LMI of the frozen closed loop is affine in (A, B), so the uncertain part
@@ -208,6 +209,8 @@ def block_numeric(
             ]
         )
         return 0.5 * (M + M.T)
+    if H is None:
+        raise ValueError(f"block_numeric: the {lyapunov} form needs H")
     U = sb.A[i] @ H + sb.B @ S
     CH = sb.C @ H
     Gx = P @ np.vstack([H, S])
@@ -233,7 +236,8 @@ def _z_index(lyapunov: str, n: int, ne: int, nz: int) -> np.ndarray:
 
 def block_gamma(M0: np.ndarray, z: np.ndarray) -> float:
     """Smallest gamma with M(g) < 0 for a block whose only g-dependence is -g I on the z rows
-    (M0 evaluated at g = 0): Schur complement, g > lambda_max(F (-P)^-1 F^T); inf if P is not < 0."""
+    (M0 evaluated at g = 0): Schur complement, g > lambda_max(F (-P)^-1 F^T); inf if P is not <
+    0."""
     keep = np.setdiff1d(np.arange(M0.shape[0]), z)
     P = M0[np.ix_(keep, keep)]
     F = M0[np.ix_(z, keep)]
@@ -275,8 +279,10 @@ def box_margins(
     z = _z_index(sol.lyapunov, n, ne, nz)
     gam, margin = 0.0, float("inf")
     for i in range(len(sb.A)):
-        Zs = [None]
+        Zs: list[Optional[np.ndarray]] = [None]
         if sol.lyapunov == "rate":
+            if pairs is None or rate is None:
+                raise ValueError("box_margins: the rate form needs the vertex pairs and the rate")
             Zs = []
             for signs in box_vertices(-np.ones(len(rate)), np.ones(len(rate))):
                 Zk = np.zeros((n, n))
@@ -332,7 +338,8 @@ def solve_box(
     R = np.asarray(R, dtype=float)
     C = np.asarray(C, dtype=float)
     N, n, m = box.N, box.n, box.m
-    pairs, rho = None, None
+    pairs: list = []  # rate form: per vertex the (minus, plus, width) neighbours per axis
+    rho = np.zeros(0)  # rate form: the per-axis rate bound
     if lyapunov == "rate":
         if rate is None or vmin is None or vmax is None:
             raise ConfigError(
@@ -350,6 +357,16 @@ def solve_box(
     nc = len(sb.used)
     Pm = np.zeros((nc, n + m))
     Pm[np.arange(nc), sb.used] = 1.0
+    log.info(
+        "robust LMI over the element box: building (%d vertices, %d states, %d inputs, "
+        "elements per vertex %s, %s Lyapunov matrix, objective %s)",
+        N,
+        n,
+        m,
+        box.p,
+        lyapunov,
+        objective,
+    )
     t0 = time.perf_counter()
     g = cp.Variable(nonneg=True, name="gamma2") if objective == "min_gamma" else float(gamma) ** 2
     kappa = cp.Variable(nonneg=True, name="kappa") if objective == "min_effort" else None
@@ -389,7 +406,8 @@ def solve_box(
         Pi = Pm[have]
         om = cp.Variable(have.size, name=f"omega_{i}")
         loc = np.searchsorted(have, colk)
-        # u_l t_l >= omega_c^2 (rotated SOC: ||[2 omega, u - t]|| <= u + t), sum_(l in c) u_l <= omega_c
+        # u_l t_l >= omega_c^2 (rotated SOC: ||[2 omega, u - t]|| <= u + t), sum_(l in c) u_l <=
+        # omega_c
         cons.append(cp.SOC(uu + tt, cp.vstack([2 * om[loc], uu - tt]), axis=0))
         cons.append(tt >= eps)
         Sc = np.zeros((have.size, p))
@@ -489,6 +507,14 @@ def solve_box(
         kw: dict = {"verbose": verbose}
         if sv == "SCS":
             kw.update(eps=1e-8, max_iters=100000)
+        log.info(
+            "robust LMI: solving with %s (%d scalar variables, %d LMI blocks, %d scalar "
+            "constraints)",
+            sv,
+            sizes["scalar_variables"],
+            sizes["lmi_blocks"],
+            sizes["scalar_constraints"],
+        )
         t1 = time.perf_counter()
         try:
             prob.solve(solver=sv, **kw)
@@ -508,7 +534,11 @@ def solve_box(
         if not np.all(np.isfinite(Hs)) or np.linalg.cond(Hs) > 1e12:
             errors.append(f"{sv}: H (or X) numerically singular")
             continue
-        gs = float(g.value) if objective == "min_gamma" else float(gamma) ** 2
+        gs = (
+            float(np.asarray(g.value, dtype=float))
+            if isinstance(g, cp.Variable)
+            else float(gamma) ** 2
+        )
         sol = BoxSolution(
             lyapunov,
             [np.asarray(X.value, dtype=float) for X in Xs],
@@ -517,7 +547,7 @@ def solve_box(
             [np.asarray(tt.value, dtype=float) for tt in T],
             [[np.asarray(w.value, dtype=float) for w in Wi] for Wi in W] if W else None,
             gs,
-            float(kappa.value) if kappa is not None else float("nan"),
+            float(np.asarray(kappa.value, dtype=float)) if kappa is not None else float("nan"),
         )
         g_cert, margin = box_margins(sb, sol, float(np.sqrt(gs)) * (1 + 1e-9), pairs, rho)
         ok = margin > 0 if objective != "min_gamma" else np.isfinite(g_cert)
@@ -558,7 +588,7 @@ def solve_box(
             "solve_time": float(stats.solve_time)
             if stats is not None and stats.solve_time is not None
             else wall,
-            "rate": None if rho is None else rho.tolist(),
+            "rate": rho.tolist() if lyapunov == "rate" else None,
             "lyapunov": lyapunov,
             "objective": objective,
             "scaled": sb,

@@ -65,7 +65,8 @@ def find_ros() -> tuple[Path | None, str]:
         last = (r.stderr.strip().splitlines() or ["?"])[-1]
         return (
             None,
-            f"ROS 2 at {setup} unusable for lpv_sysid ({last}); pip install -r requirements-ros.txt",
+            f"ROS 2 at {setup} unusable for lpv_sysid ({last}); "
+            "pip install -r requirements-ros.txt",
         )
     return None, (
         f"real ROS 2 not available: source a Jazzy setup.bash or set {ENV} "

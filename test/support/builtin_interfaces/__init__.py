@@ -1,1 +1,2 @@
-"""Stand-in for the ROS 2 Jazzy builtin_interfaces package (message classes from the rosbags typestore)."""
+"""Stand-in for the ROS 2 Jazzy builtin_interfaces package (message classes from the rosbags
+typestore)."""

@@ -1,1 +1,2 @@
-"""Stand-in for the ROS 2 Jazzy sensor_msgs package (message classes from the rosbags typestore)."""
+"""Stand-in for the ROS 2 Jazzy sensor_msgs package (message classes from the rosbags
+typestore)."""

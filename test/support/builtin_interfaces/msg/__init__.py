@@ -1,4 +1,5 @@
-"""Stand-in builtin_interfaces.msg: rclpy-like classes generated from the rosbags Jazzy typestore."""
+"""Stand-in builtin_interfaces.msg: rclpy-like classes generated from the rosbags Jazzy
+typestore."""
 
 from _rosmsg_standin import populate as _populate
 

@@ -1,0 +1,115 @@
+"""rosbag2 recordings (mcap by default, sqlite3 optional) through rosbags 0.11.9.
+
+This package is the only owner of the bag format: writing, reading, salvaging and
+repairing. One module per job:
+
+=========================  ===============================================================
+module                     job
+=========================  ===============================================================
+:mod:`.writer`             :class:`BagWriter`: topics, messages, bulk writes, flushes
+:mod:`.writer_recovery`    what a writer saves after a write error (disk full)
+:mod:`.durability`         the writer's lock and disk reserve, :func:`writer_alive`,
+                           :func:`atomic_write_text`
+:mod:`.typestore`          the Jazzy typestore, QoS profiles, stored definitions
+:mod:`.layout`             the CDR block codec (:class:`CdrLayout`, :func:`encode_block`)
+:mod:`.records`            what the readers return (:class:`TopicStats`, ...)
+:mod:`.reader`             :func:`read_bag` (message objects), :func:`topic_info`
+:mod:`.arrays`             :func:`read_arrays` (numpy columns)
+:mod:`.builder`            message objects from decoded columns
+:mod:`.collect`            raw records of any bag (index, rosbags, salvage)
+:mod:`.mcap_index`         a healthy mcap bag through its summary and message indexes
+:mod:`.mcap_records`       MCAP record primitives
+:mod:`.mcap_walk`          the record walk (salvage parser) of an unfinished mcap file
+:mod:`.mcap_repair`        in-place repair of an mcap file
+:mod:`.sqlite`             damaged sqlite3 files: salvage, roll-back, repair
+:mod:`.metadata`           ``metadata.yaml``: read, compared, written after a repair
+:mod:`.repair`             :func:`repair_bag` (``lpv-sysid bag repair DIR``)
+:mod:`.bagfiles`           the files of a bag and how they are opened (no FIFO, no device)
+=========================  ===============================================================
+
+Writing: ``with BagWriter(path) as bag: bag.add_topic(...); bag.write(...)``; messages are
+CDR-serialised with the ROS 2 Jazzy typestore, each topic registered with its message
+definition, RIHS01 type hash and offered QoS, so ``ros2 bag info`` / ``ros2 bag play``
+accept the result. A killed writer loses at most ``flush_interval_s`` of data and a full
+disk still leaves a readable bag (:mod:`.writer`).
+
+Reading: :func:`read_bag` returns ``{topic: [(stamp_ns, msg), ...]}``, :func:`read_arrays`
+the same records column-wise (``{topic: TopicArrays}``: one numpy array per numeric field,
+e.g. ``fields["pose.pose.position.x"]``), :func:`topic_info` counts and time spans, all in
+bag-timestamp order. The fast paths (index reader, block codec) give values identical to
+rosbags' (checked in test_bag_codec.py); whatever they do not recognise goes through
+``AnyReader``. ``strict=False`` recovers what a damaged bag still holds. Every file of a
+bag is screened before it is opened: a FIFO or device in place of ``metadata.yaml`` or a
+storage file is a :class:`BagError` naming it, never a hang (:mod:`.bagfiles`).
+
+Repair: :func:`repair_bag` makes a killed or starved recording readable by standard tools
+(:mod:`.repair`).
+"""
+
+from __future__ import annotations
+
+from lpv_sysid.io.bag.arrays import read_arrays
+from lpv_sysid.io.bag.bagfiles import UnsafeBagFile
+from lpv_sysid.io.bag.durability import (
+    LOCK_FILE,
+    RESERVE_BYTES,
+    DiskReserve,
+    atomic_write_text,
+    writer_alive,
+)
+from lpv_sysid.io.bag.layout import CdrLayout, LayoutError, encode_block, records_close
+from lpv_sysid.io.bag.mcap_index import _read_fast
+from lpv_sysid.io.bag.mcap_records import MCAP_MAGIC
+from lpv_sysid.io.bag.reader import read_bag, topic_info
+from lpv_sysid.io.bag.records import (
+    BagArrays,
+    BagContents,
+    TopicArrays,
+    TopicStats,
+    _Source,
+    merge_topic_stats,
+)
+from lpv_sysid.io.bag.repair import RepairReport, repair_bag
+from lpv_sysid.io.bag.typestore import DEFAULT_QOS, jazzy_typestore, make_qos
+from lpv_sysid.io.bag.writer import (
+    FLUSH_INTERVAL_S,
+    FLUSH_MESSAGES,
+    MAX_CHUNK_BYTES,
+    STORAGES,
+    BagWriter,
+)
+
+__all__ = [
+    "BagWriter",
+    "BagContents",
+    "BagArrays",
+    "TopicArrays",
+    "TopicStats",
+    "RepairReport",
+    "UnsafeBagFile",
+    "read_bag",
+    "read_arrays",
+    "topic_info",
+    "merge_topic_stats",
+    "encode_block",
+    "records_close",
+    "CdrLayout",
+    "LayoutError",
+    "repair_bag",
+    "writer_alive",
+    "atomic_write_text",
+    "DiskReserve",
+    "jazzy_typestore",
+    "DEFAULT_QOS",
+    "make_qos",
+    "LOCK_FILE",
+    "STORAGES",
+    "MCAP_MAGIC",
+    "FLUSH_INTERVAL_S",
+    "FLUSH_MESSAGES",
+    "RESERVE_BYTES",
+    "MAX_CHUNK_BYTES",
+]
+
+# raw-record access for the bulk-writer checks of test_sim_fast_paths.py (not public API)
+_INTERNAL = (_Source, _read_fast)

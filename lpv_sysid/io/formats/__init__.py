@@ -1,0 +1,98 @@
+"""The versioned files between identification, synthesis and flight: one owner per format.
+
+Each module reads (once), validates strictly and writes one file format; everyone else loads
+through it (the synthesis, ``verify``, the flight runtime, replay and the simulations get the
+same reading of the same bytes):
+
+========================================  ===================================================
+:mod:`~lpv_sysid.io.formats.vertex_models`  ``vertex_models.yaml`` (:class:`VertexModels`)
+:mod:`~lpv_sysid.io.formats.gains`          ``gains.yaml`` (:class:`GainSchedule`)
+:mod:`~lpv_sysid.io.formats.certificate`    its ``certificate`` entry (:class:`Certificate`)
+:mod:`~lpv_sysid.io.formats.sidecar`        the certificate sidecar ``<gains>.cert.npz``
+:mod:`~lpv_sysid.io.formats.shared`         channels, time base, scheduling box, vertex order
+:mod:`~lpv_sysid.io.formats.field_checker`  the field-path checks the formats are written with
+========================================  ===================================================
+
+Validation is strict: format tag, unknown/missing keys, names and units (by default the
+quadrotor layout of :mod:`lpv_sysid.models.quadrotor`), matrix shapes, finiteness, the box
+(``min < max``; the vertices are exactly the 2^p corners, each once) and the uncertain
+entries. Every error is a :class:`~lpv_sysid.errors.ConfigError` whose message starts with
+the file name and the field path, e.g. ``gains.yaml: vertices[3].K: expected shape 4x12,
+got 4x11``. The YAML itself is read and written by :mod:`lpv_sysid.io.yaml_file`, hashes by
+:mod:`lpv_sysid.io.file_hash`.
+
+Signal files (``signals.npz``, ``summary.yaml``) are owned by
+:mod:`lpv_sysid.signals.store`.
+"""
+
+from __future__ import annotations
+
+from lpv_sysid.io.file_hash import sha256_bytes, sha256_file
+from lpv_sysid.io.formats.certificate import (
+    CERTIFIED_SET_KINDS,
+    SCHEDULING_VARIATIONS,
+    Certificate,
+    DesignEnvelope,
+)
+from lpv_sysid.io.formats.gains import (
+    GAINS_FORMAT,
+    FeedforwardSpec,
+    GainSchedule,
+    GainVertex,
+    certify_law,
+    gains_dict,
+)
+from lpv_sysid.io.formats.shared import QUADROTOR_LAYOUT, Layout, SchedulingBox, layout_of
+from lpv_sysid.io.formats.sidecar import (
+    BOX_ARRAYS,
+    LMI_FORMS,
+    SYSTEMS_ARRAYS,
+    box_arrays,
+    load_certificate_npz,
+    load_certified_systems,
+    save_certificate_npz,
+    systems_arrays,
+)
+from lpv_sysid.io.formats.vertex_models import (
+    MODELS_FORMAT,
+    MODELS_FORMAT_V1,
+    MODELS_FORMATS,
+    UncertainEntry,
+    VertexModel,
+    VertexModels,
+    models_dict,
+)
+
+__all__ = [
+    "BOX_ARRAYS",
+    "CERTIFIED_SET_KINDS",
+    "Certificate",
+    "DesignEnvelope",
+    "FeedforwardSpec",
+    "GAINS_FORMAT",
+    "GainSchedule",
+    "GainVertex",
+    "LMI_FORMS",
+    "Layout",
+    "MODELS_FORMAT",
+    "MODELS_FORMATS",
+    "MODELS_FORMAT_V1",
+    "QUADROTOR_LAYOUT",
+    "SCHEDULING_VARIATIONS",
+    "SYSTEMS_ARRAYS",
+    "SchedulingBox",
+    "UncertainEntry",
+    "VertexModel",
+    "VertexModels",
+    "box_arrays",
+    "certify_law",
+    "gains_dict",
+    "layout_of",
+    "load_certificate_npz",
+    "load_certified_systems",
+    "models_dict",
+    "save_certificate_npz",
+    "sha256_bytes",
+    "sha256_file",
+    "systems_arrays",
+]
