@@ -33,7 +33,7 @@ def main() -> None:
     from lpv_sysid.control.baseline import BaselineGains
     from lpv_sysid.io import bag as bg
     from lpv_sysid.io.bag import collect, layout, mcap_index, records
-    from lpv_sysid.io import messages as M
+    from lpv_sysid.io import messages
     from lpv_sysid.models.quadrotor import Quadrotor
     from lpv_sysid.sim import phase1
     from lpv_sysid.sim.vehicle import SensorConfig
@@ -95,10 +95,11 @@ def main() -> None:
             clock=time.process_time,
         )
         # writing
-        f = M.MsgFactory.rosbags()
+        f = messages.MsgFactory.rosbags()
         items = phase1._message_items(rec, f)[:6000]
         rows = [
-            (f"/lpv_sysid/{n}", s, bytes(ts.serialize_cdr(m, M.TYPES[n]))) for s, n, m in items
+            (f"/lpv_sysid/{n}", s, bytes(ts.serialize_cdr(m, messages.TYPES[n])))
+            for s, n, m in items
         ]
         k = [0]
 
@@ -106,7 +107,7 @@ def main() -> None:
             k[0] += 1
             with bg.BagWriter(root / f"w{k[0]}") as w:
                 for n in phase1.BAG_TOPICS:
-                    w.add_topic(f"/lpv_sysid/{n}", M.TYPES[n])
+                    w.add_topic(f"/lpv_sysid/{n}", messages.TYPES[n])
                 for s, n, m in items:
                     w.write(f"/lpv_sysid/{n}", s, m)
 
@@ -114,7 +115,7 @@ def main() -> None:
             k[0] += 1
             with bg.BagWriter(root / f"w{k[0]}") as w:
                 for n in phase1.BAG_TOPICS:
-                    w.add_topic(f"/lpv_sysid/{n}", M.TYPES[n])
+                    w.add_topic(f"/lpv_sysid/{n}", messages.TYPES[n])
                 w.write_many(rows)
 
         wr = interleaved(

@@ -37,8 +37,10 @@ def bench_ticks(settings, events, passes: int = 5) -> tuple[list, list, list, li
     garbage collections during the passes as (generation, pause [s]))."""
     import gc
 
-    from lpv_sysid.io import messages as M
-    from lpv_sysid.nodes.controller_runtime import CommandBuilder, ControllerRuntime, settle_gc
+    from lpv_sysid.io import messages
+    from lpv_sysid.nodes.controller_messages import CommandBuilder
+    from lpv_sysid.nodes.controller_runtime import ControllerRuntime
+    from lpv_sysid.nodes.controller_startup import settle_gc
 
     period = round(1e9 / settings.rate_hz)
     t0 = events[0][0]
@@ -54,7 +56,7 @@ def bench_ticks(settings, events, passes: int = 5) -> tuple[list, list, list, li
             pauses.append((info["generation"], pc() - started.pop("t")))
 
     for _ in range(passes):
-        rt = ControllerRuntime(settings, M.MsgFactory.rosbags())
+        rt = ControllerRuntime(settings, messages.MsgFactory.rosbags())
         settle_gc()  # as the node does once loaded
         rt.start(t0 * 1e-9)
         nxt = t0 + period
@@ -75,7 +77,7 @@ def bench_ticks(settings, events, passes: int = 5) -> tuple[list, list, list, li
             raise RuntimeError(f"tick bench aborted: {rt.supervisor.event}")
         # floor: the law step on the inputs of the last tick + the command message
         law, build = rt.law, CommandBuilder(rt.f)
-        x, v, e = rt._x12.copy(), rt.v_d.copy(), rt._ue_scaled.copy()
+        x, v, e = rt._law_state.copy(), rt.v_d.copy(), rt._ue_scaled.copy()
         t = nxt * 1e-9
         for k in range(n_pass):
             t += period * 1e-9

@@ -66,7 +66,7 @@ def shipped_gains(dirpath: str) -> str:
 
 def shipped_settings(gains_file: str) -> Any:
     """ControllerSettings of config/lpv_controller.yaml with ``gains_file``."""
-    from lpv_sysid.nodes.controller_runtime import ControllerSettings
+    from lpv_sysid.nodes.controller_settings import ControllerSettings
     from lpv_sysid.nodes.parameters import yaml_parameters
 
     params = yaml_parameters(PARAMS, "lpv_controller")
@@ -87,10 +87,10 @@ def sample_events() -> list:
 def recorded_law_inputs(settings: Any) -> list:
     """``(t, x12, v_d, kappa u_e)`` of every law step of the runtime (the node's code) on the
     phase-2 sample at 250 Hz ticks: the inputs the law sees in flight."""
-    from lpv_sysid.io import messages as M
+    from lpv_sysid.io import messages
     from lpv_sysid.nodes.controller_runtime import ControllerRuntime
 
-    rt = ControllerRuntime(settings, M.MsgFactory.rosbags())
+    rt = ControllerRuntime(settings, messages.MsgFactory.rosbags())
     seen = []
     step = rt.law.step
 
@@ -116,21 +116,14 @@ def recorded_law_inputs(settings: Any) -> list:
 
 def floor_law(law: Any):
     """The least numpy arithmetic of ``law``'s default path (module docstring)."""
-    gs_W = law.W
-    N, n, m, p = gs_W.shape[0], law.n_x, law.n_u, law.n_p
-    mn = m * n
-    K = gs_W[:, :mn].reshape(N, m, n)
-    x0, u0 = gs_W[:, mn : mn + n], gs_W[:, mn + n : mn + n + m]
-    G = gs_W[:, mn + n + m :].reshape(N, n + m, 2 * p)
-    Wf = np.hstack(
-        [
-            np.concatenate(
-                [K, np.broadcast_to(law.R, (N, m, law.n_e)), G[:, n:], u0[:, :, None]], 2
-            ).reshape(N, -1),
-            np.concatenate([G[:, :n], x0[:, :, None]], 2).reshape(N, -1),
-        ]
-    )
+    stack = law.stack  # the per-vertex [vec K_i | x0_i | u0_i | vec G_i], named blocks
+    N, n, m, p = stack.W.shape[0], law.n_x, law.n_u, law.n_p
+    K, x0, u0, Gx, Gu = stack.K, stack.x0, stack.u0, stack.Gx, stack.Gu
+    gain = np.concatenate([K, np.broadcast_to(law.R, (N, m, law.n_e)), Gu, u0[:, :, None]], 2)
+    xref = np.concatenate([Gx, x0[:, :, None]], 2)
+    Wf = np.hstack([gain.reshape(N, -1), xref.reshape(N, -1)])
     c = n + law.n_e + 2 * p + 1
+    gain_cols, xref_cols = slice(0, m * c), slice(m * c, None)
     lo, ir = law.vmin.tolist(), law.inv_range.tolist()
 
     def f(x, v_d, u_e, aj1):
@@ -139,8 +132,8 @@ def floor_law(law: Any):
         for tk in t:
             al = [a * b for a in al for b in (1.0 - tk, tk)]
         row = np.array(al).dot(Wf)
-        x_ref = row[m * c :].reshape(n, 2 * p + 1).dot(aj1)
-        return row[: m * c].reshape(m, c).dot(np.concatenate([x - x_ref, u_e, aj1]))
+        x_ref = row[xref_cols].reshape(n, 2 * p + 1).dot(aj1)
+        return row[gain_cols].reshape(m, c).dot(np.concatenate([x - x_ref, u_e, aj1]))
 
     return f
 

@@ -89,7 +89,7 @@ def main(argv=None) -> None:
     ap.add_argument("--repeat", type=int, default=1, help="end-to-end runs of simulate phase1")
     args = ap.parse_args(argv)
     load0 = load_average()
-    from lpv_sysid.io import messages as M
+    from lpv_sysid.io import messages
     from lpv_sysid.io.bag import BagWriter
     from lpv_sysid.models.quadrotor import Quadrotor
     from lpv_sysid.sim import phase1
@@ -189,7 +189,7 @@ def main(argv=None) -> None:
     short = replace(p1, hover_validation=False)
     rec = phase1.run_phase1(model, gains, sensors, short, [8])[0]
     root = Path(tempfile.mkdtemp(prefix="bench_phase1_"))
-    f = M.MsgFactory.rosbags()
+    f = messages.MsgFactory.rosbags()
     try:
         k = [0]
 
@@ -203,14 +203,14 @@ def main(argv=None) -> None:
             k[0] += 1
             with BagWriter(root / f"raw{k[0]}") as w:
                 for name in phase1.BAG_TOPICS:
-                    w.add_topic(f"/lpv_sysid/{name}", M.TYPES[name])
+                    w.add_topic(f"/lpv_sysid/{name}", messages.TYPES[name])
                 w.write_many(rows)
 
         def per_message():
             k[0] += 1
             with BagWriter(root / f"msg{k[0]}") as w:
                 for name in phase1.BAG_TOPICS:
-                    w.add_topic(f"/lpv_sysid/{name}", M.TYPES[name])
+                    w.add_topic(f"/lpv_sysid/{name}", messages.TYPES[name])
                 for stamp, name, msg in phase1._message_items(rec, f):
                     w.write(f"/lpv_sysid/{name}", stamp, msg)
 

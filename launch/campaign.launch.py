@@ -16,16 +16,8 @@ import os
 
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
-from launch.substitutions import LaunchConfiguration
-from launch_ros.actions import Node
 
-from lpv_sysid.nodes._common import LAUNCH_SIGTERM_TIMEOUT_S
-from lpv_sysid.nodes.launch_util import declare_arguments, params, share_config_dir
-
-NAMESPACE = "lpv_sysid"
-#: launch's SIGINT -> SIGTERM escalation (5 s by default) after the nodes' orderly shutdown
-#: (nodes/_common.LAUNCH_SIGTERM_TIMEOUT_S); ``sigterm_timeout:=S`` overrides it
-SIGTERM_TIMEOUT = LaunchConfiguration("sigterm_timeout", default=str(LAUNCH_SIGTERM_TIMEOUT_S))
+from lpv_sysid.nodes.launch_util import arg, declare_arguments, node, share_config_dir
 
 
 def generate_launch_description():
@@ -46,44 +38,19 @@ def generate_launch_description():
                 default_value="campaign_runs",
                 description="one rosbag2 per run (trim + excitation) for `lpv-sysid identify`",
             ),
-            Node(
-                package="lpv_sysid",
-                executable="mavlink_bridge_node",
-                name="mavlink_bridge",
-                namespace=NAMESPACE,
-                output="screen",
-                sigterm_timeout=SIGTERM_TIMEOUT,
-                parameters=[
-                    params("mavlink_bridge_node.yaml"),
-                    {"command": "velocity", "velocity_frame": "body_ned", "offboard.arm": True},
-                ],
+            node(
+                "mavlink_bridge",
+                "mavlink_bridge_node.yaml",
+                {"command": "velocity", "velocity_frame": "body_ned", "offboard.arm": True},
             ),
-            Node(
-                package="lpv_sysid",
-                executable="campaign_node",
-                name="campaign",
-                namespace=NAMESPACE,
-                output="screen",
-                sigterm_timeout=SIGTERM_TIMEOUT,
-                parameters=[
-                    {
-                        "campaign_file": LaunchConfiguration("campaign_file"),
-                        "signals_file": LaunchConfiguration("signals_file"),
-                        "out_dir": LaunchConfiguration("runs_dir"),
-                    }
-                ],
+            node(
+                "campaign",
+                overrides={
+                    "campaign_file": arg("campaign_file"),
+                    "signals_file": arg("signals_file"),
+                    "out_dir": arg("runs_dir"),
+                },
             ),
-            Node(
-                package="lpv_sysid",
-                executable="data_logger_node",
-                name="data_logger",
-                namespace=NAMESPACE,
-                output="screen",
-                sigterm_timeout=SIGTERM_TIMEOUT,
-                parameters=[
-                    params("data_logger.yaml"),
-                    {"out_dir": LaunchConfiguration("log_dir")},
-                ],
-            ),
+            node("data_logger", "data_logger.yaml", {"out_dir": arg("log_dir")}),
         ]
     )

@@ -9,16 +9,8 @@ m/s); run the file again for the next vertex of the box.
 """
 
 from launch import LaunchDescription
-from launch.substitutions import LaunchConfiguration
-from launch_ros.actions import Node
 
-from lpv_sysid.nodes._common import LAUNCH_SIGTERM_TIMEOUT_S
-from lpv_sysid.nodes.launch_util import declare_arguments, params
-
-NAMESPACE = "lpv_sysid"
-#: launch's SIGINT -> SIGTERM escalation (5 s by default) after the nodes' orderly shutdown
-#: (nodes/_common.LAUNCH_SIGTERM_TIMEOUT_S); ``sigterm_timeout:=S`` overrides it
-SIGTERM_TIMEOUT = LaunchConfiguration("sigterm_timeout", default=str(LAUNCH_SIGTERM_TIMEOUT_S))
+from lpv_sysid.nodes.launch_util import arg, declare_arguments, node
 
 
 def generate_launch_description():
@@ -27,42 +19,16 @@ def generate_launch_description():
             *declare_arguments(
                 signals_file="signals.npz", vertex="[0.0, 0.0, 0.0]", log_dir="phase1_log"
             ),
-            Node(
-                package="lpv_sysid",
-                executable="excitation_node",
-                name="excitation",
-                namespace=NAMESPACE,
-                output="screen",
-                sigterm_timeout=SIGTERM_TIMEOUT,
-                parameters=[
-                    params("excitation_node.yaml"),
-                    {
-                        "mode": "phase1",
-                        "signals_file": LaunchConfiguration("signals_file"),
-                        "vertex_frd": LaunchConfiguration("vertex"),
-                    },
-                ],
+            node(
+                "excitation",
+                "excitation_node.yaml",
+                {
+                    "mode": "phase1",
+                    "signals_file": arg("signals_file"),
+                    "vertex_frd": arg("vertex"),
+                },
             ),
-            Node(
-                package="lpv_sysid",
-                executable="mavlink_bridge_node",
-                name="mavlink_bridge",
-                namespace=NAMESPACE,
-                output="screen",
-                sigterm_timeout=SIGTERM_TIMEOUT,
-                parameters=[params("mavlink_bridge_node.yaml"), {"command": "velocity"}],
-            ),
-            Node(
-                package="lpv_sysid",
-                executable="data_logger_node",
-                name="data_logger",
-                namespace=NAMESPACE,
-                output="screen",
-                sigterm_timeout=SIGTERM_TIMEOUT,
-                parameters=[
-                    params("data_logger.yaml"),
-                    {"out_dir": LaunchConfiguration("log_dir")},
-                ],
-            ),
+            node("mavlink_bridge", "mavlink_bridge_node.yaml", {"command": "velocity"}),
+            node("data_logger", "data_logger.yaml", {"out_dir": arg("log_dir")}),
         ]
     )

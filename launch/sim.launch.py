@@ -21,23 +21,16 @@ Start phase 2 with the controller's, then the excitation's ``start`` service.
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
 from launch.conditions import IfCondition
-from launch.substitutions import LaunchConfiguration, PythonExpression
-from launch_ros.actions import Node
+from launch.substitutions import PythonExpression
 
-from lpv_sysid.nodes._common import LAUNCH_SIGTERM_TIMEOUT_S
-from lpv_sysid.nodes.launch_util import declare_arguments, params
+from lpv_sysid.nodes.launch_util import arg, declare_arguments, node
 
-NAMESPACE = "lpv_sysid"
-#: launch's SIGINT -> SIGTERM escalation (5 s by default) after the nodes' orderly shutdown
-#: (nodes/_common.LAUNCH_SIGTERM_TIMEOUT_S); ``sigterm_timeout:=S`` overrides it
-SIGTERM_TIMEOUT = LaunchConfiguration("sigterm_timeout", default=str(LAUNCH_SIGTERM_TIMEOUT_S))
 #: every node but sim_vehicle (the clock source) runs on its /clock
 SIM_TIME = {"use_sim_time": True}
 
 
 def generate_launch_description():
-    phase = LaunchConfiguration("phase")
-    is_phase2 = IfCondition(PythonExpression(["'", phase, "' == '2'"]))
+    phase = arg("phase")
     return LaunchDescription(
         [
             DeclareLaunchArgument(
@@ -53,69 +46,35 @@ def generate_launch_description():
                 log_dir="sim_log",
                 notes={"gains_file": "phase 2 only", "vertex": "phase 1 only"},
             ),
-            Node(
-                package="lpv_sysid",
-                executable="sim_vehicle_node",
-                name="sim_vehicle",
-                namespace=NAMESPACE,
-                output="screen",
-                sigterm_timeout=SIGTERM_TIMEOUT,
-                parameters=[
-                    params("sim_vehicle.yaml"),
-                    {
-                        "mode": PythonExpression(
-                            ["'lpv' if '", phase, "' == '2' else 'baseline'"]
-                        ),
-                        "lockstep": True,
-                    },
-                ],
+            node(
+                "sim_vehicle",
+                "sim_vehicle.yaml",
+                {
+                    "mode": PythonExpression(["'lpv' if '", phase, "' == '2' else 'baseline'"]),
+                    "lockstep": True,
+                },
             ),
-            Node(
-                package="lpv_sysid",
-                executable="excitation_node",
-                name="excitation",
-                namespace=NAMESPACE,
-                output="screen",
-                sigterm_timeout=SIGTERM_TIMEOUT,
-                parameters=[
-                    params("excitation_node.yaml"),
-                    {
-                        "mode": PythonExpression(["'phase' + '", phase, "'"]),
-                        "signals_file": LaunchConfiguration("signals_file"),
-                        "vertex_frd": LaunchConfiguration("vertex"),
-                        **SIM_TIME,
-                    },
-                ],
+            node(
+                "excitation",
+                "excitation_node.yaml",
+                {
+                    "mode": PythonExpression(["'phase' + '", phase, "'"]),
+                    "signals_file": arg("signals_file"),
+                    "vertex_frd": arg("vertex"),
+                    **SIM_TIME,
+                },
             ),
-            Node(
-                package="lpv_sysid",
-                executable="lpv_controller_node",
-                name="lpv_controller",
-                namespace=NAMESPACE,
-                output="screen",
-                sigterm_timeout=SIGTERM_TIMEOUT,
-                condition=is_phase2,
-                parameters=[
-                    params("lpv_controller.yaml"),
-                    {
-                        "gains_file": LaunchConfiguration("gains_file"),
-                        "tick_source": "state",
-                        "reference_hold": "foh",
-                        **SIM_TIME,
-                    },
-                ],
+            node(
+                "lpv_controller",
+                "lpv_controller.yaml",
+                {
+                    "gains_file": arg("gains_file"),
+                    "tick_source": "state",
+                    "reference_hold": "foh",
+                    **SIM_TIME,
+                },
+                condition=IfCondition(PythonExpression(["'", phase, "' == '2'"])),
             ),
-            Node(
-                package="lpv_sysid",
-                executable="data_logger_node",
-                name="data_logger",
-                namespace=NAMESPACE,
-                output="screen",
-                sigterm_timeout=SIGTERM_TIMEOUT,
-                parameters=[
-                    params("data_logger.yaml"),
-                    {"out_dir": LaunchConfiguration("log_dir"), **SIM_TIME},
-                ],
-            ),
+            node("data_logger", "data_logger.yaml", {"out_dir": arg("log_dir"), **SIM_TIME}),
         ]
     )

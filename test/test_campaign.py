@@ -16,7 +16,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from lpv_sysid.control import campaign as C
+from lpv_sysid.control import campaign
 from lpv_sysid.control.envelope import EnvelopeConfig
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.signals.excitation import phase1_signals
@@ -36,16 +36,17 @@ def table6():
 
 # ============================================================================ plan
 def test_default_plan_alternates_climbs_and_descents_with_opposing_directions(table30):
-    cfg = C.CampaignConfig()
-    prof = C.ExcitationProfile.from_table(*table30, ramp=cfg.ramp_s)
+    cfg = campaign.CampaignConfig()
+    prof = campaign.ExcitationProfile.from_table(*table30, ramp=cfg.ramp_s)
     assert prof.duration == pytest.approx(30.0 + 2 * cfg.ramp_s)
-    plan = C.plan_campaign(cfg, prof, EnvelopeConfig())
+    plan = campaign.plan_campaign(cfg, prof, EnvelopeConfig())
     runs = plan.runs
     assert [r.order for r in runs] == list(range(1, 10))
     assert sorted(r.table_index for r in runs[:8]) == list(range(1, 9))
     assert runs[-1].name == "hover_validation" and runs[-1].vertex == (0.0, 0.0, 0.0)
     kinds = [r.kind for r in runs[:8]]
-    assert all(a != b for a, b in zip(kinds, kinds[1:])) and kinds[0] == C.CLIMB  # take-off is low
+    # take-off is low
+    assert all(a != b for a, b in zip(kinds, kinds[1:])) and kinds[0] == campaign.CLIMB
     for a, b in zip(runs[0:8:2], runs[1:8:2]):  # horizontal displacements cancel pairwise
         np.testing.assert_array_equal(np.add(a.vertex[:2], b.vertex[:2]), [0.0, 0.0])
     # room of a w segment: |w| (settle_timeout + trim + excitation) + span + 2 margins
@@ -60,7 +61,7 @@ def test_default_plan_alternates_climbs_and_descents_with_opposing_directions(ta
         )
     )
     d = runs[1]
-    assert d.kind == C.DESCENT and d.start_window[1] == pytest.approx(
+    assert d.kind == campaign.DESCENT and d.start_window[1] == pytest.approx(
         cfg.altitude_max - cfg.altitude_margin
     )
     # centred runs: half of |(u, v)| T + excitation + margin from home
@@ -71,7 +72,7 @@ def test_default_plan_alternates_climbs_and_descents_with_opposing_directions(ta
 
 
 def test_table_order_keeps_seed0_table1_order(table6):
-    cfg = C.CampaignConfig.from_dict(
+    cfg = campaign.CampaignConfig.from_dict(
         {
             "order": "table",
             "box_min": [-1, -1, -0.2],
@@ -81,43 +82,46 @@ def test_table_order_keeps_seed0_table1_order(table6):
             "trim_average_s": 1.0,
         }
     )
-    plan = C.plan_campaign(cfg, C.ExcitationProfile.from_table(*table6, ramp=0.5))
+    plan = campaign.plan_campaign(cfg, campaign.ExcitationProfile.from_table(*table6, ramp=0.5))
     assert [r.table_index for r in plan.runs] == [1, 2, 3, 4, 5, 6, 7, 8, None]
     assert plan.runs[1].vertex == (1.0, -1.0, -0.2)  # u fastest
 
 
 def test_plan_refuses_a_window_too_small_with_the_numbers(table30):
-    cfg = C.CampaignConfig.from_dict({"altitude_max": 45.0})
-    prof = C.ExcitationProfile.from_table(*table30, ramp=cfg.ramp_s)
+    cfg = campaign.CampaignConfig.from_dict({"altitude_max": 45.0})
+    prof = campaign.ExcitationProfile.from_table(*table30, ramp=cfg.ramp_s)
     with pytest.raises(ConfigError) as e:
-        C.plan_campaign(cfg, prof)
+        campaign.plan_campaign(cfg, prof)
     T = cfg.settle_timeout + cfg.trim_s + prof.duration
     msg = str(e.value)
     assert "does not fit the altitude window [15, 45] m (30 m)" in msg
     assert f"= {0.7 * T:.1f} m" in msg and f"= {0.7 * T + prof.span[2] + 4:.1f} m" in msg
     # the seed's +-5 m/s box: 5 m/s x 62 s
     with pytest.raises(ConfigError, match="310.0 m"):
-        C.plan_campaign(
-            C.CampaignConfig.from_dict({"box_min": [-5, -5, -5], "box_max": [5, 5, 5]}), prof
+        campaign.plan_campaign(
+            campaign.CampaignConfig.from_dict({"box_min": [-5, -5, -5], "box_max": [5, 5, 5]}),
+            prof,
         )
 
 
 def test_plan_refusals_name_the_conflict(table30):
-    prof = C.ExcitationProfile.from_table(*table30, ramp=1.0)
+    prof = campaign.ExcitationProfile.from_table(*table30, ramp=1.0)
     env = EnvelopeConfig()
     with pytest.raises(ConfigError, match="predictive floor .* would trip"):
-        C.plan_campaign(
-            C.CampaignConfig.from_dict(
+        campaign.plan_campaign(
+            campaign.CampaignConfig.from_dict(
                 {"altitude_min": 8.0, "takeoff_altitude": 10.0, "altitude_max": 70.0}
             ),
             prof,
             env,
         )
     with pytest.raises(ConfigError, match="predictive ceiling trips"):
-        C.plan_campaign(C.CampaignConfig.from_dict({"altitude_max": 76.0}), prof, env)
+        campaign.plan_campaign(
+            campaign.CampaignConfig.from_dict({"altitude_max": 76.0}), prof, env
+        )
     with pytest.raises(ConfigError, match="above the envelope's min"):
-        C.plan_campaign(
-            C.CampaignConfig.from_dict(
+        campaign.plan_campaign(
+            campaign.CampaignConfig.from_dict(
                 {
                     "box_min": [-9, -9, -0.2],
                     "box_max": [9, 9, 0.2],
@@ -131,15 +135,15 @@ def test_plan_refusals_name_the_conflict(table30):
             EnvelopeConfig(radius=2000.0),
         )
     with pytest.raises(ConfigError, match="campaign.radius is 100"):
-        C.plan_campaign(C.CampaignConfig.from_dict({"radius": 100.0}), prof, env)
+        campaign.plan_campaign(campaign.CampaignConfig.from_dict({"radius": 100.0}), prof, env)
     with pytest.raises(ConfigError, match="local_ned"):
-        C.CampaignConfig.from_dict({"velocity_frame": "local_ned"})
+        campaign.CampaignConfig.from_dict({"velocity_frame": "local_ned"})
     with pytest.raises(ConfigError, match="0.25 m/s"):
-        C.CampaignConfig.from_dict({"hold_max": 0.3})
+        campaign.CampaignConfig.from_dict({"hold_max": 0.3})
     with pytest.raises(ConfigError, match="unknown key"):
-        C.CampaignConfig.from_dict({"trim": 3.0})
+        campaign.CampaignConfig.from_dict({"trim": 3.0})
     with pytest.raises(ConfigError, match="takeoff_altitude"):
-        C.CampaignConfig.from_dict({"takeoff_altitude": 90.0})
+        campaign.CampaignConfig.from_dict({"takeoff_altitude": 90.0})
 
 
 def test_excitation_profile_displacement_of_a_sine_is_a_over_pi_f():
@@ -148,7 +152,9 @@ def test_excitation_profile_displacement_of_a_sine_is_a_over_pi_f():
     u = np.zeros((t.size, 4))
     u[:, 0] = A * np.sin(2 * np.pi * f * t)
     u[:, 3] = 0.25 * np.cos(2 * np.pi * 0.2 * t)
-    prof = C.ExcitationProfile.from_table(t, u, ("u_ref", "v_ref", "w_ref", "r_ref"), ramp=0.0)
+    prof = campaign.ExcitationProfile.from_table(
+        t, u, ("u_ref", "v_ref", "w_ref", "r_ref"), ramp=0.0
+    )
     assert prof.duration == pytest.approx(T)
     assert prof.span[0] == pytest.approx(
         A / (np.pi * f), rel=2e-3
@@ -165,7 +171,7 @@ class StandIn:
 
     def __init__(
         self,
-        campaign,
+        sequencer,
         tau=0.4,
         gain=1.0,
         sink=0.0,
@@ -175,7 +181,7 @@ class StandIn:
         dt=0.02,
         handback_end="DONE",
     ):
-        self.c = campaign
+        self.c = sequencer
         self.tau, self.gain, self.sink, self.psi = tau, gain, sink, psi
         self.pos = np.zeros(3)
         self.vel = np.zeros(3)
@@ -216,7 +222,7 @@ class StandIn:
         )
 
     def status(self):
-        return C.VehicleStatus(
+        return campaign.VehicleStatus(
             self.state, self.reason, self.mode, self.armed, None, self.violation, self.confirmed
         )
 
@@ -224,12 +230,12 @@ class StandIn:
         self.events += out.events
         for a in out.actions:
             self.actions.append((self.t, a))
-            if isinstance(a, C.StartBridge):
+            if isinstance(a, campaign.StartBridge):
                 self._go("PRESTREAM")
-            elif isinstance(a, C.AbortBridge):
+            elif isinstance(a, campaign.AbortBridge):
                 self.target = "HOLD" if self.handback_mode == "HOLD" else self.handback_mode
                 self._go("HANDBACK", a.reason)
-            elif isinstance(a, C.FinishBridge):
+            elif isinstance(a, campaign.FinishBridge):
                 self.target = a.mode if self.handback_mode == "HOLD" else self.handback_mode
                 self._go("HANDBACK", "finish")
         if out.command is not None:
@@ -309,25 +315,25 @@ def small_campaign(table, **kw):
         rate_hz=25.0,
     )
     d.update(kw)
-    cfg = C.CampaignConfig.from_dict(d)
-    plan = C.plan_campaign(
+    cfg = campaign.CampaignConfig.from_dict(d)
+    plan = campaign.plan_campaign(
         cfg,
-        C.ExcitationProfile.from_table(*table, ramp=cfg.ramp_s),
+        campaign.ExcitationProfile.from_table(*table, ramp=cfg.ramp_s),
         EnvelopeConfig(floor=2.0, ceiling=30.0, lookahead=2.0, radius=100.0),
     )
-    return C.Campaign(plan, table)
+    return campaign.Campaign(plan, table)
 
 
 def test_whole_sequence_on_a_stand_in_vehicle(table6):
     c = small_campaign(table6, vertices=[2, 7], settle_dwell=1.5)
     sim = StandIn(c, sink=0.03).run()
-    assert c.phase == C.DONE and c.ok, c.reason
+    assert c.phase == campaign.DONE and c.ok, c.reason
     ph = sim.phases()
-    assert ph[:3] == [C.STARTING, C.TAKEOFF, C.REPOSITION]
-    assert ph[-3:] == [C.FINISHING, C.LANDING, C.DONE]
-    assert ph.count(C.EXCITATION) == 3 and ph.count(C.SETTLE) == 3
-    started = [a for _, a in sim.actions if isinstance(a, C.RunStarted)]
-    ended = [a for _, a in sim.actions if isinstance(a, C.RunEnded)]
+    assert ph[:3] == [campaign.STARTING, campaign.TAKEOFF, campaign.REPOSITION]
+    assert ph[-3:] == [campaign.FINISHING, campaign.LANDING, campaign.DONE]
+    assert ph.count(campaign.EXCITATION) == 3 and ph.count(campaign.SETTLE) == 3
+    started = [a for _, a in sim.actions if isinstance(a, campaign.RunStarted)]
+    ended = [a for _, a in sim.actions if isinstance(a, campaign.RunEnded)]
     assert (
         [a.run.name for a in started]
         == [a.run.name for a in ended]
@@ -335,7 +341,9 @@ def test_whole_sequence_on_a_stand_in_vehicle(table6):
     )
     assert all(a.complete for a in ended)
     assert [
-        type(a).__name__ for _, a in sim.actions if not isinstance(a, (C.RunStarted, C.RunEnded))
+        type(a).__name__
+        for _, a in sim.actions
+        if not isinstance(a, (campaign.RunStarted, campaign.RunEnded))
     ] == ["StartBridge", "ActivateFloor", "FinishBridge"]
     assert not sim.armed and sim.mode == "LAND" and sim.pos[2] == 0.0
     for res, run in zip(c.results, c.plan.runs):
@@ -353,12 +361,12 @@ def test_whole_sequence_on_a_stand_in_vehicle(table6):
         # tracking of a first-order lag is not perfect but bounded by the excitation size
         assert 0.0 < res.tracking_rms["u"] < 0.4 and set(res.tracking_rms) == {"u", "v", "w", "r"}
     hover = c.results[-1]
-    assert hover.name == "hover_validation" and hover.kind == C.LEVEL
+    assert hover.name == "hover_validation" and hover.kind == campaign.LEVEL
     # the stand-in sinks 0.03 m/s beyond its command: the frozen feedforward climbs against it
     assert hover.hold_correction == pytest.approx(-0.03, abs=0.01)
     # level runs held their height, climb/descent runs travelled |w| x (trim + excitation)
     assert hover.height_max - hover.height_min < 0.3
-    climb = next(r for r in c.results if r.kind == C.CLIMB)
+    climb = next(r for r in c.results if r.kind == campaign.CLIMB)
     assert climb.height_max - climb.height_start == pytest.approx(
         0.3 * (climb.t_end - climb.t_command), abs=0.5
     )
@@ -368,22 +376,22 @@ def test_whole_sequence_on_a_stand_in_vehicle(table6):
         and s["handback"]["mode"] == "LAND"
         and s["handback"]["duration_s"] == pytest.approx(0.3, abs=0.05)
     )
-    rows = C.trim_rows(c.results)
+    rows = campaign.trim_rows(c.results)
     assert [r["run"] for r in rows] == [r.name for r in c.plan.runs]
 
 
 def test_settle_timeout_aborts_with_the_errors_and_waits_for_the_handback(table6):
     c = small_campaign(table6, vertices=[2], settle_tolerance=[0.05, 0.05, 0.05])
     sim = StandIn(c, gain=0.8).run()  # reaches only 80 % of every vertex
-    assert c.phase == C.ABORTED and c.ok is False
+    assert c.phase == campaign.ABORTED and c.ok is False
     assert (
         "not settled within settle_timeout 4 s" in c.reason and "(0.80, -0.80, -0.24)" in c.reason
     )
-    aborts = [(t, a) for t, a in sim.actions if isinstance(a, C.AbortBridge)]
+    aborts = [(t, a) for t, a in sim.actions if isinstance(a, campaign.AbortBridge)]
     assert len(aborts) == 1 and "not settled" in aborts[0][1].reason
     res = c.results[0]
     assert not res.complete and math.isnan(res.t_start)  # never recorded
-    assert not any(isinstance(a, C.RunStarted) for _, a in sim.actions)
+    assert not any(isinstance(a, campaign.RunStarted) for _, a in sim.actions)
     assert aborts[0][0] - res.t_command == pytest.approx(4.0, abs=0.03)
     assert c.summary()["handback"]["duration_s"] == pytest.approx(0.3, abs=0.05)
     assert sim.mode == "HOLD" and sim.armed  # PX4 holds; nothing commanded any more
@@ -394,7 +402,7 @@ def test_bridge_leaving_offboard_ends_the_run_without_a_second_abort(table6):
     c = small_campaign(table6, vertices=[2], hover_validation=False)
 
     def trip(sim):
-        if c.phase == C.EXCITATION and sim.state == "OFFBOARD_ACTIVE":
+        if c.phase == campaign.EXCITATION and sim.state == "OFFBOARD_ACTIVE":
             sim.violation = "floor: predictive floor ..."
             sim.target = "HOLD"
             sim._go("HANDBACK", "envelope violation (floor): predictive floor ...")
@@ -403,11 +411,11 @@ def test_bridge_leaving_offboard_ends_the_run_without_a_second_abort(table6):
     sim.hook = trip
     sim.run()
     assert (
-        c.phase == C.ABORTED
+        c.phase == campaign.ABORTED
         and "bridge left OFFBOARD_ACTIVE (HANDBACK): envelope: floor" in c.reason
     )
-    assert not any(isinstance(a, C.AbortBridge) for _, a in sim.actions)
-    ended = [a for _, a in sim.actions if isinstance(a, C.RunEnded)]
+    assert not any(isinstance(a, campaign.AbortBridge) for _, a in sim.actions)
+    ended = [a for _, a in sim.actions if isinstance(a, campaign.RunEnded)]
     assert len(ended) == 1 and not ended[0].complete and "envelope" in ended[0].result.reason
 
 
@@ -417,13 +425,13 @@ def test_external_abort_while_finishing_still_waits_for_the_confirmation(table6)
     seen = {}
 
     def interrupt(sim):
-        if c.phase == C.FINISHING and "t" not in seen:
+        if c.phase == campaign.FINISHING and "t" not in seen:
             seen["t"] = sim.t
             c.abort(sim.t, "interrupted (SIGINT)")
 
     sim.hook = interrupt
     sim.run()
-    assert c.phase == C.ABORTED and c.reason == "interrupted (SIGINT)"
+    assert c.phase == campaign.ABORTED and c.reason == "interrupted (SIGINT)"
     assert c.t_handback_done - seen["t"] == pytest.approx(1.0, abs=0.05)  # waited for DONE
     assert sim.mode == "LAND"  # the finish request itself was not withdrawn
 
@@ -431,11 +439,11 @@ def test_external_abort_while_finishing_still_waits_for_the_confirmation(table6)
 def test_finish_hold_and_a_land_request_that_ends_elsewhere(table6):
     c = small_campaign(table6, vertices=[2], hover_validation=False, finish="HOLD")
     sim = StandIn(c).run()
-    assert c.phase == C.DONE and c.ok and sim.mode == "HOLD" and sim.armed
+    assert c.phase == campaign.DONE and c.ok and sim.mode == "HOLD" and sim.armed
     c = small_campaign(table6, vertices=[2], hover_validation=False, finish="LAND")
     sim = StandIn(c, handback_mode="POSCTL").run()  # the bridge's chain ended elsewhere
     assert (
-        c.phase == C.FAILED
+        c.phase == campaign.FAILED
         and "finish LAND not confirmed: the hand-back ended in POSCTL" in c.reason
     )
 
@@ -444,19 +452,20 @@ def test_stale_state_and_start_timeout_abort(table6):
     c = small_campaign(table6, vertices=[2])
 
     def freeze(sim):
-        if c.phase == C.TRIM:
+        if c.phase == campaign.TRIM:
             sim.c.on_state = lambda s: None  # telemetry stops
 
     sim = StandIn(c)
     sim.hook = freeze
     sim.run()
-    assert c.phase == C.ABORTED and "no fresh state sample" in c.reason
+    assert c.phase == campaign.ABORTED and "no fresh state sample" in c.reason
     c = small_campaign(table6, vertices=[2], start_timeout=3.0)
     sim = StandIn(c)
     sim.physics = lambda: None  # the bridge never reaches OFFBOARD
     sim.run(t_end=10.0)
     assert (
-        c.phase == C.ABORTING and "not in OFFBOARD and armed within start_timeout 3 s" in c.reason
+        c.phase == campaign.ABORTING
+        and "not in OFFBOARD and armed within start_timeout 3 s" in c.reason
     )
 
 
@@ -515,7 +524,7 @@ def test_campaign_node_flies_through_a_bridge_node_and_writes_one_bag_per_run(tm
 
     from lpv_sysid.io import bag as iobag
     from lpv_sysid.io import messages
-    from lpv_sysid.nodes import _common
+    from lpv_sysid.nodes import shell
     from lpv_sysid.nodes.campaign_node import CampaignNode
     from lpv_sysid.signals.store import save_npz
 
@@ -563,19 +572,19 @@ def test_campaign_node_flies_through_a_bridge_node_and_writes_one_bag_per_run(tm
             )
             self.pos, self.vel, self.cmd = np.zeros(3), np.zeros(3), np.zeros(3)
             self.refs = 0
-            self.pub_state = self.create_publisher(Odometry, "state", _common.qos_for("state"))
+            self.pub_state = self.create_publisher(Odometry, "state", shell.qos_for("state"))
             self.pub_rot = self.create_publisher(
-                JointState, "rotor_speeds", _common.qos_for("rotor_speeds")
+                JointState, "rotor_speeds", shell.qos_for("rotor_speeds")
             )
-            self.pub_imu = self.create_publisher(Imu, "imu", _common.qos_for("imu"))
+            self.pub_imu = self.create_publisher(Imu, "imu", shell.qos_for("imu"))
             self.pub_status = self.create_publisher(
-                DiagnosticArray, "status", _common.qos_for("status")
+                DiagnosticArray, "status", shell.qos_for("status")
             )
             self.create_subscription(
                 TwistStamped,
                 "velocity_reference",
                 self.on_ref,
-                _common.qos_for("velocity_reference"),
+                shell.qos_for("velocity_reference"),
             )
             self.create_service(Trigger, "~/start", self.on_start)
             self.create_service(Trigger, "~/abort", self.on_abort)
@@ -689,7 +698,8 @@ def test_campaign_node_flies_through_a_bridge_node_and_writes_one_bag_per_run(tm
 
 
 @pytest.mark.parametrize(
-    "end, phase", [("DONE", C.ABORTED), ("FAILED", C.ABORTED), ("LOST", C.FAILED)]
+    "end, phase",
+    [("DONE", campaign.ABORTED), ("FAILED", campaign.ABORTED), ("LOST", campaign.FAILED)],
 )
 def test_fault_handback_confirmed_or_not(table6, end, phase):
     # the bridge ends a fault hand-back (stale input, link loss) in FAILED *with* the confirmed
@@ -697,7 +707,7 @@ def test_fault_handback_confirmed_or_not(table6, end, phase):
     c = small_campaign(table6, vertices=[2], settle_tolerance=[0.01, 0.01, 0.01])
     StandIn(c, gain=0.8, handback_end=end).run()
     assert c.phase == phase and c.ok is False
-    if phase == C.ABORTED:
+    if phase == campaign.ABORTED:
         assert (
             c.handback_mode == "HOLD"
             and c.t_handback_done - c.t_handback_request == pytest.approx(0.3, abs=0.05)

@@ -26,7 +26,7 @@ from lpv_sysid.cli.main import main as cli_main
 from lpv_sysid.errors import SafetyError
 from lpv_sysid.ident import rate_plant as rid
 from lpv_sysid.io import bag as iobag
-from lpv_sysid.io import messages as M
+from lpv_sysid.io import messages
 from lpv_sysid.mavlink.link import free_udp_port
 from lpv_sysid.mavlink.sim_vehicle import SimVehicle, SimVehicleConfig
 from lpv_sysid.models import rate_plant as rp
@@ -169,7 +169,7 @@ def test_phase2_takes_the_airborne_vehicle_flies_the_law_and_lands(tmp_path, des
     bag = tmp_path / "p2" / "bag_0000"
     tops = {k: v.msgtype for k, v in iobag.topic_info(str(bag)).items()}
     assert (
-        tops["/lpv_sysid/rate_setpoint"] == M.TYPES["actuator_command"]
+        tops["/lpv_sysid/rate_setpoint"] == messages.TYPES["actuator_command"]
         and "/lpv_sysid/state" in tops
     )
     g = s["gain_u_e_to_z"]

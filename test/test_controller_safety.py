@@ -12,7 +12,8 @@ import yaml
 from lpv_test_gains import design_for, write_gains
 
 from lpv_sysid.cli.main import main
-from lpv_sysid.control.lpv_controller import LpvControllerConfig, ReferenceLimiter
+from lpv_sysid.control.lpv_controller_config import LpvControllerConfig
+from lpv_sysid.control.reference_limiter import ReferenceLimiter
 from lpv_sysid.control.safety import check_closed_loop
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io import messages
@@ -287,7 +288,7 @@ def test_gains_without_design_envelope_are_refused(tmp_path):
     g = write_gains(
         tmp_path / "gains.yaml", box=2.0, edit=lambda d: d["certificate"].pop("design")
     )
-    with pytest.raises(ConfigError, match=r"certificate.design missing.*--summary"):
+    with pytest.raises(ConfigError, match=r"certificate.design missing.*summary.yaml of the"):
         runtime(g)
 
 

@@ -1,6 +1,7 @@
 """Synthesis reports its progress through logging (INFO per stage), and the cores this session
-split (sim/phase2*, sim/excitation_fir, synthesis/hinf_lmi, synthesis/robust_lmi) name the
-configuration field in their errors, not a command-line flag (the CLI maps fields to flags)."""
+split (sim/phase2*, sim/excitation_fir, synthesis/hinf_lmi, synthesis/robust_lmi) and the
+report core (report/*) name the configuration field or argument in their errors, not a
+command-line flag (the CLI maps fields to flags)."""
 
 from __future__ import annotations
 
@@ -16,12 +17,9 @@ from lpv_sysid.synthesis.example_models import uncontrollable_disturbance_plant
 from lpv_sysid.synthesis.hinf_lmi import HinfOptions, synthesize_hinf
 
 PKG = Path(__file__).resolve().parent.parent / "lpv_sysid"
-CORES = [
-    *sorted((PKG / "sim").glob("phase2*.py")),
-    PKG / "sim" / "excitation_fir.py",
-    PKG / "synthesis" / "hinf_lmi.py",
-    PKG / "synthesis" / "robust_lmi.py",
-]
+# Every module outside the command-line layer: the cores (and node shells) name config
+# fields and arguments; only lpv_sysid/cli/ maps them to its flags.
+CORES = sorted(p for p in PKG.rglob("*.py") if p.relative_to(PKG).parts[0] != "cli")
 FLAG = re.compile(r"(?<![\w-])--[a-z][a-z0-9-]+")
 
 

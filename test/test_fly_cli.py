@@ -25,7 +25,7 @@ import yaml
 from lpv_sysid.cli.fly import FlyConfig, fly
 from lpv_sysid.cli.main import main as cli_main
 from lpv_sysid.io import bag as iobag
-from lpv_sysid.io import messages as M
+from lpv_sysid.io import messages
 from lpv_sysid.mavlink import px4
 from lpv_sysid.mavlink.link import free_udp_port
 from lpv_sysid.mavlink.sim_vehicle import SimVehicle, SimVehicleConfig
@@ -36,7 +36,7 @@ from support.lockstep import LockStep
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / "config"
 TOPICS = {
-    f"/lpv_sysid/{n}": M.TYPES[n]
+    f"/lpv_sysid/{n}": messages.TYPES[n]
     for n in (
         "state",
         "rotor_speeds",
@@ -247,15 +247,15 @@ def test_level_vertex_at_a_tilted_vertex_holds_altitude(tmp_path, vehicles):
 
     state = {}
     res_phase = lambda: state["c"].phase if "c" in state else ""  # noqa: E731
-    import lpv_sysid.cli.fly as F
+    import lpv_sysid.cli.fly as fly_module
 
-    orig = F.FlightRunner.run
+    orig = fly_module.FlightRunner.run
 
     def run(self):
         state["c"] = self.campaign
         return orig(self)
 
-    F.FlightRunner.run = run
+    fly_module.FlightRunner.run = run
     try:
         ls.hook = hook
         res = fly(
@@ -269,7 +269,7 @@ def test_level_vertex_at_a_tilted_vertex_holds_altitude(tmp_path, vehicles):
             handle_signals=False,
         )
     finally:
-        F.FlightRunner.run = orig
+        fly_module.FlightRunner.run = orig
     assert res.status == 0, res.reason
     r = res.summary["runs"][0]
     assert r["vertex"] == [3.0, 3.0, 0.0] and r["kind"] == "level"
@@ -309,16 +309,16 @@ def test_preflight_nogo_refuses_to_fly(tmp_path, vehicles):
 def test_interrupt_hands_back_and_leaves_readable_bags(tmp_path, vehicles):
     veh, cfg, sig, ls = setup(tmp_path, vehicle={"params": {"COM_OBL_RC_ACT": 5}}, flight_log=True)
     vehicles.append(veh)
-    import lpv_sysid.cli.fly as F
+    import lpv_sysid.cli.fly as fly_module
 
     runners = []
-    orig_init = F.FlightRunner.__init__
+    orig_init = fly_module.FlightRunner.__init__
 
     def init(self, *a, **k):
         orig_init(self, *a, **k)
         runners.append(self)
 
-    F.FlightRunner.__init__ = init
+    fly_module.FlightRunner.__init__ = init
 
     def hook(step):  # Ctrl-C in the middle of the first excitation
         r = runners[0] if runners else None
@@ -338,14 +338,14 @@ def test_interrupt_hands_back_and_leaves_readable_bags(tmp_path, vehicles):
             handle_signals=False,
         )
     finally:
-        F.FlightRunner.__init__ = orig_init
+        fly_module.FlightRunner.__init__ = orig_init
     assert res.status == 130 and res.phase == "aborted" and res.reason == "interrupted (SIGINT)"
     assert veh.mode == px4.HOLD and res.summary["handback"]["mode"] == "HOLD"
     run0 = res.summary["runs"][0]
     assert run0["complete"] is False and run0["reason"] == "interrupted (SIGINT)"
     out = tmp_path / "out"
     data = iobag.read_bag(str(out / "bag_0000"), topics=["/lpv_sysid/velocity_reference"])
-    refs = [M.reference_from_twist(m) for _, m in data["/lpv_sysid/velocity_reference"]]
+    refs = [messages.reference_from_twist(m) for _, m in data["/lpv_sysid/velocity_reference"]]
     assert refs and refs[-1][0] <= run0["t_end"] + 1e-9  # the partial run, closed
     assert yaml.safe_load((out / "experiment.yaml").read_text())["closed_cleanly"]
     assert topics(out / "flight" / "bag_0000") == TOPICS

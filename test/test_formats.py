@@ -1,4 +1,4 @@
-"""io/formats.py: vertex_models.yaml / gains.yaml round trips and one broken file per case,
+"""io/formats/: vertex_models.yaml / gains.yaml round trips and one broken file per case,
 each checked for the field path in the error message."""
 
 import copy

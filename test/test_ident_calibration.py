@@ -231,9 +231,9 @@ def test_motor_constants_with_latency_are_identified():
     ):
         cfg = vx.IdentificationConfig.from_dict(kw)
         x0, u0 = vx.equilibrium(data, cfg)
-        dt, full, keep = vx._fit_indices(data, cfg)
+        dt, full, keep = vx.fit_indices(data, cfg)
         rotor_var = vx.regressor_noise_var(cfg, p, dt)[2]
-        design, tau = vx._motor_design(
+        design, tau = vx.motor_design(
             data, cfg, p, full, keep, x0, u0, data.u_eff, rotor_var=rotor_var
         )
         assert tau == pytest.approx(0.004, abs=2e-4)
@@ -252,8 +252,8 @@ def test_motor_constants_with_latency_are_identified():
     data0, _ = _motor_data(0.0, seed=1)
     cfg = vx.IdentificationConfig()
     x0, u0 = vx.equilibrium(data0, cfg)
-    dt, full, keep = vx._fit_indices(data0, cfg)
-    assert abs(vx._motor_design(data0, cfg, p, full, keep, x0, u0, data0.u_eff)[1]) < 3e-4
+    dt, full, keep = vx.fit_indices(data0, cfg)
+    assert abs(vx.motor_design(data0, cfg, p, full, keep, x0, u0, data0.u_eff)[1]) < 3e-4
 
 
 # ----------------------------------------------------------------------------- phase-1 flights

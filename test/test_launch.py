@@ -11,7 +11,6 @@ import yaml
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 LAUNCH = os.path.join(ROOT, "launch")
-FILES = ["phase1.launch.py", "phase2.launch.py", "sim.launch.py"]
 EXPECTED = {
     "phase1.launch.py": {"excitation_node", "mavlink_bridge_node", "data_logger_node"},
     "phase2.launch.py": {
@@ -26,7 +25,9 @@ EXPECTED = {
         "lpv_controller_node",
         "data_logger_node",
     },
+    "campaign.launch.py": {"mavlink_bridge_node", "campaign_node", "data_logger_node"},
 }
+FILES = sorted(EXPECTED)
 
 
 def _console_scripts():
@@ -38,17 +39,16 @@ def _console_scripts():
 
 
 def _node_calls(tree):
-    """(executable, name, namespace, params file names) of every launch_ros Node(...)."""
+    """(executable, name, parameter file or None) of every ``launch_util.node(...)`` call
+    (executable ``<name>_node``, launch_util.node)."""
     out = []
     for call in ast.walk(tree):
-        if isinstance(call, ast.Call) and getattr(call.func, "id", "") == "Node":
+        if isinstance(call, ast.Call) and getattr(call.func, "id", "") == "node":
             kw = {k.arg: k.value for k in call.keywords}
-            files = [
-                c.args[0].value
-                for c in ast.walk(kw["parameters"])
-                if isinstance(c, ast.Call) and getattr(c.func, "id", "") == "params"
-            ]
-            out.append((kw["executable"].value, kw["name"].value, kw["namespace"].id, files))
+            args = list(call.args) + [None] * 2
+            name = args[0].value
+            file = args[1] if args[1] is not None else kw.get("params_file")
+            out.append((f"{name}_node", name, None if file is None else file.value))
     return out
 
 
@@ -69,17 +69,20 @@ def test_launch_file_nodes_exist(fname):
         isinstance(n, ast.FunctionDef) and n.name == "generate_launch_description"
         for n in tree.body
     )
+    # every node through the one constructor (namespace, output, shutdown budget)
+    assert not re.search(r"\bNode\(", src) and "launch_ros" not in src
     calls = _node_calls(tree)
     execs = {c[0] for c in calls}
     assert execs == EXPECTED[fname]
     assert execs <= _console_scripts()
-    for executable, name, ns, files in calls:
-        assert ns == "NAMESPACE" and re.search(r'NAMESPACE = "lpv_sysid"', src)
+    for executable, name, file in calls:
         module = os.path.join(ROOT, "lpv_sysid", "nodes", executable + ".py")
         assert os.path.exists(module), f"{fname}: {executable} has no shell module"
+        if executable == "campaign_node":  # its parameters are the three overrides
+            assert file is None
+            continue
         # the parameter file exists and addresses this node by name
-        assert len(files) == 1
-        data = yaml.safe_load(open(os.path.join(ROOT, "config", files[0])))
+        data = yaml.safe_load(open(os.path.join(ROOT, "config", file)))
         assert f"/**/{name}" in data and "ros__parameters" in data[f"/**/{name}"]
         # the node module uses the same default node name
         assert re.search(rf'NODE_NAME = "{name}"', open(module).read())
@@ -92,6 +95,9 @@ def test_launch_description_builds(fname):  # pragma: no cover - needs ROS 2
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     from launch import LaunchDescription
+    from launch_ros.actions import Node
 
     ld = mod.generate_launch_description()
     assert isinstance(ld, LaunchDescription) and len(ld.entities) >= 4
+    nodes = [e for e in ld.entities if isinstance(e, Node)]
+    assert {n.node_executable for n in nodes} == EXPECTED[fname]

@@ -235,3 +235,49 @@ def test_campaign_launch_reads_the_share_copy_of_the_configs(fake_launch):
     for executable in ("mavlink_bridge_node", "data_logger_node"):
         assert nodes[executable].parameters[0].args[0][0] == LaunchConfiguration("config_dir")
     assert os.path.isfile(os.path.join(ROOT, "lpv_sysid", "config", "campaign.yaml"))
+
+
+def test_node_builds_the_package_node_with_its_parameter_file(fake_launch):
+    """launch_util.node: executable ``<name>_node`` of the package in /lpv_sysid, screen
+    output, the shutdown budget of nodes/shell (not launch's 5 s), the parameter file in
+    ``config_dir`` first and the overrides after it; no file, no overrides: no entry."""
+    from lpv_sysid.nodes import shell
+
+    L = fake_launch
+    n = L.node("excitation", "excitation_node.yaml", {"mode": "phase1", "x.y": L.arg("vertex")})
+    assert n.kwargs == {
+        "executable": "excitation_node",
+        "package": "lpv_sysid",
+        "name": "excitation",
+        "namespace": "lpv_sysid",
+        "output": "screen",
+        "parameters": [
+            PathJoinSubstitution([LaunchConfiguration("config_dir"), "excitation_node.yaml"]),
+            {"mode": "phase1", "x.y": LaunchConfiguration("vertex")},
+        ],
+        "condition": None,
+        "sigterm_timeout": LaunchConfiguration(
+            "sigterm_timeout", default=str(shell.LAUNCH_SIGTERM_TIMEOUT_S)
+        ),
+    }
+    assert shell.LAUNCH_SIGTERM_TIMEOUT_S > 5.0  # more than launch's own default
+    assert L.node("campaign", overrides={"out_dir": "d"}).parameters == [{"out_dir": "d"}]
+    assert L.node("data_logger").parameters == []
+    cond = IfCondition("true")
+    assert L.node("lpv_controller", "lpv_controller.yaml", condition=cond).condition is cond
+
+
+@pytest.mark.parametrize(
+    "fname", ["phase1.launch.py", "phase2.launch.py", "sim.launch.py", "campaign.launch.py"]
+)
+def test_every_launched_node_gets_the_shutdown_budget(fake_launch, fname):
+    """Every node of every launch file is built by launch_util.node: the package, the
+    /lpv_sysid namespace, screen output and the ``sigterm_timeout`` launch configuration."""
+    from lpv_sysid.nodes import shell
+
+    _, _, nodes = _describe(fname)
+    budget = LaunchConfiguration("sigterm_timeout", default=str(shell.LAUNCH_SIGTERM_TIMEOUT_S))
+    assert nodes
+    for executable, n in nodes.items():
+        assert n.kwargs["name"] + "_node" == executable
+        assert n.kwargs["output"] == "screen" and n.kwargs["sigterm_timeout"] == budget

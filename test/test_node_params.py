@@ -21,9 +21,9 @@ import pytest
 import yaml
 
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.nodes import _common as common
+from lpv_sysid.nodes import shell
 from lpv_sysid.nodes import data_logger_node, mavlink_bridge_node, sim_vehicle_node
-from lpv_sysid.nodes import parameters as P
+from lpv_sysid.nodes import parameters
 from lpv_sysid.nodes.controller_runtime import ControllerSettings
 from lpv_sysid.nodes.excitation_node import ExcitationSettings
 
@@ -31,12 +31,22 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG = os.path.join(ROOT, "config")
 #: (params file, node name, {parameter: (default, ParamSpec)}, settings class or None)
 NODES = [
-    ("lpv_controller.yaml", "lpv_controller", P.specs(ControllerSettings), ControllerSettings),
-    ("excitation_node.yaml", "excitation", P.specs(ExcitationSettings), ExcitationSettings),
+    (
+        "lpv_controller.yaml",
+        "lpv_controller",
+        parameters.specs(ControllerSettings),
+        ControllerSettings,
+    ),
+    (
+        "excitation_node.yaml",
+        "excitation",
+        parameters.specs(ExcitationSettings),
+        ExcitationSettings,
+    ),
     (
         "data_logger.yaml",
         "data_logger",
-        P.specs(data_logger_node.DataLoggerSettings),
+        parameters.specs(data_logger_node.DataLoggerSettings),
         data_logger_node.DataLoggerSettings,
     ),
     ("mavlink_bridge_node.yaml", "mavlink_bridge", mavlink_bridge_node.SPECS, None),
@@ -49,14 +59,18 @@ def ros_type(v):
     """YAML value -> the ROS parameter type rclpy gives it (a params file is typed by its
     values)."""
     if isinstance(v, bool):
-        return P.BOOL
+        return parameters.BOOL
     if isinstance(v, int):
-        return P.INTEGER
+        return parameters.INTEGER
     if isinstance(v, float):
-        return P.DOUBLE
+        return parameters.DOUBLE
     if isinstance(v, str):
-        return P.STRING
-    for kind, t in ((P.DOUBLE_ARRAY, float), (P.STRING_ARRAY, str), (P.INTEGER_ARRAY, int)):
+        return parameters.STRING
+    for kind, t in (
+        (parameters.DOUBLE_ARRAY, float),
+        (parameters.STRING_ARRAY, str),
+        (parameters.INTEGER_ARRAY, int),
+    ):
         if (
             isinstance(v, list)
             and v
@@ -156,9 +170,9 @@ def test_sim_vehicle_sensor_parameters_are_sensor_config():
     values = yaml_values("sim_vehicle.yaml", "sim_vehicle")
     sensors = {k: v for k, v in values.items() if k in SensorConfig.__dataclass_fields__}
     assert SensorConfig.from_dict(sensors) == SensorConfig()  # the YAML restates its defaults
-    assert set(sim_vehicle_node.SPECS) == set(P.specs(sim_vehicle_node.SimVehicleSettings)) | set(
-        SensorConfig.__dataclass_fields__
-    )
+    assert set(sim_vehicle_node.SPECS) == set(
+        parameters.specs(sim_vehicle_node.SimVehicleSettings)
+    ) | set(SensorConfig.__dataclass_fields__)
 
 
 def test_config_specs_rules():
@@ -177,29 +191,29 @@ def test_config_specs_rules():
         inner: Inner = field(default_factory=Inner)
 
     d = {"name": "n", "gain": "g", "ids": "i", "inner.x": "x", "inner.table": "t"}
-    specs = P.config_specs(Outer, d)
+    specs = parameters.config_specs(Outer, d)
     assert {k: (v[0], v[1].kind) for k, v in specs.items() if k != "gain"} == {
-        "name": ("", P.STRING),
-        "ids": ((1, 2), P.INTEGER_ARRAY),
-        "inner.x": (1.0, P.DOUBLE),
-        "inner.table.A": (1.0, P.DOUBLE),
-        "inner.table.B": (2.0, P.DOUBLE),
+        "name": ("", parameters.STRING),
+        "ids": ((1, 2), parameters.INTEGER_ARRAY),
+        "inner.x": (1.0, parameters.DOUBLE),
+        "inner.table.A": (1.0, parameters.DOUBLE),
+        "inner.table.B": (2.0, parameters.DOUBLE),
     }
     assert math.isnan(specs["gain"][0]) and specs["gain"][1].optional
-    assert P.nest({"name": "", "gain": math.nan, "inner.table.A": 3.0}, specs) == {
+    assert parameters.nest({"name": "", "gain": math.nan, "inner.table.A": 3.0}, specs) == {
         "inner": {"table": {"A": 3.0}}
     }
     with pytest.raises(TypeError, match="'inner.x' has no description"):
-        P.config_specs(Outer, {k: v for k, v in d.items() if k != "inner.x"})
+        parameters.config_specs(Outer, {k: v for k, v in d.items() if k != "inner.x"})
     with pytest.raises(TypeError, match=r"descriptions of no generated parameter: \['extra'\]"):
-        P.config_specs(Outer, {**d, "extra": "e"})
+        parameters.config_specs(Outer, {**d, "extra": "e"})
 
     @dataclass(frozen=True)
     class Bad:
         m: dict = field(default_factory=dict)
 
     with pytest.raises(TypeError, match="no ROS parameter form"):
-        P.config_specs(Bad, {"m": "m"})
+        parameters.config_specs(Bad, {"m": "m"})
 
 
 def _free_udp_port():
@@ -252,8 +266,8 @@ def test_every_parameter_of_a_running_node_has_a_value(
         for k, v in vars(mod).items()
         if k.endswith("Node")
         and isinstance(v, type)
-        and issubclass(v, common.ShellNode)
-        and v is not common.ShellNode
+        and issubclass(v, shell.ShellNode)
+        and v is not shell.ShellNode
     )
     args = ["n", "--ros-args", "--params-file", os.path.join(CONFIG, yaml_file)]
     for k, v in node_inputs[node].items():
@@ -273,22 +287,22 @@ def test_every_parameter_of_a_running_node_has_a_value(
 
 @pytest.mark.parametrize("yaml_file, node, declared, cls", NODES, ids=IDS)
 def test_rclpy_declarations_are_generated_from_the_settings(yaml_file, node, declared, cls):
-    table = {name: (default, d) for name, default, d in common.spec_table(declared)}
+    table = {name: (default, d) for name, default, d in shell.spec_table(declared)}
     assert list(table) == list(declared)
     for name, (default, spec) in declared.items():
         got_default, d = table[name]
         assert (
-            d.type == common.Parameter.Type[spec.kind].value and d.description == spec.description
+            d.type == shell.Parameter.Type[spec.kind].value and d.description == spec.description
         )
-        if spec.kind == P.DOUBLE and spec.lo is not None:
+        if spec.kind == parameters.DOUBLE and spec.lo is not None:
             assert (d.floating_point_range[0].from_value, d.floating_point_range[0].to_value) == (
                 spec.lo,
                 spec.hi,
             )
-        elif spec.kind == P.DOUBLE:
+        elif spec.kind == parameters.DOUBLE:
             assert list(d.floating_point_range) == []  # checked by the config class
             assert spec.checked_by and "checked at start by" in d.additional_constraints
-        if spec.kind == P.DOUBLE:
+        if spec.kind == parameters.DOUBLE:
             assert got_default == default or math.isnan(got_default) and math.isnan(default)
         assert d.additional_constraints == spec.constraints()
         assert d.description  # every parameter is described
@@ -332,8 +346,8 @@ def test_the_node_tables_are_the_generated_ones():
         for n, _, d in lpv_controller_node.PARAMETERS
     ]
     want = [
-        (n, s.hi if s.kind == P.DOUBLE else None)
-        for n, (_, s) in P.specs(ControllerSettings).items()
+        (n, s.hi if s.kind == parameters.DOUBLE else None)
+        for n, (_, s) in parameters.specs(ControllerSettings).items()
     ]
     assert got == want
     names = {n for n, _ in got}
@@ -341,7 +355,7 @@ def test_the_node_tables_are_the_generated_ones():
 
 
 def test_array_constraints_are_described_and_enforced():
-    rl = dict((n, d) for n, _, d in common.settings_table(ControllerSettings))["rate_limit"]
+    rl = dict((n, d) for n, _, d in shell.settings_table(ControllerSettings))["rate_limit"]
     assert rl.additional_constraints == "each entry in (0, 1000]; length 0 or 4"
     with pytest.raises(ConfigError, match=r"parameter 'vertex_frd' needs 3 entries"):
         ExcitationSettings(signals_file="s.npz", vertex_frd=(1.0, 2.0))
@@ -352,8 +366,10 @@ def test_array_constraints_are_described_and_enforced():
 
 
 def test_coerce_rules():
-    spec = P.ParamSpec(P.DOUBLE, "x", 0.0, 1.0, lo_open=True)
-    assert P.coerce("x", 1, spec, "w") == 1.0 and isinstance(P.coerce("x", 1, spec, "w"), float)
+    spec = parameters.ParamSpec(parameters.DOUBLE, "x", 0.0, 1.0, lo_open=True)
+    assert parameters.coerce("x", 1, spec, "w") == 1.0 and isinstance(
+        parameters.coerce("x", 1, spec, "w"), float
+    )
     for bad, msg in (
         (0.0, "must be > 0"),
         (1.5, "must be <= 1"),
@@ -362,11 +378,11 @@ def test_coerce_rules():
         ("0.5", "must be a number"),
     ):
         with pytest.raises(ConfigError, match=msg):
-            P.coerce("x", bad, spec, "w")
-    arr = P.ParamSpec(P.DOUBLE_ARRAY, "a", -1.0, 1.0)
-    assert P.coerce("a", [0, 0.5], arr, "w") == (0.0, 0.5)
+            parameters.coerce("x", bad, spec, "w")
+    arr = parameters.ParamSpec(parameters.DOUBLE_ARRAY, "a", -1.0, 1.0)
+    assert parameters.coerce("a", [0, 0.5], arr, "w") == (0.0, 0.5)
     with pytest.raises(ConfigError, match="must be a list"):
-        P.coerce("a", "0.5", arr, "w")
+        parameters.coerce("a", "0.5", arr, "w")
 
 
 def test_yaml_parameters_reads_the_node_section(tmp_path):
@@ -375,9 +391,9 @@ def test_yaml_parameters_reads_the_node_section(tmp_path):
         "/**/other:\n  ros__parameters: {a: 1}\n/**/lpv_controller:\n"
         "  ros__parameters: {rate_hz: 100.0}\n"
     )
-    assert P.yaml_parameters(str(f), "lpv_controller") == {"rate_hz": 100.0}
+    assert parameters.yaml_parameters(str(f), "lpv_controller") == {"rate_hz": 100.0}
     with pytest.raises(ConfigError, match="no parameters for node 'excitation'"):
-        P.yaml_parameters(str(f), "excitation")
+        parameters.yaml_parameters(str(f), "excitation")
 
 
 def test_launch_files_leave_the_bridge_its_whole_hand_back_chain():
@@ -396,17 +412,23 @@ def test_launch_files_leave_the_bridge_its_whole_hand_back_chain():
     # HOLD then LAND, each: 4 DO_SET_MODE attempts of 0.5 s + 2 s for the HEARTBEAT; + 1 s
     assert mavlink_bridge_node.handback_bound_s(off) == 2 * (4 * 0.5 + 2.0) + 1.0
     assert (
-        mavlink_bridge_node.handback_bound_s(off) + common.TEARDOWN_MARGIN_S
-        <= common.LAUNCH_SIGTERM_TIMEOUT_S
+        mavlink_bridge_node.handback_bound_s(off) + shell.TEARDOWN_MARGIN_S
+        <= shell.LAUNCH_SIGTERM_TIMEOUT_S
     )
-    for fname in sorted(os.listdir(os.path.join(ROOT, "launch"))):
+    # every launch file builds its nodes through launch_util.node, whose one launch_ros
+    # Node call passes sigterm_timeout (its value: test_launch_util)
+    launch_files = [f for f in os.listdir(os.path.join(ROOT, "launch")) if f.endswith(".py")]
+    assert len(launch_files) == 4
+    for fname in sorted(launch_files):
         tree = ast.parse(open(os.path.join(ROOT, "launch", fname)).read())
-        calls = [
-            c
-            for c in ast.walk(tree)
-            if isinstance(c, ast.Call) and getattr(c.func, "id", "") == "Node"
-        ]
-        assert calls, fname
-        for c in calls:
-            kw = {k.arg: k.value for k in c.keywords}
-            assert getattr(kw.get("sigterm_timeout"), "id", None) == "SIGTERM_TIMEOUT", fname
+        called = {getattr(c.func, "id", "") for c in ast.walk(tree) if isinstance(c, ast.Call)}
+        assert "node" in called and "Node" not in called, fname
+    util = ast.parse(open(os.path.join(ROOT, "lpv_sysid", "nodes", "launch_util.py")).read())
+    calls = [
+        c
+        for c in ast.walk(util)
+        if isinstance(c, ast.Call) and getattr(c.func, "id", "") == "Node"
+    ]
+    assert len(calls) == 1
+    kw = {k.arg: k.value for k in calls[0].keywords}
+    assert getattr(kw["sigterm_timeout"].func, "id", None) == "sigterm_timeout"

@@ -1,4 +1,4 @@
-"""nodes/_common.ShellNode (the base of every node shell) through the rclpy stand-in."""
+"""nodes/shell.ShellNode (the base of every node shell) through the rclpy stand-in."""
 
 import logging
 
@@ -9,7 +9,7 @@ import rclpy._standin as standin
 from rclpy.parameter import Parameter
 
 from lpv_sysid.io import messages
-from lpv_sysid.nodes import _common as common
+from lpv_sysid.nodes import shell
 from lpv_sysid.nodes.data_logger_node import DataLoggerNode
 from lpv_sysid.nodes.excitation_node import ExcitationNode
 from lpv_sysid.nodes.lpv_controller_node import LpvControllerNode
@@ -17,13 +17,13 @@ from lpv_sysid.nodes.mavlink_bridge_node import MavlinkBridgeNode
 from lpv_sysid.nodes.sim_vehicle_node import SimVehicleNode
 
 TABLE = [
-    ("rate_hz", 50.0, common.double("a rate [Hz]", 1.0, 100.0)),
-    ("label", "x", common.typed(Parameter.Type.STRING, "a label")),
-    ("names", Parameter.Type.STRING_ARRAY, common.typed(Parameter.Type.STRING_ARRAY, "a list")),
+    ("rate_hz", 50.0, shell.double("a rate [Hz]", 1.0, 100.0)),
+    ("label", "x", shell.typed(Parameter.Type.STRING, "a label")),
+    ("names", Parameter.Type.STRING_ARRAY, shell.typed(Parameter.Type.STRING_ARRAY, "a list")),
 ]
 
 
-class _Probe(common.ShellNode):
+class _Probe(shell.ShellNode):
     def __init__(self, **kwargs):
         super().__init__("probe", TABLE, **kwargs)
 
@@ -43,7 +43,7 @@ def test_every_node_shell_derives_from_shellnode():
         DataLoggerNode,
         SimVehicleNode,
     ):
-        assert issubclass(cls, common.ShellNode)
+        assert issubclass(cls, shell.ShellNode)
 
 
 def test_namespace_parameters_and_clock():

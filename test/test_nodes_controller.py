@@ -19,7 +19,7 @@ from rclpy.qos import QoSReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from lpv_sysid.io import messages as M
+from lpv_sysid.io import messages
 from lpv_sysid.io.bag import read_bag
 from lpv_sysid.signals.store import save_npz
 
@@ -91,7 +91,7 @@ def graph(gains, signals2, tmp_path, controller_start=True, **ctrl):
 def statuses(msgs, name="/lpv_sysid/lpv_controller"):
     out = []
     for m in msgs:
-        _, st = M.status_from_diagnostic_array(m)
+        _, st = messages.status_from_diagnostic_array(m)
         out += [s for s in st if s.name == name]
     return out
 
@@ -181,10 +181,10 @@ def test_end_to_end_flow_and_tracking(gains, signals2, tmp_path):
     assert len(bag["/lpv_sysid/actuator_command"]) == sent
     assert len(bag["/lpv_sysid/state"]) == 1000 and len(bag["/lpv_sysid/excitation"]) == 400
     # the vehicle follows v_d under the LPV law: forward speed error over the last 2 s
-    v = np.array([M.state_from_odometry(m).v_body[0] for m in states[-500:]])
-    t_v = np.array([M.stamp_ns_of(m) for m in states[-500:]])
-    t_r = np.array([M.stamp_ns_of(m) for m in refs])
-    vd = np.interp(t_v, t_r, [M.reference_from_twist(m)[1][0] for m in refs])
+    v = np.array([messages.state_from_odometry(m).v_body[0] for m in states[-500:]])
+    t_v = np.array([messages.stamp_ns_of(m) for m in states[-500:]])
+    t_r = np.array([messages.stamp_ns_of(m) for m in refs])
+    vd = np.interp(t_v, t_r, [messages.reference_from_twist(m)[1][0] for m in refs])
     rms = lambda a: np.sqrt(np.mean(a**2))  # noqa: E731
     assert np.ptp(vd) > 0.5 and np.corrcoef(v, vd)[0, 1] > 0.9
     assert rms(v - vd) < 0.5 * rms(vd)  # far better than not tracking at all
@@ -206,7 +206,7 @@ def _abort_case(gains, signals2, tmp_path, action, **ctrl):
     assert ev is not None and errors and errors[0].values["reason"] == ev.reason
     assert errors[0].values["commanding"] == "false"
     # no command stamped after the abort; the vehicle falls back to the PX4-like hold
-    assert max(M.stamp_ns_of(c) for c in cmds) <= ev.t * 1e9
+    assert max(messages.stamp_ns_of(c) for c in cmds) <= ev.t * 1e9
     if g["sim"] in nodes:
         assert g["sim"].handed_back
     return ev
@@ -256,7 +256,9 @@ def test_abort_on_reference_step(gains, signals2, tmp_path):
     def big_reference(g, nodes):
         pub = g["probe"].create_publisher(TwistStamped, "/lpv_sysid/velocity_reference", 10)
         stamp = g["probe"].get_clock().now().nanoseconds + 5_000_000
-        pub.publish(M.twist_reference_msg(M.MsgFactory.rclpy(), stamp, [3.0, 0.0, 0.0]))
+        pub.publish(
+            messages.twist_reference_msg(messages.MsgFactory.rclpy(), stamp, [3.0, 0.0, 0.0])
+        )
 
     ev = _abort_case(gains, signals2, tmp_path, big_reference)
     assert ev.reason == "reference_envelope" and ev.detail.startswith("reference[0] changes at")
@@ -327,7 +329,7 @@ def _exc_outputs(probe):
 
 
 def _ue(msgs):
-    return np.array([M.excitation_from_joint_state(m)[1] for m in msgs])
+    return np.array([messages.excitation_from_joint_state(m)[1] for m in msgs])
 
 
 def _playing_excitation(signals2):
@@ -363,7 +365,7 @@ def test_controller_abort_fades_the_excitation_within_one_ramp(gains, signals2, 
     exc.clear()
     refs.clear()
     spin(nodes, 1.2)
-    ts = np.array([M.stamp_ns_of(m) * 1e-9 for m in exc])
+    ts = np.array([messages.stamp_ns_of(m) * 1e-9 for m in exc])
     ue = np.abs(_ue(exc)).max(axis=1)
     assert g["exc"].aborted and "lpv_controller" in g["exc"].abort_reason
     assert np.all(ue[ts > t_abort + 1.0 + 0.011] == 0.0)  # faded within the 1 s ramp (+1 tick)
@@ -391,9 +393,9 @@ def test_abort_status_of_a_watched_node_fades_the_excitation(
 
     exc, probe, out = _playing_excitation(signals2)
     pub = probe.create_publisher(DA, "/lpv_sysid/status", 10)
-    f = M.MsgFactory.rclpy()
-    st = M.diagnostic_status(f, level, f"/lpv_sysid/{sender}", "link lost", values)
-    pub.publish(M.diagnostic_array(f, standin.now_ns(), [st]))
+    f = messages.MsgFactory.rclpy()
+    st = messages.diagnostic_status(f, level, f"/lpv_sysid/{sender}", "link lost", values)
+    pub.publish(messages.diagnostic_array(f, standin.now_ns(), [st]))
     out.clear()
     spin([exc, probe], 1.2)
     assert exc.aborted == fades
@@ -460,25 +462,25 @@ def test_command_builder_equals_io_messages(kind):
     """The tick's actuator_command equals io.messages.actuator_command_msg field by field (both
     factories: rosbags for replay, rclpy for the node), and a stamp beyond builtin_interfaces/
     Time is refused by io.messages' own check."""
-    from lpv_sysid.nodes.controller_runtime import CommandBuilder
+    from lpv_sysid.nodes.controller_messages import CommandBuilder
 
-    f = M.MsgFactory.rosbags() if kind == "rosbags" else M.MsgFactory.rclpy()
+    f = messages.MsgFactory.rosbags() if kind == "rosbags" else messages.MsgFactory.rclpy()
     build = CommandBuilder(f)
     u = np.array([0.51, -0.012, 0.034, 1e-3])
     for stamp in (0, 1_704_067_205_004_000_000, 999_999_999, -1_500_000_000):
-        a, b = build(stamp, u), M.actuator_command_msg(f, stamp, u)
+        a, b = build(stamp, u), messages.actuator_command_msg(f, stamp, u)
         assert type(a) is type(b)
         assert (a.header.stamp.sec, a.header.stamp.nanosec, a.header.frame_id) == (
             b.header.stamp.sec,
             b.header.stamp.nanosec,
             b.header.frame_id,
         )
-        assert list(a.name) == list(b.name) == list(M.INPUT_NAMES)
+        assert list(a.name) == list(b.name) == list(messages.INPUT_NAMES)
         for field in ("position", "velocity", "effort"):
             assert type(getattr(a, field)) is type(getattr(b, field))
             assert list(getattr(a, field)) == list(getattr(b, field))
-        assert M.actuator_command_from_joint_state(a)[1].tolist() == u.tolist()
-    with pytest.raises(M.MessageError, match="int32"):
+        assert messages.actuator_command_from_joint_state(a)[1].tolist() == u.tolist()
+    with pytest.raises(messages.MessageError, match="int32"):
         build(2**31 * 10**9, u)
 
 

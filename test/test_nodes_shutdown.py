@@ -1,4 +1,4 @@
-"""Orderly shutdown of the node shells (nodes/_common.run) under SIGINT, as real rclpy does it.
+"""Orderly shutdown of the node shells (nodes/shell.run) under SIGINT, as real rclpy does it.
 
 Real rclpy shuts its context down inside its SIGINT handler, before ``destroy_node``, so
 publishing there raises ``RCLError: Failed to publish: publisher's context is invalid``
@@ -15,7 +15,7 @@ import rclpy._standin as standin
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy._params_file import RCLError
 
-from lpv_sysid.nodes import _common as common
+from lpv_sysid.nodes import shell
 
 
 @pytest.fixture(autouse=True)
@@ -44,7 +44,7 @@ def test_standin_default_sigint_handler_shuts_context_down():
     assert not ctx.ok()  # rclpy's handler ran first
 
 
-class _HandBack(common.ShellNode):
+class _HandBack(shell.ShellNode):
     """Sends SIGINT to its own process (twice, like a terminal Ctrl-C plus launch's
     forwarded SIGINT) and needs three more spins after begin_shutdown to 'confirm'."""
 
@@ -85,7 +85,7 @@ class _HandBack(common.ShellNode):
 def test_run_sigint_twice_hands_back_before_context_goes():
     _HandBack.instances.clear()
     previous = signal.getsignal(signal.SIGINT)
-    assert common.run(_HandBack) == 0
+    assert shell.run(_HandBack) == 0
     node = _HandBack.instances[0]
     assert node.began == 1 and node.published_in_shutdown == 1
     assert node.after >= 3  # kept spinning until confirmed
@@ -104,7 +104,7 @@ class _NeverDone(_HandBack):
 def test_run_bounded_when_shutdown_never_completes(caplog):
     _HandBack.instances.clear()
     with caplog.at_level(logging.ERROR):
-        assert common.run(_NeverDone) == 0
+        assert shell.run(_NeverDone) == 0
     node = _HandBack.instances[0]
     assert node.began == 1 and node.after > 0
     assert any("shutdown not complete after 0.2 s" in r.getMessage() for r in caplog.records)

@@ -127,13 +127,13 @@ def test_noisy_nonlinear_run_stays_bounded_and_tracks(lpv):
     nl = simulate_nonlinear(
         veh, linear_lpv_law(sched, R), sig, Q, [-BOX] * 3, [BOX] * 3, kappa=2.0, sink=sink
     )
-    assert nl.completed and np.all(np.isfinite(nl.x12))
+    assert nl.completed and np.all(np.isfinite(nl.controller_state))
     assert np.max(np.abs(nl.v - nl.v_d)) < 1.0
-    assert np.max(np.abs(nl.x12[:, :2])) < math.radians(30)
+    assert np.max(np.abs(nl.controller_state[:, :2])) < math.radians(30)
     np.testing.assert_allclose(nl.ue, 2.0 * np.array([sig.at(t)[2] for t in nl.t]))
     assert len(sink.samples) == nl.t.size and sink.statuses[-1][1] == "OK"
     block = regressor_correlation_block(
-        nl.t, nl.x12, quad.params.arm_length, "nonlinear", nl.extra["Omega"]
+        nl.t, nl.controller_state, quad.params.arm_length, "nonlinear", nl.extra["Omega"]
     )
     assert set(block["axes"]) == set("XYZLMN")
     C = np.array(block["axes"]["Z"]["corr"], dtype=float)
@@ -205,7 +205,7 @@ def test_full_run_writes_bag_summary_and_report(lpv, tmp_path):
     io/bag + io/messages with the values that were flown, and the report picks it all up."""
     import yaml
 
-    from lpv_sysid.io import messages as M
+    from lpv_sysid.io import messages
     from lpv_sysid.io.bag import read_bag
     from lpv_sysid.report.markdown import write_report
     from lpv_sysid.sim.phase2 import Phase2Config, Phase2Problem, run
@@ -264,15 +264,15 @@ def test_full_run_writes_bag_summary_and_report(lpv, tmp_path):
         "status",
     }
     assert len(names["excitation"]) == nl.t.size == 151  # 1.5 s at 100 Hz
-    _, ue = M.excitation_from_joint_state(names["excitation"][40][1])
+    _, ue = messages.excitation_from_joint_state(names["excitation"][40][1])
     np.testing.assert_allclose(ue, nl.ue[40] / 2.0, rtol=1e-12)  # normalised u_e on the wire
-    _, u = M.actuator_command_from_joint_state(names["actuator_command"][40][1])
+    _, u = messages.actuator_command_from_joint_state(names["actuator_command"][40][1])
     np.testing.assert_allclose(u, nl.u[40], rtol=1e-12)
-    _, vd, _ = M.reference_from_twist(names["velocity_reference"][100][1])
+    _, vd, _ = messages.reference_from_twist(names["velocity_reference"][100][1])
     np.testing.assert_allclose(vd, nl.v_d[100], atol=1e-12)  # FRD after the FLU round trip
-    st = M.state_from_odometry(names["state"][100][1])
+    st = messages.state_from_odometry(names["state"][100][1])
     assert np.max(np.abs(st.v_body - nl.v[100])) < 0.2  # measured vs true (noise)
-    _, statuses = M.status_from_diagnostic_array(names["status"][-1][1])
+    _, statuses = messages.status_from_diagnostic_array(names["status"][-1][1])
     assert statuses[0].message == "phase 2 excitation complete"
 
     report = write_report(tmp_path).read_text()
@@ -486,11 +486,11 @@ def test_bag_failure_keeps_results_and_names_the_problem(lpv, tmp_path, monkeypa
     import yaml
 
     from lpv_sysid.errors import BagError
-    from lpv_sysid.sim import phase2 as P
+    from lpv_sysid.sim import phase2
 
     quad, sched = lpv
     pm = sched.model
-    problem = P.Phase2Problem(
+    problem = phase2.Phase2Problem(
         vmin=pm.vmin,
         vmax=pm.vmax,
         K=sched.Kv,
@@ -517,7 +517,7 @@ def test_bag_failure_keeps_results_and_names_the_problem(lpv, tmp_path, monkeypa
 
     monkeypatch.setattr(BagWriter, "write_many", failing_write_many)
     with pytest.raises(BagError, match="No space left"):
-        P.run(problem, sig, P.Phase2Config(), quad.params, QUIET, tmp_path / "p2")
+        phase2.run(problem, sig, phase2.Phase2Config(), quad.params, QUIET, tmp_path / "p2")
     s = yaml.safe_load((tmp_path / "p2" / "summary.yaml").read_text())
     assert s["eq33"]["completed"] and "No space left" in s["nonlinear"]["skipped"]
     assert (tmp_path / "p2" / "eq33.npz").is_file()

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lpv_sysid.io import messages as M
+from lpv_sysid.io import messages
 from lpv_sysid.io.bag import BagWriter, jazzy_typestore, records_close
 from lpv_sysid.sim.phase2_bag import BAG_TOPICS, SAMPLE_TOPICS, Phase2Bag
 
@@ -36,7 +36,7 @@ def _flight(n: int, seed: int = 0):
 def _fly_into(bag, d, status_every: int = 40):
     """Feed ``bag`` like simulate_nonlinear; returns the expected (topic, stamp, message)
     sequence built by the io.messages builders one message at a time (the former writer)."""
-    f = M.MsgFactory.rosbags()
+    f = messages.MsgFactory.rosbags()
     want = []
     for k, t in enumerate(d["t"]):
         ns = int(round(float(t) * 1e9))
@@ -45,18 +45,20 @@ def _fly_into(bag, d, status_every: int = 40):
             t, x, (d["accel"][k], d["gyro"][k]), d["omega"][k], d["v_d"][k], d["ue"][k], d["u"][k]
         )
         want += [
-            ("state", ns, M.odometry_from_state(f, ns, x[0:3], x[3:6], x[6:9], x[9:12])),
-            ("rotor_speeds", ns, M.rotor_speeds_msg(f, ns, d["omega"][k])),
-            ("imu", ns, M.imu_msg(f, ns, d["accel"][k], d["gyro"][k], x[3:6])),
-            ("velocity_reference", ns, M.twist_reference_msg(f, ns, d["v_d"][k], 0.0)),
-            ("excitation", ns, M.excitation_msg(f, ns, d["ue"][k] / KAPPA)),
-            ("actuator_command", ns, M.actuator_command_msg(f, ns, d["u"][k])),
+            ("state", ns, messages.odometry_from_state(f, ns, x[0:3], x[3:6], x[6:9], x[9:12])),
+            ("rotor_speeds", ns, messages.rotor_speeds_msg(f, ns, d["omega"][k])),
+            ("imu", ns, messages.imu_msg(f, ns, d["accel"][k], d["gyro"][k], x[3:6])),
+            ("velocity_reference", ns, messages.twist_reference_msg(f, ns, d["v_d"][k], 0.0)),
+            ("excitation", ns, messages.excitation_msg(f, ns, d["ue"][k] / KAPPA)),
+            ("actuator_command", ns, messages.actuator_command_msg(f, ns, d["u"][k])),
         ]
         if k % status_every == 0:
             bag.status(t, "OK", "phase 2 excitation running", {"kappa": KAPPA})
             vals = {"phase": "phase2", "kappa": KAPPA}
-            st = M.diagnostic_status(f, "OK", "sim_phase2", "phase 2 excitation running", vals)
-            want.append(("status", ns, M.diagnostic_array(f, ns, [st])))
+            st = messages.diagnostic_status(
+                f, "OK", "sim_phase2", "phase 2 excitation running", vals
+            )
+            want.append(("status", ns, messages.diagnostic_array(f, ns, [st])))
     return want
 
 
@@ -89,13 +91,17 @@ def test_bulk_bag_equals_the_builders_message_by_message(tmp_path, monkeypatch, 
     assert bag.counts == {**{k: n for k in SAMPLE_TOPICS}, "status": 4}
     for name in BAG_TOPICS:
         got = [(s, raw) for topic, s, raw in rows if topic == f"{NS}/{name}"]
-        exp = [(s, bytes(ts.serialize_cdr(m, M.TYPES[name]))) for nm, s, m in want if nm == name]
+        exp = [
+            (s, bytes(ts.serialize_cdr(m, messages.TYPES[name])))
+            for nm, s, m in want
+            if nm == name
+        ]
         assert [s for s, _ in got] == [s for s, _ in exp]  # stamps, in order
         if name in ("state", "imu"):
             # the orientation quaternion comes from whole-array arithmetic (frames: q @ M.T):
             # equal to the one-message value within 2 ulp; every other field byte-identical
             assert all(
-                records_close(M.TYPES[name], g, e, rtol=0, atol=4.5e-16, typestore=ts)
+                records_close(messages.TYPES[name], g, e, rtol=0, atol=4.5e-16, typestore=ts)
                 for (_, g), (_, e) in zip(got, exp)
             )
             assert all(len(g) == len(e) for (_, g), (_, e) in zip(got, exp))
@@ -104,24 +110,24 @@ def test_bulk_bag_equals_the_builders_message_by_message(tmp_path, monkeypatch, 
     # decoded values against the arrays (independent of the builders' encoding)
     x = d["x16"]
     for k in (0, 61, n - 1):
-        st = M.state_from_odometry(msgs[f"{NS}/state"][k])
+        st = messages.state_from_odometry(msgs[f"{NS}/state"][k])
         assert st.stamp_ns == int(round(d["t"][k] * 1e9))
         np.testing.assert_allclose(st.pos_ned, x[k, 0:3], rtol=0, atol=1e-12)
         np.testing.assert_allclose(st.euler, x[k, 3:6], rtol=0, atol=1e-12)
         np.testing.assert_allclose(st.v_body, x[k, 6:9], rtol=0, atol=1e-12)
-        _, om = M.rotor_speeds_from_joint_state(msgs[f"{NS}/rotor_speeds"][k])
+        _, om = messages.rotor_speeds_from_joint_state(msgs[f"{NS}/rotor_speeds"][k])
         np.testing.assert_array_equal(om, d["omega"][k])
-        imu = M.imu_from_msg(msgs[f"{NS}/imu"][k])
+        imu = messages.imu_from_msg(msgs[f"{NS}/imu"][k])
         np.testing.assert_allclose(imu.specific_force, d["accel"][k], rtol=0, atol=1e-15)
         np.testing.assert_allclose(imu.euler, x[k, 3:6], rtol=0, atol=1e-12)
-        _, vd, r = M.reference_from_twist(msgs[f"{NS}/velocity_reference"][k])
+        _, vd, r = messages.reference_from_twist(msgs[f"{NS}/velocity_reference"][k])
         np.testing.assert_array_equal(vd, d["v_d"][k])
         assert r == 0.0
-        _, ue = M.excitation_from_joint_state(msgs[f"{NS}/excitation"][k])
+        _, ue = messages.excitation_from_joint_state(msgs[f"{NS}/excitation"][k])
         np.testing.assert_allclose(ue, d["ue"][k] / KAPPA, rtol=1e-15)
-        _, u = M.actuator_command_from_joint_state(msgs[f"{NS}/actuator_command"][k])
+        _, u = messages.actuator_command_from_joint_state(msgs[f"{NS}/actuator_command"][k])
         np.testing.assert_array_equal(u, d["u"][k])
-    _, statuses = M.status_from_diagnostic_array(msgs[f"{NS}/status"][1])
+    _, statuses = messages.status_from_diagnostic_array(msgs[f"{NS}/status"][1])
     assert statuses[0].values["kappa"] == str(KAPPA) and statuses[0].values["phase"] == "phase2"
 
 
@@ -130,7 +136,7 @@ def test_non_finite_sample_is_named_by_the_builders(tmp_path):
     earlier blocks stay in the (readable) bag."""
     d = _flight(30)
     d["accel"][25, 1] = np.nan
-    with pytest.raises(M.MessageError, match="imu.specific_force: non-finite"):
+    with pytest.raises(messages.MessageError, match="imu.specific_force: non-finite"):
         with Phase2Bag(tmp_path / "bag", kappa=KAPPA, flush_every=20) as bag:
             _fly_into(bag, d)
     rows, _ = _read_raw(tmp_path / "bag")

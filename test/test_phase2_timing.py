@@ -23,7 +23,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.io import messages as M
+from lpv_sysid.io import messages
 from lpv_sysid.nodes.controller_runtime import (
     TIMEOUT_PERIODS,
     ControllerRuntime,
@@ -89,7 +89,9 @@ def test_stamp_tolerance_covers_one_state_period(gains):
 
 # ------------------------------------------------------------ tick_source: state (runtime)
 def runtime(gains, **kw):
-    return ControllerRuntime(ControllerSettings(gains_file=gains, **kw), M.MsgFactory.rosbags())
+    return ControllerRuntime(
+        ControllerSettings(gains_file=gains, **kw), messages.MsgFactory.rosbags()
+    )
 
 
 def centre_inputs(rt):
@@ -98,18 +100,18 @@ def centre_inputs(rt):
     return x0[:8], np.linalg.solve(rt.mix, x0[8:])
 
 
-def by_hand(rt, x8, om, u_e):
+def by_hand(rt, rigid_body_state, om, u_e):
     """u = u0 + K (x - x0) + R u_e at v_d = 0, the box centre: every vertex weighs 1/8."""
     gs = rt.schedule
-    x = np.concatenate([x8, rt.mix @ om])
+    x = np.concatenate([rigid_body_state, rt.mix @ om])
     return gs.u0.mean(0) + gs.K.mean(0) @ (x - gs.x0.mean(0)) + gs.R @ u_e
 
 
 def test_state_ticks_compute_each_command_on_its_own_sample(gains):
     rt = runtime(gains, tick_source="state")
-    x8, om = centre_inputs(rt)
+    rigid_body_state, om = centre_inputs(rt)
     ue = np.array([0.01, -0.02, 0.005, 0.0])
-    f = M.MsgFactory.rosbags()
+    f = messages.MsgFactory.rosbags()
     t0 = 100.0
     rt.on_sample("rotor_speeds", t0, om, t0)
     rt.on_sample("velocity_reference", t0, np.zeros(4), t0)
@@ -118,16 +120,16 @@ def test_state_ticks_compute_each_command_on_its_own_sample(gains):
     rng = np.random.default_rng(3)
     for k in range(1, 6):
         t = t0 + 0.004 * k
-        xk = x8 + rng.normal(0.0, 0.01, 8)
-        msg = M.odometry_from_state(
+        xk = rigid_body_state + rng.normal(0.0, 0.01, 8)
+        msg = messages.odometry_from_state(
             f, round(t * 1e9), np.zeros(3), [xk[0], xk[1], 0.0], xk[2:5], xk[5:8]
         )
         # delivered 1 ms late: the command is the law at the sample's stamp, on the sample
         out = rt.on_input("state", msg, t + 0.001)
         assert [topic for topic, _ in out] == ["actuator_command"]
         cmd = out[0][1]
-        assert M.stamp_ns_of(cmd) == round(t * 1e9)
-        s = M.state_from_odometry(msg)
+        assert messages.stamp_ns_of(cmd) == round(t * 1e9)
+        s = messages.state_from_odometry(msg)
         x_sent = np.concatenate([s.euler[:2], s.v_body, s.omega])
         np.testing.assert_allclose(cmd.position, by_hand(rt, x_sent, om, ue), atol=1e-12)
         assert rt.on_input("state", msg, t + 0.002) == []  # the same sample again: nothing
@@ -137,9 +139,9 @@ def test_state_ticks_compute_each_command_on_its_own_sample(gains):
 
 def test_state_ticks_timer_still_aborts_a_silent_state_stream(gains):
     rt = runtime(gains, tick_source="state")
-    x8, om = centre_inputs(rt)
+    rigid_body_state, om = centre_inputs(rt)
     for topic, v in (
-        ("state", x8),
+        ("state", rigid_body_state),
         ("rotor_speeds", om),
         ("velocity_reference", np.zeros(4)),
         ("excitation", np.zeros(4)),
@@ -166,9 +168,9 @@ def test_start_waits_for_every_input_stream(gains):
     """Measured under real Jazzy: started the moment its service appeared, before discovery
     had matched the excitation node, the controller latched a stale abort 0.1 s later."""
     rt = runtime(gains)
-    x8, om = centre_inputs(rt)
+    rigid_body_state, om = centre_inputs(rt)
     samples = [
-        ("state", x8),
+        ("state", rigid_body_state),
         ("rotor_speeds", om),
         ("velocity_reference", np.zeros(4)),
         ("excitation", np.zeros(4)),
@@ -183,8 +185,8 @@ def test_start_waits_for_every_input_stream(gains):
 
 def test_timer_ticks_are_unchanged_by_state_samples(gains):
     rt = runtime(gains)  # tick_source: timer (default)
-    x8, om = centre_inputs(rt)
-    f = M.MsgFactory.rosbags()
+    rigid_body_state, om = centre_inputs(rt)
+    f = messages.MsgFactory.rosbags()
     for topic, v in (
         ("rotor_speeds", om),
         ("velocity_reference", np.zeros(4)),
@@ -192,12 +194,17 @@ def test_timer_ticks_are_unchanged_by_state_samples(gains):
     ):
         rt.on_sample(topic, 5.0, v, 5.0)
     rt.start(5.0)
-    msg = M.odometry_from_state(
-        f, 5_004_000_000, np.zeros(3), [x8[0], x8[1], 0.0], x8[2:5], x8[5:8]
+    msg = messages.odometry_from_state(
+        f,
+        5_004_000_000,
+        np.zeros(3),
+        [rigid_body_state[0], rigid_body_state[1], 0.0],
+        rigid_body_state[2:5],
+        rigid_body_state[5:8],
     )
     assert rt.on_input("state", msg, 5.004) == []
     ((topic, cmd),) = rt.on_timer(5.006)
-    assert topic == "actuator_command" and M.stamp_ns_of(cmd) == 5_006_000_000
+    assert topic == "actuator_command" and messages.stamp_ns_of(cmd) == 5_006_000_000
 
 
 # --------------------------------------------------------------------- reference_hold
@@ -267,19 +274,24 @@ class Answerer:
 
     def __init__(self, node, u, answer=True):
         self.node, self.u, self.answer = node, list(u), answer
-        self.f = M.MsgFactory.rclpy()
+        self.f = messages.MsgFactory.rclpy()
         self.states, self.clock = [], []
         be = QoSProfile(depth=1000, reliability=QoSReliabilityPolicy.BEST_EFFORT)
         self.pub = node.create_publisher(JointState, "/lpv_sysid/actuator_command", 10)
         node.create_subscription(Odometry, "/lpv_sysid/state", self.on_state, be)
         node.create_subscription(
-            ClockMsg, "/clock", lambda m: self.clock.append(M.stamp_ns_from_time(m.clock)), 1000
+            ClockMsg,
+            "/clock",
+            lambda m: self.clock.append(messages.stamp_ns_from_time(m.clock)),
+            1000,
         )
 
     def on_state(self, msg):
-        self.states.append(M.stamp_ns_of(msg))
+        self.states.append(messages.stamp_ns_of(msg))
         if self.answer:
-            self.pub.publish(M.actuator_command_msg(self.f, M.stamp_ns_of(msg), self.u))
+            self.pub.publish(
+                messages.actuator_command_msg(self.f, messages.stamp_ns_of(msg), self.u)
+            )
 
 
 def test_lockstep_sim_time_starts_at_zero_and_publishes_the_clock(fresh):
@@ -311,7 +323,7 @@ def test_lockstep_waits_for_the_command_of_each_state_sample(fresh):
     assert ctl.states[-1] == k_stuck * node.dt_ns  # the resent sample: same stamp
     # its command arrives: exactly that command is held over the next physics steps
     u_new = [node.u[0] + 0.01, 0.0, 0.0, 0.0]
-    ctl.pub.publish(M.actuator_command_msg(ctl.f, k_stuck * node.dt_ns, u_new))
+    ctl.pub.publish(messages.actuator_command_msg(ctl.f, k_stuck * node.dt_ns, u_new))
     ctl.u, ctl.answer = u_new, True
     standin.spin_for(ex, 0.1)
     assert node.k > k_stuck + node.d_state
@@ -341,17 +353,17 @@ def test_lockstep_waits_for_a_reference_on_sim_time(fresh):
 
     node = lockstep_vehicle(("lockstep_reference_lag_s", 0.03))
     exc = rclpy.create_node("excitation")
-    f = M.MsgFactory.rclpy()
+    f = messages.MsgFactory.rclpy()
     pub = exc.create_publisher(TwistStamped, "/lpv_sysid/velocity_reference", 10)
     sim_now = {"ns": 0}
     exc.create_subscription(
-        ClockMsg, "/clock", lambda m: sim_now.update(ns=M.stamp_ns_from_time(m.clock)), 10
+        ClockMsg, "/clock", lambda m: sim_now.update(ns=messages.stamp_ns_from_time(m.clock)), 10
     )
     sending = {"on": True}
 
     def tick():
         if sending["on"]:
-            pub.publish(M.twist_reference_msg(f, sim_now["ns"], [0.0, 0.0, 0.0], 0.0))
+            pub.publish(messages.twist_reference_msg(f, sim_now["ns"], [0.0, 0.0, 0.0], 0.0))
 
     exc.create_timer(0.01, tick)
     ex = standin.spin_nodes([node, exc], 0.3)

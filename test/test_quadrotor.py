@@ -229,8 +229,8 @@ def test_u_esc_clipped_and_rotor_limits():
 
 
 def test_state_conversions_round_trip():
-    x12 = Q.trim([1, 2, -1]).x0
-    assert np.allclose(reduced_state(full_state(x12, psi=0.4)), x12)
+    controller_state = Q.trim([1, 2, -1]).x0
+    assert np.allclose(reduced_state(full_state(controller_state, psi=0.4)), controller_state)
 
 
 def test_params_validation_names_the_field():

@@ -157,6 +157,23 @@ def test_identification_refuses_short_or_malformed_data():
         )
 
 
+def test_bag_without_rate_setpoints_names_the_option_not_a_cli_flag(tmp_path):
+    """The core names the missing topic and the option that records it (``record_rate_setpoints``
+    of phase 1), not a command-line flag."""
+    from lpv_sysid.errors import BagError
+    from lpv_sysid.io import bag as bg
+    from lpv_sysid.io import messages as m
+
+    f, t0 = m.MsgFactory.rosbags(), 1_700_000_000_000_000_000
+    with bg.BagWriter(tmp_path / "b") as b:
+        b.add_topic("/lpv_sysid/excitation", "sensor_msgs/msg/JointState")
+        for i in range(3):
+            b.write("/lpv_sysid/excitation", t0 + i, m.excitation_msg(f, t0 + i, np.zeros(4)))
+    with pytest.raises(BagError, match="'rate_setpoint'.*record_rate_setpoints") as exc:
+        rid.read_run(tmp_path / "b")
+    assert "--" not in str(exc.value)
+
+
 class _Codec:
     def set_attitude_target_encode(self, *a):
         return a

@@ -9,7 +9,7 @@ import yaml
 from lpv_test_gains import design_for, gains_dict, write_gains
 
 from lpv_sysid.cli.main import main
-from lpv_sysid.io import messages as M
+from lpv_sysid.io import messages
 from lpv_sysid.io.bag import read_bag
 from lpv_sysid.io.formats import GainSchedule
 from lpv_sysid.models.quadrotor import mixer
@@ -83,10 +83,10 @@ def test_replay_matches_independent_law(tmp_path):
 
     checked = 0
     for t, u in got[50::37]:
-        st = M.state_from_odometry(last_before("state", t))
-        _, om = M.rotor_speeds_from_joint_state(last_before("rotor_speeds", t))
-        _, vd, _ = M.reference_from_twist(last_before("velocity_reference", t))
-        _, ue = M.excitation_from_joint_state(last_before("excitation", t))
+        st = messages.state_from_odometry(last_before("state", t))
+        _, om = messages.rotor_speeds_from_joint_state(last_before("rotor_speeds", t))
+        _, vd, _ = messages.reference_from_twist(last_before("velocity_reference", t))
+        _, ue = messages.excitation_from_joint_state(last_before("excitation", t))
         x = np.concatenate([st.euler[:2], st.v_body, st.omega, mix @ om])
         s = (vd - gs.scheduling.min) / (gs.scheduling.max - gs.scheduling.min)
         w = np.array(
@@ -121,7 +121,7 @@ def test_replay_reports_abort_outside_box(tmp_path, capsys):
     errs = [
         (t, s)
         for t, m in data[f"{NS}/status"]
-        for s in M.status_from_diagnostic_array(m)[1]
+        for s in messages.status_from_diagnostic_array(m)[1]
         if s.level == 2
     ]
     t_abort = errs[0][0]
@@ -260,7 +260,7 @@ def test_replay_command_count_state_ticks(tmp_path):
     first_other = max(stamps[t][0] for t in INPUTS if t != "state")
     expected, last = [], None
     for ns, msg in data[f"{NS}/state"]:
-        h = M.stamp_ns_from_time(msg.header.stamp)
+        h = messages.stamp_ns_from_time(msg.header.stamp)
         if ns > first_other and (last is None or h > last):
             expected.append(h)
         last = h if last is None or h > last else last

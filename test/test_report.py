@@ -119,7 +119,7 @@ def _write_run(d: Path) -> None:
         "certificate": {"lmi": "seed 0 Lemma 1", "solver": "CLARABEL", "gamma_achieved": 0.9321},
     }
     (d / "gains.yaml").write_text(yaml.safe_dump(gains))
-    # phase 2 through the writer of sim/phase2.py (the real producer of these files)
+    # phase 2 through the writer of sim/phase2_outputs.py (the real producer of these files)
     tt = np.linspace(0, 3, 301)
     vd = np.column_stack([np.sin(tt), np.cos(tt), 0 * tt])
     x12 = np.zeros((tt.size, 12))
@@ -273,6 +273,22 @@ def test_malformed_input_is_named_and_strict_cli_fails(tmp_path, capsys):
     assert cli_main(["report", "--run", str(tmp_path / "nope")]) == 2
     with pytest.raises(ConfigError, match=r"\.md"):
         write_report(tmp_path, tmp_path / "report.txt")
+
+
+def test_core_names_the_argument_and_the_cli_the_flag(tmp_path, capsys):
+    """The report core names its argument (``run_dir``, ``out_path``), not a command-line
+    flag; ``lpv-sysid report`` appends the flag that sets it."""
+    with pytest.raises(ConfigError, match=r"^run_dir: .*nope is not a directory$"):
+        load_run(tmp_path / "nope")
+    with pytest.raises(ConfigError, match=r"^out_path: .*report\.txt must end in \.md$"):
+        write_report(tmp_path, tmp_path / "report.txt")
+    (tmp_path / "plain").write_text("")
+    with pytest.raises(ConfigError, match=r"^out_path: cannot create .*plain"):
+        write_report(tmp_path, tmp_path / "plain" / "r.md")
+    assert cli_main(["report", "--run", str(tmp_path / "nope")]) == 2
+    assert "nope is not a directory [--run]" in capsys.readouterr().err
+    assert cli_main(["report", "--run", str(tmp_path), "--out", str(tmp_path / "r.txt")]) == 2
+    assert "r.txt must end in .md [--out]" in capsys.readouterr().err
 
 
 def test_cli_prints_path(tmp_path, capsys):

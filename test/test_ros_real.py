@@ -15,7 +15,7 @@ then forwards a second SIGINT to every node) -- the bridge's hand-back confirmed
 package's own simulated PX4 (``lpv-sysid sim-vehicle``), and the recording readable by
 rosbags' AnyReader with ``experiment.yaml`` closed.
 
-Issue 11, measured under Jazzy before the orderly shutdown of nodes/_common.run: Ctrl-C
+Issue 11, measured under Jazzy before the orderly shutdown of nodes/shell.run: Ctrl-C
 of a launch killed the bridge (``RCLError: Failed to publish: publisher's context is
 invalid`` in destroy_node, exit 1, hand-back unconfirmed), and a process-group SIGINT made
 every node exit -2 with ``KeyboardInterrupt`` inside destroy_node (the logger's bag without
@@ -328,7 +328,7 @@ HANDBACK_DONE = re.compile(r"hand-back confirmed: vehicle in ([A-Z]+)")
 
 
 def ready(node: str) -> str:
-    """The log line of nodes/_common.run once ``node`` is constructed."""
+    """The log line of nodes/shell.run once ``node`` is constructed."""
     return f"[lpv_sysid.{node}]: ready"
 
 

@@ -12,10 +12,10 @@ import pytest
 
 from lpv_sysid.control.baseline import BaselineGains
 from lpv_sysid.io import bag as bg
-from lpv_sysid.io import messages as M
+from lpv_sysid.io import messages
 from lpv_sysid.models.quadrotor import Quadrotor, QuadrotorParams
 from lpv_sysid.sim import lpv_closed_loop as cl
-from lpv_sysid.sim import phase1
+from lpv_sysid.sim import phase1, phase1_bag
 from lpv_sysid.sim.vehicle import SensorConfig, SimVehicle
 
 
@@ -169,7 +169,7 @@ def test_specialised_hot_path_drops_the_zero_terms_and_keeps_the_bits():
     set whose zeros are elsewhere gets its own code (the cache keys on the values)."""
     import dis
 
-    from lpv_sysid.models import quadrotor as Q
+    from lpv_sysid.models import quadrotor_hot_path
 
     def n_ops(fn):
         return sum(
@@ -185,7 +185,7 @@ def test_specialised_hot_path_drops_the_zero_terms_and_keeps_the_bits():
     ):
         q = Quadrotor(params)
         ns: dict = {}
-        exec(compile(Q._HOT_PATH_SOURCE, "<as written>", "exec"), ns)
+        exec(compile(quadrotor_hot_path._HOT_PATH_SOURCE, "<as written>", "exec"), ns)
         generic = ns["_factory"](**q.hot_path_constants)
         assert n_ops(q.rk4_step) <= 0.9 * n_ops(generic[3])
         for x, u in random_points(rng, 300):
@@ -260,11 +260,11 @@ def short_run():
 def test_bulk_phase1_bag_has_the_builders_messages(tmp_path, short_run):
     rec = short_run
     phase1.write_run_bag(rec, tmp_path / "bulk")
-    f = M.MsgFactory.rosbags()
+    f = messages.MsgFactory.rosbags()
     with bg.BagWriter(tmp_path / "ref") as w:
         for name in phase1.BAG_TOPICS:
-            w.add_topic(f"/lpv_sysid/{name}", M.TYPES[name])
-        for stamp, name, msg in phase1._message_items(rec, f):
+            w.add_topic(f"/lpv_sysid/{name}", messages.TYPES[name])
+        for stamp, name, msg in phase1_bag._message_items(rec, f):
             w.write(f"/lpv_sysid/{name}", stamp, msg)
     a, b = bg._Source(), bg._Source()
     bg._read_fast(tmp_path / "bulk", None, a)
@@ -282,7 +282,7 @@ def test_bulk_phase1_bag_has_the_builders_messages(tmp_path, short_run):
 def test_bulk_phase1_bag_leaves_bad_samples_to_the_builders(tmp_path, short_run):
     rec = replace(short_run, state_meas=short_run.state_meas.copy())
     rec.state_meas[5, 7] = np.nan
-    with pytest.raises(M.MessageError, match="state.v_body"):
+    with pytest.raises(messages.MessageError, match="state.v_body"):
         phase1.write_run_bag(rec, tmp_path / "bad")
 
 

@@ -14,16 +14,19 @@ signing honoured, all-interface URLs warned about.
 
 from __future__ import annotations
 
+import ast
 import logging
 import math
 import os
+import re
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from lpv_sysid.errors import ConfigError
+from lpv_sysid.errors import ConfigError, LpvSysidError
 from lpv_sysid.mavlink import px4
 from lpv_sysid.mavlink.bridge import BridgeConfig, BridgeCore
 from lpv_sysid.mavlink.link import LinkConfig, MavlinkLink, free_udp_port
@@ -642,7 +645,7 @@ def test_cli_sim_vehicle_binds_loopback_and_reports_it():
 )
 def test_all_interface_urls_are_warned_about(caplog, url, warns):
     link = MavlinkLink(LinkConfig(url=url.format(p=free_udp_port())))
-    with caplog.at_level(logging.WARNING, logger="lpv_sysid.mavlink.link"):
+    with caplog.at_level(logging.WARNING, logger="lpv_sysid.mavlink.link_url"):
         link.open(0.0)
     link.close()
     hit = [r for r in caplog.records if "ALL network interfaces" in r.getMessage()]
@@ -734,3 +737,60 @@ def test_cli_config_file_and_flags(tmp_path):
     assert cfg.params == {"COM_OBL_RC_ACT": 5, "COM_OF_LOSS_T": 0.5}  # flags add to the file
     with pytest.raises(ConfigError, match="COM_OBL_RC_ACT"):
         cli.build_config(p.parse_args(["--param", "COM_OBL_RC_ACT=5.5"]))
+
+
+#: a command-line flag inside a string (``--bind``), not ``udp://`` or an en dash
+CLI_FLAG = re.compile(r"(?<![\w-])--[a-z][a-z0-9-]+")
+MAVLINK_CORES = sorted(
+    p
+    for pattern in ("sim_vehicle*.py", "link*.py")
+    for p in (Path(ROOT) / "lpv_sysid" / "mavlink").glob(pattern)
+)
+
+
+def test_vehicle_and_link_errors_name_no_command_line_flag():
+    """Cores name the configuration field; the sim-vehicle command maps it to its flag."""
+    raised = {
+        (path.name, c.value)
+        for path in MAVLINK_CORES
+        for node in ast.walk(ast.parse(path.read_text()))
+        if isinstance(node, ast.Raise) and node.exc is not None
+        for c in ast.walk(node.exc)
+        if isinstance(c, ast.Constant) and isinstance(c.value, str)
+    }
+    # the scan sees the wording of the no-route error (it named --bind before)
+    assert any("HOST[:PORT]" in text for _, text in raised)
+    assert not [(name, text) for name, text in raised if CLI_FLAG.search(text)]
+
+
+def test_unroutable_destination_names_the_bind_field_and_the_cli_its_flag(tmp_path):
+    import argparse
+
+    from lpv_sysid.cli import sim_vehicle as cli
+
+    # a UDP connect() to the broadcast address without SO_BROADCAST is refused locally
+    # (EACCES): no route to report, and not a datagram leaves the machine
+    url = "udpout:255.255.255.255:14540"
+    veh = SimVehicle(SimVehicleConfig(url=url))
+    with pytest.raises(LpvSysidError, match=r"no local interface routes to") as ei:
+        veh.open()
+    assert "in the bind field (HOST[:PORT])" in str(ei.value) and "--" not in str(ei.value)
+    veh.close()
+    p = argparse.ArgumentParser()
+    cli.add_arguments(p)
+    with pytest.raises(LpvSysidError, match=r"bind field \(HOST\[:PORT\]\) \[--bind\]$"):
+        cli.run(p.parse_args(["--connect", url, "--duration", "0.1"]))
+    # a bad value from the flag names the flag, the same value from a file does not
+    with pytest.raises(ConfigError, match=r"bind .*notaport.* \[--bind\]$"):
+        cli.build_config(p.parse_args(["--bind", "127.0.0.1:notaport"]))
+    f = tmp_path / "veh.yaml"
+    f.write_text('bind: "127.0.0.1:notaport"\n')
+    with pytest.raises(ConfigError, match="notaport") as ei:
+        cli.build_config(p.parse_args(["--config", str(f)]))
+    assert "--bind" not in str(ei.value)
+    assert cli.with_flag("sim vehicle physics_hz must be in [50, 1000] Hz, got 1") == (
+        "sim vehicle physics_hz must be in [50, 1000] Hz, got 1 [--physics-hz]"
+    )
+    assert cli.with_flag("sim vehicle seed must be a non-negative integer") == (
+        "sim vehicle seed must be a non-negative integer"  # no flag sets seed
+    )

@@ -13,7 +13,7 @@ state and ``rate_hz`` 250), ``state`` steps it on each new state sample at its s
 command per state sample) while the timer only judges staleness. The runtime is started
 at the first input message, as with ``auto_start``. The
 parameter file goes through the node's own declaration and validation
-(:class:`~lpv_sysid.nodes.controller_runtime.ControllerSettings`: the same types, ranges and
+(:class:`~lpv_sysid.nodes.controller_settings.ControllerSettings`: the same types, ranges and
 cross-field rules, so a value the node would refuse is refused here too), and the gains
 through the same start-up checks (certificate hash, closed-loop stability, design envelope).
 Use it to check a gains file against a real flight log before flying: exit status 1 when
@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from lpv_sysid.errors import BagError, ConfigError
+from lpv_sysid.io.messages import TOPIC_NAMESPACE
 
 COMMAND = "replay"
 HELP = "replay a bag through a node core (lpv_controller) and write its outputs as a bag"
@@ -49,7 +50,7 @@ def add_arguments(parser) -> None:
     )
     parser.add_argument("--out", required=True, help="output bag directory (must not exist)")
     parser.add_argument("--gains", default=None, help="gains.yaml (overrides gains_file)")
-    parser.add_argument("--namespace", default="/lpv_sysid", help="topic namespace in the bag")
+    parser.add_argument("--namespace", default=TOPIC_NAMESPACE, help="topic namespace in the bag")
     parser.add_argument("--storage", default="mcap", choices=("mcap", "sqlite3"))
     parser.add_argument(
         "--ticks",
@@ -103,7 +104,7 @@ def parsed_stream(topic: str, rel: str, msgs: list) -> list:
     the raw message when the batch holds a malformed one (the runtime then sees it exactly
     as the node would, and aborts at that message)."""
     from lpv_sysid.io.messages import MessageError
-    from lpv_sysid.nodes.controller_runtime import parse_inputs
+    from lpv_sysid.nodes.controller_messages import parse_inputs
 
     try:
         t, values = parse_inputs(rel, [m for _, m in msgs])
@@ -116,18 +117,16 @@ def replay_controller(
     bag: str,
     params: dict,
     out: str,
-    namespace: str = "/lpv_sysid",
+    namespace: str = TOPIC_NAMESPACE,
     storage: str = "mcap",
     ticks: str = "auto",
 ) -> dict:
     """Run :class:`ControllerRuntime` over the bag; returns a summary dict."""
-    from lpv_sysid.io import messages as M
     from lpv_sysid.io.bag import BagWriter
-    from lpv_sysid.nodes.controller_runtime import (
-        INPUT_TOPICS,
-        ControllerRuntime,
-        ControllerSettings,
-    )
+    from lpv_sysid.io.messages import TYPES, MsgFactory
+    from lpv_sysid.nodes.controller_messages import INPUT_TOPICS
+    from lpv_sysid.nodes.controller_runtime import ControllerRuntime
+    from lpv_sysid.nodes.controller_settings import ControllerSettings
 
     settings = ControllerSettings.from_dict(params)
     ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
@@ -147,7 +146,7 @@ def replay_controller(
     )
     if not inputs:
         raise BagError(f"bag {bag}: the input topics hold no messages")
-    rt = ControllerRuntime(settings, M.MsgFactory.rosbags(), f"{ns}/lpv_controller")
+    rt = ControllerRuntime(settings, MsgFactory.rosbags(), f"{ns}/lpv_controller")
     log = {"info": LOG.info, "warn": LOG.warning, "error": LOG.error}
 
     def drain():
@@ -159,8 +158,8 @@ def replay_controller(
     t0 = inputs[0][0]
     rt.start(t0 * 1e-9)
     outputs = {
-        f"{ns}/actuator_command": M.TYPES["actuator_command"],
-        f"{ns}/status": M.TYPES["status"],
+        f"{ns}/actuator_command": TYPES["actuator_command"],
+        f"{ns}/status": TYPES["status"],
     }
     n_out = {t: 0 for t in outputs}
     if os.path.exists(out):

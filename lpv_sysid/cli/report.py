@@ -13,6 +13,17 @@ COMMAND = "report"
 HELP = "write a Markdown report with figures from the artefacts of a run directory"
 
 
+#: argument of the report core -> the command-line flag that sets it (the core's errors
+#: name the argument, the CLI's the flag)
+FLAG_OF_ARGUMENT = {"run_dir": "--run", "out_path": "--out"}
+
+
+def with_flag(message: str) -> str:
+    """A report core's error message with the flag of the argument it names appended."""
+    name = message.split(":", 1)[0]
+    return f"{message} [{FLAG_OF_ARGUMENT[name]}]" if name in FLAG_OF_ARGUMENT else message
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--run", required=True, type=Path, help="run directory (e.g. demo_out)")
     parser.add_argument(
@@ -34,6 +45,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from lpv_sysid.errors import ConfigError
+
+    try:
+        path = _report(args)
+    except ConfigError as exc:
+        raise ConfigError(with_flag(str(exc))) from None
+    print(path)
+    return 0
+
+
+def _report(args: argparse.Namespace) -> Path:
+    from lpv_sysid.errors import ConfigError
     from lpv_sysid.report.data import load_run
     from lpv_sysid.report.markdown import write_report
 
@@ -47,6 +69,4 @@ def run(args: argparse.Namespace) -> int:
             data_log.setLevel(level)
         if problems:
             raise ConfigError("; ".join(problems.values()))
-    path = write_report(args.run, args.out, verify=not args.no_verify)
-    print(path)
-    return 0
+    return write_report(args.run, args.out, verify=not args.no_verify)

@@ -7,20 +7,47 @@ that destination (loopback by default), never to all interfaces; ``--bind HOST[:
 chooses another. ``--config config/sim_vehicle_px4.yaml`` loads every option of
 :class:`lpv_sysid.mavlink.sim_vehicle.SimVehicleConfig` (flags given on the command line
 win). It runs in real time until ``--duration`` elapses or Ctrl-C, then prints the
-mode/arming history it went through.
+mode/arming history it went through. The vehicle's errors name the configuration field
+(``bind``); this command appends the flag that sets it (``[--bind]``, :data:`FLAG_OF_FIELD`).
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import re
+from typing import Iterable
 
-from lpv_sysid.errors import ConfigError
+from lpv_sysid.errors import ConfigError, LpvSysidError
 
 COMMAND = "sim-vehicle"
 HELP = "run a simulated PX4-like quadrotor speaking MAVLink 2 (UDP) for bridge/MAVSDK tests"
 
 log = logging.getLogger(__name__)
+
+#: SimVehicleConfig fields that a command-line flag sets (the vehicle's errors name the field)
+FLAG_OF_FIELD = {
+    "url": "--udp/--connect",
+    "bind": "--bind",
+    "initial_mode": "--mode",
+    "system_id": "--system-id",
+    "physics_hz": "--physics-hz",
+    "signing_key_file": "--signing-key",
+    "allow_unsigned": "--allow-unsigned",
+    "rc_present": "--rc",
+    "esc_telemetry": "--no-esc-telemetry",
+    "actuator_output_scale": "--actuator-output-scale",
+    "sensor_noise": "--noise",
+}
+
+
+def with_flag(message: str, fields: Iterable[str] = tuple(FLAG_OF_FIELD)) -> str:
+    """``message`` with the flag of the first of ``fields`` (SimVehicleConfig field names) it
+    names appended: ``"... in the bind field (HOST[:PORT])"`` -> ``"... [--bind]"``."""
+    for name in fields:
+        if re.search(rf"(?<![\w.]){re.escape(name)}(?!\w)", message, re.IGNORECASE):
+            return f"{message} [{FLAG_OF_FIELD[name]}]"
+    return message
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -158,7 +185,10 @@ def build_config(args: argparse.Namespace):
         raise ConfigError("--system-id must be 1..255")
     d = {k: getattr(base, k) for k in base.__dataclass_fields__}
     d.update(kw)
-    return SimVehicleConfig.from_dict(d)
+    try:
+        return SimVehicleConfig.from_dict(d)
+    except ConfigError as exc:  # name the flag only for a value that came from one
+        raise ConfigError(with_flag(str(exc), [k for k in FLAG_OF_FIELD if k in kw])) from None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -170,7 +200,10 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--speed must be in (0, 100]")
     cfg = build_config(args)
     veh = SimVehicle(cfg)
-    veh.open()
+    try:
+        veh.open()
+    except LpvSysidError as exc:  # e.g. no route to the destination: choose the bind address
+        raise type(exc)(with_flag(str(exc), ["bind"])) from None
     local = f"{veh.local_address[0]}:{veh.local_address[1]}" if veh.local_address else "n/a"
     print(
         f"sim-vehicle: PX4-like quadrotor (system {cfg.system_id}, autopilot PX4 v1.16 emulation) "

@@ -108,6 +108,15 @@ def fourier_smooth_differentiate(
     Uses ``numpy.fft`` on the odd extension of the end-point-detrended record (a DST-I in
     disguise; scipy.fft.dst would do the same, rfft keeps the derivative a one-liner).
     """
+    smooth, deriv = _fourier(x, dt, f_cut, taper, True)
+    assert deriv is not None
+    return smooth, deriv
+
+
+def _fourier(
+    x: np.ndarray, dt: float, f_cut: float, taper: float, derivative: bool
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """:func:`fourier_smooth_differentiate`; the derivative only when ``derivative``."""
     xs, squeeze = _as_2d(x, "x")
     n = xs.shape[0]
     if n < 8:
@@ -125,9 +134,11 @@ def fourier_smooth_differentiate(
     f = np.fft.rfftfreq(m, dt)
     lp = fourier_gain(f, f_cut, taper)[:, None]
     smooth = np.fft.irfft(spec * lp, n=m, axis=0)[:n] + trend
-    deriv = np.fft.irfft(spec * lp * (2j * np.pi * f)[:, None], n=m, axis=0)[:n] + slope
+    deriv = None
+    if derivative:
+        deriv = np.fft.irfft(spec * lp * (2j * np.pi * f)[:, None], n=m, axis=0)[:n] + slope
     if squeeze:
-        return smooth[:, 0], deriv[:, 0]
+        return smooth[:, 0], None if deriv is None else deriv[:, 0]
     return smooth, deriv
 
 
@@ -207,5 +218,33 @@ def smooth_and_differentiate(
 
 
 def smooth(x: np.ndarray, dt: float, config: DerivativeConfig = DerivativeConfig()) -> np.ndarray:
-    """The smoothing half of :func:`smooth_and_differentiate` (for inputs/regressors)."""
-    return smooth_and_differentiate(x, dt, config)[0]
+    """The smoothing half of :func:`smooth_and_differentiate` (for inputs/regressors): the same
+    values, without computing the derivative."""
+    if config.method == "fourier":
+        return _fourier(x, dt, config.f_cut, config.taper, False)[0]
+    if config.method == "savgol":
+        xs, squeeze = _as_2d(x, "x")
+        w = _savgol_window(config.window_s, dt, config.polyorder, xs.shape[0])
+        smooth = savgol_filter(xs, w, config.polyorder, deriv=0, axis=0, mode="interp")
+        return smooth[:, 0] if squeeze else smooth
+    raise ConfigError(f"unknown derivative method {config.method!r}")
+
+
+def smooth_columns(
+    x: np.ndarray,
+    dt: float,
+    config: DerivativeConfig = DerivativeConfig(),
+    derivative: bool = False,
+) -> np.ndarray:
+    """The smoothed (``derivative``: differentiated) columns of ``x`` (N, n), each exactly as a
+    call on that column alone gives it: one call for ``fourier`` (an FFT per column), column by
+    column for ``savgol`` (its edge fit solves all columns together, which differs from one
+    column in the last bits)."""
+    xs, _ = _as_2d(x, "x")
+    if config.method == "savgol":
+        k = 1 if derivative else 0
+        cols = [smooth_and_differentiate(xs[:, i], dt, config)[k] for i in range(xs.shape[1])]
+        return np.stack(cols, axis=1)
+    if derivative:
+        return smooth_and_differentiate(xs, dt, config)[1]
+    return smooth(xs, dt, config)

@@ -94,9 +94,8 @@ def read_run(path: str | Path, cfg: RateIdConfig = RateIdConfig()) -> RateRun:
     rs_t = [t for t in topics if t.endswith("/rate_setpoint")]
     if not st_t or not rs_t:
         raise BagError(
-            f"{path}: needs topics 'state' and 'rate_setpoint' (fly phase1 "
-            "--record-rate-setpoints), "
-            f"has {sorted(topics)}"
+            f"{path}: needs topics 'state' and 'rate_setpoint' (phase 1 flown with "
+            f"record_rate_setpoints: PX4's thrust and body-rate setpoints), has {sorted(topics)}"
         )
     data = iobag.read_bag(str(path), topics=[st_t[0], rs_t[0]])
     states = [messages.state_from_odometry(m) for _, m in data[st_t[0]]]

@@ -17,9 +17,9 @@ from typing import Callable, Mapping, Protocol, Sequence
 import numpy as np
 
 from lpv_sysid.io import frames
+from lpv_sysid.io.messages.joint_state import JOINT_STATE_FIELDS
+from lpv_sysid.io.messages.state import ODOM_LEAVES, state_arrays
 from lpv_sysid.io.messages import (
-    _JS_FIELDS,
-    _ODOM_LEAVES,
     BASE_FRAME,
     EXCITATION_NAMES,
     INPUT_NAMES,
@@ -28,7 +28,6 @@ from lpv_sysid.io.messages import (
     ROTOR_NAMES,
     MessageError,
     StateArrays,
-    _state_arrays,
 )
 
 __all__ = [
@@ -119,7 +118,7 @@ def states_from_odometry_columns(
     bad = _FirstBad()
     _check_frames(bad, cols, "header.frame_id", frame_id, "state.header")
     _check_frames(bad, cols, "child_frame_id", child_frame_id, "state.child_frame_id")
-    raw = np.column_stack([np.asarray(cols.fields[k], dtype=float) for k in _ODOM_LEAVES])
+    raw = np.column_stack([np.asarray(cols.fields[k], dtype=float) for k in ODOM_LEAVES])
     _check_finite(bad, raw[:, 0:3], "state.pose.pose.position")
     _check_finite(bad, raw[:, 3:7], "state.pose.pose.orientation")
     norm = np.linalg.norm(raw[:, 3:7], axis=1)
@@ -133,7 +132,7 @@ def states_from_odometry_columns(
     _check_finite(bad, raw[:, 10:13], "state.twist.twist.angular")
     ns = _column_stamps(bad, cols, "state")
     bad.raise_if_any()
-    return _state_arrays(ns, raw)
+    return state_arrays(ns, raw)
 
 
 def channels_from_joint_state_columns(
@@ -141,8 +140,10 @@ def channels_from_joint_state_columns(
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`channels_from_joint_states` of ``sensor_msgs/JointState`` columns:
     ``(t (N,), values (N, len(names)))``; the channel order may differ between messages."""
-    if field not in _JS_FIELDS:
-        raise MessageError(f"joint_state: field must be one of {_JS_FIELDS}, got {field!r}")
+    if field not in JOINT_STATE_FIELDS:
+        raise MessageError(
+            f"joint_state: field must be one of {JOINT_STATE_FIELDS}, got {field!r}"
+        )
     values = np.asarray(cols.fields[field], dtype=float)
     col_names = cols.strings["name"]
     n = col_names.size

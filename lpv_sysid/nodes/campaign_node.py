@@ -43,7 +43,7 @@ from std_srvs.srv import Trigger
 from lpv_sysid.control import campaign
 from lpv_sysid.errors import LpvSysidError
 from lpv_sysid.io import messages
-from lpv_sysid.nodes import _common as common
+from lpv_sysid.nodes import shell
 
 NODE_NAME = "campaign"
 STRING = Parameter.Type.STRING
@@ -52,22 +52,22 @@ PARAMETERS = [
     (
         "campaign_file",
         "campaign.yaml",
-        common.typed(STRING, "config/campaign.yaml (campaign, bridge_config, signals_config)"),
+        shell.typed(STRING, "config/campaign.yaml (campaign, bridge_config, signals_config)"),
     ),
     (
         "signals_file",
         "",
-        common.typed(STRING, "phase-1 signals.npz (empty: designed from signals_config)"),
+        shell.typed(STRING, "phase-1 signals.npz (empty: designed from signals_config)"),
     ),
     (
         "out_dir",
         "",
-        common.typed(STRING, "directory for one rosbag2 per run (empty: no per-run bags)"),
+        shell.typed(STRING, "directory for one rosbag2 per run (empty: no per-run bags)"),
     ),
     (
         "bridge_node",
         "mavlink_bridge",
-        common.typed(
+        shell.typed(
             STRING,
             "name of the bridge node in this namespace (its start/abort services and status)",
         ),
@@ -75,15 +75,15 @@ PARAMETERS = [
     (
         "rate_hz",
         100.0,
-        common.double(
+        shell.double(
             "campaign step rate [Hz] (references go out at campaign.rate_hz)", 10.0, 1000.0
         ),
     ),
-    ("status_rate_hz", 2.0, common.double("status publication rate [Hz]", 0.1, 100.0)),
+    ("status_rate_hz", 2.0, shell.double("status publication rate [Hz]", 0.1, 100.0)),
     (
         "auto_start",
         False,
-        common.typed(Parameter.Type.BOOL, "start the campaign without the service"),
+        shell.typed(Parameter.Type.BOOL, "start the campaign without the service"),
     ),
 ]
 
@@ -111,7 +111,7 @@ def vehicle_status(values: dict) -> campaign.VehicleStatus:
     )
 
 
-class CampaignNode(common.ShellNode):
+class CampaignNode(shell.ShellNode):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, PARAMETERS, **kwargs)
         from lpv_sysid.cli.fly import FlyConfig, bridge_config_for, load_signals
@@ -140,19 +140,17 @@ class CampaignNode(common.ShellNode):
         self.out_dir = Path(p["out_dir"]) if p["out_dir"] else None
         self._written = False
         self.pub_ref = self.create_publisher(
-            TwistStamped, "velocity_reference", common.qos_for("velocity_reference")
+            TwistStamped, "velocity_reference", shell.qos_for("velocity_reference")
         )
-        self.pub_exc = self.create_publisher(
-            JointState, "excitation", common.qos_for("excitation")
-        )
-        self.pub_status = common.StatusPublisher(self)  # status and /diagnostics
-        self.create_subscription(Odometry, "state", self.on_state, common.qos_for("state"))
+        self.pub_exc = self.create_publisher(JointState, "excitation", shell.qos_for("excitation"))
+        self.pub_status = shell.StatusPublisher(self)  # status and /diagnostics
+        self.create_subscription(Odometry, "state", self.on_state, shell.qos_for("state"))
         self.create_subscription(
-            JointState, "rotor_speeds", self.on_rotors, common.qos_for("rotor_speeds")
+            JointState, "rotor_speeds", self.on_rotors, shell.qos_for("rotor_speeds")
         )
-        self.create_subscription(Imu, "imu", self.on_imu, common.qos_for("imu"))
+        self.create_subscription(Imu, "imu", self.on_imu, shell.qos_for("imu"))
         self.create_subscription(
-            DiagnosticArray, "status", self.on_status, common.qos_for("status")
+            DiagnosticArray, "status", self.on_status, shell.qos_for("status")
         )
         self.cli_start = self.create_client(Trigger, f"{self.bridge_name}/start")
         self.cli_abort = self.create_client(Trigger, f"{self.bridge_name}/abort")
@@ -354,7 +352,7 @@ class CampaignNode(common.ShellNode):
         )
         self.pub_status.publish(messages.diagnostic_array(self.f, round(self.now() * 1e9), [st]))
 
-    # -- orderly shutdown (nodes/_common.run) ----------------------------------------
+    # -- orderly shutdown (nodes/shell.run) ----------------------------------------
     def begin_shutdown(self):
         now = self.now()
         if self.campaign.phase not in campaign.TERMINAL and self.campaign.phase != campaign.IDLE:
@@ -375,7 +373,7 @@ class CampaignNode(common.ShellNode):
 
 
 def main(args=None):
-    return common.run(CampaignNode, args, NODE_NAME)
+    return shell.run(CampaignNode, args, NODE_NAME)
 
 
 if __name__ == "__main__":

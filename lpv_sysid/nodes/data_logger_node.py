@@ -7,7 +7,7 @@ size / duration, writes ``experiment.yaml`` (config files, gains sha256, git rev
 counts, rates, drops) and closes every bag on shutdown: SIGINT/SIGTERM (also twice, a
 terminal's Ctrl-C plus launch's forwarded SIGINT) only request the stop, and
 :meth:`DataLoggerNode.begin_shutdown` closes the recorder before anything else runs
-(nodes/_common.run); a node destroyed without ``run`` closes it in ``destroy_node``.
+(nodes/shell.run); a node destroyed without ``run`` closes it in ``destroy_node``.
 Drops reported by the middleware (QoS ``message_lost`` event) and rates go to ``status``.
 Durability: the bag is flushed at least every ``flush_interval_s`` (a timer covers a stream
 that stops), so a ``kill -9`` loses at most that much; ``experiment.yaml`` then says
@@ -32,48 +32,48 @@ from lpv_sysid.errors import ConfigError, LpvSysidError
 from lpv_sysid.io import messages
 from lpv_sysid.io.bag import FLUSH_INTERVAL_S, STORAGES
 from lpv_sysid.io.recorder import Recorder, RecorderConfig
-from lpv_sysid.nodes import _common as common
-from lpv_sysid.nodes import parameters as P
+from lpv_sysid.nodes import shell
+from lpv_sysid.nodes import parameters
 
 NODE_NAME = "data_logger"
 
 
 @dataclass(frozen=True)
-class DataLoggerSettings(P.Settings):
+class DataLoggerSettings(parameters.Settings):
     """The node's parameters (config/data_logger.yaml): the one declaration. The recorder's
     own configuration (:class:`~lpv_sysid.io.recorder.RecorderConfig`: resolved topic names,
     bytes) is built from it and checks the rest."""
 
     WHERE = "data_logger"
 
-    out_dir: str = P.text(
+    out_dir: str = parameters.text(
         "lpv_sysid_log", "experiment directory (must not exist or be empty)", nonempty=True
     )
-    storage: str = P.text("mcap", "rosbag2 storage", choices=STORAGES)
-    topics: tuple = P.texts(
-        tuple(common.TOPIC_TYPES),
+    storage: str = parameters.text("mcap", "rosbag2 storage", choices=STORAGES)
+    topics: tuple = parameters.texts(
+        tuple(shell.TOPIC_TYPES),
         "topics to record, relative to the namespace; 'name' for the "
         "lpv_sysid topics or 'name:pkg/msg/Type' for any other",
     )
-    split_size_mb: float = P.double(
+    split_size_mb: float = parameters.double(
         0.0, "start a new bag after this many MB (0: never)", 0.0, 1.0e6
     )
-    split_duration_s: float = P.double(
+    split_duration_s: float = parameters.double(
         0.0, "start a new bag after this long (0: never)", 0.0, 1.0e6
     )
-    queue_depth: int = P.integer(1000, "subscription queue depth per topic", 1, 100000)
-    config_files: tuple = P.texts((), "files copied verbatim into experiment.yaml")
-    gains_file: str = P.text("", "gains.yaml to hash into the metadata")
-    description: str = P.text("", "free text for experiment.yaml")
-    status_rate_hz: float = P.double(1.0, "status publication rate [Hz]", 0.1, 100.0)
-    flush_interval_s: float = P.double(
+    queue_depth: int = parameters.integer(1000, "subscription queue depth per topic", 1, 100000)
+    config_files: tuple = parameters.texts((), "files copied verbatim into experiment.yaml")
+    gains_file: str = parameters.text("", "gains.yaml to hash into the metadata")
+    description: str = parameters.text("", "free text for experiment.yaml")
+    status_rate_hz: float = parameters.double(1.0, "status publication rate [Hz]", 0.1, 100.0)
+    flush_interval_s: float = parameters.double(
         FLUSH_INTERVAL_S,
         "flush the bag (mcap chunk to the OS / sqlite3 commit) at least this "
         "often: the most a kill -9 of the logger can lose [s]",
         0.01,
         1.0,
     )
-    fsync: bool = P.flag(
+    fsync: bool = parameters.flag(
         False, "fsync at every flush (also survives a power cut; slower on SD cards)"
     )
 
@@ -82,7 +82,7 @@ class DataLoggerSettings(P.Settings):
 
 
 #: the rclpy declarations, generated from the one declaration (DataLoggerSettings)
-PARAMETERS = common.settings_table(DataLoggerSettings)
+PARAMETERS = shell.settings_table(DataLoggerSettings)
 
 
 def parse_topics(entries) -> dict[str, str]:
@@ -91,17 +91,17 @@ def parse_topics(entries) -> dict[str, str]:
     for e in entries:
         name, _, typ = str(e).partition(":")
         if not typ:
-            if name not in common.TOPIC_TYPES:
+            if name not in shell.TOPIC_TYPES:
                 raise ConfigError(
                     f"parameter 'topics': {name!r} is not an lpv_sysid topic "
-                    f"{sorted(common.TOPIC_TYPES)}; write 'name:pkg/msg/Type'"
+                    f"{sorted(shell.TOPIC_TYPES)}; write 'name:pkg/msg/Type'"
                 )
-            typ = common.TOPIC_TYPES[name]
+            typ = shell.TOPIC_TYPES[name]
         out[name] = typ
     return out
 
 
-class DataLoggerNode(common.ShellNode):
+class DataLoggerNode(shell.ShellNode):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, PARAMETERS, **kwargs)
         self.settings = p = DataLoggerSettings.from_dict(self.params)
@@ -122,12 +122,12 @@ class DataLoggerNode(common.ShellNode):
         self.recorder = Recorder(cfg)
         self.recorder.start(self.now_ns())
         self.f = messages.MsgFactory.rclpy()
-        self.pub_status = common.StatusPublisher(self)  # status and /diagnostics
+        self.pub_status = shell.StatusPublisher(self)  # status and /diagnostics
         for name, typ in rel.items():
             full = self.resolve_topic_name(name)
             reliability = (
                 QoSReliabilityPolicy.BEST_EFFORT
-                if name in common.SENSOR_TOPICS
+                if name in shell.SENSOR_TOPICS
                 else QoSReliabilityPolicy.RELIABLE
             )
             qos = QoSProfile(
@@ -185,7 +185,7 @@ class DataLoggerNode(common.ShellNode):
         self.pub_status.publish(messages.diagnostic_array(self.f, self.now_ns(), [st]))
 
     def begin_shutdown(self):
-        """Close the bag while the context is valid (nodes/_common.run): metadata.yaml and
+        """Close the bag while the context is valid (nodes/shell.run): metadata.yaml and
         experiment.yaml are written before anything else can interrupt."""
         self._close_recording()
 
@@ -205,7 +205,7 @@ class DataLoggerNode(common.ShellNode):
 
 
 def main(args=None):
-    return common.run(DataLoggerNode, args, NODE_NAME)
+    return shell.run(DataLoggerNode, args, NODE_NAME)
 
 
 if __name__ == "__main__":

@@ -38,8 +38,8 @@ from std_srvs.srv import Trigger
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io import messages
-from lpv_sysid.nodes import _common as common
-from lpv_sysid.nodes import parameters as P
+from lpv_sysid.nodes import shell
+from lpv_sysid.nodes import parameters
 from lpv_sysid.signals.excitation import (
     DEFAULT_RAMP_S,
     ExcitationCore,
@@ -68,40 +68,42 @@ def reports_abort(status) -> bool:
 
 
 @dataclass(frozen=True)
-class ExcitationSettings(P.Settings):
+class ExcitationSettings(parameters.Settings):
     """The node's parameters (config/excitation_node.yaml): the one declaration."""
 
     WHERE = "excitation"
 
-    signals_file: str = P.text("", "signals.npz (lpv-sysid signals)", nonempty=True)
-    mode: str = P.text(
+    signals_file: str = parameters.text("", "signals.npz (lpv-sysid signals)", nonempty=True)
+    mode: str = parameters.text(
         "phase1",
         "phase1: vertex + multisine on u, v, w, yaw rate; phase2: v_d(t) and u_e(t)",
         choices=MODES,
     )
-    rate_hz: float = P.double(100.0, "publication rate [Hz]", 1.0, 1000.0)
-    status_rate_hz: float = P.double(2.0, "status publication rate [Hz]", 0.1, 100.0)
-    vertex_frd: tuple = P.doubles(
+    rate_hz: float = parameters.double(100.0, "publication rate [Hz]", 1.0, 1000.0)
+    status_rate_hz: float = parameters.double(2.0, "status publication rate [Hz]", 0.1, 100.0)
+    vertex_frd: tuple = parameters.doubles(
         (0.0, 0.0, 0.0),
         "phase1: vertex body velocity (u, v, w) FRD [m/s]",
         lo=-20.0,
         hi=20.0,
         lengths=(3,),
     )
-    yaw_rate_offset: float = P.double(
+    yaw_rate_offset: float = parameters.double(
         0.0, "phase1: yaw-rate reference offset FRD [rad/s]", -3.0, 3.0
     )
-    ramp_s: float = P.double(
+    ramp_s: float = parameters.double(
         DEFAULT_RAMP_S, "raised-cosine fade in/out and abort fade [s]", 0.0, 60.0
     )
-    start_delay_s: float = P.double(0.0, "delay between start and the signal [s]", 0.0, 60.0)
-    auto_start: bool = P.flag(False, "start on launch without the service")
-    gains_file: str = P.text(
+    start_delay_s: float = parameters.double(
+        0.0, "delay between start and the signal [s]", 0.0, 60.0
+    )
+    auto_start: bool = parameters.flag(False, "start on launch without the service")
+    gains_file: str = parameters.text(
         "",
         "phase2: gains.yaml whose design envelope the signal must "
         "fit (checked at load; empty: no check)",
     )
-    abort_on_status_from: tuple = P.texts(
+    abort_on_status_from: tuple = parameters.texts(
         ("lpv_controller", "mavlink_bridge", "campaign"),
         "fade out when one of these nodes (last component of the status name) reports an "
         "abort or a hand-back on status",
@@ -113,10 +115,10 @@ class ExcitationSettings(P.Settings):
 
 
 #: the rclpy declarations, generated from the one declaration (ExcitationSettings)
-PARAMETERS = common.settings_table(ExcitationSettings)
+PARAMETERS = shell.settings_table(ExcitationSettings)
 
 
-class ExcitationNode(common.ShellNode):
+class ExcitationNode(shell.ShellNode):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, PARAMETERS, **kwargs)
         self.settings = s = ExcitationSettings.from_dict(self.params)
@@ -133,14 +135,12 @@ class ExcitationNode(common.ShellNode):
         self.abort_reason = ""
         self.f = messages.MsgFactory.rclpy()
         self.pub_ref = self.create_publisher(
-            TwistStamped, "velocity_reference", common.qos_for("velocity_reference")
+            TwistStamped, "velocity_reference", shell.qos_for("velocity_reference")
         )
-        self.pub_exc = self.create_publisher(
-            JointState, "excitation", common.qos_for("excitation")
-        )
-        self.pub_status = common.StatusPublisher(self)  # status and /diagnostics
+        self.pub_exc = self.create_publisher(JointState, "excitation", shell.qos_for("excitation"))
+        self.pub_status = shell.StatusPublisher(self)  # status and /diagnostics
         self.create_subscription(
-            DiagnosticArray, "status", self.on_status, common.qos_for("status")
+            DiagnosticArray, "status", self.on_status, shell.qos_for("status")
         )
         self.create_service(Trigger, "~/start", self.on_start)
         self.create_service(Trigger, "~/abort", self.on_abort)
@@ -148,7 +148,7 @@ class ExcitationNode(common.ShellNode):
         self.create_timer(1.0 / s.status_rate_hz, self.publish_status)
         self.get_logger().info(
             f"{self.mode}: {self.table[1].shape[0]} samples of {list(self.table[2])} "
-            f"({self.core.duration:.1f} s), {s.rate_hz:g} Hz; {common.clock_source(self)}"
+            f"({self.core.duration:.1f} s), {s.rate_hz:g} Hz; {shell.clock_source(self)}"
         )
         if s.auto_start:
             self._start()
@@ -256,7 +256,7 @@ class ExcitationNode(common.ShellNode):
         self.pub_exc.publish(messages.excitation_msg(self.f, ns, u_e))
         self._shutdown_tick(ns * 1e-9)
 
-    # -- orderly shutdown (nodes/_common.run) ----------------------------------------
+    # -- orderly shutdown (nodes/shell.run) ----------------------------------------
     #: wall time without node-clock progress after which the shutdown stops waiting for the
     #: fade: under use_sim_time the clock source (sim_vehicle) may be shutting down too [s]
     CLOCK_STALL_S = 0.5
@@ -316,7 +316,7 @@ class ExcitationNode(common.ShellNode):
 
 
 def main(args=None):
-    return common.run(ExcitationNode, args, NODE_NAME)
+    return shell.run(ExcitationNode, args, NODE_NAME)
 
 
 if __name__ == "__main__":

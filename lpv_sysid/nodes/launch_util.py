@@ -2,18 +2,25 @@
 
 The launch files are installed on their own under ``share/lpv_sysid/launch``, so what they
 share lives in the package and they import it from here: the launch arguments every
-experiment uses (one description each) and the parameter-file lookup in ``config_dir``,
-whose default is the ROS share copy of the shipped configs
-(:func:`lpv_sysid.default_configs.share_config_dir`). Needs ROS 2 ``launch`` and
-``ament_index_python`` (imported only by the launch files).
+experiment uses (one description each), the parameter-file lookup in ``config_dir``, whose
+default is the ROS share copy of the shipped configs
+(:func:`lpv_sysid.default_configs.share_config_dir`), and the construction of the package's
+nodes (:func:`node`: namespace, output, shutdown budget, parameter file + overrides). Needs
+ROS 2 ``launch``, ``launch_ros`` and ``ament_index_python`` (imported only by the launch
+files).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any, Optional
+
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
+from launch_ros.actions import Node
 
 from lpv_sysid.default_configs import PACKAGE, share_config_dir
+from lpv_sysid.nodes.shell import LAUNCH_SIGTERM_TIMEOUT_S, NAMESPACE
 
 #: launch argument -> description (shared by every launch file that declares it)
 DESCRIPTIONS = {
@@ -28,7 +35,7 @@ DESCRIPTIONS = {
 REQUIRED = None
 
 
-def declare_arguments(notes: dict[str, str] | None = None, **defaults) -> list:
+def declare_arguments(notes: Optional[dict[str, str]] = None, **defaults) -> list:
     """``DeclareLaunchArgument`` for ``config_dir`` and then for each keyword, in order.
 
     ``config_dir`` defaults to the installed ``share/lpv_sysid/config``. A keyword's value
@@ -49,16 +56,60 @@ def declare_arguments(notes: dict[str, str] | None = None, **defaults) -> list:
     return out
 
 
+def arg(name: str) -> LaunchConfiguration:
+    """The value of the launch argument ``name`` (a substitution, resolved at launch)."""
+    return LaunchConfiguration(name)
+
+
 def params(name: str) -> PathJoinSubstitution:
     """The node parameter file ``name`` in the directory of the ``config_dir`` argument."""
-    return PathJoinSubstitution([LaunchConfiguration("config_dir"), name])
+    return PathJoinSubstitution([arg("config_dir"), name])
+
+
+def sigterm_timeout() -> LaunchConfiguration:
+    """launch's SIGINT -> SIGTERM escalation (5 s by default) after the nodes' orderly
+    shutdown: :data:`lpv_sysid.nodes.shell.LAUNCH_SIGTERM_TIMEOUT_S`; ``sigterm_timeout:=S``
+    overrides it."""
+    return LaunchConfiguration("sigterm_timeout", default=str(LAUNCH_SIGTERM_TIMEOUT_S))
+
+
+def node(
+    name: str,
+    params_file: Optional[str] = None,
+    overrides: Optional[Mapping[str, Any]] = None,
+    condition: Any = None,
+) -> Node:
+    """The package's node ``name`` (executable ``<name>_node``, setup.py ``NODES``) in the
+    ``/lpv_sysid`` namespace, logging to the screen, with :func:`sigterm_timeout`.
+
+    Its parameters: the file ``params_file`` in ``config_dir`` (:func:`params`; ``None``:
+    none), then ``overrides`` (launch arguments through :func:`arg`). ``condition``: a launch
+    condition (``IfCondition``) or ``None`` (always started).
+    """
+    parameters: list = [params(params_file)] if params_file is not None else []
+    if overrides:
+        parameters.append(dict(overrides))
+    return Node(
+        package=PACKAGE,
+        executable=f"{name}_node",
+        name=name,
+        namespace=NAMESPACE,
+        output="screen",
+        sigterm_timeout=sigterm_timeout(),
+        parameters=parameters,
+        condition=condition,
+    )
 
 
 __all__ = [
     "DESCRIPTIONS",
+    "NAMESPACE",
     "PACKAGE",
     "REQUIRED",
+    "arg",
     "declare_arguments",
+    "node",
     "params",
     "share_config_dir",
+    "sigterm_timeout",
 ]

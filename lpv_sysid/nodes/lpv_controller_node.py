@@ -25,28 +25,28 @@ from nav_msgs.msg import Odometry
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from lpv_sysid.io import messages as M
-from lpv_sysid.nodes import _common as C
+from lpv_sysid.io import messages
+from lpv_sysid.nodes import shell
 from lpv_sysid.nodes.controller_runtime import ControllerRuntime, ControllerSettings, settle_gc
 
 NODE_NAME = "lpv_controller"
 
 #: the rclpy declarations, generated from the one declaration (ControllerSettings)
-PARAMETERS = C.settings_table(ControllerSettings)
+PARAMETERS = shell.settings_table(ControllerSettings)
 
 
-class LpvControllerNode(C.ShellNode):
+class LpvControllerNode(shell.ShellNode):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, PARAMETERS, **kwargs)
         settings = ControllerSettings.from_dict(self.params)
         self.runtime = ControllerRuntime(
-            settings, M.MsgFactory.rclpy(), self.get_fully_qualified_name()
+            settings, messages.MsgFactory.rclpy(), self.get_fully_qualified_name()
         )
         self.pub = {
             "actuator_command": self.create_publisher(
-                JointState, "actuator_command", C.qos_for("actuator_command")
+                JointState, "actuator_command", shell.qos_for("actuator_command")
             ),
-            "status": C.StatusPublisher(self),
+            "status": shell.StatusPublisher(self),
         }  # status and /diagnostics
         for topic, typ in (
             ("state", Odometry),
@@ -54,7 +54,7 @@ class LpvControllerNode(C.ShellNode):
             ("velocity_reference", TwistStamped),
             ("excitation", JointState),
         ):
-            self.create_subscription(typ, topic, self._input(topic), C.qos_for(topic))
+            self.create_subscription(typ, topic, self._input(topic), shell.qos_for(topic))
         self.create_service(Trigger, "~/start", self.on_start)
         self.create_service(Trigger, "~/abort", self.on_abort)
         self.create_timer(1.0 / settings.rate_hz, self.on_tick)
@@ -62,7 +62,7 @@ class LpvControllerNode(C.ShellNode):
         self.get_logger().info(
             f"gains {settings.gains_file}: box "
             f"{self.runtime.schedule.scheduling.to_dict()}, "
-            f"gamma {self.runtime.schedule.gamma:g}; {C.clock_source(self)}"
+            f"gamma {self.runtime.schedule.gamma:g}; {shell.clock_source(self)}"
         )
         self.log_core()
         # auto_start: started by the timer once every input stream has delivered a sample
@@ -119,7 +119,7 @@ class LpvControllerNode(C.ShellNode):
         self.on_tick()
         return response
 
-    # -- orderly shutdown (nodes/_common.run) ----------------------------------------
+    # -- orderly shutdown (nodes/shell.run) ----------------------------------------
     def begin_shutdown(self):
         """Latch an abort "shutdown" while the context is valid and publish the final
         status: no actuator_command follows (the bridge hands control back to PX4 when the
@@ -136,7 +136,7 @@ class LpvControllerNode(C.ShellNode):
 
 
 def main(args=None):
-    return C.run(LpvControllerNode, args, NODE_NAME)
+    return shell.run(LpvControllerNode, args, NODE_NAME)
 
 
 if __name__ == "__main__":

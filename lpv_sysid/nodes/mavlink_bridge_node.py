@@ -33,11 +33,17 @@ from std_srvs.srv import Trigger
 
 from lpv_sysid.errors import LpvSysidError
 from lpv_sysid.io import messages
-from lpv_sysid.mavlink import mavros as MR
 from lpv_sysid.mavlink.bridge import BridgeConfig, BridgeCore
+from lpv_sysid.mavlink.mavros import (
+    DIAGNOSTICS_TOPIC,
+    MODE_CONTROL,
+    MavrosConfig,
+    MavrosCore,
+    cmd_vel_msg,
+)
 from lpv_sysid.mavlink.telemetry import ImuSample, RotorSample, StateSample
-from lpv_sysid.nodes import _common as common
-from lpv_sysid.nodes import parameters as P
+from lpv_sysid.nodes import shell
+from lpv_sysid.nodes import parameters
 
 NODE_NAME = "mavlink_bridge"
 TRANSPORTS = ("mavlink", "mavros")
@@ -54,17 +60,17 @@ MAVROS_SHARED = {
 
 
 @dataclass(frozen=True)
-class BridgeNodeSettings(P.Settings):
+class BridgeNodeSettings(parameters.Settings):
     """The parameters of the shell itself (the rest: :data:`PARAMETERS`)."""
 
     WHERE = "mavlink_bridge"
 
-    transport: str = P.text(
+    transport: str = parameters.text(
         "mavlink",
         "mavlink (own MAVLink link to PX4) | mavros (MAVROS topics, docs/px4_transport.md)",
     )
-    poll_rate_hz: float = P.double(250.0, "link poll rate [Hz]", 10.0, 2000.0)
-    status_rate_hz: float = P.double(2.0, "status publication rate [Hz]", 0.1, 100.0)
+    poll_rate_hz: float = parameters.double(250.0, "link poll rate [Hz]", 10.0, 2000.0)
+    status_rate_hz: float = parameters.double(2.0, "status publication rate [Hz]", 0.1, 100.0)
 
     def validate(self) -> None:
         if self.transport not in TRANSPORTS:
@@ -152,27 +158,27 @@ MAVROS_DESCRIPTIONS = {
 #: the rclpy declarations: the shell's settings, then BridgeConfig's and MavrosConfig's
 #: fields (generated; nothing restated)
 SPECS = {
-    **P.specs(BridgeNodeSettings),
-    **P.config_specs(BridgeConfig, BRIDGE_DESCRIPTIONS, exclude=BRIDGE_EXCLUDED),
-    **P.config_specs(
-        MR.MavrosConfig,
+    **parameters.specs(BridgeNodeSettings),
+    **parameters.config_specs(BridgeConfig, BRIDGE_DESCRIPTIONS, exclude=BRIDGE_EXCLUDED),
+    **parameters.config_specs(
+        MavrosConfig,
         MAVROS_DESCRIPTIONS,
         prefix="mavros.",
         exclude=tuple(f"mavros.{k}" for k in MAVROS_SHARED),
     ),
 }
-PARAMETERS = common.spec_table(SPECS)
+PARAMETERS = shell.spec_table(SPECS)
 
 
 def _split(p: dict) -> tuple[dict, dict, dict]:
     """Declared values -> (shell settings, BridgeConfig mapping, MavrosConfig mapping)."""
-    shell = {k: p[k] for k in P.specs(BridgeNodeSettings)}
+    own = {k: p[k] for k in parameters.specs(BridgeNodeSettings)}
     mavros = {k.split(".", 1)[1]: v for k, v in p.items() if k.startswith("mavros.")}
     mavros.update({k: p[v] for k, v in MAVROS_SHARED.items()})
-    bridge = P.nest(
-        {k: v for k, v in p.items() if k not in shell and not k.startswith("mavros.")}, SPECS
+    bridge = parameters.nest(
+        {k: v for k, v in p.items() if k not in own and not k.startswith("mavros.")}, SPECS
     )
-    return shell, bridge, P.nest(mavros)
+    return own, bridge, parameters.nest(mavros)
 
 
 def handback_bound_s(offboard) -> float:
@@ -184,45 +190,45 @@ def handback_bound_s(offboard) -> float:
     return round(len(offboard.chain) * per_mode + 1.0, 3)
 
 
-class MavlinkBridgeNode(common.ShellNode):
+class MavlinkBridgeNode(shell.ShellNode):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, PARAMETERS, **kwargs)
         p = self.params
-        shell, bridge, mavros = _split(p)
-        self.settings = s = BridgeNodeSettings.from_dict(shell)
+        own, bridge, mavros = _split(p)
+        self.settings = s = BridgeNodeSettings.from_dict(own)
         self.mavros = s.transport == "mavros"
         self.core = (
-            MR.MavrosCore(MR.MavrosConfig.from_dict(mavros))
+            MavrosCore(MavrosConfig.from_dict(mavros))
             if self.mavros
             else BridgeCore(BridgeConfig.from_dict(bridge))
         )
         self.f = messages.MsgFactory.rclpy()
-        self.pub_state = self.create_publisher(Odometry, "state", common.qos_for("state"))
-        self.pub_imu = self.create_publisher(Imu, "imu", common.qos_for("imu"))
-        self.pub_status = common.StatusPublisher(self)  # status and /diagnostics
+        self.pub_state = self.create_publisher(Odometry, "state", shell.qos_for("state"))
+        self.pub_imu = self.create_publisher(Imu, "imu", shell.qos_for("imu"))
+        self.pub_status = shell.StatusPublisher(self)  # status and /diagnostics
         self.create_subscription(
             TwistStamped,
             "velocity_reference",
             self.on_reference,
-            common.qos_for("velocity_reference"),
+            shell.qos_for("velocity_reference"),
         )
         self.create_service(Trigger, "~/start", self.on_start)
         self.create_service(Trigger, "~/abort", self.on_abort)
         if self.mavros:
             cfg = self.core.config
             self.pub_cmd = self.create_publisher(
-                TwistStamped, cfg.topic("cmd_vel"), common.QOS_RELIABLE
+                TwistStamped, cfg.topic("cmd_vel"), shell.QOS_RELIABLE
             )
             self.create_subscription(
-                Odometry, cfg.topic("odom"), self.on_mavros_odom, common.QOS_SENSOR
+                Odometry, cfg.topic("odom"), self.on_mavros_odom, shell.QOS_SENSOR
             )
-            self.create_subscription(Imu, cfg.topic("imu"), self.on_mavros_imu, common.QOS_SENSOR)
+            self.create_subscription(Imu, cfg.topic("imu"), self.on_mavros_imu, shell.QOS_SENSOR)
             if cfg.use_diagnostics:
                 self.create_subscription(
                     DiagnosticArray,
-                    MR.DIAGNOSTICS_TOPIC,
+                    DIAGNOSTICS_TOPIC,
                     self.on_mavros_diagnostics,
-                    common.QOS_SENSOR,
+                    shell.QOS_SENSOR,
                 )
             # twice the setpoint rate: the core sends when due; stale input is seen within
             # half a setpoint period
@@ -231,14 +237,14 @@ class MavlinkBridgeNode(common.ShellNode):
             )
             self.get_logger().info(
                 f"MAVROS {cfg.namespace}: setpoints on {cfg.topic('cmd_vel')}; "
-                f"mode control: {MR.MODE_CONTROL}"
+                f"mode control: {MODE_CONTROL}"
             )
         else:
             self.pub_rot = self.create_publisher(
-                JointState, "rotor_speeds", common.qos_for("rotor_speeds")
+                JointState, "rotor_speeds", shell.qos_for("rotor_speeds")
             )
             self.create_subscription(
-                JointState, "actuator_command", self.on_command, common.qos_for("actuator_command")
+                JointState, "actuator_command", self.on_command, shell.qos_for("actuator_command")
             )
             self.core.open(self.now())
             self.create_timer(1.0 / s.poll_rate_hz, self.on_poll)
@@ -249,12 +255,12 @@ class MavlinkBridgeNode(common.ShellNode):
                 f"{list(self.core.config.offboard.handback_chain)} within "
                 f"{self.SHUTDOWN_TIMEOUT_S:g} s"
             )
-            budget = common.LAUNCH_SIGTERM_TIMEOUT_S - common.TEARDOWN_MARGIN_S
+            budget = shell.LAUNCH_SIGTERM_TIMEOUT_S - shell.TEARDOWN_MARGIN_S
             if self.SHUTDOWN_TIMEOUT_S > budget:
                 self.get_logger().warning(
                     f"the hand-back chain may need {self.SHUTDOWN_TIMEOUT_S:g} s, more than the "
                     f"{budget:g} s a launch Ctrl-C leaves before SIGTERM: launch with "
-                    f"sigterm_timeout:={self.SHUTDOWN_TIMEOUT_S + common.TEARDOWN_MARGIN_S:g}"
+                    f"sigterm_timeout:={self.SHUTDOWN_TIMEOUT_S + shell.TEARDOWN_MARGIN_S:g}"
                 )
         self.create_timer(1.0 / s.status_rate_hz, lambda: self.publish_status([]))
 
@@ -306,7 +312,7 @@ class MavlinkBridgeNode(common.ShellNode):
     def publish_mavros(self, out):
         for sp in out.setpoints:
             self.pub_cmd.publish(
-                MR.cmd_vel_msg(self.f, round(sp.t * 1e9), sp, self.core.config.odom_frame_id)
+                cmd_vel_msg(self.f, round(sp.t * 1e9), sp, self.core.config.odom_frame_id)
             )
         if out.events:
             self.publish_status(out.events)
@@ -372,7 +378,7 @@ class MavlinkBridgeNode(common.ShellNode):
         )
         self.pub_status.publish(messages.diagnostic_array(self.f, round(now * 1e9), [st]))
 
-    # -- orderly shutdown (nodes/_common.run) ----------------------------------------
+    # -- orderly shutdown (nodes/shell.run) ----------------------------------------
     def begin_shutdown(self):
         """Hand control back while the context is valid; the poll timer keeps running
         until PX4's HEARTBEAT confirms the hand-back mode (or the chain fails)."""
@@ -397,7 +403,7 @@ class MavlinkBridgeNode(common.ShellNode):
 
 
 def main(args=None):
-    return common.run(MavlinkBridgeNode, args, NODE_NAME)
+    return shell.run(MavlinkBridgeNode, args, NODE_NAME)
 
 
 if __name__ == "__main__":

@@ -52,8 +52,8 @@ from lpv_sysid.errors import ConfigError, LpvSysidError
 from lpv_sysid.io import messages
 from lpv_sysid.io.yaml_file import read_yaml
 from lpv_sysid.models.quadrotor import Quadrotor, QuadrotorParams
-from lpv_sysid.nodes import _common as common
-from lpv_sysid.nodes import parameters as P
+from lpv_sysid.nodes import shell
+from lpv_sysid.nodes import parameters
 from lpv_sysid.sim.vehicle import SensorConfig, SimVehicle
 
 NODE_NAME = "sim_vehicle"
@@ -64,43 +64,45 @@ LOCKSTEP_RESEND_S = 0.05
 
 
 @dataclass(frozen=True)
-class SimVehicleSettings(P.Settings):
+class SimVehicleSettings(parameters.Settings):
     """The shell's parameters; the sensor parameters are SensorConfig's (:data:`SPECS`)."""
 
     WHERE = "sim_vehicle"
 
-    mode: str = P.text(
+    mode: str = parameters.text(
         "baseline",
         "baseline: fly velocity_reference (phase 1); lpv: apply actuator_command (phase 2)",
         choices=MODES,
     )
-    initial_velocity_frd: tuple = P.doubles(
+    initial_velocity_frd: tuple = parameters.doubles(
         (0.0, 0.0, 0.0),
         "start in trim at this body velocity FRD [m/s]",
         lo=-20.0,
         hi=20.0,
         lengths=(3,),
     )
-    vehicle_file: str = P.text("", "YAML of QuadrotorParams (empty: FlameWheel-450 defaults)")
-    baseline_file: str = P.text("", "YAML of BaselineGains (empty: defaults)")
-    command_timeout_s: float = P.double(
+    vehicle_file: str = parameters.text(
+        "", "YAML of QuadrotorParams (empty: FlameWheel-450 defaults)"
+    )
+    baseline_file: str = parameters.text("", "YAML of BaselineGains (empty: defaults)")
+    command_timeout_s: float = parameters.double(
         0.1,
         "lpv mode: actuator_command older than this -> baseline hold (PX4 hand-back) [s]",
         0.001,
         10.0,
     )
-    reference_timeout_s: float = P.double(
+    reference_timeout_s: float = parameters.double(
         0.5, "velocity_reference older than this -> hold zero velocity [s]", 0.001, 60.0
     )
-    status_rate_hz: float = P.double(1.0, "status publication rate [Hz]", 0.1, 100.0)
-    lockstep: bool = P.flag(
+    status_rate_hz: float = parameters.double(1.0, "status publication rate [Hz]", 0.1, 100.0)
+    lockstep: bool = parameters.flag(
         False,
         "sim time: publish /clock (the physics time, from 0) and, "
         "while a controller commands, integrate past a state sample only "
         "once the actuator_command stamped with that sample arrived (the "
         "graph on use_sim_time, controller tick_source state; sim.launch.py)",
     )
-    lockstep_timeout_s: float = P.double(
+    lockstep_timeout_s: float = parameters.double(
         1.0,
         "lockstep: wall time to wait for the command of "
         "a state sample before running on without it (the "
@@ -109,7 +111,7 @@ class SimVehicleSettings(P.Settings):
         0.01,
         60.0,
     )
-    lockstep_reference_lag_s: float = P.double(
+    lockstep_reference_lag_s: float = parameters.double(
         0.03,
         "lockstep: the physics waits at a state sample while the newest "
         "velocity_reference (once one arrives on sim time) is older than this [s]; at least one "
@@ -117,7 +119,7 @@ class SimVehicleSettings(P.Settings):
         0.001,
         1.0,
     )
-    real_time_factor: float = P.double(
+    real_time_factor: float = parameters.double(
         1.0,
         "lockstep: sim time runs at most this fast "
         "against wall time (slower when the controller is "
@@ -125,7 +127,7 @@ class SimVehicleSettings(P.Settings):
         0.01,
         100.0,
     )
-    max_catch_up_s: float = P.double(
+    max_catch_up_s: float = parameters.double(
         0.1,
         "largest lag behind the clock made up in one tick; more slips real time [s]",
         0.001,
@@ -162,8 +164,11 @@ SENSOR_DESCRIPTIONS = {
     "seed": "noise seed",
 }
 
-SPECS = {**P.specs(SimVehicleSettings), **P.config_specs(SensorConfig, SENSOR_DESCRIPTIONS)}
-PARAMETERS = common.spec_table(SPECS)
+SPECS = {
+    **parameters.specs(SimVehicleSettings),
+    **parameters.config_specs(SensorConfig, SENSOR_DESCRIPTIONS),
+}
+PARAMETERS = shell.spec_table(SPECS)
 
 
 def _yaml_mapping(path: str, what: str) -> dict:
@@ -175,10 +180,10 @@ def _yaml_mapping(path: str, what: str) -> dict:
     return d
 
 
-class SimVehicleNode(common.ShellNode):
+class SimVehicleNode(shell.ShellNode):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, PARAMETERS, **kwargs)
-        own = P.specs(SimVehicleSettings)
+        own = parameters.specs(SimVehicleSettings)
         self.settings = p = SimVehicleSettings.from_dict(
             {k: v for k, v in self.params.items() if k in own}
         )
@@ -224,23 +229,23 @@ class SimVehicleNode(common.ShellNode):
         self._published_k = -1
         self._rtf_mark = (self.t0_ns, 0)
         self.f = messages.MsgFactory.rclpy()
-        self.pub_state = self.create_publisher(Odometry, "state", common.qos_for("state"))
-        self.pub_imu = self.create_publisher(Imu, "imu", common.qos_for("imu"))
+        self.pub_state = self.create_publisher(Odometry, "state", shell.qos_for("state"))
+        self.pub_imu = self.create_publisher(Imu, "imu", shell.qos_for("imu"))
         self.pub_rot = self.create_publisher(
-            JointState, "rotor_speeds", common.qos_for("rotor_speeds")
+            JointState, "rotor_speeds", shell.qos_for("rotor_speeds")
         )
-        self.pub_status = common.StatusPublisher(self)  # status and /diagnostics
+        self.pub_status = shell.StatusPublisher(self)  # status and /diagnostics
         self.create_subscription(
             TwistStamped,
             "velocity_reference",
             self.on_reference,
-            common.qos_for("velocity_reference"),
+            shell.qos_for("velocity_reference"),
         )
         self.create_subscription(
-            JointState, "actuator_command", self.on_command, common.qos_for("actuator_command")
+            JointState, "actuator_command", self.on_command, shell.qos_for("actuator_command")
         )
         if p.lockstep:
-            self.pub_clock = self.create_publisher(ClockMsg, "/clock", common.QOS_RELIABLE)
+            self.pub_clock = self.create_publisher(ClockMsg, "/clock", shell.QOS_RELIABLE)
         self.create_timer(1.0 / sensors.state_hz, self.on_tick, clock=self.pace_clock)
         self.create_timer(1.0 / p.status_rate_hz, self.publish_status)
 
@@ -463,7 +468,7 @@ class SimVehicleNode(common.ShellNode):
 
 
 def main(args=None):
-    return common.run(SimVehicleNode, args, NODE_NAME)
+    return shell.run(SimVehicleNode, args, NODE_NAME)
 
 
 if __name__ == "__main__":

@@ -107,7 +107,7 @@ def load_run(run_dir: str | Path, verify: bool = True) -> RunData:
     del verify
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
-        raise ConfigError(f"--run: {run_dir} is not a directory")
+        raise ConfigError(f"run_dir: {run_dir} is not a directory")
     data = RunData(run_dir=run_dir)
     for key in CANDIDATES:
         path = _find(run_dir, key)

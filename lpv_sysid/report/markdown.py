@@ -106,11 +106,11 @@ def write_report(
     data = load_run(run_dir, verify=verify)
     out = Path(out_path) if out_path is not None else data.run_dir / "report" / "report.md"
     if out.suffix.lower() != ".md":
-        raise ConfigError(f"--out: {out} must end in .md")
+        raise ConfigError(f"out_path: {out} must end in .md")
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise ConfigError(f"--out: cannot create {out.parent} ({exc.strerror})") from None
+        raise ConfigError(f"out_path: cannot create {out.parent} ({exc.strerror})") from None
     r = Report(data, out)
     r.lines = [
         "# lpv_sysid run report",
@@ -130,5 +130,5 @@ def write_report(
     try:
         out.write_text(text, encoding="utf-8")
     except OSError as exc:
-        raise ConfigError(f"--out: cannot write {out} ({exc.strerror})") from None
+        raise ConfigError(f"out_path: cannot write {out} ({exc.strerror})") from None
     return out

@@ -1,5 +1,5 @@
 """Signal files: ``signals.npz`` (``t`` (N,), ``u`` (N, n), ``names`` (n,)) and ``summary.yaml``
-(ARCHITECTURE.md section 5)."""
+(docs/ARCHITECTURE.md section 5)."""
 
 from __future__ import annotations
 

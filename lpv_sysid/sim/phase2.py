@@ -73,7 +73,7 @@ from lpv_sysid.sim.phase2_flight import (
     NonlinearConfig,
     excitation_gain_by_superposition,
     make_supervisor,
-    measured_x12,
+    measured_controller_state,
     simulate_nonlinear,
     supervise,
 )
@@ -120,7 +120,7 @@ __all__ = [
     "load_signals",
     "load_vehicle_config",
     "make_supervisor",
-    "measured_x12",
+    "measured_controller_state",
     "offset_output",
     "record_from_eq33",
     "reference_acceleration",
@@ -371,7 +371,7 @@ def _regressor_block(records: dict[str, RunRecord], arm_length: float) -> Option
     for rec in order:
         if rec is not None and rec.t.size >= 10:
             block = regressor_correlation_block(
-                rec.t, rec.x12, arm_length, rec.name, rec.extra.get("Omega")
+                rec.t, rec.controller_state, arm_length, rec.name, rec.extra.get("Omega")
             )
             block["complete_run"] = bool(rec.completed)
             return block

@@ -21,10 +21,10 @@ from typing import Any, Callable, Optional
 import numpy as np
 
 from lpv_sysid.errors import BagError
+from lpv_sysid.io.messages import TOPIC_NAMESPACE
 
 log = logging.getLogger(__name__)
 
-TOPIC_NAMESPACE = "/lpv_sysid"
 #: the topics of one control sample, in the order they are written
 SAMPLE_TOPICS = (
     "state",
@@ -111,11 +111,11 @@ class Phase2Bag:
             self.flush()
 
     def status(self, t, level, message, values) -> None:
-        M, f, ns = self.messages, self.f, _stamp_ns(t)
+        messages, f, ns = self.messages, self.f, _stamp_ns(t)
         vals = {"phase": "phase2", "kappa": self.kappa}
         vals.update(values)
-        st = M.diagnostic_status(f, level, self.node_name, message, vals)
-        self._events.append((ns, M.diagnostic_array(f, ns, [st])))
+        st = messages.diagnostic_status(f, level, self.node_name, message, vals)
+        self._events.append((ns, messages.diagnostic_array(f, ns, [st])))
 
     # ------------------------------------------------------------------ writing
     def flush(self) -> int:
@@ -163,12 +163,12 @@ class Phase2Bag:
     def _builder_records(self, ns: np.ndarray, cols: dict[str, np.ndarray]) -> dict[str, list]:
         """The records of every sample built one message at a time by the io.messages builders
         (they raise :class:`lpv_sysid.io.messages.MessageError` naming a non-finite field)."""
-        ts, M, f = self.writer.typestore, self.messages, self.f
+        ts, messages, f = self.writer.typestore, self.messages, self.f
         out: dict[str, list] = {n: [] for n in SAMPLE_TOPICS}
         for k, stamp in enumerate(ns.tolist()):
-            for name, (build, args) in _builders(M, cols, self.kappa).items():
+            for name, (build, args) in _builders(messages, cols, self.kappa).items():
                 msg = build(f, stamp, *args(k))
-                out[name].append(bytes(ts.serialize_cdr(msg, M.TYPES[name])))
+                out[name].append(bytes(ts.serialize_cdr(msg, messages.TYPES[name])))
         return out
 
 
@@ -177,21 +177,24 @@ def _stamp_ns(t) -> int:
 
 
 def _builders(
-    M, cols: dict[str, np.ndarray], kappa: float
+    messages, cols: dict[str, np.ndarray], kappa: float
 ) -> dict[str, tuple[Callable, Callable]]:
     """Per sample topic: the io.messages builder and its arguments for sample k (after f, ns)."""
     x = cols["x"]
     return {
-        "state": (M.odometry_from_state, lambda k: (x[k, 0:3], x[k, 3:6], x[k, 6:9], x[k, 9:12])),
-        "rotor_speeds": (M.rotor_speeds_msg, lambda k: (cols["omega"][k],)),
-        "imu": (M.imu_msg, lambda k: (cols["accel"][k], cols["gyro"][k], x[k, 3:6])),
-        "velocity_reference": (M.twist_reference_msg, lambda k: (cols["v_d"][k], 0.0)),
-        "excitation": (M.excitation_msg, lambda k: (cols["ue"][k] / kappa,)),
-        "actuator_command": (M.actuator_command_msg, lambda k: (cols["u"][k],)),
+        "state": (
+            messages.odometry_from_state,
+            lambda k: (x[k, 0:3], x[k, 3:6], x[k, 6:9], x[k, 9:12]),
+        ),
+        "rotor_speeds": (messages.rotor_speeds_msg, lambda k: (cols["omega"][k],)),
+        "imu": (messages.imu_msg, lambda k: (cols["accel"][k], cols["gyro"][k], x[k, 3:6])),
+        "velocity_reference": (messages.twist_reference_msg, lambda k: (cols["v_d"][k], 0.0)),
+        "excitation": (messages.excitation_msg, lambda k: (cols["ue"][k] / kappa,)),
+        "actuator_command": (messages.actuator_command_msg, lambda k: (cols["u"][k],)),
     }
 
 
-def _bulk_blocks(M, f, ts, ns: np.ndarray, cols: dict[str, np.ndarray], kappa: float):
+def _bulk_blocks(messages, f, ts, ns: np.ndarray, cols: dict[str, np.ndarray], kappa: float):
     """Per sample topic the (n, size) uint8 CDR block of :func:`lpv_sysid.io.bag.encode_block`,
     or None when a value would be rejected by the builders or a record disagrees with them."""
     from lpv_sysid.io import frames
@@ -232,8 +235,8 @@ def _bulk_blocks(M, f, ts, ns: np.ndarray, cols: dict[str, np.ndarray], kappa: f
     n = len(ns)
     out = {}
     try:
-        for name, (build, args) in _builders(M, cols, kappa).items():
-            msgtype = M.TYPES[name]
+        for name, (build, args) in _builders(messages, cols, kappa).items():
+            msgtype = messages.TYPES[name]
             block = encode_block(
                 msgtype, build(f, int(ns[0]), *args(0)), {**head, **values[name]}, n, ts
             )
@@ -250,7 +253,7 @@ def _bulk_blocks(M, f, ts, ns: np.ndarray, cols: dict[str, np.ndarray], kappa: f
                     )
                     return None
             out[name] = block
-    except (LayoutError, M.MessageError, ValueError) as exc:
+    except (LayoutError, messages.MessageError, ValueError) as exc:
         log.warning("phase-2 bag: bulk writing unavailable (%s); writing message by message", exc)
         return None
     return out

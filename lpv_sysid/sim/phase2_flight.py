@@ -72,7 +72,7 @@ def make_supervisor(vmin: Corner, vmax: Corner, margin: float):
     )
 
 
-def supervise(sup, t: float, x12: np.ndarray, max_tilt: float) -> Optional[str]:
+def supervise(sup, t: float, controller_state: np.ndarray, max_tilt: float) -> Optional[str]:
     """Phase-2 trip conditions on the measured 12-state (latched in ``sup``).
 
     Non-finite state (``non_finite``); measured body velocity outside the scheduling box
@@ -80,11 +80,11 @@ def supervise(sup, t: float, x12: np.ndarray, max_tilt: float) -> Optional[str]:
     Eq. 20); roll or pitch beyond ``max_tilt`` (``bound_exceeded``: Assumption 2 far from valid).
     Returns the event text once tripped, else None.
     """
-    sup.on_input("state", t, x12, t)
+    sup.on_input("state", t, controller_state, t)
     if not sup.aborted:
-        sup.check_scheduling(t, np.asarray(x12, dtype=float)[list(VELOCITY_INDEX)])
+        sup.check_scheduling(t, np.asarray(controller_state, dtype=float)[list(VELOCITY_INDEX)])
     if not sup.aborted:
-        tilt = max(abs(float(x12[0])), abs(float(x12[1])))
+        tilt = max(abs(float(controller_state[0])), abs(float(controller_state[1])))
         if tilt > max_tilt:
             sup.on_bound_flag(
                 t,
@@ -104,7 +104,9 @@ def supervise(sup, t: float, x12: np.ndarray, max_tilt: float) -> Optional[str]:
 
 
 # --------------------------------------------------------------------------- the flight
-def measured_x12(x16_meas: np.ndarray, Omega_meas: np.ndarray, mix: np.ndarray) -> np.ndarray:
+def measured_controller_state(
+    x16_meas: np.ndarray, Omega_meas: np.ndarray, mix: np.ndarray
+) -> np.ndarray:
     """Controller state (DESIGN.md order) from the estimator output and ESC rotor speeds."""
     x16_meas = np.asarray(x16_meas, dtype=float)
     return np.concatenate(
@@ -129,10 +131,11 @@ def simulate_nonlinear(
     """Seed 0 Sec. VII on the nonlinear quadrotor: the LPV law on measured states.
 
     ``vehicle`` is a :class:`lpv_sysid.sim.vehicle.SimVehicle` (fixed-step RK4 physics,
-    noisy sensors) already placed at its initial state; ``law(t, x12, v_d, kappa u_e)`` returns
-    the virtual command. Each control period: measure (estimator state + ESC rotor speeds),
-    supervise, compute u, hold it over the physics steps. On a safety trip the excitation is
-    switched off, a status is emitted and the run stops (on the vehicle PX4 takes over).
+    noisy sensors) already placed at its initial state; ``law(t, controller_state, v_d,
+    kappa u_e)`` returns the virtual command. Each control period: measure (estimator state +
+    ESC rotor speeds), supervise, compute u, hold it over the physics steps. On a safety trip
+    the excitation is switched off, a status is emitted and the run stops (on the vehicle PX4
+    takes over).
     The performance output uses the true velocity: z = Q^-1 (v - v_d) (Eq. 18).
     """
     mix = vehicle.model.mix
@@ -160,8 +163,8 @@ def simulate_nonlinear(
         x16_true = np.array(vehicle.x)
         x16_meas = vehicle.measure_state()
         Om_meas = vehicle.measure_rotors()
-        x12m = measured_x12(x16_meas, Om_meas, mix)
-        event = supervise(sup, t, x12m, max_tilt)
+        measured_state = measured_controller_state(x16_meas, Om_meas, mix)
+        event = supervise(sup, t, measured_state, max_tilt)
         if event is not None:
             ue = np.zeros_like(ue)
             if sink is not None:
@@ -169,7 +172,7 @@ def simulate_nonlinear(
             break
         ue_s = kappa * ue
         try:
-            u = np.asarray(law(t, x12m, v_d, ue_s), dtype=float)
+            u = np.asarray(law(t, measured_state, v_d, ue_s), dtype=float)
         except SafetyError as exc:
             u = np.full(4, np.nan)
             detail = str(exc)
@@ -184,15 +187,15 @@ def simulate_nonlinear(
                 True,
                 f"bound monitor: running ||z||/||u_e|| = {gain_est:.3g} above gamma x margin",
             )
-            event = supervise(sup, t, x12m, max_tilt)
+            event = supervise(sup, t, measured_state, max_tilt)
         if event is not None:
             if sink is not None:
                 _abort_status(sink, t, event)
             break
         T.append(t)
         VD.append(v_d)
-        X.append(_x12_of(x16_true, mix))
-        XM.append(x12m)
+        X.append(measured_controller_state(x16_true, x16_true[12:16], mix))
+        XM.append(measured_state)
         UE.append(ue_s)
         U.append(u)
         OM.append(x16_true[12:16])
@@ -224,7 +227,7 @@ def simulate_nonlinear(
         name="nonlinear",
         t=t_arr,
         v_d=vd_arr,
-        x12=x_arr,
+        controller_state=x_arr,
         ue=ue_arr,
         u=np.array(U),
         z=z,
@@ -250,10 +253,6 @@ def _abort_status(sink: BagSink, t: float, event: str) -> None:
         "safety abort: excitation off, run stopped",
         {"event": event, "excitation": "off"},
     )
-
-
-def _x12_of(x16: np.ndarray, mix: np.ndarray) -> np.ndarray:
-    return np.concatenate([x16[3:5], x16[6:12], mix @ x16[12:16]])
 
 
 # ------------------------------------------------------------------ superposition estimate

@@ -24,7 +24,7 @@ class RunRecord:
     name: str  # "eq33" | "nonlinear"
     t: np.ndarray
     v_d: np.ndarray  # (N, 3)
-    x12: np.ndarray  # (N, 12)
+    controller_state: np.ndarray  # (N, 12) STATE_NAMES order
     ue: np.ndarray  # (N, 4) kappa u_e applied
     u: np.ndarray  # (N, 4) virtual command
     z: np.ndarray  # (N, 3) Q^-1 (v - v_d)
@@ -39,7 +39,7 @@ class RunRecord:
 
     @property
     def v(self) -> np.ndarray:
-        return self.x12[:, list(VELOCITY_INDEX)]
+        return self.controller_state[:, list(VELOCITY_INDEX)]
 
     @property
     def excitation_gain(self) -> Optional[float]:
@@ -78,7 +78,7 @@ class RunRecord:
             "t": self.t,
             "v_d": self.v_d,
             "v": self.v,
-            "x": self.x12,
+            "x": self.controller_state,
             "ue": self.ue,
             "u": self.u,
             "z": self.z,
@@ -92,7 +92,7 @@ def record_from_eq33(res: ClosedLoopResult, name: str = "eq33") -> RunRecord:
         name=name,
         t=res.t,
         v_d=res.v_d,
-        x12=res.x,
+        controller_state=res.x,
         ue=res.ue,
         u=res.u,
         z=res.z,
@@ -175,25 +175,27 @@ def write_outputs(
 # --------------------------------------------------------------------------- regressors
 def regressor_correlation_block(
     t: np.ndarray,
-    x12: np.ndarray,
+    controller_state: np.ndarray,
     arm_length: float,
     source: str,
     Omega: Optional[np.ndarray] = None,
 ) -> dict:
     """Fig. 10 correlation matrices of the Eq. (6) regressors for ``summary.yaml``.
 
-    ``x12`` in DESIGN.md state order; ``Omega`` (N, 4) rotor speeds if known, else
-    Omega = Mix^-1 delta from the virtual-actuator states.
+    ``controller_state`` (N, 12) in DESIGN.md state order; ``Omega`` (N, 4) rotor speeds
+    if known, else Omega = Mix^-1 delta from the virtual-actuator states.
     """
     from lpv_sysid.models.quadrotor import mixer
     from lpv_sysid.report.regressors import regressor_correlations, regressors, virtual_actuators
 
     mix = mixer(arm_length)
-    x12 = np.asarray(x12, dtype=float)
+    controller_state = np.asarray(controller_state, dtype=float)
     if Omega is None:
-        Omega = np.linalg.solve(mix, x12[:, 8:12].T).T
+        Omega = np.linalg.solve(mix, controller_state[:, 8:12].T).T
     delta, delta_sq = virtual_actuators(Omega, mix)
-    regs = regressors(t, x12[:, 2:5], x12[:, 5:8], delta, delta_sq, arm_length)
+    regs = regressors(
+        t, controller_state[:, 2:5], controller_state[:, 5:8], delta, delta_sq, arm_length
+    )
     corrs = regressor_correlations(regs)
     return {
         "source": source,

@@ -110,7 +110,7 @@ def common_input_systems(
     method: str,
     ucfg: dict,
 ) -> tuple[list, CommonInputSet]:
-    """Product polytope Lambda_i^(a,b) = (A_i^a, B^b) (models.lpv module docstring).
+    """Product polytope Lambda_i^(a,b) = (A_i^a, B^b) (models.lpv_uncertainty module docstring).
 
     B part: the hull of :func:`lpv_sysid.models.lpv.input_hull`; all corners when its p_B
     elements fit (p_B <= p_max_b), else the ``method`` reduction of ident.uncertainty with
@@ -249,8 +249,8 @@ def load_models(
     between vertices and Lemma 1 certifies the vertices only.
 
     ``common_b: true``: the product polytope of :func:`common_input_systems` (B^b common to all
-    vertices, so Lemma 1 covers the interior; models.lpv module docstring); ``model.common_input``
-    holds the B corners. ``p_max`` may list one value per vertex.
+    vertices, so Lemma 1 covers the interior; models.lpv_uncertainty module docstring);
+    ``model.common_input`` holds the B corners. ``p_max`` may list one value per vertex.
 
     ``set: full_box`` (config/synthesis.yaml): every element of the file in its interval
     (:func:`full_box_elements`; ``motor_std`` adds the motor constants where the file has none),

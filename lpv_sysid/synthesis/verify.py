@@ -12,7 +12,7 @@ Checks, each a row of the report:
    corner mixes: A = sum_i alpha_i sum_j w_i^j A_i^j, B = sum_i alpha_i sum_j w_i^j B_i^j with
    Dirichlet weights; for a common input set (``model.common_input``) the weights are the product
    w_i^(a,b) = beta_i^a beta^b with one beta^b for all vertices, so B = sum_b beta^b B^b -- the
-   frozen systems the common-B certificate claims (models.lpv module docstring);
+   frozen systems the common-B certificate claims (models.lpv_uncertainty module docstring);
 2b. ``common B`` / ``product A`` (common input set only): B_i^(a,b) identical to B^b for all
    scheduling vertices i and A-corners a within 1e-12, and A_i^(a,b) independent of b -- the
    structure Lemma 1's interior argument needs; ``verify_files`` also checks that the structure

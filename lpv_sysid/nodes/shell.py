@@ -27,9 +27,7 @@ from rclpy.qos import (
 )
 
 from lpv_sysid.errors import ConfigError, LpvSysidError
-from lpv_sysid.io.messages import TYPES
-
-NAMESPACE = "lpv_sysid"
+from lpv_sysid.io.messages import NAMESPACE, TYPES
 
 # topic (relative to /lpv_sysid) -> type: the topic table of docs/DESIGN.md (io/messages.py)
 TOPIC_TYPES = dict(TYPES)

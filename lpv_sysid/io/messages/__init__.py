@@ -1,0 +1,156 @@
+"""ROS message <-> array conversion: the only place message fields are touched (this package).
+
+Builders take a :class:`MsgFactory` so the same code makes rosbags dataclasses (CI, bag
+files) and real rclpy messages (onboard). Messages are constructed with keyword arguments
+for every field, floats are passed as Python ``float`` and numeric sequences through the
+factory's adapters, which is what both rosbags and rclpy's generated classes accept.
+
+Parsers accept either kind of message and return core quantities in the seed's frames
+(NED world, FRD body, SI units); every frame conversion goes through
+:mod:`lpv_sysid.io.frames`. Topic contents (docs/DESIGN.md):
+
+============================  ==============================  ===================================
+topic                         type                            content
+============================  ==============================  ===================================
+``state``                     nav_msgs/Odometry               ``odom`` (ENU) / ``base_link`` (FLU);
+                                                              ENU position, ENU/FLU attitude,
+                                                              body velocity and rates FLU
+``rotor_speeds``              sensor_msgs/JointState          ``rotor_1..rotor_4``, velocity rad/s;
+                                                              frame_id ``base_link`` measured
+                                                              (ESC), ``estimated`` from the
+                                                              motor outputs (seed 0 Eq. 8)
+``imu``                       sensor_msgs/Imu                 FLU specific force and rates,
+                                                              ENU/FLU orientation
+``velocity_reference``        geometry_msgs/TwistStamped      ``base_link``; linear = v_d FLU,
+                                                              angular.z = yaw-rate ref FLU
+``excitation``                sensor_msgs/JointState          ``ue_t, ue_a, ue_e, ue_r``, position
+``actuator_command``          sensor_msgs/JointState          ``ut, ua, ue, ur``, position
+``status``                    diagnostic_msgs/DiagnosticArray one DiagnosticStatus per node
+============================  ==============================  ===================================
+
+Virtual actuator channels are named channels in the seed's FRD sense and are never frame
+converted. Stamps are integer nanoseconds in the core (``stamp_ns``) and
+``builtin_interfaces/Time`` on the wire; samples also carry ``t = stamp_ns / 1e9`` (s).
+
+One module per message family, every name re-exported here:
+
+=========================================  =====================================================
+:mod:`~lpv_sysid.io.messages.factory`      :class:`MsgFactory`, :class:`MessageError`
+:mod:`~lpv_sysid.io.messages.fields`       frame ids, stamps and headers, field checks
+:mod:`~lpv_sysid.io.messages.state`        ``state`` (Odometry)
+:mod:`~lpv_sysid.io.messages.joint_state`  ``rotor_speeds``, ``excitation``, ``actuator_command``
+:mod:`~lpv_sysid.io.messages.imu`          ``imu``
+:mod:`~lpv_sysid.io.messages.twist`        ``velocity_reference``, the MAVROS setpoint
+:mod:`~lpv_sysid.io.messages.status`       ``status`` (DiagnosticArray)
+=======================================  ===========================================
+"""
+
+from __future__ import annotations
+
+from lpv_sysid.io.messages.factory import MessageError, MsgFactory
+from lpv_sysid.io.messages.fields import (
+    BASE_FRAME,
+    ODOM_FRAME,
+    header_msg,
+    stamp_ns_from_time,
+    stamp_ns_of,
+    time_msg,
+)
+from lpv_sysid.io.messages.imu import ImuSample, imu_from_msg, imu_msg
+from lpv_sysid.io.messages.joint_state import (
+    ROTOR_ESTIMATED_FRAME,
+    ROTOR_NAMES,
+    ROTOR_SOURCES,
+    actuator_command_from_joint_state,
+    actuator_command_msg,
+    channels_from_joint_state,
+    channels_from_joint_states,
+    excitation_from_joint_state,
+    excitation_msg,
+    joint_state,
+    rotor_source_of,
+    rotor_speeds_from_joint_state,
+    rotor_speeds_msg,
+)
+from lpv_sysid.io.messages.state import (
+    StateArrays,
+    StateSample,
+    odometry_from_state,
+    state_from_odometry,
+    states_from_odometry,
+)
+from lpv_sysid.io.messages.status import (
+    DIAGNOSTIC_LEVELS,
+    StatusSample,
+    diagnostic_array,
+    diagnostic_status,
+    status_from_diagnostic_array,
+)
+from lpv_sysid.io.messages.twist import (
+    enu_velocity_setpoint_msg,
+    reference_from_twist,
+    twist_reference_msg,
+)
+from lpv_sysid.models.quadrotor import EXCITATION_NAMES, INPUT_NAMES  # owner of the names
+
+__all__ = [
+    "NAMESPACE",
+    "TOPIC_NAMESPACE",
+    "MessageError",
+    "MsgFactory",
+    "ROTOR_NAMES",
+    "EXCITATION_NAMES",
+    "INPUT_NAMES",
+    "ODOM_FRAME",
+    "BASE_FRAME",
+    "TYPES",
+    "StateSample",
+    "StateArrays",
+    "ImuSample",
+    "StatusSample",
+    "states_from_odometry",
+    "channels_from_joint_states",
+    "time_msg",
+    "stamp_ns_from_time",
+    "stamp_ns_of",
+    "header_msg",
+    "odometry_from_state",
+    "state_from_odometry",
+    "joint_state",
+    "channels_from_joint_state",
+    "rotor_speeds_msg",
+    "rotor_speeds_from_joint_state",
+    "rotor_source_of",
+    "ROTOR_SOURCES",
+    "ROTOR_ESTIMATED_FRAME",
+    "excitation_msg",
+    "excitation_from_joint_state",
+    "actuator_command_msg",
+    "actuator_command_from_joint_state",
+    "imu_msg",
+    "imu_from_msg",
+    "twist_reference_msg",
+    "reference_from_twist",
+    "enu_velocity_setpoint_msg",
+    "diagnostic_status",
+    "diagnostic_array",
+    "status_from_diagnostic_array",
+    "DIAGNOSTIC_LEVELS",
+]
+
+
+#: message type of every topic of docs/DESIGN.md
+#: the package's node namespace; every topic of the table above is relative to it
+NAMESPACE = "lpv_sysid"
+#: the topics' absolute prefix (bags, replay)
+TOPIC_NAMESPACE = "/" + NAMESPACE
+
+TYPES = {
+    "state": "nav_msgs/msg/Odometry",
+    "rotor_speeds": "sensor_msgs/msg/JointState",
+    "imu": "sensor_msgs/msg/Imu",
+    "velocity_reference": "geometry_msgs/msg/TwistStamped",
+    "excitation": "sensor_msgs/msg/JointState",
+    "actuator_command": "sensor_msgs/msg/JointState",
+    "status": "diagnostic_msgs/msg/DiagnosticArray",
+}

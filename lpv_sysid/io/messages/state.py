@@ -1,0 +1,224 @@
+"""The ``state`` topic: ``nav_msgs/Odometry`` <-> the vehicle state in core frames (NED
+position, Euler angles, FRD body velocity and rates), one message at a time or a whole
+recording as arrays."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from lpv_sysid.io import frames
+from lpv_sysid.io.messages.factory import MessageError, MsgFactory
+from lpv_sysid.io.messages.fields import (
+    BASE_FRAME,
+    ODOM_FRAME,
+    check_frame,
+    covariance,
+    finite,
+    header_msg,
+    point,
+    quaternion,
+    stamp_ns_from_time,
+    stamp_ns_of,
+    vector3,
+    xyz,
+)
+
+__all__ = [
+    "StateArrays",
+    "StateSample",
+    "odometry_from_state",
+    "state_from_odometry",
+    "states_from_odometry",
+]
+
+
+@dataclass(frozen=True)
+class StateSample:
+    """Vehicle state in core frames: NED position (m), Euler ``[phi, theta, psi]`` (rad,
+    seed 0 Eq. 1), FRD body velocity ``[u, v, w]`` (m/s), FRD body rates ``[p, q, r]``."""
+
+    t: float
+    pos_ned: np.ndarray
+    euler: np.ndarray
+    v_body: np.ndarray
+    omega: np.ndarray
+    stamp_ns: int = 0
+
+
+def odometry_from_state(
+    f: MsgFactory,
+    stamp_ns: int,
+    pos_ned,
+    euler,
+    v_body,
+    omega,
+    *,
+    frame_id: str = ODOM_FRAME,
+    child_frame_id: str = BASE_FRAME,
+    pose_covariance=None,
+    twist_covariance=None,
+):
+    """``nav_msgs/Odometry`` for the ``state`` topic from NED/FRD core quantities."""
+    pos = frames.ned_to_enu(finite(pos_ned, 3, "state.pos_ned"))
+    q = frames.ros_orientation_from_euler(finite(euler, 3, "state.euler"))
+    v = frames.frd_to_flu(finite(v_body, 3, "state.v_body"))
+    w = frames.frd_to_flu(finite(omega, 3, "state.omega"))
+    pose = f("geometry_msgs/msg/Pose", position=point(f, pos), orientation=quaternion(f, q))
+    twist = f("geometry_msgs/msg/Twist", linear=vector3(f, v), angular=vector3(f, w))
+    return f(
+        "nav_msgs/msg/Odometry",
+        header=header_msg(f, stamp_ns, frame_id),
+        child_frame_id=str(child_frame_id),
+        pose=f(
+            "geometry_msgs/msg/PoseWithCovariance",
+            pose=pose,
+            covariance=covariance(f, pose_covariance, 6, "state.pose.covariance"),
+        ),
+        twist=f(
+            "geometry_msgs/msg/TwistWithCovariance",
+            twist=twist,
+            covariance=covariance(f, twist_covariance, 6, "state.twist.covariance"),
+        ),
+    )
+
+
+def state_from_odometry(
+    msg, *, frame_id: str | None = ODOM_FRAME, child_frame_id: str | None = BASE_FRAME
+) -> StateSample:
+    """Core state from a ``nav_msgs/Odometry`` (``None`` skips a frame check)."""
+    check_frame(msg.header.frame_id, frame_id, "state.header")
+    check_frame(msg.child_frame_id, child_frame_id, "state.child_frame_id")
+    p, tw = msg.pose.pose, msg.twist.twist
+    pp, o, tl, ta = p.position, p.orientation, tw.linear, tw.angular
+    vals = (pp.x, pp.y, pp.z, o.x, o.y, o.z, o.w, tl.x, tl.y, tl.z, ta.x, ta.y, ta.z)
+    try:
+        f = [float(c) for c in vals]
+    except (TypeError, ValueError):
+        f = None
+    if (
+        f is not None
+        and all(map(math.isfinite, f))
+        and abs(math.sqrt(f[3] * f[3] + f[4] * f[4] + f[5] * f[5] + f[6] * f[6]) - 1.0) <= 1e-3
+    ):
+        # fast path (the controller's state rate): plain floats through io.frames
+        pos_ned, euler, v_frd, w_frd = frames.odometry_ned_frd_from_ros_scalar(
+            f[0:3], f[3:7], f[7:10], f[10:13]
+        )
+        ns = stamp_ns_of(msg)
+        return StateSample(
+            t=ns / 1e9,
+            pos_ned=np.array(pos_ned),
+            euler=np.array(euler),
+            v_body=np.array(v_frd),
+            omega=np.array(w_frd),
+            stamp_ns=ns,
+        )
+    # validating path: names the offending field
+    pos = finite(xyz(p.position), 3, "state.pose.pose.position")
+    o = p.orientation
+    q = finite([o.x, o.y, o.z, o.w], 4, "state.pose.pose.orientation")
+    if abs(np.linalg.norm(q) - 1.0) > 1e-3:
+        raise MessageError(
+            f"state.pose.pose.orientation: not a unit quaternion (norm {np.linalg.norm(q):.6g})"
+        )
+    v = finite(xyz(tw.linear), 3, "state.twist.twist.linear")
+    w = finite(xyz(tw.angular), 3, "state.twist.twist.angular")
+    ns = stamp_ns_of(msg)
+    return StateSample(
+        t=ns / 1e9,
+        pos_ned=frames.enu_to_ned(pos),
+        euler=frames.euler_from_ros_orientation(q),
+        v_body=frames.flu_to_frd(v),
+        omega=frames.flu_to_frd(w),
+        stamp_ns=ns,
+    )
+
+
+@dataclass(frozen=True)
+class StateArrays:
+    """A time series of :class:`StateSample` as arrays: ``t`` (N,) s, ``stamp_ns`` (N,)
+    int64, ``pos_ned``, ``euler``, ``v_body``, ``omega`` (N, 3)."""
+
+    t: np.ndarray
+    stamp_ns: np.ndarray
+    pos_ned: np.ndarray
+    euler: np.ndarray
+    v_body: np.ndarray
+    omega: np.ndarray
+
+
+def states_from_odometry(
+    msgs: Sequence, *, frame_id: str | None = ODOM_FRAME, child_frame_id: str | None = BASE_FRAME
+) -> StateArrays:
+    """Vectorised :func:`state_from_odometry` for a list of messages (bag replay): the
+    fields are gathered in one pass and converted with array operations. Errors name the
+    index of the offending message."""
+    n = len(msgs)
+    ns = np.empty(n, dtype=np.int64)
+    raw = np.empty((n, 13))
+    for i, msg in enumerate(msgs):
+        if frame_id is not None and msg.header.frame_id != frame_id:
+            raise MessageError(
+                f"state[{i}].header: expected frame_id {frame_id!r}, got {msg.header.frame_id!r}",
+                row=i,
+            )
+        if child_frame_id is not None and msg.child_frame_id != child_frame_id:
+            raise MessageError(
+                f"state[{i}].child_frame_id: expected frame_id {child_frame_id!r}, "
+                f"got {msg.child_frame_id!r}",
+                row=i,
+            )
+        p, o = msg.pose.pose.position, msg.pose.pose.orientation
+        lin, ang = msg.twist.twist.linear, msg.twist.twist.angular
+        raw[i] = (p.x, p.y, p.z, o.x, o.y, o.z, o.w, lin.x, lin.y, lin.z, ang.x, ang.y, ang.z)
+        ns[i] = stamp_ns_from_time(msg.header.stamp)
+    return state_arrays(ns, raw)
+
+
+#: Odometry leaves in the order of the (N, 13) array :func:`state_arrays` converts
+ODOM_LEAVES = (
+    "pose.pose.position.x",
+    "pose.pose.position.y",
+    "pose.pose.position.z",
+    "pose.pose.orientation.x",
+    "pose.pose.orientation.y",
+    "pose.pose.orientation.z",
+    "pose.pose.orientation.w",
+    "twist.twist.linear.x",
+    "twist.twist.linear.y",
+    "twist.twist.linear.z",
+    "twist.twist.angular.x",
+    "twist.twist.angular.y",
+    "twist.twist.angular.z",
+)
+
+
+def state_arrays(ns: np.ndarray, raw: np.ndarray) -> StateArrays:
+    """:class:`StateArrays` of stamps ``ns`` and the (N, 13) Odometry values
+    ``raw`` (:data:`ODOM_LEAVES`), checked finite and unit-quaternion row by row
+    (:class:`MessageError` naming the first bad row, ``row`` set)."""
+    bad = ~np.isfinite(raw)
+    if np.any(bad):
+        i, j = (int(k) for k in np.argwhere(bad)[0])
+        where = ODOM_LEAVES[j].rsplit(".", 1)[0]
+        raise MessageError(f"state[{i}].{where}: non-finite value", row=i)
+    norm = np.linalg.norm(raw[:, 3:7], axis=1)
+    off = np.abs(norm - 1.0) > 1e-3
+    if np.any(off):
+        i = int(np.argmax(off))
+        raise MessageError(
+            f"state[{i}].pose.pose.orientation: not a unit quaternion (norm {norm[i]:.6g})",
+            row=i,
+        )
+    return StateArrays(
+        t=ns / 1e9,
+        stamp_ns=ns,
+        pos_ned=frames.enu_to_ned(raw[:, 0:3]),
+        euler=frames.euler_from_ros_orientation(raw[:, 3:7]),
+        v_body=frames.flu_to_frd(raw[:, 7:10]),
+        omega=frames.flu_to_frd(raw[:, 10:13]),
+    )
