@@ -251,6 +251,14 @@ def test_full_run_writes_bag_summary_and_report(lpv, tmp_path):
     assert set(summary["regressor_correlation"]["axes"]) == set("XYZLMN")
     assert summary["regressor_correlation"]["source"] == "nonlinear"
     assert summary["regressor_correlation"]["complete_run"] is True
+    # the limits the run was supervised against are recorded (the report's margins use them)
+    assert summary["limits"] == {
+        "max_tilt_deg": 60.0,
+        "box_margin": 1.0,
+        "monitor_margin": 1.2,
+        "monitor_min_energy": 0.05,
+        "arm_length": quad.params.arm_length,
+    }
 
     bag = read_bag(tmp_path / "phase2" / "bag")
     names = {k.rsplit("/", 1)[-1]: v for k, v in bag.items()}
@@ -283,6 +291,7 @@ def test_full_run_writes_bag_summary_and_report(lpv, tmp_path):
         f"{d['tracking']['ratio']:.4g} | {nl.gain:.4g} | completed |"
     ) in report
     assert "Computed from the nonlinear quadrotor simulation data, 151 samples." in report
+    assert "not recorded in the summary" not in report
     sp = summary["nonlinear"]["superposition"]
     assert sp["complete"] and 0 < sp["gain"] < 1.0
 

@@ -172,7 +172,9 @@ def plot_spectra(
             ax.vlines(freq[h], 0, amp[h, i], color="C0", lw=1.2)
             ax.plot(freq[h], amp[h, i], "o", color="C0", ms=3, label="excited harmonic")
         ax.set_xlim(0, fmax)
-        ax.set_ylim(bottom=0)
+        # headroom above the tallest line: the legend sits there, not on a harmonic
+        top = float(np.max(amp[sel, i])) if np.any(sel) else 0.0
+        ax.set_ylim(0, 1.35 * top if top > 0 else 1.0)
         ax.set_title(f"{names[i]}: {h.size} harmonics", fontsize=9)
         ax.set_ylabel("amplitude", fontsize=8)
         ax.tick_params(labelsize=7)
@@ -210,6 +212,10 @@ def plot_margins(m: RunMargins, path: Path, title: str = "") -> Path:
     ax.plot(m.t, m.box_distance, lw=0.8, label="distance of (u, v, w) to the nearest box face")
     ax.axhline(0, color="k", ls="-", lw=0.8, label="box edge")
     ax.axhline(-L.box_margin, color="r", ls="--", lw=1, label="supervisor stop")
+    # headroom above the largest distance: the legend sits there, not on the trace
+    lo = min(-L.box_margin, float(np.nanmin(m.box_distance)))
+    hi = max(0.0, float(np.nanmax(m.box_distance)))
+    ax.set_ylim(lo - 0.1 * (hi - lo), hi + 0.45 * (hi - lo))
     ax.set_ylabel("to box edge [m/s]")
     ax = axes[3]
     ax.plot(m.t, m.monitor_ratio, lw=0.8, label="running ||z|| / ||u_e||")

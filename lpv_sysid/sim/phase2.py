@@ -188,7 +188,7 @@ def run(
         list(records.values()),
         skipped,
         _regressor_block(records, quad_params.arm_length),
-        _summary_extra(problem, signals, cfg),
+        _summary_extra(problem, signals, cfg, quad_params.arm_length),
     )
     if bag_path is not None:
         written["bag"] = bag_path
@@ -378,9 +378,21 @@ def _regressor_block(records: dict[str, RunRecord], arm_length: float) -> Option
     return None
 
 
-def _summary_extra(problem: Phase2Problem, signals: ReferenceSignals, cfg: Phase2Config) -> dict:
+def _summary_extra(
+    problem: Phase2Problem, signals: ReferenceSignals, cfg: Phase2Config, arm_length: float
+) -> dict:
+    from lpv_sysid.control.lpv_controller import LpvControllerConfig
+
     return {
         "box": {"min": problem.vmin.tolist(), "max": problem.vmax.tolist()},
+        # the limits this run was supervised against (the report's margins use them)
+        "limits": {
+            "max_tilt_deg": float(cfg.max_tilt_deg),
+            "box_margin": float(cfg.box_margin),
+            "monitor_margin": float(cfg.monitor_margin),
+            "monitor_min_energy": float(LpvControllerConfig.monitor_min_energy),
+            "arm_length": float(arm_length),
+        },
         "inputs": {k: str(v) for k, v in problem.source.items()},
         "signals": {
             "duration": float(signals.t[-1] - signals.t[0]),

@@ -38,6 +38,7 @@ from lpv_sysid.errors import ConfigError
 
 if TYPE_CHECKING:
     from lpv_sysid.synthesis.full_box_montecarlo import FullBoxResult
+    from lpv_sysid.synthesis.scaling import Scaling
 
 VERIFICATION_FORMAT = "lpv_sysid/verification@1"
 #: file name ``lpv-sysid verify`` writes next to the gains file and the report looks for
@@ -347,3 +348,38 @@ def read_verification(path: Path | str) -> Verification:
     from lpv_sysid.io.yaml_file import read_yaml_mapping
 
     return Verification.from_dict(read_yaml_mapping(path, finite=False), str(path))
+
+
+def check_gain_from_certificate(
+    rep: VerifyReport,
+    i: int,
+    K_i: np.ndarray,
+    K_cert: np.ndarray,
+    sc: Scaling,
+    k_rtol: float,
+) -> None:
+    """Row ``K = S H^-1`` of vertex ``i``: the file's gain against the one the certificate's
+    S, H give, compared in the scaled coordinates (relative to the gain's own magnitude
+    there)."""
+    Ks = K_i * sc.t[None, :] / sc.s_u[:, None]
+    Kc = K_cert * sc.t[None, :] / sc.s_u[:, None]
+    err = float(np.max(np.abs(Ks - Kc)) / max(np.max(np.abs(Kc)), 1e-300))
+    rep.add("K = S H^-1", f"vertex {i}", err, k_rtol, err <= k_rtol)
+
+
+def check_lmi_data(rep: VerifyReport, cert: dict, R: np.ndarray, C: np.ndarray) -> None:
+    """Rows ``lmi data``: the R and C the certificate was computed with (where it records
+    them) equal the ones re-derived from the files, to 1e-12 relative."""
+    for key, ref in (("R", R), ("C", C)):
+        if key in cert:
+            same = np.shape(cert[key]) == np.shape(ref) and np.allclose(
+                cert[key], ref, rtol=1e-12, atol=0
+            )
+            rep.add(
+                "lmi data",
+                key,
+                0.0 if same else 1.0,
+                0.0,
+                bool(same),
+                "" if same else f"{key} differs from the one the certificate was computed with",
+            )
