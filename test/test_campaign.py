@@ -480,8 +480,7 @@ def _rclpy_is_the_standin() -> bool:
 
 
 def test_vehicle_status_from_the_bridge_node_status_values():
-    pytest.importorskip("rclpy")
-    from lpv_sysid.nodes.campaign_node import vehicle_status
+    from lpv_sysid.nodes.campaign_runtime import vehicle_status
 
     vs = vehicle_status(
         {

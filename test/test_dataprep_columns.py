@@ -16,6 +16,7 @@ import pytest
 from lpv_sysid.control.baseline import BaselineGains
 from lpv_sysid.errors import BagError
 from lpv_sysid.ident import dataprep as dp
+from lpv_sysid.ident import run_streams as rs
 from lpv_sysid.io import bag as bg
 from lpv_sysid.io import message_columns as mc
 from lpv_sysid.io import messages as m
@@ -30,8 +31,8 @@ ARRAYS = ("t_state", "euler", "v", "omega", "t_rotor", "Omega", "t_cmd", "u", "t
 
 def per_message(path):
     info = bg.topic_info(path)
-    wanted = [t for t in (dp._topic_for(list(info), s) for s in dp.TOPICS) if t is not None]
-    return dp._streams_from_messages(path, wanted)
+    wanted = [t for t in (rs._topic_for(list(info), s) for s in dp.TOPICS) if t is not None]
+    return rs._streams_from_messages(path, wanted)
 
 
 def assert_same(a: dp.Streams, b: dp.Streams) -> None:
@@ -62,7 +63,7 @@ def test_phase1_bag_columns_equal_messages(phase1_bag, monkeypatch):
     assert_same(cols, per_message(phase1_bag))
     assert cols.t_state.size == 1250 and cols.t_rotor.size == 500
     # the default path is the column reader: it works without the per-message one
-    monkeypatch.setattr(dp, "_streams_from_messages", None)
+    monkeypatch.setattr(rs, "_streams_from_messages", None)
     assert_same(dp.streams_from_bag(phase1_bag), cols)
     # the attitude is a real rotation (not all zeros): the 1e-12 comparison means something
     assert np.ptp(cols.euler[:, 0]) > 1e-3
@@ -149,8 +150,8 @@ def test_topic_of_mixed_structure_falls_back_to_messages(tmp_path, monkeypatch):
     with pytest.raises(BagError, match="different structure"):
         bg.read_arrays(path, topics=["/v/lpv_sysid/excitation"])
     calls = []
-    orig = dp._streams_from_messages
-    monkeypatch.setattr(dp, "_streams_from_messages", lambda *a: calls.append(a) or orig(*a))
+    orig = rs._streams_from_messages
+    monkeypatch.setattr(rs, "_streams_from_messages", lambda *a: calls.append(a) or orig(*a))
     got = dp.streams_from_bag(path)
     assert calls
     # message k = 4 (stamp 15 ms: row 2 in time order) has a fifth channel; the four read

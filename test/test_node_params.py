@@ -23,7 +23,7 @@ import yaml
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.nodes import shell
 from lpv_sysid.nodes import data_logger_node, mavlink_bridge_node, sim_vehicle_node
-from lpv_sysid.nodes import parameters
+from lpv_sysid.nodes import bridge_settings, parameters
 from lpv_sysid.nodes.controller_runtime import ControllerSettings
 from lpv_sysid.nodes.excitation_node import ExcitationSettings
 
@@ -124,10 +124,10 @@ def test_bridge_yaml_reaches_bridge_config_and_defaults_round_trip():
 
     specs = mavlink_bridge_node.SPECS
     defaults = {n: d for n, (d, _) in specs.items()}
-    _, bridge, mavros = mavlink_bridge_node._split(defaults)
+    _, bridge, mavros = bridge_settings.split_parameters(defaults)
     assert BridgeConfig.from_dict(bridge) == BridgeConfig()
     assert MavrosConfig.from_dict(mavros) == MavrosConfig()
-    _, bridge, mavros = mavlink_bridge_node._split(
+    _, bridge, mavros = bridge_settings.split_parameters(
         {**defaults, **yaml_values("mavlink_bridge_node.yaml", "mavlink_bridge")}
     )
     cfg = BridgeConfig.from_dict(bridge)
@@ -144,7 +144,7 @@ def test_bridge_yaml_reaches_bridge_config_and_defaults_round_trip():
     assert cfg.envelope.floor == 5.0 and cfg.envelope.max_tilt_deg == 50.0
     assert MavrosConfig.from_dict(mavros).setpoint_rate_hz == 50.0  # shared with offboard.*
     # a value set through the generated parameter is what BridgeConfig gets
-    _, bridge, _ = mavlink_bridge_node._split(
+    _, bridge, _ = bridge_settings.split_parameters(
         {
             **defaults,
             "rotor_estimate.a_omega": 15.0,
@@ -160,7 +160,7 @@ def test_bridge_yaml_reaches_bridge_config_and_defaults_round_trip():
     )
     with pytest.raises(ConfigError, match="handback_chain"):
         BridgeConfig.from_dict(
-            mavlink_bridge_node._split({**defaults, "offboard.handback_chain": ["ACRO"]})[1]
+            bridge_settings.split_parameters({**defaults, "offboard.handback_chain": ["ACRO"]})[1]
         )
 
 
@@ -405,7 +405,7 @@ def test_launch_files_leave_the_bridge_its_whole_hand_back_chain():
     from lpv_sysid.mavlink.bridge import BridgeConfig
 
     defaults = {n: d for n, (d, _) in mavlink_bridge_node.SPECS.items()}
-    _, bridge, _ = mavlink_bridge_node._split(
+    _, bridge, _ = bridge_settings.split_parameters(
         {**defaults, **yaml_values("mavlink_bridge_node.yaml", "mavlink_bridge")}
     )
     off = BridgeConfig.from_dict(bridge).offboard

@@ -111,7 +111,7 @@ def test_excitation_phase1_plays_core_in_flu(signals1):
     assert (v.x, v.y, v.z) == (2.0, -1.0, 0.5) and len(refs) == 20
     resp = call(probe, [node], "/lpv_sysid/excitation/start")
     assert resp.success and "phase1" in resp.message
-    t_start = node.core.start_time
+    t_start = node.runtime.core.start_time
     refs.clear()
     spin([node, probe], 3.0)
     # oracle: an independent core with the same table and start time, converted FRD -> FLU
@@ -208,7 +208,7 @@ def test_sim_vehicle_baseline_tracks_reference():
     # because the executor runs each callback as soon as its message is queued)
     assert len(states) == 1000 and len(rotors) == 400
     s = messages.state_from_odometry(states[-1])
-    assert abs(s.v_body[0] - 1.0) < 0.2 and abs(node.vehicle.x[6] - 1.0) < 0.1
+    assert abs(s.v_body[0] - 1.0) < 0.2 and abs(node.runtime.vehicle.x[6] - 1.0) < 0.1
     assert np.all(np.diff([m.header.stamp.nanosec for m in states[:10]]) == 4_000_000)
 
 
@@ -228,21 +228,23 @@ def test_sim_vehicle_keeps_real_time_through_a_late_tick_and_slips_when_overload
     )
     ctx = rclpy.get_default_context()
     spin([node, probe], 0.2)
-    k0, n0 = node.k, len(states)
+    k0, n0 = node.runtime.k, len(states)
     ctx._standin_now_ns += 50_000_000  # the executor was busy for 50 ms
     node.on_tick()
-    assert node.k - k0 == 25  # 500 Hz physics: 25 steps made up
+    assert node.runtime.k - k0 == 25  # 500 Hz physics: 25 steps made up
     spin([node, probe], 0.0)
     stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in states]
     assert len(states) - n0 == 12 or len(states) - n0 == 13
     assert set(np.diff(stamps)) == {4_000_000}  # no gap in the physics stamps
-    assert node.slip_ns == 0
-    k1 = node.k
+    assert node.runtime.slip_ns == 0
+    k1 = node.runtime.k
     ctx._standin_now_ns += 1_000_000_000  # 1 s stall: more than 0.1 s catch-up
     node.on_tick()
-    assert node.slip_ns == pytest.approx(0.9e9, abs=2.1e6)  # physics lost 0.9 s ...
-    assert node.k - k1 == 50  # ... and made up 0.1 s
-    assert 0 <= ctx._standin_now_ns - node.physics_stamp_ns() < node.dt_ns  # stamps: the clock
+    assert node.runtime.slip_ns == pytest.approx(0.9e9, abs=2.1e6)  # physics lost 0.9 s ...
+    assert node.runtime.k - k1 == 50  # ... and made up 0.1 s
+    assert (
+        0 <= ctx._standin_now_ns - node.runtime.physics_stamp_ns() < node.runtime.dt_ns
+    )  # stamps: the clock
 
 
 # ------------------------------------------------------------------ data_logger_node

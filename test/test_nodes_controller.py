@@ -173,7 +173,7 @@ def test_end_to_end_flow_and_tracking(gains, signals2, tmp_path):
     probe.create_subscription(TwistStamped, "/lpv_sysid/velocity_reference", refs.append, 100)
     spin(list(g.values()), 4.0)
     ctl = g["ctl"].runtime
-    assert ctl.supervisor.event is None and not g["sim"].handed_back
+    assert ctl.supervisor.event is None and not g["sim"].runtime.handed_back
     sent = standin.find_publisher(g["ctl"], "actuator_command").standin_published
     assert sent == ctl.commands > 950  # 250 Hz for ~4 s (first tick waits for inputs)
     g["log"].destroy_node()
@@ -208,7 +208,7 @@ def _abort_case(gains, signals2, tmp_path, action, **ctrl):
     # no command stamped after the abort; the vehicle falls back to the PX4-like hold
     assert max(messages.stamp_ns_of(c) for c in cmds) <= ev.t * 1e9
     if g["sim"] in nodes:
-        assert g["sim"].handed_back
+        assert g["sim"].runtime.handed_back
     return ev
 
 
@@ -367,7 +367,7 @@ def test_controller_abort_fades_the_excitation_within_one_ramp(gains, signals2, 
     spin(nodes, 1.2)
     ts = np.array([messages.stamp_ns_of(m) * 1e-9 for m in exc])
     ue = np.abs(_ue(exc)).max(axis=1)
-    assert g["exc"].aborted and "lpv_controller" in g["exc"].abort_reason
+    assert g["exc"].runtime.aborted and "lpv_controller" in g["exc"].runtime.abort_reason
     assert np.all(ue[ts > t_abort + 1.0 + 0.011] == 0.0)  # faded within the 1 s ramp (+1 tick)
     assert ue[(ts > t_abort + 0.3) & (ts < t_abort + 0.5)].max() > 0  # a fade, not a cut
     v = np.array([[m.twist.linear.x, m.twist.linear.y, m.twist.linear.z] for m in refs])
@@ -398,7 +398,7 @@ def test_abort_status_of_a_watched_node_fades_the_excitation(
     pub.publish(messages.diagnostic_array(f, standin.now_ns(), [st]))
     out.clear()
     spin([exc, probe], 1.2)
-    assert exc.aborted == fades
+    assert exc.runtime.aborted == fades
     assert (np.abs(_ue(out[-5:])).max() == 0.0) == fades
 
 
@@ -411,7 +411,7 @@ def test_excitation_abort_survives_the_clock_going_back(signals2):
     exc.now_ns = lambda: real() - 5_000_000_000
     out.clear()
     spin([exc, probe], 1.2)
-    assert exc.aborted and exc.abort_reason == "node clock went back by 4.990 s"
+    assert exc.runtime.aborted and exc.runtime.abort_reason == "node clock went back by 4.990 s"
     ue = np.abs(_ue(out)).max(axis=1)
     assert ue[:20].max() > 0 and np.all(ue[-15:] == 0.0)
 

@@ -296,37 +296,40 @@ class Answerer:
 
 def test_lockstep_sim_time_starts_at_zero_and_publishes_the_clock(fresh):
     node = lockstep_vehicle()
-    probe = Answerer(rclpy.create_node("probe"), node.u, answer=False)
+    probe = Answerer(rclpy.create_node("probe"), node.runtime.u, answer=False)
     standin.spin_nodes([node, probe.node], 0.2)
     # not engaged (nobody commands): free-runs paced by the steady clock, sim time from 0
     assert probe.states[:3] == [0, 4_000_000, 8_000_000]
     assert probe.clock == probe.states  # /clock: one per state, same time
-    assert not node.engaged and len(probe.states) >= 49
+    assert not node.runtime.engaged and len(probe.states) >= 49
 
 
 def test_lockstep_waits_for_the_command_of_each_state_sample(fresh):
     node = lockstep_vehicle()
-    ctl = Answerer(rclpy.create_node("controller"), node.u)
+    ctl = Answerer(rclpy.create_node("controller"), node.runtime.u)
     ex = standin.spin_nodes([node, ctl.node], 0.5)
-    assert node.engaged
+    assert node.runtime.engaged
     applied = []
-    real_step = node.vehicle.step
-    node.vehicle.step = lambda u: (applied.append((node.k, list(u))), real_step(u))[1]
+    real_step = node.runtime.vehicle.step
+    node.runtime.vehicle.step = lambda u: (
+        applied.append((node.runtime.k, list(u))),
+        real_step(u),
+    )[1]
     # the controller goes silent: the physics stops at the next state sample ...
     ctl.answer = False
     standin.spin_for(ex, 0.5)
-    k_stuck = node.k
-    assert k_stuck % node.d_state == 0 and node.awaiting[0] == k_stuck
+    k_stuck = node.runtime.k
+    assert k_stuck % node.runtime.d_state == 0 and node.runtime.awaiting[0] == k_stuck
     standin.spin_for(ex, 0.3)
-    assert node.k == k_stuck  # ... and stays there (wall 0.8 s < 1 s)
-    assert node.lockstep_resends >= 5  # the sample is sent again (best effort)
-    assert ctl.states[-1] == k_stuck * node.dt_ns  # the resent sample: same stamp
+    assert node.runtime.k == k_stuck  # ... and stays there (wall 0.8 s < 1 s)
+    assert node.runtime.lockstep_resends >= 5  # the sample is sent again (best effort)
+    assert ctl.states[-1] == k_stuck * node.runtime.dt_ns  # the resent sample: same stamp
     # its command arrives: exactly that command is held over the next physics steps
-    u_new = [node.u[0] + 0.01, 0.0, 0.0, 0.0]
-    ctl.pub.publish(messages.actuator_command_msg(ctl.f, k_stuck * node.dt_ns, u_new))
+    u_new = [node.runtime.u[0] + 0.01, 0.0, 0.0, 0.0]
+    ctl.pub.publish(messages.actuator_command_msg(ctl.f, k_stuck * node.runtime.dt_ns, u_new))
     ctl.u, ctl.answer = u_new, True
     standin.spin_for(ex, 0.1)
-    assert node.k > k_stuck + node.d_state
+    assert node.runtime.k > k_stuck + node.runtime.d_state
     assert applied[-1][1] == pytest.approx(u_new) and applied[-1][0] > k_stuck
     first = next(u for k, u in applied if k == k_stuck)
     assert first == pytest.approx(u_new)  # computed on the state at k, held from k
@@ -334,15 +337,15 @@ def test_lockstep_waits_for_the_command_of_each_state_sample(fresh):
 
 def test_lockstep_runs_on_without_a_stopped_controller(fresh):
     node = lockstep_vehicle(("lockstep_timeout_s", 0.3))
-    ctl = Answerer(rclpy.create_node("controller"), node.u)
+    ctl = Answerer(rclpy.create_node("controller"), node.runtime.u)
     ex = standin.spin_nodes([node, ctl.node], 0.2)
     ctl.answer = False
     standin.spin_for(ex, 1.0)
-    assert node.lockstep_timeouts == 1 and not node.engaged
-    k = node.k
+    assert node.runtime.lockstep_timeouts == 1 and not node.runtime.engaged
+    k = node.runtime.k
     standin.spin_for(ex, 0.5)
-    assert node.k - k >= 0.4 * 500  # free again, paced at real time
-    assert node.handed_back  # baseline hold after command_timeout_s
+    assert node.runtime.k - k >= 0.4 * 500  # free again, paced at real time
+    assert node.runtime.handed_back  # baseline hold after command_timeout_s
 
 
 def test_lockstep_waits_for_a_reference_on_sim_time(fresh):
@@ -367,9 +370,12 @@ def test_lockstep_waits_for_a_reference_on_sim_time(fresh):
 
     exc.create_timer(0.01, tick)
     ex = standin.spin_nodes([node, exc], 0.3)
-    assert node.ref_engaged
+    assert node.runtime.ref_engaged
     sending["on"] = False
-    last = node._ref_stamp_ns
+    last = node.runtime._ref_stamp_ns
     standin.spin_for(ex, 0.5)
-    assert node.physics_stamp_ns() - last <= 0.03e9 + node.d_state * node.dt_ns
-    assert node.awaiting is not None
+    assert (
+        node.runtime.physics_stamp_ns() - last
+        <= 0.03e9 + node.runtime.d_state * node.runtime.dt_ns
+    )
+    assert node.runtime.awaiting is not None

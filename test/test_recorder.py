@@ -2,6 +2,7 @@
 
 import errno
 import hashlib
+import logging
 import os
 import signal
 import subprocess
@@ -51,6 +52,22 @@ def cdr(msg):
 def count_messages(bagdir):
     with AnyReader([bagdir]) as reader:
         return [(c.topic, t) for c, t, _ in reader.messages()]
+
+
+def full_disk_on(write_no):
+    """A ``writer_factory`` whose bag writers fail the ``write_no``-th write (counted over all
+    of them) with ENOSPC."""
+
+    class FullDisk(BagWriter):
+        writes = 0
+
+        def write(self, topic, stamp_ns, msg):
+            FullDisk.writes += 1
+            if FullDisk.writes == write_no:
+                raise OSError(errno.ENOSPC, "No space left on device")
+            return super().write(topic, stamp_ns, msg)
+
+    return lambda p, s: FullDisk(p, storage=s)
 
 
 def test_1khz_for_60s_no_loss(tmp_path):
@@ -127,20 +144,10 @@ def test_split_by_size_and_metadata_content(tmp_path):
 
 def test_write_error_keeps_bag_readable(tmp_path):
     """Disk full on the 8th write: clear error, the 7 written messages stay readable."""
-
-    class FullDisk(BagWriter):
-        writes = 0
-
-        def write(self, topic, stamp_ns, msg):
-            FullDisk.writes += 1
-            if FullDisk.writes == 8:
-                raise OSError(errno.ENOSPC, "No space left on device")
-            return super().write(topic, stamp_ns, msg)
-
     cfg = RecorderConfig(
         out_dir=str(tmp_path / "exp"), topics={"/a": "sensor_msgs/msg/JointState"}
     )
-    rec = Recorder(cfg, writer_factory=lambda p, s: FullDisk(p, storage=s))
+    rec = Recorder(cfg, writer_factory=full_disk_on(8))
     rec.start(T0)
     with pytest.raises(BagError, match="No space left on device.*bag_0000 closed with 7"):
         for k in range(20):
@@ -152,6 +159,28 @@ def test_write_error_keeps_bag_readable(tmp_path):
     assert meta["topics"]["/a"]["count"] == meta["bags"][0]["messages"] == 7
     with pytest.raises(BagError, match="not recording"):
         rec.record("/a", T0 + 100, joint_state(T0, [0.0] * 4))
+
+
+def test_unwritable_metadata_after_write_error_is_logged(tmp_path, caplog):
+    """A write error (disk full) when experiment.yaml cannot be written either, the reserve
+    already given back: the recorder still raises the BagError naming the write error and
+    logs the metadata failure (it raised UnboundLocalError: the handler named an unbound
+    exception)."""
+    out = tmp_path / "exp"
+    cfg = RecorderConfig(out_dir=str(out), topics={"/a": "sensor_msgs/msg/JointState"})
+    rec = Recorder(cfg, writer_factory=full_disk_on(3))
+    rec.start(T0)
+    meta = out / "experiment.yaml"
+    meta.unlink()
+    meta.mkdir()  # a non-empty directory: every rename onto it fails, also for root
+    (meta / "keep").write_text("")
+    with caplog.at_level(logging.ERROR), pytest.raises(BagError, match="No space left on device"):
+        for k in range(20):
+            rec.record("/a", T0 + k, joint_state(T0 + k, [0.0] * 4))
+    rec.stop(T0 + 100)  # the lock is gone as well: logged again, never raised
+    failed = [r.getMessage() for r in caplog.records if r.getMessage().startswith("cannot write")]
+    assert len(failed) >= 2 and all(str(meta) in m for m in failed)
+    assert len(count_messages(out / "bag_0000")) == 2
 
 
 def test_bad_inputs(tmp_path):

@@ -22,32 +22,23 @@ recorded in the metadata (``status: incomplete``, ``error``) and raised as
 :class:`~lpv_sysid.errors.BagError`. A recording whose process was killed is made
 readable by :func:`repair_experiment` (``lpv-sysid bag repair OUT``), which also runs when
 a recorder is started on that directory again.
+
+Parts: :mod:`~lpv_sysid.io.recorder_config` (what to record),
+:mod:`~lpv_sysid.io.recorder_metadata` (the counts and ``experiment.yaml``),
+:mod:`~lpv_sysid.io.recorder_signals` (SIGINT/SIGTERM); this module is the recording lifecycle
+(:class:`Recorder`).
 """
 
 from __future__ import annotations
 
-import contextlib
 import logging
-import math
-import os
-import signal
-import subprocess
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping
-
-import yaml
+from typing import Any, Callable
 
 from lpv_sysid.errors import BagError, ConfigError
 from lpv_sysid.io.file_hash import sha256_file
-from lpv_sysid.io.bag import (
-    FLUSH_INTERVAL_S,
-    FLUSH_MESSAGES,
-    RESERVE_BYTES,
-    DiskReserve,
-    RepairReport,
-    atomic_write_text,
-)
+from lpv_sysid.io.bag import DiskReserve
 from lpv_sysid.io.bag.durability import now_iso
 from lpv_sysid.io.experiment import (  # re-exported: the directory layout and its repair
     LOCK_FILE,
@@ -57,143 +48,18 @@ from lpv_sysid.io.experiment import (  # re-exported: the directory layout and i
     ExperimentRepair,
     repair_experiment,
 )
+from lpv_sysid.io.recorder_config import RecorderConfig
+from lpv_sysid.io.recorder_metadata import (
+    BagInfo,
+    TopicStats,
+    git_revision,
+    settle,
+    static_metadata,
+    write_metadata,
+)
+from lpv_sysid.io.recorder_signals import stop_on_signals
 
 LOG = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class RecorderConfig:
-    """What to record and how to split it.
-
-    ``topics`` maps a topic name to its type ``pkg/msg/Name``. ``split_size_bytes`` /
-    ``split_duration_s``: start a new bag directory when the current one holds this many
-    payload bytes / this much recorded time (0 disables). ``config_files`` are copied
-    verbatim into the metadata; ``gains_file`` is hashed (sha256). Durability
-    (:class:`~lpv_sysid.io.bag.BagWriter`): ``flush_interval_s`` (0 < s <= 1) and
-    ``flush_messages`` bound what a killed process loses, ``fsync`` makes each flush
-    survive a power cut, ``reserve_bytes`` are kept free per bag for closing on a full disk.
-    """
-
-    out_dir: str
-    topics: Mapping[str, str]
-    storage: str = "mcap"
-    split_size_bytes: int = 0
-    split_duration_s: float = 0.0
-    config_files: tuple[str, ...] = ()
-    gains_file: str = ""
-    description: str = ""
-    flush_interval_s: float = FLUSH_INTERVAL_S
-    flush_messages: int = FLUSH_MESSAGES
-    fsync: bool = False
-    reserve_bytes: int = RESERVE_BYTES
-
-    def __post_init__(self):
-        if not self.out_dir:
-            raise ConfigError("recorder: out_dir must not be empty")
-        if not self.topics:
-            raise ConfigError("recorder: topics must list at least one topic")
-        for topic, msgtype in self.topics.items():
-            if not isinstance(topic, str) or not topic.startswith("/"):
-                raise ConfigError(f"recorder: topic {topic!r} must be an absolute name")
-            if not isinstance(msgtype, str) or msgtype.count("/") != 2:
-                raise ConfigError(
-                    f"recorder: topics[{topic!r}] type {msgtype!r} is not 'pkg/msg/Name'"
-                )
-        if self.storage not in ("mcap", "sqlite3"):
-            raise ConfigError(
-                f"recorder: storage must be 'mcap' or 'sqlite3', got {self.storage!r}"
-            )
-        if self.split_size_bytes < 0:
-            raise ConfigError("recorder: split_size_bytes must be >= 0")
-        if self.split_duration_s < 0:
-            raise ConfigError("recorder: split_duration_s must be >= 0")
-        f = self.flush_interval_s
-        if (
-            isinstance(f, bool)
-            or not isinstance(f, (int, float))
-            or not math.isfinite(f)
-            or not 0 < f <= 1.0
-        ):
-            raise ConfigError(
-                f"recorder: flush_interval_s must be in (0, 1] s (the data a "
-                f"killed recorder may lose), got {f!r}"
-            )
-        for name, lo in (("flush_messages", 1), ("reserve_bytes", 0)):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
-                raise ConfigError(f"recorder: {name} must be an integer >= {lo}, got {v!r}")
-        if not isinstance(self.fsync, bool):
-            raise ConfigError(f"recorder: fsync must be true or false, got {self.fsync!r}")
-
-    @classmethod
-    def from_dict(cls, d: Mapping) -> "RecorderConfig":
-        known = set(cls.__dataclass_fields__)
-        bad = set(d) - known
-        if bad:
-            raise ConfigError(f"recorder: unknown key(s) {sorted(bad)}")
-        for req in ("out_dir", "topics"):
-            if req not in d:
-                raise ConfigError(f"recorder: missing key '{req}'")
-        kw = dict(d)
-        kw["topics"] = dict(kw["topics"])
-        kw["config_files"] = tuple(kw.get("config_files", ()))
-        return cls(**kw)
-
-
-@dataclass
-class TopicStats:
-    msgtype: str
-    count: int = 0
-    dropped: int = 0
-    first_ns: int | None = None
-    last_ns: int | None = None
-
-    @property
-    def rate_hz(self) -> float:
-        if self.count < 2 or self.first_ns is None or self.last_ns is None:
-            return 0.0
-        if self.last_ns == self.first_ns:
-            return 0.0
-        return (self.count - 1) / ((self.last_ns - self.first_ns) * 1e-9)
-
-
-@dataclass
-class _BagInfo:
-    """One bag: what was recorded into it (``messages``, ``bytes``, stamps, ``topics``) and
-    ``durable``, what is known to be on disk (last flush; the file's content after close)."""
-
-    path: str
-    start_ns: int | None = None
-    end_ns: int | None = None
-    messages: int = 0
-    bytes: int = 0
-    topics: dict = field(default_factory=dict)
-    durable: dict | None = None
-
-    def entry(self) -> dict:
-        d = self.durable or {"topics": {}, "bytes": 0, "start_ns": None, "end_ns": None}
-        return {
-            "path": self.path,
-            "messages": sum(d["topics"].values()),
-            "bytes": d["bytes"],
-            "start_ns": d["start_ns"],
-            "end_ns": d["end_ns"],
-        }
-
-
-def git_revision(path: str | os.PathLike) -> str | None:
-    """``git rev-parse HEAD`` of the repository containing ``path`` (None when unavailable)."""
-    try:
-        out = subprocess.run(
-            ["git", "-C", str(path), "rev-parse", "HEAD"],
-            check=True,
-            capture_output=True,
-            text=True,
-            timeout=5,
-        )
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return out.stdout.strip() or None
 
 
 def _default_writer_factory(path: str, storage: str):
@@ -247,7 +113,7 @@ class Recorder:
             out.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise BagError(f"recorder: cannot create {out}: {exc.strerror or exc}") from None
-        self._static_meta = self._collect_static_metadata()
+        self._static_meta = static_metadata(self.config)
         # room for experiment.yaml on a full disk: twice its largest part, plus 64 kB
         reserve = (1 << 16) + 2 * sum(
             len(t.encode()) for t in self._static_meta["config_files"].values()
@@ -265,7 +131,7 @@ class Recorder:
         except BagError:
             self._lock.release()
             raise
-        self._write_metadata(closed=False)
+        write_metadata(self, closed=False)
         LOG.info("recording %d topic(s) to %s", len(self.stats), out)
 
     def record(self, topic: str, stamp_ns: int, msg) -> None:
@@ -291,7 +157,7 @@ class Recorder:
         if self._should_split(stamp_ns):
             self._close_current()
             self._open_next()
-            self._write_metadata(closed=False)
+            write_metadata(self, closed=False)
         raw = isinstance(msg, (bytes, bytearray, memoryview))
         try:
             if raw:
@@ -356,7 +222,7 @@ class Recorder:
         if self.bags[-1].messages:
             self._close_current()
             self._open_next()
-            self._write_metadata(closed=False)
+            write_metadata(self, closed=False)
         return self.bags[-1].path
 
     def note_dropped(self, topic: str, count: int = 1) -> None:
@@ -377,7 +243,7 @@ class Recorder:
         try:
             self._close_current()
         finally:
-            self._write_metadata(closed=self.error is None)
+            write_metadata(self, closed=self.error is None)
             if self._lock is not None:
                 self._lock.release()
         LOG.info("recording stopped: %s", self.summary())
@@ -414,11 +280,11 @@ class Recorder:
                 writer.add_topic(topic, msgtype)
         except (OSError, BagError) as exc:
             self.error = f"cannot open bag {path}: {getattr(exc, 'strerror', None) or exc}"
-            self._write_metadata(closed=False)
+            write_metadata(self, closed=False)
             raise BagError(f"recorder: {self.error}") from None
         self._writer = writer
         self._flushes_seen = getattr(writer, "flushes", 0)
-        self.bags.append(_BagInfo(path=path.name))
+        self.bags.append(BagInfo(path=path.name))
 
     def _make_writer(self, path: str):
         if self.writer_factory is not _default_writer_factory:
@@ -449,26 +315,7 @@ class Recorder:
             "start_ns": bag.start_ns,
             "end_ns": bag.end_ns,
         }
-        self._write_metadata(closed=False)
-
-    @staticmethod
-    def _settle(bag: _BagInfo, writer) -> None:
-        """``bag.durable`` after its writer closed (cleanly or after an error)."""
-        counts = getattr(writer, "durable_counts", None)
-        topics = dict(bag.topics) if counts is None else dict(counts)
-        n = sum(topics.values())
-        rep = getattr(writer, "repair", None)
-        if n >= bag.messages:
-            span = (bag.bytes, bag.start_ns, bag.end_ns)
-        elif isinstance(rep, RepairReport):
-            starts = [s.start_ns for s in rep.topics.values() if s.start_ns is not None]
-            ends = [s.end_ns for s in rep.topics.values() if s.end_ns is not None]
-            span = (rep.bytes, min(starts) if starts else None, max(ends) if ends else None)
-        elif bag.durable is not None:
-            span = (bag.durable["bytes"], bag.durable["start_ns"], bag.durable["end_ns"])
-        else:
-            span = (0, None, None)
-        bag.durable = {"topics": topics, "bytes": span[0], "start_ns": span[1], "end_ns": span[2]}
+        write_metadata(self, closed=False)
 
     def _close_current(self) -> None:
         writer, self._writer = self._writer, None
@@ -477,11 +324,11 @@ class Recorder:
         try:
             writer.__exit__(None, None, None)
         except (OSError, BagError) as exc:
-            self._settle(self.bags[-1], writer)
+            settle(self.bags[-1], writer)
             msg = f"closing {self.bags[-1].path} failed: {getattr(exc, 'strerror', None) or exc}"
             self.error = self.error or msg
             raise BagError(f"recorder: {msg}") from None
-        self._settle(self.bags[-1], writer)
+        settle(self.bags[-1], writer)
 
     def _fail(self, reason: str):
         self.error = reason
@@ -492,7 +339,7 @@ class Recorder:
             pass
         if self._lock is not None:
             self._lock.free_space()  # room for the metadata below, lock kept
-        self._write_metadata(closed=False)
+        write_metadata(self, closed=False)
         raise BagError(
             f"recorder: {reason}; {bag.path} closed with "
             f"{bag.entry()['messages']} message(s) readable"
@@ -519,111 +366,6 @@ class Recorder:
         if not self.config.split_size_bytes:
             return 0
         return len(self._ts().serialize_cdr(obj, msgtype))
-
-    def _collect_static_metadata(self) -> dict:
-        cfg = self.config
-        files = {}
-        from lpv_sysid.io.safe_open import read_text
-
-        for path in cfg.config_files:  # regular UTF-8 files of at most the YAML cap
-            files[str(path)] = read_text(path, f"recorder: config file {path}")
-        gains = None
-        if cfg.gains_file:
-            try:
-                gains = {"path": str(cfg.gains_file), "sha256": sha256_file(cfg.gains_file)}
-            except OSError as exc:
-                raise ConfigError(
-                    f"recorder: gains file {cfg.gains_file}: {exc.strerror or exc}"
-                ) from None
-        here = Path(__file__).resolve().parent
-        return {
-            "description": cfg.description,
-            "config_files": files,
-            "gains": gains,
-            "git_revision": git_revision(here),
-        }
-
-    def _write_metadata(self, closed: bool) -> None:
-        meta = {
-            "format": METADATA_FORMAT,
-            **self._static_meta,
-            "storage": self.config.storage,
-            "start_time": self._wall_start,
-            "stop_time": self._wall_stop or None,
-            "start_stamp_ns": self._started_ns,
-            "stop_stamp_ns": self._stopped_ns,
-            "status": self._status(closed),
-            "closed_cleanly": bool(closed),
-            "error": self.error,
-            "updated_time": now_iso(),
-            "split": {
-                "size_bytes": self.config.split_size_bytes,
-                "duration_s": self.config.split_duration_s,
-            },
-            "rotor_speeds_source": dict(self.rotor_sources) or None,  # {"esc"|"estimated": count}
-            # counts: what is on disk (committed), never more -- see the module docstring
-            "topics": {
-                t: {
-                    "type": s.msgtype,
-                    "count": self._durable_count(t),
-                    "dropped": s.dropped,
-                    "rate_hz": round(s.rate_hz, 6),
-                }
-                for t, s in self.stats.items()
-            },
-            "bags": [b.entry() for b in self.bags],
-        }
-        path = self.out_dir / METADATA_FILE
-        text = yaml.safe_dump(meta, sort_keys=False)
-        try:
-            atomic_write_text(path, text, fsync=self.config.fsync)
-        except OSError:
-            if self._lock is not None and self._lock.free_space():  # disk full: use the reserve
-                try:
-                    atomic_write_text(path, text, fsync=self.config.fsync)
-                    return
-                except OSError as exc2:
-                    exc = exc2
-            LOG.error("cannot write %s: %s", path, exc.strerror or exc)
-
-    def _status(self, closed: bool) -> str:
-        if closed:
-            return "closed_cleanly"
-        if self.error is not None or self._stopped_ns is not None:
-            return "incomplete"
-        return "recording"
-
-    def _durable_count(self, topic: str) -> int:
-        return sum((b.durable or {"topics": {}})["topics"].get(topic, 0) for b in self.bags)
-
-
-@contextlib.contextmanager
-def stop_on_signals(
-    recorder: Recorder,
-    stamp_ns: Callable[[], int] | None = None,
-    signals=(signal.SIGINT, signal.SIGTERM),
-):
-    """Close ``recorder`` cleanly on SIGINT/SIGTERM, then exit (status 128 + signo).
-
-    For processes that own the recorder without rclpy's signal handling (tests, CLI).
-    """
-    previous = {}
-
-    def handler(signo, _frame):
-        # Never close the bag from inside a half-done write: if the signal interrupted
-        # record(), it exits once that message is complete; the finally below closes.
-        recorder._exit_code = 128 + signo
-        if not recorder._busy:
-            raise SystemExit(128 + signo)
-
-    for s in signals:
-        previous[s] = signal.signal(s, handler)
-    try:
-        yield recorder
-    finally:
-        for s, h in previous.items():
-            signal.signal(s, h)
-        recorder.stop(stamp_ns() if stamp_ns else None)
 
 
 def _occupied(out: Path) -> str:

@@ -3,9 +3,10 @@
 Everything the bridge, the simulated vehicle and the preflight check must agree on
 lives here: the PX4 custom-mode encoding, the modes that need stick input, the
 offboard-loss actions (COM_OBL_RC_ACT) and stick sources (COM_RC_IN_MODE), the command
-ids and results (and which commands PX4 acknowledges twice), the PWM motor-output range,
-the MAVLink codec used by every link, PX4's byte-wise encoding of integer parameters,
-and the ESC_STATUS message.
+ids and results (and which commands PX4 acknowledges twice), the PWM motor-output range
+and PX4's byte-wise encoding of integer parameters. The MAVLink codec used by every
+link and the ESC_STATUS message are in :mod:`lpv_sysid.mavlink.codec` (re-exported
+here).
 
 PX4 custom mode (``HEARTBEAT.custom_mode``, ``MAV_CMD_DO_SET_MODE`` param2/param3)::
 
@@ -13,24 +14,27 @@ PX4 custom mode (``HEARTBEAT.custom_mode``, ``MAV_CMD_DO_SET_MODE`` param2/param
 
 e.g. OFFBOARD = main 6, HOLD = main 4 / sub 3 (AUTO.LOITER), LAND = main 4 / sub 6,
 POSCTL = main 3.
-
-ESC_STATUS (id 291) is sent by PX4 but is not part of the dialects bundled with
-pymavlink 2.4.50, so it is defined here with the field layout and CRC_EXTRA of
-mavlink/message_definitions common.xml (CRC_EXTRA 10, verified against
-``pymavlink.generator.mavparse`` in the tests).
 """
 
 from __future__ import annotations
 
 import enum
-import importlib
 import struct
-import time
 from dataclasses import dataclass
-from types import ModuleType
 from typing import Any
 
 from lpv_sysid.errors import ConfigError
+from lpv_sysid.mavlink.codec import (  # re-exported: links and vehicles use px4.make_codec
+    _ESC_STATUS_STRUCT as _ESC_STATUS_STRUCT,
+    DEFAULT_DIALECT as DEFAULT_DIALECT,
+    ESC_STATUS_CRC_EXTRA as ESC_STATUS_CRC_EXTRA,
+    MAVLINK_MSG_ID_ESC_STATUS as MAVLINK_MSG_ID_ESC_STATUS,
+    SIGNING_EPOCH as SIGNING_EPOCH,
+    dialect_module as dialect_module,
+    esc_status_class as esc_status_class,
+    make_codec as make_codec,
+    setup_signing as setup_signing,
+)
 
 # --------------------------------------------------------------------------- modes
 MAIN_MANUAL = 1
@@ -309,144 +313,3 @@ def pwm_from_u_esc(u_esc: float) -> float:
     """PWM pulse [us] for a normalised motor command u_ESC in [0, 1] (clipped)."""
     u = min(max(float(u_esc), 0.0), 1.0)
     return PWM_MIN_US + (PWM_MAX_US - PWM_MIN_US) * u
-
-
-# --------------------------------------------------------------------- MAVLink codec
-MAVLINK_MSG_ID_ESC_STATUS = 291
-ESC_STATUS_CRC_EXTRA = 10
-_ESC_STATUS_STRUCT = struct.Struct(
-    "<Q4i4f4fB"
-)  # wire order: time_usec, rpm, voltage, current, index
-
-DEFAULT_DIALECT = "development"  # PX4 builds its MAVLink with development.xml (includes common)
-_DIALECTS = ("development", "common", "ardupilotmega", "all")
-
-
-def dialect_module(name: str = DEFAULT_DIALECT) -> ModuleType:
-    """The pymavlink MAVLink-2 dialect module (``pymavlink.dialects.v20.<name>``)."""
-    if name not in _DIALECTS:
-        raise ConfigError(f"mavlink dialect {name!r} not supported; use one of {_DIALECTS}")
-    return importlib.import_module(f"pymavlink.dialects.v20.{name}")
-
-
-_CODEC_CLASSES: dict[str, type] = {}
-
-
-def esc_status_class(name: str = DEFAULT_DIALECT) -> type:
-    """MAVLink_esc_status_message class built on the dialect's MAVLink_message base."""
-    return _codec_classes(name)[1]
-
-
-def _codec_classes(name: str) -> tuple[type, type]:
-    if name in _CODEC_CLASSES:
-        return _CODEC_CLASSES[name], _CODEC_CLASSES[name + ":esc"]
-    mod = dialect_module(name)
-
-    # the dialect's classes are attributes of a module loaded at run time (name-defined)
-    class EscStatusMessage(mod.MAVLink_message):  # type: ignore[name-defined]
-        """ESC_STATUS (291): index, time_usec [us], rpm[4], voltage[4] [V], current[4] [A]."""
-
-        id = MAVLINK_MSG_ID_ESC_STATUS
-        msgname = "ESC_STATUS"
-        fieldnames = ["index", "time_usec", "rpm", "voltage", "current"]
-        ordered_fieldnames = ["time_usec", "rpm", "voltage", "current", "index"]
-        crc_extra = ESC_STATUS_CRC_EXTRA
-        unpacker = _ESC_STATUS_STRUCT
-        instance_field = None
-        instance_offset = -1
-
-        def __init__(self, index: int, time_usec: int, rpm, voltage, current) -> None:
-            mod.MAVLink_message.__init__(self, MAVLINK_MSG_ID_ESC_STATUS, "ESC_STATUS")
-            self._fieldnames = self.fieldnames
-            self._instance_field = None
-            self._instance_offset = -1
-            self.index = int(index)
-            self.time_usec = int(time_usec)
-            self.rpm = [int(x) for x in rpm]
-            self.voltage = [float(x) for x in voltage]
-            self.current = [float(x) for x in current]
-
-        def pack(self, mav: Any, force_mavlink1: bool = False) -> bytes:
-            payload = _ESC_STATUS_STRUCT.pack(
-                self.time_usec, *self.rpm, *self.voltage, *self.current, self.index
-            )
-            return self._pack(mav, self.crc_extra, payload, force_mavlink1=force_mavlink1)
-
-    class Px4Codec(mod.MAVLink):  # type: ignore[name-defined]  # see EscStatusMessage
-        """The dialect's MAVLink parser plus ESC_STATUS; robust parsing always on."""
-
-        def __init__(self, *args: Any, **kwargs: Any) -> None:
-            super().__init__(*args, **kwargs)
-            self.robust_parsing = True
-
-        def decode(self, msgbuf: bytearray):  # noqa: D102 - pymavlink API
-            m = super().decode(msgbuf)
-            if (
-                isinstance(m, mod.MAVLink_unknown)
-                and msgbuf[0] == mod.PROTOCOL_MARKER_V2
-                and (msgbuf[7] | msgbuf[8] << 8 | msgbuf[9] << 16) == MAVLINK_MSG_ID_ESC_STATUS
-            ):
-                return _decode_esc_status(self, mod, EscStatusMessage, msgbuf)
-            return m
-
-    _CODEC_CLASSES[name] = Px4Codec
-    _CODEC_CLASSES[name + ":esc"] = EscStatusMessage
-    return Px4Codec, EscStatusMessage
-
-
-def _decode_esc_status(codec: Any, mod: ModuleType, cls: type, msgbuf: bytearray):
-    """Decode ESC_STATUS with CRC and signature checks, mirroring pymavlink's decode()."""
-    signed = bool(msgbuf[2] & mod.MAVLINK_IFLAG_SIGNED)
-    mlen = msgbuf[1]
-    crc = struct.unpack("<H", bytes(msgbuf[10 + mlen : 12 + mlen]))[0]
-    crcbuf = bytearray(msgbuf[1 : 10 + mlen])
-    crcbuf.append(ESC_STATUS_CRC_EXTRA)
-    if crc != mod.x25crc(crcbuf).crc:
-        raise mod.MAVError("invalid MAVLink CRC in msgID 291")
-    src_sys, src_comp = msgbuf[5], msgbuf[6]
-    if codec.signing.secret_key is not None:
-        ok = signed and codec.check_signature(msgbuf, src_sys, src_comp)
-        if not ok and not (
-            codec.signing.allow_unsigned_callback is not None
-            and codec.signing.allow_unsigned_callback(codec, 291)
-        ):
-            codec.signing.badsig_count += 1
-            raise mod.MAVError("Invalid signature")
-    payload = bytes(msgbuf[10 : 10 + mlen]).ljust(_ESC_STATUS_STRUCT.size, b"\0")
-    t = _ESC_STATUS_STRUCT.unpack(payload[: _ESC_STATUS_STRUCT.size])
-    m = cls(t[13], t[0], t[1:5], t[5:9], t[9:13])
-    m._msgbuf = msgbuf
-    m._payload = msgbuf[10 : 10 + mlen]
-    m._crc = crc
-    m._signed = signed
-    m._header = mod.MAVLink_header(291, msgbuf[2], msgbuf[3], mlen, msgbuf[4], src_sys, src_comp)
-    return m
-
-
-def make_codec(
-    file: Any, source_system: int, source_component: int, dialect: str = DEFAULT_DIALECT
-) -> Any:
-    """A MAVLink 2 parser/packer for ``file`` (anything with ``write(bytes)``)."""
-    cls, _ = _codec_classes(dialect)
-    return cls(file, srcSystem=source_system, srcComponent=source_component)
-
-
-SIGNING_EPOCH = 1420070400  # 2015-01-01T00:00:00Z, MAVLink signing timestamp origin
-
-
-def setup_signing(
-    codec: Any,
-    key: bytes,
-    link_id: int = 0,
-    allow_unsigned: bool = False,
-    wall_time: float | None = None,
-) -> None:
-    """Enable MAVLink 2 signing on ``codec`` (timestamp in 10 us since 2015-01-01)."""
-    if len(key) != 32:
-        raise ConfigError(f"MAVLink signing key must be 32 bytes, got {len(key)}")
-    codec.signing.secret_key = bytes(key)
-    codec.signing.sign_outgoing = True
-    codec.signing.link_id = int(link_id) & 0xFF
-    codec.signing.allow_unsigned_callback = (lambda _mav, _msgid: True) if allow_unsigned else None
-    now = time.time() if wall_time is None else wall_time
-    codec.signing.timestamp = int(max(now - SIGNING_EPOCH, 0.0) * 100_000)

@@ -73,17 +73,7 @@ class LpvControllerNode(shell.ShellNode):
 
     def log_core(self):
         """Log what the core queued, with this node's logger (timestamp, /rosout)."""
-        logger = self.get_logger()
-        for level, text in self.runtime.take_log():
-            # one call site per severity: real rclpy keys its log context on the calling
-            # line and raises "Logger severity cannot be changed between calls" when one
-            # line logs two severities (it killed the node at its first safety abort)
-            if level == "error":
-                logger.error(text)
-            elif level == "warn":
-                logger.warning(text)
-            else:
-                logger.info(text)
+        shell.log_lines(self.get_logger(), self.runtime.take_log())
 
     def _input(self, topic):
         def cb(msg):

@@ -68,6 +68,32 @@ class StatusPublisher:
         self.diagnostics.publish(msg)
 
 
+def log_lines(logger, lines) -> None:
+    """Log a runtime core's queued ``(level, text)`` lines (level ``info`` | ``warn`` |
+    ``error``) with the node's ``logger`` (timestamped, on /rosout). One call site per
+    severity: real rclpy keys its log context on the calling line and raises "Logger
+    severity cannot be changed between calls" when one line logs two severities."""
+    for level, text in lines:
+        if level == "error":
+            logger.error(text)
+        elif level == "warn":
+            logger.warning(text)
+        else:
+            logger.info(text)
+
+
+def trigger(node, call, emit):
+    """A std_srvs/Trigger callback of ``node``: ``call(now) -> (success, message, output)``
+    answers the request; ``output`` goes to ``emit`` (the runtime cores' services)."""
+
+    def cb(request, response):
+        response.success, response.message, out = call(node.now())
+        emit(out)
+        return response
+
+    return cb
+
+
 def double(description: str, lo: float, hi: float, read_only: bool = False) -> ParameterDescriptor:
     return ParameterDescriptor(
         type=Parameter.Type.DOUBLE.value,
@@ -223,6 +249,25 @@ class ShellNode(Node):
                 self._rejected_logged_at[topic] = now
                 self.get_logger().warning(f"{topic} rejected: {exc}")
             return None
+
+
+def core_log(node):
+    """``log(level, text)`` for a pure-Python core that logs as it goes (level ``info``,
+    ``warn`` or ``error``): each line through :func:`log_lines` with ``node``'s logger."""
+    logger = node.get_logger()
+    return lambda level, text: log_lines(logger, [(level, text)])
+
+
+class RuntimeShell(ShellNode):
+    """A shell around a pure-Python ``self.runtime`` whose calls return ``(topic, message)``
+    pairs: :meth:`publish_outputs` publishes them, in order, on ``self.pub[topic]``; the
+    runtime's state is read as ``node.runtime.<name>``."""
+
+    pub: dict
+
+    def publish_outputs(self, outputs) -> None:
+        for topic, msg in outputs:
+            self.pub[topic].publish(msg)
 
 
 class StopRequest:

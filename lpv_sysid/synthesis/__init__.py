@@ -5,7 +5,10 @@
                      ``lemma1_numeric`` (Eqs. 19b, 27, 28, 30 in numpy: the re-check),
                      ``lemma1_cvxpy`` (Eq. 30 as a cvxpy problem), ``hinf_box`` (the box route)
 * ``robust_lmi``     the same bound over the whole element box (S-procedure, one block per vertex;
-                     common / per-vertex / rate-bounded Lyapunov matrices), docs/certificate.md
+                     common / per-vertex / rate-bounded Lyapunov matrices), docs/certificate.md;
+                     its parts: ``robust_box_data`` (scaling, element maps),
+                     ``robust_box_problem`` (the cvxpy problem),
+                     ``robust_box_check`` (the numpy re-check)
 * ``regions``        LMI regions, pole placement, observer, integral action (seed 2 Sec. 5)
 * ``scaling``        similarity scaling used inside the LMIs (undone for K)
 * ``hinf_norm``      H-infinity norm by Hamiltonian bisection (the independent check)
