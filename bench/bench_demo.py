@@ -18,8 +18,10 @@ from pathlib import Path
 
 from bench.harness import Page, Row, Stat, load_average, repo_root, status
 
-STEP = re.compile(r"^\[(\d+)/(\d+)\] (.*)$")
-DONE = re.compile(r"^\[(\d+)/(\d+)\] done in ([0-9.]+) s$")
+# the demo's step banners are INFO log lines on stderr: "INFO lpv_sysid.cli.demo: [k/n] ..."
+_PREFIX = r"^(?:\w+ lpv_sysid\.cli\.demo: )?"
+STEP = re.compile(_PREFIX + r"\[(\d+)/(\d+)\] (.*?)(?:: lpv-sysid .*)?$")
+DONE = re.compile(_PREFIX + r"\[(\d+)/(\d+)\] done in ([0-9.]+) s$")
 
 
 def run_once() -> tuple[float, float, dict]:
@@ -40,7 +42,7 @@ def run_once() -> tuple[float, float, dict]:
             err = [ln for ln in p.stderr.splitlines() if "error" in ln]
             failure = err[-1] if err else f"exit status {p.returncode}"
         titles, steps = {}, {}
-        for line in p.stdout.splitlines():
+        for line in p.stderr.splitlines() + p.stdout.splitlines():
             m = DONE.match(line)
             if m:
                 steps[int(m.group(1))] = float(m.group(3))
