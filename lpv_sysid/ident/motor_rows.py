@@ -141,7 +141,7 @@ def motor_design(
     ab = (params.a_omega, params.b_omega)
 
     def gated(ab):
-        frac, Om_model = pinned(e, Om[0], dt, params, *ab, speeds=True)
+        frac, Om_model = pinned(e, Om[0], dt, params, ab[0], ab[1], speeds=True)
         g = 1.0 - frac
         Xa = _stacked(g * (Om - Om0), dt, cfg, keep)
         # instrument of the measured speeds: the model's own, uncorrelated with telemetry noise

@@ -182,12 +182,15 @@ def identify(
     U = np.vstack([r.u for r in runs])
     phi, th, ub, vb, wb, p, q, r = X.T
     one = np.ones(len(X))
-    est, std, rep = {}, {}, {"rows": {}, "samples": int(len(X)), "runs": [r.name for r in runs]}
+    est: dict[str, float] = {}
+    std: dict[str, float] = {}
+    rows: dict[str, dict] = {}
+    rep = {"rows": rows, "samples": int(len(X)), "runs": [r.name for r in runs]}
 
     def put(names, theta, sd, r2, row, extra=None):
         for k, nm in enumerate(names):
             est[nm], std[nm] = float(theta[k]), float(sd[k])
-        rep["rows"][row] = {"r2": round(float(r2), 4), **(extra or {})}
+        rows[row] = {"r2": round(float(r2), 4), **(extra or {})}
 
     y = Xd[:, 2] - (r * vb - q * wb - g * np.sin(th))
     put(("X_u", "c_u"), *_ls(y, np.column_stack([ub, one])), "u")

@@ -46,8 +46,9 @@ INT_LIMIT = 2**63 - 1
 MAX_MAGNITUDE = 1e15
 
 if getattr(yaml, "__with_libyaml__", False):
-    # the libyaml binding; types-PyYAML does not list it among yaml.cyaml's exports
-    from yaml.cyaml import CParser as _Parser  # type: ignore[attr-defined]
+    # the libyaml binding (types-PyYAML does not list it among yaml.cyaml's exports: see the
+    # attr-defined exemption of this module in setup.cfg)
+    from yaml.cyaml import CParser as _Parser
 else:  # pragma: no cover - PyYAML without libyaml: same checks, slower parser
     from yaml.parser import Parser
     from yaml.reader import Reader
@@ -125,7 +126,7 @@ class _StrictConstructor(SafeConstructor):
 
     def construct_mapping(self, node, deep=False):
         if isinstance(node, MappingNode):
-            seen = {}  # key -> line of its first occurrence
+            seen: dict[Any, int] = {}  # key -> line of its first occurrence
             for key_node, _ in node.value:
                 if key_node.tag == "tag:yaml.org,2002:merge":
                     continue

@@ -93,14 +93,16 @@ class SimVehicleNode(shell.RuntimeShell):
     def on_reference(self, msg):
         parsed = self.parse_input("velocity_reference", messages.reference_from_twist, msg)
         if parsed is not None:
-            self.publish_outputs(self.runtime.on_reference(*parsed, self._pace_ns()))
+            stamp_s, v, r = parsed
+            self.publish_outputs(self.runtime.on_reference(stamp_s, v, r, self._pace_ns()))
 
     def on_command(self, msg):
         parsed = self.parse_input(
             "actuator_command", messages.actuator_command_from_joint_state, msg
         )
         if parsed is not None:
-            self.publish_outputs(self.runtime.on_command(*parsed, self._pace_ns()))
+            stamp_s, u = parsed
+            self.publish_outputs(self.runtime.on_command(stamp_s, u, self._pace_ns()))
 
     def on_tick(self):
         self.publish_outputs(self.runtime.on_tick(self._pace_ns()))

@@ -64,7 +64,8 @@ class _FusedEq33:
             np.asarray(lm.model.x0, float),
             np.asarray(lm.model.u0, float),
         ]
-        self.ff = None
+        self.ff: Optional[tuple[Any, int, int]] = None  # (accel(t), p, p_jerk)
+        self._acc: tuple[Any, Any] = (None, None)  # (t, accel(t)) of the last call
         if kind == "feedforward":
             if not (np.array_equal(ffs.vmin, pm.vmin) and np.array_equal(ffs.vmax, pm.vmax)):
                 raise ConfigError("feedforward schedule and model have different boxes")
@@ -93,7 +94,7 @@ class _FusedEq33:
         self._t = signals.t.tolist()
         self._vd = signals.v_d.tolist()
         self._ue = signals.u_e
-        self._last = None
+        self._last: Optional[tuple[Any, Any]] = None  # (key, result) of the last point
 
     # -- scheduling -------------------------------------------------------------
     def weights(self, vd, vd_dot=None):
@@ -185,6 +186,7 @@ class _FusedEq33:
     def _offsets(self, t, Mv, _unused=None):
         """(dx_ff, du_ff) of :meth:`FeedforwardSchedule.offsets` from the scattered map M(v_d);
         ``accel(t)`` is asked once per time (RK4 stages 2 and 3 share it)."""
+        assert self.ff is not None  # only the feedforward kind asks for offsets
         accel, pa, pj = self.ff
         if self._acc[0] != t:
             self._acc = (t, accel(t))

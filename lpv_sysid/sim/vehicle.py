@@ -122,7 +122,7 @@ class SimVehicle:
         self._pool: list = []  # normals drawn ahead from self.rng (_normals)
         self._pool_i = 0
         self._vib_x = None  # the state _vib_out belongs to
-        self._vib_out = None
+        self._vib_out: tuple[list[float], list[float]] | None = None
 
     # ------------------------------------------------------------------ physics
     def step(self, u) -> None:
