@@ -216,6 +216,7 @@ def test_run_bag_round_trip(short_runs, tmp_path):
     assert len(data[f"{ns}/rotor_speeds"]) == len(rec.rotor_t)
     assert len(data[f"{ns}/imu"]) == len(rec.imu_t)
     assert len(data[f"{ns}/actuator_command"]) == len(rec.cmd_t)
+    # one status per simulated second of the record (rec.duration: simulated, not wall time)
     assert len(data[f"{ns}/status"]) == math.ceil(rec.duration)
     stamp, msg = data[f"{ns}/state"][100]
     s = messages.state_from_odometry(msg)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from support.toy_plant import write_toy_plant
 import yaml
 
 from lpv_sysid.io.file_hash import sha256_file
@@ -24,66 +25,7 @@ def _write_pair(tmp: Path) -> tuple[Path, Path]:
     frozen closed loop -2 I has H-inf norm 0.5 (u_e -> x2) < gamma 1 everywhere."""
     el = {"matrix": "A", "row": 0, "col": 0, "nominal": -1.0, "std": 0.01}
     el = {**el, "lower": -1.02, "upper": -0.98}
-    names = [{"name": "x1", "unit": "m/s"}, {"name": "x2", "unit": "m/s"}]
-    inputs = [{"name": "u1", "unit": "1"}, {"name": "u2", "unit": "1"}]
-    sched = {"names": ["s"], "min": [-1.0], "max": [1.0]}
-    verts = [
-        {
-            "scheduling": [s],
-            "x0": [0.0, 0.0],
-            "u0": [0.0, 0.0],
-            "A": [[-1.0, 0.0], [0.0, -1.0]],
-            "B": [[1.0, 0.0], [0.0, 1.0]],
-            "uncertain": [el],
-        }
-        for s in (-1.0, 1.0)
-    ]
-    models = tmp / "vertex_models.yaml"
-    models.write_text(
-        yaml.safe_dump(
-            {
-                "format": "lpv_sysid/vertex_models@1",
-                "time": "continuous",
-                "states": names,
-                "inputs": inputs,
-                "scheduling": sched,
-                "vertices": verts,
-                "meta": {"k_sigma": 3.0},
-            },
-            sort_keys=False,
-        )
-    )
-    cert = {
-        "lmi": "hand-made for the test",
-        "solver": "none",
-        "gamma_achieved": 0.6,
-        "min_margin": 0.01,
-        "models_sha256": sha256_file(models),
-        "uncertainty": {},
-        "velocity_states": ["x2"],
-    }
-    gverts = [
-        {"scheduling": [s], "K": [[-1.0, 0.0], [0.0, -1.0]], "x0": [0.0, 0.0], "u0": [0.0, 0.0]}
-        for s in (-1.0, 1.0)
-    ]
-    gains = tmp / "gains.yaml"
-    gains.write_text(
-        yaml.safe_dump(
-            {
-                "format": "lpv_sysid/gains@1",
-                "states": names,
-                "inputs": inputs,
-                "scheduling": sched,
-                "vertices": gverts,
-                "R": [[1.0, 0.0], [0.0, 1.0]],
-                "Q": [[1.0]],
-                "gamma": 1.0,
-                "certificate": cert,
-            },
-            sort_keys=False,
-        )
-    )
-    return gains, models
+    return write_toy_plant(tmp, [[el], [el]], k_sigma=3.0, gamma_achieved=0.6, min_margin=0.01)
 
 
 def _table(text: str) -> dict[str, list[str]]:

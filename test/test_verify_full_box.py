@@ -14,10 +14,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from support.toy_plant import write_toy_plant
 import yaml
 
 from lpv_sysid.cli.main import main
-from lpv_sysid.io.file_hash import sha256_file
 from lpv_sysid.synthesis.verify import (
     full_box_intervals,
     read_verification,
@@ -46,66 +46,7 @@ def _write(tmp: Path, std_v0_a2: float) -> tuple[Path, Path]:
     stored (widened) interval [-1.1, -0.8]; the other elements have std 0.02."""
     v0 = [_el(0, 0, -1.0, 0.02), _el(1, 1, -1.0, std_v0_a2)]
     v1 = [_el(0, 0, -1.0, 0.05, -1.1, -0.8), _el(1, 1, -1.0, 0.02)]
-    verts = [
-        {
-            "scheduling": [s],
-            "x0": [0.0, 0.0],
-            "u0": [0.0, 0.0],
-            "A": [[-1.0, 0.0], [0.0, -1.0]],
-            "B": [[1.0, 0.0], [0.0, 1.0]],
-            "uncertain": u,
-        }
-        for s, u in ((-1.0, v0), (1.0, v1))
-    ]
-    names = [{"name": "x1", "unit": "m/s"}, {"name": "x2", "unit": "m/s"}]
-    inputs = [{"name": "u1", "unit": "1"}, {"name": "u2", "unit": "1"}]
-    sched = {"names": ["s"], "min": [-1.0], "max": [1.0]}
-    models = tmp / "vertex_models.yaml"
-    models.write_text(
-        yaml.safe_dump(
-            {
-                "format": "lpv_sysid/vertex_models@1",
-                "time": "continuous",
-                "states": names,
-                "inputs": inputs,
-                "scheduling": sched,
-                "vertices": verts,
-                "meta": {"k_sigma": K_SIGMA},
-            },
-            sort_keys=False,
-        )
-    )
-    cert = {
-        "lmi": "hand-made for the test",
-        "solver": "none",
-        "gamma_achieved": 0.9,
-        "min_margin": 0.0,
-        "models_sha256": sha256_file(models),
-        "uncertainty": {},
-        "velocity_states": ["x2"],
-    }
-    gverts = [
-        {"scheduling": [s], "K": [[-1.0, 0.0], [0.0, -1.0]], "x0": [0.0, 0.0], "u0": [0.0, 0.0]}
-        for s in (-1.0, 1.0)
-    ]
-    gains = tmp / "gains.yaml"
-    gains.write_text(
-        yaml.safe_dump(
-            {
-                "format": "lpv_sysid/gains@1",
-                "states": names,
-                "inputs": inputs,
-                "scheduling": sched,
-                "vertices": gverts,
-                "R": [[1.0, 0.0], [0.0, 1.0]],
-                "Q": [[1.0]],
-                "gamma": 1.0,
-                "certificate": cert,
-            },
-            sort_keys=False,
-        )
-    )
-    return gains, models
+    return write_toy_plant(tmp, [v0, v1], k_sigma=K_SIGMA, gamma_achieved=0.9, min_margin=0.0)
 
 
 def _grid_norm(Acl, Be, C):

@@ -241,7 +241,7 @@ _ZIP_ERRORS = (
     ValueError,
     OSError,
     struct.error,
-    NotImplementedError,
+    NotImplementedError,  # zipfile: an unsupported compression method in the archive
     RuntimeError,
     KeyError,
     OverflowError,
