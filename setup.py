@@ -5,7 +5,7 @@ colcon runs ``setup.py install`` with setup.cfg's ``[install]`` script directory
 executable lands in ``lib/lpv_sysid`` where ``ros2 run lpv_sysid <name>`` looks; pip builds a
 wheel and puts the same console scripts in the environment's ``bin`` (setup.cfg does not
 apply there). The shipped default configs live once, in ``lpv_sysid/config`` (package data,
-read through importlib.resources: lpv_sysid/default_configs.py); the same files are installed
+read through importlib.resources: lpv_sysid/configuration/defaults.py); the same files are installed
 again into ``share/lpv_sysid/config`` for launch files and ``--params-file``.
 """
 
@@ -56,7 +56,7 @@ setup(
     package_data={PACKAGE: ["py.typed", CONFIG_GLOB]},
     python_requires=">=3.10",
     install_requires=["setuptools"],
-    zip_safe=False,  # the configs are read as files (lpv_sysid/default_configs.py)
+    zip_safe=False,  # the configs are read as files (lpv_sysid/configuration/defaults.py)
     maintainer="lpv_sysid maintainers",
     maintainer_email="maintainers@example.com",
     description="Safe large-domain system identification of unstable multirotors "

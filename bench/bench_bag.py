@@ -32,8 +32,10 @@ TYPED = ("state", "rotor_speeds", "imu", "velocity_reference", "actuator_command
 def main() -> None:
     from lpv_sysid.control.baseline import BaselineGains
     from lpv_sysid.io import bag as bg
-    from lpv_sysid.io.bag import collect, layout, mcap_index, records
     from lpv_sysid.io import messages
+    from lpv_sysid.io.bag import collect, records
+    from lpv_sysid.io.bag.cdr import layout
+    from lpv_sysid.io.bag.mcap import index as mcap_index
     from lpv_sysid.models.quadrotor import Quadrotor
     from lpv_sysid.sim import phase1
     from lpv_sysid.sim.vehicle import SensorConfig

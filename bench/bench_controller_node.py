@@ -5,10 +5,10 @@
 The default configuration the product ships: config/lpv_controller.yaml (tick_source timer,
 rate_hz 250, feedforward on) with a gains file of the shape synthesize writes by default
 (:func:`bench.bench_lpv_law.shipped_gains`: F_ff and F_jerk), the GC policy the node applies
-after loading (:func:`lpv_sysid.nodes.controller_runtime.settle_gc`).
+after loading (:func:`lpv_sysid.flight.controller.settle_gc`).
 
 1. Tick: the phase-2 sample's inputs (state 250 Hz, rotor_speeds / velocity_reference /
-   excitation 100 Hz) through :class:`~lpv_sysid.nodes.controller_runtime.ControllerRuntime`
+   excitation 100 Hz) through :class:`~lpv_sysid.flight.controller.ControllerRuntime`
    with a tick every 4 ms (supervisor staleness and box checks, LPV law, actuator_command
    message): wall time of every tick (median, p10-p90, p99, max), CPU share of one core
    (inputs + ticks per simulated second), and the floor measured in the same run: the law
@@ -37,10 +37,8 @@ def bench_ticks(settings, events, passes: int = 5) -> tuple[list, list, list, li
     garbage collections during the passes as (generation, pause [s]))."""
     import gc
 
+    from lpv_sysid.flight.controller import CommandBuilder, ControllerRuntime, settle_gc
     from lpv_sysid.io import messages
-    from lpv_sysid.nodes.controller_messages import CommandBuilder
-    from lpv_sysid.nodes.controller_runtime import ControllerRuntime
-    from lpv_sysid.nodes.controller_startup import settle_gc
 
     period = round(1e9 / settings.rate_hz)
     t0 = events[0][0]
@@ -121,7 +119,7 @@ def main() -> None:
     from bench.bench_lpv_law import sample_events, shipped_gains, shipped_settings
     from bench.harness import Page, Row, Stat, load_average, status
     from lpv_sysid.cli.replay import replay_controller
-    from lpv_sysid.nodes.parameters import yaml_parameters
+    from lpv_sysid.configuration.parameters import yaml_parameters
 
     load0 = load_average()
     page = Page(

@@ -37,10 +37,10 @@ from bench.harness import Page, Row, Stat, cli, interleaved, load_average, repo_
 
 
 def _datasets():
-    from lpv_sysid.ident import synthetic as syn
     from lpv_sysid.ident import vertex as vx
     from lpv_sysid.models.lpv import box_vertices
     from lpv_sysid.models.quadrotor import Quadrotor
+    from lpv_sysid.sim import synthetic as syn
 
     q = Quadrotor()
     rng = np.random.default_rng(0)
@@ -111,7 +111,7 @@ def _steps_child(argv) -> dict[str, float]:
     import lpv_sysid.cli.main  # noqa: F401 - the imports the command needs, timed
     from lpv_sysid.ident import dataprep, metrics
     from lpv_sysid.ident import vertex as vx
-    from lpv_sysid.io.formats.vertex_models import VertexModels
+    from lpv_sysid.io.formats import VertexModels
 
     acc: dict[str, float] = {}
     patched = [
@@ -152,7 +152,7 @@ def main(argv=None) -> None:
     from lpv_sysid.ident import dataprep
     from lpv_sysid.ident import vertex as vx
     from lpv_sysid.io import bag as bg
-    from lpv_sysid.io import yaml_file
+    from lpv_sysid.io.files import yaml_reader as yaml_file
 
     load0 = load_average()
     page = Page(

@@ -38,9 +38,8 @@ def shipped_gains(dirpath: str) -> str:
     """A certified gains.yaml with the default reference feedforward (F_ff and F_jerk of the
     default FeedforwardLayout, as synthesize writes them) on msg_samples/gains.yaml's law,
     written to ``dirpath`` with its sidecar; returns its path."""
-    from lpv_sysid.io.formats import GainSchedule, load_certified_systems
-    from lpv_sysid.io.formats.gains import certify_law
-    from lpv_sysid.io.yaml_file import save_yaml
+    from lpv_sysid.io.files import save_yaml
+    from lpv_sysid.io.formats import GainSchedule, certify_law, load_certified_systems
     from lpv_sysid.synthesis.feedforward import FeedforwardLayout, vertex_feedforward
 
     src = os.path.join(SAMPLES, "gains.yaml")
@@ -66,8 +65,8 @@ def shipped_gains(dirpath: str) -> str:
 
 def shipped_settings(gains_file: str) -> Any:
     """ControllerSettings of config/lpv_controller.yaml with ``gains_file``."""
-    from lpv_sysid.nodes.controller_settings import ControllerSettings
-    from lpv_sysid.nodes.parameters import yaml_parameters
+    from lpv_sysid.configuration.parameters import yaml_parameters
+    from lpv_sysid.flight.controller import ControllerSettings
 
     params = yaml_parameters(PARAMS, "lpv_controller")
     params["gains_file"] = gains_file
@@ -87,8 +86,8 @@ def sample_events() -> list:
 def recorded_law_inputs(settings: Any) -> list:
     """``(t, x12, v_d, kappa u_e)`` of every law step of the runtime (the node's code) on the
     phase-2 sample at 250 Hz ticks: the inputs the law sees in flight."""
+    from lpv_sysid.flight.controller import ControllerRuntime
     from lpv_sysid.io import messages
-    from lpv_sysid.nodes.controller_runtime import ControllerRuntime
 
     rt = ControllerRuntime(settings, messages.MsgFactory.rosbags())
     seen = []
@@ -142,13 +141,13 @@ def main() -> None:
     import tempfile
 
     from bench.harness import Page, Row, Stat, interleaved, load_average, status
-    from lpv_sysid.control.lpv_controller import LpvController
+    from lpv_sysid.control.law import LpvController
     from lpv_sysid.models.quadrotor import mixer
 
     load0 = load_average()
     page = Page(
         "lpv_law",
-        "Runtime LPV law step (control/lpv_controller.py; issues 5, 15)",
+        "Runtime LPV law step (control/law/controller.py; issues 5, 15)",
         ".venv/bin/python -m bench.bench_lpv_law",
     )
     with tempfile.TemporaryDirectory() as tmp:

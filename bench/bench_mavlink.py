@@ -24,13 +24,12 @@ import time
 import numpy as np
 
 from bench.harness import Page, Row, interleaved, load_average, status
-
 from lpv_sysid.mavlink import px4
 from lpv_sysid.mavlink.bridge import BridgeConfig, BridgeCore
 from lpv_sysid.mavlink.link import LinkConfig, MavlinkLink, free_udp_port
 from lpv_sysid.mavlink.offboard import OffboardConfig, State
-from lpv_sysid.mavlink.sim_vehicle import SimVehicle, SimVehicleConfig
 from lpv_sysid.mavlink.telemetry import StateSample, TelemetryDecoder
+from lpv_sysid.sim.px4_vehicle import SimVehicle, SimVehicleConfig
 
 
 def _telemetry_datagrams(n: int) -> list[bytes]:

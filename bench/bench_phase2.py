@@ -59,7 +59,7 @@ def _setup(box: float = 2.0):
 
 
 def _signals(T: float = 10.0, dt: float = 0.02):
-    from lpv_sysid.sim.lpv_closed_loop import ReferenceSignals
+    from lpv_sysid.sim.closed_loop import ReferenceSignals
 
     t = np.arange(0.0, T + dt / 2, dt)
     vd = np.column_stack(
@@ -113,7 +113,7 @@ def floor_rhs(sched, sig, kappa: float = 1.0):
 
 
 def main() -> None:
-    from lpv_sysid.sim.lpv_closed_loop import (
+    from lpv_sysid.sim.closed_loop import (
         ClosedLoopConfig,
         eq33_rhs,
         fused_eq33,

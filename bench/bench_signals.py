@@ -16,10 +16,9 @@ import time
 
 import numpy as np
 
-from lpv_sysid.signals.config import load_config
 from lpv_sysid.signals.excitation import ExcitationCore
 from lpv_sysid.signals.metrics import max_cross_correlation
-from lpv_sysid.signals.multisine import design
+from lpv_sysid.signals.multisine import design, load_config
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 

@@ -136,8 +136,8 @@ def full_box_eval(models: Path, gains: Path, summary: Path) -> tuple[float, floa
     multipliers: frozen at the vertices, no interior claim), empirical worst frozen H-inf norm over
     the full box: verify --full-box 200 samples)."""
     from lpv_sysid.io.formats import GainSchedule
-    from lpv_sysid.synthesis.hinf_lmi import performance_matrix
-    from lpv_sysid.synthesis.robust_lmi import solve_box
+    from lpv_sysid.synthesis.hinf import performance_matrix
+    from lpv_sysid.synthesis.robust import solve_box
     from lpv_sysid.synthesis.uncertainty_set import load_models
     from lpv_sysid.synthesis.verify import verify_files
 

@@ -14,10 +14,11 @@ ends with the bridge's hand-back (HOLD); ``lpv-sysid fly phase1`` also lands.
 
 import os
 
-from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
 
-from lpv_sysid.nodes.launch_util import arg, declare_arguments, node, share_config_dir
+from launch import LaunchDescription
+from lpv_sysid.configuration.defaults import share_config_dir
+from lpv_sysid.nodes.launch_util import arg, declare_arguments, node
 
 
 def generate_launch_description():

@@ -9,7 +9,6 @@ m/s); run the file again for the next vertex of the box.
 """
 
 from launch import LaunchDescription
-
 from lpv_sysid.nodes.launch_util import arg, declare_arguments, node
 
 

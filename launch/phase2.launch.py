@@ -8,7 +8,6 @@ commands to PX4; hands control back to PX4 when commands stop), data_logger.
 """
 
 from launch import LaunchDescription
-
 from lpv_sysid.nodes.launch_util import REQUIRED, arg, declare_arguments, node
 
 

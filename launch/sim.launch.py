@@ -18,11 +18,11 @@ on 2 cores: the 104 s signal in ~150 s, test/test_ros_phase2.py).
 Start phase 2 with the controller's, then the excitation's ``start`` service.
 """
 
-from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
 from launch.conditions import IfCondition
 from launch.substitutions import PythonExpression
 
+from launch import LaunchDescription
 from lpv_sysid.nodes.launch_util import arg, declare_arguments, node
 
 #: every node but sim_vehicle (the clock source) runs on its /clock

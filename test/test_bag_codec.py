@@ -9,8 +9,9 @@ import yaml
 
 from lpv_sysid.errors import BagError
 from lpv_sysid.io import bag as bg
-from lpv_sysid.io.bag import layout, mcap_index
 from lpv_sysid.io import messages as m
+from lpv_sysid.io.bag.cdr import layout
+from lpv_sysid.io.bag.mcap import index as mcap_index
 
 F = m.MsgFactory.rosbags()
 TS = bg.jazzy_typestore()

@@ -1,9 +1,9 @@
-"""nodes/bridge_runtime.py and nodes/bridge_settings.py directly: no rclpy, no stand-in.
+"""flight/bridge/runtime.py and flight/bridge/settings.py directly: no rclpy, no stand-in.
 
 The message-level behaviour of mavlink_bridge_node (transport selection, MAVROS
 republishing and setpoint stream, stale-input stop, status content, hand-back bound) on
 rosbags messages and explicit clock values; oracles: the rotation body FRD -> local ENU
-worked by hand, the configured timeouts, the hand-back rule of mavlink/offboard.py.
+worked by hand, the configured timeouts, the hand-back rule of mavlink/offboard/machine.py.
 """
 
 from __future__ import annotations
@@ -16,11 +16,10 @@ import sys
 import numpy as np
 import pytest
 
+from lpv_sysid.flight.bridge import PARSERS, SPECS, BridgeRuntime
 from lpv_sysid.io import messages
 from lpv_sysid.mavlink.link import LinkEvent
 from lpv_sysid.mavlink.offboard import StatusEvent
-from lpv_sysid.nodes.bridge_runtime import PARSERS, BridgeRuntime
-from lpv_sysid.nodes.bridge_settings import SPECS
 
 F = messages.MsgFactory.rosbags()
 NAME = "/lpv_sysid/mavlink_bridge"
@@ -54,7 +53,7 @@ def reference(rt, t, v, r):
 
 def test_the_runtime_modules_never_import_rclpy():
     code = (
-        "import sys; import lpv_sysid.nodes.bridge_runtime, lpv_sysid.nodes.campaign_runtime; "
+        "import sys; import lpv_sysid.flight.bridge.runtime, lpv_sysid.flight.campaign.runtime; "
         "print(sorted(m for m in sys.modules if m.split('.')[0] in "
         "('rclpy', 'diagnostic_msgs', 'nav_msgs', 'std_srvs')))"
     )

@@ -1,4 +1,4 @@
-"""Phase-1 campaign sequencer (lpv_sysid/control/campaign.py): plan and runtime logic.
+"""Phase-1 campaign sequencer (lpv_sysid/control/campaign/sequencer.py): plan and runtime logic.
 
 The plan is checked against analytic numbers (segment room |w| T + excitation span + 2
 margins, displacement of a sine A / (pi f)); the runtime against a kinematic stand-in
@@ -480,7 +480,7 @@ def _rclpy_is_the_standin() -> bool:
 
 
 def test_vehicle_status_from_the_bridge_node_status_values():
-    from lpv_sysid.nodes.campaign_runtime import vehicle_status
+    from lpv_sysid.flight.campaign import vehicle_status
 
     vs = vehicle_status(
         {

@@ -1,4 +1,4 @@
-"""nodes/campaign_runtime.py directly: no rclpy, no stand-in.
+"""flight/campaign/runtime.py directly: no rclpy, no stand-in.
 
 The message-level behaviour of campaign_node: its settings, the LAND -> HOLD rule, start
 refused while the bridge services are missing, the bridge service calls the campaign
@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 import yaml
 
+from lpv_sysid.configuration import parameters
 from lpv_sysid.control import campaign
 from lpv_sysid.errors import ConfigError, LpvSysidError
+from lpv_sysid.flight.campaign import PARSERS, CampaignNodeSettings, CampaignRuntime
 from lpv_sysid.io import messages
-from lpv_sysid.nodes import parameters
-from lpv_sysid.nodes.campaign_runtime import PARSERS, CampaignNodeSettings, CampaignRuntime
 from lpv_sysid.signals.excitation import phase1_signals
 from lpv_sysid.signals.store import save_npz
 

@@ -13,9 +13,9 @@ import pytest
 import yaml
 
 from lpv_sysid.cli.main import main
-from lpv_sysid.errors import SolverError
-from lpv_sysid.io.formats import GainSchedule, load_certified_systems
 from lpv_sysid.control.safety import check_closed_loop
+from lpv_sysid.errors import SolverError
+from lpv_sysid.io.formats import GainSchedule, load_certificate_npz, load_certified_systems
 from lpv_sysid.models.lpv import ElementBox, PolytopicModel, UncertainElement, multilinear_weights
 from lpv_sysid.models.quadrotor import (
     INPUT_NAMES,
@@ -24,10 +24,8 @@ from lpv_sysid.models.quadrotor import (
     STATE_UNITS,
     Quadrotor,
 )
-from lpv_sysid.io.formats import load_certificate_npz
+from lpv_sysid.synthesis.hinf import HinfOptions, hinf_norm, performance_matrix, synthesize_hinf
 from lpv_sysid.synthesis.uncertainty_set import load_models
-from lpv_sysid.synthesis.hinf_lmi import HinfOptions, performance_matrix, synthesize_hinf
-from lpv_sysid.synthesis.hinf_norm import hinf_norm
 from lpv_sysid.synthesis.verify import verify_files
 
 ROOT = Path(__file__).resolve().parents[1]

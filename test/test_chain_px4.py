@@ -5,7 +5,7 @@ PX4_SITL_DIR).
 Lock-step: the runner's ``sleep`` advances the simulated vehicle (messages still travel
 over 127.0.0.1 UDP), so the flights do not depend on machine load. The simulated vehicle
 implements SET_ATTITUDE_TARGET body rates + thrust with a PX4-like rate loop
-(lpv_sysid/mavlink/sim_vehicle.py); the gains are synthesized (seed 0 Lemma 1, pole region)
+(lpv_sysid/sim/px4_vehicle/vehicle.py); the gains are synthesized (seed 0 Lemma 1, pole region)
 for a rate plant with PX4-like coefficients, so what is checked is the path: OFFBOARD from
 HOLD in the air, the law's commands arriving unchanged as rate setpoints, the bag, the
 hand-back, the gain analysis -- not the sim's tracking quality.
@@ -20,18 +20,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from support.lockstep import LockStep
 
-from lpv_sysid.cli.chain import Phase2Options, fly_phase2
 from lpv_sysid.cli.main import main as cli_main
 from lpv_sysid.errors import SafetyError
+from lpv_sysid.flight.phase2 import Phase2Options, fly_phase2
 from lpv_sysid.ident import rate_plant as rid
 from lpv_sysid.io import bag as iobag
 from lpv_sysid.io import messages
+from lpv_sysid.io.files import save_yaml
 from lpv_sysid.mavlink.link import free_udp_port
-from lpv_sysid.mavlink.sim_vehicle import SimVehicle, SimVehicleConfig
 from lpv_sysid.models import rate_plant as rp
-from lpv_sysid.io.yaml_file import save_yaml
-from support.lockstep import LockStep
+from lpv_sysid.sim.px4_vehicle import SimVehicle, SimVehicleConfig
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / "config"
@@ -201,8 +201,8 @@ def test_phase2_refuses_a_vehicle_on_the_ground_before_sending_anything(tmp_path
 
 
 def test_phase2_law_refuses_gains_of_another_plant(tmp_path, design):
-    from lpv_sysid.cli.chain import load_phase2_law
     from lpv_sysid.errors import ConfigError
+    from lpv_sysid.flight.phase2 import load_phase2_law
     from lpv_sysid.io.formats import certify_law
 
     doc = yaml.safe_load((design / "gains.yaml").read_text())
@@ -223,7 +223,8 @@ def test_real_px4_phase1_records_rate_setpoints_and_identifies(tmp_path):
     d, why = find_px4()
     if d is None:
         pytest.skip(why)
-    from lpv_sysid.cli.fly import FlyConfig, fly
+    from lpv_sysid.cli.fly import fly
+    from lpv_sysid.flight.campaign import FlyConfig
 
     cfg_doc = yaml.safe_load((CONFIG / "campaign_chain.yaml").read_text())
     cfg_doc["bridge_config"] = str(CONFIG / "mavlink_bridge_chain.yaml")

@@ -103,5 +103,5 @@ def test_a_process_logs_to_stderr_one_line_per_record_and_keeps_stdout_for_resul
     lines = loud.stderr.splitlines()
     assert lines[0].startswith("DEBUG lpv_sysid.cli.main: lpv_sysid ")
     assert lines[-1] == (
-        f"DEBUG lpv_sysid.default_configs: shipped default {ROOT}/lpv_sysid/config/quadrotor.yaml"
+        f"DEBUG lpv_sysid.configuration.defaults: shipped default {ROOT}/lpv_sysid/config/quadrotor.yaml"
     )

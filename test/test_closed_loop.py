@@ -8,7 +8,7 @@ from scipy import signal
 from scipy.linalg import solve_continuous_are
 
 from lpv_sysid.errors import ConfigError, SafetyError
-from lpv_sysid.sim.lpv_closed_loop import (
+from lpv_sysid.sim.closed_loop import (
     ClosedLoopConfig,
     ReferenceSignals,
     hinf_norm_grid,
@@ -191,7 +191,7 @@ def test_bad_inputs():
 
 
 def test_eq34_multilinear_model_against_finite_differences():
-    """x0' of Eq. (34) with the multilinear interpolation of models/lpv.py (vertex equilibria
+    """x0' of Eq. (34) with the multilinear interpolation of models/lpv/polytope.py (vertex equilibria
     that are not affine in v_d) equals the central difference of x0(v_d(t))."""
     from lpv_sysid.models.lpv import PolytopicModel, ScheduledLpv
 
@@ -232,8 +232,8 @@ def test_lemma1_gains_frozen_point_gain_below_certificate():
     independent H-inf norm, which is below the certified gamma."""
     from lpv_sysid.models.lpv import ScheduledLpv
     from lpv_sysid.synthesis.example_models import quadrotor_like_polytope
-    from lpv_sysid.synthesis.hinf_lmi import HinfOptions, excitation_R, output_Q, synthesize_hinf
-    from lpv_sysid.synthesis.hinf_lmi import performance_matrix as pm_C
+    from lpv_sysid.synthesis.hinf import HinfOptions, excitation_R, output_Q, synthesize_hinf
+    from lpv_sysid.synthesis.hinf import performance_matrix as pm_C
 
     pm = quadrotor_like_polytope()
     Rq, Qq = excitation_R([0.1] * 4, 30.0), output_Q([5.0] * 3, 30.0)

@@ -12,14 +12,13 @@ import yaml
 from lpv_test_gains import design_for, write_gains
 
 from lpv_sysid.cli.main import main
-from lpv_sysid.control.lpv_controller_config import LpvControllerConfig
-from lpv_sysid.control.reference_limiter import ReferenceLimiter
+from lpv_sysid.control.law import LpvControllerConfig, ReferenceLimiter
 from lpv_sysid.control.safety import check_closed_loop
 from lpv_sysid.errors import ConfigError
+from lpv_sysid.flight.controller import ControllerRuntime, ControllerSettings
 from lpv_sysid.io import messages
 from lpv_sysid.io.formats import GainSchedule, load_certified_systems
 from lpv_sysid.models.quadrotor import Quadrotor, mixer
-from lpv_sysid.nodes.controller_runtime import ControllerRuntime, ControllerSettings
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SAMPLES = os.path.join(ROOT, "msg_samples")
@@ -605,11 +604,10 @@ def test_design_envelope_from_a_phase2_summary(tmp_path):
     """certificate.design from the signals summary that synthesize reads: peaks and highest
     harmonics of the reference, Bernstein + fade bounds (oracle: the played signal of a
     real phase-2 design stays inside them), excitation peaks, table interval."""
-    from lpv_sysid.cli.synthesize import design_from_summary
-    from lpv_sysid.signals.config import SignalsConfig
     from lpv_sysid.signals.excitation import ExcitationCore, design_envelope
-    from lpv_sysid.signals.multisine import design
+    from lpv_sysid.signals.multisine import SignalsConfig, design
     from lpv_sysid.signals.store import summary, write_signal_set
+    from lpv_sysid.synthesis.gains import design_from_summary
 
     cfg = yaml.safe_load(open(os.path.join(ROOT, "config", "signals_phase2.yaml")))
     cfg["duration"] = 20.0

@@ -14,7 +14,7 @@ import pytest
 
 from lpv_sysid.errors import ConfigError, SolverError
 from lpv_sysid.synthesis.example_models import uncontrollable_disturbance_plant
-from lpv_sysid.synthesis.hinf_lmi import HinfOptions, synthesize_hinf
+from lpv_sysid.synthesis.hinf import HinfOptions, synthesize_hinf
 
 PKG = Path(__file__).resolve().parent.parent / "lpv_sysid"
 # Every module outside the command-line layer: the cores (and node shells) name config
@@ -67,7 +67,9 @@ def test_synthesis_logs_each_stage_and_the_remedies(caplog):
     with caplog.at_level(logging.INFO, logger="lpv_sysid.synthesis"):
         with pytest.raises(SolverError):
             synthesize_hinf(model, None, C, HinfOptions(gamma=0.8 * gmin), Be=Be)
-    msgs = [r.getMessage() for r in caplog.records if r.name == "lpv_sysid.synthesis.hinf_lmi"]
+    msgs = [
+        r.getMessage() for r in caplog.records if r.name == "lpv_sysid.synthesis.hinf.synthesize"
+    ]
     assert any(
         m.startswith("Lemma 1 (seed 0 Eq. 30): building the LMI over 2 systems") for m in msgs
     )

@@ -16,10 +16,10 @@ import pytest
 from lpv_sysid.control.baseline import BaselineGains
 from lpv_sysid.errors import BagError
 from lpv_sysid.ident import dataprep as dp
-from lpv_sysid.ident import run_streams as rs
+from lpv_sysid.ident.dataprep import streams as rs
 from lpv_sysid.io import bag as bg
-from lpv_sysid.io import message_columns as mc
 from lpv_sysid.io import messages as m
+from lpv_sysid.io.messages import columns as mc
 from lpv_sysid.models.quadrotor import EXCITATION_NAMES, INPUT_NAMES, Quadrotor
 from lpv_sysid.sim import phase1 as p1
 from lpv_sysid.sim.vehicle import SensorConfig

@@ -33,7 +33,7 @@ from lpv_sysid.mavlink import px4
 from lpv_sysid.mavlink.bridge import BridgeConfig, BridgeCore
 from lpv_sysid.mavlink.link import LinkConfig, free_udp_port
 from lpv_sysid.mavlink.offboard import OffboardConfig, State, StatusEvent
-from lpv_sysid.mavlink.sim_vehicle import SimVehicle, SimVehicleConfig
+from lpv_sysid.sim.px4_vehicle import SimVehicle, SimVehicleConfig
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DT = 0.004

@@ -1,4 +1,4 @@
-"""The one u_e -> z FIR regression (sim/excitation_fir.py) behind the phase-2 simulation and the
+"""The one u_e -> z FIR regression (sim/closed_loop/excitation_fir.py) behind the phase-2 simulation and the
 PX4 chain's gain (cli/chain.excitation_gain)."""
 
 from __future__ import annotations
@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from lpv_sysid.cli.chain import excitation_gain
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.sim.excitation_fir import excitation_response_fir
+from lpv_sysid.flight.phase2 import excitation_gain
+from lpv_sysid.sim.closed_loop import excitation_response_fir
 
 
 def _data(fs: float = 50.0, T: float = 60.0):

@@ -4,12 +4,8 @@ the fade and the shutdown rules on a simulated node clock (ticks of 10 ms)."""
 import numpy as np
 import pytest
 
+from lpv_sysid.flight.excitation import CLOCK_STALL_S, ExcitationRuntime, ExcitationSettings
 from lpv_sysid.io import messages
-from lpv_sysid.nodes.excitation_runtime import (
-    CLOCK_STALL_S,
-    ExcitationRuntime,
-    ExcitationSettings,
-)
 from lpv_sysid.signals.excitation import ExcitationCore
 from lpv_sysid.signals.store import load_npz, save_npz
 

@@ -9,7 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from lpv_sysid.control.lpv_controller import LpvController, LpvControllerConfig
+from lpv_sysid.control.law import LpvController, LpvControllerConfig
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io import formats as fm
 from lpv_sysid.models import quadrotor as qr
@@ -359,7 +359,7 @@ def test_feedforward_makes_a_ramp_an_exact_trajectory_of_the_linear_model():
     import scipy.linalg
 
     from lpv_sysid.models.lpv import ScheduledLpv
-    from lpv_sysid.sim.lpv_closed_loop import (
+    from lpv_sysid.sim.closed_loop import (
         ClosedLoopConfig,
         FeedforwardSchedule,
         ReferenceSignals,

@@ -21,17 +21,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from support.lockstep import LockStep
 
-from lpv_sysid.cli.fly import FlyConfig, fly
+from lpv_sysid.cli.fly import fly
 from lpv_sysid.cli.main import main as cli_main
+from lpv_sysid.flight.campaign import FlyConfig
 from lpv_sysid.io import bag as iobag
 from lpv_sysid.io import messages
 from lpv_sysid.mavlink import px4
 from lpv_sysid.mavlink.link import free_udp_port
-from lpv_sysid.mavlink.sim_vehicle import SimVehicle, SimVehicleConfig
 from lpv_sysid.signals.excitation import phase1_signals
 from lpv_sysid.signals.store import save_npz
-from support.lockstep import LockStep
+from lpv_sysid.sim.px4_vehicle import SimVehicle, SimVehicleConfig
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / "config"
@@ -179,8 +180,8 @@ def test_campaign_takes_off_flies_every_vertex_and_hover_lands_and_identify_acce
             assert r["height_max_m"] - r["height_min_m"] > 0.3 * 8.0
     # the recorded trim reference is constant, and identification finds the excitation where
     # the campaign started it
-    from lpv_sysid.ident import dataprep as dp
     from lpv_sysid.cli.identify import load_config
+    from lpv_sysid.ident import dataprep as dp
 
     icfg = load_config(out / "identification.yaml")
     for r in runs:

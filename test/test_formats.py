@@ -10,6 +10,7 @@ import yaml
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io import formats as fm
+from lpv_sysid.io.files import sha256_file
 from lpv_sysid.models import quadrotor as qr
 
 RNG = np.random.default_rng(5)
@@ -104,7 +105,7 @@ def test_models_round_trip(tmp_path, good_models):
     vm = fm.VertexModels.from_dict(copy.deepcopy(good_models))
     p = tmp_path / "vertex_models.yaml"
     sha = vm.save(p)
-    assert sha == fm.sha256_file(p) and len(sha) == 64
+    assert sha == sha256_file(p) and len(sha) == 64
     back = fm.VertexModels.load(p)
     assert back.to_dict() == vm.to_dict()
     np.testing.assert_array_equal(back.A, np.array([v["A"] for v in good_models["vertices"]]))

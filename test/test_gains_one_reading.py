@@ -14,10 +14,10 @@ import pytest
 import yaml
 
 from lpv_sysid.cli.main import main
-from lpv_sysid.control.lpv_controller import LpvController, LpvControllerConfig
+from lpv_sysid.control.law import LpvController, LpvControllerConfig
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io.formats import GainSchedule
-from lpv_sysid.synthesis import verify as V
+from lpv_sysid.synthesis.verify import checker as V
 
 
 def _models(path: Path) -> Path:

@@ -28,7 +28,9 @@ import yaml
 
 from lpv_sysid.cli.main import EXIT_BAD_INPUT, main
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.io import safe_open, yaml_file
+from lpv_sysid.io.files import opening as safe_open
+from lpv_sysid.io.files import yaml_loader
+from lpv_sysid.io.files import yaml_reader as yaml_file
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "config"
@@ -894,7 +896,7 @@ def test_strict_loader_uses_libyaml_and_keeps_its_checks():
     if yaml.__with_libyaml__:
         from yaml.cyaml import CParser
 
-        assert issubclass(yaml_file.StrictLoader, CParser)
+        assert issubclass(yaml_loader.StrictLoader, CParser)
     for text, problem in (
         ("a: 1\nb: 2\na: 3\n", "duplicate key 'a'"),
         ("[" * 100_000 + "]" * 100_000, "nesting deeper than 100"),  # crashes CSafeLoader

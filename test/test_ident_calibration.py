@@ -15,15 +15,16 @@ import math
 import numpy as np
 import pytest
 from scipy.signal import lfilter
-from scipy.stats import norm, t as student_t
+from scipy.stats import norm
+from scipy.stats import t as student_t
 
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.ident import coverage as cv
 from lpv_sysid.ident import dataprep as dp
 from lpv_sysid.ident import equation_error as ee
-from lpv_sysid.ident import taylor
 from lpv_sysid.ident import vertex as vx
+from lpv_sysid.ident.vertex import regressor_noise_var, taylor
 from lpv_sysid.models.quadrotor import Quadrotor, QuadrotorParams, mixer
+from lpv_sysid.studies import coverage as cv
 
 
 # ----------------------------------------------------------------------------- standard errors
@@ -122,7 +123,7 @@ def test_measurement_noise_config_and_regressor_noise_variance():
         0.008,
         250.0,
     )
-    var, dvar, rotor = vx.regressor_noise_var(cfg, QuadrotorParams(), 0.01)
+    var, dvar, rotor = regressor_noise_var(cfg, QuadrotorParams(), 0.01)
     # white noise of std s at r Hz through the Fourier low-pass: 2 s^2 / r * f_cut (1 + 3/8 taper)
     feff = cfg.derivatives.f_cut * (1 + 0.375 * cfg.derivatives.taper)
     assert var[2] == pytest.approx(2 * 0.03**2 / 100.0 * feff, rel=2e-3)
@@ -232,7 +233,7 @@ def test_motor_constants_with_latency_are_identified():
         cfg = vx.IdentificationConfig.from_dict(kw)
         x0, u0 = vx.equilibrium(data, cfg)
         dt, full, keep = vx.fit_indices(data, cfg)
-        rotor_var = vx.regressor_noise_var(cfg, p, dt)[2]
+        rotor_var = regressor_noise_var(cfg, p, dt)[2]
         design, tau = vx.motor_design(
             data, cfg, p, full, keep, x0, u0, data.u_eff, rotor_var=rotor_var
         )

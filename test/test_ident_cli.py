@@ -10,12 +10,12 @@ import pytest
 import yaml
 
 from lpv_sysid.cli.main import main
-from lpv_sysid.ident import synthetic as syn
 from lpv_sysid.io import messages
 from lpv_sysid.io.bag import BagWriter
 from lpv_sysid.io.formats import VertexModels
 from lpv_sysid.models.lpv import box_vertices
 from lpv_sysid.models.quadrotor import Quadrotor, mixer
+from lpv_sysid.sim import synthetic as syn
 
 RATE = 50.0
 NOISE = np.array([2e-3, 2e-3, 0.02, 0.02, 0.02, 5e-3, 5e-3, 5e-3, 2.0, 0.02, 0.02, 2.0])

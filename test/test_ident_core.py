@@ -12,8 +12,8 @@ from lpv_sysid.errors import ConfigError, SolverError
 from lpv_sysid.ident import derivatives as dv
 from lpv_sysid.ident import equation_error as ee
 from lpv_sysid.ident import metrics as mt
-from lpv_sysid.ident import synthetic as syn
-from lpv_sysid.ident import uncertainty as unc
+from lpv_sysid.ident.vertex import uncertainty as unc
+from lpv_sysid.sim import synthetic as syn
 
 
 @pytest.fixture(scope="module")

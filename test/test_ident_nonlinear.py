@@ -5,8 +5,8 @@ import pytest
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.ident import nonlinear as nl
-from lpv_sysid.ident import synthetic as syn
 from lpv_sysid.models.quadrotor import K_NAMES, Quadrotor
+from lpv_sysid.sim import synthetic as syn
 
 
 @pytest.fixture(scope="module")

@@ -29,8 +29,8 @@ def runs():
 
 def _truth(q, rec, cfg):
     """Linearisation at the equilibrium at the flown (true, trim-window mean) velocity
-    (seed 0 Eq. 13; lpv_sysid.ident.coverage.truth_model) and that equilibrium."""
-    from lpv_sysid.ident.coverage import truth_model
+    (seed 0 Eq. 13; lpv_sysid.studies.coverage.truth_model) and that equilibrium."""
+    from lpv_sysid.studies.coverage import truth_model
 
     A, B, x_e = truth_model(q.params, rec, vx.trim_window((0.0, rec.t_excite), cfg))
     return (A, B), x_e

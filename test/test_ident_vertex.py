@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.ident import synthetic as syn
-from lpv_sysid.ident import uncertainty as unc
 from lpv_sysid.ident import vertex as vx
+from lpv_sysid.ident.vertex import uncertainty as unc
 from lpv_sysid.models.lpv import box_vertices
 from lpv_sysid.models.quadrotor import STATE_NAMES, Quadrotor
+from lpv_sysid.sim import synthetic as syn
 
 DT = 0.01
 NOISE = np.array([2e-3, 2e-3, 0.02, 0.02, 0.02, 5e-3, 5e-3, 5e-3, 2.0, 0.02, 0.02, 2.0])
@@ -128,7 +128,8 @@ def test_vertex_models_document_and_validation():
         assert e["upper"] == pytest.approx(e["nominal"] + k * e["std"])
     # the stored std is the EWC standard error widened to the t_dof quantile of the same coverage
     first = [r for r in results if np.allclose(r.scheduling, cfg.vmin)][0]
-    from scipy.stats import norm, t as student_t
+    from scipy.stats import norm
+    from scipy.stats import t as student_t
 
     dof = doc["meta"]["std"]["dof"][0]
     assert doc["meta"]["std"]["t_factor"][0] == pytest.approx(

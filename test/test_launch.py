@@ -94,8 +94,9 @@ def test_launch_description_builds(fname):  # pragma: no cover - needs ROS 2
     spec = importlib.util.spec_from_file_location("lf", os.path.join(LAUNCH, fname))
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    from launch import LaunchDescription
     from launch_ros.actions import Node
+
+    from launch import LaunchDescription
 
     ld = mod.generate_launch_description()
     assert isinstance(ld, LaunchDescription) and len(ld.entities) >= 4

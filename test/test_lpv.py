@@ -1,4 +1,4 @@
-"""models/lpv.py: box order, multilinear weights (seed 0 Eq. 21), Eq. (23) corners, Eq. (34)."""
+"""models/lpv/polytope.py: box order, multilinear weights (seed 0 Eq. 21), Eq. (23) corners, Eq. (34)."""
 
 import itertools
 
@@ -159,7 +159,7 @@ def test_polytopic_model_validates_shapes():
 
 
 def test_from_vertex_systems_of_the_identification_helper():
-    from lpv_sysid.ident import uncertainty as unc
+    from lpv_sysid.ident.vertex import uncertainty as unc
 
     A = np.array([[-1.0, 0.5], [0.0, -2.0]])
     B = np.array([[0.0], [1.0]])

@@ -1,4 +1,4 @@
-"""control/lpv_controller.py: the runtime law of seed 0 Eqs. (17), (31) on hand-computed numbers
+"""control/law/controller.py: the runtime law of seed 0 Eqs. (17), (31) on hand-computed numbers
 and, step by step, against the law written from its equations."""
 
 from types import SimpleNamespace
@@ -6,7 +6,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from lpv_sysid.control.lpv_controller import LpvController, LpvControllerConfig
+from lpv_sysid.control.law import LpvController, LpvControllerConfig
 from lpv_sysid.errors import ConfigError, SafetyError
 from lpv_sysid.models.quadrotor import mixer
 
@@ -163,7 +163,7 @@ def _shipped_schedule(non_diagonal_weights=False):
 
 
 class _SeedLaw:
-    """The law written out from its equations, independently of control/lpv_controller.py:
+    """The law written out from its equations, independently of control/law/controller.py:
     seed 0 Eq. 21 weights (product over axes, corners of models.lpv.box_vertices' order),
     K(alpha) = sum alpha_i K_i (Eq. 31) and likewise x0, u0, F_ff, F_jerk (seed 2 Eq. 102),
     u = u0 + du_ff + K (x - x0 - dx_ff) + R u_e, the derivative filter of the module docstring,

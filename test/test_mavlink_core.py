@@ -15,7 +15,16 @@ from scipy.spatial.transform import Rotation
 from lpv_sysid.errors import ConfigError, LpvSysidError
 from lpv_sysid.io import frames
 from lpv_sysid.mavlink import px4
-from lpv_sysid.mavlink.bridge import BridgeConfig, BridgeCore
+from lpv_sysid.mavlink.bridge import (
+    ATTITUDE_TARGET_IGNORE_ATTITUDE,
+    ActuatorSetpoint,
+    AttitudeRateTransport,
+    BridgeConfig,
+    BridgeCore,
+    TransportContext,
+    VelocitySetpoint,
+    VelocityTransport,
+)
 from lpv_sysid.mavlink.link import (
     LinkConfig,
     MavlinkLink,
@@ -33,16 +42,8 @@ from lpv_sysid.mavlink.offboard import (
     State,
     StatusEvent,
 )
-from lpv_sysid.mavlink.sim_vehicle import SimVehicle, SimVehicleConfig
 from lpv_sysid.mavlink.telemetry import ImuSample, RotorSample, StateSample, TelemetryDecoder
-from lpv_sysid.mavlink.transport import (
-    ATTITUDE_TARGET_IGNORE_ATTITUDE,
-    ActuatorSetpoint,
-    AttitudeRateTransport,
-    TransportContext,
-    VelocitySetpoint,
-    VelocityTransport,
-)
+from lpv_sysid.sim.px4_vehicle import SimVehicle, SimVehicleConfig
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 MOD = px4.dialect_module()

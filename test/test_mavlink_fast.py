@@ -1,4 +1,4 @@
-"""The struct-based MAVLink fast path of mavlink/link.py against pymavlink itself: the same
+"""The struct-based MAVLink fast path of mavlink/link/connection.py against pymavlink itself: the same
 message objects (every attribute), the same link statistics and codec counters, on round
 trips of every fast message type and on corrupted, cut, concatenated and foreign packets."""
 

@@ -8,11 +8,11 @@ under a second of wall time and the outcome does not depend on machine load.
 from __future__ import annotations
 
 import math
-import socket
+import os
 import signal
+import socket
 import subprocess
 import sys
-import os
 
 import numpy as np
 import pytest
@@ -22,8 +22,8 @@ from lpv_sysid.mavlink.bridge import BridgeConfig, BridgeCore
 from lpv_sysid.mavlink.link import LinkConfig, free_udp_port
 from lpv_sysid.mavlink.offboard import OffboardConfig, State, StatusEvent
 from lpv_sysid.mavlink.preflight import NOGO, judge, run_checks, verdict
-from lpv_sysid.mavlink.sim_vehicle import SimVehicle, SimVehicleConfig
 from lpv_sysid.mavlink.telemetry import RotorSample, StateSample
+from lpv_sysid.sim.px4_vehicle import SimVehicle, SimVehicleConfig
 
 DT = 0.004
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

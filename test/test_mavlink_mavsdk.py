@@ -15,7 +15,7 @@ import pytest
 
 from lpv_sysid.mavlink import px4
 from lpv_sysid.mavlink.link import free_udp_port
-from lpv_sysid.mavlink.sim_vehicle import SimVehicle, SimVehicleConfig
+from lpv_sysid.sim.px4_vehicle import SimVehicle, SimVehicleConfig
 
 mavsdk = pytest.importorskip("mavsdk")
 

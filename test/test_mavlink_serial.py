@@ -18,7 +18,12 @@ pytest.importorskip("serial")  # pyserial (ROS: python3-serial)
 
 from lpv_sysid.mavlink import px4  # noqa: E402
 from lpv_sysid.mavlink.link import DEFAULT_STREAMS, LinkConfig, MavlinkLink  # noqa: E402
-from lpv_sysid.mavlink.telemetry import ImuSample, RotorSample, StateSample, TelemetryDecoder  # noqa: E402
+from lpv_sysid.mavlink.telemetry import (  # noqa: E402
+    ImuSample,
+    RotorSample,
+    StateSample,
+    TelemetryDecoder,
+)
 
 MOD = px4.dialect_module()
 MAV_TYPE_QUADROTOR, MAV_AUTOPILOT_PX4 = 2, 12

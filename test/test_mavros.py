@@ -1,4 +1,4 @@
-"""MAVROS mode of the bridge: the pure core (lpv_sysid/mavlink/mavros.py) against scipy's
+"""MAVROS mode of the bridge: the pure core (lpv_sysid/mavlink/bridge/mavros.py) against scipy's
 Rotation as an independent oracle, and the node shell (transport: mavros) through the
 rclpy stand-in with a fake MAVROS node publishing odom/imu and listening on cmd_vel."""
 
@@ -10,12 +10,13 @@ import numpy as np
 import pytest
 import rclpy
 import rclpy._standin as standin
-from rclpy._standin import call_trigger as call, spin_nodes as spin
+from rclpy._standin import call_trigger as call
+from rclpy._standin import spin_nodes as spin
 from scipy.spatial.transform import Rotation
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io import messages
-from lpv_sysid.mavlink.mavros import (
+from lpv_sysid.mavlink.bridge import (
     MODE_CONTROL,
     MavrosConfig,
     MavrosCore,

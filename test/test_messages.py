@@ -7,6 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from lpv_sysid.errors import ConfigError, LpvSysidError
 from lpv_sysid.io import messages
+from lpv_sysid.models.quadrotor import INPUT_NAMES
 
 RNG = np.random.default_rng(3)
 STAMP = 1_700_000_123_456_789_012
@@ -311,11 +312,11 @@ def test_states_from_odometry_errors_name_index(rb):
 def test_channels_from_joint_states(rb):
     vals = RNG.normal(size=(6, 4))
     msgs = [messages.actuator_command_msg(rb, i, v) for i, v in enumerate(vals)]
-    t, out = messages.channels_from_joint_states(msgs, messages.INPUT_NAMES)
+    t, out = messages.channels_from_joint_states(msgs, INPUT_NAMES)
     np.testing.assert_array_equal(out, vals)
     np.testing.assert_array_equal(t, np.arange(6) / 1e9)
     msgs[4] = messages.joint_state(rb, 4, ["ut", "ua", "ue"], position=[0.0, 0.0, 0.0])
     with pytest.raises(
         messages.MessageError, match=r"message 4: joint_state.name: missing channel\(s\) \['ur'\]"
     ):
-        messages.channels_from_joint_states(msgs, messages.INPUT_NAMES)
+        messages.channels_from_joint_states(msgs, INPUT_NAMES)

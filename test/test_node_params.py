@@ -20,12 +20,14 @@ import numpy as np
 import pytest
 import yaml
 
+from lpv_sysid.configuration import parameters
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.nodes import shell
-from lpv_sysid.nodes import data_logger_node, mavlink_bridge_node, sim_vehicle_node
-from lpv_sysid.nodes import bridge_settings, parameters
-from lpv_sysid.nodes.controller_runtime import ControllerSettings
-from lpv_sysid.nodes.excitation_node import ExcitationSettings
+from lpv_sysid.flight.bridge import handback_bound_s
+from lpv_sysid.flight.bridge import settings as bridge_settings
+from lpv_sysid.flight.controller import ControllerSettings
+from lpv_sysid.flight.excitation import ExcitationSettings
+from lpv_sysid.nodes import data_logger_node, mavlink_bridge_node, shell, sim_vehicle_node
+from lpv_sysid.sim.vehicle_node import SimVehicleSettings
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG = os.path.join(ROOT, "config")
@@ -119,8 +121,7 @@ def test_yaml_and_declarations_agree(yaml_file, node, declared, cls):
 def test_bridge_yaml_reaches_bridge_config_and_defaults_round_trip():
     """The generated bridge parameters carry BridgeConfig's defaults (nest(defaults) builds
     BridgeConfig()), and the node's YAML reaches every section, NaN / "" meaning unset."""
-    from lpv_sysid.mavlink.bridge import BridgeConfig
-    from lpv_sysid.mavlink.mavros import MavrosConfig
+    from lpv_sysid.mavlink.bridge import BridgeConfig, MavrosConfig
 
     specs = mavlink_bridge_node.SPECS
     defaults = {n: d for n, (d, _) in specs.items()}
@@ -170,9 +171,9 @@ def test_sim_vehicle_sensor_parameters_are_sensor_config():
     values = yaml_values("sim_vehicle.yaml", "sim_vehicle")
     sensors = {k: v for k, v in values.items() if k in SensorConfig.__dataclass_fields__}
     assert SensorConfig.from_dict(sensors) == SensorConfig()  # the YAML restates its defaults
-    assert set(sim_vehicle_node.SPECS) == set(
-        parameters.specs(sim_vehicle_node.SimVehicleSettings)
-    ) | set(SensorConfig.__dataclass_fields__)
+    assert set(sim_vehicle_node.SPECS) == set(parameters.specs(SimVehicleSettings)) | set(
+        SensorConfig.__dataclass_fields__
+    )
 
 
 def test_config_specs_rules():
@@ -226,8 +227,9 @@ def _free_udp_port():
 
 @pytest.fixture(scope="module")
 def node_inputs(tmp_path_factory):
-    from lpv_sysid.signals.store import save_npz
     from lpv_test_gains import write_gains
+
+    from lpv_sysid.signals.store import save_npz
 
     d = tmp_path_factory.mktemp("inputs")
     t = np.arange(0.0, 4.0, 0.02)
@@ -410,11 +412,8 @@ def test_launch_files_leave_the_bridge_its_whole_hand_back_chain():
     )
     off = BridgeConfig.from_dict(bridge).offboard
     # HOLD then LAND, each: 4 DO_SET_MODE attempts of 0.5 s + 2 s for the HEARTBEAT; + 1 s
-    assert mavlink_bridge_node.handback_bound_s(off) == 2 * (4 * 0.5 + 2.0) + 1.0
-    assert (
-        mavlink_bridge_node.handback_bound_s(off) + shell.TEARDOWN_MARGIN_S
-        <= shell.LAUNCH_SIGTERM_TIMEOUT_S
-    )
+    assert handback_bound_s(off) == 2 * (4 * 0.5 + 2.0) + 1.0
+    assert handback_bound_s(off) + shell.TEARDOWN_MARGIN_S <= shell.LAUNCH_SIGTERM_TIMEOUT_S
     # every launch file builds its nodes through launch_util.node, whose one launch_ros
     # Node call passes sigterm_timeout (its value: test_launch_util)
     launch_files = [f for f in os.listdir(os.path.join(ROOT, "launch")) if f.endswith(".py")]

@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 import rclpy
 import rclpy._standin as standin
-from rclpy._standin import call_trigger as call, spin_nodes as spin
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistStamped
 from nav_msgs.msg import Odometry
+from rclpy._standin import call_trigger as call
+from rclpy._standin import spin_nodes as spin
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSReliabilityPolicy
 from sensor_msgs.msg import JointState
@@ -221,7 +222,8 @@ def test_sim_vehicle_keeps_real_time_through_a_late_tick_and_slips_when_overload
     rclpy.init(args=ros_args(params_file="sim_vehicle.yaml"))
     node = SimVehicleNode(namespace=NS)
     probe = rclpy.create_node("probe")
-    from rclpy.qos import QoSProfile, QoSReliabilityPolicy as Rel
+    from rclpy.qos import QoSProfile
+    from rclpy.qos import QoSReliabilityPolicy as Rel
 
     states = collect(
         probe, Odometry, "/lpv_sysid/state", QoSProfile(depth=1000, reliability=Rel.BEST_EFFORT)
@@ -320,8 +322,8 @@ def _free_udp_port():
 
 def test_bridge_publishes_telemetry_of_mavlink_vehicle():
     """Bridge against the simulated PX4 over UDP 127.0.0.1, lock-stepped to the sim clock."""
-    from lpv_sysid.mavlink.sim_vehicle import SimVehicle, SimVehicleConfig
     from lpv_sysid.nodes.mavlink_bridge_node import MavlinkBridgeNode
+    from lpv_sysid.sim.px4_vehicle import SimVehicle, SimVehicleConfig
 
     port = _free_udp_port()
     rclpy.init(

@@ -8,12 +8,13 @@ import numpy as np
 import pytest
 import rclpy
 import rclpy._standin as standin
-from rclpy._standin import call_trigger as call, spin_nodes as spin
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistStamped
 from lpv_test_gains import gains_dict, write_gains
 from nav_msgs.msg import Odometry
+from rclpy._standin import call_trigger as call
+from rclpy._standin import spin_nodes as spin
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import JointState
@@ -21,6 +22,7 @@ from std_srvs.srv import Trigger
 
 from lpv_sysid.io import messages
 from lpv_sysid.io.bag import read_bag
+from lpv_sysid.models.quadrotor import INPUT_NAMES
 from lpv_sysid.signals.store import save_npz
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -462,7 +464,7 @@ def test_command_builder_equals_io_messages(kind):
     """The tick's actuator_command equals io.messages.actuator_command_msg field by field (both
     factories: rosbags for replay, rclpy for the node), and a stamp beyond builtin_interfaces/
     Time is refused by io.messages' own check."""
-    from lpv_sysid.nodes.controller_messages import CommandBuilder
+    from lpv_sysid.flight.controller import CommandBuilder
 
     f = messages.MsgFactory.rosbags() if kind == "rosbags" else messages.MsgFactory.rclpy()
     build = CommandBuilder(f)
@@ -475,7 +477,7 @@ def test_command_builder_equals_io_messages(kind):
             b.header.stamp.nanosec,
             b.header.frame_id,
         )
-        assert list(a.name) == list(b.name) == list(messages.INPUT_NAMES)
+        assert list(a.name) == list(b.name) == list(INPUT_NAMES)
         for field in ("position", "velocity", "effort"):
             assert type(getattr(a, field)) is type(getattr(b, field))
             assert list(getattr(a, field)) == list(getattr(b, field))

@@ -293,7 +293,7 @@ def editable_installed(source_copy, tmp_path_factory):
 
 def test_the_checkout_config_dir_is_the_package_data():
     """config/ (README and docs paths) is the package's own directory, not a second copy."""
-    from lpv_sysid.default_configs import config_dir, config_names
+    from lpv_sysid.configuration.defaults import config_dir, config_names
 
     assert (ROOT / "config").resolve() == PACKAGE_CONFIG.resolve() == config_dir().resolve()
     assert config_names() == SHIPPED and len(SHIPPED) >= 15
@@ -365,7 +365,7 @@ def test_installed_command_loads_a_shipped_config_and_v_turns_on_debug(pip_insta
     site = _site_packages(pip_installed / "python")[0]
     assert "DEBUG lpv_sysid.cli.main: lpv_sysid 0.1.0 (Python" in runs[True]
     assert f"from {site / 'lpv_sysid'}: signals" in runs[True]
-    assert "DEBUG lpv_sysid.signals.multisine: channel " in runs[True]
+    assert "DEBUG lpv_sysid.signals.multisine.generator: channel " in runs[True]
 
 
 def test_editable_install_puts_the_command_in_bin_running_the_working_tree(

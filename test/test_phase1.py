@@ -12,6 +12,7 @@ import yaml
 from lpv_sysid.cli.main import main as cli_main
 from lpv_sysid.control.baseline import BaselineGains
 from lpv_sysid.errors import ConfigError
+from lpv_sysid.io.messages import TOPIC_NAMESPACE
 from lpv_sysid.models.quadrotor import Quadrotor
 from lpv_sysid.sim import phase1
 from lpv_sysid.sim.vehicle import SensorConfig
@@ -211,7 +212,7 @@ def test_run_bag_round_trip(short_runs, tmp_path):
     rec = runs[0]
     path = phase1.write_run_bag(rec, tmp_path / rec.name)
     data = read_bag(str(path))
-    ns = phase1.TOPIC_NAMESPACE
+    ns = TOPIC_NAMESPACE
     assert len(data[f"{ns}/state"]) == len(rec.state_t)
     assert len(data[f"{ns}/rotor_speeds"]) == len(rec.rotor_t)
     assert len(data[f"{ns}/imu"]) == len(rec.imu_t)
@@ -240,7 +241,7 @@ def test_phase1_bag_read_independently_with_rosbags_anyreader(short_runs, tmp_pa
     cfg, runs = short_runs
     rec = runs[0]
     path = phase1.write_run_bag(rec, tmp_path / rec.name)
-    ns = phase1.TOPIC_NAMESPACE
+    ns = TOPIC_NAMESPACE
     expected = {
         f"{ns}/state": ("nav_msgs/msg/Odometry", 250.0),
         f"{ns}/imu": ("sensor_msgs/msg/Imu", 250.0),

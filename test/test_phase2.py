@@ -10,9 +10,10 @@ import pytest
 from scipy.linalg import solve_continuous_are
 
 from lpv_sysid.errors import ConfigError
+from lpv_sysid.io.files import sha256_file
 from lpv_sysid.models.lpv import PolytopicModel, ScheduledLpv, box_vertices
 from lpv_sysid.models.quadrotor import Quadrotor
-from lpv_sysid.sim.lpv_closed_loop import (
+from lpv_sysid.sim.closed_loop import (
     ClosedLoopConfig,
     ReferenceSignals,
     linear_lpv_law,
@@ -207,7 +208,7 @@ def test_full_run_writes_bag_summary_and_report(lpv, tmp_path):
 
     from lpv_sysid.io import messages
     from lpv_sysid.io.bag import read_bag
-    from lpv_sysid.report.markdown import write_report
+    from lpv_sysid.report import write_report
     from lpv_sysid.sim.phase2 import Phase2Config, Phase2Problem, run
 
     quad, sched = lpv
@@ -346,7 +347,7 @@ def _write_files(lpv, d):
             "solver": "scipy CARE",
             "gamma_achieved": 1.0,
             "min_margin": 0.0,
-            "models_sha256": F.sha256_file(d / "vertex_models.yaml"),
+            "models_sha256": sha256_file(d / "vertex_models.yaml"),
         },
     )
     F.GainSchedule.from_dict(gains).save(d / "gains.yaml")
@@ -549,7 +550,7 @@ def test_superposition_isolates_the_excitation_response(lpv):
     prob = Phase2Problem(
         vmin=pm.vmin, vmax=pm.vmax, K=sched.Kv, x0=pm.x0, u0=pm.u0, R=R, Q=Q, gamma=1.0
     )
-    from lpv_sysid.control.lpv_controller import LpvControllerConfig
+    from lpv_sysid.control.law import LpvControllerConfig
 
     law = lambda: RuntimeLaw(prob, quad.mix, LpvControllerConfig(monitor_margin=1e12))  # noqa: E731
     corner = np.array([BOX, -BOX, BOX])  # vertex: x0/u0 are the exact trim

@@ -1,4 +1,4 @@
-"""Phase-2 bag (sim/phase2_bag.py): written in blocks by encode_block + BagWriter.write_many, the
+"""Phase-2 bag (sim/phase2/bag.py): written in blocks by encode_block + BagWriter.write_many, the
 same messages as the io.messages builders one at a time (read back with rosbags' AnyReader)."""
 
 from __future__ import annotations
@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from lpv_sysid.io import messages
-from lpv_sysid.io.bag import BagWriter, jazzy_typestore, records_close
-from lpv_sysid.sim.phase2_bag import BAG_TOPICS, SAMPLE_TOPICS, Phase2Bag
+from lpv_sysid.io.bag import BagWriter, jazzy_typestore
+from lpv_sysid.io.bag.cdr import records_close
+from lpv_sysid.sim.phase2 import BAG_TOPICS, SAMPLE_TOPICS, Phase2Bag
 
 KAPPA = 2.5
 NS = "/lpv_sysid"

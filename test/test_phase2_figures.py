@@ -16,13 +16,14 @@ from scipy.signal import lfilter
 
 from lpv_sysid.models.lpv import PolytopicModel, ScheduledLpv, box_vertices
 from lpv_sysid.models.quadrotor import Quadrotor
-from lpv_sysid.sim.lpv_closed_loop import (
+from lpv_sysid.sim import phase2 as p2
+from lpv_sysid.sim.closed_loop import (
     ClosedLoopConfig,
     ReferenceSignals,
+    excitation_response_fir,
     l2_norm,
     simulate_eq33,
 )
-from lpv_sysid.sim import phase2 as p2
 
 BOX = 2.0
 Q = 5.0 * np.eye(3)
@@ -112,7 +113,7 @@ def test_eq33_gain_is_the_excitation_part_by_exact_superposition(problem):
     assert d["total"]["ratio"] == pytest.approx(plus.gain, rel=1e-12)
     assert plus.gain > 3 * d["excitation"]["gain"]  # what used to be reported as "the gain"
     # the mirrored-run branch (taken when a law is given, e.g. the feedforward path) agrees
-    from lpv_sysid.sim.lpv_closed_loop import linear_lpv_law
+    from lpv_sysid.sim.closed_loop import linear_lpv_law
 
     d2 = p2.decompose_eq33(pr, sig, plus, p2.Phase2Config(), law=linear_lpv_law(pr.scheduled(), R))
     assert d2["method"].endswith("the same run with -u_e)")
@@ -145,7 +146,7 @@ def test_fir_regression_recovers_a_known_excitation_response():
         [0.05 * np.sin(2 * np.pi * 0.05 * t), 0.04 * np.cos(2 * np.pi * 0.08 * t), 0 * t]
     )
     z = z_e + track + 1e-4 * rng.normal(size=z_e.shape)
-    est, info = p2.excitation_response_fir(t, z, ue)
+    est, info = excitation_response_fir(t, z, ue)
     assert l2_norm(t, est) / l2_norm(t, ue) == pytest.approx(
         l2_norm(t, z_e) / l2_norm(t, ue), rel=0.03
     )
@@ -159,7 +160,7 @@ def test_summary_cli_and_report_put_the_excitation_gain_first(problem, tmp_path)
     total_ratio and the decomposition; the CLI line starts with the gain; the report's table
     has the gain, the offset and the tracking in separate columns."""
     from lpv_sysid.cli.simulate import format_gain_line
-    from lpv_sysid.report.markdown import gain_row
+    from lpv_sysid.report import gain_row
 
     pr, quad = problem
     sig = _signals()

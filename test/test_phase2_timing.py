@@ -23,12 +23,8 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 
 from lpv_sysid.errors import ConfigError
+from lpv_sysid.flight.controller import TIMEOUT_PERIODS, ControllerRuntime, ControllerSettings
 from lpv_sysid.io import messages
-from lpv_sysid.nodes.controller_runtime import (
-    TIMEOUT_PERIODS,
-    ControllerRuntime,
-    ControllerSettings,
-)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG = os.path.join(ROOT, "config")

@@ -30,8 +30,7 @@ from lpv_sysid.mavlink.preflight import (
     run_checks,
     verdict,
 )
-from lpv_sysid.mavlink.rotor_estimate import RotorEstimateConfig
-from lpv_sysid.mavlink.telemetry import RotorSample, StateSample
+from lpv_sysid.mavlink.telemetry import RotorEstimateConfig, RotorSample, StateSample
 
 MOD = px4.dialect_module()
 RC_BIT = MOD.MAV_SYS_STATUS_SENSOR_RC_RECEIVER

@@ -9,10 +9,11 @@ import math
 import numpy as np
 import pytest
 
-from lpv_sysid.cli.chain import _fade, excitation_gain, inversion_error
 from lpv_sysid.errors import ConfigError, SafetyError
+from lpv_sysid.flight.phase2 import excitation_gain, inversion_error
+from lpv_sysid.flight.phase2.fly import _fade
 from lpv_sysid.ident import rate_plant as rid
-from lpv_sysid.mavlink.transport import (
+from lpv_sysid.mavlink.bridge import (
     ATTITUDE_TARGET_IGNORE_ATTITUDE,
     RATE_INPUT_NAMES,
     ActuatorSetpoint,
@@ -284,7 +285,7 @@ class _Link:
 
 
 def test_attitude_target_tap_passes_only_the_targets_setpoints_and_keeps_messages():
-    from lpv_sysid.cli.fly import tap_attitude_target
+    from lpv_sysid.flight.vehicle import tap_attitude_target
 
     at = dict(
         time_boot_ms=1000, thrust=0.5, body_roll_rate=0.1, body_pitch_rate=-0.2, body_yaw_rate=0.3

@@ -206,7 +206,8 @@ CHILD = textwrap.dedent("""
     import numpy as np
     sys.path.insert(0, {root!r})
     from rosbags.typesys import Stores, get_typestore
-    from lpv_sysid.io.recorder import Recorder, RecorderConfig, stop_on_signals
+    from lpv_sysid.io.recorder import Recorder, RecorderConfig
+    from lpv_sysid.io.recorder.signals import stop_on_signals
     TS = get_typestore(Stores.ROS2_JAZZY)
     T = TS.types
     rec = Recorder(RecorderConfig(out_dir={out!r}, topics={{"/a": "sensor_msgs/msg/JointState"}}))

@@ -11,9 +11,14 @@ import yaml
 
 from lpv_sysid.cli.main import main as cli_main
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.report.data import load_run
-from lpv_sysid.report.markdown import write_report
-from lpv_sysid.report.regressors import REGRESSOR_NAMES, correlation, regressors, virtual_actuators
+from lpv_sysid.report import (
+    REGRESSOR_NAMES,
+    correlation,
+    load_run,
+    regressors,
+    virtual_actuators,
+    write_report,
+)
 from lpv_sysid.signals.store import save_summary
 from lpv_sysid.sim.phase1 import TRIM_COLUMNS, write_trim_table
 from lpv_sysid.sim.phase2 import RunRecord, regressor_correlation_block, write_outputs
@@ -119,7 +124,7 @@ def _write_run(d: Path) -> None:
         "certificate": {"lmi": "seed 0 Lemma 1", "solver": "CLARABEL", "gamma_achieved": 0.9321},
     }
     (d / "gains.yaml").write_text(yaml.safe_dump(gains))
-    # phase 2 through the writer of sim/phase2_outputs.py (the real producer of these files)
+    # phase 2 through the writer of sim/phase2/outputs.py (the real producer of these files)
     tt = np.linspace(0, 3, 301)
     vd = np.column_stack([np.sin(tt), np.cos(tt), 0 * tt])
     x12 = np.zeros((tt.size, 12))

@@ -8,15 +8,22 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from support.toy_plant import write_toy_plant
 import yaml
+from support.toy_plant import write_toy_plant
 
-from lpv_sysid.io.file_hash import sha256_file
+from lpv_sysid.io.files import sha256_file
 from lpv_sysid.models.quadrotor import QuadrotorParams, mixer
-from lpv_sysid.report.data import load_run
-from lpv_sysid.report.gonogo import FLOWN, NO_GO, SIMULATED, go_no_go, provenance
-from lpv_sysid.report.margins import limits_from_summary, run_margins
-from lpv_sysid.report.markdown import write_report
+from lpv_sysid.report import (
+    FLOWN,
+    NO_GO,
+    SIMULATED,
+    go_no_go,
+    limits_from_summary,
+    load_run,
+    provenance,
+    run_margins,
+    write_report,
+)
 from lpv_sysid.synthesis.verify import read_verification, record_verification
 
 

@@ -40,8 +40,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-
 from ros_real import DomainId, RosEnv, build_package, find_ros
+
+from lpv_sysid.models.quadrotor import EXCITATION_NAMES
 
 ROOT = Path(__file__).resolve().parents[1]
 NS = "/lpv_sysid"
@@ -256,7 +257,7 @@ def test_the_graph_flies_the_whole_phase2_signal_without_abort(flight):
 
     te, ue = messages.channels_from_joint_states(
         [m for _, m in flight["bag"][f"{NS}/excitation"]],
-        messages.EXCITATION_NAMES,
+        EXCITATION_NAMES,
         field="position",
     )
     # ... and from its start: the excitation energy played before the first command (the
@@ -338,7 +339,7 @@ def test_bound_monitor_stays_below_the_offline_estimate_times_margin(flight):
     # when the monitor starts judging: int ||u_e||^2 dt of the played excitation reaches
     # monitor_min_energy (kappa = excitation_gain)
     te, ue = messages.channels_from_joint_states(
-        [m for _, m in bag[f"{NS}/excitation"]], messages.EXCITATION_NAMES, field="position"
+        [m for _, m in bag[f"{NS}/excitation"]], EXCITATION_NAMES, field="position"
     )
     energy = np.cumsum(np.sum((cfg["excitation_gain"] * ue[:-1]) ** 2, axis=1) * np.diff(te))
     t_judged = te[1:][np.searchsorted(energy, cfg["monitor_min_energy"])]

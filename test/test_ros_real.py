@@ -37,7 +37,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-
 from ros_real import DomainId, Proc, RosEnv, build_package, find_ros
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -87,8 +86,9 @@ def ros(tmp_path_factory):
     ws = build_package(SETUP, tmp_path_factory.mktemp("ros_ws"))
     MEASURED["colcon_build_s"] = round(time.monotonic() - t0, 1)
     data = tmp_path_factory.mktemp("ros_data")
-    from lpv_sysid.signals.store import save_npz
     from lpv_test_gains import write_gains
+
+    from lpv_sysid.signals.store import save_npz
 
     t = np.arange(0.0, 20.0, 0.02)
     s = 0.5 * np.sin(2 * np.pi * 0.5 * t)

@@ -1,4 +1,4 @@
-"""Rotor speeds from motor outputs (mavlink/rotor_estimate.py): seed 0 Eq. (8), exact
+"""Rotor speeds from motor outputs (mavlink/telemetry/rotor_estimate.py): seed 0 Eq. (8), exact
 zero-order-hold discretisation, output mappings, restarts, airframe parameters."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from scipy.integrate import solve_ivp
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.mavlink import px4
-from lpv_sysid.mavlink.rotor_estimate import (
+from lpv_sysid.mavlink.telemetry import (
     MAPPINGS,
     MotorModel,
     RotorEstimateConfig,
@@ -199,8 +199,8 @@ def test_disarm_and_rearm():
 
 # ------------------------------------------------- rotor_speeds topic, recorder, consumers
 def test_rotor_speeds_message_marks_the_source_and_every_consumer_reads_both():
+    from lpv_sysid.flight.controller import parse_input, parse_inputs
     from lpv_sysid.io import messages
-    from lpv_sysid.nodes.controller_runtime import parse_input, parse_inputs
 
     f = messages.MsgFactory.rosbags()
     om = [500.0, 510.0, 520.0, 530.0]

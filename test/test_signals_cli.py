@@ -9,7 +9,7 @@ import yaml
 
 from lpv_sysid.cli.main import main
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.signals.config import PHASE1_DEFAULT, SignalsConfig, load_config
+from lpv_sysid.signals.multisine import PHASE1_DEFAULT, SignalsConfig, load_config
 from lpv_sysid.signals.store import load_npz
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

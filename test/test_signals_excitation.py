@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 from lpv_sysid.errors import ConfigError, LpvSysidError, SafetyError
-from lpv_sysid.signals.config import SignalsConfig
 from lpv_sysid.signals.excitation import (
     ABORTED,
     DONE,
@@ -19,7 +18,7 @@ from lpv_sysid.signals.excitation import (
     TimeOrderError,
     phase1_reference,
 )
-from lpv_sysid.signals.multisine import design
+from lpv_sysid.signals.multisine import SignalsConfig, design
 from lpv_sysid.signals.prbs import prbs
 
 FAST = {"max_iter": 20, "clip_iter": 10, "restarts": 0, "p_stages": [4, 64]}

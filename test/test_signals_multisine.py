@@ -8,9 +8,14 @@ import pytest
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.signals import metrics
-from lpv_sysid.signals.config import SignalsConfig, load_config
-from lpv_sysid.signals.multisine import allocate_harmonics, design
-from lpv_sysid.signals.phase_opt import schroeder_phases, synthesize
+from lpv_sysid.signals.multisine import (
+    SignalsConfig,
+    allocate_harmonics,
+    design,
+    load_config,
+    schroeder_phases,
+    synthesize,
+)
 from lpv_sysid.signals.weights import energy, excitation_weight, performance_weight
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

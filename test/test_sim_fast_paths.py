@@ -1,7 +1,7 @@
 """Fast paths of the simulations, each against the computation it replaces: the compiled
-hot path of models/quadrotor.py (derivatives, RK4 step), the sensor noise pool and
-vibration cache of sim/vehicle.py, the bulk phase-1 bag (sim/phase1.py) and the fused
-Eq. (33) right-hand side (sim/lpv_closed_loop.py)."""
+hot path of models/quadrotor/model.py (derivatives, RK4 step), the sensor noise pool and
+vibration cache of sim/vehicle.py, the bulk phase-1 bag (sim/phase1/tables.py) and the fused
+Eq. (33) right-hand side (sim/closed_loop/eq33.py)."""
 
 import math
 import pickle
@@ -14,8 +14,9 @@ from lpv_sysid.control.baseline import BaselineGains
 from lpv_sysid.io import bag as bg
 from lpv_sysid.io import messages
 from lpv_sysid.models.quadrotor import Quadrotor, QuadrotorParams
-from lpv_sysid.sim import lpv_closed_loop as cl
-from lpv_sysid.sim import phase1, phase1_bag
+from lpv_sysid.sim import closed_loop as cl
+from lpv_sysid.sim import phase1
+from lpv_sysid.sim.phase1 import bag as phase1_bag
 from lpv_sysid.sim.vehicle import SensorConfig, SimVehicle
 
 
@@ -169,7 +170,7 @@ def test_specialised_hot_path_drops_the_zero_terms_and_keeps_the_bits():
     set whose zeros are elsewhere gets its own code (the cache keys on the values)."""
     import dis
 
-    from lpv_sysid.models import quadrotor_hot_path
+    from lpv_sysid.models.quadrotor import hot_path as quadrotor_hot_path
 
     def n_ops(fn):
         return sum(

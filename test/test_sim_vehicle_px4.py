@@ -31,7 +31,7 @@ from lpv_sysid.mavlink import px4
 from lpv_sysid.mavlink.bridge import BridgeConfig, BridgeCore
 from lpv_sysid.mavlink.link import LinkConfig, MavlinkLink, free_udp_port
 from lpv_sysid.mavlink.offboard import OffboardConfig, State, StatusEvent
-from lpv_sysid.mavlink.sim_vehicle import DEFAULT_RATES, PARAMS, SimVehicle, SimVehicleConfig
+from lpv_sysid.sim.px4_vehicle import DEFAULT_RATES, PARAMS, SimVehicle, SimVehicleConfig
 
 DT = 0.004
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -645,7 +645,7 @@ def test_cli_sim_vehicle_binds_loopback_and_reports_it():
 )
 def test_all_interface_urls_are_warned_about(caplog, url, warns):
     link = MavlinkLink(LinkConfig(url=url.format(p=free_udp_port())))
-    with caplog.at_level(logging.WARNING, logger="lpv_sysid.mavlink.link_url"):
+    with caplog.at_level(logging.WARNING, logger="lpv_sysid.mavlink.link.url"):
         link.open(0.0)
     link.close()
     hit = [r for r in caplog.records if "ALL network interfaces" in r.getMessage()]
@@ -743,8 +743,8 @@ def test_cli_config_file_and_flags(tmp_path):
 CLI_FLAG = re.compile(r"(?<![\w-])--[a-z][a-z0-9-]+")
 MAVLINK_CORES = sorted(
     p
-    for pattern in ("sim_vehicle*.py", "link*.py")
-    for p in (Path(ROOT) / "lpv_sysid" / "mavlink").glob(pattern)
+    for folder in ("sim/px4_vehicle", "mavlink/link")
+    for p in (Path(ROOT) / "lpv_sysid" / folder).glob("*.py")
 )
 
 

@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 
 from lpv_sysid.io import messages
-from lpv_sysid.nodes.sim_vehicle_runtime import (
+from lpv_sysid.sim.vehicle import SensorConfig
+from lpv_sysid.sim.vehicle_node import (
     LOCKSTEP_RESEND_S,
     SLIP_LOG_PERIOD_S,
     SimVehicleRuntime,
+    SimVehicleSettings,
 )
-from lpv_sysid.nodes.sim_vehicle_settings import SimVehicleSettings
-from lpv_sysid.sim.vehicle import SensorConfig
 
 MS = 1_000_000  # ns
 
@@ -58,8 +58,8 @@ def engaged_at_k2(**settings):
 
 def test_runtime_modules_never_import_rclpy():
     code = (
-        "import sys; import lpv_sysid.nodes.sim_vehicle_runtime, "
-        "lpv_sysid.nodes.excitation_runtime; print('rclpy' in sys.modules)"
+        "import sys; import lpv_sysid.sim.vehicle_node.runtime, "
+        "lpv_sysid.flight.excitation; print('rclpy' in sys.modules)"
     )
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -1,4 +1,4 @@
-"""synthesis/hinf_norm.py and hinf_lmi.py (seed 0 Lemma 1, Eqs. 29-31) against analytic oracles."""
+"""synthesis/hinf/norm.py and hinf_lmi.py (seed 0 Lemma 1, Eqs. 29-31) against analytic oracles."""
 
 import numpy as np
 import pytest
@@ -10,17 +10,18 @@ from lpv_sysid.synthesis.example_models import (
     quadrotor_like_polytope,
     uncontrollable_disturbance_plant,
 )
-from lpv_sysid.synthesis.hinf_lmi import (
+from lpv_sysid.synthesis.hinf import (
     HinfOptions,
     certificate_margins,
     eq30_matrix,
     excitation_R,
+    hinf_norm,
+    hinf_norm_sweep,
     output_Q,
     performance_matrix,
     solve_lemma1,
     synthesize_hinf,
 )
-from lpv_sysid.synthesis.hinf_norm import hinf_norm, hinf_norm_sweep
 from lpv_sysid.synthesis.scaling import choose_scaling
 
 
@@ -186,7 +187,7 @@ def test_uncertainty_reduction_remedy_by_bisection_matches_analytic_shrink():
     # x1' = -a1 x1 + w with a1 in [2 - 1, 2 + 1]: gamma_min = 1 / a1_lower. Shrinking the interval
     # by rho gives a1_lower = 2 - rho, so gamma = 0.6 needs rho <= 2 - 1/0.6 = 1/3 (analytic).
     from lpv_sysid.models.lpv import PolytopicModel, UncertainElement
-    from lpv_sysid.synthesis.hinf_lmi import remedy_analysis
+    from lpv_sysid.synthesis.hinf import remedy_analysis
 
     base, Be, C, _ = uncontrollable_disturbance_plant(a1=2.0, a2=1.0)
     el = [UncertainElement("A", 0, 0, -3.0, -1.0, -2.0)]
@@ -202,7 +203,7 @@ def test_uncertainty_reduction_remedy_by_bisection_matches_analytic_shrink():
 
 
 def test_auto_solver_order():
-    from lpv_sysid.synthesis.hinf_lmi import _solver_order
+    from lpv_sysid.synthesis.hinf.synthesize import _solver_order
 
     auto = HinfOptions.from_dict({"solver": "auto"})
     assert _solver_order(auto, 8, {"CLARABEL", "SCS"}) == ["CLARABEL", "SCS"]

@@ -8,6 +8,7 @@ import yaml
 
 from lpv_sysid.cli.main import main
 from lpv_sysid.errors import ConfigError, SolverError
+from lpv_sysid.io.formats import GainSchedule
 from lpv_sysid.models.lpv import (
     CommonInputSet,
     PolytopicModel,
@@ -17,10 +18,9 @@ from lpv_sysid.models.lpv import (
     multilinear_weights,
     product_systems,
 )
-from lpv_sysid.io.formats import GainSchedule
+from lpv_sysid.synthesis.hinf import HinfOptions, hinf_norm, solve_lemma1
+from lpv_sysid.synthesis.hinf.synthesize import _shrunk_model
 from lpv_sysid.synthesis.uncertainty_set import load_models
-from lpv_sysid.synthesis.hinf_lmi import HinfOptions, _shrunk_model, solve_lemma1
-from lpv_sysid.synthesis.hinf_norm import hinf_norm
 from lpv_sysid.synthesis.verify import verify_files, verify_gains
 
 # 2 states, 1 input, 1-axis box [-1, 1], z = x1: B turns from (0.4, 0.2) to (1.1, 2.9) across the

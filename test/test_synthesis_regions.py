@@ -6,8 +6,7 @@ import pytest
 
 from lpv_sysid.errors import ConfigError, SolverError
 from lpv_sysid.synthesis.example_models import first_order_plant
-from lpv_sysid.synthesis.hinf_lmi import HinfOptions, solve_lemma1
-from lpv_sysid.synthesis.hinf_norm import hinf_norm
+from lpv_sysid.synthesis.hinf import HinfOptions, hinf_norm, solve_lemma1
 from lpv_sysid.synthesis.regions import (
     Region,
     closed_loop_eigs,

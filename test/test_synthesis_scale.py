@@ -10,24 +10,24 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from test_certificate_full_box import quad_models
 
 from lpv_sysid.cli.main import main
-from lpv_sysid.models.lpv import PolytopicModel, corner_box, product_systems, CommonInputSet
-from lpv_sysid.synthesis.example_models import quadrotor_like_polytope
 from lpv_sysid.io.formats import load_certificate_npz
-from lpv_sysid.synthesis.uncertainty_set import load_models
-from lpv_sysid.synthesis.hinf_lmi import (
+from lpv_sysid.models.lpv import CommonInputSet, PolytopicModel, corner_box, product_systems
+from lpv_sysid.synthesis.example_models import quadrotor_like_polytope
+from lpv_sysid.synthesis.hinf import (
     HinfOptions,
     certificate_margins,
     excitation_R,
+    hinf_norm,
     output_Q,
     performance_matrix,
     seed_problem_size,
     synthesize_hinf,
 )
-from lpv_sysid.synthesis.hinf_norm import hinf_norm
+from lpv_sysid.synthesis.uncertainty_set import load_models
 from lpv_sysid.synthesis.verify import verify_files
-from test_certificate_full_box import quad_models
 
 ROOT = Path(__file__).resolve().parents[1]
 SEED_M = [256, 128, 64, 64, 32, 16, 16, 4]

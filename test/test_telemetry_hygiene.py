@@ -19,8 +19,12 @@ from lpv_sysid.io import frames
 from lpv_sysid.mavlink import px4
 from lpv_sysid.mavlink.bridge import BridgeConfig, BridgeCore
 from lpv_sysid.mavlink.link import LinkConfig, free_udp_port
-from lpv_sysid.mavlink.rotor_estimate import RotorEstimateConfig
-from lpv_sysid.mavlink.telemetry import RotorSample, StateSample, TelemetryDecoder
+from lpv_sysid.mavlink.telemetry import (
+    RotorEstimateConfig,
+    RotorSample,
+    StateSample,
+    TelemetryDecoder,
+)
 
 A, B, LO, HI = 12.31, 13990.0, 120.0, 1100.0  # config/quadrotor.yaml, seed 0 Eq. (8)
 ROLL, ROLL_EULER_OFFSET = 0.2, 0.1  # ATTITUDE reports a different roll
@@ -489,7 +493,7 @@ def test_estimated_rotor_speeds_flow_from_the_sim_vehicle_without_esc_telemetry(
     import dataclasses
     import os
 
-    from lpv_sysid.mavlink.sim_vehicle import SimVehicle, SimVehicleConfig
+    from lpv_sysid.sim.px4_vehicle import SimVehicle, SimVehicleConfig
 
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     port = free_udp_port()

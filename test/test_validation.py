@@ -1,20 +1,24 @@
-"""lpv_sysid.config_fields: the shared config checks, the declared-field validator, and the config
+"""lpv_sysid.configuration.fields: the shared config checks, the declared-field validator, and the config
 classes that use them."""
 
 import math
 
 import pytest
 
+from lpv_sysid.configuration.fields import (
+    check_config_keys,
+    check_keys,
+    is_count,
+    is_finite_number,
+)
 from lpv_sysid.control.baseline import BaselineGains
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.sim.phase1 import Phase1Config
-from lpv_sysid.sim.vehicle import SensorConfig
-from lpv_sysid.mavlink.bridge import BridgeConfig
+from lpv_sysid.mavlink.bridge import BridgeConfig, MavrosConfig
 from lpv_sysid.mavlink.link import LinkConfig
-from lpv_sysid.mavlink.mavros import MavrosConfig
 from lpv_sysid.mavlink.offboard import OffboardConfig
-from lpv_sysid.mavlink.sim_vehicle import SimVehicleConfig
-from lpv_sysid.config_fields import check_config_keys, check_keys, is_count, is_finite_number
+from lpv_sysid.sim.phase1 import Phase1Config
+from lpv_sysid.sim.px4_vehicle import SimVehicleConfig
+from lpv_sysid.sim.vehicle import SensorConfig
 
 
 @pytest.mark.parametrize(
@@ -167,7 +171,7 @@ def test_config_valid_values_round_trip():
 def test_declared_fields_check_type_range_and_keys_with_the_field_path():
     from dataclasses import dataclass
 
-    from lpv_sysid import config_fields as cf
+    from lpv_sysid.configuration import fields as cf
 
     @dataclass(frozen=True)
     class Demo:
@@ -201,9 +205,9 @@ def test_declared_fields_check_type_range_and_keys_with_the_field_path():
 
 
 def test_signals_and_vrft_configs_use_the_declared_fields():
-    from lpv_sysid import config_fields as cf
-    from lpv_sysid.ident.vrft_config import VrftConfig
-    from lpv_sysid.signals.config import GroupConfig, SignalsConfig
+    from lpv_sysid.configuration import fields as cf
+    from lpv_sysid.signals.multisine import GroupConfig, SignalsConfig
+    from lpv_sysid.vrft import VrftConfig
 
     assert cf.specs(SignalsConfig)["duration"].hi == 3600.0
     assert set(cf.specs(GroupConfig)) == {"name", "channels", "band", "energy", "power_fraction"}

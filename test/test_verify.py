@@ -9,8 +9,8 @@ import yaml
 
 from lpv_sysid.cli.main import main
 from lpv_sysid.io.formats import GainSchedule
+from lpv_sysid.synthesis.hinf import hinf_norm
 from lpv_sysid.synthesis.uncertainty_set import load_models
-from lpv_sysid.synthesis.hinf_norm import hinf_norm
 from lpv_sysid.synthesis.verify import verify_files
 
 
@@ -210,7 +210,7 @@ def test_load_models_corner_enumeration(tmp_path):
 
 
 def test_written_gains_load_with_io_formats_and_drive_the_runtime_law(synthesized):
-    from lpv_sysid.control.lpv_controller import LpvController, LpvControllerConfig
+    from lpv_sysid.control.law import LpvController, LpvControllerConfig
     from lpv_sysid.io.formats import GainSchedule
 
     models, out = synthesized

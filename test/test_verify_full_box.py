@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from support.toy_plant import write_toy_plant
 import yaml
+from support.toy_plant import write_toy_plant
 
 from lpv_sysid.cli.main import main
 from lpv_sysid.synthesis.verify import (
@@ -174,7 +174,7 @@ def test_seed_reproduces_the_samples(tmp_path):
 def test_report_verification_carries_the_full_box(tmp_path):
     """verify writes the Monte Carlo into verification.yaml; the report renders it from there
     (reduced-polytope certificate: a miss is a WARNING naming that set, not a failure)."""
-    from lpv_sysid.report.markdown import write_report
+    from lpv_sysid.report import write_report
 
     gains, models = _write(tmp_path, 1.0)
     _, path = record_verification(gains, models, n_random=2, full_box=20)
@@ -194,7 +194,7 @@ def test_element_sensitivities_match_finite_differences():
     """The analytic first-order sensitivities that pick the worst corners vs central differences
     of the Hamiltonian-bisection norm and of numpy's eigenvalues (3 states, 2 inputs, A and B
     elements)."""
-    from lpv_sysid.synthesis.hinf_norm import hinf_norm
+    from lpv_sysid.synthesis.hinf import hinf_norm
     from lpv_sysid.synthesis.verify import ElementBox, element_sensitivities
 
     rng = np.random.default_rng(4)

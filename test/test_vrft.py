@@ -7,10 +7,11 @@ from scipy import signal
 
 from lpv_sysid.cli.main import main
 from lpv_sysid.errors import ConfigError, LpvSysidError, SolverError
-from lpv_sysid.ident import vrft_examples as ex
-from lpv_sysid.ident.vrft import (
+from lpv_sysid.vrft import (
     Tf,
+    VrftConfig,
     VrftResult,
+    cascaded_vrft,
     controller_tf,
     diagonal_model,
     first_order_model,
@@ -20,8 +21,7 @@ from lpv_sysid.ident.vrft import (
     velocity_class,
     vrft,
 )
-from lpv_sysid.ident.vrft_cascade import cascaded_vrft
-from lpv_sysid.ident.vrft_config import VrftConfig
+from lpv_sysid.vrft import examples as ex
 
 
 def _siso_data(a, b, n=400, seed=0):
@@ -439,7 +439,7 @@ def test_eiv_residual_weight_unbiased_and_cuts_kp11_spread_on_lv100():
 
 
 def test_shipped_example_config_runs(tmp_path):
-    from lpv_sysid.default_configs import config_file
+    from lpv_sysid.configuration.defaults import config_file
 
     t, u, y, _ = ex.table53_data(300, seed=7)
     np.savez(tmp_path / "d.npz", t=t, u=u, y=y)

@@ -20,12 +20,12 @@ artefacts in ``DIR``:
    ``DIR/chain_summary.yaml``, ``phase2_summary.yaml`` and the report. When phase 1 did not
    complete, models and gains are still written but phase 2 is not flown;
 5. ``DIR/phase2``: the phase-2 flight under the LPV law
-   (:func:`lpv_sysid.cli.chain_phase2.fly_phase2`): the vehicle, still in the air in HOLD after
+   (:func:`lpv_sysid.flight.phase2.fly.fly_phase2`): the vehicle, still in the air in HOLD after
    phase 1, is taken into OFFBOARD with the law's rate setpoints (RateSetpointTransport on
    BridgeCore's ``attitude_rate`` command, envelope enforced by the bridge), the signal is flown
    with raised-cosine fades, then LAND;
 6. ``DIR/report.md``: measured u_e -> z gain against gamma (seed 0 Eqs. 26-29, by regression
-   on the excitation, :func:`lpv_sysid.cli.chain_analysis.excitation_gain`), tracking RMS per
+   on the excitation, :func:`lpv_sysid.flight.phase2.analysis.excitation_gain`), tracking RMS per
    axis, the design, what the vehicle did.
 
 ``lpv-sysid fly phase2 --connect URL --gains G --models M --signals S --out DIR`` flies step 5
@@ -34,8 +34,8 @@ on the bags of an earlier phase-1 flight (the vehicle still in HOLD). The simula
 demo`` / ``make demo`` is unchanged.
 
 This module runs the steps (:func:`chain`); the flight of step 5 is
-:mod:`lpv_sysid.cli.chain_phase2`, the measurements :mod:`lpv_sysid.cli.chain_analysis`, the
-report :mod:`lpv_sysid.cli.chain_report` (their names are re-exported here).
+:mod:`lpv_sysid.flight.phase2.fly`, the measurements :mod:`lpv_sysid.flight.phase2.analysis`, the
+report :mod:`lpv_sysid.flight.chain.report` (their names are re-exported here).
 """
 
 from __future__ import annotations
@@ -48,38 +48,10 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from lpv_sysid.cli.chain_analysis import analyse_phase2, excitation_gain, inversion_error
-from lpv_sysid.cli.chain_phase2 import (
-    Phase2Options,
-    _fade,
-    fly_phase2,
-    load_phase2_law,
-    phase2_bridge_config,
-    save_summary,
-)
-from lpv_sysid.cli.chain_report import format_identification, write_report
-from lpv_sysid.default_configs import config_file
+from lpv_sysid.configuration.defaults import config_file
 from lpv_sysid.errors import LpvSysidError
-
-__all__ = [
-    "COMMAND",
-    "EXIT_FAILED",
-    "HELP",
-    "Phase2Options",
-    "_fade",
-    "add_arguments",
-    "analyse_phase2",
-    "chain",
-    "excitation_gain",
-    "fly_phase2",
-    "format_identification",
-    "inversion_error",
-    "load_phase2_law",
-    "phase2_bridge_config",
-    "run",
-    "save_summary",
-    "write_report",
-]
+from lpv_sysid.flight.chain import format_identification, write_report
+from lpv_sysid.flight.phase2 import Phase2Options, fly_phase2, inversion_error, save_summary
 
 COMMAND = "chain"
 HELP = (
@@ -109,10 +81,11 @@ def chain(
     """The six steps of the module docstring; returns the exit status. ``phase1_dir``: use the
     bags of an earlier phase-1 flight (``--phase1``, e.g. after a chain stopped at a later
     step with the vehicle still in HOLD) instead of flying phase 1."""
-    from lpv_sysid.cli.fly import FlyConfig, fly
+    from lpv_sysid.cli.fly import fly
     from lpv_sysid.cli.main import main as cli_main
+    from lpv_sysid.flight.campaign import FlyConfig
     from lpv_sysid.ident import rate_plant as rid
-    from lpv_sysid.io.yaml_file import save_yaml
+    from lpv_sysid.io.files import save_yaml
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -131,7 +104,7 @@ def chain(
     if phase1_dir is not None:
         step(f"phase-1 bags of an earlier flight ({phase1_dir})")
         p1 = Path(phase1_dir)
-        from lpv_sysid.io.yaml_file import read_yaml_mapping
+        from lpv_sysid.io.files import read_yaml_mapping
 
         cs = (
             read_yaml_mapping(p1 / "campaign_summary.yaml", finite=False)

@@ -5,7 +5,7 @@
     cp "$(lpv-sysid config synthesis.yaml)" my_synthesis.yaml
 
 The defaults the commands use when no ``--config`` is given (``demo``, ``coverage``,
-``chain``) are these files, inside the installed package (:mod:`lpv_sysid.default_configs`);
+``chain``) are these files, inside the installed package (:mod:`lpv_sysid.configuration.defaults`);
 in a source checkout they are also ``config/``.
 """
 
@@ -24,7 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lpv_sysid.default_configs import config_file, config_names
+    from lpv_sysid.configuration.defaults import config_file, config_names
 
     for name in args.names or config_names():
         print(config_file(name))

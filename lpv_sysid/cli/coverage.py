@@ -6,7 +6,7 @@ Draws airframes around ``--config`` (mass, inertia, arm, motor constants, J_z an
 lumped K varied by +/- ``--spread``), flies the phase-1 experiment on each, identifies the
 vertex models exactly as ``lpv-sysid identify`` does, and counts the identified elements whose
 ``k``-sigma interval contains the true linearisation at the flown equilibrium
-(:mod:`lpv_sysid.ident.coverage`).  Writes ``coverage.yaml`` and ``coverage.md`` (the table of
+(:mod:`lpv_sysid.studies.coverage`).  Writes ``coverage.yaml`` and ``coverage.md`` (the table of
 docs/identification_coverage.md).
 """
 
@@ -71,11 +71,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import yaml
 
-    from lpv_sysid.default_configs import config_file
     from lpv_sysid.cli.identify import load_config
+    from lpv_sysid.configuration.defaults import config_file
     from lpv_sysid.errors import ConfigError
-    from lpv_sysid.ident import coverage as cv
     from lpv_sysid.sim import phase1
+    from lpv_sysid.studies import coverage as cv
 
     cfg = cv.CoverageConfig(
         airframes=args.airframes,

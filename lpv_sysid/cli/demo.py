@@ -17,7 +17,7 @@ import sys
 import time
 from pathlib import Path
 
-from lpv_sysid.default_configs import config_file
+from lpv_sysid.configuration.defaults import config_file
 from lpv_sysid.errors import LpvSysidError
 
 COMMAND = "demo"

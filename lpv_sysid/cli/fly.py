@@ -4,12 +4,12 @@
         --out flight_01 [--signals signals_phase1/signals.npz] [--set-param COM_OBL_RC_ACT=5]
 
 One process: the bridge core (link, telemetry, offboard state machine, safety envelope;
-``lpv_sysid/mavlink/bridge.py``), the campaign sequencer (``lpv_sysid/control/campaign.py``)
-and the recorder (``lpv_sysid/io/recorder.py``), on the wall clock (injectable: the tests
+``lpv_sysid/mavlink/bridge/core.py``), the campaign sequencer (``lpv_sysid/control/campaign/sequencer.py``)
+and the recorder (``lpv_sysid/io/recorder/recorder.py``), on the wall clock (injectable: the tests
 fly the package's simulated PX4 in lock-step with a simulated clock).
 
 Sequence: optional PARAM_SET of ``--set-param`` values (each confirmed by the vehicle's
-PARAM_VALUE), preflight (``lpv_sysid/mavlink/preflight.py``: NO-GO refuses to fly, e.g. an
+PARAM_VALUE), preflight (``lpv_sysid/mavlink/preflight/checks.py``: NO-GO refuses to fly, e.g. an
 offboard-loss action that needs sticks the vehicle does not have), the campaign (arm and
 take off in OFFBOARD, every vertex and the hover run, HOLD or LAND), then the outputs:
 
@@ -32,9 +32,9 @@ Ctrl-C (or SIGTERM) or any fault: excitation off, hand-back confirmed by the HEA
 FAILED loudly), bags closed and readable, exit status 1 (130 after an interrupt) with
 the reason. A second Ctrl-C stops waiting for the confirmation.
 
-Modules: inputs (:mod:`~lpv_sysid.cli.fly_config`), vehicle-link steps
-(:mod:`~lpv_sysid.cli.fly_vehicle`), recording (:mod:`~lpv_sysid.cli.fly_recorder`), the loop
-(:mod:`~lpv_sysid.cli.fly_runner`), outputs (:mod:`~lpv_sysid.cli.fly_outputs`); this module
+Modules: inputs (:mod:`~lpv_sysid.flight.campaign.config`), vehicle-link steps
+(:mod:`~lpv_sysid.flight.vehicle`), recording (:mod:`~lpv_sysid.flight.campaign.recorder`), the loop
+(:mod:`~lpv_sysid.flight.campaign.runner`), outputs (:mod:`~lpv_sysid.flight.campaign.outputs`); this module
 holds the sequence (:func:`fly`) and the command line, and re-exports the others' public names.
 """
 
@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import signal
 import threading
 import time
@@ -49,42 +50,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Mapping
 
-from lpv_sysid.cli.fly_config import FlyConfig, bridge_config_for, load_signals, parse_params
-from lpv_sysid.cli.fly_outputs import (
-    _plain,
+from lpv_sysid.errors import ConfigError
+from lpv_sysid.flight.campaign import (
+    CampaignRecorder,
+    FlightRunner,
+    FlyConfig,
+    bridge_config_for,
     format_results,
     identification_template,
+    load_signals,
     write_outputs,
 )
-from lpv_sysid.cli.fly_recorder import NAMESPACE, RATE_TOPIC, TOPICS, CampaignRecorder
-from lpv_sysid.cli.fly_runner import FlightRunner
-from lpv_sysid.cli.fly_vehicle import set_params, tap_attitude_target, wait_for_vehicle
-from lpv_sysid.errors import ConfigError
-
-__all__ = [
-    "COMMAND",
-    "HELP",
-    "NAMESPACE",
-    "TOPICS",
-    "RATE_TOPIC",
-    "EXIT_FAILED",
-    "EXIT_INTERRUPTED",
-    "FlyConfig",
-    "load_signals",
-    "bridge_config_for",
-    "parse_params",
-    "wait_for_vehicle",
-    "set_params",
-    "CampaignRecorder",
-    "tap_attitude_target",
-    "FlyResult",
-    "FlightRunner",
-    "fly",
-    "format_results",
-    "add_arguments",
-    "run",
-    "_plain",  # YAML-safe copy, used by nodes/campaign_node.py and cli/chain.py
-]
+from lpv_sysid.flight.vehicle import set_params, tap_attitude_target, wait_for_vehicle
 
 COMMAND = "fly"
 HELP = (
@@ -333,7 +310,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     if args.mode == "phase2":
-        from lpv_sysid.cli.chain import Phase2Options, fly_phase2
+        from lpv_sysid.flight.phase2 import Phase2Options, fly_phase2
 
         s = fly_phase2(
             args.gains,
@@ -384,3 +361,23 @@ def run(args: argparse.Namespace) -> int:
             f"--out vertex_models.yaml"
         )
     return res.status
+
+
+def parse_params(items) -> dict[str, float]:
+    """``--set-param NAME=VALUE`` items -> {PX4 name: value}."""
+    out: dict[str, float] = {}
+    for it in items or ():
+        name, sep, value = str(it).partition("=")
+        name = name.strip().upper()
+        if not sep or not name or len(name) > 16:
+            raise ConfigError(
+                f"--set-param {it!r}: expected NAME=VALUE (PX4 names have <= 16 characters)"
+            )
+        try:
+            v = float(value)
+        except ValueError:
+            raise ConfigError(f"--set-param {it!r}: value is not a number") from None
+        if not math.isfinite(v):
+            raise ConfigError(f"--set-param {it!r}: value must be finite")
+        out[name] = v
+    return out

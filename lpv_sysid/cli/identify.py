@@ -12,6 +12,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from lpv_sysid.ident.vertex import VertexData
+
 COMMAND = "identify"
 HELP = "identify the uncertain vertex LTI models from phase-1 bags (seed 0 Sec. IV)"
 
@@ -44,7 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def load_config(path: Path | None):
     from lpv_sysid.errors import ConfigError
     from lpv_sysid.ident.vertex import IdentificationConfig
-    from lpv_sysid.io.yaml_file import read_yaml_mapping
+    from lpv_sysid.io.files import read_yaml_mapping
 
     if path is None:
         return IdentificationConfig()
@@ -60,7 +62,7 @@ def quadrotor_section(path: Path | None) -> dict:
     if path is None:
         return {}
     from lpv_sysid.errors import ConfigError
-    from lpv_sysid.io.yaml_file import read_yaml_mapping
+    from lpv_sysid.io.files import read_yaml_mapping
 
     d = read_yaml_mapping(path)
     q = d.get("quadrotor", {})
@@ -114,7 +116,7 @@ def format_offset_table(results) -> str:
 def format_uncertainty_summary(results, cfg) -> str:
     """One line per vertex: identified elements, motor constants, dof and widening of the std."""
     from lpv_sysid.ident.equation_error import t_factor
-    from lpv_sysid.ident.uncertainty import applied_k
+    from lpv_sysid.ident.vertex import applied_k
 
     lines = [
         f"uncertainty box of Eq. (22): every identified element, nominal +/- k std (k = "
@@ -162,7 +164,7 @@ def run(args: argparse.Namespace) -> int:
         cfg = dataclasses.replace(cfg, quadrotor=quadrotor_section(args.quadrotor))
     bags = dp.find_bags(args.bags)
     centre = 0.5 * (np.asarray(cfg.vmin) + np.asarray(cfg.vmax))
-    vertices: dict[tuple[float, ...], dp.VertexData] = {}
+    vertices: dict[tuple[float, ...], VertexData] = {}
     validation = None
     for bag in bags:
         aligned = dp.align(dp.streams_from_bag(bag), cfg)

@@ -62,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
     from lpv_sysid.mavlink.bridge import BridgeConfig
     from lpv_sysid.mavlink.link import LinkConfig, MavlinkLink
     from lpv_sysid.mavlink.preflight import format_table, run_checks, verdict
-    from lpv_sysid.mavlink.rotor_estimate import RotorEstimateConfig
+    from lpv_sysid.mavlink.telemetry import RotorEstimateConfig
 
     if not (args.timeout > 0 and args.timeout < 600):
         raise ConfigError("--timeout must be in (0, 600) s")

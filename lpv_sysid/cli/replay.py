@@ -4,7 +4,7 @@
         --out OUT_BAG [--gains gains.yaml]
 
 The node's message-level runtime (the same code the node runs,
-:mod:`lpv_sysid.nodes.controller_runtime`) receives the bag's input messages in
+:mod:`lpv_sysid.flight.controller`) receives the bag's input messages in
 timestamp order (bag receive time) and its timer ticks at ``rate_hz`` on the bag's clock;
 what it would have published (``actuator_command``, abort ``status``) is written to a new
 bag. Ticks follow the node's ``tick_source``: ``timer`` steps the law at each timer tick
@@ -13,7 +13,7 @@ state and ``rate_hz`` 250), ``state`` steps it on each new state sample at its s
 command per state sample) while the timer only judges staleness. The runtime is started
 at the first input message, as with ``auto_start``. The
 parameter file goes through the node's own declaration and validation
-(:class:`~lpv_sysid.nodes.controller_settings.ControllerSettings`: the same types, ranges and
+(:class:`~lpv_sysid.flight.controller.settings.ControllerSettings`: the same types, ranges and
 cross-field rules, so a value the node would refuse is refused here too), and the gains
 through the same start-up checks (certificate hash, closed-loop stability, design envelope).
 Use it to check a gains file against a real flight log before flying: exit status 1 when
@@ -103,8 +103,8 @@ def parsed_stream(topic: str, rel: str, msgs: list) -> list:
     """``[(stamp_ns, rel, payload), ...]`` with payload ``(t, values)`` (batch-parsed), or
     the raw message when the batch holds a malformed one (the runtime then sees it exactly
     as the node would, and aborts at that message)."""
+    from lpv_sysid.flight.controller import parse_inputs
     from lpv_sysid.io.messages import MessageError
-    from lpv_sysid.nodes.controller_messages import parse_inputs
 
     try:
         t, values = parse_inputs(rel, [m for _, m in msgs])
@@ -122,11 +122,9 @@ def replay_controller(
     ticks: str = "auto",
 ) -> dict:
     """Run :class:`ControllerRuntime` over the bag; returns a summary dict."""
+    from lpv_sysid.flight.controller import INPUT_TOPICS, ControllerRuntime, ControllerSettings
     from lpv_sysid.io.bag import BagWriter
     from lpv_sysid.io.messages import TYPES, MsgFactory
-    from lpv_sysid.nodes.controller_messages import INPUT_TOPICS
-    from lpv_sysid.nodes.controller_runtime import ControllerRuntime
-    from lpv_sysid.nodes.controller_settings import ControllerSettings
 
     settings = ControllerSettings.from_dict(params)
     ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
@@ -213,7 +211,7 @@ def replay_controller(
 
 
 def run(args) -> int:
-    from lpv_sysid.nodes.parameters import yaml_parameters
+    from lpv_sysid.configuration.parameters import yaml_parameters
 
     params = yaml_parameters(args.params, args.node)
     if args.gains:

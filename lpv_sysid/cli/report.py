@@ -56,8 +56,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _report(args: argparse.Namespace) -> Path:
     from lpv_sysid.errors import ConfigError
-    from lpv_sysid.report.data import load_run
-    from lpv_sysid.report.markdown import write_report
+    from lpv_sysid.report import load_run, write_report
 
     if args.strict:
         data_log = logging.getLogger("lpv_sysid.report.data")

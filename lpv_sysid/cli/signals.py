@@ -23,8 +23,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lpv_sysid.signals.config import load_config
-    from lpv_sysid.signals.multisine import design
+    from lpv_sysid.signals.multisine import design, load_config
     from lpv_sysid.signals.store import write_signal_set
 
     cfg = load_config(args.config)

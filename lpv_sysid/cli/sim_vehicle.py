@@ -5,7 +5,7 @@ port 14540 (connect the bridge with ``udpin:127.0.0.1:14540`` or MAVSDK with
 ``udpin://127.0.0.1:14540``). Its socket is bound to the local interface that routes to
 that destination (loopback by default), never to all interfaces; ``--bind HOST[:PORT]``
 chooses another. ``--config config/sim_vehicle_px4.yaml`` loads every option of
-:class:`lpv_sysid.mavlink.sim_vehicle.SimVehicleConfig` (flags given on the command line
+:class:`lpv_sysid.sim.px4_vehicle.vehicle.SimVehicleConfig` (flags given on the command line
 win). It runs in real time until ``--duration`` elapses or Ctrl-C, then prints the
 mode/arming history it went through. The vehicle's errors name the configuration field
 (``bind``); this command appends the flag that sets it (``[--bind]``, :data:`FLAG_OF_FIELD`).
@@ -155,7 +155,7 @@ def _params(items: list[str]) -> dict[str, float]:
 
 def build_config(args: argparse.Namespace):
     """The SimVehicleConfig of the command line (``--config`` file, then the flags)."""
-    from lpv_sysid.mavlink.sim_vehicle import SimVehicleConfig
+    from lpv_sysid.sim.px4_vehicle import SimVehicleConfig
 
     base = SimVehicleConfig.load(args.config) if args.config else SimVehicleConfig()
     kw: dict = {}
@@ -192,7 +192,7 @@ def build_config(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from lpv_sysid.mavlink.sim_vehicle import SimVehicle
+    from lpv_sysid.sim.px4_vehicle import SimVehicle
 
     if args.duration is not None and not args.duration > 0:
         raise ConfigError("--duration must be positive")

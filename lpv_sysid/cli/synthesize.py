@@ -18,15 +18,15 @@ which structure was solved (B common | per_vertex, M_A, M_B, the B hull) and the
 rebuilds and checks exactly that structure. Prints the sizes M_i = M_A x M_B and the wall time.
 
 With ``uncertainty.set: full_box`` (the shipped config) the certified set is every element of the
-models file in its interval (synthesis/robust_lmi.py); ``certificate.certified_set`` states
+models file in its interval (synthesis/robust/synthesize.py); ``certificate.certified_set`` states
 exactly which plants (``kind``, the box in the sidecar) and which scheduling signals
 (``scheduling.variation``: frozen | arbitrary | rate_bounded, ``covers_design_signal``) the bound
 covers, and ``certificate.problem`` the sizes -- for a corner polytope also seed 0's Lemma 1 over
 the same systems counted the package's way and the way CVX reports them (docs/certificate.md).
 
-The steps of :func:`run` live in :mod:`lpv_sysid.cli.synthesize_inputs` (config, options, models,
-weights), :mod:`lpv_sysid.cli.synthesize_certificate` (the certificate entry) and
-:mod:`lpv_sysid.cli.synthesize_outputs` (gains.yaml, sidecar, printed result); their names are
+The steps of :func:`run` live in :mod:`lpv_sysid.synthesis.gains.inputs` (config, options, models,
+weights), :mod:`lpv_sysid.synthesis.gains.certificate` (the certificate entry) and
+:mod:`lpv_sysid.synthesis.gains.outputs` (gains.yaml, sidecar, printed result); their names are
 re-exported here.
 """
 
@@ -39,51 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lpv_sysid.cli.synthesize_certificate import (
-    LMI_TEXT,
-    VARIATION,
-    certificate_entry,
-    certified_set_entry,
-    problem_entry,
-)
-from lpv_sysid.cli.synthesize_inputs import (
-    Inputs,
-    design_from_summary,
-    feedforward_settings,
-    load_config,
-    load_inputs,
-    velocity_index,
-    weights_from_config,
-)
-from lpv_sysid.cli.synthesize_outputs import feedforward_terms, print_result, write_outputs
 from lpv_sysid.errors import ConfigError, SolverError
-
-__all__ = [
-    "COMMAND",
-    "FLAG_OF_FIELD",
-    "HELP",
-    "LMI_TEXT",
-    "VARIATION",
-    "Inputs",
-    "add_arguments",
-    "certificate_entry",
-    "certified_set_entry",
-    "describe_problem",
-    "design_from_summary",
-    "feedforward_settings",
-    "feedforward_terms",
-    "load_config",
-    "load_inputs",
-    "print_result",
-    "problem_entry",
-    "run",
-    "synthesize",
-    "velocity_index",
-    "verify",
-    "weights_from_config",
-    "with_flag",
-    "write_outputs",
-]
+from lpv_sysid.synthesis.gains import VARIATION, Inputs, load_inputs, write_outputs
 
 COMMAND = "synthesize"
 HELP = (
@@ -180,7 +137,7 @@ def with_flag(message: str) -> str:
 def synthesize(inp: Inputs, args: argparse.Namespace):
     """Lemma 1 (or the element-box LMI) on the loaded inputs: the HinfResult, its info
     completed; SolverError with the structural hint on failure."""
-    from lpv_sysid.synthesis.hinf_lmi import synthesize_hinf
+    from lpv_sysid.synthesis.hinf import synthesize_hinf
 
     model = inp.model
     try:
@@ -203,7 +160,7 @@ def synthesize(inp: Inputs, args: argparse.Namespace):
 
 
 def verify(out: Path, models_path: str, inp: Inputs) -> int:
-    """The independent verification (synthesis/verify.py) of what was written: 0 passed, 1
+    """The independent verification (synthesis/verify/checker.py) of what was written: 0 passed, 1
     failed (the gains must not be flown)."""
     from lpv_sysid.synthesis.verify import verify_files
 

@@ -13,13 +13,13 @@ systems inside the box, and the scheduling claim (frozen / arbitrary / rate-boun
 
 ``--full-box N`` (default 200, 0 disables) adds an *empirical* Monte Carlo check against the FULL
 identified uncertainty (every identified element in its Eq. 22 interval;
-:mod:`lpv_sysid.synthesis.full_box_montecarlo`). For a reduced-polytope certificate, which does not
+:mod:`lpv_sysid.synthesis.verify.montecarlo`). For a reduced-polytope certificate, which does not
 claim that set, a miss is reported as WARN and does not change the exit status unless
 ``--strict-full-box`` is given; for a full-box certificate it is a cross-check of the claim and a
 miss fails (with the file's own k and intervals).
 
 Prints a table and writes ``verification.yaml`` next to the gains file (``--out`` elsewhere;
-:mod:`lpv_sysid.synthesis.verify_report`: pass/fail per check, gamma, LMI margins, eigenvalues,
+:mod:`lpv_sysid.synthesis.verify.report`: pass/fail per check, gamma, LMI margins, eigenvalues,
 the SHA-256 of the gains and models files checked, the tool version), which ``lpv-sysid report``
 reads instead of re-running the checks; also when a check fails. Exit status 1 when any
 (non-advisory) check fails, 2 on unreadable input.

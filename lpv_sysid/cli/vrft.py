@@ -75,7 +75,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _read_yaml(path: str) -> dict:
-    from lpv_sysid.io.yaml_file import read_yaml
+    from lpv_sysid.io.files import read_yaml
 
     p = Path(path)
     if not os.path.lexists(p):
@@ -87,7 +87,7 @@ def _read_yaml(path: str) -> dict:
 
 
 def _load_npz(path: str) -> dict:
-    from lpv_sysid.io.safe_open import read_npz
+    from lpv_sysid.io.files import read_npz
 
     p = Path(path)
     if not os.path.lexists(p):
@@ -130,7 +130,7 @@ def _report(title: str, res) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lpv_sysid.ident.vrft_config import VrftConfig
+    from lpv_sysid.vrft import VrftConfig
 
     if args.example is None and (args.data is None or args.config is None):
         raise ConfigError(
@@ -159,8 +159,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _tune(cfg, data: dict, args) -> dict:
-    from lpv_sysid.ident.vrft import vrft
-    from lpv_sysid.ident.vrft_cascade import cascaded_vrft
+    from lpv_sysid.vrft import cascaded_vrft, vrft
 
     t = data["t"]
     Ts = cfg.Ts if cfg.Ts is not None else float(np.mean(np.diff(t)))
@@ -235,9 +234,8 @@ def _write(path: str, doc: dict) -> None:
 
 
 def _run_example(args: argparse.Namespace) -> int:
-    from lpv_sysid.ident import vrft_examples as ex
-    from lpv_sysid.ident.vrft import model_reference_h2
-    from lpv_sysid.ident.vrft_config import VrftConfig
+    from lpv_sysid.vrft import VrftConfig, model_reference_h2
+    from lpv_sysid.vrft import examples as ex
 
     if args.example == "table5.3":
         base = dict(TABLE53_CONFIG)
@@ -304,7 +302,7 @@ def _run_example(args: argparse.Namespace) -> int:
 
 def _run_statistics(args: argparse.Namespace) -> int:
     """Seed 1 Table 5.2: mean, std and std/|mean| of Kp, Ki over noise realisations."""
-    from lpv_sysid.ident import vrft_examples as ex
+    from lpv_sysid.vrft import examples as ex
 
     if args.example != "lv100":
         raise ConfigError("--runs is only available with --example lv100 (Table 5.2)")

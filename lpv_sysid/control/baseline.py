@@ -31,9 +31,9 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from lpv_sysid.configuration.fields import check_keys, is_finite_number
 from lpv_sysid.errors import ConfigError, SafetyError
 from lpv_sysid.models.quadrotor import mixer
-from lpv_sysid.config_fields import check_keys, is_finite_number
 
 
 @dataclass(frozen=True)

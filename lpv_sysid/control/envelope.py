@@ -43,9 +43,9 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from lpv_sysid.configuration.fields import check_config_keys, is_finite_number
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io import frames
-from lpv_sysid.config_fields import check_config_keys, is_finite_number
 
 HOME_MODES = ("auto", "home_position", "start")
 

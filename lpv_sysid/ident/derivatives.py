@@ -44,8 +44,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import savgol_coeffs, savgol_filter
 
+from lpv_sysid.configuration.fields import check_keys
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.config_fields import check_keys
 
 METHODS = ("fourier", "savgol")
 

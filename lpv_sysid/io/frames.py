@@ -38,39 +38,6 @@ import numpy as np
 
 from lpv_sysid.errors import LpvSysidError
 
-__all__ = [
-    "FrameError",
-    "T_NED_ENU",
-    "T_FRD_FLU",
-    "ned_to_enu",
-    "enu_to_ned",
-    "frd_to_flu",
-    "flu_to_frd",
-    "xyzw_from_wxyz",
-    "wxyz_from_xyzw",
-    "quaternion_multiply",
-    "quaternion_conjugate",
-    "quaternion_normalize",
-    "quaternion_rotate",
-    "rotation_from_euler",
-    "euler_from_rotation",
-    "quaternion_from_rotation",
-    "rotation_from_quaternion",
-    "quaternion_from_euler",
-    "euler_from_quaternion",
-    "Q_NED_TO_ENU",
-    "Q_FRD_TO_FLU",
-    "quaternion_enu_flu_from_ned_frd",
-    "quaternion_ned_frd_from_enu_flu",
-    "ros_orientation_from_euler",
-    "euler_from_ros_orientation",
-    "kinematics_matrix",
-    "euler_rates",
-    "body_to_world",
-    "world_to_body",
-    "wrap_angle",
-]
-
 
 class FrameError(LpvSysidError, ValueError):
     """An array with the wrong shape, a non-finite value or an undefined conversion."""

@@ -1,6 +1,6 @@
 """campaign_node: the phase-1 flight campaign in the ROS 2 graph (``launch/campaign.launch.py``).
 
-Shell around :class:`lpv_sysid.nodes.campaign_runtime.CampaignRuntime`, which drives
+Shell around :class:`lpv_sysid.flight.campaign.runtime.CampaignRuntime`, which drives
 :class:`lpv_sysid.control.campaign.Campaign` (the same core as ``lpv-sysid fly phase1``). It
 commands ``velocity_reference`` (TwistStamped, FLU) to the ``mavlink_bridge`` node, which
 streams it to PX4 and enforces the safety envelope, and follows the bridge through its
@@ -35,9 +35,9 @@ from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu, JointState
 from std_srvs.srv import Trigger
 
+from lpv_sysid.flight.campaign import PARSERS, CampaignNodeSettings, CampaignRuntime
 from lpv_sysid.io import messages
 from lpv_sysid.nodes import shell
-from lpv_sysid.nodes.campaign_runtime import PARSERS, CampaignNodeSettings, CampaignRuntime
 
 NODE_NAME = "campaign"
 #: the rclpy declarations, generated from the one declaration (CampaignNodeSettings)

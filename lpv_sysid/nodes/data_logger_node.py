@@ -28,12 +28,12 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 from rosidl_runtime_py.utilities import get_message
 
+from lpv_sysid.configuration import parameters
 from lpv_sysid.errors import ConfigError, LpvSysidError
 from lpv_sysid.io import messages
 from lpv_sysid.io.bag import FLUSH_INTERVAL_S, STORAGES
 from lpv_sysid.io.recorder import Recorder, RecorderConfig
 from lpv_sysid.nodes import shell
-from lpv_sysid.nodes import parameters
 
 NODE_NAME = "data_logger"
 

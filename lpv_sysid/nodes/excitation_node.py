@@ -1,6 +1,6 @@
 """excitation_node: plays a signal set as velocity reference and excitation u_e.
 
-Shell around :class:`lpv_sysid.nodes.excitation_runtime.ExcitationRuntime` (the
+Shell around :class:`lpv_sysid.flight.excitation.ExcitationRuntime` (the
 :class:`~lpv_sysid.signals.excitation.ExcitationCore` with the start, abort, fade and status
 rules; see there). Publishes, at ``rate_hz`` from a timer that samples the core at the node
 clock's current time: ``velocity_reference`` (TwistStamped) and ``excitation`` (JointState
@@ -23,26 +23,9 @@ from geometry_msgs.msg import TwistStamped
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
+from lpv_sysid.flight.excitation import ExcitationRuntime, ExcitationSettings
 from lpv_sysid.io import messages
 from lpv_sysid.nodes import shell
-from lpv_sysid.nodes.excitation_runtime import (
-    ABORT_MARKERS,
-    MODES,
-    ExcitationRuntime,
-    ExcitationSettings,
-    reports_abort,
-)
-
-__all__ = [
-    "ABORT_MARKERS",
-    "MODES",
-    "NODE_NAME",
-    "PARAMETERS",
-    "ExcitationNode",
-    "ExcitationSettings",
-    "main",
-    "reports_abort",
-]
 
 NODE_NAME = "excitation"
 #: the rclpy declarations, generated from the one declaration (ExcitationSettings)

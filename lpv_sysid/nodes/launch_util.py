@@ -4,7 +4,7 @@ The launch files are installed on their own under ``share/lpv_sysid/launch``, so
 share lives in the package and they import it from here: the launch arguments every
 experiment uses (one description each), the parameter-file lookup in ``config_dir``, whose
 default is the ROS share copy of the shipped configs
-(:func:`lpv_sysid.default_configs.share_config_dir`), and the construction of the package's
+(:func:`lpv_sysid.configuration.defaults.share_config_dir`), and the construction of the package's
 nodes (:func:`node`: namespace, output, shutdown budget, parameter file + overrides). Needs
 ROS 2 ``launch``, ``launch_ros`` and ``ament_index_python`` (imported only by the launch
 files).
@@ -19,8 +19,9 @@ from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 
-from lpv_sysid.default_configs import PACKAGE, share_config_dir
-from lpv_sysid.nodes.shell import LAUNCH_SIGTERM_TIMEOUT_S, NAMESPACE
+from lpv_sysid.configuration.defaults import PACKAGE, share_config_dir
+from lpv_sysid.io.messages import NAMESPACE
+from lpv_sysid.nodes.shell import LAUNCH_SIGTERM_TIMEOUT_S
 
 #: launch argument -> description (shared by every launch file that declares it)
 DESCRIPTIONS = {
@@ -99,17 +100,3 @@ def node(
         parameters=parameters,
         condition=condition,
     )
-
-
-__all__ = [
-    "DESCRIPTIONS",
-    "NAMESPACE",
-    "PACKAGE",
-    "REQUIRED",
-    "arg",
-    "declare_arguments",
-    "node",
-    "params",
-    "share_config_dir",
-    "sigterm_timeout",
-]

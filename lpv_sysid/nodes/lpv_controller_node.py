@@ -1,7 +1,7 @@
 """lpv_controller_node: the robust LPV velocity controller of phase 2 (seed 0 Sec. VI).
 
-Shell around :class:`lpv_sysid.nodes.controller_runtime.ControllerRuntime` (the runtime law
-of control/lpv_controller.py + the safety supervisor of control/safety.py). Loads and
+Shell around :class:`lpv_sysid.flight.controller.ControllerRuntime` (the runtime law
+of control/law/controller.py + the safety supervisor of control/safety.py). Loads and
 validates ``gains_file`` at start and refuses to start on any mismatch, naming the field
 (exit status 2): the file must hash to what its certificate certified, the certified
 closed loops must be stable and the design envelope present (controller_runtime). Its
@@ -25,9 +25,9 @@ from nav_msgs.msg import Odometry
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
+from lpv_sysid.flight.controller import ControllerRuntime, ControllerSettings, settle_gc
 from lpv_sysid.io import messages
 from lpv_sysid.nodes import shell
-from lpv_sysid.nodes.controller_runtime import ControllerRuntime, ControllerSettings, settle_gc
 
 NODE_NAME = "lpv_controller"
 

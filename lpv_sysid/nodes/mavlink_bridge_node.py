@@ -1,6 +1,6 @@
 """mavlink_bridge_node: ROS topics <-> PX4 over MAVLink (offboard), with safe hand-back.
 
-Shell around :class:`lpv_sysid.nodes.bridge_runtime.BridgeRuntime` (which wraps
+Shell around :class:`lpv_sysid.flight.bridge.runtime.BridgeRuntime` (which wraps
 :class:`lpv_sysid.mavlink.bridge.BridgeCore`). A timer at ``poll_rate_hz`` polls the link:
 decoded telemetry is published on ``state`` (Odometry), ``imu`` and ``rotor_speeds`` (best
 effort); link and offboard events and the core's status go to ``status``.
@@ -8,10 +8,10 @@ effort); link and offboard events and the core's status go to ``status``.
 ``command: attitude_rate``) are forwarded as setpoints. When commands stop for
 ``offboard.input_timeout`` s (e.g. the controller aborted), or on the ``abort`` service, or
 on shutdown, the core hands control back to PX4 (``offboard.handback_mode``). Services
-``start`` / ``abort`` (std_srvs/Trigger). Parameters: :mod:`lpv_sysid.nodes.bridge_settings`.
+``start`` / ``abort`` (std_srvs/Trigger). Parameters: :mod:`lpv_sysid.flight.bridge.settings`.
 
 ``transport: mavros`` (vehicles already running MAVROS): no MAVLink link; the runtime wraps
-:class:`lpv_sysid.mavlink.mavros.MavrosCore` instead, republishes
+:class:`lpv_sysid.mavlink.bridge.mavros.MavrosCore` instead, republishes
 ``/mavros/local_position/odom`` and ``/mavros/imu/data`` (best effort) on ``state`` / ``imu``
 and streams ``velocity_reference`` rotated to local ENU on
 ``/mavros/setpoint_velocity/cmd_vel`` (reliable). Mode switching and arming need
@@ -30,12 +30,9 @@ from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu, JointState
 from std_srvs.srv import Trigger
 
+from lpv_sysid.flight.bridge import PARSERS, SPECS, BridgeRuntime
 from lpv_sysid.io import messages
 from lpv_sysid.nodes import shell
-from lpv_sysid.nodes.bridge_runtime import PARSERS, BridgeRuntime
-from lpv_sysid.nodes.bridge_settings import SPECS, handback_bound_s
-
-__all__ = ["MavlinkBridgeNode", "NODE_NAME", "PARAMETERS", "SPECS", "handback_bound_s", "main"]
 
 NODE_NAME = "mavlink_bridge"
 #: the rclpy declarations, generated from the one declaration (bridge_settings.SPECS)

@@ -17,7 +17,6 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.signals import SignalHandlerOptions
 from rclpy.qos import (
     QoSDurabilityPolicy,
     QoSHistoryPolicy,
@@ -25,6 +24,7 @@ from rclpy.qos import (
     QoSReliabilityPolicy,
     qos_profile_sensor_data,
 )
+from rclpy.signals import SignalHandlerOptions
 
 from lpv_sysid.errors import ConfigError, LpvSysidError
 from lpv_sysid.io.messages import NAMESPACE, TYPES
@@ -131,15 +131,15 @@ def clock_source(node) -> str:
 
 def settings_table(settings_cls) -> list:
     """The ``[(name, default, descriptor)]`` table of :func:`declare` generated from a
-    settings dataclass (:mod:`lpv_sysid.nodes.parameters`); see :func:`spec_table`."""
-    from lpv_sysid.nodes.parameters import specs
+    settings dataclass (:mod:`lpv_sysid.configuration.parameters`); see :func:`spec_table`."""
+    from lpv_sysid.configuration.parameters import specs
 
     return spec_table(specs(settings_cls))
 
 
 def spec_table(specs: dict) -> list:
     """``[(name, default, descriptor)]`` from ``{name: (default, ParamSpec)}``
-    (:func:`lpv_sysid.nodes.parameters.specs` / ``config_specs``): type, description, the
+    (:func:`lpv_sysid.configuration.parameters.specs` / ``config_specs``): type, description, the
     range (``floating_point_range`` / ``integer_range``, enforced by rclpy) and the
     remaining constraints as ``additional_constraints`` (checked by the settings or
     configuration class). An empty array default is declared as an empty list of its type

@@ -1,6 +1,6 @@
 """sim_vehicle_node: the simulated quadrotor as a node, so the graph runs without hardware.
 
-Shell around :class:`lpv_sysid.nodes.sim_vehicle_runtime.SimVehicleRuntime` (the physics of
+Shell around :class:`lpv_sysid.sim.vehicle_node.runtime.SimVehicleRuntime` (the physics of
 sim/vehicle.py, the PX4-like baseline, lock-step, sample and status rules; see there). A
 timer at ``state_hz`` advances the physics to the pace clock; ``state`` (Odometry), ``imu``
 and ``rotor_speeds`` are published at their sensor rates (best effort), stamped with the
@@ -9,7 +9,7 @@ applies ``actuator_command`` (baseline hold once it goes stale: PX4's hand-back)
 ``lockstep`` (sim.launch.py): the simulation is the clock of the graph (``/clock``, physics
 time from 0), paced by the steady clock, each state sample waiting for its command (and the
 reference) before the physics integrates on. Parameters: :data:`SPECS`
-(:mod:`lpv_sysid.nodes.sim_vehicle_settings`).
+(:mod:`lpv_sysid.sim.vehicle_node.settings`).
 
     ros2 run lpv_sysid sim_vehicle_node --ros-args --params-file config/sim_vehicle.yaml
 """
@@ -24,26 +24,7 @@ from sensor_msgs.msg import Imu, JointState
 
 from lpv_sysid.io import messages
 from lpv_sysid.nodes import shell
-from lpv_sysid.nodes.sim_vehicle_runtime import LOCKSTEP_RESEND_S, SimVehicleRuntime
-from lpv_sysid.nodes.sim_vehicle_settings import (
-    MODES,
-    SENSOR_DESCRIPTIONS,
-    SPECS,
-    SimVehicleSettings,
-    settings_from_params,
-)
-
-__all__ = [
-    "LOCKSTEP_RESEND_S",
-    "MODES",
-    "NODE_NAME",
-    "PARAMETERS",
-    "SENSOR_DESCRIPTIONS",
-    "SPECS",
-    "SimVehicleNode",
-    "SimVehicleSettings",
-    "main",
-]
+from lpv_sysid.sim.vehicle_node import SPECS, SimVehicleRuntime, settings_from_params
 
 NODE_NAME = "sim_vehicle"
 #: the rclpy declarations, generated from the one declaration (sim_vehicle_settings)

@@ -13,7 +13,7 @@ validation            ``validation.yaml``, ``ident/validation.yaml`` (TIC/NRMSE 
 signals               ``signals/summary.yaml`` and ``signals/signals.npz``
 gains + certificate   ``gains.yaml``
 verification          ``verification.yaml`` (written by ``lpv-sysid verify``, read through
-                      :func:`lpv_sysid.synthesis.verify_report.read_verification`; the report
+                      :func:`lpv_sysid.synthesis.verify.report.read_verification`; the report
                       never re-runs the verifier: absent means "not verified")
 phase 2               ``phase2/summary.yaml`` and ``phase2/*.npz`` (written by
                       :mod:`lpv_sysid.sim.phase2`)
@@ -34,8 +34,8 @@ from typing import Any, Optional
 import numpy as np
 
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.io.yaml_file import read_yaml
-from lpv_sysid.synthesis.verify_report import Verification, read_verification
+from lpv_sysid.io.files import read_yaml
+from lpv_sysid.synthesis.verify import Verification, read_verification
 
 log = logging.getLogger(__name__)
 
@@ -81,9 +81,9 @@ class RunData:
 
 
 def read_npz(path: Path) -> dict[str, np.ndarray]:
-    """npz archive -> dict of arrays (:func:`lpv_sysid.io.safe_open.read_npz`: regular file, size
+    """npz archive -> dict of arrays (:func:`lpv_sysid.io.files.opening.read_npz`: regular file, size
     cap, no pickles, no complex arrays); ConfigError naming the file otherwise."""
-    from lpv_sysid.io.safe_open import read_npz as _read_npz
+    from lpv_sysid.io.files import read_npz as _read_npz
 
     return _read_npz(path)
 

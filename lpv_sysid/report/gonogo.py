@@ -123,7 +123,7 @@ def _certificate_row(d: RunData) -> Row:
 
 def _sha(path: Optional[Path]) -> Optional[str]:
     from lpv_sysid.errors import ConfigError
-    from lpv_sysid.io.file_hash import sha256_file
+    from lpv_sysid.io.files import sha256_file
 
     if path is None:
         return None

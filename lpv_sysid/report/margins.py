@@ -19,7 +19,7 @@ For the go/no-go table and the margin plots of the report (no plotting here). Pe
 
 Limits come from the phase-2 summary where it records them (``gamma``, ``box``, a ``limits``
 mapping, the run's ``monitor_window_s``), else from the defaults of the code that flew the run
-(:class:`lpv_sysid.sim.phase2.Phase2Config`, :class:`lpv_sysid.control.lpv_controller.
+(:class:`lpv_sysid.sim.phase2.Phase2Config`, :class:`lpv_sysid.control.law.controller.
 LpvControllerConfig`, :class:`lpv_sysid.models.quadrotor.QuadrotorParams`); :attr:`Limits.source`
 says which.
 """
@@ -60,7 +60,7 @@ class Limits:
 
 def limits_from_summary(summary: Optional[Mapping[str, Any]]) -> Limits:
     """:class:`Limits` of a phase-2 summary (``phase2/summary.yaml`` mapping, or None)."""
-    from lpv_sysid.control.lpv_controller import LpvControllerConfig
+    from lpv_sysid.control.law import LpvControllerConfig
     from lpv_sysid.models.quadrotor import QuadrotorParams
     from lpv_sysid.sim.phase2 import Phase2Config
 

@@ -25,23 +25,11 @@ from lpv_sysid.report.sections_design import (
     _signals_section,
     _synthesis_section,
     _verification_section,
-    uncertainty_rows,
 )
 from lpv_sysid.report.sections_flight import (
     _phase2_section,
-    gain_row,
     go_no_go_section,
-    regressor_correlations_from_summary,
 )
-
-__all__ = [
-    "SECTION_INPUTS",
-    "gain_row",
-    "md_table",
-    "regressor_correlations_from_summary",
-    "uncertainty_rows",
-    "write_report",
-]
 
 log = logging.getLogger(__name__)
 

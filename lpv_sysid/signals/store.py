@@ -15,7 +15,7 @@ from lpv_sysid.signals.multisine import SignalSet
 
 def save_npz(path: str, t: np.ndarray, u: np.ndarray, names) -> None:
     """Write ``t``, ``u``, ``names`` (unicode array) to ``path`` (numpy .npz, uncompressed)."""
-    from lpv_sysid.io.safe_open import check_output
+    from lpv_sysid.io.files import check_output
 
     check_output(path)  # an existing FIFO or device is refused, not opened
     try:
@@ -33,7 +33,7 @@ def save_npz(path: str, t: np.ndarray, u: np.ndarray, names) -> None:
 def load_npz(path: str) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
     """Read and validate a signal file: ``t`` strictly increasing and uniform, ``u`` (N, n)
     finite, ``names`` n unique strings."""
-    from lpv_sysid.io.safe_open import read_npz
+    from lpv_sysid.io.files import read_npz
 
     if not os.path.lexists(path):
         raise ConfigError(f"{path}: no such file")
@@ -149,7 +149,7 @@ def summary(sig: SignalSet) -> dict[str, Any]:
 def save_summary(path: str, data: dict[str, Any]) -> None:
     import yaml
 
-    from lpv_sysid.io.safe_open import check_output
+    from lpv_sysid.io.files import check_output
 
     check_output(path)
     try:

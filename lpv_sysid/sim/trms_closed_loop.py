@@ -282,19 +282,3 @@ def simulate(
         if not np.all(np.isfinite(x)):
             raise SolverError(f"trms simulate: state diverged at t={t + ts:.2f}")
     return TrmsRun(**{k: np.asarray(v) for k, v in out.items()})
-
-
-__all__ = [
-    "C_MEAS",
-    "C_TRACK",
-    "GAPS_DEFAULT",
-    "REGION_K_DEFAULT",
-    "REGION_K_PAPER",
-    "REGION_L_PAPER",
-    "SCHEDULED_DEFAULT",
-    "TrmsControlConfig",
-    "TrmsDesign",
-    "TrmsRun",
-    "design",
-    "simulate",
-]

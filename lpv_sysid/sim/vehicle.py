@@ -25,10 +25,9 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from lpv_sysid.configuration.fields import check_keys, is_count, is_finite_number
 from lpv_sysid.errors import ConfigError, SafetyError
 from lpv_sysid.models.quadrotor import Quadrotor
-from lpv_sysid.config_fields import check_keys, is_count, is_finite_number
-
 
 _TWO_PI = 2.0 * math.pi
 

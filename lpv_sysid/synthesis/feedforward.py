@@ -34,7 +34,7 @@ states): (dx_ff, du_ff) = F a + F_jerk j, with the rate states of dx_ff = w_ff. 
 phase-2 demo (reference band 0.01-0.2 Hz): F alone left 0.7-0.8 m/s rms tracking error and the
 flight left the box at 27 s; with the jerk term 0.2-0.4 m/s rms and the flight completed.
 
-At runtime (control/lpv_controller.py) ``F(v_d) = sum_i alpha_i(v_d) F_i`` (Eq. 21 weights) and
+At runtime (control/law/controller.py) ``F(v_d) = sum_i alpha_i(v_d) F_i`` (Eq. 21 weights) and
 
     u = u0(v_d) + du_ff + K(v_d) (x - x0(v_d) - dx_ff) + R u_e,   (dx_ff, du_ff) = F(v_d) a.
 

@@ -74,7 +74,7 @@ def _reduced_systems(
     free = [e for e in els if e.upper > e.lower]
     if len(free) <= p_max and 2 ** len(free) <= max_corners:
         return uncertainty_vertices(A, B, els, max_corners)
-    from lpv_sysid.ident import uncertainty as unc
+    from lpv_sysid.ident.vertex import uncertainty as unc
 
     cfg = unc.UncertaintyConfig.from_dict(
         {"k_sigma": 1.0, "method": method, "p_max": p_max, "max_corners": max_corners, **ucfg}
@@ -241,7 +241,7 @@ def load_models(
 
     ``uncertainty`` config (see config/synthesis.yaml): ``p_max`` (default 4) corner parameters
     per vertex, ``max_corners`` (4096), ``method`` (influence | hybrid | box) of
-    :func:`lpv_sysid.ident.uncertainty.build` for the reduction, ``common_b`` and ``p_max_b``.
+    :func:`lpv_sysid.ident.vertex.uncertainty.build` for the reduction, ``common_b`` and ``p_max_b``.
 
     ``common_b: false``: per scheduling vertex, all corners of the stored intervals [lower, upper]
     when 2**p <= ``max_corners`` and p <= ``p_max``, otherwise the reduction applied to the stored

@@ -1,5 +1,5 @@
 """Lock-step simulated clock for the flight runners under test (fly, chain): the runner's
-``sleep(d)`` advances the in-process MAVLink vehicle (lpv_sysid.mavlink.sim_vehicle.SimVehicle)
+``sleep(d)`` advances the in-process MAVLink vehicle (lpv_sysid.sim.px4_vehicle.vehicle.SimVehicle)
 in steps of ``dt`` on simulated time, so the flights run without wall-clock waits."""
 
 from __future__ import annotations

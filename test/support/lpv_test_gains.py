@@ -1,7 +1,7 @@
 """A valid, stabilising, flyable ``gains.yaml`` for node / replay tests and benchmarks.
 
 Per vertex of the box [-b, b]^3 (m/s): trim and analytic linearisation of the seed 0
-quadrotor (models/quadrotor.py), continuous LQR gain ``K = -R^-1 B^T P`` (scipy CARE).
+quadrotor (models/quadrotor/model.py), continuous LQR gain ``K = -R^-1 B^T P`` (scipy CARE).
 This is a simple stabilising LPV law -- *not* the Lemma 1 synthesis -- so the certificate
 block records what it is ("LQR test gains"). What the flight runtime requires of every
 gains file, this writer provides honestly for its own law:
@@ -27,7 +27,8 @@ from pathlib import Path
 import numpy as np
 from scipy.linalg import solve_continuous_are
 
-from lpv_sysid.io.formats import GainSchedule, certify_law, sha256_file, systems_arrays
+from lpv_sysid.io.files import sha256_file
+from lpv_sysid.io.formats import GainSchedule, certify_law, systems_arrays
 from lpv_sysid.models.lpv import box_vertices
 from lpv_sysid.models.quadrotor import (
     INPUT_NAMES,

@@ -83,8 +83,8 @@ def _(node):
 
 @case("publish_wrong_type")
 def _(node):
-    from std_msgs.msg import String
     from sensor_msgs.msg import JointState
+    from std_msgs.msg import String
 
     node.create_publisher(String, "t", 10).publish(JointState())
 

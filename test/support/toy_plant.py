@@ -10,7 +10,7 @@ from typing import Sequence
 
 import yaml
 
-from lpv_sysid.io.file_hash import sha256_file
+from lpv_sysid.io.files import sha256_file
 
 NAMES = [{"name": "x1", "unit": "m/s"}, {"name": "x2", "unit": "m/s"}]
 INPUTS = [{"name": "u1", "unit": "1"}, {"name": "u2", "unit": "1"}]

@@ -50,66 +50,47 @@ from __future__ import annotations
 
 from lpv_sysid.io.bag.arrays import read_arrays
 from lpv_sysid.io.bag.bagfiles import UnsafeBagFile
+from lpv_sysid.io.bag.cdr.layout import CdrLayout, LayoutError, encode_block, records_close
 from lpv_sysid.io.bag.durability import (
     LOCK_FILE,
     RESERVE_BYTES,
     DiskReserve,
     atomic_write_text,
+    now_iso,
     writer_alive,
 )
-from lpv_sysid.io.bag.layout import CdrLayout, LayoutError, encode_block, records_close
-from lpv_sysid.io.bag.mcap_index import _read_fast
-from lpv_sysid.io.bag.mcap_records import MCAP_MAGIC
+from lpv_sysid.io.bag.mcap.index import _read_fast
+from lpv_sysid.io.bag.mcap.records import MCAP_MAGIC
 from lpv_sysid.io.bag.reader import read_bag, topic_info
-from lpv_sysid.io.bag.records import (
-    BagArrays,
-    BagContents,
-    TopicArrays,
-    TopicStats,
-    _Source,
-    merge_topic_stats,
-)
+from lpv_sysid.io.bag.records import _Source, merge_topic_stats
 from lpv_sysid.io.bag.repair import RepairReport, repair_bag
-from lpv_sysid.io.bag.typestore import DEFAULT_QOS, jazzy_typestore, make_qos
-from lpv_sysid.io.bag.writer import (
-    FLUSH_INTERVAL_S,
-    FLUSH_MESSAGES,
-    MAX_CHUNK_BYTES,
-    STORAGES,
-    BagWriter,
-)
+from lpv_sysid.io.bag.typestore import jazzy_typestore
+from lpv_sysid.io.bag.writer import FLUSH_INTERVAL_S, FLUSH_MESSAGES, STORAGES, BagWriter
 
 __all__ = [
     "BagWriter",
-    "BagContents",
-    "BagArrays",
-    "TopicArrays",
-    "TopicStats",
-    "RepairReport",
-    "UnsafeBagFile",
-    "read_bag",
-    "read_arrays",
-    "topic_info",
-    "merge_topic_stats",
-    "encode_block",
-    "records_close",
     "CdrLayout",
-    "LayoutError",
-    "repair_bag",
-    "writer_alive",
-    "atomic_write_text",
     "DiskReserve",
-    "jazzy_typestore",
-    "DEFAULT_QOS",
-    "make_qos",
-    "LOCK_FILE",
-    "STORAGES",
-    "MCAP_MAGIC",
     "FLUSH_INTERVAL_S",
     "FLUSH_MESSAGES",
+    "LOCK_FILE",
+    "LayoutError",
+    "MCAP_MAGIC",
     "RESERVE_BYTES",
-    "MAX_CHUNK_BYTES",
+    "RepairReport",
+    "STORAGES",
+    "UnsafeBagFile",
+    "_Source",
+    "_read_fast",
+    "atomic_write_text",
+    "encode_block",
+    "jazzy_typestore",
+    "merge_topic_stats",
+    "now_iso",
+    "read_arrays",
+    "read_bag",
+    "records_close",
+    "repair_bag",
+    "topic_info",
+    "writer_alive",
 ]
-
-# raw-record access for the bulk-writer checks of test_sim_fast_paths.py (not public API)
-_INTERNAL = (_Source, _read_fast)

@@ -1,7 +1,7 @@
 """Reading a bag column-wise: :func:`read_arrays` (``{topic: TopicArrays}``).
 
 The fixed-layout records this package writes are decoded per topic as numpy blocks (the
-CDR block codec, :mod:`lpv_sysid.io.bag.layout`); other records go through rosbags'
+CDR block codec, :mod:`lpv_sysid.io.bag.cdr.layout`); other records go through rosbags'
 ``deserialize_cdr``. Values are those of rosbags' ``deserialize_cdr`` of the same records
 (checked in test_bag_codec.py), in the order of :func:`~lpv_sysid.io.bag.reader.read_bag`.
 """
@@ -16,10 +16,11 @@ import numpy as np
 
 from lpv_sysid.errors import BagError
 from lpv_sysid.io.bag.bagfiles import UnsafeBagFile
+from lpv_sysid.io.bag.cdr import CdrLayout
+from lpv_sysid.io.bag.cdr.layout import _LAYOUTS, _MAX_LAYOUT_GROUPS, _get_path, _LayoutWalk
 from lpv_sysid.io.bag.collect import _collect
 from lpv_sysid.io.bag.durability import _describe
-from lpv_sysid.io.bag.layout import _LAYOUTS, CdrLayout, _get_path, _LayoutWalk, _MAX_LAYOUT_GROUPS
-from lpv_sysid.io.bag.mcap_index import _open_fast, _rows_from_index
+from lpv_sysid.io.bag.mcap.index import _open_fast, _rows_from_index
 from lpv_sysid.io.bag.records import BagArrays, TopicArrays, _Rows, _Source
 from lpv_sysid.io.bag.typestore import _deserializers
 

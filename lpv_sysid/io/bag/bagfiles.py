@@ -2,8 +2,8 @@
 
 A bag path comes from the user, so every file of it (``metadata.yaml``, the ``.mcap`` /
 ``.db3`` storage files and a sqlite3 ``-journal``) is opened through
-:func:`lpv_sysid.io.safe_open.open_regular`, or checked with
-:func:`~lpv_sysid.io.safe_open.check_regular` just before rosbags or sqlite3 open it by
+:func:`lpv_sysid.io.files.opening.open_regular`, or checked with
+:func:`~lpv_sysid.io.files.opening.check_regular` just before rosbags or sqlite3 open it by
 name: a FIFO, socket or device in its place (also behind a symlink) is refused before it
 is opened, so it cannot block a reader or a repair, and the refusal is an
 :class:`UnsafeBagFile` (a :class:`~lpv_sysid.errors.BagError`) naming the file. (Between
@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import BinaryIO, Iterator
 
 from lpv_sysid.errors import BagError, ConfigError, FileReadError
-from lpv_sysid.io.safe_open import MAX_YAML_BYTES, check_regular, decode_text, open_regular
+from lpv_sysid.io.files import MAX_YAML_BYTES, check_regular, decode_text, open_regular
 
 STORAGE_SUFFIXES = (".mcap", ".db3")
 METADATA = "metadata.yaml"

@@ -1,11 +1,11 @@
 """The raw records of any bag: through the index reader, rosbags' AnyReader or, for a
 damaged bag with ``strict=False``, the salvage readers (:func:`_collect`).
 
-A healthy bag goes through :mod:`lpv_sysid.io.bag.mcap_index` or rosbags' ``AnyReader``
+A healthy bag goes through :mod:`lpv_sysid.io.bag.mcap.index` or rosbags' ``AnyReader``
 (which also names the problem of a damaged bag). With ``strict=False`` the storage files
 are read one by one (rosbags reads ``.mcap`` / ``.db3`` files without metadata), and if
 that fails too, the complete records of a truncated mcap are recovered by the record walk
-(:mod:`lpv_sysid.io.bag.mcap_walk`) and the readable rows of a damaged sqlite3 file by the
+(:mod:`lpv_sysid.io.bag.mcap.walk`) and the readable rows of a damaged sqlite3 file by the
 sqlite3 module (:mod:`lpv_sysid.io.bag.sqlite`). The files are screened first
 (:func:`~lpv_sysid.io.bag.bagfiles.screen_bag`): a FIFO or device is never opened.
 """
@@ -18,8 +18,8 @@ from pathlib import Path
 from lpv_sysid.errors import BagError
 from lpv_sysid.io.bag.bagfiles import METADATA, UnsafeBagFile, screen_bag, storage_files
 from lpv_sysid.io.bag.durability import _describe
-from lpv_sysid.io.bag.mcap_index import _read_fast
-from lpv_sysid.io.bag.mcap_walk import _salvage_mcap
+from lpv_sysid.io.bag.mcap.index import _read_fast
+from lpv_sysid.io.bag.mcap.walk import _salvage_mcap
 from lpv_sysid.io.bag.records import _Source
 from lpv_sysid.io.bag.sqlite import _salvage_sqlite, _settled
 from lpv_sysid.io.bag.typestore import jazzy_typestore

@@ -17,7 +17,7 @@ from lpv_sysid.io.bag.records import _FileInfo
 
 def _yaml_load(text: str) -> Any:
     """metadata.yaml / QoS text through the package's YAML loader (libyaml parser)."""
-    from lpv_sysid.io.yaml_file import strict_load
+    from lpv_sysid.io.files import strict_load
 
     return strict_load(text)
 

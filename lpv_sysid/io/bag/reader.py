@@ -6,8 +6,8 @@ allows out-of-order writes and stores them as written, but readers (``AnyReader`
 ones are returned as instances of the Jazzy typestore classes (the same classes
 :meth:`lpv_sysid.io.messages.MsgFactory.rosbags` builds), with the values rosbags'
 ``deserialize_cdr`` gives. A healthy indexed mcap bag is read through its index
-(:mod:`lpv_sysid.io.bag.mcap_index`) and its fixed-layout records decoded block-wise
-(:mod:`lpv_sysid.io.bag.layout`, messages built by :mod:`lpv_sysid.io.bag.builder`);
+(:mod:`lpv_sysid.io.bag.mcap.index`) and its fixed-layout records decoded block-wise
+(:mod:`lpv_sysid.io.bag.cdr.layout`, messages built by :mod:`lpv_sysid.io.bag.cdr.builder`);
 everything else goes through rosbags' ``AnyReader``.
 
 A missing ``metadata.yaml`` or a truncated/corrupt storage file raises
@@ -27,10 +27,10 @@ import numpy as np
 from lpv_sysid.errors import BagError
 from lpv_sysid.io.bag.arrays import _decode_rows, _rows_from_sources
 from lpv_sysid.io.bag.bagfiles import METADATA, UnsafeBagFile
-from lpv_sysid.io.bag.builder import _builder
+from lpv_sysid.io.bag.cdr.builder import _builder
 from lpv_sysid.io.bag.collect import _collect
 from lpv_sysid.io.bag.durability import _describe
-from lpv_sysid.io.bag.mcap_index import _open_fast, _rows_from_index, _topic_info_fast
+from lpv_sysid.io.bag.mcap.index import _open_fast, _rows_from_index, _topic_info_fast
 from lpv_sysid.io.bag.records import BagContents, TopicStats, _Source
 from lpv_sysid.io.bag.typestore import _deserializers
 

@@ -2,7 +2,7 @@
 
 In the spirit of ``ros2 bag reindex``, it makes the bag readable by standard tools: an
 mcap file is cut after its last complete record and indexed in place
-(:mod:`lpv_sysid.io.bag.mcap_repair`), a sqlite3 file has its uncommitted transaction
+(:mod:`lpv_sysid.io.bag.mcap.repair`), a sqlite3 file has its uncommitted transaction
 rolled back (:mod:`lpv_sysid.io.bag.sqlite`); then ``metadata.yaml`` is written from what
 the storage files really hold (:mod:`lpv_sysid.io.bag.metadata`) and rosbags' AnyReader
 checks the result. A bag locked by a live writer, or with a file that is not a regular
@@ -22,7 +22,7 @@ from typing import Mapping
 from lpv_sysid.errors import BagError
 from lpv_sysid.io.bag.bagfiles import check_file, screen_bag, storage_files
 from lpv_sysid.io.bag.durability import LOCK_FILE, _describe, now_iso, writer_alive
-from lpv_sysid.io.bag.mcap_repair import _repair_mcap_file
+from lpv_sysid.io.bag.mcap.repair import _repair_mcap_file
 from lpv_sysid.io.bag.metadata import _metadata_matches, _write_bag_metadata
 from lpv_sysid.io.bag.records import TopicStats, _FileInfo, merge_topic_stats
 from lpv_sysid.io.bag.sqlite import _repair_sqlite_file

@@ -2,7 +2,7 @@
 
 :class:`BagWriter` is a context manager around ``rosbags.rosbag2.Writer`` (format
 version 9); :meth:`BagWriter.write_many` writes finished records in bulk (e.g. the blocks
-of :func:`~lpv_sysid.io.bag.layout.encode_block`). Messages are CDR-serialised with the
+of :func:`~lpv_sysid.io.bag.cdr.layout.encode_block`). Messages are CDR-serialised with the
 ROS 2 Jazzy typestore and each topic is registered with its full message definition and
 RIHS01 type hash, so ``ros2 bag info`` / ``ros2 bag play`` accept the result, and with the
 offered QoS profile (default: reliable, volatile, keep-last 10 -- rclpy's default
@@ -43,7 +43,8 @@ from typing import Any, Callable, Iterable, Literal, Mapping, NoReturn
 
 from lpv_sysid.errors import BagError
 from lpv_sysid.io.bag.durability import LOCK_FILE, RESERVE_BYTES, DiskReserve, _describe
-from lpv_sysid.io.bag.mcap_records import _MSG_RECORD_OVERHEAD, append_message
+from lpv_sysid.io.bag.mcap import append_message
+from lpv_sysid.io.bag.mcap.records import _MSG_RECORD_OVERHEAD
 from lpv_sysid.io.bag.repair import RepairReport
 from lpv_sysid.io.bag.typestore import jazzy_typestore, make_qos
 from lpv_sysid.io.bag.writer_recovery import recover

@@ -18,8 +18,8 @@ quadrotor layout of :mod:`lpv_sysid.models.quadrotor`), matrix shapes, finitenes
 (``min < max``; the vertices are exactly the 2^p corners, each once) and the uncertain
 entries. Every error is a :class:`~lpv_sysid.errors.ConfigError` whose message starts with
 the file name and the field path, e.g. ``gains.yaml: vertices[3].K: expected shape 4x12,
-got 4x11``. The YAML itself is read and written by :mod:`lpv_sysid.io.yaml_file`, hashes by
-:mod:`lpv_sysid.io.file_hash`.
+got 4x11``. The YAML itself is read and written by :mod:`lpv_sysid.io.files.yaml_reader`, hashes by
+:mod:`lpv_sysid.io.files.hashing`.
 
 Signal files (``signals.npz``, ``summary.yaml``) are owned by
 :mod:`lpv_sysid.signals.store`.
@@ -27,26 +27,10 @@ Signal files (``signals.npz``, ``summary.yaml``) are owned by
 
 from __future__ import annotations
 
-from lpv_sysid.io.file_hash import sha256_bytes, sha256_file
-from lpv_sysid.io.formats.certificate import (
-    CERTIFIED_SET_KINDS,
-    SCHEDULING_VARIATIONS,
-    Certificate,
-    DesignEnvelope,
-)
-from lpv_sysid.io.formats.gains import (
-    GAINS_FORMAT,
-    FeedforwardSpec,
-    GainSchedule,
-    GainVertex,
-    certify_law,
-    gains_dict,
-)
-from lpv_sysid.io.formats.shared import QUADROTOR_LAYOUT, Layout, SchedulingBox, layout_of
+from lpv_sysid.io.formats.certificate import DesignEnvelope
+from lpv_sysid.io.formats.feedforward_spec import FeedforwardSpec
+from lpv_sysid.io.formats.gains import GAINS_FORMAT, GainSchedule, certify_law, gains_dict
 from lpv_sysid.io.formats.sidecar import (
-    BOX_ARRAYS,
-    LMI_FORMS,
-    SYSTEMS_ARRAYS,
     box_arrays,
     load_certificate_npz,
     load_certified_systems,
@@ -56,7 +40,6 @@ from lpv_sysid.io.formats.sidecar import (
 from lpv_sysid.io.formats.vertex_models import (
     MODELS_FORMAT,
     MODELS_FORMAT_V1,
-    MODELS_FORMATS,
     UncertainEntry,
     VertexModel,
     VertexModels,
@@ -64,35 +47,21 @@ from lpv_sysid.io.formats.vertex_models import (
 )
 
 __all__ = [
-    "BOX_ARRAYS",
-    "CERTIFIED_SET_KINDS",
-    "Certificate",
     "DesignEnvelope",
     "FeedforwardSpec",
     "GAINS_FORMAT",
     "GainSchedule",
-    "GainVertex",
-    "LMI_FORMS",
-    "Layout",
     "MODELS_FORMAT",
-    "MODELS_FORMATS",
     "MODELS_FORMAT_V1",
-    "QUADROTOR_LAYOUT",
-    "SCHEDULING_VARIATIONS",
-    "SYSTEMS_ARRAYS",
-    "SchedulingBox",
     "UncertainEntry",
     "VertexModel",
     "VertexModels",
     "box_arrays",
     "certify_law",
     "gains_dict",
-    "layout_of",
     "load_certificate_npz",
     "load_certified_systems",
     "models_dict",
     "save_certificate_npz",
-    "sha256_bytes",
-    "sha256_file",
     "systems_arrays",
 ]

@@ -25,8 +25,6 @@ import numpy as np
 
 from lpv_sysid.io.formats.field_checker import FieldChecker, floats
 
-__all__ = ["CERTIFIED_SET_KINDS", "Certificate", "DesignEnvelope", "SCHEDULING_VARIATIONS"]
-
 
 @dataclass(frozen=True)
 class DesignEnvelope:

@@ -15,8 +15,6 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError
 
-__all__ = ["FieldChecker", "floats", "kind_of", "rows"]
-
 
 class FieldChecker:
     """Field-path aware validators: every error is ``ConfigError("<label>: <path>: ...")``."""
@@ -54,7 +52,7 @@ class FieldChecker:
     def number(self, v, path: str, bounded: bool = True) -> float:
         """A finite number; with ``bounded`` (all fields but fit metrics) also
         ``|x| <= MAX_MAGNITUDE`` (io.yaml_file: larger entries overflow downstream products)."""
-        from lpv_sysid.io.yaml_file import MAX_MAGNITUDE
+        from lpv_sysid.io.files import MAX_MAGNITUDE
 
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             self.fail(path, f"expected a number, got {kind_of(v)} {v!r}")

@@ -11,7 +11,7 @@ also ``F_jerk`` (rows: free states, inputs, rate states; the jerk term). A file 
 ``feedforward`` has no feedforward (older files).
 
 :class:`GainSchedule` is the one reading of a gains file: the runtime law
-(:class:`lpv_sysid.control.lpv_controller.LpvController`), ``lpv-sysid verify``, replay and
+(:class:`lpv_sysid.control.law.controller.LpvController`), ``lpv-sysid verify``, replay and
 the simulations all load it through :meth:`GainSchedule.load`. Channel lists, time base, box
 and vertex order: :mod:`lpv_sysid.io.formats.shared`.
 """
@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Optional
 import numpy as np
 
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.io.file_hash import sha256_file
+from lpv_sysid.io.files import read_located, save_yaml, sha256_file
 from lpv_sysid.io.formats.certificate import Certificate
 from lpv_sysid.io.formats.feedforward_spec import FeedforwardSpec
 from lpv_sysid.io.formats.field_checker import FieldChecker, kind_of, rows
@@ -43,19 +43,10 @@ from lpv_sysid.io.formats.shared import (
     time_dict,
 )
 from lpv_sysid.io.formats.vertex_models import VertexModels
-from lpv_sysid.io.yaml_file import read_located, save_yaml
 
 if TYPE_CHECKING:
     from lpv_sysid.models.lpv import PolytopicModel
 
-__all__ = [
-    "GAINS_FORMAT",
-    "FeedforwardSpec",
-    "GainSchedule",
-    "GainVertex",
-    "certify_law",
-    "gains_dict",
-]
 
 GAINS_FORMAT = "lpv_sysid/gains@1"
 

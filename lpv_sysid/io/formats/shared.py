@@ -22,18 +22,6 @@ import numpy as np
 
 from lpv_sysid.io.formats.field_checker import FieldChecker, floats, kind_of
 
-__all__ = [
-    "Layout",
-    "QUADROTOR_LAYOUT",
-    "SchedulingBox",
-    "StackedVertices",
-    "layout_of",
-    "order_vertices",
-    "parse_channels",
-    "parse_time",
-    "time_dict",
-]
-
 
 @dataclass(frozen=True)
 class Layout:
@@ -47,7 +35,7 @@ class Layout:
 
 
 def _quadrotor_layout() -> Layout:
-    # The single place the expected names live: models/quadrotor.py (DESIGN.md state order).
+    # The single place the expected names live: models/quadrotor/model.py (DESIGN.md state order).
     from lpv_sysid.models import quadrotor as qr
 
     return Layout(

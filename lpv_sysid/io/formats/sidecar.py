@@ -17,24 +17,13 @@ from typing import TYPE_CHECKING, Any, Mapping, Optional, Sequence
 import numpy as np
 
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.io.file_hash import sha256_file
+from lpv_sysid.io.files import check_output, read_npz, sha256_file
 from lpv_sysid.io.formats.certificate import Certificate
 from lpv_sysid.io.formats.field_checker import FieldChecker
-from lpv_sysid.io.safe_open import check_output, read_npz
 
 if TYPE_CHECKING:
     from lpv_sysid.models.lpv import ElementBox
 
-__all__ = [
-    "BOX_ARRAYS",
-    "LMI_FORMS",
-    "SYSTEMS_ARRAYS",
-    "box_arrays",
-    "load_certificate_npz",
-    "load_certified_systems",
-    "save_certificate_npz",
-    "systems_arrays",
-]
 
 #: arrays of the certificate sidecar holding the certified Eq. (23) systems (A_ij, B_ij):
 #: ``A_sys`` (N, M, n, n), ``B_sys`` (N, M, n, m), NaN past ``M_sys[i]`` systems at vertex i

@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Optional, Sequence
 
 import numpy as np
 
-from lpv_sysid.io.file_hash import sha256_file
+from lpv_sysid.io.files import read_located, save_yaml, sha256_file
 from lpv_sysid.io.formats.field_checker import FieldChecker, floats, kind_of, rows
 from lpv_sysid.io.formats.shared import (
     QUADROTOR_LAYOUT,
@@ -51,20 +51,10 @@ from lpv_sysid.io.formats.shared import (
     parse_time,
     time_dict,
 )
-from lpv_sysid.io.yaml_file import read_located, save_yaml
 
 if TYPE_CHECKING:
     from lpv_sysid.models.lpv import PolytopicModel, UncertainElement
 
-__all__ = [
-    "MODELS_FORMAT",
-    "MODELS_FORMAT_V1",
-    "MODELS_FORMATS",
-    "UncertainEntry",
-    "VertexModel",
-    "VertexModels",
-    "models_dict",
-]
 
 MODELS_FORMAT = "lpv_sysid/vertex_models@2"
 MODELS_FORMAT_V1 = "lpv_sysid/vertex_models@1"

@@ -38,7 +38,7 @@ One module per message family, every name re-exported here:
 :mod:`~lpv_sysid.io.messages.factory`      :class:`MsgFactory`, :class:`MessageError`
 :mod:`~lpv_sysid.io.messages.fields`       frame ids, stamps and headers, field checks
 :mod:`~lpv_sysid.io.messages.state`        ``state`` (Odometry)
-:mod:`~lpv_sysid.io.messages.joint_state`  ``rotor_speeds``, ``excitation``, ``actuator_command``
+:mod:`~lpv_sysid.io.messages.channels`  ``rotor_speeds``, ``excitation``, ``actuator_command``
 :mod:`~lpv_sysid.io.messages.imu`          ``imu``
 :mod:`~lpv_sysid.io.messages.twist`        ``velocity_reference``, the MAVROS setpoint
 :mod:`~lpv_sysid.io.messages.status`       ``status`` (DiagnosticArray)
@@ -47,17 +47,7 @@ One module per message family, every name re-exported here:
 
 from __future__ import annotations
 
-from lpv_sysid.io.messages.factory import MessageError, MsgFactory
-from lpv_sysid.io.messages.fields import (
-    BASE_FRAME,
-    ODOM_FRAME,
-    header_msg,
-    stamp_ns_from_time,
-    stamp_ns_of,
-    time_msg,
-)
-from lpv_sysid.io.messages.imu import ImuSample, imu_from_msg, imu_msg
-from lpv_sysid.io.messages.joint_state import (
+from lpv_sysid.io.messages.channels import (
     ROTOR_ESTIMATED_FRAME,
     ROTOR_NAMES,
     ROTOR_SOURCES,
@@ -72,85 +62,70 @@ from lpv_sysid.io.messages.joint_state import (
     rotor_speeds_from_joint_state,
     rotor_speeds_msg,
 )
+from lpv_sysid.io.messages.factory import MessageError, MsgFactory
+from lpv_sysid.io.messages.fields import (
+    BASE_FRAME,
+    header_msg,
+    stamp_ns_from_time,
+    stamp_ns_of,
+    time_msg,
+)
+from lpv_sysid.io.messages.imu import ImuSample, imu_from_msg, imu_msg
 from lpv_sysid.io.messages.state import (
-    StateArrays,
     StateSample,
     odometry_from_state,
     state_from_odometry,
     states_from_odometry,
 )
 from lpv_sysid.io.messages.status import (
-    DIAGNOSTIC_LEVELS,
     StatusSample,
     diagnostic_array,
     diagnostic_status,
     status_from_diagnostic_array,
 )
+from lpv_sysid.io.messages.topics import NAMESPACE, TOPIC_NAMESPACE, TYPES
 from lpv_sysid.io.messages.twist import (
     enu_velocity_setpoint_msg,
     reference_from_twist,
     twist_reference_msg,
 )
-from lpv_sysid.models.quadrotor import EXCITATION_NAMES, INPUT_NAMES  # owner of the names
 
 __all__ = [
-    "NAMESPACE",
-    "TOPIC_NAMESPACE",
+    "BASE_FRAME",
+    "ImuSample",
     "MessageError",
     "MsgFactory",
+    "NAMESPACE",
+    "ROTOR_ESTIMATED_FRAME",
     "ROTOR_NAMES",
-    "EXCITATION_NAMES",
-    "INPUT_NAMES",
-    "ODOM_FRAME",
-    "BASE_FRAME",
-    "TYPES",
+    "ROTOR_SOURCES",
     "StateSample",
-    "StateArrays",
-    "ImuSample",
     "StatusSample",
-    "states_from_odometry",
+    "TOPIC_NAMESPACE",
+    "TYPES",
+    "actuator_command_from_joint_state",
+    "actuator_command_msg",
+    "channels_from_joint_state",
     "channels_from_joint_states",
-    "time_msg",
+    "diagnostic_array",
+    "diagnostic_status",
+    "enu_velocity_setpoint_msg",
+    "excitation_from_joint_state",
+    "excitation_msg",
+    "header_msg",
+    "imu_from_msg",
+    "imu_msg",
+    "joint_state",
+    "odometry_from_state",
+    "reference_from_twist",
+    "rotor_source_of",
+    "rotor_speeds_from_joint_state",
+    "rotor_speeds_msg",
     "stamp_ns_from_time",
     "stamp_ns_of",
-    "header_msg",
-    "odometry_from_state",
     "state_from_odometry",
-    "joint_state",
-    "channels_from_joint_state",
-    "rotor_speeds_msg",
-    "rotor_speeds_from_joint_state",
-    "rotor_source_of",
-    "ROTOR_SOURCES",
-    "ROTOR_ESTIMATED_FRAME",
-    "excitation_msg",
-    "excitation_from_joint_state",
-    "actuator_command_msg",
-    "actuator_command_from_joint_state",
-    "imu_msg",
-    "imu_from_msg",
-    "twist_reference_msg",
-    "reference_from_twist",
-    "enu_velocity_setpoint_msg",
-    "diagnostic_status",
-    "diagnostic_array",
+    "states_from_odometry",
     "status_from_diagnostic_array",
-    "DIAGNOSTIC_LEVELS",
+    "time_msg",
+    "twist_reference_msg",
 ]
-
-
-#: message type of every topic of docs/DESIGN.md
-#: the package's node namespace; every topic of the table above is relative to it
-NAMESPACE = "lpv_sysid"
-#: the topics' absolute prefix (bags, replay)
-TOPIC_NAMESPACE = "/" + NAMESPACE
-
-TYPES = {
-    "state": "nav_msgs/msg/Odometry",
-    "rotor_speeds": "sensor_msgs/msg/JointState",
-    "imu": "sensor_msgs/msg/Imu",
-    "velocity_reference": "geometry_msgs/msg/TwistStamped",
-    "excitation": "sensor_msgs/msg/JointState",
-    "actuator_command": "sensor_msgs/msg/JointState",
-    "status": "diagnostic_msgs/msg/DiagnosticArray",
-}

@@ -12,8 +12,6 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError
 
-__all__ = ["MessageError", "MsgFactory"]
-
 
 class MessageError(ConfigError, ValueError):
     """A message cannot be built or parsed; the text names the field and the problem.

@@ -9,22 +9,6 @@ import numpy as np
 
 from lpv_sysid.io.messages.factory import MessageError, MsgFactory
 
-__all__ = [
-    "BASE_FRAME",
-    "ODOM_FRAME",
-    "check_frame",
-    "covariance",
-    "finite",
-    "header_msg",
-    "point",
-    "quaternion",
-    "stamp_ns_from_time",
-    "stamp_ns_of",
-    "time_msg",
-    "vector3",
-    "xyz",
-]
-
 ODOM_FRAME = "odom"
 BASE_FRAME = "base_link"
 _INT32 = (-(2**31), 2**31 - 1)

@@ -20,8 +20,6 @@ from lpv_sysid.io.messages.fields import (
     xyz,
 )
 
-__all__ = ["ImuSample", "imu_from_msg", "imu_msg"]
-
 
 @dataclass(frozen=True)
 class ImuSample:

@@ -27,14 +27,6 @@ from lpv_sysid.io.messages.fields import (
     xyz,
 )
 
-__all__ = [
-    "StateArrays",
-    "StateSample",
-    "odometry_from_state",
-    "state_from_odometry",
-    "states_from_odometry",
-]
-
 
 @dataclass(frozen=True)
 class StateSample:

@@ -11,14 +11,6 @@ import numpy as np
 from lpv_sysid.io.messages.factory import MessageError, MsgFactory
 from lpv_sysid.io.messages.fields import header_msg, stamp_ns_of
 
-__all__ = [
-    "DIAGNOSTIC_LEVELS",
-    "StatusSample",
-    "diagnostic_array",
-    "diagnostic_status",
-    "status_from_diagnostic_array",
-]
-
 DIAGNOSTIC_LEVELS = {"OK": 0, "WARN": 1, "ERROR": 2, "STALE": 3}
 
 

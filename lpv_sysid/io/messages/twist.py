@@ -15,8 +15,6 @@ from lpv_sysid.io.messages.fields import (
     xyz,
 )
 
-__all__ = ["enu_velocity_setpoint_msg", "reference_from_twist", "twist_reference_msg"]
-
 
 def twist_reference_msg(
     f: MsgFactory, stamp_ns: int, v_d_frd, r_d_frd: float = 0.0, *, frame_id: str = BASE_FRAME

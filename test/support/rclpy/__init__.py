@@ -6,8 +6,13 @@ are delivered in-process (publish -> serialized CDR -> subscription queue -> cal
 rclpy equivalent live in ``rclpy._standin``.
 """
 
-from rclpy.utilities import get_default_context, ok, remove_ros_args, shutdown  # noqa: F401
-from rclpy.utilities import try_shutdown  # noqa: F401
+from rclpy.utilities import (  # noqa: F401
+    get_default_context,
+    ok,
+    remove_ros_args,
+    shutdown,
+    try_shutdown,  # noqa: F401
+)
 
 __all__ = [
     "init",

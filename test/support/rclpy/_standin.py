@@ -57,8 +57,9 @@ def spin_nodes(nodes, seconds):
 
 def call_trigger(client_node, server_nodes, srv_name, timeout_sec=1.0):
     """Call a std_srvs/Trigger service served by one of ``server_nodes``; the response."""
-    from rclpy.executors import SingleThreadedExecutor
     from std_srvs.srv import Trigger
+
+    from rclpy.executors import SingleThreadedExecutor
 
     cli = client_node.create_client(Trigger, srv_name)
     assert cli.wait_for_service(timeout_sec=timeout_sec)

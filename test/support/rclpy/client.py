@@ -3,6 +3,7 @@
 import collections
 
 import _rosmsg_standin as _msgs
+
 from rclpy._standin_entity import ServiceEndpoint
 from rclpy.task import Future
 

@@ -4,9 +4,9 @@ import math
 import re
 import warnings
 
+import _rosmsg_standin as _msgs
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
 
-import _rosmsg_standin as _msgs
 from rclpy._params_file import load_overrides, parse_ros_args, read
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.client import Client

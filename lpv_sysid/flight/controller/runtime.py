@@ -1,0 +1,379 @@
+"""Message-level behaviour of lpv_controller_node, shared with ``lpv-sysid replay``.
+
+No rclpy here: the node shell forwards subscription messages and timer ticks to
+:class:`ControllerRuntime`, and ``lpv-sysid replay`` does the same with the messages of a
+bag (rosbags classes via ``MsgFactory.rosbags()``), so a replay computes exactly what the
+node would have published. Both build
+:class:`~lpv_sysid.flight.controller.settings.ControllerSettings`, the one declaration of the
+node's parameters (timeout rule included).
+
+At construction, before any command can exist, the start-up checks of
+:func:`~lpv_sysid.flight.controller.startup.load_flight_schedule` run (gains validated, law
+hash, closed-loop stability, design envelope, ESC limits); any failure refuses to start,
+naming the reason. Inputs are parsed and the command is built by
+:mod:`lpv_sysid.flight.controller.messages`.
+
+Per reference message: the reference v_d is passed through the design-envelope limiter
+(:class:`~lpv_sysid.control.law.reference_limiter.ReferenceLimiter`, rate and acceleration of the
+gains' designed v_d(t)) before scheduling and feedforward; an incoming reference beyond the
+envelope x ``envelope_margin`` aborts. Per excitation message: ``kappa |u_e|`` beyond the
+designed excitation peak x margin aborts.
+
+Ticks (``tick_source``): ``timer`` steps the law every ``1 / rate_hz`` of the node clock on
+the newest samples received; ``state`` steps it on each state sample at that sample's stamp
+(:meth:`ControllerRuntime.on_input`), so the command is always computed on the freshest
+state and carries its stamp -- the lock-stepped ``sim_vehicle`` of ``sim.launch.py`` waits for
+exactly that command before it integrates on -- while the ``rate_hz`` timer only judges
+staleness. Why: the demo gains lose stability at 8-12 ms of loop delay at 250 Hz (discrete
+closed loop A + B K with the input delayed: spectral radius >= 1 from 2 samples on the worst
+of the 128 certified systems, from 3 on the nominal vertex model), and
+the wall-clock Python graph on a loaded 2-core machine measured ~14 ms mean loop delay
+(state delivery p99 31 ms): it oscillated into saturation within 0.3 s.
+
+Per tick, once started: staleness of every input stream (receipt time and
+header stamp against the node clock), scheduling box, the runtime LPV law
+u = u0(v_d) + K(v_d)(x - x0(v_d)) + R kappa u_e (seed 0 Eq. 31, control/law/controller.py;
+with the reference feedforward of gains.yaml F_ff/F_jerk the law's own filtered derivatives
+of the limited v_d supply a = dv_d/dt and its rate) on x = [phi, theta, u, v, w, p, q, r,
+Mix Omega] (seed 0 Eq. 14 without position and yaw; delta = Mix Omega, Eq. 7), and its bound
+monitor. Any fault (stale / frozen / future-stamped / out-of-order / non-finite input, v_d
+outside the box or its envelope, excitation too large, bound exceeded, abort request)
+latches an abort in :class:`~lpv_sysid.control.safety.SafetySupervisor`: one ERROR status
+naming the reason is published and no actuator command follows, so the bridge hands control
+back to PX4 (and the excitation node fades out on that status).
+
+Log lines of the core (the abort, refused inputs, the start-up checks) are queued and
+handed to the shell by :meth:`ControllerRuntime.take_log`: the node logs them with its own
+logger (timestamped, on /rosout), the replay with Python logging.
+
+The pieces are re-exported here (``ControllerSettings``, ``load_flight_schedule``,
+``settle_gc``, ``parse_input(s)``, ``CommandBuilder``, the topic tuples and constants).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Optional
+
+import numpy as np
+
+from lpv_sysid.control.law import LpvController, ReferenceLimiter
+from lpv_sysid.control.safety import (
+    EXTERNAL,
+    NON_FINITE,
+    OUT_OF_ORDER,
+    REFERENCE_ENVELOPE,
+    SafetyConfig,
+    SafetySupervisor,
+)
+from lpv_sysid.errors import ConfigError, SafetyError
+from lpv_sysid.flight.controller.messages import (
+    BODY_STATE_NAMES,
+    INPUT_TOPICS,
+    CommandBuilder,
+    parse_input,
+)
+from lpv_sysid.flight.controller.settings import ControllerSettings
+from lpv_sysid.flight.controller.startup import load_flight_schedule
+from lpv_sysid.io.messages import MessageError, MsgFactory, diagnostic_array, diagnostic_status
+from lpv_sysid.models.quadrotor import STATE_NAMES, mixer
+
+
+class ControllerRuntime:
+    """See module docstring. ``factory`` builds the output messages (MsgFactory)."""
+
+    def __init__(
+        self,
+        settings: ControllerSettings,
+        factory: MsgFactory,
+        name: str = "/lpv_sysid/lpv_controller",
+    ):
+        self.settings = settings
+        self.f = factory
+        self.name = name
+        self._log: list[tuple[str, str]] = []
+        self.mix = mixer(settings.arm_length)
+        self.schedule, info = load_flight_schedule(settings, self.mix)
+        self._log += [("info", line) for line in info]
+        self.law = LpvController(self.schedule, settings.law_config(), mix=self.mix)
+        design = self.schedule.certificate.design
+        if design is None:  # load_flight_schedule refuses such gains; stated for the types
+            raise ConfigError(f"{settings.gains_file}: certificate.design missing")
+        self.limiter = ReferenceLimiter(
+            design.reference_rate,
+            design.reference_accel,
+            design.knot_interval_s,
+            settings.envelope_margin,
+        )
+        self.excitation_limit = np.asarray(design.excitation_peak) * settings.envelope_margin
+        if self.excitation_limit.size != self.law.n_e:
+            raise ConfigError(
+                f"{settings.gains_file}: certificate.design.excitation_peak has "
+                f"{self.excitation_limit.size} entries, R has {self.law.n_e} "
+                "columns"
+            )
+        box = self.schedule.scheduling
+        self.supervisor = SafetySupervisor(
+            SafetyConfig(
+                timeouts=settings.timeouts,
+                box_min=tuple(box.min),
+                box_max=tuple(box.max),
+                box_margin=settings.box_margin,
+                stamp_tolerance=settings.stamp_tolerance_s,
+            )
+        )
+        self.body_state: Optional[np.ndarray] = None  # BODY_STATE_NAMES of the state topic (FRD)
+        self.omega: Optional[np.ndarray] = None  # rotor speeds (4), rad/s
+        # the law's state x = [body_state; Mix Omega] (STATE_NAMES, seed 0 Eq. 7, 14), kept up
+        # to date per sample so a tick only reads it; kappa u_e likewise (computed once per
+        # excitation message)
+        self._law_state = np.empty(len(STATE_NAMES))
+        self._law_body = self._law_state[: len(BODY_STATE_NAMES)]  # view: the state topic
+        self._law_delta = self._law_state[len(BODY_STATE_NAMES) :]  # view: Mix Omega
+        self._ue_scaled: Optional[np.ndarray] = None
+        self._vd_checked: Optional[np.ndarray] = None  # v_d_in the box check last passed
+        self._command = CommandBuilder(factory)
+        self.v_d_in: Optional[np.ndarray] = None  # velocity reference as received (3), FRD
+        self.v_d: Optional[np.ndarray] = None  # the reference the law follows (envelope-limited)
+        self.u_e: Optional[np.ndarray] = None  # normalised excitation (4)
+        self._ref_stamp: Optional[float] = None
+        self._t_sample: Optional[float] = None  # last state stamp ticked (tick_source: state)
+        self._ref_slope: Optional[np.ndarray] = None  # slope of the limited reference
+        self.commands = 0
+        self.flags = {"clamped": 0, "saturated": 0, "rate_limited": 0}
+        self._abort_reported = False
+
+    # -- log lines for the shell ----------------------------------------------------------
+    def take_log(self) -> list[tuple[str, str]]:
+        """Queued ``(level, text)`` lines (level: info | warn | error), oldest first."""
+        out, self._log = self._log, []
+        return out
+
+    # -- inputs -------------------------------------------------------------------------
+    def on_message(self, topic: str, msg, t_now: float) -> float | None:
+        """A message of ``topic`` (one of :data:`INPUT_TOPICS`) received at ``t_now`` [s];
+        returns its header time, None when it was malformed."""
+        try:
+            t, values = parse_input(topic, msg)
+        except MessageError as exc:
+            self.on_bad_message(topic, exc, t_now)
+            return None
+        self.on_sample(topic, t, values, t_now)
+        return t
+
+    def on_input(self, topic: str, msg, t_now: float) -> list:
+        """:meth:`on_message`, then what to publish: with ``tick_source: state`` a state
+        sample newer than the last one ticked runs the law at its stamp (:meth:`tick`)."""
+        t = self.on_message(topic, msg, t_now)
+        return [] if t is None else self._after_sample(topic, t, t_now)
+
+    def on_parsed_input(self, topic: str, t: float, values: np.ndarray, t_now: float) -> list:
+        """:meth:`on_input` for an input already parsed (:func:`parse_inputs`, the replay)."""
+        self.on_sample(topic, t, values, t_now)
+        return self._after_sample(topic, t, t_now)
+
+    def _after_sample(self, topic: str, t: float, t_now: float) -> list:
+        if (
+            self.settings.tick_source == "state"
+            and topic == "state"
+            and (self._t_sample is None or t > self._t_sample)
+        ):
+            self._t_sample = t
+            return self.tick(t_now, t_sample=t)
+        return []
+
+    def on_timer(self, t_now: float) -> list:
+        """The node's ``rate_hz`` timer: the law step (``tick_source: timer``) or only the
+        staleness watch (``state``: a silent state stream must still abort)."""
+        if self.settings.tick_source == "timer":
+            return self.tick(t_now)
+        return self.watchdog(t_now)
+
+    def on_bad_message(self, topic: str, exc: Exception, t_now: float) -> None:
+        if self.supervisor.armed:
+            self.supervisor.abort(t_now, NON_FINITE, f"{topic}: {exc}")
+        else:
+            self._log.append(("warn", f"{topic} rejected before start: {exc}"))
+
+    def on_sample(self, topic: str, t: float, values: np.ndarray, t_now: float) -> None:
+        """Parsed input (see :func:`parse_input`): header time ``t`` [s], ``values``."""
+        sup = self.supervisor
+        sup.on_input(topic, t, values, t_now)
+        if topic == "state":
+            self.body_state = values
+            self._law_body[:] = values
+        elif topic == "rotor_speeds":
+            self.omega = values
+            self.mix.dot(values, out=self._law_delta)  # delta = Mix Omega (Eq. 7)
+        elif topic == "velocity_reference":
+            self.v_d_in = values[:3]
+            if sup.aborted:
+                self.v_d = self.v_d_in
+                return
+            self._ref_stamp = t
+            self.v_d, excess = self.limiter.update(t, self.v_d_in)
+            self._ref_slope = self.limiter.w.copy()
+            if excess is not None and sup.armed:
+                sup.abort(t_now, REFERENCE_ENVELOPE, excess)
+        else:
+            self.u_e = values
+            self._ue_scaled = self.settings.excitation_gain * values
+            if sup.armed and not sup.aborted:
+                sup.check_excitation(t_now, self._ue_scaled, self.excitation_limit)
+
+    def missing_inputs(self) -> list:
+        """The input streams of which no sample has arrived yet."""
+        have = {
+            "state": self.body_state,
+            "rotor_speeds": self.omega,
+            "velocity_reference": self.v_d_in,
+            "excitation": self.u_e,
+        }
+        return [topic for topic in INPUT_TOPICS if have[topic] is None]
+
+    def start(self, t_now: float, wait_for_inputs: bool = False) -> tuple[bool, str]:
+        """Arm at ``t_now``; ``(started, why)``. ``wait_for_inputs`` (the node): refused while
+        a stream has not delivered its first sample -- arming then would latch a stale abort
+        (measured under real Jazzy: the controller started the moment its service appeared,
+        before discovery had matched the excitation node, and aborted 0.1 s later)."""
+        sup = self.supervisor
+        ev = sup.event
+        if ev is not None:
+            return False, f"aborted ({ev.reason}: {ev.detail}); restart the node"
+        if sup.armed:
+            return False, "already started"
+        if not t_now > 0.0:
+            return False, (
+                f"node clock reads {t_now:g} s: under use_sim_time no /clock has "
+                "arrived yet; start once the clock runs"
+            )
+        missing = self.missing_inputs() if wait_for_inputs else []
+        if missing:
+            return False, (
+                f"no {', '.join(missing)} received yet: start once every input stream arrives"
+            )
+        sup.arm(t_now)
+        self.law.reset()
+        self.limiter.reset()
+        if self.v_d_in is not None and self._ref_stamp is not None:
+            # follow from the current reference, not a ramp to it
+            self.v_d, _ = self.limiter.update(self._ref_stamp, self.v_d_in)
+            self._ref_slope = self.limiter.w.copy()
+        return True, "LPV control started"
+
+    def abort(self, t_now: float, reason: str = "abort requested") -> str:
+        ev = self.supervisor.abort(t_now, EXTERNAL, reason)
+        return f"{ev.reason}: {ev.detail}"
+
+    # -- output -------------------------------------------------------------------------
+    def tick(self, t_now: float, t_sample: float | None = None) -> list:
+        """``[(topic, msg), ...]`` to publish at ``t_now``: the command, or the abort status.
+
+        Staleness is judged at the node clock ``t_now``; the law steps at ``t_sample`` (the
+        stamp of the state sample the step is computed on, ``tick_source: state``; default
+        ``t_now``), which also stamps the command."""
+        sup = self.supervisor
+        out: list[tuple[str, Any]] = []
+        if not sup.armed:
+            return out
+        t_law = t_now if t_sample is None else float(t_sample)
+        sup.check(t_now)
+        if sup.aborted or self._ue_scaled is None or self.body_state is None or self.omega is None:
+            return self._report_abort(t_now, out)
+        if self.v_d is None or self.v_d_in is None:
+            return self._report_abort(t_now, out)
+        if self.v_d_in is not self._vd_checked:
+            # the box check is a function of v_d_in alone: once per reference message
+            sup.check_scheduling(t_now, self.v_d_in)
+            if sup.aborted:
+                return self._report_abort(t_now, out)
+            self._vd_checked = self.v_d_in
+        try:
+            u, info = self.law.step(
+                t_law, self._law_state, self.reference_at(t_law), self._ue_scaled
+            )
+        except SafetyError as exc:
+            kind = OUT_OF_ORDER if "backwards" in str(exc) else NON_FINITE
+            sup.abort(t_now, kind, str(exc))
+            return self._report_abort(t_now, out)
+        flags = self.flags
+        if info["clamped"]:
+            flags["clamped"] += 1
+        if info["saturated"]:
+            flags["saturated"] += 1
+        if info["rate_limited"]:
+            flags["rate_limited"] += 1
+        if info["bound_exceeded"]:
+            sup.on_bound_flag(
+                t_now,
+                True,
+                f"L2 gain estimate {self.law.gain():.4g} > gamma "
+                f"{self.law.gamma:g} x margin "
+                f"{self.settings.monitor_margin:g}",
+            )
+            return self._report_abort(t_now, out)
+        self.commands += 1
+        out.append(("actuator_command", self._command(round(t_law * 1e9), u)))
+        return out
+
+    def reference_at(self, t: float) -> np.ndarray:
+        """The reference the law follows at ``t``: the limited v_d of the last message, with
+        ``reference_hold: foh`` moved along its slope by ``t - stamp`` (clipped to one
+        message period back, ``reference_timeout_s`` ahead). The excitation node plays a
+        linearly interpolated table, so this reproduces it between messages; held (zoh) it
+        is a staircase at the message rate whose steps the feedforward's derivative filter
+        turns into spikes (offline, 250 Hz law on a 100 Hz reference, 34 s of the demo
+        signal: 16 saturated commands with zoh, 0 with foh or an exact reference)."""
+        v_d, slope, stamp = self.v_d, self._ref_slope, self._ref_stamp
+        if v_d is None:
+            raise SafetyError("lpv_controller: no velocity_reference received yet")
+        if self.settings.reference_hold == "zoh" or slope is None or stamp is None:
+            return v_d
+        s = self.settings
+        dt = min(max(t - stamp, -1.0 / s.reference_rate_hz), s.reference_timeout_s)
+        return v_d + slope * dt
+
+    def watchdog(self, t_now: float) -> list:
+        """Staleness of every input at ``t_now`` without a law step: ``[]`` or, on the
+        abort, its status (once)."""
+        sup = self.supervisor
+        if sup.armed:
+            sup.check(t_now)
+        return self._report_abort(t_now, [])
+
+    def _report_abort(self, t_now: float, out: list) -> list:
+        sup = self.supervisor
+        ev = sup.event
+        if ev is not None and sup.armed and not self._abort_reported:
+            self._abort_reported = True
+            self._log.append(
+                ("error", f"safety abort: {ev.reason}: {ev.detail}; actuator commands stopped")
+            )
+            out.append(("status", self.status(t_now)))
+        return out
+
+    def status(self, t_now: float):
+        sup = self.supervisor
+        ev = sup.event
+        if ev is not None:
+            level, message = "ERROR", f"safety abort: {ev.reason}: {ev.detail}"
+        elif sup.armed:
+            level, message = "OK", "commanding"
+        else:
+            level, message = "OK", "waiting for start (not commanding)"
+            missing = self.missing_inputs()
+            if missing:
+                message += f"; no {', '.join(missing)} received yet"
+        values = {
+            "armed": sup.armed,
+            "aborted": sup.aborted,
+            "commanding": sup.action.commanding,
+            "excitation_on": sup.action.excitation_on,
+            "reason": ev.reason if ev else "",
+            "commands": self.commands,
+            "gain_estimate": self.law.gain(),
+            "gamma": self.law.gamma,
+            "reference_limited_count": self.limiter.limited,
+            **{f"{k}_count": v for k, v in self.flags.items()},
+        }
+        st = diagnostic_status(self.f, level, self.name, message, values)
+        return diagnostic_array(self.f, round(t_now * 1e9), [st])

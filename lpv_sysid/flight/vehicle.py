@@ -1,0 +1,103 @@
+"""Vehicle-link steps of `lpv-sysid fly` around the campaign: wait for the autopilot's
+HEARTBEAT, PARAM_SET with the vehicle's confirmation, and a tap that hands PX4's
+ATTITUDE_TARGET to the recorder."""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Callable, Mapping
+
+from lpv_sysid.errors import SafetyError
+
+
+def wait_for_vehicle(link, timeout: float, clock, sleep) -> None:
+    t0 = clock()
+    while clock() - t0 < timeout:
+        now = clock()
+        link.poll(now)
+        link.step(now)
+        if link.target_system and link.link_up(now):
+            return
+        sleep(0.005)
+    raise SafetyError(f"no autopilot HEARTBEAT on {link.config.url} within {timeout:g} s")
+
+
+def set_params(
+    link, params: Mapping[str, float], clock, sleep, timeout: float = 5.0
+) -> list[dict]:
+    """PARAM_SET each value (type from a PARAM_REQUEST_READ first) and wait for the
+    vehicle's PARAM_VALUE echo with that value; SafetyError when one is not confirmed."""
+    from lpv_sysid.mavlink import px4
+
+    done = []
+    for name, value in params.items():
+        t0 = clock()
+        ptype = old = None
+        sent_set = -math.inf
+        sent_read = -math.inf
+        confirmed = False
+        while clock() - t0 < timeout and not confirmed:
+            now = clock()
+            for m in link.poll(now):
+                if m.get_type() != "PARAM_VALUE" or m.get_srcSystem() != link.target_system:
+                    continue
+                if px4.param_id_str(m.param_id) != name:
+                    continue
+                v = px4.param_from_wire(m.param_value, m.param_type)
+                same = math.isclose(
+                    float(v), value, rel_tol=1e-6, abs_tol=1e-6
+                )  # float32 on the wire
+                if ptype is None:
+                    ptype, old = int(m.param_type), v
+                    confirmed = same  # already set: nothing to change
+                elif sent_set > -math.inf and same:
+                    confirmed = True
+            link.step(now)
+            if ptype is None and now - sent_read >= 0.5:
+                sent_read = now
+                link.send(
+                    link.codec.param_request_read_encode(
+                        link.target_system, link.target_component, name.encode("ascii"), -1
+                    )
+                )
+            elif ptype is not None and not confirmed and now - sent_set >= 0.5:
+                sent_set = now
+                link.send(
+                    link.codec.param_set_encode(
+                        link.target_system,
+                        link.target_component,
+                        name.encode("ascii"),
+                        px4.param_to_wire(value, ptype),
+                        ptype,
+                    )
+                )
+            sleep(0.005)
+        if not confirmed:
+            what = "unknown parameter or no answer" if ptype is None else f"vehicle kept {old}"
+            raise SafetyError(
+                f"PARAM_SET {name}={value:g} not confirmed within {timeout:g} s ({what})"
+            )
+        done.append({"name": name, "old": old, "new": value})
+    return done
+
+
+def tap_attitude_target(link, callback: Callable[[float, Any], None]) -> None:
+    """Wrap ``link.poll`` so every ATTITUDE_TARGET of the link's target reaches
+    ``callback(receive_time, [thrust, p_sp, q_sp, r_sp])`` before the bridge sees the message
+    (BridgeCore has no raw-message hook; the telemetry decoder ignores ATTITUDE_TARGET)."""
+    from lpv_sysid.mavlink.bridge import rate_setpoint_from_attitude_target
+
+    poll = link.poll
+
+    def tapped(now, *a, **kw):
+        msgs = poll(now, *a, **kw)
+        for m in msgs:
+            if m.get_type() == "ATTITUDE_TARGET" and (
+                not link.target_system or m.get_srcSystem() == link.target_system
+            ):
+                got = rate_setpoint_from_attitude_target(m)
+                if got is not None:
+                    callback(now, got[1])
+        return msgs
+
+    link.poll = tapped

@@ -1,0 +1,186 @@
+"""What a :class:`~lpv_sysid.io.recorder.Recorder` has recorded and ``experiment.yaml``,
+the metadata that reports it: per-topic (:class:`TopicStats`) and per-bag (:class:`BagInfo`)
+counts, the static part (config files, gains sha256, git revision) and the atomic rewrite
+of the file, whose counts are what is on disk (committed), never more (the durability rules:
+:mod:`lpv_sysid.io.recorder`)."""
+
+from __future__ import annotations
+
+import logging
+import os
+import subprocess
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import yaml
+
+from lpv_sysid.errors import ConfigError
+from lpv_sysid.io.bag import RepairReport, atomic_write_text, now_iso
+from lpv_sysid.io.files import sha256_file
+from lpv_sysid.io.recorder.experiment import METADATA_FILE, METADATA_FORMAT
+
+if TYPE_CHECKING:
+    from lpv_sysid.io.recorder.config import RecorderConfig
+    from lpv_sysid.io.recorder.recorder import Recorder
+
+LOG = logging.getLogger(__name__)
+
+
+@dataclass
+class TopicStats:
+    msgtype: str
+    count: int = 0
+    dropped: int = 0
+    first_ns: int | None = None
+    last_ns: int | None = None
+
+    @property
+    def rate_hz(self) -> float:
+        if self.count < 2 or self.first_ns is None or self.last_ns is None:
+            return 0.0
+        if self.last_ns == self.first_ns:
+            return 0.0
+        return (self.count - 1) / ((self.last_ns - self.first_ns) * 1e-9)
+
+
+@dataclass
+class BagInfo:
+    """One bag: what was recorded into it (``messages``, ``bytes``, stamps, ``topics``) and
+    ``durable``, what is known to be on disk (last flush; the file's content after close)."""
+
+    path: str
+    start_ns: int | None = None
+    end_ns: int | None = None
+    messages: int = 0
+    bytes: int = 0
+    topics: dict = field(default_factory=dict)
+    durable: dict | None = None
+
+    def entry(self) -> dict:
+        d = self.durable or {"topics": {}, "bytes": 0, "start_ns": None, "end_ns": None}
+        return {
+            "path": self.path,
+            "messages": sum(d["topics"].values()),
+            "bytes": d["bytes"],
+            "start_ns": d["start_ns"],
+            "end_ns": d["end_ns"],
+        }
+
+
+def git_revision(path: str | os.PathLike) -> str | None:
+    """``git rev-parse HEAD`` of the repository containing ``path`` (None when unavailable)."""
+    try:
+        out = subprocess.run(
+            ["git", "-C", str(path), "rev-parse", "HEAD"],
+            check=True,
+            capture_output=True,
+            text=True,
+            timeout=5,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip() or None
+
+
+def settle(bag: BagInfo, writer) -> None:
+    """``bag.durable`` after its writer closed (cleanly or after an error)."""
+    counts = getattr(writer, "durable_counts", None)
+    topics = dict(bag.topics) if counts is None else dict(counts)
+    n = sum(topics.values())
+    rep = getattr(writer, "repair", None)
+    if n >= bag.messages:
+        span = (bag.bytes, bag.start_ns, bag.end_ns)
+    elif isinstance(rep, RepairReport):
+        starts = [s.start_ns for s in rep.topics.values() if s.start_ns is not None]
+        ends = [s.end_ns for s in rep.topics.values() if s.end_ns is not None]
+        span = (rep.bytes, min(starts) if starts else None, max(ends) if ends else None)
+    elif bag.durable is not None:
+        span = (bag.durable["bytes"], bag.durable["start_ns"], bag.durable["end_ns"])
+    else:
+        span = (0, None, None)
+    bag.durable = {"topics": topics, "bytes": span[0], "start_ns": span[1], "end_ns": span[2]}
+
+
+def static_metadata(cfg: RecorderConfig) -> dict:
+    """The part of the metadata fixed at start: description, config files
+    (verbatim), gains sha256, git revision."""
+    files = {}
+    from lpv_sysid.io.files import read_text
+
+    for path in cfg.config_files:  # regular UTF-8 files of at most the YAML cap
+        files[str(path)] = read_text(path, f"recorder: config file {path}")
+    gains = None
+    if cfg.gains_file:
+        try:
+            gains = {"path": str(cfg.gains_file), "sha256": sha256_file(cfg.gains_file)}
+        except OSError as exc:
+            raise ConfigError(
+                f"recorder: gains file {cfg.gains_file}: {exc.strerror or exc}"
+            ) from None
+    here = Path(__file__).resolve().parent
+    return {
+        "description": cfg.description,
+        "config_files": files,
+        "gains": gains,
+        "git_revision": git_revision(here),
+    }
+
+
+def write_metadata(rec: Recorder, closed: bool) -> None:
+    """Rewrite ``experiment.yaml`` of ``rec`` atomically (module docstring of io/recorder/recorder.py);
+    on a full disk with the lock's reserve freed, else logged."""
+    meta = {
+        "format": METADATA_FORMAT,
+        **rec._static_meta,
+        "storage": rec.config.storage,
+        "start_time": rec._wall_start,
+        "stop_time": rec._wall_stop or None,
+        "start_stamp_ns": rec._started_ns,
+        "stop_stamp_ns": rec._stopped_ns,
+        "status": _status(rec, closed),
+        "closed_cleanly": bool(closed),
+        "error": rec.error,
+        "updated_time": now_iso(),
+        "split": {
+            "size_bytes": rec.config.split_size_bytes,
+            "duration_s": rec.config.split_duration_s,
+        },
+        "rotor_speeds_source": dict(rec.rotor_sources) or None,  # {"esc"|"estimated": count}
+        # counts: what is on disk (committed), never more -- see the module docstring
+        "topics": {
+            t: {
+                "type": s.msgtype,
+                "count": _durable_count(rec, t),
+                "dropped": s.dropped,
+                "rate_hz": round(s.rate_hz, 6),
+            }
+            for t, s in rec.stats.items()
+        },
+        "bags": [b.entry() for b in rec.bags],
+    }
+    path = rec.out_dir / METADATA_FILE
+    text = yaml.safe_dump(meta, sort_keys=False)
+    try:
+        atomic_write_text(path, text, fsync=rec.config.fsync)
+    except OSError as exc:
+        err = exc  # the last failure (a second one, after the reserve was given back, too)
+        if rec._lock is not None and rec._lock.free_space():  # disk full: use the reserve
+            try:
+                atomic_write_text(path, text, fsync=rec.config.fsync)
+                return
+            except OSError as exc2:
+                err = exc2
+        LOG.error("cannot write %s: %s", path, err.strerror or err)
+
+
+def _status(rec: Recorder, closed: bool) -> str:
+    if closed:
+        return "closed_cleanly"
+    if rec.error is not None or rec._stopped_ns is not None:
+        return "incomplete"
+    return "recording"
+
+
+def _durable_count(rec: Recorder, topic: str) -> int:
+    return sum((b.durable or {"topics": {}})["topics"].get(topic, 0) for b in rec.bags)

@@ -1,0 +1,317 @@
+"""PX4 offboard state machine (pure: no I/O, no clock; ``now`` is always passed in).
+
+::
+
+    IDLE --start--> PRESTREAM --(> prestream_time of setpoints)--> SWITCHING
+    SWITCHING --(OFFBOARD confirmed)--> ARMING (arm configured, disarmed) | OFFBOARD_ACTIVE
+    ARMING --(armed confirmed)--> OFFBOARD_ACTIVE
+    any streaming state --abort / finish / stale input / link loss / shutdown--> HANDBACK
+    HANDBACK --(a mode of the chain confirmed)--> DONE (requested) | FAILED (fault, "warn")
+    HANDBACK --(chain exhausted)--> FAILED ("error": "hand-back NOT confirmed ...")
+    SWITCHING --(rejected / retries exhausted)--> FAILED (HANDBACK if the vehicle shows OFFBOARD)
+    ARMING --(rejected / retries exhausted)--> HANDBACK
+    OFFBOARD_ACTIVE --(vehicle left OFFBOARD by itself)--> FAILED (pilot or PX4 has it)
+    OFFBOARD_ACTIVE --(vehicle disarmed: landed, auto-disarm)--> HANDBACK (PX4 would keep
+                                                                 reporting OFFBOARD)
+
+PX4 facts (v1.16): setpoints must stream at >= 2 Hz for > 1 s before OFFBOARD is
+accepted; the switch is MAV_CMD_DO_SET_MODE (176) with param1 = 1
+(MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), param2 = main mode, param3 = sub mode; arming is
+MAV_CMD_COMPONENT_ARM_DISARM (400) param1 = 1. DO_SET_MODE is answered twice
+(:data:`lpv_sysid.mavlink.px4.DOUBLE_ACK_COMMANDS`): ACCEPTED at once from PX4's MAVLink
+receiver, then the commander's verdict some ms later (TEMPORARILY_REJECTED for POSCTL
+without stick input while armed, for instance); arming is answered once or twice. A
+HEARTBEAT (1 Hz) is the only proof of the mode. While disarmed PX4 accepts every mode
+(even OFFBOARD without a stream); the arming verdict then decides.
+
+Truth rules:
+
+- every COMMAND_ACK of the pending command is kept (``status()['acks']``); a rejection,
+  also one after an ACCEPTED, is a failure of that step (TEMPORARILY_REJECTED of the
+  OFFBOARD switch or of arming is retried up to ``max_retries``, other rejections are not);
+- a step is *confirmed* only when no ACK of the current attempt rejected it,
+  ``ack_settle_s`` passed since the last ACK (and since sending) without a new one, and a
+  HEARTBEAT received after the command was first sent shows exactly the requested mode
+  (or arming state). If the vehicle showed that state already before the command (e.g.
+  the stale OFFBOARD PX4 keeps after an auto-disarm), the HEARTBEAT proves nothing and a
+  final ACCEPTED is required as well;
+- hand-back: the modes of ``handback_chain`` (default HOLD, then LAND) are tried in turn;
+  a rejection, ``max_retries`` unanswered resends, or no confirmation within
+  ``mode_confirm_timeout`` of the ACCEPTED moves on to the next mode. DONE / FAILED name
+  the confirmed mode; when nothing is confirmed the machine ends FAILED with level
+  ``error`` and the reason "hand-back NOT confirmed: ...; PX4 failsafe in charge";
+- while the hand-back is in progress the transport's neutral setpoint (velocity: zero =
+  brake and hover) keeps streaming at ``setpoint_rate_hz``, so the hand-back itself does
+  not trigger PX4's offboard-loss failsafe (COM_OF_LOSS_T -> COM_OBL_RC_ACT, which without
+  stick input is an uncontrolled descent for Position/Altitude/Stabilized); the stream
+  stops once a mode is confirmed or the chain is exhausted. A transport without a neutral
+  setpoint (attitude_rate) streams nothing and the failsafe is the backstop.
+
+Inputs: :meth:`~OffboardMachine.start`, :meth:`~OffboardMachine.on_command`,
+:meth:`~OffboardMachine.on_heartbeat`, :meth:`~OffboardMachine.on_ack`,
+:meth:`~OffboardMachine.on_link`, :meth:`~OffboardMachine.abort`,
+:meth:`~OffboardMachine.finish`, :meth:`~OffboardMachine.shutdown` and
+:meth:`~OffboardMachine.step` at the caller's poll rate; :meth:`~OffboardMachine.status`
+for diagnostics.
+
+``finish(now, mode)`` ends a campaign in a chosen mode (e.g. LAND): from a streaming
+state it hands back with ``mode`` first (then the rest of the chain), in HANDBACK it
+re-targets, from IDLE / DONE / FAILED it requests ``mode`` with the same confirmation
+rules (DONE names the confirmed mode). Landing awareness: after DONE / FAILED the machine
+reports once, when the HEARTBEAT shows a vehicle that was armed during the run disarmed
+(PX4 auto-disarms COM_DISARM_LAND after landing): a StatusEvent "vehicle disarmed in
+<mode>" and ``status()['disarmed'] == 'True'``.
+
+Outputs of :meth:`OffboardMachine.step` and the input methods are lists of
+:class:`SendSetpoint`, :class:`SendCommand` and :class:`StatusEvent`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from lpv_sysid.mavlink import px4
+from lpv_sysid.mavlink.offboard.handback import HandbackChain
+from lpv_sysid.mavlink.offboard.state import (
+    MAV_CMD_COMPONENT_ARM_DISARM,
+    MAV_CMD_DO_SET_MODE,
+    MAV_RESULT_ACCEPTED,
+    MAV_RESULT_IN_PROGRESS,
+    MAV_RESULT_TEMPORARILY_REJECTED,
+    STREAMING,
+    SendCommand,
+    SendSetpoint,
+    State,
+    StatusEvent,
+    _set_mode_params,
+)
+
+
+class OffboardMachine(HandbackChain):
+    """The state machine of the module docstring: its inputs, the periodic step and the
+    timeouts and retries of a pending command (state and evidence:
+    :class:`~lpv_sysid.mavlink.offboard.state.OffboardState`; hand-back chain:
+    :class:`~lpv_sysid.mavlink.offboard.handback.HandbackChain`)."""
+
+    # --------------------------------------------------------------- inputs
+    def start(self, now: float) -> list[Any]:
+        if self.state in STREAMING or self.state == State.HANDBACK:
+            return []
+        self._fault = False
+        self._pending = None
+        self._target = None
+        self.confirmed_mode = None
+        self.disarmed_after_run = False
+        self._was_armed = self.armed
+        self._armed_active = False
+        self._t_stream0 = now
+        self._next_sp = now
+        out = self._go(now, State.PRESTREAM, "start requested")
+        return out + self.step(now)
+
+    def on_command(self, now: float, setpoint: Any) -> list[Any]:
+        """A new setpoint from ROS (velocity reference or virtual actuator command)."""
+        self._cmd, self._t_cmd = setpoint, now
+        if self.config.send_on_command and self.state in STREAMING:
+            self._next_sp = now + 1.0 / self.config.setpoint_rate_hz
+            self.setpoints_sent += 1
+            if self._t_stream0 == math.inf:
+                self._t_stream0 = now
+            return [SendSetpoint(setpoint)]
+        return []
+
+    def on_heartbeat(self, now: float, mode: px4.Px4Mode, armed: bool) -> list[Any]:
+        self.vehicle_mode, self.armed, self._t_hb = mode, armed, now
+        if armed:
+            self._was_armed = True
+        return self.step(now)
+
+    def on_ack(self, now: float, command: int, result: int) -> list[Any]:
+        """Every COMMAND_ACK of the pending command counts (PX4 sends two, see module doc)."""
+        p = self._pending
+        if p is None or p.command != command:
+            return []  # unrelated, or for a step already decided
+        p.acks.append((now, int(result)))
+        p.t_last_ack = now
+        self._last_acks = ",".join(f"{px4.result_name(r)}@{t:.3f}" for t, r in p.acks[-6:])
+        if result == MAV_RESULT_ACCEPTED:
+            if p.t_accepted is None:
+                p.t_accepted = now
+            return self.step(now)
+        if result == MAV_RESULT_IN_PROGRESS:
+            p.t_sent = now  # keep waiting
+            return []
+        p.rejected = int(result)
+        how = "accepted, then rejected" if p.t_accepted is not None else "rejected"
+        reason = f"{p.what} (command {command}) {how}: {px4.result_name(result)}"
+        if self.state == State.HANDBACK:
+            return self._next_handback(now, reason)
+        if result == MAV_RESULT_TEMPORARILY_REJECTED:
+            return self._retry_or_fail(now, reason)
+        return self._fail_step(now, reason)
+
+    def on_link(self, now: float, up: bool) -> list[Any]:
+        was, self.link_up = self.link_up, up
+        if was and not up and self.state in STREAMING:
+            return self._handback(
+                now,
+                "link lost (no HEARTBEAT); PX4 failsafe COM_OBL_RC_ACT "
+                "expected after COM_OF_LOSS_T",
+                fault=True,
+            )
+        return []
+
+    def abort(self, now: float, reason: str = "abort requested") -> list[Any]:
+        if self.state in STREAMING:
+            return self._handback(now, reason, fault=False)
+        if self.state == State.IDLE:
+            return self._go(now, State.DONE, reason)
+        return []
+
+    def shutdown(self, now: float) -> list[Any]:
+        return self.abort(now, "shutdown")
+
+    # ----------------------------------------------------------------- step
+    def step(self, now: float) -> list[Any]:
+        out: list[Any] = []
+        st = self.state
+        cfg = self.config
+        fresh = now - self._t_cmd <= cfg.input_timeout
+        if st in STREAMING:
+            if st in (State.SWITCHING, State.ARMING) and not fresh and self.neutral is None:
+                return self._handback(
+                    now,
+                    f"stale input during {st.value}: no command for "
+                    f"{now - self._t_cmd:.3f} s and no neutral setpoint",
+                    fault=True,
+                )
+            if st == State.OFFBOARD_ACTIVE:
+                if not fresh:
+                    return self._handback(
+                        now,
+                        f"stale input: no command for {now - self._t_cmd:.3f} s "
+                        f"(> {cfg.input_timeout} s)",
+                        fault=True,
+                    )
+                if self.vehicle_mode is not None and self.vehicle_mode != px4.OFFBOARD:
+                    return self._stop(
+                        now,
+                        State.FAILED,
+                        f"vehicle left OFFBOARD (now {self.vehicle_mode.name}); "
+                        "control stays with PX4/pilot",
+                        "warn",
+                    )
+                if self.armed:
+                    self._armed_active = True
+                elif cfg.arm or self._armed_active:
+                    return self._handback(
+                        now,
+                        "vehicle disarmed during OFFBOARD (landed or auto-disarm); "
+                        "handing back so PX4 does not keep reporting OFFBOARD",
+                        fault=True,
+                    )
+        if st in STREAMING or st == State.HANDBACK:
+            out += self._stream(now, fresh)
+        if st == State.PRESTREAM:
+            if now - self._t_stream0 > cfg.prestream_time:
+                out += self._go(
+                    now, State.SWITCHING, f"pre-streamed {now - self._t_stream0:.2f} s"
+                )
+                out += self._send(
+                    now,
+                    MAV_CMD_DO_SET_MODE,
+                    _set_mode_params(px4.OFFBOARD),
+                    "OFFBOARD",
+                    self.vehicle_mode == px4.OFFBOARD,
+                )
+        elif st == State.SWITCHING:
+            if self._confirmed(now, mode=px4.OFFBOARD):
+                self._pending = None
+                why = "OFFBOARD confirmed (final ACK, then HEARTBEAT)"
+                if cfg.arm and not self.armed:
+                    out += self._go(now, State.ARMING, why)
+                    out += self._send(now, MAV_CMD_COMPONENT_ARM_DISARM, (1.0, 0.0), "arm", False)
+                else:
+                    out += self._go(now, State.OFFBOARD_ACTIVE, why)
+            else:
+                out += self._check_pending(now)
+        elif st == State.ARMING:
+            if self._confirmed(now, armed=True):
+                self._pending = None
+                out += self._go(now, State.OFFBOARD_ACTIVE, "armed (final ACK, then HEARTBEAT)")
+            else:
+                out += self._check_pending(now)
+        elif st == State.HANDBACK:
+            if self._target is not None and self._confirmed(now, mode=self._target):
+                out += self._handback_confirmed(now)
+            else:
+                out += self._check_pending(now)
+        elif st in (State.DONE, State.FAILED):
+            if (
+                self._was_armed
+                and not self.armed
+                and not self.disarmed_after_run
+                and self._t_hb > self._t_state
+                and self.vehicle_mode is not None
+            ):
+                self.disarmed_after_run = True
+                out.append(
+                    StatusEvent(
+                        now,
+                        st.value,
+                        st.value,
+                        f"vehicle disarmed in {self.vehicle_mode.name} (landed or auto-disarm)",
+                    )
+                )
+        return out
+
+    # ------------------------------------------------------- pending command
+    def _check_pending(self, now: float) -> list[Any]:
+        p = self._pending
+        if p is None:
+            return []
+        cfg = self.config
+        if p.t_accepted is not None:
+            if now - p.t_accepted > cfg.mode_confirm_timeout:
+                reason = (
+                    f"{p.what} (command {p.command}) accepted but the HEARTBEAT did not show it "
+                    f"within {cfg.mode_confirm_timeout} s"
+                )
+                if self.state == State.HANDBACK:
+                    return self._next_handback(now, reason)
+                return self._retry_or_fail(now, reason)
+            return []
+        if now - p.t_sent > cfg.ack_timeout:
+            return self._retry_or_fail(
+                now,
+                f"no COMMAND_ACK for command {p.command} within {cfg.ack_timeout} s ({p.what})",
+            )
+        return []
+
+    def _retry_or_fail(self, now: float, reason: str) -> list[Any]:
+        p = self._pending
+        assert p is not None
+        if p.attempts <= self.config.max_retries:
+            p.resend(now)
+            return [
+                StatusEvent(
+                    now,
+                    self.state.value,
+                    self.state.value,
+                    f"{reason}; retry {p.attempts - 1}/{self.config.max_retries}",
+                    "warn",
+                ),
+                SendCommand(p.command, p.params, p.attempts),
+            ]
+        return self._fail_step(now, reason)
+
+    def _fail_step(self, now: float, reason: str) -> list[Any]:
+        self._pending = None
+        if self.state == State.HANDBACK:
+            return self._next_handback(now, reason)
+        if self.state == State.SWITCHING:
+            if self.vehicle_mode == px4.OFFBOARD:
+                return self._handback(now, f"switch to OFFBOARD failed: {reason}", fault=True)
+            return self._stop(now, State.FAILED, f"switch to OFFBOARD failed: {reason}", "error")
+        return self._handback(now, f"{self.state.value} failed: {reason}", fault=True)

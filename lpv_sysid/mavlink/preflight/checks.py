@@ -1,0 +1,273 @@
+"""Preflight go/no-go checks of a PX4 vehicle over MAVLink (used by ``lpv-sysid preflight``).
+
+The checks gather, within a bounded time: an autopilot HEARTBEAT (link, autopilot type,
+vehicle type, mode, arming state), AUTOPILOT_VERSION (firmware >= 1.14, MAVLink 2 and the
+offboard setpoint capabilities), the parameters the safety path depends on, the
+telemetry streams the bridge needs, the evidence of stick input (SYS_STATUS, RC_CHANNELS)
+and the source of the rotor speeds (ESC_STATUS, else the motor outputs). Each check is
+GO, WARN (does not block) or NO-GO; a check may carry a note with the reason and the fix.
+
+Gathering ends as soon as every answer is in. Streams that may legitimately be absent
+(ESC_STATUS on SIH / PWM vehicles, RC_CHANNELS without RC, HIGHRES_IMU) are waited for at
+most ``grace`` seconds after the stream requests, never for the whole timeout.
+
+Rules (PX4 v1.16, ``commander_params.c``):
+- COM_OF_LOSS_T in (0, 2] s (offboard-loss detection delay; PX4 default 1 s);
+- COM_OBL_RC_ACT, the action after offboard loss: 0 Position, 1 Altitude, 2 Stabilized,
+  3 Return, 4 Land, 5 Hold, 6 Terminate, 7 Disarm. Position, Altitude and Stabilized fly
+  on the pilot's sticks (``px4.STICK_MODES``): without stick input PX4 cannot run them
+  ("Matching flight task was not able to run") and descends without position control
+  (measured on PX4 v1.16 SIH: 17.6 m to the ground with 0, altitude held within 0.3 m
+  with 5). They are NO-GO when there is no stick input; 2 is WARN even with sticks (the
+  pilot must fly at once). 6 and 7 stop the motors in the air: NO-GO. 3, 4, 5: GO.
+- stick input: none when COM_RC_IN_MODE = 4 (stick input disabled); else PX4's own
+  verdict in SYS_STATUS (MAV_SYS_STATUS_SENSOR_RC_RECEIVER present = valid manual control
+  from RC or joystick) when received, else RC_CHANNELS with channels and RSSI > 0;
+- mode: OFFBOARD while disarmed is PX4's leftover after an auto-disarm (the commander
+  keeps the last mode): WARN, not a reason for NO-GO (the bridge switches the mode itself
+  after pre-streaming). OFFBOARD while armed means another controller flies: NO-GO;
+- rotor speeds: ESC_STATUS (measured) GO; without it the bridge estimates them from
+  ACTUATOR_OUTPUT_STATUS / SERVO_OUTPUT_RAW (``mavlink/telemetry/rotor_estimate.py``): GO, with a
+  WARN when the output values do not fit the configured mapping; neither: NO-GO;
+- COM_DISARM_PRFLT > 0 (pre-flight auto disarm enabled) else WARN;
+- NAV_DLL_ACT, COM_RCL_EXCEPT, COM_RC_IN_MODE reported (informational);
+- telemetry from other systems on the link is reported (WARN; the bridge ignores it).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any, Callable
+
+from lpv_sysid.mavlink import px4
+from lpv_sysid.mavlink.link import MavlinkLink
+from lpv_sysid.mavlink.preflight.gather import Facts, gather
+from lpv_sysid.mavlink.preflight.report import GO, NOGO, WARN, Check
+from lpv_sysid.mavlink.preflight.rules import _obl_check, _rotor_check, _sticks
+from lpv_sysid.mavlink.telemetry import ATTITUDE_SOURCES, POSITION_SOURCES, RotorEstimateConfig
+
+MIN_VERSION = (1, 14)
+MULTIROTOR_TYPES = {
+    2: "quadrotor",
+    3: "coaxial",
+    4: "helicopter",
+    13: "hexarotor",
+    14: "octorotor",
+    15: "tricopter",
+}
+
+
+def run_checks(
+    link: MavlinkLink,
+    timeout: float = 5.0,
+    clock: Callable[[], float] = time.monotonic,
+    sleep: Callable[[float], None] = time.sleep,
+    grace: float = 1.5,
+    rotor_estimate: RotorEstimateConfig | None = None,
+) -> list[Check]:
+    """Gather the facts (at most ``timeout`` s; ends once all are in, or ``grace`` s after
+    the stream requests when only possibly-absent streams are missing) and judge them."""
+    facts = gather(link, timeout, clock, sleep, grace)
+    return judge(
+        facts.hb,
+        facts.version,
+        facts.params,
+        facts.seen,
+        link,
+        facts=facts,
+        rotor_estimate=rotor_estimate,
+    )
+
+
+def judge(
+    hb: Any,
+    version: Any,
+    params: dict[str, float | int],
+    seen: set[str],
+    link: MavlinkLink | None = None,
+    *,
+    facts: Facts | None = None,
+    rotor_estimate: RotorEstimateConfig | None = None,
+) -> list[Check]:
+    """Turn the gathered facts into checks (pure; tested without a vehicle)."""
+    if facts is None:
+        facts = Facts(hb=hb, version=version, params=dict(params), seen=set(seen))
+    cfg = rotor_estimate or RotorEstimateConfig()
+    out: list[Check] = []
+    if hb is None:
+        out.append(Check("link", "no autopilot HEARTBEAT", "HEARTBEAT received", NOGO))
+        return out
+    out.append(
+        Check("link", f"HEARTBEAT from system {hb.get_srcSystem()}", "HEARTBEAT received", GO)
+    )
+    if link is not None:
+        st = link.stats
+        bad = st.bad_data + st.truncated
+        out.append(
+            Check(
+                "link quality",
+                f"{st.rx_messages} msgs, {bad} bad, {st.seq_lost} lost",
+                "no corrupted data",
+                GO if bad == 0 else WARN,
+            )
+        )
+        if link.codec is not None and link.codec.signing.secret_key is not None:
+            good = link.codec.signing.goodsig_count
+            out.append(
+                Check(
+                    "signing",
+                    f"{good} good / {link.codec.signing.badsig_count} bad signatures",
+                    "vehicle signs its messages",
+                    GO if good > 0 else NOGO,
+                )
+            )
+    if facts.foreign:
+        txt = ", ".join(f"system {s} comp {c}: {n}" for (s, c), n in sorted(facts.foreign.items()))
+        out.append(
+            Check(
+                "other systems",
+                txt,
+                "telemetry only from the target",
+                WARN,
+                "vehicle-state messages from other systems on this link; the bridge ignores them "
+                "(telemetry is taken from the target system/component only)",
+            )
+        )
+    out.append(
+        Check(
+            "autopilot",
+            "PX4" if hb.autopilot == 12 else f"MAV_AUTOPILOT {hb.autopilot}",
+            "PX4",
+            GO if hb.autopilot == 12 else NOGO,
+        )
+    )
+    vt = MULTIROTOR_TYPES.get(hb.type)
+    out.append(
+        Check("vehicle type", vt or f"MAV_TYPE {hb.type}", "multirotor", GO if vt else NOGO)
+    )
+    mode = px4.decode_custom_mode(hb.custom_mode)
+    armed = bool(hb.base_mode & px4.MAV_MODE_FLAG_SAFETY_ARMED)
+    known = not mode.name.startswith("UNKNOWN")
+    if mode == px4.OFFBOARD and not armed:
+        out.append(
+            Check(
+                "mode",
+                "OFFBOARD (disarmed: stale)",
+                "known PX4 mode, not OFFBOARD",
+                WARN,
+                "PX4 keeps reporting OFFBOARD after an auto-disarm; no offboard session is "
+                "active. "
+                "Not a reason for NO-GO: the bridge switches to OFFBOARD itself after "
+                "pre-streaming",
+            )
+        )
+    elif mode == px4.OFFBOARD:
+        out.append(
+            Check(
+                "mode",
+                "OFFBOARD (armed)",
+                "known PX4 mode, not OFFBOARD",
+                NOGO,
+                "another offboard controller is flying the vehicle",
+            )
+        )
+    else:
+        out.append(Check("mode", mode.name, "known PX4 mode, not OFFBOARD", GO if known else NOGO))
+    out.append(Check("armed", "armed" if armed else "disarmed", "disarmed", NOGO if armed else GO))
+    if version is None:
+        out.append(
+            Check(
+                "firmware",
+                "no AUTOPILOT_VERSION",
+                f"PX4 >= {MIN_VERSION[0]}.{MIN_VERSION[1]}",
+                NOGO,
+            )
+        )
+    else:
+        major, minor, patch, _ = px4.decode_flight_sw_version(version.flight_sw_version)
+        ok = (major, minor) >= MIN_VERSION
+        out.append(
+            Check(
+                "firmware",
+                f"{major}.{minor}.{patch}",
+                f">= {MIN_VERSION[0]}.{MIN_VERSION[1]}",
+                GO if ok else NOGO,
+            )
+        )
+        mod = px4.dialect_module()
+        caps = version.capabilities
+        for cname in ("MAVLINK2", "SET_POSITION_TARGET_LOCAL_NED", "SET_ATTITUDE_TARGET"):
+            bit = int(getattr(mod, f"MAV_PROTOCOL_CAPABILITY_{cname}"))
+            out.append(
+                Check(
+                    f"capability {cname}",
+                    "yes" if caps & bit else "no",
+                    "yes",
+                    GO if caps & bit else NOGO,
+                )
+            )
+    t = params.get("COM_OF_LOSS_T")
+    if t is None:
+        out.append(Check("COM_OF_LOSS_T", "missing", "0 < t <= 2 s", NOGO))
+    else:
+        out.append(
+            Check(
+                "COM_OF_LOSS_T",
+                f"{float(t):g} s",
+                "0 < t <= 2 s",
+                GO if 0 < float(t) <= 2.0 and math.isfinite(float(t)) else NOGO,
+            )
+        )
+    sticks, sticks_txt = _sticks(facts)
+    out.append(Check("stick input", sticks_txt, "(see COM_OBL_RC_ACT)", GO))
+    out.append(_obl_check(params.get("COM_OBL_RC_ACT"), sticks, sticks_txt))
+    d = params.get("COM_DISARM_PRFLT")
+    out.append(
+        Check(
+            "COM_DISARM_PRFLT",
+            "missing" if d is None else f"{float(d):g} s",
+            "> 0 s",
+            GO if d is not None and float(d) > 0 else WARN,
+        )
+    )
+    for name in ("NAV_DLL_ACT", "COM_RCL_EXCEPT", "COM_RC_IN_MODE"):
+        v = params.get(name)
+        text = "missing" if v is None else f"{v}"
+        if name == "COM_RC_IN_MODE" and v is not None and int(v) in set(px4.RcInMode):
+            text = f"{int(v)} ({px4.RcInMode(int(v)).name.lower().replace('_', ' ')})"
+        out.append(Check(name, text, "(information)", GO if v is not None else WARN))
+    for quantity, sources in (("attitude", ATTITUDE_SOURCES), ("position", POSITION_SOURCES)):
+        have = [s for s in sources if s in seen]
+        if not have:
+            out.append(
+                Check(
+                    f"telemetry {quantity}",
+                    "not received",
+                    sources[0],
+                    NOGO,
+                    f"none of {', '.join(sources)}: no state for the bridge",
+                )
+            )
+        elif have[0] != sources[0]:
+            out.append(
+                Check(
+                    f"telemetry {quantity}",
+                    f"{have[0]} (no {sources[0]})",
+                    sources[0],
+                    WARN,
+                    f"the bridge falls back to {have[0]}",
+                )
+            )
+        else:
+            out.append(Check(f"telemetry {quantity}", sources[0], sources[0], GO))
+    out.append(
+        Check(
+            "telemetry HIGHRES_IMU",
+            "received" if "HIGHRES_IMU" in seen else "not received",
+            "received",
+            GO if "HIGHRES_IMU" in seen else WARN,
+        )
+    )
+    out.append(_rotor_check(facts, cfg))
+    return out

@@ -1,0 +1,354 @@
+"""Rotor speeds from the motor outputs when the vehicle sends no ESC telemetry.
+
+SIH and vehicles with plain PWM ESCs publish no ESC_STATUS, but PX4 streams what it writes
+to the motors: ACTUATOR_OUTPUT_STATUS (id 375: ``time_usec``, ``active``, ``actuator[32]``
+float) and SERVO_OUTPUT_RAW (id 36: ``time_usec`` uint32, ``port``, ``servo1_raw`` ..
+``servo16_raw`` uint16), both copies of the uORB topic ``actuator_outputs`` (PX4 v1.16
+``src/modules/mavlink/streams``). The rotor speeds follow from the first-order motor model
+of seed 0 Eq. (8),
+
+    dOmega_i/dt = -a_Omega Omega_i + b_Omega u_ESC,i,   Omega_i held in [omega_min, omega_max],
+
+with a_Omega, b_Omega and the limits of the airframe (``models/quadrotor.QuadrotorParams``,
+``config/quadrotor.yaml``; values identified later can be set here).
+
+Output -> u_ESC (``mapping``; ``output_min`` / ``output_max`` override the range):
+
+==============  ==================  =====================================================
+mapping         output range        vehicles
+==============  ==================  =====================================================
+``pwm``         1000 .. 2000 us     PX4 PWM outputs (PWM_MAIN_MINx/MAXx defaults) and SITL
+                                    (pwm_out_sim writes 900 disarmed, 1000 .. 2000)
+``dshot``       1 .. 1999           PX4 DShot driver (0 = disarmed)
+``normalized``  0 .. 1              outputs already normalised to [0, 1]
+``symmetric``   -1 .. 1             outputs normalised to [-1, 1]
+==============  ==================  =====================================================
+
+``u_ESC = clip((x - output_min) / (output_max - output_min), 0, 1)``. A value below
+``output_min`` (the disarmed value, e.g. PWM 900 or DShot 0) or NaN means the motor is
+stopped: Omega = 0 (below the model's idle speed, which applies only to a running motor).
+
+Integration is exact for a zero-order hold of each output sample (PX4 writes the output
+and holds it until the next one): between vehicle times t_k and t_{k+1}
+
+    Omega(t_{k+1}) = Omega_ss + (Omega(t_k) - Omega_ss) exp(-a_Omega (t_{k+1} - t_k)),
+    Omega_ss = b_Omega u_ESC(t_k) / a_Omega,
+
+clipped to [omega_min, omega_max] (the clip of the monotone unconstrained solution is the
+solution with the speed held at the limit). The first sample, a gap longer than
+``max_gap`` or a time that does not advance restarts at the steady state of the newest
+output (after a gap the history is unknown; the steady state is the best guess and is
+reached within 5 / a_Omega = 0.4 s for the default airframe).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from lpv_sysid.configuration.fields import check_config_keys, is_count, is_finite_number
+from lpv_sysid.errors import ConfigError
+from lpv_sysid.io.messages import ROTOR_SOURCES
+from lpv_sysid.mavlink import px4
+
+#: output range (output_min, output_max) of each mapping name
+MAPPINGS: dict[str, tuple[float, float]] = {
+    "pwm": (px4.PWM_MIN_US, px4.PWM_MAX_US),
+    "dshot": (1.0, 1999.0),
+    "normalized": (0.0, 1.0),
+    "symmetric": (-1.0, 1.0),
+}
+#: message sources of the motor outputs; ``auto``: ACTUATOR_OUTPUT_STATUS, SERVO_OUTPUT_RAW
+#: only while ACTUATOR_OUTPUT_STATUS is not streamed
+SOURCES = ("auto", "actuator_output_status", "servo_output_raw")
+ESC, ESTIMATED = ROTOR_SOURCES  # RotorSample.source values (rotor_speeds frame_id)
+#: streams the estimate needs [Hz]; PX4 sends ACTUATOR_OUTPUT_STATUS only when requested
+#: (SITL onboard link: SERVO_OUTPUT_RAW 10 Hz by default); 50 Hz keeps rotor_speeds within
+#: the controller runtime's 0.05 s staleness limit
+MOTOR_OUTPUT_STREAMS: tuple[tuple[str, float], ...] = (
+    ("ACTUATOR_OUTPUT_STATUS", 50.0),
+    ("SERVO_OUTPUT_RAW", 10.0),
+)
+
+
+@dataclass(frozen=True)
+class MotorModel:
+    """Seed 0 Eq. (8) for one motor: a_Omega [1/s], b_Omega [rad/s^2], limits [rad/s]."""
+
+    a_omega: float
+    b_omega: float
+    omega_min: float
+    omega_max: float
+
+    def __post_init__(self) -> None:
+        for name in ("a_omega", "b_omega", "omega_max"):
+            v = getattr(self, name)
+            if not (is_finite_number(v) and v > 0):
+                raise ConfigError(
+                    f"rotor_estimate.{name} must be a positive finite number, got {v!r}"
+                )
+        if not (is_finite_number(self.omega_min) and 0 <= self.omega_min < self.omega_max):
+            raise ConfigError(
+                f"rotor_estimate.omega_min must be in [0, omega_max = {self.omega_max}), "
+                f"got {self.omega_min!r}"
+            )
+
+    @classmethod
+    def from_params(cls, params: Any) -> "MotorModel":
+        """From a :class:`lpv_sysid.models.quadrotor.QuadrotorParams`."""
+        return cls(
+            float(params.a_omega),
+            float(params.b_omega),
+            float(params.omega_min),
+            float(params.omega_max),
+        )
+
+    def steady(self, u_esc: np.ndarray) -> np.ndarray:
+        """Steady-state speed b_Omega u / a_Omega, held in the limits."""
+        return np.clip(
+            self.b_omega / self.a_omega * np.asarray(u_esc, dtype=float),
+            self.omega_min,
+            self.omega_max,
+        )
+
+    def propagate(self, omega: np.ndarray, u_esc: np.ndarray, dt: float) -> np.ndarray:
+        """Exact solution after ``dt`` s with ``u_esc`` held (zero-order hold), in the limits."""
+        ss = self.b_omega / self.a_omega * np.asarray(u_esc, dtype=float)
+        return np.clip(
+            ss + (np.asarray(omega, dtype=float) - ss) * math.exp(-self.a_omega * dt),
+            self.omega_min,
+            self.omega_max,
+        )
+
+
+@dataclass(frozen=True)
+class RotorEstimateConfig:
+    """``rotor_estimate`` section of ``config/mavlink_bridge.yaml``.
+
+    ``motor_outputs``: 1-based output channel of rotor 1..n (PX4 numbering of DESIGN.md;
+    PX4's quad-X default maps Motor 1..4 to outputs 1..4). ``servo_port``: SERVO_OUTPUT_RAW
+    ``port`` carrying the motors. ``airframe``: YAML file with a ``quadrotor`` section
+    (relative paths: working directory, then the shipped ``config/``); empty: the built-in
+    airframe (``QuadrotorParams()`` = ``config/quadrotor.yaml``). ``a_omega`` ..
+    ``omega_max``: override the airframe's values (e.g. identified ones). ``max_gap`` [s]:
+    longer gaps between output samples restart the estimate. ``esc_timeout`` [s]: ESC
+    telemetry older than this is stale and the estimate is published instead.
+    """
+
+    enabled: bool = True
+    source: str = "auto"
+    mapping: str = "pwm"
+    output_min: float | None = None
+    output_max: float | None = None
+    motor_outputs: tuple[int, ...] = (1, 2, 3, 4)
+    servo_port: int = 0
+    airframe: str = ""
+    a_omega: float | None = None
+    b_omega: float | None = None
+    omega_min: float | None = None
+    omega_max: float | None = None
+    max_gap: float = 0.25
+    esc_timeout: float = 0.2
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "RotorEstimateConfig":
+        check_config_keys(d, cls.__dataclass_fields__, "rotor_estimate")
+        kw = dict(d)
+        if "motor_outputs" in kw:
+            mo = kw["motor_outputs"]
+            if isinstance(mo, (str, bytes)) or not isinstance(mo, Sequence):
+                raise ConfigError(
+                    f"rotor_estimate.motor_outputs must be a list of output channels "
+                    f"(1-based), got {mo!r}"
+                )
+            kw["motor_outputs"] = tuple(mo)
+        if kw.get("airframe") is None:
+            kw["airframe"] = ""
+        cfg = cls(**kw)
+        cfg.validate()
+        return cfg
+
+    def validate(self) -> None:
+        if not isinstance(self.enabled, bool):
+            raise ConfigError(
+                f"rotor_estimate.enabled must be true or false, got {self.enabled!r}"
+            )
+        if self.source not in SOURCES:
+            raise ConfigError(
+                f"rotor_estimate.source must be one of {SOURCES}, got {self.source!r}"
+            )
+        if self.mapping not in MAPPINGS:
+            raise ConfigError(
+                f"rotor_estimate.mapping must be one of {sorted(MAPPINGS)}, got {self.mapping!r}"
+            )
+        for name in ("output_min", "output_max", "a_omega", "b_omega", "omega_min", "omega_max"):
+            v = getattr(self, name)
+            if v is not None and not is_finite_number(v):
+                raise ConfigError(
+                    f"rotor_estimate.{name} must be a finite number or null, got {v!r}"
+                )
+        lo, hi = self.output_range()
+        if not lo < hi:
+            raise ConfigError(
+                f"rotor_estimate: output_min ({lo:g}) must be below output_max ({hi:g})"
+            )
+        mo = self.motor_outputs
+        if not mo or not all(is_count(c, 1) and c <= 32 for c in mo) or len(set(mo)) != len(mo):
+            raise ConfigError(
+                f"rotor_estimate.motor_outputs must list distinct output channels 1..32, "
+                f"got {list(mo)!r}"
+            )
+        if not (is_count(self.servo_port) and self.servo_port <= 255):
+            raise ConfigError(
+                f"rotor_estimate.servo_port must be an integer 0..255, got {self.servo_port!r}"
+            )
+        if self.source == "servo_output_raw" and max(mo) > 16:
+            raise ConfigError(
+                f"rotor_estimate.motor_outputs: SERVO_OUTPUT_RAW carries outputs 1..16, "
+                f"got {list(mo)}"
+            )
+        if not isinstance(self.airframe, str):
+            raise ConfigError(
+                f"rotor_estimate.airframe must be a file path or empty, got {self.airframe!r}"
+            )
+        for name in ("max_gap", "esc_timeout"):
+            v = getattr(self, name)
+            if not (is_finite_number(v) and v > 0):
+                raise ConfigError(
+                    f"rotor_estimate.{name} must be a positive number of seconds, got {v!r}"
+                )
+
+    def output_range(self) -> tuple[float, float]:
+        """(output_min, output_max): the mapping's range unless overridden."""
+        lo, hi = MAPPINGS.get(self.mapping, (math.nan, math.nan))
+        return (
+            float(self.output_min) if self.output_min is not None else lo,
+            float(self.output_max) if self.output_max is not None else hi,
+        )
+
+    def motor_model(self) -> MotorModel:
+        """Eq. (8) parameters: the airframe's, with this section's overrides."""
+        base = MotorModel.from_params(load_airframe(self.airframe))
+        over = {
+            f.name: float(getattr(self, f.name))
+            for f in fields(MotorModel)
+            if getattr(self, f.name) is not None
+        }
+        return MotorModel(**{**base.__dict__, **over})
+
+
+def with_motor_output_streams(link: Any, cfg: RotorEstimateConfig) -> Any:
+    """``link`` (a :class:`~lpv_sysid.mavlink.link.LinkConfig`) with
+    :data:`MOTOR_OUTPUT_STREAMS` added when the estimate is enabled and the streams are not
+    configured (a configured rate, also 0 = off, is kept)."""
+    import dataclasses
+
+    if not cfg.enabled:
+        return link
+    have = {name for name, _ in link.streams}
+    extra = tuple((n, r) for n, r in MOTOR_OUTPUT_STREAMS if n not in have)
+    return dataclasses.replace(link, streams=tuple(link.streams) + extra) if extra else link
+
+
+def load_airframe(path: str) -> Any:
+    """QuadrotorParams of the ``quadrotor`` section of ``path`` ('' = built-in defaults)."""
+    from lpv_sysid.models.quadrotor import QuadrotorParams
+
+    if not path:
+        return QuadrotorParams()
+    from pathlib import Path
+
+    from lpv_sysid.io.files import read_yaml
+
+    p = Path(path)
+    if not p.is_absolute() and not p.is_file():
+        try:
+            from lpv_sysid.configuration.defaults import config_dir
+
+            shipped = config_dir() / p
+        except ConfigError:
+            shipped = p
+        p = shipped if shipped.is_file() else p
+    if not p.is_file():
+        raise ConfigError(
+            f"rotor_estimate.airframe: {path}: no such file (looked in the working "
+            "directory and the shipped config/)"
+        )
+    d = read_yaml(p, f"rotor_estimate.airframe {p}")
+    if not isinstance(d, Mapping) or not isinstance(d.get("quadrotor"), Mapping):
+        raise ConfigError(f"rotor_estimate.airframe {p}: no 'quadrotor' section")
+    try:
+        return QuadrotorParams.from_dict(d["quadrotor"])
+    except ConfigError as exc:
+        raise ConfigError(f"rotor_estimate.airframe {p}: {exc}") from None
+
+
+@dataclass
+class EstimatorStats:
+    samples: int = 0
+    restarts: int = 0  # first sample, gaps > max_gap, time not advancing
+
+
+class RotorSpeedEstimator:
+    """Omega (rad/s, one per motor) from motor output samples; see the module docstring."""
+
+    def __init__(
+        self, model: MotorModel, output_range: tuple[float, float], max_gap: float = 0.25
+    ) -> None:
+        lo, hi = float(output_range[0]), float(output_range[1])
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise ConfigError(f"rotor_estimate: invalid output range {output_range!r}")
+        self.model = model
+        self.lo, self.hi = lo, hi
+        self.max_gap = float(max_gap)
+        self.stats = EstimatorStats()
+        self._t: float | None = None
+        self._u: np.ndarray | None = None
+        self._stopped: np.ndarray | None = None
+        self._omega: np.ndarray | None = None
+
+    @classmethod
+    def from_config(cls, cfg: RotorEstimateConfig) -> "RotorSpeedEstimator":
+        return cls(cfg.motor_model(), cfg.output_range(), cfg.max_gap)
+
+    def u_esc(self, outputs: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+        """``(u_ESC in [0, 1], stopped)`` of raw output values (stopped: NaN or < output_min)."""
+        x = np.asarray(outputs, dtype=float)
+        with np.errstate(invalid="ignore"):
+            stopped = ~np.isfinite(x) | (x < self.lo)
+            u = np.clip((x - self.lo) / (self.hi - self.lo), 0.0, 1.0)
+        u[stopped] = 0.0
+        return u, stopped
+
+    def reset(self) -> None:
+        self._t = self._u = self._stopped = self._omega = None
+
+    @property
+    def omega(self) -> np.ndarray | None:
+        """The newest estimate (None before the first sample)."""
+        return None if self._omega is None else self._omega.copy()
+
+    def update(self, t_vehicle: float, outputs: Sequence[float]) -> np.ndarray:
+        """Omega at ``t_vehicle`` [s] given the output held since the previous sample;
+        ``outputs`` then becomes the held output."""
+        u, stopped = self.u_esc(outputs)
+        dt = None if self._t is None else t_vehicle - self._t
+        if (
+            dt is None
+            or not (0.0 < dt <= self.max_gap)
+            or self._u is None
+            or self._u.shape != u.shape
+            or self._omega is None
+        ):
+            omega = self.model.steady(u)
+            omega[stopped] = 0.0
+            self.stats.restarts += 1
+        else:
+            omega = self.model.propagate(self._omega, self._u, dt)
+            omega[self._stopped] = 0.0  # stopped over the interval: not turning
+        self._t, self._u, self._stopped, self._omega = float(t_vehicle), u, stopped, omega
+        self.stats.samples += 1
+        return omega.copy()

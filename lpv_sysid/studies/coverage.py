@@ -1,0 +1,460 @@
+"""Truth coverage of the identified vertex models on simulated airframes (issue 13 study).
+
+Question answered: do the intervals ``nominal +/- k std`` of ``vertex_models.yaml`` (seed 0
+Eq. 22, ``k = 3``) contain the true vertex model as often as they claim (99.73 % per
+element), on vehicles whose parameters the package never saw?
+
+Study:
+
+1. ``airframes`` vehicles drawn around the configured one (:func:`random_airframe`): mass,
+   each principal inertia, arm length, motor constants ``a_Omega, b_Omega``, rotor inertia
+   ``J_z`` and every lumped aerodynamic parameter ``K`` of :mod:`lpv_sysid.models.quadrotor`
+   multiplied by independent factors ``1 + U(-spread, spread)`` (default +/-25 %); an airframe
+   that has no trim at some vertex or that the baseline cannot fly is redrawn;
+2. each flies the phase-1 experiment of :mod:`lpv_sysid.sim.phase1` (full durations: the
+   statistic of a biased estimator depends on the record length, so the flights are not
+   shortened) at the chosen vertices with its own sensor-noise seed per run;
+3. identification (:mod:`lpv_sysid.ident.vertex`) is told only what an experimenter knows:
+   mass, inertia, arm length, rotor-speed limits; ``K``, ``J_z`` and the motor constants it
+   is given are the nominal ones (the motor constants are identified);
+4. the truth is the analytic linearisation (``Quadrotor.linearize``) of the airframe at its
+   equilibrium at the flown velocity: ``Quadrotor.trim(v_flown, yaw_rate)`` with ``v_flown``
+   and the yaw rate the means of the *true* states over the trim-averaging window - seed 0
+   Eq. (13): the vertex model is the expansion about the equilibrium;
+5. per identified element ``z = (nominal - truth) / std`` with the stored (calibrated)
+   ``std``; covered when ``|z| <= k``.
+
+:func:`ablations` re-identifies the same flights with parts of the method switched off, to
+show what each part contributes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from dataclasses import dataclass, field
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from lpv_sysid.errors import ConfigError, SafetyError, SolverError
+from lpv_sysid.models.quadrotor import (
+    INPUT_NAMES,
+    STATE_NAMES,
+    Quadrotor,
+    QuadrotorParams,
+    reduced_state,
+)
+
+log = logging.getLogger(__name__)
+
+#: what the experimenter is assumed to know about an airframe (passed to identification)
+KNOWN_KEYS = ("mass", "inertia", "arm_length", "hub_height", "omega_min", "omega_max", "g")
+
+
+def random_airframe(
+    base: QuadrotorParams, rng: np.random.Generator, spread: float = 0.25
+) -> QuadrotorParams:
+    """``base`` with mass, principal inertias, arm, motor constants, ``J_z`` and every ``K``
+    multiplied by independent ``1 + U(-spread, spread)`` factors."""
+    if not 0 <= spread < 1:
+        raise ConfigError(f"coverage.spread must be in [0, 1), got {spread!r}")
+
+    def f() -> float:
+        return float(1.0 + rng.uniform(-spread, spread))
+
+    inertia = np.array(base.inertia, dtype=float)
+    off_diagonal = inertia - np.diag(np.diag(inertia))
+    inertia = np.diag([inertia[i, i] * f() for i in range(3)]) + off_diagonal
+    return dataclasses.replace(
+        base,
+        mass=base.mass * f(),
+        inertia=tuple(map(tuple, inertia)),
+        arm_length=base.arm_length * f(),
+        a_omega=base.a_omega * f(),
+        b_omega=base.b_omega * f(),
+        j_rotor=base.j_rotor * f(),
+        K={k: v * f() for k, v in base.K.items()},
+    )
+
+
+def identification_params(true: QuadrotorParams, nominal: QuadrotorParams) -> dict:
+    """The ``quadrotor`` section identification gets: the known keys of the true airframe,
+    the nominal (not the true) ``K``, ``J_z`` and motor constants."""
+    d = nominal.to_dict()
+    t = true.to_dict()
+    d.update({k: t[k] for k in KNOWN_KEYS})
+    return d
+
+
+def sensor_noise(sensors) -> dict:
+    """``measurement_noise`` of the identification (errors-in-variables compensation) from the
+    simulated sensors (:class:`lpv_sysid.sim.vehicle.SensorConfig`): white-noise std per sample at
+    the estimator / ESC-telemetry rates (vibration and aliasing are not in it)."""
+    att = float(np.radians(sensors.att_std_deg))
+    out = {k: [att, sensors.state_hz] for k in ("phi", "theta")}
+    out.update({k: [sensors.vel_std, sensors.state_hz] for k in ("u", "v", "w")})
+    out.update({k: [sensors.rate_std, sensors.state_hz] for k in ("p", "q", "r")})
+    out["rotor"] = [sensors.rotor_std, sensors.rotor_hz]
+    return out
+
+
+def eiv_shift(results) -> float:
+    """Largest ``|LS - bias-compensated| / std`` over the regression coefficients of the
+    results (0 when no measurement noise was given)."""
+    worst = 0.0
+    for r in results:
+        for rf in r.fit.rows:
+            if rf.eiv_bias is not None:
+                s = np.sqrt(np.maximum(np.diag(rf.cov), 1e-300))
+                worst = max(worst, float(np.max(np.abs(rf.eiv_bias) / s)))
+    return worst
+
+
+def truth_model(params: QuadrotorParams, rec, trim_window: tuple[float, float]):
+    """``(A, B, x_e)``: linearisation of the airframe at its equilibrium at the mean true
+    velocity and yaw rate over ``trim_window`` (module docstring, step 4)."""
+    q = Quadrotor(params)
+    sel = (rec.state_t >= trim_window[0]) & (rec.state_t < trim_window[1])
+    if not sel.any():
+        raise ConfigError(f"run {rec.name}: no true states in the trim window {trim_window}")
+    xs = rec.state_true[sel]
+    reduced = reduced_state(xs, params.arm_length)
+    phi, th, q_, r_ = reduced[:, 0], reduced[:, 1], reduced[:, 6], reduced[:, 7]
+    psi_dot = float(np.mean((np.sin(phi) * q_ + np.cos(phi) * r_) / np.cos(th)))
+    tr = q.trim(reduced[:, 2:5].mean(axis=0), psi_dot)
+    A, B = q.linearize(tr)
+    return A, B, tr.x0
+
+
+def element_label(matrix: str, row: int, col: int) -> str:
+    cols = STATE_NAMES if matrix == "A" else INPUT_NAMES
+    return f"{matrix}[{STATE_NAMES[row]},{cols[col]}]"
+
+
+def z_scores(result, A: np.ndarray, B: np.ndarray) -> dict[str, float]:
+    """``(nominal - truth) / std`` per identified element of a ``VertexResult``."""
+    out = {}
+    for iv in result.uncertain.intervals:
+        truth = (A if iv.matrix == "A" else B)[iv.row, iv.col]
+        out[element_label(iv.matrix, iv.row, iv.col)] = (
+            float((iv.nominal - truth) / iv.std)
+            if iv.std > 0
+            else (0.0 if iv.nominal == truth else float("inf"))
+        )
+    return out
+
+
+@dataclass(frozen=True)
+class CoverageConfig:
+    airframes: int = 3
+    spread: float = 0.25
+    seed: int = 0
+    vertices: tuple[int, ...] | None = None  # 1-based seed 0 Table 1 indices (None: all 8)
+    max_draws: int = 20  # redraws of an airframe that cannot be flown
+
+    def __post_init__(self) -> None:
+        if int(self.airframes) != self.airframes or self.airframes < 1:
+            raise ConfigError(
+                f"coverage.airframes must be an integer >= 1, got {self.airframes!r}"
+            )
+        if not 0 <= self.spread < 1:
+            raise ConfigError(f"coverage.spread must be in [0, 1), got {self.spread!r}")
+
+
+@dataclass
+class VertexCoverage:
+    name: str
+    vertex: tuple[float, float, float]
+    z: dict[str, float]
+    k_sigma: float
+
+    @property
+    def covered(self) -> int:
+        return int(sum(abs(v) <= self.k_sigma for v in self.z.values()))
+
+    @property
+    def n(self) -> int:
+        return len(self.z)
+
+
+@dataclass
+class AirframeCoverage:
+    index: int
+    params: QuadrotorParams
+    vertices: list[VertexCoverage] = field(default_factory=list)
+    eiv_shift: float = 0.0  # largest errors-in-variables correction in std (eiv_shift)
+
+    @property
+    def covered(self) -> int:
+        return sum(v.covered for v in self.vertices)
+
+    @property
+    def n(self) -> int:
+        return sum(v.n for v in self.vertices)
+
+    @property
+    def fraction(self) -> float:
+        return self.covered / self.n if self.n else float("nan")
+
+    def factors(self, base: QuadrotorParams) -> dict[str, float]:
+        """Parameter ratios to the base airframe (for the table)."""
+        inertia, inertia_base = np.array(self.params.inertia), np.array(base.inertia)
+        K = [self.params.K[k] / base.K[k] for k in base.K if base.K[k] != 0]
+        return {
+            "mass": self.params.mass / base.mass,
+            "Ixx": inertia[0, 0] / inertia_base[0, 0],
+            "Iyy": inertia[1, 1] / inertia_base[1, 1],
+            "Izz": inertia[2, 2] / inertia_base[2, 2],
+            "arm": self.params.arm_length / base.arm_length,
+            "a_Omega": self.params.a_omega / base.a_omega,
+            "b_Omega": self.params.b_omega / base.b_omega,
+            "J_z": self.params.j_rotor / base.j_rotor if base.j_rotor else 1.0,
+            "K_min": float(min(K)),
+            "K_max": float(max(K)),
+        }
+
+
+def fly_airframe(
+    params: QuadrotorParams,
+    gains,
+    sensors,
+    phase1_cfg,
+    vertices: Sequence[int],
+    seed: int,
+    signals=None,
+) -> list:
+    """Phase-1 runs of one airframe at ``vertices`` (1-based), noise seed ``seed + i``."""
+    from lpv_sysid.sim import phase1 as p1
+
+    model = Quadrotor(params)
+    signals = signals if signals is not None else p1.design_excitation(phase1_cfg)
+    verts = phase1_cfg.vertices()
+    return [
+        p1.simulate_run(
+            model,
+            gains,
+            sensors,
+            phase1_cfg,
+            verts[i - 1],
+            p1.run_name(verts[i - 1]),
+            seed=seed + i,
+            signals=signals,
+        )
+        for i in vertices
+    ]
+
+
+def draw_flyable(
+    base: QuadrotorParams,
+    k: int,
+    cfg: CoverageConfig,
+    gains,
+    sensors,
+    phase1_cfg,
+    vertices: Sequence[int],
+    signals=None,
+):
+    """Airframe ``k`` (1-based) and its runs; redrawn while a trim is missing or a run fails."""
+    rng = np.random.default_rng([cfg.seed, k])
+    last = None
+    for _ in range(cfg.max_draws):
+        params = random_airframe(base, rng, cfg.spread)
+        try:
+            runs = fly_airframe(
+                params,
+                gains,
+                sensors,
+                phase1_cfg,
+                vertices,
+                10_000 * (cfg.seed + 1) + 100 * k,
+                signals,
+            )
+            return params, runs
+        except (SolverError, SafetyError, ConfigError) as exc:
+            last = exc
+            log.info("airframe %d redrawn: %s", k, exc)
+    raise SolverError(f"airframe {k}: no flyable draw in {cfg.max_draws} tries (last: {last})")
+
+
+def identify_runs(runs, params: QuadrotorParams, nominal: QuadrotorParams, ident_cfg) -> list:
+    """``VertexResult`` per run (the identification sees :func:`identification_params`)."""
+    from lpv_sysid.ident import dataprep as dp
+    from lpv_sysid.ident import vertex as vx
+
+    cfg = dataclasses.replace(ident_cfg, quadrotor=identification_params(params, nominal))
+    qp = QuadrotorParams.from_dict(cfg.quadrotor)
+    datas = [dp.align(dp.streams_from_record(rec), cfg, params=qp).vertex for rec in runs]
+    return vx.identify_vertices(datas, cfg)
+
+
+def score(runs, results, params: QuadrotorParams, ident_cfg) -> list[VertexCoverage]:
+    from lpv_sysid.ident import vertex as vx
+    from lpv_sysid.ident.vertex import uncertainty as unc
+
+    out = []
+    for rec, res in zip(runs, results):
+        A, B, _ = truth_model(params, rec, vx.trim_window((0.0, rec.t_excite), ident_cfg))
+        k = unc.applied_k(ident_cfg.uncertainty, len(res.uncertain.intervals))
+        u_d, v_d, w_d = (float(c) for c in rec.v_d)
+        out.append(VertexCoverage(rec.name, (u_d, v_d, w_d), z_scores(res, A, B), k))
+    return out
+
+
+def run_study(
+    cfg: CoverageConfig,
+    base: QuadrotorParams,
+    gains,
+    sensors,
+    phase1_cfg,
+    ident_cfg,
+    progress: Callable[[str], None] | None = None,
+    keep_runs: bool = False,
+):
+    """The study of the module docstring: ``(airframes, runs per airframe or None)``."""
+    from lpv_sysid.sim import phase1 as p1
+
+    vertices = list(cfg.vertices) if cfg.vertices else list(range(1, 9))
+    signals = p1.design_excitation(phase1_cfg)
+    out, kept = [], []
+    for k in range(1, cfg.airframes + 1):
+        params, runs = draw_flyable(base, k, cfg, gains, sensors, phase1_cfg, vertices, signals)
+        results = identify_runs(runs, params, base, ident_cfg)
+        af = AirframeCoverage(
+            k, params, score(runs, results, params, ident_cfg), eiv_shift(results)
+        )
+        out.append(af)
+        kept.append(runs if keep_runs else None)
+        if progress:
+            progress(
+                f"airframe {k}: {af.covered}/{af.n} elements within {af.vertices[0].k_sigma:g} "
+                "sigma "
+                f"({100 * af.fraction:.2f} %)"
+            )
+    return out, kept
+
+
+#: re-identification variants of :func:`ablations` (name -> IdentificationConfig changes)
+ABLATIONS: dict[str, dict[str, Any]] = {
+    "no re-expansion (Jacobian at the flown mean)": {"equilibrium": False},
+    "residual-ACF standard errors (no EWC, no Student-t)": {"covariance": "residual_acf"},
+}
+
+
+def ablations(
+    runs_per_airframe, airframes: Sequence[AirframeCoverage], base: QuadrotorParams, ident_cfg
+) -> dict:
+    """Coverage fraction per airframe of each :data:`ABLATIONS` variant on the same flights."""
+    from lpv_sysid.ident import equation_error as ee
+
+    out = {}
+    for name, change in ABLATIONS.items():
+        kw = dict(change)
+        if kw.get("covariance") == "residual_acf":
+            kw["covariance"] = ee.CovarianceConfig(
+                method="residual_acf", max_lag=ident_cfg.max_lag
+            )
+        cfg = dataclasses.replace(ident_cfg, **kw)
+        fr = []
+        for af, runs in zip(airframes, runs_per_airframe):
+            vc = score(runs, identify_runs(runs, af.params, base, cfg), af.params, cfg)
+            fr.append(sum(v.covered for v in vc) / max(1, sum(v.n for v in vc)))
+        out[name] = fr
+    return out
+
+
+def summary_dict(
+    airframes: Sequence[AirframeCoverage],
+    base: QuadrotorParams,
+    cfg: CoverageConfig,
+    ablation: dict | None = None,
+) -> dict:
+    """``coverage.yaml``: per airframe its parameter factors, per vertex the count and the
+    elements outside ``k`` sigma with their z."""
+    all_z = np.array([z for af in airframes for v in af.vertices for z in v.z.values()])
+    k = airframes[0].vertices[0].k_sigma if airframes and airframes[0].vertices else 3.0
+    d: dict[str, Any] = {
+        "format": "lpv_sysid/identification_coverage@1",
+        "study": {
+            "airframes": cfg.airframes,
+            "spread": cfg.spread,
+            "seed": cfg.seed,
+            "vertices": list(cfg.vertices) if cfg.vertices else list(range(1, 9)),
+            "k_sigma": float(k),
+        },
+        "overall": {
+            "covered": int(np.sum(np.abs(all_z) <= k)),
+            "elements": int(all_z.size),
+            "fraction": float(np.mean(np.abs(all_z) <= k)) if all_z.size else float("nan"),
+            "z_mean": float(np.mean(all_z)) if all_z.size else float("nan"),
+            "z_std": float(np.std(all_z)) if all_z.size else float("nan"),
+            "expected_fraction": float(_normal_coverage(k)),
+        },
+        "airframes": [],
+    }
+    for af in airframes:
+        d["airframes"].append(
+            {
+                "index": af.index,
+                "factors": {n: round(float(v), 4) for n, v in af.factors(base).items()},
+                "covered": af.covered,
+                "elements": af.n,
+                "fraction": float(af.fraction),
+                "eiv_max_shift_std": float(af.eiv_shift),
+                "vertices": [
+                    {
+                        "run": v.name,
+                        "vertex": list(v.vertex),
+                        "covered": v.covered,
+                        "elements": v.n,
+                        "outside": {
+                            lab: round(z, 2) for lab, z in v.z.items() if abs(z) > v.k_sigma
+                        },
+                    }
+                    for v in af.vertices
+                ],
+            }
+        )
+    if ablation:
+        d["ablations"] = {n: [float(x) for x in fr] for n, fr in ablation.items()}
+    return d
+
+
+def _normal_coverage(k: float) -> float:
+    from scipy.stats import norm
+
+    return float(2 * norm.cdf(k) - 1)
+
+
+def markdown_table(
+    airframes: Sequence[AirframeCoverage], base: QuadrotorParams, ablation: dict | None = None
+) -> str:
+    """The coverage table (one row per airframe, plus the ablations as extra columns)."""
+    k = airframes[0].vertices[0].k_sigma
+    ablation = ablation or {}
+    names = list(ablation)
+    head = (
+        f"| airframe | mass | Ixx | Iyy | Izz | arm | a_Omega | b_Omega | K range | elements | "
+        f"within {k:g} sigma |" + "".join(f" {n} |" for n in names)
+    )
+    lines = [head, "|" + "---|" * (11 + len(names))]
+    for i, af in enumerate(airframes):
+        f = af.factors(base)
+        cells = [str(af.index)] + [
+            f"{f[n]:.2f}" for n in ("mass", "Ixx", "Iyy", "Izz", "arm", "a_Omega", "b_Omega")
+        ]
+        cells += [
+            f"{f['K_min']:.2f}-{f['K_max']:.2f}",
+            str(af.n),
+            f"{af.covered} ({100 * af.fraction:.2f} %)",
+        ]
+        cells += [f"{100 * ablation[n][i]:.2f} %" for n in names]
+        lines.append("| " + " | ".join(cells) + " |")
+    cov = sum(a.covered for a in airframes)
+    n = sum(a.n for a in airframes)
+    tot = ["all", "", "", "", "", "", "", "", "", str(n), f"{cov} ({100 * cov / n:.2f} %)"]
+    if names:
+        ws = [a.n for a in airframes]
+        tot += [f"{100 * np.average(ablation[nm], weights=ws):.2f} %" for nm in names]
+    lines.append("| " + " | ".join(tot) + " |")
+    return "\n".join(lines)

@@ -1,0 +1,207 @@
+"""What one `lpv-sysid synthesize` run works on (:class:`Inputs`, :func:`load_inputs`).
+
+The synthesis config (its sections checked), the Lemma 1 options with the command-line
+overrides, the models (the certified uncertainty set), the weights R, Q (a signals summary or
+seed 0 Eqs. 27-28), the performance output C (Eq. 19b), the feedforward settings and the phase-2
+design envelope.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, Optional
+
+import numpy as np
+
+from lpv_sysid.errors import ConfigError
+
+_TOP_KEYS = {"hinf", "weights", "velocity_states", "uncertainty", "verify", "feedforward"}
+
+
+def feedforward_settings(cfg: dict, cfg_path: str) -> tuple[bool, dict, float]:
+    """``feedforward``: true (default) | false | {enabled, cond_max, free_states,
+    accelerated_states, held_states, kinematic_states, rate_states} -> (enabled, layout dict,
+    cond_max)."""
+    from lpv_sysid.synthesis.feedforward import COND_MAX_DEFAULT, FeedforwardLayout
+
+    v = cfg.get("feedforward", True)
+    if isinstance(v, bool):
+        return v, FeedforwardLayout().to_dict(), COND_MAX_DEFAULT
+    if not isinstance(v, dict):
+        raise ConfigError(f"{cfg_path}: feedforward must be true, false or a mapping, got {v!r}")
+    v = dict(v)
+    enabled = v.pop("enabled", True)
+    if not isinstance(enabled, bool):
+        raise ConfigError(
+            f"{cfg_path}: feedforward.enabled must be true or false, got {enabled!r}"
+        )
+    try:
+        cond_max = float(v.pop("cond_max", COND_MAX_DEFAULT))
+    except (TypeError, ValueError):
+        raise ConfigError(f"{cfg_path}: feedforward.cond_max must be a number") from None
+    return enabled, FeedforwardLayout.from_dict(v).to_dict(), cond_max
+
+
+def load_config(path: str) -> dict:
+    from lpv_sysid.io.files import read_yaml_mapping
+
+    cfg = read_yaml_mapping(path)
+    bad = set(cfg) - _TOP_KEYS
+    if bad:
+        raise ConfigError(f"{path}: unknown key(s) {sorted(bad)}; known: {sorted(_TOP_KEYS)}")
+    for key in ("hinf", "weights", "uncertainty", "verify"):  # sections: mappings (or empty)
+        if cfg.get(key) is not None and not isinstance(cfg[key], dict):
+            raise ConfigError(f"{path}: {key}: expected a mapping, got {type(cfg[key]).__name__}")
+    return cfg
+
+
+def weights_from_config(
+    cfg: dict, n_u: int, summary_path: str | None, cfg_path: str
+) -> tuple[np.ndarray, np.ndarray, str]:
+    """(R, Q, source) from a signals summary (R, Q entries) or from Eqs. (27)-(28)."""
+    from lpv_sysid.io.files import read_yaml_mapping
+    from lpv_sysid.synthesis.hinf import excitation_R, output_Q
+
+    w = dict(cfg.get("weights") or {})
+    summary_path = summary_path or w.get("summary")
+    if summary_path:
+        p = Path(summary_path)
+        if not p.is_absolute() and not p.exists():
+            p = Path(cfg_path).parent / p
+        s = read_yaml_mapping(p, f"signals summary {p}")
+        if "R" not in s or "Q" not in s:
+            raise ConfigError(
+                f"{p}: signals summary has no 'R'/'Q' (write it with weights in the signals "
+                "config)"
+            )
+        R = np.array(s["R"], dtype=float)
+        Q = np.array(s["Q"], dtype=float)
+        if R.shape[0] != n_u or Q.ndim != 2 or Q.shape[0] != Q.shape[1]:
+            raise ConfigError(f"{p}: R {R.shape} / Q {Q.shape} do not fit {n_u} inputs")
+        return R, Q, str(p)
+    bad = set(w) - {"T", "input_magnitudes", "output_magnitudes", "summary"}
+    if bad:
+        raise ConfigError(f"{cfg_path}: weights: unknown key(s) {sorted(bad)}")
+    try:
+        T = float(w["T"])
+        R = excitation_R(w["input_magnitudes"], T)
+        Q = output_Q(w["output_magnitudes"], T)
+    except KeyError as exc:
+        raise ConfigError(f"{cfg_path}: weights.{exc.args[0]} missing") from None
+    if R.shape[0] != n_u:
+        raise ConfigError(
+            f"{cfg_path}: weights.input_magnitudes has {R.shape[0]} entries, the model {n_u} "
+            "inputs"
+        )
+    return R, Q, "Eqs. (27)-(28)"
+
+
+def design_from_summary(source: str) -> Optional[dict]:
+    """``certificate.design`` (lpv_sysid.signals.excitation.design_envelope) when the weights came
+    from a phase-2 signals summary (``source`` is its path), else None."""
+    from lpv_sysid.io.files import read_yaml_mapping
+    from lpv_sysid.signals.excitation import design_envelope
+
+    if source.startswith("Eqs."):
+        return None
+    try:
+        return design_envelope(
+            read_yaml_mapping(source, f"signals summary {source}"),
+            source=f"signals summary {Path(source).name}",
+        )
+    except ConfigError as exc:
+        print(f"note: {exc}")
+        return None
+
+
+def velocity_index(cfg: dict, state_names: tuple) -> tuple[int, ...]:
+    names = cfg.get("velocity_states", ["u", "v", "w"])
+    try:
+        return tuple(state_names.index(n) for n in names)
+    except ValueError:
+        raise ConfigError(
+            f"velocity_states {names} not all among the model states {list(state_names)}"
+        ) from None
+
+
+@dataclass
+class Inputs:
+    """What one synthesis run works on (:func:`load_inputs`)."""
+
+    cfg: dict
+    opts: Any  # synthesis.hinf_lmi.HinfOptions
+    uncertainty: dict
+    feedforward: tuple[bool, dict, float]
+    model: Any  # models.lpv.PolytopicModel
+    raw: dict
+    R: np.ndarray
+    Q: np.ndarray
+    weights_source: str
+    vidx: tuple[int, ...]
+    C: np.ndarray
+    design: Optional[dict]
+    rate_from_design: bool
+    method: str
+    t0: float
+
+
+def load_inputs(args: argparse.Namespace) -> Inputs:
+    """Config, options (with the command-line overrides), models, weights and design envelope."""
+    from lpv_sysid.synthesis.hinf import HinfOptions, performance_matrix, resolve_method
+    from lpv_sysid.synthesis.uncertainty_set import load_models, uncertainty_settings
+
+    cfg = load_config(args.config)
+    opts = HinfOptions.from_dict(cfg.get("hinf"))
+    if args.gamma is not None:
+        opts = replace(opts, gamma=float(args.gamma))
+    if args.solver is not None:
+        opts = HinfOptions.from_dict(
+            {**{k: getattr(opts, k) for k in opts.__dataclass_fields__}, "solver": args.solver}
+        )
+    unc_cfg = uncertainty_settings(cfg.get("uncertainty"))
+    ff = feedforward_settings(cfg, args.config)
+    t0 = time.perf_counter()
+    model, raw = load_models(args.models, unc_cfg)
+    R, Q, source = weights_from_config(cfg, model.n_u, args.summary, args.config)
+    vidx = velocity_index(cfg, model.state_names)
+    C = performance_matrix(Q, model.n_x, vidx)
+    print(
+        f"models: {args.models} ({model.n_vertices} vertices, {model.n_x} states, "
+        f"{model.n_u} inputs); R, Q from {source}"
+    )
+    if model.ts is not None:
+        raise ConfigError(
+            f"{args.models}: Lemma 1 is a continuous-time result; the models are discrete "
+            f"(Ts={model.ts})"
+        )
+    design = design_from_summary(source)
+    rate_from_design = False
+    if opts.lyapunov == "rate" and opts.rate_bound == "design":
+        if design is None:
+            raise ConfigError(
+                "hinf.rate_bound: design needs the phase-2 signals summary (weights.summary) for the "
+                "design envelope's reference_rate"
+            )
+        opts = replace(opts, rate_bound=[float(x) for x in design["reference_rate"]])
+        rate_from_design = True
+    method = resolve_method(model, opts)
+    return Inputs(
+        cfg=cfg,
+        opts=opts,
+        uncertainty=unc_cfg,
+        feedforward=ff,
+        model=model,
+        raw=raw,
+        R=R,
+        Q=Q,
+        weights_source=source,
+        vidx=vidx,
+        C=C,
+        design=design,
+        rate_from_design=rate_from_design,
+        method=method,
+        t0=t0,
+    )

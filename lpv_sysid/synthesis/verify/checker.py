@@ -1,0 +1,265 @@
+"""Independent re-check of a gains certificate (seed 0 Lemma 1, Eqs. 29-31) without the solver.
+
+Checks, each a row of the report:
+
+1. ``hinf``: frozen-parameter closed loops A_i^j + B_i^j K_i at every scheduling vertex and every
+   uncertainty vertex, H-infinity norm u_e -> z by Hamiltonian bisection
+   (:mod:`lpv_sysid.synthesis.hinf.norm`) <= gamma;
+2. ``hinf interior``: the same at random interior scheduling points with the interpolated model
+   and gain (Eq. 21, Eq. 31), for the nominal model, for every uncertainty index j when all
+   vertices have the same number M of uncertainty vertices (the j-th corners taken together,
+   which is the same parameter theta for corner-enumerated polytopes), and for ``n_mix`` random
+   corner mixes: A = sum_i alpha_i sum_j w_i^j A_i^j, B = sum_i alpha_i sum_j w_i^j B_i^j with
+   Dirichlet weights; for a common input set (``model.common_input``) the weights are the product
+   w_i^(a,b) = beta_i^a beta^b with one beta^b for all vertices, so B = sum_b beta^b B^b -- the
+   frozen systems the common-B certificate claims (models.lpv_uncertainty module docstring);
+2b. ``common B`` / ``product A`` (common input set only): B_i^(a,b) identical to B^b for all
+   scheduling vertices i and A-corners a within 1e-12, and A_i^(a,b) independent of b -- the
+   structure Lemma 1's interior argument needs; ``verify_files`` also checks that the structure
+   is the one the certificate claims and that the B corners span every vertex's identified
+   B interval and nominal value (``B hull``);
+3. ``region``: closed-loop eigenvalues at all of the above points in the promised LMI region
+   (the stability region when none is promised);
+4. ``lmi``: when the certificate sidecar is present (sha256 checked), K_i == S_i H^-1 and the
+   Eq. (30) LMIs re-evaluated with numpy eigenvalues from the stored X, S, H (after the stored
+   diagonal congruence, which preserves inertia) hold at the file's gamma;
+4b. element-box certificates (``certificate.certified_set.kind: full_identified_box``, sidecar
+   ``lmi_form`` 1-3, :mod:`lpv_sysid.synthesis.robust`), checked without the synthesis code:
+   ``box claim`` -- the certified box (sidecar ``box_*``) contains every element interval of the
+   models file read here from the raw YAML (:func:`full_box_intervals`, the stored [lower, upper]
+   or nominal +/- k std) and its nominal A_i, B_i (elements outside the box equal the file's);
+   ``box lmi`` -- the robust LMI re-assembled here in its *uncompressed* Schur form
+   [Phi + L T L^T, cal_R^T; cal_R, -T] < 0 (the solver used the compressed harmonic-sum form)
+   from the stored X, S, H and multipliers t_l, at every vertex (and, for the rate form, at every
+   sign pattern of dv_d/dt from the stored rate bound, the exact condition the solver's W
+   relaxation implies); ``small gain`` -- independent of X and H: the KYP-equivalent
+   frequency-domain condition at every vertex, ||[C/gamma; T^-1/2 R~ [I; K_i]] (sI - A_cl)^-1
+   [B R, L T^1/2] + [0 0; T^-1/2 R~ [0; R] 0]||_inf < 1 (scaled small gain: the vertex bound for
+   every delta in the box, Hamiltonian H-inf norm with feedthrough); ``runtime set`` -- every
+   system the flight runtime re-checks (sidecar A_sys, B_sys) lies in the certified box;
+   ``scheduling`` -- the claimed variation (frozen / arbitrary / rate-bounded) matches the stored
+   LMI form and, for rate bounds, the design envelope.
+5. ``full-box *`` (optional, :func:`full_box_check`, ``verify_files(full_box=N)``): an *empirical*
+5. ``full-box *`` (optional, ``verify_files(full_box=N)``): the *empirical* Monte Carlo over the
+   FULL identified box (:mod:`lpv_sysid.synthesis.verify.montecarlo`, intervals by
+   :mod:`lpv_sysid.synthesis.verify.intervals`). A full-box certificate (item 4b, the shipped
+   configuration, docs/certificate.md) claims that set: the Monte Carlo is a cross-check of the
+   claim and a miss fails. A reduced-polytope certificate (``uncertainty.set: reduced_polytope``,
+   Eq. 23: ``p_max`` corner parameters, the others at their nominal values) does not claim it: a
+   miss is *advisory* (printed ``WARN``) and does not fail the report unless ``strict_full_box``.
+
+Modules: this one loads the files and runs the checks (:func:`verify_files`) and
+:func:`record_verification` writes the result to ``verification.yaml``
+(:mod:`lpv_sysid.synthesis.verify.report`, the owner of that format, and of the rows);
+:mod:`~lpv_sysid.synthesis.verify.frozen` (items 1-4), :mod:`~lpv_sysid.synthesis.verify.box`
+(4b), :mod:`~lpv_sysid.synthesis.verify.feedforward` and
+:mod:`~lpv_sysid.synthesis.verify.montecarlo` (5, uncertified). Their public names are
+importable from here as before.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from pathlib import Path
+from typing import Any, Optional
+
+import numpy as np
+
+from lpv_sysid.errors import ConfigError
+from lpv_sysid.synthesis.regions import Region
+from lpv_sysid.synthesis.verify.box import _sidecar_box, check_box_claim, check_scheduling_claim
+from lpv_sysid.synthesis.verify.feedforward import check_feedforward
+from lpv_sysid.synthesis.verify.frozen import _check_input_claim, verify_gains
+from lpv_sysid.synthesis.verify.intervals import full_box_intervals
+from lpv_sysid.synthesis.verify.montecarlo import add_full_box_rows, full_box_check
+from lpv_sysid.synthesis.verify.report import (
+    VERIFICATION_FILE,
+    VerifyReport,
+    verification_record,
+    write_verification,
+)
+
+log = logging.getLogger(__name__)
+
+
+def verify_files(
+    gains_path: Path | str,
+    models_path: Path | str,
+    n_random: int = 20,
+    seed: int = 0,
+    uncertainty: Optional[dict] = None,
+    velocity_index=None,
+    full_box: int = 0,
+    strict_full_box: bool = False,
+    k_sigma: Optional[float] = None,
+    full_box_kept: str = "stored",
+) -> VerifyReport:
+    """Load gains.yaml (+ sidecar) and vertex_models.yaml and run :func:`verify_gains`.
+
+    Also checks names, box, equilibria and the models_sha256 of the certificate. ``full_box`` > 0
+    adds the empirical Monte Carlo check over the full identified box (module docstring item 5,
+    :func:`full_box_check` with ``seed``); its rows are advisory (WARN, ``passed`` unaffected)
+    unless ``strict_full_box`` or the certificate claims the full box (then a miss fails: the
+    Monte Carlo is a cross-check of the claim). ``k_sigma`` overrides the models file's
+    ``meta.k_sigma``.
+    """
+    from lpv_sysid.io.files import sha256_file
+    from lpv_sysid.io.formats import GainSchedule, load_certificate_npz
+    from lpv_sysid.synthesis.hinf import performance_matrix
+    from lpv_sysid.synthesis.uncertainty_set import load_models
+
+    # the reading the vehicle flies (io.formats; LpvController takes the same GainSchedule)
+    gains = GainSchedule.load(gains_path, auto_layout=True)
+    cert = gains.certificate.to_dict()
+    claim = cert.get("input_structure")
+    if uncertainty is not None:
+        unc_cfg = uncertainty
+    else:
+        # rebuild the polytope the certificate was solved for; certificates without an
+        # input_structure entry predate the common-B option and are per-vertex
+        unc_raw = cert.get("uncertainty") or {}
+        if not isinstance(unc_raw, dict):
+            raise ConfigError(
+                f"{gains_path}: certificate.uncertainty must be a mapping, got {unc_raw!r}"
+            )
+        unc_cfg = dict(unc_raw)
+        unc_cfg["common_b"] = isinstance(claim, dict) and claim.get("B") == "common"
+    model, raw = load_models(models_path, unc_cfg)
+    ga_claim = cert.get("gamma_achieved")
+    rep = VerifyReport(
+        gamma=float(gains.gamma), gamma_achieved=None if ga_claim is None else float(ga_claim)
+    )
+    sha = sha256_file(models_path)
+    rep.add(
+        "models hash",
+        Path(models_path).name,
+        0.0 if sha == cert.get("models_sha256") else 1.0,
+        0.0,
+        sha == cert.get("models_sha256"),
+        ""
+        if sha == cert.get("models_sha256")
+        else "models file differs from the one the gains were synthesised for",
+    )
+    same_names = (
+        gains.state_names == model.state_names
+        and gains.input_names == model.input_names
+        and gains.scheduling.names == model.scheduling_names
+    )
+    rep.add("names", "states/inputs/scheduling", 0.0 if same_names else 1.0, 0.0, same_names)
+    same_box = np.allclose(gains.vmin, model.vmin) and np.allclose(gains.vmax, model.vmax)
+    rep.add("box", "scheduling min/max", 0.0 if same_box else 1.0, 0.0, bool(same_box))
+    eq_err = float(max(np.max(np.abs(gains.x0 - model.x0)), np.max(np.abs(gains.u0 - model.u0))))
+    rep.add("equilibria", "x0/u0 vs models", eq_err, 1e-9, eq_err <= 1e-9)
+    if not (same_names and same_box):
+        return rep
+    _check_input_claim(rep, model, claim, raw)
+    if gains.F_ff is not None and gains.feedforward is not None:
+        check_feedforward(rep, model, gains.F_ff, gains.feedforward.to_dict(), gains.F_jerk)
+    region = Region.from_dict(cert.get("region")) if cert.get("region") else None
+    sidecar = None
+    side = cert.get("sidecar")
+    if isinstance(side, dict) and side.get("file"):
+        p = Path(gains_path).parent / str(side["file"])
+        if not os.path.lexists(p):
+            rep.add("sidecar", p.name, 1.0, 0.0, False, "certificate sidecar missing")
+        else:
+            # present but unreadable (not a regular file, empty, truncated, corrupt): a damaged
+            # input, ConfigError (exit 2), not a failed verification; readable but altered: FAIL
+            load_certificate_npz(p)
+            ok = sha256_file(p) == side.get("sha256")
+            rep.add(
+                "sidecar", p.name, 0.0 if ok else 1.0, 0.0, ok, "" if ok else "sha256 mismatch"
+            )
+            if ok:
+                sidecar = load_certificate_npz(p)
+    if velocity_index is None and cert.get("velocity_states"):
+        try:
+            velocity_index = tuple(model.state_names.index(nm) for nm in cert["velocity_states"])
+        except ValueError:
+            rep.add(
+                "velocity",
+                "certificate.velocity_states",
+                1.0,
+                0.0,
+                False,
+                "names not among the states",
+            )
+            return rep
+    if velocity_index is None:
+        names = ("u", "v", "w")
+        velocity_index = (
+            tuple(model.state_names.index(n) for n in names)
+            if all(n in model.state_names for n in names)
+            else (2, 3, 4)
+        )
+    C = performance_matrix(gains.Q, model.n_x, velocity_index)
+    if model.box is not None:
+        bx = _sidecar_box(sidecar, model.n_x, model.n_u) if sidecar is not None else None
+        if bx is None:
+            rep.add(
+                "box claim",
+                "sidecar",
+                1.0,
+                0.0,
+                False,
+                "full-box certificate without its box arrays",
+            )
+        else:
+            check_box_claim(rep, model, raw, cert, bx)
+    check_scheduling_claim(rep, cert, sidecar)
+    sub = verify_gains(
+        model, gains.K, gains.R, C, gains.gamma, region, n_random, seed, certificate=sidecar
+    )
+    rep.rows.extend(sub.rows)
+    ga = cert.get("gamma_achieved")
+    if ga is not None:
+        worst = max(
+            (r.value for r in rep.rows if r.check.startswith("hinf")), default=float("nan")
+        )
+        rep.add(
+            "gamma claim",
+            "certificate.gamma_achieved",
+            worst,
+            float(ga) * (1 + 1e-3) + 1e-12,
+            bool(worst <= float(ga) * (1 + 1e-3) + 1e-12),
+            "worst independent H-inf norm vs the claimed gamma_achieved",
+        )
+    if full_box > 0:
+        boxes, k, k_src = full_box_intervals(raw, k_sigma, full_box_kept)
+        res = full_box_check(
+            model,
+            gains.K,
+            gains.R,
+            C,
+            gains.gamma,
+            boxes,
+            n=full_box,
+            seed=seed,
+            k_sigma=k,
+            k_source=k_src,
+        )
+        claimed = (
+            isinstance(cert.get("certified_set"), dict)
+            and cert["certified_set"].get("kind") == "full_identified_box"
+            and k_sigma is None
+            and full_box_kept == "stored"
+        )
+        add_full_box_rows(rep, res, strict=strict_full_box, claimed=claimed)
+    return rep
+
+
+def record_verification(
+    gains_path: Path | str,
+    models_path: Path | str,
+    out: Optional[Path | str] = None,
+    **kw: Any,
+) -> tuple[VerifyReport, Path]:
+    """:func:`verify_files` (``kw`` its options) and the result written to ``out`` (default
+    ``verification.yaml`` next to the gains file) with the SHA-256 of the files checked;
+    returns (report, path). The file is written for a failed verification too (passed: false)."""
+    rep = verify_files(gains_path, models_path, **kw)
+    path = Path(out) if out is not None else Path(gains_path).parent / VERIFICATION_FILE
+    settings = {k: v for k, v in kw.items() if k not in ("uncertainty", "velocity_index")}
+    write_verification(path, verification_record(rep, gains_path, models_path, settings))
+    return rep, path

@@ -1,0 +1,371 @@
+"""Empirical Monte Carlo over the FULL identified uncertainty box: evidence, not a certificate.
+
+Rows ``full-box hinf``, ``full-box frac``, ``full-box stab`` (:mod:`lpv_sysid.synthesis.verify`
+item 5). Scheduling points v_d (the box corners, then uniform interior points) and, independently
+per scheduling vertex i, every identified element theta_i,l from its full interval
+(:func:`lpv_sysid.synthesis.verify.intervals.full_box_intervals`; even samples uniform in the
+box, odd samples a random corner of it) give A(v_d) = sum_i alpha_i A_i(theta_i), B(v_d) likewise
+(Eq. 21, multilinear alpha) and the interpolated gain K(v_d) (Eq. 31); the frozen closed loop
+A + B K is judged by its spectral abscissa and H-inf norm u_e -> z
+(:func:`lpv_sysid.synthesis.hinf.norm.hinf_norm`). Two extreme corners per scheduling vertex are
+added: every element at the end of its interval that increases, to first order, (a) the
+closed-loop H-inf norm (analytic sensitivity of sigma_max at the peak frequency) and (b) the
+spectral abscissa (eigenvalue sensitivity y^H dA x / y^H x).
+
+Sampling proves nothing about the samples not drawn. For a reduced-polytope certificate, which
+does not claim this set, a miss is advisory (WARN) unless ``strict``; for a full-box certificate
+the Monte Carlo is a cross-check of the claim and a miss fails.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from lpv_sysid.errors import ConfigError
+from lpv_sysid.models.lpv import PolytopicModel, multilinear_weights
+from lpv_sysid.synthesis.hinf import hinf_norm
+from lpv_sysid.synthesis.verify.intervals import DEFAULT_K_SIGMA, ElementBox
+from lpv_sysid.synthesis.verify.report import VerifyReport
+
+
+@dataclass
+class FullBoxSample:
+    where: str  # "corner 3 uniform", "interior 17 corner-draw", "vertex 2 worst-norm corner"
+    v_d: np.ndarray
+    norm: float  # H-inf norm u_e -> z (inf when unstable; nan in discrete time)
+    abscissa: float  # max Re eig (continuous) or spectral radius - 1 (discrete)
+    ok: bool
+
+
+@dataclass
+class FullBoxResult:
+    """Outcome of :func:`full_box_check` (empirical, not certified)."""
+
+    samples: list
+    gamma: float
+    k_sigma: float
+    k_source: str
+    seed: int
+    n_elements: list  # identified elements per vertex
+    n_stored: int  # elements using the stored [lower, upper] (all vertices)
+    n_ksigma: int  # elements using nominal +/- k std
+    worst: Optional[FullBoxSample] = None
+    worst_A: Optional[np.ndarray] = None  # frozen closed-loop data of the worst sample
+    worst_B: Optional[np.ndarray] = None
+    worst_K: Optional[np.ndarray] = None
+
+    @property
+    def n(self) -> int:
+        return len(self.samples)
+
+    @property
+    def fraction_ok(self) -> float:
+        return sum(s.ok for s in self.samples) / max(1, self.n)
+
+    @property
+    def all_stable(self) -> bool:
+        return all(s.abscissa < 0 for s in self.samples)
+
+    @property
+    def max_abscissa(self) -> float:
+        return max((s.abscissa for s in self.samples), default=float("nan"))
+
+    @property
+    def passed(self) -> bool:
+        return bool(self.samples) and all(s.ok for s in self.samples)
+
+    def summary(self) -> dict:
+        """Plain mapping for verification.yaml / the report."""
+        w = self.worst
+        return {
+            "samples": self.n,
+            "seed": int(self.seed),
+            "gamma": float(self.gamma),
+            "k_sigma": float(self.k_sigma),
+            "k_sigma_source": self.k_source,
+            "elements_per_vertex": [int(x) for x in self.n_elements],
+            "intervals_stored": int(self.n_stored),
+            "intervals_k_std": int(self.n_ksigma),
+            "worst_norm": float(w.norm) if w is not None else float("nan"),
+            "worst_where": w.where if w is not None else "",
+            "worst_v_d": [float(x) for x in w.v_d] if w is not None else [],
+            "fraction_ok": float(self.fraction_ok),
+            "all_stable": bool(self.all_stable),
+            "max_abscissa": float(self.max_abscissa),
+            "passed": bool(self.passed),
+            "note": "empirical Monte Carlo over the full identified box (evidence, not a proof)",
+        }
+
+
+def _frozen(
+    A: np.ndarray,
+    B: np.ndarray,
+    K: np.ndarray,
+    R: np.ndarray,
+    C: np.ndarray,
+    gamma: float,
+    rtol: float,
+    ts: Optional[float],
+) -> tuple[float, float, bool]:
+    """(norm, abscissa, ok) of the frozen closed loop A + B K (seed 0 Eq. 19 with Eq. 31)."""
+    Acl = A + B @ K
+    eig = np.linalg.eigvals(Acl)
+    if ts is not None:
+        rho = float(np.max(np.abs(eig))) - 1.0
+        return float("nan"), rho, rho < 0.0
+    absc = float(np.max(eig.real))
+    if absc >= 0.0:
+        return float("inf"), absc, False
+    h = hinf_norm(Acl, B @ R, C)
+    return float(h.value), absc, bool(h.stable and h.lower <= gamma * (1 + rtol))
+
+
+def _worst_corners(
+    A: np.ndarray,
+    B: np.ndarray,
+    K: np.ndarray,
+    R: np.ndarray,
+    C: np.ndarray,
+    box: ElementBox,
+    ts: Optional[float],
+) -> list:
+    """First-order worst corners of the element box at one scheduling vertex: every element at the
+    end of its interval that increases (a) the H-inf norm and (b) the spectral abscissa, to first
+    order at the box centre (:func:`element_sensitivities`)."""
+    if box.is_a.size == 0:
+        return []
+    th0 = 0.5 * (box.lower + box.upper)
+    return [
+        (name, np.where(g > 0, box.upper, box.lower))
+        for name, g in element_sensitivities(A, B, K, R, C, box, th0, ts)
+    ]
+
+
+def element_sensitivities(
+    A: np.ndarray,
+    B: np.ndarray,
+    K: np.ndarray,
+    R: np.ndarray,
+    C: np.ndarray,
+    box: ElementBox,
+    theta: np.ndarray,
+    ts: Optional[float] = None,
+) -> list:
+    """[("worst-norm corner", d||G||_inf/d theta),
+    ("worst-abscissa corner", d max Re lambda/d theta)] of the frozen closed loop at ``theta``
+    (the norm entry only when stable, continuous time).
+
+    d sigma = Re(u^H dG v) at the peak frequency w (u, v top singular vectors of G(j w)),
+    dG = C Rz dAcl Rz Be + C Rz dBe, Rz = (j w I - Acl)^-1, dAcl = dA + dB K, dBe = dB R;
+    d lambda = y^H dAcl x / (y^H x) for the rightmost eigenvalue (x right, y left eigenvector).
+    Hand-written: scipy has no H-inf sensitivity."""
+    if box.is_a.size == 0:
+        return []
+    A0, B0 = box.apply(A, B, theta)
+    Acl = A0 + B0 @ K
+    eig, yl, xr = _eig_lr(Acl)
+    k = int(np.argmax(eig.real))
+    x, y = xr[:, k], yl[:, k]
+    yx = np.vdot(y, x)
+    grads = []
+    if ts is None and eig[k].real < 0:
+        h = hinf_norm(Acl, B0 @ R, C)
+        w = _refine_peak(Acl, B0 @ R, C, h.frequency if np.isfinite(h.frequency) else 0.0)
+        n = Acl.shape[0]
+        Rz = np.linalg.inv(1j * w * np.eye(n) - Acl)
+        G = C @ Rz @ (B0 @ R)
+        U, _, Vh = np.linalg.svd(G)
+        u, v = U[:, 0], Vh[0].conj()
+        p = u.conj() @ C @ Rz  # (n,)
+        q = Rz @ (B0 @ R) @ v  # (n,)
+        g = np.empty(box.is_a.size)
+        a, b = box.is_a, ~box.is_a
+        g[a] = np.real(p[box.row[a]] * q[box.col[a]])
+        g[b] = np.real(p[box.row[b]] * ((K @ q)[box.col[b]] + (R @ v)[box.col[b]]))
+        grads.append(("worst-norm corner", g))
+    if abs(yx) > 0:
+        g = np.empty(box.is_a.size)
+        a, b = box.is_a, ~box.is_a
+        g[a] = np.real(np.conj(y[box.row[a]]) * x[box.col[a]] / yx)
+        g[b] = np.real(np.conj(y[box.row[b]]) * (K @ x)[box.col[b]] / yx)
+        grads.append(("worst-abscissa corner", g))
+    return grads
+
+
+def _refine_peak(A: np.ndarray, B: np.ndarray, C: np.ndarray, w0: float) -> float:
+    """Peak frequency of sigma_max near the bisection's w0 (its bracket ends at a midpoint, O(dw)
+    off the maximiser; the envelope-theorem gradient needs the maximiser). scipy bounded Brent."""
+    from scipy.optimize import minimize_scalar
+
+    from lpv_sysid.synthesis.hinf import sigma_max
+
+    if w0 <= 0.0:
+        return 0.0
+    r = minimize_scalar(
+        lambda w: -sigma_max(A, B, C, w),
+        bounds=(0.8 * w0, 1.25 * w0),
+        method="bounded",
+        options={"xatol": 1e-10 * w0},
+    )
+    return float(r.x) if -r.fun >= sigma_max(A, B, C, w0) else w0
+
+
+def _eig_lr(M: np.ndarray):
+    from scipy.linalg import eig
+
+    w, vl, vr = eig(M, left=True, right=True)
+    return w, vl, vr
+
+
+def full_box_check(
+    model: PolytopicModel,
+    K: np.ndarray,
+    R: np.ndarray,
+    C: np.ndarray,
+    gamma: float,
+    boxes: list,
+    n: int = 200,
+    seed: int = 0,
+    rtol: float = 1e-6,
+    extremes: bool = True,
+    k_sigma: float = DEFAULT_K_SIGMA,
+    k_source: str = "",
+) -> FullBoxResult:
+    """Monte Carlo over the full identified box (module docstring, item 5); empirical only.
+
+    ``boxes``: :func:`full_box_intervals` (one per vertex, box order). Samples: the 2^p scheduling
+    corners first (when n allows), then uniform interior v_d; per sample and per vertex the
+    elements are drawn independently, uniform in their interval (even samples) or at a random
+    corner of it (odd samples). ``extremes`` adds the two first-order worst corners per scheduling
+    vertex (:func:`_worst_corners`). Seeded: same inputs and seed -> same samples.
+    """
+    if len(boxes) != model.n_vertices:
+        raise ConfigError(
+            f"full-box check: {len(boxes)} element boxes for {model.n_vertices} vertices"
+        )
+    for i, b in enumerate(boxes):
+        n_col = np.where(b.is_a, model.n_x, model.n_u)
+        if b.row.size and (
+            np.any(b.row < 0)
+            or np.any(b.row >= model.n_x)
+            or np.any(b.col < 0)
+            or np.any(b.col >= n_col)
+        ):
+            raise ConfigError(
+                f"full-box check: vertex {i}: uncertain element outside "
+                f"A ({model.n_x}x{model.n_x}) / B ({model.n_x}x{model.n_u})"
+            )
+        if np.any(b.lower > b.upper) or not np.all(np.isfinite(np.r_[b.lower, b.upper])):
+            raise ConfigError(f"full-box check: vertex {i}: need finite lower <= upper")
+    K = np.asarray(K, dtype=float)
+    R = np.asarray(R, dtype=float)
+    C = np.asarray(C, dtype=float)
+    rng = np.random.default_rng(seed)
+    verts = model.vertices
+    res = FullBoxResult(
+        [],
+        float(gamma),
+        float(k_sigma),
+        k_source,
+        int(seed),
+        [b.is_a.size for b in boxes],
+        sum(s == "stored" for b in boxes for s in b.source),
+        sum(s == "k*std" for b in boxes for s in b.source),
+    )
+    worst_key = (-np.inf, -np.inf)
+
+    def record(where, vd, A, B, Kv):
+        nonlocal worst_key
+        norm, absc, ok = _frozen(A, B, Kv, R, C, gamma, rtol, model.ts)
+        s = FullBoxSample(where, np.asarray(vd, dtype=float), norm, absc, ok)
+        res.samples.append(s)
+        key = (absc if model.ts is not None else norm, absc)
+        if key > worst_key:
+            worst_key = key
+            res.worst, res.worst_A, res.worst_B, res.worst_K = s, A, B, Kv
+
+    for k in range(max(0, int(n))):
+        if k < len(verts):
+            vd, tag = verts[k], f"corner {k}"
+        else:
+            vd, tag = (
+                model.vmin + rng.random(model.vmin.size) * (model.vmax - model.vmin),
+                f"interior {k}",
+            )
+        alpha, _ = multilinear_weights(vd, model.vmin, model.vmax)
+        corner_draw = k % 2 == 1
+        A = np.zeros_like(model.A[0])
+        B = np.zeros_like(model.B[0])
+        for i, a in enumerate(alpha):
+            b = boxes[i]
+            if corner_draw:
+                th = np.where(rng.random(b.lower.size) < 0.5, b.lower, b.upper)
+            else:
+                th = b.lower + rng.random(b.lower.size) * (b.upper - b.lower)
+            if a == 0.0:
+                continue
+            Ai, Bi = b.apply(model.A[i], model.B[i], th)
+            A += a * Ai
+            B += a * Bi
+        record(
+            f"{tag} {'corner-draw' if corner_draw else 'uniform'}",
+            vd,
+            A,
+            B,
+            np.tensordot(alpha, K, axes=1),
+        )
+    if extremes and n > 0:
+        for i, vd in enumerate(verts):
+            for name, th in _worst_corners(model.A[i], model.B[i], K[i], R, C, boxes[i], model.ts):
+                Ai, Bi = boxes[i].apply(model.A[i], model.B[i], th)
+                record(f"vertex {i} {name}", vd, Ai, Bi, K[i])
+    return res
+
+
+def add_full_box_rows(
+    rep: VerifyReport, res: FullBoxResult, strict: bool = False, claimed: bool = False
+) -> None:
+    """Rows ``full-box hinf`` / ``full-box frac`` / ``full-box stab``: ``ok`` only when every
+    sample passes; otherwise advisory (WARN) unless ``strict``. ``claimed``: the certificate
+    claims this box (``certified_set.kind: full_identified_box``), so a miss is a broken
+    certificate (strict)."""
+    rep.full_box = res
+    adv = not (strict or claimed)
+    w = res.worst
+    vd = "[" + ", ".join(f"{x:.3g}" for x in w.v_d) + "]" if w is not None else "-"
+    tag = f"empirical, {res.n} samples, k={res.k_sigma:g}; " + (
+        "cross-check of the certified full box" if claimed else "not certified"
+    )
+    if w is not None and not np.isnan(w.norm):
+        rep.add(
+            "full-box hinf",
+            f"worst v_d {vd}",
+            w.norm,
+            res.gamma,
+            res.passed,
+            f"{w.where}; {tag}",
+            advisory=adv,
+        )
+    n_ok = sum(s.ok for s in res.samples)
+    rep.add(
+        "full-box frac",
+        f"{n_ok}/{res.n} samples ok",
+        res.fraction_ok,
+        1.0,
+        res.passed,
+        "fraction with norm <= gamma and stable",
+        advisory=adv,
+    )
+    n_unst = sum(s.abscissa >= 0 for s in res.samples)
+    rep.add(
+        "full-box stab",
+        "max Re eig" if res.worst is None or not np.isnan(res.worst.norm) else "max |eig| - 1",
+        res.max_abscissa,
+        0.0,
+        res.all_stable,
+        "" if res.all_stable else f"{n_unst} unstable samples",
+        advisory=adv,
+    )
