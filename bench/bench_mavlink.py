@@ -24,7 +24,7 @@ import time
 import numpy as np
 
 from bench.harness import Page, Row, interleaved, load_average, status
-from lpv_sysid.mavlink import px4
+from lpv_sysid.mavlink import codec
 from lpv_sysid.mavlink.bridge import BridgeConfig, BridgeCore
 from lpv_sysid.mavlink.link import LinkConfig, MavlinkLink, free_udp_port
 from lpv_sysid.mavlink.offboard import OffboardConfig, State
@@ -33,8 +33,8 @@ from lpv_sysid.sim.px4_vehicle import SimVehicle, SimVehicleConfig
 
 
 def _telemetry_datagrams(n: int) -> list[bytes]:
-    tx = px4.make_codec(None, 1, 1)
-    esc = px4.esc_status_class()
+    tx = codec.make_codec(None, 1, 1)
+    esc = codec.esc_status_class()
     out = []
     for i in range(n):
         k = i % 6
@@ -63,7 +63,7 @@ def bench_decode(n: int = 30000, repeat: int = 9) -> dict:
 
     def feeder(fast: bool):
         link = MavlinkLink(LinkConfig(url="udpin:127.0.0.1:1"))
-        link.codec = px4.make_codec(None, 2, 1)
+        link.codec = codec.make_codec(None, 2, 1)
         if not fast:
             link._no_fast = link.codec
 
@@ -77,7 +77,7 @@ def bench_decode(n: int = 30000, repeat: int = 9) -> dict:
 
     def full():
         link = MavlinkLink(LinkConfig(url="udpin:127.0.0.1:1"))
-        link.codec = px4.make_codec(None, 2, 1)
+        link.codec = codec.make_codec(None, 2, 1)
         dec = TelemetryDecoder()
         for i, d in enumerate(data):
             for m in link.feed(d, 0.0):
@@ -86,8 +86,8 @@ def bench_decode(n: int = 30000, repeat: int = 9) -> dict:
     unpack = {}
     for d in data[:6]:
         mid = d[7] | d[8] << 8 | d[9] << 16
-        cls = px4.dialect_module().mavlink_map.get(mid)
-        unpack[mid] = cls.unpacker if cls is not None else px4._ESC_STATUS_STRUCT
+        cls = codec.dialect_module().mavlink_map.get(mid)
+        unpack[mid] = cls.unpacker if cls is not None else codec._ESC_STATUS_STRUCT
 
     def floor():
         for d in data:

@@ -223,8 +223,7 @@ def test_real_px4_phase1_records_rate_setpoints_and_identifies(tmp_path):
     d, why = find_px4()
     if d is None:
         pytest.skip(why)
-    from lpv_sysid.cli.fly import fly
-    from lpv_sysid.flight.campaign import FlyConfig
+    from lpv_sysid.flight.campaign import FlyConfig, fly
 
     cfg_doc = yaml.safe_load((CONFIG / "campaign_chain.yaml").read_text())
     cfg_doc["bridge_config"] = str(CONFIG / "mavlink_bridge_chain.yaml")

@@ -1,5 +1,5 @@
 """The one u_e -> z FIR regression (sim/closed_loop/excitation_fir.py) behind the phase-2 simulation and the
-PX4 chain's gain (cli/chain.excitation_gain)."""
+PX4 chain's gain (flight/phase2/analysis.excitation_gain)."""
 
 from __future__ import annotations
 
@@ -44,7 +44,7 @@ def test_fir_response_matches_the_true_one_and_its_peak_gain():
 
 
 def test_chain_gain_is_the_same_regression():
-    """cli.chain.excitation_gain reports what excitation_response_fir fitted (one regression:
+    """flight.phase2.excitation_gain reports what excitation_response_fir fitted (one regression:
     before, chain had its own copy that differed in grid and window)."""
     t, z, ue, z_e, _ = _data()
     fs = 50.0

@@ -23,9 +23,8 @@ import pytest
 import yaml
 from support.lockstep import LockStep
 
-from lpv_sysid.cli.fly import fly
 from lpv_sysid.cli.main import main as cli_main
-from lpv_sysid.flight.campaign import FlyConfig
+from lpv_sysid.flight.campaign import FlyConfig, fly
 from lpv_sysid.io import bag as iobag
 from lpv_sysid.io import messages
 from lpv_sysid.mavlink import px4
@@ -250,7 +249,7 @@ def test_level_vertex_at_a_tilted_vertex_holds_altitude(tmp_path, vehicles):
 
     state = {}
     res_phase = lambda: state["c"].phase if "c" in state else ""  # noqa: E731
-    import lpv_sysid.cli.fly as fly_module
+    from lpv_sysid.flight.campaign import runner as fly_module
 
     orig = fly_module.FlightRunner.run
 
@@ -312,7 +311,7 @@ def test_preflight_nogo_refuses_to_fly(tmp_path, vehicles):
 def test_interrupt_hands_back_and_leaves_readable_bags(tmp_path, vehicles):
     veh, cfg, sig, ls = setup(tmp_path, vehicle={"params": {"COM_OBL_RC_ACT": 5}}, flight_log=True)
     vehicles.append(veh)
-    import lpv_sysid.cli.fly as fly_module
+    from lpv_sysid.flight.campaign import runner as fly_module
 
     runners = []
     orig_init = fly_module.FlightRunner.__init__

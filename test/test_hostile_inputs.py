@@ -814,7 +814,7 @@ def test_complex_signal_is_refused_not_made_real(base, tmp_path):
 def test_unexpected_exception_is_one_line_exit_2_and_traceback_only_with_v(
     base, tmp_path, capsys, monkeypatch
 ):
-    import lpv_sysid.synthesis.verify as sv
+    import lpv_sysid.synthesis.verify.checker as sv
 
     def boom(*a, **kw):
         raise ValueError("array must not contain infs or NaNs")
@@ -873,7 +873,7 @@ def test_genuine_verification_failure_still_exits_1(base, tmp_path, capsys):
 
 
 def test_interrupt_is_one_line_exit_130(base, capsys, monkeypatch):
-    import lpv_sysid.synthesis.verify as sv
+    import lpv_sysid.synthesis.verify.checker as sv
 
     monkeypatch.setattr(
         sv, "verify_files", lambda *a, **kw: (_ for _ in ()).throw(KeyboardInterrupt())

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from lpv_sysid.control.baseline import BaselineGains
+from lpv_sysid.control.campaign import run_name
 from lpv_sysid.ident import dataprep as dp
 from lpv_sysid.ident import vertex as vx
 from lpv_sysid.models.quadrotor import Quadrotor
@@ -21,7 +22,7 @@ def runs():
     q = Quadrotor()
     cfg = p1.Phase1Config(trim_s=8.0, excite_s=24.0)
     recs = [
-        p1.simulate_run(q, BaselineGains(), SensorConfig(), cfg, v, p1.run_name(v), seed=s)
+        p1.simulate_run(q, BaselineGains(), SensorConfig(), cfg, v, run_name(v), seed=s)
         for s, v in ((3, (5.0, -5.0, 5.0)), (4, (0.0, 0.0, 0.0)))
     ]
     return q, recs

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from lpv_sysid.control.baseline import BaselineGains
+from lpv_sysid.control.campaign import run_name
 from lpv_sysid.ident import dataprep as dp
 from lpv_sysid.ident import derivatives as deriv
 from lpv_sysid.ident import vertex as vx
@@ -34,7 +35,7 @@ def datas():
     cfg = p1.Phase1Config(trim_s=8.0, excite_s=24.0)
     out = []
     for s, v in ((3, (5.0, -5.0, 5.0)), (4, (0.0, 0.0, 0.0))):
-        rec = p1.simulate_run(q, BaselineGains(), SensorConfig(), cfg, v, p1.run_name(v), seed=s)
+        rec = p1.simulate_run(q, BaselineGains(), SensorConfig(), cfg, v, run_name(v), seed=s)
         out.append(dp.align(dp.streams_from_record(rec), vx.IdentificationConfig()).vertex)
     return out
 

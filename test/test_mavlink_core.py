@@ -14,6 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from lpv_sysid.errors import ConfigError, LpvSysidError
 from lpv_sysid.io import frames
+from lpv_sysid.mavlink import codec as mavcodec
 from lpv_sysid.mavlink import px4
 from lpv_sysid.mavlink.bridge import (
     ATTITUDE_TARGET_IGNORE_ATTITUDE,
@@ -46,7 +47,7 @@ from lpv_sysid.mavlink.telemetry import ImuSample, RotorSample, StateSample, Tel
 from lpv_sysid.sim.px4_vehicle import SimVehicle, SimVehicleConfig
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-MOD = px4.dialect_module()
+MOD = mavcodec.dialect_module()
 
 
 # ----------------------------------------------------------------------- PX4 encodings
@@ -89,11 +90,13 @@ def test_esc_status_definition_matches_mavlink_xml(tmp_path):
           </message></messages></mavlink>""")
     )
     m = mavparse.MAVXML(str(xml), mavparse.PROTOCOL_2_0).message[0]
-    assert m.crc_extra == px4.ESC_STATUS_CRC_EXTRA
-    assert m.wire_length == px4._ESC_STATUS_STRUCT.size
-    tx = px4.make_codec(None, 1, 1)
-    buf = px4.esc_status_class()(4, 123456789, [1000, -2000, 3, 0], [16.0] * 4, [1.5] * 4).pack(tx)
-    rx = px4.make_codec(None, 2, 1)
+    assert m.crc_extra == mavcodec.ESC_STATUS_CRC_EXTRA
+    assert m.wire_length == mavcodec._ESC_STATUS_STRUCT.size
+    tx = mavcodec.make_codec(None, 1, 1)
+    buf = mavcodec.esc_status_class()(
+        4, 123456789, [1000, -2000, 3, 0], [16.0] * 4, [1.5] * 4
+    ).pack(tx)
+    rx = mavcodec.make_codec(None, 2, 1)
     (msg,) = rx.parse_buffer(buf)
     assert msg.get_type() == "ESC_STATUS" and msg.index == 4 and msg.time_usec == 123456789
     assert msg.rpm == [1000, -2000, 3, 0] and msg.current == [1.5] * 4
@@ -202,7 +205,7 @@ def test_signed_link_accepts_matching_key_and_rejects_wrong_key(tmp_path):
 
 # ------------------------------------------------------------------- robustness
 def _valid_packets(n: int) -> list[bytes]:
-    tx = px4.make_codec(None, 1, 1)
+    tx = mavcodec.make_codec(None, 1, 1)
     out = []
     for i in range(n):
         m = tx.attitude_quaternion_encode(i, 1.0, 0.0, 0.0, 0.0, 0.01 * i, 0.0, 0.0, [0.0] * 4)
@@ -253,7 +256,7 @@ def test_udp_link_survives_garbage_and_truncated_datagrams():
 def test_stream_parser_resynchronises_after_garbage():
     """Serial-like byte stream: junk, then >= 300 filler bytes, then packets -> all decoded."""
     rng = np.random.default_rng(11)
-    rx = px4.make_codec(None, 2, 1)
+    rx = mavcodec.make_codec(None, 2, 1)
     valid = _valid_packets(20)
     stream = b"".join(
         rng.integers(0, 256, 200, dtype=np.uint8).tobytes() + b"\0" * 300 + p for p in valid
@@ -321,7 +324,7 @@ def test_telemetry_rejects_nan_out_of_order_and_reports_staleness():
     assert age["attitude"] == pytest.approx(0.5) and age["position"] == pytest.approx(0.5)
     assert math.isinf(age["imu"])
     assert dec.latest_state(1.5) is None  # older than max_age: no state
-    esc = px4.esc_status_class()(0, 5_000_000, [6000, 6000, -6000, 0], [0] * 4, [0] * 4)
+    esc = mavcodec.esc_status_class()(0, 5_000_000, [6000, 6000, -6000, 0], [0] * 4, [0] * 4)
     (r,) = dec.on_message(esc, 1.6)
     assert isinstance(r, RotorSample)
     np.testing.assert_allclose(r.omega, [200 * math.pi, 200 * math.pi, 200 * math.pi, 0.0])
@@ -508,7 +511,7 @@ def test_offboard_config_validation(bad, match):
 
 # ------------------------------------------------------------------- transports
 def test_velocity_transport_masks_and_frames():
-    codec = px4.make_codec(None, 1, 191)
+    codec = mavcodec.make_codec(None, 1, 191)
     ctx = TransportContext(1234, 1, 1, q_wxyz=np.array([math.cos(0.3), 0, 0, math.sin(0.3)]))
     (m,) = VelocityTransport("body_ned", use_yaw_rate=False).encode(
         codec, VelocitySetpoint((1, 2, 3), 0.4), ctx
@@ -527,7 +530,7 @@ def test_attitude_rate_transport_inverts_px4_rate_p_and_allocation():
 
     quad = Quadrotor()
     tr = AttitudeRateTransport(quad.params.arm_length, rate_p=(0.15, 0.17, 0.2))
-    codec = px4.make_codec(None, 1, 191)
+    codec = mavcodec.make_codec(None, 1, 191)
     omega = np.array([0.2, -0.1, 0.05])
     u = np.array([0.55, 0.006, -0.004, 0.03])
     (m,) = tr.encode(codec, ActuatorSetpoint(tuple(u)), TransportContext(0, 1, 1, omega=omega))

@@ -10,18 +10,18 @@ import random
 import numpy as np
 import pytest
 
-from lpv_sysid.mavlink import px4
+from lpv_sysid.mavlink import codec
 from lpv_sysid.mavlink.link import FAST_MESSAGES, FastDecoder, LinkConfig, MavlinkLink, x25_crc
 
-MOD = px4.dialect_module()
+MOD = codec.dialect_module()
 
 
 def packets(n: int, seed: int = 0, system: int = 1, component: int = 1) -> list[bytes]:
     """n MAVLink 2 packets of every FAST_MESSAGES type with random field values (zero
     fields make MAVLink 2 truncate the payload), plus a few other ids."""
     rng = np.random.default_rng(seed)
-    tx = px4.make_codec(None, system, component)
-    esc = px4.esc_status_class()
+    tx = codec.make_codec(None, system, component)
+    esc = codec.esc_status_class()
 
     def f(k=None, zero=False):
         v = rng.normal(size=k) * 10
@@ -90,7 +90,7 @@ def packets(n: int, seed: int = 0, system: int = 1, component: int = 1) -> list[
 
 def link(fast: bool = True) -> MavlinkLink:
     lk = MavlinkLink(LinkConfig(url="udpin:127.0.0.1:1"))
-    lk.codec = px4.make_codec(None, 2, 1)
+    lk.codec = codec.make_codec(None, 2, 1)
     if not fast:
         lk._no_fast = lk.codec  # pymavlink for everything
     return lk
@@ -200,7 +200,7 @@ def test_corrupted_packets_are_pymavlinks_business():
 
 def test_no_fast_path_with_signing_or_callbacks():
     lk = link(True)
-    px4.setup_signing(lk.codec, os.urandom(32), allow_unsigned=True)
+    codec.setup_signing(lk.codec, os.urandom(32), allow_unsigned=True)
     assert lk._fast_decoder() is None
     lk2 = link(True)
     lk2.codec.set_callback(lambda m: None)
@@ -211,7 +211,7 @@ def test_no_fast_path_with_signing_or_callbacks():
 
 def test_decoder_stops_at_the_first_packet_it_does_not_handle():
     pk = packets(22, seed=2)
-    fd = FastDecoder(px4.make_codec(None, 2, 1), MOD)
+    fd = FastDecoder(codec.make_codec(None, 2, 1), MOD)
     data = b"".join(pk[:9]) + pk[9] + b"".join(pk[11:15])  # pk[9] is SYS_STATUS
     out, counts, seqs = [], {}, {}
     pos, got, lost, beats = fd.decode(data, out, counts, seqs)

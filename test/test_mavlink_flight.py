@@ -17,7 +17,7 @@ import sys
 import numpy as np
 import pytest
 
-from lpv_sysid.mavlink import px4
+from lpv_sysid.mavlink import codec, px4
 from lpv_sysid.mavlink.bridge import BridgeConfig, BridgeCore
 from lpv_sysid.mavlink.link import LinkConfig, free_udp_port
 from lpv_sysid.mavlink.offboard import OffboardConfig, State, StatusEvent
@@ -500,7 +500,7 @@ def test_tcp_link_reconnects_after_vehicle_restart():
 def test_lost_commands_are_retried_until_offboard(flights):
     """The first two COMMAND_LONGs (DO_SET_MODE) never reach the vehicle: the bridge retries."""
     f = flights(OffboardConfig(arm=False, ack_timeout=0.3, max_retries=3), relay=True)
-    mod = px4.dialect_module()
+    mod = codec.dialect_module()
     seen = {"n": 0}
 
     def drop(data: bytes) -> bool:

@@ -16,7 +16,10 @@ from scipy.spatial.transform import Rotation
 
 pytest.importorskip("serial")  # pyserial (ROS: python3-serial)
 
-from lpv_sysid.mavlink import px4  # noqa: E402
+from lpv_sysid.mavlink import (
+    codec,
+    px4,  # noqa: E402
+)
 from lpv_sysid.mavlink.link import DEFAULT_STREAMS, LinkConfig, MavlinkLink  # noqa: E402
 from lpv_sysid.mavlink.telemetry import (  # noqa: E402
     ImuSample,
@@ -25,7 +28,7 @@ from lpv_sysid.mavlink.telemetry import (  # noqa: E402
     TelemetryDecoder,
 )
 
-MOD = px4.dialect_module()
+MOD = codec.dialect_module()
 MAV_TYPE_QUADROTOR, MAV_AUTOPILOT_PX4 = 2, 12
 
 
@@ -35,8 +38,8 @@ class Peer:
     def __init__(self, fd: int) -> None:
         self.fd = fd
         self.written = 0
-        self.tx = px4.make_codec(self, 1, 1)
-        self.rx = px4.make_codec(None, 255, 0)
+        self.tx = codec.make_codec(self, 1, 1)
+        self.rx = codec.make_codec(None, 255, 0)
         self.received: list = []
 
     def write(self, data: bytes) -> None:  # pymavlink's "file": codec.send() lands here
@@ -117,7 +120,7 @@ def test_serial_link_over_pty_decodes_telemetry_survives_garbage_and_answers(pty
                 us, *acc, *gyr, 0.2, 0.0, 0.4, 1013.0, 0.0, 3.0, 25.0, 0x1FF, 0
             )
         )
-        peer.tx.send(px4.esc_status_class()(0, us, rpm, [16.0] * 4, [1.0] * 4))
+        peer.tx.send(codec.esc_status_class()(0, us, rpm, [16.0] * 4, [1.0] * 4))
         sent += 4
         if k == 10:  # line noise without MAVLink magic bytes, then a cut-off packet's head
             noise = bytes(
@@ -152,7 +155,7 @@ def test_serial_link_over_pty_decodes_telemetry_survives_garbage_and_answers(pty
     np.testing.assert_allclose(rot_s.omega, np.array(rpm) * 2 * math.pi / 60, rtol=1e-12)
     # what the link wrote back on the line: our HEARTBEAT and SET_MESSAGE_INTERVAL per stream
     want = {
-        int(getattr(MOD, f"MAVLINK_MSG_ID_{n}", px4.MAVLINK_MSG_ID_ESC_STATUS)): r
+        int(getattr(MOD, f"MAVLINK_MSG_ID_{n}", codec.MAVLINK_MSG_ID_ESC_STATUS)): r
         for n, r in DEFAULT_STREAMS
     }
 

@@ -17,7 +17,7 @@ import socket
 import numpy as np
 import pytest
 
-from lpv_sysid.mavlink import px4
+from lpv_sysid.mavlink import codec, px4
 from lpv_sysid.mavlink.bridge import BridgeConfig, BridgeCore
 from lpv_sysid.mavlink.link import LinkConfig, MavlinkLink, free_udp_port
 from lpv_sysid.mavlink.preflight import (
@@ -32,7 +32,7 @@ from lpv_sysid.mavlink.preflight import (
 )
 from lpv_sysid.mavlink.telemetry import RotorEstimateConfig, RotorSample, StateSample
 
-MOD = px4.dialect_module()
+MOD = codec.dialect_module()
 RC_BIT = MOD.MAV_SYS_STATUS_SENSOR_RC_RECEIVER
 CAPS = (
     MOD.MAV_PROTOCOL_CAPABILITY_MAVLINK2
@@ -48,7 +48,7 @@ PX4_DEFAULTS = {
     "COM_RC_IN_MODE": 1,
 }
 INT_PARAMS = {"COM_OBL_RC_ACT", "NAV_DLL_ACT", "COM_RCL_EXCEPT", "COM_RC_IN_MODE"}
-C = px4.make_codec(None, 1, 1)
+C = codec.make_codec(None, 1, 1)
 
 
 def _hb(mode=px4.HOLD, armed=False):
@@ -56,7 +56,7 @@ def _hb(mode=px4.HOLD, armed=False):
 
 
 def _wire(msg):
-    (m,) = px4.make_codec(None, 1, 191).parse_buffer(msg.pack(C))
+    (m,) = codec.make_codec(None, 1, 191).parse_buffer(msg.pack(C))
     return m
 
 
@@ -261,9 +261,9 @@ class ScriptedPx4:
         self.sock.bind(("127.0.0.1", 0))
         self.sock.setblocking(False)
         self.dst = ("127.0.0.1", port)
-        self.c = px4.make_codec(None, 1, 1)
-        self.other = px4.make_codec(None, 42, 1)
-        self.rx = px4.make_codec(None, 1, 1)
+        self.c = codec.make_codec(None, 1, 1)
+        self.other = codec.make_codec(None, 42, 1)
+        self.rx = codec.make_codec(None, 1, 1)
         self.params = params
         self.esc, self.foreign = esc, foreign
         self.rates = {
@@ -313,7 +313,7 @@ class ScriptedPx4:
                 if int(m.param1) == MOD.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS:
                     self.rates.setdefault("ACTUATOR_OUTPUT_STATUS", 50.0)
                     self.next.setdefault("ACTUATOR_OUTPUT_STATUS", t)
-                if int(m.param1) == px4.MAVLINK_MSG_ID_ESC_STATUS and self.esc:
+                if int(m.param1) == codec.MAVLINK_MSG_ID_ESC_STATUS and self.esc:
                     self.rates.setdefault("ESC_STATUS", 10.0)
                     self.next.setdefault("ESC_STATUS", t)
 
@@ -345,7 +345,7 @@ class ScriptedPx4:
         elif name == "ACTUATOR_OUTPUT_STATUS":
             self._send(c.actuator_output_status_encode(us, 16, [900.0] * 32))
         elif name == "ESC_STATUS":
-            self._send(px4.esc_status_class()(0, us, [0] * 4, [16.0] * 4, [0.0] * 4))
+            self._send(codec.esc_status_class()(0, us, [0] * 4, [16.0] * 4, [0.0] * 4))
 
     def close(self) -> None:
         self.sock.close()
@@ -511,7 +511,7 @@ def test_real_px4_state_without_duplicates_and_estimated_rotor_speeds(real_px4):
 
     core.link.poll = counting_poll
     intruder = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    other = px4.make_codec(None, 42, 1)
+    other = codec.make_codec(None, 42, 1)
     states, rotors = [], []
     phase = {"armed": None, "takeoff": None}
     core.open(time.monotonic())

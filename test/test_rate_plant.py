@@ -11,7 +11,7 @@ import pytest
 
 from lpv_sysid.errors import ConfigError, SafetyError
 from lpv_sysid.flight.phase2 import excitation_gain, inversion_error
-from lpv_sysid.flight.phase2.fly import _fade
+from lpv_sysid.flight.phase2.sequence import _fade
 from lpv_sysid.ident import rate_plant as rid
 from lpv_sysid.mavlink.bridge import (
     ATTITUDE_TARGET_IGNORE_ATTITUDE,

@@ -11,16 +11,16 @@ import yaml
 
 from lpv_sysid.cli.main import main as cli_main
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.report import (
+from lpv_sysid.ident.nonlinear import (
     REGRESSOR_NAMES,
-    correlation,
-    load_run,
-    regressors,
+    column_correlation,
+    fig10_regressors,
     virtual_actuators,
-    write_report,
 )
+from lpv_sysid.models.quadrotor import TRIM_COLUMNS
+from lpv_sysid.report import load_run, write_report
 from lpv_sysid.signals.store import save_summary
-from lpv_sysid.sim.phase1 import TRIM_COLUMNS, write_trim_table
+from lpv_sysid.sim.phase1 import write_trim_table
 from lpv_sysid.sim.phase2 import RunRecord, regressor_correlation_block, write_outputs
 
 STATES = ["phi", "theta", "u", "v", "w", "p", "q", "r", "dt", "da", "de", "dr"]
@@ -160,7 +160,6 @@ def _write_run(d: Path) -> None:
         skipped={"nonlinear": "no quadrotor model"},
         regressor_block=block,
         extra={"box": {"min": [-5.0, -5.0, -5.0], "max": [5.0, 5.0, 5.0]}},
-        figures=False,
     )
 
 
@@ -226,7 +225,9 @@ def block_max(x, axis):
     mix = mixer(0.225)
     Om = np.linalg.solve(mix, x["x"][:, 8:12].T).T
     d, d2 = virtual_actuators(Om, mix)
-    C = np.abs(correlation(regressors(x["t"], x["v"], x["x"][:, 5:8], d, d2, 0.225)[axis]))
+    C = np.abs(
+        column_correlation(fig10_regressors(x["t"], x["v"], x["x"][:, 5:8], d, d2, 0.225)[axis])
+    )
     np.fill_diagonal(C, 0)
     return float(np.nanmax(C))
 
@@ -315,7 +316,7 @@ def test_regressors_match_eq6_by_hand():
     v = np.array([[1.0, 2.0, 3.0], [0.5, -1.0, 2.0]])
     om = np.array([[0.1, 0.2, 0.3], [-0.1, 0.05, 0.0]])
     d, d2 = virtual_actuators(Omega, mix)
-    regs = regressors(t, v, om, d, d2, ell)
+    regs = fig10_regressors(t, v, om, d, d2, ell)
     dt, da, de, dr = d[0]
     assert d2[0, 0] == pytest.approx(np.mean(Omega[0] ** 2))
     assert regs["Z"][0, 3] == pytest.approx(4 * 3.0 * dt - 0.1 * da - 0.2 * de)
@@ -325,7 +326,7 @@ def test_regressors_match_eq6_by_hand():
     assert regs["M"][0, 6] == pytest.approx(2.0 * dr)
     assert regs["N"][0, 6] == pytest.approx((d[1, 3] - d[0, 3]) / 0.1)
     assert [regs[a].shape[1] for a in "XYZLMN"] == [len(REGRESSOR_NAMES[a]) for a in "XYZLMN"]
-    C = correlation(np.column_stack([t, 2 * t + 1, np.ones(2)]))
+    C = column_correlation(np.column_stack([t, 2 * t + 1, np.ones(2)]))
     assert C[0, 1] == pytest.approx(1.0) and np.isnan(C[0, 2])
 
 

@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 
 from lpv_sysid.errors import ConfigError, LpvSysidError
-from lpv_sysid.mavlink import px4
+from lpv_sysid.mavlink import codec, px4
 from lpv_sysid.mavlink.bridge import BridgeConfig, BridgeCore
 from lpv_sysid.mavlink.link import LinkConfig, MavlinkLink, free_udp_port
 from lpv_sysid.mavlink.offboard import OffboardConfig, State, StatusEvent
@@ -35,7 +35,7 @@ from lpv_sysid.sim.px4_vehicle import DEFAULT_RATES, PARAMS, SimVehicle, SimVehi
 
 DT = 0.004
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-MOD = px4.dialect_module()
+MOD = codec.dialect_module()
 #: only LOCAL_POSITION_NED besides the HEARTBEAT: the flight tests look at the vehicle's truth
 QUIET = {n: 0.0 for n in DEFAULT_RATES if n != "LOCAL_POSITION_NED"}
 OFFBOARD_CMD = (1.0, 6.0, 0.0)

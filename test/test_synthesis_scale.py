@@ -59,13 +59,13 @@ def test_seed_scale_config_builds_580_systems(seed_models):
     assert [len(s) for s in model.systems] == SEED_M
     st = model.input_structure
     assert st["B"] == "common" and st["M_B"] == 4
-    box = corner_box(model)
+    box = corner_box(model.systems)
     assert box is not None and box.p == [8, 7, 6, 6, 5, 4, 4, 2]
 
 
 def test_corner_box_recognises_box_polytopes_and_rejects_others():
     model = quadrotor_like_polytope(3)
-    box = corner_box(model)
+    box = corner_box(model.systems)
     assert box is not None and box.p == [3] * 8
     for i, lst in enumerate(model.systems):
         lo, hi = box.bounds(i)
@@ -81,7 +81,7 @@ def test_corner_box_recognises_box_polytopes_and_rejects_others():
         u0=model.u0,
         systems=[lst[:-1] for lst in model.systems],
     )
-    assert corner_box(broken) is None
+    assert corner_box(broken.systems) is None
     # a B part that differs between vertices -> the interior argument fails, no box
     Bc = np.array([model.B[0], model.B[0] * 1.1])
     common = CommonInputSet(Bc)
@@ -100,7 +100,7 @@ def test_corner_box_recognises_box_polytopes_and_rejects_others():
         u0=model.u0,
         systems=per_vertex,
     )
-    assert corner_box(pv) is None
+    assert corner_box(pv.systems) is None
 
 
 def test_box_method_solution_satisfies_eq30_at_every_corner():

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from lpv_sysid.io import frames
-from lpv_sysid.mavlink import px4
+from lpv_sysid.mavlink import codec, px4
 from lpv_sysid.mavlink.bridge import BridgeConfig, BridgeCore
 from lpv_sysid.mavlink.link import LinkConfig, free_udp_port
 from lpv_sysid.mavlink.telemetry import (
@@ -37,10 +37,10 @@ class Wire:
 
     def __init__(self) -> None:
         self.tx: dict[tuple[int, int], object] = {}
-        self.rx = px4.make_codec(None, 1, 191)
+        self.rx = codec.make_codec(None, 1, 191)
 
     def codec(self, sysid: int = 1, compid: int = 1):
-        return self.tx.setdefault((sysid, compid), px4.make_codec(None, sysid, compid))
+        return self.tx.setdefault((sysid, compid), codec.make_codec(None, sysid, compid))
 
     def bytes(self, name: str, *args, sysid: int = 1, compid: int = 1, **kw) -> bytes:
         c = self.codec(sysid, compid)
@@ -134,7 +134,7 @@ def servo(t, pwm, port=0):
 
 def esc(t, rpm):
     c = W.codec()
-    buf = px4.esc_status_class()(0, int(round(t * 1e6)), rpm, [16.0] * 4, [1.0] * 4).pack(c)
+    buf = codec.esc_status_class()(0, int(round(t * 1e6)), rpm, [16.0] * 4, [1.0] * 4).pack(c)
     (m,) = W.rx.parse_buffer(buf)
     return m
 

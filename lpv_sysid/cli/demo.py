@@ -5,7 +5,7 @@ phase-1 flights -> signal design -> vertex identification -> robust LPV synthesi
 independent verification -> phase-2 flight -> report. Each step's artefacts land in
 ``--out``; the run stops at the first failing step and says which.
 
-``--connect URL`` runs the same chain on a connected PX4 instead (:mod:`lpv_sysid.cli.chain`,
+``--connect URL`` runs the same chain on a connected PX4 instead (:mod:`lpv_sysid.flight.chain`,
 ``lpv-sysid chain``): rate plant, real flights, docs/px4_chain.md.
 """
 
@@ -142,8 +142,8 @@ def run(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     if getattr(args, "connect", None):
-        from lpv_sysid.cli.chain import chain
         from lpv_sysid.cli.fly import parse_params
+        from lpv_sysid.flight.chain import chain
 
         return chain(args.connect, out, params=parse_params(args.set_param), kappa=args.kappa)
     out.mkdir(parents=True, exist_ok=True)

@@ -60,13 +60,12 @@ class _Parser(argparse.ArgumentParser):
 
 def discover_commands() -> dict[str, ModuleType]:
     """Import every ``lpv_sysid.cli`` module that declares a ``COMMAND``."""
-    import lpv_sysid.cli as pkg
-
+    here = str(Path(__file__).resolve().parent)
     commands: dict[str, ModuleType] = {}
-    for info in sorted(pkgutil.iter_modules(pkg.__path__), key=lambda i: i.name):
+    for info in sorted(pkgutil.iter_modules([here]), key=lambda i: i.name):
         if info.name.startswith("_") or info.name == "main":
             continue
-        module = importlib.import_module(f"{pkg.__name__}.{info.name}")
+        module = importlib.import_module(f"{__package__}.{info.name}")
         name = getattr(module, "COMMAND", None)
         if name is None:
             continue

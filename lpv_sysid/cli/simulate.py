@@ -237,6 +237,7 @@ def format_gain_line(rec, gamma) -> str:
 
 def run_phase2(args: argparse.Namespace) -> int:
     """``lpv-sysid simulate phase2``: prints what it wrote; LpvSysidError on bad input."""
+    from lpv_sysid.report import write_phase2_figures
     from lpv_sysid.sim.phase2 import (
         Phase2Config,
         load_problem,
@@ -274,6 +275,7 @@ def run_phase2(args: argparse.Namespace) -> int:
     out = Path(args.out)
     t0 = time.perf_counter()
     result = run(problem, signals, cfg, quad_params, sensors, out)
+    figures = write_phase2_figures(out, list(result.records.values()), result.regressor_block)
     print(
         f"simulated phase 2 in {time.perf_counter() - t0:.1f} s (kappa = {cfg.kappa:g}, gamma = "
         f"{problem.gamma if problem.gamma is not None else 'n/a'})"
@@ -284,6 +286,8 @@ def run_phase2(args: argparse.Namespace) -> int:
             print(f"  {name:9s}: {format_gain_line(rec, problem.gamma)}")
         elif name in result.skipped:
             print(f"  {name:9s}: skipped ({result.skipped[name]})")
-    for key, path in result.written.items():
+    written = dict(result.written)
+    bag = written.pop("bag", None)
+    for path in [*written.values(), *figures.values(), *([bag] if bag else [])]:
         print(f"wrote {path}")
     return 0

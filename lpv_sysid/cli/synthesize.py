@@ -24,30 +24,36 @@ exactly which plants (``kind``, the box in the sidecar) and which scheduling sig
 covers, and ``certificate.problem`` the sizes -- for a corner polytope also seed 0's Lemma 1 over
 the same systems counted the package's way and the way CVX reports them (docs/certificate.md).
 
-The steps of :func:`run` live in :mod:`lpv_sysid.synthesis.gains.inputs` (config, options, models,
-weights), :mod:`lpv_sysid.synthesis.gains.certificate` (the certificate entry) and
-:mod:`lpv_sysid.synthesis.gains.outputs` (gains.yaml, sidecar, printed result); their names are
-re-exported here.
+The steps are :mod:`lpv_sysid.synthesis.gains` (inputs, solve, certificate, files,
+verification); this command maps their errors to its flags and prints what they did.
 """
 
 from __future__ import annotations
 
 import argparse
-import logging
 import time
 from pathlib import Path
 
-import numpy as np
-
-from lpv_sysid.errors import ConfigError, SolverError
-from lpv_sysid.synthesis.gains import VARIATION, Inputs, load_inputs, write_outputs
+from lpv_sysid.errors import ConfigError
+from lpv_sysid.synthesis.gains import (
+    describe_problem,
+    load_inputs,
+    synthesize,
+    verify_written,
+    write_gains,
+)
 
 COMMAND = "synthesize"
 HELP = (
     "robust polytopic LPV H-infinity state feedback (seed 0 Lemma 1) -> gains.yaml + certificate"
 )
 
-log = logging.getLogger(__name__)
+#: command-line flags that set a configuration field (named in core errors by the field)
+FLAG_OF_FIELD = {
+    "hinf.gamma": "--gamma",
+    "hinf.solver": "--solver",
+    "weights.summary": "--summary",
+}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -68,64 +74,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def run(args: argparse.Namespace) -> int:
-    """``lpv-sysid synthesize``: load, synthesise, write gains.yaml + sidecar, verify."""
-    inp = load_inputs(args)
-    describe_problem(args.models, inp)
-    res = synthesize(inp, args)
-    out, side = write_outputs(args, inp, res)
-    print(f"wrote {out}")
-    print(f"wrote {side}")
-    if args.no_verify:
-        return 0
-    return verify(out, args.models, inp)
-
-
-def describe_problem(models_path: str, inp: Inputs) -> None:
-    """Print which certified set and input structure is about to be solved."""
-    model, opts = inp.model, inp.opts
-    st = model.input_structure
-    Ms = st["M"]
-    if model.box is not None:
-        box = model.box
-        per = box.p[0] if len(set(box.p)) == 1 else box.p
-        print(
-            f"certified set: the full identified box (uncertainty.set: full_box), {per} "
-            "elements per vertex as a structured perturbation (B hull common to all vertices); "
-            f"Lyapunov matrix: {opts.lyapunov} ({VARIATION[opts.lyapunov]} v_d)"
-        )
-    elif model.common_input is not None:
-        els = ", ".join(
-            f"B[{e.row},{e.col}] in [{e.lower:.6g}, {e.upper:.6g}]"
-            for e in model.common_input.elements
-        )
-        print(
-            "input matrix common to all vertices (uncertainty.common_b): hull "
-            f"{els or '(B identical)'}; M_i = M_A x M_B = {st['M_A']} x {st['M_B']} = {Ms} "
-            f"(sum {sum(Ms)}, {st['B_method']} corners); Lemma 1 covers the whole box"
-        )
-    else:
-        print(
-            f"uncertainty vertices per scheduling vertex M_i = {Ms} (per-vertex B, "
-            "uncertainty.common_b: false)"
-        )
-        bs = {tuple(np.round(np.array([b for _, b in lst]), 12).ravel()) for lst in model.systems}
-        if len(bs) > 1:
-            print(
-                "note: B differs between scheduling vertices; Lemma 1 certifies the vertices, "
-                "the interior (B(v_d) S(v_d) is bilinear) is only checked by the verifier's "
-                "random interior points"
-            )
-
-
-#: command-line flags that set a configuration field (named in core errors by the field)
-FLAG_OF_FIELD = {
-    "hinf.gamma": "--gamma",
-    "hinf.solver": "--solver",
-    "weights.summary": "--summary",
-}
-
-
 def with_flag(message: str) -> str:
     """A core's error message with the command-line flag of the field it names appended."""
     for name, flag in FLAG_OF_FIELD.items():
@@ -134,46 +82,24 @@ def with_flag(message: str) -> str:
     return message
 
 
-def synthesize(inp: Inputs, args: argparse.Namespace):
-    """Lemma 1 (or the element-box LMI) on the loaded inputs: the HinfResult, its info
-    completed; SolverError with the structural hint on failure."""
-    from lpv_sysid.synthesis.hinf import synthesize_hinf
-
-    model = inp.model
+def run(args: argparse.Namespace) -> int:
+    """``lpv-sysid synthesize``: load, synthesise, write gains.yaml + sidecar, verify."""
     try:
-        res = synthesize_hinf(model, inp.R, inp.C, inp.opts)
+        inp = load_inputs(args.models, args.config, args.summary, args.gamma, args.solver)
+        for line in inp.notes + describe_problem(inp):
+            print(line)
+        res = synthesize(inp)
     except ConfigError as exc:
         raise ConfigError(with_flag(str(exc))) from None
-    except SolverError as exc:
-        hint = ""
-        if model.common_input is not None and model.common_input.elements:
-            hint = (
-                " | the input matrix is the hull over all vertices (uncertainty.common_b: true); "
-                "if B(v_d) varies strongly across the box, narrow the box; common_b: false "
-                "certifies the vertices only"
-            )
-        raise SolverError(str(exc).replace("\n", " | ") + hint) from None
-    res.info["rate_from_design"] = inp.rate_from_design
-    res.info["n_e"], res.info["n_z"] = inp.R.shape[1], inp.C.shape[0]
-    res.info["wall"] = time.perf_counter() - inp.t0
-    return res
-
-
-def verify(out: Path, models_path: str, inp: Inputs) -> int:
-    """The independent verification (synthesis/verify/checker.py) of what was written: 0 passed, 1
-    failed (the gains must not be flown)."""
-    from lpv_sysid.synthesis.verify import verify_files
-
-    vcfg = inp.cfg.get("verify") or {}
-    log.info("independent verification of %s", out)
+    written = write_gains(Path(args.out), args.models, inp, res)
+    for line in written.lines:
+        print(line)
+    print(f"wrote {written.gains}")
+    print(f"wrote {written.sidecar}")
+    if args.no_verify:
+        return 0
     t1 = time.perf_counter()
-    rep = verify_files(
-        out,
-        models_path,
-        n_random=int(vcfg.get("n_random", 20)),
-        seed=int(vcfg.get("seed", 0)),
-        velocity_index=inp.vidx,
-    )
+    rep = verify_written(written.gains, args.models, inp)
     print(rep.table())
     print(f"verification took {time.perf_counter() - t1:.2f} s")
     if not rep.passed:

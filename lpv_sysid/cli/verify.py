@@ -29,8 +29,9 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 from typing import Any
+
+from lpv_sysid.synthesis.verify import VERIFY_SETTINGS
 
 COMMAND = "verify"
 HELP = (
@@ -45,18 +46,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--models", required=True, help="vertex_models.yaml the gains were synthesised for"
     )
     parser.add_argument(
-        "--random", type=int, default=20, help="random interior scheduling points (default 20)"
+        "--random",
+        type=int,
+        default=VERIFY_SETTINGS["n_random"],
+        help="random interior scheduling points (default %(default)s)",
     )
     parser.add_argument(
         "--seed",
         type=int,
-        default=0,
+        default=VERIFY_SETTINGS["seed"],
         help="seed of the interior points and of the --full-box samples (default 0)",
     )
     parser.add_argument(
         "--full-box",
         type=int,
-        default=200,
+        default=VERIFY_SETTINGS["full_box"],
         metavar="N",
         help="empirical Monte Carlo over the FULL identified uncertainty box: N scheduling "
         "points (corners, then random interior), every identified element drawn "
@@ -98,11 +102,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from lpv_sysid.errors import ConfigError
-    from lpv_sysid.synthesis import verify as sv
+    from lpv_sysid.synthesis.verify import verify_and_record
 
     if args.full_box < 0:
         raise ConfigError(f"--full-box must be >= 0, got {args.full_box}")
-    settings = dict(
+    t0 = time.perf_counter()
+    rep, out = verify_and_record(
+        args.gains,
+        args.models,
+        args.out,
         n_random=args.random,
         seed=args.seed,
         full_box=args.full_box,
@@ -110,10 +118,6 @@ def run(args: argparse.Namespace) -> int:
         k_sigma=args.k_sigma,
         full_box_kept=args.full_box_kept,
     )
-    t0 = time.perf_counter()
-    rep = sv.verify_files(args.gains, args.models, **settings)
-    out = Path(args.out) if args.out else Path(args.gains).parent / sv.VERIFICATION_FILE
-    sv.write_verification(out, sv.verification_record(rep, args.gains, args.models, settings))
     print(rep.table(max_rows=10**6) if not args.all_rows else _all(rep))
     fb = rep.full_box
     if fb is not None:

@@ -24,33 +24,6 @@ from dataclasses import dataclass
 from typing import Any
 
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.mavlink.codec import (  # re-exported: links and vehicles use px4.make_codec
-    _ESC_STATUS_STRUCT as _ESC_STATUS_STRUCT,
-)
-from lpv_sysid.mavlink.codec import (
-    DEFAULT_DIALECT as DEFAULT_DIALECT,
-)
-from lpv_sysid.mavlink.codec import (
-    ESC_STATUS_CRC_EXTRA as ESC_STATUS_CRC_EXTRA,
-)
-from lpv_sysid.mavlink.codec import (
-    MAVLINK_MSG_ID_ESC_STATUS as MAVLINK_MSG_ID_ESC_STATUS,
-)
-from lpv_sysid.mavlink.codec import (
-    SIGNING_EPOCH as SIGNING_EPOCH,
-)
-from lpv_sysid.mavlink.codec import (
-    dialect_module as dialect_module,
-)
-from lpv_sysid.mavlink.codec import (
-    esc_status_class as esc_status_class,
-)
-from lpv_sysid.mavlink.codec import (
-    make_codec as make_codec,
-)
-from lpv_sysid.mavlink.codec import (
-    setup_signing as setup_signing,
-)
 
 # --------------------------------------------------------------------------- modes
 MAIN_MANUAL = 1

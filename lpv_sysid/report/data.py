@@ -35,6 +35,7 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io.files import read_yaml
+from lpv_sysid.models.quadrotor import TRIM_TABLE
 from lpv_sysid.synthesis.verify import Verification, read_verification
 
 log = logging.getLogger(__name__)
@@ -168,24 +169,11 @@ def _names(block: Any) -> list[str]:
     return [str(b.get("name")) if isinstance(b, dict) else str(b) for b in block]
 
 
-TRIM_COLUMNS = (
-    ("u", "m/s", 1.0),
-    ("v", "m/s", 1.0),
-    ("w", "m/s", 1.0),
-    ("phi", "deg", 180 / np.pi),
-    ("theta", "deg", 180 / np.pi),
-    ("dt", "rad/s", 1.0),
-    ("da", "m*rad/s", 1.0),
-    ("de", "m*rad/s", 1.0),
-    ("dr", "rad/s", 1.0),
-)
-
-
 def equilibrium_table(models: dict) -> tuple[list[str], list[list[Any]]]:
     """Seed 0 Table 1 from the vertex equilibria x0 of ``vertex_models.yaml``."""
     names = _names(models.get("states"))
     vertices = models.get("vertices") or []
-    header = ["vertex [m/s]"] + [f"{n}_0 [{u}]" for n, u, _ in TRIM_COLUMNS]
+    header = ["vertex [m/s]"] + [f"{n}_0 [{u}]" for n, u, _, _ in TRIM_TABLE]
     rows = []
     for k, vx in enumerate(vertices):
         x0 = vx.get("x0") if isinstance(vx, dict) else None
@@ -195,7 +183,7 @@ def equilibrium_table(models: dict) -> tuple[list[str], list[list[Any]]]:
                 f"vertex_models.yaml: vertices[{k}].x0 missing or not {len(names)} long"
             )
         row: list[Any] = [_fmt_vec(sched)]
-        for n, _, scale in TRIM_COLUMNS:
+        for n, _, scale, _ in TRIM_TABLE:
             row.append(float(x0[names.index(n)]) * scale if n in names else None)
         rows.append(row)
     return header, rows

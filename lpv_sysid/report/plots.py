@@ -15,7 +15,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from lpv_sysid.report.correlation import AXIS_TITLES, RegressorCorrelation  # noqa: E402
+from lpv_sysid.ident.nonlinear import AXIS_TITLES, RegressorCorrelation  # noqa: E402
 from lpv_sysid.report.margins import RunMargins  # noqa: E402
 
 VEL_LABELS = ("u [m/s]", "v [m/s]", "w [m/s]")

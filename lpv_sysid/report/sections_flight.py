@@ -10,8 +10,8 @@ from typing import Any, Optional
 import numpy as np
 
 from lpv_sysid.errors import ConfigError
+from lpv_sysid.ident.nonlinear import AXES, REGRESSOR_NAMES, RegressorCorrelation
 from lpv_sysid.report import plots
-from lpv_sysid.report.correlation import AXES, REGRESSOR_NAMES, RegressorCorrelation
 from lpv_sysid.report.data import RunData
 from lpv_sysid.report.document import Report, md_table, short
 from lpv_sysid.report.gonogo import FLOWN, SIMULATED, go_no_go, provenance

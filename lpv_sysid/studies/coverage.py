@@ -37,6 +37,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from lpv_sysid.control.campaign import run_name
 from lpv_sysid.errors import ConfigError, SafetyError, SolverError
 from lpv_sysid.models.quadrotor import (
     INPUT_NAMES,
@@ -237,7 +238,7 @@ def fly_airframe(
             sensors,
             phase1_cfg,
             verts[i - 1],
-            p1.run_name(verts[i - 1]),
+            run_name(verts[i - 1]),
             seed=seed + i,
             signals=signals,
         )

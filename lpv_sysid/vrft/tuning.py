@@ -45,7 +45,6 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError, SolverError
 from lpv_sysid.vrft.controller import VrftResult
-from lpv_sysid.vrft.controller import simulate_loop as simulate_loop
 from lpv_sysid.vrft.controller_class import ControllerClass
 from lpv_sysid.vrft.tf import (
     ONE,
@@ -58,9 +57,6 @@ from lpv_sysid.vrft.tf import (
     _det,
     _is_scalar_identity,
     diagonal_model,
-)
-from lpv_sysid.vrft.tf import (
-    ZERO as ZERO,
 )
 
 log = logging.getLogger(__name__)

@@ -71,7 +71,14 @@ the public names of the others.
 from __future__ import annotations
 
 from lpv_sysid.control.campaign.config import CampaignConfig
-from lpv_sysid.control.campaign.plan import CLIMB, DESCENT, LEVEL, ExcitationProfile, plan_campaign
+from lpv_sysid.control.campaign.plan import (
+    CLIMB,
+    DESCENT,
+    LEVEL,
+    ExcitationProfile,
+    plan_campaign,
+    run_name,
+)
 from lpv_sysid.control.campaign.protocol import (
     ABORTED,
     ABORTING,
@@ -129,5 +136,6 @@ __all__ = [
     "TRIM",
     "VehicleStatus",
     "plan_campaign",
+    "run_name",
     "trim_rows",
 ]

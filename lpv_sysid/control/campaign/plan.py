@@ -69,7 +69,7 @@ def make_excitation(
 @dataclass(frozen=True)
 class PlannedRun:
     order: int  # 1-based position in the campaign
-    name: str  # bag / run name (sim.phase1.run_name, hover_validation)
+    name: str  # bag / run name (:func:`run_name`, hover_validation)
     table_index: int | None  # seed 0 Table 1 index of the vertex (None: hover)
     vertex: tuple  # commanded (u, v, w) [m/s] in the command frame
     kind: str  # climb | descent | level
@@ -116,9 +116,10 @@ class CampaignPlan:
 
 
 def run_name(vertex) -> str:
-    from lpv_sysid.sim.phase1 import run_name as _run_name
-
-    return _run_name(vertex)
+    """The name of the phase-1 run at a vertex (its bag directory): ``vertex_p5_m5_0``."""
+    return "vertex_" + "_".join(
+        f"{'p' if c > 0 else ('m' if c < 0 else '0')}{abs(c):g}" for c in vertex
+    )
 
 
 def plan_campaign(

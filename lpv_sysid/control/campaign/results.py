@@ -72,7 +72,7 @@ class RunResult:
 def trim_rows(results: Sequence[RunResult]) -> list[dict]:
     """Rows for :func:`lpv_sysid.sim.phase1.write_trim_table` (achieved equilibria of the
     complete runs; seed 0 Table 1 values where the vertex is one of the seed's)."""
-    from lpv_sysid.sim.phase1 import SEED0_TABLE1, TRIM_COLUMNS
+    from lpv_sysid.models.quadrotor import SEED0_TABLE1, TRIM_COLUMNS
 
     rows = []
     for res in results:

@@ -2,38 +2,24 @@
 
 from __future__ import annotations
 
-from lpv_sysid.flight.campaign.config import (
-    FlyConfig,
-    bridge_config_for,
-    load_signals,
-)
-from lpv_sysid.flight.campaign.outputs import (
-    format_results,
-    identification_template,
-    write_outputs,
-)
-from lpv_sysid.flight.campaign.recorder import RATE_TOPIC, TOPICS, CampaignRecorder
-from lpv_sysid.flight.campaign.runner import FlightRunner
+from lpv_sysid.flight.campaign.config import FlyConfig
+from lpv_sysid.flight.campaign.recorder import CampaignRecorder
 from lpv_sysid.flight.campaign.runtime import (
     PARSERS,
     CampaignNodeSettings,
     CampaignRuntime,
     vehicle_status,
 )
+from lpv_sysid.flight.campaign.sequence import EXIT_FAILED, fly, plan_flight
 
 __all__ = [
     "CampaignNodeSettings",
     "CampaignRecorder",
     "CampaignRuntime",
-    "FlightRunner",
+    "EXIT_FAILED",
     "FlyConfig",
     "PARSERS",
-    "RATE_TOPIC",
-    "TOPICS",
-    "bridge_config_for",
-    "format_results",
-    "identification_template",
-    "load_signals",
+    "fly",
+    "plan_flight",
     "vehicle_status",
-    "write_outputs",
 ]

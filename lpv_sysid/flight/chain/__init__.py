@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-from lpv_sysid.flight.chain.report import format_identification, write_report
+from lpv_sysid.flight.chain.steps import chain
 
 __all__ = [
-    "format_identification",
-    "write_report",
+    "chain",
 ]

@@ -1,4 +1,4 @@
-"""``DIR/report.md`` of the PX4 chain (:mod:`lpv_sysid.cli.chain`): the design, the steps,
+"""``DIR/report.md`` of the PX4 chain (:mod:`lpv_sysid.flight.chain`): the design, the steps,
 the identification, the rate-loop inversion measurement, the certificate and what the vehicle
 did in phase 2."""
 

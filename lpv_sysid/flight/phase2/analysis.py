@@ -1,4 +1,4 @@
-"""What the PX4 chain's flights measured (:mod:`lpv_sysid.cli.chain`).
+"""What the PX4 chain's flights measured (:mod:`lpv_sysid.flight.chain`).
 
 The u_e -> z gain of seed 0 Eqs. (26)-(29) on flight data (:func:`excitation_gain`), the
 tracking and saturation figures of a phase-2 flight (:func:`analyse_phase2`) and the torque error
@@ -16,7 +16,7 @@ import numpy as np
 from lpv_sysid.errors import ConfigError
 
 if TYPE_CHECKING:
-    from lpv_sysid.flight.phase2.fly import Phase2Options
+    from lpv_sysid.flight.phase2.options import Phase2Options
 
 
 def excitation_gain(

@@ -33,6 +33,14 @@ This module is step 1; the rest lives in one module per job and is re-exported h
 
 from __future__ import annotations
 
+from lpv_sysid.ident.nonlinear.correlation import (
+    AXIS_TITLES,
+    REGRESSOR_NAMES,
+    RegressorCorrelation,
+    column_correlation,
+    fig10_regressors,
+    regressor_correlations,
+)
 from lpv_sysid.ident.nonlinear.data import (
     AXES,
     REGRESSORS,
@@ -40,19 +48,27 @@ from lpv_sysid.ident.nonlinear.data import (
     _gravity_body,
     flight_data,
     regressors,
+    virtual_actuators,
 )
 from lpv_sysid.ident.nonlinear.least_squares import regression, regression_stacked
 from lpv_sysid.ident.nonlinear.refinement import OutputErrorConfig, output_error
 
 __all__ = [
     "AXES",
+    "AXIS_TITLES",
     "FlightData",
     "OutputErrorConfig",
     "REGRESSORS",
+    "REGRESSOR_NAMES",
+    "RegressorCorrelation",
     "_gravity_body",
+    "column_correlation",
+    "fig10_regressors",
     "flight_data",
     "output_error",
     "regression",
     "regression_stacked",
+    "regressor_correlations",
     "regressors",
+    "virtual_actuators",
 ]

@@ -64,17 +64,27 @@ class FlightData:
     Omega_dot: np.ndarray  # (N, 4)
 
 
-def regressors(
-    v, omega, Omega, Omega_dot, arm_length: float, mix: np.ndarray
-) -> dict[str, np.ndarray]:
-    """Regressor matrices (N, n_axis) of Eq. (6a)-(6f) in the order of :data:`REGRESSORS`."""
+def regressors_of_delta(v, omega, delta, delta_sq, arm_length: float) -> dict[str, np.ndarray]:
+    """Regressor matrices (N, n_axis) of Eq. (6a)-(6f) in the order of :data:`REGRESSORS`,
+    from body velocity ``v`` (N, 3), body rates ``omega`` (N, 3) and the virtual actuators of
+    Eq. (7), ``delta = Mix Omega`` and ``delta_sq = Mix Omega^2`` (N, 4 each; ``dt^2`` is the
+    first entry of ``Mix Omega^2``, not ``dt`` squared). The one implementation of Eq. (6)'s
+    regressors: the identification and the correlation of Fig. 10 both use it.
+
+    >>> import numpy as np
+    >>> r = regressors_of_delta(np.array([[1.0, 2.0, 3.0]]), np.zeros((1, 3)),
+    ...                         np.array([[4.0, 0, 0, 0]]), np.array([[16.0, 0, 0, 0]]), 0.25)
+    >>> r["X"].tolist()  # u, u w, u dt
+    [[1.0, 3.0, 4.0]]
+    >>> r["Z"].tolist()  # dt^2, dt, u^2 + v^2, 4 w dt - p da - q de
+    [[16.0, 4.0, 5.0, 48.0]]
+    """
     v = np.atleast_2d(v)
     omega = np.atleast_2d(omega)
-    Omega = np.atleast_2d(Omega)
     u, vv, w = v[:, 0], v[:, 1], v[:, 2]
     p, q = omega[:, 0], omega[:, 1]  # the regressors of Eq. (6) do not use r
-    d = Omega @ mix.T
-    d2 = (Omega * Omega) @ mix.T
+    d = np.atleast_2d(delta)
+    d2 = np.atleast_2d(delta_sq)
     dt, da, de, dr = d.T
     l2 = arm_length**2
     return {
@@ -110,6 +120,15 @@ def regressors(
             axis=1,
         ),
     }
+
+
+def regressors(
+    v, omega, Omega, Omega_dot, arm_length: float, mix: np.ndarray
+) -> dict[str, np.ndarray]:
+    """:func:`regressors_of_delta` from rotor speeds ``Omega`` (N, 4) through the mixer
+    ``mix`` of Eq. (7) (``Omega_dot`` is not used by the regressors of Eq. 6)."""
+    delta, delta_sq = virtual_actuators(np.atleast_2d(Omega), mix)
+    return regressors_of_delta(v, omega, delta, delta_sq, arm_length)
 
 
 def _gravity_body(phi, th, g):
@@ -202,3 +221,10 @@ def _check(data: FlightData) -> int:
         if not np.all(np.isfinite(a)):
             raise ConfigError(f"flight data '{name}' contains NaN/inf")
     return n
+
+
+def virtual_actuators(Omega: np.ndarray, mix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(delta, delta^2) of seed 0 Eq. (7) from rotor speeds Omega (N, 4)."""
+    Omega = np.asarray(Omega, dtype=float)
+    mix = np.asarray(mix, dtype=float)
+    return Omega @ mix.T, (Omega * Omega) @ mix.T

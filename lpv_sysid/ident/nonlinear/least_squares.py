@@ -37,6 +37,7 @@ import numpy as np
 
 from lpv_sysid.errors import SolverError
 from lpv_sysid.ident import equation_error as ee
+from lpv_sysid.ident.nonlinear.correlation import column_correlation
 from lpv_sysid.ident.nonlinear.data import (
     AXES,
     REGRESSORS,
@@ -47,17 +48,6 @@ from lpv_sysid.ident.nonlinear.data import (
     generalized_force,
     regressors,
 )
-from lpv_sysid.ident.nonlinear.data import (
-    _gravity_body as _gravity_body,
-)
-
-
-def correlation(X: np.ndarray) -> np.ndarray:
-    """Correlation coefficients of the regressor columns (seed 0 Fig. 10); NaN for constants."""
-    Xc = X - X.mean(axis=0)
-    s = np.sqrt(np.sum(Xc * Xc, axis=0))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return (Xc.T @ Xc) / np.outer(s, s)
 
 
 def regression(
@@ -139,6 +129,6 @@ def regression_stacked(
             rf.theta,
             rf.std,
             rf.r2,
-            correlation(H),
+            column_correlation(H),
         )
     return NonlinearResult(K, std, axes)

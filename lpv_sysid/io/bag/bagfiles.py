@@ -97,44 +97,6 @@ def hot_journal(f: Path, bag) -> bool:
     return journal.stat().st_size > 0
 
 
-def screen_bag(path: Path, strict: bool = True, problems: list[str] | None = None) -> set[Path]:
-    """The files of the bag ``path`` that must not be opened: its ``metadata.yaml``, the
-    storage files in the directory and those its metadata lists, and sqlite3 journals,
-    when they are not regular files. ``strict``: the first one raises
-    :class:`UnsafeBagFile`; else each is described in ``problems`` and returned. What
-    rosbags and sqlite3 open by name is screened here first."""
-    cands: list[Path] = []
-    if path.is_dir():
-        meta = path / METADATA
-        cands.append(meta)
-        names: list[str] = []
-        if meta.is_file():
-            from lpv_sysid.io.bag.metadata import load_metadata
-
-            try:  # the files rosbags' reader opens (by name, inside the directory)
-                names = [str(n) for n in load_metadata(path)["relative_file_paths"]]
-            except Exception:  # noqa: BLE001 - unreadable metadata: the readers say why
-                names = []
-        cands += sorted(set(storage_files(path)) | {path / Path(n).name for n in names})
-    else:
-        cands.append(path)
-    bad: set[Path] = set()
-    for f in cands:
-        if not os.path.lexists(f):
-            continue
-        try:
-            check_file(f, path)
-            if f.suffix == ".db3":
-                hot_journal(f, path)
-        except UnsafeBagFile as exc:
-            if strict:
-                raise
-            if problems is not None:
-                problems.append(str(exc))
-            bad.add(f)
-    return bad
-
-
 def copy_file(src: Path, dst: Path, bag) -> None:
     """Copy the regular file ``src`` to the new file ``dst`` (streamed)."""
     with open_file(src, bag) as fin, open(dst, "xb") as fout:

@@ -7,7 +7,7 @@ are read one by one (rosbags reads ``.mcap`` / ``.db3`` files without metadata),
 that fails too, the complete records of a truncated mcap are recovered by the record walk
 (:mod:`lpv_sysid.io.bag.mcap.walk`) and the readable rows of a damaged sqlite3 file by the
 sqlite3 module (:mod:`lpv_sysid.io.bag.sqlite`). The files are screened first
-(:func:`~lpv_sysid.io.bag.bagfiles.screen_bag`): a FIFO or device is never opened.
+(:func:`~lpv_sysid.io.bag.metadata.screen_bag`): a FIFO or device is never opened.
 """
 
 from __future__ import annotations
@@ -16,10 +16,11 @@ import logging
 from pathlib import Path
 
 from lpv_sysid.errors import BagError
-from lpv_sysid.io.bag.bagfiles import METADATA, UnsafeBagFile, screen_bag, storage_files
+from lpv_sysid.io.bag.bagfiles import METADATA, UnsafeBagFile, storage_files
 from lpv_sysid.io.bag.durability import _describe
 from lpv_sysid.io.bag.mcap.index import _read_fast
 from lpv_sysid.io.bag.mcap.walk import _salvage_mcap
+from lpv_sysid.io.bag.metadata import screen_bag
 from lpv_sysid.io.bag.records import _Source
 from lpv_sysid.io.bag.sqlite import _salvage_sqlite, _settled
 from lpv_sysid.io.bag.typestore import jazzy_typestore

@@ -1,16 +1,25 @@
-"""``metadata.yaml``, the bag's table of contents: read (for the index reader), compared
-with what the storage files hold and written after a repair (rosbag2 format version 9,
-as rosbags' Writer writes it; a healthy bag's file is written by rosbags itself)."""
+"""``metadata.yaml``, the bag's table of contents: read (for the index reader and to screen the
+files it names before anything opens them), compared with what the storage files hold and
+written after a repair (rosbag2 format version 9, as rosbags' Writer writes it; a healthy
+bag's file is written by rosbags itself)."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
 import yaml
 
 from lpv_sysid.errors import BagError
-from lpv_sysid.io.bag.bagfiles import METADATA, read_metadata_text
+from lpv_sysid.io.bag.bagfiles import (
+    METADATA,
+    UnsafeBagFile,
+    check_file,
+    hot_journal,
+    read_metadata_text,
+    storage_files,
+)
 from lpv_sysid.io.bag.durability import atomic_write_text
 from lpv_sysid.io.bag.records import _FileInfo
 
@@ -115,3 +124,39 @@ def _write_bag_metadata(path: Path, storage: str, infos: list[_FileInfo], note: 
         }
     }
     atomic_write_text(path / METADATA, yaml.safe_dump(meta, sort_keys=False), fsync=True)
+
+
+def screen_bag(path: Path, strict: bool = True, problems: list[str] | None = None) -> set[Path]:
+    """The files of the bag ``path`` that must not be opened: its ``metadata.yaml``, the
+    storage files in the directory and those its metadata lists, and sqlite3 journals,
+    when they are not regular files. ``strict``: the first one raises
+    :class:`UnsafeBagFile`; else each is described in ``problems`` and returned. What
+    rosbags and sqlite3 open by name is screened here first."""
+    cands: list[Path] = []
+    if path.is_dir():
+        meta = path / METADATA
+        cands.append(meta)
+        names: list[str] = []
+        if meta.is_file():
+            try:  # the files rosbags' reader opens (by name, inside the directory)
+                names = [str(n) for n in load_metadata(path)["relative_file_paths"]]
+            except Exception:  # noqa: BLE001 - unreadable metadata: the readers say why
+                names = []
+        cands += sorted(set(storage_files(path)) | {path / Path(n).name for n in names})
+    else:
+        cands.append(path)
+    bad: set[Path] = set()
+    for f in cands:
+        if not os.path.lexists(f):
+            continue
+        try:
+            check_file(f, path)
+            if f.suffix == ".db3":
+                hot_journal(f, path)
+        except UnsafeBagFile as exc:
+            if strict:
+                raise
+            if problems is not None:
+                problems.append(str(exc))
+            bad.add(f)
+    return bad

@@ -20,10 +20,10 @@ from pathlib import Path
 from typing import Mapping
 
 from lpv_sysid.errors import BagError
-from lpv_sysid.io.bag.bagfiles import check_file, screen_bag, storage_files
+from lpv_sysid.io.bag.bagfiles import check_file, storage_files
 from lpv_sysid.io.bag.durability import LOCK_FILE, _describe, now_iso, writer_alive
 from lpv_sysid.io.bag.mcap.repair import _repair_mcap_file
-from lpv_sysid.io.bag.metadata import _metadata_matches, _write_bag_metadata
+from lpv_sysid.io.bag.metadata import _metadata_matches, _write_bag_metadata, screen_bag
 from lpv_sysid.io.bag.records import TopicStats, _FileInfo, merge_topic_stats
 from lpv_sysid.io.bag.sqlite import _repair_sqlite_file
 from lpv_sysid.io.bag.typestore import jazzy_typestore

@@ -12,17 +12,33 @@ import contextlib
 import logging
 import sqlite3
 import struct
-from typing import TYPE_CHECKING, Any
+from pathlib import Path
+from typing import Any, Optional, Protocol
 
-from lpv_sysid.io.bag.repair import repair_bag
+from lpv_sysid.io.bag.durability import DiskReserve
+from lpv_sysid.io.bag.repair import RepairReport, repair_bag
 
-if TYPE_CHECKING:
-    from lpv_sysid.io.bag.writer import BagWriter
+
+class FailedWriter(Protocol):
+    """What :func:`recover` reads and sets of the failed
+    :class:`~lpv_sysid.io.bag.writer.BagWriter`."""
+
+    path: Path
+    counts: dict[str, int]
+    durable_counts: dict[str, int]
+    repair: Optional[RepairReport]
+    _reserve: Optional[DiskReserve]
+    _header_end: int
+    _pending_rows: list
+
+    @property
+    def _mcap(self) -> bool: ...
+
 
 LOG = logging.getLogger(__name__)
 
 
-def recover(bw: BagWriter, writer: Any) -> str:
+def recover(bw: FailedWriter, writer: Any) -> str:
     """After a write/close error of ``bw`` (whose rosbags ``writer`` failed): give the
     disk reserve back, save the messages still in memory (the pending mcap chunk, the
     uncommitted sqlite3 rows), index the file and write ``metadata.yaml`` from what it
@@ -62,7 +78,7 @@ def recover(bw: BagWriter, writer: Any) -> str:
     )
 
 
-def settle_sqlite(bw: BagWriter, storage: Any) -> None:
+def settle_sqlite(bw: FailedWriter, storage: Any) -> None:
     """Commit what the failed transaction still holds; if SQLite rolled it back, write
     the pending rows again (the reserve just freed makes room for them)."""
     conn = storage.conn

@@ -13,16 +13,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import yaml
-
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.io.bag import RepairReport, atomic_write_text, now_iso
+from lpv_sysid.io.bag import RepairReport
 from lpv_sysid.io.files import sha256_file
-from lpv_sysid.io.recorder.experiment import METADATA_FILE, METADATA_FORMAT
 
 if TYPE_CHECKING:
     from lpv_sysid.io.recorder.config import RecorderConfig
-    from lpv_sysid.io.recorder.recorder import Recorder
 
 LOG = logging.getLogger(__name__)
 
@@ -125,62 +121,3 @@ def static_metadata(cfg: RecorderConfig) -> dict:
         "gains": gains,
         "git_revision": git_revision(here),
     }
-
-
-def write_metadata(rec: Recorder, closed: bool) -> None:
-    """Rewrite ``experiment.yaml`` of ``rec`` atomically (module docstring of io/recorder/recorder.py);
-    on a full disk with the lock's reserve freed, else logged."""
-    meta = {
-        "format": METADATA_FORMAT,
-        **rec._static_meta,
-        "storage": rec.config.storage,
-        "start_time": rec._wall_start,
-        "stop_time": rec._wall_stop or None,
-        "start_stamp_ns": rec._started_ns,
-        "stop_stamp_ns": rec._stopped_ns,
-        "status": _status(rec, closed),
-        "closed_cleanly": bool(closed),
-        "error": rec.error,
-        "updated_time": now_iso(),
-        "split": {
-            "size_bytes": rec.config.split_size_bytes,
-            "duration_s": rec.config.split_duration_s,
-        },
-        "rotor_speeds_source": dict(rec.rotor_sources) or None,  # {"esc"|"estimated": count}
-        # counts: what is on disk (committed), never more -- see the module docstring
-        "topics": {
-            t: {
-                "type": s.msgtype,
-                "count": _durable_count(rec, t),
-                "dropped": s.dropped,
-                "rate_hz": round(s.rate_hz, 6),
-            }
-            for t, s in rec.stats.items()
-        },
-        "bags": [b.entry() for b in rec.bags],
-    }
-    path = rec.out_dir / METADATA_FILE
-    text = yaml.safe_dump(meta, sort_keys=False)
-    try:
-        atomic_write_text(path, text, fsync=rec.config.fsync)
-    except OSError as exc:
-        err = exc  # the last failure (a second one, after the reserve was given back, too)
-        if rec._lock is not None and rec._lock.free_space():  # disk full: use the reserve
-            try:
-                atomic_write_text(path, text, fsync=rec.config.fsync)
-                return
-            except OSError as exc2:
-                err = exc2
-        LOG.error("cannot write %s: %s", path, err.strerror or err)
-
-
-def _status(rec: Recorder, closed: bool) -> str:
-    if closed:
-        return "closed_cleanly"
-    if rec.error is not None or rec._stopped_ns is not None:
-        return "incomplete"
-    return "recording"
-
-
-def _durable_count(rec: Recorder, topic: str) -> int:
-    return sum((b.durable or {"topics": {}})["topics"].get(topic, 0) for b in rec.bags)

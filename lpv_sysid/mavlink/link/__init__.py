@@ -9,7 +9,7 @@ Responsibilities
 - transport: ``mavutil.mavlink_connection`` (``udpin:``, ``udpout:``, ``tcp:``, serial
   device), with MAVSDK-style URLs (``udp://:14540``, ``udpout://h:p``,
   ``serial:///dev/ttyACM0:921600``) translated;
-- codec: MAVLink 2 (:func:`lpv_sysid.mavlink.px4.make_codec`), robust parsing; bad
+- codec: MAVLink 2 (:func:`lpv_sysid.mavlink.codec.make_codec`), robust parsing; bad
   bytes, CRC errors, unknown ids, bad signatures and truncated UDP datagrams are counted
   in :class:`LinkStats`, never raised; the high-rate telemetry (:data:`FAST_MESSAGES`) is
   decoded by :class:`FastDecoder` (struct unpacking, X.25 CRC with CRC_EXTRA checked, the

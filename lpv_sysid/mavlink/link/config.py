@@ -9,7 +9,7 @@ from typing import Any, Mapping
 
 from lpv_sysid.configuration.fields import check_config_keys
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.mavlink import px4
+from lpv_sysid.mavlink import codec
 from lpv_sysid.mavlink.link.url import parse_url
 
 # MAVLink ids used below (common.xml); kept numeric so that no dialect global is needed.
@@ -40,7 +40,7 @@ class LinkConfig:
     source_component: int = 191  # MAV_COMP_ID_ONBOARD_COMPUTER
     target_system: int = 0  # 0: learn from the first autopilot HEARTBEAT
     target_component: int = 1  # MAV_COMP_ID_AUTOPILOT1
-    dialect: str = px4.DEFAULT_DIALECT
+    dialect: str = codec.DEFAULT_DIALECT
     heartbeat_period: float = 1.0
     link_timeout: float = 1.5
     reconnect_period: float = 2.0
@@ -83,7 +83,7 @@ class LinkConfig:
             "stream_request_period",
         ):
             _positive(f"link.{name}", getattr(self, name))
-        mod = px4.dialect_module(self.dialect)
+        mod = codec.dialect_module(self.dialect)
         for name, rate in self.streams:
             if name != "ESC_STATUS" and not hasattr(mod, f"MAVLINK_MSG_ID_{name}"):
                 raise ConfigError(f"link.streams: unknown MAVLink message {name!r}")

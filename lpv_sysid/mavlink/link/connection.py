@@ -9,7 +9,7 @@ Responsibilities
 - transport: ``mavutil.mavlink_connection`` (``udpin:``, ``udpout:``, ``tcp:``, serial
   device), with MAVSDK-style URLs (``udp://:14540``, ``udpout://h:p``,
   ``serial:///dev/ttyACM0:921600``) translated;
-- codec: MAVLink 2 (:func:`lpv_sysid.mavlink.px4.make_codec`), robust parsing; bad
+- codec: MAVLink 2 (:func:`lpv_sysid.mavlink.codec.make_codec`), robust parsing; bad
   bytes, CRC errors, unknown ids, bad signatures and truncated UDP datagrams are counted
   in :class:`LinkStats`, never raised; the high-rate telemetry (:data:`FAST_MESSAGES`) is
   decoded by :class:`FastDecoder` (struct unpacking, X.25 CRC with CRC_EXTRA checked, the
@@ -36,7 +36,7 @@ import math
 from typing import Any, Callable
 
 from lpv_sysid.errors import LpvSysidError
-from lpv_sysid.mavlink import px4
+from lpv_sysid.mavlink import codec
 from lpv_sysid.mavlink.link.config import (
     MAV_AUTOPILOT_INVALID,
     MAV_CMD_SET_MESSAGE_INTERVAL,
@@ -63,7 +63,7 @@ class MavlinkLink(LinkReceiver):
         config.validate()
         device, self._baud = parse_url(config.url, config.baud)
         self._key = load_signing_key(config.signing_key_file) if config.signing_key_file else None
-        super().__init__(config, device, px4.dialect_module(config.dialect))
+        super().__init__(config, device, codec.dialect_module(config.dialect))
         self._factory = connection_factory or _mavutil_connection
         self.conn: Any = None
         self._next_hb = 0.0
@@ -88,11 +88,11 @@ class MavlinkLink(LinkReceiver):
             ) from None
         if self._device.startswith(("udpin:", "tcpin:")):
             warn_if_all_interfaces(f"MAVLink link {self.config.url!r}", self._device.split(":")[1])
-        self.codec = px4.make_codec(
+        self.codec = codec.make_codec(
             self.conn, self.config.source_system, self.config.source_component, self.config.dialect
         )
         if self._key is not None:
-            px4.setup_signing(
+            codec.setup_signing(
                 self.codec, self._key, self.config.signing_link_id, self.config.allow_unsigned
             )
         # the connection object keeps its own (mavutil) parser; ours replaces it
@@ -264,7 +264,7 @@ class MavlinkLink(LinkReceiver):
     # ---------------------------------------------------------------- internals
     def _msg_id(self, name: str) -> int:
         if name == "ESC_STATUS":
-            return px4.MAVLINK_MSG_ID_ESC_STATUS
+            return codec.MAVLINK_MSG_ID_ESC_STATUS
         return int(getattr(self._mod, f"MAVLINK_MSG_ID_{name}"))
 
     def _device_reopens(self) -> bool:

@@ -8,7 +8,11 @@ import binascii
 import struct
 from typing import Any
 
-from lpv_sysid.mavlink import px4
+from lpv_sysid.mavlink.codec import (
+    _ESC_STATUS_STRUCT,
+    ESC_STATUS_CRC_EXTRA,
+    MAVLINK_MSG_ID_ESC_STATUS,
+)
 from lpv_sysid.mavlink.link.config import MSG_HEARTBEAT
 
 #: telemetry the bridge receives at high rate: decoded by :class:`FastDecoder` (the rest, and
@@ -56,7 +60,7 @@ class FastDecoder:
         self.specs: dict[int, tuple] = {}
         for name in FAST_MESSAGES:
             mid = (
-                px4.MAVLINK_MSG_ID_ESC_STATUS
+                MAVLINK_MSG_ID_ESC_STATUS
                 if name == "ESC_STATUS"
                 else getattr(mod, f"MAVLINK_MSG_ID_{name}", None)
             )
@@ -68,9 +72,9 @@ class FastDecoder:
     @staticmethod
     def _spec(codec: Any, mod: Any, mid: int):
         cls = mod.mavlink_map.get(mid)
-        esc = cls is None and mid == px4.MAVLINK_MSG_ID_ESC_STATUS
+        esc = cls is None and mid == MAVLINK_MSG_ID_ESC_STATUS
         if esc:
-            crc_extra, unpacker = px4.ESC_STATUS_CRC_EXTRA, px4._ESC_STATUS_STRUCT
+            crc_extra, unpacker = ESC_STATUS_CRC_EXTRA, _ESC_STATUS_STRUCT
         elif cls is None:
             return None
         else:

@@ -40,7 +40,7 @@ import math
 import time
 from typing import Any, Callable
 
-from lpv_sysid.mavlink import px4
+from lpv_sysid.mavlink import codec, px4
 from lpv_sysid.mavlink.link import MavlinkLink
 from lpv_sysid.mavlink.preflight.gather import Facts, gather
 from lpv_sysid.mavlink.preflight.report import GO, NOGO, WARN, Check
@@ -195,7 +195,7 @@ def judge(
                 GO if ok else NOGO,
             )
         )
-        mod = px4.dialect_module()
+        mod = codec.dialect_module()
         caps = version.capabilities
         for cname in ("MAVLINK2", "SET_POSITION_TARGET_LOCAL_NED", "SET_ATTITUDE_TARGET"):
             bit = int(getattr(mod, f"MAV_PROTOCOL_CAPABILITY_{cname}"))

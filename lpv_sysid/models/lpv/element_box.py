@@ -19,16 +19,13 @@ boxes (the influence / box reductions of :mod:`lpv_sysid.ident.vertex.uncertaint
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Optional, Sequence
+from typing import Optional, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.models.lpv.uncertainty import UncertainElement, input_hull
-
-if TYPE_CHECKING:
-    from lpv_sysid.models.lpv.polytope import PolytopicModel
 
 
 # --------------------------------------------------------------------------- element box (LFT)
@@ -193,16 +190,17 @@ class ElementBox:
         return cls(Ac, Bc, tuple(rows), tuple(cols), tuple(half), tuple(labs))
 
 
-def corner_box(model: "PolytopicModel") -> Optional[ElementBox]:
-    """The :class:`ElementBox` whose corners are exactly ``model.systems`` when every vertex's
+def corner_box(systems: Sequence[Sequence[tuple]]) -> Optional[ElementBox]:
+    """The :class:`ElementBox` whose corners are exactly ``systems`` when every vertex's
     systems are all 2^q corners of a box of q single elements of [A, B] and the B part is the same
     at every vertex (the corner polytopes of :func:`uncertainty_vertices`, :func:`product_systems`
     and the influence / box reductions); None otherwise. Then the Eq. (23) polytope of each vertex
-    is that box, and an LMI that holds on the box holds at every corner."""
-    n = model.n_x
+    is that box, and an LMI that holds on the box holds at every corner. ``systems``: per vertex
+    the list of its (A, B) systems (``PolytopicModel.systems``)."""
+    n = np.asarray(systems[0][0][0]).shape[0]
     rows, cols, half, centres = [], [], [], []
     b_ref = None
-    for lst in model.systems:
+    for lst in systems:
         AB = np.array(
             [
                 np.concatenate([np.asarray(a, dtype=float), np.asarray(b, dtype=float)], axis=1)

@@ -46,6 +46,7 @@ from lpv_sysid.models.quadrotor.states import (
     reduced_state,
 )
 from lpv_sysid.models.quadrotor.trim import Trim
+from lpv_sysid.models.quadrotor.trim_table import SEED0_TABLE1, TRIM_COLUMNS, TRIM_TABLE
 
 __all__ = [
     "DEFAULT_K",
@@ -57,8 +58,11 @@ __all__ = [
     "Quadrotor",
     "QuadrotorParams",
     "SCHEDULING_NAMES",
+    "SEED0_TABLE1",
     "STATE_NAMES",
     "STATE_UNITS",
+    "TRIM_COLUMNS",
+    "TRIM_TABLE",
     "Trim",
     "_HOT_PATH_SOURCE",
     "full_state",

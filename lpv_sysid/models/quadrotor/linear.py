@@ -4,22 +4,22 @@ Eqs. 10-16) and the structure of its unknown elements (seed 0 Appendix A)."""
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Mapping
+from typing import Mapping
 
 import numpy as np
 
 from lpv_sysid.models.quadrotor.params import K_NAMES
+from lpv_sysid.models.quadrotor.protocol import QuadrotorModel
 from lpv_sysid.models.quadrotor.trim import Trim
-
-if TYPE_CHECKING:
-    from lpv_sysid.models.quadrotor.model import Quadrotor
 
 
 def _skew(a) -> np.ndarray:
     return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
 
 
-def aero_jacobians(model: Quadrotor, K: Mapping[str, float], j_rotor: float, controller_state):
+def aero_jacobians(
+    model: QuadrotorModel, K: Mapping[str, float], j_rotor: float, controller_state
+):
     """Partial derivatives of F and M (Eq. 6) w.r.t. nu = (v, omega) and delta.
 
     Returns dF/dnu (3x6), dF/ddelta (3x4), dM/dnu (3x6), dM/ddelta (3x4), dMz/du_r.
@@ -94,7 +94,7 @@ def aero_jacobians(model: Quadrotor, K: Mapping[str, float], j_rotor: float, con
     return dF_nu, dF_d + dF_d2 @ D2, dM_nu, dM_d + dM_d2 @ D2, dMz_dur
 
 
-def linearize(model: Quadrotor, trim_or_x, u0=None):
+def linearize(model: QuadrotorModel, trim_or_x, u0=None):
     """Analytic Jacobians A (12x12), B (12x4) of the 12-state model (seed 0 Eqs. 10-16).
 
     Accepts a ``Trim`` or a 12-state operating point ``x`` (then ``u0`` is unused: the
@@ -139,7 +139,7 @@ def linearize(model: Quadrotor, trim_or_x, u0=None):
     return A, B
 
 
-def unknown_masks(model: Quadrotor):
+def unknown_masks(model: QuadrotorModel):
     """Structural masks of the A, B elements that depend on the aero parameters.
 
     Seed 0 Appendix A: an element is unknown when d f_a / d(x, u) (Eq. 6) is

@@ -37,9 +37,6 @@ import numpy as np
 from lpv_sysid.models.quadrotor import linear as quadrotor_linear
 from lpv_sysid.models.quadrotor import trim as quadrotor_trim
 from lpv_sysid.models.quadrotor.hot_path import (
-    _HOT_PATH_SOURCE as _HOT_PATH_SOURCE,
-)
-from lpv_sysid.models.quadrotor.hot_path import (
     compile_hot_path,
     hot_path_constants,
 )

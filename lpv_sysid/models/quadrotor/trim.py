@@ -5,17 +5,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import optimize
 
 from lpv_sysid.errors import SolverError
 from lpv_sysid.models.quadrotor.params import as_finite
+from lpv_sysid.models.quadrotor.protocol import QuadrotorModel
 from lpv_sysid.models.quadrotor.states import reduced_state
-
-if TYPE_CHECKING:
-    from lpv_sysid.models.quadrotor.model import Quadrotor
 
 
 @dataclass(frozen=True)
@@ -30,7 +27,7 @@ class Trim:
     residual: float  # max |xdot| of phi, theta, v, omega, Omega at the solution
 
 
-def trim(model: Quadrotor, v_body, yaw_rate: float = 0.0) -> Trim:
+def trim(model: QuadrotorModel, v_body, yaw_rate: float = 0.0) -> Trim:
     """Equilibrium for body velocity v_d and yaw rate psi-dot (seed 0 Sec. III).
 
     Solves v-dot = 0, omega-dot = 0 for (phi_0, theta_0, Omega_0) with

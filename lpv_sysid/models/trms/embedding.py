@@ -30,14 +30,3 @@ This module is the entry point; the parts live in one module per job and are re-
 """
 
 from __future__ import annotations
-
-from lpv_sysid.models.trms.params import (
-    INPUT_UNITS as INPUT_UNITS,
-)
-from lpv_sysid.models.trms.params import (
-    PSI_INDEX as PSI_INDEX,
-)
-from lpv_sysid.models.trms.params import (
-    STATE_UNITS as STATE_UNITS,
-)
-from lpv_sysid.models.trms.polytope import PSI_DEPENDS as PSI_DEPENDS

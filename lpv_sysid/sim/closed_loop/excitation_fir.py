@@ -4,7 +4,7 @@ On a flight (simulated nonlinear run or PX4) ``z = Q^-1 (v - v_d)`` mixes the re
 excitation ``u_e`` with the slow tracking error of the reference. :func:`excitation_response_fir`
 fits a causal FIR ``u_e -> z`` above the reference band and returns the part of z it explains,
 the FIR's fit and its peak gain; the phase-2 simulation (:mod:`lpv_sysid.sim.phase2`) and the
-PX4 chain (:mod:`lpv_sysid.cli.chain`) both use it.
+PX4 chain (:mod:`lpv_sysid.flight.chain`) both use it.
 """
 
 from __future__ import annotations

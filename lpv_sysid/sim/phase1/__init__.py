@@ -31,30 +31,20 @@ from lpv_sysid.sim.phase1.config import Phase1Config, load_config
 from lpv_sysid.sim.phase1.runs import (
     design_excitation,
     excitation_signal,
-    run_name,
     run_phase1,
     simulate_run,
 )
-from lpv_sysid.sim.phase1.trims import (
-    SEED0_TABLE1,
-    TRIM_COLUMNS,
-    format_trim_table,
-    trim_table,
-    write_trim_table,
-)
+from lpv_sysid.sim.phase1.trims import format_trim_table, trim_table, write_trim_table
 
 __all__ = [
     "BAG_TOPICS",
     "Phase1Config",
-    "SEED0_TABLE1",
-    "TRIM_COLUMNS",
     "_bulk_rows",
     "_message_items",
     "design_excitation",
     "excitation_signal",
     "format_trim_table",
     "load_config",
-    "run_name",
     "run_phase1",
     "simulate_run",
     "trim_table",

@@ -11,10 +11,10 @@ from typing import Sequence
 import numpy as np
 
 from lpv_sysid.control.baseline import BaselineController, BaselineGains
+from lpv_sysid.control.campaign import run_name
 from lpv_sysid.errors import ConfigError, SafetyError
-from lpv_sysid.models.quadrotor import Quadrotor, Trim, mixer
+from lpv_sysid.models.quadrotor import TRIM_COLUMNS, Quadrotor, Trim, mixer
 from lpv_sysid.sim.phase1.config import Phase1Config
-from lpv_sysid.sim.phase1.trims import TRIM_COLUMNS
 from lpv_sysid.sim.vehicle import SensorConfig, SimVehicle
 
 log = logging.getLogger(__name__)
@@ -189,12 +189,6 @@ def simulate_run(
         excitation=exc,
         command=cmd,
         meta={"seed": seed, "physics_hz": phys, "control_hz": gains.rate_hz},
-    )
-
-
-def run_name(v_d) -> str:
-    return "vertex_" + "_".join(
-        f"{'p' if c > 0 else ('m' if c < 0 else '0')}{abs(c):g}" for c in v_d
     )
 
 

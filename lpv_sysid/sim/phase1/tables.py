@@ -25,6 +25,3 @@ and :mod:`~lpv_sysid.sim.phase1.bag` (``write_run_bag``).
 """
 
 from __future__ import annotations
-
-from lpv_sysid.sim.phase1.bag import _bulk_rows as _bulk_rows
-from lpv_sysid.sim.phase1.bag import _message_items as _message_items

@@ -9,22 +9,11 @@ from typing import TYPE_CHECKING, Sequence
 import numpy as np
 import yaml
 
+from lpv_sysid.models.quadrotor import SEED0_TABLE1, TRIM_COLUMNS
+
 if TYPE_CHECKING:
     from lpv_sysid.sim.phase1.config import Phase1Config
     from lpv_sysid.sim.phase1.runs import RunRecord
-
-# Seed 0 Table 1 (flight-data vertex equilibria), Table 1 row order, for comparison.
-SEED0_TABLE1 = {
-    (-5, -5, -5): (-4.99, -5.04, -4.20, -10.87, 9.28, 691.4, -36.7, 29.0, 310.5),
-    (5, -5, -5): (4.95, -5.04, -4.17, -10.44, -8.05, 685.0, -34.1, -1.5, 39.2),
-    (-5, 5, -5): (-5.01, 5.03, -3.95, 8.55, 8.11, 689.0, -2.8, 25.3, 34.9),
-    (5, 5, -5): (5.03, 5.01, -4.00, 8.04, -8.98, 679.5, -5.8, -4.0, 305.4),
-    (-5, -5, 5): (-4.83, -4.68, 2.88, -5.00, 3.17, 554.9, -45.0, 28.0, 367.6),
-    (5, -5, 5): (4.73, -4.61, 2.72, -5.14, -4.08, 521.8, -34.6, -18.3, 158.9),
-    (-5, 5, 5): (-4.85, 4.75, 3.00, 3.80, 3.00, 546.9, 14.0, 23.4, -9.8),
-    (5, 5, 5): (4.64, 4.73, 2.86, 3.85, -4.83, 525.8, 3.49, -15.8, 298.1),
-}
-TRIM_COLUMNS = ("u0", "v0", "w0", "phi0_deg", "theta0_deg", "dt0", "da0", "de0", "dr0")
 
 
 def trim_table(runs: Sequence[RunRecord], cfg: Phase1Config, arm_length: float) -> list[dict]:

@@ -88,6 +88,8 @@ class Phase2Result:
     skipped: dict[str, str]
     written: dict[str, Path]
     summary_path: Path
+    #: the Fig. 10 regressor correlation of ``summary.yaml`` (None without a run to show)
+    regressor_block: Optional[dict] = None
 
 
 def run(
@@ -127,18 +129,19 @@ def run(
         records["nonlinear"] = rec
     else:
         skipped["nonlinear"] = "not requested"
+    block = _regressor_block(records, quad_params.arm_length)
     written = write_outputs(
         out,
         problem.gamma,
         cfg.kappa,
         list(records.values()),
         skipped,
-        _regressor_block(records, quad_params.arm_length),
+        block,
         _summary_extra(problem, signals, cfg, quad_params.arm_length),
     )
     if bag_path is not None:
         written["bag"] = bag_path
-    return Phase2Result(records, skipped, written, written["summary"])
+    return Phase2Result(records, skipped, written, written["summary"], block)
 
 
 def _output_dir(out_dir: str | Path) -> Path:

@@ -116,9 +116,9 @@ def write_outputs(
     skipped: Optional[dict[str, str]] = None,
     regressor_block: Optional[dict] = None,
     extra: Optional[dict] = None,
-    figures: bool = True,
 ) -> dict[str, Path]:
-    """Write ``summary.yaml``, ``<name>.npz`` and figures; return the written paths."""
+    """Write ``summary.yaml`` and ``<name>.npz``; return the written paths (the figures of
+    the run: :func:`lpv_sysid.report.write_phase2_figures`)."""
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -150,24 +150,6 @@ def write_outputs(
         yaml.safe_dump(summary, sort_keys=False, default_flow_style=None), encoding="utf-8"
     )
     written["summary"] = p
-    if figures:
-        from lpv_sysid.report import plots, regressor_correlations_from_summary
-
-        for rec in records:
-            if rec.t.size < 2:
-                continue
-            written[f"tracking_{rec.name}"] = plots.plot_tracking(
-                rec.t, rec.v_d, rec.v, out / f"tracking_{rec.name}.png", rec.name
-            )
-            written[f"perturbation_{rec.name}"] = plots.plot_perturbation(
-                rec.t, rec.v - rec.v_d, out / f"perturbation_{rec.name}.png", rec.name
-            )
-        if regressor_block is not None:
-            written["regressor_correlation"] = plots.plot_regressor_correlations(
-                regressor_correlations_from_summary(regressor_block),
-                out / "regressor_correlation.png",
-                f"Eq. (6) regressor correlation ({regressor_block['source']})",
-            )
     return written
 
 
@@ -184,15 +166,19 @@ def regressor_correlation_block(
     ``controller_state`` (N, 12) in DESIGN.md state order; ``Omega`` (N, 4) rotor speeds
     if known, else Omega = Mix^-1 delta from the virtual-actuator states.
     """
+    from lpv_sysid.ident.nonlinear import (
+        fig10_regressors,
+        regressor_correlations,
+        virtual_actuators,
+    )
     from lpv_sysid.models.quadrotor import mixer
-    from lpv_sysid.report import regressor_correlations, regressors, virtual_actuators
 
     mix = mixer(arm_length)
     controller_state = np.asarray(controller_state, dtype=float)
     if Omega is None:
         Omega = np.linalg.solve(mix, controller_state[:, 8:12].T).T
     delta, delta_sq = virtual_actuators(Omega, mix)
-    regs = regressors(
+    regs = fig10_regressors(
         t, controller_state[:, 2:5], controller_state[:, 5:8], delta, delta_sq, arm_length
     )
     corrs = regressor_correlations(regs)

@@ -12,7 +12,7 @@ from typing import Any, Callable
 import numpy as np
 
 from lpv_sysid.io import frames
-from lpv_sysid.mavlink import px4
+from lpv_sysid.mavlink import codec, px4
 from lpv_sysid.mavlink.link import LinkConfig, MavlinkLink
 from lpv_sysid.sim.px4_vehicle.config import (
     DEFAULT_PARAMS,
@@ -107,11 +107,11 @@ class VehicleState:
         self._next_send: dict[int, float] = {}
         self._next_hb = 0.0
         self._opened = False
-        mod = px4.dialect_module(px4.DEFAULT_DIALECT)
+        mod = codec.dialect_module(codec.DEFAULT_DIALECT)
         self._mod = mod
         self._stream_ids = {
             name: (
-                px4.MAVLINK_MSG_ID_ESC_STATUS
+                codec.MAVLINK_MSG_ID_ESC_STATUS
                 if name == "ESC_STATUS"
                 else getattr(mod, f"MAVLINK_MSG_ID_{name}")
             )
@@ -120,7 +120,7 @@ class VehicleState:
         rates = {**DEFAULT_RATES, **dict(self.config.stream_rates)}
         for name, rate in rates.items():
             self.intervals[self._stream_ids[name]] = 1.0 / rate if rate > 0 else -1.0
-        self._esc_cls = px4.esc_status_class(px4.DEFAULT_DIALECT)
+        self._esc_cls = codec.esc_status_class(codec.DEFAULT_DIALECT)
 
     def param(self, name: str) -> float:
         return float(self.params[name][0])

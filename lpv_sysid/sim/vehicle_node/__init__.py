@@ -7,18 +7,10 @@ from lpv_sysid.sim.vehicle_node.runtime import (
     SLIP_LOG_PERIOD_S,
     SimVehicleRuntime,
 )
-from lpv_sysid.sim.vehicle_node.settings import (
-    MODES,
-    SENSOR_DESCRIPTIONS,
-    SPECS,
-    SimVehicleSettings,
-    settings_from_params,
-)
+from lpv_sysid.sim.vehicle_node.settings import SPECS, SimVehicleSettings, settings_from_params
 
 __all__ = [
     "LOCKSTEP_RESEND_S",
-    "MODES",
-    "SENSOR_DESCRIPTIONS",
     "SLIP_LOG_PERIOD_S",
     "SPECS",
     "SimVehicleRuntime",

@@ -2,38 +2,15 @@
 
 from __future__ import annotations
 
-from lpv_sysid.synthesis.gains.certificate import (
-    LMI_TEXT,
-    VARIATION,
-    certificate_entry,
-    certified_set_entry,
-    problem_entry,
-)
-from lpv_sysid.synthesis.gains.inputs import (
-    Inputs,
-    design_from_summary,
-    feedforward_settings,
-    load_config,
-    load_inputs,
-    velocity_index,
-    weights_from_config,
-)
-from lpv_sysid.synthesis.gains.outputs import feedforward_terms, print_result, write_outputs
+from lpv_sysid.synthesis.gains.inputs import design_from_summary, load_inputs
+from lpv_sysid.synthesis.gains.outputs import write_gains
+from lpv_sysid.synthesis.gains.pipeline import describe_problem, synthesize, verify_written
 
 __all__ = [
-    "Inputs",
-    "LMI_TEXT",
-    "VARIATION",
-    "certificate_entry",
-    "certified_set_entry",
+    "describe_problem",
     "design_from_summary",
-    "feedforward_settings",
-    "feedforward_terms",
-    "load_config",
     "load_inputs",
-    "print_result",
-    "problem_entry",
-    "velocity_index",
-    "weights_from_config",
-    "write_outputs",
+    "synthesize",
+    "verify_written",
+    "write_gains",
 ]

@@ -8,9 +8,8 @@ design envelope.
 
 from __future__ import annotations
 
-import argparse
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Optional
 
@@ -146,35 +145,45 @@ class Inputs:
     rate_from_design: bool
     method: str
     t0: float
+    #: what was loaded, for the user (one line each)
+    notes: list[str] = field(default_factory=list)
 
 
-def load_inputs(args: argparse.Namespace) -> Inputs:
-    """Config, options (with the command-line overrides), models, weights and design envelope."""
+def load_inputs(
+    models: str,
+    config: str,
+    summary: Optional[str] = None,
+    gamma: Optional[float] = None,
+    solver: Optional[str] = None,
+) -> Inputs:
+    """Config, options (``gamma`` / ``solver`` override ``hinf.gamma`` / ``hinf.solver``),
+    models, weights (``summary``: the signals summary.yaml with R and Q, overriding
+    ``weights``) and design envelope of one synthesis; ``Inputs.notes`` says what was loaded."""
     from lpv_sysid.synthesis.hinf import HinfOptions, performance_matrix, resolve_method
     from lpv_sysid.synthesis.uncertainty_set import load_models, uncertainty_settings
 
-    cfg = load_config(args.config)
+    cfg = load_config(config)
     opts = HinfOptions.from_dict(cfg.get("hinf"))
-    if args.gamma is not None:
-        opts = replace(opts, gamma=float(args.gamma))
-    if args.solver is not None:
+    if gamma is not None:
+        opts = replace(opts, gamma=float(gamma))
+    if solver is not None:
         opts = HinfOptions.from_dict(
-            {**{k: getattr(opts, k) for k in opts.__dataclass_fields__}, "solver": args.solver}
+            {**{k: getattr(opts, k) for k in opts.__dataclass_fields__}, "solver": solver}
         )
     unc_cfg = uncertainty_settings(cfg.get("uncertainty"))
-    ff = feedforward_settings(cfg, args.config)
+    ff = feedforward_settings(cfg, config)
     t0 = time.perf_counter()
-    model, raw = load_models(args.models, unc_cfg)
-    R, Q, source = weights_from_config(cfg, model.n_u, args.summary, args.config)
+    model, raw = load_models(models, unc_cfg)
+    R, Q, source = weights_from_config(cfg, model.n_u, summary, config)
     vidx = velocity_index(cfg, model.state_names)
     C = performance_matrix(Q, model.n_x, vidx)
-    print(
-        f"models: {args.models} ({model.n_vertices} vertices, {model.n_x} states, "
+    notes = [
+        f"models: {models} ({model.n_vertices} vertices, {model.n_x} states, "
         f"{model.n_u} inputs); R, Q from {source}"
-    )
+    ]
     if model.ts is not None:
         raise ConfigError(
-            f"{args.models}: Lemma 1 is a continuous-time result; the models are discrete "
+            f"{models}: Lemma 1 is a continuous-time result; the models are discrete "
             f"(Ts={model.ts})"
         )
     design = design_from_summary(source)
@@ -204,4 +213,5 @@ def load_inputs(args: argparse.Namespace) -> Inputs:
         rate_from_design=rate_from_design,
         method=method,
         t0=t0,
+        notes=notes,
     )

@@ -1,10 +1,10 @@
-"""What `lpv-sysid synthesize` writes and prints: gains.yaml with its certificate and the
-reference feedforward terms, the sidecar ``<stem>.cert.npz`` (X, S, H, scaling, the certified
-systems, the element box) and the result lines on stdout."""
+"""What a synthesis writes: gains.yaml with its certificate and the reference feedforward
+terms, the sidecar ``<stem>.cert.npz`` (X, S, H, scaling, the certified systems, the element
+box), and the lines that say what was solved."""
 
 from __future__ import annotations
 
-import argparse
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -13,16 +13,26 @@ from lpv_sysid.synthesis.gains.certificate import certificate_entry, lmi_form
 from lpv_sysid.synthesis.gains.inputs import Inputs
 
 
-def feedforward_terms(inp: Inputs):
+@dataclass
+class GainsWritten:
+    """The files one synthesis wrote and what it solved (one line each)."""
+
+    gains: Path
+    sidecar: Path
+    lines: list[str] = field(default_factory=list)
+
+
+def feedforward_terms(inp: Inputs, lines: list[str]):
     """(F_ff, F_jerk, layout) from the nominal vertex models (synthesis/feedforward.py), or
-    Nones when the feedforward is off (by config, or by default for a non-quadrotor layout)."""
+    Nones when the feedforward is off (by config, or by default for a non-quadrotor layout;
+    then a line in ``lines`` says so)."""
     enabled, layout, cond_max = inp.feedforward
     model = inp.model
     if enabled and "feedforward" not in inp.cfg:
         # default on, but only for models that have the layout's states (generic plants: off)
         names = set(model.state_names)
         if not all(set(layout[k]) <= names for k in layout):
-            print(
+            lines.append(
                 f"feedforward: off (default layout {layout['free_states']} not among the model "
                 "states)"
             )
@@ -37,13 +47,13 @@ def feedforward_terms(inp: Inputs):
     return F_ff, F_jerk, layout
 
 
-def write_outputs(args: argparse.Namespace, inp: Inputs, res) -> tuple[Path, Path]:
-    """gains.yaml (with the certificate) and its sidecar ``<stem>.cert.npz``; prints the
-    result. Returns both paths."""
+def write_gains(out: Path, models: str, inp: Inputs, res) -> GainsWritten:
+    """``out`` (gains.yaml with the certificate about the models file ``models``) and its
+    sidecar ``<stem>.cert.npz`` from the synthesis result ``res``."""
     from lpv_sysid.io.files import save_yaml
     from lpv_sysid.io.formats import box_arrays, gains_dict, save_certificate_npz
 
-    out = Path(args.out)
+    out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     side = out.with_name(out.stem + ".cert.npz")
     extra = None
@@ -64,26 +74,29 @@ def write_outputs(args: argparse.Namespace, inp: Inputs, res) -> tuple[Path, Pat
         systems=inp.model.systems,
         extra=extra,
     )
-    cert = certificate_entry(inp, res, args.models, side, side_sha)
+    cert = certificate_entry(inp, res, models, side, side_sha)
     opts = inp.opts
     gamma_file = (
         float(opts.gamma)
         if opts.effective_objective != "min_gamma"
         else float(max(res.gamma_certified, 1e-12))
     )
-    F_ff, F_jerk, ff_layout = feedforward_terms(inp)
+    lines: list[str] = []
+    F_ff, F_jerk, ff_layout = feedforward_terms(inp, lines)
     gains = gains_dict(
         inp.raw, inp.model, res.K, inp.R, inp.Q, gamma_file, cert, F_ff, ff_layout, F_jerk
     )
     save_yaml(gains, out)
-    print_result(inp, res, cert, F_ff, F_jerk, ff_layout)
-    return out, side
+    lines += result_lines(inp, res, cert, F_ff, F_jerk, ff_layout)
+    return GainsWritten(out, side, lines)
 
 
-def print_result(inp: Inputs, res, cert: dict, F_ff, F_jerk, ff_layout) -> None:
+def result_lines(inp: Inputs, res, cert: dict, F_ff, F_jerk, ff_layout) -> list[str]:
+    """What was solved and certified, one line each."""
+    out: list[str] = []
     opts, pr = inp.opts, cert["problem"]
     size = res.size
-    print(
+    out.append(
         f"LMI ({pr['method']}): {size.lmi_blocks} blocks (total dim {size.lmi_total_dim}, "
         f"{size.scalar_constraints} scalar constraints), {size.scalar_variables} scalar "
         f"variables; compile {res.compile_time:.2f} s, solve {res.solve_time:.2f} s, load + "
@@ -92,7 +105,7 @@ def print_result(inp: Inputs, res, cert: dict, F_ff, F_jerk, ff_layout) -> None:
     )
     if "seed_lemma1" in pr:
         sp = pr["seed_lemma1"]
-        print(
+        out.append(
             f"seed 0 Lemma 1 over these sum M_i = {sp['sum_M']} systems (N = {sp['N']}): "
             f"{sp['package']['scalar_variables']} scalar variables and "
             f"{sp['package']['cone_entries']} cone entries in {sp['psd_cones']} PSD cones "
@@ -102,13 +115,13 @@ def print_result(inp: Inputs, res, cert: dict, F_ff, F_jerk, ff_layout) -> None:
         )
     if res.info.get("eq30"):
         e30 = res.info["eq30"]
-        print(
+        out.append(
             f"Eq. (30) re-checked with numpy at all {e30['systems']} systems (X_i^j = X_i): "
             f"gamma {e30['gamma']:.4g}, min margin {e30['margin']:.3g} ({e30['check_s']:.2f} s)"
         )
     cs = cert["certified_set"]
     covers = cs["scheduling"].get("covers_design_signal")
-    print(
+    out.append(
         f"certified set: {cs['kind']}; scheduling: {cs['scheduling']['variation']} v_d"
         + ("" if covers is None else f" (covers the designed v_d(t): {covers})")
     )
@@ -117,7 +130,7 @@ def print_result(inp: Inputs, res, cert: dict, F_ff, F_jerk, ff_layout) -> None:
         if opts.design_gamma_fraction != 1 and opts.effective_objective != "min_gamma"
         else ""
     )
-    print(
+    out.append(
         f"gamma requested {opts.gamma:g}{solved_at}, certified (numpy re-evaluation) "
         f"{res.gamma_certified:.4g}, min margin {res.min_margin:.3g}"
     )
@@ -127,7 +140,8 @@ def print_result(inp: Inputs, res, cert: dict, F_ff, F_jerk, ff_layout) -> None:
             if F_jerk is not None
             else ""
         )
-        print(
+        out.append(
             f"reference feedforward F_ff ({F_ff.shape[1]}x{F_ff.shape[2]} per vertex, rows "
             f"{ff_layout['free_states']} + inputs) from the nominal vertex models{jerk}"
         )
+    return out

@@ -67,7 +67,7 @@ def solve_box(
         raise ConfigError(
             "hinf.region is not offered with the element-box LMI (hinf.method: corners)"
         )
-    box = model.box if model.box is not None else corner_box(model)
+    box = model.box if model.box is not None else corner_box(model.systems)
     if box is None:
         raise ConfigError(
             "hinf.method: box: the Eq. (23) systems are not the corners of a box of single "

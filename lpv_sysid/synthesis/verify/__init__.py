@@ -59,23 +59,21 @@ importable from here as before.
 
 from __future__ import annotations
 
-from lpv_sysid.synthesis.verify.checker import record_verification, verify_files
+from lpv_sysid.synthesis.verify.checker import (
+    VERIFY_SETTINGS,
+    record_verification,
+    verify_and_record,
+    verify_files,
+)
 from lpv_sysid.synthesis.verify.feedforward import check_feedforward
 from lpv_sysid.synthesis.verify.frozen import verify_gains
 from lpv_sysid.synthesis.verify.intervals import ElementBox, full_box_intervals
 from lpv_sysid.synthesis.verify.montecarlo import element_sensitivities
-from lpv_sysid.synthesis.verify.report import (
-    VERIFICATION_FILE,
-    Verification,
-    VerifyReport,
-    read_verification,
-    verification_record,
-    write_verification,
-)
+from lpv_sysid.synthesis.verify.report import Verification, VerifyReport, read_verification
 
 __all__ = [
     "ElementBox",
-    "VERIFICATION_FILE",
+    "VERIFY_SETTINGS",
     "Verification",
     "VerifyReport",
     "check_feedforward",
@@ -83,8 +81,7 @@ __all__ = [
     "full_box_intervals",
     "read_verification",
     "record_verification",
-    "verification_record",
+    "verify_and_record",
     "verify_files",
     "verify_gains",
-    "write_verification",
 ]

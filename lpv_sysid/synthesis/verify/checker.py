@@ -72,7 +72,7 @@ from lpv_sysid.synthesis.verify.box import _sidecar_box, check_box_claim, check_
 from lpv_sysid.synthesis.verify.feedforward import check_feedforward
 from lpv_sysid.synthesis.verify.frozen import _check_input_claim, verify_gains
 from lpv_sysid.synthesis.verify.intervals import full_box_intervals
-from lpv_sysid.synthesis.verify.montecarlo import add_full_box_rows, full_box_check
+from lpv_sysid.synthesis.verify.montecarlo import FullBoxResult, full_box_check
 from lpv_sysid.synthesis.verify.report import (
     VERIFICATION_FILE,
     VerifyReport,
@@ -262,4 +262,78 @@ def record_verification(
     path = Path(out) if out is not None else Path(gains_path).parent / VERIFICATION_FILE
     settings = {k: v for k, v in kw.items() if k not in ("uncertainty", "velocity_index")}
     write_verification(path, verification_record(rep, gains_path, models_path, settings))
+    return rep, path
+
+
+def add_full_box_rows(
+    rep: VerifyReport, res: FullBoxResult, strict: bool = False, claimed: bool = False
+) -> None:
+    """Rows ``full-box hinf`` / ``full-box frac`` / ``full-box stab``: ``ok`` only when every
+    sample passes; otherwise advisory (WARN) unless ``strict``. ``claimed``: the certificate
+    claims this box (``certified_set.kind: full_identified_box``), so a miss is a broken
+    certificate (strict)."""
+    rep.full_box = res
+    adv = not (strict or claimed)
+    w = res.worst
+    vd = "[" + ", ".join(f"{x:.3g}" for x in w.v_d) + "]" if w is not None else "-"
+    tag = f"empirical, {res.n} samples, k={res.k_sigma:g}; " + (
+        "cross-check of the certified full box" if claimed else "not certified"
+    )
+    if w is not None and not np.isnan(w.norm):
+        rep.add(
+            "full-box hinf",
+            f"worst v_d {vd}",
+            w.norm,
+            res.gamma,
+            res.passed,
+            f"{w.where}; {tag}",
+            advisory=adv,
+        )
+    n_ok = sum(s.ok for s in res.samples)
+    rep.add(
+        "full-box frac",
+        f"{n_ok}/{res.n} samples ok",
+        res.fraction_ok,
+        1.0,
+        res.passed,
+        "fraction with norm <= gamma and stable",
+        advisory=adv,
+    )
+    n_unst = sum(s.abscissa >= 0 for s in res.samples)
+    rep.add(
+        "full-box stab",
+        "max Re eig" if res.worst is None or not np.isnan(res.worst.norm) else "max |eig| - 1",
+        res.max_abscissa,
+        0.0,
+        res.all_stable,
+        "" if res.all_stable else f"{n_unst} unstable samples",
+        advisory=adv,
+    )
+
+
+#: the settings of ``lpv-sysid verify`` (its command-line defaults) and of the verification
+#: the PX4 chain records after a synthesis
+VERIFY_SETTINGS: dict[str, Any] = {
+    "n_random": 20,
+    "seed": 0,
+    "full_box": 200,
+    "strict_full_box": False,
+    "k_sigma": None,
+    "full_box_kept": "stored",
+}
+
+
+def verify_and_record(
+    gains_path: Path | str,
+    models_path: Path | str,
+    out: Optional[Path | str] = None,
+    **settings: Any,
+) -> tuple[VerifyReport, Path]:
+    """:func:`verify_files` with :data:`VERIFY_SETTINGS` (overridden by ``settings``), its
+    record written to ``out`` (default: ``verification.yaml`` next to the gains file).
+    Returns the report and the record's path."""
+    used = {**VERIFY_SETTINGS, **settings}
+    rep = verify_files(gains_path, models_path, **used)
+    path = Path(out) if out else Path(gains_path).parent / VERIFICATION_FILE
+    write_verification(path, verification_record(rep, gains_path, models_path, used))
     return rep, path

@@ -28,7 +28,6 @@ from lpv_sysid.errors import ConfigError
 from lpv_sysid.models.lpv import PolytopicModel, multilinear_weights
 from lpv_sysid.synthesis.hinf import hinf_norm
 from lpv_sysid.synthesis.verify.intervals import DEFAULT_K_SIGMA, ElementBox
-from lpv_sysid.synthesis.verify.report import VerifyReport
 
 
 @dataclass
@@ -323,49 +322,3 @@ def full_box_check(
                 Ai, Bi = boxes[i].apply(model.A[i], model.B[i], th)
                 record(f"vertex {i} {name}", vd, Ai, Bi, K[i])
     return res
-
-
-def add_full_box_rows(
-    rep: VerifyReport, res: FullBoxResult, strict: bool = False, claimed: bool = False
-) -> None:
-    """Rows ``full-box hinf`` / ``full-box frac`` / ``full-box stab``: ``ok`` only when every
-    sample passes; otherwise advisory (WARN) unless ``strict``. ``claimed``: the certificate
-    claims this box (``certified_set.kind: full_identified_box``), so a miss is a broken
-    certificate (strict)."""
-    rep.full_box = res
-    adv = not (strict or claimed)
-    w = res.worst
-    vd = "[" + ", ".join(f"{x:.3g}" for x in w.v_d) + "]" if w is not None else "-"
-    tag = f"empirical, {res.n} samples, k={res.k_sigma:g}; " + (
-        "cross-check of the certified full box" if claimed else "not certified"
-    )
-    if w is not None and not np.isnan(w.norm):
-        rep.add(
-            "full-box hinf",
-            f"worst v_d {vd}",
-            w.norm,
-            res.gamma,
-            res.passed,
-            f"{w.where}; {tag}",
-            advisory=adv,
-        )
-    n_ok = sum(s.ok for s in res.samples)
-    rep.add(
-        "full-box frac",
-        f"{n_ok}/{res.n} samples ok",
-        res.fraction_ok,
-        1.0,
-        res.passed,
-        "fraction with norm <= gamma and stable",
-        advisory=adv,
-    )
-    n_unst = sum(s.abscissa >= 0 for s in res.samples)
-    rep.add(
-        "full-box stab",
-        "max Re eig" if res.worst is None or not np.isnan(res.worst.norm) else "max |eig| - 1",
-        res.max_abscissa,
-        0.0,
-        res.all_stable,
-        "" if res.all_stable else f"{n_unst} unstable samples",
-        advisory=adv,
-    )

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from lpv_sysid.errors import ConfigError
+from lpv_sysid.ident.nonlinear.data import AXES, REGRESSORS, regressors_of_delta
 
-AXES = ("X", "Y", "Z", "L", "M", "N")
 AXIS_TITLES = {
     "X": "F_x (6a)",
     "Y": "F_y (6b)",
@@ -24,24 +24,15 @@ AXIS_TITLES = {
     "M": "M_y (6e)",
     "N": "M_z (6f)",
 }
+#: regressor labels per axis: those of :data:`REGRESSORS` and, in N, the rotor reaction
+#: torque ``dr_dot`` (J_z dr_dot of Eq. 6f, known in the identification, shown in Fig. 10)
 REGRESSOR_NAMES = {
-    "X": ("u", "u w", "u dt"),
-    "Y": ("v", "v w", "v dt"),
-    "Z": ("dt^2", "dt", "u^2+v^2", "4w dt - p da - q de"),
-    "L": ("da^2", "da", "w da - 2l^2 p dt - l^2 q dr/2", "v dt", "v", "v w", "u dr"),
-    "M": ("de^2", "de", "w de - 2l^2 q dt - l^2 p dr/2", "u dt", "u", "u w", "v dr"),
-    "N": ("dr^2", "dr", "w dr + p de + q da", "p q", "u da + v de", "u p + v q", "dr_dot"),
+    axis: tuple(label for _, label in REGRESSORS[axis]) + (("dr_dot",) if axis == "N" else ())
+    for axis in AXES
 }
 
 
-def virtual_actuators(Omega: np.ndarray, mix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(delta, delta^2) of seed 0 Eq. (7) from rotor speeds Omega (N, 4)."""
-    Omega = np.asarray(Omega, dtype=float)
-    mix = np.asarray(mix, dtype=float)
-    return Omega @ mix.T, (Omega * Omega) @ mix.T
-
-
-def regressors(
+def fig10_regressors(
     t: np.ndarray,
     v: np.ndarray,
     omega: np.ndarray,
@@ -65,21 +56,17 @@ def regressors(
             raise ConfigError(
                 f"regressors: '{name}' must have shape ({n}, {want}), got {arr.shape}"
             )
-    u, vv, w = np.asarray(v, dtype=float).T
-    p, q, r = np.asarray(omega, dtype=float).T
-    dt, da, de, dr = np.asarray(delta, dtype=float).T
-    dt2, da2, de2, dr2 = np.asarray(delta_sq, dtype=float).T
-    l2 = float(arm_length) ** 2
+    regs = regressors_of_delta(
+        np.asarray(v, dtype=float),
+        np.asarray(omega, dtype=float),
+        np.asarray(delta, dtype=float),
+        np.asarray(delta_sq, dtype=float),
+        float(arm_length),
+    )
+    dr = np.asarray(delta, dtype=float)[:, 3]
     dr_dot = np.gradient(dr, t) if n > 1 else np.zeros(n)
-    cols = {
-        "X": (u, u * w, u * dt),
-        "Y": (vv, vv * w, vv * dt),
-        "Z": (dt2, dt, u**2 + vv**2, 4 * w * dt - p * da - q * de),
-        "L": (da2, da, w * da - 2 * l2 * p * dt - l2 * q * dr / 2, vv * dt, vv, vv * w, u * dr),
-        "M": (de2, de, w * de - 2 * l2 * q * dt - l2 * p * dr / 2, u * dt, u, u * w, vv * dr),
-        "N": (dr2, dr, w * dr + p * de + q * da, p * q, u * da + vv * de, u * p + vv * q, dr_dot),
-    }
-    return {axis: np.column_stack(c) for axis, c in cols.items()}
+    regs["N"] = np.column_stack([regs["N"], dr_dot])
+    return regs
 
 
 @dataclass(frozen=True)
@@ -102,7 +89,7 @@ class RegressorCorrelation:
         }
 
 
-def correlation(X: np.ndarray) -> np.ndarray:
+def column_correlation(X: np.ndarray) -> np.ndarray:
     """Pearson correlation of the columns of X (np.corrcoef), NaN for constant columns."""
     X = np.asarray(X, dtype=float)
     Xc = X - X.mean(axis=0)
@@ -118,5 +105,6 @@ def correlation(X: np.ndarray) -> np.ndarray:
 def regressor_correlations(regs: dict[str, np.ndarray]) -> list[RegressorCorrelation]:
     """Correlation matrices per axis (seed 0 Fig. 10)."""
     return [
-        RegressorCorrelation(axis, REGRESSOR_NAMES[axis], correlation(regs[axis])) for axis in AXES
+        RegressorCorrelation(axis, REGRESSOR_NAMES[axis], column_correlation(regs[axis]))
+        for axis in AXES
     ]

@@ -1,4 +1,4 @@
-"""Step 5 of the PX4 chain (:mod:`lpv_sysid.cli.chain`, also `lpv-sysid fly phase2`): the
+"""Step 5 of the PX4 chain (:mod:`lpv_sysid.flight.chain`, also `lpv-sysid fly phase2`): the
 phase-2 signal flown under the LPV law on a PX4 vehicle that is armed and in the air.
 
 :func:`fly_phase2` flies it (the chain's docstring, step 5, says how), :func:`load_phase2_law`
@@ -9,6 +9,7 @@ YAML summaries; the flown log is analysed by :func:`lpv_sysid.flight.phase2.anal
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import signal
 import threading
@@ -21,36 +22,9 @@ import numpy as np
 from lpv_sysid.configuration.defaults import config_file
 from lpv_sysid.errors import ConfigError, SafetyError
 from lpv_sysid.flight.phase2.analysis import analyse_phase2
+from lpv_sysid.flight.phase2.options import Phase2Options
 
-
-@dataclasses.dataclass(frozen=True)
-class Phase2Options:
-    """Flight options of :func:`fly_phase2`."""
-
-    kappa: float = 1.0  # excitation multiplier (seed 0 Eq. 33)
-    control_rate_hz: float = 50.0  # law evaluations per second (on the newest state sample)
-    ramp_s: float = 3.0  # raised-cosine fade of v_d and u_e at both ends
-    lead_in_s: float = 2.0  # hover (v_d = 0) under the law before the signal starts
-    duration: Optional[float] = None  # s of the signal (None: one period)
-    max_tracking_error: float = 2.5  # m/s |v - v_d| per axis -> hand back
-    start_timeout: float = 15.0  # s for OFFBOARD to be confirmed
-    handback_timeout: float = 15.0
-    finish: str = "LAND"  # mode after the signal (LAND | HOLD)
-    max_rate: float = 2.0  # rad/s clip of the rate setpoints (transport)
-    min_height: float = 8.0  # m above home needed to start
-
-    def validate(self) -> None:
-        if not (
-            self.kappa >= 0
-            and self.control_rate_hz > 0
-            and self.ramp_s >= 0
-            and self.lead_in_s >= 0
-            and self.max_tracking_error > 0
-            and self.max_rate > 0
-        ):
-            raise ConfigError(f"phase 2 options out of range: {self}")
-        if self.finish.upper() not in ("LAND", "HOLD"):
-            raise ConfigError(f"phase 2 finish must be LAND or HOLD, got {self.finish!r}")
+log = logging.getLogger(__name__)
 
 
 def _fade(t: float, T: float, ramp: float) -> float:
@@ -110,7 +84,7 @@ def fly_phase2(
     opts: Phase2Options = Phase2Options(),
     clock: Callable[[], float] = time.monotonic,
     sleep: Callable[[float], None] = time.sleep,
-    echo: Callable[[str], None] = print,
+    echo: Callable[[str], None] = log.info,
     link=None,
     handle_signals: bool = True,
     storage: str = "mcap",

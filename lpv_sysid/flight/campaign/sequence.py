@@ -1,0 +1,235 @@
+"""The phase-1 campaign flown on a PX4 vehicle over MAVLink, ROS-free (`lpv-sysid fly phase1`).
+
+    lpv-sysid fly phase1 --connect udpin:127.0.0.1:14540 --config config/campaign.yaml \\
+        --out flight_01 [--signals signals_phase1/signals.npz] [--set-param COM_OBL_RC_ACT=5]
+
+One process: the bridge core (link, telemetry, offboard state machine, safety envelope;
+``lpv_sysid/mavlink/bridge/core.py``), the campaign sequencer (``lpv_sysid/control/campaign/sequencer.py``)
+and the recorder (``lpv_sysid/io/recorder/recorder.py``), on the wall clock (injectable: the tests
+fly the package's simulated PX4 in lock-step with a simulated clock).
+
+Sequence: optional PARAM_SET of ``--set-param`` values (each confirmed by the vehicle's
+PARAM_VALUE), preflight (``lpv_sysid/mavlink/preflight/checks.py``: NO-GO refuses to fly, e.g. an
+offboard-loss action that needs sticks the vehicle does not have), the campaign (arm and
+take off in OFFBOARD, every vertex and the hover run, HOLD or LAND), then the outputs:
+
+- ``DIR/bag_NNNN/``: one rosbag2 per run (trim + excitation), the topics, types and
+  layout of the data logger and ``lpv-sysid simulate phase1`` (``/lpv_sysid/state``,
+  ``rotor_speeds``, ``imu``, ``velocity_reference`` as flown, ``excitation``,
+  ``actuator_command``, ``status``), ``DIR/experiment.yaml`` (recorder metadata), so
+  ``lpv-sysid identify --bags DIR --config DIR/identification.yaml`` runs on it unchanged;
+- ``DIR/flight/``: the whole flight (take-off, transitions, hand-back), not a maneuver;
+- ``DIR/campaign_summary.yaml``: plan, per-run settle time, tracking RMS per axis,
+  achieved equilibrium, bag of each run, hand-back time and mode, preflight table, events;
+- ``DIR/trims.yaml`` / ``trims.md`` (seed 0 Table 1 layout), ``DIR/identification.yaml``
+  (the identification config with the campaign's box and trim duration),
+  ``DIR/signals/signals.npz`` (the excitation flown).
+
+Ctrl-C (or SIGTERM) or any fault: excitation off, hand-back confirmed by the HEARTBEAT (or
+FAILED loudly), bags closed and readable, exit status 1 (130 after an interrupt) with
+the reason. A second Ctrl-C stops waiting for the confirmation.
+
+Parts: inputs (:mod:`~lpv_sysid.flight.campaign.config`), vehicle-link steps
+(:mod:`~lpv_sysid.flight.vehicle`), recording (:mod:`~lpv_sysid.flight.campaign.recorder`),
+the loop (:mod:`~lpv_sysid.flight.campaign.runner`), outputs
+(:mod:`~lpv_sysid.flight.campaign.outputs`); this module holds the sequence (:func:`fly`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import signal
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Mapping
+
+from lpv_sysid.errors import ConfigError
+from lpv_sysid.flight.campaign.config import FlyConfig, bridge_config_for, load_signals
+from lpv_sysid.flight.campaign.outputs import (
+    format_results,
+    identification_template,
+    write_outputs,
+)
+from lpv_sysid.flight.campaign.recorder import CampaignRecorder
+from lpv_sysid.flight.campaign.runner import FlightRunner
+from lpv_sysid.flight.vehicle import set_params, tap_attitude_target, wait_for_vehicle
+
+log = logging.getLogger(__name__)
+
+EXIT_FAILED = 1
+EXIT_INTERRUPTED = 130
+
+
+# =============================================================================== result
+@dataclass
+class FlyResult:
+    status: int  # exit status
+    phase: str
+    reason: str
+    summary: dict = field(default_factory=dict)
+    out_dir: str = ""
+
+
+# =============================================================================== fly()
+def fly(
+    cfg: FlyConfig,
+    url: str | None,
+    out_dir: str | Path,
+    signals: str | None = None,
+    params: Mapping[str, float] | None = None,
+    clock: Callable[[], float] = time.monotonic,
+    sleep: Callable[[float], None] = time.sleep,
+    echo: Callable[[str], None] = log.info,
+    handle_signals: bool = True,
+    preflight: bool = True,
+    link=None,
+    record_rate_setpoints: bool = False,
+) -> FlyResult:
+    """The whole CLI sequence of the module docstring (also used by the tests with a
+    simulated clock); returns the exit status and the summary. Bad input raises
+    :class:`~lpv_sysid.errors.ConfigError` before anything is sent to the vehicle.
+
+    ``record_rate_setpoints``: also record PX4's ATTITUDE_TARGET (the thrust and body-rate
+    setpoints its cascade produced) on ``rate_setpoint`` in every bag, the input of the
+    rate-plant identification (lpv_sysid/ident/rate_plant.py); request the stream in the
+    bridge config (``link.streams: {ATTITUDE_TARGET: 50}``, config/mavlink_bridge_chain.yaml)."""
+    import numpy as np
+
+    from lpv_sysid.control.campaign import Campaign, ExcitationProfile, plan_campaign, trim_rows
+    from lpv_sysid.mavlink.bridge import BridgeCore
+
+    out = Path(out_dir)
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise ConfigError(f"output directory {out}: exists and is not an empty directory")
+    ccfg = cfg.campaign
+    bcfg = bridge_config_for(cfg.bridge_config, url, ccfg)
+    table = load_signals(signals, cfg.signals_config)
+    prof = ExcitationProfile.from_table(*table, ramp=ccfg.ramp_s, periods=ccfg.periods)
+    plan = plan_campaign(ccfg, prof, bcfg.envelope)
+    ident_template = identification_template(cfg.identification_config)
+    echo(
+        f"fly phase1: {len(plan.runs)} runs, excitation {prof.duration:.1f} s (peaks u v w "
+        f"{' '.join(f'{p:.2f}' for p in prof.peak)} m/s, r {prof.yaw_peak:.2f} rad/s), window "
+        f"[{ccfg.altitude_min:g}, {ccfg.altitude_max:g}] m, envelope floor "
+        f"{bcfg.envelope.floor:g} m "
+        f"ceiling {bcfg.envelope.ceiling:g} m radius {bcfg.envelope.radius:g} m"
+    )
+    echo(plan.describe())
+
+    bridge = BridgeCore(bcfg, link=link)
+    bridge.open(clock())
+    summary: dict = {
+        "connect": bcfg.link.url,
+        "config": cfg.source,
+        "signals": signals or cfg.signals_config,
+    }
+    runner = FlightRunner(
+        bridge, Campaign(plan, table), None, clock, sleep, cfg.loop_period, cfg.status_period, echo
+    )
+    previous_handlers: dict = {}
+    try:
+        wait_for_vehicle(bridge.link, cfg.link_timeout, clock, sleep)
+        echo(f"vehicle: system {bridge.link.target_system} on {bcfg.link.url}")
+        if params:
+            done = set_params(bridge.link, params, clock, sleep)
+            summary["params_set"] = done
+            for d in done:
+                echo(f"PARAM_SET {d['name']}: {d['old']} -> {d['new']:g} (confirmed)")
+        if preflight:
+            from lpv_sysid.mavlink import preflight as pf
+
+            checks = pf.run_checks(
+                bridge.link,
+                timeout=cfg.preflight_timeout,
+                clock=clock,
+                sleep=sleep,
+                rotor_estimate=bcfg.rotor_estimate,
+            )
+            echo(pf.format_table(checks))
+            summary["preflight"] = [dataclasses.asdict(c) for c in checks]
+            if not pf.verdict(checks):
+                bad = [
+                    f"{c.name} ({c.value}{': ' + c.note if c.note else ''})"
+                    for c in checks
+                    if c.verdict == pf.NOGO
+                ]
+                reason = "preflight NO-GO, not flying: " + "; ".join(bad)
+                echo(f"fly phase1: {reason}")
+                return FlyResult(EXIT_FAILED, "idle", reason, summary)
+        rec = CampaignRecorder(
+            out,
+            cfg.storage,
+            cfg.flight_log,
+            config_files=[p for p in (cfg.source, cfg.bridge_config) if p and Path(p).is_file()],
+            description=f"lpv-sysid fly phase1 on {bcfg.link.url}: one bag per run, "
+            "see campaign_summary.yaml",
+            rate_setpoints=record_rate_setpoints,
+        )
+        rec.start(clock())
+        runner.rec = rec
+        if record_rate_setpoints:
+            tap_attitude_target(
+                bridge.link, lambda t, u: runner._safe(lambda: rec.rate_setpoint(t, u))
+            )
+        (out / "signals").mkdir(exist_ok=True)
+        from lpv_sysid.signals.store import save_npz
+
+        save_npz(str(out / "signals" / "signals.npz"), *table)
+        if handle_signals and threading.current_thread() is threading.main_thread():
+            for s in (signal.SIGINT, signal.SIGTERM):
+                previous_handlers[s] = signal.signal(s, lambda signo, _f: runner.interrupt(signo))
+        try:
+            runner.prime()
+            runner.run()
+        except BaseException:
+            runner.drain_handback(ccfg.handback_timeout)
+            raise
+    finally:
+        for s, h in previous_handlers.items():
+            signal.signal(s, h)
+        close_errors = runner.rec.close(clock()) if runner.rec is not None else []
+        bridge.close()
+    c = runner.campaign
+    summary.update(c.summary())
+    summary["bags"] = dict(runner.rec.bags) if runner.rec is not None else {}
+    summary["rotor_speeds_source"] = dict(runner.rotor_sources)
+    summary["runner"] = {
+        "max_loop_gap_s": round(runner.max_gap, 4),
+        "stalled_loops": runner.late_loops,
+        "loop_period_s": cfg.loop_period,
+    }
+    summary["bridge_status"] = bridge.status(clock())
+    summary["events"] = runner.events
+    if close_errors:
+        summary["recording_errors"] = close_errors
+    write_outputs(out, summary, c, ident_template, plan, trim_rows, np)
+    echo(format_results(summary))
+    if runner.gave_up:
+        summary["result"], summary["ok"] = "failed", False
+        summary["reason"] = (
+            c.reason + "; " if c.reason else ""
+        ) + "hand-back NOT confirmed (interrupted twice)"
+    status = (
+        0
+        if c.ok and not runner.gave_up
+        else (EXIT_INTERRUPTED if runner.interrupts else EXIT_FAILED)
+    )
+    if close_errors:
+        status = status or EXIT_FAILED
+    return FlyResult(status, summary["result"], summary["reason"], summary, str(out))
+
+
+def plan_flight(cfg: FlyConfig, url: str | None, signals: str | None = None):
+    """The campaign plan of ``cfg`` (its bridge envelope at ``url``) without flying: what
+    ``lpv-sysid fly phase1 --dry-run`` prints (:meth:`CampaignPlan.describe`)."""
+    from lpv_sysid.control.campaign import ExcitationProfile, plan_campaign
+
+    bcfg = bridge_config_for(cfg.bridge_config, url, cfg.campaign)
+    table = load_signals(signals, cfg.signals_config)
+    prof = ExcitationProfile.from_table(
+        *table, ramp=cfg.campaign.ramp_s, periods=cfg.campaign.periods
+    )
+    return plan_campaign(cfg.campaign, prof, bcfg.envelope)

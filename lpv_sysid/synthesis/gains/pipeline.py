@@ -1,0 +1,100 @@
+"""One synthesis, start to end: what is about to be solved, the solve, the independent
+verification of what was written (``lpv-sysid synthesize``, ``lpv-sysid chain``).
+
+    inp = load_inputs("vertex_models.yaml", "config/synthesis.yaml", summary=".../summary.yaml")
+    res = synthesize(inp)
+    written = write_gains(Path("gains.yaml"), "vertex_models.yaml", inp, res)
+    report = verify_written(written.gains, "vertex_models.yaml", inp)
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+
+from lpv_sysid.errors import SolverError
+from lpv_sysid.synthesis.gains.certificate import VARIATION
+from lpv_sysid.synthesis.gains.inputs import Inputs
+
+log = logging.getLogger(__name__)
+
+
+def describe_problem(inp: Inputs) -> list[str]:
+    """Which certified set and input structure is about to be solved, one line each."""
+    model, opts = inp.model, inp.opts
+    st = model.input_structure
+    Ms = st["M"]
+    if model.box is not None:
+        box = model.box
+        per = box.p[0] if len(set(box.p)) == 1 else box.p
+        return [
+            f"certified set: the full identified box (uncertainty.set: full_box), {per} "
+            "elements per vertex as a structured perturbation (B hull common to all vertices); "
+            f"Lyapunov matrix: {opts.lyapunov} ({VARIATION[opts.lyapunov]} v_d)"
+        ]
+    if model.common_input is not None:
+        els = ", ".join(
+            f"B[{e.row},{e.col}] in [{e.lower:.6g}, {e.upper:.6g}]"
+            for e in model.common_input.elements
+        )
+        return [
+            "input matrix common to all vertices (uncertainty.common_b): hull "
+            f"{els or '(B identical)'}; M_i = M_A x M_B = {st['M_A']} x {st['M_B']} = {Ms} "
+            f"(sum {sum(Ms)}, {st['B_method']} corners); Lemma 1 covers the whole box"
+        ]
+    lines = [
+        f"uncertainty vertices per scheduling vertex M_i = {Ms} (per-vertex B, "
+        "uncertainty.common_b: false)"
+    ]
+    bs = {tuple(np.round(np.array([b for _, b in lst]), 12).ravel()) for lst in model.systems}
+    if len(bs) > 1:
+        lines.append(
+            "note: B differs between scheduling vertices; Lemma 1 certifies the vertices, "
+            "the interior (B(v_d) S(v_d) is bilinear) is only checked by the verifier's "
+            "random interior points"
+        )
+    return lines
+
+
+def synthesize(inp: Inputs):
+    """Lemma 1 (or the element-box LMI) on the loaded inputs: the HinfResult, its info
+    completed; SolverError with the structural hint on failure (ConfigError names the
+    configuration field)."""
+    from lpv_sysid.synthesis.hinf import synthesize_hinf
+
+    model = inp.model
+    try:
+        res = synthesize_hinf(model, inp.R, inp.C, inp.opts)
+    except SolverError as exc:
+        hint = ""
+        if model.common_input is not None and model.common_input.elements:
+            hint = (
+                " | the input matrix is the hull over all vertices (uncertainty.common_b: true); "
+                "if B(v_d) varies strongly across the box, narrow the box; common_b: false "
+                "certifies the vertices only"
+            )
+        raise SolverError(str(exc).replace("\n", " | ") + hint) from None
+    res.info["rate_from_design"] = inp.rate_from_design
+    res.info["n_e"], res.info["n_z"] = inp.R.shape[1], inp.C.shape[0]
+    res.info["wall"] = time.perf_counter() - inp.t0
+    return res
+
+
+def verify_written(gains: Path, models: str, inp: Inputs):
+    """The independent verification (:func:`lpv_sysid.synthesis.verify.verify_files`) of the
+    written ``gains`` with the synthesis config's ``verify`` settings: the VerifyReport (not
+    passed: the gains must not be flown)."""
+    from lpv_sysid.synthesis.verify import verify_files
+
+    vcfg = inp.cfg.get("verify") or {}
+    log.info("independent verification of %s", gains)
+    return verify_files(
+        gains,
+        models,
+        n_random=int(vcfg.get("n_random", 20)),
+        seed=int(vcfg.get("seed", 0)),
+        velocity_index=inp.vidx,
+    )
