@@ -38,6 +38,7 @@ def main() -> None:
     from lpv_sysid.io.bag.mcap import index as mcap_index
     from lpv_sysid.models.quadrotor import Quadrotor
     from lpv_sysid.sim import phase1
+    from lpv_sysid.sim.phase1 import bag as phase1_bag
     from lpv_sysid.sim.vehicle import SensorConfig
 
     load0 = load_average()
@@ -98,7 +99,7 @@ def main() -> None:
         )
         # writing
         f = messages.MsgFactory.rosbags()
-        items = phase1._message_items(rec, f)[:6000]
+        items = phase1_bag._message_items(rec, f)[:6000]
         rows = [
             (f"/lpv_sysid/{n}", s, bytes(ts.serialize_cdr(m, messages.TYPES[n])))
             for s, n, m in items

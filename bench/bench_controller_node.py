@@ -118,8 +118,8 @@ def expected_commands(bag: str, rate_hz: float) -> int:
 def main() -> None:
     from bench.bench_lpv_law import sample_events, shipped_gains, shipped_settings
     from bench.harness import Page, Row, Stat, load_average, status
-    from lpv_sysid.cli.replay import replay_controller
     from lpv_sysid.configuration.parameters import yaml_parameters
+    from lpv_sysid.flight.controller import replay_controller
 
     load0 = load_average()
     page = Page(

@@ -62,7 +62,7 @@ def _floor_function(code) -> tuple[object, int, int]:
 def unspecialised_rk4(model):
     """``rk4_step`` compiled from the hot-path source as it is written (parameters bound as
     closure cells, every term kept): the step before models.quadrotor specialised it."""
-    from lpv_sysid.models import quadrotor as Q
+    from lpv_sysid.models.quadrotor import hot_path as Q
 
     ns: dict = {}
     exec(compile(Q._HOT_PATH_SOURCE, "<unspecialised>", "exec"), ns)  # noqa: S102
@@ -93,6 +93,7 @@ def main(argv=None) -> None:
     from lpv_sysid.io.bag import BagWriter
     from lpv_sysid.models.quadrotor import Quadrotor
     from lpv_sysid.sim import phase1
+    from lpv_sysid.sim.phase1 import bag as phase1_bag
     from lpv_sysid.sim.vehicle import SimVehicle
 
     cfg_path = repo_root() / "config" / "quadrotor.yaml"
@@ -197,7 +198,7 @@ def main(argv=None) -> None:
             k[0] += 1
             phase1.write_run_bag(rec, root / f"bulk{k[0]}")
 
-        rows = phase1._bulk_rows(rec, f, {n: f"/lpv_sysid/{n}" for n in phase1.BAG_TOPICS})
+        rows = phase1_bag._bulk_rows(rec, f, {n: f"/lpv_sysid/{n}" for n in phase1.BAG_TOPICS})
 
         def raw_only():
             k[0] += 1
@@ -211,7 +212,7 @@ def main(argv=None) -> None:
             with BagWriter(root / f"msg{k[0]}") as w:
                 for name in phase1.BAG_TOPICS:
                     w.add_topic(f"/lpv_sysid/{name}", messages.TYPES[name])
-                for stamp, name, msg in phase1._message_items(rec, f):
+                for stamp, name, msg in phase1_bag._message_items(rec, f):
                     w.write(f"/lpv_sysid/{name}", stamp, msg)
 
         wb = interleaved(

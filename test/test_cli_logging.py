@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-import lpv_sysid.cli.config as config_command
+import lpv_sysid.cli.data.config as config_command
 from lpv_sysid.cli.main import EXIT_BAD_INPUT, logging_level, main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -103,5 +103,6 @@ def test_a_process_logs_to_stderr_one_line_per_record_and_keeps_stdout_for_resul
     lines = loud.stderr.splitlines()
     assert lines[0].startswith("DEBUG lpv_sysid.cli.main: lpv_sysid ")
     assert lines[-1] == (
-        f"DEBUG lpv_sysid.configuration.defaults: shipped default {ROOT}/lpv_sysid/config/quadrotor.yaml"
+        "DEBUG lpv_sysid.configuration.defaults: shipped default "
+        f"{ROOT}/lpv_sysid/config/quadrotor.yaml"
     )

@@ -191,8 +191,8 @@ def test_bad_inputs():
 
 
 def test_eq34_multilinear_model_against_finite_differences():
-    """x0' of Eq. (34) with the multilinear interpolation of models/lpv/polytope.py (vertex equilibria
-    that are not affine in v_d) equals the central difference of x0(v_d(t))."""
+    """x0' of Eq. (34) with the multilinear interpolation of models/lpv/polytope.py (vertex
+    equilibria that are not affine in v_d) equals the central difference of x0(v_d(t))."""
     from lpv_sysid.models.lpv import PolytopicModel, ScheduledLpv
 
     rng = np.random.default_rng(3)

@@ -52,7 +52,7 @@ def test_phase2_config_errors_name_the_field():
 
 
 def test_synthesize_cli_maps_a_field_to_its_flag():
-    from lpv_sysid.cli.synthesize import with_flag
+    from lpv_sysid.cli.design import with_flag
 
     assert (
         with_flag("hinf.gamma must be > 0, got -1") == "hinf.gamma must be > 0, got -1 [--gamma]"

@@ -1,5 +1,5 @@
-"""The one u_e -> z FIR regression (sim/closed_loop/excitation_fir.py) behind the phase-2 simulation and the
-PX4 chain's gain (flight/phase2/analysis.excitation_gain)."""
+"""The one u_e -> z FIR regression (sim/closed_loop/excitation_fir.py) behind the phase-2
+simulation and the PX4 chain's gain (flight/phase2/analysis.excitation_gain)."""
 
 from __future__ import annotations
 

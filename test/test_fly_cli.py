@@ -179,7 +179,7 @@ def test_campaign_takes_off_flies_every_vertex_and_hover_lands_and_identify_acce
             assert r["height_max_m"] - r["height_min_m"] > 0.3 * 8.0
     # the recorded trim reference is constant, and identification finds the excitation where
     # the campaign started it
-    from lpv_sysid.cli.identify import load_config
+    from lpv_sysid.cli.design import load_config
     from lpv_sysid.ident import dataprep as dp
 
     icfg = load_config(out / "identification.yaml")
@@ -539,7 +539,7 @@ def test_real_px4_sih_campaign_two_vertices_hover_land(tmp_path):
     ]
     assert all(r["complete"] for r in s["runs"]) and s["handback"]["mode"] == "LAND"
     assert s["rotor_speeds_source"].keys() == {"estimated"}  # SIH has no ESC telemetry
-    from lpv_sysid.cli.identify import load_config
+    from lpv_sysid.cli.design import load_config
     from lpv_sysid.ident import dataprep as dp
 
     icfg = load_config(tmp_path / "out" / "identification.yaml")

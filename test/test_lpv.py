@@ -1,4 +1,5 @@
-"""models/lpv/polytope.py: box order, multilinear weights (seed 0 Eq. 21), Eq. (23) corners, Eq. (34)."""
+"""models/lpv/polytope.py: box order, multilinear weights (seed 0 Eq. 21), Eq. (23) corners, Eq.
+(34)."""
 
 import itertools
 

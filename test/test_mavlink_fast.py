@@ -1,5 +1,5 @@
-"""The struct-based MAVLink fast path of mavlink/link/connection.py against pymavlink itself: the same
-message objects (every attribute), the same link statistics and codec counters, on round
+"""The struct-based MAVLink fast path of mavlink/link/connection.py against pymavlink itself: the
+same message objects (every attribute), the same link statistics and codec counters, on round
 trips of every fast message type and on corrupted, cut, concatenated and foreign packets."""
 
 from __future__ import annotations

@@ -364,7 +364,7 @@ def _write_files(lpv, d):
 def _parse(argv):
     import argparse
 
-    from lpv_sysid.cli.simulate import _add_phase2_arguments as add_phase2_arguments
+    from lpv_sysid.cli.design.simulate import _add_phase2_arguments as add_phase2_arguments
 
     p = argparse.ArgumentParser()
     add_phase2_arguments(p)
@@ -374,7 +374,7 @@ def _parse(argv):
 def test_cli_entry_point_runs_from_files(lpv, tmp_path, capsys):
     import yaml
 
-    from lpv_sysid.cli.simulate import run_phase2
+    from lpv_sysid.cli.design import run_phase2
 
     _write_files(lpv, tmp_path)
     args = _parse(

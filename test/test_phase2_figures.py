@@ -159,7 +159,7 @@ def test_summary_cli_and_report_put_the_excitation_gain_first(problem, tmp_path)
     """summary.yaml (@2): excitation_gain (what gamma bounds, within_gamma refers to it),
     total_ratio and the decomposition; the CLI line starts with the gain; the report's table
     has the gain, the offset and the tracking in separate columns."""
-    from lpv_sysid.cli.simulate import format_gain_line
+    from lpv_sysid.cli.design import format_gain_line
     from lpv_sysid.report import gain_row
 
     pr, quad = problem

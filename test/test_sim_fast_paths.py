@@ -1,6 +1,6 @@
 """Fast paths of the simulations, each against the computation it replaces: the compiled
 hot path of models/quadrotor/model.py (derivatives, RK4 step), the sensor noise pool and
-vibration cache of sim/vehicle.py, the bulk phase-1 bag (sim/phase1/tables.py) and the fused
+vibration cache of sim/vehicle.py, the bulk phase-1 bag (sim/phase1/bag.py) and the fused
 Eq. (33) right-hand side (sim/closed_loop/eq33.py)."""
 
 import math
@@ -13,6 +13,8 @@ import pytest
 from lpv_sysid.control.baseline import BaselineGains
 from lpv_sysid.io import bag as bg
 from lpv_sysid.io import messages
+from lpv_sysid.io.bag import records as records_mod
+from lpv_sysid.io.bag.mcap import index as mcap_index
 from lpv_sysid.models.quadrotor import Quadrotor, QuadrotorParams
 from lpv_sysid.sim import closed_loop as cl
 from lpv_sysid.sim import phase1
@@ -267,9 +269,9 @@ def test_bulk_phase1_bag_has_the_builders_messages(tmp_path, short_run):
             w.add_topic(f"/lpv_sysid/{name}", messages.TYPES[name])
         for stamp, name, msg in phase1_bag._message_items(rec, f):
             w.write(f"/lpv_sysid/{name}", stamp, msg)
-    a, b = bg._Source(), bg._Source()
-    bg._read_fast(tmp_path / "bulk", None, a)
-    bg._read_fast(tmp_path / "ref", None, b)
+    a, b = records_mod._Source(), records_mod._Source()
+    mcap_index._read_fast(tmp_path / "bulk", None, a)
+    mcap_index._read_fast(tmp_path / "ref", None, b)
     assert [(t, ns) for t, ns, _ in a.records] == [(t, ns) for t, ns, _ in b.records]
     assert len(a.records) == 3 * 250 + 3 * 100 + 3 * 250 * 3 + 3
     exact = 0

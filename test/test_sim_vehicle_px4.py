@@ -559,7 +559,7 @@ def test_param_set_validation_refuses_nan_inf_and_out_of_range(gcs):
 def test_default_bind_is_loopback_not_all_interfaces():
     import argparse
 
-    from lpv_sysid.cli import sim_vehicle as cli
+    from lpv_sysid.cli.vehicle import sim_vehicle as cli
 
     p = argparse.ArgumentParser()
     cli.add_arguments(p)
@@ -704,7 +704,7 @@ def test_sim_vehicle_config_file_and_errors(tmp_path):
 def test_cli_config_file_and_flags(tmp_path):
     import argparse
 
-    from lpv_sysid.cli import sim_vehicle as cli
+    from lpv_sysid.cli.vehicle import sim_vehicle as cli
 
     p = argparse.ArgumentParser()
     cli.add_arguments(p)
@@ -766,7 +766,7 @@ def test_vehicle_and_link_errors_name_no_command_line_flag():
 def test_unroutable_destination_names_the_bind_field_and_the_cli_its_flag(tmp_path):
     import argparse
 
-    from lpv_sysid.cli import sim_vehicle as cli
+    from lpv_sysid.cli.vehicle import sim_vehicle as cli
 
     # a UDP connect() to the broadcast address without SO_BROADCAST is refused locally
     # (EACCES): no route to report, and not a datagram leaves the machine

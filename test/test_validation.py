@@ -1,5 +1,5 @@
-"""lpv_sysid.configuration.fields: the shared config checks, the declared-field validator, and the config
-classes that use them."""
+"""lpv_sysid.configuration.fields: the shared config checks, the declared-field validator, and the
+config classes that use them."""
 
 import math
 

@@ -4,9 +4,9 @@ from pathlib import Path
 
 import pytest
 
-from lpv_sysid.cli.identify import load_config as load_identification
-from lpv_sysid.cli.identify import quadrotor_section
-from lpv_sysid.cli.identify_nonlinear import _params as nonlinear_params
+from lpv_sysid.cli.design import load_config as load_identification
+from lpv_sysid.cli.design import quadrotor_section
+from lpv_sysid.cli.design.identify_nonlinear import _params as nonlinear_params
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io.files import read_yaml
 from lpv_sysid.mavlink.bridge import BridgeConfig

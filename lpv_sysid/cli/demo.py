@@ -142,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     if getattr(args, "connect", None):
-        from lpv_sysid.cli.fly import parse_params
+        from lpv_sysid.cli.vehicle import parse_params
         from lpv_sysid.flight.chain import chain
 
         return chain(args.connect, out, params=parse_params(args.set_param), kappa=args.kappa)

@@ -59,13 +59,16 @@ class _Parser(argparse.ArgumentParser):
 
 
 def discover_commands() -> dict[str, ModuleType]:
-    """Import every ``lpv_sysid.cli`` module that declares a ``COMMAND``."""
+    """Import every module of ``lpv_sysid.cli`` and its subpackages that declares a
+    ``COMMAND``."""
     here = str(Path(__file__).resolve().parent)
     commands: dict[str, ModuleType] = {}
-    for info in sorted(pkgutil.iter_modules([here]), key=lambda i: i.name):
-        if info.name.startswith("_") or info.name == "main":
+    infos = pkgutil.walk_packages([here], prefix=f"{__package__}.")
+    for info in sorted(infos, key=lambda i: i.name.rsplit(".", 1)[-1]):
+        leaf = info.name.rsplit(".", 1)[-1]
+        if info.ispkg or leaf.startswith("_") or leaf == "main":
             continue
-        module = importlib.import_module(f"{__package__}.{info.name}")
+        module = importlib.import_module(info.name)
         name = getattr(module, "COMMAND", None)
         if name is None:
             continue

@@ -1,5 +1,5 @@
 """The MAVLink 2 codec every link uses: the pymavlink dialect plus PX4's ESC_STATUS,
-robust parsing, and MAVLink 2 signing (re-exported by :mod:`lpv_sysid.mavlink.px4`).
+robust parsing, and MAVLink 2 signing.
 
 ESC_STATUS (id 291) is sent by PX4 but is not part of the dialects bundled with
 pymavlink 2.4.50, so it is defined here with the field layout and CRC_EXTRA of

@@ -5,8 +5,7 @@ lives here: the PX4 custom-mode encoding, the modes that need stick input, the
 offboard-loss actions (COM_OBL_RC_ACT) and stick sources (COM_RC_IN_MODE), the command
 ids and results (and which commands PX4 acknowledges twice), the PWM motor-output range
 and PX4's byte-wise encoding of integer parameters. The MAVLink codec used by every
-link and the ESC_STATUS message are in :mod:`lpv_sysid.mavlink.codec` (re-exported
-here).
+link and the ESC_STATUS message are in :mod:`lpv_sysid.mavlink.codec`.
 
 PX4 custom mode (``HEARTBEAT.custom_mode``, ``MAV_CMD_DO_SET_MODE`` param2/param3)::
 

@@ -3,8 +3,8 @@
 PX4 >= 1.14 takes no actuator setpoints over MAVLink; what SET_ATTITUDE_TARGET delivers is
 collective thrust + body-rate setpoints, tracked by PX4's own rate controller (P, I, D, FF,
 allocation, motors). Instead of inverting that loop (omega_sp = omega + tau / K_p,
-:class:`lpv_sysid.mavlink.bridge.transport.AttitudeRateTransport`) this model takes the loop as part
-of the plant, so the seed 0 design (Lemma 1) and its certificate are about the inputs that
+:class:`lpv_sysid.mavlink.bridge.transport.AttitudeRateTransport`) this model takes the loop as
+part of the plant, so the seed 0 design (Lemma 1) and its certificate are about the inputs that
 really go out (docs/px4_chain.md):
 
     x = (phi, theta, u, v, w, p, q, r)          Euler roll/pitch [rad], FRD body velocity [m/s],
@@ -47,7 +47,8 @@ from lpv_sysid.errors import ConfigError
 
 STATE_NAMES = ("phi", "theta", "u", "v", "w", "p", "q", "r")
 STATE_UNITS = ("rad", "rad", "m/s", "m/s", "m/s", "rad/s", "rad/s", "rad/s")
-#: same names and order as lpv_sysid.mavlink.bridge.transport.RATE_INPUT_NAMES (one fact: imported there)
+#: same names and order as lpv_sysid.mavlink.bridge.transport.RATE_INPUT_NAMES (one fact:
+#: imported there)
 INPUT_NAMES = ("thrust", "p_sp", "q_sp", "r_sp")
 INPUT_UNITS = ("1", "rad/s", "rad/s", "rad/s")
 SCHEDULING_NAMES = ("u_d", "v_d", "w_d")

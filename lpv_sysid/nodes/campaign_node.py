@@ -13,9 +13,10 @@ multisine), ``excitation`` (zeros: phase 1 has no u_e) and ``status``. Services
 ``~/start`` (fly the campaign) and ``~/abort`` (excitation off, hand back).
 
 Per-run bags: with ``out_dir`` the node writes one rosbag2 per run (trim + excitation),
-``out_dir/bag_NNNN`` with the data logger's topics (``lpv_sysid.cli.fly.CampaignRecorder``),
-plus ``campaign_summary.yaml`` and ``trims.yaml`` at the end, so ``lpv-sysid identify --bags
-out_dir`` runs on it; the data logger records the whole flight as usual.
+``out_dir/bag_NNNN`` with the data logger's topics
+(``lpv_sysid.cli.vehicle.fly.CampaignRecorder``), plus ``campaign_summary.yaml`` and ``trims.yaml``
+at the end, so ``lpv-sysid identify --bags out_dir`` runs on it; the data logger records the whole
+flight as usual.
 
 The bridge node offers ``start`` and ``abort`` only: the campaign therefore ends with the
 bridge's hand-back chain (``offboard.handback_chain``, HOLD first by default); a

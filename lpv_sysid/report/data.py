@@ -82,8 +82,8 @@ class RunData:
 
 
 def read_npz(path: Path) -> dict[str, np.ndarray]:
-    """npz archive -> dict of arrays (:func:`lpv_sysid.io.files.opening.read_npz`: regular file, size
-    cap, no pickles, no complex arrays); ConfigError naming the file otherwise."""
+    """npz archive -> dict of arrays (:func:`lpv_sysid.io.files.opening.read_npz`: regular file,
+    size cap, no pickles, no complex arrays); ConfigError naming the file otherwise."""
     from lpv_sysid.io.files import read_npz as _read_npz
 
     return _read_npz(path)

@@ -11,7 +11,6 @@ Modules (import what you need; nothing heavy is imported here):
 * ``maneuvers``  - frequency sweep, doublet, 3-2-1-1
 * ``store``      - ``signals.npz`` / ``summary.yaml``
 * ``plot``       - figure like seed 0 Figs. 5-7 (Agg canvas)
-* ``excitation`` - ``phase1_signals`` / ``phase1_reference``; re-exports ``excitation_core``
-  (:class:`ExcitationCore`: O(1) lookup, fades, abort), ``sample_clock`` (monotonic time
-  checks) and ``design_envelope`` (the played envelope a certificate records)
+* ``excitation`` - the player (:class:`ExcitationCore`: O(1) lookup, fades, abort), its
+  monotonic clock, the design envelope a certificate records, the phase-1 reference
 """

@@ -241,7 +241,8 @@ def load_models(
 
     ``uncertainty`` config (see config/synthesis.yaml): ``p_max`` (default 4) corner parameters
     per vertex, ``max_corners`` (4096), ``method`` (influence | hybrid | box) of
-    :func:`lpv_sysid.ident.vertex.uncertainty.build` for the reduction, ``common_b`` and ``p_max_b``.
+    :func:`lpv_sysid.ident.vertex.uncertainty.build` for the reduction, ``common_b`` and
+    ``p_max_b``.
 
     ``common_b: false``: per scheduling vertex, all corners of the stored intervals [lower, upper]
     when 2**p <= ``max_corners`` and p <= ``p_max``, otherwise the reduction applied to the stored

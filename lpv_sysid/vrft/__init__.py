@@ -27,8 +27,7 @@ the SISO filter ``L = (1 - M) M`` of Eq. 3.12 for a flat input spectrum).
 Transfer functions are ``(num, den)`` in descending powers of ``z`` (scipy.signal.dlti
 convention) and are applied with ``scipy.signal.lfilter`` from rest.
 
-This module is the algorithm; its parts live in one module per job and are re-exported here
-(``from lpv_sysid.vrft import ...`` keeps working):
+Parts (one job each):
 
 - :mod:`~lpv_sysid.vrft.tf`: ``Tf``, reference models (``first_order_model``,
   ``diagonal_model``), determinant / adjugate of ``M``;
@@ -48,11 +47,15 @@ from lpv_sysid.vrft.controller import (
     model_reference_h2,
 )
 from lpv_sysid.vrft.controller_class import pid_class, velocity_class
+from lpv_sysid.vrft.runs import LV100_CONFIG, TABLE53_CONFIG, TuneResult, load_data, tune
 from lpv_sysid.vrft.tf import Tf, diagonal_model, first_order_model
 from lpv_sysid.vrft.tuning import vrft
 
 __all__ = [
+    "LV100_CONFIG",
+    "TABLE53_CONFIG",
     "Tf",
+    "TuneResult",
     "VrftConfig",
     "VrftResult",
     "cascaded_vrft",
@@ -60,8 +63,10 @@ __all__ = [
     "diagonal_model",
     "first_order_model",
     "invert_controller",
+    "load_data",
     "model_reference_h2",
     "pid_class",
+    "tune",
     "velocity_class",
     "vrft",
 ]

@@ -208,3 +208,20 @@ def lv100_statistics(
         kis.append(res.K[1])
     kp, ki = np.array(kps), np.array(kis)
     return kp.mean(0), kp.std(0, ddof=1), ki.mean(0), ki.std(0, ddof=1)
+
+
+#: seed 1 Table 5.2 at N = 1e3: (theta, sigma) of Kp and Ki per entry (i, j)
+LV100_T52_N1E3 = {
+    "Kp": {
+        (0, 0): (0.070, 0.116),
+        (1, 0): (14.037, 1.172),
+        (0, 1): (0.310, 0.022),
+        (1, 1): (1.477, 0.175),
+    },
+    "Ki": {
+        (0, 0): (2.874, 0.189),
+        (1, 0): (6.449, 1.006),
+        (0, 1): (1.121, 0.060),
+        (1, 1): (8.579, 0.510),
+    },
+}

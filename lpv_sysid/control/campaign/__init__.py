@@ -51,7 +51,7 @@ abort) turns the excitation off and stops commanding: ``aborting`` requests the
 hand-back (unless the bridge already gave control back) and waits for the bridge's
 confirmation: ``aborted`` (hand-back confirmed) or ``failed`` (not confirmed).
 
-The runner (``lpv_sysid/cli/fly.py``, ``lpv_sysid/nodes/campaign_node.py``) feeds state
+The runner (``lpv_sysid/cli/vehicle/fly.py``, ``lpv_sysid/nodes/campaign_node.py``) feeds state
 and rotor samples (:meth:`Campaign.on_state`, :meth:`Campaign.on_rotor`) and calls
 :meth:`Campaign.step` with a :class:`VehicleStatus`; it carries out the returned actions
 (:class:`StartBridge`, :class:`AbortBridge`, :class:`FinishBridge`, :class:`ActivateFloor`,
@@ -64,8 +64,8 @@ Modules: the configuration (:mod:`~lpv_sysid.control.campaign.config`), the plan
 (:mod:`~lpv_sysid.control.campaign.results`), the sequencer's state
 (:mod:`~lpv_sysid.control.campaign.state`), its ending and flying phases
 (:mod:`~lpv_sysid.control.campaign.handback`, :mod:`~lpv_sysid.control.campaign.flight`);
-this module holds the public :class:`Campaign` (inputs, ``step``, summary) and re-exports
-the public names of the others.
+the sequencer :class:`Campaign` itself (inputs, ``step``, summary):
+:mod:`~lpv_sysid.control.campaign.sequencer`.
 """
 
 from __future__ import annotations

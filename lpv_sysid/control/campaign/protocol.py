@@ -1,4 +1,4 @@
-"""What passes between the campaign sequencer and its runner (``lpv_sysid/cli/fly.py``,
+"""What passes between the campaign sequencer and its runner (``lpv_sysid/cli/vehicle/fly.py``,
 ``lpv_sysid/nodes/campaign_node.py``): the phase names, :class:`VehicleStatus` in, and
 :class:`CampaignOutput` out (the velocity command, the actions the runner carries out and
 the events it presents)."""

@@ -44,7 +44,7 @@ recorded sequences against the law written from the equations above (1e-12).
 
 The law's options are :class:`~lpv_sysid.control.law.config.LpvControllerConfig`
 (validated on construction); :class:`~lpv_sysid.control.law.reference_limiter.ReferenceLimiter` is
-the input conditioning the flight runtime puts in front of the law. Both are re-exported here.
+the input conditioning the flight runtime puts in front of the law.
 """
 
 from __future__ import annotations

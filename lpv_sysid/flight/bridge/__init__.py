@@ -1,4 +1,9 @@
-"""TODO face"""
+"""What ``mavlink_bridge_node`` does, without rclpy: ROS messages <-> the bridge core
+(:mod:`lpv_sysid.mavlink.bridge`) over MAVLink or MAVROS (:class:`BridgeRuntime`,
+:mod:`~lpv_sysid.flight.bridge.runtime`), and the node's parameters, declared once
+(:mod:`~lpv_sysid.flight.bridge.settings`, with the hand-back time bound the launch files
+give the node before it is stopped).
+"""
 
 from __future__ import annotations
 

@@ -9,7 +9,7 @@ timer and its services, and gets back ``[(key, payload), ...]``: messages to pub
 (:meth:`CampaignRuntime.take_log`) for the node's logger.
 
 The bridge is followed through its ``status`` values (:func:`vehicle_status`). With
-``out_dir`` one rosbag2 per run is recorded (:class:`lpv_sysid.cli.fly.CampaignRecorder`);
+``out_dir`` one rosbag2 per run is recorded (:class:`lpv_sysid.cli.vehicle.fly.CampaignRecorder`);
 a recording failure aborts the campaign; at the end ``campaign_summary.yaml`` and
 ``trims.yaml`` are written. A ``finish: LAND`` is flown as HOLD (the bridge node has no
 finish service: the campaign ends with its hand-back chain).

@@ -4,9 +4,10 @@
         --out flight_01 [--signals signals_phase1/signals.npz] [--set-param COM_OBL_RC_ACT=5]
 
 One process: the bridge core (link, telemetry, offboard state machine, safety envelope;
-``lpv_sysid/mavlink/bridge/core.py``), the campaign sequencer (``lpv_sysid/control/campaign/sequencer.py``)
-and the recorder (``lpv_sysid/io/recorder/recorder.py``), on the wall clock (injectable: the tests
-fly the package's simulated PX4 in lock-step with a simulated clock).
+``lpv_sysid/mavlink/bridge/core.py``), the campaign sequencer
+(``lpv_sysid/control/campaign/sequencer.py``) and the recorder
+(``lpv_sysid/io/recorder/recorder.py``), on the wall clock (injectable: the tests fly the package's
+simulated PX4 in lock-step with a simulated clock).
 
 Sequence: optional PARAM_SET of ``--set-param`` values (each confirmed by the vehicle's
 PARAM_VALUE), preflight (``lpv_sysid/mavlink/preflight/checks.py``: NO-GO refuses to fly, e.g. an

@@ -20,8 +20,8 @@ artefacts in ``DIR``:
    ``DIR/chain_summary.yaml``, ``phase2_summary.yaml`` and the report. When phase 1 did not
    complete, models and gains are still written but phase 2 is not flown;
 5. ``DIR/phase2``: the phase-2 flight under the LPV law
-   (:func:`lpv_sysid.flight.phase2.sequence.fly_phase2`): the vehicle, still in the air in HOLD after
-   phase 1, is taken into OFFBOARD with the law's rate setpoints (RateSetpointTransport on
+   (:func:`lpv_sysid.flight.phase2.sequence.fly_phase2`): the vehicle, still in the air in HOLD
+   after phase 1, is taken into OFFBOARD with the law's rate setpoints (RateSetpointTransport on
    BridgeCore's ``attitude_rate`` command, envelope enforced by the bridge), the signal is flown
    with raised-cosine fades, then LAND;
 6. ``DIR/report.md``: measured u_e -> z gain against gamma (seed 0 Eqs. 26-29, by regression

@@ -46,18 +46,17 @@ Log lines of the core (the abort, refused inputs, the start-up checks) are queue
 handed to the shell by :meth:`ControllerRuntime.take_log`: the node logs them with its own
 logger (timestamped, on /rosout), the replay with Python logging.
 
-The pieces are re-exported here (``ControllerSettings``, ``load_flight_schedule``,
-``settle_gc``, ``parse_input(s)``, ``CommandBuilder``, the topic tuples and constants).
+Parts: the runtime (:mod:`~lpv_sysid.flight.controller.runtime`), the node's parameters
+(:mod:`~lpv_sysid.flight.controller.settings`), the start-up checks
+(:mod:`~lpv_sysid.flight.controller.startup`), the messages as arrays
+(:mod:`~lpv_sysid.flight.controller.messages`) and the replay of a recorded flight
+(:mod:`~lpv_sysid.flight.controller.replay`).
 """
 
 from __future__ import annotations
 
-from lpv_sysid.flight.controller.messages import (
-    INPUT_TOPICS,
-    CommandBuilder,
-    parse_input,
-    parse_inputs,
-)
+from lpv_sysid.flight.controller.messages import CommandBuilder, parse_input, parse_inputs
+from lpv_sysid.flight.controller.replay import replay_controller
 from lpv_sysid.flight.controller.runtime import ControllerRuntime
 from lpv_sysid.flight.controller.settings import TIMEOUT_PERIODS, ControllerSettings
 from lpv_sysid.flight.controller.startup import settle_gc
@@ -66,9 +65,9 @@ __all__ = [
     "CommandBuilder",
     "ControllerRuntime",
     "ControllerSettings",
-    "INPUT_TOPICS",
     "TIMEOUT_PERIODS",
     "parse_input",
     "parse_inputs",
+    "replay_controller",
     "settle_gc",
 ]

@@ -1,54 +1,6 @@
-"""Message-level behaviour of lpv_controller_node, shared with ``lpv-sysid replay``.
-
-No rclpy here: the node shell forwards subscription messages and timer ticks to
-:class:`ControllerRuntime`, and ``lpv-sysid replay`` does the same with the messages of a
-bag (rosbags classes via ``MsgFactory.rosbags()``), so a replay computes exactly what the
-node would have published. Both build
-:class:`~lpv_sysid.flight.controller.settings.ControllerSettings`, the one declaration of the
-node's parameters (timeout rule included).
-
-At construction, before any command can exist, the start-up checks of
-:func:`~lpv_sysid.flight.controller.startup.load_flight_schedule` run (gains validated, law
-hash, closed-loop stability, design envelope, ESC limits); any failure refuses to start,
-naming the reason. Inputs are parsed and the command is built by
-:mod:`lpv_sysid.flight.controller.messages`.
-
-Per reference message: the reference v_d is passed through the design-envelope limiter
-(:class:`~lpv_sysid.control.law.reference_limiter.ReferenceLimiter`, rate and acceleration of the
-gains' designed v_d(t)) before scheduling and feedforward; an incoming reference beyond the
-envelope x ``envelope_margin`` aborts. Per excitation message: ``kappa |u_e|`` beyond the
-designed excitation peak x margin aborts.
-
-Ticks (``tick_source``): ``timer`` steps the law every ``1 / rate_hz`` of the node clock on
-the newest samples received; ``state`` steps it on each state sample at that sample's stamp
-(:meth:`ControllerRuntime.on_input`), so the command is always computed on the freshest
-state and carries its stamp -- the lock-stepped ``sim_vehicle`` of ``sim.launch.py`` waits for
-exactly that command before it integrates on -- while the ``rate_hz`` timer only judges
-staleness. Why: the demo gains lose stability at 8-12 ms of loop delay at 250 Hz (discrete
-closed loop A + B K with the input delayed: spectral radius >= 1 from 2 samples on the worst
-of the 128 certified systems, from 3 on the nominal vertex model), and
-the wall-clock Python graph on a loaded 2-core machine measured ~14 ms mean loop delay
-(state delivery p99 31 ms): it oscillated into saturation within 0.3 s.
-
-Per tick, once started: staleness of every input stream (receipt time and
-header stamp against the node clock), scheduling box, the runtime LPV law
-u = u0(v_d) + K(v_d)(x - x0(v_d)) + R kappa u_e (seed 0 Eq. 31, control/law/controller.py;
-with the reference feedforward of gains.yaml F_ff/F_jerk the law's own filtered derivatives
-of the limited v_d supply a = dv_d/dt and its rate) on x = [phi, theta, u, v, w, p, q, r,
-Mix Omega] (seed 0 Eq. 14 without position and yaw; delta = Mix Omega, Eq. 7), and its bound
-monitor. Any fault (stale / frozen / future-stamped / out-of-order / non-finite input, v_d
-outside the box or its envelope, excitation too large, bound exceeded, abort request)
-latches an abort in :class:`~lpv_sysid.control.safety.SafetySupervisor`: one ERROR status
-naming the reason is published and no actuator command follows, so the bridge hands control
-back to PX4 (and the excitation node fades out on that status).
-
-Log lines of the core (the abort, refused inputs, the start-up checks) are queued and
-handed to the shell by :meth:`ControllerRuntime.take_log`: the node logs them with its own
-logger (timestamped, on /rosout), the replay with Python logging.
-
-The pieces are re-exported here (``ControllerSettings``, ``load_flight_schedule``,
-``settle_gc``, ``parse_input(s)``, ``CommandBuilder``, the topic tuples and constants).
-"""
+"""The message-level behaviour of ``lpv_controller_node`` (:class:`ControllerRuntime`): start-up
+checks, input parsing and staleness, the law per tick, the safety supervisor and status;
+the method is the :mod:`lpv_sysid.flight.controller` docstring."""
 
 from __future__ import annotations
 

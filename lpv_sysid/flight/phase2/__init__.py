@@ -1,4 +1,9 @@
-"""TODO face"""
+"""The phase-2 flight on a PX4 vehicle that is armed and in the air (``lpv-sysid fly phase2``,
+step 5 of the chain): its options (:mod:`~lpv_sysid.flight.phase2.options`), the flight
+(:func:`fly_phase2`, :mod:`~lpv_sysid.flight.phase2.sequence`) and what it measured: the
+u_e -> z gain against gamma, tracking, the torque error of the rate-loop inversion
+(:mod:`~lpv_sysid.flight.phase2.analysis`).
+"""
 
 from __future__ import annotations
 

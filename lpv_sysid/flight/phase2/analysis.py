@@ -30,9 +30,9 @@ def excitation_gain(
 ) -> dict:
     """The u_e -> z gain of seed 0 Eqs. (26)-(29) on flight data (uniform grid ``tsig`` at
     ``fs``), not mixed with tracking error: the part z_e of z explained by the excitation through
-    the FIR regression of :func:`lpv_sysid.sim.closed_loop.excitation_fir.excitation_response_fir`. Returns
-    the energy ratio ||z_e||_2 / ||u_e||_2 over the fitted window (the flown signal's Eq. 29
-    ratio), the FIR's peak gain at the excited frequencies (a lower estimate of the H-inf norm
+    the FIR regression of :func:`lpv_sysid.sim.closed_loop.excitation_fir.excitation_response_fir`.
+    Returns the energy ratio ||z_e||_2 / ||u_e||_2 over the fitted window (the flown signal's Eq.
+    29 ratio), the FIR's peak gain at the excited frequencies (a lower estimate of the H-inf norm
     the certificate bounds), the fit's R^2 and the window (rows of ``tsig``)."""
     from lpv_sysid.sim.closed_loop import excitation_response_fir
 

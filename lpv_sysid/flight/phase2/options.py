@@ -1,4 +1,5 @@
-"""Flight options of a phase-2 flight on PX4 (:func:`lpv_sysid.flight.phase2.sequence.fly_phase2`)."""
+"""Flight options of a phase-2 flight on PX4
+(:func:`lpv_sysid.flight.phase2.sequence.fly_phase2`)."""
 
 from __future__ import annotations
 

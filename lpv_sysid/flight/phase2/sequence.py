@@ -3,7 +3,8 @@ phase-2 signal flown under the LPV law on a PX4 vehicle that is armed and in the
 
 :func:`fly_phase2` flies it (the chain's docstring, step 5, says how), :func:`load_phase2_law`
 and :func:`phase2_bridge_config` prepare the law and the bridge, :func:`save_summary` writes the
-YAML summaries; the flown log is analysed by :func:`lpv_sysid.flight.phase2.analysis.analyse_phase2`.
+YAML summaries; the flown log is analysed by
+:func:`lpv_sysid.flight.phase2.analysis.analyse_phase2`.
 """
 
 from __future__ import annotations

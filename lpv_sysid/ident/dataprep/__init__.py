@@ -34,7 +34,6 @@ Steps:
 from __future__ import annotations
 
 from lpv_sysid.ident.dataprep.alignment import (
-    _interp,
     align,
     format_table1,
     resample,
@@ -52,7 +51,6 @@ from lpv_sysid.ident.dataprep.streams import (
 __all__ = [
     "Streams",
     "TOPICS",
-    "_interp",
     "align",
     "find_bags",
     "format_table1",

@@ -21,9 +21,8 @@ and the others are unknown (functions of the aerodynamic parameters K).  Per row
 Uncertainty (white, ``residual_acf`` and ``ewc`` covariance estimates, :func:`t_factor`):
 :mod:`~lpv_sysid.ident.equation_error.covariance`; solving the rows and their joint covariance
 (:class:`RowFit`, :func:`fit_row`, :func:`solve_rows`, ``R^2`` per row):
-:mod:`~lpv_sysid.ident.equation_error.solve`.  This module builds the row designs from the state
-equation and assembles ``A, B``; it re-exports the other two (``from
-lpv_sysid.ident.equation_error import ...`` keeps working).
+:mod:`~lpv_sysid.ident.equation_error.solve`.  :mod:`~lpv_sysid.ident.equation_error.regression`
+builds the row designs from the state equation and assembles ``A, B``.
 
 All inputs are plain arrays; building them from bags is :mod:`lpv_sysid.ident.dataprep`.
 """
@@ -34,7 +33,7 @@ from lpv_sysid.ident.equation_error.covariance import CovarianceConfig, default_
 from lpv_sysid.ident.equation_error.regression import (
     Fit,
     RowDesign,
-    _append_independent,
+    append_independent,
     assemble,
     fit,
     row_designs,
@@ -46,7 +45,7 @@ __all__ = [
     "Fit",
     "RowDesign",
     "RowFit",
-    "_append_independent",
+    "append_independent",
     "assemble",
     "default_dof",
     "fit",

@@ -1,32 +1,6 @@
-"""Equation-error grey-box least squares, seed 0 Appendix B (Eqs. 35-47).
-
-For the perturbation state equation ``dxdot = A dx + B du`` (Eq. 35, with ``dx = x - x0``,
-``du = u - u0``) some elements of ``A`` and ``B`` are known (kinematics, gravity, motor model)
-and the others are unknown (functions of the aerodynamic parameters K).  Per row ``i``:
-
-* index sets of unknown/known elements, Eqs. (36)-(39): ``maskA[i]``, ``maskB[i]`` (True =
-  unknown) and their complements;
-* regressors ``h_i = [x_j^T  u_k^T]`` over the unknown columns, Eq. (40) -> ``H_i`` (K x p_i),
-  Eq. (45);
-* measurement ``y_i = xdot_i - sum_known A_ij x_j - sum_known B_ik u_k``, Eq. (41);
-* parameters ``theta^(i)`` = unknown elements of row i of ``[A B]``, Eq. (42);
-* estimate ``theta^(i) = (H_i^T H_i)^-1 H_i^T y_i``, Eq. (47), computed with
-  ``numpy.linalg.lstsq`` (SVD) instead of forming ``(H^T H)^-1``: the normal equations
-  square the condition number of ``H`` (regressors in rad, m/s and ~600 rad/s rotor speeds
-  differ by orders of magnitude), while the SVD solves the same problem in the conditioning
-  of ``H`` itself.  Columns are scaled to unit norm first (the solution is unscaled after),
-  and a rank-deficient ``H_i`` (regressor never excited) raises :class:`SolverError` naming
-  the row and columns instead of returning a minimum-norm guess.
-
-Uncertainty (white, ``residual_acf`` and ``ewc`` covariance estimates, :func:`t_factor`):
-:mod:`~lpv_sysid.ident.equation_error.covariance`; solving the rows and their joint covariance
-(:class:`RowFit`, :func:`fit_row`, :func:`solve_rows`, ``R^2`` per row):
-:mod:`~lpv_sysid.ident.equation_error.solve`.  This module builds the row designs from the state
-equation and assembles ``A, B``; it re-exports the other two (``from
-lpv_sysid.ident.equation_error import ...`` keeps working).
-
-All inputs are plain arrays; building them from bags is :mod:`lpv_sysid.ident.dataprep`.
-"""
+"""The row designs of the state equation (:func:`row_designs`), the fit of all rows
+(:func:`fit`, seed 0 Eqs. 35-47) and ``A, B`` assembled from it (:func:`assemble`); the
+method is the :mod:`lpv_sysid.ident.equation_error` docstring."""
 
 from __future__ import annotations
 
@@ -100,7 +74,7 @@ def _check(name: str, a: np.ndarray, shape: tuple) -> np.ndarray:
     return a
 
 
-def _append_independent(
+def append_independent(
     H: np.ndarray, E: np.ndarray, rtol: float = 1e-8
 ) -> tuple[np.ndarray, list[int]]:
     """Append the columns of ``E`` that are linearly independent of ``H`` and of each other;
@@ -168,7 +142,7 @@ def row_designs(
             E = _check(
                 f"extra[{i}]", np.asarray(extra[i], dtype=float), (n_s, np.shape(extra[i])[1])
             )
-            H, chosen = _append_independent(H, E)
+            H, chosen = append_independent(H, E)
             labels.extend(f"nuisance{c}" for c in chosen)
         designs.append(
             RowDesign(i, y, H, tuple(int(j) for j in ja), tuple(int(k) for k in kb), tuple(labels))

@@ -21,8 +21,7 @@ segments keep the unstable vehicle's open-loop prediction bounded.  Solved with
 ``scipy.optimize.least_squares`` (trust-region reflective) from the regression estimate;
 parameter standard errors from the Gauss-Newton covariance ``s^2 (J^T J)^-1``.
 
-This module is step 1; the rest lives in one module per job and is re-exported here
-(``from lpv_sysid.ident.nonlinear import ...`` keeps working):
+Parts: step 1 is :mod:`~lpv_sysid.ident.nonlinear.least_squares`; the others:
 
 - :mod:`~lpv_sysid.ident.nonlinear.data`: ``AXES``, ``REGRESSORS``, ``regressors``,
   ``FlightData``, ``flight_data``, ``generalized_force`` and the result types ``AxisFit``,
@@ -45,8 +44,8 @@ from lpv_sysid.ident.nonlinear.data import (
     AXES,
     REGRESSORS,
     FlightData,
-    _gravity_body,
     flight_data,
+    gravity_body,
     regressors,
     virtual_actuators,
 )
@@ -61,10 +60,10 @@ __all__ = [
     "REGRESSORS",
     "REGRESSOR_NAMES",
     "RegressorCorrelation",
-    "_gravity_body",
     "column_correlation",
     "fig10_regressors",
     "flight_data",
+    "gravity_body",
     "output_error",
     "regression",
     "regression_stacked",

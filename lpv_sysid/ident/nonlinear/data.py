@@ -131,7 +131,7 @@ def regressors(
     return regressors_of_delta(v, omega, delta, delta_sq, arm_length)
 
 
-def _gravity_body(phi, th, g):
+def gravity_body(phi, th, g):
     """g R_IB^T e3 (Eq. 3c) for arrays of roll/pitch."""
     return g * np.stack([-np.sin(th), np.sin(phi) * np.cos(th), np.cos(phi) * np.cos(th)], axis=-1)
 
@@ -143,7 +143,7 @@ def generalized_force(data: FlightData, params, smoother=None) -> tuple[np.ndarr
     inertia = np.asarray(params.inertia, dtype=float)
     sm = smoother or (lambda a: a)
     known_v = sm(
-        np.cross(data.v, data.omega) + _gravity_body(data.euler[:, 0], data.euler[:, 1], g)
+        np.cross(data.v, data.omega) + gravity_body(data.euler[:, 0], data.euler[:, 1], g)
     )
     F = m * (data.v_dot - known_v)
     M = data.omega_dot @ inertia.T - sm(np.cross(data.omega @ inertia.T, data.omega))

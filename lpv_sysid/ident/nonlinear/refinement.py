@@ -16,7 +16,7 @@ from lpv_sysid.ident.nonlinear.data import (
     FlightData,
     NonlinearResult,
     _check,
-    _gravity_body,
+    gravity_body,
 )
 
 log = logging.getLogger(__name__)
@@ -61,7 +61,7 @@ def simulate_segments(
     inertia = np.asarray(params.inertia, dtype=float)
     Ii = np.linalg.inv(inertia)
     dt = float(data.t[1] - data.t[0])
-    grav = _gravity_body(data.euler[:, 0], data.euler[:, 1], g)
+    grav = gravity_body(data.euler[:, 0], data.euler[:, 1], g)
     # rotor reaction torque J_z delta_r': the step mean (delta_r(k+1) - delta_r(k)) / dt, which
     # integrates exactly over the step whatever the rotor speed does inside it
     dr = data.Omega @ mix[3]

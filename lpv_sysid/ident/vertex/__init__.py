@@ -33,12 +33,13 @@ The result serialises to the ``vertices`` entries of ``vertex_models.yaml`` (for
 :mod:`lpv_sysid.io.formats`).  Truth coverage on simulated airframes:
 :mod:`lpv_sysid.studies.coverage` and docs/identification_coverage.md.
 
-Modules (each one job; this module runs the pipeline and re-exports their public names):
-:mod:`.vertex_config` (``identification.yaml``), :mod:`.vertex_types` (data in, results out,
-the known model), :mod:`.fit_segment` (trim window, fit segment, smoothed perturbations),
-:mod:`.regressor_noise` (errors in variables), :mod:`.motor_rows` (Eq. 8 rows),
-:mod:`.vertex_taylor2` (the ``taylor2`` fit and the re-expansion), :mod:`.vertex_output`
-(the ``vertex_models.yaml`` document).
+Parts (each one job; :mod:`.pipeline` runs them):
+:mod:`.config` (``identification.yaml``), :mod:`.types` (data in, results out,
+the known model), :mod:`.segment` (trim window, fit segment, smoothed perturbations),
+:mod:`.noise` (errors in variables), :mod:`.motor_rows` (Eq. 8 rows),
+:mod:`.taylor2` (the ``taylor2`` fit and the re-expansion), :mod:`.output`
+(the ``vertex_models.yaml`` document), :mod:`.taylor` (the second-order equation error
+behind ``taylor2``), :mod:`.uncertainty` (the Eq. 22 box and the Eq. 23 uncertain systems).
 """
 
 from __future__ import annotations

@@ -1,45 +1,6 @@
-"""Per-vertex identification pipeline, seed 0 Sec. IV (Tables 1-3) -> ``vertex_models.yaml``.
-
-For each scheduling vertex ``v_d`` (one phase-1 maneuver):
-
-1. the flown trim ``x0, u0`` = mean over the trim-averaging window (seed 0 Table 1);
-2. the same global smoother is applied to states and inputs and the states are
-   differentiated (:mod:`lpv_sysid.ident.derivatives`), edges of the record are dropped;
-3. perturbation variables ``dx = x - x0``, ``du = u - u0`` over the excitation segment;
-4. known elements of ``A, B`` (kinematics, gravity, ``v x omega``, ``I omega x omega``) from
-   the model's analytic linearisation, unknown masks from ``Quadrotor.unknown_masks()``
-   (seed 0 Appendix A); equation-error LS (Appendix B), by default (``model: taylor2``) with
-   the known part nonlinear and the exact second-order remainders of Eq. (6) as nuisance
-   regressors (:mod:`lpv_sysid.ident.vertex.taylor`), an intercept per row, and the rotor reaction
-   torque on the measured rotor acceleration;
-5. the motor constants ``a_Omega, b_Omega`` of Eq. (8) from the rotor speeds
-   (:func:`lpv_sysid.ident.vertex.motor_rows.motor_design`: per rotor, stacked, gated while a rotor
-   is pinned at a speed limit, with the command-to-rotor latency), where the data allow;
-   otherwise uncertain with the estimate pooled over the other maneuvers
-   (:func:`identify_vertices`);
-6. all rows' covariance jointly (:func:`lpv_sysid.ident.equation_error.solve_rows`: stacked-
-   score EWC sandwich, Student-t dof);
-7. the flown trim is *not* an equilibrium (the vehicle fluctuates about it and the dynamics
-   are nonlinear: the identified model's derivative there is a few cm/s^2, and the flown mean
-   rotor speed sits 1-3 rad/s above trim), so the second-order model is re-expanded about its
-   own equilibrium at the flown velocity (seed 0 Eq. 13), with the delta-method covariance of
-   the Jacobians there (:func:`lpv_sysid.ident.vertex.taylor.reexpand`); that equilibrium is the
-   vertex's ``x0, u0``;
-8. intervals ``nominal +/- k std`` of every identified element (Eq. 22, std widened for the
-   Student-t dof) and the reduced uncertain vertex systems (Eq. 23),
-   :mod:`lpv_sysid.ident.vertex.uncertainty`.
-
-The result serialises to the ``vertices`` entries of ``vertex_models.yaml`` (format ``@2``,
-:mod:`lpv_sysid.io.formats`).  Truth coverage on simulated airframes:
-:mod:`lpv_sysid.studies.coverage` and docs/identification_coverage.md.
-
-Modules (each one job; this module runs the pipeline and re-exports their public names):
-:mod:`.vertex_config` (``identification.yaml``), :mod:`.vertex_types` (data in, results out,
-the known model), :mod:`.fit_segment` (trim window, fit segment, smoothed perturbations),
-:mod:`.regressor_noise` (errors in variables), :mod:`.motor_rows` (Eq. 8 rows),
-:mod:`.vertex_taylor2` (the ``taylor2`` fit and the re-expansion), :mod:`.vertex_output`
-(the ``vertex_models.yaml`` document).
-"""
+"""The per-vertex identification pipeline (:func:`identify_vertex`, :func:`identify_vertices`)
+and its validation (:func:`validate`, :func:`in_sample_metrics`); the method is the
+:mod:`lpv_sysid.ident.vertex` docstring."""
 
 from __future__ import annotations
 

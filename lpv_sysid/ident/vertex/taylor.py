@@ -48,7 +48,7 @@ def known_rigid_body(states: np.ndarray, params, Ii: np.ndarray | None = None) -
     inertia = np.asarray(params.inertia, dtype=float)
     Ii = np.linalg.inv(inertia) if Ii is None else Ii
     v, w = states[:, 2:5], states[:, 5:8]
-    vd = np.cross(v, w) + nl._gravity_body(states[:, 0], states[:, 1], params.g)
+    vd = np.cross(v, w) + nl.gravity_body(states[:, 0], states[:, 1], params.g)
     wd = np.cross(w @ inertia.T, w) @ Ii.T
     return np.concatenate([vd, wd], axis=1)
 

@@ -1,7 +1,8 @@
-"""The ``taylor2`` vertex fit (seed 0 App. B with Eq. 6 nonlinear, :mod:`lpv_sysid.ident.vertex.taylor`):
-equation error with the known part nonlinear and the second-order remainders as nuisance
-regressors, the motor rows (:mod:`lpv_sysid.ident.vertex.motor_rows`), then the re-expansion about the
-identified equilibrium (seed 0 Eq. 13).
+"""The ``taylor2`` vertex fit (seed 0 App. B with Eq. 6 nonlinear,
+:mod:`lpv_sysid.ident.vertex.taylor`): equation error with the known part nonlinear and the
+second-order remainders as nuisance regressors, the motor rows
+(:mod:`lpv_sysid.ident.vertex.motor_rows`), then the re-expansion about the identified equilibrium
+(seed 0 Eq. 13).
 
 Two stages: :func:`fit_rows` solves all rows jointly about the flown trim (everything that does
 not depend on how the motor constants enter); :func:`finish` adds the motor prior where the
@@ -138,7 +139,7 @@ def fit_rows(
         cols = nuis_idx[row]
         if cols:
             E = np.stack([rem[a][:, c] for a, c in cols], axis=1)
-            Hm, chosen = ee._append_independent(Hm, E)
+            Hm, chosen = ee.append_independent(Hm, E)
             labels += [f"nuisance{c}" for c in chosen]
             if iv is not None and Z is not None:
                 Z = np.concatenate(

@@ -61,8 +61,8 @@ class VertexResult:
         the motor rows ``A[8:12, 8:12] = -a_Omega I``, ``B[8:12, :] = b_Omega I``) with its
         calibrated standard error and the interval ``nominal +/- k std`` of Eq. (22), ``k`` =
         ``meta.k_sigma`` (``meta.uncertainty.k_applied`` when raised by ``joint_alpha``).  The
-        reduced polytope of :mod:`lpv_sysid.ident.vertex.uncertainty` is not stored; a consumer that
-        wants it applies the reduction to these intervals.
+        reduced polytope of :mod:`lpv_sysid.ident.vertex.uncertainty` is not stored; a consumer
+        that wants it applies the reduction to these intervals.
         """
         fit = {"r2": {k: float(v) for k, v in self.r2_axes.items()}}
         for key in ("tic", "nrmse"):

@@ -11,18 +11,18 @@ module                     job
 :mod:`.durability`         the writer's lock and disk reserve, :func:`writer_alive`,
                            :func:`atomic_write_text`
 :mod:`.typestore`          the Jazzy typestore, QoS profiles, stored definitions
-:mod:`.layout`             the CDR block codec (:class:`CdrLayout`, :func:`encode_block`)
+:mod:`.cdr.layout`         the CDR block codec (:class:`CdrLayout`, :func:`encode_block`)
 :mod:`.records`            what the readers return (:class:`TopicStats`, ...)
 :mod:`.reader`             :func:`read_bag` (message objects), :func:`topic_info`
 :mod:`.arrays`             :func:`read_arrays` (numpy columns)
-:mod:`.builder`            message objects from decoded columns
+:mod:`.cdr.builder`        message objects from decoded columns
 :mod:`.collect`            raw records of any bag (index, rosbags, salvage)
-:mod:`.mcap_index`         a healthy mcap bag through its summary and message indexes
-:mod:`.mcap_records`       MCAP record primitives
-:mod:`.mcap_walk`          the record walk (salvage parser) of an unfinished mcap file
-:mod:`.mcap_repair`        in-place repair of an mcap file
+:mod:`.mcap.index`         a healthy mcap bag through its summary and message indexes
+:mod:`.mcap.records`       MCAP record primitives
+:mod:`.mcap.walk`          the record walk (salvage parser) of an unfinished mcap file
+:mod:`.mcap.repair`        in-place repair of an mcap file
 :mod:`.sqlite`             damaged sqlite3 files: salvage, roll-back, repair
-:mod:`.metadata`           ``metadata.yaml``: read, compared, written after a repair
+:mod:`.metadata`           ``metadata.yaml``: read, screened, compared, written after a repair
 :mod:`.repair`             :func:`repair_bag` (``lpv-sysid bag repair DIR``)
 :mod:`.bagfiles`           the files of a bag and how they are opened (no FIFO, no device)
 =========================  ===============================================================
@@ -59,10 +59,9 @@ from lpv_sysid.io.bag.durability import (
     now_iso,
     writer_alive,
 )
-from lpv_sysid.io.bag.mcap.index import _read_fast
 from lpv_sysid.io.bag.mcap.records import MCAP_MAGIC
 from lpv_sysid.io.bag.reader import read_bag, topic_info
-from lpv_sysid.io.bag.records import _Source, merge_topic_stats
+from lpv_sysid.io.bag.records import merge_topic_stats
 from lpv_sysid.io.bag.repair import RepairReport, repair_bag
 from lpv_sysid.io.bag.typestore import jazzy_typestore
 from lpv_sysid.io.bag.writer import FLUSH_INTERVAL_S, FLUSH_MESSAGES, STORAGES, BagWriter
@@ -80,8 +79,6 @@ __all__ = [
     "RepairReport",
     "STORAGES",
     "UnsafeBagFile",
-    "_Source",
-    "_read_fast",
     "atomic_write_text",
     "encode_block",
     "jazzy_typestore",

@@ -1,4 +1,9 @@
-"""TODO face"""
+"""The one place user-supplied files are opened, read and hashed: regular files only, size
+caps, no pickles (:mod:`~lpv_sysid.io.files.opening`); the strict YAML loader
+(:mod:`~lpv_sysid.io.files.yaml_loader`) and the readers and atomic writer built on it
+(:mod:`~lpv_sysid.io.files.yaml_reader`); SHA-256 of files
+(:mod:`~lpv_sysid.io.files.hashing`). May import: :mod:`lpv_sysid.errors`.
+"""
 
 from __future__ import annotations
 

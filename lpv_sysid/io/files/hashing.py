@@ -22,7 +22,8 @@ def sha256_bytes(data: bytes) -> str:
 
 def sha256_file(path: PathLike) -> str:
     """SHA-256 (hex) of the bytes of ``path``, read in chunks through
-    :func:`lpv_sysid.io.files.opening.open_regular` (regular files only: a FIFO would block; at most
+    :func:`lpv_sysid.io.files.opening.open_regular` (regular files only: a FIFO would block; at
+    most
     :data:`~lpv_sysid.io.files.opening.MAX_NPZ_BYTES`, the larger of the package's read caps).
     Every failure is a ConfigError naming the file."""
     from lpv_sysid.io.files.opening import MAX_NPZ_BYTES, open_regular

@@ -32,7 +32,7 @@ Virtual actuator channels are named channels in the seed's FRD sense and are nev
 converted. Stamps are integer nanoseconds in the core (``stamp_ns``) and
 ``builtin_interfaces/Time`` on the wire; samples also carry ``t = stamp_ns / 1e9`` (s).
 
-One module per message family, every name re-exported here:
+One module per message family:
 
 =========================================  =====================================================
 :mod:`~lpv_sysid.io.messages.factory`      :class:`MsgFactory`, :class:`MessageError`

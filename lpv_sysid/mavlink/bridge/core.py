@@ -1,32 +1,6 @@
-"""Bridge core: link + telemetry decoder + offboard state machine + setpoint transport.
-
-The rclpy shell (``nodes/mavlink_bridge_node.py``) is glue around :class:`BridgeCore`:
-
-- timer (e.g. 200 Hz): ``out = core.poll(now)`` -> publish ``out.samples`` (StateSample,
-  ImuSample, RotorSample in NED/FRD; convert with io/frames) and ``out.events``
-  (``status`` topic); ``core.status(now)`` gives key/values for the DiagnosticStatus;
-- subscriptions: ``core.on_velocity_reference(now, v_frd, yaw_rate, stamp)`` /
-  ``core.on_actuator_command(now, u, stamp)``;
-- services: ``core.start(now)``, ``core.abort(now, reason)`` (both return the status
-  events they caused); on shutdown ``core.shutdown(now)`` (sends the hand-back command at
-  once, returns the undelivered events) then ``core.close()``. Rejected commands and
-  events caused by commands are delivered with the next ``poll``.
-
-``sample_callback`` (optional) is called synchronously for every decoded sample, which
-is what a controller uses to answer within the same poll (lowest latency). Commands go
-out immediately when the machine is streaming (``send_on_command``), and again at the
-configured rate.
-
-Safety envelope (:mod:`lpv_sysid.control.envelope`, section ``envelope``): armed by
-``start`` (home: the position at start on the ground, PX4's HOME_POSITION when the vehicle
-is already armed), it checks every decoded state
-sample and every velocity reference while the machine streams. A violation (floor,
-predictive floor, ceiling, geofence, tilt, speed, setpoint magnitude, non-finite values)
-puts an ``error`` StatusEvent naming it on the output and hands control back through the
-offboard machine at once; a rejected setpoint is never encoded. ``core.envelope``
-exposes the latched :class:`~lpv_sysid.control.envelope.Violation` and
-``activate_floor``; ``status`` carries ``envelope*`` keys.
-"""
+"""The bridge core (:class:`BridgeCore`, its :class:`BridgeConfig` and :class:`BridgeOutput`):
+link, telemetry decoder, offboard machine, envelope and setpoint transport in one step per
+poll; the method is the :mod:`lpv_sysid.mavlink.bridge` docstring."""
 
 from __future__ import annotations
 

@@ -1,8 +1,7 @@
 """Polytopic (uncertain) LPV model over the scheduling box of seed 0 Eqs. (20)-(23).
 
-The model object (:class:`PolytopicModel`, :class:`ScheduledLpv`) is here; its parts live in
-one module per job and are re-exported (``from lpv_sysid.models.lpv import ...`` keeps
-working):
+Parts: the model object (:class:`PolytopicModel`, :class:`ScheduledLpv`,
+:mod:`~lpv_sysid.models.lpv.polytope`) and
 
 - :mod:`~lpv_sysid.models.lpv.box`: vertex order of the box (Eq. 20) and the multilinear
   weights alpha_i(v_d) (Eq. 21), clamped outside the box;

@@ -12,8 +12,8 @@ B elements are the common input hull of :func:`~lpv_sysid.models.lpv.uncertainty
 (the argument of that module's docstring: B carries no vertex index, so the interior of the
 scheduling box is covered). The multipliers that turn this
 into a finite LMI are in :mod:`lpv_sysid.synthesis.robust`. Corner polytopes of single-element
-boxes (the influence / box reductions of :mod:`lpv_sysid.ident.vertex.uncertainty`) have the same form
-(:func:`corner_box`), which is how the seed-size problem is solved with one block per vertex.
+boxes (the influence / box reductions of :mod:`lpv_sysid.ident.vertex.uncertainty`) have the same
+form (:func:`corner_box`), which is how the seed-size problem is solved with one block per vertex.
 """
 
 from __future__ import annotations

@@ -1,17 +1,5 @@
-"""Polytopic (uncertain) LPV model over the scheduling box of seed 0 Eqs. (20)-(23).
-
-The model object (:class:`PolytopicModel`, :class:`ScheduledLpv`) is here; its parts live in
-one module per job and are re-exported (``from lpv_sysid.models.lpv import ...`` keeps
-working):
-
-- :mod:`~lpv_sysid.models.lpv.box`: vertex order of the box (Eq. 20) and the multilinear
-  weights alpha_i(v_d) (Eq. 21), clamped outside the box;
-- :mod:`~lpv_sysid.models.lpv.uncertainty`: interval elements (Eq. 22), corner enumeration of
-  the nested uncertainty vertices Lambda_i^j (Eq. 23), and the common input matrix of Lemma 1
-  (why B must carry no vertex index, and what that costs: that module's docstring);
-- :mod:`~lpv_sysid.models.lpv.element_box`: the whole Eq. (22) box as a structured
-  perturbation (LFT form) and the corner polytopes that are such boxes.
-"""
+"""The polytopic LPV model object (:class:`PolytopicModel`, :class:`ScheduledLpv`, seed 0
+Eqs. 20-23); the method is the :mod:`lpv_sysid.models.lpv` docstring."""
 
 from __future__ import annotations
 

@@ -2,7 +2,8 @@
 
 Nested uncertainty vertices Lambda_i^j (seed 0 Eq. 23) are built per scheduling vertex from the
 nominal ``(A_i, B_i)`` and the interval box of the uncertain elements (Eq. 22) by corner
-enumeration, or taken from an explicit list (e.g. produced by ``lpv_sysid.ident.vertex.uncertainty``).
+enumeration, or taken from an explicit list (e.g. produced by
+``lpv_sysid.ident.vertex.uncertainty``).
 
 Common input matrix (why, and what it costs). Lemma 1 (seed 0 Sec. VI, Rotondo Thm. 2) certifies
 the *whole* scheduling box only because the seed's input matrix depends on theta alone (Eq. 16):

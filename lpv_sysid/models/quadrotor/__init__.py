@@ -14,8 +14,7 @@ speed held inside [omega_min, omega_max].
 
 The squared virtual actuators are delta^2 = Mix Omega^2 (Eq. 7, not the square of delta).
 
-This module is the model object; its parts live in one module per job and are re-exported
-here (``from lpv_sysid.models.quadrotor import ...`` keeps working):
+Parts: the model object :class:`Quadrotor` (:mod:`~lpv_sysid.models.quadrotor.model`) and
 
 - :mod:`~lpv_sysid.models.quadrotor.params`: ``QuadrotorParams``, the lumped aerodynamic
   parameters ``K`` of Eq. (6) (``K_NAMES``, ``DEFAULT_K``, table of regressors);
@@ -30,7 +29,6 @@ here (``from lpv_sysid.models.quadrotor import ...`` keeps working):
 
 from __future__ import annotations
 
-from lpv_sysid.models.quadrotor.hot_path import _HOT_PATH_SOURCE
 from lpv_sysid.models.quadrotor.model import Quadrotor
 from lpv_sysid.models.quadrotor.params import DEFAULT_K, K_NAMES, QuadrotorParams
 from lpv_sysid.models.quadrotor.states import (
@@ -64,7 +62,6 @@ __all__ = [
     "TRIM_COLUMNS",
     "TRIM_TABLE",
     "Trim",
-    "_HOT_PATH_SOURCE",
     "full_state",
     "mixer",
     "reduced_state",

@@ -20,8 +20,7 @@ Deviations from the converted seed text (docs/trms.md):
   and the gaps of Eq. (69) are not needed. Eq. (54) is evaluated as
   ``-g rho sinc(theta_v - theta_v^0) / J_v`` with ``rho = hypot(K_A - K_B, K_C)``, an identity.
 
-This module is the entry point; the parts live in one module per job and are re-exported here
-(``from lpv_sysid.models.trms import ...`` keeps working):
+Parts:
 
 - :mod:`~lpv_sysid.models.trms.params`: names, Table 7 ranges, ``TrmsParams`` (Tables 5-6);
 - :mod:`~lpv_sysid.models.trms.model`: ``Trms`` (Eqs. 1-6, 41-58, Sec. 5.1 equilibria);

@@ -1,14 +1,5 @@
-"""Excitation: the phase-1 reference of seed 0 Sec. IV (:func:`phase1_signals`,
-:func:`phase1_reference`) and the public names of the excitation player, which plays a
-signal set as velocity/yaw-rate reference and excitation u_e (no ROS here; the core
-behind ``excitation_node``):
-
-* :mod:`lpv_sysid.signals.excitation.player` - :class:`ExcitationCore` (timeline, fades,
-  abort, O(1) lookup) and the channels of the two experiments of seed 0;
-* :mod:`lpv_sysid.signals.excitation.clock` - :class:`TimeOrderError`, :class:`MonotonicTime`;
-* :mod:`lpv_sysid.signals.excitation.envelope` - :func:`design_envelope` (the bounds the
-  gains record in ``certificate.design``) and :func:`check_design`.
-"""
+"""The phase-1 reference of seed 0 Sec. IV: the 4-axis multisine (:func:`phase1_signals`) and
+the vertex reference with it superposed (:func:`phase1_reference`)."""
 
 from __future__ import annotations
 

@@ -31,12 +31,13 @@ the equilibrium does not move by itself) and flies :func:`feedforward_law`,
 reference a trajectory, which it does by construction of F_i from the same (A_i, B_i) up to the
 neglected dF/dt and snap terms; :mod:`lpv_sysid.sim.phase2` reports it as ``linear_ff``.
 
-The parts live in one module per job and are re-exported here (``from
-lpv_sysid.sim.closed_loop import ...`` keeps working): :mod:`~lpv_sysid.sim.closed_loop.schedule`
-(the ``ScheduledModel`` protocol, fast weights, the last-point cache),
+Parts: :mod:`~lpv_sysid.sim.closed_loop.eq33` (the loop itself),
+:mod:`~lpv_sysid.sim.closed_loop.schedule` (the ``ScheduledModel`` protocol, fast weights, the
+last-point cache),
 :mod:`~lpv_sysid.sim.closed_loop.references` (first-order hold of v_d and u_e),
 :mod:`~lpv_sysid.sim.closed_loop.laws` (the laws of Eqs. 17, 31 and the feedforward law),
-:mod:`~lpv_sysid.sim.closed_loop.fused` (the fused evaluation used for the product's models and laws),
+:mod:`~lpv_sysid.sim.closed_loop.fused` (the fused evaluation used for the product's models and
+laws),
 :mod:`~lpv_sysid.sim.closed_loop.integrate` (RK45 / RK4 on the signal grid) and
 :mod:`~lpv_sysid.sim.closed_loop.hinf_grid` (the LMI-free frequency-grid check of Eq. 29).
 """

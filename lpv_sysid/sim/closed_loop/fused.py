@@ -2,7 +2,8 @@
 matrix product per evaluation.
 
 For the product's models and laws (a ``models.lpv.ScheduledLpv`` with
-:func:`~lpv_sysid.sim.closed_loop.laws.linear_lpv_law` or :func:`~lpv_sysid.sim.closed_loop.laws.feedforward_law`)
+:func:`~lpv_sysid.sim.closed_loop.laws.linear_lpv_law` or
+:func:`~lpv_sysid.sim.closed_loop.laws.feedforward_law`)
 :func:`~lpv_sysid.sim.closed_loop.simulate_eq33` uses :func:`fused_eq33`: the weights of
 Eq. (21) and their rate (Eq. 34) as plain floats and all scheduled quantities from one
 ``[alpha; beta] @ W`` product -- the values of :func:`~lpv_sysid.sim.closed_loop.eq33_rhs`

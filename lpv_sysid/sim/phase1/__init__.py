@@ -17,8 +17,7 @@ Outputs: an in-memory :class:`RunRecord` per run; ``write_run_bag`` writes it as
 rosbag2 directory with the topics of docs/DESIGN.md; ``write_trim_table`` writes
 trims.yaml and trims.md.
 
-The parts live in one module per job and are re-exported here (``from lpv_sysid.sim.phase1
-import ...`` keeps working): :mod:`~lpv_sysid.sim.phase1.config` (``Phase1Config``,
+Parts: :mod:`~lpv_sysid.sim.phase1.config` (``Phase1Config``,
 ``load_config``), :mod:`~lpv_sysid.sim.phase1.runs` (excitation, ``simulate_run``,
 ``run_phase1``, ``RunRecord``), :mod:`~lpv_sysid.sim.phase1.trims` (the Table 1 trim table)
 and :mod:`~lpv_sysid.sim.phase1.bag` (``write_run_bag``).
@@ -26,7 +25,7 @@ and :mod:`~lpv_sysid.sim.phase1.bag` (``write_run_bag``).
 
 from __future__ import annotations
 
-from lpv_sysid.sim.phase1.bag import BAG_TOPICS, _bulk_rows, _message_items, write_run_bag
+from lpv_sysid.sim.phase1.bag import BAG_TOPICS, write_run_bag
 from lpv_sysid.sim.phase1.config import Phase1Config, load_config
 from lpv_sysid.sim.phase1.runs import (
     design_excitation,
@@ -39,8 +38,6 @@ from lpv_sysid.sim.phase1.trims import format_trim_table, trim_table, write_trim
 __all__ = [
     "BAG_TOPICS",
     "Phase1Config",
-    "_bulk_rows",
-    "_message_items",
     "design_excitation",
     "excitation_signal",
     "format_trim_table",

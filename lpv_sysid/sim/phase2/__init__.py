@@ -45,8 +45,8 @@ histories), PNG figures, and ``bag/`` (rosbag2).
 Modules: options, gains, signals (:mod:`~lpv_sysid.sim.phase2.inputs`); the runtime law
 (:mod:`~lpv_sysid.sim.phase2.law`); the nonlinear flight (:mod:`~lpv_sysid.sim.phase2.flight`);
 its bag (:mod:`~lpv_sysid.sim.phase2.bag`); what gamma bounds (:mod:`~lpv_sysid.sim.phase2.gain`,
-:mod:`~lpv_sysid.sim.closed_loop.excitation_fir`); outputs (:mod:`~lpv_sysid.sim.phase2.outputs`). This
-module runs them (:func:`run`) and re-exports their public names.
+:mod:`~lpv_sysid.sim.closed_loop.excitation_fir`); outputs (:mod:`~lpv_sysid.sim.phase2.outputs`).
+The run itself: :mod:`~lpv_sysid.sim.phase2.experiment` (:func:`run`).
 """
 
 from __future__ import annotations

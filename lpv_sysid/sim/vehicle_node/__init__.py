@@ -1,4 +1,9 @@
-"""TODO face"""
+"""What ``sim_vehicle_node`` does, without rclpy: the simulated quadrotor paced to the
+clock (or lock-stepped to the controller's commands), its sensors and samples as messages,
+its status (:class:`SimVehicleRuntime`, :mod:`~lpv_sysid.sim.vehicle_node.runtime`), and the
+node's parameters, declared once (:class:`SimVehicleSettings`,
+:mod:`~lpv_sysid.sim.vehicle_node.settings`).
+"""
 
 from __future__ import annotations
 

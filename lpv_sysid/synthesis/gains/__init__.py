@@ -1,4 +1,10 @@
-"""TODO face"""
+"""One synthesis from the vertex models to a certified gains file (``lpv-sysid synthesize``,
+the chain's step 4): inputs (config, options, models, weights, design envelope;
+:mod:`~lpv_sysid.synthesis.gains.inputs`), the solve and the independent verification of
+what was written (:mod:`~lpv_sysid.synthesis.gains.pipeline`), the certificate entry
+(:mod:`~lpv_sysid.synthesis.gains.certificate`) and the files
+(:mod:`~lpv_sysid.synthesis.gains.outputs`).
+"""
 
 from __future__ import annotations
 

@@ -191,8 +191,8 @@ def load_inputs(
     if opts.lyapunov == "rate" and opts.rate_bound == "design":
         if design is None:
             raise ConfigError(
-                "hinf.rate_bound: design needs the phase-2 signals summary (weights.summary) for the "
-                "design envelope's reference_rate"
+                "hinf.rate_bound: design needs the phase-2 signals summary (weights.summary) "
+                "for the design envelope's reference_rate"
             )
         opts = replace(opts, rate_bound=[float(x) for x in design["reference_rate"]])
         rate_from_design = True

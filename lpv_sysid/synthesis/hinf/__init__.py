@@ -17,11 +17,11 @@ dual bounded-real-lemma matrix Phi0; eliminating H recovers A X + X A^T + B_e B_
 g < 0.)
 
 The parts: :mod:`~lpv_sysid.synthesis.hinf.options` (options, problem size, result),
-:mod:`~lpv_sysid.synthesis.hinf.lemma1_numeric` (weights, Eq. (30) in numpy, the independent re-check,
-the seed's problem sizes), :mod:`~lpv_sysid.synthesis.hinf.lemma1_cvxpy` (Eq. (30) as a cvxpy problem
-and its solution read back), :mod:`~lpv_sysid.synthesis.hinf.box` (``method: box``, the
-element-box LMI). This module drives the solvers (:func:`solve_lemma1`) and, on failure, the
-remedies (:func:`synthesize_hinf`); the names above are re-exported here.
+:mod:`~lpv_sysid.synthesis.hinf.lemma1_numeric` (weights, Eq. (30) in numpy, the independent
+re-check, the seed's problem sizes), :mod:`~lpv_sysid.synthesis.hinf.lemma1_cvxpy` (Eq. (30) as a
+cvxpy problem and its solution read back), :mod:`~lpv_sysid.synthesis.hinf.box` (``method: box``,
+the element-box LMI). :mod:`~lpv_sysid.synthesis.hinf.synthesize` drives the solvers
+(:func:`solve_lemma1`) and, on failure, the remedies (:func:`synthesize_hinf`).
 
 If the problem is infeasible at the requested gamma, the remedies of seed 0 Sec. VI are quantified.
 Scaling R by c (B_e -> c B_e, Eq. 27) maps a solution (X, S, H) at gamma to c^2 (X, S, H) at

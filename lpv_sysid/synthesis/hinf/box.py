@@ -5,8 +5,8 @@
 the full element box of a ``full_box`` model, or a corner polytope recognised as the corners of a
 box (:func:`lpv_sysid.models.lpv.corner_box`), one robust block per vertex with X_i^j = X_i; for a
 corner polytope the solution is then re-checked on Eq. (30) itself at every corner system
-(:func:`lpv_sysid.synthesis.hinf.lemma1_numeric.certificate_margins`, batched), so the seed's LMIs are
-what is certified however many systems there are -- the seed-size problem (sum M_i = 580,
+(:func:`lpv_sysid.synthesis.hinf.lemma1_numeric.certificate_margins`, batched), so the seed's LMIs
+are what is certified however many systems there are -- the seed-size problem (sum M_i = 580,
 :func:`lpv_sysid.synthesis.hinf.lemma1_numeric.seed_problem_size`) in seconds.
 """
 

@@ -1,4 +1,7 @@
-"""TODO face"""
+"""The CDR block codec of the bag readers and writers: fixed-layout records decoded and
+encoded a topic at a time (:mod:`~lpv_sysid.io.bag.cdr.layout`) and message objects built
+from decoded columns (:mod:`~lpv_sysid.io.bag.cdr.builder`).
+"""
 
 from __future__ import annotations
 

@@ -12,8 +12,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from lpv_sysid.ident.vertex import VertexData
-
 COMMAND = "identify"
 HELP = "identify the uncertain vertex LTI models from phase-1 bags (seed 0 Sec. IV)"
 
@@ -151,51 +149,19 @@ def format_uncertainty_summary(results, cfg) -> str:
 def run(args: argparse.Namespace) -> int:
     import dataclasses
 
-    import numpy as np
-
-    from lpv_sysid.errors import ConfigError
     from lpv_sysid.ident import dataprep as dp
     from lpv_sysid.ident import metrics
     from lpv_sysid.ident import vertex as vx
+    from lpv_sysid.ident.phase1 import identify_campaign
     from lpv_sysid.io.formats import VertexModels
 
     cfg = load_config(args.config)
     if args.quadrotor is not None:
         cfg = dataclasses.replace(cfg, quadrotor=quadrotor_section(args.quadrotor))
-    bags = dp.find_bags(args.bags)
-    centre = 0.5 * (np.asarray(cfg.vmin) + np.asarray(cfg.vmax))
-    vertices: dict[tuple[float, ...], VertexData] = {}
-    validation = None
-    for bag in bags:
-        aligned = dp.align(dp.streams_from_bag(bag), cfg)
-        v_d = dp.snap_to_box(aligned.vertex.scheduling, cfg)
-        data = dataclasses.replace(aligned.vertex, scheduling=v_d)
-        if np.allclose(v_d, centre):
-            if validation is not None:
-                raise ConfigError(
-                    f"{bag}: second validation maneuver at the box centre "
-                    f"(first: {validation.name})"
-                )
-            validation = data
-            continue
-        key = tuple(v_d)
-        if key in vertices:
-            raise ConfigError(f"{bag}: vertex {list(key)} already given by {vertices[key].name}")
-        if aligned.input_source != "actuator_command":
-            print(
-                f"{bag.name}: no actuator_command, input reconstructed from rotor speeds (Eq. 8)"
-            )
-        vertices[key] = data
-    missing = [c.tolist() for c in vx.box_corners(cfg) if tuple(c) not in vertices]
-    if missing:
-        raise ConfigError(f"{args.bags}: no maneuver for vertex/vertices {missing}")
-    datas = list(vertices.values())
-    results = vx.identify_vertices(datas, cfg)
-    results = [
-        dataclasses.replace(res, validation=vx.in_sample_metrics(res, data, cfg))
-        for res, data in zip(results, datas)
-    ]
-    results = [results[k] for k in vx.vertex_order(results, cfg)]
+    ident = identify_campaign(args.bags, cfg)
+    for note in ident.notes:
+        print(note)
+    results, val = ident.results, ident.validation
     print("Flight data vertex equilibria (seed 0 Table 1: the flown trim means)")
     print(
         dp.format_table1(
@@ -222,10 +188,7 @@ def run(args: argparse.Namespace) -> int:
         print(format_offset_table(results))
     print()
     print(format_r2_table(results))
-    val = None
-    if validation is not None:
-        val = vx.validate(results, validation, cfg)
-        val["name"] = validation.name
+    if val is not None:
         print()
         print(format_validation_table(val))
     doc = vx.vertex_models_dict(results, cfg, val)

@@ -21,26 +21,11 @@ from pathlib import Path
 import numpy as np
 
 from lpv_sysid.errors import ConfigError
+from lpv_sysid.io.files import save_yaml
+from lpv_sysid.vrft import LV100_CONFIG, TABLE53_CONFIG, TuneResult, load_data, tune
 
 COMMAND = "vrft"
 HELP = "tune a (MIMO, optionally cascaded) controller from I/O data by VRFT (seed 1 Sec. 3.3)"
-
-FORMAT = "lpv_sysid/vrft_controller@1"
-
-TABLE53_CONFIG = {
-    "reference_model": {"poles": [0.9, 0.9]},
-    "controller": {"basis": "pid", "terms": ["p", "i"], "structure": "full"},
-    "method": "ls",
-    "window": 10,
-    "Ts": 1.0,
-}
-LV100_CONFIG = {
-    "reference_model": {"poles": [0.6, 0.6]},
-    "controller": {"basis": "pid", "terms": ["p", "i"], "structure": "full"},
-    "method": "eiv",
-    "window": 20,
-    "Ts": 0.1,
-}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -86,37 +71,13 @@ def _read_yaml(path: str) -> dict:
     return d
 
 
-def _load_npz(path: str) -> dict:
-    from lpv_sysid.io.files import read_npz
-
-    p = Path(path)
-    if not os.path.lexists(p):
-        raise ConfigError(f"data file not found: {p}")
-    d = read_npz(p)  # regular file, size cap, no pickles, no complex arrays
-    for k in ("t", "u", "y"):
-        if k not in d:
-            raise ConfigError(f"{p}: missing array {k!r} (have {sorted(d)})")
-    for k, v in d.items():
-        if v.dtype.kind not in "fiu":
-            raise ConfigError(f"{p}: array {k!r} is not numeric (dtype {v.dtype})")
-        if not np.all(np.isfinite(v)):
-            raise ConfigError(f"{p}: array {k!r} contains NaN/inf")
-    t = d["t"].reshape(-1)
-    for k in d:
-        if k != "t" and d[k].shape[0] != t.size:
-            raise ConfigError(f"{p}: {k!r} has {d[k].shape[0]} samples but t has {t.size}")
-    if t.size < 2 or np.any(np.diff(t) <= 0):
-        raise ConfigError(f"{p}: t must be strictly increasing with at least 2 samples")
-    dt = np.diff(t)
-    if np.max(np.abs(dt - dt.mean())) > 1e-6 * max(dt.mean(), 1e-12) + 1e-9:
-        raise ConfigError(f"{p}: t is not uniformly sampled (VRFT needs a fixed sample time)")
-    d["t"] = t
-    return d
-
-
 def _fmt_matrix(name: str, K: np.ndarray) -> str:
     rows = ["  ".join(f"{v:+.4f}" for v in r) for r in np.atleast_2d(K)]
     return f"  {name} = [" + "; ".join(rows) + "]"
+
+
+def _lines(out: TuneResult) -> list[str]:
+    return [line for title, res in out.loops.items() for line in _report(title, res)]
 
 
 def _report(title: str, res) -> list[str]:
@@ -148,89 +109,13 @@ def run(args: argparse.Namespace) -> int:
         return _run_example(args)
 
     cfg = VrftConfig.from_dict(_read_yaml(args.config))
-    data = _load_npz(args.data)
-    out = _tune(cfg, data, args)
-    for line in out["lines"]:
+    out = tune(cfg, load_data(args.data), str(args.data))
+    for line in _lines(out):
         print(line)
     if args.out:
-        _write(args.out, out["doc"])
+        save_yaml(out.doc, args.out)
         print(f"wrote {args.out}")
     return 0
-
-
-def _tune(cfg, data: dict, args) -> dict:
-    from lpv_sysid.vrft import cascaded_vrft, vrft
-
-    t = data["t"]
-    Ts = cfg.Ts if cfg.Ts is not None else float(np.mean(np.diff(t)))
-    u = data["u"].reshape(t.size, -1).astype(float)
-    y = data["y"].reshape(t.size, -1).astype(float)
-    cls = cfg.loop.controller_class(u.shape[1], Ts)
-    W = cfg.loop.prefilter_tf()
-    doc = {
-        "format": FORMAT,
-        "Ts": Ts,
-        "method": cfg.method,
-        "window": cfg.window,
-        "eiv_weight": cfg.eiv_weight,
-        "source": str(getattr(args, "data", None) or f"example {getattr(args, 'example', '')}"),
-    }
-    if cfg.outer is not None:
-        if cfg.method == "iv":
-            raise ConfigError("cascade (outer:) supports method ls or eiv, not iv")
-        if "y_outer" not in data:
-            raise ConfigError(
-                "config has an 'outer' loop but the data file has no 'y_outer' array"
-            )
-        yo = data["y_outer"].reshape(t.size, -1).astype(float)
-        cls_o = cfg.outer.controller_class(y.shape[1], Ts)
-        cascade = cascaded_vrft(
-            u,
-            y,
-            yo,
-            cfg.loop.M,
-            cfg.outer.M,
-            cls,
-            cls_o,
-            method=cfg.method,
-            window=cfg.window,
-            prefilter_inner=W,
-            prefilter_outer=cfg.outer.prefilter_tf("outer.prefilter"),
-            discard=cfg.discard,
-            eiv_weight=cfg.eiv_weight,
-        )
-        doc["inner"] = cascade.inner.to_dict()
-        doc["outer"] = cascade.outer.to_dict()
-        lines = _report("inner loop", cascade.inner) + _report("outer loop", cascade.outer)
-        return {"doc": doc, "lines": lines, "result": cascade}
-    res = vrft(
-        u,
-        y,
-        cfg.loop.M,
-        cls,
-        method=cfg.method,
-        prefilter=W,
-        window=cfg.window,
-        instrument=data.get("instrument"),
-        y2=data.get("y2"),
-        discard=cfg.discard,
-        eiv_weight=cfg.eiv_weight,
-    )
-    doc["controller"] = res.to_dict()
-    return {"doc": doc, "lines": _report("controller", res), "result": res}
-
-
-def _write(path: str, doc: dict) -> None:
-    import yaml
-
-    p = Path(path)
-    try:
-        p.parent.mkdir(parents=True, exist_ok=True)
-        tmp = p.with_name(p.name + ".tmp")
-        tmp.write_text(yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")
-        tmp.replace(p)
-    except OSError as exc:
-        raise ConfigError(f"cannot write {p}: {exc}") from None
 
 
 def _run_example(args: argparse.Namespace) -> int:
@@ -250,8 +135,8 @@ def _run_example(args: argparse.Namespace) -> int:
         t, u, y, _ = ex.lv100_data(args.n or 10000, args.seed, closed_loop=False)
         G, M = ex.lv100_plant_ss(), ex.lv100_model()
     cfg = VrftConfig.from_dict(_read_yaml(args.config) if args.config else base)
-    out = _tune(cfg, {"t": t, "u": u, "y": y}, args)
-    res = out["result"]
+    out = tune(cfg, {"t": t, "u": u, "y": y}, f"example {args.example}")
+    res = next(iter(out.loops.values()))
     if args.example == "table5.3":
         a, b = ex.table53_ideal_pi()
         print(
@@ -262,7 +147,7 @@ def _run_example(args: argparse.Namespace) -> int:
         print(
             f"seed 1 LV100 (Eq. 5.1, Tustin 0.1 s), open-loop PRBS, noise var 0.0025, N = {t.size}"
         )
-    for line in out["lines"]:
+    for line in _lines(out):
         print(line)
     if cfg.outer is None and hasattr(res, "K") and res.cls.kind == "pid" and len(res.K) == 2:
         Kp, Ki = res.K
@@ -293,9 +178,9 @@ def _run_example(args: argparse.Namespace) -> int:
             )
         jmr = model_reference_h2(res, G, M, n_imp=2000)
         print(f"  model-reference cost ||M - T||_2^2 (Eq. 3.4, true plant) = {jmr:.6g}")
-        out["doc"]["controller"]["J_mr_true_plant"] = float(jmr)
+        out.doc["controller"]["J_mr_true_plant"] = float(jmr)
     if args.out:
-        _write(args.out, out["doc"])
+        save_yaml(out.doc, args.out)
         print(f"wrote {args.out}")
     return 0
 
@@ -323,20 +208,7 @@ def _run_statistics(args: argparse.Namespace) -> int:
         f"{'':4}{'entry':7}{'theta':>10}{'sigma':>9}{'s/|th|':>8}   | thesis theta  sigma  (N=1e3 "
         "/ 1e4)"
     )
-    t3 = {
-        "Kp": {
-            (0, 0): (0.070, 0.116),
-            (1, 0): (14.037, 1.172),
-            (0, 1): (0.310, 0.022),
-            (1, 1): (1.477, 0.175),
-        },
-        "Ki": {
-            (0, 0): (2.874, 0.189),
-            (1, 0): (6.449, 1.006),
-            (0, 1): (1.121, 0.060),
-            (1, 1): (8.579, 0.510),
-        },
-    }
+    t3 = ex.LV100_T52_N1E3
     t4 = {"Kp": ex.LV100_T52_KP, "Ki": ex.LV100_T52_KI}
     rows = []
     for name, m, sd in (("Kp", mkp, skp), ("Ki", mki, ski)):
@@ -353,8 +225,7 @@ def _run_statistics(args: argparse.Namespace) -> int:
                 {"param": f"{name}({ij[0] + 1},{ij[1] + 1})", "mean": float(th), "std": float(sg)}
             )
     if args.out:
-        _write(
-            args.out,
+        save_yaml(
             {
                 "format": "lpv_sysid/vrft_statistics@1",
                 "example": "lv100",
@@ -362,6 +233,7 @@ def _run_statistics(args: argparse.Namespace) -> int:
                 "runs": args.runs,
                 "rows": rows,
             },
+            args.out,
         )
         print(f"wrote {args.out}")
     return 0

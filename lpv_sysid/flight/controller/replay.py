@@ -1,24 +1,15 @@
-"""`lpv-sysid replay`: drive a node core with the recorded inputs of a bag, write its outputs.
+"""A recorded flight replayed through the controller's runtime (`lpv-sysid replay`).
 
-    lpv-sysid replay --bag BAG --node lpv_controller --params config/lpv_controller.yaml \
-        --out OUT_BAG [--gains gains.yaml]
-
-The node's message-level runtime (the same code the node runs,
-:mod:`lpv_sysid.flight.controller`) receives the bag's input messages in
-timestamp order (bag receive time) and its timer ticks at ``rate_hz`` on the bag's clock;
-what it would have published (``actuator_command``, abort ``status``) is written to a new
-bag. Ticks follow the node's ``tick_source``: ``timer`` steps the law at each timer tick
-(one command per tick once every input has arrived: about one per state sample at 250 Hz
-state and ``rate_hz`` 250), ``state`` steps it on each new state sample at its stamp (one
-command per state sample) while the timer only judges staleness. The runtime is started
-at the first input message, as with ``auto_start``. The
-parameter file goes through the node's own declaration and validation
-(:class:`~lpv_sysid.flight.controller.settings.ControllerSettings`: the same types, ranges and
-cross-field rules, so a value the node would refuse is refused here too), and the gains
-through the same start-up checks (certificate hash, closed-loop stability, design envelope).
-Use it to check a gains file against a real flight log before flying: exit status 1 when
-the replayed controller would have aborted (the reason is printed), 0 otherwise, 2 on bad
-input.
+:class:`~lpv_sysid.flight.controller.runtime.ControllerRuntime` (the code the node runs)
+receives the bag's input messages in timestamp order (bag receive time) and its timer ticks
+at ``rate_hz`` on the bag's clock; what it would have published (``actuator_command``,
+abort ``status``) is written to a new bag. Ticks follow the node's ``tick_source``: ``timer``
+steps the law at each timer tick (the recorded command stamps when the bag has them, then a
+``rate_hz`` grid), ``state`` on each new state sample at its stamp while the timer only
+judges staleness. The runtime is started at the first input message, as with
+``auto_start``; the parameters go through
+:class:`~lpv_sysid.flight.controller.settings.ControllerSettings` and the gains through the
+start-up checks, so what the node refuses is refused here too.
 """
 
 from __future__ import annotations
@@ -29,50 +20,26 @@ import os
 from pathlib import Path
 from typing import Any
 
-from lpv_sysid.errors import BagError, ConfigError
+from lpv_sysid.errors import BagError
+from lpv_sysid.flight.controller.messages import INPUT_TOPICS, parse_inputs
+from lpv_sysid.flight.controller.runtime import ControllerRuntime
+from lpv_sysid.flight.controller.settings import ControllerSettings
 from lpv_sysid.io.messages import TOPIC_NAMESPACE
 
-COMMAND = "replay"
-HELP = "replay a bag through a node core (lpv_controller) and write its outputs as a bag"
-NODES = ("lpv_controller",)
 LOG = logging.getLogger(__name__)
-
-
-def add_arguments(parser) -> None:
-    parser.add_argument(
-        "--bag", required=True, help="rosbag2 directory, or a data_logger experiment directory"
-    )
-    parser.add_argument("--node", required=True, choices=NODES, help="node core to drive")
-    parser.add_argument(
-        "--params",
-        required=True,
-        help="ROS parameter file of the node, e.g. config/lpv_controller.yaml",
-    )
-    parser.add_argument("--out", required=True, help="output bag directory (must not exist)")
-    parser.add_argument("--gains", default=None, help="gains.yaml (overrides gains_file)")
-    parser.add_argument("--namespace", default=TOPIC_NAMESPACE, help="topic namespace in the bag")
-    parser.add_argument("--storage", default="mcap", choices=("mcap", "sqlite3"))
-    parser.add_argument(
-        "--ticks",
-        default="auto",
-        choices=("auto", "recorded", "rate"),
-        help="controller tick times: the stamps of the recorded "
-        "actuator_command (reproduces the flight exactly), a rate_hz grid "
-        "from the first input, or auto (recorded when present)",
-    )
 
 
 def bag_directories(path: str) -> list[Path]:
     """The bag directories of ``path``: itself, or ``bag_*`` of an experiment directory."""
     p = Path(path)
     if not p.exists():
-        raise BagError(f"--bag {path}: no such file or directory")
+        raise BagError(f"bag {path}: no such file or directory")
     if (p / "metadata.yaml").exists() or p.suffix in (".mcap", ".db3"):
         return [p]
     parts = sorted(d for d in p.glob("bag_*") if d.is_dir())
     if not parts:
         raise BagError(
-            f"--bag {path}: neither a rosbag2 directory nor an experiment "
+            f"bag {path}: neither a rosbag2 directory nor an experiment "
             "directory with bag_NNNN/ parts"
         )
     return parts
@@ -103,7 +70,6 @@ def parsed_stream(topic: str, rel: str, msgs: list) -> list:
     """``[(stamp_ns, rel, payload), ...]`` with payload ``(t, values)`` (batch-parsed), or
     the raw message when the batch holds a malformed one (the runtime then sees it exactly
     as the node would, and aborts at that message)."""
-    from lpv_sysid.flight.controller import parse_inputs
     from lpv_sysid.io.messages import MessageError
 
     try:
@@ -122,7 +88,6 @@ def replay_controller(
     ticks: str = "auto",
 ) -> dict:
     """Run :class:`ControllerRuntime` over the bag; returns a summary dict."""
-    from lpv_sysid.flight.controller import INPUT_TOPICS, ControllerRuntime, ControllerSettings
     from lpv_sysid.io.bag import BagWriter
     from lpv_sysid.io.messages import TYPES, MsgFactory
 
@@ -138,7 +103,7 @@ def replay_controller(
         )
     )
     if ticks == "recorded" and not recorded:
-        raise BagError(f"bag {bag}: --ticks recorded needs {ns}/actuator_command in the bag")
+        raise BagError(f"bag {bag}: ticks 'recorded' need {ns}/actuator_command in the bag")
     use_recorded = settings.tick_source == "timer" and (
         ticks == "recorded" or (ticks == "auto" and bool(recorded))
     )
@@ -161,7 +126,7 @@ def replay_controller(
     }
     n_out = {t: 0 for t in outputs}
     if os.path.exists(out):
-        raise BagError(f"--out {out}: already exists")
+        raise BagError(f"output bag {out}: already exists")
     with BagWriter(out, storage=storage) as w:
         for topic, typ in outputs.items():
             w.add_topic(topic, typ)
@@ -208,36 +173,3 @@ def replay_controller(
         if settings.tick_source == "state"
         else ("recorded" if use_recorded else "rate"),
     }
-
-
-def run(args) -> int:
-    from lpv_sysid.configuration.parameters import yaml_parameters
-
-    params = yaml_parameters(args.params, args.node)
-    if args.gains:
-        params["gains_file"] = args.gains
-    elif (
-        params.get("gains_file")
-        and not os.path.isabs(params["gains_file"])
-        and not os.path.exists(params["gains_file"])
-    ):
-        raise ConfigError(
-            f"{args.params}: gains_file {params['gains_file']!r} not found (give --gains)"
-        )
-    s = replay_controller(args.bag, params, args.out, args.namespace, args.storage, args.ticks)
-    print(
-        f"replayed {s['inputs']} input messages ({s['duration_s']:.2f} s) through "
-        f"{args.node} ({s['ticks']} ticks): {s['commands']} actuator commands"
-    )
-    for topic, n in s["outputs"].items():
-        print(f"  {topic}: {n} messages")
-    print(f"bound monitor: L2 gain estimate {s['gain_estimate']:.4g} (gamma {s['gamma']:g})")
-    print(f"wrote {args.out}")
-    ev = s["event"]
-    if ev is not None:
-        print(
-            f"SAFETY ABORT at t={ev.t:.6f} s: {ev.reason}: {ev.detail} -- the controller "
-            "would have stopped commanding here"
-        )
-        return 1
-    return 0

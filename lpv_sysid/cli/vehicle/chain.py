@@ -56,7 +56,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lpv_sysid.cli.fly import parse_params
+    from lpv_sysid.cli.vehicle.fly import parse_params
 
     return chain(
         args.connect,

@@ -71,7 +71,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import yaml
 
-    from lpv_sysid.cli.identify import load_config
+    from lpv_sysid.cli.design.identify import load_config
     from lpv_sysid.configuration.defaults import config_file
     from lpv_sysid.errors import ConfigError
     from lpv_sysid.sim import phase1

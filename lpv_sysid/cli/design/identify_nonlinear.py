@@ -61,7 +61,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _params(path: Path | None):
-    from lpv_sysid.cli.identify import quadrotor_section
+    from lpv_sysid.cli.design.identify import quadrotor_section
     from lpv_sysid.errors import ConfigError
     from lpv_sysid.models.quadrotor import QuadrotorParams
 
@@ -128,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
     import yaml
 
-    from lpv_sysid.cli.identify import load_config
+    from lpv_sysid.cli.design.identify import load_config
     from lpv_sysid.errors import BagError, ConfigError
     from lpv_sysid.ident import dataprep as dp
     from lpv_sysid.ident import nonlinear as nl
