@@ -370,7 +370,7 @@ def main(argv=None) -> None:
                 ""
                 if i1w.median < 3.0
                 else "the bag side is at its floor; the rest is identification, plot and "
-                "YAML output (ident/, cli/identify.py)",
+                "YAML output (ident/, cli/design/identify.py)",
             ),
             order=5,
         )

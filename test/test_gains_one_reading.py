@@ -3,7 +3,7 @@
 Both paths load the file through io.formats.GainSchedule: verify_files (its verify_gains gets
 K, R, gamma) and LpvController (what the vehicle flies). A file whose vertices are listed in
 another corner order is valid (io.formats re-orders it); the former second parser of
-synthesis/files.py (now synthesis/uncertainty_set.py) refused it in verify while the vehicle
+the synthesis reader (synthesis/uncertainty_set.py) refused it in verify while the vehicle
 flew it.
 """
 

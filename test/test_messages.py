@@ -1,4 +1,4 @@
-"""io/messages.py: build -> parse round trips (rosbags and the rclpy stand-in), CDR
+"""io/messages/: build -> parse round trips (rosbags and the rclpy stand-in), CDR
 round trips through the Jazzy typestore, frame conventions and bad-input errors."""
 
 import numpy as np

@@ -1,4 +1,5 @@
-"""synthesis/hinf/norm.py and hinf_lmi.py (seed 0 Lemma 1, Eqs. 29-31) against analytic oracles."""
+"""synthesis/hinf/norm.py and synthesis/hinf/synthesize.py (seed 0 Lemma 1, Eqs. 29-31) against
+analytic oracles."""
 
 import numpy as np
 import pytest

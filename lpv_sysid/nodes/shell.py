@@ -29,7 +29,7 @@ from rclpy.signals import SignalHandlerOptions
 from lpv_sysid.errors import ConfigError, LpvSysidError
 from lpv_sysid.io.messages import NAMESPACE, TYPES
 
-# topic (relative to /lpv_sysid) -> type: the topic table of docs/DESIGN.md (io/messages.py)
+# topic (relative to /lpv_sysid) -> type: the topic table of docs/DESIGN.md (io/messages/)
 TOPIC_TYPES = dict(TYPES)
 # high-rate measurement streams: best effort (a late sample is worthless); the rest
 # (references, excitation, commands, status) reliable.

@@ -41,7 +41,8 @@ def vertex_order(results: Sequence[VertexResult], cfg: IdentificationConfig) -> 
 def vertex_models_dict(
     results: Sequence[VertexResult], cfg: IdentificationConfig, validation: dict | None = None
 ) -> dict:
-    """The ``vertex_models.yaml`` document (format ``@2``, io/formats.py), vertices in box order.
+    """The ``vertex_models.yaml`` document (format ``@2``, io/formats/vertex_models.py), vertices
+    in box order.
 
     ``meta`` records how the file was made: the method, ``k_sigma`` of Eq. (22) (and the
     ``k`` applied per vertex when ``joint_alpha`` raises it), how the standard errors were

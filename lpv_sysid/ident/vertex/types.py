@@ -55,7 +55,8 @@ class VertexResult:
     motor: dict = field(default_factory=lambda: {"mode": "known"})  # how a_Omega, b_Omega entered
 
     def to_dict(self) -> dict:
-        """One ``vertices`` entry of ``vertex_models.yaml`` (format ``@2``, io/formats.py).
+        """One ``vertices`` entry of ``vertex_models.yaml`` (format ``@2``,
+        io/formats/vertex_models.py).
 
         ``uncertain`` lists every identified element (aerodynamic rows and, when identified,
         the motor rows ``A[8:12, 8:12] = -a_Omega I``, ``B[8:12, :] = b_Omega I``) with its

@@ -50,7 +50,7 @@ from __future__ import annotations
 
 from lpv_sysid.io.bag.arrays import read_arrays
 from lpv_sysid.io.bag.bagfiles import UnsafeBagFile
-from lpv_sysid.io.bag.cdr.layout import CdrLayout, LayoutError, encode_block, records_close
+from lpv_sysid.io.bag.cdr import CdrLayout, LayoutError, encode_block, records_close
 from lpv_sysid.io.bag.durability import (
     LOCK_FILE,
     RESERVE_BYTES,
@@ -59,7 +59,7 @@ from lpv_sysid.io.bag.durability import (
     now_iso,
     writer_alive,
 )
-from lpv_sysid.io.bag.mcap.records import MCAP_MAGIC
+from lpv_sysid.io.bag.mcap import MCAP_MAGIC
 from lpv_sysid.io.bag.reader import read_bag, topic_info
 from lpv_sysid.io.bag.records import merge_topic_stats
 from lpv_sysid.io.bag.repair import RepairReport, repair_bag

@@ -7,8 +7,9 @@
 
 from __future__ import annotations
 
-from lpv_sysid.io.bag.mcap.records import append_message
+from lpv_sysid.io.bag.mcap.records import MCAP_MAGIC, append_message
 
 __all__ = [
+    "MCAP_MAGIC",
     "append_message",
 ]
