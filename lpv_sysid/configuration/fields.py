@@ -398,8 +398,7 @@ def parse_fields(
     sections).
 
     Unknown keys, then missing ``required`` keys (default: the declared fields without a
-    default), are refused in the wording of :func:`check_keys` (named ``where``, at the top of
-    a path-less mapping the class name); then each value is checked by
+    default), are refused in the wording of :func:`check_keys`; then each value is checked by
     :func:`check_value` with the path ``{where}.{key}`` (``{where}.{section}.{key}`` for a
     field of a ``section``). A ``nullable`` field given as null is left out (its default
     applies)."""
@@ -411,7 +410,7 @@ def parse_fields(
     if required is None:
         required = [k for k, name in top.items() if not _has_default(declared[name])]
     allowed = set(top) | set(by_section) | set(other_keys)
-    check_keys(d, allowed, where or cls.__name__, required=required, list_allowed=True)
+    check_keys(d, allowed, where, required=required, list_allowed=True)
     out: dict[str, Any] = {}
     sources = [(where, d, top)]
     for s, sub in _sections(d, by_section, where).items():
@@ -478,14 +477,17 @@ def check_keys(
 
     Messages (checked in this order): ``"{where}: expected a mapping, got {type}"``,
     ``"{where}: unknown key(s) [...]"`` (followed by ``"; allowed [...]"`` when
-    ``list_allowed``), ``"{where}: missing key(s) [...]"`` for absent ``required`` keys.
+    ``list_allowed``), ``"{where}: missing key(s) [...]"`` for absent ``required`` keys;
+    without the ``"{where}: "`` for ``where = ""`` (the top of a file, whose reader prefixes
+    the file name).
     """
+    at = f"{where}: " if where else ""
     if not isinstance(d, Mapping):
-        raise ConfigError(f"{where}: expected a mapping, got {type(d).__name__}")
+        raise ConfigError(f"{at}expected a mapping, got {type(d).__name__}")
     unknown = sorted(set(d) - set(allowed), key=str)
     if unknown:
         hint = f"; allowed {sorted(allowed)}" if list_allowed else ""
-        raise ConfigError(f"{where}: unknown key(s) {unknown}{hint}")
+        raise ConfigError(f"{at}unknown key(s) {unknown}{hint}")
     missing = sorted(set(required) - set(d))
     if missing:
-        raise ConfigError(f"{where}: missing key(s) {missing}")
+        raise ConfigError(f"{at}missing key(s) {missing}")
