@@ -230,11 +230,12 @@ def _number(v: Any, spec: FieldSpec, path: str) -> float:
 
 def _count(v: Any, spec: FieldSpec, path: str) -> int:
     lo = int(spec.lo or 0)
-    if not (isinstance(v, _numbers.Integral) and not isinstance(v, bool) and v >= lo):
+    n = int(v) if isinstance(v, _numbers.Integral) and not isinstance(v, bool) else None
+    if n is None or n < lo:
         raise _bad(path, f"expected an integer >= {lo}, got {v!r}")
-    if spec.hi is not None and v > spec.hi:
-        raise _bad(path, f"{v} exceeds the limit of {spec.hi:g}{spec.unit}")
-    return int(v)
+    if spec.hi is not None and n > spec.hi:
+        raise _bad(path, f"{n} exceeds the limit of {spec.hi:g}{spec.unit}")
+    return n
 
 
 def _fold(name: Any, spec: FieldSpec) -> Any:

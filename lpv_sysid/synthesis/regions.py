@@ -74,7 +74,11 @@ class HalfPlaneSpec:
 
 
 #: the keys of a region file entry -> their declared sections
-_REGION_SECTIONS = {"disk": DiskSpec, "strip": StripSpec, "half_plane": HalfPlaneSpec}
+_REGION_SECTIONS: dict[str, Any] = {
+    "disk": DiskSpec,
+    "strip": StripSpec,
+    "half_plane": HalfPlaneSpec,
+}
 
 
 @dataclass(frozen=True)

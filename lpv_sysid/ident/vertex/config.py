@@ -125,7 +125,7 @@ class IdentificationConfig:
 
 
 #: nested sections -> their classes (each parsed by its from_dict)
-_SECTIONS = {
+_SECTIONS: dict[str, Any] = {
     "derivatives": deriv.DerivativeConfig,
     "uncertainty": unc.UncertaintyConfig,
     "covariance": ee.CovarianceConfig,

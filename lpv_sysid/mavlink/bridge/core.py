@@ -69,7 +69,7 @@ log = logging.getLogger(__name__)
 
 
 #: nested sections of the bridge config -> their classes (each parsed by its from_dict)
-_SECTIONS = {
+_SECTIONS: dict[str, Any] = {
     "link": LinkConfig,
     "offboard": OffboardConfig,
     "rotor_estimate": RotorEstimateConfig,

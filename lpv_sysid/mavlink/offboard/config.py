@@ -12,7 +12,7 @@ from lpv_sysid.mavlink import px4
 
 
 #: PX4 modes a hand-back may request (names compared in upper case, kept as written)
-_MODES = {"choices": tuple(px4.HANDBACK_MODES), "fold_case": True}
+_MODES: dict[str, Any] = {"choices": tuple(px4.HANDBACK_MODES), "fold_case": True}
 
 
 @dataclass(frozen=True)
