@@ -460,6 +460,7 @@ GUARDS = [
     ("RecorderConfig", "reserve_bytes", (-1, (1 << 30) + 1)),
     ("IdentificationConfig", "sample_rate", (0.0, 10_000.1)),
     ("IdentificationConfig", "motor_max_pinned", (-0.01, 1.01)),
+    ("UncertaintyConfig", "k_sigma", (0.99,)),
     ("UncertaintyConfig", "max_corners", (0, 65_537)),
     ("UncertaintyConfig", "p_max", (-1, 17)),
     ("UncertaintyConfig", "n_freq", (1, 10_001)),

@@ -184,9 +184,6 @@ def join(where: str, name: str) -> str:
     return f"{where}.{name}" if where else name
 
 
-_path = join
-
-
 def _bad(path: str, msg: str) -> ConfigError:
     return ConfigError(f"{path}: {msg}")
 
@@ -251,7 +248,7 @@ def _one_of(v: Any, spec: FieldSpec, path: str) -> Any:
 
 
 def _sequence(v: Any, spec: FieldSpec, path: str) -> list:
-    """The entries of a list value, its length checked (``length``, ``nonempty``)."""
+    """The entries of a list value, its length checked (``length``)."""
     if not isinstance(v, (list, tuple)):
         raise _bad(path, f"expected a list, got {v!r}")
     n = spec.length
@@ -291,7 +288,9 @@ def _texts_value(v: Any, spec: FieldSpec, path: str) -> tuple:
         or (spec.nonempty and not v)
         or not all(isinstance(c, str) and c for c in v)
     ):
-        raise _bad(path, f"expected a non-empty list of names, got {v!r}")
+        raise _bad(
+            path, f"expected a{' non-empty' if spec.nonempty else ''} list of names, got {v!r}"
+        )
     if spec.choices:
         for i, c in enumerate(v):
             _one_of(c, spec, f"{path}[{i}]")
@@ -322,7 +321,7 @@ def _table_value(v: Any, spec: FieldSpec, path: str) -> Any:
     if spec.choices:
         check_keys(v, spec.choices, path, list_allowed=True)
     out = {
-        k: x if spec.item is None else check_value(spec.item, x, _path(path, k))
+        k: x if spec.item is None else check_value(spec.item, x, join(path, k))
         for k, x in v.items()
     }
     return tuple(out.items()) if spec.pairs else out
@@ -381,7 +380,7 @@ def _sections(d: Mapping[str, Any], names: Collection[str], where: str) -> dict[
     for s in names:
         v = d.get(s)
         if v is not None and not isinstance(v, Mapping):
-            raise _bad(_path(where, s), f"expected a mapping, got {type(v).__name__}")
+            raise _bad(join(where, s), f"expected a mapping, got {type(v).__name__}")
         out[s] = v or {}
     return out
 
@@ -415,8 +414,8 @@ def parse_fields(
     out: dict[str, Any] = {}
     sources = [(where, d, top)]
     for s, sub in _sections(d, by_section, where).items():
-        check_keys(sub, by_section[s], _path(where, s), list_allowed=True)
-        sources.append((_path(where, s), sub, by_section[s]))
+        check_keys(sub, by_section[s], join(where, s), list_allowed=True)
+        sources.append((join(where, s), sub, by_section[s]))
     for path, mapping, keys in sources:
         for k, v in mapping.items():
             if k not in keys:
@@ -424,7 +423,7 @@ def parse_fields(
             spec = declared[keys[k]].metadata["spec"]
             if v is None and spec.nullable:
                 continue
-            out[keys[k]] = check_value(spec, v, _path(path, k))
+            out[keys[k]] = check_value(spec, v, join(path, k))
     return out
 
 
@@ -435,8 +434,8 @@ def check_fields(obj: Any, where: str) -> dict[str, Any]:
     out = {}
     for name, f in _declared(type(obj)).items():
         spec = f.metadata["spec"]
-        where_s = _path(where, spec.section) if spec.section else where
-        out[name] = check_value(spec, getattr(obj, name), _path(where_s, _yaml_key(f)))
+        where_s = join(where, spec.section) if spec.section else where
+        out[name] = check_value(spec, getattr(obj, name), join(where_s, _yaml_key(f)))
     return out
 
 
