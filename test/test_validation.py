@@ -528,6 +528,8 @@ def test_hostile_guard_values_are_refused_with_a_clear_message():
         LinkConfig(link_timeout=1e9).validate()
     with pytest.raises(ConfigError, match=r"^offboard\.input_timeout: 1e\+09 s exceeds"):
         OffboardConfig(input_timeout=1e9).validate()
+    with pytest.raises(ConfigError, match=r"^telemetry_max_age: 1e\+09 s exceeds"):
+        BridgeConfig(telemetry_max_age=1e9).validate()  # BridgeCore calls it
 
 
 def test_every_converted_config_declares_its_keys():

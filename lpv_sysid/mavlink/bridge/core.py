@@ -80,7 +80,8 @@ _SECTIONS: dict[str, Any] = {
 @dataclass(frozen=True)
 class BridgeConfig:
     """``config/mavlink_bridge.yaml``: sections ``link``, ``offboard``, ``rotor_estimate``,
-    ``envelope`` and the command path."""
+    ``envelope`` and the command path, checked by :meth:`validate` (also for a config built
+    in code: :class:`BridgeCore` calls it; the parts that use a section check it)."""
 
     link: LinkConfig = field(default_factory=LinkConfig)
     offboard: OffboardConfig = field(default_factory=OffboardConfig)
@@ -127,7 +128,7 @@ class BridgeConfig:
         for name, section in _SECTIONS.items():
             kw[name] = section.from_dict(d.get(name) or {}, cf.join(where, name))
         cfg = cls(**kw)
-        cf.under(cf.join(where, "command"), cfg.transport)  # the transport's own checks
+        cfg.validate(where)
         return cfg
 
     @classmethod
@@ -136,6 +137,12 @@ class BridgeConfig:
 
         d = read_yaml_mapping(path)  # an explicitly given empty or non-mapping file is an error
         return cls.from_dict(d, path)
+
+    def validate(self, where: str = "") -> None:
+        """The declared fields of the top level, then the command against its transport
+        (:func:`make_transport` checks the kind and the geometry)."""
+        cf.check_fields(self, where)
+        cf.under(cf.join(where, "command"), self.transport)
 
     def transport(self):
         if self.command == "velocity":
@@ -162,6 +169,7 @@ class BridgeCore:
         link: MavlinkLink | None = None,
         sample_callback: Callable[[Any], None] | None = None,
     ) -> None:
+        config.validate()
         self.config = config
         self.link = link or MavlinkLink(
             with_motor_output_streams(config.link, config.rotor_estimate)
