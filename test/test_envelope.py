@@ -60,9 +60,9 @@ def test_config_defaults_match_the_bridge_yaml_and_bad_values_are_named():
     cfg = BridgeConfig.load(os.path.join(ROOT, "config", "mavlink_bridge.yaml"))
     assert cfg.envelope == EnvelopeConfig()  # yaml and code defaults are one set
     assert (cfg.envelope.floor, cfg.envelope.ceiling, cfg.envelope.radius) == (5.0, 80.0, 300.0)
-    with pytest.raises(ConfigError, match="ceiling .* must be above floor"):
+    with pytest.raises(ConfigError, match=r"envelope\.ceiling: .* must be above floor"):
         EnvelopeConfig.from_dict({"floor": 10.0, "ceiling": 10.5})
-    with pytest.raises(ConfigError, match="unknown envelope config key"):
+    with pytest.raises(ConfigError, match=r"envelope: unknown key\(s\) \['flor'\]"):
         EnvelopeConfig.from_dict({"flor": 3.0})
     with pytest.raises(ConfigError, match="envelope.home"):
         EnvelopeConfig.from_dict({"home": "gps"})

@@ -132,10 +132,14 @@ def test_measurement_noise_config_and_regressor_noise_variance():
     mix = mixer(QuadrotorParams().arm_length)
     assert var[8] == pytest.approx(2 * 4.0 / 100.0 * feff * np.sum(mix[0] ** 2), rel=2e-3)
     assert var[0] == 0.0 and dvar[2] > 0
-    with pytest.raises(ConfigError, match="unknown channel"):
+    with pytest.raises(
+        ConfigError, match=r"^identification\.measurement_noise: unknown key\(s\) \['speed'\]"
+    ):
         vx.IdentificationConfig.from_dict({"measurement_noise": {"speed": 1.0}})
-    with pytest.raises(ConfigError, match="std >= 0"):
+    with pytest.raises(ConfigError, match=r"measurement_noise\.u\[0\]: must be >= 0"):
         vx.IdentificationConfig.from_dict({"measurement_noise": {"u": [-1.0, 100.0]}})
+    with pytest.raises(ConfigError, match=r"measurement_noise\.u\[1\]: the rate must be > 0"):
+        vx.IdentificationConfig.from_dict({"measurement_noise": {"u": [0.1, 0.0]}})
 
 
 # ----------------------------------------------------------------------------- dataprep

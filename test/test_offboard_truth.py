@@ -411,7 +411,7 @@ def test_handback_chain_config():
         ({"handback_chain": []}, "handback_chain"),
         ({"handback_chain": "HOLD"}, "handback_chain"),
         ({"handback_chain": ["HOLD", "OFFBOARD"]}, "OFFBOARD"),
-        ({"handback_chain": ["HOLD", "hold"]}, "twice"),
+        ({"handback_chain": ["HOLD", "hold"]}, "duplicate names"),
         ({"ack_settle_s": 2.0}, "ack_settle_s"),
         ({"ack_settle_s": -0.1}, "ack_settle_s"),
         ({"handback_mode": "ACRO"}, "handback_mode"),

@@ -72,7 +72,7 @@ def test_airframe_parameters_come_from_config_quadrotor_yaml(tmp_path):
     [
         ({"mapping": "oneshot"}, "mapping"),
         ({"source": "esc"}, "source"),
-        ({"motor_outputs": [1, 1, 2, 3]}, "distinct"),
+        ({"motor_outputs": [1, 1, 2, 3]}, "motor_outputs: duplicate values"),
         ({"motor_outputs": [0, 1, 2, 3]}, "motor_outputs"),
         ({"motor_outputs": "1234"}, "motor_outputs"),
         ({"source": "servo_output_raw", "motor_outputs": [17, 18, 19, 20]}, "1..16"),

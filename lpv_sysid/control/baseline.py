@@ -31,76 +31,85 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from lpv_sysid.configuration.fields import check_keys, is_finite_number
-from lpv_sysid.errors import ConfigError, SafetyError
+from lpv_sysid.configuration import fields as cf
+from lpv_sysid.errors import SafetyError
 from lpv_sysid.models.quadrotor import mixer
+
+
+def _gain(default: float, doc: str) -> Any:
+    return cf.number(default, doc, lo=0.0)
+
+
+def _positive(default: float, doc: str, **kw: Any) -> Any:
+    return cf.number(default, doc, lo=0.0, lo_open=True, **kw)
+
+
+def _thrust(default: float, doc: str) -> Any:
+    """A normalised collective (PX4 MPC_THR_*): in [0, 1]."""
+    return cf.number(default, doc, lo=0.0, hi=1.0)
 
 
 @dataclass(frozen=True)
 class BaselineGains:
-    """Gains and limits (PX4 parameter in brackets where one exists)."""
+    """Gains and limits (PX4 parameter in brackets where one exists), checked on every
+    construction (``config/quadrotor.yaml`` section ``controller``)."""
 
-    vel_p_xy: float = 1.8  # [MPC_XY_VEL_P_ACC] 1/s
-    vel_i_xy: float = 0.4  # [MPC_XY_VEL_I_ACC] 1/s^2
-    vel_d_xy: float = 0.2  # [MPC_XY_VEL_D_ACC] -
-    vel_p_z: float = 4.0  # [MPC_Z_VEL_P_ACC]
-    vel_i_z: float = 2.0  # [MPC_Z_VEL_I_ACC]
-    vel_d_z: float = 0.0  # [MPC_Z_VEL_D_ACC]
-    vel_int_limit: float = 6.0  # |integral| per axis, m/s^2
-    vel_d_cutoff_hz: float = 5.0
-    ref_att_tau: float = 2.0  # s, low-pass of the attitude that rotates v_d (see module doc)
-    max_vel_up: float = 8.0  # [MPC_Z_VEL_MAX_UP] m/s, world frame
-    max_vel_down: float = 8.0  # [MPC_Z_VEL_MAX_DN] m/s, world frame
-    tilt_max_deg: float = 35.0  # [MPC_TILTMAX_AIR]
-    hover_thrust: float = 0.54  # [MPC_THR_HOVER] collective u_t at hover
-    thr_min: float = 0.12  # [MPC_THR_MIN]
-    thr_max: float = 0.90  # [MPC_THR_MAX]
-    att_p_roll: float = 5.0  # [MC_ROLL_P] 1/s
-    att_p_pitch: float = 5.0  # [MC_PITCH_P]
-    rate_max_rp_deg: float = 220.0  # [MC_ROLLRATE_MAX]
-    rate_max_yaw_deg: float = 200.0  # [MC_YAWRATE_MAX]
-    rate_p_roll: float = 0.030  # m / (rad/s) of virtual command u_a
-    rate_i_roll: float = 0.030
-    rate_d_roll: float = 0.0008
-    rate_p_pitch: float = 0.030
-    rate_i_pitch: float = 0.030
-    rate_d_pitch: float = 0.0008
-    rate_p_yaw: float = 0.60  # 1 / (rad/s) of u_r
-    rate_i_yaw: float = 0.30
-    rate_d_yaw: float = 0.0
-    rate_int_limit_rp: float = 0.05  # m
-    rate_int_limit_yaw: float = 0.6
-    rate_d_cutoff_hz: float = 30.0
-    rate_hz: float = 250.0  # attitude + rate loop
-    velocity_rate_hz: float = 50.0
-    arm_length: float = 0.225  # for the output mixer (seed 0 Eq. 7)
+    vel_p_xy: float = _gain(1.8, "[MPC_XY_VEL_P_ACC] 1/s")
+    vel_i_xy: float = _gain(0.4, "[MPC_XY_VEL_I_ACC] 1/s^2")
+    vel_d_xy: float = _gain(0.2, "[MPC_XY_VEL_D_ACC] -")
+    vel_p_z: float = _gain(4.0, "[MPC_Z_VEL_P_ACC] 1/s")
+    vel_i_z: float = _gain(2.0, "[MPC_Z_VEL_I_ACC] 1/s^2")
+    vel_d_z: float = _gain(0.0, "[MPC_Z_VEL_D_ACC] -")
+    vel_int_limit: float = _gain(6.0, "|integral| per axis [m/s^2]")
+    vel_d_cutoff_hz: float = _gain(5.0, "velocity derivative filter cutoff [Hz]")
+    ref_att_tau: float = _gain(
+        2.0, "low-pass time constant of the attitude that rotates v_d [s] (module doc)"
+    )
+    max_vel_up: float = _gain(8.0, "[MPC_Z_VEL_MAX_UP] world frame [m/s]")
+    max_vel_down: float = _gain(8.0, "[MPC_Z_VEL_MAX_DN] world frame [m/s]")
+    tilt_max_deg: float = _positive(
+        35.0, "[MPC_TILTMAX_AIR] [deg], below 89 deg", hi=89.0, hi_open=True, unit=" deg"
+    )
+    hover_thrust: float = _thrust(0.54, "[MPC_THR_HOVER] collective u_t at hover")
+    thr_min: float = _thrust(0.12, "[MPC_THR_MIN]")
+    thr_max: float = _thrust(0.90, "[MPC_THR_MAX]")
+    att_p_roll: float = _gain(5.0, "[MC_ROLL_P] 1/s")
+    att_p_pitch: float = _gain(5.0, "[MC_PITCH_P] 1/s")
+    rate_max_rp_deg: float = _gain(220.0, "[MC_ROLLRATE_MAX] [deg/s]")
+    rate_max_yaw_deg: float = _gain(200.0, "[MC_YAWRATE_MAX] [deg/s]")
+    rate_p_roll: float = _gain(0.030, "m / (rad/s) of virtual command u_a")
+    rate_i_roll: float = _gain(0.030, "m / rad of u_a")
+    rate_d_roll: float = _gain(0.0008, "m / (rad/s^2) of u_a")
+    rate_p_pitch: float = _gain(0.030, "m / (rad/s) of u_e")
+    rate_i_pitch: float = _gain(0.030, "m / rad of u_e")
+    rate_d_pitch: float = _gain(0.0008, "m / (rad/s^2) of u_e")
+    rate_p_yaw: float = _gain(0.60, "1 / (rad/s) of u_r")
+    rate_i_yaw: float = _gain(0.30, "1 / rad of u_r")
+    rate_d_yaw: float = _gain(0.0, "1 / (rad/s^2) of u_r")
+    rate_int_limit_rp: float = _gain(0.05, "|rate integral| of u_a, u_e [m]")
+    rate_int_limit_yaw: float = _gain(0.6, "|rate integral| of u_r")
+    rate_d_cutoff_hz: float = _gain(30.0, "rate derivative filter cutoff [Hz]")
+    rate_hz: float = _positive(250.0, "attitude + rate loop [Hz]")
+    velocity_rate_hz: float = _positive(50.0, "velocity loop [Hz], at most rate_hz")
+    arm_length: float = _positive(0.225, "arm length of the output mixer (seed 0 Eq. 7) [m]")
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if not is_finite_number(v):
-                raise ConfigError(f"controller.{f.name}: must be a finite number, got {v!r}")
-            if v < 0:
-                raise ConfigError(f"controller.{f.name}: must be >= 0, got {v!r}")
-        for name in ("rate_hz", "velocity_rate_hz", "arm_length", "hover_thrust", "thr_max"):
-            if getattr(self, name) <= 0:
-                raise ConfigError(f"controller.{name}: must be > 0")
-        if not 0 < self.tilt_max_deg < 89:
-            raise ConfigError("controller.tilt_max_deg: must be in (0, 89)")
-        if not self.thr_min < self.hover_thrust < self.thr_max <= 1.0:
-            raise ConfigError("controller: need thr_min < hover_thrust < thr_max <= 1")
+        """The declared fields, then: thr_min < hover_thrust < thr_max, the velocity loop no
+        faster than the rate loop."""
+        cf.normalize_fields(self, "controller")
+        if not self.thr_min < self.hover_thrust < self.thr_max:
+            raise cf.error(
+                "controller",
+                "hover_thrust",
+                f"need thr_min < hover_thrust < thr_max, got {self.thr_min:g}, "
+                f"{self.hover_thrust:g}, {self.thr_max:g}",
+            )
         if self.velocity_rate_hz > self.rate_hz:
-            raise ConfigError("controller.velocity_rate_hz: must not exceed rate_hz")
+            raise cf.error("controller", "velocity_rate_hz", "must not exceed rate_hz")
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "BaselineGains":
-        check_keys(d, {f.name for f in fields(cls)}, "controller")
-        return cls(
-            **{
-                k: (float(v) if isinstance(v, int) and not isinstance(v, bool) else v)
-                for k, v in d.items()
-            }
-        )
+    def from_dict(cls, d: Mapping[str, Any], where: str = "controller") -> "BaselineGains":
+        return cls(**cf.parse_fields(cls, d, where))
 
     def to_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}

@@ -38,13 +38,12 @@ once and reports the reason as an error event; the envelope stays tripped until 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any, Mapping
 
 import numpy as np
 
-from lpv_sysid.configuration.fields import check_config_keys, is_finite_number
-from lpv_sysid.errors import ConfigError
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.io import frames
 
 HOME_MODES = ("auto", "home_position", "start")
@@ -54,56 +53,89 @@ SETPOINT, NON_FINITE, HOME = "setpoint", "non_finite", "home"
 KINDS = (FLOOR, CEILING, RADIUS, TILT, SPEED, SETPOINT, NON_FINITE, HOME)
 
 
+def _limit(default: float, doc: str, hi: float, unit: str, lo_open: bool = True) -> Any:
+    """A positive limit of the envelope, at most ``hi`` (a larger one guards nothing)."""
+    return cf.number(default, doc, lo=0.0, lo_open=lo_open, hi=hi, unit=unit)
+
+
 @dataclass(frozen=True)
 class EnvelopeConfig:
-    """``envelope`` section of ``config/mavlink_bridge.yaml`` (module docstring)."""
+    """``envelope`` section of ``config/mavlink_bridge.yaml`` (module docstring), checked
+    by :meth:`validate` (also for a config built in code: :class:`Envelope` calls it). The
+    upper bounds keep every limit a guard: beyond them it no longer bounds a test flight."""
 
-    enabled: bool = True
-    home: str = "auto"  # auto | home_position | start
-    floor: float = 5.0  # m above home
-    ceiling: float = 80.0  # m above home
-    floor_arm_margin: float = 1.0  # floor active once above floor + margin
-    lookahead: float = 3.0  # s, predictive floor/ceiling/fence
-    radius: float = 300.0  # m, horizontal distance from home
-    max_tilt_deg: float = 50.0
-    max_speed: float = 12.0  # m/s, NED velocity norm
-    max_setpoint: float = 12.0  # m/s, velocity reference norm
-    max_setpoint_yaw_rate: float = 2.0  # rad/s
+    enabled: bool = cf.flag(True, "enforce the envelope (violation -> hand-back)")
+    home: str = cf.choice("auto", HOME_MODES, "where home is taken (module docstring)")
+    floor: float = _limit(5.0, "floor above home [m]; at most 100 m", 100.0, " m", lo_open=False)
+    ceiling: float = _limit(
+        80.0,
+        "ceiling above home [m]; at most 500 m (national limits are 120-150 m above ground)",
+        500.0,
+        " m",
+    )
+    floor_arm_margin: float = _limit(
+        1.0,
+        "the floor is active once above floor + margin [m]; at most 10 m: a larger margin "
+        "leaves the floor off on a low flight",
+        10.0,
+        " m",
+        lo_open=False,
+    )
+    lookahead: float = _limit(
+        3.0,
+        "predictive floor/ceiling/fence on p + v * lookahead [s]; at most 10 s",
+        10.0,
+        " s",
+        lo_open=False,
+    )
+    radius: float = _limit(
+        300.0,
+        "horizontal geofence around home [m]; at most 2 km (a test flight stays in visual "
+        "line of sight)",
+        2000.0,
+        " m",
+    )
+    max_tilt_deg: float = _limit(
+        50.0,
+        "largest tilt acos(cos(phi) cos(theta)) [deg]; at most 80 deg (PX4's MPC_TILTMAX_AIR "
+        "is at most 89 deg; a multirotor cannot hold height near 90 deg)",
+        80.0,
+        " deg",
+    )
+    max_speed: float = _limit(
+        12.0,
+        "largest NED speed [m/s]; at most 30 m/s (PX4 MPC_XY_VEL_MAX <= 20 m/s)",
+        30.0,
+        " m/s",
+    )
+    max_setpoint: float = _limit(
+        12.0,
+        "velocity references above this are rejected [m/s]; at most 30 m/s",
+        30.0,
+        " m/s",
+    )
+    max_setpoint_yaw_rate: float = _limit(
+        2.0,
+        "yaw-rate references above this are rejected [rad/s]; at most one turn per second",
+        2.0 * math.pi,
+        " rad/s",
+    )
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "EnvelopeConfig":
-        check_config_keys(d, cls.__dataclass_fields__, "envelope")
-        cfg = cls(**dict(d))
-        cfg.validate()
+    def from_dict(cls, d: Mapping[str, Any], where: str = "envelope") -> "EnvelopeConfig":
+        cfg = cls(**cf.parse_fields(cls, d, where))
+        cfg.validate(where)
         return cfg
 
-    def validate(self) -> None:
-        if not isinstance(self.enabled, bool):
-            raise ConfigError(f"envelope.enabled must be true or false, got {self.enabled!r}")
-        if self.home not in HOME_MODES:
-            raise ConfigError(
-                f"envelope.home must be one of {list(HOME_MODES)}, got {self.home!r}"
-            )
-        for f in fields(self):
-            if f.name in ("enabled", "home"):
-                continue
-            v = getattr(self, f.name)
-            if not is_finite_number(v):
-                raise ConfigError(f"envelope.{f.name} must be a finite number, got {v!r}")
-        for name in ("floor", "floor_arm_margin", "lookahead"):
-            if getattr(self, name) < 0:
-                raise ConfigError(f"envelope.{name} must be >= 0, got {getattr(self, name)!r}")
-        for name in ("radius", "max_speed", "max_setpoint", "max_setpoint_yaw_rate"):
-            if getattr(self, name) <= 0:
-                raise ConfigError(f"envelope.{name} must be > 0, got {getattr(self, name)!r}")
-        if not 0 < self.max_tilt_deg < 90:
-            raise ConfigError(
-                f"envelope.max_tilt_deg must be in (0, 90), got {self.max_tilt_deg!r}"
-            )
+    def validate(self, where: str = "envelope") -> None:
+        """The declared fields, then: the ceiling lies above the armed floor."""
+        cf.check_fields(self, where)
         if self.ceiling <= self.floor + self.floor_arm_margin:
-            raise ConfigError(
-                f"envelope.ceiling ({self.ceiling} m) must be above floor + "
-                f"floor_arm_margin ({self.floor} + {self.floor_arm_margin} m)"
+            raise cf.error(
+                where,
+                "ceiling",
+                f"{self.ceiling} m must be above floor + floor_arm_margin "
+                f"({self.floor} + {self.floor_arm_margin} m)",
             )
 
 

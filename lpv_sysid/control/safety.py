@@ -41,6 +41,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError, SafetyError
 
 STALE = "stale"
@@ -68,49 +69,48 @@ REASONS = (
 @dataclass(frozen=True)
 class SafetyConfig:
     """Stream timeouts [s], the tolerance of header stamps against the node clock [s] and
-    the scheduling box (seed 0 Eq. 17, ``v_d`` in a box)."""
+    the scheduling box (seed 0 Eq. 17, ``v_d`` in a box), checked on every construction.
+    The upper bounds keep the checks guards (the node's parameters declare the same)."""
 
-    timeouts: Mapping[str, float]
-    box_min: tuple[float, ...] = ()
-    box_max: tuple[float, ...] = ()
-    box_margin: float = 0.0
-    stamp_tolerance: float = 0.0
+    timeouts: Mapping[str, float] = cf.table(
+        doc="stream -> abort when its newest sample is older [s]; (0, 1] s: the law of "
+        "seed 0 Sec. 4 needs fresh state feedback, a longer timeout is no staleness check",
+        item=cf.FieldSpec(cf.NUMBER, lo=0.0, lo_open=True, hi=1.0, unit=" s"),
+    )
+    box_min: tuple[float, ...] = cf.numbers((), "scheduling box low corner [m/s]")
+    box_max: tuple[float, ...] = cf.numbers((), "scheduling box high corner [m/s]")
+    box_margin: float = cf.number(
+        0.0,
+        "tolerance around the box [m/s]; at most 1 m/s: a wider margin leaves the certified "
+        "box (Eq. 20) unguarded",
+        lo=0.0,
+        hi=1.0,
+        unit=" m/s",
+    )
+    stamp_tolerance: float = cf.number(
+        0.0,
+        "header stamps may lead the node clock by this much (transport latency) [s]; at most "
+        "0.5 s",
+        lo=0.0,
+        hi=0.5,
+        unit=" s",
+    )
 
     def __post_init__(self):
-        for name, tmo in self.timeouts.items():
-            if not isinstance(tmo, (int, float)) or not math.isfinite(tmo) or tmo <= 0.0:
-                raise ConfigError(
-                    f"safety: timeouts.{name} must be a positive number, got {tmo!r}"
-                )
+        """The declared fields, then: box_min and box_max of one length, low below high."""
+        cf.normalize_fields(self, "safety")
         if len(self.box_min) != len(self.box_max):
-            raise ConfigError(
-                "safety: box_min and box_max have different lengths "
-                f"({len(self.box_min)} vs {len(self.box_max)})"
+            raise cf.error(
+                "safety",
+                "box_min",
+                f"{len(self.box_min)} values, box_max has {len(self.box_max)}",
             )
-        lo, hi = np.asarray(self.box_min, float), np.asarray(self.box_max, float)
-        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo < hi)):
-            raise ConfigError("safety: box_min must be finite and below box_max")
-        if not math.isfinite(self.box_margin) or self.box_margin < 0.0:
-            raise ConfigError(f"safety: box_margin must be >= 0, got {self.box_margin!r}")
-        tol = self.stamp_tolerance
-        if not (isinstance(tol, (int, float)) and math.isfinite(tol) and tol >= 0.0):
-            raise ConfigError(f"safety: stamp_tolerance must be >= 0, got {tol!r}")
+        if not all(a < b for a, b in zip(self.box_min, self.box_max)):
+            raise cf.error("safety", "box_min", "must be below box_max")
 
     @classmethod
-    def from_dict(cls, d: Mapping) -> "SafetyConfig":
-        known = {"timeouts", "box_min", "box_max", "box_margin", "stamp_tolerance"}
-        bad = set(d) - known
-        if bad:
-            raise ConfigError(f"safety: unknown key(s) {sorted(bad)}")
-        if "timeouts" not in d or not isinstance(d["timeouts"], Mapping):
-            raise ConfigError("safety: 'timeouts' must be a mapping stream -> seconds")
-        return cls(
-            timeouts=dict(d["timeouts"]),
-            box_min=tuple(float(v) for v in d.get("box_min", ())),
-            box_max=tuple(float(v) for v in d.get("box_max", ())),
-            box_margin=float(d.get("box_margin", 0.0)),
-            stamp_tolerance=float(d.get("stamp_tolerance", 0.0)),
-        )
+    def from_dict(cls, d: Mapping, where: str = "safety") -> "SafetyConfig":
+        return cls(**cf.parse_fields(cls, d, where))
 
 
 @dataclass(frozen=True)

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import savgol_coeffs, savgol_filter
 
-from lpv_sysid.configuration.fields import check_keys
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError
 
 METHODS = ("fourier", "savgol")
@@ -54,30 +54,23 @@ METHODS = ("fourier", "savgol")
 class DerivativeConfig:
     """How state derivatives are estimated (see module docstring for the bias)."""
 
-    method: str = "fourier"
-    f_cut: float = 6.0  # Hz, Fourier pass band edge (excitation tops out at 2-5 Hz)
-    taper: float = 0.3  # raised-cosine roll-off width as a fraction of f_cut
-    window_s: float = 0.21  # s, Savitzky-Golay window length
-    polyorder: int = 4  # Savitzky-Golay polynomial order
+    method: str = cf.choice("fourier", METHODS, "differentiator (module docstring)")
+    f_cut: float = cf.number(
+        6.0,
+        "Fourier pass band edge [Hz] (excitation tops out at 2-5 Hz)",
+        lo=0.0,
+        lo_open=True,
+        unit=" Hz",
+    )
+    taper: float = cf.number(
+        0.3, "raised-cosine roll-off width as a fraction of f_cut", lo=0.0, hi=2.0
+    )
+    window_s: float = cf.number(0.21, "Savitzky-Golay window length [s]", lo=0.0, lo_open=True)
+    polyorder: int = cf.count(4, "Savitzky-Golay polynomial order", lo=1)
 
     @classmethod
-    def from_dict(cls, d: dict | None) -> "DerivativeConfig":
-        d = dict(d or {})
-        check_keys(d, ("method", "f_cut", "taper", "window_s", "polyorder"), "derivatives")
-        cfg = cls(**d)
-        if cfg.method not in METHODS:
-            raise ConfigError(f"derivatives.method must be one of {METHODS}, got {cfg.method!r}")
-        if not (np.isfinite(cfg.f_cut) and cfg.f_cut > 0):
-            raise ConfigError(f"derivatives.f_cut must be > 0 Hz, got {cfg.f_cut!r}")
-        if not (0 <= cfg.taper <= 2):
-            raise ConfigError(f"derivatives.taper must be in [0, 2], got {cfg.taper!r}")
-        if not (cfg.window_s > 0):
-            raise ConfigError(f"derivatives.window_s must be > 0, got {cfg.window_s!r}")
-        if int(cfg.polyorder) != cfg.polyorder or cfg.polyorder < 1:
-            raise ConfigError(
-                f"derivatives.polyorder must be an integer >= 1, got {cfg.polyorder!r}"
-            )
-        return cfg
+    def from_dict(cls, d: dict | None, where: str = "derivatives") -> "DerivativeConfig":
+        return cls(**cf.parse_fields(cls, d or {}, where))
 
 
 def _as_2d(x: np.ndarray, name: str) -> tuple[np.ndarray, bool]:

@@ -38,11 +38,12 @@ gravity) terms evaluated at their trim.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Mapping, Optional, Sequence
 
 import numpy as np
 
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError
 
 STATE_NAMES = ("phi", "theta", "u", "v", "w", "p", "q", "r")
@@ -83,43 +84,49 @@ PARAM_ENTRIES: dict[str, Optional[tuple[str, int, int]]] = {
 }
 
 
+def _coefficient(doc: str, **kw: Any) -> Any:
+    return cf.number(doc=doc, **kw)
+
+
+def _offset(doc: str) -> Any:
+    return cf.number(0.0, f"{doc} (enters the trim only)")
+
+
 @dataclass(frozen=True)
 class RatePlantParams:
-    """Identified coefficients (module docstring); ``std`` holds their standard deviations."""
+    """Identified coefficients (module docstring), checked on every construction; ``std``
+    holds their standard deviations. The signs the model needs are declared: thrust
+    accelerates up (Z_T < 0), each rate loop follows its setpoint (L_sp, M_sp, N_sp > 0)."""
 
-    X_u: float
-    Y_v: float
-    Z_w: float
-    Z_T: float
-    L_p: float
-    L_sp: float
-    M_q: float
-    M_sp: float
-    N_r: float
-    N_sp: float
-    c_u: float = 0.0
-    c_v: float = 0.0
-    c_w: float = 0.0
-    c_p: float = 0.0
-    c_q: float = 0.0
-    c_r: float = 0.0
-    std: Mapping[str, float] = field(default_factory=dict)
+    X_u: float = _coefficient("u drag [1/s]")
+    Y_v: float = _coefficient("v drag [1/s]")
+    Z_w: float = _coefficient("w drag [1/s]")
+    Z_T: float = _coefficient(
+        "thrust gain [m/s^2 per unit thrust], < 0 (thrust accelerates up, -w)",
+        hi=0.0,
+        hi_open=True,
+    )
+    L_p: float = _coefficient("closed roll-rate loop pole [1/s]")
+    L_sp: float = _coefficient("roll-rate setpoint gain [1/s], > 0", lo=0.0, lo_open=True)
+    M_q: float = _coefficient("closed pitch-rate loop pole [1/s]")
+    M_sp: float = _coefficient("pitch-rate setpoint gain [1/s], > 0", lo=0.0, lo_open=True)
+    N_r: float = _coefficient("closed yaw-rate loop pole [1/s]")
+    N_sp: float = _coefficient("yaw-rate setpoint gain [1/s], > 0", lo=0.0, lo_open=True)
+    c_u: float = _offset("u offset [m/s^2]")
+    c_v: float = _offset("v offset [m/s^2]")
+    c_w: float = _offset("w offset [m/s^2]")
+    c_p: float = _offset("p offset [rad/s^2]")
+    c_q: float = _offset("q offset [rad/s^2]")
+    c_r: float = _offset("r offset [rad/s^2]")
+    std: Mapping[str, float] = cf.table(
+        {},
+        "standard deviation of each identified coefficient, name: std >= 0",
+        item=cf.FieldSpec(cf.NUMBER, lo=0.0),
+        choices=tuple(PARAM_ENTRIES),
+    )
 
     def __post_init__(self) -> None:
-        for k in PARAM_ENTRIES:
-            v = getattr(self, k)
-            if not (isinstance(v, (int, float)) and math.isfinite(v)):
-                raise ConfigError(f"rate plant parameter {k} must be a finite number, got {v!r}")
-        if self.Z_T >= 0:
-            raise ConfigError(
-                f"rate plant: Z_T = {self.Z_T:g} must be negative (thrust accelerates up, -w)"
-            )
-        for k in ("L_sp", "M_sp", "N_sp"):
-            if getattr(self, k) <= 0:
-                raise ConfigError(
-                    f"rate plant: {k} = {getattr(self, k):g} must be positive (rate loop follows "
-                    "its setpoint)"
-                )
+        cf.normalize_fields(self, "rate_plant")
 
     def as_dict(self) -> dict:
         d: dict[str, Any] = {k: float(getattr(self, k)) for k in PARAM_ENTRIES}
@@ -127,15 +134,8 @@ class RatePlantParams:
         return d
 
     @classmethod
-    def from_dict(cls, d: Mapping) -> "RatePlantParams":
-        try:
-            kw = {k: float(d[k]) for k in PARAM_ENTRIES if k in d}
-        except (TypeError, ValueError) as exc:
-            raise ConfigError(f"rate plant parameters: {exc}") from None
-        missing = [k for k in PARAM_ENTRIES if k not in kw and not k.startswith("c_")]
-        if missing:
-            raise ConfigError(f"rate plant parameters: missing {missing}")
-        return cls(**kw, std={str(k): float(v) for k, v in (d.get("std") or {}).items()})
+    def from_dict(cls, d: Mapping, where: str = "rate_plant") -> "RatePlantParams":
+        return cls(**cf.parse_fields(cls, d, where))
 
 
 def dynamics(x: np.ndarray, u: np.ndarray, P: RatePlantParams, g: float = GRAVITY) -> np.ndarray:

@@ -32,20 +32,23 @@ The plant is the nonlinear model of Eqs. (1)-(6) integrated with ``scipy.integra
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable, Optional, Sequence
 
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError, SolverError
 from lpv_sysid.models.trms import (
+    PSI_NAMES,
     TABLE7_RANGES,
     TS_PAPER,
     Trms,
     TrmsPolytope,
     bounding_box_polytope,
 )
+from lpv_sysid.models.trms.params import P_NAMES
 from lpv_sysid.synthesis.regions import (
     PlacementResult,
     Region,
@@ -76,61 +79,65 @@ SCHEDULED_DEFAULT = ("a21", "a23", "a26", "a54", "a56")
 GAPS_DEFAULT = {"omega_h": (-0.5, 0.5), "omega_v": (-0.5, 0.5)}
 
 
+#: the Region sections of the TRMS control config
+_REGIONS = ("region_K", "region_L")
+
+
 @dataclass(frozen=True)
 class TrmsControlConfig:
-    """Design and runtime settings of the TRMS LPV controller (seed 2 Sec. 5-6)."""
+    """Design and runtime settings of the TRMS LPV controller (seed 2 Sec. 5-6), checked on
+    every construction."""
 
-    scheduled: tuple = SCHEDULED_DEFAULT
-    ts: float = TS_PAPER
-    gaps: dict = field(default_factory=lambda: dict(GAPS_DEFAULT))
+    scheduled: tuple = cf.texts(
+        SCHEDULED_DEFAULT, "scheduled psi (Eq. 41), distinct", choices=PSI_NAMES, unique=True
+    )
+    ts: float = cf.number(TS_PAPER, "Euler sample time [s] (Sec. 6.2)", lo=0.0, lo_open=True)
+    gaps: dict = cf.table(
+        GAPS_DEFAULT,
+        "Eq. (69) gaps around 0 of p variables: name: [minus, plus]",
+        item=cf.FieldSpec(cf.NUMBERS, length=2),
+        choices=P_NAMES,
+    )
     region_K: Region = REGION_K_DEFAULT
     region_L: Region = REGION_L_PAPER
-    tau_h: Optional[float] = None
-    tau_v: Optional[float] = None
-    u_min: tuple = (TABLE7_RANGES["u_h"][0], TABLE7_RANGES["u_v"][0])
-    u_max: tuple = (TABLE7_RANGES["u_h"][1], TABLE7_RANGES["u_v"][1])
+    tau_h: Optional[float] = cf.number(
+        None,
+        "Omega_h^r time constant [s] (Eq. 105); null: Omega^r = 0",
+        lo=0.0,
+        lo_open=True,
+        optional=True,
+    )
+    tau_v: Optional[float] = cf.number(
+        None,
+        "Omega_v^r time constant [s] (Eq. 106); null: Omega^r = 0",
+        lo=0.0,
+        lo_open=True,
+        optional=True,
+    )
+    u_min: tuple = cf.numbers(
+        (TABLE7_RANGES["u_h"][0], TABLE7_RANGES["u_v"][0]), "input saturation low [V]", length=2
+    )
+    u_max: tuple = cf.numbers(
+        (TABLE7_RANGES["u_h"][1], TABLE7_RANGES["u_v"][1]), "input saturation high [V]", length=2
+    )
 
     def __post_init__(self) -> None:
-        if not (np.isfinite(self.ts) and self.ts > 0):
-            raise ConfigError(f"trms control: ts must be > 0, got {self.ts!r}")
-        for name in ("tau_h", "tau_v"):
-            v = getattr(self, name)
-            if v is not None and not (np.isfinite(v) and v > 0):
-                raise ConfigError(f"trms control: {name} must be > 0 or None, got {v!r}")
-        for reg, name in ((self.region_K, "region_K"), (self.region_L, "region_L")):
+        """The declared fields, then: both regions valid and inside the unit disk."""
+        cf.normalize_fields(self, "trms_control")
+        for name in _REGIONS:
+            reg = getattr(self, name)
             reg.check()
             if not reg.stable_for(self.ts):
-                raise ConfigError(
-                    f"trms control: {name} {reg.to_dict()} is not inside the unit disk"
+                raise cf.error(
+                    "trms_control", name, f"{reg.to_dict()} is not inside the unit disk"
                 )
 
     @classmethod
-    def from_dict(cls, d: dict) -> "TrmsControlConfig":
-        allowed = {
-            "scheduled",
-            "ts",
-            "gaps",
-            "region_K",
-            "region_L",
-            "tau_h",
-            "tau_v",
-            "u_min",
-            "u_max",
-        }
-        if not isinstance(d, dict):
-            raise ConfigError(f"trms control: expected a mapping, got {type(d).__name__}")
-        bad = sorted(set(d) - allowed)
-        if bad:
-            raise ConfigError(f"trms control: unknown key(s) {bad}; allowed {sorted(allowed)}")
-        kw = dict(d)
-        for key in ("region_K", "region_L"):
-            if key in kw:
-                kw[key] = Region.from_dict(kw[key])
-        if "scheduled" in kw:
-            kw["scheduled"] = tuple(kw["scheduled"])
-        for key in ("u_min", "u_max"):
-            if key in kw:
-                kw[key] = tuple(float(v) for v in kw[key])
+    def from_dict(cls, d: dict, where: str = "trms_control") -> "TrmsControlConfig":
+        kw = cf.parse_fields(cls, d, where, other_keys=_REGIONS)
+        for name in _REGIONS:
+            if name in d:
+                kw[name] = Region.from_dict(d[name], cf.join(where, name))
         return cls(**kw)
 
 

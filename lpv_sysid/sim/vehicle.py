@@ -25,7 +25,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from lpv_sysid.configuration.fields import check_keys, is_count, is_finite_number
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError, SafetyError
 from lpv_sysid.models.quadrotor import Quadrotor
 
@@ -35,56 +35,52 @@ _TWO_PI = 2.0 * math.pi
 MAX_PHYSICS_HZ = 50_000.0
 
 
+def _rate(default: float, doc: str) -> Any:
+    return cf.number(default, doc, lo=0.0, lo_open=True, hi=MAX_PHYSICS_HZ, unit=" Hz")
+
+
+def _std(default: float, doc: str) -> Any:
+    return cf.number(default, doc, lo=0.0)
+
+
 @dataclass(frozen=True)
 class SensorConfig:
-    physics_hz: float = 500.0
-    state_hz: float = 250.0
-    imu_hz: float = 250.0
-    rotor_hz: float = 100.0
-    pos_std: float = 0.02  # m
-    att_std_deg: float = 0.15  # deg
-    vel_std: float = 0.03  # m/s
-    rate_std: float = 0.008  # rad/s
-    accel_std: float = 0.08  # m/s^2
-    gyro_std: float = 0.006  # rad/s
-    rotor_std: float = 2.0  # rad/s
-    vib_accel: float = 2.0  # m/s^2, once-per-rev amplitude at omega_ref
-    vib_accel_blade: float = 1.0  # m/s^2, blade-pass (2/rev) amplitude at omega_ref
-    vib_gyro: float = 0.03  # rad/s at omega_ref
-    vib_state_fraction: float = 0.1  # share of the gyro vibration in the estimated rates
-    omega_ref: float = 600.0  # rad/s
-    seed: int = 0
+    """Rates, noise and vibration of the simulated sensors (``config/quadrotor.yaml``
+    section ``sim``), checked on every construction."""
+
+    physics_hz: float = _rate(
+        500.0, f"RK4 steps per simulated second; at most {MAX_PHYSICS_HZ:g} Hz (100x default)"
+    )
+    state_hz: float = _rate(250.0, "estimator output rate [Hz], divides physics_hz")
+    imu_hz: float = _rate(250.0, "IMU rate [Hz], divides physics_hz")
+    rotor_hz: float = _rate(100.0, "ESC telemetry rate [Hz], divides physics_hz")
+    pos_std: float = _std(0.02, "position noise [m]")
+    att_std_deg: float = _std(0.15, "attitude noise [deg]")
+    vel_std: float = _std(0.03, "velocity noise [m/s]")
+    rate_std: float = _std(0.008, "body-rate noise of the estimator [rad/s]")
+    accel_std: float = _std(0.08, "accelerometer noise [m/s^2]")
+    gyro_std: float = _std(0.006, "gyro noise [rad/s]")
+    rotor_std: float = _std(2.0, "rotor-speed noise [rad/s]")
+    vib_accel: float = _std(2.0, "once-per-rev accelerometer vibration at omega_ref [m/s^2]")
+    vib_accel_blade: float = _std(1.0, "blade-pass (2/rev) vibration at omega_ref [m/s^2]")
+    vib_gyro: float = _std(0.03, "gyro vibration at omega_ref [rad/s]")
+    vib_state_fraction: float = _std(0.1, "share of the gyro vibration in the estimated rates")
+    omega_ref: float = cf.number(
+        600.0, "rotor speed of the vibration amplitudes [rad/s]", lo=0.0, lo_open=True
+    )
+    seed: int = cf.count(0, "noise seed")
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if f.name == "seed":
-                if not is_count(v):
-                    raise ConfigError(f"sim.seed: must be a non-negative integer, got {v!r}")
-                continue
-            if not is_finite_number(v) or v < 0:
-                raise ConfigError(f"sim.{f.name}: must be a finite number >= 0, got {v!r}")
-        for name in ("physics_hz", "state_hz", "imu_hz", "rotor_hz", "omega_ref"):
-            if getattr(self, name) <= 0:
-                raise ConfigError(f"sim.{name}: must be > 0")
-        if self.physics_hz > MAX_PHYSICS_HZ:  # every simulated second costs physics_hz RK4 steps
-            raise ConfigError(
-                f"sim.physics_hz: {self.physics_hz:g} Hz exceeds the limit of "
-                f"{MAX_PHYSICS_HZ:g} Hz"
-            )
+        """The declared fields, then: every sensor rate divides the physics rate."""
+        cf.normalize_fields(self, "sim")
         for name in ("state_hz", "imu_hz", "rotor_hz"):
             ratio = self.physics_hz / getattr(self, name)
             if abs(ratio - round(ratio)) > 1e-9 or ratio < 1:
-                raise ConfigError(f"sim.{name}: must divide physics_hz={self.physics_hz}")
+                raise cf.error("sim", name, f"must divide physics_hz={self.physics_hz}")
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "SensorConfig":
-        check_keys(d, {f.name for f in fields(cls)}, "sim")
-        values: dict[str, Any] = {
-            k: (float(v) if k != "seed" and isinstance(v, int) and not isinstance(v, bool) else v)
-            for k, v in d.items()
-        }
-        return cls(**values)
+    def from_dict(cls, d: Mapping[str, Any], where: str = "sim") -> "SensorConfig":
+        return cls(**cf.parse_fields(cls, d, where))
 
     def to_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}

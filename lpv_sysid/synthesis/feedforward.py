@@ -54,6 +54,7 @@ from typing import Optional, Sequence
 import numpy as np
 import scipy.linalg
 
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io.formats import FeedforwardSpec
 
@@ -64,41 +65,43 @@ log = logging.getLogger(__name__)
 COND_MAX_DEFAULT = 1e10
 
 
+def _states(default: tuple, doc: str) -> tuple:
+    """A list of state names (distinct; may be empty), checked against the model's states
+    when the layout is used (:meth:`FeedforwardLayout.indices`)."""
+    return cf.texts(default, doc, nonempty=False, unique=True)
+
+
+#: the jerk keys: absent from an explicit layout = no jerk term (older gains files)
+_JERK_KEYS = ("kinematic_states", "rate_states")
+
+
 @dataclass(frozen=True)
 class FeedforwardLayout(FeedforwardSpec):
     """Which states are solved for, which are accelerated and which are held (module docstring):
     the gains.yaml ``feedforward`` layout (:class:`~lpv_sysid.io.formats.FeedforwardSpec`,
     which also gives ``has_jerk`` and ``to_dict``) with the quadrotor defaults."""
 
-    free_states: tuple = ("phi", "theta", "dt", "da", "de", "dr")
-    accelerated_states: tuple = ("u", "v", "w")
-    held_states: tuple = ("p", "q", "r", "dt", "da", "de", "dr")
-    #: jerk term (module docstring): the attitude rows whose rate is imposed and the rate states
-    #: that produce it; empty tuples switch the jerk term off.
-    kinematic_states: tuple = ("phi", "theta")
-    rate_states: tuple = ("p", "q", "r")
+    free_states: tuple = _states(
+        ("phi", "theta", "dt", "da", "de", "dr"), "the unknowns y besides the inputs"
+    )
+    accelerated_states: tuple = _states(("u", "v", "w"), "v' = a rows: the axes of v_d")
+    held_states: tuple = _states(
+        ("p", "q", "r", "dt", "da", "de", "dr"), "rows held at zero derivative"
+    )
+    kinematic_states: tuple = _states(
+        ("phi", "theta"), "jerk term: attitude rows whose rate is imposed (empty: no jerk term)"
+    )
+    rate_states: tuple = _states(
+        ("p", "q", "r"), "jerk term: the rate states that produce it (empty: no jerk term)"
+    )
 
     @classmethod
-    def from_dict(cls, d: Optional[dict]) -> "FeedforwardLayout":
-        d = dict(d or {})
-        if d and ("kinematic_states" not in d or "rate_states" not in d):
-            # an explicit layout without the jerk keys has no jerk term (older gains files)
-            d.setdefault("kinematic_states", [])
-            d.setdefault("rate_states", [])
-        bad = set(d) - {
-            "free_states",
-            "accelerated_states",
-            "held_states",
-            "kinematic_states",
-            "rate_states",
-        }
-        if bad:
-            raise ConfigError(f"feedforward: unknown key(s) {sorted(bad)}")
-        kw = {}
-        for k, v in d.items():
-            if not isinstance(v, (list, tuple)) or not all(isinstance(x, str) for x in v):
-                raise ConfigError(f"feedforward.{k}: expected a list of state names, got {v!r}")
-            kw[k] = tuple(v)
+    def from_dict(cls, d: Optional[dict], where: str = "feedforward") -> "FeedforwardLayout":
+        """The layout of ``d`` (defaults for absent keys); an explicit layout without both
+        jerk keys has no jerk term."""
+        kw = cf.parse_fields(cls, d or {}, where)
+        if kw and not all(k in kw for k in _JERK_KEYS):
+            kw.update({k: () for k in _JERK_KEYS if k not in kw})
         return cls(**kw)
 
     def indices(self, state_names: Sequence[str]) -> tuple[list, list, list]:

@@ -26,16 +26,67 @@ Integral augmentation (Eqs. 128-129) builds [[A, 0], [C, I]] (discrete) or [[A, 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional, Sequence
+from typing import Any, Mapping, Optional, Sequence
 
 import numpy as np
 
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError, SolverError
 
 
 @dataclass(frozen=True)
+class DiskSpec:
+    """``disk`` of a region file entry: centre ``(centre, 0)`` (``center`` is accepted too)
+    and radius, seed 2 Eq. (117)."""
+
+    centre: float = cf.number(doc="centre on the real axis (= -q)")
+    radius: float = cf.number(doc="radius r > 0", lo=0.0, lo_open=True)
+
+    @classmethod
+    def from_dict(cls, d: Any, where: str = "region.disk") -> "DiskSpec":
+        if isinstance(d, Mapping) and "center" in d:  # the US spelling of the key
+            d = {("centre" if k == "center" else k): v for k, v in d.items() if k != "centre"}
+        return cls(**cf.parse_fields(cls, d, where))
+
+
+@dataclass(frozen=True)
+class StripSpec:
+    """``strip`` of a region file entry: ``min < Re z < max`` (Eq. 119; ``max`` null: the
+    half-plane ``Re z > min``)."""
+
+    min: float = cf.number(doc="S_min, the left edge")
+    max: Optional[float] = cf.number(None, "S_max, the right edge (null: none)", optional=True)
+
+    @classmethod
+    def from_dict(cls, d: Any, where: str = "region.strip") -> "StripSpec":
+        return cls(**cf.parse_fields(cls, d, where))
+
+
+@dataclass(frozen=True)
+class HalfPlaneSpec:
+    """``half_plane`` of a region file entry: ``Re z < -alpha`` (Eq. 119, right edge only)."""
+
+    alpha: float = cf.number(doc="the half-plane Re z < -alpha")
+
+    @classmethod
+    def from_dict(cls, d: Any, where: str = "region.half_plane") -> "HalfPlaneSpec":
+        return cls(**cf.parse_fields(cls, d, where))
+
+
+#: the keys of a region file entry -> their declared sections
+_REGION_SECTIONS: dict[str, Any] = {
+    "disk": DiskSpec,
+    "strip": StripSpec,
+    "half_plane": HalfPlaneSpec,
+}
+
+
+@dataclass(frozen=True)
 class Region:
-    """Intersection of a disk and a vertical strip (either may be absent)."""
+    """Intersection of a disk and a vertical strip (either may be absent). The file form
+    (:meth:`from_dict`, :meth:`to_dict`) is ``{disk: {centre, radius}, strip: {min, max},
+    half_plane: {alpha}}``, each section declared once (:class:`DiskSpec`,
+    :class:`StripSpec`, :class:`HalfPlaneSpec`)."""
 
     disk_q: Optional[float] = None  # disk centre is (-q, 0) (seed 2 Eq. 117)
     disk_r: Optional[float] = None
@@ -43,37 +94,25 @@ class Region:
     s_max: Optional[float] = None
 
     @classmethod
-    def from_dict(cls, d: Optional[dict]) -> Optional["Region"]:
+    def from_dict(cls, d: Optional[dict], where: str = "region") -> Optional["Region"]:
+        """The region of a file entry (None for an empty one); a half-plane and a strip
+        together keep the smaller right edge."""
         if not d:
             return None
-        allowed = {"disk", "strip", "half_plane"}
-        bad = set(d) - allowed
-        if bad:
-            raise ConfigError(f"region: unknown key(s) {sorted(bad)}; known: {sorted(allowed)}")
+        cf.check_keys(d, _REGION_SECTIONS, where, list_allowed=True)
+        parts = {
+            k: spec.from_dict(d[k], cf.join(where, k))
+            for k, spec in _REGION_SECTIONS.items()
+            if k in d
+        }
         kw: dict = {}
-        if "disk" in d:
-            disk = d["disk"]
-            try:
-                centre = float(disk["centre"] if "centre" in disk else disk["center"])
-                kw["disk_q"], kw["disk_r"] = -centre, float(disk["radius"])
-            except (KeyError, TypeError, ValueError):
-                raise ConfigError("region.disk needs {centre: real, radius: > 0}") from None
-        if "strip" in d:
-            try:
-                smax = d["strip"].get("max")
-                kw["s_min"] = float(d["strip"]["min"])
-                kw["s_max"] = None if smax is None else float(smax)
-            except (KeyError, TypeError, ValueError):
-                raise ConfigError("region.strip needs {min: real, max: real}") from None
-        if "half_plane" in d:
-            try:
-                prev = kw.get("s_max")
-                hp = -float(d["half_plane"]["alpha"])
-                kw["s_max"] = hp if prev is None else min(prev, hp)
-            except (KeyError, TypeError, ValueError):
-                raise ConfigError(
-                    "region.half_plane needs {alpha: real} (Re z < -alpha)"
-                ) from None
+        if "disk" in parts:
+            kw["disk_q"], kw["disk_r"] = -parts["disk"].centre, parts["disk"].radius
+        if "strip" in parts:
+            kw["s_min"], kw["s_max"] = parts["strip"].min, parts["strip"].max
+        if "half_plane" in parts:
+            edge = -parts["half_plane"].alpha
+            kw["s_max"] = edge if kw.get("s_max") is None else min(kw["s_max"], edge)
         reg = cls(**kw)
         reg.check()
         return reg

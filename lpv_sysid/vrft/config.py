@@ -32,18 +32,9 @@ from lpv_sysid.vrft.tf import (
     first_order_model,
 )
 
-_TOP = {
-    "reference_model",
-    "controller",
-    "prefilter",
-    "method",
-    "window",
-    "discard",
-    "Ts",
-    "outer",
-    "eiv_weight",
-}
-_LOOP = {"reference_model", "controller", "prefilter"}
+_LOOP = ("reference_model", "controller", "prefilter")
+_PREFILTERS = ("none", "one_minus_m")
+_STRUCTURES = ("full", "diagonal")
 
 
 def _tf(d: Any, where: str) -> Tf:
@@ -81,42 +72,69 @@ def parse_model(d: Any, where: str = "reference_model") -> TfMatrix:
     raise ConfigError(f"{where}: unknown key {key!r}; use poles, diagonal or full")
 
 
+def _prefilter(v: Any, where: str) -> Any:
+    """``none`` (or null), ``one_minus_m`` or ``{num, den}`` (checked as a Tf)."""
+    if isinstance(v, dict):
+        _tf(v, where)
+        return v
+    if v is not None and v not in _PREFILTERS:
+        raise ConfigError(f"{where}: {v!r}; use none, one_minus_m or {{num, den}}")
+    return v or "none"
+
+
+@dataclass(frozen=True)
+class ControllerSpec:
+    """The ``controller`` section: the controller class of seed 1 Sec. 3.3 (built by
+    :meth:`LoopConfig.controller_class` once n_u and Ts are known). ``structure``: ``full``,
+    ``diagonal`` or a 0/1 matrix (n_u x n_y, checked when the class is built)."""
+
+    basis: str = cf.choice("pid", ("pid", "velocity"), "pid (Eq. 3.2) | velocity basis")
+    terms: tuple[str, ...] = cf.texts(
+        ("p", "i"),
+        "pid: distinct terms of p, i, d",
+        choices=("p", "i", "d"),
+        fold_case=True,
+        unique=True,
+    )
+    order: int = cf.count(1, "velocity: order of the velocity-form basis")
+    structure: Any = "full"
+
+    @classmethod
+    def from_dict(cls, d: Any, where: str = "controller") -> "ControllerSpec":
+        kw = cf.parse_fields(cls, d, where, other_keys=("structure",))
+        structure = d.get("structure", "full")
+        if isinstance(structure, str) and structure not in _STRUCTURES:
+            raise cf.error(
+                where, "structure", f"{structure!r}; use full, diagonal or a 0/1 matrix"
+            )
+        return cls(structure=structure, **kw)
+
+
 @dataclass(frozen=True)
 class LoopConfig:
+    """One loop: the reference model M (``reference_model``, Eqs. 5.3/5.5), the controller
+    class (``controller``) and the prefilter L (``prefilter``, Eq. 3.12). M and L are
+    transfer functions in the grammar of :func:`parse_model` / ``{num, den}``."""
+
     M: TfMatrix = field(compare=False)
-    controller: dict = field(compare=False)
+    controller: ControllerSpec = field(compare=False)
     prefilter: Any = "none"
 
     @classmethod
-    def from_dict(cls, d: Any, where: str) -> "LoopConfig":
-        if not isinstance(d, dict):
-            raise ConfigError(f"{where}: expected a mapping")
-        for k in ("reference_model", "controller"):
-            if k not in d:
-                raise ConfigError(f"{where}: missing key {k!r}")
-        M = parse_model(d["reference_model"], f"{where}reference_model")
-        c = d["controller"]
-        if not isinstance(c, dict):
-            raise ConfigError(f"{where}controller: expected a mapping")
-        bad = set(c) - {"basis", "terms", "order", "structure"}
-        if bad:
-            raise ConfigError(f"{where}controller: unknown key(s) {sorted(bad)}")
-        if c.get("basis", "pid") not in ("pid", "velocity"):
-            raise ConfigError(f"{where}controller.basis: {c.get('basis')!r}; use pid or velocity")
-        pf = d.get("prefilter", "none")
-        if isinstance(pf, dict):
-            _tf(pf, f"{where}prefilter")
-        elif pf not in ("none", "one_minus_m", None):
-            raise ConfigError(f"{where}prefilter: {pf!r}; use none, one_minus_m or {{num, den}}")
-        return cls(M, dict(c), pf or "none")
+    def from_dict(cls, d: Any, where: str = "") -> "LoopConfig":
+        cf.parse_fields(
+            cls, d, where, other_keys=_LOOP, required=("reference_model", "controller")
+        )
+        M = parse_model(d["reference_model"], cf.join(where, "reference_model"))
+        c = ControllerSpec.from_dict(d["controller"], cf.join(where, "controller"))
+        return cls(M, c, _prefilter(d.get("prefilter", "none"), cf.join(where, "prefilter")))
 
     def controller_class(self, n_u: int, Ts: float) -> ControllerClass:
         c = self.controller
         n_y = len(self.M)
-        structure = c.get("structure", "full")
-        if c.get("basis", "pid") == "velocity":
-            return velocity_class(n_u, n_y, c.get("order", 1), structure, Ts)
-        return pid_class(n_u, n_y, Ts, c.get("terms", ["p", "i"]), structure)
+        if c.basis == "velocity":
+            return velocity_class(n_u, n_y, c.order, c.structure, Ts)
+        return pid_class(n_u, n_y, Ts, c.terms, c.structure)
 
     def prefilter_tf(self, where: str = "prefilter") -> Tf | None:
         pf = self.prefilter
@@ -145,12 +163,10 @@ class VrftConfig:
 
     @classmethod
     def from_dict(cls, d: Any) -> "VrftConfig":
-        if not isinstance(d, dict):
-            raise ConfigError("vrft config: expected a YAML mapping at top level")
-        bad = set(d) - _TOP
-        if bad:
-            raise ConfigError(f"vrft config: unknown key(s) {sorted(bad)}; known: {sorted(_TOP)}")
-        kw = cf.parse_fields(cls, d, "", other_keys=_LOOP | {"outer"}, required=())
+        """The top of the file: its keys, the loop and the optional outer loop."""
+        kw = cf.parse_fields(cls, d, "", other_keys=(*_LOOP, "outer"), required=())
         loop = LoopConfig.from_dict({k: d[k] for k in _LOOP if k in d}, "")
-        outer = LoopConfig.from_dict(d["outer"], "outer.") if d.get("outer") is not None else None
-        return cls(loop, outer=outer, **kw)
+        outer = d.get("outer")
+        return cls(
+            loop, outer=None if outer is None else LoopConfig.from_dict(outer, "outer"), **kw
+        )

@@ -186,7 +186,7 @@ def build_config(args: argparse.Namespace):
     d = {k: getattr(base, k) for k in base.__dataclass_fields__}
     d.update(kw)
     try:
-        return SimVehicleConfig.from_dict(d)
+        return SimVehicleConfig.from_dict(d, "")  # errors name the bare field (with_flag)
     except ConfigError as exc:  # name the flag only for a value that came from one
         raise ConfigError(with_flag(str(exc), [k for k in FLAG_OF_FIELD if k in kw])) from None
 

@@ -4,11 +4,10 @@ checks (the sequence these settings drive is described in :mod:`lpv_sysid.contro
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any, Mapping
 
-from lpv_sysid.configuration.fields import check_keys, is_count, is_finite_number
-from lpv_sysid.errors import ConfigError
+from lpv_sysid.configuration import fields as cf
 
 #: the campaign commands in MAV_FRAME_BODY_NED (PX4 rotates by yaw only; seed 0's frame). In
 #: ``local_ned`` the bridge rotates an FRD body reference by the full attitude, so a w = 0
@@ -22,166 +21,200 @@ ORDERS = ("alternate", "table")
 IDENTIFY_SNAP_TOLERANCE = 0.25
 
 
+#: largest height above home [m] the campaign may plan: the envelope ceiling's limit
+MAX_ALTITUDE = 500.0
+
+
+def _timeout(default: float, doc: str, hi: float) -> Any:
+    """A phase timeout [s] > 0, at most ``hi``: a larger one waits on a stuck phase forever."""
+    return cf.number(default, doc, lo=0.0, lo_open=True, hi=hi, unit=" s")
+
+
+def _positive(default: float, doc: str, hi: float, unit: str) -> Any:
+    return cf.number(default, doc, lo=0.0, lo_open=True, hi=hi, unit=unit)
+
+
 # =============================================================================== config
 @dataclass(frozen=True)
 class CampaignConfig:
-    """``campaign`` section of ``config/campaign.yaml`` (heights above home, m; m/s; s)."""
+    """``campaign`` section of ``config/campaign.yaml`` (heights above home, m; m/s; s),
+    checked by :meth:`validate` (also for a config built in code: the planner calls it).
 
-    box_min: tuple = (-3.0, -3.0, -0.7)
-    box_max: tuple = (3.0, 3.0, 0.7)
-    vertices: tuple | None = None  # 1-based seed 0 Table 1 indices; None: all 8
-    hover_validation: bool = True
-    order: str = "alternate"  # alternate | table
-    velocity_frame: str = "body_ned"  # the bridge's velocity_frame (body_ned only, see FRAMES)
-    rate_hz: float = 50.0  # velocity reference rate
-    takeoff_altitude: float = 20.0
-    altitude_min: float = 15.0  # campaign altitude window
-    altitude_max: float = 70.0
-    altitude_margin: float = 2.0  # kept free at both ends of every segment
-    altitude_tolerance: float = 1.0  # reached a target height
-    position_tolerance: float = 3.0  # reached a horizontal start point
-    climb_rate: float = 1.5  # take-off / reposition limits
-    descent_rate: float = 1.0
-    horizontal_speed: float = 3.0
-    position_gain: float = 0.5  # 1/s, take-off / reposition P loop
-    hold_gain: float = 0.2  # 1/s, altitude hold on level runs
-    hold_max: float = 0.2  # m/s
-    radius: float = 250.0  # m, campaign horizontal limit around home
-    center_runs: bool = True  # reposition so each run is centred on home
-    settle_tolerance: tuple = (0.3, 0.3, 0.3)
-    settle_dwell: float = 1.0
-    settle_timeout: float = 20.0
-    hover_tolerance: float = 0.3  # m/s speed: hover reached (take-off, recover)
-    trim_s: float = 10.0
-    trim_average_s: float = 5.0  # end of the trim averaged for the equilibrium
-    ramp_s: float = 1.0  # excitation raised-cosine ramps
-    periods: int = 1  # excitation periods per run
-    start_timeout: float = 20.0
-    takeoff_timeout: float = 60.0
-    reposition_timeout: float = 90.0
-    recover_timeout: float = 20.0
-    state_timeout: float = 0.5
-    handback_timeout: float = 15.0
-    finish: str = "LAND"  # LAND | HOLD
-    land_timeout: float = 180.0
-    arm_length: float | None = None  # m, for the Table 1 delta columns; None: quadrotor default
+    The limits keep every guard a guard: speeds within PX4's own ranges (MPC_*_VEL_MAX),
+    heights and radius within the envelope's, timeouts bounded so a stuck phase ends."""
+
+    box_min: tuple = cf.numbers(
+        (-3.0, -3.0, -0.7), "body-velocity box low corner (u, v, w) [m/s]", length=3
+    )
+    box_max: tuple = cf.numbers((3.0, 3.0, 0.7), "body-velocity box high corner [m/s]", length=3)
+    vertices: tuple | None = cf.counts(
+        None,
+        "seed 0 Table 1 indices 1..8 to fly (null: all 8)",
+        lo=1,
+        hi=8,
+        unique=True,
+        optional=True,
+    )
+    hover_validation: bool = cf.flag(True, "extra run at the box centre")
+    order: str = cf.choice("alternate", ORDERS, "alternate climbs/descents | table order")
+    velocity_frame: str = cf.choice(
+        "body_ned",
+        FRAMES,
+        "the bridge's velocity_frame; body_ned only: with local_ned the bridge rotates the "
+        "FRD vertex by the full attitude, so a w = 0 vertex sinks u sin(theta) at pitch "
+        "theta and no altitude hold can keep the vertex",
+    )
+    rate_hz: float = cf.number(
+        50.0,
+        "velocity reference rate [Hz]; PX4 needs > 2 Hz, at most 1000 Hz",
+        lo=2.0,
+        lo_open=True,
+        hi=1000.0,
+        unit=" Hz",
+    )
+    takeoff_altitude: float = _positive(20.0, "take-off height [m]", MAX_ALTITUDE, " m")
+    altitude_min: float = cf.number(
+        15.0, "campaign altitude window, low [m]", lo=0.0, hi=MAX_ALTITUDE, unit=" m"
+    )
+    altitude_max: float = _positive(
+        70.0,
+        f"campaign altitude window, high [m]; at most {MAX_ALTITUDE:g} m (the envelope "
+        "ceiling's limit)",
+        MAX_ALTITUDE,
+        " m",
+    )
+    altitude_margin: float = cf.number(
+        2.0, "kept free at both ends of every segment [m]", lo=0.0, hi=50.0, unit=" m"
+    )
+    altitude_tolerance: float = _positive(
+        1.0, "a target height is reached within this [m]; at most 10 m", 10.0, " m"
+    )
+    position_tolerance: float = _positive(
+        3.0, "a horizontal start point is reached within this [m]; at most 50 m", 50.0, " m"
+    )
+    climb_rate: float = _positive(
+        1.5, "take-off / reposition climb limit [m/s] (PX4 MPC_Z_VEL_MAX_UP <= 8)", 8.0, " m/s"
+    )
+    descent_rate: float = _positive(
+        1.0, "reposition descent limit [m/s] (PX4 MPC_Z_VEL_MAX_DN <= 4)", 4.0, " m/s"
+    )
+    horizontal_speed: float = _positive(
+        3.0, "reposition speed limit [m/s] (PX4 MPC_XY_VEL_MAX <= 20)", 20.0, " m/s"
+    )
+    position_gain: float = _positive(
+        0.5, "take-off / reposition P loop [1/s]; at most 5", 5.0, " 1/s"
+    )
+    hold_gain: float = _positive(0.2, "altitude hold on level runs [1/s]; at most 5", 5.0, " 1/s")
+    hold_max: float = cf.number(
+        0.2,
+        f"largest altitude-hold correction [m/s]; below {IDENTIFY_SNAP_TOLERANCE} m/s: the "
+        "correction is part of the recorded trim reference that `lpv-sysid identify` snaps "
+        "to the box",
+        lo=0.0,
+        lo_open=True,
+        hi=IDENTIFY_SNAP_TOLERANCE,
+        hi_open=True,
+        unit=" m/s",
+    )
+    radius: float = _positive(
+        250.0,
+        "campaign horizontal limit around home [m]; at most 2 km (the envelope's)",
+        2000.0,
+        " m",
+    )
+    center_runs: bool = cf.flag(True, "reposition so each run is centred on home")
+    settle_tolerance: tuple = cf.numbers(
+        (0.3, 0.3, 0.3),
+        "|measured - commanded| per axis for settled [m/s]; at most 2 m/s",
+        length=3,
+        lo=0.0,
+        lo_open=True,
+        hi=2.0,
+    )
+    settle_dwell: float = _timeout(1.0, "inside the tolerance this long = settled [s]", 60.0)
+    settle_timeout: float = _timeout(20.0, "not settled within this -> abort [s]", 300.0)
+    hover_tolerance: float = _positive(
+        0.3, "speed below which hover is regained (take-off, recover) [m/s]", 2.0, " m/s"
+    )
+    trim_s: float = _timeout(10.0, "constant vertex reference before the excitation [s]", 3600.0)
+    trim_average_s: float = _timeout(
+        5.0, "end of the trim averaged for the equilibrium [s]", 3600.0
+    )
+    ramp_s: float = cf.number(
+        1.0, "excitation raised-cosine ramps [s]", lo=0.0, hi=60.0, unit=" s"
+    )
+    periods: int = cf.count(1, "excitation periods per run", lo=1, hi=100)
+    start_timeout: float = _timeout(
+        20.0, "pre-stream + OFFBOARD + arming within this [s]; at most 120 s", 120.0
+    )
+    takeoff_timeout: float = _timeout(60.0, "take-off within this [s]; at most 600 s", 600.0)
+    reposition_timeout: float = _timeout(90.0, "reposition within this [s]; at most 600 s", 600.0)
+    recover_timeout: float = _timeout(20.0, "hover regained within this [s]; at most 120 s", 120.0)
+    state_timeout: float = _timeout(
+        0.5,
+        "no state sample for longer -> abort [s]; at most 1 s: flying on an older state is "
+        "flying blind",
+        1.0,
+    )
+    handback_timeout: float = _timeout(
+        15.0, "hand-back confirmed within this [s]; at most 120 s", 120.0
+    )
+    finish: str = cf.choice(
+        "LAND", FINISH_MODES, "LAND (wait for disarm) | HOLD at the end", fold_case=True
+    )
+    land_timeout: float = _timeout(
+        180.0, "landed and disarmed within this [s]; at most 900 s", 900.0
+    )
+    arm_length: float | None = cf.number(
+        None,
+        "for the Table 1 delta columns [m]; null: the quadrotor default",
+        lo=0.0,
+        lo_open=True,
+        optional=True,
+    )
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "CampaignConfig":
-        check_keys(d, {f.name for f in fields(cls)}, "campaign", list_allowed=True)
-        kw = dict(d)
-        for name in ("box_min", "box_max", "settle_tolerance", "vertices"):
-            if name in kw and isinstance(kw[name], list):
-                kw[name] = tuple(kw[name])
-        cfg = cls(**kw)
-        cfg.validate()
+    def from_dict(cls, d: Mapping[str, Any], where: str = "campaign") -> "CampaignConfig":
+        cfg = cls(**cf.parse_fields(cls, d, where))
+        cfg.validate(where)
         return cfg
 
-    def validate(self) -> None:
-        def num(name: str, lo: float = 0.0, strict: bool = True) -> None:
-            v = getattr(self, name)
-            if not is_finite_number(v) or (v <= lo if strict else v < lo):
-                raise ConfigError(
-                    f"campaign.{name} must be a finite number {'>' if strict else '>='} "
-                    f"{lo:g}, got {v!r}"
-                )
-
-        for name, n in (("box_min", 3), ("box_max", 3), ("settle_tolerance", 3)):
-            v = getattr(self, name)
-            if not (isinstance(v, tuple) and len(v) == n and all(is_finite_number(x) for x in v)):
-                raise ConfigError(f"campaign.{name} must be {n} finite numbers, got {v!r}")
+    def validate(self, where: str = "campaign") -> None:
+        """The declared fields, then: the box, the altitude window holding the take-off
+        height, the trim average within the trim, the dwell within the settle timeout."""
+        cf.check_fields(self, where)
         if any(a >= b for a, b in zip(self.box_min, self.box_max)):
-            raise ConfigError(
-                f"campaign.box_min {list(self.box_min)} must be below box_max "
-                f"{list(self.box_max)} in every component"
+            raise cf.error(
+                where,
+                "box_min",
+                f"{list(self.box_min)} must be below box_max {list(self.box_max)} in every "
+                "component",
             )
-        if any(x <= 0 for x in self.settle_tolerance):
-            raise ConfigError("campaign.settle_tolerance must be positive")
-        if self.vertices is not None:
-            v = self.vertices
-            if not (
-                isinstance(v, tuple)
-                and v
-                and all(is_count(i, 1) and i <= 8 for i in v)
-                and len(set(v)) == len(v)
-            ):
-                raise ConfigError(
-                    f"campaign.vertices must be distinct seed 0 Table 1 indices 1..8, got {v!r}"
-                )
-        for name in ("hover_validation", "center_runs"):
-            if not isinstance(getattr(self, name), bool):
-                raise ConfigError(f"campaign.{name} must be true or false")
-        if self.order not in ORDERS:
-            raise ConfigError(f"campaign.order must be one of {list(ORDERS)}, got {self.order!r}")
-        if self.velocity_frame not in FRAMES:
-            raise ConfigError(
-                f"campaign.velocity_frame must be 'body_ned', got {self.velocity_frame!r}: with "
-                "local_ned the bridge rotates the FRD vertex by the full attitude, so a w = 0 "
-                "vertex "
-                "sinks u sin(theta) at pitch theta and no altitude hold can keep the vertex"
-            )
-        if str(self.finish).upper() not in FINISH_MODES:
-            raise ConfigError(
-                f"campaign.finish must be one of {list(FINISH_MODES)}, got {self.finish!r}"
-            )
-        for name in (
-            "rate_hz",
-            "takeoff_altitude",
-            "altitude_max",
-            "altitude_tolerance",
-            "position_tolerance",
-            "climb_rate",
-            "descent_rate",
-            "horizontal_speed",
-            "position_gain",
-            "hold_gain",
-            "hold_max",
-            "radius",
-            "settle_dwell",
-            "settle_timeout",
-            "hover_tolerance",
-            "trim_s",
-            "trim_average_s",
-            "start_timeout",
-            "takeoff_timeout",
-            "reposition_timeout",
-            "recover_timeout",
-            "state_timeout",
-            "handback_timeout",
-            "land_timeout",
-        ):
-            num(name)
-        for name in ("altitude_min", "altitude_margin", "ramp_s"):
-            num(name, strict=False)
-        if not is_count(self.periods, 1):
-            raise ConfigError(f"campaign.periods must be an integer >= 1, got {self.periods!r}")
-        if self.arm_length is not None:
-            num("arm_length")
         if self.altitude_min >= self.altitude_max:
-            raise ConfigError(
-                f"campaign.altitude_min ({self.altitude_min} m) must be below "
-                f"altitude_max ({self.altitude_max} m)"
+            raise cf.error(
+                where,
+                "altitude_min",
+                f"{self.altitude_min} m must be below altitude_max ({self.altitude_max} m)",
             )
         if not self.altitude_min <= self.takeoff_altitude <= self.altitude_max:
-            raise ConfigError(
-                f"campaign.takeoff_altitude {self.takeoff_altitude} m must lie in the "
-                f"window [{self.altitude_min}, {self.altitude_max}] m"
-            )
-        if self.hold_max >= IDENTIFY_SNAP_TOLERANCE:
-            raise ConfigError(
-                f"campaign.hold_max {self.hold_max} m/s must stay below "
-                f"{IDENTIFY_SNAP_TOLERANCE} m/s: the altitude correction is part of the "
-                "recorded trim reference that `lpv-sysid identify` snaps to the box"
+            raise cf.error(
+                where,
+                "takeoff_altitude",
+                f"{self.takeoff_altitude} m must lie in the window "
+                f"[{self.altitude_min}, {self.altitude_max}] m",
             )
         if self.trim_average_s > self.trim_s:
-            raise ConfigError(
-                f"campaign.trim_average_s ({self.trim_average_s} s) must not exceed "
-                f"trim_s ({self.trim_s} s)"
+            raise cf.error(
+                where,
+                "trim_average_s",
+                f"{self.trim_average_s} s must not exceed trim_s ({self.trim_s} s)",
             )
         if self.settle_dwell >= self.settle_timeout:
-            raise ConfigError(
-                f"campaign.settle_dwell ({self.settle_dwell} s) must be shorter than "
-                f"settle_timeout ({self.settle_timeout} s)"
+            raise cf.error(
+                where,
+                "settle_dwell",
+                f"{self.settle_dwell} s must be shorter than settle_timeout "
+                f"({self.settle_timeout} s)",
             )
 
     def corners(self) -> list[tuple[float, float, float]]:

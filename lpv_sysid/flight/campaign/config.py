@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping
 
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -15,87 +16,76 @@ if TYPE_CHECKING:
 
 
 # ================================================================================ config
+#: the files the campaign file names (relative paths: to the campaign file's directory)
+_FILES = ("bridge_config", "signals_config", "identification_config")
+
+
 @dataclass(frozen=True)
 class FlyConfig:
-    """``config/campaign.yaml`` (paths relative to the file's directory)."""
+    """``config/campaign.yaml`` (paths relative to the file's directory): the files, the
+    ``campaign`` section (:class:`~lpv_sysid.control.campaign.CampaignConfig`) and the
+    ``recording``, ``preflight`` and ``runner`` sections, whose keys are fields here."""
 
     campaign: Any  # CampaignConfig
-    bridge_config: str = "mavlink_bridge.yaml"
-    signals_config: str = "signals_phase1.yaml"
-    identification_config: str = "identification.yaml"
-    storage: str = "mcap"
-    flight_log: bool = True
-    preflight_timeout: float = 8.0
-    link_timeout: float = 15.0  # s to wait for the vehicle's first HEARTBEAT
-    loop_period: float = 0.005  # s, link poll period
-    status_period: float = 1.0  # s, periodic status message in the bags
-    source: str = ""
-
-    KEYS = (
-        "bridge_config",
-        "signals_config",
-        "identification_config",
-        "campaign",
-        "recording",
-        "preflight",
-        "runner",
+    bridge_config: str = cf.text("mavlink_bridge.yaml", "bridge config: link, offboard, envelope")
+    signals_config: str = cf.text(
+        "signals_phase1.yaml", "excitation designed from this unless --signals is given"
     )
+    identification_config: str = cf.text(
+        "identification.yaml", "template of DIR/identification.yaml"
+    )
+    storage: str = cf.choice(
+        "mcap", ("mcap", "sqlite3"), "rosbag2 storage of the runs", section="recording"
+    )
+    flight_log: bool = cf.flag(True, "whole flight in DIR/flight/ as well", section="recording")
+    preflight_timeout: float = cf.number(
+        8.0,
+        "preflight checks within this [s]; 0.5 .. 120 s",
+        lo=0.5,
+        hi=120.0,
+        unit=" s",
+        section="preflight",
+        key="timeout",
+    )
+    link_timeout: float = cf.number(
+        15.0,
+        "wait for the vehicle's first HEARTBEAT [s]; 0.5 .. 600 s",
+        lo=0.5,
+        hi=600.0,
+        unit=" s",
+        section="runner",
+    )
+    loop_period: float = cf.number(
+        0.005,
+        "link poll period [s]; 0.5 .. 50 ms (shorter spins, longer misses the setpoint rate)",
+        lo=0.0005,
+        hi=0.05,
+        unit=" s",
+        section="runner",
+    )
+    status_period: float = cf.number(
+        1.0,
+        "periodic status message in the bags [s]; 0.05 .. 60 s",
+        lo=0.05,
+        hi=60.0,
+        unit=" s",
+        section="runner",
+    )
+    source: str = ""
 
     @classmethod
     def from_dict(
         cls, d: Mapping[str, Any], base: str | Path = ".", source: str = ""
     ) -> "FlyConfig":
-        from lpv_sysid.configuration.fields import check_keys, is_finite_number
+        """The campaign file ``d`` (read from ``source``; file names relative to ``base``).
+        Errors name the key path (``campaign.radius``, ``runner.loop_period``)."""
         from lpv_sysid.control.campaign import CampaignConfig
 
-        where = source or "campaign config"
-        check_keys(d, cls.KEYS, where, list_allowed=True)
-        base = Path(base)
-        kw: dict[str, Any] = {"source": source}
-        for k in ("bridge_config", "signals_config", "identification_config"):
-            if k in d:
-                if not isinstance(d[k], str) or not d[k]:
-                    raise ConfigError(f"{where}: {k} must be a file name, got {d[k]!r}")
-                kw[k] = str(base / d[k])
-            else:
-                kw[k] = str(base / getattr(cls, k))
-        try:
-            kw["campaign"] = CampaignConfig.from_dict(d.get("campaign") or {})
-        except (ConfigError, TypeError) as exc:
-            raise ConfigError(f"{where}: {exc}") from None
-        rec = d.get("recording") or {}
-        check_keys(rec, ("storage", "flight_log"), f"{where}: recording", list_allowed=True)
-        if rec.get("storage", "mcap") not in ("mcap", "sqlite3"):
-            raise ConfigError(
-                f"{where}: recording.storage must be mcap or sqlite3, got {rec['storage']!r}"
-            )
-        kw["storage"] = rec.get("storage", "mcap")
-        if not isinstance(rec.get("flight_log", True), bool):
-            raise ConfigError(f"{where}: recording.flight_log must be true or false")
-        kw["flight_log"] = rec.get("flight_log", True)
-        pre = d.get("preflight") or {}
-        check_keys(pre, ("timeout",), f"{where}: preflight", list_allowed=True)
-        run = d.get("runner") or {}
-        check_keys(
-            run,
-            ("link_timeout", "loop_period", "status_period"),
-            f"{where}: runner",
-            list_allowed=True,
-        )
-        for sect, key, name, lo, hi in (
-            (pre, "timeout", "preflight_timeout", 0.5, 120.0),
-            (run, "link_timeout", "link_timeout", 0.5, 600.0),
-            (run, "loop_period", "loop_period", 0.0005, 0.05),
-            (run, "status_period", "status_period", 0.05, 60.0),
-        ):
-            if key in sect:
-                v = sect[key]
-                if not is_finite_number(v) or not lo <= v <= hi:
-                    raise ConfigError(
-                        f"{where}: {name} must be a number in [{lo}, {hi}], got {v!r}"
-                    )
-                kw[name] = float(v)
-        return cls(**kw)
+        kw = cf.parse_fields(cls, d, "", other_keys=("campaign",))
+        for k in _FILES:
+            kw[k] = str(Path(base) / kw.get(k, getattr(cls, k)))
+        campaign = CampaignConfig.from_dict(d.get("campaign") or {}, "campaign")
+        return cls(campaign, source=source, **kw)
 
     @classmethod
     def load(cls, path: str | Path) -> "FlyConfig":
@@ -104,7 +94,10 @@ class FlyConfig:
         d = read_yaml(path)
         if not isinstance(d, dict):
             raise ConfigError(f"{path}: expected a mapping at top level")
-        return cls.from_dict(d, Path(path).resolve().parent, str(path))
+        try:
+            return cls.from_dict(d, Path(path).resolve().parent, str(path))
+        except ConfigError as exc:
+            raise ConfigError(f"{path}: {exc}") from None
 
 
 def load_signals(

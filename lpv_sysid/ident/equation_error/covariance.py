@@ -40,7 +40,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lpv_sysid.errors import ConfigError, SolverError
+from lpv_sysid.configuration import fields as cf
+from lpv_sysid.errors import SolverError
 
 COV_METHODS = ("ewc", "residual_acf")
 
@@ -49,32 +50,22 @@ COV_METHODS = ("ewc", "residual_acf")
 class CovarianceConfig:
     """How the parameter covariance is estimated (module docstring)."""
 
-    method: str = "ewc"
-    dof: int | None = None  # ewc: cosine terms nu (None: default_dof)
-    band_hz: float = 1.0  # ewc default: nu / (2 T) <= band_hz (flat score spectrum)
-    max_lag: int | None = None  # residual_acf: lags (None: auto_max_lag)
+    method: str = cf.choice("ewc", COV_METHODS, "covariance estimate (module docstring)")
+    dof: int | None = cf.count(
+        None, "ewc: cosine terms nu (null: default_dof)", lo=2, optional=True
+    )
+    band_hz: float = cf.number(
+        1.0,
+        "ewc default: nu / (2 T) <= band_hz (flat score spectrum) [Hz]",
+        lo=0.0,
+        lo_open=True,
+        unit=" Hz",
+    )
+    max_lag: int | None = cf.count(None, "residual_acf: lags (null: auto_max_lag)", optional=True)
 
     @classmethod
-    def from_dict(cls, d: dict | None) -> "CovarianceConfig":
-        from lpv_sysid.configuration.fields import check_keys, is_count, is_finite_number
-
-        d = dict(d or {})
-        check_keys(d, ("method", "dof", "band_hz", "max_lag"), "covariance")
-        if d.get("method", "ewc") not in COV_METHODS:
-            raise ConfigError(
-                f"covariance.method must be one of {COV_METHODS}, got {d['method']!r}"
-            )
-        for key, low in (("dof", 2), ("max_lag", 0)):
-            v = d.get(key)
-            if v is not None and (not is_count(v) or v < low):
-                raise ConfigError(
-                    f"covariance.{key} must be null or an integer >= {low}, got {v!r}"
-                )
-        if "band_hz" in d and (not is_finite_number(d["band_hz"]) or d["band_hz"] <= 0):
-            raise ConfigError(f"covariance.band_hz must be a number > 0, got {d['band_hz']!r}")
-        if "band_hz" in d:
-            d["band_hz"] = float(d["band_hz"])
-        return cls(**d)
+    def from_dict(cls, d: dict | None, where: str = "covariance") -> "CovarianceConfig":
+        return cls(**cf.parse_fields(cls, d or {}, where))
 
 
 def auto_max_lag(v: np.ndarray) -> int:

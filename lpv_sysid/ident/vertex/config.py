@@ -4,13 +4,22 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any, Mapping
 
-from lpv_sysid.configuration.fields import check_keys, is_count, is_finite_number
-from lpv_sysid.errors import ConfigError
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.ident import derivatives as deriv
 from lpv_sysid.ident import equation_error as ee
 from lpv_sysid.ident.vertex import uncertainty as unc
 from lpv_sysid.models.quadrotor import STATE_NAMES, QuadrotorParams
+from lpv_sysid.signals.multisine.config import MAX_SAMPLE_RATE
+
+
+#: channels of ``measurement_noise``: the states (STATE_NAMES) and the rotor speeds
+NOISE_CHANNELS = (*STATE_NAMES, "rotor")
+
+
+def _seconds(default: float, doc: str) -> Any:
+    return cf.number(default, doc, lo=0.0, unit=" s")
 
 
 @dataclass(frozen=True)
@@ -19,162 +28,128 @@ class IdentificationConfig:
 
     derivatives: deriv.DerivativeConfig = field(default_factory=deriv.DerivativeConfig)
     uncertainty: unc.UncertaintyConfig = field(default_factory=unc.UncertaintyConfig)
-    trim_duration: float = 10.0  # s of steady reference before the excitation (seed 0 Sec. IV)
-    trim_average: float = 5.0  # s at the end of the trim segment averaged for x0, u0
-    edge: float = 0.5  # s dropped at both ends of the fit segment (smoother end effects)
-    min_fit_duration: float = 5.0  # s, shorter excitation segments are refused
-    sample_rate: float = 100.0  # Hz, common grid of dataprep
-    max_lag: int | None = None  # residual autocorrelation lags (covariance.method residual_acf)
-    intercept: bool = True  # per-row bias term (Klein & Morelli), see equation_error
-    model: str = "taylor2"  # "taylor2" (ident.taylor) or "appendix_b" (plain seed 0 App. B)
+    trim_duration: float = _seconds(
+        10.0, "steady reference before the excitation [s] (seed 0 Sec. IV)"
+    )
+    trim_average: float = _seconds(5.0, "end of the trim segment averaged for x0, u0 [s]")
+    edge: float = _seconds(0.5, "dropped at both ends of the fit segment [s] (end effects)")
+    min_fit_duration: float = _seconds(5.0, "shorter excitation segments are refused [s]")
+    sample_rate: float = cf.number(
+        100.0,
+        f"common grid of dataprep [Hz]; at most {MAX_SAMPLE_RATE:g} Hz (it is allocated)",
+        lo=0.0,
+        lo_open=True,
+        hi=MAX_SAMPLE_RATE,
+        unit=" Hz",
+    )
+    max_lag: int | None = cf.count(
+        None, "residual autocorrelation lags (covariance.method residual_acf)", optional=True
+    )
+    intercept: bool = cf.flag(True, "per-row bias term (Klein & Morelli), see equation_error")
+    model: str = cf.choice(
+        "taylor2",
+        ("taylor2", "appendix_b"),
+        "taylor2 (ident.taylor) or appendix_b (plain seed 0 App. B)",
+    )
     covariance: ee.CovarianceConfig = field(default_factory=ee.CovarianceConfig)
-    equilibrium: bool = True  # taylor2: re-expand about the identified equilibrium (Eq. 13)
-    motor: str = "identify"  # a_Omega, b_Omega: "identify" (motor rows, Eq. 8) or "known"
-    motor_max_pinned: float = 0.01  # identify a_Omega, b_Omega only if no rotor is pinned at a
-    # speed limit longer than this fraction of the fit segment
-    motor_std: tuple[float, float] | None = None  # std of a_Omega, b_Omega where not identifiable
-    instruments: bool = False  # taylor2: rotor speeds instrumented by the motor model (EIV check)
-    motor_instrument: bool = True  # motor rows: measured speeds instrumented by the model's (EIV)
-    measurement_noise: dict = field(
-        default_factory=dict
-    )  # EIV: {state or "rotor": std | [std, rate_hz]}
-    excitation_threshold: float = 1e-6  # |u_e| above which the excitation counts as on
-    vmin: tuple[float, float, float] = (-5.0, -5.0, -5.0)
-    vmax: tuple[float, float, float] = (5.0, 5.0, 5.0)
-    validation: str = "hover"  # name pattern of the validation bag
-    quadrotor: dict = field(default_factory=dict)  # QuadrotorParams overrides (known elements)
+    equilibrium: bool = cf.flag(
+        True, "taylor2: re-expand about the identified equilibrium (Eq. 13)"
+    )
+    motor: str = cf.choice(
+        "identify",
+        ("identify", "known"),
+        "a_Omega, b_Omega: identify (motor rows, Eq. 8) or known",
+    )
+    motor_max_pinned: float = cf.number(
+        0.01,
+        "identify a_Omega, b_Omega only if no rotor is pinned at a speed limit longer than "
+        "this fraction of the fit segment, in [0, 1]",
+        lo=0.0,
+        hi=1.0,
+    )
+    motor_std: tuple[float, float] | None = cf.numbers(
+        None,
+        "[std a_Omega, std b_Omega] where not identifiable (null: none)",
+        length=2,
+        lo=0.0,
+        lo_open=True,
+        optional=True,
+    )
+    instruments: bool = cf.flag(
+        False, "taylor2: rotor speeds instrumented by the motor model (EIV check)"
+    )
+    motor_instrument: bool = cf.flag(
+        True, "motor rows: measured speeds instrumented by the model's (EIV)"
+    )
+    measurement_noise: dict = cf.table(
+        {},
+        "EIV: channel (a state or rotor): std per sample, or [std, rate_hz] (rate the "
+        "channel was sampled at; default the grid rate)",
+        item=cf.FieldSpec(cf.NUMBERS, lo=0.0, length=(1, 2), scalar=True),
+        choices=NOISE_CHANNELS,
+        nullable=True,
+    )
+    excitation_threshold: float = cf.number(
+        1e-6, "|u_e| above which the excitation counts as on", lo=0.0
+    )
+    vmin: tuple[float, float, float] = cf.numbers(
+        (-5.0, -5.0, -5.0), "scheduling box low corner [m/s] (seed 0 Eq. 20)", length=3
+    )
+    vmax: tuple[float, float, float] = cf.numbers(
+        (5.0, 5.0, 5.0), "scheduling box high corner [m/s]", length=3
+    )
+    validation: str = cf.text("hover", "name pattern of the validation bag")
+    quadrotor: dict = cf.table(
+        {},
+        "QuadrotorParams overrides of the known elements (checked when they are built)",
+        item=None,
+    )
 
     @classmethod
-    def from_dict(cls, d: dict | None) -> "IdentificationConfig":
-        if d is None:
-            d = {}
-        if not isinstance(d, dict):
-            raise ConfigError(f"identification config must be a mapping, got {type(d).__name__}")
-        from lpv_sysid.signals.multisine import MAX_SAMPLE_RATE
-
-        d = d.get("identification", d)
-        if not isinstance(d, dict):
-            raise ConfigError(f"identification: expected a mapping, got {type(d).__name__}")
-        d = dict(d)
-        check_keys(d, cls.__dataclass_fields__, "identification", list_allowed=True)
-        kw: dict = {}
-        kw["derivatives"] = deriv.DerivativeConfig.from_dict(d.pop("derivatives", None))
-        kw["uncertainty"] = unc.UncertaintyConfig.from_dict(d.pop("uncertainty", None))
-        kw["covariance"] = ee.CovarianceConfig.from_dict(d.pop("covariance", None))
-        for key in (
-            "trim_duration",
-            "trim_average",
-            "edge",
-            "min_fit_duration",
-            "sample_rate",
-            "excitation_threshold",
-            "motor_max_pinned",
-        ):
-            if key in d:
-                v = d.pop(key)
-                if not is_finite_number(v) or v < 0:
-                    raise ConfigError(
-                        f"identification.{key} must be a finite number >= 0, got {v!r}"
-                    )
-                if (
-                    key == "sample_rate" and v > MAX_SAMPLE_RATE
-                ):  # the common grid is allocated from it
-                    raise ConfigError(
-                        f"identification.sample_rate: {v:g} Hz exceeds the limit of "
-                        f"{MAX_SAMPLE_RATE:g} Hz"
-                    )
-                kw[key] = float(v)
-        if "max_lag" in d:
-            v = d.pop("max_lag")
-            if v is not None and not is_count(v):
-                raise ConfigError(
-                    f"identification.max_lag must be null or an integer >= 0, got {v!r}"
-                )
-            kw["max_lag"] = v
-        for key in ("vmin", "vmax"):
-            if key in d:
-                v = d.pop(key)
-                if not isinstance(v, (list, tuple)) or len(v) != 3:
-                    raise ConfigError(
-                        f"identification.{key} must be a list of 3 numbers, got {v!r}"
-                    )
-                kw[key] = tuple(float(a) for a in v)
-        for key in ("intercept", "equilibrium", "instruments", "motor_instrument"):
-            if key in d:
-                v = d.pop(key)
-                if not isinstance(v, bool):
-                    raise ConfigError(f"identification.{key} must be true or false, got {v!r}")
-                kw[key] = v
-        if "measurement_noise" in d:
-            kw["measurement_noise"] = parse_measurement_noise(d.pop("measurement_noise"))
-        if "motor_std" in d:
-            v = d.pop("motor_std")
-            if v is not None and (
-                not isinstance(v, (list, tuple))
-                or len(v) != 2
-                or not all(is_finite_number(a) and a > 0 for a in v)
-            ):
-                raise ConfigError(
-                    f"identification.motor_std must be null or [std a_Omega, std b_Omega] > 0, "
-                    f"got {v!r}"
-                )
-            kw["motor_std"] = None if v is None else (float(v[0]), float(v[1]))
-        if "motor" in d:
-            v = d.pop("motor")
-            if v not in ("identify", "known"):
-                raise ConfigError(f"identification.motor must be 'identify' or 'known', got {v!r}")
-            kw["motor"] = v
-        if "model" in d:
-            v = d.pop("model")
-            if v not in ("taylor2", "appendix_b"):
-                raise ConfigError(
-                    f"identification.model must be 'taylor2' or 'appendix_b', got {v!r}"
-                )
-            kw["model"] = v
-        if "validation" in d:
-            kw["validation"] = str(d.pop("validation"))
-        if "quadrotor" in d:
-            q = d.pop("quadrotor")
-            if not isinstance(q, dict):
-                raise ConfigError("identification.quadrotor must be a mapping")
-            kw["quadrotor"] = q
+    def from_dict(cls, d: dict | None, where: str = "identification") -> "IdentificationConfig":
+        """The ``identification`` section (or the mapping itself) and its sections."""
+        if isinstance(d, Mapping) and "identification" in d:
+            d = d["identification"]
+        d = d or {}
+        kw = cf.parse_fields(cls, d, where, other_keys=_SECTIONS)
+        for name, section in _SECTIONS.items():
+            kw[name] = section.from_dict(d.get(name), cf.join(where, name))
+        if "measurement_noise" in kw:
+            kw["measurement_noise"] = _noise_pairs(
+                kw["measurement_noise"], cf.join(where, "measurement_noise")
+            )
         cfg = cls(**kw)
-        if cfg.sample_rate <= 0:
-            raise ConfigError("identification.sample_rate must be > 0")
         if any(a >= b for a, b in zip(cfg.vmin, cfg.vmax)):
-            raise ConfigError(f"identification.vmin {cfg.vmin} must be below vmax {cfg.vmax}")
+            raise cf.error(where, "vmin", f"{cfg.vmin} must be below vmax {cfg.vmax}")
         return cfg
 
 
-def parse_measurement_noise(v) -> dict:
-    """``measurement_noise``: state name (STATE_NAMES) or ``rotor`` -> white-noise std per sample,
-    or ``[std, rate_hz]`` (the rate the channel was sampled at; default the grid rate)."""
+#: nested sections -> their classes (each parsed by its from_dict)
+_SECTIONS: dict[str, Any] = {
+    "derivatives": deriv.DerivativeConfig,
+    "uncertainty": unc.UncertaintyConfig,
+    "covariance": ee.CovarianceConfig,
+}
+
+
+def _noise_pairs(noise: Mapping[str, tuple], where: str) -> dict:
+    """``{channel: (std, rate_hz or None)}`` of the checked ``measurement_noise`` values."""
+    out = {}
+    for k, v in noise.items():
+        if len(v) == 2 and not v[1] > 0:
+            raise cf.error(where, f"{k}[1]", f"the rate must be > 0 Hz, got {v[1]!r}")
+        out[k] = (v[0], v[1] if len(v) == 2 else None)
+    return out
+
+
+def parse_measurement_noise(v, where: str = "identification.measurement_noise") -> dict:
+    """``measurement_noise`` (the declaration of :class:`IdentificationConfig`): state name
+    (STATE_NAMES) or ``rotor`` -> white-noise std per sample, or ``[std, rate_hz]`` (the rate
+    the channel was sampled at; default the grid rate) -> ``{channel: (std, rate or None)}``."""
     if v is None:
         return {}
-    if not isinstance(v, dict):
-        raise ConfigError(
-            f"identification.measurement_noise must be a mapping, got {type(v).__name__}"
-        )
-    out = {}
-    for k, x in v.items():
-        if k not in STATE_NAMES and k != "rotor":
-            raise ConfigError(
-                f"identification.measurement_noise: unknown channel {k!r}; "
-                f"allowed: {list(STATE_NAMES) + ['rotor']}"
-            )
-        pair = list(x) if isinstance(x, (list, tuple)) else [x, None]
-        if (
-            len(pair) != 2
-            or not is_finite_number(pair[0])
-            or pair[0] < 0
-            or (pair[1] is not None and (not is_finite_number(pair[1]) or pair[1] <= 0))
-        ):
-            raise ConfigError(
-                f"identification.measurement_noise.{k} must be std >= 0 or [std, rate_hz > 0], "
-                f"got {x!r}"
-            )
-        out[k] = (float(pair[0]), None if pair[1] is None else float(pair[1]))
-    return out
+    spec = cf.specs(IdentificationConfig)["measurement_noise"]
+    return _noise_pairs(cf.check_value(spec, v, where), where)
 
 
 def quadrotor_params(cfg: IdentificationConfig) -> QuadrotorParams:

@@ -41,65 +41,62 @@ from typing import Sequence
 
 import numpy as np
 
-from lpv_sysid.configuration.fields import check_keys
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io.formats import UncertainEntry
 
 METHODS = ("box", "influence", "hybrid")
 
 
+#: most corner systems of one vertex (Eq. 23): 2^16; beyond, no LMI solver takes them
+MAX_CORNERS = 65536
+
+
 @dataclass(frozen=True)
 class UncertaintyConfig:
-    k_sigma: float = 3.0
-    method: str = "influence"
-    p_max: int = 4
-    max_corners: int = 4096
-    freq_hz: tuple[float, float] = (0.05, 10.0)
-    n_freq: int = 40
-    output_states: tuple[int, ...] = (2, 3, 4)  # u, v, w: z = Q^-1 (v - v_d), Eq. (18)
-    joint_alpha: float | None = None  # see sidak_k: widen k for joint coverage
+    """The interval width (Eq. 22) and the reduction to corner systems (Eq. 23)."""
+
+    k_sigma: float = cf.number(
+        3.0,
+        "interval = nominal +/- k_sigma std (Eq. 22); at least 1: a narrower interval covers "
+        "less than 68 % of an element and the certified box (Eq. 23) misses the model",
+        lo=1.0,
+    )
+    method: str = cf.choice("influence", METHODS, "reduction to corners (module docstring)")
+    p_max: int = cf.count(4, "corner parameters per vertex, M_i = 2^p_max (Eq. 23)", hi=16)
+    max_corners: int = cf.count(
+        4096,
+        f"box: refused above this many corners; 1 .. {MAX_CORNERS} (2^16: larger corner "
+        "sets are no LMI a solver takes, the guard against 2^p corners)",
+        lo=1,
+        hi=MAX_CORNERS,
+    )
+    freq_hz: tuple[float, float] = cf.numbers(
+        (0.05, 10.0),
+        "band of the frequency-response influence ranking [Hz], [low, high]",
+        length=2,
+        lo=0.0,
+        lo_open=True,
+    )
+    n_freq: int = cf.count(40, "frequencies of the influence ranking", lo=2, hi=10_000)
+    output_states: tuple[int, ...] = cf.counts((2, 3, 4), "u, v, w: z = Q^-1 (v - v_d), Eq. (18)")
+    joint_alpha: float | None = cf.number(
+        None,
+        "null, or widen k (sidak_k) for joint coverage 1 - alpha of all elements",
+        lo=0.0,
+        lo_open=True,
+        hi=1.0,
+        hi_open=True,
+        optional=True,
+    )
 
     @classmethod
-    def from_dict(cls, d: dict | None) -> "UncertaintyConfig":
-        d = dict(d or {})
-        check_keys(
-            d,
-            (
-                "k_sigma",
-                "method",
-                "p_max",
-                "max_corners",
-                "freq_hz",
-                "n_freq",
-                "output_states",
-                "joint_alpha",
-            ),
-            "uncertainty",
-        )
-        if "freq_hz" in d:
-            d["freq_hz"] = tuple(float(v) for v in d["freq_hz"])
-        if "output_states" in d:
-            d["output_states"] = tuple(int(v) for v in d["output_states"])
-        cfg = cls(**d)
-        if not (np.isfinite(cfg.k_sigma) and cfg.k_sigma > 0):
-            raise ConfigError(f"uncertainty.k_sigma must be > 0, got {cfg.k_sigma!r}")
-        if cfg.method not in METHODS:
-            raise ConfigError(f"uncertainty.method must be one of {METHODS}, got {cfg.method!r}")
-        if int(cfg.p_max) != cfg.p_max or not 0 <= cfg.p_max <= 16:
-            raise ConfigError(
-                f"uncertainty.p_max must be an integer in [0, 16], got {cfg.p_max!r}"
-            )
-        if len(cfg.freq_hz) != 2 or not 0 < cfg.freq_hz[0] < cfg.freq_hz[1]:
-            raise ConfigError(
-                f"uncertainty.freq_hz must be [low, high] with 0 < low < high, got {cfg.freq_hz}"
-            )
-        if cfg.n_freq < 2:
-            raise ConfigError("uncertainty.n_freq must be >= 2")
-        if cfg.joint_alpha is not None and not 0 < cfg.joint_alpha < 1:
-            raise ConfigError(
-                f"uncertainty.joint_alpha must be in (0, 1) or null, got {cfg.joint_alpha!r}"
-            )
-        return cfg
+    def from_dict(cls, d: dict | None, where: str = "uncertainty") -> "UncertaintyConfig":
+        kw = cf.parse_fields(cls, d or {}, where)
+        lo, hi = kw.get("freq_hz", cls.freq_hz)
+        if not lo < hi:
+            raise cf.error(where, "freq_hz", f"need low < high, got {[lo, hi]}")
+        return cls(**kw)
 
 
 @dataclass(frozen=True)

@@ -3,17 +3,16 @@ and flushes its bags: :class:`RecorderConfig`, validated."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Mapping
 
-from lpv_sysid.errors import ConfigError
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.io.bag import FLUSH_INTERVAL_S, FLUSH_MESSAGES, RESERVE_BYTES
 
 
 @dataclass(frozen=True)
 class RecorderConfig:
-    """What to record and how to split it.
+    """What to record and how to split it, checked on every construction.
 
     ``topics`` maps a topic name to its type ``pkg/msg/Name``. ``split_size_bytes`` /
     ``split_duration_s``: start a new bag directory when the current one holds this many
@@ -24,67 +23,49 @@ class RecorderConfig:
     survive a power cut, ``reserve_bytes`` are kept free per bag for closing on a full disk.
     """
 
-    out_dir: str
-    topics: Mapping[str, str]
-    storage: str = "mcap"
-    split_size_bytes: int = 0
-    split_duration_s: float = 0.0
-    config_files: tuple[str, ...] = ()
-    gains_file: str = ""
-    description: str = ""
-    flush_interval_s: float = FLUSH_INTERVAL_S
-    flush_messages: int = FLUSH_MESSAGES
-    fsync: bool = False
-    reserve_bytes: int = RESERVE_BYTES
+    out_dir: str = cf.text(doc="directory of the bags")
+    topics: Mapping[str, str] = cf.table(
+        doc="absolute topic name -> type pkg/msg/Name", item=cf.FieldSpec(cf.TEXT)
+    )
+    storage: str = cf.choice("mcap", ("mcap", "sqlite3"), "rosbag2 storage")
+    split_size_bytes: int = cf.count(0, "new bag above this many payload bytes (0: never)")
+    split_duration_s: float = cf.number(
+        0.0, "new bag after this much recorded time [s] (0: never)", lo=0.0, unit=" s"
+    )
+    config_files: tuple[str, ...] = cf.texts(
+        (), "files copied verbatim into the metadata", nonempty=False
+    )
+    gains_file: str = cf.text("", "gains file hashed into the metadata", nonempty=False)
+    description: str = cf.text("", "free text of the metadata", nonempty=False)
+    flush_interval_s: float = cf.number(
+        FLUSH_INTERVAL_S,
+        "flush at least this often [s]; (0, 1] s: the data a killed recorder may lose",
+        lo=0.0,
+        lo_open=True,
+        hi=1.0,
+        unit=" s",
+    )
+    flush_messages: int = cf.count(FLUSH_MESSAGES, "flush after this many messages", lo=1)
+    fsync: bool = cf.flag(False, "fsync each flush (survives a power cut)")
+    reserve_bytes: int = cf.count(
+        RESERVE_BYTES,
+        "disk space kept free per bag for closing on a full disk; at most 1 GiB",
+        hi=1 << 30,
+    )
 
     def __post_init__(self):
-        if not self.out_dir:
-            raise ConfigError("recorder: out_dir must not be empty")
+        """The declared fields, then: at least one topic, absolute names, pkg/msg/Name."""
+        cf.normalize_fields(self, "recorder")
         if not self.topics:
-            raise ConfigError("recorder: topics must list at least one topic")
+            raise cf.error("recorder", "topics", "must list at least one topic")
         for topic, msgtype in self.topics.items():
-            if not isinstance(topic, str) or not topic.startswith("/"):
-                raise ConfigError(f"recorder: topic {topic!r} must be an absolute name")
-            if not isinstance(msgtype, str) or msgtype.count("/") != 2:
-                raise ConfigError(
-                    f"recorder: topics[{topic!r}] type {msgtype!r} is not 'pkg/msg/Name'"
+            if not topic.startswith("/"):
+                raise cf.error("recorder", "topics", f"topic {topic!r} must be an absolute name")
+            if msgtype.count("/") != 2:
+                raise cf.error(
+                    "recorder", f"topics.{topic}", f"type {msgtype!r} is not 'pkg/msg/Name'"
                 )
-        if self.storage not in ("mcap", "sqlite3"):
-            raise ConfigError(
-                f"recorder: storage must be 'mcap' or 'sqlite3', got {self.storage!r}"
-            )
-        if self.split_size_bytes < 0:
-            raise ConfigError("recorder: split_size_bytes must be >= 0")
-        if self.split_duration_s < 0:
-            raise ConfigError("recorder: split_duration_s must be >= 0")
-        f = self.flush_interval_s
-        if (
-            isinstance(f, bool)
-            or not isinstance(f, (int, float))
-            or not math.isfinite(f)
-            or not 0 < f <= 1.0
-        ):
-            raise ConfigError(
-                f"recorder: flush_interval_s must be in (0, 1] s (the data a "
-                f"killed recorder may lose), got {f!r}"
-            )
-        for name, lo in (("flush_messages", 1), ("reserve_bytes", 0)):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
-                raise ConfigError(f"recorder: {name} must be an integer >= {lo}, got {v!r}")
-        if not isinstance(self.fsync, bool):
-            raise ConfigError(f"recorder: fsync must be true or false, got {self.fsync!r}")
 
     @classmethod
-    def from_dict(cls, d: Mapping) -> "RecorderConfig":
-        known = set(cls.__dataclass_fields__)
-        bad = set(d) - known
-        if bad:
-            raise ConfigError(f"recorder: unknown key(s) {sorted(bad)}")
-        for req in ("out_dir", "topics"):
-            if req not in d:
-                raise ConfigError(f"recorder: missing key '{req}'")
-        kw = dict(d)
-        kw["topics"] = dict(kw["topics"])
-        kw["config_files"] = tuple(kw.get("config_files", ()))
-        return cls(**kw)
+    def from_dict(cls, d: Mapping, where: str = "recorder") -> "RecorderConfig":
+        return cls(**cf.parse_fields(cls, d, where))

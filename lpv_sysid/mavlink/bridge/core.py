@@ -12,9 +12,9 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from lpv_sysid.configuration.fields import check_config_keys
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.control.envelope import Envelope, EnvelopeConfig, Violation
-from lpv_sysid.errors import ConfigError, LpvSysidError, SafetyError
+from lpv_sysid.errors import LpvSysidError, SafetyError
 from lpv_sysid.mavlink import px4
 from lpv_sysid.mavlink.bridge.transport import (
     ActuatorSetpoint,
@@ -42,41 +42,67 @@ from lpv_sysid.mavlink.telemetry import (
 log = logging.getLogger(__name__)
 
 
+#: nested sections of the bridge config -> their classes (each parsed by its from_dict)
+_SECTIONS: dict[str, Any] = {
+    "link": LinkConfig,
+    "offboard": OffboardConfig,
+    "rotor_estimate": RotorEstimateConfig,
+    "envelope": EnvelopeConfig,
+}
+
+
 @dataclass(frozen=True)
 class BridgeConfig:
-    """``config/mavlink_bridge.yaml``: sections ``link``, ``offboard``, ``envelope``,
-    ``command``."""
+    """``config/mavlink_bridge.yaml``: sections ``link``, ``offboard``, ``rotor_estimate``,
+    ``envelope`` and the command path, checked by :meth:`validate` (also for a config built
+    in code: :class:`BridgeCore` calls it; the parts that use a section check it)."""
 
     link: LinkConfig = field(default_factory=LinkConfig)
     offboard: OffboardConfig = field(default_factory=OffboardConfig)
-    command: str = "velocity"  # velocity | attitude_rate
-    velocity_frame: str = "body_ned"  # body_ned | local_ned
-    use_yaw_rate: bool = True
-    arm_length: float = 0.225  # attitude_rate: seed 0 Eq. (7) geometry
-    rate_p: tuple[float, float, float] = (0.15, 0.15, 0.2)
-    auto_start: bool = False  # start the machine on the first command
-    telemetry_max_age: float = 0.5
-    n_rotors: int = 4
+    command: str = cf.text(
+        "velocity",
+        "setpoint kind: velocity | attitude_rate | rate_setpoint (the transports of "
+        "make_transport, which checks it with the geometry)",
+    )
+    velocity_frame: str = cf.choice(
+        "body_ned", ("body_ned", "local_ned"), "velocity setpoint frame (PX4 rotates by yaw)"
+    )
+    use_yaw_rate: bool = cf.flag(True, "velocity setpoints carry the yaw-rate reference")
+    arm_length: float = cf.number(
+        0.225, "attitude_rate: seed 0 Eq. (7) geometry [m]", lo=0.01, hi=10.0, unit=" m"
+    )
+    rate_p: tuple[float, float, float] = cf.numbers(
+        (0.15, 0.15, 0.2),
+        "attitude_rate: PX4 MC_ROLLRATE_P, MC_PITCHRATE_P, MC_YAWRATE_P; 0.01 .. 0.6 (PX4's "
+        "ranges: omega_sp = omega + tau / K_p amplifies a smaller one)",
+        length=3,
+        lo=0.01,
+        hi=0.6,
+    )
+    auto_start: bool = cf.flag(False, "start the machine on the first command")
+    telemetry_max_age: float = cf.number(
+        0.5,
+        "attitude/velocity older than this makes no state sample [s]; 0.01 .. 1 s: older "
+        "telemetry is no feedback for a flying vehicle",
+        lo=0.01,
+        hi=1.0,
+        unit=" s",
+    )
+    n_rotors: int = cf.count(4, "number of rotors (ESC_STATUS / motor outputs)", lo=1, hi=8)
     rotor_estimate: RotorEstimateConfig = field(
         default_factory=RotorEstimateConfig
     )  # no ESC telemetry
     envelope: EnvelopeConfig = field(default_factory=EnvelopeConfig)  # control/envelope.py
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "BridgeConfig":
-        check_config_keys(d, cls.__dataclass_fields__, "mavlink bridge")
-        kw = dict(d)
-        kw["link"] = LinkConfig.from_dict(d.get("link", {}) or {})
-        kw["offboard"] = OffboardConfig.from_dict(d.get("offboard", {}) or {})
-        kw["envelope"] = EnvelopeConfig.from_dict(d.get("envelope", {}) or {})
-        kw["rotor_estimate"] = RotorEstimateConfig.from_dict(d.get("rotor_estimate", {}) or {})
-        if "rate_p" in kw:
-            try:
-                kw["rate_p"] = tuple(float(x) for x in kw["rate_p"])
-            except (TypeError, ValueError):
-                raise ConfigError("rate_p must be a list of 3 numbers") from None
+    def from_dict(cls, d: Mapping[str, Any], where: str = "") -> "BridgeConfig":
+        """The fields and sections of ``d``; ``where`` prefixes the paths (node parameters:
+        none, so a message names the parameter, ``link.url``)."""
+        kw = cf.parse_fields(cls, d, where, other_keys=_SECTIONS)
+        for name, section in _SECTIONS.items():
+            kw[name] = section.from_dict(d.get(name) or {}, cf.join(where, name))
         cfg = cls(**kw)
-        cfg.transport()  # validates command/frame/geometry
+        cfg.validate(where)
         return cfg
 
     @classmethod
@@ -84,10 +110,13 @@ class BridgeConfig:
         from lpv_sysid.io.files import read_yaml_mapping
 
         d = read_yaml_mapping(path)  # an explicitly given empty or non-mapping file is an error
-        try:
-            return cls.from_dict(d)
-        except ConfigError as exc:
-            raise ConfigError(f"{path}: {exc}") from None
+        return cls.from_dict(d, path)
+
+    def validate(self, where: str = "") -> None:
+        """The declared fields of the top level, then the command against its transport
+        (:func:`make_transport` checks the kind and the geometry)."""
+        cf.check_fields(self, where)
+        cf.under(cf.join(where, "command"), self.transport)
 
     def transport(self):
         if self.command == "velocity":
@@ -114,6 +143,7 @@ class BridgeCore:
         link: MavlinkLink | None = None,
         sample_callback: Callable[[Any], None] | None = None,
     ) -> None:
+        config.validate()
         self.config = config
         self.link = link or MavlinkLink(
             with_motor_output_streams(config.link, config.rotor_estimate)

@@ -54,8 +54,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from lpv_sysid.configuration.fields import check_config_keys
-from lpv_sysid.errors import ConfigError
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.io import frames, messages
 from lpv_sysid.mavlink.offboard import StatusEvent
 
@@ -91,53 +90,72 @@ STREAMING_STATES = (MavrosState.PRESTREAM, MavrosState.STREAMING)
 
 @dataclass(frozen=True)
 class MavrosConfig:
-    """MAVROS-mode parameters (node parameters ``mavros.*`` plus the shared ones)."""
+    """MAVROS-mode parameters (node parameters ``mavros.*`` plus the shared ones), checked
+    by :meth:`validate` (also for a config built in code: :class:`MavrosCore` calls it)."""
 
-    namespace: str = "/mavros"
-    odom_frame_id: str = "map"  # MAVROS local_position ``frame_id`` (default map)
-    base_frame_id: str = "base_link"  # MAVROS ``tf.child_frame_id`` / imu ``frame_id``
-    setpoint_rate_hz: float = 20.0  # PX4 needs > 2 Hz
-    input_timeout: float = 0.5  # no velocity_reference for longer -> stop
-    prestream_timeout: float = 30.0  # zero-velocity stream without any reference -> stop
-    telemetry_max_age: float = 0.5  # odometry older than this cannot rotate the reference
-    send_on_command: bool = True
-    auto_start: bool = False
-    use_diagnostics: bool = True  # observe the PX4 mode on /diagnostics (read-only)
-    command: str = "velocity"
+    namespace: str = cf.text("/mavros", "MAVROS node namespace, an absolute ROS name")
+    odom_frame_id: str = cf.text("map", "frame_id of MAVROS local_position/odom")
+    base_frame_id: str = cf.text("base_link", "MAVROS body frame (odom child, imu)")
+    setpoint_rate_hz: float = cf.number(
+        20.0,
+        "setpoint stream rate [Hz]; PX4 needs > 2 Hz (COM_OF_LOSS_T), at most 1000 Hz",
+        lo=2.0,
+        lo_open=True,
+        hi=1000.0,
+        unit=" Hz",
+    )
+    input_timeout: float = cf.number(
+        0.5,
+        "no velocity_reference for this long -> stop [s]; 0.01 .. 2 s: the last reference is "
+        "streamed meanwhile (PX4's own offboard-loss time COM_OF_LOSS_T is 1 s)",
+        lo=0.01,
+        hi=2.0,
+        unit=" s",
+    )
+    prestream_timeout: float = cf.number(
+        30.0,
+        "zero-velocity stream without any reference -> stop [s]; > 1 s (PX4's pre-stream), "
+        "at most 300 s: the operator switches to OFFBOARD within minutes or not at all",
+        lo=1.0,
+        lo_open=True,
+        hi=300.0,
+        unit=" s",
+    )
+    telemetry_max_age: float = cf.number(
+        0.5,
+        "odometry older than this cannot rotate the reference [s]; 0.01 .. 1 s: an older "
+        "attitude turns the setpoint by whatever the vehicle yawed since",
+        lo=0.01,
+        hi=1.0,
+        unit=" s",
+    )
+    send_on_command: bool = cf.flag(True, "forward each new reference at once (latency)")
+    auto_start: bool = cf.flag(False, "start streaming on the first reference")
+    use_diagnostics: bool = cf.flag(True, "observe the PX4 mode on /diagnostics (read-only)")
+    command: str = cf.text("velocity", "setpoint kind; MAVROS mode streams velocity only")
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "MavrosConfig":
-        check_config_keys(d, cls.__dataclass_fields__, "mavros")
-        cfg = cls(**dict(d))
-        cfg.validate()
+    def from_dict(cls, d: Mapping[str, Any], where: str = "mavros") -> "MavrosConfig":
+        cfg = cls(**cf.parse_fields(cls, d, where))
+        cfg.validate(where)
         return cfg
 
-    def validate(self) -> None:
-        def num(name: str, lo: float, hi: float) -> None:
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (lo <= v <= hi):
-                raise ConfigError(f"mavros.{name} must be a number in [{lo}, {hi}], got {v!r}")
-
-        num("setpoint_rate_hz", 2.0001, 1000.0)
-        num("input_timeout", 0.01, 60.0)
-        num("prestream_timeout", 1.0001, 3600.0)
-        num("telemetry_max_age", 0.01, 10.0)
-        for name in ("send_on_command", "auto_start", "use_diagnostics"):
-            if not isinstance(getattr(self, name), bool):
-                raise ConfigError(f"mavros.{name} must be a boolean, got {getattr(self, name)!r}")
+    def validate(self, where: str = "mavros") -> None:
+        """The declared fields, then: the namespace is an absolute name, the command is
+        velocity (the only setpoint of common_interfaces)."""
+        cf.check_fields(self, where)
         ns = self.namespace
-        if not isinstance(ns, str) or not ns.startswith("/") or ns.endswith("/") or "//" in ns:
-            raise ConfigError(
-                f"mavros.namespace must be an absolute name like '/mavros', got {ns!r}"
+        if not ns.startswith("/") or ns.endswith("/") or "//" in ns:
+            raise cf.error(
+                where, "namespace", f"must be an absolute name like '/mavros', got {ns!r}"
             )
-        for name in ("odom_frame_id", "base_frame_id"):
-            if not isinstance(getattr(self, name), str) or not getattr(self, name):
-                raise ConfigError(f"mavros.{name} must be a non-empty string")
         if self.command != "velocity":
-            raise ConfigError(
-                f"command {self.command!r} is not available with transport mavros: "
-                "MAVROS's attitude/actuator setpoints need mavros_msgs; use "
-                "command velocity or transport mavlink"
+            raise cf.error(
+                where,
+                "command",
+                f"{self.command!r} is not available with transport mavros: MAVROS's "
+                "attitude/actuator setpoints need mavros_msgs; use command velocity or "
+                "transport mavlink",
             )
 
     def topic(self, key: str) -> str:

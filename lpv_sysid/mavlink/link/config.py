@@ -7,7 +7,7 @@ import binascii
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-from lpv_sysid.configuration.fields import check_config_keys
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.mavlink import codec
 from lpv_sysid.mavlink.link.url import parse_url
@@ -30,77 +30,92 @@ DEFAULT_STREAMS: tuple[tuple[str, float], ...] = (
 )
 
 
+_HZ = cf.FieldSpec(cf.NUMBER, "Hz, 0 = off", lo=0.0, hi=1000.0, unit=" Hz")
+_ID = {"hi": 255}  # MAVLink system and component ids are uint8
+
+
 @dataclass(frozen=True)
 class LinkConfig:
-    """Link parameters (``config/mavlink_bridge.yaml`` section ``link``)."""
+    """Link parameters (``config/mavlink_bridge.yaml`` section ``link``), checked by
+    :meth:`validate` (also for a config built in code: :class:`MavlinkLink` calls it)."""
 
-    url: str = "udpin:127.0.0.1:14540"
-    baud: int = 921600
-    source_system: int = 1
-    source_component: int = 191  # MAV_COMP_ID_ONBOARD_COMPUTER
-    target_system: int = 0  # 0: learn from the first autopilot HEARTBEAT
-    target_component: int = 1  # MAV_COMP_ID_AUTOPILOT1
-    dialect: str = codec.DEFAULT_DIALECT
-    heartbeat_period: float = 1.0
-    link_timeout: float = 1.5
-    reconnect_period: float = 2.0
-    stream_request_period: float = 1.0
-    streams: tuple[tuple[str, float], ...] = DEFAULT_STREAMS
-    signing_key_file: str | None = None
-    signing_link_id: int = 0
-    allow_unsigned: bool = False
-    mav_type: int = MAV_TYPE_ONBOARD_CONTROLLER
+    url: str = cf.text(
+        "udpin:127.0.0.1:14540",
+        "pymavlink connection string (udpin:H:P, udpout:H:P, tcp:H:P, serial device)",
+    )
+    baud: int = cf.count(921600, "serial baud rate (serial URLs only)", lo=1)
+    source_system: int = cf.count(1, "our MAVLink system id", lo=1, **_ID)
+    source_component: int = cf.count(191, "our component id (MAV_COMP_ID_ONBOARD_COMPUTER)", **_ID)
+    target_system: int = cf.count(
+        0, "autopilot system id; 0: the first autopilot HEARTBEAT", **_ID
+    )
+    target_component: int = cf.count(1, "autopilot component id (MAV_COMP_ID_AUTOPILOT1)", **_ID)
+    dialect: str = cf.text(codec.DEFAULT_DIALECT, "MAVLink dialect (PX4: development)")
+    heartbeat_period: float = cf.number(
+        1.0,
+        "our HEARTBEAT period [s]; 0.05 .. 5 s: faster floods the link, slower than 5 s and "
+        "PX4 (and a GCS) may declare the companion lost",
+        lo=0.05,
+        hi=5.0,
+        unit=" s",
+    )
+    link_timeout: float = cf.number(
+        1.5,
+        "no autopilot HEARTBEAT (1 Hz) for this long -> link lost [s]; 0.1 .. 10 s: longer "
+        "hides a lost link past PX4's own datalink-loss time (COM_DL_LOSS_T, 10 s)",
+        lo=0.1,
+        hi=10.0,
+        unit=" s",
+    )
+    reconnect_period: float = cf.number(
+        2.0,
+        "reopen period of a lost serial/TCP link [s]; 0.1 .. 60 s (shorter spins on a "
+        "missing device)",
+        lo=0.1,
+        hi=60.0,
+        unit=" s",
+    )
+    stream_request_period: float = cf.number(
+        1.0,
+        "SET_MESSAGE_INTERVAL retry period for missing streams [s]; 0.1 .. 60 s",
+        lo=0.1,
+        hi=60.0,
+        unit=" s",
+    )
+    streams: tuple[tuple[str, float], ...] = cf.table(
+        DEFAULT_STREAMS,
+        "requested telemetry rates, MESSAGE_NAME: Hz in [0, 1000] (0: off)",
+        item=_HZ,
+        pairs=True,
+    )
+    signing_key_file: str | None = cf.text(
+        None,
+        "MAVLink 2 signing key file (32 raw bytes or 64 hex chars); null or empty: unsigned",
+        nonempty=False,
+        optional=True,
+    )
+    signing_link_id: int = cf.count(0, "MAVLink 2 signing link id (uint8)", hi=255)
+    allow_unsigned: bool = cf.flag(False, "with a signing key: still accept unsigned messages")
+    mav_type: int = cf.count(
+        MAV_TYPE_ONBOARD_CONTROLLER, "MAV_TYPE of our HEARTBEAT (uint8)", hi=255
+    )
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "LinkConfig":
-        check_config_keys(d, cls.__dataclass_fields__, "link")
-        kw = dict(d)
-        if "streams" in kw:
-            s = kw["streams"]
-            if not isinstance(s, Mapping):
-                raise ConfigError("link.streams must be a mapping MESSAGE_NAME: rate_hz")
-            kw["streams"] = tuple(
-                (str(k), _positive(f"link.streams.{k}", v, allow_zero=True)) for k, v in s.items()
-            )
-        cfg = cls(**kw)
-        cfg.validate()
+    def from_dict(cls, d: Mapping[str, Any], where: str = "link") -> "LinkConfig":
+        cfg = cls(**cf.parse_fields(cls, d, where))
+        cfg.validate(where)
         return cfg
 
-    def validate(self) -> None:
-        if not isinstance(self.url, str) or not self.url:
-            raise ConfigError("link.url must be a non-empty string")
-        parse_url(self.url)
-        for name in ("source_system", "target_system", "source_component", "target_component"):
-            v = getattr(self, name)
-            if not isinstance(v, int) or not 0 <= v <= 255:
-                raise ConfigError(f"link.{name} must be an integer 0..255, got {v!r}")
-        if self.source_system == 0:
-            raise ConfigError("link.source_system must be 1..255")
-        for name in (
-            "heartbeat_period",
-            "link_timeout",
-            "reconnect_period",
-            "stream_request_period",
-        ):
-            _positive(f"link.{name}", getattr(self, name))
-        mod = codec.dialect_module(self.dialect)
-        for name, rate in self.streams:
+    def validate(self, where: str = "link") -> None:
+        """The declared fields, then the URL and the stream names against the dialect."""
+        cf.check_fields(self, where)
+        cf.under(cf.join(where, "url"), parse_url, self.url)
+        mod = cf.under(cf.join(where, "dialect"), codec.dialect_module, self.dialect)
+        for name, _ in self.streams:
             if name != "ESC_STATUS" and not hasattr(mod, f"MAVLINK_MSG_ID_{name}"):
-                raise ConfigError(f"link.streams: unknown MAVLink message {name!r}")
-            _positive(f"link.streams.{name}", rate, allow_zero=True)
-
-
-def _positive(name: str, v: Any, allow_zero: bool = False) -> float:
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{name} must be a number, got {v!r}") from None
-    if f != f or f in (float("inf"), float("-inf")) or f < 0 or (f == 0 and not allow_zero):
-        raise ConfigError(
-            f"{name} must be a finite {'non-negative' if allow_zero else 'positive'} number, got "
-            f"{v!r}"
-        )
-    return f
+                raise cf.error(
+                    where, f"streams.{name}", f"unknown MAVLink message (dialect {self.dialect})"
+                )
 
 
 def load_signing_key(path: str) -> bytes:

@@ -4,104 +4,110 @@ offboard state machine (:mod:`lpv_sysid.mavlink.offboard`) and their PX4 limits.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping
 
-from lpv_sysid.configuration.fields import check_config_keys
-from lpv_sysid.errors import ConfigError
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.mavlink import px4
+
+
+#: PX4 modes a hand-back may request (names compared in upper case, kept as written)
+_MODES: dict[str, Any] = {"choices": tuple(px4.HANDBACK_MODES), "fold_case": True}
 
 
 @dataclass(frozen=True)
 class OffboardConfig:
-    """``config/mavlink_bridge.yaml`` section ``offboard``.
+    """``config/mavlink_bridge.yaml`` section ``offboard``, checked by :meth:`validate` (also
+    for a config built in code: the offboard machine calls it).
 
     ``handback_chain``: PX4 modes tried in turn on hand-back (names of
     :data:`lpv_sysid.mavlink.px4.HANDBACK_MODES`). ``handback_mode`` (optional, the
     single-mode key of earlier releases and of the bridge node's parameters): tried first,
-    then the other modes of ``handback_chain``.
+    then the other modes of ``handback_chain``. The timeouts bound the hand-back: each mode
+    takes at most ``(max_retries + 1) ack_timeout + mode_confirm_timeout``.
     """
 
-    setpoint_rate_hz: float = 20.0
-    prestream_time: float = 1.2
-    arm: bool = False
-    handback_chain: tuple[str, ...] = ("HOLD", "LAND")
-    handback_mode: str | None = None
-    input_timeout: float = 0.5  # no ROS command for longer -> hand back
-    ack_timeout: float = 0.5  # per attempt, for the first COMMAND_ACK
-    ack_settle_s: float = 0.2  # quiet time after the last ACK before a step counts
-    max_retries: int = 3
-    mode_confirm_timeout: float = 2.0  # HEARTBEAT must show the mode/arming after ACCEPTED
-    send_on_command: bool = True  # forward a new command at once (latency)
+    setpoint_rate_hz: float = cf.number(
+        20.0,
+        "setpoint stream rate [Hz]; PX4 needs > 2 Hz (COM_OF_LOSS_T), at most 1000 Hz",
+        lo=2.0,
+        lo_open=True,
+        hi=1000.0,
+        unit=" Hz",
+    )
+    prestream_time: float = cf.number(
+        1.2,
+        "setpoints streamed before OFFBOARD is requested [s]; PX4 needs > 1 s, at most 60 s",
+        lo=1.0,
+        lo_open=True,
+        hi=60.0,
+        unit=" s",
+    )
+    arm: bool = cf.flag(False, "arm via MAV_CMD_COMPONENT_ARM_DISARM on start")
+    handback_chain: tuple[str, ...] = cf.texts(
+        ("HOLD", "LAND"),
+        "PX4 modes tried in turn on hand-back until the HEARTBEAT confirms one",
+        unique=True,
+        **_MODES,
+    )
+    handback_mode: str | None = cf.choice(
+        None,
+        doc="tried before the chain (single-mode key of earlier releases)",
+        optional=True,
+        **_MODES,
+    )
+    input_timeout: float = cf.number(
+        0.5,
+        "no ROS command for this long -> hand back [s]; 0.01 .. 2 s: the last command is "
+        "streamed meanwhile, so this is how long the vehicle flies on after its commander "
+        "died (PX4's own offboard-loss time COM_OF_LOSS_T is 1 s)",
+        lo=0.01,
+        hi=2.0,
+        unit=" s",
+    )
+    ack_timeout: float = cf.number(
+        0.5,
+        "per attempt, for the first COMMAND_ACK [s]; 0.01 .. 5 s (PX4 answers within "
+        "~50 ms; longer only delays the hand-back)",
+        lo=0.01,
+        hi=5.0,
+        unit=" s",
+    )
+    ack_settle_s: float = cf.number(
+        0.2,
+        "quiet time after the last ACK before a step counts [s]; 0 .. 1 s (PX4's verdict "
+        "follows its first ACCEPTED within 0-15 ms on v1.16 SIH, ~50 ms seen)",
+        lo=0.0,
+        hi=1.0,
+        unit=" s",
+    )
+    max_retries: int = cf.count(
+        3, "command retries per step; at most 10 (each costs ack_timeout of hand-back)", hi=10
+    )
+    mode_confirm_timeout: float = cf.number(
+        2.0,
+        "after ACCEPTED, for the HEARTBEAT (1 Hz) to show the mode/arming [s]; 0.01 .. 10 s",
+        lo=0.01,
+        hi=10.0,
+        unit=" s",
+    )
+    send_on_command: bool = cf.flag(True, "forward a new command at once (latency)")
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "OffboardConfig":
-        check_config_keys(d, cls.__dataclass_fields__, "offboard")
-        kw = dict(d)
-        chain = kw.get("handback_chain")
-        if chain is not None:
-            if isinstance(chain, (str, bytes)) or not isinstance(chain, Sequence):
-                raise ConfigError(
-                    f"offboard.handback_chain must be a list of PX4 mode names, got {chain!r}"
-                )
-            kw["handback_chain"] = tuple(chain)
-        cfg = cls(**kw)
-        cfg.validate()
+    def from_dict(cls, d: Mapping[str, Any], where: str = "offboard") -> "OffboardConfig":
+        cfg = cls(**cf.parse_fields(cls, d, where))
+        cfg.validate(where)
         return cfg
 
-    def validate(self) -> None:
-        def num(name: str, lo: float, hi: float = math.inf) -> None:
-            v = getattr(self, name)
-            if (
-                isinstance(v, bool)
-                or not isinstance(v, (int, float))
-                or not (lo <= v <= hi)
-                or v != v
-            ):
-                raise ConfigError(f"offboard.{name} must be a number in [{lo}, {hi}], got {v!r}")
-
-        num("setpoint_rate_hz", 2.0001, 1000.0)  # PX4 needs > 2 Hz
-        num("prestream_time", 1.0001, 60.0)  # PX4 needs > 1 s
-        num("input_timeout", 0.01, 60.0)
-        num("ack_timeout", 0.01, 60.0)
-        num("ack_settle_s", 0.0, 10.0)
-        num("mode_confirm_timeout", 0.01, 60.0)
+    def validate(self, where: str = "offboard") -> None:
+        """The declared fields, then: the settle time fits in the confirmation time."""
+        cf.check_fields(self, where)
         if self.ack_settle_s >= self.mode_confirm_timeout:
-            raise ConfigError(
-                f"offboard.ack_settle_s ({self.ack_settle_s}) must be below "
-                f"offboard.mode_confirm_timeout ({self.mode_confirm_timeout})"
-            )
-        if (
-            not isinstance(self.max_retries, int)
-            or isinstance(self.max_retries, bool)
-            or not 0 <= self.max_retries <= 100
-        ):
-            raise ConfigError(
-                f"offboard.max_retries must be an integer 0..100, got {self.max_retries!r}"
-            )
-        if not isinstance(self.arm, bool) or not isinstance(self.send_on_command, bool):
-            raise ConfigError("offboard.arm and offboard.send_on_command must be booleans")
-        chain = self.handback_chain
-        if isinstance(chain, (str, bytes)) or not isinstance(chain, Sequence) or not chain:
-            raise ConfigError(
-                f"offboard.handback_chain must be a non-empty list of mode names, got {chain!r}"
-            )
-        for name in chain:
-            if not isinstance(name, str) or name.upper() not in px4.HANDBACK_MODES:
-                raise ConfigError(
-                    f"offboard.handback_chain: {name!r} is not a hand-back mode; use "
-                    f"{sorted(px4.HANDBACK_MODES)}"
-                )
-        if len({n.upper() for n in chain}) != len(chain):
-            raise ConfigError(f"offboard.handback_chain lists a mode twice: {list(chain)}")
-        if self.handback_mode is not None and (
-            not isinstance(self.handback_mode, str)
-            or self.handback_mode.upper() not in px4.HANDBACK_MODES
-        ):
-            raise ConfigError(
-                f"offboard.handback_mode must be one of {sorted(px4.HANDBACK_MODES)}, "
-                f"got {self.handback_mode!r}"
+            raise cf.error(
+                where,
+                "ack_settle_s",
+                f"{self.ack_settle_s} s must be below mode_confirm_timeout "
+                f"({self.mode_confirm_timeout} s)",
             )
 
     @property

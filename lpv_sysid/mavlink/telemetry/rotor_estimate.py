@@ -49,7 +49,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from lpv_sysid.configuration.fields import check_config_keys, is_count, is_finite_number
+from lpv_sysid.configuration import fields as cf
+from lpv_sysid.configuration.fields import is_finite_number
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io.messages import ROTOR_SOURCES
 from lpv_sysid.mavlink import px4
@@ -124,102 +125,95 @@ class MotorModel:
         )
 
 
+_OVERRIDE = {"optional": True, "lo": 0.0, "lo_open": True}
+
+
 @dataclass(frozen=True)
 class RotorEstimateConfig:
-    """``rotor_estimate`` section of ``config/mavlink_bridge.yaml``.
+    """``rotor_estimate`` section of ``config/mavlink_bridge.yaml``, checked by
+    :meth:`validate`.
 
     ``motor_outputs``: 1-based output channel of rotor 1..n (PX4 numbering of DESIGN.md;
     PX4's quad-X default maps Motor 1..4 to outputs 1..4). ``servo_port``: SERVO_OUTPUT_RAW
     ``port`` carrying the motors. ``airframe``: YAML file with a ``quadrotor`` section
     (relative paths: working directory, then the shipped ``config/``); empty: the built-in
     airframe (``QuadrotorParams()`` = ``config/quadrotor.yaml``). ``a_omega`` ..
-    ``omega_max``: override the airframe's values (e.g. identified ones). ``max_gap`` [s]:
-    longer gaps between output samples restart the estimate. ``esc_timeout`` [s]: ESC
-    telemetry older than this is stale and the estimate is published instead.
+    ``omega_max``: override the airframe's values (e.g. identified ones), seed 0 Eq. (8).
     """
 
-    enabled: bool = True
-    source: str = "auto"
-    mapping: str = "pwm"
-    output_min: float | None = None
-    output_max: float | None = None
-    motor_outputs: tuple[int, ...] = (1, 2, 3, 4)
-    servo_port: int = 0
-    airframe: str = ""
-    a_omega: float | None = None
-    b_omega: float | None = None
-    omega_min: float | None = None
-    omega_max: float | None = None
-    max_gap: float = 0.25
-    esc_timeout: float = 0.2
+    enabled: bool = cf.flag(True, "estimate rotor speeds while no fresh ESC telemetry")
+    source: str = cf.choice("auto", SOURCES, "message of the motor outputs")
+    mapping: str = cf.choice("pwm", tuple(MAPPINGS), "motor output -> u_ESC (module docstring)")
+    output_min: float | None = cf.number(
+        None, "override of the mapping's output range (low end)", optional=True
+    )
+    output_max: float | None = cf.number(
+        None, "override of the mapping's output range (high end)", optional=True
+    )
+    motor_outputs: tuple[int, ...] = cf.counts(
+        (1, 2, 3, 4), "output channel (1-based) of rotor 1..n", lo=1, hi=32, unique=True
+    )
+    servo_port: int = cf.count(0, "SERVO_OUTPUT_RAW port of the motors (uint8)", hi=255)
+    airframe: str = cf.text(
+        "",
+        "YAML with a quadrotor section; empty or null: the built-in airframe",
+        nonempty=False,
+        nullable=True,
+    )
+    a_omega: float | None = cf.number(None, "a_Omega [1/s] (null: the airframe's)", **_OVERRIDE)
+    b_omega: float | None = cf.number(
+        None, "b_Omega [rad/s^2 per unit u_ESC] (null: the airframe's)", **_OVERRIDE
+    )
+    omega_min: float | None = cf.number(
+        None,
+        "idle speed of a running motor [rad/s] (null: the airframe's)",
+        optional=True,
+        lo=0.0,
+    )
+    omega_max: float | None = cf.number(
+        None, "largest rotor speed [rad/s] (null: the airframe's)", **_OVERRIDE
+    )
+    max_gap: float = cf.number(
+        0.25,
+        "longer gaps between output samples restart the estimate at the steady state [s]; "
+        "at most 2 s: across a longer gap the held output says nothing about the motor "
+        "(5 / a_Omega = 0.4 s settles it)",
+        lo=0.0,
+        lo_open=True,
+        hi=2.0,
+        unit=" s",
+    )
+    esc_timeout: float = cf.number(
+        0.2,
+        "ESC telemetry older than this is stale and the estimate is published instead [s]; "
+        "at most 1 s: an older rotor speed is no feedback (the controller accepts 0.05 s)",
+        lo=0.0,
+        lo_open=True,
+        hi=1.0,
+        unit=" s",
+    )
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "RotorEstimateConfig":
-        check_config_keys(d, cls.__dataclass_fields__, "rotor_estimate")
-        kw = dict(d)
-        if "motor_outputs" in kw:
-            mo = kw["motor_outputs"]
-            if isinstance(mo, (str, bytes)) or not isinstance(mo, Sequence):
-                raise ConfigError(
-                    f"rotor_estimate.motor_outputs must be a list of output channels "
-                    f"(1-based), got {mo!r}"
-                )
-            kw["motor_outputs"] = tuple(mo)
-        if kw.get("airframe") is None:
-            kw["airframe"] = ""
-        cfg = cls(**kw)
-        cfg.validate()
+    def from_dict(
+        cls, d: Mapping[str, Any], where: str = "rotor_estimate"
+    ) -> "RotorEstimateConfig":
+        cfg = cls(**cf.parse_fields(cls, d, where))
+        cfg.validate(where)
         return cfg
 
-    def validate(self) -> None:
-        if not isinstance(self.enabled, bool):
-            raise ConfigError(
-                f"rotor_estimate.enabled must be true or false, got {self.enabled!r}"
-            )
-        if self.source not in SOURCES:
-            raise ConfigError(
-                f"rotor_estimate.source must be one of {SOURCES}, got {self.source!r}"
-            )
-        if self.mapping not in MAPPINGS:
-            raise ConfigError(
-                f"rotor_estimate.mapping must be one of {sorted(MAPPINGS)}, got {self.mapping!r}"
-            )
-        for name in ("output_min", "output_max", "a_omega", "b_omega", "omega_min", "omega_max"):
-            v = getattr(self, name)
-            if v is not None and not is_finite_number(v):
-                raise ConfigError(
-                    f"rotor_estimate.{name} must be a finite number or null, got {v!r}"
-                )
+    def validate(self, where: str = "rotor_estimate") -> None:
+        """The declared fields, then: the output range is increasing, SERVO_OUTPUT_RAW
+        carries outputs 1..16 only."""
+        cf.check_fields(self, where)
         lo, hi = self.output_range()
         if not lo < hi:
-            raise ConfigError(
-                f"rotor_estimate: output_min ({lo:g}) must be below output_max ({hi:g})"
+            raise cf.error(where, "output_min", f"{lo:g} must be below output_max ({hi:g})")
+        if self.source == "servo_output_raw" and max(self.motor_outputs) > 16:
+            raise cf.error(
+                where,
+                "motor_outputs",
+                f"SERVO_OUTPUT_RAW carries outputs 1..16, got {list(self.motor_outputs)}",
             )
-        mo = self.motor_outputs
-        if not mo or not all(is_count(c, 1) and c <= 32 for c in mo) or len(set(mo)) != len(mo):
-            raise ConfigError(
-                f"rotor_estimate.motor_outputs must list distinct output channels 1..32, "
-                f"got {list(mo)!r}"
-            )
-        if not (is_count(self.servo_port) and self.servo_port <= 255):
-            raise ConfigError(
-                f"rotor_estimate.servo_port must be an integer 0..255, got {self.servo_port!r}"
-            )
-        if self.source == "servo_output_raw" and max(mo) > 16:
-            raise ConfigError(
-                f"rotor_estimate.motor_outputs: SERVO_OUTPUT_RAW carries outputs 1..16, "
-                f"got {list(mo)}"
-            )
-        if not isinstance(self.airframe, str):
-            raise ConfigError(
-                f"rotor_estimate.airframe must be a file path or empty, got {self.airframe!r}"
-            )
-        for name in ("max_gap", "esc_timeout"):
-            v = getattr(self, name)
-            if not (is_finite_number(v) and v > 0):
-                raise ConfigError(
-                    f"rotor_estimate.{name} must be a positive number of seconds, got {v!r}"
-                )
 
     def output_range(self) -> tuple[float, float]:
         """(output_min, output_max): the mapping's range unless overridden."""

@@ -38,12 +38,12 @@ it is read as J_z delta_r-dot, which is the physical reaction torque of the roto
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Mapping
 
 import numpy as np
 
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError
 
 K_NAMES = (
@@ -127,110 +127,64 @@ def as_finite(name: str, value: Any, shape: tuple[int, ...] | None = None) -> np
     return arr
 
 
+def _positive(default: float, doc: str) -> Any:
+    return cf.number(default, doc, lo=0.0, lo_open=True)
+
+
 @dataclass(frozen=True)
 class QuadrotorParams:
-    """Physical parameters of the quadrotor (FlameWheel-450-like defaults).
+    """Physical parameters of the quadrotor (FlameWheel-450-like defaults), checked on every
+    construction (``config/quadrotor.yaml`` section ``quadrotor``).
 
     ``K`` holds the lumped aerodynamic parameters of seed 0 Eq. (6) keyed by ``K_NAMES``.
     ``hub_height`` (h in seed 0 Fig. 2) enters Eq. (6) only through the lumped K (blade
     flapping moments); it is kept for documentation and for the inertia bookkeeping.
     """
 
-    mass: float = 1.6
-    inertia: tuple = ((0.0205, 0.0, 0.0), (0.0, 0.0215, 0.0), (0.0, 0.0, 0.0385))
-    arm_length: float = 0.225
-    hub_height: float = 0.045
-    a_omega: float = 12.31
-    b_omega: float = 1.399e4
-    j_rotor: float = 2.5e-5
-    K: Mapping[str, float] = field(default_factory=lambda: dict(DEFAULT_K))
-    omega_min: float = 120.0
-    omega_max: float = 1100.0
-    g: float = 9.80665
+    mass: float = _positive(1.6, "m [kg]")
+    inertia: tuple = cf.matrix(
+        ((0.0205, 0.0, 0.0), (0.0, 0.0215, 0.0), (0.0, 0.0, 0.0385)),
+        "J [kg m^2], symmetric positive definite (seed 0 Eq. 3)",
+        shape=(3, 3),
+    )
+    arm_length: float = _positive(0.225, "l [m] (seed 0 Eq. 7)")
+    hub_height: float = cf.number(0.045, "h [m] (seed 0 Fig. 2)", lo=0.0)
+    a_omega: float = _positive(12.31, "a_Omega [1/s] (seed 0 Eq. 8)")
+    b_omega: float = _positive(1.399e4, "b_Omega [rad/s^2 per unit u_ESC] (seed 0 Eq. 8)")
+    j_rotor: float = cf.number(2.5e-5, "J_z, rotor reaction inertia [kg m^2]", lo=0.0)
+    K: Mapping[str, float] = cf.table(
+        DEFAULT_K,
+        "lumped aerodynamic parameters of seed 0 Eq. (6), name: value (module docstring); "
+        "a file may give some, the others keep their defaults",
+        item=cf.FieldSpec(cf.NUMBER),
+        choices=K_NAMES,
+    )
+    omega_min: float = cf.number(120.0, "idle rotor speed [rad/s]", lo=0.0)
+    omega_max: float = _positive(1100.0, "largest rotor speed [rad/s]")
+    g: float = _positive(9.80665, "gravity [m/s^2]")
 
     def __post_init__(self) -> None:
-        for name in ("mass", "arm_length", "a_omega", "b_omega", "g", "omega_max"):
-            val = getattr(self, name)
-            if not (isinstance(val, (int, float)) and math.isfinite(val) and val > 0):
-                raise ConfigError(
-                    f"quadrotor.{name}: must be a positive finite number, got {val!r}"
-                )
-        for name in ("hub_height", "j_rotor", "omega_min"):
-            val = getattr(self, name)
-            if not (isinstance(val, (int, float)) and math.isfinite(val) and val >= 0):
-                raise ConfigError(f"quadrotor.{name}: must be a finite number >= 0, got {val!r}")
+        """The declared fields, then: omega_min < omega_max, J symmetric positive definite,
+        every K of K_NAMES given."""
+        cf.normalize_fields(self, "quadrotor")
         if self.omega_min >= self.omega_max:
-            raise ConfigError("quadrotor.omega_min: must be below omega_max")
-        inertia = as_finite("quadrotor.inertia", self.inertia, (3, 3))
+            raise cf.error("quadrotor", "omega_min", "must be below omega_max")
+        inertia = np.array(self.inertia)
         if not np.allclose(inertia, inertia.T):
-            raise ConfigError("quadrotor.inertia: must be symmetric")
+            raise cf.error("quadrotor", "inertia", "must be symmetric")
         if np.any(np.linalg.eigvalsh(inertia) <= 0):
-            raise ConfigError("quadrotor.inertia: must be positive definite")
-        object.__setattr__(self, "inertia", tuple(tuple(float(v) for v in row) for row in inertia))
+            raise cf.error("quadrotor", "inertia", "must be positive definite")
         missing = [k for k in K_NAMES if k not in self.K]
-        unknown = [k for k in self.K if k not in K_NAMES]
         if missing:
-            raise ConfigError(f"quadrotor.K: missing parameter(s) {missing}")
-        if unknown:
-            raise ConfigError(
-                f"quadrotor.K: unknown parameter(s) {unknown}; known: {list(K_NAMES)}"
-            )
-        K = {}
-        for k in K_NAMES:
-            v = self.K[k]
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ConfigError(f"quadrotor.K.{k}: must be a finite number, got {v!r}")
-            K[k] = float(v)
-        object.__setattr__(self, "K", K)
+            raise cf.error("quadrotor", "K", f"missing parameter(s) {missing}")
+        object.__setattr__(self, "K", {k: self.K[k] for k in K_NAMES})  # K_NAMES order
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "QuadrotorParams":
-        if not isinstance(d, Mapping):
-            raise ConfigError(f"quadrotor: expected a mapping, got {type(d).__name__}")
-        allowed = {
-            "mass",
-            "inertia",
-            "arm_length",
-            "hub_height",
-            "a_omega",
-            "b_omega",
-            "j_rotor",
-            "K",
-            "omega_min",
-            "omega_max",
-            "g",
-        }
-        bad = sorted(set(d) - allowed)
-        if bad:
-            raise ConfigError(f"quadrotor: unknown key(s) {bad}; allowed: {sorted(allowed)}")
-        kw = dict(d)
+    def from_dict(cls, d: Mapping[str, Any], where: str = "quadrotor") -> "QuadrotorParams":
+        """The given keys; a partial ``K`` completes the default K."""
+        kw = cf.parse_fields(cls, d, where)
         if "K" in kw:
-            if not isinstance(kw["K"], Mapping):
-                raise ConfigError("quadrotor.K: expected a mapping of name -> value")
-            merged = dict(DEFAULT_K)
-            merged.update(kw["K"])
-            unknown = [k for k in kw["K"] if k not in K_NAMES]
-            if unknown:
-                raise ConfigError(
-                    f"quadrotor.K: unknown parameter(s) {unknown}; known: {list(K_NAMES)}"
-                )
-            kw["K"] = merged
-        for key in (
-            "mass",
-            "arm_length",
-            "hub_height",
-            "a_omega",
-            "b_omega",
-            "j_rotor",
-            "omega_min",
-            "omega_max",
-            "g",
-        ):
-            if key in kw:
-                v = kw[key]
-                if isinstance(v, bool) or not isinstance(v, (int, float)):
-                    raise ConfigError(f"quadrotor.{key}: must be a number, got {v!r}")
-                kw[key] = float(v)
+            kw["K"] = {**DEFAULT_K, **kw["K"]}
         return cls(**kw)
 
     def to_dict(self) -> dict:

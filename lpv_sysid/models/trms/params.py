@@ -5,11 +5,10 @@ the derived ones of Eqs. (7)-(14), (21)-(27); conventions and the derivation of 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from typing import Any, Mapping
 
-from lpv_sysid.configuration.fields import check_keys, is_finite_number
-from lpv_sysid.errors import ConfigError
+from lpv_sysid.configuration import fields as cf
 
 STATE_NAMES = ("omega_h", "Omega_h", "theta_h", "omega_v", "Omega_v", "theta_v")
 STATE_UNITS = ("V", "rad/s", "rad", "V", "rad/s", "rad")
@@ -49,91 +48,66 @@ TABLE7_RANGES = {
 TS_PAPER = 0.1  # Sec. 6.2, Euler sample time
 
 
+def _c(default: float, doc: str, positive: bool = True) -> float:
+    """A TRMS constant (seed 2 Tables 5-6): finite, > 0 (``positive``) or >= 0."""
+    return cf.number(default, doc, lo=0.0, lo_open=positive)
+
+
 @dataclass(frozen=True)
 class TrmsParams:
-    """TRMS constants, seed 2 Tables 5 (manufacturer) and 6 (identified). SI units, rotor speeds
-    in V."""
+    """TRMS constants, seed 2 Tables 5 (manufacturer) and 6 (identified), checked on every
+    construction. SI units, rotor speeds in V. Lengths, masses, the motor constants and the
+    rotor inertias are > 0; the gains and friction coefficients >= 0."""
 
     # Table 5 (known)
-    k_g: float = 0.2
-    l_t: float = 0.282
-    l_m: float = 0.246
-    l_b: float = 0.290
-    l_cb: float = 0.276
-    r_ts: float = 0.1
-    r_ms: float = 0.155
-    m_cb: float = 0.068
-    m_b: float = 0.022
-    m_m: float = 0.014
-    m_mr: float = 0.236
-    m_ms: float = 0.219
-    m_t: float = 0.015
-    m_tr: float = 0.221
-    m_ts: float = 0.119
-    k_a: float = 0.0202
-    R_a: float = 8.0
-    k_1: float = 6.5
-    k_2: float = 8.5
+    k_g: float = _c(0.2, "gyroscopic momentum gain", positive=False)
+    l_t: float = _c(0.282, "length of the tail part of the beam [m]")
+    l_m: float = _c(0.246, "length of the main part of the beam [m]")
+    l_b: float = _c(0.290, "length of the counter-weight beam [m]")
+    l_cb: float = _c(0.276, "distance of the counter-weight from the joint [m]")
+    r_ts: float = _c(0.1, "radius of the tail shield [m]")
+    r_ms: float = _c(0.155, "radius of the main shield [m]")
+    m_cb: float = _c(0.068, "mass of the counter-weight [kg]")
+    m_b: float = _c(0.022, "mass of the counter-weight beam [kg]")
+    m_m: float = _c(0.014, "mass of the main part of the beam [kg]")
+    m_mr: float = _c(0.236, "mass of the main motor and rotor [kg]")
+    m_ms: float = _c(0.219, "mass of the main shield [kg]")
+    m_t: float = _c(0.015, "mass of the tail part of the beam [kg]")
+    m_tr: float = _c(0.221, "mass of the tail motor and rotor [kg]")
+    m_ts: float = _c(0.119, "mass of the tail shield [kg]")
+    k_a: float = _c(0.0202, "motor torque constant")
+    R_a: float = _c(8.0, "armature resistance [Ohm]")
+    k_1: float = _c(6.5, "tail motor input gain", positive=False)
+    k_2: float = _c(8.5, "main motor input gain", positive=False)
     # Table 6 (identified)
-    B_tr: float = 0.0086
-    B_mr: float = 0.0026
-    k_thp: float = 0.0027
-    k_thn: float = 0.0028
-    J_tr: float = 0.0059
-    J_mr: float = 0.0254
-    k_t: float = 0.0
-    k_m: float = 0.0017
-    k_tvp: float = 0.0168
-    k_tvn: float = 0.0155
-    k_oh: float = 0.0185
-    k_ov: float = 0.1026
-    k_fhp: float = 0.0566
-    k_fhn: float = 0.0660
-    k_fvp: float = 0.3819
-    k_fvn: float = 0.2197
-    k_chp: float = 0.0158
-    k_chn: float = 0.0111
-    k_cvp: float = 0.0623
-    k_cvn: float = 0.0563
-    g: float = 9.81
-
-    _POSITIVE = (
-        "l_t",
-        "l_m",
-        "l_b",
-        "l_cb",
-        "r_ts",
-        "r_ms",
-        "m_cb",
-        "m_b",
-        "m_m",
-        "m_mr",
-        "m_ms",
-        "m_t",
-        "m_tr",
-        "m_ts",
-        "k_a",
-        "R_a",
-        "J_tr",
-        "J_mr",
-        "g",
-    )
+    B_tr: float = _c(0.0086, "tail rotor friction", positive=False)
+    B_mr: float = _c(0.0026, "main rotor friction", positive=False)
+    k_thp: float = _c(0.0027, "tail rotor drag, omega_h > 0", positive=False)
+    k_thn: float = _c(0.0028, "tail rotor drag, omega_h < 0", positive=False)
+    J_tr: float = _c(0.0059, "tail rotor moment of inertia")
+    J_mr: float = _c(0.0254, "main rotor moment of inertia")
+    k_t: float = _c(0.0, "tail rotor reaction on the pitch", positive=False)
+    k_m: float = _c(0.0017, "main rotor reaction on the yaw", positive=False)
+    k_tvp: float = _c(0.0168, "main rotor drag, omega_v > 0", positive=False)
+    k_tvn: float = _c(0.0155, "main rotor drag, omega_v < 0", positive=False)
+    k_oh: float = _c(0.0185, "yaw friction", positive=False)
+    k_ov: float = _c(0.1026, "pitch friction", positive=False)
+    k_fhp: float = _c(0.0566, "tail thrust, omega_h > 0", positive=False)
+    k_fhn: float = _c(0.0660, "tail thrust, omega_h < 0", positive=False)
+    k_fvp: float = _c(0.3819, "main thrust, omega_v > 0", positive=False)
+    k_fvn: float = _c(0.2197, "main thrust, omega_v < 0", positive=False)
+    k_chp: float = _c(0.0158, "cable torque, theta_h > 0", positive=False)
+    k_chn: float = _c(0.0111, "cable torque, theta_h < 0", positive=False)
+    k_cvp: float = _c(0.0623, "cable torque (pitch), positive branch", positive=False)
+    k_cvn: float = _c(0.0563, "cable torque (pitch), negative branch", positive=False)
+    g: float = _c(9.81, "gravity [m/s^2]")
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if not is_finite_number(v):
-                raise ConfigError(f"trms.{f.name}: must be a finite number, got {v!r}")
-            if v < 0 or (f.name in self._POSITIVE and v == 0):
-                raise ConfigError(
-                    f"trms.{f.name}: must be {'> 0' if f.name in self._POSITIVE else '>= 0'}, got "
-                    f"{v}"
-                )
+        cf.normalize_fields(self, "trms")
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "TrmsParams":
-        check_keys(d, [f.name for f in fields(cls)], "trms", list_allowed=True)
-        return cls(**dict(d))
+    def from_dict(cls, d: Mapping[str, Any], where: str = "trms") -> "TrmsParams":
+        return cls(**cf.parse_fields(cls, d, where))
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -9,75 +9,55 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, Mapping
 
-import numpy as np
 
-from lpv_sysid.configuration.fields import check_keys, is_count, is_finite_number
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.control.baseline import BaselineGains
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io.files import read_yaml
 from lpv_sysid.models.quadrotor import QuadrotorParams
+from lpv_sysid.signals.multisine.config import MAX_DURATION
 from lpv_sysid.sim.vehicle import SensorConfig
+
+
+def _duration(default: float, doc: str, lo_open: bool) -> Any:
+    """A duration simulated before anything is written: at most MAX_DURATION (an hour)."""
+    return cf.number(default, doc, lo=0.0, lo_open=lo_open, hi=MAX_DURATION, unit=" s")
 
 
 @dataclass(frozen=True)
 class Phase1Config:
-    """Phase-1 experiment settings (seed 0 Sec. IV)."""
+    """Phase-1 experiment settings (seed 0 Sec. IV), checked on every construction."""
 
-    box_min: tuple = (-5.0, -5.0, -5.0)
-    box_max: tuple = (5.0, 5.0, 5.0)
-    trim_s: float = 10.0
-    excite_s: float = 30.0
-    trim_average_s: float = 5.0
-    amplitudes: tuple = (1.5, 1.5, 1.0, 0.4)  # peak u, v, w [m/s], yaw rate [rad/s]
-    f_min_hz: float = 0.2
-    f_max_hz: float = 2.0
-    taper_s: float = 1.0
-    hover_validation: bool = True
-    start: str = (
-        "hover"  # "hover": reference steps from hover at t=0; "trim": start at the model trim
+    box_min: tuple = cf.numbers((-5.0, -5.0, -5.0), "scheduling box low corner [m/s]", length=3)
+    box_max: tuple = cf.numbers((5.0, 5.0, 5.0), "scheduling box high corner [m/s]", length=3)
+    trim_s: float = _duration(10.0, "steady reference before the excitation [s]", True)
+    excite_s: float = _duration(30.0, "excitation per vertex [s]", True)
+    trim_average_s: float = _duration(5.0, "end of the trim averaged for x0, u0 [s]", False)
+    amplitudes: tuple = cf.numbers(
+        (1.5, 1.5, 1.0, 0.4), "peak u, v, w [m/s], yaw rate [rad/s]", length=4, lo=0.0
     )
-    seed: int = 0
+    f_min_hz: float = cf.number(0.2, "excitation band low edge [Hz]", lo=0.0, lo_open=True)
+    f_max_hz: float = cf.number(2.0, "excitation band high edge [Hz]", lo=0.0, lo_open=True)
+    taper_s: float = _duration(1.0, "raised-cosine taper of the excitation [s]", False)
+    hover_validation: bool = cf.flag(True, "fly the box centre as validation run")
+    start: str = cf.choice(
+        "hover",
+        ("hover", "trim"),
+        "hover: reference steps from hover at t=0; trim: start at the model trim",
+    )
+    seed: int = cf.count(0, "noise seed")
 
     def __post_init__(self) -> None:
-        if self.start not in ("hover", "trim"):
-            raise ConfigError(f"phase1.start: must be 'hover' or 'trim', got {self.start!r}")
-        for name, n in (("box_min", 3), ("box_max", 3), ("amplitudes", 4)):
-            v = getattr(self, name)
-            try:
-                arr = np.asarray(v, dtype=float)
-            except (TypeError, ValueError):
-                raise ConfigError(f"phase1.{name}: not numeric: {v!r}") from None
-            if arr.shape != (n,) or not np.all(np.isfinite(arr)):
-                raise ConfigError(f"phase1.{name}: expected {n} finite numbers, got {v!r}")
-            object.__setattr__(self, name, tuple(float(x) for x in arr))
+        """The declared fields, then: box_min below box_max, f_min_hz below f_max_hz."""
+        cf.normalize_fields(self, "phase1")
         if any(a >= b for a, b in zip(self.box_min, self.box_max)):
-            raise ConfigError("phase1.box_min: must be below box_max in every component")
-        if any(a < 0 for a in self.amplitudes):
-            raise ConfigError("phase1.amplitudes: must be >= 0")
-        from lpv_sysid.signals.multisine import MAX_DURATION
-
-        for name in ("trim_s", "excite_s", "trim_average_s", "f_min_hz", "f_max_hz", "taper_s"):
-            v = getattr(self, name)
-            if not is_finite_number(v) or v < 0:
-                raise ConfigError(f"phase1.{name}: must be a finite number >= 0, got {v!r}")
-            if name.endswith("_s") and v > MAX_DURATION:  # simulated before anything is written
-                raise ConfigError(
-                    f"phase1.{name}: {v:g} s exceeds the limit of {MAX_DURATION:g} s"
-                )
-            object.__setattr__(self, name, float(v))
-        if self.trim_s <= 0 or self.excite_s <= 0:
-            raise ConfigError("phase1.trim_s and phase1.excite_s: must be > 0")
-        if not 0 < self.f_min_hz < self.f_max_hz:
-            raise ConfigError("phase1.f_min_hz: need 0 < f_min_hz < f_max_hz")
-        if not isinstance(self.hover_validation, bool):
-            raise ConfigError("phase1.hover_validation: must be true or false")
-        if not is_count(self.seed):
-            raise ConfigError(f"phase1.seed: must be a non-negative integer, got {self.seed!r}")
+            raise cf.error("phase1", "box_min", "must be below box_max in every component")
+        if not self.f_min_hz < self.f_max_hz:
+            raise cf.error("phase1", "f_min_hz", f"must be below f_max_hz ({self.f_max_hz})")
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "Phase1Config":
-        check_keys(d, {f.name for f in fields(cls)}, "phase1")
-        return cls(**d)
+    def from_dict(cls, d: Mapping[str, Any], where: str = "phase1") -> "Phase1Config":
+        return cls(**cf.parse_fields(cls, d, where))
 
     def scaled(self, s: float) -> "Phase1Config":
         """Durations multiplied by ``s`` (quick runs); the band is kept."""

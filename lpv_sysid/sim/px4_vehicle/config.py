@@ -5,13 +5,15 @@ the behaviour is described in :mod:`lpv_sysid.sim.px4_vehicle.vehicle`."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Mapping
 
-from lpv_sysid.configuration.fields import check_config_keys, is_finite_number
+from lpv_sysid.configuration import fields as cf
+from lpv_sysid.configuration.fields import is_finite_number
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.mavlink import px4
 from lpv_sysid.mavlink.link import parse_url
+from lpv_sysid.sim.vehicle import MAX_PHYSICS_HZ
 
 
 @dataclass(frozen=True)
@@ -103,114 +105,99 @@ def parse_hostport(text: str, what: str) -> tuple[str, int]:
 @dataclass(frozen=True)
 class SimVehicleConfig:
     """Options of the simulated vehicle (``config/sim_vehicle_px4.yaml``; what they select:
-    :mod:`lpv_sysid.sim.px4_vehicle.vehicle`)."""
+    :mod:`lpv_sysid.sim.px4_vehicle.vehicle`), checked by :meth:`validate` (also for a config
+    built in code: the vehicle calls it)."""
 
-    url: str = "udpout:127.0.0.1:14540"  # PX4 SITL sends to the offboard port 14540
-    bind: str | None = None  # udpout: local HOST[:PORT]; None: route to url's host
-    system_id: int = 1
-    component_id: int = 1
-    physics_hz: float = 250.0
-    params: Mapping[str, float] = field(default_factory=dict)  # overrides of PARAMS defaults
-    initial_mode: str = "HOLD"
-    signing_key_file: str | None = None
-    allow_unsigned: bool = False
-    sensor_noise: bool = False
-    seed: int = 0
-    rc_present: bool = False  # an RC transmitter is bound (sticks centred)
-    esc_telemetry: bool = True  # ESC_STATUS (False: SIH / PWM ESCs)
-    actuator_output_scale: str = "pwm"  # ACTUATOR_OUTPUT_STATUS values: pwm | normalized
-    stream_rates: Mapping[str, float] = field(default_factory=dict)  # overrides of DEFAULT_RATES
-    double_ack: bool = True  # PX4 v1.16: DO_SET_MODE ACCEPTED, then the verdict
-    verdict_delay_s: float = 0.01  # commander verdict after the first ACK (0-15 ms measured)
-    odometry_lag_s: float = 0.004  # ODOMETRY time_usec behind the other stamps
-    duplicate_acks: bool = False  # additionally send every COMMAND_ACK twice
+    url: str = cf.text(
+        "udpout:127.0.0.1:14540", "connection URL (PX4 SITL sends to the offboard port 14540)"
+    )
+    bind: str | None = cf.text(
+        None,
+        "udpout: local HOST[:PORT]; null: the interface routing to url's host",
+        optional=True,
+    )
+    system_id: int = cf.count(1, "MAVLink system id", lo=1, hi=255)
+    component_id: int = cf.count(1, "MAVLink component id", lo=1, hi=255)
+    physics_hz: float = cf.number(
+        250.0,
+        f"RK4 physics and controller rate [Hz]; 50 .. {MAX_PHYSICS_HZ:g} Hz (every simulated "
+        "second costs physics_hz steps)",
+        lo=50.0,
+        hi=MAX_PHYSICS_HZ,
+        unit=" Hz",
+    )
+    params: Mapping[str, float] = cf.table(
+        {},
+        "overrides of the PX4 parameter defaults, NAME: value (ranges of PARAMS)",
+        item=None,
+        choices=tuple(PARAMS),
+        nullable=True,
+    )
+    initial_mode: str = cf.choice(
+        "HOLD", tuple(sorted(px4.MODES_BY_NAME)), "PX4 mode at start", fold_case=True
+    )
+    signing_key_file: str | None = cf.text(
+        None,
+        "32 raw bytes or 64 hex chars: unsigned messages are ignored; null or empty: unsigned",
+        optional=True,
+        nonempty=False,
+    )
+    allow_unsigned: bool = cf.flag(False, "with a signing key: still accept unsigned messages")
+    sensor_noise: bool = cf.flag(False, "noisy sensors (seeded)")
+    seed: int = cf.count(0, "noise seed")
+    rc_present: bool = cf.flag(False, "an RC transmitter is bound (sticks centred)")
+    esc_telemetry: bool = cf.flag(True, "ESC_STATUS (false: SIH / PWM ESCs)")
+    actuator_output_scale: str = cf.choice(
+        "pwm", ACTUATOR_OUTPUT_SCALES, "ACTUATOR_OUTPUT_STATUS values"
+    )
+    stream_rates: Mapping[str, float] = cf.table(
+        {},
+        "overrides of PX4's onboard-link stream rates, MESSAGE: Hz in [0, 1000]",
+        item=cf.FieldSpec(cf.NUMBER, lo=0.0, hi=1000.0, unit=" Hz"),
+        choices=tuple(DEFAULT_RATES),
+        nullable=True,
+    )
+    double_ack: bool = cf.flag(True, "PX4 v1.16: DO_SET_MODE ACCEPTED, then the verdict")
+    verdict_delay_s: float = cf.number(
+        0.01,
+        "commander verdict after the first ACK [s] (0-15 ms measured); at most 1 s",
+        lo=0.0,
+        hi=1.0,
+        unit=" s",
+    )
+    odometry_lag_s: float = cf.number(
+        0.004,
+        "ODOMETRY time_usec behind the other stamps [s]; at most 0.1 s",
+        lo=0.0,
+        hi=0.1,
+        unit=" s",
+    )
+    duplicate_acks: bool = cf.flag(False, "additionally send every COMMAND_ACK twice")
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "SimVehicleConfig":
-        check_config_keys(d, cls.__dataclass_fields__, "sim vehicle")
-        kw = dict(d)
-        for k in ("params", "stream_rates"):
-            if kw.get(k) is None:
-                kw.pop(k, None)
-        cfg = cls(**kw)
-        cfg.validate()
+    def from_dict(cls, d: Mapping[str, Any], where: str = "sim_vehicle") -> "SimVehicleConfig":
+        cfg = cls(**cf.parse_fields(cls, d, where))
+        cfg.validate(where)
         return cfg
 
     @classmethod
     def load(cls, path: str) -> "SimVehicleConfig":
         from lpv_sysid.io.files import read_yaml_mapping
 
-        d = read_yaml_mapping(path, f"sim vehicle config {path}")
-        try:
-            return cls.from_dict(d)
-        except ConfigError as exc:
-            raise ConfigError(f"{path}: {exc}") from None
+        return cls.from_dict(read_yaml_mapping(path, f"sim vehicle config {path}"), path)
 
-    def validate(self) -> None:
-        if not isinstance(self.url, str):
-            raise ConfigError(f"sim vehicle url must be a string, got {self.url!r}")
-        parse_url(self.url)
+    def validate(self, where: str = "sim_vehicle") -> None:
+        """The declared fields, then: the URL and bind address, every PX4 parameter in its
+        PX4 range, no start in OFFBOARD (PX4 needs a setpoint stream)."""
+        cf.check_fields(self, where)
+        cf.under(cf.join(where, "url"), parse_url, self.url)
         if self.bind is not None:
-            parse_hostport(self.bind, "sim vehicle bind")
-        if not isinstance(self.physics_hz, (int, float)) or isinstance(self.physics_hz, bool):
-            raise ConfigError(f"sim vehicle physics_hz must be a number, got {self.physics_hz!r}")
-        from lpv_sysid.sim.vehicle import MAX_PHYSICS_HZ
-
-        if not (50.0 <= self.physics_hz <= MAX_PHYSICS_HZ):  # NaN fails too
-            raise ConfigError(
-                f"sim vehicle physics_hz must be in [50, {MAX_PHYSICS_HZ:g}] Hz, got "
-                f"{self.physics_hz!r}"
-            )
-        for name in ("system_id", "component_id"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 255:
-                raise ConfigError(f"sim vehicle {name} must be an integer 1..255, got {v!r}")
-        if not isinstance(self.params, Mapping):
-            raise ConfigError("sim vehicle params must be a mapping NAME: value")
+            parse_hostport(self.bind, cf.join(where, "bind"))
         for k, v in self.params.items():
-            if k not in PARAMS:
-                raise ConfigError(f"sim vehicle: unknown parameter {k!r}; known: {sorted(PARAMS)}")
             err = PARAMS[k].check(k, v)
             if err is not None:
-                raise ConfigError(f"sim vehicle: parameter {err}")
-        if not isinstance(self.stream_rates, Mapping):
-            raise ConfigError("sim vehicle stream_rates must be a mapping MESSAGE: rate_hz")
-        for k, v in self.stream_rates.items():
-            if k not in DEFAULT_RATES:
-                raise ConfigError(
-                    f"sim vehicle stream_rates: unknown stream {k!r}; known: "
-                    f"{sorted(DEFAULT_RATES)}"
-                )
-            if not (is_finite_number(v) and 0 <= v <= 1000):
-                raise ConfigError(
-                    f"sim vehicle stream_rates.{k} must be a rate in [0, 1000] Hz, got {v!r}"
-                )
-        for name in (
-            "allow_unsigned",
-            "sensor_noise",
-            "rc_present",
-            "esc_telemetry",
-            "double_ack",
-            "duplicate_acks",
-        ):
-            if not isinstance(getattr(self, name), bool):
-                raise ConfigError(
-                    f"sim vehicle {name} must be true or false, got {getattr(self, name)!r}"
-                )
-        if self.actuator_output_scale not in ACTUATOR_OUTPUT_SCALES:
-            raise ConfigError(
-                f"sim vehicle actuator_output_scale must be one of {ACTUATOR_OUTPUT_SCALES}, "
-                f"got {self.actuator_output_scale!r}"
-            )
-        for name, hi in (("verdict_delay_s", 1.0), ("odometry_lag_s", 0.1)):
-            v = getattr(self, name)
-            if not (is_finite_number(v) and 0 <= v <= hi):
-                raise ConfigError(f"sim vehicle {name} must be in [0, {hi}] s, got {v!r}")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise ConfigError(
-                f"sim vehicle seed must be a non-negative integer, got {self.seed!r}"
-            )
+                raise cf.error(where, f"params.{k}", err)
         if px4.mode_by_name(self.initial_mode) == px4.OFFBOARD:
-            raise ConfigError(
-                "sim vehicle initial_mode cannot be OFFBOARD (PX4 needs a setpoint stream)"
+            raise cf.error(
+                where, "initial_mode", "cannot be OFFBOARD (PX4 needs a setpoint stream)"
             )

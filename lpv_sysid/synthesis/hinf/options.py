@@ -13,7 +13,7 @@ from typing import Optional, Sequence, Union
 
 import numpy as np
 
-from lpv_sysid.errors import ConfigError
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.synthesis.regions import Region
 from lpv_sysid.synthesis.scaling import Scaling
 
@@ -24,102 +24,99 @@ SOLVERS = ("CLARABEL", "SCS", "MOSEK", "AUTO")
 class HinfOptions:
     """Options of the Lemma 1 synthesis (keys of ``config/synthesis.yaml: hinf``)."""
 
-    gamma: float = 1.0  # requested bound (Eq. 29)
-    minimize_gamma: bool = (
-        False  # True: minimise gamma^2 as a variable; False: feasibility at gamma
+    gamma: float = cf.number(
+        1.0, "requested bound on ||u_e -> z||_inf (Eq. 29)", lo=0.0, lo_open=True
     )
-    eps: float = 1e-6  # strictness margin: LMI <= -eps I, X >= eps I (scaled coords)
-    solver: str = (
-        "CLARABEL"  # CLARABEL (default) | SCS | MOSEK | AUTO (MOSEK if installed, else by size)
+    minimize_gamma: bool = cf.flag(
+        False, "true: minimise gamma^2 as a variable; false: feasibility at gamma"
     )
-    fallback: Optional[str] = "SCS"  # tried when the first solver errors out (not when infeasible)
-    scale: bool = True  # diagonal similarity scaling (synthesis.scaling)
-    remedy_bisection_steps: int = 0  # >0: quantify uncertainty-reduction remedy by bisection
-    region: Optional[Region] = (
-        None  # optional LMI region for the closed-loop poles (common-H, see lemma1_cvxpy)
+    eps: float = cf.number(
+        1e-6, "strictness margin: LMI <= -eps I, X >= eps I (scaled coordinates)", lo=0.0
     )
-    verbose: bool = False
-    #: "corners": Eq. (30) at every Eq. (23) system (the seed); "box": the structured-perturbation
-    #: LMI of synthesis.robust_lmi over the element box (one block per vertex); "auto": box when
-    #: the
-    #: model is the full element box, else corners
-    method: str = "auto"
-    #: "vertex": X_i (box) / X_i^j (corners) per vertex, frozen v_d (the seed's Lemma 1);
-    #: "common": one X, any rate of v_d; "rate": X(v_d) with |dv_d/dt| <= rate_bound (box only)
-    lyapunov: str = "vertex"
-    #: "feasibility" | "min_gamma" | "min_effort" (None: min_gamma when minimize_gamma, else
-    #: feasibility)
-    objective: Optional[str] = None
-    #: rate mode: "design" (certificate.design.reference_rate of the phase-2 signal) or per-axis
-    #: bounds
-    rate_bound: Union[None, str, Sequence[float]] = None
-    #: the LMI is solved at gamma x this (<= 1); min_effort otherwise uses the whole bound
-    design_gamma_fraction: float = 1.0
+    solver: str = cf.choice(
+        "CLARABEL",
+        SOLVERS,
+        "CLARABEL | SCS | MOSEK | AUTO (MOSEK if installed, else by size); any case",
+        fold_case=True,
+    )
+    fallback: Optional[str] = cf.choice(
+        "SCS",
+        SOLVERS,
+        "tried when the first solver errors out (not when infeasible); null: none",
+        fold_case=True,
+        optional=True,
+    )
+    scale: bool = cf.flag(True, "diagonal similarity scaling (synthesis.scaling)")
+    remedy_bisection_steps: int = cf.count(
+        0,
+        ">0: quantify the uncertainty-reduction remedy by bisection; at most 30 (one LMI "
+        "solve each, 2^-30 is below any solver's tolerance)",
+        hi=30,
+    )
+    #: optional LMI region for the closed-loop poles (common-H, see lemma1_cvxpy)
+    region: Optional[Region] = None
+    verbose: bool = cf.flag(False, "solver output")
+    method: str = cf.choice(
+        "auto",
+        ("auto", "corners", "box"),
+        "corners: Eq. (30) at every Eq. (23) system (the seed); box: the structured-"
+        "perturbation LMI of synthesis.robust over the element box; auto: box when the model "
+        "is the full element box, else corners",
+    )
+    lyapunov: str = cf.choice(
+        "vertex",
+        ("vertex", "common", "rate"),
+        "vertex: X_i per vertex, frozen v_d (Lemma 1); common: one X, any rate of v_d; rate: "
+        "X(v_d) with |dv_d/dt| <= rate_bound (box only)",
+    )
+    objective: Optional[str] = cf.choice(
+        None,
+        ("feasibility", "min_gamma", "min_effort"),
+        "null: min_gamma when minimize_gamma, else feasibility",
+        optional=True,
+    )
+    rate_bound: Union[None, str, Sequence[float]] = cf.numbers(
+        None,
+        "rate mode: design (certificate.design.reference_rate of the phase-2 signal) or "
+        "per-axis bounds [m/s^2] >= 0",
+        lo=0.0,
+        choices=("design",),
+        optional=True,
+    )
+    design_gamma_fraction: float = cf.number(
+        1.0,
+        "the LMI is solved at gamma x this, in (0, 1]; min_effort otherwise uses the whole bound",
+        lo=0.0,
+        lo_open=True,
+        hi=1.0,
+    )
 
     @classmethod
-    def from_dict(cls, d: Optional[dict]) -> "HinfOptions":
-        d = dict(d or {})
-        known = set(cls.__dataclass_fields__)
-        bad = set(d) - known
-        if bad:
-            raise ConfigError(f"hinf: unknown key(s) {sorted(bad)}; known: {sorted(known)}")
-        if "region" in d and not isinstance(d["region"], Region):
-            d["region"] = Region.from_dict(d["region"])
-        opts = cls(**d)
-        if not (
-            isinstance(opts.gamma, (int, float)) and np.isfinite(opts.gamma) and opts.gamma > 0
-        ):
-            raise ConfigError(f"hinf.gamma must be a finite number > 0, got {opts.gamma!r}")
-        if not (opts.eps >= 0 and np.isfinite(opts.eps)):
-            raise ConfigError(f"hinf.eps must be >= 0, got {opts.eps!r}")
-        if str(opts.solver).upper() not in SOLVERS:
-            raise ConfigError(f"hinf.solver must be one of {SOLVERS}, got {opts.solver!r}")
-        if opts.fallback is not None and str(opts.fallback).upper() not in SOLVERS:
-            raise ConfigError(
-                f"hinf.fallback must be one of {SOLVERS} or null, got {opts.fallback!r}"
-            )
-        if opts.method not in ("auto", "corners", "box"):
-            raise ConfigError(f"hinf.method must be auto, corners or box, got {opts.method!r}")
-        if opts.lyapunov not in ("vertex", "common", "rate"):
-            raise ConfigError(
-                f"hinf.lyapunov must be vertex, common or rate, got {opts.lyapunov!r}"
-            )
-        if opts.objective is not None and opts.objective not in (
-            "feasibility",
-            "min_gamma",
-            "min_effort",
-        ):
-            raise ConfigError(
-                "hinf.objective must be feasibility, min_gamma or min_effort, got "
-                f"{opts.objective!r}"
-            )
+    def from_dict(cls, d: Optional[dict], where: str = "hinf") -> "HinfOptions":
+        """The keys of ``d`` (a ``region`` given as a :class:`Region` is kept); solver names
+        in upper case; the objective agrees with minimize_gamma, rate mode has a bound."""
+        d = d or {}
+        kw = cf.parse_fields(cls, d, where, other_keys=("region",))
+        region = d.get("region")
+        if region is not None and not isinstance(region, Region):
+            region = Region.from_dict(region, cf.join(where, "region"))
+        opts = cls(region=region, **kw)
         if opts.objective is not None and opts.minimize_gamma and opts.objective != "min_gamma":
-            raise ConfigError(
-                "hinf: minimize_gamma: true contradicts objective "
-                f"{opts.objective!r} (use objective: min_gamma)"
+            raise cf.error(
+                where,
+                "minimize_gamma",
+                f"true contradicts objective {opts.objective!r} (use objective: min_gamma)",
             )
-        f = opts.design_gamma_fraction
-        if isinstance(f, bool) or not isinstance(f, (int, float)) or not (0 < f <= 1):
-            raise ConfigError(f"hinf.design_gamma_fraction must be in (0, 1], got {f!r}")
-        rb = opts.rate_bound
-        if rb is not None and rb != "design":
-            try:
-                rb = [float(x) for x in rb]
-            except (TypeError, ValueError):
-                raise ConfigError(
-                    f"hinf.rate_bound must be 'design' or a list of numbers, got {rb!r}"
-                ) from None
-            if not all(np.isfinite(x) and x >= 0 for x in rb):
-                raise ConfigError(f"hinf.rate_bound entries must be finite and >= 0, got {rb}")
-        if opts.lyapunov == "rate" and rb is None:
-            raise ConfigError(
-                "hinf.lyapunov: rate needs hinf.rate_bound ('design' or per-axis bounds in m/s^2)"
+        if opts.lyapunov == "rate" and opts.rate_bound is None:
+            raise cf.error(
+                where,
+                "lyapunov",
+                "rate needs hinf.rate_bound ('design' or per-axis bounds in m/s^2)",
             )
         return replace(
             opts,
-            solver=str(opts.solver).upper(),
-            rate_bound=rb,
-            fallback=None if opts.fallback is None else str(opts.fallback).upper(),
+            solver=opts.solver.upper(),
+            fallback=None if opts.fallback is None else opts.fallback.upper(),
         )
 
     @property
