@@ -5,8 +5,8 @@ colcon runs ``setup.py install`` with setup.cfg's ``[install]`` script directory
 executable lands in ``lib/lpv_sysid`` where ``ros2 run lpv_sysid <name>`` looks; pip builds a
 wheel and puts the same console scripts in the environment's ``bin`` (setup.cfg does not
 apply there). The shipped default configs live once, in ``lpv_sysid/config`` (package data,
-read through importlib.resources: lpv_sysid/configuration/defaults.py); the same files are installed
-again into ``share/lpv_sysid/config`` for launch files and ``--params-file``.
+read through importlib.resources: lpv_sysid/configuration/defaults.py); the same files are
+installed again into ``share/lpv_sysid/config`` for launch files and ``--params-file``.
 """
 
 import os

@@ -329,9 +329,8 @@ def _config_classes():
     from lpv_sysid.control.law import LpvControllerConfig
     from lpv_sysid.control.safety import SafetyConfig
     from lpv_sysid.flight.campaign import FlyConfig
-    from lpv_sysid.ident.vertex.config import IdentificationConfig
-    from lpv_sysid.ident.vertex.uncertainty import UncertaintyConfig
-    from lpv_sysid.io.recorder.config import RecorderConfig
+    from lpv_sysid.ident.vertex import IdentificationConfig, UncertaintyConfig
+    from lpv_sysid.io.recorder import RecorderConfig
     from lpv_sysid.mavlink.telemetry import RotorEstimateConfig
     from lpv_sysid.synthesis.hinf import HinfOptions
 
@@ -551,11 +550,11 @@ def test_the_shipped_configs_load():
 
     from lpv_sysid.control.envelope import EnvelopeConfig
     from lpv_sysid.flight.campaign import FlyConfig
-    from lpv_sysid.ident.vertex.config import IdentificationConfig
+    from lpv_sysid.ident.vertex import IdentificationConfig
     from lpv_sysid.io.files import read_yaml, read_yaml_mapping
     from lpv_sysid.sim.phase1 import load_config as load_phase1
-    from lpv_sysid.synthesis.gains.inputs import feedforward_settings
-    from lpv_sysid.synthesis.gains.inputs import load_config as load_synthesis
+    from lpv_sysid.synthesis.gains import feedforward_settings
+    from lpv_sysid.synthesis.gains import load_config as load_synthesis
     from lpv_sysid.synthesis.hinf import HinfOptions
     from lpv_sysid.vrft import VrftConfig
 

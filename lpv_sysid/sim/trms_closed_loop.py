@@ -41,6 +41,7 @@ from scipy.integrate import solve_ivp
 from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError, SolverError
 from lpv_sysid.models.trms import (
+    P_NAMES,
     PSI_NAMES,
     TABLE7_RANGES,
     TS_PAPER,
@@ -48,7 +49,6 @@ from lpv_sysid.models.trms import (
     TrmsPolytope,
     bounding_box_polytope,
 )
-from lpv_sysid.models.trms.params import P_NAMES
 from lpv_sysid.synthesis.regions import (
     PlacementResult,
     Region,

@@ -57,10 +57,11 @@ from lpv_sysid.ident.vertex.pipeline import (
 )
 from lpv_sysid.ident.vertex.segment import equilibrium, fit_indices, trim_window
 from lpv_sysid.ident.vertex.types import VertexData, VertexResult, known_from_quadrotor
-from lpv_sysid.ident.vertex.uncertainty import applied_k, sidak_k
+from lpv_sysid.ident.vertex.uncertainty import UncertaintyConfig, applied_k, sidak_k
 
 __all__ = [
     "IdentificationConfig",
+    "UncertaintyConfig",
     "VertexData",
     "VertexResult",
     "applied_k",

@@ -11,8 +11,7 @@ from lpv_sysid.ident import derivatives as deriv
 from lpv_sysid.ident import equation_error as ee
 from lpv_sysid.ident.vertex import uncertainty as unc
 from lpv_sysid.models.quadrotor import STATE_NAMES, QuadrotorParams
-from lpv_sysid.signals.multisine.config import MAX_SAMPLE_RATE
-
+from lpv_sysid.signals.multisine import MAX_SAMPLE_RATE
 
 #: channels of ``measurement_noise``: the states (STATE_NAMES) and the rotor speeds
 NOISE_CHANNELS = (*STATE_NAMES, "rotor")

@@ -10,7 +10,6 @@ from typing import Any, Mapping
 from lpv_sysid.configuration import fields as cf
 from lpv_sysid.mavlink import px4
 
-
 #: PX4 modes a hand-back may request (names compared in upper case, kept as written)
 _MODES: dict[str, Any] = {"choices": tuple(px4.HANDBACK_MODES), "fold_case": True}
 

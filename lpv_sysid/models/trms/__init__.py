@@ -32,6 +32,7 @@ from __future__ import annotations
 
 from lpv_sysid.models.trms.model import Trms
 from lpv_sysid.models.trms.params import (
+    P_NAMES,
     PSI_NAMES,
     REDUCED_PSI,
     TABLE7_RANGES,
@@ -48,6 +49,7 @@ from lpv_sysid.models.trms.polytope import (
 
 __all__ = [
     "PSI_NAMES",
+    "P_NAMES",
     "REDUCED_PSI",
     "TABLE7_RANGES",
     "TS_PAPER",

@@ -9,13 +9,12 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, Mapping
 
-
 from lpv_sysid.configuration import fields as cf
 from lpv_sysid.control.baseline import BaselineGains
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io.files import read_yaml
 from lpv_sysid.models.quadrotor import QuadrotorParams
-from lpv_sysid.signals.multisine.config import MAX_DURATION
+from lpv_sysid.signals.multisine import MAX_DURATION
 from lpv_sysid.sim.vehicle import SensorConfig
 
 

@@ -8,13 +8,20 @@ what was written (:mod:`~lpv_sysid.synthesis.gains.pipeline`), the certificate e
 
 from __future__ import annotations
 
-from lpv_sysid.synthesis.gains.inputs import design_from_summary, load_inputs
+from lpv_sysid.synthesis.gains.inputs import (
+    design_from_summary,
+    feedforward_settings,
+    load_config,
+    load_inputs,
+)
 from lpv_sysid.synthesis.gains.outputs import write_gains
 from lpv_sysid.synthesis.gains.pipeline import describe_problem, synthesize, verify_written
 
 __all__ = [
     "describe_problem",
     "design_from_summary",
+    "feedforward_settings",
+    "load_config",
     "load_inputs",
     "synthesize",
     "verify_written",
