@@ -553,8 +553,7 @@ def test_the_shipped_configs_load():
     from lpv_sysid.ident.vertex import IdentificationConfig
     from lpv_sysid.io.files import read_yaml, read_yaml_mapping
     from lpv_sysid.sim.phase1 import load_config as load_phase1
-    from lpv_sysid.synthesis.gains import feedforward_settings
-    from lpv_sysid.synthesis.gains import load_config as load_synthesis
+    from lpv_sysid.synthesis.gains import SynthesisConfig
     from lpv_sysid.synthesis.hinf import HinfOptions
     from lpv_sysid.vrft import VrftConfig
 
@@ -576,7 +575,6 @@ def test_the_shipped_configs_load():
         assert fly.campaign.state_timeout == 0.5 and fly.loop_period == 0.005
         BridgeConfig.load(fly.bridge_config)
     for name in ("synthesis.yaml", "synthesis_chain.yaml", "synthesis_seed_scale.yaml"):
-        cfg = load_synthesis(path(name))
-        HinfOptions.from_dict(cfg.get("hinf"))
-        feedforward_settings(cfg, name)
+        cfg = SynthesisConfig.load(path(name))
+        assert isinstance(cfg.hinf, HinfOptions) and cfg.verify.n_random == 20
     VrftConfig.from_dict(read_yaml(path("vrft_example.yaml")))

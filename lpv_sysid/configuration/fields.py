@@ -25,8 +25,8 @@ Field kinds beyond the scalars, each small and general:
 * ``choices`` on :func:`texts` (each entry one of them) and :func:`numbers` (a keyword in
   place of the list, e.g. ``rate_bound: design``); ``fold_case`` compares names in upper
   case (PX4 mode names, solver names) and keeps the value as written;
-* ``scalar`` on :func:`numbers`: a bare number is a list of one (``std`` or ``[std,
-  rate_hz]``); ``length`` may list the allowed lengths;
+* ``scalar`` on :func:`numbers` and :func:`counts`: a bare number is a list of one
+  (``std`` or ``[std, rate_hz]``); ``length`` may list the allowed lengths;
 * ``nullable``: YAML ``null`` stands for the default (the key counts as absent);
 * ``section``: the key lives in a sub-mapping of the file (``runner: {loop_period: ...}``)
   while the dataclass stays flat.
@@ -82,11 +82,12 @@ class FieldSpec:
     ``fold_case``: names compared in upper case, kept as written. ``optional``: ``None``
     (YAML ``null``) is accepted and kept; ``nullable``: ``None`` means the default (the key
     counts as absent). ``nonempty``: a text, a name list or an integer list must not be
-    empty; ``unique``: no entry twice. ``scalar``: a :data:`NUMBERS` value may be a bare
-    number (a list of one). ``item``: what every value of a :data:`TABLE` must be (None:
-    anything, checked by the class); ``pairs``: the table is stored as ``(name, value)``
-    pairs in file order instead of a dict. ``key``: the YAML key when it differs from the
-    field name; ``section``: the sub-mapping of the file that holds the key."""
+    empty; ``unique``: no entry twice. ``scalar``: a :data:`NUMBERS` (:data:`COUNTS`)
+    value may be a bare number (integer), a list of one. ``item``: what every value of a
+    :data:`TABLE` must be (None: anything, checked by the class); ``pairs``: the table is
+    stored as ``(name, value)`` pairs in file order instead of a dict. ``key``: the YAML key
+    when it differs from the field name; ``section``: the sub-mapping of the file that holds
+    the key."""
 
     kind: str
     doc: str = ""
@@ -274,6 +275,8 @@ def _numbers_value(v: Any, spec: FieldSpec, path: str) -> Any:
 
 
 def _counts_value(v: Any, spec: FieldSpec, path: str) -> tuple:
+    if spec.scalar and isinstance(v, int) and not isinstance(v, bool):
+        v = [v]
     items = _sequence(v, spec, path)
     if spec.nonempty and not items:
         raise _bad(path, "expected a non-empty list of integers, got []")

@@ -3,7 +3,7 @@
 The models file is read and validated by :class:`lpv_sysid.io.formats.VertexModels` (its only
 reader); this module turns that reading into the set of plants seed 0 Lemma 1 is solved for,
 as configured by the ``uncertainty`` section of config/synthesis.yaml
-(:func:`uncertainty_settings`): the per-vertex corner polytope of Eq. (23) (reduced when the
+(:class:`UncertaintySettings`): the per-vertex corner polytope of Eq. (23) (reduced when the
 identified elements are too many), the common-input product polytope
 (:func:`common_input_systems`, the interior of the scheduling box covered), or the full
 identified element box (:func:`full_box_elements`). The gains file, its certificate and the
@@ -14,11 +14,14 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Optional, Sequence
 
 import numpy as np
 
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError
+from lpv_sysid.ident.vertex import UncertaintyConfig
 from lpv_sysid.io.formats import VertexModels
 from lpv_sysid.models.lpv import (
     CommonInputSet,
@@ -43,17 +46,13 @@ DEFAULT_COMMON_B = True
 DEFAULT_P_MAX_B = 2
 
 
-def _flag(v: Any, where: str) -> bool:
-    if isinstance(v, bool):
-        return v
-    raise ConfigError(f"{where} must be true or false, got {v!r}")
-
-
 #: ``uncertainty.set``: ``full_box`` = every element of the models file in its interval (the
 #: structured perturbation of models.lpv.ElementBox, certified by synthesis.robust_lmi);
 #: ``reduced_polytope`` = the corner polytope of Eq. (23) after the influence/box/hybrid reduction
 #: (what certificates written before the full box recorded, hence the default of an absent key).
 SETS = ("full_box", "reduced_polytope")
+#: keys of ``uncertainty`` that configure the reduction (ident.vertex.UncertaintyConfig)
+REDUCTION_KEYS = ("freq_hz", "n_freq", "output_states")
 DEFAULT_SET = "reduced_polytope"
 #: systems per vertex of the finite sample of a full box stored for the runtime re-check
 FULL_BOX_SAMPLE = 16
@@ -66,7 +65,7 @@ def _reduced_systems(
     p_max: int,
     max_corners: int,
     method: str,
-    ucfg: dict,
+    reduction: Mapping[str, Any],
 ) -> list:
     """Eq. (23) systems of one (A, B) from stored intervals: all corners when the free elements
     fit (p <= p_max, 2**p <= max_corners), else the reduction of ident.uncertainty.build applied to
@@ -77,7 +76,13 @@ def _reduced_systems(
     from lpv_sysid.ident.vertex import uncertainty as unc
 
     cfg = unc.UncertaintyConfig.from_dict(
-        {"k_sigma": 1.0, "method": method, "p_max": p_max, "max_corners": max_corners, **ucfg}
+        {
+            "k_sigma": 1.0,
+            "method": method,
+            "p_max": p_max,
+            "max_corners": max_corners,
+            **reduction,
+        }
     )
     elements = [
         (e.matrix, e.row, e.col, 0.5 * (e.lower + e.upper), 0.5 * (e.upper - e.lower)) for e in els
@@ -85,19 +90,67 @@ def _reduced_systems(
     return [(np.asarray(a), np.asarray(b)) for a, b in unc.build(A, B, elements, cfg).systems]
 
 
-def uncertainty_settings(uncertainty: Optional[dict]) -> dict:
-    """The effective ``uncertainty`` section (defaults filled in; recorded in the certificate)."""
-    u = dict(uncertainty or {})
-    u.setdefault("set", DEFAULT_SET)
-    if u["set"] not in SETS:
-        raise ConfigError(f"uncertainty.set must be one of {SETS}, got {u['set']!r}")
-    u.setdefault("p_max", 4)
-    u.setdefault("max_corners", 4096)
-    u.setdefault("method", "influence")
-    u["common_b"] = _flag(u.get("common_b", DEFAULT_COMMON_B), "uncertainty.common_b")
-    u.setdefault("p_max_b", DEFAULT_P_MAX_B)
-    u.setdefault("motor_std", None)
-    return u
+@dataclass(frozen=True)
+class UncertaintySettings:
+    """The ``uncertainty`` section of config/synthesis.yaml: which set the synthesis certifies
+    (seed 0 Eqs. 22-23), recorded in the certificate by :meth:`to_dict` and rebuilt from it by
+    ``verify``.
+
+    >>> UncertaintySettings.from_dict({"set": "full_box", "p_max": [4, 4]}).p_max
+    (4, 4)
+    >>> UncertaintySettings.from_dict({"p_max": 3}).to_dict()["p_max"]
+    3
+    """
+
+    set: str = cf.choice(
+        DEFAULT_SET, SETS, "full_box: every element in its interval; reduced_polytope: Eq. (23)"
+    )
+    motor_std: Optional[tuple] = cf.numbers(
+        None,
+        "[std a_Omega 1/s, std b_Omega rad/s^2] of the motor rows where the file has none",
+        length=2,
+        lo=0.0,
+        lo_open=True,
+        optional=True,
+    )
+    p_max: tuple = cf.counts(
+        (4,), "corner parameters per vertex: one integer, or one per vertex", scalar=True
+    )
+    max_corners: int = cf.count(4096, "corners of one vertex polytope before reduction", lo=1)
+    method: str = cf.choice(
+        "influence",
+        cf.specs(UncertaintyConfig)["method"].choices,
+        "reduction of lpv_sysid.ident.vertex.uncertainty",
+    )
+    common_b: bool = cf.flag(DEFAULT_COMMON_B, "B^b common to all vertices (interior covered)")
+    p_max_b: int = cf.count(DEFAULT_P_MAX_B, "corner parameters of the common input set")
+    #: keys of the reduction itself (:data:`REDUCTION_KEYS`, declared and checked by
+    #: :class:`~lpv_sysid.ident.vertex.UncertaintyConfig`), passed to it as given
+    reduction: Mapping[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def from_dict(
+        cls, d: Optional[Mapping[str, Any]], where: str = "uncertainty"
+    ) -> "UncertaintySettings":
+        d = d or {}
+        kw = cf.parse_fields(cls, d, where, other_keys=REDUCTION_KEYS)
+        reduction = {k: d[k] for k in REDUCTION_KEYS if k in d}
+        UncertaintyConfig.from_dict(reduction, where)
+        return cls(reduction=reduction, **kw)
+
+    def to_dict(self) -> dict:
+        """The settings as recorded in ``certificate.uncertainty`` (``p_max`` an integer when
+        one value serves every vertex)."""
+        return {
+            "set": self.set,
+            "motor_std": None if self.motor_std is None else list(self.motor_std),
+            "p_max": self.p_max[0] if len(self.p_max) == 1 else list(self.p_max),
+            "max_corners": self.max_corners,
+            "method": self.method,
+            "common_b": self.common_b,
+            "p_max_b": self.p_max_b,
+            **self.reduction,
+        }
 
 
 def common_input_systems(
@@ -108,7 +161,7 @@ def common_input_systems(
     p_max_b: int,
     max_corners: int,
     method: str,
-    ucfg: dict,
+    reduction: Mapping[str, Any],
 ) -> tuple[list, CommonInputSet]:
     """Product polytope Lambda_i^(a,b) = (A_i^a, B^b) (models.lpv_uncertainty module docstring).
 
@@ -124,7 +177,12 @@ def common_input_systems(
     else:
         A_ref = np.mean(As, axis=0)
         corners = np.array(
-            [b for _, b in _reduced_systems(A_ref, base, hull, p_max_b, max_corners, method, ucfg)]
+            [
+                b
+                for _, b in _reduced_systems(
+                    A_ref, base, hull, p_max_b, max_corners, method, reduction
+                )
+            ]
         )
         b_method = method
     common = CommonInputSet(corners, tuple(hull), nlo, nhi, b_method)
@@ -135,24 +193,23 @@ def common_input_systems(
     for A, B, e, p_i in zip(As, Bs, els, p_list):
         a_els = [x for x in e if x.matrix == "A"]
         p_a = max(0, p_i - int(np.ceil(np.log2(M_B))))
-        a_corners.append([a for a, _ in _reduced_systems(A, B, a_els, p_a, max_a, method, ucfg)])
+        a_corners.append(
+            [a for a, _ in _reduced_systems(A, B, a_els, p_a, max_a, method, reduction)]
+        )
     return product_systems(a_corners, common), common
 
 
-def _per_vertex(p_max, N: int) -> list:
+def _per_vertex(p_max: int | Sequence[int], N: int) -> list:
     """``uncertainty.p_max``: one integer for every vertex or a list of N (the seed-size
     configuration gives the vertices different corner counts, config/synthesis_seed_scale.yaml)."""
-    vals = list(p_max) if isinstance(p_max, (list, tuple)) else [p_max] * N
+    if isinstance(p_max, int):
+        p_max = (p_max,)
+    vals = list(p_max) * N if len(p_max) == 1 else list(p_max)
     if len(vals) != N:
         raise ConfigError(
             f"uncertainty.p_max: a list needs one entry per vertex ({N}), got {len(vals)}"
         )
-    out = []
-    for v in vals:
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
-            raise ConfigError(f"uncertainty.p_max entries must be integers >= 0, got {v!r}")
-        out.append(int(v))
-    return out
+    return vals
 
 
 #: the quadrotor's motor rows (seed 0 Eq. 15): A[d, d] = -a_Omega, B[d, u] = b_Omega
@@ -235,7 +292,7 @@ def full_box_elements(
 
 
 def load_models(
-    path: Path | str, uncertainty: Optional[dict] = None
+    path: Path | str, uncertainty: Optional[Mapping[str, Any] | UncertaintySettings] = None
 ) -> tuple[PolytopicModel, dict]:
     """Read vertex_models.yaml into the nested polytope of seed 0 Eq. (23).
 
@@ -266,34 +323,14 @@ def load_models(
     raw = vm.to_dict()
     states, inputs, box = vm.state_names, vm.input_names, vm.scheduling
     corners = box.corners
-    ucfg = uncertainty_settings(uncertainty)
-    p_max = _per_vertex(ucfg.pop("p_max"), len(corners))
-    try:
-        max_corners = int(ucfg.pop("max_corners"))
-        p_max_b = int(ucfg.pop("p_max_b"))
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(
-            f"uncertainty: p_max_b and max_corners must be integers ({exc})"
-        ) from None
-    if p_max_b < 0 or max_corners < 1:
-        raise ConfigError(
-            f"uncertainty: need p_max_b >= 0, max_corners >= 1, got {p_max_b}, {max_corners}"
-        )
-    method = str(ucfg.pop("method"))
-    common_b = ucfg.pop("common_b")
-    which = ucfg.pop("set")
-    motor_std = ucfg.pop("motor_std", None)
-    if motor_std is not None:
-        try:
-            motor_std = tuple(float(x) for x in motor_std)
-        except (TypeError, ValueError):
-            raise ConfigError(
-                f"uncertainty.motor_std must be [std a_Omega, std b_Omega], got {motor_std!r}"
-            ) from None
-        if len(motor_std) != 2 or not all(np.isfinite(x) and x > 0 for x in motor_std):
-            raise ConfigError(
-                f"uncertainty.motor_std must be two numbers > 0, got {list(motor_std)}"
-            )
+    ucfg = (
+        uncertainty
+        if isinstance(uncertainty, UncertaintySettings)
+        else UncertaintySettings.from_dict(uncertainty)
+    )
+    p_max = _per_vertex(ucfg.p_max, len(corners))
+    max_corners, p_max_b, method = ucfg.max_corners, ucfg.p_max_b, ucfg.method
+    common_b, which, motor_std = ucfg.common_b, ucfg.set, ucfg.motor_std
     As, Bs = vm.A, vm.B
     elss = [[e.to_lpv() for e in vx.uncertain] for vx in vm.vertices]
     kw: dict[str, Any] = dict(
@@ -323,11 +360,11 @@ def load_models(
     common = None
     if common_b:
         systems, common = common_input_systems(
-            As, Bs, elss, p_max, p_max_b, max_corners, method, ucfg
+            As, Bs, elss, p_max, p_max_b, max_corners, method, ucfg.reduction
         )
     else:
         systems = [
-            _reduced_systems(A, B, e, p, max_corners, method, ucfg)
+            _reduced_systems(A, B, e, p, max_corners, method, ucfg.reduction)
             for A, B, e, p in zip(As, Bs, elss, p_max)
         ]
     model = PolytopicModel(systems=systems, common_input=common, **kw)

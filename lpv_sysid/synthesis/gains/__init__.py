@@ -1,6 +1,7 @@
 """One synthesis from the vertex models to a certified gains file (``lpv-sysid synthesize``,
-the chain's step 4): inputs (config, options, models, weights, design envelope;
-:mod:`~lpv_sysid.synthesis.gains.inputs`), the solve and the independent verification of
+the chain's step 4): the configuration file declared once
+(:mod:`~lpv_sysid.synthesis.gains.config`), inputs (options, models, weights, design
+envelope; :mod:`~lpv_sysid.synthesis.gains.inputs`), the solve and the independent verification of
 what was written (:mod:`~lpv_sysid.synthesis.gains.pipeline`), the certificate entry
 (:mod:`~lpv_sysid.synthesis.gains.certificate`) and the files
 (:mod:`~lpv_sysid.synthesis.gains.outputs`).
@@ -8,20 +9,23 @@ what was written (:mod:`~lpv_sysid.synthesis.gains.pipeline`), the certificate e
 
 from __future__ import annotations
 
-from lpv_sysid.synthesis.gains.inputs import (
-    design_from_summary,
-    feedforward_settings,
-    load_config,
-    load_inputs,
+from lpv_sysid.synthesis.gains.config import (
+    FeedforwardSection,
+    SynthesisConfig,
+    VerifySection,
+    WeightsSection,
 )
+from lpv_sysid.synthesis.gains.inputs import design_from_summary, load_inputs
 from lpv_sysid.synthesis.gains.outputs import write_gains
 from lpv_sysid.synthesis.gains.pipeline import describe_problem, synthesize, verify_written
 
 __all__ = [
+    "FeedforwardSection",
+    "SynthesisConfig",
+    "VerifySection",
+    "WeightsSection",
     "describe_problem",
     "design_from_summary",
-    "feedforward_settings",
-    "load_config",
     "load_inputs",
     "synthesize",
     "verify_written",

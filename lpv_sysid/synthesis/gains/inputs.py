@@ -8,6 +8,7 @@ design envelope.
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -16,56 +17,20 @@ from typing import Any, Optional
 import numpy as np
 
 from lpv_sysid.errors import ConfigError
+from lpv_sysid.synthesis.gains.config import SynthesisConfig
 
-_TOP_KEYS = {"hinf", "weights", "velocity_states", "uncertainty", "verify", "feedforward"}
-
-
-def feedforward_settings(cfg: dict, cfg_path: str) -> tuple[bool, dict, float]:
-    """``feedforward``: true (default) | false | {enabled, cond_max, free_states,
-    accelerated_states, held_states, kinematic_states, rate_states} -> (enabled, layout dict,
-    cond_max)."""
-    from lpv_sysid.synthesis.feedforward import COND_MAX_DEFAULT, FeedforwardLayout
-
-    v = cfg.get("feedforward", True)
-    if isinstance(v, bool):
-        return v, FeedforwardLayout().to_dict(), COND_MAX_DEFAULT
-    if not isinstance(v, dict):
-        raise ConfigError(f"{cfg_path}: feedforward must be true, false or a mapping, got {v!r}")
-    v = dict(v)
-    enabled = v.pop("enabled", True)
-    if not isinstance(enabled, bool):
-        raise ConfigError(
-            f"{cfg_path}: feedforward.enabled must be true or false, got {enabled!r}"
-        )
-    try:
-        cond_max = float(v.pop("cond_max", COND_MAX_DEFAULT))
-    except (TypeError, ValueError):
-        raise ConfigError(f"{cfg_path}: feedforward.cond_max must be a number") from None
-    return enabled, FeedforwardLayout.from_dict(v).to_dict(), cond_max
-
-
-def load_config(path: str) -> dict:
-    from lpv_sysid.io.files import read_yaml_mapping
-
-    cfg = read_yaml_mapping(path)
-    bad = set(cfg) - _TOP_KEYS
-    if bad:
-        raise ConfigError(f"{path}: unknown key(s) {sorted(bad)}; known: {sorted(_TOP_KEYS)}")
-    for key in ("hinf", "weights", "uncertainty", "verify"):  # sections: mappings (or empty)
-        if cfg.get(key) is not None and not isinstance(cfg[key], dict):
-            raise ConfigError(f"{path}: {key}: expected a mapping, got {type(cfg[key]).__name__}")
-    return cfg
+log = logging.getLogger(__name__)
 
 
 def weights_from_config(
-    cfg: dict, n_u: int, summary_path: str | None, cfg_path: str
+    cfg: SynthesisConfig, n_u: int, summary_path: str | None, cfg_path: str
 ) -> tuple[np.ndarray, np.ndarray, str]:
     """(R, Q, source) from a signals summary (R, Q entries) or from Eqs. (27)-(28)."""
     from lpv_sysid.io.files import read_yaml_mapping
     from lpv_sysid.synthesis.hinf import excitation_R, output_Q
 
-    w = dict(cfg.get("weights") or {})
-    summary_path = summary_path or w.get("summary")
+    w = cfg.weights
+    summary_path = summary_path or w.summary
     if summary_path:
         p = Path(summary_path)
         if not p.is_absolute() and not p.exists():
@@ -81,15 +46,16 @@ def weights_from_config(
         if R.shape[0] != n_u or Q.ndim != 2 or Q.shape[0] != Q.shape[1]:
             raise ConfigError(f"{p}: R {R.shape} / Q {Q.shape} do not fit {n_u} inputs")
         return R, Q, str(p)
-    bad = set(w) - {"T", "input_magnitudes", "output_magnitudes", "summary"}
-    if bad:
-        raise ConfigError(f"{cfg_path}: weights: unknown key(s) {sorted(bad)}")
-    try:
-        T = float(w["T"])
-        R = excitation_R(w["input_magnitudes"], T)
-        Q = output_Q(w["output_magnitudes"], T)
-    except KeyError as exc:
-        raise ConfigError(f"{cfg_path}: weights.{exc.args[0]} missing") from None
+    T, mag_in, mag_out = w.T, w.input_magnitudes, w.output_magnitudes
+    if T is None or mag_in is None or mag_out is None:
+        missing = [
+            k
+            for k, v in zip(("T", "input_magnitudes", "output_magnitudes"), (T, mag_in, mag_out))
+            if v is None
+        ]
+        raise ConfigError(f"{cfg_path}: weights.{missing[0]} missing (or give weights.summary)")
+    R = excitation_R(list(mag_in), float(T))
+    Q = output_Q(list(mag_out), float(T))
     if R.shape[0] != n_u:
         raise ConfigError(
             f"{cfg_path}: weights.input_magnitudes has {R.shape[0]} entries, the model {n_u} "
@@ -112,17 +78,17 @@ def design_from_summary(source: str) -> Optional[dict]:
             source=f"signals summary {Path(source).name}",
         )
     except ConfigError as exc:
-        print(f"note: {exc}")
+        log.info("no design envelope from %s: %s", source, exc)
         return None
 
 
-def velocity_index(cfg: dict, state_names: tuple) -> tuple[int, ...]:
-    names = cfg.get("velocity_states", ["u", "v", "w"])
+def velocity_index(cfg: SynthesisConfig, state_names: tuple) -> tuple[int, ...]:
+    names = cfg.velocity_states
     try:
         return tuple(state_names.index(n) for n in names)
     except ValueError:
         raise ConfigError(
-            f"velocity_states {names} not all among the model states {list(state_names)}"
+            f"velocity_states {list(names)} not all among the model states {list(state_names)}"
         ) from None
 
 
@@ -130,9 +96,9 @@ def velocity_index(cfg: dict, state_names: tuple) -> tuple[int, ...]:
 class Inputs:
     """What one synthesis run works on (:func:`load_inputs`)."""
 
-    cfg: dict
-    opts: Any  # synthesis.hinf_lmi.HinfOptions
-    uncertainty: dict
+    cfg: SynthesisConfig
+    opts: Any  # synthesis.hinf.HinfOptions
+    uncertainty: dict  # UncertaintySettings.to_dict(): what the certificate records
     feedforward: tuple[bool, dict, float]
     model: Any  # models.lpv.PolytopicModel
     raw: dict
@@ -160,20 +126,21 @@ def load_inputs(
     models, weights (``summary``: the signals summary.yaml with R and Q, overriding
     ``weights``) and design envelope of one synthesis; ``Inputs.notes`` says what was loaded."""
     from lpv_sysid.synthesis.hinf import HinfOptions, performance_matrix, resolve_method
-    from lpv_sysid.synthesis.uncertainty_set import load_models, uncertainty_settings
+    from lpv_sysid.synthesis.uncertainty_set import load_models
 
-    cfg = load_config(config)
-    opts = HinfOptions.from_dict(cfg.get("hinf"))
+    cfg = SynthesisConfig.load(config)
+    opts = cfg.hinf
     if gamma is not None:
         opts = replace(opts, gamma=float(gamma))
     if solver is not None:
         opts = HinfOptions.from_dict(
             {**{k: getattr(opts, k) for k in opts.__dataclass_fields__}, "solver": solver}
         )
-    unc_cfg = uncertainty_settings(cfg.get("uncertainty"))
-    ff = feedforward_settings(cfg, config)
+    unc_cfg = cfg.uncertainty.to_dict()
+    ff_cfg = cfg.feedforward
+    ff = (ff_cfg.enabled, ff_cfg.layout.to_dict(), ff_cfg.cond_max)
     t0 = time.perf_counter()
-    model, raw = load_models(models, unc_cfg)
+    model, raw = load_models(models, cfg.uncertainty)
     R, Q, source = weights_from_config(cfg, model.n_u, summary, config)
     vidx = velocity_index(cfg, model.state_names)
     C = performance_matrix(Q, model.n_x, vidx)

@@ -28,7 +28,7 @@ def feedforward_terms(inp: Inputs, lines: list[str]):
     then a line in ``lines`` says so)."""
     enabled, layout, cond_max = inp.feedforward
     model = inp.model
-    if enabled and "feedforward" not in inp.cfg:
+    if enabled and not inp.cfg.feedforward.given:
         # default on, but only for models that have the layout's states (generic plants: off)
         names = set(model.state_names)
         if not all(set(layout[k]) <= names for k in layout):

@@ -89,12 +89,11 @@ def verify_written(gains: Path, models: str, inp: Inputs):
     passed: the gains must not be flown)."""
     from lpv_sysid.synthesis.verify import verify_files
 
-    vcfg = inp.cfg.get("verify") or {}
     log.info("independent verification of %s", gains)
     return verify_files(
         gains,
         models,
-        n_random=int(vcfg.get("n_random", 20)),
-        seed=int(vcfg.get("seed", 0)),
+        n_random=inp.cfg.verify.n_random,
+        seed=inp.cfg.verify.seed,
         velocity_index=inp.vidx,
     )
