@@ -38,6 +38,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from lpv_sysid.control.campaign import run_name
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError, SafetyError, SolverError
 from lpv_sysid.models.quadrotor import (
     INPUT_NAMES,
@@ -148,19 +149,20 @@ def z_scores(result, A: np.ndarray, B: np.ndarray) -> dict[str, float]:
 
 @dataclass(frozen=True)
 class CoverageConfig:
-    airframes: int = 3
-    spread: float = 0.25
-    seed: int = 0
-    vertices: tuple[int, ...] | None = None  # 1-based seed 0 Table 1 indices (None: all 8)
-    max_draws: int = 20  # redraws of an airframe that cannot be flown
+    """A coverage study: how many simulated airframes, how far from the nominal one."""
+
+    airframes: int = cf.count(3, "simulated airframes", lo=1, hi=10_000)
+    spread: float = cf.number(
+        0.25, "relative spread of every physical parameter", lo=0.0, hi=1.0, hi_open=True
+    )
+    seed: int = cf.count(0, "seed of the airframe draws")
+    vertices: tuple[int, ...] | None = cf.counts(
+        None, "1-based seed 0 Table 1 indices (null: all 8)", lo=1, optional=True
+    )
+    max_draws: int = cf.count(20, "redraws of an airframe that cannot be flown", lo=1)
 
     def __post_init__(self) -> None:
-        if int(self.airframes) != self.airframes or self.airframes < 1:
-            raise ConfigError(
-                f"coverage.airframes must be an integer >= 1, got {self.airframes!r}"
-            )
-        if not 0 <= self.spread < 1:
-            raise ConfigError(f"coverage.spread must be in [0, 1), got {self.spread!r}")
+        cf.normalize_fields(self, "coverage")
 
 
 @dataclass

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError, SolverError
 from lpv_sysid.ident.nonlinear.data import (
     AXES,
@@ -24,12 +25,29 @@ log = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class OutputErrorConfig:
-    segment_s: float = 2.0
-    max_segments: int = 40
-    max_nfev: int = 60
-    free: tuple[str, ...] | None = None  # K names to refine (default: all regression ones)
-    bounds_sigma: float | None = 5.0  # search box K0 +/- bounds_sigma * std0 (seed 2 Eq. 89)
-    estimate_initial: bool = True  # segment initial states projected out (see output_error)
+    """Output-error refinement of the regression estimate (seed 2 Sec. 4.3)."""
+
+    segment_s: float = cf.number(
+        2.0, "length of one simulated segment", lo=0.0, lo_open=True, hi=600.0, unit=" s"
+    )
+    max_segments: int = cf.count(40, "segments simulated (evenly picked)", lo=1, hi=100_000)
+    max_nfev: int = cf.count(60, "function evaluations of the least-squares search", lo=1)
+    free: tuple[str, ...] | None = cf.texts(
+        None, "K names to refine (null: all regression ones)", optional=True
+    )
+    bounds_sigma: float | None = cf.number(
+        5.0,
+        "search box K0 +/- bounds_sigma * std0 (seed 2 Eq. 89); null: unbounded",
+        lo=0.0,
+        lo_open=True,
+        optional=True,
+    )
+    estimate_initial: bool = cf.flag(
+        True, "segment initial states projected out (see output_error)"
+    )
+
+    def __post_init__(self) -> None:
+        cf.normalize_fields(self, "output_error")
 
 
 def _segments(n: int, seg: int, max_segments: int) -> np.ndarray:

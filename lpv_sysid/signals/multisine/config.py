@@ -43,7 +43,6 @@ MAX_DURATION = 3600.0
 MAX_SAMPLE_RATE = 10_000.0
 MAX_SAMPLES = 2_000_000
 #: Iteration counts of the phase optimiser (defaults 150, 100, 3): larger values never finish.
-MAX_COUNTS = {"max_iter": 100_000, "clip_iter": 100_000, "restarts": 1_000}
 
 _BREAKPOINT = cf.FieldSpec(cf.NUMBERS, length=2, lo=0.0)
 _POSITIVE = cf.FieldSpec(cf.NUMBER, lo=0.0, lo_open=True)
@@ -144,24 +143,6 @@ class WeightsConfig:
         return cls(**kw)
 
 
-#: ``optimisation`` keys -> what their values must be (PhaseOptOptions checks the rest)
-_OPTIONS = {
-    "p_stages": _POSITIVES,
-    "max_iter": cf.FieldSpec(cf.COUNT, hi=MAX_COUNTS["max_iter"]),
-    "clip_iter": cf.FieldSpec(cf.COUNT, hi=MAX_COUNTS["clip_iter"]),
-    "restarts": cf.FieldSpec(cf.COUNT, hi=MAX_COUNTS["restarts"]),
-    "restart_max_harmonics": cf.FieldSpec(cf.COUNT),
-    "seed": cf.FieldSpec(cf.COUNT),
-    "clip_level": _POSITIVE,
-}
-
-
-def _options_from_dict(d: Mapping[str, Any], where: str = "optimisation") -> PhaseOptOptions:
-    cf.check_keys(d, _OPTIONS, where, list_allowed=True)
-    kw = {k: cf.check_value(_OPTIONS[k], v, f"{where}.{k}") for k, v in d.items()}
-    return PhaseOptOptions(**kw)
-
-
 @dataclass(frozen=True)
 class SignalsConfig:
     """A full multisine design: period, rate, groups, optimiser options, weights."""
@@ -220,7 +201,7 @@ class SignalsConfig:
                     f"{where}.groups[{i}].band: upper edge {g.band[1]} Hz must be "
                     f"below the Nyquist frequency {fs / 2} Hz"
                 )
-        opts = _options_from_dict(d.get("optimisation") or {}, f"{where}.optimisation")
+        opts = PhaseOptOptions.from_dict(d.get("optimisation") or {}, f"{where}.optimisation")
         w = WeightsConfig.from_dict(d.get("weights") or {}, f"{where}.weights")
         if w.group is not None:
             match = [g for g in groups if g.name == w.group]

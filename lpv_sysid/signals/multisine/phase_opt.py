@@ -19,12 +19,13 @@ The RPF is evaluated on the sample grid, i.e. on the signal that is actually com
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy import fft as sfft
 from scipy.optimize import minimize
 
-from lpv_sysid.errors import ConfigError
+from lpv_sysid.configuration import fields as cf
 
 
 def synthesize(
@@ -60,29 +61,39 @@ def rpf_of(x: np.ndarray) -> float:
 
 @dataclass(frozen=True)
 class PhaseOptOptions:
-    """Options of :func:`optimise_phases` (config key ``optimisation``)."""
+    """Options of :func:`optimise_phases` (config key ``optimisation``), declared once.
 
-    p_stages: tuple[float, ...] = (4.0, 16.0, 64.0, 256.0, 1024.0)
-    max_iter: int = 150  # L-BFGS-B iterations per stage
-    clip_iter: int = 100  # iterative-clipping iterations before the L_p stages
-    clip_level: float = 0.9  # clipping level, fraction of the current half range
-    restarts: int = 3  # extra starts from random phases (best kept) ...
-    restart_max_harmonics: int = 40  # ... for channels with at most this many harmonics
-    seed: int = 0  # for the random restarts
+    >>> PhaseOptOptions.from_dict({"max_iter": 10}).max_iter
+    10
+    """
+
+    p_stages: tuple[float, ...] = cf.numbers(
+        (4.0, 16.0, 64.0, 256.0, 1024.0), "exponents p of the L_p crest-factor stages", lo=2.0
+    )
+    max_iter: int = cf.count(150, "L-BFGS-B iterations per stage", hi=100_000)
+    clip_iter: int = cf.count(
+        100, "iterative-clipping iterations before the L_p stages", hi=100_000
+    )
+    clip_level: float = cf.number(
+        0.9,
+        "clipping level, fraction of the current half range",
+        lo=0.0,
+        lo_open=True,
+        hi=1.0,
+        hi_open=True,
+    )
+    restarts: int = cf.count(3, "extra starts from random phases (best kept)", hi=1_000)
+    restart_max_harmonics: int = cf.count(
+        40, "restarts only for channels with at most this many harmonics"
+    )
+    seed: int = cf.count(0, "seed of the random restarts")
 
     def __post_init__(self) -> None:
-        if not self.p_stages or any(not np.isfinite(p) or p < 2 for p in self.p_stages):
-            raise ConfigError(
-                f"optimisation.p_stages: need values >= 2, got {list(self.p_stages)}"
-            )
-        if self.max_iter < 0:
-            raise ConfigError(f"optimisation.max_iter: must be >= 0, got {self.max_iter}")
-        if self.clip_iter < 0:
-            raise ConfigError(f"optimisation.clip_iter: must be >= 0, got {self.clip_iter}")
-        if not 0.0 < self.clip_level < 1.0:
-            raise ConfigError(f"optimisation.clip_level: must be in (0, 1), got {self.clip_level}")
-        if self.restarts < 0:
-            raise ConfigError(f"optimisation.restarts: must be >= 0, got {self.restarts}")
+        cf.normalize_fields(self, "optimisation")
+
+    @classmethod
+    def from_dict(cls, d: Any, where: str = "optimisation") -> "PhaseOptOptions":
+        return cls(**cf.parse_fields(cls, d, where))
 
 
 class _PNormObjective:

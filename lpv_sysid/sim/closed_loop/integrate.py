@@ -17,7 +17,8 @@ from typing import Callable
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from lpv_sysid.errors import ConfigError, SafetyError
+from lpv_sysid.configuration import fields as cf
+from lpv_sysid.errors import SafetyError
 from lpv_sysid.sim.closed_loop.references import ReferenceSignals
 from lpv_sysid.sim.closed_loop.schedule import ScheduledModel
 
@@ -26,19 +27,26 @@ from lpv_sysid.sim.closed_loop.schedule import ScheduledModel
 class ClosedLoopConfig:
     """How Eq. (33) is integrated (see module docstring)."""
 
-    kappa: float = 1.0
-    method: str = "RK45"
-    rtol: float = 1e-7
-    atol: float = 1e-9
-    rk4_lambda_h: float = 0.5
-    # states whose magnitude above this bound marks the run as diverged (finiteness always checked)
-    divergence_bound: float = 1e6
+    kappa: float = cf.number(1.0, "excitation scale (Eq. 33: kappa u_e)", lo=0.0, lo_open=True)
+    method: str = cf.choice("RK45", ("RK45", "rk4"), "adaptive RK45 or fixed-step RK4")
+    rtol: float = cf.number(1e-7, "RK45 relative tolerance", lo=0.0, lo_open=True, hi=1.0)
+    atol: float = cf.number(1e-9, "RK45 absolute tolerance", lo=0.0, lo_open=True)
+    rk4_lambda_h: float = cf.number(
+        0.5,
+        "RK4 step times the fastest closed-loop eigenvalue (RK4 is stable up to 2.78)",
+        lo=0.0,
+        lo_open=True,
+        hi=2.78,
+    )
+    divergence_bound: float = cf.number(
+        1e6,
+        "a state above this magnitude marks the run as diverged (finiteness always checked)",
+        lo=0.0,
+        lo_open=True,
+    )
 
     def __post_init__(self) -> None:
-        if not (np.isfinite(self.kappa) and self.kappa > 0):
-            raise ConfigError(f"kappa must be a finite number > 0, got {self.kappa!r}")
-        if self.method not in ("RK45", "rk4"):
-            raise ConfigError(f"method must be 'RK45' or 'rk4', got {self.method!r}")
+        cf.normalize_fields(self, "closed_loop")
 
 
 def closed_loop_rate(model: ScheduledModel, signals: ReferenceSignals) -> float:

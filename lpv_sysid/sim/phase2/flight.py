@@ -19,6 +19,7 @@ from typing import Any, Callable, Optional, Protocol, Sequence, Union
 
 import numpy as np
 
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError, SafetyError
 from lpv_sysid.sim.closed_loop import VELOCITY_INDEX, ControlLaw, ReferenceSignals, l2_norm
 from lpv_sysid.sim.phase2.outputs import RunRecord
@@ -32,12 +33,15 @@ class NonlinearConfig:
     """Loop rates of run (b). The control law runs at ``control_hz`` (zero-order hold on the
     vehicle's fixed-step physics, which must be a multiple); the signals are sampled there."""
 
-    control_hz: float = 100.0
-    status_hz: float = 1.0
+    control_hz: float = cf.number(
+        100.0, "rate of the control law", lo=0.0, lo_open=True, hi=10_000.0, unit=" Hz"
+    )
+    status_hz: float = cf.number(
+        1.0, "rate of the status messages", lo=0.0, lo_open=True, hi=1_000.0, unit=" Hz"
+    )
 
     def __post_init__(self) -> None:
-        if not (self.control_hz > 0 and math.isfinite(self.control_hz)):
-            raise ConfigError(f"control_hz must be > 0, got {self.control_hz!r}")
+        cf.normalize_fields(self, "phase2")
 
 
 class BagSink(Protocol):
