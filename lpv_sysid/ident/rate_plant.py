@@ -44,6 +44,7 @@ from typing import Sequence
 
 import numpy as np
 
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import BagError, ConfigError
 from lpv_sysid.models import rate_plant as rp
 
@@ -64,23 +65,43 @@ class RateRun:
 
 @dataclass(frozen=True)
 class RateIdConfig:
-    sample_rate: float = 50.0
-    lowpass_hz: float = 5.0  # zero-phase Butterworth (order 2, forward-backward) on x and u
-    delays: tuple = (0.0, 0.02, 0.04, 0.06, 0.08, 0.1, 0.12)
-    trim_edges_s: float = 0.5  # dropped at both ends of every run (filter edges)
-    unit_dc_gain: bool = (
-        True  # rate rows p' = a (p_sp - p) + c (PX4's rate I term: no steady error)
+    """Identification of the rate plant PX4 executes (:func:`identify`), declared once."""
+
+    sample_rate: float = cf.number(
+        50.0,
+        "resampling rate of state and setpoints",
+        lo=0.0,
+        lo_open=True,
+        hi=1000.0,
+        unit=" Hz",
+    )
+    lowpass_hz: float = cf.number(
+        5.0,
+        "zero-phase Butterworth (order 2, forward-backward) on x and u",
+        lo=0.0,
+        lo_open=True,
+        unit=" Hz",
+    )
+    delays: tuple = cf.numbers(
+        (0.0, 0.02, 0.04, 0.06, 0.08, 0.1, 0.12),
+        "candidate setpoint delays",
+        lo=0.0,
+        hi=1.0,
+        unit=" s",
+    )
+    trim_edges_s: float = cf.number(
+        0.5, "dropped at both ends of every run (filter edges)", lo=0.0, hi=60.0, unit=" s"
+    )
+    unit_dc_gain: bool = cf.flag(
+        True, "rate rows p' = a (p_sp - p) + c (PX4's rate I term: no steady error)"
     )
 
+    def __post_init__(self) -> None:
+        cf.normalize_fields(self, "rate_identification")
+
     def validate(self) -> None:
-        if not (self.sample_rate > 0 and self.lowpass_hz > 0 and self.trim_edges_s >= 0):
-            raise ConfigError(
-                "rate-plant identification: sample_rate, lowpass_hz must be > 0, trim_edges_s >= 0"
-            )
-        if not self.delays or any(d < 0 for d in self.delays):
-            raise ConfigError(
-                "rate-plant identification: delays must be a non-empty list of values >= 0"
-            )
+        """The declared fields (also checked on construction)."""
+        cf.check_fields(self, "rate_identification")
 
 
 def read_run(path: str | Path, cfg: RateIdConfig = RateIdConfig()) -> RateRun:

@@ -10,7 +10,6 @@ excitation ``ue_t, ue_a, ue_e, ue_r``) and :func:`load_vehicle_config` the simul
 from __future__ import annotations
 
 import logging
-import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,6 +17,7 @@ from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
+from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.sim.closed_loop import ReferenceSignals
 
@@ -33,53 +33,73 @@ class Phase2Config:
     """Options of the phase-2 simulation (``simulate phase2`` maps its flags onto the fields;
     errors name the field)."""
 
-    kappa: float = 1.0  # excitation multiplier of Eq. (33)
-    eq33_method: str = "rk4"  # "rk4" (fixed step on the signal grid) or "RK45" (ode45-like)
-    box_margin: float = 1.0  # m/s beyond the scheduling box before the supervisor stops
-    max_tilt_deg: float = 60.0  # |phi|, |theta| limit of the supervisor
-    duration: Optional[float] = None  # truncate the signals to this many seconds
-    ramp: Optional[float] = 2.0  # fade in/out of the excitation player (None: raw table)
-    record_bag: bool = True
-    storage: str = "mcap"
-    seed: int = 0  # sensor-noise seed of run (b)
-    run_eq33: bool = True
-    run_nonlinear: bool = True
-    monitor_margin: float = 1.2  # bound monitor of the runtime law: flag at gain > gamma x margin
-    superposition: bool = False  # also estimate the excitation-only gain on the nonlinear model
-    feedforward: str = "exact"  # reference feedforward of run (b): exact | filtered | off
-    ff_filter_tau: float = 0.05  # s, derivative filter of the 'filtered' feedforward
-    ff_jerk_tau: float = 0.2  # s, its jerk stage
-    monitor_window: Optional[float] = None  # s, exponential forgetting of the bound monitor
+    kappa: float = cf.number(
+        1.0, "excitation multiplier of Eq. (33)", lo=0.0, lo_open=True, hi=100.0
+    )
+    eq33_method: str = cf.choice(
+        "rk4", ("RK45", "rk4"), "rk4: fixed step on the signal grid; RK45: ode45-like"
+    )
+    box_margin: float = cf.number(
+        1.0,
+        "beyond the scheduling box before the supervisor stops",
+        lo=0.0,
+        hi=10.0,
+        unit=" m/s",
+    )
+    max_tilt_deg: float = cf.number(
+        60.0,
+        "|phi|, |theta| limit of the supervisor",
+        lo=0.0,
+        lo_open=True,
+        hi=90.0,
+        hi_open=True,
+        unit=" deg",
+    )
+    duration: Optional[float] = cf.number(
+        None,
+        "truncate the signals to this many seconds",
+        lo=0.0,
+        lo_open=True,
+        unit=" s",
+        optional=True,
+    )
+    ramp: Optional[float] = cf.number(
+        2.0,
+        "fade in/out of the excitation player (null: raw table)",
+        lo=0.0,
+        hi=600.0,
+        unit=" s",
+        optional=True,
+    )
+    record_bag: bool = cf.flag(True, "write the phase-2 bag of run (b)")
+    storage: str = cf.choice("mcap", ("mcap", "sqlite3"), "rosbag2 storage of that bag")
+    seed: int = cf.count(0, "sensor-noise seed of run (b)")
+    run_eq33: bool = cf.flag(True, "run (a): Eq. (33) on the identified models")
+    run_nonlinear: bool = cf.flag(True, "run (b): the nonlinear simulated vehicle")
+    monitor_margin: float = cf.number(
+        1.2, "bound monitor of the runtime law: flag at gain > gamma x margin", lo=1.0, hi=10.0
+    )
+    superposition: bool = cf.flag(
+        False, "also estimate the excitation-only gain on the nonlinear model"
+    )
+    feedforward: str = cf.choice(
+        "exact", ("exact", "filtered", "off"), "reference feedforward of run (b)"
+    )
+    ff_filter_tau: float = cf.number(
+        0.05, "derivative filter of the 'filtered' feedforward", lo=0.0, hi=10.0, unit=" s"
+    )
+    ff_jerk_tau: float = cf.number(0.2, "its jerk stage", lo=0.0, hi=10.0, unit=" s")
+    monitor_window: Optional[float] = cf.number(
+        None,
+        "exponential forgetting of the bound monitor",
+        lo=0.0,
+        lo_open=True,
+        unit=" s",
+        optional=True,
+    )
 
     def __post_init__(self) -> None:
-        if not (
-            isinstance(self.kappa, (int, float)) and math.isfinite(self.kappa) and self.kappa > 0
-        ):
-            raise ConfigError(f"kappa must be a finite number > 0, got {self.kappa!r}")
-        if self.eq33_method not in ("RK45", "rk4"):
-            raise ConfigError(f"eq33_method must be RK45 or rk4, got {self.eq33_method!r}")
-        if not (self.box_margin >= 0 and math.isfinite(self.box_margin)):
-            raise ConfigError(f"box_margin must be >= 0, got {self.box_margin!r}")
-        if not (0 < self.max_tilt_deg < 90):
-            raise ConfigError(f"max_tilt_deg must be in (0, 90) deg, got {self.max_tilt_deg!r}")
-        if self.duration is not None and not (self.duration > 0 and math.isfinite(self.duration)):
-            raise ConfigError(f"duration must be > 0, got {self.duration!r}")
-        if not (self.monitor_margin > 0):
-            raise ConfigError(f"monitor_margin must be > 0, got {self.monitor_margin!r}")
-        if self.feedforward not in ("exact", "filtered", "off"):
-            raise ConfigError(
-                f"feedforward must be exact, filtered or off, got {self.feedforward!r}"
-            )
-        if not (math.isfinite(self.ff_filter_tau) and self.ff_filter_tau >= 0):
-            raise ConfigError(f"ff_filter_tau must be >= 0, got {self.ff_filter_tau!r}")
-        if not (math.isfinite(self.ff_jerk_tau) and self.ff_jerk_tau >= 0):
-            raise ConfigError(f"ff_jerk_tau must be >= 0, got {self.ff_jerk_tau!r}")
-        if self.monitor_window is not None and not (
-            math.isfinite(self.monitor_window) and self.monitor_window > 0
-        ):
-            raise ConfigError(f"monitor_window must be > 0, got {self.monitor_window!r}")
-        if self.storage not in ("mcap", "sqlite3"):
-            raise ConfigError(f"storage must be mcap or sqlite3, got {self.storage!r}")
+        cf.normalize_fields(self, "phase2")
 
 
 # --------------------------------------------------------------------------- gains and models
