@@ -206,7 +206,8 @@ class BridgeCore:
     def _on_message(self, msg: Any, now: float, out: BridgeOutput) -> None:
         mtype = msg.get_type()
         if mtype == "HEARTBEAT":
-            if msg.get_srcSystem() == self.link.target_system and msg.autopilot != 8:
+            # mode, ACK and home evidence only from the target autopilot component
+            if self.link.from_autopilot(msg) and msg.autopilot != 8:
                 mode = px4.decode_custom_mode(msg.custom_mode)
                 armed = bool(msg.base_mode & px4.MAV_MODE_FLAG_SAFETY_ARMED)
                 if not self._link_was_up:
@@ -215,15 +216,18 @@ class BridgeCore:
                 self._run(self.machine.on_heartbeat(now, mode, armed), now, out)
             return
         if mtype == "COMMAND_ACK":
-            if msg.get_srcSystem() == self.link.target_system:
+            if self.link.from_autopilot(msg):
                 self._run(self.machine.on_ack(now, msg.command, msg.result), now, out)
             return
         if mtype == "HOME_POSITION":
-            if msg.get_srcSystem() == self.link.target_system:
+            if self.link.from_autopilot(msg):
                 self.envelope.set_home_position((msg.x, msg.y, msg.z))
             return
-        if self.link.target_system:
-            self.telemetry.target = (self.link.target_system, self.link.target_component)
+        link = self.link
+        if link.target_system and not link.ambiguous_target:
+            self.telemetry.target = (link.target_system, link.target_component)
+        else:
+            self.telemetry.target = None
         for s in self.telemetry.on_message(msg, now):
             if isinstance(s, StateSample):
                 self._state = s
