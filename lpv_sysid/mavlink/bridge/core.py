@@ -17,6 +17,7 @@ from lpv_sysid.control.envelope import Envelope, EnvelopeConfig, Violation
 from lpv_sysid.errors import LpvSysidError, SafetyError
 from lpv_sysid.mavlink import px4
 from lpv_sysid.mavlink.bridge.transport import (
+    ABSURD_FACTOR,
     ActuatorSetpoint,
     TransportContext,
     VelocitySetpoint,
@@ -79,6 +80,13 @@ class BridgeConfig:
         lo=0.01,
         hi=0.6,
     )
+    command_abort_factor: float = cf.number(
+        ABSURD_FACTOR,
+        "attitude_rate / rate_setpoint: a command beyond this multiple of the transport's "
+        "range (thrust, body rate) aborts (hand-back) instead of being clipped; 1 .. 100",
+        lo=1.0,
+        hi=100.0,
+    )
     auto_start: bool = cf.flag(False, "start the machine on the first command")
     telemetry_max_age: float = cf.number(
         0.5,
@@ -124,7 +132,14 @@ class BridgeConfig:
                 "velocity", frame=self.velocity_frame, use_yaw_rate=self.use_yaw_rate
             )
         if self.command == "attitude_rate":
-            return make_transport("attitude_rate", arm_length=self.arm_length, rate_p=self.rate_p)
+            return make_transport(
+                "attitude_rate",
+                arm_length=self.arm_length,
+                rate_p=self.rate_p,
+                absurd_factor=self.command_abort_factor,
+            )
+        if self.command == "rate_setpoint":
+            return make_transport(self.command, absurd_factor=self.command_abort_factor)
         return make_transport(self.command)
 
 
