@@ -109,6 +109,14 @@ class ControllerSettings(Settings):
         0.0,
         1.0,
     )
+    max_body_speed: float = double(
+        30.0, "|body velocity| of a state sample beyond this -> abort [m/s]", 1.0, 100.0
+    )
+    max_tilt: float = double(1.2, "|roll| or |pitch| beyond this -> abort [rad]", 0.1, 1.5)
+    max_body_rate: float = double(20.0, "|p|, |q| or |r| beyond this -> abort [rad/s]", 1.0, 100.0)
+    max_rotor_speed: float = double(
+        5000.0, "a rotor speed outside [0, this] -> abort [rad/s]", 10.0, 1e5
+    )
     excitation_gain: float = double(1.0, "excitation multiplier kappa (seed 0 Eq. 33)", 0.0, 10.0)
     arm_length: float = double(0.225, "arm length of the mixer (seed 0 Eq. 7) [m]", 0.01, 10.0)
     u_esc_min: float = double(
