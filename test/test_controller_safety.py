@@ -103,8 +103,8 @@ def fly(rt, t0, seconds, dt=0.004, stamp_offset=0.0, **kw):
     "params, needle",
     [
         ({"u_esc_min": 0.9, "u_esc_max": 0.1}, "u_esc_min < u_esc_max"),
-        ({"rate_limit": [-1.0, 1.0, 1.0, 1.0]}, "rate_limit' entry [0] must be > 0"),
-        ({"rate_limit": [0.0, 1.0, 1.0, 1.0]}, "rate_limit' entry [0] must be > 0"),
+        ({"rate_limit": [-1.0, 1.0, 1.0, 1.0]}, "rate_limit' entry [0] must be >= 0.01"),
+        ({"rate_limit": [0.0, 1.0, 1.0, 1.0]}, "rate_limit' entry [0] must be >= 0.01"),
         ({"rate_limit": [1.0, math.nan, 1.0, 1.0]}, "rate_limit' entry [1] must be finite"),
         ({"rate_limit": [1.0, 1.0]}, "rate_limit' needs 0 or 4 entries"),
         ({"monitor_margin": 0.0}, "monitor_margin' must be >= 1"),

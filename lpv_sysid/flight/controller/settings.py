@@ -127,11 +127,11 @@ class ControllerSettings(Settings):
     )
     rate_limit: tuple = doubles(
         (),
-        "per-channel rate limit of u [1/s] (unset: none)",
-        lo=0.0,
+        "per-channel rate limit of u [1/s] (unset: none); 0.01 .. 1000 /s: a slower limit "
+        "freezes the command (the feedback no longer acts)",
+        lo=0.01,
         hi=1000.0,
         lengths=(0, 4),
-        lo_open=True,
     )
     monitor_margin: float = double(
         1.2, "bound monitor: abort when gain > gamma x margin", 1.0, 10.0
