@@ -103,8 +103,8 @@ def fly(rt, t0, seconds, dt=0.004, stamp_offset=0.0, **kw):
     "params, needle",
     [
         ({"u_esc_min": 0.9, "u_esc_max": 0.1}, "u_esc_min < u_esc_max"),
-        ({"rate_limit": [-1.0, 1.0, 1.0, 1.0]}, "rate_limit' entry [0] must be > 0"),
-        ({"rate_limit": [0.0, 1.0, 1.0, 1.0]}, "rate_limit' entry [0] must be > 0"),
+        ({"rate_limit": [-1.0, 1.0, 1.0, 1.0]}, "rate_limit' entry [0] must be >= 0.01"),
+        ({"rate_limit": [0.0, 1.0, 1.0, 1.0]}, "rate_limit' entry [0] must be >= 0.01"),
         ({"rate_limit": [1.0, math.nan, 1.0, 1.0]}, "rate_limit' entry [1] must be finite"),
         ({"rate_limit": [1.0, 1.0]}, "rate_limit' needs 0 or 4 entries"),
         ({"monitor_margin": 0.0}, "monitor_margin' must be >= 1"),
@@ -630,3 +630,55 @@ def test_design_envelope_from_a_phase2_summary(tmp_path):
     R1 = np.array(env["reference_rate"])
     assert np.all(rate <= R1) and np.all(rate > 0.3 * R1)
     assert np.all(np.array(env["reference_peak"]) == P)
+
+
+# ------------------------------------------------- issue 25 item 6: absurd inputs abort
+def _absurd_state(rt, index, value):
+    x8, _ = hover_inputs(rt)
+    x8 = x8.copy()
+    x8[index] = value
+    return x8
+
+
+@pytest.mark.parametrize(
+    "topic, index, value, needle",
+    [
+        ("state", 2, 1e6, "body speed 1e+06 m/s beyond max_body_speed 30"),  # u = 1e6 m/s
+        ("state", 4, -31.0, "body speed 31 m/s beyond max_body_speed 30"),
+        ("state", 0, 3.0, "roll 3 rad / pitch"),  # roll 3 rad
+        ("state", 1, -1.3, "pitch -1.3 rad beyond max_tilt 1.2"),
+        ("state", 6, 25.0, "body rate 25 rad/s beyond max_body_rate 20"),
+        ("rotor_speeds", 2, -1000.0, "rotor_speeds[2] = -1000 rad/s outside [0, 5000]"),
+        ("rotor_speeds", 0, 1e7, "rotor_speeds[0] = 1e+07 rad/s outside"),
+    ],
+)
+def test_absurd_inputs_abort_the_controller(gains2, topic, index, value, needle):
+    rt = runtime(gains2)
+    feed(rt, 100.0)
+    assert rt.start(100.0)[0]
+    assert fly(rt, 100.004, 0.1)
+    x8, om = hover_inputs(rt)
+    if topic == "state":
+        bad = _absurd_state(rt, index, value)
+    else:
+        bad = om.copy()
+        bad[index] = value
+    rt.on_sample(topic, 100.2, bad, 100.2)
+    ev = rt.supervisor.event
+    assert ev is not None and ev.reason == "input_bound" and needle in ev.detail
+    assert [m for tp, m in rt.tick(100.2) if tp == "actuator_command"] == []
+
+
+def test_plausible_inputs_near_the_bounds_fly(gains2):
+    rt = runtime(gains2, max_tilt=0.5, max_body_speed=5.0)
+    feed(rt, 100.0)
+    assert rt.start(100.0)[0]
+    x8, _ = hover_inputs(rt)
+    x8 = x8.copy()
+    x8[0], x8[2] = 0.49, 4.9  # inside the declared bounds: no abort (the law may saturate)
+    rt.on_sample("state", 100.004, x8, 100.004)
+    assert rt.supervisor.event is None
+    with pytest.raises(ConfigError, match="max_body_speed"):
+        ControllerSettings(gains_file=str(gains2), max_body_speed=1e9)
+    with pytest.raises(ConfigError, match="max_tilt"):
+        ControllerSettings(gains_file=str(gains2), max_tilt=3.5)

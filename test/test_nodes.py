@@ -255,22 +255,22 @@ def test_logger_records_excitation_and_closes(tmp_path, signals1):
     from lpv_sysid.nodes.excitation_node import ExcitationNode
 
     out = tmp_path / "log"
-    rclpy.init(
-        args=ros_args(
-            ("signals_file", signals1),
-            ("auto_start", True),
-            ("out_dir", str(out)),
-            ("split_duration_s", 1.0),
-            ("config_files", f"['{CONFIG}/excitation_node.yaml']"),
-        )
-    )
+    rclpy.init(args=ros_args())
+    # each node its own parameters (a key of the other node would be refused as unknown)
     exc = ExcitationNode(
         namespace=NS,
-        cli_args=["--ros-args", "--params-file", os.path.join(CONFIG, "excitation_node.yaml")],
+        cli_args=ros_args(
+            ("signals_file", signals1), ("auto_start", True), params_file="excitation_node.yaml"
+        )[1:],
     )
     log = DataLoggerNode(
         namespace=NS,
-        cli_args=["--ros-args", "--params-file", os.path.join(CONFIG, "data_logger.yaml")],
+        cli_args=ros_args(
+            ("out_dir", str(out)),
+            ("split_duration_s", 1.0),
+            ("config_files", f"['{CONFIG}/excitation_node.yaml']"),
+            params_file="data_logger.yaml",
+        )[1:],
     )
     spin([exc, log], 2.5)
     sent = standin.find_publisher(exc, "excitation").standin_published

@@ -499,3 +499,40 @@ def test_real_px4_posctl_handback_without_rc_ends_in_confirmed_hold():
             assert abs(z[-1] - z_abort) < 1.0 and core.machine.vehicle_mode == px4.HOLD
         finally:
             core.close()
+
+
+def test_vehicle_back_in_offboard_after_done_is_reported_each_time():
+    """Issue 25 item 8: after a confirmed hand-back (DONE) nothing streams; a HEARTBEAT
+    showing OFFBOARD again is an error-level StatusEvent, every time it happens."""
+    s = Script(OffboardConfig(arm=True))
+    s.active()
+    s.m.abort(s.t, "operator")
+    s.ack(0.01, MAV_CMD_DO_SET_MODE, ACC)
+    s.hb(0.3, px4.HOLD, True)
+    s.run(0.05)
+    assert s.m.state == State.DONE and s.m.confirmed_mode == px4.HOLD
+    assert kinds(s.hb(1.0, px4.HOLD, True), StatusEvent) == []
+    ev = kinds(s.hb(1.0, px4.OFFBOARD, True), StatusEvent)
+    assert len(ev) == 1 and ev[0].level == "error" and ev[0].state == "DONE"
+    assert ev[0].reason.startswith("vehicle back in OFFBOARD after the run ended (DONE")
+    assert s.m.status(s.t)["reverted_to_offboard"] == "1"
+    assert kinds(s.hb(1.0, px4.OFFBOARD, True), StatusEvent) == []  # same episode: once
+    assert kinds(s.hb(1.0, px4.POSCTL, True), StatusEvent) == []
+    ev = kinds(s.hb(1.0, px4.OFFBOARD, True), StatusEvent)  # a second episode
+    assert len(ev) == 1 and s.m.status(s.t)["reverted_to_offboard"] == "2"
+    assert s.m.state == State.DONE and kinds(s.run(0.5), SendSetpoint) == []
+
+
+def test_unconfirmed_handback_still_in_offboard_is_not_a_revert():
+    """FAILED with the vehicle never out of OFFBOARD is FAILED's own error, not a revert."""
+    s = Script(OffboardConfig(arm=True, handback_chain=("HOLD",)))
+    s.active()
+    s.m.abort(s.t, "operator")
+    for _ in range(8):
+        s.ack(0.01, MAV_CMD_DO_SET_MODE, 4)  # FAILED
+        if s.m.state == State.FAILED:
+            break
+    assert s.m.state == State.FAILED
+    events = kinds(s.hb(1.0, px4.OFFBOARD, True), StatusEvent)
+    assert all("back in OFFBOARD" not in e.reason for e in events)
+    assert s.m.status(s.t)["reverted_to_offboard"] == "0"

@@ -38,11 +38,12 @@ cannot express that, the check here does).
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import math
 import types
 import typing
 from dataclasses import MISSING, dataclass, field, fields
-from typing import Any, Mapping, Optional
+from typing import Any, Iterable, Mapping, Optional
 
 from lpv_sysid.errors import ConfigError
 
@@ -232,6 +233,28 @@ def coerce(name: str, value: Any, spec: ParamSpec, where: str) -> Any:
     return tuple(float(x) for x in items)
 
 
+def refuse_unknown(given: Iterable[str], declared: Iterable[str], where: str) -> None:
+    """The one check of parameter names every node and ``lpv-sysid replay`` run: a given
+    name (a parameter file's key, ``-p name:=value``) that is not declared is refused,
+    named, with the closest declared name -- a misspelled key (``envelope_margn``) would
+    otherwise leave its default in force silently (rclpy keeps undeclared overrides without
+    a word). ConfigError."""
+    known = list(declared)
+    bad = sorted(set(given) - set(known))
+    if not bad:
+        return
+    hints = []
+    for k in bad:
+        close = difflib.get_close_matches(k, known, n=1, cutoff=0.6)
+        if close:
+            hints.append(f"'{k}' (did you mean '{close[0]}'?)")
+    hint = f": {', '.join(hints)}" if hints else ""
+    raise ConfigError(
+        f"{where}: unknown parameter(s) {bad}{hint}; refused: a misspelled key would leave "
+        f"the default in force (declared: {len(known)} parameters, `ros2 param list`)"
+    )
+
+
 class Settings:
     """Base of the frozen settings dataclasses (see module docstring).
 
@@ -258,12 +281,7 @@ class Settings:
         ``ros__parameters``); unknown names are refused, missing ones take the default."""
         if not isinstance(d, Mapping):
             raise ConfigError(f"{cls.WHERE}: parameters must be a mapping, got {type(d).__name__}")
-        known = specs(cls)
-        bad = sorted(set(d) - set(known))
-        if bad:
-            raise ConfigError(
-                f"{cls.WHERE}: unknown parameter(s) {bad}; declared: {sorted(known)}"
-            )
+        refuse_unknown(d, specs(cls), cls.WHERE)
         return cls(**dict(d))
 
     def to_dict(self) -> dict:

@@ -15,6 +15,10 @@ on the first of:
 - ``bound_exceeded`` the bound monitor flag raised (state/excitation bounds);
 - ``excitation_bound`` the excitation u_e beyond what the gains were designed for;
 - ``reference_envelope`` the reference v_d changing faster than the gains were designed for;
+- ``input_bound``    a physically absurd input (finite, but a broken or hostile sensor):
+                     body speed, roll/pitch, body rate or a rotor speed outside its declared
+                     bound (``max_body_speed``, ``max_tilt``, ``max_body_rate``,
+                     ``max_rotor_speed``; rotor speeds are magnitudes, never negative);
 - ``external``       an operator or another node asked for an abort.
 
 Stamps and ``t_now`` must come from the same clock source: the shells pass the node clock,
@@ -53,6 +57,7 @@ EXTERNAL = "external"
 FUTURE_STAMP = "future_stamp"
 EXCITATION_BOUND = "excitation_bound"
 REFERENCE_ENVELOPE = "reference_envelope"
+INPUT_BOUND = "input_bound"
 REASONS = (
     STALE,
     OUT_OF_ORDER,
@@ -63,6 +68,7 @@ REASONS = (
     FUTURE_STAMP,
     EXCITATION_BOUND,
     REFERENCE_ENVELOPE,
+    INPUT_BOUND,
 )
 
 
@@ -94,6 +100,32 @@ class SafetyConfig:
         lo=0.0,
         hi=0.5,
         unit=" s",
+    )
+
+    max_body_speed: float = cf.number(
+        30.0,
+        "|body velocity| beyond this is an absurd state sample -> abort [m/s]; 1 .. 100 m/s",
+        lo=1.0,
+        hi=100.0,
+        unit=" m/s",
+    )
+    max_tilt: float = cf.number(
+        1.2,
+        "|roll| or |pitch| beyond this -> abort [rad]; 0.1 .. 1.5 rad (the law is linearised "
+        "about level flight, seed 0 Eq. 14)",
+        lo=0.1,
+        hi=1.5,
+        unit=" rad",
+    )
+    max_body_rate: float = cf.number(
+        20.0, "|p|, |q| or |r| beyond this -> abort [rad/s]; 1 .. 100", lo=1.0, hi=100.0
+    )
+    max_rotor_speed: float = cf.number(
+        5000.0,
+        "a rotor speed outside [0, this] -> abort [rad/s]; 10 .. 1e5 (rotor speeds are "
+        "magnitudes, seed 0 Eq. 8)",
+        lo=10.0,
+        hi=1e5,
     )
 
     def __post_init__(self):
@@ -254,6 +286,50 @@ class SafetySupervisor:
                 f"[{cfg.box_min[i]:.4g}, {cfg.box_max[i]:.4g}]"
                 + (f" + margin {cfg.box_margin:g}" if cfg.box_margin else ""),
             )
+        return self.event
+
+    def check_state(self, t: float, x: Sequence[float] | np.ndarray) -> SafetyEvent | None:
+        """Abort on an absurd state sample ``x = [phi, theta, u, v, w, p, q, r]`` (FRD, the
+        controller's state topic): roll/pitch beyond ``max_tilt``, body speed beyond
+        ``max_body_speed``, a body rate beyond ``max_body_rate``."""
+        cfg = self.config
+        phi, theta, u, v, w = float(x[0]), float(x[1]), float(x[2]), float(x[3]), float(x[4])
+        if abs(phi) > cfg.max_tilt or abs(theta) > cfg.max_tilt:
+            return self.abort(
+                t,
+                INPUT_BOUND,
+                f"state: roll {phi:.4g} rad / pitch {theta:.4g} rad beyond max_tilt "
+                f"{cfg.max_tilt:g} rad",
+            )
+        speed = math.sqrt(u * u + v * v + w * w)
+        if speed > cfg.max_body_speed:
+            return self.abort(
+                t,
+                INPUT_BOUND,
+                f"state: body speed {speed:.4g} m/s beyond max_body_speed "
+                f"{cfg.max_body_speed:g} m/s",
+            )
+        rate = max(abs(float(x[5])), abs(float(x[6])), abs(float(x[7])))
+        if rate > cfg.max_body_rate:
+            return self.abort(
+                t,
+                INPUT_BOUND,
+                f"state: body rate {rate:.4g} rad/s beyond max_body_rate "
+                f"{cfg.max_body_rate:g} rad/s",
+            )
+        return self.event
+
+    def check_rotors(self, t: float, omega: Sequence[float] | np.ndarray) -> SafetyEvent | None:
+        """Abort on a rotor speed outside ``[0, max_rotor_speed]`` (rad/s)."""
+        hi = self.config.max_rotor_speed
+        for k, w in enumerate(omega):
+            if not 0.0 <= float(w) <= hi:
+                return self.abort(
+                    t,
+                    INPUT_BOUND,
+                    f"rotor_speeds[{k}] = {float(w):.4g} rad/s outside [0, {hi:g}] "
+                    "(max_rotor_speed)",
+                )
         return self.event
 
     def on_bound_flag(self, t: float, exceeded: bool, detail: str = "") -> SafetyEvent | None:

@@ -26,6 +26,7 @@ from rclpy.qos import (
 )
 from rclpy.signals import SignalHandlerOptions
 
+from lpv_sysid.configuration.parameters import refuse_unknown
 from lpv_sysid.errors import ConfigError, LpvSysidError
 from lpv_sysid.io.messages import NAMESPACE, TYPES
 
@@ -186,6 +187,15 @@ def declare(node, table) -> dict:
             if not result.successful:
                 raise ConfigError(f"parameter '{name}': {result.reason}")
         values[name] = list(p.value) if isinstance(default, (list, Parameter.Type)) else p.value
+    # the node's parameter-file / -p values (rclpy keeps them in _parameter_overrides, no
+    # public accessor): one that no declaration took, and that is none of rclpy's own
+    # (use_sim_time, qos_overrides.*, ...: has_parameter), is refused by name
+    given = [
+        k
+        for k in node._parameter_overrides
+        if not node.has_parameter(k) and not k.startswith("qos_overrides.")
+    ]
+    refuse_unknown(given, values, node.get_fully_qualified_name())
     return values
 
 

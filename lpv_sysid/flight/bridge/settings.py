@@ -85,6 +85,8 @@ BRIDGE_DESCRIPTIONS = {
     "arm_length": "attitude_rate: seed 0 Eq. (7) geometry [m]",
     "rate_p": "attitude_rate: PX4 MC_ROLLRATE_P, MC_PITCHRATE_P, MC_YAWRATE_P",
     "auto_start": "start offboard on the first command",
+    "command_abort_factor": "attitude_rate: a command beyond this multiple of the range "
+    "(thrust, body rate) aborts instead of being clipped",
     "telemetry_max_age": "attitude/velocity older than this is not fused [s]",
     "n_rotors": "number of rotors (ESC_STATUS / motor outputs)",
     "rotor_estimate.enabled": "estimate rotor speeds from motor outputs while no fresh ESC "

@@ -71,6 +71,10 @@ class ControllerRuntime:
                 box_max=tuple(box.max),
                 box_margin=settings.box_margin,
                 stamp_tolerance=settings.stamp_tolerance_s,
+                max_body_speed=settings.max_body_speed,
+                max_tilt=settings.max_tilt,
+                max_body_rate=settings.max_body_rate,
+                max_rotor_speed=settings.max_rotor_speed,
             )
         )
         self.body_state: Optional[np.ndarray] = None  # BODY_STATE_NAMES of the state topic (FRD)
@@ -151,9 +155,13 @@ class ControllerRuntime:
         sup = self.supervisor
         sup.on_input(topic, t, values, t_now)
         if topic == "state":
+            if sup.armed and not sup.aborted:
+                sup.check_state(t_now, values)  # physically absurd -> abort
             self.body_state = values
             self._law_body[:] = values
         elif topic == "rotor_speeds":
+            if sup.armed and not sup.aborted:
+                sup.check_rotors(t_now, values)
             self.omega = values
             self.mix.dot(values, out=self._law_delta)  # delta = Mix Omega (Eq. 7)
         elif topic == "velocity_reference":

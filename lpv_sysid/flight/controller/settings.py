@@ -109,6 +109,14 @@ class ControllerSettings(Settings):
         0.0,
         1.0,
     )
+    max_body_speed: float = double(
+        30.0, "|body velocity| of a state sample beyond this -> abort [m/s]", 1.0, 100.0
+    )
+    max_tilt: float = double(1.2, "|roll| or |pitch| beyond this -> abort [rad]", 0.1, 1.5)
+    max_body_rate: float = double(20.0, "|p|, |q| or |r| beyond this -> abort [rad/s]", 1.0, 100.0)
+    max_rotor_speed: float = double(
+        5000.0, "a rotor speed outside [0, this] -> abort [rad/s]", 10.0, 1e5
+    )
     excitation_gain: float = double(1.0, "excitation multiplier kappa (seed 0 Eq. 33)", 0.0, 10.0)
     arm_length: float = double(0.225, "arm length of the mixer (seed 0 Eq. 7) [m]", 0.01, 10.0)
     u_esc_min: float = double(
@@ -119,11 +127,11 @@ class ControllerSettings(Settings):
     )
     rate_limit: tuple = doubles(
         (),
-        "per-channel rate limit of u [1/s] (unset: none)",
-        lo=0.0,
+        "per-channel rate limit of u [1/s] (unset: none); 0.01 .. 1000 /s: a slower limit "
+        "freezes the command (the feedback no longer acts)",
+        lo=0.01,
         hi=1000.0,
         lengths=(0, 4),
-        lo_open=True,
     )
     monitor_margin: float = double(
         1.2, "bound monitor: abort when gain > gamma x margin", 1.0, 10.0

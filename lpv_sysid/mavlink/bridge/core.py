@@ -17,6 +17,7 @@ from lpv_sysid.control.envelope import Envelope, EnvelopeConfig, Violation
 from lpv_sysid.errors import LpvSysidError, SafetyError
 from lpv_sysid.mavlink import px4
 from lpv_sysid.mavlink.bridge.transport import (
+    ABSURD_FACTOR,
     ActuatorSetpoint,
     TransportContext,
     VelocitySetpoint,
@@ -79,6 +80,13 @@ class BridgeConfig:
         lo=0.01,
         hi=0.6,
     )
+    command_abort_factor: float = cf.number(
+        ABSURD_FACTOR,
+        "attitude_rate / rate_setpoint: a command beyond this multiple of the transport's "
+        "range (thrust, body rate) aborts (hand-back) instead of being clipped; 1 .. 100",
+        lo=1.0,
+        hi=100.0,
+    )
     auto_start: bool = cf.flag(False, "start the machine on the first command")
     telemetry_max_age: float = cf.number(
         0.5,
@@ -124,7 +132,14 @@ class BridgeConfig:
                 "velocity", frame=self.velocity_frame, use_yaw_rate=self.use_yaw_rate
             )
         if self.command == "attitude_rate":
-            return make_transport("attitude_rate", arm_length=self.arm_length, rate_p=self.rate_p)
+            return make_transport(
+                "attitude_rate",
+                arm_length=self.arm_length,
+                rate_p=self.rate_p,
+                absurd_factor=self.command_abort_factor,
+            )
+        if self.command == "rate_setpoint":
+            return make_transport(self.command, absurd_factor=self.command_abort_factor)
         return make_transport(self.command)
 
 
@@ -206,7 +221,8 @@ class BridgeCore:
     def _on_message(self, msg: Any, now: float, out: BridgeOutput) -> None:
         mtype = msg.get_type()
         if mtype == "HEARTBEAT":
-            if msg.get_srcSystem() == self.link.target_system and msg.autopilot != 8:
+            # mode, ACK and home evidence only from the target autopilot component
+            if self.link.from_autopilot(msg) and msg.autopilot != 8:
                 mode = px4.decode_custom_mode(msg.custom_mode)
                 armed = bool(msg.base_mode & px4.MAV_MODE_FLAG_SAFETY_ARMED)
                 if not self._link_was_up:
@@ -215,15 +231,18 @@ class BridgeCore:
                 self._run(self.machine.on_heartbeat(now, mode, armed), now, out)
             return
         if mtype == "COMMAND_ACK":
-            if msg.get_srcSystem() == self.link.target_system:
+            if self.link.from_autopilot(msg):
                 self._run(self.machine.on_ack(now, msg.command, msg.result), now, out)
             return
         if mtype == "HOME_POSITION":
-            if msg.get_srcSystem() == self.link.target_system:
+            if self.link.from_autopilot(msg):
                 self.envelope.set_home_position((msg.x, msg.y, msg.z))
             return
-        if self.link.target_system:
-            self.telemetry.target = (self.link.target_system, self.link.target_component)
+        link = self.link
+        if link.target_system and not link.ambiguous_target:
+            self.telemetry.target = (link.target_system, link.target_component)
+        else:
+            self.telemetry.target = None
         for s in self.telemetry.on_message(msg, now):
             if isinstance(s, StateSample):
                 self._state = s

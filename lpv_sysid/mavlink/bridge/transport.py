@@ -78,6 +78,22 @@ class SetpointTransport(Protocol):
         """Setpoint streamed while no fresh command exists (None: stream nothing)."""
 
 
+#: default of ``BridgeConfig.command_abort_factor``: a command beyond this multiple of the
+#: transport's range (thrust, rate) is absurd (a broken law, a corrupt gains file, a
+#: hostile publisher) and aborts instead of being clipped to full thrust / full rate
+ABSURD_FACTOR = 10.0
+
+
+def _absurd(what: str, value: float, limit: float, factor: float) -> None:
+    """Raise SafetyError (the bridge aborts: hand-back) for ``|value| > factor * limit``;
+    commands up to that bound are the law's saturation and are clipped."""
+    if abs(value) > factor * limit:
+        raise SafetyError(
+            f"{what} {value:.6g} is absurd: beyond {factor:g} x the range {limit:g} "
+            "(command_abort_factor); aborting, not clipping"
+        )
+
+
 def _finite(name: str, values: Any, n: int) -> np.ndarray:
     a = np.asarray(values, dtype=float)
     if a.shape != (n,):
@@ -171,6 +187,7 @@ class AttitudeRateTransport:
         arm_length: float,
         rate_p: tuple[float, float, float] = (0.15, 0.15, 0.2),
         max_rate: float = 4.0,
+        absurd_factor: float = ABSURD_FACTOR,
     ) -> None:
         if not (arm_length > 0 and math.isfinite(arm_length)):
             raise ConfigError(f"attitude_rate.arm_length must be positive, got {arm_length!r}")
@@ -180,6 +197,7 @@ class AttitudeRateTransport:
         self.s = arm_length * _SQ2
         self.rate_p = kp
         self.max_rate = float(max_rate)
+        self.absurd_factor = _factor(absurd_factor)
 
     def neutral(self) -> None:
         return None  # no safe neutral without a model of the hover thrust: stream nothing
@@ -192,8 +210,13 @@ class AttitudeRateTransport:
         if ctx.omega is None:
             raise SafetyError("attitude_rate transport needs the body rates (no telemetry)")
         thrust, tau = self.thrust_torque(sp.u)
+        f = self.absurd_factor
+        _absurd("thrust command", thrust, 1.0, f)
+        d_omega = tau / self.rate_p
+        for axis, d in zip(("roll", "pitch", "yaw"), d_omega):
+            _absurd(f"{axis} moment (as a rate increment, rad/s)", float(d), self.max_rate, f)
         omega_sp = np.clip(
-            np.asarray(ctx.omega, dtype=float) + tau / self.rate_p, -self.max_rate, self.max_rate
+            np.asarray(ctx.omega, dtype=float) + d_omega, -self.max_rate, self.max_rate
         )
         thrust = min(max(thrust, 0.0), 1.0)
         return [
@@ -231,7 +254,11 @@ class RateSetpointTransport:
     input_form = "rate_setpoint"
 
     def __init__(
-        self, max_rate: float = 2.0, thrust_min: float = 0.05, thrust_max: float = 0.95
+        self,
+        max_rate: float = 2.0,
+        thrust_min: float = 0.05,
+        thrust_max: float = 0.95,
+        absurd_factor: float = ABSURD_FACTOR,
     ) -> None:
         if not (math.isfinite(max_rate) and max_rate > 0):
             raise ConfigError(f"rate_setpoint.max_rate must be positive, got {max_rate!r}")
@@ -243,13 +270,19 @@ class RateSetpointTransport:
         self.max_rate = float(max_rate)
         self.thrust_min = float(thrust_min)
         self.thrust_max = float(thrust_max)
+        self.absurd_factor = _factor(absurd_factor)
 
     def neutral(self) -> None:
         return None  # the hover thrust is vehicle-specific: stream only what the law commands
 
     def clip(self, u: Any) -> np.ndarray:
-        """The command PX4 receives: thrust in [thrust_min, thrust_max], rates in +-max_rate."""
+        """The command PX4 receives: thrust in [thrust_min, thrust_max], rates in +-max_rate;
+        SafetyError (abort) beyond ``absurd_factor`` times those ranges."""
         a = _finite("rate setpoint", u, 4).copy()
+        f = self.absurd_factor
+        _absurd("thrust setpoint", float(a[0]), self.thrust_max, f)
+        for name, r in zip(RATE_INPUT_NAMES[1:], a[1:]):
+            _absurd(name, float(r), self.max_rate, f)
         a[0] = min(max(a[0], self.thrust_min), self.thrust_max)
         a[1:] = np.clip(a[1:], -self.max_rate, self.max_rate)
         return a
@@ -269,6 +302,12 @@ class RateSetpointTransport:
                 float(a[0]),
             )
         ]
+
+
+def _factor(f: float) -> float:
+    if not (math.isfinite(f) and 1.0 <= f <= 100.0):
+        raise ConfigError(f"command_abort_factor must be in [1, 100], got {f!r}")
+    return float(f)
 
 
 def rate_setpoint_from_attitude_target(msg: Any) -> tuple[float, np.ndarray] | None:

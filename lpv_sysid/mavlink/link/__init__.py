@@ -18,6 +18,9 @@ Responsibilities
 - HEARTBEAT at ``heartbeat_period`` (MAV_TYPE_ONBOARD_CONTROLLER);
 - SET_MESSAGE_INTERVAL (MAV_CMD_SET_MESSAGE_INTERVAL, 511) for the telemetry streams,
   repeated until each stream is seen;
+- evidence only from the target autopilot component (``MavlinkLink.from_autopilot``:
+  ``target_system``/``target_component``); ``target_system: 0`` learns the id while a
+  single autopilot is heard and refuses (``ambiguous_target``, link down) when two are;
 - link loss (no HEARTBEAT from the target for ``link_timeout``) and reconnection
   (the transport is reopened every ``reconnect_period`` while the link is down).
 

@@ -47,9 +47,17 @@ class LinkConfig:
     source_system: int = cf.count(1, "our MAVLink system id", lo=1, **_ID)
     source_component: int = cf.count(191, "our component id (MAV_COMP_ID_ONBOARD_COMPUTER)", **_ID)
     target_system: int = cf.count(
-        0, "autopilot system id; 0: the first autopilot HEARTBEAT", **_ID
+        0,
+        "autopilot system id; 0: the first autopilot HEARTBEAT while it is the only one (a "
+        "second autopilot system id makes the link refuse both: set the id explicitly)",
+        **_ID,
     )
-    target_component: int = cf.count(1, "autopilot component id (MAV_COMP_ID_AUTOPILOT1)", **_ID)
+    target_component: int = cf.count(
+        1,
+        "autopilot component id (MAV_COMP_ID_AUTOPILOT1); the only component whose HEARTBEAT, "
+        "COMMAND_ACK, HOME_POSITION and telemetry count",
+        **_ID,
+    )
     dialect: str = cf.text(codec.DEFAULT_DIALECT, "MAVLink dialect (PX4: development)")
     heartbeat_period: float = cf.number(
         1.0,

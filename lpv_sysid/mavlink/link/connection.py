@@ -92,7 +92,8 @@ class MavlinkLink(LinkReceiver):
 
     def link_up(self, now: float) -> bool:
         return (
-            self.last_heartbeat_t is not None
+            not self.ambiguous_target
+            and self.last_heartbeat_t is not None
             and now - self.last_heartbeat_t <= self.config.link_timeout
         )
 

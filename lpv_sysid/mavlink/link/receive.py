@@ -49,7 +49,7 @@ class LinkEvent:
     """A change of link health (for the ``status`` topic)."""
 
     t: float
-    kind: str  # "link_up" | "link_lost" | "reconnect" | "io_error"
+    kind: str  # "link_up" | "link_lost" | "reconnect" | "io_error" | "ambiguous_target"
     detail: str = ""
 
 
@@ -78,6 +78,9 @@ class LinkReceiver:
         self._events: list[LinkEvent] = []
         self._fast: FastDecoder | None = None
         self._no_fast: Any = None  # a codec FastDecoder could not be built for
+        #: autopilot system ids heard (target_system 0 locks only while there is one)
+        self.autopilots_heard: set[int] = set()
+        self.ambiguous_target = False  # target_system 0 and more than one autopilot heard
 
     def feed(self, data: bytes, now: float, out: list[Any] | None = None) -> list[Any]:
         """Parse one datagram / chunk of bytes; append decoded messages to ``out``."""
@@ -151,16 +154,52 @@ class LinkReceiver:
                 return None
         return fd
 
+    def from_autopilot(self, m: Any) -> bool:
+        """The one check of MAVLink evidence (mode, arming, COMMAND_ACK, HOME_POSITION,
+        telemetry): ``m`` comes from the target autopilot component (``target_system``,
+        ``target_component``; MAV_COMP_ID_AUTOPILOT1 by default). A HEARTBEAT of another
+        component of the vehicle's system (a companion, a camera, a spoofer using the
+        vehicle's id) is no evidence of the autopilot's mode; an ambiguous target (see
+        :meth:`_on_heartbeat`) is none at all."""
+        return (
+            not self.ambiguous_target
+            and self.target_system != 0
+            and m.get_srcSystem() == self.target_system
+            and m.get_srcComponent() == self.target_component
+        )
+
     def _on_heartbeat(self, m: Any, now: float) -> None:
+        """Autopilot HEARTBEATs of the target component only. ``target_system: 0`` learns the
+        system id of the first one, but only while a single autopilot is heard: a second
+        autopilot system id on the link makes the target ambiguous (a foreign autopilot may
+        have been heard first): an ``ambiguous_target`` event, and the link is down (link
+        lost: the offboard machine's link-loss path) and stays down; name the vehicle with an
+        explicit ``target_system``."""
         if m.autopilot == MAV_AUTOPILOT_INVALID or m.type in (
             MAV_TYPE_GCS,
             MAV_TYPE_ONBOARD_CONTROLLER,
         ):
             return
         src = m.get_srcSystem()
-        if self.target_system == 0:
-            self.target_system = src
-            self.target_component = m.get_srcComponent()
+        if m.get_srcComponent() != self.target_component:
+            return
+        if self.config.target_system == 0:
+            self.autopilots_heard.add(src)
+            if len(self.autopilots_heard) > 1:
+                if not self.ambiguous_target:
+                    self.ambiguous_target = True  # link_up() is False from now on
+                    ids = sorted(self.autopilots_heard)
+                    self._events.append(
+                        LinkEvent(
+                            now,
+                            "ambiguous_target",
+                            f"autopilots of systems {ids} heard with link.target_system 0: "
+                            "refusing to pick one; set link.target_system explicitly",
+                        )
+                    )
+                return
+            if self.target_system == 0:
+                self.target_system = src
         if src != self.target_system:
             return
         self.last_heartbeat = m

@@ -61,6 +61,10 @@ rules (DONE names the confirmed mode). Landing awareness: after DONE / FAILED th
 reports once, when the HEARTBEAT shows a vehicle that was armed during the run disarmed
 (PX4 auto-disarms COM_DISARM_LAND after landing): a StatusEvent "vehicle disarmed in
 <mode>" and ``status()['disarmed'] == 'True'``.
+A vehicle seen out of OFFBOARD after DONE / FAILED that goes back to OFFBOARD (nobody
+streams any more: PX4's offboard-loss failsafe acts) is reported each time, a StatusEvent
+of level ``error`` "vehicle back in OFFBOARD after the run ended" and
+``status()['reverted_to_offboard']`` counts it.
 
 Outputs of :meth:`OffboardMachine.step` and the input methods are lists of
 :class:`SendSetpoint`, :class:`SendCommand` and :class:`StatusEvent`.

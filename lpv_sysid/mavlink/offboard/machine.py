@@ -38,6 +38,7 @@ class OffboardMachine(HandbackChain):
         self._target = None
         self.confirmed_mode = None
         self.disarmed_after_run = False
+        self._left_offboard = False
         self._was_armed = self.armed
         self._armed_active = False
         self._t_stream0 = now
@@ -183,6 +184,7 @@ class OffboardMachine(HandbackChain):
             else:
                 out += self._check_pending(now)
         elif st in (State.DONE, State.FAILED):
+            out += self._offboard_after_end(now, st)
             if (
                 self._was_armed
                 and not self.armed
@@ -200,6 +202,33 @@ class OffboardMachine(HandbackChain):
                     )
                 )
         return out
+
+    def _offboard_after_end(self, now: float, st: State) -> list[Any]:
+        """DONE/FAILED: a HEARTBEAT (after the end) showing OFFBOARD once the vehicle was
+        seen out of it (the confirmed hand-back mode, a pilot's mode) is reported, level
+        ``error``, every time it happens: nobody streams setpoints any more, so PX4's
+        offboard-loss failsafe (COM_OF_LOSS_T -> COM_OBL_RC_ACT) is in charge."""
+        mode = self.vehicle_mode
+        if mode is None or self._t_hb < self._t_state:
+            return []
+        if mode != px4.OFFBOARD:
+            self._left_offboard = True
+            return []
+        if not self._left_offboard:
+            return []  # never left OFFBOARD (e.g. an unconfirmed hand-back): FAILED said it
+        self._left_offboard = False
+        self.reverted_to_offboard += 1
+        return [
+            StatusEvent(
+                now,
+                st.value,
+                st.value,
+                f"vehicle back in OFFBOARD after the run ended ({st.value}: {self.reason}); "
+                "nothing streams setpoints: PX4's offboard-loss failsafe (COM_OF_LOSS_T -> "
+                "COM_OBL_RC_ACT) is in charge",
+                "error",
+            )
+        ]
 
     # ------------------------------------------------------- pending command
     def _check_pending(self, now: float) -> list[Any]:

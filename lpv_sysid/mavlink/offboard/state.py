@@ -102,6 +102,8 @@ class OffboardState:
         self.setpoints_sent = 0
         self.confirmed_mode: px4.Px4Mode | None = None
         self.disarmed_after_run = False
+        self.reverted_to_offboard = 0  # times the vehicle went back to OFFBOARD after the end
+        self._left_offboard = False  # seen out of OFFBOARD since DONE/FAILED
         self._fault = False
         self._t_state = 0.0
         self._t_stream0 = math.inf
@@ -134,6 +136,7 @@ class OffboardState:
             "handback_target": self._target.name if self._target is not None else "",
             "confirmed_mode": self.confirmed_mode.name if self.confirmed_mode is not None else "",
             "disarmed": str(self.disarmed_after_run),
+            "reverted_to_offboard": str(self.reverted_to_offboard),
         }
 
     def _stream(self, now: float, fresh: bool) -> list[Any]:

@@ -49,7 +49,7 @@ class Facts:
         mt = m.get_type()
         src = (m.get_srcSystem(), m.get_srcComponent())
         if mt == "HEARTBEAT":
-            if target is not None and src[0] == target[0] and m.autopilot != 8:
+            if target is not None and src == target and m.autopilot != 8:
                 self.hb = m
             return
         if target is None:
@@ -110,7 +110,8 @@ def gather(
         if now - t0 > timeout:
             break
         for m in link.poll(now):
-            target = (link.target_system, link.target_component) if link.target_system else None
+            ok = link.target_system and not link.ambiguous_target
+            target = (link.target_system, link.target_component) if ok else None
             facts.absorb(m, target)
         link.step(now)
         if facts.hb is not None and now >= next_req:
