@@ -48,7 +48,7 @@ setup(
     packages=find_packages(include=[PACKAGE, PACKAGE + ".*"]),  # not bench/, test/
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
-        ("share/" + PACKAGE, ["package.xml"]),
+        ("share/" + PACKAGE, ["package.xml", "LICENSE"]),
         ("share/" + PACKAGE + "/launch", glob("launch/*.launch.py")),
         ("share/" + PACKAGE + "/config", sorted(glob(os.path.join(PACKAGE, CONFIG_GLOB)))),
     ]
@@ -62,6 +62,7 @@ setup(
     description="Safe large-domain system identification of unstable multirotors "
     "with robust LPV control (PX4, MAVLink/MAVROS, rosbag2).",
     license="BSD-3-Clause",
+    license_files=["LICENSE"],
     entry_points={
         "console_scripts": [f"{n} = {PACKAGE}.nodes.{n}:main" for n in NODES]
         + [f"lpv-sysid = {PACKAGE}.cli.main:main"],

@@ -76,6 +76,8 @@ def test_excitation_parameters_topics_qos(signals1):
         1000.0,
     )
     res = node.set_parameters([Parameter("rate_hz", value=5000.0)])
+    assert not res[0].successful and "read-only" in res[0].reason  # applied at start only
+    res = node.set_parameters([Parameter("status_rate_hz", value=500.0)])
     assert not res[0].successful and "out of range" in res[0].reason
     assert dict(node.get_topic_names_and_types()) == {
         "/lpv_sysid/velocity_reference": ["geometry_msgs/msg/TwistStamped"],

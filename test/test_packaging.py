@@ -13,6 +13,7 @@ scratch venvs see that interpreter's site-packages for numpy & co.
 import ast
 import importlib
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -75,7 +76,7 @@ def test_share_files_and_resource_index(installed):
     assert (
         installed / "share" / "ament_index" / "resource_index" / "packages" / "lpv_sysid"
     ).is_file()
-    assert (share / "package.xml").is_file()
+    assert (share / "package.xml").is_file() and (share / "LICENSE").is_file()
     for launch in ("phase1.launch.py", "phase2.launch.py", "sim.launch.py"):
         assert (share / "launch" / launch).is_file()
     # the same files as the package data, byte for byte: one copy in the repository
@@ -164,6 +165,34 @@ def test_package_xml_declares_exactly_what_the_code_imports():
     for m in used & PIP_ONLY - {"scs", "clarabel"}:
         assert f"{m}==" in pip, m
     assert xml.find("export/build_type").text == "ament_python"
+
+
+def test_license_file_matches_package_xml_and_setup_py():
+    """One licence: LICENSE holds the BSD-3-Clause text with package.xml's maintainer, and
+    package.xml and setup.py name the same SPDX identifier; colcon installs the file."""
+    xml = ET.parse(ROOT / "package.xml").getroot()
+    assert xml.findtext("license") == "BSD-3-Clause"
+    text = (ROOT / "LICENSE").read_text()
+    assert text.startswith("BSD 3-Clause License")
+    assert "Neither the name of the copyright holder nor the names of its" in text
+    maintainer = xml.find("maintainer")
+    assert f"{maintainer.text} <{maintainer.get('email')}>" in text
+    setup_py = (ROOT / "setup.py").read_text()
+    assert 'license="BSD-3-Clause"' in setup_py and '"LICENSE"]' in setup_py
+
+
+def test_every_declared_test_dependency_is_used_by_a_test():
+    """package.xml declares no linter (ament_copyright, ament_flake8, ...) that no test runs:
+    each test_depend other than pytest is imported by a test file."""
+    xml = ET.parse(ROOT / "package.xml").getroot()
+    declared = {e.text for e in xml.findall("test_depend")}
+    tests = "\n".join(p.read_text() for p in (ROOT / "test").glob("test_*.py"))
+    unused = sorted(
+        d
+        for d in declared - {"python3-pytest"}
+        if not re.search(rf"^\s*(import|from) {d}\b", tests, re.M)
+    )
+    assert not unused, f"declared in package.xml but run by no test: {unused}"
 
 
 def test_library_code_never_imports_rclpy_outside_the_shells():

@@ -342,6 +342,37 @@ def parallel(**calls) -> dict:
         return {k: f.result() for k, f in futures.items()}
 
 
+#: per executable, a read-only parameter and a valid value (issue 24: ``ros2 param set
+#: state_hz 5.0`` answered "successful" while the node kept publishing at 250 Hz)
+READ_ONLY_PROBE = {
+    "excitation_node": ("rate_hz", "50.0"),
+    "lpv_controller_node": ("rate_hz", "100.0"),
+    "mavlink_bridge_node": ("offboard.input_timeout", "0.3"),
+    "data_logger_node": ("queue_depth", "10"),
+    "sim_vehicle_node": ("state_hz", "5.0"),
+}
+
+
+def param_set(env: RosEnv, fqn: str, name: str, value: str) -> str:
+    r = env.run(f"ros2 param set {fqn} {name} {value} --no-daemon", timeout=60)
+    return (r.stdout + r.stderr).strip()
+
+
+def probe_param_set(env: RosEnv, fqn: str, exe: str, proc: Proc) -> dict:
+    """``ros2 param set``: a read-only parameter is refused and keeps its value; the status
+    rate set to 10 Hz takes effect (``ros2 topic hz`` of the node's own status: each node
+    runs alone on its domain), a value out of range is refused."""
+    name, value = READ_ONLY_PROBE[exe]
+    before = param_dump(env, fqn)[name]
+    out = {"read_only": param_set(env, fqn, name, value)}
+    out["read_only_after"] = (before, param_dump(env, fqn)[name])
+    out["out_of_range"] = param_set(env, fqn, "status_rate_hz", "1000.0")
+    out["runtime"] = param_set(env, fqn, "status_rate_hz", "10.0")
+    out["applied_logged"] = proc.wait_for("parameters applied: status_rate_hz=10.0", 30.0)
+    out["status_hz"] = topic_hz(env, f"{NS}/status")
+    return out
+
+
 def probe_node(exe: str, s: dict) -> dict:
     """What the node-alone test checks, queried with the ROS tools (run for every node at
     once, in threads)."""
@@ -355,6 +386,7 @@ def probe_node(exe: str, s: dict) -> dict:
             dump=lambda: param_dump(env, fqn),
         )
     )
+    out["param_set"] = probe_param_set(env, fqn, exe, s["proc"])
     services = README_NODES[exe][2]
     if exe == "mavlink_bridge_node":
         # start with a reference stream: OFFBOARD, then the hand-back is SIGINT's (the
@@ -464,6 +496,13 @@ def test_node_from_config_params_topics_services_sigint(ros, alone, exe):
         assert all(ok for ok, _ in probe["services"].values()), probe["services"]
     if exe == "mavlink_bridge_node":
         assert probe["offboard"] and probe["offboard_kept"], proc.log()[-3000:]
+    ps = probe["param_set"]
+    MEASURED.setdefault("param_set", {})[exe] = ps
+    assert "Setting parameter failed" in ps["read_only"] and "read-only" in ps["read_only"], ps
+    assert same(*ps["read_only_after"]), ps
+    assert "Setting parameter failed" in ps["out_of_range"], ps
+    assert "Set parameter successful" in ps["runtime"] and ps["applied_logged"], ps
+    assert 8.0 <= ps["status_hz"] <= 12.0, ps  # from <= 2 Hz (the shipped files)
     rc, dt = probe["sigint"]
     MEASURED.setdefault("sigint_node_exit", {})[exe] = {"rc": rc, "s": dt}
     assert rc == 0, proc.log()[-3000:]

@@ -46,6 +46,8 @@ PARAMETERS = shell.settings_table(CampaignNodeSettings)
 
 
 class CampaignNode(shell.ShellNode):
+    SETTINGS = CampaignNodeSettings
+
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, PARAMETERS, **kwargs)
         s = CampaignNodeSettings.from_dict(self.params)
@@ -76,7 +78,7 @@ class CampaignNode(shell.ShellNode):
         self.create_service(Trigger, "~/start", shell.trigger(self, rt.start, self.emit))
         self.create_service(Trigger, "~/abort", shell.trigger(self, rt.abort, self.emit))
         self.create_timer(1.0 / s.rate_hz, lambda: self.emit(rt.on_timer(self.now())))
-        self.create_timer(1.0 / s.status_rate_hz, lambda: self.emit(rt.status(self.now())))
+        self.status_timer(s.status_rate_hz, lambda: self.emit(rt.status(self.now())))
         self.emit([])
 
     def _input(self, topic):

@@ -102,6 +102,8 @@ def parse_topics(entries) -> dict[str, str]:
 
 
 class DataLoggerNode(shell.ShellNode):
+    SETTINGS = DataLoggerSettings
+
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, PARAMETERS, **kwargs)
         self.settings = p = DataLoggerSettings.from_dict(self.params)
@@ -142,7 +144,7 @@ class DataLoggerNode(shell.ShellNode):
                 event_callbacks=events,
                 raw=True,
             )
-        self.create_timer(1.0 / p.status_rate_hz, self.publish_status)
+        self.status_timer(p.status_rate_hz, self.publish_status)
         # a stream that stops still reaches the disk within flush_interval_s
         self.create_timer(p.flush_interval_s / 2, self._flush_cb)
         self.get_logger().info(f"recording {sorted(topics)} to {p.out_dir}")

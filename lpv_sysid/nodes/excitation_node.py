@@ -33,6 +33,8 @@ PARAMETERS = shell.settings_table(ExcitationSettings)
 
 
 class ExcitationNode(shell.RuntimeShell):
+    SETTINGS = ExcitationSettings
+
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, PARAMETERS, **kwargs)
         s = ExcitationSettings.from_dict(self.params)
@@ -54,7 +56,7 @@ class ExcitationNode(shell.RuntimeShell):
         self.create_service(Trigger, "~/start", self.on_start)
         self.create_service(Trigger, "~/abort", self.on_abort)
         self.create_timer(1.0 / s.rate_hz, self.on_timer)
-        self.create_timer(1.0 / s.status_rate_hz, self.publish_status)
+        self.status_timer(s.status_rate_hz, self.publish_status)
         table = self.runtime.table
         self.get_logger().info(
             f"{s.mode}: {table[1].shape[0]} samples of {list(table[2])} "

@@ -36,6 +36,8 @@ PARAMETERS = shell.settings_table(ControllerSettings)
 
 
 class LpvControllerNode(shell.ShellNode):
+    SETTINGS = ControllerSettings
+
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, PARAMETERS, **kwargs)
         settings = ControllerSettings.from_dict(self.params)
@@ -58,7 +60,7 @@ class LpvControllerNode(shell.ShellNode):
         self.create_service(Trigger, "~/start", self.on_start)
         self.create_service(Trigger, "~/abort", self.on_abort)
         self.create_timer(1.0 / settings.rate_hz, self.on_tick)
-        self.create_timer(1.0 / settings.status_rate_hz, self.publish_status)
+        self.status_timer(settings.status_rate_hz, self.publish_status)
         self.get_logger().info(
             f"gains {settings.gains_file}: box "
             f"{self.runtime.schedule.scheduling.to_dict()}, "

@@ -30,7 +30,7 @@ from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu, JointState
 from std_srvs.srv import Trigger
 
-from lpv_sysid.flight.bridge import PARSERS, SPECS, BridgeRuntime
+from lpv_sysid.flight.bridge import PARSERS, SPECS, BridgeRuntime, settings_from_params
 from lpv_sysid.io import messages
 from lpv_sysid.nodes import shell
 
@@ -80,10 +80,11 @@ class MavlinkBridgeNode(shell.ShellNode):
         self.create_timer(rt.timer_period_s, lambda: self.emit(rt.on_timer(self.now())))
         if rt.shutdown_timeout_s is not None:
             self.SHUTDOWN_TIMEOUT_S = rt.shutdown_timeout_s
-        self.create_timer(
-            1.0 / rt.settings.status_rate_hz, lambda: self.emit(rt.status(self.now()))
-        )
+        self.status_timer(rt.settings.status_rate_hz, lambda: self.emit(rt.status(self.now())))
         self.emit([])
+
+    def settings_from(self, values):
+        return settings_from_params(values)
 
     def _input(self, key):
         parse = PARSERS.get(key)

@@ -9,11 +9,17 @@ import math
 import signal
 import threading
 import time
+from typing import Any
 
 import rclpy
 import rclpy.logging
 from diagnostic_msgs.msg import DiagnosticArray
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -106,10 +112,11 @@ def double(description: str, lo: float, hi: float, read_only: bool = False) -> P
     )
 
 
-def integer(description: str, lo: int, hi: int) -> ParameterDescriptor:
+def integer(description: str, lo: int, hi: int, read_only: bool = False) -> ParameterDescriptor:
     return ParameterDescriptor(
         type=Parameter.Type.INTEGER.value,
         description=description,
+        read_only=read_only,
         integer_range=[IntegerRange(from_value=int(lo), to_value=int(hi), step=1)],
     )
 
@@ -130,30 +137,40 @@ def clock_source(node) -> str:
     )
 
 
-def settings_table(settings_cls) -> list:
+#: the parameters every node applies while it runs (``ros2 param set`` takes effect: the
+#: status timer's period changes, :meth:`ShellNode.apply_parameters`); every other parameter
+#: is declared ``read_only`` (read once at start: ``ros2 param set`` is refused, so an
+#: operator never believes a setting changed when it did not)
+RUNTIME_PARAMETERS = frozenset({"status_rate_hz"})
+#: why a read-only parameter cannot be set
+READ_ONLY_NOTE = "read-only: applied at start (restart the node to change it)"
+
+
+def settings_table(settings_cls, runtime: frozenset = RUNTIME_PARAMETERS) -> list:
     """The ``[(name, default, descriptor)]`` table of :func:`declare` generated from a
     settings dataclass (:mod:`lpv_sysid.configuration.parameters`); see :func:`spec_table`."""
     from lpv_sysid.configuration.parameters import specs
 
-    return spec_table(specs(settings_cls))
+    return spec_table(specs(settings_cls), runtime)
 
 
-def spec_table(specs: dict) -> list:
+def spec_table(specs: dict, runtime: frozenset = RUNTIME_PARAMETERS) -> list:
     """``[(name, default, descriptor)]`` from ``{name: (default, ParamSpec)}``
     (:func:`lpv_sysid.configuration.parameters.specs` / ``config_specs``): type, description, the
     range (``floating_point_range`` / ``integer_range``, enforced by rclpy) and the
     remaining constraints as ``additional_constraints`` (checked by the settings or
-    configuration class). An empty array default is declared as an empty list of its type
-    (see :func:`declare`)."""
+    configuration class). A parameter not in ``runtime`` is ``read_only``. An empty array
+    default is declared as an empty list of its type (see :func:`declare`)."""
     table = []
     for name, (default, spec) in specs.items():
         kind = Parameter.Type[spec.kind]
+        ro = name not in runtime
         if spec.kind == "DOUBLE" and spec.lo is not None:
-            d = double(spec.description, spec.lo, spec.hi)
+            d = double(spec.description, spec.lo, spec.hi, read_only=ro)
         elif spec.kind == "INTEGER" and spec.lo is not None:
-            d = integer(spec.description, spec.lo, spec.hi)
+            d = integer(spec.description, spec.lo, spec.hi, read_only=ro)
         else:
-            d = typed(kind, spec.description)
+            d = typed(kind, spec.description, read_only=ro)
         d.additional_constraints = spec.constraints()
         if isinstance(default, tuple):
             default = list(default) if default else kind
@@ -170,10 +187,17 @@ def declare(node, table) -> dict:
     cannot write one). Nothing is left uninitialized: under real rclpy one uninitialized
     parameter makes the node's ``get_parameters`` service answer with no values at all
     (``ros2 param dump`` prints ``ros__parameters: {}``).
+
+    A read-only parameter that needs that empty list is declared writable, given the
+    list, then made read-only with ``set_descriptor`` (rclpy refuses ``set_parameters`` on a
+    read-only parameter, and ``set_descriptor`` runs no parameter callback).
     """
     values = {}
     for name, default, descriptor in table:
-        p = node.declare_parameter(name, default, descriptor)
+        writable = descriptor
+        if descriptor.read_only and isinstance(default, Parameter.Type):
+            writable = _descriptor_copy(descriptor, read_only=False)
+        p = node.declare_parameter(name, default, writable)
         if p.type_ == Parameter.Type.NOT_SET:
             # no default, or a params file wrote ``name: []`` (rcl reads it as no value)
             kind = Parameter.Type(descriptor.type)
@@ -186,7 +210,9 @@ def declare(node, table) -> dict:
             (result,) = node.set_parameters([p])
             if not result.successful:
                 raise ConfigError(f"parameter '{name}': {result.reason}")
-        values[name] = list(p.value) if isinstance(default, (list, Parameter.Type)) else p.value
+        if writable is not descriptor:
+            node.set_descriptor(name, _descriptor_copy(descriptor, read_only=True))
+        values[name] = _plain(p.value) if isinstance(default, (list, Parameter.Type)) else p.value
     # the node's parameter-file / -p values (rclpy keeps them in _parameter_overrides, no
     # public accessor): one that no declaration took, and that is none of rclpy's own
     # (use_sim_time, qos_overrides.*, ...: has_parameter), is refused by name
@@ -197,6 +223,27 @@ def declare(node, table) -> dict:
     ]
     refuse_unknown(given, values, node.get_fully_qualified_name())
     return values
+
+
+def _plain(value):
+    """A parameter value as the settings classes take it (rclpy gives arrays as
+    ``array.array`` or lists)."""
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__iter__"):
+        return value
+    return list(value)
+
+
+def _descriptor_copy(d: ParameterDescriptor, read_only: bool) -> ParameterDescriptor:
+    return ParameterDescriptor(
+        name=d.name,
+        type=d.type,
+        description=d.description,
+        additional_constraints=d.additional_constraints,
+        read_only=read_only,
+        dynamic_typing=d.dynamic_typing,
+        floating_point_range=list(d.floating_point_range),
+        integer_range=list(d.integer_range),
+    )
 
 
 _ARRAY_TYPES = (
@@ -210,7 +257,14 @@ _ARRAY_TYPES = (
 class ShellNode(Node):
     """Base of the node shells: ``node_name`` in ``/lpv_sysid`` unless a namespace is given
     (a ``__ns`` remap still wins), the module's parameter table declared into
-    ``self.params`` (see :func:`declare`), and the node clock in seconds / nanoseconds."""
+    ``self.params`` (see :func:`declare`), and the node clock in seconds / nanoseconds.
+
+    Parameters at run time: the table's writable parameters (:data:`RUNTIME_PARAMETERS`)
+    are applied when set (``ros2 param set``): the new values go through the node's
+    :meth:`settings_from` (the same declaration and checks as at start) and then
+    :meth:`apply_parameters`; a value those refuse is rejected with their reason (an
+    ``on_set_parameters`` callback), the node keeps the old one. Every other parameter is
+    read-only (rclpy refuses the set: "Trying to set a read-only parameter")."""
 
     #: at most one "rejected" warning per input topic in this period [s]
     REJECT_LOG_PERIOD_S = 1.0
@@ -220,6 +274,48 @@ class ShellNode(Node):
         super().__init__(node_name, **kwargs)
         self._rejected_logged_at: dict[str, float] = {}
         self.params = declare(self, parameters)
+        #: the parameters applied while the node runs (the writable ones of the table)
+        self.runtime_parameters = frozenset(n for n, _, d in parameters if not d.read_only)
+        self._status_timer = None
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+    def settings_from(self, values: dict):
+        """The node's settings from ``{parameter: value}`` (raises a ConfigError naming the
+        parameter when a value or a combination is refused); the shells whose parameters
+        are one settings class set :attr:`SETTINGS` to it."""
+        return self.SETTINGS.from_dict(values)
+
+    #: the settings class of :meth:`settings_from` (a node overrides one or the other)
+    SETTINGS: Any = None
+
+    def status_timer(self, rate_hz: float, callback):
+        """The node's status timer (``status_rate_hz``; its period follows the parameter)."""
+        self._status_timer = self.create_timer(1.0 / rate_hz, callback)
+        return self._status_timer
+
+    def apply_parameters(self, settings, changes: dict) -> None:
+        """Make ``changes`` (validated: ``settings`` holds every value) take effect."""
+        if "status_rate_hz" in changes and self._status_timer is not None:
+            self._status_timer.timer_period_ns = int(round(1e9 / changes["status_rate_hz"]))
+
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        changes = {p.name: _plain(p.value) for p in params}
+        fixed = sorted(set(changes) - self.runtime_parameters)
+        if fixed:  # read-only ones never get here under rclpy; undeclared ones neither
+            return SetParametersResult(
+                successful=False, reason=f"{', '.join(fixed)}: {READ_ONLY_NOTE}"
+            )
+        values = {**self.params, **changes}
+        try:
+            settings = self.settings_from(values)
+            self.apply_parameters(settings, changes)
+        except LpvSysidError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        self.params = values
+        self.get_logger().info(
+            "parameters applied: " + ", ".join(f"{k}={v!r}" for k, v in changes.items())
+        )
+        return SetParametersResult(successful=True)
 
     #: wall-time bound of the orderly shutdown of :func:`run` [s]
     SHUTDOWN_TIMEOUT_S = 3.0

@@ -66,7 +66,10 @@ class SimVehicleNode(shell.RuntimeShell):
         if settings.lockstep:
             self.pub["clock"] = self.create_publisher(ClockMsg, "/clock", shell.QOS_RELIABLE)
         self.create_timer(1.0 / sensors.state_hz, self.on_tick, clock=self.pace_clock)
-        self.create_timer(1.0 / settings.status_rate_hz, self.publish_status)
+        self.status_timer(settings.status_rate_hz, self.publish_status)
+
+    def settings_from(self, values):
+        return settings_from_params(values)
 
     def _pace_ns(self) -> int:
         return self.pace_clock.now().nanoseconds if self.pace_clock is not None else self.now_ns()

@@ -8,11 +8,12 @@ give the node before it is stopped).
 from __future__ import annotations
 
 from lpv_sysid.flight.bridge.runtime import PARSERS, BridgeRuntime
-from lpv_sysid.flight.bridge.settings import SPECS, handback_bound_s
+from lpv_sysid.flight.bridge.settings import SPECS, handback_bound_s, settings_from_params
 
 __all__ = [
     "BridgeRuntime",
     "PARSERS",
     "SPECS",
     "handback_bound_s",
+    "settings_from_params",
 ]

@@ -152,6 +152,12 @@ def split_parameters(p: Mapping[str, Any]) -> tuple[dict, dict, dict]:
     return own, bridge, parameters.nest(mavros)
 
 
+def settings_from_params(p: Mapping[str, Any]) -> BridgeNodeSettings:
+    """The shell's settings from the declared values, checked as at start (a parameter set
+    while the node runs: see lpv_sysid/nodes/shell.py)."""
+    return BridgeNodeSettings.from_dict(split_parameters(p)[0])
+
+
 def handback_bound_s(offboard) -> float:
     """Longest a hand-back can take (the orderly-shutdown bound of the bridge), from the
     truth rules of mavlink/offboard/machine.py: each mode of the chain gets ``max_retries + 1``

@@ -330,6 +330,10 @@ class Node:
             raise ParameterNotDeclaredException(name)
         if self._descriptors[name].read_only:
             raise ParameterImmutableException(name)
+        # rclpy: the current value must satisfy the new descriptor (no callbacks run)
+        if not self._check(self._parameters[name], descriptor, False).successful:
+            raise InvalidParameterValueException(name, self._parameters[name].value, "descriptor")
+        descriptor.name = name
         self._descriptors[name] = descriptor
         return self.get_parameter(name).get_parameter_value()
 
