@@ -39,6 +39,7 @@ def verify_files(
     strict_full_box: bool = False,
     k_sigma: Optional[float] = None,
     full_box_kept: str = "stored",
+    workers: Optional[int] = 1,
 ) -> VerifyReport:
     """Load gains.yaml (+ sidecar) and vertex_models.yaml and run :func:`verify_gains`.
 
@@ -47,7 +48,8 @@ def verify_files(
     :func:`full_box_check` with ``seed``); its rows are advisory (WARN, ``passed`` unaffected)
     unless ``strict_full_box`` or the certificate claims the full box (then a miss fails: the
     Monte Carlo is a cross-check of the claim). ``k_sigma`` overrides the models file's
-    ``meta.k_sigma``.
+    ``meta.k_sigma``. ``workers``: processes of the full-box Monte Carlo (``None``: every core;
+    the numbers do not depend on it).
     """
     from lpv_sysid.io.files import sha256_file
     from lpv_sysid.io.formats import GainSchedule, load_certificate_npz
@@ -183,6 +185,7 @@ def verify_files(
             seed=seed,
             k_sigma=k,
             k_source=k_src,
+            workers=workers,
         )
         claimed = (
             isinstance(cert.get("certified_set"), dict)
@@ -272,13 +275,15 @@ def verify_and_record(
     gains_path: Path | str,
     models_path: Path | str,
     out: Optional[Path | str] = None,
+    workers: Optional[int] = 1,
     **settings: Any,
 ) -> tuple[VerifyReport, Path]:
     """:func:`verify_files` with :data:`VERIFY_SETTINGS` (overridden by ``settings``), its
     record written to ``out`` (default: ``verification.yaml`` next to the gains file).
+    ``workers`` (not a setting: the record does not depend on it) goes to :func:`verify_files`.
     Returns the report and the record's path."""
     used = {**VERIFY_SETTINGS, **settings}
-    rep = verify_files(gains_path, models_path, **used)
+    rep = verify_files(gains_path, models_path, **used, workers=workers)
     path = Path(out) if out else Path(gains_path).parent / VERIFICATION_FILE
     write_verification(path, verification_record(rep, gains_path, models_path, used))
     return rep, path
