@@ -7,8 +7,9 @@ import contextlib
 import logging
 import multiprocessing
 import os
+import threading
 from concurrent.futures import Future, ProcessPoolExecutor
-from typing import Any, Callable, Iterable, Iterator, Optional, TypeVar
+from typing import Any, Callable, Generic, Iterable, Iterator, Optional, TypeVar
 
 from lpv_sysid.errors import ConfigError
 
@@ -83,6 +84,114 @@ def _limit_worker_blas() -> None:
     threadpool_limits(limits=1, user_api="blas")
 
 
+def start_method() -> str:
+    """``fork`` where the platform has it and this process runs no other Python thread (the
+    workers start with every module already loaded: no second import of numpy/scipy per worker;
+    a fork copies only the calling thread), else ``spawn`` (a fresh interpreter, which reads
+    the BLAS variables of :func:`single_thread_blas_environment` when it loads numpy)."""
+    if "fork" in multiprocessing.get_all_start_methods() and threading.active_count() == 1:
+        return "fork"
+    return "spawn"
+
+
+class Batch(Generic[R]):
+    """Tasks handed out by :func:`start_tasks`; :meth:`results` collects them in task order.
+
+    A context manager: leaving the block without :meth:`results` (an exception in the work done
+    meanwhile) cancels the tasks not yet started and stops the workers."""
+
+    def __init__(
+        self,
+        fn: Callable[[T], R],
+        items: list[T],
+        n: int,
+        backend: str,
+    ) -> None:
+        self._fn: Callable[[Any], R] = fn
+        self._items: list[Any] = items
+        self._n = n
+        self._backend = backend
+        self._ex: Optional[ProcessPoolExecutor] = None
+        self._futures: list[Future[R]] = []
+        if n > 1 and backend == "process":
+            method = start_method()
+            log.debug("%d tasks on %d %sed one-BLAS-thread workers", len(items), n, method)
+            with single_thread_blas_environment():
+                self._ex = ProcessPoolExecutor(
+                    max_workers=n,
+                    mp_context=multiprocessing.get_context(method),
+                    initializer=_limit_worker_blas,
+                )
+                try:
+                    self._futures = [self._ex.submit(fn, t) for t in items]
+                except BaseException:
+                    self.cancel()
+                    raise
+
+    def results(self, on_result: Optional[Callable[[int, R], Any]] = None) -> list[R]:
+        """Every task's result in task order (``on_result(i, result)`` called here as each
+        arrives); a task's exception is raised here and the tasks not yet started cancelled."""
+        out: list[R] = []
+        try:
+            if self._ex is not None:
+                for f in self._futures:
+                    out.append(f.result())
+                    if on_result is not None:
+                        on_result(len(out) - 1, out[-1])
+                self._ex.shutdown(wait=True)
+                self._ex = None
+                return out
+            if self._backend == "dask" and self._n > 1:
+                out = _dask_map(self._fn, self._items, self._n)
+            else:
+                with one_blas_thread():
+                    for t in self._items:
+                        out.append(self._fn(t))
+                        if on_result is not None:
+                            on_result(len(out) - 1, out[-1])
+                return out
+            if on_result is not None:
+                for i, r in enumerate(out):
+                    on_result(i, r)
+            return out
+        except BaseException:
+            self.cancel()
+            raise
+
+    def cancel(self) -> None:
+        """Cancel the tasks not yet started and stop the workers (waits for running ones)."""
+        if self._ex is not None:
+            self._ex.shutdown(wait=True, cancel_futures=True)
+            self._ex = None
+
+    def __del__(self) -> None:  # dropped without results(): an exception in between
+        if getattr(self, "_ex", None) is not None:
+            self._ex.shutdown(wait=False, cancel_futures=True)  # type: ignore[union-attr]
+
+    def __enter__(self) -> "Batch[R]":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.cancel()
+
+
+def start_tasks(
+    fn: Callable[[T], R],
+    tasks: Iterable[T],
+    workers: Optional[int] = None,
+    backend: str = "process",
+) -> Batch[R]:
+    """Hand ``fn(t)`` for each task to ``workers`` processes (``None``: every core) and return
+    at once: the caller does other work while they run, then calls :meth:`Batch.results`.
+    With one worker (or one task) nothing runs until :meth:`Batch.results`, which computes the
+    tasks here in order. Contract of :func:`map_tasks`."""
+    items = list(tasks)
+    n = resolve_workers(workers)
+    if backend not in BACKENDS:
+        raise ConfigError(f"parallel backend must be one of {BACKENDS}, got {backend!r}")
+    return Batch(fn, items, 1 if len(items) <= 1 else min(n, len(items)), backend)
+
+
 def map_tasks(
     fn: Callable[[T], R],
     tasks: Iterable[T],
@@ -98,49 +207,8 @@ def map_tasks(
     ``workers``. ``on_result(i, result)`` is called here for each task in task order as the
     results arrive (progress lines). A task's exception is raised here; the tasks not yet
     started are cancelled."""
-    items = list(tasks)
-    n = resolve_workers(workers)
-    if backend not in BACKENDS:
-        raise ConfigError(f"parallel backend must be one of {BACKENDS}, got {backend!r}")
-    if n == 1 or len(items) <= 1:
-        out: list[R] = []
-        with one_blas_thread():
-            for i, t in enumerate(items):
-                out.append(fn(t))
-                if on_result is not None:
-                    on_result(i, out[-1])
-        return out
-    if backend == "dask":
-        results = _dask_map(fn, items, n)
-        if on_result is not None:
-            for i, r in enumerate(results):
-                on_result(i, r)
-        return results
-    return _process_map(fn, items, min(n, len(items)), on_result)
-
-
-def _process_map(
-    fn: Callable[[T], R],
-    items: list[T],
-    n: int,
-    on_result: Optional[Callable[[int, R], Any]],
-) -> list[R]:
-    log.debug("%d tasks on %d spawned single-threaded-BLAS workers", len(items), n)
-    ctx = multiprocessing.get_context("spawn")  # a fresh interpreter reads the BLAS variables
-    with single_thread_blas_environment():
-        ex = ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_limit_worker_blas)
-        try:
-            futures: list[Future[R]] = [ex.submit(fn, t) for t in items]
-            out: list[R] = []
-            for i, f in enumerate(futures):
-                out.append(f.result())
-                if on_result is not None:
-                    on_result(i, out[-1])
-        except BaseException:
-            ex.shutdown(wait=True, cancel_futures=True)
-            raise
-        ex.shutdown(wait=True)
-    return out
+    with start_tasks(fn, tasks, workers, backend) as batch:
+        return batch.results(on_result)
 
 
 def _dask_map(fn: Callable[[T], R], items: list[T], n: int) -> list[R]:

@@ -17,7 +17,7 @@ from lpv_sysid.synthesis.verify.box import _sidecar_box, check_box_claim, check_
 from lpv_sysid.synthesis.verify.feedforward import check_feedforward
 from lpv_sysid.synthesis.verify.frozen import _check_input_claim, verify_gains
 from lpv_sysid.synthesis.verify.intervals import full_box_intervals
-from lpv_sysid.synthesis.verify.montecarlo import FullBoxResult, full_box_check
+from lpv_sysid.synthesis.verify.montecarlo import FullBoxResult, start_full_box_check
 from lpv_sysid.synthesis.verify.report import (
     VERIFICATION_FILE,
     VerifyReport,
@@ -141,6 +141,22 @@ def verify_files(
             else (2, 3, 4)
         )
     C = performance_matrix(gains.Q, model.n_x, velocity_index)
+    mc = None  # the full-box Monte Carlo runs on its workers while the checks below run here
+    if full_box > 0:
+        boxes, k, k_src = full_box_intervals(raw, k_sigma, full_box_kept)
+        mc = start_full_box_check(
+            model,
+            gains.K,
+            gains.R,
+            C,
+            gains.gamma,
+            boxes,
+            n=full_box,
+            seed=seed,
+            k_sigma=k,
+            k_source=k_src,
+            workers=workers,
+        )
     if model.box is not None:
         bx = _sidecar_box(sidecar, model.n_x, model.n_u) if sidecar is not None else None
         if bx is None:
@@ -172,21 +188,8 @@ def verify_files(
             bool(worst <= float(ga) * (1 + 1e-3) + 1e-12),
             "worst independent H-inf norm vs the claimed gamma_achieved",
         )
-    if full_box > 0:
-        boxes, k, k_src = full_box_intervals(raw, k_sigma, full_box_kept)
-        res = full_box_check(
-            model,
-            gains.K,
-            gains.R,
-            C,
-            gains.gamma,
-            boxes,
-            n=full_box,
-            seed=seed,
-            k_sigma=k,
-            k_source=k_src,
-            workers=workers,
-        )
+    if mc is not None:
+        res = mc.result()
         claimed = (
             isinstance(cert.get("certified_set"), dict)
             and cert["certified_set"].get("kind") == "full_identified_box"

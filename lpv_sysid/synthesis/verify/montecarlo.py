@@ -26,7 +26,7 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.models.lpv import PolytopicModel, multilinear_weights
-from lpv_sysid.parallel import map_tasks, resolve_workers
+from lpv_sysid.parallel import Batch, resolve_workers, start_tasks
 from lpv_sysid.synthesis.hinf import hinf_norm
 from lpv_sysid.synthesis.verify.intervals import DEFAULT_K_SIGMA, ElementBox
 
@@ -105,7 +105,7 @@ class FullBoxResult:
 PARALLEL_MIN_SAMPLES = 800
 
 
-def _judge_all(
+def _start_judging(
     draws: list,
     R: np.ndarray,
     C: np.ndarray,
@@ -113,15 +113,15 @@ def _judge_all(
     rtol: float,
     ts: Optional[float],
     workers: Optional[int],
-) -> list:
-    """:func:`_frozen` of every ``(where, v_d, A, B, K)`` draw, in order, on ``workers``."""
+) -> Batch:
+    """:func:`_frozen` of every ``(where, v_d, A, B, K)`` draw, in chunks on ``workers``."""
     n_work = 1 if len(draws) < PARALLEL_MIN_SAMPLES else resolve_workers(workers)
     size = max(1, -(-len(draws) // (8 * n_work)))  # ~8 chunks per worker: load balance
     chunks = [
         ([(A, B, Kv) for _, _, A, B, Kv in draws[i : i + size]], R, C, gamma, rtol, ts)
         for i in range(0, len(draws), size)
     ]
-    return [r for part in map_tasks(_judge_chunk, chunks, n_work) for r in part]
+    return start_tasks(_judge_chunk, chunks, n_work)
 
 
 def _judge_chunk(chunk: tuple) -> list:
@@ -265,7 +265,30 @@ def full_box_check(
     k_source: str = "",
     workers: Optional[int] = 1,
 ) -> FullBoxResult:
-    """Monte Carlo over the full identified box (module docstring, item 5); empirical only.
+    """Monte Carlo over the full identified box (module docstring, item 5); empirical only:
+    :func:`start_full_box_check` and its result."""
+    return start_full_box_check(
+        model, K, R, C, gamma, boxes, n, seed, rtol, extremes, k_sigma, k_source, workers
+    ).result()
+
+
+def start_full_box_check(
+    model: PolytopicModel,
+    K: np.ndarray,
+    R: np.ndarray,
+    C: np.ndarray,
+    gamma: float,
+    boxes: list,
+    n: int = 200,
+    seed: int = 0,
+    rtol: float = 1e-6,
+    extremes: bool = True,
+    k_sigma: float = DEFAULT_K_SIGMA,
+    k_source: str = "",
+    workers: Optional[int] = 1,
+) -> "PendingFullBox":
+    """The samples of :func:`full_box_check` drawn and handed to the workers; returns at once
+    (the caller runs its other checks meanwhile; :meth:`PendingFullBox.result` collects).
 
     ``boxes``: :func:`full_box_intervals` (one per vertex, box order). Samples: the 2^p scheduling
     corners first (when n allows), then uniform interior v_d; per sample and per vertex the
@@ -349,13 +372,26 @@ def full_box_check(
             for name, th in _worst_corners(model.A[i], model.B[i], K[i], R, C, boxes[i], model.ts):
                 Ai, Bi = boxes[i].apply(model.A[i], model.B[i], th)
                 draws.append((f"vertex {i} {name}", np.asarray(vd, dtype=float), Ai, Bi, K[i]))
-    judged = _judge_all(draws, R, C, float(gamma), rtol, model.ts, workers)
-    worst_key = (-np.inf, -np.inf)
-    for (where, vd, A, B, Kv), (norm, absc, ok) in zip(draws, judged):
-        s = FullBoxSample(where, vd, norm, absc, ok)
-        res.samples.append(s)
-        key = (absc if model.ts is not None else norm, absc)
-        if key > worst_key:
-            worst_key = key
-            res.worst, res.worst_A, res.worst_B, res.worst_K = s, A, B, Kv
-    return res
+    return PendingFullBox(
+        res, draws, _start_judging(draws, R, C, float(gamma), rtol, model.ts, workers), model.ts
+    )
+
+
+class PendingFullBox:
+    """A started :func:`start_full_box_check`: :meth:`result` waits for the judged samples."""
+
+    def __init__(self, res: FullBoxResult, draws: list, batch: Batch, ts: Optional[float]):
+        self._res, self._draws, self._batch, self._ts = res, draws, batch, ts
+
+    def result(self) -> FullBoxResult:
+        res = self._res
+        judged = [r for part in self._batch.results() for r in part]
+        worst_key = (-np.inf, -np.inf)
+        for (where, vd, A, B, Kv), (norm, absc, ok) in zip(self._draws, judged):
+            s = FullBoxSample(where, vd, norm, absc, ok)
+            res.samples.append(s)
+            key = (absc if self._ts is not None else norm, absc)
+            if key > worst_key:
+                worst_key = key
+                res.worst, res.worst_A, res.worst_B, res.worst_K = s, A, B, Kv
+        return res
