@@ -104,8 +104,17 @@ def build_parser(commands: dict[str, ModuleType]) -> argparse.ArgumentParser:
 
 
 #: commands whose linear algebra is many small problems: there OpenBLAS' second thread costs
-#: CPU and saves no wall time (measured both ways by bench/bench_ident.py; BENCHMARKS.md)
-SINGLE_THREAD_BLAS = ("identify", "identify-nonlinear", "vrft", "simulate", "demo")
+#: CPU and saves no wall time (measured both ways by bench/bench_ident.py and, for the studies
+#: that use every core through worker processes instead, bench/bench_studies.py; BENCHMARKS.md)
+SINGLE_THREAD_BLAS = (
+    "identify",
+    "identify-nonlinear",
+    "vrft",
+    "simulate",
+    "demo",
+    "coverage",
+    "verify",
+)
 
 
 def _single_thread_blas(argv: Sequence[str]) -> None:

@@ -19,6 +19,12 @@ on the first of:
                      body speed, roll/pitch, body rate or a rotor speed outside its declared
                      bound (``max_body_speed``, ``max_tilt``, ``max_body_rate``,
                      ``max_rotor_speed``; rotor speeds are magnitudes, never negative);
+- ``loop_delay``     the loop delay -- the age of the state a command is computed from (its
+                     header stamp to the command's time) -- above the certified bound
+                     ``loop_delay_bound`` on every command for ``loop_delay_tolerance`` or
+                     longer (:meth:`SafetySupervisor.check_loop_delay`): the certificate proves
+                     stability for delays up to the bound only, and a sustained delay below the
+                     staleness timeouts (tens of ms) can already be past it;
 - ``external``       an operator or another node asked for an abort.
 
 Stamps and ``t_now`` must come from the same clock source: the shells pass the node clock,
@@ -58,6 +64,7 @@ FUTURE_STAMP = "future_stamp"
 EXCITATION_BOUND = "excitation_bound"
 REFERENCE_ENVELOPE = "reference_envelope"
 INPUT_BOUND = "input_bound"
+LOOP_DELAY = "loop_delay"
 REASONS = (
     STALE,
     OUT_OF_ORDER,
@@ -69,6 +76,7 @@ REASONS = (
     EXCITATION_BOUND,
     REFERENCE_ENVELOPE,
     INPUT_BOUND,
+    LOOP_DELAY,
 )
 
 
@@ -99,6 +107,22 @@ class SafetyConfig:
         "0.5 s",
         lo=0.0,
         hi=0.5,
+        unit=" s",
+    )
+    loop_delay_bound: float = cf.number(
+        0.0,
+        "the certified loop delay [s]: commands computed from states older than this (header "
+        "stamp to command time) for loop_delay_tolerance or longer abort; 0: no bound (off)",
+        lo=0.0,
+        hi=1.0,
+        unit=" s",
+    )
+    loop_delay_tolerance: float = cf.number(
+        0.0,
+        "how long the loop delay may stay above loop_delay_bound before the abort [s] "
+        "(0: the first command above it)",
+        lo=0.0,
+        hi=1.0,
         unit=" s",
     )
 
@@ -177,6 +201,7 @@ class SafetySupervisor:
     _t_arm: float = 0.0
     _last_rx: dict = field(default_factory=dict)
     _last_stamp: dict = field(default_factory=dict)
+    _delay_since: float | None = None  # command time of the first of a run above the bound
 
     # -- state ------------------------------------------------------------------------
     @property
@@ -195,6 +220,7 @@ class SafetySupervisor:
         self.armed = True
         self._t_arm = float(t)
         self._last_rx.clear()
+        self._delay_since = None
 
     def disarm(self) -> None:
         self.armed = False
@@ -206,6 +232,7 @@ class SafetySupervisor:
         self.event = None
         self._last_stamp.clear()
         self._last_rx.clear()
+        self._delay_since = None
 
     def abort(self, t: float, reason: str, detail: str) -> SafetyEvent:
         """Latch an abort (the first one wins); return the latched event."""
@@ -363,6 +390,32 @@ class SafetySupervisor:
                     f"timeout {timeout:g} s + tolerance {tol:g} s)",
                 )
         return self.event
+
+    def check_loop_delay(self, t_command: float, t_state: float) -> SafetyEvent | None:
+        """A command computed at ``t_command`` from the state stamped ``t_state`` (same clock):
+        its loop delay ``t_command - t_state``. Abort (``loop_delay``) when the delay has been
+        above ``loop_delay_bound`` on every command since one issued ``loop_delay_tolerance``
+        or more earlier; a command at or below the bound ends the run. Off when the bound is 0
+        or not armed."""
+        bound = self.config.loop_delay_bound
+        if bound <= 0.0 or not self.armed or self.event is not None:
+            return self.event
+        delay = t_command - t_state
+        if not delay > bound:
+            self._delay_since = None
+            return None
+        if self._delay_since is None:
+            self._delay_since = float(t_command)
+        above = t_command - self._delay_since
+        if above >= self.config.loop_delay_tolerance:
+            return self.abort(
+                t_command,
+                LOOP_DELAY,
+                f"loop delay {1e3 * delay:.3f} ms (state stamp {t_state:.6f} s -> command "
+                f"{t_command:.6f} s) above the certified {1e3 * bound:.3f} ms for "
+                f"{1e3 * above:.3f} ms (tolerance {1e3 * self.config.loop_delay_tolerance:g} ms)",
+            )
+        return None
 
     def check_excitation(
         self, t: float, u_e: Sequence[float] | np.ndarray, limit: Sequence[float] | np.ndarray

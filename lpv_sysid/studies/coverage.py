@@ -40,6 +40,7 @@ import numpy as np
 from lpv_sysid.control.campaign import run_name
 from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError, SafetyError, SolverError
+from lpv_sysid.parallel import map_tasks
 from lpv_sysid.models.quadrotor import (
     INPUT_NAMES,
     STATE_NAMES,
@@ -313,28 +314,43 @@ def run_study(
     ident_cfg,
     progress: Callable[[str], None] | None = None,
     keep_runs: bool = False,
+    workers: int | None = 1,
 ):
-    """The study of the module docstring: ``(airframes, runs per airframe or None)``."""
+    """The study of the module docstring: ``(airframes, runs per airframe or None)``.
+
+    The airframes are independent tasks (each draws from its own stream
+    ``default_rng([seed, k])`` and flies with its own noise seeds): they run on ``workers``
+    processes (:func:`lpv_sysid.parallel.map_tasks`; ``None``: every core) with the same
+    numbers as the serial run; ``progress`` lines come in airframe order."""
     from lpv_sysid.sim import phase1 as p1
 
     vertices = list(cfg.vertices) if cfg.vertices else list(range(1, 9))
     signals = p1.design_excitation(phase1_cfg)
-    out, kept = [], []
-    for k in range(1, cfg.airframes + 1):
-        params, runs = draw_flyable(base, k, cfg, gains, sensors, phase1_cfg, vertices, signals)
-        results = identify_runs(runs, params, base, ident_cfg)
-        af = AirframeCoverage(
-            k, params, score(runs, results, params, ident_cfg), eiv_shift(results)
-        )
-        out.append(af)
-        kept.append(runs if keep_runs else None)
+    tasks = [
+        (k, cfg, base, gains, sensors, phase1_cfg, ident_cfg, vertices, signals, keep_runs)
+        for k in range(1, cfg.airframes + 1)
+    ]
+
+    def report(_: int, result: tuple) -> None:
+        af = result[0]
         if progress:
             progress(
-                f"airframe {k}: {af.covered}/{af.n} elements within {af.vertices[0].k_sigma:g} "
-                "sigma "
-                f"({100 * af.fraction:.2f} %)"
+                f"airframe {af.index}: {af.covered}/{af.n} elements within "
+                f"{af.vertices[0].k_sigma:g} sigma ({100 * af.fraction:.2f} %)"
             )
-    return out, kept
+
+    done = map_tasks(_airframe_task, tasks, workers, on_result=report)
+    return [af for af, _ in done], [runs for _, runs in done]
+
+
+def _airframe_task(task: tuple) -> tuple:
+    """Airframe ``k`` of :func:`run_study`: drawn, flown, identified, scored (module level: it
+    runs in a worker process). Returns ``(AirframeCoverage, runs or None)``."""
+    k, cfg, base, gains, sensors, phase1_cfg, ident_cfg, vertices, signals, keep_runs = task
+    params, runs = draw_flyable(base, k, cfg, gains, sensors, phase1_cfg, vertices, signals)
+    results = identify_runs(runs, params, base, ident_cfg)
+    af = AirframeCoverage(k, params, score(runs, results, params, ident_cfg), eiv_shift(results))
+    return af, (runs if keep_runs else None)
 
 
 #: re-identification variants of :func:`ablations` (name -> IdentificationConfig changes)

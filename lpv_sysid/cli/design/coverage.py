@@ -61,6 +61,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "compensation, identification.measurement_noise) and report its largest shift",
     )
     parser.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        metavar="N",
+        help="processes flying and identifying the airframes (default: every core this process "
+        "may use; 1 = serial; the numbers do not depend on it)",
+    )
+    parser.add_argument(
         "--ablations",
         action="store_true",
         help="also re-identify the same flights without the re-expansion and with the "
@@ -74,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
     from lpv_sysid.cli.design.identify import load_config
     from lpv_sysid.configuration.defaults import config_file
     from lpv_sysid.errors import ConfigError
+    from lpv_sysid.parallel import resolve_workers
     from lpv_sysid.sim import phase1
     from lpv_sysid.studies import coverage as cv
 
@@ -83,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         vertices=tuple(args.vertices) if args.vertices else None,
     )
+    resolve_workers(args.workers)
     if args.seed < 0:
         raise ConfigError(f"--seed must be >= 0, got {args.seed}")
     if args.vertices and any(not 1 <= i <= 8 for i in args.vertices):
@@ -104,7 +114,15 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--out {out}: cannot create ({exc.strerror})") from None
     t0 = time.perf_counter()
     airframes, runs = cv.run_study(
-        cfg, qp, gains, sensors, ph1, ident_cfg, progress=print, keep_runs=args.ablations
+        cfg,
+        qp,
+        gains,
+        sensors,
+        ph1,
+        ident_cfg,
+        progress=print,
+        keep_runs=args.ablations,
+        workers=args.workers,
     )
     ablation = cv.ablations(runs, airframes, qp, ident_cfg) if args.ablations else None
     doc = cv.summary_dict(airframes, qp, cfg, ablation)

@@ -98,12 +98,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--all-rows", action="store_true", help="print every check, not only failures + worst"
     )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        metavar="N",
+        help="processes judging the --full-box samples (default: every core this process may "
+        "use; 1 = serial; the numbers do not depend on it)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     from lpv_sysid.errors import ConfigError
+    from lpv_sysid.parallel import resolve_workers
     from lpv_sysid.synthesis.verify import verify_and_record
 
+    resolve_workers(args.workers)
     if args.full_box < 0:
         raise ConfigError(f"--full-box must be >= 0, got {args.full_box}")
     t0 = time.perf_counter()
@@ -117,6 +127,7 @@ def run(args: argparse.Namespace) -> int:
         strict_full_box=args.strict_full_box,
         k_sigma=args.k_sigma,
         full_box_kept=args.full_box_kept,
+        workers=args.workers,
     )
     print(rep.table(max_rows=10**6) if not args.all_rows else _all(rep))
     fb = rep.full_box

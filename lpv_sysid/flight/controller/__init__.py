@@ -24,11 +24,17 @@ the newest samples received; ``state`` steps it on each state sample at that sam
 (:meth:`ControllerRuntime.on_input`), so the command is always computed on the freshest
 state and carries its stamp -- the lock-stepped ``sim_vehicle`` of ``sim.launch.py`` waits for
 exactly that command before it integrates on -- while the ``rate_hz`` timer only judges
-staleness. Why: the demo gains lose stability at 8-12 ms of loop delay at 250 Hz (discrete
-closed loop A + B K with the input delayed: spectral radius >= 1 from 2 samples on the worst
-of the 128 certified systems, from 3 on the nominal vertex model), and
-the wall-clock Python graph on a loaded 2-core machine measured ~14 ms mean loop delay
-(state delivery p99 31 ms): it oscillated into saturation within 0.3 s.
+staleness. Why: the loop delay costs stability margin (issue 27 measured the demo gains
+unstable beyond 27.0-28.2 ms of loop delay at 250 Hz, 24.2-25.2 ms at 100 Hz; an earlier
+figure of 8-12 ms was not reproduced with the current gains), and the wall-clock Python
+graph on a loaded 2-core machine measured ~14 ms mean loop delay (state delivery p99 31 ms).
+
+The loop-delay watchdog holds every command to the delay the proof assumes: the age of the
+state a command is computed from (its header stamp to the node clock at the tick) must not
+stay above the certified bound (the gains certificate's ``loop_delay.bound_s``; the
+``loop_delay_bound_s`` parameter where the certificate states none, the smaller of both
+otherwise) for ``loop_delay_tolerance_s`` or longer -- a ``loop_delay`` abort, not only a
+staleness abort after the 50-100 ms timeouts, which a sustained 25-50 ms delay passes.
 
 Per tick, once started: staleness of every input stream (receipt time and
 header stamp against the node clock), scheduling box, the runtime LPV law
@@ -37,7 +43,8 @@ with the reference feedforward of gains.yaml F_ff/F_jerk the law's own filtered 
 of the limited v_d supply a = dv_d/dt and its rate) on x = [phi, theta, u, v, w, p, q, r,
 Mix Omega] (seed 0 Eq. 14 without position and yaw; delta = Mix Omega, Eq. 7), and its bound
 monitor. Any fault (stale / frozen / future-stamped / out-of-order / non-finite input, v_d
-outside the box or its envelope, excitation too large, bound exceeded, abort request)
+outside the box or its envelope, excitation too large, bound exceeded, loop delay above the
+certified bound, abort request)
 latches an abort in :class:`~lpv_sysid.control.safety.SafetySupervisor`: one ERROR status
 naming the reason is published and no actuator command follows, so the bridge hands control
 back to PX4 (and the excitation node fades out on that status).

@@ -75,6 +75,8 @@ class ControllerRuntime:
                 max_tilt=settings.max_tilt,
                 max_body_rate=settings.max_body_rate,
                 max_rotor_speed=settings.max_rotor_speed,
+                loop_delay_bound=self._loop_delay_bound(settings),
+                loop_delay_tolerance=settings.loop_delay_tolerance_s,
             )
         )
         self.body_state: Optional[np.ndarray] = None  # BODY_STATE_NAMES of the state topic (FRD)
@@ -93,10 +95,55 @@ class ControllerRuntime:
         self.u_e: Optional[np.ndarray] = None  # normalised excitation (4)
         self._ref_stamp: Optional[float] = None
         self._t_sample: Optional[float] = None  # last state stamp ticked (tick_source: state)
+        self._state_stamp: Optional[float] = None  # stamp of the newest state sample
         self._ref_slope: Optional[np.ndarray] = None  # slope of the limited reference
         self.commands = 0
         self.flags = {"clamped": 0, "saturated": 0, "rate_limited": 0}
         self._abort_reported = False
+
+    def _loop_delay_bound(self, settings: ControllerSettings) -> float:
+        """The loop delay the supervisor holds the commands to [s] (0: none): the gains
+        certificate's ``loop_delay.bound_s`` and the ``loop_delay_bound_s`` parameter, the
+        smaller of those stated. Refused (ConfigError) when a timer tick would exceed it
+        between two healthy state samples."""
+        cert = self.schedule.certificate
+        entry = getattr(cert, "loop_delay", None)
+        if entry is None:
+            entry = cert.extra.get("loop_delay") if isinstance(cert.extra, dict) else None
+        raw = entry.get("bound_s") if isinstance(entry, dict) else getattr(entry, "bound_s", None)
+        stated = [float(raw)] if raw is not None else []
+        if stated and not (np.isfinite(stated[0]) and stated[0] > 0.0):
+            raise ConfigError(
+                f"{settings.gains_file}: certificate.loop_delay.bound_s must be a finite "
+                f"delay > 0 s, got {raw!r}"
+            )
+        if settings.loop_delay_bound_s > 0.0:
+            stated.append(settings.loop_delay_bound_s)
+        if not stated:
+            self._log.append(
+                (
+                    "warn",
+                    "no loop-delay bound (certificate.loop_delay.bound_s absent, "
+                    "loop_delay_bound_s 0): the loop-delay watchdog is off; only the "
+                    "staleness timeouts guard the state's age",
+                )
+            )
+            return 0.0
+        bound = min(stated)
+        if settings.tick_source == "timer" and bound <= 1.0 / settings.state_rate_hz:
+            raise ConfigError(
+                f"loop delay bound {1e3 * bound:g} ms is not above one state period "
+                f"(1 / state_rate_hz = {1e3 / settings.state_rate_hz:g} ms): with "
+                "tick_source timer a healthy state stream would exceed it between samples"
+            )
+        self._log.append(
+            (
+                "info",
+                f"loop-delay watchdog: abort when commands come from states older than "
+                f"{1e3 * bound:g} ms for {1e3 * settings.loop_delay_tolerance_s:g} ms",
+            )
+        )
+        return bound
 
     # -- log lines for the shell ----------------------------------------------------------
     def take_log(self) -> list[tuple[str, str]]:
@@ -158,6 +205,7 @@ class ControllerRuntime:
             if sup.armed and not sup.aborted:
                 sup.check_state(t_now, values)  # physically absurd -> abort
             self.body_state = values
+            self._state_stamp = t
             self._law_body[:] = values
         elif topic == "rotor_speeds":
             if sup.armed and not sup.aborted:
@@ -230,13 +278,18 @@ class ControllerRuntime:
 
         Staleness is judged at the node clock ``t_now``; the law steps at ``t_sample`` (the
         stamp of the state sample the step is computed on, ``tick_source: state``; default
-        ``t_now``), which also stamps the command."""
+        ``t_now``), which also stamps the command. The loop delay -- ``t_now`` minus the stamp of
+        the state the step uses -- is held to the certified bound
+        (:meth:`SafetySupervisor.check_loop_delay`)."""
         sup = self.supervisor
         out: list[tuple[str, Any]] = []
         if not sup.armed:
             return out
         t_law = t_now if t_sample is None else float(t_sample)
         sup.check(t_now)
+        t_state = self._state_stamp if t_sample is None else t_law
+        if t_state is not None:
+            sup.check_loop_delay(t_now, t_state)
         if sup.aborted or self._ue_scaled is None or self.body_state is None or self.omega is None:
             return self._report_abort(t_now, out)
         if self.v_d is None or self.v_d_in is None:

@@ -160,6 +160,22 @@ class ControllerSettings(Settings):
         1.0,
         10.0,
     )
+    loop_delay_bound_s: float = double(
+        0.0,
+        "loop delay bound [s] when the gains certificate states none "
+        "(certificate.loop_delay.bound_s); with both, the smaller. A command computed from a "
+        "state whose stamp is older than this for loop_delay_tolerance_s or longer aborts. "
+        "0 and no certified bound: the loop-delay watchdog is off (logged at start)",
+        0.0,
+        1.0,
+    )
+    loop_delay_tolerance_s: float = double(
+        0.02,
+        "how long the loop delay may stay above its bound before the abort [s] (isolated "
+        "scheduling hiccups pass; 0: the first command above the bound aborts)",
+        0.0,
+        1.0,
+    )
     auto_start: bool = flag(False, "start commanding without the service")
     status_rate_hz: float = double(2.0, "status publication rate [Hz]", 0.1, 100.0)
 

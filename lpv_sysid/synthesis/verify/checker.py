@@ -17,7 +17,7 @@ from lpv_sysid.synthesis.verify.box import _sidecar_box, check_box_claim, check_
 from lpv_sysid.synthesis.verify.feedforward import check_feedforward
 from lpv_sysid.synthesis.verify.frozen import _check_input_claim, verify_gains
 from lpv_sysid.synthesis.verify.intervals import full_box_intervals
-from lpv_sysid.synthesis.verify.montecarlo import FullBoxResult, full_box_check
+from lpv_sysid.synthesis.verify.montecarlo import FullBoxResult, start_full_box_check
 from lpv_sysid.synthesis.verify.report import (
     VERIFICATION_FILE,
     VerifyReport,
@@ -39,6 +39,7 @@ def verify_files(
     strict_full_box: bool = False,
     k_sigma: Optional[float] = None,
     full_box_kept: str = "stored",
+    workers: Optional[int] = 1,
 ) -> VerifyReport:
     """Load gains.yaml (+ sidecar) and vertex_models.yaml and run :func:`verify_gains`.
 
@@ -47,7 +48,8 @@ def verify_files(
     :func:`full_box_check` with ``seed``); its rows are advisory (WARN, ``passed`` unaffected)
     unless ``strict_full_box`` or the certificate claims the full box (then a miss fails: the
     Monte Carlo is a cross-check of the claim). ``k_sigma`` overrides the models file's
-    ``meta.k_sigma``.
+    ``meta.k_sigma``. ``workers``: processes of the full-box Monte Carlo (``None``: every core;
+    the numbers do not depend on it).
     """
     from lpv_sysid.io.files import sha256_file
     from lpv_sysid.io.formats import GainSchedule, load_certificate_npz
@@ -139,6 +141,22 @@ def verify_files(
             else (2, 3, 4)
         )
     C = performance_matrix(gains.Q, model.n_x, velocity_index)
+    mc = None  # the full-box Monte Carlo runs on its workers while the checks below run here
+    if full_box > 0:
+        boxes, k, k_src = full_box_intervals(raw, k_sigma, full_box_kept)
+        mc = start_full_box_check(
+            model,
+            gains.K,
+            gains.R,
+            C,
+            gains.gamma,
+            boxes,
+            n=full_box,
+            seed=seed,
+            k_sigma=k,
+            k_source=k_src,
+            workers=workers,
+        )
     if model.box is not None:
         bx = _sidecar_box(sidecar, model.n_x, model.n_u) if sidecar is not None else None
         if bx is None:
@@ -170,20 +188,8 @@ def verify_files(
             bool(worst <= float(ga) * (1 + 1e-3) + 1e-12),
             "worst independent H-inf norm vs the claimed gamma_achieved",
         )
-    if full_box > 0:
-        boxes, k, k_src = full_box_intervals(raw, k_sigma, full_box_kept)
-        res = full_box_check(
-            model,
-            gains.K,
-            gains.R,
-            C,
-            gains.gamma,
-            boxes,
-            n=full_box,
-            seed=seed,
-            k_sigma=k,
-            k_source=k_src,
-        )
+    if mc is not None:
+        res = mc.result()
         claimed = (
             isinstance(cert.get("certified_set"), dict)
             and cert["certified_set"].get("kind") == "full_identified_box"
@@ -272,13 +278,15 @@ def verify_and_record(
     gains_path: Path | str,
     models_path: Path | str,
     out: Optional[Path | str] = None,
+    workers: Optional[int] = 1,
     **settings: Any,
 ) -> tuple[VerifyReport, Path]:
     """:func:`verify_files` with :data:`VERIFY_SETTINGS` (overridden by ``settings``), its
     record written to ``out`` (default: ``verification.yaml`` next to the gains file).
+    ``workers`` (not a setting: the record does not depend on it) goes to :func:`verify_files`.
     Returns the report and the record's path."""
     used = {**VERIFY_SETTINGS, **settings}
-    rep = verify_files(gains_path, models_path, **used)
+    rep = verify_files(gains_path, models_path, **used, workers=workers)
     path = Path(out) if out else Path(gains_path).parent / VERIFICATION_FILE
     write_verification(path, verification_record(rep, gains_path, models_path, used))
     return rep, path

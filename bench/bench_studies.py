@@ -1,0 +1,181 @@
+"""Studies on both cores (issue 27 item 4): ``lpv-sysid verify --full-box 4000`` and
+``lpv-sysid coverage --airframes 4`` serially (``--workers 1``) and on every core
+(``--workers 2`` here), interleaved so both see the same machine load, each in its own
+subprocess exactly as a user runs it (process start-up included), with the outputs compared
+byte for byte (``verification.yaml`` without its ``created`` stamp, ``coverage.yaml``).
+
+    .venv/bin/python -m bench.bench_studies [--run DEMO_DIR] [--repeat N] [--airframes 4]
+        [--full-box 4000] [--workers 2]
+
+``--run``: a ``demo`` output directory (gains.yaml, vertex_models.yaml); default: one is made
+with ``lpv-sysid demo --quick`` first (not timed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from bench.harness import Page, Row, Stat, load_average, repo_root, status
+
+TARGET = 1.6
+
+
+def _lpv(args: list, cwd: Path) -> tuple[float, float, float, str]:
+    """(wall, CPU of the process tree, load average at the start, stdout) of one CLI run."""
+    load = load_average()
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    w0 = time.perf_counter()
+    p = subprocess.run(
+        [sys.executable, "-m", "lpv_sysid.cli.main", *map(str, args)],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+    )
+    wall = time.perf_counter() - w0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if p.returncode not in (0, 1):
+        raise SystemExit(f"lpv-sysid {' '.join(map(str, args))}: exit {p.returncode}\n{p.stderr}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return wall, cpu, load, p.stdout
+
+
+def _without_stamp(path: Path) -> str:
+    return re.sub(r"(?m)^created: .*$", "", path.read_text())
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--run", type=Path, default=None, help="demo output directory")
+    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--airframes", type=int, default=4)
+    ap.add_argument("--full-box", type=int, default=4000)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--skip-coverage", action="store_true")
+    args = ap.parse_args(argv)
+    load0 = load_average()
+    tmp = Path(tempfile.mkdtemp(prefix="bench_studies_"))
+    try:
+        run = args.run
+        if run is None:
+            run = tmp / "demo"
+            _lpv(["demo", "--quick", "--out", run], repo_root())
+        page = Page(
+            "studies",
+            "Studies on both cores (issue 27 item 4)",
+            f".venv/bin/python -m bench.bench_studies --repeat {args.repeat} --airframes "
+            f"{args.airframes} --full-box {args.full_box} --workers {args.workers}",
+        )
+        cases = {
+            f"verify --full-box {args.full_box}": lambda w, out: [
+                "verify",
+                "--gains",
+                run / "gains.yaml",
+                "--models",
+                run / "vertex_models.yaml",
+                "--full-box",
+                args.full_box,
+                "--workers",
+                w,
+                "--out",
+                out / "verification.yaml",
+            ],
+        }
+        if not args.skip_coverage:
+            cases[f"coverage --airframes {args.airframes}"] = lambda w, out: [
+                "coverage",
+                "--airframes",
+                args.airframes,
+                "--workers",
+                w,
+                "--out",
+                out,
+            ]
+        results: dict = {}
+        loads: list = []
+        for name, argf in cases.items():
+            same = True
+            for r in range(args.repeat):
+                texts = {}
+                for w in (1, args.workers) if r % 2 == 0 else (args.workers, 1):
+                    out = tmp / f"{abs(hash(name))}_{w}"
+                    shutil.rmtree(out, ignore_errors=True)
+                    out.mkdir(parents=True)
+                    wall, cpu, load, _ = _lpv(argf(w, out), repo_root())
+                    loads.append(load)
+                    results.setdefault((name, w), ([], []))
+                    results[(name, w)][0].append(wall)
+                    results[(name, w)][1].append(cpu)
+                    f = "verification.yaml" if name.startswith("verify") else "coverage.yaml"
+                    texts[w] = _without_stamp(out / f)
+                same = same and texts[1] == texts[args.workers]
+            results[(name, "same")] = same
+        page.add(
+            f"Each command in its own subprocess (`python -m lpv_sysid.cli.main ...`, start-up "
+            f"included), `--workers 1` and `--workers {args.workers}` interleaved, "
+            f"{args.repeat} runs each; CPU is user + sys of the process tree. Load average at "
+            f"the start of the runs: {min(loads):.1f}-{max(loads):.1f} (other jobs share the "
+            f"{os.cpu_count()} cores). Outputs compared byte for byte (verification.yaml "
+            "without its `created` stamp)."
+        )
+        page.add()
+        lines = []
+        for name in cases:
+            s_wall, s_cpu = map(Stat, results[(name, 1)])
+            p_wall, p_cpu = map(Stat, results[(name, args.workers)])
+            speed = s_wall.median / p_wall.median
+            lines.append(
+                [
+                    f"`{name}`",
+                    s_wall.fmt(1, "s"),
+                    s_cpu.fmt(1, "s"),
+                    p_wall.fmt(1, "s"),
+                    p_cpu.fmt(1, "s"),
+                    f"{speed:.2f}x",
+                    "yes" if results[(name, "same")] else "NO",
+                ]
+            )
+            page.rows.append(
+                Row(
+                    f"studies on both cores: `{name}`",
+                    "27",
+                    f"{p_wall.median:.2f} s wall on {args.workers} workers vs {s_wall.median:.2f}"
+                    f" s serial (CPU {p_cpu.median:.1f} / {s_cpu.median:.1f} s); outputs "
+                    + ("identical" if results[(name, "same")] else "DIFFER"),
+                    f"serial {s_wall.median:.2f} s",
+                    f"{speed:.2f}x faster",
+                    f">= {TARGET}x, identical results",
+                    status(
+                        speed >= TARGET and results[(name, "same")],
+                        f"load average {min(loads):.1f}-{max(loads):.1f} during the runs",
+                    ),
+                    order=40,
+                )
+            )
+        page.table(
+            [
+                "study",
+                "serial wall",
+                "serial CPU",
+                f"{args.workers} workers wall",
+                f"{args.workers} workers CPU",
+                "speed-up",
+                "identical",
+            ],
+            lines,
+        )
+        page.write(load0)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
