@@ -210,7 +210,7 @@ def test_phase2_law_refuses_gains_of_another_plant(tmp_path, design):
         {"name": n, "unit": "1"} for n in ("ut", "ua", "ue", "ur")
     ]  # virtual actuators
     (tmp_path / "g.yaml").write_text(yaml.safe_dump(certify_law(doc, layout=None)))
-    with pytest.raises(ConfigError, match="not the rate plant"):
+    with pytest.raises(ConfigError, match="are neither the virtual-actuator"):
         load_phase2_law(tmp_path / "g.yaml")
     ctrl, _ = load_phase2_law(design / "gains.yaml", design / "vertex_models.yaml")
     assert (ctrl.n_x, ctrl.n_u) == (8, 4)

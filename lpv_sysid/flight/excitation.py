@@ -102,6 +102,13 @@ class ExcitationSettings(parameters.Settings):
     start_delay_s: float = parameters.double(
         0.0, "delay between start and the signal [s]", 0.0, 60.0
     )
+    duration_s: float = parameters.double(
+        0.0,
+        "phase2: play only the first duration_s of the table, fades inside it (0: one period, "
+        "fades around it)",
+        0.0,
+        1e5,
+    )
     auto_start: bool = parameters.flag(False, "start on launch without the service")
     gains_file: str = parameters.text(
         "",
@@ -117,6 +124,8 @@ class ExcitationSettings(parameters.Settings):
     def validate(self) -> None:
         if self.gains_file and self.mode != "phase2":
             self.fail("gains_file is a phase-2 check; mode is phase1")
+        if self.duration_s and self.mode != "phase2":
+            self.fail("duration_s shortens a phase-2 signal; mode is phase1")
 
 
 def _python_log(level: str, text: str) -> None:
@@ -165,12 +174,23 @@ class ExcitationRuntime:
                 ramp=self.settings.ramp_s,
                 yaw_rate_offset=self.yaw_offset,
             )
+        if self.settings.duration_s > 0.0:
+            # a part of the period: played as it is, fades inside (no wrap to the table start)
+            keep = t <= t[0] + self.settings.duration_s + 1e-9
+            return ExcitationCore.phase2(
+                t[keep],
+                u[keep],
+                names,
+                start_time=start_time,
+                ramp=self.settings.ramp_s,
+                periodic=False,
+            )
         return ExcitationCore.phase2(t, u, names, start_time=start_time, ramp=self.settings.ramp_s)
 
     def _check_gains(self, path: str) -> None:
         from lpv_sysid.io.formats import GainSchedule
 
-        design = GainSchedule.load(path).certificate.design
+        design = GainSchedule.load(path, auto_layout=True).certificate.design
         if design is None:
             raise ConfigError(
                 f"{path}: certificate.design missing: cannot check the signal "

@@ -97,6 +97,11 @@ class CampaignRecorder:
             self.error = str(exc)
             raise
 
+    def message(self, topic: str, t: float, msg) -> None:
+        """A message as published (``topic`` of :data:`TOPICS` or :data:`RATE_TOPIC`), logged
+        at ``t`` [s] (its send or receipt time; the header keeps its own stamp)."""
+        self._write(topic, _ns(t), msg)
+
     def state(self, t: float, pos_ned, euler, v_body, omega) -> None:
         st = _ns(t)
         self._write(

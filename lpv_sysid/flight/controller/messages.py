@@ -15,6 +15,7 @@ from lpv_sysid.io.messages import (
     actuator_command_msg,
     channels_from_joint_states,
     excitation_from_joint_state,
+    joint_state,
     reference_from_twist,
     rotor_speeds_from_joint_state,
     state_from_odometry,
@@ -41,18 +42,22 @@ class CommandBuilder:
     through io.messages, which names the problem (test_nodes_controller compares both
     builders field by field)."""
 
-    def __init__(self, factory: MsgFactory) -> None:
+    def __init__(self, factory: MsgFactory, names: tuple = INPUT_NAMES) -> None:
         self.f = factory
         self._time = factory.get("builtin_interfaces/msg/Time")
         self._header = factory.get("std_msgs/msg/Header")
         self._joint_state = factory.get("sensor_msgs/msg/JointState")
-        self._names = [str(n) for n in INPUT_NAMES]
+        #: the law's input names (the design's: ``ut, ua, ue, ur`` or the rate plant's
+        #: ``thrust, p_sp, q_sp, r_sp``)
+        self._names = [str(n) for n in names]
         self._seq = factory.float_seq
 
     def __call__(self, stamp_ns: int, u: np.ndarray) -> Any:
         sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
         if not -(2**31) <= sec < 2**31:
-            return actuator_command_msg(self.f, stamp_ns, u)  # raises MessageError
+            if tuple(self._names) == tuple(INPUT_NAMES):
+                return actuator_command_msg(self.f, stamp_ns, u)  # raises MessageError
+            return joint_state(self.f, stamp_ns, self._names, position=u)  # raises MessageError
         seq = self._seq
         return self._joint_state(
             header=self._header(stamp=self._time(sec=sec, nanosec=nanosec), frame_id=""),

@@ -25,7 +25,7 @@ from lpv_sysid.flight.controller.messages import (
     parse_input,
 )
 from lpv_sysid.flight.controller.settings import ControllerSettings
-from lpv_sysid.flight.controller.startup import load_flight_schedule
+from lpv_sysid.flight.controller.startup import RATE_PLANT, design_of, load_flight_schedule
 from lpv_sysid.io.messages import MessageError, MsgFactory, diagnostic_array, diagnostic_status
 from lpv_sysid.models.quadrotor import STATE_NAMES, mixer
 
@@ -46,7 +46,17 @@ class ControllerRuntime:
         self.mix = mixer(settings.arm_length)
         self.schedule, info = load_flight_schedule(settings, self.mix)
         self._log += [("info", line) for line in info]
-        self.law = LpvController(self.schedule, settings.law_config(), mix=self.mix)
+        #: the plant the gains were designed for (startup.design_of): ``virtual_actuator``
+        #: (state [body; Mix Omega], inputs ut, ua, ue, ur mixed to ESC commands) or
+        #: ``rate_plant`` (state = the body state, inputs thrust + body-rate setpoints; no
+        #: rotor_speeds needed, no mixer)
+        self.design = design_of(self.schedule, str(settings.gains_file))
+        rate = self.design == RATE_PLANT
+        self.law = LpvController(
+            self.schedule, settings.law_config(), mix=None if rate else self.mix
+        )
+        #: the input streams the law needs
+        self.inputs = tuple(t for t in INPUT_TOPICS if not (rate and t == "rotor_speeds"))
         design = self.schedule.certificate.design
         if design is None:  # load_flight_schedule refuses such gains; stated for the types
             raise ConfigError(f"{settings.gains_file}: certificate.design missing")
@@ -66,7 +76,7 @@ class ControllerRuntime:
         box = self.schedule.scheduling
         self.supervisor = SafetySupervisor(
             SafetyConfig(
-                timeouts=settings.timeouts,
+                timeouts={k: v for k, v in settings.timeouts.items() if k in self.inputs},
                 box_min=tuple(box.min),
                 box_max=tuple(box.max),
                 box_margin=settings.box_margin,
@@ -84,12 +94,12 @@ class ControllerRuntime:
         # the law's state x = [body_state; Mix Omega] (STATE_NAMES, seed 0 Eq. 7, 14), kept up
         # to date per sample so a tick only reads it; kappa u_e likewise (computed once per
         # excitation message)
-        self._law_state = np.empty(len(STATE_NAMES))
+        self._law_state = np.empty(len(BODY_STATE_NAMES) if rate else len(STATE_NAMES))
         self._law_body = self._law_state[: len(BODY_STATE_NAMES)]  # view: the state topic
         self._law_delta = self._law_state[len(BODY_STATE_NAMES) :]  # view: Mix Omega
         self._ue_scaled: Optional[np.ndarray] = None
         self._vd_checked: Optional[np.ndarray] = None  # v_d_in the box check last passed
-        self._command = CommandBuilder(factory)
+        self._command = CommandBuilder(factory, tuple(self.schedule.input_names))
         self.v_d_in: Optional[np.ndarray] = None  # velocity reference as received (3), FRD
         self.v_d: Optional[np.ndarray] = None  # the reference the law follows (envelope-limited)
         self.u_e: Optional[np.ndarray] = None  # normalised excitation (4)
@@ -211,7 +221,8 @@ class ControllerRuntime:
             if sup.armed and not sup.aborted:
                 sup.check_rotors(t_now, values)
             self.omega = values
-            self.mix.dot(values, out=self._law_delta)  # delta = Mix Omega (Eq. 7)
+            if self._law_delta.size:
+                self.mix.dot(values, out=self._law_delta)  # delta = Mix Omega (Eq. 7)
         elif topic == "velocity_reference":
             self.v_d_in = values[:3]
             if sup.aborted:
@@ -236,7 +247,7 @@ class ControllerRuntime:
             "velocity_reference": self.v_d_in,
             "excitation": self.u_e,
         }
-        return [topic for topic in INPUT_TOPICS if have[topic] is None]
+        return [topic for topic in self.inputs if have[topic] is None]
 
     def start(self, t_now: float, wait_for_inputs: bool = False) -> tuple[bool, str]:
         """Arm at ``t_now``; ``(started, why)``. ``wait_for_inputs`` (the node): refused while
@@ -290,7 +301,12 @@ class ControllerRuntime:
         t_state = self._state_stamp if t_sample is None else t_law
         if t_state is not None:
             sup.check_loop_delay(t_now, t_state)
-        if sup.aborted or self._ue_scaled is None or self.body_state is None or self.omega is None:
+        if (
+            sup.aborted
+            or self._ue_scaled is None
+            or self.body_state is None
+            or (self.omega is None and "rotor_speeds" in self.inputs)
+        ):
             return self._report_abort(t_now, out)
         if self.v_d is None or self.v_d_in is None:
             return self._report_abort(t_now, out)

@@ -51,6 +51,12 @@ class ControllerSettings(Settings):
         nonempty=True,
     )
     models_file: str = text("", "vertex_models.yaml the gains must match (optional)")
+    signals_file: str = text(
+        "",
+        "phase-2 signals.npz (or its directory) to be flown: checked at start against the "
+        "gains (v_d inside the scheduling box, design envelope, excitation_gain x u_e within "
+        "the designed excitation peak); empty: only the run-time checks",
+    )
     rate_hz: float = double(250.0, "actuator command rate [Hz]", 1.0, 2000.0)
     state_timeout_s: float = double(0.02, "state older than this -> abort [s]", 0.001, 1.0)
     rotor_timeout_s: float = double(0.05, "rotor_speeds older than this -> abort [s]", 0.001, 1.0)

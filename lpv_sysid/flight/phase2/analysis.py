@@ -147,3 +147,21 @@ def analyse_phase2(arr: Mapping[str, np.ndarray], gs, gamma: float, opts: Phase2
         "commands_clipped": clipped,
         "commands": int(len(t)),
     }
+
+
+def loop_latency(t_state, t_sent) -> dict:
+    """State-stamp -> setpoint-sent latency of the loop [ms]: ``t_sent - t_state`` per command
+    (``t_state`` the stamp of the state sample the command was computed on, as the command's
+    header carries it with ``tick_source: state``; ``t_sent`` when it went to the link, the
+    bag's log time of ``actuator_command``): count, p50, p99, max. It is the loop delay the
+    certificate's delay bound must cover."""
+    d = (np.asarray(t_sent, dtype=float) - np.asarray(t_state, dtype=float)) * 1e3
+    d = d[np.isfinite(d)]
+    if d.size == 0:
+        return {"commands": 0}
+    return {
+        "commands": int(d.size),
+        "p50": float(np.percentile(d, 50)),
+        "p99": float(np.percentile(d, 99)),
+        "max": float(d.max()),
+    }

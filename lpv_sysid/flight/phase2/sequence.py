@@ -1,61 +1,135 @@
 """Step 5 of the PX4 chain (:mod:`lpv_sysid.flight.chain`, also `lpv-sysid fly phase2`): the
 phase-2 signal flown under the LPV law on a PX4 vehicle that is armed and in the air.
 
-:func:`fly_phase2` flies it (the chain's docstring, step 5, says how), :func:`load_phase2_law`
-and :func:`phase2_bridge_config` prepare the law and the bridge, :func:`save_summary` writes the
-YAML summaries; the flown log is analysed by
-:func:`lpv_sysid.flight.phase2.analysis.analyse_phase2`.
+One flight path with the ROS graph of ``phase2.launch.py``: :func:`phase2_graph` builds the
+phase-2 nodes' runtimes in process -- :class:`~lpv_sysid.flight.controller.ControllerRuntime`
+from ``config/lpv_controller_px4.yaml`` (every start-up check of ``lpv_controller_node``: law
+hash, sidecar stability, design envelope, the signal inside the box, kappa within the designed
+excitation peak; at run time its safety supervisor, reference limiter and bound monitor) and
+:class:`~lpv_sysid.flight.excitation.ExcitationRuntime` (the signal against the gains' design,
+fades, abort on the controller's status) -- and :func:`fly_phase2` hands them the messages the
+graph would carry: the bridge's telemetry as ``state``, the excitation node's
+``velocity_reference`` / ``excitation``, the controller's ``actuator_command`` (thrust +
+body-rate setpoints) to :class:`~lpv_sysid.mavlink.bridge.BridgeCore` (SET_ATTITUDE_TARGET,
+envelope, hand-back). Everything is recorded as the data logger would (state, imu,
+rotor_speeds, status, velocity_reference, excitation, actuator_command = the setpoints sent,
+rate_setpoint = PX4's ATTITUDE_TARGET echo). :func:`save_summary` writes the YAML summaries;
+the flown log is analysed by :func:`lpv_sysid.flight.phase2.analysis.analyse_phase2` and
+:func:`~lpv_sysid.flight.phase2.analysis.loop_latency`.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import logging
-import math
 import signal
 import threading
 import time
 from pathlib import Path
-from typing import Callable, Optional
+from typing import Any, Callable, Optional
 
 import numpy as np
 
 from lpv_sysid.configuration.defaults import config_file
 from lpv_sysid.errors import ConfigError, SafetyError
-from lpv_sysid.flight.phase2.analysis import analyse_phase2
+from lpv_sysid.flight.phase2.analysis import analyse_phase2, loop_latency
 from lpv_sysid.flight.phase2.options import Phase2Options
 
 log = logging.getLogger(__name__)
 
 
-def _fade(t: float, T: float, ramp: float) -> float:
-    if ramp <= 0:
-        return 1.0 if 0.0 <= t <= T else 0.0
-    if t <= 0.0 or t >= T:
-        return 0.0
-    a = min(t, T - t) / ramp
-    return 1.0 if a >= 1.0 else 0.5 - 0.5 * math.cos(math.pi * a)
+#: node names of the in-process graph (status names, as under ``ros2 launch``)
+CONTROLLER_NAME = "/lpv_sysid/lpv_controller"
+EXCITATION_NAME = "/lpv_sysid/excitation"
+BRIDGE_NAME = "/lpv_sysid/mavlink_bridge"
+
+
+@dataclasses.dataclass
+class Phase2Graph:
+    """The phase-2 nodes' runtimes, in process: :class:`ExcitationRuntime` (phase-2 mode, the
+    signal checked against the gains' design envelope), :class:`ControllerRuntime` (every
+    start-up check of ``lpv_controller_node``: law hash, sidecar stability, design envelope,
+    the signal inside the box and kappa within the designed excitation peak; at run time its
+    safety supervisor and bound monitor)."""
+
+    controller: Any
+    excitation: Any
+    factory: Any
+
+
+def phase2_graph(
+    gains: str | Path,
+    signals: str | Path,
+    models: str | Path | None = None,
+    opts: Phase2Options = Phase2Options(),
+    controller_config: str | Path | None = None,
+    excitation_config: str | Path | None = None,
+) -> Phase2Graph:
+    """Build the runtimes of :class:`Phase2Graph` from the shipped node parameter files
+    (``config/lpv_controller_px4.yaml``, ``config/excitation_node.yaml``) with the flight's
+    files and options; ConfigError (the node's own words) when anything is refused. Nothing
+    talks to a vehicle here."""
+    from lpv_sysid.configuration.parameters import yaml_parameters
+    from lpv_sysid.flight.controller import ControllerRuntime, ControllerSettings
+    from lpv_sysid.flight.excitation import ExcitationRuntime, ExcitationSettings
+    from lpv_sysid.io.messages import MsgFactory
+    from lpv_sysid.models import rate_plant as rp
+
+    opts.validate()
+    sig = Path(signals)
+    npz = sig / "signals.npz" if sig.is_dir() else sig
+    factory = MsgFactory.rosbags()
+    cp = yaml_parameters(
+        str(controller_config or config_file("lpv_controller_px4.yaml")), "lpv_controller"
+    )
+    cp.update(
+        gains_file=str(gains),
+        models_file=str(models or ""),
+        signals_file=str(npz),
+        excitation_gain=float(opts.kappa),
+    )
+    ctrl = ControllerRuntime(ControllerSettings.from_dict(cp), factory, CONTROLLER_NAME)
+    if ctrl.design != rp.DESIGN:
+        raise ConfigError(
+            f"{gains}: a {ctrl.design} design cannot be flown through SET_ATTITUDE_TARGET rate "
+            f"setpoints; phase 2 on PX4 flies the rate plant ({rp.DESIGN_TEXT})"
+        )
+    ep = yaml_parameters(
+        str(excitation_config or config_file("excitation_node.yaml")), "excitation"
+    )
+    ep.update(
+        mode="phase2",
+        signals_file=str(npz),
+        gains_file=str(gains),
+        rate_hz=float(opts.control_rate_hz),
+        ramp_s=float(opts.ramp_s),
+        start_delay_s=float(opts.lead_in_s),
+        duration_s=float(opts.duration or 0.0),
+        auto_start=False,
+    )
+    exc = ExcitationRuntime(ExcitationSettings.from_dict(ep), factory, EXCITATION_NAME)
+    return Phase2Graph(ctrl, exc, factory)
 
 
 def load_phase2_law(gains_path: str | Path, models_path: str | Path | None = None):
-    """(LpvController, GainSchedule) from a rate-plant gains file (generic layout), checked
-    against the models file when given."""
-    from lpv_sysid.control.law import LpvController, LpvControllerConfig
-    from lpv_sysid.io.formats import GainSchedule
+    """(LpvController, GainSchedule) of a rate-plant gains file after every start-up check of
+    ``lpv_controller_node`` (:class:`lpv_sysid.flight.controller.ControllerRuntime`)."""
+    from lpv_sysid.configuration.parameters import yaml_parameters
+    from lpv_sysid.flight.controller import ControllerRuntime, ControllerSettings
+    from lpv_sysid.io.messages import MsgFactory
     from lpv_sysid.models import rate_plant as rp
 
-    gs = GainSchedule.load(gains_path, models_path, layout=None)
-    if tuple(gs.state_names) != rp.STATE_NAMES or tuple(gs.input_names) != rp.INPUT_NAMES:
+    cp = yaml_parameters(str(config_file("lpv_controller_px4.yaml")), "lpv_controller")
+    cp.update(gains_file=str(gains_path), models_file=str(models_path or ""))
+    rt = ControllerRuntime(ControllerSettings.from_dict(cp), MsgFactory.rosbags())
+    if rt.design != rp.DESIGN:
         raise ConfigError(
-            f"{gains_path}: states {list(gs.state_names)} / inputs {list(gs.input_names)} are not "
-            "the "
-            f"rate plant's {list(rp.STATE_NAMES)} / {list(rp.INPUT_NAMES)} (a virtual-actuator "
-            "design cannot be flown through SET_ATTITUDE_TARGET rate setpoints)"
+            f"{gains_path}: states {list(rt.schedule.state_names)} / inputs "
+            f"{list(rt.schedule.input_names)} are not the rate plant's {list(rp.STATE_NAMES)} / "
+            f"{list(rp.INPUT_NAMES)} (a virtual-actuator design cannot be flown through "
+            "SET_ATTITUDE_TARGET rate setpoints)"
         )
-    ctrl = LpvController(
-        gs, LpvControllerConfig(velocity_index=rp.VELOCITY_INDEX, feedforward=False)
-    )
-    return ctrl, gs
+    return rt.law, rt.schedule
 
 
 def phase2_bridge_config(path: str | Path, url: str | None):
@@ -92,30 +166,43 @@ def fly_phase2(
 ) -> dict:
     """Fly the phase-2 signal under the LPV law on a PX4 vehicle that is armed and in the air
     (module docstring step 5); returns the summary (also ``DIR/phase2_summary.yaml``).
-    Raises SafetyError before sending anything when the vehicle is not airborne."""
+
+    The law is :class:`~lpv_sysid.flight.controller.ControllerRuntime` and the signal
+    :class:`~lpv_sysid.flight.excitation.ExcitationRuntime`, fed the messages the ROS graph
+    would carry (:func:`phase2_graph`): every file the controller node refuses is refused here,
+    with its words, before the link is opened. Raises SafetyError before sending anything when
+    the vehicle is not airborne."""
     from lpv_sysid.flight.campaign import CampaignRecorder
     from lpv_sysid.flight.vehicle import tap_attitude_target, wait_for_vehicle
+    from lpv_sysid.io import messages as m
     from lpv_sysid.mavlink.bridge import BridgeCore, RateSetpointTransport
     from lpv_sysid.mavlink.offboard import STREAMING, State
-    from lpv_sysid.mavlink.telemetry import StateSample
-    from lpv_sysid.sim.phase2 import load_signals
+    from lpv_sysid.mavlink.telemetry import ImuSample, RotorSample, StateSample
 
     opts.validate()
     out = Path(out_dir)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise ConfigError(f"output directory {out}: exists and is not an empty directory")
-    ctrl, gs = load_phase2_law(gains, models)
-    sig = load_signals(signals, duration=opts.duration)
-    T = float(sig.t[-1] - sig.t[0])
-    dt_sig = float(np.median(np.diff(sig.t)))
+    graph = phase2_graph(gains, signals, models, opts)  # every start-up check, nothing sent
+    ctrl, exc, f = graph.controller, graph.excitation, graph.factory
+    for level, line in ctrl.take_log():
+        echo(f"controller: {line}")
+    names = tuple(ctrl.schedule.input_names)
+    gamma = float(ctrl.law.gamma)
+    T = float(exc.core.duration)
     bcfg = phase2_bridge_config(bridge_config or config_file("mavlink_bridge_chain.yaml"), url)
     core = BridgeCore(bcfg, link=link)
-    core.transport = RateSetpointTransport(
-        max_rate=opts.max_rate
-    )  # the rate plant's inputs as sent
+    core.transport = RateSetpointTransport(max_rate=opts.max_rate)  # the law's inputs as sent
     core.open(clock())
+    rec_box: list = [None]
     px4_sp: list = []
-    tap_attitude_target(core.link, lambda t, u: px4_sp.append((t, np.asarray(u, float).copy())))
+
+    def on_echo(t: float, u) -> None:  # PX4's ATTITUDE_TARGET: the setpoints it is tracking
+        px4_sp.append((t, np.asarray(u, float).copy()))
+        if rec_box[0] is not None:
+            rec_box[0].rate_setpoint(t, u)
+
+    tap_attitude_target(core.link, on_echo)
     interrupts = [0]
     prev_handlers: dict = {}
     summary: dict = {
@@ -123,33 +210,59 @@ def fly_phase2(
         "gains": str(gains),
         "signals": str(signals),
         "connect": bcfg.link.url,
-        "gamma": float(ctrl.gamma),
+        "gamma": gamma,
         "kappa": opts.kappa,
         "signal_duration_s": T,
     }
-    log_rows: dict[str, list] = {k: [] for k in ("t", "x", "v_d", "u_e", "u", "sent", "tsig")}
+    log_rows: dict[str, list] = {
+        k: [] for k in ("t", "x", "v_d", "u_e", "u", "sent", "tsig", "t_state")
+    }
     rec = None
     state: Optional[StateSample] = None
     reason, ok = "", False
+    live = [True]  # the controller is fed until the flight loop ends (then hand-back only)
     t0 = clock()
 
+    def record(topic: str, t: float, msg) -> None:
+        if rec is not None:
+            rec.message(topic, t, msg)
+
     def poll(now):
+        """Poll the link: telemetry recorded (and the state handed to the controller)."""
         nonlocal state
         o = core.poll(now)
-        for s in o.samples:
-            if isinstance(s, StateSample):
-                state = s
-                if rec is not None:
-                    rec.state(s.t, s.pos_ned, s.euler, s.v_body, s.omega)
-        for ev in o.events:
-            text = (
-                getattr(ev, "reason", None)
-                or f"{getattr(ev, 'kind', '')}: {getattr(ev, 'detail', '')}"
-            )
-            lvl = getattr(ev, "level", "warn")
-            if lvl != "info" or getattr(ev, "previous", None) != getattr(ev, "state", None):
-                echo(f"[{now - t0:8.2f} s] bridge: {text}")
-        return o
+        outs: list = []
+        for smp in o.samples:
+            stamp = round(smp.t * 1e9)
+            if isinstance(smp, StateSample):
+                state = smp
+                msg = m.odometry_from_state(
+                    f, stamp, smp.pos_ned, smp.euler, smp.v_body, smp.omega
+                )
+                record("state", now, msg)
+                if live[0]:
+                    outs += ctrl.on_input("state", msg, now)
+            elif isinstance(smp, ImuSample):
+                record("imu", now, m.imu_msg(f, stamp, smp.accel_frd, smp.gyro_frd))
+            elif isinstance(smp, RotorSample):
+                record("rotor_speeds", now, m.rotor_speeds_msg(f, stamp, smp.omega, smp.source))
+        if o.events:
+            lines = []
+            level = "OK"
+            for ev in o.events:
+                text = (
+                    getattr(ev, "reason", None)
+                    or f"{getattr(ev, 'kind', '')}: {getattr(ev, 'detail', '')}"
+                )
+                lvl = getattr(ev, "level", "warn")
+                if lvl in ("warn", "error"):
+                    level = "ERROR" if lvl == "error" or level == "ERROR" else "WARN"
+                lines.append(text)
+                if lvl != "info" or getattr(ev, "previous", None) != getattr(ev, "state", None):
+                    echo(f"[{now - t0:8.2f} s] bridge: {text}")
+            st = m.diagnostic_status(f, level, BRIDGE_NAME, lines[-1], core.status(now))
+            record("status", now, m.diagnostic_array(f, round(now * 1e9), [st]))
+        return outs
 
     try:
         if handle_signals and threading.current_thread() is threading.main_thread():
@@ -191,7 +304,7 @@ def fly_phase2(
         echo(
             f"phase 2: vehicle armed at {height:.1f} m, mode "
             f"{mode.name if mode is not None else 'unknown'}; "
-            f"signal {T:.1f} s, kappa {opts.kappa:g}, gamma {ctrl.gamma:.4g}, design rate_plant"
+            f"signal {T:.1f} s, kappa {opts.kappa:g}, gamma {gamma:.4g}, design rate_plant"
         )
         rec = CampaignRecorder(
             out,
@@ -200,63 +313,81 @@ def fly_phase2(
             description=f"lpv-sysid phase 2 (rate plant) on {bcfg.link.url}",
             rate_setpoints=True,
         )
+        rec_box[0] = rec
         rec.start(clock())
         rec.begin_run("phase2")
-        period = 1.0 / opts.control_rate_hz
-        next_ctrl = clock()
+        exc_period = 1.0 / exc.settings.rate_hz
+        ctrl_period = 1.0 / ctrl.settings.rate_hz
+        status_period = 1.0 / ctrl.settings.status_rate_hz
+        next_exc = next_ctrl = next_status = clock()
         t_active = None
-        started = False
+        bridge_started = False
         while True:
             now = clock()
-            poll(now)
+            outs = poll(now)
             st = core.machine.state
             if interrupts[0]:
                 reason = "interrupted"
                 break
-            if started and st not in STREAMING:
+            if bridge_started and st not in STREAMING:
                 reason = f"bridge left offboard ({st.value}): {core.machine.reason}"
                 break
             if st == State.OFFBOARD_ACTIVE and t_active is None:
                 t_active = now
+                started, why = exc.start(round(now * 1e9))
                 echo(
-                    f"[{now - t0:8.2f} s] phase 2: OFFBOARD active, law in control; signal after "
-                    f"{opts.lead_in_s:g} s lead-in"
+                    f"[{now - t0:8.2f} s] phase 2: OFFBOARD active, law in control; {why} "
+                    f"(after {opts.lead_in_s:g} s lead-in)"
                 )
-            if not started and now - t0 > opts.start_timeout + 10.0:
+            if not bridge_started and now - t0 > opts.start_timeout + 10.0:
                 reason = "OFFBOARD not confirmed"
                 break
-            if t_active is None and started and now - tw > opts.start_timeout:
+            if t_active is None and bridge_started and now - tw > opts.start_timeout:
                 reason = f"OFFBOARD not confirmed within {opts.start_timeout:g} s"
                 break
-            if now >= next_ctrl and state is not None and now - state.t <= bcfg.telemetry_max_age:
-                next_ctrl = max(next_ctrl + period, now)
-                tsig = (now - t_active - opts.lead_in_s) if t_active is not None else -1.0
-                if tsig > T:
-                    ok = True
-                    break
-                w = _fade(tsig, T, opts.ramp_s) if tsig >= 0 else 0.0
-                k = int(min(max(round(tsig / dt_sig), 0), len(sig.t) - 1))
-                v_d = w * sig.v_d[k] if tsig >= 0 else np.zeros(3)
-                u_e = (opts.kappa * w * sig.u_e[k]) if tsig >= 0 else np.zeros(sig.u_e.shape[1])
-                x = np.r_[state.euler[0], state.euler[1], state.v_body, state.omega]
-                u, info = ctrl.step(now, x, v_d, u_e)
+            if now >= next_exc:  # the excitation node's timer
+                next_exc = max(next_exc + exc_period, now)
+                for topic, msg in exc.on_timer(round(now * 1e9)):
+                    record(topic, now, msg)
+                    if topic in ("velocity_reference", "excitation"):
+                        outs += ctrl.on_input(topic, msg, now)
+            if not ctrl.supervisor.armed and not ctrl.supervisor.aborted:
+                ctrl.start(now, wait_for_inputs=True)  # once every input stream has arrived
+            if now >= next_ctrl:  # the controller's rate_hz timer (staleness watch)
+                next_ctrl = max(next_ctrl + ctrl_period, now)
+                outs += ctrl.on_timer(now)
+            if now >= next_status:
+                next_status = max(next_status + status_period, now)
+                outs.append(("status", ctrl.status(now)))
+            for level, line in ctrl.take_log():
+                echo(f"[{now - t0:8.2f} s] controller: {line}")
+            aborted = False
+            for topic, msg in outs:
+                record(topic, now, msg)
+                if topic == "status":
+                    for o2 in exc.on_status(msg, round(now * 1e9)):
+                        record(o2[0], now, o2[1])
+                    continue
+                t_cmd, u = m.channels_from_joint_state(msg, names, field="position")
                 sent = core.transport.clip(u)
-                core.on_actuator_command(now, u, stamp=now)
-                if not started:
+                core.on_actuator_command(now, u, stamp=t_cmd)
+                if not bridge_started:
                     core.start(now)
-                    started = True
+                    bridge_started = True
                     tw = now
-                if rec is not None:
-                    rec.reference(now, v_d, 0.0)
-                    rec.rate_setpoint(now, sent)
+                x = np.asarray(ctrl.body_state, float)
+                v_d = np.asarray(ctrl.reference_at(t_cmd), float)
+                tsig = (now - exc.core.start_time) if t_active is not None else -1.0
+                ue = ctrl._ue_scaled if tsig >= 0 else None
                 for key, val in (
                     ("t", now),
                     ("x", x),
                     ("v_d", v_d),
-                    ("u_e", u_e),
+                    ("u_e", np.zeros(len(names)) if ue is None else np.asarray(ue, float)),
                     ("u", u),
                     ("sent", sent),
-                    ("tsig", tsig),
+                    ("tsig", tsig if tsig <= T else -1.0),
+                    ("t_state", t_cmd),
                 ):
                     log_rows[key].append(val)
                 err = np.abs(x[2:5] - v_d)
@@ -265,10 +396,24 @@ def fly_phase2(
                         f"tracking error {err.max():.2f} m/s > {opts.max_tracking_error:g} m/s "
                         f"(axis {'uvw'[int(err.argmax())]}) -> hand back"
                     )
+                    aborted = True
                     break
+            ev = ctrl.supervisor.event
+            if ev is not None:
+                reason = f"lpv_controller safety abort: {ev.reason}: {ev.detail}"
+                break
+            if aborted:
+                break
+            if t_active is not None and exc.started and now >= exc.core.end_time:
+                ok = True
+                break
             sleep(0.002)
         # hand back: finish mode after a complete signal, the abort chain otherwise
+        live[0] = False
         now = clock()
+        if not ok:
+            for o2 in exc.abort(round(now * 1e9), reason or "phase 2 ended"):
+                record(o2[0], now, o2[1])
         if core.machine.state in STREAMING:
             if ok:
                 core.finish(now, opts.finish.upper())
@@ -318,13 +463,24 @@ def fly_phase2(
     summary["ok"] = bool(ok)
     summary["reason"] = reason or "signal complete"
     summary["envelope"] = core.envelope.status()
+    summary["controller"] = {
+        "commands": ctrl.commands,
+        "abort": (
+            f"{ctrl.supervisor.event.reason}: {ctrl.supervisor.event.detail}"
+            if ctrl.supervisor.event is not None
+            else None
+        ),
+        "gain_estimate": float(ctrl.law.gain()),
+        **{f"{k}_count": v for k, v in ctrl.flags.items()},
+    }
     arr = {k: np.asarray(v, dtype=float) for k, v in log_rows.items()}
     if px4_sp:
         arr["px4_t"] = np.array([p[0] for p in px4_sp])
         arr["px4_sp"] = np.array([p[1] for p in px4_sp])
     if len(arr["t"]):
         np.savez(out / "phase2_log.npz", **arr)
-        summary.update(analyse_phase2(arr, gs, ctrl.gamma, opts))
+        summary.update(analyse_phase2(arr, ctrl.schedule, gamma, opts))
+        summary["latency_state_to_setpoint_ms"] = loop_latency(arr["t_state"], arr["t"])
     save_summary(out / "phase2_summary.yaml", summary)
     return summary
 

@@ -208,8 +208,10 @@ class ExcitationCore:
         start_time: float,
         ramp: float = DEFAULT_RAMP_S,
         offset: Sequence[float] = (0.0, 0.0, 0.0),
+        periodic: bool = True,
     ) -> "ExcitationCore":
-        """Phase 2 (seed 0 Sec. V): v_d(t) from ``u_d, v_d, w_d``, u_e(t) from ``ue_*``."""
+        """Phase 2 (seed 0 Sec. V): v_d(t) from ``u_d, v_d, w_d``, u_e(t) from ``ue_*``.
+        ``periodic=False``: a part of a period (fades inside it, no wrap-around)."""
         return cls(
             t,
             u,
@@ -219,6 +221,7 @@ class ExcitationCore:
             excitation_channels=PHASE2_EXCITATION,
             offset=offset,
             ramp=ramp,
+            periodic=periodic,
         )
 
     @classmethod
