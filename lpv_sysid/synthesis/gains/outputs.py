@@ -97,7 +97,7 @@ def result_lines(inp: Inputs, res, cert: dict, F_ff, F_jerk, ff_layout) -> list[
     opts, pr = inp.opts, cert["problem"]
     size = res.size
     out.append(
-        f"LMI ({pr['method']}): {size.lmi_blocks} blocks (total dim {size.lmi_total_dim}, "
+        f"LMI solved ({pr['method']}): {size.lmi_blocks} blocks (total dim {size.lmi_total_dim}, "
         f"{size.scalar_constraints} scalar constraints), {size.scalar_variables} scalar "
         f"variables; compile {res.compile_time:.2f} s, solve {res.solve_time:.2f} s, load + "
         f"synthesis wall {res.info['wall']:.2f} s ({res.solver}, {res.status}, objective "
@@ -105,8 +105,14 @@ def result_lines(inp: Inputs, res, cert: dict, F_ff, F_jerk, ff_layout) -> list[
     )
     if "seed_lemma1" in pr:
         sp = pr["seed_lemma1"]
+        label = (
+            "not the problem solved (that is its restriction X_i^j = X_i above): "
+            if not sp.get("solved", True)
+            else ""
+        )
         out.append(
-            f"seed 0 Lemma 1 over these sum M_i = {sp['sum_M']} systems (N = {sp['N']}): "
+            f"seed 0 Lemma 1 over these sum M_i = {sp['sum_M']} systems (N = {sp['N']}), "
+            f"{label}"
             f"{sp['package']['scalar_variables']} scalar variables and "
             f"{sp['package']['cone_entries']} cone entries in {sp['psd_cones']} PSD cones "
             "(package, primal); as CVX reports it (dual): "

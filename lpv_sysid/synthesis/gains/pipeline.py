@@ -40,10 +40,17 @@ def describe_problem(inp: Inputs) -> list[str]:
             f"B[{e.row},{e.col}] in [{e.lower:.6g}, {e.upper:.6g}]"
             for e in model.common_input.elements
         )
+        covers = (
+            "Lemma 1 covers the whole box"
+            if _all_corners(inp)
+            else "Lemma 1 covers the scheduling box interior for these reduced corner systems "
+            "only (a reduced polytope, NOT the whole identified box: the influence reduction "
+            "holds the other elements at their nominal values)"
+        )
         return [
             "input matrix common to all vertices (uncertainty.common_b): hull "
             f"{els or '(B identical)'}; M_i = M_A x M_B = {st['M_A']} x {st['M_B']} = {Ms} "
-            f"(sum {sum(Ms)}, {st['B_method']} corners); Lemma 1 covers the whole box"
+            f"(sum {sum(Ms)}, {st['B_method']} corners); {covers}"
         ]
     lines = [
         f"uncertainty vertices per scheduling vertex M_i = {Ms} (per-vertex B, "
@@ -57,6 +64,25 @@ def describe_problem(inp: Inputs) -> list[str]:
             "random interior points"
         )
     return lines
+
+
+def _all_corners(inp: Inputs) -> bool:
+    """True when the corner polytope is the whole identified box: the B hull taken with all its
+    corners and every vertex's free A elements all varied (M_A,i = 2^(free A elements))."""
+    st = inp.model.input_structure
+    if st.get("B_method") != "box":
+        return False
+    free_a = [
+        sum(
+            1
+            for e in v.get("uncertain") or []
+            if e.get("matrix") == "A" and float(e["upper"]) > float(e["lower"])
+        )
+        for v in inp.raw.get("vertices", [])
+    ]
+    M_A = st.get("M_A")
+    M_A = list(M_A) if isinstance(M_A, (list, tuple)) else [M_A] * len(free_a)
+    return len(M_A) == len(free_a) and all(int(m) == 2**f for m, f in zip(M_A, free_a))
 
 
 def synthesize(inp: Inputs):
