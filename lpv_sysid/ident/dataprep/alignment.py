@@ -156,6 +156,7 @@ def align(s: Streams, cfg: IdentificationConfig, params=None, max_gap: float = 0
         QuadrotorParams.from_dict(cfg.quadrotor) if cfg.quadrotor else QuadrotorParams()
     )
     run = s.name or "run"
+    s, origin = _rebased(s)
     g = resample(s, cfg.sample_rate, max_gap)
     series, tg, sg, Og = g["series"], g["t"], g["state"], g["Omega"]
     dt = 1.0 / cfg.sample_rate
@@ -219,7 +220,37 @@ def align(s: Streams, cfg: IdentificationConfig, params=None, max_gap: float = 0
         u_eff=u_eff,
         motor_identifiable=source == "actuator_command" and not s.rotor_estimated,
     )
-    return AlignedRun(vd, Og, sg[:, 0:3], ref, source, float(tg[0]))
+    return AlignedRun(vd, Og, sg[:, 0:3], ref, source, float(tg[0]) + origin)
+
+
+def _rebased(s: Streams) -> tuple[Streams, float]:
+    """``s`` with its times counted from a whole second before its first state sample, and
+    that origin (s). Wall-clock (epoch) stamps are ~1.8e9 s, where float64 resolves only
+    2.4e-7 s: a uniform grid built on them is not uniform to the 1e-8 s identification
+    checks; relative times are exact enough."""
+    import dataclasses
+
+    if s.t_state is None or not len(s.t_state):
+        return s, 0.0
+    origin = float(np.floor(np.min(s.t_state)))
+    if abs(origin) < 1e6:  # simulation / boot time: already exact
+        return s, 0.0
+
+    def sh(t):
+        return None if t is None else np.asarray(t, dtype=float) - origin
+
+    return (
+        dataclasses.replace(
+            s,
+            t_state=sh(s.t_state),
+            t_rotor=sh(s.t_rotor),
+            t_cmd=sh(s.t_cmd),
+            t_ref=sh(s.t_ref),
+            t_exc=sh(s.t_exc),
+            t_excite=None if s.t_excite is None else float(s.t_excite) - origin,
+        ),
+        origin,
+    )
 
 
 def snap_to_box(v_d: np.ndarray, cfg: IdentificationConfig, tol: float = 0.25) -> np.ndarray:

@@ -188,6 +188,15 @@ class Recorder:
             write_metadata(self, closed=False)
         return self.bags[-1].path
 
+    def annotate(self, key: str, value) -> None:
+        """Add ``key: value`` (plain YAML data, e.g. the provenance of an imported flight)
+        to ``experiment.yaml`` and rewrite it now."""
+        if key in ("format", "topics", "bags", "status"):
+            raise ConfigError(f"recorder: {key!r} is written by the recorder itself")
+        self._static_meta[str(key)] = value
+        if self._started_ns is not None:
+            write_metadata(self, closed=self._stopped_ns is not None and self.error is None)
+
     def note_dropped(self, topic: str, count: int = 1) -> None:
         """Messages the middleware reported lost before they reached the logger."""
         if topic in self.stats:

@@ -1,0 +1,721 @@
+"""Importers of flight data recorded with other tools (issue 23 item 1): a PX4 ULog written by
+this test from PX4's format specification (``support/ulog_writer.py``), a MAVROS-recorded and
+a ``/fmu/out`` px4_msgs rosbag2 written with rosbags and those packages' message definitions.
+
+Oracles: the source values the test wrote, converted by scipy's ``Rotation`` (not by
+``io/frames.py``, whose conversions are under test) -- the imported ``state`` equals the
+simulated run's measured state; identification of the imported run gives the vertex model
+the package's own bag of the same run gives, within the stated uncertainty.
+"""
+
+from __future__ import annotations
+
+import calendar
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+import yaml
+from scipy.spatial.transform import Rotation
+
+from lpv_sysid.control.baseline import BaselineGains
+from lpv_sysid.control.campaign import run_name
+from lpv_sysid.errors import BagError, ConfigError
+from lpv_sysid.ident import dataprep as dp
+from lpv_sysid.ident import vertex as vx
+from lpv_sysid.io import imports
+from lpv_sysid.io.bag import read_bag
+from lpv_sysid.io.messages import state_from_odometry
+from lpv_sysid.models.quadrotor import Quadrotor
+from lpv_sysid.sim import phase1 as p1
+from lpv_sysid.sim.vehicle import SensorConfig
+
+pytest.importorskip("pyulog", reason="pyulog not installed (requirements.txt pins it)")
+from ulog_writer import ULogWriter  # noqa: E402
+
+BOOT_S = 20.0  # the run starts 20 s after PX4 booted
+EPOCH_US = 1_795_000_000_000_000  # wall-clock time of the boot (2026-11-18), GPS UTC
+RELEASE = (1 << 24) | (15 << 16) | (2 << 8) | 255  # v1.15.2 release
+
+
+@pytest.fixture(scope="module")
+def run():
+    q = Quadrotor()
+    cfg = p1.Phase1Config(trim_s=8.0, excite_s=24.0)
+    v = (5.0, -5.0, 5.0)
+    return p1.simulate_run(q, BaselineGains(), SensorConfig(), cfg, v, run_name(v), seed=3)
+
+
+def _rot(euler):
+    """body FRD -> NED rotations of ``[phi, theta, psi]`` rows (ZYX, seed 0 Eq. 1)."""
+    e = np.asarray(euler)
+    return Rotation.from_euler("ZYX", e[:, ::-1])
+
+
+def _us(t):
+    return int(round((BOOT_S + float(t)) * 1e6))
+
+
+def write_ulog(rec, path, with_gps=True):
+    """The run as PX4 would log it: uORB topics at the run's sample times (+ BOOT_S)."""
+    w = ULogWriter(start_us=int(BOOT_S * 1e6) - 2_000_000)
+    w.format(
+        "vehicle_attitude",
+        [
+            "uint64_t timestamp",
+            "uint64_t timestamp_sample",
+            "float[4] q",
+            "float[4] delta_q_reset",
+            "uint8_t quat_reset_counter",
+        ],
+    )
+    w.format(
+        "vehicle_local_position",
+        [
+            "uint64_t timestamp",
+            "uint64_t timestamp_sample",
+            "float x",
+            "float y",
+            "float z",
+            "float vx",
+            "float vy",
+            "float vz",
+            "float heading",
+        ],
+    )
+    w.format(
+        "vehicle_angular_velocity",
+        [
+            "uint64_t timestamp",
+            "uint64_t timestamp_sample",
+            "float[3] xyz",
+            "float[3] xyz_derivative",
+        ],
+    )
+    w.format(
+        "sensor_combined",
+        [
+            "uint64_t timestamp",
+            "float[3] gyro_rad",
+            "uint32_t gyro_integral_dt",
+            "int32_t accelerometer_timestamp_relative",
+            "float[3] accelerometer_m_s2",
+        ],
+    )
+    w.format("esc_report", ["uint64_t timestamp", "int32_t esc_rpm", "float esc_voltage"])
+    w.format(
+        "esc_status",
+        ["uint64_t timestamp", "uint16_t counter", "uint8_t esc_count", "esc_report[8] esc"],
+    )
+    w.format(
+        "trajectory_setpoint",
+        [
+            "uint64_t timestamp",
+            "float[3] position",
+            "float[3] velocity",
+            "float[3] acceleration",
+            "float[3] jerk",
+            "float yaw",
+            "float yawspeed",
+        ],
+    )
+    w.format("vehicle_status", ["uint64_t timestamp", "uint8_t nav_state", "uint8_t arming_state"])
+    w.format("vehicle_gps_position", ["uint64_t timestamp", "uint64_t time_utc_usec"])
+    w.format("battery_status", ["uint64_t timestamp", "float voltage_v", "float remaining"])
+    w.info("char", "ver_sw", "0123456789abcdef0123456789abcdef01234567")
+    w.info("uint32_t", "ver_sw_release", RELEASE)
+    w.info("char", "ver_hw", "PX4_SITL")
+    w.info("char", "sys_name", "PX4")
+    w.param("SYS_AUTOSTART", 10040)
+    w.param("SYS_HITL", 0)
+    w.param("MPC_XY_VEL_MAX", 12.0)
+    for name in (
+        "vehicle_attitude",
+        "vehicle_local_position",
+        "vehicle_angular_velocity",
+        "sensor_combined",
+        "esc_status",
+        "trajectory_setpoint",
+        "vehicle_status",
+        "vehicle_gps_position",
+        "battery_status",
+    ):
+        w.add(name)
+    xm = rec.state_meas
+    R = _rot(xm[:, 3:6])
+    q_xyzw = R.as_quat()
+    v_ned = R.apply(xm[:, 6:9])
+    items = []  # (timestamp_us, order, topic, values)
+    for k, t in enumerate(rec.state_t):
+        ts = _us(t)
+        qw = [q_xyzw[k, 3], *q_xyzw[k, :3]]
+        items.append(
+            (
+                ts,
+                0,
+                "vehicle_attitude",
+                {"timestamp": ts, "timestamp_sample": ts, **{f"q[{i}]": qw[i] for i in range(4)}},
+            )
+        )
+        items.append(
+            (
+                ts,
+                1,
+                "vehicle_local_position",
+                {
+                    "timestamp": ts,
+                    "timestamp_sample": ts,
+                    "x": xm[k, 0],
+                    "y": xm[k, 1],
+                    "z": xm[k, 2],
+                    "vx": v_ned[k, 0],
+                    "vy": v_ned[k, 1],
+                    "vz": v_ned[k, 2],
+                },
+            )
+        )
+        items.append(
+            (
+                ts,
+                2,
+                "vehicle_angular_velocity",
+                {
+                    "timestamp": ts,
+                    "timestamp_sample": ts,
+                    **{f"xyz[{i}]": xm[k, 9 + i] for i in range(3)},
+                },
+            )
+        )
+    for k in range(0, rec.imu_t.size, 5):  # 50 Hz
+        ts = _us(rec.imu_t[k])
+        items.append(
+            (
+                ts,
+                3,
+                "sensor_combined",
+                {
+                    "timestamp": ts,
+                    **{f"gyro_rad[{i}]": rec.imu_gyro[k, i] for i in range(3)},
+                    **{f"accelerometer_m_s2[{i}]": rec.imu_accel[k, i] for i in range(3)},
+                },
+            )
+        )
+    for k, t in enumerate(rec.rotor_t):
+        ts = _us(t)
+        rpm = np.round(rec.rotor_meas[k] * 60.0 / (2 * math.pi)).astype(int)
+        items.append(
+            (
+                ts,
+                4,
+                "esc_status",
+                {
+                    "timestamp": ts,
+                    "esc_count": 4,
+                    **{f"esc[{i}].esc_rpm": int(rpm[i]) for i in range(4)},
+                },
+            )
+        )
+    psi = np.interp(rec.cmd_t, rec.state_t, xm[:, 5])
+    for k in range(0, rec.cmd_t.size, 2):  # 125 Hz
+        ts = _us(rec.cmd_t[k])
+        v = Rotation.from_euler("z", psi[k]).apply(rec.reference[k, :3])
+        items.append(
+            (
+                ts,
+                5,
+                "trajectory_setpoint",
+                {
+                    "timestamp": ts,
+                    **{f"velocity[{i}]": v[i] for i in range(3)},
+                    **{f"position[{i}]": float("nan") for i in range(3)},
+                    "yaw": float("nan"),
+                    "yawspeed": rec.reference[k, 3],
+                },
+            )
+        )
+    t_end = float(rec.state_t[-1])
+    for t in np.arange(-2.0, t_end + 2.0, 0.5):
+        nav = 14 if 0.0 <= t <= t_end else (2 if t < 0 else 4)
+        items.append(
+            (
+                _us(t),
+                6,
+                "vehicle_status",
+                {"timestamp": _us(t), "nav_state": nav, "arming_state": 2},
+            )
+        )
+        items.append(
+            (
+                _us(t),
+                7,
+                "battery_status",
+                {"timestamp": _us(t), "voltage_v": 16.0 - 0.01 * t, "remaining": 0.9},
+            )
+        )
+        if with_gps:
+            items.append(
+                (
+                    _us(t),
+                    8,
+                    "vehicle_gps_position",
+                    {"timestamp": _us(t), "time_utc_usec": EPOCH_US + _us(t)},
+                )
+            )
+    items.sort(key=lambda it: (it[0], it[1]))
+    w.log(6, _us(0.0), "Offboard control started")
+    for _, _, topic, vals in items:
+        w.data(topic, vals)
+    path.write_bytes(w.bytes())
+    return path
+
+
+def _imported_state(bag):
+    data = read_bag(str(bag), topics=["/lpv_sysid/state"])
+    rows = data["/lpv_sysid/state"]
+    st = [state_from_odometry(m) for _, m in rows]
+    return (
+        np.array([ns for ns, _ in rows], dtype=np.int64),
+        np.array([s.pos_ned for s in st]),
+        np.array([s.euler for s in st]),
+        np.array([s.v_body for s in st]),
+        np.array([s.omega for s in st]),
+    )
+
+
+def test_ulog_import_state_stamps_and_provenance(run, tmp_path):
+    log_file = write_ulog(run, tmp_path / "flight.ulg")
+    rec = imports.read_ulog(log_file)
+    runs = imports.import_flight(rec, tmp_path / "out")
+    assert [(r.name, r.bag) for r in runs] == [("offboard_0", "bag_0000")]
+    assert runs[0].start == pytest.approx(BOOT_S, abs=1e-6)
+    stamps, pos, euler, v, w = _imported_state(tmp_path / "out" / "bag_0000")
+    xm = run.state_meas
+    assert stamps.size == run.state_t.size
+    # wall-clock stamps: GPS UTC of the boot + time since boot (ULog: microseconds)
+    want = EPOCH_US * 1000 + np.round((BOOT_S + run.state_t) * 1e6).astype(np.int64) * 1000
+    np.testing.assert_array_equal(stamps, want)
+    np.testing.assert_allclose(pos, xm[:, 0:3], atol=2e-5 * max(1.0, np.abs(xm[:, :3]).max()))
+    np.testing.assert_allclose(euler, xm[:, 3:6], atol=2e-6)  # float32 quaternion
+    np.testing.assert_allclose(v, xm[:, 6:9], atol=2e-5)
+    np.testing.assert_allclose(w, xm[:, 9:12], atol=1e-6)
+    meta = yaml.safe_load((tmp_path / "out" / "experiment.yaml").read_text())
+    prov = meta["provenance"]
+    assert prov["vehicle_kind"] == "SITL"
+    assert prov["firmware"]["release"] == "v1.15.2"
+    assert prov["airframe"]["SYS_AUTOSTART"] == 10040
+    assert prov["px4_parameters"]["MPC_XY_VEL_MAX"] == pytest.approx(12.0)
+    assert (prov["clock"]["kind"], prov["clock"]["offset_ns"]) == ("utc", EPOCH_US * 1000)
+    assert prov["battery"]["voltage_v"]["start"] == pytest.approx(16.02, abs=1e-5)
+    assert prov["rotor_speeds"] == "esc"
+    assert meta["bags"][0]["path"] == "bag_0000"
+    assert meta["status"] == "closed_cleanly"
+
+
+def test_ulog_import_identifies_like_the_packages_bag(run, tmp_path):
+    """Same run, two recordings: the package's bag and PX4's ULog -> the same vertex model
+    (both from rotor speeds: the ULog has no virtual actuator command)."""
+    cfg = vx.IdentificationConfig()
+    own = p1.write_run_bag(run, tmp_path / "own")
+    s_own = dataclasses.replace(dp.streams_from_bag(own), t_cmd=None, u=None)
+    imports.import_flight(imports.read_ulog(write_ulog(run, tmp_path / "f.ulg")), tmp_path / "imp")
+    s_imp = dp.streams_from_bag(tmp_path / "imp" / "bag_0000")
+    r_own = vx.identify_vertex(dp.align(s_own, cfg).vertex, cfg)
+    ar = dp.align(s_imp, cfg)
+    np.testing.assert_allclose(dp.snap_to_box(ar.vertex.scheduling, cfg), run.v_d)
+    r_imp = vx.identify_vertex(ar.vertex, cfg)
+    m = r_own.fit.maskA
+    assert m.sum() > 10
+    assert np.all(np.abs(r_imp.fit.A - r_own.fit.A)[m] <= r_own.fit.std_A[m])
+    mb = r_own.fit.maskB
+    assert np.all(np.abs(r_imp.fit.B - r_own.fit.B)[mb] <= r_own.fit.std_B[mb])
+
+
+# ------------------------------------------------------------------ foreign rosbag2 files
+PX4_MSGS = {
+    "px4_msgs/msg/VehicleOdometry": """uint64 timestamp
+uint64 timestamp_sample
+uint8 POSE_FRAME_NED = 1
+uint8 pose_frame
+float32[3] position
+float32[4] q
+uint8 VELOCITY_FRAME_NED = 1
+uint8 VELOCITY_FRAME_BODY_FRD = 3
+uint8 velocity_frame
+float32[3] velocity
+float32[3] angular_velocity
+float32[3] position_variance
+float32[3] orientation_variance
+float32[3] velocity_variance
+uint8 reset_counter
+int8 quality
+""",
+    "px4_msgs/msg/VehicleStatus": """uint64 timestamp
+uint8 nav_state
+uint8 arming_state
+""",
+    "px4_msgs/msg/EscReport": """uint64 timestamp
+int32 esc_rpm
+float32 esc_voltage
+""",
+    "px4_msgs/msg/EscStatus": """uint64 timestamp
+uint16 counter
+uint8 esc_count
+px4_msgs/EscReport[8] esc
+""",
+    "px4_msgs/msg/TrajectorySetpoint": """uint64 timestamp
+float32[3] position
+float32[3] velocity
+float32[3] acceleration
+float32[3] jerk
+float32 yaw
+float32 yawspeed
+""",
+}
+MAVROS_MSGS = {
+    "mavros_msgs/msg/State": """std_msgs/Header header
+bool connected
+bool armed
+bool guided
+bool manual_input
+string mode
+uint8 system_status
+""",
+    "mavros_msgs/msg/ESCStatusItem": """std_msgs/Header header
+int32 rpm
+float32 voltage
+float32 current
+""",
+    "mavros_msgs/msg/ESCStatus": """std_msgs/Header header
+mavros_msgs/ESCStatusItem[] esc_status
+""",
+    "mavros_msgs/msg/PositionTarget": """std_msgs/Header header
+uint8 coordinate_frame
+uint8 FRAME_LOCAL_NED = 1
+uint8 FRAME_BODY_NED = 8
+uint16 type_mask
+geometry_msgs/Point position
+geometry_msgs/Vector3 velocity
+geometry_msgs/Vector3 acceleration_or_force
+float32 yaw
+float32 yaw_rate
+""",
+}
+
+
+def _typestore(defs):
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    for name, text in defs.items():
+        ts.register(get_types_from_msg(text, name))
+    return ts
+
+
+def _writer(path, ts, topics):
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    w = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
+    w.open()
+    return w, {t: w.add_connection(t, mt, typestore=ts) for t, mt in topics.items()}
+
+
+def write_px4_msgs_bag(rec, path):
+    """``/fmu/out`` topics as PX4's uXRCE-DDS client publishes them (px4_msgs types, uORB
+    fields, NED/FRD), bag stamps = receive time (boot + 1 ms)."""
+    ts = _typestore(PX4_MSGS)
+    T = ts.types
+    topics = {
+        "/fmu/out/vehicle_odometry": "px4_msgs/msg/VehicleOdometry",
+        "/fmu/out/vehicle_status_v1": "px4_msgs/msg/VehicleStatus",
+        "/fmu/out/esc_status": "px4_msgs/msg/EscStatus",
+        "/fmu/out/trajectory_setpoint": "px4_msgs/msg/TrajectorySetpoint",
+    }
+    w, con = _writer(path, ts, topics)
+    xm = rec.state_meas
+    R = _rot(xm[:, 3:6])
+    q_xyzw = R.as_quat()
+    f32 = np.float32
+    items = []
+    for k, t in enumerate(rec.state_t):
+        us = _us(t)
+        msg = T[
+            "px4_msgs/msg/VehicleOdometry"
+        ](
+            timestamp=us,
+            timestamp_sample=us,
+            pose_frame=1,
+            position=np.asarray(xm[k, 0:3], f32),
+            q=np.asarray([q_xyzw[k, 3], *q_xyzw[k, :3]], f32),
+            velocity_frame=3,
+            velocity=np.asarray(xm[k, 6:9], f32),  # body FRD
+            angular_velocity=np.asarray(xm[k, 9:12], f32),
+            position_variance=np.zeros(3, f32),
+            orientation_variance=np.zeros(3, f32),
+            velocity_variance=np.zeros(3, f32),
+            reset_counter=0,
+            quality=0,
+        )
+        items.append((us, "/fmu/out/vehicle_odometry", msg))
+    rep = T["px4_msgs/msg/EscReport"]
+    for k, t in enumerate(rec.rotor_t):
+        us = _us(t)
+        rpm = np.round(rec.rotor_meas[k] * 60.0 / (2 * math.pi)).astype(int)
+        esc = [
+            rep(timestamp=us, esc_rpm=int(rpm[i]) if i < 4 else 0, esc_voltage=16.0)
+            for i in range(8)
+        ]
+        items.append(
+            (
+                us,
+                "/fmu/out/esc_status",
+                T["px4_msgs/msg/EscStatus"](timestamp=us, counter=k, esc_count=4, esc=esc),
+            )
+        )
+    psi = np.interp(rec.cmd_t, rec.state_t, xm[:, 5])
+    nan3 = np.full(3, np.nan, f32)
+    for k in range(0, rec.cmd_t.size, 2):
+        us = _us(rec.cmd_t[k])
+        v = Rotation.from_euler("z", psi[k]).apply(rec.reference[k, :3])
+        items.append(
+            (
+                us,
+                "/fmu/out/trajectory_setpoint",
+                T["px4_msgs/msg/TrajectorySetpoint"](
+                    timestamp=us,
+                    position=nan3,
+                    velocity=np.asarray(v, f32),
+                    acceleration=nan3,
+                    jerk=nan3,
+                    yaw=f32(np.nan),
+                    yawspeed=f32(rec.reference[k, 3]),
+                ),
+            )
+        )
+    t_end = float(rec.state_t[-1])
+    for t in np.arange(-1.0, t_end + 1.0, 0.5):
+        items.append(
+            (
+                _us(t),
+                "/fmu/out/vehicle_status_v1",
+                T["px4_msgs/msg/VehicleStatus"](
+                    timestamp=_us(t), nav_state=14 if 0.0 <= t <= t_end else 2, arming_state=2
+                ),
+            )
+        )
+    items.sort(key=lambda it: it[0])
+    for us, topic, msg in items:
+        w.write(con[topic], us * 1000 + 1_000_000, ts.serialize_cdr(msg, topics[topic]))
+    w.close()
+    return path
+
+
+def write_mavros_bag(rec, path, stamp0_ns):
+    """MAVROS topics in ROS conventions: ``local_position/odom`` (ENU ``odom`` pose of the FLU
+    ``base_link``, twist in ``base_link``), ``esc_status/status``, ``setpoint_raw/local``
+    (ENU velocity, coordinate_frame 1), ``state``; header stamps = ROS (wall-clock) time."""
+    ts = _typestore(MAVROS_MSGS)
+    T = ts.types
+    topics = {
+        "/mavros/local_position/odom": "nav_msgs/msg/Odometry",
+        "/mavros/esc_status/status": "mavros_msgs/msg/ESCStatus",
+        "/mavros/setpoint_raw/local": "mavros_msgs/msg/PositionTarget",
+        "/mavros/state": "mavros_msgs/msg/State",
+    }
+    w, con = _writer(path, ts, topics)
+    Time, Header = T["builtin_interfaces/msg/Time"], T["std_msgs/msg/Header"]
+    V3, P = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Point"]
+
+    def hdr(t, frame=""):
+        ns = stamp0_ns + int(round(float(t) * 1e9))
+        return ns, Header(stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id=frame)
+
+    xm = rec.state_meas
+    ned_to_enu = np.array([[0, 1, 0], [1, 0, 0], [0, 0, -1]], float)
+    frd_to_flu = np.diag([1.0, -1.0, -1.0])
+    R = _rot(xm[:, 3:6]).as_matrix()
+    q_enu_flu = Rotation.from_matrix(ned_to_enu @ R @ frd_to_flu).as_quat()  # xyzw
+    p_enu = xm[:, 0:3] @ ned_to_enu.T
+    v_flu, w_flu = xm[:, 6:9] @ frd_to_flu, xm[:, 9:12] @ frd_to_flu
+    items = []
+    for k, t in enumerate(rec.state_t):
+        ns, h = hdr(t, "map")
+        q = q_enu_flu[k]
+        msg = T["nav_msgs/msg/Odometry"](
+            header=h,
+            child_frame_id="base_link",
+            pose=T["geometry_msgs/msg/PoseWithCovariance"](
+                pose=T["geometry_msgs/msg/Pose"](
+                    position=P(x=p_enu[k, 0], y=p_enu[k, 1], z=p_enu[k, 2]),
+                    orientation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3]),
+                ),
+                covariance=np.zeros(36),
+            ),
+            twist=T["geometry_msgs/msg/TwistWithCovariance"](
+                twist=T["geometry_msgs/msg/Twist"](
+                    linear=V3(x=v_flu[k, 0], y=v_flu[k, 1], z=v_flu[k, 2]),
+                    angular=V3(x=w_flu[k, 0], y=w_flu[k, 1], z=w_flu[k, 2]),
+                ),
+                covariance=np.zeros(36),
+            ),
+        )
+        items.append((ns, "/mavros/local_position/odom", msg))
+    for k, t in enumerate(rec.rotor_t):
+        ns, h = hdr(t)
+        rpm = np.round(rec.rotor_meas[k] * 60.0 / (2 * math.pi)).astype(int)
+        it = [
+            T["mavros_msgs/msg/ESCStatusItem"](header=h, rpm=int(r), voltage=16.0, current=1.0)
+            for r in rpm
+        ]
+        items.append(
+            (
+                ns,
+                "/mavros/esc_status/status",
+                T["mavros_msgs/msg/ESCStatus"](header=h, esc_status=it),
+            )
+        )
+    psi = np.interp(rec.cmd_t, rec.state_t, xm[:, 5])
+    for k in range(0, rec.cmd_t.size, 2):
+        ns, h = hdr(rec.cmd_t[k])
+        v = ned_to_enu @ Rotation.from_euler("z", psi[k]).apply(rec.reference[k, :3])
+        items.append(
+            (
+                ns,
+                "/mavros/setpoint_raw/local",
+                T["mavros_msgs/msg/PositionTarget"](
+                    header=h,
+                    coordinate_frame=1,
+                    type_mask=0b100111000111,
+                    position=P(x=0.0, y=0.0, z=0.0),
+                    velocity=V3(x=v[0], y=v[1], z=v[2]),
+                    acceleration_or_force=V3(x=0.0, y=0.0, z=0.0),
+                    yaw=0.0,
+                    yaw_rate=float(-rec.reference[k, 3]),
+                ),
+            )
+        )
+    t_end = float(rec.state_t[-1])
+    for t in np.arange(-1.0, t_end + 1.0, 0.5):
+        ns, h = hdr(t)
+        items.append(
+            (
+                ns,
+                "/mavros/state",
+                T["mavros_msgs/msg/State"](
+                    header=h,
+                    connected=True,
+                    armed=True,
+                    guided=True,
+                    manual_input=False,
+                    mode="OFFBOARD" if 0.0 <= t <= t_end else "POSCTL",
+                    system_status=4,
+                ),
+            )
+        )
+    items.sort(key=lambda it: it[0])
+    for ns, topic, msg in items:
+        w.write(con[topic], ns, ts.serialize_cdr(msg, topics[topic]))
+    w.close()
+    return path
+
+
+def _identified_like_own(run, bag, tmp_path):
+    cfg = vx.IdentificationConfig()
+    own = p1.write_run_bag(run, tmp_path / "own")
+    s_own = dataclasses.replace(dp.streams_from_bag(own), t_cmd=None, u=None)
+    r_own = vx.identify_vertex(dp.align(s_own, cfg).vertex, cfg)
+    ar = dp.align(dp.streams_from_bag(bag), cfg)
+    np.testing.assert_allclose(dp.snap_to_box(ar.vertex.scheduling, cfg), run.v_d)
+    r_imp = vx.identify_vertex(ar.vertex, cfg)
+    m = r_own.fit.maskA
+    assert np.all(np.abs(r_imp.fit.A - r_own.fit.A)[m] <= r_own.fit.std_A[m])
+
+
+def test_px4_msgs_bag_import(run, tmp_path):
+    src = write_px4_msgs_bag(run, tmp_path / "dds")
+    rec = imports.read_foreign_bag(src, epoch_ns=EPOCH_US * 1000)
+    assert rec.provenance["source"]["kind"] == "px4_msgs_bag"
+    runs = imports.import_flight(rec, tmp_path / "out", vehicle_kind="SITL")
+    assert len(runs) == 1
+    stamps, pos, euler, v, w = _imported_state(tmp_path / "out" / "bag_0000")
+    xm = run.state_meas
+    # no GPS time in the bag: the declared epoch of the boot + time since boot
+    want = EPOCH_US * 1000 + np.round((BOOT_S + run.state_t) * 1e6).astype(np.int64) * 1000
+    np.testing.assert_array_equal(stamps, want)
+    np.testing.assert_allclose(euler, xm[:, 3:6], atol=2e-6)
+    np.testing.assert_allclose(v, xm[:, 6:9], atol=2e-5)
+    np.testing.assert_allclose(w, xm[:, 9:12], atol=1e-6)
+    np.testing.assert_allclose(pos, xm[:, 0:3], atol=2e-5 * max(1.0, np.abs(xm[:, :3]).max()))
+    meta = yaml.safe_load((tmp_path / "out" / "experiment.yaml").read_text())
+    assert meta["provenance"]["clock"]["kind"] == "declared"
+    assert meta["provenance"]["vehicle_kind"] == "SITL"
+    _identified_like_own(run, tmp_path / "out" / "bag_0000", tmp_path)
+
+
+def test_mavros_bag_import(run, tmp_path):
+    stamp0 = 1_795_000_123_000_000_000
+    src = write_mavros_bag(run, tmp_path / "mavros", stamp0)
+    rec = imports.read_foreign_bag(src)
+    assert rec.provenance["source"]["kind"] == "mavros_bag"
+    runs = imports.import_flight(rec, tmp_path / "out")
+    assert len(runs) == 1
+    stamps, pos, euler, v, w = _imported_state(tmp_path / "out" / "bag_0000")
+    xm = run.state_meas
+    np.testing.assert_array_equal(stamps, stamp0 + np.round(run.state_t * 1e9).astype(np.int64))
+    np.testing.assert_allclose(euler, xm[:, 3:6], atol=1e-9)
+    np.testing.assert_allclose(v, xm[:, 6:9], atol=1e-9)
+    np.testing.assert_allclose(w, xm[:, 9:12], atol=1e-9)
+    np.testing.assert_allclose(pos, xm[:, 0:3], atol=1e-9)
+    meta = yaml.safe_load((tmp_path / "out" / "experiment.yaml").read_text())
+    clock = meta["provenance"]["clock"]
+    assert (clock["kind"], clock["offset_ns"]) == ("utc", stamp0)
+    _identified_like_own(run, tmp_path / "out" / "bag_0000", tmp_path)
+
+
+def test_windows_cli_and_bad_input(run, tmp_path, capsys):
+    from lpv_sysid.cli.main import main
+
+    log_file = write_ulog(run, tmp_path / "flight.ulg", with_gps=False)
+    out = tmp_path / "out"
+    a, b = BOOT_S + 1.0, BOOT_S + 5.0
+    rc = main(
+        [
+            "import",
+            "ulog",
+            str(log_file),
+            "--out",
+            str(out),
+            "--window",
+            f"{a}:{b}:first",
+            "--window",
+            f"{b}:{b + 2}",
+            "--epoch",
+            "2026-11-18T00:00:00Z",
+        ]
+    )
+    assert rc == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith(f"{out}/bag_0000: first [21.000, 25.000] s")
+    assert lines[1].startswith(f"{out}/bag_0001: window_1 [25.000, 27.000] s")
+    assert "2 run(s), vehicle SITL, clock declared" in lines[2]
+    stamps = _imported_state(out / "bag_0001")[0]
+    epoch = calendar.timegm((2026, 11, 18, 0, 0, 0)) * 10**9
+    in_win = run.state_t[(run.state_t + BOOT_S >= b) & (run.state_t + BOOT_S <= b + 2)]
+    np.testing.assert_array_equal(
+        stamps, epoch + np.round((BOOT_S + in_win) * 1e6).astype(np.int64) * 1000
+    )
+    meta = yaml.safe_load((out / "experiment.yaml").read_text())
+    assert [r["window_s"] for r in meta["provenance"]["runs"]] == [[a, b], [b, b + 2]]
+    # bad input: a named error, exit status 2
+    with pytest.raises(ConfigError, match="START:END"):
+        imports.parse_window("12", 0)
+    with pytest.raises(ConfigError, match="holds no state sample"):
+        imports.runs_of(imports.read_ulog(log_file), ["500:600"])
+    junk = tmp_path / "junk.ulg"
+    junk.write_bytes(b"not a ulog at all" * 10)
+    with pytest.raises(BagError, match="junk.ulg"):
+        imports.read_ulog(junk)
+    assert main(["import", "ulog", str(junk), "--out", str(tmp_path / "o2")]) == 2
+    assert main(["import", "bag", str(tmp_path), "--out", str(tmp_path / "o3")]) == 2
+    err = capsys.readouterr().err
+    assert "junk.ulg" in err
