@@ -61,7 +61,11 @@ def _undeclared(cls) -> list[str]:
 
 
 _classes = _config_classes()
-_names = {c.__name__ for c in _classes.values()} | {"Region", "FeedforwardLayout", "ControllerSpec"}
+_names = {c.__name__ for c in _classes.values()} | {
+    "Region",
+    "FeedforwardLayout",
+    "ControllerSpec",
+}
 
 
 def test_there_are_config_classes_to_check():
