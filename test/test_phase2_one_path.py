@@ -170,3 +170,106 @@ def test_every_tamper_is_refused_by_the_node_and_by_fly_phase2_alike(
     )
     err = capsys.readouterr().err
     assert status == 2 and text in err, err
+
+
+# ============================================ issue 21 items 4 and 5: the bag and the latency
+def test_phase2_bag_has_every_topic_at_its_configured_rate_and_the_latency(
+    design,  # noqa: F811
+    tmp_path,
+):
+    """A 20 s phase-2 flight on the simulated PX4 (lock-step, no ESC telemetry): the bag has
+    state, imu, rotor_speeds (estimated from ACTUATOR_OUTPUT_STATUS), status,
+    velocity_reference, excitation, actuator_command (the setpoints sent) and rate_setpoint
+    (PX4's ATTITUDE_TARGET echo), each at the rate its configuration sets; the summary's
+    state-stamp -> setpoint-sent latency is the one of the bag's stamps. Before: rotor_speeds,
+    imu and status 0 messages, the excitation a stream of zeros, no echo, no latency."""
+    from lpv_sysid.io import bag as iobag
+    from lpv_sysid.io import messages
+    from lpv_sysid.io.files import read_yaml
+    from lpv_sysid.flight.phase2 import loop_latency
+
+    veh, bcfg = _vehicle(tmp_path, airborne=True)
+    opts = Phase2Options(duration=20.0, ramp_s=2.0, lead_in_s=1.0)
+    try:
+        ls, rates = _lockstep(veh)
+        s = fly_phase2(
+            design / "gains.yaml",
+            design / "signals",
+            tmp_path / "p2",
+            models=design / "vertex_models.yaml",
+            bridge_config=bcfg,
+            opts=opts,
+            clock=ls.clock,
+            sleep=ls.sleep,
+            echo=lambda _: None,
+            handle_signals=False,
+        )
+    finally:
+        veh.close()
+    assert s["ok"] and s["handback"]["state"] == "DONE", s["reason"]
+    bag = tmp_path / "p2" / s["bag"]
+    info = {k.rsplit("/", 1)[-1]: v for k, v in iobag.topic_info(str(bag)).items()}
+    streams = read_yaml(str(bcfg))["link"]["streams"]
+    ctrl = yaml_parameters(str(config_file("lpv_controller_px4.yaml")), "lpv_controller")
+    expected = {
+        # one state sample per attitude and per position message (telemetry decoder)
+        "state": streams["ATTITUDE_QUATERNION"] + streams["LOCAL_POSITION_NED"],
+        "imu": streams["HIGHRES_IMU"],
+        "rotor_speeds": streams["ACTUATOR_OUTPUT_STATUS"],  # no ESC_STATUS: the estimate
+        "velocity_reference": opts.control_rate_hz,  # the excitation runtime's rate_hz
+        "excitation": opts.control_rate_hz,
+        "rate_setpoint": streams["ATTITUDE_TARGET"],
+    }
+    for topic, hz in expected.items():
+        assert info[topic].rate_hz == pytest.approx(hz, rel=0.05), (topic, info[topic])
+    # the setpoints sent: one per state sample of a new stamp, at least the attitude rate
+    assert info["actuator_command"].count == s["controller"]["commands"] > 0
+    assert info["actuator_command"].rate_hz >= 0.95 * streams["ATTITUDE_QUATERNION"]
+    assert info["status"].count >= ctrl["status_rate_hz"] * info["status"].duration_s * 0.9
+    got = iobag.read_bag(str(bag))
+    rotor = [m for _, m in got["/lpv_sysid/rotor_speeds"]]
+    assert {messages.rotor_source_of(m) for m in rotor} == {"estimated"}
+    ue = np.array(
+        [messages.excitation_from_joint_state(m)[1] for _, m in got["/lpv_sysid/excitation"]]
+    )
+    assert np.abs(ue).max() > 0.05  # the signal, not zeros
+    # PX4's echo equals what was sent (float32 on the wire)
+    sent = np.array(
+        [
+            messages.channels_from_joint_state(m, ("thrust", "p_sp", "q_sp", "r_sp"))[1]
+            for _, m in got["/lpv_sysid/actuator_command"]
+        ]
+    )
+    echo = np.array(
+        [
+            messages.channels_from_joint_state(m, ("thrust", "p_sp", "q_sp", "r_sp"))[1]
+            for _, m in got["/lpv_sysid/rate_setpoint"]
+        ]
+    )
+    clipped = np.column_stack([np.clip(sent[:, 0], 0.05, 0.95), np.clip(sent[:, 1:], -2, 2)])
+    for row in echo[5::50]:
+        assert np.min(np.abs(clipped - row).max(axis=1)) < 1e-5
+    # latency: the summary's numbers are the bag's (log time - header stamp per command)
+    rows = got["/lpv_sysid/actuator_command"]
+    lat = loop_latency(
+        [messages.stamp_ns_of(m) * 1e-9 for _, m in rows], [t * 1e-9 for t, _ in rows]
+    )
+    summ = s["latency_state_to_setpoint_ms"]
+    assert summ["commands"] == lat["commands"] == len(rows)
+    for k in ("p50", "p99", "max"):
+        assert summ[k] == pytest.approx(lat[k], abs=1e-9)
+    assert yaml.safe_load((tmp_path / "p2" / "phase2_summary.yaml").read_text())[
+        "latency_state_to_setpoint_ms"
+    ]["commands"] == len(rows)
+
+
+def test_loop_latency_percentiles():
+    from lpv_sysid.flight.phase2 import loop_latency
+
+    t_state = np.arange(100) * 0.01
+    delay = np.r_[np.full(98, 0.002), 0.010, 0.030]  # 2 ms, one 10 ms, one 30 ms
+    lat = loop_latency(t_state, t_state + delay)
+    assert lat["commands"] == 100
+    assert lat["p50"] == pytest.approx(2.0) and lat["max"] == pytest.approx(30.0)
+    # numpy's linear percentile: rank 98.01 between 10 ms and 30 ms
+    assert lat["p99"] == pytest.approx(10.0 + 0.01 * 20.0)
