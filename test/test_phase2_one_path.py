@@ -173,32 +173,24 @@ def test_every_tamper_is_refused_by_the_node_and_by_fly_phase2_alike(
 
 
 # ============================================ issue 21 items 4 and 5: the bag and the latency
-def test_phase2_bag_has_every_topic_at_its_configured_rate_and_the_latency(
-    design,  # noqa: F811
-    tmp_path,
-):
-    """A 20 s phase-2 flight on the simulated PX4 (lock-step, no ESC telemetry): the bag has
-    state, imu, rotor_speeds (estimated from ACTUATOR_OUTPUT_STATUS), status,
-    velocity_reference, excitation, actuator_command (the setpoints sent) and rate_setpoint
-    (PX4's ATTITUDE_TARGET echo), each at the rate its configuration sets; the summary's
-    state-stamp -> setpoint-sent latency is the one of the bag's stamps. Before: rotor_speeds,
-    imu and status 0 messages, the excitation a stream of zeros, no echo, no latency."""
-    from lpv_sysid.io import bag as iobag
-    from lpv_sysid.io import messages
-    from lpv_sysid.io.files import read_yaml
-    from lpv_sysid.flight.phase2 import loop_latency
+FLIGHT_OPTS = Phase2Options(duration=20.0, ramp_s=2.0, lead_in_s=1.0)
 
-    veh, bcfg = _vehicle(tmp_path, airborne=True)
-    opts = Phase2Options(duration=20.0, ramp_s=2.0, lead_in_s=1.0)
+
+@pytest.fixture(scope="module")
+def flown(design, tmp_path_factory):  # noqa: F811
+    """A 20 s phase-2 flight of ``fly_phase2`` on the simulated PX4 (lock-step, airborne in
+    HOLD, no ESC telemetry): (summary, output directory, bridge config)."""
+    tmp = tmp_path_factory.mktemp("flown")
+    veh, bcfg = _vehicle(tmp, airborne=True)
     try:
-        ls, rates = _lockstep(veh)
+        ls, _ = _lockstep(veh)
         s = fly_phase2(
             design / "gains.yaml",
             design / "signals",
-            tmp_path / "p2",
+            tmp / "p2",
             models=design / "vertex_models.yaml",
             bridge_config=bcfg,
-            opts=opts,
+            opts=FLIGHT_OPTS,
             clock=ls.clock,
             sleep=ls.sleep,
             echo=lambda _: None,
@@ -206,8 +198,25 @@ def test_phase2_bag_has_every_topic_at_its_configured_rate_and_the_latency(
         )
     finally:
         veh.close()
+    return s, tmp / "p2", bcfg
+
+
+def test_phase2_bag_has_every_topic_at_its_configured_rate_and_the_latency(flown):
+    """The bag of a phase-2 flight has
+    state, imu, rotor_speeds (estimated from ACTUATOR_OUTPUT_STATUS), status,
+    velocity_reference, excitation, actuator_command (the setpoints sent) and rate_setpoint
+    (PX4's ATTITUDE_TARGET echo), each at the rate its configuration sets; the summary's
+    state-stamp -> setpoint-sent latency is the one of the bag's stamps. Before: rotor_speeds,
+    imu and status 0 messages, the excitation a stream of zeros, no echo, no latency."""
+    from lpv_sysid.flight.phase2 import loop_latency
+    from lpv_sysid.io import bag as iobag
+    from lpv_sysid.io import messages
+    from lpv_sysid.io.files import read_yaml
+
+    s, out, bcfg = flown
+    opts = FLIGHT_OPTS
     assert s["ok"] and s["handback"]["state"] == "DONE", s["reason"]
-    bag = tmp_path / "p2" / s["bag"]
+    bag = out / s["bag"]
     info = {k.rsplit("/", 1)[-1]: v for k, v in iobag.topic_info(str(bag)).items()}
     streams = read_yaml(str(bcfg))["link"]["streams"]
     ctrl = yaml_parameters(str(config_file("lpv_controller_px4.yaml")), "lpv_controller")
@@ -220,6 +229,7 @@ def test_phase2_bag_has_every_topic_at_its_configured_rate_and_the_latency(
         "excitation": opts.control_rate_hz,
         "rate_setpoint": streams["ATTITUDE_TARGET"],
     }
+    print({k: round(v.rate_hz, 2) for k, v in info.items()}, s["latency_state_to_setpoint_ms"])
     for topic, hz in expected.items():
         assert info[topic].rate_hz == pytest.approx(hz, rel=0.05), (topic, info[topic])
     # the setpoints sent: one per state sample of a new stamp, at least the attitude rate
@@ -258,7 +268,7 @@ def test_phase2_bag_has_every_topic_at_its_configured_rate_and_the_latency(
     assert summ["commands"] == lat["commands"] == len(rows)
     for k in ("p50", "p99", "max"):
         assert summ[k] == pytest.approx(lat[k], abs=1e-9)
-    assert yaml.safe_load((tmp_path / "p2" / "phase2_summary.yaml").read_text())[
+    assert yaml.safe_load((out / "phase2_summary.yaml").read_text())[
         "latency_state_to_setpoint_ms"
     ]["commands"] == len(rows)
 
@@ -273,3 +283,91 @@ def test_loop_latency_percentiles():
     assert lat["p50"] == pytest.approx(2.0) and lat["max"] == pytest.approx(30.0)
     # numpy's linear percentile: rank 98.01 between 10 ms and 30 ms
     assert lat["p99"] == pytest.approx(10.0 + 0.01 * 20.0)
+
+
+def test_the_node_runtime_replays_the_cli_flight_command_for_command(flown, design, tmp_path):  # noqa: F811
+    """``lpv-sysid replay`` (lpv_controller_node's runtime over the recorded inputs, with the
+    parameters of config/lpv_controller_px4.yaml, the file phase2.launch.py design:=rate_plant
+    gives the node) computes the commands ``fly phase2`` sent, to float64 round-off: one
+    controller, not two."""
+    from lpv_sysid.flight.controller import replay_controller
+    from lpv_sysid.io import bag as iobag
+    from lpv_sysid.io import messages
+
+    s, out, _ = flown
+    p = yaml_parameters(str(config_file("lpv_controller_px4.yaml")), "lpv_controller")
+    p.update(gains_file=str(design / "gains.yaml"))
+    r = replay_controller(str(out / s["bag"]), p, str(tmp_path / "replay"))
+    assert r["event"] is None or r["event"].reason == "stale"  # the recording ends
+    names = ("thrust", "p_sp", "q_sp", "r_sp")
+
+    def commands(bag):
+        rows = iobag.read_bag(str(bag))["/lpv_sysid/actuator_command"]
+        return {
+            messages.stamp_ns_of(m): messages.channels_from_joint_state(m, names)[1]
+            for _, m in rows
+        }
+
+    flown_cmds, replayed = commands(out / s["bag"]), commands(tmp_path / "replay")
+    common = sorted(set(flown_cmds) & set(replayed))
+    assert len(common) >= 0.99 * len(flown_cmds) > 1000
+    diff = max(float(np.abs(flown_cmds[k] - replayed[k]).max()) for k in common)
+    print(f"replay: {len(common)} of {len(flown_cmds)} commands compared, max |diff| {diff:.3g}")
+    assert diff < 1e-9, diff
+
+
+# ====================================== issue 21 item 2: the rate plant through the bridge node
+def test_bridge_node_runtime_sends_rate_plant_commands_as_set_attitude_target(tmp_path):
+    """mavlink_bridge_node's runtime with ``command: rate_setpoint`` (phase2.launch.py
+    design:=rate_plant) parses ``actuator_command`` by the rate plant's names and sends them
+    as SET_ATTITUDE_TARGET thrust + body rates: the simulated PX4 (airborne in HOLD) tracks
+    exactly those values in OFFBOARD; when the commands stop it hands back (HOLD confirmed).
+    Before: ``actuator command ignored: bridge command is 'rate_setpoint'``.
+    A virtual-actuator command (ut, ua, ue, ur) is refused by the parser, not sent."""
+    from lpv_sysid.flight.bridge import SPECS, BridgeRuntime
+    from lpv_sysid.io import messages
+    from lpv_sysid.io.messages import MessageError
+    from lpv_sysid.mavlink.bridge import RATE_INPUT_NAMES
+
+    f = MsgFactory.rosbags()
+    veh, _ = _vehicle(tmp_path, airborne=True)
+    port = veh.config.url.rsplit(":", 1)[-1]
+    params = {n: d for n, (d, _) in SPECS.items()}
+    params.update(
+        {
+            "link.url": f"udpin:127.0.0.1:{port}",
+            "command": "rate_setpoint",
+            "auto_start": True,
+            "offboard.arm": False,
+            "offboard.input_timeout": 0.5,
+        }
+    )
+    rt = BridgeRuntime(params, f, "/lpv_sysid/mavlink_bridge", 15.0, 3.0)
+    u = np.array([0.55, 0.1, -0.05, 0.02])
+    bad = messages.actuator_command_msg(f, 1, [0.5, 0.0, 0.0, 0.0])
+    with pytest.raises(MessageError):
+        rt.parsers["actuator_command"](bad)
+    t, dt = 0.0, 0.004
+    rt.open(t)
+    modes: list = []
+    try:
+        for k in range(int(12.0 / dt)):  # bounded: 12 s of simulated time
+            t += dt
+            veh.step(t)
+            rt.on_timer(t)
+            if k % 5 == 0 and t < 6.0:  # 50 Hz commands for 6 s, then silence
+                msg = messages.joint_state(f, round(t * 1e9), RATE_INPUT_NAMES, position=u)
+                rt.on_sample("actuator_command", rt.parsers["actuator_command"](msg), t)
+            if not modes or modes[-1] != veh.mode.name:
+                modes.append(veh.mode.name)
+            if t > 4.0 and veh.mode.name == "OFFBOARD":
+                sp = veh.setpoint
+                assert sp.kind == "rates" and sp.thrust == pytest.approx(u[0], abs=1e-6)
+                assert np.allclose(sp.rates, u[1:], atol=1e-6)
+        final = (rt.core.state.value, rt.core.status(t).get("reason"))
+    finally:
+        rt.close()
+        veh.close()
+    assert modes[:3] == ["HOLD", "OFFBOARD", "HOLD"], modes
+    # commands stopped = a fault of the input stream: the run FAILED, PX4 confirmed in HOLD
+    assert final[1].startswith("hand-back confirmed: vehicle in HOLD: stale input"), final

@@ -30,7 +30,7 @@ from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu, JointState
 from std_srvs.srv import Trigger
 
-from lpv_sysid.flight.bridge import PARSERS, SPECS, BridgeRuntime
+from lpv_sysid.flight.bridge import SPECS, BridgeRuntime
 from lpv_sysid.io import messages
 from lpv_sysid.nodes import shell
 
@@ -86,7 +86,7 @@ class MavlinkBridgeNode(shell.ShellNode):
         self.emit([])
 
     def _input(self, key):
-        parse = PARSERS.get(key)
+        parse = self.runtime.parsers.get(key)
 
         def cb(msg):
             if parse is None:  # a MAVROS message: the runtime judges it

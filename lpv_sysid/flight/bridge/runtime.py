@@ -33,6 +33,7 @@ from lpv_sysid.mavlink.bridge import (
     BridgeCore,
     MavrosConfig,
     MavrosCore,
+    RATE_INPUT_NAMES,
     MavrosOutput,
     cmd_vel_msg,
 )
@@ -43,6 +44,14 @@ from lpv_sysid.mavlink.telemetry import ImuSample, RotorSample, StateSample
 PARSERS = {
     "velocity_reference": messages.reference_from_twist,
     "actuator_command": messages.actuator_command_from_joint_state,
+}
+#: ``command: rate_setpoint`` (the rate-plant design): ``actuator_command`` carries the rate
+#: plant's inputs (thrust, p_sp, q_sp, r_sp), sent as SET_ATTITUDE_TARGET unchanged but clipped
+RATE_PLANT_PARSERS = {
+    **PARSERS,
+    "actuator_command": lambda msg: messages.channels_from_joint_state(
+        msg, RATE_INPUT_NAMES, field="position"
+    ),
 }
 #: core states in which the orderly shutdown needs no more spinning
 SHUTDOWN_DONE = ("IDLE", "DONE", "FAILED")
@@ -88,6 +97,8 @@ class BridgeRuntime:
         self.publishers = [Endpoint("state", "state"), Endpoint("imu", "imu")]
         self.subscriptions = [Endpoint("velocity_reference", "velocity_reference")]
         self.core: Union[MavrosCore, BridgeCore]
+        #: the parsers of the package input topics for this configuration (the shell's)
+        self.parsers: Mapping[str, Any] = PARSERS
         if s.transport == "mavros":
             self.core = self.mavros = MavrosCore(MavrosConfig.from_dict(mavros))
             cfg = self.mavros.config
@@ -112,6 +123,8 @@ class BridgeRuntime:
             )
         else:
             self.core = self.link = BridgeCore(BridgeConfig.from_dict(bridge))
+            if self.link.config.command == "rate_setpoint":
+                self.parsers = RATE_PLANT_PARSERS
             self.publishers.append(Endpoint("rotor_speeds", "rotor_speeds"))
             self.subscriptions.append(Endpoint("actuator_command", "actuator_command"))
             self.timer_period_s = 1.0 / s.poll_rate_hz
