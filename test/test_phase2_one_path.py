@@ -371,3 +371,27 @@ def test_bridge_node_runtime_sends_rate_plant_commands_as_set_attitude_target(tm
     assert modes[:3] == ["HOLD", "OFFBOARD", "HOLD"], modes
     # commands stopped = a fault of the input stream: the run FAILED, PX4 confirmed in HOLD
     assert final[1].startswith("hand-back confirmed: vehicle in HOLD: stale input"), final
+
+
+def test_bag_latency_cli_reads_a_data_logger_bag(tmp_path, capsys):
+    """``lpv-sysid bag latency``: the node path's numbers from the data logger's bag (log time =
+    receipt, header stamp = the state stamp the controller computed the command on)."""
+    from lpv_sysid.io import bag as iobag
+    from lpv_sysid.io import messages
+
+    f = MsgFactory.rosbags()
+    t0 = 1_700_000_000_000_000_000
+    delays_ms = [1.0] * 98 + [5.0, 20.0]
+    with iobag.BagWriter(tmp_path / "b") as w:
+        w.add_topic("/lpv_sysid/actuator_command", messages.TYPES["actuator_command"])
+        for i, d in enumerate(delays_ms):
+            stamp = t0 + i * 4_000_000
+            msg = messages.joint_state(
+                f, stamp, ("thrust", "p_sp", "q_sp", "r_sp"), position=[0.5, 0, 0, 0]
+            )
+            w.write("/lpv_sysid/actuator_command", stamp + round(d * 1e6), msg)
+    assert cli_main(["bag", "latency", str(tmp_path / "b")]) == 0
+    out = capsys.readouterr().out
+    # numpy's linear percentile: p99 at rank 98.01 between 5 ms and 20 ms
+    assert "100 commands" in out and "p50 1.000 ms" in out and "max 20.000 ms" in out
+    assert "p99 5.150 ms" in out, out
