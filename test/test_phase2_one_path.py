@@ -395,3 +395,60 @@ def test_bag_latency_cli_reads_a_data_logger_bag(tmp_path, capsys):
     # numpy's linear percentile: p99 at rank 98.01 between 5 ms and 20 ms
     assert "100 commands" in out and "p50 1.000 ms" in out and "max 20.000 ms" in out
     assert "p99 5.150 ms" in out, out
+
+
+def test_chain_phase2_refuses_what_the_node_refuses(tmp_path):
+    """``lpv-sysid chain --phase1 OLD --kappa 10``: the chain identifies, synthesizes and
+    verifies (steps 2-4), then its phase 2 is refused before the link is opened with the
+    controller node's words for the same gains, signals and kappa."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from test_rate_plant import P0, _simulate
+
+    from lpv_sysid.flight.chain import chain
+    from lpv_sysid.io import bag as iobag
+    from lpv_sysid.io import messages
+    from lpv_sysid.models import rate_plant as rp
+
+    f = MsgFactory.rosbags()
+    p1 = tmp_path / "old" / "phase1"
+    bags = {}
+    for k, seed in enumerate((0, 1)):
+        t, x, u = _simulate(P0, T=25.0, seed=seed)
+        t0 = 1_000_000_000 * (100 + 50 * k)
+        name = f"bag_{k:04d}"
+        bags[f"run{k}"] = name
+        with iobag.BagWriter(p1 / name) as b:
+            b.add_topic("/lpv_sysid/state", messages.TYPES["state"])
+            b.add_topic("/lpv_sysid/rate_setpoint", messages.TYPES["actuator_command"])
+            for i in range(0, len(t), 2):
+                ns = t0 + round(t[i] * 1e9)
+                msg = messages.odometry_from_state(
+                    f, ns, [0.0, 0.0, -10.0], [x[i, 0], x[i, 1], 0.0], x[i, 2:5], x[i, 5:8]
+                )
+                b.write("/lpv_sysid/state", ns, msg)
+            for i in range(0, len(t), 4):
+                ns = t0 + round(t[i] * 1e9)
+                msg = messages.joint_state(f, ns, rp.INPUT_NAMES, position=u[i])
+                b.write("/lpv_sysid/rate_setpoint", ns, msg)
+    (p1 / "campaign_summary.yaml").write_text(
+        yaml.safe_dump({"ok": True, "result": "complete", "bags": bags})
+    )
+    lines: list = []
+    status = chain(
+        f"udpin:127.0.0.1:{free_udp_port()}",
+        tmp_path / "chain",
+        kappa=10.0,
+        phase1_dir=p1,
+        echo=lines.append,
+        preflight=False,
+    )
+    out = tmp_path / "chain"
+    summary = yaml.safe_load((out / "chain_summary.yaml").read_text())
+    assert status == 1 and (out / "gains.yaml").exists(), lines[-10:]
+    with pytest.raises(ConfigError) as node:
+        _node_runtime(out / "gains.yaml", out / "signals", 10.0)
+    assert "kappa 10 x ue_t peak" in str(node.value)
+    assert summary["phase2"]["reason"] == str(node.value)
+    assert not (out / "phase2").exists() or not any((out / "phase2").iterdir())
