@@ -322,7 +322,8 @@ def test_bridge_node_runtime_sends_rate_plant_commands_as_set_attitude_target(tm
     design:=rate_plant) parses ``actuator_command`` by the rate plant's names and sends them
     as SET_ATTITUDE_TARGET thrust + body rates: the simulated PX4 (airborne in HOLD) tracks
     exactly those values in OFFBOARD; when the commands stop it hands back (HOLD confirmed).
-    Before: ``actuator command ignored: bridge command is 'rate_setpoint'``.
+    PX4's ATTITUDE_TARGET echo is republished on ``rate_setpoint`` (recorded by the data
+    logger). Before: ``actuator command ignored: bridge command is 'rate_setpoint'``.
     A virtual-actuator command (ut, ua, ue, ur) is refused by the parser, not sent."""
     from lpv_sysid.flight.bridge import SPECS, BridgeRuntime
     from lpv_sysid.io import messages
@@ -350,11 +351,13 @@ def test_bridge_node_runtime_sends_rate_plant_commands_as_set_attitude_target(tm
     t, dt = 0.0, 0.004
     rt.open(t)
     modes: list = []
+    echo: list = []
+    assert "rate_setpoint" in [e.key for e in rt.publishers]
     try:
         for k in range(int(12.0 / dt)):  # bounded: 12 s of simulated time
             t += dt
             veh.step(t)
-            rt.on_timer(t)
+            echo += [(t, m) for key, m in rt.on_timer(t) if key == "rate_setpoint"]
             if k % 5 == 0 and t < 6.0:  # 50 Hz commands for 6 s, then silence
                 msg = messages.joint_state(f, round(t * 1e9), RATE_INPUT_NAMES, position=u)
                 rt.on_sample("actuator_command", rt.parsers["actuator_command"](msg), t)
@@ -371,6 +374,12 @@ def test_bridge_node_runtime_sends_rate_plant_commands_as_set_attitude_target(tm
     assert modes[:3] == ["HOLD", "OFFBOARD", "HOLD"], modes
     # commands stopped = a fault of the input stream: the run FAILED, PX4 confirmed in HOLD
     assert final[1].startswith("hand-back confirmed: vehicle in HOLD: stale input"), final
+    # PX4's echo (ATTITUDE_TARGET, requested at 50 Hz for command rate_setpoint) republished on
+    # rate_setpoint for the data logger: the values sent, at the requested rate
+    vals = np.array([messages.channels_from_joint_state(m, RATE_INPUT_NAMES)[1] for _, m in echo])
+    ts = np.array([t for t, _ in echo])
+    assert len(vals) > 50 and np.allclose(vals, u, atol=1e-6)
+    assert (len(ts) - 1) / (ts[-1] - ts[0]) == pytest.approx(50.0, rel=0.05)
 
 
 def test_bag_latency_cli_reads_a_data_logger_bag(tmp_path, capsys):

@@ -46,6 +46,7 @@ TYPES = {
     "cmd_vel": TwistStamped,
     "velocity_reference": TwistStamped,
     "actuator_command": JointState,
+    "rate_setpoint": JointState,
     "mavros_odom": Odometry,
     "mavros_imu": Imu,
     "mavros_diagnostics": DiagnosticArray,

@@ -53,6 +53,22 @@ RATE_PLANT_PARSERS = {
         msg, RATE_INPUT_NAMES, field="position"
     ),
 }
+#: rate of PX4's ATTITUDE_TARGET requested with ``command: rate_setpoint`` unless configured [Hz]
+ATTITUDE_TARGET_HZ = 50.0
+
+
+def with_attitude_target_stream(cfg: BridgeConfig) -> BridgeConfig:
+    """``cfg`` with PX4's ATTITUDE_TARGET requested at :data:`ATTITUDE_TARGET_HZ` (the echo of
+    the rate setpoints it tracks, recorded on ``rate_setpoint``) unless its rate is
+    configured (also 0 = off)."""
+    import dataclasses
+
+    if any(name == "ATTITUDE_TARGET" for name, _ in cfg.link.streams):
+        return cfg
+    streams = tuple(cfg.link.streams) + (("ATTITUDE_TARGET", ATTITUDE_TARGET_HZ),)
+    return dataclasses.replace(cfg, link=dataclasses.replace(cfg.link, streams=streams))
+
+
 #: core states in which the orderly shutdown needs no more spinning
 SHUTDOWN_DONE = ("IDLE", "DONE", "FAILED")
 
@@ -122,10 +138,15 @@ class BridgeRuntime:
                 )
             )
         else:
-            self.core = self.link = BridgeCore(BridgeConfig.from_dict(bridge))
-            if self.link.config.command == "rate_setpoint":
+            cfg_b = BridgeConfig.from_dict(bridge)
+            if cfg_b.command == "rate_setpoint":
                 self.parsers = RATE_PLANT_PARSERS
+                cfg_b = with_attitude_target_stream(cfg_b)
+            self.core = self.link = BridgeCore(cfg_b)
+            #: PX4's ATTITUDE_TARGET (the setpoints it tracks) seen since the last poll
+            self._echo: list[tuple[float, Any]] = []
             self.publishers.append(Endpoint("rotor_speeds", "rotor_speeds"))
+            self.publishers.append(Endpoint("rate_setpoint", "rate_setpoint"))
             self.subscriptions.append(Endpoint("actuator_command", "actuator_command"))
             self.timer_period_s = 1.0 / s.poll_rate_hz
             self._log += self._handback_lines(sigterm_timeout_s, teardown_margin_s)
@@ -159,9 +180,13 @@ class BridgeRuntime:
         return out
 
     def open(self, now: float) -> None:
-        """Open the MAVLink link (transport mavlink; MAVROS owns its link)."""
+        """Open the MAVLink link (transport mavlink; MAVROS owns its link); PX4's
+        ATTITUDE_TARGET is republished on ``rate_setpoint``."""
         if self.link is not None:
+            from lpv_sysid.flight.vehicle import tap_attitude_target
+
             self.link.open(now)
+            tap_attitude_target(self.link.link, lambda t, u: self._echo.append((t, u)))
 
     # -- inputs ---------------------------------------------------------------------------
     def on_sample(self, key: str, parsed: tuple, now: float) -> Output:
@@ -257,6 +282,14 @@ class BridgeRuntime:
                 pubs.append(
                     ("rotor_speeds", messages.rotor_speeds_msg(f, stamp, s.omega, s.source))
                 )
+        for t, u in self._echo:
+            pubs.append(
+                (
+                    "rate_setpoint",
+                    messages.joint_state(f, round(t * 1e9), RATE_INPUT_NAMES, position=u),
+                )
+            )
+        self._echo.clear()
         if out.events:
             pubs += self.status(now, out.events)
         return pubs
