@@ -141,12 +141,14 @@ class BridgeRuntime:
             cfg_b = BridgeConfig.from_dict(bridge)
             if cfg_b.command == "rate_setpoint":
                 self.parsers = RATE_PLANT_PARSERS
+            if s.rate_setpoints:
                 cfg_b = with_attitude_target_stream(cfg_b)
             self.core = self.link = BridgeCore(cfg_b)
             #: PX4's ATTITUDE_TARGET (the setpoints it tracks) seen since the last poll
             self._echo: list[tuple[float, Any]] = []
             self.publishers.append(Endpoint("rotor_speeds", "rotor_speeds"))
-            self.publishers.append(Endpoint("rate_setpoint", "rate_setpoint"))
+            if s.rate_setpoints:
+                self.publishers.append(Endpoint("rate_setpoint", "rate_setpoint"))
             self.subscriptions.append(Endpoint("actuator_command", "actuator_command"))
             self.timer_period_s = 1.0 / s.poll_rate_hz
             self._log += self._handback_lines(sigterm_timeout_s, teardown_margin_s)
@@ -186,7 +188,8 @@ class BridgeRuntime:
             from lpv_sysid.flight.vehicle import tap_attitude_target
 
             self.link.open(now)
-            tap_attitude_target(self.link.link, lambda t, u: self._echo.append((t, u)))
+            if self.settings.rate_setpoints:
+                tap_attitude_target(self.link.link, lambda t, u: self._echo.append((t, u)))
 
     # -- inputs ---------------------------------------------------------------------------
     def on_sample(self, key: str, parsed: tuple, now: float) -> Output:
