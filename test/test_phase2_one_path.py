@@ -406,16 +406,14 @@ def test_bag_latency_cli_reads_a_data_logger_bag(tmp_path, capsys):
     assert "p99 5.150 ms" in out, out
 
 
-def test_chain_phase2_refuses_what_the_node_refuses(tmp_path):
-    """``lpv-sysid chain --phase1 OLD --kappa 10``: the chain identifies, synthesizes and
-    verifies (steps 2-4), then its phase 2 is refused before the link is opened with the
-    controller node's words for the same gains, signals and kappa."""
+def _phase1_bags(tmp_path: Path, plant) -> Path:
+    """An earlier phase-1 directory (campaign_summary.yaml + two bags with state and PX4's
+    rate setpoints) of the known rate plant ``plant`` (test_rate_plant._simulate)."""
     import sys
 
     sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from test_rate_plant import P0, _simulate
+    from test_rate_plant import _simulate
 
-    from lpv_sysid.flight.chain import chain
     from lpv_sysid.io import bag as iobag
     from lpv_sysid.io import messages
     from lpv_sysid.models import rate_plant as rp
@@ -424,7 +422,7 @@ def test_chain_phase2_refuses_what_the_node_refuses(tmp_path):
     p1 = tmp_path / "old" / "phase1"
     bags = {}
     for k, seed in enumerate((0, 1)):
-        t, x, u = _simulate(P0, T=25.0, seed=seed)
+        t, x, u = _simulate(plant, T=25.0, seed=seed)
         t0 = 1_000_000_000 * (100 + 50 * k)
         name = f"bag_{k:04d}"
         bags[f"run{k}"] = name
@@ -444,6 +442,18 @@ def test_chain_phase2_refuses_what_the_node_refuses(tmp_path):
     (p1 / "campaign_summary.yaml").write_text(
         yaml.safe_dump({"ok": True, "result": "complete", "bags": bags})
     )
+    return p1
+
+
+def test_chain_phase2_refuses_what_the_node_refuses(tmp_path):
+    """``lpv-sysid chain --phase1 OLD --kappa 10``: the chain identifies, synthesizes and
+    verifies (steps 2-4), then its phase 2 is refused before the link is opened with the
+    controller node's words for the same gains, signals and kappa."""
+    from test_rate_plant import P0
+
+    from lpv_sysid.flight.chain import chain
+
+    p1 = _phase1_bags(tmp_path, P0)
     lines: list = []
     status = chain(
         f"udpin:127.0.0.1:{free_udp_port()}",
@@ -461,3 +471,40 @@ def test_chain_phase2_refuses_what_the_node_refuses(tmp_path):
     assert "kappa 10 x ue_t peak" in str(node.value)
     assert summary["phase2"]["reason"] == str(node.value)
     assert not (out / "phase2").exists() or not any((out / "phase2").iterdir())
+
+
+def test_chain_flies_phase2_on_the_simulated_px4_and_checks_the_model_by_output_error(tmp_path):
+    """``lpv-sysid chain --phase1 OLD`` against the simulated PX4 in the air (lock-step): the
+    chain's phase 2 (the node runtimes) flies the signal, hands back to LAND, and the chain
+    summary carries the identified plant's output-error R^2 per row on the phase-2 flight (its
+    window stated) and the loop latency."""
+    from test_chain_px4 import P_SIM
+
+    from lpv_sysid.flight.chain import chain
+
+    p1 = _phase1_bags(tmp_path, P_SIM)
+    veh, bcfg = _vehicle(tmp_path, airborne=True)
+    url = yaml.safe_load(bcfg.read_text())["link"]["url"]
+    lines: list = []
+    try:
+        ls, _ = _lockstep(veh)
+        status = chain(
+            url,
+            tmp_path / "chain",
+            phase1_dir=p1,
+            echo=lines.append,
+            preflight=False,
+            clock=ls.clock,
+            sleep=ls.sleep,
+            phase2=FLIGHT_OPTS,
+        )
+    finally:
+        veh.close()
+    summary = yaml.safe_load((tmp_path / "chain" / "chain_summary.yaml").read_text())
+    p2 = summary["phase2"]
+    assert status == 0 and p2["ok"] and p2["handback"]["state"] == "DONE", lines[-12:]
+    oe = p2["model_check_output_error"]
+    assert oe["window_s"] == 10.0 and set(oe) >= {"u", "v", "w", "p", "q", "r"}
+    assert all(isinstance(oe[k], float) for k in ("u", "v", "w", "p", "q", "r"))
+    assert p2["latency_state_to_setpoint_ms"]["commands"] > 1000
+    print("output error R^2 on the phase-2 flight:", oe)

@@ -374,3 +374,22 @@ def test_identify_cli_builds_the_rate_plant_from_a_campaigns_bags(tmp_path, caps
         )
         == 2
     )
+
+
+def test_output_error_scores_the_true_model_near_one_and_a_wrong_pole_lower():
+    """Output error (issue 21 item 3): rows simulated from the recorded setpoints; the true
+    plant reproduces the states (R^2 > 0.97 on every row), a rate loop 3x too slow or a drag
+    of the wrong sign does not (the error accumulates), while the other rows keep their
+    score (row-wise simulation with measured couplings)."""
+    import dataclasses
+
+    t, x, u = _simulate(P0, T=30.0, seed=5)
+    run = rid.run_from_arrays("sim", t[::2], x[::2], t[::4], u[::4])
+    good = rid.output_error(P0, run)
+    assert good["window_s"] == rid.OUTPUT_ERROR_WINDOW_S
+    for row in ("u", "v", "w", "p", "q", "r"):
+        assert good[row] > 0.97, (row, good)
+    slow = rid.output_error(dataclasses.replace(P0, L_p=P0.L_p / 3, L_sp=P0.L_sp / 3), run)
+    assert slow["p"] < good["p"] - 0.1 and slow["q"] == good["q"]
+    drag = rid.output_error(dataclasses.replace(P0, X_u=-P0.X_u), run)
+    assert drag["u"] < good["u"] - 0.1 and drag["v"] == good["v"]

@@ -221,20 +221,39 @@ def chain(
         p2 = {"ok": False, "reason": str(exc)}
     done(ok=p2.get("ok"), reason=p2.get("reason"))
     # the identified rate plant against the phase-2 flight (rate setpoints from the law, not PX4)
-    bag2 = out / "phase2" / "bag_0000"  # state at the telemetry rate + the commands as sent
+    # state at the telemetry rate + PX4's echo of the commands (rate_setpoint)
+    bag2 = out / "phase2" / str(p2.get("bag") or "bag_0000")
     if bag2.exists():
         try:
-            p2["model_check_r2"] = rid.validate(params_rp, rid.read_run(bag2))
+            run2 = rid.read_run(bag2)
+            p2["model_check_r2"] = rid.validate(params_rp, run2)
             echo(
                 "  identified rate plant vs the phase-2 flight, R^2 per row: "
                 + ", ".join(f"{k} {v}" for k, v in p2["model_check_r2"].items())
+            )
+            p2["model_check_output_error"] = rid.output_error(params_rp, run2)
+            oe = p2["model_check_output_error"]
+            echo(
+                f"  output error (rows simulated from the recorded setpoints, restarted every "
+                f"{oe['window_s']:g} s), R^2 per row: "
+                + ", ".join(f"{k} {oe[k]}" for k in ("u", "v", "w", "p", "q", "r"))
             )
         except LpvSysidError as exc:
             p2["model_check_r2"] = {"error": str(exc)}
     summary["phase2"] = {
         k: v
         for k, v in p2.items()
-        if k in ("ok", "reason", "tracking_rms", "gain_u_e_to_z", "handback", "model_check_r2")
+        if k
+        in (
+            "ok",
+            "reason",
+            "tracking_rms",
+            "gain_u_e_to_z",
+            "handback",
+            "model_check_r2",
+            "model_check_output_error",
+            "latency_state_to_setpoint_ms",
+        )
     }
     summary["result"] = "complete" if p2.get("ok") else f"phase 2: {p2.get('reason')}"
     summary["wall_s"] = round(clock() - t_all, 1)
