@@ -1,29 +1,51 @@
 """Phase 2 (seed 0 Sec. 4): robust LPV control of the vehicle + excitation, logged.
 
     ros2 launch lpv_sysid phase2.launch.py gains_file:=gains.yaml [signals_file:=...]
+    ros2 launch lpv_sysid phase2.launch.py design:=rate_plant gains_file:=DIR/gains.yaml \
+        signals_file:=DIR/signals/signals.npz          # PX4 >= 1.14 (the chain's rate plant)
 
-Nodes (namespace /lpv_sysid): excitation (phase-2 mode: v_d(t) and u_e(t)),
-lpv_controller (refuses to start on an invalid gains file), mavlink_bridge (actuator
-commands to PX4; hands control back to PX4 when commands stop), data_logger.
+Nodes (namespace /lpv_sysid): excitation (phase-2 mode: v_d(t) and u_e(t), checked against the
+gains' design envelope), lpv_controller (refuses to start on an invalid gains file or a signal
+outside the box / envelope / kappa; the design -- virtual actuator or rate plant -- is read from
+the gains file), mavlink_bridge (actuator commands to PX4: ``attitude_rate`` inversion for the
+virtual-actuator design, ``rate_setpoint`` = SET_ATTITUDE_TARGET thrust + body rates for the rate
+plant; hands control back to PX4 when commands stop), data_logger. ``design:=rate_plant`` picks
+config/lpv_controller_px4.yaml (the file `lpv-sysid fly phase2` flies with) and the bridge's
+``rate_setpoint`` command: no hand-edited configuration.
 """
 
 from launch import LaunchDescription
-from lpv_sysid.nodes.launch_util import REQUIRED, arg, declare_arguments, node
+from lpv_sysid.nodes.launch_util import REQUIRED, arg, by_design, declare_arguments, node
 
 
 def generate_launch_description():
     return LaunchDescription(
         [
             *declare_arguments(
-                gains_file=REQUIRED, signals_file="signals.npz", log_dir="phase2_log"
+                gains_file=REQUIRED,
+                signals_file="signals.npz",
+                log_dir="phase2_log",
+                design="virtual_actuator",
             ),
             node(
                 "excitation",
                 "excitation_node.yaml",
-                {"mode": "phase2", "signals_file": arg("signals_file")},
+                {
+                    "mode": "phase2",
+                    "signals_file": arg("signals_file"),
+                    "gains_file": arg("gains_file"),
+                },
             ),
-            node("lpv_controller", "lpv_controller.yaml", {"gains_file": arg("gains_file")}),
-            node("mavlink_bridge", "mavlink_bridge_node.yaml", {"command": "attitude_rate"}),
+            node(
+                "lpv_controller",
+                by_design("lpv_controller_px4.yaml", "lpv_controller.yaml"),
+                {"gains_file": arg("gains_file"), "signals_file": arg("signals_file")},
+            ),
+            node(
+                "mavlink_bridge",
+                "mavlink_bridge_node.yaml",
+                {"command": by_design("rate_setpoint", "attitude_rate")},
+            ),
             node(
                 "data_logger",
                 "data_logger.yaml",

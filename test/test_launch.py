@@ -48,7 +48,14 @@ def _node_calls(tree):
             args = list(call.args) + [None] * 2
             name = args[0].value
             file = args[1] if args[1] is not None else kw.get("params_file")
-            out.append((f"{name}_node", name, None if file is None else file.value))
+            if file is None:
+                out.append((f"{name}_node", name, None))
+            elif isinstance(file, ast.Constant):
+                out.append((f"{name}_node", name, file.value))
+            else:  # a file picked by a launch argument (by_design): every candidate
+                for c in ast.walk(file):
+                    if isinstance(c, ast.Constant) and str(c.value).endswith(".yaml"):
+                        out.append((f"{name}_node", name, c.value))
     return out
 
 

@@ -176,7 +176,7 @@ SIGNALS = ("signals.npz", "signals.npz written by `lpv-sysid signals`")
         ),
         (
             "phase2.launch.py",
-            ["config_dir", "gains_file", "signals_file", "log_dir"],
+            ["config_dir", "gains_file", "signals_file", "log_dir", "design"],
             {
                 "gains_file": (None, "gains.yaml from `lpv-sysid synthesize`"),
                 "signals_file": SIGNALS,
@@ -213,13 +213,34 @@ def test_launch_files_declare_and_wire(fake_launch, fname, order, expected):
         # in the overrides names a declared argument
         first = node.parameters[0]
         assert first.args[0][0] == LaunchConfiguration("config_dir")
+        if isinstance(first.args[0][1], PythonExpression):  # the file named by a launch argument
+            for v in first.args[0][1].args[0]:
+                if isinstance(v, LaunchConfiguration):
+                    assert v.args[0] in args, (executable, v)
         for v in node.parameters[1].values():
             if isinstance(v, LaunchConfiguration):
                 assert v.args[0] in args, (executable, v)
     if fname == "phase2.launch.py":
+        # the controller checks the signal the excitation node plays (box, envelope, kappa)
         assert nodes["lpv_controller_node"].parameters[1] == {
-            "gains_file": LaunchConfiguration("gains_file")
+            "gains_file": LaunchConfiguration("gains_file"),
+            "signals_file": LaunchConfiguration("signals_file"),
         }
+        assert nodes["excitation_node"].parameters[1]["gains_file"] == LaunchConfiguration(
+            "gains_file"
+        )
+        # design:=rate_plant -> the PX4 controller file and the rate_setpoint bridge command
+        ctrl_file = nodes["lpv_controller_node"].parameters[0].args[0][1]
+        command = nodes["mavlink_bridge_node"].parameters[1]["command"]
+        for expr, rate, virtual in (
+            (ctrl_file, "lpv_controller_px4.yaml", "lpv_controller.yaml"),
+            (command, "rate_setpoint", "attitude_rate"),
+        ):
+            parts = expr.args[0]
+            for design, want in (("rate_plant", rate), ("virtual_actuator", virtual)):
+                text = "".join(design if isinstance(p, LaunchConfiguration) else p for p in parts)
+                assert eval(text, {}) == want  # noqa: S307 - PythonExpression's own evaluation
+        assert args["design"][0] == "virtual_actuator"
     if fname == "sim.launch.py":
         assert nodes["lpv_controller_node"].condition is not None
         assert all(n.condition is None for e, n in nodes.items() if e != "lpv_controller_node")

@@ -30,7 +30,15 @@ DESCRIPTIONS = {
     "gains_file": "gains.yaml from `lpv-sysid synthesize`",
     "vertex": "vertex body velocity (u, v, w) FRD, m/s, for this run",
     "log_dir": "experiment directory of the data logger",
+    "design": "the plant the gains were designed for: virtual_actuator (ut, ua, ue, ur; bridge "
+    "command attitude_rate, config lpv_controller.yaml) or rate_plant (thrust + body-rate "
+    "setpoints sent as SET_ATTITUDE_TARGET, bridge command rate_setpoint, config "
+    "lpv_controller_px4.yaml: PX4 >= 1.14, gains of `lpv-sysid chain` / `identify --plant "
+    "px4-rate`)",
 }
+#: ``design`` launch argument values (the controller reads the design from the gains file and
+#: refuses a file of neither; the argument picks the bridge command and parameter file)
+DESIGNS = ("virtual_actuator", "rate_plant")
 
 #: marks an argument without default (``ros2 launch`` refuses to start without it)
 REQUIRED = None
@@ -62,9 +70,19 @@ def arg(name: str) -> LaunchConfiguration:
     return LaunchConfiguration(name)
 
 
-def params(name: str) -> PathJoinSubstitution:
+def params(name: Any) -> PathJoinSubstitution:
     """The node parameter file ``name`` in the directory of the ``config_dir`` argument."""
     return PathJoinSubstitution([arg("config_dir"), name])
+
+
+def by_design(rate_plant: str, virtual_actuator: str) -> Any:
+    """``rate_plant`` when the ``design`` launch argument is ``rate_plant``, else
+    ``virtual_actuator`` (a substitution, resolved at launch)."""
+    from launch.substitutions import PythonExpression
+
+    return PythonExpression(
+        [f"{rate_plant!r} if '", arg("design"), f"' == 'rate_plant' else {virtual_actuator!r}"]
+    )
 
 
 def sigterm_timeout() -> LaunchConfiguration:
@@ -76,7 +94,7 @@ def sigterm_timeout() -> LaunchConfiguration:
 
 def node(
     name: str,
-    params_file: Optional[str] = None,
+    params_file: Any = None,
     overrides: Optional[Mapping[str, Any]] = None,
     condition: Any = None,
 ) -> Node:

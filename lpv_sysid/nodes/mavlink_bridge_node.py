@@ -30,7 +30,7 @@ from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu, JointState
 from std_srvs.srv import Trigger
 
-from lpv_sysid.flight.bridge import PARSERS, SPECS, BridgeRuntime, settings_from_params
+from lpv_sysid.flight.bridge import SPECS, BridgeRuntime, settings_from_params
 from lpv_sysid.io import messages
 from lpv_sysid.nodes import shell
 
@@ -46,6 +46,7 @@ TYPES = {
     "cmd_vel": TwistStamped,
     "velocity_reference": TwistStamped,
     "actuator_command": JointState,
+    "rate_setpoint": JointState,
     "mavros_odom": Odometry,
     "mavros_imu": Imu,
     "mavros_diagnostics": DiagnosticArray,
@@ -87,7 +88,7 @@ class MavlinkBridgeNode(shell.ShellNode):
         return settings_from_params(values)
 
     def _input(self, key):
-        parse = PARSERS.get(key)
+        parse = self.runtime.parsers.get(key)
 
         def cb(msg):
             if parse is None:  # a MAVROS message: the runtime judges it

@@ -120,6 +120,12 @@ def run(args: argparse.Namespace) -> int:
             opts=Phase2Options(kappa=args.kappa, finish=args.finish),
             echo=print,
         )
+        lat = s.get("latency_state_to_setpoint_ms") or {}
+        if lat.get("commands"):
+            print(
+                f"loop latency (state stamp -> setpoint sent, {lat['commands']} commands): p50 "
+                f"{lat['p50']:.2f} ms, p99 {lat['p99']:.2f} ms, max {lat['max']:.2f} ms"
+            )
         print(
             f"phase 2 {'complete' if s.get('ok') else 'FAILED'}: {s.get('reason')}; "
             f"{args.out / 'phase2_summary.yaml'}"

@@ -33,6 +33,7 @@ from lpv_sysid.mavlink.bridge import (
     BridgeCore,
     MavrosConfig,
     MavrosCore,
+    RATE_INPUT_NAMES,
     MavrosOutput,
     cmd_vel_msg,
 )
@@ -44,6 +45,30 @@ PARSERS = {
     "velocity_reference": messages.reference_from_twist,
     "actuator_command": messages.actuator_command_from_joint_state,
 }
+#: ``command: rate_setpoint`` (the rate-plant design): ``actuator_command`` carries the rate
+#: plant's inputs (thrust, p_sp, q_sp, r_sp), sent as SET_ATTITUDE_TARGET unchanged but clipped
+RATE_PLANT_PARSERS = {
+    **PARSERS,
+    "actuator_command": lambda msg: messages.channels_from_joint_state(
+        msg, RATE_INPUT_NAMES, field="position"
+    ),
+}
+#: rate of PX4's ATTITUDE_TARGET requested with ``command: rate_setpoint`` unless configured [Hz]
+ATTITUDE_TARGET_HZ = 50.0
+
+
+def with_attitude_target_stream(cfg: BridgeConfig) -> BridgeConfig:
+    """``cfg`` with PX4's ATTITUDE_TARGET requested at :data:`ATTITUDE_TARGET_HZ` (the echo of
+    the rate setpoints it tracks, recorded on ``rate_setpoint``) unless its rate is
+    configured (also 0 = off)."""
+    import dataclasses
+
+    if any(name == "ATTITUDE_TARGET" for name, _ in cfg.link.streams):
+        return cfg
+    streams = tuple(cfg.link.streams) + (("ATTITUDE_TARGET", ATTITUDE_TARGET_HZ),)
+    return dataclasses.replace(cfg, link=dataclasses.replace(cfg.link, streams=streams))
+
+
 #: core states in which the orderly shutdown needs no more spinning
 SHUTDOWN_DONE = ("IDLE", "DONE", "FAILED")
 
@@ -88,6 +113,8 @@ class BridgeRuntime:
         self.publishers = [Endpoint("state", "state"), Endpoint("imu", "imu")]
         self.subscriptions = [Endpoint("velocity_reference", "velocity_reference")]
         self.core: Union[MavrosCore, BridgeCore]
+        #: the parsers of the package input topics for this configuration (the shell's)
+        self.parsers: Mapping[str, Any] = PARSERS
         if s.transport == "mavros":
             self.core = self.mavros = MavrosCore(MavrosConfig.from_dict(mavros))
             cfg = self.mavros.config
@@ -111,8 +138,17 @@ class BridgeRuntime:
                 )
             )
         else:
-            self.core = self.link = BridgeCore(BridgeConfig.from_dict(bridge))
+            cfg_b = BridgeConfig.from_dict(bridge)
+            if cfg_b.command == "rate_setpoint":
+                self.parsers = RATE_PLANT_PARSERS
+            if s.rate_setpoints:
+                cfg_b = with_attitude_target_stream(cfg_b)
+            self.core = self.link = BridgeCore(cfg_b)
+            #: PX4's ATTITUDE_TARGET (the setpoints it tracks) seen since the last poll
+            self._echo: list[tuple[float, Any]] = []
             self.publishers.append(Endpoint("rotor_speeds", "rotor_speeds"))
+            if s.rate_setpoints:
+                self.publishers.append(Endpoint("rate_setpoint", "rate_setpoint"))
             self.subscriptions.append(Endpoint("actuator_command", "actuator_command"))
             self.timer_period_s = 1.0 / s.poll_rate_hz
             self._log += self._handback_lines(sigterm_timeout_s, teardown_margin_s)
@@ -146,9 +182,14 @@ class BridgeRuntime:
         return out
 
     def open(self, now: float) -> None:
-        """Open the MAVLink link (transport mavlink; MAVROS owns its link)."""
+        """Open the MAVLink link (transport mavlink; MAVROS owns its link); PX4's
+        ATTITUDE_TARGET is republished on ``rate_setpoint``."""
         if self.link is not None:
+            from lpv_sysid.flight.vehicle import tap_attitude_target
+
             self.link.open(now)
+            if self.settings.rate_setpoints:
+                tap_attitude_target(self.link.link, lambda t, u: self._echo.append((t, u)))
 
     # -- inputs ---------------------------------------------------------------------------
     def on_sample(self, key: str, parsed: tuple, now: float) -> Output:
@@ -244,6 +285,14 @@ class BridgeRuntime:
                 pubs.append(
                     ("rotor_speeds", messages.rotor_speeds_msg(f, stamp, s.omega, s.source))
                 )
+        for t, u in self._echo:
+            pubs.append(
+                (
+                    "rate_setpoint",
+                    messages.joint_state(f, round(t * 1e9), RATE_INPUT_NAMES, position=u),
+                )
+            )
+        self._echo.clear()
         if out.events:
             pubs += self.status(now, out.events)
         return pubs

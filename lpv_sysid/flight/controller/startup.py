@@ -155,8 +155,8 @@ def check_flight_signals(gs: GainSchedule, signals_file: str, kappa: float) -> s
         if peak > design.excitation_peak[k] * (1 + _TOL):
             raise ConfigError(
                 f"{where}: kappa {kappa:g} x {n} peak = {peak:.4g} exceeds the design "
-                f"excitation peak {design.excitation_peak[k]:.4g} (excitation_gain / --kappa "
-                "scales the signal the gains' R was designed for)"
+                f"excitation peak {design.excitation_peak[k]:.4g} (excitation_gain, kappa of "
+                "seed 0 Eq. 33, scales the signal the gains' R was designed for)"
             )
     return (
         f"signals {where}: v_d inside the box, within the design envelope, kappa {kappa:g} "

@@ -14,4 +14,7 @@ TYPES = {
     "excitation": "sensor_msgs/msg/JointState",
     "actuator_command": "sensor_msgs/msg/JointState",
     "status": "diagnostic_msgs/msg/DiagnosticArray",
+    # PX4's ATTITUDE_TARGET (thrust + body-rate setpoints it tracks; names thrust, p_sp, q_sp,
+    # r_sp in ``position``): the rate-plant identification's input, phase 2's echo
+    "rate_setpoint": "sensor_msgs/msg/JointState",
 }
