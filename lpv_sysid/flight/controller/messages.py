@@ -18,6 +18,7 @@ from lpv_sysid.io.messages import (
     reference_from_twist,
     rotor_speeds_from_joint_state,
     state_from_odometry,
+    state_from_odometry_cdr,
     states_from_odometry,
 )
 from lpv_sysid.models.quadrotor import EXCITATION_NAMES, INPUT_NAMES, STATE_NAMES
@@ -39,20 +40,35 @@ class CommandBuilder:
     clips, so the per-message finiteness and duplicate-name checks of io.messages (5 of the
     7 us a message took) are not repeated; a stamp outside builtin_interfaces/Time goes
     through io.messages, which names the problem (test_nodes_controller compares both
-    builders field by field)."""
+    builders field by field).
 
-    def __init__(self, factory: MsgFactory) -> None:
+    ``reuse``: one message, allocated here, is filled and returned by every call (stamp and
+    ``position`` set; names, frame and the empty fields stay) -- for a caller that publishes
+    each command before it asks for the next (the node: rclpy serialises on ``publish``)."""
+
+    def __init__(self, factory: MsgFactory, reuse: bool = False) -> None:
         self.f = factory
         self._time = factory.get("builtin_interfaces/msg/Time")
         self._header = factory.get("std_msgs/msg/Header")
         self._joint_state = factory.get("sensor_msgs/msg/JointState")
         self._names = [str(n) for n in INPUT_NAMES]
         self._seq = factory.float_seq
+        self._msg = self._new(0, 0, np.zeros(len(INPUT_NAMES))) if reuse else None
 
     def __call__(self, stamp_ns: int, u: np.ndarray) -> Any:
         sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
         if not -(2**31) <= sec < 2**31:
             return actuator_command_msg(self.f, stamp_ns, u)  # raises MessageError
+        msg = self._msg
+        if msg is None:
+            return self._new(sec, nanosec, u)
+        stamp = msg.header.stamp
+        stamp.sec = sec
+        stamp.nanosec = nanosec
+        msg.position = self._seq(u)
+        return msg
+
+    def _new(self, sec: int, nanosec: int, u: np.ndarray) -> Any:
         seq = self._seq
         return self._joint_state(
             header=self._header(stamp=self._time(sec=sec, nanosec=nanosec), frame_id=""),
@@ -80,6 +96,17 @@ def parse_input(topic: str, msg) -> tuple[float, np.ndarray]:
     if topic == "excitation":
         return excitation_from_joint_state(msg)
     raise ConfigError(f"lpv_controller: unknown input topic {topic!r}")
+
+
+def parse_state_cdr(data: bytes) -> tuple[float, np.ndarray] | None:
+    """:func:`parse_input` of a serialized ``state`` message (the node's raw subscription):
+    the same ``(t, values)`` read from the CDR bytes; ``None`` when it needs the validating
+    path (:func:`lpv_sysid.io.messages.state_from_odometry_cdr`: deserialise it and call
+    :func:`parse_input`); MessageError on a wrong frame or stamp."""
+    s = state_from_odometry_cdr(data)
+    if s is None:
+        return None
+    return s.t, np.concatenate([s.euler[:2], s.v_body, s.omega])
 
 
 def parse_inputs(topic: str, msgs: list) -> tuple[np.ndarray, np.ndarray]:

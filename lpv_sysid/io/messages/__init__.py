@@ -75,6 +75,7 @@ from lpv_sysid.io.messages.state import (
     StateSample,
     odometry_from_state,
     state_from_odometry,
+    state_from_odometry_cdr,
     states_from_odometry,
 )
 from lpv_sysid.io.messages.status import (
@@ -124,6 +125,7 @@ __all__ = [
     "stamp_ns_from_time",
     "stamp_ns_of",
     "state_from_odometry",
+    "state_from_odometry_cdr",
     "states_from_odometry",
     "status_from_diagnostic_array",
     "time_msg",
