@@ -107,7 +107,7 @@ def test_coverage_study_on_two_workers_equals_the_serial_run():
     )
     lines: list = []
     serial, _ = cv.run_study(*args, workers=1)
-    pooled, _ = cv.run_study(*args, progress=lines.append, workers=2)
+    pooled, runs = cv.run_study(*args, progress=lines.append, keep_runs=True, workers=2)
     assert [a.index for a in pooled] == [1, 2] and [ln.split(":")[0] for ln in lines] == [
         "airframe 1",
         "airframe 2",
@@ -121,6 +121,13 @@ def test_coverage_study_on_two_workers_equals_the_serial_run():
     assert cv.summary_dict(pooled, QuadrotorParams(), cfg) == cv.summary_dict(
         serial, QuadrotorParams(), cfg
     )
+    # the ablations re-identify the kept flights (returned by the workers): 2 variants x 2
+    # airframes as tasks, the serial numbers
+    assert [len(r) for r in runs] == [1, 1]
+    ab1 = cv.ablations(runs, pooled, QuadrotorParams(), args[-1], workers=1)
+    ab2 = cv.ablations(runs, pooled, QuadrotorParams(), args[-1], workers=2)
+    assert list(ab1) == list(cv.ABLATIONS) and ab2 == ab1
+    assert all(0.0 < f <= 1.0 for fr in ab1.values() for f in fr)
 
 
 def test_dask_backend_equals_the_serial_run():

@@ -359,25 +359,39 @@ ABLATIONS: dict[str, dict[str, Any]] = {
 
 
 def ablations(
-    runs_per_airframe, airframes: Sequence[AirframeCoverage], base: QuadrotorParams, ident_cfg
+    runs_per_airframe,
+    airframes: Sequence[AirframeCoverage],
+    base: QuadrotorParams,
+    ident_cfg,
+    workers: int | None = 1,
 ) -> dict:
-    """Coverage fraction per airframe of each :data:`ABLATIONS` variant on the same flights."""
+    """Coverage fraction per airframe of each :data:`ABLATIONS` variant on the same flights;
+    each (variant, airframe) re-identification is a task on ``workers`` processes (the
+    numbers of the serial run)."""
     from lpv_sysid.ident import equation_error as ee
 
-    out = {}
+    cfgs = {}
     for name, change in ABLATIONS.items():
         kw = dict(change)
         if kw.get("covariance") == "residual_acf":
             kw["covariance"] = ee.CovarianceConfig(
                 method="residual_acf", max_lag=ident_cfg.max_lag
             )
-        cfg = dataclasses.replace(ident_cfg, **kw)
-        fr = []
-        for af, runs in zip(airframes, runs_per_airframe):
-            vc = score(runs, identify_runs(runs, af.params, base, cfg), af.params, cfg)
-            fr.append(sum(v.covered for v in vc) / max(1, sum(v.n for v in vc)))
-        out[name] = fr
-    return out
+        cfgs[name] = dataclasses.replace(ident_cfg, **kw)
+    tasks = [
+        (runs, af.params, base, cfg)
+        for cfg in cfgs.values()
+        for af, runs in zip(airframes, runs_per_airframe)
+    ]
+    fractions = iter(map_tasks(_ablation_task, tasks, workers))
+    return {name: [next(fractions) for _ in airframes] for name in cfgs}
+
+
+def _ablation_task(task: tuple) -> float:
+    """One airframe re-identified under one ablation config: its coverage fraction."""
+    runs, params, base, cfg = task
+    vc = score(runs, identify_runs(runs, params, base, cfg), params, cfg)
+    return sum(v.covered for v in vc) / max(1, sum(v.n for v in vc))
 
 
 def summary_dict(

@@ -124,7 +124,11 @@ def run(args: argparse.Namespace) -> int:
         keep_runs=args.ablations,
         workers=args.workers,
     )
-    ablation = cv.ablations(runs, airframes, qp, ident_cfg) if args.ablations else None
+    ablation = (
+        cv.ablations(runs, airframes, qp, ident_cfg, workers=args.workers)
+        if args.ablations
+        else None
+    )
     doc = cv.summary_dict(airframes, qp, cfg, ablation)
     table = cv.markdown_table(airframes, qp, ablation)
     (out / "coverage.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
