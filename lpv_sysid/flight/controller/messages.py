@@ -17,8 +17,8 @@ from lpv_sysid.io.messages import (
     excitation_from_joint_state,
     reference_from_twist,
     rotor_speeds_from_joint_state,
+    odometry_cdr_frames,
     state_from_odometry,
-    state_from_odometry_cdr,
     states_from_odometry,
 )
 from lpv_sysid.models.quadrotor import EXCITATION_NAMES, INPUT_NAMES, STATE_NAMES
@@ -101,12 +101,13 @@ def parse_input(topic: str, msg) -> tuple[float, np.ndarray]:
 def parse_state_cdr(data: bytes) -> tuple[float, np.ndarray] | None:
     """:func:`parse_input` of a serialized ``state`` message (the node's raw subscription):
     the same ``(t, values)`` read from the CDR bytes; ``None`` when it needs the validating
-    path (:func:`lpv_sysid.io.messages.state_from_odometry_cdr`: deserialise it and call
+    path (:func:`lpv_sysid.io.messages.odometry_cdr_frames`: deserialise it and call
     :func:`parse_input`); MessageError on a wrong frame or stamp."""
-    s = state_from_odometry_cdr(data)
-    if s is None:
+    got = odometry_cdr_frames(data)
+    if got is None:
         return None
-    return s.t, np.concatenate([s.euler[:2], s.v_body, s.omega])
+    ns, _, euler, v_frd, w_frd = got  # one array built, not four and their concatenation
+    return ns / 1e9, np.array([euler[0], euler[1], *v_frd, *w_frd])
 
 
 def parse_inputs(topic: str, msgs: list) -> tuple[np.ndarray, np.ndarray]:

@@ -138,15 +138,16 @@ def _fast_sample(f: Sequence[float], ns: int) -> StateSample:
     )
 
 
-def state_from_odometry_cdr(
+def odometry_cdr_frames(
     data: bytes, *, frame_id: str | None = ODOM_FRAME, child_frame_id: str | None = BASE_FRAME
-) -> StateSample | None:
-    """:func:`state_from_odometry` of the serialized message (a raw subscription's bytes),
-    reading only the 13 values it needs (:func:`lpv_sysid.io.bag.cdr.odometry_record`): the
-    same sample, the same frame checks (MessageError). ``None`` when the message needs the
-    validating path (a non-finite value, a quaternion off unit norm, bytes that are no CDR
-    Odometry record): the caller deserialises it and calls :func:`state_from_odometry`,
-    which names the problem."""
+) -> tuple[int, tuple, tuple, tuple, tuple] | None:
+    """``(stamp_ns, pos_ned, euler, v_frd, w_frd)`` (float tuples) of a serialized
+    ``nav_msgs/Odometry`` (a raw subscription's bytes), reading only the 13 values it needs
+    (:func:`lpv_sysid.io.bag.cdr.odometry_record`) through the fast path of
+    :func:`state_from_odometry`: the same numbers, the same frame and stamp checks
+    (MessageError). ``None`` when the message needs the validating path (a non-finite value,
+    a quaternion off unit norm, bytes that are no CDR Odometry record): the caller
+    deserialises it and calls :func:`state_from_odometry`, which names the problem."""
     from lpv_sysid.io.bag.cdr import LayoutError, odometry_record  # the node's path only
 
     try:
@@ -160,7 +161,27 @@ def state_from_odometry_cdr(
         return None
     if not 0 <= rec.nanosec < 1_000_000_000:
         raise MessageError(f"stamp: nanosec {rec.nanosec} outside [0, 1e9)")
-    return _fast_sample(f, rec.sec * 1_000_000_000 + rec.nanosec)
+    ns = rec.sec * 1_000_000_000 + rec.nanosec
+    return (ns, *frames.odometry_ned_frd_from_ros_scalar(f[0:3], f[3:7], f[7:10], f[10:13]))
+
+
+def state_from_odometry_cdr(
+    data: bytes, *, frame_id: str | None = ODOM_FRAME, child_frame_id: str | None = BASE_FRAME
+) -> StateSample | None:
+    """:func:`state_from_odometry` of the serialized message (:func:`odometry_cdr_frames`;
+    ``None``: take the validating path)."""
+    got = odometry_cdr_frames(data, frame_id=frame_id, child_frame_id=child_frame_id)
+    if got is None:
+        return None
+    ns, pos_ned, euler, v_frd, w_frd = got
+    return StateSample(
+        t=ns / 1e9,
+        pos_ned=np.array(pos_ned),
+        euler=np.array(euler),
+        v_body=np.array(v_frd),
+        omega=np.array(w_frd),
+        stamp_ns=ns,
+    )
 
 
 @dataclass(frozen=True)
