@@ -50,6 +50,25 @@ def test_serial_and_pooled_tasks_see_one_blas_thread():
     assert map_tasks(_blas_threads, [0, 1, 2], 2) == [1, 1, 1]
 
 
+def test_with_other_threads_running_the_workers_are_spawned_with_the_blas_variables():
+    """A fork copies only the calling thread: with another Python thread alive the pool
+    spawns fresh interpreters, which read the BLAS variables when they load numpy."""
+    import threading
+
+    from lpv_sysid.parallel.pool import start_method
+
+    stop = threading.Event()
+    t = threading.Thread(target=stop.wait)
+    t.start()
+    try:
+        assert start_method() == "spawn"
+        assert map_tasks(os.getenv, list(BLAS_THREAD_VARIABLES), 2) == ["1"] * 3
+        assert map_tasks(_blas_threads, [0, 1], 2) == [1, 1]
+    finally:
+        stop.set()
+        t.join()
+
+
 def test_a_task_error_reaches_the_caller_with_its_type():
     with pytest.raises(ConfigError, match="workers must be an integer >= 1, got 0"):
         map_tasks(resolve_workers, [1, 0, 2], 2)
