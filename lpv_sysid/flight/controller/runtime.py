@@ -99,6 +99,7 @@ class ControllerRuntime:
         self._state_stamp: Optional[float] = None  # stamp of the newest state sample
         self._ref_slope: Optional[np.ndarray] = None  # slope of the limited reference
         self.commands = 0
+        self.loop_delay_max = 0.0  # the largest loop delay of a tick since start [s]
         self.flags = {"clamped": 0, "saturated": 0, "rate_limited": 0}
         self._abort_reported = False
 
@@ -274,6 +275,7 @@ class ControllerRuntime:
                 f"no {', '.join(missing)} received yet: start once every input stream arrives"
             )
         sup.arm(t_now)
+        self.loop_delay_max = 0.0
         self.law.reset()
         self.limiter.reset()
         if self.v_d_in is not None and self._ref_stamp is not None:
@@ -303,6 +305,8 @@ class ControllerRuntime:
         sup.check(t_now)
         t_state = self._state_stamp if t_sample is None else t_law
         if t_state is not None:
+            if t_now - t_state > self.loop_delay_max:
+                self.loop_delay_max = t_now - t_state
             sup.check_loop_delay(t_now, t_state)
         if sup.aborted or self._ue_scaled is None or self.body_state is None or self.omega is None:
             return self._report_abort(t_now, out)
@@ -400,6 +404,8 @@ class ControllerRuntime:
             "gain_estimate": self.law.gain(),
             "gamma": self.law.gamma,
             "reference_limited_count": self.limiter.limited,
+            "loop_delay_max_ms": 1e3 * self.loop_delay_max,
+            "loop_delay_bound_ms": 1e3 * sup.config.loop_delay_bound,
             **{f"{k}_count": v for k, v in self.flags.items()},
         }
         st = diagnostic_status(self.f, level, self.name, message, values)
