@@ -149,6 +149,22 @@ def test_coverage_study_on_two_workers_equals_the_serial_run():
     assert all(0.0 < f <= 1.0 for fr in ab1.values() for f in fr)
 
 
-def test_dask_backend_equals_the_serial_run():
+def test_dask_backend_equals_the_serial_run(tmp_path):
     pytest.importorskip("dask", reason="dask not installed (optional backend)")
     assert map_tasks(abs, [-3, 1, -2], 2, backend="dask") == [3, 1, 2]
+    gains, models = _toy(tmp_path)
+    n = PARALLEL_MIN_SAMPLES
+    serial = verify_files(gains, models, n_random=1, seed=5, full_box=n, workers=1).full_box
+    dasked = verify_files(
+        gains, models, n_random=1, seed=5, full_box=n, workers=2, backend="dask"
+    ).full_box
+    assert dasked.summary() == serial.summary()
+    assert [s.norm for s in dasked.samples] == [s.norm for s in serial.samples]
+
+
+def test_dask_backend_without_dask_is_a_clear_error(monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "dask", None)  # import dask -> ImportError
+    with pytest.raises(ConfigError, match="dask is not installed"):
+        map_tasks(abs, [1, 2], 2, backend="dask")
