@@ -315,13 +315,15 @@ def run_study(
     progress: Callable[[str], None] | None = None,
     keep_runs: bool = False,
     workers: int | None = 1,
+    backend: str = "process",
 ):
     """The study of the module docstring: ``(airframes, runs per airframe or None)``.
 
     The airframes are independent tasks (each draws from its own stream
     ``default_rng([seed, k])`` and flies with its own noise seeds): they run on ``workers``
     processes (:func:`lpv_sysid.parallel.map_tasks`; ``None``: every core) with the same
-    numbers as the serial run; ``progress`` lines come in airframe order."""
+    numbers as the serial run; ``progress`` lines come in airframe order. ``backend``:
+    ``process`` or ``dask`` (:data:`lpv_sysid.parallel.BACKENDS`)."""
     from lpv_sysid.sim import phase1 as p1
 
     vertices = list(cfg.vertices) if cfg.vertices else list(range(1, 9))
@@ -339,7 +341,7 @@ def run_study(
                 f"{af.vertices[0].k_sigma:g} sigma ({100 * af.fraction:.2f} %)"
             )
 
-    done = map_tasks(_airframe_task, tasks, workers, on_result=report)
+    done = map_tasks(_airframe_task, tasks, workers, backend, on_result=report)
     return [af for af, _ in done], [runs for _, runs in done]
 
 
@@ -361,25 +363,40 @@ ABLATIONS: dict[str, dict[str, Any]] = {
 
 
 def ablations(
-    runs_per_airframe, airframes: Sequence[AirframeCoverage], base: QuadrotorParams, ident_cfg
+    runs_per_airframe,
+    airframes: Sequence[AirframeCoverage],
+    base: QuadrotorParams,
+    ident_cfg,
+    workers: int | None = 1,
+    backend: str = "process",
 ) -> dict:
-    """Coverage fraction per airframe of each :data:`ABLATIONS` variant on the same flights."""
+    """Coverage fraction per airframe of each :data:`ABLATIONS` variant on the same flights;
+    each (variant, airframe) re-identification is a task on ``workers`` processes (the
+    numbers of the serial run)."""
     from lpv_sysid.ident import equation_error as ee
 
-    out = {}
+    cfgs = {}
     for name, change in ABLATIONS.items():
         kw = dict(change)
         if kw.get("covariance") == "residual_acf":
             kw["covariance"] = ee.CovarianceConfig(
                 method="residual_acf", max_lag=ident_cfg.max_lag
             )
-        cfg = dataclasses.replace(ident_cfg, **kw)
-        fr = []
-        for af, runs in zip(airframes, runs_per_airframe):
-            vc = score(runs, identify_runs(runs, af.params, base, cfg), af.params, cfg)
-            fr.append(sum(v.covered for v in vc) / max(1, sum(v.n for v in vc)))
-        out[name] = fr
-    return out
+        cfgs[name] = dataclasses.replace(ident_cfg, **kw)
+    tasks = [
+        (runs, af.params, base, cfg)
+        for cfg in cfgs.values()
+        for af, runs in zip(airframes, runs_per_airframe)
+    ]
+    fractions = iter(map_tasks(_ablation_task, tasks, workers, backend))
+    return {name: [next(fractions) for _ in airframes] for name in cfgs}
+
+
+def _ablation_task(task: tuple) -> float:
+    """One airframe re-identified under one ablation config: its coverage fraction."""
+    runs, params, base, cfg = task
+    vc = score(runs, identify_runs(runs, params, base, cfg), params, cfg)
+    return sum(v.covered for v in vc) / max(1, sum(v.n for v in vc))
 
 
 def summary_dict(

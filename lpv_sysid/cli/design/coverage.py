@@ -16,6 +16,8 @@ import argparse
 import time
 from pathlib import Path
 
+from lpv_sysid.parallel import BACKENDS
+
 COMMAND = "coverage"
 HELP = "truth coverage of the identified vertex-model intervals on simulated airframes"
 
@@ -67,6 +69,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="N",
         help="processes flying and identifying the airframes (default: every core this process "
         "may use; 1 = serial; the numbers do not depend on it)",
+    )
+    parser.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default="process",
+        help="where the --workers run: process (a local process pool, default) or dask (the "
+        "active dask.distributed client, else Dask's local processes; dask must be installed)",
     )
     parser.add_argument(
         "--ablations",
@@ -123,8 +132,13 @@ def run(args: argparse.Namespace) -> int:
         progress=print,
         keep_runs=args.ablations,
         workers=args.workers,
+        backend=args.backend,
     )
-    ablation = cv.ablations(runs, airframes, qp, ident_cfg) if args.ablations else None
+    ablation = (
+        cv.ablations(runs, airframes, qp, ident_cfg, workers=args.workers, backend=args.backend)
+        if args.ablations
+        else None
+    )
     doc = cv.summary_dict(airframes, qp, cfg, ablation)
     table = cv.markdown_table(airframes, qp, ablation)
     (out / "coverage.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))

@@ -31,6 +31,7 @@ import argparse
 import time
 from typing import Any
 
+from lpv_sysid.parallel import BACKENDS
 from lpv_sysid.synthesis.verify import VERIFY_SETTINGS
 
 COMMAND = "verify"
@@ -106,6 +107,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="processes judging the --full-box samples (default: every core this process may "
         "use; 1 = serial; the numbers do not depend on it)",
     )
+    parser.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default="process",
+        help="where the --workers run: process (a local process pool, default) or dask (the "
+        "active dask.distributed client, else Dask's local processes; dask must be installed)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -128,6 +136,7 @@ def run(args: argparse.Namespace) -> int:
         k_sigma=args.k_sigma,
         full_box_kept=args.full_box_kept,
         workers=args.workers,
+        backend=args.backend,
     )
     print(rep.table(max_rows=10**6) if not args.all_rows else _all(rep))
     fb = rep.full_box

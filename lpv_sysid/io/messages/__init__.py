@@ -74,7 +74,9 @@ from lpv_sysid.io.messages.imu import ImuSample, imu_from_msg, imu_msg
 from lpv_sysid.io.messages.state import (
     StateSample,
     odometry_from_state,
+    odometry_cdr_frames,
     state_from_odometry,
+    state_from_odometry_cdr,
     states_from_odometry,
 )
 from lpv_sysid.io.messages.status import (
@@ -123,7 +125,9 @@ __all__ = [
     "rotor_speeds_msg",
     "stamp_ns_from_time",
     "stamp_ns_of",
+    "odometry_cdr_frames",
     "state_from_odometry",
+    "state_from_odometry_cdr",
     "states_from_odometry",
     "status_from_diagnostic_array",
     "time_msg",

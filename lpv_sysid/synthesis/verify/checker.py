@@ -40,6 +40,7 @@ def verify_files(
     k_sigma: Optional[float] = None,
     full_box_kept: str = "stored",
     workers: Optional[int] = 1,
+    backend: str = "process",
 ) -> VerifyReport:
     """Load gains.yaml (+ sidecar) and vertex_models.yaml and run :func:`verify_gains`.
 
@@ -49,7 +50,7 @@ def verify_files(
     unless ``strict_full_box`` or the certificate claims the full box (then a miss fails: the
     Monte Carlo is a cross-check of the claim). ``k_sigma`` overrides the models file's
     ``meta.k_sigma``. ``workers``: processes of the full-box Monte Carlo (``None``: every core;
-    the numbers do not depend on it).
+    the numbers do not depend on it), on ``backend`` (``process`` or ``dask``).
     """
     from lpv_sysid.io.files import sha256_file
     from lpv_sysid.io.formats import GainSchedule, load_certificate_npz
@@ -156,6 +157,7 @@ def verify_files(
             k_sigma=k,
             k_source=k_src,
             workers=workers,
+            backend=backend,
         )
     if model.box is not None:
         bx = _sidecar_box(sidecar, model.n_x, model.n_u) if sidecar is not None else None
@@ -279,14 +281,16 @@ def verify_and_record(
     models_path: Path | str,
     out: Optional[Path | str] = None,
     workers: Optional[int] = 1,
+    backend: str = "process",
     **settings: Any,
 ) -> tuple[VerifyReport, Path]:
     """:func:`verify_files` with :data:`VERIFY_SETTINGS` (overridden by ``settings``), its
     record written to ``out`` (default: ``verification.yaml`` next to the gains file).
-    ``workers`` (not a setting: the record does not depend on it) goes to :func:`verify_files`.
+    ``workers`` and ``backend`` (not settings: the record does not depend on them) go to
+    :func:`verify_files`.
     Returns the report and the record's path."""
     used = {**VERIFY_SETTINGS, **settings}
-    rep = verify_files(gains_path, models_path, **used, workers=workers)
+    rep = verify_files(gains_path, models_path, **used, workers=workers, backend=backend)
     path = Path(out) if out else Path(gains_path).parent / VERIFICATION_FILE
     write_verification(path, verification_record(rep, gains_path, models_path, used))
     return rep, path
