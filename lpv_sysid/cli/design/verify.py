@@ -98,25 +98,39 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--all-rows", action="store_true", help="print every check, not only failures + worst"
     )
+    parser.add_argument(
+        "--key",
+        default=None,
+        metavar="FILE",
+        help="operator seal key: require and check the file's keyed seal (seal.hmac_sha256); "
+        "without it only the unkeyed seal and certificate.gains_sha256 are checked",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     from lpv_sysid.errors import ConfigError
+    from lpv_sysid.io.formats import load_seal_key
     from lpv_sysid.synthesis.verify import verify_and_record
 
     if args.full_box < 0:
         raise ConfigError(f"--full-box must be >= 0, got {args.full_box}")
     t0 = time.perf_counter()
+    key = load_seal_key(args.key) if args.key else None
     rep, out = verify_and_record(
         args.gains,
         args.models,
         args.out,
+        seal_key=key,
         n_random=args.random,
         seed=args.seed,
         full_box=args.full_box,
         strict_full_box=args.strict_full_box,
         k_sigma=args.k_sigma,
         full_box_kept=args.full_box_kept,
+    )
+    print(
+        "gains file: law matches certificate.gains_sha256, seal.sha256 matches the whole file"
+        + (", keyed seal (seal.hmac_sha256) checked with the key" if key else "")
     )
     print(rep.table(max_rows=10**6) if not args.all_rows else _all(rep))
     fb = rep.full_box

@@ -51,6 +51,11 @@ class ControllerSettings(Settings):
         nonempty=True,
     )
     models_file: str = text("", "vertex_models.yaml the gains must match (optional)")
+    seal_key_file: str = text(
+        "",
+        "operator seal key (32 raw bytes or 64 hex characters): the gains file must carry a "
+        "keyed seal made with it (seal.hmac_sha256); empty: the unkeyed seal is checked",
+    )
     rate_hz: float = double(250.0, "actuator command rate [Hz]", 1.0, 2000.0)
     state_timeout_s: float = double(0.02, "state older than this -> abort [s]", 0.001, 1.0)
     rotor_timeout_s: float = double(0.05, "rotor_speeds older than this -> abort [s]", 0.001, 1.0)

@@ -39,6 +39,7 @@ def verify_files(
     strict_full_box: bool = False,
     k_sigma: Optional[float] = None,
     full_box_kept: str = "stored",
+    seal_key: Optional[bytes] = None,
 ) -> VerifyReport:
     """Load gains.yaml (+ sidecar) and vertex_models.yaml and run :func:`verify_gains`.
 
@@ -55,7 +56,9 @@ def verify_files(
     from lpv_sysid.synthesis.uncertainty_set import load_models
 
     # the reading the vehicle flies (io.formats; LpvController takes the same GainSchedule)
-    gains = GainSchedule.load(gains_path, auto_layout=True)
+    # the one load: structure, the law against certificate.gains_sha256, the whole file
+    # against its seal (with seal_key: the operator's keyed seal too)
+    gains = GainSchedule.load(gains_path, auto_layout=True, key=seal_key)
     cert = gains.certificate.to_dict()
     claim = cert.get("input_structure")
     if uncertainty is not None:
@@ -272,13 +275,14 @@ def verify_and_record(
     gains_path: Path | str,
     models_path: Path | str,
     out: Optional[Path | str] = None,
+    seal_key: Optional[bytes] = None,
     **settings: Any,
 ) -> tuple[VerifyReport, Path]:
     """:func:`verify_files` with :data:`VERIFY_SETTINGS` (overridden by ``settings``), its
     record written to ``out`` (default: ``verification.yaml`` next to the gains file).
     Returns the report and the record's path."""
     used = {**VERIFY_SETTINGS, **settings}
-    rep = verify_files(gains_path, models_path, **used)
+    rep = verify_files(gains_path, models_path, seal_key=seal_key, **used)
     path = Path(out) if out else Path(gains_path).parent / VERIFICATION_FILE
     write_verification(path, verification_record(rep, gains_path, models_path, used))
     return rep, path
