@@ -70,6 +70,7 @@ def plan(out: Path, quick: bool, kappa: float) -> list[tuple[str, list[str]]]:
                 str(config_file("signals_phase2.yaml")),
                 "--out",
                 str(out / "signals"),
+                "--force",  # a re-run rewrites the gains that refer to it, in this same run
             ],
         ),
         (

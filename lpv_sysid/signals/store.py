@@ -159,14 +159,21 @@ def save_summary(path: str, data: dict[str, Any]) -> None:
         raise ConfigError(f"{path}: cannot write ({exc.strerror})") from None
 
 
-def write_signal_set(out_dir: str, sig: SignalSet) -> tuple[str, str]:
-    """Write ``signals.npz`` and ``summary.yaml`` into ``out_dir`` (created); returns paths."""
+def write_signal_set(out_dir: str, sig: SignalSet, force: bool = False) -> tuple[str, str]:
+    """Write ``signals.npz`` and ``summary.yaml`` into ``out_dir`` (created); returns paths.
+    An existing signal set there is not replaced unless ``force``: gains designed for it
+    (``certificate.design``) and the excitation node would silently fly another signal."""
+    from lpv_sysid.io.files import refuse_existing
+
+    npz = os.path.join(out_dir, "signals.npz")
+    yml = os.path.join(out_dir, "summary.yaml")
+    refuse_existing(
+        (npz, yml), force, " (a certificate's design envelope may refer to this signal set)"
+    )
     try:
         os.makedirs(out_dir, exist_ok=True)
     except OSError as exc:
         raise ConfigError(f"{out_dir}: cannot create directory ({exc.strerror})") from None
-    npz = os.path.join(out_dir, "signals.npz")
-    yml = os.path.join(out_dir, "summary.yaml")
     save_npz(npz, sig.t, sig.u, sig.names)
     save_summary(yml, summary(sig))
     return npz, yml

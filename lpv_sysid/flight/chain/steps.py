@@ -282,7 +282,8 @@ def design_signals(config: Path, out_dir: Path, echo: Callable[[str], None]) -> 
     from lpv_sysid.signals.store import write_signal_set
 
     sig = design(load_config(str(config)))
-    for path in write_signal_set(str(out_dir), sig):
+    # force: the chain synthesises the gains that refer to this set right after, in this run
+    for path in write_signal_set(str(out_dir), sig, force=True):
         echo(f"wrote {path}")
     return out_dir
 
