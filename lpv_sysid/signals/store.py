@@ -10,7 +10,7 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.signals import metrics
-from lpv_sysid.signals.multisine import SignalSet
+from lpv_sysid.signals.multisine import MAX_SAMPLE_RATE, SignalSet
 
 
 def save_npz(path: str, t: np.ndarray, u: np.ndarray, names) -> None:
@@ -71,6 +71,13 @@ def validate_table(
     d = np.diff(t)
     if np.any(d <= 0) or np.max(np.abs(d - d.mean())) > 1e-6 * d.mean():
         raise ConfigError(f"{where}: 't' must be a strictly increasing uniform grid")
+    if d.mean() < 1.0 / MAX_SAMPLE_RATE * (1 - 1e-9):
+        # before anything is sampled on this step: a 2e-9 s interval made a phase-2
+        # simulation allocate a grid of ~1e9 samples (14 GB in 60 s)
+        raise ConfigError(
+            f"{where}: sample interval {d.mean():.3g} s is below {1.0 / MAX_SAMPLE_RATE:g} s "
+            f"(sample rates above {MAX_SAMPLE_RATE:g} Hz are refused, as in the signal design)"
+        )
     check_magnitude(t, u, names, where)
     return t, u, names
 

@@ -146,6 +146,10 @@ def z_scores(result, A: np.ndarray, B: np.ndarray) -> dict[str, float]:
     return out
 
 
+#: most airframes of one study (each is a simulated phase-1 campaign and identification)
+MAX_AIRFRAMES = 1000
+
+
 @dataclass(frozen=True)
 class CoverageConfig:
     airframes: int = 3
@@ -155,9 +159,10 @@ class CoverageConfig:
     max_draws: int = 20  # redraws of an airframe that cannot be flown
 
     def __post_init__(self) -> None:
-        if int(self.airframes) != self.airframes or self.airframes < 1:
+        if int(self.airframes) != self.airframes or not 1 <= self.airframes <= MAX_AIRFRAMES:
             raise ConfigError(
-                f"coverage.airframes must be an integer >= 1, got {self.airframes!r}"
+                f"coverage.airframes must be an integer in 1 .. {MAX_AIRFRAMES} (each is a "
+                f"full phase-1 campaign, minutes of CPU), got {self.airframes!r}"
             )
         if not 0 <= self.spread < 1:
             raise ConfigError(f"coverage.spread must be in [0, 1), got {self.spread!r}")

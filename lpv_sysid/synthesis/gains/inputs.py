@@ -164,12 +164,13 @@ def load_inputs(
 
     cfg = load_config(config)
     opts = HinfOptions.from_dict(cfg.get("hinf"))
-    if gamma is not None:
-        opts = replace(opts, gamma=float(gamma))
-    if solver is not None:
-        opts = HinfOptions.from_dict(
-            {**{k: getattr(opts, k) for k in opts.__dataclass_fields__}, "solver": solver}
-        )
+    if gamma is not None or solver is not None:
+        # the overrides go through the declared checks too (--gamma 0 / inf / nan refused)
+        over = {"gamma": gamma} if gamma is not None else {}
+        if solver is not None:
+            over["solver"] = solver
+        d = {k: getattr(opts, k) for k in opts.__dataclass_fields__}
+        opts = HinfOptions.from_dict({**d, **over})
     unc_cfg = uncertainty_settings(cfg.get("uncertainty"))
     ff = feedforward_settings(cfg, config)
     t0 = time.perf_counter()

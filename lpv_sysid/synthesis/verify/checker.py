@@ -55,6 +55,8 @@ def verify_files(
     from lpv_sysid.synthesis.hinf import performance_matrix
     from lpv_sysid.synthesis.uncertainty_set import load_models
 
+    check_counts(n_random, seed, full_box)
+
     # the reading the vehicle flies (io.formats; LpvController takes the same GainSchedule)
     # the one load: structure, the law against certificate.gains_sha256, the whole file
     # against its seal (with seal_key: the operator's keyed seal too)
@@ -269,6 +271,24 @@ VERIFY_SETTINGS: dict[str, Any] = {
     "k_sigma": None,
     "full_box_kept": "stored",
 }
+
+
+#: bounds of verify's counts (checked before anything is drawn or allocated)
+MAX_RANDOM = 100_000
+MAX_FULL_BOX = 100_000
+MAX_SEED = 2**32 - 1
+
+
+def check_counts(n_random: int, seed: int, full_box: int) -> None:
+    """ConfigError naming the flag: ``--random`` in 0 .. MAX_RANDOM, ``--seed`` in
+    0 .. 2^32 - 1 (numpy's seed range), ``--full-box`` in 0 .. MAX_FULL_BOX."""
+    for flag, value, hi in (
+        ("--random", n_random, MAX_RANDOM),
+        ("--seed", seed, MAX_SEED),
+        ("--full-box", full_box, MAX_FULL_BOX),
+    ):
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= hi:
+            raise ConfigError(f"{flag} {value!r}: must be an integer in 0 .. {hi}")
 
 
 def verify_and_record(
