@@ -166,7 +166,7 @@ def load_inputs(
     opts = HinfOptions.from_dict(cfg.get("hinf"))
     if gamma is not None or solver is not None:
         # the overrides go through the declared checks too (--gamma 0 / inf / nan refused)
-        over = {"gamma": gamma} if gamma is not None else {}
+        over: dict[str, Any] = {"gamma": gamma} if gamma is not None else {}
         if solver is not None:
             over["solver"] = solver
         d = {k: getattr(opts, k) for k in opts.__dataclass_fields__}
