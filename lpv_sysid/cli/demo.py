@@ -141,6 +141,9 @@ def plan(out: Path, quick: bool, kappa: float) -> list[tuple[str, list[str]]]:
 def run(args: argparse.Namespace) -> int:
     from lpv_sysid.cli.main import main as cli_main
 
+    from lpv_sysid.control.law import check_kappa
+
+    check_kappa(args.kappa, positive=True)  # before step 1, not at step 6 after 20-37 s
     out = Path(args.out)
     if getattr(args, "connect", None):
         from lpv_sysid.cli.vehicle import parse_params

@@ -78,6 +78,9 @@ def chain(
     from lpv_sysid.ident import rate_plant as rid
     from lpv_sysid.io.files import save_yaml
 
+    from lpv_sysid.control.law import check_kappa
+
+    kappa = check_kappa(kappa)  # before waiting for a vehicle (nan used to wait first)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     summary: dict = {"design": "rate_plant", "connect": url, "steps": []}

@@ -18,6 +18,7 @@ from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
+from lpv_sysid.control.law import check_kappa
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.sim.closed_loop import ReferenceSignals
 
@@ -52,14 +53,16 @@ class Phase2Config:
     monitor_window: Optional[float] = None  # s, exponential forgetting of the bound monitor
 
     def __post_init__(self) -> None:
-        if not (
-            isinstance(self.kappa, (int, float)) and math.isfinite(self.kappa) and self.kappa > 0
-        ):
+        if isinstance(self.kappa, bool) or not isinstance(self.kappa, (int, float)):
             raise ConfigError(f"kappa must be a finite number > 0, got {self.kappa!r}")
+        check_kappa(self.kappa, "kappa", positive=True)  # the controller's range (Eq. 33)
         if self.eq33_method not in ("RK45", "rk4"):
             raise ConfigError(f"eq33_method must be RK45 or rk4, got {self.eq33_method!r}")
-        if not (self.box_margin >= 0 and math.isfinite(self.box_margin)):
-            raise ConfigError(f"box_margin must be >= 0, got {self.box_margin!r}")
+        if not 0 <= self.box_margin <= 1.0:  # SafetyConfig.box_margin's declared range
+            raise ConfigError(
+                f"box_margin must be in 0 .. 1 m/s (a wider margin leaves the certified box "
+                f"unguarded), got {self.box_margin!r}"
+            )
         if not (0 < self.max_tilt_deg < 90):
             raise ConfigError(f"max_tilt_deg must be in (0, 90) deg, got {self.max_tilt_deg!r}")
         if self.duration is not None and not (self.duration > 0 and math.isfinite(self.duration)):
