@@ -15,7 +15,12 @@ import yaml
 from lpv_sysid.cli.main import main
 from lpv_sysid.control.safety import check_closed_loop
 from lpv_sysid.errors import SolverError
-from lpv_sysid.io.formats import GainSchedule, load_certificate_npz, load_certified_systems
+from lpv_sysid.io.formats import (
+    GainSchedule,
+    load_certificate_npz,
+    load_certified_systems,
+    seal_document,
+)
 from lpv_sysid.models.lpv import ElementBox, PolytopicModel, UncertainElement, multilinear_weights
 from lpv_sysid.models.quadrotor import (
     INPUT_NAMES,
@@ -430,7 +435,8 @@ def test_frozen_certificate_says_so_and_a_false_claim_fails_verify(tmp_path, cap
     assert sch["variation"] == "frozen" and sch["covers_design_signal"] is False
     assert verify_files(out, models, n_random=2).passed
     d["certificate"]["certified_set"]["scheduling"]["variation"] = "arbitrary"
-    out.write_text(yaml.safe_dump(d, sort_keys=False))
+    # re-sealed (anyone can write an unkeyed seal): the claim itself must fail verify
+    out.write_text(yaml.safe_dump(seal_document(d), sort_keys=False))
     rep = verify_files(out, models, n_random=2)
     row = next(r for r in rep.rows if r.check == "scheduling")
     assert not row.ok and "one Lyapunov matrix" in row.note
@@ -514,6 +520,6 @@ def test_rate_bounded_certificate_round_trip_and_an_overstated_bound_fails(tmp_p
     assert rep.passed
     assert next(r for r in rep.rows if r.check == "box lmi margin").value > 0
     d["certificate"]["certified_set"]["scheduling"]["rate_bound"] = [20.0]
-    out.write_text(yaml.safe_dump(d, sort_keys=False))
+    out.write_text(yaml.safe_dump(seal_document(d), sort_keys=False))  # re-sealed, see above
     row = next(r for r in verify_files(out, models, n_random=1).rows if r.check == "scheduling")
     assert not row.ok and "at least the claimed bound" in row.note

@@ -148,11 +148,20 @@ def z_scores(result, A: np.ndarray, B: np.ndarray) -> dict[str, float]:
     return out
 
 
+#: most airframes of one study (each is a simulated phase-1 campaign and identification)
+MAX_AIRFRAMES = 1000
+
+
 @dataclass(frozen=True)
 class CoverageConfig:
     """A coverage study: how many simulated airframes, how far from the nominal one."""
 
-    airframes: int = cf.count(3, "simulated airframes", lo=1, hi=10_000)
+    airframes: int = cf.count(
+        3,
+        "simulated airframes (each a full phase-1 campaign, minutes of CPU)",
+        lo=1,
+        hi=MAX_AIRFRAMES,
+    )
     spread: float = cf.number(
         0.25, "relative spread of every physical parameter", lo=0.0, hi=1.0, hi_open=True
     )

@@ -114,21 +114,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="where the --workers run: process (a local process pool, default) or dask (the "
         "active dask.distributed client, else Dask's local processes; dask must be installed)",
     )
+    parser.add_argument(
+        "--key",
+        default=None,
+        metavar="FILE",
+        help="operator seal key: require and check the file's keyed seal (seal.hmac_sha256); "
+        "without it only the unkeyed seal and certificate.gains_sha256 are checked",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     from lpv_sysid.errors import ConfigError
     from lpv_sysid.parallel import resolve_workers
+    from lpv_sysid.io.formats import load_seal_key
     from lpv_sysid.synthesis.verify import verify_and_record
 
     resolve_workers(args.workers)
     if args.full_box < 0:
         raise ConfigError(f"--full-box must be >= 0, got {args.full_box}")
     t0 = time.perf_counter()
+    key = load_seal_key(args.key) if args.key else None
     rep, out = verify_and_record(
         args.gains,
         args.models,
         args.out,
+        seal_key=key,
         n_random=args.random,
         seed=args.seed,
         full_box=args.full_box,
@@ -137,6 +147,10 @@ def run(args: argparse.Namespace) -> int:
         full_box_kept=args.full_box_kept,
         workers=args.workers,
         backend=args.backend,
+    )
+    print(
+        "gains file: law matches certificate.gains_sha256, seal.sha256 matches the whole file"
+        + (", keyed seal (seal.hmac_sha256) checked with the key" if key else "")
     )
     print(rep.table(max_rows=10**6) if not args.all_rows else _all(rep))
     fb = rep.full_box

@@ -77,6 +77,9 @@ def chain(
     from lpv_sysid.flight.campaign import FlyConfig, fly
     from lpv_sysid.ident import rate_plant as rid
 
+    from lpv_sysid.control.law import check_kappa
+
+    kappa = check_kappa(kappa)  # before waiting for a vehicle (nan used to wait first)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     summary: dict = {"design": "rate_plant", "connect": url, "steps": []}
@@ -339,7 +342,8 @@ def design_signals(config: Path, out_dir: Path, echo: Callable[[str], None]) -> 
     from lpv_sysid.signals.store import write_signal_set
 
     sig = design(load_config(str(config)))
-    for path in write_signal_set(str(out_dir), sig):
+    # force: the chain synthesises the gains that refer to this set right after, in this run
+    for path in write_signal_set(str(out_dir), sig, force=True):
         echo(f"wrote {path}")
     return out_dir
 

@@ -8,6 +8,7 @@ same reading of the same bytes):
 :mod:`~lpv_sysid.io.formats.vertex_models`  ``vertex_models.yaml`` (:class:`VertexModels`)
 :mod:`~lpv_sysid.io.formats.gains`          ``gains.yaml`` (:class:`GainSchedule`)
 :mod:`~lpv_sysid.io.formats.certificate`    its ``certificate`` entry (:class:`Certificate`)
+:mod:`~lpv_sysid.io.formats.seal`           its ``seal`` (whole file; optional operator key)
 :mod:`~lpv_sysid.io.formats.sidecar`        the certificate sidecar ``<gains>.cert.npz``
 :mod:`~lpv_sysid.io.formats.shared`         channels, time base, scheduling box, vertex order
 :mod:`~lpv_sysid.io.formats.field_checker`  the field-path checks the formats are written with
@@ -30,6 +31,7 @@ from __future__ import annotations
 from lpv_sysid.io.formats.certificate import DesignEnvelope
 from lpv_sysid.io.formats.feedforward_spec import FeedforwardSpec
 from lpv_sysid.io.formats.gains import GAINS_FORMAT, GainSchedule, certify_law, gains_dict
+from lpv_sysid.io.formats.seal import check_seal, load_seal_key, seal_document
 from lpv_sysid.io.formats.sidecar import (
     box_arrays,
     load_certificate_npz,
@@ -58,10 +60,13 @@ __all__ = [
     "VertexModels",
     "box_arrays",
     "certify_law",
+    "check_seal",
     "gains_dict",
     "load_certificate_npz",
     "load_certified_systems",
+    "load_seal_key",
     "models_dict",
     "save_certificate_npz",
+    "seal_document",
     "systems_arrays",
 ]

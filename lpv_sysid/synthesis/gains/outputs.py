@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 
@@ -47,9 +48,12 @@ def feedforward_terms(inp: Inputs, lines: list[str]):
     return F_ff, F_jerk, layout
 
 
-def write_gains(out: Path, models: str, inp: Inputs, res) -> GainsWritten:
-    """``out`` (gains.yaml with the certificate about the models file ``models``) and its
-    sidecar ``<stem>.cert.npz`` from the synthesis result ``res``."""
+def write_gains(
+    out: Path, models: str, inp: Inputs, res, seal_key: Optional[bytes] = None
+) -> GainsWritten:
+    """``out`` (gains.yaml with the certificate about the models file ``models``, sealed;
+    ``seal_key``: with the operator's keyed seal too) and its sidecar ``<stem>.cert.npz``
+    from the synthesis result ``res``."""
     from lpv_sysid.io.files import save_yaml
     from lpv_sysid.io.formats import box_arrays, gains_dict, save_certificate_npz
 
@@ -84,7 +88,17 @@ def write_gains(out: Path, models: str, inp: Inputs, res) -> GainsWritten:
     lines: list[str] = []
     F_ff, F_jerk, ff_layout = feedforward_terms(inp, lines)
     gains = gains_dict(
-        inp.raw, inp.model, res.K, inp.R, inp.Q, gamma_file, cert, F_ff, ff_layout, F_jerk
+        inp.raw,
+        inp.model,
+        res.K,
+        inp.R,
+        inp.Q,
+        gamma_file,
+        cert,
+        F_ff,
+        ff_layout,
+        F_jerk,
+        seal_key=seal_key,
     )
     save_yaml(gains, out)
     lines += result_lines(inp, res, cert, F_ff, F_jerk, ff_layout)

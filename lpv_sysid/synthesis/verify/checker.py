@@ -41,6 +41,7 @@ def verify_files(
     full_box_kept: str = "stored",
     workers: Optional[int] = 1,
     backend: str = "process",
+    seal_key: Optional[bytes] = None,
 ) -> VerifyReport:
     """Load gains.yaml (+ sidecar) and vertex_models.yaml and run :func:`verify_gains`.
 
@@ -57,8 +58,12 @@ def verify_files(
     from lpv_sysid.synthesis.hinf import performance_matrix
     from lpv_sysid.synthesis.uncertainty_set import load_models
 
+    check_counts(n_random, seed, full_box)
+
     # the reading the vehicle flies (io.formats; LpvController takes the same GainSchedule)
-    gains = GainSchedule.load(gains_path, auto_layout=True)
+    # the one load: structure, the law against certificate.gains_sha256, the whole file
+    # against its seal (with seal_key: the operator's keyed seal too)
+    gains = GainSchedule.load(gains_path, auto_layout=True, key=seal_key)
     cert = gains.certificate.to_dict()
     claim = cert.get("input_structure")
     if uncertainty is not None:
@@ -276,12 +281,31 @@ VERIFY_SETTINGS: dict[str, Any] = {
 }
 
 
+#: bounds of verify's counts (checked before anything is drawn or allocated)
+MAX_RANDOM = 100_000
+MAX_FULL_BOX = 100_000
+MAX_SEED = 2**32 - 1
+
+
+def check_counts(n_random: int, seed: int, full_box: int) -> None:
+    """ConfigError naming the flag: ``--random`` in 0 .. MAX_RANDOM, ``--seed`` in
+    0 .. 2^32 - 1 (numpy's seed range), ``--full-box`` in 0 .. MAX_FULL_BOX."""
+    for flag, value, hi in (
+        ("--random", n_random, MAX_RANDOM),
+        ("--seed", seed, MAX_SEED),
+        ("--full-box", full_box, MAX_FULL_BOX),
+    ):
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= hi:
+            raise ConfigError(f"{flag} {value!r}: must be an integer in 0 .. {hi}")
+
+
 def verify_and_record(
     gains_path: Path | str,
     models_path: Path | str,
     out: Optional[Path | str] = None,
     workers: Optional[int] = 1,
     backend: str = "process",
+    seal_key: Optional[bytes] = None,
     **settings: Any,
 ) -> tuple[VerifyReport, Path]:
     """:func:`verify_files` with :data:`VERIFY_SETTINGS` (overridden by ``settings``), its
@@ -290,7 +314,9 @@ def verify_and_record(
     :func:`verify_files`.
     Returns the report and the record's path."""
     used = {**VERIFY_SETTINGS, **settings}
-    rep = verify_files(gains_path, models_path, **used, workers=workers, backend=backend)
+    rep = verify_files(
+        gains_path, models_path, **used, workers=workers, backend=backend, seal_key=seal_key
+    )
     path = Path(out) if out else Path(gains_path).parent / VERIFICATION_FILE
     write_verification(path, verification_record(rep, gains_path, models_path, used))
     return rep, path
