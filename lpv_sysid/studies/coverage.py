@@ -39,6 +39,7 @@ import numpy as np
 
 from lpv_sysid.control.campaign import run_name
 from lpv_sysid.errors import ConfigError, SafetyError, SolverError
+from lpv_sysid.ident.vertex import DEFAULT_JOINT_PROBABILITY
 from lpv_sysid.models.quadrotor import (
     INPUT_NAMES,
     STATE_NAMES,
@@ -153,6 +154,7 @@ class CoverageConfig:
     seed: int = 0
     vertices: tuple[int, ...] | None = None  # 1-based seed 0 Table 1 indices (None: all 8)
     max_draws: int = 20  # redraws of an airframe that cannot be flown
+    joint_probability: float = DEFAULT_JOINT_PROBABILITY  # that of the certified box
 
     def __post_init__(self) -> None:
         if int(self.airframes) != self.airframes or self.airframes < 1:
@@ -161,6 +163,10 @@ class CoverageConfig:
             )
         if not 0 <= self.spread < 1:
             raise ConfigError(f"coverage.spread must be in [0, 1), got {self.spread!r}")
+        if not 0 < self.joint_probability < 1:
+            raise ConfigError(
+                f"coverage.joint_probability must be in (0, 1), got {self.joint_probability!r}"
+            )
 
 
 @dataclass
@@ -169,6 +175,7 @@ class VertexCoverage:
     vertex: tuple[float, float, float]
     z: dict[str, float]
     k_sigma: float
+    dof: float | None = None  # Student-t dof of the vertex's standard errors (Fit.dof)
 
     @property
     def covered(self) -> int:
@@ -197,6 +204,37 @@ class AirframeCoverage:
     @property
     def fraction(self) -> float:
         return self.covered / self.n if self.n else float("nan")
+
+    def joint_k(self, probability: float) -> list[float]:
+        """Per vertex, the half-width in stored std of the certified box for this airframe's
+        identification: the Sidak value over all its elements
+        (:func:`lpv_sysid.ident.vertex.joint_k`), never below the stored ``k_sigma``
+        (synthesis.uncertainty_set.joint_widen keeps a wider stored interval)."""
+        from lpv_sysid.ident.vertex import joint_k
+
+        return [
+            max(v.k_sigma, joint_k(self.n, probability, v.dof, v.k_sigma)) for v in self.vertices
+        ]
+
+    def jointly_covered(self, probability: float) -> bool:
+        """True when ALL identified elements of the airframe lie in their simultaneous
+        intervals at once (the event the certificate's joint probability is about)."""
+        return all(
+            abs(z) <= k
+            for v, k in zip(self.vertices, self.joint_k(probability))
+            for z in v.z.values()
+        )
+
+    def worst_joint_ratio(self, probability: float) -> float:
+        """max |z| / k_joint over all elements (<= 1: jointly covered)."""
+        return max(
+            (
+                abs(z) / k
+                for v, k in zip(self.vertices, self.joint_k(probability))
+                for z in v.z.values()
+            ),
+            default=0.0,
+        )
 
     def factors(self, base: QuadrotorParams) -> dict[str, float]:
         """Parameter ratios to the base airframe (for the table)."""
@@ -298,7 +336,16 @@ def score(runs, results, params: QuadrotorParams, ident_cfg) -> list[VertexCover
         A, B, _ = truth_model(params, rec, vx.trim_window((0.0, rec.t_excite), ident_cfg))
         k = unc.applied_k(ident_cfg.uncertainty, len(res.uncertain.intervals))
         u_d, v_d, w_d = (float(c) for c in rec.v_d)
-        out.append(VertexCoverage(rec.name, (u_d, v_d, w_d), z_scores(res, A, B), k))
+        dof = res.fit.dof
+        out.append(
+            VertexCoverage(
+                rec.name,
+                (u_d, v_d, w_d),
+                z_scores(res, A, B),
+                k,
+                None if dof is None else float(dof),
+            )
+        )
     return out
 
 
@@ -382,6 +429,7 @@ def summary_dict(
             "seed": cfg.seed,
             "vertices": list(cfg.vertices) if cfg.vertices else list(range(1, 9)),
             "k_sigma": float(k),
+            "joint_probability": float(cfg.joint_probability),
         },
         "overall": {
             "covered": int(np.sum(np.abs(all_z) <= k)),
@@ -393,7 +441,18 @@ def summary_dict(
         },
         "airframes": [],
     }
-    for af in airframes:
+    P = float(cfg.joint_probability)
+    joint = [af.jointly_covered(P) for af in airframes]
+    d["joint"] = {
+        "probability": P,
+        "airframes_all_inside": int(sum(joint)),
+        "airframes": len(airframes),
+        "rate": float(np.mean(joint)) if joint else float("nan"),
+        "meaning": "fraction of airframes with ALL identified elements inside the simultaneous "
+        "intervals of the certified box (Sidak k over the airframe's element count, "
+        "ident.vertex.joint_k), the event the certificate's joint probability is about",
+    }
+    for af, jc in zip(airframes, joint):
         d["airframes"].append(
             {
                 "index": af.index,
@@ -401,6 +460,9 @@ def summary_dict(
                 "covered": af.covered,
                 "elements": af.n,
                 "fraction": float(af.fraction),
+                "joint_k": [round(k, 4) for k in af.joint_k(P)],
+                "jointly_covered": bool(jc),
+                "worst_z_over_joint_k": float(af.worst_joint_ratio(P)),
                 "eiv_max_shift_std": float(af.eiv_shift),
                 "vertices": [
                     {

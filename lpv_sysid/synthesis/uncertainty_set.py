@@ -12,6 +12,7 @@ sidecar are written by :mod:`lpv_sysid.io.formats`.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from pathlib import Path
 from typing import Any, Optional, Sequence
@@ -97,6 +98,18 @@ def uncertainty_settings(uncertainty: Optional[dict]) -> dict:
     u["common_b"] = _flag(u.get("common_b", DEFAULT_COMMON_B), "uncertainty.common_b")
     u.setdefault("p_max_b", DEFAULT_P_MAX_B)
     u.setdefault("motor_std", None)
+    if u["set"] == "full_box":
+        from lpv_sysid.ident.vertex import DEFAULT_JOINT_PROBABILITY
+
+        u.setdefault("joint_probability", DEFAULT_JOINT_PROBABILITY)
+    jp = u.get("joint_probability")
+    if jp is not None and (
+        isinstance(jp, bool) or not isinstance(jp, (int, float)) or not 0.0 < float(jp) < 1.0
+    ):
+        raise ConfigError(
+            "uncertainty.joint_probability must be null or a number in (0, 1) (the probability "
+            f"that all identified elements are in the certified box at once), got {jp!r}"
+        )
     return u
 
 
@@ -160,8 +173,64 @@ MOTOR_STATES = ("dt", "da", "de", "dr")
 MOTOR_INPUTS = ("ut", "ua", "ue", "ur")
 
 
+def _meta_list(meta: dict, *keys: str) -> list:
+    d: Any = meta
+    for k in keys:
+        d = d.get(k) if isinstance(d, dict) else None
+    return list(d) if isinstance(d, (list, tuple)) else []
+
+
+def _t_widening(meta: dict, i: int, k: float) -> float:
+    from lpv_sysid.ident.equation_error import t_factor
+
+    dofs = _meta_list(meta, "std", "dof")
+    dof = dofs[i] if i < len(dofs) else None
+    return t_factor(k, None if dof is None else float(dof))
+
+
+def joint_widen(
+    models: VertexModels, out: list, sigmas: list, probability: float, k_stored: list
+) -> dict:
+    """Widen every element with a standard error to the simultaneous interval that holds *all*
+    of them at once with ``probability`` (:func:`lpv_sysid.ident.vertex.joint_k`, Sidak over the
+    total count, Student-t with each vertex's ``meta.std.dof``); a stored interval already
+    wider is kept. ``sigmas[i][l]``: the stored std of ``out[i][l]`` (0: no std, kept as
+    stored). Returns the certificate's ``joint_coverage`` entry."""
+    from lpv_sysid.ident.vertex import uncertainty as unc
+
+    dofs = _meta_list(models.meta, "std", "dof")
+    p_total = sum(1 for sv in sigmas for sd in sv if sd > 0)
+    ks, widened = [], 0
+    for i, (els, sv) in enumerate(zip(out, sigmas)):
+        dof = dofs[i] if i < len(dofs) and dofs[i] is not None else None
+        k_j = unc.joint_k(p_total, probability, None if dof is None else float(dof), k_stored[i])
+        ks.append(round(k_j, 4))
+        for idx, (e, sd) in enumerate(zip(els, sv)):
+            if sd <= 0:
+                continue
+            nom = e.nominal if e.nominal is not None else 0.5 * (e.lower + e.upper)
+            lo, hi = min(e.lower, nom - k_j * sd), max(e.upper, nom + k_j * sd)
+            if lo < e.lower or hi > e.upper:
+                widened += 1
+                els[idx] = UncertainElement(e.matrix, e.row, e.col, lo, hi, nom)
+    return {
+        "probability": float(probability),
+        "method": "Sidak over all elements with a standard error (Sidak 1967: a lower bound "
+        "for jointly Gaussian estimates with any correlation), Student-t quantile with the "
+        "file's meta.std.dof",
+        "elements": int(p_total),
+        "k_stored_std": ks,
+        "widened": int(widened),
+        "statement": f"all {p_total} identified elements in their intervals at once with "
+        f"probability >= {probability:g} under the identification's error model "
+        "(elements without a std are taken as stored)",
+    }
+
+
 def full_box_elements(
-    models: VertexModels, motor_std: Optional[tuple] = None
+    models: VertexModels,
+    motor_std: Optional[tuple] = None,
+    joint_probability: Optional[float] = None,
 ) -> tuple[list, list, dict]:
     """Every uncertain element of the models file in its interval, per vertex (box order):
     ([UncertainElement], [label]) lists and a description of the rule (certificate entry).
@@ -185,12 +254,15 @@ def full_box_elements(
         else False
     )
     n_stored = n_ksig = n_motor = 0
-    out, labels = [], []
+    out, labels, sigmas, k_used = [], [], [], []
     for i, vx in enumerate(models.vertices):
         k_i = float(k_applied[i]) if i < len(k_applied) else k_meta
-        els, labs, seen = [], [], set()
+        k_used.append(k_i)
+        els, labs, seen, sv = [], [], set(), []
         for e in vx.uncertain:
             seen.add((e.matrix, e.row, e.col))
+            if e.upper > e.lower or e.std > 0:
+                sv.append(float(e.std))
             if e.upper > e.lower:
                 els.append(e.to_lpv())
                 labs.append("stored")
@@ -220,9 +292,17 @@ def full_box_elements(
                         labs.append(
                             f"motor constant, synthesis config motor_std +/- {k_meta:g} std"
                         )
+                        # config std is not t-widened: store it as the file would
+                        sv.append(float(sd) * _t_widening(models.meta, i, k_i))
                         n_motor += 1
         out.append(els)
         labels.append(labs)
+        sigmas.append(sv)
+    joint = (
+        None
+        if joint_probability is None
+        else joint_widen(models, out, sigmas, float(joint_probability), k_used)
+    )
     rule = {
         "intervals": "stored [lower, upper] where lower < upper; nominal +/- k std where a file "
         "stores lower = upper with std > 0 (k = meta.uncertainty.k_applied, meta.k_sigma or 3)",
@@ -231,6 +311,8 @@ def full_box_elements(
         "motor_from_config": n_motor,
         "motor_std": None if motor_std is None else [float(x) for x in motor_std],
     }
+    if joint is not None:
+        rule["joint_coverage"] = joint
     return out, labels, rule
 
 
@@ -283,6 +365,7 @@ def load_models(
     common_b = ucfg.pop("common_b")
     which = ucfg.pop("set")
     motor_std = ucfg.pop("motor_std", None)
+    joint_probability = ucfg.pop("joint_probability", None)
     if motor_std is not None:
         try:
             motor_std = tuple(float(x) for x in motor_std)
@@ -314,8 +397,10 @@ def load_models(
                 "uncertainty.set: full_box needs common_b: true (the B hull is what covers the "
                 "interior of the scheduling box)"
             )
-        fb, labels, _ = full_box_elements(vm, motor_std)
+        fb, labels, rule = full_box_elements(vm, motor_std, joint_probability)
         ebox = ElementBox.from_elements(As, Bs, fb, labels)
+        if "joint_coverage" in rule:
+            ebox = dataclasses.replace(ebox, coverage=rule["joint_coverage"])
         model = PolytopicModel(
             systems=ebox.sample_systems(list(zip(As, Bs)), FULL_BOX_SAMPLE), box=ebox, **kw
         )

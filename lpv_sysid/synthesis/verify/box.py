@@ -110,6 +110,66 @@ def check_box_claim(
     )
 
 
+def _sidak_stored_k(p: int, prob: float, dof: Optional[float], k_stored: float) -> float:
+    """The verifier's own Sidak half-width in stored std (the identification widened the std
+    by t_nu^-1(Phi(k)) / k, docs/identification_coverage.md)."""
+    from scipy.stats import norm, t
+
+    a = 1.0 - prob ** (1.0 / max(p, 1))
+    if dof is None:
+        return float(norm.isf(a / 2.0))
+    return float(t.isf(a / 2.0, dof) / (t.ppf(norm.cdf(k_stored), dof) / k_stored))
+
+
+def check_joint_claim(
+    rep: VerifyReport, model: PolytopicModel, raw: dict, cert_yaml: dict, bx: dict
+) -> None:
+    """``joint claim``: where the certificate claims simultaneous intervals
+    (``certified_set.joint_coverage.probability``), every element of the models file with a
+    standard error lies in the certified box with the Sidak half-width for the number of such
+    elements, recomputed here from the raw file (issue 20 item 4)."""
+    jc = (cert_yaml.get("certified_set") or {}).get("joint_coverage") or {}
+    prob = jc.get("probability")
+    if prob is None:
+        return
+    n = model.n_x
+    meta = raw.get("meta") if isinstance(raw.get("meta"), dict) else {}
+    dofs = list(
+        ((meta.get("std") or {}) if isinstance(meta.get("std"), dict) else {}).get("dof") or []
+    )
+    unc = meta.get("uncertainty") if isinstance(meta.get("uncertainty"), dict) else {}
+    ks = list((unc or {}).get("k_applied") or [])
+    k_meta = float(meta.get("k_sigma", DEFAULT_K_SIGMA))
+    verts = raw.get("vertices", [])
+    p = sum(1 for v in verts for e in v.get("uncertain") or [] if float(e["std"]) > 0)
+    p_claim = int(jc.get("elements", -1))
+    worst, where = 0.0, f"{p} elements with a std"
+    for i, v in enumerate(verts):
+        lo, hi = _bounds(bx, i, n)
+        scale = np.maximum(1.0, np.abs(np.concatenate([bx["Ac"][i], bx["Bc"]], axis=1)))
+        dof = float(dofs[i]) if i < len(dofs) and dofs[i] is not None else None
+        k = _sidak_stored_k(p_claim, float(prob), dof, float(ks[i]) if i < len(ks) else k_meta)
+        for e in v.get("uncertain") or []:
+            sd = float(e["std"])
+            if sd <= 0:
+                continue
+            r, c = int(e["row"]), int(e["col"]) + (0 if e["matrix"] == "A" else n)
+            nom = float(e["nominal"])
+            viol = max(lo[r, c] - (nom - k * sd), (nom + k * sd) - hi[r, c]) / scale[r, c]
+            if viol > worst:
+                worst, where = float(viol), f"vertex {i} {e['matrix']}[{e['row']},{e['col']}]"
+    ok = worst <= BOX_TOL and p_claim >= p
+    rep.add(
+        "joint claim",
+        where,
+        worst,
+        BOX_TOL,
+        bool(ok),
+        f"Sidak over {p_claim} elements at joint probability {float(prob):g}"
+        + ("" if p_claim >= p else f"; the file has {p} elements with a std, more than claimed"),
+    )
+
+
 def _vertex_edges(vmin: np.ndarray, vmax: np.ndarray) -> list:
     """Per vertex and axis the (min, max) vertex indices of the edge through it (box order)."""
     V = np.array(list(itertools.product(*zip(vmin, vmax))), dtype=float)
