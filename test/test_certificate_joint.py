@@ -18,8 +18,8 @@ from lpv_sysid.ident.vertex import DEFAULT_JOINT_PROBABILITY, joint_k
 from lpv_sysid.models.quadrotor import QuadrotorParams
 from lpv_sysid.studies.coverage import AirframeCoverage, VertexCoverage
 from lpv_sysid.synthesis.uncertainty_set import load_models
+from lpv_sysid.synthesis.verify import VerifyReport
 from lpv_sysid.synthesis.verify.box import check_joint_claim
-from lpv_sysid.synthesis.verify.report import VerifyReport
 
 
 def test_sidak_half_width_solves_its_defining_equation():
@@ -100,10 +100,12 @@ def _half(box, i, r, c):
 def test_full_box_uses_the_simultaneous_half_width(tmp_path, dof):
     models = _models(tmp_path / "vm.yaml", dof)
     # default 0.95 over 6 elements: Sidak k 2.63 < 3 -> the stored (wider) 3-std intervals stay
-    model, _ = load_models(models, {"set": "full_box"})
+    model, _ = load_models(models, {"set": "full_box", "box_inflation": None})
     assert _half(model.box, 0, 0, 0) == pytest.approx(0.03, rel=1e-9)
     assert model.box.coverage["probability"] == 0.95 and model.box.coverage["widened"] == 0
-    model, _ = load_models(models, {"set": "full_box", "joint_probability": 0.999})
+    model, _ = load_models(
+        models, {"set": "full_box", "joint_probability": 0.999, "box_inflation": None}
+    )
     box = model.box
     p = 6  # elements with a std over both vertices
     a = 1 - 0.999 ** (1 / p)
@@ -118,15 +120,24 @@ def test_full_box_uses_the_simultaneous_half_width(tmp_path, dof):
     assert box.coverage["probability"] == 0.999 and box.coverage["elements"] == p
     assert box.coverage["widened"] == 4
     # marginal (the earlier meaning): the stored 3-std intervals
-    marg, _ = load_models(models, {"set": "full_box", "joint_probability": None})
+    marg, _ = load_models(
+        models, {"set": "full_box", "joint_probability": None, "box_inflation": None}
+    )
     assert _half(marg.box, 0, 0, 0) == pytest.approx(0.03) and marg.box.coverage is None
+    # the stated margin (issue 20 item 6, default 5 %): every half-width x 1.05, same centre
+    infl, _ = load_models(models, {"set": "full_box", "joint_probability": None})
+    assert _half(infl.box, 0, 0, 0) == pytest.approx(0.03 * 1.05, rel=1e-12)
+    assert np.array_equal(infl.box.A_centre, marg.box.A_centre)
+    assert infl.box.coverage == {"box_inflation": 0.05}
     with pytest.raises(ConfigError, match="joint_probability"):
         load_models(models, {"set": "full_box", "joint_probability": 1.5})
 
 
 def test_verifier_recomputes_the_joint_claim(tmp_path):
     models = _models(tmp_path / "vm.yaml")
-    model, raw = load_models(models, {"set": "full_box", "joint_probability": 0.999})
+    model, raw = load_models(
+        models, {"set": "full_box", "joint_probability": 0.999, "box_inflation": None}
+    )
     box = model.box
     bx = {
         "Ac": np.asarray(box.A_centre),

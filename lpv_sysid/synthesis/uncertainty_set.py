@@ -56,6 +56,9 @@ def _flag(v: Any, where: str) -> bool:
 #: (what certificates written before the full box recorded, hence the default of an absent key).
 SETS = ("full_box", "reduced_polytope")
 DEFAULT_SET = "reduced_polytope"
+#: ``uncertainty.box_inflation`` of a full box: the proof covers every half-width x 1.05 (issue 20
+#: item 6: a stated robustness margin instead of the solver's epsilon)
+DEFAULT_BOX_INFLATION = 0.05
 #: systems per vertex of the finite sample of a full box stored for the runtime re-check
 FULL_BOX_SAMPLE = 16
 
@@ -102,6 +105,15 @@ def uncertainty_settings(uncertainty: Optional[dict]) -> dict:
         from lpv_sysid.ident.vertex import DEFAULT_JOINT_PROBABILITY
 
         u.setdefault("joint_probability", DEFAULT_JOINT_PROBABILITY)
+        u.setdefault("box_inflation", DEFAULT_BOX_INFLATION)
+    bi = u.get("box_inflation")
+    if bi is not None and (
+        isinstance(bi, bool) or not isinstance(bi, (int, float)) or not 0.0 <= float(bi) <= 1.0
+    ):
+        raise ConfigError(
+            "uncertainty.box_inflation must be null or a number in [0, 1] (the certified box is "
+            f"every half-width x (1 + box_inflation): the proof's stated margin), got {bi!r}"
+        )
     jp = u.get("joint_probability")
     if jp is not None and (
         isinstance(jp, bool) or not isinstance(jp, (int, float)) or not 0.0 < float(jp) < 1.0
@@ -366,6 +378,7 @@ def load_models(
     which = ucfg.pop("set")
     motor_std = ucfg.pop("motor_std", None)
     joint_probability = ucfg.pop("joint_probability", None)
+    box_inflation = ucfg.pop("box_inflation", None)
     if motor_std is not None:
         try:
             motor_std = tuple(float(x) for x in motor_std)
@@ -399,8 +412,13 @@ def load_models(
             )
         fb, labels, rule = full_box_elements(vm, motor_std, joint_probability)
         ebox = ElementBox.from_elements(As, Bs, fb, labels)
-        if "joint_coverage" in rule:
-            ebox = dataclasses.replace(ebox, coverage=rule["joint_coverage"])
+        cov = dict(rule.get("joint_coverage") or {})
+        if box_inflation:
+            f = 1.0 + float(box_inflation)
+            ebox = dataclasses.replace(ebox, half=tuple(np.asarray(h) * f for h in ebox.half))
+        if cov or box_inflation is not None:
+            cov["box_inflation"] = None if box_inflation is None else float(box_inflation)
+            ebox = dataclasses.replace(ebox, coverage=cov)
         model = PolytopicModel(
             systems=ebox.sample_systems(list(zip(As, Bs)), FULL_BOX_SAMPLE), box=ebox, **kw
         )

@@ -89,6 +89,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "of the file, default) or 'ksigma' (nominal +/- k std, the Eq. 22 box itself)",
     )
     parser.add_argument(
+        "--loop-delay",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="worst delay of the configured loop (input latency + 1 / state rate + 1 / "
+        "command rate); FAIL when above the certificate's loop_delay.bound_s",
+    )
+    parser.add_argument(
         "--out",
         default=None,
         metavar="PATH",
@@ -117,6 +125,7 @@ def run(args: argparse.Namespace) -> int:
         strict_full_box=args.strict_full_box,
         k_sigma=args.k_sigma,
         full_box_kept=args.full_box_kept,
+        loop_delay_s=args.loop_delay,
     )
     print(rep.table(max_rows=10**6) if not args.all_rows else _all(rep))
     fb = rep.full_box

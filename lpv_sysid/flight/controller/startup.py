@@ -14,7 +14,7 @@ import gc
 
 import numpy as np
 
-from lpv_sysid.control.safety import check_closed_loop
+from lpv_sysid.control.safety import check_closed_loop, check_loop_delay, loop_delay_s
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.flight.controller.settings import BOX_MARGIN_MAX_FRACTION, ControllerSettings
 from lpv_sysid.io.formats import GainSchedule, load_certified_systems
@@ -60,13 +60,24 @@ def load_flight_schedule(
             f"{BOX_MARGIN_MAX_FRACTION:g} of the narrowest box axis ({width:g} m/s, "
             f"{label}): the certificate covers the box only"
         )
+    delay_line = check_loop_delay(
+        gs.certificate,
+        loop_delay_s(
+            settings.tick_source,
+            settings.rate_hz,
+            settings.state_rate_hz,
+            settings.input_latency_s,
+        ),
+        label,
+    )
     n_sys = sum(len(s) for s in systems)
     info = [
         f"gains {path}: law sha256 {(gs.certificate.gains_sha256 or '')[:12]} matches the "
         f"certificate; closed loop stable on {n_sys} certified systems (max Re(eig) "
         f"{abscissa:.3g}); design envelope ({design.source or 'certificate.design'}): "
         f"|dv_d/dt| <= {np.round(design.reference_rate, 3).tolist()} m/s^2, |u_e| <= "
-        f"{np.round(design.excitation_peak, 4).tolist()}"
+        f"{np.round(design.excitation_peak, 4).tolist()}",
+        delay_line,
     ]
     return gs, info
 

@@ -17,7 +17,15 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError
 
-_TOP_KEYS = {"hinf", "weights", "velocity_states", "uncertainty", "verify", "feedforward"}
+_TOP_KEYS = {
+    "hinf",
+    "weights",
+    "velocity_states",
+    "uncertainty",
+    "verify",
+    "feedforward",
+    "loop_delay",
+}
 
 
 def feedforward_settings(cfg: dict, cfg_path: str) -> tuple[bool, dict, float]:
@@ -51,7 +59,7 @@ def load_config(path: str) -> dict:
     bad = set(cfg) - _TOP_KEYS
     if bad:
         raise ConfigError(f"{path}: unknown key(s) {sorted(bad)}; known: {sorted(_TOP_KEYS)}")
-    for key in ("hinf", "weights", "uncertainty", "verify"):  # sections: mappings (or empty)
+    for key in ("hinf", "weights", "uncertainty", "verify", "loop_delay"):  # sections: mappings
         if cfg.get(key) is not None and not isinstance(cfg[key], dict):
             raise ConfigError(f"{path}: {key}: expected a mapping, got {type(cfg[key]).__name__}")
     return cfg
