@@ -18,8 +18,10 @@ Study:
    mass, inertia, arm length, rotor-speed limits; ``K``, ``J_z`` and the motor constants it
    is given are the nominal ones (the motor constants are identified);
 4. the truth is the analytic linearisation (``Quadrotor.linearize``) of the airframe at its
-   equilibrium at the flown velocity: ``Quadrotor.trim(v_flown, yaw_rate)`` with ``v_flown``
-   and the yaw rate the means of the *true* states over the trim-averaging window - seed 0
+   equilibrium at the commanded vertex velocity v_d (what the LPV model is scheduled on; the
+   identification re-expands there, ``expand_at: commanded``), or with ``expand_at: flown`` at
+   the flown velocity: ``Quadrotor.trim(v, yaw_rate)`` with the yaw rate (and ``v_flown``) the
+   means of the *true* states over the trim-averaging window - seed 0
    Eq. (13): the vertex model is the expansion about the equilibrium;
 5. per identified element ``z = (nominal - truth) / std`` with the stored (calibrated)
    ``std``; covered when ``|z| <= k``.
@@ -113,9 +115,13 @@ def eiv_shift(results) -> float:
     return worst
 
 
-def truth_model(params: QuadrotorParams, rec, trim_window: tuple[float, float]):
-    """``(A, B, x_e)``: linearisation of the airframe at its equilibrium at the mean true
-    velocity and yaw rate over ``trim_window`` (module docstring, step 4)."""
+def truth_model(
+    params: QuadrotorParams, rec, trim_window: tuple[float, float], at: str = "commanded"
+):
+    """``(A, B, x_e)``: linearisation of the airframe at its equilibrium at the commanded vertex
+    velocity ``rec.v_d`` (``at="commanded"``, what the LPV model is scheduled on) or at the mean
+    true velocity over ``trim_window`` (``"flown"``), with the mean true yaw rate there
+    (module docstring, step 4)."""
     q = Quadrotor(params)
     sel = (rec.state_t >= trim_window[0]) & (rec.state_t < trim_window[1])
     if not sel.any():
@@ -124,7 +130,8 @@ def truth_model(params: QuadrotorParams, rec, trim_window: tuple[float, float]):
     reduced = reduced_state(xs, params.arm_length)
     phi, th, q_, r_ = reduced[:, 0], reduced[:, 1], reduced[:, 6], reduced[:, 7]
     psi_dot = float(np.mean((np.sin(phi) * q_ + np.cos(phi) * r_) / np.cos(th)))
-    tr = q.trim(reduced[:, 2:5].mean(axis=0), psi_dot)
+    v = np.asarray(rec.v_d, dtype=float) if at == "commanded" else reduced[:, 2:5].mean(axis=0)
+    tr = q.trim(v, psi_dot)
     A, B = q.linearize(tr)
     return A, B, tr.x0
 
@@ -333,7 +340,8 @@ def score(runs, results, params: QuadrotorParams, ident_cfg) -> list[VertexCover
 
     out = []
     for rec, res in zip(runs, results):
-        A, B, _ = truth_model(params, rec, vx.trim_window((0.0, rec.t_excite), ident_cfg))
+        at = "commanded" if ident_cfg.expand_at == "commanded" else "flown"
+        A, B, _ = truth_model(params, rec, vx.trim_window((0.0, rec.t_excite), ident_cfg), at)
         k = unc.applied_k(ident_cfg.uncertainty, len(res.uncertain.intervals))
         u_d, v_d, w_d = (float(c) for c in rec.v_d)
         dof = res.fit.dof

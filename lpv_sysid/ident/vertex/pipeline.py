@@ -86,7 +86,12 @@ def finish_vertex(
             p = quadrotor_params(cfg)
             motor_prior = ((p.a_omega, cfg.motor_std[0]), (p.b_omega, cfg.motor_std[1]))
         assert start.rows is not None  # start_vertex solved the rows for taylor2
-        fit, x0, u0, flown, motor = finish(start.rows, known, cfg, motor_prior, data.name)
+        v_target = (
+            np.asarray(data.scheduling, dtype=float) if cfg.expand_at == "commanded" else None
+        )
+        fit, x0, u0, flown, motor = finish(
+            start.rows, known, cfg, motor_prior, data.name, v_target
+        )
     else:
         _, xdot, dx, du = prepare(data, cfg, x0, u0, u=rotor_input(data, quadrotor_params(cfg)))
         dt = float(np.median(np.diff(data.t)))
