@@ -27,6 +27,11 @@ from lpv_sysid.ident.vertex import regressor_noise_var, taylor
 from lpv_sysid.models.quadrotor import Quadrotor, QuadrotorParams, mixer
 from lpv_sysid.studies import coverage as cv
 
+#: known elements that move with the identified equilibrium and carry its uncertainty (issue 20
+#: item 3): gravity/kinematic terms at the identified attitude and yaw rate, e.g. A[w,theta],
+#: A[v,phi], A[u,v] = r, A[p,r]
+N_FIXED = 15
+
 
 # ----------------------------------------------------------------------------- standard errors
 def test_t_factor_is_the_student_t_quantile_ratio():
@@ -334,13 +339,14 @@ def test_stored_box_is_every_element_with_calibrated_std(descending_run, tmp_pat
     data = dp.align(dp.streams_from_record(rec), cfg).vertex
     res = vx.identify_vertex(data, cfg, motor_prior=((12.0, 0.2), (14000.0, 150.0)))
     assert res.motor["mode"] in ("identified", "prior")
-    assert len(res.uncertain.intervals) == 51  # 43 aerodynamic + 8 motor
+    # 43 aerodynamic + 8 motor + the known elements moving with the identified equilibrium
+    assert len(res.uncertain.intervals) == 51 + N_FIXED
     results = [dataclasses.replace(res, scheduling=c) for c in box_vertices(cfg.vmin, cfg.vmax)]
     doc = vx.vertex_models_dict(results, cfg)
     assert doc["format"] == MODELS_FORMAT == "lpv_sysid/vertex_models@2"
     vm = VertexModels.from_dict(doc)
     es = vm.vertices[0].uncertain
-    assert len(es) == 51 and all(e.std > 0 for e in es)
+    assert len(es) == 51 + N_FIXED and all(e.std > 0 for e in es)
     assert all(e.upper - e.nominal == pytest.approx(3 * e.std) for e in es)
     motor = [e for e in es if e.row >= 8]
     assert sorted((e.matrix, e.row, e.col) for e in motor) == sorted(
@@ -365,7 +371,7 @@ def test_motor_constants_pooled_where_a_rotor_is_pinned(descending_run):
     data = dp.align(dp.streams_from_record(rec), cfg).vertex
     alone = vx.identify_vertex(data, cfg)
     assert alone.motor["mode"] == "known" and "speed limit" in alone.motor["reason"]
-    assert len(alone.uncertain.intervals) == 43
+    assert len(alone.uncertain.intervals) == 43 + N_FIXED
     strict = dataclasses.replace(cfg, motor_max_pinned=1.0)
     forced = vx.identify_vertex(data, strict)
     assert forced.motor["mode"] == "identified"
@@ -373,7 +379,7 @@ def test_motor_constants_pooled_where_a_rotor_is_pinned(descending_run):
     (a, sa), (b, sb) = prior
     assert abs(a - q.params.a_omega) < 4 * sa and abs(b - q.params.b_omega) < 4 * sb
     pooled = vx.identify_vertex(data, dataclasses.replace(cfg, motor="known"), motor_prior=prior)
-    assert pooled.motor["mode"] == "prior" and len(pooled.uncertain.intervals) == 51
+    assert pooled.motor["mode"] == "prior" and len(pooled.uncertain.intervals) == 51 + N_FIXED
     iv = {(i.matrix, i.row, i.col): i for i in pooled.uncertain.intervals}
     assert iv[("A", 8, 8)].nominal == pytest.approx(-a) and iv[
         ("B", 9, 1)
@@ -432,7 +438,7 @@ def test_coverage_study_on_an_unseen_airframe():
         vx.IdentificationConfig(),
     )
     (af,) = afs
-    assert af.params != QuadrotorParams() and af.n in (43, 51)
+    assert af.params != QuadrotorParams() and af.n in (43 + N_FIXED, 51 + N_FIXED)
     assert af.fraction >= 0.97
     doc = cv.summary_dict(afs, QuadrotorParams(), cfg)
     assert doc["overall"]["elements"] == af.n and doc["overall"][
@@ -458,7 +464,7 @@ def test_coverage_cli(tmp_path, capsys):
     assert doc["format"] == "lpv_sysid/identification_coverage@1" and doc["study"]["vertices"] == [
         3
     ]
-    assert doc["overall"]["elements"] in (43, 51)
+    assert doc["overall"]["elements"] in (43 + N_FIXED, 51 + N_FIXED)
     assert "| airframe | mass |" in (out / "coverage.md").read_text()
     assert main(["coverage", "--vertices", "9", "--out", str(out)]) == 2
     assert "1..8" in capsys.readouterr().err

@@ -54,6 +54,13 @@ class IdentificationConfig:
     equilibrium: bool = cf.flag(
         True, "taylor2: re-expand about the identified equilibrium (Eq. 13)"
     )
+    fixed_intervals: bool = cf.flag(
+        True,
+        "taylor2 with equilibrium: the known elements that move with the identified "
+        "equilibrium (gravity/kinematic terms at the identified attitude, rigid-body terms at "
+        "the identified rotor speeds) get intervals from its delta-method uncertainty "
+        "(issue 20 item 3); false: they are exact",
+    )
     expand_at: str = cf.choice(
         "commanded",
         ("commanded", "flown"),

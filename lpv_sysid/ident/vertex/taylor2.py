@@ -177,6 +177,7 @@ def finish(
     motor_prior: MotorPrior | None = None,
     name: str = "",
     v_target: np.ndarray | None = None,
+    psi_var: float = 0.0,
 ):
     """``(Fit, x_e, u_e, xdot_flown, motor)`` from :func:`fit_rows`: where the maneuver did not
     identify ``a_Omega, b_Omega`` and ``motor_prior`` is given, they enter uncertain with it;
@@ -226,7 +227,19 @@ def finish(
     psi_dot = float((np.sin(x0[0]) * x0[6] + np.cos(x0[0]) * x0[7]) / np.cos(x0[1]))
     if cfg.equilibrium:
         v_e = x0[2:5] if v_target is None else np.asarray(v_target, dtype=float)
-        rx = taylor.reexpand(model, theta, joint, v_e, psi_dot, maskA, maskB)
+        rx = taylor.reexpand(
+            model,
+            theta,
+            joint,
+            v_e,
+            psi_dot,
+            maskA,
+            maskB,
+            fixed=cfg.fixed_intervals,
+            psi_var=psi_var,
+        )
+        if rx.maskA is not None and rx.maskB is not None:
+            maskA, maskB = rx.maskA, rx.maskB
         x_e, u_e, A, B, sA, sB, flown = (
             rx.x_e,
             rx.u_e,
