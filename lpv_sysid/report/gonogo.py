@@ -121,6 +121,33 @@ def _certificate_row(d: RunData) -> Row:
     )
 
 
+def _delay_row(d: RunData) -> Row:
+    """certificate.loop_delay (issue 20 item 7): the constant loop delay the proof covers and
+    the proven margins; NO-GO when the certificate states none (no delay is covered)."""
+    cert = (d.gains or {}).get("certificate")
+    ld = cert.get("loop_delay") if isinstance(cert, dict) else None
+    if not isinstance(ld, dict) or not isinstance(ld.get("bound_s"), (int, float)):
+        return Row(
+            "loop delay (certificate)",
+            "not stated",
+            "certificate.loop_delay.bound_s",
+            NO_GO,
+            "the proof covers no loop delay: synthesize again",
+        )
+
+    def ms(x) -> str:
+        return f"{1e3 * x:.2f} ms" if isinstance(x, (int, float)) else "?"
+
+    return Row(
+        "loop delay (certificate)",
+        f"bound {ms(ld['bound_s'])}; margins: gamma kept up to "
+        f"{ms(ld.get('performance_margin_s'))}, stable up to {ms(ld.get('stability_margin_s'))}",
+        "controller loop delay <= bound (refused at start-up otherwise)",
+        GO,
+        str(ld.get("source", "")),
+    )
+
+
 def _sha(path: Optional[Path]) -> Optional[str]:
     from lpv_sysid.errors import ConfigError
     from lpv_sysid.io.files import sha256_file
@@ -263,6 +290,11 @@ def events_rows(d: RunData) -> list[Row]:
 
 def go_no_go(d: RunData, margins: Optional[RunMargins]) -> tuple[list[Row], str]:
     """All rows and the overall verdict (NO-GO when any row is)."""
-    rows = [_certificate_row(d)] + verification_rows(d) + margin_rows(margins) + events_rows(d)
+    rows = (
+        [_certificate_row(d), _delay_row(d)]
+        + verification_rows(d)
+        + margin_rows(margins)
+        + events_rows(d)
+    )
     overall = NO_GO if any(r.verdict == NO_GO for r in rows) else GO
     return rows, overall

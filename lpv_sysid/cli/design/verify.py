@@ -90,6 +90,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "of the file, default) or 'ksigma' (nominal +/- k std, the Eq. 22 box itself)",
     )
     parser.add_argument(
+        "--loop-delay",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="worst delay of the configured loop (input latency + 1 / state rate + 1 / "
+        "command rate); FAIL when above the certificate's loop_delay.bound_s",
+    )
+    parser.add_argument(
         "--out",
         default=None,
         metavar="PATH",
@@ -147,6 +155,7 @@ def run(args: argparse.Namespace) -> int:
         full_box_kept=args.full_box_kept,
         workers=args.workers,
         backend=args.backend,
+        loop_delay_s=args.loop_delay,
     )
     print(
         "gains file: law matches certificate.gains_sha256, seal.sha256 matches the whole file"

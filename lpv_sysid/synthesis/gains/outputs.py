@@ -154,6 +154,13 @@ def result_lines(inp: Inputs, res, cert: dict, F_ff, F_jerk, ff_layout) -> list[
         f"gamma requested {opts.gamma:g}{solved_at}, certified (numpy re-evaluation) "
         f"{res.gamma_certified:.4g}, min margin {res.min_margin:.3g}"
     )
+    ld = cert.get("loop_delay")
+    if ld:
+        out.append(
+            f"loop delay: certified up to {ld['bound_s'] * 1e3:.2f} ms ({ld['source']}); "
+            f"proven margins: ||u_e -> z|| < gamma up to {ld['performance_margin_s'] * 1e3:.2f} "
+            f"ms, stable up to {ld['stability_margin_s'] * 1e3:.2f} ms (frozen systems)"
+        )
     if F_ff is not None:
         jerk = (
             f", jerk term F_jerk ({F_jerk.shape[1]}x{F_jerk.shape[2]})"

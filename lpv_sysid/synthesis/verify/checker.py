@@ -13,7 +13,13 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.synthesis.regions import Region
-from lpv_sysid.synthesis.verify.box import _sidecar_box, check_box_claim, check_scheduling_claim
+from lpv_sysid.synthesis.verify.box import (
+    _sidecar_box,
+    check_box_claim,
+    check_joint_claim,
+    check_robust_claim,
+    check_scheduling_claim,
+)
 from lpv_sysid.synthesis.verify.feedforward import check_feedforward
 from lpv_sysid.synthesis.verify.frozen import _check_input_claim, verify_gains
 from lpv_sysid.synthesis.verify.intervals import full_box_intervals
@@ -42,8 +48,14 @@ def verify_files(
     workers: Optional[int] = 1,
     backend: str = "process",
     seal_key: Optional[bytes] = None,
+    loop_delay_s: Optional[float] = None,
 ) -> VerifyReport:
     """Load gains.yaml (+ sidecar) and vertex_models.yaml and run :func:`verify_gains`.
+
+    ``loop delay``: the certificate's ``loop_delay.bound_s`` re-proven (the D-scaled small gain
+    of :mod:`lpv_sysid.synthesis.delay` on every stored frozen system); ``loop_delay_s`` (the
+    configured loop's worst delay, :func:`lpv_sysid.synthesis.delay.configured_delay_s`) must
+    not exceed it.
 
     Also checks names, box, equilibria and the models_sha256 of the certificate. ``full_box`` > 0
     adds the empirical Monte Carlo check over the full identified box (module docstring item 5,
@@ -177,6 +189,8 @@ def verify_files(
             )
         else:
             check_box_claim(rep, model, raw, cert, bx)
+            check_joint_claim(rep, model, raw, cert, bx)
+            check_robust_claim(rep, model, raw, cert, bx)
     check_scheduling_claim(rep, cert, sidecar)
     sub = verify_gains(
         model, gains.K, gains.R, C, gains.gamma, region, n_random, seed, certificate=sidecar
@@ -195,6 +209,7 @@ def verify_files(
             bool(worst <= float(ga) * (1 + 1e-3) + 1e-12),
             "worst independent H-inf norm vs the claimed gamma_achieved",
         )
+    _check_loop_delay(rep, model, gains, C, loop_delay_s)
     if mc is not None:
         res = mc.result()
         claimed = (
@@ -278,6 +293,7 @@ VERIFY_SETTINGS: dict[str, Any] = {
     "strict_full_box": False,
     "k_sigma": None,
     "full_box_kept": "stored",
+    "loop_delay_s": None,
 }
 
 
@@ -320,3 +336,44 @@ def verify_and_record(
     path = Path(out) if out else Path(gains_path).parent / VERIFICATION_FILE
     write_verification(path, verification_record(rep, gains_path, models_path, used))
     return rep, path
+
+
+def _check_loop_delay(
+    rep: VerifyReport, model, gains, C: np.ndarray, configured: Optional[float]
+) -> None:
+    """Rows ``loop delay`` (the bound re-proven) and ``loop config`` (a configured delay within
+    it); a certificate without ``loop_delay`` (written before issue 20) gets a WARN: no delay
+    is covered."""
+    from lpv_sysid.synthesis import delay as dl
+
+    bound = gains.certificate.loop_delay_bound_s
+    if bound is None:
+        rep.add(
+            "loop delay",
+            "certificate.loop_delay",
+            float("nan"),
+            float("nan"),
+            False,
+            "the certificate states no loop-delay bound: no delay is covered (synthesize again)",
+            advisory=True,
+        )
+        return
+    ok, worst, where = dl.covers(model.systems, gains.K, gains.R, C, float(gains.gamma), bound)
+    rep.add(
+        "loop delay",
+        f"{bound * 1e3:.2f} ms, {where}",
+        worst,
+        1.0,
+        bool(ok),
+        "D-scaled small gain at the bound (< 1: ||u_e -> z|| < gamma for every constant delay "
+        "<= bound on the stored frozen systems)",
+    )
+    if configured is not None:
+        rep.add(
+            "loop config",
+            "configured loop delay",
+            float(configured),
+            bound,
+            bool(configured <= bound),
+            "" if configured <= bound else "the configured loop is slower than the certificate",
+        )
