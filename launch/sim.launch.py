@@ -27,6 +27,9 @@ from lpv_sysid.nodes.launch_util import arg, declare_arguments, node
 
 #: every node but sim_vehicle (the clock source) runs on its /clock
 SIM_TIME = {"use_sim_time": True}
+#: the simulation's clock in the graph's namespace (two simulated graphs side by side do
+#: not share one /clock): sim_vehicle publishes it there, every node reads it from there
+CLOCK = [("/clock", ["/", arg("namespace"), "/clock"])]
 
 
 def generate_launch_description():
@@ -53,6 +56,7 @@ def generate_launch_description():
                     "mode": PythonExpression(["'lpv' if '", phase, "' == '2' else 'baseline'"]),
                     "lockstep": True,
                 },
+                remappings=CLOCK,
             ),
             node(
                 "excitation",
@@ -63,6 +67,7 @@ def generate_launch_description():
                     "vertex_frd": arg("vertex"),
                     **SIM_TIME,
                 },
+                remappings=CLOCK,
             ),
             node(
                 "lpv_controller",
@@ -74,7 +79,13 @@ def generate_launch_description():
                     **SIM_TIME,
                 },
                 condition=IfCondition(PythonExpression(["'", phase, "' == '2'"])),
+                remappings=CLOCK,
             ),
-            node("data_logger", "data_logger.yaml", {"out_dir": arg("log_dir"), **SIM_TIME}),
+            node(
+                "data_logger",
+                "data_logger.yaml",
+                {"out_dir": arg("log_dir"), **SIM_TIME},
+                remappings=CLOCK,
+            ),
         ]
     )

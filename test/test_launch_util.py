@@ -139,13 +139,14 @@ def _describe(fname):
 def test_declare_arguments_and_params(fake_launch):
     L = fake_launch
     out = L.declare_arguments(gains_file=L.REQUIRED, log_dir="x_log", notes={"log_dir": "test"})
-    assert [a.name for a in out] == ["config_dir", "gains_file", "log_dir"]
+    assert [a.name for a in out] == ["config_dir", "namespace", "gains_file", "log_dir"]
     assert out[0].default_value == os.path.join(SHARE, "config")
     assert out[0].description == "directory holding the node parameter files"
-    assert out[1].default_value is None  # required: no default_value given at all
-    assert out[1].kwargs["default_value"] is None
-    assert out[2].default_value == "x_log"
-    assert out[2].description == "experiment directory of the data logger (test)"
+    assert out[1].default_value == "lpv_sysid"  # one namespace per vehicle
+    assert out[2].default_value is None  # required: no default_value given at all
+    assert out[2].kwargs["default_value"] is None
+    assert out[3].default_value == "x_log"
+    assert out[3].description == "experiment directory of the data logger (test)"
     assert L.params("a.yaml") == PathJoinSubstitution(
         [LaunchConfiguration("config_dir"), "a.yaml"]
     )
@@ -164,7 +165,7 @@ SIGNALS = ("signals.npz", "signals.npz written by `lpv-sysid signals`")
     [
         (
             "phase1.launch.py",
-            ["config_dir", "signals_file", "vertex", "log_dir"],
+            ["config_dir", "namespace", "signals_file", "vertex", "log_dir"],
             {
                 "signals_file": SIGNALS,
                 "vertex": (
@@ -176,7 +177,7 @@ SIGNALS = ("signals.npz", "signals.npz written by `lpv-sysid signals`")
         ),
         (
             "phase2.launch.py",
-            ["config_dir", "gains_file", "signals_file", "log_dir"],
+            ["config_dir", "namespace", "gains_file", "signals_file", "log_dir"],
             {
                 "gains_file": (None, "gains.yaml from `lpv-sysid synthesize`"),
                 "signals_file": SIGNALS,
@@ -185,7 +186,15 @@ SIGNALS = ("signals.npz", "signals.npz written by `lpv-sysid signals`")
         ),
         (
             "sim.launch.py",
-            ["phase", "config_dir", "signals_file", "gains_file", "vertex", "log_dir"],
+            [
+                "phase",
+                "config_dir",
+                "namespace",
+                "signals_file",
+                "gains_file",
+                "vertex",
+                "log_dir",
+            ],
             {
                 "phase": ("1", "1: baseline + excitation, 2: LPV controller"),
                 "gains_file": (
@@ -208,7 +217,8 @@ def test_launch_files_declare_and_wire(fake_launch, fname, order, expected):
     for name, value in expected.items():
         assert args[name] == value, name
     for executable, node in nodes.items():
-        assert node.kwargs["namespace"] == "lpv_sysid" and node.kwargs["package"] == "lpv_sysid"
+        assert node.kwargs["namespace"] == LaunchConfiguration("namespace")
+        assert node.kwargs["package"] == "lpv_sysid"
         # first parameter entry: the node's file in config_dir; every LaunchConfiguration
         # in the overrides names a declared argument
         first = node.parameters[0]
@@ -249,8 +259,9 @@ def test_node_builds_the_package_node_with_its_parameter_file(fake_launch):
         "executable": "excitation_node",
         "package": "lpv_sysid",
         "name": "excitation",
-        "namespace": "lpv_sysid",
+        "namespace": LaunchConfiguration("namespace"),
         "output": "screen",
+        "remappings": None,
         "parameters": [
             PathJoinSubstitution([LaunchConfiguration("config_dir"), "excitation_node.yaml"]),
             {"mode": "phase1", "x.y": LaunchConfiguration("vertex")},

@@ -30,6 +30,7 @@ DESCRIPTIONS = {
     "gains_file": "gains.yaml from `lpv-sysid synthesize`",
     "vertex": "vertex body velocity (u, v, w) FRD, m/s, for this run",
     "log_dir": "experiment directory of the data logger",
+    "namespace": "ROS namespace of every node and topic (no leading slash); one per vehicle",
 }
 
 #: marks an argument without default (``ros2 launch`` refuses to start without it)
@@ -37,18 +38,22 @@ REQUIRED = None
 
 
 def declare_arguments(notes: Optional[dict[str, str]] = None, **defaults) -> list:
-    """``DeclareLaunchArgument`` for ``config_dir`` and then for each keyword, in order.
+    """``DeclareLaunchArgument`` for ``config_dir``, ``namespace`` and then for each keyword,
+    in order.
 
-    ``config_dir`` defaults to the installed ``share/lpv_sysid/config``. A keyword's value
-    is the argument's default (:data:`REQUIRED`: none); its description is the shared one
-    of :data:`DESCRIPTIONS`, followed by ``" (<note>)"`` for the names in ``notes``.
+    ``config_dir`` defaults to the installed ``share/lpv_sysid/config``, ``namespace`` to
+    ``lpv_sysid`` (every node of :func:`node` runs in it, so every topic is under it). A
+    keyword's value is the argument's default (:data:`REQUIRED`: none); its description is
+    the shared one of :data:`DESCRIPTIONS`, followed by ``" (<note>)"`` for the names in
+    ``notes``.
     """
     unknown = sorted((set(defaults) | set(notes or {})) - set(DESCRIPTIONS))
     if unknown:
         raise KeyError(f"launch arguments without a description: {unknown}")
     notes = notes or {}
     out = []
-    for name, default in {"config_dir": share_config_dir(), **defaults}.items():
+    first = {"config_dir": share_config_dir(), "namespace": NAMESPACE}
+    for name, default in {**first, **defaults}.items():
         description = DESCRIPTIONS[name] + (f" ({notes[name]})" if name in notes else "")
         if default is REQUIRED:
             out.append(DeclareLaunchArgument(name, description=description))
@@ -79,9 +84,11 @@ def node(
     params_file: Optional[str] = None,
     overrides: Optional[Mapping[str, Any]] = None,
     condition: Any = None,
+    remappings: Optional[list] = None,
 ) -> Node:
     """The package's node ``name`` (executable ``<name>_node``, setup.py ``NODES``) in the
-    ``/lpv_sysid`` namespace, logging to the screen, with :func:`sigterm_timeout`.
+    namespace of the ``namespace`` launch argument (``lpv_sysid``), logging to the screen,
+    with :func:`sigterm_timeout`; ``remappings``: launch_ros remapping pairs.
 
     Its parameters: the file ``params_file`` in ``config_dir`` (:func:`params`; ``None``:
     none), then ``overrides`` (launch arguments through :func:`arg`). ``condition``: a launch
@@ -94,8 +101,9 @@ def node(
         package=PACKAGE,
         executable=f"{name}_node",
         name=name,
-        namespace=NAMESPACE,
+        namespace=arg("namespace"),
         output="screen",
+        remappings=remappings,
         sigterm_timeout=sigterm_timeout(),
         parameters=parameters,
         condition=condition,

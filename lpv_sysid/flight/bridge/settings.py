@@ -41,6 +41,9 @@ class BridgeNodeSettings(parameters.Settings):
     )
     poll_rate_hz: float = parameters.double(250.0, "link poll rate [Hz]", 10.0, 2000.0)
     status_rate_hz: float = parameters.double(2.0, "status publication rate [Hz]", 0.1, 100.0)
+    publish_tf: bool = parameters.flag(
+        False, "publish odom -> base_link on /tf from the state (REP-105; RViz, Foxglove)"
+    )
 
     def validate(self) -> None:
         if self.transport not in TRANSPORTS:
