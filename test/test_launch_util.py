@@ -165,7 +165,16 @@ SIGNALS = ("signals.npz", "signals.npz written by `lpv-sysid signals`")
     [
         (
             "phase1.launch.py",
-            ["config_dir", "namespace", "signals_file", "vertex", "log_dir"],
+            [
+                "config_dir",
+                "namespace",
+                "signals_file",
+                "vertex",
+                "log_dir",
+                "transport",
+                "link_url",
+                "auto_start",
+            ],
             {
                 "signals_file": SIGNALS,
                 "vertex": (
@@ -177,7 +186,16 @@ SIGNALS = ("signals.npz", "signals.npz written by `lpv-sysid signals`")
         ),
         (
             "phase2.launch.py",
-            ["config_dir", "namespace", "gains_file", "signals_file", "log_dir"],
+            [
+                "config_dir",
+                "namespace",
+                "gains_file",
+                "signals_file",
+                "log_dir",
+                "transport",
+                "link_url",
+                "auto_start",
+            ],
             {
                 "gains_file": (None, "gains.yaml from `lpv-sysid synthesize`"),
                 "signals_file": SIGNALS,
@@ -194,6 +212,7 @@ SIGNALS = ("signals.npz", "signals.npz written by `lpv-sysid signals`")
                 "gains_file",
                 "vertex",
                 "log_dir",
+                "auto_start",
             ],
             {
                 "phase": ("1", "1: baseline + excitation, 2: LPV controller"),
@@ -219,11 +238,12 @@ def test_launch_files_declare_and_wire(fake_launch, fname, order, expected):
     for executable, node in nodes.items():
         assert node.kwargs["namespace"] == LaunchConfiguration("namespace")
         assert node.kwargs["package"] == "lpv_sysid"
-        # first parameter entry: the node's file in config_dir; every LaunchConfiguration
-        # in the overrides names a declared argument
-        first = node.parameters[0]
-        assert first.args[0][0] == LaunchConfiguration("config_dir")
-        for v in node.parameters[1].values():
+        # first parameter entry: the node's file in config_dir (the sequencer has none);
+        # every LaunchConfiguration in the overrides names a declared argument
+        if executable != "sequencer_node":
+            first = node.parameters[0]
+            assert first.args[0][0] == LaunchConfiguration("config_dir")
+        for v in node.parameters[-1].values():
             if isinstance(v, LaunchConfiguration):
                 assert v.args[0] in args, (executable, v)
     if fname == "phase2.launch.py":
@@ -233,6 +253,29 @@ def test_launch_files_declare_and_wire(fake_launch, fname, order, expected):
     if fname == "sim.launch.py":
         assert nodes["lpv_controller_node"].condition is not None
         assert all(n.condition is None for e, n in nodes.items() if e != "lpv_controller_node")
+    else:  # the operator's per-flight choices reach the bridge
+        bridge = nodes["mavlink_bridge_node"].parameters[1]
+        assert bridge["transport"] == LaunchConfiguration("transport")
+        assert bridge["link.url"] == LaunchConfiguration("link_url")
+        assert args["transport"][0] == "mavlink" and args["link_url"][0] == "udpin:127.0.0.1:14540"
+    seq = nodes["sequencer_node"].parameters[-1]
+    assert (
+        seq["auto_start"] == LaunchConfiguration("auto_start") and args["auto_start"][0] == "false"
+    )
+    steps = {
+        "phase1.launch.py": ["mavlink_bridge", "excitation"],
+        "phase2.launch.py": [
+            "mavlink_bridge:ready",
+            "lpv_controller",
+            "mavlink_bridge",
+            "excitation",
+        ],
+    }
+    if fname in steps:
+        assert seq["steps"] == steps[fname]
+        from lpv_sysid.flight.sequencer import SequencerSettings
+
+        SequencerSettings(steps=tuple(seq["steps"]))  # valid steps
 
 
 def test_campaign_launch_reads_the_share_copy_of_the_configs(fake_launch):

@@ -810,6 +810,52 @@ def test_phase2_launch_px4_sim_services_and_launch_sigint(ros, dom, tmp_path):
     check_recording(out, {"state": 20, "velocity_reference": 20, "excitation": 20, "status": 2})
 
 
+def test_phase2_launch_sequencer_starts_the_nodes_in_the_safe_order(ros, dom, tmp_path):
+    """Issue 24 item 4: phase2.launch.py with ``link_url`` (no copied config directory) and
+    ``auto_start:=true`` against the simulated PX4: the sequencer waits for the link, starts
+    the controller, then the bridge (OFFBOARD confirmed), then the excitation, each after the
+    previous one confirmed on its status; SIGINT ends everything with exit 0."""
+    env = RosEnv(SETUP, ros["ws"], dom.value)
+    port = free_udp_port()
+    px4 = env.popen(
+        f"{ros['lib']}/lpv-sysid sim-vehicle --udp 127.0.0.1:{port}", tmp_path / "px4_sim.log"
+    )
+    proc = launch(
+        ros,
+        env,
+        "phase2.launch.py",
+        {
+            "link_url": f"udpin:127.0.0.1:{port}",
+            "gains_file": ros["gains"],
+            "signals_file": ros["sig2"],
+            "log_dir": tmp_path / "phase2_log",
+            "auto_start": "true",
+        },
+        tmp_path / "launch.log",
+    )
+    try:
+        ok = proc.wait_for("sequence complete: every node started in order", 150.0)
+        text = proc.log()
+        steps = re.findall(r"\[lpv_sysid\.sequencer\]: (step \d/4: .*)", text)
+        MEASURED["phase2_sequence"] = steps
+        assert ok, text[-5000:]
+        order = [m for m in steps if "confirmed" in m or ": start " in m]
+        assert [o.split(": ", 1)[1].split(" (")[0] for o in order] == [
+            "mavlink_bridge:ready confirmed",
+            "start lpv_controller",
+            "lpv_controller confirmed",
+            "start mavlink_bridge",
+            "mavlink_bridge confirmed",
+            "start excitation",
+            "excitation confirmed",
+        ], steps
+        rc, _ = sigint_and_wait(proc, group=False)
+    finally:
+        proc.kill()
+        sigint_and_wait(px4, group=False)
+    assert rc == 0, proc.log()[-4000:]
+
+
 #: campaign_node.publish_status logs several severities from one call site (lines
 #: ``log = {...}[ev.level]; log(...)``): rclpy raises this at its first non-info event
 CAMPAIGN_LOGGER_BUG = "Logger severity cannot be changed between calls"

@@ -31,7 +31,30 @@ DESCRIPTIONS = {
     "vertex": "vertex body velocity (u, v, w) FRD, m/s, for this run",
     "log_dir": "experiment directory of the data logger",
     "namespace": "ROS namespace of every node and topic (no leading slash); one per vehicle",
+    "transport": "mavlink (the bridge's own MAVLink link to PX4) | mavros (MAVROS topics)",
+    "link_url": "MAVLink link of the bridge: udpin:HOST:PORT, tcp:HOST:PORT, /dev/ttyAMA0",
+    "auto_start": "true: the sequencer starts the nodes in order at once; false: on its "
+    "start service",
 }
+
+#: the defaults of the per-flight arguments (the shipped config/mavlink_bridge_node.yaml's)
+TRANSPORT_DEFAULT = "mavlink"
+LINK_URL_DEFAULT = "udpin:127.0.0.1:14540"
+
+
+def bridge_overrides(**more) -> dict:
+    """The bridge's parameters chosen per flight by launch arguments (``transport``,
+    ``link_url``), plus ``more``."""
+    return {"transport": arg("transport"), "link.url": arg("link_url"), **more}
+
+
+def sequencer(steps: Any, remappings: Optional[list] = None, **more) -> Node:
+    """The sequencer node (nodes/sequencer_node.py) running ``steps`` (a list, or a
+    substitution giving one), on its ``start`` service or at once with ``auto_start``;
+    ``more``: further parameters (``use_sim_time``)."""
+    overrides = {"steps": steps, "auto_start": arg("auto_start"), **more}
+    return node("sequencer", overrides=overrides, remappings=remappings)
+
 
 #: marks an argument without default (``ros2 launch`` refuses to start without it)
 REQUIRED = None
