@@ -35,28 +35,56 @@ DESCRIPTIONS = {
     "setpoints sent as SET_ATTITUDE_TARGET, bridge command rate_setpoint, config "
     "lpv_controller_px4.yaml: PX4 >= 1.14, gains of `lpv-sysid chain` / `identify --plant "
     "px4-rate`)",
+    "namespace": "ROS namespace of every node and topic (no leading slash); one per vehicle",
+    "transport": "mavlink (the bridge's own MAVLink link to PX4) | mavros (MAVROS topics)",
+    "link_url": "MAVLink link of the bridge: udpin:HOST:PORT, tcp:HOST:PORT, /dev/ttyAMA0",
+    "auto_start": "true: the sequencer starts the nodes in order at once; false: on its "
+    "start service",
 }
 #: ``design`` launch argument values (the controller reads the design from the gains file and
 #: refuses a file of neither; the argument picks the bridge command and parameter file)
 DESIGNS = ("virtual_actuator", "rate_plant")
+
+#: the defaults of the per-flight arguments (the shipped config/mavlink_bridge_node.yaml's)
+TRANSPORT_DEFAULT = "mavlink"
+LINK_URL_DEFAULT = "udpin:127.0.0.1:14540"
+
+
+def bridge_overrides(**more) -> dict:
+    """The bridge's parameters chosen per flight by launch arguments (``transport``,
+    ``link_url``), plus ``more``."""
+    return {"transport": arg("transport"), "link.url": arg("link_url"), **more}
+
+
+def sequencer(steps: Any, remappings: Optional[list] = None, **more) -> Node:
+    """The sequencer node (nodes/sequencer_node.py) running ``steps`` (a list, or a
+    substitution giving one), on its ``start`` service or at once with ``auto_start``;
+    ``more``: further parameters (``use_sim_time``)."""
+    overrides = {"steps": steps, "auto_start": arg("auto_start"), **more}
+    return node("sequencer", overrides=overrides, remappings=remappings)
+
 
 #: marks an argument without default (``ros2 launch`` refuses to start without it)
 REQUIRED = None
 
 
 def declare_arguments(notes: Optional[dict[str, str]] = None, **defaults) -> list:
-    """``DeclareLaunchArgument`` for ``config_dir`` and then for each keyword, in order.
+    """``DeclareLaunchArgument`` for ``config_dir``, ``namespace`` and then for each keyword,
+    in order.
 
-    ``config_dir`` defaults to the installed ``share/lpv_sysid/config``. A keyword's value
-    is the argument's default (:data:`REQUIRED`: none); its description is the shared one
-    of :data:`DESCRIPTIONS`, followed by ``" (<note>)"`` for the names in ``notes``.
+    ``config_dir`` defaults to the installed ``share/lpv_sysid/config``, ``namespace`` to
+    ``lpv_sysid`` (every node of :func:`node` runs in it, so every topic is under it). A
+    keyword's value is the argument's default (:data:`REQUIRED`: none); its description is
+    the shared one of :data:`DESCRIPTIONS`, followed by ``" (<note>)"`` for the names in
+    ``notes``.
     """
     unknown = sorted((set(defaults) | set(notes or {})) - set(DESCRIPTIONS))
     if unknown:
         raise KeyError(f"launch arguments without a description: {unknown}")
     notes = notes or {}
     out = []
-    for name, default in {"config_dir": share_config_dir(), **defaults}.items():
+    first = {"config_dir": share_config_dir(), "namespace": NAMESPACE}
+    for name, default in {**first, **defaults}.items():
         description = DESCRIPTIONS[name] + (f" ({notes[name]})" if name in notes else "")
         if default is REQUIRED:
             out.append(DeclareLaunchArgument(name, description=description))
@@ -97,9 +125,11 @@ def node(
     params_file: Any = None,
     overrides: Optional[Mapping[str, Any]] = None,
     condition: Any = None,
+    remappings: Optional[list] = None,
 ) -> Node:
     """The package's node ``name`` (executable ``<name>_node``, setup.py ``NODES``) in the
-    ``/lpv_sysid`` namespace, logging to the screen, with :func:`sigterm_timeout`.
+    namespace of the ``namespace`` launch argument (``lpv_sysid``), logging to the screen,
+    with :func:`sigterm_timeout`; ``remappings``: launch_ros remapping pairs.
 
     Its parameters: the file ``params_file`` in ``config_dir`` (:func:`params`; ``None``:
     none), then ``overrides`` (launch arguments through :func:`arg`). ``condition``: a launch
@@ -112,8 +142,9 @@ def node(
         package=PACKAGE,
         executable=f"{name}_node",
         name=name,
-        namespace=NAMESPACE,
+        namespace=arg("namespace"),
         output="screen",
+        remappings=remappings,
         sigterm_timeout=sigterm_timeout(),
         parameters=parameters,
         condition=condition,

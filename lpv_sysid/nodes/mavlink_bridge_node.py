@@ -70,6 +70,8 @@ class MavlinkBridgeNode(shell.ShellNode):
             shell.TEARDOWN_MARGIN_S,
         )
         self.core = rt.core
+        if rt.settings.publish_tf:
+            self.enable_tf()
         self.pub = {"status": shell.StatusPublisher(self)}  # status and /diagnostics
         for e in rt.publishers:
             self.pub[e.key] = self.create_publisher(TYPES[e.key], e.topic, qos_of(e))
@@ -103,6 +105,7 @@ class MavlinkBridgeNode(shell.ShellNode):
         """Publish the runtime's ``[(key, message)]``, then log what it queued."""
         for key, msg in out:
             self.pub[key].publish(msg)
+            self.publish_tf_of(key, msg)
         shell.log_lines(self.get_logger(), self.runtime.take_log())
 
     # -- orderly shutdown (nodes/shell.run) ----------------------------------------

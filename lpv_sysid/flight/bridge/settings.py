@@ -48,6 +48,9 @@ class BridgeNodeSettings(parameters.Settings):
         "input of `lpv-sysid identify --plant px4-rate` (phase 1), the echo of the commands "
         "(phase 2)",
     )
+    publish_tf: bool = parameters.flag(
+        False, "publish odom -> base_link on /tf from the state (REP-105; RViz, Foxglove)"
+    )
 
     def validate(self) -> None:
         if self.transport not in TRANSPORTS:

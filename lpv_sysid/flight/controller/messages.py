@@ -10,13 +10,13 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io.messages import (
-    ROTOR_NAMES,
     MsgFactory,
     actuator_command_msg,
     channels_from_joint_states,
     excitation_from_joint_state,
     joint_state,
     reference_from_twist,
+    rotor_names_of,
     rotor_speeds_from_joint_state,
     odometry_cdr_frames,
     state_from_odometry,
@@ -123,8 +123,9 @@ def parse_inputs(topic: str, msgs: list) -> tuple[np.ndarray, np.ndarray]:
     if topic == "state":
         s = states_from_odometry(msgs)
         return s.t, np.column_stack([s.euler[:, :2], s.v_body, s.omega])
-    if topic == "rotor_speeds":
-        return channels_from_joint_states(msgs, ROTOR_NAMES, field="velocity")
+    names = {rotor_names_of(m.name) for m in msgs} if topic == "rotor_speeds" else set()
+    if len(names) == 1:  # one source (measured or estimated) in the whole recording
+        return channels_from_joint_states(msgs, names.pop(), field="velocity")
     if topic == "excitation":
         return channels_from_joint_states(msgs, EXCITATION_NAMES, field="position")
     t = np.empty(len(msgs))

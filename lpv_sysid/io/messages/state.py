@@ -78,6 +78,30 @@ def odometry_from_state(
     )
 
 
+#: the TF topic (tf2's convention: absolute, one tree per ROS domain)
+TF_TOPIC = "/tf"
+
+
+def tf_from_odometry(f: MsgFactory, odom):
+    """The REP-105 transform of a ``state`` message: ``tf2_msgs/TFMessage`` with one
+    ``geometry_msgs/TransformStamped`` from the Odometry's ``header.frame_id`` (``odom``) to
+    its ``child_frame_id`` (``base_link``), stamped like it: translation = the ENU position,
+    rotation = the ENU/FLU orientation (RViz and Foxglove place the vehicle with it)."""
+    p, q = odom.pose.pose.position, odom.pose.pose.orientation
+    transform = f(
+        "geometry_msgs/msg/Transform",
+        translation=vector3(f, (p.x, p.y, p.z)),
+        rotation=quaternion(f, (q.x, q.y, q.z, q.w)),
+    )
+    tf = f(
+        "geometry_msgs/msg/TransformStamped",
+        header=header_msg(f, stamp_ns_of(odom), odom.header.frame_id),
+        child_frame_id=str(odom.child_frame_id),
+        transform=transform,
+    )
+    return f("tf2_msgs/msg/TFMessage", transforms=[tf])
+
+
 def state_from_odometry(
     msg, *, frame_id: str | None = ODOM_FRAME, child_frame_id: str | None = BASE_FRAME
 ) -> StateSample:

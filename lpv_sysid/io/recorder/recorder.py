@@ -13,6 +13,7 @@ import yaml
 
 from lpv_sysid.errors import BagError, ConfigError
 from lpv_sysid.io.bag import DiskReserve, atomic_write_text, now_iso
+from lpv_sysid.io.messages import qos_of
 from lpv_sysid.io.recorder.config import RecorderConfig
 from lpv_sysid.io.recorder.experiment import (
     LOCK_FILE,
@@ -249,7 +250,9 @@ class Recorder:
             writer = self._make_writer(str(path))
             writer.__enter__()
             for topic, msgtype in self.config.topics.items():
-                writer.add_topic(topic, msgtype)
+                # the QoS the package's publishers offer (best effort sensors, ...): what
+                # ``ros2 bag play`` offers again
+                writer.add_topic(topic, msgtype, qos_of(topic))
         except (OSError, BagError) as exc:
             self.error = f"cannot open bag {path}: {getattr(exc, 'strerror', None) or exc}"
             write_metadata(self, closed=False)
