@@ -6,6 +6,7 @@ same reading of the same bytes):
 
 ========================================  ===================================================
 :mod:`~lpv_sysid.io.formats.vertex_models`  ``vertex_models.yaml`` (:class:`VertexModels`)
+:mod:`~lpv_sysid.io.formats.export`         its export: ``.mat`` file, python-control systems
 :mod:`~lpv_sysid.io.formats.gains`          ``gains.yaml`` (:class:`GainSchedule`)
 :mod:`~lpv_sysid.io.formats.certificate`    its ``certificate`` entry (:class:`Certificate`)
 :mod:`~lpv_sysid.io.formats.sidecar`        the certificate sidecar ``<gains>.cert.npz``
@@ -28,6 +29,12 @@ Signal files (``signals.npz``, ``summary.yaml``) are owned by
 from __future__ import annotations
 
 from lpv_sysid.io.formats.certificate import DesignEnvelope
+from lpv_sysid.io.formats.export import (
+    MAT_FORMAT,
+    control_systems,
+    models_mat_dict,
+    save_models_mat,
+)
 from lpv_sysid.io.formats.feedforward_spec import FeedforwardSpec
 from lpv_sysid.io.formats.gains import GAINS_FORMAT, GainSchedule, certify_law, gains_dict
 from lpv_sysid.io.formats.sidecar import (
@@ -51,17 +58,21 @@ __all__ = [
     "FeedforwardSpec",
     "GAINS_FORMAT",
     "GainSchedule",
+    "MAT_FORMAT",
     "MODELS_FORMAT",
     "MODELS_FORMAT_V1",
     "UncertainEntry",
     "VertexModel",
     "VertexModels",
     "box_arrays",
+    "models_mat_dict",
     "certify_law",
+    "control_systems",
     "gains_dict",
     "load_certificate_npz",
     "load_certified_systems",
     "models_dict",
     "save_certificate_npz",
+    "save_models_mat",
     "systems_arrays",
 ]
