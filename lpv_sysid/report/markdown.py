@@ -32,6 +32,7 @@ from lpv_sysid.report.sections_flight import (
     go_no_go_section,
 )
 from lpv_sysid.report.sections_models import stability_section
+from lpv_sysid.report.sections_phase1 import phase1_section
 
 log = logging.getLogger(__name__)
 
@@ -111,6 +112,7 @@ def write_report(
     go_no_go_section(r)
     _inputs_section(r)
     _phase1_section(r)
+    phase1_section(r)
     _ident_section(r)
     stability_section(r)
     _signals_section(r)

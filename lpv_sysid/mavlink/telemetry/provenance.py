@@ -15,7 +15,8 @@ Vehicle kind (:func:`vehicle_kind`, first match): ``SIMULATED`` -- the package's
 simulated PX4 (``sim/px4_vehicle``: AUTOPILOT_VERSION ``flight_custom_version`` =
 :data:`SIM_MARKER`); ``HITL`` -- ``SYS_HITL`` 1 or the HEARTBEAT's HIL flag; ``SIH`` --
 ``SYS_HITL`` 2 (simulation in hardware); ``SITL`` -- PX4 built for the host (parameters
-of its simulation modules, ``SIM_*``, which a flight controller build does not have);
+of its simulation modules, ``SIM_*`` / ``SIH_*`` with ``SYS_HITL`` 0, which a flight
+controller's build does not have);
 else ``FLOWN``.
 """
 
@@ -41,7 +42,7 @@ def vehicle_kind(params: dict, hil_flag: bool, custom_version: bytes | None) -> 
         return "HITL"
     if hitl == 2:
         return "SIH"
-    if any(k.startswith("SIM_") for k in params):
+    if any(k.startswith(("SIM_", "SIH_")) for k in params):
         return "SITL"
     return "FLOWN"
 
