@@ -6,7 +6,8 @@
 
 Every rosbag2 directory under DIR is one maneuver.  Its velocity reference during the
 trim segment decides what it is: a corner of the scheduling box -> a vertex model; the
-box centre -> the independent validation maneuver (seed 0 Table 3, Fig. 4).
+box centre -> the independent validation maneuver (seed 0 Table 3, Fig. 4). The models are also
+written as a MATLAB file next to it (``vertex_models.mat``: lpv_sysid/io/formats/export.py).
 
 ``--plant px4-rate``: the rate plant PX4 executes (lpv_sysid/models/rate_plant.py: thrust +
 body-rate setpoints in, PX4's rate loop inside), identified from the campaign's bags that carry
@@ -214,7 +215,7 @@ def run(args: argparse.Namespace) -> int:
     from lpv_sysid.ident import metrics
     from lpv_sysid.ident import vertex as vx
     from lpv_sysid.ident.phase1 import identify_campaign
-    from lpv_sysid.io.formats import VertexModels
+    from lpv_sysid.io.formats import VertexModels, save_models_mat
 
     cfg = load_config(args.config)
     if args.quadrotor is not None:
@@ -259,6 +260,8 @@ def run(args: argparse.Namespace) -> int:
     print()
     print(format_uncertainty_summary(results, cfg))
     print(f"wrote {args.out} (sha256 {sha[:12]})")
+    mat = save_models_mat(models, args.out.with_suffix(".mat"))
+    print(f"wrote {mat} (MATLAB: A, B, x0, u0 per vertex, uncertain intervals)")
     if val is not None:
         plot = args.plot or args.out.with_name(args.out.stem + "_validation.png")
         metrics.plot_validation(val["t"], val["xdot_m"], val["xdot_f"], str(plot))

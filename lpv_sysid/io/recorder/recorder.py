@@ -304,6 +304,17 @@ class Recorder:
             self.error = self.error or msg
             raise BagError(f"recorder: {msg}") from None
         settle(self.bags[-1], writer)
+        self._note_file_bytes(self.bags[-1])
+
+    def _note_file_bytes(self, bag) -> None:
+        """``bytes`` of a closed bag: the size of its files on disk (the payload count
+        during recording is kept only when splitting by size needs it)."""
+        try:
+            size = sum(p.stat().st_size for p in (self.out_dir / bag.path).iterdir())
+        except OSError:
+            return
+        if bag.durable is not None:
+            bag.durable["bytes"] = int(size)
 
     def _fail(self, reason: str):
         self.error = reason

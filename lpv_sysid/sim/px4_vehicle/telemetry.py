@@ -10,7 +10,7 @@ import math
 import numpy as np
 
 from lpv_sysid.mavlink import px4
-from lpv_sysid.mavlink.telemetry import euler_to_quat
+from lpv_sysid.mavlink.telemetry import SIM_MARKER, euler_to_quat
 from lpv_sysid.sim.px4_vehicle.state import MAV_TYPE_QUADROTOR, VehicleState
 
 MAV_AUTOPILOT_PX4 = 12
@@ -108,7 +108,7 @@ class TelemetryStreams(VehicleState):
                 0,
                 0,
                 0,
-                b"\0" * 8,
+                SIM_MARKER,  # flight_custom_version: tells this simulation from a PX4
                 b"\0" * 8,
                 b"\0" * 8,
                 0,
