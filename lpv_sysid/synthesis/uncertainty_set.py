@@ -174,10 +174,11 @@ class UncertaintySettings:
             "method": self.method,
             "common_b": self.common_b,
             "p_max_b": self.p_max_b,
+            # a full box records both, null included (an absent key means the default)
             **{
                 k: getattr(self, k)
                 for k in ("joint_probability", "box_inflation")
-                if getattr(self, k) is not None
+                if self.set == "full_box" or getattr(self, k) is not None
             },
             **self.reduction,
         }
