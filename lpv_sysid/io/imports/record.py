@@ -91,13 +91,13 @@ def parse_window(text: str, index: int) -> Run:
     """``START:END`` or ``START:END:NAME`` (seconds on the log's clock) -> :class:`Run`."""
     parts = str(text).split(":")
     if len(parts) not in (2, 3):
-        raise ConfigError(f"--window {text!r}: expected START:END or START:END:NAME (seconds)")
+        raise ConfigError(f"window {text!r}: expected START:END or START:END:NAME (seconds)")
     try:
         a, b = float(parts[0]), float(parts[1])
     except ValueError:
-        raise ConfigError(f"--window {text!r}: START and END must be numbers (s)") from None
+        raise ConfigError(f"window {text!r}: START and END must be numbers (s)") from None
     if not (np.isfinite(a) and np.isfinite(b) and b > a):
-        raise ConfigError(f"--window {text!r}: need finite START < END")
+        raise ConfigError(f"window {text!r}: need finite START < END")
     name = parts[2] if len(parts) == 3 and parts[2] else f"window_{index}"
     return Run(name, a, b)
 
@@ -120,7 +120,7 @@ def runs_of(
             raise ConfigError(
                 f"{rec.source}: no offboard segment of >= {min_duration:g} s "
                 f"(segments: {[(round(a, 2), round(b, 2)) for a, b in rec.offboard]}); "
-                "give the runs with --window START:END"
+                "give the runs as windows START:END"
             )
     t = rec.state.t
     for r in runs:
