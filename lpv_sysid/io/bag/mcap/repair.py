@@ -3,10 +3,11 @@
 The incomplete tail (a record the process did not finish) is cut -- the complete records of
 a chunk the cut went through are written again as a chunk of their own (with its CRC), so
 no complete record is dropped -- the message index of the last chunk regenerated if it was
-cut, the chunk a failed writer still held in memory appended, and a summary section (schemas, channels, chunk indexes, statistics) and footer
-written after it -- nothing before the cut is rewritten, so a repair needs only a few kB
-even on a full disk -- then rosbags' own reader checks the result. The file is found by
-the salvage walk of :mod:`lpv_sysid.io.bag.mcap.walk`.
+cut, the chunk a failed writer still held in memory appended, and a summary section
+(schemas, channels, chunk indexes, statistics) and footer written after it -- nothing
+before the cut is rewritten, so a repair needs only a few kB even on a full disk -- then
+rosbags' own reader checks the result. The file is found by the salvage walk of
+:mod:`lpv_sysid.io.bag.mcap.walk`.
 """
 
 from __future__ import annotations
