@@ -36,6 +36,7 @@ from lpv_sysid.io.formats.sidecar import (
     box_arrays,
     load_certificate_npz,
     load_certified_systems,
+    referenced_files,
     save_certificate_npz,
     systems_arrays,
 )
@@ -66,6 +67,7 @@ __all__ = [
     "load_certified_systems",
     "load_seal_key",
     "models_dict",
+    "referenced_files",
     "save_certificate_npz",
     "seal_document",
     "systems_arrays",
