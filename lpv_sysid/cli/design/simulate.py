@@ -270,7 +270,7 @@ def run_phase2(args: argparse.Namespace) -> int:
     problem = load_problem(
         args.gains, models_path if (args.models is not None or models_path.is_file()) else None
     )
-    signals = load_signals(args.signals, cfg.duration, cfg.ramp)
+    signals = load_signals(args.signals, cfg.duration, cfg.ramp, design=problem.design)
     quad_params, sensors = load_vehicle_config(args.config, args.seed)
     out = Path(args.out)
     t0 = time.perf_counter()
