@@ -162,6 +162,9 @@ class CoverageConfig:
     vertices: tuple[int, ...] | None = None  # 1-based seed 0 Table 1 indices (None: all 8)
     max_draws: int = 20  # redraws of an airframe that cannot be flown
     joint_probability: float = DEFAULT_JOINT_PROBABILITY  # that of the certified box
+    box_inflation: float = 0.05  # synthesis.uncertainty_set.DEFAULT_BOX_INFLATION
+    interior: int = 12  # random interior scheduling points besides hover (0: no interior check)
+    check_hover: bool = True  # fly and identify hover, add the interpolation residual
 
     def __post_init__(self) -> None:
         if int(self.airframes) != self.airframes or self.airframes < 1:
@@ -199,6 +202,11 @@ class AirframeCoverage:
     params: QuadrotorParams
     vertices: list[VertexCoverage] = field(default_factory=list)
     eiv_shift: float = 0.0  # largest errors-in-variables correction in std (eiv_shift)
+    # issue 20 item 2: per interior point (hover first) the worst excess of the truth over the
+    # interpolated certified set in half-widths (<= 0 inside) and the element, without and
+    # with the measured hover residual added
+    interior: list = field(default_factory=list)
+    interior_padded: list = field(default_factory=list)
 
     @property
     def covered(self) -> int:
@@ -379,6 +387,25 @@ def run_study(
         af = AirframeCoverage(
             k, params, score(runs, results, params, ident_cfg), eiv_shift(results)
         )
+        if cfg.interior and len(results) == 8:
+            verts = certified_bounds(results, cfg.joint_probability, cfg.box_inflation)
+            pts = interior_points(verts, cfg.interior, np.random.default_rng([cfg.seed, k, 7]))
+            af.interior = interior_excess(params, verts, pts)
+            if cfg.check_hover:
+                pad = hover_residual(
+                    params,
+                    base,
+                    verts,
+                    results,
+                    gains,
+                    sensors,
+                    phase1_cfg,
+                    ident_cfg,
+                    cfg.joint_probability,
+                    10_000 * (cfg.seed + 1) + 100 * k + 99,
+                    signals,
+                )
+                af.interior_padded = interior_excess(params, verts, pts, pad)
         out.append(af)
         kept.append(runs if keep_runs else None)
         if progress:
@@ -460,6 +487,18 @@ def summary_dict(
         "intervals of the certified box (Sidak k over the airframe's element count, "
         "ident.vertex.joint_k), the event the certificate's joint probability is about",
     }
+    inside = [sum(e <= 0 for e, _ in af.interior) for af in airframes]
+    inside_p = [sum(e <= 0 for e, _ in af.interior_padded) for af in airframes]
+    d["interior"] = {
+        "points_per_airframe": max((len(af.interior) for af in airframes), default=0),
+        "truth_inside": int(sum(inside)),
+        "truth_inside_with_hover_residual": int(sum(inside_p)),
+        "points": int(sum(len(af.interior) for af in airframes)),
+        "meaning": "true linearisation at hover and random interior v_d inside the interpolated "
+        "certified set [sum alpha_i lo_i, sum alpha_i hi_i] (joint, inflated box; B hull); "
+        "'with hover residual': every half-width + the interpolation residual measured at an "
+        "identified hover check flight (+ k_joint std)",
+    }
     for af, jc in zip(airframes, joint):
         d["airframes"].append(
             {
@@ -471,6 +510,10 @@ def summary_dict(
                 "joint_k": [round(k, 4) for k in af.joint_k(P)],
                 "jointly_covered": bool(jc),
                 "worst_z_over_joint_k": float(af.worst_joint_ratio(P)),
+                "interior_excess": [[round(e, 3), lab] for e, lab in af.interior],
+                "interior_excess_with_hover_residual": [
+                    [round(e, 3), lab] for e, lab in af.interior_padded
+                ],
                 "eiv_max_shift_std": float(af.eiv_shift),
                 "vertices": [
                     {
@@ -529,3 +572,127 @@ def markdown_table(
         tot += [f"{100 * np.average(ablation[nm], weights=ws):.2f} %" for nm in names]
     lines.append("| " + " | ".join(tot) + " |")
     return "\n".join(lines)
+
+
+# ----------------------------------------------------------------- interior of the box (item 2)
+def certified_bounds(results, probability: float, inflation: float) -> list:
+    """Per vertex ``(scheduling, lo, hi)`` of ``[A, B]`` (12 x 16) as the synthesis box states
+    them (synthesis.uncertainty_set): every element with a std in ``max(stored half, k_joint
+    std)`` about its interval centre (Sidak over all elements of the airframe), times
+    ``1 + inflation``; the other elements at their value."""
+    from lpv_sysid.ident.vertex import joint_k
+
+    p = sum(len(r.uncertain.intervals) for r in results)
+    out = []
+    for r in results:
+        AB = np.concatenate([r.fit.A, r.fit.B], axis=1)
+        lo, hi = AB.copy(), AB.copy()
+        k_st = float(r.uncertain.intervals[0].upper - r.uncertain.intervals[0].nominal) / max(
+            r.uncertain.intervals[0].std, 1e-300
+        )
+        k_j = joint_k(p, probability, r.fit.dof, k_st) if r.uncertain.intervals else 0.0
+        for iv in r.uncertain.intervals:
+            c = iv.col if iv.matrix == "A" else 12 + iv.col
+            a, b = (
+                min(iv.lower, iv.nominal - k_j * iv.std),
+                max(iv.upper, iv.nominal + k_j * iv.std),
+            )
+            m, h = 0.5 * (a + b), 0.5 * (b - a) * (1.0 + inflation)
+            lo[iv.row, c], hi[iv.row, c] = m - h, m + h
+        out.append((np.asarray(r.scheduling, dtype=float), lo, hi))
+    # B: one hull common to all vertices (models.lpv.input_hull)
+    bl = np.min([lo[:, 12:] for _, lo, _ in out], axis=0)
+    bh = np.max([hi[:, 12:] for _, _, hi in out], axis=0)
+    for _, lo, hi in out:
+        lo[:, 12:], hi[:, 12:] = bl, bh
+    return out
+
+
+def _weights(v: np.ndarray, verts: list) -> np.ndarray:
+    """Multilinear weights (seed 0 Eq. 21) of ``v`` for vertices at the corners of their box."""
+    S = np.array([s for s, _, _ in verts])
+    vmin, vmax = S.min(axis=0), S.max(axis=0)
+    t = (v - vmin) / (vmax - vmin)
+    return np.array([np.prod(np.where(s == vmax, t, 1.0 - t)) for s in S])
+
+
+def interior_points(verts: list, n: int, rng: np.random.Generator) -> list:
+    """Hover (the box centre) and ``n`` uniform random interior scheduling points."""
+    S = np.array([s for s, _, _ in verts])
+    vmin, vmax = S.min(axis=0), S.max(axis=0)
+    return [0.5 * (vmin + vmax)] + [
+        vmin + rng.uniform(size=vmin.size) * (vmax - vmin) for _ in range(n)
+    ]
+
+
+def interior_excess(params: QuadrotorParams, verts: list, points: list, pad=None) -> list:
+    """Per point the worst excess of the true linearisation (at the equilibrium at v, yaw rate
+    0) over the interpolated certified set ``[sum alpha_i lo_i, sum alpha_i hi_i]`` (the set
+    is elementwise affine in alpha), in units of the set's half-width there (the element's
+    value where the set has none); <= 0: inside. ``pad`` (12 x 16): added to every half-width
+    (the measured interpolation residual)."""
+    q = Quadrotor(params)
+    out = []
+    for v in points:
+        a = _weights(np.asarray(v, dtype=float), verts)
+        lo = sum(ai * lo_i for ai, (_, lo_i, _) in zip(a, verts))
+        hi = sum(ai * hi_i for ai, (_, _, hi_i) in zip(a, verts))
+        if pad is not None:
+            lo, hi = lo - pad, hi + pad
+        A, B = q.linearize(q.trim(np.asarray(v, dtype=float), 0.0))
+        T = np.concatenate([A, B], axis=1)
+        half = 0.5 * (hi - lo)
+        scale = np.where(half > 0, half, np.maximum(np.abs(T), 1e-9))
+        exc = np.maximum(lo - T, T - hi) / scale
+        k = int(np.argmax(exc))
+        i, j = np.unravel_index(k, exc.shape)
+        out.append(
+            (
+                float(exc[i, j]),
+                element_label("A" if j < 12 else "B", int(i), int(j % 12 if j >= 12 else j)),
+            )
+        )
+    return out
+
+
+def hover_residual(
+    params: QuadrotorParams,
+    base: QuadrotorParams,
+    verts: list,
+    results,
+    gains,
+    sensors,
+    phase1_cfg,
+    ident_cfg,
+    probability: float,
+    seed: int,
+    signals=None,
+) -> np.ndarray:
+    """The interpolation residual measured at a check point the campaign can fly (hover, the
+    box centre): the phase-1 experiment there, identified like a vertex (expanded at its
+    commanded v = centre), minus the multilinear interpolation of the vertex models there;
+    returned as ``|residual| + k_joint std`` per element of [A, B] (12 x 16), to be added to
+    every half-width (a measured, not a proven, bound between the vertices)."""
+    from lpv_sysid.ident.vertex import joint_k
+    from lpv_sysid.sim import phase1 as p1
+
+    centre = interior_points(verts, 0, np.random.default_rng(0))[0]
+    rec = p1.simulate_run(
+        Quadrotor(params),
+        gains,
+        sensors,
+        phase1_cfg,
+        tuple(float(c) for c in centre),
+        "check_hover",
+        seed=seed,
+        signals=signals,
+    )
+    res = identify_runs([rec], params, base, ident_cfg)[0]
+    a = _weights(centre, verts)
+    interp = sum(ai * np.concatenate([r.fit.A, r.fit.B], axis=1) for ai, r in zip(a, results))
+    check = np.concatenate([res.fit.A, res.fit.B], axis=1)
+    std = np.zeros_like(check)  # the stored (t-widened) std of the check model's intervals
+    for iv in res.uncertain.intervals:
+        std[iv.row, iv.col if iv.matrix == "A" else 12 + iv.col] = iv.std
+    k_j = joint_k(int(np.count_nonzero(std)), probability, res.fit.dof, 3.0)
+    return np.abs(check - interp) + k_j * std

@@ -141,6 +141,13 @@ def run(args: argparse.Namespace) -> int:
         f"the simultaneous intervals (joint probability {j['probability']:g}): rate "
         f"{100 * j['rate']:.1f} %"
     )
+    it = doc.get("interior") or {}
+    if it.get("points"):
+        print(
+            f"interior: truth inside the interpolated certified set at {it['truth_inside']}/"
+            f"{it['points']} points (hover + random); with the hover interpolation residual "
+            f"added: {it['truth_inside_with_hover_residual']}/{it['points']}"
+        )
     print(f"wrote {out / 'coverage.yaml'}")
     print(f"wrote {out / 'coverage.md'}")
     return 0
