@@ -388,7 +388,15 @@ def run_study(
             k, params, score(runs, results, params, ident_cfg), eiv_shift(results)
         )
         if cfg.interior and len(results) == 8:
-            verts = certified_bounds(results, cfg.joint_probability, cfg.box_inflation)
+            from lpv_sysid.ident.vertex.interpolation import interpolation_pad
+
+            ip = interpolation_pad(results, cfg.joint_probability)
+            ip_pad = (
+                None
+                if ip is None or not ident_cfg.interpolation_pad
+                else np.concatenate([np.array(ip["pad_A"]), np.array(ip["pad_B"])], axis=1)
+            )
+            verts = certified_bounds(results, cfg.joint_probability, cfg.box_inflation, ip_pad)
             pts = interior_points(verts, cfg.interior, np.random.default_rng([cfg.seed, k, 7]))
             af.interior = interior_excess(params, verts, pts)
             if cfg.check_hover:
@@ -575,11 +583,12 @@ def markdown_table(
 
 
 # ----------------------------------------------------------------- interior of the box (item 2)
-def certified_bounds(results, probability: float, inflation: float) -> list:
+def certified_bounds(results, probability: float, inflation: float, pad=None) -> list:
     """Per vertex ``(scheduling, lo, hi)`` of ``[A, B]`` (12 x 16) as the synthesis box states
     them (synthesis.uncertainty_set): every element with a std in ``max(stored half, k_joint
-    std)`` about its interval centre (Sidak over all elements of the airframe), times
-    ``1 + inflation``; the other elements at their value."""
+    std)`` about its interval centre (Sidak over all elements of the airframe), plus ``pad``
+    (the interpolation pad of ident.vertex.interpolation, 12 x 16), times ``1 + inflation``;
+    the other elements at their value (+/- pad)."""
     from lpv_sysid.ident.vertex import joint_k
 
     p = sum(len(r.uncertain.intervals) for r in results)
@@ -597,8 +606,12 @@ def certified_bounds(results, probability: float, inflation: float) -> list:
                 min(iv.lower, iv.nominal - k_j * iv.std),
                 max(iv.upper, iv.nominal + k_j * iv.std),
             )
-            m, h = 0.5 * (a + b), 0.5 * (b - a) * (1.0 + inflation)
+            m, h = 0.5 * (a + b), 0.5 * (b - a)
             lo[iv.row, c], hi[iv.row, c] = m - h, m + h
+        if pad is not None:
+            lo, hi = lo - pad, hi + pad
+        m, h = 0.5 * (lo + hi), 0.5 * (hi - lo) * (1.0 + inflation)
+        lo, hi = m - h, m + h
         out.append((np.asarray(r.scheduling, dtype=float), lo, hi))
     # B: one hull common to all vertices (models.lpv.input_hull)
     bl = np.min([lo[:, 12:] for _, lo, _ in out], axis=0)
@@ -643,7 +656,8 @@ def interior_excess(params: QuadrotorParams, verts: list, points: list, pad=None
         T = np.concatenate([A, B], axis=1)
         half = 0.5 * (hi - lo)
         scale = np.where(half > 0, half, np.maximum(np.abs(T), 1e-9))
-        exc = np.maximum(lo - T, T - hi) / scale
+        # rounding tolerance for the elements that are exact (lo = hi = the structural value)
+        exc = (np.maximum(lo - T, T - hi) - 1e-9 * np.maximum(1.0, np.abs(T))) / scale
         k = int(np.argmax(exc))
         i, j = np.unravel_index(k, exc.shape)
         out.append(
