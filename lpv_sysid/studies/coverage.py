@@ -164,7 +164,6 @@ class CoverageConfig:
     joint_probability: float = DEFAULT_JOINT_PROBABILITY  # that of the certified box
     box_inflation: float = 0.05  # synthesis.uncertainty_set.DEFAULT_BOX_INFLATION
     interior: int = 12  # random interior scheduling points besides hover (0: no interior check)
-    check_hover: bool = True  # fly and identify hover, add the interpolation residual
 
     def __post_init__(self) -> None:
         if int(self.airframes) != self.airframes or self.airframes < 1:
@@ -204,7 +203,7 @@ class AirframeCoverage:
     eiv_shift: float = 0.0  # largest errors-in-variables correction in std (eiv_shift)
     # issue 20 item 2: per interior point (hover first) the worst excess of the truth over the
     # interpolated certified set in half-widths (<= 0 inside) and the element, without and
-    # with the measured hover residual added
+    # with the interpolation pad of ident.vertex.interpolation added
     interior: list = field(default_factory=list)
     interior_padded: list = field(default_factory=list)
 
@@ -390,30 +389,14 @@ def run_study(
         if cfg.interior and len(results) == 8:
             from lpv_sysid.ident.vertex.interpolation import interpolation_pad
 
-            ip = interpolation_pad(results, cfg.joint_probability)
-            ip_pad = (
-                None
-                if ip is None or not ident_cfg.interpolation_pad
-                else np.concatenate([np.array(ip["pad_A"]), np.array(ip["pad_B"])], axis=1)
-            )
-            verts = certified_bounds(results, cfg.joint_probability, cfg.box_inflation, ip_pad)
+            verts = certified_bounds(results, cfg.joint_probability, cfg.box_inflation)
             pts = interior_points(verts, cfg.interior, np.random.default_rng([cfg.seed, k, 7]))
             af.interior = interior_excess(params, verts, pts)
-            if cfg.check_hover:
-                pad = hover_residual(
-                    params,
-                    base,
-                    verts,
-                    results,
-                    gains,
-                    sensors,
-                    phase1_cfg,
-                    ident_cfg,
-                    cfg.joint_probability,
-                    10_000 * (cfg.seed + 1) + 100 * k + 99,
-                    signals,
-                )
-                af.interior_padded = interior_excess(params, verts, pts, pad)
+            ip = interpolation_pad(results, cfg.joint_probability)
+            if ip is not None:
+                pad = np.concatenate([np.array(ip["pad_A"]), np.array(ip["pad_B"])], axis=1)
+                padded = certified_bounds(results, cfg.joint_probability, cfg.box_inflation, pad)
+                af.interior_padded = interior_excess(params, padded, pts)
         out.append(af)
         kept.append(runs if keep_runs else None)
         if progress:
@@ -500,12 +483,12 @@ def summary_dict(
     d["interior"] = {
         "points_per_airframe": max((len(af.interior) for af in airframes), default=0),
         "truth_inside": int(sum(inside)),
-        "truth_inside_with_hover_residual": int(sum(inside_p)),
+        "truth_inside_with_interpolation_pad": int(sum(inside_p)),
         "points": int(sum(len(af.interior) for af in airframes)),
         "meaning": "true linearisation at hover and random interior v_d inside the interpolated "
         "certified set [sum alpha_i lo_i, sum alpha_i hi_i] (joint, inflated box; B hull); "
-        "'with hover residual': every half-width + the interpolation residual measured at an "
-        "identified hover check flight (+ k_joint std)",
+        "'with interpolation pad': every half-width + the pad of ident.vertex.interpolation "
+        "(the vertex models re-expanded on a grid), uncertainty.interpolation: true",
     }
     for af, jc in zip(airframes, joint):
         d["airframes"].append(
@@ -519,7 +502,7 @@ def summary_dict(
                 "jointly_covered": bool(jc),
                 "worst_z_over_joint_k": float(af.worst_joint_ratio(P)),
                 "interior_excess": [[round(e, 3), lab] for e, lab in af.interior],
-                "interior_excess_with_hover_residual": [
+                "interior_excess_with_interpolation_pad": [
                     [round(e, 3), lab] for e, lab in af.interior_padded
                 ],
                 "eiv_max_shift_std": float(af.eiv_shift),
@@ -667,46 +650,3 @@ def interior_excess(params: QuadrotorParams, verts: list, points: list, pad=None
             )
         )
     return out
-
-
-def hover_residual(
-    params: QuadrotorParams,
-    base: QuadrotorParams,
-    verts: list,
-    results,
-    gains,
-    sensors,
-    phase1_cfg,
-    ident_cfg,
-    probability: float,
-    seed: int,
-    signals=None,
-) -> np.ndarray:
-    """The interpolation residual measured at a check point the campaign can fly (hover, the
-    box centre): the phase-1 experiment there, identified like a vertex (expanded at its
-    commanded v = centre), minus the multilinear interpolation of the vertex models there;
-    returned as ``|residual| + k_joint std`` per element of [A, B] (12 x 16), to be added to
-    every half-width (a measured, not a proven, bound between the vertices)."""
-    from lpv_sysid.ident.vertex import joint_k
-    from lpv_sysid.sim import phase1 as p1
-
-    centre = interior_points(verts, 0, np.random.default_rng(0))[0]
-    rec = p1.simulate_run(
-        Quadrotor(params),
-        gains,
-        sensors,
-        phase1_cfg,
-        tuple(float(c) for c in centre),
-        "check_hover",
-        seed=seed,
-        signals=signals,
-    )
-    res = identify_runs([rec], params, base, ident_cfg)[0]
-    a = _weights(centre, verts)
-    interp = sum(ai * np.concatenate([r.fit.A, r.fit.B], axis=1) for ai, r in zip(a, results))
-    check = np.concatenate([res.fit.A, res.fit.B], axis=1)
-    std = np.zeros_like(check)  # the stored (t-widened) std of the check model's intervals
-    for iv in res.uncertain.intervals:
-        std[iv.row, iv.col if iv.matrix == "A" else 12 + iv.col] = iv.std
-    k_j = joint_k(int(np.count_nonzero(std)), probability, res.fit.dof, 3.0)
-    return np.abs(check - interp) + k_j * std

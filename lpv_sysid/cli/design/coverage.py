@@ -145,8 +145,9 @@ def run(args: argparse.Namespace) -> int:
     if it.get("points"):
         print(
             f"interior: truth inside the interpolated certified set at {it['truth_inside']}/"
-            f"{it['points']} points (hover + random); with the hover interpolation residual "
-            f"added: {it['truth_inside_with_hover_residual']}/{it['points']}"
+            f"{it['points']} points (hover + random); with the interpolation pad "
+            f"(uncertainty.interpolation): {it['truth_inside_with_interpolation_pad']}/"
+            f"{it['points']}"
         )
     print(f"wrote {out / 'coverage.yaml'}")
     print(f"wrote {out / 'coverage.md'}")
