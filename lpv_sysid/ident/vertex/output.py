@@ -98,6 +98,13 @@ def vertex_models_dict(
             "inflation": [results[k].uncertain.inflation for k in order],
         },
     }
+    if cfg.interpolation_pad:
+        from lpv_sysid.ident.vertex.interpolation import interpolation_pad
+        from lpv_sysid.ident.vertex.uncertainty import DEFAULT_JOINT_PROBABILITY
+
+        pad = interpolation_pad([results[k] for k in order], DEFAULT_JOINT_PROBABILITY)
+        if pad is not None:
+            meta["interpolation"] = pad
     if validation:
         meta["validation"] = {
             "maneuver": validation.get("name", ""),
