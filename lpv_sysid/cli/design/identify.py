@@ -96,6 +96,18 @@ def format_validation_table(val: dict) -> str:
     )
 
 
+def format_output_error_table(oe: dict) -> str:
+    axes = list(oe["nrmse"])
+    return "\n".join(
+        [
+            f"Output-error (free-run) validation, restarted every {oe['horizon_s']:.2f} s",
+            f"{'State':>6} " + " ".join(f"{a:>7}" for a in axes),
+            f"{'TIC':>6} " + " ".join(f"{oe['tic'][a]:7.3f}" for a in axes),
+            f"{'NRMSE':>6} " + " ".join(f"{oe['nrmse'][a]:7.3f}" for a in axes),
+        ]
+    )
+
+
 def format_offset_table(results) -> str:
     """The identified model's derivative at the flown trim mean (it is not an equilibrium;
     the vertex models are re-expanded about the equilibrium instead)."""
@@ -192,6 +204,9 @@ def run(args: argparse.Namespace) -> int:
     if val is not None:
         print()
         print(format_validation_table(val))
+        if val.get("output_error"):
+            print()
+            print(format_output_error_table(val["output_error"]))
     doc = vx.vertex_models_dict(results, cfg, val)
     models = VertexModels.from_dict(doc)
     args.out.parent.mkdir(parents=True, exist_ok=True)
