@@ -96,6 +96,22 @@ def format_validation_table(val: dict) -> str:
     )
 
 
+def data_label(bags: str | Path) -> str:
+    """SIMULATED / SITL / HITL / SIH / FLOWN of the bags: the vehicle kind their
+    ``experiment.yaml`` records (report.gonogo.vehicle_label); none: ``simulate phase1``."""
+    from lpv_sysid.errors import LpvSysidError
+    from lpv_sysid.io.files import read_yaml
+    from lpv_sysid.report import SIMULATED, vehicle_label
+
+    meta = Path(bags) / "experiment.yaml"
+    if not meta.is_file():
+        return SIMULATED
+    try:
+        return vehicle_label(read_yaml(meta))[0]
+    except LpvSysidError:
+        return "source unknown"
+
+
 def format_output_error_table(oe: dict) -> str:
     axes = list(oe["nrmse"])
     return "\n".join(
@@ -218,6 +234,12 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {mat} (MATLAB: A, B, x0, u0 per vertex, uncertain intervals)")
     if val is not None:
         plot = args.plot or args.out.with_name(args.out.stem + "_validation.png")
-        metrics.plot_validation(val["t"], val["xdot_m"], val["xdot_f"], str(plot))
+        metrics.plot_validation(
+            val["t"],
+            val["xdot_m"],
+            val["xdot_f"],
+            str(plot),
+            title=f"[{data_label(args.bags)}] LPV model independent validation (seed 0 Fig. 4)",
+        )
         print(f"wrote {plot}")
     return 0

@@ -33,9 +33,9 @@ class ImportedRun:
     messages: int
 
 
-def _stream(name: str, t: np.ndarray, idx: np.ndarray, make: Callable, offset: int):
+def _stream(name: str, t: np.ndarray, idx: np.ndarray, make: Callable, offset: int, rate: float):
     for k in idx:
-        yield int(round(float(t[k]) * 1e9)) + offset, name, int(k), make
+        yield int(round(float(t[k]) * 1e9 * rate)) + offset, name, int(k), make
 
 
 def write_runs(
@@ -100,27 +100,28 @@ def write_runs(
         )
     written: list[ImportedRun] = []
     t0 = min(r.start for r in runs)
-    recorder.start(int(round(t0 * 1e9)) + off)
+    rate = rec.clock_rate
+    recorder.start(int(round(t0 * 1e9 * rate)) + off)
     try:
         for run in runs:
             bag = recorder.split()
             n = 0
-            for st, topic, k, make in _merged(makers, run, off):
+            for st, topic, k, make in _merged(makers, run, off, rec.clock_rate):
                 recorder.record(f"{ns}/{topic}", st, make(st, k))
                 n += 1
             written.append(ImportedRun(run.name, bag, run.start, run.end, n))
             log.info("%s: run %s -> %s (%d messages)", rec.source, run.name, bag, n)
         recorder.annotate("provenance", provenance(rec, written))
     finally:
-        recorder.stop(int(round(max(r.end for r in runs) * 1e9)) + off)
+        recorder.stop(int(round(max(r.end for r in runs) * 1e9 * rate)) + off)
     return written
 
 
-def _merged(makers, run: Run, off: int) -> Iterator[tuple[int, str, int, Any]]:
+def _merged(makers, run: Run, off: int, rate: float) -> Iterator[tuple[int, str, int, Any]]:
     streams = []
     for name, (t, make) in makers.items():
         idx = np.nonzero((t >= run.start) & (t <= run.end))[0]
-        streams.append(_stream(name, t, idx, make, off))
+        streams.append(_stream(name, t, idx, make, off, rate))
     return heapq.merge(*streams, key=lambda r: r[0])
 
 
@@ -132,7 +133,8 @@ def provenance(rec: FlightRecord, runs: Sequence[ImportedRun]) -> dict:
         "clock": {
             "kind": rec.clock,
             "offset_ns": int(rec.clock_offset_ns),
-            "meaning": "bag stamp [ns] = t * 1e9 + offset_ns; t [s]: since PX4 boot (ULog, "
+            "rate": float(rec.clock_rate),
+            "meaning": "bag stamp [ns] = t * 1e9 * rate + offset_ns; t [s]: since PX4 boot (ULog, "
             "px4_msgs) or since the first odometry message (MAVROS)",
         },
         "rotor_speeds": rec.rotor_source if rec.rotors is not None else None,
