@@ -799,7 +799,7 @@ def test_real_px4_sitl_ulog_identifies_like_the_bags_of_the_same_flight(tmp_path
     (build / "etc" / "logging" / "logger_topics.txt").write_text(LOGGER_TOPICS)
     work = tmp_path / "px4"
     work.mkdir()
-    with Px4Sitl(build, instance=6, workdir=str(work)) as sitl:
+    with Px4Sitl(build, instance=7, workdir=str(work)) as sitl:
         res = fly(
             FlyConfig.load(tmp_path / "campaign.yaml"),
             sitl.url,
@@ -813,17 +813,22 @@ def test_real_px4_sitl_ulog_identifies_like_the_bags_of_the_same_flight(tmp_path
     assert logs, f"PX4 wrote no ULog under {work}"
     meta = yaml.safe_load((tmp_path / "out" / "experiment.yaml").read_text())
     assert meta["vehicle"]["kind"] == "SITL"
-    boot_ns, rate = imports.px4_clock_of(tmp_path / "out")
+    boot_ns, rate, knots = imports.px4_clock_of(tmp_path / "out")
     bags = {b["path"]: b for b in meta["bags"]}
     s = res.summary
     windows = []
     for r in s["runs"]:
         b = bags[s["bags"][r["name"]]]
-        a, e = ((b[k] - boot_ns) / rate * 1e-9 for k in ("start_ns", "end_ns"))
+        # bag clock -> PX4 time through the knots (offset interpolated at the PX4 time)
+        a, e = (
+            (b[k] - np.interp((b[k] - boot_ns) / rate * 1e-9, *knots)) * 1e-9
+            for k in ("start_ns", "end_ns")
+        )
         windows.append(f"{a}:{e}:{r['name']}")
     rec = imports.read_ulog(logs[-1], epoch_ns=boot_ns)
     assert rec.provenance["vehicle_kind"] == "SITL"
-    rec.clock_offset_ns, rec.clock_rate, rec.clock = boot_ns, rate, "recording"  # bag clock
+    rec.clock_offset_ns, rec.clock_rate, rec.clock_knots = boot_ns, rate, knots
+    rec.clock = "recording"  # the ULog on the bags' clock
     runs = imports.import_flight(rec, tmp_path / "imp", windows)
     icfg = load_config(tmp_path / "out" / "identification.yaml")
     for r, imp in zip(s["runs"], runs):

@@ -114,3 +114,20 @@ def test_loop_margins_of_an_unstable_first_order_loop():
     assert res["closed_loop_stable"]
     # decoupled loops: the unstructured MIMO margin is the smallest channel's
     assert res["mimo_disk_margin"] == pytest.approx(min(d[2] for d in res["channels"]), rel=1e-3)
+
+
+def test_chain_directory_gets_the_run_report(tmp_path):
+    """A chain directory (phase1/ flown on PX4 SITL) gets report/report.md beside its own
+    summary, go/no-go first, the data labelled SITL."""
+    from lpv_sysid.flight.chain.report import _full_report
+
+    (tmp_path / "phase1").mkdir()
+    (tmp_path / "phase1" / "experiment.yaml").write_text(
+        yaml.safe_dump({"vehicle": {"kind": "SITL"}, "status": "closed_cleanly"})
+    )
+    rel = _full_report(tmp_path)
+    assert str(rel) == "report/report.md"
+    text = (tmp_path / rel).read_text()
+    first = [ln for ln in text.splitlines() if ln.startswith("## ")][0]
+    assert first.startswith("## Go / no-go:") and "(on SITL data only)" in first
+    assert "| phase-1 flights | SITL |" in text

@@ -97,3 +97,28 @@ def test_clock_fit_follows_a_px4_clock_that_runs_slow():
     assert abs(rec.boot_ns + 62e9 - (BOOT_NS + rate * 62e9)) > 0.5e9
     s = rec.summary()["px4_clock"]
     assert s["boot_ns"] == boot and s["rate"] == r
+
+
+def test_clock_knots_follow_a_varying_rate():
+    """A lock-step SITL slows down and speeds up with the load: the knots keep the offset
+    within 3 ms where a line through them is more than 10 ms off."""
+    rng = np.random.default_rng(5)
+    rec = VehicleRecord()
+
+    def offset(tb_s):  # bag - PX4 clock: drifts 2 % for 20 s, then 0.5 %
+        return BOOT_NS + 1e9 * (0.02 * min(tb_s, 20.0) + 0.005 * max(tb_s - 20.0, 0.0))
+
+    for k in range(40 * 250):
+        tb_ns = 1_000_000_000 + k * 4_000_000 + int(rng.integers(0, 999_999))
+        m = mav.MAVLink_attitude_message(tb_ns // 1_000_000, 0, 0, 0, 0, 0, 0)
+        rec.absorb(m, int(tb_ns + offset(tb_ns * 1e-9)) + int(rng.uniform(0.3e6, 12e6)))
+    kt, ko = np.array(rec.clock_knots(), dtype=float).T
+    boot, r = rec.clock_fit()
+    errs_knots, errs_line = [], []
+    for tb_s in np.linspace(2.0, 39.0, 50):
+        truth = tb_s * 1e9 + offset(tb_s)
+        errs_knots.append(tb_s * 1e9 + np.interp(tb_s, kt, ko) - truth)
+        errs_line.append(boot + r * tb_s * 1e9 - truth)
+    # late by the latency floor (0.3 ms) + the ms truncation of time_boot_ms
+    assert max(np.abs(errs_knots)) < 3e6 and min(errs_knots) >= 0
+    assert max(np.abs(errs_line)) > 10e6

@@ -99,7 +99,9 @@ def run(args: argparse.Namespace) -> int:
     else:
         rec = imports.read_foreign_bag(args.source, epoch_ns=epoch)
     if args.clock_from is not None:
-        rec.clock_offset_ns, rec.clock_rate = imports.px4_clock_of(args.clock_from)
+        rec.clock_offset_ns, rec.clock_rate, rec.clock_knots = imports.px4_clock_of(
+            args.clock_from
+        )
         rec.clock = "recording"
     runs = imports.import_flight(
         rec, args.out, args.window, args.storage, args.min_duration, args.vehicle_kind

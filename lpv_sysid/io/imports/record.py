@@ -74,6 +74,20 @@ class FlightRecord:
     clock_offset_ns: int = 0
     clock: str = "boot"
     clock_rate: float = 1.0  # bag ns per source ns (a PX4 clock fitted against the bags)
+    #: (source time s (K,), offset ns (K,)): the offset interpolated in these knots replaces
+    #: clock_offset_ns / clock_rate (a PX4 clock measured against a recording's)
+    clock_knots: tuple[np.ndarray, np.ndarray] | None = None
+
+    def stamps_ns(self, t: np.ndarray) -> np.ndarray:
+        """Bag stamps (int ns) of source times ``t`` (s)."""
+        t = np.asarray(t, dtype=float)
+        if self.clock_knots is not None:
+            kt, ko = self.clock_knots
+            return np.round(t * 1e9 + np.interp(t, kt, ko)).astype(np.int64)
+        return np.round(t * 1e9 * self.clock_rate).astype(np.int64) + np.int64(
+            self.clock_offset_ns
+        )
+
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -161,10 +175,11 @@ def interp_rows(tq: np.ndarray, t: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.column_stack([np.interp(tq, t, y[:, k]) for k in range(y.shape[1])])
 
 
-def px4_clock_of(experiment: str | Path) -> tuple[int, float]:
-    """``(boot_ns, rate)`` of PX4's clock on the bag clock of a ``fly`` recording of the same
-    flight (its ``experiment.yaml``: ``vehicle.px4_clock``, fitted from the MAVLink
-    ``time_boot_ms``): a ULog imported with it lines up with those bags."""
+def px4_clock_of(experiment: str | Path) -> tuple[int, float, tuple | None]:
+    """``(boot_ns, rate, knots)`` of PX4's clock on the bag clock of a ``fly`` recording of
+    the same flight (its ``experiment.yaml``: ``vehicle.px4_clock``, measured from the MAVLink
+    ``time_boot_ms``; knots ``(t_s, offset_ns)`` arrays or None): a ULog imported with it
+    lines up with those bags."""
     from lpv_sysid.io.files import read_yaml
 
     p = Path(experiment)
@@ -175,4 +190,11 @@ def px4_clock_of(experiment: str | Path) -> tuple[int, float]:
     boot, rate = clk.get("boot_ns"), clk.get("rate", 1.0)
     if not isinstance(boot, int) or not isinstance(rate, (int, float)) or not rate > 0:
         raise ConfigError(f"{p}: no vehicle.px4_clock (boot_ns, rate): not a fly recording")
-    return boot, float(rate)
+    knots = None
+    k = clk.get("knots")
+    if isinstance(k, list) and len(k) >= 2:
+        arr = np.asarray(k, dtype=float)
+        if arr.ndim != 2 or arr.shape[1] != 2 or np.any(np.diff(arr[:, 0]) <= 0):
+            raise ConfigError(f"{p}: vehicle.px4_clock.knots: expected increasing [t_s, ns] pairs")
+        knots = (arr[:, 0], arr[:, 1])
+    return boot, float(rate), knots

@@ -141,6 +141,14 @@ class VehicleRecord:
         boot = off[0] + c0 * 1e9 - c1 * tb[0]
         return int(round(boot)), float(1.0 + c1)
 
+    def clock_knots(self) -> list[list]:
+        """``[[time_boot_s, offset_ns], ...]``: per second of PX4 time the smallest
+        receive - time_boot (at the PX4 time it was seen), in time order. A lock-step SITL's
+        clock rate changes with the load, so a line (:meth:`clock_fit`) is not enough;
+        between knots the offset is interpolated."""
+        items = sorted(self.windows.values(), key=lambda p: p[1])
+        return [[round(tb * 1e-9, 6), int(off)] for off, tb in items]
+
     @property
     def kind(self) -> str:
         return vehicle_kind(self.params, self.hil_flag, self.custom_version)
@@ -163,10 +171,13 @@ class VehicleRecord:
                 "boot_ns": self.boot_ns if fit is None else fit[0],
                 "rate": 1.0 if fit is None else fit[1],
                 "boot_ns_min": self.boot_ns,
+                "knots": self.clock_knots(),
                 "boot_samples": self.boot_samples,
-                "meaning": "bag_stamp_ns = boot_ns + rate * PX4 time since boot [ns] (ULog "
-                "timestamp us * 1000): a line through the per-second minima of receive time - "
-                "time_boot_ms (late by the smallest latency); boot_ns_min: the overall minimum",
+                "meaning": "bag_stamp_ns = PX4 time since boot [ns] (ULog timestamp us * 1000) "
+                "+ offset, offset interpolated in knots [PX4 time s, offset ns] (the per-second "
+                "minima of receive time - time_boot_ms, late by the smallest latency); "
+                "boot_ns + rate * PX4 time: the line through them; boot_ns_min: the overall "
+                "minimum",
                 "system_time": self.system_time,
             },
             "px4_parameters": dict(sorted(p.items())),
