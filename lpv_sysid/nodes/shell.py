@@ -326,7 +326,10 @@ class ShellNode(Node):
             self._status_timer.timer_period_ns = int(round(1e9 / changes["status_rate_hz"]))
 
     def _on_set_parameters(self, params) -> SetParametersResult:
-        changes = {p.name: _plain(p.value) for p in params}
+        # only the package's own parameters: rclpy's (use_sim_time, ...) are rclpy's business
+        changes = {p.name: _plain(p.value) for p in params if p.name in self.params}
+        if not changes:
+            return SetParametersResult(successful=True)
         fixed = sorted(set(changes) - self.runtime_parameters)
         if fixed:  # read-only ones never get here under rclpy; undeclared ones neither
             return SetParametersResult(
