@@ -234,7 +234,11 @@ def declare(node, table) -> dict:
             if not result.successful:
                 raise ConfigError(f"parameter '{name}': {result.reason}")
         if writable is not descriptor:
-            node.set_descriptor(name, _descriptor_copy(descriptor, read_only=True))
+            try:
+                node.set_descriptor(name, _descriptor_copy(descriptor, read_only=True))
+            except Exception as exc:  # noqa: BLE001 - rclpy versions differ here
+                # still refused at run time: ShellNode's on-set callback rejects it
+                node.get_logger().debug(f"parameter '{name}' left writable: {exc!r}")
         values[name] = _plain(p.value) if isinstance(default, (list, Parameter.Type)) else p.value
     return values
 
