@@ -108,7 +108,7 @@ def vehicles():
         v.close()
 
 
-def fly_locked(tmp, vehicles, params=None, **kw):
+def fly_locked(tmp, vehicles, params=None, confirm=None, **kw):
     veh, cfg, sig, ls = setup(tmp, **kw)
     vehicles.append(veh)
     lines: list[str] = []
@@ -122,6 +122,7 @@ def fly_locked(tmp, vehicles, params=None, **kw):
         sleep=ls.sleep,
         echo=lines.append,
         handle_signals=False,
+        confirm=confirm,
     )
     return res, veh, ls, lines
 
@@ -143,10 +144,11 @@ def test_campaign_takes_off_flies_every_vertex_and_hover_lands_and_identify_acce
     assert res.status == 0, (res.reason, lines[-30:])
     s = res.summary
     assert s["result"] == "done" and s["ok"]
-    assert (
-        s["params_set"] == [{"name": "COM_OBL_RC_ACT", "old": 0, "new": 5.0}]
-        and veh.param("COM_OBL_RC_ACT") == 5
-    )
+    # --set-param is undone when the flight ends (issue 24): PX4 is left as it was found
+    assert s["params_set"] == [{"name": "COM_OBL_RC_ACT", "old": 0, "new": 5.0}]
+    assert s["params_restored"] == [{"name": "COM_OBL_RC_ACT", "value": 0, "restored": True}]
+    assert veh.param("COM_OBL_RC_ACT") == 0
+    assert "PARAM_SET COM_OBL_RC_ACT: 5 -> 0 (restored, confirmed)" in lines
     # the vehicle: OFFBOARD (armed there, took off), LAND at the end, disarmed on the ground
     modes = [m for _, m, _ in veh.mode_log]
     assert modes[0] == "OFFBOARD" and "LAND" in modes and modes[-1] == "DISARMED"
@@ -472,6 +474,7 @@ def test_cli_process_sigint_hands_back_and_exits_130(tmp_path):
                 str(tmp_path / "out"),
                 "--signals",
                 sig,
+                "--yes",  # stdin is not a terminal: confirmed in advance
             ],
             stdout=fh,
             stderr=subprocess.PIPE,

@@ -188,6 +188,9 @@ def test_a_value_the_settings_refuse_is_rejected_with_their_reason():
         assert res.successful and node._status_timer.timer_period_ns == 250_000_000
         ((settings, changes),) = node.applied
         assert changes == {"status_rate_hz": 4.0} and settings.rate_hz == 5.0
+        # rclpy's own parameters are left to rclpy (use_sim_time switches the clock)
+        (res,) = node.set_parameters([Parameter("use_sim_time", value=True)])
+        assert res.successful and node.get_parameter("use_sim_time").value is True
         (res,) = node.set_parameters([Parameter("rate_hz", value=50.0)])
         assert not res.successful and res.reason == "Trying to set a read-only parameter: rate_hz."
         with pytest.raises(ConfigError):

@@ -46,6 +46,11 @@ PX4_DEFAULTS = {
     "NAV_DLL_ACT": 0,
     "COM_RCL_EXCEPT": 0,
     "COM_RC_IN_MODE": 1,
+    # PX4 v1.16 defaults of the limits checked against the box
+    "MPC_XY_VEL_MAX": 12.0,
+    "MPC_Z_VEL_MAX_UP": 3.0,
+    "MPC_Z_VEL_MAX_DN": 1.5,
+    "MPC_TILTMAX_AIR": 45.0,
 }
 INT_PARAMS = {"COM_OBL_RC_ACT", "NAV_DLL_ACT", "COM_RCL_EXCEPT", "COM_RC_IN_MODE"}
 C = codec.make_codec(None, 1, 1)
@@ -69,6 +74,24 @@ def _version():
 def _sys_status(rc=False):
     s = 0x3FFF | (RC_BIT if rc else 0)
     return C.sys_status_encode(s, s, s, 100, 16000, 500, 80, 0, 0, 0, 0, 0, 0)
+
+
+def _gps(fix=3):
+    return C.gps_raw_int_encode(1_000_000, fix, 473977420, 85455940, 488000, 80, 120, 0, 0, 12)
+
+
+#: ESTIMATOR_STATUS flags of a converged EKF2 with GPS (attitude .. predicted abs position)
+EKF_OK = 1 | 2 | 4 | 8 | 16 | 32 | 256 | 512
+
+
+def _ekf(flags=EKF_OK):
+    return C.estimator_status_encode(1_000_000, flags, 0.1, 0.1, 0.1, 0.1, 0, 0, 0.5, 0.8)
+
+
+def _home():
+    return C.home_position_encode(
+        473977420, 85455940, 488000, 0, 0, 0, [1, 0, 0, 0], 0, 0, 0, 1_000_000
+    )
 
 
 def _rc(chancount=8, rssi=100):
@@ -101,8 +124,14 @@ def sih_facts(**kw) -> Facts:
             "SYS_STATUS",
             "ACTUATOR_OUTPUT_STATUS",
             "SERVO_OUTPUT_RAW",
+            "GPS_RAW_INT",
+            "ESTIMATOR_STATUS",
+            "HOME_POSITION",
         },
         sys_status=_wire(_sys_status(kw.pop("sticks", False))),
+        gps=_wire(_gps()),
+        estimator=_wire(_ekf()),
+        home=_wire(_home()),
         motor_outputs={
             "ACTUATOR_OUTPUT_STATUS": _wire(_aos()),
             "SERVO_OUTPUT_RAW": _wire(_servo()),
@@ -308,11 +337,17 @@ class ScriptedPx4:
             self._send(self.c.command_ack_encode(m.command, 0, 0, 0, 0, 0))
             if m.command == 512 and int(m.param1) == MOD.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
                 self._send(_version())
+            elif m.command == 512 and int(m.param1) == MOD.MAVLINK_MSG_ID_HOME_POSITION:
+                self._send(_home())
             elif m.command == 511:
                 self.requested.append(int(m.param1))
                 if int(m.param1) == MOD.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS:
                     self.rates.setdefault("ACTUATOR_OUTPUT_STATUS", 50.0)
                     self.next.setdefault("ACTUATOR_OUTPUT_STATUS", t)
+                for name in ("GPS_RAW_INT", "ESTIMATOR_STATUS"):
+                    if int(m.param1) == getattr(MOD, f"MAVLINK_MSG_ID_{name}"):
+                        self.rates.setdefault(name, 5.0)
+                        self.next.setdefault(name, t)
                 if int(m.param1) == codec.MAVLINK_MSG_ID_ESC_STATUS and self.esc:
                     self.rates.setdefault("ESC_STATUS", 10.0)
                     self.next.setdefault("ESC_STATUS", t)
@@ -346,6 +381,10 @@ class ScriptedPx4:
             self._send(c.actuator_output_status_encode(us, 16, [900.0] * 32))
         elif name == "ESC_STATUS":
             self._send(codec.esc_status_class()(0, us, [0] * 4, [16.0] * 4, [0.0] * 4))
+        elif name == "GPS_RAW_INT":
+            self._send(_gps())
+        elif name == "ESTIMATOR_STATUS":
+            self._send(_ekf())
 
     def close(self) -> None:
         self.sock.close()

@@ -1,6 +1,6 @@
-"""The safe start order of a phase (issue 24 item 4): flight/sequencer.py (ROS-free) and
-its shell, sequencer_node, against stand-in Trigger servers that publish the status the
-real nodes publish."""
+"""The safe start order of a phase (issue 24 item 4): flight/sequencer.py, ROS-free (its
+shell against the rclpy stand-in: test_sequencer_node.py; under real ROS 2:
+test_ros_real.py's phase-2 launch)."""
 
 import pytest
 
@@ -116,61 +116,3 @@ def test_settings_refuse_unknown_or_repeated_steps():
     with pytest.raises(ConfigError, match="at least one"):
         SequencerSettings(steps=())
     assert SequencerSettings().steps == PHASE2_STEPS
-
-
-# ------------------------------------------------------------------ the node (stand-in)
-def test_sequencer_node_starts_fake_nodes_in_order():
-    import rclpy
-    import rclpy._standin as standin
-    from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.node import Node
-    from std_srvs.srv import Trigger
-
-    from lpv_sysid.nodes import shell
-    from lpv_sysid.nodes.sequencer_node import SequencerNode
-
-    standin.reset()
-    rclpy.init(args=["n", "--ros-args", "-p", "auto_start:=true"])
-    try:
-        order = []
-        fake = Node("fakes", namespace="lpv_sysid")
-        pub = fake.create_publisher(DiagnosticArray, "status", shell.QOS_STATUS)
-        fr = messages.MsgFactory.rclpy()
-        values = {
-            "mavlink_bridge": {"link_up": "True", "state": "IDLE"},
-            "lpv_controller": {"armed": "false"},
-            "excitation": {"phase": "waiting_for_start"},
-        }
-        started = {
-            "mavlink_bridge": {"state": "OFFBOARD_ACTIVE"},
-            "lpv_controller": {"armed": "true"},
-            "excitation": {"phase": "playing"},
-        }
-
-        def server(node):
-            def cb(req, resp):
-                order.append(node)
-                values[node].update(started[node])
-                resp.success, resp.message = True, "ok"
-                return resp
-
-            return cb
-
-        for node in values:
-            fake.create_service(Trigger, f"{node}/start", server(node))
-            fake.create_service(Trigger, f"{node}/abort", server(node))
-
-        def publish():
-            sts = [
-                messages.diagnostic_status(fr, "OK", f"/lpv_sysid/{n}", "", v)
-                for n, v in values.items()
-            ]
-            pub.publish(messages.diagnostic_array(fr, standin.now_ns(), sts))
-
-        fake.create_timer(0.1, publish)
-        seq = SequencerNode()
-        standin.spin_nodes([fake, seq], 3.0)
-        assert order == ["lpv_controller", "mavlink_bridge", "excitation"]
-        assert seq.runtime.state == RUNNING
-    finally:
-        rclpy.try_shutdown()

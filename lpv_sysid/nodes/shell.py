@@ -235,7 +235,11 @@ def declare(node, table) -> dict:
             if not result.successful:
                 raise ConfigError(f"parameter '{name}': {result.reason}")
         if writable is not descriptor:
-            node.set_descriptor(name, _descriptor_copy(descriptor, read_only=True))
+            try:
+                node.set_descriptor(name, _descriptor_copy(descriptor, read_only=True))
+            except Exception as exc:  # noqa: BLE001 - rclpy versions differ here
+                # still refused at run time: ShellNode's on-set callback rejects it
+                node.get_logger().debug(f"parameter '{name}' left writable: {exc!r}")
         values[name] = _plain(p.value) if isinstance(default, (list, Parameter.Type)) else p.value
     # the node's parameter-file / -p values (rclpy keeps them in _parameter_overrides, no
     # public accessor): one that no declaration took, and that is none of rclpy's own
@@ -336,7 +340,10 @@ class ShellNode(Node):
             self._status_timer.timer_period_ns = int(round(1e9 / changes["status_rate_hz"]))
 
     def _on_set_parameters(self, params) -> SetParametersResult:
-        changes = {p.name: _plain(p.value) for p in params}
+        # only the package's own parameters: rclpy's (use_sim_time, ...) are rclpy's business
+        changes = {p.name: _plain(p.value) for p in params if p.name in self.params}
+        if not changes:
+            return SetParametersResult(successful=True)
         fixed = sorted(set(changes) - self.runtime_parameters)
         if fixed:  # read-only ones never get here under rclpy; undeclared ones neither
             return SetParametersResult(

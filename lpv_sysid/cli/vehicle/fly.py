@@ -6,6 +6,10 @@
 
 ``phase1``: the campaign of :mod:`lpv_sysid.flight.campaign` (take-off in OFFBOARD, every
 vertex and the hover run, HOLD or LAND; one rosbag2 per run for `lpv-sysid identify`).
+Before anything arms (phase 1) or takes control (phase 2) the operator confirms on the
+terminal; ``--yes`` confirms in advance, and without a terminal (stdin not a TTY) the
+command refuses unless ``--yes`` is given. ``--set-param`` changes are set back when the
+flight ends. ``--dry-run`` prints the plan, total time, battery estimate and airspace.
 ``phase2``: the phase-2 signal under the LPV law on a vehicle already armed and in the air
 (:mod:`lpv_sysid.flight.phase2`). Ctrl-C (or SIGTERM) or any fault: excitation off,
 hand-back confirmed by the HEARTBEAT (or FAILED loudly), bags closed and readable, exit
@@ -20,6 +24,7 @@ import math
 import sys
 from pathlib import Path
 
+from lpv_sysid.control.campaign import DEFAULT_ENDURANCE_S, PLAN_COLUMNS
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.flight.campaign import EXIT_FAILED, FlyConfig, fly, plan_flight
 
@@ -66,7 +71,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "e.g. COM_OBL_RC_ACT=5 on a SITL without RC",
     )
     p.add_argument(
-        "--dry-run", action="store_true", help="load and plan only; print the plan and exit"
+        "--dry-run",
+        action="store_true",
+        help="load and plan only; print the plan, total time, battery use and airspace, exit",
+    )
+    p.add_argument(
+        "--endurance-min",
+        type=float,
+        default=DEFAULT_ENDURANCE_S / 60.0,
+        metavar="MIN",
+        help="hover endurance of one battery [min] for the battery estimate and preflight's "
+        "battery check (default %(default)g)",
+    )
+    p.add_argument(
+        "--yes",
+        action="store_true",
+        help="do not ask before arming (needed when stdin is not a terminal)",
     )
     p2 = modes.add_parser(
         "phase2",
@@ -98,6 +118,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p2.add_argument(
         "--finish", default="LAND", choices=("LAND", "HOLD"), help="mode after the signal"
     )
+    p2.add_argument(
+        "--yes",
+        action="store_true",
+        help="do not ask before taking control (needed when stdin is not a terminal)",
+    )
     p.add_argument(
         "--record-rate-setpoints",
         action="store_true",
@@ -112,6 +137,14 @@ def run(args: argparse.Namespace) -> int:
         from lpv_sysid.flight.phase2 import Phase2Options, fly_phase2
 
         check_kappa(args.kappa)  # before connecting
+        ask = confirmation(args.yes)
+        if ask is not None and not ask(
+            f"take the airborne vehicle on {args.connect} into OFFBOARD under the LPV law "
+            f"({args.gains}) and fly the phase-2 signal?"
+        ):
+            print("lpv-sysid fly: not confirmed: nothing sent", file=sys.stderr)
+            return EXIT_FAILED
+
         s = fly_phase2(
             args.gains,
             args.signals,
@@ -134,10 +167,23 @@ def run(args: argparse.Namespace) -> int:
         )
         return 0 if s.get("ok") else EXIT_FAILED
     cfg = FlyConfig.load(args.config)
+    if not math.isfinite(args.endurance_min) or args.endurance_min <= 0:
+        raise ConfigError(f"--endurance-min {args.endurance_min:g}: must be > 0 minutes")
     params = parse_params(args.set_param)  # a dry run checks them too
     if args.dry_run:
-        print(plan_flight(cfg, args.connect, args.signals).describe())
+        plan = plan_flight(cfg, args.connect, args.signals)
+        print(plan.describe())
+        print(PLAN_COLUMNS)
+        print(plan.budget(args.endurance_min * 60.0).describe())
+        d = plan.demands()
+        print(
+            f"PX4 limits the box needs (checked by preflight): MPC_XY_VEL_MAX >= "
+            f"{d.horizontal_speed:.2f} m/s, MPC_Z_VEL_MAX_UP >= {d.climb_speed:.2f} m/s, "
+            f"MPC_Z_VEL_MAX_DN >= {d.descent_speed:.2f} m/s, MPC_TILTMAX_AIR >= "
+            f"{d.tilt_deg:.1f} deg"
+        )
         return 0
+    ask = confirmation(args.yes)  # refuses before connecting when it cannot ask
     res = fly(
         cfg,
         args.connect,
@@ -146,6 +192,8 @@ def run(args: argparse.Namespace) -> int:
         params=params,
         record_rate_setpoints=args.record_rate_setpoints,
         echo=print,
+        confirm=ask,
+        endurance_s=args.endurance_min * 60.0,
     )
     if res.status:
         print(f"lpv-sysid fly: {res.phase}: {res.reason}", file=sys.stderr)
@@ -161,6 +209,29 @@ def run(args: argparse.Namespace) -> int:
             f"--out vertex_models.yaml"
         )
     return res.status
+
+
+def confirmation(yes: bool):
+    """The operator's confirmation: None with ``--yes`` (not asked); a question on the
+    terminal otherwise (only ``y`` / ``yes`` confirms); ConfigError when stdin is not a
+    terminal (a script or a pipe cannot confirm: it must say ``--yes``)."""
+    if yes:
+        return None
+    if not sys.stdin.isatty():
+        raise ConfigError(
+            "refusing to fly without confirmation: stdin is not a terminal; "
+            "pass --yes to confirm in advance"
+        )
+
+    def ask(question: str) -> bool:
+        print(question, flush=True)
+        try:
+            answer = input("type 'yes' to go, anything else aborts: ")
+        except EOFError:
+            return False
+        return answer.strip().lower() in ("y", "yes")
+
+    return ask
 
 
 def parse_params(items) -> dict[str, float]:

@@ -6,7 +6,10 @@ firmware (AUTOPILOT_VERSION), mode and arming state, the offboard-loss parameter
 the rotor-speed source (ESC telemetry or the estimate from the motor outputs), prints a
 table with the reasons and fixes and exits 0 (GO), 1 (NO-GO) or 2 (bad input).
 ``--config config/mavlink_bridge.yaml`` checks with the bridge's link streams and
-``rotor_estimate`` settings (``--connect`` replaces its URL).
+``rotor_estimate`` settings (``--connect`` replaces its URL). Battery, GPS fix, EKF health
+and the home position are always checked; ``--campaign config/campaign.yaml`` also checks
+the battery and PX4's velocity and tilt limits against that campaign's plan (what
+``lpv-sysid fly phase1`` checks before it flies).
 """
 
 from __future__ import annotations
@@ -41,6 +44,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         metavar="FILE",
         help="bridge config (config/mavlink_bridge.yaml): link streams and rotor_estimate",
+    )
+    parser.add_argument(
+        "--campaign",
+        default=None,
+        metavar="FILE",
+        help="campaign file (config/campaign.yaml): check battery and PX4's MPC_* limits "
+        "against its plan",
+    )
+    parser.add_argument(
+        "--endurance-min",
+        type=float,
+        default=15.0,
+        metavar="MIN",
+        help="hover endurance of one battery [min] (with --campaign; default 15)",
     )
     parser.add_argument(
         "--signing-key",
@@ -80,10 +97,26 @@ def run(args: argparse.Namespace) -> int:
         )
         rotor = RotorEstimateConfig()
     cfg.validate()
+    demands = needed = None
+    if args.campaign:
+        from lpv_sysid.flight.campaign import FlyConfig, plan_flight
+
+        if not args.endurance_min > 0:
+            raise ConfigError("--endurance-min must be > 0 minutes")
+        plan = plan_flight(FlyConfig.load(args.campaign), args.connect)
+        demands = plan.demands()
+        needed = plan.budget(args.endurance_min * 60.0).battery_needed_pct
     link = MavlinkLink(cfg)
     link.open()
     try:
-        checks = run_checks(link, timeout=args.timeout, grace=args.grace, rotor_estimate=rotor)
+        checks = run_checks(
+            link,
+            timeout=args.timeout,
+            grace=args.grace,
+            rotor_estimate=rotor,
+            demands=demands,
+            battery_needed_pct=needed,
+        )
     finally:
         link.close()
     print(format_table(checks))

@@ -72,6 +72,11 @@ from __future__ import annotations
 
 from lpv_sysid.control.campaign.config import CampaignConfig
 from lpv_sysid.control.campaign.plan import (
+    BATTERY_RESERVE_PCT,
+    DEFAULT_ENDURANCE_S,
+    PLAN_COLUMNS,
+    FlightBudget,
+    FlightDemands,
     CLIMB,
     DESCENT,
     LEVEL,
@@ -107,6 +112,11 @@ from lpv_sysid.control.campaign.results import trim_rows
 from lpv_sysid.control.campaign.sequencer import Campaign
 
 __all__ = [
+    "BATTERY_RESERVE_PCT",
+    "DEFAULT_ENDURANCE_S",
+    "FlightBudget",
+    "FlightDemands",
+    "PLAN_COLUMNS",
     "ABORTED",
     "ABORTING",
     "AbortBridge",

@@ -18,6 +18,14 @@ if TYPE_CHECKING:
 
 CLIMB, DESCENT, LEVEL = "climb", "descent", "level"
 _NOMINAL_ACCEL = 2.0  # m/s^2, for the expected settle transient of the horizontal plan
+#: tilt beyond the trim tilt the velocity loop needs to accelerate onto the multisine [deg]
+TILT_MARGIN_DEG = 10.0
+#: hover endurance of one battery assumed by ``fly --dry-run`` (``--endurance-min``) [s]
+DEFAULT_ENDURANCE_S = 15 * 60.0
+#: charge kept in reserve at landing [%]: the battery preflight asks for is use + reserve
+BATTERY_RESERVE_PCT = 25.0
+#: PX4's MPC_LAND_SPEED default [m/s] (the landing at the end)
+LAND_SPEED = 0.7
 
 
 # ============================================================================= planning
@@ -113,6 +121,122 @@ class CampaignPlan:
                 f"{r.altitude_room:8.1f} {r.horizontal_extent:10.1f} {r.duration_worst:11.1f}"
             )
         return "\n".join(lines)
+
+    def demands(self, model=None) -> "FlightDemands":
+        """What flying the plan asks of the vehicle (checked by preflight against PX4's
+        limits): see :class:`FlightDemands`. ``model``: the quadrotor model whose trim
+        gives the tilt (default: the package's FlameWheel-450-like model)."""
+        from lpv_sysid.models.quadrotor import Quadrotor
+        from lpv_sysid.models.quadrotor.trim import trim
+
+        cfg, ex = self.config, self.excitation
+        model = model or Quadrotor()
+        pu, pv, pw = ex.peak
+        horizontal = max(
+            math.hypot(abs(r.vertex[0]) + pu, abs(r.vertex[1]) + pv) for r in self.runs
+        )
+        climb = max([cfg.climb_rate, cfg.hold_max] + [-r.vertex[2] + pw for r in self.runs])
+        descent = max([cfg.descent_rate, cfg.hold_max] + [r.vertex[2] + pw for r in self.runs])
+        tilt = 0.0
+        for r in self.runs:
+            u, v, w = r.vertex
+            for su in (-1.0, 1.0):
+                for sv in (-1.0, 1.0):
+                    tr = trim(model, [u + su * pu, v + sv * pv, w])
+                    c = math.cos(tr.x0[0]) * math.cos(tr.x0[1])
+                    tilt = max(tilt, math.degrees(math.acos(max(-1.0, min(1.0, c)))))
+        return FlightDemands(horizontal, climb, descent, tilt + TILT_MARGIN_DEG)
+
+    def budget(self, endurance_s: float = DEFAULT_ENDURANCE_S) -> "FlightBudget":
+        """Time, battery and airspace of the whole flight (``fly --dry-run``)."""
+        cfg = self.config
+        takeoff = cfg.takeoff_altitude / cfg.climb_rate
+        landing = cfg.altitude_max / LAND_SPEED
+        # after each run the vehicle is back in the next run's start window: at worst the
+        # height the run swept, at the slower of climb and descent rate
+        reposition = sum(r.altitude_room for r in self.runs) / min(
+            cfg.climb_rate, cfg.descent_rate
+        )
+        nominal = takeoff + sum(r.duration_nominal for r in self.runs) + reposition + landing
+        worst = takeoff + sum(r.duration_worst for r in self.runs) + reposition + landing
+        radius = max(r.horizontal_extent for r in self.runs)
+        return FlightBudget(
+            runs=len(self.runs),
+            time_nominal_s=nominal,
+            time_worst_s=worst,
+            battery_nominal_pct=100.0 * nominal / endurance_s,
+            battery_worst_pct=100.0 * worst / endurance_s,
+            endurance_s=endurance_s,
+            radius_m=radius,
+            floor_m=cfg.altitude_min,
+            ceiling_m=cfg.altitude_max,
+        )
+
+
+@dataclass(frozen=True)
+class FlightDemands:
+    """What the planned box asks of PX4 (preflight checks each against its parameter):
+    horizontal speed (largest ``hypot(|u| + peak_u, |v| + peak_v)`` of the runs:
+    MPC_XY_VEL_MAX), climb and descent speed (vertex plus excitation peak, the campaign's
+    climb / descent rates: MPC_Z_VEL_MAX_UP / _DN), and tilt (the model's trim tilt at the
+    fastest corners plus :data:`TILT_MARGIN_DEG`: MPC_TILTMAX_AIR) [m/s, deg]."""
+
+    horizontal_speed: float
+    climb_speed: float
+    descent_speed: float
+    tilt_deg: float
+
+
+@dataclass(frozen=True)
+class FlightBudget:
+    """The whole flight: time (take-off at climb_rate, every run, repositioning between
+    runs over the height each run swept, landing from altitude_max at PX4's 0.7 m/s),
+    battery as a share of the hover endurance, and the airspace (a cylinder around home)."""
+
+    runs: int
+    time_nominal_s: float
+    time_worst_s: float
+    battery_nominal_pct: float
+    battery_worst_pct: float
+    endurance_s: float
+    radius_m: float
+    floor_m: float
+    ceiling_m: float
+
+    @property
+    def battery_needed_pct(self) -> float:
+        """The charge preflight asks for: worst-case use plus the reserve."""
+        return self.battery_worst_pct + BATTERY_RESERVE_PCT
+
+    def describe(self) -> str:
+        e = self.endurance_s / 60.0
+        lines = [
+            f"total time: {self.time_nominal_s / 60:.1f} min expected, "
+            f"{self.time_worst_s / 60:.1f} min worst case ({self.runs} runs)",
+            f"battery: {self.battery_nominal_pct:.0f} % expected, {self.battery_worst_pct:.0f} % "
+            f"worst case of a pack that hovers {e:g} min (--endurance-min); preflight asks "
+            f"for {self.battery_needed_pct:.0f} % (worst case + "
+            f"{BATTERY_RESERVE_PCT:g} % reserve)",
+            f"airspace: a cylinder of radius {self.radius_m:.0f} m around the take-off point, "
+            f"{self.floor_m:g} m to {self.ceiling_m:g} m above it (plus the envelope's margins)",
+        ]
+        if self.battery_needed_pct > 100.0:
+            lines.append(
+                "NOT ON ONE BATTERY: split the campaign (campaign.vertices: a subset per "
+                "flight) or shorten the runs"
+            )
+        return "\n".join(lines)
+
+
+#: what the columns of :meth:`CampaignPlan.describe` mean (printed by ``fly --dry-run``)
+PLAN_COLUMNS = """\
+columns: # = flying order; run = bag name; kind = climb | descent | level (sign of w);
+  vertex = commanded body velocity (u, v, w) [m/s, FRD: w > 0 descends];
+  start h = heights above home [m] where the run may start so it stays in the window;
+  room = height the run sweeps: |w| x T_worst + excitation displacement + 2 margins [m];
+  extent = worst horizontal distance from home during the run: speed x T_worst (halved
+    when center_runs repositions first) + excitation displacement + margin [m];
+  T_worst = settle_timeout + trim_s + excitation [s] (the longest the run can take)."""
 
 
 def run_name(vertex) -> str:

@@ -96,6 +96,8 @@ def fly(
     link=None,
     record_rate_setpoints: bool = False,
     epoch_ns: int | None = None,
+    confirm: Callable[[str], bool] | None = None,
+    endurance_s: float | None = None,
 ) -> FlyResult:
     """The whole CLI sequence of the module docstring (also used by the tests with a
     simulated clock); returns the exit status and the summary. Bad input raises
@@ -111,7 +113,14 @@ def fly(
     ``epoch_ns``, by ``epoch_ns - round(clock() * 1e9)`` (a declared epoch for a simulated
     clock). ``experiment.yaml`` gets ``clock`` (that offset) and ``vehicle``
     (:class:`~lpv_sysid.mavlink.telemetry.VehicleRecord`: kind, firmware, airframe, PX4
-    parameter snapshot, battery at start and end, PX4's boot on the bag clock)."""
+    parameter snapshot, battery at start and end, PX4's boot on the bag clock).
+
+    ``confirm(question)``: asked after preflight GO, before anything arms; False ends the
+    flight without arming (None: no question, ``fly --yes``). Every parameter changed by
+    ``params`` is set back to its old value when the flight ends, whatever the reason
+    (confirmed by PARAM_VALUE; what could not be restored is reported with the command that
+    does it). ``endurance_s``: hover endurance of the battery (preflight's battery check
+    asks for the plan's worst-case use plus the reserve)."""
     import numpy as np
 
     from lpv_sysid.control.campaign import Campaign, ExcitationProfile, plan_campaign, trim_rows
@@ -125,6 +134,7 @@ def fly(
     table = load_signals(signals, cfg.signals_config)
     prof = ExcitationProfile.from_table(*table, ramp=ccfg.ramp_s, periods=ccfg.periods)
     plan = plan_campaign(ccfg, prof, bcfg.envelope)
+    budget = plan.budget(endurance_s) if endurance_s else plan.budget()
     ident_template = identification_template(cfg.identification_config)
     echo(
         f"fly phase1: {len(plan.runs)} runs, excitation {prof.duration:.1f} s (peaks u v w "
@@ -134,6 +144,7 @@ def fly(
         f"ceiling {bcfg.envelope.ceiling:g} m radius {bcfg.envelope.radius:g} m"
     )
     echo(plan.describe())
+    echo(budget.describe())
 
     bridge = BridgeCore(bcfg, link=link)
     bridge.open(clock())
@@ -166,9 +177,10 @@ def fly(
         # anything time-critical runs
         request_parameter_list(bridge.link)
         if params:
-            done = set_params(bridge.link, params, clock, sleep)
-            summary["params_set"] = done
-            for d in done:
+            summary["params_set"] = []
+            for name, value in params.items():  # one by one: each change is restored
+                (d,) = set_params(bridge.link, {name: value}, clock, sleep)
+                summary["params_set"].append(d)
                 echo(f"PARAM_SET {d['name']}: {d['old']} -> {d['new']:g} (confirmed)")
         if preflight:
             from lpv_sysid.mavlink import preflight as pf
@@ -179,6 +191,8 @@ def fly(
                 clock=clock,
                 sleep=sleep,
                 rotor_estimate=bcfg.rotor_estimate,
+                demands=plan.demands(),
+                battery_needed_pct=budget.battery_needed_pct,
             )
             echo(pf.format_table(checks))
             summary["preflight"] = [dataclasses.asdict(c) for c in checks]
@@ -191,6 +205,13 @@ def fly(
                 reason = "preflight NO-GO, not flying: " + "; ".join(bad)
                 echo(f"fly phase1: {reason}")
                 return FlyResult(EXIT_FAILED, "idle", reason, summary)
+        if confirm is not None and not confirm(
+            f"arm and take off to {ccfg.takeoff_altitude:g} m on {bcfg.link.url}, then fly "
+            f"{len(plan.runs)} runs ({budget.time_worst_s / 60:.1f} min at most)?"
+        ):
+            reason = "not confirmed by the operator: nothing armed"
+            echo(f"fly phase1: {reason}")
+            return FlyResult(EXIT_FAILED, "idle", reason, summary)
         rec = CampaignRecorder(
             out,
             cfg.storage,
@@ -235,6 +256,10 @@ def fly(
         if runner.rec is not None:
             runner._safe(lambda: runner.rec.annotate("vehicle", vehicle.summary()))
         close_errors = runner.rec.close(clock()) if runner.rec is not None else []
+        if summary.get("params_set"):
+            summary["params_restored"] = restore_params(
+                bridge.link, summary["params_set"], clock, sleep, echo
+            )
         bridge.close()
     c = runner.campaign
     summary.update(c.summary())
@@ -264,6 +289,30 @@ def fly(
     if close_errors:
         status = status or EXIT_FAILED
     return FlyResult(status, summary["result"], summary["reason"], summary, str(out))
+
+
+def restore_params(link, changed: list[dict], clock, sleep, echo) -> list[dict]:
+    """Set every parameter of ``changed`` (``set_params``' records) back to its old value,
+    confirmed by PARAM_VALUE; what cannot be restored is reported with the commands that
+    restore it by hand. Returns one record per parameter (name, value, restored)."""
+    from lpv_sysid.errors import LpvSysidError
+
+    out = []
+    for d in changed:
+        name, old = d["name"], d["old"]
+        if old is None or old == d["new"]:
+            continue
+        try:
+            set_params(link, {name: float(old)}, clock, sleep)
+            echo(f"PARAM_SET {name}: {d['new']:g} -> {old} (restored, confirmed)")
+            out.append({"name": name, "value": old, "restored": True})
+        except LpvSysidError as exc:
+            echo(
+                f"PARAM {name} NOT restored ({exc}): set it back by hand, e.g. QGroundControl "
+                f"MAVLink console `param set {name} {old}`"
+            )
+            out.append({"name": name, "value": old, "restored": False})
+    return out
 
 
 def plan_flight(cfg: FlyConfig, url: str | None, signals: str | None = None):

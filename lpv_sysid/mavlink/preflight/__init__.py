@@ -31,6 +31,10 @@ Rules (PX4 v1.16, ``commander_params.c``):
   WARN when the output values do not fit the configured mapping; neither: NO-GO;
 - COM_DISARM_PRFLT > 0 (pre-flight auto disarm enabled) else WARN;
 - NAV_DLL_ACT, COM_RCL_EXCEPT, COM_RC_IN_MODE reported (informational);
+- battery, GPS fix, EKF2 health, home position, and PX4's velocity and tilt limits
+  (MPC_XY_VEL_MAX, MPC_Z_VEL_MAX_UP / _DN, MPC_TILTMAX_AIR) against what the planned box
+  needs: :mod:`~lpv_sysid.mavlink.preflight.health` (NO-GO names the parameter and the
+  value that flies the box);
 - telemetry from other systems on the link is reported (WARN; the bridge ignores it).
 """
 

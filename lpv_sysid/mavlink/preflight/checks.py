@@ -9,7 +9,9 @@ from typing import Any, Callable
 
 from lpv_sysid.mavlink import codec, px4
 from lpv_sysid.mavlink.link import MavlinkLink
+from lpv_sysid.control.campaign import FlightDemands
 from lpv_sysid.mavlink.preflight.gather import Facts, gather
+from lpv_sysid.mavlink.preflight.health import health_checks
 from lpv_sysid.mavlink.preflight.report import GO, NOGO, WARN, Check
 from lpv_sysid.mavlink.preflight.rules import _obl_check, _rotor_check, _sticks
 from lpv_sysid.mavlink.telemetry import ATTITUDE_SOURCES, POSITION_SOURCES, RotorEstimateConfig
@@ -32,9 +34,12 @@ def run_checks(
     sleep: Callable[[float], None] = time.sleep,
     grace: float = 1.5,
     rotor_estimate: RotorEstimateConfig | None = None,
+    demands: FlightDemands | None = None,
+    battery_needed_pct: float | None = None,
 ) -> list[Check]:
     """Gather the facts (at most ``timeout`` s; ends once all are in, or ``grace`` s after
-    the stream requests when only possibly-absent streams are missing) and judge them."""
+    the stream requests when only possibly-absent streams are missing) and judge them;
+    ``demands`` / ``battery_needed_pct``: what the planned flight asks (health.py)."""
     facts = gather(link, timeout, clock, sleep, grace)
     return judge(
         facts.hb,
@@ -44,6 +49,8 @@ def run_checks(
         link,
         facts=facts,
         rotor_estimate=rotor_estimate,
+        demands=demands,
+        battery_needed_pct=battery_needed_pct,
     )
 
 
@@ -56,6 +63,8 @@ def judge(
     *,
     facts: Facts | None = None,
     rotor_estimate: RotorEstimateConfig | None = None,
+    demands: FlightDemands | None = None,
+    battery_needed_pct: float | None = None,
 ) -> list[Check]:
     """Turn the gathered facts into checks (pure; tested without a vehicle)."""
     if facts is None:
@@ -209,6 +218,7 @@ def judge(
             GO if d is not None and float(d) > 0 else WARN,
         )
     )
+    out += health_checks(facts, demands, battery_needed_pct)
     for name in ("NAV_DLL_ACT", "COM_RCL_EXCEPT", "COM_RC_IN_MODE"):
         v = params.get(name)
         text = "missing" if v is None else f"{v}"

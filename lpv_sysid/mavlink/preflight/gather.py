@@ -20,12 +20,26 @@ from lpv_sysid.mavlink.telemetry import (
 )
 
 REQUIRED_PARAMS = ("COM_OF_LOSS_T", "COM_OBL_RC_ACT")
-INFO_PARAMS = ("COM_DISARM_PRFLT", "NAV_DLL_ACT", "COM_RCL_EXCEPT", "COM_RC_IN_MODE")
+#: PX4's velocity and tilt limits, checked against the planned box (preflight/vehicle.py)
+LIMIT_PARAMS = ("MPC_XY_VEL_MAX", "MPC_Z_VEL_MAX_UP", "MPC_Z_VEL_MAX_DN", "MPC_TILTMAX_AIR")
+INFO_PARAMS = (
+    "COM_DISARM_PRFLT",
+    "NAV_DLL_ACT",
+    "COM_RCL_EXCEPT",
+    "COM_RC_IN_MODE",
+) + LIMIT_PARAMS
+#: the vehicle's health: GPS fix, EKF2 flags (streams), home position (requested)
+HEALTH = ("GPS_RAW_INT", "ESTIMATOR_STATUS", "HOME_POSITION")
 #: streams waited for until the grace period ends (ATTITUDE_QUATERNION, LOCAL_POSITION_NED
 #: are the preferred state sources; the others may be absent on a healthy vehicle)
 TELEMETRY = ("ATTITUDE_QUATERNION", "LOCAL_POSITION_NED", "HIGHRES_IMU", "ESC_STATUS")
 #: streams requested besides the link's own: stick evidence and motor outputs [Hz]
-EXTRA_STREAMS = (("SYS_STATUS", 5.0), ("RC_CHANNELS", 5.0)) + MOTOR_OUTPUT_STREAMS
+EXTRA_STREAMS = (
+    ("SYS_STATUS", 5.0),
+    ("RC_CHANNELS", 5.0),
+    ("GPS_RAW_INT", 5.0),
+    ("ESTIMATOR_STATUS", 5.0),
+) + MOTOR_OUTPUT_STREAMS
 #: vehicle-state messages whose foreign sources are reported
 STATE_TYPES = frozenset(
     ATTITUDE_SOURCES + POSITION_SOURCES + MOTOR_OUTPUT_SOURCES + ("HIGHRES_IMU", "ESC_STATUS")
@@ -43,6 +57,9 @@ class Facts:
     sys_status: Any = None
     rc_channels: Any = None
     motor_outputs: dict[str, Any] = field(default_factory=dict)  # type -> newest message
+    gps: Any = None  # GPS_RAW_INT
+    estimator: Any = None  # ESTIMATOR_STATUS
+    home: Any = None  # HOME_POSITION
     foreign: dict[tuple[int, int], int] = field(default_factory=dict)
 
     def absorb(self, m: Any, target: tuple[int, int] | None) -> None:
@@ -70,6 +87,12 @@ class Facts:
             self.rc_channels = m
         elif mt in MOTOR_OUTPUT_SOURCES:
             self.motor_outputs[mt] = m
+        elif mt == "GPS_RAW_INT":
+            self.gps = m
+        elif mt == "ESTIMATOR_STATUS":
+            self.estimator = m
+        elif mt == "HOME_POSITION":
+            self.home = m
         self.seen.add(mt)
 
     def core_complete(self) -> bool:
@@ -86,7 +109,11 @@ class Facts:
             or _rc_present(self.rc_channels)
             or self.params.get("COM_RC_IN_MODE") == px4.RcInMode.DISABLED
         )
-        return self.core_complete() and all(s in self.seen for s in TELEMETRY) and sticks_known
+        return (
+            self.core_complete()
+            and all(s in self.seen for s in TELEMETRY + HEALTH)
+            and sticks_known
+        )
 
 
 def gather(
@@ -119,6 +146,10 @@ def gather(
             if facts.version is None:
                 link.command_long(
                     px4.MAV_CMD_REQUEST_MESSAGE, float(mod.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+                )
+            if facts.home is None:
+                link.command_long(
+                    px4.MAV_CMD_REQUEST_MESSAGE, float(mod.MAVLINK_MSG_ID_HOME_POSITION)
                 )
             for name in REQUIRED_PARAMS + INFO_PARAMS:
                 if name not in facts.params:

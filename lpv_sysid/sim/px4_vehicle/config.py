@@ -56,6 +56,7 @@ PARAMS: dict[str, ParamSpec] = {
     "MPC_XY_VEL_MAX": ParamSpec(12.0, _R32, 0.0, 20.0),
     "MPC_Z_VEL_MAX_UP": ParamSpec(3.0, _R32, 0.5, 8.0),
     "MPC_Z_VEL_MAX_DN": ParamSpec(1.5, _R32, 0.5, 4.0),
+    "MPC_TILTMAX_AIR": ParamSpec(45.0, _R32, 20.0, 89.0),
     "MPC_LAND_SPEED": ParamSpec(0.7, _R32, 0.6, 4.0),
     "MIS_TAKEOFF_ALT": ParamSpec(2.5, _R32, 0.0, 1000.0),
     "MC_ROLLRATE_P": ParamSpec(0.15, _R32, 0.01, 0.5),
@@ -85,6 +86,8 @@ DEFAULT_RATES: dict[str, float] = {
     # thrust + body-rate setpoints PX4 tracks (sent while a SET_ATTITUDE_TARGET rates setpoint
     # is flown in OFFBOARD: the echo of what arrived; the sim's own cascade has no rate stage)
     "ATTITUDE_TARGET": 10.0,
+    "GPS_RAW_INT": 5.0,
+    "ESTIMATOR_STATUS": 1.0,
 }
 ACTUATOR_OUTPUT_SCALES = ("pwm", "normalized")
 
@@ -176,6 +179,28 @@ class SimVehicleConfig:
         unit=" s",
     )
     duplicate_acks: bool = cf.flag(False, "additionally send every COMMAND_ACK twice")
+    # what preflight reads of the vehicle's health (SYS_STATUS, GPS_RAW_INT, ESTIMATOR_STATUS,
+    # HOME_POSITION)
+    battery_remaining: int = cf.count(
+        80, "battery charge at start, SYS_STATUS.battery_remaining [%]", lo=0, hi=100
+    )
+    battery_drain: float = cf.number(
+        6.0,
+        "charge used per minute armed [%/min] (a 450-size quad hovers ~15 min on a pack)",
+        lo=0.0,
+        hi=100.0,
+        unit=" %/min",
+    )
+    battery_voltage: float = cf.number(
+        16.0, "battery voltage at start, SYS_STATUS.voltage_battery [V]", lo=0.0, hi=60.0
+    )
+    gps_fix: int = cf.count(3, "GPS_RAW_INT.fix_type (0-1 no fix, 2 2D, 3 3D, ...)", lo=0, hi=8)
+    ekf_healthy: bool = cf.flag(
+        True,
+        "ESTIMATOR_STATUS: attitude, velocity and position valid (false: no horizontal "
+        "position, GPS glitch)",
+    )
+    home_set: bool = cf.flag(True, "a home position is set (HOME_POSITION answered)")
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], where: str = "sim_vehicle") -> "SimVehicleConfig":

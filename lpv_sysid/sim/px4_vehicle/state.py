@@ -88,6 +88,7 @@ class VehicleState:
         self.landed = True
         self.took_off = False
         self.t_armed = 0.0
+        self.armed_s = 0.0  # time armed since boot [s] (battery drain)
         self.t_landed = 0.0
         self.hold_pos = np.zeros(3)
         self.descending = False  # emergency Descend task (stick mode without sticks)

@@ -19,6 +19,7 @@ MAV_LANDED_STATE_ON_GROUND, MAV_LANDED_STATE_IN_AIR = 1, 2
 MAV_FRAME_LOCAL_NED = 1
 MAV_ESTIMATOR_TYPE_AUTOPILOT = 8
 MAV_SYS_STATUS_SENSOR_RC_RECEIVER = 0x10000
+MAV_SYS_STATUS_SENSOR_GPS = 0x20
 SENSORS_BASE = 0x3FFF  # gyro .. motor outputs, all present/enabled/healthy
 N_OUTPUTS = 16  # actuator outputs PX4 SIH reports (ACTUATOR_OUTPUT_STATUS.active)
 HOME_LAT, HOME_LON, HOME_ALT = 47.397742, 8.545594, 488.0  # PX4 SITL default home
@@ -51,6 +52,8 @@ class TelemetryStreams(VehicleState):
             return self.config.rc_present
         if mid == sid["ATTITUDE_TARGET"]:
             return self._rates_setpoint() is not None
+        if mid == sid["HOME_POSITION"]:
+            return self.config.home_set
         return True
 
     def _rates_setpoint(self):
@@ -59,6 +62,27 @@ class TelemetryStreams(VehicleState):
         if self.mode == px4.OFFBOARD and sp is not None and sp.kind == "rates":
             return sp
         return None
+
+    def battery_remaining(self) -> int:
+        """SYS_STATUS.battery_remaining [%]: the start charge less the drain while armed."""
+        used = self.config.battery_drain * self.armed_s / 60.0
+        return max(0, int(math.floor(self.config.battery_remaining - used)))
+
+    def estimator_flags(self) -> int:
+        """ESTIMATOR_STATUS.flags (MAV ESTIMATOR_* bits) of a healthy EKF2 with GPS, or of
+        one without horizontal position and with a GPS glitch (``ekf_healthy: false``)."""
+        m = self._mod
+        base = m.ESTIMATOR_ATTITUDE | m.ESTIMATOR_VELOCITY_VERT | m.ESTIMATOR_POS_VERT_ABS
+        if not self.config.ekf_healthy:
+            return base | m.ESTIMATOR_GPS_GLITCH
+        return (
+            base
+            | m.ESTIMATOR_VELOCITY_HORIZ
+            | m.ESTIMATOR_POS_HORIZ_REL
+            | m.ESTIMATOR_POS_HORIZ_ABS
+            | m.ESTIMATOR_PRED_POS_HORIZ_REL
+            | m.ESTIMATOR_PRED_POS_HORIZ_ABS
+        )
 
     def _send_telemetry(self, now: float) -> None:
         if now >= self._next_hb:
@@ -196,8 +220,41 @@ class TelemetryStreams(VehicleState):
             sensors = SENSORS_BASE | (
                 MAV_SYS_STATUS_SENSOR_RC_RECEIVER if self.sticks_available(now) else 0
             )
+            health = sensors & ~(MAV_SYS_STATUS_SENSOR_GPS if self.config.gps_fix < 3 else 0)
             c_msg = c.sys_status_encode(
-                sensors, sensors, sensors, 100, 16000, 500, 80, 0, 0, 0, 0, 0, 0
+                sensors,
+                sensors,
+                health,
+                100,
+                int(self.config.battery_voltage * 1000),
+                500 if self.armed else 20,
+                self.battery_remaining(),
+                0,
+                0,
+                0,
+                0,
+                0,
+                0,
+            )
+        elif mid == sid["GPS_RAW_INT"]:
+            fix = self.config.gps_fix
+            lat = HOME_LAT + x[0] / 111319.5
+            lon = HOME_LON + x[1] / (111319.5 * math.cos(math.radians(HOME_LAT)))
+            c_msg = c.gps_raw_int_encode(
+                us,
+                fix,
+                int(lat * 1e7),
+                int(lon * 1e7),
+                int((HOME_ALT - x[2]) * 1000),
+                80 if fix >= 3 else 9999,
+                120 if fix >= 3 else 9999,
+                int(100 * math.hypot(v_ned[0], v_ned[1])),
+                0,
+                12 if fix >= 3 else 0,
+            )
+        elif mid == sid["ESTIMATOR_STATUS"]:
+            c_msg = c.estimator_status_encode(
+                us, self.estimator_flags(), 0.1, 0.1, 0.1, 0.1, 0.0, 0.0, 0.5, 0.8
             )
         elif mid == sid["EXTENDED_SYS_STATE"]:
             c_msg = c.extended_sys_state_encode(

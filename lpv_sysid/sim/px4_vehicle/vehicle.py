@@ -38,8 +38,11 @@ Protocol (what a bridge, MAVSDK or a ground station sees):
   ACTUATOR_OUTPUT_STATUS (``active`` 16, the same PWM values, or u_ESC in [0, 1] for the
   motors and 0 elsewhere with ``actuator_output_scale: normalized``; off by default as in
   PX4, SET_MESSAGE_INTERVAL enables it), RC_CHANNELS (only with an RC), SYS_STATUS
-  (RC_RECEIVER present/healthy while stick input is valid), EXTENDED_SYS_STATE,
-  HOME_POSITION.
+  (RC_RECEIVER present/healthy while stick input is valid; battery ``battery_remaining``
+  less ``battery_drain`` per minute armed, ``battery_voltage``), EXTENDED_SYS_STATE,
+  HOME_POSITION (only with ``home_set``, also on REQUEST_MESSAGE), GPS_RAW_INT
+  (``gps_fix``) and ESTIMATOR_STATUS (EKF2 flags: healthy, or no horizontal position and a
+  GPS glitch with ``ekf_healthy: false``) -- what preflight reads.
 
 Behaviour:
 - OFFBOARD accepts SET_POSITION_TARGET_LOCAL_NED (velocity, optional yaw rate,
@@ -152,6 +155,8 @@ class SimVehicle(FlightPhysics, ParamServer):
             for msg in self.link.poll(now):
                 self._handle(msg, now)
         while self.t + self.dt <= now + 1e-9:
+            if self.armed:
+                self.armed_s += self.dt
             self._physics_step()
             self._supervise(self.t)
             self._run_verdicts(self.t)
