@@ -194,6 +194,16 @@ def test_certified_bound_is_read_from_the_gains_and_the_parameter_only_tightens(
     assert n == 0 and t_abort == T0 + DT
 
 
+@pytest.mark.parametrize("bad", [0.0, -0.01, "fast", True, float("nan")])
+def test_a_malformed_certified_bound_is_refused(tmp_path, bad):
+    def edit(d):
+        d["certificate"]["loop_delay"] = {"bound_s": bad}
+
+    g = write_gains(tmp_path / "gains.yaml", box=2.0, edit=edit)
+    with pytest.raises(ConfigError, match="certificate.loop_delay.bound_s must be a finite"):
+        runtime(g)
+
+
 def test_a_bound_below_one_state_period_is_refused_with_a_timer_tick(gains):
     with pytest.raises(ConfigError, match="not above one state period"):
         runtime(gains, loop_delay_bound_s=0.004)  # state_rate_hz 250: 4 ms

@@ -129,8 +129,11 @@ class ControllerRuntime:
         if entry is None:
             entry = cert.extra.get("loop_delay") if isinstance(cert.extra, dict) else None
         raw = entry.get("bound_s") if isinstance(entry, dict) else getattr(entry, "bound_s", None)
-        stated = [float(raw)] if raw is not None else []
-        if stated and not (np.isfinite(stated[0]) and stated[0] > 0.0):
+        try:
+            stated = [float(raw)] if raw is not None and not isinstance(raw, bool) else []
+        except (TypeError, ValueError):
+            stated = [float("nan")]
+        if raw is not None and not (stated and np.isfinite(stated[0]) and stated[0] > 0.0):
             raise ConfigError(
                 f"{settings.gains_file}: certificate.loop_delay.bound_s must be a finite "
                 f"delay > 0 s, got {raw!r}"
