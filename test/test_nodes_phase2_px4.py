@@ -139,3 +139,36 @@ def test_rate_plant_graph_flies_phase2_on_px4_and_records_every_topic(design, tm
         [messages.excitation_from_joint_state(m)[1] for _, m in got["/lpv_sysid/excitation"]]
     )
     assert np.abs(ue).max() > 0.05
+    # the loop latency from the logger's bag (here on the stand-in's simulated clock: the
+    # logger receives at the publishing instant; under real rclpy the DDS hop adds to it)
+    from lpv_sysid.flight.phase2 import latency_from_bag
+
+    lat = latency_from_bag(bag)
+    assert lat["commands"] == len(got["/lpv_sysid/actuator_command"]) and lat["max"] >= 0.0
+
+
+@pytest.mark.parametrize("case", ["K_negated", "sidecar_missing", "v_d_x3", "kappa_10"])
+def test_controller_node_refuses_the_tampers_fly_phase2_refuses(design, tmp_path, caplog, case):  # noqa: F811
+    """``lpv_controller_node`` (the shell, stand-in rclpy) exits 2 with the words of the
+    runtime for the tamper cases of test_phase2_one_path (the same ones ``fly phase2`` and the
+    chain refuse with those words)."""
+    from test_phase2_one_path import _node_runtime, _tampered
+
+    from lpv_sysid.errors import ConfigError
+    from lpv_sysid.nodes import lpv_controller_node
+
+    gains, signals, kappa = _tampered(design, tmp_path, case)
+    with pytest.raises(ConfigError) as rt:
+        _node_runtime(gains, signals, kappa)
+    with caplog.at_level("CRITICAL"):
+        code = lpv_controller_node.main(
+            args=["n"]
+            + args(
+                "lpv_controller_px4.yaml",
+                gains_file=str(gains),
+                signals_file=str(signals / "signals.npz"),
+                excitation_gain=kappa,
+            )
+        )
+    assert code == 2
+    assert str(rt.value) in caplog.records[-1].getMessage()
