@@ -150,6 +150,13 @@ class BridgeRuntime:
             if s.rate_setpoints:
                 self.publishers.append(Endpoint("rate_setpoint", "rate_setpoint"))
             self.subscriptions.append(Endpoint("actuator_command", "actuator_command"))
+            if cfg_b.command != "velocity":
+                # phase 2: the excitation node's velocity_reference is the controller's input,
+                # not a setpoint of this bridge (each one was rejected with a WARN status:
+                # 100 status messages a second on the stand-in graph)
+                self.subscriptions = [
+                    e for e in self.subscriptions if e.key != "velocity_reference"
+                ]
             self.timer_period_s = 1.0 / s.poll_rate_hz
             self._log += self._handback_lines(sigterm_timeout_s, teardown_margin_s)
 

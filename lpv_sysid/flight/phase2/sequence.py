@@ -363,14 +363,16 @@ def fly_phase2(
                 echo(f"[{now - t0:8.2f} s] controller: {line}")
             aborted = False
             for topic, msg in outs:
-                record(topic, now, msg)
                 if topic == "status":
+                    record(topic, now, msg)
                     for o2 in exc.on_status(msg, round(now * 1e9)):
                         record(o2[0], now, o2[1])
                     continue
                 t_cmd, u = m.channels_from_joint_state(msg, names, field="position")
                 sent = core.transport.clip(u)
-                core.on_actuator_command(now, u, stamp=t_cmd)
+                t_send = clock()  # logged: the bag's actuator_command log time - its stamp
+                core.on_actuator_command(t_send, u, stamp=t_cmd)  # is the loop's latency
+                record(topic, t_send, msg)
                 if not bridge_started:
                     core.start(now)
                     bridge_started = True
