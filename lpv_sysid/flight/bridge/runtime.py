@@ -23,7 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence, Union
 
-from lpv_sysid.errors import LpvSysidError
+from lpv_sysid.errors import ConfigError, LpvSysidError
 from lpv_sysid.flight.bridge.settings import BridgeNodeSettings, handback_bound_s, split_parameters
 from lpv_sysid.io import messages
 from lpv_sysid.mavlink.bridge import (
@@ -33,7 +33,11 @@ from lpv_sysid.mavlink.bridge import (
     BridgeCore,
     MavrosConfig,
     MavrosCore,
+    MavrosLink,
     MavrosOutput,
+    RateTarget,
+    ServiceRequest,
+    VelocityTarget,
     cmd_vel_msg,
 )
 from lpv_sysid.mavlink.telemetry import ImuSample, RotorSample, StateSample
@@ -44,6 +48,29 @@ PARSERS = {
     "velocity_reference": messages.reference_from_twist,
     "actuator_command": messages.actuator_command_from_joint_state,
 }
+POSITION_TARGET = messages.MAVROS_TYPES["position_target"]
+ATTITUDE_TARGET = messages.MAVROS_TYPES["attitude_target"]
+#: transport mavros with mavros_msgs: subscription key -> (topic under the MAVROS
+#: namespace, type); odometry and IMU are the common_interfaces ones of MavrosConfig
+MAVROS_INPUTS = {
+    "mavros_state": ("state", messages.MAVROS_TYPES["state"]),
+    "mavros_esc": ("esc_status", messages.MAVROS_TYPES["esc_status"]),
+    "mavros_rc_out": ("rc/out", messages.MAVROS_TYPES["rc_out"]),
+    "mavros_home": ("home_position/home", messages.MAVROS_TYPES["home_position"]),
+}
+
+
+def _use_mavros_msgs(cfg: MavrosConfig, factory: messages.MsgFactory) -> bool:
+    """``interfaces`` resolved: ``auto`` means mavros_msgs when the factory can load it."""
+    if cfg.interfaces != "auto":
+        return cfg.interfaces == "mavros_msgs"
+    try:
+        factory.lookup(messages.MAVROS_TYPES["state"])
+    except (LpvSysidError, ImportError, ValueError):
+        return False
+    return True
+
+
 #: core states in which the orderly shutdown needs no more spinning
 SHUTDOWN_DONE = ("IDLE", "DONE", "FAILED")
 
@@ -57,6 +84,7 @@ class Endpoint:
     key: str
     topic: str
     qos: str = ""
+    typename: str = ""  # a mavros_msgs type (looked up by name: no import without MAVROS)
 
 
 Output = list[tuple[str, Any]]
@@ -83,13 +111,25 @@ class BridgeRuntime:
         self._shutting_down = False
         self.link: BridgeCore | None = None
         self.mavros: MavrosCore | None = None
+        #: transport mavros with mavros_msgs: the link of ``self.link`` (a BridgeCore)
+        self.mavros_link: MavrosLink | None = None
+        #: MAVROS services the shell calls with the ServiceRequests of the output
+        self.clients: list[Endpoint] = []
         #: the orderly-shutdown bound [s] (None: the shell's default)
         self.shutdown_timeout_s: float | None = None
         self.publishers = [Endpoint("state", "state"), Endpoint("imu", "imu")]
         self.subscriptions = [Endpoint("velocity_reference", "velocity_reference")]
         self.core: Union[MavrosCore, BridgeCore]
-        if s.transport == "mavros":
-            self.core = self.mavros = MavrosCore(MavrosConfig.from_dict(mavros))
+        mcfg = MavrosConfig.from_dict(mavros) if s.transport == "mavros" else None
+        if mcfg is not None and _use_mavros_msgs(mcfg, factory):
+            self._init_mavros_msgs(mcfg, bridge, sigterm_timeout_s, teardown_margin_s)
+        elif mcfg is not None:
+            if mcfg.command != "velocity":
+                raise ConfigError(
+                    f"mavros.command {mcfg.command!r} needs mavros_msgs, which cannot be "
+                    "loaded (source a ROS with mavros_msgs, or use command velocity)"
+                )
+            self.core = self.mavros = MavrosCore(mcfg)
             cfg = self.mavros.config
             self.publishers.append(Endpoint("cmd_vel", cfg.topic("cmd_vel"), "reliable"))
             self.subscriptions += [
@@ -116,6 +156,42 @@ class BridgeRuntime:
             self.subscriptions.append(Endpoint("actuator_command", "actuator_command"))
             self.timer_period_s = 1.0 / s.poll_rate_hz
             self._log += self._handback_lines(sigterm_timeout_s, teardown_margin_s)
+
+    def _init_mavros_msgs(
+        self, mcfg: MavrosConfig, bridge: Mapping[str, Any], sigterm_s: float, margin_s: float
+    ) -> None:
+        """transport mavros with mavros_msgs: BridgeCore over a :class:`MavrosLink`."""
+        ns = mcfg.namespace
+        self.mavros_link = MavrosLink(mcfg.state_timeout, ns)
+        self.core = self.link = BridgeCore(BridgeConfig.from_dict(bridge), link=self.mavros_link)
+        self._mavros_cfg = mcfg
+        self._rejected: dict[str, int] = {}
+        if self.link.config.command == "velocity":
+            sp = Endpoint("mavros_local", f"{ns}/setpoint_raw/local", "reliable", POSITION_TARGET)
+        else:
+            sp = Endpoint(
+                "mavros_attitude", f"{ns}/setpoint_raw/attitude", "reliable", ATTITUDE_TARGET
+            )
+        self.publishers += [Endpoint("rotor_speeds", "rotor_speeds"), sp]
+        self.subscriptions += [
+            Endpoint("actuator_command", "actuator_command"),
+            Endpoint("mavros_odom", mcfg.topic("odom"), "sensor"),
+            Endpoint("mavros_imu", mcfg.topic("imu"), "sensor"),
+        ] + [Endpoint(k, f"{ns}/{t}", "sensor", ty) for k, (t, ty) in MAVROS_INPUTS.items()]
+        self.clients = [
+            Endpoint("set_mode", f"{ns}/set_mode", "", messages.MAVROS_TYPES["set_mode"]),
+            Endpoint("arming", f"{ns}/cmd/arming", "", messages.MAVROS_TYPES["command_bool"]),
+        ]
+        self.timer_period_s = 1.0 / self.settings.poll_rate_hz
+        self._log.append(
+            (
+                "info",
+                f"MAVROS {ns} with mavros_msgs: mode from {ns}/state (stale after "
+                f"{mcfg.state_timeout:g} s), {ns}/set_mode and {ns}/cmd/arming, setpoints on "
+                f"{sp.topic}",
+            )
+        )
+        self._log += self._handback_lines(sigterm_s, margin_s)
 
     def _handback_lines(self, sigterm_timeout_s: float, margin_s: float) -> list[tuple[str, str]]:
         assert self.link is not None  # transport mavlink
@@ -159,12 +235,14 @@ class BridgeRuntime:
             return self._mavros_out(out, now) if isinstance(out, MavrosOutput) else []
         if self.link is not None and key == "actuator_command":
             self.link.on_actuator_command(now, parsed[1], stamp=parsed[0])
-        return []
+        return self._drain(now)
 
     def on_message(self, key: str, msg: Any, now: float) -> Output:
         """A MAVROS message (transport mavros): ``mavros_odom`` / ``mavros_imu`` are parsed in
         MAVROS's frames (a bad one is counted and reported by the core) and republished on
         ``state`` / ``imu``; ``mavros_diagnostics`` gives the PX4 mode."""
+        if self.mavros_link is not None:
+            return self._on_mavros_msgs(key, msg, now)
         core = self.mavros
         if core is None:
             return []
@@ -206,17 +284,80 @@ class BridgeRuntime:
             ("imu", messages.imu_msg(f, imu.stamp_ns, imu.specific_force, imu.omega, imu.euler))
         ]
 
+    def _on_mavros_msgs(self, key: str, msg: Any, now: float) -> Output:
+        """transport mavros with mavros_msgs: a MAVROS message becomes link evidence (the
+        core judges it at the next poll); a malformed one is counted and reported."""
+        link, cfg = self.mavros_link, self._mavros_cfg
+        assert link is not None
+        try:
+            if key == "mavros_state":
+                link.on_state(now, messages.state_from_msg(msg))
+            elif key == "mavros_odom":
+                link.on_odometry(
+                    now,
+                    messages.state_from_odometry(
+                        msg, frame_id=cfg.odom_frame_id, child_frame_id=cfg.base_frame_id
+                    ),
+                )
+            elif key == "mavros_imu":
+                link.on_imu(now, messages.imu_from_msg(msg, frame_id=cfg.base_frame_id))
+            elif key == "mavros_esc":
+                link.on_esc(now, *messages.esc_rpm_from_msg(msg))
+            elif key == "mavros_rc_out":
+                link.on_rc_out(now, *messages.rc_out_from_msg(msg))
+            elif key == "mavros_home":
+                link.on_home(now, messages.home_ned_from_msg(msg))
+        except LpvSysidError as exc:
+            link.stats.rejected_inputs += 1
+            n = self._rejected[key] = self._rejected.get(key, 0) + 1
+            if n & (n - 1) == 0:  # the 1st, 2nd, 4th, 8th, ... of a kind: no log flood
+                self._log.append(("warn", f"{key} rejected ({n} so far): {exc}"))
+        return []
+
+    def on_service_answer(self, req: ServiceRequest, response: Any, now: float) -> Output:
+        """The answer of a MAVROS service call the shell made for ``req`` (None: the call
+        failed; the core's ``ack_timeout`` then retries)."""
+        assert self.mavros_link is not None
+        if response is None:
+            self.mavros_link.on_service_failed(now, req)
+            self._log.append(("warn", f"{req.key} {req.fields} got no answer"))
+        else:
+            self.mavros_link.on_service_answer(now, req, response)
+        return []
+
+    def _drain(self, now: float) -> Output:
+        """transport mavros with mavros_msgs: the link's setpoints as MAVROS messages and its
+        service requests (key ``set_mode`` / ``arming``, the shell calls them)."""
+        if self.mavros_link is None:
+            return []
+        f, stamp, out = self.f, round(now * 1e9), []
+        for item in self.mavros_link.take_outbox():
+            if isinstance(item, VelocityTarget):
+                msg = messages.position_target_msg(
+                    f, stamp, item.frame, item.type_mask, item.v, item.yaw_rate
+                )
+                out.append(("mavros_local", msg))
+            elif isinstance(item, RateTarget):
+                msg = messages.attitude_target_msg(
+                    f, stamp, item.type_mask, item.rates_frd, item.thrust
+                )
+                out.append(("mavros_attitude", msg))
+            elif isinstance(item, ServiceRequest):
+                out.append((item.key, item))
+        return out
+
     # -- services -------------------------------------------------------------------------
     def start(self, now: float) -> tuple[bool, str, Output]:
         """The ``start`` service: ``(success, message, output)`` (the status to publish)."""
         events = self.core.start(now)
-        return True, f"offboard: {self.core.state.value}", self.status(now, events)
+        out = self.status(now, events) + self._drain(now)
+        return True, f"offboard: {self.core.state.value}", out
 
     def abort(self, now: float, reason: str = "abort service") -> tuple[bool, str, Output]:
         """The ``abort`` service: hand control back; ``(success, message, output)``."""
         events = self.core.abort(now, reason)
         message = f"handing control back to PX4: {self.core.state.value}"
-        return True, message, self.status(now, events)
+        return True, message, self.status(now, events) + self._drain(now)
 
     # -- loop -----------------------------------------------------------------------------
     def on_timer(self, now: float) -> Output:
@@ -246,7 +387,7 @@ class BridgeRuntime:
                 )
         if out.events:
             pubs += self.status(now, out.events)
-        return pubs
+        return pubs + self._drain(now)
 
     def _mavros_out(self, out: MavrosOutput, now: float) -> Output:
         assert self.mavros is not None
@@ -262,6 +403,8 @@ class BridgeRuntime:
         """The ``status`` array: the core's values; level and message of the last warn/error
         event (else OK and the core state); every event is logged."""
         values = self.core.status(now)
+        if self.mavros_link is not None:
+            values.update(self.mavros_link.status(now))
         level, message = "OK", self.core.state.value
         for ev in events:
             lv = getattr(ev, "level", "warn" if getattr(ev, "kind", "") != "link_up" else "info")
@@ -280,7 +423,7 @@ class BridgeRuntime:
         if self._shutting_down:
             return []
         self._shutting_down = True
-        return self.status(now, self.core.shutdown(now))
+        return self.status(now, self.core.shutdown(now)) + self._drain(now)
 
     def shutdown_complete(self) -> bool:
         return self.core.state.value in SHUTDOWN_DONE

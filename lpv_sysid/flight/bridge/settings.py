@@ -124,7 +124,10 @@ MAVROS_DESCRIPTIONS = {
     "mavros.odom_frame_id": "frame_id of MAVROS local_position/odom",
     "mavros.base_frame_id": "MAVROS body frame (odom child, imu)",
     "mavros.prestream_timeout": "zero-velocity stream without a reference -> stop [s]",
-    "mavros.use_diagnostics": "read the PX4 mode from /diagnostics (read-only)",
+    "mavros.use_diagnostics": "read the PX4 mode from /diagnostics (read-only; interfaces common)",
+    "mavros.interfaces": "auto | mavros_msgs (mode, arming, hand-back, rate setpoints, rotor "
+    "speeds) | common (common_interfaces only: velocity, no mode control)",
+    "mavros.state_timeout": "mavros_msgs: no /mavros/state for this long -> no mode evidence [s]",
 }
 
 #: the rclpy declarations: the shell's settings, then BridgeConfig's and MavrosConfig's

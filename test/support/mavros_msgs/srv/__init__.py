@@ -1,0 +1,7 @@
+"""Stand-in mavros_msgs.srv (MAVROS 2.10 definitions): SetMode, CommandBool."""
+
+from _rosmsg_standin import make_service as _make
+
+SetMode = _make("mavros_msgs", "SetMode")
+CommandBool = _make("mavros_msgs", "CommandBool")
+del _make
