@@ -9,14 +9,24 @@ m/s); run the file again for the next vertex of the box.
 """
 
 from launch import LaunchDescription
-from lpv_sysid.nodes.launch_util import arg, declare_arguments, node
+from lpv_sysid.nodes.launch_util import (
+    MAVROS_ARGUMENTS,
+    arg,
+    declare_arguments,
+    mavros_node,
+    node,
+    transport_overrides,
+)
 
 
 def generate_launch_description():
     return LaunchDescription(
         [
             *declare_arguments(
-                signals_file="signals.npz", vertex="[0.0, 0.0, 0.0]", log_dir="phase1_log"
+                signals_file="signals.npz",
+                vertex="[0.0, 0.0, 0.0]",
+                log_dir="phase1_log",
+                **MAVROS_ARGUMENTS,
             ),
             node(
                 "excitation",
@@ -27,7 +37,12 @@ def generate_launch_description():
                     "vertex_frd": arg("vertex"),
                 },
             ),
-            node("mavlink_bridge", "mavlink_bridge_node.yaml", {"command": "velocity"}),
+            node(
+                "mavlink_bridge",
+                "mavlink_bridge_node.yaml",
+                {"command": "velocity", **transport_overrides()},
+            ),
+            mavros_node(),
             node("data_logger", "data_logger.yaml", {"out_dir": arg("log_dir")}),
         ]
     )

@@ -8,14 +8,25 @@ commands to PX4; hands control back to PX4 when commands stop), data_logger.
 """
 
 from launch import LaunchDescription
-from lpv_sysid.nodes.launch_util import REQUIRED, arg, declare_arguments, node
+from lpv_sysid.nodes.launch_util import (
+    MAVROS_ARGUMENTS,
+    REQUIRED,
+    arg,
+    declare_arguments,
+    mavros_node,
+    node,
+    transport_overrides,
+)
 
 
 def generate_launch_description():
     return LaunchDescription(
         [
             *declare_arguments(
-                gains_file=REQUIRED, signals_file="signals.npz", log_dir="phase2_log"
+                gains_file=REQUIRED,
+                signals_file="signals.npz",
+                log_dir="phase2_log",
+                **MAVROS_ARGUMENTS,
             ),
             node(
                 "excitation",
@@ -23,7 +34,12 @@ def generate_launch_description():
                 {"mode": "phase2", "signals_file": arg("signals_file")},
             ),
             node("lpv_controller", "lpv_controller.yaml", {"gains_file": arg("gains_file")}),
-            node("mavlink_bridge", "mavlink_bridge_node.yaml", {"command": "attitude_rate"}),
+            node(
+                "mavlink_bridge",
+                "mavlink_bridge_node.yaml",
+                {"command": "attitude_rate", **transport_overrides()},
+            ),
+            mavros_node(),
             node(
                 "data_logger",
                 "data_logger.yaml",

@@ -30,6 +30,21 @@ DESCRIPTIONS = {
     "gains_file": "gains.yaml from `lpv-sysid synthesize`",
     "vertex": "vertex body velocity (u, v, w) FRD, m/s, for this run",
     "log_dir": "experiment directory of the data logger",
+    # the MAVROS transport (issue 26): MAVROS_ARGUMENTS, transport_overrides, mavros_node
+    "transport": "mavlink_bridge transport: mavlink (its own MAVLink link) | mavros (MAVROS, "
+    "docs/px4_transport.md)",
+    "mavros_ns": "namespace of the MAVROS node (transport mavros)",
+    "fcu_url": "non-empty: start MAVROS here with this fcu_url (PX4 SITL instance 0: "
+    "udp://:14540@127.0.0.1:14580); empty: MAVROS runs elsewhere",
+    "tgt_system": "MAVROS tgt_system: PX4's MAV_SYS_ID (SITL: 1 + instance)",
+}
+
+#: the MAVROS transport's launch arguments and defaults (``declare_arguments(**...)``)
+MAVROS_ARGUMENTS = {
+    "transport": "mavlink",
+    "mavros_ns": "/mavros",
+    "fcu_url": "",
+    "tgt_system": "1",
 }
 
 #: marks an argument without default (``ros2 launch`` refuses to start without it)
@@ -99,4 +114,30 @@ def node(
         sigterm_timeout=sigterm_timeout(),
         parameters=parameters,
         condition=condition,
+    )
+
+
+def transport_overrides() -> dict:
+    """mavlink_bridge parameters of the MAVROS arguments (:data:`MAVROS_ARGUMENTS`)."""
+    return {"transport": arg("transport"), "mavros.namespace": arg("mavros_ns")}
+
+
+def mavros_node() -> Node:
+    """MAVROS (``mavros_node`` of the mavros package) in ``mavros_ns``, started only when
+    ``fcu_url`` is given; its ``setpoint_raw`` plugin gets ``thrust_scaling`` 1 (MAVROS 2
+    ignores every non-zero AttitudeTarget thrust while it is unset) through the shipped
+    ``mavros_px4.yaml`` of ``config_dir``."""
+    from launch.conditions import IfCondition
+    from launch.substitutions import PythonExpression
+
+    return Node(
+        package="mavros",
+        executable="mavros_node",
+        namespace=arg("mavros_ns"),
+        output="screen",
+        parameters=[
+            params("mavros_px4.yaml"),
+            {"fcu_url": arg("fcu_url"), "tgt_system": arg("tgt_system")},
+        ],
+        condition=IfCondition(PythonExpression(["'", arg("fcu_url"), "' != ''"])),
     )
