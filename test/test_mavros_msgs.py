@@ -279,6 +279,39 @@ def test_rotor_speeds_from_esc_status_rpm():
     assert rotor[-1].header.frame_id != messages.ROTOR_ESTIMATED_FRAME
 
 
+def test_rotor_speeds_estimated_from_rc_out_pwm():
+    """No ESC telemetry: /mavros/rc/out (PX4's SERVO_OUTPUT_RAW) through the motor model of
+    seed 0 Eq. (8). The first sample starts at the steady state Omega = b u / a with
+    u = (PWM - PWM_MAIN_MIN) / (PWM_MAIN_MAX - PWM_MAIN_MIN), here 1100 .. 1900 us."""
+    rt = runtime(
+        command="velocity",
+        **{
+            "rotor_estimate.output_min": 1100.0,
+            "rotor_estimate.output_max": 1900.0,
+            "rotor_estimate.a_omega": 10.0,
+            "rotor_estimate.b_omega": 10000.0,
+            "rotor_estimate.omega_min": 50.0,
+            "rotor_estimate.omega_max": 900.0,
+        },
+    )
+    fake = FakeMavros(rt)
+    fake.run(0.3)
+    pwm = [1500, 1580, 1100, 1900, 1234, 900]  # channels 5, 6: not motors
+    rc = F(
+        "mavros_msgs/msg/RCOut",
+        header=messages.header_msg(F, round(fake.t * 1e9)),
+        channels=pwm,
+    )
+    fake.handle(rt.on_message("mavros_rc_out", rc, fake.t))
+    fake.run(0.01)
+    (msg,) = fake.setpoints("rotor_speeds")
+    u = (np.array(pwm[:4]) - 1100.0) / 800.0
+    np.testing.assert_allclose(
+        np.asarray(msg.velocity), np.clip(1000.0 * u, 50.0, 900.0), rtol=1e-12
+    )
+    assert msg.header.frame_id == messages.ROTOR_ESTIMATED_FRAME
+
+
 def test_unknown_mode_and_bad_state_message_are_counted():
     rt = runtime(command="velocity")
     fake = FakeMavros(rt, mode="AUTO.PRECLAND")
