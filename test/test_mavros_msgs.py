@@ -17,15 +17,59 @@ import math
 import numpy as np
 import pytest
 
-from mavros_msgs.srv import CommandBool, SetMode
+from mavros_msgs.msg import VehicleInfo
+from mavros_msgs.srv import CommandBool, SetMode, VehicleInfoGet
+from rcl_interfaces.msg import ParameterValue
+from rcl_interfaces.srv import GetParameters
 
 from lpv_sysid.flight.bridge import PARSERS, SPECS, BridgeRuntime
 from lpv_sysid.io import messages
+from lpv_sysid.mavlink import codec, px4
 from lpv_sysid.mavlink.bridge import ServiceRequest
 
 F = messages.MsgFactory.rclpy()  # the stand-in's rclpy classes (test/support), mavros_msgs too
 DEFAULTS = {n: d for n, (d, _) in SPECS.items()}
 ZERO3 = [0.0, 0.0, 0.0]
+#: PX4 v1.16 SITL's answers to the preflight's parameter questions (Hold on offboard loss,
+#: no stick input)
+PX4_PARAMS = {
+    "COM_OF_LOSS_T": 1.0,
+    "COM_OBL_RC_ACT": 5,
+    "COM_DISARM_PRFLT": 10.0,
+    "NAV_DLL_ACT": 0,
+    "COM_RCL_EXCEPT": 4,
+    "COM_RC_IN_MODE": 4,
+}
+_MOD = codec.dialect_module()
+CAPS = (
+    _MOD.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    | _MOD.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+    | _MOD.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
+)
+
+
+def vehicle_info(version=(1, 16, 0)):
+    return VehicleInfo(
+        sysid=1,
+        compid=1,
+        autopilot=12,
+        type=2,
+        capabilities=CAPS,
+        flight_sw_version=px4.encode_flight_sw_version(*version),
+    )
+
+
+def param_answer(names, params):
+    values = []
+    for n in names:
+        v = params.get(n)
+        if v is None:
+            values.append(ParameterValue(type=0))
+        elif isinstance(v, int):
+            values.append(ParameterValue(type=2, integer_value=v))
+        else:
+            values.append(ParameterValue(type=3, double_value=v))
+    return GetParameters.Response(values=values)
 
 
 def runtime(**overrides):
@@ -40,6 +84,10 @@ class FakeMavros:
         self.rt, self.mode, self.armed = rt, mode, armed
         self.applies = applies  # None: every mode
         self.publishing = True  # /mavros/state published (False: stale)
+        self.params = dict(PX4_PARAMS)  # what MAVROS's param node has pulled
+        self.info = vehicle_info()
+        self.asked: list[str] = []
+        self.rc_out = True  # publishes /mavros/rc/out (PX4 SITL: SERVO_OUTPUT_RAW)
         self.calls: list[ServiceRequest] = []
         self.sent: list[tuple[float, str, object]] = []  # (t, key, msg) setpoints
         self.events: list[tuple[float, str, str]] = []  # (t, level, text) the runtime logged
@@ -56,6 +104,12 @@ class FakeMavros:
                     if self.applies is None or name in self.applies:
                         self.mode = name
                     resp = SetMode.Response(mode_sent=True)
+                elif key == "param_get":
+                    self.asked += item.fields["names"]
+                    resp = param_answer(item.fields["names"], self.params)
+                elif key == "vehicle_info":
+                    ok = self.info is not None
+                    resp = VehicleInfoGet.Response(success=ok, vehicles=[self.info] if ok else [])
                 else:
                     self.armed = bool(item.fields["value"])
                     resp = CommandBool.Response(success=True, result=0)
@@ -95,6 +149,13 @@ class FakeMavros:
                     frame_id="map",
                 )
                 self.handle(self.rt.on_message("mavros_odom", odom, self.t))
+                if self.rc_out and k % 25 == 0:  # PX4 SITL's SERVO_OUTPUT_RAW, 10 Hz
+                    rc = F(
+                        "mavros_msgs/msg/RCOut",
+                        header=messages.header_msg(F, round(self.t * 1e9)),
+                        channels=[1500 if self.armed else 900] * 4,
+                    )
+                    self.handle(self.rt.on_message("mavros_rc_out", rc, self.t))
                 if reference is not None:
                     msg = messages.twist_reference_msg(F, round(self.t * 1e9), *reference)
                     parsed = PARSERS["velocity_reference"](msg)
@@ -113,14 +174,18 @@ class FakeMavros:
     def setpoints(self, key):
         return [m for _, k, m in self.sent if k == key]
 
+    def mode_calls(self):
+        return [(c.key, c.fields) for c in self.calls if c.key in ("set_mode", "arming")]
+
     def modes_requested(self):
         return [c.fields["custom_mode"] for c in self.calls if c.key == "set_mode"]
 
 
 def started(fake, **kw):
     fake.run(0.5, **kw)  # telemetry and state before start
-    ok, _, out = fake.rt.start(fake.t)
+    ok, message, out = fake.rt.start(fake.t)
     fake.handle(out)
+    assert ok, message
     return fake
 
 
@@ -136,10 +201,16 @@ def test_endpoints_of_the_mavros_msgs_mode():
     assert subs["mavros_state"] == ("/mavros/state", "mavros_msgs/msg/State")
     assert subs["mavros_esc"] == ("/mavros/esc_status", "mavros_msgs/msg/ESCStatus")
     assert subs["mavros_rc_out"] == ("/mavros/rc/out", "mavros_msgs/msg/RCOut")
+    assert subs["mavros_rc_in"] == ("/mavros/rc/in", "mavros_msgs/msg/RCIn")
     assert [(e.key, e.topic, e.typename) for e in rt.clients] == [
         ("set_mode", "/mavros/set_mode", "mavros_msgs/srv/SetMode"),
         ("arming", "/mavros/cmd/arming", "mavros_msgs/srv/CommandBool"),
+        ("param_get", "/mavros/param/get_parameters", "rcl_interfaces/srv/GetParameters"),
+        ("vehicle_info", "/mavros/vehicle_info_get", "mavros_msgs/srv/VehicleInfoGet"),
     ]
+    rt = runtime(command="velocity", **{"mavros.preflight": False})
+    assert [e.key for e in rt.clients] == ["set_mode", "arming"]
+    assert "mavros_rc_in" not in [e.key for e in rt.subscriptions]
     rt = runtime(command="attitude_rate", **{"mavros.namespace": "/uav1/mavros"})
     assert [(e.key, e.topic) for e in rt.publishers][-1] == (
         "mavros_attitude",
@@ -152,7 +223,7 @@ def test_offboard_arm_run_and_handback_confirmed_through_mavros_state():
     fake = started(FakeMavros(rt))
     fake.run(6.0, reference=([1.0, 0.5, -0.2], 0.3))
     assert fake.state() == "OFFBOARD_ACTIVE"
-    assert [(c.key, c.fields) for c in fake.calls] == [
+    assert fake.mode_calls() == [
         ("set_mode", {"base_mode": 0, "custom_mode": "OFFBOARD"}),
         ("arming", {"value": True}),
     ]
@@ -295,6 +366,7 @@ def test_rotor_speeds_estimated_from_rc_out_pwm():
         },
     )
     fake = FakeMavros(rt)
+    fake.rc_out = False
     fake.run(0.3)
     pwm = [1500, 1580, 1100, 1900, 1234, 900]  # channels 5, 6: not motors
     rc = F(
@@ -336,13 +408,15 @@ def fresh():
 
 
 def test_node_offboard_and_handback_with_a_fake_mavros_node(fresh):
-    """The node shell: mavros_msgs types by name, the service clients, /mavros/state.
-    The fake MAVROS node applies every mode but LOITER: the chain goes on to LAND."""
+    """The node shell: mavros_msgs types by name, the service clients, /mavros/state, the
+    preflight through MAVROS's param node and vehicle_info_get (the first start is refused
+    while the vehicle info is unanswered). The fake MAVROS node applies every mode but
+    LOITER: the chain goes on to LAND."""
     import os
 
     import rclpy
     from geometry_msgs.msg import TwistStamped
-    from mavros_msgs.msg import PositionTarget, State
+    from mavros_msgs.msg import PositionTarget, RCOut, State
     from nav_msgs.msg import Odometry
     from rclpy._standin import call_trigger, spin_nodes
     from rclpy.qos import qos_profile_sensor_data
@@ -351,12 +425,18 @@ def test_node_offboard_and_handback_with_a_fake_mavros_node(fresh):
 
     cfg = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config")
     args = ["node", "--ros-args", "--params-file", f"{cfg}/mavlink_bridge_node.yaml"]
-    for k, v in (("transport", "mavros"), ("mavros.interfaces", "mavros_msgs")):
+    pairs = (
+        ("transport", "mavros"),
+        ("mavros.interfaces", "mavros_msgs"),
+        ("offboard.arm", "true"),
+    )
+    for k, v in pairs:
         args += ["-p", f"{k}:={v}"]
     rclpy.init(args=args)
     node = MavlinkBridgeNode(namespace="lpv_sysid")
     mavros = rclpy.create_node("mavros")
-    vehicle = {"mode": "AUTO.LOITER", "armed": True}
+    now_ns = lambda: mavros.get_clock().now().nanoseconds  # noqa: E731
+    vehicle = {"mode": "AUTO.LOITER", "armed": False, "info": False}
     calls = []
 
     def set_mode(req, resp):
@@ -371,13 +451,33 @@ def test_node_offboard_and_handback_with_a_fake_mavros_node(fresh):
         resp.success, resp.result = True, 0
         return resp
 
+    def get_parameters(req, resp):
+        resp.values = param_answer(req.names, PX4_PARAMS).values
+        return resp
+
+    def info(req, resp):
+        resp.success = vehicle["info"]
+        resp.vehicles = [vehicle_info()] if vehicle["info"] else []
+        return resp
+
+    mavros.create_service(GetParameters, "/mavros/param/get_parameters", get_parameters)
+    mavros.create_service(VehicleInfoGet, "/mavros/vehicle_info_get", info)
+    pub_rc = mavros.create_publisher(RCOut, "/mavros/rc/out", qos_profile_sensor_data)
+    mavros.create_timer(
+        0.1,
+        lambda: pub_rc.publish(
+            RCOut(
+                header=messages.header_msg(F, now_ns()),
+                channels=[1500 if vehicle["armed"] else 900] * 4,
+            )
+        ),
+    )
     mavros.create_service(SetMode, "/mavros/set_mode", set_mode)
     mavros.create_service(CommandBool, "/mavros/cmd/arming", arming)
     pub_state = mavros.create_publisher(State, "/mavros/state", 10)
     pub_odom = mavros.create_publisher(
         Odometry, "/mavros/local_position/odom", qos_profile_sensor_data
     )
-    now_ns = lambda: mavros.get_clock().now().nanoseconds  # noqa: E731
     mavros.create_timer(
         1.0,
         lambda: pub_state.publish(
@@ -405,10 +505,17 @@ def test_node_offboard_and_handback_with_a_fake_mavros_node(fresh):
         lambda: pub_ref.publish(messages.twist_reference_msg(F, now_ns(), [0.4, 0.0, 0.0], 0.0)),
     )
     try:
-        spin_nodes([node, mavros], 1.5)
-        assert call_trigger(mavros, [node], "/lpv_sysid/mavlink_bridge/start").success
+        spin_nodes([node, mavros], 3.0)
+        r = call_trigger(mavros, [node], "/lpv_sysid/mavlink_bridge/start")
+        assert not r.success and "vehicle info: no answer" in r.message, r.message
+        assert node.core.state.value == "IDLE" and calls == []
+        vehicle["info"] = True  # MAVROS got AUTOPILOT_VERSION
+        spin_nodes([node, mavros], 3.0)
+        r = call_trigger(mavros, [node], "/lpv_sysid/mavlink_bridge/start")
+        assert r.success, r.message
         spin_nodes([node, mavros], 5.0)
         assert node.core.state.value == "OFFBOARD_ACTIVE" and vehicle["mode"] == "OFFBOARD"
+        assert vehicle["armed"]
         last = sp[-1]
         assert (last.coordinate_frame, last.type_mask) == (8, 0x07C7)
         assert (last.velocity.x, last.velocity.y, last.velocity.z) == (0.4, 0.0, 0.0)
@@ -419,3 +526,63 @@ def test_node_offboard_and_handback_with_a_fake_mavros_node(fresh):
     assert calls == ["OFFBOARD", "AUTO.LOITER", "AUTO.LAND"]
     assert node.core.state.value == "FAILED" and vehicle["mode"] == "AUTO.LAND"
     assert "vehicle in LAND after HOLD" in node.core.status(0.0)["reason"]
+
+
+# ----------------------------------------------------------------- preflight through MAVROS
+def preflight_start(fake):
+    fake.run(1.0)
+    ok, message, out = fake.rt.start(fake.t)
+    fake.handle(out)
+    fake.run(2.0)
+    return ok, message
+
+
+@pytest.mark.parametrize(
+    "change, named",
+    [
+        # Position on offboard loss without stick input (COM_RC_IN_MODE 4): PX4 descends
+        ({"params": {"COM_OBL_RC_ACT": 0}}, "COM_OBL_RC_ACT: 0 (POSITION)"),
+        ({"params": {"COM_OF_LOSS_T": 5.0}}, "COM_OF_LOSS_T: 5 s"),
+        ({"params": {"COM_OF_LOSS_T": None}}, "COM_OF_LOSS_T: missing"),  # not pulled yet
+        ({"info": vehicle_info((1, 13, 0))}, "firmware: 1.13.0"),
+        ({"info": None}, "vehicle info: no answer"),
+        ({"armed": True}, "armed: armed"),
+        ({"rc_out": False}, "rotor speeds: none"),
+    ],
+)
+def test_preflight_no_go_refuses_start_before_any_mode_command(change, named):
+    rt = runtime(command="velocity")
+    fake = FakeMavros(rt)
+    for k, v in change.items():
+        if k == "params":
+            for p, x in v.items():
+                if x is None:
+                    fake.params.pop(p)
+                else:
+                    fake.params[p] = x
+        else:
+            setattr(fake, k, v)
+    ok, message = preflight_start(fake)
+    assert not ok and message.startswith("start refused: preflight NO-GO through MAVROS")
+    assert named in message, message
+    assert fake.state() == "IDLE" and fake.mode_calls() == []
+    assert not fake.setpoints("mavros_local")
+    table = [t for _, lv, t in fake.events if t.startswith("preflight (MAVROS)")]
+    assert table and "NO-GO" in table[-1]
+
+
+def test_preflight_go_asks_only_until_answered_and_judges_the_mavros_evidence():
+    rt = runtime(command="velocity")
+    fake = FakeMavros(rt)
+    ok, message = preflight_start(fake)
+    assert ok, message
+    # every parameter asked once (answered at once), not again
+    assert sorted(fake.asked) == sorted(PX4_PARAMS)
+    (table,) = [t for _, lv, t in fake.events if t.startswith("preflight (MAVROS)")]
+    rows = {line.split()[0]: line for line in table.splitlines()[2:] if line.strip()}
+    assert rows["firmware"].split()[1] == "1.16.0" and rows["firmware"].endswith("GO")
+    assert "estimated (SERVO_OUTPUT_RAW)" in rows["rotor"]
+    assert "5 (HOLD)" in rows["COM_OBL_RC_ACT"] and rows["COM_OBL_RC_ACT"].endswith("GO")
+    # odometry is MAVROS's state source: the MAVLink preflight's fallback note (WARN)
+    att = [x for x in table.splitlines() if x.startswith("telemetry attitude")]
+    assert att and "ODOMETRY" in att[0] and att[0].endswith("WARN")

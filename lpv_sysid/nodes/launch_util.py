@@ -126,7 +126,12 @@ def mavros_node() -> Node:
     """MAVROS (``mavros_node`` of the mavros package) in ``mavros_ns``, started only when
     ``fcu_url`` is given; its ``setpoint_raw`` plugin gets ``thrust_scaling`` 1 (MAVROS 2
     ignores every non-zero AttitudeTarget thrust while it is unset) through the shipped
-    ``mavros_px4.yaml`` of ``config_dir``."""
+    ``mavros_px4.yaml`` of ``config_dir``.
+
+    For SITL convenience: a Ctrl-C of the launch stops MAVROS together with the bridge,
+    so a hand-back that still needs MAVROS cannot be confirmed (the bridge ends FAILED and
+    PX4's offboard-loss failsafe acts). On a vehicle, run MAVROS on its own and call the
+    bridge's ``abort`` (or stop the phase launch) before stopping MAVROS."""
     from launch.conditions import IfCondition
     from launch.substitutions import PythonExpression
 
@@ -135,6 +140,7 @@ def mavros_node() -> Node:
         executable="mavros_node",
         namespace=arg("mavros_ns"),
         output="screen",
+        sigterm_timeout=sigterm_timeout(),
         parameters=[
             params("mavros_px4.yaml"),
             {"fcu_url": arg("fcu_url"), "tgt_system": arg("tgt_system")},

@@ -72,6 +72,21 @@ _EXTRA.update(
         "mavros_msgs/srv/SetMode_Response": "bool mode_sent\n",
         "mavros_msgs/srv/CommandBool_Request": "bool value\n",
         "mavros_msgs/srv/CommandBool_Response": "bool success\nuint8 result\n",
+        "mavros_msgs/msg/RCIn": "std_msgs/Header header\nuint8 rssi\nuint16[] channels\n",
+        "mavros_msgs/msg/VehicleInfo": "std_msgs/Header header\n"
+        "uint8 HAVE_INFO_HEARTBEAT = 1\nuint8 HAVE_INFO_AUTOPILOT_VERSION = 2\n"
+        "uint8 available_info\nuint8 sysid\nuint8 compid\nuint8 autopilot\nuint8 type\n"
+        "uint8 system_status\nuint8 base_mode\nuint32 custom_mode\nstring mode\n"
+        "uint32 mode_id\nuint64 capabilities\nuint32 flight_sw_version\n"
+        "uint32 middleware_sw_version\nuint32 os_sw_version\nuint32 board_version\n"
+        "string flight_custom_version\nuint16 vendor_id\nuint16 product_id\nuint64 uid\n",
+        "mavros_msgs/srv/VehicleInfoGet_Request": "uint8 GET_MY_SYSID = 0\n"
+        "uint8 GET_MY_COMPID = 0\nuint8 sysid\nuint8 compid\nbool get_all\n",
+        "mavros_msgs/srv/VehicleInfoGet_Response": "bool success\n"
+        "mavros_msgs/VehicleInfo[] vehicles\n",
+        # rcl_interfaces' services are not in the rosbags store either
+        "rcl_interfaces/srv/GetParameters_Request": "string[] names\n",
+        "rcl_interfaces/srv/GetParameters_Response": "rcl_interfaces/ParameterValue[] values\n",
     }
 )
 for _name, _text in _EXTRA.items():
@@ -369,6 +384,10 @@ def _to_rb(desc, value):
     etname = edetail[0] if ekind == BASE else edetail
     if ekind == BASE and etname in _DTYPE:
         return np.asarray(value, dtype=_DTYPE[etname])
+    if ekind == BASE and etname == "byte":  # rosbags holds byte[] as a uint8 array
+        return np.array([v[0] for v in value], dtype=np.uint8)
+    if ekind == BASE and etname == "bool":  # and bool[] as a bool array
+        return np.array(value, dtype=bool)
     return [_to_rb((ekind, edetail), v) for v in value]
 
 
@@ -402,6 +421,8 @@ def _from_rb(desc, value):
     if ekind == BASE and etname in _DTYPE:
         arr = np.asarray(value, dtype=_DTYPE[etname])
         return arr if kind == ARRAY else array.array(_TYPECODE[etname], arr.tolist())
+    if ekind == BASE and etname == "bool":
+        return [bool(v) for v in value]
     return [_from_rb((ekind, edetail), v) for v in value]
 
 

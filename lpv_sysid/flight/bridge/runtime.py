@@ -20,6 +20,7 @@ and message, every event is logged.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence, Union
 
@@ -40,6 +41,13 @@ from lpv_sysid.mavlink.bridge import (
     VelocityTarget,
     cmd_vel_msg,
 )
+from lpv_sysid.mavlink.offboard import StatusEvent
+from lpv_sysid.mavlink.preflight import (
+    MavrosEvidence,
+    format_table,
+    mavros_checks,
+    verdict,
+)
 from lpv_sysid.mavlink.telemetry import ImuSample, RotorSample, StateSample
 
 #: the package input topics parsed by the shell (``ShellNode.parse_input``: a bad message is
@@ -57,6 +65,17 @@ MAVROS_INPUTS = {
     "mavros_esc": ("esc_status", messages.MAVROS_TYPES["esc_status"]),
     "mavros_rc_out": ("rc/out", messages.MAVROS_TYPES["rc_out"]),
     "mavros_home": ("home_position/home", messages.MAVROS_TYPES["home_position"]),
+}
+#: the MAVROS inputs of the preflight (``mavros.preflight``), besides the ones above
+MAVROS_PREFLIGHT_INPUTS = {"mavros_rc_in": ("rc/in", messages.MAVROS_TYPES["rc_in"])}
+#: seconds between the preflight's questions to MAVROS while answers are missing
+PREFLIGHT_ASK_PERIOD_S = 2.0
+#: MAVROS input key -> the MAVLink stream it stands for (preflight ``seen``)
+SEEN = {
+    "mavros_odom": "ODOMETRY",
+    "mavros_imu": "HIGHRES_IMU",
+    "mavros_esc": "ESC_STATUS",
+    "mavros_rc_out": "SERVO_OUTPUT_RAW",
 }
 
 
@@ -115,6 +134,9 @@ class BridgeRuntime:
         self.mavros_link: MavrosLink | None = None
         #: MAVROS services the shell calls with the ServiceRequests of the output
         self.clients: list[Endpoint] = []
+        #: the preflight's MAVROS evidence (mavros_msgs with ``mavros.preflight``), else None
+        self.evidence: MavrosEvidence | None = None
+        self._t_asked = -math.inf
         #: the orderly-shutdown bound [s] (None: the shell's default)
         self.shutdown_timeout_s: float | None = None
         self.publishers = [Endpoint("state", "state"), Endpoint("imu", "imu")]
@@ -166,6 +188,7 @@ class BridgeRuntime:
         self.core = self.link = BridgeCore(BridgeConfig.from_dict(bridge), link=self.mavros_link)
         self._mavros_cfg = mcfg
         self._rejected: dict[str, int] = {}
+        self.evidence = MavrosEvidence() if mcfg.preflight else None
         if self.link.config.command == "velocity":
             sp = Endpoint("mavros_local", f"{ns}/setpoint_raw/local", "reliable", POSITION_TARGET)
         else:
@@ -182,6 +205,25 @@ class BridgeRuntime:
             Endpoint("set_mode", f"{ns}/set_mode", "", messages.MAVROS_TYPES["set_mode"]),
             Endpoint("arming", f"{ns}/cmd/arming", "", messages.MAVROS_TYPES["command_bool"]),
         ]
+        if mcfg.preflight:
+            self.subscriptions += [
+                Endpoint(k, f"{ns}/{t}", "sensor", ty)
+                for k, (t, ty) in MAVROS_PREFLIGHT_INPUTS.items()
+            ]
+            self.clients += [
+                Endpoint(
+                    "param_get",
+                    f"{ns}/param/get_parameters",
+                    "",
+                    messages.MAVROS_TYPES["get_parameters"],
+                ),
+                Endpoint(
+                    "vehicle_info",
+                    f"{ns}/vehicle_info_get",
+                    "",
+                    messages.MAVROS_TYPES["vehicle_info_get"],
+                ),
+            ]
         self.timer_period_s = 1.0 / self.settings.poll_rate_hz
         self._log.append(
             (
@@ -287,9 +329,13 @@ class BridgeRuntime:
     def _on_mavros_msgs(self, key: str, msg: Any, now: float) -> Output:
         """transport mavros with mavros_msgs: a MAVROS message becomes link evidence (the
         core judges it at the next poll); a malformed one is counted and reported."""
-        link, cfg = self.mavros_link, self._mavros_cfg
+        link, cfg, ev = self.mavros_link, self._mavros_cfg, self.evidence
         assert link is not None
         try:
+            if key == "mavros_rc_in":
+                if ev is not None:
+                    ev.rc_in = messages.rc_in_from_msg(msg)
+                return []
             if key == "mavros_state":
                 link.on_state(now, messages.state_from_msg(msg))
             elif key == "mavros_odom":
@@ -304,9 +350,14 @@ class BridgeRuntime:
             elif key == "mavros_esc":
                 link.on_esc(now, *messages.esc_rpm_from_msg(msg))
             elif key == "mavros_rc_out":
-                link.on_rc_out(now, *messages.rc_out_from_msg(msg))
+                stamp_ns, channels = messages.rc_out_from_msg(msg)
+                link.on_rc_out(now, stamp_ns, channels)
+                if ev is not None:
+                    ev.servo_raw = channels
             elif key == "mavros_home":
                 link.on_home(now, messages.home_ned_from_msg(msg))
+            if ev is not None and key in SEEN:
+                ev.seen.add(SEEN[key])
         except LpvSysidError as exc:
             link.stats.rejected_inputs += 1
             n = self._rejected[key] = self._rejected.get(key, 0) + 1
@@ -321,9 +372,63 @@ class BridgeRuntime:
         if response is None:
             self.mavros_link.on_service_failed(now, req)
             self._log.append(("warn", f"{req.key} {req.fields} got no answer"))
+        elif req.key in ("param_get", "vehicle_info"):
+            self._preflight_answer(req, response)
         else:
             self.mavros_link.on_service_answer(now, req, response)
         return []
+
+    def _preflight_answer(self, req: ServiceRequest, response: Any) -> None:
+        ev = self.evidence
+        assert ev is not None
+        try:
+            if req.key == "param_get":
+                ev.params.update(
+                    messages.params_from_get_parameters(req.fields["names"], response)
+                )
+            else:
+                ev.vehicle = messages.vehicle_from_info_response(response) or ev.vehicle
+        except (LpvSysidError, AttributeError, TypeError, ValueError) as exc:
+            self._log.append(("warn", f"{req.key} answer unusable: {exc}"))
+
+    def _preflight_questions(self, now: float) -> list[ServiceRequest]:
+        """While MAVROS is connected and answers are missing: ask (every few seconds)."""
+        ev, link = self.evidence, self.mavros_link
+        if ev is None or link is None or not link.link_up(now):
+            return []
+        missing = ev.missing_params()
+        if (
+            not missing and ev.vehicle is not None
+        ) or now - self._t_asked < PREFLIGHT_ASK_PERIOD_S:
+            return []
+        self._t_asked = now
+        out = []
+        if missing:
+            out.append(ServiceRequest("param_get", {"names": missing}, 0))
+        if ev.vehicle is None:
+            out.append(
+                ServiceRequest("vehicle_info", {"sysid": 0, "compid": 0, "get_all": False}, 0)
+            )
+        return out
+
+    def _preflight_refusal(self, now: float) -> str:
+        """'' when the preflight on MAVROS's evidence finds no NO-GO (or is off), else the
+        reason ``start`` is refused; the table is logged either way."""
+        ev, core = self.evidence, self.link
+        if ev is None or core is None or self.mavros_link is None:
+            return ""
+        up = self.mavros_link.link_up(now)
+        ev.mode = core.machine.vehicle_mode if up else None
+        ev.armed = core.machine.armed
+        checks = mavros_checks(ev, core.config.rotor_estimate, self._mavros_cfg.namespace)
+        ok = verdict(checks)
+        self._log.append(
+            ("info" if ok else "error", "preflight (MAVROS):\n" + format_table(checks))
+        )
+        if ok:
+            return ""
+        bad = "; ".join(f"{c.name}: {c.value}" for c in checks if c.verdict == "NO-GO")
+        return f"start refused: preflight NO-GO through MAVROS ({bad})"
 
     def _drain(self, now: float) -> Output:
         """transport mavros with mavros_msgs: the link's setpoints as MAVROS messages and its
@@ -349,6 +454,10 @@ class BridgeRuntime:
     # -- services -------------------------------------------------------------------------
     def start(self, now: float) -> tuple[bool, str, Output]:
         """The ``start`` service: ``(success, message, output)`` (the status to publish)."""
+        refusal = self._preflight_refusal(now)
+        if refusal:
+            st = self.core.state.value
+            return False, refusal, self.status(now, [StatusEvent(now, st, st, refusal, "error")])
         events = self.core.start(now)
         out = self.status(now, events) + self._drain(now)
         return True, f"offboard: {self.core.state.value}", out
@@ -366,6 +475,7 @@ class BridgeRuntime:
             return self._mavros_out(self.mavros.step(now), now)
         assert self.link is not None
         out = self.link.poll(now)
+        asks = [(q.key, q) for q in self._preflight_questions(now)]
         f = self.f
         pubs: Output = []
         for s in out.samples:
@@ -387,7 +497,7 @@ class BridgeRuntime:
                 )
         if out.events:
             pubs += self.status(now, out.events)
-        return pubs + self._drain(now)
+        return pubs + self._drain(now) + asks
 
     def _mavros_out(self, out: MavrosOutput, now: float) -> Output:
         assert self.mavros is not None

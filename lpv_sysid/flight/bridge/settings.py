@@ -128,6 +128,8 @@ MAVROS_DESCRIPTIONS = {
     "mavros.interfaces": "auto | mavros_msgs (mode, arming, hand-back, rate setpoints, rotor "
     "speeds) | common (common_interfaces only: velocity, no mode control)",
     "mavros.state_timeout": "mavros_msgs: no /mavros/state for this long -> no mode evidence [s]",
+    "mavros.preflight": "mavros_msgs: refuse start on a preflight NO-GO (PX4 parameters, "
+    "firmware, sticks, telemetry through MAVROS)",
 }
 
 #: the rclpy declarations: the shell's settings, then BridgeConfig's and MavrosConfig's

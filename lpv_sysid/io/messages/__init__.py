@@ -89,10 +89,13 @@ from lpv_sysid.io.messages.mavros import (
     attitude_target_msg,
     esc_rpm_from_msg,
     home_ned_from_msg,
+    params_from_get_parameters,
     position_target_msg,
     rate_setpoint_from_attitude_target_msg,
+    rc_in_from_msg,
     rc_out_from_msg,
     state_from_msg,
+    vehicle_from_info_response,
     velocity_setpoint_from_position_target,
 )
 from lpv_sysid.io.messages.topics import NAMESPACE, TOPIC_NAMESPACE, TYPES
@@ -134,8 +137,10 @@ __all__ = [
     "imu_msg",
     "joint_state",
     "odometry_from_state",
+    "params_from_get_parameters",
     "position_target_msg",
     "rate_setpoint_from_attitude_target_msg",
+    "rc_in_from_msg",
     "rc_out_from_msg",
     "reference_from_twist",
     "rotor_source_of",
@@ -149,5 +154,6 @@ __all__ = [
     "status_from_diagnostic_array",
     "time_msg",
     "twist_reference_msg",
+    "vehicle_from_info_response",
     "velocity_setpoint_from_position_target",
 ]

@@ -33,6 +33,9 @@ STATE = "mavros_msgs/msg/State"
 ESC_STATUS = "mavros_msgs/msg/ESCStatus"
 RC_OUT = "mavros_msgs/msg/RCOut"
 HOME_POSITION = "mavros_msgs/msg/HomePosition"
+RC_IN = "mavros_msgs/msg/RCIn"
+VEHICLE_INFO_GET = "mavros_msgs/srv/VehicleInfoGet"
+GET_PARAMETERS = "rcl_interfaces/srv/GetParameters"  # MAVROS mirrors FCU params as ROS ones
 SET_MODE = "mavros_msgs/srv/SetMode"
 COMMAND_BOOL = "mavros_msgs/srv/CommandBool"
 
@@ -46,7 +49,12 @@ MAVROS_TYPES = {
     "home_position": HOME_POSITION,
     "set_mode": SET_MODE,
     "command_bool": COMMAND_BOOL,
+    "rc_in": RC_IN,
+    "vehicle_info_get": VEHICLE_INFO_GET,
+    "get_parameters": GET_PARAMETERS,
 }
+#: rcl_interfaces/ParameterValue.type of the numbers (PARAMETER_INTEGER, PARAMETER_DOUBLE)
+PARAMETER_INTEGER, PARAMETER_DOUBLE = 2, 3
 
 FRAME_LOCAL_NED = 1
 FRAME_BODY_NED = 8
@@ -138,3 +146,27 @@ def rc_out_from_msg(msg) -> tuple[int, list[int]]:
 def home_ned_from_msg(msg) -> np.ndarray:
     """``mavros_msgs/HomePosition.position`` (local ENU) -> NED [m]."""
     return frames.enu_to_ned(finite(xyz(msg.position), 3, "home position"))
+
+
+def rc_in_from_msg(msg) -> tuple[int, int]:
+    """``mavros_msgs/RCIn`` (PX4's RC_CHANNELS) -> ``(channel count, RSSI)``."""
+    return len(msg.channels), int(msg.rssi)
+
+
+def params_from_get_parameters(names, response) -> dict[str, float | int]:
+    """``rcl_interfaces/srv/GetParameters`` answer for ``names`` -> the numbers that are
+    set (a name MAVROS has not pulled yet answers PARAMETER_NOT_SET: left out)."""
+    out: dict[str, float | int] = {}
+    for name, v in zip(names, response.values):
+        if int(v.type) == PARAMETER_INTEGER:
+            out[str(name)] = int(v.integer_value)
+        elif int(v.type) == PARAMETER_DOUBLE:
+            out[str(name)] = float(v.double_value)
+    return out
+
+
+def vehicle_from_info_response(response):
+    """The first ``mavros_msgs/VehicleInfo`` of a successful ``VehicleInfoGet``, else None."""
+    if not bool(response.success) or len(response.vehicles) == 0:
+        return None
+    return response.vehicles[0]

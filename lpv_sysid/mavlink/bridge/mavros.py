@@ -148,6 +148,11 @@ class MavrosConfig:
         "mavros_msgs (mavlink/bridge/mavros_link.py); common: common_interfaces only (this "
         "module); auto: mavros_msgs when its types can be loaded",
     )
+    preflight: bool = cf.flag(
+        True,
+        "interfaces mavros_msgs: start is refused unless the preflight checks on MAVROS's "
+        "evidence (mavlink/preflight/mavros.py) find no NO-GO",
+    )
     state_timeout: float = cf.number(
         3.0,
         "interfaces mavros_msgs: no /mavros/state for this long -> no mode evidence, link "

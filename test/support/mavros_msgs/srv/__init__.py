@@ -1,7 +1,8 @@
-"""Stand-in mavros_msgs.srv (MAVROS 2.10 definitions): SetMode, CommandBool."""
+"""Stand-in mavros_msgs.srv (MAVROS 2.10 definitions): SetMode, CommandBool, VehicleInfoGet."""
 
 from _rosmsg_standin import make_service as _make
 
 SetMode = _make("mavros_msgs", "SetMode")
 CommandBool = _make("mavros_msgs", "CommandBool")
+VehicleInfoGet = _make("mavros_msgs", "VehicleInfoGet")
 del _make
