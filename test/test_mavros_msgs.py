@@ -571,13 +571,32 @@ def test_preflight_no_go_refuses_start_before_any_mode_command(change, named):
     assert table and "NO-GO" in table[-1]
 
 
+def test_a_parameter_fixed_after_a_refusal_counts_at_the_next_start():
+    rt = runtime(command="velocity")
+    fake = FakeMavros(rt)
+    fake.params["COM_OBL_RC_ACT"] = 0
+    ok, message = preflight_start(fake)
+    assert not ok and "COM_OBL_RC_ACT: 0 (POSITION)" in message
+    fake.params["COM_OBL_RC_ACT"] = 5  # `ros2 param set /mavros/param COM_OBL_RC_ACT 5`
+    fake.run(10.5)  # the parameters are refreshed every 10 s
+    fake.run(1.0)
+    ok, message, out = rt.start(fake.t)
+    fake.handle(out)
+    assert ok, message
+    fake.run(3.0, reference=([0.5, 0.0, 0.0], 0.0))
+    assert fake.state() == "OFFBOARD_ACTIVE"
+    assert fake.mode_calls() == [("set_mode", {"base_mode": 0, "custom_mode": "OFFBOARD"})]
+
+
 def test_preflight_go_asks_only_until_answered_and_judges_the_mavros_evidence():
     rt = runtime(command="velocity")
     fake = FakeMavros(rt)
     ok, message = preflight_start(fake)
     assert ok, message
-    # every parameter asked once (answered at once), not again
+    # every parameter asked once (answered at once), refreshed every 10 s
     assert sorted(fake.asked) == sorted(PX4_PARAMS)
+    fake.run(10.0)
+    assert sorted(fake.asked) == sorted(list(PX4_PARAMS) * 2)
     (table,) = [t for _, lv, t in fake.events if t.startswith("preflight (MAVROS)")]
     rows = {line.split()[0]: line for line in table.splitlines()[2:] if line.strip()}
     assert rows["firmware"].split()[1] == "1.16.0" and rows["firmware"].endswith("GO")

@@ -7,13 +7,16 @@ PX4 instance 7 sends its offboard link from UDP 14587 to 127.0.0.1:14547; MAVROS
 1 + instance), with the package's ``config/mavros_px4.yaml`` (setpoint_raw thrust_scaling).
 
 The flight (a driver script under ROS's python talking to the bridge node like an
-operator): stream zero velocity references, call ``start``; the bridge switches to OFFBOARD
-and arms through ``/mavros/set_mode`` and ``/mavros/cmd/arming``, confirmed by
-``/mavros/state``; phase 1 climbs on velocity setpoints (``/mavros/setpoint_raw/local``)
-for a few seconds; ``abort`` hands back with the chain POSCTL, HOLD, LAND. Without RC PX4
-refuses POSCTL (the commander's verdict is not visible through MAVROS's SET_MODE, whose
-service answers ``mode_sent`` at once): ``/mavros/state`` never shows it, the bridge
-moves on after ``mode_confirm_timeout`` and ends DONE only once the state shows HOLD.
+operator): stream zero velocity references, call ``start``: refused by the preflight
+through MAVROS (PX4 SITL's default COM_OBL_RC_ACT 0, Position, without stick input is
+NO-GO); set COM_OBL_RC_ACT 5 (Hold) through MAVROS's param node, ``start`` again; the
+bridge switches to OFFBOARD and arms through ``/mavros/set_mode`` and
+``/mavros/cmd/arming``, confirmed by ``/mavros/state``; phase 1 climbs on velocity
+setpoints (``/mavros/setpoint_raw/local``) for a few seconds; ``abort`` hands back with
+the chain POSCTL, HOLD, LAND. Without RC PX4 refuses POSCTL (the commander's verdict is
+not visible through MAVROS's SET_MODE, whose service answers ``mode_sent`` at once):
+``/mavros/state`` never shows it, the bridge moves on after ``mode_confirm_timeout`` and
+ends DONE only once the state shows HOLD.
 Oracles: PX4's own mode reports on ``/mavros/state`` recorded by the driver, the altitude
 of ``/lpv_sysid/state``. Timeouts are generous and bounded (2 cores, load ~10).
 """
@@ -65,6 +68,8 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistStamped
 from mavros_msgs.msg import PositionTarget, State
 from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import Parameter, ParameterValue
+from rcl_interfaces.srv import SetParameters
 from rclpy.qos import qos_profile_sensor_data
 from std_srvs.srv import Trigger
 
@@ -113,12 +118,26 @@ def call(name):
     assert c.wait_for_service(timeout_sec=60.0), name
     f = c.call_async(Trigger.Request())
     spin(30.0, until=f.done)
-    return f.result().message if f.done() else "no answer"
+    return [f.result().success, f.result().message] if f.done() else [False, "no answer"]
+
+def set_px4_param(name, value):
+    """Through MAVROS's param node (it sets the FCU parameter and mirrors the answer)."""
+    c = n.create_client(SetParameters, "/mavros/param/set_parameters")
+    assert c.wait_for_service(timeout_sec=60.0)
+    v = ParameterValue(type=2, integer_value=value)
+    f = c.call_async(SetParameters.Request(parameters=[Parameter(name=name, value=v)]))
+    spin(60.0, until=f.done)
+    return f.done() and all(r.successful for r in f.result().results)
 
 def state():
     return res["states"][-1] if res["states"] else ""
 
 spin(120.0, until=lambda: any(m[0] for m in res["modes"]) and len(res["z"]) > 10)
+spin(20.0)                       # MAVROS pulls PX4's parameters after connecting
+# PX4 SITL's default COM_OBL_RC_ACT 0 (Position) without stick input: NO-GO
+res["start_nogo"] = call("start")
+res["param_set"] = set_px4_param("COM_OBL_RC_ACT", 5)
+spin(15.0)                       # the bridge refreshes the parameters every 10 s
 res["start"] = call("start")
 res["active"] = spin(90.0, until=lambda: state() in ("OFFBOARD_ACTIVE", "FAILED", "DONE"))
 t_active = time.monotonic()
@@ -187,6 +206,10 @@ def test_phase1_offboard_and_rejected_posctl_handback_through_real_mavros(stack)
                 p.kill()
     print("MAVROS real:", json.dumps({k: v for k, v in res.items() if k != "z"}))
     states, modes = res["states"], [m[0] for m in res["modes"]]
+    # preflight through MAVROS: NO-GO with PX4's default offboard-loss action, GO with Hold
+    ok, why = res["start_nogo"]
+    assert not ok and "COM_OBL_RC_ACT: 0 (POSITION)" in why, (why, logs)
+    assert res["param_set"] and res["start"][0], (res["start"], logs)
     assert res["active"] and "OFFBOARD_ACTIVE" in states, logs
     # OFFBOARD and arming confirmed by /mavros/state, as PX4 reported them
     assert ["OFFBOARD", True] in res["modes"], res["modes"]

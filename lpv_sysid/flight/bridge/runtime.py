@@ -43,6 +43,7 @@ from lpv_sysid.mavlink.bridge import (
 )
 from lpv_sysid.mavlink.offboard import StatusEvent
 from lpv_sysid.mavlink.preflight import (
+    PARAMS,
     MavrosEvidence,
     format_table,
     mavros_checks,
@@ -68,8 +69,10 @@ MAVROS_INPUTS = {
 }
 #: the MAVROS inputs of the preflight (``mavros.preflight``), besides the ones above
 MAVROS_PREFLIGHT_INPUTS = {"mavros_rc_in": ("rc/in", messages.MAVROS_TYPES["rc_in"])}
-#: seconds between the preflight's questions to MAVROS while answers are missing
+#: seconds between the preflight's questions to MAVROS while answers are missing, and
+#: between refreshes of the parameters once all are in (a parameter set meanwhile counts)
 PREFLIGHT_ASK_PERIOD_S = 2.0
+PREFLIGHT_REFRESH_S = 10.0
 #: MAVROS input key -> the MAVLink stream it stands for (preflight ``seen``)
 SEEN = {
     "mavros_odom": "ODOMETRY",
@@ -392,19 +395,18 @@ class BridgeRuntime:
             self._log.append(("warn", f"{req.key} answer unusable: {exc}"))
 
     def _preflight_questions(self, now: float) -> list[ServiceRequest]:
-        """While MAVROS is connected and answers are missing: ask (every few seconds)."""
+        """While MAVROS is connected: ask what is missing (every PREFLIGHT_ASK_PERIOD_S),
+        refresh the parameters once all are in (every PREFLIGHT_REFRESH_S)."""
         ev, link = self.evidence, self.mavros_link
         if ev is None or link is None or not link.link_up(now):
             return []
         missing = ev.missing_params()
-        if (
-            not missing and ev.vehicle is not None
-        ) or now - self._t_asked < PREFLIGHT_ASK_PERIOD_S:
+        complete = not missing and ev.vehicle is not None
+        period = PREFLIGHT_REFRESH_S if complete else PREFLIGHT_ASK_PERIOD_S
+        if now - self._t_asked < period:
             return []
         self._t_asked = now
-        out = []
-        if missing:
-            out.append(ServiceRequest("param_get", {"names": missing}, 0))
+        out = [ServiceRequest("param_get", {"names": missing or list(PARAMS)}, 0)]
         if ev.vehicle is None:
             out.append(
                 ServiceRequest("vehicle_info", {"sysid": 0, "compid": 0, "get_all": False}, 0)
@@ -413,7 +415,8 @@ class BridgeRuntime:
 
     def _preflight_refusal(self, now: float) -> str:
         """'' when the preflight on MAVROS's evidence finds no NO-GO (or is off), else the
-        reason ``start`` is refused; the table is logged either way."""
+        reason ``start`` is refused (and the parameters are asked again, so a fixed one
+        counts at the next ``start``); the table is logged either way."""
         ev, core = self.evidence, self.link
         if ev is None or core is None or self.mavros_link is None:
             return ""
@@ -427,6 +430,9 @@ class BridgeRuntime:
         )
         if ok:
             return ""
+        # a refusal is acted on (a parameter set, MAVROS reconnected): ask again
+        ev.params.clear()
+        self._t_asked = -math.inf
         bad = "; ".join(f"{c.name}: {c.value}" for c in checks if c.verdict == "NO-GO")
         return f"start refused: preflight NO-GO through MAVROS ({bad})"
 
