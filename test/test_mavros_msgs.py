@@ -546,7 +546,6 @@ def preflight_start(fake):
         ({"params": {"COM_OF_LOSS_T": None}}, "COM_OF_LOSS_T: missing"),  # not pulled yet
         ({"info": vehicle_info((1, 13, 0))}, "firmware: 1.13.0"),
         ({"info": None}, "vehicle info: no answer"),
-        ({"armed": True}, "armed: armed"),
         ({"rc_out": False}, "rotor speeds: none"),
     ],
 )
@@ -569,6 +568,22 @@ def test_preflight_no_go_refuses_start_before_any_mode_command(change, named):
     assert not fake.setpoints("mavros_local")
     table = [t for _, lv, t in fake.events if t.startswith("preflight (MAVROS)")]
     assert table and "NO-GO" in table[-1]
+
+
+def test_an_armed_vehicle_is_no_reason_to_refuse_the_start():
+    """Phase 2 takes an airborne vehicle (armed, in Hold): the ground check 'armed' of the
+    CLI preflight is shown, not blocking; a vehicle armed in OFFBOARD still is (another
+    controller flies it)."""
+    rt = runtime(command="velocity")
+    fake = FakeMavros(rt, mode="AUTO.LOITER", armed=True)
+    ok, message = preflight_start(fake)
+    assert ok, message
+    table = [t for _, lv, t in fake.events if t.startswith("preflight (MAVROS)")][-1]
+    assert [x for x in table.splitlines() if x.startswith("armed")][0].endswith("NO-GO")
+    rt = runtime(command="velocity")
+    fake = FakeMavros(rt, mode="OFFBOARD", armed=True)
+    ok, message = preflight_start(fake)
+    assert not ok and "mode: OFFBOARD (armed)" in message and "armed: armed" not in message
 
 
 def test_a_parameter_fixed_after_a_refusal_counts_at_the_next_start():

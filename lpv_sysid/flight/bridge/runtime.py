@@ -73,6 +73,9 @@ MAVROS_PREFLIGHT_INPUTS = {"mavros_rc_in": ("rc/in", messages.MAVROS_TYPES["rc_i
 #: between refreshes of the parameters once all are in (a parameter set meanwhile counts)
 PREFLIGHT_ASK_PERIOD_S = 2.0
 PREFLIGHT_REFRESH_S = 10.0
+#: preflight checks that do not refuse the bridge's ``start``: an armed vehicle (airborne
+#: in Hold, phase 2) is the normal case of a start; the CLI preflight is a ground check
+NOT_BLOCKING_AT_START = ("armed",)
 #: MAVROS input key -> the MAVLink stream it stands for (preflight ``seen``)
 SEEN = {
     "mavros_odom": "ODOMETRY",
@@ -424,7 +427,8 @@ class BridgeRuntime:
         ev.mode = core.machine.vehicle_mode if up else None
         ev.armed = core.machine.armed
         checks = mavros_checks(ev, core.config.rotor_estimate, self._mavros_cfg.namespace)
-        ok = verdict(checks)
+        blocking = [c for c in checks if c.name not in NOT_BLOCKING_AT_START]
+        ok = verdict(blocking)
         self._log.append(
             ("info" if ok else "error", "preflight (MAVROS):\n" + format_table(checks))
         )
@@ -433,7 +437,7 @@ class BridgeRuntime:
         # a refusal is acted on (a parameter set, MAVROS reconnected): ask again
         ev.params.clear()
         self._t_asked = -math.inf
-        bad = "; ".join(f"{c.name}: {c.value}" for c in checks if c.verdict == "NO-GO")
+        bad = "; ".join(f"{c.name}: {c.value}" for c in blocking if c.verdict == "NO-GO")
         return f"start refused: preflight NO-GO through MAVROS ({bad})"
 
     def _drain(self, now: float) -> Output:
