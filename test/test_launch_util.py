@@ -322,5 +322,6 @@ def test_phase_launches_take_the_mavros_transport(fake_launch, fname):
     with open(os.path.join(ROOT, "lpv_sysid", "config", "mavros_px4.yaml")) as f:
         px4 = yaml.safe_load(f)
     assert px4["/**/setpoint_raw"]["ros__parameters"]["thrust_scaling"] == 1.0
-    allow = px4["/**"]["ros__parameters"]["plugin_allowlist"]
-    assert {"sys_status", "command", "setpoint_raw", "local_position", "imu"} <= set(allow)
+    deny = set(px4["/**"]["ros__parameters"]["plugin_denylist"])
+    used = {"sys_status", "command", "setpoint_raw", "local_position", "imu", "rc_io", "param"}
+    assert deny and not deny & used

@@ -126,7 +126,8 @@ def mavros_node() -> Node:
     """MAVROS (``mavros_node`` of the mavros package) in ``mavros_ns``, started only when
     ``fcu_url`` is given; its ``setpoint_raw`` plugin gets ``thrust_scaling`` 1 (MAVROS 2
     ignores every non-zero AttitudeTarget thrust while it is unset) through the shipped
-    ``mavros_px4.yaml`` of ``config_dir``.
+    ``mavros_px4.yaml`` of ``config_dir`` (which also leaves out the plugins MAVROS's own
+    px4_pluginlists.yaml leaves out).
 
     For SITL convenience: a Ctrl-C of the launch stops MAVROS together with the bridge,
     so a hand-back that still needs MAVROS cannot be confirmed (the bridge ends FAILED and
