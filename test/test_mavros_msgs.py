@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from mavros_msgs.msg import VehicleInfo
-from mavros_msgs.srv import CommandBool, SetMode, VehicleInfoGet
+from mavros_msgs.srv import CommandBool, MessageInterval, SetMode, VehicleInfoGet
 from rcl_interfaces.msg import ParameterValue
 from rcl_interfaces.srv import GetParameters
 
@@ -87,6 +87,7 @@ class FakeMavros:
         self.params = dict(PX4_PARAMS)  # what MAVROS's param node has pulled
         self.info = vehicle_info()
         self.asked: list[str] = []
+        self.rates: list = []  # (t, set_message_interval request)
         self.rc_out = True  # publishes /mavros/rc/out (PX4 SITL: SERVO_OUTPUT_RAW)
         self.calls: list[ServiceRequest] = []
         self.sent: list[tuple[float, str, object]] = []  # (t, key, msg) setpoints
@@ -107,6 +108,9 @@ class FakeMavros:
                 elif key == "param_get":
                     self.asked += item.fields["names"]
                     resp = param_answer(item.fields["names"], self.params)
+                elif key == "message_interval":
+                    self.rates.append((self.t, dict(item.fields)))
+                    resp = MessageInterval.Response(success=True)
                 elif key == "vehicle_info":
                     ok = self.info is not None
                     resp = VehicleInfoGet.Response(success=ok, vehicles=[self.info] if ok else [])
@@ -205,10 +209,11 @@ def test_endpoints_of_the_mavros_msgs_mode():
     assert [(e.key, e.topic, e.typename) for e in rt.clients] == [
         ("set_mode", "/mavros/set_mode", "mavros_msgs/srv/SetMode"),
         ("arming", "/mavros/cmd/arming", "mavros_msgs/srv/CommandBool"),
+        ("message_interval", "/mavros/set_message_interval", "mavros_msgs/srv/MessageInterval"),
         ("param_get", "/mavros/param/get_parameters", "rcl_interfaces/srv/GetParameters"),
         ("vehicle_info", "/mavros/vehicle_info_get", "mavros_msgs/srv/VehicleInfoGet"),
     ]
-    rt = runtime(command="velocity", **{"mavros.preflight": False})
+    rt = runtime(command="velocity", **{"mavros.preflight": False, "mavros.rc_out_rate_hz": 0.0})
     assert [e.key for e in rt.clients] == ["set_mode", "arming"]
     assert "mavros_rc_in" not in [e.key for e in rt.subscriptions]
     rt = runtime(command="attitude_rate", **{"mavros.namespace": "/uav1/mavros"})
@@ -296,6 +301,13 @@ def test_stale_or_disconnected_state_is_no_evidence():
     fake.run(12.0)
     assert fake.modes_requested()[-2:] == ["AUTO.LOITER", "AUTO.LAND"]
     assert fake.mode == "AUTO.LAND"  # applied by PX4, never shown on /mavros/state
+    # SERVO_OUTPUT_RAW at 50 Hz asked once after connecting (answered success), not
+    # during the stale time; again once states come back (PX4 may have rebooted)
+    want = {"message_id": 36, "message_rate": 50.0}
+    assert [r for _, r in fake.rates] == [want]
+    fake.publishing = True
+    fake.run(1.5)
+    assert [r for _, r in fake.rates] == [want, want]
     assert fake.state() == "FAILED"
     assert "hand-back NOT confirmed" in rt.core.status(fake.t)["reason"]
 
@@ -460,6 +472,13 @@ def test_node_offboard_and_handback_with_a_fake_mavros_node(fresh):
         resp.vehicles = [vehicle_info()] if vehicle["info"] else []
         return resp
 
+    def interval(req, resp):
+        rates.append((req.message_id, req.message_rate))
+        resp.success = True
+        return resp
+
+    rates = []
+    mavros.create_service(MessageInterval, "/mavros/set_message_interval", interval)
     mavros.create_service(GetParameters, "/mavros/param/get_parameters", get_parameters)
     mavros.create_service(VehicleInfoGet, "/mavros/vehicle_info_get", info)
     pub_rc = mavros.create_publisher(RCOut, "/mavros/rc/out", qos_profile_sensor_data)
@@ -524,6 +543,7 @@ def test_node_offboard_and_handback_with_a_fake_mavros_node(fresh):
     finally:
         node.destroy_node()
     assert calls == ["OFFBOARD", "AUTO.LOITER", "AUTO.LAND"]
+    assert rates == [(36, 50.0)]
     assert node.core.state.value == "FAILED" and vehicle["mode"] == "AUTO.LAND"
     assert "vehicle in LAND after HOLD" in node.core.status(0.0)["reason"]
 

@@ -84,6 +84,8 @@ _EXTRA.update(
         "uint8 GET_MY_COMPID = 0\nuint8 sysid\nuint8 compid\nbool get_all\n",
         "mavros_msgs/srv/VehicleInfoGet_Response": "bool success\n"
         "mavros_msgs/VehicleInfo[] vehicles\n",
+        "mavros_msgs/srv/MessageInterval_Request": "uint32 message_id\nfloat32 message_rate\n",
+        "mavros_msgs/srv/MessageInterval_Response": "bool success\n",
         # rcl_interfaces' services are not in the rosbags store either
         "rcl_interfaces/srv/GetParameters_Request": "string[] names\n",
         "rcl_interfaces/srv/GetParameters_Response": "rcl_interfaces/ParameterValue[] values\n",

@@ -73,6 +73,10 @@ MAVROS_PREFLIGHT_INPUTS = {"mavros_rc_in": ("rc/in", messages.MAVROS_TYPES["rc_i
 #: between refreshes of the parameters once all are in (a parameter set meanwhile counts)
 PREFLIGHT_ASK_PERIOD_S = 2.0
 PREFLIGHT_REFRESH_S = 10.0
+#: MAVLink id of SERVO_OUTPUT_RAW (MAVROS rc/out), asked at ``mavros.rc_out_rate_hz``
+SERVO_OUTPUT_RAW_ID = 36
+#: seconds between rate requests until MAVROS answers success (again after a link loss)
+RATE_ASK_PERIOD_S = 5.0
 #: preflight checks that do not refuse the bridge's ``start``: an armed vehicle (airborne
 #: in Hold, phase 2) is the normal case of a start; the CLI preflight is a ground check
 NOT_BLOCKING_AT_START = ("armed",)
@@ -195,6 +199,7 @@ class BridgeRuntime:
         self._mavros_cfg = mcfg
         self._rejected: dict[str, int] = {}
         self.evidence = MavrosEvidence() if mcfg.preflight else None
+        self._rate_ok, self._t_rate_asked = False, -math.inf
         if self.link.config.command == "velocity":
             sp = Endpoint("mavros_local", f"{ns}/setpoint_raw/local", "reliable", POSITION_TARGET)
         else:
@@ -211,6 +216,15 @@ class BridgeRuntime:
             Endpoint("set_mode", f"{ns}/set_mode", "", messages.MAVROS_TYPES["set_mode"]),
             Endpoint("arming", f"{ns}/cmd/arming", "", messages.MAVROS_TYPES["command_bool"]),
         ]
+        if mcfg.rc_out_rate_hz > 0:
+            self.clients.append(
+                Endpoint(
+                    "message_interval",
+                    f"{ns}/set_message_interval",
+                    "",
+                    messages.MAVROS_TYPES["message_interval"],
+                )
+            )
         if mcfg.preflight:
             self.subscriptions += [
                 Endpoint(k, f"{ns}/{t}", "sensor", ty)
@@ -380,6 +394,10 @@ class BridgeRuntime:
             self._log.append(("warn", f"{req.key} {req.fields} got no answer"))
         elif req.key in ("param_get", "vehicle_info"):
             self._preflight_answer(req, response)
+        elif req.key == "message_interval":
+            self._rate_ok = bool(getattr(response, "success", False))
+            if not self._rate_ok:
+                self._log.append(("warn", f"{req.fields} refused by MAVROS/PX4"))
         else:
             self.mavros_link.on_service_answer(now, req, response)
         return []
@@ -396,6 +414,23 @@ class BridgeRuntime:
                 ev.vehicle = messages.vehicle_from_info_response(response) or ev.vehicle
         except (LpvSysidError, AttributeError, TypeError, ValueError) as exc:
             self._log.append(("warn", f"{req.key} answer unusable: {exc}"))
+
+    def _rate_request(self, now: float) -> list[ServiceRequest]:
+        """SERVO_OUTPUT_RAW at ``mavros.rc_out_rate_hz`` (PX4's onboard link sends 10 Hz):
+        asked once MAVROS is connected, every RATE_ASK_PERIOD_S until it answers success,
+        and again after a link loss (PX4 may have rebooted)."""
+        link = self.mavros_link
+        rate = self._mavros_cfg.rc_out_rate_hz if link is not None else 0.0
+        if link is None or rate <= 0:
+            return []
+        if not link.link_up(now):
+            self._rate_ok = False
+            return []
+        if self._rate_ok or now - self._t_rate_asked < RATE_ASK_PERIOD_S:
+            return []
+        self._t_rate_asked = now
+        fields = {"message_id": SERVO_OUTPUT_RAW_ID, "message_rate": float(rate)}
+        return [ServiceRequest("message_interval", fields, 0)]
 
     def _preflight_questions(self, now: float) -> list[ServiceRequest]:
         """While MAVROS is connected: ask what is missing (every PREFLIGHT_ASK_PERIOD_S),
@@ -485,7 +520,7 @@ class BridgeRuntime:
             return self._mavros_out(self.mavros.step(now), now)
         assert self.link is not None
         out = self.link.poll(now)
-        asks = [(q.key, q) for q in self._preflight_questions(now)]
+        asks = [(q.key, q) for q in self._preflight_questions(now) + self._rate_request(now)]
         f = self.f
         pubs: Output = []
         for s in out.samples:

@@ -35,6 +35,7 @@ RC_OUT = "mavros_msgs/msg/RCOut"
 HOME_POSITION = "mavros_msgs/msg/HomePosition"
 RC_IN = "mavros_msgs/msg/RCIn"
 VEHICLE_INFO_GET = "mavros_msgs/srv/VehicleInfoGet"
+MESSAGE_INTERVAL = "mavros_msgs/srv/MessageInterval"
 GET_PARAMETERS = "rcl_interfaces/srv/GetParameters"  # MAVROS mirrors FCU params as ROS ones
 SET_MODE = "mavros_msgs/srv/SetMode"
 COMMAND_BOOL = "mavros_msgs/srv/CommandBool"
@@ -51,6 +52,7 @@ MAVROS_TYPES = {
     "command_bool": COMMAND_BOOL,
     "rc_in": RC_IN,
     "vehicle_info_get": VEHICLE_INFO_GET,
+    "message_interval": MESSAGE_INTERVAL,
     "get_parameters": GET_PARAMETERS,
 }
 #: rcl_interfaces/ParameterValue.type of the numbers (PARAMETER_INTEGER, PARAMETER_DOUBLE)

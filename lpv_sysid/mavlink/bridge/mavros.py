@@ -148,6 +148,15 @@ class MavrosConfig:
         "mavros_msgs (mavlink/bridge/mavros_link.py); common: common_interfaces only (this "
         "module); auto: mavros_msgs when its types can be loaded",
     )
+    rc_out_rate_hz: float = cf.number(
+        50.0,
+        "interfaces mavros_msgs: SERVO_OUTPUT_RAW rate asked of PX4 through "
+        "<ns>/set_message_interval, the rate of /mavros/rc/out and so of the estimated "
+        "rotor_speeds (PX4's onboard link: 10 Hz); 0: not asked, at most 400 Hz",
+        lo=0.0,
+        hi=400.0,
+        unit=" Hz",
+    )
     preflight: bool = cf.flag(
         True,
         "interfaces mavros_msgs: start is refused unless the preflight checks on MAVROS's "
