@@ -26,6 +26,7 @@ NODES = [
     "data_logger_node",
     "sim_vehicle_node",
     "campaign_node",
+    "sequencer_node",
 ]
 
 

@@ -228,7 +228,7 @@ def main() -> None:
     )
     page.rows.append(
         Row(
-            "controller node tick @ 250 Hz",
+            "controller runtime tick @ 250 Hz (core only, no rclpy; the node: issue 27 row)",
             "6, 15",
             f"median {tk.median * 1e6:.1f} us [{tk.p10 * 1e6:.1f}-{tk.p90 * 1e6:.1f}], p99 "
             f"{tk.p99 * 1e6:.1f} us, max {max(ticks) * 1e6:.0f} us (n={len(ticks)}); "

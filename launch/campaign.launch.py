@@ -1,7 +1,8 @@
 """The whole phase-1 campaign (seed 0 Sec. IV) on PX4: take-off, every vertex, hover, hand-back.
 
     ros2 launch lpv_sysid campaign.launch.py [campaign_file:=...] [signals_file:=signals.npz] \
-        [runs_dir:=campaign_runs] [log_dir:=campaign_log]
+        [runs_dir:=campaign_runs] [log_dir:=campaign_log] [link_url:=/dev/ttyAMA0] \
+        [namespace:=uav1]
     ros2 service call /lpv_sysid/campaign/start std_srvs/srv/Trigger      # fly it
     ros2 service call /lpv_sysid/campaign/abort std_srvs/srv/Trigger      # stop, hand back
 
@@ -18,7 +19,13 @@ from launch.actions import DeclareLaunchArgument
 
 from launch import LaunchDescription
 from lpv_sysid.configuration.defaults import share_config_dir
-from lpv_sysid.nodes.launch_util import arg, declare_arguments, node
+from lpv_sysid.nodes.launch_util import (
+    LINK_URL_DEFAULT,
+    arg,
+    bridge_overrides,
+    declare_arguments,
+    node,
+)
 
 
 def generate_launch_description():
@@ -27,6 +34,7 @@ def generate_launch_description():
             *declare_arguments(
                 signals_file="",
                 log_dir="campaign_log",
+                link_url=LINK_URL_DEFAULT,
                 notes={"signals_file": "empty: designed from the campaign's signals_config"},
             ),
             DeclareLaunchArgument(
@@ -42,7 +50,13 @@ def generate_launch_description():
             node(
                 "mavlink_bridge",
                 "mavlink_bridge_node.yaml",
-                {"command": "velocity", "velocity_frame": "body_ned", "offboard.arm": True},
+                {
+                    **bridge_overrides(),
+                    "transport": "mavlink",  # the campaign arms and takes off: MAVLink only
+                    "command": "velocity",
+                    "velocity_frame": "body_ned",
+                    "offboard.arm": True,
+                },
             ),
             node(
                 "campaign",

@@ -15,7 +15,11 @@ So the loop samples exactly like the offline ``lpv-sysid simulate phase2`` howev
 the machine is (a wall-clock Python graph on 2 loaded cores had more loop delay than the demo
 gains tolerate); the wall time of a run stretches instead (real-time factor 0.7 at load ~9
 on 2 cores: the 104 s signal in ~150 s, test/test_ros_phase2.py).
-Start phase 2 with the controller's, then the excitation's ``start`` service.
+The sequencer starts the nodes in the safe order on its ``start`` service (or at once with
+``auto_start:=true``): phase 1 the excitation; phase 2 the controller (confirmed armed), then
+the excitation:
+
+    ros2 service call /lpv_sysid/sequencer/start std_srvs/srv/Trigger
 """
 
 from launch.actions import DeclareLaunchArgument
@@ -23,10 +27,13 @@ from launch.conditions import IfCondition
 from launch.substitutions import PythonExpression
 
 from launch import LaunchDescription
-from lpv_sysid.nodes.launch_util import arg, declare_arguments, node
+from lpv_sysid.nodes.launch_util import arg, declare_arguments, node, sequencer
 
 #: every node but sim_vehicle (the clock source) runs on its /clock
 SIM_TIME = {"use_sim_time": True}
+#: the simulation's clock in the graph's namespace (two simulated graphs side by side do
+#: not share one /clock): sim_vehicle publishes it there, every node reads it from there
+CLOCK = [("/clock", ["/", arg("namespace"), "/clock"])]
 
 
 def generate_launch_description():
@@ -44,6 +51,7 @@ def generate_launch_description():
                 gains_file="gains.yaml",
                 vertex="[0.0, 0.0, 0.0]",
                 log_dir="sim_log",
+                auto_start="false",
                 notes={"gains_file": "phase 2 only", "vertex": "phase 1 only"},
             ),
             node(
@@ -53,6 +61,7 @@ def generate_launch_description():
                     "mode": PythonExpression(["'lpv' if '", phase, "' == '2' else 'baseline'"]),
                     "lockstep": True,
                 },
+                remappings=CLOCK,
             ),
             node(
                 "excitation",
@@ -63,6 +72,7 @@ def generate_launch_description():
                     "vertex_frd": arg("vertex"),
                     **SIM_TIME,
                 },
+                remappings=CLOCK,
             ),
             node(
                 "lpv_controller",
@@ -74,7 +84,26 @@ def generate_launch_description():
                     **SIM_TIME,
                 },
                 condition=IfCondition(PythonExpression(["'", phase, "' == '2'"])),
+                remappings=CLOCK,
             ),
-            node("data_logger", "data_logger.yaml", {"out_dir": arg("log_dir"), **SIM_TIME}),
+            node(
+                "data_logger",
+                "data_logger.yaml",
+                {"out_dir": arg("log_dir"), **SIM_TIME},
+                remappings=CLOCK,
+            ),
+            # no bridge in the simulation: phase 1 starts the excitation, phase 2 the
+            # controller (armed) and then the excitation
+            sequencer(
+                PythonExpression(
+                    [
+                        "'[lpv_controller, excitation]' if '",
+                        phase,
+                        "' == '2' else '[excitation]'",
+                    ]
+                ),
+                remappings=CLOCK,
+                **SIM_TIME,
+            ),
         ]
     )

@@ -281,12 +281,12 @@ def _gains_doc(model, F=None, Fj=None, lay=None):
 
 def test_gains_round_trip_with_and_without_feedforward(tmp_path, quad_ff):
     model, lay, F, Fj = quad_ff
-    plain = fm.GainSchedule.from_dict(_gains_doc(model))
+    plain = fm.GainSchedule.from_dict(fm.certify_law(_gains_doc(model)))
     assert plain.F_ff is None and plain.F_jerk is None and plain.feedforward is None
     plain.save(tmp_path / "plain.yaml")
     back = fm.GainSchedule.load(tmp_path / "plain.yaml")
     assert back.F_ff is None and "feedforward" not in (tmp_path / "plain.yaml").read_text()
-    gs = fm.GainSchedule.from_dict(_gains_doc(model, F, Fj, lay))
+    gs = fm.GainSchedule.from_dict(fm.certify_law(_gains_doc(model, F, Fj, lay)))
     gs.save(tmp_path / "ff.yaml")
     back = fm.GainSchedule.load(tmp_path / "ff.yaml")
     np.testing.assert_array_equal(back.F_ff, F)

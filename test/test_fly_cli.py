@@ -183,13 +183,21 @@ def test_campaign_takes_off_flies_every_vertex_and_hover_lands_and_identify_acce
     from lpv_sysid.ident import dataprep as dp
 
     icfg = load_config(out / "identification.yaml")
+    # bags carry wall-clock stamps: the flight clock + the offset recorded in both files
+    meta = yaml.safe_load((out / "experiment.yaml").read_text())
+    off = s["clock"]["offset_ns"]
+    assert meta["clock"]["offset_ns"] == off and meta["clock"]["kind"] == "utc"
+    assert abs(off * 1e-9 + runs[0]["t_excite"] - time.time()) < 3600.0
+    assert meta["vehicle"]["kind"] == "SIMULATED"  # the package's own PX4 stand-in
+    assert meta["vehicle"]["firmware"]["flight_sw_version"] == "v1.16.0"
     for r in runs:
         st = dp.streams_from_bag(out / s["bags"][r["name"]])
-        trim = st.ref[st.t_ref < r["t_excite"] - 1e-6]
+        t_excite = r["t_excite"] + off * 1e-9
+        trim = st.ref[st.t_ref < t_excite - 1e-6]
         assert np.ptp(trim, axis=0).max() == 0.0
         al = dp.align(st, icfg)
         assert (
-            0.0 <= al.t0 + al.vertex.fit[0] - r["t_excite"] < 0.06
+            0.0 <= al.t0 + al.vertex.fit[0] - t_excite < 0.06
         )  # within the ramp onset (3 samples)
         assert st.t_excite is None  # found from the data, not given
     # `lpv-sysid identify` runs on the output directory unchanged
@@ -348,7 +356,8 @@ def test_interrupt_hands_back_and_leaves_readable_bags(tmp_path, vehicles):
     out = tmp_path / "out"
     data = iobag.read_bag(str(out / "bag_0000"), topics=["/lpv_sysid/velocity_reference"])
     refs = [messages.reference_from_twist(m) for _, m in data["/lpv_sysid/velocity_reference"]]
-    assert refs and refs[-1][0] <= run0["t_end"] + 1e-9  # the partial run, closed
+    off_s = res.summary["clock"]["offset_ns"] * 1e-9  # bag stamps: flight clock + offset
+    assert refs and refs[-1][0] <= run0["t_end"] + off_s + 1e-6  # the partial run, closed
     assert yaml.safe_load((out / "experiment.yaml").read_text())["closed_cleanly"]
     assert topics(out / "flight" / "bag_0000") == TOPICS
 

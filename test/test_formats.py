@@ -123,7 +123,7 @@ def test_models_round_trip(tmp_path, good_models):
 def test_gains_round_trip_and_models_check(tmp_path, good_models):
     mp = tmp_path / "vertex_models.yaml"
     sha = fm.VertexModels.from_dict(copy.deepcopy(good_models)).save(mp)
-    g = fm.GainSchedule.from_dict(gains_dict(good_models, sha))
+    g = fm.GainSchedule.from_dict(fm.certify_law(gains_dict(good_models, sha)))
     gp = tmp_path / "gains.yaml"
     g.save(gp)
     back = fm.GainSchedule.load(gp, models_path=mp)
@@ -456,8 +456,10 @@ def pair(tmp_path, good_models):
 
 
 def _write(tmp_path, d, name="gains.yaml"):
+    """``d`` as the certifying tool writes it (law hash, seal): these tests are about the
+    models check, which a load runs after the file's own checks."""
     p = tmp_path / name
-    p.write_text(yaml.safe_dump(d))
+    p.write_text(yaml.safe_dump(fm.certify_law(d)))
     return p
 
 

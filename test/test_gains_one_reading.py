@@ -16,7 +16,7 @@ import yaml
 from lpv_sysid.cli.main import main
 from lpv_sysid.control.law import LpvController, LpvControllerConfig
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.io.formats import GainSchedule
+from lpv_sysid.io.formats import GainSchedule, seal_document
 from lpv_sysid.synthesis.verify import checker as V
 
 
@@ -101,6 +101,7 @@ def test_reordered_vertices_are_read_the_same_on_both_paths(files, monkeypatch):
     u_before = _flown(gains, 0.3, 1.0, 0.5)
     d = yaml.safe_load(gains.read_text())
     d["vertices"] = d["vertices"][::-1]  # same corners, other order: a valid file
+    d = seal_document(d)  # as a tool writing this order would seal it (any edit breaks a seal)
     gains.write_text(yaml.safe_dump(d, sort_keys=False))
     after = _verify_arrays(monkeypatch, gains, models)  # the old second parser refused this
     assert after["passed"]

@@ -27,6 +27,11 @@ from lpv_sysid.ident.vertex import regressor_noise_var, taylor
 from lpv_sysid.models.quadrotor import Quadrotor, QuadrotorParams, mixer
 from lpv_sysid.studies import coverage as cv
 
+#: known elements that move with the identified equilibrium and carry its uncertainty (issue 20
+#: item 3): gravity/kinematic terms at the identified attitude and yaw rate, e.g. A[w,theta],
+#: A[v,phi], A[u,v] = r, A[p,r]
+N_FIXED = 15
+
 
 # ----------------------------------------------------------------------------- standard errors
 def test_t_factor_is_the_student_t_quantile_ratio():
@@ -298,7 +303,29 @@ def test_equilibrium_reexpansion_removes_the_trim_bias(descending_run):
     xd = q.derivatives12(res.x0, res.u0)
     assert np.max(np.abs(xd[2:5])) < 5e-3 and np.max(np.abs(xd[5:8])) < 0.05
     np.testing.assert_allclose(res.x0[8], x_e[8], atol=0.5)
-    assert abs(res.x_flown[8] - x_e[8]) > 1.0  # the flown mean rotor speed is not
+    _, _, x_e_flown = cv.truth_model(
+        q.params, rec, vx.trim_window((0.0, rec.t_excite), cfg), at="flown"
+    )
+    assert abs(res.x_flown[8] - x_e_flown[8]) > 1.0  # the flown mean rotor speed is not
+
+
+def test_vertex_model_is_expanded_at_the_commanded_velocity(descending_run):
+    """Issue 20 item 1: the LPV model is scheduled on v_d, so the vertex model is the identified
+    model re-expanded at v_d (not at the flown mean velocity, which is off v_d); against the
+    true linearisation at v_d the flown-point expansion misses by many standard errors."""
+    q, rec = descending_run
+    cfg = vx.IdentificationConfig()
+    assert cfg.expand_at == "commanded"
+    data = dp.align(dp.streams_from_record(rec), cfg).vertex
+    A, B, x_e = cv.truth_model(q.params, rec, vx.trim_window((0.0, rec.t_excite), cfg))
+    np.testing.assert_allclose(x_e[2:5], rec.v_d, atol=1e-9)
+    res = vx.identify_vertex(data, cfg)
+    flown = vx.identify_vertex(data, dataclasses.replace(cfg, expand_at="flown"))
+    np.testing.assert_allclose(res.x0[2:5], rec.v_d, atol=1e-9)  # the model's own equilibrium
+    assert np.max(np.abs(flown.x0[2:5] - np.asarray(rec.v_d))) > 0.02
+    z, z_fl = cv.z_scores(res, A, B), cv.z_scores(flown, A, B)
+    assert np.mean(np.abs(list(z.values())) <= 3) >= 0.97
+    assert max(abs(v) for v in z_fl.values()) > 2 * max(abs(v) for v in z.values())
 
 
 def test_stored_box_is_every_element_with_calibrated_std(descending_run, tmp_path):
@@ -312,13 +339,14 @@ def test_stored_box_is_every_element_with_calibrated_std(descending_run, tmp_pat
     data = dp.align(dp.streams_from_record(rec), cfg).vertex
     res = vx.identify_vertex(data, cfg, motor_prior=((12.0, 0.2), (14000.0, 150.0)))
     assert res.motor["mode"] in ("identified", "prior")
-    assert len(res.uncertain.intervals) == 51  # 43 aerodynamic + 8 motor
+    # 43 aerodynamic + 8 motor + the known elements moving with the identified equilibrium
+    assert len(res.uncertain.intervals) == 51 + N_FIXED
     results = [dataclasses.replace(res, scheduling=c) for c in box_vertices(cfg.vmin, cfg.vmax)]
     doc = vx.vertex_models_dict(results, cfg)
     assert doc["format"] == MODELS_FORMAT == "lpv_sysid/vertex_models@2"
     vm = VertexModels.from_dict(doc)
     es = vm.vertices[0].uncertain
-    assert len(es) == 51 and all(e.std > 0 for e in es)
+    assert len(es) == 51 + N_FIXED and all(e.std > 0 for e in es)
     assert all(e.upper - e.nominal == pytest.approx(3 * e.std) for e in es)
     motor = [e for e in es if e.row >= 8]
     assert sorted((e.matrix, e.row, e.col) for e in motor) == sorted(
@@ -343,7 +371,7 @@ def test_motor_constants_pooled_where_a_rotor_is_pinned(descending_run):
     data = dp.align(dp.streams_from_record(rec), cfg).vertex
     alone = vx.identify_vertex(data, cfg)
     assert alone.motor["mode"] == "known" and "speed limit" in alone.motor["reason"]
-    assert len(alone.uncertain.intervals) == 43
+    assert len(alone.uncertain.intervals) == 43 + N_FIXED
     strict = dataclasses.replace(cfg, motor_max_pinned=1.0)
     forced = vx.identify_vertex(data, strict)
     assert forced.motor["mode"] == "identified"
@@ -351,7 +379,7 @@ def test_motor_constants_pooled_where_a_rotor_is_pinned(descending_run):
     (a, sa), (b, sb) = prior
     assert abs(a - q.params.a_omega) < 4 * sa and abs(b - q.params.b_omega) < 4 * sb
     pooled = vx.identify_vertex(data, dataclasses.replace(cfg, motor="known"), motor_prior=prior)
-    assert pooled.motor["mode"] == "prior" and len(pooled.uncertain.intervals) == 51
+    assert pooled.motor["mode"] == "prior" and len(pooled.uncertain.intervals) == 51 + N_FIXED
     iv = {(i.matrix, i.row, i.col): i for i in pooled.uncertain.intervals}
     assert iv[("A", 8, 8)].nominal == pytest.approx(-a) and iv[
         ("B", 9, 1)
@@ -410,7 +438,7 @@ def test_coverage_study_on_an_unseen_airframe():
         vx.IdentificationConfig(),
     )
     (af,) = afs
-    assert af.params != QuadrotorParams() and af.n in (43, 51)
+    assert af.params != QuadrotorParams() and af.n in (43 + N_FIXED, 51 + N_FIXED)
     assert af.fraction >= 0.97
     doc = cv.summary_dict(afs, QuadrotorParams(), cfg)
     assert doc["overall"]["elements"] == af.n and doc["overall"][
@@ -436,7 +464,7 @@ def test_coverage_cli(tmp_path, capsys):
     assert doc["format"] == "lpv_sysid/identification_coverage@1" and doc["study"]["vertices"] == [
         3
     ]
-    assert doc["overall"]["elements"] in (43, 51)
+    assert doc["overall"]["elements"] in (43 + N_FIXED, 51 + N_FIXED)
     assert "| airframe | mass |" in (out / "coverage.md").read_text()
     assert main(["coverage", "--vertices", "9", "--out", str(out)]) == 2
     assert "1..8" in capsys.readouterr().err

@@ -719,3 +719,134 @@ def test_windows_cli_and_bad_input(run, tmp_path, capsys):
     assert main(["import", "bag", str(tmp_path), "--out", str(tmp_path / "o3")]) == 2
     err = capsys.readouterr().err
     assert "junk.ulg" in err
+
+
+# ------------------------------------------------------------------ the real PX4 SITL
+#: the topics a phase-1 identification needs, at full rate (PX4's default profile logs
+#: vehicle_local_position at 10 Hz); the logger reads this file from its root directory
+LOGGER_TOPICS = (
+    "vehicle_attitude 0\nvehicle_local_position 0\nvehicle_angular_velocity 0\n"
+    "sensor_combined 0\nactuator_outputs 0\nactuator_motors 0\nesc_status 0\n"
+    "trajectory_setpoint 0\nvehicle_rates_setpoint 0\nvehicle_status 0\nbattery_status 0\n"
+    "vehicle_gps_position 0\n"
+)
+
+
+def test_real_px4_sitl_ulog_identifies_like_the_bags_of_the_same_flight(tmp_path):
+    """``fly phase1`` on PX4 SITL (SIH): the package's bags and PX4's own ULog of the flight,
+    imported with the runs' windows from ``experiment.yaml`` (bag clock -> PX4 boot time
+    through the recorded boot offset), give the same vertex models within their stated
+    uncertainty, and the two recordings line up within 10 ms."""
+    from pathlib import Path
+
+    from px4_sitl import Px4Sitl, find_px4
+
+    from lpv_sysid.cli.design import load_config
+    from lpv_sysid.flight.campaign import FlyConfig, fly
+
+    d, reason = find_px4()
+    if d is None:
+        pytest.skip(reason)
+    config = Path(__file__).resolve().parent.parent / "config"
+    (tmp_path / "bridge.yaml").write_text((config / "mavlink_bridge.yaml").read_text())
+    signals = yaml.safe_load((config / "signals_phase1.yaml").read_text())
+    signals["duration"] = 20.0
+    (tmp_path / "signals.yaml").write_text(yaml.safe_dump(signals))
+    doc = {
+        "bridge_config": "bridge.yaml",
+        "signals_config": "signals.yaml",
+        "identification_config": str(config / "identification.yaml"),
+        "campaign": {
+            "box_min": [-1.5, -1.5, -0.5],
+            "box_max": [1.5, 1.5, 0.5],
+            "vertices": [1, 8],
+            "hover_validation": False,
+            "trim_s": 4.0,
+            "trim_average_s": 2.0,
+            "takeoff_altitude": 15.0,
+            "altitude_min": 12.0,
+            "altitude_max": 40.0,
+            "radius": 100.0,
+            "settle_timeout": 15.0,
+        },
+        "recording": {"flight_log": False},
+    }
+    (tmp_path / "campaign.yaml").write_text(yaml.safe_dump(doc))
+    work = tmp_path / "px4"
+    (work / "etc" / "logging").mkdir(parents=True)
+    (work / "etc" / "logging" / "logger_topics.txt").write_text(LOGGER_TOPICS)
+    with Px4Sitl(d, instance=6, workdir=str(work)) as sitl:
+        res = fly(
+            FlyConfig.load(tmp_path / "campaign.yaml"),
+            sitl.url,
+            tmp_path / "out",
+            params={"COM_OBL_RC_ACT": 5.0},
+            echo=lambda s: None,
+            handle_signals=False,
+        )
+    assert res.status == 0, res.reason
+    logs = sorted(work.rglob("*.ulg"))
+    assert logs, f"PX4 wrote no ULog under {work}"
+    meta = yaml.safe_load((tmp_path / "out" / "experiment.yaml").read_text())
+    assert meta["vehicle"]["kind"] == "SITL"
+    boot_ns = meta["vehicle"]["px4_clock"]["boot_ns"]
+    bags = {b["path"]: b for b in meta["bags"]}
+    s = res.summary
+    windows = []
+    for r in s["runs"]:
+        b = bags[s["bags"][r["name"]]]
+        windows.append(
+            f"{(b['start_ns'] - boot_ns) * 1e-9}:{(b['end_ns'] - boot_ns) * 1e-9}:{r['name']}"
+        )
+    rec = imports.read_ulog(logs[-1], epoch_ns=boot_ns)
+    assert rec.provenance["vehicle_kind"] == "SITL"
+    rec.clock_offset_ns, rec.clock = boot_ns, "declared"  # the ULog on the bag clock
+    runs = imports.import_flight(rec, tmp_path / "imp", windows)
+    icfg = load_config(tmp_path / "out" / "identification.yaml")
+    for r, imp in zip(s["runs"], runs):
+        own = dp.streams_from_bag(tmp_path / "out" / s["bags"][r["name"]])
+        ulg = dp.streams_from_bag(tmp_path / "imp" / imp.bag)
+        # the recordings line up: roll of PX4's log vs the bag, lag within 10 ms
+        t = np.linspace(
+            max(own.t_state[0], ulg.t_state[0]) + 1,
+            min(own.t_state[-1], ulg.t_state[-1]) - 1,
+            4000,
+        )
+        lags = np.arange(-0.05, 0.0505, 0.001)
+        err = [
+            np.mean(
+                (
+                    np.interp(t, own.t_state, own.euler[:, 0])
+                    - np.interp(t + lag, ulg.t_state, ulg.euler[:, 0])
+                )
+                ** 2
+            )
+            for lag in lags
+        ]
+        assert abs(lags[int(np.argmin(err))]) <= 0.010
+        r_own = vx.identify_vertex(dp.align(own, icfg).vertex, icfg)
+        r_imp = vx.identify_vertex(dp.align(ulg, icfg).vertex, icfg)
+        m = r_own.fit.maskA
+        both = np.hypot(r_own.fit.std_A, r_imp.fit.std_A)
+        assert np.all(np.abs(r_imp.fit.A - r_own.fit.A)[m] <= 3.0 * both[m])
+
+
+def test_report_of_an_imported_flight(run, tmp_path):
+    """``report --run`` on an imported ULog: labelled with the log's vehicle kind, the
+    phase-1 table holds what the run did (oracle: the simulated positions)."""
+    from lpv_sysid.report import write_report
+
+    out = tmp_path / "imported"
+    imports.import_flight(imports.read_ulog(write_ulog(run, tmp_path / "f.ulg")), out)
+    text = write_report(out).read_text()
+    assert "## Phase 1: time histories (SITL)" in text
+    assert "phase-1 flights | SITL |" in text
+    xm = run.state_meas
+    climb = -(xm[-1, 2] - xm[0, 2])
+    travelled = np.sum(np.linalg.norm(np.diff(xm[:, :2], axis=0), axis=1))
+    row = next(line for line in text.splitlines() if line.startswith("| bag_0000 |"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert float(cells[1]) == pytest.approx(run.state_t[-1] - run.state_t[0], abs=0.01)
+    assert float(cells[2]) == pytest.approx(climb, rel=2e-3)
+    assert float(cells[4]) == pytest.approx(travelled, rel=2e-3)
+    assert (out / "report" / "phase1_time_histories.png").is_file()

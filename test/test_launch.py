@@ -12,18 +12,25 @@ import yaml
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 LAUNCH = os.path.join(ROOT, "launch")
 EXPECTED = {
-    "phase1.launch.py": {"excitation_node", "mavlink_bridge_node", "data_logger_node"},
+    "phase1.launch.py": {
+        "excitation_node",
+        "mavlink_bridge_node",
+        "data_logger_node",
+        "sequencer_node",
+    },
     "phase2.launch.py": {
         "excitation_node",
         "lpv_controller_node",
         "mavlink_bridge_node",
         "data_logger_node",
+        "sequencer_node",
     },
     "sim.launch.py": {
         "sim_vehicle_node",
         "excitation_node",
         "lpv_controller_node",
         "data_logger_node",
+        "sequencer_node",
     },
     "campaign.launch.py": {"mavlink_bridge_node", "campaign_node", "data_logger_node"},
 }
@@ -43,12 +50,21 @@ def _node_calls(tree):
     (executable ``<name>_node``, launch_util.node)."""
     out = []
     for call in ast.walk(tree):
+        if isinstance(call, ast.Call) and getattr(call.func, "id", "") == "sequencer":
+            out.append(("sequencer_node", "sequencer", None))  # launch_util.sequencer
         if isinstance(call, ast.Call) and getattr(call.func, "id", "") == "node":
             kw = {k.arg: k.value for k in call.keywords}
             args = list(call.args) + [None] * 2
             name = args[0].value
             file = args[1] if args[1] is not None else kw.get("params_file")
-            out.append((f"{name}_node", name, None if file is None else file.value))
+            if file is None:
+                out.append((f"{name}_node", name, None))
+            elif isinstance(file, ast.Constant):
+                out.append((f"{name}_node", name, file.value))
+            else:  # a file picked by a launch argument (by_design): every candidate
+                for c in ast.walk(file):
+                    if isinstance(c, ast.Constant) and str(c.value).endswith(".yaml"):
+                        out.append((f"{name}_node", name, c.value))
     return out
 
 
@@ -78,7 +94,7 @@ def test_launch_file_nodes_exist(fname):
     for executable, name, file in calls:
         module = os.path.join(ROOT, "lpv_sysid", "nodes", executable + ".py")
         assert os.path.exists(module), f"{fname}: {executable} has no shell module"
-        if executable == "campaign_node":  # its parameters are the three overrides
+        if executable in ("campaign_node", "sequencer_node"):  # parameters: the overrides
             assert file is None
             continue
         # the parameter file exists and addresses this node by name

@@ -139,13 +139,14 @@ def _describe(fname):
 def test_declare_arguments_and_params(fake_launch):
     L = fake_launch
     out = L.declare_arguments(gains_file=L.REQUIRED, log_dir="x_log", notes={"log_dir": "test"})
-    assert [a.name for a in out] == ["config_dir", "gains_file", "log_dir"]
+    assert [a.name for a in out] == ["config_dir", "namespace", "gains_file", "log_dir"]
     assert out[0].default_value == os.path.join(SHARE, "config")
     assert out[0].description == "directory holding the node parameter files"
-    assert out[1].default_value is None  # required: no default_value given at all
-    assert out[1].kwargs["default_value"] is None
-    assert out[2].default_value == "x_log"
-    assert out[2].description == "experiment directory of the data logger (test)"
+    assert out[1].default_value == "lpv_sysid"  # one namespace per vehicle
+    assert out[2].default_value is None  # required: no default_value given at all
+    assert out[2].kwargs["default_value"] is None
+    assert out[3].default_value == "x_log"
+    assert out[3].description == "experiment directory of the data logger (test)"
     assert L.params("a.yaml") == PathJoinSubstitution(
         [LaunchConfiguration("config_dir"), "a.yaml"]
     )
@@ -156,7 +157,7 @@ def test_declare_arguments_and_params(fake_launch):
 
 
 CONFIG_DIR = os.path.join(SHARE, "config")
-MAVROS_ARGS = ["transport", "mavros_ns", "fcu_url", "tgt_system"]
+MAVROS_ARGS = ["mavros_ns", "fcu_url", "tgt_system"]
 SIGNALS = ("signals.npz", "signals.npz written by `lpv-sysid signals`")
 
 
@@ -165,7 +166,17 @@ SIGNALS = ("signals.npz", "signals.npz written by `lpv-sysid signals`")
     [
         (
             "phase1.launch.py",
-            ["config_dir", "signals_file", "vertex", "log_dir", *MAVROS_ARGS],
+            [
+                "config_dir",
+                "namespace",
+                "signals_file",
+                "vertex",
+                "log_dir",
+                "transport",
+                "link_url",
+                "auto_start",
+                *MAVROS_ARGS,
+            ],
             {
                 "signals_file": SIGNALS,
                 "vertex": (
@@ -177,7 +188,18 @@ SIGNALS = ("signals.npz", "signals.npz written by `lpv-sysid signals`")
         ),
         (
             "phase2.launch.py",
-            ["config_dir", "gains_file", "signals_file", "log_dir", *MAVROS_ARGS],
+            [
+                "config_dir",
+                "namespace",
+                "gains_file",
+                "signals_file",
+                "log_dir",
+                "design",
+                "transport",
+                "link_url",
+                "auto_start",
+                *MAVROS_ARGS,
+            ],
             {
                 "gains_file": (None, "gains.yaml from `lpv-sysid synthesize`"),
                 "signals_file": SIGNALS,
@@ -186,7 +208,16 @@ SIGNALS = ("signals.npz", "signals.npz written by `lpv-sysid signals`")
         ),
         (
             "sim.launch.py",
-            ["phase", "config_dir", "signals_file", "gains_file", "vertex", "log_dir"],
+            [
+                "phase",
+                "config_dir",
+                "namespace",
+                "signals_file",
+                "gains_file",
+                "vertex",
+                "log_dir",
+                "auto_start",
+            ],
             {
                 "phase": ("1", "1: baseline + excitation, 2: LPV controller"),
                 "gains_file": (
@@ -211,21 +242,63 @@ def test_launch_files_declare_and_wire(fake_launch, fname, order, expected):
     for executable, node in nodes.items():
         if node.kwargs["package"] == "mavros":
             continue  # test_phase_launches_take_the_mavros_transport
-        assert node.kwargs["namespace"] == "lpv_sysid" and node.kwargs["package"] == "lpv_sysid"
-        # first parameter entry: the node's file in config_dir; every LaunchConfiguration
-        # in the overrides names a declared argument
-        first = node.parameters[0]
-        assert first.args[0][0] == LaunchConfiguration("config_dir")
-        for v in node.parameters[1].values():
+        assert node.kwargs["namespace"] == LaunchConfiguration("namespace")
+        assert node.kwargs["package"] == "lpv_sysid"
+        # first parameter entry: the node's file in config_dir (the sequencer has none);
+        # every LaunchConfiguration in the overrides names a declared argument
+        if executable != "sequencer_node":
+            first = node.parameters[0]
+            assert first.args[0][0] == LaunchConfiguration("config_dir")
+        for v in node.parameters[-1].values():
             if isinstance(v, LaunchConfiguration):
                 assert v.args[0] in args, (executable, v)
     if fname == "phase2.launch.py":
+        # the controller checks the signal the excitation node plays (box, envelope, kappa)
         assert nodes["lpv_controller_node"].parameters[1] == {
-            "gains_file": LaunchConfiguration("gains_file")
+            "gains_file": LaunchConfiguration("gains_file"),
+            "signals_file": LaunchConfiguration("signals_file"),
         }
+        assert nodes["excitation_node"].parameters[1]["gains_file"] == LaunchConfiguration(
+            "gains_file"
+        )
+        # design:=rate_plant -> the PX4 controller file and the rate_setpoint bridge command
+        ctrl_file = nodes["lpv_controller_node"].parameters[0].args[0][1]
+        command = nodes["mavlink_bridge_node"].parameters[1]["command"]
+        for expr, rate, virtual in (
+            (ctrl_file, "lpv_controller_px4.yaml", "lpv_controller.yaml"),
+            (command, "rate_setpoint", "attitude_rate"),
+        ):
+            parts = expr.args[0]
+            for design, want in (("rate_plant", rate), ("virtual_actuator", virtual)):
+                text = "".join(design if isinstance(p, LaunchConfiguration) else p for p in parts)
+                assert eval(text, {}) == want  # noqa: S307 - PythonExpression's own evaluation
+        assert args["design"][0] == "virtual_actuator"
     if fname == "sim.launch.py":
         assert nodes["lpv_controller_node"].condition is not None
         assert all(n.condition is None for e, n in nodes.items() if e != "lpv_controller_node")
+    else:  # the operator's per-flight choices reach the bridge
+        bridge = nodes["mavlink_bridge_node"].parameters[1]
+        assert bridge["transport"] == LaunchConfiguration("transport")
+        assert bridge["link.url"] == LaunchConfiguration("link_url")
+        assert args["transport"][0] == "mavlink" and args["link_url"][0] == "udpin:127.0.0.1:14540"
+    seq = nodes["sequencer_node"].parameters[-1]
+    assert (
+        seq["auto_start"] == LaunchConfiguration("auto_start") and args["auto_start"][0] == "false"
+    )
+    steps = {
+        "phase1.launch.py": ["mavlink_bridge", "excitation"],
+        "phase2.launch.py": [
+            "mavlink_bridge:ready",
+            "lpv_controller",
+            "mavlink_bridge",
+            "excitation",
+        ],
+    }
+    if fname in steps:
+        assert seq["steps"] == steps[fname]
+        from lpv_sysid.flight.sequencer import SequencerSettings
+
+        SequencerSettings(steps=tuple(seq["steps"]))  # valid steps
 
 
 def test_campaign_launch_reads_the_share_copy_of_the_configs(fake_launch):
@@ -252,8 +325,9 @@ def test_node_builds_the_package_node_with_its_parameter_file(fake_launch):
         "executable": "excitation_node",
         "package": "lpv_sysid",
         "name": "excitation",
-        "namespace": "lpv_sysid",
+        "namespace": LaunchConfiguration("namespace"),
         "output": "screen",
+        "remappings": None,
         "parameters": [
             PathJoinSubstitution([LaunchConfiguration("config_dir"), "excitation_node.yaml"]),
             {"mode": "phase1", "x.y": LaunchConfiguration("vertex")},
@@ -296,7 +370,7 @@ def test_phase_launches_take_the_mavros_transport(fake_launch, fname):
     import yaml
 
     order, args, nodes = _describe(fname)
-    assert {a: args[a][0] for a in MAVROS_ARGS} == {
+    assert {a: args[a][0] for a in ["transport", *MAVROS_ARGS]} == {
         "transport": "mavlink",
         "mavros_ns": "/mavros",
         "fcu_url": "",

@@ -139,6 +139,9 @@ def test_runtime_keeps_commanding_just_below_the_bound(gains):
     rt = runtime(gains, **SETTINGS)
     n, t_abort = fly_delayed(rt, 6 * DT - EPS, 2.0)
     assert t_abort is None and rt.supervisor.event is None and n == 512
+    values = {kv.key: kv.value for kv in rt.status(T0 + 2.0).status[0].values}
+    assert float(values["loop_delay_max_ms"]) == pytest.approx(1e3 * (6 * DT - EPS), rel=1e-12)
+    assert float(values["loop_delay_bound_ms"]) == 1e3 * 6 * DT
 
 
 def test_runtime_without_a_bound_lets_the_same_delay_pass_and_says_so(gains):

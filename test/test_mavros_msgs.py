@@ -195,11 +195,15 @@ def started(fake, **kw):
 
 def test_endpoints_of_the_mavros_msgs_mode():
     rt = runtime(command="velocity")
-    pubs = [(e.key, e.topic, e.typename) for e in rt.publishers]
-    assert pubs[-1] == (
-        "mavros_local",
-        "/mavros/setpoint_raw/local",
-        "mavros_msgs/msg/PositionTarget",
+    pubs = {e.key: (e.topic, e.typename) for e in rt.publishers}
+    assert pubs["mavros_local"] == ("/mavros/setpoint_raw/local", "mavros_msgs/msg/PositionTarget")
+    assert "mavros_attitude" not in pubs
+    # PX4's ATTITUDE_TARGET as MAVROS republishes it: the rate_setpoint echo
+    assert "rate_setpoint" in pubs
+    subs_ = {e.key: (e.topic, e.typename) for e in rt.subscriptions}
+    assert subs_["mavros_target_attitude"] == (
+        "/mavros/setpoint_raw/target_attitude",
+        "mavros_msgs/msg/AttitudeTarget",
     )
     subs = {e.key: (e.topic, e.typename) for e in rt.subscriptions}
     assert subs["mavros_state"] == ("/mavros/state", "mavros_msgs/msg/State")
@@ -213,14 +217,17 @@ def test_endpoints_of_the_mavros_msgs_mode():
         ("param_get", "/mavros/param/get_parameters", "rcl_interfaces/srv/GetParameters"),
         ("vehicle_info", "/mavros/vehicle_info_get", "mavros_msgs/srv/VehicleInfoGet"),
     ]
-    rt = runtime(command="velocity", **{"mavros.preflight": False, "mavros.rc_out_rate_hz": 0.0})
+    rt = runtime(
+        command="velocity",
+        rate_setpoints=False,
+        **{"mavros.preflight": False, "mavros.rc_out_rate_hz": 0.0},
+    )
     assert [e.key for e in rt.clients] == ["set_mode", "arming"]
     assert "mavros_rc_in" not in [e.key for e in rt.subscriptions]
     rt = runtime(command="attitude_rate", **{"mavros.namespace": "/uav1/mavros"})
-    assert [(e.key, e.topic) for e in rt.publishers][-1] == (
-        "mavros_attitude",
-        "/uav1/mavros/setpoint_raw/attitude",
-    )
+    pubs = {e.key: e.topic for e in rt.publishers}
+    assert pubs["mavros_attitude"] == "/uav1/mavros/setpoint_raw/attitude"
+    assert "mavros_local" not in pubs
 
 
 def test_offboard_arm_run_and_handback_confirmed_through_mavros_state():
@@ -301,13 +308,14 @@ def test_stale_or_disconnected_state_is_no_evidence():
     fake.run(12.0)
     assert fake.modes_requested()[-2:] == ["AUTO.LOITER", "AUTO.LAND"]
     assert fake.mode == "AUTO.LAND"  # applied by PX4, never shown on /mavros/state
-    # SERVO_OUTPUT_RAW at 50 Hz asked once after connecting (answered success), not
-    # during the stale time; again once states come back (PX4 may have rebooted)
-    want = {"message_id": 36, "message_rate": 50.0}
-    assert [r for _, r in fake.rates] == [want]
+    # SERVO_OUTPUT_RAW (36) and ATTITUDE_TARGET (83) at 50 Hz asked once after connecting
+    # (answered success), not during the stale time; again once states come back (PX4 may
+    # have rebooted)
+    want = [{"message_id": 36, "message_rate": 50.0}, {"message_id": 83, "message_rate": 50.0}]
+    assert [r for _, r in fake.rates] == want
     fake.publishing = True
     fake.run(1.5)
-    assert [r for _, r in fake.rates] == [want, want]
+    assert [r for _, r in fake.rates] == want + want
     assert fake.state() == "FAILED"
     assert "hand-back NOT confirmed" in rt.core.status(fake.t)["reason"]
 
@@ -359,7 +367,7 @@ def test_rotor_speeds_from_esc_status_rpm():
     assert rotor, "no rotor_speeds published"
     w = np.asarray(rotor[-1].velocity)
     np.testing.assert_allclose(w, np.array([6000, 6100, 5900, 6050]) * 2 * math.pi / 60)
-    assert rotor[-1].header.frame_id != messages.ROTOR_ESTIMATED_FRAME
+    assert messages.rotor_source_of(rotor[-1]) == "esc"
 
 
 def test_rotor_speeds_estimated_from_rc_out_pwm():
@@ -393,7 +401,7 @@ def test_rotor_speeds_estimated_from_rc_out_pwm():
     np.testing.assert_allclose(
         np.asarray(msg.velocity), np.clip(1000.0 * u, 50.0, 900.0), rtol=1e-12
     )
-    assert msg.header.frame_id == messages.ROTOR_ESTIMATED_FRAME
+    assert messages.rotor_source_of(msg) == "estimated"
 
 
 def test_unknown_mode_and_bad_state_message_are_counted():
@@ -543,7 +551,7 @@ def test_node_offboard_and_handback_with_a_fake_mavros_node(fresh):
     finally:
         node.destroy_node()
     assert calls == ["OFFBOARD", "AUTO.LOITER", "AUTO.LAND"]
-    assert rates == [(36, 50.0)]
+    assert rates == [(36, 50.0), (83, 50.0)]
     assert node.core.state.value == "FAILED" and vehicle["mode"] == "AUTO.LAND"
     assert "vehicle in LAND after HOLD" in node.core.status(0.0)["reason"]
 
@@ -640,3 +648,28 @@ def test_preflight_go_asks_only_until_answered_and_judges_the_mavros_evidence():
     # odometry is MAVROS's state source: the MAVLink preflight's fallback note (WARN)
     att = [x for x in table.splitlines() if x.startswith("telemetry attitude")]
     assert att and "ODOMETRY" in att[0] and att[0].endswith("WARN")
+
+
+def test_px4_attitude_target_through_mavros_is_the_rate_setpoint_echo():
+    """``/mavros/setpoint_raw/target_attitude`` (MAVROS turns PX4's FRD ATTITUDE_TARGET
+    into FLU: x, -y, -z) comes out on ``rate_setpoint`` as PX4 holds it: thrust and FRD
+    body rates (the same columns as over the MAVLink transport)."""
+    from lpv_sysid.mavlink.bridge import RATE_INPUT_NAMES
+
+    rt = runtime(command="rate_setpoint")
+    rt.open(0.0)  # the shell opens the runtime: the echo tap
+    fake = FakeMavros(rt)
+    fake.run(0.5)
+    # MAVROS's message for PX4's p=0.3, q=-0.2, r=0.1 (FRD), thrust 0.62: body_rate in FLU
+    msg = F(
+        "mavros_msgs/msg/AttitudeTarget",
+        header=messages.header_msg(F, round(fake.t * 1e9)),
+        type_mask=128,
+        body_rate=F("geometry_msgs/msg/Vector3", x=0.3, y=0.2, z=-0.1),
+        thrust=0.62,
+    )
+    fake.handle(rt.on_message("mavros_target_attitude", msg, fake.t))
+    fake.run(0.01)
+    (echo,) = fake.setpoints("rate_setpoint")
+    assert list(echo.name) == list(RATE_INPUT_NAMES)
+    np.testing.assert_allclose(np.asarray(echo.position), [0.62, 0.3, -0.2, 0.1], atol=1e-6)

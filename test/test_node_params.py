@@ -358,7 +358,7 @@ def test_the_node_tables_are_the_generated_ones():
 
 def test_array_constraints_are_described_and_enforced():
     rl = dict((n, d) for n, _, d in shell.settings_table(ControllerSettings))["rate_limit"]
-    assert rl.additional_constraints == "each entry in (0, 1000]; length 0 or 4"
+    assert rl.additional_constraints == "each entry in [0.01, 1000]; length 0 or 4"
     with pytest.raises(ConfigError, match=r"parameter 'vertex_frd' needs 3 entries"):
         ExcitationSettings(signals_file="s.npz", vertex_frd=(1.0, 2.0))
     with pytest.raises(ConfigError, match=r"'mode' must be one of \['phase1', 'phase2'\]"):

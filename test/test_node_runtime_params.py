@@ -90,7 +90,7 @@ def _status_count(node, listener, seconds):
         lambda m: got.extend(
             s for s in m.status if s.name.startswith(node.get_fully_qualified_name())
         ),
-        shell.qos_for("status"),
+        shell.QOS_RELIABLE,  # volatile: only what is published from now on
     )
     standin.spin_nodes([node, listener], seconds)
     listener.destroy_subscription(sub)
@@ -119,6 +119,20 @@ def test_status_rate_applies_at_run_time_and_the_rest_is_read_only(name, inputs)
         assert node.params["status_rate_hz"] == 10.0
         n_after = _status_count(node, listener, 5.0)
         assert 48 <= n_after <= 52, n_after
+
+        # status is transient local: a subscriber that joins late (``ros2 topic echo``)
+        # receives the node's last status at once, without waiting for the next one
+        late = []
+        listener.create_subscription(
+            DiagnosticArray,
+            "/lpv_sysid/status",
+            lambda m: late.extend(
+                s for s in m.status if s.name.startswith(node.get_fully_qualified_name())
+            ),
+            shell.QOS_STATUS,  # what ros2 topic echo picks: the publishers' QoS
+        )
+        standin.spin_nodes([listener], 0.0)
+        assert len(late) == 10  # the publisher's history (keep last 10), nothing newer
 
         # every other parameter: read-only, the set refused and the value kept
         for pname in node.params:

@@ -122,7 +122,7 @@ ROSDEP_KEYS = {
     "serial": "python3-serial",
 }
 #: imported, but with no Ubuntu 24.04 package / rosdep key: pip, from requirements-ros.txt
-PIP_ONLY = {"pymavlink", "rosbags", "pyulog", "cvxpy", "mavsdk", "scs", "clarabel"}
+PIP_ONLY = {"pymavlink", "rosbags", "pyulog", "control", "cvxpy", "mavsdk", "scs", "clarabel"}
 
 
 def _third_party_imports():

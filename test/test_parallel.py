@@ -50,6 +50,25 @@ def test_serial_and_pooled_tasks_see_one_blas_thread():
     assert map_tasks(_blas_threads, [0, 1, 2], 2) == [1, 1, 1]
 
 
+def test_with_other_threads_running_the_workers_are_spawned_with_the_blas_variables():
+    """A fork copies only the calling thread: with another Python thread alive the pool
+    spawns fresh interpreters, which read the BLAS variables when they load numpy."""
+    import threading
+
+    from lpv_sysid.parallel.pool import start_method
+
+    stop = threading.Event()
+    t = threading.Thread(target=stop.wait)
+    t.start()
+    try:
+        assert start_method() == "spawn"
+        assert map_tasks(os.getenv, list(BLAS_THREAD_VARIABLES), 2) == ["1"] * 3
+        assert map_tasks(_blas_threads, [0, 1], 2) == [1, 1]
+    finally:
+        stop.set()
+        t.join()
+
+
 def test_a_task_error_reaches_the_caller_with_its_type():
     with pytest.raises(ConfigError, match="workers must be an integer >= 1, got 0"):
         map_tasks(resolve_workers, [1, 0, 2], 2)
@@ -107,7 +126,7 @@ def test_coverage_study_on_two_workers_equals_the_serial_run():
     )
     lines: list = []
     serial, _ = cv.run_study(*args, workers=1)
-    pooled, _ = cv.run_study(*args, progress=lines.append, workers=2)
+    pooled, runs = cv.run_study(*args, progress=lines.append, keep_runs=True, workers=2)
     assert [a.index for a in pooled] == [1, 2] and [ln.split(":")[0] for ln in lines] == [
         "airframe 1",
         "airframe 2",
@@ -121,8 +140,31 @@ def test_coverage_study_on_two_workers_equals_the_serial_run():
     assert cv.summary_dict(pooled, QuadrotorParams(), cfg) == cv.summary_dict(
         serial, QuadrotorParams(), cfg
     )
+    # the ablations re-identify the kept flights (returned by the workers): 2 variants x 2
+    # airframes as tasks, the serial numbers
+    assert [len(r) for r in runs] == [1, 1]
+    ab1 = cv.ablations(runs, pooled, QuadrotorParams(), args[-1], workers=1)
+    ab2 = cv.ablations(runs, pooled, QuadrotorParams(), args[-1], workers=2)
+    assert list(ab1) == list(cv.ABLATIONS) and ab2 == ab1
+    assert all(0.0 < f <= 1.0 for fr in ab1.values() for f in fr)
 
 
-def test_dask_backend_equals_the_serial_run():
+def test_dask_backend_equals_the_serial_run(tmp_path):
     pytest.importorskip("dask", reason="dask not installed (optional backend)")
     assert map_tasks(abs, [-3, 1, -2], 2, backend="dask") == [3, 1, 2]
+    gains, models = _toy(tmp_path)
+    n = PARALLEL_MIN_SAMPLES
+    serial = verify_files(gains, models, n_random=1, seed=5, full_box=n, workers=1).full_box
+    dasked = verify_files(
+        gains, models, n_random=1, seed=5, full_box=n, workers=2, backend="dask"
+    ).full_box
+    assert dasked.summary() == serial.summary()
+    assert [s.norm for s in dasked.samples] == [s.norm for s in serial.samples]
+
+
+def test_dask_backend_without_dask_is_a_clear_error(monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "dask", None)  # import dask -> ImportError
+    with pytest.raises(ConfigError, match="dask is not installed"):
+        map_tasks(abs, [1, 2], 2, backend="dask")

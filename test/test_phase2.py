@@ -350,7 +350,7 @@ def _write_files(lpv, d):
             "models_sha256": sha256_file(d / "vertex_models.yaml"),
         },
     )
-    F.GainSchedule.from_dict(gains).save(d / "gains.yaml")
+    F.GainSchedule.from_dict(F.certify_law(gains)).save(d / "gains.yaml")
     (d / "signals").mkdir()
     t = np.arange(0.0, 3.0, 0.02)
     names = ["u_d", "v_d", "w_d", "ue_t", "ue_a", "ue_e", "ue_r"]

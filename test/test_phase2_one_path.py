@@ -170,3 +170,341 @@ def test_every_tamper_is_refused_by_the_node_and_by_fly_phase2_alike(
     )
     err = capsys.readouterr().err
     assert status == 2 and text in err, err
+
+
+# ============================================ issue 21 items 4 and 5: the bag and the latency
+FLIGHT_OPTS = Phase2Options(duration=20.0, ramp_s=2.0, lead_in_s=1.0)
+
+
+@pytest.fixture(scope="module")
+def flown(design, tmp_path_factory):  # noqa: F811
+    """A 20 s phase-2 flight of ``fly_phase2`` on the simulated PX4 (lock-step, airborne in
+    HOLD, no ESC telemetry): (summary, output directory, bridge config)."""
+    tmp = tmp_path_factory.mktemp("flown")
+    veh, bcfg = _vehicle(tmp, airborne=True)
+    try:
+        ls, _ = _lockstep(veh)
+        s = fly_phase2(
+            design / "gains.yaml",
+            design / "signals",
+            tmp / "p2",
+            models=design / "vertex_models.yaml",
+            bridge_config=bcfg,
+            opts=FLIGHT_OPTS,
+            clock=ls.clock,
+            sleep=ls.sleep,
+            echo=lambda _: None,
+            handle_signals=False,
+        )
+    finally:
+        veh.close()
+    return s, tmp / "p2", bcfg
+
+
+def test_phase2_bag_has_every_topic_at_its_configured_rate_and_the_latency(flown):
+    """The bag of a phase-2 flight has
+    state, imu, rotor_speeds (estimated from ACTUATOR_OUTPUT_STATUS), status,
+    velocity_reference, excitation, actuator_command (the setpoints sent) and rate_setpoint
+    (PX4's ATTITUDE_TARGET echo), each at the rate its configuration sets; the summary's
+    state-stamp -> setpoint-sent latency is the one of the bag's stamps. Before: rotor_speeds,
+    imu and status 0 messages, the excitation a stream of zeros, no echo, no latency."""
+    from lpv_sysid.flight.phase2 import loop_latency
+    from lpv_sysid.io import bag as iobag
+    from lpv_sysid.io import messages
+    from lpv_sysid.io.files import read_yaml
+
+    s, out, bcfg = flown
+    opts = FLIGHT_OPTS
+    assert s["ok"] and s["handback"]["state"] == "DONE", s["reason"]
+    bag = out / s["bag"]
+    info = {k.rsplit("/", 1)[-1]: v for k, v in iobag.topic_info(str(bag)).items()}
+    streams = read_yaml(str(bcfg))["link"]["streams"]
+    ctrl = yaml_parameters(str(config_file("lpv_controller_px4.yaml")), "lpv_controller")
+    expected = {
+        # one state sample per attitude and per position message (telemetry decoder)
+        "state": streams["ATTITUDE_QUATERNION"] + streams["LOCAL_POSITION_NED"],
+        "imu": streams["HIGHRES_IMU"],
+        "rotor_speeds": streams["ACTUATOR_OUTPUT_STATUS"],  # no ESC_STATUS: the estimate
+        "velocity_reference": opts.control_rate_hz,  # the excitation runtime's rate_hz
+        "excitation": opts.control_rate_hz,
+        "rate_setpoint": streams["ATTITUDE_TARGET"],
+    }
+    print({k: round(v.rate_hz, 2) for k, v in info.items()}, s["latency_state_to_setpoint_ms"])
+    for topic, hz in expected.items():
+        assert info[topic].rate_hz == pytest.approx(hz, rel=0.05), (topic, info[topic])
+    # the setpoints sent: one per state sample of a new stamp, at least the attitude rate
+    assert info["actuator_command"].count == s["controller"]["commands"] > 0
+    assert info["actuator_command"].rate_hz >= 0.95 * streams["ATTITUDE_QUATERNION"]
+    assert info["status"].count >= ctrl["status_rate_hz"] * info["status"].duration_s * 0.9
+    got = iobag.read_bag(str(bag))
+    rotor = [m for _, m in got["/lpv_sysid/rotor_speeds"]]
+    assert {messages.rotor_source_of(m) for m in rotor} == {"estimated"}
+    ue = np.array(
+        [messages.excitation_from_joint_state(m)[1] for _, m in got["/lpv_sysid/excitation"]]
+    )
+    assert np.abs(ue).max() > 0.05  # the signal, not zeros
+    # PX4's echo equals what was sent (float32 on the wire)
+    sent = np.array(
+        [
+            messages.channels_from_joint_state(m, ("thrust", "p_sp", "q_sp", "r_sp"))[1]
+            for _, m in got["/lpv_sysid/actuator_command"]
+        ]
+    )
+    echo = np.array(
+        [
+            messages.channels_from_joint_state(m, ("thrust", "p_sp", "q_sp", "r_sp"))[1]
+            for _, m in got["/lpv_sysid/rate_setpoint"]
+        ]
+    )
+    clipped = np.column_stack([np.clip(sent[:, 0], 0.05, 0.95), np.clip(sent[:, 1:], -2, 2)])
+    for row in echo[5::50]:
+        assert np.min(np.abs(clipped - row).max(axis=1)) < 1e-5
+    # latency: the summary's numbers are the bag's (log time - header stamp per command)
+    rows = got["/lpv_sysid/actuator_command"]
+    lat = loop_latency(
+        [messages.stamp_ns_of(m) * 1e-9 for _, m in rows], [t * 1e-9 for t, _ in rows]
+    )
+    summ = s["latency_state_to_setpoint_ms"]
+    assert summ["commands"] == lat["commands"] == len(rows)
+    for k in ("p50", "p99", "max"):
+        assert summ[k] == pytest.approx(lat[k], abs=1e-9)
+    assert yaml.safe_load((out / "phase2_summary.yaml").read_text())[
+        "latency_state_to_setpoint_ms"
+    ]["commands"] == len(rows)
+
+
+def test_loop_latency_percentiles():
+    from lpv_sysid.flight.phase2 import loop_latency
+
+    t_state = np.arange(100) * 0.01
+    delay = np.r_[np.full(98, 0.002), 0.010, 0.030]  # 2 ms, one 10 ms, one 30 ms
+    lat = loop_latency(t_state, t_state + delay)
+    assert lat["commands"] == 100
+    assert lat["p50"] == pytest.approx(2.0) and lat["max"] == pytest.approx(30.0)
+    # numpy's linear percentile: rank 98.01 between 10 ms and 30 ms
+    assert lat["p99"] == pytest.approx(10.0 + 0.01 * 20.0)
+
+
+def test_the_node_runtime_replays_the_cli_flight_command_for_command(flown, design, tmp_path):  # noqa: F811
+    """``lpv-sysid replay`` (lpv_controller_node's runtime over the recorded inputs, with the
+    parameters of config/lpv_controller_px4.yaml, the file phase2.launch.py design:=rate_plant
+    gives the node) computes the commands ``fly phase2`` sent, to float64 round-off: one
+    controller, not two."""
+    from lpv_sysid.flight.controller import replay_controller
+    from lpv_sysid.io import bag as iobag
+    from lpv_sysid.io import messages
+
+    s, out, _ = flown
+    p = yaml_parameters(str(config_file("lpv_controller_px4.yaml")), "lpv_controller")
+    p.update(gains_file=str(design / "gains.yaml"))
+    r = replay_controller(str(out / s["bag"]), p, str(tmp_path / "replay"))
+    assert r["event"] is None or r["event"].reason == "stale"  # the recording ends
+    names = ("thrust", "p_sp", "q_sp", "r_sp")
+
+    def commands(bag):
+        rows = iobag.read_bag(str(bag))["/lpv_sysid/actuator_command"]
+        return {
+            messages.stamp_ns_of(m): messages.channels_from_joint_state(m, names)[1]
+            for _, m in rows
+        }
+
+    flown_cmds, replayed = commands(out / s["bag"]), commands(tmp_path / "replay")
+    common = sorted(set(flown_cmds) & set(replayed))
+    assert len(common) >= 0.99 * len(flown_cmds) > 1000
+    diff = max(float(np.abs(flown_cmds[k] - replayed[k]).max()) for k in common)
+    print(f"replay: {len(common)} of {len(flown_cmds)} commands compared, max |diff| {diff:.3g}")
+    assert diff < 1e-9, diff
+
+
+# ====================================== issue 21 item 2: the rate plant through the bridge node
+def test_bridge_node_runtime_sends_rate_plant_commands_as_set_attitude_target(tmp_path):
+    """mavlink_bridge_node's runtime with ``command: rate_setpoint`` (phase2.launch.py
+    design:=rate_plant) parses ``actuator_command`` by the rate plant's names and sends them
+    as SET_ATTITUDE_TARGET thrust + body rates: the simulated PX4 (airborne in HOLD) tracks
+    exactly those values in OFFBOARD; when the commands stop it hands back (HOLD confirmed).
+    PX4's ATTITUDE_TARGET echo is republished on ``rate_setpoint`` (recorded by the data
+    logger). Before: ``actuator command ignored: bridge command is 'rate_setpoint'``.
+    A virtual-actuator command (ut, ua, ue, ur) is refused by the parser, not sent."""
+    from lpv_sysid.flight.bridge import SPECS, BridgeRuntime
+    from lpv_sysid.io import messages
+    from lpv_sysid.io.messages import MessageError
+    from lpv_sysid.mavlink.bridge import RATE_INPUT_NAMES
+
+    f = MsgFactory.rosbags()
+    veh, _ = _vehicle(tmp_path, airborne=True)
+    port = veh.config.url.rsplit(":", 1)[-1]
+    params = {n: d for n, (d, _) in SPECS.items()}
+    params.update(
+        {
+            "link.url": f"udpin:127.0.0.1:{port}",
+            "command": "rate_setpoint",
+            "auto_start": True,
+            "offboard.arm": False,
+            "offboard.input_timeout": 0.5,
+        }
+    )
+    rt = BridgeRuntime(params, f, "/lpv_sysid/mavlink_bridge", 15.0, 3.0)
+    u = np.array([0.55, 0.1, -0.05, 0.02])
+    bad = messages.actuator_command_msg(f, 1, [0.5, 0.0, 0.0, 0.0])
+    with pytest.raises(MessageError):
+        rt.parsers["actuator_command"](bad)
+    t, dt = 0.0, 0.004
+    rt.open(t)
+    modes: list = []
+    echo: list = []
+    assert "rate_setpoint" in [e.key for e in rt.publishers]
+    try:
+        for k in range(int(12.0 / dt)):  # bounded: 12 s of simulated time
+            t += dt
+            veh.step(t)
+            echo += [(t, m) for key, m in rt.on_timer(t) if key == "rate_setpoint"]
+            if k % 5 == 0 and t < 6.0:  # 50 Hz commands for 6 s, then silence
+                msg = messages.joint_state(f, round(t * 1e9), RATE_INPUT_NAMES, position=u)
+                rt.on_sample("actuator_command", rt.parsers["actuator_command"](msg), t)
+            if not modes or modes[-1] != veh.mode.name:
+                modes.append(veh.mode.name)
+            if t > 4.0 and veh.mode.name == "OFFBOARD":
+                sp = veh.setpoint
+                assert sp.kind == "rates" and sp.thrust == pytest.approx(u[0], abs=1e-6)
+                assert np.allclose(sp.rates, u[1:], atol=1e-6)
+        final = (rt.core.state.value, rt.core.status(t).get("reason"))
+    finally:
+        rt.close()
+        veh.close()
+    assert modes[:3] == ["HOLD", "OFFBOARD", "HOLD"], modes
+    # commands stopped = a fault of the input stream: the run FAILED, PX4 confirmed in HOLD
+    assert final[1].startswith("hand-back confirmed: vehicle in HOLD: stale input"), final
+    # PX4's echo (ATTITUDE_TARGET, requested at 50 Hz for command rate_setpoint) republished on
+    # rate_setpoint for the data logger: the values sent, at the requested rate
+    vals = np.array([messages.channels_from_joint_state(m, RATE_INPUT_NAMES)[1] for _, m in echo])
+    ts = np.array([t for t, _ in echo])
+    assert len(vals) > 50 and np.allclose(vals, u, atol=1e-6)
+    assert (len(ts) - 1) / (ts[-1] - ts[0]) == pytest.approx(50.0, rel=0.05)
+
+
+def test_bag_latency_cli_reads_a_data_logger_bag(tmp_path, capsys):
+    """``lpv-sysid bag latency``: the node path's numbers from the data logger's bag (log time =
+    receipt, header stamp = the state stamp the controller computed the command on)."""
+    from lpv_sysid.io import bag as iobag
+    from lpv_sysid.io import messages
+
+    f = MsgFactory.rosbags()
+    t0 = 1_700_000_000_000_000_000
+    delays_ms = [1.0] * 98 + [5.0, 20.0]
+    with iobag.BagWriter(tmp_path / "b") as w:
+        w.add_topic("/lpv_sysid/actuator_command", messages.TYPES["actuator_command"])
+        for i, d in enumerate(delays_ms):
+            stamp = t0 + i * 4_000_000
+            msg = messages.joint_state(
+                f, stamp, ("thrust", "p_sp", "q_sp", "r_sp"), position=[0.5, 0, 0, 0]
+            )
+            w.write("/lpv_sysid/actuator_command", stamp + round(d * 1e6), msg)
+    assert cli_main(["bag", "latency", str(tmp_path / "b")]) == 0
+    out = capsys.readouterr().out
+    # numpy's linear percentile: p99 at rank 98.01 between 5 ms and 20 ms
+    assert "100 commands" in out and "p50 1.000 ms" in out and "max 20.000 ms" in out
+    assert "p99 5.150 ms" in out, out
+
+
+def _phase1_bags(tmp_path: Path, plant) -> Path:
+    """An earlier phase-1 directory (campaign_summary.yaml + two bags with state and PX4's
+    rate setpoints) of the known rate plant ``plant`` (test_rate_plant._simulate)."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from test_rate_plant import _simulate
+
+    from lpv_sysid.io import bag as iobag
+    from lpv_sysid.io import messages
+    from lpv_sysid.models import rate_plant as rp
+
+    f = MsgFactory.rosbags()
+    p1 = tmp_path / "old" / "phase1"
+    bags = {}
+    for k, seed in enumerate((0, 1)):
+        t, x, u = _simulate(plant, T=25.0, seed=seed)
+        t0 = 1_000_000_000 * (100 + 50 * k)
+        name = f"bag_{k:04d}"
+        bags[f"run{k}"] = name
+        with iobag.BagWriter(p1 / name) as b:
+            b.add_topic("/lpv_sysid/state", messages.TYPES["state"])
+            b.add_topic("/lpv_sysid/rate_setpoint", messages.TYPES["actuator_command"])
+            for i in range(0, len(t), 2):
+                ns = t0 + round(t[i] * 1e9)
+                msg = messages.odometry_from_state(
+                    f, ns, [0.0, 0.0, -10.0], [x[i, 0], x[i, 1], 0.0], x[i, 2:5], x[i, 5:8]
+                )
+                b.write("/lpv_sysid/state", ns, msg)
+            for i in range(0, len(t), 4):
+                ns = t0 + round(t[i] * 1e9)
+                msg = messages.joint_state(f, ns, rp.INPUT_NAMES, position=u[i])
+                b.write("/lpv_sysid/rate_setpoint", ns, msg)
+    (p1 / "campaign_summary.yaml").write_text(
+        yaml.safe_dump({"ok": True, "result": "complete", "bags": bags})
+    )
+    return p1
+
+
+def test_chain_phase2_refuses_what_the_node_refuses(tmp_path):
+    """``lpv-sysid chain --phase1 OLD --kappa 10``: the chain identifies, synthesizes and
+    verifies (steps 2-4), then its phase 2 is refused before the link is opened with the
+    controller node's words for the same gains, signals and kappa."""
+    from test_rate_plant import P0
+
+    from lpv_sysid.flight.chain import chain
+
+    p1 = _phase1_bags(tmp_path, P0)
+    lines: list = []
+    status = chain(
+        f"udpin:127.0.0.1:{free_udp_port()}",
+        tmp_path / "chain",
+        kappa=10.0,
+        phase1_dir=p1,
+        echo=lines.append,
+        preflight=False,
+    )
+    out = tmp_path / "chain"
+    summary = yaml.safe_load((out / "chain_summary.yaml").read_text())
+    assert status == 1 and (out / "gains.yaml").exists(), lines[-10:]
+    with pytest.raises(ConfigError) as node:
+        _node_runtime(out / "gains.yaml", out / "signals", 10.0)
+    assert "kappa 10 x ue_t peak" in str(node.value)
+    assert summary["phase2"]["reason"] == str(node.value)
+    assert not (out / "phase2").exists() or not any((out / "phase2").iterdir())
+
+
+def test_chain_flies_phase2_on_the_simulated_px4_and_checks_the_model_by_output_error(tmp_path):
+    """``lpv-sysid chain --phase1 OLD`` against the simulated PX4 in the air (lock-step): the
+    chain's phase 2 (the node runtimes) flies the signal, hands back to LAND, and the chain
+    summary carries the identified plant's output-error R^2 per row on the phase-2 flight (its
+    window stated) and the loop latency."""
+    from test_chain_px4 import P_SIM
+
+    from lpv_sysid.flight.chain import chain
+
+    p1 = _phase1_bags(tmp_path, P_SIM)
+    veh, bcfg = _vehicle(tmp_path, airborne=True)
+    url = yaml.safe_load(bcfg.read_text())["link"]["url"]
+    lines: list = []
+    try:
+        ls, _ = _lockstep(veh)
+        status = chain(
+            url,
+            tmp_path / "chain",
+            phase1_dir=p1,
+            echo=lines.append,
+            preflight=False,
+            clock=ls.clock,
+            sleep=ls.sleep,
+            phase2=FLIGHT_OPTS,
+        )
+    finally:
+        veh.close()
+    summary = yaml.safe_load((tmp_path / "chain" / "chain_summary.yaml").read_text())
+    p2 = summary["phase2"]
+    assert status == 0 and p2["ok"] and p2["handback"]["state"] == "DONE", lines[-12:]
+    oe = p2["model_check_output_error"]
+    assert oe["window_s"] == 10.0 and set(oe) >= {"u", "v", "w", "p", "q", "r"}
+    assert all(isinstance(oe[k], float) for k in ("u", "v", "w", "p", "q", "r"))
+    assert p2["latency_state_to_setpoint_ms"]["commands"] > 1000
+    print("output error R^2 on the phase-2 flight:", oe)

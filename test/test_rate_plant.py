@@ -11,7 +11,6 @@ import pytest
 
 from lpv_sysid.errors import ConfigError, SafetyError
 from lpv_sysid.flight.phase2 import excitation_gain, inversion_error
-from lpv_sysid.flight.phase2.sequence import _fade
 from lpv_sysid.ident import rate_plant as rid
 from lpv_sysid.mavlink.bridge import (
     ATTITUDE_TARGET_IGNORE_ATTITUDE,
@@ -239,9 +238,17 @@ def test_excitation_gain_recovers_known_fir_and_ignores_tracking_error():
 
 
 def test_fade_is_raised_cosine_with_zero_ends():
-    assert _fade(0.0, 10.0, 2.0) == 0.0 and _fade(10.0, 10.0, 2.0) == 0.0
-    assert _fade(1.0, 10.0, 2.0) == pytest.approx(0.5) and _fade(5.0, 10.0, 2.0) == 1.0
-    assert _fade(9.0, 10.0, 2.0) == pytest.approx(0.5)
+    """A part of a phase-2 period (``fly phase2 --duration``, excitation ``duration_s``) is
+    played with the raised-cosine fades inside it: zero at both ends, 1/2 one half-ramp in."""
+    from lpv_sysid.signals.excitation import ExcitationCore
+
+    t = np.arange(0.0, 10.0 + 1e-9, 0.02)
+    names = ["u_d", "v_d", "w_d", "ue_t", "ue_a", "ue_e", "ue_r"]
+    u = np.column_stack([np.ones_like(t)] + [np.zeros_like(t)] * 6)
+    core = ExcitationCore.phase2(t, u, names, start_time=0.0, ramp=2.0, periodic=False)
+    v = core.evaluate(np.array([0.0, 1.0, 5.0, 9.0, 10.0]))[0][:, 0]
+    assert core.duration == pytest.approx(10.0)
+    assert v == pytest.approx([0.0, 0.5, 1.0, 0.5, 0.0], abs=1e-12)
 
 
 def test_inversion_error_is_kp_times_rate_change_over_the_telemetry_age():
@@ -302,3 +309,87 @@ def test_attitude_target_tap_passes_only_the_targets_setpoints_and_keeps_message
     msgs = link.poll(12.5)
     assert msgs == batch  # the bridge still sees every message
     assert got == [(12.5, pytest.approx([0.5, 0.1, -0.2, 0.3]))]
+
+
+def test_identify_cli_builds_the_rate_plant_from_a_campaigns_bags(tmp_path, capsys):
+    """``lpv-sysid identify --plant px4-rate`` (issue 21 item 2): the bags of an experiment
+    directory (``bag_*``, as the data logger writes them) with state and PX4's rate setpoints
+    -> vertex_models.yaml of the rate plant over the campaign box; the identified loop poles
+    and thrust gain are the simulated plant's (P0) and every vertex carries them."""
+    from lpv_sysid.cli.main import main as cli_main
+    from lpv_sysid.configuration.defaults import config_file
+    from lpv_sysid.flight.campaign import FlyConfig
+    from lpv_sysid.io import bag as bg
+    from lpv_sysid.io import messages as m
+    from lpv_sysid.io.files import read_yaml
+
+    f = m.MsgFactory.rosbags()
+    for k, seed in enumerate((0, 1)):
+        t, x, u = _simulate(P0, T=25.0, seed=seed)
+        t0 = 1_000_000_000 * (100 + 50 * k)
+        with bg.BagWriter(tmp_path / "exp" / f"bag_{k:04d}") as b:
+            b.add_topic("/lpv_sysid/state", m.TYPES["state"])
+            b.add_topic("/lpv_sysid/rate_setpoint", m.TYPES["actuator_command"])
+            for i in range(0, len(t), 2):  # state 100 Hz
+                ns = t0 + round(t[i] * 1e9)
+                eul = [x[i, 0], x[i, 1], 0.0]
+                msg = m.odometry_from_state(f, ns, [0.0, 0.0, -10.0], eul, x[i, 2:5], x[i, 5:8])
+                b.write("/lpv_sysid/state", ns, msg)
+            for i in range(0, len(t), 4):  # setpoints 50 Hz
+                ns = t0 + round(t[i] * 1e9)
+                b.write(
+                    "/lpv_sysid/rate_setpoint",
+                    ns,
+                    m.joint_state(f, ns, rp.INPUT_NAMES, position=u[i]),
+                )
+    out = tmp_path / "vertex_models.yaml"
+    args = ["identify", "--plant", "px4-rate", "--bags", str(tmp_path / "exp"), "--out", str(out)]
+    assert cli_main(args) == 0
+    printed = capsys.readouterr().out
+    assert f"wrote {out}" in printed
+    doc = read_yaml(str(out))
+    box = FlyConfig.load(config_file("campaign_chain.yaml")).campaign
+    assert doc["scheduling"]["min"] == pytest.approx(list(box.box_min))
+    assert doc["scheduling"]["max"] == pytest.approx(list(box.box_max))
+    assert [s["name"] for s in doc["inputs"]] == list(rp.INPUT_NAMES)
+    assert doc["meta"]["design"] == rp.DESIGN and len(doc["vertices"]) == 8
+    for v in doc["vertices"]:
+        A, B = np.array(v["A"]), np.array(v["B"])
+        assert A[5, 5] == pytest.approx(P0.L_p, rel=0.08)
+        assert A[6, 6] == pytest.approx(P0.M_q, rel=0.08)
+        assert A[7, 7] == pytest.approx(P0.N_r, rel=0.08)
+        assert B[4, 0] == pytest.approx(P0.Z_T, rel=0.08)
+    # a directory without rate setpoints: a named error, exit 2
+    assert (
+        cli_main(
+            [
+                "identify",
+                "--plant",
+                "px4-rate",
+                "--bags",
+                str(tmp_path / "nothing"),
+                "--out",
+                str(tmp_path / "m2.yaml"),
+            ]
+        )
+        == 2
+    )
+
+
+def test_output_error_scores_the_true_model_near_one_and_a_wrong_pole_lower():
+    """Output error (issue 21 item 3): rows simulated from the recorded setpoints; the true
+    plant reproduces the states (R^2 > 0.97 on every row), a rate loop 3x too slow or a drag
+    of the wrong sign does not (the error accumulates), while the other rows keep their
+    score (row-wise simulation with measured couplings)."""
+    import dataclasses
+
+    t, x, u = _simulate(P0, T=30.0, seed=5)
+    run = rid.run_from_arrays("sim", t[::2], x[::2], t[::4], u[::4])
+    good = rid.output_error(P0, run)
+    assert good["window_s"] == rid.OUTPUT_ERROR_WINDOW_S
+    for row in ("u", "v", "w", "p", "q", "r"):
+        assert good[row] > 0.97, (row, good)
+    slow = rid.output_error(dataclasses.replace(P0, L_p=P0.L_p / 3, L_sp=P0.L_sp / 3), run)
+    assert slow["p"] < good["p"] - 0.1 and slow["q"] == good["q"]
+    drag = rid.output_error(dataclasses.replace(P0, X_u=-P0.X_u), run)
+    assert drag["u"] < good["u"] - 0.1 and drag["v"] == good["v"]

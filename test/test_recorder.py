@@ -134,7 +134,12 @@ def test_split_by_size_and_metadata_content(tmp_path):
     meta = yaml.safe_load((tmp_path / "exp" / "experiment.yaml").read_text())
     assert [b["messages"] for b in meta["bags"]] == [10, 10, 5]
     assert meta["gains"]["sha256"] == hashlib.sha256(gains.read_bytes()).hexdigest()
-    assert meta["config_files"][str(conf)] == conf.read_text()
+    # paths relative to the experiment directory; bytes = the bag's files on disk
+    assert meta["config_files"]["../logger.yaml"] == conf.read_text()
+    assert meta["gains"]["path"] == "../gains.yaml"
+    for b in meta["bags"]:
+        on_disk = sum(p.stat().st_size for p in (tmp_path / "exp" / b["path"]).iterdir())
+        assert b["bytes"] == on_disk > 10 * msg_len * b["messages"] // 10
     assert meta["topics"]["/lpv_sysid/actuator_command"]["dropped"] == 3
     git = subprocess.run(["git", "-C", ROOT, "rev-parse", "HEAD"], capture_output=True, text=True)
     assert meta["git_revision"] == (git.stdout.strip() or None)

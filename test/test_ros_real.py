@@ -810,6 +810,52 @@ def test_phase2_launch_px4_sim_services_and_launch_sigint(ros, dom, tmp_path):
     check_recording(out, {"state": 20, "velocity_reference": 20, "excitation": 20, "status": 2})
 
 
+def test_phase2_launch_sequencer_starts_the_nodes_in_the_safe_order(ros, dom, tmp_path):
+    """Issue 24 item 4: phase2.launch.py with ``link_url`` (no copied config directory) and
+    ``auto_start:=true`` against the simulated PX4: the sequencer waits for the link, starts
+    the controller, then the bridge (OFFBOARD confirmed), then the excitation, each after the
+    previous one confirmed on its status; SIGINT ends everything with exit 0."""
+    env = RosEnv(SETUP, ros["ws"], dom.value)
+    port = free_udp_port()
+    px4 = env.popen(
+        f"{ros['lib']}/lpv-sysid sim-vehicle --udp 127.0.0.1:{port}", tmp_path / "px4_sim.log"
+    )
+    proc = launch(
+        ros,
+        env,
+        "phase2.launch.py",
+        {
+            "link_url": f"udpin:127.0.0.1:{port}",
+            "gains_file": ros["gains"],
+            "signals_file": ros["sig2"],
+            "log_dir": tmp_path / "phase2_log",
+            "auto_start": "true",
+        },
+        tmp_path / "launch.log",
+    )
+    try:
+        ok = proc.wait_for("sequence complete: every node started in order", 150.0)
+        text = proc.log()
+        steps = re.findall(r"\[lpv_sysid\.sequencer\]: (step \d/4: .*)", text)
+        MEASURED["phase2_sequence"] = steps
+        assert ok, text[-5000:]
+        order = [m for m in steps if "confirmed" in m or ": start " in m]
+        assert [o.split(": ", 1)[1].split(" (")[0] for o in order] == [
+            "mavlink_bridge:ready confirmed",
+            "start lpv_controller",
+            "lpv_controller confirmed",
+            "start mavlink_bridge",
+            "mavlink_bridge confirmed",
+            "start excitation",
+            "excitation confirmed",
+        ], steps
+        rc, _ = sigint_and_wait(proc, group=False)
+    finally:
+        proc.kill()
+        sigint_and_wait(px4, group=False)
+    assert rc == 0, proc.log()[-4000:]
+
+
 #: campaign_node.publish_status logs several severities from one call site (lines
 #: ``log = {...}[ev.level]; log(...)``): rclpy raises this at its first non-info event
 CAMPAIGN_LOGGER_BUG = "Logger severity cannot be changed between calls"
@@ -874,6 +920,46 @@ def test_campaign_launch_px4_sim_start_abort_process_group_sigint(ros, dom, tmp_
 
 
 # ------------------------------------------------------- the stand-in against rclpy
+def test_two_namespaced_vehicles_late_status_and_tf(ros, dom, tmp_path):
+    """Issue 24 item 3 under real Jazzy: two simulated vehicles in ``uav1`` / ``uav2`` on
+    one domain keep to their namespaces (``ros2 topic list``; a state subscriber of one
+    sees only its own vehicle), a ``ros2 topic echo`` started long after a status was
+    published still receives it (transient local: the stamp is older than the echo), and
+    ``publish_tf`` puts odom -> base_link on /tf."""
+    env = RosEnv(SETUP, ros["ws"], dom.value)
+    procs = []
+    try:
+        for ns, extra in (("uav1", "-p publish_tf:=true"), ("uav2", "")):
+            procs.append(
+                env.popen(
+                    f"{ros['lib']}/sim_vehicle_node --ros-args -r __ns:=/{ns} "
+                    f"--params-file {ros['share']}/config/sim_vehicle.yaml "
+                    f"-p status_rate_hz:=0.1 -p initial_velocity_frd:='[1.0, 0.0, 0.0]' {extra}",
+                    tmp_path / f"{ns}.log",
+                )
+            )
+        for p in procs:
+            assert p.wait_for(ready("sim_vehicle"), 90.0), p.log()[-3000:]
+        types = topic_types(env)
+        for ns in ("uav1", "uav2"):
+            for t in ("state", "imu", "rotor_speeds", "status"):
+                assert types.get(f"/{ns}/{t}") == README_TYPES[t], (ns, t, types)
+        assert not any(n.startswith(NS + "/") for n in types), types
+        assert types.get("/tf") == "tf2_msgs/msg/TFMessage"
+        time.sleep(2.0)  # the first status (at start) is now seconds old; the next in ~8 s
+        t_echo = time.time()
+        r = env.run("timeout 6 ros2 topic echo --once /uav2/status --no-daemon", timeout=60)
+        assert "/uav2/sim_vehicle" in r.stdout and "/uav1/" not in r.stdout, r.stdout
+        sec = int(re.search(r"sec: (\d+)", r.stdout).group(1))
+        MEASURED["late_status_age_s"] = round(t_echo - sec, 1)
+        assert sec < t_echo  # published before the subscriber existed: transient local
+        r = env.run("timeout 6 ros2 topic echo --once /tf --no-daemon", timeout=60)
+        assert "frame_id: odom" in r.stdout and "child_frame_id: base_link" in r.stdout, r.stdout
+    finally:
+        for p in procs:
+            p.kill()
+
+
 def test_standin_is_no_kinder_than_rclpy(ros, dom, tmp_path):
     """test/support/rclpy_probe.py under real rclpy and under the stand-in gives the same
     outcome in every case: the logger's one-severity-per-call-site rule and its keyword

@@ -206,16 +206,27 @@ def test_rotor_speeds_message_marks_the_source_and_every_consumer_reads_both():
     om = [500.0, 510.0, 520.0, 530.0]
     meas = messages.rotor_speeds_msg(f, 1_000_000_000, om)
     est = messages.rotor_speeds_msg(f, 1_010_000_000, om, source="estimated")
-    assert meas.header.frame_id == messages.BASE_FRAME and est.header.frame_id == "estimated"
-    assert list(est.name) == list(meas.name) == list(messages.ROTOR_NAMES)
+    # the source is in the joint names; frame_id is a frame (issue 24: TF-aware tools read
+    # it as one), base_link for both
+    assert meas.header.frame_id == est.header.frame_id == messages.BASE_FRAME
+    assert list(meas.name) == ["rotor_1", "rotor_2", "rotor_3", "rotor_4"]
+    assert list(est.name) == [f"rotor_{i}_estimated" for i in (1, 2, 3, 4)]
     assert [messages.rotor_source_of(m) for m in (meas, est)] == ["esc", "estimated"]
-    for m in (meas, est):  # identification (ident/dataprep) and the controller runtime
+    # a recording made before issue 24 (frame_id "estimated", plain names) still reads
+    legacy = messages.joint_state(
+        f, 1_020_000_000, messages.ROTOR_NAMES, velocity=om, frame_id="estimated"
+    )
+    assert messages.rotor_source_of(legacy) == "estimated"
+    for m in (meas, est, legacy):  # identification (ident/dataprep), the controller runtime
         t, values = messages.rotor_speeds_from_joint_state(m)
         np.testing.assert_array_equal(values, om)
         t2, v2 = parse_input("rotor_speeds", m)
         assert t2 == t and np.array_equal(v2, values)
-    t, v = parse_inputs("rotor_speeds", [meas, est])
-    np.testing.assert_array_equal(t, [1.0, 1.01])
+    t, v = parse_inputs("rotor_speeds", [meas, est, legacy])
+    np.testing.assert_array_equal(t, [1.0, 1.01, 1.02])
+    np.testing.assert_array_equal(v, [om, om, om])
+    t, v = parse_inputs("rotor_speeds", [est, est])  # one source: the vectorised path
+    np.testing.assert_array_equal(v, [om, om])
     with pytest.raises(messages.MessageError, match="source"):
         messages.rotor_speeds_msg(f, 0, om, source="model")
 

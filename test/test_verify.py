@@ -8,7 +8,7 @@ import pytest
 import yaml
 
 from lpv_sysid.cli.main import main
-from lpv_sysid.io.formats import GainSchedule
+from lpv_sysid.io.formats import GainSchedule, certify_law
 from lpv_sysid.synthesis.hinf import hinf_norm
 from lpv_sysid.synthesis.uncertainty_set import load_models
 from lpv_sysid.synthesis.verify import verify_files
@@ -77,6 +77,9 @@ def test_tampered_gain_breaks_the_bound_and_fails_verify(synthesized, capsys):
     d = yaml.safe_load(out.read_text())
     k = d["vertices"][0]["K"][0][0]
     d["vertices"][0]["K"][0][0] = 0.8 * k  # one entry changed by 20%
+    # re-hashed and re-sealed (anyone can: certify_law is public, the seal unkeyed): the
+    # file checks, only the independent verification can catch the broken bound
+    d = certify_law(d, layout=None)
     out.write_text(yaml.safe_dump(d, sort_keys=False))
     # the bound is really broken at that vertex (independent oracle: 1 / |1 + 0.8 k| > 0.5)
     assert 1.0 / abs(1 + 0.8 * k) > 0.5

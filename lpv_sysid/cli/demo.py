@@ -70,6 +70,7 @@ def plan(out: Path, quick: bool, kappa: float) -> list[tuple[str, list[str]]]:
                 str(config_file("signals_phase2.yaml")),
                 "--out",
                 str(out / "signals"),
+                "--force",  # a re-run rewrites the gains that refer to it, in this same run
             ],
         ),
         (
@@ -140,6 +141,9 @@ def plan(out: Path, quick: bool, kappa: float) -> list[tuple[str, list[str]]]:
 def run(args: argparse.Namespace) -> int:
     from lpv_sysid.cli.main import main as cli_main
 
+    from lpv_sysid.control.law import check_kappa
+
+    check_kappa(args.kappa, positive=True)  # before step 1, not at step 6 after 20-37 s
     out = Path(args.out)
     if getattr(args, "connect", None):
         from lpv_sysid.cli.vehicle import parse_params

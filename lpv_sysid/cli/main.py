@@ -100,7 +100,38 @@ def build_parser(commands: dict[str, ModuleType]) -> argparse.ArgumentParser:
         p = sub.add_parser(name, help=module.HELP, description=module.HELP)
         module.add_arguments(p)
         p.set_defaults(_run=module.run)
+        _add_force(p)
     return parser
+
+
+def _add_force(p: argparse.ArgumentParser) -> None:
+    """``--force`` on every (sub)parser with an ``--out``: the one switch of
+    :func:`_guard_output` (and of outputs a command refuses to replace)."""
+    dests = {a.dest for a in p._actions}
+    if "out" in dests and "force" not in dests:
+        p.add_argument(
+            "--force",
+            action="store_true",
+            help="write --out even where it is an input of this run or replaces files "
+            "a certificate refers to",
+        )
+    for a in p._actions:
+        if isinstance(a, argparse._SubParsersAction):
+            for child in a.choices.values():
+                _add_force(child)
+
+
+def _guard_output(args: argparse.Namespace) -> None:
+    """Every command: an ``--out`` that is one of the run's input files is refused (unless
+    ``--force``): :func:`lpv_sysid.io.files.refuse_overwrite` against every argument that
+    names an existing file."""
+    out = getattr(args, "out", None)
+    if out is None:
+        return
+    from lpv_sysid.io.files import refuse_overwrite
+
+    inputs = [tuple(s.split(" ", 1)) for s in _inputs(args)]
+    refuse_overwrite(out, [(a, b) for a, b in inputs], bool(getattr(args, "force", False)))
 
 
 #: commands whose linear algebra is many small problems: there OpenBLAS' second thread costs
@@ -151,6 +182,7 @@ def _run(args: argparse.Namespace) -> int:
     shown = warnings.showwarning
     warnings.showwarning = _warning_line  # a Python warning is one log line, not source text
     try:
+        _guard_output(args)
         return int(args._run(args) or 0)
     except LpvSysidError as exc:
         return _fail(args, str(exc))

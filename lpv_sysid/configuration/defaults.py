@@ -39,7 +39,13 @@ def config_dir() -> Path:
 
 
 def config_file(name: str) -> Path:
-    """The shipped default ``name`` (e.g. ``"synthesis.yaml"``)."""
+    """The shipped default ``name`` (e.g. ``"synthesis.yaml"``): a file name of
+    :func:`config_names`, nothing else (``../../etc/passwd`` or an absolute path is no
+    shipped default)."""
+    if name not in config_names():
+        raise ConfigError(
+            f"{name!r} is not a shipped config file; the shipped ones: {', '.join(config_names())}"
+        )
     path = config_dir() / name
     if not path.is_file():
         raise ConfigError(f"shipped config file {name!r} is missing from {path.parent}")

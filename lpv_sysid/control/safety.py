@@ -472,3 +472,39 @@ def check_closed_loop(
             "fly them"
         )
     return worst
+
+
+def loop_delay_s(
+    tick_source: str, rate_hz: float, state_rate_hz: float, input_latency_s: float
+) -> float:
+    """Worst age of the state a command acts on, plus the time it is held, for the configured
+    loop [s]: ``input_latency_s`` (p99 delivery latency of the inputs) + ``1 / state_rate_hz``
+    (the newest sample is at most one period old / the command is held until the next state
+    sample) + ``1 / rate_hz`` when the law steps on its own timer (``tick_source: timer``)."""
+    from lpv_sysid.synthesis.delay import configured_delay_s
+
+    if tick_source == "state":
+        return float(input_latency_s + 1.0 / state_rate_hz)
+    return configured_delay_s(rate_hz, state_rate_hz, input_latency_s)
+
+
+def check_loop_delay(certificate, delay_s: float, label: str = "gains") -> str:
+    """ConfigError when the configured loop delay ``delay_s`` exceeds the certificate's
+    ``loop_delay.bound_s`` (issue 20 item 7: the H-inf proof covers constant delays up to that
+    bound only); returns the info line. A certificate written before the bound existed states
+    no delay: the line says the delay is not covered (not refused: such gains predate it)."""
+    bound = certificate.loop_delay_bound_s
+    if bound is None:
+        return (
+            f"loop delay {delay_s * 1e3:.1f} ms NOT covered: {label} states no "
+            "certificate.loop_delay (synthesize again to certify one)"
+        )
+    if not delay_s <= bound:
+        raise ConfigError(
+            f"{label}: the configured loop delay {delay_s * 1e3:.1f} ms (input latency + state "
+            f"period + command period) exceeds certificate.loop_delay.bound_s "
+            f"{bound * 1e3:.1f} ms: the H-inf bound is not proven for this loop; refusing to "
+            "fly (raise the loop rates, lower the transport latency, or synthesize gains "
+            "certified for the delay)"
+        )
+    return f"loop delay {delay_s * 1e3:.1f} ms within the certified {bound * 1e3:.1f} ms"

@@ -8,6 +8,8 @@ flight from ``lpv-sysid fly`` and one from ``ros2 launch`` are the same code.
 * :mod:`~lpv_sysid.flight.phase2`: the phase-2 flight on PX4 and what it measured;
 * :mod:`~lpv_sysid.flight.bridge`: the MAVLink/MAVROS bridge node's runtime;
 * :mod:`~lpv_sysid.flight.excitation`: the excitation node's runtime;
+* :mod:`~lpv_sysid.flight.sequencer`: the safe start order of a phase's nodes (the
+  sequencer node's runtime);
 * :mod:`~lpv_sysid.flight.chain`: the whole two-phase job on a connected PX4;
 * :mod:`~lpv_sysid.flight.vehicle`: the vehicle-link steps around a flight (wait for the
   autopilot, confirmed PARAM_SET, the ATTITUDE_TARGET tap).

@@ -67,9 +67,23 @@ CLOCK_STALL_S = 0.5
 Outputs = list[tuple[str, Any]]
 
 
+#: :data:`ABORT_MARKERS` compared case-folded and without surrounding blanks: "True",
+#: "TRUE", "handback" and "Aborted " are the same report (a publisher's spelling must not
+#: hide an abort)
+_FOLDED = {
+    key.casefold(): frozenset(v.casefold() for v in values)
+    for key, values in ABORT_MARKERS.items()
+}
+
+
 def reports_abort(status) -> bool:
-    """Whether a DiagnosticStatus (io.messages.StatusSample) reports an abort."""
-    return any(status.values.get(key, "") in values for key, values in ABORT_MARKERS.items())
+    """Whether a DiagnosticStatus (io.messages.StatusSample) reports an abort (keys and
+    values of :data:`ABORT_MARKERS`, case-insensitive)."""
+    for key, value in status.values.items():
+        wanted = _FOLDED.get(str(key).strip().casefold())
+        if wanted is not None and str(value).strip().casefold() in wanted:
+            return True
+    return False
 
 
 @dataclass(frozen=True)

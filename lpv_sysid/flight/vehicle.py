@@ -101,3 +101,29 @@ def tap_attitude_target(link, callback: Callable[[float, Any], None]) -> None:
         return msgs
 
     link.poll = tapped
+
+
+def tap_messages(link, callback: Callable[[float, Any], None]) -> None:
+    """Wrap ``link.poll`` so every message of the link's target reaches
+    ``callback(receive_time, msg)`` (the vehicle record of ``experiment.yaml``)."""
+    poll = link.poll
+
+    def tapped(now, *a, **kw):
+        msgs = poll(now, *a, **kw)
+        for m in msgs:
+            if not link.target_system or m.get_srcSystem() == link.target_system:
+                callback(now, m)
+        return msgs
+
+    link.poll = tapped
+
+
+def request_parameter_list(link) -> None:
+    """PARAM_REQUEST_LIST to the target: the PX4 parameter snapshot of ``experiment.yaml``
+    arrives as PARAM_VALUE while the flight runs (best effort; a lost one is not retried)."""
+    try:
+        link.send(link.codec.param_request_list_encode(link.target_system, link.target_component))
+    except (OSError, AttributeError) as exc:
+        import logging
+
+        logging.getLogger(__name__).warning("PARAM_REQUEST_LIST not sent: %s", exc)

@@ -297,6 +297,64 @@ def validate(params: rp.RatePlantParams, run: RateRun, g: float = rp.GRAVITY) ->
     return out
 
 
+#: output error (:func:`output_error`): the rows simulated, their state index and the
+#: coefficient of the row's own state (the loop pole or drag)
+OUTPUT_ERROR_ROWS = (
+    ("u", 2, "X_u"),
+    ("v", 3, "Y_v"),
+    ("w", 4, "Z_w"),
+    ("p", 5, "L_p"),
+    ("q", 6, "M_q"),
+    ("r", 7, "N_r"),
+)
+#: window of :func:`output_error` [s]: each row restarts from the measured state this often
+OUTPUT_ERROR_WINDOW_S = 10.0
+
+
+def output_error(
+    params: rp.RatePlantParams,
+    run: RateRun,
+    window_s: float = OUTPUT_ERROR_WINDOW_S,
+    g: float = rp.GRAVITY,
+) -> dict:
+    """Output-error check of ``params`` on a run (the phase-2 flight: the law's setpoints as
+    PX4 echoed them): each row of the module docstring's model -- u, v, w (drag, thrust,
+    Coriolis and gravity with the measured attitude and rates) and p, q, r (the rate loops) --
+    is *simulated* from the recorded setpoints (zero-order held, ``run.u_raw``), the other
+    states taken as measured, restarting from the measured value every ``window_s`` seconds
+    (an open-loop velocity integrates any bias without bound); per row R^2 of the simulated
+    against the measured state over the whole run. Unlike :func:`validate` (one-step
+    derivatives) a wrong pole or gain accumulates here. Exact discretisation of the row's own
+    linear term over each grid step (inputs held)."""
+    if not (math.isfinite(window_s) and window_s > 0):
+        raise ConfigError(f"output error: window_s must be > 0, got {window_s!r}")
+    t, x, u = run.t, run.x, run.u_raw
+    if len(t) < 3:
+        raise ConfigError(f"{run.name}: too few samples for the output error")
+    dt = float(t[1] - t[0])
+    # the forcing of every row = x' minus the row's own linear term, from measured states
+    forcing = np.array([rp.dynamics(xi, ui, params, g) for xi, ui in zip(x, u)])
+    restart = np.floor((t - t[0]) / window_s).astype(int)
+    out: dict = {"window_s": float(window_s), "samples": int(len(t))}
+    for name, k, coef in OUTPUT_ERROR_ROWS:
+        a = float(getattr(params, coef))
+        b = forcing[:, k] - a * x[:, k]
+        ea = math.exp(a * dt)
+        gain = (ea - 1.0) / a if abs(a) > 1e-12 else dt
+        y = np.empty(len(t))
+        y[0] = x[0, k]
+        for n in range(len(t) - 1):
+            if restart[n + 1] != restart[n]:
+                y[n + 1] = x[n + 1, k]
+            else:
+                y[n + 1] = ea * y[n] + gain * b[n]
+        m = x[:, k]
+        sst = float(((m - m.mean()) ** 2).sum())
+        e = m - y
+        out[name] = round(1.0 - float(e @ e) / sst, 4) if sst > 0 else None
+    return out
+
+
 def identify_bags(
     bags: Sequence[str | Path], cfg: RateIdConfig = RateIdConfig()
 ) -> tuple[rp.RatePlantParams, dict]:

@@ -25,7 +25,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 from rosidl_runtime_py.utilities import get_message
 
 from lpv_sysid.configuration import parameters
@@ -127,14 +126,10 @@ class DataLoggerNode(shell.ShellNode):
         self.pub_status = shell.StatusPublisher(self)  # status and /diagnostics
         for name, typ in rel.items():
             full = self.resolve_topic_name(name)
-            reliability = (
-                QoSReliabilityPolicy.BEST_EFFORT
-                if name in shell.SENSOR_TOPICS
-                else QoSReliabilityPolicy.RELIABLE
-            )
-            qos = QoSProfile(
-                history=QoSHistoryPolicy.KEEP_LAST, depth=p.queue_depth, reliability=reliability
-            )
+            # the publishers' QoS (io/messages/topics.py: best effort sensors), volatile
+            # (shell.qos_for), with the logger's queue depth
+            qos = shell.qos_for(name)
+            qos.depth = p.queue_depth
             events = SubscriptionEventCallbacks(message_lost=self._lost_cb(full))
             self.create_subscription(
                 get_message(typ),

@@ -30,40 +30,70 @@ DESCRIPTIONS = {
     "gains_file": "gains.yaml from `lpv-sysid synthesize`",
     "vertex": "vertex body velocity (u, v, w) FRD, m/s, for this run",
     "log_dir": "experiment directory of the data logger",
-    # the MAVROS transport (issue 26): MAVROS_ARGUMENTS, transport_overrides, mavros_node
-    "transport": "mavlink_bridge transport: mavlink (its own MAVLink link) | mavros (MAVROS, "
-    "docs/px4_transport.md)",
+    "design": "the plant the gains were designed for: virtual_actuator (ut, ua, ue, ur; bridge "
+    "command attitude_rate, config lpv_controller.yaml) or rate_plant (thrust + body-rate "
+    "setpoints sent as SET_ATTITUDE_TARGET, bridge command rate_setpoint, config "
+    "lpv_controller_px4.yaml: PX4 >= 1.14, gains of `lpv-sysid chain` / `identify --plant "
+    "px4-rate`)",
+    "namespace": "ROS namespace of every node and topic (no leading slash); one per vehicle",
+    "transport": "mavlink (the bridge's own MAVLink link to PX4) | mavros (MAVROS topics)",
+    "link_url": "MAVLink link of the bridge: udpin:HOST:PORT, tcp:HOST:PORT, /dev/ttyAMA0",
+    "auto_start": "true: the sequencer starts the nodes in order at once; false: on its "
+    "start service",
+    # the MAVROS transport (issue 26): MAVROS_ARGUMENTS, mavros_overrides, mavros_node
     "mavros_ns": "namespace of the MAVROS node (transport mavros)",
     "fcu_url": "non-empty: start MAVROS here with this fcu_url (PX4 SITL instance 0: "
     "udp://:14540@127.0.0.1:14580); empty: MAVROS runs elsewhere",
     "tgt_system": "MAVROS tgt_system: PX4's MAV_SYS_ID (SITL: 1 + instance)",
 }
+#: ``design`` launch argument values (the controller reads the design from the gains file and
+#: refuses a file of neither; the argument picks the bridge command and parameter file)
+DESIGNS = ("virtual_actuator", "rate_plant")
 
-#: the MAVROS transport's launch arguments and defaults (``declare_arguments(**...)``)
-MAVROS_ARGUMENTS = {
-    "transport": "mavlink",
-    "mavros_ns": "/mavros",
-    "fcu_url": "",
-    "tgt_system": "1",
-}
+#: the MAVROS transport's launch arguments and defaults (``declare_arguments(**...)``;
+#: ``transport`` is one of the per-flight arguments below)
+MAVROS_ARGUMENTS = {"mavros_ns": "/mavros", "fcu_url": "", "tgt_system": "1"}
+
+#: the defaults of the per-flight arguments (the shipped config/mavlink_bridge_node.yaml's)
+TRANSPORT_DEFAULT = "mavlink"
+LINK_URL_DEFAULT = "udpin:127.0.0.1:14540"
+
+
+def bridge_overrides(**more) -> dict:
+    """The bridge's parameters chosen per flight by launch arguments (``transport``,
+    ``link_url``), plus ``more``."""
+    return {"transport": arg("transport"), "link.url": arg("link_url"), **more}
+
+
+def sequencer(steps: Any, remappings: Optional[list] = None, **more) -> Node:
+    """The sequencer node (nodes/sequencer_node.py) running ``steps`` (a list, or a
+    substitution giving one), on its ``start`` service or at once with ``auto_start``;
+    ``more``: further parameters (``use_sim_time``)."""
+    overrides = {"steps": steps, "auto_start": arg("auto_start"), **more}
+    return node("sequencer", overrides=overrides, remappings=remappings)
+
 
 #: marks an argument without default (``ros2 launch`` refuses to start without it)
 REQUIRED = None
 
 
 def declare_arguments(notes: Optional[dict[str, str]] = None, **defaults) -> list:
-    """``DeclareLaunchArgument`` for ``config_dir`` and then for each keyword, in order.
+    """``DeclareLaunchArgument`` for ``config_dir``, ``namespace`` and then for each keyword,
+    in order.
 
-    ``config_dir`` defaults to the installed ``share/lpv_sysid/config``. A keyword's value
-    is the argument's default (:data:`REQUIRED`: none); its description is the shared one
-    of :data:`DESCRIPTIONS`, followed by ``" (<note>)"`` for the names in ``notes``.
+    ``config_dir`` defaults to the installed ``share/lpv_sysid/config``, ``namespace`` to
+    ``lpv_sysid`` (every node of :func:`node` runs in it, so every topic is under it). A
+    keyword's value is the argument's default (:data:`REQUIRED`: none); its description is
+    the shared one of :data:`DESCRIPTIONS`, followed by ``" (<note>)"`` for the names in
+    ``notes``.
     """
     unknown = sorted((set(defaults) | set(notes or {})) - set(DESCRIPTIONS))
     if unknown:
         raise KeyError(f"launch arguments without a description: {unknown}")
     notes = notes or {}
     out = []
-    for name, default in {"config_dir": share_config_dir(), **defaults}.items():
+    first = {"config_dir": share_config_dir(), "namespace": NAMESPACE}
+    for name, default in {**first, **defaults}.items():
         description = DESCRIPTIONS[name] + (f" ({notes[name]})" if name in notes else "")
         if default is REQUIRED:
             out.append(DeclareLaunchArgument(name, description=description))
@@ -77,9 +107,19 @@ def arg(name: str) -> LaunchConfiguration:
     return LaunchConfiguration(name)
 
 
-def params(name: str) -> PathJoinSubstitution:
+def params(name: Any) -> PathJoinSubstitution:
     """The node parameter file ``name`` in the directory of the ``config_dir`` argument."""
     return PathJoinSubstitution([arg("config_dir"), name])
+
+
+def by_design(rate_plant: str, virtual_actuator: str) -> Any:
+    """``rate_plant`` when the ``design`` launch argument is ``rate_plant``, else
+    ``virtual_actuator`` (a substitution, resolved at launch)."""
+    from launch.substitutions import PythonExpression
+
+    return PythonExpression(
+        [f"{rate_plant!r} if '", arg("design"), f"' == 'rate_plant' else {virtual_actuator!r}"]
+    )
 
 
 def sigterm_timeout() -> LaunchConfiguration:
@@ -91,12 +131,14 @@ def sigterm_timeout() -> LaunchConfiguration:
 
 def node(
     name: str,
-    params_file: Optional[str] = None,
+    params_file: Any = None,
     overrides: Optional[Mapping[str, Any]] = None,
     condition: Any = None,
+    remappings: Optional[list] = None,
 ) -> Node:
     """The package's node ``name`` (executable ``<name>_node``, setup.py ``NODES``) in the
-    ``/lpv_sysid`` namespace, logging to the screen, with :func:`sigterm_timeout`.
+    namespace of the ``namespace`` launch argument (``lpv_sysid``), logging to the screen,
+    with :func:`sigterm_timeout`; ``remappings``: launch_ros remapping pairs.
 
     Its parameters: the file ``params_file`` in ``config_dir`` (:func:`params`; ``None``:
     none), then ``overrides`` (launch arguments through :func:`arg`). ``condition``: a launch
@@ -109,17 +151,18 @@ def node(
         package=PACKAGE,
         executable=f"{name}_node",
         name=name,
-        namespace=NAMESPACE,
+        namespace=arg("namespace"),
         output="screen",
+        remappings=remappings,
         sigterm_timeout=sigterm_timeout(),
         parameters=parameters,
         condition=condition,
     )
 
 
-def transport_overrides() -> dict:
+def mavros_overrides() -> dict:
     """mavlink_bridge parameters of the MAVROS arguments (:data:`MAVROS_ARGUMENTS`)."""
-    return {"transport": arg("transport"), "mavros.namespace": arg("mavros_ns")}
+    return {"mavros.namespace": arg("mavros_ns")}
 
 
 def mavros_node() -> Node:

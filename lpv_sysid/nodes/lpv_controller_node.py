@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from geometry_msgs.msg import TwistStamped
 from nav_msgs.msg import Odometry
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
@@ -40,18 +41,28 @@ class LpvControllerNode(shell.ShellNode):
 
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, PARAMETERS, **kwargs)
+        self._clock = self.get_clock()  # the node clock, looked up once (now())
         settings = ControllerSettings.from_dict(self.params)
+        # one preallocated actuator_command, filled per tick (published before the next one)
         self.runtime = ControllerRuntime(
-            settings, messages.MsgFactory.rclpy(), self.get_fully_qualified_name()
+            settings,
+            messages.MsgFactory.rclpy(),
+            self.get_fully_qualified_name(),
+            reuse_messages=True,
         )
+
         self.pub = {
             "actuator_command": self.create_publisher(
                 JointState, "actuator_command", shell.qos_for("actuator_command")
             ),
             "status": shell.StatusPublisher(self),
         }  # status and /diagnostics
+        # state (the high-rate input): serialized bytes, only the fields the law needs read
+        # (rclpy would build the whole Odometry, 72 covariance doubles included)
+        self.create_subscription(
+            Odometry, "state", self._on_state_raw, shell.qos_for("state"), raw=True
+        )
         for topic, typ in (
-            ("state", Odometry),
             ("rotor_speeds", JointState),
             ("velocity_reference", TwistStamped),
             ("excitation", JointState),
@@ -59,7 +70,8 @@ class LpvControllerNode(shell.ShellNode):
             self.create_subscription(typ, topic, self._input(topic), shell.qos_for(topic))
         self.create_service(Trigger, "~/start", self.on_start)
         self.create_service(Trigger, "~/abort", self.on_abort)
-        self.create_timer(1.0 / settings.rate_hz, self.on_tick)
+        # tick_source timer: the law step at rate_hz; state: only the staleness watch
+        self.create_timer(settings.timer_period_s, self.on_tick)
         self.status_timer(settings.status_rate_hz, self.publish_status)
         self.get_logger().info(
             f"gains {settings.gains_file}: box "
@@ -77,14 +89,27 @@ class LpvControllerNode(shell.ShellNode):
         """Log what the core queued, with this node's logger (timestamp, /rosout)."""
         shell.log_lines(self.get_logger(), self.runtime.take_log())
 
+    def now(self) -> float:
+        """The node clock [s], read once per callback (the clock object looked up once)."""
+        return self._clock.now().nanoseconds * 1e-9
+
     def _input(self, topic):
         def cb(msg):
-            # tick_source state: a state sample steps the law at once (freshest sample)
             for out, m in self.runtime.on_input(topic, msg, self.now()):
                 self.pub[out].publish(m)
             self.log_core()
 
         return cb
+
+    def _on_state_raw(self, data):
+        # tick_source state: a state sample steps the law at once (freshest sample)
+        for out, m in self.runtime.on_state_cdr(data, self.now(), self._deserialize_state):
+            self.pub[out].publish(m)
+        self.log_core()
+
+    @staticmethod
+    def _deserialize_state(data):
+        return deserialize_message(data, Odometry)
 
     def on_tick(self):
         if self._auto_start and not self.runtime.supervisor.armed:

@@ -37,7 +37,7 @@ from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu, JointState
 from std_srvs.srv import Trigger
 
-from lpv_sysid.flight.bridge import PARSERS, SPECS, BridgeRuntime, settings_from_params
+from lpv_sysid.flight.bridge import SPECS, BridgeRuntime, settings_from_params
 from lpv_sysid.io import messages
 from lpv_sysid.nodes import shell
 
@@ -53,6 +53,7 @@ TYPES = {
     "cmd_vel": TwistStamped,
     "velocity_reference": TwistStamped,
     "actuator_command": JointState,
+    "rate_setpoint": JointState,
     "mavros_odom": Odometry,
     "mavros_imu": Imu,
     "mavros_diagnostics": DiagnosticArray,
@@ -106,6 +107,8 @@ class MavlinkBridgeNode(shell.ShellNode):
             shell.TEARDOWN_MARGIN_S,
         )
         self.core = rt.core
+        if rt.settings.publish_tf:
+            self.enable_tf()
         self.pub: dict = {"status": shell.StatusPublisher(self)}  # status and /diagnostics
         for e in rt.publishers:
             self.pub[e.key] = self.create_publisher(type_of(e), e.topic, qos_of(e))
@@ -126,7 +129,7 @@ class MavlinkBridgeNode(shell.ShellNode):
         return settings_from_params(values)
 
     def _input(self, key):
-        parse = PARSERS.get(key)
+        parse = self.runtime.parsers.get(key)
 
         def cb(msg):
             if parse is None:  # a MAVROS message: the runtime judges it
@@ -141,6 +144,7 @@ class MavlinkBridgeNode(shell.ShellNode):
         """Publish the runtime's ``[(key, message)]``, then log what it queued."""
         for key, msg in out:
             self.pub[key].publish(msg)
+            self.publish_tf_of(key, msg)
         shell.log_lines(self.get_logger(), self.runtime.take_log())
 
     # -- orderly shutdown (nodes/shell.run) ----------------------------------------

@@ -28,31 +28,56 @@ from rclpy.qos import (
     QoSHistoryPolicy,
     QoSProfile,
     QoSReliabilityPolicy,
-    qos_profile_sensor_data,
 )
 from rclpy.signals import SignalHandlerOptions
+from tf2_msgs.msg import TFMessage
 
 from lpv_sysid.configuration.parameters import refuse_unknown
 from lpv_sysid.errors import ConfigError, LpvSysidError
-from lpv_sysid.io.messages import NAMESPACE, TYPES
+from lpv_sysid.io.messages import (
+    NAMESPACE,
+    TF_TOPIC,
+    TYPES,
+    MsgFactory,
+    qos_of,
+    tf_from_odometry,
+)
 
-# topic (relative to /lpv_sysid) -> type: the topic table of docs/DESIGN.md (io/messages/)
+# topic (relative to the namespace) -> type: the topic table of docs/DESIGN.md (io/messages/)
 TOPIC_TYPES = dict(TYPES)
-# high-rate measurement streams: best effort (a late sample is worthless); the rest
-# (references, excitation, commands, status) reliable.
-SENSOR_TOPICS = frozenset({"state", "rotor_speeds", "imu"})
 
-QOS_SENSOR = qos_profile_sensor_data
-QOS_RELIABLE = QoSProfile(
+
+def qos_profile(spec: dict) -> QoSProfile:
+    """An rclpy QoSProfile from the package's declaration (io/messages/topics.py)."""
+    return QoSProfile(
+        history=QoSHistoryPolicy[spec["history"].upper()],
+        depth=spec["depth"],
+        reliability=QoSReliabilityPolicy[spec["reliability"].upper()],
+        durability=QoSDurabilityPolicy[spec["durability"].upper()],
+    )
+
+
+#: high-rate measurement streams: best effort (a late sample is worthless); references,
+#: excitation, commands: reliable; status: reliable + transient local (a late joiner sees
+#: each node's last status). Declared once in io/messages/topics.py (also what a bag
+#: records as the offered QoS).
+QOS_SENSOR = qos_profile(qos_of("state"))
+QOS_RELIABLE = qos_profile(qos_of("velocity_reference"))
+QOS_STATUS = qos_profile(qos_of("status"))
+#: tf2_ros's TransformBroadcaster profile (reliable, volatile, keep last 100)
+QOS_TF = QoSProfile(
     history=QoSHistoryPolicy.KEEP_LAST,
-    depth=10,
+    depth=100,
     reliability=QoSReliabilityPolicy.RELIABLE,
     durability=QoSDurabilityPolicy.VOLATILE,
 )
 
 
 def qos_for(topic: str) -> QoSProfile:
-    return QOS_SENSOR if topic in SENSOR_TOPICS else QOS_RELIABLE
+    """The QoS of the package's publishers of ``topic`` -- and of its subscriptions, but
+    always volatile: a transient-local reader matches only transient-local writers (a
+    status published by ``ros2 topic pub`` or another tool would never arrive)."""
+    return qos_profile({**qos_of(topic), "durability": "volatile"})
 
 
 #: the ROS convention for diagnostics (diagnostic_aggregator, rqt_robot_monitor read it);
@@ -62,13 +87,12 @@ DIAGNOSTICS_TOPIC = "/diagnostics"
 
 class StatusPublisher:
     """``status`` (in the node's namespace, what the package's nodes read and record) and
-    :data:`DIAGNOSTICS_TOPIC`, one DiagnosticArray to both (reliable, volatile)."""
+    :data:`DIAGNOSTICS_TOPIC`, one DiagnosticArray to both (reliable, transient local: a
+    late ``ros2 topic echo status`` still sees the node's last status)."""
 
     def __init__(self, node) -> None:
-        self.status = node.create_publisher(DiagnosticArray, "status", qos_for("status"))
-        self.diagnostics = node.create_publisher(
-            DiagnosticArray, DIAGNOSTICS_TOPIC, qos_for("status")
-        )
+        self.status = node.create_publisher(DiagnosticArray, "status", QOS_STATUS)
+        self.diagnostics = node.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, QOS_STATUS)
 
     def publish(self, msg) -> None:
         self.status.publish(msg)
@@ -277,7 +301,20 @@ class ShellNode(Node):
         #: the parameters applied while the node runs (the writable ones of the table)
         self.runtime_parameters = frozenset(n for n, _, d in parameters if not d.read_only)
         self._status_timer = None
+        self._tf: Any = None
         self.add_on_set_parameters_callback(self._on_set_parameters)
+
+    def enable_tf(self) -> None:
+        """Publish the REP-105 transform odom -> base_link of every ``state`` message on
+        ``/tf`` (``publish_tf``; see :meth:`publish_tf_of`)."""
+        self._tf = (self.create_publisher(TFMessage, TF_TOPIC, QOS_TF), MsgFactory.rclpy())
+
+    def publish_tf_of(self, topic: str, msg) -> None:
+        """After publishing ``msg`` on ``topic``: its transform, when it is the state and
+        TF is enabled."""
+        if self._tf is not None and topic == "state":
+            pub, f = self._tf
+            pub.publish(tf_from_odometry(f, msg))
 
     def settings_from(self, values: dict):
         """The node's settings from ``{parameter: value}`` (raises a ConfigError naming the
@@ -374,6 +411,7 @@ class RuntimeShell(ShellNode):
     def publish_outputs(self, outputs) -> None:
         for topic, msg in outputs:
             self.pub[topic].publish(msg)
+            self.publish_tf_of(topic, msg)
 
 
 class StopRequest:

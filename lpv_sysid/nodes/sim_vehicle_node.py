@@ -63,6 +63,8 @@ class SimVehicleNode(shell.RuntimeShell):
         self.create_subscription(
             JointState, "actuator_command", self.on_command, shell.qos_for("actuator_command")
         )
+        if settings.publish_tf:
+            self.enable_tf()
         if settings.lockstep:
             self.pub["clock"] = self.create_publisher(ClockMsg, "/clock", shell.QOS_RELIABLE)
         self.create_timer(1.0 / sensors.state_hz, self.on_tick, clock=self.pace_clock)

@@ -31,6 +31,13 @@ from lpv_sysid.report.margins import RunMargins
 
 GO, NO_GO, WATCH, INFO = "GO", "NO-GO", "WATCH", "INFO"
 SIMULATED, FLOWN = "SIMULATED", "FLOWN"
+#: labels of a recording's vehicle (``experiment.yaml``: ``vehicle.kind`` of ``fly``,
+#: ``provenance.vehicle_kind`` of ``import``): PX4 SITL, PX4 hardware-in-the-loop, PX4's
+#: simulation in hardware, the package's own simulated PX4 (SIMULATED), a vehicle (FLOWN)
+SITL, HITL, SIH = "SITL", "HITL", "SIH"
+DATA_LABELS = (SIMULATED, SITL, HITL, SIH, FLOWN)
+#: simulated in some way: a go/no-go on these alone is not one for a vehicle
+SIMULATED_LABELS = (SIMULATED, SITL, HITL, SIH)
 
 
 @dataclass(frozen=True)
@@ -59,6 +66,23 @@ def _g(x: Any, fmt: str = "{:.4g}") -> str:
     return "nan" if not math.isfinite(v) else fmt.format(v)
 
 
+def vehicle_label(experiment: Any) -> tuple[str, str]:
+    """(label, how it was told) of a flight recorder's ``experiment.yaml``: the vehicle kind
+    ``fly`` (``vehicle.kind``) or ``import`` (``provenance.vehicle_kind``) recorded; FLOWN
+    for a recording that does not say (older ``fly`` runs: a PX4 SITL and a vehicle were not
+    told apart then)."""
+    e = experiment if isinstance(experiment, dict) else {}
+    veh = e.get("vehicle")
+    veh = veh if isinstance(veh, dict) else {}
+    imp = e.get("provenance")
+    imp = imp if isinstance(imp, dict) else {}
+    kind = veh.get("kind") or imp.get("vehicle_kind")
+    if kind in DATA_LABELS:
+        src = "imported " + str((imp.get("source") or {}).get("kind", "log")) if imp else "PX4"
+        return str(kind), f"{src}, vehicle kind {kind} from its records"
+    return FLOWN, "PX4 over MAVLink, vehicle kind not recorded"
+
+
 def provenance(d: RunData) -> list[DataSource]:
     """Where each data set came from (module docstring)."""
     out = []
@@ -66,7 +90,8 @@ def provenance(d: RunData) -> list[DataSource]:
     if d.experiment is not None or d.campaign is not None:
         url = (d.campaign or {}).get("connect") or "URL not recorded"
         files = ", ".join(rel(k) for k in ("experiment", "campaign") if k in d.found)
-        p1 = DataSource("phase-1 flights", FLOWN, f"PX4 over MAVLink ({url}); {files}")
+        label, how = vehicle_label(d.experiment)
+        p1 = DataSource("phase-1 flights", label, f"{how} ({url}); {files}")
     elif (d.run_dir / "phase1").is_dir() or d.trims is not None:
         p1 = DataSource(
             "phase-1 flights",
@@ -118,6 +143,33 @@ def _certificate_row(d: RunData) -> Row:
         f"gamma {_g(gamma)}, margin > 0",
         GO if ok else NO_GO,
         f"{kind}, {var} v_d",
+    )
+
+
+def _delay_row(d: RunData) -> Row:
+    """certificate.loop_delay (issue 20 item 7): the constant loop delay the proof covers and
+    the proven margins; NO-GO when the certificate states none (no delay is covered)."""
+    cert = (d.gains or {}).get("certificate")
+    ld = cert.get("loop_delay") if isinstance(cert, dict) else None
+    if not isinstance(ld, dict) or not isinstance(ld.get("bound_s"), (int, float)):
+        return Row(
+            "loop delay (certificate)",
+            "not stated",
+            "certificate.loop_delay.bound_s",
+            NO_GO,
+            "the proof covers no loop delay: synthesize again",
+        )
+
+    def ms(x) -> str:
+        return f"{1e3 * x:.2f} ms" if isinstance(x, (int, float)) else "?"
+
+    return Row(
+        "loop delay (certificate)",
+        f"bound {ms(ld['bound_s'])}; margins: gamma kept up to "
+        f"{ms(ld.get('performance_margin_s'))}, stable up to {ms(ld.get('stability_margin_s'))}",
+        "controller loop delay <= bound (refused at start-up otherwise)",
+        GO,
+        str(ld.get("source", "")),
     )
 
 
@@ -263,6 +315,11 @@ def events_rows(d: RunData) -> list[Row]:
 
 def go_no_go(d: RunData, margins: Optional[RunMargins]) -> tuple[list[Row], str]:
     """All rows and the overall verdict (NO-GO when any row is)."""
-    rows = [_certificate_row(d)] + verification_rows(d) + margin_rows(margins) + events_rows(d)
+    rows = (
+        [_certificate_row(d), _delay_row(d)]
+        + verification_rows(d)
+        + margin_rows(margins)
+        + events_rows(d)
+    )
     overall = NO_GO if any(r.verdict == NO_GO for r in rows) else GO
     return rows, overall

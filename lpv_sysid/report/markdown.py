@@ -7,7 +7,8 @@ validation TIC/NRMSE (Table 3), signal design (spectra, Fig. 7), synthesis certi
 (Lemma 1), the independent verification as recorded, phase-2 gain vs gamma (Eq. 29), tracking
 (Figs. 8-9) and regressor correlations (Fig. 10). A section is written only when its input
 exists; otherwise the report says which file is missing. Sections:
-:mod:`~lpv_sysid.report.sections_design`, :mod:`~lpv_sysid.report.sections_flight`.
+:mod:`~lpv_sysid.report.sections_design`, :mod:`~lpv_sysid.report.sections_models` (open-loop
+poles, time to double, parameter table), :mod:`~lpv_sysid.report.sections_flight`.
 """
 
 from __future__ import annotations
@@ -30,6 +31,8 @@ from lpv_sysid.report.sections_flight import (
     _phase2_section,
     go_no_go_section,
 )
+from lpv_sysid.report.sections_models import stability_section
+from lpv_sysid.report.sections_phase1 import phase1_section
 
 log = logging.getLogger(__name__)
 
@@ -109,7 +112,9 @@ def write_report(
     go_no_go_section(r)
     _inputs_section(r)
     _phase1_section(r)
+    phase1_section(r)
     _ident_section(r)
+    stability_section(r)
     _signals_section(r)
     _synthesis_section(r)
     _verification_section(r)

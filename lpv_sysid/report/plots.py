@@ -141,6 +141,19 @@ def plot_correlation_matrix(
     return _save(fig, path)
 
 
+def excited_bins(amp: np.ndarray, rel: float = 1e-2) -> np.ndarray:
+    """Bins of an amplitude spectrum above ``rel`` x its largest non-DC line: the excited
+    harmonics of a multisine (the other bins hold only leakage and rounding)."""
+    a = np.asarray(amp, dtype=float).copy()
+    if a.size < 2:
+        return np.zeros(0, dtype=int)
+    a[0] = 0.0  # the mean (a vertex offset) is no harmonic
+    top = float(np.max(a))
+    if top <= 0.0:
+        return np.zeros(0, dtype=int)
+    return np.nonzero(a > rel * top)[0]
+
+
 def plot_spectra(
     t: np.ndarray,
     u: np.ndarray,
@@ -151,20 +164,30 @@ def plot_spectra(
     title: str = "",
 ) -> Path:
     """Amplitude spectra of the designed multisines, one panel per channel (seed 0 Sec. V):
-    |DFT| x 2/N of one period on the grid k f0, the channel's excited harmonics marked (dots) and
-    the other bins (leakage, other channels' harmonics) in grey; x range up to 1.25x the
-    channel's highest harmonic."""
+    |DFT| x 2/N of the record (one or more whole periods), the channel's excited harmonics
+    k f0 marked (dots) and the other bins (leakage, other channels' harmonics) in grey; x range
+    up to 1.25x the channel's highest harmonic. A channel whose harmonics are not given (a
+    ``fly`` run keeps ``signals.npz`` without ``summary.yaml``) has them read from its
+    spectrum (:func:`excited_bins`) and says so in its title."""
     u = np.asarray(u, dtype=float)
     N, n = u.shape
     amp = np.abs(np.fft.rfft(u, axis=0)) * 2.0 / N
     freq = np.fft.rfftfreq(N, d=float(np.median(np.diff(t))))
+    df = float(freq[1]) if freq.size > 1 else 1.0
     cols = 2 if n > 3 else 1
     rows = int(math.ceil(n / cols))
     fig, axes = plt.subplots(rows, cols, figsize=(11, 2.1 * rows + 0.8), squeeze=False)
     for i in range(n):
         ax = axes[i // cols][i % cols]
-        h = np.asarray(harmonics[i] if harmonics[i] is not None else [], dtype=int)
+        hi = harmonics[i]
+        given = hi is not None and len(hi) > 0
+        if given:  # harmonic k is at k f0: its bin on this record's frequency grid
+            k = np.asarray(hi, dtype=float)
+            h = np.rint(k * float(f0) / df).astype(int)
+        else:
+            h = excited_bins(amp[:, i])
         h = h[(h >= 0) & (h < freq.size)]
+        how = "" if given or not h.size else " (read from the spectrum)"
         fmax = 1.25 * float(freq[h].max()) if h.size else float(freq[-1])
         sel = freq <= fmax
         ax.vlines(freq[sel], 0, amp[sel, i], color="0.65", lw=0.8)
@@ -175,7 +198,7 @@ def plot_spectra(
         # headroom above the tallest line: the legend sits there, not on a harmonic
         top = float(np.max(amp[sel, i])) if np.any(sel) else 0.0
         ax.set_ylim(0, 1.35 * top if top > 0 else 1.0)
-        ax.set_title(f"{names[i]}: {h.size} harmonics", fontsize=9)
+        ax.set_title(f"{names[i]}: {h.size} harmonics{how}", fontsize=9)
         ax.set_ylabel("amplitude", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)

@@ -14,7 +14,12 @@ from lpv_sysid.ident.nonlinear import AXES, REGRESSOR_NAMES, RegressorCorrelatio
 from lpv_sysid.report import plots
 from lpv_sysid.report.data import RunData
 from lpv_sysid.report.document import Report, md_table, short
-from lpv_sysid.report.gonogo import FLOWN, SIMULATED, go_no_go, provenance
+from lpv_sysid.report.gonogo import (
+    DATA_LABELS,
+    SIMULATED_LABELS,
+    go_no_go,
+    provenance,
+)
 from lpv_sysid.report.margins import RunMargins, limits_from_summary, run_margins
 
 log = logging.getLogger(__name__)
@@ -279,9 +284,10 @@ def go_no_go_section(r: Report) -> Optional[RunMargins]:
         r.p(f"**Safety margins could not be computed:** {exc}")
     rows, overall = go_no_go(d, m)
     src = provenance(d)
-    labelled = [x for x in src if x.label in (SIMULATED, FLOWN)]
-    all_sim = bool(labelled) and all(x.label == SIMULATED for x in labelled)
-    r.h(2, f"Go / no-go: **{overall}**" + (" (on SIMULATED data only)" if all_sim else ""))
+    labelled = [x for x in src if x.label in DATA_LABELS]
+    all_sim = bool(labelled) and all(x.label in SIMULATED_LABELS for x in labelled)
+    kinds = "/".join(dict.fromkeys(x.label for x in labelled))
+    r.h(2, f"Go / no-go: **{overall}**" + (f" (on {kinds} data only)" if all_sim else ""))
     r.p(
         md_table(
             ["item", "value", "limit", "verdict", "note"],
@@ -290,7 +296,7 @@ def go_no_go_section(r: Report) -> Optional[RunMargins]:
     )
     r.p(
         "Data sources: "
-        + ("**SIMULATED** data only -- nothing here was flown." if all_sim else "see the table.")
+        + (f"**{kinds}** data only -- nothing here was flown." if all_sim else "see the table.")
     )
     r.p(
         md_table(

@@ -10,7 +10,7 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.signals import metrics
-from lpv_sysid.signals.multisine import SignalSet
+from lpv_sysid.signals.multisine import MAX_SAMPLE_RATE, SignalSet
 
 
 def save_npz(path: str, t: np.ndarray, u: np.ndarray, names) -> None:
@@ -71,6 +71,13 @@ def validate_table(
     d = np.diff(t)
     if np.any(d <= 0) or np.max(np.abs(d - d.mean())) > 1e-6 * d.mean():
         raise ConfigError(f"{where}: 't' must be a strictly increasing uniform grid")
+    if d.mean() < 1.0 / MAX_SAMPLE_RATE * (1 - 1e-9):
+        # before anything is sampled on this step: a 2e-9 s interval made a phase-2
+        # simulation allocate a grid of ~1e9 samples (14 GB in 60 s)
+        raise ConfigError(
+            f"{where}: sample interval {d.mean():.3g} s is below {1.0 / MAX_SAMPLE_RATE:g} s "
+            f"(sample rates above {MAX_SAMPLE_RATE:g} Hz are refused, as in the signal design)"
+        )
     check_magnitude(t, u, names, where)
     return t, u, names
 
@@ -159,14 +166,21 @@ def save_summary(path: str, data: dict[str, Any]) -> None:
         raise ConfigError(f"{path}: cannot write ({exc.strerror})") from None
 
 
-def write_signal_set(out_dir: str, sig: SignalSet) -> tuple[str, str]:
-    """Write ``signals.npz`` and ``summary.yaml`` into ``out_dir`` (created); returns paths."""
+def write_signal_set(out_dir: str, sig: SignalSet, force: bool = False) -> tuple[str, str]:
+    """Write ``signals.npz`` and ``summary.yaml`` into ``out_dir`` (created); returns paths.
+    An existing signal set there is not replaced unless ``force``: gains designed for it
+    (``certificate.design``) and the excitation node would silently fly another signal."""
+    from lpv_sysid.io.files import refuse_existing
+
+    npz = os.path.join(out_dir, "signals.npz")
+    yml = os.path.join(out_dir, "summary.yaml")
+    refuse_existing(
+        (npz, yml), force, " (a certificate's design envelope may refer to this signal set)"
+    )
     try:
         os.makedirs(out_dir, exist_ok=True)
     except OSError as exc:
         raise ConfigError(f"{out_dir}: cannot create directory ({exc.strerror})") from None
-    npz = os.path.join(out_dir, "signals.npz")
-    yml = os.path.join(out_dir, "summary.yaml")
     save_npz(npz, sig.t, sig.u, sig.names)
     save_summary(yml, summary(sig))
     return npz, yml

@@ -18,8 +18,10 @@ Study:
    mass, inertia, arm length, rotor-speed limits; ``K``, ``J_z`` and the motor constants it
    is given are the nominal ones (the motor constants are identified);
 4. the truth is the analytic linearisation (``Quadrotor.linearize``) of the airframe at its
-   equilibrium at the flown velocity: ``Quadrotor.trim(v_flown, yaw_rate)`` with ``v_flown``
-   and the yaw rate the means of the *true* states over the trim-averaging window - seed 0
+   equilibrium at the commanded vertex velocity v_d (what the LPV model is scheduled on; the
+   identification re-expands there, ``expand_at: commanded``), or with ``expand_at: flown`` at
+   the flown velocity: ``Quadrotor.trim(v, yaw_rate)`` with the yaw rate (and ``v_flown``) the
+   means of the *true* states over the trim-averaging window - seed 0
    Eq. (13): the vertex model is the expansion about the equilibrium;
 5. per identified element ``z = (nominal - truth) / std`` with the stored (calibrated)
    ``std``; covered when ``|z| <= k``.
@@ -41,6 +43,7 @@ from lpv_sysid.control.campaign import run_name
 from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError, SafetyError, SolverError
 from lpv_sysid.parallel import map_tasks
+from lpv_sysid.ident.vertex import DEFAULT_JOINT_PROBABILITY
 from lpv_sysid.models.quadrotor import (
     INPUT_NAMES,
     STATE_NAMES,
@@ -114,9 +117,13 @@ def eiv_shift(results) -> float:
     return worst
 
 
-def truth_model(params: QuadrotorParams, rec, trim_window: tuple[float, float]):
-    """``(A, B, x_e)``: linearisation of the airframe at its equilibrium at the mean true
-    velocity and yaw rate over ``trim_window`` (module docstring, step 4)."""
+def truth_model(
+    params: QuadrotorParams, rec, trim_window: tuple[float, float], at: str = "commanded"
+):
+    """``(A, B, x_e)``: linearisation of the airframe at its equilibrium at the commanded vertex
+    velocity ``rec.v_d`` (``at="commanded"``, what the LPV model is scheduled on) or at the mean
+    true velocity over ``trim_window`` (``"flown"``), with the mean true yaw rate there
+    (module docstring, step 4)."""
     q = Quadrotor(params)
     sel = (rec.state_t >= trim_window[0]) & (rec.state_t < trim_window[1])
     if not sel.any():
@@ -125,7 +132,8 @@ def truth_model(params: QuadrotorParams, rec, trim_window: tuple[float, float]):
     reduced = reduced_state(xs, params.arm_length)
     phi, th, q_, r_ = reduced[:, 0], reduced[:, 1], reduced[:, 6], reduced[:, 7]
     psi_dot = float(np.mean((np.sin(phi) * q_ + np.cos(phi) * r_) / np.cos(th)))
-    tr = q.trim(reduced[:, 2:5].mean(axis=0), psi_dot)
+    v = np.asarray(rec.v_d, dtype=float) if at == "commanded" else reduced[:, 2:5].mean(axis=0)
+    tr = q.trim(v, psi_dot)
     A, B = q.linearize(tr)
     return A, B, tr.x0
 
@@ -148,11 +156,20 @@ def z_scores(result, A: np.ndarray, B: np.ndarray) -> dict[str, float]:
     return out
 
 
+#: most airframes of one study (each is a simulated phase-1 campaign and identification)
+MAX_AIRFRAMES = 1000
+
+
 @dataclass(frozen=True)
 class CoverageConfig:
     """A coverage study: how many simulated airframes, how far from the nominal one."""
 
-    airframes: int = cf.count(3, "simulated airframes", lo=1, hi=10_000)
+    airframes: int = cf.count(
+        3,
+        "simulated airframes (each a full phase-1 campaign, minutes of CPU)",
+        lo=1,
+        hi=MAX_AIRFRAMES,
+    )
     spread: float = cf.number(
         0.25, "relative spread of every physical parameter", lo=0.0, hi=1.0, hi_open=True
     )
@@ -161,6 +178,14 @@ class CoverageConfig:
         None, "1-based seed 0 Table 1 indices (null: all 8)", lo=1, optional=True
     )
     max_draws: int = cf.count(20, "redraws of an airframe that cannot be flown", lo=1)
+    joint_probability: float = cf.number(
+        DEFAULT_JOINT_PROBABILITY,
+        "that of the certified box (the joint rate is judged against it)",
+        lo=0.0,
+        lo_open=True,
+        hi=1.0,
+        hi_open=True,
+    )
 
     def __post_init__(self) -> None:
         cf.normalize_fields(self, "coverage")
@@ -172,6 +197,7 @@ class VertexCoverage:
     vertex: tuple[float, float, float]
     z: dict[str, float]
     k_sigma: float
+    dof: float | None = None  # Student-t dof of the vertex's standard errors (Fit.dof)
 
     @property
     def covered(self) -> int:
@@ -200,6 +226,37 @@ class AirframeCoverage:
     @property
     def fraction(self) -> float:
         return self.covered / self.n if self.n else float("nan")
+
+    def joint_k(self, probability: float) -> list[float]:
+        """Per vertex, the half-width in stored std of the certified box for this airframe's
+        identification: the Sidak value over all its elements
+        (:func:`lpv_sysid.ident.vertex.joint_k`), never below the stored ``k_sigma``
+        (synthesis.uncertainty_set.joint_widen keeps a wider stored interval)."""
+        from lpv_sysid.ident.vertex import joint_k
+
+        return [
+            max(v.k_sigma, joint_k(self.n, probability, v.dof, v.k_sigma)) for v in self.vertices
+        ]
+
+    def jointly_covered(self, probability: float) -> bool:
+        """True when ALL identified elements of the airframe lie in their simultaneous
+        intervals at once (the event the certificate's joint probability is about)."""
+        return all(
+            abs(z) <= k
+            for v, k in zip(self.vertices, self.joint_k(probability))
+            for z in v.z.values()
+        )
+
+    def worst_joint_ratio(self, probability: float) -> float:
+        """max |z| / k_joint over all elements (<= 1: jointly covered)."""
+        return max(
+            (
+                abs(z) / k
+                for v, k in zip(self.vertices, self.joint_k(probability))
+                for z in v.z.values()
+            ),
+            default=0.0,
+        )
 
     def factors(self, base: QuadrotorParams) -> dict[str, float]:
         """Parameter ratios to the base airframe (for the table)."""
@@ -298,10 +355,20 @@ def score(runs, results, params: QuadrotorParams, ident_cfg) -> list[VertexCover
 
     out = []
     for rec, res in zip(runs, results):
-        A, B, _ = truth_model(params, rec, vx.trim_window((0.0, rec.t_excite), ident_cfg))
+        at = "commanded" if ident_cfg.expand_at == "commanded" else "flown"
+        A, B, _ = truth_model(params, rec, vx.trim_window((0.0, rec.t_excite), ident_cfg), at)
         k = unc.applied_k(ident_cfg.uncertainty, len(res.uncertain.intervals))
         u_d, v_d, w_d = (float(c) for c in rec.v_d)
-        out.append(VertexCoverage(rec.name, (u_d, v_d, w_d), z_scores(res, A, B), k))
+        dof = res.fit.dof
+        out.append(
+            VertexCoverage(
+                rec.name,
+                (u_d, v_d, w_d),
+                z_scores(res, A, B),
+                k,
+                None if dof is None else float(dof),
+            )
+        )
     return out
 
 
@@ -315,13 +382,15 @@ def run_study(
     progress: Callable[[str], None] | None = None,
     keep_runs: bool = False,
     workers: int | None = 1,
+    backend: str = "process",
 ):
     """The study of the module docstring: ``(airframes, runs per airframe or None)``.
 
     The airframes are independent tasks (each draws from its own stream
     ``default_rng([seed, k])`` and flies with its own noise seeds): they run on ``workers``
     processes (:func:`lpv_sysid.parallel.map_tasks`; ``None``: every core) with the same
-    numbers as the serial run; ``progress`` lines come in airframe order."""
+    numbers as the serial run; ``progress`` lines come in airframe order. ``backend``:
+    ``process`` or ``dask`` (:data:`lpv_sysid.parallel.BACKENDS`)."""
     from lpv_sysid.sim import phase1 as p1
 
     vertices = list(cfg.vertices) if cfg.vertices else list(range(1, 9))
@@ -339,7 +408,7 @@ def run_study(
                 f"{af.vertices[0].k_sigma:g} sigma ({100 * af.fraction:.2f} %)"
             )
 
-    done = map_tasks(_airframe_task, tasks, workers, on_result=report)
+    done = map_tasks(_airframe_task, tasks, workers, backend, on_result=report)
     return [af for af, _ in done], [runs for _, runs in done]
 
 
@@ -361,25 +430,40 @@ ABLATIONS: dict[str, dict[str, Any]] = {
 
 
 def ablations(
-    runs_per_airframe, airframes: Sequence[AirframeCoverage], base: QuadrotorParams, ident_cfg
+    runs_per_airframe,
+    airframes: Sequence[AirframeCoverage],
+    base: QuadrotorParams,
+    ident_cfg,
+    workers: int | None = 1,
+    backend: str = "process",
 ) -> dict:
-    """Coverage fraction per airframe of each :data:`ABLATIONS` variant on the same flights."""
+    """Coverage fraction per airframe of each :data:`ABLATIONS` variant on the same flights;
+    each (variant, airframe) re-identification is a task on ``workers`` processes (the
+    numbers of the serial run)."""
     from lpv_sysid.ident import equation_error as ee
 
-    out = {}
+    cfgs = {}
     for name, change in ABLATIONS.items():
         kw = dict(change)
         if kw.get("covariance") == "residual_acf":
             kw["covariance"] = ee.CovarianceConfig(
                 method="residual_acf", max_lag=ident_cfg.max_lag
             )
-        cfg = dataclasses.replace(ident_cfg, **kw)
-        fr = []
-        for af, runs in zip(airframes, runs_per_airframe):
-            vc = score(runs, identify_runs(runs, af.params, base, cfg), af.params, cfg)
-            fr.append(sum(v.covered for v in vc) / max(1, sum(v.n for v in vc)))
-        out[name] = fr
-    return out
+        cfgs[name] = dataclasses.replace(ident_cfg, **kw)
+    tasks = [
+        (runs, af.params, base, cfg)
+        for cfg in cfgs.values()
+        for af, runs in zip(airframes, runs_per_airframe)
+    ]
+    fractions = iter(map_tasks(_ablation_task, tasks, workers, backend))
+    return {name: [next(fractions) for _ in airframes] for name in cfgs}
+
+
+def _ablation_task(task: tuple) -> float:
+    """One airframe re-identified under one ablation config: its coverage fraction."""
+    runs, params, base, cfg = task
+    vc = score(runs, identify_runs(runs, params, base, cfg), params, cfg)
+    return sum(v.covered for v in vc) / max(1, sum(v.n for v in vc))
 
 
 def summary_dict(
@@ -400,6 +484,7 @@ def summary_dict(
             "seed": cfg.seed,
             "vertices": list(cfg.vertices) if cfg.vertices else list(range(1, 9)),
             "k_sigma": float(k),
+            "joint_probability": float(cfg.joint_probability),
         },
         "overall": {
             "covered": int(np.sum(np.abs(all_z) <= k)),
@@ -411,7 +496,18 @@ def summary_dict(
         },
         "airframes": [],
     }
-    for af in airframes:
+    P = float(cfg.joint_probability)
+    joint = [af.jointly_covered(P) for af in airframes]
+    d["joint"] = {
+        "probability": P,
+        "airframes_all_inside": int(sum(joint)),
+        "airframes": len(airframes),
+        "rate": float(np.mean(joint)) if joint else float("nan"),
+        "meaning": "fraction of airframes with ALL identified elements inside the simultaneous "
+        "intervals of the certified box (Sidak k over the airframe's element count, "
+        "ident.vertex.joint_k), the event the certificate's joint probability is about",
+    }
+    for af, jc in zip(airframes, joint):
         d["airframes"].append(
             {
                 "index": af.index,
@@ -419,6 +515,9 @@ def summary_dict(
                 "covered": af.covered,
                 "elements": af.n,
                 "fraction": float(af.fraction),
+                "joint_k": [round(k, 4) for k in af.joint_k(P)],
+                "jointly_covered": bool(jc),
+                "worst_z_over_joint_k": float(af.worst_joint_ratio(P)),
                 "eiv_max_shift_std": float(af.eiv_shift),
                 "vertices": [
                     {

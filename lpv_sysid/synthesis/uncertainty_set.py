@@ -12,6 +12,7 @@ sidecar are written by :mod:`lpv_sysid.io.formats`.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from pathlib import Path
 from dataclasses import dataclass, field
@@ -21,7 +22,7 @@ import numpy as np
 
 from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.ident.vertex import UncertaintyConfig
+from lpv_sysid.ident.vertex import DEFAULT_JOINT_PROBABILITY, UncertaintyConfig
 from lpv_sysid.io.formats import VertexModels
 from lpv_sysid.models.lpv import (
     CommonInputSet,
@@ -54,6 +55,9 @@ SETS = ("full_box", "reduced_polytope")
 #: keys of ``uncertainty`` that configure the reduction (ident.vertex.UncertaintyConfig)
 REDUCTION_KEYS = ("freq_hz", "n_freq", "output_states")
 DEFAULT_SET = "reduced_polytope"
+#: ``uncertainty.box_inflation`` of a full box: the proof covers every half-width x 1.05 (issue 20
+#: item 6: a stated robustness margin instead of the solver's epsilon)
+DEFAULT_BOX_INFLATION = 0.05
 #: systems per vertex of the finite sample of a full box stored for the runtime re-check
 FULL_BOX_SAMPLE = 16
 
@@ -124,6 +128,24 @@ class UncertaintySettings:
     )
     common_b: bool = cf.flag(DEFAULT_COMMON_B, "B^b common to all vertices (interior covered)")
     p_max_b: int = cf.count(DEFAULT_P_MAX_B, "corner parameters of the common input set")
+    joint_probability: Optional[float] = cf.number(
+        None,
+        "probability that all identified elements are in the certified box at once (Sidak "
+        "widening, full_box; default there: ident.vertex.DEFAULT_JOINT_PROBABILITY)",
+        lo=0.0,
+        lo_open=True,
+        hi=1.0,
+        hi_open=True,
+        optional=True,
+    )
+    box_inflation: Optional[float] = cf.number(
+        None,
+        "the certified box is every half-width x (1 + box_inflation): the proof's stated "
+        f"margin (full_box; default there: {DEFAULT_BOX_INFLATION})",
+        lo=0.0,
+        hi=1.0,
+        optional=True,
+    )
     #: keys of the reduction itself (:data:`REDUCTION_KEYS`, declared and checked by
     #: :class:`~lpv_sysid.ident.vertex.UncertaintyConfig`), passed to it as given
     reduction: Mapping[str, Any] = field(default_factory=dict)
@@ -136,6 +158,9 @@ class UncertaintySettings:
         kw = cf.parse_fields(cls, d, where, other_keys=REDUCTION_KEYS)
         reduction = {k: d[k] for k in REDUCTION_KEYS if k in d}
         UncertaintyConfig.from_dict(reduction, where)
+        if kw.get("set", DEFAULT_SET) == "full_box":  # the full box's stated coverage and margin
+            kw.setdefault("joint_probability", DEFAULT_JOINT_PROBABILITY)
+            kw.setdefault("box_inflation", DEFAULT_BOX_INFLATION)
         return cls(reduction=reduction, **kw)
 
     def to_dict(self) -> dict:
@@ -149,6 +174,11 @@ class UncertaintySettings:
             "method": self.method,
             "common_b": self.common_b,
             "p_max_b": self.p_max_b,
+            **{
+                k: getattr(self, k)
+                for k in ("joint_probability", "box_inflation")
+                if getattr(self, k) is not None
+            },
             **self.reduction,
         }
 
@@ -217,8 +247,64 @@ MOTOR_STATES = ("dt", "da", "de", "dr")
 MOTOR_INPUTS = ("ut", "ua", "ue", "ur")
 
 
+def _meta_list(meta: dict, *keys: str) -> list:
+    d: Any = meta
+    for k in keys:
+        d = d.get(k) if isinstance(d, dict) else None
+    return list(d) if isinstance(d, (list, tuple)) else []
+
+
+def _t_widening(meta: dict, i: int, k: float) -> float:
+    from lpv_sysid.ident.equation_error import t_factor
+
+    dofs = _meta_list(meta, "std", "dof")
+    dof = dofs[i] if i < len(dofs) else None
+    return t_factor(k, None if dof is None else float(dof))
+
+
+def joint_widen(
+    models: VertexModels, out: list, sigmas: list, probability: float, k_stored: list
+) -> dict:
+    """Widen every element with a standard error to the simultaneous interval that holds *all*
+    of them at once with ``probability`` (:func:`lpv_sysid.ident.vertex.joint_k`, Sidak over the
+    total count, Student-t with each vertex's ``meta.std.dof``); a stored interval already
+    wider is kept. ``sigmas[i][l]``: the stored std of ``out[i][l]`` (0: no std, kept as
+    stored). Returns the certificate's ``joint_coverage`` entry."""
+    from lpv_sysid.ident.vertex import uncertainty as unc
+
+    dofs = _meta_list(models.meta, "std", "dof")
+    p_total = sum(1 for sv in sigmas for sd in sv if sd > 0)
+    ks, widened = [], 0
+    for i, (els, sv) in enumerate(zip(out, sigmas)):
+        dof = dofs[i] if i < len(dofs) and dofs[i] is not None else None
+        k_j = unc.joint_k(p_total, probability, None if dof is None else float(dof), k_stored[i])
+        ks.append(round(k_j, 4))
+        for idx, (e, sd) in enumerate(zip(els, sv)):
+            if sd <= 0:
+                continue
+            nom = e.nominal if e.nominal is not None else 0.5 * (e.lower + e.upper)
+            lo, hi = min(e.lower, nom - k_j * sd), max(e.upper, nom + k_j * sd)
+            if lo < e.lower or hi > e.upper:
+                widened += 1
+                els[idx] = UncertainElement(e.matrix, e.row, e.col, lo, hi, nom)
+    return {
+        "probability": float(probability),
+        "method": "Sidak over all elements with a standard error (Sidak 1967: a lower bound "
+        "for jointly Gaussian estimates with any correlation), Student-t quantile with the "
+        "file's meta.std.dof",
+        "elements": int(p_total),
+        "k_stored_std": ks,
+        "widened": int(widened),
+        "statement": f"all {p_total} identified elements in their intervals at once with "
+        f"probability >= {probability:g} under the identification's error model "
+        "(elements without a std are taken as stored)",
+    }
+
+
 def full_box_elements(
-    models: VertexModels, motor_std: Optional[tuple] = None
+    models: VertexModels,
+    motor_std: Optional[tuple] = None,
+    joint_probability: Optional[float] = None,
 ) -> tuple[list, list, dict]:
     """Every uncertain element of the models file in its interval, per vertex (box order):
     ([UncertainElement], [label]) lists and a description of the rule (certificate entry).
@@ -242,12 +328,15 @@ def full_box_elements(
         else False
     )
     n_stored = n_ksig = n_motor = 0
-    out, labels = [], []
+    out, labels, sigmas, k_used = [], [], [], []
     for i, vx in enumerate(models.vertices):
         k_i = float(k_applied[i]) if i < len(k_applied) else k_meta
-        els, labs, seen = [], [], set()
+        k_used.append(k_i)
+        els, labs, seen, sv = [], [], set(), []
         for e in vx.uncertain:
             seen.add((e.matrix, e.row, e.col))
+            if e.upper > e.lower or e.std > 0:
+                sv.append(float(e.std))
             if e.upper > e.lower:
                 els.append(e.to_lpv())
                 labs.append("stored")
@@ -277,9 +366,17 @@ def full_box_elements(
                         labs.append(
                             f"motor constant, synthesis config motor_std +/- {k_meta:g} std"
                         )
+                        # config std is not t-widened: store it as the file would
+                        sv.append(float(sd) * _t_widening(models.meta, i, k_i))
                         n_motor += 1
         out.append(els)
         labels.append(labs)
+        sigmas.append(sv)
+    joint = (
+        None
+        if joint_probability is None
+        else joint_widen(models, out, sigmas, float(joint_probability), k_used)
+    )
     rule = {
         "intervals": "stored [lower, upper] where lower < upper; nominal +/- k std where a file "
         "stores lower = upper with std > 0 (k = meta.uncertainty.k_applied, meta.k_sigma or 3)",
@@ -288,6 +385,8 @@ def full_box_elements(
         "motor_from_config": n_motor,
         "motor_std": None if motor_std is None else [float(x) for x in motor_std],
     }
+    if joint is not None:
+        rule["joint_coverage"] = joint
     return out, labels, rule
 
 
@@ -331,6 +430,7 @@ def load_models(
     p_max = _per_vertex(ucfg.p_max, len(corners))
     max_corners, p_max_b, method = ucfg.max_corners, ucfg.p_max_b, ucfg.method
     common_b, which, motor_std = ucfg.common_b, ucfg.set, ucfg.motor_std
+    joint_probability, box_inflation = ucfg.joint_probability, ucfg.box_inflation
     As, Bs = vm.A, vm.B
     elss = [[e.to_lpv() for e in vx.uncertain] for vx in vm.vertices]
     kw: dict[str, Any] = dict(
@@ -351,8 +451,15 @@ def load_models(
                 "uncertainty.set: full_box needs common_b: true (the B hull is what covers the "
                 "interior of the scheduling box)"
             )
-        fb, labels, _ = full_box_elements(vm, motor_std)
+        fb, labels, rule = full_box_elements(vm, motor_std, joint_probability)
         ebox = ElementBox.from_elements(As, Bs, fb, labels)
+        cov = dict(rule.get("joint_coverage") or {})
+        if box_inflation:
+            f = 1.0 + float(box_inflation)
+            ebox = dataclasses.replace(ebox, half=tuple(np.asarray(h) * f for h in ebox.half))
+        if cov or box_inflation is not None:
+            cov["box_inflation"] = None if box_inflation is None else float(box_inflation)
+            ebox = dataclasses.replace(ebox, coverage=cov)
         model = PolytopicModel(
             systems=ebox.sample_systems(list(zip(As, Bs)), FULL_BOX_SAMPLE), box=ebox, **kw
         )

@@ -184,6 +184,11 @@ def lv100_c0_spectral_radius(K: np.ndarray = LV100_C0_K) -> float:
     return float(np.max(np.abs(np.linalg.eigvals(Acl))))
 
 
+#: bounds of the example studies (checked before anything is allocated)
+MAX_RUNS = 10_000
+MAX_SAMPLES = 10_000_000
+
+
 def lv100_statistics(
     n: int,
     runs: int,
@@ -196,9 +201,17 @@ def lv100_statistics(
 
     Returns (mean_Kp, std_Kp, mean_Ki, std_Ki), each 2x2, for the PI class of Sec. 5.1.1.
     """
+    from lpv_sysid.errors import ConfigError
     from lpv_sysid.vrft.controller_class import pid_class
     from lpv_sysid.vrft.tuning import vrft
 
+    if not 2 <= runs <= MAX_RUNS:
+        raise ConfigError(
+            f"--runs {runs}: need 2 .. {MAX_RUNS} noise realisations (each is one VRFT "
+            "identification)"
+        )
+    if not 50 <= n <= MAX_SAMPLES:
+        raise ConfigError(f"--n {n}: the examples take 50 .. {MAX_SAMPLES} samples")
     cls = pid_class(2, 2, LV100_TS, ("p", "i"))
     kps, kis = [], []
     for r in range(runs):

@@ -16,6 +16,12 @@ is rewritten or dropped. A directory a live recorder is writing is refused.
 
 Prints one line per bag and per experiment; exit status 0 when every bag is readable,
 1 when a bag could not be repaired (the line says why), 2 on bad input.
+
+`lpv-sysid bag latency BAG...`: the loop's state-stamp -> setpoint latency p50/p99/max of a
+phase-2 bag (``actuator_command``: log time minus header stamp, the stamp of the state sample
+the command was computed on, controller ``tick_source: state``) -- the data logger's bag of
+``phase2.launch.py`` or the bag of ``fly phase2`` (whose summary reports the same numbers,
+:func:`lpv_sysid.flight.phase2.latency_from_bag`).
 """
 
 from __future__ import annotations
@@ -48,6 +54,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--dry-run", action="store_true", help="report what would be done, change nothing"
     )
     p.set_defaults(_action_run=run_repair)
+    q = actions.add_parser(
+        "latency",
+        help="state-stamp -> setpoint latency p50/p99/max of a phase-2 bag (actuator_command)",
+        description=__doc__.split("\n\n")[-1],
+    )
+    q.add_argument("bags", nargs="+", metavar="BAG", help="rosbag2 directory")
+    q.set_defaults(_action_run=run_latency)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -76,3 +89,18 @@ def run_repair(args: argparse.Namespace) -> int:
         else:
             print(f"{path.parent}/{repair_bag(path, dry_run=args.dry_run).summary()}")
     return status
+
+
+def run_latency(args: argparse.Namespace) -> int:
+    from lpv_sysid.flight.phase2 import latency_from_bag
+
+    for b in args.bags:
+        lat = latency_from_bag(b)
+        if not lat.get("commands"):
+            print(f"{b}: no actuator_command")
+            continue
+        print(
+            f"{b}: {lat['commands']} commands, state stamp -> setpoint latency p50 "
+            f"{lat['p50']:.3f} ms, p99 {lat['p99']:.3f} ms, max {lat['max']:.3f} ms"
+        )
+    return 0

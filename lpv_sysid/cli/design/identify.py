@@ -1,10 +1,19 @@
 """`lpv-sysid identify`: phase-1 bags -> vertex_models.yaml (seed 0 Sec. IV, Tables 1-3).
 
     lpv-sysid identify --bags DIR --config config/identification.yaml --out vertex_models.yaml
+    lpv-sysid identify --plant px4-rate --bags DIR/phase1 --out vertex_models.yaml \
+        [--campaign config/campaign_chain.yaml] [--k-sigma 2]
 
 Every rosbag2 directory under DIR is one maneuver.  Its velocity reference during the
 trim segment decides what it is: a corner of the scheduling box -> a vertex model; the
-box centre -> the independent validation maneuver (seed 0 Table 3, Fig. 4).
+box centre -> the independent validation maneuver (seed 0 Table 3, Fig. 4). The models are also
+written as a MATLAB file next to it (``vertex_models.mat``: lpv_sysid/io/formats/export.py).
+
+``--plant px4-rate``: the rate plant PX4 executes (lpv_sysid/models/rate_plant.py: thrust +
+body-rate setpoints in, PX4's rate loop inside), identified from the campaign's bags that carry
+PX4's ATTITUDE_TARGET on ``rate_setpoint`` -- the chain's step 2, the same code
+(:func:`lpv_sysid.flight.chain.identify_rate_runs`) -- over the scheduling box of the campaign
+config; its gains fly through ``phase2.launch.py design:=rate_plant`` or ``fly phase2``.
 """
 
 from __future__ import annotations
@@ -27,6 +36,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="identification YAML (default: built-in values = config/identification.yaml)",
     )
     parser.add_argument("--out", required=True, type=Path, help="vertex_models.yaml to write")
+    parser.add_argument(
+        "--plant",
+        choices=("quadrotor", "px4-rate"),
+        default="quadrotor",
+        help="quadrotor: seed 0 virtual-actuator vertex models (default); px4-rate: the rate "
+        "plant PX4 executes (bags with rate_setpoint, e.g. fly phase1 --record-rate-setpoints)",
+    )
+    parser.add_argument(
+        "--campaign",
+        type=Path,
+        default=None,
+        help="px4-rate: campaign config whose box the vertex models span "
+        "(default config/campaign_chain.yaml)",
+    )
+    parser.add_argument(
+        "--k-sigma",
+        type=float,
+        default=2.0,
+        help="px4-rate: interval half-width of the identified elements in standard deviations",
+    )
     parser.add_argument(
         "--plot",
         type=Path,
@@ -146,14 +175,47 @@ def format_uncertainty_summary(results, cfg) -> str:
     return "\n".join(lines)
 
 
+def run_rate_plant(args: argparse.Namespace) -> int:
+    """``--plant px4-rate`` (module docstring)."""
+    import math
+
+    from lpv_sysid.configuration.defaults import config_file
+    from lpv_sysid.errors import ConfigError, LpvSysidError
+    from lpv_sysid.flight.campaign import FlyConfig
+    from lpv_sysid.flight.chain import campaign_bags, identify_rate_runs
+    from lpv_sysid.ident import rate_plant as rid
+
+    if not (math.isfinite(args.k_sigma) and 0.0 <= args.k_sigma <= 10.0):
+        raise ConfigError(f"--k-sigma must be in [0, 10], got {args.k_sigma!r}")
+    cfg = FlyConfig.load(args.campaign or config_file("campaign_chain.yaml"))
+    runs = []
+    for b in campaign_bags(args.bags):
+        try:
+            runs.append(rid.read_run(b))
+        except LpvSysidError as exc:
+            print(f"skipped {b}: {exc}")
+    if not runs:
+        raise ConfigError(
+            f"{args.bags}: no bag with state and rate_setpoint (PX4's ATTITUDE_TARGET): fly "
+            "phase 1 with --record-rate-setpoints (the chain does)"
+        )
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    c = cfg.campaign
+    identify_rate_runs(runs, c.box_min, c.box_max, args.k_sigma, args.out, print)
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     import dataclasses
+
+    if args.plant == "px4-rate":
+        return run_rate_plant(args)
 
     from lpv_sysid.ident import dataprep as dp
     from lpv_sysid.ident import metrics
     from lpv_sysid.ident import vertex as vx
     from lpv_sysid.ident.phase1 import identify_campaign
-    from lpv_sysid.io.formats import VertexModels
+    from lpv_sysid.io.formats import VertexModels, save_models_mat
 
     cfg = load_config(args.config)
     if args.quadrotor is not None:
@@ -198,6 +260,8 @@ def run(args: argparse.Namespace) -> int:
     print()
     print(format_uncertainty_summary(results, cfg))
     print(f"wrote {args.out} (sha256 {sha[:12]})")
+    mat = save_models_mat(models, args.out.with_suffix(".mat"))
+    print(f"wrote {mat} (MATLAB: A, B, x0, u0 per vertex, uncertain intervals)")
     if val is not None:
         plot = args.plot or args.out.with_name(args.out.stem + "_validation.png")
         metrics.plot_validation(val["t"], val["xdot_m"], val["xdot_f"], str(plot))

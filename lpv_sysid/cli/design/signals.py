@@ -30,7 +30,7 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     sig = design(cfg)
     elapsed = time.perf_counter() - t0
-    npz, yml = write_signal_set(args.out, sig)
+    npz, yml = write_signal_set(args.out, sig, force=args.force)
     written = [npz, yml]
     if not args.no_plot:
         from lpv_sysid.signals.plot import save_figure

@@ -35,6 +35,7 @@ import time
 from pathlib import Path
 
 from lpv_sysid.errors import ConfigError
+from lpv_sysid.io.formats import load_seal_key
 from lpv_sysid.synthesis.gains import (
     describe_problem,
     load_inputs,
@@ -72,6 +73,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--no-verify", action="store_true", help="skip the independent verification"
     )
+    parser.add_argument(
+        "--key",
+        default=None,
+        metavar="FILE",
+        help="operator seal key (32 raw bytes or 64 hex characters, like a MAVLink signing "
+        "key): the gains file also gets seal.hmac_sha256, which only a key holder can write "
+        "(docs/certificate.md, 'Seal')",
+    )
 
 
 def with_flag(message: str) -> str:
@@ -91,7 +100,8 @@ def run(args: argparse.Namespace) -> int:
         res = synthesize(inp)
     except ConfigError as exc:
         raise ConfigError(with_flag(str(exc))) from None
-    written = write_gains(Path(args.out), args.models, inp, res)
+    key = load_seal_key(args.key) if args.key else None
+    written = write_gains(Path(args.out), args.models, inp, res, seal_key=key)
     for line in written.lines:
         print(line)
     print(f"wrote {written.gains}")

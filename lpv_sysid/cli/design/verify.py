@@ -31,6 +31,7 @@ import argparse
 import time
 from typing import Any
 
+from lpv_sysid.parallel import BACKENDS
 from lpv_sysid.synthesis.verify import VERIFY_SETTINGS
 
 COMMAND = "verify"
@@ -89,6 +90,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "of the file, default) or 'ksigma' (nominal +/- k std, the Eq. 22 box itself)",
     )
     parser.add_argument(
+        "--loop-delay",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="worst delay of the configured loop (input latency + 1 / state rate + 1 / "
+        "command rate); FAIL when above the certificate's loop_delay.bound_s",
+    )
+    parser.add_argument(
         "--out",
         default=None,
         metavar="PATH",
@@ -106,21 +115,38 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="processes judging the --full-box samples (default: every core this process may "
         "use; 1 = serial; the numbers do not depend on it)",
     )
+    parser.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default="process",
+        help="where the --workers run: process (a local process pool, default) or dask (the "
+        "active dask.distributed client, else Dask's local processes; dask must be installed)",
+    )
+    parser.add_argument(
+        "--key",
+        default=None,
+        metavar="FILE",
+        help="operator seal key: require and check the file's keyed seal (seal.hmac_sha256); "
+        "without it only the unkeyed seal and certificate.gains_sha256 are checked",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     from lpv_sysid.errors import ConfigError
     from lpv_sysid.parallel import resolve_workers
+    from lpv_sysid.io.formats import load_seal_key
     from lpv_sysid.synthesis.verify import verify_and_record
 
     resolve_workers(args.workers)
     if args.full_box < 0:
         raise ConfigError(f"--full-box must be >= 0, got {args.full_box}")
     t0 = time.perf_counter()
+    key = load_seal_key(args.key) if args.key else None
     rep, out = verify_and_record(
         args.gains,
         args.models,
         args.out,
+        seal_key=key,
         n_random=args.random,
         seed=args.seed,
         full_box=args.full_box,
@@ -128,6 +154,12 @@ def run(args: argparse.Namespace) -> int:
         k_sigma=args.k_sigma,
         full_box_kept=args.full_box_kept,
         workers=args.workers,
+        backend=args.backend,
+        loop_delay_s=args.loop_delay,
+    )
+    print(
+        "gains file: law matches certificate.gains_sha256, seal.sha256 matches the whole file"
+        + (", keyed seal (seal.hmac_sha256) checked with the key" if key else "")
     )
     print(rep.table(max_rows=10**6) if not args.all_rows else _all(rep))
     fb = rep.full_box

@@ -108,8 +108,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     if args.mode == "phase2":
+        from lpv_sysid.control.law import check_kappa
         from lpv_sysid.flight.phase2 import Phase2Options, fly_phase2
 
+        check_kappa(args.kappa)  # before connecting
         s = fly_phase2(
             args.gains,
             args.signals,
@@ -120,12 +122,19 @@ def run(args: argparse.Namespace) -> int:
             opts=Phase2Options(kappa=args.kappa, finish=args.finish),
             echo=print,
         )
+        lat = s.get("latency_state_to_setpoint_ms") or {}
+        if lat.get("commands"):
+            print(
+                f"loop latency (state stamp -> setpoint sent, {lat['commands']} commands): p50 "
+                f"{lat['p50']:.2f} ms, p99 {lat['p99']:.2f} ms, max {lat['max']:.2f} ms"
+            )
         print(
             f"phase 2 {'complete' if s.get('ok') else 'FAILED'}: {s.get('reason')}; "
             f"{args.out / 'phase2_summary.yaml'}"
         )
         return 0 if s.get("ok") else EXIT_FAILED
     cfg = FlyConfig.load(args.config)
+    params = parse_params(args.set_param)  # a dry run checks them too
     if args.dry_run:
         print(plan_flight(cfg, args.connect, args.signals).describe())
         return 0
@@ -134,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
         args.connect,
         args.out,
         signals=args.signals,
-        params=parse_params(args.set_param),
+        params=params,
         record_rate_setpoints=args.record_rate_setpoints,
         echo=print,
     )

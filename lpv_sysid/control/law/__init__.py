@@ -11,12 +11,15 @@ filter of the reference feedforward (:mod:`~lpv_sysid.control.law.reference_rate
 
 from __future__ import annotations
 
-from lpv_sysid.control.law.config import LpvControllerConfig
+from lpv_sysid.control.law.config import KAPPA_MAX, KAPPA_MIN, LpvControllerConfig, check_kappa
 from lpv_sysid.control.law.controller import LpvController
 from lpv_sysid.control.law.reference_limiter import ReferenceLimiter
 
 __all__ = [
     "LpvController",
+    "KAPPA_MAX",
+    "KAPPA_MIN",
     "LpvControllerConfig",
+    "check_kappa",
     "ReferenceLimiter",
 ]

@@ -9,6 +9,29 @@ from dataclasses import dataclass
 from typing import Optional
 
 from lpv_sysid.configuration import fields as cf
+from lpv_sysid.errors import ConfigError
+
+#: the excitation multiplier kappa (seed 0 Eq. 33): the one declared range, used by the
+#: controller node (``excitation_gain``), the phase-2 simulation and every command that
+#: takes ``--kappa`` (checked before anything runs)
+KAPPA_MIN, KAPPA_MAX = 0.0, 10.0
+
+
+def check_kappa(kappa, where: str = "--kappa", positive: bool = False) -> float:
+    """``kappa`` as a float in [KAPPA_MIN, KAPPA_MAX] (``positive``: > 0), else ConfigError
+    naming ``where``."""
+    try:
+        k = float(kappa)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{where} {kappa!r}: not a number") from None
+    ok = KAPPA_MIN <= k <= KAPPA_MAX and (k > 0 or not positive)
+    if not ok:  # NaN fails both comparisons
+        lo = f"> {KAPPA_MIN:g}" if positive else f">= {KAPPA_MIN:g}"
+        raise ConfigError(
+            f"{where} {kappa!r}: the excitation multiplier (seed 0 Eq. 33) must be {lo} and "
+            f"<= {KAPPA_MAX:g}"
+        )
+    return k
 
 
 @dataclass(frozen=True)

@@ -35,6 +35,7 @@ from lpv_sysid.mavlink.bridge import (
     MavrosConfig,
     MavrosCore,
     MavrosLink,
+    RATE_INPUT_NAMES,
     MavrosOutput,
     RateTarget,
     ServiceRequest,
@@ -57,6 +58,30 @@ PARSERS = {
     "velocity_reference": messages.reference_from_twist,
     "actuator_command": messages.actuator_command_from_joint_state,
 }
+#: ``command: rate_setpoint`` (the rate-plant design): ``actuator_command`` carries the rate
+#: plant's inputs (thrust, p_sp, q_sp, r_sp), sent as SET_ATTITUDE_TARGET unchanged but clipped
+RATE_PLANT_PARSERS = {
+    **PARSERS,
+    "actuator_command": lambda msg: messages.channels_from_joint_state(
+        msg, RATE_INPUT_NAMES, field="position"
+    ),
+}
+#: rate of PX4's ATTITUDE_TARGET requested with ``command: rate_setpoint`` unless configured [Hz]
+ATTITUDE_TARGET_HZ = 50.0
+
+
+def with_attitude_target_stream(cfg: BridgeConfig) -> BridgeConfig:
+    """``cfg`` with PX4's ATTITUDE_TARGET requested at :data:`ATTITUDE_TARGET_HZ` (the echo of
+    the rate setpoints it tracks, recorded on ``rate_setpoint``) unless its rate is
+    configured (also 0 = off)."""
+    import dataclasses
+
+    if any(name == "ATTITUDE_TARGET" for name, _ in cfg.link.streams):
+        return cfg
+    streams = tuple(cfg.link.streams) + (("ATTITUDE_TARGET", ATTITUDE_TARGET_HZ),)
+    return dataclasses.replace(cfg, link=dataclasses.replace(cfg.link, streams=streams))
+
+
 POSITION_TARGET = messages.MAVROS_TYPES["position_target"]
 ATTITUDE_TARGET = messages.MAVROS_TYPES["attitude_target"]
 #: transport mavros with mavros_msgs: subscription key -> (topic under the MAVROS
@@ -73,8 +98,9 @@ MAVROS_PREFLIGHT_INPUTS = {"mavros_rc_in": ("rc/in", messages.MAVROS_TYPES["rc_i
 #: between refreshes of the parameters once all are in (a parameter set meanwhile counts)
 PREFLIGHT_ASK_PERIOD_S = 2.0
 PREFLIGHT_REFRESH_S = 10.0
-#: MAVLink id of SERVO_OUTPUT_RAW (MAVROS rc/out), asked at ``mavros.rc_out_rate_hz``
-SERVO_OUTPUT_RAW_ID = 36
+#: MAVLink ids of SERVO_OUTPUT_RAW (MAVROS rc/out), asked at ``mavros.rc_out_rate_hz``,
+#: and ATTITUDE_TARGET (MAVROS setpoint_raw/target_attitude: the rate_setpoint echo)
+SERVO_OUTPUT_RAW_ID, ATTITUDE_TARGET_ID = 36, 83
 #: seconds between rate requests until MAVROS answers success (again after a link loss)
 RATE_ASK_PERIOD_S = 5.0
 #: preflight checks that do not refuse the bridge's ``start``: an armed vehicle (airborne
@@ -152,6 +178,10 @@ class BridgeRuntime:
         self.publishers = [Endpoint("state", "state"), Endpoint("imu", "imu")]
         self.subscriptions = [Endpoint("velocity_reference", "velocity_reference")]
         self.core: Union[MavrosCore, BridgeCore]
+        #: the parsers of the package input topics for this configuration (the shell's)
+        self.parsers: Mapping[str, Any] = PARSERS
+        #: PX4's ATTITUDE_TARGET (the setpoints it tracks) seen since the last poll
+        self._echo: list[tuple[float, Any]] = []
         mcfg = MavrosConfig.from_dict(mavros) if s.transport == "mavros" else None
         if mcfg is not None and _use_mavros_msgs(mcfg, factory):
             self._init_mavros_msgs(mcfg, bridge, sigterm_timeout_s, teardown_margin_s)
@@ -183,8 +213,15 @@ class BridgeRuntime:
                 )
             )
         else:
-            self.core = self.link = BridgeCore(BridgeConfig.from_dict(bridge))
+            cfg_b = BridgeConfig.from_dict(bridge)
+            if cfg_b.command == "rate_setpoint":
+                self.parsers = RATE_PLANT_PARSERS
+            if s.rate_setpoints:
+                cfg_b = with_attitude_target_stream(cfg_b)
+            self.core = self.link = BridgeCore(cfg_b)
             self.publishers.append(Endpoint("rotor_speeds", "rotor_speeds"))
+            if s.rate_setpoints:
+                self.publishers.append(Endpoint("rate_setpoint", "rate_setpoint"))
             self.subscriptions.append(Endpoint("actuator_command", "actuator_command"))
             self.timer_period_s = 1.0 / s.poll_rate_hz
             self._log += self._handback_lines(sigterm_timeout_s, teardown_margin_s)
@@ -195,11 +232,22 @@ class BridgeRuntime:
         """transport mavros with mavros_msgs: BridgeCore over a :class:`MavrosLink`."""
         ns = mcfg.namespace
         self.mavros_link = MavrosLink(mcfg.state_timeout, ns)
-        self.core = self.link = BridgeCore(BridgeConfig.from_dict(bridge), link=self.mavros_link)
+        cfg_b = BridgeConfig.from_dict(bridge)
+        if cfg_b.command == "rate_setpoint":
+            self.parsers = RATE_PLANT_PARSERS
+        self.core = self.link = BridgeCore(cfg_b, link=self.mavros_link)
         self._mavros_cfg = mcfg
         self._rejected: dict[str, int] = {}
         self.evidence = MavrosEvidence() if mcfg.preflight else None
-        self._rate_ok, self._t_rate_asked = False, -math.inf
+        #: MAVLink message id -> rate [Hz] asked through set_message_interval; the ids
+        #: MAVROS answered success for (cleared by a link loss)
+        self._rates: dict[int, float] = {}
+        if mcfg.rc_out_rate_hz > 0:
+            self._rates[SERVO_OUTPUT_RAW_ID] = mcfg.rc_out_rate_hz
+        if self.settings.rate_setpoints:
+            self._rates[ATTITUDE_TARGET_ID] = ATTITUDE_TARGET_HZ
+        self._rates_ok: set[int] = set()
+        self._t_rate_asked = -math.inf
         if self.link.config.command == "velocity":
             sp = Endpoint("mavros_local", f"{ns}/setpoint_raw/local", "reliable", POSITION_TARGET)
         else:
@@ -207,6 +255,16 @@ class BridgeRuntime:
                 "mavros_attitude", f"{ns}/setpoint_raw/attitude", "reliable", ATTITUDE_TARGET
             )
         self.publishers += [Endpoint("rotor_speeds", "rotor_speeds"), sp]
+        if self.settings.rate_setpoints:  # PX4's ATTITUDE_TARGET, as MAVROS republishes it
+            self.publishers.append(Endpoint("rate_setpoint", "rate_setpoint"))
+            self.subscriptions.append(
+                Endpoint(
+                    "mavros_target_attitude",
+                    f"{ns}/setpoint_raw/target_attitude",
+                    "sensor",
+                    ATTITUDE_TARGET,
+                )
+            )
         self.subscriptions += [
             Endpoint("actuator_command", "actuator_command"),
             Endpoint("mavros_odom", mcfg.topic("odom"), "sensor"),
@@ -216,7 +274,7 @@ class BridgeRuntime:
             Endpoint("set_mode", f"{ns}/set_mode", "", messages.MAVROS_TYPES["set_mode"]),
             Endpoint("arming", f"{ns}/cmd/arming", "", messages.MAVROS_TYPES["command_bool"]),
         ]
-        if mcfg.rc_out_rate_hz > 0:
+        if self._rates:
             self.clients.append(
                 Endpoint(
                     "message_interval",
@@ -284,9 +342,14 @@ class BridgeRuntime:
         return out
 
     def open(self, now: float) -> None:
-        """Open the MAVLink link (transport mavlink; MAVROS owns its link)."""
+        """Open the MAVLink link (transport mavlink; MAVROS owns its link); PX4's
+        ATTITUDE_TARGET is republished on ``rate_setpoint``."""
         if self.link is not None:
+            from lpv_sysid.flight.vehicle import tap_attitude_target
+
             self.link.open(now)
+            if self.settings.rate_setpoints:
+                tap_attitude_target(self.link.link, lambda t, u: self._echo.append((t, u)))
 
     # -- inputs ---------------------------------------------------------------------------
     def on_sample(self, key: str, parsed: tuple, now: float) -> Output:
@@ -376,6 +439,10 @@ class BridgeRuntime:
                     ev.servo_raw = channels
             elif key == "mavros_home":
                 link.on_home(now, messages.home_ned_from_msg(msg))
+            elif key == "mavros_target_attitude":
+                t_boot_ms = messages.stamp_ns_of(msg) // 1_000_000
+                _, rates, thrust = messages.rate_setpoint_from_attitude_target_msg(msg)
+                link.on_target_attitude(now, t_boot_ms, rates, thrust)
             if ev is not None and key in SEEN:
                 ev.seen.add(SEEN[key])
         except LpvSysidError as exc:
@@ -395,8 +462,10 @@ class BridgeRuntime:
         elif req.key in ("param_get", "vehicle_info"):
             self._preflight_answer(req, response)
         elif req.key == "message_interval":
-            self._rate_ok = bool(getattr(response, "success", False))
-            if not self._rate_ok:
+            ok = bool(getattr(response, "success", False))
+            if ok:
+                self._rates_ok.add(int(req.fields["message_id"]))
+            else:
                 self._log.append(("warn", f"{req.fields} refused by MAVROS/PX4"))
         else:
             self.mavros_link.on_service_answer(now, req, response)
@@ -416,21 +485,26 @@ class BridgeRuntime:
             self._log.append(("warn", f"{req.key} answer unusable: {exc}"))
 
     def _rate_request(self, now: float) -> list[ServiceRequest]:
-        """SERVO_OUTPUT_RAW at ``mavros.rc_out_rate_hz`` (PX4's onboard link sends 10 Hz):
-        asked once MAVROS is connected, every RATE_ASK_PERIOD_S until it answers success,
-        and again after a link loss (PX4 may have rebooted)."""
+        """The stream rates of ``self._rates`` (PX4's onboard link sends SERVO_OUTPUT_RAW
+        and ATTITUDE_TARGET at 10 Hz): asked once MAVROS is connected, every
+        RATE_ASK_PERIOD_S until it answers success, again after a link loss (PX4 may have
+        rebooted)."""
         link = self.mavros_link
-        rate = self._mavros_cfg.rc_out_rate_hz if link is not None else 0.0
-        if link is None or rate <= 0:
+        if link is None or not self._rates:
             return []
         if not link.link_up(now):
-            self._rate_ok = False
+            self._rates_ok.clear()
             return []
-        if self._rate_ok or now - self._t_rate_asked < RATE_ASK_PERIOD_S:
+        todo = [i for i in self._rates if i not in self._rates_ok]
+        if not todo or now - self._t_rate_asked < RATE_ASK_PERIOD_S:
             return []
         self._t_rate_asked = now
-        fields = {"message_id": SERVO_OUTPUT_RAW_ID, "message_rate": float(rate)}
-        return [ServiceRequest("message_interval", fields, 0)]
+        return [
+            ServiceRequest(
+                "message_interval", {"message_id": i, "message_rate": float(self._rates[i])}, 0
+            )
+            for i in todo
+        ]
 
     def _preflight_questions(self, now: float) -> list[ServiceRequest]:
         """While MAVROS is connected: ask what is missing (every PREFLIGHT_ASK_PERIOD_S),
@@ -540,6 +614,14 @@ class BridgeRuntime:
                 pubs.append(
                     ("rotor_speeds", messages.rotor_speeds_msg(f, stamp, s.omega, s.source))
                 )
+        for t, u in self._echo:
+            pubs.append(
+                (
+                    "rate_setpoint",
+                    messages.joint_state(f, round(t * 1e9), RATE_INPUT_NAMES, position=u),
+                )
+            )
+        self._echo.clear()
         if out.events:
             pubs += self.status(now, out.events)
         return pubs + self._drain(now) + asks

@@ -41,6 +41,16 @@ class BridgeNodeSettings(parameters.Settings):
     )
     poll_rate_hz: float = parameters.double(250.0, "link poll rate [Hz]", 10.0, 2000.0)
     status_rate_hz: float = parameters.double(2.0, "status publication rate [Hz]", 0.1, 100.0)
+    rate_setpoints: bool = parameters.flag(
+        True,
+        "transport mavlink: request PX4's ATTITUDE_TARGET (50 Hz unless link.streams sets it) and "
+        "republish it on rate_setpoint -- the thrust + body-rate setpoints PX4 tracks: the "
+        "input of `lpv-sysid identify --plant px4-rate` (phase 1), the echo of the commands "
+        "(phase 2)",
+    )
+    publish_tf: bool = parameters.flag(
+        False, "publish odom -> base_link on /tf from the state (REP-105; RViz, Foxglove)"
+    )
 
     def validate(self) -> None:
         if self.transport not in TRANSPORTS:

@@ -35,7 +35,12 @@ class CampaignRecorder:
         config_files=(),
         description="",
         rate_setpoints: bool = False,
+        clock_offset_ns: int = 0,
     ) -> None:
+        """``clock_offset_ns``: added to the flight clock's ``round(t * 1e9)`` for every
+        stamp, so that the bags carry wall-clock (epoch) stamps when the flight's clock is
+        ``time.monotonic`` (``fly`` passes ``time.time_ns() - monotonic_ns`` at start, or a
+        declared epoch)."""
         from lpv_sysid.io import messages
         from lpv_sysid.io.recorder import Recorder, RecorderConfig
 
@@ -65,16 +70,26 @@ class CampaignRecorder:
             if flight_log
             else None
         )
+        self.clock_offset_ns = int(clock_offset_ns)
         self.active: str | None = None  # run being recorded
         self.bags: dict[str, str] = {}  # run name -> bag directory name
         self.started = False
         self.error: str | None = None
 
+    def _ns(self, t: float) -> int:
+        return _ns(t) + self.clock_offset_ns
+
     def start(self, now: float) -> None:
-        self.runs.start(_ns(now))
+        self.runs.start(self._ns(now))
         if self.flight is not None:
-            self.flight.start(_ns(now))
+            self.flight.start(self._ns(now))
         self.started = True
+
+    def annotate(self, key: str, value) -> None:
+        """``key: value`` in ``experiment.yaml`` of the runs and of the whole flight."""
+        for rec in (self.runs, self.flight):
+            if rec is not None:
+                rec.annotate(key, value)
 
     def begin_run(self, name: str) -> str:
         bag = self.runs.split()
@@ -103,7 +118,7 @@ class CampaignRecorder:
         self._write(topic, _ns(t), msg)
 
     def state(self, t: float, pos_ned, euler, v_body, omega) -> None:
-        st = _ns(t)
+        st = self._ns(t)
         self._write(
             "state",
             st,
@@ -111,11 +126,11 @@ class CampaignRecorder:
         )
 
     def imu(self, t: float, accel_frd, gyro_frd) -> None:
-        st = _ns(t)
+        st = self._ns(t)
         self._write("imu", st, self.messages.imu_msg(self.f, st, accel_frd, gyro_frd))
 
     def rotors(self, t: float, omega, source: str = "esc") -> None:
-        st = _ns(t)
+        st = self._ns(t)
         self._write("rotor_speeds", st, self.messages.rotor_speeds_msg(self.f, st, omega, source))
 
     def rate_setpoint(self, t: float, u) -> None:
@@ -123,20 +138,20 @@ class CampaignRecorder:
         command)."""
         from lpv_sysid.mavlink.bridge import RATE_INPUT_NAMES
 
-        st = _ns(t)
+        st = self._ns(t)
         self._write(
             RATE_TOPIC, st, self.messages.joint_state(self.f, st, RATE_INPUT_NAMES, position=u)
         )
 
     def reference(self, t: float, v, r: float) -> None:
-        st = _ns(t)
+        st = self._ns(t)
         self._write("velocity_reference", st, self.messages.twist_reference_msg(self.f, st, v, r))
         self._write(
             "excitation", st, self.messages.excitation_msg(self.f, st, (0.0, 0.0, 0.0, 0.0))
         )
 
     def status(self, t: float, level: str, message: str, values: Mapping[str, Any]) -> None:
-        st = _ns(t)
+        st = self._ns(t)
         lv = {"info": "OK", "warn": "WARN", "error": "ERROR"}.get(level, level)
         msg = self.messages.diagnostic_array(
             self.f,
@@ -151,7 +166,7 @@ class CampaignRecorder:
             if rec is None:
                 continue
             try:
-                rec.stop(_ns(now))
+                rec.stop(self._ns(now))
             except LpvSysidError as exc:
                 errors.append(str(exc))
         return errors

@@ -56,7 +56,14 @@ from lpv_sysid.flight.campaign.outputs import (
 )
 from lpv_sysid.flight.campaign.recorder import CampaignRecorder
 from lpv_sysid.flight.campaign.runner import FlightRunner
-from lpv_sysid.flight.vehicle import set_params, tap_attitude_target, wait_for_vehicle
+from lpv_sysid.flight.vehicle import (
+    request_parameter_list,
+    set_params,
+    tap_attitude_target,
+    tap_messages,
+    wait_for_vehicle,
+)
+from lpv_sysid.mavlink.telemetry import VehicleRecord
 
 log = logging.getLogger(__name__)
 
@@ -88,6 +95,7 @@ def fly(
     preflight: bool = True,
     link=None,
     record_rate_setpoints: bool = False,
+    epoch_ns: int | None = None,
 ) -> FlyResult:
     """The whole CLI sequence of the module docstring (also used by the tests with a
     simulated clock); returns the exit status and the summary. Bad input raises
@@ -96,7 +104,14 @@ def fly(
     ``record_rate_setpoints``: also record PX4's ATTITUDE_TARGET (the thrust and body-rate
     setpoints its cascade produced) on ``rate_setpoint`` in every bag, the input of the
     rate-plant identification (lpv_sysid/ident/rate_plant.py); request the stream in the
-    bridge config (``link.streams: {ATTITUDE_TARGET: 50}``, config/mavlink_bridge_chain.yaml)."""
+    bridge config (``link.streams: {ATTITUDE_TARGET: 50}``, config/mavlink_bridge_chain.yaml).
+
+    Stamps: the bags carry wall-clock (epoch) nanoseconds, ``round(clock() * 1e9)`` shifted by
+    ``time.time_ns() - round(clock() * 1e9)`` taken when the bridge opens, or, with
+    ``epoch_ns``, by ``epoch_ns - round(clock() * 1e9)`` (a declared epoch for a simulated
+    clock). ``experiment.yaml`` gets ``clock`` (that offset) and ``vehicle``
+    (:class:`~lpv_sysid.mavlink.telemetry.VehicleRecord`: kind, firmware, airframe, PX4
+    parameter snapshot, battery at start and end, PX4's boot on the bag clock)."""
     import numpy as np
 
     from lpv_sysid.control.campaign import Campaign, ExcitationProfile, plan_campaign, trim_rows
@@ -122,10 +137,23 @@ def fly(
 
     bridge = BridgeCore(bcfg, link=link)
     bridge.open(clock())
+    vehicle = VehicleRecord()
+    t_start = clock()
+    clock_offset = (time.time_ns() if epoch_ns is None else int(epoch_ns)) - int(
+        round(t_start * 1e9)
+    )
+    tap_messages(
+        bridge.link, lambda now, m: vehicle.absorb(m, int(round(now * 1e9)) + clock_offset)
+    )
     summary: dict = {
         "connect": bcfg.link.url,
         "config": cfg.source,
         "signals": signals or cfg.signals_config,
+        # the times in this summary are on the flight clock; bag stamps add this offset
+        "clock": {
+            "kind": "utc" if epoch_ns is None else "declared",
+            "offset_ns": clock_offset,
+        },
     }
     runner = FlightRunner(
         bridge, Campaign(plan, table), None, clock, sleep, cfg.loop_period, cfg.status_period, echo
@@ -168,8 +196,19 @@ def fly(
             description=f"lpv-sysid fly phase1 on {bcfg.link.url}: one bag per run, "
             "see campaign_summary.yaml",
             rate_setpoints=record_rate_setpoints,
+            clock_offset_ns=clock_offset,
         )
         rec.start(clock())
+        rec.annotate(
+            "clock",
+            {
+                "kind": "utc" if epoch_ns is None else "declared",
+                "offset_ns": clock_offset,
+                "meaning": "bag stamp = round(flight clock [s] * 1e9) + offset_ns; the flight "
+                "clock is time.monotonic (fly) or the simulation's",
+            },
+        )
+        request_parameter_list(bridge.link)
         runner.rec = rec
         if record_rate_setpoints:
             tap_attitude_target(
@@ -191,6 +230,8 @@ def fly(
     finally:
         for s, h in previous_handlers.items():
             signal.signal(s, h)
+        if runner.rec is not None:
+            runner._safe(lambda: runner.rec.annotate("vehicle", vehicle.summary()))
         close_errors = runner.rec.close(clock()) if runner.rec is not None else []
         bridge.close()
     c = runner.campaign

@@ -6,8 +6,10 @@ report. The steps: :mod:`~lpv_sysid.flight.chain.steps`; the report:
 
 from __future__ import annotations
 
-from lpv_sysid.flight.chain.steps import chain
+from lpv_sysid.flight.chain.steps import campaign_bags, chain, identify_rate_runs
 
 __all__ = [
+    "campaign_bags",
     "chain",
+    "identify_rate_runs",
 ]

@@ -76,8 +76,10 @@ def chain(
     step with the vehicle still in HOLD) instead of flying phase 1."""
     from lpv_sysid.flight.campaign import FlyConfig, fly
     from lpv_sysid.ident import rate_plant as rid
-    from lpv_sysid.io.files import save_yaml
 
+    from lpv_sysid.control.law import check_kappa
+
+    kappa = check_kappa(kappa)  # before waiting for a vehicle (nan used to wait first)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     summary: dict = {"design": "rate_plant", "connect": url, "steps": []}
@@ -130,7 +132,7 @@ def chain(
         )
         bags = [out / "phase1" / b for b in (res.summary.get("bags") or {}).values()]
     done(status=res.status, result=res.phase, reason=res.reason, bags=[str(b) for b in bags])
-    usable = []
+    usable, rep, params_rp = [], None, None
     for b in bags:
         try:
             usable.append(rid.read_run(b))
@@ -148,13 +150,10 @@ def chain(
             "phase 2 will not be flown"
         )
     step("rate-plant identification (pooled equation error)")
-    params_rp, rep = rid.identify(usable)
     c = cfg.campaign
-    save_yaml(
-        rid.models_document(params_rp, c.box_min, c.box_max, k_sigma, rep),
-        out / "vertex_models.yaml",
+    params_rp, rep = identify_rate_runs(
+        usable, c.box_min, c.box_max, k_sigma, out / "vertex_models.yaml", echo
     )
-    echo(format_identification(rep))
     done(
         result=f"{len(usable)} run(s), {rep['samples']} samples",
         rows=rep["rows"],
@@ -225,20 +224,39 @@ def chain(
         p2 = {"ok": False, "reason": str(exc)}
     done(ok=p2.get("ok"), reason=p2.get("reason"))
     # the identified rate plant against the phase-2 flight (rate setpoints from the law, not PX4)
-    bag2 = out / "phase2" / "bag_0000"  # state at the telemetry rate + the commands as sent
+    # state at the telemetry rate + PX4's echo of the commands (rate_setpoint)
+    bag2 = out / "phase2" / str(p2.get("bag") or "bag_0000")
     if bag2.exists():
         try:
-            p2["model_check_r2"] = rid.validate(params_rp, rid.read_run(bag2))
+            run2 = rid.read_run(bag2)
+            p2["model_check_r2"] = rid.validate(params_rp, run2)
             echo(
                 "  identified rate plant vs the phase-2 flight, R^2 per row: "
                 + ", ".join(f"{k} {v}" for k, v in p2["model_check_r2"].items())
+            )
+            p2["model_check_output_error"] = rid.output_error(params_rp, run2)
+            oe = p2["model_check_output_error"]
+            echo(
+                f"  output error (rows simulated from the recorded setpoints, restarted every "
+                f"{oe['window_s']:g} s), R^2 per row: "
+                + ", ".join(f"{k} {oe[k]}" for k in ("u", "v", "w", "p", "q", "r"))
             )
         except LpvSysidError as exc:
             p2["model_check_r2"] = {"error": str(exc)}
     summary["phase2"] = {
         k: v
         for k, v in p2.items()
-        if k in ("ok", "reason", "tracking_rms", "gain_u_e_to_z", "handback", "model_check_r2")
+        if k
+        in (
+            "ok",
+            "reason",
+            "tracking_rms",
+            "gain_u_e_to_z",
+            "handback",
+            "model_check_r2",
+            "model_check_output_error",
+            "latency_state_to_setpoint_ms",
+        )
     }
     summary["result"] = "complete" if p2.get("ok") else f"phase 2: {p2.get('reason')}"
     summary["wall_s"] = round(clock() - t_all, 1)
@@ -246,6 +264,48 @@ def chain(
     write_report(out, summary, p2, rep)
     echo(f"\nchain {summary['result']} in {summary['wall_s']:.0f} s; report: {out / 'report.md'}")
     return 0 if p2.get("ok") else EXIT_FAILED
+
+
+def campaign_bags(bags_dir: str | Path) -> list[Path]:
+    """The run bags of a phase-1 campaign directory: those its ``campaign_summary.yaml`` lists
+    (``lpv-sysid fly phase1``), else every ``bag_*`` rosbag2 directory in it (a data logger's
+    experiment directory under ``ros2 launch``), else ``bags_dir`` itself when it is one bag.
+    The whole-flight log (``flight/``) is not a run."""
+    from lpv_sysid.errors import BagError
+    from lpv_sysid.io.files import read_yaml_mapping
+
+    d = Path(bags_dir)
+    if (d / "campaign_summary.yaml").is_file():
+        listed = read_yaml_mapping(d / "campaign_summary.yaml", finite=False).get("bags") or {}
+        return [d / str(b) for b in listed.values()]
+    if (d / "metadata.yaml").is_file():
+        return [d]
+    found = sorted(p for p in d.glob("bag_*") if (p / "metadata.yaml").is_file())
+    if not found:
+        raise BagError(f"{d}: no campaign_summary.yaml, no bag_* rosbag2 directories")
+    return found
+
+
+def identify_rate_runs(
+    runs: list,
+    box_min,
+    box_max,
+    k_sigma: float,
+    out: Path,
+    echo: Callable[[str], None],
+) -> tuple[Any, dict]:
+    """Step 2 of the chain, also ``lpv-sysid identify --plant px4-rate``: pooled equation-error
+    identification of the rate plant (:mod:`lpv_sysid.ident.rate_plant`) from ``runs``
+    (``read_run`` of each bag), its vertex models over the box ``box_min``..``box_max`` with
+    intervals of ``k_sigma`` standard deviations written to ``out``; returns (params, report)."""
+    from lpv_sysid.ident import rate_plant as rid
+    from lpv_sysid.io.files import save_yaml
+
+    params, rep = rid.identify(runs)
+    save_yaml(rid.models_document(params, box_min, box_max, k_sigma, rep), out)
+    echo(format_identification(rep))
+    echo(f"wrote {out}")
+    return params, rep
 
 
 def _raw_rates(bag: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -282,7 +342,8 @@ def design_signals(config: Path, out_dir: Path, echo: Callable[[str], None]) -> 
     from lpv_sysid.signals.store import write_signal_set
 
     sig = design(load_config(str(config)))
-    for path in write_signal_set(str(out_dir), sig):
+    # force: the chain synthesises the gains that refer to this set right after, in this run
+    for path in write_signal_set(str(out_dir), sig, force=True):
         echo(f"wrote {path}")
     return out_dir
 

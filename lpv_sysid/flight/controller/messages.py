@@ -10,14 +10,15 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io.messages import (
-    ROTOR_NAMES,
     MsgFactory,
     actuator_command_msg,
     channels_from_joint_states,
     excitation_from_joint_state,
     joint_state,
     reference_from_twist,
+    rotor_names_of,
     rotor_speeds_from_joint_state,
+    odometry_cdr_frames,
     state_from_odometry,
     states_from_odometry,
 )
@@ -40,9 +41,15 @@ class CommandBuilder:
     clips, so the per-message finiteness and duplicate-name checks of io.messages (5 of the
     7 us a message took) are not repeated; a stamp outside builtin_interfaces/Time goes
     through io.messages, which names the problem (test_nodes_controller compares both
-    builders field by field)."""
+    builders field by field).
 
-    def __init__(self, factory: MsgFactory, names: tuple = INPUT_NAMES) -> None:
+    ``reuse``: one message, allocated here, is filled and returned by every call (stamp and
+    ``position`` set; names, frame and the empty fields stay) -- for a caller that publishes
+    each command before it asks for the next (the node: rclpy serialises on ``publish``)."""
+
+    def __init__(
+        self, factory: MsgFactory, names: tuple = INPUT_NAMES, reuse: bool = False
+    ) -> None:
         self.f = factory
         self._time = factory.get("builtin_interfaces/msg/Time")
         self._header = factory.get("std_msgs/msg/Header")
@@ -51,6 +58,7 @@ class CommandBuilder:
         #: ``thrust, p_sp, q_sp, r_sp``)
         self._names = [str(n) for n in names]
         self._seq = factory.float_seq
+        self._msg = self._new(0, 0, np.zeros(len(self._names))) if reuse else None
 
     def __call__(self, stamp_ns: int, u: np.ndarray) -> Any:
         sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
@@ -58,6 +66,16 @@ class CommandBuilder:
             if tuple(self._names) == tuple(INPUT_NAMES):
                 return actuator_command_msg(self.f, stamp_ns, u)  # raises MessageError
             return joint_state(self.f, stamp_ns, self._names, position=u)  # raises MessageError
+        msg = self._msg
+        if msg is None:
+            return self._new(sec, nanosec, u)
+        stamp = msg.header.stamp
+        stamp.sec = sec
+        stamp.nanosec = nanosec
+        msg.position = self._seq(u)
+        return msg
+
+    def _new(self, sec: int, nanosec: int, u: np.ndarray) -> Any:
         seq = self._seq
         return self._joint_state(
             header=self._header(stamp=self._time(sec=sec, nanosec=nanosec), frame_id=""),
@@ -87,14 +105,27 @@ def parse_input(topic: str, msg) -> tuple[float, np.ndarray]:
     raise ConfigError(f"lpv_controller: unknown input topic {topic!r}")
 
 
+def parse_state_cdr(data: bytes) -> tuple[float, np.ndarray] | None:
+    """:func:`parse_input` of a serialized ``state`` message (the node's raw subscription):
+    the same ``(t, values)`` read from the CDR bytes; ``None`` when it needs the validating
+    path (:func:`lpv_sysid.io.messages.odometry_cdr_frames`: deserialise it and call
+    :func:`parse_input`); MessageError on a wrong frame or stamp."""
+    got = odometry_cdr_frames(data)
+    if got is None:
+        return None
+    ns, _, euler, v_frd, w_frd = got  # one array built, not four and their concatenation
+    return ns / 1e9, np.array([euler[0], euler[1], *v_frd, *w_frd])
+
+
 def parse_inputs(topic: str, msgs: list) -> tuple[np.ndarray, np.ndarray]:
     """Vectorised :func:`parse_input` for a whole recording (replay); MessageError names
     the first malformed message."""
     if topic == "state":
         s = states_from_odometry(msgs)
         return s.t, np.column_stack([s.euler[:, :2], s.v_body, s.omega])
-    if topic == "rotor_speeds":
-        return channels_from_joint_states(msgs, ROTOR_NAMES, field="velocity")
+    names = {rotor_names_of(m.name) for m in msgs} if topic == "rotor_speeds" else set()
+    if len(names) == 1:  # one source (measured or estimated) in the whole recording
+        return channels_from_joint_states(msgs, names.pop(), field="velocity")
     if topic == "excitation":
         return channels_from_joint_states(msgs, EXCITATION_NAMES, field="position")
     t = np.empty(len(msgs))

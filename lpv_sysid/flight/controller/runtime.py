@@ -4,7 +4,7 @@ the method is the :mod:`lpv_sysid.flight.controller` docstring."""
 
 from __future__ import annotations
 
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 import numpy as np
 
@@ -23,6 +23,7 @@ from lpv_sysid.flight.controller.messages import (
     INPUT_TOPICS,
     CommandBuilder,
     parse_input,
+    parse_state_cdr,
 )
 from lpv_sysid.flight.controller.settings import ControllerSettings
 from lpv_sysid.flight.controller.startup import RATE_PLANT, design_of, load_flight_schedule
@@ -38,7 +39,11 @@ class ControllerRuntime:
         settings: ControllerSettings,
         factory: MsgFactory,
         name: str = "/lpv_sysid/lpv_controller",
+        reuse_messages: bool = False,
     ):
+        """``reuse_messages`` (the node, which publishes each command before the next tick):
+        every tick fills one preallocated ``actuator_command`` message instead of building a
+        new one; off (the replay keeps every command) each tick returns a new message."""
         self.settings = settings
         self.f = factory
         self.name = name
@@ -99,7 +104,9 @@ class ControllerRuntime:
         self._law_delta = self._law_state[len(BODY_STATE_NAMES) :]  # view: Mix Omega
         self._ue_scaled: Optional[np.ndarray] = None
         self._vd_checked: Optional[np.ndarray] = None  # v_d_in the box check last passed
-        self._command = CommandBuilder(factory, tuple(self.schedule.input_names))
+        self._command = CommandBuilder(
+            factory, tuple(self.schedule.input_names), reuse=reuse_messages
+        )
         self.v_d_in: Optional[np.ndarray] = None  # velocity reference as received (3), FRD
         self.v_d: Optional[np.ndarray] = None  # the reference the law follows (envelope-limited)
         self.u_e: Optional[np.ndarray] = None  # normalised excitation (4)
@@ -108,6 +115,7 @@ class ControllerRuntime:
         self._state_stamp: Optional[float] = None  # stamp of the newest state sample
         self._ref_slope: Optional[np.ndarray] = None  # slope of the limited reference
         self.commands = 0
+        self.loop_delay_max = 0.0  # the largest loop delay of a tick since start [s]
         self.flags = {"clamped": 0, "saturated": 0, "rate_limited": 0}
         self._abort_reported = False
 
@@ -179,6 +187,22 @@ class ControllerRuntime:
         t = self.on_message(topic, msg, t_now)
         return [] if t is None else self._after_sample(topic, t, t_now)
 
+    def on_state_cdr(self, data: bytes, t_now: float, deserialize: Callable[[bytes], Any]) -> list:
+        """:meth:`on_input` of a serialized ``state`` message (the node's raw subscription):
+        the 13 values the law needs read from the CDR bytes (:func:`parse_state_cdr`), the
+        same sample, checks and commands; a message that needs the validating path goes
+        through ``deserialize(data)`` and :meth:`on_input`, which names the problem."""
+        try:
+            parsed = parse_state_cdr(data)
+        except MessageError as exc:
+            self.on_bad_message("state", exc, t_now)
+            return []
+        if parsed is None:
+            return self.on_input("state", deserialize(data), t_now)
+        t, values = parsed
+        self.on_sample("state", t, values, t_now)
+        return self._after_sample("state", t, t_now)
+
     def on_parsed_input(self, topic: str, t: float, values: np.ndarray, t_now: float) -> list:
         """:meth:`on_input` for an input already parsed (:func:`parse_inputs`, the replay)."""
         self.on_sample(topic, t, values, t_now)
@@ -195,8 +219,9 @@ class ControllerRuntime:
         return []
 
     def on_timer(self, t_now: float) -> list:
-        """The node's ``rate_hz`` timer: the law step (``tick_source: timer``) or only the
-        staleness watch (``state``: a silent state stream must still abort)."""
+        """The node's timer (:attr:`ControllerSettings.timer_period_s`): the law step
+        (``tick_source: timer``) or only the staleness watch (``state``: a silent state
+        stream must still abort)."""
         if self.settings.tick_source == "timer":
             return self.tick(t_now)
         return self.watchdog(t_now)
@@ -271,6 +296,7 @@ class ControllerRuntime:
                 f"no {', '.join(missing)} received yet: start once every input stream arrives"
             )
         sup.arm(t_now)
+        self.loop_delay_max = 0.0
         self.law.reset()
         self.limiter.reset()
         if self.v_d_in is not None and self._ref_stamp is not None:
@@ -300,6 +326,8 @@ class ControllerRuntime:
         sup.check(t_now)
         t_state = self._state_stamp if t_sample is None else t_law
         if t_state is not None:
+            if t_now - t_state > self.loop_delay_max:
+                self.loop_delay_max = t_now - t_state
             sup.check_loop_delay(t_now, t_state)
         if (
             sup.aborted
@@ -402,6 +430,8 @@ class ControllerRuntime:
             "gain_estimate": self.law.gain(),
             "gamma": self.law.gamma,
             "reference_limited_count": self.limiter.limited,
+            "loop_delay_max_ms": 1e3 * self.loop_delay_max,
+            "loop_delay_bound_ms": 1e3 * sup.config.loop_delay_bound,
             **{f"{k}_count": v for k, v in self.flags.items()},
         }
         st = diagnostic_status(self.f, level, self.name, message, values)

@@ -14,7 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from lpv_sysid.configuration.parameters import Settings, double, doubles, flag, text
-from lpv_sysid.control.law import LpvControllerConfig
+from lpv_sysid.control.law import KAPPA_MAX, KAPPA_MIN, LpvControllerConfig
 
 _TIMEOUTS = ("state_timeout_s", "rotor_timeout_s", "reference_timeout_s", "excitation_timeout_s")
 #: timeout parameter -> the parameter holding its stream's publication rate (the timeout rule)
@@ -56,6 +56,11 @@ class ControllerSettings(Settings):
         "phase-2 signals.npz (or its directory) to be flown: checked at start against the "
         "gains (v_d inside the scheduling box, design envelope, excitation_gain x u_e within "
         "the designed excitation peak); empty: only the run-time checks",
+    )
+    seal_key_file: str = text(
+        "",
+        "operator seal key (32 raw bytes or 64 hex characters): the gains file must carry a "
+        "keyed seal made with it (seal.hmac_sha256); empty: the unkeyed seal is checked",
     )
     rate_hz: float = double(250.0, "actuator command rate [Hz]", 1.0, 2000.0)
     state_timeout_s: float = double(0.02, "state older than this -> abort [s]", 0.001, 1.0)
@@ -123,7 +128,9 @@ class ControllerSettings(Settings):
     max_rotor_speed: float = double(
         5000.0, "a rotor speed outside [0, this] -> abort [rad/s]", 10.0, 1e5
     )
-    excitation_gain: float = double(1.0, "excitation multiplier kappa (seed 0 Eq. 33)", 0.0, 10.0)
+    excitation_gain: float = double(
+        1.0, "excitation multiplier kappa (seed 0 Eq. 33)", KAPPA_MIN, KAPPA_MAX
+    )
     arm_length: float = double(0.225, "arm length of the mixer (seed 0 Eq. 7) [m]", 0.01, 10.0)
     u_esc_min: float = double(
         0.0, "lower ESC command limit (< u_esc_max, below every vertex trim)", 0.0, 1.0
@@ -224,6 +231,15 @@ class ControllerSettings(Settings):
     def min_timeout(self, name: str) -> float:
         """The least value the timeout rule allows for the timeout parameter ``name``."""
         return TIMEOUT_PERIODS / getattr(self, _RATES[name]) + self.input_latency_s
+
+    @property
+    def timer_period_s(self) -> float:
+        """The node's timer: ``1 / rate_hz`` with ``tick_source: timer`` (the law step);
+        with ``state`` the timer only watches for a silent stream, every
+        ``stamp_tolerance_s`` -- a silent stream is then judged stale at most its timeout +
+        stamp tolerance after its last sample, the allowance the stamp checks already give
+        (0.01 s: 100 timer callbacks a second instead of 250 beside the state ticks)."""
+        return 1.0 / self.rate_hz if self.tick_source == "timer" else self.stamp_tolerance_s
 
     @property
     def timeouts(self) -> dict:

@@ -1,7 +1,8 @@
 """Start-up of the flight controller: what happens once, before any command can exist.
 
 :func:`load_flight_schedule`: the gains file is validated (io/formats), the law it holds must
-hash to ``certificate.gains_sha256`` (the K that flies is the K that was certified), every
+hash to ``certificate.gains_sha256`` (the K that flies is the K that was certified), the whole
+file must match its seal (with ``seal_key_file``: the operator's keyed seal), every
 ``A_ij + B_ij K_i`` of the certified systems in the sidecar must be Hurwitz (eigenvalues only,
 milliseconds), the certificate must carry the design envelope of the phase-2 signal, and the
 ESC limits must contain every vertex trim (virtual-actuator design); any failure refuses to start,
@@ -24,10 +25,10 @@ import gc
 
 import numpy as np
 
-from lpv_sysid.control.safety import check_closed_loop
+from lpv_sysid.control.safety import check_closed_loop, check_loop_delay, loop_delay_s
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.flight.controller.settings import BOX_MARGIN_MAX_FRACTION, ControllerSettings
-from lpv_sysid.io.formats import GainSchedule, load_certified_systems
+from lpv_sysid.io.formats import GainSchedule, load_certified_systems, load_seal_key
 from lpv_sysid.models import rate_plant
 from lpv_sysid.models.quadrotor import INPUT_NAMES, STATE_NAMES
 
@@ -61,7 +62,9 @@ def load_flight_schedule(
     schedule and the info lines describing what was checked. ConfigError names the reason."""
     path = settings.gains_file
     label = str(path)
-    gs = GainSchedule.load(path, settings.models_file or None, auto_layout=True)
+    key = load_seal_key(settings.seal_key_file) if settings.seal_key_file else None
+    # structure, law hash (certificate.gains_sha256) and the seal of the whole file
+    gs = GainSchedule.load(path, settings.models_file or None, auto_layout=True, key=key)
     design_name = design_of(gs, label)
     gs.check_law_sha256(label)
     systems = load_certified_systems(
@@ -85,14 +88,26 @@ def load_flight_schedule(
             f"{BOX_MARGIN_MAX_FRACTION:g} of the narrowest box axis ({width:g} m/s, "
             f"{label}): the certificate covers the box only"
         )
+    delay_line = check_loop_delay(
+        gs.certificate,
+        loop_delay_s(
+            settings.tick_source,
+            settings.rate_hz,
+            settings.state_rate_hz,
+            settings.input_latency_s,
+        ),
+        label,
+    )
     n_sys = sum(len(s) for s in systems)
     info = [
         f"gains {path} ({design_name} design): law sha256 "
-        f"{(gs.certificate.gains_sha256 or '')[:12]} matches the certificate; closed loop "
+        f"{(gs.certificate.gains_sha256 or '')[:12]} matches the certificate, the whole file "
+        f"its seal{' (keyed)' if key else ''}; closed loop "
         f"stable on {n_sys} certified systems (max Re(eig) {abscissa:.3g}); design envelope "
         f"({design.source or 'certificate.design'}): |dv_d/dt| <= "
         f"{np.round(design.reference_rate, 3).tolist()} m/s^2, |u_e| <= "
-        f"{np.round(design.excitation_peak, 4).tolist()}"
+        f"{np.round(design.excitation_peak, 4).tolist()}",
+        delay_line,
     ]
     if settings.signals_file:
         info.append(check_flight_signals(gs, settings.signals_file, settings.excitation_gain))
@@ -155,8 +170,8 @@ def check_flight_signals(gs: GainSchedule, signals_file: str, kappa: float) -> s
         if peak > design.excitation_peak[k] * (1 + _TOL):
             raise ConfigError(
                 f"{where}: kappa {kappa:g} x {n} peak = {peak:.4g} exceeds the design "
-                f"excitation peak {design.excitation_peak[k]:.4g} (excitation_gain / --kappa "
-                "scales the signal the gains' R was designed for)"
+                f"excitation peak {design.excitation_peak[k]:.4g} (excitation_gain, kappa of "
+                "seed 0 Eq. 33, scales the signal the gains' R was designed for)"
             )
     return (
         f"signals {where}: v_d inside the box, within the design envelope, kappa {kappa:g} "

@@ -8,7 +8,12 @@ inversion, the loop latency (:mod:`~lpv_sysid.flight.phase2.analysis`).
 
 from __future__ import annotations
 
-from lpv_sysid.flight.phase2.analysis import excitation_gain, inversion_error, loop_latency
+from lpv_sysid.flight.phase2.analysis import (
+    excitation_gain,
+    inversion_error,
+    latency_from_bag,
+    loop_latency,
+)
 from lpv_sysid.flight.phase2.options import Phase2Options
 from lpv_sysid.flight.phase2.sequence import (
     Phase2Graph,
@@ -24,6 +29,7 @@ __all__ = [
     "excitation_gain",
     "fly_phase2",
     "inversion_error",
+    "latency_from_bag",
     "load_phase2_law",
     "loop_latency",
     "phase2_graph",

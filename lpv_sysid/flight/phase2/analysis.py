@@ -165,3 +165,23 @@ def loop_latency(t_state, t_sent) -> dict:
         "p99": float(np.percentile(d, 99)),
         "max": float(d.max()),
     }
+
+
+def latency_from_bag(bag, topic: str = "actuator_command") -> dict:
+    """:func:`loop_latency` from a phase-2 bag: per ``actuator_command`` message its log time
+    (when ``fly phase2`` sent it to the link; under ``ros2 launch`` when the data logger received
+    it) minus its header stamp (the stamp of the state sample it was computed on, controller
+    ``tick_source: state``). The same function for the bag of either path."""
+    from lpv_sysid.io import bag as iobag
+    from lpv_sysid.io.messages import TOPIC_NAMESPACE, stamp_ns_of
+
+    name = next(
+        (n for n in iobag.topic_info(str(bag)) if n.rsplit("/", 1)[-1] == topic),
+        f"{TOPIC_NAMESPACE}/{topic}",
+    )
+    rows = iobag.read_bag(str(bag), topics=[name])[name]
+    if not rows:
+        return {"commands": 0}
+    log_ns = np.array([r[0] for r in rows], dtype=np.int64)
+    stamp_ns = np.array([stamp_ns_of(r[1]) for r in rows], dtype=np.int64)
+    return loop_latency(stamp_ns * 1e-9, log_ns * 1e-9) | {"source": f"{bag}:{name}"}

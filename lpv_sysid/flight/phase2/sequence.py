@@ -32,7 +32,7 @@ import numpy as np
 
 from lpv_sysid.configuration.defaults import config_file
 from lpv_sysid.errors import ConfigError, SafetyError
-from lpv_sysid.flight.phase2.analysis import analyse_phase2, loop_latency
+from lpv_sysid.flight.phase2.analysis import analyse_phase2, latency_from_bag
 from lpv_sysid.flight.phase2.options import Phase2Options
 
 log = logging.getLogger(__name__)
@@ -480,7 +480,9 @@ def fly_phase2(
     if len(arr["t"]):
         np.savez(out / "phase2_log.npz", **arr)
         summary.update(analyse_phase2(arr, ctrl.schedule, gamma, opts))
-        summary["latency_state_to_setpoint_ms"] = loop_latency(arr["t_state"], arr["t"])
+    if rec is not None and "phase2" in rec.bags:  # from the recorded stamps, as for the ROS graph
+        summary["bag"] = rec.bags["phase2"]
+        summary["latency_state_to_setpoint_ms"] = latency_from_bag(out / rec.bags["phase2"])
     save_summary(out / "phase2_summary.yaml", summary)
     return summary
 

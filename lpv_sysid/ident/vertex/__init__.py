@@ -57,7 +57,13 @@ from lpv_sysid.ident.vertex.pipeline import (
 )
 from lpv_sysid.ident.vertex.segment import equilibrium, fit_indices, trim_window
 from lpv_sysid.ident.vertex.types import VertexData, VertexResult, known_from_quadrotor
-from lpv_sysid.ident.vertex.uncertainty import UncertaintyConfig, applied_k, sidak_k
+from lpv_sysid.ident.vertex.uncertainty import (
+    DEFAULT_JOINT_PROBABILITY,
+    UncertaintyConfig,
+    applied_k,
+    joint_k,
+    sidak_k,
+)
 
 __all__ = [
     "IdentificationConfig",
@@ -65,6 +71,8 @@ __all__ = [
     "VertexData",
     "VertexResult",
     "applied_k",
+    "joint_k",
+    "DEFAULT_JOINT_PROBABILITY",
     "box_corners",
     "equilibrium",
     "fit_indices",

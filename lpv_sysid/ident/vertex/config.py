@@ -54,6 +54,20 @@ class IdentificationConfig:
     equilibrium: bool = cf.flag(
         True, "taylor2: re-expand about the identified equilibrium (Eq. 13)"
     )
+    fixed_intervals: bool = cf.flag(
+        True,
+        "taylor2 with equilibrium: the known elements that move with the identified "
+        "equilibrium (gravity/kinematic terms at the identified attitude, rigid-body terms at "
+        "the identified rotor speeds) get intervals from its delta-method uncertainty "
+        "(issue 20 item 3); false: they are exact",
+    )
+    expand_at: str = cf.choice(
+        "commanded",
+        ("commanded", "flown"),
+        "taylor2 with equilibrium: the velocity of the equilibrium the vertex model is expanded "
+        "about: commanded (the vertex v_d the LPV model is scheduled on, issue 20 item 1) or "
+        "flown (the mean velocity of the trim window; up to 0.26 m/s off v_d)",
+    )
     motor: str = cf.choice(
         "identify",
         ("identify", "known"),

@@ -78,7 +78,12 @@ def vertex_models_dict(
         },
         "motor": [dict(results[k].motor) for k in order],
         "operating_point": {
-            "x0": "equilibrium of the identified model at the flown velocity"
+            "x0": (
+                "equilibrium of the identified model at the commanded vertex velocity v_d "
+                "(re-expanded from the flown point, expand_at: commanded)"
+                if cfg.expand_at == "commanded"
+                else "equilibrium of the identified model at the flown velocity"
+            )
             if cfg.model == "taylor2" and cfg.equilibrium
             else "mean over the trim window (flown)",
             "x_flown": [vec(results[k].x_flown) for k in order],

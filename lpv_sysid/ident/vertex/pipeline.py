@@ -18,7 +18,12 @@ from lpv_sysid.ident.vertex import uncertainty as unc
 from lpv_sysid.ident.vertex.config import IdentificationConfig, quadrotor_params
 from lpv_sysid.ident.vertex.noise import design_noise, regressor_noise_var
 from lpv_sysid.ident.vertex.output import vertex_order
-from lpv_sysid.ident.vertex.segment import equilibrium, prepare, rotor_input
+from lpv_sysid.ident.vertex.segment import (
+    equilibrium,
+    prepare,
+    rotor_input,
+    yaw_rate_variance,
+)
 from lpv_sysid.ident.vertex.taylor2 import MotorPrior, RowSolution, finish, fit_rows
 from lpv_sysid.ident.vertex.types import KnownModel, VertexData, VertexResult, known_from_quadrotor
 
@@ -86,7 +91,13 @@ def finish_vertex(
             p = quadrotor_params(cfg)
             motor_prior = ((p.a_omega, cfg.motor_std[0]), (p.b_omega, cfg.motor_std[1]))
         assert start.rows is not None  # start_vertex solved the rows for taylor2
-        fit, x0, u0, flown, motor = finish(start.rows, known, cfg, motor_prior, data.name)
+        v_target = (
+            np.asarray(data.scheduling, dtype=float) if cfg.expand_at == "commanded" else None
+        )
+        psi_var = yaw_rate_variance(data, cfg) if cfg.fixed_intervals else 0.0
+        fit, x0, u0, flown, motor = finish(
+            start.rows, known, cfg, motor_prior, data.name, v_target, psi_var
+        )
     else:
         _, xdot, dx, du = prepare(data, cfg, x0, u0, u=rotor_input(data, quadrotor_params(cfg)))
         dt = float(np.median(np.diff(data.t)))

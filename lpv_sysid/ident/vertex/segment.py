@@ -49,6 +49,19 @@ def equilibrium(data: VertexData, cfg: IdentificationConfig) -> tuple[np.ndarray
     return data.x[idx].mean(axis=0), data.u[idx].mean(axis=0)
 
 
+def yaw_rate_variance(data: VertexData, cfg: IdentificationConfig, batches: int = 8) -> float:
+    """Variance of the trim-window mean yaw rate ``psi_dot = (sin(phi) q + cos(phi) r) /
+    cos(theta)`` (the equilibrium's yaw rate, not identified): batch means over ``batches``
+    contiguous batches (robust to the samples' autocorrelation), ``var(batch means) /
+    batches``."""
+    a, b = trim_window(data.trim, cfg)
+    idx = _segment(data.t, a, b, f"{data.name or 'vertex'} trim", min(0.5, b - a))
+    x = np.asarray(data.x)[idx]
+    psi = (np.sin(x[:, 0]) * x[:, 6] + np.cos(x[:, 0]) * x[:, 7]) / np.cos(x[:, 1])
+    means = np.array([c.mean() for c in np.array_split(psi, batches) if c.size])
+    return float(np.var(means, ddof=1) / means.size) if means.size > 1 else 0.0
+
+
 def fit_indices(data: VertexData, cfg: IdentificationConfig):
     """``(dt, full, keep)``: sample indices differentiated (a little more than the fit segment,
     FFT-friendly) and the slice of them kept after cutting the smoother's edges."""

@@ -164,6 +164,11 @@ class Reexpansion:
     xdot_flown: np.ndarray  # (12,) identified model's derivative at the flown mean attitude,
     # velocity, rotor speeds and input (body rates: pure yaw rate)
     iterations: int
+    # elements with a standard error: the identified ones and, with ``fixed``, the known
+    # (gravity / kinematic / rigid-body) ones that move with the identified equilibrium
+    maskA: np.ndarray | None = None
+    maskB: np.ndarray | None = None
+    cov_w: np.ndarray | None = None  # (10, 10) covariance of (phi, theta, delta_1..4, u_1..4)
 
 
 def _x_of(w: np.ndarray, v0: np.ndarray, psi_dot: float) -> np.ndarray:
@@ -298,6 +303,8 @@ def reexpand(
     maskB: np.ndarray,
     max_iter: int = 20,
     tol: float = 1e-10,
+    fixed: bool = False,
+    psi_var: float = 0.0,
 ) -> Reexpansion:
     """Equilibrium of the identified model at the flown velocity, its Jacobians there and their
     covariance (seed 0 Eq. 13: the model is the expansion about an equilibrium).
@@ -306,6 +313,15 @@ def reexpand(
     ``psi_dot``; the delta-method covariance of the elements includes the dependence of the
     equilibrium on the parameters (implicit function theorem: ``dw/dtheta = -G_w^-1 G_theta``,
     ``G_theta`` = the regressor vectors at the equilibrium).
+
+    ``fixed`` (issue 20 item 3): the elements the identification does not estimate but that
+    move with the identified equilibrium (gravity and kinematic terms at the identified
+    attitude, rigid-body terms at the identified rotor speeds, remainder terms of identified
+    rows) get their delta-method standard error too, from the same covariance (the trim
+    uncertainty ``dw/dtheta cov dw/dtheta^T``); ``maskA``/``maskB`` of the result then mark
+    every element with a standard error. ``psi_var``: variance of the equilibrium's yaw rate
+    (the trim-window mean, not identified); its effect on the elements, directly and through
+    the equilibrium, is added to their covariance.
     """
     from lpv_sysid.errors import SolverError
 
@@ -347,6 +363,10 @@ def reexpand(
     x_e = _x_of(w[:6], v0, psi_dot)
     u_e = w[6:10]
     A, B = model.jacobians(x_e, u_e, theta)
+    if fixed:
+        maskA, maskB = _moving_elements(
+            model, w, theta, v0, psi_dot, scale, cov, maskA, maskB, psi_var > 0
+        )
     # delta method: d(elements)/d(theta) = direct + d/dw * dw/dtheta
     idx = []
     for i in range(A.shape[0]):
@@ -381,8 +401,66 @@ def reexpand(
         e[p] = th_scale[p]
         D[:, p] += (elems(w, theta + e) - elems(w, theta - e)) / (2 * th_scale[p])
     C = D @ cov @ D.T
+    if psi_var > 0:  # the yaw rate of the equilibrium: directly and through w(psi_dot)
+        e_p = 1e-4
+
+        def at(psi: float) -> tuple[np.ndarray, np.ndarray]:
+            gp = model.residual(w, theta, v0, psi)
+            Aw, Bw = model.jacobians(_x_of(w[:6], v0, psi), w[6:10], theta)
+            return gp, np.array([(Aw if m == "A" else Bw)[i, j] for m, i, j in idx])
+
+        (g_hi, e_hi), (g_lo, e_lo) = at(psi_dot + e_p), at(psi_dot - e_p)
+        dw_psi = -np.linalg.solve(G_w(w), (g_hi - g_lo) / (2 * e_p))
+        d_psi = (e_hi - e_lo) / (2 * e_p)
+        for k in range(10):
+            e = np.zeros(10)
+            e[k] = scale[k]
+            d_psi += (elems(w + e, theta) - elems(w - e, theta)) / (2 * scale[k]) * dw_psi[k]
+        C = C + psi_var * np.outer(d_psi, d_psi)
     std = np.sqrt(np.maximum(np.diag(C), 0.0))
     std_A, std_B = np.zeros_like(A), np.zeros_like(B)
     for (m, i, j), s in zip(idx, std):
         (std_A if m == "A" else std_B)[i, j] = s
-    return Reexpansion(x_e, u_e, A, B, std_A, std_B, C, np.concatenate([[0.0, 0.0], flown]), it)
+    return Reexpansion(
+        x_e,
+        u_e,
+        A,
+        B,
+        std_A,
+        std_B,
+        C,
+        np.concatenate([[0.0, 0.0], flown]),
+        it,
+        maskA,
+        maskB,
+        dw @ cov @ dw.T,
+    )
+
+
+def _moving_elements(model, w, theta, v0, psi_dot, scale, cov, maskA, maskB, psi=False):
+    """``maskA | extraA, maskB | extraB``: the elements whose value changes with the
+    equilibrium ``w`` or with an uncertain parameter (finite differences; relative threshold
+    1e-9), i.e. the ones that carry a standard error."""
+
+    def ab(wv, th):
+        Aw, Bw = model.jacobians(_x_of(wv[:6], v0, psi_dot), wv[6:10], th)
+        return np.concatenate([Aw, Bw], axis=1)
+
+    base = ab(w, theta)
+    moved = np.zeros(base.shape, dtype=bool)
+    tol = 1e-9 * np.maximum(1.0, np.abs(base))
+    for k in range(w.size):
+        e = np.zeros(w.size)
+        e[k] = scale[k]
+        moved |= np.abs(ab(w + e, theta) - ab(w - e, theta)) > tol
+    th_scale = np.maximum(np.abs(theta), 1e-12) * 1e-6
+    for p in np.nonzero(np.any(cov != 0, axis=0))[0]:
+        e = np.zeros(theta.size)
+        e[p] = th_scale[p]
+        moved |= np.abs(ab(w, theta + e) - ab(w, theta - e)) > tol
+    if psi:
+        hi = model.jacobians(_x_of(w[:6], v0, psi_dot + 1e-4), w[6:10], theta)
+        lo = model.jacobians(_x_of(w[:6], v0, psi_dot - 1e-4), w[6:10], theta)
+        moved |= np.abs(np.concatenate(hi, axis=1) - np.concatenate(lo, axis=1)) > tol
+    n = maskA.shape[0]
+    return maskA | moved[:, :n], maskB | moved[:, n:]

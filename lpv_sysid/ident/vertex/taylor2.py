@@ -176,11 +176,17 @@ def finish(
     cfg: IdentificationConfig,
     motor_prior: MotorPrior | None = None,
     name: str = "",
+    v_target: np.ndarray | None = None,
+    psi_var: float = 0.0,
 ):
     """``(Fit, x_e, u_e, xdot_flown, motor)`` from :func:`fit_rows`: where the maneuver did not
     identify ``a_Omega, b_Omega`` and ``motor_prior`` is given, they enter uncertain with it;
     then the re-expansion about the identified equilibrium (``cfg.equilibrium``) or the
-    Jacobians at the flown trim."""
+    Jacobians at the flown trim. ``v_target``: the body velocity of that equilibrium (the
+    commanded vertex v_d, ``cfg.expand_at: commanded``: the identified second-order model,
+    exact in its quadratic remainders, carried from the flown velocity to the one the LPV
+    model is scheduled on, its uncertainty propagated by the same delta method); None: the
+    flown mean velocity."""
     x0, u0, params, info = rows.x0, rows.u0, rows.params, rows.motor_info
     fits, joint, dof, nuis_kept = list(rows.fits), rows.joint, rows.dof, rows.nuis_kept
     motor = (
@@ -220,7 +226,20 @@ def finish(
     theta = np.concatenate([rf.theta for rf in fits])
     psi_dot = float((np.sin(x0[0]) * x0[6] + np.cos(x0[0]) * x0[7]) / np.cos(x0[1]))
     if cfg.equilibrium:
-        rx = taylor.reexpand(model, theta, joint, x0[2:5], psi_dot, maskA, maskB)
+        v_e = x0[2:5] if v_target is None else np.asarray(v_target, dtype=float)
+        rx = taylor.reexpand(
+            model,
+            theta,
+            joint,
+            v_e,
+            psi_dot,
+            maskA,
+            maskB,
+            fixed=cfg.fixed_intervals,
+            psi_var=psi_var,
+        )
+        if rx.maskA is not None and rx.maskB is not None:
+            maskA, maskB = rx.maskA, rx.maskB
         x_e, u_e, A, B, sA, sB, flown = (
             rx.x_e,
             rx.u_e,
@@ -230,6 +249,15 @@ def finish(
             rx.std_B,
             rx.xdot_flown,
         )
+        if v_target is not None:  # the derivative at the flown point itself (meta)
+            flown = np.concatenate(
+                [
+                    [0.0, 0.0],
+                    model.residual(
+                        np.concatenate([x0[:2], x0[8:12], u0]), theta, x0[2:5], psi_dot
+                    ),
+                ]
+            )
         log.debug(
             "%s: equilibrium re-expansion in %d Newton steps, shift %s",
             name,

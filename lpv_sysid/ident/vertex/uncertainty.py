@@ -142,6 +142,40 @@ def sidak_k(p: int, alpha: float) -> float:
     return float(norm.ppf(1.0 - a / 2.0))
 
 
+#: joint probability with which the certified element box contains *all* identified elements
+#: at once (issue 20 item 4): the synthesis box and ``lpv-sysid coverage`` use it
+DEFAULT_JOINT_PROBABILITY = 0.95
+
+
+def joint_k(
+    p_total: int,
+    probability: float = DEFAULT_JOINT_PROBABILITY,
+    dof: float | None = None,
+    k_stored: float = 3.0,
+) -> float:
+    """Simultaneous half-width, in *stored* standard errors, that covers all ``p_total``
+    elements at once with probability ``probability`` (Sidak: each two-sided interval at
+    ``1 - a`` with ``a = 1 - probability^(1/p_total)``; by Sidak's inequality (Sidak 1967,
+    JASA 62) this holds for jointly Gaussian estimates with any correlation, and
+    ``probability`` is a lower bound).
+
+    The stored std is ``s * t_factor(k_stored, dof)`` (:func:`build`): the quantile is the
+    Student-t one with ``dof`` degrees of freedom (normal when None) on the raw ``s``,
+    returned in units of the stored std. ``joint_k(408, 0.95)`` = 3.84 (normal), against the
+    marginal 3 that covers all 408 only with 0.9973^408 ~ 33 %."""
+    from scipy.stats import norm, t
+
+    from lpv_sysid.ident.equation_error import t_factor
+
+    if not 0.0 < probability < 1.0:
+        raise ConfigError(f"joint probability must be in (0, 1), got {probability!r}")
+    a = 1.0 - probability ** (1.0 / max(int(p_total), 1))
+    if dof is not None and not np.isfinite(dof):
+        dof = None
+    q = float(norm.isf(a / 2.0) if dof is None else t.isf(a / 2.0, dof))
+    return q / t_factor(k_stored, dof)
+
+
 def intervals_from_elements(elements, k_sigma: float, std_factor: float = 1.0) -> list[Interval]:
     """``elements``: iterable of (matrix, row, col, nominal, std) (``Fit.elements()``); the
     stored standard error is ``std * std_factor`` (the finite-sample widening of

@@ -74,6 +74,20 @@ def read_bag(
             if topics is None or topic in topics or topic in optional:
                 out.types.setdefault(topic, msgtype)
                 out.setdefault(topic, [])
+    for topic, msgtype in list(out.types.items()):
+        want_type = _declared_type(topic)
+        if want_type is not None and msgtype != want_type:
+            # e.g. /lpv_sysid/state recorded as sensor_msgs/Imu: reading it as Odometry ended
+            # in KeyError 'child_frame_id' (and replay's exit 1, a verdict on the gains)
+            msg = (
+                f"bag {path}: topic {topic} has type {msgtype}, expected {want_type} "
+                "(the package's topic table, docs/ARCHITECTURE.md section 4)"
+            )
+            if strict:
+                raise BagError(msg)
+            problems.append(msg)
+            del out.types[topic]
+            out.pop(topic, None)
     if topics is not None:
         missing = [t for t in topics if t not in out.types]
         if missing:
@@ -131,6 +145,15 @@ def read_bag(
     for p in problems:
         LOG.warning("%s", p)
     return out
+
+
+def _declared_type(topic: str) -> str | None:
+    """The type the package's topic table declares for ``topic`` (``/lpv_sysid/<name>``),
+    None for any other topic."""
+    from lpv_sysid.io.messages import TOPIC_NAMESPACE, TYPES
+
+    head, _, name = topic.rpartition("/")
+    return TYPES.get(name) if head == TOPIC_NAMESPACE else None
 
 
 def topic_info(path, strict: bool = True) -> dict[str, TopicStats]:

@@ -17,6 +17,8 @@ from lpv_sysid.io.files.opening import (
     read_bytes,
     read_npz,
     read_text,
+    refuse_existing,
+    refuse_overwrite,
 )
 from lpv_sysid.io.files.yaml_loader import MAX_MAGNITUDE, strict_load
 from lpv_sysid.io.files.yaml_reader import read_located, read_yaml, read_yaml_mapping, save_yaml
@@ -34,6 +36,8 @@ __all__ = [
     "read_text",
     "read_yaml",
     "read_yaml_mapping",
+    "refuse_existing",
+    "refuse_overwrite",
     "save_yaml",
     "sha256_file",
     "strict_load",

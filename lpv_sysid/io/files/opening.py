@@ -232,6 +232,50 @@ def check_output(path, label: Optional[str] = None) -> None:
         raise FileReadError(f"{label}: cannot write ({reason})", p, reason)
 
 
+def _same(a: str, b: str) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):
+        return os.path.realpath(a) == os.path.realpath(b)
+
+
+def refuse_overwrite(
+    out, inputs: "list[tuple[str, str]]", force: bool = False, flag: str = "--out"
+) -> None:
+    """The one check of an output against the inputs of the same run: ConfigError when
+    ``out`` is (the same file as) one of ``inputs`` (``(name, path)`` pairs, e.g.
+    ``("--gains", "g.yaml")``) -- ``verify --out gains.yaml`` would replace the gains,
+    ``synthesize --models M --out M`` the models -- unless ``force``."""
+    if force or out is None:
+        return
+    o = os.fspath(out)
+    if not os.path.lexists(o):
+        return
+    for name, path in inputs:
+        if path and os.path.lexists(path) and _same(o, path):
+            raise ConfigError(
+                f"{flag} {o} is the input {name} {path}: refusing to overwrite an input "
+                "(choose another output, or --force)"
+            )
+
+
+def refuse_existing(paths, force: bool = False, why: str = "") -> None:
+    """ConfigError naming the ``paths`` that exist already, unless ``force`` (an output that
+    would silently replace files something else refers to, e.g. the signal set a
+    certificate's design envelope was computed from)."""
+    paths = [os.fspath(p) for p in paths]
+    for p in paths:
+        check_output(p)  # a FIFO, device or directory is never an output, --force or not
+    if force:
+        return
+    there = [p for p in paths if os.path.lexists(p)]
+    if there:
+        raise ConfigError(
+            f"{', '.join(there)} exist(s) already{why}: refusing to replace them (another "
+            "output directory, or --force)"
+        )
+
+
 # ----------------------------------------------------------------------------- npz
 _ZIP_ERRORS = (
     zipfile.BadZipFile,

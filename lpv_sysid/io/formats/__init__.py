@@ -6,8 +6,10 @@ same reading of the same bytes):
 
 ========================================  ===================================================
 :mod:`~lpv_sysid.io.formats.vertex_models`  ``vertex_models.yaml`` (:class:`VertexModels`)
+:mod:`~lpv_sysid.io.formats.export`         its export: ``.mat`` file, python-control systems
 :mod:`~lpv_sysid.io.formats.gains`          ``gains.yaml`` (:class:`GainSchedule`)
 :mod:`~lpv_sysid.io.formats.certificate`    its ``certificate`` entry (:class:`Certificate`)
+:mod:`~lpv_sysid.io.formats.seal`           its ``seal`` (whole file; optional operator key)
 :mod:`~lpv_sysid.io.formats.sidecar`        the certificate sidecar ``<gains>.cert.npz``
 :mod:`~lpv_sysid.io.formats.shared`         channels, time base, scheduling box, vertex order
 :mod:`~lpv_sysid.io.formats.field_checker`  the field-path checks the formats are written with
@@ -28,8 +30,15 @@ Signal files (``signals.npz``, ``summary.yaml``) are owned by
 from __future__ import annotations
 
 from lpv_sysid.io.formats.certificate import DesignEnvelope
+from lpv_sysid.io.formats.export import (
+    MAT_FORMAT,
+    control_systems,
+    models_mat_dict,
+    save_models_mat,
+)
 from lpv_sysid.io.formats.feedforward_spec import FeedforwardSpec
 from lpv_sysid.io.formats.gains import GAINS_FORMAT, GainSchedule, certify_law, gains_dict
+from lpv_sysid.io.formats.seal import check_seal, load_seal_key, seal_document
 from lpv_sysid.io.formats.sidecar import (
     box_arrays,
     load_certificate_npz,
@@ -51,6 +60,7 @@ __all__ = [
     "FeedforwardSpec",
     "GAINS_FORMAT",
     "GainSchedule",
+    "MAT_FORMAT",
     "MODELS_FORMAT",
     "MODELS_FORMAT_V1",
     "UncertainEntry",
@@ -58,10 +68,16 @@ __all__ = [
     "VertexModels",
     "box_arrays",
     "certify_law",
+    "check_seal",
+    "control_systems",
     "gains_dict",
     "load_certificate_npz",
     "load_certified_systems",
+    "load_seal_key",
     "models_dict",
+    "models_mat_dict",
     "save_certificate_npz",
+    "save_models_mat",
+    "seal_document",
     "systems_arrays",
 ]

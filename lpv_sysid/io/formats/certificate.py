@@ -12,8 +12,10 @@ docs/certificate.md) says exactly which plants and which scheduling signals the 
 itself in the sidecar; ``reduced_polytope``: the convex hull of the sidecar's Eq. (23) systems)
 and ``scheduling.variation`` (``frozen`` v_d, ``arbitrary`` rate: one Lyapunov matrix, or
 ``rate_bounded`` with ``rate_bound``); the systems the runtime re-checks (sidecar ``A_sys``,
-``B_sys``) are members of that set. Other keys the synthesis records (``uncertainty``,
-``input_structure``, ``region``, ...) are kept in :attr:`Certificate.extra`.
+``B_sys``) are members of that set; ``loop_delay`` (:class:`LoopDelay`, accessor
+:attr:`Certificate.loop_delay_bound_s`) the constant loop delay the proof covers. Other keys
+the synthesis records (``uncertainty``, ``input_structure``, ``region``, ...) are kept in
+:attr:`Certificate.extra`.
 """
 
 from __future__ import annotations
@@ -107,6 +109,48 @@ class DesignEnvelope:
         )
 
 
+@dataclass(frozen=True)
+class LoopDelay:
+    """``certificate.loop_delay`` (issue 20 item 7): the constant state -> command -> actuator
+    delay ``bound_s`` [s] up to which the proof holds (D-scaled small gain on the frozen loops,
+    :mod:`lpv_sysid.synthesis.delay`), the proven margins and what the proof covers. The flight
+    controller refuses a configured loop (rate, state rate, measured input latency) whose worst
+    delay exceeds ``bound_s``."""
+
+    bound_s: float
+    stability_margin_s: Optional[float] = None
+    performance_margin_s: Optional[float] = None
+    extra: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        d: dict = {"bound_s": float(self.bound_s)}
+        for k in ("stability_margin_s", "performance_margin_s"):
+            if getattr(self, k) is not None:
+                d[k] = float(getattr(self, k))
+        d.update(self.extra)
+        return d
+
+    @classmethod
+    def parse(cls, v: FieldChecker, d, path: str = "certificate.loop_delay") -> "LoopDelay":
+        v.mapping(d, path, ("bound_s",), extra_ok=True)
+        bound = v.number(d["bound_s"], f"{path}.bound_s")
+        if not (np.isfinite(bound) and bound >= 0):
+            v.fail(f"{path}.bound_s", f"must be a finite number >= 0 [s], got {bound}")
+        margins = {}
+        for k in ("stability_margin_s", "performance_margin_s"):
+            margins[k] = None if d.get(k) is None else v.number(d[k], f"{path}.{k}")
+        pm = margins["performance_margin_s"]
+        if pm is not None and bound > pm * (1 + 1e-9):
+            v.fail(f"{path}.bound_s", f"{bound} s exceeds the proven performance margin {pm} s")
+        own = ("bound_s", "stability_margin_s", "performance_margin_s")
+        return cls(
+            bound,
+            margins["stability_margin_s"],
+            pm,
+            {k: d[k] for k in d if k not in own},
+        )
+
+
 #: ``certificate.certified_set.kind`` / ``.scheduling.variation`` (module docstring)
 CERTIFIED_SET_KINDS = ("full_identified_box", "reduced_polytope")
 SCHEDULING_VARIATIONS = ("frozen", "arbitrary", "rate_bounded")
@@ -127,6 +171,13 @@ class Certificate:
     extra: dict = field(default_factory=dict)
     gains_sha256: Optional[str] = None
     design: Optional[DesignEnvelope] = None
+    loop_delay: Optional[LoopDelay] = None
+
+    @property
+    def loop_delay_bound_s(self) -> Optional[float]:
+        """``certificate.loop_delay.bound_s`` [s]: the largest constant loop delay the proof
+        covers (None: a certificate written before the delay was certified)."""
+        return None if self.loop_delay is None else float(self.loop_delay.bound_s)
 
     def to_dict(self) -> dict:
         d = {
@@ -141,6 +192,8 @@ class Certificate:
             d["gains_sha256"] = self.gains_sha256
         if self.design is not None:
             d["design"] = self.design.to_dict()
+        if self.loop_delay is not None:
+            d["loop_delay"] = self.loop_delay.to_dict()
         return d
 
     @staticmethod
@@ -160,7 +213,7 @@ class Certificate:
         n_e: Optional[int] = None,
     ) -> "Certificate":
         req = ("lmi", "solver", "gamma_achieved", "min_margin", "models_sha256")
-        own = req + ("gains_sha256", "design")
+        own = req + ("gains_sha256", "design", "loop_delay")
         v.mapping(d, path, req, extra_ok=True)
         sha = cls._sha(v, d["models_sha256"], f"{path}.models_sha256")
         g = v.number(d["gamma_achieved"], f"{path}.gamma_achieved")
@@ -174,6 +227,11 @@ class Certificate:
         design = (
             DesignEnvelope.parse(v, d["design"], n_p, n_e, f"{path}.design")
             if d.get("design") is not None
+            else None
+        )
+        loop_delay = (
+            LoopDelay.parse(v, d["loop_delay"], f"{path}.loop_delay")
+            if d.get("loop_delay") is not None
             else None
         )
         cs = d.get("certified_set")
@@ -204,4 +262,5 @@ class Certificate:
             {k: d[k] for k in d if k not in own},
             gains_sha,
             design,
+            loop_delay,
         )

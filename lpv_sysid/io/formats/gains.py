@@ -12,8 +12,10 @@ also ``F_jerk`` (rows: free states, inputs, rate states; the jerk term). A file 
 
 :class:`GainSchedule` is the one reading of a gains file: the runtime law
 (:class:`lpv_sysid.control.law.controller.LpvController`), ``lpv-sysid verify``, replay and
-the simulations all load it through :meth:`GainSchedule.load`. Channel lists, time base, box
-and vertex order: :mod:`lpv_sysid.io.formats.shared`.
+the simulations all load it through :meth:`GainSchedule.load`, which also requires the law to
+hash to ``certificate.gains_sha256`` and the whole file to match its ``seal``
+(:mod:`lpv_sysid.io.formats.seal`: every entry but the seal, optionally keyed with an operator
+key). Channel lists, time base, box and vertex order: :mod:`lpv_sysid.io.formats.shared`.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from lpv_sysid.io.formats.certificate import Certificate
 from lpv_sysid.io.formats.feedforward_spec import FeedforwardSpec
 from lpv_sysid.io.formats.field_checker import FieldChecker, kind_of, rows
 from lpv_sysid.io.formats.gain_vertex import GainVertex
+from lpv_sysid.io.formats.seal import check_seal, seal_document
 from lpv_sysid.io.formats.shared import (
     QUADROTOR_LAYOUT,
     Layout,
@@ -191,7 +194,7 @@ class GainSchedule(StackedVertices):
                 "gamma",
                 "certificate",
             ),
-            ("time", "feedforward"),
+            ("time", "feedforward", "seal"),
         )
         if d["format"] != GAINS_FORMAT:
             v.fail("format", f"expected {GAINS_FORMAT!r}, got {d['format']!r}")
@@ -232,8 +235,12 @@ class GainSchedule(StackedVertices):
         layout: Optional[Layout] = QUADROTOR_LAYOUT,
         *,
         auto_layout: bool = False,
+        key: Optional[bytes] = None,
     ) -> "GainSchedule":
-        """Read (once) and validate; with ``models_path`` also check it against the models file
+        """Read (once) and validate, then the law against ``certificate.gains_sha256``
+        (:meth:`check_law_sha256`) and the whole file against its seal
+        (:func:`~lpv_sysid.io.formats.seal.check_seal`; with ``key``, the operator's keyed
+        seal too); with ``models_path`` also check it against the models file
         (:meth:`check_models`). ``auto_layout``: the layout :func:`layout_of` picks from the
         gains document (the quadrotor's when it names the quadrotor's states, else none), also
         used for the models file."""
@@ -242,6 +249,8 @@ class GainSchedule(StackedVertices):
         if auto_layout:
             layout = layout_of(doc)
         gs = cls.from_dict(doc, layout, label=path.name)
+        gs.check_law_sha256(path.name)
+        check_seal(doc, path.name, key)
         if models_path is not None:
             models = VertexModels.load(models_path, layout)
             gs.check_models(
@@ -308,19 +317,30 @@ class GainSchedule(StackedVertices):
                 f"{models_label} (sha256 {models_sha256})",
             )
 
-    def save(self, path) -> None:
+    def save(self, path, key: Optional[bytes] = None) -> None:
+        """Write the file, sealed (with ``key``: the keyed seal too)."""
         doc = self.to_dict()
         self.from_dict(doc, layout=None, label=Path(path).name)  # never write an invalid file
-        save_yaml(doc, path)
+        save_yaml(seal_document(doc, key), path)
 
 
-def certify_law(doc: dict, layout: Optional[Layout] = None, label: str = "gains.yaml") -> dict:
+def certify_law(
+    doc: dict,
+    layout: Optional[Layout] = None,
+    label: str = "gains.yaml",
+    key: Optional[bytes] = None,
+) -> dict:
     """``doc`` (a gains.yaml mapping) with ``certificate.gains_sha256`` set to the
-    :meth:`GainSchedule.law_sha256` of the law it holds. Called only by the tool that
-    certified that law (``lpv-sysid synthesize``; the LQR test-law writer of the tests),
-    never by a loader or editor: the hash records what was certified."""
+    :meth:`GainSchedule.law_sha256` of the law it holds, then sealed as a whole
+    (:func:`~lpv_sysid.io.formats.seal.seal_document`; with ``key`` also the operator's keyed
+    seal). Called only by the tool that certified that law (``lpv-sysid synthesize``; the
+    LQR test-law writer of the tests), never by a loader or editor: the hash records what
+    was certified, the seal the file that was written (anyone can recompute an unkeyed seal;
+    only a key holder a keyed one)."""
     gs = GainSchedule.from_dict(doc, layout, label)
-    return {**doc, "certificate": {**doc["certificate"], "gains_sha256": gs.law_sha256()}}
+    body = {k: v for k, v in doc.items() if k != "seal"}
+    certified = {**body, "certificate": {**doc["certificate"], "gains_sha256": gs.law_sha256()}}
+    return seal_document(certified, key)
 
 
 def gains_dict(
@@ -334,6 +354,7 @@ def gains_dict(
     F_ff: Optional[np.ndarray] = None,
     ff_layout: Optional[dict] = None,
     F_jerk: Optional[np.ndarray] = None,
+    seal_key: Optional[bytes] = None,
 ) -> dict:
     """The certified gains.yaml document of a synthesis result: channels and box from the
     models document ``models_raw``, per vertex (box order of ``model``) K, x0, u0, the weights,
@@ -342,6 +363,7 @@ def gains_dict(
 
     With ``F_ff`` (N, n_free + m, p) and its layout (``FeedforwardLayout.to_dict()``) every vertex
     gets an ``F_ff`` entry and the document a top-level ``feedforward`` (synthesis/feedforward.py).
+    The document is sealed (``seal_key``: with the operator's keyed seal too).
     """
     d = {
         "format": GAINS_FORMAT,
@@ -371,4 +393,4 @@ def gains_dict(
             if F_jerk is not None:
                 vx["F_jerk"] = np.asarray(F_jerk[i]).tolist()
     # the hash of the law just certified (the one place it is written; io.formats.certify_law)
-    return certify_law(d, layout=None, label="gains")
+    return certify_law(d, layout=None, label="gains", key=seal_key)

@@ -15,10 +15,11 @@ topic                         type                            content
 ``state``                     nav_msgs/Odometry               ``odom`` (ENU) / ``base_link`` (FLU);
                                                               ENU position, ENU/FLU attitude,
                                                               body velocity and rates FLU
-``rotor_speeds``              sensor_msgs/JointState          ``rotor_1..rotor_4``, velocity rad/s;
-                                                              frame_id ``base_link`` measured
-                                                              (ESC), ``estimated`` from the
-                                                              motor outputs (seed 0 Eq. 8)
+``rotor_speeds``              sensor_msgs/JointState          ``rotor_1..rotor_4``, velocity rad/s,
+                                                              measured (ESC);
+                                                              ``rotor_1_estimated..`` from the
+                                                              motor outputs (seed 0 Eq. 8);
+                                                              frame_id ``base_link``
 ``imu``                       sensor_msgs/Imu                 FLU specific force and rates,
                                                               ENU/FLU orientation
 ``velocity_reference``        geometry_msgs/TwistStamped      ``base_link``; linear = v_d FLU,
@@ -49,6 +50,7 @@ from __future__ import annotations
 
 from lpv_sysid.io.messages.channels import (
     ROTOR_ESTIMATED_FRAME,
+    ROTOR_ESTIMATED_NAMES,
     ROTOR_NAMES,
     ROTOR_SOURCES,
     actuator_command_from_joint_state,
@@ -58,6 +60,7 @@ from lpv_sysid.io.messages.channels import (
     excitation_from_joint_state,
     excitation_msg,
     joint_state,
+    rotor_names_of,
     rotor_source_of,
     rotor_speeds_from_joint_state,
     rotor_speeds_msg,
@@ -72,10 +75,14 @@ from lpv_sysid.io.messages.fields import (
 )
 from lpv_sysid.io.messages.imu import ImuSample, imu_from_msg, imu_msg
 from lpv_sysid.io.messages.state import (
+    TF_TOPIC,
     StateSample,
     odometry_from_state,
+    odometry_cdr_frames,
     state_from_odometry,
+    state_from_odometry_cdr,
     states_from_odometry,
+    tf_from_odometry,
 )
 from lpv_sysid.io.messages.status import (
     StatusSample,
@@ -98,7 +105,13 @@ from lpv_sysid.io.messages.mavros import (
     vehicle_from_info_response,
     velocity_setpoint_from_position_target,
 )
-from lpv_sysid.io.messages.topics import NAMESPACE, TOPIC_NAMESPACE, TYPES
+from lpv_sysid.io.messages.topics import (
+    NAMESPACE,
+    SENSOR_TOPICS,
+    TOPIC_NAMESPACE,
+    TYPES,
+    qos_of,
+)
 from lpv_sysid.io.messages.twist import (
     enu_velocity_setpoint_msg,
     reference_from_twist,
@@ -114,12 +127,15 @@ __all__ = [
     "MsgFactory",
     "NAMESPACE",
     "ROTOR_ESTIMATED_FRAME",
+    "ROTOR_ESTIMATED_NAMES",
     "ROTOR_NAMES",
     "ROTOR_SOURCES",
     "StateSample",
     "StatusSample",
     "TOPIC_NAMESPACE",
     "TYPES",
+    "SENSOR_TOPICS",
+    "qos_of",
     "actuator_command_from_joint_state",
     "attitude_target_msg",
     "actuator_command_msg",
@@ -143,14 +159,19 @@ __all__ = [
     "rc_in_from_msg",
     "rc_out_from_msg",
     "reference_from_twist",
+    "rotor_names_of",
     "rotor_source_of",
     "rotor_speeds_from_joint_state",
     "rotor_speeds_msg",
     "stamp_ns_from_time",
     "stamp_ns_of",
+    "odometry_cdr_frames",
     "state_from_msg",
     "state_from_odometry",
+    "state_from_odometry_cdr",
     "states_from_odometry",
+    "tf_from_odometry",
+    "TF_TOPIC",
     "status_from_diagnostic_array",
     "time_msg",
     "twist_reference_msg",

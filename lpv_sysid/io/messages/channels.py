@@ -15,8 +15,11 @@ from lpv_sysid.models.quadrotor import EXCITATION_NAMES, INPUT_NAMES  # owner of
 
 ROTOR_NAMES = ("rotor_1", "rotor_2", "rotor_3", "rotor_4")  # PX4 quad-X numbering
 #: where rotor speeds come from: "esc" (measured, ESC telemetry) or "estimated" (motor
-#: outputs through the motor model); the JointState's header.frame_id tells them apart
+#: outputs through the motor model); the joint names tell them apart (``rotor_1`` measured,
+#: ``rotor_1_estimated`` estimated); ``header.frame_id`` is a frame, ``base_link``, for both
 ROTOR_SOURCES = ("esc", "estimated")
+ROTOR_ESTIMATED_NAMES = tuple(f"{n}_estimated" for n in ROTOR_NAMES)
+#: the frame_id that marked estimated speeds in recordings before issue 24 (still read)
 ROTOR_ESTIMATED_FRAME = "estimated"
 
 JOINT_STATE_FIELDS = ("position", "velocity", "effort")
@@ -88,25 +91,34 @@ def channels_from_joint_states(msgs: Sequence, names: Sequence[str], field: str 
 def rotor_speeds_msg(f: MsgFactory, stamp_ns: int, omega_rotors, source: str = "esc"):
     """``rotor_speeds``: rotor angular speeds Omega_1..4 (rad/s, PX4 numbering) in ``velocity``.
 
-    ``source`` (:data:`ROTOR_SOURCES`) is carried in ``header.frame_id``: ``base_link`` for
-    measured speeds (ESC telemetry), ``estimated`` for speeds estimated from the motor
-    outputs; names and values are the same for both, so every consumer reads either.
+    ``source`` (:data:`ROTOR_SOURCES`) is carried in the joint names: :data:`ROTOR_NAMES`
+    for measured speeds (ESC telemetry), :data:`ROTOR_ESTIMATED_NAMES` for speeds estimated
+    from the motor outputs; ``header.frame_id`` is ``base_link`` (a frame, as TF-aware tools
+    read it). Every consumer reads either (:func:`rotor_speeds_from_joint_state`).
     """
     if source not in ROTOR_SOURCES:
         raise MessageError(f"rotor_speeds: source must be one of {ROTOR_SOURCES}, got {source!r}")
-    frame = ROTOR_ESTIMATED_FRAME if source == "estimated" else BASE_FRAME
-    return joint_state(f, stamp_ns, ROTOR_NAMES, velocity=omega_rotors, frame_id=frame)
+    names = ROTOR_ESTIMATED_NAMES if source == "estimated" else ROTOR_NAMES
+    return joint_state(f, stamp_ns, names, velocity=omega_rotors, frame_id=BASE_FRAME)
+
+
+def rotor_names_of(names: Sequence[str]) -> tuple:
+    """The rotor channel names a ``rotor_speeds`` message with joint names ``names`` carries:
+    :data:`ROTOR_ESTIMATED_NAMES` when it has them, else :data:`ROTOR_NAMES`."""
+    return ROTOR_ESTIMATED_NAMES if ROTOR_ESTIMATED_NAMES[0] in tuple(names) else ROTOR_NAMES
 
 
 def rotor_speeds_from_joint_state(msg):
     """``(t, Omega(4))`` from a ``rotor_speeds`` JointState (either source)."""
-    return channels_from_joint_state(msg, ROTOR_NAMES, field="velocity")
+    return channels_from_joint_state(msg, rotor_names_of(msg.name), field="velocity")
 
 
 def rotor_source_of(msg) -> str:
-    """``"estimated"`` when a ``rotor_speeds`` JointState carries estimated speeds, else
-    ``"esc"`` (measured; any other frame_id, e.g. ``base_link`` of older recordings)."""
-    return "estimated" if msg.header.frame_id == ROTOR_ESTIMATED_FRAME else "esc"
+    """``"estimated"`` when a ``rotor_speeds`` JointState carries estimated speeds (the
+    joint names; ``header.frame_id: estimated`` in recordings before issue 24), else
+    ``"esc"`` (measured)."""
+    estimated = rotor_names_of(msg.name) is ROTOR_ESTIMATED_NAMES
+    return "estimated" if estimated or msg.header.frame_id == ROTOR_ESTIMATED_FRAME else "esc"
 
 
 def excitation_msg(f: MsgFactory, stamp_ns: int, u_e):

@@ -17,7 +17,13 @@ from typing import Callable, Mapping, Protocol, Sequence
 import numpy as np
 
 from lpv_sysid.io import frames
-from lpv_sysid.io.messages.channels import JOINT_STATE_FIELDS, ROTOR_ESTIMATED_FRAME, ROTOR_NAMES
+from lpv_sysid.io.messages.channels import (
+    JOINT_STATE_FIELDS,
+    ROTOR_ESTIMATED_FRAME,
+    ROTOR_ESTIMATED_NAMES,
+    ROTOR_NAMES,
+    rotor_names_of,
+)
 from lpv_sysid.io.messages.factory import MessageError
 from lpv_sysid.io.messages.fields import BASE_FRAME, ODOM_FRAME
 from lpv_sysid.io.messages.state import ODOM_LEAVES, StateArrays, state_arrays
@@ -117,10 +123,12 @@ def states_from_odometry_columns(
 
 
 def channels_from_joint_state_columns(
-    cols: Columns, names: Sequence[str], field: str = "position"
+    cols: Columns, names: Sequence[str], field: str = "position", pick=None
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`channels_from_joint_states` of ``sensor_msgs/JointState`` columns:
-    ``(t (N,), values (N, len(names)))``; the channel order may differ between messages."""
+    ``(t (N,), values (N, len(names)))``; the channel order may differ between messages.
+    ``pick(have)``: the channel names to read from messages whose names are ``have``
+    (same count as ``names``; default: ``names``)."""
     if field not in JOINT_STATE_FIELDS:
         raise MessageError(
             f"joint_state: field must be one of {JOINT_STATE_FIELDS}, got {field!r}"
@@ -139,7 +147,8 @@ def channels_from_joint_state_columns(
         in_group = np.zeros(n, bool)
         in_group[rows] = True
         index = {c: k for k, c in enumerate(have)}
-        missing = [c for c in names if c not in index]
+        want = tuple(names) if pick is None else pick(have)
+        missing = [c for c in want if c not in index]
         if values.shape[1] != len(have):
             bad.check(
                 in_group,
@@ -157,7 +166,7 @@ def channels_from_joint_state_columns(
                 ),
             )
         else:
-            out[rows] = values[rows][:, [index[c] for c in names]]
+            out[rows] = values[rows][:, [index[c] for c in want]]
             mask = in_group[:, None] & ~np.isfinite(out)
             bad.check(
                 mask.any(axis=1),
@@ -173,12 +182,17 @@ def channels_from_joint_state_columns(
 
 def rotor_speeds_from_joint_state_columns(cols: Columns) -> tuple[np.ndarray, np.ndarray]:
     """``(t, Omega (N, 4))`` of ``rotor_speeds`` columns (either source)."""
-    return channels_from_joint_state_columns(cols, ROTOR_NAMES, field="velocity")
+    return channels_from_joint_state_columns(
+        cols, ROTOR_NAMES, field="velocity", pick=rotor_names_of
+    )
 
 
 def rotor_sources_of_columns(cols: Columns) -> np.ndarray:
     """(N,) :func:`rotor_source_of` of every message of ``rotor_speeds`` columns."""
-    estimated = cols.strings["header.frame_id"] == ROTOR_ESTIMATED_FRAME
+    by_name = np.array(
+        [rotor_names_of(n) is ROTOR_ESTIMATED_NAMES for n in cols.strings["name"]], dtype=bool
+    ).reshape(-1)
+    estimated = by_name | (cols.strings["header.frame_id"] == ROTOR_ESTIMATED_FRAME)
     return np.where(estimated, "estimated", "esc")
 
 

@@ -78,6 +78,30 @@ def odometry_from_state(
     )
 
 
+#: the TF topic (tf2's convention: absolute, one tree per ROS domain)
+TF_TOPIC = "/tf"
+
+
+def tf_from_odometry(f: MsgFactory, odom):
+    """The REP-105 transform of a ``state`` message: ``tf2_msgs/TFMessage`` with one
+    ``geometry_msgs/TransformStamped`` from the Odometry's ``header.frame_id`` (``odom``) to
+    its ``child_frame_id`` (``base_link``), stamped like it: translation = the ENU position,
+    rotation = the ENU/FLU orientation (RViz and Foxglove place the vehicle with it)."""
+    p, q = odom.pose.pose.position, odom.pose.pose.orientation
+    transform = f(
+        "geometry_msgs/msg/Transform",
+        translation=vector3(f, (p.x, p.y, p.z)),
+        rotation=quaternion(f, (q.x, q.y, q.z, q.w)),
+    )
+    tf = f(
+        "geometry_msgs/msg/TransformStamped",
+        header=header_msg(f, stamp_ns_of(odom), odom.header.frame_id),
+        child_frame_id=str(odom.child_frame_id),
+        transform=transform,
+    )
+    return f("tf2_msgs/msg/TFMessage", transforms=[tf])
+
+
 def state_from_odometry(
     msg, *, frame_id: str | None = ODOM_FRAME, child_frame_id: str | None = BASE_FRAME
 ) -> StateSample:
@@ -91,24 +115,8 @@ def state_from_odometry(
         f = [float(c) for c in vals]
     except (TypeError, ValueError):
         f = None
-    if (
-        f is not None
-        and all(map(math.isfinite, f))
-        and abs(math.sqrt(f[3] * f[3] + f[4] * f[4] + f[5] * f[5] + f[6] * f[6]) - 1.0) <= 1e-3
-    ):
-        # fast path (the controller's state rate): plain floats through io.frames
-        pos_ned, euler, v_frd, w_frd = frames.odometry_ned_frd_from_ros_scalar(
-            f[0:3], f[3:7], f[7:10], f[10:13]
-        )
-        ns = stamp_ns_of(msg)
-        return StateSample(
-            t=ns / 1e9,
-            pos_ned=np.array(pos_ned),
-            euler=np.array(euler),
-            v_body=np.array(v_frd),
-            omega=np.array(w_frd),
-            stamp_ns=ns,
-        )
+    if f is not None and _plain(f):
+        return _fast_sample(f, stamp_ns_of(msg))
     # validating path: names the offending field
     pos = finite(xyz(p.position), 3, "state.pose.pose.position")
     o = p.orientation
@@ -126,6 +134,76 @@ def state_from_odometry(
         euler=frames.euler_from_ros_orientation(q),
         v_body=frames.flu_to_frd(v),
         omega=frames.flu_to_frd(w),
+        stamp_ns=ns,
+    )
+
+
+def _plain(f: list) -> bool:
+    """Every value finite and the quaternion (``f[3:7]``) of unit norm within 1e-3: the fast
+    path's condition (anything else takes the validating path, which names the field)."""
+    return (
+        all(map(math.isfinite, f))
+        and abs(math.sqrt(f[3] * f[3] + f[4] * f[4] + f[5] * f[5] + f[6] * f[6]) - 1.0) <= 1e-3
+    )
+
+
+def _fast_sample(f: Sequence[float], ns: int) -> StateSample:
+    """The fast path (the controller's state rate): plain floats through io.frames."""
+    pos_ned, euler, v_frd, w_frd = frames.odometry_ned_frd_from_ros_scalar(
+        f[0:3], f[3:7], f[7:10], f[10:13]
+    )
+    return StateSample(
+        t=ns / 1e9,
+        pos_ned=np.array(pos_ned),
+        euler=np.array(euler),
+        v_body=np.array(v_frd),
+        omega=np.array(w_frd),
+        stamp_ns=ns,
+    )
+
+
+def odometry_cdr_frames(
+    data: bytes, *, frame_id: str | None = ODOM_FRAME, child_frame_id: str | None = BASE_FRAME
+) -> tuple[int, tuple, tuple, tuple, tuple] | None:
+    """``(stamp_ns, pos_ned, euler, v_frd, w_frd)`` (float tuples) of a serialized
+    ``nav_msgs/Odometry`` (a raw subscription's bytes), reading only the 13 values it needs
+    (:func:`lpv_sysid.io.bag.cdr.odometry_record`) through the fast path of
+    :func:`state_from_odometry`: the same numbers, the same frame and stamp checks
+    (MessageError). ``None`` when the message needs the validating path (a non-finite value,
+    a quaternion off unit norm, bytes that are no CDR Odometry record): the caller
+    deserialises it and calls :func:`state_from_odometry`, which names the problem."""
+    from lpv_sysid.io.bag.cdr import LayoutError, odometry_record  # the node's path only
+
+    try:
+        rec = odometry_record(data)
+    except LayoutError:
+        return None
+    check_frame(rec.frame_id, frame_id, "state.header")
+    check_frame(rec.child_frame_id, child_frame_id, "state.child_frame_id")
+    f = list(rec.values)
+    if not _plain(f):
+        return None
+    if not 0 <= rec.nanosec < 1_000_000_000:
+        raise MessageError(f"stamp: nanosec {rec.nanosec} outside [0, 1e9)")
+    ns = rec.sec * 1_000_000_000 + rec.nanosec
+    return (ns, *frames.odometry_ned_frd_from_ros_scalar(f[0:3], f[3:7], f[7:10], f[10:13]))
+
+
+def state_from_odometry_cdr(
+    data: bytes, *, frame_id: str | None = ODOM_FRAME, child_frame_id: str | None = BASE_FRAME
+) -> StateSample | None:
+    """:func:`state_from_odometry` of the serialized message (:func:`odometry_cdr_frames`;
+    ``None``: take the validating path)."""
+    got = odometry_cdr_frames(data, frame_id=frame_id, child_frame_id=child_frame_id)
+    if got is None:
+        return None
+    ns, pos_ned, euler, v_frd, w_frd = got
+    return StateSample(
+        t=ns / 1e9,
+        pos_ned=np.array(pos_ned),
+        euler=np.array(euler),
+        v_body=np.array(v_frd),
+        omega=np.array(w_frd),
         stamp_ns=ns,
     )
 

@@ -14,4 +14,41 @@ TYPES = {
     "excitation": "sensor_msgs/msg/JointState",
     "actuator_command": "sensor_msgs/msg/JointState",
     "status": "diagnostic_msgs/msg/DiagnosticArray",
+    # PX4's ATTITUDE_TARGET (thrust + body-rate setpoints it tracks; names thrust, p_sp, q_sp,
+    # r_sp in ``position``): the rate-plant identification's input, phase 2's echo
+    "rate_setpoint": "sensor_msgs/msg/JointState",
 }
+
+#: QoS of the high-rate measurement streams: best effort, keep last 5 (rclpy's
+#: ``qos_profile_sensor_data``): a late sample is worthless, a retransmission only delays
+#: the next one
+SENSOR_QOS = {
+    "history": "keep_last",
+    "depth": 5,
+    "reliability": "best_effort",
+    "durability": "volatile",
+}
+#: references, excitation and commands: reliable, keep last 10, volatile
+RELIABLE_QOS = {
+    "history": "keep_last",
+    "depth": 10,
+    "reliability": "reliable",
+    "durability": "volatile",
+}
+#: ``status`` (and ``/diagnostics``): reliable and transient local, keep last 10, so a
+#: subscriber that joins late (``ros2 topic echo``, a restarted logger) still receives each
+#: node's last status, e.g. the final state of a node that aborted
+STATUS_QOS = {**RELIABLE_QOS, "durability": "transient_local"}
+SENSOR_TOPICS = frozenset({"state", "rotor_speeds", "imu"})
+
+
+def qos_of(topic: str) -> dict:
+    """The QoS the package's publishers offer on ``topic`` (relative or absolute name; the
+    last name component decides) -- what the nodes publish with and what a recording
+    stores as the topic's ``offered_qos_profiles``."""
+    leaf = topic.rsplit("/", 1)[-1]
+    if leaf in SENSOR_TOPICS:
+        return dict(SENSOR_QOS)
+    if leaf in ("status", "diagnostics"):
+        return dict(STATUS_QOS)
+    return dict(RELIABLE_QOS)

@@ -105,11 +105,14 @@ def static_metadata(cfg: RecorderConfig) -> dict:
     from lpv_sysid.io.files import read_text
 
     for path in cfg.config_files:  # regular UTF-8 files of at most the YAML cap
-        files[str(path)] = read_text(path, f"recorder: config file {path}")
+        files[_relative(path, cfg.out_dir)] = read_text(path, f"recorder: config file {path}")
     gains = None
     if cfg.gains_file:
         try:
-            gains = {"path": str(cfg.gains_file), "sha256": sha256_file(cfg.gains_file)}
+            gains = {
+                "path": _relative(cfg.gains_file, cfg.out_dir),
+                "sha256": sha256_file(cfg.gains_file),
+            }
         except OSError as exc:
             raise ConfigError(
                 f"recorder: gains file {cfg.gains_file}: {exc.strerror or exc}"
@@ -121,3 +124,12 @@ def static_metadata(cfg: RecorderConfig) -> dict:
         "gains": gains,
         "git_revision": git_revision(here),
     }
+
+
+def _relative(path: str | os.PathLike, out_dir: str | os.PathLike) -> str:
+    """``path`` relative to the experiment directory (the record moves with it); as given
+    when there is no relative path (another drive)."""
+    try:
+        return os.path.relpath(Path(path).resolve(), Path(out_dir).resolve())
+    except ValueError:
+        return str(path)

@@ -13,6 +13,7 @@ import yaml
 
 from lpv_sysid.errors import BagError, ConfigError
 from lpv_sysid.io.bag import DiskReserve, atomic_write_text, now_iso
+from lpv_sysid.io.messages import qos_of
 from lpv_sysid.io.recorder.config import RecorderConfig
 from lpv_sysid.io.recorder.experiment import (
     LOCK_FILE,
@@ -249,7 +250,9 @@ class Recorder:
             writer = self._make_writer(str(path))
             writer.__enter__()
             for topic, msgtype in self.config.topics.items():
-                writer.add_topic(topic, msgtype)
+                # the QoS the package's publishers offer (best effort sensors, ...): what
+                # ``ros2 bag play`` offers again
+                writer.add_topic(topic, msgtype, qos_of(topic))
         except (OSError, BagError) as exc:
             self.error = f"cannot open bag {path}: {getattr(exc, 'strerror', None) or exc}"
             write_metadata(self, closed=False)
@@ -301,6 +304,17 @@ class Recorder:
             self.error = self.error or msg
             raise BagError(f"recorder: {msg}") from None
         settle(self.bags[-1], writer)
+        self._note_file_bytes(self.bags[-1])
+
+    def _note_file_bytes(self, bag) -> None:
+        """``bytes`` of a closed bag: the size of its files on disk (the payload count
+        during recording is kept only when splitting by size needs it)."""
+        try:
+            size = sum(p.stat().st_size for p in (self.out_dir / bag.path).iterdir())
+        except OSError:
+            return
+        if bag.durable is not None:
+            bag.durable["bytes"] = int(size)
 
     def _fail(self, reason: str):
         self.error = reason

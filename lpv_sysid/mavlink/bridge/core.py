@@ -292,7 +292,7 @@ class BridgeCore:
                 f"actuator command rejected: needs 4 finite values (ut, ua, ue, ur), "
                 f"got {a.tolist()!r}",
             )
-        if self.config.command != "attitude_rate":
+        if self.config.command not in ("attitude_rate", "rate_setpoint"):
             return self._reject(
                 now, f"actuator command ignored: bridge command is {self.config.command!r}"
             )

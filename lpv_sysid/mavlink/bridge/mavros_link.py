@@ -32,6 +32,8 @@ MAVROS (namespace ``/mavros``)     mavros_msgs / std type      becomes (core inp
                                                                NED (velocity, phase 1)
 ``setpoint_raw/attitude``          AttitudeTarget              <- SET_ATTITUDE_TARGET (body
                                                                rates + thrust, phase 2)
+``setpoint_raw/target_attitude``   AttitudeTarget              ATTITUDE_TARGET (PX4's echo,
+                                                               ``rate_setpoint`` topic)
 =================================  ==========================  ===========================
 
 The truth rule is unchanged: a step counts only when, after the service's final answer
@@ -359,6 +361,22 @@ class MavrosLink:
         servos.update({f"servo{k + 1}_raw": int(c) for k, c in enumerate(channels[:16])})
         self._inbox.append(
             _Msg("SERVO_OUTPUT_RAW", time_usec=(stamp_ns // 1000) % 2**32, port=0, **servos)
+        )
+
+    def on_target_attitude(
+        self, now: float, time_boot_ms: int, rates_frd: np.ndarray, thrust: float
+    ) -> None:
+        """``setpoint_raw/target_attitude`` (PX4's ATTITUDE_TARGET, FLU turned back to FRD)
+        -> ATTITUDE_TARGET: the rate setpoints PX4 tracks (the ``rate_setpoint`` echo)."""
+        self._inbox.append(
+            _Msg(
+                "ATTITUDE_TARGET",
+                time_boot_ms=int(time_boot_ms),
+                thrust=float(thrust),
+                body_roll_rate=float(rates_frd[0]),
+                body_pitch_rate=float(rates_frd[1]),
+                body_yaw_rate=float(rates_frd[2]),
+            )
         )
 
     def on_home(self, now: float, home_ned: np.ndarray) -> None:

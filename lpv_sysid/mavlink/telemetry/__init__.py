@@ -45,6 +45,12 @@ Telemetry hygiene
 from __future__ import annotations
 
 from lpv_sysid.mavlink.telemetry.decoder import TelemetryDecoder
+from lpv_sysid.mavlink.telemetry.provenance import (
+    SIM_MARKER,
+    VEHICLE_KINDS,
+    VehicleRecord,
+    vehicle_kind,
+)
 from lpv_sysid.mavlink.telemetry.rotor_estimate import (
     MAPPINGS,
     MOTOR_OUTPUT_STREAMS,
@@ -75,9 +81,13 @@ __all__ = [
     "RotorEstimateConfig",
     "RotorSample",
     "RotorSpeedEstimator",
+    "SIM_MARKER",
     "StateSample",
     "TelemetryDecoder",
+    "VEHICLE_KINDS",
+    "VehicleRecord",
     "euler_to_quat",
     "quat_to_dcm",
+    "vehicle_kind",
     "with_motor_output_streams",
 ]

@@ -38,7 +38,9 @@ class ElementBox:
     not uncertain keep the vertex value; B is common to all vertices). Per vertex i the elements
     are ``rows[i]``, ``cols[i]`` (column of [A, B]: ``c < n`` an A element, ``c >= n`` the B
     element (r, c - n)) and ``half[i]`` (> 0); the B elements are the same at every vertex (the
-    common hull) and come after the A elements. ``labels[i]`` say where each interval came from.
+    common hull) and come after the A elements. ``labels[i]`` say where each interval came from;
+    ``coverage``: with which joint probability the intervals hold the identified elements (the
+    certificate's ``certified_set.joint_coverage``; None: marginal intervals as stored).
     """
 
     A_centre: np.ndarray
@@ -47,6 +49,7 @@ class ElementBox:
     cols: tuple
     half: tuple
     labels: tuple = ()
+    coverage: Optional[dict] = None
 
     def __post_init__(self) -> None:
         A = np.asarray(self.A_centre, dtype=float)

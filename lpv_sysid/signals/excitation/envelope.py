@@ -92,8 +92,9 @@ def design_envelope(
 def check_design(t, u, names, design, ramp: float, where: str = "signals") -> None:
     """A phase-2 table against the design envelope of the gains (``design``: a
     :class:`lpv_sysid.io.formats.DesignEnvelope`): reference peaks, the table's own rates
-    (chord slopes, which the interpolated playback reproduces), excitation peaks, the table
-    interval and the fade ``ramp``; ConfigError naming the first violation."""
+    (chord slopes, which the interpolated playback reproduces) and accelerations (second
+    divided differences), excitation peaks, the table interval and the fade ``ramp``;
+    ConfigError naming the first violation."""
     t, u, names = validate_table(t, u, names, where=where)
     missing = [n for n in PHASE2_CHANNELS + PHASE2_EXCITATION if n not in names]
     if missing:
@@ -123,6 +124,17 @@ def check_design(t, u, names, design, ramp: float, where: str = "signals") -> No
             raise ConfigError(
                 f"{where}: {n} changes at {rate:.4g} m/s^2, beyond the design rate "
                 f"{design.reference_rate[k]:.4g} m/s^2"
+            )
+        # second divided difference = x''(xi) of the sampled signal: the gains' gamma bounds
+        # u_e -> z only; the reference-driven part is covered for references within the
+        # recorded rate AND acceleration bounds (docs/certificate.md section 3b)
+        accel = float(np.max(np.abs(np.diff(x, 2)))) / dt**2 if x.size > 2 else 0.0
+        if accel > design.reference_accel[k] * (1 + tol):
+            raise ConfigError(
+                f"{where}: {n} accelerates at {accel:.4g} m/s^3, beyond the design "
+                f"acceleration {design.reference_accel[k]:.4g} m/s^3 the gains were designed "
+                "for (refused before flight: the certified bound does not cover the "
+                "reference-driven terms of a faster reference)"
             )
     for k, n in enumerate(PHASE2_EXCITATION):
         peak = float(np.max(np.abs(u[:, names.index(n)])))

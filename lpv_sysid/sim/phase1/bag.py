@@ -50,7 +50,7 @@ def write_run_bag(
     try:
         with BagWriter(str(path), storage=storage) as w:
             for name in BAG_TOPICS:
-                w.add_topic(topic[name], messages.TYPES[name])
+                w.add_topic(topic[name], messages.TYPES[name], messages.qos_of(name))
             if rows is not None:
                 w.write_many(rows)
             else:

@@ -78,7 +78,9 @@ class Phase2Bag:
     def __enter__(self) -> "Phase2Bag":
         self.writer.open()
         for name in BAG_TOPICS:
-            self.writer.add_topic(self.topic[name], self.messages.TYPES[name])
+            self.writer.add_topic(
+                self.topic[name], self.messages.TYPES[name], self.messages.qos_of(name)
+            )
         return self
 
     def __exit__(self, exc_type, exc, tb) -> bool:

@@ -18,6 +18,7 @@ from typing import Any, Callable, Optional, Sequence
 import numpy as np
 
 from lpv_sysid.configuration import fields as cf
+from lpv_sysid.control.law import check_kappa
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.sim.closed_loop import ReferenceSignals
 
@@ -34,16 +35,17 @@ class Phase2Config:
     errors name the field)."""
 
     kappa: float = cf.number(
-        1.0, "excitation multiplier of Eq. (33)", lo=0.0, lo_open=True, hi=100.0
+        1.0, "excitation multiplier of Eq. (33) (range: control.law.check_kappa)"
     )
     eq33_method: str = cf.choice(
         "rk4", ("RK45", "rk4"), "rk4: fixed step on the signal grid; RK45: ode45-like"
     )
     box_margin: float = cf.number(
         1.0,
-        "beyond the scheduling box before the supervisor stops",
+        "beyond the scheduling box before the supervisor stops (a wider margin leaves the "
+        "certified box unguarded)",
         lo=0.0,
-        hi=10.0,
+        hi=1.0,
         unit=" m/s",
     )
     max_tilt_deg: float = cf.number(
@@ -100,6 +102,7 @@ class Phase2Config:
 
     def __post_init__(self) -> None:
         cf.normalize_fields(self, "phase2")
+        check_kappa(self.kappa, "kappa", positive=True)  # the controller's range (Eq. 33)
 
 
 # --------------------------------------------------------------------------- gains and models

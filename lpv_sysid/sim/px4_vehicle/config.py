@@ -82,6 +82,9 @@ DEFAULT_RATES: dict[str, float] = {
     "SYS_STATUS": 5.0,
     "EXTENDED_SYS_STATE": 5.0,
     "HOME_POSITION": 0.5,
+    # thrust + body-rate setpoints PX4 tracks (sent while a SET_ATTITUDE_TARGET rates setpoint
+    # is flown in OFFBOARD: the echo of what arrived; the sim's own cascade has no rate stage)
+    "ATTITUDE_TARGET": 10.0,
 }
 ACTUATOR_OUTPUT_SCALES = ("pwm", "normalized")
 

@@ -10,7 +10,7 @@ import math
 import numpy as np
 
 from lpv_sysid.mavlink import px4
-from lpv_sysid.mavlink.telemetry import euler_to_quat
+from lpv_sysid.mavlink.telemetry import SIM_MARKER, euler_to_quat
 from lpv_sysid.sim.px4_vehicle.state import MAV_TYPE_QUADROTOR, VehicleState
 
 MAV_AUTOPILOT_PX4 = 12
@@ -49,7 +49,16 @@ class TelemetryStreams(VehicleState):
             return self.config.esc_telemetry
         if mid == sid["RC_CHANNELS"]:
             return self.config.rc_present
+        if mid == sid["ATTITUDE_TARGET"]:
+            return self._rates_setpoint() is not None
         return True
+
+    def _rates_setpoint(self):
+        """The SET_ATTITUDE_TARGET rates setpoint PX4 is tracking (OFFBOARD), else None."""
+        sp = self.setpoint
+        if self.mode == px4.OFFBOARD and sp is not None and sp.kind == "rates":
+            return sp
+        return None
 
     def _send_telemetry(self, now: float) -> None:
         if now >= self._next_hb:
@@ -99,7 +108,7 @@ class TelemetryStreams(VehicleState):
                 0,
                 0,
                 0,
-                b"\0" * 8,
+                SIM_MARKER,  # flight_custom_version: tells this simulation from a PX4
                 b"\0" * 8,
                 b"\0" * 8,
                 0,
@@ -207,6 +216,20 @@ class TelemetryStreams(VehicleState):
                 0.0,
                 0.0,
                 us,
+            )
+        elif mid == sid["ATTITUDE_TARGET"]:
+            sp = self._rates_setpoint()
+            if sp is None:
+                return
+            rates = sp.rates if sp.rates is not None else np.zeros(3)
+            c_msg = c.attitude_target_encode(
+                ms,
+                7,  # ATTITUDE_TARGET_TYPEMASK: attitude ignored (a rates setpoint)
+                [float(a) for a in euler_to_quat(*x[3:6])],
+                float(rates[0]),
+                float(rates[1]),
+                float(rates[2]),
+                float(sp.thrust),
             )
         elif mid == sid["ODOMETRY"]:
             # EKF2 vehicle_odometry: timestamp_sample = IMU sample time (before the publish

@@ -84,6 +84,9 @@ class SimVehicleSettings(parameters.Settings):
         0.001,
         10.0,
     )
+    publish_tf: bool = parameters.flag(
+        False, "publish odom -> base_link on /tf from the state (REP-105; RViz, Foxglove)"
+    )
 
     def validate(self) -> None:
         if self.real_time_factor != 1.0 and not self.lockstep:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from lpv_sysid.synthesis.gains.config import (
     FeedforwardSection,
+    LoopDelaySection,
     SynthesisConfig,
     VerifySection,
     WeightsSection,
@@ -21,6 +22,7 @@ from lpv_sysid.synthesis.gains.pipeline import describe_problem, synthesize, ver
 
 __all__ = [
     "FeedforwardSection",
+    "LoopDelaySection",
     "SynthesisConfig",
     "VerifySection",
     "WeightsSection",

@@ -100,7 +100,11 @@ def certified_set_entry(model, res, opts, design: Optional[dict]) -> dict:
     if var == "arbitrary":
         sched["covers_design_signal"] = True
         sched["note"] = (
-            "V = x^T X^-1 x decreases along every trajectory of the set: any v_d(t) in the box"
+            "V = x^T X^-1 x decreases along every trajectory of the set: the u_e -> z bound of "
+            "the deviation dynamics holds for any scheduling signal v_d(t) in the box; the "
+            "reference-driven terms (d/dt x0(v_d), feedforward and x0/u0 interpolation errors) "
+            "are not in it: references are bounded by certificate.design (rate, acceleration), "
+            "refused before flight beyond it"
         )
     elif var == "rate_bounded":
         rate = [float(x) for x in opts.rate_bound]
@@ -123,7 +127,8 @@ def certified_set_entry(model, res, opts, design: Optional[dict]) -> dict:
         )
     entry: dict = {"scheduling": sched, "lmi": LMI_TEXT[method]}
     rate_txt = {
-        "arbitrary": "v_d(t) in the scheduling box, varying arbitrarily fast",
+        "arbitrary": "any scheduling signal v_d(t) in the scheduling box (u_e -> z only; "
+        "references within certificate.design's rate and acceleration bounds)",
         "frozen": "every constant (frozen) v_d in the scheduling box",
         "rate_bounded": (
             f"v_d(t) in the scheduling box with |dv_d,k/dt| <= {sched.get('rate_bound')} m/s^2"
@@ -180,6 +185,36 @@ def certified_set_entry(model, res, opts, design: Optional[dict]) -> dict:
                 ),
             }
         )
+        cov = dict(box.coverage or {})
+        infl = cov.pop("box_inflation", None)
+        entry["robustness"] = {
+            "box_inflation": infl,
+            "statement": (
+                f"the proof holds for the box with every half-width x {1 + infl:g} (the "
+                "sidecar's box is the inflated one): the stated margin, not the solver's eps"
+                if infl
+                else "no stated margin: the proof holds for the box itself (margin = eps)"
+            ),
+        }
+        if infl:
+            entry["statement"] += (
+                f"; proven with every half-width inflated by {100 * infl:g} % "
+                "(certified_set.robustness)"
+            )
+        if cov.get("probability") is not None:
+            jc = cov
+            entry["joint_coverage"] = jc
+            entry["statement"] += (
+                f"; the intervals are simultaneous: they hold all {jc['elements']} identified "
+                f"elements at once with probability >= {jc['probability']:g} "
+                "(certified_set.joint_coverage), not each element marginally"
+            )
+        else:
+            entry["joint_coverage"] = {
+                "probability": None,
+                "statement": "marginal intervals as stored (uncertainty.joint_probability: "
+                "null): no joint probability is claimed",
+            }
     else:
         Ms = [len(lst) for lst in model.systems]
         entry.update(
@@ -268,6 +303,45 @@ def _lmi_text(inp: Inputs, form: int) -> str:
     return text + (" + seed 2 Eq. (125) region (common H)" if inp.opts.region else "")
 
 
+def loop_delay_entry(inp: Inputs, res) -> dict:
+    """certificate.loop_delay: the constant loop delay the proof covers (synthesis/delay.py).
+
+    ``loop_delay.bound_s`` of the synthesis config (the measured state -> command -> actuator
+    latency plus margin) must be within the proven performance margin (SolverError otherwise);
+    without it the bound is the proven margin itself (rounded down to 0.1 ms)."""
+    from lpv_sysid.errors import SolverError
+    from lpv_sysid.synthesis import delay as dl
+
+    want = inp.cfg.loop_delay.bound_s
+    systems, K, gamma = inp.model.systems, np.asarray(res.K), float(inp.opts.gamma)
+    stab = dl.stability_margin(systems, K)
+    perf = dl.performance_margin(systems, K, inp.R, inp.C, gamma)
+    if want is not None and want > perf:
+        raise SolverError(
+            f"loop_delay.bound_s {want:g} s is not certified: the frozen loops keep "
+            f"||u_e -> z|| <= gamma {gamma:g} only up to {perf * 1e3:.2f} ms of constant loop "
+            f"delay (stable up to {stab * 1e3:.2f} ms); lower the delay (loop rate, "
+            "transport) or synthesize for less bandwidth"
+        )
+    bound = float(want) if want is not None else float(np.floor(perf * 1e4) / 1e4)
+    n_sys = sum(len(lst) for lst in systems)
+    return {
+        "bound_s": bound,
+        "source": "loop_delay.bound_s of the synthesis config"
+        if want is not None
+        else "the proven performance margin (no loop_delay.bound_s configured)",
+        "stability_margin_s": float(stab),
+        "performance_margin_s": float(perf),
+        "gamma": gamma,
+        "proof": "D-scaled small gain (synthesis/delay.py): u_c = K x(t - tau), every constant "
+        f"tau <= bound_s keeps ||u_e -> z||_inf < gamma on the {n_sys} frozen systems the "
+        "sidecar stores (per vertex centre, nominal, seeded box corners); frozen v_d, not "
+        "the common-X proof over the whole box; re-checked by lpv-sysid verify",
+        "configured_delay": "input_latency_s + 1 / state_rate_hz + 1 / rate_hz of the "
+        "controller settings; refused at start-up when above bound_s",
+    }
+
+
 def certificate_entry(inp: Inputs, res, models_path: str, side: Path, side_sha: str) -> dict:
     """gains.yaml ``certificate``: what was solved, how well, over which set, and the sidecar."""
     from lpv_sysid.io.files import sha256_file
@@ -306,6 +380,7 @@ def certificate_entry(inp: Inputs, res, models_path: str, side: Path, side_sha: 
             "note": "seed 0 Eq. (30) re-evaluated with numpy at every Eq. (23) system with "
             "X_i^j = X_i, S_i, H of the element-box solve",
         }
+    cert["loop_delay"] = loop_delay_entry(inp, res)
     if opts.region is not None:
         cert["region"] = opts.region.to_dict()
     if inp.design is not None:

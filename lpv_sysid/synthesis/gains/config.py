@@ -4,7 +4,8 @@ Top-level sections: ``hinf`` (:class:`~lpv_sysid.synthesis.hinf.HinfOptions`), `
 (:class:`WeightsSection`, seed 0 Eqs. 27-28), ``velocity_states`` (the states of
 z = Q^-1 (v - v_d), Eq. 18), ``uncertainty``
 (:class:`~lpv_sysid.synthesis.uncertainty_set.UncertaintySettings`, Eqs. 22-23), ``verify``
-(:class:`VerifySection`) and ``feedforward`` (true | false | :class:`FeedforwardSection`).
+(:class:`VerifySection`), ``loop_delay`` (:class:`LoopDelaySection`) and ``feedforward``
+(true | false | :class:`FeedforwardSection`).
 Every key is declared with :mod:`lpv_sysid.configuration.fields`; a misspelt key anywhere is
 refused naming the file, the section and the key.
 
@@ -67,6 +68,28 @@ class VerifySection:
 
 
 @dataclass(frozen=True)
+class LoopDelaySection:
+    """``loop_delay``: the measured state -> command -> actuator latency plus margin that the
+    certificate must cover (:mod:`lpv_sysid.synthesis.delay`); null: the proven margin."""
+
+    bound_s: Optional[float] = cf.number(
+        None,
+        "constant loop delay the proof must cover",
+        lo=0.0,
+        hi=1.0,
+        hi_open=True,
+        unit=" s",
+        optional=True,
+    )
+
+    @classmethod
+    def from_dict(
+        cls, d: Optional[Mapping[str, Any]], where: str = "loop_delay"
+    ) -> "LoopDelaySection":
+        return cls(**cf.parse_fields(cls, d or {}, where))
+
+
+@dataclass(frozen=True)
 class FeedforwardSection:
     """``feedforward`` (seed 2 Sec. 5.1): on/off, the conditioning limit of the per-vertex
     solve and the state layout (:class:`~lpv_sysid.synthesis.feedforward.FeedforwardLayout`).
@@ -105,12 +128,13 @@ class SynthesisConfig:
     uncertainty: UncertaintySettings = field(default_factory=UncertaintySettings)
     verify: VerifySection = field(default_factory=VerifySection)
     feedforward: FeedforwardSection = field(default_factory=FeedforwardSection)
+    loop_delay: LoopDelaySection = field(default_factory=LoopDelaySection)
 
     @classmethod
     def from_dict(cls, d: Any, where: str = "synthesis") -> "SynthesisConfig":
-        sections = ("hinf", "weights", "uncertainty", "verify", "feedforward")
+        sections = ("hinf", "weights", "uncertainty", "verify", "loop_delay", "feedforward")
         kw: dict[str, Any] = cf.parse_fields(cls, d, where, other_keys=sections)
-        for name in sections[:4]:
+        for name in sections[:5]:
             if d.get(name) is not None and not isinstance(d[name], Mapping):
                 raise cf.error(where, name, f"expected a mapping, got {type(d[name]).__name__}")
         kw["hinf"] = HinfOptions.from_dict(d.get("hinf"), cf.join(where, "hinf"))
@@ -119,6 +143,9 @@ class SynthesisConfig:
             d.get("uncertainty"), cf.join(where, "uncertainty")
         )
         kw["verify"] = VerifySection.from_dict(d.get("verify"), cf.join(where, "verify"))
+        kw["loop_delay"] = LoopDelaySection.from_dict(
+            d.get("loop_delay"), cf.join(where, "loop_delay")
+        )
         if "feedforward" in d:
             kw["feedforward"] = FeedforwardSection.from_value(
                 d["feedforward"], cf.join(where, "feedforward")

@@ -130,12 +130,13 @@ def load_inputs(
 
     cfg = SynthesisConfig.load(config)
     opts = cfg.hinf
-    if gamma is not None:
-        opts = replace(opts, gamma=float(gamma))
-    if solver is not None:
-        opts = HinfOptions.from_dict(
-            {**{k: getattr(opts, k) for k in opts.__dataclass_fields__}, "solver": solver}
-        )
+    if gamma is not None or solver is not None:
+        # the overrides go through the declared checks too (--gamma 0 / inf / nan refused)
+        over: dict[str, Any] = {"gamma": gamma} if gamma is not None else {}
+        if solver is not None:
+            over["solver"] = solver
+        d = {k: getattr(opts, k) for k in opts.__dataclass_fields__}
+        opts = HinfOptions.from_dict({**d, **over})
     unc_cfg = cfg.uncertainty.to_dict()
     ff_cfg = cfg.feedforward
     ff = (ff_cfg.enabled, ff_cfg.layout.to_dict(), ff_cfg.cond_max)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 
@@ -47,9 +48,12 @@ def feedforward_terms(inp: Inputs, lines: list[str]):
     return F_ff, F_jerk, layout
 
 
-def write_gains(out: Path, models: str, inp: Inputs, res) -> GainsWritten:
-    """``out`` (gains.yaml with the certificate about the models file ``models``) and its
-    sidecar ``<stem>.cert.npz`` from the synthesis result ``res``."""
+def write_gains(
+    out: Path, models: str, inp: Inputs, res, seal_key: Optional[bytes] = None
+) -> GainsWritten:
+    """``out`` (gains.yaml with the certificate about the models file ``models``, sealed;
+    ``seal_key``: with the operator's keyed seal too) and its sidecar ``<stem>.cert.npz``
+    from the synthesis result ``res``."""
     from lpv_sysid.io.files import save_yaml
     from lpv_sysid.io.formats import box_arrays, gains_dict, save_certificate_npz
 
@@ -84,7 +88,17 @@ def write_gains(out: Path, models: str, inp: Inputs, res) -> GainsWritten:
     lines: list[str] = []
     F_ff, F_jerk, ff_layout = feedforward_terms(inp, lines)
     gains = gains_dict(
-        inp.raw, inp.model, res.K, inp.R, inp.Q, gamma_file, cert, F_ff, ff_layout, F_jerk
+        inp.raw,
+        inp.model,
+        res.K,
+        inp.R,
+        inp.Q,
+        gamma_file,
+        cert,
+        F_ff,
+        ff_layout,
+        F_jerk,
+        seal_key=seal_key,
     )
     save_yaml(gains, out)
     lines += result_lines(inp, res, cert, F_ff, F_jerk, ff_layout)
@@ -140,6 +154,13 @@ def result_lines(inp: Inputs, res, cert: dict, F_ff, F_jerk, ff_layout) -> list[
         f"gamma requested {opts.gamma:g}{solved_at}, certified (numpy re-evaluation) "
         f"{res.gamma_certified:.4g}, min margin {res.min_margin:.3g}"
     )
+    ld = cert.get("loop_delay")
+    if ld:
+        out.append(
+            f"loop delay: certified up to {ld['bound_s'] * 1e3:.2f} ms ({ld['source']}); "
+            f"proven margins: ||u_e -> z|| < gamma up to {ld['performance_margin_s'] * 1e3:.2f} "
+            f"ms, stable up to {ld['stability_margin_s'] * 1e3:.2f} ms (frozen systems)"
+        )
     if F_ff is not None:
         jerk = (
             f", jerk term F_jerk ({F_jerk.shape[1]}x{F_jerk.shape[2]})"

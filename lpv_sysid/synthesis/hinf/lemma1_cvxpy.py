@@ -8,7 +8,8 @@ with numpy (:func:`lpv_sysid.synthesis.hinf.lemma1_numeric.certificate_margins`)
 
 Strictness: every LMI is imposed as ``<= -eps I`` and ``X >= eps I`` (in the scaled coordinates of
 :mod:`lpv_sysid.synthesis.scaling`). Options: fixed gamma (feasibility) or minimise g = gamma^2;
-``lyapunov: common`` ties every X_i^j to one X (the bound then holds for arbitrarily fast v_d).
+``lyapunov: common`` ties every X_i^j to one X (the u_e -> z bound then holds for
+any scheduling signal v_d(t); not the reference-driven part, docs/certificate.md 3b).
 """
 
 from __future__ import annotations

@@ -25,7 +25,11 @@ class HinfOptions:
     """Options of the Lemma 1 synthesis (keys of ``config/synthesis.yaml: hinf``)."""
 
     gamma: float = cf.number(
-        1.0, "requested bound on ||u_e -> z||_inf (Eq. 29)", lo=0.0, lo_open=True
+        1.0,
+        "requested bound on ||u_e -> z||_inf (Eq. 29); 1e-6 .. 1e6: a bound of 0 or one "
+        "that rounds to it has no feasible LMI (the solver runs on), inf/nan are no bound",
+        lo=1e-6,
+        hi=1e6,
     )
     minimize_gamma: bool = cf.flag(
         False, "true: minimise gamma^2 as a variable; false: feasibility at gamma"

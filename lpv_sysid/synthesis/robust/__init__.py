@@ -24,8 +24,9 @@ Feron & Balakrishnan 1994, *LMIs in System and Control Theory*, Sec. 5.1 and 6.3
                 [G                                   G_w     0       -T ]
 
             G = R~ [X; Y_i], G_w = R~ [0; R]. Because X is common, V = x^T X^-1 x is a
-            Lyapunov function of every closed loop in the set, so the bound holds for *arbitrarily
-            fast* variation of v_d (and of delta): it covers any flown v_d(t). K_i = Y_i X^-1.
+            Lyapunov function of every closed loop in the set, so the u_e -> z bound holds for
+            any variation of v_d (and of delta) in the set; the reference-driven terms (d/dt
+            x0(v_d), feedforward error) are not in it (docs/certificate.md 3b). K_i = Y_i X^-1.
 ``vertex``  seed 0 Eq. (30) (Rotondo Thm. 2, common H, X_i per scheduling vertex) with the same
             S-procedure on U = A H + B S_i and B_e = B R: frozen v_d (the seed's claim).
 ``rate``    Eq. (30) with X(v_d) = sum_i alpha_i X_i and the term -dX/dt in the (1,1) block

@@ -110,6 +110,121 @@ def check_box_claim(
     )
 
 
+def _mapping(x) -> dict:
+    return x if isinstance(x, dict) else {}
+
+
+def _std_meta(raw: dict) -> tuple[list, list, float]:
+    """(meta.std.dof per vertex, meta.uncertainty.k_applied per vertex, meta.k_sigma or 3) of
+    the raw models file."""
+    meta = _mapping(raw.get("meta"))
+    dofs = list(_mapping(meta.get("std")).get("dof") or [])
+    ks = list(_mapping(meta.get("uncertainty")).get("k_applied") or [])
+    return dofs, ks, float(meta.get("k_sigma", DEFAULT_K_SIGMA))
+
+
+def _sidak_stored_k(p: int, prob: float, dof: Optional[float], k_stored: float) -> float:
+    """The verifier's own Sidak half-width in stored std (the identification widened the std
+    by t_nu^-1(Phi(k)) / k, docs/identification_coverage.md)."""
+    from scipy.stats import norm, t
+
+    a = 1.0 - prob ** (1.0 / max(p, 1))
+    if dof is None:
+        return float(norm.isf(a / 2.0))
+    return float(t.isf(a / 2.0, dof) / (t.ppf(norm.cdf(k_stored), dof) / k_stored))
+
+
+def check_joint_claim(
+    rep: VerifyReport, model: PolytopicModel, raw: dict, cert_yaml: dict, bx: dict
+) -> None:
+    """``joint claim``: where the certificate claims simultaneous intervals
+    (``certified_set.joint_coverage.probability``), every element of the models file with a
+    standard error lies in the certified box with the Sidak half-width for the number of such
+    elements, recomputed here from the raw file (issue 20 item 4)."""
+    jc = _mapping(_mapping(cert_yaml.get("certified_set")).get("joint_coverage"))
+    prob = jc.get("probability")
+    if prob is None:
+        return
+    n = model.n_x
+    dofs, ks, k_meta = _std_meta(raw)
+    verts = raw.get("vertices", [])
+    p = sum(1 for v in verts for e in v.get("uncertain") or [] if float(e["std"]) > 0)
+    p_claim = int(jc.get("elements", -1))
+    worst, where = 0.0, f"{p} elements with a std"
+    for i, v in enumerate(verts):
+        lo, hi = _bounds(bx, i, n)
+        scale = np.maximum(1.0, np.abs(np.concatenate([bx["Ac"][i], bx["Bc"]], axis=1)))
+        dof = float(dofs[i]) if i < len(dofs) and dofs[i] is not None else None
+        k = _sidak_stored_k(p_claim, float(prob), dof, float(ks[i]) if i < len(ks) else k_meta)
+        for e in v.get("uncertain") or []:
+            sd = float(e["std"])
+            if sd <= 0:
+                continue
+            r, c = int(e["row"]), int(e["col"]) + (0 if e["matrix"] == "A" else n)
+            nom = float(e["nominal"])
+            viol = max(lo[r, c] - (nom - k * sd), (nom + k * sd) - hi[r, c]) / scale[r, c]
+            if viol > worst:
+                worst, where = float(viol), f"vertex {i} {e['matrix']}[{e['row']},{e['col']}]"
+    ok = worst <= BOX_TOL and p_claim >= p
+    rep.add(
+        "joint claim",
+        where,
+        worst,
+        BOX_TOL,
+        bool(ok),
+        f"Sidak over {p_claim} elements at joint probability {float(prob):g}"
+        + ("" if p_claim >= p else f"; the file has {p} elements with a std, more than claimed"),
+    )
+
+
+def check_robust_claim(
+    rep: VerifyReport, model: PolytopicModel, raw: dict, cert_yaml: dict, bx: dict
+) -> None:
+    """``robust claim`` (issue 20 item 6): where the certificate states
+    ``certified_set.robustness.box_inflation = f``, the certified box (on which ``box lmi``
+    re-proves the bound) contains every interval of the models file -- the stored one, joined
+    with the simultaneous one when a joint probability is claimed -- with its half-width
+    multiplied by ``1 + f`` about its centre. The bound then survives an f-fold widening."""
+    cs = _mapping(cert_yaml.get("certified_set"))
+    f = _mapping(cs.get("robustness")).get("box_inflation")
+    if not f:
+        return
+    n = model.n_x
+    jc = _mapping(cs.get("joint_coverage"))
+    prob, p_claim = jc.get("probability"), int(jc.get("elements", 0) or 0)
+    dofs, ks, k_meta = _std_meta(raw)
+    worst, where = 0.0, f"every interval x {1 + float(f):g}"
+    for i, v in enumerate(raw.get("vertices", [])):
+        lo, hi = _bounds(bx, i, n)
+        scale = np.maximum(1.0, np.abs(np.concatenate([bx["Ac"][i], bx["Bc"]], axis=1)))
+        dof = float(dofs[i]) if i < len(dofs) and dofs[i] is not None else None
+        k_i = float(ks[i]) if i < len(ks) else k_meta
+        k_j = 0.0 if prob is None else _sidak_stored_k(p_claim, float(prob), dof, k_i)
+        for e in v.get("uncertain") or []:
+            a, b = float(e["lower"]), float(e["upper"])
+            nom, sd = float(e["nominal"]), float(e["std"])
+            if b <= a and sd > 0:
+                a, b = nom - k_i * sd, nom + k_i * sd
+            if sd > 0 and k_j > 0:
+                a, b = min(a, nom - k_j * sd), max(b, nom + k_j * sd)
+            if b <= a:
+                continue
+            c, h = 0.5 * (a + b), 0.5 * (b - a) * (1.0 + float(f))
+            r, cc = int(e["row"]), int(e["col"]) + (0 if e["matrix"] == "A" else n)
+            viol = max(lo[r, cc] - (c - h), (c + h) - hi[r, cc]) / scale[r, cc]
+            if viol > worst:
+                worst, where = float(viol), f"vertex {i} {e['matrix']}[{e['row']},{e['col']}]"
+    ok = worst <= BOX_TOL
+    rep.add(
+        "robust claim",
+        where,
+        worst,
+        BOX_TOL,
+        bool(ok),
+        f"certified box contains every interval widened by {100 * float(f):g} %",
+    )
+
+
 def _vertex_edges(vmin: np.ndarray, vmax: np.ndarray) -> list:
     """Per vertex and axis the (min, max) vertex indices of the edge through it (box order)."""
     V = np.array(list(itertools.product(*zip(vmin, vmax))), dtype=float)

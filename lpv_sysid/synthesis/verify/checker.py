@@ -13,7 +13,13 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.synthesis.regions import Region
-from lpv_sysid.synthesis.verify.box import _sidecar_box, check_box_claim, check_scheduling_claim
+from lpv_sysid.synthesis.verify.box import (
+    _sidecar_box,
+    check_box_claim,
+    check_joint_claim,
+    check_robust_claim,
+    check_scheduling_claim,
+)
 from lpv_sysid.synthesis.verify.feedforward import check_feedforward
 from lpv_sysid.synthesis.verify.frozen import _check_input_claim, verify_gains
 from lpv_sysid.synthesis.verify.intervals import full_box_intervals
@@ -40,8 +46,16 @@ def verify_files(
     k_sigma: Optional[float] = None,
     full_box_kept: str = "stored",
     workers: Optional[int] = 1,
+    backend: str = "process",
+    seal_key: Optional[bytes] = None,
+    loop_delay_s: Optional[float] = None,
 ) -> VerifyReport:
     """Load gains.yaml (+ sidecar) and vertex_models.yaml and run :func:`verify_gains`.
+
+    ``loop delay``: the certificate's ``loop_delay.bound_s`` re-proven (the D-scaled small gain
+    of :mod:`lpv_sysid.synthesis.delay` on every stored frozen system); ``loop_delay_s`` (the
+    configured loop's worst delay, :func:`lpv_sysid.synthesis.delay.configured_delay_s`) must
+    not exceed it.
 
     Also checks names, box, equilibria and the models_sha256 of the certificate. ``full_box`` > 0
     adds the empirical Monte Carlo check over the full identified box (module docstring item 5,
@@ -49,15 +63,19 @@ def verify_files(
     unless ``strict_full_box`` or the certificate claims the full box (then a miss fails: the
     Monte Carlo is a cross-check of the claim). ``k_sigma`` overrides the models file's
     ``meta.k_sigma``. ``workers``: processes of the full-box Monte Carlo (``None``: every core;
-    the numbers do not depend on it).
+    the numbers do not depend on it), on ``backend`` (``process`` or ``dask``).
     """
     from lpv_sysid.io.files import sha256_file
     from lpv_sysid.io.formats import GainSchedule, load_certificate_npz
     from lpv_sysid.synthesis.hinf import performance_matrix
     from lpv_sysid.synthesis.uncertainty_set import load_models
 
+    check_counts(n_random, seed, full_box)
+
     # the reading the vehicle flies (io.formats; LpvController takes the same GainSchedule)
-    gains = GainSchedule.load(gains_path, auto_layout=True)
+    # the one load: structure, the law against certificate.gains_sha256, the whole file
+    # against its seal (with seal_key: the operator's keyed seal too)
+    gains = GainSchedule.load(gains_path, auto_layout=True, key=seal_key)
     cert = gains.certificate.to_dict()
     claim = cert.get("input_structure")
     if uncertainty is not None:
@@ -156,6 +174,7 @@ def verify_files(
             k_sigma=k,
             k_source=k_src,
             workers=workers,
+            backend=backend,
         )
     if model.box is not None:
         bx = _sidecar_box(sidecar, model.n_x, model.n_u) if sidecar is not None else None
@@ -170,6 +189,8 @@ def verify_files(
             )
         else:
             check_box_claim(rep, model, raw, cert, bx)
+            check_joint_claim(rep, model, raw, cert, bx)
+            check_robust_claim(rep, model, raw, cert, bx)
     check_scheduling_claim(rep, cert, sidecar)
     sub = verify_gains(
         model, gains.K, gains.R, C, gains.gamma, region, n_random, seed, certificate=sidecar
@@ -188,6 +209,7 @@ def verify_files(
             bool(worst <= float(ga) * (1 + 1e-3) + 1e-12),
             "worst independent H-inf norm vs the claimed gamma_achieved",
         )
+    _check_loop_delay(rep, model, gains, C, loop_delay_s)
     if mc is not None:
         res = mc.result()
         claimed = (
@@ -271,7 +293,26 @@ VERIFY_SETTINGS: dict[str, Any] = {
     "strict_full_box": False,
     "k_sigma": None,
     "full_box_kept": "stored",
+    "loop_delay_s": None,
 }
+
+
+#: bounds of verify's counts (checked before anything is drawn or allocated)
+MAX_RANDOM = 100_000
+MAX_FULL_BOX = 100_000
+MAX_SEED = 2**32 - 1
+
+
+def check_counts(n_random: int, seed: int, full_box: int) -> None:
+    """ConfigError naming the flag: ``--random`` in 0 .. MAX_RANDOM, ``--seed`` in
+    0 .. 2^32 - 1 (numpy's seed range), ``--full-box`` in 0 .. MAX_FULL_BOX."""
+    for flag, value, hi in (
+        ("--random", n_random, MAX_RANDOM),
+        ("--seed", seed, MAX_SEED),
+        ("--full-box", full_box, MAX_FULL_BOX),
+    ):
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= hi:
+            raise ConfigError(f"{flag} {value!r}: must be an integer in 0 .. {hi}")
 
 
 def verify_and_record(
@@ -279,14 +320,60 @@ def verify_and_record(
     models_path: Path | str,
     out: Optional[Path | str] = None,
     workers: Optional[int] = 1,
+    backend: str = "process",
+    seal_key: Optional[bytes] = None,
     **settings: Any,
 ) -> tuple[VerifyReport, Path]:
     """:func:`verify_files` with :data:`VERIFY_SETTINGS` (overridden by ``settings``), its
     record written to ``out`` (default: ``verification.yaml`` next to the gains file).
-    ``workers`` (not a setting: the record does not depend on it) goes to :func:`verify_files`.
+    ``workers`` and ``backend`` (not settings: the record does not depend on them) go to
+    :func:`verify_files`.
     Returns the report and the record's path."""
     used = {**VERIFY_SETTINGS, **settings}
-    rep = verify_files(gains_path, models_path, **used, workers=workers)
+    rep = verify_files(
+        gains_path, models_path, **used, workers=workers, backend=backend, seal_key=seal_key
+    )
     path = Path(out) if out else Path(gains_path).parent / VERIFICATION_FILE
     write_verification(path, verification_record(rep, gains_path, models_path, used))
     return rep, path
+
+
+def _check_loop_delay(
+    rep: VerifyReport, model, gains, C: np.ndarray, configured: Optional[float]
+) -> None:
+    """Rows ``loop delay`` (the bound re-proven) and ``loop config`` (a configured delay within
+    it); a certificate without ``loop_delay`` (written before issue 20) gets a WARN: no delay
+    is covered."""
+    from lpv_sysid.synthesis import delay as dl
+
+    bound = gains.certificate.loop_delay_bound_s
+    if bound is None:
+        rep.add(
+            "loop delay",
+            "certificate.loop_delay",
+            float("nan"),
+            float("nan"),
+            False,
+            "the certificate states no loop-delay bound: no delay is covered (synthesize again)",
+            advisory=True,
+        )
+        return
+    ok, worst, where = dl.covers(model.systems, gains.K, gains.R, C, float(gains.gamma), bound)
+    rep.add(
+        "loop delay",
+        f"{bound * 1e3:.2f} ms, {where}",
+        worst,
+        1.0,
+        bool(ok),
+        "D-scaled small gain at the bound (< 1: ||u_e -> z|| < gamma for every constant delay "
+        "<= bound on the stored frozen systems)",
+    )
+    if configured is not None:
+        rep.add(
+            "loop config",
+            "configured loop delay",
+            float(configured),
+            bound,
+            bool(configured <= bound),
+            "" if configured <= bound else "the configured loop is slower than the certificate",
+        )

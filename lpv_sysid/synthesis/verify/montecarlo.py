@@ -113,6 +113,7 @@ def _start_judging(
     rtol: float,
     ts: Optional[float],
     workers: Optional[int],
+    backend: str = "process",
 ) -> Batch:
     """:func:`_frozen` of every ``(where, v_d, A, B, K)`` draw, in chunks on ``workers``."""
     n_work = 1 if len(draws) < PARALLEL_MIN_SAMPLES else resolve_workers(workers)
@@ -121,7 +122,7 @@ def _start_judging(
         ([(A, B, Kv) for _, _, A, B, Kv in draws[i : i + size]], R, C, gamma, rtol, ts)
         for i in range(0, len(draws), size)
     ]
-    return start_tasks(_judge_chunk, chunks, n_work)
+    return start_tasks(_judge_chunk, chunks, n_work, backend)
 
 
 def _judge_chunk(chunk: tuple) -> list:
@@ -264,11 +265,12 @@ def full_box_check(
     k_sigma: float = DEFAULT_K_SIGMA,
     k_source: str = "",
     workers: Optional[int] = 1,
+    backend: str = "process",
 ) -> FullBoxResult:
     """Monte Carlo over the full identified box (module docstring, item 5); empirical only:
     :func:`start_full_box_check` and its result."""
     return start_full_box_check(
-        model, K, R, C, gamma, boxes, n, seed, rtol, extremes, k_sigma, k_source, workers
+        model, K, R, C, gamma, boxes, n, seed, rtol, extremes, k_sigma, k_source, workers, backend
     ).result()
 
 
@@ -286,6 +288,7 @@ def start_full_box_check(
     k_sigma: float = DEFAULT_K_SIGMA,
     k_source: str = "",
     workers: Optional[int] = 1,
+    backend: str = "process",
 ) -> "PendingFullBox":
     """The samples of :func:`full_box_check` drawn and handed to the workers; returns at once
     (the caller runs its other checks meanwhile; :meth:`PendingFullBox.result` collects).
@@ -373,7 +376,10 @@ def start_full_box_check(
                 Ai, Bi = boxes[i].apply(model.A[i], model.B[i], th)
                 draws.append((f"vertex {i} {name}", np.asarray(vd, dtype=float), Ai, Bi, K[i]))
     return PendingFullBox(
-        res, draws, _start_judging(draws, R, C, float(gamma), rtol, model.ts, workers), model.ts
+        res,
+        draws,
+        _start_judging(draws, R, C, float(gamma), rtol, model.ts, workers, backend),
+        model.ts,
     )
 
 

@@ -29,6 +29,7 @@ from rclpy.impl.rcutils_logger import RcutilsLogger
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from rclpy.qos import (
+    DurabilityPolicy,
     QoSCompatibility,
     QoSProfile,
     qos_check_compatible,
@@ -539,7 +540,9 @@ class Node:
         )
         self.subscriptions.append(sub)
         for pub in self._context._standin_entities("publishers"):
-            if self._standin_match(pub, sub) and pub._latched:
+            # DDS: only a transient-local reader receives a transient-local writer's history
+            late_joiner = sub.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+            if late_joiner and self._standin_match(pub, sub) and pub._latched:
                 for data in pub._latched:
                     sub._standin_enqueue(data)
         return sub

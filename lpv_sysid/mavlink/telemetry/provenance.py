@@ -1,0 +1,145 @@
+"""What a flight learns about its vehicle from the MAVLink stream, for ``experiment.yaml``
+(:class:`VehicleRecord`): firmware (AUTOPILOT_VERSION), the PX4 parameter snapshot
+(PARAM_VALUE, e.g. after a PARAM_REQUEST_LIST), battery at start and end (SYS_STATUS,
+BATTERY_STATUS), PX4's boot time on the recording clock, and what kind of vehicle it is.
+
+Boot time. Every message with ``time_boot_ms`` was sent after PX4's clock read that value,
+so ``receive_time - time_boot_ms`` over-estimates PX4's boot time (on the receiver's clock)
+by the message's latency; the minimum over all messages is the estimate, within the
+smallest latency + 1 ms (the ms truncation). With it, a ULog (microseconds since boot) and
+the bags (receiver clock) line up: ``bag_stamp_ns = ulog_timestamp_us * 1000 +
+boot_ns``. SYSTEM_TIME's ``time_unix_usec - time_boot_ms`` (PX4's own wall clock of its
+boot, from GPS or the host in SITL) is recorded next to it.
+
+Vehicle kind (:func:`vehicle_kind`, first match): ``SIMULATED`` -- the package's own
+simulated PX4 (``sim/px4_vehicle``: AUTOPILOT_VERSION ``flight_custom_version`` =
+:data:`SIM_MARKER`); ``HITL`` -- ``SYS_HITL`` 1 or the HEARTBEAT's HIL flag; ``SIH`` --
+``SYS_HITL`` 2 (simulation in hardware); ``SITL`` -- PX4 built for the host (parameters
+of its simulation modules, ``SIM_*`` / ``SIH_*`` with ``SYS_HITL`` 0, which a flight
+controller's build does not have);
+else ``FLOWN``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from lpv_sysid.mavlink import px4
+
+#: AUTOPILOT_VERSION.flight_custom_version of the package's simulated PX4 vehicle
+SIM_MARKER = b"lpvsim\0\0"
+MAV_MODE_FLAG_HIL_ENABLED = 32
+VEHICLE_KINDS = ("SIMULATED", "HITL", "SIH", "SITL", "FLOWN")
+
+
+def vehicle_kind(params: dict, hil_flag: bool, custom_version: bytes | None) -> str:
+    """The kind of vehicle (module docstring)."""
+    if custom_version is not None and bytes(custom_version)[:8] == SIM_MARKER:
+        return "SIMULATED"
+    hitl = int(params.get("SYS_HITL", 0) or 0)
+    if hitl == 1 or (hil_flag and hitl != 2):
+        return "HITL"
+    if hitl == 2:
+        return "SIH"
+    if any(k.startswith(("SIM_", "SIH_")) for k in params):
+        return "SITL"
+    return "FLOWN"
+
+
+@dataclass
+class VehicleRecord:
+    """Absorbs the target's messages (:meth:`absorb`) and summarises them
+    (:meth:`summary`)."""
+
+    version: dict | None = None
+    custom_version: bytes | None = None
+    params: dict = field(default_factory=dict)
+    hil_flag: bool = False
+    boot_ns: int | None = None  # PX4 boot on the receive clock (ns), minimum estimate
+    boot_samples: int = 0
+    system_time: dict | None = None
+    battery_first: dict | None = None
+    battery_last: dict | None = None
+
+    def absorb(self, m: Any, receive_ns: int) -> None:
+        """One MAVLink message of the target received at ``receive_ns`` (recording clock)."""
+        mt = m.get_type()
+        tb = getattr(m, "time_boot_ms", None)
+        if isinstance(tb, int) and tb > 0:
+            est = int(receive_ns) - tb * 1_000_000
+            self.boot_ns = est if self.boot_ns is None else min(self.boot_ns, est)
+            self.boot_samples += 1
+        if mt == "HEARTBEAT":
+            if int(m.base_mode) & MAV_MODE_FLAG_HIL_ENABLED:
+                self.hil_flag = True
+        elif mt == "AUTOPILOT_VERSION":
+            major, minor, patch, kind = px4.decode_flight_sw_version(m.flight_sw_version)
+            self.custom_version = bytes(m.flight_custom_version)
+            self.version = {
+                "flight_sw_version": f"v{major}.{minor}.{patch}"
+                + ("" if kind == 255 else f" (type {kind})"),
+                "flight_custom_version": bytes(m.flight_custom_version).hex(),
+                "board_version": int(m.board_version),
+                "vendor_id": int(m.vendor_id),
+                "product_id": int(m.product_id),
+                "uid": int(m.uid),
+            }
+        elif mt == "PARAM_VALUE":
+            self.params[px4.param_id_str(m.param_id)] = px4.param_from_wire(
+                m.param_value, m.param_type
+            )
+        elif mt == "SYSTEM_TIME":
+            if int(m.time_unix_usec) > 0:
+                self.system_time = {
+                    "time_unix_usec": int(m.time_unix_usec),
+                    "time_boot_ms": int(m.time_boot_ms),
+                    "boot_epoch_ns": int(m.time_unix_usec) * 1000
+                    - int(m.time_boot_ms) * 1_000_000,
+                }
+        elif mt == "SYS_STATUS":
+            v = int(m.voltage_battery)
+            if v not in (0, 65535):
+                self._battery(receive_ns, v * 1e-3, int(m.battery_remaining))
+        elif mt == "BATTERY_STATUS":
+            cells = [c for c in m.voltages if c not in (0, 65535)]
+            if cells:
+                self._battery(receive_ns, sum(cells) * 1e-3, int(m.battery_remaining))
+
+    def _battery(self, ns: int, volts: float, remaining: int) -> None:
+        b = {
+            "stamp_ns": int(ns),
+            "voltage_v": round(volts, 3),
+            "remaining_pct": None if remaining < 0 else remaining,
+        }
+        if self.battery_first is None:
+            self.battery_first = b
+        self.battery_last = b
+
+    @property
+    def kind(self) -> str:
+        return vehicle_kind(self.params, self.hil_flag, self.custom_version)
+
+    def summary(self) -> dict:
+        """The ``vehicle`` entry of ``experiment.yaml``."""
+        p = self.params
+        return {
+            "kind": self.kind,
+            "firmware": self.version,
+            "airframe": {
+                "SYS_AUTOSTART": p.get("SYS_AUTOSTART"),
+                "MAV_TYPE": p.get("MAV_TYPE"),
+                "CA_AIRFRAME": p.get("CA_AIRFRAME"),
+            },
+            "hil_flag": self.hil_flag,
+            "battery": {"start": self.battery_first, "end": self.battery_last},
+            "px4_clock": {
+                "boot_ns": self.boot_ns,
+                "boot_samples": self.boot_samples,
+                "meaning": "PX4 boot on the bag clock: bag_stamp_ns = PX4 time since boot "
+                "(ULog timestamp us * 1000) + boot_ns; the minimum of receive time - "
+                "time_boot_ms over the messages (over-estimate by the smallest latency)",
+                "system_time": self.system_time,
+            },
+            "px4_parameters": dict(sorted(p.items())),
+        }

@@ -1,0 +1,79 @@
+"""The report's view of the identified models (issue 23 item 3): open-loop poles and time to
+double per vertex (oracle: the eigenvalues placed in A by construction) and the parameter
+table with intervals and significance."""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+import pytest
+import yaml
+from test_formats import models_dict
+
+from lpv_sysid.report import write_report
+from lpv_sysid.report.sections_models import parameter_rows, pole_rows
+
+
+def _with_poles(doc):
+    rng = np.random.default_rng(2)
+    for k, v in enumerate(doc["vertices"]):
+        # eigenvalues: +2.1 (vertex 0 only, else -2.1), 0.5 +/- 2j, the rest stable
+        lam = [2.1 if k == 0 else -2.1, -1.0, -3.0, -4.0, -5.0, -6.0, -7.0, -8.0, -9.0, -10.0]
+        J = np.zeros((12, 12))
+        J[:10, :10] = np.diag(lam)
+        J[10:, 10:] = [[0.5, 2.0], [-2.0, 0.5]]
+        T = rng.normal(size=(12, 12)) + 5 * np.eye(12)
+        v["A"] = (T @ J @ np.linalg.inv(T)).tolist()
+    return doc
+
+
+def test_poles_and_time_to_double():
+    doc = _with_poles(copy.deepcopy(models_dict()))
+    rows = pole_rows(doc)
+    assert len(rows) == 8
+    assert rows[0][2] == pytest.approx(2.1, rel=1e-9)
+    assert rows[0][3] == pytest.approx(math.log(2) / 2.1, rel=1e-9)  # 0.33 s
+    assert rows[0][1].startswith("+2.1, +0.5+2j")
+    for r in rows[1:]:
+        assert r[2] == pytest.approx(0.5) and r[1] == "+0.5+2j"
+        assert r[3] == pytest.approx(math.log(2) / 0.5)
+
+
+def test_parameter_table_intervals_and_significance():
+    doc = copy.deepcopy(models_dict())
+    e = doc["vertices"][0]["uncertain"][0]
+    e.update(nominal=-0.41, std=0.03, lower=-0.50, upper=-0.32)
+    e2 = doc["vertices"][1]["uncertain"][0]
+    e2.update(nominal=0.02, std=0.03, lower=-0.07, upper=0.11)
+    header, rows = parameter_rows(doc)
+    assert header[0] == "element" and len(header) == 9
+    row = next(r for r in rows if r[0] == "A[u, phi]")  # row 2 = u, col 0 = phi
+    assert row[1] == "-0.41 [-0.5, -0.32] 13.7*"
+    assert row[2] == "+0.02 [-0.07, +0.11] 0.7"  # interval holds zero: not significant
+    assert all(r[0] != "B[dr, ur]" for r in rows)  # std 0: known, not identified
+
+
+def test_report_shows_the_views(tmp_path):
+    doc = _with_poles(copy.deepcopy(models_dict()))
+    (tmp_path / "vertex_models.yaml").write_text(yaml.safe_dump(doc))
+    text = write_report(tmp_path).read_text()
+    assert "## Identified models: open-loop stability and parameters" in text
+    assert "shortest: **0.33 s**" in text
+
+
+def test_data_source_labels_sitl_apart_from_flown(tmp_path):
+    from lpv_sysid.report import load_run, provenance
+
+    for kind, meta in (
+        ("SITL", {"vehicle": {"kind": "SITL"}}),
+        ("SIMULATED", {"vehicle": {"kind": "SIMULATED"}}),
+        ("HITL", {"provenance": {"vehicle_kind": "HITL", "source": {"kind": "px4_ulog"}}}),
+        ("FLOWN", {"status": "closed_cleanly"}),  # an older record: kind not recorded
+    ):
+        run = tmp_path / kind
+        run.mkdir()
+        (run / "experiment.yaml").write_text(yaml.safe_dump(meta))
+        src = provenance(load_run(run, verify=False))
+        assert src[0].dataset == "phase-1 flights" and src[0].label == kind

@@ -1,0 +1,77 @@
+"""The vehicle record of ``experiment.yaml`` (issue 23 item 2): PX4's boot on the bag clock
+from the ``time_boot_ms`` of the received messages, the vehicle kind, firmware, parameters and
+battery, from pymavlink messages built as PX4 sends them."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("pymavlink")
+from pymavlink.dialects.v20 import common as mav  # noqa: E402
+
+from lpv_sysid.mavlink import px4  # noqa: E402
+from lpv_sysid.mavlink.telemetry import SIM_MARKER, VehicleRecord, vehicle_kind  # noqa: E402
+
+BOOT_NS = 1_795_000_000_123_456_789  # PX4 booted then (bag clock)
+
+
+def _param(name, value, ptype=mav.MAV_PARAM_TYPE_INT32):
+    return mav.MAVLink_param_value_message(
+        name.encode(), px4.param_to_wire(value, ptype), ptype, 900, 0
+    )
+
+
+def test_boot_offset_is_the_minimum_latency_estimate():
+    rng = np.random.default_rng(1)
+    rec = VehicleRecord()
+    lat_min = np.inf
+    for k in range(400):
+        sent_ns = 5_000_000_000 + k * 4_000_000 + int(rng.integers(0, 999_999))
+        latency = int(rng.uniform(0.3e6, 20e6))  # 0.3 .. 20 ms
+        lat_min = min(lat_min, latency)
+        m = mav.MAVLink_attitude_message(sent_ns // 1_000_000, 0, 0, 0, 0, 0, 0)
+        rec.absorb(m, BOOT_NS + sent_ns + latency)
+    # receive - time_boot_ms >= boot; the ms truncation adds < 1 ms, the latency >= lat_min
+    assert BOOT_NS + lat_min <= rec.boot_ns < BOOT_NS + lat_min + 1_000_000 + 1_000_000
+    assert rec.boot_ns - BOOT_NS < 10_000_000  # lines a ULog up within 10 ms
+    assert rec.summary()["px4_clock"]["boot_ns"] == rec.boot_ns
+
+
+def test_kind_firmware_parameters_and_battery():
+    rec = VehicleRecord()
+    ver = mav.MAVLink_autopilot_version_message(
+        0,
+        px4.encode_flight_sw_version(1, 15, 2),
+        0,
+        0,
+        0,
+        b"abcdef12",
+        b"\0" * 8,
+        b"\0" * 8,
+        0,
+        0,
+        0,
+        [0] * 18,
+    )
+    rec.absorb(ver, 1)
+    rec.absorb(_param("SYS_AUTOSTART", 10040), 2)
+    rec.absorb(_param("SYS_HITL", 0), 3)
+    assert rec.kind == "FLOWN"
+    rec.absorb(_param("SIM_BAT_DRAIN", 60.0, mav.MAV_PARAM_TYPE_REAL32), 4)
+    assert rec.kind == "SITL"  # simulation modules' parameters: PX4 built for the host
+    for k, (mv, pct) in enumerate(((16200, 98), (15100, 71))):
+        rec.absorb(
+            mav.MAVLink_sys_status_message(0, 0, 0, 500, mv, -1, pct, 0, 0, 0, 0, 0, 0),
+            10 + k,
+        )
+    s = rec.summary()
+    assert s["firmware"]["flight_sw_version"] == "v1.15.2"
+    assert s["airframe"]["SYS_AUTOSTART"] == 10040
+    assert s["px4_parameters"]["SIM_BAT_DRAIN"] == pytest.approx(60.0)
+    assert s["battery"]["start"]["voltage_v"] == pytest.approx(16.2)
+    assert s["battery"]["end"]["remaining_pct"] == 71
+    assert vehicle_kind({"SYS_HITL": 1}, False, None) == "HITL"
+    assert vehicle_kind({"SYS_HITL": 2}, True, None) == "SIH"
+    assert vehicle_kind({}, True, None) == "HITL"
+    assert vehicle_kind({"SIM_X": 1}, False, SIM_MARKER) == "SIMULATED"
