@@ -207,7 +207,7 @@ def test_endpoints_of_the_mavros_msgs_mode():
     )
     subs = {e.key: (e.topic, e.typename) for e in rt.subscriptions}
     assert subs["mavros_state"] == ("/mavros/state", "mavros_msgs/msg/State")
-    assert subs["mavros_esc"] == ("/mavros/esc_status", "mavros_msgs/msg/ESCStatus")
+    assert subs["mavros_esc"] == ("/mavros/esc_status/status", "mavros_msgs/msg/ESCStatus")
     assert subs["mavros_rc_out"] == ("/mavros/rc/out", "mavros_msgs/msg/RCOut")
     assert subs["mavros_rc_in"] == ("/mavros/rc/in", "mavros_msgs/msg/RCIn")
     assert [(e.key, e.topic, e.typename) for e in rt.clients] == [

@@ -16,7 +16,7 @@ runs the same BridgeCore over :class:`lpv_sysid.mavlink.bridge.MavrosLink`: ``/m
 is the mode evidence, ``/mavros/set_mode`` and ``/mavros/cmd/arming`` are called through
 :class:`ServiceCaller`, setpoints go to ``/mavros/setpoint_raw/local`` (velocity) or
 ``/mavros/setpoint_raw/attitude`` (rates + thrust), rotor speeds come from
-``/mavros/esc_status`` or ``/mavros/rc/out``. With ``common`` it wraps
+``/mavros/esc_status/status`` or ``/mavros/rc/out``. With ``common`` it wraps
 :class:`lpv_sysid.mavlink.bridge.mavros.MavrosCore` instead, republishes
 ``/mavros/local_position/odom`` and ``/mavros/imu/data`` (best effort) on ``state`` / ``imu``
 and streams ``velocity_reference`` rotated to local ENU on

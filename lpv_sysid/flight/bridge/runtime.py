@@ -88,7 +88,7 @@ ATTITUDE_TARGET = messages.MAVROS_TYPES["attitude_target"]
 #: namespace, type); odometry and IMU are the common_interfaces ones of MavrosConfig
 MAVROS_INPUTS = {
     "mavros_state": ("state", messages.MAVROS_TYPES["state"]),
-    "mavros_esc": ("esc_status", messages.MAVROS_TYPES["esc_status"]),
+    "mavros_esc": ("esc_status/status", messages.MAVROS_TYPES["esc_status"]),  # extras
     "mavros_rc_out": ("rc/out", messages.MAVROS_TYPES["rc_out"]),
     "mavros_home": ("home_position/home", messages.MAVROS_TYPES["home_position"]),
 }

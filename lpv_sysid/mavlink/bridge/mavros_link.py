@@ -23,7 +23,7 @@ MAVROS (namespace ``/mavros``)     mavros_msgs / std type      becomes (core inp
                                                                ``result`` -> COMMAND_ACK
 ``local_position/odom``            nav_msgs/Odometry           ODOMETRY (NED, FRD)
 ``imu/data``                       sensor_msgs/Imu             HIGHRES_IMU
-``esc_status``                     ESCStatus                   ESC_STATUS (rpm)
+``esc_status/status``              ESCStatus                   ESC_STATUS (rpm; extras)
 ``rc/out``                         RCOut                       SERVO_OUTPUT_RAW (PWM): the
                                                                rotor estimate (seed 0
                                                                Eq. 8) without ESC rpm
@@ -352,7 +352,7 @@ class MavrosLink:
         )
 
     def on_esc(self, now: float, stamp_ns: int, rpm: Sequence[float]) -> None:
-        """``esc_status`` -> ESC_STATUS (index 0, all ESCs)."""
+        """``esc_status/status`` -> ESC_STATUS (index 0, all ESCs)."""
         self._inbox.append(_Msg("ESC_STATUS", time_usec=stamp_ns // 1000, index=0, rpm=list(rpm)))
 
     def on_rc_out(self, now: float, stamp_ns: int, channels: Sequence[int]) -> None:

@@ -15,7 +15,7 @@ PARAM_VALUE                  the FCU parameters MAVROS's param plugin mirrors as
                              parameters of ``<ns>/param`` (``get_parameters``)
 RC_CHANNELS                  ``/mavros/rc/in`` (channel count, RSSI)
 telemetry streams            ``local_position/odom`` (ODOMETRY), ``imu/data``
-                             (HIGHRES_IMU), ``esc_status`` (ESC_STATUS), ``rc/out``
+                             (HIGHRES_IMU), ``esc_status/status`` (ESC_STATUS), ``rc/out``
                              (SERVO_OUTPUT_RAW, port 0)
 ===========================  ==========================================================
 
