@@ -673,3 +673,25 @@ def test_px4_attitude_target_through_mavros_is_the_rate_setpoint_echo():
     (echo,) = fake.setpoints("rate_setpoint")
     assert list(echo.name) == list(RATE_INPUT_NAMES)
     np.testing.assert_allclose(np.asarray(echo.position), [0.62, 0.3, -0.2, 0.1], atol=1e-6)
+
+
+@pytest.mark.parametrize(
+    "u, rates_frd, thrust",
+    [
+        # the rate plant's input (thrust, p_sp, q_sp, r_sp) goes out unchanged ...
+        ((0.5, 0.3, -0.4, 0.1), (0.3, -0.4, 0.1), 0.5),
+        # ... clipped to PX4's ranges (RateSetpointTransport: thrust 0.05..0.95, |rate| <= 2)
+        ((0.99, 2.5, 0.0, -3.0), (2.0, 0.0, -2.0), 0.95),
+    ],
+)
+def test_rate_plant_command_through_mavros_attitude_target(u, rates_frd, thrust):
+    rt = runtime(command="rate_setpoint")
+    fake = started(FakeMavros(rt, mode="AUTO.LOITER", armed=True), actuator=u)
+    fake.run(4.0, actuator=u)
+    assert fake.state() == "OFFBOARD_ACTIVE"
+    sp = fake.setpoints("mavros_attitude")[-1]
+    assert sp.type_mask == 128
+    # FLU on the topic: MAVROS turns (x, y, z) into FRD (x, -y, -z)
+    flu = [sp.body_rate.x, sp.body_rate.y, sp.body_rate.z]
+    np.testing.assert_allclose(flu, [rates_frd[0], -rates_frd[1], -rates_frd[2]], atol=1e-6)
+    assert sp.thrust == pytest.approx(thrust, abs=1e-6)
