@@ -318,3 +318,75 @@ def test_px4_sitl_through_mavros_semantics_preflight_offboard_climb_rejected_pos
     # PX4 refused POSCTL (176 TEMPORARILY_REJECTED): visible here, never to MAVROS's set_mode
     assert (176, px4.MAV_RESULT_TEMPORARILY_REJECTED) in mav.acks
     assert abs(mav.z[-1] - z_climbed) < 1.5  # held altitude: no offboard-loss descent
+
+
+def test_px4_sitl_stale_mavros_state_hands_back_and_confirms_nothing():
+    """MAVROS's state stalls during OFFBOARD (the stand-in stops forwarding HEARTBEATs as
+    State for longer than state_timeout): the bridge hands back, PX4 applies HOLD (its
+    HEARTBEAT, seen by the stand-in), but with no State nothing is confirmed: FAILED, level
+    error, never DONE. Preflight off (COM_OBL_RC_ACT left at PX4's default)."""
+    defaults = {n: d for n, (d, _) in SPECS.items()}
+    params = {
+        **defaults,
+        "transport": "mavros",
+        "mavros.interfaces": "mavros_msgs",
+        "mavros.preflight": False,
+        "mavros.state_timeout": 2.0,
+        "command": "velocity",
+        "offboard.arm": True,
+        "offboard.handback_chain": ["HOLD", "LAND"],
+        "offboard.mode_confirm_timeout": 3.0,
+        "offboard.ack_timeout": 2.0,
+        "offboard.input_timeout": 1.0,
+    }
+    rt = BridgeRuntime(params, F, "/lpv_sysid/mavlink_bridge", 60.0, 3.0)
+    with Px4Sitl(PX4_DIR, instance=INSTANCE, boot_timeout=240.0):
+        mav = MavrosStandIn(f"udpin:127.0.0.1:{14540 + INSTANCE}", rt)
+        forward = {"state": True}
+        on_message = rt.on_message
+
+        def gate(key, msg, now):  # MAVROS's state topic stalls
+            if key == "mavros_state" and not forward["state"]:
+                return []
+            return on_message(key, msg, now)
+
+        rt.on_message = gate  # type: ignore[method-assign]
+
+        def run(seconds, v=None, until=None):
+            end = time.monotonic() + seconds
+            next_ref = 0.0
+            while time.monotonic() < end:
+                now = time.monotonic()
+                mav.pump(now)
+                if v is not None and now >= next_ref:
+                    next_ref = now + 0.05
+                    msg = messages.twist_reference_msg(F, round(now * 1e9), v, 0.0)
+                    mav.out(
+                        rt.on_sample("velocity_reference", PARSERS["velocity_reference"](msg), now)
+                    )
+                mav.out(rt.on_timer(now))
+                if until is not None and until():
+                    return True
+                time.sleep(0.004)
+            return False
+
+        state = lambda: rt.core.state.value  # noqa: E731
+        assert run(90.0, until=lambda: bool(mav.z))
+        run(2.0, v=[0.0, 0.0, 0.0])
+        ok, why, out = rt.start(time.monotonic())
+        mav.out(out)
+        assert ok, why
+        assert run(
+            90.0, v=[0.0, 0.0, -1.0], until=lambda: state() in ("OFFBOARD_ACTIVE", "FAILED")
+        )
+        assert state() == "OFFBOARD_ACTIVE", mav.log[-10:]
+        run(4.0, v=[0.0, 0.0, -1.0])
+        forward["state"] = False
+        assert run(10.0, v=[0.0, 0.0, 0.0], until=lambda: state() == "HANDBACK")
+        assert run(60.0, until=lambda: state() in ("DONE", "FAILED"))
+        names = [m for m, _ in mav.modes]
+    reason = rt.core.status(0.0)["reason"]
+    print("stale MAVROS state on PX4:", mav.modes, reason)
+    assert "AUTO.LOITER" in names  # PX4 did switch to HOLD: the bridge could not know
+    assert state() == "FAILED" and reason.startswith("hand-back NOT confirmed"), reason
+    assert any("no /mavros/state for" in t for _, t in mav.log), mav.log[-10:]
