@@ -61,6 +61,7 @@ class MavrosStandIn:
         self.modes: list[tuple[str, bool]] = []  # PX4's HEARTBEAT, on change
         self.acks: list[tuple[int, int]] = []
         self.z: list[float] = []
+        self.yaw: list[float] = []  # PX4's NED yaw [rad] of every ATTITUDE_QUATERNION
         self.att = None
         self.log: list[tuple[str, str]] = []
         self.t_hb = 0.0
@@ -107,6 +108,7 @@ class MavrosStandIn:
                         break
             elif t == "ATTITUDE_QUATERNION":
                 self.att = msg
+                self.yaw.append(float(px4_euler(msg.q1, msg.q2, msg.q3, msg.q4)[2]))
             elif t == "LOCAL_POSITION_NED" and self.att is not None:
                 a = self.att
                 euler = px4_euler(a.q1, a.q2, a.q3, a.q4)
@@ -156,6 +158,21 @@ class MavrosStandIn:
                     0.0,
                     0.0,
                     -item.yaw_rate,
+                )
+            elif key == "mavros_attitude":
+                # setpoint_raw attitude_cb: body_rate baselink (FLU) -> aircraft (FRD),
+                # thrust * thrust_scaling (1) in [0, 1]; the orientation is ignored (mask)
+                w = item.body_rate
+                self.m.mav.set_attitude_target_send(
+                    0,
+                    self.sysid,
+                    1,
+                    item.type_mask,
+                    [1.0, 0.0, 0.0, 0.0],
+                    w.x,
+                    -w.y,
+                    -w.z,
+                    min(1.0, max(0.0, item.thrust)),
                 )
             elif isinstance(item, ServiceRequest):
                 self.serve(item)
@@ -390,3 +407,62 @@ def test_px4_sitl_stale_mavros_state_hands_back_and_confirms_nothing():
     assert "AUTO.LOITER" in names  # PX4 did switch to HOLD: the bridge could not know
     assert state() == "FAILED" and reason.startswith("hand-back NOT confirmed"), reason
     assert any("no /mavros/state for" in t for _, t in mav.log), mav.log[-10:]
+
+
+def test_px4_sitl_rate_setpoints_through_mavros_attitude_target_turn_the_right_way():
+    """Phase 2's command path (``command: rate_setpoint``, setpoint_raw/attitude): PX4 flies
+    the body rates it receives. A yaw-rate setpoint r_sp = +0.6 rad/s (FRD: clockwise seen
+    from above) with thrust above hover must make PX4's own NED yaw grow and the vehicle
+    rise -- a sign error in the FRD <-> FLU conversion (bridge or MAVROS side) turns it
+    the other way. Preflight off; the hand-back goes to HOLD."""
+    defaults = {n: d for n, (d, _) in SPECS.items()}
+    params = {
+        **defaults,
+        "transport": "mavros",
+        "mavros.interfaces": "mavros_msgs",
+        "mavros.preflight": False,
+        "command": "rate_setpoint",
+        "offboard.arm": True,
+        "offboard.handback_chain": ["HOLD", "LAND"],
+        "offboard.mode_confirm_timeout": 5.0,
+        "offboard.ack_timeout": 2.0,
+        "offboard.input_timeout": 1.0,
+    }
+    rt = BridgeRuntime(params, F, "/lpv_sysid/mavlink_bridge", 60.0, 3.0)
+    u = np.array([0.7, 0.0, 0.0, 0.6])  # thrust, p_sp, q_sp, r_sp
+    with Px4Sitl(PX4_DIR, instance=INSTANCE, boot_timeout=240.0):
+        mav = MavrosStandIn(f"udpin:127.0.0.1:{14540 + INSTANCE}", rt)
+
+        def run(seconds, cmd=None, until=None):
+            end = time.monotonic() + seconds
+            next_cmd = 0.0
+            while time.monotonic() < end:
+                now = time.monotonic()
+                mav.pump(now)
+                if cmd is not None and now >= next_cmd:
+                    next_cmd = now + 0.02
+                    mav.out(rt.on_sample("actuator_command", (now, cmd), now))
+                mav.out(rt.on_timer(now))
+                if until is not None and until():
+                    return True
+                time.sleep(0.004)
+            return False
+
+        state = lambda: rt.core.state.value  # noqa: E731
+        assert run(90.0, until=lambda: bool(mav.z) and bool(mav.yaw))
+        ok, why, out = rt.start(time.monotonic())
+        mav.out(out)
+        assert ok, why
+        hold = np.array([0.0, 0.0, 0.0, 0.0])  # on the ground: no thrust until OFFBOARD
+        assert run(90.0, cmd=hold, until=lambda: state() in ("OFFBOARD_ACTIVE", "FAILED"))
+        assert state() == "OFFBOARD_ACTIVE", mav.log[-10:]
+        n0, z0 = len(mav.yaw), mav.z[-1]
+        run(3.0, cmd=u)
+        yaw = np.unwrap(np.array(mav.yaw[n0:]))
+        turned, rose = float(yaw[-1] - yaw[0]), float(z0 - mav.z[-1])
+        mav.out(rt.abort(time.monotonic(), "end of test")[2])
+        assert run(60.0, until=lambda: state() in ("DONE", "FAILED"))
+    print(f"rate setpoints through MAVROS on PX4: yaw +{turned:.2f} rad, rose {rose:.2f} m")
+    assert turned > 0.5, turned  # r_sp 0.6 rad/s for 3 s (PX4's rate loop lags)
+    assert rose > 0.3, rose
+    assert state() == "DONE" and "vehicle in HOLD" in rt.core.status(0.0)["reason"]
