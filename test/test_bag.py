@@ -11,6 +11,7 @@ import yaml
 from lpv_sysid.errors import BagError
 from lpv_sysid.io import bag as bg
 from lpv_sysid.io import messages as m
+from lpv_sysid.mavlink.bridge import RATE_INPUT_NAMES
 
 F = m.MsgFactory.rosbags()
 T0 = 1_700_000_000_000_000_000
@@ -35,6 +36,7 @@ def sample_set(i):
         "excitation": RNG.uniform(-1, 1, 4),
         "actuator_command": RNG.normal(size=4),
         "status": ("WARN", f"node{i}", "msg", {"k": float(i) / 3}),
+        "rate_setpoint": RNG.normal(size=4),
     }
     msgs = {
         "state": m.odometry_from_state(F, ns, *vals["state"]),
@@ -44,6 +46,7 @@ def sample_set(i):
         "excitation": m.excitation_msg(F, ns, vals["excitation"]),
         "actuator_command": m.actuator_command_msg(F, ns, vals["actuator_command"]),
         "status": m.diagnostic_array(F, ns, [m.diagnostic_status(F, *vals["status"])]),
+        "rate_setpoint": m.joint_state(F, ns, RATE_INPUT_NAMES, position=vals["rate_setpoint"]),
     }
     return ns, vals, msgs
 
@@ -67,6 +70,9 @@ def check_sample(name, msg, val):
         np.testing.assert_array_equal(m.excitation_from_joint_state(msg)[1], val)
     elif name == "actuator_command":
         np.testing.assert_array_equal(m.actuator_command_from_joint_state(msg)[1], val)
+    elif name == "rate_setpoint":
+        assert list(msg.name) == list(RATE_INPUT_NAMES)
+        np.testing.assert_array_equal(np.asarray(msg.position), val)
     else:
         _, st = m.status_from_diagnostic_array(msg)
         assert (st[0].level, st[0].name, st[0].values) == (1, val[1], {"k": repr(val[3]["k"])})

@@ -11,10 +11,12 @@ the sqlite3 hot journal, the bounded flush interval on a simulated clock, and th
 import errno
 import os
 import signal
+import struct
 import subprocess
 import sys
 import textwrap
 import time
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -339,39 +341,118 @@ def _chunked_bag(path, n=300, **kw):
             b.write("/e", T0 + k * 1_000_000, joint(k))
 
 
-def test_mcap_cut_anywhere_keeps_every_complete_chunk(tmp_path):
-    """Oracle: rosbags' McapReader on the intact file (its chunk index). A cut at offset c
-    must give back exactly the messages of the chunks that end at or before c (a chunk
-    whose message index was cut off gets a new one), all of them once the data section is
-    complete."""
+def _message_ends(intact: bytes, chunk_start: int) -> list[int]:
+    """File offsets where the Message records of the (uncompressed) chunk at
+    ``chunk_start`` end, read from the bytes by the MCAP spec (Chunk: start, end, size u64,
+    crc u32, compression string, records length u64, records; a record: opcode u8, length
+    u64, body; Message opcode 0x05)."""
+    p = chunk_start + 9 + 28
+    (clen,) = struct.unpack_from("<I", intact, p)
+    assert clen == 0  # uncompressed (rosbags' default)
+    p += 4 + clen
+    (rlen,) = struct.unpack_from("<Q", intact, p)
+    p += 8
+    end, out = p + rlen, []
+    while p < end:
+        op, n = intact[p], struct.unpack_from("<Q", intact, p + 1)[0]
+        p += 9 + n
+        if op == 0x05:
+            out.append(p)
+    return out
+
+
+def test_mcap_cut_anywhere_keeps_every_complete_record(tmp_path):
+    """Oracle: rosbags' McapReader on the intact file (its chunk index) and the record
+    boundaries of the MCAP spec. A cut at offset c must give back exactly the messages
+    whose Message record lies entirely before c -- those of the chunks that end at or before
+    c (a chunk whose message index was cut off gets a new one) and the complete records of
+    the chunk the cut goes through (issue 25 item 9: they used to be dropped) -- all of
+    them once the data section is complete."""
     src = tmp_path / "src"
     _chunked_bag(src)
     f = src / "src.mcap"
     intact = f.read_bytes()
     reader = McapReader(f)
     reader.open()
-    chunks = [
-        (c.chunk_start_offset + c.chunk_length, sum(c.channel_count.values()))
-        for c in reader.chunks
-    ]
+    chunks = [(c.chunk_start_offset, c.chunk_start_offset + c.chunk_length) for c in reader.chunks]
     data_end = reader.data_end
     reader.close()
-    assert len(chunks) > 10
+    ends = [e for start, _ in chunks for e in _message_ends(intact, start)]
+    assert len(chunks) > 10 and len(ends) == 300
     cuts = sorted(
         {0, 5, 8, 20, 40, len(intact) - 1, len(intact) - 30, data_end, data_end + 5}
-        | {e + d for e, _ in chunks[:4] for d in (-1, 0, 1, 9, 40)}
-        | {e for e, _ in chunks}
+        | {e + d for _, e in chunks[:4] for d in (-1, 0, 1, 9, 40)}
+        | {e for _, e in chunks}
+        | {ends[k] + d for k in (0, 1, 7, 13, 150) for d in (-1, 0, 1)}
     )
     for c in cuts:
         d = tmp_path / f"cut{c}"
         d.mkdir()
         (d / "src.mcap").write_bytes(intact[:c])
         rep = bg.repair_bag(d)
-        want = sum(n for e, n in chunks if e <= c) if c < data_end else 300
+        want = sum(1 for e in ends if e <= c) if c < data_end else 300
         got = readable(d)
         assert got == list(range(want)), c
         assert rep.messages == want and rep.action in ("storage", "metadata")
         assert bg.repair_bag(d).action == "none"  # idempotent
+
+
+def test_repair_of_one_big_chunk_cut_in_half_keeps_its_complete_messages(tmp_path):
+    """The audit's case: a 1 MB chunk cut at 50 % shrank to 174 bytes (2,771 intact
+    messages gone, exit 0). Now every message whose record is whole stays, and the
+    re-chunked records carry their CRC."""
+    src = tmp_path / "big"
+    with bg.BagWriter(src, flush_interval_s=1e3, flush_messages=10**9) as b:
+        b.add_topic("/e", JS)
+        for k in range(4000):
+            b.write("/e", T0 + k * 1_000_000, joint(k))
+    f = src / "big.mcap"
+    intact = f.read_bytes()
+    reader = McapReader(f)
+    reader.open()
+    (chunk,) = reader.chunks
+    reader.close()
+    ends = _message_ends(intact, chunk.chunk_start_offset)
+    c = len(intact) // 2
+    f.write_bytes(intact[:c])
+    rep = bg.repair_bag(src)
+    want = sum(1 for e in ends if e <= c)
+    assert want > 1500 and rep.messages == want
+    assert readable(src) == list(range(want))
+    rb = McapReader(f)
+    rb.open()
+    (new,) = rb.chunks
+    rb.close()
+    data = f.read_bytes()
+    t0, t1, usize, crc = struct.unpack_from("<QQQI", data, new.chunk_start_offset + 9)
+    records = data[new.chunk_start_offset + 9 + 28 + 4 + 8 :][:usize]
+    assert crc == zlib.crc32(records) != 0
+
+
+def test_chunks_carry_crcs_and_a_flipped_byte_is_caught_on_read(tmp_path):
+    """Chunks used to be written with CRC 0 ("none"): a flipped byte inside one was read
+    silently by identify and replay. Oracle: zlib.crc32 of each chunk's records; rosbags'
+    own reader then refuses the flipped file too."""
+    src = tmp_path / "src"
+    _chunked_bag(src)
+    f = src / "src.mcap"
+    data = f.read_bytes()
+    reader = McapReader(f)
+    reader.open()
+    starts = [c.chunk_start_offset for c in reader.chunks]
+    reader.close()
+    for s0 in starts:
+        _t0, _t1, usize, crc = struct.unpack_from("<QQQI", data, s0 + 9)
+        records = data[s0 + 9 + 28 + 4 + 8 :][:usize]
+        assert crc == zlib.crc32(records) and crc != 0
+    s0 = starts[3]
+    flipped = bytearray(data)
+    flipped[s0 + 9 + 28 + 4 + 8 + 200] ^= 0x10
+    f.write_bytes(bytes(flipped))
+    with pytest.raises(BagError, match="[Cc]hecksum"):
+        bg.read_bag(src)
+    with pytest.raises(Exception, match="[Cc]hecksum"):
+        readable(src)
 
 
 def test_repaired_metadata_equals_what_rosbags_writes(tmp_path):

@@ -147,3 +147,16 @@ def test_explicit_target_system_ignores_a_foreign_autopilot():
         assert s.core.machine.vehicle_mode == px4.HOLD
     finally:
         s.close()
+
+
+def test_preflight_says_no_go_for_an_ambiguous_target():
+    from lpv_sysid.mavlink.preflight import NOGO, judge
+
+    s = _Stand(target_system=0)
+    try:
+        s.send(_heartbeat(px4.HOLD, False, sysid=42), 0.1)
+        s.send(_heartbeat(px4.HOLD, False, sysid=1), 0.2)
+        (check,) = judge(s.core.link.last_heartbeat, None, {}, set(), link=s.core.link)
+        assert check.verdict == NOGO and "systems [1, 42]" in check.value
+    finally:
+        s.close()

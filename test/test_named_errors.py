@@ -124,3 +124,23 @@ def test_excitation_abort_markers_are_case_insensitive(values):
     assert reports_abort(s)
     s.values = {"aborted": "false", "state": "OFFBOARD_ACTIVE", "phase": "excite"}
     assert not reports_abort(s)
+
+
+def test_simulate_phase2_refuses_signals_beyond_the_design_envelope(tmp_path, capsys):
+    """``simulate phase2`` with a table x 20 used to run; it now meets the check of the
+    flight path (check_design against the gains' certificate.design)."""
+    from lpv_sysid.io.formats import GainSchedule
+    from lpv_sysid.signals.store import load_npz, save_npz
+    from lpv_sysid.sim.phase2 import load_signals
+
+    sig = tmp_path / "signals"
+    cfg = str(ROOT / "config" / "signals_phase2.yaml")
+    assert main(["signals", "--config", cfg, "--out", str(sig), "--no-plot"]) == 0
+    design = GainSchedule.load(ROOT / "msg_samples" / "gains.yaml").certificate.design
+    load_signals(sig, ramp=2.0, design=design)  # the designed signal: accepted
+    t, u, names = load_npz(str(sig / "signals.npz"))
+    big = tmp_path / "big"
+    big.mkdir()
+    save_npz(str(big / "signals.npz"), t, 20 * u, names)
+    with pytest.raises(ConfigError, match="exceeds the design|beyond the design"):
+        load_signals(big, ramp=2.0, design=design)

@@ -518,3 +518,49 @@ def test_unknown_ros_parameter_given_with_p_is_refused_too(node_inputs):
             LpvControllerNode()
     finally:
         rclpy.try_shutdown()
+
+
+#: node name of a launch file's node(...) -> the module of its shell
+_LAUNCH_NODES = {
+    "mavlink_bridge": "mavlink_bridge_node",
+    "lpv_controller": "lpv_controller_node",
+    "data_logger": "data_logger_node",
+    "sim_vehicle": "sim_vehicle_node",
+    "excitation": "excitation_node",
+    "campaign": "campaign_node",
+}
+
+
+def _declared_names(node: str) -> set:
+    import importlib
+
+    mod = importlib.import_module(f"lpv_sysid.nodes.{_LAUNCH_NODES[node]}")
+    return {name for name, _, _ in mod.PARAMETERS}
+
+
+def test_every_launch_override_is_a_declared_parameter():
+    """Issue 25 item 5: a node refuses an undeclared parameter at start, so a launch file
+    that passes one would not start; read from the launch files' syntax (no ROS needed):
+    every literal key of a ``node(name, file, {...})`` override is declared by that node
+    (or is rclpy's own use_sim_time)."""
+    import ast
+    import glob
+
+    seen = 0
+    for path in sorted(glob.glob(os.path.join(ROOT, "launch", "*.launch.py"))):
+        tree = ast.parse(open(path).read())
+        for call in ast.walk(tree):
+            if not (isinstance(call, ast.Call) and getattr(call.func, "id", "") == "node"):
+                continue
+            name = call.args[0].value
+            over = call.args[2] if len(call.args) > 2 else None
+            for kw in call.keywords:
+                if kw.arg == "overrides":
+                    over = kw.value
+            if not isinstance(over, ast.Dict):
+                continue
+            keys = {k.value for k in over.keys if isinstance(k, ast.Constant)}
+            unknown = keys - _declared_names(name) - {"use_sim_time"}
+            assert unknown == set(), (path, name, unknown)
+            seen += 1
+    assert seen >= 10

@@ -137,7 +137,9 @@ def test_controller_wiring(gains):
     "edit, field",
     [
         (lambda d: d["vertices"][3].update(K=[[0.0] * 12] * 3), "vertices[3].K"),
-        (lambda d: d["states"][2].update(name="speed"), "states"),
+        # renamed states make no known layout: the structure passes, the (absent) law hash
+        # of this uncertified file refuses it first
+        (lambda d: d["states"][2].update(name="speed"), "gains_sha256"),
         (lambda d: d.update(gamma=-1.0), "gamma"),
         (lambda d: d["scheduling"].update(max=[2.0, 2.0, -3.0]), "scheduling"),
     ],

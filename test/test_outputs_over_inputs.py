@@ -73,3 +73,13 @@ def test_every_command_with_out_has_force(command, capsys):
     with pytest.raises(SystemExit):
         main(command + ["--help"])
     assert "--force" in capsys.readouterr().out
+
+
+def test_verify_out_equal_to_the_sidecar_a_certificate_refers_to_is_refused(tmp_path, capsys):
+    g = tmp_path / "gains.yaml"
+    g.write_bytes(SAMPLE_GAINS.read_bytes())
+    side = tmp_path / "gains.cert.npz"
+    side.write_bytes((SAMPLE_GAINS.parent / "gains.cert.npz").read_bytes())
+    before = side.read_bytes()
+    rc, err = _run(["verify", "--gains", str(g), "--models", str(g), "--out", str(side)], capsys)
+    assert rc == 2 and "(sidecar of --gains" in err and side.read_bytes() == before

@@ -122,7 +122,19 @@ ROSDEP_KEYS = {
     "serial": "python3-serial",
 }
 #: imported, but with no Ubuntu 24.04 package / rosdep key: pip, from requirements-ros.txt
-PIP_ONLY = {"pymavlink", "rosbags", "pyulog", "control", "cvxpy", "mavsdk", "scs", "clarabel"}
+PIP_ONLY = {
+    "pymavlink",
+    "rosbags",
+    "pyulog",
+    "control",
+    "cvxpy",
+    "mavsdk",
+    "scs",
+    "clarabel",
+    "threadpoolctl",
+}
+#: imported only when the user installed them (``--backend dask``), never required
+OPTIONAL = {"dask", "distributed"}
 
 
 def _third_party_imports():
@@ -158,7 +170,7 @@ def test_package_xml_declares_exactly_what_the_code_imports():
     xml = ET.parse(ROOT / "package.xml").getroot()
     assert xml.get("format") == "3" and xml.findtext("name") == "lpv_sysid"
     deps = {e.text for e in xml.findall("exec_depend")}
-    used = _third_party_imports() | {"serial"}  # pymavlink's serial links need pyserial
+    used = (_third_party_imports() - OPTIONAL) | {"serial"}  # pyserial: pymavlink's serial
     expected = {ROSDEP_KEYS.get(m, m) for m in used - PIP_ONLY}
     assert deps == expected, (sorted(deps - expected), sorted(expected - deps))
     pip = (ROOT / "requirements-ros.txt").read_text().lower()

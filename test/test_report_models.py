@@ -57,8 +57,21 @@ def test_parameter_table_intervals_and_significance():
 
 def test_report_shows_the_views(tmp_path):
     doc = _with_poles(copy.deepcopy(models_dict()))
+    axes = ("u", "v", "w", "p", "q", "r")
+    doc.setdefault("meta", {})["validation"] = {
+        "maneuver": "hover",
+        "tic": {a + "dot": 0.1 for a in axes},
+        "nrmse": {a + "dot": 0.1 for a in axes},
+        "output_error": {
+            "horizon_s": 1.0,
+            "tic": dict.fromkeys(axes, 0.05),
+            "nrmse": {a: 0.01 * (k + 1) for k, a in enumerate(axes)},
+        },
+    }
     (tmp_path / "vertex_models.yaml").write_text(yaml.safe_dump(doc))
     text = write_report(tmp_path).read_text()
+    assert "restarted from the measured state every 1.00 s" in text
+    assert "| NRMSE | 0.010 | 0.020 | 0.030 | 0.040 | 0.050 | 0.060 |" in text
     assert "## Identified models: open-loop stability and parameters" in text
     assert "shortest: **0.33 s**" in text
 
@@ -77,3 +90,44 @@ def test_data_source_labels_sitl_apart_from_flown(tmp_path):
         (run / "experiment.yaml").write_text(yaml.safe_dump(meta))
         src = provenance(load_run(run, verify=False))
         assert src[0].dataset == "phase-1 flights" and src[0].label == kind
+
+
+def test_loop_margins_of_an_unstable_first_order_loop():
+    """Four decoupled loops L = k / (s - 1) (plant 1/(s-1), du = -k dx): analytic margins
+    gm = 1/k, pm = atan(sqrt(k^2 - 1)); balanced disk margin 2/(1 + k) at w = 0 for k >= 1."""
+    pytest.importorskip("control")
+    from lpv_sysid.report.sections_models import loop_margins
+
+    k = np.array([2.0, 3.0, 1.5, 4.0])
+    A = -2.0 * np.eye(12)
+    A[:4, :4] = np.eye(4)
+    B = np.zeros((12, 4))
+    B[:4, :4] = np.eye(4)
+    K = np.zeros((4, 12))
+    K[:4, :4] = -np.diag(k)
+    res = loop_margins(A, B, K)
+    for (gm_db, pm, dm, _, _), ki in zip(res["channels"], k):
+        assert gm_db == pytest.approx(20 * math.log10(1 / ki), abs=1e-6)
+        assert pm == pytest.approx(math.degrees(math.atan(math.sqrt(ki**2 - 1))), abs=1e-3)
+        # |0.5 (S - T)| = 0.5 |(1 - L) / (1 + L)| peaks at w = 0, L(0) = -k: (1 + k) / 2 (k - 1)
+        assert dm == pytest.approx(2 * (ki - 1) / (ki + 1), rel=1e-3)
+    assert res["closed_loop_stable"]
+    # decoupled loops: the unstructured MIMO margin is the smallest channel's
+    assert res["mimo_disk_margin"] == pytest.approx(min(d[2] for d in res["channels"]), rel=1e-3)
+
+
+def test_chain_directory_gets_the_run_report(tmp_path):
+    """A chain directory (phase1/ flown on PX4 SITL) gets report/report.md beside its own
+    summary, go/no-go first, the data labelled SITL."""
+    from lpv_sysid.flight.chain.report import _full_report
+
+    (tmp_path / "phase1").mkdir()
+    (tmp_path / "phase1" / "experiment.yaml").write_text(
+        yaml.safe_dump({"vehicle": {"kind": "SITL"}, "status": "closed_cleanly"})
+    )
+    rel = _full_report(tmp_path)
+    assert str(rel) == "report/report.md"
+    text = (tmp_path / rel).read_text()
+    first = [ln for ln in text.splitlines() if ln.startswith("## ")][0]
+    assert first.startswith("## Go / no-go:") and "(on SITL data only)" in first
+    assert "| phase-1 flights | SITL |" in text

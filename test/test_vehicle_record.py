@@ -75,3 +75,50 @@ def test_kind_firmware_parameters_and_battery():
     assert vehicle_kind({"SYS_HITL": 2}, True, None) == "SIH"
     assert vehicle_kind({}, True, None) == "HITL"
     assert vehicle_kind({"SIM_X": 1}, False, SIM_MARKER) == "SIMULATED"
+
+
+def test_clock_fit_follows_a_px4_clock_that_runs_slow():
+    """PX4 SITL in lock-step under load: its clock runs 1.5 % slower than the bag's. The line
+    through the per-second minima maps PX4 time to the bag clock within 2 ms over 60 s;
+    the single minimum would be 0.9 s off at the end."""
+    rng = np.random.default_rng(3)
+    rec = VehicleRecord()
+    rate = 1.0 / 0.985  # bag ns per PX4 ns
+    for k in range(60 * 250):
+        tb_ns = 3_000_000_000 + k * 4_000_000 + int(rng.integers(0, 999_999))
+        latency = int(rng.uniform(0.5e6, 15e6))
+        m = mav.MAVLink_attitude_message(tb_ns // 1_000_000, 0, 0, 0, 0, 0, 0)
+        rec.absorb(m, BOOT_NS + int(round(rate * tb_ns)) + latency)
+    boot, r = rec.clock_fit()
+    assert r == pytest.approx(rate, rel=1e-5)
+    for tb_s in (5.0, 30.0, 62.0):
+        tb = tb_s * 1e9
+        assert abs(boot + r * tb - (BOOT_NS + rate * tb)) < 2e6  # latency floor + ms rounding
+    assert abs(rec.boot_ns + 62e9 - (BOOT_NS + rate * 62e9)) > 0.5e9
+    s = rec.summary()["px4_clock"]
+    assert s["boot_ns"] == boot and s["rate"] == r
+
+
+def test_clock_knots_follow_a_varying_rate():
+    """A lock-step SITL slows down and speeds up with the load: the knots keep the offset
+    within 3 ms where a line through them is more than 10 ms off."""
+    rng = np.random.default_rng(5)
+    rec = VehicleRecord()
+
+    def offset(tb_s):  # bag - PX4 clock: drifts 2 % for 20 s, then 0.5 %
+        return BOOT_NS + 1e9 * (0.02 * min(tb_s, 20.0) + 0.005 * max(tb_s - 20.0, 0.0))
+
+    for k in range(40 * 250):
+        tb_ns = 1_000_000_000 + k * 4_000_000 + int(rng.integers(0, 999_999))
+        m = mav.MAVLink_attitude_message(tb_ns // 1_000_000, 0, 0, 0, 0, 0, 0)
+        rec.absorb(m, int(tb_ns + offset(tb_ns * 1e-9)) + int(rng.uniform(0.3e6, 12e6)))
+    kt, ko = np.array(rec.clock_knots(), dtype=float).T
+    boot, r = rec.clock_fit()
+    errs_knots, errs_line = [], []
+    for tb_s in np.linspace(2.0, 39.0, 50):
+        truth = tb_s * 1e9 + offset(tb_s)
+        errs_knots.append(tb_s * 1e9 + np.interp(tb_s, kt, ko) - truth)
+        errs_line.append(boot + r * tb_s * 1e9 - truth)
+    # late by the latency floor (0.3 ms) + the ms truncation of time_boot_ms
+    assert max(np.abs(errs_knots)) < 3e6 and min(errs_knots) >= 0
+    assert max(np.abs(errs_line)) > 10e6

@@ -122,16 +122,22 @@ def _add_force(p: argparse.ArgumentParser) -> None:
 
 
 def _guard_output(args: argparse.Namespace) -> None:
-    """Every command: an ``--out`` that is one of the run's input files is refused (unless
-    ``--force``): :func:`lpv_sysid.io.files.refuse_overwrite` against every argument that
-    names an existing file."""
+    """Every command: an ``--out`` that is one of the run's input files, or a file a gains
+    certificate among them refers to (its sidecar), is refused (unless ``--force``):
+    :func:`lpv_sysid.io.files.refuse_overwrite` against every argument that names an
+    existing file."""
     out = getattr(args, "out", None)
     if out is None:
         return
     from lpv_sysid.io.files import refuse_overwrite
+    from lpv_sysid.io.formats import referenced_files
 
-    inputs = [tuple(s.split(" ", 1)) for s in _inputs(args)]
-    refuse_overwrite(out, [(a, b) for a, b in inputs], bool(getattr(args, "force", False)))
+    inputs = [(a, b) for a, b in (s.split(" ", 1) for s in _inputs(args))]
+    # and the files a certificate among them refers to (verify --out gains.cert.npz)
+    inputs += [
+        (f"(sidecar of {a} {b})", str(f)) for a, b in list(inputs) for f in referenced_files(b)
+    ]
+    refuse_overwrite(out, inputs, bool(getattr(args, "force", False)))
 
 
 #: commands whose linear algebra is many small problems: there OpenBLAS' second thread costs

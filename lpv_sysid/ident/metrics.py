@@ -105,7 +105,7 @@ def plot_validation(
     FigureCanvasAgg(fig)
     axs = fig.subplots(len(axes), 1, sharex=True, squeeze=False)[:, 0]
     for ax, a, i in zip(axs, axes, index):
-        ax.plot(t, xdot_f[:, i], "k-", lw=0.8, label="flight data")
+        ax.plot(t, xdot_f[:, i], "k-", lw=0.8, label="measured")
         ax.plot(t, xdot_m[:, i], "r--", lw=0.8, label="model")
         ax.set_ylabel(f"{a} [{units.get(a, '')}]")
     axs[0].legend(loc="upper right", fontsize=8)

@@ -73,4 +73,5 @@ def identify_campaign(bags_path: str, cfg: vx.IdentificationConfig) -> Phase1Ide
     if validation is not None:
         val = vx.validate(results, validation, cfg)
         val["name"] = validation.name
+        val["output_error"] = vx.free_run(results, validation, cfg)
     return Phase1Identification(results, val, notes)

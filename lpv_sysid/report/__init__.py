@@ -11,13 +11,22 @@
 from __future__ import annotations
 
 from lpv_sysid.report.data import load_run
-from lpv_sysid.report.gonogo import FLOWN, NO_GO, SIMULATED, go_no_go, provenance
+from lpv_sysid.report.gonogo import (
+    DATA_LABELS,
+    FLOWN,
+    NO_GO,
+    SIMULATED,
+    go_no_go,
+    provenance,
+    vehicle_label,
+)
 from lpv_sysid.report.margins import limits_from_summary, run_margins
 from lpv_sysid.report.markdown import write_report
 from lpv_sysid.report.phase2_figures import write_phase2_figures
 from lpv_sysid.report.sections_flight import gain_row
 
 __all__ = [
+    "DATA_LABELS",
     "FLOWN",
     "NO_GO",
     "SIMULATED",
@@ -27,6 +36,7 @@ __all__ = [
     "load_run",
     "provenance",
     "run_margins",
+    "vehicle_label",
     "write_phase2_figures",
     "write_report",
 ]

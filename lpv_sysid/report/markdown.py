@@ -32,7 +32,7 @@ from lpv_sysid.report.sections_flight import (
     go_no_go_section,
 )
 from lpv_sysid.report.sections_models import stability_section
-from lpv_sysid.report.sections_phase1 import phase1_section
+from lpv_sysid.report.sections_phase1 import frequency_section, phase1_section
 
 log = logging.getLogger(__name__)
 
@@ -115,6 +115,7 @@ def write_report(
     phase1_section(r)
     _ident_section(r)
     stability_section(r)
+    frequency_section(r)
     _signals_section(r)
     _synthesis_section(r)
     _verification_section(r)

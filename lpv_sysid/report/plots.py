@@ -32,13 +32,22 @@ def _save(fig: Any, path: Path, layout: bool = True) -> Path:
 
 
 def plot_tracking(
-    t: np.ndarray, v_d: np.ndarray, v: np.ndarray, path: Path, title: str = ""
+    t: np.ndarray,
+    v_d: np.ndarray,
+    v: np.ndarray,
+    path: Path,
+    title: str = "",
+    box: Optional[tuple[Sequence[float], Sequence[float]]] = None,
 ) -> Path:
-    """Body velocity (solid) and reference (black dashed), like seed 0 Fig. 8."""
+    """Body velocity (solid) and reference (black dashed), like seed 0 Fig. 8; ``box``
+    ``(min, max)``: the scheduling box edges (dotted)."""
     fig, axes = plt.subplots(3, 1, figsize=(8, 6), sharex=True)
     for i, ax in enumerate(axes):
         ax.plot(t, v[:, i], lw=1.0, label="v")
         ax.plot(t, v_d[:, i], "k--", lw=1.0, label="v_d")
+        if box is not None:
+            for edge in (box[0][i], box[1][i]):
+                ax.axhline(float(edge), color="0.4", ls=":", lw=0.8)
         ax.set_ylabel(VEL_LABELS[i])
         ax.grid(alpha=0.3)
     axes[0].legend(loc="upper right", fontsize=8)

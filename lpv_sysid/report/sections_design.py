@@ -152,8 +152,7 @@ def _ident_section(r: Report) -> None:
                 r.fig(
                     dst,
                     "Independent validation time histories, model vs measured state derivatives "
-                    f"of the {phase1_label(d)} validation run (Fig. 4; from `{name}`; its legend "
-                    "says 'flight data' for the measured curve)",
+                    f"of the {phase1_label(d)} validation run (Fig. 4; from `{name}`)",
                 )
                 break
 

@@ -16,6 +16,7 @@ from lpv_sysid.report.data import RunData
 from lpv_sysid.report.document import Report, md_table, short
 from lpv_sysid.report.gonogo import (
     DATA_LABELS,
+    SIMULATED,
     SIMULATED_LABELS,
     go_no_go,
     provenance,
@@ -160,13 +161,21 @@ def _phase2_section(r: Report) -> None:
                 f"u/v/w = {rms[0]:.3f} / {rms[1]:.3f} / {rms[2]:.3f} m/s, max |v - v_d| = "
                 f"{np.max(np.abs(err)):.3f} m/s."
             )
+            sched = (d.gains or {}).get("scheduling") or (d.models or {}).get("scheduling")
+            box = (
+                (sched["min"], sched["max"])
+                if isinstance(sched, dict) and "min" in sched and "max" in sched
+                else None
+            )
+            title = f"[{SIMULATED}] {label}"
             r.fig(
-                plots.plot_tracking(t, vd, v, r.fig_dir / f"tracking_{name}.png", label),
-                f"Body velocity and reference, {label} (Fig. 8)",
+                plots.plot_tracking(t, vd, v, r.fig_dir / f"tracking_{name}.png", title, box),
+                f"[{SIMULATED}] Body velocity and reference with the scheduling box, {label} "
+                "(Fig. 8)",
             )
             r.fig(
-                plots.plot_perturbation(t, err, r.fig_dir / f"perturbation_{name}.png", label),
-                f"Body velocity perturbation, {label} (Fig. 9)",
+                plots.plot_perturbation(t, err, r.fig_dir / f"perturbation_{name}.png", title),
+                f"[{SIMULATED}] Body velocity perturbation, {label} (Fig. 9)",
             )
 
         r.guard(f"phase-2 {name} plots", tracking)

@@ -4,6 +4,12 @@ item 3), from ``vertex_models.yaml`` alone:
 - open-loop poles per vertex: the eigenvalues of the nominal ``A`` (seed 0 Eq. 20), the
   largest real part and the time to double ``ln 2 / max Re(lambda)`` of the divergent mode
   (amplitude ``exp(Re(lambda) t)``: it doubles in that time), or "stable";
+- the loop margins of the LPV controller (``gains.yaml``, ``du = K dx``, Eq. 31) on each
+  vertex model, with python-control: loop at a time (the loop broken at one virtual input,
+  the others closed: ``L_i = -K_i (sI - A - B_o K_o)^-1 B_i``), classical gain/phase
+  margins and the balanced disk margin, and the disk margin of all four loops at once
+  (``L = -K (sI - A)^-1 B``, unstructured: ``1 / max sigma(0.5 (S - T))``, a lower bound;
+  0 when the closed loop ``A + B K`` is unstable);
 - the identified parameters with their confidence intervals (Eq. 22: lower, upper =
   nominal -/+ k std) and significance (``|t| = |nominal| / std``; ``*``: the interval
   excludes zero), one row per element, one column per vertex.
@@ -92,6 +98,78 @@ def parameter_rows(models: dict | None) -> tuple[list[str], list[list[str]]]:
     return header, [[n, *cells] for n, cells in table.items()]
 
 
+#: frequency grid of the disk margins [rad/s]
+OMEGA = np.logspace(-2, 3, 1500)
+
+
+def loop_margins(A, B, K, omega=OMEGA) -> dict:
+    """Per input channel ``(gm_db, pm_deg, disk_margin, disk_gm_db, disk_pm_deg)`` of the loop
+    broken there (others closed) and the MIMO balanced disk margin (module docstring)."""
+    import control
+
+    A, B, K = (np.asarray(m, dtype=float) for m in (A, B, K))
+    n, m = B.shape
+    rows = []
+    for i in range(m):
+        o = [j for j in range(m) if j != i]
+        Ao = A + B[:, o] @ K[o, :]
+        L = control.ss(Ao, B[:, [i]], -K[[i], :], np.zeros((1, 1)))
+        gm, pm, *_ = control.stability_margins(L)
+        dm, dgm, dpm = control.disk_margins(L, omega)
+        rows.append(
+            (
+                20 * math.log10(gm) if np.isfinite(gm) and gm > 0 else float("inf"),
+                float(pm),
+                float(dm),
+                float(dgm),
+                float(dpm),
+            )
+        )
+    # all loops at once: the unstructured balanced disk margin 1 / max_w sigma_max(0.5 (S - T))
+    # (a lower bound of the structured one, which needs slycot's mu)
+    peak = 0.0
+    eye = np.eye(m)
+    for w in omega:
+        Lw = -K @ np.linalg.solve(1j * w * np.eye(n) - A, B)
+        M = 0.5 * (eye - Lw) @ np.linalg.inv(eye + Lw)
+        peak = max(peak, float(np.linalg.svd(M, compute_uv=False)[0]))
+    stable = bool(np.max(np.linalg.eigvals(A + B @ K).real) < 0.0)
+    return {
+        "channels": rows,
+        "mimo_disk_margin": (1.0 / peak if peak > 0 else float("inf")) if stable else 0.0,
+        "closed_loop_stable": stable,
+    }
+
+
+def margin_rows(models: dict | None, gains: dict | None) -> list[list]:
+    """One row per vertex and channel of :func:`loop_margins` (vertices matched by their
+    scheduling point)."""
+    if not isinstance(models, dict) or not isinstance(gains, dict):
+        return []
+    inputs = _names(models, "inputs")
+    by_point = {
+        tuple(np.round(np.asarray(v["scheduling"], float), 9)): v
+        for v in models.get("vertices") or []
+    }
+    rows = []
+    for g in gains.get("vertices") or []:
+        key = tuple(np.round(np.asarray(g["scheduling"], float), 9))
+        v = by_point.get(key)
+        if v is None:
+            continue
+        res = loop_margins(v["A"], v["B"], g["K"])
+        for i, ch in enumerate(res["channels"]):
+            rows.append(
+                [
+                    _vertex_label(g) if i == 0 else "",
+                    inputs[i] if i < len(inputs) else str(i),
+                    *ch,
+                    res["mimo_disk_margin"] if i == 0 else "",
+                ]
+            )
+    return rows
+
+
 def stability_section(r: Report) -> None:
     """Open-loop poles / time to double and the parameter table (module docstring)."""
     d = r.data
@@ -123,4 +201,59 @@ def stability_section(r: Report) -> None:
             )
             r.p(md_table(header, prows))
 
+        oe = ((d.models or {}).get("meta") or {}).get("validation", {}).get("output_error")
+        if isinstance(oe, dict) and isinstance(oe.get("nrmse"), dict):
+            order = ("u", "v", "w", "p", "q", "r")
+            axes = [a for a in order if a in oe["nrmse"]]
+            axes += [a for a in oe["nrmse"] if a not in order]
+            r.p(
+                "Output-error (free-run) validation on the validation maneuver: the LPV model "
+                "driven by the measured inputs alone, restarted from the measured state every "
+                f"{float(oe.get('horizon_s', 0)):.2f} s (ident/vertex/pipeline.free_run)."
+            )
+            r.p(
+                md_table(
+                    ["metric", *axes],
+                    [[m.upper(), *[oe.get(m, {}).get(a) for a in axes]] for m in ("tic", "nrmse")],
+                    fmt="{:.3f}",
+                )
+            )
+
     r.with_input("models", "open-loop poles", body)
+    if d.models is not None and d.gains is not None:
+
+        def margins() -> None:
+            try:
+                rows = margin_rows(d.models, d.gains)
+            except ImportError:
+                r.p("Loop margins need python-control (requirements.txt pins it).")
+                return
+            if not rows:
+                return
+            r.p(
+                "Loop margins of the LPV controller (gains.yaml, du = K dx, Eq. 31) on each "
+                "vertex model, python-control: loop at a time at each virtual input (the "
+                "others closed): gain margin [dB] (a negative value: the loop tolerates a gain "
+                "reduction down to that, as an unstable plant needs), phase margin [deg], "
+                "balanced disk margin alpha with its gain [dB] and phase [deg] margins; last "
+                "column: the disk margin of all four loops at once (unstructured, a lower "
+                "bound; 0: the closed loop A + B K is unstable)."
+            )
+            r.p(
+                md_table(
+                    [
+                        "vertex",
+                        "loop",
+                        "GM [dB]",
+                        "PM [deg]",
+                        "disk alpha",
+                        "disk GM [dB]",
+                        "disk PM [deg]",
+                        "MIMO disk alpha",
+                    ],
+                    rows,
+                    fmt="{:.3g}",
+                )
+            )
+
+        r.guard("loop margins", margins)

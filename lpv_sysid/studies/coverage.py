@@ -43,6 +43,7 @@ from lpv_sysid.control.campaign import run_name
 from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError, SafetyError, SolverError
 from lpv_sysid.parallel import map_tasks
+from lpv_sysid.synthesis.uncertainty_set import DEFAULT_BOX_INFLATION
 from lpv_sysid.ident.vertex import DEFAULT_JOINT_PROBABILITY
 from lpv_sysid.models.quadrotor import (
     INPUT_NAMES,
@@ -186,6 +187,12 @@ class CoverageConfig:
         hi=1.0,
         hi_open=True,
     )
+    box_inflation: float = cf.number(
+        DEFAULT_BOX_INFLATION, "that of the certified box", lo=0.0, hi=1.0
+    )
+    interior: int = cf.count(
+        12, "random interior scheduling points besides hover (0: no interior check)", hi=10_000
+    )
 
     def __post_init__(self) -> None:
         cf.normalize_fields(self, "coverage")
@@ -214,6 +221,11 @@ class AirframeCoverage:
     params: QuadrotorParams
     vertices: list[VertexCoverage] = field(default_factory=list)
     eiv_shift: float = 0.0  # largest errors-in-variables correction in std (eiv_shift)
+    # issue 20 item 2: per interior point (hover first) the worst excess of the truth over the
+    # interpolated certified set in half-widths (<= 0 inside) and the element, without and
+    # with the interpolation pad of ident.vertex.interpolation added
+    interior: list = field(default_factory=list)
+    interior_padded: list = field(default_factory=list)
 
     @property
     def covered(self) -> int:
@@ -419,6 +431,17 @@ def _airframe_task(task: tuple) -> tuple:
     params, runs = draw_flyable(base, k, cfg, gains, sensors, phase1_cfg, vertices, signals)
     results = identify_runs(runs, params, base, ident_cfg)
     af = AirframeCoverage(k, params, score(runs, results, params, ident_cfg), eiv_shift(results))
+    if cfg.interior and len(results) == 8:
+        from lpv_sysid.ident.vertex.interpolation import interpolation_pad
+
+        verts = certified_bounds(results, cfg.joint_probability, cfg.box_inflation)
+        pts = interior_points(verts, cfg.interior, np.random.default_rng([cfg.seed, k, 7]))
+        af.interior = interior_excess(params, verts, pts)
+        ip = interpolation_pad(results, cfg.joint_probability)
+        if ip is not None:
+            pad = np.concatenate([np.array(ip["pad_A"]), np.array(ip["pad_B"])], axis=1)
+            padded = certified_bounds(results, cfg.joint_probability, cfg.box_inflation, pad)
+            af.interior_padded = interior_excess(params, padded, pts)
     return af, (runs if keep_runs else None)
 
 
@@ -507,6 +530,18 @@ def summary_dict(
         "intervals of the certified box (Sidak k over the airframe's element count, "
         "ident.vertex.joint_k), the event the certificate's joint probability is about",
     }
+    inside = [sum(e <= 0 for e, _ in af.interior) for af in airframes]
+    inside_p = [sum(e <= 0 for e, _ in af.interior_padded) for af in airframes]
+    d["interior"] = {
+        "points_per_airframe": max((len(af.interior) for af in airframes), default=0),
+        "truth_inside": int(sum(inside)),
+        "truth_inside_with_interpolation_pad": int(sum(inside_p)),
+        "points": int(sum(len(af.interior) for af in airframes)),
+        "meaning": "true linearisation at hover and random interior v_d inside the interpolated "
+        "certified set [sum alpha_i lo_i, sum alpha_i hi_i] (joint, inflated box; B hull); "
+        "'with interpolation pad': every half-width + the pad of ident.vertex.interpolation "
+        "(the vertex models re-expanded on a grid), uncertainty.interpolation: true",
+    }
     for af, jc in zip(airframes, joint):
         d["airframes"].append(
             {
@@ -518,6 +553,10 @@ def summary_dict(
                 "joint_k": [round(k, 4) for k in af.joint_k(P)],
                 "jointly_covered": bool(jc),
                 "worst_z_over_joint_k": float(af.worst_joint_ratio(P)),
+                "interior_excess": [[round(e, 3), lab] for e, lab in af.interior],
+                "interior_excess_with_interpolation_pad": [
+                    [round(e, 3), lab] for e, lab in af.interior_padded
+                ],
                 "eiv_max_shift_std": float(af.eiv_shift),
                 "vertices": [
                     {
@@ -576,3 +615,90 @@ def markdown_table(
         tot += [f"{100 * np.average(ablation[nm], weights=ws):.2f} %" for nm in names]
     lines.append("| " + " | ".join(tot) + " |")
     return "\n".join(lines)
+
+
+# ----------------------------------------------------------------- interior of the box (item 2)
+def certified_bounds(results, probability: float, inflation: float, pad=None) -> list:
+    """Per vertex ``(scheduling, lo, hi)`` of ``[A, B]`` (12 x 16) as the synthesis box states
+    them (synthesis.uncertainty_set): every element with a std in ``max(stored half, k_joint
+    std)`` about its interval centre (Sidak over all elements of the airframe), plus ``pad``
+    (the interpolation pad of ident.vertex.interpolation, 12 x 16), times ``1 + inflation``;
+    the other elements at their value (+/- pad)."""
+    from lpv_sysid.ident.vertex import joint_k
+
+    p = sum(len(r.uncertain.intervals) for r in results)
+    out = []
+    for r in results:
+        AB = np.concatenate([r.fit.A, r.fit.B], axis=1)
+        lo, hi = AB.copy(), AB.copy()
+        k_st = float(r.uncertain.intervals[0].upper - r.uncertain.intervals[0].nominal) / max(
+            r.uncertain.intervals[0].std, 1e-300
+        )
+        k_j = joint_k(p, probability, r.fit.dof, k_st) if r.uncertain.intervals else 0.0
+        for iv in r.uncertain.intervals:
+            c = iv.col if iv.matrix == "A" else 12 + iv.col
+            a, b = (
+                min(iv.lower, iv.nominal - k_j * iv.std),
+                max(iv.upper, iv.nominal + k_j * iv.std),
+            )
+            m, h = 0.5 * (a + b), 0.5 * (b - a)
+            lo[iv.row, c], hi[iv.row, c] = m - h, m + h
+        if pad is not None:
+            lo, hi = lo - pad, hi + pad
+        m, h = 0.5 * (lo + hi), 0.5 * (hi - lo) * (1.0 + inflation)
+        lo, hi = m - h, m + h
+        out.append((np.asarray(r.scheduling, dtype=float), lo, hi))
+    # B: one hull common to all vertices (models.lpv.input_hull)
+    bl = np.min([lo[:, 12:] for _, lo, _ in out], axis=0)
+    bh = np.max([hi[:, 12:] for _, _, hi in out], axis=0)
+    for _, lo, hi in out:
+        lo[:, 12:], hi[:, 12:] = bl, bh
+    return out
+
+
+def _weights(v: np.ndarray, verts: list) -> np.ndarray:
+    """Multilinear weights (seed 0 Eq. 21) of ``v`` for vertices at the corners of their box."""
+    S = np.array([s for s, _, _ in verts])
+    vmin, vmax = S.min(axis=0), S.max(axis=0)
+    t = (v - vmin) / (vmax - vmin)
+    return np.array([np.prod(np.where(s == vmax, t, 1.0 - t)) for s in S])
+
+
+def interior_points(verts: list, n: int, rng: np.random.Generator) -> list:
+    """Hover (the box centre) and ``n`` uniform random interior scheduling points."""
+    S = np.array([s for s, _, _ in verts])
+    vmin, vmax = S.min(axis=0), S.max(axis=0)
+    return [0.5 * (vmin + vmax)] + [
+        vmin + rng.uniform(size=vmin.size) * (vmax - vmin) for _ in range(n)
+    ]
+
+
+def interior_excess(params: QuadrotorParams, verts: list, points: list, pad=None) -> list:
+    """Per point the worst excess of the true linearisation (at the equilibrium at v, yaw rate
+    0) over the interpolated certified set ``[sum alpha_i lo_i, sum alpha_i hi_i]`` (the set
+    is elementwise affine in alpha), in units of the set's half-width there (the element's
+    value where the set has none); <= 0: inside. ``pad`` (12 x 16): added to every half-width
+    (the measured interpolation residual)."""
+    q = Quadrotor(params)
+    out = []
+    for v in points:
+        a = _weights(np.asarray(v, dtype=float), verts)
+        lo = sum(ai * lo_i for ai, (_, lo_i, _) in zip(a, verts))
+        hi = sum(ai * hi_i for ai, (_, _, hi_i) in zip(a, verts))
+        if pad is not None:
+            lo, hi = lo - pad, hi + pad
+        A, B = q.linearize(q.trim(np.asarray(v, dtype=float), 0.0))
+        T = np.concatenate([A, B], axis=1)
+        half = 0.5 * (hi - lo)
+        scale = np.where(half > 0, half, np.maximum(np.abs(T), 1e-9))
+        # rounding tolerance for the elements that are exact (lo = hi = the structural value)
+        exc = (np.maximum(lo - T, T - hi) - 1e-9 * np.maximum(1.0, np.abs(T))) / scale
+        k = int(np.argmax(exc))
+        i, j = np.unravel_index(k, exc.shape)
+        out.append(
+            (
+                float(exc[i, j]),
+                element_label("A" if j < 12 else "B", int(i), int(j % 12 if j >= 12 else j)),
+            )
+        )
+    return out

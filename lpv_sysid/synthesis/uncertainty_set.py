@@ -146,6 +146,11 @@ class UncertaintySettings:
         hi=1.0,
         optional=True,
     )
+    interpolation: bool = cf.flag(
+        True,
+        "full_box: add the models file's measured interpolation error between the vertices "
+        "(meta.interpolation) to every half-width",
+    )
     #: keys of the reduction itself (:data:`REDUCTION_KEYS`, declared and checked by
     #: :class:`~lpv_sysid.ident.vertex.UncertaintyConfig`), passed to it as given
     reduction: Mapping[str, Any] = field(default_factory=dict)
@@ -174,10 +179,11 @@ class UncertaintySettings:
             "method": self.method,
             "common_b": self.common_b,
             "p_max_b": self.p_max_b,
+            # a full box records both, null included (an absent key means the default)
             **{
                 k: getattr(self, k)
-                for k in ("joint_probability", "box_inflation")
-                if getattr(self, k) is not None
+                for k in ("joint_probability", "box_inflation", "interpolation")
+                if self.set == "full_box" or k != "interpolation" and getattr(self, k) is not None
             },
             **self.reduction,
         }
@@ -301,10 +307,63 @@ def joint_widen(
     }
 
 
+def interpolation_widen(models: VertexModels, out: list, labels: list) -> Optional[dict]:
+    """Add the models file's ``meta.interpolation`` pad (the measured multilinear interpolation
+    error between the vertices, :mod:`lpv_sysid.ident.vertex.interpolation`) to every vertex's
+    half-widths; an element the file lists as fixed but the pad does not gets an interval about
+    its value. Returns the certificate's ``interpolation`` entry (None without a pad)."""
+    meta = models.meta.get("interpolation") if isinstance(models.meta, dict) else None
+    if not isinstance(meta, dict) or "pad_A" not in meta or "pad_B" not in meta:
+        return None
+    pad_A, pad_B = np.asarray(meta["pad_A"], dtype=float), np.asarray(meta["pad_B"], dtype=float)
+    n, m = models.vertices[0].A.shape[0], models.vertices[0].B.shape[1]
+    if (
+        pad_A.shape != (n, n)
+        or pad_B.shape != (n, m)
+        or not (np.all(np.isfinite(pad_A)) and np.all(np.isfinite(pad_B)))
+    ):
+        raise ConfigError(
+            f"meta.interpolation: pad_A {pad_A.shape} / pad_B {pad_B.shape} must be finite "
+            f"{n}x{n} / {n}x{m}"
+        )
+    if np.any(pad_A < 0) or np.any(pad_B < 0):
+        raise ConfigError("meta.interpolation: pads must be >= 0")
+    added = 0
+    for i, vx in enumerate(models.vertices):
+        seen = {}
+        for idx, e in enumerate(out[i]):
+            seen[(e.matrix, e.row, e.col)] = idx
+        for mat, P, M in (("A", pad_A, vx.A), ("B", pad_B, vx.B)):
+            for r, c in zip(*np.nonzero(P > 0)):
+                h = float(P[r, c])
+                k = seen.get((mat, int(r), int(c)))
+                if k is None:
+                    nom = float(M[r, c])
+                    out[i].append(UncertainElement(mat, int(r), int(c), nom - h, nom + h, nom))
+                    labels[i].append("interpolation pad")
+                    added += 1
+                else:
+                    e = out[i][k]
+                    out[i][k] = UncertainElement(
+                        e.matrix, e.row, e.col, e.lower - h, e.upper + h, e.nominal
+                    )
+    return {
+        "source": "meta.interpolation of the models file",
+        "points": meta.get("points"),
+        "max_pad": float(max(pad_A.max(), pad_B.max())),
+        "elements_added": added,
+        "method": meta.get("method", ""),
+        "statement": "every half-width + the interpolation error measured between the vertices "
+        "(identified models re-expanded on a grid): the certified set holds the identified "
+        "dynamics at the grid points; between them it is measured, not proven",
+    }
+
+
 def full_box_elements(
     models: VertexModels,
     motor_std: Optional[tuple] = None,
     joint_probability: Optional[float] = None,
+    interpolation: bool = True,
 ) -> tuple[list, list, dict]:
     """Every uncertain element of the models file in its interval, per vertex (box order):
     ([UncertainElement], [label]) lists and a description of the rule (certificate entry).
@@ -377,6 +436,7 @@ def full_box_elements(
         if joint_probability is None
         else joint_widen(models, out, sigmas, float(joint_probability), k_used)
     )
+    interp = interpolation_widen(models, out, labels) if interpolation else None
     rule = {
         "intervals": "stored [lower, upper] where lower < upper; nominal +/- k std where a file "
         "stores lower = upper with std > 0 (k = meta.uncertainty.k_applied, meta.k_sigma or 3)",
@@ -387,6 +447,8 @@ def full_box_elements(
     }
     if joint is not None:
         rule["joint_coverage"] = joint
+    if interp is not None:
+        rule["interpolation"] = interp
     return out, labels, rule
 
 
@@ -431,6 +493,7 @@ def load_models(
     max_corners, p_max_b, method = ucfg.max_corners, ucfg.p_max_b, ucfg.method
     common_b, which, motor_std = ucfg.common_b, ucfg.set, ucfg.motor_std
     joint_probability, box_inflation = ucfg.joint_probability, ucfg.box_inflation
+    interpolation = ucfg.interpolation
     As, Bs = vm.A, vm.B
     elss = [[e.to_lpv() for e in vx.uncertain] for vx in vm.vertices]
     kw: dict[str, Any] = dict(
@@ -451,9 +514,11 @@ def load_models(
                 "uncertainty.set: full_box needs common_b: true (the B hull is what covers the "
                 "interior of the scheduling box)"
             )
-        fb, labels, rule = full_box_elements(vm, motor_std, joint_probability)
+        fb, labels, rule = full_box_elements(vm, motor_std, joint_probability, interpolation)
         ebox = ElementBox.from_elements(As, Bs, fb, labels)
         cov = dict(rule.get("joint_coverage") or {})
+        if "interpolation" in rule:
+            cov["interpolation"] = rule["interpolation"]
         if box_inflation:
             f = 1.0 + float(box_inflation)
             ebox = dataclasses.replace(ebox, half=tuple(np.asarray(h) * f for h in ebox.half))

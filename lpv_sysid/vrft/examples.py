@@ -207,7 +207,7 @@ def lv100_statistics(
 
     if not 2 <= runs <= MAX_RUNS:
         raise ConfigError(
-            f"--runs {runs}: need 2 .. {MAX_RUNS} noise realisations (each is one VRFT "
+            f"runs {runs}: need 2 .. {MAX_RUNS} noise realisations (each is one VRFT "
             "identification)"
         )
     if not 50 <= n <= MAX_SAMPLES:

@@ -54,6 +54,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
             help="wall-clock time of the PX4 boot when the log has no GPS time "
             "(ISO 8601 UTC or Unix seconds); default: stamps stay time since boot",
         )
+        p.add_argument(
+            "--clock-from",
+            default=None,
+            metavar="DIR",
+            help="a `fly` recording of the same flight (its experiment.yaml): stamp the "
+            "imported bags on its clock (PX4 boot offset and rate fitted from MAVLink), so "
+            "both line up; --window is then still in seconds since PX4 boot",
+        )
         p.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap")
         p.add_argument(
             "--vehicle-kind",
@@ -90,6 +98,11 @@ def run(args: argparse.Namespace) -> int:
         rec = imports.read_ulog(args.source, epoch_ns=epoch)
     else:
         rec = imports.read_foreign_bag(args.source, epoch_ns=epoch)
+    if args.clock_from is not None:
+        rec.clock_offset_ns, rec.clock_rate, rec.clock_knots = imports.px4_clock_of(
+            args.clock_from
+        )
+        rec.clock = "recording"
     runs = imports.import_flight(
         rec, args.out, args.window, args.storage, args.min_duration, args.vehicle_kind
     )

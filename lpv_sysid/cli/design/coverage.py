@@ -173,6 +173,14 @@ def run(args: argparse.Namespace) -> int:
         f"the simultaneous intervals (joint probability {j['probability']:g}): rate "
         f"{100 * j['rate']:.1f} %"
     )
+    it = doc.get("interior") or {}
+    if it.get("points"):
+        print(
+            f"interior: truth inside the interpolated certified set at {it['truth_inside']}/"
+            f"{it['points']} points (hover + random); with the interpolation pad "
+            f"(uncertainty.interpolation): {it['truth_inside_with_interpolation_pad']}/"
+            f"{it['points']}"
+        )
     print(f"wrote {out / 'coverage.yaml'}")
     print(f"wrote {out / 'coverage.md'}")
     return 0

@@ -124,6 +124,34 @@ def format_validation_table(val: dict) -> str:
     )
 
 
+def data_label(bags: str | Path) -> str:
+    """SIMULATED / SITL / HITL / SIH / FLOWN of the bags: the vehicle kind their
+    ``experiment.yaml`` records (report.gonogo.vehicle_label); none: ``simulate phase1``."""
+    from lpv_sysid.errors import LpvSysidError
+    from lpv_sysid.io.files import read_yaml
+    from lpv_sysid.report import SIMULATED, vehicle_label
+
+    meta = Path(bags) / "experiment.yaml"
+    if not meta.is_file():
+        return SIMULATED
+    try:
+        return vehicle_label(read_yaml(meta))[0]
+    except LpvSysidError:
+        return "source unknown"
+
+
+def format_output_error_table(oe: dict) -> str:
+    axes = list(oe["nrmse"])
+    return "\n".join(
+        [
+            f"Output-error (free-run) validation, restarted every {oe['horizon_s']:.2f} s",
+            f"{'State':>6} " + " ".join(f"{a:>7}" for a in axes),
+            f"{'TIC':>6} " + " ".join(f"{oe['tic'][a]:7.3f}" for a in axes),
+            f"{'NRMSE':>6} " + " ".join(f"{oe['nrmse'][a]:7.3f}" for a in axes),
+        ]
+    )
+
+
 def format_offset_table(results) -> str:
     """The identified model's derivative at the flown trim mean (it is not an equilibrium;
     the vertex models are re-expanded about the equilibrium instead)."""
@@ -253,6 +281,9 @@ def run(args: argparse.Namespace) -> int:
     if val is not None:
         print()
         print(format_validation_table(val))
+        if val.get("output_error"):
+            print()
+            print(format_output_error_table(val["output_error"]))
     doc = vx.vertex_models_dict(results, cfg, val)
     models = VertexModels.from_dict(doc)
     args.out.parent.mkdir(parents=True, exist_ok=True)
@@ -264,6 +295,12 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {mat} (MATLAB: A, B, x0, u0 per vertex, uncertain intervals)")
     if val is not None:
         plot = args.plot or args.out.with_name(args.out.stem + "_validation.png")
-        metrics.plot_validation(val["t"], val["xdot_m"], val["xdot_f"], str(plot))
+        metrics.plot_validation(
+            val["t"],
+            val["xdot_m"],
+            val["xdot_f"],
+            str(plot),
+            title=f"[{data_label(args.bags)}] LPV model independent validation (seed 0 Fig. 4)",
+        )
         print(f"wrote {plot}")
     return 0

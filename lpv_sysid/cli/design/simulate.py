@@ -68,6 +68,13 @@ def _add_phase1_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--storage", choices=("mcap", "sqlite3"), default="mcap", help="rosbag2 storage"
     )
+    p.add_argument(
+        "--epoch",
+        default="2026-01-01T00:00:00Z",
+        metavar="ISO|SECONDS",
+        help="wall-clock time the simulated runs are stamped from (each run starts there; "
+        "default 2026-01-01T00:00:00Z, a declared date, not the time of the simulation)",
+    )
     p.add_argument("--no-bags", action="store_true", help="only write the trim table")
 
 
@@ -90,6 +97,12 @@ def run_phase1(args: argparse.Namespace) -> int:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise ConfigError(f"--out {out}: cannot create ({exc.strerror})") from None
+    from lpv_sysid.cli.data.imports import parse_epoch
+
+    try:
+        epoch_ns = parse_epoch(args.epoch) or 0
+    except ValueError as exc:
+        raise ConfigError(f"--epoch {args.epoch!r}: {exc}") from None
     model = Quadrotor(qp)
     t0 = time.perf_counter()
     runs = phase1.run_phase1(model, gains, sensors, cfg, args.vertices)
@@ -97,7 +110,7 @@ def run_phase1(args: argparse.Namespace) -> int:
     if not args.no_bags:
         for rec in runs:
             path = out / rec.name
-            phase1.write_run_bag(rec, path, storage=args.storage)
+            phase1.write_run_bag(rec, path, storage=args.storage, epoch_ns=epoch_ns)
             print(f"wrote {path}")
     rows = phase1.trim_table(runs, cfg, qp.arm_length)
     y, m = phase1.write_trim_table(rows, out)
@@ -270,12 +283,17 @@ def run_phase2(args: argparse.Namespace) -> int:
     problem = load_problem(
         args.gains, models_path if (args.models is not None or models_path.is_file()) else None
     )
-    signals = load_signals(args.signals, cfg.duration, cfg.ramp)
+    signals = load_signals(args.signals, cfg.duration, cfg.ramp, design=problem.design)
     quad_params, sensors = load_vehicle_config(args.config, args.seed)
     out = Path(args.out)
     t0 = time.perf_counter()
     result = run(problem, signals, cfg, quad_params, sensors, out)
-    figures = write_phase2_figures(out, list(result.records.values()), result.regressor_block)
+    figures = write_phase2_figures(
+        out,
+        list(result.records.values()),
+        result.regressor_block,
+        box=(problem.vmin.tolist(), problem.vmax.tolist()),
+    )
     print(
         f"simulated phase 2 in {time.perf_counter() - t0:.1f} s (kappa = {cfg.kappa:g}, gamma = "
         f"{problem.gamma if problem.gamma is not None else 'n/a'})"

@@ -162,6 +162,9 @@ def fly(
     try:
         wait_for_vehicle(bridge.link, cfg.link_timeout, clock, sleep)
         echo(f"vehicle: system {bridge.link.target_system} on {bcfg.link.url}")
+        # the PX4 parameter snapshot of experiment.yaml arrives during the preflight, before
+        # anything time-critical runs
+        request_parameter_list(bridge.link)
         if params:
             done = set_params(bridge.link, params, clock, sleep)
             summary["params_set"] = done
@@ -208,7 +211,6 @@ def fly(
                 "clock is time.monotonic (fly) or the simulation's",
             },
         )
-        request_parameter_list(bridge.link)
         runner.rec = rec
         if record_rate_setpoints:
             tap_attitude_target(

@@ -131,4 +131,26 @@ def write_report(out: Path, summary: dict, p2: Optional[dict], rep: dict) -> Non
                 "from the "
                 "law), R^2 of x' per row: " + ", ".join(f"{k} {v}" for k, v in mc.items()),
             ]
+    full = _full_report(out)
+    if full is not None:
+        L += [
+            "",
+            f"The run report of this directory (go/no-go first, data source of every figure, "
+            f"phase-1 time histories, poles and time to double, margins): `{full}`.",
+        ]
     (out / "report.md").write_text("\n".join(L) + "\n")
+
+
+def _full_report(out: Path) -> Optional[Path]:
+    """``out/report/report.md`` (:func:`lpv_sysid.report.write_report`, the report every run
+    kind gets) next to the chain's own summary; None (logged) when it cannot be written."""
+    import logging
+
+    from lpv_sysid.errors import LpvSysidError
+    from lpv_sysid.report import write_report as run_report
+
+    try:
+        return run_report(out).relative_to(out)
+    except (LpvSysidError, OSError, ValueError) as exc:
+        logging.getLogger(__name__).warning("run report of %s not written: %s", out, exc)
+        return None

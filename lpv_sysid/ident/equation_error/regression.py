@@ -5,6 +5,7 @@ method is the :mod:`lpv_sysid.ident.equation_error` docstring."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -27,6 +28,9 @@ class Fit:
     cov_joint: np.ndarray | None = None  # all rows' theta stacked (RowFit.offset), ewc only
     dof: float | None = None  # Student-t dof of every studentised element error
     cov_method: str = "residual_acf"
+    # taylor2: v -> the identified model re-expanded at body velocity v (ident.vertex.taylor
+    # Reexpansion); what bounds the interpolation error between vertices (issue 20 item 2)
+    expand: Any = field(default=None, compare=False, repr=False)
 
     @property
     def r2(self) -> dict[int, float]:

@@ -53,6 +53,7 @@ from lpv_sysid.ident.vertex.pipeline import (
     identify_vertices,
     in_sample_metrics,
     pooled_motor,
+    free_run,
     validate,
 )
 from lpv_sysid.ident.vertex.segment import equilibrium, fit_indices, trim_window
@@ -87,6 +88,7 @@ __all__ = [
     "regressor_noise_var",
     "sidak_k",
     "trim_window",
+    "free_run",
     "validate",
     "vertex_models_dict",
     "vertex_order",

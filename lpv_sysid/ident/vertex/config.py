@@ -61,6 +61,12 @@ class IdentificationConfig:
         "the identified rotor speeds) get intervals from its delta-method uncertainty "
         "(issue 20 item 3); false: they are exact",
     )
+    interpolation_pad: bool = cf.flag(
+        True,
+        "taylor2: measure the multilinear interpolation error between the vertices with the "
+        "identified models re-expanded on a grid (ident/vertex/interpolation.py) and record "
+        "it as meta.interpolation (the synthesis box adds it, issue 20 item 2)",
+    )
     expand_at: str = cf.choice(
         "commanded",
         ("commanded", "flown"),

@@ -5,7 +5,7 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -98,12 +98,27 @@ def vertex_models_dict(
             "inflation": [results[k].uncertain.inflation for k in order],
         },
     }
+    if cfg.interpolation_pad:
+        from lpv_sysid.ident.vertex.interpolation import interpolation_pad
+        from lpv_sysid.ident.vertex.uncertainty import DEFAULT_JOINT_PROBABILITY
+
+        pad = interpolation_pad([results[k] for k in order], DEFAULT_JOINT_PROBABILITY)
+        if pad is not None:
+            meta["interpolation"] = pad
     if validation:
-        meta["validation"] = {
+        val_meta: dict[str, Any] = {
             "maneuver": validation.get("name", ""),
             "tic": {k: float(v) for k, v in validation["tic"].items()},
             "nrmse": {k: float(v) for k, v in validation["nrmse"].items()},
         }
+        meta["validation"] = val_meta
+        oe = validation.get("output_error")
+        if oe:  # free run restarted every horizon_s (ident/vertex/pipeline.free_run)
+            val_meta["output_error"] = {
+                "horizon_s": float(oe["horizon_s"]),
+                "tic": {k: float(v) for k, v in oe["tic"].items()},
+                "nrmse": {k: float(v) for k, v in oe["nrmse"].items()},
+            }
     return {
         "format": MODELS_FORMAT,
         "time": "continuous",

@@ -230,6 +230,54 @@ def validate(results: Sequence[VertexResult], data: VertexData, cfg: Identificat
     return out
 
 
+def free_run(
+    results: Sequence[VertexResult],
+    data: VertexData,
+    cfg: IdentificationConfig,
+    horizon_s: float = 1.0,
+) -> dict:
+    """Output-error (free-run) validation on ``data``: the LPV model of :func:`validate`
+    simulated from the measured state, driven by the measured input only,
+
+        dx_{k+1} = Phi dx_k + Gamma du_k,   [Phi Gamma] = expm([[A, B], [0, 0]] dt) (ZOH),
+
+    restarted from the measured state every ``horizon_s`` seconds (an unstable vehicle's
+    open-loop model diverges from any error within a few times its time to double, so an
+    unbounded free run measures that instability, not the model); TIC and NRMSE of the
+    simulated against the measured (smoothed) states per axis, and the time series."""
+    from scipy.linalg import expm
+
+    from lpv_sysid.models.lpv import multilinear_weights
+
+    if not horizon_s > 0.0:
+        raise ConfigError(f"free run: horizon_s must be > 0, got {horizon_s}")
+    order = vertex_order(results, cfg)
+    w, outside = multilinear_weights(np.asarray(data.scheduling, dtype=float), cfg.vmin, cfg.vmax)
+    if outside:
+        raise ConfigError(f"validation maneuver v_d={list(data.scheduling)} outside the box")
+    A = sum(wi * results[k].fit.A for wi, k in zip(w, order))
+    B = sum(wi * results[k].fit.B for wi, k in zip(w, order))
+    x0 = sum(wi * results[k].x0 for wi, k in zip(w, order))
+    u0 = sum(wi * results[k].u0 for wi, k in zip(w, order))
+    t, _, dx, du = prepare(data, cfg, x0, u0)
+    dt = float(np.median(np.diff(t)))
+    n, m = A.shape[0], B.shape[1]
+    M = np.zeros((n + m, n + m))
+    M[:n, :n], M[:n, n:] = A, B
+    E = expm(M * dt)
+    Phi, Gam = E[:n, :n], E[:n, n:]
+    steps = max(1, int(round(horizon_s / dt)))
+    x_sim = np.empty_like(dx)
+    for k in range(dx.shape[0]):
+        if k % steps == 0:
+            x_sim[k] = dx[k]
+        else:
+            x_sim[k] = Phi @ x_sim[k - 1] + Gam @ du[k - 1]
+    out: dict = dict(metrics.axis_metrics(x_sim, dx, axes=("u", "v", "w", "p", "q", "r")))
+    out.update({"t": t, "x_sim": x_sim, "x_meas": dx, "horizon_s": steps * dt})
+    return out
+
+
 def in_sample_metrics(result: VertexResult, data: VertexData, cfg: IdentificationConfig) -> dict:
     """TIC/NRMSE (Eqs. 24-25) of the vertex model on its own maneuver (per-vertex ``fit``)."""
     t, xdot_f, dx, du = prepare(data, cfg, result.x0, result.u0)

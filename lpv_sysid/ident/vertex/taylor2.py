@@ -222,6 +222,7 @@ def finish(
         for j in range(4):
             maskA[8 + j, 8 + j] = True
             maskB[8 + j, j] = True
+    mA0, mB0 = maskA.copy(), maskB.copy()  # the identified elements (before fixed_intervals)
     model = taylor.IdentifiedModel(x0, u0, fits, nuis_kept, params)
     theta = np.concatenate([rf.theta for rf in fits])
     psi_dot = float((np.sin(x0[0]) * x0[6] + np.cos(x0[0]) * x0[7]) / np.cos(x0[1]))
@@ -274,7 +275,35 @@ def finish(
         A, B = model.jacobians(x0, u0, theta)
         x_e, u_e = x0, np.asarray(u0, dtype=float)
         sA, sB = _direct_std(model, theta, joint, x0, u0, maskA, maskB)
-    f = ee.Fit(A, B, sA, sB, maskA, maskB, tuple(fits), joint, dof, cfg.covariance.method)
+
+    def expand(v: np.ndarray) -> taylor.Reexpansion:
+        """The same identified model re-expanded at body velocity ``v`` (its own uncertainty:
+        the delta method there)."""
+        return taylor.reexpand(
+            model,
+            theta,
+            joint,
+            np.asarray(v, dtype=float),
+            psi_dot,
+            mA0,
+            mB0,
+            fixed=cfg.fixed_intervals,
+            psi_var=psi_var,
+        )
+
+    f = ee.Fit(
+        A,
+        B,
+        sA,
+        sB,
+        maskA,
+        maskB,
+        tuple(fits),
+        joint,
+        dof,
+        cfg.covariance.method,
+        expand if cfg.equilibrium else None,
+    )
     return f, x_e, u_e, flown, motor
 
 

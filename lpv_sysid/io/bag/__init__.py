@@ -43,7 +43,9 @@ bag is screened before it is opened: a FIFO or device in place of ``metadata.yam
 storage file is a :class:`BagError` naming it, never a hang (:mod:`.bagfiles`).
 
 Repair: :func:`repair_bag` makes a killed or starved recording readable by standard tools
-(:mod:`.repair`).
+(:mod:`.repair`); nothing that was complete on disk is dropped: the complete records of an
+mcap chunk the cut went through are re-chunked. mcap chunks are written with their CRC
+(:func:`~lpv_sysid.io.bag.mcap.write_chunk_crcs`), which every reader checks.
 """
 
 from __future__ import annotations

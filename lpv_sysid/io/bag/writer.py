@@ -43,7 +43,7 @@ from typing import Any, Callable, Iterable, Literal, Mapping, NoReturn
 
 from lpv_sysid.errors import BagError
 from lpv_sysid.io.bag.durability import LOCK_FILE, RESERVE_BYTES, DiskReserve, _describe
-from lpv_sysid.io.bag.mcap import append_message
+from lpv_sysid.io.bag.mcap import append_message, write_chunk_crcs
 from lpv_sysid.io.bag.mcap.records import _MSG_RECORD_OVERHEAD
 from lpv_sysid.io.bag.repair import RepairReport
 from lpv_sysid.io.bag.typestore import jazzy_typestore, make_qos
@@ -151,6 +151,7 @@ class BagWriter:
             writer.open()
             storage: Any = writer.storage
             if self._mcap:
+                write_chunk_crcs(storage)  # flipped bytes in a chunk are caught on read
                 storage.bio.flush()  # the header is on disk from the start
                 self._header_end = storage.bio.tell()
             else:

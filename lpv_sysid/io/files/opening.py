@@ -255,7 +255,7 @@ def refuse_overwrite(
         if path and os.path.lexists(path) and _same(o, path):
             raise ConfigError(
                 f"{flag} {o} is the input {name} {path}: refusing to overwrite an input "
-                "(choose another output, or --force)"
+                "(choose another output, or force the replacement)"
             )
 
 
@@ -272,7 +272,7 @@ def refuse_existing(paths, force: bool = False, why: str = "") -> None:
     if there:
         raise ConfigError(
             f"{', '.join(there)} exist(s) already{why}: refusing to replace them (another "
-            "output directory, or --force)"
+            "output directory, or force the replacement)"
         )
 
 

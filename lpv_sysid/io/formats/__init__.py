@@ -43,6 +43,7 @@ from lpv_sysid.io.formats.sidecar import (
     box_arrays,
     load_certificate_npz,
     load_certified_systems,
+    referenced_files,
     save_certificate_npz,
     systems_arrays,
 )
@@ -76,6 +77,7 @@ __all__ = [
     "load_seal_key",
     "models_dict",
     "models_mat_dict",
+    "referenced_files",
     "save_certificate_npz",
     "save_models_mat",
     "seal_document",

@@ -132,7 +132,7 @@ def check_seal(doc: Mapping[str, Any], label: str, key: Optional[bytes] = None) 
         raise ConfigError(
             f"{label}: seal.hmac_sha256: missing, but a seal key was given: the file was not "
             "sealed with the operator key (anyone can write an unkeyed seal); synthesize it "
-            "with --key"
+            "with the operator key"
         )
     if not hmac.compare_digest(hmac.new(key, data, hashlib.sha256).hexdigest(), mac):
         raise ConfigError(

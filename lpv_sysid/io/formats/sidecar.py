@@ -44,6 +44,23 @@ def systems_arrays(systems: Sequence[Sequence[tuple]]) -> dict:
     return {"A_sys": A, "B_sys": B, "M_sys": Ms}
 
 
+def referenced_files(path) -> list[Path]:
+    """The files a gains file's certificate refers to (its sidecar), for a command that
+    must not overwrite them; ``[]`` for anything that is not a readable gains file (the
+    command itself reports that)."""
+    from lpv_sysid.io.files import read_located
+
+    p = Path(path)
+    try:
+        if p.suffix not in (".yaml", ".yml") or not p.is_file():
+            return []
+        doc = read_located(p)
+        side = doc["certificate"]["sidecar"]["file"]
+    except Exception:  # noqa: BLE001 - not a gains file: nothing it refers to
+        return []
+    return [p.parent / side] if isinstance(side, str) and side else []
+
+
 def load_certified_systems(
     gains_path, certificate: Certificate, n_x: int, n_u: int, label: Optional[str] = None
 ) -> list:

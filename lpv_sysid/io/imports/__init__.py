@@ -28,6 +28,7 @@ from lpv_sysid.io.imports.record import (
     Run,
     StateSeries,
     parse_window,
+    px4_clock_of,
     runs_of,
 )
 from lpv_sysid.io.imports.ulog import VEHICLE_KINDS, firmware_release, read_ulog, vehicle_kind
@@ -49,6 +50,7 @@ __all__ = [
     "import_flight",
     "flight_from_uorb",
     "parse_window",
+    "px4_clock_of",
     "read_foreign_bag",
     "read_ulog",
     "runs_of",

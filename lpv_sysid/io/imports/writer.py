@@ -33,9 +33,9 @@ class ImportedRun:
     messages: int
 
 
-def _stream(name: str, t: np.ndarray, idx: np.ndarray, make: Callable, offset: int):
+def _stream(name: str, stamps: np.ndarray, idx: np.ndarray, make: Callable):
     for k in idx:
-        yield int(round(float(t[k]) * 1e9)) + offset, name, int(k), make
+        yield int(stamps[k]), name, int(k), make
 
 
 def write_runs(
@@ -60,7 +60,6 @@ def write_runs(
             description=f"imported from {rec.source}",
         )
     )
-    off = rec.clock_offset_ns
     s = rec.state
     makers: dict[str, tuple[np.ndarray, Callable[[int, int], Any]]] = {
         "state": (
@@ -100,27 +99,27 @@ def write_runs(
         )
     written: list[ImportedRun] = []
     t0 = min(r.start for r in runs)
-    recorder.start(int(round(t0 * 1e9)) + off)
+    recorder.start(int(rec.stamps_ns(np.array([t0]))[0]))
     try:
         for run in runs:
             bag = recorder.split()
             n = 0
-            for st, topic, k, make in _merged(makers, run, off):
+            for st, topic, k, make in _merged(makers, run, rec):
                 recorder.record(f"{ns}/{topic}", st, make(st, k))
                 n += 1
             written.append(ImportedRun(run.name, bag, run.start, run.end, n))
             log.info("%s: run %s -> %s (%d messages)", rec.source, run.name, bag, n)
         recorder.annotate("provenance", provenance(rec, written))
     finally:
-        recorder.stop(int(round(max(r.end for r in runs) * 1e9)) + off)
+        recorder.stop(int(rec.stamps_ns(np.array([max(r.end for r in runs)]))[0]))
     return written
 
 
-def _merged(makers, run: Run, off: int) -> Iterator[tuple[int, str, int, Any]]:
+def _merged(makers, run: Run, rec: FlightRecord) -> Iterator[tuple[int, str, int, Any]]:
     streams = []
     for name, (t, make) in makers.items():
         idx = np.nonzero((t >= run.start) & (t <= run.end))[0]
-        streams.append(_stream(name, t, idx, make, off))
+        streams.append(_stream(name, rec.stamps_ns(t), idx, make))
     return heapq.merge(*streams, key=lambda r: r[0])
 
 
@@ -132,7 +131,10 @@ def provenance(rec: FlightRecord, runs: Sequence[ImportedRun]) -> dict:
         "clock": {
             "kind": rec.clock,
             "offset_ns": int(rec.clock_offset_ns),
-            "meaning": "bag stamp [ns] = t * 1e9 + offset_ns; t [s]: since PX4 boot (ULog, "
+            "rate": float(rec.clock_rate),
+            "knots": None if rec.clock_knots is None else len(rec.clock_knots[0]),
+            "meaning": "bag stamp [ns] = t * 1e9 * rate + offset_ns (or + the offset interpolated "
+            "in the recording's px4_clock knots); t [s]: since PX4 boot (ULog, "
             "px4_msgs) or since the first odometry message (MAVROS)",
         },
         "rotor_speeds": rec.rotor_source if rec.rotors is not None else None,

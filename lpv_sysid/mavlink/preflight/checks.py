@@ -62,6 +62,17 @@ def judge(
         facts = Facts(hb=hb, version=version, params=dict(params), seen=set(seen))
     cfg = rotor_estimate or RotorEstimateConfig()
     out: list[Check] = []
+    if link is not None and getattr(link, "ambiguous_target", False):
+        out.append(
+            Check(
+                "link",
+                f"autopilots of systems {sorted(link.autopilots_heard)} heard with "
+                "link.target_system 0",
+                "one autopilot, or link.target_system set",
+                NOGO,
+            )
+        )
+        return out
     if hb is None:
         out.append(Check("link", "no autopilot HEARTBEAT", "HEARTBEAT received", NOGO))
         return out

@@ -25,6 +25,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from lpv_sysid.mavlink import px4
 
 #: AUTOPILOT_VERSION.flight_custom_version of the package's simulated PX4 vehicle
@@ -62,6 +64,9 @@ class VehicleRecord:
     battery_first: dict | None = None
     battery_last: dict | None = None
 
+    #: per second of PX4 time: (min receive - time_boot, time_boot) (ns), for the clock fit
+    windows: dict = field(default_factory=dict)
+
     def absorb(self, m: Any, receive_ns: int) -> None:
         """One MAVLink message of the target received at ``receive_ns`` (recording clock)."""
         mt = m.get_type()
@@ -70,6 +75,10 @@ class VehicleRecord:
             est = int(receive_ns) - tb * 1_000_000
             self.boot_ns = est if self.boot_ns is None else min(self.boot_ns, est)
             self.boot_samples += 1
+            w = tb // 1000
+            old = self.windows.get(w)
+            if old is None or est < old[0]:
+                self.windows[w] = (est, tb * 1_000_000)
         if mt == "HEARTBEAT":
             if int(m.base_mode) & MAV_MODE_FLAG_HIL_ENABLED:
                 self.hil_flag = True
@@ -116,6 +125,30 @@ class VehicleRecord:
             self.battery_first = b
         self.battery_last = b
 
+    def clock_fit(self) -> tuple[int, float] | None:
+        """``(boot_ns, rate)``: the bag time of PX4's boot and the bag nanoseconds per PX4
+        nanosecond, a straight line through the per-second minima of receive - time_boot
+        (a PX4 SITL in lock-step runs slower than the wall clock under load: the offset
+        drifts, a single minimum is then off by the drift over the flight); None with fewer
+        than 3 seconds of data (then ``boot_ns``, rate 1)."""
+        if len(self.windows) < 3:
+            return None
+        items = sorted(self.windows.values(), key=lambda p: p[1])
+        tb = np.array([p[1] for p in items], dtype=float)
+        off = np.array([p[0] for p in items], dtype=float)
+        # offset(tb) = off[0] + c0 + c1 (tb - tb[0]) (seconds in the fit, ns outside)
+        c1, c0 = np.polyfit((tb - tb[0]) * 1e-9, (off - off[0]) * 1e-9, 1)
+        boot = off[0] + c0 * 1e9 - c1 * tb[0]
+        return int(round(boot)), float(1.0 + c1)
+
+    def clock_knots(self) -> list[list]:
+        """``[[time_boot_s, offset_ns], ...]``: per second of PX4 time the smallest
+        receive - time_boot (at the PX4 time it was seen), in time order. A lock-step SITL's
+        clock rate changes with the load, so a line (:meth:`clock_fit`) is not enough;
+        between knots the offset is interpolated."""
+        items = sorted(self.windows.values(), key=lambda p: p[1])
+        return [[round(tb * 1e-9, 6), int(off)] for off, tb in items]
+
     @property
     def kind(self) -> str:
         return vehicle_kind(self.params, self.hil_flag, self.custom_version)
@@ -123,6 +156,7 @@ class VehicleRecord:
     def summary(self) -> dict:
         """The ``vehicle`` entry of ``experiment.yaml``."""
         p = self.params
+        fit = self.clock_fit()
         return {
             "kind": self.kind,
             "firmware": self.version,
@@ -134,11 +168,16 @@ class VehicleRecord:
             "hil_flag": self.hil_flag,
             "battery": {"start": self.battery_first, "end": self.battery_last},
             "px4_clock": {
-                "boot_ns": self.boot_ns,
+                "boot_ns": self.boot_ns if fit is None else fit[0],
+                "rate": 1.0 if fit is None else fit[1],
+                "boot_ns_min": self.boot_ns,
+                "knots": self.clock_knots(),
                 "boot_samples": self.boot_samples,
-                "meaning": "PX4 boot on the bag clock: bag_stamp_ns = PX4 time since boot "
-                "(ULog timestamp us * 1000) + boot_ns; the minimum of receive time - "
-                "time_boot_ms over the messages (over-estimate by the smallest latency)",
+                "meaning": "bag_stamp_ns = PX4 time since boot [ns] (ULog timestamp us * 1000) "
+                "+ offset, offset interpolated in knots [PX4 time s, offset ns] (the per-second "
+                "minima of receive time - time_boot_ms, late by the smallest latency); "
+                "boot_ns + rate * PX4 time: the line through them; boot_ns_min: the overall "
+                "minimum",
                 "system_time": self.system_time,
             },
             "px4_parameters": dict(sorted(p.items())),

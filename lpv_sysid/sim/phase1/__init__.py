@@ -25,7 +25,7 @@ and :mod:`~lpv_sysid.sim.phase1.bag` (``write_run_bag``).
 
 from __future__ import annotations
 
-from lpv_sysid.sim.phase1.bag import BAG_TOPICS, write_run_bag
+from lpv_sysid.sim.phase1.bag import BAG_TOPICS, DECLARED_EPOCH_NS, write_run_bag
 from lpv_sysid.sim.phase1.config import Phase1Config, load_config
 from lpv_sysid.sim.phase1.runs import (
     design_excitation,
@@ -36,6 +36,7 @@ from lpv_sysid.sim.phase1.runs import (
 from lpv_sysid.sim.phase1.trims import format_trim_table, trim_table, write_trim_table
 
 __all__ = [
+    "DECLARED_EPOCH_NS",
     "BAG_TOPICS",
     "Phase1Config",
     "design_excitation",

@@ -17,8 +17,17 @@ log = logging.getLogger(__name__)
 BAG_TOPICS = ("state", "rotor_speeds", "imu", "velocity_reference", "actuator_command", "status")
 
 
+#: the declared epoch of simulated runs (``simulate phase1 --epoch``): 2026-01-01T00:00:00Z,
+#: so the bags open at a plausible date in Foxglove / PlotJuggler and say they are simulated
+DECLARED_EPOCH_NS = 1_767_225_600 * 1_000_000_000
+
+
 def write_run_bag(
-    record: RunRecord, path: str | Path, storage: str = "mcap", namespace: str = TOPIC_NAMESPACE
+    record: RunRecord,
+    path: str | Path,
+    storage: str = "mcap",
+    namespace: str = TOPIC_NAMESPACE,
+    epoch_ns: int = 0,
 ) -> Path:
     """Write one run as a rosbag2 directory with the topics of docs/DESIGN.md.
 
@@ -27,7 +36,8 @@ def write_run_bag(
     ``actuator_command`` and ``status`` (1 Hz, phase trim/excitation). Messages are those
     of the :mod:`lpv_sysid.io.messages` builders (frame conversions by
     :mod:`lpv_sysid.io.frames`), written by :class:`lpv_sysid.io.bag.BagWriter`; stamps are
-    nanoseconds from the run start, messages in stamp order.
+    ``epoch_ns`` + nanoseconds from the run start (``simulate phase1`` declares
+    :data:`DECLARED_EPOCH_NS`), messages in stamp order.
 
     The arrays are complete, so every topic is built in bulk: one builder message is the
     template, the frame conversions run on whole arrays and the CDR records come from
@@ -46,7 +56,7 @@ def write_run_bag(
     f = messages.MsgFactory.rosbags()
     path = Path(path)
     topic = {name: f"{namespace}/{name}" for name in BAG_TOPICS}
-    rows = _bulk_rows(record, f, topic)
+    rows = _bulk_rows(record, f, topic, int(epoch_ns))
     try:
         with BagWriter(str(path), storage=storage) as w:
             for name in BAG_TOPICS:
@@ -54,7 +64,7 @@ def write_run_bag(
             if rows is not None:
                 w.write_many(rows)
             else:
-                for stamp, name, msg in _message_items(record, f):
+                for stamp, name, msg in _message_items(record, f, int(epoch_ns)):
                     w.write(topic[name], stamp, msg)
     except BagError:
         raise
@@ -67,7 +77,7 @@ def _stamp_ns(t) -> int:
     return int(round(float(t) * 1e9))
 
 
-def _status_items(record: RunRecord, f) -> list:
+def _status_items(record: RunRecord, f, epoch_ns: int = 0) -> list:
     from lpv_sysid.io import messages
 
     items = []
@@ -86,7 +96,8 @@ def _status_items(record: RunRecord, f) -> list:
                 "seed": record.meta.get("seed", ""),
             },
         )
-        items.append((_stamp_ns(t), "status", messages.diagnostic_array(f, _stamp_ns(t), [st])))
+        st_ns = _stamp_ns(t) + epoch_ns
+        items.append((st_ns, "status", messages.diagnostic_array(f, st_ns, [st])))
     return items
 
 
@@ -97,11 +108,13 @@ def _imu_state_index(record: RunRecord) -> np.ndarray:
     )
 
 
-def _message_items(record: RunRecord, f) -> list:
+def _message_items(record: RunRecord, f, epoch_ns: int = 0) -> list:
     """(stamp_ns, topic name, message) of every message, built one at a time, stamp order."""
     from lpv_sysid.io import messages
 
-    ns = _stamp_ns
+    def ns(t) -> int:
+        return _stamp_ns(t) + epoch_ns
+
     items: list[tuple[int, str, Any]] = []
     xm = record.state_meas
     for t, x in zip(record.state_t, xm):
@@ -127,12 +140,12 @@ def _message_items(record: RunRecord, f) -> list:
             )
         )
         items.append((ns(t), "actuator_command", messages.actuator_command_msg(f, ns(t), u)))
-    items.extend(_status_items(record, f))
+    items.extend(_status_items(record, f, epoch_ns))
     items.sort(key=lambda it: it[0])
     return items
 
 
-def _bulk_rows(record: RunRecord, f, topic: Mapping[str, str]):
+def _bulk_rows(record: RunRecord, f, topic: Mapping[str, str], epoch_ns: int = 0):
     """``(topic, stamp_ns, CDR record)`` of every message of :func:`write_run_bag` in the order
     of :func:`_message_items`, built per topic with :func:`lpv_sysid.io.bag.encode_block`;
     None when a sample would be rejected by the builders or a record disagrees with them."""
@@ -144,7 +157,7 @@ def _bulk_rows(record: RunRecord, f, topic: Mapping[str, str]):
         t = np.asarray(t, dtype=float)
         if t.size == 0 or not np.all(np.isfinite(t)):
             return None
-        ns = np.round(t * 1e9).astype(np.int64)
+        ns = np.round(t * 1e9).astype(np.int64) + np.int64(epoch_ns)
         sec, nsec = np.divmod(ns, 1_000_000_000)
         if sec.min() < -(2**31) or sec.max() > 2**31 - 1:
             return None
@@ -250,7 +263,7 @@ def _bulk_rows(record: RunRecord, f, topic: Mapping[str, str]):
         return None
     status = [
         (ns, "status", bytes(ts.serialize_cdr(msg, messages.TYPES["status"])))
-        for ns, _, msg in _status_items(record, f)
+        for ns, _, msg in _status_items(record, f, epoch_ns)
     ]
     # the order of _message_items: stamp, then state, rotor, imu, (reference, command) per
     # control sample, status

@@ -126,6 +126,7 @@ class Phase2Problem:
     F_jerk: Optional[np.ndarray] = None  # (N, n_free + n_u + n_rate, 3) its jerk term
     feedforward: Any = None  # its layout (io.formats.FeedforwardSpec), None: no feedforward
     state_names: tuple = ()
+    design: Any = None  # certificate.design (io.formats.DesignEnvelope), None: not recorded
 
     def scheduled(self):
         """ScheduledLpv of the nominal model with the gains' equilibria (Eq. 33 inputs)."""
@@ -182,6 +183,7 @@ def load_problem(
         F_jerk=gs.F_jerk,
         feedforward=gs.feedforward,
         state_names=tuple(gs.state_names),
+        design=gs.certificate.design,
     )
 
 
@@ -209,7 +211,10 @@ def reference_signals(
 
 
 def load_signals(
-    signals_dir: str | Path, duration: Optional[float] = None, ramp: Optional[float] = None
+    signals_dir: str | Path,
+    duration: Optional[float] = None,
+    ramp: Optional[float] = None,
+    design: Any = None,
 ) -> ReferenceSignals:
     """``DIR/signals.npz`` (t, u, names) -> ReferenceSignals; ConfigError naming the problem.
 
@@ -226,6 +231,12 @@ def load_signals(
     if not os.path.lexists(path):
         raise ConfigError(f"signals: {path} not found")
     t, u, table_names = load_npz(str(path))  # safe open + table checks (store.validate_table)
+    if design is not None:
+        # the check the flight path makes (excitation node with gains_file): a table beyond
+        # the gains' design envelope (e.g. x 20) is refused, not simulated
+        from lpv_sysid.signals.excitation import check_design
+
+        check_design(t, u, table_names, design, float(ramp or 0.0), where=str(path))
     names = [str(n) for n in table_names]
     sig = reference_signals(t, u, names)  # validates channels by name
     if ramp is None:

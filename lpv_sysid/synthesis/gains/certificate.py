@@ -187,6 +187,18 @@ def certified_set_entry(model, res, opts, design: Optional[dict]) -> dict:
         )
         cov = dict(box.coverage or {})
         infl = cov.pop("box_inflation", None)
+        interp = cov.pop("interpolation", None)
+        entry["interpolation"] = interp or {
+            "statement": "no interpolation error added (the models file has no "
+            "meta.interpolation): between the vertices only seed 0's Assumption 2 (multilinear "
+            "interpolation is the plant) covers the plant"
+        }
+        if interp:
+            entry["statement"] += (
+                "; every half-width also carries the interpolation error measured between the "
+                "vertices (certified_set.interpolation: on a grid, not proven between its "
+                "points)"
+            )
         entry["robustness"] = {
             "box_inflation": infl,
             "statement": (

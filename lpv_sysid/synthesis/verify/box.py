@@ -193,6 +193,13 @@ def check_robust_claim(
     jc = _mapping(cs.get("joint_coverage"))
     prob, p_claim = jc.get("probability"), int(jc.get("elements", 0) or 0)
     dofs, ks, k_meta = _std_meta(raw)
+    # the interpolation pad of the models file when the certificate says it added it
+    pad = None
+    if _mapping(cs.get("interpolation")).get("source"):
+        mi = _mapping(_mapping(raw.get("meta")).get("interpolation"))
+        pad = np.concatenate(
+            [np.asarray(mi["pad_A"], dtype=float), np.asarray(mi["pad_B"], dtype=float)], axis=1
+        )
     worst, where = 0.0, f"every interval x {1 + float(f):g}"
     for i, v in enumerate(raw.get("vertices", [])):
         lo, hi = _bounds(bx, i, n)
@@ -200,6 +207,7 @@ def check_robust_claim(
         dof = float(dofs[i]) if i < len(dofs) and dofs[i] is not None else None
         k_i = float(ks[i]) if i < len(ks) else k_meta
         k_j = 0.0 if prob is None else _sidak_stored_k(p_claim, float(prob), dof, k_i)
+        listed = set()
         for e in v.get("uncertain") or []:
             a, b = float(e["lower"]), float(e["upper"])
             nom, sd = float(e["nominal"]), float(e["std"])
@@ -207,13 +215,25 @@ def check_robust_claim(
                 a, b = nom - k_i * sd, nom + k_i * sd
             if sd > 0 and k_j > 0:
                 a, b = min(a, nom - k_j * sd), max(b, nom + k_j * sd)
-            if b <= a:
-                continue
-            c, h = 0.5 * (a + b), 0.5 * (b - a) * (1.0 + float(f))
             r, cc = int(e["row"]), int(e["col"]) + (0 if e["matrix"] == "A" else n)
+            listed.add((r, cc))
+            p_rc = 0.0 if pad is None else float(pad[r, cc])
+            if b <= a and p_rc <= 0:
+                continue
+            c, h = 0.5 * (a + b), (0.5 * (b - a) + p_rc) * (1.0 + float(f))
             viol = max(lo[r, cc] - (c - h), (c + h) - hi[r, cc]) / scale[r, cc]
             if viol > worst:
                 worst, where = float(viol), f"vertex {i} {e['matrix']}[{e['row']},{e['col']}]"
+        if pad is not None:  # elements the file lists as fixed but the pad widens
+            AB = np.concatenate([np.asarray(v["A"], float), np.asarray(v["B"], float)], axis=1)
+            for r, cc in zip(*np.nonzero(pad > 0)):
+                if (int(r), int(cc)) in listed:
+                    continue
+                h = float(pad[r, cc]) * (1.0 + float(f))
+                viol = max(lo[r, cc] - (AB[r, cc] - h), (AB[r, cc] + h) - hi[r, cc])
+                viol /= scale[r, cc]
+                if viol > worst:
+                    worst, where = float(viol), f"vertex {i} pad [{r},{cc}]"
     ok = worst <= BOX_TOL
     rep.add(
         "robust claim",

@@ -7,9 +7,16 @@
 
 from __future__ import annotations
 
-from lpv_sysid.io.bag.mcap.records import MCAP_MAGIC, append_message
+from lpv_sysid.io.bag.mcap.records import (
+    MCAP_MAGIC,
+    append_message,
+    chunk_crc,
+    write_chunk_crcs,
+)
 
 __all__ = [
     "MCAP_MAGIC",
     "append_message",
+    "chunk_crc",
+    "write_chunk_crcs",
 ]

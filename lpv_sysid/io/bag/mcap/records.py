@@ -7,6 +7,7 @@ MCAP records are (opcode u8, length u64, body); strings and byte arrays in a bod
 from __future__ import annotations
 
 import struct
+import zlib
 from typing import Any
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -38,6 +39,32 @@ def _enc_str(text: str) -> bytes:
 
 def _record(op: int, body: bytes) -> bytes:
     return struct.pack("<BQ", op, len(body)) + body
+
+
+def chunk_crc(data: bytes) -> int:
+    """The ``uncompressed_crc`` of a Chunk record: CRC-32 (zlib, as the MCAP spec and
+    rosbags' ``decompress`` check it) of the uncompressed records."""
+    return zlib.crc32(data) & 0xFFFFFFFF
+
+
+def write_chunk_crcs(storage: Any) -> None:
+    """Make a rosbags 0.11.9 ``McapWriter`` write the CRC of every chunk it closes (it
+    writes 0, "no CRC", so a flipped byte inside a chunk was read silently): its
+    ``close_chunk`` is wrapped to patch the ``uncompressed_crc`` field (offset 9 + 24 in the
+    Chunk record) after the record is written. Every chunk goes through ``close_chunk``
+    (rosbags' own size limit, :func:`append_message`, the writer's flush and close)."""
+    original = storage.close_chunk
+
+    def close_chunk() -> None:
+        data = storage.chunk.bio.getvalue()
+        start = storage.bio.tell()
+        original()
+        end = storage.bio.tell()
+        storage.bio.seek(start + 9 + 24)
+        storage.bio.write(struct.pack("<I", chunk_crc(data)))
+        storage.bio.seek(end)
+
+    storage.close_chunk = close_chunk
 
 
 def append_message(writer: Any, cid: int, ns: int, data: Any) -> bool:

@@ -1,11 +1,13 @@
 """In-place repair of one mcap storage file (``lpv-sysid bag repair``).
 
-The incomplete tail (a record the process did not finish) is cut, the message index of
-the last chunk regenerated if it was cut, the chunk a failed writer still held in memory
-appended, and a summary section (schemas, channels, chunk indexes, statistics) and footer
-written after it -- nothing before the cut is rewritten, so a repair needs only a few kB
-even on a full disk -- then rosbags' own reader checks the result. The file is found by
-the salvage walk of :mod:`lpv_sysid.io.bag.mcap.walk`.
+The incomplete tail (a record the process did not finish) is cut -- the complete records of
+a chunk the cut went through are written again as a chunk of their own (with its CRC), so
+no complete record is dropped -- the message index of the last chunk regenerated if it was
+cut, the chunk a failed writer still held in memory appended, and a summary section
+(schemas, channels, chunk indexes, statistics) and footer written after it -- nothing
+before the cut is rewritten, so a repair needs only a few kB even on a full disk -- then
+rosbags' own reader checks the result. The file is found by the salvage walk of
+:mod:`lpv_sysid.io.bag.mcap.walk`.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from pathlib import Path
 from lpv_sysid.errors import BagError
 from lpv_sysid.io.bag.bagfiles import open_file
 from lpv_sysid.io.bag.durability import _describe
-from lpv_sysid.io.bag.mcap.records import MCAP_MAGIC, _enc_str, _record
+from lpv_sysid.io.bag.mcap.records import MCAP_MAGIC, _enc_str, _record, chunk_crc
 from lpv_sysid.io.bag.mcap.walk import _Chunk, _Damaged, _McapWalk, _walk_mcap, _walk_records
 from lpv_sysid.io.bag.records import TopicStats, _add_stats, _FileInfo
 from lpv_sysid.io.bag.typestore import _rihs01
@@ -204,6 +206,15 @@ def _repair_mcap_file(
     if walk.unchunked:
         notes.append(f"{f.name}: {walk.unchunked} message(s) outside chunks are not indexed")
     new_tail, extra = b"", []
+    rechunk: list[tuple[bytes, dict, dict, int, int]] = []
+    if walk.partial is not None:
+        # the complete records of the chunk the cut went through: never dropped
+        _at, data, msgs, nbytes = walk.partial
+        times = [t for entries in msgs.values() for t, _ in entries]
+        if data:  # also Schema/Channel records alone: the data section keeps the channels
+            rechunk.append((data, msgs, nbytes, min(times, default=0), max(times, default=0)))
+            n = len(times)
+            notes.append(f"{f.name}: {n} complete message(s) of the cut chunk kept (re-chunked)")
     if pending is not None:
         data, t0, t1 = pending
         try:
@@ -211,28 +222,13 @@ def _repair_mcap_file(
         except _Damaged as exc:
             notes.append(str(exc))
         else:
-            body = (
-                struct.pack("<QQQI", t0, t1, len(data), 0)
-                + _enc_str("")
-                + struct.pack("<Q", len(data))
-                + data
-            )
-            at = base + len(old_tail)
-            ch = _Chunk(
-                at,
-                9 + len(body),
-                t0,
-                t1,
-                len(data),
-                len(data),
-                "",
-                msgs,
-                nbytes,
-                {},
-                at + 9 + len(body),
-            )
-            new_tail = _record(0x06, body) + _index_records(ch, ch.end)
-            extra = [ch]
+            rechunk.append((data, msgs, nbytes, t0, t1))
+    at = base + len(old_tail)
+    for data, msgs, nbytes, t0, t1 in rechunk:
+        rec, ch = _chunk_record(data, msgs, nbytes, t0, t1, at)
+        new_tail += rec
+        extra.append(ch)
+        at += len(rec)
     cut = max(0, walk.size - base) if walk.header_ok else walk.size
     if dry_run:
         return _mcap_info(f, walk, indexed + extra, True, cut, notes + walk.problems[:1])
@@ -244,7 +240,7 @@ def _repair_mcap_file(
             raise BagError(
                 f"bag {f.parent}: cannot write the index of {f.name}: {_describe(exc)}"
             ) from None
-        lost = sum(len(v) for v in extra[0].msgs.values())
+        lost = sum(len(v) for ch in extra for v in ch.msgs.values())
         notes.append(f"{f.name}: no room for the last {lost} message(s) ({_describe(exc)})")
         extra = []
         try:
@@ -271,6 +267,22 @@ def _repair_mcap_file(
             f"messages, the index {info.count}"
         )
     return info
+
+
+def _chunk_record(
+    data: bytes, msgs: dict, nbytes: dict, t0: int, t1: int, at: int
+) -> tuple[bytes, _Chunk]:
+    """An uncompressed Chunk record of the records ``data`` (with its CRC) and its
+    MessageIndex records, to be written at file offset ``at``; and its :class:`_Chunk`."""
+    body = (
+        struct.pack("<QQQI", t0, t1, len(data), chunk_crc(data))
+        + _enc_str("")
+        + struct.pack("<Q", len(data))
+        + data
+    )
+    n = 9 + len(body)
+    ch = _Chunk(at, n, t0, t1, len(data), len(data), "", msgs, nbytes, {}, at + n)
+    return _record(0x06, body) + _index_records(ch, ch.end), ch
 
 
 def _write_tail(f: Path, head: bytes, base: int, tail: bytes) -> None:

@@ -75,6 +75,9 @@ class _McapWalk:
     size: int = 0  # file size
     ended: bool = False  # reached data end / summary / footer
     problems: list = field(default_factory=list)
+    #: the complete records of a Chunk cut by the end of the file (uncompressed chunks):
+    #: (file offset of the cut chunk, their bytes, msgs, nbytes); the repair re-chunks them
+    partial: Optional[tuple[int, bytes, dict, dict]] = None
 
 
 def _parse_schema(buf, pos: int, walk: _McapWalk) -> None:
@@ -159,6 +162,55 @@ def _parse_chunk(
     return _Chunk(pos, 9 + len(body), t0, t1, usize, csize, comp, msgs, nbytes, {}, end)
 
 
+def complete_prefix(buf) -> int:
+    """Length of the longest prefix of ``buf`` made of complete records (opcode, length,
+    body): where a cut chunk's records stop being whole."""
+    pos, n = 0, len(buf)
+    while pos + 9 <= n:
+        (length,) = struct.unpack_from("<Q", buf, pos + 1)
+        if length > n - pos - 9:
+            break
+        pos += 9 + length
+    return pos
+
+
+def _salvage_partial_chunk(
+    body: bytes, pos: int, walk: _McapWalk, on_message: OnMessage, where: str
+) -> None:
+    """The complete records of a Chunk record cut by the end of the file (a writer killed
+    while the chunk was being written, or a file cut inside it): an uncompressed chunk's
+    records are read as far as they are whole (Schema, Channel and Message records; the
+    chunk's CRC covers the whole chunk, so none is checked) and kept in ``walk.partial``
+    for the repair; ``on_message`` gets their messages. A compressed chunk cannot be read
+    in part: noted, nothing salvaged."""
+    try:
+        _t0, _t1, _usize, _crc = struct.unpack_from("<QQQI", body, 0)
+        comp, p = _read_str(body, 28)
+        struct.unpack_from("<Q", body, p)
+    except (struct.error, UnicodeDecodeError):
+        walk.problems.append(f"{where}: cut chunk at byte {pos}: header incomplete, nothing kept")
+        return
+    if comp:
+        walk.problems.append(
+            f"{where}: cut chunk at byte {pos} is {comp}-compressed: its records cannot be "
+            "read in part"
+        )
+        return
+    data = body[p + 8 :]
+    keep = complete_prefix(data)
+    try:
+        msgs, nbytes = _walk_records(data[:keep], walk, on_message, f"{where} cut chunk")
+    except _Damaged as exc:
+        walk.problems.append(str(exc))
+        return
+    n = sum(len(v) for v in msgs.values())
+    walk.partial = (pos, bytes(data[:keep]), msgs, nbytes)
+    walk.problems.append(
+        f"{where}: cut chunk at byte {pos}: {n} complete message(s) in its first {keep} bytes "
+        "salvaged"
+    )
+
+
 def _walk_mcap(path: Path, on_message: OnMessage = None, limit: int | None = None) -> _McapWalk:
     """Walk the data section of an mcap file record by record, never past ``limit`` bytes;
     stops at the end of the data section, at the first incomplete or unreadable record."""
@@ -209,6 +261,8 @@ def _walk_mcap(path: Path, on_message: OnMessage = None, limit: int | None = Non
                     f"{where}: truncated record (op 0x{op:02x}) at byte {pos}: "
                     f"{size - pos - 9} of {length} bytes present"
                 )
+                if op == 0x06:
+                    _salvage_partial_chunk(fh.read(size - pos - 9), pos, walk, on_message, where)
                 break
             if op not in _DATA_OPS and op < 0x80:
                 walk.problems.append(f"{where}: invalid record (op 0x{op:02x}) at byte {pos}")
