@@ -1,7 +1,8 @@
 """Phase 1 (seed 0 Sec. 3): PX4 baseline velocity control + excitation, logged.
 
     ros2 launch lpv_sysid phase1.launch.py vertex:="[2.0, 0.0, 0.0]" \
-        signals_file:=signals.npz link_url:=/dev/ttyAMA0 [transport:=mavros] \
+        signals_file:=signals.npz link_url:=/dev/ttyAMA0 \
+        [transport:=mavros [mavros_ns:=/mavros] [fcu_url:=URL tgt_system:=N]] \
         [namespace:=uav1] [log_dir:=phase1_log] [auto_start:=false]
     ros2 service call /lpv_sysid/sequencer/start std_srvs/srv/Trigger   # fly the run
     ros2 service call /lpv_sysid/sequencer/abort std_srvs/srv/Trigger   # stop, hand back
@@ -20,10 +21,13 @@ from launch import LaunchDescription
 from lpv_sysid.flight.sequencer import PHASE1_STEPS
 from lpv_sysid.nodes.launch_util import (
     LINK_URL_DEFAULT,
+    MAVROS_ARGUMENTS,
     TRANSPORT_DEFAULT,
     arg,
     bridge_overrides,
     declare_arguments,
+    mavros_node,
+    mavros_overrides,
     node,
     sequencer,
 )
@@ -39,6 +43,7 @@ def generate_launch_description():
                 transport=TRANSPORT_DEFAULT,
                 link_url=LINK_URL_DEFAULT,
                 auto_start="false",
+                **MAVROS_ARGUMENTS,
             ),
             node(
                 "excitation",
@@ -50,8 +55,11 @@ def generate_launch_description():
                 },
             ),
             node(
-                "mavlink_bridge", "mavlink_bridge_node.yaml", bridge_overrides(command="velocity")
+                "mavlink_bridge",
+                "mavlink_bridge_node.yaml",
+                bridge_overrides(command="velocity", **mavros_overrides()),
             ),
+            mavros_node(),
             node("data_logger", "data_logger.yaml", {"out_dir": arg("log_dir")}),
             sequencer(list(PHASE1_STEPS)),
         ]

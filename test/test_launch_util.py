@@ -157,6 +157,7 @@ def test_declare_arguments_and_params(fake_launch):
 
 
 CONFIG_DIR = os.path.join(SHARE, "config")
+MAVROS_ARGS = ["mavros_ns", "fcu_url", "tgt_system"]
 SIGNALS = ("signals.npz", "signals.npz written by `lpv-sysid signals`")
 
 
@@ -174,6 +175,7 @@ SIGNALS = ("signals.npz", "signals.npz written by `lpv-sysid signals`")
                 "transport",
                 "link_url",
                 "auto_start",
+                *MAVROS_ARGS,
             ],
             {
                 "signals_file": SIGNALS,
@@ -196,6 +198,7 @@ SIGNALS = ("signals.npz", "signals.npz written by `lpv-sysid signals`")
                 "transport",
                 "link_url",
                 "auto_start",
+                *MAVROS_ARGS,
             ],
             {
                 "gains_file": (None, "gains.yaml from `lpv-sysid synthesize`"),
@@ -237,6 +240,8 @@ def test_launch_files_declare_and_wire(fake_launch, fname, order, expected):
     for name, value in expected.items():
         assert args[name] == value, name
     for executable, node in nodes.items():
+        if node.kwargs["package"] == "mavros":
+            continue  # test_phase_launches_take_the_mavros_transport
         assert node.kwargs["namespace"] == LaunchConfiguration("namespace")
         assert node.kwargs["package"] == "lpv_sysid"
         # first parameter entry: the node's file in config_dir (the sequencer has none);
@@ -350,6 +355,47 @@ def test_every_launched_node_gets_the_shutdown_budget(fake_launch, fname):
     _, _, nodes = _describe(fname)
     budget = LaunchConfiguration("sigterm_timeout", default=str(shell.LAUNCH_SIGTERM_TIMEOUT_S))
     assert nodes
+    nodes.pop("mavros_node", None)  # MAVROS itself: not the package's node
     for executable, n in nodes.items():
         assert n.kwargs["name"] + "_node" == executable
         assert n.kwargs["output"] == "screen" and n.kwargs["sigterm_timeout"] == budget
+
+
+@pytest.mark.parametrize("fname", ["phase1.launch.py", "phase2.launch.py"])
+def test_phase_launches_take_the_mavros_transport(fake_launch, fname):
+    """``transport:=mavros mavros_ns:=... fcu_url:=...``: the bridge's transport and MAVROS
+    namespace come from the arguments (defaults: the MAVLink transport, /mavros); MAVROS
+    itself starts only with a non-empty fcu_url, in mavros_ns, with the shipped
+    mavros_px4.yaml (setpoint_raw thrust_scaling 1) before the URL and target system."""
+    import yaml
+
+    order, args, nodes = _describe(fname)
+    assert {a: args[a][0] for a in ["transport", *MAVROS_ARGS]} == {
+        "transport": "mavlink",
+        "mavros_ns": "/mavros",
+        "fcu_url": "",
+        "tgt_system": "1",
+    }
+    bridge = nodes["mavlink_bridge_node"].parameters[1]
+    assert bridge["transport"] == LaunchConfiguration("transport")
+    assert bridge["mavros.namespace"] == LaunchConfiguration("mavros_ns")
+    m = nodes["mavros_node"]
+    assert m.kwargs["package"] == "mavros" and m.kwargs["namespace"] == LaunchConfiguration(
+        "mavros_ns"
+    )
+    assert m.parameters == [
+        PathJoinSubstitution([LaunchConfiguration("config_dir"), "mavros_px4.yaml"]),
+        {
+            "fcu_url": LaunchConfiguration("fcu_url"),
+            "tgt_system": LaunchConfiguration("tgt_system"),
+        },
+    ]
+    assert m.condition == IfCondition(
+        PythonExpression(["'", LaunchConfiguration("fcu_url"), "' != ''"])
+    )
+    with open(os.path.join(ROOT, "lpv_sysid", "config", "mavros_px4.yaml")) as f:
+        px4 = yaml.safe_load(f)
+    assert px4["/**/setpoint_raw"]["ros__parameters"]["thrust_scaling"] == 1.0
+    deny = set(px4["/**"]["ros__parameters"]["plugin_denylist"])
+    used = {"sys_status", "command", "setpoint_raw", "local_position", "imu", "rc_io", "param"}
+    assert deny and not deny & used

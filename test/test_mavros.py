@@ -231,7 +231,7 @@ def test_bad_inputs_are_rejected_and_reported():
 @pytest.mark.parametrize(
     "bad, match",
     [
-        ({"command": "attitude_rate"}, "mavros_msgs"),
+        ({"command": "attitude_rate", "interfaces": "common"}, "mavros_msgs"),
         ({"setpoint_rate_hz": 2.0}, "setpoint_rate_hz"),
         ({"namespace": "mavros"}, "namespace"),
         ({"auto_start": "yes"}, "auto_start"),
@@ -268,7 +268,7 @@ def test_node_mavros_parameters_topics_qos(fresh):
 
     from lpv_sysid.nodes.mavlink_bridge_node import MavlinkBridgeNode
 
-    rclpy.init(args=ros_args(("transport", "mavros")))
+    rclpy.init(args=ros_args(("transport", "mavros"), ("mavros.interfaces", "common")))
     node = MavlinkBridgeNode(namespace=NS)
     try:
         assert node.get_parameter("transport").value == "mavros"
@@ -312,7 +312,7 @@ def test_node_mavros_reference_to_enu_setpoint_and_stale_stop(fresh):
 
     from lpv_sysid.nodes.mavlink_bridge_node import MavlinkBridgeNode
 
-    rclpy.init(args=ros_args(("transport", "mavros")))
+    rclpy.init(args=ros_args(("transport", "mavros"), ("mavros.interfaces", "common")))
     node = MavlinkBridgeNode(namespace=NS)
     mavros = rclpy.create_node("mavros")  # fake MAVROS + excitation source
     f = messages.MsgFactory.rclpy()
@@ -385,7 +385,7 @@ def test_node_mavros_rejects_wrong_frame_and_republishes_imu(fresh):
 
     from lpv_sysid.nodes.mavlink_bridge_node import MavlinkBridgeNode
 
-    rclpy.init(args=ros_args(("transport", "mavros")))
+    rclpy.init(args=ros_args(("transport", "mavros"), ("mavros.interfaces", "common")))
     node = MavlinkBridgeNode(namespace=NS)
     mavros = rclpy.create_node("mavros")
     f = messages.MsgFactory.rclpy()

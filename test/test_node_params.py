@@ -428,9 +428,10 @@ def test_launch_files_leave_the_bridge_its_whole_hand_back_chain():
         for c in ast.walk(util)
         if isinstance(c, ast.Call) and getattr(c.func, "id", "") == "Node"
     ]
-    assert len(calls) == 1
-    kw = {k.arg: k.value for k in calls[0].keywords}
-    assert getattr(kw["sigterm_timeout"].func, "id", None) == "sigterm_timeout"
+    assert len(calls) == 2  # the package's nodes (node) and MAVROS (mavros_node)
+    for call in calls:
+        kw = {k.arg: k.value for k in call.keywords}
+        assert getattr(kw["sigterm_timeout"].func, "id", None) == "sigterm_timeout"
 
 
 #: issue 25 item 5: misspelled keys of a params file (the audit's), one per node

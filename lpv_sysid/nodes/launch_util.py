@@ -40,10 +40,19 @@ DESCRIPTIONS = {
     "link_url": "MAVLink link of the bridge: udpin:HOST:PORT, tcp:HOST:PORT, /dev/ttyAMA0",
     "auto_start": "true: the sequencer starts the nodes in order at once; false: on its "
     "start service",
+    # the MAVROS transport (issue 26): MAVROS_ARGUMENTS, mavros_overrides, mavros_node
+    "mavros_ns": "namespace of the MAVROS node (transport mavros)",
+    "fcu_url": "non-empty: start MAVROS here with this fcu_url (PX4 SITL instance 0: "
+    "udp://:14540@127.0.0.1:14580); empty: MAVROS runs elsewhere",
+    "tgt_system": "MAVROS tgt_system: PX4's MAV_SYS_ID (SITL: 1 + instance)",
 }
 #: ``design`` launch argument values (the controller reads the design from the gains file and
 #: refuses a file of neither; the argument picks the bridge command and parameter file)
 DESIGNS = ("virtual_actuator", "rate_plant")
+
+#: the MAVROS transport's launch arguments and defaults (``declare_arguments(**...)``;
+#: ``transport`` is one of the per-flight arguments below)
+MAVROS_ARGUMENTS = {"mavros_ns": "/mavros", "fcu_url": "", "tgt_system": "1"}
 
 #: the defaults of the per-flight arguments (the shipped config/mavlink_bridge_node.yaml's)
 TRANSPORT_DEFAULT = "mavlink"
@@ -148,4 +157,37 @@ def node(
         sigterm_timeout=sigterm_timeout(),
         parameters=parameters,
         condition=condition,
+    )
+
+
+def mavros_overrides() -> dict:
+    """mavlink_bridge parameters of the MAVROS arguments (:data:`MAVROS_ARGUMENTS`)."""
+    return {"mavros.namespace": arg("mavros_ns")}
+
+
+def mavros_node() -> Node:
+    """MAVROS (``mavros_node`` of the mavros package) in ``mavros_ns``, started only when
+    ``fcu_url`` is given; its ``setpoint_raw`` plugin gets ``thrust_scaling`` 1 (MAVROS 2
+    ignores every non-zero AttitudeTarget thrust while it is unset) through the shipped
+    ``mavros_px4.yaml`` of ``config_dir`` (which also leaves out the plugins MAVROS's own
+    px4_pluginlists.yaml leaves out).
+
+    For SITL convenience: a Ctrl-C of the launch stops MAVROS together with the bridge,
+    so a hand-back that still needs MAVROS cannot be confirmed (the bridge ends FAILED and
+    PX4's offboard-loss failsafe acts). On a vehicle, run MAVROS on its own and call the
+    bridge's ``abort`` (or stop the phase launch) before stopping MAVROS."""
+    from launch.conditions import IfCondition
+    from launch.substitutions import PythonExpression
+
+    return Node(
+        package="mavros",
+        executable="mavros_node",
+        namespace=arg("mavros_ns"),
+        output="screen",
+        sigterm_timeout=sigterm_timeout(),
+        parameters=[
+            params("mavros_px4.yaml"),
+            {"fcu_url": arg("fcu_url"), "tgt_system": arg("tgt_system")},
+        ],
+        condition=IfCondition(PythonExpression(["'", arg("fcu_url"), "' != ''"])),
     )

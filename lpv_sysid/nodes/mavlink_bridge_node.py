@@ -10,7 +10,13 @@ effort); link and offboard events and the core's status go to ``status``.
 on shutdown, the core hands control back to PX4 (``offboard.handback_mode``). Services
 ``start`` / ``abort`` (std_srvs/Trigger). Parameters: :mod:`lpv_sysid.flight.bridge.settings`.
 
-``transport: mavros`` (vehicles already running MAVROS): no MAVLink link; the runtime wraps
+``transport: mavros`` (vehicles already running MAVROS): no MAVLink link. With
+``mavros.interfaces`` ``mavros_msgs`` (``auto``: when mavros_msgs can be loaded) the runtime
+runs the same BridgeCore over :class:`lpv_sysid.mavlink.bridge.MavrosLink`: ``/mavros/state``
+is the mode evidence, ``/mavros/set_mode`` and ``/mavros/cmd/arming`` are called through
+:class:`ServiceCaller`, setpoints go to ``/mavros/setpoint_raw/local`` (velocity) or
+``/mavros/setpoint_raw/attitude`` (rates + thrust), rotor speeds come from
+``/mavros/esc_status/status`` or ``/mavros/rc/out``. With ``common`` it wraps
 :class:`lpv_sysid.mavlink.bridge.mavros.MavrosCore` instead, republishes
 ``/mavros/local_position/odom`` and ``/mavros/imu/data`` (best effort) on ``state`` / ``imu``
 and streams ``velocity_reference`` rotated to local ENU on
@@ -25,6 +31,7 @@ failsafe takes over). See docs/px4_transport.md, "MAVROS mode".
 from __future__ import annotations
 
 from diagnostic_msgs.msg import DiagnosticArray
+from rosidl_runtime_py.utilities import get_message, get_service
 from geometry_msgs.msg import TwistStamped
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu, JointState
@@ -54,6 +61,36 @@ TYPES = {
 QOS = {"sensor": shell.QOS_SENSOR, "reliable": shell.QOS_RELIABLE}
 
 
+def type_of(endpoint):
+    """An endpoint's type: mavros_msgs by name (loaded only in MAVROS mode), else TYPES."""
+    name = endpoint.typename
+    if not name:
+        return TYPES[endpoint.key]
+    return get_service(name) if "/srv/" in name else get_message(name)
+
+
+class ServiceCaller:
+    """A MAVROS service as an output key: ``publish(ServiceRequest)`` calls it
+    asynchronously and hands the answer (None when the call failed) to the runtime."""
+
+    def __init__(self, node, srv_type, name):
+        self.node, self.srv_type = node, srv_type
+        self.client = node.create_client(srv_type, name)
+
+    def publish(self, req):
+        future = self.client.call_async(self.srv_type.Request(**req.fields))
+        node = self.node
+
+        def done(fut):
+            try:
+                response = fut.result()
+            except Exception:  # noqa: BLE001 -- any failure of the call: no answer
+                response = None
+            node.emit(node.runtime.on_service_answer(req, response, node.now()))
+
+        future.add_done_callback(done)
+
+
 def qos_of(endpoint):
     """An endpoint's QoS: its own, else the package topic table's."""
     return QOS[endpoint.qos] if endpoint.qos else shell.qos_for(endpoint.topic)
@@ -72,11 +109,13 @@ class MavlinkBridgeNode(shell.ShellNode):
         self.core = rt.core
         if rt.settings.publish_tf:
             self.enable_tf()
-        self.pub = {"status": shell.StatusPublisher(self)}  # status and /diagnostics
+        self.pub: dict = {"status": shell.StatusPublisher(self)}  # status and /diagnostics
         for e in rt.publishers:
-            self.pub[e.key] = self.create_publisher(TYPES[e.key], e.topic, qos_of(e))
+            self.pub[e.key] = self.create_publisher(type_of(e), e.topic, qos_of(e))
         for e in rt.subscriptions:
-            self.create_subscription(TYPES[e.key], e.topic, self._input(e.key), qos_of(e))
+            self.create_subscription(type_of(e), e.topic, self._input(e.key), qos_of(e))
+        for e in rt.clients:
+            self.pub[e.key] = ServiceCaller(self, type_of(e), e.topic)
         self.create_service(Trigger, "~/start", shell.trigger(self, rt.start, self.emit))
         self.create_service(Trigger, "~/abort", shell.trigger(self, rt.abort, self.emit))
         rt.open(self.now())

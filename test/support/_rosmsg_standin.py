@@ -39,6 +39,58 @@ _EXTRA = {
     "std_srvs/srv/SetBool_Request": "bool data\n",
     "std_srvs/srv/SetBool_Response": "bool success\nstring message\n",
 }
+# mavros_msgs (MAVROS 2.10, ROS 2) as far as the MAVROS transport uses it, and the
+# geographic_msgs type its HomePosition needs; registered in dependency order.
+_EXTRA.update(
+    {
+        "geographic_msgs/msg/GeoPoint": "float64 latitude\nfloat64 longitude\nfloat64 altitude\n",
+        "mavros_msgs/msg/State": "std_msgs/Header header\nbool connected\nbool armed\n"
+        "bool guided\nbool manual_input\nstring mode\nuint8 system_status\n",
+        "mavros_msgs/msg/PositionTarget": "std_msgs/Header header\nuint8 coordinate_frame\n"
+        "uint8 FRAME_LOCAL_NED = 1\nuint8 FRAME_LOCAL_OFFSET_NED = 7\n"
+        "uint8 FRAME_BODY_NED = 8\nuint8 FRAME_BODY_OFFSET_NED = 9\nuint16 type_mask\n"
+        "uint16 IGNORE_PX = 1\nuint16 IGNORE_PY = 2\nuint16 IGNORE_PZ = 4\n"
+        "uint16 IGNORE_VX = 8\nuint16 IGNORE_VY = 16\nuint16 IGNORE_VZ = 32\n"
+        "uint16 IGNORE_AFX = 64\nuint16 IGNORE_AFY = 128\nuint16 IGNORE_AFZ = 256\n"
+        "uint16 FORCE = 512\nuint16 IGNORE_YAW = 1024\nuint16 IGNORE_YAW_RATE = 2048\n"
+        "geometry_msgs/Point position\ngeometry_msgs/Vector3 velocity\n"
+        "geometry_msgs/Vector3 acceleration_or_force\nfloat32 yaw\nfloat32 yaw_rate\n",
+        "mavros_msgs/msg/AttitudeTarget": "std_msgs/Header header\nuint8 type_mask\n"
+        "uint8 IGNORE_ROLL_RATE = 1\nuint8 IGNORE_PITCH_RATE = 2\nuint8 IGNORE_YAW_RATE = 4\n"
+        "uint8 IGNORE_THRUST = 64\nuint8 IGNORE_ATTITUDE = 128\n"
+        "geometry_msgs/Quaternion orientation\ngeometry_msgs/Vector3 body_rate\n"
+        "float32 thrust\n",
+        "mavros_msgs/msg/ESCStatusItem": "std_msgs/Header header\nint32 rpm\n"
+        "float32 voltage\nfloat32 current\n",
+        "mavros_msgs/msg/ESCStatus": "std_msgs/Header header\n"
+        "mavros_msgs/ESCStatusItem[] esc_status\n",
+        "mavros_msgs/msg/RCOut": "std_msgs/Header header\nuint16[] channels\n",
+        "mavros_msgs/msg/HomePosition": "std_msgs/Header header\n"
+        "geographic_msgs/GeoPoint geo\ngeometry_msgs/Point position\n"
+        "geometry_msgs/Quaternion orientation\ngeometry_msgs/Vector3 approach\n",
+        "mavros_msgs/srv/SetMode_Request": "uint8 base_mode\nstring custom_mode\n",
+        "mavros_msgs/srv/SetMode_Response": "bool mode_sent\n",
+        "mavros_msgs/srv/CommandBool_Request": "bool value\n",
+        "mavros_msgs/srv/CommandBool_Response": "bool success\nuint8 result\n",
+        "mavros_msgs/msg/RCIn": "std_msgs/Header header\nuint8 rssi\nuint16[] channels\n",
+        "mavros_msgs/msg/VehicleInfo": "std_msgs/Header header\n"
+        "uint8 HAVE_INFO_HEARTBEAT = 1\nuint8 HAVE_INFO_AUTOPILOT_VERSION = 2\n"
+        "uint8 available_info\nuint8 sysid\nuint8 compid\nuint8 autopilot\nuint8 type\n"
+        "uint8 system_status\nuint8 base_mode\nuint32 custom_mode\nstring mode\n"
+        "uint32 mode_id\nuint64 capabilities\nuint32 flight_sw_version\n"
+        "uint32 middleware_sw_version\nuint32 os_sw_version\nuint32 board_version\n"
+        "string flight_custom_version\nuint16 vendor_id\nuint16 product_id\nuint64 uid\n",
+        "mavros_msgs/srv/VehicleInfoGet_Request": "uint8 GET_MY_SYSID = 0\n"
+        "uint8 GET_MY_COMPID = 0\nuint8 sysid\nuint8 compid\nbool get_all\n",
+        "mavros_msgs/srv/VehicleInfoGet_Response": "bool success\n"
+        "mavros_msgs/VehicleInfo[] vehicles\n",
+        "mavros_msgs/srv/MessageInterval_Request": "uint32 message_id\nfloat32 message_rate\n",
+        "mavros_msgs/srv/MessageInterval_Response": "bool success\n",
+        # rcl_interfaces' services are not in the rosbags store either
+        "rcl_interfaces/srv/GetParameters_Request": "string[] names\n",
+        "rcl_interfaces/srv/GetParameters_Response": "rcl_interfaces/ParameterValue[] values\n",
+    }
+)
 for _name, _text in _EXTRA.items():
     # rosbags files a .srv part under pkg/srv/msg/Name; register it under pkg/srv/Name.
     TYPESTORE.register({_name: v for v in get_types_from_msg(_text, _name).values()})
@@ -334,6 +386,10 @@ def _to_rb(desc, value):
     etname = edetail[0] if ekind == BASE else edetail
     if ekind == BASE and etname in _DTYPE:
         return np.asarray(value, dtype=_DTYPE[etname])
+    if ekind == BASE and etname == "byte":  # rosbags holds byte[] as a uint8 array
+        return np.array([v[0] for v in value], dtype=np.uint8)
+    if ekind == BASE and etname == "bool":  # and bool[] as a bool array
+        return np.array(value, dtype=bool)
     return [_to_rb((ekind, edetail), v) for v in value]
 
 
@@ -367,6 +423,8 @@ def _from_rb(desc, value):
     if ekind == BASE and etname in _DTYPE:
         arr = np.asarray(value, dtype=_DTYPE[etname])
         return arr if kind == ARRAY else array.array(_TYPECODE[etname], arr.tolist())
+    if ekind == BASE and etname == "bool":
+        return [bool(v) for v in value]
     return [_from_rb((ekind, edetail), v) for v in value]
 
 

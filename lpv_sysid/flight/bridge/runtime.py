@@ -20,10 +20,11 @@ and message, every event is logged.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence, Union
 
-from lpv_sysid.errors import LpvSysidError
+from lpv_sysid.errors import ConfigError, LpvSysidError
 from lpv_sysid.flight.bridge.settings import BridgeNodeSettings, handback_bound_s, split_parameters
 from lpv_sysid.io import messages
 from lpv_sysid.mavlink.bridge import (
@@ -33,9 +34,21 @@ from lpv_sysid.mavlink.bridge import (
     BridgeCore,
     MavrosConfig,
     MavrosCore,
+    MavrosLink,
     RATE_INPUT_NAMES,
     MavrosOutput,
+    RateTarget,
+    ServiceRequest,
+    VelocityTarget,
     cmd_vel_msg,
+)
+from lpv_sysid.mavlink.offboard import StatusEvent
+from lpv_sysid.mavlink.preflight import (
+    PARAMS,
+    MavrosEvidence,
+    format_table,
+    mavros_checks,
+    verdict,
 )
 from lpv_sysid.mavlink.telemetry import ImuSample, RotorSample, StateSample
 
@@ -69,6 +82,50 @@ def with_attitude_target_stream(cfg: BridgeConfig) -> BridgeConfig:
     return dataclasses.replace(cfg, link=dataclasses.replace(cfg.link, streams=streams))
 
 
+POSITION_TARGET = messages.MAVROS_TYPES["position_target"]
+ATTITUDE_TARGET = messages.MAVROS_TYPES["attitude_target"]
+#: transport mavros with mavros_msgs: subscription key -> (topic under the MAVROS
+#: namespace, type); odometry and IMU are the common_interfaces ones of MavrosConfig
+MAVROS_INPUTS = {
+    "mavros_state": ("state", messages.MAVROS_TYPES["state"]),
+    "mavros_esc": ("esc_status/status", messages.MAVROS_TYPES["esc_status"]),  # extras
+    "mavros_rc_out": ("rc/out", messages.MAVROS_TYPES["rc_out"]),
+    "mavros_home": ("home_position/home", messages.MAVROS_TYPES["home_position"]),
+}
+#: the MAVROS inputs of the preflight (``mavros.preflight``), besides the ones above
+MAVROS_PREFLIGHT_INPUTS = {"mavros_rc_in": ("rc/in", messages.MAVROS_TYPES["rc_in"])}
+#: seconds between the preflight's questions to MAVROS while answers are missing, and
+#: between refreshes of the parameters once all are in (a parameter set meanwhile counts)
+PREFLIGHT_ASK_PERIOD_S = 2.0
+PREFLIGHT_REFRESH_S = 10.0
+#: MAVLink ids of SERVO_OUTPUT_RAW (MAVROS rc/out), asked at ``mavros.rc_out_rate_hz``,
+#: and ATTITUDE_TARGET (MAVROS setpoint_raw/target_attitude: the rate_setpoint echo)
+SERVO_OUTPUT_RAW_ID, ATTITUDE_TARGET_ID = 36, 83
+#: seconds between rate requests until MAVROS answers success (again after a link loss)
+RATE_ASK_PERIOD_S = 5.0
+#: preflight checks that do not refuse the bridge's ``start``: an armed vehicle (airborne
+#: in Hold, phase 2) is the normal case of a start; the CLI preflight is a ground check
+NOT_BLOCKING_AT_START = ("armed",)
+#: MAVROS input key -> the MAVLink stream it stands for (preflight ``seen``)
+SEEN = {
+    "mavros_odom": "ODOMETRY",
+    "mavros_imu": "HIGHRES_IMU",
+    "mavros_esc": "ESC_STATUS",
+    "mavros_rc_out": "SERVO_OUTPUT_RAW",
+}
+
+
+def _use_mavros_msgs(cfg: MavrosConfig, factory: messages.MsgFactory) -> bool:
+    """``interfaces`` resolved: ``auto`` means mavros_msgs when the factory can load it."""
+    if cfg.interfaces != "auto":
+        return cfg.interfaces == "mavros_msgs"
+    try:
+        factory.lookup(messages.MAVROS_TYPES["state"])
+    except (LpvSysidError, ImportError, ValueError):
+        return False
+    return True
+
+
 #: core states in which the orderly shutdown needs no more spinning
 SHUTDOWN_DONE = ("IDLE", "DONE", "FAILED")
 
@@ -82,6 +139,7 @@ class Endpoint:
     key: str
     topic: str
     qos: str = ""
+    typename: str = ""  # a mavros_msgs type (looked up by name: no import without MAVROS)
 
 
 Output = list[tuple[str, Any]]
@@ -108,6 +166,13 @@ class BridgeRuntime:
         self._shutting_down = False
         self.link: BridgeCore | None = None
         self.mavros: MavrosCore | None = None
+        #: transport mavros with mavros_msgs: the link of ``self.link`` (a BridgeCore)
+        self.mavros_link: MavrosLink | None = None
+        #: MAVROS services the shell calls with the ServiceRequests of the output
+        self.clients: list[Endpoint] = []
+        #: the preflight's MAVROS evidence (mavros_msgs with ``mavros.preflight``), else None
+        self.evidence: MavrosEvidence | None = None
+        self._t_asked = -math.inf
         #: the orderly-shutdown bound [s] (None: the shell's default)
         self.shutdown_timeout_s: float | None = None
         self.publishers = [Endpoint("state", "state"), Endpoint("imu", "imu")]
@@ -115,8 +180,18 @@ class BridgeRuntime:
         self.core: Union[MavrosCore, BridgeCore]
         #: the parsers of the package input topics for this configuration (the shell's)
         self.parsers: Mapping[str, Any] = PARSERS
-        if s.transport == "mavros":
-            self.core = self.mavros = MavrosCore(MavrosConfig.from_dict(mavros))
+        #: PX4's ATTITUDE_TARGET (the setpoints it tracks) seen since the last poll
+        self._echo: list[tuple[float, Any]] = []
+        mcfg = MavrosConfig.from_dict(mavros) if s.transport == "mavros" else None
+        if mcfg is not None and _use_mavros_msgs(mcfg, factory):
+            self._init_mavros_msgs(mcfg, bridge, sigterm_timeout_s, teardown_margin_s)
+        elif mcfg is not None:
+            if mcfg.command != "velocity":
+                raise ConfigError(
+                    f"mavros.command {mcfg.command!r} needs mavros_msgs, which cannot be "
+                    "loaded (source a ROS with mavros_msgs, or use command velocity)"
+                )
+            self.core = self.mavros = MavrosCore(mcfg)
             cfg = self.mavros.config
             self.publishers.append(Endpoint("cmd_vel", cfg.topic("cmd_vel"), "reliable"))
             self.subscriptions += [
@@ -144,8 +219,6 @@ class BridgeRuntime:
             if s.rate_setpoints:
                 cfg_b = with_attitude_target_stream(cfg_b)
             self.core = self.link = BridgeCore(cfg_b)
-            #: PX4's ATTITUDE_TARGET (the setpoints it tracks) seen since the last poll
-            self._echo: list[tuple[float, Any]] = []
             self.publishers.append(Endpoint("rotor_speeds", "rotor_speeds"))
             if s.rate_setpoints:
                 self.publishers.append(Endpoint("rate_setpoint", "rate_setpoint"))
@@ -159,6 +232,93 @@ class BridgeRuntime:
                 ]
             self.timer_period_s = 1.0 / s.poll_rate_hz
             self._log += self._handback_lines(sigterm_timeout_s, teardown_margin_s)
+
+    def _init_mavros_msgs(
+        self, mcfg: MavrosConfig, bridge: Mapping[str, Any], sigterm_s: float, margin_s: float
+    ) -> None:
+        """transport mavros with mavros_msgs: BridgeCore over a :class:`MavrosLink`."""
+        ns = mcfg.namespace
+        self.mavros_link = MavrosLink(mcfg.state_timeout, ns)
+        cfg_b = BridgeConfig.from_dict(bridge)
+        if cfg_b.command == "rate_setpoint":
+            self.parsers = RATE_PLANT_PARSERS
+        self.core = self.link = BridgeCore(cfg_b, link=self.mavros_link)
+        self._mavros_cfg = mcfg
+        self._rejected: dict[str, int] = {}
+        self.evidence = MavrosEvidence() if mcfg.preflight else None
+        #: MAVLink message id -> rate [Hz] asked through set_message_interval; the ids
+        #: MAVROS answered success for (cleared by a link loss)
+        self._rates: dict[int, float] = {}
+        if mcfg.rc_out_rate_hz > 0:
+            self._rates[SERVO_OUTPUT_RAW_ID] = mcfg.rc_out_rate_hz
+        if self.settings.rate_setpoints:
+            self._rates[ATTITUDE_TARGET_ID] = ATTITUDE_TARGET_HZ
+        self._rates_ok: set[int] = set()
+        self._t_rate_asked = -math.inf
+        if self.link.config.command == "velocity":
+            sp = Endpoint("mavros_local", f"{ns}/setpoint_raw/local", "reliable", POSITION_TARGET)
+        else:
+            sp = Endpoint(
+                "mavros_attitude", f"{ns}/setpoint_raw/attitude", "reliable", ATTITUDE_TARGET
+            )
+        self.publishers += [Endpoint("rotor_speeds", "rotor_speeds"), sp]
+        if self.settings.rate_setpoints:  # PX4's ATTITUDE_TARGET, as MAVROS republishes it
+            self.publishers.append(Endpoint("rate_setpoint", "rate_setpoint"))
+            self.subscriptions.append(
+                Endpoint(
+                    "mavros_target_attitude",
+                    f"{ns}/setpoint_raw/target_attitude",
+                    "sensor",
+                    ATTITUDE_TARGET,
+                )
+            )
+        self.subscriptions += [
+            Endpoint("actuator_command", "actuator_command"),
+            Endpoint("mavros_odom", mcfg.topic("odom"), "sensor"),
+            Endpoint("mavros_imu", mcfg.topic("imu"), "sensor"),
+        ] + [Endpoint(k, f"{ns}/{t}", "sensor", ty) for k, (t, ty) in MAVROS_INPUTS.items()]
+        self.clients = [
+            Endpoint("set_mode", f"{ns}/set_mode", "", messages.MAVROS_TYPES["set_mode"]),
+            Endpoint("arming", f"{ns}/cmd/arming", "", messages.MAVROS_TYPES["command_bool"]),
+        ]
+        if self._rates:
+            self.clients.append(
+                Endpoint(
+                    "message_interval",
+                    f"{ns}/set_message_interval",
+                    "",
+                    messages.MAVROS_TYPES["message_interval"],
+                )
+            )
+        if mcfg.preflight:
+            self.subscriptions += [
+                Endpoint(k, f"{ns}/{t}", "sensor", ty)
+                for k, (t, ty) in MAVROS_PREFLIGHT_INPUTS.items()
+            ]
+            self.clients += [
+                Endpoint(
+                    "param_get",
+                    f"{ns}/param/get_parameters",
+                    "",
+                    messages.MAVROS_TYPES["get_parameters"],
+                ),
+                Endpoint(
+                    "vehicle_info",
+                    f"{ns}/vehicle_info_get",
+                    "",
+                    messages.MAVROS_TYPES["vehicle_info_get"],
+                ),
+            ]
+        self.timer_period_s = 1.0 / self.settings.poll_rate_hz
+        self._log.append(
+            (
+                "info",
+                f"MAVROS {ns} with mavros_msgs: mode from {ns}/state (stale after "
+                f"{mcfg.state_timeout:g} s), {ns}/set_mode and {ns}/cmd/arming, setpoints on "
+                f"{sp.topic}",
+            )
+        )
+        self._log += self._handback_lines(sigterm_s, margin_s)
 
     def _handback_lines(self, sigterm_timeout_s: float, margin_s: float) -> list[tuple[str, str]]:
         assert self.link is not None  # transport mavlink
@@ -207,12 +367,14 @@ class BridgeRuntime:
             return self._mavros_out(out, now) if isinstance(out, MavrosOutput) else []
         if self.link is not None and key == "actuator_command":
             self.link.on_actuator_command(now, parsed[1], stamp=parsed[0])
-        return []
+        return self._drain(now)
 
     def on_message(self, key: str, msg: Any, now: float) -> Output:
         """A MAVROS message (transport mavros): ``mavros_odom`` / ``mavros_imu`` are parsed in
         MAVROS's frames (a bad one is counted and reported by the core) and republished on
         ``state`` / ``imu``; ``mavros_diagnostics`` gives the PX4 mode."""
+        if self.mavros_link is not None:
+            return self._on_mavros_msgs(key, msg, now)
         core = self.mavros
         if core is None:
             return []
@@ -254,17 +416,183 @@ class BridgeRuntime:
             ("imu", messages.imu_msg(f, imu.stamp_ns, imu.specific_force, imu.omega, imu.euler))
         ]
 
+    def _on_mavros_msgs(self, key: str, msg: Any, now: float) -> Output:
+        """transport mavros with mavros_msgs: a MAVROS message becomes link evidence (the
+        core judges it at the next poll); a malformed one is counted and reported."""
+        link, cfg, ev = self.mavros_link, self._mavros_cfg, self.evidence
+        assert link is not None
+        try:
+            if key == "mavros_rc_in":
+                if ev is not None:
+                    ev.rc_in = messages.rc_in_from_msg(msg)
+                return []
+            if key == "mavros_state":
+                link.on_state(now, messages.state_from_msg(msg))
+            elif key == "mavros_odom":
+                link.on_odometry(
+                    now,
+                    messages.state_from_odometry(
+                        msg, frame_id=cfg.odom_frame_id, child_frame_id=cfg.base_frame_id
+                    ),
+                )
+            elif key == "mavros_imu":
+                link.on_imu(now, messages.imu_from_msg(msg, frame_id=cfg.base_frame_id))
+            elif key == "mavros_esc":
+                link.on_esc(now, *messages.esc_rpm_from_msg(msg))
+            elif key == "mavros_rc_out":
+                stamp_ns, channels = messages.rc_out_from_msg(msg)
+                link.on_rc_out(now, stamp_ns, channels)
+                if ev is not None:
+                    ev.servo_raw = channels
+            elif key == "mavros_home":
+                link.on_home(now, messages.home_ned_from_msg(msg))
+            elif key == "mavros_target_attitude":
+                t_boot_ms = messages.stamp_ns_of(msg) // 1_000_000
+                _, rates, thrust = messages.rate_setpoint_from_attitude_target_msg(msg)
+                link.on_target_attitude(now, t_boot_ms, rates, thrust)
+            if ev is not None and key in SEEN:
+                ev.seen.add(SEEN[key])
+        except LpvSysidError as exc:
+            link.stats.rejected_inputs += 1
+            n = self._rejected[key] = self._rejected.get(key, 0) + 1
+            if n & (n - 1) == 0:  # the 1st, 2nd, 4th, 8th, ... of a kind: no log flood
+                self._log.append(("warn", f"{key} rejected ({n} so far): {exc}"))
+        return []
+
+    def on_service_answer(self, req: ServiceRequest, response: Any, now: float) -> Output:
+        """The answer of a MAVROS service call the shell made for ``req`` (None: the call
+        failed; the core's ``ack_timeout`` then retries)."""
+        assert self.mavros_link is not None
+        if response is None:
+            self.mavros_link.on_service_failed(now, req)
+            self._log.append(("warn", f"{req.key} {req.fields} got no answer"))
+        elif req.key in ("param_get", "vehicle_info"):
+            self._preflight_answer(req, response)
+        elif req.key == "message_interval":
+            ok = bool(getattr(response, "success", False))
+            if ok:
+                self._rates_ok.add(int(req.fields["message_id"]))
+            else:
+                self._log.append(("warn", f"{req.fields} refused by MAVROS/PX4"))
+        else:
+            self.mavros_link.on_service_answer(now, req, response)
+        return []
+
+    def _preflight_answer(self, req: ServiceRequest, response: Any) -> None:
+        ev = self.evidence
+        assert ev is not None
+        try:
+            if req.key == "param_get":
+                ev.params.update(
+                    messages.params_from_get_parameters(req.fields["names"], response)
+                )
+            else:
+                ev.vehicle = messages.vehicle_from_info_response(response) or ev.vehicle
+        except (LpvSysidError, AttributeError, TypeError, ValueError) as exc:
+            self._log.append(("warn", f"{req.key} answer unusable: {exc}"))
+
+    def _rate_request(self, now: float) -> list[ServiceRequest]:
+        """The stream rates of ``self._rates`` (PX4's onboard link sends SERVO_OUTPUT_RAW
+        and ATTITUDE_TARGET at 10 Hz): asked once MAVROS is connected, every
+        RATE_ASK_PERIOD_S until it answers success, again after a link loss (PX4 may have
+        rebooted)."""
+        link = self.mavros_link
+        if link is None or not self._rates:
+            return []
+        if not link.link_up(now):
+            self._rates_ok.clear()
+            return []
+        todo = [i for i in self._rates if i not in self._rates_ok]
+        if not todo or now - self._t_rate_asked < RATE_ASK_PERIOD_S:
+            return []
+        self._t_rate_asked = now
+        return [
+            ServiceRequest(
+                "message_interval", {"message_id": i, "message_rate": float(self._rates[i])}, 0
+            )
+            for i in todo
+        ]
+
+    def _preflight_questions(self, now: float) -> list[ServiceRequest]:
+        """While MAVROS is connected: ask what is missing (every PREFLIGHT_ASK_PERIOD_S),
+        refresh the parameters once all are in (every PREFLIGHT_REFRESH_S)."""
+        ev, link = self.evidence, self.mavros_link
+        if ev is None or link is None or not link.link_up(now):
+            return []
+        missing = ev.missing_params()
+        complete = not missing and ev.vehicle is not None
+        period = PREFLIGHT_REFRESH_S if complete else PREFLIGHT_ASK_PERIOD_S
+        if now - self._t_asked < period:
+            return []
+        self._t_asked = now
+        out = [ServiceRequest("param_get", {"names": missing or list(PARAMS)}, 0)]
+        if ev.vehicle is None:
+            out.append(
+                ServiceRequest("vehicle_info", {"sysid": 0, "compid": 0, "get_all": False}, 0)
+            )
+        return out
+
+    def _preflight_refusal(self, now: float) -> str:
+        """'' when the preflight on MAVROS's evidence finds no NO-GO (or is off), else the
+        reason ``start`` is refused (and the parameters are asked again, so a fixed one
+        counts at the next ``start``); the table is logged either way."""
+        ev, core = self.evidence, self.link
+        if ev is None or core is None or self.mavros_link is None:
+            return ""
+        up = self.mavros_link.link_up(now)
+        ev.mode = core.machine.vehicle_mode if up else None
+        ev.armed = core.machine.armed
+        checks = mavros_checks(ev, core.config.rotor_estimate, self._mavros_cfg.namespace)
+        blocking = [c for c in checks if c.name not in NOT_BLOCKING_AT_START]
+        ok = verdict(blocking)
+        self._log.append(
+            ("info" if ok else "error", "preflight (MAVROS):\n" + format_table(checks))
+        )
+        if ok:
+            return ""
+        # a refusal is acted on (a parameter set, MAVROS reconnected): ask again
+        ev.params.clear()
+        self._t_asked = -math.inf
+        bad = "; ".join(f"{c.name}: {c.value}" for c in blocking if c.verdict == "NO-GO")
+        return f"start refused: preflight NO-GO through MAVROS ({bad})"
+
+    def _drain(self, now: float) -> Output:
+        """transport mavros with mavros_msgs: the link's setpoints as MAVROS messages and its
+        service requests (key ``set_mode`` / ``arming``, the shell calls them)."""
+        if self.mavros_link is None:
+            return []
+        f, stamp, out = self.f, round(now * 1e9), []
+        for item in self.mavros_link.take_outbox():
+            if isinstance(item, VelocityTarget):
+                msg = messages.position_target_msg(
+                    f, stamp, item.frame, item.type_mask, item.v, item.yaw_rate
+                )
+                out.append(("mavros_local", msg))
+            elif isinstance(item, RateTarget):
+                msg = messages.attitude_target_msg(
+                    f, stamp, item.type_mask, item.rates_frd, item.thrust
+                )
+                out.append(("mavros_attitude", msg))
+            elif isinstance(item, ServiceRequest):
+                out.append((item.key, item))
+        return out
+
     # -- services -------------------------------------------------------------------------
     def start(self, now: float) -> tuple[bool, str, Output]:
         """The ``start`` service: ``(success, message, output)`` (the status to publish)."""
+        refusal = self._preflight_refusal(now)
+        if refusal:
+            st = self.core.state.value
+            return False, refusal, self.status(now, [StatusEvent(now, st, st, refusal, "error")])
         events = self.core.start(now)
-        return True, f"offboard: {self.core.state.value}", self.status(now, events)
+        out = self.status(now, events) + self._drain(now)
+        return True, f"offboard: {self.core.state.value}", out
 
     def abort(self, now: float, reason: str = "abort service") -> tuple[bool, str, Output]:
         """The ``abort`` service: hand control back; ``(success, message, output)``."""
         events = self.core.abort(now, reason)
         message = f"handing control back to PX4: {self.core.state.value}"
-        return True, message, self.status(now, events)
+        return True, message, self.status(now, events) + self._drain(now)
 
     # -- loop -----------------------------------------------------------------------------
     def on_timer(self, now: float) -> Output:
@@ -273,6 +601,7 @@ class BridgeRuntime:
             return self._mavros_out(self.mavros.step(now), now)
         assert self.link is not None
         out = self.link.poll(now)
+        asks = [(q.key, q) for q in self._preflight_questions(now) + self._rate_request(now)]
         f = self.f
         pubs: Output = []
         for s in out.samples:
@@ -302,7 +631,7 @@ class BridgeRuntime:
         self._echo.clear()
         if out.events:
             pubs += self.status(now, out.events)
-        return pubs
+        return pubs + self._drain(now) + asks
 
     def _mavros_out(self, out: MavrosOutput, now: float) -> Output:
         assert self.mavros is not None
@@ -318,6 +647,8 @@ class BridgeRuntime:
         """The ``status`` array: the core's values; level and message of the last warn/error
         event (else OK and the core state); every event is logged."""
         values = self.core.status(now)
+        if self.mavros_link is not None:
+            values.update(self.mavros_link.status(now))
         level, message = "OK", self.core.state.value
         for ev in events:
             lv = getattr(ev, "level", "warn" if getattr(ev, "kind", "") != "link_up" else "info")
@@ -336,7 +667,7 @@ class BridgeRuntime:
         if self._shutting_down:
             return []
         self._shutting_down = True
-        return self.status(now, self.core.shutdown(now))
+        return self.status(now, self.core.shutdown(now)) + self._drain(now)
 
     def shutdown_complete(self) -> bool:
         return self.core.state.value in SHUTDOWN_DONE

@@ -134,7 +134,14 @@ MAVROS_DESCRIPTIONS = {
     "mavros.odom_frame_id": "frame_id of MAVROS local_position/odom",
     "mavros.base_frame_id": "MAVROS body frame (odom child, imu)",
     "mavros.prestream_timeout": "zero-velocity stream without a reference -> stop [s]",
-    "mavros.use_diagnostics": "read the PX4 mode from /diagnostics (read-only)",
+    "mavros.use_diagnostics": "read the PX4 mode from /diagnostics (read-only; interfaces common)",
+    "mavros.interfaces": "auto | mavros_msgs (mode, arming, hand-back, rate setpoints, rotor "
+    "speeds) | common (common_interfaces only: velocity, no mode control)",
+    "mavros.state_timeout": "mavros_msgs: no /mavros/state for this long -> no mode evidence [s]",
+    "mavros.rc_out_rate_hz": "mavros_msgs: SERVO_OUTPUT_RAW rate asked through "
+    "set_message_interval (rc/out, estimated rotor speeds) [Hz]; 0: not asked",
+    "mavros.preflight": "mavros_msgs: refuse start on a preflight NO-GO (PX4 parameters, "
+    "firmware, sticks, telemetry through MAVROS)",
 }
 
 #: the rclpy declarations: the shell's settings, then BridgeConfig's and MavrosConfig's

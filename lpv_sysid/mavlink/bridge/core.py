@@ -155,7 +155,7 @@ class BridgeCore:
     def __init__(
         self,
         config: BridgeConfig,
-        link: MavlinkLink | None = None,
+        link: Any = None,  # MavlinkLink (default) or mavros_link.MavrosLink
         sample_callback: Callable[[Any], None] | None = None,
     ) -> None:
         config.validate()

@@ -1,9 +1,13 @@
-"""MAVROS mode of the bridge: the same safety path over MAVROS's standard topics.
+"""MAVROS mode of the bridge with common_interfaces only (``mavros.interfaces: common``).
 
 For vehicles already running MAVROS (ROS 2 ``mavros`` node talking MAVLink to PX4) the
 ``mavlink_bridge_node`` with ``transport: mavros`` does not open a MAVLink link; it
-subscribes and publishes MAVROS's topics instead. Only common_interfaces types are used
-(docs/DESIGN.md, Conventions), which fixes what is possible:
+subscribes and publishes MAVROS's topics instead. With ``interfaces: mavros_msgs`` (or
+``auto`` when mavros_msgs can be loaded) the full bridge core runs over MAVROS --
+mode, arming, hand-back chain, rate setpoints, rotor speeds: see
+:mod:`lpv_sysid.mavlink.bridge.mavros_link`. This module is the fallback without
+mavros_msgs: only common_interfaces types are used (docs/DESIGN.md, Conventions), which
+fixes what is possible:
 
 ======================================  ==============================  ======================
 MAVROS topic                            type                            used
@@ -16,9 +20,9 @@ MAVROS topic                            type                            used
                                                                         + yaw rate (ENU z)
 ``/diagnostics`` (``mavros: Heartbeat``  diagnostic_msgs/DiagnosticArray in (optional, read-only):
 key ``Mode``)                                                           the PX4 mode string
-``/mavros/state``                       mavros_msgs/State               **not available**
-``/mavros/set_mode``, ``cmd/arming``    mavros_msgs/srv/*               **not available**
-``/mavros/esc_status``                  mavros_msgs/ESCStatus           **not available**
+``/mavros/state``                       mavros_msgs/State               only mavros_link
+``/mavros/set_mode``, ``cmd/arming``    mavros_msgs/srv/*               only mavros_link
+``/mavros/esc_status``                  mavros_msgs/ESCStatus           only mavros_link
 ======================================  ==============================  ======================
 
 Consequences (docs/px4_transport.md, "MAVROS mode"): the core streams the setpoint but
@@ -71,6 +75,8 @@ TOPICS = {
 DIAGNOSTICS_TOPIC = "/diagnostics"
 HEARTBEAT_STATUS_SUFFIX = ": Heartbeat"
 OFFBOARD_MODE = "OFFBOARD"
+#: ``MavrosConfig.interfaces``: which MAVROS types the bridge uses
+INTERFACES = ("auto", "mavros_msgs", "common")
 MODE_CONTROL = (
     "none: mavros_msgs is not a dependency (switch OFFBOARD / arm / hand back "
     "with RC, GCS or `ros2 service call /mavros/set_mode mavros_msgs/srv/SetMode`)"
@@ -132,7 +138,38 @@ class MavrosConfig:
     send_on_command: bool = cf.flag(True, "forward each new reference at once (latency)")
     auto_start: bool = cf.flag(False, "start streaming on the first reference")
     use_diagnostics: bool = cf.flag(True, "observe the PX4 mode on /diagnostics (read-only)")
-    command: str = cf.text("velocity", "setpoint kind; MAVROS mode streams velocity only")
+    command: str = cf.text(
+        "velocity", "setpoint kind; with interfaces common MAVROS mode streams velocity only"
+    )
+    interfaces: str = cf.choice(
+        "auto",
+        INTERFACES,
+        "mavros_msgs: mode, arming, hand-back, rate setpoints and rotor speeds through "
+        "mavros_msgs (mavlink/bridge/mavros_link.py); common: common_interfaces only (this "
+        "module); auto: mavros_msgs when its types can be loaded",
+    )
+    rc_out_rate_hz: float = cf.number(
+        50.0,
+        "interfaces mavros_msgs: SERVO_OUTPUT_RAW rate asked of PX4 through "
+        "<ns>/set_message_interval, the rate of /mavros/rc/out and so of the estimated "
+        "rotor_speeds (PX4's onboard link: 10 Hz); 0: not asked, at most 400 Hz",
+        lo=0.0,
+        hi=400.0,
+        unit=" Hz",
+    )
+    preflight: bool = cf.flag(
+        True,
+        "interfaces mavros_msgs: start is refused unless the preflight checks on MAVROS's "
+        "evidence (mavlink/preflight/mavros.py) find no NO-GO",
+    )
+    state_timeout: float = cf.number(
+        3.0,
+        "interfaces mavros_msgs: no /mavros/state for this long -> no mode evidence, link "
+        "down [s]; 1.5 .. 30 s (MAVROS publishes it with every 1 Hz HEARTBEAT)",
+        lo=1.5,
+        hi=30.0,
+        unit=" s",
+    )
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], where: str = "mavros") -> "MavrosConfig":
@@ -149,13 +186,13 @@ class MavrosConfig:
             raise cf.error(
                 where, "namespace", f"must be an absolute name like '/mavros', got {ns!r}"
             )
-        if self.command != "velocity":
+        if self.command != "velocity" and self.interfaces == "common":
             raise cf.error(
                 where,
                 "command",
                 f"{self.command!r} is not available with transport mavros: MAVROS's "
-                "attitude/actuator setpoints need mavros_msgs; use command velocity or "
-                "transport mavlink",
+                "attitude/actuator setpoints need mavros_msgs; use command velocity, "
+                "interfaces mavros_msgs or transport mavlink",
             )
 
     def topic(self, key: str) -> str:

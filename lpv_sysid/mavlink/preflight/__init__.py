@@ -1,4 +1,5 @@
-"""Preflight go/no-go checks of a PX4 vehicle over MAVLink (used by ``lpv-sysid preflight``).
+"""Preflight go/no-go checks of a PX4 vehicle over MAVLink (used by ``lpv-sysid preflight``),
+or on MAVROS's evidence (:func:`mavros_checks`, the bridge's MAVROS transport).
 
 The checks gather, within a bounded time: an autopilot HEARTBEAT (link, autopilot type,
 vehicle type, mode, arming state), AUTOPILOT_VERSION (firmware >= 1.14, MAVLink 2 and the
@@ -42,15 +43,19 @@ from __future__ import annotations
 
 from lpv_sysid.mavlink.preflight.checks import judge, run_checks
 from lpv_sysid.mavlink.preflight.gather import Facts
+from lpv_sysid.mavlink.preflight.mavros import PARAMS, MavrosEvidence, mavros_checks
 from lpv_sysid.mavlink.preflight.report import GO, NOGO, WARN, format_table, verdict
 
 __all__ = [
     "Facts",
     "GO",
+    "MavrosEvidence",
     "NOGO",
+    "PARAMS",
     "WARN",
     "format_table",
     "judge",
+    "mavros_checks",
     "run_checks",
     "verdict",
 ]

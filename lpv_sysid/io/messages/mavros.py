@@ -1,0 +1,174 @@
+"""mavros_msgs fields (MAVROS 2.x, ROS 2): setpoints out, state / rotor evidence in.
+
+Only the MAVROS transport with ``mavros.interfaces`` ``mavros_msgs`` touches these types;
+the factory looks them up by name, so nothing here imports mavros_msgs (the package works
+without it). MAVROS's frame conventions (mavros ``setpoint_raw`` plugin, ``ftf``):
+
+- ``PositionTarget``: ``FRAME_BODY_NED`` (8) vectors are given in ``base_link`` (FLU) and
+  turned to FRD by MAVROS (``transform_frame_baselink_aircraft``: x, -y, -z);
+  ``FRAME_LOCAL_NED`` (1) vectors in local ENU (``transform_frame_enu_ned``); ``yaw_rate``
+  is the ENU z rate, negated by MAVROS; ``type_mask`` passes unchanged (the bits equal
+  MAVLink's POSITION_TARGET_TYPEMASK);
+- ``AttitudeTarget``: ``body_rate`` in FLU (MAVROS: x, -y, -z), ``thrust`` in [0, 1],
+  ``type_mask`` unchanged (``IGNORE_ATTITUDE`` = 128), the orientation is base_link -> ENU
+  (ignored with that bit; identity is sent).
+
+So the core's NED/FRD values pass :mod:`lpv_sysid.io.frames` (``frd_to_flu``,
+``ned_to_enu``) here and nowhere else.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from lpv_sysid.io import frames
+from lpv_sysid.io.messages.factory import MessageError, MsgFactory
+from lpv_sysid.io.messages.fields import finite, header_msg, stamp_ns_of, vector3, xyz
+
+POSITION_TARGET = "mavros_msgs/msg/PositionTarget"
+ATTITUDE_TARGET = "mavros_msgs/msg/AttitudeTarget"
+STATE = "mavros_msgs/msg/State"
+ESC_STATUS = "mavros_msgs/msg/ESCStatus"
+RC_OUT = "mavros_msgs/msg/RCOut"
+HOME_POSITION = "mavros_msgs/msg/HomePosition"
+RC_IN = "mavros_msgs/msg/RCIn"
+VEHICLE_INFO_GET = "mavros_msgs/srv/VehicleInfoGet"
+MESSAGE_INTERVAL = "mavros_msgs/srv/MessageInterval"
+GET_PARAMETERS = "rcl_interfaces/srv/GetParameters"  # MAVROS mirrors FCU params as ROS ones
+SET_MODE = "mavros_msgs/srv/SetMode"
+COMMAND_BOOL = "mavros_msgs/srv/CommandBool"
+
+#: the mavros_msgs types of the MAVROS transport, by role
+MAVROS_TYPES = {
+    "position_target": POSITION_TARGET,
+    "attitude_target": ATTITUDE_TARGET,
+    "state": STATE,
+    "esc_status": ESC_STATUS,
+    "rc_out": RC_OUT,
+    "home_position": HOME_POSITION,
+    "set_mode": SET_MODE,
+    "command_bool": COMMAND_BOOL,
+    "rc_in": RC_IN,
+    "vehicle_info_get": VEHICLE_INFO_GET,
+    "message_interval": MESSAGE_INTERVAL,
+    "get_parameters": GET_PARAMETERS,
+}
+#: rcl_interfaces/ParameterValue.type of the numbers (PARAMETER_INTEGER, PARAMETER_DOUBLE)
+PARAMETER_INTEGER, PARAMETER_DOUBLE = 2, 3
+
+FRAME_LOCAL_NED = 1
+FRAME_BODY_NED = 8
+MAVLINK_FRAMES = (FRAME_LOCAL_NED, FRAME_BODY_NED)
+
+
+@dataclass(frozen=True)
+class MavrosVehicleState:
+    """``mavros_msgs/State``: ``connected`` (MAVROS hears the autopilot's HEARTBEAT),
+    ``armed`` and the PX4 ``mode`` string as MAVROS names it (``AUTO.LOITER``, ...)."""
+
+    stamp_ns: int
+    connected: bool
+    armed: bool
+    mode: str
+
+
+def position_target_msg(
+    f: MsgFactory, stamp_ns: int, frame: int, type_mask: int, v_ned_or_frd, yaw_rate_frd: float
+):
+    """``PositionTarget`` carrying a velocity (+ yaw rate) setpoint for
+    ``setpoint_raw/local``: ``v_ned_or_frd`` is FRD for ``FRAME_BODY_NED``, NED for
+    ``FRAME_LOCAL_NED`` (MAVLink's SET_POSITION_TARGET_LOCAL_NED meaning); ``yaw_rate_frd``
+    the NED/FRD yaw rate. Converted to MAVROS's FLU / ENU (module docstring)."""
+    if frame not in MAVLINK_FRAMES:
+        raise MessageError(f"PositionTarget: frame {frame} is not LOCAL_NED (1) or BODY_NED (8)")
+    v = finite(v_ned_or_frd, 3, "velocity setpoint")
+    r = float(finite([yaw_rate_frd], 1, "yaw-rate setpoint")[0])
+    v_ros = frames.frd_to_flu(v) if frame == FRAME_BODY_NED else frames.ned_to_enu(v)
+    return f(
+        POSITION_TARGET,
+        header=header_msg(f, stamp_ns, ""),
+        coordinate_frame=int(frame),
+        type_mask=int(type_mask),
+        position=f("geometry_msgs/msg/Point", x=0.0, y=0.0, z=0.0),
+        velocity=vector3(f, v_ros),
+        acceleration_or_force=vector3(f, [0.0, 0.0, 0.0]),
+        yaw=0.0,
+        yaw_rate=-r,
+    )
+
+
+def attitude_target_msg(f: MsgFactory, stamp_ns: int, type_mask: int, rates_frd, thrust: float):
+    """``AttitudeTarget`` for ``setpoint_raw/attitude``: FRD body rates [rad/s] as FLU
+    ``body_rate``, normalised ``thrust``, identity orientation (ignored by ``type_mask``)."""
+    w = finite(rates_frd, 3, "body-rate setpoint")
+    t = float(finite([thrust], 1, "thrust setpoint")[0])
+    return f(
+        ATTITUDE_TARGET,
+        header=header_msg(f, stamp_ns, ""),
+        type_mask=int(type_mask),
+        orientation=f("geometry_msgs/msg/Quaternion", x=0.0, y=0.0, z=0.0, w=1.0),
+        body_rate=vector3(f, frames.frd_to_flu(w)),
+        thrust=t,
+    )
+
+
+def velocity_setpoint_from_position_target(msg) -> tuple[int, int, np.ndarray, float]:
+    """Inverse of :func:`position_target_msg` (what MAVROS hands PX4):
+    ``(frame, type_mask, v (FRD or NED), yaw_rate (NED))``."""
+    frame = int(msg.coordinate_frame)
+    v = xyz(msg.velocity)
+    v_mav = frames.flu_to_frd(v) if frame == FRAME_BODY_NED else frames.enu_to_ned(v)
+    return frame, int(msg.type_mask), v_mav, -float(msg.yaw_rate)
+
+
+def rate_setpoint_from_attitude_target_msg(msg) -> tuple[int, np.ndarray, float]:
+    """Inverse of :func:`attitude_target_msg`: ``(type_mask, rates FRD, thrust)``."""
+    return int(msg.type_mask), frames.flu_to_frd(xyz(msg.body_rate)), float(msg.thrust)
+
+
+def state_from_msg(msg) -> MavrosVehicleState:
+    """``mavros_msgs/State`` -> :class:`MavrosVehicleState`."""
+    return MavrosVehicleState(
+        stamp_ns_of(msg), bool(msg.connected), bool(msg.armed), str(msg.mode).strip()
+    )
+
+
+def esc_rpm_from_msg(msg) -> tuple[int, list[float]]:
+    """``mavros_msgs/ESCStatus`` -> ``(stamp_ns, rpm of each ESC)``."""
+    return stamp_ns_of(msg), [float(item.rpm) for item in msg.esc_status]
+
+
+def rc_out_from_msg(msg) -> tuple[int, list[int]]:
+    """``mavros_msgs/RCOut`` (PX4's SERVO_OUTPUT_RAW) -> ``(stamp_ns, PWM per channel)``."""
+    return stamp_ns_of(msg), [int(c) for c in msg.channels]
+
+
+def home_ned_from_msg(msg) -> np.ndarray:
+    """``mavros_msgs/HomePosition.position`` (local ENU) -> NED [m]."""
+    return frames.enu_to_ned(finite(xyz(msg.position), 3, "home position"))
+
+
+def rc_in_from_msg(msg) -> tuple[int, int]:
+    """``mavros_msgs/RCIn`` (PX4's RC_CHANNELS) -> ``(channel count, RSSI)``."""
+    return len(msg.channels), int(msg.rssi)
+
+
+def params_from_get_parameters(names, response) -> dict[str, float | int]:
+    """``rcl_interfaces/srv/GetParameters`` answer for ``names`` -> the numbers that are
+    set (a name MAVROS has not pulled yet answers PARAMETER_NOT_SET: left out)."""
+    out: dict[str, float | int] = {}
+    for name, v in zip(names, response.values):
+        if int(v.type) == PARAMETER_INTEGER:
+            out[str(name)] = int(v.integer_value)
+        elif int(v.type) == PARAMETER_DOUBLE:
+            out[str(name)] = float(v.double_value)
+    return out
+
+
+def vehicle_from_info_response(response):
+    """The first ``mavros_msgs/VehicleInfo`` of a successful ``VehicleInfoGet``, else None."""
+    if not bool(response.success) or len(response.vehicles) == 0:
+        return None
+    return response.vehicles[0]

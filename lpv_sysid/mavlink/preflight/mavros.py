@@ -1,0 +1,127 @@
+"""The preflight checks on MAVROS's evidence (transport mavros with mavros_msgs).
+
+The bridge cannot open its own MAVLink link next to MAVROS, so the facts of
+:func:`~lpv_sysid.mavlink.preflight.judge` come from MAVROS (the rules are unchanged,
+:mod:`lpv_sysid.mavlink.preflight`):
+
+===========================  ==========================================================
+preflight fact               MAVROS source
+===========================  ==========================================================
+HEARTBEAT                    ``/mavros/state`` (mode, armed) + ``vehicle_info_get``
+                             (autopilot, MAV_TYPE, system id)
+AUTOPILOT_VERSION            ``vehicle_info_get`` (``flight_sw_version``,
+                             ``capabilities``; MAVROS requests it on connection)
+PARAM_VALUE                  the FCU parameters MAVROS's param plugin mirrors as ROS
+                             parameters of ``<ns>/param`` (``get_parameters``)
+RC_CHANNELS                  ``/mavros/rc/in`` (channel count, RSSI)
+telemetry streams            ``local_position/odom`` (ODOMETRY), ``imu/data``
+                             (HIGHRES_IMU), ``esc_status/status`` (ESC_STATUS), ``rc/out``
+                             (SERVO_OUTPUT_RAW, port 0)
+===========================  ==========================================================
+
+SYS_STATUS (PX4's own stick verdict) is not used: stick input is decided from
+COM_RC_IN_MODE and RC_CHANNELS as on a link without SYS_STATUS. A fact MAVROS has not
+delivered yet is missing, with the verdict the MAVLink preflight gives it (NO-GO for the
+HEARTBEAT, the firmware and COM_OF_LOSS_T / COM_OBL_RC_ACT).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from lpv_sysid.mavlink import px4
+from lpv_sysid.mavlink.preflight.checks import judge
+from lpv_sysid.mavlink.preflight.gather import INFO_PARAMS, REQUIRED_PARAMS, Facts
+from lpv_sysid.mavlink.preflight.report import NOGO, Check
+from lpv_sysid.mavlink.telemetry import RotorEstimateConfig
+
+#: the PX4 parameters the checks read (asked from MAVROS's param node)
+PARAMS = REQUIRED_PARAMS + INFO_PARAMS
+
+
+@dataclass
+class MavrosEvidence:
+    """What MAVROS delivered so far (filled by the bridge runtime)."""
+
+    mode: px4.Px4Mode | None = None  # latest /mavros/state while connected
+    armed: bool = False
+    vehicle: Any = None  # mavros_msgs/VehicleInfo of the target (duck-typed)
+    params: dict[str, float | int] = field(default_factory=dict)
+    seen: set[str] = field(default_factory=set)  # MAVLink names of the streams seen
+    rc_in: tuple[int, int] | None = None  # (channel count, RSSI) of /mavros/rc/in
+    servo_raw: list[int] | None = None  # newest /mavros/rc/out channels
+
+    def missing_params(self) -> list[str]:
+        return [p for p in PARAMS if p not in self.params]
+
+
+class _Heartbeat:
+    """The HEARTBEAT fields judge() reads, from /mavros/state and VehicleInfo."""
+
+    def __init__(self, vehicle: Any, mode: px4.Px4Mode, armed: bool) -> None:
+        self.autopilot = int(vehicle.autopilot)
+        self.type = int(vehicle.type)
+        self.custom_mode = mode.custom_mode
+        self.base_mode = px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (
+            px4.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0
+        )
+        self._sysid = int(vehicle.sysid)
+
+    def get_srcSystem(self) -> int:  # noqa: N802 (pymavlink's name)
+        return self._sysid
+
+
+@dataclass(frozen=True)
+class _Version:
+    flight_sw_version: int
+    capabilities: int
+
+
+@dataclass(frozen=True)
+class _RcChannels:
+    chancount: int
+    rssi: int
+
+
+class _ServoOutputRaw:
+    def __init__(self, channels: list[int]) -> None:
+        self.port = 0
+        for k in range(16):
+            setattr(self, f"servo{k + 1}_raw", int(channels[k]) if k < len(channels) else 0)
+
+
+def facts_from_mavros(ev: MavrosEvidence) -> Facts:
+    """The preflight :class:`~lpv_sysid.mavlink.preflight.Facts` of MAVROS's evidence."""
+    v = ev.vehicle
+    hb = _Heartbeat(v, ev.mode, ev.armed) if v is not None and ev.mode is not None else None
+    version = None
+    if v is not None and int(v.flight_sw_version) != 0:
+        version = _Version(int(v.flight_sw_version), int(v.capabilities))
+    facts = Facts(hb=hb, version=version, params=dict(ev.params), seen=set(ev.seen))
+    if ev.rc_in is not None:
+        facts.rc_channels = _RcChannels(*ev.rc_in)
+    if ev.servo_raw is not None:
+        facts.motor_outputs["SERVO_OUTPUT_RAW"] = _ServoOutputRaw(ev.servo_raw)
+        facts.seen.add("SERVO_OUTPUT_RAW")
+    return facts
+
+
+def mavros_checks(
+    ev: MavrosEvidence, rotor_estimate: RotorEstimateConfig | None = None, namespace: str = ""
+) -> list[Check]:
+    """The preflight checks of the MAVLink transport on MAVROS's evidence."""
+    f = facts_from_mavros(ev)
+    out: list[Check] = []
+    if ev.vehicle is None:
+        out.append(
+            Check(
+                "vehicle info",
+                f"no answer from {namespace}/vehicle_info_get",
+                "autopilot, type, firmware",
+                NOGO,
+            )
+        )
+    return out + judge(
+        f.hb, f.version, f.params, f.seen, None, facts=f, rotor_estimate=rotor_estimate
+    )

@@ -1,0 +1,1 @@
+"""Stand-in geographic_msgs (GeoPoint, for mavros_msgs/HomePosition)."""
