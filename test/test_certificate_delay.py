@@ -207,3 +207,37 @@ def test_a_configured_bound_beyond_the_proof_is_refused(synthesized, tmp_path, c
     )
     assert rc != 0
     assert "is not certified" in capsys.readouterr().err
+
+
+def test_flight_controller_start_up_refuses_gains_certified_for_less_delay(tmp_path):
+    """The runtime's one start-up path (flight/controller/startup.load_flight_schedule): the
+    stabilising LQR test law (its small-gain stability margin computed here, ~21 ms), certified
+    for 5 ms, is refused on a 250 Hz timer loop (1/250 + 1/250 = 8 ms); certified for 15 ms it
+    starts and says so."""
+    from lpv_test_gains import _vertices, write_gains
+
+    from lpv_sysid.flight.controller import ControllerRuntime, ControllerSettings
+    from lpv_sysid.io import messages
+
+    vs = _vertices(2.0)
+    margin = dl.stability_margin([[(a, b)] for _, _, a, b, _ in vs], np.array([k for *_, k in vs]))
+    assert margin > 0.015
+
+    def with_bound(b):
+        def edit(d):
+            d["certificate"]["loop_delay"] = {"bound_s": b, "stability_margin_s": margin}
+
+        return edit
+
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    slow = write_gains(tmp_path / "a" / "gains.yaml", edit=with_bound(0.005))
+    settings = ControllerSettings(gains_file=slow)
+    assert loop_delay_s(
+        settings.tick_source, settings.rate_hz, settings.state_rate_hz, settings.input_latency_s
+    ) == pytest.approx(0.008)
+    with pytest.raises(ConfigError, match="exceeds certificate.loop_delay.bound_s 5.0 ms"):
+        ControllerRuntime(settings, messages.MsgFactory.rosbags())
+    ok = write_gains(tmp_path / "b" / "gains.yaml", edit=with_bound(0.015))
+    rt = ControllerRuntime(ControllerSettings(gains_file=ok), messages.MsgFactory.rosbags())
+    assert rt.schedule.certificate.loop_delay_bound_s == 0.015
