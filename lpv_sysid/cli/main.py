@@ -137,7 +137,7 @@ def _guard_output(args: argparse.Namespace) -> None:
     inputs += [
         (f"(sidecar of {a} {b})", str(f)) for a, b in list(inputs) for f in referenced_files(b)
     ]
-    refuse_overwrite(out, inputs, bool(getattr(args, "force", False)))
+    refuse_overwrite(out, inputs, bool(getattr(args, "force", False)), force_hint="--force")
 
 
 #: commands whose linear algebra is many small problems: there OpenBLAS' second thread costs

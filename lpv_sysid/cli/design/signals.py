@@ -24,13 +24,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from lpv_sysid.signals.multisine import design, load_config
+    from lpv_sysid.errors import ConfigError
     from lpv_sysid.signals.store import write_signal_set
 
     cfg = load_config(args.config)
     t0 = time.perf_counter()
     sig = design(cfg)
     elapsed = time.perf_counter() - t0
-    npz, yml = write_signal_set(args.out, sig, force=args.force)
+    try:
+        npz, yml = write_signal_set(args.out, sig, force=args.force)
+    except ConfigError as exc:  # the core says how; the command line forces it with --force
+        raise ConfigError(str(exc).replace("force the replacement", "--force")) from None
     written = [npz, yml]
     if not args.no_plot:
         from lpv_sysid.signals.plot import save_figure

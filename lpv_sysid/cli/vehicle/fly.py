@@ -137,14 +137,7 @@ def run(args: argparse.Namespace) -> int:
         from lpv_sysid.flight.phase2 import Phase2Options, fly_phase2
 
         check_kappa(args.kappa)  # before connecting
-        ask = confirmation(args.yes)
-        if ask is not None and not ask(
-            f"take the airborne vehicle on {args.connect} into OFFBOARD under the LPV law "
-            f"({args.gains}) and fly the phase-2 signal?"
-        ):
-            print("lpv-sysid fly: not confirmed: nothing sent", file=sys.stderr)
-            return EXIT_FAILED
-
+        ask = confirmation(args.yes, when_asked=True)  # after every check of gains and signals
         s = fly_phase2(
             args.gains,
             args.signals,
@@ -154,7 +147,11 @@ def run(args: argparse.Namespace) -> int:
             bridge_config=args.bridge_config,
             opts=Phase2Options(kappa=args.kappa, finish=args.finish),
             echo=print,
+            confirm=ask,
         )
+        if s.get("confirmed") is False:
+            print("lpv-sysid fly: not confirmed: nothing sent", file=sys.stderr)
+            return EXIT_FAILED
         lat = s.get("latency_state_to_setpoint_ms") or {}
         if lat.get("commands"):
             print(
@@ -211,17 +208,26 @@ def run(args: argparse.Namespace) -> int:
     return res.status
 
 
-def confirmation(yes: bool):
+def confirmation(yes: bool, when_asked: bool = False):
     """The operator's confirmation: None with ``--yes`` (not asked); a question on the
     terminal otherwise (only ``y`` / ``yes`` confirms); ConfigError when stdin is not a
-    terminal (a script or a pipe cannot confirm: it must say ``--yes``)."""
+    terminal (a script or a pipe cannot confirm: it must say ``--yes``) -- at once, or with
+    ``when_asked`` when the question comes (after the checks of the files, which then refuse
+    a bad file with their own words first)."""
     if yes:
         return None
     if not sys.stdin.isatty():
-        raise ConfigError(
+        why = (
             "refusing to fly without confirmation: stdin is not a terminal; "
             "pass --yes to confirm in advance"
         )
+        if not when_asked:
+            raise ConfigError(why)
+
+        def refuse(question: str) -> bool:
+            raise ConfigError(why)
+
+        return refuse
 
     def ask(question: str) -> bool:
         print(question, flush=True)

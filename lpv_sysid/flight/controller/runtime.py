@@ -124,20 +124,9 @@ class ControllerRuntime:
         certificate's ``loop_delay.bound_s`` and the ``loop_delay_bound_s`` parameter, the
         smaller of those stated. Refused (ConfigError) when a timer tick would exceed it
         between two healthy state samples."""
-        cert = self.schedule.certificate
-        entry = getattr(cert, "loop_delay", None)
-        if entry is None:
-            entry = cert.extra.get("loop_delay") if isinstance(cert.extra, dict) else None
-        raw = entry.get("bound_s") if isinstance(entry, dict) else getattr(entry, "bound_s", None)
-        try:
-            stated = [float(raw)] if raw is not None and not isinstance(raw, bool) else []
-        except (TypeError, ValueError):
-            stated = [float("nan")]
-        if raw is not None and not (stated and np.isfinite(stated[0]) and stated[0] > 0.0):
-            raise ConfigError(
-                f"{settings.gains_file}: certificate.loop_delay.bound_s must be a finite "
-                f"delay > 0 s, got {raw!r}"
-            )
+        # the format owner (io.formats.certificate.LoopDelay) checked the stated bound
+        certified = self.schedule.certificate.loop_delay_bound_s
+        stated = [] if certified is None else [float(certified)]
         if settings.loop_delay_bound_s > 0.0:
             stated.append(settings.loop_delay_bound_s)
         if not stated:

@@ -163,6 +163,7 @@ def fly_phase2(
     link=None,
     handle_signals: bool = True,
     storage: str = "mcap",
+    confirm: Callable[[str], bool] | None = None,
 ) -> dict:
     """Fly the phase-2 signal under the LPV law on a PX4 vehicle that is armed and in the air
     (module docstring step 5); returns the summary (also ``DIR/phase2_summary.yaml``).
@@ -170,8 +171,10 @@ def fly_phase2(
     The law is :class:`~lpv_sysid.flight.controller.ControllerRuntime` and the signal
     :class:`~lpv_sysid.flight.excitation.ExcitationRuntime`, fed the messages the ROS graph
     would carry (:func:`phase2_graph`): every file the controller node refuses is refused here,
-    with its words, before the link is opened. Raises SafetyError before sending anything when
-    the vehicle is not airborne."""
+    with its words, before the link is opened. ``confirm(question)``: asked after those checks,
+    before the link is opened (False: ``{"ok": False, "confirmed": False}``, nothing sent; None:
+    no question, ``fly --yes``). Raises SafetyError before sending anything when the vehicle is
+    not airborne."""
     from lpv_sysid.flight.campaign import CampaignRecorder
     from lpv_sysid.flight.vehicle import tap_attitude_target, wait_for_vehicle
     from lpv_sysid.io import messages as m
@@ -191,6 +194,11 @@ def fly_phase2(
     gamma = float(ctrl.law.gamma)
     T = float(exc.core.duration)
     bcfg = phase2_bridge_config(bridge_config or config_file("mavlink_bridge_chain.yaml"), url)
+    if confirm is not None and not confirm(
+        f"take the airborne vehicle on {bcfg.link.url} into OFFBOARD under the LPV law "
+        f"({gains}) and fly the phase-2 signal?"
+    ):
+        return {"ok": False, "confirmed": False, "reason": "not confirmed: nothing sent"}
     core = BridgeCore(bcfg, link=link)
     core.transport = RateSetpointTransport(max_rate=opts.max_rate)  # the law's inputs as sent
     core.open(clock())

@@ -240,12 +240,17 @@ def _same(a: str, b: str) -> bool:
 
 
 def refuse_overwrite(
-    out, inputs: "list[tuple[str, str]]", force: bool = False, flag: str = "--out"
+    out,
+    inputs: "list[tuple[str, str]]",
+    force: bool = False,
+    flag: str = "--out",
+    force_hint: str = "force the replacement",
 ) -> None:
     """The one check of an output against the inputs of the same run: ConfigError when
     ``out`` is (the same file as) one of ``inputs`` (``(name, path)`` pairs, e.g.
     ``("--gains", "g.yaml")``) -- ``verify --out gains.yaml`` would replace the gains,
-    ``synthesize --models M --out M`` the models -- unless ``force``."""
+    ``synthesize --models M --out M`` the models -- unless ``force``; ``force_hint``: how
+    the caller forces it (the CLI: its flag)."""
     if force or out is None:
         return
     o = os.fspath(out)
@@ -255,7 +260,7 @@ def refuse_overwrite(
         if path and os.path.lexists(path) and _same(o, path):
             raise ConfigError(
                 f"{flag} {o} is the input {name} {path}: refusing to overwrite an input "
-                "(choose another output, or force the replacement)"
+                f"(choose another output, or {force_hint})"
             )
 
 

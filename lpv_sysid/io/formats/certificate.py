@@ -134,8 +134,8 @@ class LoopDelay:
     def parse(cls, v: FieldChecker, d, path: str = "certificate.loop_delay") -> "LoopDelay":
         v.mapping(d, path, ("bound_s",), extra_ok=True)
         bound = v.number(d["bound_s"], f"{path}.bound_s")
-        if not (np.isfinite(bound) and bound >= 0):
-            v.fail(f"{path}.bound_s", f"must be a finite number >= 0 [s], got {bound}")
+        if not (np.isfinite(bound) and bound > 0):
+            v.fail(f"{path}.bound_s", f"must be a finite number > 0 [s], got {bound}")
         margins = {}
         for k in ("stability_margin_s", "performance_margin_s"):
             margins[k] = None if d.get(k) is None else v.number(d[k], f"{path}.{k}")
