@@ -81,6 +81,11 @@ def generate_launch_description():
                     "gains_file": arg("gains_file"),
                     "tick_source": "state",
                     "reference_hold": "foh",
+                    # lock-stepped: the simulated vehicle waits for the command of each state,
+                    # so in sim time a command acts on a state at most one period old; the
+                    # configured loop delay (10 ms + 1 / state_rate_hz) must fit the gains'
+                    # certificate.loop_delay.bound_s (checked at start)
+                    "input_latency_s": 0.01,
                     **SIM_TIME,
                 },
                 condition=IfCondition(PythonExpression(["'", phase, "' == '2'"])),
