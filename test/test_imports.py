@@ -891,3 +891,26 @@ def test_report_of_an_imported_flight(run, tmp_path):
     assert float(cells[2]) == pytest.approx(climb, rel=2e-3)
     assert float(cells[4]) == pytest.approx(travelled, rel=2e-3)
     assert (out / "report" / "phase1_time_histories.png").is_file()
+
+
+def test_simulated_bags_carry_the_declared_epoch(tmp_path, capsys):
+    """``simulate phase1`` stamps from the declared epoch (default 2026-01-01T00:00:00Z, or
+    ``--epoch``), so Foxglove / PlotJuggler open the bags at a date that says 'simulated'."""
+    from lpv_sysid.cli.main import main
+    from lpv_sysid.io.bag import topic_info
+
+    for extra, epoch_s in (
+        ([], calendar.timegm((2026, 1, 1, 0, 0, 0))),
+        (["--epoch", "2030-06-01T12:00:00Z"], calendar.timegm((2030, 6, 1, 12, 0, 0))),
+    ):
+        out = tmp_path / str(epoch_s)
+        from pathlib import Path
+
+        config = Path(__file__).resolve().parent.parent / "config" / "quadrotor.yaml"
+        args = ["simulate", "phase1", "--config", str(config), "--vertices", "1", "--no-hover"]
+        args += ["--duration-scale", "0.3"]
+        assert main([*args, "--out", str(out), *extra]) == 0
+        bag = next(p for p in out.iterdir() if (p / "metadata.yaml").is_file())
+        first = min(s.start_ns for s in topic_info(str(bag)).values() if s.start_ns is not None)
+        assert epoch_s * 10**9 <= first < epoch_s * 10**9 + 10**9
+    capsys.readouterr()
