@@ -847,11 +847,12 @@ def test_real_px4_sitl_ulog_identifies_like_the_bags_of_the_same_flight(tmp_path
         r_imp = vx.identify_vertex(dp.align(ulg, icfg).vertex, icfg)
         m = r_own.fit.maskA
         z = np.abs(r_imp.fit.A - r_own.fit.A)[m] / np.hypot(r_own.fit.std_A, r_imp.fit.std_A)[m]
-        # measured on PX4 SITL (SIH, 2026-12-02): all identified elements within 3 combined
-        # std but the pitch damping A[q, q] (-4.0 +/- 0.13 from the bags, -3.3 +/- 0.06 from
-        # the ULog, z ~ 5; A[p, p] likewise 15 % apart, z < 3): the bags stamp each MAVLink
-        # stream at its receive time, the ULog at PX4's sample time
-        assert np.median(z) < 1.0 and np.mean(z <= 3.0) >= 0.95, (r["name"], np.sort(z)[-5:])
+        # measured on PX4 SITL v1.16 (SIH, 2026-12-02; bags stamped at PX4's sample time):
+        # 40 of 42 identified elements within 3 combined std (median z 0.15-0.31); the roll and
+        # pitch damping A[p, p], A[q, q] come out ~20 % larger from the bags (-4.2 vs -3.3,
+        # z up to 8): the bags' rates and motor outputs are MAVLink streams (~180 Hz, 50 Hz),
+        # the ULog's the uORB topics at 250 Hz -- open in the issue note
+        assert np.median(z) < 1.0 and np.sum(z > 3.0) <= 3, (r["name"], np.sort(z)[-5:])
 
 
 def test_report_of_an_imported_flight(run, tmp_path):
@@ -890,3 +891,26 @@ def test_report_of_an_imported_flight(run, tmp_path):
     assert float(cells[2]) == pytest.approx(climb, rel=2e-3)
     assert float(cells[4]) == pytest.approx(travelled, rel=2e-3)
     assert (out / "report" / "phase1_time_histories.png").is_file()
+
+
+def test_simulated_bags_carry_the_declared_epoch(tmp_path, capsys):
+    """``simulate phase1`` stamps from the declared epoch (default 2026-01-01T00:00:00Z, or
+    ``--epoch``), so Foxglove / PlotJuggler open the bags at a date that says 'simulated'."""
+    from lpv_sysid.cli.main import main
+    from lpv_sysid.io.bag import topic_info
+
+    for extra, epoch_s in (
+        ([], calendar.timegm((2026, 1, 1, 0, 0, 0))),
+        (["--epoch", "2030-06-01T12:00:00Z"], calendar.timegm((2030, 6, 1, 12, 0, 0))),
+    ):
+        out = tmp_path / str(epoch_s)
+        from pathlib import Path
+
+        config = Path(__file__).resolve().parent.parent / "config" / "quadrotor.yaml"
+        args = ["simulate", "phase1", "--config", str(config), "--vertices", "1", "--no-hover"]
+        args += ["--duration-scale", "0.3"]
+        assert main([*args, "--out", str(out), *extra]) == 0
+        bag = next(p for p in out.iterdir() if (p / "metadata.yaml").is_file())
+        first = min(s.start_ns for s in topic_info(str(bag)).values() if s.start_ns is not None)
+        assert epoch_s * 10**9 <= first < epoch_s * 10**9 + 10**9
+    capsys.readouterr()

@@ -131,3 +131,16 @@ def test_chain_directory_gets_the_run_report(tmp_path):
     first = [ln for ln in text.splitlines() if ln.startswith("## ")][0]
     assert first.startswith("## Go / no-go:") and "(on SITL data only)" in first
     assert "| phase-1 flights | SITL |" in text
+
+
+def test_nonlinear_identification_table(tmp_path):
+    doc = {
+        "K": {"C_T": 1.2e-5, "C_D": 3.0e-3},
+        "std": {"C_T": 2.0e-7, "C_D": 4.0e-3},
+        "refined": {"K": {"C_T": 1.21e-5, "C_D": 2.5e-3}, "std": {"C_T": 1.0e-7}},
+    }
+    (tmp_path / "nonlinear_model.yaml").write_text(yaml.safe_dump(doc))
+    text = write_report(tmp_path).read_text()
+    assert "## Nonlinear identification (seed 0 Eq. 6)" in text
+    assert "| C_T | 1.2e-05 | 2e-07 | 60 | 1.21e-05 | 1e-07 |" in text
+    assert "| C_D | 0.003 | 0.004 | 0.75 | 0.0025 | - |" in text

@@ -31,7 +31,7 @@ from lpv_sysid.report.sections_flight import (
     _phase2_section,
     go_no_go_section,
 )
-from lpv_sysid.report.sections_models import stability_section
+from lpv_sysid.report.sections_models import nonlinear_section, stability_section
 from lpv_sysid.report.sections_phase1 import frequency_section, phase1_section
 
 log = logging.getLogger(__name__)
@@ -116,6 +116,7 @@ def write_report(
     _ident_section(r)
     stability_section(r)
     frequency_section(r)
+    nonlinear_section(r)
     _signals_section(r)
     _synthesis_section(r)
     _verification_section(r)

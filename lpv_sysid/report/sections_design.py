@@ -280,7 +280,8 @@ def _spectra(r: Report, channels: list, f0: Any) -> None:
     r.fig(
         plots.plot_spectra(t, u, nm, harm, f0, r.fig_dir / "spectra.png", "multisine spectra"),
         "Amplitude spectra of the reference and excitation multisines over one period; dots: "
-        "each channel's excited harmonics k f0 (signals/summary.yaml), grey: all other bins "
+        "each channel's excited harmonics k f0 (signals/summary.yaml, or read from the "
+        "spectrum where a panel's title says so), grey: all other bins "
         "(seed 0 Sec. V, Fig. 6)",
     )
 

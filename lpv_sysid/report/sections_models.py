@@ -257,3 +257,57 @@ def stability_section(r: Report) -> None:
             )
 
         r.guard("loop margins", margins)
+
+
+#: where ``lpv-sysid identify-nonlinear --out`` is looked for in a run directory
+NONLINEAR_CANDIDATES = ("nonlinear_model.yaml", "phase2/nonlinear_model.yaml")
+
+
+def nonlinear_rows(doc: dict) -> list[list]:
+    """Per lumped parameter of seed 0 Eq. (6): regression estimate, std, |t|, and the
+    output-error refinement (estimate, std) when present."""
+    K, std = doc.get("K") or {}, doc.get("std") or {}
+    ref = doc.get("refined") or {}
+    rk, rs = ref.get("K") or {}, ref.get("std") or {}
+    rows = []
+    for name, v in K.items():
+        sd = std.get(name)
+        t = None
+        if isinstance(sd, (int, float)) and sd > 0 and np.isfinite(sd):
+            t = abs(float(v)) / float(sd)
+        rows.append([name, float(v), sd, t, rk.get(name), rs.get(name)])
+    return rows
+
+
+def nonlinear_section(r: Report) -> None:
+    """The nonlinear identification (``identify-nonlinear``) when its file is in the run
+    directory; nothing otherwise."""
+    from lpv_sysid.io.files import read_yaml
+
+    path = next(
+        (r.data.run_dir / c for c in NONLINEAR_CANDIDATES if (r.data.run_dir / c).is_file()), None
+    )
+    if path is None:
+        return
+    r.h(2, "Nonlinear identification (seed 0 Eq. 6)")
+
+    def body() -> None:
+        doc = read_yaml(path)
+        if not isinstance(doc, dict) or not isinstance(doc.get("K"), dict):
+            r.p(f"`{path.name}` has no `K` mapping.")
+            return
+        r.p(
+            f"Lumped parameters of Eq. (6) from `{path.relative_to(r.data.run_dir)}` "
+            "(`lpv-sysid identify-nonlinear`): least-squares estimate, standard error, |t| = "
+            "|estimate| / std (significant above ~2), and the short-segment output-error "
+            "refinement (seed 2 Sec. 4) when it was run."
+        )
+        r.p(
+            md_table(
+                ["K", "estimate", "std", "|t|", "refined", "refined std"],
+                nonlinear_rows(doc),
+                fmt="{:.4g}",
+            )
+        )
+
+    r.guard("nonlinear identification", body)

@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 from lpv_sysid.errors import LpvSysidError
 from lpv_sysid.io.messages import TOPIC_NAMESPACE as NAMESPACE
@@ -71,6 +71,9 @@ class CampaignRecorder:
             else None
         )
         self.clock_offset_ns = int(clock_offset_ns)
+        #: PX4 time (s since boot) -> bag ns, when known (``fly``: the vehicle record's live
+        #: estimate); then telemetry is stamped at the time PX4 sampled it, not received it
+        self.vehicle_clock: Callable[[float], int | None] | None = None
         self.active: str | None = None  # run being recorded
         self.bags: dict[str, str] = {}  # run name -> bag directory name
         self.started = False
@@ -115,22 +118,29 @@ class CampaignRecorder:
     def message(self, topic: str, t: float, msg) -> None:
         """A message as published (``topic`` of :data:`TOPICS` or :data:`RATE_TOPIC`), logged
         at ``t`` [s] (its send or receipt time; the header keeps its own stamp)."""
-        self._write(topic, _ns(t), msg)
+        self._write(topic, self._ns(t), msg)
 
-    def state(self, t: float, pos_ned, euler, v_body, omega) -> None:
-        st = self._ns(t)
+    def _sample_ns(self, t: float, t_vehicle: float | None) -> int:
+        if t_vehicle is not None and self.vehicle_clock is not None:
+            ns = self.vehicle_clock(t_vehicle)
+            if ns is not None:
+                return ns
+        return self._ns(t)
+
+    def state(self, t: float, pos_ned, euler, v_body, omega, t_vehicle=None) -> None:
+        st = self._sample_ns(t, t_vehicle)
         self._write(
             "state",
             st,
             self.messages.odometry_from_state(self.f, st, pos_ned, euler, v_body, omega),
         )
 
-    def imu(self, t: float, accel_frd, gyro_frd) -> None:
-        st = self._ns(t)
+    def imu(self, t: float, accel_frd, gyro_frd, t_vehicle=None) -> None:
+        st = self._sample_ns(t, t_vehicle)
         self._write("imu", st, self.messages.imu_msg(self.f, st, accel_frd, gyro_frd))
 
-    def rotors(self, t: float, omega, source: str = "esc") -> None:
-        st = self._ns(t)
+    def rotors(self, t: float, omega, source: str = "esc", t_vehicle=None) -> None:
+        st = self._sample_ns(t, t_vehicle)
         self._write("rotor_speeds", st, self.messages.rotor_speeds_msg(self.f, st, omega, source))
 
     def rate_setpoint(self, t: float, u) -> None:

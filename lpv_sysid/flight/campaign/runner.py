@@ -152,16 +152,20 @@ class FlightRunner:
                     c.on_state(s)
                     if self.rec is not None:
                         self._safe(
-                            lambda s=s: self.rec.state(s.t, s.pos_ned, s.euler, s.v_body, s.omega)
+                            lambda s=s: self.rec.state(
+                                s.t, s.pos_ned, s.euler, s.v_body, s.omega, s.t_vehicle
+                            )
                         )
                 elif isinstance(s, RotorSample):
                     c.on_rotor(s.t, s.omega)
                     src = getattr(s, "source", "esc")
                     self.rotor_sources[src] = self.rotor_sources.get(src, 0) + 1
                     if self.rec is not None:
-                        self._safe(lambda s=s, src=src: self.rec.rotors(s.t, s.omega, src))
+                        self._safe(
+                            lambda s=s, src=src: self.rec.rotors(s.t, s.omega, src, s.t_vehicle)
+                        )
                 elif isinstance(s, ImuSample) and self.rec is not None:
-                    self._safe(lambda s=s: self.rec.imu(s.t, s.accel_frd, s.gyro_frd))
+                    self._safe(lambda s=s: self.rec.imu(s.t, s.accel_frd, s.gyro_frd, s.t_vehicle))
             self._bridge_events(now, out.events)
             co = c.step(now, self._vehicle_status())
             self._handle(now, co)

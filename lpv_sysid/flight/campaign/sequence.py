@@ -108,7 +108,9 @@ def fly(
     rate-plant identification (lpv_sysid/ident/rate_plant.py); request the stream in the
     bridge config (``link.streams: {ATTITUDE_TARGET: 50}``, config/mavlink_bridge_chain.yaml).
 
-    Stamps: the bags carry wall-clock (epoch) nanoseconds, ``round(clock() * 1e9)`` shifted by
+    Stamps: the bags carry wall-clock (epoch) nanoseconds; telemetry (state, rotor speeds,
+    IMU) at the time PX4 sampled it (``time_boot_ms`` through the vehicle record's live clock
+    estimate), commands at the flight clock ``round(clock() * 1e9)`` shifted by
     ``time.time_ns() - round(clock() * 1e9)`` taken when the bridge opens, or, with
     ``epoch_ns``, by ``epoch_ns - round(clock() * 1e9)`` (a declared epoch for a simulated
     clock). ``experiment.yaml`` gets ``clock`` (that offset) and ``vehicle``
@@ -222,6 +224,9 @@ def fly(
             rate_setpoints=record_rate_setpoints,
             clock_offset_ns=clock_offset,
         )
+        # telemetry stamped at PX4's sample time on the bag clock (the same clock as a ULog
+        # imported with --clock-from), not at its receive time
+        rec.vehicle_clock = vehicle.bag_ns_of
         rec.start(clock())
         rec.annotate(
             "clock",
