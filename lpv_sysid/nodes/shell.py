@@ -30,7 +30,6 @@ from rclpy.qos import (
     QoSReliabilityPolicy,
 )
 from rclpy.signals import SignalHandlerOptions
-from tf2_msgs.msg import TFMessage
 
 from lpv_sysid.configuration.parameters import refuse_unknown
 from lpv_sysid.errors import ConfigError, LpvSysidError
@@ -310,7 +309,10 @@ class ShellNode(Node):
 
     def enable_tf(self) -> None:
         """Publish the REP-105 transform odom -> base_link of every ``state`` message on
-        ``/tf`` (``publish_tf``; see :meth:`publish_tf_of`)."""
+        ``/tf`` (``publish_tf``; see :meth:`publish_tf_of`). tf2_msgs is imported only here:
+        a node without TF runs on a ROS install that lacks it."""
+        from tf2_msgs.msg import TFMessage
+
         self._tf = (self.create_publisher(TFMessage, TF_TOPIC, QOS_TF), MsgFactory.rclpy())
 
     def publish_tf_of(self, topic: str, msg) -> None:
