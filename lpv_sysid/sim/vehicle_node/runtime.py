@@ -32,8 +32,9 @@ reference to be at most ``lockstep_reference_lag_s`` old: a CPU-starved excitati
 the simulation instead of going stale; measured at load 9 on 2 cores without this barrier: a
 104 ms sim-time gap in the reference and a stale abort), so the loop has exactly the
 sampling of the offline ``simulate phase2`` (command computed on the state at t_k, held over
-[t_k, t_k+1)) however loaded the machine is: the wall-clock graph on 2 loaded cores had ~14
-ms of loop delay, beyond the 8-12 ms at which the demo gains go unstable. An unanswered
+[t_k, t_k+1)) however loaded the machine is: the wall-clock graph on 2 loaded cores had a
+p99 state-to-command delay of 23 ms (bench_node_rclpy, load 8-11), beyond the demo gains'
+certified loop delay (certificate.loop_delay.bound_s, 17.7 ms). An unanswered
 sample is sent again every :data:`LOCKSTEP_RESEND_S` (best-effort stream); after
 ``lockstep_timeout_s`` of wall time without an answer the simulation runs on alone
 (``command_timeout_s`` later: baseline hold). Status reports ``real_time_factor`` (sim time
