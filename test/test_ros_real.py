@@ -941,8 +941,8 @@ def test_two_namespaced_vehicles_late_status_and_tf(ros, dom, tmp_path):
                     tmp_path / f"{ns}.log",
                 )
             )
-        for p in procs:
-            assert p.wait_for(ready("sim_vehicle"), 90.0), p.log()[-3000:]
+        for p, ns in zip(procs, ("uav1", "uav2")):
+            assert p.wait_for(f"[{ns}.sim_vehicle]: ready", 90.0), p.log()[-3000:]
         types = topic_types(env)
         for ns in ("uav1", "uav2"):
             for t in ("state", "imu", "rotor_speeds", "status"):
