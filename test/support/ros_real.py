@@ -27,8 +27,13 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 ENV = "LPV_SYSID_ROS_SETUP"
 DEFAULT_SETUP = Path("/opt/ros/jazzy/setup.bash")
+#: what the real-ROS tests use: rclpy, launch, the message packages of the package's topics
+#: and the ``ros2`` verbs the tests call (a partial build without ``ros2 launch`` is unusable,
+#: not a failure), and the package's pip requirements in ROS's own ``python3``
 PROBE = (
-    "import rclpy, launch_ros, std_srvs.srv, nav_msgs.msg, diagnostic_msgs.msg; "
+    "import rclpy, launch, launch_ros, std_srvs.srv, nav_msgs.msg, sensor_msgs.msg, "
+    "geometry_msgs.msg, diagnostic_msgs.msg, rcl_interfaces.msg; "
+    "import ros2launch, ros2topic, ros2param, ros2node, ros2service, ros2run, ros2pkg; "
     "import numpy, scipy, yaml, pymavlink, rosbags"
 )
 
