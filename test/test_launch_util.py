@@ -398,4 +398,5 @@ def test_phase_launches_take_the_mavros_transport(fake_launch, fname):
     assert px4["/**/setpoint_raw"]["ros__parameters"]["thrust_scaling"] == 1.0
     deny = set(px4["/**"]["ros__parameters"]["plugin_denylist"])
     used = {"sys_status", "command", "setpoint_raw", "local_position", "imu", "rc_io", "param"}
+    used |= {"home_position", "global_position", "gps_status", "esc_status"}  # evidence
     assert deny and not deny & used

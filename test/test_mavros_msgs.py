@@ -39,13 +39,39 @@ PX4_PARAMS = {
     "NAV_DLL_ACT": 0,
     "COM_RCL_EXCEPT": 4,
     "COM_RC_IN_MODE": 4,
+    # PX4 v1.16 defaults of the velocity and tilt limits (checked against a planned box)
+    "MPC_XY_VEL_MAX": 12.0,
+    "MPC_Z_VEL_MAX_UP": 3.0,
+    "MPC_Z_VEL_MAX_DN": 1.5,
+    "MPC_TILTMAX_AIR": 45.0,
 }
+#: a converged EKF2 with GPS as MAVROS's estimator_status shows it (ESTIMATOR_STATUS flags
+#: 0x33f: attitude, velocities, relative and absolute horizontal and absolute vertical
+#: position, predicted positions)
+EKF_OK = (
+    "attitude_status_flag",
+    "velocity_horiz_status_flag",
+    "velocity_vert_status_flag",
+    "pos_horiz_rel_status_flag",
+    "pos_horiz_abs_status_flag",
+    "pos_vert_abs_status_flag",
+    "pred_pos_horiz_rel_status_flag",
+    "pred_pos_horiz_abs_status_flag",
+)
 _MOD = codec.dialect_module()
 CAPS = (
     _MOD.MAV_PROTOCOL_CAPABILITY_MAVLINK2
     | _MOD.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
     | _MOD.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
 )
+
+
+BATTERY = "sensor_msgs/msg/BatteryState"
+GPSRAW = "mavros_msgs/msg/GPSRAW"
+ESTIMATOR = "mavros_msgs/msg/EstimatorStatus"
+HOME = "mavros_msgs/msg/HomePosition"
+GEOPOINT = "geographic_msgs/msg/GeoPoint"
+NAVSATFIX, NAVSATSTATUS = "sensor_msgs/msg/NavSatFix", "sensor_msgs/msg/NavSatStatus"
 
 
 def vehicle_info(version=(1, 16, 0)):
@@ -89,6 +115,12 @@ class FakeMavros:
         self.asked: list[str] = []
         self.rates: list = []  # (t, set_message_interval request)
         self.rc_out = True  # publishes /mavros/rc/out (PX4 SITL: SERVO_OUTPUT_RAW)
+        # the vehicle's health as MAVROS publishes it (None: topic not published)
+        self.battery = 0.8  # /mavros/battery percentage (0..1; PX4's -1 comes as -0.01)
+        self.gps = 3  # /mavros/gpsstatus/gps1/raw fix_type
+        self.ekf: tuple[str, ...] | None = EKF_OK  # estimator_status flags set
+        self.home = (47.397742, 8.545594, 488.0)  # /mavros/home_position/home geo
+        self.fix: int | None = None  # /mavros/global_position/raw/fix status.status
         self.calls: list[ServiceRequest] = []
         self.sent: list[tuple[float, str, object]] = []  # (t, key, msg) setpoints
         self.events: list[tuple[float, str, str]] = []  # (t, level, text) the runtime logged
@@ -132,6 +164,31 @@ class FakeMavros:
             mode=self.mode if mode is None else mode,
         )
 
+    def health_msgs(self):
+        """``(key, topic under /mavros, message)`` of the health topics as MAVROS 2.10
+        fills them (1 Hz here)."""
+        h = messages.header_msg(F, round(self.t * 1e9))
+        out = []
+        if self.battery is not None:
+            pct = float(np.float32(self.battery))  # MAVROS: battery_remaining / 100.0f
+            msg = F(BATTERY, header=h, voltage=16.2, percentage=pct)
+            out.append(("mavros_battery", "battery", msg))
+        if self.gps is not None:
+            sats = 10 if self.gps >= 3 else 2
+            msg = F(GPSRAW, header=h, fix_type=self.gps, satellites_visible=sats)
+            out.append(("mavros_gps_raw", "gpsstatus/gps1/raw", msg))
+        if self.fix is not None:
+            msg = F(NAVSATFIX, header=h, status=F(NAVSATSTATUS, status=self.fix, service=1))
+            out.append(("mavros_gps_fix", "global_position/raw/fix", msg))
+        if self.ekf is not None:
+            msg = F(ESTIMATOR, header=h, **dict.fromkeys(self.ekf, True))
+            out.append(("mavros_estimator", "estimator_status", msg))
+        if self.home is not None:
+            lat, lon, alt = self.home
+            geo = F(GEOPOINT, latitude=lat, longitude=lon, altitude=alt)
+            out.append(("mavros_home", "home_position/home", F(HOME, header=h, geo=geo)))
+        return out
+
     def run(self, seconds, reference=None, actuator=None, dt=0.004):
         """Advance: 1 Hz state, 50 Hz odometry, 250 Hz poll, the commands at 50 Hz."""
         end = self.t + seconds
@@ -142,6 +199,8 @@ class FakeMavros:
             if self.publishing and self.t >= self._next_state:
                 self._next_state = self.t + 1.0
                 self.handle(self.rt.on_message("mavros_state", self.state_msg(), self.t))
+                for key, _, msg in self.health_msgs():
+                    self.handle(self.rt.on_message(key, msg, self.t))
             if k % 5 == 0:
                 odom = messages.odometry_from_state(
                     F,
@@ -210,6 +269,12 @@ def test_endpoints_of_the_mavros_msgs_mode():
     assert subs["mavros_esc"] == ("/mavros/esc_status/status", "mavros_msgs/msg/ESCStatus")
     assert subs["mavros_rc_out"] == ("/mavros/rc/out", "mavros_msgs/msg/RCOut")
     assert subs["mavros_rc_in"] == ("/mavros/rc/in", "mavros_msgs/msg/RCIn")
+    # the vehicle's health (MAVROS 2.10 sys_status, gps_status, global_position plugins)
+    assert subs["mavros_home"] == ("/mavros/home_position/home", HOME)
+    assert subs["mavros_battery"] == ("/mavros/battery", BATTERY)
+    assert subs["mavros_gps_raw"] == ("/mavros/gpsstatus/gps1/raw", GPSRAW)
+    assert subs["mavros_gps_fix"] == ("/mavros/global_position/raw/fix", NAVSATFIX)
+    assert subs["mavros_estimator"] == ("/mavros/estimator_status", ESTIMATOR)
     assert [(e.key, e.topic, e.typename) for e in rt.clients] == [
         ("set_mode", "/mavros/set_mode", "mavros_msgs/srv/SetMode"),
         ("arming", "/mavros/cmd/arming", "mavros_msgs/srv/CommandBool"),
@@ -223,7 +288,9 @@ def test_endpoints_of_the_mavros_msgs_mode():
         **{"mavros.preflight": False, "mavros.rc_out_rate_hz": 0.0},
     )
     assert [e.key for e in rt.clients] == ["set_mode", "arming"]
-    assert "mavros_rc_in" not in [e.key for e in rt.subscriptions]
+    assert not {"mavros_rc_in", "mavros_battery", "mavros_estimator"} & {
+        e.key for e in rt.subscriptions
+    }
     rt = runtime(command="attitude_rate", **{"mavros.namespace": "/uav1/mavros"})
     pubs = {e.key: e.topic for e in rt.publishers}
     assert pubs["mavros_attitude"] == "/uav1/mavros/setpoint_raw/attitude"
@@ -502,6 +569,15 @@ def test_node_offboard_and_handback_with_a_fake_mavros_node(fresh):
     mavros.create_service(SetMode, "/mavros/set_mode", set_mode)
     mavros.create_service(CommandBool, "/mavros/cmd/arming", arming)
     pub_state = mavros.create_publisher(State, "/mavros/state", 10)
+    # the vehicle's health on MAVROS's topics (the fake's messages, at 1 Hz)
+    health = FakeMavros(None)
+    health_pubs = {
+        key: mavros.create_publisher(type(msg), f"/mavros/{topic}", qos_profile_sensor_data)
+        for key, topic, msg in health.health_msgs()
+    }
+    mavros.create_timer(
+        1.0, lambda: [health_pubs[k].publish(m) for k, _, m in health.health_msgs()]
+    )
     pub_odom = mavros.create_publisher(
         Odometry, "/mavros/local_position/odom", qos_profile_sensor_data
     )
@@ -575,6 +651,19 @@ def preflight_start(fake):
         ({"info": vehicle_info((1, 13, 0))}, "firmware: 1.13.0"),
         ({"info": None}, "vehicle info: no answer"),
         ({"rc_out": False}, "rotor speeds: none"),
+        # the vehicle's health through MAVROS's topics (same rules as over MAVLink)
+        ({"battery": 0.24}, "battery: 24 % (16.20 V)"),  # below the 25 % reserve
+        ({"battery": -0.01}, "battery: unknown"),  # PX4's -1 as MAVROS divides it
+        ({"battery": float("nan")}, "battery: unknown"),
+        ({"battery": None}, "battery: unknown"),  # /mavros/battery not published
+        # no GPS fix and no horizontal position in the EKF (no vision / flow either)
+        ({"gps": 1, "ekf": EKF_OK[:3] + EKF_OK[5:6]}, "GPS: fix type 1 (no 3D fix)"),
+        ({"gps": None, "fix": -1, "ekf": EKF_OK[:3]}, "GPS: fix type 1 (no 3D fix)"),
+        # flags 0x33d: horizontal velocity (0x2) missing
+        ({"ekf": EKF_OK[:1] + EKF_OK[2:]}, "EKF: flags 0x33d"),
+        ({"ekf": EKF_OK + ("accel_error_status_flag",)}, "EKF: flags 0xb3f"),
+        ({"ekf": None}, "EKF: no ESTIMATOR_STATUS"),
+        ({"home": None}, "home position: not set"),
     ],
 )
 def test_preflight_no_go_refuses_start_before_any_mode_command(change, named):
@@ -648,6 +737,43 @@ def test_preflight_go_asks_only_until_answered_and_judges_the_mavros_evidence():
     # odometry is MAVROS's state source: the MAVLink preflight's fallback note (WARN)
     att = [x for x in table.splitlines() if x.startswith("telemetry attitude")]
     assert att and "ODOMETRY" in att[0] and att[0].endswith("WARN")
+    # the vehicle's health from /mavros/battery, gpsstatus/gps1/raw, estimator_status and
+    # home_position/home: the MAVLink rows and verdicts
+    assert "80 % (16.20 V)" in rows["battery"] and rows["battery"].endswith(" GO")
+    assert "fix type 3, 10 sats" in rows["GPS"] and rows["GPS"].endswith(" GO")
+    assert "flags 0x33f (healthy)" in rows["EKF"] and rows["EKF"].endswith(" GO")
+    home = [r for r in table.splitlines() if r.startswith("home position")][0]
+    assert "47.397742, 8.545594, 488.0 m" in home and home.endswith(" GO")
+
+
+def _health_rows(fake):
+    table = [t for _, lv, t in fake.events if t.startswith("preflight (MAVROS)")][-1]
+    return {r.split()[0]: r for r in table.splitlines() if r.strip()}
+
+
+@pytest.mark.parametrize(
+    "change, row, value, verdict",
+    [
+        # MAVROS divides PX4's integer % by 100 in float32: 0.29f * 100 = 28.99999...
+        ({"battery": 0.29}, "battery", "29 % (16.20 V)", "GO"),
+        ({"battery": 0.25}, "battery", "25 % (16.20 V)", "GO"),  # the reserve itself
+        # global_position/raw/fix instead of GPSRAW: STATUS_FIX means fix_type > 2
+        ({"gps": None, "fix": 0}, "GPS", "fix type 3 ", "GO"),
+        # indoors: no GPS, but the EKF has a relative horizontal position (vision / flow)
+        ({"gps": None, "ekf": EKF_OK[:4] + EKF_OK[5:6]}, "GPS", "no GPS_RAW_INT", "WARN"),
+        ({"gps": 0, "ekf": EKF_OK[:4] + EKF_OK[5:6]}, "GPS", "fix type 0 (no 3D fix)", "WARN"),
+    ],
+)
+def test_preflight_health_through_mavros_that_allows_the_start(change, row, value, verdict):
+    rt = runtime(command="velocity")
+    fake = FakeMavros(rt)
+    for k, v in change.items():
+        setattr(fake, k, v)
+    ok, message = preflight_start(fake)
+    assert ok, message
+    r = _health_rows(fake)[row]
+    assert value in r and r.endswith(f" {verdict}"), r
+    assert fake.modes_requested()[0] == "OFFBOARD"  # the start went on
 
 
 def test_px4_attitude_target_through_mavros_is_the_rate_setpoint_echo():

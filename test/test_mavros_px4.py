@@ -7,7 +7,9 @@ SET_MODE with base_mode CUSTOM_MODE_ENABLED | the last HEARTBEAT's armed flag, a
 ``mode_sent`` at once; command: arming -> COMMAND_LONG 400 answered with PX4's
 COMMAND_ACK; setpoint_raw: PositionTarget FLU -> SET_POSITION_TARGET_LOCAL_NED FRD,
 ``yaw_rate`` negated; param: PX4's PARAM_VALUE as ROS parameters; rc_io: SERVO_OUTPUT_RAW
--> rc/out; vehicle_info_get from HEARTBEAT + AUTOPILOT_VERSION). Skipped without
+-> rc/out; vehicle_info_get from HEARTBEAT + AUTOPILOT_VERSION; the preflight's health:
+SYS_STATUS -> battery, GPS_RAW_INT -> gpsstatus/gps1/raw, ESTIMATOR_STATUS ->
+estimator_status, HOME_POSITION -> home_position/home). Skipped without
 ``PX4_SITL_DIR``.
 
 Oracles are PX4's: its HEARTBEAT modes and arming, its PARAM_VALUE answers, its altitude.
@@ -65,6 +67,7 @@ class MavrosStandIn:
         self.att = None
         self.log: list[tuple[str, str]] = []
         self.t_hb = 0.0
+        self.seen: set[str] = set()  # the health messages PX4 sent
 
     # -- PX4 -> ROS ------------------------------------------------------------------
     def pump(self, now: float) -> None:
@@ -125,6 +128,9 @@ class MavrosStandIn:
                 )
                 self.z.append(msg.z)
                 self.out(self.rt.on_message("mavros_odom", odom, now))
+            elif t in HEALTH:
+                self.seen.add(t)
+                self.out(self.rt.on_message(HEALTH[t], mavros_health_msg(msg, now), now))
             elif t == "SERVO_OUTPUT_RAW" and msg.port == 0:
                 rc = F(
                     "mavros_msgs/msg/RCOut",
@@ -237,6 +243,51 @@ class MavrosStandIn:
         self.params.pop(name, None)
 
 
+#: PX4's health messages -> the MAVROS topic key they become
+HEALTH = {
+    "SYS_STATUS": "mavros_battery",
+    "GPS_RAW_INT": "mavros_gps_raw",
+    "ESTIMATOR_STATUS": "mavros_estimator",
+    "HOME_POSITION": "mavros_home",
+}
+
+
+def mavros_health_msg(msg, now):
+    """MAVROS 2's message of a PX4 health message: sys_status (SYS_STATUS -> BatteryState,
+    ``battery_remaining / 100.0f``), gps_status (GPS_RAW_INT -> GPSRAW), sys_status
+    (ESTIMATOR_STATUS flags -> EstimatorStatus booleans), home_position (HOME_POSITION ->
+    HomePosition: geo in degrees / metres, position NED -> ENU)."""
+    h = messages.header_msg(F, round(now * 1e9))
+    t = msg.get_type()
+    if t == "SYS_STATUS":
+        pct = float(np.float32(msg.battery_remaining) / np.float32(100.0))
+        volts = float(np.float32(msg.voltage_battery) / np.float32(1000.0))
+        return F("sensor_msgs/msg/BatteryState", header=h, voltage=volts, percentage=pct)
+    if t == "GPS_RAW_INT":
+        return F(
+            "mavros_msgs/msg/GPSRAW",
+            header=h,
+            fix_type=msg.fix_type,
+            satellites_visible=msg.satellites_visible,
+        )
+    if t == "ESTIMATOR_STATUS":
+        names = [
+            "attitude", "velocity_horiz", "velocity_vert", "pos_horiz_rel", "pos_horiz_abs",
+            "pos_vert_abs", "pos_vert_agl", "const_pos_mode", "pred_pos_horiz_rel",
+            "pred_pos_horiz_abs", "gps_glitch", "accel_error",
+        ]  # fmt: skip
+        flags = {f"{n}_status_flag": bool(msg.flags & (1 << k)) for k, n in enumerate(names)}
+        return F("mavros_msgs/msg/EstimatorStatus", header=h, **flags)
+    geo = F(
+        "geographic_msgs/msg/GeoPoint",
+        latitude=msg.latitude / 1e7,
+        longitude=msg.longitude / 1e7,
+        altitude=msg.altitude / 1e3,
+    )
+    pos = F("geometry_msgs/msg/Point", x=float(msg.y), y=float(msg.x), z=float(-msg.z))
+    return F("mavros_msgs/msg/HomePosition", header=h, geo=geo, position=pos)
+
+
 def px4_euler(w, x, y, z):
     from lpv_sysid.io import frames
 
@@ -298,6 +349,14 @@ def test_px4_sitl_through_mavros_semantics_preflight_offboard_climb_rejected_pos
         mav.out(out)
         assert not ok and "COM_OBL_RC_ACT: 0 (POSITION)" in why, why
         assert mav.params.get("COM_OBL_RC_ACT") == 0  # PX4 SITL's default
+        # PX4's own health, as MAVROS's battery / gpsstatus / estimator_status /
+        # home_position topics carry it: judged GO (only the parameter refuses)
+        assert "battery" not in why and "GPS" not in why and "EKF" not in why, (why, mav.seen)
+        assert "home position" not in why, why
+        table = [t for _, t in mav.log if t.startswith("preflight (MAVROS)")][-1]
+        rows = {r.split()[0]: r for r in table.splitlines() if r.strip()}
+        # PX4 v1.16 SIH measured here: 100 % (16.20 V), fix type 3, 10 sats, flags 0x3ff
+        assert all(rows[k].endswith(" GO") for k in ("battery", "GPS", "EKF", "home")), rows
         mav.set_param_int("COM_OBL_RC_ACT", 5)
         assert run(30.0, until=lambda: mav.params.get("COM_OBL_RC_ACT") == 5)
         run(11.0)  # the bridge's parameter refresh (10 s)

@@ -68,6 +68,23 @@ _EXTRA.update(
         "mavros_msgs/msg/HomePosition": "std_msgs/Header header\n"
         "geographic_msgs/GeoPoint geo\ngeometry_msgs/Point position\n"
         "geometry_msgs/Quaternion orientation\ngeometry_msgs/Vector3 approach\n",
+        # the preflight's health evidence (MAVROS 2.10 gps_status / sys_status plugins)
+        "mavros_msgs/msg/GPSRAW": "std_msgs/Header header\n"
+        "uint8 GPS_FIX_TYPE_NO_GPS = 0\nuint8 GPS_FIX_TYPE_NO_FIX = 1\n"
+        "uint8 GPS_FIX_TYPE_2D_FIX = 2\nuint8 GPS_FIX_TYPE_3D_FIX = 3\n"
+        "uint8 GPS_FIX_TYPE_DGPS = 4\nuint8 GPS_FIX_TYPE_RTK_FLOAT = 5\n"
+        "uint8 GPS_FIX_TYPE_RTK_FIXED = 6\nuint8 GPS_FIX_TYPE_STATIC = 7\n"
+        "uint8 GPS_FIX_TYPE_PPP = 8\nuint8 fix_type\nint32 lat\nint32 lon\nint32 alt\n"
+        "uint16 eph\nuint16 epv\nuint16 vel\nuint16 cog\nuint8 satellites_visible\n"
+        "int32 alt_ellipsoid\nuint32 h_acc\nuint32 v_acc\nuint32 vel_acc\nint32 hdg_acc\n"
+        "uint16 yaw\nuint8 dgps_numch\nuint32 dgps_age\n",
+        "mavros_msgs/msg/EstimatorStatus": "std_msgs/Header header\n"
+        "bool attitude_status_flag\nbool velocity_horiz_status_flag\n"
+        "bool velocity_vert_status_flag\nbool pos_horiz_rel_status_flag\n"
+        "bool pos_horiz_abs_status_flag\nbool pos_vert_abs_status_flag\n"
+        "bool pos_vert_agl_status_flag\nbool const_pos_mode_status_flag\n"
+        "bool pred_pos_horiz_rel_status_flag\nbool pred_pos_horiz_abs_status_flag\n"
+        "bool gps_glitch_status_flag\nbool accel_error_status_flag\n",
         "mavros_msgs/srv/SetMode_Request": "uint8 base_mode\nstring custom_mode\n",
         "mavros_msgs/srv/SetMode_Response": "bool mode_sent\n",
         "mavros_msgs/srv/CommandBool_Request": "bool value\n",

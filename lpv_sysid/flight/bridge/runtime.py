@@ -93,7 +93,21 @@ MAVROS_INPUTS = {
     "mavros_home": ("home_position/home", messages.MAVROS_TYPES["home_position"]),
 }
 #: the MAVROS inputs of the preflight (``mavros.preflight``), besides the ones above
-MAVROS_PREFLIGHT_INPUTS = {"mavros_rc_in": ("rc/in", messages.MAVROS_TYPES["rc_in"])}
+MAVROS_PREFLIGHT_INPUTS = {
+    "mavros_rc_in": ("rc/in", messages.MAVROS_TYPES["rc_in"]),
+    "mavros_battery": ("battery", messages.MAVROS_TYPES["battery"]),
+    "mavros_gps_raw": ("gpsstatus/gps1/raw", messages.MAVROS_TYPES["gps_raw"]),
+    "mavros_gps_fix": ("global_position/raw/fix", messages.MAVROS_TYPES["nav_sat_fix"]),
+    "mavros_estimator": ("estimator_status", messages.MAVROS_TYPES["estimator_status"]),
+}
+#: preflight input key -> (MavrosEvidence field, parser of the message)
+MAVROS_EVIDENCE = {
+    "mavros_rc_in": ("rc_in", messages.rc_in_from_msg),
+    "mavros_battery": ("battery", messages.battery_from_msg),
+    "mavros_gps_raw": ("gps_raw", messages.gps_from_gpsraw),
+    "mavros_gps_fix": ("gps_fix", messages.gps_from_navsatfix),
+    "mavros_estimator": ("estimator_flags", messages.estimator_flags_from_msg),
+}
 #: seconds between the preflight's questions to MAVROS while answers are missing, and
 #: between refreshes of the parameters once all are in (a parameter set meanwhile counts)
 PREFLIGHT_ASK_PERIOD_S = 2.0
@@ -422,9 +436,10 @@ class BridgeRuntime:
         link, cfg, ev = self.mavros_link, self._mavros_cfg, self.evidence
         assert link is not None
         try:
-            if key == "mavros_rc_in":
+            if key in MAVROS_EVIDENCE:
+                name, parse = MAVROS_EVIDENCE[key]
                 if ev is not None:
-                    ev.rc_in = messages.rc_in_from_msg(msg)
+                    setattr(ev, name, parse(msg))
                 return []
             if key == "mavros_state":
                 link.on_state(now, messages.state_from_msg(msg))
@@ -446,6 +461,8 @@ class BridgeRuntime:
                     ev.servo_raw = channels
             elif key == "mavros_home":
                 link.on_home(now, messages.home_ned_from_msg(msg))
+                if ev is not None:
+                    ev.home = messages.home_geo_from_msg(msg)
             elif key == "mavros_target_attitude":
                 t_boot_ms = messages.stamp_ns_of(msg) // 1_000_000
                 _, rates, thrust = messages.rate_setpoint_from_attitude_target_msg(msg)

@@ -19,6 +19,7 @@ So the core's NED/FRD values pass :mod:`lpv_sysid.io.frames` (``frd_to_flu``,
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,6 +38,10 @@ RC_IN = "mavros_msgs/msg/RCIn"
 VEHICLE_INFO_GET = "mavros_msgs/srv/VehicleInfoGet"
 MESSAGE_INTERVAL = "mavros_msgs/srv/MessageInterval"
 GET_PARAMETERS = "rcl_interfaces/srv/GetParameters"  # MAVROS mirrors FCU params as ROS ones
+BATTERY = "sensor_msgs/msg/BatteryState"  # sys_status plugin: SYS_STATUS / BATTERY_STATUS
+GPS_RAW = "mavros_msgs/msg/GPSRAW"  # gps_status plugin: GPS_RAW_INT
+NAV_SAT_FIX = "sensor_msgs/msg/NavSatFix"  # global_position plugin: GPS_RAW_INT fix
+ESTIMATOR_STATUS = "mavros_msgs/msg/EstimatorStatus"  # sys_status plugin: ESTIMATOR_STATUS
 SET_MODE = "mavros_msgs/srv/SetMode"
 COMMAND_BOOL = "mavros_msgs/srv/CommandBool"
 
@@ -54,6 +59,10 @@ MAVROS_TYPES = {
     "vehicle_info_get": VEHICLE_INFO_GET,
     "message_interval": MESSAGE_INTERVAL,
     "get_parameters": GET_PARAMETERS,
+    "battery": BATTERY,
+    "gps_raw": GPS_RAW,
+    "nav_sat_fix": NAV_SAT_FIX,
+    "estimator_status": ESTIMATOR_STATUS,
 }
 #: rcl_interfaces/ParameterValue.type of the numbers (PARAMETER_INTEGER, PARAMETER_DOUBLE)
 PARAMETER_INTEGER, PARAMETER_DOUBLE = 2, 3
@@ -61,6 +70,27 @@ PARAMETER_INTEGER, PARAMETER_DOUBLE = 2, 3
 FRAME_LOCAL_NED = 1
 FRAME_BODY_NED = 8
 MAVLINK_FRAMES = (FRAME_LOCAL_NED, FRAME_BODY_NED)
+#: mavros_msgs/EstimatorStatus fields in the order of MAVLink's ESTIMATOR_STATUS_FLAGS bits
+#: (field k is bit 2**k: attitude 1 .. accel_error 2048; MAVROS sys_status plugin)
+ESTIMATOR_FLAG_FIELDS = (
+    "attitude_status_flag",
+    "velocity_horiz_status_flag",
+    "velocity_vert_status_flag",
+    "pos_horiz_rel_status_flag",
+    "pos_horiz_abs_status_flag",
+    "pos_vert_abs_status_flag",
+    "pos_vert_agl_status_flag",
+    "const_pos_mode_status_flag",
+    "pred_pos_horiz_rel_status_flag",
+    "pred_pos_horiz_abs_status_flag",
+    "gps_glitch_status_flag",
+    "accel_error_status_flag",
+)
+#: sensor_msgs/NavSatStatus.STATUS_FIX: MAVROS publishes it when GPS_RAW_INT.fix_type > 2
+NAV_SAT_STATUS_FIX = 0
+#: GPS_RAW_INT fix types a NavSatFix status stands for (3D fix / no 3D fix) and the
+#: satellite count it cannot tell (255: unknown, as in GPS_RAW_INT)
+FIX_3D, NO_FIX, SATELLITES_UNKNOWN = 3, 1, 255
 
 
 @dataclass(frozen=True)
@@ -148,6 +178,41 @@ def rc_out_from_msg(msg) -> tuple[int, list[int]]:
 def home_ned_from_msg(msg) -> np.ndarray:
     """``mavros_msgs/HomePosition.position`` (local ENU) -> NED [m]."""
     return frames.enu_to_ned(finite(xyz(msg.position), 3, "home position"))
+
+
+def home_geo_from_msg(msg) -> tuple[float, float, float]:
+    """``mavros_msgs/HomePosition.geo`` -> ``(latitude deg, longitude deg, altitude m)``."""
+    g = msg.geo
+    lat, lon, alt = finite([g.latitude, g.longitude, g.altitude], 3, "home geo")
+    return float(lat), float(lon), float(alt)
+
+
+def battery_from_msg(msg) -> tuple[float | None, float]:
+    """``sensor_msgs/BatteryState`` as MAVROS fills it -> ``(remaining %, voltage V)``;
+    ``percentage`` is 0..1 (MAVROS: ``battery_remaining / 100``, so PX4's unknown -1 comes
+    as -0.01); NaN or negative: None (unknown)."""
+    p = float(msg.percentage)
+    pct = 100.0 * p if math.isfinite(p) and p >= 0.0 else None
+    return pct, float(msg.voltage)
+
+
+def gps_from_gpsraw(msg) -> tuple[int, int]:
+    """``mavros_msgs/GPSRAW`` (PX4's GPS_RAW_INT) -> ``(fix_type, satellites_visible)``."""
+    return int(msg.fix_type), int(msg.satellites_visible)
+
+
+def gps_from_navsatfix(msg) -> tuple[int, int]:
+    """``sensor_msgs/NavSatFix`` from MAVROS's global_position plugin -> the
+    ``(fix_type, satellites_visible)`` it implies: STATUS_FIX (>= 0) only for
+    ``fix_type > 2``, so :data:`FIX_3D`, else :data:`NO_FIX`; satellites unknown."""
+    fix = int(msg.status.status) >= NAV_SAT_STATUS_FIX
+    return (FIX_3D if fix else NO_FIX), SATELLITES_UNKNOWN
+
+
+def estimator_flags_from_msg(msg) -> int:
+    """``mavros_msgs/EstimatorStatus`` -> MAVLink ESTIMATOR_STATUS ``flags`` (bit 2**k for
+    field k of :data:`ESTIMATOR_FLAG_FIELDS`)."""
+    return sum(1 << k for k, name in enumerate(ESTIMATOR_FLAG_FIELDS) if bool(getattr(msg, name)))
 
 
 def rc_in_from_msg(msg) -> tuple[int, int]:

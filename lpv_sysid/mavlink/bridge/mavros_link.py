@@ -27,7 +27,9 @@ MAVROS (namespace ``/mavros``)     mavros_msgs / std type      becomes (core inp
 ``rc/out``                         RCOut                       SERVO_OUTPUT_RAW (PWM): the
                                                                rotor estimate (seed 0
                                                                Eq. 8) without ESC rpm
-``home_position/home``             HomePosition                HOME_POSITION (envelope)
+``home_position/home``             HomePosition                HOME_POSITION (envelope;
+                                                               the preflight's home is
+                                                               kept by the runtime)
 ``setpoint_raw/local``             PositionTarget              <- SET_POSITION_TARGET_LOCAL_
                                                                NED (velocity, phase 1)
 ``setpoint_raw/attitude``          AttitudeTarget              <- SET_ATTITUDE_TARGET (body

@@ -54,13 +54,20 @@ class Facts:
     version: Any = None
     params: dict[str, float | int] = field(default_factory=dict)
     seen: set[str] = field(default_factory=set)
-    sys_status: Any = None
+    sys_status: Any = None  # stick evidence (sensor bits) and the battery
     rc_channels: Any = None
     motor_outputs: dict[str, Any] = field(default_factory=dict)  # type -> newest message
     gps: Any = None  # GPS_RAW_INT
     estimator: Any = None  # ESTIMATOR_STATUS
     home: Any = None  # HOME_POSITION
     foreign: dict[tuple[int, int], int] = field(default_factory=dict)
+    #: the battery fields health.py reads (``battery_remaining`` %, -1 unknown;
+    #: ``voltage_battery`` mV): SYS_STATUS's, or MAVROS's ``battery`` topic
+    battery: Any = None
+
+    def __post_init__(self) -> None:
+        if self.battery is None:
+            self.battery = self.sys_status
 
     def absorb(self, m: Any, target: tuple[int, int] | None) -> None:
         mt = m.get_type()
@@ -82,7 +89,7 @@ class Facts:
                 m.param_value, m.param_type
             )
         elif mt == "SYS_STATUS":
-            self.sys_status = m
+            self.sys_status = self.battery = m
         elif mt == "RC_CHANNELS":
             self.rc_channels = m
         elif mt in MOTOR_OUTPUT_SOURCES:

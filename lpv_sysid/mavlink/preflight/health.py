@@ -1,5 +1,6 @@
 """The vehicle's health and limits against the planned flight: battery (SYS_STATUS), GPS fix
-(GPS_RAW_INT), EKF2 (ESTIMATOR_STATUS), home position (HOME_POSITION) and PX4's velocity and
+(GPS_RAW_INT), EKF2 (ESTIMATOR_STATUS), home position (HOME_POSITION) -- over MAVROS the
+same facts from its topics (:mod:`~lpv_sysid.mavlink.preflight.mavros`) -- and PX4's velocity and
 tilt limits (MPC_XY_VEL_MAX, MPC_Z_VEL_MAX_UP, MPC_Z_VEL_MAX_DN, MPC_TILTMAX_AIR) against
 what the box asks (:class:`~lpv_sysid.control.campaign.FlightDemands`).
 
@@ -7,9 +8,9 @@ Rules (PX4 v1.16):
 - battery: ``battery_remaining`` >= the charge the plan needs (worst-case use + reserve,
   :class:`~lpv_sysid.control.campaign.FlightBudget`; without a plan: the reserve alone),
   NO-GO below; unknown (-1, no SYS_STATUS): NO-GO;
-- GPS: a 3D fix (``fix_type`` >= 3) GO; without one, GO is left to the EKF check (indoor
-  flight on vision / flow: WARN when the EKF has a relative horizontal position), NO-GO
-  when the EKF has no horizontal position either;
+- GPS: a 3D fix (``fix_type`` >= 3) GO (satellites shown unless 255, unknown); without
+  one, GO is left to the EKF check (indoor flight on vision / flow: WARN when the EKF has
+  a relative horizontal position), NO-GO when the EKF has no horizontal position either;
 - EKF: attitude, horizontal and vertical velocity, relative horizontal position and
   vertical position valid, no GPS glitch or accelerometer error flag, else NO-GO (the
   velocity loop of PX4 and the bridge's state both come from it);
@@ -55,7 +56,7 @@ def health_checks(
     """Battery, GPS, EKF, home and the PX4 limits (module docstring); ``demands`` and
     ``battery_needed_pct`` come from the plan (None: ``lpv-sysid preflight`` without one)."""
     return [
-        _battery(facts.sys_status, battery_needed_pct),
+        _battery(facts.battery, battery_needed_pct),
         _gps(facts.gps, facts.estimator),
         _ekf(facts.estimator),
         _home(facts.home),
@@ -63,13 +64,19 @@ def health_checks(
     ]
 
 
-def _battery(sys_status: Any, needed: float | None) -> Check:
+def _battery(battery: Any, needed: float | None) -> Check:
     need = BATTERY_RESERVE_PCT if needed is None else needed
     expected = f">= {need:.0f} %" + (" (plan + reserve)" if needed is not None else " (reserve)")
-    if sys_status is None or int(sys_status.battery_remaining) < 0:
-        return Check("battery", "unknown", expected, NOGO, "no battery state in SYS_STATUS")
-    pct = int(sys_status.battery_remaining)
-    value = f"{pct} % ({sys_status.voltage_battery / 1000:.2f} V)"
+    if battery is None or int(battery.battery_remaining) < 0:
+        return Check(
+            "battery",
+            "unknown",
+            expected,
+            NOGO,
+            "no battery state (none received, or remaining -1)",
+        )
+    pct = int(battery.battery_remaining)
+    value = f"{pct} % ({battery.voltage_battery / 1000:.2f} V)"
     if pct < need:
         fix = (
             "charge or swap the battery, or fly fewer runs (campaign.vertices) "
@@ -84,9 +91,9 @@ def _battery(sys_status: Any, needed: float | None) -> Check:
 def _gps(gps: Any, est: Any) -> Check:
     expected = "3D fix"
     if gps is not None and int(gps.fix_type) >= 3:
-        return Check(
-            "GPS", f"fix type {int(gps.fix_type)}, {gps.satellites_visible} sats", expected, GO
-        )
+        sats = int(gps.satellites_visible)  # 255: unknown (GPS_RAW_INT)
+        value = f"fix type {int(gps.fix_type)}" + (f", {sats} sats" if sats != 255 else "")
+        return Check("GPS", value, expected, GO)
     value = "no GPS_RAW_INT" if gps is None else f"fix type {int(gps.fix_type)} (no 3D fix)"
     if est is not None and int(est.flags) & EKF_HORIZ_POS:
         return Check(

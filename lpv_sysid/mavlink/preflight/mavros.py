@@ -17,7 +17,23 @@ RC_CHANNELS                  ``/mavros/rc/in`` (channel count, RSSI)
 telemetry streams            ``local_position/odom`` (ODOMETRY), ``imu/data``
                              (HIGHRES_IMU), ``esc_status/status`` (ESC_STATUS), ``rc/out``
                              (SERVO_OUTPUT_RAW, port 0)
+battery (SYS_STATUS          ``battery`` (sensor_msgs/BatteryState): ``percentage`` x 100
+battery fields)              -> ``battery_remaining``, unknown when NaN or negative
+                             (MAVROS sends PX4's -1 as -0.01); ``voltage`` -> mV
+GPS_RAW_INT                  ``gpsstatus/gps1/raw`` (mavros_msgs/GPSRAW: ``fix_type``,
+                             ``satellites_visible``); without it
+                             ``global_position/raw/fix`` (NavSatFix: STATUS_FIX, sent by
+                             MAVROS for ``fix_type`` > 2, -> fix type 3; else 1;
+                             satellites unknown)
+ESTIMATOR_STATUS             ``estimator_status`` (mavros_msgs/EstimatorStatus): the
+                             ``*_status_flag`` booleans -> ``flags`` bits
+                             (:data:`~lpv_sysid.io.messages.mavros.ESTIMATOR_FLAG_FIELDS`)
+HOME_POSITION                ``home_position/home`` (mavros_msgs/HomePosition ``geo``:
+                             degrees -> degE7, metres -> mm)
 ===========================  ==========================================================
+
+These facts are judged by :mod:`~lpv_sysid.mavlink.preflight.health` with the rules and
+verdicts of the MAVLink transport (without a plan: the battery reserve alone).
 
 SYS_STATUS (PX4's own stick verdict) is not used: stick input is decided from
 COM_RC_IN_MODE and RC_CHANNELS as on a link without SYS_STATUS. A fact MAVROS has not
@@ -51,6 +67,11 @@ class MavrosEvidence:
     seen: set[str] = field(default_factory=set)  # MAVLink names of the streams seen
     rc_in: tuple[int, int] | None = None  # (channel count, RSSI) of /mavros/rc/in
     servo_raw: list[int] | None = None  # newest /mavros/rc/out channels
+    battery: tuple[float | None, float] | None = None  # (remaining % or None, V) of battery
+    gps_raw: tuple[int, int] | None = None  # (fix_type, satellites) of gpsstatus/gps1/raw
+    gps_fix: tuple[int, int] | None = None  # the same implied by global_position/raw/fix
+    estimator_flags: int | None = None  # ESTIMATOR_STATUS flags of estimator_status
+    home: tuple[float, float, float] | None = None  # (lat deg, lon deg, alt m) of home
 
     def missing_params(self) -> list[str]:
         return [p for p in PARAMS if p not in self.params]
@@ -91,6 +112,30 @@ class _ServoOutputRaw:
             setattr(self, f"servo{k + 1}_raw", int(channels[k]) if k < len(channels) else 0)
 
 
+@dataclass(frozen=True)
+class _Battery:
+    battery_remaining: int  # %, -1 unknown (SYS_STATUS)
+    voltage_battery: float  # mV
+
+
+@dataclass(frozen=True)
+class _Gps:
+    fix_type: int
+    satellites_visible: int
+
+
+@dataclass(frozen=True)
+class _Estimator:
+    flags: int
+
+
+@dataclass(frozen=True)
+class _Home:
+    latitude: int  # degE7
+    longitude: int  # degE7
+    altitude: int  # mm
+
+
 def facts_from_mavros(ev: MavrosEvidence) -> Facts:
     """The preflight :class:`~lpv_sysid.mavlink.preflight.Facts` of MAVROS's evidence."""
     v = ev.vehicle
@@ -104,6 +149,19 @@ def facts_from_mavros(ev: MavrosEvidence) -> Facts:
     if ev.servo_raw is not None:
         facts.motor_outputs["SERVO_OUTPUT_RAW"] = _ServoOutputRaw(ev.servo_raw)
         facts.seen.add("SERVO_OUTPUT_RAW")
+    if ev.battery is not None:
+        pct, volts = ev.battery
+        # PX4's battery_remaining is an integer %; MAVROS divided it by 100 in float32
+        remaining = -1 if pct is None else int(round(pct))
+        facts.battery = _Battery(remaining, 1000.0 * volts)
+    gps = ev.gps_raw if ev.gps_raw is not None else ev.gps_fix
+    if gps is not None:
+        facts.gps = _Gps(*gps)
+    if ev.estimator_flags is not None:
+        facts.estimator = _Estimator(ev.estimator_flags)
+    if ev.home is not None:
+        lat, lon, alt = ev.home
+        facts.home = _Home(round(lat * 1e7), round(lon * 1e7), round(alt * 1e3))
     return facts
 
 
