@@ -162,7 +162,8 @@ def test_dry_run_prints_time_battery_airspace_and_explains_the_columns(capsys, t
 
 
 def test_without_a_terminal_fly_refuses_unless_yes(tmp_path):
-    """stdin from /dev/null: no one can confirm; exit 2 before any connection is made."""
+    """stdin from /dev/null: no one can confirm; exit 2 before any connection is made (phase
+    2: a missing gains file is named first, its files are checked before the question)."""
     argv = [sys.executable, "-m", "lpv_sysid.cli", "fly", "phase1", "--connect"]
     argv += [f"udpin:127.0.0.1:{free_udp_port()}", "--config", str(CONFIG / "campaign.yaml")]
     argv += ["--out", str(tmp_path / "o")]
@@ -179,7 +180,8 @@ def test_without_a_terminal_fly_refuses_unless_yes(tmp_path):
         text=True,
         timeout=120,
     )
-    assert r.returncode == 2 and "pass --yes" in r.stderr, r.stderr
+    # phase 2 checks its files first (test_phase2_one_path: the question comes after them)
+    assert r.returncode == 2 and "g: cannot read" in r.stderr, r.stderr
 
 
 def test_not_confirmed_nothing_arms_and_parameters_are_restored(tmp_path, vehicles):

@@ -172,6 +172,25 @@ def test_every_tamper_is_refused_by_the_node_and_by_fly_phase2_alike(
     assert status == 2 and text in err, err
 
 
+def test_fly_phase2_without_a_terminal_is_refused_after_the_checks_before_the_link(
+    design,  # noqa: F811
+    tmp_path,
+):
+    """Untampered files, stdin not a terminal, no --yes: the checks pass, then the question
+    cannot be asked -> exit 2 'pass --yes', before any link is opened (nothing written)."""
+    import subprocess
+    import sys
+
+    gains, signals, _ = _tampered(design, tmp_path, "none")
+    argv = [sys.executable, "-m", "lpv_sysid.cli", "fly", "phase2", "--connect"]
+    argv += [f"udpin:127.0.0.1:{free_udp_port()}", "--gains", str(gains)]
+    argv += ["--signals", str(signals), "--out", str(tmp_path / "p2")]
+    r = subprocess.run(argv, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2, r.stderr
+    assert "refusing to fly without confirmation: stdin is not a terminal; pass --yes" in r.stderr
+    assert not (tmp_path / "p2").exists() or not any((tmp_path / "p2").iterdir())
+
+
 # ============================================ issue 21 items 4 and 5: the bag and the latency
 FLIGHT_OPTS = Phase2Options(duration=20.0, ramp_s=2.0, lead_in_s=1.0)
 
