@@ -76,7 +76,10 @@ from lpv_sysid.control.campaign.plan import (
     DESCENT,
     LEVEL,
     ExcitationProfile,
+    Px4Need,
+    airspace,
     plan_campaign,
+    px4_needs,
     run_name,
 )
 from lpv_sysid.control.campaign.protocol import (
@@ -119,6 +122,7 @@ __all__ = [
     "DONE",
     "EXCITATION",
     "ExcitationProfile",
+    "Px4Need",
     "FAILED",
     "FINISHING",
     "FinishBridge",
@@ -135,7 +139,9 @@ __all__ = [
     "TERMINAL",
     "TRIM",
     "VehicleStatus",
+    "airspace",
     "plan_campaign",
+    "px4_needs",
     "run_name",
     "trim_rows",
 ]

@@ -115,6 +115,63 @@ class CampaignPlan:
         return "\n".join(lines)
 
 
+#: margin on the speeds the box needs before PX4's limits (MPC_*_VEL_MAX) clip them
+PX4_LIMIT_MARGIN = 1.1
+
+
+@dataclass(frozen=True)
+class Px4Need:
+    """A PX4 parameter the campaign needs at least at ``needed`` (preflight NO-GO below)."""
+
+    param: str
+    needed: float
+    unit: str
+    why: str
+
+
+def px4_needs(plan: "CampaignPlan") -> list[Px4Need]:
+    """The PX4 v1.16 limits the campaign's velocity commands must stay under (PX4's position
+    controller clips offboard velocity setpoints to them, so a box beyond them is flown
+    smaller than planned, silently): the largest horizontal speed (|u| + excitation peak,
+    |v| + peak) -> MPC_XY_VEL_MAX, climb (-w + peak) -> MPC_Z_VEL_MAX_UP, descent (w + peak)
+    -> MPC_Z_VEL_MAX_DN, each x :data:`PX4_LIMIT_MARGIN`; the tilt that holds the fastest
+    horizontal run against drag (``drag_estimate`` x speed) -> MPC_TILTMAX_AIR [deg], with
+    the same margin."""
+    cfg, ex = plan.config, plan.excitation
+    runs = plan.runs
+    xy = max(
+        math.hypot(abs(r.vertex[0]) + ex.peak[0], abs(r.vertex[1]) + ex.peak[1]) for r in runs
+    )
+    up = max([cfg.climb_rate] + [-r.vertex[2] + ex.peak[2] for r in runs])
+    dn = max([cfg.descent_rate] + [r.vertex[2] + ex.peak[2] for r in runs])
+    tilt = math.degrees(math.atan(cfg.drag_estimate * xy / 9.80665))
+    k = PX4_LIMIT_MARGIN
+    return [
+        Px4Need("MPC_XY_VEL_MAX", round(k * xy, 2), "m/s", f"horizontal speed {xy:.2f} m/s"),
+        Px4Need("MPC_Z_VEL_MAX_UP", round(k * up, 2), "m/s", f"climb {up:.2f} m/s"),
+        Px4Need("MPC_Z_VEL_MAX_DN", round(k * dn, 2), "m/s", f"descent {dn:.2f} m/s"),
+        Px4Need(
+            "MPC_TILTMAX_AIR",
+            round(min(k * tilt, 89.0), 1),
+            "deg",
+            f"tilt {tilt:.1f} deg against drag {cfg.drag_estimate:g} 1/s x {xy:.2f} m/s",
+        ),
+    ]
+
+
+def airspace(plan: "CampaignPlan") -> dict:
+    """The airspace the campaign needs: the altitude window (heights above home), the
+    largest horizontal distance from home of any run and the height each run climbs or
+    descends through."""
+    cfg = plan.config
+    return {
+        "altitude_window_m": [cfg.altitude_min, cfg.altitude_max],
+        "radius_m": round(max(r.horizontal_extent for r in plan.runs), 1),
+        "radius_limit_m": cfg.radius,
+        "largest_altitude_room_m": round(max(r.altitude_room for r in plan.runs), 1),
+    }
+
+
 def run_name(vertex) -> str:
     """The name of the phase-1 run at a vertex (its bag directory): ``vertex_p5_m5_0``."""
     return "vertex_" + "_".join(

@@ -168,6 +168,7 @@ def fly(
             for d in done:
                 echo(f"PARAM_SET {d['name']}: {d['old']} -> {d['new']:g} (confirmed)")
         if preflight:
+            from lpv_sysid.control.campaign import airspace, px4_needs
             from lpv_sysid.mavlink import preflight as pf
 
             checks = pf.run_checks(
@@ -176,6 +177,8 @@ def fly(
                 clock=clock,
                 sleep=sleep,
                 rotor_estimate=bcfg.rotor_estimate,
+                needs=px4_needs(plan),
+                airspace=airspace(plan),
             )
             echo(pf.format_table(checks))
             summary["preflight"] = [dataclasses.asdict(c) for c in checks]

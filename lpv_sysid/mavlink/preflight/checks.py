@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any, Callable
+from typing import Any, Callable, Mapping, Sequence
 
 from lpv_sysid.mavlink import codec, px4
 from lpv_sysid.mavlink.link import MavlinkLink
@@ -32,10 +32,13 @@ def run_checks(
     sleep: Callable[[float], None] = time.sleep,
     grace: float = 1.5,
     rotor_estimate: RotorEstimateConfig | None = None,
+    needs: Sequence[Any] = (),
+    airspace: Mapping[str, Any] | None = None,
 ) -> list[Check]:
     """Gather the facts (at most ``timeout`` s; ends once all are in, or ``grace`` s after
-    the stream requests when only possibly-absent streams are missing) and judge them."""
-    facts = gather(link, timeout, clock, sleep, grace)
+    the stream requests when only possibly-absent streams are missing) and judge them;
+    ``needs``/``airspace``: what the campaign needs (:func:`judge`)."""
+    facts = gather(link, timeout, clock, sleep, grace, tuple(n.param for n in needs))
     return judge(
         facts.hb,
         facts.version,
@@ -44,6 +47,8 @@ def run_checks(
         link,
         facts=facts,
         rotor_estimate=rotor_estimate,
+        needs=needs,
+        airspace=airspace,
     )
 
 
@@ -56,8 +61,13 @@ def judge(
     *,
     facts: Facts | None = None,
     rotor_estimate: RotorEstimateConfig | None = None,
+    needs: Sequence[Any] = (),
+    airspace: Mapping[str, Any] | None = None,
 ) -> list[Check]:
-    """Turn the gathered facts into checks (pure; tested without a vehicle)."""
+    """Turn the gathered facts into checks (pure; tested without a vehicle). ``needs``: the
+    PX4 limits the flight needs (objects with ``param``, ``needed``, ``unit``, ``why``:
+    ``control.campaign.px4_needs``), each NO-GO below its value or when not received, naming
+    the parameter and the value to set; ``airspace``: what the flight needs, reported."""
     if facts is None:
         facts = Facts(hb=hb, version=version, params=dict(params), seen=set(seen))
     cfg = rotor_estimate or RotorEstimateConfig()
@@ -248,4 +258,31 @@ def judge(
         )
     )
     out.append(_rotor_check(facts, cfg))
+    out += [_need_check(n, params.get(n.param)) for n in needs]
+    if airspace:
+        out.append(
+            Check(
+                "airspace",
+                f"heights {airspace['altitude_window_m'][0]:g}-"
+                f"{airspace['altitude_window_m'][1]:g} m above home, radius "
+                f"{airspace['radius_m']:g} m (limit {airspace['radius_limit_m']:g} m)",
+                "(information: clear this airspace)",
+                GO,
+            )
+        )
     return out
+
+
+def _need_check(need: Any, value: float | int | None) -> Check:
+    fix = f"`param set {need.param} {need.needed:g}`"
+    expected = f">= {need.needed:g} {need.unit} ({need.why})"
+    if value is None:
+        return Check(need.param, "missing", expected, NOGO, f"parameter not received; {fix}")
+    ok = math.isfinite(float(value)) and float(value) >= need.needed
+    return Check(
+        need.param,
+        f"{float(value):g} {need.unit}",
+        expected,
+        GO if ok else NOGO,
+        "" if ok else f"PX4 would clip the box's commands: raise it, {fix}",
+    )

@@ -44,6 +44,7 @@ class Facts:
     rc_channels: Any = None
     motor_outputs: dict[str, Any] = field(default_factory=dict)  # type -> newest message
     foreign: dict[tuple[int, int], int] = field(default_factory=dict)
+    extra_params: tuple = ()  # names asked for besides REQUIRED_PARAMS + INFO_PARAMS
 
     def absorb(self, m: Any, target: tuple[int, int] | None) -> None:
         mt = m.get_type()
@@ -77,6 +78,7 @@ class Facts:
             self.hb is not None
             and self.version is not None
             and all(p in self.params for p in REQUIRED_PARAMS + INFO_PARAMS)
+            and all(p in self.params for p in self.extra_params)
         )
 
     def all_in(self) -> bool:
@@ -95,9 +97,10 @@ def gather(
     clock: Callable[[], float] = time.monotonic,
     sleep: Callable[[float], None] = time.sleep,
     grace: float = 1.5,
+    extra_params: tuple = (),
 ) -> Facts:
     t0 = clock()
-    facts = Facts()
+    facts = Facts(extra_params=tuple(extra_params))
     next_req = t0
     t_streams: float | None = None
     mod = link.dialect_module
@@ -120,7 +123,7 @@ def gather(
                 link.command_long(
                     px4.MAV_CMD_REQUEST_MESSAGE, float(mod.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
                 )
-            for name in REQUIRED_PARAMS + INFO_PARAMS:
+            for name in REQUIRED_PARAMS + INFO_PARAMS + facts.extra_params:
                 if name not in facts.params:
                     link.send(
                         link.codec.param_request_read_encode(

@@ -57,6 +57,7 @@ PARAMS: dict[str, ParamSpec] = {
     "MPC_Z_VEL_MAX_UP": ParamSpec(3.0, _R32, 0.5, 8.0),
     "MPC_Z_VEL_MAX_DN": ParamSpec(1.5, _R32, 0.5, 4.0),
     "MPC_LAND_SPEED": ParamSpec(0.7, _R32, 0.6, 4.0),
+    "MPC_TILTMAX_AIR": ParamSpec(45.0, _R32, 20.0, 89.0),  # served (preflight); not simulated
     "MIS_TAKEOFF_ALT": ParamSpec(2.5, _R32, 0.0, 1000.0),
     "MC_ROLLRATE_P": ParamSpec(0.15, _R32, 0.01, 0.5),
     "MC_PITCHRATE_P": ParamSpec(0.15, _R32, 0.01, 0.6),
