@@ -628,3 +628,46 @@ def test_full_box_plan_flies_all_eight_vertices_and_preflight_names_the_limits_t
         c.name: c for c in judge(f.hb, f.version, f.params, f.seen, facts=f, needs=px4_needs(plan))
     }
     assert by["MPC_TILTMAX_AIR"].verdict == NOGO and by["MPC_TILTMAX_AIR"].value == "missing"
+
+
+def test_resume_flies_only_the_runs_a_stopped_flight_did_not_complete(tmp_path):
+    """``fly phase1 --resume DIR`` (issue 22 item 1, batteries): the full-box campaign stopped
+    after 3 complete runs and one incomplete run; the resumed campaign plans exactly the 5
+    vertices left (the incomplete one again) + hover, and says which were done; a previous
+    flight over another box, a directory without a summary, and a campaign with every
+    vertex done are refused by name."""
+    import dataclasses
+
+    from lpv_sysid.configuration.defaults import config_file
+    from lpv_sysid.errors import ConfigError
+    from lpv_sysid.flight.campaign import FlyConfig, plan_flight, resume_config
+    from lpv_sysid.io.files import save_yaml
+
+    cfg = FlyConfig.load(config_file("campaign_px4_box.yaml"))
+    plan = plan_flight(cfg, None)
+    runs = [r for r in plan.runs]
+    prev = tmp_path / "flight1"
+    prev.mkdir()
+    summary = {
+        "plan": [r.to_dict() for r in runs],
+        "runs": [{"name": r.name, "complete": True} for r in runs[:3]]
+        + [{"name": runs[3].name, "complete": False, "reason": "battery"}],
+    }
+    save_yaml(summary, prev / "campaign_summary.yaml")
+    cfg2, done = resume_config(cfg, prev)
+    assert done == [r.name for r in runs[:3]]
+    plan2 = plan_flight(cfg2, None)
+    left = [r.name for r in plan2.runs]
+    assert sorted(left) == sorted(r.name for r in runs[3:])
+    assert len(left) == 6 and "hover_validation" in left
+    with pytest.raises(ConfigError, match="no campaign_summary.yaml"):
+        resume_config(cfg, tmp_path)
+    small = dataclasses.replace(
+        cfg, campaign=dataclasses.replace(cfg.campaign, box_min=(-4, -4, -1), box_max=(4, 4, 1))
+    )
+    with pytest.raises(ConfigError, match="not vertices of this campaign's box"):
+        resume_config(small, prev)
+    summary["runs"] = [{"name": r.name, "complete": True} for r in runs]
+    save_yaml(summary, prev / "campaign_summary.yaml")
+    with pytest.raises(ConfigError, match="every vertex was completed"):
+        resume_config(cfg, prev)

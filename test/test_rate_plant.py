@@ -521,3 +521,65 @@ def _short(run):
     """(t, x, t, u) of the first 8 s of a run (less than min_vertex_s after trimming)."""
     k = int(8.0 * 50)
     return run.t[:k], run.x[:k], run.t[:k], run.u_raw[:k]
+
+
+def _write_rate_bag(path, t, x, u, t0_ns):
+    """A phase-1 run bag as `fly phase1 --record-rate-setpoints` writes it: state at 100 Hz,
+    PX4's rate setpoints at 50 Hz (from a 200 Hz simulation)."""
+    from lpv_sysid.io import bag as bg
+    from lpv_sysid.io import messages as m
+
+    f = m.MsgFactory.rosbags()
+    with bg.BagWriter(path) as b:
+        b.add_topic("/lpv_sysid/state", m.TYPES["state"])
+        b.add_topic("/lpv_sysid/rate_setpoint", m.TYPES["actuator_command"])
+        for i in range(0, len(t), 2):
+            ns = t0_ns + round(t[i] * 1e9)
+            eul = [x[i, 0], x[i, 1], 0.0]
+            msg = m.odometry_from_state(f, ns, [0.0, 0.0, -30.0], eul, x[i, 2:5], x[i, 5:8])
+            b.write("/lpv_sysid/state", ns, msg)
+        for i in range(0, len(t), 4):
+            ns = t0_ns + round(t[i] * 1e9)
+            b.write(
+                "/lpv_sysid/rate_setpoint", ns, m.joint_state(f, ns, rp.INPUT_NAMES, position=u[i])
+            )
+
+
+def test_identify_cli_takes_the_bags_of_several_flights_per_vertex(tmp_path, capsys):
+    """``identify --plant px4-rate --bags FLIGHT1 FLIGHT2`` (issue 22 items 1-2: a campaign
+    over two batteries, ``fly phase1 --resume``): three corners of the +-5/+-5/+-1.2 box of
+    config/campaign_px4_box.yaml flown over two flights get their own fits (their drag is
+    the simulated truth of each corner), the other five the pooled fit, and the printed
+    table and vertex_models.yaml say which."""
+    from lpv_sysid.cli.main import main as cli_main
+    from lpv_sysid.configuration.defaults import config_file
+    from lpv_sysid.io.files import read_yaml
+    from lpv_sysid.models.lpv import box_vertices
+
+    vmin, vmax = [-5.0, -5.0, -1.2], [5.0, 5.0, 1.2]
+    corners = box_vertices(vmin, vmax)
+    flown = {0: "flight1", 7: "flight1", 2: "flight2"}
+    for n, (k, flight) in enumerate(flown.items()):
+        c = corners[k]
+        t, x, u = _simulate_at(_scheduled_truth(c), tuple(c), T=25.0, seed=40 + k)
+        _write_rate_bag(tmp_path / flight / f"bag_{n:04d}", t, x, u, 10**9 * (100 + 60 * n))
+    out = tmp_path / "vertex_models.yaml"
+    args = ["identify", "--plant", "px4-rate", "--bags", str(tmp_path / "flight1")]
+    args += [str(tmp_path / "flight2"), "--out", str(out)]
+    args += ["--campaign", str(config_file("campaign_px4_box.yaml"))]
+    assert cli_main(args) == 0
+    printed = capsys.readouterr().out
+    rows = [ln.split() for ln in printed.splitlines() if ln.strip().startswith(tuple("12345678"))]
+    assert [r[0] for r in rows] == [str(k) for k in range(1, 9)]
+    assert [r[4] for r in rows] == ["vertex" if k in flown else "pooled" for k in range(8)]
+    assert printed.count("(no run at this vertex)") == 5
+    (tmp_path / "printed.txt").write_text(printed)
+    doc = read_yaml(str(out))
+    ident = doc["meta"]["identification"]
+    assert [v["source"] for v in ident["vertices"]] == [
+        "vertex" if k in flown else "pooled" for k in range(8)
+    ]
+    for k in flown:
+        A = np.array(doc["vertices"][k]["A"])
+        assert A[2, 2] == pytest.approx(_scheduled_truth(corners[k]).X_u, rel=0.05)
+        assert A[5, 5] == pytest.approx(_scheduled_truth(corners[k]).L_p, rel=0.05)

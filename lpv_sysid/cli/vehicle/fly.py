@@ -21,7 +21,7 @@ import sys
 from pathlib import Path
 
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.flight.campaign import EXIT_FAILED, FlyConfig, fly, plan_flight
+from lpv_sysid.flight.campaign import EXIT_FAILED, FlyConfig, fly, plan_flight, resume_config
 
 COMMAND = "fly"
 HELP = (
@@ -66,7 +66,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "e.g. COM_OBL_RC_ACT=5 on a SITL without RC",
     )
     p.add_argument(
-        "--dry-run", action="store_true", help="load and plan only; print the plan and exit"
+        "--dry-run",
+        action="store_true",
+        help="load and plan only; print the plan, the PX4 limits and airspace it needs, exit",
+    )
+    p.add_argument(
+        "--resume",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="continue the campaign a stopped flight (its output DIR) did not complete: fly "
+        "only the runs not complete there (identify then takes --bags DIR OUT)",
     )
     p2 = modes.add_parser(
         "phase2",
@@ -135,8 +145,23 @@ def run(args: argparse.Namespace) -> int:
         return 0 if s.get("ok") else EXIT_FAILED
     cfg = FlyConfig.load(args.config)
     params = parse_params(args.set_param)  # a dry run checks them too
+    resumed = None
+    if args.resume is not None:
+        cfg, done = resume_config(cfg, args.resume)
+        resumed = {"dir": str(args.resume), "completed": done}
+        print(f"resuming {args.resume}: {len(done)} run(s) complete there ({', '.join(done)})")
     if args.dry_run:
-        print(plan_flight(cfg, args.connect, args.signals).describe())
+        from lpv_sysid.control.campaign import airspace, px4_needs
+
+        plan = plan_flight(cfg, args.connect, args.signals)
+        print(plan.describe())
+        for n in px4_needs(plan):
+            print(f"PX4 {n.param} >= {n.needed:g} {n.unit} ({n.why})")
+        a = airspace(plan)
+        print(
+            f"airspace: heights {a['altitude_window_m'][0]:g}-{a['altitude_window_m'][1]:g} m "
+            f"above home, radius {a['radius_m']:g} m"
+        )
         return 0
     res = fly(
         cfg,
@@ -146,6 +171,7 @@ def run(args: argparse.Namespace) -> int:
         params=params,
         record_rate_setpoints=args.record_rate_setpoints,
         echo=print,
+        resumed_from=resumed,
     )
     if res.status:
         print(f"lpv-sysid fly: {res.phase}: {res.reason}", file=sys.stderr)

@@ -25,14 +25,14 @@ def format_identification(rep: dict) -> str:
         names = ("X_u", "Y_v", "Z_w", "Z_T", "L_p", "M_q", "N_r")
         lines.append(
             "  per vertex (estimate +- std; seed 0 Tables 1-2):\n"
-            f"  {'#':>2} {'vertex [m/s]':<18} {'source':<7} " + " ".join(f"{n:>13}" for n in names)
+            f"  {'#':>2} {'vertex [m/s]':<18} {'source':<7} " + " ".join(f"{n:>16}" for n in names)
         )
         for v in rep["vertices"]:
             q, sd = v["params"], v["params"]["std"]
             vtx = "[" + " ".join(f"{c:+.3g}" for c in v["vertex"]) + "]"
             lines.append(
                 f"  {v['index']:>2} {vtx:<18} {v['source']:<7} "
-                + " ".join(f"{q[n]:>6.3g}+-{sd.get(n, 0.0):<5.2g}" for n in names)
+                + " ".join(f"{f'{q[n]:.3g}+-{sd.get(n, 0.0):.2g}':>16}" for n in names)
                 + (f"  ({v['reason']})" if v["reason"] else "")
             )
         sch = rep.get("scheduling") or {}
