@@ -453,6 +453,24 @@ def _scheduled_truth(corner):
     )
 
 
+def _flown_at(P, corner):
+    """The FRD body velocity at which the rate plant ``P`` flies the campaign vertex
+    ``corner`` (commanded in the heading frame, ``body_ned``): the fixed point of
+    v_body = R(phi, theta)^T corner with (phi, theta) the trim attitude at v_body."""
+    corner = np.asarray(corner, dtype=float)
+    vb = corner.copy()
+    for _ in range(50):
+        x0, _ = rp.trim(tuple(vb), P)
+        x = np.r_[x0[:2], vb, np.zeros(3)][None, :]
+        # level = R vb (orthonormal R): R^T corner from the level image of the unit vectors
+        R = np.column_stack(
+            [rid.level_velocity(np.r_[x0[:2], e, np.zeros(3)][None, :])[0] for e in np.eye(3)]
+        )
+        vb = R.T @ corner
+    assert np.allclose(rid.level_velocity(x)[0], corner, atol=1e-6)
+    return tuple(vb)
+
+
 def test_per_vertex_identification_recovers_each_vertex_within_its_intervals(tmp_path):
     """Issue 22 item 2: each corner of a +-4/+-4/+-2 m/s box is flown (simulated) with its own
     true coefficients and measurement noise (0.003 rad, 0.02 m/s, 0.01 rad/s); the per-vertex
@@ -470,7 +488,8 @@ def test_per_vertex_identification_recovers_each_vertex_within_its_intervals(tmp
     noise = (0.003, 0.02, 0.01)
     runs = []
     for k, c in enumerate(corners):
-        t, x, u = _simulate_at(_scheduled_truth(c), tuple(c), T=30.0, seed=k, noise=noise)
+        P = _scheduled_truth(c)
+        t, x, u = _simulate_at(P, _flown_at(P, c), T=30.0, seed=k, noise=noise)
         runs.append(rid.run_from_arrays(f"vertex_{k + 1}", t[::2], x[::2], t[::4], u[::4]))
     t, x, u = _simulate_at(P0, (0.0, 0.0, 0.0), T=20.0, seed=20, noise=noise)
     hover = rid.run_from_arrays("hover", t[::2], x[::2], t[::4], u[::4])
@@ -547,7 +566,7 @@ def _write_rate_bag(path, t, x, u, t0_ns):
 
 def test_identify_cli_takes_the_bags_of_several_flights_per_vertex(tmp_path, capsys):
     """``identify --plant px4-rate --bags FLIGHT1 FLIGHT2`` (issue 22 items 1-2: a campaign
-    over two batteries, ``fly phase1 --resume``): three corners of the +-5/+-5/+-1.2 box of
+    over two batteries, ``fly phase1 --resume``): three corners of the +-4/+-4/+-1.2 box of
     config/campaign_px4_box.yaml flown over two flights get their own fits (their drag is
     the simulated truth of each corner), the other five the pooled fit, and the printed
     table and vertex_models.yaml say which."""
@@ -556,12 +575,13 @@ def test_identify_cli_takes_the_bags_of_several_flights_per_vertex(tmp_path, cap
     from lpv_sysid.io.files import read_yaml
     from lpv_sysid.models.lpv import box_vertices
 
-    vmin, vmax = [-5.0, -5.0, -1.2], [5.0, 5.0, 1.2]
+    vmin, vmax = [-4.0, -4.0, -1.2], [4.0, 4.0, 1.2]
     corners = box_vertices(vmin, vmax)
     flown = {0: "flight1", 7: "flight1", 2: "flight2"}
     for n, (k, flight) in enumerate(flown.items()):
         c = corners[k]
-        t, x, u = _simulate_at(_scheduled_truth(c), tuple(c), T=25.0, seed=40 + k)
+        P = _scheduled_truth(c)
+        t, x, u = _simulate_at(P, _flown_at(P, c), T=25.0, seed=40 + k)
         _write_rate_bag(tmp_path / flight / f"bag_{n:04d}", t, x, u, 10**9 * (100 + 60 * n))
     out = tmp_path / "vertex_models.yaml"
     args = ["identify", "--plant", "px4-rate", "--bags", str(tmp_path / "flight1")]
@@ -583,3 +603,14 @@ def test_identify_cli_takes_the_bags_of_several_flights_per_vertex(tmp_path, cap
         A = np.array(doc["vertices"][k]["A"])
         assert A[2, 2] == pytest.approx(_scheduled_truth(corners[k]).X_u, rel=0.05)
         assert A[5, 5] == pytest.approx(_scheduled_truth(corners[k]).L_p, rel=0.05)
+
+
+def test_level_velocity_rotates_body_velocity_by_roll_and_pitch():
+    """Hand values: pitch 30 deg nose up, body u = 1 -> level (cos 30, 0, -sin 30); roll 90
+    deg right, body w = 1 (down in the body) -> level v = -1 (the body's down points left);
+    the norm is kept."""
+    th = math.radians(30.0)
+    x = np.array([[0.0, th, 1.0, 0.0, 0.0, 0, 0, 0], [math.pi / 2, 0.0, 0.0, 0.0, 1.0, 0, 0, 0]])
+    lv = rid.level_velocity(x)
+    assert lv[0] == pytest.approx([math.cos(th), 0.0, -math.sin(th)], abs=1e-12)
+    assert lv[1] == pytest.approx([0.0, -1.0, 0.0], abs=1e-12)

@@ -350,17 +350,30 @@ class VertexFit:
     rows: dict  # per row: R^2 (own fit) or the pooled fit's
 
 
+def level_velocity(x: np.ndarray) -> np.ndarray:
+    """FRD body velocity of states ``x`` (K, 8) in the heading (yaw-only) frame:
+    R_y(theta) R_x(phi) v_body (ZYX Euler angles with psi = 0), (K, 3)."""
+    phi, th, ub, vb, wb = x[:, 0], x[:, 1], x[:, 2], x[:, 3], x[:, 4]
+    sf, cf, st, ct = np.sin(phi), np.cos(phi), np.sin(th), np.cos(th)
+    v1 = cf * vb - sf * wb  # R_x(phi)
+    w1 = sf * vb + cf * wb
+    return np.column_stack([ct * ub + st * w1, v1, -st * ub + ct * w1])
+
+
 def assign_vertex(
     run: RateRun, box_min, box_max, tolerance: float = RateIdConfig().vertex_tolerance
 ) -> int | None:
     """Index (``box_vertices`` order) of the box corner the run was flown at: the corner
-    nearest the run's mean body velocity (the multisine has zero mean), if every axis lies
-    within ``tolerance`` x the half-width of it; None (hover, a transit) otherwise."""
+    nearest the run's mean velocity in the frame the campaign commands it (``body_ned``: the
+    heading frame, body velocity rotated by roll and pitch; at 5 m/s the FRD body w of a
+    level vertex is ~2 m/s off it at the ~25 deg trim pitch of PX4 SIH), if every axis lies
+    within ``tolerance`` x the half-width of it (the multisine has zero mean); None (hover,
+    a transit) otherwise."""
     from lpv_sysid.models.lpv import box_vertices
 
     corners = box_vertices(box_min, box_max)
     half = 0.5 * (np.asarray(box_max, float) - np.asarray(box_min, float))
-    mean = run.x[:, 2:5].mean(axis=0)
+    mean = level_velocity(run.x).mean(axis=0)
     dev = np.abs(corners - mean) / half
     k = int(np.argmin(dev.max(axis=1)))
     return k if float(dev[k].max()) <= tolerance else None
