@@ -580,10 +580,10 @@ def test_real_px4_state_without_duplicates_and_estimated_rotor_speeds(real_px4):
 
 # ------------------------------------------------------- the full box (issue 22 item 1)
 def test_full_box_plan_flies_all_eight_vertices_and_preflight_names_the_limits_to_raise():
-    """config/campaign_px4_box.yaml: all 8 vertices of +-4 / +-4 / +-1.2 m/s + hover, climbs
+    """config/campaign_px4_box.yaml: all 8 vertices of +-4 / +-4 / +-1.0 m/s + hover, climbs
     and descents alternating, each inside the altitude window 15-72 m (a w vertex travels
-    1.2 m/s x (20 + 5 + 17) s = 50.4 m + 0.29 m + 2 x 2 m = 54.7 m). The PX4 limits it needs
-    (hand computation: horizontal |(4 + 1, 4 + 1)| = 7.071 m/s, vertical 1.2 + 0.5 = 1.7 m/s,
+    1.0 m/s x (30 + 5 + 17) s = 52 m + 0.29 m + 2 x 2 m = 56.3 m). The PX4 limits it needs
+    (hand computation: horizontal |(4 + 1, 4 + 1)| = 7.071 m/s, vertical 1.0 + 0.5 = 1.5 m/s,
     tilt atan(1.5 x 7.071 / g) = 47.23 deg, each x 1.1): PX4 v1.16's MPC_Z_VEL_MAX_DN 1.5 m/s
     and MPC_TILTMAX_AIR 45 deg defaults are NO-GO naming the values to set; raised, the same
     facts are GO; the airspace is reported."""
@@ -594,7 +594,7 @@ def test_full_box_plan_flies_all_eight_vertices_and_preflight_names_the_limits_t
     plan = plan_flight(FlyConfig.load(config_file("campaign_px4_box.yaml")), None)
     vertices = [r.vertex for r in plan.runs if r.table_index is not None]
     assert sorted(vertices) == sorted(
-        (u, v, w) for u in (-4.0, 4.0) for v in (-4.0, 4.0) for w in (-1.2, 1.2)
+        (u, v, w) for u in (-4.0, 4.0) for v in (-4.0, 4.0) for w in (-1.0, 1.0)
     )
     kinds = [r.kind for r in plan.runs if r.table_index is not None]
     assert all(a != b for a, b in zip(kinds, kinds[1:]))  # climbs and descents alternate
@@ -602,12 +602,12 @@ def test_full_box_plan_flies_all_eight_vertices_and_preflight_names_the_limits_t
         lo, hi = r.start_window
         assert 15.0 <= lo <= hi <= 72.0
     room = max(r.altitude_room for r in plan.runs)
-    assert room == pytest.approx(1.2 * 42.0 + plan.excitation.span[2] + 4.0, abs=1e-6)
+    assert room == pytest.approx(1.0 * 52.0 + plan.excitation.span[2] + 4.0, abs=1e-6)
     assert room <= 57.0
     needs = {n.param: n for n in px4_needs(plan)}
     assert needs["MPC_XY_VEL_MAX"].needed == pytest.approx(1.1 * math.hypot(5.0, 5.0), abs=0.01)
-    assert needs["MPC_Z_VEL_MAX_UP"].needed == pytest.approx(1.1 * 1.7, abs=0.01)
-    assert needs["MPC_Z_VEL_MAX_DN"].needed == pytest.approx(1.1 * 1.7, abs=0.01)
+    assert needs["MPC_Z_VEL_MAX_UP"].needed == pytest.approx(1.1 * 1.5, abs=0.01)
+    assert needs["MPC_Z_VEL_MAX_DN"].needed == pytest.approx(1.1 * 1.5, abs=0.01)
     tilt = math.degrees(math.atan(1.5 * math.hypot(5.0, 5.0) / 9.80665))
     assert needs["MPC_TILTMAX_AIR"].needed == pytest.approx(1.1 * tilt, abs=0.06)
     limits = {"MPC_XY_VEL_MAX": 12.0, "MPC_Z_VEL_MAX_UP": 3.0, "MPC_Z_VEL_MAX_DN": 1.5}
@@ -617,7 +617,7 @@ def test_full_box_plan_flies_all_eight_vertices_and_preflight_names_the_limits_t
     by = {c.name: c for c in checks}
     assert not verdict(checks)
     assert by["MPC_Z_VEL_MAX_DN"].verdict == NOGO
-    assert "param set MPC_Z_VEL_MAX_DN 1.87" in by["MPC_Z_VEL_MAX_DN"].note
+    assert "param set MPC_Z_VEL_MAX_DN 1.65" in by["MPC_Z_VEL_MAX_DN"].note
     assert by["MPC_TILTMAX_AIR"].verdict == NOGO
     assert "param set MPC_TILTMAX_AIR 52" in by["MPC_TILTMAX_AIR"].note
     for ok in ("MPC_XY_VEL_MAX", "MPC_Z_VEL_MAX_UP"):
@@ -666,7 +666,7 @@ def test_resume_flies_only_the_runs_a_stopped_flight_did_not_complete(tmp_path):
     with pytest.raises(ConfigError, match="no campaign_summary.yaml"):
         resume_config(cfg, tmp_path)
     small = dataclasses.replace(
-        cfg, campaign=dataclasses.replace(cfg.campaign, box_min=(-4, -4, -1), box_max=(4, 4, 1))
+        cfg, campaign=dataclasses.replace(cfg.campaign, box_min=(-3, -3, -1), box_max=(3, 3, 1))
     )
     with pytest.raises(ConfigError, match="not vertices of this campaign's box"):
         resume_config(small, prev)

@@ -566,7 +566,7 @@ def _write_rate_bag(path, t, x, u, t0_ns):
 
 def test_identify_cli_takes_the_bags_of_several_flights_per_vertex(tmp_path, capsys):
     """``identify --plant px4-rate --bags FLIGHT1 FLIGHT2`` (issue 22 items 1-2: a campaign
-    over two batteries, ``fly phase1 --resume``): three corners of the +-4/+-4/+-1.2 box of
+    over two batteries, ``fly phase1 --resume``): three corners of the +-4/+-4/+-1.0 box of
     config/campaign_px4_box.yaml flown over two flights get their own fits (their drag is
     the simulated truth of each corner), the other five the pooled fit, and the printed
     table and vertex_models.yaml say which."""
@@ -575,7 +575,7 @@ def test_identify_cli_takes_the_bags_of_several_flights_per_vertex(tmp_path, cap
     from lpv_sysid.io.files import read_yaml
     from lpv_sysid.models.lpv import box_vertices
 
-    vmin, vmax = [-4.0, -4.0, -1.2], [4.0, 4.0, 1.2]
+    vmin, vmax = [-4.0, -4.0, -1.0], [4.0, 4.0, 1.0]
     corners = box_vertices(vmin, vmax)
     flown = {0: "flight1", 7: "flight1", 2: "flight2"}
     for n, (k, flight) in enumerate(flown.items()):
