@@ -615,3 +615,91 @@ def test_real_px4_state_without_duplicates_and_estimated_rotor_speeds(real_px4):
     assert 1400.0 < hover_pwm.mean() < 1600.0
     expect = np.clip(13990.0 / 12.31 * (hover_pwm.mean(axis=0) - 1000.0) / 1000.0, 120.0, 1100.0)
     np.testing.assert_allclose(hover.mean(axis=0), expect, rtol=0.03)
+
+
+# ------------------------------------------------------- the full box (issue 22 item 1)
+def test_full_box_plan_flies_all_eight_vertices_and_preflight_names_the_limits_to_raise():
+    """config/campaign_px4_box.yaml: all 8 vertices of +-4 / +-4 / +-1.0 m/s + hover, climbs
+    and descents alternating, each inside the altitude window 15-72 m (a w vertex travels
+    1.0 m/s x (30 + 5 + 17) s = 52 m + 0.29 m + 2 x 2 m = 56.3 m). What it asks of PX4 (hand
+    computation: horizontal |(4 + 1, 4 + 1)| = 7.071 m/s, vertical 1.0 + 0.5 = 1.5 m/s, tilt
+    atan(1.5 x 7.071 / g) = 47.23 deg + 10 deg margin): PX4 v1.16's MPC_TILTMAX_AIR 45 deg
+    default is NO-GO naming the value to set; raised, GO."""
+    from lpv_sysid.configuration.defaults import config_file
+    from lpv_sysid.flight.campaign import FlyConfig, plan_flight
+
+    plan = plan_flight(FlyConfig.load(config_file("campaign_px4_box.yaml")), None)
+    vertices = [r.vertex for r in plan.runs if r.table_index is not None]
+    assert sorted(vertices) == sorted(
+        (u, v, w) for u in (-4.0, 4.0) for v in (-4.0, 4.0) for w in (-1.0, 1.0)
+    )
+    kinds = [r.kind for r in plan.runs if r.table_index is not None]
+    assert all(a != b for a, b in zip(kinds, kinds[1:]))  # climbs and descents alternate
+    for r in plan.runs:
+        lo, hi = r.start_window
+        assert 15.0 <= lo <= hi <= 72.0
+    room = max(r.altitude_room for r in plan.runs)
+    assert room == pytest.approx(1.0 * 52.0 + plan.excitation.span[2] + 4.0, abs=1e-6)
+    assert room <= 57.0
+    d = plan.demands()
+    assert d.horizontal_speed == pytest.approx(math.hypot(5.0, 5.0), abs=1e-9)
+    assert d.climb_speed == pytest.approx(1.5, abs=1e-9)
+    assert d.descent_speed == pytest.approx(1.5, abs=1e-9)
+    tilt = math.degrees(math.atan(1.5 * math.hypot(5.0, 5.0) / 9.80665))
+    assert d.tilt_deg == pytest.approx(tilt + 10.0, abs=1e-9)
+    limits = {"MPC_XY_VEL_MAX": 12.0, "MPC_Z_VEL_MAX_UP": 3.0, "MPC_Z_VEL_MAX_DN": 1.5}
+    f = sih_facts(params={"COM_OBL_RC_ACT": 5, **limits, "MPC_TILTMAX_AIR": 45.0})
+    by = {c.name: c for c in judge(f.hb, f.version, f.params, f.seen, facts=f, demands=d)}
+    assert by["MPC_TILTMAX_AIR"].verdict == NOGO
+    assert "param set MPC_TILTMAX_AIR 57.3" in by["MPC_TILTMAX_AIR"].note
+    for ok in ("MPC_XY_VEL_MAX", "MPC_Z_VEL_MAX_UP", "MPC_Z_VEL_MAX_DN"):
+        assert by[ok].verdict == GO, by[ok]
+    f.params["MPC_TILTMAX_AIR"] = 58.0
+    by = {c.name: c for c in judge(f.hb, f.version, f.params, f.seen, facts=f, demands=d)}
+    assert by["MPC_TILTMAX_AIR"].verdict == GO
+    del f.params["MPC_TILTMAX_AIR"]  # not received: NO-GO, not assumed
+    by = {c.name: c for c in judge(f.hb, f.version, f.params, f.seen, facts=f, demands=d)}
+    assert by["MPC_TILTMAX_AIR"].verdict == NOGO and by["MPC_TILTMAX_AIR"].value == "missing"
+
+
+def test_resume_flies_only_the_runs_a_stopped_flight_did_not_complete(tmp_path):
+    """``fly phase1 --resume DIR`` (issue 22 item 1, batteries): the full-box campaign stopped
+    after 3 complete runs and one incomplete run; the resumed campaign plans exactly the 5
+    vertices left (the incomplete one again) + hover, and says which were done; a previous
+    flight over another box, a directory without a summary, and a campaign with every
+    vertex done are refused by name."""
+    import dataclasses
+
+    from lpv_sysid.configuration.defaults import config_file
+    from lpv_sysid.errors import ConfigError
+    from lpv_sysid.flight.campaign import FlyConfig, plan_flight, resume_config
+    from lpv_sysid.io.files import save_yaml
+
+    cfg = FlyConfig.load(config_file("campaign_px4_box.yaml"))
+    plan = plan_flight(cfg, None)
+    runs = [r for r in plan.runs]
+    prev = tmp_path / "flight1"
+    prev.mkdir()
+    summary = {
+        "plan": [r.to_dict() for r in runs],
+        "runs": [{"name": r.name, "complete": True} for r in runs[:3]]
+        + [{"name": runs[3].name, "complete": False, "reason": "battery"}],
+    }
+    save_yaml(summary, prev / "campaign_summary.yaml")
+    cfg2, done = resume_config(cfg, prev)
+    assert done == [r.name for r in runs[:3]]
+    plan2 = plan_flight(cfg2, None)
+    left = [r.name for r in plan2.runs]
+    assert sorted(left) == sorted(r.name for r in runs[3:])
+    assert len(left) == 6 and "hover_validation" in left
+    with pytest.raises(ConfigError, match="no campaign_summary.yaml"):
+        resume_config(cfg, tmp_path)
+    small = dataclasses.replace(
+        cfg, campaign=dataclasses.replace(cfg.campaign, box_min=(-3, -3, -1), box_max=(3, 3, 1))
+    )
+    with pytest.raises(ConfigError, match="not vertices of this campaign's box"):
+        resume_config(small, prev)
+    summary["runs"] = [{"name": r.name, "complete": True} for r in runs]
+    save_yaml(summary, prev / "campaign_summary.yaml")
+    with pytest.raises(ConfigError, match="every vertex was completed"):
+        resume_config(cfg, prev)

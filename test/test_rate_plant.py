@@ -81,15 +81,18 @@ def test_polytope_vertex_order_and_intervals():
         rp.RatePlantParams(**{**{k: getattr(P0, k) for k in rp.PARAM_ENTRIES}, "Z_T": 1.0})
 
 
-def _simulate(P, T=40.0, fs=200.0, seed=0, noise=0.0):
-    """Nonlinear rate plant driven by random multisine setpoints around a hover-ish trim."""
+def _simulate(P, T=40.0, fs=200.0, seed=0, noise=0.0, vtrim=(0.3, -0.2, 0.1), hold=1):
+    """Nonlinear rate plant driven by random multisine setpoints around the trim at body
+    velocity ``vtrim`` (default hover-ish); ``hold``: setpoints held over that many steps."""
     rng = np.random.default_rng(seed)
-    x0, u0 = rp.trim((0.3, -0.2, 0.1), P)
+    x0, u0 = rp.trim(vtrim, P)
     t = np.arange(0.0, T, 1.0 / fs)
     u = np.tile(u0, (len(t), 1))
     for k, amp in enumerate((0.02, 0.15, 0.15, 0.15)):
         for f in rng.uniform(0.2, 3.0, 6):
             u[:, k] += amp / 3 * np.sin(2 * np.pi * f * t + rng.uniform(0, 2 * np.pi))
+    if hold > 1:  # piecewise-constant commands (a setpoint stream at fs / hold)
+        u = u[(np.arange(len(t)) // hold) * hold]
     x = np.zeros((len(t), 8))
     x[0] = x0
     dt = 1.0 / fs
@@ -101,6 +104,43 @@ def _simulate(P, T=40.0, fs=200.0, seed=0, noise=0.0):
         x[i + 1] = x[i] + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
     xs = x + noise * rng.standard_normal(x.shape)
     return t, xs, u
+
+
+def _simulate_at(P, vtrim, T=40.0, fs=200.0, seed=0, noise=(0.0, 0.0, 0.0)):
+    """The rate plant ``P`` around its trim at body velocity ``vtrim``, driven by multisine
+    setpoints that are continuous functions of time (RK4 evaluates them at its stages: PX4's
+    cascade updates its setpoints far faster than they are streamed), sampled at ``fs``;
+    ``noise``: white measurement noise std of (angles [rad], velocities [m/s], rates
+    [rad/s]) added to the recorded states. Returns (t, x, u)."""
+    rng = np.random.default_rng(seed)
+    x0, u0 = rp.trim(vtrim, P)
+    comps = [
+        (k, amp / 3, 2 * np.pi * f, rng.uniform(0, 2 * np.pi))
+        for k, amp in enumerate((0.03, 0.2, 0.2, 0.2))
+        for f in rng.uniform(0.2, 3.0, 6)
+    ]
+
+    def sp(tt):
+        u = np.array(u0, dtype=float)
+        for k, a, w, ph in comps:
+            u[k] += a * math.sin(w * tt + ph)
+        return u
+
+    dt = 1.0 / fs
+    t = np.arange(0.0, T, dt)
+    x = np.zeros((len(t), 8))
+    x[0] = x0
+    for i in range(len(t) - 1):
+        ti = t[i]
+        um = sp(ti + dt / 2)
+        k1 = rp.dynamics(x[i], sp(ti), P)
+        k2 = rp.dynamics(x[i] + dt / 2 * k1, um, P)
+        k3 = rp.dynamics(x[i] + dt / 2 * k2, um, P)
+        k4 = rp.dynamics(x[i] + dt * k3, sp(ti + dt), P)
+        x[i + 1] = x[i] + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    sd = np.repeat(np.asarray(noise, dtype=float), (2, 3, 3))
+    u = np.array([sp(tt) for tt in t])
+    return t, x + sd * rng.standard_normal(x.shape), u
 
 
 def test_identification_recovers_known_rate_plant():
@@ -393,3 +433,184 @@ def test_output_error_scores_the_true_model_near_one_and_a_wrong_pole_lower():
     assert slow["p"] < good["p"] - 0.1 and slow["q"] == good["q"]
     drag = rid.output_error(dataclasses.replace(P0, X_u=-P0.X_u), run)
     assert drag["u"] < good["u"] - 0.1 and drag["v"] == good["v"]
+
+
+def _scheduled_truth(corner):
+    """A rate plant whose identified coefficients depend on the vertex (drag, thrust gain
+    and roll-loop bandwidth change with the flight condition; pitch and yaw loops do not):
+    the known truth of the per-vertex test."""
+    import dataclasses
+
+    u, v, w = (float(c) for c in corner)
+    return dataclasses.replace(
+        P0,
+        X_u=-0.7 - 0.05 * u,
+        Y_v=-0.6 + 0.04 * v,
+        Z_w=-0.5 - 0.05 * w,
+        Z_T=-12.5 * (1 + 0.04 * w),
+        L_p=-10.0 - 0.5 * u,
+        L_sp=10.0 + 0.5 * u,
+    )
+
+
+def _flown_at(P, corner):
+    """The FRD body velocity at which the rate plant ``P`` flies the campaign vertex
+    ``corner`` (commanded in the heading frame, ``body_ned``): the fixed point of
+    v_body = R(phi, theta)^T corner with (phi, theta) the trim attitude at v_body."""
+    corner = np.asarray(corner, dtype=float)
+    vb = corner.copy()
+    for _ in range(50):
+        x0, _ = rp.trim(tuple(vb), P)
+        x = np.r_[x0[:2], vb, np.zeros(3)][None, :]
+        # level = R vb (orthonormal R): R^T corner from the level image of the unit vectors
+        R = np.column_stack(
+            [rid.level_velocity(np.r_[x0[:2], e, np.zeros(3)][None, :])[0] for e in np.eye(3)]
+        )
+        vb = R.T @ corner
+    assert np.allclose(rid.level_velocity(x)[0], corner, atol=1e-6)
+    return tuple(vb)
+
+
+def test_per_vertex_identification_recovers_each_vertex_within_its_intervals(tmp_path):
+    """Issue 22 item 2: each corner of a +-4/+-4/+-2 m/s box is flown (simulated) with its own
+    true coefficients and measurement noise (0.003 rad, 0.02 m/s, 0.01 rad/s); the per-vertex
+    fit recovers every vertex's drag, thrust gain and loop poles within 3 of its own standard
+    deviations (56 coefficients), detects the coefficients whose truth depends on the vertex
+    (spread > 3 combined std) and not those that do not, and the pooled fit of all runs is
+    outside the 3-sigma interval of some vertex (pooling would assume what is identified).
+    A hover run belongs to no corner; a corner without runs takes the pooled fit and says
+    so; vertex_models.yaml carries each vertex's own coefficients."""
+    from lpv_sysid.io.files import read_yaml, save_yaml
+    from lpv_sysid.models.lpv import box_vertices
+
+    vmin, vmax = [-4.0, -4.0, -2.0], [4.0, 4.0, 2.0]
+    corners = box_vertices(vmin, vmax)
+    noise = (0.003, 0.02, 0.01)
+    runs = []
+    for k, c in enumerate(corners):
+        P = _scheduled_truth(c)
+        t, x, u = _simulate_at(P, _flown_at(P, c), T=30.0, seed=k, noise=noise)
+        runs.append(rid.run_from_arrays(f"vertex_{k + 1}", t[::2], x[::2], t[::4], u[::4]))
+    t, x, u = _simulate_at(P0, (0.0, 0.0, 0.0), T=20.0, seed=20, noise=noise)
+    hover = rid.run_from_arrays("hover", t[::2], x[::2], t[::4], u[::4])
+    assert rid.assign_vertex(hover, vmin, vmax) is None
+    assert [rid.assign_vertex(r, vmin, vmax) for r in runs] == list(range(8))
+    fits, pooled, rep = rid.identify_vertices([*runs, hover], vmin, vmax)
+    assert rep["unassigned_runs"] == ["hover"]
+    names = ("X_u", "Y_v", "Z_w", "Z_T", "L_p", "M_q", "N_r")
+    worst = 0.0
+    for f in fits:
+        assert f.source == "vertex" and f.runs == (f"vertex_{f.index + 1}",)
+        truth = _scheduled_truth(f.vertex)
+        for n in names:
+            z = abs(getattr(f.params, n) - getattr(truth, n)) / f.params.std[n]
+            assert z < 3.0, (f.index, n, getattr(f.params, n), getattr(truth, n), z)
+            worst = max(worst, z)
+    assert worst > 0.5  # the intervals are not vacuous
+    sch = rep["scheduling"]
+    for n in ("X_u", "Y_v", "Z_T", "L_p"):
+        assert sch[n]["max_difference_sigmas"] > 3.0, (n, sch[n])
+    for n in ("M_q", "N_r"):
+        assert sch[n]["max_difference_sigmas"] < 3.0, (n, sch[n])
+    assert (
+        max(abs(pooled.X_u - f.params.X_u) / f.params.std["X_u"] for f in fits) > 3.0
+    )  # the pooled drag misses a vertex's
+    # vertex_models.yaml: each corner's A/B carry that corner's own fit
+    doc = rid.models_document([f.params for f in fits], vmin, vmax, 2.0, rep)
+    save_yaml(doc, tmp_path / "m.yaml")
+    doc = read_yaml(str(tmp_path / "m.yaml"))
+    assert "per-vertex" in doc["meta"]["identification"]["method"]
+    for f, v in zip(fits, doc["vertices"]):
+        A, B = np.array(v["A"]), np.array(v["B"])
+        assert A[2, 2] == pytest.approx(f.params.X_u) and B[4, 0] == pytest.approx(f.params.Z_T)
+        assert A[5, 5] == pytest.approx(f.params.L_p)
+    # corners without data: the pooled fit, said per vertex
+    fits2, pooled2, rep2 = rid.identify_vertices([runs[0], runs[7], hover], vmin, vmax)
+    src = [f.source for f in fits2]
+    assert src == ["vertex"] + ["pooled"] * 6 + ["vertex"]
+    assert fits2[3].params == pooled2 and fits2[3].reason == "no run at this vertex"
+    assert rep2["vertices"][3]["source"] == "pooled"
+    assert rep2["scheduling"]["vertices_pooled"] == 6
+    short = rid.run_from_arrays("short", *_short(runs[2]))
+    fits3, _, _ = rid.identify_vertices([runs[0], short], vmin, vmax)
+    assert fits3[2].source == "pooled" and "s of data" in fits3[2].reason
+
+
+def _short(run):
+    """(t, x, t, u) of the first 8 s of a run (less than min_vertex_s after trimming)."""
+    k = int(8.0 * 50)
+    return run.t[:k], run.x[:k], run.t[:k], run.u_raw[:k]
+
+
+def _write_rate_bag(path, t, x, u, t0_ns):
+    """A phase-1 run bag as `fly phase1 --record-rate-setpoints` writes it: state at 100 Hz,
+    PX4's rate setpoints at 50 Hz (from a 200 Hz simulation)."""
+    from lpv_sysid.io import bag as bg
+    from lpv_sysid.io import messages as m
+
+    f = m.MsgFactory.rosbags()
+    with bg.BagWriter(path) as b:
+        b.add_topic("/lpv_sysid/state", m.TYPES["state"])
+        b.add_topic("/lpv_sysid/rate_setpoint", m.TYPES["actuator_command"])
+        for i in range(0, len(t), 2):
+            ns = t0_ns + round(t[i] * 1e9)
+            eul = [x[i, 0], x[i, 1], 0.0]
+            msg = m.odometry_from_state(f, ns, [0.0, 0.0, -30.0], eul, x[i, 2:5], x[i, 5:8])
+            b.write("/lpv_sysid/state", ns, msg)
+        for i in range(0, len(t), 4):
+            ns = t0_ns + round(t[i] * 1e9)
+            b.write(
+                "/lpv_sysid/rate_setpoint", ns, m.joint_state(f, ns, rp.INPUT_NAMES, position=u[i])
+            )
+
+
+def test_identify_cli_takes_the_bags_of_several_flights_per_vertex(tmp_path, capsys):
+    """``identify --plant px4-rate --bags FLIGHT1 FLIGHT2`` (issue 22 items 1-2: a campaign
+    over two batteries, ``fly phase1 --resume``): three corners of the +-4/+-4/+-1.0 box of
+    config/campaign_px4_box.yaml flown over two flights get their own fits (their drag is
+    the simulated truth of each corner), the other five the pooled fit, and the printed
+    table and vertex_models.yaml say which."""
+    from lpv_sysid.cli.main import main as cli_main
+    from lpv_sysid.configuration.defaults import config_file
+    from lpv_sysid.io.files import read_yaml
+    from lpv_sysid.models.lpv import box_vertices
+
+    vmin, vmax = [-4.0, -4.0, -1.0], [4.0, 4.0, 1.0]
+    corners = box_vertices(vmin, vmax)
+    flown = {0: "flight1", 7: "flight1", 2: "flight2"}
+    for n, (k, flight) in enumerate(flown.items()):
+        c = corners[k]
+        P = _scheduled_truth(c)
+        t, x, u = _simulate_at(P, _flown_at(P, c), T=25.0, seed=40 + k)
+        _write_rate_bag(tmp_path / flight / f"bag_{n:04d}", t, x, u, 10**9 * (100 + 60 * n))
+    out = tmp_path / "vertex_models.yaml"
+    args = ["identify", "--plant", "px4-rate", "--bags", str(tmp_path / "flight1")]
+    args += [str(tmp_path / "flight2"), "--out", str(out)]
+    args += ["--campaign", str(config_file("campaign_px4_box.yaml"))]
+    assert cli_main(args) == 0
+    printed = capsys.readouterr().out
+    rows = [ln.split() for ln in printed.splitlines() if ln.strip().startswith(tuple("12345678"))]
+    assert [r[0] for r in rows] == [str(k) for k in range(1, 9)]
+    assert [r[4] for r in rows] == ["vertex" if k in flown else "pooled" for k in range(8)]
+    assert printed.count("(no run at this vertex)") == 5
+    (tmp_path / "printed.txt").write_text(printed)
+    doc = read_yaml(str(out))
+    ident = doc["meta"]["identification"]
+    assert [v["source"] for v in ident["vertices"]] == [
+        "vertex" if k in flown else "pooled" for k in range(8)
+    ]
+    for k in flown:
+        A = np.array(doc["vertices"][k]["A"])
+        assert A[2, 2] == pytest.approx(_scheduled_truth(corners[k]).X_u, rel=0.05)
+        assert A[5, 5] == pytest.approx(_scheduled_truth(corners[k]).L_p, rel=0.05)
+
+
+def test_level_velocity_rotates_body_velocity_by_roll_and_pitch():
+    """Hand values: pitch 30 deg nose up, body u = 1 -> level (cos 30, 0, -sin 30); roll 90
+    deg right, body w = 1 (down in the body) -> level v = -1 (the body's down points left);
+    the norm is kept."""
+    th = math.radians(30.0)
+    x = np.array([[0.0, th, 1.0, 0.0, 0.0, 0, 0, 0], [math.pi / 2, 0.0, 0.0, 0.0, 1.0, 0, 0, 0]])
+    lv = rid.level_velocity(x)
+    assert lv[0] == pytest.approx([math.cos(th), 0.0, -math.sin(th)], abs=1e-12)
+    assert lv[1] == pytest.approx([0.0, -1.0, 0.0], abs=1e-12)

@@ -30,9 +30,10 @@ velocity rows kept and the rotor/moment rows replaced by the closed rate loop)::
 body velocity, :func:`linearize` the Jacobians there (numerical central differences of
 :func:`dynamics`, checked against the analytic ones in the tests), :func:`polytope` the
 vertex models of the scheduling box (seed 0 Eqs. 20-23) with optional intervals on the
-identified entries. The scheduling is the body-velocity reference v_d as in seed 0; with the
-identified part common to all vertices, the vertices differ by the kinematic (Coriolis,
-gravity) terms evaluated at their trim.
+identified entries. The scheduling is the body-velocity reference v_d as in seed 0; each
+vertex has its own identified coefficients (lpv_sysid/ident/rate_plant.py, per-vertex fits as
+seed 0 Tables 1-2) on top of the kinematic (Coriolis, gravity) terms evaluated at its trim;
+one common parameter set (a pooled fit) is the special case where a vertex lacks data.
 """
 
 from __future__ import annotations
@@ -204,17 +205,28 @@ def linearize(
 
 
 def polytope(
-    P: RatePlantParams, vmin: Sequence[float], vmax: Sequence[float], k_sigma: float = 0.0
+    P: RatePlantParams | Sequence[RatePlantParams],
+    vmin: Sequence[float],
+    vmax: Sequence[float],
+    k_sigma: float = 0.0,
 ):
     """Vertex models at the box corners (``models.lpv.box_vertices`` order) as a
     :class:`~lpv_sysid.models.lpv.PolytopicModel`, plus the per-vertex uncertain elements
     (intervals ``nominal +- k_sigma * std`` of the identified linear entries; none when
-    ``k_sigma`` is 0 or no std is known)."""
+    ``k_sigma`` is 0 or no std is known). ``P``: one parameter set for every corner, or one
+    per corner (per-vertex identification, seed 0 Tables 1-2: each vertex its own
+    coefficients and standard deviations, so the scheduling dependence of the identified
+    entries is measured, not only that of the kinematics)."""
     from lpv_sysid.models.lpv import PolytopicModel, UncertainElement, box_vertices
 
     corners = box_vertices(vmin, vmax)
+    per_vertex = [P] * len(corners) if isinstance(P, RatePlantParams) else list(P)
+    if len(per_vertex) != len(corners):
+        raise ConfigError(
+            f"rate plant: {len(per_vertex)} parameter sets for {len(corners)} box corners"
+        )
     As, Bs, x0s, u0s, els = [], [], [], [], []
-    for vd in corners:
+    for vd, P in zip(corners, per_vertex):
         x0, u0 = trim(vd, P)
         A, B = linearize(x0, u0, P)
         As.append(A)

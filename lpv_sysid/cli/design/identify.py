@@ -1,7 +1,7 @@
 """`lpv-sysid identify`: phase-1 bags -> vertex_models.yaml (seed 0 Sec. IV, Tables 1-3).
 
     lpv-sysid identify --bags DIR --config config/identification.yaml --out vertex_models.yaml
-    lpv-sysid identify --plant px4-rate --bags DIR/phase1 --out vertex_models.yaml \
+    lpv-sysid identify --plant px4-rate --bags DIR/phase1 [DIR2 ...] --out vertex_models.yaml \
         [--campaign config/campaign_chain.yaml] [--k-sigma 2]
 
 Every rosbag2 directory under DIR is one maneuver.  Its velocity reference during the
@@ -27,7 +27,12 @@ HELP = "identify the uncertain vertex LTI models from phase-1 bags (seed 0 Sec. 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--bags", required=True, type=Path, help="directory holding one rosbag2 per maneuver"
+        "--bags",
+        required=True,
+        type=Path,
+        nargs="+",
+        help="directory holding one rosbag2 per maneuver; px4-rate: one or more (the flights "
+        "of a campaign that took several batteries, fly phase1 --resume)",
     )
     parser.add_argument(
         "--config",
@@ -217,15 +222,16 @@ def run_rate_plant(args: argparse.Namespace) -> int:
         raise ConfigError(f"--k-sigma must be in [0, 10], got {args.k_sigma!r}")
     cfg = FlyConfig.load(args.campaign or config_file("campaign_chain.yaml"))
     runs = []
-    for b in campaign_bags(args.bags):
-        try:
-            runs.append(rid.read_run(b))
-        except LpvSysidError as exc:
-            print(f"skipped {b}: {exc}")
+    for d in args.bags:
+        for b in campaign_bags(d):
+            try:
+                runs.append(rid.read_run(b))
+            except LpvSysidError as exc:
+                print(f"skipped {b}: {exc}")
     if not runs:
         raise ConfigError(
-            f"{args.bags}: no bag with state and rate_setpoint (PX4's ATTITUDE_TARGET): fly "
-            "phase 1 with --record-rate-setpoints (the chain does)"
+            f"{' '.join(map(str, args.bags))}: no bag with state and rate_setpoint (PX4's "
+            "ATTITUDE_TARGET): fly phase 1 with --record-rate-setpoints (the chain does)"
         )
     args.out.parent.mkdir(parents=True, exist_ok=True)
     c = cfg.campaign
@@ -248,7 +254,14 @@ def run(args: argparse.Namespace) -> int:
     cfg = load_config(args.config)
     if args.quadrotor is not None:
         cfg = dataclasses.replace(cfg, quadrotor=quadrotor_section(args.quadrotor))
-    ident = identify_campaign(args.bags, cfg)
+    if len(args.bags) != 1:
+        from lpv_sysid.errors import ConfigError
+
+        raise ConfigError(
+            f"--bags: the quadrotor plant takes one campaign directory, got {len(args.bags)} "
+            "(several flights: --plant px4-rate)"
+        )
+    ident = identify_campaign(args.bags[0], cfg)
     for note in ident.notes:
         print(note)
     results, val = ident.results, ident.validation
@@ -300,7 +313,7 @@ def run(args: argparse.Namespace) -> int:
             val["xdot_m"],
             val["xdot_f"],
             str(plot),
-            title=f"[{data_label(args.bags)}] LPV model independent validation (seed 0 Fig. 4)",
+            title=f"[{data_label(args.bags[0])}] LPV model independent validation (seed 0 Fig. 4)",
         )
         print(f"wrote {plot}")
     return 0

@@ -26,7 +26,7 @@ from pathlib import Path
 
 from lpv_sysid.control.campaign import DEFAULT_ENDURANCE_S, PLAN_COLUMNS
 from lpv_sysid.errors import ConfigError
-from lpv_sysid.flight.campaign import EXIT_FAILED, FlyConfig, fly, plan_flight
+from lpv_sysid.flight.campaign import EXIT_FAILED, FlyConfig, fly, plan_flight, resume_config
 
 COMMAND = "fly"
 HELP = (
@@ -87,6 +87,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--yes",
         action="store_true",
         help="do not ask before arming (needed when stdin is not a terminal)",
+    )
+    p.add_argument(
+        "--resume",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="continue the campaign a stopped flight (its output DIR) did not complete: fly "
+        "only the runs not complete there (identify then takes --bags DIR OUT)",
     )
     p2 = modes.add_parser(
         "phase2",
@@ -167,6 +175,11 @@ def run(args: argparse.Namespace) -> int:
     if not math.isfinite(args.endurance_min) or args.endurance_min <= 0:
         raise ConfigError(f"--endurance-min {args.endurance_min:g}: must be > 0 minutes")
     params = parse_params(args.set_param)  # a dry run checks them too
+    resumed = None
+    if args.resume is not None:
+        cfg, done = resume_config(cfg, args.resume)
+        resumed = {"dir": str(args.resume), "completed": done}
+        print(f"resuming {args.resume}: {len(done)} run(s) complete there ({', '.join(done)})")
     if args.dry_run:
         plan = plan_flight(cfg, args.connect, args.signals)
         print(plan.describe())
@@ -191,6 +204,7 @@ def run(args: argparse.Namespace) -> int:
         echo=print,
         confirm=ask,
         endurance_s=args.endurance_min * 60.0,
+        resumed_from=resumed,
     )
     if res.status:
         print(f"lpv-sysid fly: {res.phase}: {res.reason}", file=sys.stderr)

@@ -123,6 +123,14 @@ class CampaignConfig:
         " m",
     )
     center_runs: bool = cf.flag(True, "reposition so each run is centred on home")
+    drag_estimate: float = cf.number(
+        1.0,
+        "mass-normalised horizontal drag of the vehicle [1/s] (a prior, e.g. SIH_KDV / "
+        "SIH_MASS), only for the tilt the box needs (preflight: MPC_TILTMAX_AIR)",
+        lo=0.0,
+        hi=10.0,
+        unit=" 1/s",
+    )
     settle_tolerance: tuple = cf.numbers(
         (0.3, 0.3, 0.3),
         "|measured - commanded| per axis for settled [m/s]; at most 2 m/s",

@@ -124,10 +124,9 @@ class CampaignPlan:
 
     def demands(self, model=None) -> "FlightDemands":
         """What flying the plan asks of the vehicle (checked by preflight against PX4's
-        limits): see :class:`FlightDemands`. ``model``: the quadrotor model whose trim
-        gives the tilt (default: the package's FlameWheel-450-like model)."""
+        limits): see :class:`FlightDemands`. ``model``: the quadrotor whose gravity is used
+        (default: the package's FlameWheel-450-like model)."""
         from lpv_sysid.models.quadrotor import Quadrotor
-        from lpv_sysid.models.quadrotor.trim import trim
 
         cfg, ex = self.config, self.excitation
         model = model or Quadrotor()
@@ -137,14 +136,9 @@ class CampaignPlan:
         )
         climb = max([cfg.climb_rate, cfg.hold_max] + [-r.vertex[2] + pw for r in self.runs])
         descent = max([cfg.descent_rate, cfg.hold_max] + [r.vertex[2] + pw for r in self.runs])
-        tilt = 0.0
-        for r in self.runs:
-            u, v, w = r.vertex
-            for su in (-1.0, 1.0):
-                for sv in (-1.0, 1.0):
-                    tr = trim(model, [u + su * pu, v + sv * pv, w])
-                    c = math.cos(tr.x0[0]) * math.cos(tr.x0[1])
-                    tilt = max(tilt, math.degrees(math.acos(max(-1.0, min(1.0, c)))))
+        # the tilt that holds the fastest horizontal speed against the drag prior D
+        # (campaign.drag_estimate, mass-normalised): tan(tilt) = D v / g
+        tilt = math.degrees(math.atan(cfg.drag_estimate * horizontal / model.params.g))
         return FlightDemands(horizontal, climb, descent, tilt + TILT_MARGIN_DEG)
 
     def budget(self, endurance_s: float = DEFAULT_ENDURANCE_S) -> "FlightBudget":
@@ -178,8 +172,9 @@ class FlightDemands:
     """What the planned box asks of PX4 (preflight checks each against its parameter):
     horizontal speed (largest ``hypot(|u| + peak_u, |v| + peak_v)`` of the runs:
     MPC_XY_VEL_MAX), climb and descent speed (vertex plus excitation peak, the campaign's
-    climb / descent rates: MPC_Z_VEL_MAX_UP / _DN), and tilt (the model's trim tilt at the
-    fastest corners plus :data:`TILT_MARGIN_DEG`: MPC_TILTMAX_AIR) [m/s, deg]."""
+    climb / descent rates: MPC_Z_VEL_MAX_UP / _DN), and tilt (``atan(D v / g)`` at that
+    horizontal speed with the drag prior ``campaign.drag_estimate`` D, plus
+    :data:`TILT_MARGIN_DEG`: MPC_TILTMAX_AIR) [m/s, deg]."""
 
     horizontal_speed: float
     climb_speed: float

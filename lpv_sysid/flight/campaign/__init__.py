@@ -11,7 +11,7 @@ command line (:func:`fly`, :mod:`~lpv_sysid.flight.campaign.sequence`), its loop
 
 from __future__ import annotations
 
-from lpv_sysid.flight.campaign.config import FlyConfig
+from lpv_sysid.flight.campaign.config import FlyConfig, resume_config
 from lpv_sysid.flight.campaign.recorder import CampaignRecorder
 from lpv_sysid.flight.campaign.runtime import (
     PARSERS,
@@ -30,5 +30,6 @@ __all__ = [
     "PARSERS",
     "fly",
     "plan_flight",
+    "resume_config",
     "vehicle_status",
 ]

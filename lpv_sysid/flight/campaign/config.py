@@ -135,3 +135,45 @@ def bridge_config_for(path: str, url: str | None, campaign) -> Any:
     return dataclasses.replace(
         cfg, link=link, offboard=dataclasses.replace(cfg.offboard, arm=True), auto_start=False
     )
+
+
+def resume_config(cfg: FlyConfig, previous: str | Path) -> tuple[FlyConfig, list[str]]:
+    """``fly phase1 --resume PREVIOUS``: the campaign of ``cfg`` without the runs a stopped
+    flight completed (a campaign that does not fit one battery). The completed runs are the
+    ``runs`` with ``complete: true`` in ``PREVIOUS/campaign_summary.yaml``; every run the
+    previous flight planned must belong to ``cfg``'s campaign (the same box and vertices),
+    else ConfigError. Returns (the config of the remaining runs, the completed run names);
+    ConfigError when nothing is left to fly. ``identify`` takes the bags of both flights
+    (``--bags PREVIOUS NEW``)."""
+    from lpv_sysid.control.campaign import run_name
+    from lpv_sysid.io.files import read_yaml_mapping
+
+    f = Path(previous) / "campaign_summary.yaml"
+    if not f.is_file():
+        raise ConfigError(f"--resume {previous}: no campaign_summary.yaml (not a phase-1 flight)")
+    s = read_yaml_mapping(f, finite=False)
+    c = cfg.campaign
+    corners = c.corners()
+    centre = tuple(0.5 * (a + b) for a, b in zip(c.box_min, c.box_max))
+    names = {run_name(v): i + 1 for i, v in enumerate(corners)}
+    hover = {"hover_validation", "centre_validation"}
+    planned = [str(p.get("name")) for p in s.get("plan") or []]
+    foreign = [n for n in planned if n not in names and n not in hover]
+    if foreign:
+        raise ConfigError(
+            f"--resume {previous}: runs {foreign} are not vertices of this campaign's box "
+            f"{list(c.box_min)}..{list(c.box_max)}; resume with the stopped flight's config"
+        )
+    done = [str(r.get("name")) for r in s.get("runs") or [] if r.get("complete")]
+    wanted = list(c.vertices) if c.vertices is not None else list(range(1, 9))
+    left = [i for i in wanted if run_name(corners[i - 1]) not in done]
+    hover_left = c.hover_validation and not (hover & set(done))
+    if not left:
+        what = "only the hover validation run is" if hover_left else "no run is"
+        raise ConfigError(
+            f"--resume {previous}: every vertex was completed ({len(done)} runs); {what} left "
+            f"(centre {list(centre)})"
+        )
+    camp = dataclasses.replace(c, vertices=tuple(left), hover_validation=bool(hover_left))
+    camp.validate()
+    return dataclasses.replace(cfg, campaign=camp), done

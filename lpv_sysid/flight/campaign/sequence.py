@@ -98,6 +98,7 @@ def fly(
     epoch_ns: int | None = None,
     confirm: Callable[[str], bool] | None = None,
     endurance_s: float | None = None,
+    resumed_from: Mapping | None = None,
 ) -> FlyResult:
     """The whole CLI sequence of the module docstring (also used by the tests with a
     simulated clock); returns the exit status and the summary. Bad input raises
@@ -160,6 +161,8 @@ def fly(
     )
     summary: dict = {
         "connect": bcfg.link.url,
+        # ``fly phase1 --resume``: the stopped flight and its completed runs (resume_config)
+        **({"resumed_from": dict(resumed_from)} if resumed_from else {}),
         "config": cfg.source,
         "signals": signals or cfg.signals_config,
         # the times in this summary are on the flight clock; bag stamps add this offset

@@ -20,7 +20,32 @@ def format_identification(rep: dict) -> str:
             )
         lines.append(f"  {row:<5} {d['r2']:.3f}   {extra}")
     p = rep["params"]
-    lines.append("  " + ", ".join(f"{k} {p[k]:.3g}" for k in ("X_u", "Y_v", "Z_w", "Z_T")))
+    lines.append("  pooled: " + ", ".join(f"{k} {p[k]:.3g}" for k in ("X_u", "Y_v", "Z_w", "Z_T")))
+    if rep.get("vertices"):
+        names = ("X_u", "Y_v", "Z_w", "Z_T", "L_p", "M_q", "N_r")
+        lines.append(
+            "  per vertex (estimate +- std; seed 0 Tables 1-2):\n"
+            f"  {'#':>2} {'vertex [m/s]':<18} {'source':<7} " + " ".join(f"{n:>16}" for n in names)
+        )
+        for v in rep["vertices"]:
+            q, sd = v["params"], v["params"]["std"]
+            vtx = "[" + " ".join(f"{c:+.3g}" for c in v["vertex"]) + "]"
+            lines.append(
+                f"  {v['index']:>2} {vtx:<18} {v['source']:<7} "
+                + " ".join(f"{f'{q[n]:.3g}+-{sd.get(n, 0.0):.2g}':>16}" for n in names)
+                + (f"  ({v['reason']})" if v["reason"] else "")
+            )
+        sch = rep.get("scheduling") or {}
+        diffs = [
+            f"{n} {sch[n]['max_difference_sigmas']:g}"
+            for n in names
+            if "max_difference_sigmas" in sch.get(n, {})
+        ]
+        if diffs:
+            lines.append(
+                "  largest difference between two vertices in combined std (> 3: depends on "
+                "the vertex): " + ", ".join(diffs)
+            )
     return "\n".join(lines)
 
 
@@ -54,7 +79,7 @@ def write_report(out: Path, summary: dict, p2: Optional[dict], rep: dict) -> Non
         L.append(f"| {s['step']} | {s.get('t_start_s')} | {s.get('t_end_s', '-')} | {outcome} |")
     L += [
         "",
-        "## Identification (pooled equation error)",
+        "## Identification (per-vertex equation error)",
         "",
         "```",
         format_identification(rep),

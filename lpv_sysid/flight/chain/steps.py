@@ -149,7 +149,7 @@ def chain(
             "run(s), "
             "phase 2 will not be flown"
         )
-    step("rate-plant identification (pooled equation error)")
+    step("rate-plant identification (per-vertex equation error)")
     c = cfg.campaign
     params_rp, rep = identify_rate_runs(
         usable, c.box_min, c.box_max, k_sigma, out / "vertex_models.yaml", echo
@@ -294,15 +294,17 @@ def identify_rate_runs(
     out: Path,
     echo: Callable[[str], None],
 ) -> tuple[Any, dict]:
-    """Step 2 of the chain, also ``lpv-sysid identify --plant px4-rate``: pooled equation-error
-    identification of the rate plant (:mod:`lpv_sysid.ident.rate_plant`) from ``runs``
-    (``read_run`` of each bag), its vertex models over the box ``box_min``..``box_max`` with
-    intervals of ``k_sigma`` standard deviations written to ``out``; returns (params, report)."""
+    """Step 2 of the chain, also ``lpv-sysid identify --plant px4-rate``: per-vertex
+    equation-error identification of the rate plant (:func:`lpv_sysid.ident.rate_plant.
+    identify_vertices`: each corner its own fit from the runs flown there, the pooled fit of
+    all runs where a corner lacks data, said in the output) from ``runs`` (``read_run`` of
+    each bag), its vertex models over the box ``box_min``..``box_max`` with intervals of
+    ``k_sigma`` standard deviations written to ``out``; returns (pooled params, report)."""
     from lpv_sysid.ident import rate_plant as rid
     from lpv_sysid.io.files import save_yaml
 
-    params, rep = rid.identify(runs)
-    save_yaml(rid.models_document(params, box_min, box_max, k_sigma, rep), out)
+    fits, params, rep = rid.identify_vertices(runs, box_min, box_max)
+    save_yaml(rid.models_document([f.params for f in fits], box_min, box_max, k_sigma, rep), out)
     echo(format_identification(rep))
     echo(f"wrote {out}")
     return params, rep

@@ -66,7 +66,9 @@ def judge(
     demands: FlightDemands | None = None,
     battery_needed_pct: float | None = None,
 ) -> list[Check]:
-    """Turn the gathered facts into checks (pure; tested without a vehicle)."""
+    """Turn the gathered facts into checks (pure; tested without a vehicle). ``demands`` /
+    ``battery_needed_pct``: what the planned flight asks (health.py: the PX4 limits the box
+    needs, NO-GO naming the parameter and the value to set)."""
     if facts is None:
         facts = Facts(hb=hb, version=version, params=dict(params), seen=set(seen))
     cfg = rotor_estimate or RotorEstimateConfig()
