@@ -11,6 +11,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from lpv_sysid.control.broken_loop import BrokenLoopConfig, BrokenLoopRun
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.ident import rate_plant as rid
 from lpv_sysid.ident import rate_plant_dynamics as lag
@@ -24,7 +25,8 @@ FS = 200.0
 #: the rate loops' resonance (P-only loop + motor lag) sits near 5 Hz: keep it in the data
 LOWPASS_HZ = 20.0
 #: the multisine reaches past the loop resonance so lag and delay separate
-FMAX_HZ = 8.0
+FMAX_HZ = 6.0
+THRUST_AMP = 0.1
 
 
 class _RateLoop:
@@ -71,8 +73,8 @@ def _truth(model: Quadrotor, T0: float) -> dict:
 
 
 def _broken_loop_run(model: Quadrotor, T: float = 40.0, seed: int = 0, noise: float = 0.0):
-    """Stabilised run with a multisine superposed on the body-rate and thrust setpoints (the
-    broken-loop excitation): a weak attitude/heave stabiliser + independent multisines."""
+    """The campaign's broken-loop run (control/broken_loop.py: stabiliser + multisine on the
+    body-rate and thrust setpoints) flown at 50 Hz on the simulated vehicle's rate loop."""
     rng = np.random.default_rng(seed)
     T0 = _hover_thrust(model)
     loop = _RateLoop(model)
@@ -80,35 +82,27 @@ def _broken_loop_run(model: Quadrotor, T: float = 40.0, seed: int = 0, noise: fl
     x[12:16] = model.params.b_omega / model.params.a_omega * T0
     n = int(T * FS)
     t = np.arange(n) / FS
-    exc = np.zeros((n, 4))
-    for k, amp in enumerate((0.03, 0.4, 0.4, 0.3)):
-        for f in rng.uniform(0.2, FMAX_HZ, 8):
-            exc[:, k] += amp / 4 * np.sin(2 * np.pi * f * t + rng.uniform(0, 2 * np.pi))
+    # a different seed: another period (other harmonics) for the validation run
+    cfg = BrokenLoopConfig(
+        duration_s=T, f_max=FMAX_HZ, period_s=20.0 + 3.0 * seed, thrust_amplitude=THRUST_AMP
+    )
+    run = BrokenLoopRun(cfg, T0)
     xs, us = np.zeros((n, 8)), np.zeros((n, 4))
     u_sp = np.zeros(4)
     for i in range(n):
-        phi, th, w = x[3], x[4], x[8]
-        if i % 4:  # setpoints streamed at 50 Hz, held in between (as PX4 holds them)
-            pass
-        else:
-            u_sp = np.array(
-                [
-                    T0 + 0.02 * w + exc[i, 0],
-                    -2.0 * phi + exc[i, 1],
-                    -2.0 * th + exc[i, 2],
-                    exc[i, 3],
-                ]
-            )
+        if i % 4 == 0:  # setpoints streamed at 50 Hz, held in between (as PX4 holds them)
+            u_sp = run.command(t[i], np.r_[x[3:5], x[6:12]])
         xs[i] = np.r_[x[3:5], x[6:12]]
         us[i] = u_sp
         loop.x = x
         sp = Setpoint("rates", t[i], rates=u_sp[1:], thrust=float(u_sp[0]))
         u = FlightPhysics._rate_mode(loop, sp)  # type: ignore[arg-type]
         x = np.array(model.rk4_step(x.tolist(), u.tolist(), 1.0 / FS))
+    assert run.aborted is None
     xs = xs + noise * rng.standard_normal(xs.shape)
     # state at 100 Hz, setpoints at 50 Hz (as streamed)
-    cfg = rid.RateIdConfig(lowpass_hz=LOWPASS_HZ)
-    return rid.run_from_arrays(f"sim{seed}", t[::2], xs[::2], t[::4] - 1e-4, us[::4], cfg), T0
+    id_cfg = rid.RateIdConfig(lowpass_hz=LOWPASS_HZ)
+    return rid.run_from_arrays(f"sim{seed}", t[::2], xs[::2], t[::4], us[::4], id_cfg), T0
 
 
 @pytest.fixture(scope="module")
@@ -176,8 +170,40 @@ def test_bad_configuration_and_empty_input_are_named_errors():
         lag.identify([])
     plant = lag.LagPlant(rows={}, window_s=1.0)
     with pytest.raises(ConfigError, match="window_s"):
-        lag.output_error(plant, None, window_s=-1.0)  # type: ignore[arg-type]
+        lag.output_error(plant, None, window_s=-1.0)
 
 
 def test_rate_plant_gravity_is_the_identifications():
     assert lag.rp.GRAVITY == rp.GRAVITY
+
+
+def test_broken_loop_run_channels_envelope_and_clips():
+    """control/broken_loop.py: disjoint harmonics (channels uncorrelated over a period), the
+    configured peaks, zero at both ends, the stabiliser alone after an envelope breach."""
+    cfg = BrokenLoopConfig(duration_s=40.0, period_s=20.0, ramp_s=2.0)
+    run = BrokenLoopRun(cfg, 0.5)
+    f = run.freqs
+    assert not set(np.round(f[0] * 20).astype(int)) & set(np.round(f[1] * 20).astype(int))
+    tg = np.arange(2.0, 22.0, 0.01)  # one period past the fade
+    e = np.array([run.excitation(t) for t in tg])
+    c = np.corrcoef(e.T)
+    assert np.max(np.abs(c - np.eye(4))) < 0.02
+    peaks = np.max(np.abs(e), axis=0)
+    assert peaks == pytest.approx([0.1, 0.4, 0.4, 0.3], rel=0.05)  # peak found on a grid
+    assert np.allclose(run.excitation(0.0), 0.0) and np.allclose(run.excitation(40.0), 0.0)
+    x = np.zeros(8)
+    x[0] = 0.1  # roll 5.7 deg, inside
+    cmd = run.command(10.0, x)
+    assert cmd[1] == pytest.approx(-2.0 * 0.1 + run.excitation(10.0)[1])
+    x[1] = np.radians(30.0)  # pitch beyond 25 deg: excitation off for good
+    cmd = run.command(10.0, x)
+    assert run.aborted and "tilt" in run.aborted
+    assert cmd[2] == pytest.approx(-2.0 * np.radians(30.0)) and cmd[3] == 0.0
+    assert np.all(run.command(11.0, np.zeros(8)) == np.array([0.5, 0.0, 0.0, 0.0]))
+    x = np.zeros(8)
+    x[0] = 3.0  # clip at max_rate
+    assert run.command(1.0, x)[1] == -cfg.max_rate
+    with pytest.raises(ConfigError, match="hover thrust"):
+        BrokenLoopRun(cfg, 0.95)
+    with pytest.raises(ConfigError, match="fades"):
+        BrokenLoopConfig(duration_s=10.0, ramp_s=5.0)

@@ -74,6 +74,11 @@ class LagIdConfig:
         0.005, "smallest lag time constant searched", lo=0.0, lo_open=True, unit=" s"
     )
     tau_max: float = cf.number(1.0, "largest lag time constant searched", lo=0.0, unit=" s")
+    heave_tau_from_rates: bool = cf.flag(
+        False,
+        "heave row: thrust lag = mean roll/pitch loop lag (one motor time constant, e.g. "
+        "SIH_T_TAU), not fitted (false: fitted from the heave row alone)",
+    )
     tau_starts: tuple = cf.numbers(
         (0.03, 0.1, 0.3), "initial lag time constants (one fit from each)", lo=0.0, unit=" s"
     )
@@ -208,7 +213,11 @@ def _r2(y: np.ndarray, e: np.ndarray) -> float:
     return 1.0 - float(e @ e) / sst if sst > 0 else float("nan")
 
 
-def _fit_row(runs, row, cfg: LagIdConfig, g: float, guess: np.ndarray) -> dict:
+def _fit_row(
+    runs, row, cfg: LagIdConfig, g: float, guess: np.ndarray, fixed_tau: float | None = None
+) -> dict:
+    """Output-error fit of one row; with ``fixed_tau`` the lag is not fitted (the heave row
+    takes the rate loops' motor lag: one motor time constant)."""
     from scipy.optimize import least_squares
 
     dt = float(runs[0].t[1] - runs[0].t[0])
@@ -223,18 +232,30 @@ def _fit_row(runs, row, cfg: LagIdConfig, g: float, guess: np.ndarray) -> dict:
     else:
         hi[1] = 0.0  # thrust accelerates up (-w)
     x0 = np.clip(guess, lo + 1e-9, hi - 1e-9)
+    nfree = npar if fixed_tau is None else tau_i
+    starts = cfg.tau_starts if fixed_tau is None else (fixed_tau,)
+
+    def full(th):
+        return th if fixed_tau is None else np.r_[th, fixed_tau]
+
     best = None
     for d in cfg.delays:
         k = int(round(d / dt))
         rds = [_row_data(r, row, k, L, g) for r in runs]
 
         def res(th, rds=rds):
-            return np.concatenate([_residual(th, rd) for rd in rds])
+            return np.concatenate([_residual(full(th), rd) for rd in rds])
 
-        for tau0 in cfg.tau_starts:  # the lag's cost has local minima: several starts
+        for tau0 in starts:  # the lag's cost has local minima: several starts
             start = x0.copy()
             start[tau_i] = min(max(tau0, cfg.tau_min * 1.01), cfg.tau_max * 0.99)
-            sol = least_squares(res, start, bounds=(lo, hi), x_scale="jac", max_nfev=400)
+            sol = least_squares(
+                res,
+                start[:nfree],
+                bounds=(lo[:nfree], hi[:nfree]),
+                x_scale="jac",
+                max_nfev=400,
+            )
             cost = float(sol.fun @ sol.fun)
             if best is None or cost < best[0]:
                 best = (cost, sol, k * dt, rds)
@@ -242,17 +263,19 @@ def _fit_row(runs, row, cfg: LagIdConfig, g: float, guess: np.ndarray) -> dict:
     cost, sol, d, rds = best
     e = sol.fun
     n = len(e)
-    s2 = cost / max(n - npar, 1)
+    s2 = cost / max(n - nfree, 1)
     J = sol.jac
     cov = s2 * _corr_factor(e) * np.linalg.pinv(J.T @ J)
-    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    std = np.r_[np.sqrt(np.maximum(np.diag(cov), 0.0)), np.zeros(npar - nfree)]
+    est = full(sol.x)
     y = np.concatenate([_measured(rd) for rd in rds])
     names = HEAVE_PARAMS if row[0] == "w" else RATE_PARAMS
     return {
-        "params": {nm: float(v) for nm, v in zip(names, sol.x)},
+        "params": {nm: float(v) for nm, v in zip(names, est)},
         "std": {nm: float(s) for nm, s in zip(names, std)},
         "delay_s": round(d, 4),
-        "equivalent_delay_s": round(d + float(sol.x[tau_i]), 4),
+        "equivalent_delay_s": round(d + float(est[tau_i]), 4),
+        "tau_fitted": fixed_tau is None,
         "r2": round(_r2(y, e), 4),
         "samples": int(n),
     }
@@ -297,7 +320,10 @@ def identify(
         guess = np.array([start.Z_w, start.Z_T, start.c_w, 0.05])
     else:
         guess = np.array([-0.3, -20.0, 0.0, 0.05])
-    rows["w"] = _fit_row(runs, HEAVE_ROW, cfg, g, guess)
+    fixed = None
+    if cfg.heave_tau_from_rates:
+        fixed = float(np.mean([rows[k]["params"]["tau"] for k in ("p", "q")]))
+    rows["w"] = _fit_row(runs, HEAVE_ROW, cfg, g, guess, fixed_tau=fixed)
     return LagPlant(rows=rows, window_s=float(cfg.window_s))
 
 
