@@ -257,3 +257,16 @@ def test_real_px4_phase1_records_rate_setpoints_and_identifies(tmp_path):
     assert 0.2 < float(np.median(run.u_raw[:, 0])) < 0.8  # hover thrust, normalised
     P, rep = rid.identify([run])
     assert P.Z_T < 0 and rep["rows"]["p"]["r2"] > 0.5 and rep["rows"]["q"]["r2"] > 0.5
+    # lag dynamics (ident/rate_plant_dynamics.py) on PX4's own rate loop: a lag in the range of
+    # SIH's motor time constant (SIH_T_TAU, default 0.05 s; the chain's 3-vertex flight gave
+    # 0.027 s: PX4's rate D term and filters are in the identified loop too), and an output
+    # error on the run at least as good as the first-order model's on the same windows
+    from lpv_sysid.ident import rate_plant_dynamics as lag
+
+    plant = lag.identify([run], start=P)
+    for row in ("p", "q"):
+        assert 0.01 < plant.rows[row]["params"]["tau"] < 0.1, plant.rows[row]
+    oe_lag = lag.output_error(plant, run, window_s=rid.OUTPUT_ERROR_WINDOW_S)
+    oe_first = rid.output_error(P, run)
+    for row in ("p", "q", "r"):
+        assert oe_lag[row] >= oe_first[row] - 0.01, (row, oe_lag, oe_first)

@@ -156,6 +156,20 @@ def write_report(out: Path, summary: dict, p2: Optional[dict], rep: dict) -> Non
                 "from the "
                 "law), R^2 of x' per row: " + ", ".join(f"{k} {v}" for k, v in mc.items()),
             ]
+        for key, what in (
+            ("model_check_output_error", "first-order rate plant"),
+            ("model_check_lag_output_error", "with motor lag + delay"),
+        ):
+            oe = p2.get(key)
+            if oe and "error" not in oe:
+                L += [
+                    "",
+                    f"Output error on the phase-2 flight ({what}; rows simulated from the "
+                    f"recorded setpoints, restarted every {oe.get('window_s')} s), R^2 per row: "
+                    + ", ".join(
+                        f"{k} {v}" for k, v in oe.items() if k not in ("window_s", "samples")
+                    ),
+                ]
     full = _full_report(out)
     if full is not None:
         L += [

@@ -76,6 +76,7 @@ def chain(
     step with the vehicle still in HOLD) instead of flying phase 1."""
     from lpv_sysid.flight.campaign import FlyConfig, fly
     from lpv_sysid.ident import rate_plant as rid
+    from lpv_sysid.ident import rate_plant_dynamics as lag
 
     from lpv_sysid.control.law import check_kappa
 
@@ -243,6 +244,21 @@ def chain(
             )
         except LpvSysidError as exc:
             p2["model_check_r2"] = {"error": str(exc)}
+        else:
+            # lag dynamics (motor lag + delay, ident/rate_plant_dynamics.py) from the phase-1
+            # runs, scored by output error on the same flight and windows
+            try:
+                lagp = lag.identify(usable, start=params_rp)
+                loe = lag.output_error(lagp, run2, window_s=oe["window_s"])
+            except (LpvSysidError, ValueError, np.linalg.LinAlgError) as exc:
+                p2["model_check_lag_output_error"] = {"error": str(exc)}
+            else:
+                p2["lag_dynamics"] = lagp.as_dict()
+                p2["model_check_lag_output_error"] = loe
+                echo(
+                    "  with motor lag + delay (output error, same windows), R^2 per row: "
+                    + ", ".join(f"{k} {loe[k]}" for k in ("w", "p", "q", "r"))
+                )
     summary["phase2"] = {
         k: v
         for k, v in p2.items()
@@ -255,6 +271,8 @@ def chain(
             "handback",
             "model_check_r2",
             "model_check_output_error",
+            "model_check_lag_output_error",
+            "lag_dynamics",
             "latency_state_to_setpoint_ms",
         )
     }

@@ -1,0 +1,345 @@
+"""Output-error identification of the rate plant's *lag* dynamics (issue 21 item 3): the
+rate loops and the heave row with the motor lag and delay that PX4 + the vehicle have,
+which the first-order equation-error model of :mod:`lpv_sysid.ident.rate_plant` omits.
+
+Model (per rate axis, p shown; q, r alike; ``d`` a pure delay, ``tau`` the motor/thrust
+lag, e.g. PX4 SIH's ``SIH_T_TAU``; the seed 0 rotor model Eq. (8) has ``tau = 1/a_Omega``)::
+
+    p'  = m                                           (m: achieved angular acceleration)
+    m'  = (K_sp p_sp(t - d) - K_p p + c - m) / tau    i.e. tau p'' + p' = K_sp p_sp - K_p p + c
+
+Heave, thrust through the same lag (``T_a`` the achieved thrust, ``F_w = q u - p v + g cos
+theta cos phi`` the measured Coriolis and gravity terms of models/rate_plant.py)::
+
+    w'   = F_w + Z_w w + Z_T T_a + c_w
+    T_a' = (thrust(t - d) - T_a) / tau_T
+
+The gains are free (no unit DC gain): on data where the setpoints are excited independently
+of the state (broken-loop excitation: the multisine superposed on the body-rate and thrust
+setpoints of a stabilised run) equation-error regressor bias does not arise, and Z_w is not
+confounded with Z_T because thrust no longer follows w. Each row is *simulated* from its
+setpoint (the other states as measured) over windows of ``window_s`` seconds, each window
+started at the measured state (and at the measured x' for the acceleration state, the
+recorded thrust for T_a); the parameters minimise the summed squared output error
+(``scipy.optimize.least_squares``, bounded ``tau``), for each candidate delay in ``delays``;
+the best delay is kept. Standard deviations from the Jacobian at the optimum, scaled by the
+residuals' correlation length ``(1 + 2 sum rho_k)`` like the equation-error fit. Discretisation
+is exact for inputs held over each grid step (augmented matrix exponential).
+
+:func:`output_error` scores identified lag dynamics on another run (the phase-2 flight) with
+the same windows; R^2 per row of the simulated against the measured state. The controller's
+design states stay (phi, theta, u, v, w, p, q, r): the lag and delay identified here are for
+the prediction model (output-error validation) and the certificate's delay/uncertainty
+(``equivalent_delay_s = d + tau`` per row, the low-frequency phase of lag + delay).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from lpv_sysid.configuration import fields as cf
+from lpv_sysid.errors import ConfigError
+from lpv_sysid.models import rate_plant as rp
+
+#: rows of the lag model: name, state index, setpoint column, parameter names
+RATE_ROWS = (("p", 5, 1), ("q", 6, 2), ("r", 7, 3))
+HEAVE_ROW = ("w", 4, 0)
+RATE_PARAMS = ("K_sp", "K_p", "c", "tau")
+HEAVE_PARAMS = ("Z_w", "Z_T", "c_w", "tau")
+
+
+@dataclass(frozen=True)
+class LagIdConfig:
+    """Output-error identification of the lag dynamics (:func:`identify`), declared once."""
+
+    window_s: float = cf.number(
+        4.0,
+        "output-error window: each row restarts from the measured state this often",
+        lo=0.2,
+        hi=600.0,
+        unit=" s",
+    )
+    delays: tuple = cf.numbers(
+        (0.0, 0.02, 0.04, 0.06),
+        "candidate setpoint delays (pure delay on top of the lag)",
+        lo=0.0,
+        hi=1.0,
+        unit=" s",
+    )
+    tau_min: float = cf.number(
+        0.005, "smallest lag time constant searched", lo=0.0, lo_open=True, unit=" s"
+    )
+    tau_max: float = cf.number(1.0, "largest lag time constant searched", lo=0.0, unit=" s")
+    heave_tau_from_rates: bool = cf.flag(
+        False,
+        "heave row: thrust lag = mean roll/pitch loop lag (one motor time constant, e.g. "
+        "SIH_T_TAU), not fitted (false: fitted from the heave row alone)",
+    )
+    tau_starts: tuple = cf.numbers(
+        (0.03, 0.1, 0.3), "initial lag time constants (one fit from each)", lo=0.0, unit=" s"
+    )
+
+    def __post_init__(self) -> None:
+        cf.normalize_fields(self, "lag_identification")
+        if not self.tau_min < self.tau_max:
+            raise ConfigError(
+                f"lag_identification: tau_min {self.tau_min} must be < tau_max {self.tau_max}"
+            )
+
+
+def _rate_matrices(th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(A, B) of the rate row, state (p, m), inputs (p_sp, 1)."""
+    k_sp, k_p, c, tau = th
+    A = np.array([[0.0, 1.0], [-k_p / tau, -1.0 / tau]])
+    B = np.array([[0.0, 0.0], [k_sp / tau, c / tau]])
+    return A, B
+
+
+def _heave_matrices(th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(A, B) of the heave row, state (w, T_a), inputs (thrust, F_w + c_w as two columns)."""
+    z_w, z_t, c_w, tau = th
+    A = np.array([[z_w, z_t], [0.0, -1.0 / tau]])
+    B = np.array([[0.0, 1.0, c_w], [1.0 / tau, 0.0, 0.0]])
+    return A, B
+
+
+def _discretise(A: np.ndarray, B: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    from scipy.linalg import expm
+
+    n, m = B.shape
+    M = np.zeros((n + m, n + m))
+    M[:n, :n], M[:n, n:] = A, B
+    E = expm(M * dt)
+    return E[:n, :n], E[:n, n:]
+
+
+def _windows(n: int, L: int) -> list[tuple[int, int]]:
+    return [(a, min(a + L, n)) for a in range(0, n, L) if min(a + L, n) - a >= 3]
+
+
+def _simulate(
+    Ad: np.ndarray, Bd: np.ndarray, x0: np.ndarray, v: np.ndarray, wins: list[tuple[int, int]]
+) -> np.ndarray:
+    """First state of the discrete system, all windows at once (batch over windows):
+    x0 (W, n) at each window start, v (N, m) inputs; returns (N,) with NaN outside."""
+    N = len(v)
+    out = np.full(N, np.nan)
+    L = max(b - a for a, b in wins)
+    W = len(wins)
+    V = np.zeros((W, L, v.shape[1]))
+    for i, (a, b) in enumerate(wins):
+        V[i, : b - a] = v[a:b]
+    X = x0.copy()
+    Y = np.empty((W, L))
+    for k in range(L):
+        Y[:, k] = X[:, 0]
+        X = X @ Ad.T + V[:, k] @ Bd.T
+    for i, (a, b) in enumerate(wins):
+        out[a:b] = Y[i, : b - a]
+    return out
+
+
+def _shift(u: np.ndarray, k: int) -> np.ndarray:
+    """u(t - k dt), the first value held before the record."""
+    return u if k == 0 else np.concatenate([np.repeat(u[:1], k, axis=0), u[:-k]])
+
+
+@dataclass(frozen=True)
+class _RowData:
+    name: str
+    dt: float
+    y: np.ndarray  # measured output (N,)
+    x0: np.ndarray  # (W, 2) window initial states
+    v: np.ndarray  # (N, m) inputs (setpoint first, delayed per candidate)
+    wins: list
+
+
+def _row_data(run, row: tuple[str, int, int], k_delay: int, L: int, g: float) -> _RowData:
+    name, ix, iu = row
+    t, x, xd = run.t, run.x, run.xdot
+    dt = float(t[1] - t[0])
+    sp = _shift(run.u_raw[:, iu], k_delay)  # as sent: held between samples
+    wins = _windows(len(t), L)
+    starts = np.array([a for a, _ in wins])
+    if name == "w":
+        phi, th, ub, vb, _, p, q, _r = x.T
+        f_w = q * ub - p * vb + g * np.cos(th) * np.cos(phi)
+        v = np.column_stack([sp, f_w, np.ones(len(t))])
+        x0 = np.column_stack([x[starts, ix], sp[starts]])
+    else:
+        v = np.column_stack([sp, np.ones(len(t))])
+        x0 = np.column_stack([x[starts, ix], xd[starts, ix]])
+    # the measured forcing is smooth, not held: the step's mean (trapezoid) is what the
+    # held-input discretisation needs (holding v[n] would lag it by dt / 2)
+    v[:, 1:] = 0.5 * (v[:, 1:] + np.vstack([v[1:, 1:], v[-1:, 1:]]))
+    return _RowData(name, dt, x[:, ix], x0, v, wins)
+
+
+def _residual(th: np.ndarray, rd: _RowData) -> np.ndarray:
+    A, B = (_heave_matrices if rd.name == "w" else _rate_matrices)(th)
+    Ad, Bd = _discretise(A, B, rd.dt)
+    ys = _simulate(Ad, Bd, rd.x0, rd.v, rd.wins)
+    e = ys - rd.y
+    return e[np.isfinite(e)]
+
+
+def _measured(rd: _RowData) -> np.ndarray:
+    """The measured output where :func:`_residual` has samples (inside the windows)."""
+    mask = np.zeros(len(rd.y), bool)
+    for a, b in rd.wins:
+        mask[a:b] = True
+    return rd.y[mask]
+
+
+def _corr_factor(e: np.ndarray) -> float:
+    ec = e - e.mean()
+    den = float(ec @ ec)
+    corr = 1.0
+    if den > 0:
+        for lag in range(1, min(200, len(e) // 4)):
+            rho = float(ec[lag:] @ ec[:-lag]) / den
+            if rho <= 0:
+                break
+            corr += 2 * rho
+    return corr
+
+
+def _r2(y: np.ndarray, e: np.ndarray) -> float:
+    sst = float(((y - y.mean()) ** 2).sum())
+    return 1.0 - float(e @ e) / sst if sst > 0 else float("nan")
+
+
+def _fit_row(
+    runs, row, cfg: LagIdConfig, g: float, guess: np.ndarray, fixed_tau: float | None = None
+) -> dict:
+    """Output-error fit of one row; with ``fixed_tau`` the lag is not fitted (the heave row
+    takes the rate loops' motor lag: one motor time constant)."""
+    from scipy.optimize import least_squares
+
+    dt = float(runs[0].t[1] - runs[0].t[0])
+    L = max(int(round(cfg.window_s / dt)), 3)
+    tau_i = 3
+    npar = len(guess)
+    lo = np.full(npar, -np.inf)
+    hi = np.full(npar, np.inf)
+    lo[tau_i], hi[tau_i] = cfg.tau_min, cfg.tau_max
+    if row[0] != "w":
+        lo[0] = 0.0  # the loop follows its setpoint
+    else:
+        hi[1] = 0.0  # thrust accelerates up (-w)
+    x0 = np.clip(guess, lo + 1e-9, hi - 1e-9)
+    nfree = npar if fixed_tau is None else tau_i
+    starts = cfg.tau_starts if fixed_tau is None else (fixed_tau,)
+
+    def full(th):
+        return th if fixed_tau is None else np.r_[th, fixed_tau]
+
+    best = None
+    for d in cfg.delays:
+        k = int(round(d / dt))
+        rds = [_row_data(r, row, k, L, g) for r in runs]
+
+        def res(th, rds=rds):
+            return np.concatenate([_residual(full(th), rd) for rd in rds])
+
+        for tau0 in starts:  # the lag's cost has local minima: several starts
+            start = x0.copy()
+            start[tau_i] = min(max(tau0, cfg.tau_min * 1.01), cfg.tau_max * 0.99)
+            sol = least_squares(
+                res,
+                start[:nfree],
+                bounds=(lo[:nfree], hi[:nfree]),
+                x_scale="jac",
+                max_nfev=400,
+            )
+            cost = float(sol.fun @ sol.fun)
+            if best is None or cost < best[0]:
+                best = (cost, sol, k * dt, rds)
+    assert best is not None
+    cost, sol, d, rds = best
+    e = sol.fun
+    n = len(e)
+    s2 = cost / max(n - nfree, 1)
+    J = sol.jac
+    cov = s2 * _corr_factor(e) * np.linalg.pinv(J.T @ J)
+    std = np.r_[np.sqrt(np.maximum(np.diag(cov), 0.0)), np.zeros(npar - nfree)]
+    est = full(sol.x)
+    y = np.concatenate([_measured(rd) for rd in rds])
+    names = HEAVE_PARAMS if row[0] == "w" else RATE_PARAMS
+    return {
+        "params": {nm: float(v) for nm, v in zip(names, est)},
+        "std": {nm: float(s) for nm, s in zip(names, std)},
+        "delay_s": round(d, 4),
+        "equivalent_delay_s": round(d + float(est[tau_i]), 4),
+        "tau_fitted": fixed_tau is None,
+        "r2": round(_r2(y, e), 4),
+        "samples": int(n),
+    }
+
+
+@dataclass(frozen=True)
+class LagPlant:
+    """Identified lag dynamics: ``rows[name]`` as returned per row (``params``, ``std``,
+    ``delay_s``, ``equivalent_delay_s``, ``r2``) for p, q, r and w."""
+
+    rows: dict
+    window_s: float
+
+    def as_dict(self) -> dict:
+        return {"window_s": float(self.window_s), "rows": self.rows}
+
+
+def identify(
+    runs: Sequence,
+    cfg: LagIdConfig = LagIdConfig(),
+    start: rp.RatePlantParams | None = None,
+    g: float = rp.GRAVITY,
+) -> LagPlant:
+    """Output-error fit of the lag model (module docstring) on :class:`~lpv_sysid.ident.
+    rate_plant.RateRun` runs (same grid), per row; ``start``: first-order equation-error
+    params used as the initial guess (rate pole and gain, drag, thrust gain)."""
+    if not runs:
+        raise ConfigError("lag identification: no runs")
+    dts = {round(float(r.t[1] - r.t[0]), 9) for r in runs}
+    if len(dts) != 1:
+        raise ConfigError(f"lag identification: runs on different grids {sorted(dts)}")
+    rows: dict = {}
+    for name, ix, iu in RATE_ROWS:
+        if start is not None:
+            pole = -float(getattr(start, {"p": "L_p", "q": "M_q", "r": "N_r"}[name]))
+            gain = float(getattr(start, {"p": "L_sp", "q": "M_sp", "r": "N_sp"}[name]))
+            guess = np.array([max(gain, 1.0), max(pole, 1.0), 0.0, 0.05])
+        else:
+            guess = np.array([10.0, 10.0, 0.0, 0.05])
+        rows[name] = _fit_row(runs, (name, ix, iu), cfg, g, guess)
+    if start is not None:
+        guess = np.array([start.Z_w, start.Z_T, start.c_w, 0.05])
+    else:
+        guess = np.array([-0.3, -20.0, 0.0, 0.05])
+    fixed = None
+    if cfg.heave_tau_from_rates:
+        fixed = float(np.mean([rows[k]["params"]["tau"] for k in ("p", "q")]))
+    rows["w"] = _fit_row(runs, HEAVE_ROW, cfg, g, guess, fixed_tau=fixed)
+    return LagPlant(rows=rows, window_s=float(cfg.window_s))
+
+
+def output_error(plant: LagPlant, run, window_s: float | None = None, g: float = rp.GRAVITY):
+    """R^2 per row (p, q, r, w) of the lag model simulated from the run's setpoints against
+    the measured state, windows of ``window_s`` (default: the identification's)."""
+    w = float(plant.window_s if window_s is None else window_s)
+    if not (math.isfinite(w) and w > 0):
+        raise ConfigError(f"lag output error: window_s must be > 0, got {window_s!r}")
+    dt = float(run.t[1] - run.t[0])
+    L = max(int(round(w / dt)), 3)
+    out: dict = {"window_s": w}
+    for row in (*RATE_ROWS, HEAVE_ROW):
+        r = plant.rows[row[0]]
+        names = HEAVE_PARAMS if row[0] == "w" else RATE_PARAMS
+        th = np.array([r["params"][k] for k in names])
+        rd = _row_data(run, row, int(round(r["delay_s"] / dt)), L, g)
+        out[row[0]] = round(_r2(_measured(rd), _residual(th, rd)), 4)
+    return out
