@@ -239,6 +239,29 @@ def _same(a: str, b: str) -> bool:
         return os.path.realpath(a) == os.path.realpath(b)
 
 
+def read_key(path, what: str) -> bytes:
+    """A 32-byte secret from a key file (an operator seal key, a MAVLink 2 signing key): 32
+    raw bytes, or 64 hexadecimal characters; regular files only (a FIFO would block), at most
+    4 KiB. ConfigError ``"{what} {path!r}: ..."`` otherwise."""
+    import binascii
+
+    try:
+        raw = read_bytes(path, f"{what} {path!r}", max_bytes=4096)
+    except FileReadError as exc:
+        raise ConfigError(f"{what} {path!r} cannot be read: {exc.reason}") from None
+    if len(raw) == 32:
+        return raw
+    text = raw.strip()
+    if len(text) == 64:
+        try:
+            return binascii.unhexlify(text)
+        except (binascii.Error, ValueError):
+            raise ConfigError(f"{what} {path!r}: 64 characters but not hexadecimal") from None
+    raise ConfigError(
+        f"{what} {path!r}: expected 32 raw bytes or 64 hex characters, got {len(raw)} bytes"
+    )
+
+
 def refuse_overwrite(
     out,
     inputs: "list[tuple[str, str]]",

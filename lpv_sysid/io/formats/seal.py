@@ -23,7 +23,6 @@ a gains file runs (:meth:`~lpv_sysid.io.formats.gains.GainSchedule.load`).
 
 from __future__ import annotations
 
-import binascii
 import datetime
 import hashlib
 import hmac
@@ -31,8 +30,8 @@ import json
 import math
 from typing import Any, Mapping, Optional
 
-from lpv_sysid.errors import ConfigError, FileReadError
-from lpv_sysid.io.files import read_bytes
+from lpv_sysid.errors import ConfigError
+from lpv_sysid.io.files import read_key
 
 SEAL_KEY = "seal"
 SEAL_TAG = b"lpv_sysid/gains-seal@1\n"
@@ -145,20 +144,4 @@ def check_seal(doc: Mapping[str, Any], label: str, key: Optional[bytes] = None) 
 def load_seal_key(path: str) -> bytes:
     """An operator seal key: 32 raw bytes, or 64 hexadecimal characters (as a MAVLink
     signing key); ConfigError naming the file otherwise."""
-    try:  # regular files only (a FIFO would block), at most 4 KiB
-        raw = read_bytes(path, f"seal key file {path!r}", max_bytes=4096)
-    except FileReadError as exc:
-        raise ConfigError(f"seal key file {path!r} cannot be read: {exc.reason}") from None
-    if len(raw) == 32:
-        return raw
-    text = raw.strip()
-    if len(text) == 64:
-        try:
-            return binascii.unhexlify(text)
-        except (binascii.Error, ValueError):
-            raise ConfigError(
-                f"seal key file {path!r}: 64 characters but not hexadecimal"
-            ) from None
-    raise ConfigError(
-        f"seal key file {path!r}: expected 32 raw bytes or 64 hex characters, got {len(raw)} bytes"
-    )
+    return read_key(path, "seal key file")

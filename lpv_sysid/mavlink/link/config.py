@@ -3,12 +3,10 @@
 
 from __future__ import annotations
 
-import binascii
 from dataclasses import dataclass
 from typing import Any, Mapping
 
 from lpv_sysid.configuration import fields as cf
-from lpv_sysid.errors import ConfigError
 from lpv_sysid.mavlink import codec
 from lpv_sysid.mavlink.link.url import parse_url
 
@@ -128,24 +126,6 @@ class LinkConfig:
 
 def load_signing_key(path: str) -> bytes:
     """Read a MAVLink 2 signing secret: 32 raw bytes, or 64 hexadecimal characters."""
-    from lpv_sysid.errors import FileReadError
-    from lpv_sysid.io.files import read_bytes
+    from lpv_sysid.io.files import read_key
 
-    try:  # regular files only (a FIFO would block the reader), at most 4 KiB
-        raw = read_bytes(path, f"signing key file {path!r}", max_bytes=4096)
-    except FileReadError as exc:
-        raise ConfigError(f"signing key file {path!r} cannot be read: {exc.reason}") from None
-    if len(raw) == 32:
-        return raw
-    text = raw.strip()
-    if len(text) == 64:
-        try:
-            return binascii.unhexlify(text)
-        except (binascii.Error, ValueError):
-            raise ConfigError(
-                f"signing key file {path!r}: 64 characters but not hexadecimal"
-            ) from None
-    raise ConfigError(
-        f"signing key file {path!r}: expected 32 raw bytes or 64 hex characters, "
-        f"got {len(raw)} bytes"
-    )
+    return read_key(path, "signing key file")
