@@ -995,3 +995,28 @@ def test_standin_is_no_kinder_than_rclpy(ros, dom, tmp_path):
         if real.get(k) != standin.get(k)
     }
     assert diff == {}, diff
+
+
+@pytest.mark.parametrize(
+    "exe, typo",
+    [
+        ("mavlink_bridge_node", "telemetry_max_agee"),
+        ("lpv_controller_node", "box_margn"),
+        ("data_logger_node", "flush_intervall_s"),
+    ],
+)
+def test_a_misspelt_parameter_is_refused_under_real_rclpy(ros, dom, tmp_path, exe, typo):
+    """Issue 25 item 5 under real Jazzy rclpy: a ``-p`` key no declaration takes (rclpy keeps
+    it in the node's overrides) ends the node at start, exit 2, naming the key -- the node
+    does not run on its defaults."""
+    env = RosEnv(SETUP, ros["ws"], dom.value)
+    node, params_file, _ = NODES[exe]
+    extra = f" -p gains_file:={ros['gains']}" if exe == "lpv_controller_node" else ""
+    r = env.run(
+        f"timeout -s KILL 60 {ros['lib']}/{exe} --ros-args --params-file "
+        f"{ros['share']}/config/{params_file}{extra} -p {typo}:=1.0",
+        timeout=90,
+    )
+    out = r.stdout + r.stderr
+    assert r.returncode == 2, out[-3000:]
+    assert typo in out and "unknown" in out.lower(), out[-3000:]
