@@ -618,7 +618,13 @@ def test_sim_launch_phase2_process_group_sigint(ros, dom, tmp_path):
     assert_launch_exit(
         proc,
         rc,
-        ["sim_vehicle_node", "excitation_node", "lpv_controller_node", "data_logger_node"],
+        [
+            "sim_vehicle_node",
+            "excitation_node",
+            "lpv_controller_node",
+            "data_logger_node",
+            "sequencer_node",
+        ],
     )
     text = proc.log()
     abort = re.search(
@@ -684,6 +690,7 @@ def test_phase1_launch_px4_sim_handback_on_process_group_sigint(ros, dom, tmp_pa
         "phase1.launch.py",
         {
             "config_dir": cfg,
+            "link_url": f"udpin:127.0.0.1:{port}",  # the launch argument sets the link
             "signals_file": ros["sig1"],
             "log_dir": out,
             "vertex": '"[1.0, 0.0, 0.0]"',
@@ -715,7 +722,11 @@ def test_phase1_launch_px4_sim_handback_on_process_group_sigint(ros, dom, tmp_pa
         proc.kill()
         px4_rc, _ = sigint_and_wait(px4, group=False)
     MEASURED["phase1_group_sigint"] = {"rc": rc, "s": dt}
-    assert_launch_exit(proc, rc, ["excitation_node", "mavlink_bridge_node", "data_logger_node"])
+    assert_launch_exit(
+        proc,
+        rc,
+        ["excitation_node", "mavlink_bridge_node", "data_logger_node", "sequencer_node"],
+    )
     assert "[lpv_sysid.excitation]: excitation faded out: shutdown" in proc.log()
     after = proc.log().rsplit("OFFBOARD confirmed", 1)[1]
     m = HANDBACK_DONE.search(after)
@@ -763,6 +774,7 @@ def test_phase2_launch_px4_sim_services_and_launch_sigint(ros, dom, tmp_path):
         "phase2.launch.py",
         {
             "config_dir": cfg,
+            "link_url": f"udpin:127.0.0.1:{port}",  # the launch argument sets the link
             "gains_file": ros["gains"],
             "signals_file": ros["sig2"],
             "log_dir": out,
@@ -805,7 +817,13 @@ def test_phase2_launch_px4_sim_services_and_launch_sigint(ros, dom, tmp_path):
     assert_launch_exit(
         proc,
         rc,
-        ["excitation_node", "lpv_controller_node", "mavlink_bridge_node", "data_logger_node"],
+        [
+            "excitation_node",
+            "lpv_controller_node",
+            "mavlink_bridge_node",
+            "data_logger_node",
+            "sequencer_node",
+        ],
     )
     check_recording(out, {"state": 20, "velocity_reference": 20, "excitation": 20, "status": 2})
 
@@ -883,6 +901,7 @@ def test_campaign_launch_px4_sim_start_abort_process_group_sigint(ros, dom, tmp_
         "campaign.launch.py",
         {
             "config_dir": cfg,
+            "link_url": f"udpin:127.0.0.1:{port}",  # the launch argument sets the link
             "signals_file": ros["sig1"],
             "log_dir": out,
             "runs_dir": tmp_path / "runs",

@@ -204,7 +204,7 @@ def _(node):
 
     v = Vector3()
     v.x = np.float64(1.5)
-    return v.x
+    return float(v.x)  # the value kept (numpy 2 prints np.float64(1.5))
 
 
 @case("init_twice")

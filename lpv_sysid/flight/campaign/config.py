@@ -150,7 +150,9 @@ def resume_config(cfg: FlyConfig, previous: str | Path) -> tuple[FlyConfig, list
 
     f = Path(previous) / "campaign_summary.yaml"
     if not f.is_file():
-        raise ConfigError(f"--resume {previous}: no campaign_summary.yaml (not a phase-1 flight)")
+        raise ConfigError(
+            f"previous flight {previous}: no campaign_summary.yaml (not a phase-1 flight)"
+        )
     s = read_yaml_mapping(f, finite=False)
     c = cfg.campaign
     corners = c.corners()
@@ -161,7 +163,7 @@ def resume_config(cfg: FlyConfig, previous: str | Path) -> tuple[FlyConfig, list
     foreign = [n for n in planned if n not in names and n not in hover]
     if foreign:
         raise ConfigError(
-            f"--resume {previous}: runs {foreign} are not vertices of this campaign's box "
+            f"previous flight {previous}: runs {foreign} are not vertices of this campaign's box "
             f"{list(c.box_min)}..{list(c.box_max)}; resume with the stopped flight's config"
         )
     done = [str(r.get("name")) for r in s.get("runs") or [] if r.get("complete")]
@@ -171,7 +173,8 @@ def resume_config(cfg: FlyConfig, previous: str | Path) -> tuple[FlyConfig, list
     if not left:
         what = "only the hover validation run is" if hover_left else "no run is"
         raise ConfigError(
-            f"--resume {previous}: every vertex was completed ({len(done)} runs); {what} left "
+            f"previous flight {previous}: every vertex was completed ({len(done)} runs); "
+            f"{what} left "
             f"(centre {list(centre)})"
         )
     camp = dataclasses.replace(c, vertices=tuple(left), hover_validation=bool(hover_left))
