@@ -17,7 +17,23 @@ SUPPORT = os.path.join(ROOT, "test", "support")
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
-REAL_RCLPY = importlib.util.find_spec("rclpy") is not None
+
+def _real_rclpy_imports() -> bool:
+    """A real rclpy that imports in this interpreter: a sourced ROS whose compiled rclpy was
+    built for another Python (or lacks a library) is no real rclpy here -- the stand-in is
+    used instead of failing the whole collection."""
+    if importlib.util.find_spec("rclpy") is None:
+        return False
+    try:
+        import rclpy  # noqa: F401
+    except Exception:  # ImportError, or an extension that does not load
+        for m in [m for m in sys.modules if m == "rclpy" or m.startswith("rclpy.")]:
+            del sys.modules[m]
+        return False
+    return True
+
+
+REAL_RCLPY = _real_rclpy_imports()
 if not REAL_RCLPY and SUPPORT not in sys.path:
     sys.path.insert(0, SUPPORT)
 elif REAL_RCLPY and SUPPORT not in sys.path:
