@@ -241,3 +241,30 @@ def test_flight_controller_start_up_refuses_gains_certified_for_less_delay(tmp_p
     ok = write_gains(tmp_path / "b" / "gains.yaml", edit=with_bound(0.015))
     rt = ControllerRuntime(ControllerSettings(gains_file=ok), messages.MsgFactory.rosbags())
     assert rt.schedule.certificate.loop_delay_bound_s == 0.015
+
+
+def test_flight_start_up_refuses_a_proof_without_loop_delay(tmp_path):
+    """A certificate that claims a Lemma 1 proof but predates the delay bound (no
+    ``certificate.loop_delay``) is refused on the one start-up path, naming the remedy (issue 20
+    round 2); a test law that claims no proof (``lmi: none ...``) still starts, flagged as not
+    covered."""
+    from lpv_test_gains import write_gains
+
+    from lpv_sysid.flight.controller import ControllerRuntime, ControllerSettings
+    from lpv_sysid.io import messages
+
+    def claims_proof(d):
+        d["certificate"].pop("loop_delay", None)
+        d["certificate"]["lmi"] = "seed 0 Lemma 1 (Eq. 30), common X"
+
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    old = write_gains(tmp_path / "a" / "gains.yaml", edit=claims_proof)
+    with pytest.raises(ConfigError, match="certificate.loop_delay missing") as ei:
+        ControllerRuntime(ControllerSettings(gains_file=old), messages.MsgFactory.rosbags())
+    assert "lpv-sysid synthesize" in str(ei.value) and "--loop-delay" in str(ei.value)
+    test_law = write_gains(
+        tmp_path / "b" / "gains.yaml", edit=lambda d: d["certificate"].pop("loop_delay", None)
+    )
+    rt = ControllerRuntime(ControllerSettings(gains_file=test_law), messages.MsgFactory.rosbags())
+    assert rt.schedule.certificate.loop_delay_bound_s is None

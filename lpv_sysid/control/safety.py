@@ -491,13 +491,24 @@ def loop_delay_s(
 def check_loop_delay(certificate, delay_s: float, label: str = "gains") -> str:
     """ConfigError when the configured loop delay ``delay_s`` exceeds the certificate's
     ``loop_delay.bound_s`` (issue 20 item 7: the H-inf proof covers constant delays up to that
-    bound only); returns the info line. A certificate written before the bound existed states
-    no delay: the line says the delay is not covered (not refused: such gains predate it)."""
+    bound only); returns the info line. A certificate that claims a Lemma 1 proof but was
+    written before the bound existed (no ``loop_delay``) is refused too: its proof says nothing
+    about the loop it would fly (issue 20 round 2). Only a test law that claims no proof at all
+    (``certificate.lmi`` starting with ``none``) flies without a bound, and the line says so."""
     bound = certificate.loop_delay_bound_s
     if bound is None:
-        return (
-            f"loop delay {delay_s * 1e3:.1f} ms NOT covered: {label} states no "
-            "certificate.loop_delay (synthesize again to certify one)"
+        if str(getattr(certificate, "lmi", "")).strip().lower().startswith("none"):
+            return (
+                f"loop delay {delay_s * 1e3:.1f} ms NOT covered: {label} is a test law "
+                "without a proof (certificate.lmi: none) and states no certificate.loop_delay"
+            )
+        raise ConfigError(
+            f"{label}: certificate.loop_delay missing: these gains were certified before the "
+            "loop delay was part of the proof, so the H-inf bound is not proven for the "
+            f"configured loop ({delay_s * 1e3:.1f} ms); refusing to fly. Synthesize them again "
+            "(lpv-sysid synthesize --models vertex_models.yaml --config <synthesis.yaml> "
+            "--out gains.yaml records certificate.loop_delay) and check with lpv-sysid verify "
+            "--loop-delay <s>"
         )
     if not delay_s <= bound:
         raise ConfigError(
