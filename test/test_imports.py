@@ -36,6 +36,7 @@ from ulog_writer import ULogWriter  # noqa: E402
 
 BOOT_S = 20.0  # the run starts 20 s after PX4 booted
 EPOCH_US = 1_795_000_000_000_000  # wall-clock time of the boot (2026-11-18), GPS UTC
+HOME = (47.3977418, 8.5455939, 488.125)  # lat, lon (deg), alt AMSL (m): PX4's SITL home
 RELEASE = (1 << 24) | (15 << 16) | (2 << 8) | 255  # v1.15.2 release
 
 
@@ -123,6 +124,19 @@ def write_ulog(rec, path, with_gps=True):
     w.format("vehicle_status", ["uint64_t timestamp", "uint8_t nav_state", "uint8_t arming_state"])
     w.format("vehicle_gps_position", ["uint64_t timestamp", "uint64_t time_utc_usec"])
     w.format("battery_status", ["uint64_t timestamp", "float voltage_v", "float remaining"])
+    w.format(
+        "home_position",
+        [
+            "uint64_t timestamp",
+            "double lat",
+            "double lon",
+            "float alt",
+            "float x",
+            "float y",
+            "float z",
+            "bool valid_hpos",
+        ],
+    )
     w.info("char", "ver_sw", "0123456789abcdef0123456789abcdef01234567")
     w.info("uint32_t", "ver_sw_release", RELEASE)
     w.info("char", "ver_hw", "PX4_SITL")
@@ -140,6 +154,7 @@ def write_ulog(rec, path, with_gps=True):
         "vehicle_status",
         "vehicle_gps_position",
         "battery_status",
+        "home_position",
     ):
         w.add(name)
     xm = rec.state_meas
@@ -262,6 +277,11 @@ def write_ulog(rec, path, with_gps=True):
                     {"timestamp": _us(t), "time_utc_usec": EPOCH_US + _us(t)},
                 )
             )
+    for t, ok in ((-2.0, False), (-1.5, True), (t_end / 2, True)):  # first fix, then a reset
+        home = {"lat": HOME[0], "lon": HOME[1], "alt": HOME[2], "x": 0.5, "y": -0.25, "z": 0.0}
+        if t > 0:
+            home["lat"] += 1e-5
+        items.append((_us(t), 9, "home_position", {"timestamp": _us(t), **home, "valid_hpos": ok}))
     items.sort(key=lambda it: (it[0], it[1]))
     w.log(6, _us(0.0), "Offboard control started")
     for _, _, topic, vals in items:
@@ -308,6 +328,11 @@ def test_ulog_import_state_stamps_and_provenance(run, tmp_path):
     assert (prov["clock"]["kind"], prov["clock"]["offset_ns"]) == ("utc", EPOCH_US * 1000)
     assert prov["battery"]["voltage_v"]["start"] == pytest.approx(16.02, abs=1e-5)
     assert prov["rotor_speeds"] == "esc"
+    site = prov["site"]  # the first valid home, and the moved one
+    assert (site["latitude_deg"], site["longitude_deg"]) == HOME[:2]
+    assert site["altitude_amsl_m"] == pytest.approx(HOME[2], abs=1e-9)  # float32 exact
+    assert site["local_ned_m"] == [0.5, -0.25, 0.0] and site["t_s"] == BOOT_S - 1.5
+    assert site["last"]["latitude_deg"] == HOME[0] + 1e-5 and site["updates"] == 2
     assert meta["bags"][0]["path"] == "bag_0000"
     assert meta["status"] == "closed_cleanly"
 

@@ -141,3 +141,26 @@ def test_live_estimate_stamps_samples_at_their_px4_time():
     errs = np.array(errs)
     assert errs.min() >= 0 and np.percentile(errs, 99) < 5e6 and errs.max() < 8e6
     assert rec.bag_ns_of(float("nan")) is None
+
+
+def test_site_is_the_autopilots_home_position():
+    """``vehicle.site``: PX4's HOME_POSITION (degE7, mm AMSL) in degrees and metres; a home
+    without a global position (MAVROS' local home) is no site; a moved home is kept as
+    ``last``."""
+    rec = VehicleRecord()
+    assert rec.summary()["site"] is None
+    z4 = [1.0, 0.0, 0.0, 0.0]
+    rec.absorb(mav.MAVLink_home_position_message(0, 0, 0, 0.0, 0.0, 0.0, z4, 0, 0, 0), 1)
+    assert rec.summary()["site"] is None
+    lat, lon, alt = 473977418, 85455939, 488123  # Zurich, PX4's default SITL home
+    home = mav.MAVLink_home_position_message(lat, lon, alt, 0.5, -0.25, 0.0, z4, 0, 0, 0)
+    rec.absorb(home, 2_000)
+    rec.absorb(home, 3_000)
+    site = rec.summary()["site"]
+    assert site["latitude_deg"] == pytest.approx(47.3977418, abs=1e-9)
+    assert site["longitude_deg"] == pytest.approx(8.5455939, abs=1e-9)
+    assert site["altitude_amsl_m"] == pytest.approx(488.123, abs=1e-9)
+    assert site["local_ned_m"] == [0.5, -0.25, 0.0] and site["stamp_ns"] == 2_000
+    assert "last" not in site
+    rec.absorb(mav.MAVLink_home_position_message(lat + 90, lon, alt, 0, 0, 0, z4, 0, 0, 0), 9)
+    assert rec.summary()["site"]["last"]["latitude_deg"] == pytest.approx(47.3977508, abs=1e-9)

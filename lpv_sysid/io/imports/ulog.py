@@ -33,6 +33,7 @@ TOPICS = (
     "vehicle_gps_position",
     "sensor_gps",
     "battery_status",
+    "home_position",
 )
 #: the kinds of vehicle a recording can come from (report labels)
 VEHICLE_KINDS = ("SITL", "HITL", "SIH", "FLOWN", "SIMULATED")

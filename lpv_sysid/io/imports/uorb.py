@@ -28,6 +28,8 @@ rate setpoint                     ``vehicle_rates_setpoint`` (``roll, pitch, yaw
 offboard segments, events         ``vehicle_status.nav_state`` (14: offboard), ``arming_state``
 wall clock                        ``vehicle_gps_position`` / ``sensor_gps`` ``time_utc_usec``
 battery                           ``battery_status`` (``voltage_v``, ``remaining``) first / last
+site                              ``home_position`` (``lat``, ``lon``, ``alt`` AMSL; ``x y z``
+                                  local NED) first valid and last
 ================================  =============================================================
 
 Times are taken from ``timestamp_sample`` where a topic has it (when the data were sampled),
@@ -323,6 +325,39 @@ def battery_of(tables: Tables) -> dict | None:
     return out or None
 
 
+def site_of(tables: Tables) -> dict | None:
+    """The site: PX4's home position (``home_position``: WGS-84 ``lat``/``lon`` deg, ``alt``
+    m AMSL, local NED ``x y z`` m) -- the first one with a valid global position, and how far
+    the last one moved from it (a home reset in flight)."""
+    tab = tables.get("home_position")
+    if tab is None or "lat" not in tab or "lon" not in tab:
+        return None
+    lat, lon = np.asarray(tab["lat"], float), np.asarray(tab["lon"], float)
+    alt = np.asarray(tab.get("alt", np.full(lat.shape, np.nan)), float)
+    ok = np.isfinite(lat) & np.isfinite(lon) & ((lat != 0.0) | (lon != 0.0))
+    if "valid_hpos" in tab:
+        ok &= np.asarray(tab["valid_hpos"]).astype(bool)
+    idx = np.nonzero(ok)[0]
+    if not idx.size:
+        return None
+    i, j = int(idx[0]), int(idx[-1])
+    local = [float(np.asarray(tab[k], float)[i]) if k in tab else None for k in "xyz"]
+    return {
+        "source": "px4 home_position",
+        "latitude_deg": float(lat[i]),
+        "longitude_deg": float(lon[i]),
+        "altitude_amsl_m": float(alt[i]),
+        "local_ned_m": local,
+        "t_s": round(float(times(tab)[i]), 6),
+        "updates": int(idx.size),
+        "last": {
+            "latitude_deg": float(lat[j]),
+            "longitude_deg": float(lon[j]),
+            "altitude_amsl_m": float(alt[j]),
+        },
+    }
+
+
 def flight_from_uorb(
     tables: Tables, source: str, rotor_config: Any = None, epoch_ns: int | None = None
 ) -> FlightRecord:
@@ -354,4 +389,7 @@ def flight_from_uorb(
     battery = battery_of(tables)
     if battery is not None:
         rec.provenance["battery"] = battery
+    site = site_of(tables)
+    if site is not None:
+        rec.provenance["site"] = site
     return rec

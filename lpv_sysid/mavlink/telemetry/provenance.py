@@ -1,7 +1,8 @@
 """What a flight learns about its vehicle from the MAVLink stream, for ``experiment.yaml``
 (:class:`VehicleRecord`): firmware (AUTOPILOT_VERSION), the PX4 parameter snapshot
 (PARAM_VALUE, e.g. after a PARAM_REQUEST_LIST), battery at start and end (SYS_STATUS,
-BATTERY_STATUS), PX4's boot time on the recording clock, and what kind of vehicle it is.
+BATTERY_STATUS), the site (HOME_POSITION: WGS-84 latitude/longitude, altitude AMSL, the
+local NED home), PX4's boot time on the recording clock, and what kind of vehicle it is.
 
 Boot time. Every message with ``time_boot_ms`` was sent after PX4's clock read that value,
 so ``receive_time - time_boot_ms`` over-estimates PX4's boot time (on the receiver's clock)
@@ -66,6 +67,8 @@ class VehicleRecord:
     system_time: dict | None = None
     battery_first: dict | None = None
     battery_last: dict | None = None
+    site: dict | None = None  # first HOME_POSITION with a global position
+    site_last: dict | None = None
 
     #: per second of PX4 time: (min receive - time_boot, time_boot) (ns), for the clock fit
     windows: dict = field(default_factory=dict)
@@ -119,6 +122,8 @@ class VehicleRecord:
                     "boot_epoch_ns": int(m.time_unix_usec) * 1000
                     - int(m.time_boot_ms) * 1_000_000,
                 }
+        elif mt == "HOME_POSITION":
+            self._home(m, receive_ns)
         elif mt == "SYS_STATUS":
             v = int(m.voltage_battery)
             if v not in (0, 65535):
@@ -127,6 +132,25 @@ class VehicleRecord:
             cells = [c for c in m.voltages if c not in (0, 65535)]
             if cells:
                 self._battery(receive_ns, sum(cells) * 1e-3, int(m.battery_remaining))
+
+    def _home(self, m: Any, receive_ns: int) -> None:
+        """HOME_POSITION (latitude/longitude degE7, altitude mm AMSL, x y z local NED m); a
+        home without a global position (MAVROS' local home, latitude 0 and longitude 0)
+        gives no site."""
+        lat, lon, alt = (getattr(m, k, None) for k in ("latitude", "longitude", "altitude"))
+        if not isinstance(lat, int) or not isinstance(lon, int) or (lat == 0 and lon == 0):
+            return
+        h = {
+            "source": "HOME_POSITION",
+            "latitude_deg": lat * 1e-7,
+            "longitude_deg": lon * 1e-7,
+            "altitude_amsl_m": None if not isinstance(alt, int) else alt * 1e-3,
+            "local_ned_m": [round(float(getattr(m, k, 0.0)), 3) for k in "xyz"],
+            "stamp_ns": int(receive_ns),
+        }
+        if self.site is None:
+            self.site = h
+        self.site_last = h
 
     def _battery(self, ns: int, volts: float, remaining: int) -> None:
         b = {
@@ -171,6 +195,19 @@ class VehicleRecord:
         items = sorted(self.windows.values(), key=lambda p: p[1])
         return [[round(tb * 1e-9, 6), int(off)] for off, tb in items]
 
+    def site_summary(self) -> dict | None:
+        """The ``site`` of ``experiment.yaml``: the first home position the autopilot sent
+        and, when it moved (a home reset), the last one; None without a global home."""
+        if self.site is None:
+            return None
+        out = dict(self.site)
+        last = self.site_last
+        if last is not None and last is not self.site:
+            keys = ("latitude_deg", "longitude_deg", "altitude_amsl_m", "local_ned_m")
+            if any(last[k] != self.site[k] for k in keys):
+                out["last"] = {k: last[k] for k in (*keys, "stamp_ns")}
+        return out
+
     @property
     def kind(self) -> str:
         return vehicle_kind(self.params, self.hil_flag, self.custom_version)
@@ -189,6 +226,7 @@ class VehicleRecord:
             },
             "hil_flag": self.hil_flag,
             "battery": {"start": self.battery_first, "end": self.battery_last},
+            "site": self.site_summary(),
             "px4_clock": {
                 "boot_ns": self.boot_ns if fit is None else fit[0],
                 "rate": 1.0 if fit is None else fit[1],
