@@ -350,6 +350,8 @@ READ_ONLY_PROBE = {
     "mavlink_bridge_node": ("offboard.input_timeout", "0.3"),
     "data_logger_node": ("queue_depth", "10"),
     "sim_vehicle_node": ("state_hz", "5.0"),
+    "campaign_node": ("rate_hz", "50.0"),
+    "sequencer_node": ("step_timeout_s", "10.0"),
 }
 
 
@@ -577,6 +579,53 @@ def dom():
     d = domain()
     yield d
     d.release()
+
+
+#: the two nodes the README's node table leaves to the launch files: node name and the -p
+#: arguments (by fixture key) they need to start alone
+LAUNCH_ONLY_NODES = {
+    "campaign_node": ("campaign", {"campaign_file": "campaign_yaml", "signals_file": "sig1"}),
+    "sequencer_node": ("sequencer", {}),
+}
+
+
+@pytest.mark.parametrize("exe", list(LAUNCH_ONLY_NODES))
+def test_param_set_on_the_campaign_and_sequencer_nodes(ros, dom, tmp_path, exe):
+    """Issue 24 item 1 for the nodes of the launch files only (the README's five nodes:
+    test_node_from_config_params_topics_services_sigint): under real Jazzy, ``ros2 param
+    set`` of a read-only parameter is refused and the value kept, ``status_rate_hz`` out of
+    range is refused, and ``status_rate_hz`` 10 takes effect -- the node's status, measured
+    with ``ros2 topic hz`` before (the default: 2 Hz campaign, 1 Hz sequencer) and after."""
+    env = RosEnv(SETUP, ros["ws"], dom.value)
+    node, extra = LAUNCH_ONLY_NODES[exe]
+    fixture = {**ros, "campaign_yaml": ros["share"] / "config" / "campaign.yaml"}
+    args = " ".join(f"-p {k}:={fixture[v]}" for k, v in extra.items())
+    proc = env.popen(f"{ros['lib']}/{exe} --ros-args {args}", tmp_path / f"{exe}.log")
+    try:
+        assert proc.wait_for(ready(node), 90.0), proc.log()[-3000:]
+        default_hz = declared_defaults(exe)["status_rate_hz"]
+        before = topic_hz(env, f"{NS}/status")
+        ps = probe_param_set(env, f"{NS}/{node}", exe, proc)
+        rc, _ = sigint_and_wait(proc, group=False)
+    finally:
+        proc.kill()
+    MEASURED.setdefault("param_set", {})[exe] = {**ps, "status_hz_before": before}
+    assert before == pytest.approx(default_hz, rel=0.3), (before, default_hz)
+    assert "Setting parameter failed" in ps["read_only"] and "read-only" in ps["read_only"], ps
+    assert same(*ps["read_only_after"]), ps
+    assert "Setting parameter failed" in ps["out_of_range"], ps
+    assert "Set parameter successful" in ps["runtime"] and ps["applied_logged"], ps
+    assert 8.0 <= ps["status_hz"] <= 12.0, ps
+    assert rc == 0, proc.log()[-3000:]
+    assert_no_traceback(proc.log(), exe)
+
+
+def declared_defaults(exe: str) -> dict:
+    """{parameter: default} of the node module's declaration."""
+    import importlib
+
+    mod = importlib.import_module(f"lpv_sysid.nodes.{exe}")
+    return {name: default for name, default, _ in mod.PARAMETERS}
 
 
 def test_sim_launch_phase2_process_group_sigint(ros, dom, tmp_path):
