@@ -306,9 +306,10 @@ def test_logger_main_closes_bag_on_shutdown(tmp_path):
     )
     meta = yaml.safe_load((out / "experiment.yaml").read_text())
     assert meta["closed_cleanly"] is True
-    # its own 1 Hz status is recorded: t = 1.0 s (the 1.5 s shutdown comes first)
+    # its own 1 Hz status is recorded: t = 0 (the first, at start) and 1.0 s (the 1.5 s
+    # shutdown comes first)
     bag = read_bag(str(out / "bag_0000"))
-    assert len(bag["/lpv_sysid/status"]) == meta["topics"]["/lpv_sysid/status"]["count"] == 1
+    assert len(bag["/lpv_sysid/status"]) == meta["topics"]["/lpv_sysid/status"]["count"] == 2
 
 
 # ------------------------------------------------------------------ mavlink_bridge_node

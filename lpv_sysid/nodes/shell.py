@@ -332,8 +332,13 @@ class ShellNode(Node):
     SETTINGS: Any = None
 
     def status_timer(self, rate_hz: float, callback):
-        """The node's status timer (``status_rate_hz``; its period follows the parameter)."""
+        """The node's status timer (``status_rate_hz``; its period follows the parameter),
+        and the first status published now: a timer fires one period after it is created
+        (10 s at 0.1 Hz), and ``status`` is transient local so that a late ``ros2 topic
+        echo`` sees the node's last status -- which must exist from the start (issue 24:
+        under real Jazzy a late echo otherwise waited for the first timer period)."""
         self._status_timer = self.create_timer(1.0 / rate_hz, callback)
+        callback()
         return self._status_timer
 
     def apply_parameters(self, settings, changes: dict) -> None:
