@@ -181,3 +181,20 @@ def test_imu_is_only_wanted_while_a_run_is_recorded(files):
     assert rt.wants("state") and rt.wants("rotor_speeds") and not rt.wants("imu")
     rt.rec = FailingRecorder()
     assert rt.wants("imu")
+
+
+def test_the_bridge_status_from_before_the_start_call_is_no_refusal(files):
+    """Under real Jazzy the bridge's start answer and its next 2 Hz status came 0.9-1.4 s
+    after the call: the IDLE it still showed aborted the campaign ("offboard start failed:
+    bridge IDLE"). IDLE counts as a refusal only START_ANSWER_S after the call."""
+    from lpv_sysid.flight.campaign.runtime import START_ANSWER_S
+
+    rt = make(files)
+    rt.on_status(bridge_status(BRIDGE, "IDLE"))
+    rt.start(1.0)
+    for t in (1.5, 2.5, 1.0 + START_ANSWER_S - 0.1):
+        rt.on_timer(t)
+        assert rt.campaign.phase == campaign.STARTING, rt.campaign.reason
+    rt.on_timer(1.0 + START_ANSWER_S + 0.1)  # still IDLE: the bridge did not start
+    assert rt.campaign.phase != campaign.STARTING
+    assert "offboard start failed: bridge IDLE" in rt.campaign.reason

@@ -1,6 +1,8 @@
 """The PX4 chain's phase-2 path (rate plant) against the package's simulated PX4 in lock-step,
-and the chain's phase-1 recording of PX4's rate setpoints on a real PX4 SITL (skips without
-PX4_SITL_DIR).
+the chain's phase-1 recording of PX4's rate setpoints on a real PX4 SITL (skips without
+PX4_SITL_DIR), and the whole chain through the ROS graph under real ROS 2 Jazzy against a
+real PX4 SITL (campaign.launch.py -> identify --plant px4-rate -> synthesize ->
+phase2.launch.py; skips without either peer).
 
 Lock-step: the runner's ``sleep`` advances the simulated vehicle (messages still travel
 over 127.0.0.1 UDP), so the flights do not depend on machine load. The simulated vehicle
@@ -34,6 +36,8 @@ from lpv_sysid.models import rate_plant as rp
 from lpv_sysid.sim.px4_vehicle import SimVehicle, SimVehicleConfig
 
 ROOT = Path(__file__).resolve().parent.parent
+#: this file's PX4 SITL instance (ports 14540 + 11, 14550 + 11) and its ROS_DOMAIN_ID
+INSTANCE = 11
 CONFIG = ROOT / "config"
 sys.path.insert(0, str(ROOT / "test"))
 
@@ -216,6 +220,57 @@ def test_phase2_law_refuses_gains_of_another_plant(tmp_path, design):
     assert (ctrl.n_x, ctrl.n_u) == (8, 4)
 
 
+def test_broken_loop_run_on_the_airborne_vehicle_excites_the_rate_setpoints(tmp_path):
+    """Issue 21 item 3: the campaign's broken-loop run (flight/campaign/broken_loop.py) on
+    the simulated PX4 in the air in HOLD: hover thrust taken from PX4's own thrust setpoint,
+    OFFBOARD, the stabiliser + zippered multisines sent unchanged as SET_ATTITUDE_TARGET,
+    hand-back HOLD confirmed; the bag reads as a rate-plant run, and the lag model's heave
+    row identified from it has Z_T and Z_w of the simulated vehicle's rate mode (seed 0
+    quadrotor at hover: Z_T -36.34, Z_w -0.494; test_rate_plant_dynamics.py's truth), within
+    3 sigma + 20 % (thrust ~ Omega^2 linearised, the sim's rate loop is not the lag model)."""
+    from lpv_sysid.control.broken_loop import BrokenLoopConfig
+    from lpv_sysid.flight.campaign.broken_loop import fly_broken_loop
+    from lpv_sysid.ident import rate_plant_dynamics as lag
+
+    veh, bcfg = _vehicle(tmp_path, airborne=True)
+    cfg = BrokenLoopConfig(duration_s=30.0, period_s=15.0, ramp_s=2.0, thrust_amplitude=0.08)
+    try:
+        ls, rates = _lockstep(veh)
+        lines: list[str] = []
+        s = fly_broken_loop(
+            tmp_path / "bl",
+            bcfg,
+            cfg=cfg,
+            clock=ls.clock,
+            sleep=ls.sleep,
+            echo=lines.append,
+            min_height=5.0,
+            # the simulated PX4 echoes ATTITUDE_TARGET only in OFFBOARD (real PX4 always):
+            # its hover ESC command, as the seed 0 model trims it
+            hover_thrust=float(
+                np.linalg.solve(veh.model.mix, veh.model.trim((0.0, 0.0, 0.0)).u0).mean()
+            ),
+        )
+    finally:
+        veh.close()
+    assert s["ok"], (s["reason"], lines[-15:])
+    modes = [mo for _, mo, _ in veh.mode_log]
+    assert modes[0] == "OFFBOARD" and modes[-1] == "HOLD", modes
+    assert s["handback"]["state"] == "DONE" and 0.2 < s["hover_thrust"] < 0.8
+    got = np.array([[th, *r] for _, th, r in rates.received])
+    assert len(got) > 0.8 * 50 * cfg.duration_s
+    # the multisine is on every channel (thrust and the three rates)
+    assert got[:, 0].std() > 0.02 and (got[:, 1:].std(axis=0) > 0.05).all(), got.std(axis=0)
+    run = rid.read_run(tmp_path / "bl" / s["bag"])
+    start, _ = rid.identify([run])
+    plant = lag.identify([run], start=start)
+    h = plant.rows["w"]
+    print(f"broken-loop heave: {h['params']} +- {h['std']}")
+    for k, truth in (("Z_T", -36.34), ("Z_w", -0.494)):
+        est, sd = h["params"][k], h["std"][k]
+        assert abs(est - truth) < 3 * sd + 0.2 * abs(truth), (k, est, sd, truth)
+
+
 # ====================================================================== real PX4 SITL
 def test_real_px4_phase1_records_rate_setpoints_and_identifies(tmp_path):
     from support.px4_sitl import Px4Sitl, find_px4
@@ -231,7 +286,7 @@ def test_real_px4_phase1_records_rate_setpoints_and_identifies(tmp_path):
     cfg_doc["identification_config"] = str(CONFIG / "identification.yaml")
     cfg_doc["campaign"].update({"vertices": [8], "hover_validation": False, "finish": "LAND"})
     (tmp_path / "campaign.yaml").write_text(yaml.safe_dump(cfg_doc))
-    with Px4Sitl(d, instance=9) as px4:
+    with Px4Sitl(d, instance=INSTANCE) as px4:
         res = fly(
             FlyConfig.load(tmp_path / "campaign.yaml"),
             px4.url,
@@ -270,3 +325,243 @@ def test_real_px4_phase1_records_rate_setpoints_and_identifies(tmp_path):
     oe_first = rid.output_error(P, run)
     for row in ("p", "q", "r"):
         assert oe_lag[row] >= oe_first[row] - 0.01, (row, oe_lag, oe_first)
+
+
+# ====================================================== the whole chain through the ROS graph
+def _px4_param(d: Path, name: str, value) -> None:
+    """``param set`` on the running SITL instance through PX4's own client."""
+    import subprocess
+
+    r = subprocess.run(
+        [str(d / "bin" / "px4-param"), "--instance", str(INSTANCE), "set", name, str(value)],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert r.returncode == 0, (name, r.stdout, r.stderr)
+
+
+def _bag_rates(out_dir: Path) -> dict:
+    """{topic: (messages, Hz over the recording)} of a data logger's experiment directory."""
+    meta = yaml.safe_load((out_dir / "experiment.yaml").read_text())
+    return {
+        t.rsplit("/", 1)[-1]: (int(v["count"]), round(float(v["rate_hz"]), 1))
+        for t, v in meta["topics"].items()
+    }
+
+
+def test_real_ros_graph_whole_chain_on_px4_sitl(tmp_path):
+    """Issue 21 item 6: under real ROS 2 Jazzy against PX4 SITL (SIH quad, instance 11),
+    ``ros2 launch lpv_sysid campaign.launch.py`` flies phase 1 (one vertex, PX4's own rate
+    setpoints recorded per run from the bridge's echo), ``lpv-sysid identify --plant
+    px4-rate`` builds the rate plant from those bags, ``synthesize`` designs the gains, and
+    ``ros2 launch lpv_sysid phase2.launch.py design:=rate_plant auto_start:=true`` flies the
+    whole phase-2 signal under the LPV law: the sequencer starts the nodes in order, the
+    excitation plays to its end, the bridge hands back with PX4's mode confirmed. The
+    phase-2 bag holds state, imu, rotor_speeds, status, velocity_reference, excitation,
+    actuator_command (setpoints sent) and rate_setpoint (PX4's echo) near their configured
+    rates, and ``replay`` of that bag through the controller runtime (the code ``fly phase2``
+    runs) computes the commands the node sent."""
+    import re
+
+    from support.px4_sitl import Px4Sitl, find_px4
+    from support.ros_real import DomainId, RosEnv, build_package, find_ros
+
+    d, why = find_px4()
+    if d is None:
+        pytest.skip(why)
+    setup, why = find_ros()
+    if setup is None:
+        pytest.skip(why)
+    ws = build_package(setup, tmp_path / "ws")
+    dom = DomainId(40 + INSTANCE - 1)
+    env = RosEnv(setup, ws, dom.value)
+    # phase-1 inputs: the chain's campaign with one vertex, signals designed beforehand
+    assert (
+        cli_main(
+            [
+                "signals",
+                "--config",
+                str(CONFIG / "signals_phase1_chain.yaml"),
+                "--out",
+                str(tmp_path / "sig1"),
+            ]
+        )
+        == 0
+    )
+    cfg_doc = yaml.safe_load((CONFIG / "campaign_chain.yaml").read_text())
+    cfg_doc["bridge_config"] = str(CONFIG / "mavlink_bridge_chain.yaml")
+    cfg_doc["signals_config"] = str(CONFIG / "signals_phase1_chain.yaml")
+    cfg_doc["identification_config"] = str(CONFIG / "identification.yaml")
+    # state_timeout: the state reaches campaign_node through the bridge node and DDS; gaps of
+    # 0.51 s were seen at load ~15 on 2 cores (0.5 s in the chain's file; 1 s is the limit)
+    cfg_doc["campaign"].update(
+        {"vertices": [1, 8], "hover_validation": False, "state_timeout": 1.0}
+    )
+    (tmp_path / "campaign.yaml").write_text(yaml.safe_dump(cfg_doc))
+    logs: dict = {}
+
+    def launch(file: str, args: dict, name: str):
+        argv = " ".join(f"{k}:={v}" for k, v in args.items())
+        p = env.popen(f"ros2 launch lpv_sysid {file} {argv}", tmp_path / f"{name}.log")
+        logs[name] = p
+        return p
+
+    def stop(p, timeout: float = 60.0) -> int:
+        p.sigint(group=True)
+        try:
+            return p.wait(timeout)
+        except Exception:
+            p.kill()
+            return -9
+
+    try:
+        with Px4Sitl(d, instance=INSTANCE) as px4:
+            link = px4.url
+            for name, value in (("COM_OBL_RC_ACT", 5), ("COM_OF_LOSS_T", 2.0)):
+                _px4_param(d, name, value)
+            # ---- phase 1 through the ROS graph
+            p1 = launch(
+                "campaign.launch.py",
+                {
+                    "campaign_file": tmp_path / "campaign.yaml",
+                    "signals_file": tmp_path / "sig1" / "signals.npz",
+                    "runs_dir": tmp_path / "runs",
+                    "log_dir": tmp_path / "campaign_log",
+                    "link_url": link,
+                },
+                "campaign",
+            )
+            assert p1.wait_for("[lpv_sysid.mavlink_bridge]: link_up", 120.0), p1.log()[-4000:]
+            assert p1.wait_for("[lpv_sysid.campaign]: ready", 120.0), p1.log()[-4000:]
+            r = env.run(
+                "ros2 service call /lpv_sysid/campaign/start std_srvs/srv/Trigger", timeout=90
+            )
+            assert "success=True" in r.stdout, (r.stdout, r.stderr, p1.log()[-4000:])
+            # take-off, two vertices (settle + 5 s trim + 17 s excitation each), hand-back
+            if not p1.wait_for("campaign done: ok", 600.0):
+                if "no fresh state sample" in p1.log():
+                    # a process of the graph starved > 1 s (seen at load 20-26 on 2 cores): an
+                    # overloaded host, not a result about the chain; the hand-back is checked
+                    assert p1.wait_for("hand-back confirmed", 60.0), p1.log()[-4000:]
+                    pytest.skip("host overloaded: campaign_node saw no state for > 1 s")
+                raise AssertionError(p1.log()[-6000:])
+            assert p1.wait_for("hand-back confirmed", 60.0), p1.log()[-4000:]
+            assert stop(p1) == 0, p1.log()[-4000:]
+            # ---- identify, signals, synthesize (the CLI, as docs/px4_chain.md)
+            assert (
+                cli_main(
+                    [
+                        "identify",
+                        "--plant",
+                        "px4-rate",
+                        "--bags",
+                        str(tmp_path / "runs"),
+                        "--out",
+                        str(tmp_path / "vertex_models.yaml"),
+                        "--campaign",
+                        str(tmp_path / "campaign.yaml"),
+                    ]
+                )
+                == 0
+            )
+            assert (
+                cli_main(
+                    [
+                        "signals",
+                        "--config",
+                        str(CONFIG / "signals_chain_phase2.yaml"),
+                        "--out",
+                        str(tmp_path / "sig2"),
+                    ]
+                )
+                == 0
+            )
+            assert (
+                cli_main(
+                    [
+                        "synthesize",
+                        "--models",
+                        str(tmp_path / "vertex_models.yaml"),
+                        "--config",
+                        str(CONFIG / "synthesis_chain.yaml"),
+                        "--summary",
+                        str(tmp_path / "sig2" / "summary.yaml"),
+                        "--out",
+                        str(tmp_path / "gains.yaml"),
+                    ]
+                )
+                == 0
+            )
+            # ---- phase 2 through the ROS graph, the vehicle in the air in HOLD
+            p2 = launch(
+                "phase2.launch.py",
+                {
+                    "design": "rate_plant",
+                    "gains_file": tmp_path / "gains.yaml",
+                    "signals_file": tmp_path / "sig2" / "signals.npz",
+                    "log_dir": tmp_path / "phase2_log",
+                    "link_url": link,
+                    "auto_start": "true",
+                },
+                "phase2",
+            )
+            assert p2.wait_for("sequence complete: every node started in order", 240.0), p2.log()[
+                -6000:
+            ]
+            assert p2.wait_for("signal complete: hand-back and stop sent", 300.0), p2.log()[-6000:]
+            assert p2.wait_for("hand-back confirmed", 60.0), p2.log()[-4000:]
+            text = p2.log()
+            mode = re.findall(r"hand-back confirmed: vehicle in ([A-Z]+)", text)
+            assert mode and mode[-1] in ("HOLD", "LAND"), text[-4000:]
+            assert "safety abort" not in text, text[-6000:]
+            assert stop(p2) == 0, p2.log()[-4000:]
+    finally:
+        for p in logs.values():
+            p.kill()
+        dom.release()
+    rates = _bag_rates(tmp_path / "phase2_log")
+    print(f"phase-2 bag (messages, Hz): {rates}")
+    for topic, hz in (
+        ("state", 100.0),
+        ("imu", 100.0),
+        ("rotor_speeds", 50.0),
+        ("velocity_reference", 50.0),
+        ("excitation", 50.0),
+        ("actuator_command", 100.0),
+        ("rate_setpoint", 50.0),
+        ("status", 2.0),
+    ):
+        assert rates.get(topic, (0, 0.0))[1] >= 0.6 * hz, (topic, rates)
+    # replay: the controller runtime (what fly phase2 runs) on the bag's inputs, node
+    # parameters of config/lpv_controller_px4.yaml, gives the commands the node sent
+    from lpv_sysid.flight.controller import replay_controller
+
+    doc = yaml.safe_load((CONFIG / "lpv_controller_px4.yaml").read_text())
+    params = doc["/**/lpv_controller"]["ros__parameters"]
+    params = dict(params, gains_file=str(tmp_path / "gains.yaml"))
+    bag = tmp_path / "phase2_log"
+    rep = replay_controller(str(bag), params, str(tmp_path / "replay"))
+    names = ("thrust", "p_sp", "q_sp", "r_sp")
+
+    def commands(b):
+        from lpv_sysid.flight.controller.replay import bag_directories
+
+        out: dict = {}
+        for part in bag_directories(str(b)):
+            for _, m in iobag.read_bag(str(part), topics=["/lpv_sysid/actuator_command"]).get(
+                "/lpv_sysid/actuator_command", []
+            ):
+                out[messages.stamp_ns_of(m)] = messages.channels_from_joint_state(m, names)[1]
+        return out
+
+    flown, replayed = commands(bag), commands(tmp_path / "replay")
+    common = sorted(set(flown) & set(replayed))
+    diffs = np.array([float(np.abs(flown[k] - replayed[k]).max()) for k in common])
+    same = int((diffs < 1e-9).sum())
+    print(
+        f"replay: {len(flown)} commands flown, {len(common)} stamps in both, {same} identical "
+        f"(max |diff| {diffs.max():.3g}); replay event {rep['event']}"
+    )
+    assert len(common) >= 0.95 * len(flown) > 1000
+    assert same >= 0.95 * len(common)

@@ -22,6 +22,7 @@ NOT_KEYS = {
     ("UncertaintySettings", "reduction"),  # checked by ident.vertex.UncertaintyConfig
     ("FlyConfig", "source"),  # the file it was read from
     ("FlyConfig", "campaign"),  # the nested CampaignConfig (checked as a class of its own)
+    ("FlyConfig", "broken_loop"),  # the nested BrokenLoopConfig (a class of its own), or None
     ("GroupConfig", "peak"),  # a number or a list of one per channel (declared FieldSpecs)
     ("GroupConfig", "spectra"),  # breakpoint tables (declared FieldSpecs)
     ("LoopConfig", "M"),  # a transfer-function matrix (vrft.tf.parse_model)

@@ -116,3 +116,43 @@ def test_settings_refuse_unknown_or_repeated_steps():
     with pytest.raises(ConfigError, match="at least one"):
         SequencerSettings(steps=())
     assert SequencerSettings().steps == PHASE2_STEPS
+
+
+def _running(rt):
+    rt.start(0.0)
+    rt.on_status(status("mavlink_bridge", link_up="True", state="IDLE"), 0.1)
+    rt.on_timer(0.2)
+    rt.on_status(status("lpv_controller", armed="true"), 0.3)
+    rt.on_timer(0.4)
+    rt.on_status(status("mavlink_bridge", link_up="True", state="OFFBOARD_ACTIVE"), 0.5)
+    rt.on_timer(0.6)
+    rt.on_status(status("excitation", phase="running"), 0.7)
+    rt.on_timer(0.8)
+    assert rt.state == RUNNING
+
+
+def test_a_signal_played_to_its_end_hands_back_first_then_stops_the_rest():
+    """Issue 21: the graph's phase 2 ends like ``fly phase2``: the excitation's phase
+    ``done`` -> the bridge hands back (while the controller still commands), then the
+    controller and the excitation stop; a later hand-back status is no abort."""
+    from lpv_sysid.flight.sequencer import COMPLETE
+
+    rt = runtime()
+    _running(rt)
+    assert calls(rt.on_status(status("excitation", phase="ramp_out"), 30.0)) == []
+    out = rt.on_status(status("excitation", phase="done"), 31.0)
+    assert calls(out) == [
+        ("mavlink_bridge", "abort"),
+        ("excitation", "abort"),
+        ("lpv_controller", "abort"),
+    ]
+    assert rt.state == COMPLETE and rt.reason == "signal complete"
+    # the bridge's HANDBACK that follows is the expected end, not a new abort
+    assert calls(rt.on_status(status("mavlink_bridge", state="HANDBACK"), 31.5)) == []
+    (st,) = messages.status_from_diagnostic_array(rt.status(32.0)[0][1])[1]
+    assert st.values["phase"] == COMPLETE and st.level == 0  # OK
+    # off: the nodes are left running (the operator ends the flight)
+    rt2 = runtime(hand_back_when_done=False)
+    _running(rt2)
+    assert calls(rt2.on_status(status("excitation", phase="done"), 31.0)) == []
+    assert rt2.state == RUNNING

@@ -16,6 +16,12 @@ on ``status`` (the excitation's :func:`~lpv_sysid.flight.excitation.reports_abor
 aborts every node the sequence started, in reverse order (the excitation fades out, the
 controller stops, the bridge hands control back to PX4 and confirms the mode).
 
+When the excitation, started by the sequence, reports its signal played to the end (phase
+``done``), the flight is complete (``hand_back_when_done``): the bridge's abort hands control
+back to PX4 (the mode confirmed by PX4, its ``handback_chain``) while the controller still
+commands, then the controller and the excitation stop -- the ROS graph's end of phase 2, as
+``lpv-sysid fly phase2`` hands back after a complete signal.
+
 The sequence itself starts on the sequencer's own ``start`` service (one call for the
 operator), or at once with ``auto_start``. ROS-free: the shell (``nodes/sequencer_node.py``)
 calls the services the runtime asks for (``("call", (node, "start" | "abort"))`` outputs)
@@ -53,6 +59,10 @@ PHASE1_STEPS = ("mavlink_bridge", "excitation")
 _NOT_PLAYING = ("waiting_for_start", "aborted", "aborting", "failed")
 
 IDLE, STARTING, RUNNING, ABORTED = "idle", "starting", "running", "aborted"
+#: the signal was flown to the end and the nodes were told to hand back / stop
+COMPLETE = "complete"
+#: the excitation phase of a signal played to its end (signals/excitation/player.py)
+SIGNAL_DONE = "done"
 
 Output = list[tuple[str, Any]]
 
@@ -74,6 +84,11 @@ class SequencerSettings(parameters.Settings):
         "a node that has not confirmed its start after this aborts the sequence [s]",
         1.0,
         600.0,
+    )
+    hand_back_when_done: bool = parameters.flag(
+        True,
+        "once the excitation reports its signal done: hand back (bridge abort, PX4's mode "
+        "confirmed), then stop the controller and the excitation",
     )
     rate_hz: float = parameters.double(10.0, "sequencing step rate [Hz]", 1.0, 100.0)
     status_rate_hz: float = parameters.double(1.0, "status publication rate [Hz]", 0.1, 100.0)
@@ -170,9 +185,30 @@ class SequencerRuntime:
             if node not in self._nodes or st.name == self.name:
                 continue
             self.values[node] = dict(st.values)
+            if (
+                self.state == RUNNING
+                and self.settings.hand_back_when_done
+                and node == "excitation"
+                and node in self.started
+                and str(st.values.get("phase", "")) == SIGNAL_DONE
+            ):
+                return self.complete(now)
             if self.state in (STARTING, RUNNING) and node in self.started and reports_abort(st):
                 return self.abort(now, f"{st.name} reported an abort: {st.message}")[2]
         return []
+
+    def complete(self, now: float) -> Output:
+        """The signal was flown to its end: the bridge hands back first (the controller's
+        commands still stream while PX4 switches), then the other started nodes stop, in
+        reverse start order."""
+        self.state, self.reason = COMPLETE, "signal complete"
+        order = [n for n in self.started if n == "mavlink_bridge"] + [
+            n for n in reversed(self.started) if n != "mavlink_bridge"
+        ]
+        self._log.append(
+            ("info", f"signal complete: hand-back and stop sent to {order} in that order")
+        )
+        return [("call", (node, "abort")) for node in order] + self.status(now)
 
     def on_answer(self, node: str, which: str, success: bool, message: str, now: float) -> Output:
         """The answer of a service the runtime asked for."""
@@ -228,6 +264,8 @@ class SequencerRuntime:
             message = f"aborted: {self.reason}"
         elif self.state == RUNNING:
             message = "running: every node started in order"
+        elif self.state == COMPLETE:
+            message = "complete: signal flown, hand-back sent"
         else:
             message = f"idle: call start to run {' -> '.join(steps)}"
         values = {

@@ -72,7 +72,12 @@ class CampaignNode(shell.ShellNode):
             ),
             "status": shell.StatusPublisher(self),  # status and /diagnostics
         }
-        for topic, typ in (("state", Odometry), ("rotor_speeds", JointState), ("imu", Imu)):
+        for topic, typ in (
+            ("state", Odometry),
+            ("rotor_speeds", JointState),
+            ("imu", Imu),
+            ("rate_setpoint", JointState),
+        ):
             self.create_subscription(typ, topic, self._input(topic), shell.qos_for(topic))
         self.create_subscription(DiagnosticArray, "status", rt.on_status, shell.qos_for("status"))
         self.create_service(Trigger, "~/start", shell.trigger(self, rt.start, self.emit))

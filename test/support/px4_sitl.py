@@ -20,7 +20,8 @@ import time
 from pathlib import Path
 
 ENV = "PX4_SITL_DIR"
-OFFBOARD_PORT = 14540  # + instance
+OFFBOARD_PORT = 14540  # + instance (instances 0..9; see Px4Sitl.url)
+OFFBOARD_LOCAL_PORT = 14580  # + instance: PX4's own port of the offboard link
 GCS_PORT = 14550  # + instance
 
 
@@ -57,7 +58,13 @@ class Px4Sitl:
 
     @property
     def url(self) -> str:
-        """The companion-computer (offboard) link, as the bridge connects to it."""
+        """The companion-computer (offboard) link, as the bridge connects to it. PX4's
+        px4-rc.mavlink sends instance N's offboard link to 14540 + N only for N <= 9; every
+        instance >= 10 sends to 14549, a port shared by all of them (two autopilots heard:
+        the bridge refuses). From 10 on the bridge sends to the instance's own local port
+        14580 + N instead (``udpout``): PX4 answers the first sender on localhost."""
+        if self.instance > 9:
+            return f"udpout:127.0.0.1:{OFFBOARD_LOCAL_PORT + self.instance}"
         return f"udpin:127.0.0.1:{OFFBOARD_PORT + self.instance}"
 
     @property

@@ -72,6 +72,10 @@ class FlyConfig:
         section="runner",
     )
     source: str = ""
+    #: the ``broken_loop`` section (:class:`~lpv_sysid.control.broken_loop.BrokenLoopConfig`):
+    #: when present, the chain flies the broken-loop run after the vertex runs
+    #: (:mod:`~lpv_sysid.flight.campaign.broken_loop`); absent or null: not flown
+    broken_loop: Any = None
 
     @classmethod
     def from_dict(
@@ -81,11 +85,18 @@ class FlyConfig:
         Errors name the key path (``campaign.radius``, ``runner.loop_period``)."""
         from lpv_sysid.control.campaign import CampaignConfig
 
-        kw = cf.parse_fields(cls, d, "", other_keys=("campaign",))
+        from lpv_sysid.control.broken_loop import BrokenLoopConfig
+
+        kw = cf.parse_fields(cls, d, "", other_keys=("campaign", "broken_loop"))
         for k in _FILES:
             kw[k] = str(Path(base) / kw.get(k, getattr(cls, k)))
         campaign = CampaignConfig.from_dict(d.get("campaign") or {}, "campaign")
-        return cls(campaign, source=source, **kw)
+        bl = d.get("broken_loop")
+        if bl is not None:
+            if not isinstance(bl, Mapping):
+                raise ConfigError(f"broken_loop: expected a mapping, got {bl!r}")
+            bl = BrokenLoopConfig(**cf.parse_fields(BrokenLoopConfig, bl, "broken_loop"))
+        return cls(campaign, source=source, broken_loop=bl, **kw)
 
     @classmethod
     def load(cls, path: str | Path) -> "FlyConfig":

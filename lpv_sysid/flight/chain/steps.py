@@ -133,6 +133,37 @@ def chain(
         )
         bags = [out / "phase1" / b for b in (res.summary.get("bags") or {}).values()]
     done(status=res.status, result=res.phase, reason=res.reason, bags=[str(b) for b in bags])
+    bl_run = None
+    if cfg.broken_loop is not None and phase1_dir is None and not res.status:
+        from lpv_sysid.flight.campaign.broken_loop import fly_broken_loop
+
+        step("broken-loop run (multisine on PX4's thrust + body-rate setpoints, stabilised)")
+        try:
+            bl = fly_broken_loop(
+                out / "broken_loop",
+                cfg.bridge_config,
+                url,
+                cfg.broken_loop,
+                clock=clock,
+                sleep=sleep,
+                echo=echo,
+                link=link_factory() if link_factory else None,
+            )
+        except LpvSysidError as exc:
+            bl = {"ok": False, "reason": str(exc)}
+        done(ok=bl.get("ok"), reason=bl.get("reason"), handback=bl.get("handback"))
+        summary["broken_loop"] = {
+            k: bl.get(k) for k in ("ok", "reason", "hover_thrust", "commands", "handback")
+        }
+        bag_bl = out / "broken_loop" / str(bl.get("bag") or "bag_0000")
+        if bag_bl.exists():
+            try:
+                bl_run = rid.read_run(bag_bl)
+            except LpvSysidError as exc:
+                echo(f"  broken-loop bag unusable: {exc}")
+        if not (bl.get("handback") or {}).get("state") == "DONE":
+            res.status = EXIT_FAILED  # control not confirmed back with PX4: no phase 2
+            res.reason = f"broken-loop run: {bl.get('reason')}"
     usable, rep, params_rp = [], None, None
     for b in bags:
         try:
@@ -248,7 +279,10 @@ def chain(
             # lag dynamics (motor lag + delay, ident/rate_plant_dynamics.py) from the phase-1
             # runs, scored by output error on the same flight and windows
             try:
-                lagp = lag.identify(usable, start=params_rp)
+                # from the broken-loop run when flown (setpoints excited independently of the
+                # state: heave thrust and drag separable), else from the phase-1 runs
+                lagp = lag.identify([bl_run] if bl_run is not None else usable, start=params_rp)
+                p2["lag_identified_from"] = "broken_loop" if bl_run is not None else "phase1"
                 loe = lag.output_error(lagp, run2, window_s=oe["window_s"])
             except (LpvSysidError, ValueError, np.linalg.LinAlgError) as exc:
                 p2["model_check_lag_output_error"] = {"error": str(exc)}
@@ -273,6 +307,7 @@ def chain(
             "model_check_output_error",
             "model_check_lag_output_error",
             "lag_dynamics",
+            "lag_identified_from",
             "latency_state_to_setpoint_ms",
         )
     }
