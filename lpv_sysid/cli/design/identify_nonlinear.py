@@ -1,6 +1,13 @@
 """`lpv-sysid identify-nonlinear`: lumped parameters K of seed 0 Eq. (6) from flight bags.
 
     lpv-sysid identify-nonlinear --bags DIR --out nonlinear_model.yaml [--refine]
+    lpv-sysid identify-nonlinear --structure px4 --bags DIR [DIR ...] --out M.yaml \
+        [--validate DIR ...] [--plot-validation PNG] [--sih NAME=VALUE ...]
+
+``--structure px4`` (PX4 bags without ESC telemetry: ``state``, ``imu``, estimated
+``rotor_speeds``) fits the documented PX4 variant of Eq. (6)
+(``ident.nonlinear.px4_model``), predicts the flights of ``--validate`` (R^2, TIC per axis)
+and, with ``--sih``, compares the physical quantities with PX4 SIH's parameters.
 
 Every rosbag2 under DIR (phase-2 data, or any flight with ``state`` and ``rotor_speeds``)
 is resampled (``ident.dataprep``), differentiated (global Fourier) and stacked; Eq. (6) is
@@ -23,7 +30,34 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--bags",
         required=True,
         type=Path,
-        help="a rosbag2 directory, or a directory holding several",
+        nargs="+",
+        help="rosbag2 directories, or directories holding several (px4: several flights)",
+    )
+    parser.add_argument(
+        "--structure",
+        choices=("eq6", "px4"),
+        default="eq6",
+        help="eq6: seed 0 Eq. (6) with rotor speeds; px4: the PX4 variant (motor outputs, "
+        "specific force, angular acceleration, motor lag; ident.nonlinear.px4_model)",
+    )
+    parser.add_argument("--intercept", action="store_true", help="px4: a constant per axis")
+    parser.add_argument(
+        "--validate",
+        type=Path,
+        nargs="+",
+        default=[],
+        help="px4: bags of flights not used in the fit, predicted by the model",
+    )
+    parser.add_argument(
+        "--plot-validation", type=Path, default=None, help="px4: prediction vs data figure"
+    )
+    parser.add_argument(
+        "--sih",
+        action="append",
+        default=None,
+        metavar="NAME=VALUE",
+        help="px4: compare with PX4 SIH (its defaults, overridden by each NAME=VALUE; "
+        "'--sih default' for the defaults)",
     )
     parser.add_argument("--out", required=True, type=Path, help="YAML file to write")
     parser.add_argument(
@@ -124,6 +158,147 @@ def plot_correlation(result, path: Path) -> Path:
     return path
 
 
+def _bag_dirs(paths) -> list[Path]:
+    from lpv_sysid.ident import dataprep as dp
+
+    out: list[Path] = []
+    for p in paths:
+        out.extend([p] if (p / "metadata.yaml").exists() else dp.find_bags(p))
+    return out
+
+
+def _sih_params(items) -> dict[str, float]:
+    from lpv_sysid.errors import ConfigError
+    from lpv_sysid.ident.nonlinear import SIH_DEFAULTS
+
+    out = {}
+    for it in items:
+        if it == "default":
+            continue
+        name, sep, val = it.partition("=")
+        if not sep or name not in SIH_DEFAULTS:
+            raise ConfigError(
+                f"--sih {it!r}: expected NAME=VALUE with NAME in {list(SIH_DEFAULTS)}"
+            )
+        try:
+            out[name] = float(val)
+        except ValueError:
+            raise ConfigError(f"--sih {it!r}: value is not a number") from None
+    return out
+
+
+def plot_prediction(pred, path: Path, title: str) -> Path:
+    """Measured against predicted specific forces and angular accelerations, per axis."""
+    import numpy as np
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from lpv_sysid.ident.nonlinear import PX4_AXES, PX4_OUTPUTS
+
+    fig = Figure(figsize=(9, 10))
+    FigureCanvasAgg(fig)
+    axs = list(fig.subplots(6, 1, sharex=True, squeeze=False)[:, 0])
+    step = float(np.median(np.diff(pred.t))) if pred.t.size > 1 else 1.0
+    x = np.arange(pred.t.size) * step  # records stacked end to end
+    for ax, a in zip(axs, PX4_AXES):
+        name, unit = PX4_OUTPUTS[a]
+        ax.plot(x, pred.measured[a], "k-", lw=0.6, label="measured")
+        ax.plot(x, pred.predicted[a], "r-", lw=0.6, label="model")
+        ax.set_ylabel(f"{name}\n[{unit}]", fontsize=8)
+        ax.set_title(f"R^2 {pred.r2[a]:.3f}  TIC {pred.tic[a]:.3f}", fontsize=8, loc="right")
+    axs[0].legend(loc="upper left", fontsize=7)
+    axs[-1].set_xlabel("t [s] (records stacked)")
+    fig.suptitle(title, fontsize=10)
+    fig.savefig(path, dpi=100)
+    return path
+
+
+def run_px4(args: argparse.Namespace, params, cfg) -> int:
+    """``--structure px4``: fit, validate, compare (``ident.nonlinear.px4_model``)."""
+    import yaml
+
+    from lpv_sysid.errors import ConfigError
+    from lpv_sysid.ident import dataprep as dp
+    from lpv_sysid.ident import nonlinear as nl
+
+    def records(paths):
+        recs = []
+        for b in _bag_dirs(paths):
+            r = dp.px4_record(b, params, cfg.sample_rate, cfg.derivatives, cfg.edge)
+            print(f"{r.name}: {r.t.size} samples, {r.t[-1] - r.t[0]:.1f} s")
+            recs.append(r)
+        return recs
+
+    fit = records(args.bags)
+    model = nl.identify_px4(fit, intercept=args.intercept, max_lag=cfg.max_lag)
+    print()
+    print("PX4 variant of seed 0 Eq. (6) (ident.nonlinear.px4_model), equation error")
+    print(
+        f"motor lag tau = {model.tau:.4f} s, std {model.tau_std:.4f} s "
+        f"(statistical {model.tau_std_statistical:.4f}, "
+        f"output timing +-{model.timing_s / 2:.3f} s)"
+    )
+    print(f"{'axis':>4} {'K':>6} {'regressor':>10} {'estimate':>12} {'std':>10} {'95% CI':>24}")
+    for a in model.axes.values():
+        for n, lb, k, sd in zip(a.names, a.labels, a.K, a.std):
+            print(
+                f"{a.axis:>4} {n:>6} {lb:>10} {k:12.5g} {sd:10.3g}   "
+                f"[{k - 1.96 * sd:10.4g}, {k + 1.96 * sd:10.4g}]"
+            )
+    print()
+    print("Regressor correlation (seed 0 Fig. 10) and R^2 per axis")
+    for fit_axis in model.axes.values():
+        print(format_correlation(fit_axis))
+    doc = model.to_dict()
+    doc["bags"] = [r.name for r in fit]
+    pq = nl.physical_quantities(model)
+    doc["physical"] = {k: {"value": float(v), "std": float(s)} for k, (v, s) in pq.items()}
+    if args.validate:
+        val = records(args.validate)
+        pred = nl.predict(model, val)
+        print()
+        print("Prediction of the validation flight(s) (model of the fit flights)")
+        print(f"{'output':>8} {'R^2':>8} {'TIC':>8}")
+        for ax in nl.PX4_AXES:
+            print(f"{nl.PX4_OUTPUTS[ax][0]:>8} {pred.r2[ax]:8.3f} {pred.tic[ax]:8.3f}")
+        doc["validation"] = {
+            "bags": [r.name for r in val],
+            "r2": {nl.PX4_OUTPUTS[a][0]: float(pred.r2[a]) for a in nl.PX4_AXES},
+            "tic": {nl.PX4_OUTPUTS[a][0]: float(pred.tic[a]) for a in nl.PX4_AXES},
+        }
+        if args.plot_validation is not None:
+            plot_prediction(
+                pred, args.plot_validation, "PX4 variant of Eq. (6): validation flight"
+            )
+            print(f"wrote {args.plot_validation}")
+    if args.sih is not None:
+        truth = nl.sih_truth(_sih_params(args.sih))
+        print()
+        print("Identified physical quantities against PX4 SIH (3-sigma intervals)")
+        print(
+            f"{'quantity':>14} {'identified':>11} {'std':>9} {'SIH':>9} "
+            f"{'(SIH-id)/std':>13}  SIH expression"
+        )
+        rows = {}
+        for k, (v, sd) in pq.items():
+            z = (truth[k] - v) / sd if sd > 0 else float("inf")
+            print(f"{k:>14} {v:11.4g} {sd:9.3g} {truth[k]:9.4g} {z:13.2f}  {nl.PHYSICAL[k][2]}")
+            rows[k] = {
+                "identified": float(v),
+                "std": float(sd),
+                "sih": float(truth[k]),
+                "z": float(z),
+            }
+        doc["sih_comparison"] = rows
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        args.out.write_text(yaml.safe_dump(doc, sort_keys=False))
+    except OSError as exc:
+        raise ConfigError(f"--out {args.out}: cannot write ({exc.strerror})") from None
+    print(f"\nwrote {args.out}")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     import numpy as np
     import yaml
@@ -136,6 +311,13 @@ def run(args: argparse.Namespace) -> int:
 
     params = _params(args.quadrotor)
     cfg = load_config(args.config)
+    if args.structure == "px4":
+        return run_px4(args, params, cfg)
+    if args.validate or args.sih is not None or args.plot_validation or args.intercept:
+        raise ConfigError("--validate, --plot-validation, --sih, --intercept need --structure px4")
+    if len(args.bags) != 1:
+        raise ConfigError("--structure eq6 takes one --bags directory")
+    args.bags = args.bags[0]
     fixed = _fixed(args.fix)
     if args.segment <= 0 or args.max_segments < 1 or args.max_nfev < 1:
         raise ConfigError("--segment, --max-segments and --max-nfev must be positive")

@@ -40,6 +40,7 @@ from lpv_sysid.ident.dataprep.alignment import (
     snap_to_box,
     trim_row,
 )
+from lpv_sysid.ident.dataprep.px4_records import px4_record
 from lpv_sysid.ident.dataprep.streams import (
     TOPICS,
     Streams,
@@ -54,6 +55,7 @@ __all__ = [
     "align",
     "find_bags",
     "format_table1",
+    "px4_record",
     "resample",
     "snap_to_box",
     "streams_from_bag",

@@ -27,7 +27,13 @@ Parts: step 1 is :mod:`~lpv_sysid.ident.nonlinear.least_squares`; the others:
   ``FlightData``, ``flight_data``, ``generalized_force`` and the result types ``AxisFit``,
   ``NonlinearResult``;
 - :mod:`~lpv_sysid.ident.nonlinear.refinement`: step 2 (``OutputErrorConfig``,
-  ``simulate_segments``, ``output_error``).
+  ``simulate_segments``, ``output_error``);
+- :mod:`~lpv_sysid.ident.nonlinear.px4_model` and
+  :mod:`~lpv_sysid.ident.nonlinear.px4_data`: the documented PX4 variant of Eq. (6)
+  (motor outputs instead of rotor speeds, specific force and angular acceleration, the
+  motor lag identified), its flight records (made from PX4 bags by
+  ``ident.dataprep.px4_record``), prediction of another flight
+  (R^2, TIC) and the physical quantities compared with PX4 SIH's parameters.
 """
 
 from __future__ import annotations
@@ -50,10 +56,37 @@ from lpv_sysid.ident.nonlinear.data import (
     virtual_actuators,
 )
 from lpv_sysid.ident.nonlinear.least_squares import regression, regression_stacked
+from lpv_sysid.ident.nonlinear.px4_data import Px4Record, motor_lag
+from lpv_sysid.ident.nonlinear.px4_model import (
+    PHYSICAL,
+    PX4_AXES,
+    PX4_OUTPUTS,
+    PX4_REGRESSORS,
+    SIH_DEFAULTS,
+    Prediction,
+    Px4Model,
+    identify_px4,
+    physical_quantities,
+    predict,
+    sih_truth,
+)
 from lpv_sysid.ident.nonlinear.refinement import OutputErrorConfig, output_error
 
 __all__ = [
     "AXES",
+    "PHYSICAL",
+    "PX4_AXES",
+    "PX4_OUTPUTS",
+    "PX4_REGRESSORS",
+    "Prediction",
+    "Px4Model",
+    "Px4Record",
+    "SIH_DEFAULTS",
+    "identify_px4",
+    "motor_lag",
+    "physical_quantities",
+    "predict",
+    "sih_truth",
     "AXIS_TITLES",
     "FlightData",
     "OutputErrorConfig",
