@@ -292,6 +292,41 @@ def test_phase2_bag_has_every_topic_at_its_configured_rate_and_the_latency(flown
     ]["commands"] == len(rows)
 
 
+def test_phase2_recording_carries_epoch_stamps_and_the_vehicle_record(flown):
+    """Issue 23 item 2 for phase 2: the bag is stamped in wall-clock (epoch) ns and
+    ``experiment.yaml`` holds the clock offset and the vehicle record -- kind SIMULATED (the
+    package's own PX4 stand-in), firmware, parameters, battery, site (its HOME_POSITION) and
+    PX4's boot on the bag clock. Oracle: the lock-step vehicle's clock is the flight clock
+    (it boots at flight time 0 and sends time_boot_ms = its time), so its boot on the bag
+    clock is ``clock.offset_ns``; the estimate may only be late, by the link latency (one
+    lock-step step, 4 ms) + the ms truncation: within the 10 ms of the issue."""
+    import time as _time
+
+    from lpv_sysid.io import bag as iobag
+    from lpv_sysid.sim.px4_vehicle.telemetry import HOME_ALT, HOME_LAT, HOME_LON
+
+    s, out, _ = flown
+    meta = yaml.safe_load((out / "experiment.yaml").read_text())
+    off = meta["clock"]["offset_ns"]
+    assert meta["clock"]["kind"] == "utc"
+    assert abs(off - _time.time_ns()) < 3600 * 10**9  # wall clock of this run, not 1970
+    v = meta["vehicle"]
+    assert v["kind"] == "SIMULATED"
+    assert v["firmware"]["flight_sw_version"].startswith("v1.")
+    assert len(v["px4_parameters"]) > 10
+    assert v["battery"]["start"]["voltage_v"] > 10.0
+    site = v["site"]
+    assert site["latitude_deg"] == pytest.approx(HOME_LAT, abs=2e-7)
+    assert site["longitude_deg"] == pytest.approx(HOME_LON, abs=2e-7)
+    assert site["altitude_amsl_m"] == pytest.approx(HOME_ALT, abs=1e-3)
+    boot = v["px4_clock"]["boot_ns"]
+    assert 0 <= boot - off < 10_000_000, boot - off
+    info = iobag.topic_info(str(out / s["bag"]))
+    st = info["/lpv_sysid/state"]
+    # bag clock - offset = the flight (lock-step) clock: the phase-2 run started after take-off
+    assert 0.0 < (st.start_ns - off) * 1e-9 < st.duration_s + (st.start_ns - off) * 1e-9 < 200.0
+
+
 def test_loop_latency_percentiles():
     from lpv_sysid.flight.phase2 import loop_latency
 

@@ -164,3 +164,27 @@ def test_site_is_the_autopilots_home_position():
     assert "last" not in site
     rec.absorb(mav.MAVLink_home_position_message(lat + 90, lon, alt, 0, 0, 0, z4, 0, 0, 0), 9)
     assert rec.summary()["site"]["last"]["latitude_deg"] == pytest.approx(47.3977508, abs=1e-9)
+
+
+def test_parameter_hash_is_kept_as_an_integer():
+    """PX4 ends a parameter list with ``_HASH_CHECK`` (MAV_PARAM_TYPE_UINT32, the hash's bytes
+    in the float): kept as the 32-bit integer, not as a float of up to 3e38 that the YAML
+    reader of ``experiment.yaml`` refuses (seen on PX4 SITL v1.16: -1.02e15)."""
+    import struct
+
+    from lpv_sysid.io.files import read_yaml
+
+    h = 0xD9E8A5B7
+    wire = struct.unpack("<f", struct.pack("<I", h))[0]
+    rec = VehicleRecord()
+    rec.absorb(mav.MAVLink_param_value_message(b"_HASH_CHECK", wire, 5, 900, 65535), 1)
+    assert rec.summary()["px4_parameters"]["_HASH_CHECK"] == h
+    import tempfile
+
+    import yaml
+
+    with tempfile.TemporaryDirectory() as d:
+        p = f"{d}/e.yaml"
+        with open(p, "w") as f:
+            yaml.safe_dump({"vehicle": rec.summary()}, f)
+        assert read_yaml(p)["vehicle"]["px4_parameters"]["_HASH_CHECK"] == h

@@ -225,6 +225,7 @@ def sticks_available(rc_in_mode: int, rc_present: bool, joystick_present: bool) 
     return bool(rc_ok or joy_ok)
 
 
+MAV_PARAM_TYPE_UINT32 = 5  # PX4: only the parameter list's hash, _HASH_CHECK
 MAV_PARAM_TYPE_INT32 = 6
 MAV_PARAM_TYPE_REAL32 = 9
 
@@ -241,6 +242,8 @@ def param_from_wire(wire: float, param_type: int) -> float | int:
     MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE)."""
     if param_type == MAV_PARAM_TYPE_INT32:
         return struct.unpack("<i", struct.pack("<f", wire))[0]
+    if param_type == MAV_PARAM_TYPE_UINT32:  # _HASH_CHECK: a 32-bit hash, not a number
+        return struct.unpack("<I", struct.pack("<f", wire))[0]
     return float(wire)
 
 

@@ -113,6 +113,7 @@ BRIDGE_DESCRIPTIONS = {
     "rotor_estimate.omega_min": "idle rotor speed [rad/s] (NaN: the airframe's)",
     "rotor_estimate.omega_max": "maximum rotor speed [rad/s] (NaN: the airframe's)",
     "rotor_estimate.max_gap": "longer gaps between output samples restart the estimate [s]",
+    "rotor_estimate.hold": "motor output between samples: zero (held) | linear (ramp)",
     "rotor_estimate.esc_timeout": "ESC telemetry older than this -> the estimate is used [s]",
     "envelope.enabled": "onboard safety envelope (violation -> hand-back)",
     "envelope.home": "auto | home_position | start",

@@ -164,6 +164,7 @@ def fly_phase2(
     handle_signals: bool = True,
     storage: str = "mcap",
     confirm: Callable[[str], bool] | None = None,
+    epoch_ns: int | None = None,
 ) -> dict:
     """Fly the phase-2 signal under the LPV law on a PX4 vehicle that is armed and in the air
     (module docstring step 5); returns the summary (also ``DIR/phase2_summary.yaml``).
@@ -174,9 +175,23 @@ def fly_phase2(
     with its words, before the link is opened. ``confirm(question)``: asked after those checks,
     before the link is opened (False: ``{"ok": False, "confirmed": False}``, nothing sent; None:
     no question, ``fly --yes``). Raises SafetyError before sending anything when the vehicle is
-    not airborne."""
+    not airborne.
+
+    Time and provenance (as ``fly phase1``): every stamp is wall-clock (epoch) ns -- the
+    flight runs on ``clock() + offset``, the offset taken once at start from
+    ``time.time_ns()`` (or from ``epoch_ns``, a declared epoch for a simulated clock) and
+    written to ``experiment.yaml`` (``clock``); ``experiment.yaml`` also gets ``vehicle``
+    (:class:`~lpv_sysid.mavlink.telemetry.VehicleRecord`: kind SIMULATED / SITL / HITL / SIH /
+    FLOWN, firmware, airframe, the PX4 parameter snapshot, battery, site, PX4's boot on the
+    bag clock: a ULog of the flight lines up with the bag through ``vehicle.px4_clock``)."""
     from lpv_sysid.flight.campaign import CampaignRecorder
-    from lpv_sysid.flight.vehicle import tap_attitude_target, wait_for_vehicle
+    from lpv_sysid.flight.vehicle import (
+        request_parameter_list,
+        tap_attitude_target,
+        tap_messages,
+        wait_for_vehicle,
+    )
+    from lpv_sysid.mavlink.telemetry import VehicleRecord
     from lpv_sysid.io import messages as m
     from lpv_sysid.mavlink.bridge import BridgeCore, RateSetpointTransport
     from lpv_sysid.mavlink.offboard import STREAMING, State
@@ -199,9 +214,15 @@ def fly_phase2(
         f"({gains}) and fly the phase-2 signal?"
     ):
         return {"ok": False, "confirmed": False, "reason": "not confirmed: nothing sent"}
+    clock_offset_ns = (time.time_ns() if epoch_ns is None else int(epoch_ns)) - round(
+        clock() * 1e9
+    )
+    clock = epoch_clock(clock, clock_offset_ns)
     core = BridgeCore(bcfg, link=link)
     core.transport = RateSetpointTransport(max_rate=opts.max_rate)  # the law's inputs as sent
     core.open(clock())
+    vehicle = VehicleRecord()
+    tap_messages(core.link, lambda now, msg: vehicle.absorb(msg, round(now * 1e9)))
     rec_box: list = [None]
     px4_sp: list = []
 
@@ -279,6 +300,9 @@ def fly_phase2(
                     sgn, lambda *_: interrupts.__setitem__(0, interrupts[0] + 1)
                 )
         wait_for_vehicle(core.link, 15.0, clock, sleep)
+        # the vehicle record of experiment.yaml: PX4's parameter snapshot and its firmware
+        request_parameter_list(core.link)
+        core.link.command_long(512, 148.0)  # MAV_CMD_REQUEST_MESSAGE AUTOPILOT_VERSION
         # telemetry + HOME_POSITION (the envelope's home when started armed)
         tw = clock()
         next_req = tw
@@ -323,6 +347,15 @@ def fly_phase2(
         )
         rec_box[0] = rec
         rec.start(clock())
+        rec.annotate(
+            "clock",
+            {
+                "kind": "utc" if epoch_ns is None else "declared",
+                "offset_ns": clock_offset_ns,
+                "meaning": "bag stamp = round(flight clock [s] * 1e9) + offset_ns; the flight "
+                "clock is time.monotonic (fly) or the simulation's",
+            },
+        )
         rec.begin_run("phase2")
         exc_period = 1.0 / exc.settings.rate_hz
         ctrl_period = 1.0 / ctrl.settings.rate_hz
@@ -468,6 +501,7 @@ def fly_phase2(
             core.shutdown(clock())
         if rec is not None:
             rec.end_run()
+            rec.annotate("vehicle", vehicle.summary())
             summary["recording_errors"] = rec.close(clock())
         core.close()
     summary["ok"] = bool(ok)
@@ -495,6 +529,13 @@ def fly_phase2(
         summary["latency_state_to_setpoint_ms"] = latency_from_bag(out / rec.bags["phase2"])
     save_summary(out / "phase2_summary.yaml", summary)
     return summary
+
+
+def epoch_clock(clock: Callable[[], float], offset_ns: int) -> Callable[[], float]:
+    """``clock`` shifted to the epoch: ``clock() + offset_ns * 1e-9`` (s). A float at ~1.8e9 s
+    resolves 0.24 us, far below the 1 ms of the stamps' sources (MAVLink ``time_boot_ms``)."""
+    off = offset_ns * 1e-9
+    return lambda: clock() + off
 
 
 def save_summary(path: Path, d: dict) -> None:
