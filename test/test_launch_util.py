@@ -279,8 +279,11 @@ def test_launch_files_declare_and_wire(fake_launch, fname, order, expected):
     else:  # the operator's per-flight choices reach the bridge
         bridge = nodes["mavlink_bridge_node"].parameters[1]
         assert bridge["transport"] == LaunchConfiguration("transport")
-        assert bridge["link.url"] == LaunchConfiguration("link_url")
-        assert args["transport"][0] == "mavlink" and args["link_url"][0] == "udpin:127.0.0.1:14540"
+        # link_url reaches the bridge's link_url_override, never link.url: its default (empty)
+        # leaves config_dir's link.url in force (test_link_url_precedence)
+        assert bridge["link_url_override"] == LaunchConfiguration("link_url")
+        assert "link.url" not in bridge
+        assert args["transport"][0] == "mavlink" and args["link_url"][0] == ""
     seq = nodes["sequencer_node"].parameters[-1]
     assert (
         seq["auto_start"] == LaunchConfiguration("auto_start") and args["auto_start"][0] == "false"
@@ -400,3 +403,53 @@ def test_phase_launches_take_the_mavros_transport(fake_launch, fname):
     used = {"sys_status", "command", "setpoint_raw", "local_position", "imu", "rc_io", "param"}
     used |= {"home_position", "global_position", "gps_status", "esc_status"}  # evidence
     assert deny and not deny & used
+
+
+@pytest.mark.parametrize("fname", ["phase1.launch.py", "phase2.launch.py", "campaign.launch.py"])
+def test_link_url_precedence(fake_launch, fname):
+    """Issue 24: ``link_url`` silently replaced ``link.url`` of ``config_dir`` (its default was
+    the shipped URL). Now: the argument's default is empty and it reaches the bridge as
+    ``link_url_override`` after the parameter file (launch_ros: later entries win); the
+    bridge uses the file's ``link.url`` unless the argument is non-empty, and its start log
+    names the source. Oracle: the shipped file's URL and a URL given here."""
+    import yaml
+
+    from lpv_sysid.flight.bridge import SPECS, BridgeRuntime
+    from lpv_sysid.io import messages
+
+    _, args, nodes = _describe(fname)
+    assert args["link_url"][0] == ""
+    assert "empty (default): link.url of config_dir" in args["link_url"][1]
+    bridge = nodes["mavlink_bridge_node"].parameters
+    assert bridge[0] == PathJoinSubstitution(
+        [LaunchConfiguration("config_dir"), "mavlink_bridge_node.yaml"]
+    )
+    assert bridge[1]["link_url_override"] == LaunchConfiguration("link_url")
+    assert "link.url" not in bridge[1]
+
+    path = os.path.join(ROOT, "lpv_sysid", "config", "mavlink_bridge_node.yaml")
+    with open(path) as f:
+        body = yaml.safe_load(f)["/**/mavlink_bridge"]["ros__parameters"]
+
+    def flat(d, prefix=""):
+        out = {}
+        for k, v in d.items():
+            out.update(flat(v, f"{prefix}{k}.") if isinstance(v, dict) else {prefix + k: v})
+        return out
+
+    file_values = {**{n: d for n, (d, _) in SPECS.items()}, **flat(body)}
+    assert file_values["link_url_override"] == ""  # the shipped file sets no override
+    file_url = body["link"]["url"]
+    given = "udpin:127.0.0.1:14999"
+    assert given != file_url
+    f = messages.MsgFactory.rosbags()
+    for launch_value, want, source in (
+        ("", file_url, "link.url of the parameter file"),
+        (given, given, "link_url launch argument"),
+    ):
+        rt = BridgeRuntime(
+            {**file_values, "link_url_override": launch_value}, f, "/lpv_sysid/b", 15.0, 3.0
+        )
+        assert rt.link is not None and rt.link.config.link.url == want
+        (line,) = [t for lv, t in rt.take_log() if t.startswith("MAVLink ")]
+        assert line.startswith(f"MAVLink {want} (from the {source}"), line

@@ -738,8 +738,7 @@ def test_phase1_launch_px4_sim_handback_on_process_group_sigint(ros, dom, tmp_pa
         env,
         "phase1.launch.py",
         {
-            "config_dir": cfg,
-            "link_url": f"udpin:127.0.0.1:{port}",  # the launch argument sets the link
+            "config_dir": cfg,  # its link.url is the link: no link_url argument (empty)
             "signals_file": ros["sig1"],
             "log_dir": out,
             "vertex": '"[1.0, 0.0, 0.0]"',
@@ -752,6 +751,10 @@ def test_phase1_launch_px4_sim_handback_on_process_group_sigint(ros, dom, tmp_pa
             [ready(n) for n in ("excitation", "mavlink_bridge", "data_logger")]
             + ["[lpv_sysid.mavlink_bridge]: link_up"],
         )
+        assert (
+            f"MAVLink udpin:127.0.0.1:{port} (from the link.url of the parameter file)"
+            in proc.log()
+        ), proc.log()[-4000:]
         got = parallel(
             topics=lambda: assert_graph_topics(
                 env, ["velocity_reference", "excitation", "state", "imu", "rotor_speeds", "status"]
@@ -810,8 +813,10 @@ def test_phase2_launch_px4_sim_services_and_launch_sigint(ros, dom, tmp_path):
     signals each node once): every node exits 0, the recording opens in rosbags."""
     env = RosEnv(SETUP, ros["ws"], dom.value)
     port = free_udp_port()
+    unused = next(u for u in iter(free_udp_port, None) if u != port)
+    # link.url of config_dir names a port no PX4 serves: the link_url argument wins over it
     cfg = config_dir_with(
-        ros, tmp_path, "mavlink_bridge_node.yaml", {"link.url": f"udpin:127.0.0.1:{port}"}
+        ros, tmp_path, "mavlink_bridge_node.yaml", {"link.url": f"udpin:127.0.0.1:{unused}"}
     )
     px4 = env.popen(
         f"{ros['lib']}/lpv-sysid sim-vehicle --udp 127.0.0.1:{port}", tmp_path / "px4_sim.log"
@@ -823,7 +828,7 @@ def test_phase2_launch_px4_sim_services_and_launch_sigint(ros, dom, tmp_path):
         "phase2.launch.py",
         {
             "config_dir": cfg,
-            "link_url": f"udpin:127.0.0.1:{port}",  # the launch argument sets the link
+            "link_url": f"udpin:127.0.0.1:{port}",  # the launch argument wins over link.url
             "gains_file": ros["gains"],
             "signals_file": ros["sig2"],
             "log_dir": out,
@@ -837,6 +842,9 @@ def test_phase2_launch_px4_sim_services_and_launch_sigint(ros, dom, tmp_path):
             [ready(n) for n in ("excitation", "lpv_controller", "mavlink_bridge", "data_logger")]
             + ["[lpv_sysid.mavlink_bridge]: link_up"],
         )
+        assert (
+            f"MAVLink udpin:127.0.0.1:{port} (from the link_url launch argument" in proc.log()
+        ), proc.log()[-4000:]
         calls = {
             srv: (lambda srv=srv: trigger(env, f"{NS}/{srv}", proc))
             for srv in ("mavlink_bridge/start", "lpv_controller/start", "excitation/start")

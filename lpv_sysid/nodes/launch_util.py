@@ -37,7 +37,9 @@ DESCRIPTIONS = {
     "px4-rate`)",
     "namespace": "ROS namespace of every node and topic (no leading slash); one per vehicle",
     "transport": "mavlink (the bridge's own MAVLink link to PX4) | mavros (MAVROS topics)",
-    "link_url": "MAVLink link of the bridge: udpin:HOST:PORT, tcp:HOST:PORT, /dev/ttyAMA0",
+    "link_url": "MAVLink link of the bridge: udpin:HOST:PORT, tcp:HOST:PORT, /dev/ttyAMA0; "
+    "empty (default): link.url of config_dir's mavlink_bridge_node.yaml; a value wins over it "
+    "(the bridge logs which one it used)",
     "auto_start": "true: the sequencer starts the nodes in order at once; false: on its "
     "start service",
     # the MAVROS transport (issue 26): MAVROS_ARGUMENTS, mavros_overrides, mavros_node
@@ -54,15 +56,19 @@ DESIGNS = ("virtual_actuator", "rate_plant")
 #: ``transport`` is one of the per-flight arguments below)
 MAVROS_ARGUMENTS = {"mavros_ns": "/mavros", "fcu_url": "", "tgt_system": "1"}
 
-#: the defaults of the per-flight arguments (the shipped config/mavlink_bridge_node.yaml's)
+#: the defaults of the per-flight arguments: the transport of the shipped
+#: config/mavlink_bridge_node.yaml; no link URL (empty: config_dir's ``link.url`` applies)
 TRANSPORT_DEFAULT = "mavlink"
-LINK_URL_DEFAULT = "udpin:127.0.0.1:14540"
+LINK_URL_DEFAULT = ""
 
 
 def bridge_overrides(**more) -> dict:
     """The bridge's parameters chosen per flight by launch arguments (``transport``,
-    ``link_url``), plus ``more``."""
-    return {"transport": arg("transport"), "link.url": arg("link_url"), **more}
+    ``link_url``), plus ``more``. ``link_url`` goes to the bridge's ``link_url_override``,
+    not to ``link.url``: a launch file cannot leave a parameter out when an argument is
+    empty, so the bridge resolves it (non-empty wins over ``link.url`` of the parameter
+    file; it logs which one it used, lpv_sysid.flight.bridge.settings.link_url_source)."""
+    return {"transport": arg("transport"), "link_url_override": arg("link_url"), **more}
 
 
 def sequencer(steps: Any, remappings: Optional[list] = None, **more) -> Node:

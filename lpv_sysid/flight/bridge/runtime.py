@@ -25,7 +25,12 @@ from dataclasses import dataclass
 from typing import Any, Mapping, Sequence, Union
 
 from lpv_sysid.errors import ConfigError, LpvSysidError
-from lpv_sysid.flight.bridge.settings import BridgeNodeSettings, handback_bound_s, split_parameters
+from lpv_sysid.flight.bridge.settings import (
+    BridgeNodeSettings,
+    handback_bound_s,
+    link_url_source,
+    split_parameters,
+)
 from lpv_sysid.io import messages
 from lpv_sysid.mavlink.bridge import (
     DIAGNOSTICS_TOPIC,
@@ -175,6 +180,8 @@ class BridgeRuntime:
     ) -> None:
         own, bridge, mavros = split_parameters(params)
         self.settings = s = BridgeNodeSettings.from_dict(own)
+        #: where link.url came from (the launch argument or the parameter file)
+        self.link_url_source = link_url_source(own)
         self.f, self.name = factory, name
         self._log: list[tuple[str, str]] = []
         self._shutting_down = False
@@ -341,7 +348,8 @@ class BridgeRuntime:
         lines = [
             (
                 "info",
-                f"MAVLink {cfg.link.url}, command {cfg.command}; hand-back chain "
+                f"MAVLink {cfg.link.url} (from the {self.link_url_source}), command "
+                f"{cfg.command}; hand-back chain "
                 f"{list(cfg.offboard.handback_chain)} within {bound:g} s",
             )
         ]

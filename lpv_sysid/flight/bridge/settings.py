@@ -51,6 +51,11 @@ class BridgeNodeSettings(parameters.Settings):
     publish_tf: bool = parameters.flag(
         False, "publish odom -> base_link on /tf from the state (REP-105; RViz, Foxglove)"
     )
+    link_url_override: str = parameters.text(
+        "",
+        "the launch files' link_url argument: non-empty replaces link.url; empty (the "
+        "launch default): link.url of the parameter file (the bridge logs which one it used)",
+    )
 
     def validate(self) -> None:
         if self.transport not in TRANSPORTS:
@@ -167,7 +172,17 @@ def split_parameters(p: Mapping[str, Any]) -> tuple[dict, dict, dict]:
     bridge = parameters.nest(
         {k: v for k, v in p.items() if k not in own and not k.startswith("mavros.")}, SPECS
     )
+    if own.get("link_url_override"):
+        bridge.setdefault("link", {})["url"] = own["link_url_override"]
     return own, bridge, parameters.nest(mavros)
+
+
+def link_url_source(p: Mapping[str, Any]) -> str:
+    """Where the bridge's link URL comes from (logged at start): the ``link_url`` launch
+    argument (``link_url_override``) wins over ``link.url`` of the parameter file."""
+    if p.get("link_url_override"):
+        return "link_url launch argument (link_url_override), replacing link.url"
+    return "link.url of the parameter file"
 
 
 def settings_from_params(p: Mapping[str, Any]) -> BridgeNodeSettings:
