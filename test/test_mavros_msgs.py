@@ -110,6 +110,7 @@ class FakeMavros:
         self.rt, self.mode, self.armed = rt, mode, armed
         self.applies = applies  # None: every mode
         self.publishing = True  # /mavros/state published (False: stale)
+        self.system_status = 4  # HEARTBEAT MAV_STATE (PX4: 5 CRITICAL while in a failsafe)
         self.params = dict(PX4_PARAMS)  # what MAVROS's param node has pulled
         self.info = vehicle_info()
         self.asked: list[str] = []
@@ -162,6 +163,7 @@ class FakeMavros:
             connected=connected,
             armed=self.armed,
             mode=self.mode if mode is None else mode,
+            system_status=self.system_status,
         )
 
     def health_msgs(self):
@@ -295,6 +297,12 @@ def test_endpoints_of_the_mavros_msgs_mode():
     pubs = {e.key: e.topic for e in rt.publishers}
     assert pubs["mavros_attitude"] == "/uav1/mavros/setpoint_raw/attitude"
     assert "mavros_local" not in pubs
+    # phase 1 takes velocity_reference; phase 2's is the controller's input (not subscribed:
+    # real MAVROS phase 2 logged an ERROR for each, 50 a second)
+    assert "velocity_reference" in {e.key for e in runtime(command="velocity").subscriptions}
+    for command in ("attitude_rate", "rate_setpoint"):
+        keys = {e.key for e in runtime(command=command).subscriptions}
+        assert "velocity_reference" not in keys and "actuator_command" in keys, command
 
 
 def test_offboard_arm_run_and_handback_confirmed_through_mavros_state():
@@ -821,3 +829,113 @@ def test_rate_plant_command_through_mavros_attitude_target(u, rates_frd, thrust)
     flu = [sp.body_rate.x, sp.body_rate.y, sp.body_rate.z]
     np.testing.assert_allclose(flu, [rates_frd[0], -rates_frd[1], -rates_frd[2]], atol=1e-6)
     assert sp.thrust == pytest.approx(thrust, abs=1e-6)
+
+
+# --------------------------------------------------- PX4 failsafe modes and stale evidence
+def test_a_failsafe_during_offboard_ends_failed_and_commands_no_mode():
+    """PX4 leaves OFFBOARD by a failsafe (Hold on offboard loss, MAV_STATE_CRITICAL in its
+    HEARTBEAT): the bridge concludes "left OFFBOARD", FAILED, the failsafe keeps control
+    (no mode commanded); the status names the failsafe and the mode PX4 shows."""
+    rt = runtime(command="velocity")
+    fake = started(FakeMavros(rt, armed=True))
+    fake.run(3.0, reference=([0.5, 0.0, 0.0], 0.0))
+    assert fake.state() == "OFFBOARD_ACTIVE"
+    fake.mode, fake.system_status = "AUTO.LOITER", 5
+    fake.run(2.0, reference=([0.5, 0.0, 0.0], 0.0))
+    assert fake.state() == "FAILED" and fake.modes_requested() == ["OFFBOARD"]
+    assert "vehicle left OFFBOARD" in rt.core.status(fake.t)["reason"]
+    texts = [t for _, _, t in fake.events]
+    assert any(
+        "PX4 failsafe active, vehicle in AUTO.LOITER (MAV_STATE_CRITICAL)" in t for t in texts
+    ), texts
+    st = rt.mavros_link.status(fake.t)
+    assert st["px4_failsafe"] == "AUTO.LOITER (MAV_STATE_CRITICAL)"
+    assert st["mavros_mode"] == "AUTO.LOITER"
+    # the failsafe ends (the pilot picks a mode): reported, nothing claimed
+    fake.mode, fake.system_status = "POSCTL", 4
+    fake.run(1.5)
+    assert rt.mavros_link.status(fake.t)["px4_failsafe"] == "false"
+    assert fake.state() == "FAILED" and fake.modes_requested() == ["OFFBOARD"]
+
+
+@pytest.mark.parametrize("land_applied", [True, False])
+def test_a_failsafe_hold_is_not_the_requested_hold(land_applied):
+    """Hand-back chain HOLD, LAND while PX4's failsafe put the vehicle in Hold (the state
+    shows AUTO.LOITER, system_status CRITICAL): HOLD is not confirmed by it; LAND, applied
+    by PX4 outside the failsafe, is (DONE, "LAND after HOLD"); refused, the run ends FAILED
+    -- never "vehicle in HOLD"."""
+    rt = runtime(command="velocity")
+    applies = {"OFFBOARD", "AUTO.LAND"} if land_applied else {"OFFBOARD"}
+    fake = started(FakeMavros(rt, armed=True, applies=applies))
+    fake.run(3.0, reference=([0.5, 0.0, 0.0], 0.0))
+    assert fake.state() == "OFFBOARD_ACTIVE"
+    fake.handle(rt.abort(fake.t)[2])
+    fake.mode, fake.system_status = "AUTO.LOITER", 5  # PX4's failsafe, not the request
+
+    def set_mode(out):  # a mode change PX4 applies ends its failsafe (OnModeChangeOrDisarm)
+        before = fake.mode
+        FakeMavros.handle(fake, out)
+        if fake.mode != before:
+            fake.system_status = 4
+
+    fake.handle = set_mode
+    fake.run(12.0)
+    assert fake.modes_requested() == ["OFFBOARD", "AUTO.LOITER", "AUTO.LAND"]
+    reason = rt.core.status(fake.t)["reason"]
+    assert "vehicle in HOLD" not in reason
+    if land_applied:
+        assert fake.state() == "DONE" and "vehicle in LAND after HOLD" in reason, reason
+    else:
+        assert fake.state() == "FAILED" and "hand-back NOT confirmed" in reason, reason
+
+
+@pytest.mark.parametrize(
+    "silent, named",
+    [
+        ("battery", "battery: unknown"),
+        ("ekf", "EKF: no ESTIMATOR_STATUS"),
+        ("home", "home position: not set"),
+        ("rc_out", "rotor speeds: none"),
+    ],
+)
+def test_health_evidence_expires_when_mavros_stops_publishing_it(silent, named):
+    """A health topic MAVROS stops publishing (while /mavros/state stays fresh) keeps its
+    last value for ``mavros.health_max_age`` s only: GO within it, then the fact counts as
+    missing (the verdict of one never received) and ``start`` is refused."""
+    rt = runtime(command="velocity", **{"mavros.health_max_age": 5.0})
+    fake = FakeMavros(rt)
+    fake.run(2.0)
+    setattr(fake, silent, None if silent != "rc_out" else False)
+    fake.run(3.0)  # 3-4 s since the last message: still evidence
+    ok, message, out = rt.start(fake.t)
+    fake.handle(out)
+    assert ok, message
+    fake.handle(rt.abort(fake.t)[2])
+    rt2 = runtime(command="velocity", **{"mavros.health_max_age": 5.0})
+    fake2 = FakeMavros(rt2)
+    fake2.run(2.0)
+    setattr(fake2, silent, None if silent != "rc_out" else False)
+    fake2.run(6.0)  # > 5 s: expired
+    ok, message, out = rt2.start(fake2.t)
+    fake2.handle(out)
+    assert not ok and named in message, message
+    assert fake2.mode_calls() == []
+    assert any("older than 5 s ignored" in t for _, _, t in fake2.events), fake2.events
+
+
+def test_evidence_fresh_copy_drops_only_the_stale_facts():
+    from lpv_sysid.mavlink.preflight import MavrosEvidence
+
+    ev = MavrosEvidence()
+    ev.put("battery", (80.0, 16.2), 0.0)
+    ev.put("home", (47.0, 8.0, 400.0), 9.0)
+    ev.saw("ODOMETRY", 1.0)
+    ev.saw("HIGHRES_IMU", 9.5)
+    ev.estimator_flags = 0x33F  # set in code, no stamp: kept
+    f = ev.fresh(10.0, 5.0)
+    assert f.battery is None and f.home == (47.0, 8.0, 400.0) and f.estimator_flags == 0x33F
+    assert f.seen == {"HIGHRES_IMU"} and ev.seen == {"ODOMETRY", "HIGHRES_IMU"}
+    assert ev.battery == (80.0, 16.2)  # the original is untouched
+    assert ev.stale(10.0, 5.0) == ["battery 10.0 s old", "ODOMETRY 9.0 s old"]
+    with pytest.raises(ValueError, match="not an expiring"):
+        ev.put("mode", None, 0.0)

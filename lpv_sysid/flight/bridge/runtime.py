@@ -293,6 +293,11 @@ class BridgeRuntime:
                     ATTITUDE_TARGET,
                 )
             )
+        if self.link.config.command != "velocity":
+            # phase 2: velocity_reference is the controller's input, not a setpoint here (as
+            # over MAVLink: each one was refused with an ERROR line, 50 a second through
+            # real MAVROS, load enough to trip the controller's loop-delay watchdog)
+            self.subscriptions = [e for e in self.subscriptions if e.key != "velocity_reference"]
         self.subscriptions += [
             Endpoint("actuator_command", "actuator_command"),
             Endpoint("mavros_odom", mcfg.topic("odom"), "sensor"),
@@ -447,7 +452,7 @@ class BridgeRuntime:
             if key in MAVROS_EVIDENCE:
                 name, parse = MAVROS_EVIDENCE[key]
                 if ev is not None:
-                    setattr(ev, name, parse(msg))
+                    ev.put(name, parse(msg), now)
                 return []
             if key == "mavros_state":
                 link.on_state(now, messages.state_from_msg(msg))
@@ -466,17 +471,17 @@ class BridgeRuntime:
                 stamp_ns, channels = messages.rc_out_from_msg(msg)
                 link.on_rc_out(now, stamp_ns, channels)
                 if ev is not None:
-                    ev.servo_raw = channels
+                    ev.put("servo_raw", channels, now)
             elif key == "mavros_home":
                 link.on_home(now, messages.home_ned_from_msg(msg))
                 if ev is not None:
-                    ev.home = messages.home_geo_from_msg(msg)
+                    ev.put("home", messages.home_geo_from_msg(msg), now)
             elif key == "mavros_target_attitude":
                 t_boot_ms = messages.stamp_ns_of(msg) // 1_000_000
                 _, rates, thrust = messages.rate_setpoint_from_attitude_target_msg(msg)
                 link.on_target_attitude(now, t_boot_ms, rates, thrust)
             if ev is not None and key in SEEN:
-                ev.seen.add(SEEN[key])
+                ev.saw(SEEN[key], now)
         except LpvSysidError as exc:
             link.stats.rejected_inputs += 1
             n = self._rejected[key] = self._rejected.get(key, 0) + 1
@@ -567,7 +572,15 @@ class BridgeRuntime:
         up = self.mavros_link.link_up(now)
         ev.mode = core.machine.vehicle_mode if up else None
         ev.armed = core.machine.armed
-        checks = mavros_checks(ev, core.config.rotor_estimate, self._mavros_cfg.namespace)
+        max_age = self._mavros_cfg.health_max_age
+        stale = ev.stale(now, max_age)
+        if stale:
+            self._log.append(
+                ("warn", f"MAVROS evidence older than {max_age:g} s ignored: {', '.join(stale)}")
+            )
+        checks = mavros_checks(
+            ev.fresh(now, max_age), core.config.rotor_estimate, self._mavros_cfg.namespace
+        )
         blocking = [c for c in checks if c.name not in NOT_BLOCKING_AT_START]
         ok = verdict(blocking)
         self._log.append(
@@ -676,7 +689,9 @@ class BridgeRuntime:
             values.update(self.mavros_link.status(now))
         level, message = "OK", self.core.state.value
         for ev in events:
-            lv = getattr(ev, "level", "warn" if getattr(ev, "kind", "") != "link_up" else "info")
+            lv = getattr(ev, "level", None) or (
+                "info" if getattr(ev, "kind", "") in ("link_up", "px4_failsafe_end") else "warn"
+            )
             text = getattr(ev, "reason", None) or f"{ev.kind}: {ev.detail}"
             self._log.append((lv, text))
             if lv in ("warn", "error"):

@@ -144,6 +144,8 @@ MAVROS_DESCRIPTIONS = {
     "mavros.interfaces": "auto | mavros_msgs (mode, arming, hand-back, rate setpoints, rotor "
     "speeds) | common (common_interfaces only: velocity, no mode control)",
     "mavros.state_timeout": "mavros_msgs: no /mavros/state for this long -> no mode evidence [s]",
+    "mavros.health_max_age": "mavros_msgs: preflight health evidence (battery, GPS, EKF, RC, "
+    "home, streams) older than this counts as missing at start [s]",
     "mavros.rc_out_rate_hz": "mavros_msgs: SERVO_OUTPUT_RAW rate asked through "
     "set_message_interval (rc/out, estimated rotor speeds) [Hz]; 0: not asked",
     "mavros.preflight": "mavros_msgs: refuse start on a preflight NO-GO (PX4 parameters, "

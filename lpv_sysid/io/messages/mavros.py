@@ -96,12 +96,15 @@ FIX_3D, NO_FIX, SATELLITES_UNKNOWN = 3, 1, 255
 @dataclass(frozen=True)
 class MavrosVehicleState:
     """``mavros_msgs/State``: ``connected`` (MAVROS hears the autopilot's HEARTBEAT),
-    ``armed`` and the PX4 ``mode`` string as MAVROS names it (``AUTO.LOITER``, ...)."""
+    ``armed``, the PX4 ``mode`` string as MAVROS names it (``AUTO.LOITER``, ...) and the
+    HEARTBEAT's ``system_status`` (MAV_STATE; PX4 sends MAV_STATE_CRITICAL while armed in a
+    failsafe)."""
 
     stamp_ns: int
     connected: bool
     armed: bool
     mode: str
+    system_status: int = 0
 
 
 def position_target_msg(
@@ -161,7 +164,11 @@ def rate_setpoint_from_attitude_target_msg(msg) -> tuple[int, np.ndarray, float]
 def state_from_msg(msg) -> MavrosVehicleState:
     """``mavros_msgs/State`` -> :class:`MavrosVehicleState`."""
     return MavrosVehicleState(
-        stamp_ns_of(msg), bool(msg.connected), bool(msg.armed), str(msg.mode).strip()
+        stamp_ns_of(msg),
+        bool(msg.connected),
+        bool(msg.armed),
+        str(msg.mode).strip(),
+        int(msg.system_status),
     )
 
 

@@ -170,6 +170,15 @@ class MavrosConfig:
         hi=30.0,
         unit=" s",
     )
+    health_max_age: float = cf.number(
+        10.0,
+        "interfaces mavros_msgs: preflight health evidence (battery, GPS, EKF, RC, motor "
+        "outputs, home, telemetry streams) older than this counts as missing at start [s]; "
+        "3 .. 120 s (PX4 sends HOME_POSITION at 0.5 Hz, the others faster)",
+        lo=3.0,
+        hi=120.0,
+        unit=" s",
+    )
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], where: str = "mavros") -> "MavrosConfig":

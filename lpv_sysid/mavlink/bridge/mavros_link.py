@@ -14,7 +14,11 @@ MAVROS (namespace ``/mavros``)     mavros_msgs / std type      becomes (core inp
 ``state``                          State                       HEARTBEAT (mode, armed) --
                                                                only while ``connected``;
                                                                none for ``state_timeout``
-                                                               s: link down (no evidence)
+                                                               s: link down (no evidence);
+                                                               armed with ``system_status``
+                                                               CRITICAL / EMERGENCY /
+                                                               FLIGHT_TERMINATION (a PX4
+                                                               failsafe): mode unknown
 ``set_mode`` (service)             SetMode                     <- DO_SET_MODE (custom_mode
                                                                = MAVROS mode name);
                                                                ``mode_sent`` -> COMMAND_ACK
@@ -47,6 +51,17 @@ next mode of the hand-back chain, then FAILED). ``/mavros/state`` with
 ``connected = false`` (MAVROS lost the autopilot's HEARTBEAT) is no evidence; neither is
 silence: after ``state_timeout`` s without a State the link counts as down, which hands
 control back while streaming (the machine's link-loss rule) and lets nothing be confirmed.
+
+A mode a PX4 failsafe entered looks on ``/mavros/state`` like a requested one (MAVROS's
+``set_mode`` never reports PX4's verdict), except for ``system_status``: PX4 sends
+MAV_STATE_CRITICAL in its HEARTBEAT while armed with a failsafe active (``vehicle_status.
+failsafe``; EMERGENCY and FLIGHT_TERMINATION are worse). Such a state is passed on with
+the mode *unknown* (:data:`UNKNOWN_MODE`) and reported once (event ``px4_failsafe``,
+status ``px4_failsafe``): it confirms no step, so the bridge concludes what it can prove --
+in OFFBOARD_ACTIVE "vehicle left OFFBOARD" (FAILED, the failsafe keeps control, no mode is
+commanded), in the hand-back the requested mode is not confirmed by the failsafe's Hold or
+Land (the chain moves on; DONE only once PX4 shows a chain mode outside the failsafe, else
+FAILED "hand-back NOT confirmed ... PX4 failsafe in charge").
 
 Outgoing requests are :class:`ServiceRequest` (``key`` ``set_mode`` / ``arming`` and the
 request fields); setpoints are :class:`VelocityTarget` / :class:`RateTarget` (MAVLink
@@ -88,6 +103,12 @@ MAV_AUTOPILOT_PX4 = 12
 MAV_RESULT_FAILED = px4.MAV_RESULT_FAILED
 MAV_RESULT_DENIED = px4.MAV_RESULT_DENIED
 MAV_FRAME_BODY_FRD = 12  # ODOMETRY.child_frame_id: velocity in the body frame
+#: HEARTBEAT.system_status (MAV_STATE) values PX4 sends while a failsafe is active
+FAILSAFE_SYSTEM_STATUS = {
+    5: "MAV_STATE_CRITICAL",
+    6: "MAV_STATE_EMERGENCY",
+    8: "MAV_STATE_FLIGHT_TERMINATION",
+}
 
 
 def mode_from_mavros(name: str) -> px4.Px4Mode:
@@ -174,6 +195,7 @@ class MavrosLinkStats:
     states: int = 0
     disconnected_states: int = 0
     unknown_modes: int = 0
+    failsafe_states: int = 0
     service_calls: int = 0
     service_answers: int = 0
     setpoints: int = 0
@@ -187,6 +209,7 @@ class MavrosLinkStats:
 class _Clock:
     t_state: float = -math.inf
     connected: bool = False
+    failsafe: str = ""  # "<mode> (<MAV_STATE>)" while PX4 reports a failsafe, else ""
     events: list[LinkEvent] = field(default_factory=list)
 
 
@@ -286,6 +309,31 @@ class MavrosLink:
         if not c.connected:
             c.events.append(LinkEvent(now, "link_up", f"{self.namespace}/state: {s.mode}"))
         c.connected, c.t_state = True, now
+        failsafe = s.system_status in FAILSAFE_SYSTEM_STATUS and s.armed
+        if failsafe:
+            self.stats.failsafe_states += 1
+            mode = UNKNOWN_MODE  # entered by PX4, not by a request: confirms nothing
+            what = f"{s.mode} ({FAILSAFE_SYSTEM_STATUS[s.system_status]})"
+            if c.failsafe != what:
+                c.events.append(
+                    LinkEvent(
+                        now,
+                        "px4_failsafe",
+                        f"{self.namespace}/state: PX4 failsafe active, vehicle in {what}; "
+                        "not evidence of a requested mode",
+                    )
+                )
+            c.failsafe = what
+        elif c.failsafe:
+            c.events.append(
+                LinkEvent(
+                    now,
+                    "px4_failsafe_end",
+                    f"{self.namespace}/state: failsafe over, {s.mode} "
+                    f"(system_status {s.system_status})",
+                )
+            )
+            c.failsafe = ""
         self.last_mode = s.mode
         base = px4.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
         if s.armed:
@@ -393,4 +441,5 @@ class MavrosLink:
         return {
             "mavros_state_age_s": f"{age:.3f}" if math.isfinite(age) else "inf",
             "mavros_mode": self.last_mode or "unknown",
+            "px4_failsafe": c.failsafe or "false",
         }

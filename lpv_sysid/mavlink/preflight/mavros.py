@@ -35,6 +35,14 @@ HOME_POSITION                ``home_position/home`` (mavros_msgs/HomePosition ``
 These facts are judged by :mod:`~lpv_sysid.mavlink.preflight.health` with the rules and
 verdicts of the MAVLink transport (without a plan: the battery reserve alone).
 
+Health evidence expires: each fact carries the time it arrived (:meth:`MavrosEvidence.put`),
+and the preflight judges :meth:`MavrosEvidence.fresh` -- a battery, GPS, EKF, RC, motor
+output, home or stream fact older than ``max_age`` counts as missing (the verdict of a fact
+never received), so a topic MAVROS stopped publishing while it stays connected (a sensor or
+plugin gone silent, PX4 no longer sending the message) cannot keep a GO. The mode and
+armed state come from ``/mavros/state`` only while it is fresh (the link's
+``state_timeout``).
+
 SYS_STATUS (PX4's own stick verdict) is not used: stick input is decided from
 COM_RC_IN_MODE and RC_CHANNELS as on a link without SYS_STATUS. A fact MAVROS has not
 delivered yet is missing, with the verdict the MAVLink preflight gives it (NO-GO for the
@@ -43,6 +51,7 @@ HEARTBEAT, the firmware and COM_OF_LOSS_T / COM_OBL_RC_ACT).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -72,9 +81,52 @@ class MavrosEvidence:
     gps_fix: tuple[int, int] | None = None  # the same implied by global_position/raw/fix
     estimator_flags: int | None = None  # ESTIMATOR_STATUS flags of estimator_status
     home: tuple[float, float, float] | None = None  # (lat deg, lon deg, alt m) of home
+    #: receive time [s] of each health fact (field name, or ``seen:<stream>``)
+    stamps: dict[str, float] = field(default_factory=dict)
+
+    #: the facts that expire (:meth:`fresh`); the mode / armed state is the link's
+    EXPIRING = ("rc_in", "servo_raw", "battery", "gps_raw", "gps_fix", "estimator_flags", "home")
 
     def missing_params(self) -> list[str]:
         return [p for p in PARAMS if p not in self.params]
+
+    def put(self, name: str, value: Any, now: float) -> None:
+        """Fact ``name`` (a field of :data:`EXPIRING`) received at ``now``."""
+        if name not in self.EXPIRING:
+            raise ValueError(f"{name!r} is not an expiring MAVROS fact")
+        setattr(self, name, value)
+        self.stamps[name] = now
+
+    def saw(self, stream: str, now: float) -> None:
+        """A message of MAVLink stream ``stream`` (``ODOMETRY``, ...) arrived at ``now``."""
+        self.seen.add(stream)
+        self.stamps["seen:" + stream] = now
+
+    def fresh(self, now: float, max_age: float) -> "MavrosEvidence":
+        """A copy without the facts (and streams) older than ``max_age`` s at ``now``; a
+        fact set without a stamp (built in code) is kept."""
+
+        def old(key: str) -> bool:
+            return key in self.stamps and now - self.stamps[key] > max_age
+
+        out = dataclasses.replace(
+            self,
+            params=dict(self.params),
+            seen={s for s in self.seen if not old("seen:" + s)},
+            stamps=dict(self.stamps),
+        )
+        for k in self.EXPIRING:
+            if old(k):
+                setattr(out, k, None)
+        return out
+
+    def stale(self, now: float, max_age: float) -> list[str]:
+        """The facts and streams older than ``max_age`` s at ``now`` (with their ages)."""
+        return [
+            f"{k.removeprefix('seen:')} {now - t:.1f} s old"
+            for k, t in sorted(self.stamps.items())
+            if now - t > max_age
+        ]
 
 
 class _Heartbeat:
