@@ -136,12 +136,29 @@ def _cpu_window(seconds: float, out: dict) -> threading.Thread:
     return t
 
 
-def role_target(kind: str, gains: str, seconds: float) -> dict:
+def role_target(
+    kind: str, gains: str, seconds: float, executor: str = "node", depth: int = 0
+) -> dict:
+    """``executor``: ``node`` (the node class's choice, ``shell.run``'s: the controller's
+    LeanExecutor, SingleThreadedExecutor for the echo), ``single`` (rclpy's
+    SingleThreadedExecutor) or ``lean``; ``depth`` > 0: the keep-last depth of the ``state``
+    subscription instead of the declared one."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
 
     from lpv_sysid.nodes import shell
+    from lpv_sysid.nodes.lean_executor import LeanExecutor
 
+    if depth > 0:
+        declared = shell.qos_for
+
+        def qos_for(topic: str):
+            q = declared(topic)
+            if topic == "state":
+                q.depth = depth
+            return q
+
+        shell.qos_for = qos_for  # type: ignore[assignment]
     out: dict = {}
     rclpy.init()
     if kind == "echo":
@@ -184,7 +201,8 @@ def role_target(kind: str, gains: str, seconds: float) -> dict:
                 *sum((["-p", f"{k}:=0.5"] for k in TIMEOUTS), []),
             ]
         )
-    ex = SingleThreadedExecutor()
+    choice = {"single": SingleThreadedExecutor, "lean": LeanExecutor}
+    ex = choice.get(executor, getattr(node, "EXECUTOR", SingleThreadedExecutor))()
     ex.add_node(node)
     window = _cpu_window(seconds, out)
     end = time.monotonic() + WARMUP_S + seconds + 0.2  # before the publisher stops

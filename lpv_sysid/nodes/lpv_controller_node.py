@@ -29,6 +29,7 @@ from std_srvs.srv import Trigger
 from lpv_sysid.flight.controller import ControllerRuntime, ControllerSettings, settle_gc
 from lpv_sysid.io import messages
 from lpv_sysid.nodes import shell
+from lpv_sysid.nodes.lean_executor import HIGH_RATE_EXECUTOR
 
 NODE_NAME = "lpv_controller"
 
@@ -38,6 +39,9 @@ PARAMETERS = shell.settings_table(ControllerSettings)
 
 class LpvControllerNode(shell.ShellNode):
     SETTINGS = ControllerSettings
+    #: ~800 wakes/s in the vehicle configuration: rclpy's executor cost per wake dominated
+    #: the node's CPU (issue 27; bench/bench_node_rclpy.py measures both executors)
+    EXECUTOR = HIGH_RATE_EXECUTOR
 
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, PARAMETERS, **kwargs)

@@ -295,6 +295,9 @@ class ShellNode(Node):
 
     #: at most one "rejected" warning per input topic in this period [s]
     REJECT_LOG_PERIOD_S = 1.0
+    #: the executor :func:`run` spins the node with (a class with ``add_node`` and
+    #: ``spin_once(timeout_sec)``); the high-rate controller sets ``lean_executor.LeanExecutor``
+    EXECUTOR: Any = SingleThreadedExecutor
 
     def __init__(self, node_name: str, parameters, **kwargs):
         kwargs.setdefault("namespace", NAMESPACE)
@@ -487,7 +490,8 @@ def run(node_factory, args=None, name: str = NAMESPACE) -> int:
     node = None
     try:
         node = node_factory()
-        executor = SingleThreadedExecutor()
+        # the node class chooses its executor (the controller: lean_executor)
+        executor = getattr(node, "EXECUTOR", SingleThreadedExecutor)()
         executor.add_node(node)
         node.get_logger().info(READY)
         while rclpy.ok() and not stop.requested:
