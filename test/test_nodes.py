@@ -285,6 +285,7 @@ def test_logger_records_excitation_and_closes(tmp_path, signals1):
         "bag_0002",
     ]
     assert meta["topics"]["/lpv_sysid/excitation"]["dropped"] == 2
+    assert (meta["clock"]["kind"], meta["clock"]["offset_ns"]) == ("utc", 0)
     assert "excitation_node.yaml" in next(iter(meta["config_files"]))
     got = []
     for b in meta["bags"]:

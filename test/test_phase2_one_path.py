@@ -327,6 +327,43 @@ def test_phase2_recording_carries_epoch_stamps_and_the_vehicle_record(flown):
     assert 0.0 < (st.start_ns - off) * 1e-9 < st.duration_s + (st.start_ns - off) * 1e-9 < 200.0
 
 
+def test_report_of_the_flown_phase2_run(flown, tmp_path):
+    """Issue 23 item 4: ``report --run`` on a ``fly phase2`` directory opens with the go/no-go,
+    labels the phase-2 flight with the kind its recorder recorded (SIMULATED: the package's
+    PX4 stand-in; the site on the first page) and draws the flown time histories with the
+    box, the limits and, for an aborted run, the abort. Oracles: the numbers of
+    phase2_log.npz and phase2_summary.yaml themselves."""
+    import shutil
+
+    from lpv_sysid.report import write_report
+
+    s, out, _ = flown
+    run = tmp_path / "run"
+    shutil.copytree(out, run)
+    text = write_report(run).read_text()
+    head = text.split("\n## ")[1]
+    assert head.startswith("Go / no-go: **")
+    row = next(x for x in text.splitlines() if x.startswith("| phase-2 flight |"))
+    assert "| SIMULATED |" in row and "site 47.39774" in row
+    assert "## Phase 2: flown under the LPV law (SIMULATED)" in text
+    assert (run / "report" / "phase2_flight.png").is_file()
+    log = np.load(run / "phase2_log.npz")
+    err = np.abs(log["x"][:, 2:5] - log["v_d"]).max()
+    assert f"max |v - v_d| {err:.3f} m/s (limit {FLIGHT_OPTS.max_tracking_error:g} m/s)" in text
+    assert "signal complete." in text and "ABORT" not in text.split("## Phase 2: flown")[1]
+    lim = s["limits"]
+    assert lim["max_rate_rad_s"] == FLIGHT_OPTS.max_rate and lim["thrust"] == [0.05, 0.95]
+    assert len(lim["box_min"]) == 3 and all(a < b for a, b in zip(lim["box_min"], lim["box_max"]))
+    # the same flight recorded as aborted: the outcome, the go/no-go and the figure say so
+    doc = yaml.safe_load((run / "phase2_summary.yaml").read_text())
+    doc.update(ok=False, reason="tracking error 1.20 m/s > 1 m/s (axis u) -> hand back")
+    (run / "phase2_summary.yaml").write_text(yaml.safe_dump(doc))
+    text = write_report(run).read_text()
+    assert "| outcome | ABORTED: tracking error 1.20 m/s" in text
+    assert "Go / no-go: **NO-GO**" in text
+    assert "ABORTED at the red line" in text and "and the abort (red line)" in text
+
+
 def test_loop_latency_percentiles():
     from lpv_sysid.flight.phase2 import loop_latency
 

@@ -122,6 +122,7 @@ class DataLoggerNode(shell.ShellNode):
         )
         self.recorder = Recorder(cfg)
         self.recorder.start(self.now_ns())
+        self.recorder.annotate("clock", self.clock_record())
         self.f = messages.MsgFactory.rclpy()
         self.pub_status = shell.StatusPublisher(self)  # status and /diagnostics
         for name, typ in rel.items():
@@ -143,6 +144,22 @@ class DataLoggerNode(shell.ShellNode):
         # a stream that stops still reaches the disk within flush_interval_s
         self.create_timer(p.flush_interval_s / 2, self._flush_cb)
         self.get_logger().info(f"recording {sorted(topics)} to {p.out_dir}")
+
+    def clock_record(self) -> dict:
+        """``clock`` of ``experiment.yaml``: the bag stamps are this node's ROS clock at
+        reception -- the wall clock (epoch ns), or ``/clock`` with ``use_sim_time``. The
+        vehicle record (PX4 boot on this clock, firmware, parameters, site) is not known to
+        the logger: ``fly`` and ``fly phase2`` write it; under ``ros2 launch`` it is absent."""
+        try:
+            sim = bool(self.get_parameter("use_sim_time").value)
+        except Exception:  # noqa: BLE001 - a stand-in or older rclpy without the parameter
+            sim = False
+        return {
+            "kind": "ros_sim_time" if sim else "utc",
+            "offset_ns": 0,
+            "meaning": "bag stamp = the data logger's ROS clock at reception "
+            + ("(/clock: use_sim_time)" if sim else "(system wall clock, epoch ns)"),
+        }
 
     def _flush_cb(self):
         try:

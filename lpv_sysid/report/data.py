@@ -20,6 +20,8 @@ phase 2               ``phase2/summary.yaml`` and ``phase2/*.npz`` (written by
 provenance            ``phase1/experiment.yaml`` / ``phase1/campaign_summary.yaml`` (recorder and
                       campaign of ``lpv-sysid fly phase1``: flown over MAVLink) and
                       ``phase2/phase2_summary.yaml`` (``lpv-sysid fly phase2``)
+flown phase 2         ``phase2/phase2_log.npz`` (its time histories) and ``phase2/experiment.yaml``
+                      (its recorder: vehicle kind, site, clock)
 ====================  =========================================================================
 """
 
@@ -52,9 +54,17 @@ CANDIDATES: dict[str, tuple[str, ...]] = {
     "experiment": ("phase1/experiment.yaml", "experiment.yaml"),
     "campaign": ("phase1/campaign_summary.yaml", "campaign_summary.yaml"),
     "flight_phase2": ("phase2/phase2_summary.yaml", "phase2_summary.yaml"),
+    "flight_phase2_log": ("phase2/phase2_log.npz", "phase2_log.npz"),
+    "flight_phase2_experiment": ("phase2/experiment.yaml",),
 }
 #: inputs only used to say where the data came from (not listed as missing sections)
-PROVENANCE_INPUTS = ("experiment", "campaign", "flight_phase2")
+PROVENANCE_INPUTS = (
+    "experiment",
+    "campaign",
+    "flight_phase2",
+    "flight_phase2_log",
+    "flight_phase2_experiment",
+)
 PHASE2_SERIES = ("eq33", "nonlinear")
 
 
@@ -78,6 +88,8 @@ class RunData:
     experiment: Optional[dict] = None
     campaign: Optional[dict] = None
     flight_phase2: Optional[dict] = None
+    flight_phase2_log: Optional[dict[str, np.ndarray]] = None  # fly phase2's phase2_log.npz
+    flight_phase2_experiment: Optional[dict] = None  # its recorder's experiment.yaml
     phase2_series: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
 
 
@@ -124,7 +136,12 @@ def load_run(run_dir: str | Path, verify: bool = True) -> RunData:
                 value = read_npz(path)
             else:
                 value = read_yaml(path, finite=False)  # outputs may hold .nan
-            if key not in ("verification", "signals", "trims") and not isinstance(value, dict):
+            if key not in (
+                "verification",
+                "signals",
+                "trims",
+                "flight_phase2_log",
+            ) and not isinstance(value, dict):
                 raise ConfigError(
                     f"{path}: expected a mapping at the top level, got {type(value).__name__}"
                 )

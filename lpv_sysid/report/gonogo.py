@@ -16,7 +16,9 @@ Provenance: a phase-1 directory with the flight recorder's ``experiment.yaml`` o
 ``campaign_summary.yaml`` (``lpv-sysid fly phase1``) was FLOWN on a PX4 over MAVLink; one without
 them was written by ``lpv-sysid simulate phase1`` (SIMULATED); ``phase2/summary.yaml``
 (:mod:`lpv_sysid.sim.phase2`) holds SIMULATED runs only, ``phase2/phase2_summary.yaml``
-(``lpv-sysid fly phase2``) a FLOWN one. A PX4 SITL and a vehicle are not told apart by the records.
+(``lpv-sysid fly phase2``) a flown one, labelled by its recorder's ``experiment.yaml``
+(``vehicle.kind``: SIMULATED -- the package's own PX4 stand-in --, SITL, HITL, SIH or FLOWN;
+FLOWN when a recording does not say).
 """
 
 from __future__ import annotations
@@ -77,17 +79,39 @@ def vehicle_label(experiment: Any) -> tuple[str, str]:
     imp = e.get("provenance")
     imp = imp if isinstance(imp, dict) else {}
     kind = veh.get("kind") or imp.get("vehicle_kind")
+    site = veh.get("site") or imp.get("site")
+    where = ""
+    if isinstance(site, dict) and isinstance(site.get("latitude_deg"), (int, float)):
+        alt = site.get("altitude_amsl_m")
+        where = (
+            f", site {site['latitude_deg']:.6f} deg N {site.get('longitude_deg', 0.0):.6f} deg E"
+            + (f" {alt:.1f} m AMSL" if isinstance(alt, (int, float)) else "")
+        )
     if kind in DATA_LABELS:
         src = "imported " + str((imp.get("source") or {}).get("kind", "log")) if imp else "PX4"
-        return str(kind), f"{src}, vehicle kind {kind} from its records"
+        return str(kind), f"{src}, vehicle kind {kind} from its records{where}"
     return FLOWN, "PX4 over MAVLink, vehicle kind not recorded"
+
+
+def phase2_experiment(d: RunData) -> Optional[dict]:
+    """The ``experiment.yaml`` of the flown phase 2: ``phase2/experiment.yaml``, or the run
+    directory's own when it is a ``fly phase2`` directory (``phase2_summary.yaml`` next to it)."""
+    if isinstance(d.flight_phase2_experiment, dict):
+        return d.flight_phase2_experiment
+    f, e = d.found.get("flight_phase2"), d.found.get("experiment")
+    if f is not None and e is not None and f.parent == e.parent and d.campaign is None:
+        return d.experiment if isinstance(d.experiment, dict) else None
+    return None
 
 
 def provenance(d: RunData) -> list[DataSource]:
     """Where each data set came from (module docstring)."""
     out = []
     rel = lambda key: f"`{d.found[key].relative_to(d.run_dir)}`"  # noqa: E731
-    if d.experiment is not None or d.campaign is not None:
+    exp2 = phase2_experiment(d)
+    if exp2 is not None and exp2 is d.experiment:
+        p1 = DataSource("phase-1 flights", "not in the run directory", "-")
+    elif d.experiment is not None or d.campaign is not None:
         url = (d.campaign or {}).get("connect") or "URL not recorded"
         files = ", ".join(rel(k) for k in ("experiment", "campaign") if k in d.found)
         label, how = vehicle_label(d.experiment)
@@ -105,8 +129,13 @@ def provenance(d: RunData) -> list[DataSource]:
     if d.models is not None:
         out.append(DataSource("identification data", p1.label, "the phase-1 runs above"))
     if d.flight_phase2 is not None:
+        label2, how2 = vehicle_label(exp2)
         out.append(
-            DataSource("phase-2 flight", FLOWN, f"{rel('flight_phase2')} (`lpv-sysid fly phase2`)")
+            DataSource(
+                "phase-2 flight",
+                label2,
+                f"{how2}; {rel('flight_phase2')} (`lpv-sysid fly phase2`)",
+            )
         )
     s = d.phase2_summary
     if isinstance(s, dict):

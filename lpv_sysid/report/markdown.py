@@ -29,6 +29,7 @@ from lpv_sysid.report.sections_design import (
 )
 from lpv_sysid.report.sections_flight import (
     _phase2_section,
+    flown_phase2_section,
     go_no_go_section,
 )
 from lpv_sysid.report.sections_models import nonlinear_section, stability_section
@@ -121,6 +122,7 @@ def write_report(
     _synthesis_section(r)
     _verification_section(r)
     _phase2_section(r)
+    flown_phase2_section(r)
     text = "\n".join(r.lines).rstrip() + "\n"
     try:
         out.write_text(text, encoding="utf-8")

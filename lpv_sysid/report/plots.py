@@ -267,3 +267,63 @@ def plot_margins(m: RunMargins, path: Path, title: str = "") -> Path:
     if title:
         axes[0].set_title(title)
     return _save(fig, path)
+
+
+def plot_flown_phase2(
+    t: np.ndarray,
+    v: np.ndarray,
+    v_d: np.ndarray,
+    u: np.ndarray,
+    sent: np.ndarray,
+    path: Path,
+    title: str,
+    box: Optional[tuple[Sequence[float], Sequence[float]]] = None,
+    max_error: Optional[float] = None,
+    input_limits: Optional[Sequence[tuple[float, float]]] = None,
+    input_names: Sequence[str] = ("thrust", "p_sp", "q_sp", "r_sp"),
+    signal: Optional[tuple[float, float]] = None,
+    abort: Optional[tuple[float, str]] = None,
+) -> Path:
+    """A flown phase-2 run (``fly phase2``): body velocity u, v, w against v_d with the
+    scheduling ``box`` edges (dotted), the tracking-error limit v_d +- ``max_error`` that hands
+    back (grey band), the signal window (shaded) and the ``abort`` (time, reason: red line);
+    below, the rate-plant inputs the law computed (thin) and sent after the clip (thick) with
+    their ``input_limits``."""
+    fig, axes = plt.subplots(3 + u.shape[1], 1, figsize=(8, 2.0 * (3 + u.shape[1])), sharex=True)
+    for i in range(3):
+        ax = axes[i]
+        if max_error is not None:
+            ax.fill_between(
+                t,
+                v_d[:, i] - max_error,
+                v_d[:, i] + max_error,
+                color="0.85",
+                lw=0,
+                label=f"|v - v_d| <= {max_error:g} m/s",
+            )
+        ax.plot(t, v[:, i], lw=1.0, label="v")
+        ax.plot(t, v_d[:, i], "k--", lw=1.0, label="v_d")
+        if box is not None:
+            for edge in (box[0][i], box[1][i]):
+                ax.axhline(float(edge), color="0.4", ls=":", lw=0.8)
+        ax.set_ylabel(VEL_LABELS[i])
+    for j in range(u.shape[1]):
+        ax = axes[3 + j]
+        ax.plot(t, u[:, j], lw=0.6, color="0.5", label="law")
+        ax.plot(t, sent[:, j], lw=1.0, label="sent")
+        if input_limits is not None and j < len(input_limits):
+            for edge in input_limits[j]:
+                ax.axhline(float(edge), color="r", ls=":", lw=0.8)
+        ax.set_ylabel(str(input_names[j]) if j < len(input_names) else f"u{j}")
+    for ax in axes:
+        if signal is not None:
+            ax.axvspan(signal[0], signal[1], color="tab:green", alpha=0.07)
+        if abort is not None:
+            ax.axvline(abort[0], color="r", lw=1.2)
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="upper right", fontsize=7, ncol=3)
+    axes[3].legend(loc="upper right", fontsize=7, ncol=2)
+    axes[-1].set_xlabel("t [s] since the first command")
+    head = title if abort is None else f"{title}\nABORT at {abort[0]:.2f} s: {abort[1][:80]}"
+    axes[0].set_title(head, fontsize=9)
+    return _save(fig, path)

@@ -323,3 +323,121 @@ def go_no_go_section(r: Report) -> Optional[RunMargins]:
         if limits:
             r.p(f"Limits not recorded by the run, taken from the code's defaults: {limits}.")
     return m
+
+
+def flown_phase2_section(r: Report) -> None:
+    """The flown phase 2 (``fly phase2`` / ``chain``: ``phase2_summary.yaml`` +
+    ``phase2_log.npz``): outcome, aborts, hand-back, tracking and the u_e -> z gain against
+    gamma, and the time histories with the scheduling box, the limits and the abort, every
+    title labelled with the vehicle kind its recorder recorded."""
+    d = r.data
+    s = d.flight_phase2
+    if not isinstance(s, dict):
+        return
+    from lpv_sysid.report.gonogo import phase2_experiment, vehicle_label
+
+    label, how = vehicle_label(phase2_experiment(d))
+    r.h(2, f"Phase 2: flown under the LPV law ({label})")
+
+    def summary() -> None:
+        hb = s.get("handback") or {}
+        gi = s.get("gain_u_e_to_z") or {}
+        lat = s.get("latency_state_to_setpoint_ms") or {}
+        rows = [
+            ["data", f"{label}: {how}"],
+            ["outcome", ("complete" if s.get("ok") else "ABORTED") + f": {s.get('reason')}"],
+            ["hand-back", f"{hb.get('state')} to {hb.get('mode')} ({hb.get('reason')})"],
+            ["controller abort", (s.get("controller") or {}).get("abort") or "none"],
+            [
+                "signal / kappa / gamma",
+                f"{s.get('signal_duration_s')} s / {s.get('kappa')} / {s.get('gamma')}",
+            ],
+            ["u_e -> z gain", f"{gi.get('gain', gi.get('ratio'))} ({gi.get('method', '-')})"],
+            ["loop latency p50 / p99 [ms]", f"{lat.get('p50')} / {lat.get('p99')}"],
+        ]
+        for key, what in (("tracking_rms", "tracking RMS"), ("tracking_max", "tracking max")):
+            v = s.get(key)
+            if isinstance(v, dict):
+                rows.append(
+                    [
+                        f"{what} u/v/w [m/s]",
+                        " / ".join(f"{float(v[a]):.3f}" for a in "uvw" if a in v),
+                    ]
+                )
+        r.p(md_table(["item", "value"], rows, fmt="{:.4g}"))
+
+    r.guard("flown phase-2 summary", summary)
+    log_ = d.flight_phase2_log
+    if log_ is None:
+        r.p(
+            "**No time histories:** `phase2_log.npz` not found next to the phase-2 summary "
+            "(written by `lpv-sysid fly phase2`)."
+        )
+        return
+
+    def histories() -> None:
+        t_abs = np.asarray(log_["t"], dtype=float)
+        if t_abs.size < 2:
+            raise ValueError("phase2_log.npz: fewer than 2 samples")
+        t = t_abs - t_abs[0]
+        x = np.asarray(log_["x"], dtype=float)
+        v, vd = x[:, 2:5], np.asarray(log_["v_d"], dtype=float)
+        u, sent = np.asarray(log_["u"], dtype=float), np.asarray(log_["sent"], dtype=float)
+        lim = s.get("limits") or {}
+        box = (lim["box_min"], lim["box_max"]) if "box_min" in lim else None
+        if box is None:
+            sched = (d.gains or {}).get("scheduling")
+            if isinstance(sched, dict) and "min" in sched:
+                box = (sched["min"], sched["max"])
+        ins = None
+        if "thrust" in lim and "max_rate_rad_s" in lim:
+            mr = float(lim["max_rate_rad_s"])
+            ins = [tuple(lim["thrust"])] + [(-mr, mr)] * 3
+        tsig = np.asarray(log_["tsig"], dtype=float)
+        on = np.nonzero(tsig >= 0)[0]
+        signal = (float(t[on[0]]), float(t[on[-1]])) if on.size else None
+        abort = None if s.get("ok") else (float(t[-1]), str(s.get("reason")))
+        err = np.abs(v - vd)
+        out_box = (
+            None
+            if box is None
+            else float(np.max(np.maximum(np.asarray(box[0]) - v, v - np.asarray(box[1]))))
+        )
+        r.p(
+            f"{t.size} commands over {t[-1]:.2f} s; max |v - v_d| {err.max():.3f} m/s"
+            + (
+                f" (limit {float(lim['max_tracking_error_m_s']):g} m/s)"
+                if "max_tracking_error_m_s" in lim
+                else ""
+            )
+            + (
+                ""
+                if out_box is None
+                else f"; largest excursion beyond the scheduling box {max(out_box, 0.0):.3f} m/s"
+            )
+            + ("; " + ("ABORTED at the red line" if abort else "signal complete") + ".")
+        )
+        title = f"[{label}] phase-2 flight: body velocity, reference, box, limits"
+        r.fig(
+            plots.plot_flown_phase2(
+                t,
+                v,
+                vd,
+                u,
+                sent,
+                r.fig_dir / "phase2_flight.png",
+                title,
+                box,
+                lim.get("max_tracking_error_m_s"),
+                ins,
+                lim.get("input_names") or ("thrust", "p_sp", "q_sp", "r_sp"),
+                signal,
+                abort,
+            ),
+            f"[{label}] Flown phase 2: u, v, w against v_d with the scheduling box (dotted), "
+            "the tracking limit that hands back (grey band), the signal window (green), "
+            "the inputs computed and sent with their limits (red dotted)"
+            + (" and the abort (red line)" if abort else ""),
+        )
+
+    r.guard("flown phase-2 time histories", histories)

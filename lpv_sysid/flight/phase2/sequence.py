@@ -506,6 +506,17 @@ def fly_phase2(
         core.close()
     summary["ok"] = bool(ok)
     summary["reason"] = reason or "signal complete"
+    box = ctrl.schedule.scheduling
+    # what the report draws on the time histories (phase2_log.npz): the limits of this flight
+    summary["limits"] = {
+        "box_min": [float(x) for x in box.min],
+        "box_max": [float(x) for x in box.max],
+        "max_tracking_error_m_s": float(opts.max_tracking_error),
+        "min_height_m": float(opts.min_height),
+        "thrust": [float(core.transport.thrust_min), float(core.transport.thrust_max)],
+        "max_rate_rad_s": float(core.transport.max_rate),
+        "input_names": list(names),
+    }
     summary["envelope"] = core.envelope.status()
     summary["controller"] = {
         "commands": ctrl.commands,
