@@ -262,8 +262,11 @@ def _offline_build_problem() -> str:
 
 
 def _run(cmd: list, cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess:
+    """``cmd`` without the caller's PYTHONPATH: an install is judged on its own (a sourced
+    ROS 2 workspace, or a checkout on PYTHONPATH, would otherwise supply lpv_sysid)."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     return subprocess.run(
-        [str(c) for c in cmd], cwd=cwd, capture_output=True, text=True, timeout=timeout
+        [str(c) for c in cmd], cwd=cwd, capture_output=True, text=True, timeout=timeout, env=env
     )
 
 
