@@ -29,6 +29,7 @@ import importlib
 import logging
 import os
 import pkgutil
+import re
 import sys
 import traceback
 import warnings
@@ -58,13 +59,29 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
 
 
-def discover_commands() -> dict[str, ModuleType]:
+#: ``COMMAND = "name"`` at the start of a line of a command module's source
+_COMMAND_LINE = re.compile(r"""^COMMAND = ["']([^"']+)["']""", re.MULTILINE)
+
+
+def discover_commands(only: str | None = None) -> dict[str, ModuleType]:
     """Import every module of ``lpv_sysid.cli`` and its subpackages that declares a
-    ``COMMAND``."""
-    here = str(Path(__file__).resolve().parent)
+    ``COMMAND``. ``only``: import just the module whose source declares ``COMMAND = "only"``
+    (a run of one command: the other commands' imports cost ~2 s of start-up); every module
+    when none does."""
+    here = Path(__file__).resolve().parent
     commands: dict[str, ModuleType] = {}
-    infos = pkgutil.walk_packages([here], prefix=f"{__package__}.")
-    for info in sorted(infos, key=lambda i: i.name.rsplit(".", 1)[-1]):
+    if only is not None:  # the file system, not pkgutil (which imports every subpackage)
+        for path in sorted(here.rglob("*.py")):
+            if not path.stem.startswith("_") and _declares(path, only):
+                rel = path.relative_to(here).with_suffix("").parts
+                module = importlib.import_module(".".join((__package__, *rel)))
+                if getattr(module, "COMMAND", None) == only:
+                    return {only: module}
+    infos = sorted(
+        pkgutil.walk_packages([str(here)], prefix=f"{__package__}."),
+        key=lambda i: i.name.rsplit(".", 1)[-1],
+    )
+    for info in infos:
         leaf = info.name.rsplit(".", 1)[-1]
         if info.ispkg or leaf.startswith("_") or leaf == "main":
             continue
@@ -76,6 +93,14 @@ def discover_commands() -> dict[str, ModuleType]:
             raise RuntimeError(f"duplicate CLI command {name!r} in {module.__name__}")
         commands[name] = module
     return commands
+
+
+def _declares(path: Path, command: str) -> bool:
+    """Whether the source at ``path`` declares ``COMMAND = command``."""
+    try:
+        return command in _COMMAND_LINE.findall(path.read_text(encoding="utf-8"))
+    except OSError:
+        return False
 
 
 DESCRIPTION = (
@@ -154,19 +179,24 @@ SINGLE_THREAD_BLAS = (
 )
 
 
+def _command_word(argv: Sequence[str]) -> str | None:
+    """The COMMAND of a command line (global options come before it and take no value)."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
 def _single_thread_blas(argv: Sequence[str]) -> None:
     """``OPENBLAS_NUM_THREADS=1`` for :data:`SINGLE_THREAD_BLAS`, set before numpy is imported
     (OpenBLAS reads it once, when it loads); a value already in the environment wins."""
     if "numpy" in sys.modules:
         return
-    command = next((a for a in argv if not a.startswith("-")), None)
-    if command in SINGLE_THREAD_BLAS:
+    if _command_word(argv) in SINGLE_THREAD_BLAS:
         os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    _single_thread_blas(sys.argv[1:] if argv is None else argv)
-    commands = discover_commands()
+    words = sys.argv[1:] if argv is None else argv
+    _single_thread_blas(words)
+    commands = discover_commands(_command_word(words))
     parser = build_parser(commands)
     args = parser.parse_args(argv)
     if args.command is None:

@@ -107,6 +107,7 @@ PARALLEL_MIN_SAMPLES = 800
 
 def _start_judging(
     draws: list,
+    ctx: tuple,
     R: np.ndarray,
     C: np.ndarray,
     gamma: float,
@@ -115,20 +116,46 @@ def _start_judging(
     workers: Optional[int],
     backend: str = "process",
 ) -> Batch:
-    """:func:`_frozen` of every ``(where, v_d, A, B, K)`` draw, in chunks on ``workers``."""
+    """:func:`_frozen` of every draw (:func:`_system`: the frozen system built where it is
+    judged), in chunks on ``workers``; ``ctx``: :func:`_system`'s model data."""
     n_work = 1 if len(draws) < PARALLEL_MIN_SAMPLES else resolve_workers(workers)
     size = max(1, -(-len(draws) // (8 * n_work)))  # ~8 chunks per worker: load balance
     chunks = [
-        ([(A, B, Kv) for _, _, A, B, Kv in draws[i : i + size]], R, C, gamma, rtol, ts)
+        ([d[2] for d in draws[i : i + size]], ctx, R, C, gamma, rtol, ts)
         for i in range(0, len(draws), size)
     ]
     return start_tasks(_judge_chunk, chunks, n_work, backend)
 
 
 def _judge_chunk(chunk: tuple) -> list:
-    """One chunk of :func:`_judge_all` (module level: it runs in a worker process)."""
-    systems, R, C, gamma, rtol, ts = chunk
-    return [_frozen(A, B, Kv, R, C, gamma, rtol, ts) for A, B, Kv in systems]
+    """One chunk of :func:`_start_judging` (module level: it runs in a worker process)."""
+    specs, ctx, R, C, gamma, rtol, ts = chunk
+    out = []
+    for spec in specs:
+        A, B, K = _system(ctx, spec)
+        out.append(_frozen(A, B, K, R, C, gamma, rtol, ts))
+    return out
+
+
+def _system(ctx: tuple, spec: tuple) -> tuple:
+    """``(A, B, K)`` of one draw: ``("draw", v_d, thetas)`` -- A(v_d) = sum_i alpha_i A_i(theta_i),
+    B likewise (Eq. 21), K(v_d) = sum_i alpha_i K_i (Eq. 31) -- or ``("system", A, B, K)``
+    (the extreme corners, built where they were found). ``ctx``: (A_i, B_i, K_i, vmin, vmax,
+    element boxes). Deterministic: the worker and this process build the same numbers."""
+    if spec[0] == "system":
+        return spec[1], spec[2], spec[3]
+    _, vd, thetas = spec
+    As, Bs, K, vmin, vmax, boxes = ctx
+    alpha, _ = multilinear_weights(vd, vmin, vmax)
+    A = np.zeros_like(As[0])
+    B = np.zeros_like(Bs[0])
+    for i, a in enumerate(alpha):
+        if a == 0.0:
+            continue
+        Ai, Bi = boxes[i].apply(As[i], Bs[i], thetas[i])
+        A += a * Ai
+        B += a * Bi
+    return A, B, np.tensordot(alpha, K, axes=1)
 
 
 def _frozen(
@@ -337,7 +364,9 @@ def start_full_box_check(
         sum(s == "stored" for b in boxes for s in b.source),
         sum(s == "k*std" for b in boxes for s in b.source),
     )
-    draws: list = []  # (where, v_d, A, B, K) in sample order; all random draws happen here
+    # (where, v_d, spec) in sample order; every random draw happens here, in this order (the
+    # samples do not depend on ``workers``); the systems are built where they are judged
+    draws: list = []
     for k in range(max(0, int(n))):
         if k < len(verts):
             vd, tag = verts[k], f"corner {k}"
@@ -346,39 +375,30 @@ def start_full_box_check(
                 model.vmin + rng.random(model.vmin.size) * (model.vmax - model.vmin),
                 f"interior {k}",
             )
-        alpha, _ = multilinear_weights(vd, model.vmin, model.vmax)
         corner_draw = k % 2 == 1
-        A = np.zeros_like(model.A[0])
-        B = np.zeros_like(model.B[0])
-        for i, a in enumerate(alpha):
-            b = boxes[i]
+        thetas = []
+        for b in boxes:  # every vertex draws (a zero weight skips it in _system)
             if corner_draw:
-                th = np.where(rng.random(b.lower.size) < 0.5, b.lower, b.upper)
+                thetas.append(np.where(rng.random(b.lower.size) < 0.5, b.lower, b.upper))
             else:
-                th = b.lower + rng.random(b.lower.size) * (b.upper - b.lower)
-            if a == 0.0:
-                continue
-            Ai, Bi = b.apply(model.A[i], model.B[i], th)
-            A += a * Ai
-            B += a * Bi
+                thetas.append(b.lower + rng.random(b.lower.size) * (b.upper - b.lower))
+        vd = np.asarray(vd, dtype=float)
         draws.append(
-            (
-                f"{tag} {'corner-draw' if corner_draw else 'uniform'}",
-                np.asarray(vd, dtype=float),
-                A,
-                B,
-                np.tensordot(alpha, K, axes=1),
-            )
+            (f"{tag} {'corner-draw' if corner_draw else 'uniform'}", vd, ("draw", vd, thetas))
         )
     if extremes and n > 0:
         for i, vd in enumerate(verts):
             for name, th in _worst_corners(model.A[i], model.B[i], K[i], R, C, boxes[i], model.ts):
                 Ai, Bi = boxes[i].apply(model.A[i], model.B[i], th)
-                draws.append((f"vertex {i} {name}", np.asarray(vd, dtype=float), Ai, Bi, K[i]))
+                draws.append(
+                    (f"vertex {i} {name}", np.asarray(vd, dtype=float), ("system", Ai, Bi, K[i]))
+                )
+    ctx = (model.A, model.B, K, model.vmin, model.vmax, list(boxes))
     return PendingFullBox(
         res,
         draws,
-        _start_judging(draws, R, C, float(gamma), rtol, model.ts, workers, backend),
+        ctx,
+        _start_judging(draws, ctx, R, C, float(gamma), rtol, model.ts, workers, backend),
         model.ts,
     )
 
@@ -386,18 +406,23 @@ def start_full_box_check(
 class PendingFullBox:
     """A started :func:`start_full_box_check`: :meth:`result` waits for the judged samples."""
 
-    def __init__(self, res: FullBoxResult, draws: list, batch: Batch, ts: Optional[float]):
-        self._res, self._draws, self._batch, self._ts = res, draws, batch, ts
+    def __init__(
+        self, res: FullBoxResult, draws: list, ctx: tuple, batch: Batch, ts: Optional[float]
+    ):
+        self._res, self._draws, self._ctx, self._batch, self._ts = res, draws, ctx, batch, ts
 
     def result(self) -> FullBoxResult:
         res = self._res
         judged = [r for part in self._batch.results() for r in part]
         worst_key = (-np.inf, -np.inf)
-        for (where, vd, A, B, Kv), (norm, absc, ok) in zip(self._draws, judged):
+        worst_spec = None
+        for (where, vd, spec), (norm, absc, ok) in zip(self._draws, judged):
             s = FullBoxSample(where, vd, norm, absc, ok)
             res.samples.append(s)
             key = (absc if self._ts is not None else norm, absc)
             if key > worst_key:
                 worst_key = key
-                res.worst, res.worst_A, res.worst_B, res.worst_K = s, A, B, Kv
+                res.worst, worst_spec = s, spec
+        if worst_spec is not None:  # the worst system, built again (the same numbers)
+            res.worst_A, res.worst_B, res.worst_K = _system(self._ctx, worst_spec)
         return res
