@@ -2,6 +2,10 @@
 
     source /opt/ros/jazzy/setup.bash
     PYTHONPATH=$PWD python3 -m bench.bench_node_rclpy [--seconds 20] [--runs 3]
+    PYTHONPATH=$PWD python3 -m bench.bench_node_rclpy --choices [--seconds 10] [--runs 2]
+
+``--choices``: the executor x state-queue-depth study (:data:`CHOICES`), written to
+bench/results/node_rclpy_choices.md. ``--executor`` / ``--depth``: one choice for every target.
 
 Without rclpy it prints one line and records "not measured". Per run, three processes on an
 isolated ``ROS_DOMAIN_ID`` (localhost only): a publisher (``state`` nav_msgs/Odometry at
@@ -260,7 +264,15 @@ def _spawn(role: str, args: list, env: dict, out: Path) -> subprocess.Popen:
     )
 
 
-def measure(kind: str, gains: str, seconds: float, tmp: Path, domain: int) -> dict:
+def measure(
+    kind: str,
+    gains: str,
+    seconds: float,
+    tmp: Path,
+    domain: int,
+    executor: str = "node",
+    depth: int = 0,
+) -> dict:
     env = {
         **os.environ,
         "ROS_DOMAIN_ID": str(domain),
@@ -270,7 +282,9 @@ def measure(kind: str, gains: str, seconds: float, tmp: Path, domain: int) -> di
     files = {r: tmp / f"{kind}_{r}.json" for r in ("receiver", "target", "publisher")}
     procs = {
         "receiver": _spawn("receiver", common, env, files["receiver"]),
-        "target": _spawn(kind, common, env, files["target"]),
+        "target": _spawn(
+            kind, common + ["--executor", executor, "--depth", str(depth)], env, files["target"]
+        ),
     }
     time.sleep(0.5)
     procs["publisher"] = _spawn("publisher", common, env, files["publisher"])
@@ -304,6 +318,19 @@ def main(argv=None) -> None:
     ap.add_argument("--gains", default=str(repo_root() / "msg_samples" / "gains.yaml"))
     ap.add_argument("--seconds", type=float, default=20.0)
     ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument(
+        "--executor",
+        choices=("node", "single", "lean"),
+        default="node",
+        help="executor of the node under test (node: the node class's, as shell.run spins it)",
+    )
+    ap.add_argument("--depth", type=int, default=0, help="> 0: state subscription depth")
+    ap.add_argument(
+        "--choices",
+        action="store_true",
+        help="the executor x state-depth study (issue 27): controller (tick on state) under "
+        "rclpy's SingleThreadedExecutor and the LeanExecutor, depth 1/5/10, beside the echo",
+    )
     args = ap.parse_args(argv)
     if args.role is not None:
         if args.role == "receiver":
@@ -311,7 +338,7 @@ def main(argv=None) -> None:
         elif args.role == "publisher":
             res = role_publisher(args.gains, args.seconds)
         else:
-            res = role_target(args.role, args.gains, args.seconds)
+            res = role_target(args.role, args.gains, args.seconds, args.executor, args.depth)
         args.json.write_text(json.dumps(res))
         return
     load0 = load_average()
@@ -337,6 +364,8 @@ def main(argv=None) -> None:
         )
         page.write(load0)
         return
+    if args.choices:
+        return choices(args, load0)
     results: dict = {k: [] for k in TARGETS}
     loads = []
     with tempfile.TemporaryDirectory(prefix="bench_node_rclpy_") as tmp:
@@ -385,18 +414,93 @@ def main(argv=None) -> None:
     e = Stat([x["cpu"] for x in results["echo"]]).median
     cp = Stat([x["p99"] for x in results["controller_state"]]).median
     ep = Stat([x["p99"] for x in results["echo"]]).median
+    v = Stat([x["cpu"] for x in results["controller_timer"]]).median
     page.rows.append(
         Row(
             "controller node through real rclpy (CPU, state-to-command latency)",
             "27",
-            f"CPU {100 * c:.1f} % of a core, p99 {cp:.2f} ms (tick on state); vehicle config "
-            f"{100 * Stat([x['cpu'] for x in results['controller_timer']]).median:.1f} %",
+            f"vehicle config (timer 250 Hz) CPU {100 * v:.1f} % of a core; tick on state "
+            f"{100 * c:.1f} %, p99 {cp:.2f} ms",
             f"echo {100 * e:.1f} %, p99 {ep:.2f} ms",
-            f"CPU {c / e:.2f}x, p99 {cp / ep:.2f}x",
-            "CPU <= 1.5x echo, p99 <= 2x echo (same run)",
-            status(c <= 1.5 * e and cp <= 2 * ep),
+            f"CPU {v / e:.2f}x (tick on state {c / e:.2f}x), p99 {cp / ep:.2f}x",
+            "CPU <= 1.5x echo (vehicle config), p99 <= 2x echo (same run)",
+            status(v <= 1.5 * e and cp <= 2 * ep),
             order=41,
         )
+    )
+    page.write(load0)
+
+
+#: the executor x depth study: (label, target kind, executor, state depth; 0: declared)
+CHOICES = (
+    ("echo (SingleThreadedExecutor, depth 5)", "echo", "single", 0),
+    ("controller, SingleThreadedExecutor, depth 1", "controller_state", "single", 1),
+    ("controller, SingleThreadedExecutor, depth 5", "controller_state", "single", 5),
+    ("controller, SingleThreadedExecutor, depth 10", "controller_state", "single", 10),
+    ("controller, LeanExecutor, depth 1", "controller_state", "lean", 1),
+    ("controller, LeanExecutor, depth 5", "controller_state", "lean", 5),
+    ("controller, LeanExecutor, depth 10", "controller_state", "lean", 10),
+    (
+        "controller (vehicle: timer 250 Hz), SingleThreadedExecutor",
+        "controller_timer",
+        "single",
+        0,
+    ),
+    ("controller (vehicle: timer 250 Hz), LeanExecutor", "controller_timer", "lean", 0),
+)
+
+
+def choices(args, load0: float) -> None:
+    """The ``--choices`` study: every configuration of :data:`CHOICES` per run, interleaved
+    (the order reversed every other run); CPU, latency and commands per window. Writes
+    bench/results/node_rclpy_choices.md."""
+    page = Page(
+        "node_rclpy_choices",
+        "lpv_controller_node: executor and state-queue depth through real rclpy (issue 27)",
+        f"source /opt/ros/jazzy/setup.bash; python3 -m bench.bench_node_rclpy --choices "
+        f"--seconds {args.seconds:g} --runs {args.runs}",
+    )
+    results: dict = {c[0]: [] for c in CHOICES}
+    loads = []
+    with tempfile.TemporaryDirectory(prefix="bench_node_rclpy_") as tmp:
+        for r in range(args.runs):
+            for i, (label, kind, ex, depth) in enumerate(CHOICES if r % 2 == 0 else CHOICES[::-1]):
+                loads.append(load_average())
+                results[label].append(
+                    measure(kind, args.gains, args.seconds, Path(tmp), 60 + i, ex, depth)
+                )
+    lines = []
+    for label, kind, _, _ in CHOICES:
+        rs = results[label]
+        cpu = Stat([x["cpu"] for x in rs])
+        lat = kind != "controller_timer"
+        lines.append(
+            [
+                label,
+                f"{100 * cpu.median:.1f} % [{100 * cpu.p10:.1f}-{100 * cpu.p90:.1f}]",
+                *(
+                    [
+                        f"{Stat([x[k] for x in rs]).median:.2f} ms" + _spread(rs, k)
+                        for k in ("p50", "p99", "max")
+                    ]
+                    if lat
+                    else ["-", "-", "-"]
+                ),
+                f"{sum(x['n'] for x in rs)}" if lat else "-",
+                "; ".join(sorted({x["abort"] for x in rs if x["abort"]})) or "none",
+            ]
+        )
+    page.add(
+        f"Executor and state-queue depth (issue 27): {args.runs} runs of {args.seconds:g} s per "
+        f"configuration, interleaved; load average {min(loads):.1f}-{max(loads):.1f} at the "
+        "starts. Jazzy's rclpy (7.1) has no EventsExecutor (rclpy.experimental is not in it); "
+        "MultiThreadedExecutor adds a thread pool to the same Python wait-set rebuild. Commands "
+        "received in the windows: one per state sample that reached the controller (tick on "
+        "state), so fewer means samples dropped or late."
+    )
+    page.add()
+    page.table(
+        ["configuration", "CPU", "p50", "p99", "max", "commands in the windows", "aborts"], lines
     )
     page.write(load0)
 
