@@ -536,3 +536,33 @@ def test_rate_bounded_certificate_round_trip_and_an_overstated_bound_fails(tmp_p
     out.write_text(yaml.safe_dump(seal_document(d), sort_keys=False))  # re-sealed, see above
     row = next(r for r in verify_files(out, models, n_random=1).rows if r.check == "scheduling")
     assert not row.ok and "at least the claimed bound" in row.note
+
+
+def test_stored_lmi_at_one_plant_holds_inside_the_box_and_fails_for_an_unstable_loop(full_box):
+    """synthesis.verify.lmi_at_plant (issue 20: the stored proof evaluated at a true plant, as
+    ``lpv-sysid coverage --synthesis`` does): at every vertex's box-centre plant and at the
+    interpolated centre plant the sidecar's LMI holds at gamma_achieved (lambda_max < 0); a
+    plant whose frozen closed loop with K(alpha) is unstable (eigenvalue oracle) cannot satisfy
+    it (X > 0 and the LMI would prove stability): lambda_max > 0."""
+    from lpv_sysid.synthesis.verify import lmi_at_plant
+
+    models, out = full_box
+    gs = GainSchedule.load(out)
+    cert = load_certificate_npz(out.with_name(out.stem + ".cert.npz"))
+    raw = yaml.safe_load(models.read_text())
+    g = float(gs.certificate.gamma_achieved)
+    vmin, vmax = np.asarray(gs.scheduling.min), np.asarray(gs.scheduling.max)
+    R, C = np.asarray(cert["R"]), np.asarray(cert["C"])
+    A = np.array([np.asarray(v["A"], dtype=float) for v in raw["vertices"]])
+    B = np.array([np.asarray(v["B"], dtype=float) for v in raw["vertices"]])
+    S = np.array([np.asarray(v["scheduling"], dtype=float) for v in raw["vertices"]])
+    lams = [lmi_at_plant(cert, vmin, vmax, S[i], A[i], B[i], R, C, g) for i in range(len(S))]
+    assert max(lams) < 0
+    centre = 0.5 * (vmin + vmax)
+    alpha, _ = multilinear_weights(centre, vmin, vmax)
+    Ac, Bc = np.tensordot(alpha, A, axes=1), np.tensordot(alpha, B, axes=1)
+    assert lmi_at_plant(cert, vmin, vmax, centre, Ac, Bc, R, C, g) < 0
+    K = np.tensordot(alpha, gs.K, axes=1)
+    bad = Ac + 3.0 * np.abs(np.linalg.eigvals(Ac + Bc @ K)).max() * np.eye(Ac.shape[0])
+    assert np.linalg.eigvals(bad + Bc @ K).real.max() > 0
+    assert lmi_at_plant(cert, vmin, vmax, centre, bad, Bc, R, C, g) > 0

@@ -226,6 +226,14 @@ class AirframeCoverage:
     # with the interpolation pad of ident.vertex.interpolation added
     interior: list = field(default_factory=list)
     interior_padded: list = field(default_factory=list)
+    # issue 20 round 2 item 2: the certificate synthesized for THIS airframe's identification
+    # (``synthesis`` config of run_study) checked at its true plants: per plant (label,
+    # lambda_max of the stored LMI at gamma_achieved; < 0: the proof holds there)
+    lmi_truth: list = field(default_factory=list)
+    lmi_gamma: float = float("nan")
+    lmi_note: str = ""
+    # per true plant: max |v - v_d| [m/s] the law with those gains settles at, constant v_d
+    offsets: list = field(default_factory=list)
 
     @property
     def covered(self) -> int:
@@ -395,8 +403,13 @@ def run_study(
     keep_runs: bool = False,
     workers: int | None = 1,
     backend: str = "process",
+    synthesis: str | None = None,
 ):
     """The study of the module docstring: ``(airframes, runs per airframe or None)``.
+
+    ``synthesis`` (a synthesis config, e.g. config/synthesis.yaml): each airframe's vertex
+    models are also synthesized and the stored LMI is evaluated at the airframe's true plants
+    (:func:`truth_lmi`; ``AirframeCoverage.lmi_truth``).
 
     The airframes are independent tasks (each draws from its own stream
     ``default_rng([seed, k])`` and flies with its own noise seeds): they run on ``workers``
@@ -408,7 +421,19 @@ def run_study(
     vertices = list(cfg.vertices) if cfg.vertices else list(range(1, 9))
     signals = p1.design_excitation(phase1_cfg)
     tasks = [
-        (k, cfg, base, gains, sensors, phase1_cfg, ident_cfg, vertices, signals, keep_runs)
+        (
+            k,
+            cfg,
+            base,
+            gains,
+            sensors,
+            phase1_cfg,
+            ident_cfg,
+            vertices,
+            signals,
+            keep_runs,
+            synthesis,
+        )
         for k in range(1, cfg.airframes + 1)
     ]
 
@@ -427,7 +452,7 @@ def run_study(
 def _airframe_task(task: tuple) -> tuple:
     """Airframe ``k`` of :func:`run_study`: drawn, flown, identified, scored (module level: it
     runs in a worker process). Returns ``(AirframeCoverage, runs or None)``."""
-    k, cfg, base, gains, sensors, phase1_cfg, ident_cfg, vertices, signals, keep_runs = task
+    k, cfg, base, gains, sensors, phase1_cfg, ident_cfg, vertices, signals, keep_runs, synth = task
     params, runs = draw_flyable(base, k, cfg, gains, sensors, phase1_cfg, vertices, signals)
     results = identify_runs(runs, params, base, ident_cfg)
     af = AirframeCoverage(k, params, score(runs, results, params, ident_cfg), eiv_shift(results))
@@ -442,7 +467,109 @@ def _airframe_task(task: tuple) -> tuple:
             pad = np.concatenate([np.array(ip["pad_A"]), np.array(ip["pad_B"])], axis=1)
             padded = certified_bounds(results, cfg.joint_probability, cfg.box_inflation, pad)
             af.interior_padded = interior_excess(params, padded, pts)
+        if synth:
+            truths = [
+                _truth_at(params, r.scheduling, _yaw_rate(params, rec, ident_cfg))
+                for rec, r in zip(runs, results)
+            ]
+            truths += [_truth_at(params, v, 0.0) for v in pts]
+            labels = (
+                [rec.name for rec in runs]
+                + ["hover"]
+                + [f"interior {i}" for i in range(1, len(pts))]
+            )
+            af.lmi_gamma, lams, af.lmi_note, K = truth_lmi(
+                results, ident_cfg, synth, [t[:3] for t in truths]
+            )
+            af.lmi_truth = list(zip(labels, lams))
+            if K is not None:
+                af.offsets = [
+                    (lab, float(np.max(np.abs(steady_offset(results, K, *t)))))
+                    for lab, t in zip(labels, truths)
+                ]
     return af, (runs if keep_runs else None)
+
+
+def _yaw_rate(params: QuadrotorParams, rec, ident_cfg) -> float:
+    """Mean true yaw rate over the trim window (the truth's, :func:`truth_model`)."""
+    from lpv_sysid.ident import vertex as vx
+
+    a, b = vx.trim_window((0.0, rec.t_excite), ident_cfg)
+    sel = (rec.state_t >= a) & (rec.state_t < b)
+    x = reduced_state(rec.state_true[sel], params.arm_length)
+    return float(
+        np.mean((np.sin(x[:, 0]) * x[:, 6] + np.cos(x[:, 0]) * x[:, 7]) / np.cos(x[:, 1]))
+    )
+
+
+def _truth_at(params: QuadrotorParams, v, yaw_rate: float) -> tuple:
+    """``(v, A, B, x_e, u_e)``: the airframe's equilibrium at body velocity ``v`` and its
+    linearisation."""
+    q = Quadrotor(params)
+    tr = q.trim(np.asarray(v, dtype=float), yaw_rate)
+    A, B = q.linearize(tr)
+    return np.asarray(v, dtype=float), A, B, tr.x0, tr.u0
+
+
+def steady_offset(results, K: np.ndarray, v, A, B, x_e, u_e) -> np.ndarray:
+    """``v - v_d`` [m/s] where the flown law ``u = u0(v_d) + K(v_d) (x - x0(v_d))`` (seed 0
+    Eq. 31; x0, u0, K interpolated multilinearly from the identified vertices, Eq. 21) settles
+    on the TRUE plant at constant ``v_d = v`` (no feedforward: dv_d/dt = 0), linearised about
+    the true equilibrium ``(x_e, u_e)`` at ``v``: ``(A + B K) dx = -B (u0 - u_e + K (x_e -
+    x0))`` and ``v - v_d = dx[u, v, w]`` (the true equilibrium flies exactly ``v_d``). The
+    offset is what the model's equilibrium error costs; gamma does not bound it."""
+    S = np.array([np.asarray(r.scheduling, dtype=float) for r in results])
+    from lpv_sysid.models.lpv import multilinear_weights
+
+    alpha, _ = multilinear_weights(np.asarray(v, dtype=float), S.min(axis=0), S.max(axis=0))
+    order = _box_order(S)
+    x0 = sum(a * results[i].x0 for a, i in zip(alpha, order))
+    u0 = sum(a * results[i].u0 for a, i in zip(alpha, order))
+    Ka = np.tensordot(alpha, K, axes=1)
+    dx = -np.linalg.solve(A + B @ Ka, B @ (u0 - u_e + Ka @ (x_e - x0)))
+    return dx[2:5]
+
+
+def _box_order(S: np.ndarray) -> list:
+    """Index of the result at each corner of :func:`lpv_sysid.models.lpv.box_vertices`."""
+    from lpv_sysid.models.lpv import box_vertices
+
+    V = box_vertices(S.min(axis=0), S.max(axis=0))
+    return [int(np.argmin(np.abs(S - c).sum(axis=1))) for c in V]
+
+
+def truth_lmi(results, ident_cfg, synthesis: str, truths: list) -> tuple:
+    """Synthesize gains for the vertex ``results`` with the synthesis config ``synthesis`` (the
+    ``lpv-sysid identify`` models file, ``lpv-sysid synthesize``'s pipeline, its gains and
+    sidecar written to a temporary directory), then evaluate the STORED LMI (the sidecar read
+    back) at every ``(v, A_true, B_true)`` of ``truths`` at the certified ``gamma_achieved``
+    (:func:`lpv_sysid.synthesis.verify.lmi_at_plant`). Returns ``(gamma_achieved, lambda_max
+    per truth, note, K per box corner or None)``; a synthesis that fails gives nan values and
+    the reason."""
+    import tempfile
+    from pathlib import Path
+
+    from lpv_sysid.ident import vertex as vx
+    from lpv_sysid.io.formats import VertexModels, load_certificate_npz
+    from lpv_sysid.synthesis.gains import load_inputs, synthesize, write_gains
+    from lpv_sysid.synthesis.verify import lmi_at_plant
+
+    with tempfile.TemporaryDirectory() as tmp:
+        models = Path(tmp) / "vertex_models.yaml"
+        VertexModels.from_dict(vx.vertex_models_dict(results, ident_cfg)).save(models)
+        try:
+            inp = load_inputs(str(models), synthesis)
+            res = synthesize(inp)
+            written = write_gains(Path(tmp) / "gains.yaml", str(models), inp, res)
+        except (SolverError, ConfigError) as exc:
+            return float("nan"), [float("nan")] * len(truths), f"synthesis failed: {exc}", None
+        cert = load_certificate_npz(written.sidecar)
+        g = float(res.gamma_certified)
+        vmin, vmax = inp.model.vmin, inp.model.vmax
+        lams = [lmi_at_plant(cert, vmin, vmax, v, A, B, inp.R, inp.C, g) for v, A, B in truths]
+    form = int(np.asarray(cert.get("lmi_form", 0)))
+    note = "" if form in (1, 2, 3) else "corner certificate: no element-box LMI to evaluate"
+    return g, lams, note, np.asarray(res.K, dtype=float)
 
 
 #: re-identification variants of :func:`ablations` (name -> IdentificationConfig changes)
@@ -542,6 +669,30 @@ def summary_dict(
         "'with interpolation pad': every half-width + the pad of ident.vertex.interpolation "
         "(the vertex models re-expanded on a grid), uncertainty.interpolation: true",
     }
+    lam = [x for af in airframes for _, x in af.lmi_truth]
+    if lam:
+        d["lmi_at_truth"] = {
+            "plants": len(lam),
+            "holds": int(sum(x < 0 for x in lam)),
+            "worst_lambda_max": float(np.nanmax(lam)) if np.any(np.isfinite(lam)) else None,
+            "airframes_all_hold": int(
+                sum(bool(af.lmi_truth) and all(x < 0 for _, x in af.lmi_truth) for af in airframes)
+            ),
+            "meaning": "per airframe gains synthesized for its own identification (the "
+            "--synthesis config), the stored LMI (sidecar X, S, H, multipliers) evaluated at the "
+            "airframe's true plants (vertices at v_d with the flown yaw rate, hover, interior "
+            "points) at gamma_achieved: lambda_max < 0 means the stored proof holds there "
+            "(synthesis.verify.lmi_at_plant)",
+        }
+    off = [x for af in airframes for _, x in af.offsets]
+    if off:
+        d["steady_offset"] = {
+            "plants": len(off),
+            "max_abs_m_s": float(np.max(off)),
+            "meaning": "max over u, v, w of |v - v_d| where the law (gains synthesized per "
+            "airframe, x0/u0/K interpolated from the identified vertices) settles on the TRUE "
+            "plant at constant v_d, linearised about the true equilibrium (steady_offset)",
+        }
     for af, jc in zip(airframes, joint):
         d["airframes"].append(
             {
@@ -558,6 +709,10 @@ def summary_dict(
                     [round(e, 3), lab] for e, lab in af.interior_padded
                 ],
                 "eiv_max_shift_std": float(af.eiv_shift),
+                "lmi_gamma_achieved": float(af.lmi_gamma),
+                "lmi_at_truth": [[lab, float(x)] for lab, x in af.lmi_truth],
+                "lmi_note": af.lmi_note,
+                "steady_offset_m_s": [[lab, round(x, 5)] for lab, x in af.offsets],
                 "vertices": [
                     {
                         "run": v.name,

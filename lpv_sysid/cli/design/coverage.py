@@ -85,6 +85,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "active dask.distributed client, else Dask's local processes; dask must be installed)",
     )
     parser.add_argument(
+        "--synthesis",
+        type=Path,
+        default=None,
+        metavar="YAML",
+        help="also synthesize gains for each airframe's identification with this synthesis "
+        "config (e.g. config/synthesis.yaml) and evaluate the stored LMI at the airframe's true "
+        "plants (vertices, hover, interior points; coverage.yaml lmi_at_truth)",
+    )
+    parser.add_argument(
         "--ablations",
         action="store_true",
         help="also re-identify the same flights without the re-expansion and with the "
@@ -141,6 +150,7 @@ def run(args: argparse.Namespace) -> int:
         keep_runs=args.ablations,
         workers=args.workers,
         backend=args.backend,
+        synthesis=str(args.synthesis) if args.synthesis else None,
     )
     ablation = (
         cv.ablations(runs, airframes, qp, ident_cfg, workers=args.workers, backend=args.backend)
@@ -180,6 +190,20 @@ def run(args: argparse.Namespace) -> int:
             f"{it['points']} points (hover + random); with the interpolation pad "
             f"(uncertainty.interpolation): {it['truth_inside_with_interpolation_pad']}/"
             f"{it['points']}"
+        )
+    lt = doc.get("lmi_at_truth")
+    if lt:
+        print(
+            f"lmi at the truth: the stored LMI holds (lambda_max < 0 at gamma_achieved) at "
+            f"{lt['holds']}/{lt['plants']} true plants; worst lambda_max "
+            f"{lt['worst_lambda_max']:.3g}; airframes with all plants inside the proof: "
+            f"{lt['airframes_all_hold']}/{len(airframes)}"
+        )
+    so = doc.get("steady_offset")
+    if so:
+        print(
+            f"steady offset at constant v_d (true plants, linearised): max |v - v_d| "
+            f"{so['max_abs_m_s']:.4f} m/s over {so['plants']} plants"
         )
     print(f"wrote {out / 'coverage.yaml'}")
     print(f"wrote {out / 'coverage.md'}")

@@ -22,6 +22,7 @@ from lpv_sysid.ident.vertex.segment import (
     equilibrium,
     prepare,
     rotor_input,
+    yaw_rate_mean,
     yaw_rate_variance,
 )
 from lpv_sysid.ident.vertex.taylor2 import MotorPrior, RowSolution, finish, fit_rows
@@ -96,7 +97,14 @@ def finish_vertex(
         )
         psi_var = yaw_rate_variance(data, cfg) if cfg.fixed_intervals else 0.0
         fit, x0, u0, flown, motor = finish(
-            start.rows, known, cfg, motor_prior, data.name, v_target, psi_var
+            start.rows,
+            known,
+            cfg,
+            motor_prior,
+            data.name,
+            v_target,
+            psi_var,
+            yaw_rate_mean(data, cfg),
         )
     else:
         _, xdot, dx, du = prepare(data, cfg, x0, u0, u=rotor_input(data, quadrotor_params(cfg)))

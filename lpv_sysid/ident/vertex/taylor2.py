@@ -178,6 +178,7 @@ def finish(
     name: str = "",
     v_target: np.ndarray | None = None,
     psi_var: float = 0.0,
+    psi_dot: float | None = None,
 ):
     """``(Fit, x_e, u_e, xdot_flown, motor)`` from :func:`fit_rows`: where the maneuver did not
     identify ``a_Omega, b_Omega`` and ``motor_prior`` is given, they enter uncertain with it;
@@ -186,7 +187,8 @@ def finish(
     commanded vertex v_d, ``cfg.expand_at: commanded``: the identified second-order model,
     exact in its quadratic remainders, carried from the flown velocity to the one the LPV
     model is scheduled on, its uncertainty propagated by the same delta method); None: the
-    flown mean velocity."""
+    flown mean velocity. ``psi_dot``: the equilibrium's yaw rate (the trim-window mean of the
+    per-sample yaw rate, segment.yaw_rate_mean); None: the yaw rate of the mean state."""
     x0, u0, params, info = rows.x0, rows.u0, rows.params, rows.motor_info
     fits, joint, dof, nuis_kept = list(rows.fits), rows.joint, rows.dof, rows.nuis_kept
     motor = (
@@ -225,7 +227,8 @@ def finish(
     mA0, mB0 = maskA.copy(), maskB.copy()  # the identified elements (before fixed_intervals)
     model = taylor.IdentifiedModel(x0, u0, fits, nuis_kept, params)
     theta = np.concatenate([rf.theta for rf in fits])
-    psi_dot = float((np.sin(x0[0]) * x0[6] + np.cos(x0[0]) * x0[7]) / np.cos(x0[1]))
+    if psi_dot is None:
+        psi_dot = float((np.sin(x0[0]) * x0[6] + np.cos(x0[0]) * x0[7]) / np.cos(x0[1]))
     if cfg.equilibrium:
         v_e = x0[2:5] if v_target is None else np.asarray(v_target, dtype=float)
         rx = taylor.reexpand(

@@ -59,6 +59,7 @@ importable from here as before.
 
 from __future__ import annotations
 
+from lpv_sysid.synthesis.verify.box import lmi_at_plant
 from lpv_sysid.synthesis.verify.checker import (
     VERIFY_SETTINGS,
     record_verification,
@@ -72,6 +73,7 @@ from lpv_sysid.synthesis.verify.montecarlo import element_sensitivities
 from lpv_sysid.synthesis.verify.report import Verification, VerifyReport, read_verification
 
 __all__ = [
+    "lmi_at_plant",
     "ElementBox",
     "VERIFY_SETTINGS",
     "Verification",

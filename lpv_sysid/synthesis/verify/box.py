@@ -516,3 +516,69 @@ def check_scheduling_claim(rep: VerifyReport, cert_yaml: dict, sidecar: Optional
         bool(ok),
         "" if ok else why,
     )
+
+
+def lmi_at_plant(
+    cert: dict,
+    vmin: np.ndarray,
+    vmax: np.ndarray,
+    v: np.ndarray,
+    A: np.ndarray,
+    B: np.ndarray,
+    R: np.ndarray,
+    C: np.ndarray,
+    gamma: float,
+) -> float:
+    """``lambda_max`` of the stored element-box LMI (sidecar ``cert``: X, S, H, t, s_u,
+    lmi_form 1-3, rate; :func:`lpv_sysid.io.formats.load_certificate_npz`) evaluated at ONE
+    plant ``(A, B)`` scheduled at ``v`` (issue 20: the proof at the true plant), in the stored
+    scaling, with the bound ``gamma``: the certain block of :func:`check_box_lmi` (no
+    perturbation rows) with ``X(alpha) = sum alpha_i X_i``, ``S(alpha) = sum alpha_i S_i`` at
+    the multilinear weights ``alpha(v)`` (seed 0 Eq. 21; form 1: one X), and for form 3 the
+    worst ``dX/dt`` over every sign of the recorded rate bound. ``< 0``: the stored proof holds
+    at that plant (the bounded-real LMI certifies ``||u_e -> z|| < gamma`` for it frozen, with
+    the same K(alpha) the runtime flies); ``nan`` for a corner certificate (form 0)."""
+    from lpv_sysid.models.lpv import box_vertices, multilinear_weights
+
+    form = int(np.asarray(cert.get("lmi_form", 0)))
+    if form not in (1, 2, 3):
+        return float("nan")
+    n, m = B.shape
+    sc = Scaling(t=np.asarray(cert["t"], float), s_u=np.asarray(cert["s_u"], float))
+    tt = sc.t[:, None] * sc.t[None, :]
+    Xs = [np.asarray(cert["X_list"][i][0], dtype=float) / tt for i in range(len(cert["X_list"]))]
+    Ss = np.asarray(cert["S"], dtype=float) / (sc.s_u[None, :, None] * sc.t[None, None, :])
+    Hs = np.asarray(cert["H"], dtype=float) / tt
+    vmin, vmax = np.asarray(vmin, dtype=float), np.asarray(vmax, dtype=float)
+
+    def X_at(vv: np.ndarray) -> np.ndarray:
+        a, _ = multilinear_weights(vv, vmin, vmax)
+        return np.tensordot(a, np.array(Xs), axes=1)
+
+    v = np.asarray(v, dtype=float)
+    alpha, _ = multilinear_weights(v, vmin, vmax)
+    assert len(alpha) == box_vertices(vmin, vmax).shape[0] == len(Xs)
+    X = np.tensordot(alpha, np.array(Xs), axes=1)
+    S = np.tensordot(alpha, Ss, axes=1)
+    Zs: list[Optional[np.ndarray]] = [None]
+    if form == 3:
+        rate = np.asarray(cert.get("rate", []), dtype=float)
+        dX = []
+        for k in range(vmin.size):  # X(v) is affine along each axis: exact difference
+            a, b = v.copy(), v.copy()
+            a[k], b[k] = vmin[k], vmax[k]
+            dX.append((X_at(b) - X_at(a)) / (vmax[k] - vmin[k]))
+        Zs = [
+            -sum(s * rate[k] * dX[k] for k, s in enumerate(signs))
+            for signs in itertools_product_signs(vmin.size)
+        ]
+    Rs = np.asarray(R, dtype=float) / sc.s_u[:, None]
+    empty_L, empty_R = np.zeros((n, 0)), np.zeros((0, n + m))
+    worst = -np.inf
+    for Z in Zs:
+        M, z = _box_block(
+            form, sc.A(A), sc.Bc(B), Rs, sc.C(C), empty_L, empty_R, np.zeros(0), X, S, Hs, Z
+        )
+        M[z, z] -= gamma**2
+        worst = max(worst, float(np.linalg.eigvalsh(M)[-1]))
+    return worst
