@@ -190,7 +190,7 @@ def run(args: argparse.Namespace) -> int:
             f"PX4 limits the box needs (checked by preflight): MPC_XY_VEL_MAX >= "
             f"{d.horizontal_speed:.2f} m/s, MPC_Z_VEL_MAX_UP >= {d.climb_speed:.2f} m/s, "
             f"MPC_Z_VEL_MAX_DN >= {d.descent_speed:.2f} m/s, MPC_TILTMAX_AIR >= "
-            f"{d.tilt_deg:.1f} deg"
+            f"{d.tilt_deg:.2f} deg"
         )
         return 0
     ask = confirmation(args.yes)  # refuses before connecting when it cannot ask
