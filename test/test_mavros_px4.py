@@ -40,7 +40,7 @@ from lpv_sysid.mavlink.bridge import MAVROS_MODE_NAMES, ServiceRequest
 
 PX4_DIR, SKIP_REASON = find_px4()
 pytestmark = pytest.mark.skipif(PX4_DIR is None, reason=SKIP_REASON)
-INSTANCE = 5
+INSTANCE = 17
 F = messages.MsgFactory.rclpy()  # the in-repo rclpy stand-in's classes (test/support)
 MAVROS_NAME = {m.custom_mode: name for m, name in MAVROS_MODE_NAMES.items()}
 
