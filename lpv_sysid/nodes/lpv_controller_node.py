@@ -12,7 +12,9 @@ state sample, stamped with it (``tick_source: state``, the lock-stepped sim of
 sim.launch.py); ``start`` and ``auto_start`` wait until every input stream has delivered a
 sample. The core's log lines (the safety abort among them) go to this node's logger.
 On a fault it publishes the abort on ``status`` and stops commanding, so the bridge hands
-control back to PX4. Services ``start`` / ``abort`` (std_srvs/Trigger).
+control back to PX4. Services ``start`` / ``abort`` (std_srvs/Trigger). Spun by
+:class:`lpv_sysid.nodes.lean_executor.LeanExecutor` under a real rclpy (issue 27: rclpy's
+executor cost per wake dominated the node's CPU).
 
     ros2 run lpv_sysid lpv_controller_node --ros-args \
         --params-file config/lpv_controller.yaml -p gains_file:=gains.yaml
