@@ -189,3 +189,19 @@ def test_model_file_round_trip(fitted):
     model, _ = fitted
     back = nl.Px4Model.from_dict(model.to_dict())
     assert back.K == model.K and back.tau == model.tau and back.std == model.std
+
+
+def test_cli_refuses_px4_options_without_the_px4_structure(tmp_path, capsys):
+    from lpv_sysid.cli.main import main
+
+    out = tmp_path / "m.yaml"
+    for extra in (["--validate", str(tmp_path)], ["--sih", "default"], ["--intercept"]):
+        assert (
+            main(["identify-nonlinear", "--bags", str(tmp_path), "--out", str(out), *extra]) == 2
+        )
+        assert "need --structure px4" in capsys.readouterr().err
+    # eq6 takes one directory
+    args = ["identify-nonlinear", "--bags", str(tmp_path), str(tmp_path), "--out", str(out)]
+    assert main(args) == 2
+    assert "takes one --bags directory" in capsys.readouterr().err
+    assert not out.exists()
