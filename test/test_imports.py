@@ -895,20 +895,13 @@ def test_real_px4_sitl_ulog_identifies_like_the_bags_of_the_same_flight(tmp_path
         "recording": {"flight_log": False},
     }
     (tmp_path / "campaign.yaml").write_text(yaml.safe_dump(doc))
-    # the build's etc/ (copied: the peer is not ours to change) with the logger's topic list;
-    # PX4 sends instance >= 10's offboard link to port 14549 -- this one to 14540 + N
+    # the build's etc/ (copied: the peer is not ours to change) with the logger's topic list
     build = tmp_path / "build"
     build.mkdir()
     (build / "bin").symlink_to(Path(d) / "bin")
     shutil.copytree(Path(d) / "etc", build / "etc", symlinks=True)
     (build / "etc" / "logging").mkdir(exist_ok=True)
     (build / "etc" / "logging" / "logger_topics.txt").write_text(LOGGER_TOPICS)
-    rc = build / "etc" / "init.d-posix" / "px4-rc.mavlink"
-    text = rc.read_text().replace(
-        '[ "$px4_instance" -gt 9 ] && udp_offboard_port_remote=14549', ""
-    )
-    rc.unlink()
-    rc.write_text(text)
     work = tmp_path / "px4"
     work.mkdir()
     with Px4Sitl(build, instance=SITL_INSTANCE, workdir=str(work), boot_timeout=180.0) as sitl:

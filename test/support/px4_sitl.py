@@ -8,29 +8,26 @@ headless instance in its own working directory with fresh parameters, waits unti
 offboard MAVLink link (PX4 sends from UDP 14580+N to 127.0.0.1:14540+N) shows a PX4
 HEARTBEAT, and stops it (SIGINT, then SIGKILL) on exit.
 
-From instance 10 up PX4 sends the offboard link of every instance to 127.0.0.1:14549
-(px4-rc.mavlink: "use the same ports for more than 10 instances"), where several instances
-would meet: :class:`OffboardRelay` then gives instance N its own 127.0.0.1:14540+N, as for
-0..9 (measured with PX4 1.16.0: instance 14 sent to 14549; ``udpin:127.0.0.1:14554`` heard
-nothing).
+From instance 10 up PX4's ``px4-rc.mavlink`` sends the offboard link of every instance to
+127.0.0.1:14549 ("use the same ports for more than 10 instances"), where several instances
+would meet (measured with PX4 1.16.0: instance 14 sent to 14549; ``udpin:127.0.0.1:14554``
+heard nothing). :class:`Px4Sitl` then runs the instance from a copy of the build's ``etc/``
+in its working directory without that line (the peer's own tree is not changed), so every
+instance N sends to 127.0.0.1:14540+N and :attr:`Px4Sitl.url` is the same for all.
 """
 
 from __future__ import annotations
 
 import os
-import select
 import shutil
 import signal
-import socket
 import subprocess
 import tempfile
-import threading
 import time
 from pathlib import Path
 
 ENV = "PX4_SITL_DIR"
-OFFBOARD_PORT = 14540  # + instance (instances 0..9; see Px4Sitl.url)
-OFFBOARD_LOCAL_PORT = 14580  # + instance: PX4's own port of the offboard link
+OFFBOARD_PORT = 14540  # + instance
 GCS_PORT = 14550  # + instance
 
 
@@ -45,63 +42,28 @@ def find_px4() -> tuple[Path | None, str]:
     return p, ""
 
 
-#: PX4's offboard link partner port of every instance >= 10 (px4-rc.mavlink)
-SHARED_REMOTE_PORT = 14549
-#: first instance that sends there
+#: first instance that px4-rc.mavlink points at the shared port 14549
 SHARED_FROM_INSTANCE = 10
+#: the line of etc/init.d-posix/px4-rc.mavlink (PX4 v1.14-v1.16) that does it
+SHARED_PORT_LINE = '[ "$px4_instance" -gt 9 ] && udp_offboard_port_remote=14549'
 
 
-class OffboardRelay(threading.Thread):
-    """Instance N >= 10: becomes PX4's offboard partner and forwards to 127.0.0.1:14540+N.
-
-    PX4 takes the first localhost sender on its local offboard port (14580+N) as the link's
-    partner for good; the relay sends it a HEARTBEAT from its own socket (every 0.5 s until
-    PX4 answers), then forwards PX4's datagrams to 127.0.0.1:14540+N from a second socket,
-    and what comes back to that socket from 14540+N to PX4. A program that listens on
-    ``udpin:127.0.0.1:14540+N`` sees the same link as with an instance 0..9."""
-
-    def __init__(self, instance: int):
-        super().__init__(daemon=True, name=f"px4-relay-{instance}")
-        self.px4 = ("127.0.0.1", 14580 + instance)
-        self.app = ("127.0.0.1", OFFBOARD_PORT + instance)
-        self.to_px4 = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.to_px4.bind(("127.0.0.1", 0))
-        self.to_app = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.to_app.bind(("127.0.0.1", 0))
-        self.heard = threading.Event()
-        self._halt = threading.Event()
-
-    @staticmethod
-    def _kick() -> bytes:
-        from pymavlink.dialects.v20 import common as mav
-
-        m = mav.MAVLink(None, srcSystem=1, srcComponent=191)
-        onboard, no_autopilot = mav.MAV_TYPE_ONBOARD_CONTROLLER, mav.MAV_AUTOPILOT_INVALID
-        return m.heartbeat_encode(onboard, no_autopilot, 0, 0, 0).pack(m)
-
-    def run(self) -> None:
-        kick, last = self._kick(), -1.0
-        while not self._halt.is_set():
-            if not self.heard.is_set() and time.monotonic() - last > 0.5:
-                self.to_px4.sendto(kick, self.px4)
-                last = time.monotonic()
-            ready, _, _ = select.select([self.to_px4, self.to_app], [], [], 0.2)
-            for sock in ready:
-                try:
-                    data, src = sock.recvfrom(65536)
-                    if sock is self.to_px4:
-                        self.heard.set()
-                        self.to_app.sendto(data, self.app)
-                    elif src == self.app:
-                        self.to_px4.sendto(data, self.px4)
-                except OSError:  # nobody on 14540+N yet, or shutting down
-                    continue
-
-    def stop(self) -> None:
-        self._halt.set()
-        self.join(timeout=5)
-        self.to_px4.close()
-        self.to_app.close()
+def own_port_build(build_dir: Path, into: Path) -> Path:
+    """A build directory for an instance >= 10 that sends its offboard link to 14540+N:
+    ``bin`` linked, ``etc`` copied without :data:`SHARED_PORT_LINE` (error if absent)."""
+    build = into / "px4_build"
+    if build.exists():
+        return build
+    build.mkdir(parents=True)
+    (build / "bin").symlink_to((build_dir / "bin").resolve())
+    shutil.copytree(build_dir / "etc", build / "etc", symlinks=True)
+    rc = build / "etc" / "init.d-posix" / "px4-rc.mavlink"
+    text = rc.read_text()
+    if SHARED_PORT_LINE not in text and "14549" in text:
+        raise RuntimeError(f"{rc}: unknown form of the instance >= 10 port line; see px4_sitl.py")
+    rc.unlink()  # may be a link into the peer's tree
+    rc.write_text(text.replace(SHARED_PORT_LINE, ""))
+    return build
 
 
 class Px4Sitl:
@@ -122,18 +84,11 @@ class Px4Sitl:
         self._own_dir = workdir is None
         self.workdir = Path(workdir or tempfile.mkdtemp(prefix=f"px4_i{instance}_"))
         self.proc: subprocess.Popen | None = None
-        self.relay: OffboardRelay | None = None
         self.log_path = self.workdir / "px4.log"
 
     @property
     def url(self) -> str:
-        """The companion-computer (offboard) link, as the bridge connects to it. PX4's
-        px4-rc.mavlink sends instance N's offboard link to 14540 + N only for N <= 9; every
-        instance >= 10 sends to 14549, a port shared by all of them (two autopilots heard:
-        the bridge refuses). From 10 on the bridge sends to the instance's own local port
-        14580 + N instead (``udpout``): PX4 answers the first sender on localhost."""
-        if self.instance > 9:
-            return f"udpout:127.0.0.1:{OFFBOARD_LOCAL_PORT + self.instance}"
+        """The companion-computer (offboard) link, as the bridge connects to it."""
         return f"udpin:127.0.0.1:{OFFBOARD_PORT + self.instance}"
 
     @property
@@ -143,15 +98,18 @@ class Px4Sitl:
     def start(self) -> "Px4Sitl":
         for f in ("parameters.bson", "parameters_backup.bson"):
             (self.workdir / f).unlink(missing_ok=True)
+        build = self.build_dir
+        if self.instance >= SHARED_FROM_INSTANCE:
+            build = own_port_build(self.build_dir, self.workdir)
         env = dict(os.environ, PX4_SIMULATOR="sihsim", PX4_SIM_MODEL=self.model, HEADLESS="1")
         with open(self.log_path, "wb") as log:
             self.proc = subprocess.Popen(
                 [
-                    str(self.build_dir / "bin" / "px4"),
+                    str(build / "bin" / "px4"),
                     "-d",
                     "-i",
                     str(self.instance),
-                    str(self.build_dir / "etc"),
+                    str(build / "etc"),
                 ],
                 cwd=self.workdir,
                 env=env,
@@ -160,9 +118,6 @@ class Px4Sitl:
                 stdin=subprocess.DEVNULL,
                 start_new_session=True,
             )
-        if self.instance >= SHARED_FROM_INSTANCE:
-            self.relay = OffboardRelay(self.instance)
-            self.relay.start()
         return self
 
     def wait_ready(self, predicate_text: str = "Ready for takeoff") -> float:
@@ -186,9 +141,6 @@ class Px4Sitl:
         return "\n".join(self.log().splitlines()[-n:])
 
     def stop(self) -> None:
-        if self.relay is not None:
-            self.relay.stop()
-            self.relay = None
         if self.proc is None or self.proc.poll() is not None:
             return
         os.killpg(self.proc.pid, signal.SIGINT)
