@@ -32,9 +32,6 @@ from support.px4_sitl import Px4Sitl, find_px4
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
 INSTANCE = 12
-# PX4's rc.mavlink sends the offboard link of instances > 9 to UDP 14549 (shared); the
-# bridge sends first to the instance's own port and PX4 answers there
-URL = f"udpout:127.0.0.1:{14580 + INSTANCE}"
 
 AIRFRAMES = {
     "heavy_slow_motors": {
@@ -102,10 +99,10 @@ def test_identified_quantities_match_sih_parameters(airframe, tmp_path):
     cfg_doc["campaign"].update({"vertices": [1, 8], "hover_validation": False, "finish": "LAND"})
     (tmp_path / "campaign.yaml").write_text(yaml.safe_dump(cfg_doc))
     params = {"COM_OBL_RC_ACT": 5.0, "COM_OF_LOSS_T": 2.0, **sih}
-    with Px4Sitl(d, instance=INSTANCE, boot_timeout=120.0):
+    with Px4Sitl(d, instance=INSTANCE, boot_timeout=120.0) as px4:
         res = fly(
             FlyConfig.load(tmp_path / "campaign.yaml"),
-            URL,
+            px4.url,
             tmp_path / "out",
             params=params,
             echo=lambda s: None,
