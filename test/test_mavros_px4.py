@@ -41,6 +41,10 @@ from lpv_sysid.mavlink.bridge import MAVROS_MODE_NAMES, ServiceRequest
 PX4_DIR, SKIP_REASON = find_px4()
 pytestmark = pytest.mark.skipif(PX4_DIR is None, reason=SKIP_REASON)
 INSTANCE = 17
+#: PX4 SITL instance N > 9 sends its offboard link from UDP 14580+N to 127.0.0.1:14549 (one
+#: port for all, px4-rc.mavlink) until it hears a peer, then answers the peer: like MAVROS's
+#: ``fcu_url udp://:14540+N@127.0.0.1:14580+N`` the stand-in sends first (a HEARTBEAT)
+URL = f"udpout:127.0.0.1:{14580 + INSTANCE}"
 F = messages.MsgFactory.rclpy()  # the in-repo rclpy stand-in's classes (test/support)
 MAVROS_NAME = {m.custom_mode: name for m, name in MAVROS_MODE_NAMES.items()}
 
@@ -56,6 +60,7 @@ class MavrosStandIn:
         )
         self.rt = rt
         self.sysid = 0
+        self._t_hello = -1e9
         self.hb = None
         self.version = None
         self.params: dict[str, float | int] = {}
@@ -71,6 +76,9 @@ class MavrosStandIn:
 
     # -- PX4 -> ROS ------------------------------------------------------------------
     def pump(self, now: float) -> None:
+        if not self.sysid and now - self._t_hello > 1.0:  # MAVROS's 1 Hz HEARTBEAT
+            self._t_hello = now
+            self.m.mav.heartbeat_send(18, 8, 0, 0, 0)
         while True:
             msg = self.m.recv_match(blocking=False)
             if msg is None:
@@ -315,7 +323,7 @@ def test_px4_sitl_through_mavros_semantics_preflight_offboard_climb_rejected_pos
     }
     rt = BridgeRuntime(params, F, "/lpv_sysid/mavlink_bridge", 60.0, 3.0)
     with Px4Sitl(PX4_DIR, instance=INSTANCE, boot_timeout=240.0) as sitl:
-        mav = MavrosStandIn(f"udpin:127.0.0.1:{14540 + INSTANCE}", rt)
+        mav = MavrosStandIn(URL, rt)
         rt.open(time.monotonic())
         ref = {"v": None}
 
@@ -417,7 +425,7 @@ def test_px4_sitl_stale_mavros_state_hands_back_and_confirms_nothing():
     }
     rt = BridgeRuntime(params, F, "/lpv_sysid/mavlink_bridge", 60.0, 3.0)
     with Px4Sitl(PX4_DIR, instance=INSTANCE, boot_timeout=240.0):
-        mav = MavrosStandIn(f"udpin:127.0.0.1:{14540 + INSTANCE}", rt)
+        mav = MavrosStandIn(URL, rt)
         forward = {"state": True}
         on_message = rt.on_message
 
@@ -490,7 +498,7 @@ def test_px4_sitl_rate_setpoints_through_mavros_attitude_target_turn_the_right_w
     rt = BridgeRuntime(params, F, "/lpv_sysid/mavlink_bridge", 60.0, 3.0)
     u = np.array([0.7, 0.0, 0.0, 0.6])  # thrust, p_sp, q_sp, r_sp
     with Px4Sitl(PX4_DIR, instance=INSTANCE, boot_timeout=240.0):
-        mav = MavrosStandIn(f"udpin:127.0.0.1:{14540 + INSTANCE}", rt)
+        mav = MavrosStandIn(URL, rt)
 
         def run(seconds, cmd=None, until=None):
             end = time.monotonic() + seconds

@@ -2,7 +2,8 @@
 
 Needs a sourced ROS 2 Jazzy with the ``mavros`` package (``ros_real.find_ros``, then
 ``ros2 pkg prefix mavros``) and ``PX4_SITL_DIR``; each missing peer skips with one line.
-PX4 instance 16 sends its offboard link from UDP 14596 to 127.0.0.1:14556; MAVROS takes
+PX4 instance 16 listens on UDP 14596 for its offboard link (it sends to 127.0.0.1:14549,
+the port of every instance > 9, until a peer talks to it; MAVROS sends first); MAVROS takes
 ``fcu_url:=udp://:14556@127.0.0.1:14596`` and ``tgt_system:=17`` (SITL MAV_SYS_ID is
 1 + instance), with the package's ``config/mavros_px4.yaml`` (setpoint_raw thrust_scaling).
 One PX4 SITL serves the module; the tests run in file order and each starts where the
