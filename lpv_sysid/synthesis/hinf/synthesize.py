@@ -157,8 +157,21 @@ class Remedy:
     output_grow: float  # multiply Delta_u..Delta_w (Q) by this factor
     uncertainty_shrink: Optional[float] = None  # largest rho in [0,1] found feasible (bisection)
     nominal_gamma_min: Optional[float] = None
+    failure: str = ""  # why the solve at gamma_requested failed (the solver's / re-check's words)
 
     def message(self) -> str:
+        if self.gamma_min < self.gamma_requested:
+            # not infeasibility: a point below the requested bound exists, the solve at the
+            # requested one failed numerically (solver accuracy or the numpy re-check)
+            return (
+                f"Lemma 1 not certified at gamma={self.gamma_requested:g}, but NOT infeasible: "
+                f"a gamma minimisation reached gamma_min={self.gamma_min:.4g} < "
+                f"{self.gamma_requested:g}; the solve at the requested objective failed "
+                f"numerically ({self.failure or 'solver'}). Remedies: another solver "
+                "(hinf.solver: MOSEK / SCS / CLARABEL), hinf.objective: feasibility or "
+                "min_gamma, a larger hinf.eps, or a smaller uncertainty set (the pad / "
+                "inflation of uncertainty.*)"
+            )
         lines = [
             f"Lemma 1 infeasible at gamma={self.gamma_requested:g}: the smallest achievable bound "
             "is "
@@ -300,6 +313,7 @@ def synthesize_hinf(
                 f"{exc}; gamma minimisation also failed ({exc2}): the polytope may not be "
                 "quadratically stabilisable with a common H (reduce the uncertainty)"
             ) from None
+        rem.failure = str(exc).replace("\n", " | ")
         err = SolverError(rem.message())
         err.remedy = rem  # type: ignore[attr-defined]
         raise err from None
