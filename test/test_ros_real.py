@@ -764,7 +764,7 @@ def test_phase1_launch_px4_sim_handback_on_process_group_sigint(ros, dom, tmp_pa
         assert got["start"][0], got["start"]
         assert proc.wait_for("OFFBOARD confirmed", 30.0), proc.log()[-4000:]
         ok, msg = trigger(env, f"{NS}/excitation/start", proc)
-        assert ok, msg
+        assert ok, (msg, proc.log()[-6000:], px4.log()[-2000:])
         MEASURED["phase1_state_hz_ros2_topic_hz"] = topic_hz(env, f"{NS}/state", 5.0)
         assert "OFFBOARD" in proc.log().rsplit("OFFBOARD confirmed", 1)[
             1
