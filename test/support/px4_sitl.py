@@ -21,7 +21,9 @@ from pathlib import Path
 
 ENV = "PX4_SITL_DIR"
 OFFBOARD_PORT = 14540  # + instance (instances 0..9; see Px4Sitl.url)
-OFFBOARD_LOCAL_PORT = 14580  # + instance: PX4's own port of the offboard link
+#: instances >= 10: the extra onboard channel (Px4Sitl.url): PX4's port, the bridge's port
+EXTRA_LOCAL_PORT = 24580  # + instance
+EXTRA_REMOTE_PORT = 24540  # + instance
 GCS_PORT = 14550  # + instance
 
 
@@ -61,10 +63,12 @@ class Px4Sitl:
         """The companion-computer (offboard) link, as the bridge connects to it. PX4's
         px4-rc.mavlink sends instance N's offboard link to 14540 + N only for N <= 9; every
         instance >= 10 sends to 14549, a port shared by all of them (two autopilots heard:
-        the bridge refuses). From 10 on the bridge sends to the instance's own local port
-        14580 + N instead (``udpout``): PX4 answers the first sender on localhost."""
+        the bridge refuses), and answers only the first client it heard (``udpout`` to its
+        port works for one connection: a second bridge process never got a reply). From 10 on
+        :meth:`wait_ready` starts one more onboard MAVLink channel on the instance, PX4 on
+        ``EXTRA_LOCAL_PORT + N`` sending to 127.0.0.1:``EXTRA_REMOTE_PORT + N``: the URL."""
         if self.instance > 9:
-            return f"udpout:127.0.0.1:{OFFBOARD_LOCAL_PORT + self.instance}"
+            return f"udpin:127.0.0.1:{EXTRA_REMOTE_PORT + self.instance}"
         return f"udpin:127.0.0.1:{OFFBOARD_PORT + self.instance}"
 
     @property
@@ -100,9 +104,37 @@ class Px4Sitl:
             if self.proc is not None and self.proc.poll() is not None:
                 raise RuntimeError(f"PX4 exited with {self.proc.returncode}: {self.log_tail()}")
             if predicate_text in self.log():
+                if self.instance > 9:
+                    self._extra_channel()
                 return time.monotonic() - t0
             time.sleep(0.2)
         raise TimeoutError(f"PX4 not ready after {self.boot_timeout} s: {self.log_tail()}")
+
+    def _extra_channel(self) -> None:
+        """One more onboard MAVLink channel (module ``mavlink`` through PX4's own client)."""
+        n = self.instance
+        r = subprocess.run(
+            [
+                str(self.build_dir / "bin" / "px4-mavlink"),
+                "--instance",
+                str(n),
+                "start",
+                "-u",
+                str(EXTRA_LOCAL_PORT + n),
+                "-r",
+                "4000000",
+                "-f",
+                "-m",
+                "onboard",
+                "-o",
+                str(EXTRA_REMOTE_PORT + n),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=30,
+        )
+        if r.returncode != 0:
+            raise RuntimeError(f"px4-mavlink start on instance {n}: {r.stdout}{r.stderr}")
 
     def log(self) -> str:
         try:
