@@ -39,24 +39,6 @@ BRIDGE_NAME = "/lpv_sysid/mavlink_bridge"
 RUN_NAME = "broken_loop"
 
 
-def rate_bridge_config(path: str | Path, url: str | None):
-    """A bridge config for thrust + body-rate setpoints on an airborne vehicle: BridgeCore's
-    4-value command path (``attitude_rate``; the caller sets the rate-setpoint transport), no
-    arming, no auto start, the URL override."""
-    from lpv_sysid.mavlink.bridge import BridgeConfig
-
-    cfg = BridgeConfig.load(str(path))
-    link = dataclasses.replace(cfg.link, url=url) if url else cfg.link
-    link.validate()
-    return dataclasses.replace(
-        cfg,
-        link=link,
-        command="attitude_rate",
-        auto_start=False,
-        offboard=dataclasses.replace(cfg.offboard, arm=False),
-    )
-
-
 def fly_broken_loop(
     out_dir: str | Path,
     bridge_config: str | Path,
@@ -83,14 +65,19 @@ def fly_broken_loop(
 
     from lpv_sysid.flight.vehicle import tap_attitude_target, wait_for_vehicle
     from lpv_sysid.io import messages as m
-    from lpv_sysid.mavlink.bridge import RATE_INPUT_NAMES, BridgeCore, RateSetpointTransport
+    from lpv_sysid.mavlink.bridge import (
+        RATE_INPUT_NAMES,
+        BridgeConfig,
+        BridgeCore,
+        RateSetpointTransport,
+    )
     from lpv_sysid.mavlink.offboard import STREAMING, State
     from lpv_sysid.mavlink.telemetry import ImuSample, RotorSample, StateSample
 
     out = Path(out_dir)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise ConfigError(f"output directory {out}: exists and is not an empty directory")
-    bcfg = rate_bridge_config(bridge_config, url)
+    bcfg = BridgeConfig.load(str(bridge_config)).airborne_rates(url)
     f = m.MsgFactory.rosbags()
     core = BridgeCore(bcfg, link=link)
     core.transport = RateSetpointTransport(max_rate=cfg.max_rate)

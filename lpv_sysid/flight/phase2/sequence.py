@@ -132,23 +132,6 @@ def load_phase2_law(gains_path: str | Path, models_path: str | Path | None = Non
     return rt.law, rt.schedule
 
 
-def phase2_bridge_config(path: str | Path, url: str | None):
-    """The chain's bridge config for phase 2: command ``attitude_rate`` (BridgeCore's 4-value
-    command path), no arming (the vehicle is in the air), the URL override."""
-    from lpv_sysid.mavlink.bridge import BridgeConfig
-
-    cfg = BridgeConfig.load(str(path))
-    link = dataclasses.replace(cfg.link, url=url) if url else cfg.link
-    link.validate()
-    return dataclasses.replace(
-        cfg,
-        link=link,
-        command="attitude_rate",
-        auto_start=False,
-        offboard=dataclasses.replace(cfg.offboard, arm=False),
-    )
-
-
 def fly_phase2(
     gains: str | Path,
     signals: str | Path,
@@ -193,7 +176,7 @@ def fly_phase2(
     )
     from lpv_sysid.mavlink.telemetry import VehicleRecord
     from lpv_sysid.io import messages as m
-    from lpv_sysid.mavlink.bridge import BridgeCore, RateSetpointTransport
+    from lpv_sysid.mavlink.bridge import BridgeConfig, BridgeCore, RateSetpointTransport
     from lpv_sysid.mavlink.offboard import STREAMING, State
     from lpv_sysid.mavlink.telemetry import ImuSample, RotorSample, StateSample
 
@@ -208,7 +191,9 @@ def fly_phase2(
     names = tuple(ctrl.schedule.input_names)
     gamma = float(ctrl.law.gamma)
     T = float(exc.core.duration)
-    bcfg = phase2_bridge_config(bridge_config or config_file("mavlink_bridge_chain.yaml"), url)
+    bcfg = BridgeConfig.load(
+        str(bridge_config or config_file("mavlink_bridge_chain.yaml"))
+    ).airborne_rates(url)
     if confirm is not None and not confirm(
         f"take the airborne vehicle on {bcfg.link.url} into OFFBOARD under the LPV law "
         f"({gains}) and fly the phase-2 signal?"

@@ -53,6 +53,7 @@ import numpy as np
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.ident import equation_error as ee
 from lpv_sysid.ident.nonlinear.correlation import column_correlation
+from lpv_sysid.ident.nonlinear.data import AxisFit
 from lpv_sysid.ident.nonlinear.px4_data import Px4Record, motor_lag
 
 #: PX4 quad-X mix of the motor outputs (rows dt, da, de, dr; sign of models.quadrotor.mixer)
@@ -137,15 +138,11 @@ def _names(axis: str, intercept: bool) -> tuple[tuple[str, ...], tuple[str, ...]
 
 
 @dataclass
-class Px4AxisFit:
-    axis: str
-    names: tuple[str, ...]
-    labels: tuple[str, ...]
-    K: np.ndarray
-    std: np.ndarray
-    r2: float
-    correlation: np.ndarray
-    n_samples: int
+class Px4AxisFit(AxisFit):
+    """An axis of Eq. (6)'s fit (:class:`~lpv_sysid.ident.nonlinear.data.AxisFit`) and the
+    number of samples it used."""
+
+    n_samples: int = 0
 
 
 @dataclass

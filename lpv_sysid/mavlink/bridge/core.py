@@ -7,7 +7,7 @@ from __future__ import annotations
 import logging
 import math
 import struct
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Mapping
 
 import numpy as np
@@ -119,6 +119,20 @@ class BridgeConfig:
 
         d = read_yaml_mapping(path)  # an explicitly given empty or non-mapping file is an error
         return cls.from_dict(d, path)
+
+    def airborne_rates(self, url: str | None = None) -> "BridgeConfig":
+        """This config for thrust + body-rate setpoints on a vehicle already in the air
+        (phase 2, the broken-loop run): command ``attitude_rate`` (the caller may pick the
+        rate-setpoint transport), no arming, no auto start, ``url`` overriding the link's."""
+        link = replace(self.link, url=url) if url else self.link
+        link.validate()
+        return replace(
+            self,
+            link=link,
+            command="attitude_rate",
+            auto_start=False,
+            offboard=replace(self.offboard, arm=False),
+        )
 
     def validate(self, where: str = "") -> None:
         """The declared fields of the top level, then the command against its transport
