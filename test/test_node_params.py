@@ -520,6 +520,30 @@ def test_unknown_ros_parameter_given_with_p_is_refused_too(node_inputs):
         rclpy.try_shutdown()
 
 
+@pytest.mark.parametrize(
+    "given, match",
+    [
+        ("status_rate_hz:=0.05", r"parameter 'status_rate_hz': .*(range|0\.05)"),
+        ("status_rate_hz:=fast", r"parameter 'status_rate_hz': .*(type|STRING)"),
+    ],
+)
+def test_out_of_range_or_mistyped_p_is_one_named_error(node_inputs, given, match):
+    """A ``-p`` value outside the declared range (or of another type) ends the node with a
+    ConfigError naming the parameter (``run``: one FATAL line, exit 2), not rclpy's
+    traceback (issue 24: ``status_rate_hz:=0.05`` printed a Python traceback)."""
+    import rclpy
+
+    from lpv_sysid.nodes.lpv_controller_node import LpvControllerNode
+
+    gains = node_inputs["lpv_controller"]["gains_file"]
+    rclpy.init(args=["n", "--ros-args", "-p", f"gains_file:={gains}", "-p", given])
+    try:
+        with pytest.raises(ConfigError, match=match):
+            LpvControllerNode()
+    finally:
+        rclpy.try_shutdown()
+
+
 #: node name of a launch file's node(...) -> the module of its shell
 _LAUNCH_NODES = {
     "mavlink_bridge": "mavlink_bridge_node",

@@ -1113,3 +1113,18 @@ def test_a_misspelt_parameter_is_refused_under_real_rclpy(ros, dom, tmp_path, ex
     out = r.stdout + r.stderr
     assert r.returncode == 2, out[-3000:]
     assert typo in out and "unknown" in out.lower(), out[-3000:]
+
+
+def test_an_out_of_range_parameter_is_one_fatal_line_under_real_rclpy(ros, dom, tmp_path):
+    """Under real Jazzy rclpy a ``-p`` value outside the declared range ends the node at
+    start with exit 2 and one FATAL line naming the parameter, not rclpy's traceback."""
+    env = RosEnv(SETUP, ros["ws"], dom.value)
+    r = env.run(
+        f"timeout -s KILL 60 {ros['lib']}/lpv_controller_node --ros-args --params-file "
+        f"{ros['share']}/config/lpv_controller.yaml -p gains_file:={ros['gains']} "
+        "-p status_rate_hz:=0.05",
+        timeout=90,
+    )
+    out = r.stdout + r.stderr
+    assert r.returncode == 2, out[-3000:]
+    assert "parameter 'status_rate_hz'" in out and "Traceback" not in out, out[-3000:]

@@ -20,6 +20,7 @@ from rcl_interfaces.msg import (
     ParameterDescriptor,
     SetParametersResult,
 )
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -220,7 +221,12 @@ def declare(node, table) -> dict:
         writable = descriptor
         if descriptor.read_only and isinstance(default, Parameter.Type):
             writable = _descriptor_copy(descriptor, read_only=False)
-        p = node.declare_parameter(name, default, writable)
+        try:
+            p = node.declare_parameter(name, default, writable)
+        except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
+            # a -p or parameter-file value outside the declared range or of another type:
+            # one named error (run(): FATAL line, exit 2), not a traceback
+            raise ConfigError(f"parameter '{name}': {exc}") from None
         if p.type_ == Parameter.Type.NOT_SET:
             # no default, or a params file wrote ``name: []`` (rcl reads it as no value)
             kind = Parameter.Type(descriptor.type)
