@@ -13,8 +13,9 @@ MAVLink sources (PX4 sends all of them in NED/FRD):
 
 The body velocity of seed 0 (u, v, w) is ``R_IB^T v_ned`` (seed 0 Eq. 1, R_IB maps FRD
 into NED); rotations and quaternion conventions come from ``lpv_sysid.io.frames``. Each
-sample carries the receive time ``t`` (the caller's clock) and the vehicle's own timestamp
-``t_vehicle``.
+sample carries the vehicle's own timestamp ``t_vehicle`` and ``t``, that time on the
+caller's clock (:mod:`lpv_sysid.mavlink.telemetry.clock`: the lower envelope of receipt -
+vehicle time), so a backlog read in one poll keeps each sample's own time and real age.
 
 Telemetry hygiene
 - Sources: with ``source_filter`` only messages of the target ``(system, component)`` are
@@ -44,6 +45,7 @@ Telemetry hygiene
 
 from __future__ import annotations
 
+from lpv_sysid.mavlink.telemetry.clock import VehicleClock
 from lpv_sysid.mavlink.telemetry.decoder import TelemetryDecoder
 from lpv_sysid.mavlink.telemetry.provenance import (
     SIM_MARKER,
@@ -85,6 +87,7 @@ __all__ = [
     "StateSample",
     "TelemetryDecoder",
     "VEHICLE_KINDS",
+    "VehicleClock",
     "VehicleRecord",
     "euler_to_quat",
     "quat_to_dcm",

@@ -11,6 +11,7 @@ import numpy as np
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io import frames
+from lpv_sysid.mavlink.telemetry.clock import VehicleClock
 from lpv_sysid.mavlink.telemetry.rotor_estimate import (
     ESC,
     ESTIMATED,
@@ -86,6 +87,8 @@ class TelemetryDecoder:
         self.n_rotors = n_rotors
         self.max_age = max_age
         self.stats = TelemetryStats()
+        #: the vehicle's clock on the caller's: samples carry their sample time (clock.py)
+        self.clock = VehicleClock()
         self.source_filter = source_filter
         self.target = target
         self.foreign_sources: dict[tuple[int, int], int] = {}
@@ -180,6 +183,8 @@ class TelemetryDecoder:
             self.stats.out_of_order += 1
             return False
         lat.t, lat.tv, lat.value = now, tv, value
+        if slot != "SERVO_OUTPUT_RAW":  # its uint32 microseconds may have wrapped
+            self.clock.observe(now, tv)
         return True
 
     def _selected(self, sources: tuple[str, ...], now: float) -> str | None:
@@ -265,7 +270,7 @@ class TelemetryDecoder:
         tv = m.time_usec * 1e-6
         if not self._accept("HIGHRES_IMU", tv, now, None):
             return None
-        return [ImuSample(now, tv, acc, gyr)]
+        return [ImuSample(self.clock.local(tv, now), tv, acc, gyr)]
 
     def _esc_status(self, m: Any, now: float) -> list[Any] | None:
         tv = m.time_usec * 1e-6
@@ -298,7 +303,7 @@ class TelemetryDecoder:
         lat = self._latest["rotors"]
         lat.t, lat.tv, lat.value = now, tv, ESC
         self.rotor_source = ESC
-        return [RotorSample(now, tv, self._rotors.copy(), ESC)]
+        return [RotorSample(self.clock.local(tv, now), tv, self._rotors.copy(), ESC)]
 
     def _latest_motor_t(self) -> float:
         return max(self._latest[s].t for s in MOTOR_OUTPUT_SOURCES)
@@ -358,7 +363,7 @@ class TelemetryDecoder:
         lat = self._latest["rotors"]
         lat.t, lat.tv, lat.value = now, tv, ESTIMATED
         self.rotor_source = ESTIMATED
-        return [RotorSample(now, tv, omega, ESTIMATED)]
+        return [RotorSample(self.clock.local(tv, now), tv, omega, ESTIMATED)]
 
     # -------------------------------------------------------------- state
     def _state(
@@ -382,8 +387,9 @@ class TelemetryDecoder:
                 R[0][2] * vn + R[1][2] * ve + R[2][2] * vd,
             ]
         )
+        tv = max(a.tv, p.tv)
         return StateSample(
-            now, max(a.tv, p.tv), pos, vel, q, euler, v_body, omega, abs(a.tv - p.tv)
+            self.clock.local(tv, now), tv, pos, vel, q, euler, v_body, omega, abs(a.tv - p.tv)
         )
 
     def _state_list(self, now: float) -> list[Any]:

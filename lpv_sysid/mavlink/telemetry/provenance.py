@@ -29,10 +29,8 @@ from typing import Any
 import numpy as np
 
 from lpv_sysid.mavlink import px4
+from lpv_sysid.mavlink.telemetry.clock import VehicleClock
 
-#: how fast the live offset estimate may rise (bag ns per PX4 ns): a lock-step SITL slowed
-#: down by load, or a crystal, drifts by far less than 5 %
-LIVE_RISE = 0.05
 #: AUTOPILOT_VERSION.flight_custom_version of the package's simulated PX4 vehicle
 SIM_MARKER = b"lpvsim\0\0"
 MAV_MODE_FLAG_HIL_ENABLED = 32
@@ -72,9 +70,8 @@ class VehicleRecord:
 
     #: per second of PX4 time: (min receive - time_boot, time_boot) (ns), for the clock fit
     windows: dict = field(default_factory=dict)
-    #: live lower envelope of receive - time_boot (ns) and the PX4 time it holds at (ns)
-    live_offset_ns: int | None = None
-    live_tb_ns: int = 0
+    #: live lower envelope of receive - time_boot (the decoder's own estimator, clock.py)
+    live: VehicleClock = field(default_factory=VehicleClock)
 
     def absorb(self, m: Any, receive_ns: int) -> None:
         """One MAVLink message of the target received at ``receive_ns`` (recording clock)."""
@@ -84,13 +81,7 @@ class VehicleRecord:
             est = int(receive_ns) - tb * 1_000_000
             self.boot_ns = est if self.boot_ns is None else min(self.boot_ns, est)
             self.boot_samples += 1
-            tb_ns = tb * 1_000_000
-            if self.live_offset_ns is None:
-                self.live_offset_ns, self.live_tb_ns = est, tb_ns
-            else:
-                rise = LIVE_RISE * max(0, tb_ns - self.live_tb_ns)
-                self.live_offset_ns = min(est, self.live_offset_ns + int(rise))
-                self.live_tb_ns = max(self.live_tb_ns, tb_ns)
+            self.live.observe(int(receive_ns) * 1e-9, tb * 1e-3)
             w = tb // 1000
             old = self.windows.get(w)
             if old is None or est < old[0]:
@@ -181,11 +172,12 @@ class VehicleRecord:
     def bag_ns_of(self, t_vehicle: float) -> int | None:
         """The bag-clock time (ns) of PX4 time ``t_vehicle`` (s since boot) by the live
         estimate: the lower envelope of receive - time_boot, allowed to rise at
-        :data:`LIVE_RISE` (a drifting clock); None before the first message or for a time
+        :data:`~lpv_sysid.mavlink.telemetry.clock.LIVE_RISE` (a drifting clock); None before the first message or for a time
         that is not one."""
-        if self.live_offset_ns is None or not (t_vehicle > 0.0 and np.isfinite(t_vehicle)):
+        offset = self.live.offset
+        if offset is None or not (t_vehicle > 0.0 and np.isfinite(t_vehicle)):
             return None
-        return int(round(float(t_vehicle) * 1e9)) + self.live_offset_ns
+        return int(round((float(t_vehicle) + offset) * 1e9))
 
     def clock_knots(self) -> list[list]:
         """``[[time_boot_s, offset_ns], ...]``: per second of PX4 time the smallest

@@ -1,0 +1,71 @@
+"""The vehicle's clock on the receiver's clock: when a sample was taken, not when it was read.
+
+Every PX4 message with a boot time (``time_boot_ms``, ``time_usec``) left PX4 after its
+clock read that value, so ``receive - t_vehicle`` over-estimates the offset between the
+two clocks by the message's latency. :class:`VehicleClock` keeps the lower envelope of
+that difference (the least-delayed message so far), allowed to rise at :data:`LIVE_RISE`
+receiver seconds per vehicle second (a drifting crystal, or a lock-step SITL slowed by
+load, drifts by far less), and maps a vehicle time onto the receiver's clock:
+``local(t_vehicle) = t_vehicle + offset``, never later than the sample's receipt and
+never more than :data:`MAX_AGE_S` before it (another time base, e.g. a wrapped counter).
+
+Why it matters (issue 27): a link poll that runs late reads a backlog of states in one go;
+stamped with the poll's clock they all get one stamp and look fresh, so a loop-delay
+watchdog sees neither their true age nor their spacing. Stamped with the vehicle's time
+mapped here, each keeps its own time and its real age.
+
+A vehicle time that goes back by more than :data:`RESET_JUMP_S` is a reboot: the
+estimate starts again.
+
+Example
+-------
+>>> c = VehicleClock()
+>>> c.observe(100.030, 5.000)   # latency 30 ms
+>>> c.observe(100.045, 5.040)   # latency 5 ms: the lower envelope
+>>> round(c.local(5.020, 100.050), 3)
+100.025
+"""
+
+from __future__ import annotations
+
+import math
+
+#: how fast the offset estimate may rise (receiver s per vehicle s)
+LIVE_RISE = 0.05
+#: vehicle time this far back: a reboot (matches the decoder's out-of-order rule)
+RESET_JUMP_S = 10.0
+#: a mapped time older than this is on another time base (a wrapped uint32 microsecond
+#: counter): the sample keeps its receipt time
+MAX_AGE_S = 2.0
+
+
+class VehicleClock:
+    """Lower-envelope offset between the vehicle's boot clock and the receiver's clock
+    (module docstring). Times in seconds."""
+
+    def __init__(self) -> None:
+        self.offset: float | None = None  # receive - t_vehicle, lower envelope [s]
+        self._tv = -math.inf  # newest vehicle time observed [s]
+
+    def observe(self, now: float, t_vehicle: float) -> None:
+        """One message received at ``now`` (receiver clock) stamped ``t_vehicle`` by PX4."""
+        if not (math.isfinite(now) and math.isfinite(t_vehicle) and t_vehicle > 0.0):
+            return
+        est = now - t_vehicle
+        if self.offset is None or t_vehicle < self._tv - RESET_JUMP_S:
+            self.offset, self._tv = est, t_vehicle
+        else:
+            rise = LIVE_RISE * max(0.0, t_vehicle - self._tv)
+            self.offset = min(est, self.offset + rise)
+            self._tv = max(self._tv, t_vehicle)
+
+    def local(self, t_vehicle: float, received: float) -> float:
+        """Receiver-clock time of vehicle time ``t_vehicle`` for a sample read at
+        ``received``: ``received`` itself before any estimate or for a time that is none,
+        else ``t_vehicle + offset``, at most ``received``."""
+        if self.offset is None or not (math.isfinite(t_vehicle) and t_vehicle > 0.0):
+            return received
+        t = t_vehicle + self.offset
+        if t < received - MAX_AGE_S:
+            return received
+        return min(t, received)

@@ -1,0 +1,65 @@
+"""Samples carry their sample time on the receiver's clock (issue 27 item 3's root cause):
+a link poll that runs late reads a backlog of states at once; stamped with the poll's
+clock they shared one stamp and looked fresh (real Jazzy: runs of 10+ states with one
+stamp, up to 250 ms late). Oracle: the messages' own PX4 times and the receipt times the
+test chooses (exact binary fractions, so equalities are exact)."""
+
+from __future__ import annotations
+
+import math
+
+from lpv_sysid.mavlink.telemetry import TelemetryDecoder, VehicleClock
+from lpv_sysid.mavlink.telemetry.clock import LIVE_RISE, MAX_AGE_S
+
+from test_telemetry_hygiene import BOOT, att_q, lpos
+
+
+def test_lower_envelope_rise_reset_and_other_time_base():
+    c = VehicleClock()
+    assert c.local(5.0, 7.0) == 7.0  # no estimate yet: the receipt time
+    c.observe(100.0625, 5.0)  # 62.5 ms late
+    c.observe(100.0390625, 5.03125)  # 7.8 ms late: the envelope
+    assert c.offset == 100.0390625 - 5.03125
+    assert c.local(5.0, 100.125) == 5.0 + c.offset  # sample time, not receipt
+    assert c.local(5.5, 100.125) == 100.125  # never after its receipt
+    # later, all messages 0.5 s late for 10 s of vehicle time: rises at LIVE_RISE only
+    off0 = c.offset
+    c.observe(100.0390625 + 10.0 + 0.5, 15.03125)
+    assert math.isclose(c.offset, off0 + LIVE_RISE * 10.0)
+    # a reboot (vehicle time 10 s back or more): starts again
+    c.observe(200.0, 1.0)
+    assert c.offset == 199.0
+    # a time far before the receipt is on another base (a wrapped counter): the receipt
+    assert c.local(0.5, 199.5 + MAX_AGE_S + 0.25) == 199.5 + MAX_AGE_S + 0.25
+    assert c.local(1.0 + MAX_AGE_S / 2, 200.0 + MAX_AGE_S) == 199.0 + 1.0 + MAX_AGE_S / 2
+    for bad in (math.nan, math.inf, -1.0, 0.0):
+        c.observe(300.0, bad)
+        assert c.offset == 199.0
+        assert c.local(bad, 301.0) == 301.0
+
+
+def test_a_backlog_read_in_one_poll_keeps_each_states_time():
+    dec = TelemetryDecoder()
+    # 4 ms states delivered on time: the offset is learnt (receipt = PX4 time - BOOT)
+    t = 0.0
+    for k in range(50):
+        t = k / 256
+        for m in (att_q(t), lpos(t)):
+            dec.on_message(m, t)
+    # a 10-state backlog (40 ms of states) read by one late poll at t_poll
+    t_poll = t + 11 / 256
+    stamps = []
+    for k in range(1, 11):
+        tk = t + k / 256
+        for m in (att_q(tk), lpos(tk)):
+            for s in dec.on_message(m, t_poll):
+                stamps.append((s.t, s.t_vehicle))
+    assert len(stamps) >= 10
+    for st, tv in stamps:
+        # its own time on the receiver's clock, within the ms rounding of two messages
+        assert abs(st - (tv - BOOT)) <= 2e-3
+        assert st < t_poll
+    # one stamp per PX4 time (the two messages of a time give one state each)
+    assert len({st for st, _ in stamps}) == len({tv for _, tv in stamps}) == 10
+    oldest = t_poll - stamps[0][0]
+    assert oldest >= 9 / 256  # its real age, not 0
