@@ -4,6 +4,8 @@ import os
 
 import numpy as np
 import pytest
+
+from lpv_sysid.errors import ConfigError
 import rclpy
 import rclpy._standin as standin
 import yaml
@@ -163,14 +165,13 @@ def test_excitation_abort_fades_to_zero(signals1):
 
 
 def test_excitation_bad_parameters(tmp_path, signals1, caplog):
-    from rclpy.exceptions import InvalidParameterTypeException
-
     from lpv_sysid.nodes import excitation_node
 
     bad = tmp_path / "bad.yaml"
     bad.write_text("/**/excitation:\n  ros__parameters:\n    rate_hz: 100\n")
     rclpy.init(args=["n", "--ros-args", "--params-file", str(bad)])
-    with pytest.raises(InvalidParameterTypeException, match="rate_hz"):
+    # a mistyped value is one named error (shell.declare), not rclpy's exception
+    with pytest.raises(ConfigError, match="parameter 'rate_hz': .*DOUBLE"):
         excitation_node.ExcitationNode(namespace=NS)
     rclpy.shutdown()
     standin.reset()

@@ -506,9 +506,8 @@ def check_loop_delay(certificate, delay_s: float, label: str = "gains") -> str:
             f"{label}: certificate.loop_delay missing: these gains were certified before the "
             "loop delay was part of the proof, so the H-inf bound is not proven for the "
             f"configured loop ({delay_s * 1e3:.1f} ms); refusing to fly. Synthesize them again "
-            "(lpv-sysid synthesize --models vertex_models.yaml --config <synthesis.yaml> "
-            "--out gains.yaml records certificate.loop_delay) and check with lpv-sysid verify "
-            "--loop-delay <s>"
+            "(the synthesis records certificate.loop_delay) and verify them with the "
+            "configured loop delay"
         )
     if not delay_s <= bound:
         raise ConfigError(

@@ -171,9 +171,9 @@ class VehicleRecord:
 
     def bag_ns_of(self, t_vehicle: float) -> int | None:
         """The bag-clock time (ns) of PX4 time ``t_vehicle`` (s since boot) by the live
-        estimate: the lower envelope of receive - time_boot, allowed to rise at
-        :data:`~lpv_sysid.mavlink.telemetry.clock.LIVE_RISE` (a drifting clock); None before the first message or for a time
-        that is not one."""
+        estimate (:class:`~lpv_sysid.mavlink.telemetry.clock.VehicleClock`: the lower
+        envelope of receive - time_boot, rising at most ``LIVE_RISE``); None before the
+        first message or for a time that is not one."""
         offset = self.live.offset
         if offset is None or not (t_vehicle > 0.0 and np.isfinite(t_vehicle)):
             return None
