@@ -32,6 +32,7 @@ show what each part contributes.
 
 from __future__ import annotations
 
+import math
 import dataclasses
 import logging
 from dataclasses import dataclass, field
@@ -709,7 +710,10 @@ def summary_dict(
                     [round(e, 3), lab] for e, lab in af.interior_padded
                 ],
                 "eiv_max_shift_std": float(af.eiv_shift),
-                "lmi_gamma_achieved": float(af.lmi_gamma),
+                # null: not synthesized for this airframe (no --synthesis)
+                "lmi_gamma_achieved": (
+                    float(af.lmi_gamma) if math.isfinite(af.lmi_gamma) else None
+                ),
                 "lmi_at_truth": [[lab, float(x)] for lab, x in af.lmi_truth],
                 "lmi_note": af.lmi_note,
                 "steady_offset_m_s": [[lab, round(x, 5)] for lab, x in af.offsets],
