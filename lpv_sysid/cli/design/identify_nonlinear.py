@@ -215,10 +215,8 @@ def plot_prediction(pred, path: Path, title: str) -> Path:
 
 def run_px4(args: argparse.Namespace, params, cfg) -> int:
     """``--structure px4``: fit, validate, compare (``ident.nonlinear.px4_model``)."""
-    import yaml
-
-    from lpv_sysid.errors import ConfigError
     from lpv_sysid.ident import dataprep as dp
+    from lpv_sysid.io.files import save_yaml
     from lpv_sysid.ident import nonlinear as nl
 
     def records(paths):
@@ -290,21 +288,17 @@ def run_px4(args: argparse.Namespace, params, cfg) -> int:
                 "z": float(z),
             }
         doc["sih_comparison"] = rows
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        args.out.write_text(yaml.safe_dump(doc, sort_keys=False))
-    except OSError as exc:
-        raise ConfigError(f"--out {args.out}: cannot write ({exc.strerror})") from None
+    save_yaml(doc, args.out, "--out")  # atomic; names --out and the path on failure
     print(f"\nwrote {args.out}")
     return 0
 
 
 def run(args: argparse.Namespace) -> int:
     import numpy as np
-    import yaml
 
     from lpv_sysid.cli.design.identify import load_config
     from lpv_sysid.errors import BagError, ConfigError
+    from lpv_sysid.io.files import save_yaml
     from lpv_sysid.ident import dataprep as dp
     from lpv_sysid.ident import nonlinear as nl
     from lpv_sysid.models.quadrotor import K_NAMES
@@ -389,11 +383,7 @@ def run(args: argparse.Namespace) -> int:
             "K": {k: float(oe.K[k]) for k in K_NAMES},
             "std": {k: float(v) for k, v in oe.refined_std.items()},
         }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        args.out.write_text(yaml.safe_dump(doc, sort_keys=False))
-    except OSError as exc:
-        raise ConfigError(f"--out {args.out}: cannot write ({exc.strerror})") from None
+    save_yaml(doc, args.out, "--out")  # atomic; names --out and the path on failure
     print(f"\nwrote {args.out}")
     if args.plot is not None:
         print(f"wrote {plot_correlation(res, args.plot)}")
