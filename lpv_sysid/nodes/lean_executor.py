@@ -109,7 +109,6 @@ class LeanExecutor:
             clients += list(n.clients)
             guards += list(n.guards)
             waitables += list(n.waitables)
-        events = sum(w.get_num_entities().num_events for w in waitables)
         extra = [w.get_num_entities() for w in waitables]
         self._ws = _rclpy.WaitSet(
             len(subs) + sum(e.num_subscriptions for e in extra),
@@ -117,7 +116,7 @@ class LeanExecutor:
             len(timers) + sum(e.num_timers for e in extra),
             len(clients) + sum(e.num_clients for e in extra),
             len(services) + sum(e.num_services for e in extra),
-            events,
+            sum(e.num_events for e in extra),
             self._context.handle,
         )
         # (handle, entity) pairs: rclpy reports ready entities by handle pointer
