@@ -1,5 +1,6 @@
 """Vehicle-link steps of `lpv-sysid fly` around the campaign: wait for the autopilot's
-HEARTBEAT, PARAM_SET with the vehicle's confirmation, and a tap that hands PX4's
+HEARTBEAT, the airborne start check of every run that begins in the air (phase 2, the
+broken-loop run), PARAM_SET with the vehicle's confirmation, and a tap that hands PX4's
 ATTITUDE_TARGET to the recorder."""
 
 from __future__ import annotations
@@ -20,6 +21,60 @@ def wait_for_vehicle(link, timeout: float, clock, sleep) -> None:
             return
         sleep(0.005)
     raise SafetyError(f"no autopilot HEARTBEAT on {link.config.url} within {timeout:g} s")
+
+
+#: MAV_CMD_REQUEST_MESSAGE and the id of HOME_POSITION
+_REQUEST_MESSAGE, _HOME_POSITION = 512, 242.0
+
+
+def wait_airborne(
+    core,
+    poll: Callable[[float], Any],
+    latest_state: Callable[[], Any],
+    clock,
+    sleep,
+    what: str,
+    min_height: float,
+    timeout: float = 8.0,
+) -> tuple[Any, float]:
+    """The start check of a run that begins in the air: ``(state, height above home [m])``.
+
+    Polls up to ``timeout`` s until a state sample, PX4's mode and (when armed) the home
+    position are in, asking HOME_POSITION (MAV_CMD_REQUEST_MESSAGE) once a second while it is
+    missing; then requires the vehicle armed and at least ``min_height`` m above home (NED:
+    height = -(z - z_home); z_home 0 when PX4 never sent a home). :class:`SafetyError` naming
+    ``what`` otherwise."""
+    t0 = clock()
+    next_req = t0
+    while clock() - t0 < timeout:
+        now = clock()
+        poll(now)
+        state = latest_state()
+        if (
+            state is not None
+            and core.machine.vehicle_mode is not None
+            and (core.envelope.home_position is not None or not core.machine.armed)
+        ):
+            break
+        if now >= next_req:
+            next_req = now + 1.0
+            core.link.command_long(_REQUEST_MESSAGE, _HOME_POSITION)
+        sleep(0.005)
+    state = latest_state()
+    if state is None:
+        raise SafetyError(f"{what}: no state telemetry from the vehicle")
+    if not core.machine.armed:
+        raise SafetyError(
+            f"{what} starts in the air: the vehicle is not armed (fly the campaign with "
+            "finish: HOLD first, or take off)"
+        )
+    hp = core.envelope.home_position
+    height = -(float(state.pos_ned[2]) - (float(hp[2]) if hp is not None else 0.0))
+    if height < min_height:
+        raise SafetyError(
+            f"{what} needs >= {min_height:g} m above home, vehicle at {height:.1f} m"
+        )
+    return state, height
 
 
 def set_params(

@@ -63,7 +63,11 @@ def fly_broken_loop(
     given: used instead of PX4's setpoint)."""
     import yaml
 
-    from lpv_sysid.flight.vehicle import tap_attitude_target, wait_for_vehicle
+    from lpv_sysid.flight.vehicle import (
+        tap_attitude_target,
+        wait_airborne,
+        wait_for_vehicle,
+    )
     from lpv_sysid.io import messages as m
     from lpv_sysid.mavlink.bridge import (
         RATE_INPUT_NAMES,
@@ -118,29 +122,15 @@ def fly_broken_loop(
     ok, reason = False, ""
     try:
         wait_for_vehicle(core.link, 15.0, clock, sleep)
-        tw = clock()
-        while clock() - tw < 8.0 and (state is None or core.machine.vehicle_mode is None):
-            poll(clock())
-            sleep(0.005)
-        if state is None or not core.machine.armed:
-            raise SafetyError(
-                "broken-loop run starts in the air: the vehicle is not armed (fly the "
-                "campaign with finish: HOLD first)"
-                if state is not None
-                else "broken-loop run: no state telemetry from the vehicle"
-            )
+        state, height = wait_airborne(
+            core, poll, lambda: state, clock, sleep, "broken-loop run", min_height
+        )
         # hover thrust: PX4's own thrust setpoint while it holds position (HOLD)
         echoes.clear()
         th = clock()
         while clock() - th < hover_s:
             poll(clock())
             sleep(0.005)
-        hp = core.envelope.home_position
-        height = -(state.pos_ned[2] - (hp[2] if hp is not None else 0.0))
-        if height < min_height:
-            raise SafetyError(
-                f"broken-loop run needs >= {min_height:g} m above home, vehicle at {height:.1f} m"
-            )
         if hover_thrust is None and len(echoes) < 10:
             raise SafetyError(
                 f"broken-loop run: PX4 sent {len(echoes)} ATTITUDE_TARGET in {hover_s:g} s "

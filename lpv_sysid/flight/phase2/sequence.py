@@ -31,7 +31,7 @@ from typing import Any, Callable, Optional
 import numpy as np
 
 from lpv_sysid.configuration.defaults import config_file
-from lpv_sysid.errors import ConfigError, SafetyError
+from lpv_sysid.errors import ConfigError
 from lpv_sysid.flight.phase2.analysis import analyse_phase2, latency_from_bag
 from lpv_sysid.flight.phase2.options import Phase2Options
 
@@ -172,6 +172,7 @@ def fly_phase2(
         request_parameter_list,
         tap_attitude_target,
         tap_messages,
+        wait_airborne,
         wait_for_vehicle,
     )
     from lpv_sysid.mavlink.telemetry import VehicleRecord
@@ -289,34 +290,10 @@ def fly_phase2(
         request_parameter_list(core.link)
         core.link.command_long(512, 148.0)  # MAV_CMD_REQUEST_MESSAGE AUTOPILOT_VERSION
         # telemetry + HOME_POSITION (the envelope's home when started armed)
-        tw = clock()
-        next_req = tw
-        while clock() - tw < 8.0:
-            now = clock()
-            poll(now)
-            if (
-                state is not None
-                and core.machine.vehicle_mode is not None
-                and (core.envelope.home_position is not None or not core.machine.armed)
-            ):
-                break
-            if now >= next_req:
-                next_req = now + 1.0
-                core.link.command_long(512, 242.0)  # MAV_CMD_REQUEST_MESSAGE HOME_POSITION
-            sleep(0.005)
-        if state is None or not core.machine.armed:
-            raise SafetyError(
-                "phase 2 starts in the air: the vehicle is not armed (fly phase 1 with "
-                "finish: HOLD first, or take off)"
-                if state is not None
-                else "phase 2: no state telemetry from the vehicle"
-            )
-        hp = core.envelope.home_position
-        height = -(state.pos_ned[2] - (hp[2] if hp is not None else 0.0))
-        if height < opts.min_height:
-            raise SafetyError(
-                f"phase 2 needs >= {opts.min_height:g} m above home, vehicle at {height:.1f} m"
-            )
+        state, height = wait_airborne(
+            core, poll, lambda: state, clock, sleep, "phase 2", opts.min_height
+        )
+        tw = clock()  # OFFBOARD's start-timeout origin, reset when the bridge starts
         mode = core.machine.vehicle_mode
         echo(
             f"phase 2: vehicle armed at {height:.1f} m, mode "
