@@ -1056,14 +1056,14 @@ def test_two_namespaced_vehicles_late_status_and_tf(ros, dom, tmp_path):
         time.sleep(2.0)  # the first status (at start) is now seconds old; the next in ~8 s
         t_echo = time.time()
         echo = LATE_STATUS_ECHO.replace("/lpv_sysid/", "/uav2/")
-        r = env.run(f"timeout 6 {echo} --no-daemon", timeout=60)
+        r = env.run(f"timeout 60 {echo} --no-daemon", timeout=90)  # CLI start at load: seconds
         assert "/uav2/sim_vehicle" in r.stdout and "/uav1/" not in r.stdout, r.stdout
         m = re.search(r"stamp:\s+sec: (\d+)\s+nanosec: (\d+)", r.stdout)
         stamp = int(m.group(1)) + int(m.group(2)) * 1e-9
         MEASURED["late_status_age_s"] = round(t_echo - stamp, 1)
         assert stamp < t_echo  # published before the subscriber existed: transient local
         if have_tf:
-            r = env.run("timeout 6 ros2 topic echo --once /tf --no-daemon", timeout=60)
+            r = env.run("timeout 60 ros2 topic echo --once /tf --no-daemon", timeout=90)
             assert "frame_id: odom" in r.stdout and "child_frame_id: base_link" in r.stdout
     finally:
         for p in procs:
