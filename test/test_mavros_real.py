@@ -307,7 +307,10 @@ def have_info():
         return False
     f = c.call_async(VehicleInfoGet.Request())
     spin(10.0, until=f.done)
-    return f.done() and f.result().success
+    # MAVROS answers from the HEARTBEAT before it has PX4's AUTOPILOT_VERSION (firmware 0;
+    # the bridge asks PX4 for it meanwhile): the preflight needs the firmware
+    r = f.result() if f.done() else None
+    return bool(r and r.success and r.vehicles and r.vehicles[0].flight_sw_version != 0)
 
 res["connected"] = spin(180.0, until=lambda: bool(res["modes"]) and res.get("link_up"))
 t0 = time.monotonic()
@@ -646,12 +649,15 @@ spin(120.0, until=lambda: bool(res["modes"]) and bool(res["states"]))
 c = n.create_client(Trigger, "/lpv_sysid/mavlink_bridge/start")
 assert c.wait_for_service(timeout_sec=60.0)
 t0 = time.monotonic()
-while True:  # until MAVROS has pulled PX4's parameters (the preflight's evidence)
+# until MAVROS has delivered the preflight's evidence (PX4's parameters and
+# AUTOPILOT_VERSION): a refusal naming "evidence missing" is retried, a judged NO-GO is not
+while True:
     spin(8.0)
     f = c.call_async(Trigger.Request())
     spin(30.0, until=f.done)
     res["start"] = [f.result().success, f.result().message] if f.done() else [False, "?"]
-    if res["start"][0] or "missing" not in res["start"][1] or time.monotonic() - t0 > 120:
+    missing = "evidence missing so far" in res["start"][1]
+    if res["start"][0] or not missing or time.monotonic() - t0 > 120:
         break
 res["active"] = spin(60.0, until=lambda: bridge() in ("OFFBOARD_ACTIVE", "FAILED", "DONE"))
 spin(2.0)
