@@ -735,6 +735,30 @@ def test_a_parameter_fixed_after_a_refusal_counts_at_the_next_start():
     assert fake.mode_calls() == [("set_mode", {"base_mode": 0, "custom_mode": "OFFBOARD"})]
 
 
+def test_state_is_stamped_with_mavros_stamp_whatever_the_bridge_latency():
+    """MAVROS stamps local_position/odom with ROS time -- the bridge's clock: the state
+    keeps that stamp (the sample's time; the loop delay the controller measures starts
+    there), whether the bridge reads it 200 ms late (stalled) or at once; stamps never step
+    back. Through PX4's boot-time envelope the stalled run raised the stamps (the age
+    under-stated) and the first prompt sample stepped back (the controller's out_of_order
+    abort, measured in the real phase-2 graph at load 15)."""
+    rt = runtime(command="rate_setpoint")
+    fake = FakeMavros(rt)
+    fake.run(0.5)
+    t0, stamps, got = fake.t + 1.0, [], []
+    for k in range(60):
+        t = t0 + k / 30.0  # MAVROS's stamp (ROS time), 30 Hz
+        now = t + (0.2 if 10 <= k < 30 else 0.001)
+        odom = messages.odometry_from_state(
+            F, round(t * 1e9), [0.0, 0.0, -5.0], ZERO3, ZERO3, ZERO3, frame_id="map"
+        )
+        stamps.append(round(t * 1e9))
+        rt.on_message("mavros_odom", odom, now)
+        got += [messages.stamp_ns_of(m) for k_, m in rt.on_timer(now) if k_ == "state"]
+    # the stamp to the microsecond (MavrosLink carries MAVLink's time_usec)
+    assert len(got) == len(stamps) and all(0 <= s - g < 1000 for s, g in zip(stamps, got))
+
+
 def test_firmware_answered_before_mavros_had_autopilot_version_is_asked_until_known():
     """MAVROS answers vehicle_info_get from PX4's HEARTBEAT before it has PX4's
     AUTOPILOT_VERSION (``flight_sw_version`` 0; MAVROS 2.10 requests it a few times after
