@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from mavros_msgs.msg import VehicleInfo
-from mavros_msgs.srv import CommandBool, MessageInterval, SetMode, VehicleInfoGet
+from mavros_msgs.srv import CommandBool, CommandLong, MessageInterval, SetMode, VehicleInfoGet
 from rcl_interfaces.msg import ParameterValue
 from rcl_interfaces.srv import GetParameters
 
@@ -115,6 +115,7 @@ class FakeMavros:
         self.info = vehicle_info()
         self.asked: list[str] = []
         self.rates: list = []  # (t, set_message_interval request)
+        self.requested: list = []  # (t, cmd/command request)
         self.rc_out = True  # publishes /mavros/rc/out (PX4 SITL: SERVO_OUTPUT_RAW)
         # the vehicle's health as MAVROS publishes it (None: topic not published)
         self.battery = 0.8  # /mavros/battery percentage (0..1; PX4's -1 comes as -0.01)
@@ -147,6 +148,9 @@ class FakeMavros:
                 elif key == "vehicle_info":
                     ok = self.info is not None
                     resp = VehicleInfoGet.Response(success=ok, vehicles=[self.info] if ok else [])
+                elif key == "request_message":  # cmd/command: PX4 acknowledges (and sends)
+                    self.requested.append((self.t, dict(item.fields)))
+                    resp = CommandLong.Response(success=True, result=0)
                 else:
                     self.armed = bool(item.fields["value"])
                     resp = CommandBool.Response(success=True, result=0)
@@ -283,6 +287,7 @@ def test_endpoints_of_the_mavros_msgs_mode():
         ("message_interval", "/mavros/set_message_interval", "mavros_msgs/srv/MessageInterval"),
         ("param_get", "/mavros/param/get_parameters", "rcl_interfaces/srv/GetParameters"),
         ("vehicle_info", "/mavros/vehicle_info_get", "mavros_msgs/srv/VehicleInfoGet"),
+        ("request_message", "/mavros/cmd/command", "mavros_msgs/srv/CommandLong"),
     ]
     rt = runtime(
         command="velocity",
@@ -717,6 +722,8 @@ def test_a_parameter_fixed_after_a_refusal_counts_at_the_next_start():
     fake.params["COM_OBL_RC_ACT"] = 0
     ok, message = preflight_start(fake)
     assert not ok and "COM_OBL_RC_ACT: 0 (POSITION)" in message
+    # a judged NO-GO: nothing named missing (test_mavros_real's start retry stops on it)
+    assert "missing" not in message, message
     fake.params["COM_OBL_RC_ACT"] = 5  # `ros2 param set /mavros/param COM_OBL_RC_ACT 5`
     fake.run(10.5)  # the parameters are refreshed every 10 s
     fake.run(1.0)
@@ -726,6 +733,70 @@ def test_a_parameter_fixed_after_a_refusal_counts_at_the_next_start():
     fake.run(3.0, reference=([0.5, 0.0, 0.0], 0.0))
     assert fake.state() == "OFFBOARD_ACTIVE"
     assert fake.mode_calls() == [("set_mode", {"base_mode": 0, "custom_mode": "OFFBOARD"})]
+
+
+def test_state_is_stamped_with_mavros_stamp_whatever_the_bridge_latency():
+    """MAVROS stamps local_position/odom with ROS time -- the bridge's clock: the state
+    keeps that stamp (the sample's time; the loop delay the controller measures starts
+    there), whether the bridge reads it 200 ms late (stalled) or at once; stamps never step
+    back. Through PX4's boot-time envelope the stalled run raised the stamps (the age
+    under-stated) and the first prompt sample stepped back (the controller's out_of_order
+    abort, measured in the real phase-2 graph at load 15)."""
+    rt = runtime(command="rate_setpoint")
+    fake = FakeMavros(rt)
+    fake.run(0.5)
+    t0, stamps, got = fake.t + 1.0, [], []
+    for k in range(60):
+        t = t0 + k / 30.0  # MAVROS's stamp (ROS time), 30 Hz
+        now = t + (0.2 if 10 <= k < 30 else 0.001)
+        odom = messages.odometry_from_state(
+            F, round(t * 1e9), [0.0, 0.0, -5.0], ZERO3, ZERO3, ZERO3, frame_id="map"
+        )
+        stamps.append(round(t * 1e9))
+        rt.on_message("mavros_odom", odom, now)
+        got += [messages.stamp_ns_of(m) for k_, m in rt.on_timer(now) if k_ == "state"]
+    # the stamp to the microsecond (MavrosLink carries MAVLink's time_usec)
+    assert len(got) == len(stamps) and all(0 <= s - g < 1000 for s, g in zip(stamps, got))
+
+
+def test_firmware_answered_before_mavros_had_autopilot_version_is_asked_until_known():
+    """MAVROS answers vehicle_info_get from PX4's HEARTBEAT before it has PX4's
+    AUTOPILOT_VERSION (``flight_sw_version`` 0; MAVROS 2.10 requests it a few times after
+    connecting only, which a stalled host can miss for good): the start is refused with the
+    firmware named as missing evidence; the bridge keeps asking vehicle_info_get and asks
+    PX4 through cmd/command (MAV_CMD_REQUEST_MESSAGE 512, param1 148 = AUTOPILOT_VERSION),
+    one call per ask period; once MAVROS answers PX4 1.16.0 the next start is GO and
+    nothing more is requested."""
+    rt = runtime(command="velocity")
+    fake = FakeMavros(rt)
+    # MAVROS's VehicleInfo from the HEARTBEAT alone (available_info HAVE_INFO_HEARTBEAT)
+    fake.info = VehicleInfo(sysid=1, compid=1, autopilot=12, type=2, available_info=1)
+    ok, message = preflight_start(fake)
+    assert not ok and message.startswith("start refused: preflight NO-GO through MAVROS")
+    assert "firmware: no AUTOPILOT_VERSION" in message, message
+    assert message.endswith("evidence missing so far: firmware"), message
+    fake.run(5.0)
+    infos = [c for c in fake.calls if c.key == "vehicle_info"]
+    # asked every 2 s while unknown (the old bridge kept the first answer: asked once)
+    assert len(infos) >= 4, len(infos)
+    want = {"broadcast": False, "command": 512, "confirmation": 0, "param1": 148.0}
+    assert fake.requested and all(f == want for _, f in fake.requested), fake.requested
+    gaps = np.diff([t for t, _ in fake.requested])
+    assert len(fake.requested) >= 2 and gaps.min() >= 2.0 - 1e-9, fake.requested
+    # PX4's AUTOPILOT_VERSION reached MAVROS: its next answer holds the firmware
+    fake.info = vehicle_info((1, 16, 0))
+    fake.run(2.5)
+    ok, message, out = rt.start(fake.t)
+    fake.handle(out)
+    assert ok, message
+    table = [t for _, lv, t in fake.events if t.startswith("preflight (MAVROS)")][-1]
+    row = [r for r in table.splitlines() if r.startswith("firmware")][0]
+    assert "1.16.0" in row and row.endswith(" GO"), row
+    n_req, n_info = len(fake.requested), len([c for c in fake.calls if c.key == "vehicle_info"])
+    fake.run(12.0, reference=([0.5, 0.0, 0.0], 0.0))
+    assert len(fake.requested) == n_req
+    assert len([c for c in fake.calls if c.key == "vehicle_info"]) == n_info
+    assert fake.state() == "OFFBOARD_ACTIVE"
 
 
 def test_preflight_go_asks_only_until_answered_and_judges_the_mavros_evidence():

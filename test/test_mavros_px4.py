@@ -7,7 +7,9 @@ SET_MODE with base_mode CUSTOM_MODE_ENABLED | the last HEARTBEAT's armed flag, a
 ``mode_sent`` at once; command: arming -> COMMAND_LONG 400 answered with PX4's
 COMMAND_ACK; setpoint_raw: PositionTarget FLU -> SET_POSITION_TARGET_LOCAL_NED FRD,
 ``yaw_rate`` negated; param: PX4's PARAM_VALUE as ROS parameters; rc_io: SERVO_OUTPUT_RAW
--> rc/out; vehicle_info_get from HEARTBEAT + AUTOPILOT_VERSION; the preflight's health:
+-> rc/out; vehicle_info_get from HEARTBEAT + AUTOPILOT_VERSION, flight_sw_version 0 until
+PX4's AUTOPILOT_VERSION came -- which the bridge asks for through cmd/command, COMMAND_LONG
+512 answered with PX4's COMMAND_ACK; the preflight's health:
 SYS_STATUS -> battery, GPS_RAW_INT -> gpsstatus/gps1/raw, ESTIMATOR_STATUS ->
 estimator_status, HOME_POSITION -> home_position/home). Skipped without
 ``PX4_SITL_DIR``.
@@ -28,7 +30,7 @@ import time
 import numpy as np
 import pytest
 from mavros_msgs.msg import State
-from mavros_msgs.srv import CommandBool, MessageInterval, SetMode, VehicleInfoGet
+from mavros_msgs.srv import CommandBool, CommandLong, MessageInterval, SetMode, VehicleInfoGet
 from px4_sitl import Px4Sitl, find_px4
 from rcl_interfaces.msg import ParameterValue
 from rcl_interfaces.srv import GetParameters
@@ -113,6 +115,8 @@ class MavrosStandIn:
                         ok = msg.result == px4.MAV_RESULT_ACCEPTED
                         if req.key == "arming":
                             resp = CommandBool.Response(success=ok, result=msg.result)
+                        elif req.key == "request_message":
+                            resp = CommandLong.Response(success=ok, result=msg.result)
                         else:
                             resp = MessageInterval.Response(success=ok)
                         self.out(self.rt.on_service_answer(req, resp, now))
@@ -228,19 +232,25 @@ class MavrosStandIn:
                 else:
                     values.append(ParameterValue(type=3, double_value=float(v)))
             self.out(self.rt.on_service_answer(req, GetParameters.Response(values=values), now))
+        elif req.key == "request_message":
+            f = req.fields
+            self.m.mav.command_long_send(
+                self.sysid, 1, f["command"], f["confirmation"], f["param1"], 0, 0, 0, 0, 0, 0
+            )
+            self.pending.append((f["command"], req))
         elif req.key == "vehicle_info":
-            if self.version is None:
-                self.m.mav.command_long_send(self.sysid, 1, 512, 0, 148, 0, 0, 0, 0, 0, 0)
+            if self.hb is None:
                 resp = VehicleInfoGet.Response(success=False, vehicles=[])
-            else:
+            else:  # MAVROS 2: from the HEARTBEAT, the version fields once it has them
+                v = self.version
                 info = F(
                     "mavros_msgs/msg/VehicleInfo",
                     sysid=self.sysid,
                     compid=1,
                     autopilot=self.hb.autopilot,
                     type=self.hb.type,
-                    capabilities=int(self.version.capabilities),
-                    flight_sw_version=int(self.version.flight_sw_version),
+                    capabilities=int(v.capabilities) if v is not None else 0,
+                    flight_sw_version=int(v.flight_sw_version) if v is not None else 0,
                 )
                 resp = VehicleInfoGet.Response(success=True, vehicles=[info])
             self.out(self.rt.on_service_answer(req, resp, now))
@@ -349,10 +359,12 @@ def test_px4_sitl_through_mavros_semantics_preflight_offboard_climb_rejected_pos
         state = lambda: rt.core.state.value  # noqa: E731
         ev = rt.evidence
         assert ev is not None
-        # MAVROS connected, PX4's parameters and version in
+        # MAVROS connected, PX4's parameters and version in (the version asked by the
+        # bridge through cmd/command: the stand-in's MAVROS never requests it itself)
         assert run(
-            90.0, until=lambda: not ev.missing_params() and ev.vehicle is not None and mav.z
-        ), (mav.params, sitl.log_tail())
+            90.0, until=lambda: not ev.missing_params() and ev.firmware_known() and mav.z
+        ), (mav.params, mav.acks, sitl.log_tail())
+        assert (512, px4.MAV_RESULT_ACCEPTED) in mav.acks, mav.acks
         ok, why, out = rt.start(time.monotonic())
         mav.out(out)
         assert not ok and "COM_OBL_RC_ACT: 0 (POSITION)" in why, why

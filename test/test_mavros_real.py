@@ -307,7 +307,10 @@ def have_info():
         return False
     f = c.call_async(VehicleInfoGet.Request())
     spin(10.0, until=f.done)
-    return f.done() and f.result().success
+    # MAVROS answers from the HEARTBEAT before it has PX4's AUTOPILOT_VERSION (firmware 0;
+    # the bridge asks PX4 for it meanwhile): the preflight needs the firmware
+    r = f.result() if f.done() else None
+    return bool(r and r.success and r.vehicles and r.vehicles[0].flight_sw_version != 0)
 
 res["connected"] = spin(180.0, until=lambda: bool(res["modes"]) and res.get("link_up"))
 t0 = time.monotonic()
@@ -481,13 +484,52 @@ def test_phase1_launch_through_mavros_flies_and_hands_back_confirmed(stack, tmp_
     stack["airborne"] = res["modes"][-1] == ["AUTO.LOITER", True]
 
 
+#: the phase-2 gains flown here: test_chain_px4's plant and signals, synthesized for less
+#: closed-loop bandwidth (pole disk centre -4, radius 4: |s| <= 8 rad/s instead of the
+#: shipped synthesis_chain.yaml's 14) and certified for 160 ms of loop delay (the shipped
+#: design: 96.6 ms). Why: the loop delay (state stamp = MAVROS's receipt -> command) through
+#: MAVROS, DDS, the bridge and the controller on this 2-core host at load 12-19 is real age
+#: (Python nodes starved of CPU, the stamps are MAVROS's own), measured p50 11 / p99 106 /
+#: max 172 ms in a run that flew the whole signal, 208 ms for 325 ms in one the watchdog
+#: stopped. 160 ms is about the most this plant and signal set certify (performance margin
+#: 165.7 ms, stable to 214.7 ms); a smaller disk is infeasible at gamma 1 (gamma_min 1.23
+#: at radius 2.5), so 0.25-0.3 s is out of reach. A vehicle keeps the shipped design.
+MAVROS_SYNTHESIS = {
+    "hinf.region": {"disk": {"centre": -4.0, "radius": 4.0}, "half_plane": {"alpha": 0.2}},
+    "loop_delay": {"bound_s": 0.16},
+}
+
+
+@pytest.fixture(scope="module")
+def design_mavros(design, tmp_path_factory):  # noqa: F811
+    """``design`` (test_chain_px4) synthesized with :data:`MAVROS_SYNTHESIS`."""
+    import yaml
+
+    from lpv_sysid.cli.main import main as cli_main
+
+    d = tmp_path_factory.mktemp("design_mavros")
+    cfg = yaml.safe_load((ROOT / "config" / "synthesis_chain.yaml").read_text())
+    cfg["hinf"]["region"] = MAVROS_SYNTHESIS["hinf.region"]
+    cfg["loop_delay"] = MAVROS_SYNTHESIS["loop_delay"]
+    (d / "synthesis.yaml").write_text(yaml.safe_dump(cfg))
+    argv = ["synthesize", "--models", str(design / "vertex_models.yaml")]
+    argv += ["--config", str(d / "synthesis.yaml")]
+    argv += ["--summary", str(design / "signals" / "summary.yaml"), "--out", str(d / "gains.yaml")]
+    assert cli_main(argv) == 0
+    cert = yaml.safe_load((d / "gains.yaml").read_text())["certificate"]["loop_delay"]
+    assert cert["bound_s"] == 0.16 and cert["performance_margin_s"] >= 0.16, cert
+    return d
+
+
 def test_phase2_launch_through_mavros_flies_the_lpv_law_and_hands_back_confirmed(
     stack,
     design,  # noqa: F811  (test_chain_px4's rate-plant gains and phase-2 signal)
+    design_mavros,
     tmp_path,
 ):
     """``phase2.launch.py design:=rate_plant transport:=mavros fcu_url:=...``: the LPV law
-    (rate plant, the gains of test_chain_px4) commands thrust + body rates through
+    (rate plant: test_chain_px4's plant and signal, the gains of :data:`MAVROS_SYNTHESIS`)
+    commands thrust + body rates through
     ``/mavros/setpoint_raw/attitude`` while the excitation plays the phase-2 signal; the
     sequencer's abort hands back (POSCTL refused, HOLD confirmed on /mavros/state). The
     recording holds the MAVLink transport's topics, and PX4's own echo of the setpoints it
@@ -520,7 +562,7 @@ def test_phase2_launch_through_mavros_flies_the_lpv_law_and_hands_back_confirmed
         {
             "config_dir": cfg,
             "design": "rate_plant",
-            "gains_file": design / "gains.yaml",
+            "gains_file": design_mavros / "gains.yaml",
             "signals_file": design / "signals" / "signals.npz",
             "log_dir": out,
         },
@@ -646,12 +688,15 @@ spin(120.0, until=lambda: bool(res["modes"]) and bool(res["states"]))
 c = n.create_client(Trigger, "/lpv_sysid/mavlink_bridge/start")
 assert c.wait_for_service(timeout_sec=60.0)
 t0 = time.monotonic()
-while True:  # until MAVROS has pulled PX4's parameters (the preflight's evidence)
+# until MAVROS has delivered the preflight's evidence (PX4's parameters and
+# AUTOPILOT_VERSION): a refusal naming "evidence missing" is retried, a judged NO-GO is not
+while True:
     spin(8.0)
     f = c.call_async(Trigger.Request())
     spin(30.0, until=f.done)
     res["start"] = [f.result().success, f.result().message] if f.done() else [False, "?"]
-    if res["start"][0] or "missing" not in res["start"][1] or time.monotonic() - t0 > 120:
+    missing = "evidence missing so far" in res["start"][1]
+    if res["start"][0] or not missing or time.monotonic() - t0 > 120:
         break
 res["active"] = spin(60.0, until=lambda: bridge() in ("OFFBOARD_ACTIVE", "FAILED", "DONE"))
 spin(2.0)

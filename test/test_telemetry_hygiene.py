@@ -20,6 +20,7 @@ from lpv_sysid.mavlink import codec, px4
 from lpv_sysid.mavlink.bridge import BridgeConfig, BridgeCore
 from lpv_sysid.mavlink.link import LinkConfig, free_udp_port
 from lpv_sysid.mavlink.telemetry import (
+    ReceiverClock,
     RotorEstimateConfig,
     RotorSample,
     StateSample,
@@ -535,3 +536,43 @@ def test_estimated_rotor_speeds_flow_from_the_sim_vehicle_without_esc_telemetry(
     rel = np.abs(est - ref) / ref
     # measured here: median 3e-7, max 0.042 (a 50 Hz zero-order hold of the 250 Hz control output)
     assert np.median(rel) < 0.02 and rel.max() < 0.1, (np.median(rel), rel.max())
+
+
+def test_state_stamps_never_step_back_when_the_clock_estimate_drops():
+    """20 ODOMETRY samples (30 Hz) read 200 ms late (a stalled receiver), then promptly:
+    the lower envelope drops by 198 ms at the first prompt one, whose mapped time falls
+    165 ms before its predecessor's (measured through real MAVROS at load 15: steps back up
+    to 95 ms, the controller's out_of_order abort). Published times never step back: held
+    at the previous one until the mapping passes it, then the mapping (receipt - 2 ms)."""
+    dec = TelemetryDecoder()
+    out = []
+    for k in range(40):
+        t = k / 30.0  # sample time on the receiver's clock; vehicle time t + BOOT
+        late = 0.2 if k < 20 else 0.002
+        out += [s for s in dec.on_message(odom(t, lag=0.0), t + late)]
+    t_pub = np.array([s.t for s in out])
+    t_smp = np.arange(40) / 30.0
+    assert len(out) == 40 and np.all(np.diff(t_pub) >= 0.0), np.diff(t_pub)
+    np.testing.assert_allclose(t_pub[:20], t_smp[:20] + 0.2, atol=1e-9)  # the estimate then
+    held = t_pub[20:] == t_pub[19]
+    assert dec.stats.stamps_held == held.sum() == 5, (held, dec.stats)
+    np.testing.assert_allclose(t_pub[25:], t_smp[25:] + 0.002, atol=1e-9)
+
+
+def test_receiver_clock_keeps_stamps_already_on_the_receivers_clock():
+    """MAVROS's stamps are ROS time (the bridge's clock): kept as they are whatever the
+    latency of their reading (the lower envelope made them later by up to the latency it
+    had allowed to rise), never later than the receipt, never more than 2 s before it."""
+    dec = TelemetryDecoder(clock=ReceiverClock())
+    out = []
+    for k in range(40):
+        t = 100.0 + k / 30.0  # MAVROS's stamp
+        late = 0.2 if k < 20 else 0.002
+        out += dec.on_message(odom(t - BOOT, lag=0.0), t + late)
+    np.testing.assert_allclose([s.t for s in out], 100.0 + np.arange(40) / 30.0, atol=1e-9)
+    assert dec.stats.stamps_held == 0
+    # a stamp after its receipt is the receipt; one 2 s or more before it too
+    (s,) = dec.on_message(odom(120.0 - BOOT, lag=0.0), 119.5)
+    assert s.t == 119.5
+    (s,) = dec.on_message(odom(121.0 - BOOT, lag=0.0), 124.0)
+    assert s.t == 124.0

@@ -89,6 +89,10 @@ _EXTRA.update(
         "mavros_msgs/srv/SetMode_Response": "bool mode_sent\n",
         "mavros_msgs/srv/CommandBool_Request": "bool value\n",
         "mavros_msgs/srv/CommandBool_Response": "bool success\nuint8 result\n",
+        "mavros_msgs/srv/CommandLong_Request": "bool broadcast\nuint16 command\n"
+        "uint8 confirmation\nfloat32 param1\nfloat32 param2\nfloat32 param3\n"
+        "float32 param4\nfloat32 param5\nfloat32 param6\nfloat32 param7\n",
+        "mavros_msgs/srv/CommandLong_Response": "bool success\nuint8 result\n",
         "mavros_msgs/msg/RCIn": "std_msgs/Header header\nuint8 rssi\nuint16[] channels\n",
         "mavros_msgs/msg/VehicleInfo": "std_msgs/Header header\n"
         "uint8 HAVE_INFO_HEARTBEAT = 1\nuint8 HAVE_INFO_AUTOPILOT_VERSION = 2\n"

@@ -32,6 +32,7 @@ from lpv_sysid.flight.bridge.settings import (
     split_parameters,
 )
 from lpv_sysid.io import messages
+from lpv_sysid.mavlink import px4
 from lpv_sysid.mavlink.bridge import (
     DIAGNOSTICS_TOPIC,
     MODE_CONTROL,
@@ -49,6 +50,7 @@ from lpv_sysid.mavlink.bridge import (
 )
 from lpv_sysid.mavlink.offboard import StatusEvent
 from lpv_sysid.mavlink.preflight import (
+    NOGO,
     PARAMS,
     MavrosEvidence,
     format_table,
@@ -120,6 +122,13 @@ PREFLIGHT_REFRESH_S = 10.0
 #: MAVLink ids of SERVO_OUTPUT_RAW (MAVROS rc/out), asked at ``mavros.rc_out_rate_hz``,
 #: and ATTITUDE_TARGET (MAVROS setpoint_raw/target_attitude: the rate_setpoint echo)
 SERVO_OUTPUT_RAW_ID, ATTITUDE_TARGET_ID = 36, 83
+#: MAVLink id of AUTOPILOT_VERSION: MAVROS 2.10's sys_status plugin requests it only a few
+#: times, 1 s apart, after connecting (a stalled host can miss them all, and its
+#: vehicle_info_get then answers flight_sw_version 0 for good); while the firmware is
+#: unknown the preflight asks PX4 for it through ``<ns>/cmd/command`` (MAV_CMD_REQUEST_MESSAGE)
+#: every PREFLIGHT_ASK_PERIOD_S, one call at a time -- MAVROS's AUTOPILOT_VERSION handler
+#: stores the answer whenever it arrives
+AUTOPILOT_VERSION_ID = 148
 #: seconds between rate requests until MAVROS answers success (again after a link loss)
 RATE_ASK_PERIOD_S = 5.0
 #: preflight checks that do not refuse the bridge's ``start``: an armed vehicle (airborne
@@ -267,6 +276,8 @@ class BridgeRuntime:
         self._mavros_cfg = mcfg
         self._rejected: dict[str, int] = {}
         self.evidence = MavrosEvidence() if mcfg.preflight else None
+        #: when the pending request for AUTOPILOT_VERSION was made (None: none pending)
+        self._version_asked: float | None = None
         #: MAVLink message id -> rate [Hz] asked through set_message_interval; the ids
         #: MAVROS answered success for (cleared by a link loss)
         self._rates: dict[int, float] = {}
@@ -333,6 +344,12 @@ class BridgeRuntime:
                     f"{ns}/vehicle_info_get",
                     "",
                     messages.MAVROS_TYPES["vehicle_info_get"],
+                ),
+                Endpoint(
+                    "request_message",
+                    f"{ns}/cmd/command",
+                    "",
+                    messages.MAVROS_TYPES["command_long"],
                 ),
             ]
         self.timer_period_s = 1.0 / self.settings.poll_rate_hz
@@ -493,11 +510,24 @@ class BridgeRuntime:
         """The answer of a MAVROS service call the shell made for ``req`` (None: the call
         failed; the core's ``ack_timeout`` then retries)."""
         assert self.mavros_link is not None
+        if req.key == "request_message":
+            self._version_asked = None  # answered (or failed): the next one may go
         if response is None:
             self.mavros_link.on_service_failed(now, req)
             self._log.append(("warn", f"{req.key} {req.fields} got no answer"))
         elif req.key in ("param_get", "vehicle_info"):
             self._preflight_answer(req, response)
+        elif req.key == "request_message":
+            if not bool(getattr(response, "success", False)):
+                n = self._rejected[req.key] = self._rejected.get(req.key, 0) + 1
+                if n & (n - 1) == 0:  # the 1st, 2nd, 4th, ... refusal: no log flood
+                    self._log.append(
+                        (
+                            "warn",
+                            f"AUTOPILOT_VERSION request not accepted ({n} so far): "
+                            f"MAV_RESULT {getattr(response, 'result', '?')}",
+                        )
+                    )
         elif req.key == "message_interval":
             ok = bool(getattr(response, "success", False))
             if ok:
@@ -517,7 +547,9 @@ class BridgeRuntime:
                     messages.params_from_get_parameters(req.fields["names"], response)
                 )
             else:
-                ev.vehicle = messages.vehicle_from_info_response(response) or ev.vehicle
+                info = messages.vehicle_from_info_response(response)
+                if info is not None:  # the newest answer (flight_sw_version 0: not yet)
+                    ev.vehicle = info
         except (LpvSysidError, AttributeError, TypeError, ValueError) as exc:
             self._log.append(("warn", f"{req.key} answer unusable: {exc}"))
 
@@ -545,20 +577,40 @@ class BridgeRuntime:
 
     def _preflight_questions(self, now: float) -> list[ServiceRequest]:
         """While MAVROS is connected: ask what is missing (every PREFLIGHT_ASK_PERIOD_S),
-        refresh the parameters once all are in (every PREFLIGHT_REFRESH_S)."""
+        refresh the parameters once all are in (every PREFLIGHT_REFRESH_S). The vehicle
+        info is asked until it holds the firmware (AUTOPILOT_VERSION); while MAVROS has
+        answered without it, PX4 is asked for it through ``cmd/command``
+        (:data:`AUTOPILOT_VERSION_ID`)."""
         ev, link = self.evidence, self.mavros_link
         if ev is None or link is None or not link.link_up(now):
             return []
         missing = ev.missing_params()
-        complete = not missing and ev.vehicle is not None
-        period = PREFLIGHT_REFRESH_S if complete else PREFLIGHT_ASK_PERIOD_S
+        firmware = ev.firmware_known()
+        period = PREFLIGHT_REFRESH_S if not missing and firmware else PREFLIGHT_ASK_PERIOD_S
         if now - self._t_asked < period:
             return []
         self._t_asked = now
         out = [ServiceRequest("param_get", {"names": missing or list(PARAMS)}, 0)]
-        if ev.vehicle is None:
+        if not firmware:
             out.append(
                 ServiceRequest("vehicle_info", {"sysid": 0, "compid": 0, "get_all": False}, 0)
+            )
+        # one call at a time; one MAVROS never answered (service not up yet) is made again
+        asked = self._version_asked
+        pending = asked is not None and now - asked < PREFLIGHT_REFRESH_S
+        if not firmware and ev.vehicle is not None and not pending:
+            self._version_asked = now
+            out.append(
+                ServiceRequest(
+                    "request_message",
+                    {
+                        "broadcast": False,
+                        "command": px4.MAV_CMD_REQUEST_MESSAGE,
+                        "confirmation": 0,
+                        "param1": float(AUTOPILOT_VERSION_ID),
+                    },
+                    0,
+                )
             )
         return out
 
@@ -590,9 +642,16 @@ class BridgeRuntime:
             return ""
         # a refusal is acted on (a parameter set, MAVROS reconnected): ask again
         ev.params.clear()
+        ev.vehicle = None
         self._t_asked = -math.inf
-        bad = "; ".join(f"{c.name}: {c.value}" for c in blocking if c.verdict == "NO-GO")
-        return f"start refused: preflight NO-GO through MAVROS ({bad})"
+        nogo = [c for c in blocking if c.verdict == NOGO]
+        # judged values first; evidence not received yet is named as missing (MAVROS may
+        # still deliver it: a retry of the start can pass; a judged NO-GO needs a fix)
+        nogo.sort(key=lambda c: c.missing)
+        bad = "; ".join(f"{c.name}: {c.value}" for c in nogo)
+        absent = [c.name for c in nogo if c.missing]
+        tail = f"; evidence missing so far: {', '.join(absent)}" if absent else ""
+        return f"start refused: preflight NO-GO through MAVROS ({bad}){tail}"
 
     def _drain(self, now: float) -> Output:
         """transport mavros with mavros_msgs: the link's setpoints as MAVROS messages and its

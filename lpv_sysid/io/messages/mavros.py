@@ -44,6 +44,7 @@ NAV_SAT_FIX = "sensor_msgs/msg/NavSatFix"  # global_position plugin: GPS_RAW_INT
 ESTIMATOR_STATUS = "mavros_msgs/msg/EstimatorStatus"  # sys_status plugin: ESTIMATOR_STATUS
 SET_MODE = "mavros_msgs/srv/SetMode"
 COMMAND_BOOL = "mavros_msgs/srv/CommandBool"
+COMMAND_LONG = "mavros_msgs/srv/CommandLong"  # command plugin: COMMAND_LONG, PX4's ACK
 
 #: the mavros_msgs types of the MAVROS transport, by role
 MAVROS_TYPES = {
@@ -55,6 +56,7 @@ MAVROS_TYPES = {
     "home_position": HOME_POSITION,
     "set_mode": SET_MODE,
     "command_bool": COMMAND_BOOL,
+    "command_long": COMMAND_LONG,
     "rc_in": RC_IN,
     "vehicle_info_get": VEHICLE_INFO_GET,
     "message_interval": MESSAGE_INTERVAL,

@@ -34,6 +34,7 @@ from lpv_sysid.mavlink.offboard import (
     StatusEvent,
 )
 from lpv_sysid.mavlink.telemetry import (
+    ReceiverClock,
     RotorEstimateConfig,
     StateSample,
     TelemetryDecoder,
@@ -178,11 +179,14 @@ class BridgeCore:
             with_motor_output_streams(config.link, config.rotor_estimate)
         )
         # telemetry only from the link's target (configured, or the first autopilot HEARTBEAT)
+        # a link whose messages are stamped on this clock already (MAVROS: ROS time) keeps
+        # the stamps; PX4's boot times are mapped (telemetry/clock.py)
         self.telemetry = TelemetryDecoder(
             config.n_rotors,
             config.telemetry_max_age,
             rotor_estimate=config.rotor_estimate,
             source_filter=True,
+            clock=ReceiverClock() if getattr(self.link, "RECEIVER_CLOCK", False) else None,
         )
         self.transport = config.transport()
         self.machine = OffboardMachine(config.offboard, self.transport.neutral())

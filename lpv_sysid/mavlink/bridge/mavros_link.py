@@ -219,6 +219,9 @@ class MavrosLink:
 
     #: (system, component) of the synthetic messages (MAVROS's target autopilot)
     TARGET = (1, 1)
+    #: the telemetry's times are MAVROS's header stamps, ROS time -- the bridge's clock
+    #: already (BridgeCore keeps them: telemetry.ReceiverClock)
+    RECEIVER_CLOCK = True
 
     def __init__(self, state_timeout: float = 3.0, namespace: str = "/mavros") -> None:
         self.state_timeout = float(state_timeout)

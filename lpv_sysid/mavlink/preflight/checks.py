@@ -85,7 +85,9 @@ def judge(
         )
         return out
     if hb is None:
-        out.append(Check("link", "no autopilot HEARTBEAT", "HEARTBEAT received", NOGO))
+        out.append(
+            Check("link", "no autopilot HEARTBEAT", "HEARTBEAT received", NOGO, missing=True)
+        )
         return out
     out.append(
         Check("link", f"HEARTBEAT from system {hb.get_srcSystem()}", "HEARTBEAT received", GO)
@@ -171,6 +173,7 @@ def judge(
                 "no AUTOPILOT_VERSION",
                 f"PX4 >= {MIN_VERSION[0]}.{MIN_VERSION[1]}",
                 NOGO,
+                missing=True,
             )
         )
     else:
@@ -198,7 +201,7 @@ def judge(
             )
     t = params.get("COM_OF_LOSS_T")
     if t is None:
-        out.append(Check("COM_OF_LOSS_T", "missing", "0 < t <= 2 s", NOGO))
+        out.append(Check("COM_OF_LOSS_T", "missing", "0 < t <= 2 s", NOGO, missing=True))
     else:
         out.append(
             Check(
@@ -218,6 +221,7 @@ def judge(
             "missing" if d is None else f"{float(d):g} s",
             "> 0 s",
             GO if d is not None and float(d) > 0 else WARN,
+            missing=d is None,
         )
     )
     out += health_checks(facts, demands, battery_needed_pct)
@@ -226,7 +230,9 @@ def judge(
         text = "missing" if v is None else f"{v}"
         if name == "COM_RC_IN_MODE" and v is not None and int(v) in set(px4.RcInMode):
             text = f"{int(v)} ({px4.RcInMode(int(v)).name.lower().replace('_', ' ')})"
-        out.append(Check(name, text, "(information)", GO if v is not None else WARN))
+        out.append(
+            Check(name, text, "(information)", GO if v is not None else WARN, missing=v is None)
+        )
     for quantity, sources in (("attitude", ATTITUDE_SOURCES), ("position", POSITION_SOURCES)):
         have = [s for s in sources if s in seen]
         if not have:
@@ -237,6 +243,7 @@ def judge(
                     sources[0],
                     NOGO,
                     f"none of {', '.join(sources)}: no state for the bridge",
+                    missing=True,
                 )
             )
         elif have[0] != sources[0]:
@@ -257,6 +264,7 @@ def judge(
             "received" if "HIGHRES_IMU" in seen else "not received",
             "received",
             GO if "HIGHRES_IMU" in seen else WARN,
+            missing="HIGHRES_IMU" not in seen,
         )
     )
     out.append(_rotor_check(facts, cfg))

@@ -74,6 +74,7 @@ def _battery(battery: Any, needed: float | None) -> Check:
             expected,
             NOGO,
             "no battery state (none received, or remaining -1)",
+            missing=battery is None,
         )
     pct = int(battery.battery_remaining)
     value = f"{pct} % ({battery.voltage_battery / 1000:.2f} V)"
@@ -102,16 +103,24 @@ def _gps(gps: Any, est: Any) -> Check:
             expected,
             WARN,
             "no GPS fix, but the EKF has a horizontal position (vision / flow): fine indoors",
+            missing=gps is None,
         )
     return Check(
-        "GPS", value, expected, NOGO, "no GPS fix and no other horizontal position: wait for a fix"
+        "GPS",
+        value,
+        expected,
+        NOGO,
+        "no GPS fix and no other horizontal position: wait for a fix",
+        missing=gps is None,
     )
 
 
 def _ekf(est: Any) -> Check:
     expected = "attitude, velocity, position valid"
     if est is None:
-        return Check("EKF", "no ESTIMATOR_STATUS", expected, NOGO, "EKF health unknown")
+        return Check(
+            "EKF", "no ESTIMATOR_STATUS", expected, NOGO, "EKF health unknown", missing=True
+        )
     flags = int(est.flags)
     missing = [name for bit, name in EKF_NEEDED.items() if not flags & bit]
     bad = [name for bit, name in EKF_BAD.items() if flags & bit]
@@ -138,6 +147,7 @@ def _home(home: Any) -> Check:
             NOGO,
             "no HOME_POSITION: the envelope's floor, ceiling and geofence are relative to "
             "home; wait until PX4 sets it (GPS / EKF origin)",
+            missing=True,
         )
     lat, lon, alt = home.latitude * 1e-7, home.longitude * 1e-7, home.altitude * 1e-3
     return Check("home position", f"{lat:.6f}, {lon:.6f}, {alt:.1f} m", "set", GO)
@@ -149,12 +159,25 @@ def _limits(params: dict, demands: FlightDemands | None) -> list[Check]:
         v = params.get(name)
         if demands is None:
             text = "missing" if v is None else f"{float(v):g} {unit}"
-            out.append(Check(name, text, "(information)", GO if v is not None else WARN))
+            out.append(
+                Check(
+                    name, text, "(information)", GO if v is not None else WARN, missing=v is None
+                )
+            )
             continue
         need = getattr(demands, key)
         expected = f">= {need:.2f} {unit}"
         if v is None or not math.isfinite(float(v)):
-            out.append(Check(name, "missing", expected, NOGO, f"cannot check the {what} limit"))
+            out.append(
+                Check(
+                    name,
+                    "missing",
+                    expected,
+                    NOGO,
+                    f"cannot check the {what} limit",
+                    missing=v is None,
+                )
+            )
         elif float(v) + 1e-6 < need:
             fix = math.ceil(need * 10.0) / 10.0
             out.append(

@@ -10,7 +10,10 @@ preflight fact               MAVROS source
 HEARTBEAT                    ``/mavros/state`` (mode, armed) + ``vehicle_info_get``
                              (autopilot, MAV_TYPE, system id)
 AUTOPILOT_VERSION            ``vehicle_info_get`` (``flight_sw_version``,
-                             ``capabilities``; MAVROS requests it on connection)
+                             ``capabilities``; MAVROS requests it on connection, a
+                             few times only: while ``flight_sw_version`` is 0 the
+                             bridge asks PX4 for it through ``cmd/command``,
+                             MAV_CMD_REQUEST_MESSAGE)
 PARAM_VALUE                  the FCU parameters MAVROS's param plugin mirrors as ROS
                              parameters of ``<ns>/param`` (``get_parameters``)
 RC_CHANNELS                  ``/mavros/rc/in`` (channel count, RSSI)
@@ -46,7 +49,10 @@ armed state come from ``/mavros/state`` only while it is fresh (the link's
 SYS_STATUS (PX4's own stick verdict) is not used: stick input is decided from
 COM_RC_IN_MODE and RC_CHANNELS as on a link without SYS_STATUS. A fact MAVROS has not
 delivered yet is missing, with the verdict the MAVLink preflight gives it (NO-GO for the
-HEARTBEAT, the firmware and COM_OF_LOSS_T / COM_OBL_RC_ACT).
+HEARTBEAT, the firmware and COM_OF_LOSS_T / COM_OBL_RC_ACT) and its check marked
+``missing``. A VehicleInfo answered before MAVROS had PX4's AUTOPILOT_VERSION carries the
+HEARTBEAT fields and ``flight_sw_version`` 0: the firmware stays missing
+(:meth:`MavrosEvidence.firmware_known`) until a later answer has it.
 """
 
 from __future__ import annotations
@@ -89,6 +95,11 @@ class MavrosEvidence:
 
     def missing_params(self) -> list[str]:
         return [p for p in PARAMS if p not in self.params]
+
+    def firmware_known(self) -> bool:
+        """MAVROS's VehicleInfo holds PX4's AUTOPILOT_VERSION (``flight_sw_version`` set;
+        0 until MAVROS has received it)."""
+        return self.vehicle is not None and int(self.vehicle.flight_sw_version) != 0
 
     def put(self, name: str, value: Any, now: float) -> None:
         """Fact ``name`` (a field of :data:`EXPIRING`) received at ``now``."""
@@ -193,7 +204,7 @@ def facts_from_mavros(ev: MavrosEvidence) -> Facts:
     v = ev.vehicle
     hb = _Heartbeat(v, ev.mode, ev.armed) if v is not None and ev.mode is not None else None
     version = None
-    if v is not None and int(v.flight_sw_version) != 0:
+    if ev.firmware_known():
         version = _Version(int(v.flight_sw_version), int(v.capabilities))
     facts = Facts(hb=hb, version=version, params=dict(ev.params), seen=set(ev.seen))
     if ev.rc_in is not None:
@@ -230,6 +241,7 @@ def mavros_checks(
                 f"no answer from {namespace}/vehicle_info_get",
                 "autopilot, type, firmware",
                 NOGO,
+                missing=True,
             )
         )
     return out + judge(

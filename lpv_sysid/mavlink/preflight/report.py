@@ -17,6 +17,9 @@ class Check:
     expected: str
     verdict: str
     note: str = ""  # reason and fix (printed below the table)
+    #: the verdict is the one of a fact not received (yet): no HEARTBEAT, AUTOPILOT_VERSION,
+    #: parameter, stream or health message so far -- not a judged value
+    missing: bool = False
 
 
 def verdict(checks: list[Check]) -> bool:

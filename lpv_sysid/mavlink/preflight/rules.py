@@ -49,7 +49,12 @@ def _obl_check(a: float | int | None, sticks: bool, sticks_txt: str) -> Check:
     expected = "Return/Land/Hold, or sticks"
     if a is None:
         return Check(
-            "COM_OBL_RC_ACT", "missing", expected, NOGO, f"parameter not received; {HOLD_FIX}"
+            "COM_OBL_RC_ACT",
+            "missing",
+            expected,
+            NOGO,
+            f"parameter not received; {HOLD_FIX}",
+            missing=True,
         )
     try:
         act = px4.OblAction(int(a))
@@ -113,6 +118,7 @@ def _rotor_check(facts: Facts, cfg: RotorEstimateConfig) -> Check:
             NOGO,
             f"no ESC telemetry and {why}: rotor_speeds cannot be published "
             "(identification and the controller runtime need them)",
+            missing=cfg.enabled and not facts.motor_outputs,
         )
     src = usable[0]
     m = facts.motor_outputs[src]

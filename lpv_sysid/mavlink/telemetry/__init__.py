@@ -45,7 +45,7 @@ Telemetry hygiene
 
 from __future__ import annotations
 
-from lpv_sysid.mavlink.telemetry.clock import VehicleClock
+from lpv_sysid.mavlink.telemetry.clock import ReceiverClock, VehicleClock
 from lpv_sysid.mavlink.telemetry.decoder import TelemetryDecoder
 from lpv_sysid.mavlink.telemetry.provenance import (
     SIM_MARKER,
@@ -87,6 +87,7 @@ __all__ = [
     "StateSample",
     "TelemetryDecoder",
     "VEHICLE_KINDS",
+    "ReceiverClock",
     "VehicleClock",
     "VehicleRecord",
     "euler_to_quat",

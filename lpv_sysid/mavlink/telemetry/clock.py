@@ -17,6 +17,14 @@ mapped here, each keeps its own time and its real age.
 A vehicle time that goes back by more than :data:`RESET_JUMP_S` is a reboot: the
 estimate starts again.
 
+:class:`ReceiverClock` is for sample times already on the receiver's clock: MAVROS stamps
+its messages with ROS time (the FCU time through its timesync offset, or its receipt time
+with ``timesync_rate`` 0, MAVROS 2's default) -- the same clock as the bridge's. Mapped
+through the lower envelope they got the rise allowance as an error: a bridge stalled for a
+while raised the offset (stamps later than MAVROS's, the age under-stated) and the next
+prompt sample dropped it again, a stamp up to 95 ms before its predecessor (measured in
+the real phase-2 graph at load 15: the controller's out_of_order abort).
+
 Example
 -------
 >>> c = VehicleClock()
@@ -69,3 +77,15 @@ class VehicleClock:
         if t < received - MAX_AGE_S:
             return received
         return min(t, received)
+
+
+class ReceiverClock(VehicleClock):
+    """Sample times already on the receiver's clock (module docstring): kept as they are,
+    never later than the sample's receipt nor more than :data:`MAX_AGE_S` before it."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.offset = 0.0
+
+    def observe(self, now: float, t_vehicle: float) -> None:
+        """Nothing to estimate: the offset is 0."""
