@@ -147,7 +147,9 @@ def main(argv=None) -> None:
             "studies",
             "Studies on both cores (issue 27 item 4)",
             f".venv/bin/python -m bench.bench_studies --repeat {args.repeat} --airframes "
-            f"{args.airframes} --full-box {args.full_box} --workers {args.workers}",
+            f"{args.airframes} --full-box {args.full_box} --workers {args.workers}"
+            + (" --cpu-phases" if args.cpu_phases else "")
+            + (" --skip-coverage" if args.skip_coverage else ""),
         )
         cases = {
             f"verify --full-box {args.full_box}": lambda w, out: [
