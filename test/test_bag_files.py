@@ -20,6 +20,7 @@ import pytest
 from lpv_sysid.errors import BagError
 from lpv_sysid.io import bag as bg
 from lpv_sysid.io import messages as m
+from lpv_sysid.io.files import atomic_write_text
 
 F = m.MsgFactory.rosbags()
 T0 = 1_700_000_000_000_000_000
@@ -154,7 +155,7 @@ def test_atomic_write_replaces_a_fifo_left_at_its_tmp_name(tmp_path):
     target = tmp_path / "metadata.yaml"
     tmp = tmp_path / "metadata.yaml.tmp"
     os.mkfifo(tmp)
-    got = bounded(lambda: bg.atomic_write_text(target, "a: 1\n"), tmp)
+    got = bounded(lambda: atomic_write_text(target, "a: 1\n"), tmp)
     assert got is None
     assert target.read_text() == "a: 1\n"
     assert not tmp.exists()
@@ -164,7 +165,7 @@ def test_atomic_write_does_not_follow_a_symlink_at_its_tmp_name(tmp_path):
     victim = tmp_path / "victim.txt"
     victim.write_text("keep")
     (tmp_path / "out.yaml.tmp").symlink_to(victim)
-    bg.atomic_write_text(tmp_path / "out.yaml", "new\n")
+    atomic_write_text(tmp_path / "out.yaml", "new\n")
     assert victim.read_text() == "keep"
     assert (tmp_path / "out.yaml").read_text() == "new\n"
 

@@ -19,7 +19,7 @@ from lpv_sysid.models.quadrotor import QuadrotorParams
 from lpv_sysid.studies.coverage import AirframeCoverage, VertexCoverage
 from lpv_sysid.synthesis.uncertainty_set import load_models
 from lpv_sysid.synthesis.verify import VerifyReport
-from lpv_sysid.synthesis.verify.box import check_joint_claim
+from lpv_sysid.synthesis.verify.box import _sidak_stored_k, check_joint_claim
 
 
 def test_sidak_half_width_solves_its_defining_equation():
@@ -38,6 +38,23 @@ def test_sidak_half_width_solves_its_defining_equation():
         assert k > joint_k(408, 0.95)  # heavier tails, wider
     with pytest.raises(ConfigError):
         joint_k(10, 1.0)
+
+
+def test_verifier_sidak_width_is_scipy_stats_bit_for_bit():
+    """The verifier's own Sidak half-width (scipy.special, no scipy.stats import) is the
+    scipy.stats formula exactly, also where a quantile reaches the end of the support."""
+    for p in (1, 6, 528, 10**6):
+        for prob in (0.5, 0.95, 0.999, 1 - 1e-17):
+            for dof in (None, 0.5, 5.0, 58.0, 1e5, np.inf):
+                for k in (1.0, 3.0, 9.0):  # norm.cdf(9) == 1: t.ppf = inf
+                    a = 1.0 - prob ** (1.0 / p)
+                    if dof is None:
+                        want = float(norm.isf(a / 2.0))
+                    else:
+                        with np.errstate(invalid="ignore"):  # inf / inf at a = 0
+                            want = float(t.isf(a / 2.0, dof) / (t.ppf(norm.cdf(k), dof) / k))
+                    got = _sidak_stored_k(p, prob, dof, k)
+                    assert got == want or (np.isnan(got) and np.isnan(want)), (p, prob, dof, k)
 
 
 def test_sidak_holds_for_correlated_gaussian_estimates():

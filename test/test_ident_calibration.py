@@ -46,6 +46,21 @@ def test_t_factor_is_the_student_t_quantile_ratio():
     assert ee.default_dof(3000, 0.01, 100.0) == int(0.4 * 3000 ** (2 / 3))
 
 
+def test_upper_quantile_is_scipy_stats_isf_bit_for_bit():
+    """upper_quantile (scipy.special, no scipy.stats import) gives scipy.stats' own numbers,
+    exactly, also at the ends of the support and for invalid dof (the joint box widths and the
+    t-factors recorded in the model files must not move)."""
+    qs = (0.0, 5e-324, 1e-300, 1e-9, 0.01, 0.025, 0.2, 0.4999, 0.7, 1.0 - 1e-16, 1.0)
+    for q in qs:
+        for dof in (None, 0.0, -1.0, math.nan, 0.5, 1.0, 2.5, 27.0, 1e3, 1e6, math.inf):
+            want = float(norm.isf(q) if dof is None else student_t.isf(q, dof))
+            got = ee.upper_quantile(q, dof)
+            assert got == want or (math.isnan(got) and math.isnan(want)), (q, dof, got, want)
+    for k in (1e-3, 0.5, 3.0, 3.84, 8.3, 10.0, 40.0):  # ndtr(k) == 1 from k ~ 8.3: t.ppf = inf
+        for dof in (0.5, 1.0, 5.0, 58.0, 1e5):
+            assert ee.t_factor(k, dof) == float(student_t.ppf(norm.cdf(k), dof) / k), (k, dof)
+
+
 def _coloured_regression(rng, n=3000, rho=0.95):
     """y = H theta + v with AR(1) regressors and AR(1) errors (both strongly coloured)."""
     H = np.column_stack(

@@ -83,3 +83,20 @@ def test_verify_out_equal_to_the_sidecar_a_certificate_refers_to_is_refused(tmp_
     before = side.read_bytes()
     rc, err = _run(["verify", "--gains", str(g), "--models", str(g), "--out", str(side)], capsys)
     assert rc == 2 and "(sidecar of --gains" in err and side.read_bytes() == before
+
+
+def test_referenced_files_finds_a_sidecar_key_spelled_with_an_escape(tmp_path):
+    """The text pre-check of referenced_files (no ``sidecar``, no backslash: not parsed) keeps
+    every gains file: a key written ``"\\x73idecar"`` still names the sidecar; a file without
+    the entry (a models file) refers to nothing."""
+    from lpv_sysid.io.formats import referenced_files
+
+    text = SAMPLE_GAINS.read_text()
+    assert text.count("  sidecar:") == 1
+    g = tmp_path / "gains.yaml"
+    g.write_text(text.replace("  sidecar:", '  "\\x73idecar":'))
+    assert "sidecar" not in g.read_text()  # only the escape spells it
+    assert referenced_files(g) == [tmp_path / "gains.cert.npz"]
+    plain = tmp_path / "plain.yaml"
+    plain.write_text("certificate: {other: {file: x.npz}}\n")
+    assert referenced_files(plain) == []

@@ -107,6 +107,36 @@ def test_full_box_monte_carlo_on_two_workers_equals_the_serial_run(tmp_path):
     assert serial.worst.norm == pytest.approx(1 / (1 - 0.2), rel=1e-5)
 
 
+def test_full_box_draws_are_the_per_sample_stream(tmp_path):
+    """The draws come in two Generator.random blocks; the oracle is the per-sample loop they
+    replaced (v_d of an interior sample, then each vertex's elements): every sample's v_d --
+    which sits after all the earlier samples' element draws in the stream -- is the loop's."""
+    from lpv_sysid.synthesis.uncertainty_set import load_models
+    from lpv_sysid.synthesis.verify import full_box_intervals
+
+    gains, models = _toy(tmp_path)
+    fb = verify_files(gains, models, n_random=1, seed=7, full_box=40, workers=1).full_box
+    model, raw = load_models(models, {})
+    boxes, _, _ = full_box_intervals(raw, None, "stored")
+    rng = np.random.default_rng(7)
+    want = []
+    for k in range(40):
+        if k < len(model.vertices):
+            want.append(np.asarray(model.vertices[k], dtype=float))
+        else:
+            want.append(model.vmin + rng.random(model.vmin.size) * (model.vmax - model.vmin))
+        for b in boxes:
+            rng.random(b.lower.size)
+    got = [s.v_d for s in fb.samples[:40]]
+    assert len(model.vertices) < 40 and all(np.array_equal(g, w) for g, w in zip(got, want))
+    assert [s.where.split()[-1] for s in fb.samples[:4]] == [
+        "uniform",
+        "corner-draw",
+        "uniform",
+        "corner-draw",
+    ]
+
+
 def test_coverage_study_on_two_workers_equals_the_serial_run():
     from lpv_sysid.control.baseline import BaselineGains
     from lpv_sysid.ident import vertex as vx

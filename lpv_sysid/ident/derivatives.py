@@ -42,7 +42,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import savgol_coeffs, savgol_filter
 
 from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError
@@ -169,6 +168,8 @@ def savgol_smooth_differentiate(
     x: np.ndarray, dt: float, window_s: float = 0.21, polyorder: int = 4
 ) -> tuple[np.ndarray, np.ndarray]:
     """Savitzky-Golay smoothing (``deriv=0``) and differentiation (``deriv=1``)."""
+    from scipy.signal import savgol_filter  # here: scipy.signal costs ~0.2 s to import
+
     xs, squeeze = _as_2d(x, "x")
     w = _savgol_window(window_s, dt, polyorder, xs.shape[0])
     smooth = savgol_filter(xs, w, polyorder, deriv=0, axis=0, mode="interp")
@@ -186,6 +187,8 @@ def savgol_gain(
     ``deriv=1``: ``H1(f) / (j 2 pi f)`` (1 means an unbiased derivative); ``deriv=0``: ``H0(f)``.
     The filter is symmetric (deriv 0) or antisymmetric (deriv 1), so the result is real.
     """
+    from scipy.signal import savgol_coeffs
+
     f = np.asarray(f, dtype=float)
     c = savgol_coeffs(window, polyorder, deriv=deriv, delta=dt, use="dot")
     m = (window - 1) // 2
@@ -216,6 +219,8 @@ def smooth(x: np.ndarray, dt: float, config: DerivativeConfig = DerivativeConfig
     if config.method == "fourier":
         return _fourier(x, dt, config.f_cut, config.taper, False)[0]
     if config.method == "savgol":
+        from scipy.signal import savgol_filter
+
         xs, squeeze = _as_2d(x, "x")
         w = _savgol_window(config.window_s, dt, config.polyorder, xs.shape[0])
         smooth = savgol_filter(xs, w, config.polyorder, deriv=0, axis=0, mode="interp")

@@ -18,9 +18,9 @@ and the others are unknown (functions of the aerodynamic parameters K).  Per row
   and a rank-deficient ``H_i`` (regressor never excited) raises :class:`SolverError` naming
   the row and columns instead of returning a minimum-norm guess.
 
-Uncertainty (white, ``residual_acf`` and ``ewc`` covariance estimates, :func:`t_factor`):
-:mod:`~lpv_sysid.ident.equation_error.covariance`; solving the rows and their joint covariance
-(:class:`RowFit`, :func:`fit_row`, :func:`solve_rows`, ``R^2`` per row):
+Uncertainty (white, ``residual_acf`` and ``ewc`` covariance estimates, :func:`t_factor`,
+:func:`upper_quantile`): :mod:`~lpv_sysid.ident.equation_error.covariance`; solving the rows
+and their joint covariance (:class:`RowFit`, :func:`fit_row`, :func:`solve_rows`, ``R^2`` per row):
 :mod:`~lpv_sysid.ident.equation_error.solve`.  :mod:`~lpv_sysid.ident.equation_error.regression`
 builds the row designs from the state equation and assembles ``A, B``.
 
@@ -29,7 +29,12 @@ All inputs are plain arrays; building them from bags is :mod:`lpv_sysid.ident.da
 
 from __future__ import annotations
 
-from lpv_sysid.ident.equation_error.covariance import CovarianceConfig, default_dof, t_factor
+from lpv_sysid.ident.equation_error.covariance import (
+    CovarianceConfig,
+    default_dof,
+    t_factor,
+    upper_quantile,
+)
 from lpv_sysid.ident.equation_error.regression import (
     Fit,
     RowDesign,
@@ -53,4 +58,5 @@ __all__ = [
     "row_designs",
     "solve_rows",
     "t_factor",
+    "upper_quantile",
 ]

@@ -7,7 +7,6 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from lpv_sysid.configuration import fields as cf
 from lpv_sysid.errors import ConfigError, SolverError
@@ -252,6 +251,8 @@ def output_error(
             if s > 0 and np.isfinite(s):
                 lo[i] = (x0[i] - cfg.bounds_sigma * s) / xs[i]
                 hi[i] = (x0[i] + cfg.bounds_sigma * s) / xs[i]
+    from scipy.optimize import least_squares  # here: scipy.optimize costs ~0.1 s to import
+
     sol = least_squares(
         resid, x0 / xs, method="trf", x_scale="jac", max_nfev=cfg.max_nfev, bounds=(lo, hi)
     )

@@ -163,16 +163,14 @@ def joint_k(
     Student-t one with ``dof`` degrees of freedom (normal when None) on the raw ``s``,
     returned in units of the stored std. ``joint_k(408, 0.95)`` = 3.84 (normal), against the
     marginal 3 that covers all 408 only with 0.9973^408 ~ 33 %."""
-    from scipy.stats import norm, t
-
-    from lpv_sysid.ident.equation_error import t_factor
+    from lpv_sysid.ident.equation_error import t_factor, upper_quantile
 
     if not 0.0 < probability < 1.0:
         raise ConfigError(f"joint probability must be in (0, 1), got {probability!r}")
     a = 1.0 - probability ** (1.0 / max(int(p_total), 1))
     if dof is not None and not np.isfinite(dof):
         dof = None
-    q = float(norm.isf(a / 2.0) if dof is None else t.isf(a / 2.0, dof))
+    q = upper_quantile(a / 2.0, dof)  # norm.isf / t.isf, without importing scipy.stats
     return q / t_factor(k_stored, dof)
 
 

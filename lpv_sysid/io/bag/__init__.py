@@ -8,8 +8,7 @@ module                     job
 =========================  ===============================================================
 :mod:`.writer`             :class:`BagWriter`: topics, messages, bulk writes, flushes
 :mod:`.writer_recovery`    what a writer saves after a write error (disk full)
-:mod:`.durability`         the writer's lock and disk reserve, :func:`writer_alive`,
-                           :func:`atomic_write_text`
+:mod:`.durability`         the writer's lock and disk reserve, :func:`writer_alive`
 :mod:`.typestore`          the Jazzy typestore, QoS profiles, stored definitions
 :mod:`.cdr.layout`         the CDR block codec (:class:`CdrLayout`, :func:`encode_block`)
 :mod:`.records`            what the readers return (:class:`TopicStats`, ...)
@@ -57,7 +56,6 @@ from lpv_sysid.io.bag.durability import (
     LOCK_FILE,
     RESERVE_BYTES,
     DiskReserve,
-    atomic_write_text,
     now_iso,
     writer_alive,
 )
@@ -81,7 +79,6 @@ __all__ = [
     "RepairReport",
     "STORAGES",
     "UnsafeBagFile",
-    "atomic_write_text",
     "encode_block",
     "jazzy_typestore",
     "merge_topic_stats",

@@ -1,5 +1,6 @@
 """What keeps a recording readable when its process dies: the writer's lock and disk
-reserve, the "is a writer alive?" test and atomic text files.
+reserve and the "is a writer alive?" test (atomic text files:
+:func:`lpv_sysid.io.files.atomic_write_text`).
 
 While a :class:`~lpv_sysid.io.bag.writer.BagWriter` is open, the bag directory holds
 :data:`LOCK_FILE`, a :class:`DiskReserve`: locked with ``flock`` (the kernel drops the lock
@@ -116,37 +117,6 @@ def writer_alive(lock_path) -> bool:
     finally:
         os.close(fd)  # closing drops our own lock, if we got it
     return False
-
-
-def atomic_write_text(path, text: str, fsync: bool = False) -> None:
-    """Write ``text`` to ``path`` through ``path.tmp`` + rename: readers see the old or the
-    new file, never half of one, and a failed write (disk full) leaves no ``.tmp`` behind.
-    Raises OSError."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    # the .tmp name is ours: a leftover (or a FIFO / symlink planted there) is removed and
-    # the file created exclusively, so the write never blocks on a FIFO or follows a link
-    with contextlib.suppress(FileNotFoundError):
-        tmp.unlink()
-    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | os.O_CLOEXEC
-    try:
-        with os.fdopen(os.open(tmp, flags, 0o666), "w", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
-            if fsync:
-                os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-        raise
-    if fsync:
-        with contextlib.suppress(OSError):
-            fd = os.open(path.parent, os.O_RDONLY)
-            try:
-                os.fsync(fd)
-            finally:
-                os.close(fd)
 
 
 def now_iso() -> str:

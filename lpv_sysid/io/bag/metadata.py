@@ -20,8 +20,8 @@ from lpv_sysid.io.bag.bagfiles import (
     read_metadata_text,
     storage_files,
 )
-from lpv_sysid.io.bag.durability import atomic_write_text
 from lpv_sysid.io.bag.records import _FileInfo
+from lpv_sysid.io.files import atomic_write_text
 
 
 def _yaml_load(text: str) -> Any:

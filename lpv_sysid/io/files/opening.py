@@ -31,12 +31,14 @@ the reason an open fails: ``"gains.yaml: cannot read /data/gains.yaml (Permissio
 from __future__ import annotations
 
 import codecs
+import contextlib
 import os
 import stat
 import struct
 import zipfile
 import zlib
 from contextlib import contextmanager
+from pathlib import Path
 from typing import BinaryIO, Iterator, Optional
 
 import numpy as np
@@ -411,3 +413,34 @@ def read_npz(
                 reason = "not a zip archive; truncated or not an .npz file"
             raise ConfigError(f"{label}: not a readable .npz archive ({reason})") from None
     return out
+
+
+def atomic_write_text(path, text: str, fsync: bool = False) -> None:
+    """Write ``text`` to ``path`` through ``path.tmp`` + rename: readers see the old or the
+    new file, never half of one, and a failed write (disk full) leaves no ``.tmp`` behind.
+    Raises OSError."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    # the .tmp name is ours: a leftover (or a FIFO / symlink planted there) is removed and
+    # the file created exclusively, so the write never blocks on a FIFO or follows a link
+    with contextlib.suppress(FileNotFoundError):
+        tmp.unlink()
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | os.O_CLOEXEC
+    try:
+        with os.fdopen(os.open(tmp, flags, 0o666), "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            if fsync:
+                os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+    if fsync:
+        with contextlib.suppress(OSError):
+            fd = os.open(path.parent, os.O_RDONLY)
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)

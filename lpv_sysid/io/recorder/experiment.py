@@ -24,13 +24,12 @@ import yaml
 
 from lpv_sysid.errors import BagError, FileReadError
 from lpv_sysid.io.bag import (
-    atomic_write_text,
     merge_topic_stats,
     now_iso,
     repair_bag,
     writer_alive,
 )
-from lpv_sysid.io.files import check_regular, read_yaml
+from lpv_sysid.io.files import atomic_write_text, check_regular, read_yaml
 
 LOG = logging.getLogger(__name__)
 METADATA_FORMAT = "lpv_sysid/experiment@1"

@@ -12,7 +12,8 @@ from typing import Any, Callable
 import yaml
 
 from lpv_sysid.errors import BagError, ConfigError
-from lpv_sysid.io.bag import DiskReserve, atomic_write_text, now_iso
+from lpv_sysid.io.bag import DiskReserve, now_iso
+from lpv_sysid.io.files import atomic_write_text
 from lpv_sysid.io.messages import qos_of
 from lpv_sysid.io.recorder.config import RecorderConfig
 from lpv_sysid.io.recorder.experiment import (

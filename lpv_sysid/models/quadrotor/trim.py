@@ -7,7 +7,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize
 
 from lpv_sysid.errors import SolverError
 from lpv_sysid.models.quadrotor.params import as_finite
@@ -57,6 +56,8 @@ def trim(model: QuadrotorModel, v_body, yaw_rate: float = 0.0) -> Trim:
         x = [0.0, 0.0, 0.0, z[0], z[1], 0.0, *v_d.tolist(), *w, *z[2:].tolist()]
         xd = model.derivatives_list(x, (model.mix @ (p.a_omega * z[2:] / p.b_omega)).tolist())
         return np.array(xd[6:12]) * np.array([1, 1, 1, 50, 50, 50])
+
+    from scipy import optimize  # here: scipy.optimize costs ~0.1 s to import
 
     try:
         sol = optimize.least_squares(

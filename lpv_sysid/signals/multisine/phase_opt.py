@@ -23,7 +23,6 @@ from typing import Any
 
 import numpy as np
 from scipy import fft as sfft
-from scipy.optimize import minimize
 
 from lpv_sysid.configuration import fields as cf
 
@@ -145,6 +144,8 @@ def clip_phases(n: int, h: np.ndarray, a: np.ndarray, phi: np.ndarray, iters: in
 
 
 def _optimise_from(n, h, a, phi0, options) -> tuple[np.ndarray, float]:
+    from scipy.optimize import minimize  # here: scipy.optimize costs ~0.1 s to import
+
     best_phi, best = clip_phases(n, h, a, phi0, options.clip_iter, options.clip_level)
     z = np.concatenate([best_phi, [0.0]])
     for p in options.p_stages:

@@ -20,13 +20,13 @@ the Monte Carlo is a cross-check of the claim and a miss fails.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional
+from typing import Iterator, Optional
 
 import numpy as np
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.models.lpv import PolytopicModel, multilinear_weights
-from lpv_sysid.parallel import Batch, resolve_workers, start_tasks
+from lpv_sysid.parallel import Batch, map_tasks, resolve_workers, start_tasks
 from lpv_sysid.synthesis.hinf import hinf_norm
 from lpv_sysid.synthesis.verify.intervals import DEFAULT_K_SIGMA, ElementBox
 
@@ -106,7 +106,7 @@ PARALLEL_MIN_SAMPLES = 800
 
 
 def _start_judging(
-    draws: list,
+    samples: "_Samples",
     ctx: tuple,
     R: np.ndarray,
     C: np.ndarray,
@@ -116,25 +116,65 @@ def _start_judging(
     workers: Optional[int],
     backend: str = "process",
 ) -> Batch:
-    """:func:`_frozen` of every draw (:func:`_system`: the frozen system built where it is
-    judged), in chunks on ``workers``; ``ctx``: :func:`_system`'s model data."""
-    n_work = 1 if len(draws) < PARALLEL_MIN_SAMPLES else resolve_workers(workers)
-    size = max(1, -(-len(draws) // (8 * n_work)))  # ~8 chunks per worker: load balance
-    chunks = [
-        ([d[2] for d in draws[i : i + size]], ctx, R, C, gamma, rtol, ts)
-        for i in range(0, len(draws), size)
-    ]
+    """:func:`_frozen` of every random draw (:func:`_system`: the frozen system built where it
+    is judged), in chunks on ``workers``; ``ctx``: :func:`_system`'s model data. A chunk
+    carries its rows of the drawn arrays (a few arrays to pickle, not one per sample and
+    vertex)."""
+    n = samples.n_draws
+    n_work = 1 if n < PARALLEL_MIN_SAMPLES else resolve_workers(workers)
+    size = max(1, -(-n // (8 * n_work)))  # ~8 chunks per worker: load balance
+    chunks = [(samples.rows(i, i + size), ctx, R, C, gamma, rtol, ts) for i in range(0, n, size)]
     return start_tasks(_judge_chunk, chunks, n_work, backend)
 
 
 def _judge_chunk(chunk: tuple) -> list:
     """One chunk of :func:`_start_judging` (module level: it runs in a worker process)."""
-    specs, ctx, R, C, gamma, rtol, ts = chunk
+    block, ctx, R, C, gamma, rtol, ts = chunk
     out = []
-    for spec in specs:
+    for spec in _Samples.specs(block):
         A, B, K = _system(ctx, spec)
         out.append(_frozen(A, B, K, R, C, gamma, rtol, ts))
     return out
+
+
+class _Samples:
+    """The drawn samples in sample order: ``vd`` (n_draws, p) and ``thetas`` (per vertex,
+    (n_draws, elements)) of the random draws, then the extreme corners (``extremes``: (where,
+    v_d, (A, B, K))), each sample i a :func:`_system` spec (:meth:`spec`)."""
+
+    def __init__(self, vd: np.ndarray, thetas: list, n_vertices: int, extremes: list):
+        self.vd, self.thetas, self.extremes = vd, thetas, extremes
+        self.n_draws = vd.shape[0]
+        self.n_vertices = n_vertices
+
+    @property
+    def n(self) -> int:
+        return self.n_draws + len(self.extremes)
+
+    def rows(self, i: int, j: int) -> tuple:
+        """Samples i..j-1 as (v_d rows, theta rows per vertex, extreme systems)."""
+        a, b = min(i, self.n_draws), min(j, self.n_draws)
+        ext = [e[2] for e in self.extremes[max(0, i - self.n_draws) : max(0, j - self.n_draws)]]
+        return self.vd[a:b], [t[a:b] for t in self.thetas], ext
+
+    @staticmethod
+    def specs(block: tuple) -> Iterator[tuple]:
+        vd, thetas, ext = block
+        for k in range(vd.shape[0]):
+            yield ("draw", vd[k], [t[k] for t in thetas])
+        for A, B, K in ext:
+            yield ("system", A, B, K)
+
+    def spec(self, i: int) -> tuple:
+        return next(self.specs(self.rows(i, i + 1)))
+
+    def where(self, i: int) -> tuple:
+        """(where, v_d) of sample i: "corner 3 uniform", "interior 17 corner-draw",
+        "vertex 2 worst-norm corner"."""
+        if i >= self.n_draws:
+            return self.extremes[i - self.n_draws][:2]
+        tag = f"corner {i}" if i < self.n_vertices else f"interior {i}"
+        return f"{tag} {'corner-draw' if i % 2 == 1 else 'uniform'}", self.vd[i]
 
 
 def _system(ctx: tuple, spec: tuple) -> tuple:
@@ -327,9 +367,11 @@ def start_full_box_check(
     vertex (:func:`_worst_corners`). Seeded: same inputs and seed -> same samples.
 
     The samples are drawn first (in this process, in the order above), then judged in chunks
-    on ``workers`` processes (:func:`lpv_sysid.parallel.map_tasks`; ``None``: every core) --
+    on ``workers`` processes (:func:`lpv_sysid.parallel.start_tasks`; ``None``: every core) --
     the same numbers as the serial run for any ``workers``. Fewer than
-    :data:`PARALLEL_MIN_SAMPLES` samples are judged here (starting a worker costs more).
+    :data:`PARALLEL_MIN_SAMPLES` random draws are judged here (starting a worker costs more).
+    The extreme corners are found while the workers run and judged here, one BLAS thread, in
+    :meth:`PendingFullBox.result` (their sample order stays last).
     """
     if len(boxes) != model.n_vertices:
         raise ConfigError(
@@ -364,65 +406,90 @@ def start_full_box_check(
         sum(s == "stored" for b in boxes for s in b.source),
         sum(s == "k*std" for b in boxes for s in b.source),
     )
-    # (where, v_d, spec) in sample order; every random draw happens here, in this order (the
-    # samples do not depend on ``workers``); the systems are built where they are judged
-    draws: list = []
-    for k in range(max(0, int(n))):
-        if k < len(verts):
-            vd, tag = verts[k], f"corner {k}"
-        else:
-            vd, tag = (
-                model.vmin + rng.random(model.vmin.size) * (model.vmax - model.vmin),
-                f"interior {k}",
-            )
-        corner_draw = k % 2 == 1
-        thetas = []
-        for b in boxes:  # every vertex draws (a zero weight skips it in _system)
-            if corner_draw:
-                thetas.append(np.where(rng.random(b.lower.size) < 0.5, b.lower, b.upper))
-            else:
-                thetas.append(b.lower + rng.random(b.lower.size) * (b.upper - b.lower))
-        vd = np.asarray(vd, dtype=float)
-        draws.append(
-            (f"{tag} {'corner-draw' if corner_draw else 'uniform'}", vd, ("draw", vd, thetas))
-        )
-    if extremes and n > 0:
-        for i, vd in enumerate(verts):
-            for name, th in _worst_corners(model.A[i], model.B[i], K[i], R, C, boxes[i], model.ts):
-                Ai, Bi = boxes[i].apply(model.A[i], model.B[i], th)
-                draws.append(
-                    (f"vertex {i} {name}", np.asarray(vd, dtype=float), ("system", Ai, Bi, K[i]))
-                )
-    ctx = (model.A, model.B, K, model.vmin, model.vmax, list(boxes))
-    return PendingFullBox(
-        res,
-        draws,
-        ctx,
-        _start_judging(draws, ctx, R, C, float(gamma), rtol, model.ts, workers, backend),
-        model.ts,
+    # every random draw happens here (the samples do not depend on ``workers``), in sample
+    # order: per sample its interior v_d (p numbers; none for a corner) and then every
+    # vertex's elements (a zero weight skips a vertex in _system). Drawn in two blocks, the
+    # corners' and the interior samples': Generator.random fills doubles one after another,
+    # so the numbers are those of one call per sample and vertex (the loop this replaced),
+    # and the arithmetic below is the same per element. The systems are built where they are
+    # judged.
+    n = max(0, int(n))
+    p = model.vmin.size
+    sizes = [int(b.lower.size) for b in boxes]
+    n_el = sum(sizes)
+    n_c = min(n, len(verts))
+    u_c = rng.random(n_c * n_el).reshape(n_c, n_el)
+    u_i = rng.random((n - n_c) * (p + n_el)).reshape(n - n_c, p + n_el)
+    vd = np.vstack(
+        [
+            np.asarray(verts[:n_c], dtype=float).reshape(n_c, p),
+            model.vmin + u_i[:, :p] * (model.vmax - model.vmin),
+        ]
     )
+    u = np.vstack([u_c, u_i[:, p:]])
+    corner_draw = (np.arange(n) % 2 == 1)[:, None]  # odd samples: a random corner of the box
+    thetas = []
+    off = 0
+    for b, m in zip(boxes, sizes):
+        ub = u[:, off : off + m]
+        off += m
+        thetas.append(
+            np.where(
+                corner_draw,
+                np.where(ub < 0.5, b.lower, b.upper),
+                b.lower + ub * (b.upper - b.lower),
+            )
+        )
+    samples = _Samples(vd, thetas, len(verts), [])
+    ctx = (model.A, model.B, K, model.vmin, model.vmax, list(boxes))
+    judge = (R, C, float(gamma), rtol, model.ts)
+    batch = _start_judging(samples, ctx, *judge, workers, backend)  # the draws, on the workers
+    try:  # meanwhile here: the extreme corners (judged here too, PendingFullBox.result)
+        if extremes and n > 0:
+            for i, vd_i in enumerate(verts):
+                for name, th in _worst_corners(
+                    model.A[i], model.B[i], K[i], R, C, boxes[i], model.ts
+                ):
+                    Ai, Bi = boxes[i].apply(model.A[i], model.B[i], th)
+                    samples.extremes.append(
+                        (f"vertex {i} {name}", np.asarray(vd_i, dtype=float), (Ai, Bi, K[i]))
+                    )
+    except BaseException:
+        batch.cancel()
+        raise
+    return PendingFullBox(res, samples, ctx, batch, judge)
 
 
 class PendingFullBox:
     """A started :func:`start_full_box_check`: :meth:`result` waits for the judged samples."""
 
     def __init__(
-        self, res: FullBoxResult, draws: list, ctx: tuple, batch: Batch, ts: Optional[float]
+        self, res: FullBoxResult, samples: _Samples, ctx: tuple, batch: Batch, judge: tuple
     ):
-        self._res, self._draws, self._ctx, self._batch, self._ts = res, draws, ctx, batch, ts
+        self._res, self._samples, self._ctx, self._batch = res, samples, ctx, batch
+        self._judge = judge  # (R, C, gamma, rtol, ts) of _frozen
+        self._ts = judge[4]
 
     def result(self) -> FullBoxResult:
         res = self._res
-        judged = [r for part in self._batch.results() for r in part]
+        smp = self._samples
+        try:  # the extreme corners here (one BLAS thread, like a worker) while the draws run
+            block = smp.rows(smp.n_draws, smp.n)
+            corners = map_tasks(_judge_chunk, [(block, self._ctx, *self._judge)], 1)[0]
+        except BaseException:
+            self._batch.cancel()
+            raise
+        judged = [r for part in self._batch.results() for r in part] + corners
         worst_key = (-np.inf, -np.inf)
-        worst_spec = None
-        for (where, vd, spec), (norm, absc, ok) in zip(self._draws, judged):
+        worst_i = None
+        for i, (norm, absc, ok) in enumerate(judged):
+            where, vd = self._samples.where(i)
             s = FullBoxSample(where, vd, norm, absc, ok)
             res.samples.append(s)
             key = (absc if self._ts is not None else norm, absc)
             if key > worst_key:
                 worst_key = key
-                res.worst, worst_spec = s, spec
-        if worst_spec is not None:  # the worst system, built again (the same numbers)
-            res.worst_A, res.worst_B, res.worst_K = _system(self._ctx, worst_spec)
+                res.worst, worst_i = s, i
+        if worst_i is not None:  # the worst system, built again (the same numbers)
+            res.worst_A, res.worst_B, res.worst_K = _system(self._ctx, self._samples.spec(worst_i))
         return res

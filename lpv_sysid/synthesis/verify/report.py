@@ -332,7 +332,7 @@ def verification_record(
 def write_verification(path: Path | str, v: Verification) -> Path:
     """Write ``v`` to ``path`` atomically (temporary file + rename: a reader sees the old file
     or the new one); ConfigError naming the file when it cannot be written."""
-    from lpv_sysid.io.bag import atomic_write_text
+    from lpv_sysid.io.files import atomic_write_text
 
     path = Path(path)
     # libyaml's emitter where PyYAML has it: the same text (compared on the demo's
