@@ -16,6 +16,19 @@ shutdown the core hands control back to PX4. ``transport: mavros``:
 setpoint rate. Either way the core's events and status values make the ``status``
 DiagnosticArray (:meth:`BridgeRuntime.status`): the last warn/error event names the level
 and message, every event is logged.
+
+Vehicle record (``transport: mavlink``): every message of the target feeds a
+:class:`~lpv_sysid.mavlink.telemetry.VehicleRecord` on the node clock (the one the fly CLI
+keeps: firmware, PX4 parameter snapshot, battery, site, PX4's boot on that clock); once the
+link is up the parameter list is asked (PARAM_REQUEST_LIST, again after a link loss: PX4 may
+have rebooted) and AUTOPILOT_VERSION (MAV_CMD_REQUEST_MESSAGE, every
+:data:`RECORD_ASK_PERIOD_S` until it arrives, at most :data:`RECORD_ASKS` times), as
+``fly phase2`` does; neither touches the offboard logic (its COMMAND_ACK is not the pending
+command's). The record goes out on ``vehicle_record`` (:meth:`BridgeRuntime.record_output`)
+when it changed materially (``VehicleRecord.revision``), at most every
+:data:`RECORD_MIN_PERIOD_S`, and every :data:`RECORD_REFRESH_S` while the vehicle's clock
+knots grow; the data logger writes it to ``experiment.yaml`` (``vehicle``).
+``transport: mavros``: no MAVLink stream reaches the bridge, so no record (docs/px4_transport.md).
 """
 
 from __future__ import annotations
@@ -55,7 +68,7 @@ from lpv_sysid.mavlink.preflight import (
     mavros_checks,
     verdict,
 )
-from lpv_sysid.mavlink.telemetry import ImuSample, RotorSample, StateSample
+from lpv_sysid.mavlink.telemetry import ImuSample, RotorSample, StateSample, VehicleRecord
 
 #: the package input topics parsed by the shell (``ShellNode.parse_input``: a bad message is
 #: dropped with a throttled warning) before :meth:`BridgeRuntime.on_sample`
@@ -145,6 +158,15 @@ def _use_mavros_msgs(cfg: MavrosConfig, factory: messages.MsgFactory) -> bool:
     return True
 
 
+#: vehicle record: AUTOPILOT_VERSION asked every RECORD_ASK_PERIOD_S [s] until it arrives, at
+#: most RECORD_ASKS times per link-up; the record published at most every
+#: RECORD_MIN_PERIOD_S [s] after a material change and every RECORD_REFRESH_S [s] while the
+#: clock knots grow (PX4's boot offset, battery at the end)
+RECORD_ASK_PERIOD_S, RECORD_ASKS = 2.0, 10
+RECORD_MIN_PERIOD_S, RECORD_REFRESH_S = 1.0, 10.0
+#: MAVLink id of AUTOPILOT_VERSION (MAV_CMD_REQUEST_MESSAGE's param 1)
+AUTOPILOT_VERSION_ID = 148
+
 #: core states in which the orderly shutdown needs no more spinning
 SHUTDOWN_DONE = ("IDLE", "DONE", "FAILED")
 
@@ -203,6 +225,15 @@ class BridgeRuntime:
         self.parsers: Mapping[str, Any] = PARSERS
         #: PX4's ATTITUDE_TARGET (the setpoints it tracks) seen since the last poll
         self._echo: list[tuple[float, Any]] = []
+        #: transport mavlink: the vehicle record (module docstring), fed from :meth:`open`
+        self.vehicle: VehicleRecord | None = None
+        #: the node clock's kind (``utc`` | ``ros_sim_time``): what the record's times are on
+        self.clock_kind = "utc"
+        self._record_asked = False  # PARAM_REQUEST_LIST sent on this link-up
+        self._version_asks = 0
+        self._t_version_asked = -math.inf
+        self._record_sent: tuple[int, int] | None = None  # (revision, boot samples) sent
+        self._t_record_sent = -math.inf
         mcfg = MavrosConfig.from_dict(mavros) if s.transport == "mavros" else None
         if mcfg is not None and _use_mavros_msgs(mcfg, factory):
             self._init_mavros_msgs(mcfg, bridge, sigterm_timeout_s, teardown_margin_s)
@@ -241,6 +272,9 @@ class BridgeRuntime:
                 cfg_b = with_attitude_target_stream(cfg_b)
             self.core = self.link = BridgeCore(cfg_b)
             self.publishers.append(Endpoint("rotor_speeds", "rotor_speeds"))
+            self.publishers.append(
+                Endpoint("vehicle_record", messages.VEHICLE_RECORD_TOPIC, "record")
+            )
             if s.rate_setpoints:
                 self.publishers.append(Endpoint("rate_setpoint", "rate_setpoint"))
             self.subscriptions.append(Endpoint("actuator_command", "actuator_command"))
@@ -379,11 +413,14 @@ class BridgeRuntime:
         """Open the MAVLink link (transport mavlink; MAVROS owns its link); PX4's
         ATTITUDE_TARGET is republished on ``rate_setpoint``."""
         if self.link is not None:
-            from lpv_sysid.flight.vehicle import tap_attitude_target
+            from lpv_sysid.flight.vehicle import tap_attitude_target, tap_messages
 
             self.link.open(now)
             if self.settings.rate_setpoints:
                 tap_attitude_target(self.link.link, lambda t, u: self._echo.append((t, u)))
+            if self.mavros_link is None:
+                rec = self.vehicle = VehicleRecord()
+                tap_messages(self.link.link, lambda t, m: rec.absorb(m, round(t * 1e9)))
 
     # -- inputs ---------------------------------------------------------------------------
     def on_sample(self, key: str, parsed: tuple, now: float) -> Output:
@@ -669,7 +706,50 @@ class BridgeRuntime:
         self._echo.clear()
         if out.events:
             pubs += self.status(now, out.events)
-        return pubs + self._drain(now) + asks
+        self._ask_record(now)
+        return pubs + self._drain(now) + asks + self.record_output(now)
+
+    def _ask_record(self, now: float) -> None:
+        """The vehicle record's questions to PX4 (module docstring): the parameter list once
+        per link-up, AUTOPILOT_VERSION until it arrives."""
+        if self.vehicle is None or self.link is None:
+            return
+        from lpv_sysid.flight.vehicle import request_parameter_list
+        from lpv_sysid.mavlink import px4
+
+        link = self.link.link
+        if not (link.target_system and link.link_up(now)):
+            self._record_asked, self._version_asks = False, 0
+            return
+        if not self._record_asked:
+            self._record_asked = True
+            request_parameter_list(link)
+        if (
+            self.vehicle.version is None
+            and self._version_asks < RECORD_ASKS
+            and now - self._t_version_asked >= RECORD_ASK_PERIOD_S
+        ):
+            self._version_asks += 1
+            self._t_version_asked = now
+            link.command_long(px4.MAV_CMD_REQUEST_MESSAGE, float(AUTOPILOT_VERSION_ID))
+
+    def record_output(self, now: float, force: bool = False) -> Output:
+        """``[("vehicle_record", msg)]`` when the record is due (module docstring; ``force``:
+        now if anything is new, e.g. at shutdown), else ``[]``."""
+        rec = self.vehicle
+        if rec is None or rec.boot_samples == 0:
+            return []
+        key = (rec.revision, rec.boot_samples)
+        if key == self._record_sent:
+            return []
+        changed = self._record_sent is None or rec.revision != self._record_sent[0]
+        age = now - self._t_record_sent
+        if not (force or (changed and age >= RECORD_MIN_PERIOD_S) or age >= RECORD_REFRESH_S):
+            return []
+        self._record_sent, self._t_record_sent = key, now
+        return [
+            ("vehicle_record", messages.vehicle_record_msg(self.f, rec.summary(), self.clock_kind))
+        ]
 
     def _mavros_out(self, out: MavrosOutput, now: float) -> Output:
         assert self.mavros is not None
@@ -707,7 +787,8 @@ class BridgeRuntime:
         if self._shutting_down:
             return []
         self._shutting_down = True
-        return self.status(now, self.core.shutdown(now)) + self._drain(now)
+        out = self.status(now, self.core.shutdown(now)) + self._drain(now)
+        return out + self.record_output(now, force=True)
 
     def shutdown_complete(self) -> bool:
         return self.core.state.value in SHUTDOWN_DONE
