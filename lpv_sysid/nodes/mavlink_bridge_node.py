@@ -6,7 +6,8 @@ decoded telemetry is published on ``state`` (Odometry), ``imu`` and ``rotor_spee
 effort); link and offboard events and the core's status go to ``status``; the vehicle
 record (firmware, PX4 parameters, battery, site, PX4's boot on the node clock) on
 ``vehicle_record`` (std_msgs/String, JSON; reliable, transient local) when it changes
-materially -- the data logger's ``experiment.yaml`` ``vehicle``.
+materially -- the data logger's ``experiment.yaml`` ``vehicle`` (through MAVROS: what
+MAVROS offers, no PX4 boot time; :mod:`lpv_sysid.flight.bridge.runtime`).
 ``velocity_reference`` (phase 1, ``command: velocity``) or ``actuator_command`` (phase 2,
 ``command: attitude_rate``) are forwarded as setpoints. When commands stop for
 ``offboard.input_timeout`` s (e.g. the controller aborted), or on the ``abort`` service, or

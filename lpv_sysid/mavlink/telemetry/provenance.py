@@ -78,6 +78,9 @@ class VehicleRecord:
     #: record sends it again when this moved, not at telemetry rate (the clock knots and the
     #: last battery reading change every second)
     revision: int = 0
+    #: why ``px4_clock`` is empty when no message carries PX4's boot time (e.g. through
+    #: MAVROS), written into it by :meth:`summary`
+    clock_note: str | None = None
 
     def absorb(self, m: Any, receive_ns: int) -> None:
         """One MAVLink message of the target received at ``receive_ns`` (recording clock)."""
@@ -171,13 +174,38 @@ class VehicleRecord:
         lat, lon, alt = (getattr(m, k, None) for k in ("latitude", "longitude", "altitude"))
         if not isinstance(lat, int) or not isinstance(lon, int) or (lat == 0 and lon == 0):
             return
+        self.set_site(
+            "HOME_POSITION",
+            lat * 1e-7,
+            lon * 1e-7,
+            None if not isinstance(alt, int) else alt * 1e-3,
+            [float(getattr(m, k, 0.0)) for k in "xyz"],
+            receive_ns,
+        )
+
+    def set_site(
+        self,
+        source: str,
+        latitude_deg: float,
+        longitude_deg: float,
+        altitude_amsl_m: float | None,
+        local_ned_m,
+        receive_ns: int,
+        **extra: Any,
+    ) -> None:
+        """The autopilot's home: WGS-84 latitude/longitude [deg], altitude AMSL [m] (None:
+        unknown), the local NED home [m]; ``extra``: what the source adds (e.g. MAVROS'
+        ellipsoid height). A latitude and longitude both 0 is no global home: ignored."""
+        if latitude_deg == 0.0 and longitude_deg == 0.0:
+            return
         h = {
-            "source": "HOME_POSITION",
-            "latitude_deg": lat * 1e-7,
-            "longitude_deg": lon * 1e-7,
-            "altitude_amsl_m": None if not isinstance(alt, int) else alt * 1e-3,
-            "local_ned_m": [round(float(getattr(m, k, 0.0)), 3) for k in "xyz"],
+            "source": source,
+            "latitude_deg": float(latitude_deg),
+            "longitude_deg": float(longitude_deg),
+            "altitude_amsl_m": None if altitude_amsl_m is None else float(altitude_amsl_m),
+            "local_ned_m": [round(float(x), 3) for x in local_ned_m],
             "stamp_ns": int(receive_ns),
+            **extra,
         }
         if self.site is None:
             self.site = h
@@ -276,6 +304,7 @@ class VehicleRecord:
                 "boot_ns + rate * PX4 time: the line through them; boot_ns_min: the overall "
                 "minimum",
                 "system_time": self.system_time,
+                **({"note": self.clock_note} if self.clock_note and not self.boot_samples else {}),
             },
             "px4_parameters": dict(sorted(p.items())),
         }

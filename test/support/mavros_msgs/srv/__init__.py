@@ -1,5 +1,5 @@
 """Stand-in mavros_msgs.srv (MAVROS 2.10 definitions): SetMode, CommandBool, VehicleInfoGet,
-MessageInterval."""
+MessageInterval, ParamPull."""
 
 from _rosmsg_standin import make_service as _make
 
@@ -7,4 +7,5 @@ SetMode = _make("mavros_msgs", "SetMode")
 CommandBool = _make("mavros_msgs", "CommandBool")
 VehicleInfoGet = _make("mavros_msgs", "VehicleInfoGet")
 MessageInterval = _make("mavros_msgs", "MessageInterval")
+ParamPull = _make("mavros_msgs", "ParamPull")
 del _make
