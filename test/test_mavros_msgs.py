@@ -1015,3 +1015,5 @@ def test_vehicle_record_through_mavros(preflight):
     fake.run(12.0)
     _, v = messages.vehicle_record_from_msg(fake.setpoints("vehicle_record")[-1])
     assert v["px4_parameters"]["COM_OBL_RC_ACT"] == (1 if preflight else 5)
+    # the battery at the end: refreshed every 10 s (1 Hz readings here)
+    assert v["battery"]["end"]["stamp_ns"] >= round((fake.t - 11.0) * 1e9)

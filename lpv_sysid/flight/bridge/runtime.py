@@ -27,7 +27,7 @@ have rebooted) and AUTOPILOT_VERSION (MAV_CMD_REQUEST_MESSAGE, every
 command's). The record goes out on ``vehicle_record`` (:meth:`BridgeRuntime.record_output`)
 when it changed materially (``VehicleRecord.revision``), at most every
 :data:`RECORD_MIN_PERIOD_S`, and every :data:`RECORD_REFRESH_S` while the vehicle's clock
-knots grow; the data logger writes it to ``experiment.yaml`` (``vehicle``).
+knots or the battery reading move; the data logger writes it to ``experiment.yaml`` (``vehicle``).
 ``transport: mavros`` with mavros_msgs: the same record from what MAVROS offers -- firmware
 and the HIL flag from ``vehicle_info_get``, the parameter snapshot by ``param/pull`` then
 ``param/list_parameters`` + ``param/get_parameters`` (MAVROS publishes no ``param/event``
@@ -246,7 +246,8 @@ class BridgeRuntime:
         self._record_asked = False  # PARAM_REQUEST_LIST sent on this link-up
         self._version_asks = 0
         self._t_version_asked = -math.inf
-        self._record_sent: tuple[int, int] | None = None  # (revision, boot samples) sent
+        #: (revision, boot samples, last battery stamp) of the record sent last
+        self._record_sent: tuple | None = None
         self._t_record_sent = -math.inf
         mcfg = MavrosConfig.from_dict(mavros) if s.transport == "mavros" else None
         if mcfg is not None and _use_mavros_msgs(mcfg, factory):
@@ -892,7 +893,8 @@ class BridgeRuntime:
         rec = self.vehicle
         if rec is None or rec.revision == 0:
             return []
-        key = (rec.revision, rec.boot_samples)
+        last_battery = rec.battery_last["stamp_ns"] if rec.battery_last else None
+        key = (rec.revision, rec.boot_samples, last_battery)
         if key == self._record_sent:
             return []
         changed = self._record_sent is None or rec.revision != self._record_sent[0]
