@@ -84,8 +84,15 @@ def test_transport_selects_the_endpoints_and_the_timer():
     assert rt.timer_period_s == 0.5 / DEFAULTS["offboard.setpoint_rate_hz"]
     assert rt.shutdown_timeout_s is None and rt.link is None
     rt = runtime(transport="mavlink", poll_rate_hz=200.0)
-    # rate_setpoint: PX4's ATTITUDE_TARGET echo (the data logger records it)
-    assert [e.key for e in rt.publishers] == ["state", "imu", "rotor_speeds", "rate_setpoint"]
+    # rate_setpoint: PX4's ATTITUDE_TARGET echo (the data logger records it); vehicle_record:
+    # the vehicle record (transient local: the logger's experiment.yaml)
+    assert [(e.key, e.qos) for e in rt.publishers] == [
+        ("state", ""),
+        ("imu", ""),
+        ("rotor_speeds", ""),
+        ("vehicle_record", "record"),
+        ("rate_setpoint", ""),
+    ]
     assert [e.key for e in rt.subscriptions] == ["velocity_reference", "actuator_command"]
     assert rt.timer_period_s == 1.0 / 200.0 and rt.mavros is None
 

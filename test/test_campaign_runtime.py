@@ -198,3 +198,23 @@ def test_the_bridge_status_from_before_the_start_call_is_no_refusal(files):
     rt.on_timer(1.0 + START_ANSWER_S + 0.1)  # still IDLE: the bridge did not start
     assert rt.campaign.phase != campaign.STARTING
     assert "offboard start failed: bridge IDLE" in rt.campaign.reason
+
+
+def test_the_bridges_vehicle_record_goes_into_the_runs_experiment_yaml(files, tmp_path):
+    """A vehicle_record received before the start is written when the recording opens, a
+    newer one replaces it (the bridge re-publishes on material changes); a bad one is
+    logged and changes nothing."""
+    rt = make(files, out_dir=str(tmp_path / "runs"))
+    first = {"kind": "SITL", "px4_parameters": {"SYS_AUTOSTART": 10040}}
+    rt.on_vehicle_record(messages.vehicle_record_msg(F, first, "utc"))
+    rt.start(1.0)
+    meta = yaml.safe_load((tmp_path / "runs" / "experiment.yaml").read_text())
+    assert meta["vehicle"] == first
+    newer = {"kind": "SITL", "px4_parameters": {"SYS_AUTOSTART": 10040, "COM_OBL_RC_ACT": 5}}
+    rt.on_vehicle_record(messages.vehicle_record_msg(F, newer, "utc"))
+    rt.take_log()
+    rt.on_vehicle_record(F("std_msgs/msg/String", data="{not json"))
+    ((level, text),) = rt.take_log()
+    assert level == "warn" and text.startswith("vehicle_record ignored: vehicle_record: data is")
+    meta = yaml.safe_load((tmp_path / "runs" / "experiment.yaml").read_text())
+    assert meta["vehicle"] == newer

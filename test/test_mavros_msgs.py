@@ -18,9 +18,16 @@ import numpy as np
 import pytest
 
 from mavros_msgs.msg import VehicleInfo
-from mavros_msgs.srv import CommandBool, CommandLong, MessageInterval, SetMode, VehicleInfoGet
-from rcl_interfaces.msg import ParameterValue
-from rcl_interfaces.srv import GetParameters
+from mavros_msgs.srv import (
+    CommandBool,
+    CommandLong,
+    MessageInterval,
+    ParamPull,
+    SetMode,
+    VehicleInfoGet,
+)
+from rcl_interfaces.msg import ListParametersResult, ParameterValue
+from rcl_interfaces.srv import GetParameters, ListParameters
 
 from lpv_sysid.flight.bridge import PARSERS, SPECS, BridgeRuntime
 from lpv_sysid.io import messages
@@ -82,6 +89,7 @@ def vehicle_info(version=(1, 16, 0)):
         type=2,
         capabilities=CAPS,
         flight_sw_version=px4.encode_flight_sw_version(*version),
+        available_info=3,  # HAVE_INFO_HEARTBEAT | HAVE_INFO_AUTOPILOT_VERSION, as MAVROS sets
     )
 
 
@@ -114,6 +122,7 @@ class FakeMavros:
         self.params = dict(PX4_PARAMS)  # what MAVROS's param node has pulled
         self.info = vehicle_info()
         self.asked: list[str] = []
+        self.pulls = 0  # param/pull calls answered
         self.rates: list = []  # (t, set_message_interval request)
         self.requested: list = []  # (t, cmd/command request)
         self.rc_out = True  # publishes /mavros/rc/out (PX4 SITL: SERVO_OUTPUT_RAW)
@@ -141,6 +150,14 @@ class FakeMavros:
                     resp = SetMode.Response(mode_sent=True)
                 elif key == "param_get":
                     self.asked += item.fields["names"]
+                    resp = param_answer(item.fields["names"], self.params)
+                elif key == "param_pull":  # MAVROS' param plugin: PARAM_REQUEST_LIST
+                    self.pulls += 1
+                    resp = ParamPull.Response(success=True, param_received=len(self.params))
+                elif key == "param_list":  # the param node: PX4's names and its own
+                    names = [*self.params, "use_sim_time"] if self.pulls else []
+                    resp = ListParameters.Response(result=ListParametersResult(names=names))
+                elif key == "record_param_get":
                     resp = param_answer(item.fields["names"], self.params)
                 elif key == "message_interval":
                     self.rates.append((self.t, dict(item.fields)))
@@ -285,8 +302,11 @@ def test_endpoints_of_the_mavros_msgs_mode():
         ("set_mode", "/mavros/set_mode", "mavros_msgs/srv/SetMode"),
         ("arming", "/mavros/cmd/arming", "mavros_msgs/srv/CommandBool"),
         ("message_interval", "/mavros/set_message_interval", "mavros_msgs/srv/MessageInterval"),
-        ("param_get", "/mavros/param/get_parameters", "rcl_interfaces/srv/GetParameters"),
+        ("param_pull", "/mavros/param/pull", "mavros_msgs/srv/ParamPull"),
+        ("param_list", "/mavros/param/list_parameters", "rcl_interfaces/srv/ListParameters"),
+        ("record_param_get", "/mavros/param/get_parameters", "rcl_interfaces/srv/GetParameters"),
         ("vehicle_info", "/mavros/vehicle_info_get", "mavros_msgs/srv/VehicleInfoGet"),
+        ("param_get", "/mavros/param/get_parameters", "rcl_interfaces/srv/GetParameters"),
         ("request_message", "/mavros/cmd/command", "mavros_msgs/srv/CommandLong"),
     ]
     rt = runtime(
@@ -294,10 +314,17 @@ def test_endpoints_of_the_mavros_msgs_mode():
         rate_setpoints=False,
         **{"mavros.preflight": False, "mavros.rc_out_rate_hz": 0.0},
     )
-    assert [e.key for e in rt.clients] == ["set_mode", "arming"]
-    assert not {"mavros_rc_in", "mavros_battery", "mavros_estimator"} & {
-        e.key for e in rt.subscriptions
-    }
+    # the vehicle record's questions and its battery stay without the preflight
+    assert [e.key for e in rt.clients] == [
+        "set_mode",
+        "arming",
+        "param_pull",
+        "param_list",
+        "record_param_get",
+        "vehicle_info",
+    ]
+    keys = {e.key for e in rt.subscriptions}
+    assert "mavros_battery" in keys and not {"mavros_rc_in", "mavros_estimator"} & keys
     rt = runtime(command="attitude_rate", **{"mavros.namespace": "/uav1/mavros"})
     pubs = {e.key: e.topic for e in rt.publishers}
     assert pubs["mavros_attitude"] == "/uav1/mavros/setpoint_raw/attitude"
@@ -1010,3 +1037,62 @@ def test_evidence_fresh_copy_drops_only_the_stale_facts():
     assert ev.stale(10.0, 5.0) == ["battery 10.0 s old", "ODOMETRY 9.0 s old"]
     with pytest.raises(ValueError, match="not an expiring"):
         ev.put("mode", None, 0.0)
+
+
+@pytest.mark.parametrize("preflight", [True, False])
+def test_vehicle_record_through_mavros(preflight):
+    """transport mavros: the vehicle record from MAVROS -- firmware and HIL flag from
+    vehicle_info_get, the parameter snapshot by param/pull, list_parameters and
+    get_parameters (the param node's own parameters left out), battery, and the home's
+    latitude/longitude (MAVROS' geo altitude is the ellipsoid height: not AMSL); no PX4
+    boot time (px4_clock empty, with the note why); published once complete, not at the
+    poll rate, and the same mapping as the MAVLink record."""
+    from lpv_sysid.mavlink.telemetry import VehicleRecord
+
+    rt = runtime(command="velocity", **{"mavros.preflight": preflight})
+    fake = FakeMavros(rt)
+    fake.params = {f"P{k:03d}_X": float(k) for k in range(450)} | {
+        "SYS_AUTOSTART": 10040,
+        "SYS_HITL": 2,
+        "MAV_TYPE": 2,
+        **PX4_PARAMS,
+    }
+    fake.info = VehicleInfo(  # as MAVROS 2.10 answered for PX4 v1.16 SITL (measured)
+        available_info=1,  # HEARTBEAT only: no AUTOPILOT_VERSION yet, asked again
+        sysid=1,
+        compid=1,
+        base_mode=29,
+        flight_sw_version=px4.encode_flight_sw_version(1, 16, 0),
+        flight_custom_version="6ea3539157000000",
+        board_version=1,
+        uid=5283920058631409236,
+    )
+    fake.run(3.0)
+    assert fake.rt.vehicle.version is None  # the zeros of a VehicleInfo without it
+    fake.info.available_info = 3
+    fake.run(3.0)
+    records = fake.setpoints("vehicle_record")
+    assert 1 <= len(records) <= 6, len(records)  # not at the 250 Hz poll rate
+    kind, v = messages.vehicle_record_from_msg(records[-1])
+    assert kind == "utc" and set(v) == set(VehicleRecord().summary())
+    assert v["px4_parameters"] == pytest.approx(fake.params)  # 464 in 3 batches
+    assert fake.pulls == 1
+    assert v["kind"] == "SIH" and v["hil_flag"] is False
+    assert v["airframe"] == {"SYS_AUTOSTART": 10040, "MAV_TYPE": 2, "CA_AIRFRAME": None}
+    assert v["firmware"]["flight_sw_version"] == "v1.16.0"
+    assert v["firmware"]["flight_custom_version"] == "6ea3539157000000"
+    assert v["firmware"]["uid"] == 5283920058631409236
+    assert v["battery"]["start"]["voltage_v"] == pytest.approx(16.2)
+    assert v["battery"]["start"]["remaining_pct"] == 80
+    site = v["site"]
+    assert (site["latitude_deg"], site["longitude_deg"]) == (47.397742, 8.545594)
+    assert site["altitude_amsl_m"] is None and site["altitude_wgs84_m"] == 488.0
+    clk = v["px4_clock"]
+    assert clk["boot_ns"] is None and clk["boot_samples"] == 0 and "MAVROS" in clk["note"]
+    # a parameter set after the snapshot: the preflight's 10 s refresh carries it over
+    fake.params["COM_OBL_RC_ACT"] = 1
+    fake.run(12.0)
+    _, v = messages.vehicle_record_from_msg(fake.setpoints("vehicle_record")[-1])
+    assert v["px4_parameters"]["COM_OBL_RC_ACT"] == (1 if preflight else 5)
+    # the battery at the end: refreshed every 10 s (1 Hz readings here)
+    assert v["battery"]["end"]["stamp_ns"] >= round((fake.t - 11.0) * 1e9)

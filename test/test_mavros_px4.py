@@ -251,6 +251,9 @@ class MavrosStandIn:
                     type=self.hb.type,
                     capabilities=int(v.capabilities) if v is not None else 0,
                     flight_sw_version=int(v.flight_sw_version) if v is not None else 0,
+                    available_info=3
+                    if v is not None
+                    else 1,  # HAVE_INFO_HEARTBEAT | AUTOPILOT_VERSION
                 )
                 resp = VehicleInfoGet.Response(success=True, vehicles=[info])
             self.out(self.rt.on_service_answer(req, resp, now))

@@ -27,6 +27,7 @@ of ``/lpv_sysid/state``. Timeouts are generous and bounded (2 cores, load ~10).
 from __future__ import annotations
 
 import json
+import os
 import re
 import shlex
 import subprocess
@@ -38,7 +39,8 @@ from ros_real import DomainId, RosEnv, build_package, find_ros
 from test_chain_px4 import design  # noqa: F401  (module fixture: rate-plant gains)
 
 ROOT = Path(__file__).resolve().parents[1]
-INSTANCE = 16
+#: the PX4 SITL instance (LPV_SYSID_PX4_INSTANCE: another one when parallel runs share a host)
+INSTANCE = int(os.environ.get("LPV_SYSID_PX4_INSTANCE", "16"))
 
 
 def _mavros(setup) -> str:
@@ -75,7 +77,8 @@ from mavros_msgs.msg import PositionTarget, State
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import Parameter, ParameterValue
 from rcl_interfaces.srv import SetParameters
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 rclpy.init()
@@ -100,6 +103,12 @@ def on_sp(m):
     res["setpoints"] += 1
     res["last_sp"] = [m.coordinate_frame, m.type_mask, m.velocity.x, m.velocity.y, m.velocity.z]
 n.create_subscription(PositionTarget, "/mavros/setpoint_raw/local", on_sp, 10)
+def on_record(m):
+    res["records"] = res.get("records", 0) + 1
+    res["vehicle"] = json.loads(m.data)["vehicle"]
+latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+n.create_subscription(String, "/lpv_sysid/vehicle_record", on_record, latched)
 ref = n.create_publisher(TwistStamped, "/lpv_sysid/velocity_reference", 10)
 vz = [0.0]
 def tick():
@@ -232,6 +241,18 @@ def test_phase1_offboard_and_rejected_posctl_handback_through_real_mavros(stack)
     assert "POSCTL" not in modes and "after POSCTL" in final, (modes, final)
     assert modes[-1] == "AUTO.LOITER"
     stack["airborne"] = res["modes"][-1] == ["AUTO.LOITER", True]
+    # the vehicle record through MAVROS (vehicle_info_get, param pull/list/get, home):
+    # PX4 SITL's own parameters, the one set during the run, its firmware; no boot time
+    v = res.get("vehicle")
+    assert v is not None, logs
+    params = v["px4_parameters"]
+    MEASURED_RECORD = {"records": res["records"], "parameters": len(params), "kind": v["kind"]}
+    print("MAVROS vehicle record:", json.dumps(MEASURED_RECORD))
+    assert v["kind"] == "SITL" and len(params) > 500 and params["SYS_AUTOSTART"] > 0, v["kind"]
+    assert params["COM_OBL_RC_ACT"] == 5  # set through MAVROS after the snapshot
+    assert v["firmware"]["flight_sw_version"].startswith("v1.1"), v["firmware"]
+    assert v["px4_clock"]["boot_ns"] is None and "MAVROS" in v["px4_clock"]["note"]
+    assert res["records"] < 30, res["records"]  # on change, not at the 250 Hz poll rate
 
 
 #: ROS-side driver of a phase launch (``auto_start:=false``): wait until MAVROS is connected

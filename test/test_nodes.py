@@ -415,3 +415,75 @@ def test_logger_node_sigterm_closes_bag(tmp_path):
     assert meta["closed_cleanly"] is True
     bag = read_bag(str(out / "bag_0000"))
     assert len(bag["/lpv_sysid/status"]) == meta["topics"]["/lpv_sysid/status"]["count"] > 0
+
+
+def test_logger_writes_the_bridges_vehicle_record(tmp_path):
+    """The bridge's vehicle record from the simulated PX4 (its parameters, AUTOPILOT_VERSION,
+    battery, home) reaches the data logger's ``experiment.yaml`` ``vehicle`` -- the logger
+    started 1 s after the record went out (transient local) -- in the mapping ``fly`` writes
+    (VehicleRecord.summary: the same keys), with PX4's boot on the bag clock: the probe's
+    clock when the simulation's time 0 was."""
+    from lpv_sysid.mavlink.telemetry import VehicleRecord
+    from lpv_sysid.nodes.data_logger_node import DataLoggerNode
+    from lpv_sysid.nodes import shell
+    from lpv_sysid.nodes.mavlink_bridge_node import MavlinkBridgeNode
+    from lpv_sysid.sim.px4_vehicle import SimVehicle, SimVehicleConfig
+    from lpv_sysid.sim.px4_vehicle.config import DEFAULT_PARAMS
+    from lpv_sysid.sim.px4_vehicle.telemetry import HOME_LAT, HOME_LON
+    from std_msgs.msg import String
+
+    port = _free_udp_port()
+    out = tmp_path / "log"
+    rclpy.init(args=ros_args())
+    node = MavlinkBridgeNode(
+        namespace=NS,
+        cli_args=ros_args(
+            ("link.url", f"udpin:127.0.0.1:{port}"), params_file="mavlink_bridge_node.yaml"
+        )[1:],
+    )
+    veh = SimVehicle(
+        SimVehicleConfig(
+            url=f"udpout:127.0.0.1:{port}",
+            params={"MPC_XY_VEL_MAX": 7.5},
+            battery_voltage=15.2,
+        )
+    )
+    veh.open()
+    try:
+        probe = rclpy.create_node("probe")
+        t0 = probe.get_clock().now().nanoseconds
+        probe.create_timer(
+            0.004, lambda: veh.step((probe.get_clock().now().nanoseconds - t0) * 1e-9)
+        )
+        records = collect(probe, String, "/lpv_sysid/vehicle_record", shell.QOS_VEHICLE_RECORD)
+        spin([node, probe], 3.0)
+        n_before = len(records)
+        log = DataLoggerNode(
+            namespace=NS,
+            cli_args=ros_args(("out_dir", str(out)), params_file="data_logger.yaml")[1:],
+        )
+        spin([node, probe, log], 2.0)
+        log.destroy_node()
+    finally:
+        veh.close()
+        node.destroy_node()
+    # published on material changes only: a handful, not at the 250 Hz poll rate
+    assert 1 <= n_before <= 6, n_before
+    meta = yaml.safe_load((out / "experiment.yaml").read_text())
+    v = meta["vehicle"]
+    assert set(v) == set(VehicleRecord().summary())
+    assert v["kind"] == "SIMULATED"
+    assert v["firmware"]["flight_sw_version"] == "v1.16.0"
+    want = {k: d for k, (d, _) in DEFAULT_PARAMS.items()}
+    want["MPC_XY_VEL_MAX"] = 7.5
+    assert v["px4_parameters"] == pytest.approx(want)
+    assert v["battery"]["start"]["voltage_v"] == pytest.approx(15.2, abs=1e-3)
+    assert v["site"]["latitude_deg"] == pytest.approx(HOME_LAT, abs=1e-7)
+    assert v["site"]["longitude_deg"] == pytest.approx(HOME_LON, abs=1e-7)
+    # PX4 booted at the probe's t0; the estimate is late by the smallest latency (here the
+    # 4 ms poll period at most) + 1 ms of time_boot_ms truncation, never early
+    boot = v["px4_clock"]["boot_ns_min"]
+    assert 0 <= boot - t0 <= 5_000_000, boot - t0
+    assert v["px4_clock"]["boot_samples"] > 100
+    assert meta["clock"] == {**meta["clock"], "kind": "utc", "offset_ns": 0}
+    assert "vehicle_record_clock" not in meta["clock"]

@@ -296,6 +296,32 @@ def check_recording(out_dir: Path, min_counts: dict) -> dict:
     return {t.rsplit("/", 1)[-1]: round(v["rate_hz"], 1) for t, v in meta["topics"].items()}
 
 
+def check_vehicle_record(experiment: Path, t_booted_after: int, t_booted_before: int) -> None:
+    """``experiment.yaml``'s ``vehicle``, from the bridge's ``vehicle_record`` through the
+    data logger: the mapping ``fly`` writes (VehicleRecord.summary's keys), the package's
+    simulated PX4 (kind SIMULATED, its AUTOPILOT_VERSION v1.16.0, every parameter it serves
+    at its default), and PX4's boot on the bag clock (epoch ns) between the simulator's
+    start and the bridge's link_up."""
+    from lpv_sysid.mavlink.telemetry import VehicleRecord
+    from lpv_sysid.sim.px4_vehicle.config import DEFAULT_PARAMS
+
+    meta = yaml.safe_load(experiment.read_text())
+    v = meta.get("vehicle")
+    assert v is not None, f"{experiment}: no vehicle record"
+    assert set(v) == set(VehicleRecord().summary()), sorted(v)
+    assert v["kind"] == "SIMULATED" and v["firmware"]["flight_sw_version"] == "v1.16.0"
+    assert v["px4_parameters"] == pytest.approx({k: d for k, (d, _) in DEFAULT_PARAMS.items()})
+    boot = v["px4_clock"]["boot_ns_min"]
+    assert t_booted_after <= boot <= t_booted_before, (t_booted_after, boot, t_booted_before)
+    assert v["px4_clock"]["boot_samples"] > 100 and v["px4_clock"]["knots"]
+    assert meta["clock"]["kind"] == "utc" and "vehicle_record_clock" not in meta["clock"]
+    MEASURED["phase1_vehicle_record"] = {
+        "boot_after_sim_start_s": round((boot - t_booted_after) * 1e-9, 3),
+        "knots": len(v["px4_clock"]["knots"]),
+        "boot_samples": v["px4_clock"]["boot_samples"],
+    }
+
+
 def assert_topics_as_readme(info: dict, exe: str) -> None:
     """The node's publishers / subscribers carry the README's names and types; its status
     array is on /diagnostics too; its services are the README's (std_srvs/Trigger)."""
@@ -743,6 +769,7 @@ def test_phase1_launch_px4_sim_handback_on_process_group_sigint(ros, dom, tmp_pa
         "mavlink_bridge_node.yaml",
         {"link.url": f"udpin:127.0.0.1:{port}", "offboard.input_timeout": 1.0},
     )
+    t_px4_started = time.time_ns()  # the simulated PX4 boots after this (epoch ns)
     px4 = env.popen(
         f"{ros['lib']}/lpv-sysid sim-vehicle --udp 127.0.0.1:{port}", tmp_path / "px4_sim.log"
     )
@@ -765,6 +792,7 @@ def test_phase1_launch_px4_sim_handback_on_process_group_sigint(ros, dom, tmp_pa
             [ready(n) for n in ("excitation", "mavlink_bridge", "data_logger")]
             + ["[lpv_sysid.mavlink_bridge]: link_up"],
         )
+        t_link_up = time.time_ns()  # the simulated PX4 had booted by then
         assert (
             f"MAVLink udpin:127.0.0.1:{port} (from the link.url of the parameter file)"
             in proc.log()
@@ -807,6 +835,7 @@ def test_phase1_launch_px4_sim_handback_on_process_group_sigint(ros, dom, tmp_pa
         out, {"state": 50, "imu": 50, "velocity_reference": 50, "excitation": 50, "status": 2}
     )
     MEASURED["phase1_recorded_rates_hz"] = rates
+    check_vehicle_record(out / "experiment.yaml", t_px4_started, t_link_up)
     # wall-clock streams at their configured rates: PX4's (the bridge's stream requests)
     # and the excitation's timer (30 %: the other processes of a loaded machine)
     bridge = yaml_parameters(cfg / "mavlink_bridge_node.yaml", "mavlink_bridge")

@@ -188,3 +188,35 @@ def test_parameter_hash_is_kept_as_an_integer():
         with open(p, "w") as f:
             yaml.safe_dump({"vehicle": rec.summary()}, f)
         assert read_yaml(p)["vehicle"]["px4_parameters"]["_HASH_CHECK"] == h
+
+
+def test_revision_counts_material_changes_not_telemetry():
+    """``revision`` (what makes the bridge publish ``vehicle_record`` again): a new or changed
+    parameter, the firmware, the first battery reading, a moved home count; the same
+    parameter again, telemetry (the clock knots grow), later battery readings do not."""
+    rec = VehicleRecord()
+    att = mav.MAVLink_attitude_message
+    rec.absorb(att(1000, 0, 0, 0, 0, 0, 0), BOOT_NS + 1_001_000_000)
+    assert rec.revision == 1  # the first boot estimate
+    for k in range(1, 200):  # 4 s of telemetry: knots grow, no material change
+        tb = 1000 + 20 * k
+        rec.absorb(att(tb, 0, 0, 0, 0, 0, 0), BOOT_NS + (tb + 1) * 1_000_000)
+    assert rec.revision == 1 and len(rec.clock_knots()) == 4  # PX4 seconds 1 .. 4
+    rec.absorb(_param("SYS_AUTOSTART", 10040), 2)
+    rec.absorb(_param("SYS_AUTOSTART", 10040), 3)  # the same value again
+    assert rec.revision == 2
+    rec.absorb(_param("SYS_AUTOSTART", 4001), 4)
+    assert rec.revision == 3 and rec.params["SYS_AUTOSTART"] == 4001
+    for k, mv in enumerate((16200, 16100, 16000)):
+        st = mav.MAVLink_sys_status_message(0, 0, 0, 500, mv, -1, 90, 0, 0, 0, 0, 0, 0)
+        rec.absorb(st, k)
+    assert rec.revision == 4  # the first reading only
+    q = [1, 0, 0, 0]
+    home = mav.MAVLink_home_position_message(473977420, 85455940, 488000, 0, 0, 0, q, 0, 0, 0)
+    rec.absorb(home, 5)
+    rec.absorb(home, 6)
+    assert rec.revision == 5
+    moved = mav.MAVLink_home_position_message(473977520, 85455940, 488000, 1, 0, 0, q, 0, 0, 0)
+    rec.absorb(moved, 7)
+    assert rec.revision == 6
+    assert rec.site_summary()["last"]["latitude_deg"] == pytest.approx(47.397752)

@@ -16,7 +16,8 @@ Per-run bags: with ``out_dir`` the node writes one rosbag2 per run (trim + excit
 ``out_dir/bag_NNNN`` with the data logger's topics
 (``lpv_sysid.cli.vehicle.fly.CampaignRecorder``), plus ``campaign_summary.yaml`` and ``trims.yaml``
 at the end, so ``lpv-sysid identify --bags out_dir`` runs on it; the data logger records the whole
-flight as usual.
+flight as usual. The bridge's ``vehicle_record`` (transient local) becomes the runs'
+``experiment.yaml`` ``vehicle``, as ``fly phase1`` writes it.
 
 The bridge node offers ``start`` and ``abort`` only: the campaign therefore ends with the
 bridge's hand-back chain (``offboard.handback_chain``, HOLD first by default); a
@@ -34,6 +35,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TwistStamped
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu, JointState
+from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from lpv_sysid.flight.campaign import PARSERS, CampaignNodeSettings, CampaignRuntime
@@ -80,11 +82,18 @@ class CampaignNode(shell.ShellNode):
         ):
             self.create_subscription(typ, topic, self._input(topic), shell.qos_for(topic))
         self.create_subscription(DiagnosticArray, "status", rt.on_status, shell.qos_for("status"))
+        self.create_subscription(
+            String, messages.VEHICLE_RECORD_TOPIC, self._vehicle_record, shell.QOS_VEHICLE_RECORD
+        )
         self.create_service(Trigger, "~/start", shell.trigger(self, rt.start, self.emit))
         self.create_service(Trigger, "~/abort", shell.trigger(self, rt.abort, self.emit))
         self.create_timer(1.0 / s.rate_hz, lambda: self.emit(rt.on_timer(self.now())))
         self.status_timer(s.status_rate_hz, lambda: self.emit(rt.status(self.now())))
         self.emit([])
+
+    def _vehicle_record(self, msg):
+        self.runtime.on_vehicle_record(msg)
+        shell.log_lines(self.get_logger(), self.runtime.take_log())
 
     def _input(self, topic):
         parse = PARSERS[topic]

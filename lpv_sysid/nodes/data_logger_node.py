@@ -15,6 +15,10 @@ that stops), so a ``kill -9`` loses at most that much; ``experiment.yaml`` then 
 run automatically when the logger is started on the same ``out_dir`` again) makes the bags
 readable by ``ros2 bag`` / rosbags and the metadata ``incomplete``. On a full disk the bag
 is closed readable and the node reports the error on ``status``.
+Vehicle record: the bridge's ``vehicle_record`` (reliable, transient local: also the one
+published before the logger started) becomes ``experiment.yaml``'s ``vehicle`` -- the same
+mapping ``fly`` writes (:meth:`lpv_sysid.mavlink.telemetry.VehicleRecord.summary`), each
+newer record replacing the older one.
 
     ros2 run lpv_sysid data_logger_node --ros-args --params-file config/data_logger.yaml \
         -p out_dir:=flight_07
@@ -140,6 +144,13 @@ class DataLoggerNode(shell.ShellNode):
                 event_callbacks=events,
                 raw=True,
             )
+        self.create_subscription(
+            get_message(messages.VEHICLE_RECORD_TYPE),
+            messages.VEHICLE_RECORD_TOPIC,
+            self._vehicle_record_cb,
+            shell.QOS_VEHICLE_RECORD,
+        )
+        self.vehicle_records = 0  # records written to experiment.yaml
         self.status_timer(p.status_rate_hz, self.publish_status)
         # a stream that stops still reaches the disk within flush_interval_s
         self.create_timer(p.flush_interval_s / 2, self._flush_cb)
@@ -148,18 +159,44 @@ class DataLoggerNode(shell.ShellNode):
     def clock_record(self) -> dict:
         """``clock`` of ``experiment.yaml``: the bag stamps are this node's ROS clock at
         reception -- the wall clock (epoch ns), or ``/clock`` with ``use_sim_time``. The
-        vehicle record (PX4 boot on this clock, firmware, parameters, site) is not known to
-        the logger: ``fly`` and ``fly phase2`` write it; under ``ros2 launch`` it is absent."""
-        try:
-            sim = bool(self.get_parameter("use_sim_time").value)
-        except Exception:  # noqa: BLE001 - a stand-in or older rclpy without the parameter
-            sim = False
+        vehicle record (``vehicle``: PX4's boot on the bridge's ROS clock, firmware,
+        parameters, site) comes from the bridge on ``vehicle_record``
+        (:meth:`_vehicle_record_cb`); on the same host and clock kind its times are on the
+        bag clock with offset 0, as this record says."""
+        sim = shell.clock_kind(self) == "ros_sim_time"
         return {
-            "kind": "ros_sim_time" if sim else "utc",
+            "kind": shell.clock_kind(self),
             "offset_ns": 0,
             "meaning": "bag stamp = the data logger's ROS clock at reception "
             + ("(/clock: use_sim_time)" if sim else "(system wall clock, epoch ns)"),
         }
+
+    def _vehicle_record_cb(self, msg):
+        """The bridge's vehicle record -> ``experiment.yaml`` ``vehicle`` (a bad message is
+        logged and skipped); a record on another kind of clock than the bags' is written
+        with the mismatch stated in ``clock.vehicle_record_clock``."""
+        if getattr(self, "_closed", False):
+            return
+        try:
+            kind, record = messages.vehicle_record_from_msg(msg)
+        except LpvSysidError as exc:
+            self.get_logger().warning(f"vehicle_record ignored: {exc}", once=True)
+            return
+        try:
+            own = shell.clock_kind(self)
+            if kind != own:
+                self.get_logger().error(
+                    f"vehicle_record on a {kind} clock, the bags on {own}: its times "
+                    "(vehicle.px4_clock) are not on the bag clock",
+                    once=True,
+                )
+                self.recorder.annotate(
+                    "clock", {**self.clock_record(), "vehicle_record_clock": kind}
+                )
+            self.recorder.annotate("vehicle", record)
+            self.vehicle_records += 1
+        except LpvSysidError as exc:
+            self.get_logger().error(str(exc), once=True)
 
     def _flush_cb(self):
         try:
@@ -191,6 +228,7 @@ class DataLoggerNode(shell.ShellNode):
             values[f"{topic}.rate_hz"] = round(s.rate_hz, 3)
             values[f"{topic}.dropped"] = s.dropped
         values["bags"] = len(rec.bags)
+        values["vehicle_records"] = self.vehicle_records
         level = "ERROR" if rec.error else "OK"
         msg = rec.error or ("recording" if rec.recording else "stopped")
         st = messages.diagnostic_status(

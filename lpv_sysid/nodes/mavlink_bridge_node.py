@@ -3,7 +3,11 @@
 Shell around :class:`lpv_sysid.flight.bridge.runtime.BridgeRuntime` (which wraps
 :class:`lpv_sysid.mavlink.bridge.BridgeCore`). A timer at ``poll_rate_hz`` polls the link:
 decoded telemetry is published on ``state`` (Odometry), ``imu`` and ``rotor_speeds`` (best
-effort); link and offboard events and the core's status go to ``status``.
+effort); link and offboard events and the core's status go to ``status``; the vehicle
+record (firmware, PX4 parameters, battery, site, PX4's boot on the node clock) on
+``vehicle_record`` (std_msgs/String, JSON; reliable, transient local) when it changes
+materially -- the data logger's ``experiment.yaml`` ``vehicle`` (through MAVROS: what
+MAVROS offers, no PX4 boot time; :mod:`lpv_sysid.flight.bridge.runtime`).
 ``velocity_reference`` (phase 1, ``command: velocity``) or ``actuator_command`` (phase 2,
 ``command: attitude_rate``) are forwarded as setpoints. When commands stop for
 ``offboard.input_timeout`` s (e.g. the controller aborted), or on the ``abort`` service, or
@@ -35,6 +39,7 @@ from rosidl_runtime_py.utilities import get_message, get_service
 from geometry_msgs.msg import TwistStamped
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu, JointState
+from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from lpv_sysid.flight.bridge import SPECS, BridgeRuntime, settings_from_params
@@ -58,8 +63,13 @@ TYPES = {
     "mavros_odom": Odometry,
     "mavros_imu": Imu,
     "mavros_diagnostics": DiagnosticArray,
+    "vehicle_record": String,
 }
-QOS = {"sensor": shell.QOS_SENSOR, "reliable": shell.QOS_RELIABLE}
+QOS = {
+    "sensor": shell.QOS_SENSOR,
+    "reliable": shell.QOS_RELIABLE,
+    "record": shell.QOS_VEHICLE_RECORD,
+}
 
 
 def type_of(endpoint):
@@ -125,6 +135,7 @@ class MavlinkBridgeNode(shell.ShellNode):
             self.pub[e.key] = ServiceCaller(self, type_of(e), e.topic)
         self.create_service(Trigger, "~/start", shell.trigger(self, rt.start, self.emit))
         self.create_service(Trigger, "~/abort", shell.trigger(self, rt.abort, self.emit))
+        rt.clock_kind = shell.clock_kind(self)
         rt.open(self.now())
         self.create_timer(rt.timer_period_s, lambda: self.emit(rt.on_timer(self.now())))
         if rt.shutdown_timeout_s is not None:

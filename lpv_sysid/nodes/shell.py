@@ -38,6 +38,7 @@ from lpv_sysid.io.messages import (
     NAMESPACE,
     TF_TOPIC,
     TYPES,
+    VEHICLE_RECORD_TOPIC,
     MsgFactory,
     qos_of,
     tf_from_odometry,
@@ -64,6 +65,9 @@ def qos_profile(spec: dict) -> QoSProfile:
 QOS_SENSOR = qos_profile(qos_of("state"))
 QOS_RELIABLE = qos_profile(qos_of("velocity_reference"))
 QOS_STATUS = qos_profile(qos_of("status"))
+#: the bridge's ``vehicle_record``: reliable, transient local, keep last 1 -- publisher and
+#: subscriber alike (the logger must receive the record published before it joined)
+QOS_VEHICLE_RECORD = qos_profile(qos_of(VEHICLE_RECORD_TOPIC))
 #: tf2_ros's TransformBroadcaster profile (reliable, volatile, keep last 100)
 QOS_TF = QoSProfile(
     history=QoSHistoryPolicy.KEEP_LAST,
@@ -159,6 +163,16 @@ def clock_source(node) -> str:
         f"{'simulation time (/clock, use_sim_time)' if sim else 'system time'}; "
         "input stamps are judged against it"
     )
+
+
+def clock_kind(node) -> str:
+    """``ros_sim_time`` under ``use_sim_time`` (``/clock``), else ``utc`` (the system wall
+    clock, epoch ns): the kind of the node clock's stamps (io/messages ``CLOCK_KINDS``)."""
+    try:
+        sim = bool(node.get_parameter("use_sim_time").value)
+    except Exception:  # noqa: BLE001 - a stand-in or older rclpy without the parameter
+        sim = False
+    return "ros_sim_time" if sim else "utc"
 
 
 #: the parameters every node applies while it runs (``ros2 param set`` takes effect: the

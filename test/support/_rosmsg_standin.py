@@ -107,8 +107,16 @@ _EXTRA.update(
         "mavros_msgs/VehicleInfo[] vehicles\n",
         "mavros_msgs/srv/MessageInterval_Request": "uint32 message_id\nfloat32 message_rate\n",
         "mavros_msgs/srv/MessageInterval_Response": "bool success\n",
+        "mavros_msgs/msg/ParamEvent": "std_msgs/Header header\nstring param_id\n"
+        "rcl_interfaces/ParameterValue value\nuint16 param_index\nuint16 param_count\n",
+        "mavros_msgs/srv/ParamPull_Request": "bool force_pull\n",
+        "mavros_msgs/srv/ParamPull_Response": "bool success\nuint32 param_received\n",
         # rcl_interfaces' services are not in the rosbags store either
         "rcl_interfaces/srv/GetParameters_Request": "string[] names\n",
+        "rcl_interfaces/srv/ListParameters_Request": "string[] prefixes\nuint64 depth\n",
+        "rcl_interfaces/srv/ListParameters_Response": (
+            "rcl_interfaces/ListParametersResult result\n"
+        ),
         "rcl_interfaces/srv/GetParameters_Response": "rcl_interfaces/ParameterValue[] values\n",
     }
 )

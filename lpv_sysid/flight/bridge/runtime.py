@@ -16,6 +16,26 @@ shutdown the core hands control back to PX4. ``transport: mavros``:
 setpoint rate. Either way the core's events and status values make the ``status``
 DiagnosticArray (:meth:`BridgeRuntime.status`): the last warn/error event names the level
 and message, every event is logged.
+
+Vehicle record (``transport: mavlink``): every message of the target feeds a
+:class:`~lpv_sysid.mavlink.telemetry.VehicleRecord` on the node clock (the one the fly CLI
+keeps: firmware, PX4 parameter snapshot, battery, site, PX4's boot on that clock); once the
+link is up the parameter list is asked (PARAM_REQUEST_LIST, again after a link loss: PX4 may
+have rebooted) and AUTOPILOT_VERSION (MAV_CMD_REQUEST_MESSAGE, every
+:data:`RECORD_ASK_PERIOD_S` until it arrives, at most :data:`RECORD_ASKS` times), as
+``fly phase2`` does; neither touches the offboard logic (its COMMAND_ACK is not the pending
+command's). The record goes out on ``vehicle_record`` (:meth:`BridgeRuntime.record_output`)
+when it changed materially (``VehicleRecord.revision``), at most every
+:data:`RECORD_MIN_PERIOD_S`, and every :data:`RECORD_REFRESH_S` while the vehicle's clock
+knots or the battery reading move; the data logger writes it to ``experiment.yaml`` (``vehicle``).
+``transport: mavros`` with mavros_msgs: the same record from what MAVROS offers -- firmware
+and the HIL flag from ``vehicle_info_get``, the parameter snapshot by ``param/pull`` then
+``param/list_parameters`` + ``param/get_parameters`` (MAVROS publishes no ``param/event``
+for a pull: measured), battery from ``battery``, the site's latitude/longitude from
+``home_position/home`` (its altitude is MAVROS' WGS-84 ellipsoid height, kept as
+``altitude_wgs84_m``, not AMSL); PX4's boot time is not in MAVROS' messages, so
+``px4_clock`` stays empty with a note (docs/px4_transport.md). ``mavros.interfaces:
+common``: no record.
 """
 
 from __future__ import annotations
@@ -57,7 +77,7 @@ from lpv_sysid.mavlink.preflight import (
     mavros_checks,
     verdict,
 )
-from lpv_sysid.mavlink.telemetry import ImuSample, RotorSample, StateSample
+from lpv_sysid.mavlink.telemetry import ImuSample, RotorSample, StateSample, VehicleRecord
 
 #: the package input topics parsed by the shell (``ShellNode.parse_input``: a bad message is
 #: dropped with a throttled warning) before :meth:`BridgeRuntime.on_sample`
@@ -154,6 +174,22 @@ def _use_mavros_msgs(cfg: MavrosConfig, factory: messages.MsgFactory) -> bool:
     return True
 
 
+#: vehicle record: AUTOPILOT_VERSION asked every RECORD_ASK_PERIOD_S [s] until it arrives, at
+#: most RECORD_ASKS times per link-up; the record published at most every
+#: RECORD_MIN_PERIOD_S [s] after a material change and every RECORD_REFRESH_S [s] while the
+#: clock knots grow (PX4's boot offset, battery at the end)
+RECORD_ASK_PERIOD_S, RECORD_ASKS = 2.0, 10
+RECORD_MIN_PERIOD_S, RECORD_REFRESH_S = 1.0, 10.0
+#: names per ``param/get_parameters`` call of the MAVROS parameter snapshot
+PARAM_BATCH = 200
+#: ``px4_clock`` note of a record made through MAVROS
+MAVROS_CLOCK_NOTE = (
+    "not recorded: MAVROS' messages carry no PX4 boot time (their stamps are already on "
+    "the ROS clock); a ULog cannot be lined up from this record"
+)
+#: MAVLink id of AUTOPILOT_VERSION (MAV_CMD_REQUEST_MESSAGE's param 1)
+AUTOPILOT_VERSION_ID = 148
+
 #: core states in which the orderly shutdown needs no more spinning
 SHUTDOWN_DONE = ("IDLE", "DONE", "FAILED")
 
@@ -212,6 +248,16 @@ class BridgeRuntime:
         self.parsers: Mapping[str, Any] = PARSERS
         #: PX4's ATTITUDE_TARGET (the setpoints it tracks) seen since the last poll
         self._echo: list[tuple[float, Any]] = []
+        #: transport mavlink: the vehicle record (module docstring), fed from :meth:`open`
+        self.vehicle: VehicleRecord | None = None
+        #: the node clock's kind (``utc`` | ``ros_sim_time``): what the record's times are on
+        self.clock_kind = "utc"
+        self._record_asked = False  # PARAM_REQUEST_LIST sent on this link-up
+        self._version_asks = 0
+        self._t_version_asked = -math.inf
+        #: (revision, boot samples, last battery stamp) of the record sent last
+        self._record_sent: tuple | None = None
+        self._t_record_sent = -math.inf
         mcfg = MavrosConfig.from_dict(mavros) if s.transport == "mavros" else None
         if mcfg is not None and _use_mavros_msgs(mcfg, factory):
             self._init_mavros_msgs(mcfg, bridge, sigterm_timeout_s, teardown_margin_s)
@@ -250,6 +296,9 @@ class BridgeRuntime:
                 cfg_b = with_attitude_target_stream(cfg_b)
             self.core = self.link = BridgeCore(cfg_b)
             self.publishers.append(Endpoint("rotor_speeds", "rotor_speeds"))
+            self.publishers.append(
+                Endpoint("vehicle_record", messages.VEHICLE_RECORD_TOPIC, "record")
+            )
             if s.rate_setpoints:
                 self.publishers.append(Endpoint("rate_setpoint", "rate_setpoint"))
             self.subscriptions.append(Endpoint("actuator_command", "actuator_command"))
@@ -327,31 +376,57 @@ class BridgeRuntime:
                     messages.MAVROS_TYPES["message_interval"],
                 )
             )
+        # the vehicle record (module docstring): its inputs, its questions to MAVROS
+        self.vehicle = VehicleRecord(clock_note=MAVROS_CLOCK_NOTE)
+        self._params_state = "ask"  # ask -> pulling -> listing -> getting -> done
+        self._t_pull_asked = -math.inf
+        self._param_names: list[str] = []
+        self.publishers.append(Endpoint("vehicle_record", messages.VEHICLE_RECORD_TOPIC, "record"))
+        self.clients += [
+            Endpoint("param_pull", f"{ns}/param/pull", "", messages.MAVROS_TYPES["param_pull"]),
+            Endpoint(
+                "param_list",
+                f"{ns}/param/list_parameters",
+                "",
+                messages.MAVROS_TYPES["list_parameters"],
+            ),
+            Endpoint(
+                "record_param_get",
+                f"{ns}/param/get_parameters",
+                "",
+                messages.MAVROS_TYPES["get_parameters"],
+            ),
+            Endpoint(
+                "vehicle_info",
+                f"{ns}/vehicle_info_get",
+                "",
+                messages.MAVROS_TYPES["vehicle_info_get"],
+            ),
+        ]
         if mcfg.preflight:
             self.subscriptions += [
                 Endpoint(k, f"{ns}/{t}", "sensor", ty)
                 for k, (t, ty) in MAVROS_PREFLIGHT_INPUTS.items()
             ]
-            self.clients += [
+            self.clients.append(
                 Endpoint(
                     "param_get",
                     f"{ns}/param/get_parameters",
                     "",
                     messages.MAVROS_TYPES["get_parameters"],
                 ),
-                Endpoint(
-                    "vehicle_info",
-                    f"{ns}/vehicle_info_get",
-                    "",
-                    messages.MAVROS_TYPES["vehicle_info_get"],
-                ),
+            )
+            self.clients.append(
                 Endpoint(
                     "request_message",
                     f"{ns}/cmd/command",
                     "",
                     messages.MAVROS_TYPES["command_long"],
-                ),
-            ]
+                )
+            )
+        else:  # the record's battery
+            t, ty = MAVROS_PREFLIGHT_INPUTS["mavros_battery"]
+            self.subscriptions.append(Endpoint("mavros_battery", f"{ns}/{t}", "sensor", ty))
         self.timer_period_s = 1.0 / self.settings.poll_rate_hz
         self._log.append(
             (
@@ -396,11 +471,14 @@ class BridgeRuntime:
         """Open the MAVLink link (transport mavlink; MAVROS owns its link); PX4's
         ATTITUDE_TARGET is republished on ``rate_setpoint``."""
         if self.link is not None:
-            from lpv_sysid.flight.vehicle import tap_attitude_target
+            from lpv_sysid.flight.vehicle import tap_attitude_target, tap_messages
 
             self.link.open(now)
             if self.settings.rate_setpoints:
                 tap_attitude_target(self.link.link, lambda t, u: self._echo.append((t, u)))
+            if self.mavros_link is None:
+                rec = self.vehicle = VehicleRecord()
+                tap_messages(self.link.link, lambda t, m: rec.absorb(m, round(t * 1e9)))
 
     # -- inputs ---------------------------------------------------------------------------
     def on_sample(self, key: str, parsed: tuple, now: float) -> Output:
@@ -466,6 +544,7 @@ class BridgeRuntime:
         link, cfg, ev = self.mavros_link, self._mavros_cfg, self.evidence
         assert link is not None
         try:
+            self._record_mavros(key, msg, now)
             if key in MAVROS_EVIDENCE:
                 name, parse = MAVROS_EVIDENCE[key]
                 if ev is not None:
@@ -506,16 +585,112 @@ class BridgeRuntime:
                 self._log.append(("warn", f"{key} rejected ({n} so far): {exc}"))
         return []
 
+    def _record_mavros(self, key: str, msg: Any, now: float) -> None:
+        """The vehicle record's MAVROS inputs: battery and home (module docstring)."""
+        rec = self.vehicle
+        if rec is None:
+            return
+        if key == "mavros_battery":
+            pct, volts = messages.battery_from_msg(msg)
+            if math.isfinite(volts) and volts > 0.0:
+                rec.battery_reading(round(now * 1e9), volts, -1 if pct is None else round(pct))
+        elif key == "mavros_home":
+            lat, lon, alt = messages.home_geo_from_msg(msg)
+            rec.set_site(
+                "MAVROS home_position/home",
+                lat,
+                lon,
+                None,  # MAVROS' geo altitude is the WGS-84 ellipsoid height, not AMSL
+                messages.home_ned_from_msg(msg),
+                round(now * 1e9),
+                altitude_wgs84_m=alt,
+            )
+
+    def _record_questions(self, now: float) -> list[ServiceRequest]:
+        """transport mavros: the record's questions -- ``param/pull`` (PARAM_REQUEST_LIST
+        through MAVROS) once per link-up, then the names (``param/list_parameters``) and
+        their values (``param/get_parameters``, :data:`PARAM_BATCH` at a time); and
+        ``vehicle_info_get`` until it answers (every RECORD_ASK_PERIOD_S, RECORD_ASKS
+        times)."""
+        link, rec = self.mavros_link, self.vehicle
+        if link is None or rec is None:
+            return []
+        if not link.link_up(now):
+            self._params_state, self._version_asks = "ask", 0
+            return []
+        out = []
+        if self._params_state == "ask" and now - self._t_pull_asked >= RECORD_ASK_PERIOD_S:
+            self._params_state, self._t_pull_asked = "pulling", now
+            out.append(ServiceRequest("param_pull", {"force_pull": False}, 0))
+        elif self._params_state == "listing":
+            self._params_state = "listing_asked"
+            out.append(ServiceRequest("param_list", {"prefixes": [], "depth": 0}, 0))
+        elif self._params_state == "getting" and self._param_names:
+            batch = self._param_names[:PARAM_BATCH]
+            self._param_names = self._param_names[PARAM_BATCH:]
+            self._params_state = "getting_asked"
+            out.append(ServiceRequest("record_param_get", {"names": batch}, 0))
+        if (
+            rec.version is None
+            and self._version_asks < RECORD_ASKS
+            and now - self._t_version_asked >= RECORD_ASK_PERIOD_S
+        ):
+            self._version_asks += 1
+            self._t_version_asked = now
+            out.append(
+                ServiceRequest("vehicle_info", {"sysid": 0, "compid": 0, "get_all": False}, 0)
+            )
+        return out
+
+    def _record_answer(self, req: ServiceRequest, response: Any) -> bool:
+        """An answer to :meth:`_record_questions` (True when it was one). A failed step of
+        the parameter snapshot starts it again at the next link-up check."""
+        rec = self.vehicle
+        if rec is None or req.key not in ("param_pull", "param_list", "record_param_get"):
+            return False
+        if response is None:
+            self._params_state = "ask"
+            return True
+        try:
+            if req.key == "param_pull":
+                ok = bool(response.success)
+                self._params_state = "listing" if ok else "ask"
+                self._log.append(
+                    (
+                        "info" if ok else "warn",
+                        f"vehicle record: MAVROS param pull {'received' if ok else 'failed'}"
+                        f" ({int(response.param_received)} parameters)",
+                    )
+                )
+            elif req.key == "param_list":
+                self._param_names = messages.param_names_from_list(response)
+                self._params_state = "getting" if self._param_names else "ask"
+            else:
+                for name, value in messages.params_from_get_parameters(
+                    req.fields["names"], response
+                ).items():
+                    rec.set_param(name, value)
+                self._params_state = "getting" if self._param_names else "done"
+        except (LpvSysidError, AttributeError, TypeError, ValueError) as exc:
+            self._params_state = "ask"
+            self._log.append(("warn", f"vehicle record: {req.key} answer unusable: {exc}"))
+        return True
+
     def on_service_answer(self, req: ServiceRequest, response: Any, now: float) -> Output:
         """The answer of a MAVROS service call the shell made for ``req`` (None: the call
         failed; the core's ``ack_timeout`` then retries)."""
         assert self.mavros_link is not None
         if req.key == "request_message":
             self._version_asked = None  # answered (or failed): the next one may go
-        if response is None:
+        if self._record_answer(req, response):
+            if response is None:
+                self._log.append(("warn", f"{req.key} got no answer"))
+        elif response is None:
             self.mavros_link.on_service_failed(now, req)
             self._log.append(("warn", f"{req.key} {req.fields} got no answer"))
-        elif req.key in ("param_get", "vehicle_info"):
+        elif req.key == "vehicle_info":
+            self._vehicle_info_answer(response)
+        elif req.key == "param_get":
             self._preflight_answer(req, response)
         elif req.key == "request_message":
             if not bool(getattr(response, "success", False)):
@@ -538,18 +713,31 @@ class BridgeRuntime:
             self.mavros_link.on_service_answer(now, req, response)
         return []
 
+    def _vehicle_info_answer(self, response: Any) -> None:
+        """``vehicle_info_get``: the record's firmware and HIL flag, the preflight's vehicle."""
+        try:
+            vi = messages.vehicle_from_info_response(response)
+            if vi is None:
+                return
+            fw = messages.firmware_from_vehicle_info(vi)
+            if self.vehicle is not None and fw is not None:  # None: asked again
+                sw, custom, board, vendor, product, uid, base_mode = fw
+                self.vehicle.set_firmware(sw, custom, board, vendor, product, uid)
+                self.vehicle.observe_base_mode(base_mode)
+            if self.evidence is not None:
+                self.evidence.vehicle = vi
+        except (LpvSysidError, AttributeError, TypeError, ValueError) as exc:
+            self._log.append(("warn", f"vehicle_info answer unusable: {exc}"))
+
     def _preflight_answer(self, req: ServiceRequest, response: Any) -> None:
         ev = self.evidence
         assert ev is not None
         try:
-            if req.key == "param_get":
-                ev.params.update(
-                    messages.params_from_get_parameters(req.fields["names"], response)
-                )
-            else:
-                info = messages.vehicle_from_info_response(response)
-                if info is not None:  # the newest answer (flight_sw_version 0: not yet)
-                    ev.vehicle = info
+            got = messages.params_from_get_parameters(req.fields["names"], response)
+            ev.params.update(got)
+            if self.vehicle is not None:  # a parameter set since the snapshot counts there too
+                for name, value in got.items():
+                    self.vehicle.set_param(name, value)
         except (LpvSysidError, AttributeError, TypeError, ValueError) as exc:
             self._log.append(("warn", f"{req.key} answer unusable: {exc}"))
 
@@ -698,7 +886,10 @@ class BridgeRuntime:
             return self._mavros_out(self.mavros.step(now), now)
         assert self.link is not None
         out = self.link.poll(now)
-        asks = [(q.key, q) for q in self._preflight_questions(now) + self._rate_request(now)]
+        questions = (
+            self._preflight_questions(now) + self._rate_request(now) + self._record_questions(now)
+        )
+        asks = [(q.key, q) for q in questions]
         f = self.f
         pubs: Output = []
         for s in out.samples:
@@ -728,7 +919,51 @@ class BridgeRuntime:
         self._echo.clear()
         if out.events:
             pubs += self.status(now, out.events)
-        return pubs + self._drain(now) + asks
+        self._ask_record(now)
+        return pubs + self._drain(now) + asks + self.record_output(now)
+
+    def _ask_record(self, now: float) -> None:
+        """The vehicle record's questions to PX4 (module docstring): the parameter list once
+        per link-up, AUTOPILOT_VERSION until it arrives."""
+        if self.vehicle is None or self.link is None or self.mavros_link is not None:
+            return
+        from lpv_sysid.flight.vehicle import request_parameter_list
+        from lpv_sysid.mavlink import px4
+
+        link = self.link.link
+        if not (link.target_system and link.link_up(now)):
+            self._record_asked, self._version_asks = False, 0
+            return
+        if not self._record_asked:
+            self._record_asked = True
+            request_parameter_list(link)
+        if (
+            self.vehicle.version is None
+            and self._version_asks < RECORD_ASKS
+            and now - self._t_version_asked >= RECORD_ASK_PERIOD_S
+        ):
+            self._version_asks += 1
+            self._t_version_asked = now
+            link.command_long(px4.MAV_CMD_REQUEST_MESSAGE, float(AUTOPILOT_VERSION_ID))
+
+    def record_output(self, now: float, force: bool = False) -> Output:
+        """``[("vehicle_record", msg)]`` when the record is due (module docstring; ``force``:
+        now if anything is new, e.g. at shutdown), else ``[]``."""
+        rec = self.vehicle
+        if rec is None or rec.revision == 0:
+            return []
+        last_battery = rec.battery_last["stamp_ns"] if rec.battery_last else None
+        key = (rec.revision, rec.boot_samples, last_battery)
+        if key == self._record_sent:
+            return []
+        changed = self._record_sent is None or rec.revision != self._record_sent[0]
+        age = now - self._t_record_sent
+        if not (force or (changed and age >= RECORD_MIN_PERIOD_S) or age >= RECORD_REFRESH_S):
+            return []
+        self._record_sent, self._t_record_sent = key, now
+        return [
+            ("vehicle_record", messages.vehicle_record_msg(self.f, rec.summary(), self.clock_kind))
+        ]
 
     def _mavros_out(self, out: MavrosOutput, now: float) -> Output:
         assert self.mavros is not None
@@ -766,7 +1001,8 @@ class BridgeRuntime:
         if self._shutting_down:
             return []
         self._shutting_down = True
-        return self.status(now, self.core.shutdown(now)) + self._drain(now)
+        out = self.status(now, self.core.shutdown(now)) + self._drain(now)
+        return out + self.record_output(now, force=True)
 
     def shutdown_complete(self) -> bool:
         return self.core.state.value in SHUTDOWN_DONE

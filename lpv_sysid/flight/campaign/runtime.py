@@ -151,6 +151,9 @@ class CampaignRuntime:
         self.service_ready = service_ready
         self.bridge_values: dict = {}
         self.rec: Any = None  # CampaignRecorder once started with out_dir
+        #: the bridge's latest vehicle record (``vehicle_record``), for the runs'
+        #: ``experiment.yaml`` ``vehicle`` (as ``fly phase1`` writes it)
+        self.vehicle: dict | None = None
         self.out_dir = Path(settings.out_dir) if settings.out_dir else None
         self._written = False
         self._record_error_logged = False
@@ -213,6 +216,16 @@ class CampaignRuntime:
             if st.name == self.bridge_name:
                 self.bridge_values = dict(st.values)
 
+    def on_vehicle_record(self, msg: Any) -> None:
+        """The bridge's ``vehicle_record``: kept, and written to the recording's
+        ``experiment.yaml`` (``vehicle``) when one is open; a bad message is logged."""
+        try:
+            _, self.vehicle = messages.vehicle_record_from_msg(msg)
+            if self.rec is not None:
+                self.rec.annotate("vehicle", self.vehicle)
+        except LpvSysidError as exc:
+            self._log.append(("warn", f"vehicle_record ignored: {exc}"))
+
     # -- services -------------------------------------------------------------------------
     def _start(self, now: float, out: Output) -> str:
         if self.campaign.phase != campaign.IDLE:
@@ -233,6 +246,8 @@ class CampaignRuntime:
                 rate_setpoints=True,  # the echo of PX4's setpoints: identify --plant px4-rate
             )
             self.rec.start(now)
+            if self.vehicle is not None:
+                self.rec.annotate("vehicle", self.vehicle)
         self._handle(now, self.campaign.start(now), out)
         return f"campaign started: {len(self.plan.runs)} runs"
 

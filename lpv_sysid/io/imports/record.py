@@ -189,7 +189,8 @@ def px4_clock_of(experiment: str | Path) -> tuple[int, float, tuple | None]:
     clk = ((doc or {}).get("vehicle") or {}).get("px4_clock") or {}
     boot, rate = clk.get("boot_ns"), clk.get("rate", 1.0)
     if not isinstance(boot, int) or not isinstance(rate, (int, float)) or not rate > 0:
-        raise ConfigError(f"{p}: no vehicle.px4_clock (boot_ns, rate): not a fly recording")
+        why = f" ({clk['note']})" if clk.get("note") else ": not a fly recording"
+        raise ConfigError(f"{p}: no vehicle.px4_clock (boot_ns, rate){why}")
     knots = None
     k = clk.get("knots")
     if isinstance(k, list) and len(k) >= 2:

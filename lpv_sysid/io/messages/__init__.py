@@ -27,6 +27,8 @@ topic                         type                            content
 ``excitation``                sensor_msgs/JointState          ``ue_t, ue_a, ue_e, ue_r``, position
 ``actuator_command``          sensor_msgs/JointState          ``ut, ua, ue, ur``, position
 ``status``                    diagnostic_msgs/DiagnosticArray one DiagnosticStatus per node
+``vehicle_record``            std_msgs/String                 JSON: the bridge's vehicle record
+                                                              (``experiment.yaml`` ``vehicle``)
 ============================  ==============================  ===================================
 
 Virtual actuator channels are named channels in the seed's FRD sense and are never frame
@@ -43,6 +45,7 @@ One module per message family:
 :mod:`~lpv_sysid.io.messages.imu`          ``imu``
 :mod:`~lpv_sysid.io.messages.twist`        ``velocity_reference``, the MAVROS setpoint
 :mod:`~lpv_sysid.io.messages.status`       ``status`` (DiagnosticArray)
+:mod:`~lpv_sysid.io.messages.record`       ``vehicle_record`` (String, JSON)
 =======================================  ===========================================
 """
 
@@ -97,10 +100,14 @@ from lpv_sysid.io.messages.mavros import (
     battery_from_msg,
     esc_rpm_from_msg,
     estimator_flags_from_msg,
+    autopilot_version_known,
+    firmware_from_vehicle_info,
     gps_from_gpsraw,
     gps_from_navsatfix,
     home_geo_from_msg,
     home_ned_from_msg,
+    param_from_event,
+    param_names_from_list,
     params_from_get_parameters,
     position_target_msg,
     rate_setpoint_from_attitude_target_msg,
@@ -110,11 +117,18 @@ from lpv_sysid.io.messages.mavros import (
     vehicle_from_info_response,
     velocity_setpoint_from_position_target,
 )
+from lpv_sysid.io.messages.record import (
+    CLOCK_KINDS,
+    vehicle_record_from_msg,
+    vehicle_record_msg,
+)
 from lpv_sysid.io.messages.topics import (
     NAMESPACE,
     SENSOR_TOPICS,
     TOPIC_NAMESPACE,
     TYPES,
+    VEHICLE_RECORD_TOPIC,
+    VEHICLE_RECORD_TYPE,
     qos_of,
 )
 from lpv_sysid.io.messages.twist import (
@@ -187,4 +201,13 @@ __all__ = [
     "twist_reference_msg",
     "vehicle_from_info_response",
     "velocity_setpoint_from_position_target",
+    "CLOCK_KINDS",
+    "autopilot_version_known",
+    "firmware_from_vehicle_info",
+    "param_from_event",
+    "param_names_from_list",
+    "VEHICLE_RECORD_TOPIC",
+    "VEHICLE_RECORD_TYPE",
+    "vehicle_record_from_msg",
+    "vehicle_record_msg",
 ]

@@ -45,6 +45,9 @@ ESTIMATOR_STATUS = "mavros_msgs/msg/EstimatorStatus"  # sys_status plugin: ESTIM
 SET_MODE = "mavros_msgs/srv/SetMode"
 COMMAND_BOOL = "mavros_msgs/srv/CommandBool"
 COMMAND_LONG = "mavros_msgs/srv/CommandLong"  # command plugin: COMMAND_LONG, PX4's ACK
+PARAM_EVENT = "mavros_msgs/msg/ParamEvent"  # param plugin: one per PARAM_VALUE
+PARAM_PULL = "mavros_msgs/srv/ParamPull"  # param plugin: PARAM_REQUEST_LIST
+LIST_PARAMETERS = "rcl_interfaces/srv/ListParameters"  # the FCU params MAVROS has pulled
 
 #: the mavros_msgs types of the MAVROS transport, by role
 MAVROS_TYPES = {
@@ -65,6 +68,9 @@ MAVROS_TYPES = {
     "gps_raw": GPS_RAW,
     "nav_sat_fix": NAV_SAT_FIX,
     "estimator_status": ESTIMATOR_STATUS,
+    "param_event": PARAM_EVENT,
+    "param_pull": PARAM_PULL,
+    "list_parameters": LIST_PARAMETERS,
 }
 #: rcl_interfaces/ParameterValue.type of the numbers (PARAMETER_INTEGER, PARAMETER_DOUBLE)
 PARAMETER_INTEGER, PARAMETER_DOUBLE = 2, 3
@@ -246,3 +252,58 @@ def vehicle_from_info_response(response):
     if not bool(response.success) or len(response.vehicles) == 0:
         return None
     return response.vehicles[0]
+
+
+#: mavros_msgs/VehicleInfo.available_info bit: AUTOPILOT_VERSION received
+HAVE_INFO_AUTOPILOT_VERSION = 2
+
+
+def autopilot_version_known(vi) -> bool:
+    """``mavros_msgs/VehicleInfo`` holds PX4's AUTOPILOT_VERSION: ``available_info`` has
+    :data:`HAVE_INFO_AUTOPILOT_VERSION` (MAVROS sets it when the message arrives; until then
+    the version fields are zeros)."""
+    return bool(int(vi.available_info) & HAVE_INFO_AUTOPILOT_VERSION)
+
+
+def firmware_from_vehicle_info(vi) -> tuple[int, bytes, int, int, int, int, int] | None:
+    """``mavros_msgs/VehicleInfo`` -> AUTOPILOT_VERSION's ``(flight_sw_version,
+    flight_custom_version, board_version, vendor_id, product_id, uid)`` and HEARTBEAT's
+    ``base_mode``; None while MAVROS has no AUTOPILOT_VERSION (``available_info`` without
+    :data:`HAVE_INFO_AUTOPILOT_VERSION`: the version fields are zeros). MAVROS gives
+    ``flight_custom_version`` as the hex text of the 8 bytes (measured with PX4 v1.16 SITL:
+    ``'6ea3539157000000'``, ``available_info`` 3); text that is not 16 hex digits is kept
+    as its first 8 UTF-8 bytes."""
+    if not autopilot_version_known(vi):
+        return None
+    text = str(vi.flight_custom_version)
+    try:
+        custom = bytes.fromhex(text) if len(text) == 16 else text.encode()[:8]
+    except ValueError:
+        custom = text.encode()[:8]
+    return (
+        int(vi.flight_sw_version),
+        custom,
+        int(vi.board_version),
+        int(vi.vendor_id),
+        int(vi.product_id),
+        int(vi.uid),
+        int(vi.base_mode),
+    )
+
+
+def param_from_event(msg) -> tuple[str, float | int]:
+    """``mavros_msgs/ParamEvent`` -> ``(PX4 parameter name, value)``: an integer parameter
+    as int, a real one as float; MessageError for any other value type."""
+    v = msg.value
+    if int(v.type) == PARAMETER_INTEGER:
+        return str(msg.param_id), int(v.integer_value)
+    if int(v.type) == PARAMETER_DOUBLE:
+        return str(msg.param_id), float(v.double_value)
+    raise MessageError(f"param event {msg.param_id!r}: value type {int(v.type)} is no number")
+
+
+def param_names_from_list(response) -> list[str]:
+    """``rcl_interfaces/srv/ListParameters`` answer of MAVROS' param node -> the PX4
+    parameter names (upper case; the node's own ROS parameters, e.g. ``use_sim_time``, are
+    left out), sorted."""
+    return sorted(str(n) for n in response.result.names if str(n) == str(n).upper())

@@ -40,6 +40,14 @@ RELIABLE_QOS = {
 #: node's last status, e.g. the final state of a node that aborted
 STATUS_QOS = {**RELIABLE_QOS, "durability": "transient_local"}
 SENSOR_TOPICS = frozenset({"state", "rotor_speeds", "imu"})
+#: the bridge's vehicle record (firmware, PX4 parameters, PX4's boot on the ROS clock, ...,
+#: ``experiment.yaml``'s ``vehicle``): JSON in a std_msgs/String, published when it changes
+#: materially; metadata, not a recorded stream (not in :data:`TYPES`)
+VEHICLE_RECORD_TOPIC = "vehicle_record"
+VEHICLE_RECORD_TYPE = "std_msgs/msg/String"
+#: ``vehicle_record``: reliable and transient local, keep last 1: a logger started (or
+#: restarted) after the bridge still receives the latest record, and only that one
+VEHICLE_RECORD_QOS = {**RELIABLE_QOS, "depth": 1, "durability": "transient_local"}
 
 
 def qos_of(topic: str) -> dict:
@@ -51,4 +59,6 @@ def qos_of(topic: str) -> dict:
         return dict(SENSOR_QOS)
     if leaf in ("status", "diagnostics"):
         return dict(STATUS_QOS)
+    if leaf == VEHICLE_RECORD_TOPIC:
+        return dict(VEHICLE_RECORD_QOS)
     return dict(RELIABLE_QOS)

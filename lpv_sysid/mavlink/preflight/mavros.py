@@ -97,9 +97,11 @@ class MavrosEvidence:
         return [p for p in PARAMS if p not in self.params]
 
     def firmware_known(self) -> bool:
-        """MAVROS's VehicleInfo holds PX4's AUTOPILOT_VERSION (``flight_sw_version`` set;
-        0 until MAVROS has received it)."""
-        return self.vehicle is not None and int(self.vehicle.flight_sw_version) != 0
+        """MAVROS's VehicleInfo holds PX4's AUTOPILOT_VERSION
+        (:func:`~lpv_sysid.io.messages.autopilot_version_known`)."""
+        from lpv_sysid.io.messages import autopilot_version_known
+
+        return self.vehicle is not None and autopilot_version_known(self.vehicle)
 
     def put(self, name: str, value: Any, now: float) -> None:
         """Fact ``name`` (a field of :data:`EXPIRING`) received at ``now``."""

@@ -35,6 +35,7 @@ from lpv_sysid.mavlink.telemetry.clock import VehicleClock
 SIM_MARKER = b"lpvsim\0\0"
 MAV_MODE_FLAG_HIL_ENABLED = 32
 VEHICLE_KINDS = ("SIMULATED", "HITL", "SIH", "SITL", "FLOWN")
+_MISSING = object()
 
 
 def vehicle_kind(params: dict, hil_flag: bool, custom_version: bytes | None) -> str:
@@ -72,41 +73,38 @@ class VehicleRecord:
     windows: dict = field(default_factory=dict)
     #: live lower envelope of receive - time_boot (the decoder's own estimator, clock.py)
     live: VehicleClock = field(default_factory=VehicleClock)
+    #: counts the material changes (firmware, a parameter's value, the HIL flag, the site,
+    #: the first battery reading, SYSTEM_TIME, the first boot estimate): a publisher of the
+    #: record sends it again when this moved, not at telemetry rate (the clock knots and the
+    #: last battery reading change every second)
+    revision: int = 0
+    #: why ``px4_clock`` is empty when no message carries PX4's boot time (e.g. through
+    #: MAVROS), written into it by :meth:`summary`
+    clock_note: str | None = None
 
     def absorb(self, m: Any, receive_ns: int) -> None:
         """One MAVLink message of the target received at ``receive_ns`` (recording clock)."""
         mt = m.get_type()
         tb = getattr(m, "time_boot_ms", None)
         if isinstance(tb, int) and tb > 0:
-            est = int(receive_ns) - tb * 1_000_000
-            self.boot_ns = est if self.boot_ns is None else min(self.boot_ns, est)
-            self.boot_samples += 1
-            self.live.observe(int(receive_ns) * 1e-9, tb * 1e-3)
-            w = tb // 1000
-            old = self.windows.get(w)
-            if old is None or est < old[0]:
-                self.windows[w] = (est, tb * 1_000_000)
+            self.observe_boot(receive_ns, tb * 1_000_000)
         if mt == "HEARTBEAT":
-            if int(m.base_mode) & MAV_MODE_FLAG_HIL_ENABLED:
-                self.hil_flag = True
+            self.observe_base_mode(int(m.base_mode))
         elif mt == "AUTOPILOT_VERSION":
-            major, minor, patch, kind = px4.decode_flight_sw_version(m.flight_sw_version)
-            self.custom_version = bytes(m.flight_custom_version)
-            self.version = {
-                "flight_sw_version": f"v{major}.{minor}.{patch}"
-                + ("" if kind == 255 else f" (type {kind})"),
-                "flight_custom_version": bytes(m.flight_custom_version).hex(),
-                "board_version": int(m.board_version),
-                "vendor_id": int(m.vendor_id),
-                "product_id": int(m.product_id),
-                "uid": int(m.uid),
-            }
-        elif mt == "PARAM_VALUE":
-            self.params[px4.param_id_str(m.param_id)] = px4.param_from_wire(
-                m.param_value, m.param_type
+            self.set_firmware(
+                int(m.flight_sw_version),
+                bytes(m.flight_custom_version),
+                int(m.board_version),
+                int(m.vendor_id),
+                int(m.product_id),
+                int(m.uid),
             )
+        elif mt == "PARAM_VALUE":
+            name = px4.param_id_str(m.param_id)
+            self.set_param(name, px4.param_from_wire(m.param_value, m.param_type))
         elif mt == "SYSTEM_TIME":
             if int(m.time_unix_usec) > 0:
+                self.revision += self.system_time is None
                 self.system_time = {
                     "time_unix_usec": int(m.time_unix_usec),
                     "time_boot_ms": int(m.time_boot_ms),
@@ -118,11 +116,56 @@ class VehicleRecord:
         elif mt == "SYS_STATUS":
             v = int(m.voltage_battery)
             if v not in (0, 65535):
-                self._battery(receive_ns, v * 1e-3, int(m.battery_remaining))
+                self.battery_reading(receive_ns, v * 1e-3, int(m.battery_remaining))
         elif mt == "BATTERY_STATUS":
             cells = [c for c in m.voltages if c not in (0, 65535)]
             if cells:
-                self._battery(receive_ns, sum(cells) * 1e-3, int(m.battery_remaining))
+                self.battery_reading(receive_ns, sum(cells) * 1e-3, int(m.battery_remaining))
+
+    # -- the facts, whatever carried them (MAVLink above; MAVROS: flight/bridge/runtime.py) --
+    def observe_boot(self, receive_ns: int, time_boot_ns: int) -> None:
+        """PX4's clock read ``time_boot_ns`` (since boot) before the message left; it was
+        received at ``receive_ns`` (recording clock): one sample of the boot estimate."""
+        est = int(receive_ns) - int(time_boot_ns)
+        if self.boot_ns is None:
+            self.revision += 1
+        self.boot_ns = est if self.boot_ns is None else min(self.boot_ns, est)
+        self.boot_samples += 1
+        self.live.observe(int(receive_ns) * 1e-9, int(time_boot_ns) * 1e-9)
+        w = int(time_boot_ns) // 1_000_000_000
+        old = self.windows.get(w)
+        if old is None or est < old[0]:
+            self.windows[w] = (est, int(time_boot_ns))
+
+    def observe_base_mode(self, base_mode: int) -> None:
+        """A HEARTBEAT's ``base_mode``: its HIL flag latches."""
+        if int(base_mode) & MAV_MODE_FLAG_HIL_ENABLED and not self.hil_flag:
+            self.hil_flag = True
+            self.revision += 1
+
+    def set_firmware(
+        self, sw_version: int, custom: bytes, board: int, vendor: int, product: int, uid: int
+    ) -> None:
+        """AUTOPILOT_VERSION's fields (``flight_sw_version``, ``flight_custom_version``, ...)."""
+        major, minor, patch, kind = px4.decode_flight_sw_version(int(sw_version))
+        self.custom_version = bytes(custom)
+        old = self.version
+        self.version = {
+            "flight_sw_version": f"v{major}.{minor}.{patch}"
+            + ("" if kind == 255 else f" (type {kind})"),
+            "flight_custom_version": bytes(custom).hex(),
+            "board_version": int(board),
+            "vendor_id": int(vendor),
+            "product_id": int(product),
+            "uid": int(uid),
+        }
+        self.revision += self.version != old
+
+    def set_param(self, name: str, value: float | int) -> None:
+        """One PX4 parameter's value (a change counts as a new revision)."""
+        if self.params.get(name, _MISSING) != value:
+            self.params[name] = value
+            self.revision += 1
 
     def _home(self, m: Any, receive_ns: int) -> None:
         """HOME_POSITION (latitude/longitude degE7, altitude mm AMSL, x y z local NED m); a
@@ -131,19 +174,48 @@ class VehicleRecord:
         lat, lon, alt = (getattr(m, k, None) for k in ("latitude", "longitude", "altitude"))
         if not isinstance(lat, int) or not isinstance(lon, int) or (lat == 0 and lon == 0):
             return
+        self.set_site(
+            "HOME_POSITION",
+            lat * 1e-7,
+            lon * 1e-7,
+            None if not isinstance(alt, int) else alt * 1e-3,
+            [float(getattr(m, k, 0.0)) for k in "xyz"],
+            receive_ns,
+        )
+
+    def set_site(
+        self,
+        source: str,
+        latitude_deg: float,
+        longitude_deg: float,
+        altitude_amsl_m: float | None,
+        local_ned_m,
+        receive_ns: int,
+        **extra: Any,
+    ) -> None:
+        """The autopilot's home: WGS-84 latitude/longitude [deg], altitude AMSL [m] (None:
+        unknown), the local NED home [m]; ``extra``: what the source adds (e.g. MAVROS'
+        ellipsoid height). A latitude and longitude both 0 is no global home: ignored."""
+        if latitude_deg == 0.0 and longitude_deg == 0.0:
+            return
         h = {
-            "source": "HOME_POSITION",
-            "latitude_deg": lat * 1e-7,
-            "longitude_deg": lon * 1e-7,
-            "altitude_amsl_m": None if not isinstance(alt, int) else alt * 1e-3,
-            "local_ned_m": [round(float(getattr(m, k, 0.0)), 3) for k in "xyz"],
+            "source": source,
+            "latitude_deg": float(latitude_deg),
+            "longitude_deg": float(longitude_deg),
+            "altitude_amsl_m": None if altitude_amsl_m is None else float(altitude_amsl_m),
+            "local_ned_m": [round(float(x), 3) for x in local_ned_m],
             "stamp_ns": int(receive_ns),
+            **extra,
         }
         if self.site is None:
             self.site = h
+        keys = ("latitude_deg", "longitude_deg", "altitude_amsl_m", "local_ned_m")
+        if self.site_last is None or any(self.site_last[k] != h[k] for k in keys):
+            self.revision += 1
         self.site_last = h
 
-    def _battery(self, ns: int, volts: float, remaining: int) -> None:
+    def battery_reading(self, ns: int, volts: float, remaining: int) -> None:
+        """A battery reading at ``ns``: voltage [V], remaining [%] (negative: unknown)."""
         b = {
             "stamp_ns": int(ns),
             "voltage_v": round(volts, 3),
@@ -151,6 +223,7 @@ class VehicleRecord:
         }
         if self.battery_first is None:
             self.battery_first = b
+            self.revision += 1
         self.battery_last = b
 
     def clock_fit(self) -> tuple[int, float] | None:
@@ -231,6 +304,7 @@ class VehicleRecord:
                 "boot_ns + rate * PX4 time: the line through them; boot_ns_min: the overall "
                 "minimum",
                 "system_time": self.system_time,
+                **({"note": self.clock_note} if self.clock_note and not self.boot_samples else {}),
             },
             "px4_parameters": dict(sorted(p.items())),
         }
