@@ -27,7 +27,14 @@ from lpv_sysid.flight.controller.messages import (
 )
 from lpv_sysid.flight.controller.settings import ControllerSettings
 from lpv_sysid.flight.controller.startup import RATE_PLANT, design_of, load_flight_schedule
-from lpv_sysid.io.messages import MessageError, MsgFactory, diagnostic_array, diagnostic_status
+from lpv_sysid.io.messages import (
+    LOCKSTEP_ACK,
+    MessageError,
+    MsgFactory,
+    clock_msg,
+    diagnostic_array,
+    diagnostic_status,
+)
 from lpv_sysid.models.quadrotor import STATE_NAMES, mixer
 
 
@@ -201,13 +208,21 @@ class ControllerRuntime:
         return self._after_sample(topic, t, t_now)
 
     def _after_sample(self, topic: str, t: float, t_now: float) -> list:
+        """``tick_source: state``: a state sample newer than the last one ticked runs the law
+        at its stamp; with ``lockstep`` every such sample is answered -- by its command, or,
+        when the tick sends none (not started, aborted), by ``lockstep_ack`` stamped with it
+        (the lock-stepped simulation integrates past a sample only once it is answered, so
+        its time never runs ahead of what this controller has processed, started or not)."""
         if (
             self.settings.tick_source == "state"
             and topic == "state"
             and (self._t_sample is None or t > self._t_sample)
         ):
             self._t_sample = t
-            return self.tick(t_now, t_sample=t)
+            out = self.tick(t_now, t_sample=t)
+            if self.settings.lockstep and not any(name == "actuator_command" for name, _ in out):
+                out.append((LOCKSTEP_ACK[0], clock_msg(self.f, round(t * 1e9))))
+            return out
         return []
 
     def on_timer(self, t_now: float) -> list:

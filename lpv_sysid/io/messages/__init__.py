@@ -68,6 +68,8 @@ from lpv_sysid.io.messages.channels import (
 from lpv_sysid.io.messages.factory import MessageError, MsgFactory
 from lpv_sysid.io.messages.fields import (
     BASE_FRAME,
+    clock_msg,
+    clock_ns_of,
     header_msg,
     stamp_ns_from_time,
     stamp_ns_of,
@@ -111,6 +113,7 @@ from lpv_sysid.io.messages.mavros import (
     velocity_setpoint_from_position_target,
 )
 from lpv_sysid.io.messages.topics import (
+    LOCKSTEP_ACK,
     NAMESPACE,
     SENSOR_TOPICS,
     TOPIC_NAMESPACE,
@@ -130,6 +133,7 @@ __all__ = [
     "MavrosVehicleState",
     "MessageError",
     "MsgFactory",
+    "LOCKSTEP_ACK",
     "NAMESPACE",
     "ROTOR_ESTIMATED_FRAME",
     "ROTOR_ESTIMATED_NAMES",
@@ -146,6 +150,8 @@ __all__ = [
     "battery_from_msg",
     "actuator_command_msg",
     "channels_from_joint_state",
+    "clock_msg",
+    "clock_ns_of",
     "channels_from_joint_states",
     "diagnostic_array",
     "diagnostic_status",
