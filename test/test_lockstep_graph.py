@@ -63,6 +63,7 @@ class Graph:
             SimVehicleSettings(mode="lpv", lockstep=True), SensorConfig(), F, log=self._log
         )
         self.ctl = ControllerRuntime(controller_settings(lockstep), F)
+        self.ctl.lockstep_linked = True  # the simulation subscribes to the answers (the shell)
         self.ctl_q = {k: deque(maxlen=d) for k, d in DEPTH.items()}
         self.sim_q: deque = deque()  # reliable: commands, acks, references, in arrival order
         self.exc_clock: deque = deque(maxlen=1)
@@ -204,3 +205,25 @@ def test_lockstep_answers_hold_the_simulation_through_a_stall_after_start():
     first_cmd = min(s for k, s in g.answers if k == "actuator_command")
     assert first_cmd - t_start_ns == 4 * MS
     assert g.sim_at_stall_end - t_start_ns == 4 * MS
+
+
+def test_lockstep_start_waits_until_the_simulation_receives_the_answers():
+    """The controller's start is refused (naming why) until the simulation's subscription to
+    its answers matched and two answers went out since: only then does the simulation wait
+    for it (real Jazzy: a start in the controller's first wake, before DDS matched the
+    answers, let the simulation run on the wall clock past it)."""
+    g = Graph(lockstep=True)
+    g.ctl.lockstep_linked = False
+    g.run_until(300 * MS)
+    assert g.ctl.missing_inputs() == []
+    ok, why = g.ctl.start(g.ctl_now, wait_for_inputs=True)
+    assert not ok and why.startswith("lockstep: no answer received yet by the simulation")
+    assert "received yet" in why  # the drivers' retry word (test_ros_phase2.py DRIVER)
+    assert g.ctl.status(g.ctl_now).status[0].message.endswith(
+        "no answer received yet by the lock-stepped simulation"
+    )
+    g.ctl.lockstep_linked = True
+    g.run_until(304 * MS)  # one answer since
+    assert not g.ctl.start(g.ctl_now, wait_for_inputs=True)[0]
+    g.run_until(308 * MS)
+    assert g.ctl.start(g.ctl_now, wait_for_inputs=True) == (True, "LPV control started")

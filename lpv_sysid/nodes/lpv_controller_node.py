@@ -114,6 +114,11 @@ class LpvControllerNode(shell.ShellNode):
         return cb
 
     def _on_state_raw(self, data):
+        rt = self.runtime
+        if rt.settings.lockstep and not rt.lockstep_linked:
+            # the simulation's subscription to the answers matched (start waits for it)
+            ack = self.pub[messages.LOCKSTEP_ACK[0]]
+            rt.lockstep_linked = ack.get_subscription_count() > 0
         # tick_source state: a state sample steps the law at once (freshest sample)
         for out, m in self.runtime.on_state_cdr(data, self.now(), self._deserialize_state):
             self.pub[out].publish(m)
