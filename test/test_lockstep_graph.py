@@ -219,8 +219,10 @@ def test_lockstep_start_waits_until_the_simulation_receives_the_answers():
     ok, why = g.ctl.start(g.ctl_now, wait_for_inputs=True)
     assert not ok and why.startswith("lockstep: no answer received yet by the simulation")
     assert "received yet" in why  # the drivers' retry word (test_ros_phase2.py DRIVER)
-    assert g.ctl.status(g.ctl_now).status[0].message.endswith(
-        "no answer received yet by the lock-stepped simulation"
+    assert (
+        g.ctl.status(g.ctl_now)
+        .status[0]
+        .message.endswith("no answer received yet by the lock-stepped simulation")
     )
     g.ctl.lockstep_linked = True
     g.run_until(304 * MS)  # one answer since
