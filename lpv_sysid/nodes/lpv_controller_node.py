@@ -12,7 +12,8 @@ state sample, stamped with it (``tick_source: state``, the lock-stepped sim of
 sim.launch.py; with ``lockstep`` a state sample it sends no command on -- not started,
 aborted -- is answered on ``lockstep_ack``, so the simulation waits for it before and after
 start alike, and ``start`` waits until the simulation receives those answers); ``start``
-and ``auto_start`` wait until every input stream has delivered a sample. The core's log lines (the safety abort among them) go to this node's logger.
+and ``auto_start`` wait until every input stream has delivered a sample. The core's log
+lines (the safety abort among them) go to this node's logger.
 On a fault it publishes the abort on ``status`` and stops commanding, so the bridge hands
 control back to PX4. Services ``start`` / ``abort`` (std_srvs/Trigger). Spun by
 :class:`lpv_sysid.nodes.lean_executor.LeanExecutor` under a real rclpy (issue 27: rclpy's
