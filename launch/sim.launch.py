@@ -9,7 +9,9 @@ PX4-like baseline on velocity_reference in phase 1 and applies actuator_command 
 The graph runs on simulation time: sim_vehicle (``lockstep``) publishes ``/clock`` from its
 physics time, every other node has ``use_sim_time``, and the controller steps its law on each
 state sample (``tick_source: state``); sim_vehicle integrates past a state sample only once the
-command computed on it arrived. The controller follows the 100 Hz reference along its slope
+command computed on it arrived (the controller's ``lockstep``: before its start and after an
+abort it answers each state sample on ``lockstep_ack`` instead, so sim time never runs ahead
+of it). The controller follows the 100 Hz reference along its slope
 between messages (``reference_hold: foh``), as the offline simulation samples the signal.
 So the loop samples exactly like the offline ``lpv-sysid simulate phase2`` however loaded
 the machine is (a wall-clock Python graph on 2 loaded cores had more loop delay than the demo
@@ -80,6 +82,10 @@ def generate_launch_description():
                 {
                     "gains_file": arg("gains_file"),
                     "tick_source": "state",
+                    # answer every state sample, started or not (lockstep_ack while not
+                    # commanding): the simulation never runs past a sample the controller has
+                    # not processed, also between its start and its first command
+                    "lockstep": True,
                     "reference_hold": "foh",
                     # lock-stepped: the simulated vehicle waits for the command of each state,
                     # so in sim time a command acts on a state at most one period old; the

@@ -505,3 +505,42 @@ def test_node_freezes_the_loaded_heap(gains):
     finally:
         node.destroy_node()
         gc.unfreeze()
+
+
+def test_lockstep_controller_answers_every_state_sample_before_start(gains):
+    """lockstep (sim.launch.py): before start the controller answers each state sample of
+    the lock-stepped sim_vehicle on lockstep_ack (stamped with it, no command), so the
+    simulation waits for it from its first sample on -- not only from its first command
+    (test_lockstep_graph.py: the stall after start that this closes)."""
+    from rosgraph_msgs.msg import Clock
+
+    from lpv_sysid.nodes.lpv_controller_node import LpvControllerNode
+    from lpv_sysid.nodes.sim_vehicle_node import SimVehicleNode
+
+    rclpy.init()
+    sim = SimVehicleNode(cli_args=args("sim_vehicle.yaml", mode="lpv", lockstep=True))
+    ctl = LpvControllerNode(
+        cli_args=args("lpv_controller.yaml", gains_file=gains, tick_source="state", lockstep=True)
+    )
+    assert dict(ctl.get_topic_names_and_types())["/lpv_sysid/lockstep_ack"] == [
+        "rosgraph_msgs/msg/Clock"
+    ]
+    probe = rclpy.create_node("probe")
+    states, acks, cmds = [], [], []
+    probe.create_subscription(Odometry, "/lpv_sysid/state", states.append, qos_profile_sensor_data)
+    probe.create_subscription(Clock, "/lpv_sysid/lockstep_ack", acks.append, 100)
+    probe.create_subscription(JointState, "/lpv_sysid/actuator_command", cmds.append, 10)
+    spin([sim, ctl, probe], 0.5)
+    assert sim.runtime.engaged and not ctl.runtime.supervisor.armed and cmds == []
+    sent = sorted({messages.stamp_ns_of(m) for m in states})
+    answered = [messages.clock_ns_of(m) for m in acks]
+    assert len(sent) > 50 and answered == sent[: len(answered)] and len(sent) - len(answered) <= 1
+    assert sim.runtime.lockstep_timeouts == 0
+
+
+def test_lockstep_needs_tick_source_state(gains):
+    from lpv_sysid.errors import ConfigError
+    from lpv_sysid.flight.controller import ControllerSettings
+
+    with pytest.raises(ConfigError, match="lockstep needs tick_source state"):
+        ControllerSettings(gains_file=gains, lockstep=True)

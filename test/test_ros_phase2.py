@@ -14,6 +14,15 @@ first abort (rclpy: "Logger severity cannot be changed between calls"). The grap
 sim time in lock-step (sim_vehicle ``lockstep``, controller ``tick_source: state``,
 ``use_sim_time``), see launch/sim.launch.py.
 
+CI at load 10-20 on 2 cores (4 failures in one run): the controller aborted right after its
+start ("stale: rotor_speeds: no message for 0.064 s since arming"). The simulation engaged its
+barrier only on the controller's first command and ran on the wall clock until then, so a
+controller descheduled between its start and that command woke to a /clock 64 ms past its
+start -- a wall-time artefact of the simulated graph, not a timeout to widen (the vehicle's
+timeouts are unchanged). The controller's ``lockstep`` now answers every state sample, started
+or not (``lockstep_ack`` while it sends no command), so the simulation waits for it from its
+first sample on (test/test_lockstep_graph.py reproduces the stall without ROS).
+
 The oracles are independent of the nodes: the offline ``lpv-sysid simulate phase2`` of the
 same gains and signal (its saturated steps and bound-monitor estimate; the acceptance is the
 graph's monitor staying below the offline estimate x ``monitor_margin`` of the shipped

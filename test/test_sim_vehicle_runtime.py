@@ -120,8 +120,8 @@ def test_timeout_after_lockstep_timeout_s_runs_on_without_the_controller():
     assert rt.lockstep_timeouts == 1 and not rt.engaged and rt.awaiting is None
     assert log[-1] == (
         "warn",
-        "lockstep: no actuator_command for the state at t=0.004 s within 0.3 s of wall "
-        "time: running on without it",
+        "lockstep: no actuator_command or lockstep_ack for the state at t=0.004 s within 0.3 s "
+        "of wall time: running on without it",
     )
     # ran on by max_catch_up_s (50 steps: states at 8 ... 100 ms), the rest slipped:
     # pace 315 ms = 210 ms slipped + 104 ms of physics + 1 ms not yet due

@@ -9,8 +9,11 @@ parameters are declared once, in ``ControllerSettings``. Subscribes ``state``,
 ``rotor_speeds`` (best effort), ``velocity_reference`` and ``excitation`` (reliable); after
 ``start`` publishes ``actuator_command`` at ``rate_hz`` (``tick_source: timer``) or one per
 state sample, stamped with it (``tick_source: state``, the lock-stepped sim of
-sim.launch.py); ``start`` and ``auto_start`` wait until every input stream has delivered a
-sample. The core's log lines (the safety abort among them) go to this node's logger.
+sim.launch.py; with ``lockstep`` a state sample it sends no command on -- not started,
+aborted -- is answered on ``lockstep_ack``, so the simulation waits for it before and after
+start alike, and ``start`` waits until the simulation receives those answers); ``start``
+and ``auto_start`` wait until every input stream has delivered a sample. The core's log
+lines (the safety abort among them) go to this node's logger.
 On a fault it publishes the abort on ``status`` and stops commanding, so the bridge hands
 control back to PX4. Services ``start`` / ``abort`` (std_srvs/Trigger). Spun by
 :class:`lpv_sysid.nodes.lean_executor.LeanExecutor` under a real rclpy (issue 27: rclpy's
@@ -25,6 +28,7 @@ from __future__ import annotations
 from geometry_msgs.msg import TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message
+from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
@@ -63,6 +67,9 @@ class LpvControllerNode(shell.ShellNode):
             ),
             "status": shell.StatusPublisher(self),
         }  # status and /diagnostics
+        if settings.lockstep:  # the answer to a state sample without a command (sim only)
+            topic = messages.LOCKSTEP_ACK[0]
+            self.pub[topic] = self.create_publisher(ClockMsg, topic, shell.qos_for(topic))
         # state (the high-rate input): serialized bytes, only the fields the law needs read
         # (rclpy would build the whole Odometry, 72 covariance doubles included)
         self.create_subscription(
@@ -108,6 +115,11 @@ class LpvControllerNode(shell.ShellNode):
         return cb
 
     def _on_state_raw(self, data):
+        rt = self.runtime
+        if rt.settings.lockstep and not rt.lockstep_linked:
+            # the simulation's subscription to the answers matched (start waits for it)
+            ack = self.pub[messages.LOCKSTEP_ACK[0]]
+            rt.lockstep_linked = ack.get_subscription_count() > 0
         # tick_source state: a state sample steps the law at once (freshest sample)
         for out, m in self.runtime.on_state_cdr(data, self.now(), self._deserialize_state):
             self.pub[out].publish(m)

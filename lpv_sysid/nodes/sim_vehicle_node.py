@@ -7,8 +7,9 @@ and ``rotor_speeds`` are published at their sensor rates (best effort), stamped 
 physics time. Mode ``baseline`` (phase 1) flies ``velocity_reference``; mode ``lpv`` (phase 2)
 applies ``actuator_command`` (baseline hold once it goes stale: PX4's hand-back).
 ``lockstep`` (sim.launch.py): the simulation is the clock of the graph (``/clock``, physics
-time from 0), paced by the steady clock, each state sample waiting for its command (and the
-reference) before the physics integrates on. Parameters: :data:`SPECS`
+time from 0), paced by the steady clock, each state sample waiting for the controller's
+answer (its command, or ``lockstep_ack`` while it sends none) and the reference before the
+physics integrates on. Parameters: :data:`SPECS`
 (:mod:`lpv_sysid.sim.vehicle_node.settings`).
 
     ros2 run lpv_sysid sim_vehicle_node --ros-args --params-file config/sim_vehicle.yaml
@@ -67,6 +68,9 @@ class SimVehicleNode(shell.RuntimeShell):
             self.enable_tf()
         if settings.lockstep:
             self.pub["clock"] = self.create_publisher(ClockMsg, "/clock", shell.QOS_RELIABLE)
+            # the controller's answer to a state sample it sends no command on (its lockstep)
+            ack = messages.LOCKSTEP_ACK[0]
+            self.create_subscription(ClockMsg, ack, self.on_ack, shell.qos_for(ack))
         self.create_timer(1.0 / sensors.state_hz, self.on_tick, clock=self.pace_clock)
         self.status_timer(settings.status_rate_hz, self.publish_status)
 
@@ -89,6 +93,11 @@ class SimVehicleNode(shell.RuntimeShell):
         if parsed is not None:
             stamp_s, u = parsed
             self.publish_outputs(self.runtime.on_command(stamp_s, u, self._pace_ns()))
+
+    def on_ack(self, msg):
+        stamp_ns = self.parse_input(messages.LOCKSTEP_ACK[0], messages.clock_ns_of, msg)
+        if stamp_ns is not None:
+            self.publish_outputs(self.runtime.on_answer(stamp_ns * 1e-9, self._pace_ns()))
 
     def on_tick(self):
         self.publish_outputs(self.runtime.on_tick(self._pace_ns()))

@@ -27,8 +27,20 @@ from lpv_sysid.flight.controller.messages import (
 )
 from lpv_sysid.flight.controller.settings import ControllerSettings
 from lpv_sysid.flight.controller.startup import RATE_PLANT, design_of, load_flight_schedule
-from lpv_sysid.io.messages import MessageError, MsgFactory, diagnostic_array, diagnostic_status
+from lpv_sysid.io.messages import (
+    LOCKSTEP_ACK,
+    MessageError,
+    MsgFactory,
+    clock_msg,
+    diagnostic_array,
+    diagnostic_status,
+)
 from lpv_sysid.models.quadrotor import STATE_NAMES, mixer
+
+
+#: ``lockstep``: answers sent to a matched simulation before :meth:`ControllerRuntime.start`
+#: arms (one may be in flight while the match completes; the next arrives after it)
+LOCKSTEP_ANSWERS_BEFORE_START = 2
 
 
 class ControllerRuntime:
@@ -118,6 +130,11 @@ class ControllerRuntime:
         self.loop_delay_max = 0.0  # the largest loop delay of a tick since start [s]
         self.flags = {"clamped": 0, "saturated": 0, "rate_limited": 0}
         self._abort_reported = False
+        #: ``lockstep``: the shell sets this once a simulation subscribes to the answers
+        #: (``lockstep_ack`` matched); answers sent since then (:meth:`start` waits for
+        #: :data:`LOCKSTEP_ANSWERS_BEFORE_START`)
+        self.lockstep_linked = False
+        self.answers_linked = 0
 
     def _loop_delay_bound(self, settings: ControllerSettings) -> float:
         """The loop delay the supervisor holds the commands to [s] (0: none): the gains
@@ -201,13 +218,24 @@ class ControllerRuntime:
         return self._after_sample(topic, t, t_now)
 
     def _after_sample(self, topic: str, t: float, t_now: float) -> list:
+        """``tick_source: state``: a state sample newer than the last one ticked runs the law
+        at its stamp; with ``lockstep`` every such sample is answered -- by its command, or,
+        when the tick sends none (not started, aborted), by ``lockstep_ack`` stamped with it
+        (the lock-stepped simulation integrates past a sample only once it is answered, so
+        its time never runs ahead of what this controller has processed, started or not)."""
         if (
             self.settings.tick_source == "state"
             and topic == "state"
             and (self._t_sample is None or t > self._t_sample)
         ):
             self._t_sample = t
-            return self.tick(t_now, t_sample=t)
+            out = self.tick(t_now, t_sample=t)
+            if self.settings.lockstep:
+                if not any(name == "actuator_command" for name, _ in out):
+                    out.append((LOCKSTEP_ACK[0], clock_msg(self.f, round(t * 1e9))))
+                if self.lockstep_linked:
+                    self.answers_linked += 1
+            return out
         return []
 
     def on_timer(self, t_now: float) -> list:
@@ -266,6 +294,17 @@ class ControllerRuntime:
         }
         return [topic for topic in self.inputs if have[topic] is None]
 
+    def lockstep_ready(self) -> bool:
+        """Without ``lockstep`` always; with it once the simulation's subscription to the
+        answers matched and :data:`LOCKSTEP_ANSWERS_BEFORE_START` answers went out since: the
+        simulation then waits for every state sample this controller has not answered, so
+        its sim time cannot run ahead of an armed controller. Measured under real Jazzy
+        (load 10-17, the start called at once and again while refused): without this wait
+        the start came in the controller's first wake with its inputs, before DDS had
+        matched the answers to the simulation; the simulation ran on the wall clock past
+        the start and the controller aborted stale (5 of 6 starts)."""
+        return not self.settings.lockstep or self.answers_linked >= LOCKSTEP_ANSWERS_BEFORE_START
+
     def start(self, t_now: float, wait_for_inputs: bool = False) -> tuple[bool, str]:
         """Arm at ``t_now``; ``(started, why)``. ``wait_for_inputs`` (the node): refused while
         a stream has not delivered its first sample -- arming then would latch a stale abort
@@ -286,6 +325,12 @@ class ControllerRuntime:
         if missing:
             return False, (
                 f"no {', '.join(missing)} received yet: start once every input stream arrives"
+            )
+        if wait_for_inputs and not self.lockstep_ready():
+            return False, (
+                "lockstep: no answer received yet by the simulation (lockstep_ack "
+                f"{'matched' if self.lockstep_linked else 'not matched'}): start once it "
+                "waits for this controller"
             )
         sup.arm(t_now)
         self.loop_delay_max = 0.0
@@ -412,6 +457,8 @@ class ControllerRuntime:
             missing = self.missing_inputs()
             if missing:
                 message += f"; no {', '.join(missing)} received yet"
+            elif not self.lockstep_ready():
+                message += "; no answer received yet by the lock-stepped simulation"
         values = {
             "armed": sup.armed,
             "aborted": sup.aborted,

@@ -86,6 +86,14 @@ class ControllerSettings(Settings):
         "timer then only judges staleness",
         choices=TICK_SOURCES,
     )
+    lockstep: bool = flag(
+        False,
+        "a lock-stepped simulation is the clock (sim.launch.py, sim_vehicle lockstep): answer "
+        "every state sample -- with its actuator_command, or on lockstep_ack while not "
+        "commanding (before start, after an abort) -- so the simulation never integrates past "
+        "a sample the controller has not processed, started or not (needs tick_source state); "
+        "false on a vehicle",
+    )
     reference_hold: str = text(
         "zoh",
         "the reference between its messages: zoh holds it (a staircase: its steps reach "
@@ -222,6 +230,11 @@ class ControllerSettings(Settings):
                 f"stamp_tolerance_s {self.stamp_tolerance_s:g} s is below one state period "
                 f"(1 / state_rate_hz = {1.0 / self.state_rate_hz:g} s): under use_sim_time "
                 "a sample may arrive before the /clock message of its instant"
+            )
+        if self.lockstep and self.tick_source != "state":
+            self.fail(
+                "lockstep needs tick_source state (the simulation waits for the answer to "
+                f"each state sample), got tick_source {self.tick_source}"
             )
         if 0.0 < self.monitor_window_s < 1.0:
             self.fail(

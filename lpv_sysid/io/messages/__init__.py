@@ -71,6 +71,8 @@ from lpv_sysid.io.messages.channels import (
 from lpv_sysid.io.messages.factory import MessageError, MsgFactory
 from lpv_sysid.io.messages.fields import (
     BASE_FRAME,
+    clock_msg,
+    clock_ns_of,
     header_msg,
     stamp_ns_from_time,
     stamp_ns_of,
@@ -123,6 +125,7 @@ from lpv_sysid.io.messages.record import (
     vehicle_record_msg,
 )
 from lpv_sysid.io.messages.topics import (
+    LOCKSTEP_ACK,
     NAMESPACE,
     SENSOR_TOPICS,
     TOPIC_NAMESPACE,
@@ -144,6 +147,7 @@ __all__ = [
     "MavrosVehicleState",
     "MessageError",
     "MsgFactory",
+    "LOCKSTEP_ACK",
     "NAMESPACE",
     "ROTOR_ESTIMATED_FRAME",
     "ROTOR_ESTIMATED_NAMES",
@@ -160,6 +164,8 @@ __all__ = [
     "battery_from_msg",
     "actuator_command_msg",
     "channels_from_joint_state",
+    "clock_msg",
+    "clock_ns_of",
     "channels_from_joint_states",
     "diagnostic_array",
     "diagnostic_status",

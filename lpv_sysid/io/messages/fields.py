@@ -90,5 +90,15 @@ def stamp_ns_of(msg) -> int:
     return stamp_ns_from_time(msg.header.stamp)
 
 
+def clock_msg(f: MsgFactory, stamp_ns: int):
+    """``rosgraph_msgs/Clock`` of integer nanoseconds (``/clock``, ``lockstep_ack``)."""
+    return f("rosgraph_msgs/msg/Clock", clock=time_msg(f, stamp_ns))
+
+
+def clock_ns_of(msg) -> int:
+    """Integer nanoseconds of a ``rosgraph_msgs/Clock``."""
+    return stamp_ns_from_time(msg.clock)
+
+
 def header_msg(f: MsgFactory, stamp_ns: int, frame_id: str = ""):
     return f("std_msgs/msg/Header", stamp=time_msg(f, stamp_ns), frame_id=str(frame_id))

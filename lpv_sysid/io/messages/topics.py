@@ -18,6 +18,11 @@ TYPES = {
     # r_sp in ``position``): the rate-plant identification's input, phase 2's echo
     "rate_setpoint": "sensor_msgs/msg/JointState",
 }
+#: lock-stepped simulation only (sim.launch.py): the controller's answer to a state sample on
+#: which it sent no ``actuator_command`` (not started, or aborted), ``clock`` = the sample's
+#: stamp; sim_vehicle (``lockstep``) integrates past a state sample only once it is answered
+#: (command or this). Not an experiment topic: not recorded, absent on a vehicle.
+LOCKSTEP_ACK = ("lockstep_ack", "rosgraph_msgs/msg/Clock")
 
 #: QoS of the high-rate measurement streams: best effort, keep last 5 (rclpy's
 #: ``qos_profile_sensor_data``): a late sample is worthless, a retransmission only delays

@@ -26,19 +26,26 @@ at 0 and every stamp, and ``/clock`` (published at each state sample, before the
 that instant), is physics time; the other nodes run on ``use_sim_time``. A steady wall clock
 paces it (at most ``real_time_factor`` x real time). Once a controller answers the state
 samples (an ``actuator_command`` stamped with a state instant: lpv_controller with
-``tick_source: state``) every state sample waits for the command stamped with it before the
-physics integrates on (and, once a ``velocity_reference`` arrives on sim time, for the
-reference to be at most ``lockstep_reference_lag_s`` old: a CPU-starved excitation node slows
-the simulation instead of going stale; measured at load 9 on 2 cores without this barrier: a
-104 ms sim-time gap in the reference and a stale abort), so the loop has exactly the
-sampling of the offline ``simulate phase2`` (command computed on the state at t_k, held over
-[t_k, t_k+1)) however loaded the machine is: the wall-clock graph on 2 loaded cores had a
-p99 state-to-command delay of 23 ms (bench_node_rclpy, load 8-11), beyond the demo gains'
-certified loop delay (certificate.loop_delay.bound_s, 17.7 ms). An unanswered
-sample is sent again every :data:`LOCKSTEP_RESEND_S` (best-effort stream); after
-``lockstep_timeout_s`` of wall time without an answer the simulation runs on alone
-(``command_timeout_s`` later: baseline hold). Status reports ``real_time_factor`` (sim time
-per wall time), resends and timeouts.
+``tick_source: state``; with its ``lockstep`` also a ``lockstep_ack`` stamped with the sample
+while it sends no command, i.e. from its first sample on, started or not) every state sample
+waits for the answer stamped with it before the physics integrates on (and, once a
+``velocity_reference`` arrives on sim time, for the reference to be at most
+``lockstep_reference_lag_s`` old: a CPU-starved excitation node slows the simulation instead
+of going stale; measured at load 9 on 2 cores without this barrier: a 104 ms sim-time gap in
+the reference and a stale abort), so the loop has exactly the sampling of the offline
+``simulate phase2`` (command computed on the state at t_k, held over [t_k, t_k+1)) however
+loaded the machine is: the wall-clock graph on 2 loaded cores had a p99 state-to-command
+delay of 23 ms (bench_node_rclpy, load 8-11), beyond the demo gains' certified loop delay
+(certificate.loop_delay.bound_s, 17.7 ms). A controller that answers with commands only
+engages the barrier at its first command: until then the physics runs on the wall clock, and
+a controller descheduled between its start and that command sees its clock jump past its
+start (measured at load 12-25 on 2 cores, test_ros_phase2.py: "stale: rotor_speeds: no
+message for 0.064 s since arming", or a state stamp ahead of its clock); lpv_controller's
+``lockstep`` answers from its first sample and closes that window
+(test/test_lockstep_graph.py). An unanswered sample is sent again every
+:data:`LOCKSTEP_RESEND_S` (best-effort stream); after ``lockstep_timeout_s`` of wall time
+without an answer the simulation runs on alone (``command_timeout_s`` later: baseline hold).
+Status reports ``real_time_factor`` (sim time per wall time), resends and timeouts.
 """
 
 from __future__ import annotations
@@ -62,6 +69,8 @@ _LOG = logging.getLogger(__name__)
 #: lockstep: a state sample still unanswered after this much wall time is sent again (same
 #: stamp and values: the state stream is best effort, one lost sample must not stall the loop)
 LOCKSTEP_RESEND_S = 0.05
+#: lockstep: what a state sample waits for from the controller (its command or its ack)
+ANSWER = "actuator_command or lockstep_ack"
 #: at most one "slipping real time" warning in this period of the pace clock [s]
 SLIP_LOG_PERIOD_S = 5.0
 
@@ -153,19 +162,32 @@ class SimVehicleRuntime:
         return out
 
     def on_command(self, stamp_s: float, u, pace_ns: int) -> Outputs:
-        """A parsed ``actuator_command`` (stamp, u)."""
-        out: Outputs = []
+        """A parsed ``actuator_command`` (stamp, u): applied, and in lockstep the answer to
+        the state sample it is stamped with."""
         self.cmd = (u, self.physics_stamp_ns() * 1e-9)
+        return self.on_answer(stamp_s, pace_ns)
+
+    def on_answer(self, stamp_s: float, pace_ns: int) -> Outputs:
+        """Lockstep: the controller answered the state sample stamped ``stamp_s`` -- with its
+        ``actuator_command`` (:meth:`on_command`) or, while it sends none (not started,
+        aborted), on ``lockstep_ack``. An answer stamped with a state instant comes from a
+        controller answering the state samples (``tick_source: state``): from then on every
+        sample waits for its answer. The controller's ``lockstep`` answers from its first
+        sample, so the physics never runs ahead of it, neither before its start nor between
+        its start and its first command (measured before: the simulation ran on the wall
+        clock until that first command, and a controller descheduled there for 60+ ms of a
+        loaded machine saw /clock jump past its start and aborted stale)."""
+        out: Outputs = []
         if not self.lockstep:
             return out
-        # a command stamped with a state instant comes from a controller answering the
-        # state samples (tick_source state): from now on every sample waits for its command
         t_cmd = round(stamp_s * 1e9)
         period = self.d_state * self.dt_ns
         on_grid = abs(t_cmd - round(t_cmd / period) * period) * 2 <= self.dt_ns
         if on_grid and not self.engaged:
             self.engaged = True
-            self.log("info", "lockstep engaged: each state sample waits for its actuator_command")
+            self.log(
+                "info", "lockstep engaged: each state sample waits for the controller's answer"
+            )
         if (
             self.awaiting is not None
             and abs(t_cmd - self.awaiting[0] * self.dt_ns) * 2 <= self.dt_ns
@@ -181,7 +203,7 @@ class SimVehicleRuntime:
         k = self.awaiting[0]
         out = []
         if self.engaged and self._cmd_k != k:
-            out.append("actuator_command")
+            out.append(ANSWER)
         if self.ref_engaged and self._ref_stamp_ns < k * self.dt_ns - self._ref_lag_ns:
             out.append("velocity_reference")
         return out
@@ -201,16 +223,13 @@ class SimVehicleRuntime:
             return True
         waited = pace_ns - self.awaiting[1]
         if waited <= self.settings.lockstep_timeout_s * 1e9:
-            if (
-                "actuator_command" in missing
-                and waited >= (self.awaiting[2] + 1) * LOCKSTEP_RESEND_S * 1e9
-            ):
+            if ANSWER in missing and waited >= (self.awaiting[2] + 1) * LOCKSTEP_RESEND_S * 1e9:
                 self.awaiting[2] += 1
                 self.lockstep_resends += 1
                 out.append(("state", self._state_msg(self.physics_stamp_ns())))
             return False
         self.awaiting = None
-        self.engaged = self.engaged and "actuator_command" not in missing
+        self.engaged = self.engaged and ANSWER not in missing
         self.ref_engaged = self.ref_engaged and "velocity_reference" not in missing
         self.lockstep_timeouts += 1
         self.log(
@@ -289,7 +308,7 @@ class SimVehicleRuntime:
         veh, f = self.vehicle, self.f
         if self.lockstep and k % self.d_state == 0:
             # the clock first: a sample then never arrives ahead of its instant's /clock
-            out.append(("clock", f("rosgraph_msgs/msg/Clock", clock=messages.time_msg(f, stamp))))
+            out.append(("clock", messages.clock_msg(f, stamp)))
         if k % self.d_state == 0:
             self.xm = veh.measure_state()
             out.append(("state", self._state_msg(stamp)))

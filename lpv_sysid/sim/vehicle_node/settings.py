@@ -49,13 +49,14 @@ class SimVehicleSettings(parameters.Settings):
     lockstep: bool = parameters.flag(
         False,
         "sim time: publish /clock (the physics time, from 0) and, "
-        "while a controller commands, integrate past a state sample only "
-        "once the actuator_command stamped with that sample arrived (the "
-        "graph on use_sim_time, controller tick_source state; sim.launch.py)",
+        "once a controller answers the state samples, integrate past a state sample only "
+        "once its answer arrived: the actuator_command stamped with it, or lockstep_ack "
+        "while the controller sends no command (the graph on use_sim_time, controller "
+        "tick_source state and lockstep; sim.launch.py)",
     )
     lockstep_timeout_s: float = parameters.double(
         1.0,
-        "lockstep: wall time to wait for the command of "
+        "lockstep: wall time to wait for the answer to "
         "a state sample before running on without it (the "
         "controller stopped; baseline hold after "
         "command_timeout_s of sim time) [s]",
