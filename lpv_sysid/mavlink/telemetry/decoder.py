@@ -270,7 +270,7 @@ class TelemetryDecoder:
         tv = m.time_usec * 1e-6
         if not self._accept("HIGHRES_IMU", tv, now, None):
             return None
-        return [ImuSample(self.clock.local(tv, now), tv, acc, gyr)]
+        return [ImuSample(self.clock.local(tv, now, "imu"), tv, acc, gyr)]
 
     def _esc_status(self, m: Any, now: float) -> list[Any] | None:
         tv = m.time_usec * 1e-6
@@ -303,7 +303,7 @@ class TelemetryDecoder:
         lat = self._latest["rotors"]
         lat.t, lat.tv, lat.value = now, tv, ESC
         self.rotor_source = ESC
-        return [RotorSample(self.clock.local(tv, now), tv, self._rotors.copy(), ESC)]
+        return [RotorSample(self.clock.local(tv, now, "rotors"), tv, self._rotors.copy(), ESC)]
 
     def _latest_motor_t(self) -> float:
         return max(self._latest[s].t for s in MOTOR_OUTPUT_SOURCES)
@@ -363,7 +363,7 @@ class TelemetryDecoder:
         lat = self._latest["rotors"]
         lat.t, lat.tv, lat.value = now, tv, ESTIMATED
         self.rotor_source = ESTIMATED
-        return [RotorSample(self.clock.local(tv, now), tv, omega, ESTIMATED)]
+        return [RotorSample(self.clock.local(tv, now, "rotors"), tv, omega, ESTIMATED)]
 
     # -------------------------------------------------------------- state
     def _state(
@@ -388,9 +388,8 @@ class TelemetryDecoder:
             ]
         )
         tv = max(a.tv, p.tv)
-        return StateSample(
-            self.clock.local(tv, now), tv, pos, vel, q, euler, v_body, omega, abs(a.tv - p.tv)
-        )
+        t = self.clock.local(tv, now, "state")
+        return StateSample(t, tv, pos, vel, q, euler, v_body, omega, abs(a.tv - p.tv))
 
     def _state_list(self, now: float) -> list[Any]:
         s = self._state(now)
