@@ -18,9 +18,10 @@ A vehicle time that goes back by more than :data:`RESET_JUMP_S` is a reboot: the
 estimate starts again.
 
 Per ``stream`` (a caller's name for one kind of sample), the stamps never go back while the
-vehicle times do not: when a less-delayed message lowers the envelope by more than the
-spacing of two samples, the later sample keeps the earlier one's stamp (measured under real
-Jazzy against PX4 SITL at load 10: two states 76 us apart backwards, and the controller's
+vehicle times do not: when a less-delayed message lowers the envelope, the stream's offset
+follows it down at most :data:`CATCH_UP` s per vehicle second, so consecutive stamps stay at
+least half their vehicle spacing apart (measured under real Jazzy against PX4 SITL at load
+10: a drop larger than two states' spacing stamped them 76 us backwards, and the controller's
 out-of-order check aborted phase 2).
 
 Example
@@ -38,6 +39,8 @@ import math
 
 #: how fast the offset estimate may rise (receiver s per vehicle s)
 LIVE_RISE = 0.05
+#: how fast a stream's offset may fall to a lowered envelope (receiver s per vehicle s, < 1)
+CATCH_UP = 0.5
 #: vehicle time this far back: a reboot (matches the decoder's out-of-order rule)
 RESET_JUMP_S = 10.0
 #: a mapped time older than this is on another time base (a wrapped uint32 microsecond
@@ -52,7 +55,7 @@ class VehicleClock:
     def __init__(self) -> None:
         self.offset: float | None = None  # receive - t_vehicle, lower envelope [s]
         self._tv = -math.inf  # newest vehicle time observed [s]
-        self._last: dict[str, tuple[float, float]] = {}  # stream: (t_vehicle, stamp) [s]
+        self._last: dict[str, tuple[float, float]] = {}  # stream: (t_vehicle, offset) [s]
 
     def observe(self, now: float, t_vehicle: float) -> None:
         """One message received at ``now`` (receiver clock) stamped ``t_vehicle`` by PX4."""
@@ -70,17 +73,18 @@ class VehicleClock:
     def local(self, t_vehicle: float, received: float, stream: str | None = None) -> float:
         """Receiver-clock time of vehicle time ``t_vehicle`` for a sample read at
         ``received``: ``received`` itself before any estimate or for a time that is none,
-        else ``t_vehicle + offset``, at most ``received``; with ``stream``, not before the
-        stamp of that stream's previous sample unless its vehicle time went back."""
+        else ``t_vehicle + offset``, at most ``received``; with ``stream``, the offset falls
+        at most :data:`CATCH_UP` per vehicle second from that stream's previous one (module
+        docstring), so its stamps do not go back while its vehicle times do not."""
         if self.offset is None or not (math.isfinite(t_vehicle) and t_vehicle > 0.0):
             return received
-        t = t_vehicle + self.offset
+        off = self.offset
+        if stream is not None:
+            tv_prev, off_prev = self._last.get(stream, (-math.inf, -math.inf))
+            if t_vehicle >= tv_prev:
+                off = max(off, off_prev - CATCH_UP * (t_vehicle - tv_prev))
+                self._last[stream] = (t_vehicle, off)
+        t = t_vehicle + off
         if t < received - MAX_AGE_S:
             return received
-        t = min(t, received)
-        if stream is not None:
-            tv_prev, t_prev = self._last.get(stream, (-math.inf, -math.inf))
-            if t_vehicle >= tv_prev:
-                t = max(t, min(t_prev, received))
-                self._last[stream] = (t_vehicle, t)
-        return t
+        return min(t, received)
