@@ -16,6 +16,7 @@ hand-back, the gain analysis -- not the sim's tracking quality.
 from __future__ import annotations
 
 import math
+import re
 import sys
 from pathlib import Path
 
@@ -305,7 +306,11 @@ def test_real_px4_phase1_records_rate_setpoints_and_identifies(tmp_path):
     cfg_doc["bridge_config"] = str(CONFIG / "mavlink_bridge_chain.yaml")
     cfg_doc["signals_config"] = str(CONFIG / "signals_phase1_chain.yaml")
     cfg_doc["identification_config"] = str(CONFIG / "identification.yaml")
-    cfg_doc["campaign"].update({"vertices": [8], "hover_validation": False, "finish": "LAND"})
+    # state_timeout 1 s as the graph test below (0.5 s in the chain's file: the in-process
+    # loop was starved 0.74 s at load 20 on 2 cores before the first run)
+    cfg_doc["campaign"].update(
+        {"vertices": [8], "hover_validation": False, "finish": "LAND", "state_timeout": 1.0}
+    )
     (tmp_path / "campaign.yaml").write_text(yaml.safe_dump(cfg_doc))
     with Px4Sitl(d, instance=INSTANCE) as px4:
         res = fly(
@@ -317,7 +322,7 @@ def test_real_px4_phase1_records_rate_setpoints_and_identifies(tmp_path):
             handle_signals=False,
             record_rate_setpoints=True,
         )
-    if not res.summary.get("bags") and "stale input" in res.reason:
+    if not res.summary.get("bags") and re.search(r"stale input|no fresh state", res.reason):
         # the companion loop stalled longer than input_timeout (seen at load 13-15 on 2 cores):
         # an overloaded host, not a result about the chain; the hand-back was confirmed
         pytest.skip(f"host overloaded, campaign handed back before the first run: {res.reason}")
@@ -371,6 +376,21 @@ def _bag_rates(out_dir: Path) -> dict:
     }
 
 
+def _loop_delay_max_ms(log_dir: Path) -> float:
+    """The controller's largest loop delay of the flight [ms] (its status, recorded)."""
+    from lpv_sysid.flight.controller.replay import bag_directories
+
+    best = 0.0
+    for part in bag_directories(str(log_dir)):
+        names = [n for n in iobag.topic_info(str(part)) if n.endswith("status")]
+        for _, m in (x for rows in iobag.read_bag(str(part), topics=names).values() for x in rows):
+            for st in m.status:
+                for kv in st.values:
+                    if kv.key == "loop_delay_max_ms":
+                        best = max(best, float(kv.value))
+    return best
+
+
 def test_real_ros_graph_whole_chain_on_px4_sitl(tmp_path):
     """Issue 21 item 6: under real ROS 2 Jazzy against PX4 SITL (SIH quad, instance 11),
     ``ros2 launch lpv_sysid campaign.launch.py`` flies phase 1 (one vertex, PX4's own rate
@@ -383,8 +403,6 @@ def test_real_ros_graph_whole_chain_on_px4_sitl(tmp_path):
     actuator_command (setpoints sent) and rate_setpoint (PX4's echo) near their configured
     rates, and ``replay`` of that bag through the controller runtime (the code ``fly phase2``
     runs) computes the commands the node sent."""
-    import re
-
     from support.px4_sitl import Px4Sitl, find_px4
     from support.ros_real import DomainId, RosEnv, build_package, find_ros
 
@@ -573,6 +591,11 @@ def test_real_ros_graph_whole_chain_on_px4_sitl(tmp_path):
                 )
                 == 0
             )
+            cert = yaml.safe_load((tmp_path / "gains.yaml").read_text())["certificate"]
+            print(
+                f"gains: gamma {cert.get('gamma')}, achieved {cert.get('gamma_achieved')}, "
+                f"loop delay certified {cert['loop_delay']}"
+            )
             # ---- phase 2 through the ROS graph, the vehicle in the air in HOLD
             p2 = launch(
                 "phase2.launch.py",
@@ -591,13 +614,16 @@ def test_real_ros_graph_whole_chain_on_px4_sitl(tmp_path):
                 ("sequence complete: every node started in order", 240.0),
                 ("signal complete: hand-back and stop sent", 300.0),
             ):
-                if p2.wait_for(line, timeout):
+                if p2.wait_for(line, timeout, unless="sequence aborted"):
                     continue
                 if "safety abort: loop_delay" in p2.log():
                     # the law's commands came from states older than the certified delay (184 ms
                     # against 77 ms at load 17): the host, not the chain; handed back
                     assert p2.wait_for("hand-back", 60.0), p2.log()[-4000:]
-                    pytest.skip("host overloaded: loop delay above the certified bound")
+                    why = re.findall(
+                        r"safety abort: loop_delay: (.*?above the certified \S+ ms)", p2.log()
+                    )
+                    pytest.skip(f"host overloaded: {why[0] if why else 'loop delay > bound'}")
                 raise AssertionError(p2.log()[-6000:])
             assert p2.wait_for("hand-back confirmed", 60.0), p2.log()[-4000:]
             text = p2.log()
@@ -611,6 +637,7 @@ def test_real_ros_graph_whole_chain_on_px4_sitl(tmp_path):
         dom.release()
     rates = _bag_rates(tmp_path / "phase2_log")
     print(f"phase-2 bag (messages, Hz): {rates}")
+    print(f"controller loop delay max {_loop_delay_max_ms(tmp_path / 'phase2_log'):.1f} ms")
     for topic, hz in (
         ("state", 100.0),
         ("imu", 100.0),

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 
 from lpv_sysid.mavlink.telemetry import TelemetryDecoder, VehicleClock
-from lpv_sysid.mavlink.telemetry.clock import LIVE_RISE, MAX_AGE_S
+from lpv_sysid.mavlink.telemetry.clock import CATCH_UP, LIVE_RISE, MAX_AGE_S
 
 from test_telemetry_hygiene import BOOT, att_q, lpos
 
@@ -63,3 +63,25 @@ def test_a_backlog_read_in_one_poll_keeps_each_states_time():
     assert len({st for st, _ in stamps}) == len({tv for _, tv in stamps}) == 10
     oldest = t_poll - stamps[0][0]
     assert oldest >= 9 / 256  # its real age, not 0
+
+
+def test_a_lower_envelope_never_sends_a_streams_stamps_back():
+    """Phase 2 under real Jazzy on PX4 SITL (load 10) aborted on two states stamped 76 us
+    backwards: a less-delayed message lowered the envelope by more than the samples'
+    spacing. Per stream the offset follows the envelope down at CATCH_UP only; other streams
+    and a stream-less call see the new estimate (oracle: exact binary fractions)."""
+    c = VehicleClock()
+    c.observe(100.0625, 5.0)  # 62.5 ms late: offset 95.0625
+    s1 = c.local(5.0, 100.0625, "state")
+    assert s1 == 100.0625
+    c.observe(100.078125, 5.0625)  # 15.6 ms after: the envelope drops to 95.015625
+    assert c.offset == 100.078125 - 5.0625
+    # the next state (vehicle time 1/128 s after s1's) would map before s1: its offset falls
+    # by CATCH_UP x 1/128 s only, so it comes half the spacing after s1
+    assert 5.0078125 + c.offset < s1
+    s2 = c.local(5.0078125, 100.078125, "state")
+    assert s2 == s1 + (1 - CATCH_UP) / 128 > s1
+    assert c.local(5.0078125, 100.078125) == 5.0078125 + c.offset  # no stream: as mapped
+    assert c.local(5.0078125, 100.078125, "imu") == 5.0078125 + c.offset  # its own stream
+    # once the stream's offset has reached the envelope, stamps follow it again
+    assert c.local(5.1, 100.25, "state") == 5.1 + c.offset > s1

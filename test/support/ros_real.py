@@ -171,11 +171,16 @@ class Proc:
             self._fh.flush()
         return self.log_path.read_text(errors="replace")
 
-    def wait_for(self, text: str, timeout: float) -> bool:
+    def wait_for(self, text: str, timeout: float, unless: str | None = None) -> bool:
+        """Whether ``text`` appears in the log within ``timeout`` s; False at once when
+        ``unless`` appears first (e.g. an abort: no point waiting for the rest)."""
         t0 = time.monotonic()
         while time.monotonic() - t0 < timeout:
-            if text in self.log():
+            log = self.log()
+            if text in log:
                 return True
+            if unless is not None and unless in log:
+                return False
             if self.p.poll() is not None:
                 return text in self.log()
             time.sleep(0.2)

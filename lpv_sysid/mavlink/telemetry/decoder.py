@@ -42,9 +42,6 @@ class TelemetryStats:
     foreign: int = 0  # telemetry from a source other than the target
     untargeted: int = 0  # telemetry before the target was known
     esc_zero_while_running: int = 0
-    #: samples whose mapped time fell before the previous sample's of the same output
-    #: (the clock estimate dropped): published at the previous time, never earlier
-    stamps_held: int = 0
 
 
 @dataclass
@@ -94,8 +91,6 @@ class TelemetryDecoder:
         #: the vehicle's clock on the caller's: samples carry their sample time (clock.py;
         #: a ReceiverClock for stamps already on the caller's clock)
         self.clock = clock if clock is not None else VehicleClock()
-        #: the newest published time of each output (state, imu, rotor): never earlier
-        self._t_out: dict[str, float] = {}
         self.source_filter = source_filter
         self.target = target
         self.foreign_sources: dict[tuple[int, int], int] = {}
@@ -182,19 +177,6 @@ class TelemetryDecoder:
         """Measured rotor speeds (ESC_STATUS with rpm) younger than the ESC timeout."""
         timeout = self.rotor_config.esc_timeout if self.rotor_config is not None else math.inf
         return now - self._esc_valid_t <= timeout
-
-    def _local(self, output: str, tv: float, now: float) -> float:
-        """The receiver-clock time of ``output``'s sample at vehicle time ``tv`` read at
-        ``now``: the clock's mapping, held at the previous sample's time when the mapping
-        fell below it (a consumer rejects a stamp before its predecessor: the controller's
-        out_of_order abort)."""
-        t = self.clock.local(tv, now)
-        last = self._t_out.get(output, -math.inf)
-        if t < last:
-            self.stats.stamps_held += 1
-            t = last
-        self._t_out[output] = t
-        return t
 
     # ------------------------------------------------------------- handlers
     def _accept(self, slot: str, tv: float, now: float, value: Any) -> bool:
@@ -290,7 +272,7 @@ class TelemetryDecoder:
         tv = m.time_usec * 1e-6
         if not self._accept("HIGHRES_IMU", tv, now, None):
             return None
-        return [ImuSample(self._local("imu", tv, now), tv, acc, gyr)]
+        return [ImuSample(self.clock.local(tv, now, "imu"), tv, acc, gyr)]
 
     def _esc_status(self, m: Any, now: float) -> list[Any] | None:
         tv = m.time_usec * 1e-6
@@ -323,7 +305,7 @@ class TelemetryDecoder:
         lat = self._latest["rotors"]
         lat.t, lat.tv, lat.value = now, tv, ESC
         self.rotor_source = ESC
-        return [RotorSample(self._local("rotor", tv, now), tv, self._rotors.copy(), ESC)]
+        return [RotorSample(self.clock.local(tv, now, "rotors"), tv, self._rotors.copy(), ESC)]
 
     def _latest_motor_t(self) -> float:
         return max(self._latest[s].t for s in MOTOR_OUTPUT_SOURCES)
@@ -383,7 +365,7 @@ class TelemetryDecoder:
         lat = self._latest["rotors"]
         lat.t, lat.tv, lat.value = now, tv, ESTIMATED
         self.rotor_source = ESTIMATED
-        return [RotorSample(self._local("rotor", tv, now), tv, omega, ESTIMATED)]
+        return [RotorSample(self.clock.local(tv, now, "rotors"), tv, omega, ESTIMATED)]
 
     # -------------------------------------------------------------- state
     def _state(
@@ -408,7 +390,7 @@ class TelemetryDecoder:
             ]
         )
         tv = max(a.tv, p.tv)
-        t = self._local("state", tv, now) if emit else self.clock.local(tv, now)
+        t = self.clock.local(tv, now, "state" if emit else None)
         return StateSample(t, tv, pos, vel, q, euler, v_body, omega, abs(a.tv - p.tv))
 
     def _state_list(self, now: float) -> list[Any]:

@@ -322,12 +322,14 @@ def loop_delay_entry(inp: Inputs, res) -> dict:
     latency plus margin) must be within the proven performance margin (SolverError otherwise);
     without it the bound is the proven margin itself (rounded down to 0.1 ms)."""
     from lpv_sysid.errors import SolverError
+    from lpv_sysid.parallel.pool import one_blas_thread
     from lpv_sysid.synthesis import delay as dl
 
     want = inp.cfg.loop_delay.bound_s
     systems, K, gamma = inp.model.systems, np.asarray(res.K), float(inp.opts.gamma)
-    stab = dl.stability_margin(systems, K)
-    perf = dl.performance_margin(systems, K, inp.R, inp.C, gamma)
+    with one_blas_thread():  # small dense problems (pipeline.synthesize: why)
+        stab = dl.stability_margin(systems, K)
+        perf = dl.performance_margin(systems, K, inp.R, inp.C, gamma)
     if want is not None and want > perf:
         raise SolverError(
             f"loop_delay.bound_s {want:g} s is not certified: the frozen loops keep "
