@@ -314,6 +314,15 @@ def test_logger_main_closes_bag_on_shutdown(tmp_path):
     assert len(bag["/lpv_sysid/status"]) == meta["topics"]["/lpv_sysid/status"]["count"] == 2
 
 
+def stepping_probe(veh):
+    """``(probe node, t0 [ns])``: the probe's 4 ms timer steps the simulated PX4 ``veh`` on the
+    node clock from ``t0``."""
+    probe = rclpy.create_node("probe")
+    t0 = probe.get_clock().now().nanoseconds
+    probe.create_timer(0.004, lambda: veh.step((probe.get_clock().now().nanoseconds - t0) * 1e-9))
+    return probe, t0
+
+
 # ------------------------------------------------------------------ mavlink_bridge_node
 def _free_udp_port():
     import socket
@@ -340,11 +349,7 @@ def test_bridge_publishes_telemetry_of_mavlink_vehicle():
     veh = SimVehicle(SimVehicleConfig(url=f"udpout:127.0.0.1:{port}"))
     veh.open()
     try:
-        probe = rclpy.create_node("probe")
-        t0 = probe.get_clock().now().nanoseconds
-        probe.create_timer(
-            0.004, lambda: veh.step((probe.get_clock().now().nanoseconds - t0) * 1e-9)
-        )
+        probe, t0 = stepping_probe(veh)
         from rclpy.qos import qos_profile_sensor_data
 
         states = collect(probe, Odometry, "/lpv_sysid/state", qos_profile_sensor_data)
@@ -450,11 +455,7 @@ def test_logger_writes_the_bridges_vehicle_record(tmp_path):
     )
     veh.open()
     try:
-        probe = rclpy.create_node("probe")
-        t0 = probe.get_clock().now().nanoseconds
-        probe.create_timer(
-            0.004, lambda: veh.step((probe.get_clock().now().nanoseconds - t0) * 1e-9)
-        )
+        probe, t0 = stepping_probe(veh)
         records = collect(probe, String, "/lpv_sysid/vehicle_record", shell.QOS_VEHICLE_RECORD)
         spin([node, probe], 3.0)
         n_before = len(records)
