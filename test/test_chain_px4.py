@@ -673,11 +673,13 @@ def test_real_ros_graph_whole_chain_on_px4_sitl(tmp_path):
         ("status", 2.0),
     ):
         assert rates.get(topic, (0, 0.0))[1] >= 0.6 * hz, (topic, rates)
-    # replay: the controller runtime (what fly phase2 runs) on the bag's inputs, node
-    # parameters of config/lpv_controller_px4.yaml, gives the commands the node sent
+    # replay: the controller runtime (what fly phase2 runs) on the bag's inputs, with the
+    # node's parameters, gives the commands the node sent
     from lpv_sysid.flight.controller import replay_controller
 
-    doc = yaml.safe_load((CONFIG / "lpv_controller_px4.yaml").read_text())
+    # the parameters the node ran with: the launch's config_dir copy (its staleness limits
+    # at 0.5 s); the shipped 0.2 s made the replay abort stale at its start, no command
+    doc = yaml.safe_load((cfg_dir / "lpv_controller_px4.yaml").read_text())
     params = doc["/**/lpv_controller"]["ros__parameters"]
     params = dict(params, gains_file=str(tmp_path / "gains.yaml"))
     bag = tmp_path / "phase2_log"
