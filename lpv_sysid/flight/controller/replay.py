@@ -6,8 +6,10 @@ at ``rate_hz`` on the bag's clock; what it would have published (``actuator_comm
 abort ``status``) is written to a new bag. Ticks follow the node's ``tick_source``: ``timer``
 steps the law at each timer tick (the recorded command stamps when the bag has them, then a
 ``rate_hz`` grid), ``state`` on each new state sample at its stamp while the timer only
-judges staleness. The runtime is started at the first input message, as with
-``auto_start``; the parameters go through
+judges staleness. The runtime is started as the node starts it: at the first input
+message after which every input stream has delivered a sample (``start`` with
+``wait_for_inputs``; a bag recorded before the vehicle's state flowed does not start the
+law on references alone); the parameters go through
 :class:`~lpv_sysid.flight.controller.settings.ControllerSettings` and the gains through the
 start-up checks, so what the node refuses is refused here too.
 """
@@ -119,7 +121,7 @@ def replay_controller(
     drain()
     period = round(1e9 / settings.rate_hz)
     t0 = inputs[0][0]
-    rt.start(t0 * 1e-9)
+    started = False
     outputs = {
         f"{ns}/actuator_command": TYPES["actuator_command"],
         f"{ns}/status": TYPES["status"],
@@ -157,6 +159,8 @@ def replay_controller(
             else:
                 outs = rt.on_input(topic, msg, stamp * 1e-9)
             publish(stamp, outs)
+            if not started:  # as the node: started once every input stream has arrived
+                started, _ = rt.start(stamp * 1e-9, wait_for_inputs=True)
         last = inputs[-1][0]  # no tick after the recording ends
         w.write(f"{ns}/status", last, rt.status(last * 1e-9))
         n_out[f"{ns}/status"] += 1
