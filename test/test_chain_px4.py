@@ -376,19 +376,22 @@ def _bag_rates(out_dir: Path) -> dict:
     }
 
 
-def _loop_delay_max_ms(log_dir: Path) -> float:
-    """The controller's largest loop delay of the flight [ms] (its status, recorded)."""
+def _status_values(log_dir: Path, key: str) -> list:
+    """The values of ``key`` in the controller status messages recorded in ``log_dir``."""
     from lpv_sysid.flight.controller.replay import bag_directories
 
-    best = 0.0
+    out = []
     for part in bag_directories(str(log_dir)):
         names = [n for n in iobag.topic_info(str(part)) if n.endswith("status")]
         for _, m in (x for rows in iobag.read_bag(str(part), topics=names).values() for x in rows):
             for st in m.status:
-                for kv in st.values:
-                    if kv.key == "loop_delay_max_ms":
-                        best = max(best, float(kv.value))
-    return best
+                out += [float(kv.value) for kv in st.values if kv.key == key]
+    return out
+
+
+def _loop_delay_max_ms(log_dir: Path) -> float:
+    """The controller's largest loop delay of the flight [ms] (its status, recorded)."""
+    return max(_status_values(log_dir, "loop_delay_max_ms"), default=0.0)
 
 
 def test_real_ros_graph_whole_chain_on_px4_sitl(tmp_path):
@@ -705,5 +708,13 @@ def test_real_ros_graph_whole_chain_on_px4_sitl(tmp_path):
         f"replay: {len(flown)} commands flown, {len(common)} stamps in both, {same} identical "
         f"(max |diff| {diffs.max():.3g}); replay event {rep['event']}"
     )
+    # the law sees each input by its stamp: a command differs only where an input sample
+    # arrived after its state at the node and not in the bag's order, or the reverse. Measured:
+    # quiet 96 of 5948 differed (119 late in the bag); beside other tests 184 of 6530 (246 late
+    # in the bag, 151 at the node); newest-delivered instead: 6-9 % differed
+    late_node = max(_status_values(bag, "late_input_count"), default=-1.0)
+    print(f"late input samples: replay {rep['late_inputs']}, node {late_node:.0f}")
+    assert late_node >= 0, "the controller status carries no late_input_count"
     assert len(common) >= 0.95 * len(flown) > 1000
-    assert same >= 0.95 * len(common)
+    assert len(common) - same <= 2 * (late_node + rep["late_inputs"])
+    assert same >= 0.9 * len(common)

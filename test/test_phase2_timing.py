@@ -133,6 +133,49 @@ def test_state_ticks_compute_each_command_on_its_own_sample(gains):
     assert rt.commands == 5
 
 
+def test_state_ticks_see_the_inputs_by_stamp_not_by_arrival(gains):
+    """tick_source state: the command at a state sample uses the newest sample of each other
+    stream stamped at or before it, whatever order the transport delivered them in (measured
+    on PX4 SITL through the ROS graph, newest-received: 6-9 % of the commands were not
+    reproduced by a replay of the bag). A sample stamped at or before a state already ticked
+    arrives late: the next state's command uses it, and it is counted in the status."""
+    rt = runtime(gains, tick_source="state")
+    rigid_body_state, om = centre_inputs(rt)
+    f = messages.MsgFactory.rosbags()
+    ue = [np.array([0.01 * k, -0.02, 0.005 * k, 0.0]) for k in range(4)]
+    t0 = 100.0
+    for topic, v in (("rotor_speeds", om), ("velocity_reference", np.zeros(4))):
+        rt.on_sample(topic, t0, v, t0)
+    rt.on_sample("excitation", t0, ue[0], t0)
+
+    def state(t):
+        msg = messages.odometry_from_state(
+            f,
+            round(t * 1e9),
+            np.zeros(3),
+            [*rigid_body_state[:2], 0.0],
+            rigid_body_state[2:5],
+            rigid_body_state[5:8],
+        )
+        out = rt.on_input("state", msg, t + 0.003)
+        return np.asarray(out[0][1].position)
+
+    assert rt.start(t0)[0]
+    t1, t2, t3 = t0 + 0.01, t0 + 0.02, t0 + 0.03
+    # ue[1] stamped after the state at t1 but delivered before it: not that state's input
+    rt.on_sample("excitation", t1 + 0.002, ue[1], t1 + 0.0025)
+    np.testing.assert_allclose(state(t1), by_hand(rt, rigid_body_state, om, ue[0]), atol=1e-12)
+    np.testing.assert_allclose(state(t2), by_hand(rt, rigid_body_state, om, ue[1]), atol=1e-12)
+    assert rt.late_inputs == 0
+    # ue[2] stamped before the state at t2 but delivered after it: late, used at t3
+    rt.on_sample("excitation", t2 - 0.001, ue[2], t2 + 0.004)
+    assert rt.late_inputs == 1
+    np.testing.assert_allclose(state(t3), by_hand(rt, rigid_body_state, om, ue[2]), atol=1e-12)
+    status = rt.status(t3 + 0.003)
+    (st,) = status.status
+    assert {kv.key: kv.value for kv in st.values}["late_input_count"] == "1"
+
+
 def test_state_ticks_timer_still_aborts_a_silent_state_stream(gains):
     rt = runtime(gains, tick_source="state")
     rigid_body_state, om = centre_inputs(rt)

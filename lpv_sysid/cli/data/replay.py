@@ -79,6 +79,11 @@ def run(args) -> int:
         f"replayed {s['inputs']} input messages ({s['duration_s']:.2f} s) through "
         f"{args.node} ({s['ticks']} ticks): {s['commands']} actuator commands"
     )
+    if s["ticks"] == "state":
+        print(
+            f"  {s['late_inputs']} input samples arrived after the state sample they were "
+            "stamped for (the node counts its own: late_input_count in its status)"
+        )
     for topic, n in s["outputs"].items():
         print(f"  {topic}: {n} messages")
     print(f"bound monitor: L2 gain estimate {s['gain_estimate']:.4g} (gamma {s['gamma']:g})")

@@ -6,7 +6,11 @@ at ``rate_hz`` on the bag's clock; what it would have published (``actuator_comm
 abort ``status``) is written to a new bag. Ticks follow the node's ``tick_source``: ``timer``
 steps the law at each timer tick (the recorded command stamps when the bag has them, then a
 ``rate_hz`` grid), ``state`` on each new state sample at its stamp while the timer only
-judges staleness. The runtime is started as the node starts it: at the first input
+judges staleness; with ``state`` the law sees each input by its stamp (the newest sample
+stamped at or before the state sample), so a command differs from the node's only where a
+sample arrived after the state it was stamped for at the node and not at the logger, or the
+reverse (both count them: ``late_input_count`` in the node's status, ``late_inputs`` here).
+The runtime is started as the node starts it: at the first input
 message after which every input stream has delivered a sample (``start`` with
 ``wait_for_inputs``; a bag recorded before the vehicle's state flowed does not start the
 law on references alone); the parameters go through
@@ -170,6 +174,7 @@ def replay_controller(
         "duration_s": (inputs[-1][0] - t0) * 1e-9,
         "outputs": n_out,
         "commands": rt.commands,
+        "late_inputs": rt.late_inputs,
         "event": ev,
         "gain_estimate": rt.law.gain(),
         "gamma": rt.law.gamma,

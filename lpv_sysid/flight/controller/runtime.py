@@ -4,6 +4,7 @@ the method is the :mod:`lpv_sysid.flight.controller` docstring."""
 
 from __future__ import annotations
 
+import heapq
 from typing import Any, Callable, Optional
 
 import numpy as np
@@ -37,6 +38,10 @@ from lpv_sysid.io.messages import (
 )
 from lpv_sysid.models.quadrotor import STATE_NAMES, mixer
 
+
+#: ``tick_source: state``: samples held for a later state stamp beyond this many are applied
+#: at once (oldest first), so a stream stamped far ahead cannot hold the law's inputs back
+PENDING_MAX = 256
 
 #: ``lockstep``: answers sent to a matched simulation before :meth:`ControllerRuntime.start`
 #: arms (one may be in flight while the match completes; the next arrives after it)
@@ -126,6 +131,16 @@ class ControllerRuntime:
         self._t_sample: Optional[float] = None  # last state stamp ticked (tick_source: state)
         self._state_stamp: Optional[float] = None  # stamp of the newest state sample
         self._ref_slope: Optional[np.ndarray] = None  # slope of the limited reference
+        #: ``tick_source: state``: input samples received but stamped after the last state
+        #: sample ticked, ``(stamp, arrival, topic, values)``; applied in stamp order at the
+        #: first state sample stamped at or after them (:meth:`_apply_until`)
+        self._pending: list[tuple[float, int, str, np.ndarray]] = []
+        self._arrivals = 0
+        self._received: set[str] = set()
+        #: samples of the law's inputs that arrived stamped at or before a state sample
+        #: already ticked (the law of that state did not see them; a replay in the logger's
+        #: order may): reported in status
+        self.late_inputs = 0
         self.commands = 0
         self.loop_delay_max = 0.0  # the largest loop delay of a tick since start [s]
         self.flags = {"clamped": 0, "saturated": 0, "rate_limited": 0}
@@ -229,6 +244,7 @@ class ControllerRuntime:
             and (self._t_sample is None or t > self._t_sample)
         ):
             self._t_sample = t
+            self._apply_until(t, t_now)
             out = self.tick(t_now, t_sample=t)
             if self.settings.lockstep:
                 if not any(name == "actuator_command" for name, _ in out):
@@ -253,18 +269,57 @@ class ControllerRuntime:
             self._log.append(("warn", f"{topic} rejected before start: {exc}"))
 
     def on_sample(self, topic: str, t: float, values: np.ndarray, t_now: float) -> None:
-        """Parsed input (see :func:`parse_input`): header time ``t`` [s], ``values``."""
+        """Parsed input (see :func:`parse_input`): header time ``t`` [s], ``values``.
+
+        The supervisor judges every sample on arrival (staleness, order, physical limits,
+        excitation size). What the law sees: with ``tick_source: timer`` the newest sample
+        received; with ``state`` the newest sample of each stream stamped at or before the
+        state sample the law steps on (held until then, :meth:`_apply_until`), so each command
+        is a function of the recorded samples by their stamps, not of the order in which the
+        transport delivered them -- a replay of the bag computes the same command (measured on
+        PX4 SITL through the ROS graph, newest-received: 90.6-94.0 % of 5880-5951 commands
+        replayed identically)."""
         sup = self.supervisor
         sup.on_input(topic, t, values, t_now)
+        self._received.add(topic)
         if topic == "state":
             if sup.armed and not sup.aborted:
                 sup.check_state(t_now, values)  # physically absurd -> abort
             self.body_state = values
             self._state_stamp = t
             self._law_body[:] = values
-        elif topic == "rotor_speeds":
+            return
+        if topic == "rotor_speeds":
             if sup.armed and not sup.aborted:
                 sup.check_rotors(t_now, values)
+        elif topic == "excitation":
+            if sup.armed and not sup.aborted:
+                sup.check_excitation(
+                    t_now, self.settings.excitation_gain * values, self.excitation_limit
+                )
+        if self.settings.tick_source != "state":
+            self._apply(topic, t, values, t_now)
+            return
+        if topic in self.inputs and self._t_sample is not None and t <= self._t_sample:
+            self.late_inputs += 1
+        self._arrivals += 1
+        heapq.heappush(self._pending, (t, self._arrivals, topic, values))
+        while len(self._pending) > PENDING_MAX:
+            self._apply(*self._pop(), t_now=t_now)
+
+    def _pop(self) -> tuple[str, float, np.ndarray]:
+        t, _, topic, values = heapq.heappop(self._pending)
+        return topic, t, values
+
+    def _apply_until(self, t_sample: float, t_now: float) -> None:
+        """Apply the held samples stamped at or before ``t_sample``, in stamp order."""
+        while self._pending and self._pending[0][0] <= t_sample:
+            self._apply(*self._pop(), t_now=t_now)
+
+    def _apply(self, topic: str, t: float, values: np.ndarray, t_now: float) -> None:
+        """A non-state sample becomes the law's input (rotor speeds, reference, excitation)."""
+        sup = self.supervisor
+        if topic == "rotor_speeds":
             self.omega = values
             if self._law_delta.size:
                 self.mix.dot(values, out=self._law_delta)  # delta = Mix Omega (Eq. 7)
@@ -281,18 +336,10 @@ class ControllerRuntime:
         else:
             self.u_e = values
             self._ue_scaled = self.settings.excitation_gain * values
-            if sup.armed and not sup.aborted:
-                sup.check_excitation(t_now, self._ue_scaled, self.excitation_limit)
 
     def missing_inputs(self) -> list:
         """The input streams of which no sample has arrived yet."""
-        have = {
-            "state": self.body_state,
-            "rotor_speeds": self.omega,
-            "velocity_reference": self.v_d_in,
-            "excitation": self.u_e,
-        }
-        return [topic for topic in self.inputs if have[topic] is None]
+        return [topic for topic in self.inputs if topic not in self._received]
 
     def lockstep_ready(self) -> bool:
         """Without ``lockstep`` always; with it once the simulation's subscription to the
@@ -470,6 +517,7 @@ class ControllerRuntime:
             "gamma": self.law.gamma,
             "reference_limited_count": self.limiter.limited,
             "loop_delay_max_ms": 1e3 * self.loop_delay_max,
+            "late_input_count": self.late_inputs,
             "loop_delay_bound_ms": 1e3 * sup.config.loop_delay_bound,
             **{f"{k}_count": v for k, v in self.flags.items()},
         }
