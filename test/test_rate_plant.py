@@ -330,6 +330,9 @@ class _Link:
     def poll(self, now, max_reads=1000):
         return self.batches.pop(0) if self.batches else []
 
+    def send(self, msg):
+        self.sent = [*getattr(self, "sent", []), msg]
+
 
 def test_attitude_target_tap_passes_only_the_targets_setpoints_and_keeps_messages():
     from lpv_sysid.flight.vehicle import tap_attitude_target
@@ -349,6 +352,61 @@ def test_attitude_target_tap_passes_only_the_targets_setpoints_and_keeps_message
     msgs = link.poll(12.5)
     assert msgs == batch  # the bridge still sees every message
     assert got == [(12.5, pytest.approx([0.5, 0.1, -0.2, 0.3]))]
+
+
+def test_attitude_target_tap_replaces_the_thrust_px4_repeats_in_body_rate_offboard():
+    """PX4 v1.14-1.16 (src/modules/mavlink/streams/ATTITUDE_TARGET.hpp) takes the echo's rates
+    from vehicle_rates_setpoint but thrust and time_boot_ms from the last
+    vehicle_attitude_setpoint, which nothing publishes in body-rate OFFBOARD: the repeated
+    time_boot_ms marks the thrust as stale; the thrust PX4 executes there is the one sent
+    (rate-only SET_ATTITUDE_TARGET). Measured on PX4 SITL phase 2: echoed thrust std 0.0022
+    against 0.038 commanded."""
+    from pymavlink.dialects.v20 import common as mavlink
+
+    from lpv_sysid.flight.vehicle import tap_attitude_target
+    from lpv_sysid.mavlink.bridge import ATTITUDE_TARGET_IGNORE_ATTITUDE
+
+    def at(ms, thrust, p):
+        return _Msg(
+            "ATTITUDE_TARGET",
+            3,
+            time_boot_ms=ms,
+            thrust=thrust,
+            body_roll_rate=p,
+            body_pitch_rate=0.0,
+            body_yaw_rate=0.0,
+        )
+
+    codec = mavlink.MAVLink(None)
+    link = _Link(
+        [
+            [at(1000, 0.50, 0.1)],  # PX4's own attitude setpoint (HOLD): fresh
+            [at(1000, 0.50, 0.2)],  # repeated time_boot_ms, nothing sent yet: dropped
+            [at(1000, 0.50, 0.3)],  # repeated: the thrust sent below replaces it
+            [at(1020, 0.47, 0.4)],  # an attitude setpoint again (time moved): PX4's own
+        ]
+    )
+    got = []
+    echo = tap_attitude_target(link, lambda t, u: got.append(list(u)))
+    link.poll(1.0)
+    link.poll(1.02)
+    link.send(
+        codec.set_attitude_target_encode(
+            0, 3, 1, ATTITUDE_TARGET_IGNORE_ATTITUDE, [1, 0, 0, 0], 0.3, 0.0, 0.0, 0.61
+        )
+    )
+    link.send(  # an attitude setpoint (attitude not ignored) does not set the rate thrust
+        codec.set_attitude_target_encode(0, 3, 1, 0, [1, 0, 0, 0], 0.0, 0.0, 0.0, 0.9)
+    )
+    link.poll(1.04)
+    link.poll(1.06)
+    assert [g[:2] for g in got] == [
+        pytest.approx([0.50, 0.1]),
+        pytest.approx([0.61, 0.3]),
+        pytest.approx([0.47, 0.4]),
+    ]
+    assert (echo.dropped, echo.replaced) == (1, 1)
+    assert len(link.sent) == 2  # every message still reaches the vehicle
 
 
 def test_identify_cli_builds_the_rate_plant_from_a_campaigns_bags(tmp_path, capsys):

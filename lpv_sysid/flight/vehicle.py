@@ -136,13 +136,16 @@ def set_params(
     return done
 
 
-def tap_attitude_target(link, callback: Callable[[float, Any], None]) -> None:
+def tap_attitude_target(link, callback: Callable[[float, Any], None]):
     """Wrap ``link.poll`` so every ATTITUDE_TARGET of the link's target reaches
     ``callback(receive_time, [thrust, p_sp, q_sp, r_sp])`` before the bridge sees the message
-    (BridgeCore has no raw-message hook; the telemetry decoder ignores ATTITUDE_TARGET)."""
-    from lpv_sysid.mavlink.bridge import rate_setpoint_from_attitude_target
+    (BridgeCore has no raw-message hook; the telemetry decoder ignores ATTITUDE_TARGET), and
+    ``link.send`` so the thrust PX4 executes in body-rate OFFBOARD replaces the stale one PX4
+    echoes then (:class:`~lpv_sysid.mavlink.bridge.AttitudeTargetEcho`, returned: its counts)."""
+    from lpv_sysid.mavlink.bridge import AttitudeTargetEcho
 
-    poll = link.poll
+    echo = AttitudeTargetEcho()
+    poll, send = link.poll, link.send
 
     def tapped(now, *a, **kw):
         msgs = poll(now, *a, **kw)
@@ -150,12 +153,18 @@ def tap_attitude_target(link, callback: Callable[[float, Any], None]) -> None:
             if m.get_type() == "ATTITUDE_TARGET" and (
                 not link.target_system or m.get_srcSystem() == link.target_system
             ):
-                got = rate_setpoint_from_attitude_target(m)
+                got = echo.on_target(m)
                 if got is not None:
-                    callback(now, got[1])
+                    callback(now, got)
         return msgs
 
+    def sent(msg, *a, **kw):
+        echo.on_sent(msg)
+        return send(msg, *a, **kw)
+
     link.poll = tapped
+    link.send = sent
+    return echo
 
 
 def tap_messages(link, callback: Callable[[float, Any], None]) -> None:

@@ -171,6 +171,10 @@ class RateTarget:
     rates_frd: np.ndarray
     thrust: float
 
+    def get_type(self) -> str:
+        """The MAVLink message this setpoint stands for (MAVROS sends it as one)."""
+        return "SET_ATTITUDE_TARGET"
+
 
 class CaptureCodec:
     """The two encoders the setpoint transports call, returning MAVROS-bound setpoints

@@ -322,6 +322,68 @@ def rate_setpoint_from_attitude_target(msg: Any) -> tuple[float, np.ndarray] | N
     return float(msg.time_boot_ms) * 1e-3, vals
 
 
+#: :class:`AttitudeTargetEcho`: an ATTITUDE_TARGET whose time_boot_ms moved by at most this
+#: [ms] since the previous one repeats PX4's last attitude setpoint
+STALE_MS = 1
+
+
+class AttitudeTargetEcho:
+    """PX4's ATTITUDE_TARGET read as the setpoints PX4 executes: ``[thrust, p_sp, q_sp, r_sp]``.
+
+    PX4 (``src/modules/mavlink/streams/ATTITUDE_TARGET.hpp``, v1.14-1.16) fills the body rates
+    from ``vehicle_rates_setpoint`` but ``thrust`` and ``time_boot_ms`` from
+    ``vehicle_attitude_setpoint``; when no attitude setpoint has been published for 500 ms --
+    OFFBOARD body-rate control (SET_ATTITUDE_TARGET with the attitude ignored), where PX4 puts
+    the thrust sent straight into ``vehicle_rates_setpoint`` -- it keeps sending the last
+    attitude setpoint's thrust and ``time_boot_ms`` beside fresh rates. So a ``time_boot_ms``
+    that did not advance marks a stale thrust: it is replaced by the thrust of the last
+    rate-only SET_ATTITUDE_TARGET sent (:meth:`on_sent`), which is the thrust PX4 executes;
+    with none sent, the sample is dropped (``None``). Measured on PX4 v1.16 SITL, phase 2
+    through the ROS graph: the echoed thrust had std 0.0022 around the hover value 0.495
+    while the thrust commanded had std 0.038 (the heave row could not be identified from it).
+    """
+
+    def __init__(self) -> None:
+        self._last_boot_ms: int | None = None
+        #: thrust of the last rate-only SET_ATTITUDE_TARGET sent (None: none yet)
+        self.sent_thrust: float | None = None
+        #: echoes whose thrust was stale: replaced by the sent thrust / dropped (none sent)
+        self.replaced = 0
+        self.dropped = 0
+
+    def on_sent(self, msg: Any) -> None:
+        """A message sent to PX4: a rate-only SET_ATTITUDE_TARGET sets :attr:`sent_thrust`."""
+        kind = getattr(msg, "get_type", None)  # MAVROS-bound setpoints: only RateTarget has it
+        if (
+            kind is not None
+            and kind() == "SET_ATTITUDE_TARGET"
+            and int(msg.type_mask) & ATTITUDE_TARGET_IGNORE_ATTITUDE
+        ):
+            thrust = float(msg.thrust)
+            if math.isfinite(thrust):
+                self.sent_thrust = thrust
+
+    def on_target(self, msg: Any) -> np.ndarray | None:
+        """``[thrust, p_sp, q_sp, r_sp]`` of an ATTITUDE_TARGET, thrust as PX4 executes it
+        (class docstring); None when a field is not finite or the thrust is unknown."""
+        got = rate_setpoint_from_attitude_target(msg)
+        boot_ms = int(msg.time_boot_ms)
+        # within STALE_MS: MAVROS restamps time_boot_ms through its time sync (a frozen one
+        # moves by the sync's corrections), a fresh attitude setpoint is >= 1 stream period on
+        stale = self._last_boot_ms is not None and abs(boot_ms - self._last_boot_ms) <= STALE_MS
+        self._last_boot_ms = boot_ms
+        if got is None:
+            return None
+        values = got[1]
+        if stale:
+            if self.sent_thrust is None:
+                self.dropped += 1
+                return None
+            values[0] = self.sent_thrust
+            self.replaced += 1
+        return values
+
+
 def make_transport(kind: str, **kw: Any) -> SetpointTransport:
     if kind == "velocity":
         return VelocityTransport(**kw)

@@ -93,6 +93,9 @@ class VehicleState:
         self.hold_pos = np.zeros(3)
         self.descending = False  # emergency Descend task (stick mode without sticks)
         self.setpoint: Setpoint | None = None
+        #: (time_boot_ms, thrust) of the attitude setpoint PX4's ATTITUDE_TARGET repeats in
+        #: body-rate OFFBOARD (telemetry.py); None outside it
+        self.att_sp_echo: tuple[int, float] | None = None
         self._sp_times: list[float] = []
         self.setpoints_received = 0
         self.mode_log: list[tuple[float, str, str]] = []  # (t, mode name, reason)

@@ -51,7 +51,10 @@ class TelemetryStreams(VehicleState):
         if mid == sid["RC_CHANNELS"]:
             return self.config.rc_present
         if mid == sid["ATTITUDE_TARGET"]:
-            return self._rates_setpoint() is not None
+            if self._rates_setpoint() is None:
+                self.att_sp_echo = None  # out of body-rate OFFBOARD: no echo (see below)
+                return False
+            return True
         if mid == sid["HOME_POSITION"]:
             return self.config.home_set
         return True
@@ -279,14 +282,20 @@ class TelemetryStreams(VehicleState):
             if sp is None:
                 return
             rates = sp.rates if sp.rates is not None else np.zeros(3)
+            # as PX4 (streams/ATTITUDE_TARGET.hpp): fresh body rates (vehicle_rates_setpoint),
+            # but thrust and time_boot_ms of the last vehicle_attitude_setpoint, which nothing
+            # publishes in body-rate OFFBOARD: held from the episode's first rate setpoint (the
+            # hover thrust the bridge pre-streams, as PX4's last HOLD setpoint would be)
+            if self.att_sp_echo is None:
+                self.att_sp_echo = (ms, float(sp.thrust))
             c_msg = c.attitude_target_encode(
-                ms,
+                self.att_sp_echo[0],
                 7,  # ATTITUDE_TARGET_TYPEMASK: attitude ignored (a rates setpoint)
                 [float(a) for a in euler_to_quat(*x[3:6])],
                 float(rates[0]),
                 float(rates[1]),
                 float(rates[2]),
-                float(sp.thrust),
+                self.att_sp_echo[1],
             )
         elif mid == sid["ODOMETRY"]:
             # EKF2 vehicle_odometry: timestamp_sample = IMU sample time (before the publish
