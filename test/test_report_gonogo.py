@@ -204,3 +204,28 @@ def test_simulated_data_is_labelled_and_the_flown_one_too(tmp_path):
     rows, overall = go_no_go(d, None)
     hb = {r.item: r for r in rows}["hand-back confirmed (phase 1)"]
     assert hb.verdict == NO_GO and overall == NO_GO
+
+
+def test_loop_delay_row_judges_the_configured_loop_verify_checked(verified):
+    """A certificate whose bound (0.1 s, the toy plant) is below the loop the controller will fly
+    is NO-GO on the first page: measured on a PX4 SITL chain, the report said GO while phase 2
+    was refused for a 60 ms loop against a 52.8 ms bound."""
+    run, gains, models, path = verified
+    t = _table(write_report(run).read_text())
+    assert t["loop delay (certificate)"][2] == "GO"
+    assert "no configured loop checked" in t["loop delay (certificate)"][3]
+    record_verification(gains, models, n_random=3, full_box=0, loop_delay_s=0.06)
+    t = _table(write_report(run).read_text())
+    assert t["loop delay (certificate)"][:3] == [
+        "configured loop 60.00 ms; bound 100.00 ms; margins: gamma kept up to 700.00 ms, "
+        "stable up to 1000.00 ms",
+        "configured loop delay <= bound",
+        "GO",
+    ]
+    record_verification(gains, models, n_random=3, full_box=0, loop_delay_s=0.12)
+    text = write_report(run).read_text()
+    t = _table(text)
+    assert t["loop delay (certificate)"][0].startswith("configured loop 120.00 ms; bound 100.00")
+    assert t["loop delay (certificate)"][2] == NO_GO
+    assert "refuses these gains" in t["loop delay (certificate)"][3]
+    assert "## Go / no-go: **NO-GO**" in text

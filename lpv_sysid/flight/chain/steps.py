@@ -49,7 +49,13 @@ import numpy as np
 from lpv_sysid.configuration.defaults import config_file
 from lpv_sysid.errors import LpvSysidError
 from lpv_sysid.flight.chain.report import format_identification, write_report
-from lpv_sysid.flight.phase2 import Phase2Options, fly_phase2, inversion_error, save_summary
+from lpv_sysid.flight.phase2 import (
+    Phase2Options,
+    controller_loop_delay_s,
+    fly_phase2,
+    inversion_error,
+    save_summary,
+)
 from lpv_sysid.synthesis.verify import verify_and_record
 
 log = logging.getLogger(__name__)
@@ -228,7 +234,13 @@ def chain(
         write_report(out, summary, None, rep)
         return EXIT_FAILED
     _mark_design(out / "gains.yaml")
-    verify_and_record(out / "gains.yaml", out / "vertex_models.yaml")
+    # with the loop phase 2 will fly: verification.yaml (and the report's go/no-go) show
+    # whether the certificate's delay bound covers it, as the controller checks at start
+    verify_and_record(
+        out / "gains.yaml",
+        out / "vertex_models.yaml",
+        loop_delay_s=controller_loop_delay_s(out / "gains.yaml"),
+    )
     if res.status:
         # models and gains from the usable runs are written; flying phase 2 after a phase-1 fault
         # (stall, envelope, failsafe) would start from a state nobody checked

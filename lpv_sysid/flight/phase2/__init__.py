@@ -17,6 +17,7 @@ from lpv_sysid.flight.phase2.analysis import (
 from lpv_sysid.flight.phase2.options import Phase2Options
 from lpv_sysid.flight.phase2.sequence import (
     Phase2Graph,
+    controller_loop_delay_s,
     fly_phase2,
     load_phase2_law,
     phase2_graph,
@@ -26,6 +27,7 @@ from lpv_sysid.flight.phase2.sequence import (
 __all__ = [
     "Phase2Graph",
     "Phase2Options",
+    "controller_loop_delay_s",
     "excitation_gain",
     "fly_phase2",
     "inversion_error",
