@@ -913,6 +913,12 @@ def test_real_px4_sitl_ulog_identifies_like_the_bags_of_the_same_flight(tmp_path
             echo=lambda s: None,
             handle_signals=False,
         )
+        px4_failsafe = sitl.own_failsafe()
+    if res.status and px4_failsafe:
+        # PX4's own estimator failsafe took the vehicle: the bridge must have said so, not DONE
+        assert "left OFFBOARD" in res.reason, res.reason
+        assert res.summary["bridge_status"]["state"] == "FAILED", res.summary["bridge_status"]
+        pytest.skip(f"PX4 SITL's own failsafe (its sensors starved by the host): {px4_failsafe}")
     assert res.status == 0, (res.reason, res.summary.get("runner"), res.summary.get("events"))
     check_sitl_campaign(tmp_path)
 

@@ -137,6 +137,16 @@ class Px4Sitl:
         except FileNotFoundError:
             return ""
 
+    def own_failsafe(self) -> str | None:
+        """PX4's log line when PX4 itself left the flight for a failsafe of its own estimator
+        (mc_pos_control "Failsafe: blind land": no valid local position), None otherwise.
+        Seen once in CI at the end of a full run: SIH's baro/compass stopped ("No valid data
+        from Baro 0" after take-off) -- the SITL starved by its host, not the package's chain."""
+        for line in self.log().splitlines():
+            if "Failsafe: blind land" in line:
+                return line.strip()
+        return None
+
     def log_tail(self, n: int = 20) -> str:
         return "\n".join(self.log().splitlines()[-n:])
 
