@@ -305,16 +305,13 @@ class ControllerRuntime:
         self._arrivals += 1
         heapq.heappush(self._pending, (t, self._arrivals, topic, values))
         while len(self._pending) > PENDING_MAX:
-            self._apply(*self._pop(), t_now=t_now)
-
-    def _pop(self) -> tuple[str, float, np.ndarray]:
-        t, _, topic, values = heapq.heappop(self._pending)
-        return topic, t, values
+            self._apply_until(self._pending[0][0], t_now)
 
     def _apply_until(self, t_sample: float, t_now: float) -> None:
         """Apply the held samples stamped at or before ``t_sample``, in stamp order."""
         while self._pending and self._pending[0][0] <= t_sample:
-            self._apply(*self._pop(), t_now=t_now)
+            t, _, topic, values = heapq.heappop(self._pending)
+            self._apply(topic, t, values, t_now)
 
     def _apply(self, topic: str, t: float, values: np.ndarray, t_now: float) -> None:
         """A non-state sample becomes the law's input (rotor speeds, reference, excitation)."""

@@ -255,6 +255,16 @@ class ControllerSettings(Settings):
         return 1.0 / self.rate_hz if self.tick_source == "timer" else self.stamp_tolerance_s
 
     @property
+    def loop_delay_s(self) -> float:
+        """The configured loop delay [s] (:func:`lpv_sysid.control.safety.loop_delay_s` of
+        these settings): what the start-up check holds against the certificate's bound."""
+        from lpv_sysid.control.safety import loop_delay_s
+
+        return loop_delay_s(
+            self.tick_source, self.rate_hz, self.state_rate_hz, self.input_latency_s
+        )
+
+    @property
     def timeouts(self) -> dict:
         return {
             "state": self.state_timeout_s,

@@ -25,7 +25,7 @@ import gc
 
 import numpy as np
 
-from lpv_sysid.control.safety import check_closed_loop, check_loop_delay, loop_delay_s
+from lpv_sysid.control.safety import check_closed_loop, check_loop_delay
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.flight.controller.settings import BOX_MARGIN_MAX_FRACTION, ControllerSettings
 from lpv_sysid.io.formats import GainSchedule, load_certified_systems, load_seal_key
@@ -88,16 +88,7 @@ def load_flight_schedule(
             f"{BOX_MARGIN_MAX_FRACTION:g} of the narrowest box axis ({width:g} m/s, "
             f"{label}): the certificate covers the box only"
         )
-    delay_line = check_loop_delay(
-        gs.certificate,
-        loop_delay_s(
-            settings.tick_source,
-            settings.rate_hz,
-            settings.state_rate_hz,
-            settings.input_latency_s,
-        ),
-        label,
-    )
+    delay_line = check_loop_delay(gs.certificate, settings.loop_delay_s, label)
     n_sys = sum(len(s) for s in systems)
     info = [
         f"gains {path} ({design_name} design): law sha256 "

@@ -115,19 +115,17 @@ def controller_loop_delay_s(
     gains: str | Path, controller_config: str | Path | None = None
 ) -> float:
     """The configured loop delay [s] of the controller phase 2 flies
-    (:func:`lpv_sysid.control.safety.loop_delay_s` of ``config/lpv_controller_px4.yaml`` or
+    (:attr:`ControllerSettings.loop_delay_s` of ``config/lpv_controller_px4.yaml`` or
     ``controller_config``): what its start-up check holds against the certificate's
     ``loop_delay.bound_s``, and what ``verify`` checks (``loop config``) for the chain."""
     from lpv_sysid.configuration.parameters import yaml_parameters
-    from lpv_sysid.control.safety import loop_delay_s
     from lpv_sysid.flight.controller import ControllerSettings
 
     cp = yaml_parameters(
         str(controller_config or config_file("lpv_controller_px4.yaml")), "lpv_controller"
     )
     cp.update(gains_file=str(gains))
-    s = ControllerSettings.from_dict(cp)
-    return loop_delay_s(s.tick_source, s.rate_hz, s.state_rate_hz, s.input_latency_s)
+    return ControllerSettings.from_dict(cp).loop_delay_s
 
 
 def load_phase2_law(gains_path: str | Path, models_path: str | Path | None = None):
