@@ -568,7 +568,9 @@ def test_chain_flies_phase2_on_the_simulated_px4_and_checks_the_model_by_output_
     """``lpv-sysid chain --phase1 OLD`` against the simulated PX4 in the air (lock-step): the
     chain's phase 2 (the node runtimes) flies the signal, hands back to LAND, and the chain
     summary carries the identified plant's output-error R^2 per row on the phase-2 flight (its
-    window stated) and the loop latency."""
+    window stated) and the loop latency. ``--set-param`` values hold through phase 2 (PX4's
+    own parameter snapshot in the phase-2 recording shows them) and are restored when the
+    chain ends (the simulated PX4 holds the old values again)."""
     from test_chain_px4 import P_SIM
 
     from lpv_sysid.flight.chain import chain
@@ -577,11 +579,14 @@ def test_chain_flies_phase2_on_the_simulated_px4_and_checks_the_model_by_output_
     veh, bcfg = _vehicle(tmp_path, airborne=True)
     url = yaml.safe_load(bcfg.read_text())["link"]["url"]
     lines: list = []
+    before = {k: veh.param(k) for k in ("COM_OF_LOSS_T", "MPC_TILTMAX_AIR")}
+    assert before == {"COM_OF_LOSS_T": 1.0, "MPC_TILTMAX_AIR": 45.0}  # the sim's defaults
     try:
         ls, _ = _lockstep(veh)
         status = chain(
             url,
             tmp_path / "chain",
+            params={"COM_OF_LOSS_T": 2.0, "MPC_TILTMAX_AIR": 40.0},
             phase1_dir=p1,
             echo=lines.append,
             preflight=False,
@@ -589,11 +594,24 @@ def test_chain_flies_phase2_on_the_simulated_px4_and_checks_the_model_by_output_
             sleep=ls.sleep,
             phase2=FLIGHT_OPTS,
         )
+        after = {k: veh.param(k) for k in before}
     finally:
         veh.close()
     summary = yaml.safe_load((tmp_path / "chain" / "chain_summary.yaml").read_text())
     p2 = summary["phase2"]
     assert status == 0 and p2["ok"] and p2["handback"]["state"] == "DONE", lines[-12:]
+    flown = yaml.safe_load((tmp_path / "chain" / "phase2" / "experiment.yaml").read_text())
+    seen = flown["vehicle"]["px4_parameters"]
+    assert (seen["COM_OF_LOSS_T"], seen["MPC_TILTMAX_AIR"]) == (2.0, 40.0)
+    assert after == before
+    assert [(d["name"], d["old"], d["new"]) for d in summary["params_set"]] == [
+        ("COM_OF_LOSS_T", 1.0, 2.0),
+        ("MPC_TILTMAX_AIR", 45.0, 40.0),
+    ]
+    assert summary["params_restored"] == [
+        {"name": "COM_OF_LOSS_T", "value": 1.0, "restored": True},
+        {"name": "MPC_TILTMAX_AIR", "value": 45.0, "restored": True},
+    ]
     oe = p2["model_check_output_error"]
     assert oe["window_s"] == 10.0 and set(oe) >= {"u", "v", "w", "p", "q", "r"}
     assert all(isinstance(oe[k], float) for k in ("u", "v", "w", "p", "q", "r"))

@@ -35,7 +35,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="NAME=VALUE",
-        help="PARAM_SET before phase 1 (e.g. COM_OBL_RC_ACT=5 on a SITL without RC)",
+        help="PARAM_SET before phase 1 (e.g. COM_OBL_RC_ACT=5 on a SITL without RC), held "
+        "through phase 2 and set back when the chain ends",
     )
     parser.add_argument(
         "--kappa", type=float, default=1.0, help="phase-2 excitation multiplier (seed 0 Eq. 33)"

@@ -38,6 +38,7 @@ the loop (:mod:`~lpv_sysid.flight.campaign.runner`), outputs
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import signal
@@ -99,6 +100,7 @@ def fly(
     confirm: Callable[[str], bool] | None = None,
     endurance_s: float | None = None,
     resumed_from: Mapping | None = None,
+    keep_params: list | None = None,
 ) -> FlyResult:
     """The whole CLI sequence of the module docstring (also used by the tests with a
     simulated clock); returns the exit status and the summary. Bad input raises
@@ -122,7 +124,9 @@ def fly(
     flight without arming (None: no question, ``fly --yes``). Every parameter changed by
     ``params`` is set back to its old value when the flight ends, whatever the reason
     (confirmed by PARAM_VALUE; what could not be restored is reported with the command that
-    does it). ``endurance_s``: hover endurance of the battery (preflight's battery check
+    does it); with ``keep_params`` (a list) the changes are appended to it instead and stay
+    set: the caller restores them (``lpv-sysid chain``: its parameters hold for the whole job,
+    phase 2 included). ``endurance_s``: hover endurance of the battery (preflight's battery check
     asks for the plan's worst-case use plus the reserve)."""
     import numpy as np
 
@@ -182,11 +186,9 @@ def fly(
         # anything time-critical runs
         request_parameter_list(bridge.link)
         if params:
-            summary["params_set"] = []
-            for name, value in params.items():  # one by one: each change is restored
-                (d,) = set_params(bridge.link, {name: value}, clock, sleep)
-                summary["params_set"].append(d)
-                echo(f"PARAM_SET {d['name']}: {d['old']} -> {d['new']:g} (confirmed)")
+            # with keep_params the caller's list: what was confirmed before a fault is in it
+            summary["params_set"] = keep_params if keep_params is not None else []
+            apply_params(bridge.link, params, clock, sleep, echo, summary["params_set"])
         if preflight:
             from lpv_sysid.mavlink import preflight as pf
 
@@ -264,7 +266,7 @@ def fly(
         if runner.rec is not None:
             runner._safe(lambda: runner.rec.annotate("vehicle", vehicle.summary()))
         close_errors = runner.rec.close(clock()) if runner.rec is not None else []
-        if summary.get("params_set"):
+        if summary.get("params_set") and keep_params is None:
             summary["params_restored"] = restore_params(
                 bridge.link, summary["params_set"], clock, sleep, echo
             )
@@ -297,6 +299,35 @@ def fly(
     if close_errors:
         status = status or EXIT_FAILED
     return FlyResult(status, summary["result"], summary["reason"], summary, str(out))
+
+
+def apply_params(
+    link, params: Mapping[str, float], clock, sleep, echo, changed: list[dict]
+) -> list[dict]:
+    """PARAM_SET each of ``params`` (confirmed by PARAM_VALUE), one by one, appending each
+    confirmed change to ``changed`` as it happens, so a fault halfway leaves in ``changed``
+    exactly what :func:`restore_params` must set back."""
+    for name, value in params.items():
+        (d,) = set_params(link, {name: value}, clock, sleep)
+        changed.append(d)
+        echo(f"PARAM_SET {d['name']}: {d['old']} -> {d['new']:g} (confirmed)")
+    return changed
+
+
+@contextlib.contextmanager
+def vehicle_link(cfg: FlyConfig, url: str | None, clock, sleep, link=None):
+    """A link to the vehicle of ``cfg`` (its bridge config at ``url``) with the autopilot's
+    HEARTBEAT in, for parameter work between flights (``lpv-sysid chain``); closed on exit.
+    Nothing is commanded: the bridge core is opened, not started."""
+    from lpv_sysid.mavlink.bridge import BridgeCore
+
+    bridge = BridgeCore(bridge_config_for(cfg.bridge_config, url, cfg.campaign), link=link)
+    bridge.open(clock())
+    try:
+        wait_for_vehicle(bridge.link, cfg.link_timeout, clock, sleep)
+        yield bridge.link
+    finally:
+        bridge.close()
 
 
 def restore_params(link, changed: list[dict], clock, sleep, echo) -> list[dict]:

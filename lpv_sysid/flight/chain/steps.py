@@ -79,17 +79,85 @@ def chain(
 ) -> int:
     """The six steps of the module docstring; returns the exit status. ``phase1_dir``: use the
     bags of an earlier phase-1 flight (``--phase1``, e.g. after a chain stopped at a later
-    step with the vehicle still in HOLD) instead of flying phase 1."""
-    from lpv_sysid.flight.campaign import FlyConfig, fly
-    from lpv_sysid.ident import rate_plant as rid
-    from lpv_sysid.ident import rate_plant_dynamics as lag
+    step with the vehicle still in HOLD) instead of flying phase 1.
 
+    ``params`` (``--set-param``) hold for the whole job: set before phase 1 (or, with
+    ``phase1_dir``, before anything else flies), kept through the broken-loop run and phase 2,
+    and set back to their old values when the chain ends, whatever the reason, each
+    confirmed by PARAM_VALUE (``chain_summary.yaml``: ``params_set``, ``params_restored``).
+    A vehicle whose parameters changed between the phases would fly phase 2 as another
+    airframe than the one identified (PX4 SIH: ``SIH_*``), or with another failsafe."""
     from lpv_sysid.control.law import check_kappa
+    from lpv_sysid.flight.campaign import FlyConfig
+    from lpv_sysid.flight.campaign.sequence import restore_params, vehicle_link
 
     kappa = check_kappa(kappa)  # before waiting for a vehicle (nan used to wait first)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     summary: dict = {"design": "rate_plant", "connect": url, "steps": []}
+    cfg = FlyConfig.load(campaign_config or config_file("campaign_chain.yaml"))
+    changed: list[dict] = []
+    try:
+        return _steps(
+            url,
+            out,
+            summary,
+            cfg,
+            dict(params or {}),
+            changed,
+            kappa,
+            k_sigma,
+            echo,
+            clock,
+            sleep,
+            link_factory,
+            phase2,
+            preflight,
+            phase1_dir,
+        )
+    finally:
+        if changed:
+            try:
+                with vehicle_link(
+                    cfg, url, clock, sleep, link_factory() if link_factory else None
+                ) as link:
+                    summary["params_restored"] = restore_params(link, changed, clock, sleep, echo)
+            except LpvSysidError as exc:
+                summary["params_restored"] = [
+                    {"name": d["name"], "value": d["old"], "restored": False} for d in changed
+                ]
+                echo(
+                    f"PARAMETERS NOT restored ({exc}): set back by hand "
+                    + ", ".join(f"{d['name']}={d['old']}" for d in changed)
+                )
+            save_summary(out / "chain_summary.yaml", summary)
+
+
+def _steps(
+    url: str,
+    out: Path,
+    summary: dict,
+    cfg,
+    params: dict,
+    changed: list,
+    kappa: float,
+    k_sigma: float,
+    echo: Callable[[str], None],
+    clock: Callable[[], float],
+    sleep: Callable[[float], None],
+    link_factory: Callable[[], Any] | None,
+    phase2: Phase2Options | None,
+    preflight: bool,
+    phase1_dir: str | Path | None,
+) -> int:
+    """:func:`chain`'s steps; parameter changes confirmed on the vehicle go into ``changed``
+    (restored by :func:`chain`)."""
+    from lpv_sysid.flight.campaign import fly
+    from lpv_sysid.flight.campaign.sequence import apply_params, vehicle_link
+    from lpv_sysid.ident import rate_plant as rid
+    from lpv_sysid.ident import rate_plant_dynamics as lag
+
+    summary["params_set"] = changed
     t_all = clock()
 
     def step(title):
@@ -100,9 +168,13 @@ def chain(
         summary["steps"][-1].update({"t_end_s": round(clock() - t_all, 1), **kw})
         save_summary(out / "chain_summary.yaml", summary)
 
-    cfg = FlyConfig.load(campaign_config or config_file("campaign_chain.yaml"))
     if phase1_dir is not None:
         step(f"phase-1 bags of an earlier flight ({phase1_dir})")
+        if params:  # phase 2 flies with them, as after a phase 1 of this chain
+            with vehicle_link(
+                cfg, url, clock, sleep, link_factory() if link_factory else None
+            ) as lk:
+                apply_params(lk, params, clock, sleep, echo, changed)
         p1 = Path(phase1_dir)
         from lpv_sysid.io.files import read_yaml_mapping
 
@@ -130,6 +202,7 @@ def chain(
             url,
             out / "phase1",
             params=params,
+            keep_params=changed,  # held through phase 2, restored by chain()
             clock=clock,
             sleep=sleep,
             echo=echo,
@@ -288,13 +361,19 @@ def chain(
         except LpvSysidError as exc:
             p2["model_check_r2"] = {"error": str(exc)}
         else:
-            # lag dynamics (motor lag + delay, ident/rate_plant_dynamics.py) from the phase-1
-            # runs, scored by output error on the same flight and windows
+            # lag dynamics (motor lag + delay, surge/sway drag and offsets:
+            # ident/rate_plant_dynamics.py) by output error, scored on the same flight and
+            # windows. From the phase-1 runs pooled with the broken-loop run when flown: the
+            # broken-loop run excites the rate and thrust setpoints independently of the state
+            # (heave thrust and drag separable), the vertex runs give the speeds that show the
+            # drag; the broken-loop run alone left drag unidentified (PX4 SIH, 2026-12-03:
+            # X_u -0.06 against SIH's -0.46, surge output error -1.06 on phase 2; pooled 0.98)
             try:
-                # from the broken-loop run when flown (setpoints excited independently of the
-                # state: heave thrust and drag separable), else from the phase-1 runs
-                lagp = lag.identify([bl_run] if bl_run is not None else usable, start=params_rp)
-                p2["lag_identified_from"] = "broken_loop" if bl_run is not None else "phase1"
+                lag_runs = [*usable, bl_run] if bl_run is not None else usable
+                lagp = lag.identify(lag_runs, start=params_rp)
+                p2["lag_identified_from"] = (
+                    "phase1+broken_loop" if bl_run is not None else "phase1"
+                )
                 loe = lag.output_error(lagp, run2, window_s=oe["window_s"])
             except (LpvSysidError, ValueError, np.linalg.LinAlgError) as exc:
                 p2["model_check_lag_output_error"] = {"error": str(exc)}
@@ -303,7 +382,7 @@ def chain(
                 p2["model_check_lag_output_error"] = loe
                 echo(
                     "  with motor lag + delay (output error, same windows), R^2 per row: "
-                    + ", ".join(f"{k} {loe[k]}" for k in ("w", "p", "q", "r"))
+                    + ", ".join(f"{k} {loe[k]}" for k in ("u", "v", "w", "p", "q", "r"))
                 )
     summary["phase2"] = {
         k: v
