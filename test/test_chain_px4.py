@@ -274,16 +274,17 @@ def test_broken_loop_run_on_the_airborne_vehicle_excites_the_rate_setpoints(tmp_
 
 def test_campaign_file_broken_loop_section_is_parsed_and_checked(tmp_path):
     """The chain flies the broken-loop run when the campaign file has a ``broken_loop``
-    section (control/broken_loop.py's declared keys); a misspelt key or a bad value is a
-    ConfigError naming it; no section: not flown."""
+    section (control/broken_loop.py's declared keys; the shipped chain file has one); a
+    misspelt key or a bad value is a ConfigError naming it; no section: not flown."""
     from lpv_sysid.errors import ConfigError
     from lpv_sysid.flight.campaign import FlyConfig
 
     doc = yaml.safe_load((CONFIG / "campaign_chain.yaml").read_text())
-    assert FlyConfig.from_dict(doc, CONFIG).broken_loop is None
-    doc["broken_loop"] = {"duration_s": 40.0, "period_s": 20.0, "ramp_s": 3.0}
     bl = FlyConfig.from_dict(doc, CONFIG).broken_loop
     assert (bl.duration_s, bl.period_s, bl.ramp_s, bl.thrust_amplitude) == (40.0, 20.0, 3.0, 0.1)
+    assert FlyConfig.from_dict({**doc, "broken_loop": None}, CONFIG).broken_loop is None
+    del doc["broken_loop"]
+    assert FlyConfig.from_dict(doc, CONFIG).broken_loop is None
     for bad, word in (
         ({"duration_s": 40.0, "perod_s": 20.0}, "perod_s"),
         ({"ramp_s": -1}, "ramp_s"),

@@ -612,8 +612,58 @@ def test_chain_flies_phase2_on_the_simulated_px4_and_checks_the_model_by_output_
         {"name": "COM_OF_LOSS_T", "value": 1.0, "restored": True},
         {"name": "MPC_TILTMAX_AIR", "value": 45.0, "restored": True},
     ]
+    # the synthesis covers the loop phase 2 flies: its certificate's bound >= the configured
+    # loop, or the pole region is shrunk until it does (chain.synthesize_for_loop)
+    syn = next(st for st in summary["steps"] if st["step"].startswith("Lemma 1"))
+    assert syn["attempts"][-1]["loop_delay_bound_s"] >= syn["loop_delay_s"] > 0
     oe = p2["model_check_output_error"]
     assert oe["window_s"] == 10.0 and set(oe) >= {"u", "v", "w", "p", "q", "r"}
     assert all(isinstance(oe[k], float) for k in ("u", "v", "w", "p", "q", "r"))
     assert p2["latency_state_to_setpoint_ms"]["commands"] > 1000
     print("output error R^2 on the phase-2 flight:", oe)
+
+
+def chain_design_only(p1: Path, out: Path) -> int:
+    """``lpv-sysid chain --phase1 P1 --kappa 10``: identification, signals and synthesis;
+    phase 2 refused before any link traffic (kappa beyond the designed excitation)."""
+    from lpv_sysid.flight.chain import chain
+
+    return chain(
+        f"udpin:127.0.0.1:{free_udp_port()}",
+        out,
+        kappa=10.0,
+        phase1_dir=p1,
+        echo=lambda _: None,
+        preflight=False,
+    )
+
+
+def test_chain_synthesis_shrinks_the_pole_region_until_the_loop_is_covered(tmp_path):
+    """``synthesize_for_loop``: asked for a loop 5 ms beyond what the shipped region proves,
+    it synthesizes again with a smaller disk until the certificate's delay bound covers it;
+    each attempt verified, the bounds growing; the gains left are the covering one."""
+    from test_chain_px4 import P_SIM
+
+    from lpv_sysid.configuration.defaults import config_file
+    from lpv_sysid.flight.chain.steps import REGION_SCALES, synthesize_for_loop
+    from lpv_sysid.io.formats import GainSchedule
+
+    p1 = _phase1_bags(tmp_path, P_SIM)
+    out = tmp_path / "chain"
+    status = chain_design_only(p1, out)
+    assert (out / "vertex_models.yaml").exists() and (out / "signals").exists(), status
+    cfg, summ = config_file("synthesis_chain.yaml"), out / "signals" / "summary.yaml"
+    first_ok, first = synthesize_for_loop(
+        out / "vertex_models.yaml", cfg, summ, tmp_path / "a", 1e-3, lambda _: None
+    )
+    b0 = first[0]["loop_delay_bound_s"]
+    assert first_ok and len(first) == 1 and b0 > 1e-3
+    ok, att = synthesize_for_loop(
+        out / "vertex_models.yaml", cfg, summ, tmp_path / "b", b0 + 0.005, lambda _: None
+    )
+    bounds = [a["loop_delay_bound_s"] for a in att]
+    assert ok and len(att) >= 2 and all(a["verified"] for a in att), att
+    assert bounds[0] == b0 and bounds[-1] >= b0 + 0.005 and bounds == sorted(bounds)
+    assert [a["region_scale"] for a in att] == list(REGION_SCALES[: len(att)])
+    gs = GainSchedule.load(str(tmp_path / "b" / "gains.yaml"), auto_layout=True)
+    assert gs.certificate.loop_delay_bound_s == bounds[-1]
