@@ -638,14 +638,15 @@ def chain_design_only(p1: Path, out: Path) -> int:
     )
 
 
-def test_chain_synthesis_shrinks_the_pole_region_until_the_loop_is_covered(tmp_path):
+def test_chain_synthesis_shrinks_the_pole_region_until_the_loop_is_covered(tmp_path, capsys):
     """``synthesize_for_loop``: asked for a loop 5 ms beyond what the shipped region proves,
     it synthesizes again with a smaller disk until the certificate's delay bound covers it;
     each attempt verified, the bounds growing; the gains left are the covering one."""
     from test_chain_px4 import P_SIM
 
     from lpv_sysid.configuration.defaults import config_file
-    from lpv_sysid.flight.chain.steps import REGION_SCALES, synthesize_for_loop
+    from lpv_sysid.flight.chain.steps import synthesize_for_loop
+    from lpv_sysid.synthesis.gains import REGION_SCALES
     from lpv_sysid.io.formats import GainSchedule
 
     p1 = _phase1_bags(tmp_path, P_SIM)
@@ -667,3 +668,19 @@ def test_chain_synthesis_shrinks_the_pole_region_until_the_loop_is_covered(tmp_p
     assert [a["region_scale"] for a in att] == list(REGION_SCALES[: len(att)])
     gs = GainSchedule.load(str(tmp_path / "b" / "gains.yaml"), auto_layout=True)
     assert gs.certificate.loop_delay_bound_s == bounds[-1]
+    # the ROS-graph path's command does the same (lpv-sysid synthesize --loop-delay)
+    from lpv_sysid.cli.main import main as cli_main
+
+    argv = ["synthesize", "--models", str(out / "vertex_models.yaml"), "--config", str(cfg)]
+    argv += ["--summary", str(summ), "--out", str(tmp_path / "c" / "gains.yaml")]
+    (tmp_path / "c").mkdir()
+    assert cli_main([*argv, "--loop-delay", str(b0 + 0.005)]) == 0
+    gc = GainSchedule.load(str(tmp_path / "c" / "gains.yaml"), auto_layout=True)
+    assert gc.certificate.loop_delay_bound_s == pytest.approx(bounds[-1], rel=0.02)
+    used = yaml.safe_load((tmp_path / "c" / "gains.synthesis.yaml").read_text())
+    assert used["hinf"]["region"]["disk"]["radius"] == pytest.approx(
+        7.0 * att[-1]["region_scale"]
+    )
+    capsys.readouterr()
+    assert cli_main([*argv, "--loop-delay", "nan"]) != 0
+    assert "--loop-delay must be in (0, 1) s, got nan" in capsys.readouterr().err

@@ -24,6 +24,12 @@ exactly which plants (``kind``, the box in the sidecar) and which scheduling sig
 covers, and ``certificate.problem`` the sizes -- for a corner polytope also seed 0's Lemma 1 over
 the same systems counted the package's way and the way CVX reports them (docs/certificate.md).
 
+With ``--loop-delay S`` (the configured loop delay of the controller that will fly the gains,
+e.g. 0.06 for config/lpv_controller_px4.yaml) the synthesis is repeated with a smaller pole
+region until ``certificate.loop_delay.bound_s`` >= S (:mod:`lpv_sysid.synthesis.gains.loop_cover`,
+the chain's step 4 too); the configuration used is written next to the gains
+(``<out stem>.synthesis.yaml``); exit 1 when no region covers S.
+
 The steps are :mod:`lpv_sysid.synthesis.gains` (inputs, solve, certificate, files,
 verification); this command maps their errors to its flags and prints what they did.
 """
@@ -31,12 +37,14 @@ verification); this command maps their errors to its flags and prints what they 
 from __future__ import annotations
 
 import argparse
+import math
 import time
 from pathlib import Path
 
 from lpv_sysid.errors import ConfigError
 from lpv_sysid.io.formats import load_seal_key
 from lpv_sysid.synthesis.gains import (
+    cover_loop,
     describe_problem,
     load_inputs,
     synthesize,
@@ -74,6 +82,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--no-verify", action="store_true", help="skip the independent verification"
     )
     parser.add_argument(
+        "--loop-delay",
+        type=float,
+        default=None,
+        metavar="S",
+        help="configured loop delay [s] of the controller that flies the gains: synthesize "
+        "again with a smaller pole region until the certificate's delay bound covers it",
+    )
+    parser.add_argument(
         "--key",
         default=None,
         metavar="FILE",
@@ -92,9 +108,35 @@ def with_flag(message: str) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    """``lpv-sysid synthesize``: load, synthesise, write gains.yaml + sidecar, verify."""
+    """``lpv-sysid synthesize``: load, synthesise, write gains.yaml + sidecar, verify; with
+    ``--loop-delay`` until the certificate covers that loop."""
+    if args.loop_delay is None:
+        return _once(args, args.config)
+    if not (math.isfinite(args.loop_delay) and 0.0 < args.loop_delay < 1.0):
+        raise ConfigError(f"--loop-delay must be in (0, 1) s, got {args.loop_delay!r}")
+    if args.no_verify:
+        raise ConfigError("--loop-delay needs the verification (drop --no-verify)")
+    out = Path(args.out)
+
+    def attempt(cfg: Path) -> tuple[bool, Path]:
+        return _once(args, str(cfg)) == 0, out
+
+    used = out.with_name(out.stem + ".synthesis.yaml")
+    ok, tried = cover_loop(args.config, used, args.loop_delay, attempt, print)
+    print(f"wrote {used} (the configuration of the gains written)")
+    if ok and tried[-1]["loop_delay_bound_s"] >= args.loop_delay:
+        return 0
+    print(
+        f"no pole region tried certifies the {args.loop_delay * 1e3:.1f} ms loop: the "
+        "controller refuses these gains at start; lower the loop delay (loop rate, transport)"
+    )
+    return 1
+
+
+def _once(args: argparse.Namespace, config: str) -> int:
+    """One synthesis with ``config``, written and (unless ``--no-verify``) verified."""
     try:
-        inp = load_inputs(args.models, args.config, args.summary, args.gamma, args.solver)
+        inp = load_inputs(args.models, config, args.summary, args.gamma, args.solver)
         for line in inp.notes + describe_problem(inp):
             print(line)
         res = synthesize(inp)

@@ -45,7 +45,6 @@ from pathlib import Path
 from typing import Any, Callable, Mapping
 
 import numpy as np
-import yaml
 
 from lpv_sysid.configuration.defaults import config_file
 from lpv_sysid.errors import LpvSysidError
@@ -493,10 +492,6 @@ def design_signals(config: Path, out_dir: Path, echo: Callable[[str], None]) -> 
     return out_dir
 
 
-#: pole-region scales tried by :func:`synthesize_for_loop` (disk centre and radius x scale)
-REGION_SCALES = (1.0, 0.8, 0.64, 0.5, 0.4)
-
-
 def synthesize_for_loop(
     models: Path,
     config: Path,
@@ -505,56 +500,17 @@ def synthesize_for_loop(
     loop_s: float,
     echo: Callable[[str], None],
 ) -> tuple[bool, list[dict]]:
-    """Gains ``out/gains.yaml`` whose certificate covers the loop phase 2 flies (``loop_s``,
-    the controller's configured loop delay): the synthesis of ``config`` first; while its
-    proven delay margin (``certificate.loop_delay.bound_s``, synthesis/delay.py) is below
-    ``loop_s``, again with the pole region's disk (seed 2 Eq. 125) shrunk by
-    :data:`REGION_SCALES` -- slower closed-loop poles, smaller gains, a larger delay margin
-    (PX4 SIH, 2026-12-03: 48.3 ms at the shipped disk, 65.2 ms at 0.71x, 83.4 ms at 0.57x on
-    an airframe with SIH_T_TAU 0.1 s). Each attempt is synthesized and verified like any other;
-    the config actually used is ``out/synthesis.yaml``. Returns (verification passed, the
-    attempts: scale, region, proven margin); the last attempt's gains stay when none covers
-    the loop (phase 2 then refuses them at start, as it must)."""
-    import copy
+    """``out/gains.yaml`` whose certificate covers the loop phase 2 flies (``loop_s``, the
+    controller's configured loop delay): :func:`lpv_sysid.synthesis.gains.cover_loop` over
+    :func:`synthesize_and_verify`; the config used is ``out/synthesis.yaml``."""
+    from lpv_sysid.synthesis.gains import cover_loop
 
-    from lpv_sysid.io.files import read_yaml_mapping
-    from lpv_sysid.io.formats import GainSchedule
+    def attempt(cfg: Path) -> tuple[bool, Path]:
+        return synthesize_and_verify(
+            models, cfg, summary, out / "gains.yaml", echo
+        ), out / "gains.yaml"
 
-    out.mkdir(parents=True, exist_ok=True)
-    base = read_yaml_mapping(config, finite=False)
-    region = (base.get("hinf") or {}).get("region") or {}
-    disk = region.get("disk") if isinstance(region, dict) else None
-    scales = REGION_SCALES if isinstance(disk, dict) else REGION_SCALES[:1]
-    attempts: list[dict] = []
-    ok = False
-    for scale in scales:
-        doc = copy.deepcopy(base)
-        if scale != 1.0:
-            d = doc["hinf"]["region"]["disk"]
-            d["centre"], d["radius"] = float(d["centre"]) * scale, float(d["radius"]) * scale
-        used = out / "synthesis.yaml"
-        used.write_text(yaml.safe_dump(doc, sort_keys=False))
-        ok = synthesize_and_verify(models, used, summary, out / "gains.yaml", echo)
-        bound = float(
-            GainSchedule.load(
-                str(out / "gains.yaml"), auto_layout=True
-            ).certificate.loop_delay_bound_s
-        )
-        attempts.append(
-            {
-                "region_scale": scale,
-                "region": doc["hinf"].get("region"),
-                "verified": bool(ok),
-                "loop_delay_bound_s": bound,
-            }
-        )
-        echo(
-            f"  region x{scale:g}: certified loop delay {bound * 1e3:.1f} ms, configured loop "
-            f"{loop_s * 1e3:.1f} ms{'' if bound >= loop_s else ' (not covered)'}"
-        )
-        if not ok or bound >= loop_s:
-            break
-    return ok, attempts
+    return cover_loop(config, out / "synthesis.yaml", loop_s, attempt, lambda s: echo("  " + s))
 
 
 def synthesize_and_verify(
