@@ -668,6 +668,24 @@ def test_chain_synthesis_shrinks_the_pole_region_until_the_loop_is_covered(tmp_p
     assert [a["region_scale"] for a in att] == list(REGION_SCALES[: len(att)])
     gs = GainSchedule.load(str(tmp_path / "b" / "gains.yaml"), auto_layout=True)
     assert gs.certificate.loop_delay_bound_s == bounds[-1]
+    # an attempt that finds no gains (Lemma 1 infeasible in the smaller region) ends the
+    # search: the previous gains stay, and so does the config that made them
+    from lpv_sysid.errors import SolverError
+    from lpv_sysid.synthesis.gains import cover_loop
+
+    calls: list = []
+
+    def attempt(path):
+        calls.append(yaml.safe_load(path.read_text()))
+        if len(calls) > 1:
+            raise SolverError("Lemma 1 infeasible at gamma=1: gamma_min=1.022. | remedies")
+        return True, tmp_path / "a" / "gains.yaml"
+
+    used = tmp_path / "d" / "used.yaml"
+    ok_d, att_d = cover_loop(cfg, used, b0 + 0.005, attempt)
+    assert ok_d and [a["region_scale"] for a in att_d] == [1.0, 0.8]
+    assert att_d[1]["error"] == "Lemma 1 infeasible at gamma=1: gamma_min=1.022."
+    assert yaml.safe_load(used.read_text()) == calls[0] != calls[1]
     # the ROS-graph path's command does the same (lpv-sysid synthesize --loop-delay)
     from lpv_sysid.cli.main import main as cli_main
 
@@ -678,9 +696,7 @@ def test_chain_synthesis_shrinks_the_pole_region_until_the_loop_is_covered(tmp_p
     gc = GainSchedule.load(str(tmp_path / "c" / "gains.yaml"), auto_layout=True)
     assert gc.certificate.loop_delay_bound_s == pytest.approx(bounds[-1], rel=0.02)
     used = yaml.safe_load((tmp_path / "c" / "gains.synthesis.yaml").read_text())
-    assert used["hinf"]["region"]["disk"]["radius"] == pytest.approx(
-        7.0 * att[-1]["region_scale"]
-    )
+    assert used["hinf"]["region"]["disk"]["radius"] == pytest.approx(7.0 * att[-1]["region_scale"])
     capsys.readouterr()
     assert cli_main([*argv, "--loop-delay", "nan"]) != 0
     assert "--loop-delay must be in (0, 1) s, got nan" in capsys.readouterr().err

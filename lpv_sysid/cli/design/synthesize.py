@@ -124,7 +124,7 @@ def run(args: argparse.Namespace) -> int:
     used = out.with_name(out.stem + ".synthesis.yaml")
     ok, tried = cover_loop(args.config, used, args.loop_delay, attempt, print)
     print(f"wrote {used} (the configuration of the gains written)")
-    if ok and tried[-1]["loop_delay_bound_s"] >= args.loop_delay:
+    if ok and tried[-1].get("loop_delay_bound_s", 0.0) >= args.loop_delay:
         return 0
     print(
         f"no pole region tried certifies the {args.loop_delay * 1e3:.1f} ms loop: the "

@@ -52,9 +52,11 @@ def cover_loop(
     """Synthesize through ``attempt(config_path) -> (verified, gains_path)`` until the gains'
     ``certificate.loop_delay.bound_s`` >= ``loop_s`` (module docstring); ``used``: where each
     attempt's configuration is written (the last one stays). A config without a disk region
-    is tried once. Returns (the last attempt verified, the attempts: region scale and region,
-    verified, bound); the last attempt's gains stay when none covers the loop (the
-    controller refuses them at start, as it must)."""
+    is tried once. Returns (the last gains written verified, the attempts: region scale and
+    region, verified, bound -- or the error of an attempt that found no gains, which ends the
+    search); the last gains written stay when none covers the loop (the controller refuses
+    them at start, as it must). An error of the first attempt is raised."""
+    from lpv_sysid.errors import LpvSysidError
     from lpv_sysid.io.files import read_yaml_mapping
     from lpv_sysid.io.formats import GainSchedule
 
@@ -65,10 +67,29 @@ def cover_loop(
     used.parent.mkdir(parents=True, exist_ok=True)
     attempts: list[dict] = []
     ok = False
+    previous: str | None = None
     for scale in REGION_SCALES if has_disk else REGION_SCALES[:1]:
         doc = scaled_region(base, scale)
-        used.write_text(yaml.safe_dump(doc, sort_keys=False))
-        ok, gains = attempt(used)
+        text = yaml.safe_dump(doc, sort_keys=False)
+        used.write_text(text)
+        try:
+            ok, gains = attempt(used)
+        except LpvSysidError as exc:
+            if previous is None:
+                raise
+            # e.g. Lemma 1 infeasible at gamma in the smaller region: nothing was written,
+            # the previous attempt's gains stay, and so does the config that made them
+            used.write_text(previous)
+            attempts.append(
+                {
+                    "region_scale": scale,
+                    "region": doc["hinf"].get("region"),
+                    "error": str(exc).split(" | ")[0],
+                }
+            )
+            echo(f"region x{scale:g}: {attempts[-1]['error']}; the previous gains stay")
+            break
+        previous = text
         bound = GainSchedule.load(str(gains), auto_layout=True).certificate.loop_delay_bound_s
         bound = float(bound) if bound is not None else 0.0
         attempts.append(
