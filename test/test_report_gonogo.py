@@ -204,6 +204,27 @@ def test_simulated_data_is_labelled_and_the_flown_one_too(tmp_path):
     rows, overall = go_no_go(d, None)
     hb = {r.item: r for r in rows}["hand-back confirmed (phase 1)"]
     assert hb.verdict == NO_GO and overall == NO_GO
+    # the chain's broken-loop run: listed as a data set of the same vehicle, and its hand-back
+    # judged like every flight's (HOLD confirmed: GO; FAILED: NO-GO)
+    (flown / "broken_loop").mkdir()
+    for state, verdict in (("DONE", "GO"), ("FAILED", NO_GO)):
+        (flown / "broken_loop" / "broken_loop_summary.yaml").write_text(
+            yaml.safe_dump(
+                {
+                    "ok": state == "DONE",
+                    "reason": "run complete",
+                    "handback": {"state": state, "mode": "HOLD"},
+                }
+            )
+        )
+        d = load_run(flown)
+        src = {p.dataset: p for p in provenance(d)}
+        assert src["broken-loop run"].label == FLOWN
+        assert "run complete" in src["broken-loop run"].evidence
+        assert "broken_loop/broken_loop_summary.yaml" in src["broken-loop run"].evidence
+        rows, _ = go_no_go(d, None)
+        hb = {r.item: r for r in rows}["hand-back confirmed (broken-loop run)"]
+        assert (hb.value, hb.verdict) == (f"state {state}", verdict)
 
 
 def test_loop_delay_row_judges_the_configured_loop_verify_checked(verified):

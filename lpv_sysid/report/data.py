@@ -56,6 +56,7 @@ CANDIDATES: dict[str, tuple[str, ...]] = {
     "flight_phase2": ("phase2/phase2_summary.yaml", "phase2_summary.yaml"),
     "flight_phase2_log": ("phase2/phase2_log.npz", "phase2_log.npz"),
     "flight_phase2_experiment": ("phase2/experiment.yaml",),
+    "broken_loop": ("broken_loop/broken_loop_summary.yaml",),
 }
 #: inputs only used to say where the data came from (not listed as missing sections)
 PROVENANCE_INPUTS = (
@@ -64,6 +65,7 @@ PROVENANCE_INPUTS = (
     "flight_phase2",
     "flight_phase2_log",
     "flight_phase2_experiment",
+    "broken_loop",
 )
 PHASE2_SERIES = ("eq33", "nonlinear")
 
@@ -90,6 +92,7 @@ class RunData:
     flight_phase2: Optional[dict] = None
     flight_phase2_log: Optional[dict[str, np.ndarray]] = None  # fly phase2's phase2_log.npz
     flight_phase2_experiment: Optional[dict] = None  # its recorder's experiment.yaml
+    broken_loop: Optional[dict] = None  # the chain's broken-loop run (broken_loop_summary.yaml)
     phase2_series: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
 
 

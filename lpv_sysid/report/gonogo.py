@@ -126,8 +126,24 @@ def provenance(d: RunData) -> list[DataSource]:
     else:
         p1 = DataSource("phase-1 flights", "not in the run directory", "-")
     out.append(p1)
+    bl = d.broken_loop
+    if isinstance(bl, dict):
+        out.append(
+            DataSource(
+                "broken-loop run",
+                p1.label,
+                "the same vehicle after phase 1: multisine on thrust + body-rate setpoints, "
+                f"stabilised ({bl.get('reason') or 'no result recorded'}); {rel('broken_loop')}",
+            )
+        )
     if d.models is not None:
-        out.append(DataSource("identification data", p1.label, "the phase-1 runs above"))
+        what = "the phase-1 runs above"
+        if isinstance(bl, dict):
+            what += (
+                " (design model); with the broken-loop run, the prediction model (lag "
+                "dynamics, output error)"
+            )
+        out.append(DataSource("identification data", p1.label, what))
     if d.flight_phase2 is not None:
         label2, how2 = vehicle_label(exp2)
         out.append(
@@ -356,6 +372,10 @@ def events_rows(d: RunData) -> list[Row]:
     if isinstance(c, dict):
         conf = (c.get("handback") or {}).get("confirmed")
         hb.append(("phase 1", conf is not None, f"confirmed at {conf}"))
+    bl = d.broken_loop
+    if isinstance(bl, dict):
+        st = (bl.get("handback") or {}).get("state")
+        hb.append(("broken-loop run", st == "DONE", f"state {st}"))
     if not hb:
         rows.append(Row("hand-back confirmed", "n/a", "-", INFO, "simulated: no autopilot"))
     for phase, ok, what in hb:
