@@ -304,7 +304,11 @@ def test_every_state_sample_is_answered_by_the_command_computed_on_it(flight):
     # is at most a few state periods long.
     head = int(np.count_nonzero(cmd < st[0]))
     assert head <= 25, f"{head} commands before the first recorded state sample"
-    cmd = cmd[cmd >= st[0]]
+    # the same at the end: the logger's state subscription can stop (or drop its last
+    # best-effort sample) while the last commands still arrive; no gap is allowed in between
+    tail = int(np.count_nonzero(cmd > st[-1]))
+    assert tail <= 25, f"{tail} commands after the last recorded state sample"
+    cmd = cmd[(cmd >= st[0]) & (cmd <= st[-1])]
     window = st[(st >= cmd[0]) & (st <= cmd[-1])]
     assert np.array_equal(cmd, window)
     ref = stamps_ns(bag[f"{NS}/velocity_reference"])
