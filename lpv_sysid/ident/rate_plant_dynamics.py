@@ -301,22 +301,30 @@ def _fit_row(
             if best is None or cost < best[0]:
                 best = (cost, sol, k * dt, rds)
     assert best is not None
-    cost, sol, d, rds = best
-    e = sol.fun
-    n = len(e)
-    s2 = cost / max(n - nfree, 1)
-    J = sol.jac
-    cov = s2 * _corr_factor(e) * np.linalg.pinv(J.T @ J)
-    std = np.r_[np.sqrt(np.maximum(np.diag(cov), 0.0)), np.zeros(npar - nfree)]
+    _, sol, d, rds = best
     est = full(sol.x)
-    y = np.concatenate([_measured(rd) for rd in rds])
-    names = row_params(row[0])
     return {
-        "params": {nm: float(v) for nm, v in zip(names, est)},
-        "std": {nm: float(s) for nm, s in zip(names, std)},
-        "delay_s": round(d, 4),
+        **_fit_result(row[0], sol, est, npar - nfree, rds, d),
         "equivalent_delay_s": round(d + float(est[tau_i]), 4),
         "tau_fitted": fixed_tau is None,
+    }
+
+
+def _fit_result(name: str, sol, est: np.ndarray, n_fixed: int, rds: list, delay: float) -> dict:
+    """A row's fit record: parameters, standard deviations from the Jacobian (white-residual
+    formula scaled by the residuals' correlation length; 0 for the ``n_fixed`` trailing
+    parameters not fitted), the delay, R^2 and the sample count."""
+    e = sol.fun
+    n = len(e)
+    nfree = len(sol.x)
+    cov = float(e @ e) / max(n - nfree, 1) * _corr_factor(e) * np.linalg.pinv(sol.jac.T @ sol.jac)
+    std = np.r_[np.sqrt(np.maximum(np.diag(cov), 0.0)), np.zeros(n_fixed)]
+    y = np.concatenate([_measured(rd) for rd in rds])
+    names = row_params(name)
+    return {
+        "params": {nm: float(v) for nm, v in zip(names, est)},
+        "std": {nm: float(v) for nm, v in zip(names, std)},
+        "delay_s": round(delay, 4),
         "r2": round(_r2(y, e), 4),
         "samples": int(n),
     }
@@ -335,20 +343,7 @@ def _fit_velocity_row(runs, row, cfg: LagIdConfig, g: float) -> dict:
         return np.concatenate([_residual(th, rd) for rd in rds])
 
     sol = least_squares(res, np.array([-0.3, 0.0]), bounds=([-50.0, -20.0], [0.0, 20.0]))
-    e = sol.fun
-    n = len(e)
-    cost = float(e @ e)
-    cov = cost / max(n - 2, 1) * _corr_factor(e) * np.linalg.pinv(sol.jac.T @ sol.jac)
-    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    names = VELOCITY_PARAMS[row[0]]
-    y = np.concatenate([_measured(rd) for rd in rds])
-    return {
-        "params": {nm: float(v) for nm, v in zip(names, sol.x)},
-        "std": {nm: float(v) for nm, v in zip(names, std)},
-        "delay_s": 0.0,
-        "r2": round(_r2(y, e), 4),
-        "samples": int(n),
-    }
+    return _fit_result(row[0], sol, sol.x, 0, rds, 0.0)
 
 
 @dataclass(frozen=True)
