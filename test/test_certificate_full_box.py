@@ -579,3 +579,69 @@ def test_remedy_message_does_not_call_a_numerical_failure_infeasible():
     assert "NOT infeasible" in msg and "re-check failed" in msg and "0.02652" in msg
     msg = Remedy(1.0, 2.5, 2.5, 2.5).message()
     assert msg.startswith("Lemma 1 infeasible at gamma=1") and "factor >= 2.5" in msg
+
+
+def _fail_first_solves(monkeypatch, n: int) -> list:
+    """cvxpy's Problem.solve raises SolverError for its first ``n`` calls (a solver stalling
+    in NumericalError, as Clarabel does on the padded quick-demo box), then solves."""
+    import cvxpy as cp
+
+    calls: list = []
+    real = cp.Problem.solve
+
+    def solve(self, *a, **kw):
+        calls.append(kw.get("solver"))
+        if len(calls) <= n:
+            raise cp.error.SolverError("forced numerical failure (test)")
+        return real(self, *a, **kw)
+
+    monkeypatch.setattr(cp.Problem, "solve", solve)
+    return calls
+
+
+def test_a_stalled_synthesis_is_rescued_by_certifying_its_law_by_analysis(monkeypatch):
+    """Clarabel's min_effort solve fails (forced), the rescue re-solves it and certifies THAT law
+    with the gains fixed (objective min_gamma); the certificate must then hold for the law
+    against the analytic worst case of the box (first-order loop: |b R| / |a + b k| at a
+    corner), at most the requested gamma, and say how it was obtained."""
+    model = _scalar_box(a0=1.0, wa=0.2, b0=1.0, wb=0.3, a_step=0.5)
+    R, C, gamma = np.array([[0.5]]), np.array([[1.0]]), 0.4
+    calls = _fail_first_solves(monkeypatch, 1)
+    res = synthesize_hinf(
+        model,
+        R,
+        C,
+        HinfOptions(gamma=gamma, lyapunov="common", solver="CLARABEL", objective="min_effort"),
+    )
+    assert calls[:3] == ["CLARABEL", "CLARABEL", "CLARABEL"]  # failed, rescue, analysis
+    assert "certified by analysis" in res.status
+    worst = 0.0
+    for i, k in enumerate(res.K[:, 0, 0]):
+        a_c = model.box.A_centre[i, 0, 0]
+        for a in (a_c - 0.2, a_c + 0.2):
+            for b in (0.7, 1.3):
+                assert a + b * k < 0
+                worst = max(worst, abs(b * R[0, 0]) / abs(a + b * k))
+    assert worst <= res.gamma_certified * (1 + 1e-6)
+    assert res.gamma_certified <= gamma and res.min_margin > 0
+
+
+def test_a_rescued_law_above_the_requested_gamma_is_refused(monkeypatch):
+    """The rescue accepts a law only when its analysis proves at most ``gamma_accept``: asked for
+    less than the law's own analytic worst case, no certificate comes out."""
+    from lpv_sysid.synthesis import robust
+
+    model = _scalar_box(a0=1.0, wa=0.2, b0=1.0, wb=0.3, a_step=0.5)
+    R, C = np.array([[0.5]]), np.array([[1.0]])
+    _fail_first_solves(monkeypatch, 1)
+    with pytest.raises(SolverError, match="analysis of the inaccurate law: certified gamma"):
+        robust.solve_box(
+            model.box,
+            R,
+            C,
+            gamma=0.4,
+            objective="min_effort",
+            solver="CLARABEL",
+            fallback=None,
+            gamma_accept=1e-3,
+        )

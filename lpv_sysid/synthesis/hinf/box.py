@@ -101,6 +101,7 @@ def solve_box(
         vmax=model.vmax,
         rate=rate,
         verbose=opts.verbose,
+        gamma_accept=float(opts.gamma),
     )
     Ms = [len(lst) for lst in model.systems]
     X = [[r["X"][i]] * (Ms[i] if model.box is None else 1) for i in range(model.n_vertices)]
