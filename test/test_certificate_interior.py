@@ -117,3 +117,31 @@ def test_synthesis_box_adds_the_interpolation_pad(tmp_path):
     assert abs(_half(model.box, 1, 1, 1) - 0.02) < 1e-12
     bare, _ = load_models(models, dict(cfg, interpolation=False))
     assert abs(_half(bare.box, 0, 0, 0) - 0.03) < 1e-12
+
+
+def test_the_shipped_synthesis_config_certifies_the_padded_set(tmp_path):
+    """Issue 20: the certificate the package ships is about the set that holds the identified
+    dynamics between the vertices (the pad on), not seed 0's Assumption 2 alone: the shipped
+    config's uncertainty section widens a half-width by the models file's pad."""
+    from pathlib import Path
+
+    import yaml
+    from test_certificate_joint import _half, _models
+
+    from lpv_sysid.synthesis.uncertainty_set import load_models
+
+    shipped = yaml.safe_load(
+        (Path(__file__).resolve().parents[1] / "config" / "synthesis.yaml").read_text()
+    )["uncertainty"]
+    assert shipped["interpolation"] is True
+    models = _models(tmp_path / "vm.yaml")
+    doc = yaml.safe_load(models.read_text())
+    doc["meta"]["interpolation"] = {
+        "pad_A": [[0.01, 0.0], [0.0, 0.0]],
+        "pad_B": [[0.0], [0.0]],
+        "points": 27,
+    }
+    models.write_text(yaml.safe_dump(doc))
+    cfg = dict(shipped, joint_probability=None, box_inflation=None)
+    model, _ = load_models(models, cfg)
+    assert abs(_half(model.box, 0, 0, 0) - (0.03 + 0.01)) < 1e-12

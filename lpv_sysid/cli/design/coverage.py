@@ -191,6 +191,13 @@ def run(args: argparse.Namespace) -> int:
             f"(uncertainty.interpolation): {it['truth_inside_with_interpolation_pad']}/"
             f"{it['points']}"
         )
+        if args.synthesis:
+            pad = _pad_configured(args.synthesis)
+            n_in = it["truth_inside_with_interpolation_pad" if pad else "truth_inside"]
+            print(
+                f"interior, the set the --synthesis config certifies (interpolation pad "
+                f"{'on' if pad else 'off'}): truth inside at {n_in}/{it['points']} points"
+            )
     lt = doc.get("lmi_at_truth")
     if lt:
         print(
@@ -208,3 +215,13 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {out / 'coverage.yaml'}")
     print(f"wrote {out / 'coverage.md'}")
     return 0
+
+
+def _pad_configured(synthesis: Path) -> bool:
+    """``uncertainty.interpolation`` of a synthesis config (its declared default when absent)."""
+    import yaml
+
+    from lpv_sysid.synthesis.uncertainty_set import UncertaintySettings
+
+    doc = yaml.safe_load(Path(synthesis).read_text()) or {}
+    return bool(UncertaintySettings.from_dict(doc.get("uncertainty")).interpolation)
