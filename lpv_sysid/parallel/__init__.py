@@ -20,11 +20,13 @@ The results are bit-identical to the serial run: every task is a pure function o
 arguments (its own seeded random stream, no state shared between tasks), and the callers put
 every random draw either in the task or before the tasks are handed out.
 :func:`default_workers` is the number of cores this process may run on; :func:`resolve_workers`
-checks a ``workers`` argument (``None``: every core).
+checks a ``workers`` argument (``None``: every core). :func:`run_in_child` runs one call in a
+spawned process so that Ctrl-C reaches the caller while a native solver holds SIGINT.
 """
 
 from __future__ import annotations
 
+from lpv_sysid.parallel.child import run_in_child
 from lpv_sysid.parallel.pool import (
     BACKENDS,
     Batch,
@@ -34,4 +36,12 @@ from lpv_sysid.parallel.pool import (
     start_tasks,
 )
 
-__all__ = ["BACKENDS", "Batch", "default_workers", "map_tasks", "resolve_workers", "start_tasks"]
+__all__ = [
+    "BACKENDS",
+    "Batch",
+    "default_workers",
+    "map_tasks",
+    "resolve_workers",
+    "run_in_child",
+    "start_tasks",
+]

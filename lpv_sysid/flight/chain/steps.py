@@ -517,7 +517,22 @@ def synthesize_and_verify(
     models: Path, config: Path, summary: Path, out: Path, echo: Callable[[str], None]
 ) -> bool:
     """``lpv-sysid synthesize``'s steps: gains ``out`` for ``models`` and their independent
-    verification; True when the verification passed."""
+    verification; True when the verification passed. Runs in a child process
+    (:func:`lpv_sysid.parallel.run_in_child`): the vehicle hovers meanwhile, and the LMI
+    solvers take SIGINT for themselves, so in this process an operator's Ctrl-C was lost and
+    the chain went on to phase 2; now it ends the synthesis and the chain (hand-back, the
+    parameters set back) at once."""
+    from lpv_sysid.parallel import run_in_child
+
+    passed, lines = run_in_child(_synthesis_job, str(models), str(config), str(summary), str(out))
+    for line in lines:
+        echo(line)
+    return passed
+
+
+def _synthesis_job(models: str, config: str, summary: str, out: str) -> tuple[bool, list[str]]:
+    """The work of :func:`synthesize_and_verify` (in its child): (verification passed, the
+    lines to show)."""
     from lpv_sysid.synthesis.gains import (
         describe_problem,
         load_inputs,
@@ -526,12 +541,10 @@ def synthesize_and_verify(
         write_gains,
     )
 
-    inp = load_inputs(str(models), str(config), str(summary))
-    for line in inp.notes + describe_problem(inp):
-        echo(line)
-    written = write_gains(out, str(models), inp, synthesize(inp))
-    for line in written.lines + [f"wrote {written.gains}", f"wrote {written.sidecar}"]:
-        echo(line)
-    rep = verify_written(written.gains, str(models), inp)
-    echo(rep.table())
-    return rep.passed
+    inp = load_inputs(models, config, summary)
+    lines = list(inp.notes + describe_problem(inp))
+    written = write_gains(Path(out), models, inp, synthesize(inp))
+    lines += written.lines + [f"wrote {written.gains}", f"wrote {written.sidecar}"]
+    rep = verify_written(written.gains, models, inp)
+    lines.append(rep.table())
+    return rep.passed, lines
