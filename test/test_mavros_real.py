@@ -216,7 +216,9 @@ def test_phase1_offboard_and_rejected_posctl_handback_through_real_mavros(stack)
         res = json.loads(line[0][len("RESULT ") :])
     finally:
         for p in procs:
-            p.sigint()
+            # the group, as a terminal's Ctrl-C: `ros2 run` does not pass a SIGINT of its own
+            # on to the node it started, which then waited out the 60 s below and was killed
+            p.sigint(group=True)
         for p in procs:
             try:
                 p.wait(timeout=60.0)
